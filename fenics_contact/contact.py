@@ -1,0 +1,121 @@
+"""Semismooth Newton for penalized contact, and what it reports: history and contact profile.
+
+The generalized derivative of s ↦ (s)⁺ is the Heaviside function, so for a
+fixed active set 𝒜 (the Γ_C nodes with u_c > 0) the penalized problem is
+linear; Newton stops after the first step whose new iterate has the same active
+set as the one it was linearized at (finite termination), after checking the
+residual.
+"""
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import NamedTuple
+
+import numpy as np
+
+from fenics_contact.errors import ConvergenceError, InputError
+
+__all__ = ["NewtonOptions", "NewtonHistory", "ContactProfile", "semismooth_newton", "active_interval"]
+
+
+@dataclass(frozen=True, slots=True)
+class NewtonOptions:
+    """Semismooth Newton options: step cap, and the residual check ‖F‖ ≤ rtol‖b‖ + atol at termination."""
+
+    max_iterations: int = 50
+    rtol: float = 1e-8
+    atol: float = 1e-13
+
+    def __post_init__(self) -> None:
+        if self.max_iterations < 1:
+            raise InputError("max_iterations must be >= 1")
+        if not (self.rtol > 0 and self.atol >= 0):
+            raise InputError("Newton tolerances must be positive")
+
+
+@dataclass(slots=True)
+class NewtonHistory:
+    """Per-step residual norms (before each step) and active-set sizes (after each step)."""
+
+    residuals: list[float] = field(default_factory=list)
+    active_sizes: list[int] = field(default_factory=list)
+    factorizations: int = 0
+
+    @property
+    def steps(self) -> int:
+        """Number of Newton steps (linear solves)."""
+        return len(self.active_sizes)
+
+
+class ContactProfile(NamedTuple):
+    """Nodal data along Γ_C, sorted by y: position, normal displacement, normal stress."""
+
+    y: np.ndarray
+    u_c: np.ndarray
+    sigma_c: np.ndarray
+
+    @property
+    def active(self) -> np.ndarray:
+        """Nodes in contact (u_c > 0: the penalty is active)."""
+        return self.u_c > 0.0
+
+    @property
+    def penetration(self) -> float:
+        """max (u_c)⁺: the penetration the penalty leaves."""
+        return float(np.max(np.maximum(self.u_c, 0.0), initial=0.0))
+
+    def active_interval(self) -> tuple[float, float] | None:
+        """[y_min, y_max] of the contact zone, or None when nothing touches."""
+        return active_interval(self.y, self.active)
+
+
+def active_interval(y: np.ndarray, active: np.ndarray) -> tuple[float, float] | None:
+    """[min y, max y] over the active nodes, or None."""
+    if not np.any(active):
+        return None
+    return float(np.min(y[active])), float(np.max(y[active]))
+
+
+def semismooth_newton(
+    *,
+    residual: Callable[[], float],
+    active_set: Callable[[], np.ndarray],
+    same_sets: Callable[[np.ndarray, np.ndarray], bool],
+    factorize: Callable[[], None],
+    step: Callable[[], None],
+    load_norm: float,
+    options: NewtonOptions,
+    name: str,
+) -> NewtonHistory:
+    """Generic semismooth Newton loop over callbacks.
+
+    ``residual()`` assembles F(u) and returns ‖F‖; ``active_set()`` returns the
+    local active-set indicator of the current u; ``factorize()`` assembles and
+    factorizes J at the current u; ``step()`` solves J du = −F and updates u.
+    The Jacobian is refactorized only when the active set has changed.
+    """
+    history = NewtonHistory()
+    linearized_at = None
+    current = active_set()
+    for _ in range(options.max_iterations):
+        history.residuals.append(residual())
+        if linearized_at is None or not same_sets(current, linearized_at):
+            factorize()
+            history.factorizations += 1
+            linearized_at = current
+        step()
+        current = active_set()
+        history.active_sizes.append(int(np.count_nonzero(current)))
+        if same_sets(current, linearized_at):
+            final = residual()
+            history.residuals.append(final)
+            if final > options.rtol * load_norm + options.atol:
+                raise ConvergenceError(
+                    f"{name}: active set settled but residual {final:.3e} exceeds "
+                    f"{options.rtol:g}·‖b‖ = {options.rtol * load_norm:.3e} (ill-conditioned solve?)"
+                )
+            return history
+    raise ConvergenceError(
+        f"{name}: semismooth Newton did not converge in {options.max_iterations} steps "
+        f"(active-set sizes {history.active_sizes[-5:]}, residuals {history.residuals[-3:]})"
+    )

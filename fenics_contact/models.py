@@ -1,0 +1,163 @@
+"""The built-in test models (METHOD §5) as data: Young's modulus map, ν, load.
+
+The paper's Figure 5.1 is not available, so the two heterogeneity maps are
+documented stand-ins on Ω = (0,1)², every feature aligned with the 1/32 grid
+(so h = 1/32, 1/64, 1/128 resolve them exactly) and kept in x ≤ 27/32 < 7/8, so
+that the contact strip Ω₂ = (1−H, 1)×(0,1) is homogeneous for every H ≤ 1/8:
+
+* **Test model 1 — channels.** Eight horizontal high-modulus channels of width
+  1/32, one in every horizontal band of height 1/8, alternately starting at
+  x = 1/32 and x = 5/32 and all ending at x = 27/32: long thin inclusions that
+  cross many coarse cells (the classical hard case for multiscale methods).
+* **Test model 2 — inclusions.** A field of 40 square inclusions (sides 1/32 and
+  1/16) on a staggered lattice, positions listed in ``_INCLUSIONS``.
+
+E = ``E_high`` (10³) inside the pattern and ``E_low`` (1) elsewhere; ν = 0.35.
+
+Loads f = (f₁, 0), f₁ piecewise constant in bands of the right half x ≥ 1/2
+(next to Γ_C): model 1 pushes the lower half towards the obstacle and pulls the
+upper half away, giving contact on about y ∈ [0, 0.5]; model 2 pushes the band
+3/8 ≤ y ≤ 5/8 and pulls the rest, giving contact on about y ∈ [0.4, 0.6].
+"""
+
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+
+import numpy as np
+import numpy.typing as npt
+
+from fenics_contact.errors import InputError
+
+__all__ = ["TestModel", "model_1", "model_2", "get_model", "pixel_field", "constant_field"]
+
+#: A scalar field: points x of shape (3, N) -> values of shape (N,).
+ScalarField = Callable[[np.ndarray], np.ndarray]
+#: A vector field: points x of shape (3, N) -> values of shape (2, N).
+VectorField = Callable[[np.ndarray], np.ndarray]
+
+
+@dataclass(frozen=True, slots=True)
+class TestModel:
+    """A contact test model: E(x), ν(x) and body force f(x) on Ω = (0,1)²."""
+
+    __test__ = False  # not a pytest test class
+
+    name: str
+    youngs_modulus: ScalarField
+    poisson_ratio: ScalarField
+    load: VectorField
+    description: str = ""
+
+    def with_(self, **changes) -> "TestModel":
+        """A copy with some fields replaced (``dataclasses.replace``)."""
+        return replace(self, **changes)
+
+
+def constant_field(value: float) -> ScalarField:
+    """x ↦ value, as a scalar field."""
+    return lambda x: np.full(x.shape[1], float(value))
+
+
+def pixel_field(values: npt.ArrayLike, extent=(0.0, 1.0, 0.0, 1.0)) -> ScalarField:
+    """A piecewise-constant field from a pixel array ``values[row, col]``.
+
+    Row 0 is the bottom row (y = extent[2]); column 0 is the left (x = extent[0]).
+    Points outside the extent take the nearest pixel.
+    """
+    values = np.asarray(values, dtype=np.float64)
+    if values.ndim != 2 or values.size == 0:
+        raise InputError(f"a pixel field needs a non-empty 2D array, got shape {values.shape}")
+    x0, x1, y0, y1 = extent
+    if not (x1 > x0 and y1 > y0):
+        raise InputError(f"invalid pixel extent {extent}")
+    ny, nx = values.shape
+
+    def field(x: np.ndarray) -> np.ndarray:
+        i = np.clip(np.floor((x[0] - x0) / (x1 - x0) * nx).astype(int), 0, nx - 1)
+        j = np.clip(np.floor((x[1] - y0) / (y1 - y0) * ny).astype(int), 0, ny - 1)
+        return values[j, i]
+
+    return field
+
+
+def _boxes_field(boxes: np.ndarray, inside: float, outside: float) -> ScalarField:
+    """inside on the union of axis-aligned boxes [x0,x1]×[y0,y1], outside elsewhere."""
+
+    def field(x: np.ndarray) -> np.ndarray:
+        hit = np.zeros(x.shape[1], dtype=bool)
+        for x0, x1, y0, y1 in boxes:
+            hit |= (x[0] > x0) & (x[0] < x1) & (x[1] > y0) & (x[1] < y1)
+        return np.where(hit, inside, outside)
+
+    return field
+
+
+def _band_load(bands: list[tuple[float, float, float, float, float]]) -> VectorField:
+    """f = (f₁, 0) with f₁ = value on each box (x0, x1, y0, y1, value), 0 elsewhere."""
+
+    def load(x: np.ndarray) -> np.ndarray:
+        f = np.zeros((2, x.shape[1]))
+        for x0, x1, y0, y1, value in bands:
+            inside = (x[0] > x0) & (x[0] < x1) & (x[1] > y0) & (x[1] < y1)
+            f[0, inside] = value
+        return f
+
+    return load
+
+
+_S = 1.0 / 32.0
+_CHANNELS = np.array(
+    [[(1 if k % 2 == 0 else 5) * _S, 27 * _S, (4 * k + 2) * _S, (4 * k + 3) * _S] for k in range(8)]
+)
+
+
+def _inclusion_boxes() -> np.ndarray:
+    """40 square inclusions on a staggered lattice of the 1/32 grid, in x ≤ 27/32."""
+    boxes = []
+    for j in range(8):  # rows: y in [j/8, (j+1)/8)
+        for i in range(5):  # columns: x in [0, 27/32]
+            big = (i + j) % 3 == 0
+            side = 2 if big else 1
+            ix = 1 + 5 * i + (j % 2) * 2  # staggered, <= 1 + 20 + 2 = 23 -> x1 <= 25/32
+            iy = 4 * j + 1 + (i % 2)
+            boxes.append([ix * _S, (ix + side) * _S, iy * _S, (iy + side) * _S])
+    return np.array(boxes)
+
+
+_INCLUSIONS = _inclusion_boxes()
+
+
+def model_1(*, E_high: float = 1.0e3, E_low: float = 1.0, nu: float = 0.35, load_scale: float = 1.0) -> TestModel:
+    """Test model 1: thin high-modulus channels; contact on about y ∈ [0, 0.5]."""
+    bands = [(0.5, 1.0, 0.0, 0.5, 1.0 * load_scale), (0.5, 1.0, 0.5, 1.0, -1.0 * load_scale)]
+    return TestModel(
+        name="model1",
+        youngs_modulus=_boxes_field(_CHANNELS, E_high, E_low),
+        poisson_ratio=constant_field(nu),
+        load=_band_load(bands),
+        description=f"channels, E={E_high:g}/{E_low:g}, nu={nu:g}",
+    )
+
+
+def model_2(*, E_high: float = 1.0e3, E_low: float = 1.0, nu: float = 0.35, load_scale: float = 1.0) -> TestModel:
+    """Test model 2: a field of inclusions; contact on about y ∈ [0.4, 0.6]."""
+    bands = [
+        (0.5, 1.0, 0.0, 0.375, -1.0 * load_scale),
+        (0.5, 1.0, 0.375, 0.625, 2.0 * load_scale),
+        (0.5, 1.0, 0.625, 1.0, -1.0 * load_scale),
+    ]
+    return TestModel(
+        name="model2",
+        youngs_modulus=_boxes_field(_INCLUSIONS, E_high, E_low),
+        poisson_ratio=constant_field(nu),
+        load=_band_load(bands),
+        description=f"inclusions, E={E_high:g}/{E_low:g}, nu={nu:g}",
+    )
+
+
+def get_model(number: int, **kwargs) -> TestModel:
+    """The built-in test model 1 or 2."""
+    builders = {1: model_1, 2: model_2}
+    if number not in builders:
+        raise InputError(f"unknown test model {number!r}; the built-in models are 1 and 2")
+    return builders[number](**kwargs)

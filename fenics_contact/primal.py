@@ -1,0 +1,252 @@
+"""Primal P1 elasticity subproblems and the monolithic penalized contact solve.
+
+One class, ``PrimalSubproblem``, serves three roles: the monolithic problem on Ω
+(contact, no Robin), the linear Ω₁ problem (Robin on γ, no contact) and the
+nonlinear Ω₂ problem (contact and Robin). Forms come from ``forms_primal``.
+"""
+
+import logging
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import ufl
+from mpi4py import MPI
+from petsc4py import PETSc
+
+import basix.ufl
+from dolfinx import fem
+from dolfinx import mesh as dmesh
+import dolfinx.fem.petsc
+
+from fenics_contact import forms_primal
+from fenics_contact.contact import ContactProfile, NewtonHistory, NewtonOptions, semismooth_newton
+from fenics_contact.errors import InputError
+from fenics_contact.fields import MaterialFields
+from fenics_contact.linalg import DirectSolver, quadratic_form
+from fenics_contact.materials import strain, stress
+from fenics_contact.tags import Boundary
+
+__all__ = ["PrimalSubproblem", "PrimalSolution", "solve_primal_monolithic", "default_penalty"]
+
+log = logging.getLogger(__name__)
+
+
+def default_penalty(h: float, E_contact: float, factor: float = 1.0e-3) -> float:
+    """δ = factor · h / E_c: penalty stiffness 1/δ a factor 1/factor above the element stiffness E_c/h."""
+    return factor * h / E_contact
+
+
+def _num_local_cells(msh: dmesh.Mesh) -> int:
+    imap = msh.topology.index_map(msh.topology.dim)
+    return imap.size_local + imap.num_ghosts
+
+
+class PrimalSubproblem:
+    """a(u, v) [+ (1/δ)∫_ΓC (u·n)⁺ v·n] [+ α∫_γ u·v − ∫_γ g·v] = (f, v), u = 0 on Γ_D, P1."""
+
+    def __init__(
+        self,
+        msh: dmesh.Mesh,
+        facet_tags: dmesh.MeshTags,
+        fields: MaterialFields,
+        *,
+        delta: float | None,
+        alpha: fem.Function | None,
+        prefix: str,
+        newton: NewtonOptions = NewtonOptions(),
+        V: fem.FunctionSpace | None = None,
+    ) -> None:
+        if delta is not None and not delta > 0:
+            raise InputError(f"the penalty parameter δ must be > 0, got {delta}")
+        self.mesh = msh
+        self.prefix = prefix
+        self.newton = newton
+        self.contact = delta is not None
+        self.delta = delta
+        tdim = msh.topology.dim
+        gdim = msh.geometry.dim
+        self.V = V or fem.functionspace(msh, basix.ufl.element("Lagrange", msh.basix_cell(), 1, shape=(gdim,)))
+        self.Q = fem.functionspace(msh, basix.ufl.element("Lagrange", msh.basix_cell(), 1))
+        self.u = fem.Function(self.V, name="u")
+        self.g = fem.Function(self.V, name="g") if alpha is not None else None
+        self.fields = fields
+
+        msh.topology.create_connectivity(tdim - 1, tdim)
+        dirichlet = facet_tags.find(Boundary.GAMMA_D)
+        dofs = fem.locate_dofs_topological(self.V, tdim - 1, dirichlet)
+        self.bcs = [fem.dirichletbc(np.zeros(gdim, dtype=PETSc.ScalarType), dofs, self.V)]
+
+        ds = forms_primal.vertex_measure(msh, facet_tags)
+        n = ufl.FacetNormal(msh)
+        v, du = ufl.TestFunction(self.V), ufl.TrialFunction(self.V)
+        q = ufl.TestFunction(self.Q)
+        lm, mu = fields.lmbda, fields.mu
+        penalty = (fem.Constant(msh, PETSc.ScalarType(1.0 / delta)), n) if self.contact else None
+        robin = (alpha, self.g, ds(Boundary.INTERFACE)) if alpha is not None else None
+        kw = dict(lmbda=lm, mu=mu, penalty=penalty, ds_contact=ds(Boundary.GAMMA_C), robin=robin)
+        self._F = fem.form(forms_primal.contact_residual(self.u, v, f=fields.f, **kw))
+        self._J = fem.form(forms_primal.contact_jacobian(self.u, du, v, **kw))
+        load = ufl.inner(fields.f, v) * ufl.dx
+        if robin is not None:
+            load += ufl.inner(self.g, v) * ds(Boundary.INTERFACE)
+        self._load = fem.form(load)
+        self._a = fem.form(forms_primal.elastic_form(du, v, lm, mu))
+        self._m = fem.form(forms_primal.mass_form(du, v))
+        if self.contact:
+            self._indicator = fem.form(forms_primal.nodal_indicator(ufl.dot(self.u, n), q, ds(Boundary.GAMMA_C)))
+            self._weights = fem.form(q * ds(Boundary.GAMMA_C))
+            self._normals = fem.form(ufl.dot(v, n) * ds(Boundary.GAMMA_C))
+            self._reaction = fem.form(
+                ufl.inner(stress(strain(self.u), lm, mu), strain(v)) * ufl.dx - ufl.inner(fields.f, v) * ufl.dx
+            )
+
+        self.A = dolfinx.fem.petsc.create_matrix(self._J)
+        self.b = dolfinx.fem.petsc.create_vector(self.V)
+        self.du = dolfinx.fem.petsc.create_vector(self.V)
+        self.solver = DirectSolver(msh.comm, prefix=prefix)
+        self._K = dolfinx.fem.petsc.assemble_matrix(self._a)
+        self._K.assemble()
+        self._M = dolfinx.fem.petsc.assemble_matrix(self._m)
+        self._M.assemble()
+        self._work = self._K.createVecLeft()
+        self._linear_ready = False
+
+    # -- sizes ---------------------------------------------------------------------------
+    @property
+    def num_dofs(self) -> int:
+        """Global number of displacement DOFs."""
+        return self.V.dofmap.index_map.size_global * self.V.dofmap.index_map_bs
+
+    # -- assembly ------------------------------------------------------------------------
+    def _assemble_vector(self, form, out: PETSc.Vec) -> PETSc.Vec:
+        with out.localForm() as loc:
+            loc.set(0.0)
+        dolfinx.fem.petsc.assemble_vector(out, form)
+        out.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        dolfinx.fem.petsc.set_bc(out, self.bcs)
+        return out
+
+    def _residual(self) -> float:
+        self._assemble_vector(self._F, self.b)
+        return self.b.norm()
+
+    def _factorize(self) -> None:
+        self.A.zeroEntries()
+        dolfinx.fem.petsc.assemble_matrix(self.A, self._J, bcs=self.bcs)
+        self.A.assemble()
+        self.solver.set_operator(self.A)
+
+    def _step(self) -> None:
+        self.b.scale(-1.0)
+        self.solver.solve(self.b, self.du)
+        self.u.x.petsc_vec.axpy(1.0, self.du)
+        self.u.x.scatter_forward()
+
+    def _active_set(self) -> np.ndarray:
+        vec = dolfinx.fem.assemble_vector(self._indicator)
+        vec.scatter_reverse(dolfinx.la.InsertMode.add)
+        return vec.array[: self.Q.dofmap.index_map.size_local] > 0.0
+
+    def _same_sets(self, a: np.ndarray, b: np.ndarray) -> bool:
+        return self.mesh.comm.allreduce(bool(np.array_equal(a, b)), op=MPI.LAND)
+
+    def load_norm(self) -> float:
+        """‖b‖ of the load vector (f and Robin data)."""
+        return self._assemble_vector(self._load, self.b).norm()
+
+    # -- solve ---------------------------------------------------------------------------
+    def solve(self) -> NewtonHistory:
+        """Solve for u (warm-started from the current u); Newton when there is contact."""
+        if not self.contact:
+            if not self._linear_ready:
+                self._factorize()
+                self._linear_ready = True
+            self._residual()
+            self._step()
+            h = NewtonHistory()
+            h.active_sizes.append(0)
+            return h
+        return semismooth_newton(
+            residual=self._residual,
+            active_set=self._active_set,
+            same_sets=self._same_sets,
+            factorize=self._factorize,
+            step=self._step,
+            load_norm=self.load_norm(),
+            options=self.newton,
+            name=self.prefix.rstrip("_"),
+        )
+
+    # -- measures ------------------------------------------------------------------------
+    def energy_norm2(self, w: fem.Function) -> float:
+        """a(w, w) on this (sub)mesh."""
+        return quadratic_form(self._K, w.x.petsc_vec, self._work)
+
+    def l2_norm2(self, w: fem.Function) -> float:
+        """(w, w) on this (sub)mesh."""
+        return quadratic_form(self._M, w.x.petsc_vec, self._work)
+
+    def contact_profile(self) -> ContactProfile:
+        """u_c and the consistent nodal normal stress σ_c = (R·n_p)/w_p along Γ_C, on every rank."""
+        if not self.contact:
+            raise InputError("this subproblem has no contact boundary")
+        nloc = self.Q.dofmap.index_map.size_local
+        w = dolfinx.fem.assemble_vector(self._weights)
+        w.scatter_reverse(dolfinx.la.InsertMode.add)
+        N = dolfinx.fem.assemble_vector(self._normals)
+        N.scatter_reverse(dolfinx.la.InsertMode.add)
+        R = dolfinx.fem.assemble_vector(self._reaction)
+        R.scatter_reverse(dolfinx.la.InsertMode.add)
+        on = np.flatnonzero(w.array[:nloc] > 0.0)
+        gdim = self.mesh.geometry.dim
+        Nn = N.array.reshape(-1, gdim)[on]
+        normal = Nn / np.linalg.norm(Nn, axis=1)[:, None]
+        u_c = np.sum(self.u.x.array.reshape(-1, gdim)[on] * normal, axis=1)
+        sigma_c = np.sum(R.array.reshape(-1, gdim)[on] * normal, axis=1) / w.array[on]
+        y = self.Q.tabulate_dof_coordinates()[on, 1]
+        comm = self.mesh.comm
+        y, u_c, sigma_c = (np.concatenate(comm.allgather(a)) for a in (y, u_c, sigma_c))
+        order = np.argsort(y, kind="stable")
+        return ContactProfile(y[order], u_c[order], sigma_c[order])
+
+    def destroy(self) -> None:
+        """Free the PETSc objects (collective)."""
+        for obj in (self.A, self.b, self.du, self._K, self._M, self._work):
+            obj.destroy()
+        self.solver.destroy()
+
+
+@dataclass(slots=True)
+class PrimalSolution:
+    """The monolithic penalized solution with its Newton history and contact profile."""
+
+    u: fem.Function
+    newton: NewtonHistory
+    profile: ContactProfile
+    delta: float
+    dofs: int
+    time_s: float
+    problem: PrimalSubproblem
+
+
+def solve_primal_monolithic(
+    msh: dmesh.Mesh,
+    facet_tags: dmesh.MeshTags,
+    fields: MaterialFields,
+    *,
+    delta: float,
+    newton: NewtonOptions = NewtonOptions(),
+    prefix: str = "fc_primal_mono_",
+) -> PrimalSolution:
+    """Penalized primal contact on the whole mesh (METHOD §2) by semismooth Newton."""
+    start = time.perf_counter()
+    problem = PrimalSubproblem(msh, facet_tags, fields, delta=delta, alpha=None, prefix=prefix, newton=newton)
+    history = problem.solve()
+    elapsed = time.perf_counter() - start
+    profile = problem.contact_profile()
+    log.info(
+        "monolithic primal: %d Newton steps, active-set sizes %s, penetration %.3e, %.2f s",
+        history.steps, history.active_sizes, profile.penetration, elapsed,
+    )
+    return PrimalSolution(problem.u, history, profile, delta, problem.num_dofs, elapsed, problem)

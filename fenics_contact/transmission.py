@@ -1,0 +1,124 @@
+"""Interface (γ) bookkeeping: submeshes of Ω₁ and Ω₂, transfers, nodal Robin coefficient α.
+
+The Robin data are nodal on γ (vertex quadrature), so they are stored as values
+at the *owned* γ DOFs of a P1 space on the parent mesh, and copied into P1
+functions on each submesh when a subproblem needs them.
+"""
+
+from typing import NamedTuple
+
+import numpy as np
+import ufl
+from mpi4py import MPI
+
+import basix.ufl
+from dolfinx import fem, la
+from dolfinx import mesh as dmesh
+
+from fenics_contact.errors import InputError
+from fenics_contact.fields import SubmeshTransfer
+from fenics_contact.geometry import ContactMesh
+from fenics_contact.tags import Boundary, Subdomain
+
+__all__ = ["Part", "split_mesh", "InterfaceSpace", "robin_coefficient"]
+
+
+class Part(NamedTuple):
+    """A subdomain submesh with its facet tags and cell map to the parent."""
+
+    mesh: dmesh.Mesh
+    facet_tags: dmesh.MeshTags
+    cell_map: dmesh.EntityMap
+    vertex_map: dmesh.EntityMap
+
+
+def split_mesh(cm: ContactMesh) -> tuple[Part, Part]:
+    """Submeshes Ω₁ and Ω₂ of a tagged mesh, with the facet tags transferred."""
+    tdim = cm.mesh.topology.dim
+    parts = []
+    for sub in (Subdomain.OMEGA1, Subdomain.OMEGA2):
+        cells = cm.cell_tags.find(sub)
+        msh, cmap, vmap, _ = dmesh.create_submesh(cm.mesh, tdim, cells)
+        ft = dmesh.transfer_meshtags_to_submesh(cm.facet_tags, msh, vmap, cmap)
+        parts.append(Part(msh, ft, cmap, vmap))
+    return parts[0], parts[1]
+
+
+class InterfaceSpace:
+    """Nodal P1 data on γ: owned interface DOFs of a parent space and transfers to both parts."""
+
+    def __init__(self, cm: ContactMesh, parts: tuple[Part, Part], *, shape: tuple[int, ...]) -> None:
+        msh = cm.mesh
+        tdim = msh.topology.dim
+        self.comm = msh.comm
+        el = basix.ufl.element("Lagrange", msh.basix_cell(), 1, shape=shape)
+        self.V = fem.functionspace(msh, el)
+        self.bs = self.V.dofmap.index_map_bs
+        blocks = fem.locate_dofs_topological(self.V, tdim - 1, cm.facet_tags.find(Boundary.INTERFACE))
+        blocks = blocks[blocks < self.V.dofmap.index_map.size_local]
+        self.dofs = (self.bs * blocks[:, None] + np.arange(self.bs)).ravel()
+        self.spaces = [fem.functionspace(p.mesh, el) for p in parts]
+        self.transfers = [SubmeshTransfer(self.V, Vs, p.cell_map) for Vs, p in zip(self.spaces, parts)]
+        self._scratch = fem.Function(self.V)
+        self.coordinates = self.V.tabulate_dof_coordinates()[blocks]
+
+    @property
+    def size(self) -> int:
+        """Local number of owned interface values."""
+        return self.dofs.size
+
+    def to_part(self, values: np.ndarray, i: int, out: fem.Function) -> None:
+        """out (on part i) ← nodal interface values, zero off γ (collective)."""
+        self._scratch.x.array[:] = 0.0
+        self._scratch.x.array[self.dofs] = values
+        self._scratch.x.scatter_forward()
+        self.transfers[i].to_sub(self._scratch, out)
+
+    def from_part(self, u: fem.Function, i: int) -> np.ndarray:
+        """Owned interface values of a function on part i (collective)."""
+        self._scratch.x.array[:] = 0.0
+        self.transfers[i].to_parent(u, self._scratch)
+        return self._scratch.x.array[self.dofs].copy()
+
+    def from_parent(self, u: fem.Function) -> np.ndarray:
+        """Owned interface values of a function on the parent space."""
+        return u.x.array[self.dofs].copy()
+
+
+def robin_coefficient(alpha: float | str, E: fem.Function, space: "InterfaceSpace", h: float) -> np.ndarray:
+    """Nodal α on the owned interface DOFs.
+
+    ``alpha`` is a number (constant α), ``"h^-1/2"`` / ``"sqrt-h"`` (h^∓½), or
+    ``"cE"`` with c a number (e.g. ``"E"``, ``"2E"``): α_p = c·E_p with E_p the
+    area-weighted mean of E over the cells touching node p.
+    """
+    if isinstance(alpha, str):
+        text = alpha.strip().replace(" ", "")
+        if text in ("h^-1/2", "h^-0.5"):
+            value = h**-0.5
+        elif text in ("sqrt-h", "h^1/2", "h^0.5"):
+            value = h**0.5
+        elif text.endswith("E"):
+            c = float(text[:-1]) if text[:-1] else 1.0
+            if not c > 0:
+                raise InputError(f"the factor c in alpha = cE must be > 0, got {alpha!r}")
+            v = ufl.TestFunction(space.V)
+            ones = ufl.as_vector([1.0] * space.bs)
+            num = fem.assemble_vector(fem.form(E * ufl.dot(v, ones) * ufl.dx))
+            den = fem.assemble_vector(fem.form(ufl.dot(v, ones) * ufl.dx))
+            for vec in (num, den):
+                vec.scatter_reverse(la.InsertMode.add)
+            Ep = num.array[space.dofs] / den.array[space.dofs]
+            return c * Ep
+        else:
+            try:
+                value = float(text)
+            except ValueError:
+                raise InputError(
+                    f"cannot read alpha={alpha!r}: give a number, 'h^-1/2', 'sqrt-h' or 'cE' (e.g. 'E', '2E')"
+                ) from None
+    else:
+        value = float(alpha)
+    if not (np.isfinite(value) and value > 0):
+        raise InputError(f"the transmission coefficient must be > 0, got {alpha!r}")
+    return np.full(space.size, value)

@@ -76,6 +76,7 @@ class PrimalSubproblem:
         dirichlet = facet_tags.find(Boundary.GAMMA_D)
         dofs = fem.locate_dofs_topological(self.V, tdim - 1, dirichlet)
         self.bcs = [fem.dirichletbc(np.zeros(gdim, dtype=PETSc.ScalarType), dofs, self.V)]
+        self._dirichlet_q = fem.locate_dofs_topological(self.Q, tdim - 1, dirichlet)
 
         ds = forms_primal.vertex_measure(msh, facet_tags)
         n = ufl.FacetNormal(msh)
@@ -198,7 +199,9 @@ class PrimalSubproblem:
         N.scatter_reverse(dolfinx.la.InsertMode.add)
         R = dolfinx.fem.assemble_vector(self._reaction)
         R.scatter_reverse(dolfinx.la.InsertMode.add)
-        on = np.flatnonzero(w.array[:nloc] > 0.0)
+        on_contact = w.array[:nloc] > 0.0
+        on_contact[self._dirichlet_q[self._dirichlet_q < nloc]] = False  # clamped corners: not contact
+        on = np.flatnonzero(on_contact)
         gdim = self.mesh.geometry.dim
         Nn = N.array.reshape(-1, gdim)[on]
         normal = Nn / np.linalg.norm(Nn, axis=1)[:, None]

@@ -1,0 +1,23 @@
+# Two commands do everything on a fresh machine:
+#   make demo   - creates .venv if needed, runs a real contact simulation, writes results/
+#   make test   - creates .venv if needed, runs the test suite
+VENV ?= .venv
+OUT ?= results
+
+.PHONY: demo test env clean
+
+$(VENV)/.installed: pyproject.toml scripts/bootstrap.sh
+	VENV=$(VENV) scripts/bootstrap.sh
+
+env: $(VENV)/.installed
+
+demo: $(VENV)/.installed
+	$(VENV)/bin/fenics-contact run --model 1 --method primal --h 64 --H 16 --reference --out $(OUT)/model1-primal
+	$(VENV)/bin/fenics-contact run --model 2 --method primal --h 64 --H 16 --reference --out $(OUT)/model2-primal
+	@echo "Fields for ParaView: $(OUT)/*/fields.xdmf   plots: $(OUT)/*/*.png   summaries: $(OUT)/*/summary.md"
+
+test: $(VENV)/.installed
+	$(VENV)/bin/python -m pytest -ra
+
+clean:
+	rm -rf $(OUT) .pytest_cache

@@ -1,0 +1,168 @@
+"""Command line: ``fenics-contact run …`` (one simulation with fields, plots and a summary)."""
+
+import argparse
+import logging
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+from mpi4py import MPI
+
+from fenics_contact import __version__
+from fenics_contact.contact import NewtonOptions
+from fenics_contact.dd import IterationOptions
+from fenics_contact.errors import FenicsContactError
+from fenics_contact.fields import material_fields
+from fenics_contact.geometry import ContactMesh, read_mesh, unit_square
+from fenics_contact.io import cell_markers, stress_field, write_fields, write_summary
+from fenics_contact.models import get_model
+from fenics_contact.plots import plot_cell_field, plot_contact, plot_displacement, plot_history
+from fenics_contact.primal import default_penalty, solve_primal_monolithic
+from fenics_contact.primal_hybrid import solve_primal_hybrid
+from fenics_contact.tags import Subdomain
+
+__all__ = ["main", "build_parser"]
+
+log = logging.getLogger("fenics_contact")
+
+METHODS = ("primal",)
+
+
+class _RankZero(logging.Filter):
+    def filter(self, record: logging.LogRecord) -> bool:
+        return MPI.COMM_WORLD.rank == 0
+
+
+def _setup_logging(verbose: bool) -> None:
+    handler = logging.StreamHandler(sys.stdout)
+    handler.addFilter(_RankZero())
+    handler.setFormatter(logging.Formatter("%(message)s"))
+    root = logging.getLogger("fenics_contact")
+    root.handlers[:] = [handler]
+    root.setLevel(logging.DEBUG if verbose else logging.INFO)
+    root.propagate = False
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="fenics-contact", description=__doc__)
+    parser.add_argument("--version", action="version", version=f"fenics-contact {__version__}")
+    sub = parser.add_subparsers(dest="command", required=True)
+    run = sub.add_parser("run", help="run one contact simulation and write fields, plots and a summary")
+    run.add_argument("--model", type=int, choices=(1, 2), default=1, help="built-in test model")
+    run.add_argument("--method", choices=METHODS, default="primal", help="discretization / algorithm")
+    run.add_argument("--h", type=int, default=64, help="fine mesh size given as 1/h (e.g. 64)")
+    run.add_argument("--H", type=int, default=16, help="coarse size / strip width given as 1/H (e.g. 16)")
+    run.add_argument("--mesh", type=Path, help="a gmsh .msh file with the physical groups "
+                     "Omega1, Omega2, Gamma_D, Gamma_C, gamma (replaces the built-in unit square)")
+    run.add_argument("--alpha", default="E", help="Robin coefficient: a number, 'h^-1/2', 'sqrt-h' "
+                     "or 'cE' (α_p = c·E_p, nodal mean of E); default E")
+    run.add_argument("--accel", choices=("none", "anderson"), default="anderson",
+                     help="update of the interface data: the paper's plain update or Anderson acceleration")
+    run.add_argument("--tol", type=float, default=1e-6, help="relative-change tolerance (METHOD §6)")
+    run.add_argument("--max-iterations", type=int, default=2000)
+    run.add_argument("--delta", type=float, help="primal penalty δ (default 1e-3·h/E on Γ_C)")
+    run.add_argument("--E-high", type=float, default=1e3, help="E in the high-modulus pattern")
+    run.add_argument("--E-low", type=float, default=1.0, help="E elsewhere")
+    run.add_argument("--nu", type=float, default=0.35, help="Poisson ratio")
+    run.add_argument("--reference", action="store_true", help="also solve the monolithic problem and report e_u")
+    run.add_argument("--out", type=Path, default=Path("results"), help="output directory")
+    run.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
+    run.add_argument("-v", "--verbose", action="store_true")
+    return parser
+
+
+def _mesh(args) -> ContactMesh:
+    if args.mesh is not None:
+        return read_mesh(args.mesh, H=1.0 / args.H)
+    return unit_square(args.h, args.H)
+
+
+def _contact_modulus(cm: ContactMesh, E) -> float:
+    """Largest E in the contact strip Ω₂."""
+    cells = cm.cell_tags.find(Subdomain.OMEGA2)
+    local = float(np.max(E.x.array[cells])) if cells.size else 0.0
+    return cm.comm.allreduce(local, op=MPI.MAX)
+
+
+def run(args) -> int:
+    """Run one simulation; returns the exit code (0 converged, 3 not converged)."""
+    comm = MPI.COMM_WORLD
+    out: Path = args.out
+    model = get_model(args.model, E_high=args.E_high, E_low=args.E_low, nu=args.nu)
+    options = IterationOptions(tol=args.tol, max_iterations=args.max_iterations, accel=args.accel)
+    t0 = time.perf_counter()
+    cm = _mesh(args)
+    fields = material_fields(cm.mesh, model)
+    delta = args.delta if args.delta is not None else default_penalty(cm.h, _contact_modulus(cm, fields.E))
+    t_mesh = time.perf_counter() - t0
+    log.info("model %d (%s), h = %.4g, H = %s, method %s, alpha %s, accel %s, delta %.3g",
+             args.model, model.description, cm.h, cm.H, args.method, args.alpha, args.accel, delta)
+
+    reference = None
+    if args.reference:
+        reference = solve_primal_monolithic(cm.mesh, cm.facet_tags, fields, delta=delta)
+    result = solve_primal_hybrid(
+        cm, model, alpha=args.alpha, delta=delta, options=options, newton=NewtonOptions(),
+        reference=reference.u if reference is not None else None,
+    )
+    profile = result.profile
+    summary = {
+        "method": args.method,
+        "model": args.model,
+        "h": cm.h,
+        "H": cm.H,
+        "alpha": args.alpha,
+        "accel": args.accel,
+        "delta": delta,
+        "iterations": result.iterations,
+        "converged": result.converged,
+        "rel_tolerance": args.tol,
+        "final_rel_change": float(result.history.rel_changes[-1]),
+        "e_u": result.e_u,
+        "active_set": profile.active_interval(),
+        "penetration": profile.penetration,
+        "max_tensile_sigma_c": float(np.max(profile.sigma_c, initial=0.0)),
+        "newton_steps_total": int(sum(r.info["newton"] for r in result.history.records)),
+        "dofs": result.dofs,
+        "time_mesh_s": t_mesh,
+        "time_offline_s": result.time_offline_s,
+        "time_online_s": result.time_online_s,
+        "time_reference_s": reference.time_s if reference is not None else None,
+        "reference_newton_steps": reference.newton.steps if reference is not None else None,
+        "reference_active_set": reference.profile.active_interval() if reference is not None else None,
+        "mpi_ranks": comm.size,
+    }
+    if comm.rank == 0:
+        out.mkdir(parents=True, exist_ok=True)
+    comm.Barrier()
+    sigma = stress_field(result.u, fields.lmbda, fields.mu)
+    markers = cell_markers(cm.cell_tags, cm.mesh)
+    write_fields(out / "fields.xdmf", cm.mesh, [result.u, sigma, fields.E, markers])
+    if not args.no_plots:
+        plot_cell_field(fields.E, out / "E.png", title=f"Young's modulus, model {args.model}", log=True)
+        plot_displacement(result.u, out / "displacement.png", title=f"({args.method} hybrid)")
+        profiles = {f"{args.method} hybrid": profile}
+        if reference is not None:
+            profiles["monolithic"] = reference.profile
+        plot_contact(profiles, out / "contact.png", comm=comm)
+        plot_history({f"{args.method}, {args.accel}": result.history}, out / "history.png", comm=comm, tol=args.tol)
+    write_summary(out, summary, comm)
+    status = "converged" if result.converged else "NOT CONVERGED"
+    log.info("%s after %d iterations; e_u = %s; active set %s; summary in %s",
+             status, result.iterations, result.e_u, profile.active_interval(), out / "summary.json")
+    return 0 if result.converged else 3
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    _setup_logging(getattr(args, "verbose", False))
+    try:
+        return run(args)
+    except FenicsContactError as err:
+        log.error("error: %s", err)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

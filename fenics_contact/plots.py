@@ -1,0 +1,120 @@
+"""PNG figures: E map, displacement components, contact profiles, convergence history.
+
+Data are gathered to rank 0 (collective), which draws with matplotlib (Agg).
+"""
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+from matplotlib.colors import LogNorm  # noqa: E402
+from matplotlib.tri import Triangulation  # noqa: E402
+
+from dolfinx import fem  # noqa: E402
+
+__all__ = ["gather_cells", "plot_cell_field", "plot_displacement", "plot_contact", "plot_history"]
+
+
+def gather_cells(fn: fem.Function, component: int | None = None):
+    """(triangulation, values) on rank 0 for a P1 or DG0 function; (None, None) elsewhere.
+
+    P1 values are per cell corner (so Gouraud shading works), DG0 values per cell.
+    """
+    V = fn.function_space
+    msh = V.mesh
+    tdim = msh.topology.dim
+    ncells = msh.topology.index_map(tdim).size_local
+    xy = msh.geometry.x[msh.geometry.dofmap[:ncells]][:, :, :2]  # (N, 3, 2)
+    bs = V.dofmap.index_map_bs
+    dofs = V.dofmap.list[:ncells]
+    comp = 0 if component is None else component
+    vals = fn.x.array[dofs * bs + comp]  # (N, 3) for P1, (N, 1) for DG0
+    parts = msh.comm.gather((xy, vals), root=0)
+    if msh.comm.rank != 0:
+        return None, None
+    xy = np.concatenate([p[0] for p in parts])
+    vals = np.concatenate([p[1] for p in parts])
+    n = xy.shape[0]
+    tri = Triangulation(xy[:, :, 0].ravel(), xy[:, :, 1].ravel(), np.arange(3 * n).reshape(n, 3))
+    return tri, vals
+
+
+def _save(fig, path: Path) -> Path:
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+def plot_cell_field(fn: fem.Function, path: str | Path, *, title: str, log: bool = False) -> Path | None:
+    """A DG0 field (e.g. E) as a coloured map."""
+    tri, vals = gather_cells(fn)
+    if tri is None:
+        return None
+    fig, ax = plt.subplots(figsize=(5, 4.3))
+    vals = np.ravel(vals)
+    norm = LogNorm(vmin=vals.min(), vmax=vals.max()) if log and vals.min() > 0 and vals.max() > vals.min() else None
+    pc = ax.tripcolor(tri, facecolors=vals, norm=norm, cmap="viridis")
+    fig.colorbar(pc, ax=ax)
+    ax.set_aspect("equal")
+    ax.set_title(title)
+    ax.set_xlabel("x")
+    ax.set_ylabel("y")
+    return _save(fig, Path(path))
+
+
+def plot_displacement(u: fem.Function, path: str | Path, *, title: str = "") -> Path | None:
+    """Both displacement components of a P1 field, side by side."""
+    panels = [gather_cells(u, c) for c in range(2)]
+    if panels[0][0] is None:
+        return None
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4.3))
+    for ax, (tri, vals), name in zip(axes, panels, ("u_x", "u_y")):
+        pc = ax.tripcolor(tri, vals.ravel(), shading="gouraud", cmap="RdBu_r")
+        fig.colorbar(pc, ax=ax)
+        ax.set_aspect("equal")
+        ax.set_title(f"{name} {title}".strip())
+        ax.set_xlabel("x")
+        ax.set_ylabel("y")
+    return _save(fig, Path(path))
+
+
+def plot_contact(profiles: dict, path: str | Path, *, comm) -> Path | None:
+    """u_c and σ_c along Γ_C for one or more labelled ContactProfiles (cf. the paper's Fig. 5.4)."""
+    if comm.rank != 0:
+        return None
+    fig, axes = plt.subplots(1, 2, figsize=(10, 3.8))
+    styles = ["-", "--", ":", "-."]
+    for (label, prof), style in zip(profiles.items(), styles):
+        axes[0].plot(prof.y, prof.u_c, style, label=label)
+        axes[1].plot(prof.y, prof.sigma_c, style, label=label)
+    axes[0].set_title("normal displacement $u_c$ on $\\Gamma_C$")
+    axes[1].set_title("normal stress $\\sigma_c$ on $\\Gamma_C$")
+    for ax in axes:
+        ax.set_xlabel("y")
+        ax.axhline(0.0, color="k", lw=0.5)
+        ax.legend()
+    return _save(fig, Path(path))
+
+
+def plot_history(histories: dict, path: str | Path, *, comm, tol: float | None = None) -> Path | None:
+    """Relative change (solid) and true error (dashed, when known) per iteration (cf. Fig. 5.5)."""
+    if comm.rank != 0:
+        return None
+    fig, ax = plt.subplots(figsize=(6, 4))
+    for label, hist in histories.items():
+        its = np.arange(1, hist.iterations + 1)
+        line, = ax.semilogy(its, hist.rel_changes, label=f"{label}: rel. change")
+        errs = [r.info.get("e_u") for r in hist.records]
+        if all(e is not None for e in errs) and errs:
+            ax.semilogy(its, errs, "--", color=line.get_color(), label=f"{label}: $e_u$")
+    if tol is not None:
+        ax.axhline(tol, color="k", lw=0.5, ls=":")
+    ax.set_xlabel("iteration")
+    ax.set_ylabel("relative change / error")
+    ax.legend()
+    ax.grid(True, which="both", alpha=0.3)
+    return _save(fig, Path(path))

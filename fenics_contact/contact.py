@@ -86,10 +86,11 @@ def semismooth_newton(
     load_norm: float,
     options: NewtonOptions,
     name: str,
+    comm,
 ) -> NewtonHistory:
     """Generic semismooth Newton loop over callbacks.
 
-    ``residual()`` assembles F(u) and returns ‖F‖; ``active_set()`` returns the
+    ``comm`` sums the active-set sizes over ranks. ``residual()`` assembles F(u) and returns ‖F‖; ``active_set()`` returns the
     local active-set indicator of the current u; ``factorize()`` assembles and
     factorizes J at the current u; ``step()`` solves J du = −F and updates u.
     The Jacobian is refactorized only when the active set has changed.
@@ -105,7 +106,7 @@ def semismooth_newton(
             linearized_at = current
         step()
         current = active_set()
-        history.active_sizes.append(int(np.count_nonzero(current)))
+        history.active_sizes.append(comm.allreduce(int(np.count_nonzero(current))))
         if same_sets(current, linearized_at):
             final = residual()
             history.residuals.append(final)

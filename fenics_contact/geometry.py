@@ -125,7 +125,20 @@ def read_mesh(path: str | Path, *, comm: MPI.Comm = MPI.COMM_WORLD, H: float | N
     if not path.is_file():
         raise InputError(f"mesh file {path} does not exist")
     with gmsh_session():
-        data = dolfinx.io.gmsh.read_from_msh(str(path), comm, 0, gdim=2)
+        names = None
+        if comm.rank == 0:
+            gmsh.model.add("user mesh")
+            gmsh.merge(str(path))
+            names = {gmsh.model.getPhysicalName(d, t) for d, t in gmsh.model.getPhysicalGroups()}
+        names = comm.bcast(names, root=0)
+        # validate before the collective mesh construction (which aborts on inconsistent tags)
+        missing = [name for name in PHYSICAL_NAMES.values() if name not in names]
+        if missing:
+            raise MeshTagError(
+                f"{path} lacks the physical group(s) {missing}; it has {sorted(names)}. "
+                f"Required names: {list(PHYSICAL_NAMES.values())}"
+            )
+        data = dolfinx.io.gmsh.model_to_mesh(gmsh.model, comm, 0, gdim=2)
     msh = data.mesh
     tdim = msh.topology.dim
     cells = np.arange(msh.topology.index_map(tdim).size_local, dtype=np.int32)

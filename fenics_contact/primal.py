@@ -177,6 +177,7 @@ class PrimalSubproblem:
             load_norm=self.load_norm(),
             options=self.newton,
             name=self.prefix.rstrip("_"),
+            comm=self.mesh.comm,
         )
 
     # -- measures ------------------------------------------------------------------------

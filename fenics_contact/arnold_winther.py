@@ -1,0 +1,622 @@
+"""Lowest-order conforming Arnold–Winther stress space on triangles for DOLFINx.
+
+The Arnold–Winther (AW) element [Arnold & Winther 2002] is the space of symmetric
+2x2 tensors that are cubic on each triangle and whose divergence is linear,
+
+    X_T = {σ ∈ P3(T; S) : div σ ∈ P1(T; R²)},   dim X_T = 24,
+
+glued together so that the normal traction σn is continuous across edges
+(H(div)-conforming, strongly symmetric).  Its 24 local degrees of freedom are
+
+* at each vertex the three Cartesian components σ_xx, σ_xy, σ_yy (9),
+* on each edge e the averages (1/|e|)∫_e σn·n q ds and (1/|e|)∫_e σn·t q ds
+  for q ∈ {1, 2s-1}, s ∈ [0, 1] the arc-length parameter of e from its lower to
+  its higher *global* vertex number, t the unit tangent in that direction and
+  n = (t_y, -t_x) (12),
+* the three cell averages (1/|T|)∫_T σ_ij dx (3).
+
+Edge moments are normalised by |e| (they are averages) so that every DOF has
+the size of a stress value; this keeps the local 24x24 systems well conditioned.
+
+basix does not ship the element (it is not affine-equivalent), so forms are
+written on a discontinuous vector P3 space ``dg`` holding (σ_xx, σ_xy, σ_yy),
+and a sparse *prolongation* matrix ``P`` maps AW coefficients to DG
+coefficients.  For every cell the local nodal basis is computed in physical
+coordinates from a spanning set in scaled coordinates ξ = (x - x_T)/h_T:
+18 symmetric P2 tensors plus the 6 Airy stresses curl curl(ξ^a η^b), a+b = 5
+(homogeneous cubic, divergence-free), which together span exactly X_T.  The
+AW matrices are then Pᵀ A P, B P, Pᵀ b.
+
+Essential conditions σn·t = 0 and σn = 0 on straight facets are imposed by
+removing columns of ``P`` (edge moments dropped; vertex values restricted to
+the null space of the vertex constraints, which also handles corners).
+
+Only serial runs (one MPI rank) and affine triangles are supported.
+"""
+
+from __future__ import annotations
+
+try:  # the dolfinx-solver wheels need this import before dolfinx/petsc4py
+    import dolfinx_solver  # noqa: F401
+except ImportError:  # pragma: no cover - a source/conda DOLFINx needs nothing
+    pass
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import basix
+import basix.ufl
+import dolfinx
+import dolfinx.fem
+import dolfinx.fem.petsc
+import dolfinx.mesh
+import numpy as np
+import numpy.typing as npt
+import scipy.sparse as sp
+import ufl
+from petsc4py import PETSc
+
+__all__ = [
+    "ArnoldWintherSpace",
+    "MixedElasticitySolution",
+    "compliance",
+    "lame_parameters",
+    "local_nodal_basis",
+    "solve_mixed_elasticity",
+    "solve_saddle_point",
+    "symmetric_tensor",
+]
+
+# ---------------------------------------------------------------------------
+# Reference data
+# ---------------------------------------------------------------------------
+
+#: Local edge k of the basix reference triangle joins these local vertices.
+_EDGE_VERTICES = np.array([[1, 2], [0, 2], [0, 1]], dtype=np.int64)
+#: Monomials ξ^p η^q of degree ≤ 3.
+_MONOMIALS = np.array([(p, d - p) for d in range(4) for p in range(d, -1, -1)], dtype=np.int64)
+_NUM_LOCAL = 24
+
+
+def _gauss_legendre_01(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Gauss–Legendre points/weights on [0, 1], weights summing to 1."""
+    x, w = np.polynomial.legendre.leggauss(n)
+    return 0.5 * (x + 1.0), 0.5 * w
+
+
+_EDGE_S, _EDGE_W = _gauss_legendre_01(4)  # exact to degree 7 (integrand degree 4)
+_CELL_Q, _CELL_W = basix.make_quadrature(basix.CellType.triangle, 6)
+_CELL_W = _CELL_W / _CELL_W.sum()  # averages on the cell
+
+
+def _span_coefficients() -> np.ndarray:
+    """Monomial coefficients of the 24 spanning functions, shape (10, 3, 24).
+
+    Entry [m, j, k]: coefficient of monomial m in component j ∈ (xx, xy, yy)
+    of spanning function k.  Functions 0..17 are the symmetric P2 tensors, 18..23
+    the Airy stresses [[φ_ηη, -φ_ξη], [-φ_ξη, φ_ξξ]] / 20 of φ = ξ^a η^(5-a).
+    """
+    index = {tuple(m): i for i, m in enumerate(_MONOMIALS)}
+    C = np.zeros((len(_MONOMIALS), 3, _NUM_LOCAL))
+    k = 0
+    for m, (p, q) in enumerate(_MONOMIALS):
+        if p + q <= 2:
+            for j in range(3):
+                C[m, j, k] = 1.0
+                k += 1
+    for a in range(6):
+        b = 5 - a
+        if b >= 2:  # σ_xx = ∂ηη φ
+            C[index[(a, b - 2)], 0, k] = b * (b - 1) / 20.0
+        if a >= 1 and b >= 1:  # σ_xy = -∂ξη φ
+            C[index[(a - 1, b - 1)], 1, k] = -a * b / 20.0
+        if a >= 2:  # σ_yy = ∂ξξ φ
+            C[index[(a - 2, b)], 2, k] = a * (a - 1) / 20.0
+        k += 1
+    assert k == _NUM_LOCAL
+    return C
+
+
+_SPAN = _span_coefficients()
+
+
+def _eval_span(xi: np.ndarray) -> np.ndarray:
+    """Spanning functions at scaled points ξ (..., 2) -> values (..., 3, 24)."""
+    mono = xi[..., None, 0] ** _MONOMIALS[:, 0] * xi[..., None, 1] ** _MONOMIALS[:, 1]
+    return np.einsum("...m,mjk->...jk", mono, _SPAN)
+
+
+def _edge_frames(start: np.ndarray, end: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Weights (..., 3) giving σn·n and σn·t from (σ_xx, σ_xy, σ_yy) on edges start→end."""
+    d = end - start
+    t = d / np.linalg.norm(d, axis=-1, keepdims=True)
+    n = np.stack([t[..., 1], -t[..., 0]], axis=-1)
+    wn = np.stack([n[..., 0] ** 2, 2.0 * n[..., 0] * n[..., 1], n[..., 1] ** 2], axis=-1)
+    wt = np.stack(
+        [n[..., 0] * t[..., 0], n[..., 0] * t[..., 1] + n[..., 1] * t[..., 0], n[..., 1] * t[..., 1]],
+        axis=-1,
+    )
+    return wn, wt
+
+
+def _edge_moments(values: np.ndarray, wn: np.ndarray, wt: np.ndarray) -> np.ndarray:
+    """Edge DOFs from values (..., nq, 3, K) at the edge Gauss points -> (..., 4, K).
+
+    Order: σn·n against 1, 2s-1, then σn·t against 1, 2s-1.
+    """
+    q = np.stack([_EDGE_W, _EDGE_W * (2.0 * _EDGE_S - 1.0)])  # (2, nq)
+    snn = np.einsum("...j,...qjk->...qk", wn, values)
+    snt = np.einsum("...j,...qjk->...qk", wt, values)
+    return np.concatenate(
+        [np.einsum("lq,...qk->...lk", q, snn), np.einsum("lq,...qk->...lk", q, snt)], axis=-2
+    )
+
+
+def _edge_points(start: np.ndarray, end: np.ndarray) -> np.ndarray:
+    """Gauss points on edges start→end: (..., 2) -> (..., nq, 2)."""
+    return start[..., None, :] + _EDGE_S[:, None] * (end - start)[..., None, :]
+
+
+def _map_to_cells(vertices: np.ndarray, ref: np.ndarray) -> np.ndarray:
+    """Affine map of reference points (m, 2) into cells (n, 3, 2) -> (n, m, 2)."""
+    v0 = vertices[:, 0, :]
+    J = np.stack([vertices[:, 1] - v0, vertices[:, 2] - v0], axis=-1)  # (n, 2, 2)
+    return v0[:, None, :] + np.einsum("nij,mj->nmi", J, ref)
+
+
+def local_nodal_basis(
+    vertices: npt.NDArray[np.floating],
+    edge_flip: npt.NDArray[np.bool_],
+    points: npt.NDArray[np.floating],
+) -> np.ndarray:
+    """Values of the AW nodal basis of a batch of cells at reference points.
+
+    φ_i ∈ X_T with ℓ_j(φ_i) = δ_ij, evaluated at x = F_T(points).
+
+    Args:
+        vertices: (n, 3, 2) physical vertex coordinates, basix local order.
+        edge_flip: (n, 3) bool; True if local edge k (opposite vertex k) is
+            oriented from its higher to its lower local vertex (the orientation
+            must come from global vertex numbers so that neighbours agree).
+        points: (m, 2) points on the reference triangle.
+
+    Returns:
+        (n, m, 3, 24) array: component j ∈ (xx, xy, yy) of basis function i.
+        Local DOF order: vertex v comp j -> 3v+j; edge k moment l -> 9+4k+l
+        (l: nn·1, nn·(2s-1), nt·1, nt·(2s-1)); cell average comp j -> 21+j.
+    """
+    vertices = np.asarray(vertices, dtype=np.float64)
+    edge_flip = np.asarray(edge_flip, dtype=bool)
+    n = vertices.shape[0]
+    centre = vertices.mean(axis=1)  # (n, 2)
+    edges = vertices[:, _EDGE_VERTICES[:, 1]] - vertices[:, _EDGE_VERTICES[:, 0]]
+    h = np.linalg.norm(edges, axis=-1).max(axis=1)  # (n,)
+
+    def scaled(x: np.ndarray) -> np.ndarray:
+        shape = (n,) + (1,) * (x.ndim - 2) + (2,)
+        return (x - centre.reshape(shape)) / h.reshape(shape[:-1] + (1,))
+
+    D = np.empty((n, _NUM_LOCAL, _NUM_LOCAL))
+    # vertex values
+    D[:, 0:9, :] = _eval_span(scaled(vertices)).reshape(n, 9, _NUM_LOCAL)
+    # edge moments
+    a = np.where(edge_flip, _EDGE_VERTICES[:, 1], _EDGE_VERTICES[:, 0])  # (n, 3)
+    b = np.where(edge_flip, _EDGE_VERTICES[:, 0], _EDGE_VERTICES[:, 1])
+    rows = np.arange(n)[:, None]
+    start, end = vertices[rows, a], vertices[rows, b]  # (n, 3, 2)
+    wn, wt = _edge_frames(start, end)
+    values = _eval_span(scaled(_edge_points(start, end)))  # (n, 3, nq, 3, 24)
+    D[:, 9:21, :] = _edge_moments(values, wn, wt).reshape(n, 12, _NUM_LOCAL)
+    # cell averages
+    values = _eval_span(scaled(_map_to_cells(vertices, _CELL_Q)))  # (n, nq, 3, 24)
+    D[:, 21:24, :] = np.einsum("q,nqjk->njk", _CELL_W, values)
+
+    C = np.linalg.solve(D, np.broadcast_to(np.eye(_NUM_LOCAL), D.shape))  # span coeffs
+    values = _eval_span(scaled(_map_to_cells(vertices, np.asarray(points, dtype=np.float64))))
+    return values @ C[:, None, :, :]
+
+
+# ---------------------------------------------------------------------------
+# UFL helpers
+# ---------------------------------------------------------------------------
+
+
+def symmetric_tensor(s: ufl.core.expr.Expr) -> ufl.core.expr.Expr:
+    """(s0, s1, s2) ↦ [[s0, s1], [s1, s2]]."""
+    return ufl.as_matrix([[s[0], s[1]], [s[1], s[2]]])
+
+
+def lame_parameters(E: float | ufl.core.expr.Expr, nu: float | ufl.core.expr.Expr):
+    """Plane-strain Lamé parameters λ = Eν/((1+ν)(1-2ν)), μ = E/(2(1+ν))."""
+    return E * nu / ((1 + nu) * (1 - 2 * nu)), E / (2 * (1 + nu))
+
+
+def compliance(sigma: ufl.core.expr.Expr, lmbda, mu) -> ufl.core.expr.Expr:
+    """Plane-strain compliance Aσ = (σ - λ/(2λ+2μ) tr(σ) I) / (2μ)."""
+    return (sigma - lmbda / (2 * lmbda + 2 * mu) * ufl.tr(sigma) * ufl.Identity(2)) / (2 * mu)
+
+
+# ---------------------------------------------------------------------------
+# The space
+# ---------------------------------------------------------------------------
+
+
+def _as_form(form) -> dolfinx.fem.Form:
+    return form if isinstance(form, dolfinx.fem.Form) else dolfinx.fem.form(form)
+
+
+class ArnoldWintherSpace:
+    """Lowest-order Arnold–Winther stress space X_h ⊂ H(div; Ω; S) on a triangle mesh.
+
+    Forms are written on ``self.dg`` (DG P3, value shape (3,) = (σ_xx, σ_xy,
+    σ_yy)); use :meth:`stress` to obtain the symmetric tensor and
+    :meth:`assemble_matrix` / :meth:`assemble_vector` to obtain the AW
+    operators Pᵀ A P, B P, Pᵀ b.
+
+    Args:
+        mesh: serial mesh of affine triangles, gdim 2.
+        zero_tangential_facets: facet (edge) indices of straight edges on which
+            σn·t = 0 is imposed essentially (frictionless / sliding).
+        zero_traction_facets: facet indices on which σn = 0 is imposed
+            essentially (traction-free).
+    """
+
+    def __init__(
+        self,
+        mesh: dolfinx.mesh.Mesh,
+        *,
+        zero_tangential_facets: npt.ArrayLike | None = None,
+        zero_traction_facets: npt.ArrayLike | None = None,
+    ) -> None:
+        t0 = time.perf_counter()
+        if mesh.comm.size > 1:
+            raise ValueError("ArnoldWintherSpace supports serial runs only (one MPI rank).")
+        if mesh.topology.cell_type != dolfinx.mesh.CellType.triangle:
+            raise ValueError(f"Arnold–Winther needs a triangle mesh, got {mesh.topology.cell_type}.")
+        if mesh.geometry.dim != 2:
+            raise ValueError("Arnold–Winther needs a mesh with geometric dimension 2.")
+        if len(mesh.geometry.cmaps) != 1 or mesh.geometry.cmaps[0].degree != 1:
+            raise ValueError("Arnold–Winther needs an affine (degree 1) geometry.")
+        self.mesh = mesh
+        top = mesh.topology
+        top.create_connectivity(2, 0)
+        top.create_connectivity(2, 1)
+        top.create_connectivity(1, 0)
+        nc = top.index_map(2).size_local
+        nv = top.index_map(0).size_local
+        ne = top.index_map(1).size_local
+        c2v = top.connectivity(2, 0).array.reshape(-1, 3)[:nc].astype(np.int64)
+        c2e = top.connectivity(2, 1).array.reshape(-1, 3)[:nc].astype(np.int64)
+        e2v = top.connectivity(1, 0).array.reshape(-1, 2).astype(np.int64)
+        gdofs = mesh.geometry.dofmaps[0][:nc]
+        vx = np.empty((nv, 2))
+        vx[c2v.ravel()] = mesh.geometry.x[gdofs.ravel(), :2]
+        self._c2v, self._c2e, self._e2v, self._vx = c2v, c2e, e2v, vx
+        self.num_cells, self.num_vertices, self.num_edges = nc, nv, ne
+
+        # sanity: local edge k is opposite local vertex k (basix numbering)
+        loc = np.sort(c2v[:, _EDGE_VERTICES], axis=-1)  # (nc, 3, 2)
+        if not np.array_equal(loc, np.sort(e2v[c2e], axis=-1)):
+            raise RuntimeError("Unexpected local edge numbering in the mesh topology.")
+        gnum = top.index_map(0).local_to_global(np.arange(nv, dtype=np.int32)).astype(np.int64)
+        edge_flip = gnum[c2v[:, _EDGE_VERTICES[:, 0]]] > gnum[c2v[:, _EDGE_VERTICES[:, 1]]]
+        self._edge_start = np.where(
+            gnum[e2v[:, 0]] < gnum[e2v[:, 1]], e2v[:, 0], e2v[:, 1]
+        )  # global orientation per edge
+        self._edge_end = np.where(gnum[e2v[:, 0]] < gnum[e2v[:, 1]], e2v[:, 1], e2v[:, 0])
+
+        # DG P3 space for (σ_xx, σ_xy, σ_yy)
+        scalar = basix.ufl.element("DG", "triangle", 3)
+        self.dg = dolfinx.fem.functionspace(mesh, basix.ufl.blocked_element(scalar, shape=(3,)))
+        bel = scalar.basix_element
+        ref_pts = np.asarray(bel.points)
+        interp = np.asarray(bel.interpolation_matrix)  # (10, 10), identity for Lagrange
+
+        # local AW -> global AW numbering
+        self.num_dofs_full = 3 * nv + 4 * ne + 3 * nc
+        l2g = np.empty((nc, _NUM_LOCAL), dtype=np.int64)
+        l2g[:, 0:9] = (3 * c2v[:, :, None] + np.arange(3)).reshape(nc, 9)
+        l2g[:, 9:21] = (3 * nv + 4 * c2e[:, :, None] + np.arange(4)).reshape(nc, 12)
+        l2g[:, 21:24] = 3 * nv + 4 * ne + 3 * np.arange(nc)[:, None] + np.arange(3)
+        self._l2g = l2g
+
+        # per-cell nodal basis at the DG nodes -> DG coefficients
+        values = local_nodal_basis(vx[c2v], edge_flip, ref_pts)  # (nc, 10, 3, 24)
+        coeffs = np.einsum("pq,nqjk->npjk", interp, values)
+        dg_dofs = self.dg.dofmap.list[:nc].astype(np.int64)  # (nc, 10) blocks
+        rows = (3 * dg_dofs[:, :, None] + np.arange(3)).reshape(nc, 30)
+        n_dg = 3 * self.dg.dofmap.index_map.size_local
+        P = sp.csr_matrix(
+            (
+                coeffs.reshape(nc, 30, _NUM_LOCAL).ravel(),
+                (np.repeat(rows, _NUM_LOCAL, axis=1).ravel(), np.tile(l2g, (1, 30)).ravel()),
+            ),
+            shape=(n_dg, self.num_dofs_full),
+        )
+        # (duplicates cannot occur: each DG row belongs to one cell)
+        self._T = self._constraint_basis(zero_tangential_facets, zero_traction_facets)
+        self._P = P if self._T is None else (P @ self._T).tocsr()
+        self._P.sort_indices()
+        self._P_petsc: PETSc.Mat | None = None
+        self.build_time = time.perf_counter() - t0
+
+    # -- constraints ---------------------------------------------------------
+
+    def _constraint_basis(self, tangential, traction) -> sp.csr_matrix | None:
+        """Sparse T (reduced AW -> full AW) with orthonormal columns, or None.
+
+        On each listed edge e (unit normal n, tangent t) the moments of σn·t
+        (and of σn·n for traction-free edges) are dropped, and at its vertices
+        the value σ(v) is restricted to the null space of the rows
+        σ ↦ σn·t (resp. σ ↦ σn), stacked over all constrained edges at v.
+        """
+        sets = [
+            np.unique(np.asarray([] if f is None else f, dtype=np.int64)) for f in (tangential, traction)
+        ]
+        if all(f.size == 0 for f in sets):
+            return None
+        for facets in sets:
+            if facets.size and (facets.min() < 0 or facets.max() >= self.num_edges):
+                raise ValueError("Facet index out of range.")
+        nv, ne = self.num_vertices, self.num_edges
+        keep = np.ones(self.num_dofs_full, dtype=bool)
+        rows_at: dict[int, list[np.ndarray]] = {}
+        for facets, dropped, full in ((sets[0], (2, 3), False), (sets[1], (0, 1, 2, 3), True)):
+            if facets.size == 0:
+                continue
+            keep[(3 * nv + 4 * facets[:, None] + np.array(dropped)).ravel()] = False
+            start, end = self._vx[self._edge_start[facets]], self._vx[self._edge_end[facets]]
+            _, wt = _edge_frames(start, end)
+            d = end - start
+            t = d / np.linalg.norm(d, axis=-1, keepdims=True)
+            n0, n1 = t[:, 1], -t[:, 0]
+            for i, e in enumerate(facets):
+                if full:  # σn = (n0 σxx + n1 σxy, n0 σxy + n1 σyy)
+                    rows = np.array([[n0[i], n1[i], 0.0], [0.0, n0[i], n1[i]]])
+                else:  # σn·t
+                    rows = wt[i][None, :]
+                for v in self._e2v[e]:
+                    rows_at.setdefault(int(v), []).append(rows)
+        cv = np.fromiter(rows_at.keys(), dtype=np.int64, count=len(rows_at))
+        keep[(3 * cv[:, None] + np.arange(3)).ravel()] = False
+        kept = np.flatnonzero(keep)
+        r_idx, c_idx, vals = [kept], [np.arange(kept.size)], [np.ones(kept.size)]
+        ncol = kept.size
+        for v, rows in rows_at.items():
+            _, sv, vt = np.linalg.svd(np.vstack(rows))
+            null = vt[int(np.sum(sv > 1e-10 * sv.max())) :]  # (k, 3) orthonormal rows
+            null[np.abs(null) < 1e-14] = 0.0
+            for vec in null:
+                nz = np.flatnonzero(vec)
+                r_idx.append(3 * v + nz)
+                c_idx.append(np.full(nz.size, ncol))
+                vals.append(vec[nz])
+                ncol += 1
+        return sp.csr_matrix(
+            (np.concatenate(vals), (np.concatenate(r_idx), np.concatenate(c_idx))),
+            shape=(self.num_dofs_full, ncol),
+        )
+
+    # -- public API ----------------------------------------------------------
+
+    @property
+    def num_dofs(self) -> int:
+        """Number of (reduced) AW degrees of freedom."""
+        return self._P.shape[1]
+
+    @property
+    def prolongation(self) -> sp.csr_matrix:
+        """Sparse P: AW coefficients -> coefficients of ``self.dg`` (scipy CSR)."""
+        return self._P
+
+    @property
+    def prolongation_petsc(self) -> PETSc.Mat:
+        """P as a PETSc AIJ matrix (created once)."""
+        if self._P_petsc is None:
+            P = self._P
+            self._P_petsc = PETSc.Mat().createAIJ(
+                size=P.shape,
+                csr=(P.indptr.astype(PETSc.IntType), P.indices.astype(PETSc.IntType), P.data),
+                comm=self.mesh.comm,
+            )
+            self._P_petsc.assemble()
+        return self._P_petsc
+
+    @property
+    def constraint_basis(self) -> sp.csr_matrix:
+        """T: reduced AW coefficients -> full AW coefficients (identity if unconstrained)."""
+        return sp.identity(self.num_dofs_full, format="csr") if self._T is None else self._T
+
+    @staticmethod
+    def stress(s: ufl.core.expr.Expr) -> ufl.core.expr.Expr:
+        """Symmetric tensor [[s0, s1], [s1, s2]] of a function/argument on ``dg``."""
+        return symmetric_tensor(s)
+
+    def to_dg(self, coeffs: npt.ArrayLike, out: dolfinx.fem.Function | None = None) -> dolfinx.fem.Function:
+        """AW coefficient vector c ↦ DG P3 function with coefficients P c."""
+        out = dolfinx.fem.Function(self.dg) if out is None else out
+        n = self._P.shape[0]
+        out.x.array[:n] = self._P @ np.asarray(coeffs, dtype=np.float64)
+        out.x.scatter_forward()
+        return out
+
+    def interpolate(self, sigma: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
+        """AW interpolant: DOF functionals ℓ_i(σ) of a stress field, as (reduced) AW coefficients.
+
+        Args:
+            sigma: callable x -> components, x of shape (3, N) (dolfinx
+                convention, x[2] = 0), returning (3, N) = (σ_xx, σ_xy, σ_yy).
+        """
+        nv, ne, nc = self.num_vertices, self.num_edges, self.num_cells
+        vx = self._vx
+        start, end = vx[self._edge_start], vx[self._edge_end]
+        epts = _edge_points(start, end)  # (ne, nq, 2)
+        cpts = _map_to_cells(vx[self._c2v], _CELL_Q)  # (nc, nqc, 2)
+        pts = np.concatenate([vx, epts.reshape(-1, 2), cpts.reshape(-1, 2)])
+        x = np.zeros((3, pts.shape[0]))
+        x[:2] = pts.T
+        val = np.asarray(sigma(x), dtype=np.float64).reshape(3, -1).T  # (N, 3)
+        d = np.empty(self.num_dofs_full)
+        d[: 3 * nv] = val[:nv].ravel()
+        ev = val[nv : nv + epts.shape[0] * epts.shape[1]].reshape(ne, len(_EDGE_S), 3, 1)
+        wn, wt = _edge_frames(start, end)
+        d[3 * nv : 3 * nv + 4 * ne] = _edge_moments(ev, wn, wt).reshape(-1)
+        cv = val[nv + epts.shape[0] * epts.shape[1] :].reshape(nc, len(_CELL_W), 3)
+        d[3 * nv + 4 * ne :] = np.einsum("q,nqj->nj", _CELL_W, cv).ravel()
+        return d if self._T is None else self._T.T @ d
+
+    def is_stress_space(self, V) -> bool:
+        """True if V (python or C++ function space) is ``self.dg``."""
+        cpp = getattr(V, "_cpp_object", V)
+        return cpp == self.dg._cpp_object
+
+    def assemble_matrix(self, a) -> PETSc.Mat:
+        """Assemble a bilinear form; stress arguments are reduced: Pᵀ A P, Pᵀ A or A P."""
+        form = _as_form(a)
+        A = dolfinx.fem.petsc.assemble_matrix(form)
+        A.assemble()
+        test_s, trial_s = (self.is_stress_space(V) for V in form.function_spaces)
+        P = self.prolongation_petsc
+        if test_s and trial_s:
+            R = A.PtAP(P)
+        elif trial_s:
+            R = A.matMult(P)
+        elif test_s:
+            R = P.transposeMatMult(A)
+        else:
+            return A
+        A.destroy()
+        return R
+
+    def assemble_vector(self, L) -> np.ndarray:
+        """Assemble a linear form to a numpy array; on the stress space returns Pᵀ b."""
+        form = _as_form(L)
+        b = dolfinx.fem.petsc.assemble_vector(form)
+        b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        arr = b.getArray(readonly=True).copy()
+        b.destroy()
+        if self.is_stress_space(form.function_spaces[0]):
+            return self._P.T @ arr[: self._P.shape[0]]
+        return arr
+
+
+# ---------------------------------------------------------------------------
+# Solvers
+# ---------------------------------------------------------------------------
+
+
+def _to_scipy(A: PETSc.Mat) -> sp.csr_matrix:
+    """Copy a sequential PETSc AIJ matrix to scipy CSR."""
+    indptr, indices, data = A.getValuesCSR()
+    return sp.csr_matrix((data.copy(), indices.copy(), indptr.copy()), shape=A.getSize())
+
+
+def solve_saddle_point(
+    K: PETSc.Mat, B: PETSc.Mat, F: npt.ArrayLike, G: npt.ArrayLike
+) -> tuple[np.ndarray, np.ndarray, dict[str, float]]:
+    """Solve [[K, Bᵀ], [B, 0]] [x; y] = [F; G] by MUMPS LU.
+
+    Returns (x, y, timings) with timings 'block' (matrix build) and 'lu'.
+    """
+    t0 = time.perf_counter()
+    comm = K.getComm()
+    Ks, Bs = _to_scipy(K), _to_scipy(B)
+    # (a MatNest converted to AIJ keeps references into the nest; build the CSR directly)
+    Ms = sp.bmat([[Ks, Bs.T], [Bs, None]], format="csr")
+    Ms.sort_indices()
+    M = PETSc.Mat().createAIJ(
+        size=Ms.shape,
+        csr=(Ms.indptr.astype(PETSc.IntType), Ms.indices.astype(PETSc.IntType), Ms.data),
+        comm=comm,
+    )
+    M.assemble()
+    t1 = time.perf_counter()
+    rhs = M.createVecRight()
+    n = K.getSize()[0]
+    rhs.array[:n] = F
+    rhs.array[n:] = G
+    sol = M.createVecRight()
+    ksp = PETSc.KSP().create(comm)
+    ksp.setOperators(M)
+    ksp.setType("preonly")
+    pc = ksp.getPC()
+    pc.setType("lu")
+    pc.setFactorSolverType("mumps")
+    ksp.setFromOptions()
+    ksp.solve(rhs, sol)
+    reason = ksp.getConvergedReason()
+    if reason < 0:
+        raise RuntimeError(f"MUMPS LU failed (KSP reason {reason}).")
+    x = sol.array[:n].copy()
+    y = sol.array[n:].copy()
+    t2 = time.perf_counter()
+    for obj in (ksp, M, rhs, sol):
+        obj.destroy()
+    return x, y, {"block": t1 - t0, "lu": t2 - t1}
+
+
+@dataclass
+class MixedElasticitySolution:
+    """Result of :func:`solve_mixed_elasticity`."""
+
+    sigma: dolfinx.fem.Function  #: stress on ``space.dg`` (σ_xx, σ_xy, σ_yy)
+    u: dolfinx.fem.Function  #: displacement, DG P1 vector
+    sigma_coeffs: np.ndarray  #: AW coefficients of σ_h
+    timings: dict[str, float] = field(default_factory=dict)
+
+
+def solve_mixed_elasticity(
+    space: ArnoldWintherSpace,
+    *,
+    E: float = 1.0,
+    nu: float = 0.3,
+    f: ufl.core.expr.Expr | None = None,
+    u_D: ufl.core.expr.Expr | None = None,
+) -> MixedElasticitySolution:
+    """Hellinger–Reissner mixed elasticity with AW stresses and DG P1 displacements.
+
+    Find (σ, u) ∈ X_h × U_h: (Aσ, τ) + (div τ, u) = ⟨u_D, τn⟩_∂Ω,  (div σ, v) = -(f, v).
+    The displacement u_D enters naturally on ∂Ω (where the space imposes σn·t = 0
+    only its normal part acts, where σn = 0 nothing).  E, ν are plane-strain
+    constants; f, u_D are UFL vector expressions (None means zero).
+    """
+    timings: dict[str, float] = {"build_P": space.build_time}
+    mesh = space.mesh
+    U = dolfinx.fem.functionspace(mesh, ("DG", 1, (2,)))
+    Ec = dolfinx.fem.Constant(mesh, PETSc.ScalarType(E))
+    nuc = dolfinx.fem.Constant(mesh, PETSc.ScalarType(nu))
+    lmbda, mu = lame_parameters(Ec, nuc)
+    s, t = ufl.TrialFunction(space.dg), ufl.TestFunction(space.dg)
+    v = ufl.TestFunction(U)
+    S, T = space.stress(s), space.stress(t)
+    dx = ufl.dx(mesh)
+    t0 = time.perf_counter()
+    a = dolfinx.fem.form(ufl.inner(compliance(S, lmbda, mu), T) * dx)
+    b = dolfinx.fem.form(ufl.inner(ufl.div(S), v) * dx)
+    timings["forms"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    K = space.assemble_matrix(a)
+    timings["PtAP"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    B = space.assemble_matrix(b)
+    timings["BP"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    if u_D is not None:
+        n = ufl.FacetNormal(mesh)
+        F = space.assemble_vector(ufl.inner(u_D, ufl.dot(T, n)) * ufl.ds(mesh))
+    else:
+        F = np.zeros(space.num_dofs)
+    if f is not None:
+        G = space.assemble_vector(-ufl.inner(f, v) * dx)
+    else:
+        G = np.zeros(U.dofmap.index_map.size_local * 2)
+    timings["rhs"] = time.perf_counter() - t0
+    x, y, tsolve = solve_saddle_point(K, B, F, G)
+    timings.update(tsolve)
+    K.destroy()
+    B.destroy()
+    uh = dolfinx.fem.Function(U)
+    uh.x.array[: y.size] = y
+    uh.x.scatter_forward()
+    return MixedElasticitySolution(space.to_dg(x), uh, x, timings)

@@ -1,0 +1,54 @@
+"""Run the monolithic solve and Algorithm 1 on model 1 and print key numbers as JSON (rank 0).
+
+Used by test_mpi.py: once serially and once under ``mpiexec -n 2``; the numbers must agree.
+"""
+
+import json
+import sys
+
+import fenics_contact  # noqa: F401
+import numpy as np
+from dolfinx import fem
+
+from fenics_contact.dd import IterationOptions
+from fenics_contact.fields import material_fields
+from fenics_contact.geometry import unit_square
+from fenics_contact.models import get_model
+from fenics_contact.primal import default_penalty, solve_primal_monolithic
+from fenics_contact.primal_hybrid import solve_primal_hybrid
+
+n, n_coarse, model_number = (int(a) for a in sys.argv[1:4])
+cm = unit_square(n, n_coarse)
+model = get_model(model_number)
+fields = material_fields(cm.mesh, model)
+delta = default_penalty(cm.h, 1.0)
+ref = solve_primal_monolithic(cm.mesh, cm.facet_tags, fields, delta=delta)
+res = solve_primal_hybrid(cm, model, alpha="E", delta=delta, reference=ref.u,
+                          options=IterationOptions(tol=1e-8, accel="anderson"))
+
+
+def norm(u):
+    return float(np.sqrt(cm.comm.allreduce(fem.assemble_scalar(fem.form(fem_inner(u))), op=__import__("mpi4py").MPI.SUM)))
+
+
+def fem_inner(u):
+    import ufl
+
+    return ufl.inner(u, u) * ufl.dx
+
+
+out = {
+    "ranks": cm.comm.size,
+    "newton_steps": ref.newton.steps,
+    "active_sizes": ref.newton.active_sizes,
+    "ref_norm": norm(ref.u),
+    "hybrid_norm": norm(res.u),
+    "iterations": res.iterations,
+    "rel_changes": res.history.rel_changes.tolist(),
+    "e_u": res.e_u,
+    "active_set": res.profile.active_interval(),
+    "ref_active_set": ref.profile.active_interval(),
+    "sigma_c": ref.profile.sigma_c.tolist(),
+}
+if cm.comm.rank == 0:
+    print("RESULT " + json.dumps(out))

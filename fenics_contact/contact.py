@@ -81,7 +81,7 @@ def semismooth_newton(
     residual: Callable[[], float],
     active_set: Callable[[], np.ndarray],
     same_sets: Callable[[np.ndarray, np.ndarray], bool],
-    factorize: Callable[[], None],
+    factorize: Callable[[np.ndarray], bool],
     step: Callable[[], None],
     load_norm: float,
     options: NewtonOptions,
@@ -91,19 +91,17 @@ def semismooth_newton(
     """Generic semismooth Newton loop over callbacks.
 
     ``comm`` sums the active-set sizes over ranks. ``residual()`` assembles F(u) and returns ‖F‖; ``active_set()`` returns the
-    local active-set indicator of the current u; ``factorize()`` assembles and
-    factorizes J at the current u; ``step()`` solves J du = −F and updates u.
-    The Jacobian is refactorized only when the active set has changed.
+    local active-set indicator of the current u; ``factorize(active)`` makes the
+    factorization of J at the current u available, returning True if it had to
+    refactorize (the caller caches it by active set: J depends on u only through
+    the active set); ``step()`` solves J du = −F and updates u.
     """
     history = NewtonHistory()
-    linearized_at = None
     current = active_set()
     for _ in range(options.max_iterations):
         history.residuals.append(residual())
-        if linearized_at is None or not same_sets(current, linearized_at):
-            factorize()
-            history.factorizations += 1
-            linearized_at = current
+        history.factorizations += bool(factorize(current))
+        linearized_at = current
         step()
         current = active_set()
         history.active_sizes.append(comm.allreduce(int(np.count_nonzero(current))))

@@ -112,6 +112,7 @@ class PrimalSubproblem:
         self._M.assemble()
         self._work = self._K.createVecLeft()
         self._linear_ready = False
+        self._factorized_set: np.ndarray | None = None
 
     # -- sizes ---------------------------------------------------------------------------
     @property
@@ -131,6 +132,14 @@ class PrimalSubproblem:
     def _residual(self) -> float:
         self._assemble_vector(self._F, self.b)
         return self.b.norm()
+
+    def _factorize_for(self, active: np.ndarray) -> bool:
+        """Factorize J unless the cached factorization has the same active set."""
+        if self._factorized_set is not None and self._same_sets(active, self._factorized_set):
+            return False
+        self._factorize()
+        self._factorized_set = active.copy()
+        return True
 
     def _factorize(self) -> None:
         self.A.zeroEntries()
@@ -172,7 +181,7 @@ class PrimalSubproblem:
             residual=self._residual,
             active_set=self._active_set,
             same_sets=self._same_sets,
-            factorize=self._factorize,
+            factorize=self._factorize_for,
             step=self._step,
             load_norm=self.load_norm(),
             options=self.newton,

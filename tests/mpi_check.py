@@ -8,6 +8,9 @@ import sys
 
 import fenics_contact  # noqa: F401
 import numpy as np
+import ufl
+from mpi4py import MPI
+
 from dolfinx import fem
 
 from fenics_contact.dd import IterationOptions
@@ -28,13 +31,8 @@ res = solve_primal_hybrid(cm, model, alpha="E", delta=delta, reference=ref.u,
 
 
 def norm(u):
-    return float(np.sqrt(cm.comm.allreduce(fem.assemble_scalar(fem.form(fem_inner(u))), op=__import__("mpi4py").MPI.SUM)))
-
-
-def fem_inner(u):
-    import ufl
-
-    return ufl.inner(u, u) * ufl.dx
+    local = fem.assemble_scalar(fem.form(ufl.inner(u, u) * ufl.dx))
+    return float(np.sqrt(cm.comm.allreduce(local, op=MPI.SUM)))
 
 
 out = {

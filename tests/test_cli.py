@@ -1,0 +1,48 @@
+"""The command line: outputs, exit codes, clear errors."""
+
+import json
+
+import pytest
+from mpi4py import MPI
+
+from fenics_contact.cli import main
+
+pytestmark = pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="the CLI tests run serially")
+
+
+def test_run_writes_summary_fields_and_plots(tmp_path):
+    out = tmp_path / "run"
+    code = main(["run", "--model", "2", "--h", "16", "--H", "4", "--reference", "--out", str(out)])
+    assert code == 0
+    summary = json.loads((out / "summary.json").read_text())
+    for key in ("iterations", "converged", "rel_tolerance", "e_u", "active_set", "dofs",
+                "time_offline_s", "time_online_s", "time_reference_s"):
+        assert key in summary, key
+    assert summary["converged"] is True and summary["e_u"] < 1e-4
+    lo, hi = summary["active_set"]
+    assert 0.3 <= lo < hi <= 0.7
+    assert summary["dofs"]["omega1"] + summary["dofs"]["omega2"] - summary["dofs"]["interface"] == 2 * 17 * 17
+    for name in ("fields.xdmf", "fields.h5", "E.png", "displacement.png", "contact.png", "history.png", "summary.md"):
+        assert (out / name).stat().st_size > 0, name
+
+
+def test_not_converged_exits_nonzero(tmp_path):
+    out = tmp_path / "capped"
+    code = main(["run", "--h", "16", "--H", "4", "--accel", "none", "--max-iterations", "3",
+                 "--no-plots", "--out", str(out)])
+    assert code == 3
+    assert json.loads((out / "summary.json").read_text())["converged"] is False
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--nu", "0.5"], "Poisson"),
+    (["--E-low", "-1"], "Young"),
+    (["--H", "5"], "multiple"),
+    (["--alpha", "-3"], "transmission"),
+])
+def test_bad_input_is_a_clear_error(tmp_path, caplog, capsys, args, message):
+    out = tmp_path / "bad"
+    code = main(["run", "--h", "16", "--H", "4", "--no-plots", "--out", str(out), *args])
+    assert code == 2
+    assert message in capsys.readouterr().out
+    assert not (out / "summary.json").exists(), "no partial result may be written"

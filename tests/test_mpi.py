@@ -1,0 +1,47 @@
+"""The monolithic solve and Algorithm 1 give the serial answer under ``mpiexec -n 2``."""
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+SCRIPT = Path(__file__).with_name("mpi_check.py")
+pytestmark = [pytest.mark.mpi, pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="launches its own MPI job")]
+
+
+def _mpiexec() -> str | None:
+    local = Path(sys.executable).with_name("mpiexec")
+    return str(local) if local.exists() else shutil.which("mpiexec")
+
+
+def _run(prefix: list[str], *args: str) -> dict:
+    env = dict(os.environ, OMP_NUM_THREADS="1")
+    proc = subprocess.run([*prefix, sys.executable, str(SCRIPT), *args], capture_output=True, text=True,
+                          env=env, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    line = next(l for l in proc.stdout.splitlines() if l.startswith("RESULT "))
+    return json.loads(line[len("RESULT "):])
+
+
+@pytest.mark.skipif(_mpiexec() is None, reason="no mpiexec")
+@pytest.mark.parametrize("model", ["1", "2"])
+def test_two_ranks_match_serial(model):
+    serial = _run([], "32", "8", model)
+    parallel = _run([_mpiexec(), "-n", "2"], "32", "8", model)
+    assert serial["ranks"] == 1 and parallel["ranks"] == 2
+    assert parallel["newton_steps"] == serial["newton_steps"]
+    assert parallel["active_sizes"] == serial["active_sizes"]
+    assert parallel["iterations"] == serial["iterations"]
+    assert np.allclose(parallel["active_set"], serial["active_set"], rtol=0, atol=1e-12)
+    assert np.allclose(serial["active_set"], serial["ref_active_set"], rtol=0, atol=1e-12)
+    for key in ("ref_norm", "hybrid_norm"):
+        assert abs(parallel[key] - serial[key]) <= 1e-10 * serial[key], key
+    assert np.allclose(parallel["rel_changes"], serial["rel_changes"], rtol=1e-6, atol=1e-12)
+    assert np.allclose(parallel["sigma_c"], serial["sigma_c"], rtol=0, atol=1e-10 * np.abs(serial["sigma_c"]).max())
+    assert serial["e_u"] < 1e-6 and parallel["e_u"] < 1e-6

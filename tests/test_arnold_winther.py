@@ -227,6 +227,7 @@ def test_normal_continuity_and_div_p1(diagonal):
     scale = l2(ufl.avg(S), dS)
     jump_n = l2(ufl.jump(S, n), dS) / scale  # σ⁺n⁺ + σ⁻n⁻
     jump_tt = l2(ufl.dot(S("+") * t("+"), t("+")) - ufl.dot(S("-") * t("+"), t("+")), dS) / scale
+    print(f"\nrelative ‖[σn]‖ = {jump_n:.1e}, ‖[σtt]‖ = {jump_tt:.1e}")
     assert jump_n < 1e-11, jump_n
     assert jump_tt > 1e-2  # the space is not H1: the test above is not vacuous
 

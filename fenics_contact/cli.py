@@ -17,7 +17,7 @@ from fenics_contact.fields import material_fields
 from fenics_contact.geometry import ContactMesh, read_mesh, unit_square
 from fenics_contact.io import cell_markers, stress_field, write_fields, write_summary
 from fenics_contact.models import get_model
-from fenics_contact.plots import plot_cell_field, plot_contact, plot_displacement, plot_history
+from fenics_contact.plots import plot_cell_field, plot_contact, plot_displacement, plot_history, render_deformed
 from fenics_contact.primal import default_penalty, solve_primal_monolithic
 from fenics_contact.primal_hybrid import solve_primal_hybrid
 from fenics_contact.tags import Subdomain
@@ -142,6 +142,7 @@ def run(args) -> int:
     if not args.no_plots:
         plot_cell_field(fields.E, out / "E.png", title=f"Young's modulus, model {args.model}", log=True)
         plot_displacement(result.u, out / "displacement.png", title=f"({args.method} hybrid)")
+        render_deformed(result.u, out / "deformed.png", title=f"model {args.model}, {args.method} hybrid")
         profiles = {f"{args.method} hybrid": profile}
         if reference is not None:
             profiles["monolithic"] = reference.profile

@@ -15,7 +15,7 @@ from matplotlib.tri import Triangulation  # noqa: E402
 
 from dolfinx import fem  # noqa: E402
 
-__all__ = ["gather_cells", "plot_cell_field", "plot_displacement", "plot_contact", "plot_history"]
+__all__ = ["gather_cells", "plot_cell_field", "plot_displacement", "plot_contact", "plot_history", "render_deformed"]
 
 
 def gather_cells(fn: fem.Function, component: int | None = None):
@@ -118,3 +118,45 @@ def plot_history(histories: dict, path: str | Path, *, comm, tol: float | None =
     ax.legend()
     ax.grid(True, which="both", alpha=0.3)
     return _save(fig, Path(path))
+
+
+def render_deformed(u: fem.Function, path: str | Path, *, scale: float | None = None,
+                    title: str = "") -> Path | None:
+    """The mesh deformed by u (magnified), coloured by |u|, rendered off-screen with pyvista (rank 0)."""
+    import pyvista
+
+    from dolfinx import plot
+
+    V = u.function_space
+    msh = V.mesh
+    topology, cell_types, x = plot.vtk_mesh(V)
+    values = np.zeros((x.shape[0], 3))
+    values[:, : msh.geometry.dim] = u.x.array.reshape(x.shape[0], V.dofmap.index_map_bs)
+    parts = msh.comm.gather((topology, cell_types, x, values), root=0)
+    if msh.comm.rank != 0:
+        return None
+    offsets = np.cumsum([0] + [p[2].shape[0] for p in parts[:-1]])
+    cells = []
+    for (top, _, _, _), off in zip(parts, offsets):
+        top = top.reshape(-1, 4).copy()
+        top[:, 1:] += off
+        cells.append(top.ravel())
+    grid = pyvista.UnstructuredGrid(np.concatenate(cells), np.concatenate([p[1] for p in parts]),
+                                   np.concatenate([p[2] for p in parts]))
+    disp = np.concatenate([p[3] for p in parts])
+    grid.point_data["|u|"] = np.linalg.norm(disp, axis=1)
+    if scale is None:
+        umax = float(np.max(np.abs(disp)))
+        scale = 0.1 / umax if umax > 0 else 1.0
+    warped = grid.copy()
+    warped.points = grid.points + scale * disp
+    pyvista.OFF_SCREEN = True
+    plotter = pyvista.Plotter(off_screen=True, window_size=(900, 800))
+    plotter.add_mesh(grid, style="wireframe", color="lightgray", opacity=0.3)
+    plotter.add_mesh(warped, scalars="|u|", show_edges=False, cmap="viridis")
+    plotter.add_mesh(pyvista.Line((1.0, -0.02, 0.0), (1.0, 1.02, 0.0)), color="red", line_width=4)  # obstacle
+    plotter.add_text(f"{title} (displacement x{scale:.3g})".strip(), font_size=10)
+    plotter.view_xy()
+    plotter.screenshot(str(path))
+    plotter.close()
+    return Path(path)

@@ -22,7 +22,8 @@ def test_run_writes_summary_fields_and_plots(tmp_path):
     lo, hi = summary["active_set"]
     assert 0.3 <= lo < hi <= 0.7
     assert summary["dofs"]["omega1"] + summary["dofs"]["omega2"] - summary["dofs"]["interface"] == 2 * 17 * 17
-    for name in ("fields.xdmf", "fields.h5", "E.png", "displacement.png", "contact.png", "history.png", "summary.md"):
+    for name in ("fields.xdmf", "fields.h5", "E.png", "displacement.png", "deformed.png", "contact.png",
+                 "history.png", "summary.md"):
         assert (out / name).stat().st_size > 0, name
 
 

@@ -19,7 +19,7 @@ from fenics_contact.io import cell_markers, stress_field, write_fields, write_su
 from fenics_contact.models import get_model
 from fenics_contact.plots import plot_cell_field, plot_contact, plot_displacement, plot_history, render_deformed
 from fenics_contact.primal import default_penalty, solve_primal_monolithic
-from fenics_contact.primal_hybrid import solve_primal_hybrid
+from fenics_contact.primal_hybrid import DEFAULT_ALPHA, solve_primal_hybrid
 from fenics_contact.tags import Subdomain
 
 __all__ = ["main", "build_parser"]
@@ -55,8 +55,8 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--H", type=int, default=16, help="coarse size / strip width given as 1/H (e.g. 16)")
     run.add_argument("--mesh", type=Path, help="a gmsh .msh file with the physical groups "
                      "Omega1, Omega2, Gamma_D, Gamma_C, gamma (replaces the built-in unit square)")
-    run.add_argument("--alpha", default="E", help="Robin coefficient: a number, 'h^-1/2', 'sqrt-h' "
-                     "or 'cE' (α_p = c·E_p, nodal mean of E); default E")
+    run.add_argument("--alpha", default=DEFAULT_ALPHA, help="Robin coefficient: a number or a product of "
+                     "numbers, h^p, sqrt-h and E (E_p: mean E at the γ node), e.g. 1, h^-1/2, 2E*h^-1/2")
     run.add_argument("--accel", choices=("none", "anderson"), default="anderson",
                      help="update of the interface data: the paper's plain update or Anderson acceleration")
     run.add_argument("--tol", type=float, default=1e-6, help="relative-change tolerance (METHOD §6)")

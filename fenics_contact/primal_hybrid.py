@@ -25,7 +25,10 @@ from fenics_contact.models import TestModel
 from fenics_contact.primal import PrimalSubproblem
 from fenics_contact.transmission import InterfaceSpace, robin_coefficient, split_mesh
 
-__all__ = ["PrimalHybridStep", "HybridResult", "solve_primal_hybrid"]
+__all__ = ["PrimalHybridStep", "HybridResult", "solve_primal_hybrid", "DEFAULT_ALPHA"]
+
+#: Default transmission coefficient α_p = E_p h^(-1/2) (chosen from benchmarks/primal_hybrid_study.py).
+DEFAULT_ALPHA = "E*h^-1/2"
 
 log = logging.getLogger(__name__)
 
@@ -158,7 +161,7 @@ def solve_primal_hybrid(
     cm: ContactMesh,
     model: TestModel,
     *,
-    alpha: float | str = "E",
+    alpha: float | str = DEFAULT_ALPHA,
     delta: float,
     options: IterationOptions = IterationOptions(),
     newton: NewtonOptions = NewtonOptions(),

@@ -85,40 +85,50 @@ class InterfaceSpace:
         return u.x.array[self.dofs].copy()
 
 
-def robin_coefficient(alpha: float | str, E: fem.Function, space: "InterfaceSpace", h: float) -> np.ndarray:
-    """Nodal α on the owned interface DOFs.
+def _parse_factor(token: str, h: float) -> tuple[float, bool]:
+    """One factor of an α spelling: a number, 'E', 'sqrt-h' or 'h^p' → (value, is_E)."""
+    if token == "E":
+        return 1.0, True
+    if token == "sqrt-h":
+        return h**0.5, False
+    if token.startswith("h^"):
+        power = token[2:].strip("()")
+        num, _, den = power.partition("/")
+        return h ** (float(num) / float(den or 1)), False
+    if token.endswith("E"):
+        return float(token[:-1]), True
+    return float(token), False
 
-    ``alpha`` is a number (constant α), ``"h^-1/2"`` / ``"sqrt-h"`` (h^∓½), or
-    ``"cE"`` with c a number (e.g. ``"E"``, ``"2E"``): α_p = c·E_p with E_p the
-    area-weighted mean of E over the cells touching node p.
+
+def robin_coefficient(alpha: float | str, E: fem.Function, space: "InterfaceSpace", h: float) -> np.ndarray:
+    """Nodal α on the owned interface DOFs from a number or a product spelling.
+
+    ``alpha`` is a number, or a product of factors joined by ``*``: numbers,
+    ``h^p`` (e.g. ``h^-1/2``), ``sqrt-h`` (= h^½) and ``E``, where E stands for
+    E_p, the area-weighted mean of Young's modulus over the cells touching node p.
+    Examples: ``"1"``, ``"h^-1/2"``, ``"E"``, ``"2E"``, ``"E*h^-1/2"``.
     """
+    scale, with_E = 1.0, False
     if isinstance(alpha, str):
-        text = alpha.strip().replace(" ", "")
-        if text in ("h^-1/2", "h^-0.5"):
-            value = h**-0.5
-        elif text in ("sqrt-h", "h^1/2", "h^0.5"):
-            value = h**0.5
-        elif text.endswith("E"):
-            c = float(text[:-1]) if text[:-1] else 1.0
-            if not c > 0:
-                raise InputError(f"the factor c in alpha = cE must be > 0, got {alpha!r}")
-            v = ufl.TestFunction(space.V)
-            ones = ufl.as_vector([1.0] * space.bs)
-            num = fem.assemble_vector(fem.form(E * ufl.dot(v, ones) * ufl.dx))
-            den = fem.assemble_vector(fem.form(ufl.dot(v, ones) * ufl.dx))
-            for vec in (num, den):
-                vec.scatter_reverse(la.InsertMode.add)
-            Ep = num.array[space.dofs] / den.array[space.dofs]
-            return c * Ep
-        else:
-            try:
-                value = float(text)
-            except ValueError:
-                raise InputError(
-                    f"cannot read alpha={alpha!r}: give a number, 'h^-1/2', 'sqrt-h' or 'cE' (e.g. 'E', '2E')"
-                ) from None
+        try:
+            for token in alpha.replace(" ", "").split("*"):
+                value, is_E = _parse_factor(token, h)
+                scale *= value
+                with_E |= is_E
+        except (ValueError, ZeroDivisionError):
+            raise InputError(
+                f"cannot read alpha={alpha!r}: give a number or a product like 'h^-1/2', 'sqrt-h', 'E', '2E*h^-1/2'"
+            ) from None
     else:
-        value = float(alpha)
-    if not (np.isfinite(value) and value > 0):
+        scale = float(alpha)
+    if not (np.isfinite(scale) and scale > 0):
         raise InputError(f"the transmission coefficient must be > 0, got {alpha!r}")
-    return np.full(space.size, value)
+    if not with_E:
+        return np.full(space.size, scale)
+    v = ufl.TestFunction(space.V)
+    ones = ufl.as_vector([1.0] * space.bs)
+    num = fem.assemble_vector(fem.form(E * ufl.dot(v, ones) * ufl.dx))
+    den = fem.assemble_vector(fem.form(ufl.dot(v, ones) * ufl.dx))
+    for vec in (num, den):
+        vec.scatter_reverse(la.InsertMode.add)
+    return scale * num.array[space.dofs] / den.array[space.dofs]

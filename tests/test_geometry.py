@@ -124,3 +124,19 @@ def test_material_fields_validate_values():
         material_fields(cm.mesh, model_2(E_low=0.0))
     fields = material_fields(cm.mesh, model_2())
     assert isinstance(fields.E, fem.Function)
+
+
+def test_stored_mesh_is_the_builder_output():
+    """meshes/unit_square_n16_H4.msh is what meshes/make_unit_square.py writes (see meshes/README.md)."""
+    from pathlib import Path
+
+    stored = read_mesh(Path(__file__).parents[1] / "meshes" / "unit_square_n16_H4.msh", H=0.25)
+    built = unit_square(16, 4)
+    for t in Subdomain:
+        assert _count(stored.cell_tags, t, stored.comm) == _count(built.cell_tags, t, built.comm)
+    for t in Boundary:
+        assert _count(stored.facet_tags, t, stored.comm) == _count(built.facet_tags, t, built.comm)
+    xs = np.concatenate(stored.comm.allgather(stored.mesh.geometry.x[:, :2]))
+    xb = np.concatenate(built.comm.allgather(built.mesh.geometry.x[:, :2]))
+    order = lambda x: x[np.lexsort((np.round(x[:, 1], 9), np.round(x[:, 0], 9)))]  # noqa: E731
+    assert np.allclose(order(np.unique(np.round(xs, 12), axis=0)), order(np.unique(np.round(xb, 12), axis=0)))

@@ -57,7 +57,7 @@ def test_iteration_cap_reports_not_converged():
     assert res.history.rel_changes[-1] > 1e-6
 
 
-@pytest.mark.parametrize("alpha", [0.0, -1.0, "foo", "-2E", "0E", float("nan")])
+@pytest.mark.parametrize("alpha", [0.0, -1.0, "foo", "-2E", "0E", float("nan"), "E*h^x", "h^1/0", "E*-1"])
 def test_bad_transmission_coefficient(alpha):
     cm, model, delta, _ = _setup(8, 4, 1)
     with pytest.raises(InputError):
@@ -70,7 +70,8 @@ def test_bad_iteration_options(kwargs):
         IterationOptions(**kwargs)
 
 
-@pytest.mark.parametrize("alpha, expected", [(2.5, 2.5), ("h^-1/2", 4.0), ("sqrt-h", 0.25)])
+@pytest.mark.parametrize("alpha, expected", [(2.5, 2.5), ("h^-1/2", 4.0), ("sqrt-h", 0.25), ("2*h^-1/2", 8.0),
+                                             ("E*h^-1/2", 4.0), ("0.5E*h^(1/2)", 0.125)])
 def test_alpha_spellings(alpha, expected):
     from fenics_contact.transmission import InterfaceSpace, robin_coefficient, split_mesh
 

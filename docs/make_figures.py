@@ -1,0 +1,24 @@
+"""Regenerate the figures of the README/docs: the E maps of the two test models (h = 1/64).
+
+    .venv/bin/python docs/make_figures.py
+"""
+
+from pathlib import Path
+
+import fenics_contact  # noqa: F401
+from fenics_contact.fields import material_fields
+from fenics_contact.geometry import unit_square
+from fenics_contact.models import get_model
+from fenics_contact.plots import plot_cell_field
+
+OUT = Path(__file__).parent / "figures"
+
+if __name__ == "__main__":
+    OUT.mkdir(exist_ok=True)
+    cm = unit_square(64, 16)
+    for number in (1, 2):
+        model = get_model(number)
+        E = material_fields(cm.mesh, model).E
+        plot_cell_field(E, OUT / f"model{number}_E.png", title=f"Test model {number}: E ({model.description})",
+                        log=True)
+        print("written", OUT / f"model{number}_E.png")

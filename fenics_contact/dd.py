@@ -146,6 +146,10 @@ class IterationHistory:
         return np.array([r.rel_change for r in self.records])
 
 
+def _format(info: dict) -> str:
+    return "  ".join(f"{k} {v:.3e}" if isinstance(v, float) else f"{k} {v}" for k, v in info.items())
+
+
 def iterate(step: HybridStep, options: IterationOptions, *, name: str = "hybrid") -> IterationHistory:
     """Run g ← update(g, T(g)) until the relative change drops below ``options.tol``."""
     update = make_update(options.accel, step.comm, depth=options.depth)
@@ -159,7 +163,7 @@ def iterate(step: HybridStep, options: IterationOptions, *, name: str = "hybrid"
             raise ConvergenceError(f"{name}: the iteration produced non-finite values at iteration {k}")
         history.records.append(IterationRecord(k, change, step.record()))
         if k == 1 or k % 10 == 0 or change < options.tol:
-            log.info("%s it %4d  rel. change %.3e  %s", name, k, change, history.records[-1].info)
+            log.info("%s it %4d  rel. change %.3e  %s", name, k, change, _format(history.records[-1].info))
         if change < options.tol:
             history.converged = True
             break

@@ -123,6 +123,10 @@ def plot_history(histories: dict, path: str | Path, *, comm, tol: float | None =
 def render_deformed(u: fem.Function, path: str | Path, *, scale: float | None = None,
                     title: str = "") -> Path | None:
     """The mesh deformed by u (magnified), coloured by |u|, rendered off-screen with pyvista (rank 0)."""
+    import os
+
+    if not os.environ.get("DISPLAY"):  # off-screen OpenGL, no X server needed
+        os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
     import pyvista
 
     from dolfinx import plot

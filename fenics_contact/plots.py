@@ -10,7 +10,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
-from matplotlib.colors import LogNorm  # noqa: E402
+from matplotlib.colors import LogNorm, TwoSlopeNorm  # noqa: E402
 from matplotlib.tri import Triangulation  # noqa: E402
 
 from dolfinx import fem  # noqa: E402
@@ -73,7 +73,9 @@ def plot_displacement(u: fem.Function, path: str | Path, *, title: str = "") -> 
         return None
     fig, axes = plt.subplots(1, 2, figsize=(10, 4.3))
     for ax, (tri, vals), name in zip(axes, panels, ("u_x", "u_y")):
-        pc = ax.tripcolor(tri, vals.ravel(), shading="gouraud", cmap="RdBu_r")
+        vals = vals.ravel()
+        norm = TwoSlopeNorm(0.0, vals.min(), vals.max()) if vals.min() < 0.0 < vals.max() else None
+        pc = ax.tripcolor(tri, vals, shading="gouraud", cmap="RdBu_r", norm=norm)
         fig.colorbar(pc, ax=ax)
         ax.set_aspect("equal")
         ax.set_title(f"{name} {title}".strip())

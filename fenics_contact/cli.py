@@ -12,11 +12,11 @@ from mpi4py import MPI
 from fenics_contact import __version__
 from fenics_contact.contact import NewtonOptions
 from fenics_contact.dd import IterationOptions
-from fenics_contact.errors import FenicsContactError
+from fenics_contact.errors import FenicsContactError, InputError
 from fenics_contact.fields import material_fields
 from fenics_contact.geometry import ContactMesh, read_mesh, unit_square
 from fenics_contact.io import cell_markers, stress_field, write_fields, write_summary
-from fenics_contact.models import get_model
+from fenics_contact.models import get_model, pixel_field
 from fenics_contact.plots import plot_cell_field, plot_contact, plot_displacement, plot_history, render_deformed
 from fenics_contact.primal import default_penalty, solve_primal_monolithic
 from fenics_contact.primal_hybrid import DEFAULT_ALPHA, solve_primal_hybrid
@@ -65,11 +65,22 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--E-high", type=float, default=1e3, help="E in the high-modulus pattern")
     run.add_argument("--E-low", type=float, default=1.0, help="E elsewhere")
     run.add_argument("--nu", type=float, default=0.35, help="Poisson ratio")
+    run.add_argument("--E-map", type=Path, help="Young's modulus as a pixel array over the unit square "
+                     "(.npy, or text/.csv readable by numpy.loadtxt; row 0 = bottom); replaces the model's E map")
     run.add_argument("--reference", action="store_true", help="also solve the monolithic problem and report e_u")
     run.add_argument("--out", type=Path, default=Path("results"), help="output directory")
     run.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
     run.add_argument("-v", "--verbose", action="store_true")
     return parser
+
+
+def _load_array(path: Path) -> np.ndarray:
+    if not path.is_file():
+        raise InputError(f"{path} does not exist")
+    try:
+        return np.load(path) if path.suffix == ".npy" else np.loadtxt(path, delimiter="," if path.suffix == ".csv" else None)
+    except ValueError as err:
+        raise InputError(f"cannot read a pixel array from {path}: {err}") from None
 
 
 def _mesh(args) -> ContactMesh:
@@ -90,6 +101,9 @@ def run(args) -> int:
     comm = MPI.COMM_WORLD
     out: Path = args.out
     model = get_model(args.model, E_high=args.E_high, E_low=args.E_low, nu=args.nu)
+    if args.E_map is not None:
+        model = model.with_(youngs_modulus=pixel_field(_load_array(args.E_map)),
+                            description=f"E from {args.E_map.name}, nu={args.nu:g}")
     options = IterationOptions(tol=args.tol, max_iterations=args.max_iterations, accel=args.accel)
     t0 = time.perf_counter()
     cm = _mesh(args)

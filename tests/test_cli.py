@@ -47,3 +47,18 @@ def test_bad_input_is_a_clear_error(tmp_path, caplog, capsys, args, message):
     assert code == 2
     assert message in capsys.readouterr().out
     assert not (out / "summary.json").exists(), "no partial result may be written"
+
+
+def test_user_pixel_map_of_E(tmp_path):
+    """A homogeneous pixel map gives the same answer as the model with E_high = E_low."""
+    import numpy as np
+
+    np.save(tmp_path / "E.npy", np.full((8, 8), 5.0))
+    args = ["run", "--model", "1", "--h", "16", "--H", "4", "--no-plots"]
+    assert main([*args, "--E-map", str(tmp_path / "E.npy"), "--out", str(tmp_path / "a")]) == 0
+    assert main([*args, "--E-high", "5", "--E-low", "5", "--out", str(tmp_path / "b")]) == 0
+    a, b = (json.loads((tmp_path / d / "summary.json").read_text()) for d in "ab")
+    assert a["iterations"] == b["iterations"] and a["active_set"] == b["active_set"]
+    bad = tmp_path / "bad.csv"
+    bad.write_text("1,2\n3\n")
+    assert main([*args, "--E-map", str(bad), "--out", str(tmp_path / "c")]) == 2

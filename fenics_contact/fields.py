@@ -4,7 +4,6 @@ from collections.abc import Callable
 from typing import NamedTuple
 
 import numpy as np
-from mpi4py import MPI
 
 import basix.ufl
 from dolfinx import fem, la
@@ -54,8 +53,8 @@ class SubmeshTransfer:
     """Copies Lagrange data between a space on a submesh and the same space on its parent mesh."""
 
     def __init__(self, V_parent: fem.FunctionSpace, V_sub: fem.FunctionSpace, cell_map: dmesh.EntityMap) -> None:
-        sub_cells = np.arange(V_sub.mesh.topology.index_map(V_sub.mesh.topology.dim).size_local
-                              + V_sub.mesh.topology.index_map(V_sub.mesh.topology.dim).num_ghosts, dtype=np.int32)
+        cell_map_sub = V_sub.mesh.topology.index_map(V_sub.mesh.topology.dim)
+        sub_cells = np.arange(cell_map_sub.size_local + cell_map_sub.num_ghosts, dtype=np.int32)
         parent_cells = np.asarray(cell_map.sub_topology_to_topology(sub_cells, False), dtype=np.int32)
         bs = V_sub.dofmap.index_map_bs
         assert bs == V_parent.dofmap.index_map_bs

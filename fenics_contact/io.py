@@ -1,18 +1,20 @@
 """Output: ParaView fields (XDMF/HDF5) and the run summary (JSON + markdown table)."""
 
 import json
+import os
 import platform
 from pathlib import Path
 
 import numpy as np
-import ufl
 from mpi4py import MPI
 
 import basix.ufl
 import dolfinx.io
 from dolfinx import fem
 
-__all__ = ["write_fields", "write_summary", "cell_markers", "machine_description"]
+from fenics_contact.materials import strain, stress
+
+__all__ = ["write_fields", "write_summary", "cell_markers", "stress_field", "machine_description"]
 
 
 def cell_markers(cell_tags, msh) -> fem.Function:
@@ -36,8 +38,6 @@ def write_fields(path: str | Path, msh, functions: list[fem.Function]) -> Path:
 
 def stress_field(u: fem.Function, lmbda, mu, name: str = "sigma") -> fem.Function:
     """σ(u) as a DG0 tensor function (cellwise constant for P1 displacements)."""
-    from fenics_contact.materials import strain, stress
-
     msh = u.function_space.mesh
     gdim = msh.geometry.dim
     S = fem.functionspace(msh, basix.ufl.element("DG", msh.basix_cell(), 0, shape=(gdim, gdim)))
@@ -49,8 +49,6 @@ def stress_field(u: fem.Function, lmbda, mu, name: str = "sigma") -> fem.Functio
 
 def machine_description() -> str:
     """One line describing this machine (for benchmark tables)."""
-    import os
-
     return (
         f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
         f"{platform.system()} {platform.release()}, Python {platform.python_version()}, "

@@ -37,11 +37,6 @@ def default_penalty(h: float, E_contact: float, factor: float = 1.0e-3) -> float
     return factor * h / E_contact
 
 
-def _num_local_cells(msh: dmesh.Mesh) -> int:
-    imap = msh.topology.index_map(msh.topology.dim)
-    return imap.size_local + imap.num_ghosts
-
-
 class PrimalSubproblem:
     """a(u, v) [+ (1/δ)∫_ΓC (u·n)⁺ v·n] [+ α∫_γ u·v − ∫_γ g·v] = (f, v), u = 0 on Γ_D, P1."""
 
@@ -166,12 +161,16 @@ class PrimalSubproblem:
         return self._assemble_vector(self._load, self.b).norm()
 
     # -- solve ---------------------------------------------------------------------------
+    def factorize(self) -> None:
+        """Factorize the operator now (offline work for a linear problem; a no-op once done)."""
+        if not self._linear_ready:
+            self._factorize()
+            self._linear_ready = not self.contact
+
     def solve(self) -> NewtonHistory:
         """Solve for u (warm-started from the current u); Newton when there is contact."""
         if not self.contact:
-            if not self._linear_ready:
-                self._factorize()
-                self._linear_ready = True
+            self.factorize()
             self._residual()
             self._step()
             h = NewtonHistory()

@@ -79,8 +79,7 @@ class PrimalHybridStep:
 
     def prepare(self) -> None:
         """Offline work: factorize the linear Ω₁ operator once."""
-        self.sub[0]._factorize()
-        self.sub[0]._linear_ready = True
+        self.sub[0].factorize()
 
     def apply(self, g: np.ndarray) -> np.ndarray:
         n = self.interface.size

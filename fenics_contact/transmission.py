@@ -9,7 +9,6 @@ from typing import NamedTuple
 
 import numpy as np
 import ufl
-from mpi4py import MPI
 
 import basix.ufl
 from dolfinx import fem, la

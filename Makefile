@@ -3,6 +3,8 @@
 #   make test   - creates .venv if needed, runs the test suite
 VENV ?= .venv
 OUT ?= results
+# one thread per process: MUMPS/OpenBLAS threads spinning on 2 cores slow the sparse solves badly
+export OMP_NUM_THREADS ?= 1
 
 .PHONY: demo test env clean
 

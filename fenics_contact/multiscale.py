@@ -37,6 +37,7 @@ import logging
 import os
 import tempfile
 import time
+import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import NamedTuple
@@ -50,7 +51,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 from slepc4py import SLEPc
 
-from dolfinx import fem
+from dolfinx import fem, la
 from dolfinx import mesh as dmesh
 
 from fenics_contact import __version__, forms_primal
@@ -65,6 +66,7 @@ __all__ = [
     "FineOperators",
     "assemble_fine_operators",
     "local_spectral_problem",
+    "count_eigenvalues_below",
     "AuxiliarySpace",
     "build_auxiliary_space",
     "MultiscaleSpace",
@@ -73,7 +75,10 @@ __all__ = [
     "MultiscaleRobinSolver",
     "offline_key",
     "OfflineCache",
+    "offline_stage",
+    "local_matrices",
     "ALL_MODES",
+    "require_serial",
 ]
 
 log = logging.getLogger(__name__)
@@ -121,10 +126,11 @@ class CEMOptions:
         if not (0 < self.eig_tol < 1e-2):
             raise InputError(f"eig_tol must lie in (0, 1e-2), got {self.eig_tol}")
         if not self.target < 0:
-            raise InputError(f"the shift-and-invert target must be < 0 (the pencil is semi-definite), got {self.target}")
+            raise InputError(f"the shift-and-invert target must be < 0 (A is only semi-definite), got {self.target}")
 
 
-def _check_serial(comm: MPI.Comm) -> None:
+def require_serial(comm: MPI.Comm) -> None:
+    """Raise InputError on a communicator with more than one rank (the offline stage is serial)."""
     if comm.size > 1:
         raise InputError(
             f"the CEM-GMsFEM offline stage runs serially on the Ω₁ mesh; got a communicator with {comm.size} "
@@ -173,7 +179,7 @@ def coarse_grid(msh: dmesh.Mesh, cell_map: dmesh.EntityMap, coarse_cell: np.ndar
     index = np.asarray(coarse_cell)[parent]
     if np.any(index < 0):
         raise InputError("some Ω₁ cells lie in no coarse cell (coarse_cell = -1)")
-    n_coarse = int(round(1.0 / H))
+    n_coarse = round(1.0 / H)
     global_index, cell_coarse = np.unique(index, return_inverse=True)
     ij = np.stack([global_index % n_coarse, global_index // n_coarse], axis=1)
     order = np.argsort(cell_coarse, kind="stable")
@@ -211,7 +217,7 @@ class FineOperators:
     """SciPy matrices of the Ω₁ P1 space (no boundary conditions applied; ``free`` marks non-Γ_D DOFs).
 
     K: a(u, v); R: α∫_γ u·v; A = K + R; M: (u, v); S: s(u, v); G: ∫_γ u·v (vertex quadrature);
-    Kc/Sc/Gc: the same restricted to the cells of one colour (index = colour); F: (f, v).
+    Kc/Sc/Gc: the same restricted to the cells of one colour (index = colour), Ac = Kc + α Gc; F: (f, v).
     """
 
     V: fem.FunctionSpace
@@ -224,6 +230,7 @@ class FineOperators:
     Kc: list
     Sc: list
     Gc: list
+    Ac: list
     F: np.ndarray
     free: np.ndarray  #: bool, scalar DOF not on Γ_D
     gamma: np.ndarray  #: scalar DOFs on γ (sorted), the columns of N
@@ -247,7 +254,7 @@ def assemble_fine_operators(
 ) -> FineOperators:
     """Assemble every Ω₁ matrix the CEM construction needs (serial; colour-restricted copies included)."""
     msh = V.mesh
-    _check_serial(msh.comm)
+    require_serial(msh.comm)
     tdim = msh.topology.dim
     bs = V.dofmap.index_map_bs
     u, v = ufl.TrialFunction(V), ufl.TestFunction(V)
@@ -269,7 +276,7 @@ def assemble_fine_operators(
     R = (sp.diags(a) @ G).tocsr()
     M = _to_scipy(forms_primal.mass_form(u, v))
     F_vec = fem.assemble_vector(fem.form(ufl.inner(fields.f, v) * ufl.dx))
-    F_vec.scatter_reverse(dolfinx_la_add())
+    F_vec.scatter_reverse(la.InsertMode.add)
     F = F_vec.array.copy()
 
     n = K.shape[0]
@@ -294,15 +301,9 @@ def assemble_fine_operators(
         "cell_coarse": grid.global_index[grid.cell_coarse],
         "free": free,
     }
-    return FineOperators(V, K, R, (K + R).tocsr(), M, S, G, Kc, Sc, Gc, F, free, gamma, a, node_dofs,
+    Ac = [(Kc[c] + sp.diags(a) @ Gc[c]).tocsr() for c in range(4)]
+    return FineOperators(V, K, R, (K + R).tocsr(), M, S, G, Kc, Sc, Gc, Ac, F, free, gamma, a, node_dofs,
                          cell_nodes, key_data)
-
-
-def dolfinx_la_add():
-    """The additive insert mode of dolfinx.la (reverse scatters sum ghost contributions)."""
-    from dolfinx import la
-
-    return la.InsertMode.add
 
 
 # ---------------------------------------------------------------------------------------
@@ -318,30 +319,19 @@ def _petsc_aij(X: sp.spmatrix) -> PETSc.Mat:
     )
 
 
-def local_spectral_problem(
-    A: sp.spmatrix,
-    S: sp.spmatrix,
-    nev: int | None,
-    *,
-    eigensolver: str = "auto",
-    target: float = -1.0,
-    tol: float = 1.0e-12,
-) -> tuple[np.ndarray, np.ndarray]:
-    """The ``nev`` smallest eigenpairs of A φ = λ S φ (A ⪰ 0, S ≻ 0), by SLEPc on COMM_SELF.
+#: Extra eigenpairs requested from Krylov–Schur beyond the wanted ones (a margin for multiplicities).
+_EXTRA_PAIRS = 3
+#: Relative gap above the last wanted eigenvalue at which the inertia count is taken.
+_INERTIA_GAP = 1.0e-6
 
-    GHEP; Krylov–Schur with shift-and-invert about ``target`` < 0 (A − target·S is
-    SPD even when A has rigid-body modes), or LAPACK for small/complete problems.
-    Returns ascending eigenvalues and S-orthonormal eigenvectors (columns).
-    """
-    n = A.shape[0]
-    if n == 0:
-        return np.zeros(0), np.zeros((0, 0))
-    nev = n if nev is None else min(int(nev), n)
-    kind = eigensolver
-    if kind == "auto":
-        kind = "krylovschur" if (n >= 2 * nev + 16 and 3 * nev <= n) else "lapack"
-    Ap, Sp = _petsc_aij(A), _petsc_aij(S)
+
+def _eps_pairs(
+    Ap: PETSc.Mat, Sp: PETSc.Mat, nev: int, kind: str, *, target: float, tol: float, deflation: np.ndarray | None
+) -> tuple[np.ndarray, np.ndarray]:
+    """All converged eigenpairs of one SLEPc GHEP solve (Krylov–Schur + shift-and-invert, or LAPACK)."""
+    n = Ap.getSize()[0]
     eps = SLEPc.EPS().create(PETSc.COMM_SELF)
+    defl = []
     try:
         eps.setOperators(Ap, Sp)
         eps.setProblemType(SLEPc.EPS.ProblemType.GHEP)
@@ -355,6 +345,12 @@ def local_spectral_problem(
             ksp.getPC().setType(PETSc.PC.Type.LU)
             eps.setTarget(target)
             eps.setWhichEigenpairs(SLEPc.EPS.Which.TARGET_REAL)
+            if deflation is not None and deflation.shape[1]:
+                for col in deflation.T:
+                    vec = Ap.createVecRight()
+                    vec.array[:] = col
+                    defl.append(vec)
+                eps.setDeflationSpace(defl)
         else:
             eps.setType(SLEPc.EPS.Type.LAPACK)
             eps.setDimensions(n)
@@ -376,6 +372,87 @@ def local_spectral_problem(
         vr.destroy()
     finally:
         eps.destroy()
+        for vec in defl:
+            vec.destroy()
+    return values, vectors
+
+
+def count_eigenvalues_below(A: sp.spmatrix, S: sp.spmatrix, sigma: float) -> int:
+    """#{λ < σ} for A φ = λ S φ (S ≻ 0): the negative inertia of A − σS (MUMPS LDLᵀ, Sylvester's law)."""
+    X = _petsc_aij((A - sigma * S).tocsr())
+    ksp = PETSc.KSP().create(PETSc.COMM_SELF)
+    try:
+        ksp.setOperators(X)
+        ksp.setType(PETSc.KSP.Type.PREONLY)
+        pc = ksp.getPC()
+        pc.setType(PETSc.PC.Type.CHOLESKY)
+        pc.setFactorSolverType("mumps")
+        pc.setFactorSetUpSolverType()
+        pc.getFactorMatrix().setMumpsIcntl(24, 1)  # null-pivot detection: required for the inertia
+        ksp.setUp()
+        if pc.getFailedReason() != 0:
+            raise ConvergenceError(f"LDLᵀ of A − σS failed (PETSc reason {pc.getFailedReason()})")
+        nneg, _, _ = pc.getFactorMatrix().getInertia()
+    finally:
+        ksp.destroy()
+        X.destroy()
+    return int(nneg)
+
+
+def local_spectral_problem(
+    A: sp.spmatrix,
+    S: sp.spmatrix,
+    nev: int | None,
+    *,
+    eigensolver: str = "auto",
+    target: float = -1.0,
+    tol: float = 1.0e-12,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The ``nev`` smallest eigenpairs of A φ = λ S φ (A ⪰ 0, S ≻ 0), by SLEPc on COMM_SELF.
+
+    GHEP; Krylov–Schur with shift-and-invert about ``target`` < 0 (A − target·S is
+    SPD even when A has rigid-body modes), or LAPACK for small/complete problems.
+    A Krylov method can miss copies of a multiple eigenvalue (the three rigid-body
+    modes of a floating cell): the Krylov–Schur result is therefore checked by
+    Sylvester's inertia of A − σS just above the last wanted eigenvalue, and missing
+    pairs are searched again with the found ones deflated.
+    Returns ascending eigenvalues and S-orthonormal eigenvectors (columns).
+    """
+    n = A.shape[0]
+    if n == 0:
+        return np.zeros(0), np.zeros((0, 0))
+    nev = n if nev is None else min(int(nev), n)
+    kind = eigensolver
+    if kind == "auto":
+        kind = "krylovschur" if (n >= 2 * nev + 16 and 3 * nev <= n) else "lapack"
+    Ap, Sp = _petsc_aij(A), _petsc_aij(S)
+    try:
+        if kind == "lapack":
+            values, vectors = _eps_pairs(Ap, Sp, nev, kind, target=target, tol=tol, deflation=None)
+        else:
+            want = min(nev + _EXTRA_PAIRS, n)
+            values, vectors = _eps_pairs(Ap, Sp, want, kind, target=target, tol=tol, deflation=None)
+            for _ in range(10):
+                order = np.argsort(values, kind="stable")
+                values, vectors = values[order], vectors[:, order]
+                cut = values[nev - 1]
+                sigma = cut + _INERTIA_GAP * max(1.0, abs(cut))
+                below = count_eigenvalues_below(A, S, sigma)
+                have = int(np.count_nonzero(values < sigma))
+                if below <= have:
+                    break
+                log.debug("Krylov–Schur missed %d eigenpair(s) below %.3e; deflating and searching again",
+                          below - have, sigma)
+                more_v, more_x = _eps_pairs(
+                    Ap, Sp, min(below - have + _EXTRA_PAIRS, n - have), kind, target=target, tol=tol,
+                    deflation=vectors[:, values < sigma],
+                )
+                keep = values < sigma
+                values = np.concatenate([values[keep], more_v])
+                vectors = np.concatenate([vectors[:, keep], more_x], axis=1)
+            else:
+                raise ConvergenceError(f"local spectral problem (n = {n}): could not find all {nev} smallest pairs")
+    finally:
         Ap.destroy()
         Sp.destroy()
     order = np.argsort(values, kind="stable")[:nev]
@@ -387,7 +464,7 @@ def local_spectral_problem(
         L = np.linalg.cholesky(gram)
     except np.linalg.LinAlgError as err:
         raise ConvergenceError(f"local eigenvectors are linearly dependent in the s-inner product: {err}") from None
-    vectors = scipy.linalg.solve_triangular(L, vectors.T, lower=True).T
+    vectors = np.linalg.solve(L, vectors.T).T
     return values, vectors
 
 
@@ -437,21 +514,14 @@ def local_matrices(ops: FineOperators, grid: CoarseGrid, k: int) -> tuple[np.nda
     """D_k and the matrices of a_k(·,·) + α∫_{γ∩∂K_k} and s_k on it (colour restriction)."""
     c = int(grid.colors[k])
     D = _cell_dofs(ops, grid, k)
-    Ac = ops.Kc[c] + sp.diags(ops.alpha) @ ops.Gc[c]
-    A = Ac[D][:, D].tocsr()
-    S = ops.Sc[c][D][:, D].tocsr()
-    return D, A, S
+    return D, ops.Ac[c][D][:, D].tocsr(), ops.Sc[c][D][:, D].tocsr()
 
 
 def build_auxiliary_space(ops: FineOperators, grid: CoarseGrid, options: CEMOptions) -> AuxiliarySpace:
     """Solve every local spectral problem and keep l_k s-normalized eigenfunctions per coarse cell."""
     dofs, values, vectors, blocks = [], [], [], []
-    Ac = [(ops.Kc[c] + sp.diags(ops.alpha) @ ops.Gc[c]).tocsr() for c in range(4)]
     for k in range(grid.size):
-        c = int(grid.colors[k])
-        D = _cell_dofs(ops, grid, k)
-        A = Ac[c][D][:, D]
-        S = ops.Sc[c][D][:, D]
+        D, A, S = local_matrices(ops, grid, k)
         lam, Phi = local_spectral_problem(
             A, S, options.nbasis, eigensolver=options.eigensolver, target=options.target, tol=options.eig_tol
         )
@@ -544,15 +614,15 @@ def build_multiscale_space(
         ts = time.perf_counter()
         patch = grid.patch(i, options.layers)
         nodes = node_coarse.interior_nodes(patch, grid.size)
-        I = ops.node_dofs[nodes].ravel()
-        I = I[ops.free[I]]
+        inner = ops.node_dofs[nodes].ravel()
+        inner = inner[ops.free[inner]]
         cols = np.concatenate([aux.columns(k) for k in patch])
-        BI = B[I][:, cols]
-        lu = spla.splu((A[I][:, I] + BI @ BI.T).tocsc())
-        rhs = B[I][:, aux.columns(i)].toarray()
+        BI = B[inner][:, cols]
+        lu = spla.splu((A[inner][:, inner] + BI @ BI.T).tocsc(), permc_spec="MMD_AT_PLUS_A")  # SPD: symmetric ordering
+        rhs = B[inner][:, aux.columns(i)].toarray()
         psi = lu.solve(rhs)
-        psi_rows.append(np.repeat(I, psi.shape[1]))
-        psi_cols.append(np.tile(aux.columns(i), I.size))
+        psi_rows.append(np.repeat(inner, psi.shape[1]))
+        psi_cols.append(np.tile(aux.columns(i), inner.size))
         psi_vals.append(psi.ravel())
         t_basis += time.perf_counter() - ts
         # Robin correction: only coarse cells whose boundary meets γ contribute.
@@ -562,12 +632,12 @@ def build_multiscale_space(
         Gi = ops.Gc[c][D_all][:, D_all]
         on_gamma = D_all[np.flatnonzero(Gi.diagonal() > 0)]
         if on_gamma.size:
-            rhs_g = ops.Gc[c][I][:, on_gamma].toarray()
+            rhs_g = ops.Gc[c][inner][:, on_gamma].toarray()
             used = np.flatnonzero(np.any(rhs_g != 0.0, axis=0))
             if used.size:
                 corr = lu.solve(rhs_g[:, used])
-                n_rows.append(np.repeat(I, used.size))
-                n_cols.append(np.tile(gamma_pos[on_gamma[used]], I.size))
+                n_rows.append(np.repeat(inner, used.size))
+                n_cols.append(np.tile(gamma_pos[on_gamma[used]], inner.size))
                 n_vals.append(corr.ravel())
         t_corr += time.perf_counter() - ts
     n_ms = aux.size
@@ -581,8 +651,6 @@ def build_multiscale_space(
         )
     else:
         N = sp.csc_matrix((ops.size, ops.gamma.size))
-    if np.any(gamma_pos[ops.gamma] < 0):
-        raise AssertionError("γ DOF bookkeeping failed")
     times["basis"] = t_basis
     times["correction"] = t_corr
     times["total"] = times["eigen"] + time.perf_counter() - t0
@@ -615,14 +683,15 @@ class CoarseFactor:
         self.n = A.shape[0]
         self.rank = int(rank)
         self.keep = piv[: self.rank] - 1
-        self.L = np.tril(c[: self.rank, : self.rank])
+        self.L = np.asfortranarray(np.tril(c[: self.rank, : self.rank]))
         if self.rank < self.n:
             log.info("coarse matrix: rank %d of %d, dependent basis functions dropped", self.rank, self.n)
 
     def solve(self, b: np.ndarray) -> np.ndarray:
         bs = (b * self.scale[:, None]) if b.ndim == 2 else b * self.scale
-        y = scipy.linalg.solve_triangular(self.L, bs[self.keep], lower=True)
-        z = scipy.linalg.solve_triangular(self.L.T, y, lower=False)
+        z, info = scipy.linalg.lapack.dpotrs(self.L, bs[self.keep], lower=1)
+        if info != 0:
+            raise ConvergenceError(f"coarse solve failed (LAPACK dpotrs info {info})")
         x = np.zeros_like(bs)
         x[self.keep] = z
         return (x * self.scale[:, None]) if b.ndim == 2 else x * self.scale
@@ -767,7 +836,7 @@ class OfflineCache:
             if _checksum(arrays) != stored_sum:
                 return None, "invalid: checksum mismatch (corrupt file)"
             return _unpack(arrays, ops, grid), "loaded"
-        except Exception as err:  # unreadable, truncated or malformed file: rebuild
+        except (OSError, EOFError, ValueError, KeyError, zipfile.BadZipFile) as err:  # unreadable/malformed: rebuild
             return None, f"invalid: {type(err).__name__}: {err}"
 
     def save(self, key: str, space: MultiscaleSpace) -> Path:
@@ -781,6 +850,7 @@ class OfflineCache:
         try:
             with os.fdopen(fd, "wb") as fh:
                 np.savez(fh, **arrays)
+            os.chmod(tmp, 0o644)
             os.replace(tmp, path)
         except BaseException:
             if os.path.exists(tmp):

@@ -18,7 +18,7 @@ from mpi4py import MPI
 from dolfinx import fem
 
 from fenics_contact.contact import ContactProfile, NewtonOptions
-from fenics_contact.dd import IterationHistory, IterationOptions, iterate
+from fenics_contact.dd import HybridStep, IterationHistory, IterationOptions, iterate
 from fenics_contact.fields import material_fields
 from fenics_contact.geometry import ContactMesh
 from fenics_contact.models import TestModel
@@ -145,7 +145,7 @@ class HybridResult:
     time_offline_s: float
     time_online_s: float
     e_u: float | None
-    step: PrimalHybridStep
+    step: HybridStep  #: the step object (PrimalHybridStep, MultiscalePrimalHybridStep, ...)
 
     @property
     def converged(self) -> bool:

@@ -1,0 +1,290 @@
+"""Algorithm 3: CEM-GMsFEM in Ω₁, primal FEM with penalty contact in Ω₂ (METHOD §3).
+
+    Ω₁ (multiscale, linear): w ∈ V_ms,
+        a₁(w, v) + α∫_γ w·v = (f, v)_Ω₁ + ∫_γ g₁₂·v − [a₁(N g₁₂, v) + α∫_γ N g₁₂·v],   u₁ = w + N g₁₂
+    Ω₂ (fine, nonlinear): a₂(u₂, v) + (1/δ)∫_ΓC (u₂c)⁺ v_c + α∫_γ u₂·v = (f, v)_Ω₂ + ∫_γ g₂₁·v
+    update at every γ node p:  g₁₂ ← 2α u₂(p) − g₂₁(p),  g₂₁ ← 2α u₁(p) − g₁₂(p)
+
+Offline (``MultiscalePrimalHybridStep.__init__``): local spectral problems,
+relaxed CEM bases, the Robin correction N and the factorized coarse matrix.
+Online (``dd.iterate``): one coarse solve, one Ω₂ Newton solve and the update per
+iteration. The fixed point is the CEM-GMsFEM/FEM hybrid solution, whose
+difference to the fine monolithic solution is the multiscale error (it falls
+with the oversampling layers m and the number of local modes).
+"""
+
+import logging
+import time
+from pathlib import Path
+
+import numpy as np
+from mpi4py import MPI
+
+from dolfinx import fem
+
+from fenics_contact import multiscale
+from fenics_contact.contact import NewtonOptions
+from fenics_contact.dd import IterationOptions, iterate
+from fenics_contact.errors import InputError
+from fenics_contact.fields import material_fields
+from fenics_contact.geometry import ContactMesh
+from fenics_contact.models import TestModel
+from fenics_contact.primal import PrimalSubproblem
+from fenics_contact.primal_hybrid import HybridResult
+from fenics_contact.transmission import InterfaceSpace, Part, robin_coefficient, split_mesh
+
+__all__ = ["Omega1Multiscale", "build_omega1_multiscale", "MultiscalePrimalHybridStep", "solve_primal_ms_hybrid"]
+
+log = logging.getLogger(__name__)
+
+
+class Omega1Multiscale:
+    """The Ω₁ side of Algorithm 3: fine operators, coarse grid, multiscale space and the online solver."""
+
+    def __init__(
+        self,
+        cm: ContactMesh,
+        model: TestModel,
+        parts: tuple[Part, Part],
+        interface: InterfaceSpace,
+        alpha: np.ndarray,
+        *,
+        cem: multiscale.CEMOptions,
+        cache_dir: str | Path | None = None,
+    ) -> None:
+        multiscale.require_serial(cm.comm)
+        t0 = time.perf_counter()
+        part_index = 0
+        part = parts[part_index]
+        self.mesh = part.mesh
+        self.facet_tags = part.facet_tags
+        self.V = interface.spaces[part_index]
+        self.alpha_fn = fem.Function(self.V, name="alpha")
+        interface.to_part(alpha, part_index, self.alpha_fn)
+        self.fields = material_fields(part.mesh, model)
+        self.grid = multiscale.coarse_grid(part.mesh, part.cell_map, cm.coarse_cell, cm.H)
+        self.ops = multiscale.assemble_fine_operators(self.V, part.facet_tags, self.fields, self.alpha_fn, self.grid)
+        t_assembly = time.perf_counter() - t0
+        self.space, self.cache_status = multiscale.offline_stage(
+            self.ops, self.grid, cem, h=cm.h, cache_dir=cache_dir
+        )
+        self.solver = multiscale.MultiscaleRobinSolver(self.ops, self.space)
+        # interface value index (InterfaceSpace ordering) → position in ops.gamma
+        probe = fem.Function(self.V)
+        interface.to_part(np.arange(1, interface.size + 1, dtype=np.float64), part_index, probe)
+        value_of_dof = np.rint(probe.x.array[self.ops.gamma]).astype(np.int64) - 1
+        if np.any(value_of_dof < 0) or np.unique(value_of_dof).size != interface.size:
+            raise InputError("the Ω₁ γ DOFs do not match the interface DOFs one to one")
+        self.gamma_of_value = np.empty(interface.size, dtype=np.int64)
+        self.gamma_of_value[value_of_dof] = np.arange(self.ops.gamma.size)
+        self.times = {
+            "assembly": t_assembly,
+            "eigen": self.space.times.get("eigen", 0.0),
+            "basis": self.space.times.get("basis", 0.0),
+            "correction": self.space.times.get("correction", 0.0),
+            "cache_load": self.space.times.get("load", 0.0),
+            "coarse": self.solver.time_s,
+        }
+
+    @property
+    def num_coarse_dofs(self) -> int:
+        """dim V_ms."""
+        return self.space.size
+
+    @property
+    def num_fine_dofs(self) -> int:
+        """Scalar DOFs of the fine Ω₁ P1 space (Γ_D included, as PrimalSubproblem.num_dofs counts them)."""
+        return self.ops.size
+
+    def solve(self, g12: np.ndarray) -> np.ndarray:
+        """u₁ on every Ω₁ DOF for Robin data g₁₂ (InterfaceSpace ordering)."""
+        g = np.zeros(self.ops.gamma.size)
+        g[self.gamma_of_value] = g12
+        return self.solver.solve(g)
+
+    def interface_values(self, u1: np.ndarray) -> np.ndarray:
+        """u₁ at the interface DOFs, in InterfaceSpace ordering."""
+        return u1[self.ops.gamma[self.gamma_of_value]]
+
+
+def build_omega1_multiscale(
+    cm: ContactMesh,
+    model: TestModel,
+    *,
+    alpha: float | str = "E",
+    cem: multiscale.CEMOptions = multiscale.CEMOptions(),
+    cache_dir: str | Path | None = None,
+) -> tuple[Omega1Multiscale, InterfaceSpace, np.ndarray]:
+    """The Ω₁ multiscale solver on its own (for linear Robin problems and tests): (Ω₁ solver, interface, α)."""
+    multiscale.require_serial(cm.comm)
+    parts = split_mesh(cm)
+    interface = InterfaceSpace(cm, parts, shape=(cm.mesh.geometry.dim,))
+    alpha_values = robin_coefficient(alpha, material_fields(cm.mesh, model).E, interface, cm.h)
+    omega1 = Omega1Multiscale(cm, model, parts, interface, alpha_values, cem=cem, cache_dir=cache_dir)
+    return omega1, interface, alpha_values
+
+
+class MultiscalePrimalHybridStep:
+    """The transmission map T of Algorithm 3 (``dd.HybridStep`` protocol)."""
+
+    def __init__(
+        self,
+        cm: ContactMesh,
+        model: TestModel,
+        *,
+        alpha: float | str,
+        delta: float,
+        cem: multiscale.CEMOptions = multiscale.CEMOptions(),
+        newton: NewtonOptions = NewtonOptions(),
+        reference: fem.Function | None = None,
+        cache_dir: str | Path | None = None,
+    ) -> None:
+        multiscale.require_serial(cm.comm)
+        if cm.H is None:
+            raise InputError("Algorithm 3 needs a coarse grid: build the mesh with geometry.unit_square(n, n_coarse)")
+        start = time.perf_counter()
+        self.comm = cm.comm
+        self.parts = split_mesh(cm)
+        gdim = cm.mesh.geometry.dim
+        self.interface = InterfaceSpace(cm, self.parts, shape=(gdim,))
+        parent_fields = material_fields(cm.mesh, model)
+        self.alpha = robin_coefficient(alpha, parent_fields.E, self.interface, cm.h)
+        self.omega1 = Omega1Multiscale(
+            cm, model, self.parts, self.interface, self.alpha, cem=cem, cache_dir=cache_dir
+        )
+        alpha2 = fem.Function(self.interface.spaces[1], name="alpha")
+        self.interface.to_part(self.alpha, 1, alpha2)
+        p2 = self.parts[1]
+        self.omega2 = PrimalSubproblem(
+            p2.mesh, p2.facet_tags, material_fields(p2.mesh, model), delta=delta, alpha=alpha2,
+            prefix="fc_primal_ms_omega2_", newton=newton, V=self.interface.spaces[1],
+        )
+        self.u1 = fem.Function(self.interface.spaces[0], name="u1")
+        self._prev = [np.zeros(self.omega1.ops.size), np.zeros_like(self.omega2.u.x.array)]
+        self._diff2 = fem.Function(self.omega2.V)
+        self._change = np.inf
+        self._record: dict = {}
+        self.reference = None
+        if reference is not None:
+            r1 = fem.Function(self.interface.spaces[0])
+            r2 = fem.Function(self.interface.spaces[1])
+            self.interface.transfers[0].to_sub(reference, r1)
+            self.interface.transfers[1].to_sub(reference, r2)
+            self.reference = (r1.x.array.copy(), r2)
+            ops = self.omega1.ops
+            self._ref_l2 = ops.M.dot(r1.x.array).dot(r1.x.array) + self.omega2.l2_norm2(r2)
+            self._ref_energy = ops.K.dot(r1.x.array).dot(r1.x.array) + self.omega2.energy_norm2(r2)
+        self.offline_times = dict(self.omega1.times)
+        self.offline_times["setup"] = time.perf_counter() - start - sum(self.omega1.times.values())
+        self.time_offline_s = time.perf_counter() - start
+
+    # -- HybridStep protocol --------------------------------------------------------------
+    def initial_data(self) -> np.ndarray:
+        return np.zeros(2 * self.interface.size)
+
+    def apply(self, g: np.ndarray) -> np.ndarray:
+        n = self.interface.size
+        g12, g21 = g[:n], g[n:]
+        u1 = self.omega1.solve(g12)
+        self.u1.x.array[:] = u1
+        self.interface.to_part(g21, 1, self.omega2.g)
+        newton = self.omega2.solve()
+        u1g = self.omega1.interface_values(u1)
+        u2g = self.interface.from_part(self.omega2.u, 1)
+        self._measure()
+        self._record = {"newton": newton.steps, "active": newton.active_sizes[-1], "refactor": newton.factorizations}
+        if self.reference is not None:
+            self._record["e_u"] = self.error_l2()
+        return np.concatenate([2.0 * self.alpha * u2g - g21, 2.0 * self.alpha * u1g - g12])
+
+    def relative_change(self) -> float:
+        return self._change
+
+    def record(self) -> dict:
+        return dict(self._record)
+
+    # -- measures -------------------------------------------------------------------------
+    def _measure(self) -> None:
+        ops = self.omega1.ops
+        u1 = self.u1.x.array
+        d1 = u1 - self._prev[0]
+        self._diff2.x.array[:] = self.omega2.u.x.array - self._prev[1]
+        de = ops.K.dot(d1).dot(d1) + self.omega2.energy_norm2(self._diff2)
+        dl = ops.M.dot(d1).dot(d1) + self.omega2.l2_norm2(self._diff2)
+        ne = ops.K.dot(u1).dot(u1) + self.omega2.energy_norm2(self.omega2.u)
+        nl = ops.M.dot(u1).dot(u1) + self.omega2.l2_norm2(self.omega2.u)
+        self._prev[0][:] = u1
+        self._prev[1][:] = self.omega2.u.x.array
+        self._change = max(np.sqrt(de / ne), np.sqrt(dl / nl)) if ne > 0 and nl > 0 else np.inf
+
+    def _errors(self) -> tuple[float, float]:
+        if self.reference is None:
+            raise InputError("no reference solution was given")
+        r1, r2 = self.reference
+        ops = self.omega1.ops
+        d1 = self.u1.x.array - r1
+        self._diff2.x.array[:] = self.omega2.u.x.array - r2.x.array
+        l2 = ops.M.dot(d1).dot(d1) + self.omega2.l2_norm2(self._diff2)
+        en = ops.K.dot(d1).dot(d1) + self.omega2.energy_norm2(self._diff2)
+        return float(np.sqrt(l2 / self._ref_l2)), float(np.sqrt(en / self._ref_energy))
+
+    def error_l2(self) -> float:
+        """‖u_h − uⁿ‖_L² / ‖u_h‖_L² over Ω₁ ∪ Ω₂ against the fine monolithic reference."""
+        return self._errors()[0]
+
+    def error_energy(self) -> float:
+        """(Σ_i a_i(u_h − uⁿ, u_h − uⁿ))^½ / (Σ_i a_i(u_h, u_h))^½ against the fine monolithic reference."""
+        return self._errors()[1]
+
+    def glued(self, V: fem.FunctionSpace) -> fem.Function:
+        """u on the parent mesh: u₁ on Ω₁, u₂ on Ω₂ (u₂ on γ)."""
+        u = fem.Function(V, name="u")
+        self.interface.transfers[0].to_parent(self.u1, u)
+        self.interface.transfers[1].to_parent(self.omega2.u, u)
+        return u
+
+
+def solve_primal_ms_hybrid(
+    cm: ContactMesh,
+    model: TestModel,
+    *,
+    alpha: float | str = "E",
+    delta: float,
+    layers: int = 3,
+    nbasis: int | None = 3,
+    threshold: float | None = None,
+    options: IterationOptions = IterationOptions(),
+    newton: NewtonOptions = NewtonOptions(),
+    reference: fem.Function | None = None,
+    cache_dir: str | Path | None = None,
+) -> HybridResult:
+    """Algorithm 3 to the relative-change tolerance; e_u is measured against ``reference`` (fine monolithic).
+
+    ``dofs["omega1_ms"]`` is dim V_ms; ``time_offline_s`` covers assembly, eigenproblems,
+    bases, N and the coarse factorization (breakdown in ``result.step.offline_times``);
+    ``time_online_s`` the iteration.
+    """
+    cem = multiscale.CEMOptions(layers=layers, nbasis=nbasis, threshold=threshold)
+    step = MultiscalePrimalHybridStep(
+        cm, model, alpha=alpha, delta=delta, cem=cem, newton=newton, reference=reference, cache_dir=cache_dir
+    )
+    history = iterate(step, options, name=f"primal CEM hybrid (m={layers}, l={nbasis})")
+    V = reference.function_space if reference is not None else None
+    if V is None:
+        V = fem.functionspace(cm.mesh, ("Lagrange", 1, (cm.mesh.geometry.dim,)))
+    u = step.glued(V)
+    dofs = {
+        "omega1": step.omega1.num_fine_dofs,
+        "omega1_ms": step.omega1.num_coarse_dofs,
+        "omega2": step.omega2.num_dofs,
+        "interface": step.comm.allreduce(step.interface.size, op=MPI.SUM),
+    }
+    e_u = step.error_l2() if reference is not None else None
+    log.info(
+        "Algorithm 3: %d iterations (converged %s), dim V_ms = %d, offline %.2f s, online %.2f s, e_u %s",
+        history.iterations, history.converged, dofs["omega1_ms"], step.time_offline_s, history.time_s, e_u,
+    )
+    return HybridResult(
+        step.u1, step.omega2.u, u, history, step.omega2.contact_profile(), dofs,
+        step.time_offline_s, history.time_s, e_u, step,
+    )

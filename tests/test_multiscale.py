@@ -1,0 +1,272 @@
+"""CEM-GMsFEM in Ω₁ (multiscale.py) and Algorithm 3 (primal_ms.py).
+
+Unit checks: coarse grid and colouring, local spectral problems (SLEPc against
+dense LAPACK, residuals, rigid-body modes), π is an s-orthogonal projection,
+cache integrity. Verification: with all local modes and patches covering Ω₁ the
+multiscale space is the fine space (Robin problem reproduced to round-off, and
+Algorithm 3 lands on the fine monolithic solution); with 3 modes the error
+against the fine monolithic solution falls with the oversampling layers m.
+"""
+
+import gc
+import glob
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+import scipy.linalg
+
+import fenics_contact  # noqa: F401  (imports dolfinx_solver first)
+from mpi4py import MPI
+
+from fenics_contact import geometry, models, multiscale, primal, primal_ms
+from fenics_contact.dd import IterationOptions
+from fenics_contact.errors import InputError
+from fenics_contact.fields import material_fields
+from fenics_contact.primal import PrimalSubproblem
+
+pytestmark = pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="Algorithm 3 is serial")
+
+EPS = np.finfo(np.float64).eps
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _teardown():
+    yield
+    gc.collect()
+    MPI.COMM_WORLD.Barrier()
+
+
+@pytest.fixture(scope="module")
+def mesh_32_8():
+    return geometry.unit_square(32, 8)
+
+
+@pytest.fixture(scope="module")
+def omega1_32_8(mesh_32_8):
+    """Ω₁ of model 1 at h = 1/32, H = 1/8 with m = 2, l = 3."""
+    om, _, _ = primal_ms.build_omega1_multiscale(
+        mesh_32_8, models.get_model(1), cem=multiscale.CEMOptions(layers=2, nbasis=3)
+    )
+    return om
+
+
+def _robin_data(om: primal_ms.Omega1Multiscale) -> np.ndarray:
+    y = om.V.tabulate_dof_coordinates()[om.ops.gamma // 2, 1]
+    return np.where(om.ops.gamma % 2 == 0, np.sin(3.0 * y) + 0.3, 0.5 * np.cos(2.0 * y))
+
+
+# -- coarse grid ------------------------------------------------------------------------------
+def test_coarse_grid_and_colouring(omega1_32_8):
+    grid, ops = omega1_32_8.grid, omega1_32_8.ops
+    assert grid.size == 7 * 8  # Ω₁ = 7 coarse columns × 8 rows
+    assert all(c.size == 2 * 4 * 4 for c in grid.cells)  # 2 (H/h)² triangles per square
+    assert set(grid.ij[:, 0]) == set(range(7))
+    nodes = [set(np.unique(ops.cell_nodes[c]).tolist()) for c in grid.cells]
+    for a in range(grid.size):
+        for b in range(a + 1, grid.size):
+            if grid.colors[a] == grid.colors[b]:
+                assert not nodes[a] & nodes[b]
+    # a patch of m layers holds (2m+1)² cells away from the boundary
+    inner = np.flatnonzero((grid.ij[:, 0] == 3) & (grid.ij[:, 1] == 4))[0]
+    assert grid.patch(inner, 1).size == 9 and grid.patch(inner, 2).size == 25
+    # colour-restricted matrices sum to the full ones
+    assert abs(sum(ops.Kc) - ops.K).max() < 1e3 * EPS * abs(ops.K).max()
+
+
+# -- local spectral problems ------------------------------------------------------------------
+def test_local_eigenproblems(omega1_32_8):
+    om = omega1_32_8
+    aux = om.space.aux
+    interior = []
+    for k in range(om.grid.size):
+        D, A, S = multiscale.local_matrices(om.ops, om.grid, k)
+        lam, Phi = aux.eigenvalues[k], aux.vectors[k]
+        assert Phi.shape == (D.size, 3)
+        res = A @ Phi - (S @ Phi) * lam
+        scale = np.linalg.norm((A @ Phi), axis=0) + np.abs(lam) * np.linalg.norm(S @ Phi, axis=0) + 1.0
+        assert np.max(np.linalg.norm(res, axis=0) / scale) < 1e-9
+        assert np.allclose(Phi.T @ S @ Phi, np.eye(3), atol=1e-10)
+        # independent reference: dense LAPACK via SciPy
+        ref = scipy.linalg.eigh(A.toarray(), S.toarray(), eigvals_only=True, subset_by_index=[0, 2])
+        assert np.allclose(lam, ref, rtol=1e-8, atol=1e-9)
+        i, j = om.grid.ij[k]
+        if 0 < i < 6 and 0 < j < 7:
+            interior.append(lam)
+    # interior cells (no Γ_D, no γ): the three smallest modes are the rigid-body motions (λ = 0)
+    assert len(interior) == 5 * 6
+    assert np.max(np.abs(interior)) < 1e-9
+
+
+def test_krylov_schur_matches_lapack(omega1_32_8):
+    om = omega1_32_8
+    for k in (0, 20, om.grid.size - 1):
+        _, A, S = multiscale.local_matrices(om.ops, om.grid, k)
+        lam_ks, Phi_ks = multiscale.local_spectral_problem(A, S, 4, eigensolver="krylovschur")
+        lam_la, Phi_la = multiscale.local_spectral_problem(A, S, 4, eigensolver="lapack")
+        assert np.allclose(lam_ks, lam_la, rtol=1e-8, atol=1e-9)
+        # same spanned subspace (eigenvalues may be multiple): projector difference
+        P_ks, P_la = Phi_ks @ Phi_ks.T @ S, Phi_la @ Phi_la.T @ S
+        if lam_la[3] - lam_la[2] > 1e-6:
+            assert np.abs(P_ks - P_la).max() < 1e-6
+
+
+def test_projection_is_s_orthogonal(omega1_32_8):
+    om = omega1_32_8
+    aux = om.space.aux
+    rng = np.random.default_rng(1)
+    u = rng.standard_normal(om.ops.size) * om.ops.free
+    S_local = [multiscale.local_matrices(om.ops, om.grid, k)[2] for k in range(om.grid.size)]
+    pu = aux.project(u)
+    ppu = aux.project_local(pu, S_local)
+    for k, (a, b) in enumerate(zip(pu, ppu)):
+        assert np.allclose(a, b, atol=1e-12 * max(1.0, np.abs(a).max()))  # π² = π
+        D = aux.dofs[k]
+        r = u[D] - a
+        assert np.abs(aux.vectors[k].T @ (S_local[k] @ r)).max() < 1e-10 * np.abs(S_local[k] @ u[D]).max()
+    # π of an auxiliary function is itself
+    phi = np.zeros(om.ops.size)
+    phi[aux.dofs[7]] = aux.vectors[7][:, 1]
+    assert np.allclose(aux.project(phi)[7], aux.vectors[7][:, 1], atol=1e-12)
+
+
+def test_basis_supported_in_patch(omega1_32_8):
+    om = omega1_32_8
+    Psi = om.space.Psi.tocsc()
+    assert Psi.shape == (om.ops.size, 3 * om.grid.size)
+    assert not np.any(Psi[~om.ops.free].toarray())  # zero on Γ_D
+    k = np.flatnonzero((om.grid.ij[:, 0] == 3) & (om.grid.ij[:, 1] == 4))[0]
+    rows = Psi[:, om.space.aux.columns(k)].nonzero()[0]
+    x = om.V.tabulate_dof_coordinates()[rows // 2]
+    H = om.grid.H
+    # strictly inside K_{k,2} = [1, 6]H × [2, 7]H
+    assert x[:, 0].min() > 1 * H and x[:, 0].max() < 6 * H
+    assert x[:, 1].min() > 2 * H and x[:, 1].max() < 7 * H
+
+
+# -- verification: full space ------------------------------------------------------------------
+def test_all_modes_reproduce_fine_robin_solution():
+    """Patches = Ω₁ and every local mode kept: V_ms = V_h(Ω₁), so u₁ = w + Ng is the fine solution."""
+    cm = geometry.unit_square(16, 4)
+    model = models.get_model(1)
+    om, _, _ = primal_ms.build_omega1_multiscale(
+        cm, model, cem=multiscale.CEMOptions(layers=4, nbasis=multiscale.ALL_MODES)
+    )
+    assert om.solver.factor.rank == int(np.count_nonzero(om.ops.free))
+    g = _robin_data(om)
+    u_ms = om.solver.solve(g)
+    # independent fine solve with DOLFINx/PETSc (PrimalSubproblem, MUMPS)
+    part = om.ops.V.mesh
+    fine = PrimalSubproblem(part, om.facet_tags, om.fields, delta=None, alpha=om.alpha_fn,
+                            prefix="test_ms_fine_", V=om.V)
+    fine.g.x.array[:] = 0.0
+    fine.g.x.array[om.ops.gamma] = g
+    fine.solve()
+    ref = fine.u.x.array
+    err = np.sqrt((u_ms - ref) @ om.ops.K @ (u_ms - ref) / (ref @ om.ops.K @ ref))
+    assert err < 1e-10
+    fine.destroy()
+
+
+def test_algorithm3_full_space_matches_monolithic():
+    """All modes, global patches: the Algorithm 3 fixed point is the fine monolithic solution."""
+    cm = geometry.unit_square(16, 4)
+    model = models.get_model(2)
+    fields = material_fields(cm.mesh, model)
+    delta = primal.default_penalty(cm.h, 1.0)
+    ref = primal.solve_primal_monolithic(cm.mesh, cm.facet_tags, fields, delta=delta)
+    res = primal_ms.solve_primal_ms_hybrid(
+        cm, model, delta=delta, layers=4, nbasis=None, reference=ref.u, options=IterationOptions(tol=1e-11)
+    )
+    assert res.converged
+    assert res.e_u < 1e-9
+    assert res.step.error_energy() < 1e-8
+    assert res.dofs["omega1_ms"] > res.dofs["omega1"]  # redundant spanning set, dependent columns dropped
+
+
+# -- verification: localization -----------------------------------------------------------------
+@pytest.mark.parametrize("number, gain", [(1, 0.15), (2, 0.5)])
+def test_algorithm3_error_decreases_with_layers(mesh_32_8, number, gain):
+    cm = mesh_32_8
+    model = models.get_model(number)
+    fields = material_fields(cm.mesh, model)
+    delta = primal.default_penalty(cm.h, 1.0)
+    ref = primal.solve_primal_monolithic(cm.mesh, cm.facet_tags, fields, delta=delta)
+    errors = []
+    for m in (1, 2, 3, 4):
+        res = primal_ms.solve_primal_ms_hybrid(cm, model, delta=delta, layers=m, nbasis=3, reference=ref.u)
+        assert res.converged and res.iterations < 200
+        assert res.dofs["omega1_ms"] == 3 * 56
+        assert res.time_offline_s > 0 and res.time_online_s > 0
+        assert res.profile.active_interval() == pytest.approx(ref.profile.active_interval(), abs=cm.h + 1e-9)
+        errors.append((res.e_u, res.step.error_energy()))
+    e_u, e_a = np.array(errors).T
+    assert np.all(np.diff(e_u) < 0) and np.all(np.diff(e_a) < 0)
+    assert e_u[-1] < gain * e_u[0]
+
+
+# -- offline cache --------------------------------------------------------------------------------
+def test_offline_cache(tmp_path, mesh_32_8, caplog):
+    cm = mesh_32_8
+    model = models.get_model(2)
+    cem = multiscale.CEMOptions(layers=1, nbasis=2)
+
+    def build():
+        return primal_ms.build_omega1_multiscale(cm, model, cem=cem, cache_dir=tmp_path)[0]
+
+    first = build()
+    assert first.cache_status == "built"
+    files = glob.glob(str(tmp_path / "cem_*.npz"))
+    assert len(files) == 1
+    second = build()
+    assert second.cache_status == "loaded"
+    g = _robin_data(first)
+    assert np.array_equal(first.solver.solve(g), second.solver.solve(g))
+    # corrupt one stored value: detected by the checksum, rebuilt, never used
+    with np.load(files[0]) as data:
+        arrays = {k: data[k] for k in data.files}
+    arrays["Psi_data"][3] += 1.0
+    np.savez(files[0], **arrays)
+    third = build()
+    assert third.cache_status == "rebuilt"
+    assert "checksum" in caplog.text
+    assert np.array_equal(first.solver.solve(g), third.solver.solve(g))
+    # a file of another configuration under this name: the stored key differs
+    arrays["key"] = np.array("0" * 64)
+    np.savez(files[0], **arrays)
+    assert build().cache_status == "rebuilt"
+    # truncated file
+    with open(files[0], "r+b") as fh:
+        fh.truncate(100)
+    assert build().cache_status == "rebuilt"
+    # the key changes with the material, α and the options
+    key = multiscale.offline_key(first.ops, first.grid, cem, h=cm.h)
+    other = primal_ms.build_omega1_multiscale(cm, models.get_model(2, E_high=1e4), cem=cem)[0]
+    assert multiscale.offline_key(other.ops, other.grid, cem, h=cm.h) != key
+    assert multiscale.offline_key(first.ops, first.grid, multiscale.CEMOptions(layers=2, nbasis=2), h=cm.h) != key
+    first_alpha2 = primal_ms.build_omega1_multiscale(cm, model, alpha="2E", cem=cem)[0]
+    assert multiscale.offline_key(first_alpha2.ops, first_alpha2.grid, cem, h=cm.h) != key
+
+
+# -- input validation -------------------------------------------------------------------------------
+@pytest.mark.parametrize(
+    "kwargs",
+    [{"layers": -1}, {"layers": 1.5}, {"nbasis": 0}, {"threshold": -1.0}, {"eigensolver": "arpack"}, {"target": 1.0}],
+)
+def test_options_validated(kwargs):
+    with pytest.raises(InputError):
+        multiscale.CEMOptions(**kwargs)
+
+
+def test_refuses_parallel_communicator():
+    with pytest.raises(InputError, match="one MPI process"):
+        multiscale.require_serial(SimpleNamespace(size=2))
+
+
+def test_threshold_limits_modes(omega1_32_8):
+    om = omega1_32_8
+    aux = multiscale.build_auxiliary_space(om.ops, om.grid, multiscale.CEMOptions(nbasis=5, threshold=1e-6))
+    # rigid-body modes only (λ = 0) where the cell floats; one mode at least elsewhere
+    counts = np.diff(aux.offsets)
+    assert counts.min() >= 1 and counts.max() == 3
+    assert all(np.all(lam <= 1e-6) or lam.size == 1 for lam in aux.eigenvalues)

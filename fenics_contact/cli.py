@@ -20,13 +20,14 @@ from fenics_contact.models import get_model, pixel_field
 from fenics_contact.plots import plot_cell_field, plot_contact, plot_displacement, plot_history, render_deformed
 from fenics_contact.primal import default_penalty, solve_primal_monolithic
 from fenics_contact.primal_hybrid import DEFAULT_ALPHA, solve_primal_hybrid
+from fenics_contact.primal_ms import solve_primal_ms_hybrid
 from fenics_contact.tags import Subdomain
 
 __all__ = ["main", "build_parser"]
 
 log = logging.getLogger("fenics_contact")
 
-METHODS = ("primal",)
+METHODS = ("primal", "primal-ms")
 
 
 class _RankZero(logging.Filter):
@@ -67,6 +68,9 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--nu", type=float, default=0.35, help="Poisson ratio")
     run.add_argument("--E-map", type=Path, help="Young's modulus as a pixel array over the unit square "
                      "(.npy, or text/.csv readable by numpy.loadtxt; row 0 = bottom); replaces the model's E map")
+    run.add_argument("--layers", type=int, default=4, help="primal-ms: oversampling layers m of the CEM bases")
+    run.add_argument("--nbasis", type=int, default=3, help="primal-ms: local spectral modes l per coarse cell")
+    run.add_argument("--cache-dir", type=Path, help="primal-ms: directory for the offline data (reused when valid)")
     run.add_argument("--reference", action="store_true", help="also solve the monolithic problem and report e_u")
     run.add_argument("--out", type=Path, default=Path("results"), help="output directory")
     run.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
@@ -116,10 +120,14 @@ def run(args) -> int:
     reference = None
     if args.reference:
         reference = solve_primal_monolithic(cm.mesh, cm.facet_tags, fields, delta=delta)
-    result = solve_primal_hybrid(
-        cm, model, alpha=args.alpha, delta=delta, options=options, newton=NewtonOptions(),
-        reference=reference.u if reference is not None else None,
-    )
+    ref_u = reference.u if reference is not None else None
+    if args.method == "primal":
+        result = solve_primal_hybrid(cm, model, alpha=args.alpha, delta=delta, options=options,
+                                     newton=NewtonOptions(), reference=ref_u)
+    else:  # primal-ms (Algorithm 3)
+        result = solve_primal_ms_hybrid(cm, model, alpha=args.alpha, delta=delta, options=options,
+                                        layers=args.layers, nbasis=args.nbasis, reference=ref_u,
+                                        cache_dir=args.cache_dir)
     profile = result.profile
     summary = {
         "method": args.method,
@@ -134,11 +142,14 @@ def run(args) -> int:
         "rel_tolerance": args.tol,
         "final_rel_change": float(result.history.rel_changes[-1]),
         "e_u": result.e_u,
+        "e_energy": result.step.error_energy() if reference is not None else None,
         "active_set": profile.active_interval(),
         "penetration": profile.penetration,
         "max_tensile_sigma_c": float(np.max(profile.sigma_c, initial=0.0)),
         "newton_steps_total": int(sum(r.info["newton"] for r in result.history.records)),
         "dofs": result.dofs,
+        "layers": args.layers if args.method == "primal-ms" else None,
+        "nbasis": args.nbasis if args.method == "primal-ms" else None,
         "time_mesh_s": t_mesh,
         "time_offline_s": result.time_offline_s,
         "time_online_s": result.time_online_s,

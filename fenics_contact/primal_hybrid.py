@@ -124,6 +124,15 @@ class PrimalHybridStep:
             err += s.l2_norm2(diff)
         return float(np.sqrt(err / self._ref_norm2))
 
+    def error_energy(self) -> float:
+        """‖u_h − uⁿ‖_a / ‖u_h‖_a over both subdomains (needs the reference)."""
+        err = ref = 0.0
+        for s, r, diff in zip(self.sub, self.reference, self._diff):
+            diff.x.array[:] = s.u.x.array - r.x.array
+            err += s.energy_norm2(diff)
+            ref += s.energy_norm2(r)
+        return float(np.sqrt(err / ref))
+
     def glued(self, V: fem.FunctionSpace) -> fem.Function:
         """u on the parent mesh: u₁ on Ω₁, u₂ on Ω₂ (u₂ on γ)."""
         u = fem.Function(V, name="u")

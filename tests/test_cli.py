@@ -62,3 +62,17 @@ def test_user_pixel_map_of_E(tmp_path):
     bad = tmp_path / "bad.csv"
     bad.write_text("1,2\n3\n")
     assert main([*args, "--E-map", str(bad), "--out", str(tmp_path / "c")]) == 2
+
+
+def test_primal_ms_method_and_offline_cache(tmp_path):
+    args = ["run", "--model", "2", "--method", "primal-ms", "--h", "32", "--H", "8", "--layers", "3",
+            "--reference", "--no-plots", "--cache-dir", str(tmp_path / "cache")]
+    assert main([*args, "--out", str(tmp_path / "a")]) == 0
+    assert main([*args, "--out", str(tmp_path / "b")]) == 0
+    a, b = (json.loads((tmp_path / d / "summary.json").read_text()) for d in "ab")
+    assert a["dofs"]["omega1_ms"] == 3 * 7 * 8 < a["dofs"]["omega1"]
+    assert a["e_u"] < 0.05 and a["e_energy"] < 0.2
+    # the second run reuses the cached bases: identical answer, cheaper offline phase
+    assert b["e_u"] == a["e_u"] and b["iterations"] == a["iterations"]
+    assert b["time_offline_s"] < a["time_offline_s"]
+    assert len(list((tmp_path / "cache").iterdir())) == 1

@@ -8,6 +8,7 @@ fine mesh (METHOD §6): e_u in L², e_a in the energy norm (Σ_i a_i(·,·) over
     (c) number of local modes l = 1..5, fixed m
     (d) DOFs (coarse vs fine Ω₁) and offline/online times for H = 1/8, 1/16, 1/32,
         with Algorithm 1 (fine FEM in Ω₁) for comparison
+    (e) the weight factor c of the CEM inner product, κ̃ = c (λ+2μ) H⁻², c ∈ {1, 2, 3, 10, 30, 100}
 
 Run:  python benchmarks/multiscale_primal.py --output multiscale_primal.md
       python benchmarks/multiscale_primal.py --output quick.md --n 32 --n-coarse 8 --coarse-list 4,8 --parts a,d
@@ -32,7 +33,7 @@ import dolfinx
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from fenics_contact import geometry, models, primal, primal_hybrid, primal_ms
+from fenics_contact import geometry, models, multiscale, primal, primal_hybrid, primal_ms
 from fenics_contact.dd import IterationOptions
 from fenics_contact.fields import material_fields
 
@@ -84,13 +85,15 @@ class Runner:
             self._refs[key] = (model, delta, ref)
         return self._refs[key]
 
-    def alg3(self, n: int, N: int, number: int, *, layers: int, nbasis: int, contrast: float = 1e3) -> dict:
+    def alg3(self, n: int, N: int, number: int, *, layers: int, nbasis: int, contrast: float = 1e3,
+             s_factor: float | None = None) -> dict:
         cm = self.mesh(n, N)
         model, delta, ref = self.reference(n, N, number, contrast)
         start = time.perf_counter()
         res = primal_ms.solve_primal_ms_hybrid(
             cm, model, alpha=self.args.alpha, delta=delta, layers=layers, nbasis=nbasis,
             options=self.options, reference=ref.u,
+            s_factor=self.args.s_factor if s_factor is None else s_factor,
         )
         row = {
             "model": number, "H": f"1/{N}", "h": f"1/{n}", "m": layers, "l": nbasis, "contrast": contrast,
@@ -193,13 +196,29 @@ def part_d(run: Runner) -> list[str]:
     return lines
 
 
-PARTS = {"a": part_a, "b": part_b, "c": part_c, "d": part_d}
+def part_e(run: Runner) -> list[str]:
+    a = run.args
+    lines = [
+        f"### (e) Weight factor c of the CEM inner product, κ̃ = c (λ+2μ) H⁻² (h = 1/{a.n}, H = 1/{a.n_coarse}, "
+        f"l = {a.nbasis}, E_high/E_low = 1e3)", "",
+        "| model | c | m | its | e_u (L²) | e_a (energy) |",
+        "|---|---|---|---|---|---|",
+    ]
+    for number in a.models:
+        for c in a.s_factors:
+            for m in (4, 5):
+                r = run.alg3(a.n, a.n_coarse, number, layers=m, nbasis=a.nbasis, s_factor=c)
+                lines.append(f"| {number} | {c:g} | {m} | {_its(r)} | {_e(r['e_u'])} | {_e(r['e_a'])} |")
+    return lines
+
+
+PARTS = {"a": part_a, "b": part_b, "c": part_c, "d": part_d, "e": part_e}
 
 
 def parse_args(argv=None) -> argparse.Namespace:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--output", type=Path, required=True, help="markdown file to write")
-    p.add_argument("--parts", default="a,b,c,d", help="comma-separated subset of a,b,c,d")
+    p.add_argument("--parts", default="a,b,c,d,e", help="comma-separated subset of a,b,c,d,e")
     p.add_argument("--models", type=_ints, default=[1, 2])
     p.add_argument("--n", type=int, default=64, help="1/h")
     p.add_argument("--n-coarse", type=int, default=16, help="1/H for parts a-c")
@@ -209,7 +228,9 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--nbasis-list", type=_ints, default=[1, 2, 3, 4, 5], help="l values for part c")
     p.add_argument("--contrasts", type=_floats, default=[1e2, 1e3, 1e4, 1e6])
     p.add_argument("--coarse-list", type=_ints, default=[8, 16, 32], help="1/H values for part d")
-    p.add_argument("--alpha", default="E", help="Robin coefficient (number, 'sqrt-h', 'h^-1/2' or 'cE')")
+    p.add_argument("--alpha", default=primal_hybrid.DEFAULT_ALPHA, help="Robin coefficient (see fenics-contact run --help)")
+    p.add_argument("--s-factor", type=float, default=multiscale.DEFAULT_S_FACTOR, help="c in κ̃ = c (λ+2μ) H⁻²")
+    p.add_argument("--s-factors", type=_floats, default=[1, 2, 3, 10, 30, 100], help="c values for part e")
     p.add_argument("--tol", type=float, default=1e-6, help="relative-change stopping tolerance")
     p.add_argument("--accel", default="anderson", choices=["anderson", "none"])
     p.add_argument("--no-alg1", dest="compare_alg1", action="store_false", help="skip the Algorithm 1 comparison")
@@ -217,7 +238,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     args = p.parse_args(argv)
     bad = set(args.parts.split(",")) - set(PARTS)
     if bad:
-        p.error(f"unknown part(s) {sorted(bad)}; choose from a,b,c,d")
+        p.error(f"unknown part(s) {sorted(bad)}; choose from a,b,c,d,e")
     return args
 
 
@@ -234,7 +255,7 @@ def main(argv=None) -> int:
         "# Algorithm 3 (CEM-GMsFEM in Ω₁ + primal FEM/contact in Ω₂) — benchmark", "",
         f"Machine: {machine()}", "",
         f"Command: `{' '.join([Path(sys.argv[0]).name] + (argv if argv is not None else sys.argv[1:]))}`", "",
-        f"Robin α = {args.alpha!r}; stopping rule: relative change < {args.tol:g} ({args.accel} update); "
+        f"Robin α = {args.alpha!r}; κ̃ factor c = {args.s_factor:g}; stopping rule: relative change < {args.tol:g} ({args.accel} update); "
         "penalty δ = 1e-3·h/E_c. Errors against the fine monolithic penalized solution.", "",
     ]
     for name in args.parts.split(","):

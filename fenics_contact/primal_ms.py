@@ -63,7 +63,9 @@ class Omega1Multiscale:
         interface.to_part(alpha, part_index, self.alpha_fn)
         self.fields = material_fields(part.mesh, model)
         self.grid = multiscale.coarse_grid(part.mesh, part.cell_map, cm.coarse_cell, cm.H)
-        self.ops = multiscale.assemble_fine_operators(self.V, part.facet_tags, self.fields, self.alpha_fn, self.grid)
+        self.ops = multiscale.assemble_fine_operators(
+            self.V, part.facet_tags, self.fields, self.alpha_fn, self.grid, s_factor=cem.s_factor
+        )
         t_assembly = time.perf_counter() - t0
         self.space, self.cache_status = multiscale.offline_stage(
             self.ops, self.grid, cem, h=cm.h, cache_dir=cache_dir
@@ -253,6 +255,7 @@ def solve_primal_ms_hybrid(
     layers: int = 3,
     nbasis: int | None = 3,
     threshold: float | None = None,
+    s_factor: float = multiscale.DEFAULT_S_FACTOR,
     options: IterationOptions = IterationOptions(),
     newton: NewtonOptions = NewtonOptions(),
     reference: fem.Function | None = None,
@@ -264,7 +267,7 @@ def solve_primal_ms_hybrid(
     bases, N and the coarse factorization (breakdown in ``result.step.offline_times``);
     ``time_online_s`` the iteration.
     """
-    cem = multiscale.CEMOptions(layers=layers, nbasis=nbasis, threshold=threshold)
+    cem = multiscale.CEMOptions(layers=layers, nbasis=nbasis, threshold=threshold, s_factor=s_factor)
     step = MultiscalePrimalHybridStep(
         cm, model, alpha=alpha, delta=delta, cem=cem, newton=newton, reference=reference, cache_dir=cache_dir
     )

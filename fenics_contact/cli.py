@@ -4,7 +4,9 @@ import argparse
 import logging
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 from mpi4py import MPI
@@ -15,9 +17,16 @@ from fenics_contact.dd import IterationOptions
 from fenics_contact.errors import FenicsContactError, InputError
 from fenics_contact.fields import material_fields
 from fenics_contact.geometry import ContactMesh, read_mesh, unit_square
-from fenics_contact.io import cell_markers, stress_field, write_fields, write_summary
+from fenics_contact.io import cell_function_of, cell_markers, stress_field, write_fields, write_summary, write_vtx
 from fenics_contact.models import get_model, pixel_field
-from fenics_contact.plots import plot_cell_field, plot_contact, plot_displacement, plot_history, render_deformed
+from fenics_contact.plots import (
+    plot_cell_field,
+    plot_contact,
+    plot_displacement,
+    plot_history,
+    plot_stress,
+    render_deformed,
+)
 from fenics_contact.primal import default_penalty, solve_primal_monolithic
 from fenics_contact.primal_hybrid import DEFAULT_ALPHA, solve_primal_hybrid
 from fenics_contact.primal_ms import solve_primal_ms_hybrid
@@ -27,7 +36,7 @@ __all__ = ["main", "build_parser"]
 
 log = logging.getLogger("fenics_contact")
 
-METHODS = ("primal", "primal-ms")
+METHODS = ("primal", "primal-ms", "mixed", "mixed-ms")
 
 
 class _RankZero(logging.Filter):
@@ -63,14 +72,16 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--tol", type=float, default=1e-6, help="relative-change tolerance (METHOD §6)")
     run.add_argument("--max-iterations", type=int, default=2000)
     run.add_argument("--delta", type=float, help="primal penalty δ (default 1e-3·h/E on Γ_C)")
+    run.add_argument("--beta", default="sqrt-h", help="mixed: transmission coefficient β (1, sqrt-h or a number)")
+    run.add_argument("--epsilon", type=float, help="mixed penalty ε (default 1e-3·h·E on Γ_C)")
     run.add_argument("--E-high", type=float, default=1e3, help="E in the high-modulus pattern")
     run.add_argument("--E-low", type=float, default=1.0, help="E elsewhere")
     run.add_argument("--nu", type=float, default=0.35, help="Poisson ratio")
     run.add_argument("--E-map", type=Path, help="Young's modulus as a pixel array over the unit square "
                      "(.npy, or text/.csv readable by numpy.loadtxt; row 0 = bottom); replaces the model's E map")
-    run.add_argument("--layers", type=int, default=4, help="primal-ms: oversampling layers m of the CEM bases")
-    run.add_argument("--nbasis", type=int, default=3, help="primal-ms: local spectral modes l per coarse cell")
-    run.add_argument("--cache-dir", type=Path, help="primal-ms: directory for the offline data (reused when valid)")
+    run.add_argument("--layers", type=int, default=4, help="*-ms: oversampling layers m of the multiscale bases")
+    run.add_argument("--nbasis", type=int, default=3, help="*-ms: local spectral modes l per coarse cell")
+    run.add_argument("--cache-dir", type=Path, help="*-ms: directory for the offline data (reused when valid)")
     run.add_argument("--reference", action="store_true", help="also solve the monolithic problem and report e_u")
     run.add_argument("--out", type=Path, default=Path("results"), help="output directory")
     run.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
@@ -100,6 +111,87 @@ def _contact_modulus(cm: ContactMesh, E) -> float:
     return cm.comm.allreduce(local, op=MPI.MAX)
 
 
+class _Outcome(NamedTuple):
+    """What a method family hands back to ``run``: its result, summary entries and output writer."""
+
+    result: object
+    reference: object | None
+    summary: dict
+    write: Callable[[Path], None]
+
+
+def _run_primal(args, cm: ContactMesh, model, fields, options: IterationOptions) -> _Outcome:
+    """Algorithms 1 (primal) and 3 (primal-ms), with the monolithic primal reference."""
+    delta = args.delta if args.delta is not None else default_penalty(cm.h, _contact_modulus(cm, fields.E))
+    reference = solve_primal_monolithic(cm.mesh, cm.facet_tags, fields, delta=delta) if args.reference else None
+    ref_u = reference.u if reference is not None else None
+    if args.method == "primal":
+        result = solve_primal_hybrid(cm, model, alpha=args.alpha, delta=delta, options=options,
+                                     newton=NewtonOptions(), reference=ref_u)
+    else:
+        result = solve_primal_ms_hybrid(cm, model, alpha=args.alpha, delta=delta, options=options,
+                                        layers=args.layers, nbasis=args.nbasis, reference=ref_u,
+                                        cache_dir=args.cache_dir)
+    summary = {
+        "alpha": args.alpha,
+        "delta": delta,
+        "e_u": result.e_u,
+        "e_energy": result.step.error_energy() if reference is not None else None,
+        "penetration": result.profile.penetration,
+        "max_tensile_sigma_c": float(np.max(result.profile.sigma_c, initial=0.0)),
+        "layers": args.layers if args.method == "primal-ms" else None,
+        "nbasis": args.nbasis if args.method == "primal-ms" else None,
+    }
+
+    def write(out: Path) -> None:
+        sigma = stress_field(result.u, fields.lmbda, fields.mu)
+        markers = cell_markers(cm.cell_tags, cm.mesh)
+        write_fields(out / "fields.xdmf", cm.mesh, [result.u, sigma, fields.E, markers])
+        if not args.no_plots:
+            plot_displacement(result.u, out / "displacement.png", title=f"({args.method} hybrid)")
+            render_deformed(result.u, out / "deformed.png", title=f"model {args.model}, {args.method} hybrid")
+
+    return _Outcome(result, reference, summary, write)
+
+
+def _run_mixed(args, cm: ContactMesh, model, fields, options: IterationOptions) -> _Outcome:
+    """Algorithms 2 (mixed) and 4 (mixed-ms), with the monolithic mixed reference (serial)."""
+    from fenics_contact import mixed, mixed_hybrid, mixed_ms
+
+    epsilon = args.epsilon
+    reference = mixed.solve_mixed_monolithic(cm, model, epsilon=epsilon) if args.reference else None
+    if args.method == "mixed":
+        result = mixed_hybrid.solve_mixed_hybrid(cm, model, beta=args.beta, epsilon=epsilon, options=options,
+                                                 reference=reference)
+    else:
+        result = mixed_ms.solve_mixed_ms_hybrid(cm, model, beta=args.beta, epsilon=epsilon, options=options,
+                                                layers=args.layers, nbasis=args.nbasis, reference=reference,
+                                                cache_dir=args.cache_dir)
+    summary = {
+        "beta": args.beta,
+        "beta_value": result.beta,
+        "epsilon": result.epsilon,
+        "e_sigma": result.e_sigma,
+        "e_u": result.e_u,
+        "max_tensile_sigma_c": result.profile.max_tensile,
+        "layers": args.layers if args.method == "mixed-ms" else None,
+        "nbasis": args.nbasis if args.method == "mixed-ms" else None,
+    }
+
+    def write(out: Path) -> None:
+        sigma_cells = cell_function_of(result.sigma, name="sigma_cell_mean")
+        u_cells = cell_function_of(result.u, name="u_cell_mean")
+        markers = cell_markers(cm.cell_tags, cm.mesh)
+        write_fields(out / "fields.xdmf", cm.mesh, [sigma_cells, u_cells, fields.E, markers])
+        write_vtx(out / "sigma.bp", result.sigma)
+        write_vtx(out / "u.bp", result.u)
+        if not args.no_plots:
+            plot_stress(result.sigma, out / "stress.png", title=f"({args.method} hybrid)")
+            plot_displacement(result.u, out / "displacement.png", title=f"({args.method} hybrid)")
+
+    return _Outcome(result, reference, summary, write)
+
+
 def run(args) -> int:
     """Run one simulation; returns the exit code (0 converged, 3 not converged)."""
     comm = MPI.COMM_WORLD
@@ -112,44 +204,27 @@ def run(args) -> int:
     t0 = time.perf_counter()
     cm = _mesh(args)
     fields = material_fields(cm.mesh, model)
-    delta = args.delta if args.delta is not None else default_penalty(cm.h, _contact_modulus(cm, fields.E))
     t_mesh = time.perf_counter() - t0
-    log.info("model %d (%s), h = %.4g, H = %s, method %s, alpha %s, accel %s, delta %.3g",
-             args.model, model.description, cm.h, cm.H, args.method, args.alpha, args.accel, delta)
-
-    reference = None
-    if args.reference:
-        reference = solve_primal_monolithic(cm.mesh, cm.facet_tags, fields, delta=delta)
-    ref_u = reference.u if reference is not None else None
-    if args.method == "primal":
-        result = solve_primal_hybrid(cm, model, alpha=args.alpha, delta=delta, options=options,
-                                     newton=NewtonOptions(), reference=ref_u)
-    else:  # primal-ms (Algorithm 3)
-        result = solve_primal_ms_hybrid(cm, model, alpha=args.alpha, delta=delta, options=options,
-                                        layers=args.layers, nbasis=args.nbasis, reference=ref_u,
-                                        cache_dir=args.cache_dir)
+    log.info("model %d (%s), h = %.4g, H = %s, method %s, accel %s",
+             args.model, model.description, cm.h, cm.H, args.method, args.accel)
+    family = _run_primal if args.method.startswith("primal") else _run_mixed
+    outcome = family(args, cm, model, fields, options)
+    result, reference = outcome.result, outcome.reference
     profile = result.profile
     summary = {
         "method": args.method,
         "model": args.model,
         "h": cm.h,
         "H": cm.H,
-        "alpha": args.alpha,
         "accel": args.accel,
-        "delta": delta,
         "iterations": result.iterations,
         "converged": result.converged,
         "rel_tolerance": args.tol,
         "final_rel_change": float(result.history.rel_changes[-1]),
-        "e_u": result.e_u,
-        "e_energy": result.step.error_energy() if reference is not None else None,
+        **outcome.summary,
         "active_set": profile.active_interval(),
-        "penetration": profile.penetration,
-        "max_tensile_sigma_c": float(np.max(profile.sigma_c, initial=0.0)),
-        "newton_steps_total": int(sum(r.info["newton"] for r in result.history.records)),
+        "newton_steps_total": int(sum(r.info.get("newton", 0) for r in result.history.records)),
         "dofs": result.dofs,
-        "layers": args.layers if args.method == "primal-ms" else None,
-        "nbasis": args.nbasis if args.method == "primal-ms" else None,
         "time_mesh_s": t_mesh,
         "time_offline_s": result.time_offline_s,
         "time_online_s": result.time_online_s,
@@ -161,13 +236,9 @@ def run(args) -> int:
     if comm.rank == 0:
         out.mkdir(parents=True, exist_ok=True)
     comm.Barrier()
-    sigma = stress_field(result.u, fields.lmbda, fields.mu)
-    markers = cell_markers(cm.cell_tags, cm.mesh)
-    write_fields(out / "fields.xdmf", cm.mesh, [result.u, sigma, fields.E, markers])
+    outcome.write(out)
     if not args.no_plots:
         plot_cell_field(fields.E, out / "E.png", title=f"Young's modulus, model {args.model}", log=True)
-        plot_displacement(result.u, out / "displacement.png", title=f"({args.method} hybrid)")
-        render_deformed(result.u, out / "deformed.png", title=f"model {args.model}, {args.method} hybrid")
         profiles = {f"{args.method} hybrid": profile}
         if reference is not None:
             profiles["monolithic"] = reference.profile

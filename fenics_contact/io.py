@@ -14,7 +14,8 @@ from dolfinx import fem
 
 from fenics_contact.materials import strain, stress
 
-__all__ = ["write_fields", "write_summary", "cell_markers", "stress_field", "machine_description"]
+__all__ = ["write_fields", "write_summary", "write_vtx", "cell_markers", "cell_function_of", "stress_field",
+           "machine_description"]
 
 
 def cell_markers(cell_tags, msh) -> fem.Function:
@@ -45,6 +46,24 @@ def stress_field(u: fem.Function, lmbda, mu, name: str = "sigma") -> fem.Functio
     expr = fem.Expression(stress(strain(u), lmbda, mu), S.element.interpolation_points)
     sigma.interpolate(expr)
     return sigma
+
+
+def cell_function_of(fn: fem.Function, *, name: str) -> fem.Function:
+    """The values of ``fn`` at the cell midpoints as a DG0 function (for cellwise output of DG fields)."""
+    msh = fn.function_space.mesh
+    shape = fn.function_space.value_shape
+    V0 = fem.functionspace(msh, basix.ufl.element("DG", msh.basix_cell(), 0, shape=tuple(shape)))
+    out = fem.Function(V0, name=name)
+    out.interpolate(fn)
+    return out
+
+
+def write_vtx(path: str | Path, fn: fem.Function) -> Path:
+    """Write one function of any degree (e.g. the DG P3 Arnold–Winther stress) as ADIOS2/VTX for ParaView."""
+    path = Path(path)
+    with dolfinx.io.VTXWriter(fn.function_space.mesh.comm, str(path), [fn], engine="BP4") as writer:
+        writer.write(0.0)
+    return path
 
 
 def machine_description() -> str:

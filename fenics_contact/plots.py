@@ -15,7 +15,10 @@ from matplotlib.tri import Triangulation  # noqa: E402
 
 from dolfinx import fem  # noqa: E402
 
-__all__ = ["gather_cells", "plot_cell_field", "plot_displacement", "plot_contact", "plot_history", "render_deformed"]
+from fenics_contact.io import cell_function_of  # noqa: E402
+
+__all__ = ["gather_cells", "plot_cell_field", "plot_displacement", "plot_stress", "plot_contact", "plot_history",
+           "render_deformed"]
 
 
 def gather_cells(fn: fem.Function, component: int | None = None):
@@ -76,6 +79,25 @@ def plot_displacement(u: fem.Function, path: str | Path, *, title: str = "") -> 
         vals = vals.ravel()
         norm = TwoSlopeNorm(0.0, vals.min(), vals.max()) if vals.min() < 0.0 < vals.max() else None
         pc = ax.tripcolor(tri, vals, shading="gouraud", cmap="RdBu_r", norm=norm)
+        fig.colorbar(pc, ax=ax)
+        ax.set_aspect("equal")
+        ax.set_title(f"{name} {title}".strip())
+        ax.set_xlabel("x")
+        ax.set_ylabel("y")
+    return _save(fig, Path(path))
+
+
+def plot_stress(sigma: fem.Function, path: str | Path, *, title: str = "") -> Path | None:
+    """The three stress components (xx, xy, yy) of a DG stress field, cellwise at the midpoints."""
+    cells = cell_function_of(sigma, name="sigma_mid")
+    panels = [gather_cells(cells, c) for c in range(3)]
+    if panels[0][0] is None:
+        return None
+    fig, axes = plt.subplots(1, 3, figsize=(14, 4.2))
+    for ax, (tri, vals), name in zip(axes, panels, ("σ_xx", "σ_xy", "σ_yy")):
+        vals = np.ravel(vals)
+        norm = TwoSlopeNorm(0.0, vals.min(), vals.max()) if vals.min() < 0.0 < vals.max() else None
+        pc = ax.tripcolor(tri, facecolors=vals, cmap="RdBu_r", norm=norm)
         fig.colorbar(pc, ax=ax)
         ax.set_aspect("equal")
         ax.set_title(f"{name} {title}".strip())

@@ -76,3 +76,23 @@ def test_primal_ms_method_and_offline_cache(tmp_path):
     assert b["e_u"] == a["e_u"] and b["iterations"] == a["iterations"]
     assert b["time_offline_s"] < a["time_offline_s"]
     assert len(list((tmp_path / "cache").iterdir())) == 1
+
+
+@pytest.mark.parametrize("method", ["mixed", "mixed-ms"])
+def test_mixed_methods(tmp_path, method):
+    out = tmp_path / method
+    extra = ["--layers", "2"] if method == "mixed-ms" else []
+    code = main(["run", "--model", "2", "--method", method, "--h", "16", "--H", "4", "--beta", "sqrt-h",
+                 "--reference", "--out", str(out), *extra])
+    assert code == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["converged"] is True
+    assert summary["e_sigma"] is not None and summary["e_u"] is not None
+    assert summary["max_tensile_sigma_c"] >= 0.0
+    for name in ("sigma.bp", "u.bp", "fields.xdmf", "stress.png", "displacement.png", "contact.png", "history.png"):
+        assert (out / name).exists(), name
+
+
+def test_mixed_rejects_bad_beta(tmp_path):
+    assert main(["run", "--method", "mixed", "--h", "16", "--H", "4", "--beta", "0", "--no-plots",
+                 "--out", str(tmp_path / "x")]) == 2

@@ -1,0 +1,313 @@
+"""Algorithm 2: the mixed iterative contact-resolving hybrid method (METHOD §3).
+
+    Ω₁ (linear):    (Aσ₁, τ) + (div τ, u₁) + β∫_γ (σ₁n₁)·(τn₁) = ∫_γ g₁₂·(τn₁),   (div σ₁, v) = −(f, v)
+    Ω₂ (nonlinear): (Aσ₂, τ) + (div τ, u₂) + β∫_γ (σ₂n₂)·(τn₂) + (1/ε)∫_ΓC (σ₂c)⁺τ_c = ∫_γ g₂₁·(τn₂),
+                    (div σ₂, v) = −(f, v)
+    update:         g₁₂ ← g₂₁ − 2β σ₂n₂,   g₂₁ ← g₁₂ − 2β σ₁n₁   (old values on the right)
+
+Both subdomains use Arnold–Winther stresses × DG P1 displacements
+(``mixed.MixedSubproblem``); Ω₁ is factorized once, Ω₂ runs the globalized
+semismooth Newton warm-started from its last solution and refactorizes only
+when its active set changes.  The loop is ``dd.iterate`` (plain update as in the
+paper, or Anderson acceleration).
+
+**Space of the Robin data and quadrature on γ.**  The normal trace σn of an AW
+stress on a straight edge is a cubic vector polynomial, and it is continuous at
+the vertices (AW has vertex degrees of freedom); on γ the traces of X_h(Ω₁) and
+X_h(Ω₂) therefore both fill Λ_h = continuous piecewise-P3 vector functions on
+γ.  The data g₁₂, g₂₁ live in Λ_h, stored as their values at the P3 Lagrange
+nodes of γ (vertices + 2 points per edge).  Then:
+
+* the update is exact: σ_i n_i ∈ Λ_h is evaluated at the nodes from the DG P3
+  representation (no projection);
+* every γ integral (β∫σn·τn and ∫g·τn, both degree 6) uses the same 4-point
+  Gauss rule per edge and is exact.
+
+At a fixed point, adding the two updates gives σ₁n₁ + σ₂n₂ = 0 in Λ_h, i.e.
+pointwise, and λ := g₁₂ − βσ₁n₁ = g₂₁ − βσ₂n₂ is a single displacement trace on
+γ with (Aσ_i, τ) + (div τ, u_i) − ∫_γ λ·τn_i + … = 0 on each side; summing over
+τ with continuous normal trace eliminates λ.  So the fixed point is exactly the
+monolithic mixed solution on X̃_h = {σ ∈ X_h(Ω₁) × X_h(Ω₂) : σn continuous on γ}.
+X̃_h is X_h plus one function per γ vertex: AW glues all three stress
+components at a vertex, X̃_h only the traction σn, so σ_tt (= σ_yy on γ) may
+differ on the two sides of a γ vertex.  No transmission condition can restore
+that (σ_tt is not a trace quantity), so this is the closest fixed point a
+non-overlapping Robin iteration with AW subdomain spaces can have.
+``mixed.solve_mixed_monolithic(split_interface=True)`` computes it directly; the
+iterate converges to it to round-off (1e−10 at tolerance 1e−10).  Its distance
+from the standard AW solution (``split_interface=False``, the paper's
+reference) is a discretization effect, concentrated where the load bands'
+corner (x = 15/16, y = ½) meets γ: measured with H = 1/16, model 1 / model 2,
+
+    h = 1/32: e_σ 9.1e−4 / 1.1e−3,  e_u 1.7e−5 / 1.6e−5
+    h = 1/64: e_σ 1.4e−4 / 1.9e−4,  e_u 1.5e−6 / 1.5e−6
+    h = 1/128: e_σ 3.5e−5 / 4.7e−5, e_u 1.8e−7 / 1.8e−7
+
+(O(h²); ``benchmarks/reproduce_mixed_tables.py``, ``tests/test_mixed_hybrid.py``).
+It is the floor of e_σ, e_u against the AW reference.
+
+Serial only (one MPI rank).
+"""
+
+import logging
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse.linalg as spla
+from scipy.spatial import cKDTree
+
+import basix.ufl
+from dolfinx import fem
+
+from fenics_contact.contact import NewtonOptions
+from fenics_contact.dd import IterationHistory, IterationOptions, iterate
+from fenics_contact.errors import InputError
+from fenics_contact.fields import material_fields
+from fenics_contact.geometry import ContactMesh
+from fenics_contact.mixed import (
+    MixedContactProfile,
+    MixedSolution,
+    MixedSubproblem,
+    check_serial_triangles,
+    contact_modulus,
+    default_epsilon,
+)
+from fenics_contact.models import TestModel
+from fenics_contact.transmission import Part, split_mesh
+
+__all__ = ["transmission_coefficient", "MixedHybridStep", "MixedHybridResult", "solve_mixed_hybrid"]
+
+log = logging.getLogger(__name__)
+
+
+def transmission_coefficient(beta: float | str, h: float) -> float:
+    """β from a number (or its string) or ``"sqrt-h"`` (β = √h); raises InputError unless β > 0."""
+    if isinstance(beta, str):
+        text = beta.strip().replace(" ", "").lower()
+        if text in ("sqrt-h", "sqrt(h)", "h^1/2", "h^0.5"):
+            value = float(np.sqrt(h))
+        else:
+            try:
+                value = float(text)
+            except ValueError:
+                raise InputError(f"cannot read beta={beta!r}: give a number > 0 or 'sqrt-h'") from None
+    else:
+        value = float(beta)
+    if not (np.isfinite(value) and value > 0):
+        raise InputError(f"the transmission coefficient β must be > 0, got {beta!r}")
+    return value
+
+
+def _sub_to_parent_dofs(part: Part, V_sub: fem.FunctionSpace, V_parent: fem.FunctionSpace) -> tuple[np.ndarray, np.ndarray]:
+    """(sub, parent) indices of the same DOFs of a discontinuous blocked space (checked by coordinates)."""
+    tdim = part.mesh.topology.dim
+    ncell = part.mesh.topology.index_map(tdim).size_local
+    cells = np.arange(ncell, dtype=np.int32)
+    pcells = np.asarray(part.cell_map.sub_topology_to_topology(cells, False), dtype=np.int32)
+    bs = V_sub.dofmap.index_map_bs
+    ds, dp = V_sub.dofmap.list[cells].ravel(), V_parent.dofmap.list[pcells].ravel()
+    xs, xp = V_sub.tabulate_dof_coordinates()[ds], V_parent.tabulate_dof_coordinates()[dp]
+    if not np.allclose(xs, xp, atol=1e-12):
+        raise RuntimeError("submesh and parent cells do not share their local DOF layout")
+    sub = (bs * ds.astype(np.int64)[:, None] + np.arange(bs)).ravel()
+    par = (bs * dp.astype(np.int64)[:, None] + np.arange(bs)).ravel()
+    return sub, par
+
+
+class MixedHybridStep:
+    """The transmission map T of Algorithm 2 on a tagged mesh (implements ``dd.HybridStep``)."""
+
+    def __init__(
+        self,
+        cm: ContactMesh,
+        model: TestModel,
+        *,
+        beta: float | str,
+        epsilon: float | None = None,
+        newton: NewtonOptions = NewtonOptions(),
+        reference: MixedSolution | None = None,
+    ) -> None:
+        check_serial_triangles(cm.mesh)
+        self.comm = cm.comm
+        self.beta = transmission_coefficient(beta, cm.h)
+        parent_fields = material_fields(cm.mesh, model)
+        if epsilon is None:
+            epsilon = default_epsilon(cm.h, contact_modulus(cm.mesh, cm.facet_tags, parent_fields.E))
+        self.epsilon = float(epsilon)
+        self.cm = cm
+        self.parts = split_mesh(cm)
+        self.sub = [
+            MixedSubproblem(
+                part.mesh, part.facet_tags, material_fields(part.mesh, model),
+                epsilon=self.epsilon if i == 1 else None, beta=self.beta,
+                prefix=f"fc_mixed_omega{i + 1}_", newton=newton,
+            )
+            for i, part in enumerate(self.parts)
+        ]
+        # canonical interface ordering: the nodes of Ω₁; Ω₂'s node k is canonical node perm[k]
+        x1, x2 = self.sub[0].gamma_points, self.sub[1].gamma_points
+        dist, perm = cKDTree(x1).query(x2)
+        if x1.shape != x2.shape or np.max(dist, initial=0.0) > 1e-10 or np.unique(perm).size != perm.size:
+            raise InputError("the interface nodes of Ω₁ and Ω₂ do not match (γ must be conforming)")
+        self._perm2 = (2 * perm[:, None] + np.arange(2)).ravel()  # part-2 value k ↔ canonical value perm2[k]
+        self.size = 2 * x1.shape[0]
+        self._prev = [(s.c.copy(), s.u.copy()) for s in self.sub]
+        self._change = np.inf
+        self._record: dict = {}
+        self.reference = None
+        if reference is not None:
+            self.set_reference(reference)
+
+    # -- reference --------------------------------------------------------------------
+    def set_reference(self, reference: MixedSolution) -> None:
+        """Restrict the monolithic σ_h, u_h to the parts, as AW / DG P1 coefficients there."""
+        self.reference = []
+        for part, s in zip(self.parts, self.sub):
+            i_sub, i_par = _sub_to_parent_dofs(part, s.dg, reference.sigma.function_space)
+            d = np.zeros(s.P.shape[0])
+            d[i_sub] = reference.sigma.x.array[i_par]
+            PtP = (s.P.T @ s.P).tocsc()
+            c = spla.splu(PtP).solve(s.P.T @ d)
+            miss = np.linalg.norm(s.P @ c - d) / max(np.linalg.norm(d), 1e-300)
+            if miss > 1e-8:
+                raise InputError(f"the reference stress is not in the subdomain stress space (misfit {miss:.2e})")
+            j_sub, j_par = _sub_to_parent_dofs(part, s.U, reference.u.function_space)
+            u = np.zeros(s.n_u)
+            u[j_sub] = reference.u.x.array[j_par]
+            self.reference.append((c, u))
+        self._ref_norm2 = (
+            sum(s.stress_norm2(c) for s, (c, _) in zip(self.sub, self.reference)),
+            sum(s.l2_norm2(u) for s, (_, u) in zip(self.sub, self.reference)),
+        )
+
+    def errors(self) -> tuple[float, float]:
+        """(e_σ, e_u) = (‖σ_h − σⁿ‖_A/‖σ_h‖_A, ‖u_h − uⁿ‖/‖u_h‖) against the reference (METHOD §6)."""
+        es = sum(s.stress_norm2(s.c - c) for s, (c, _) in zip(self.sub, self.reference))
+        eu = sum(s.l2_norm2(s.u - u) for s, (_, u) in zip(self.sub, self.reference))
+        return float(np.sqrt(es / self._ref_norm2[0])), float(np.sqrt(eu / self._ref_norm2[1]))
+
+    # -- HybridStep protocol -------------------------------------------------------------
+    def initial_data(self) -> np.ndarray:
+        """g⁰ = 0: (g₁₂, g₂₁) stacked, values (x, y) at the canonical γ nodes."""
+        return np.zeros(2 * self.size)
+
+    def prepare(self) -> None:
+        """Offline work: factorize the linear Ω₁ saddle-point operator once."""
+        self.sub[0]._factorize_for(None)
+
+    def apply(self, g: np.ndarray) -> np.ndarray:
+        n = self.size
+        g12, g21 = g[:n], g[n:]
+        self.sub[0].solve(g12)
+        newton = self.sub[1].solve(g21[self._perm2])
+        t1 = self.sub[0].N @ self.sub[0].c  # σ₁n₁ at the canonical nodes
+        t2 = np.empty(n)
+        t2[self._perm2] = self.sub[1].N @ self.sub[1].c  # σ₂n₂
+        self._measure()
+        self._record = {
+            "newton": newton.steps,
+            "active": newton.active_sizes[-1],
+            "refactor": newton.factorizations,
+        }
+        if self.reference is not None:
+            self._record["e_sigma"], self._record["e_u"] = self.errors()
+        return np.concatenate([g21 - 2.0 * self.beta * t2, g12 - 2.0 * self.beta * t1])
+
+    def _measure(self) -> None:
+        ds = du = ns = nu = 0.0
+        for s, (c0, u0) in zip(self.sub, self._prev):
+            ds += s.stress_norm2(s.c - c0)
+            du += s.l2_norm2(s.u - u0)
+            ns += s.stress_norm2(s.c)
+            nu += s.l2_norm2(s.u)
+            c0[:] = s.c
+            u0[:] = s.u
+        self._change = max(np.sqrt(ds / ns), np.sqrt(du / nu)) if ns > 0 and nu > 0 else np.inf
+
+    def relative_change(self) -> float:
+        return self._change
+
+    def record(self) -> dict:
+        return dict(self._record)
+
+    # -- output ----------------------------------------------------------------------------
+    def glued(self) -> tuple[fem.Function, fem.Function]:
+        """σ (DG P3) and u (DG P1) on the parent mesh, each part's values on its cells."""
+        msh = self.cm.mesh
+        el = basix.ufl.blocked_element(basix.ufl.element("DG", msh.basix_cell(), 3), shape=(3,))
+        sigma = fem.Function(fem.functionspace(msh, el), name="sigma")
+        u = fem.Function(fem.functionspace(msh, basix.ufl.element("DG", msh.basix_cell(), 1, shape=(2,))), name="u")
+        for part, s in zip(self.parts, self.sub):
+            i_sub, i_par = _sub_to_parent_dofs(part, s.dg, sigma.function_space)
+            sigma.x.array[i_par] = s.sigma_function().x.array[i_sub]
+            j_sub, j_par = _sub_to_parent_dofs(part, s.U, u.function_space)
+            u.x.array[j_par] = s.u[j_sub]
+        return sigma, u
+
+
+@dataclass(slots=True)
+class MixedHybridResult:
+    """Fields, history, DOF counts, timings and errors of an Algorithm 2 solve."""
+
+    sigma: fem.Function  #: DG P3 (σ_xx, σ_xy, σ_yy) on the parent mesh
+    u: fem.Function  #: DG P1 on the parent mesh
+    sigma1: fem.Function
+    sigma2: fem.Function
+    u1: fem.Function
+    u2: fem.Function
+    history: IterationHistory
+    profile: MixedContactProfile
+    dofs: dict
+    time_offline_s: float
+    time_online_s: float
+    e_sigma: float | None
+    e_u: float | None
+    beta: float
+    epsilon: float
+    step: MixedHybridStep
+
+    @property
+    def converged(self) -> bool:
+        return self.history.converged
+
+    @property
+    def iterations(self) -> int:
+        return self.history.iterations
+
+
+def solve_mixed_hybrid(
+    cm: ContactMesh,
+    model: TestModel,
+    *,
+    beta: float | str = "sqrt-h",
+    epsilon: float | None = None,
+    options: IterationOptions = IterationOptions(),
+    newton: NewtonOptions = NewtonOptions(),
+    reference: MixedSolution | None = None,
+) -> MixedHybridResult:
+    """Algorithm 2 to the relative-change tolerance; ``reference`` adds e_σ, e_u (per iteration and final).
+
+    ``epsilon`` defaults to ``mixed.default_epsilon`` (pass the reference's ε when comparing).
+    """
+    start = time.perf_counter()
+    if reference is not None and epsilon is None:
+        epsilon = reference.epsilon
+    step = MixedHybridStep(cm, model, beta=beta, epsilon=epsilon, newton=newton)
+    step.prepare()
+    offline = time.perf_counter() - start
+    if reference is not None:  # not part of the method: outside the timings
+        step.set_reference(reference)
+    history = iterate(step, options, name="mixed hybrid")
+    sigma, u = step.glued()
+    s1, s2 = step.sub
+    dofs = {
+        "omega1": s1.num_dofs["total"],
+        "omega2": s2.num_dofs["total"],
+        "interface": 2 * step.size,
+    }
+    e_sigma, e_u = step.errors() if reference is not None else (None, None)
+    return MixedHybridResult(
+        sigma, u, s1.sigma_function(), s2.sigma_function(), s1.u_function(), s2.u_function(), history,
+        s2.contact_profile(), dofs, offline, history.time_s, e_sigma, e_u, step.beta, step.epsilon, step,
+    )

@@ -1,0 +1,731 @@
+"""Mixed CEM-GMsFEM on Ω₁ (METHOD §3, Algorithm 4): local spaces, Stage I, Stage II, Robin correction.
+
+All fine quantities live in a *cell-major* discontinuous layout: a stress is an
+array (n_cells, 30) of DG P3 coefficients (10 Lagrange nodes × (σ_xx, σ_xy,
+σ_yy)), a displacement (n_cells, 6) of DG P1 coefficients.  Every volume
+operator is block diagonal in this layout (compliance, Robin term on γ,
+divergence, masses), so local problems are assembled from cell blocks.
+
+**Local stress spaces.**  For a set of fine cells ω (a coarse cell K_i or an
+oversampled patch K_{i,m}) X_h(ω) = {τ ∈ AW(ω) : τn = 0 on ∂ω ∩ Ω₁°}.  Its basis:
+the global AW basis functions supported in ω (interior vertices, edges not on
+the inner boundary, cells) plus, at every vertex v on the inner boundary, the
+restrictions to ω of the AW vertex functions with value z, z in the null space
+of τ ↦ τn for the normals of the inner-boundary edges at v (so σ_tt stays free
+there, as in the restriction of AW to ω; at a patch corner nothing is left).
+The zero extension of such a function is H(div)-conforming but not vertex
+continuous, so X_ms ⊄ AW(Ω₁); everything is therefore computed on the DG P3
+representation.  With ω = Ω₁ the space is exactly AW(Ω₁).
+
+**Stage I** (per coarse cell, dense): Ã φ + Bᵀp = 0, −Bφ = λ S p with
+Ã = (A·,·) + β∫_{γ∩∂K}(·n)·(·n) and S the κ̃-weighted mass, κ̃ = (λ+2μ)H⁻² (the
+weight of the primal method, METHOD §3).  Eliminating φ gives the symmetric
+GHEP B Ã⁻¹ Bᵀ p = λ S p, solved with LAPACK (all pairs: repeated eigenvalues,
+e.g. the three rigid motions at λ = 0 on interior cells, are never missed).
+The l smallest, S-orthonormal p_j^i span U_aux; π = Π Πᵀ S.
+
+**Stage II** and the correction (sparse LU per patch): with Z = S Π (patch
+columns) and y = Zᵀ q the relaxed problem s(πq, πv) − (div ψ, v) = s(p, πv)
+becomes the sparse symmetric system
+
+    [Ã   Bᵀ   0 ] [ψ]   [ 0     ]      [Ã   Bᵀ   0 ] [Q]   [C_i g]
+    [B   0   −Z ] [q] = [−Z e_j ],     [B   0   −Z ] [N] = [ 0   ]
+    [0  −Zᵀ   I ] [y]   [ 0     ]      [0  −Zᵀ   I ] [y]   [ 0   ]
+
+(C_i g = ∫_{γ∩∂K_i} g·τn₁, nonzero only for the coarse cells touching γ).
+
+**Coarse operators.**  With Φ = [Ψ | Q] (Q per interface value of g) the
+online problem needs only small dense matrices, accumulated coarse cell by
+coarse cell from the patch functions that reach it: the Robin/compliance Gram
+ΦᵀÃΦ, the compliance Gram ΦᵀKΦ (A-norms), Πᵀ B Φ, (BΦ)ᵀN, ΦᵀC, the trace map
+E Φ (σn₁ at the γ nodes, averaged at vertices where the multiscale trace may
+jump), and the displacement Gram of [Π | N].  The online Ω₁ solve is one dense
+LU solve of size dim X_ms + dim U_aux.
+"""
+
+import logging
+import time
+from dataclasses import dataclass
+
+import basix.ufl
+import dolfinx.fem.petsc
+import numpy as np
+import scipy.linalg as sla
+import scipy.sparse as sp
+import ufl
+from dolfinx import fem
+from dolfinx import mesh as dmesh
+from petsc4py import PETSc
+
+from fenics_contact import forms_mixed
+from fenics_contact.errors import InputError
+from fenics_contact.multiscale import CoarseGrid, kappa_tilde, require_serial
+from fenics_contact.tags import Boundary
+
+__all__ = [
+    "CellOperators",
+    "LocalSpace",
+    "MixedCEMOptions",
+    "MixedMultiscaleOmega1",
+    "PatchFunctions",
+    "StageI",
+    "cell_operators",
+    "local_stress_space",
+    "stage_one",
+]
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True, slots=True)
+class MixedCEMOptions:
+    """Mixed CEM parameters: m oversampling layers, l eigenfunctions per coarse cell (None: all)."""
+
+    layers: int = 3
+    nbasis: int | None = 3
+    weight: str = "lambda+2mu"  #: κ̃ = (λ+2μ)H⁻² (METHOD §3) or "2mu": κ̃ = 2μ H⁻²
+
+    def __post_init__(self) -> None:
+        if self.weight not in ("lambda+2mu", "2mu"):
+            raise InputError(f"weight must be 'lambda+2mu' or '2mu', got {self.weight!r}")
+        if int(self.layers) != self.layers or self.layers < 0:
+            raise InputError(f"the number of oversampling layers must be an integer >= 0, got {self.layers!r}")
+        if self.nbasis is not None and (int(self.nbasis) != self.nbasis or self.nbasis < 1):
+            raise InputError(f"nbasis must be an integer >= 1 (or None for all modes), got {self.nbasis!r}")
+
+
+# ---------------------------------------------------------------------------------------
+# helpers
+# ---------------------------------------------------------------------------------------
+def _petsc_to_scipy(A) -> sp.csr_matrix:
+    indptr, indices, data = A.getValuesCSR()
+    return sp.csr_matrix((data.copy(), indices.copy(), indptr.copy()), shape=A.getSize())
+
+
+def _assemble(form) -> sp.csr_matrix:
+    A = dolfinx.fem.petsc.assemble_matrix(fem.form(form))
+    A.assemble()
+    out = _petsc_to_scipy(A)
+    A.destroy()
+    return out
+
+
+def _cell_blocks(A: sp.spmatrix, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+    """Diagonal blocks (n, a, b) of a cellwise operator: A[rows[c]][:, cols[c]] (zero blocks allowed)."""
+    n, a = rows.shape
+    b = cols.shape[1]
+    Ap = sp.csr_matrix(A)[rows.ravel()][:, cols.ravel()].tobsr(blocksize=(a, b))
+    out = np.zeros((n, a, b))
+    brow = np.repeat(np.arange(n), np.diff(Ap.indptr))
+    if not np.array_equal(brow, Ap.indices):
+        raise RuntimeError("the operator is not block diagonal in the cell-major layout")
+    out[brow] = Ap.data
+    return out
+
+
+def _blockdiag(blocks: np.ndarray) -> sp.csr_matrix:
+    """Sparse block-diagonal matrix of blocks (n, a, b)."""
+    n, a, b = blocks.shape
+    r = np.broadcast_to(a * np.arange(n)[:, None, None] + np.arange(a)[None, :, None], blocks.shape)
+    c = np.broadcast_to(b * np.arange(n)[:, None, None] + np.arange(b)[None, None, :], blocks.shape)
+    return sp.csr_matrix((blocks.ravel(), (r.ravel(), c.ravel())), shape=(n * a, n * b))
+
+
+def _contains(sorted_cells: np.ndarray, c: int) -> bool:
+    k = np.searchsorted(sorted_cells, c)
+    return bool(k < sorted_cells.size and sorted_cells[k] == c)
+
+
+def _rows(cells: np.ndarray, width: int) -> np.ndarray:
+    return (width * np.asarray(cells, dtype=np.int64)[:, None] + np.arange(width)).ravel()
+
+
+# ---------------------------------------------------------------------------------------
+# cellwise operators of Ω₁
+# ---------------------------------------------------------------------------------------
+@dataclass(slots=True)
+class CellOperators:
+    """Cell blocks and interface maps of the Ω₁ mixed problem in the cell-major layout."""
+
+    K: np.ndarray  #: (n, 30, 30) compliance (Aσ, τ)
+    Kt: np.ndarray  #: (n, 30, 30) compliance + β ∫_γ (σn)·(τn)
+    B: np.ndarray  #: (n, 6, 30) (div σ, v)
+    M: np.ndarray  #: (n, 6, 6) L² mass of DG P1
+    S: np.ndarray  #: (n, 6, 6) κ̃-weighted mass, κ̃ = (λ+2μ)H⁻²
+    G: np.ndarray  #: (n, 6) −(f, v)
+    C: sp.csr_matrix  #: (30 n, n_g) ∫_γ g·(τn₁), g by values (x, y) at the γ nodes
+    E: sp.csr_matrix  #: (n_g, 30 n) σn₁ at the γ nodes (average of the two sides at vertices)
+    P: sp.csr_matrix  #: (30 n, n_AW) AW prolongation, rows cell-major
+    dg_rows: np.ndarray  #: (n, 30) standard DG P3 index of each cell-major stress entry
+    u_rows: np.ndarray  #: (n, 6) standard DG P1 index of each cell-major displacement entry
+    gamma_cells: np.ndarray  #: cells with a γ facet
+
+    @property
+    def num_cells(self) -> int:
+        return self.K.shape[0]
+
+    @property
+    def num_gamma_values(self) -> int:
+        return self.C.shape[1]
+
+
+def _trace_operator(msh: dmesh.Mesh, dg: fem.FunctionSpace, gamma: np.ndarray, points: np.ndarray) -> sp.csr_matrix:
+    """σn (outward normal) at ``points`` on the γ facets, cell-major columns; averaged where two facets meet."""
+    tdim = msh.topology.dim
+    msh.topology.create_connectivity(tdim - 1, tdim)
+    f2c = msh.topology.connectivity(tdim - 1, tdim)
+    geo = dmesh.entities_to_geometry(msh, tdim - 1, gamma)
+    x = msh.geometry.x[:, :2]
+    a, b = x[geo[:, 0]], x[geo[:, 1]]
+    d = b - a
+    length = np.linalg.norm(d, axis=1)
+    cells = np.array([f2c.links(f)[0] for f in gamma], dtype=np.int64)
+    n = np.stack([d[:, 1], -d[:, 0]], axis=1) / length[:, None]
+    centre = x[msh.geometry.dofmaps[0][cells]].mean(axis=1)
+    n[np.sum(n * (0.5 * (a + b) - centre), axis=1) < 0] *= -1.0
+    # (point, facet) incidences
+    rel = points[:, None, :] - a[None]
+    s = np.einsum("pfi,fi->pf", rel, d) / length[None] ** 2
+    dist = np.linalg.norm(rel - s[..., None] * d[None], axis=-1)
+    on = (dist <= 1e-10 * length[None]) & (s >= -1e-10) & (s <= 1 + 1e-10)
+    pi, fi = np.nonzero(on)
+    if np.unique(pi).size != points.shape[0]:
+        raise RuntimeError("a γ node lies on no γ facet")
+    weight = 1.0 / np.bincount(pi, minlength=points.shape[0])[pi]
+    c = cells[fi]
+    gx = x[msh.geometry.dofmaps[0][c]]
+    J = np.stack([gx[:, 1] - gx[:, 0], gx[:, 2] - gx[:, 0]], axis=-1)
+    X = np.linalg.solve(J, (points[pi] - gx[:, 0])[..., None])[..., 0]
+    el = dg.ufl_element().sub_elements[0].basix_element
+    phi = el.tabulate(0, X)[0, :, :, 0]  # (N, 10)
+    nn = n[fi]
+    rows, cols, vals = [], [], []
+    base = 30 * c[:, None] + 3 * np.arange(10)[None, :]  # (N, 10)
+    for comp, (j, w) in enumerate([(0, nn[:, 0]), (1, nn[:, 1]), (1, nn[:, 0]), (2, nn[:, 1])]):
+        row = 2 * pi + (0 if comp < 2 else 1)
+        rows.append(np.repeat(row, 10))
+        cols.append((base + j).ravel())
+        vals.append((phi * (w * weight)[:, None]).ravel())
+    ncell = msh.topology.index_map(tdim).size_local
+    E = sp.csr_matrix(
+        (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(2 * points.shape[0], 30 * ncell)
+    )
+    E.sum_duplicates()
+    return E
+
+
+def cell_operators(sub, H: float, weight: str = "lambda+2mu") -> CellOperators:
+    """Cell-major operators of the Ω₁ ``mixed.MixedSubproblem`` ``sub`` (Robin β, no contact)."""
+    msh, ft, fields = sub.mesh, sub.facet_tags, sub.fields
+    if sub.beta is None:
+        raise InputError("the Ω₁ subproblem needs a Robin coefficient β")
+    tdim = msh.topology.dim
+    ncell = msh.topology.index_map(tdim).size_local
+    dg, U = sub.dg, sub.U
+    dg_rows = (3 * dg.dofmap.list[:ncell].astype(np.int64)[:, :, None] + np.arange(3)).reshape(ncell, 30)
+    u_rows = (2 * U.dofmap.list[:ncell].astype(np.int64)[:, :, None] + np.arange(2)).reshape(ncell, 6)
+    s, t = ufl.TrialFunction(dg), ufl.TestFunction(dg)
+    w, v = ufl.TrialFunction(U), ufl.TestFunction(U)
+    n = ufl.FacetNormal(msh)
+    ds = forms_mixed.boundary_measure(msh, ft)
+    K = _cell_blocks(_assemble(forms_mixed.compliance_form(s, t, fields.lmbda, fields.mu)), dg_rows, dg_rows)
+    R = _cell_blocks(_assemble(forms_mixed.robin_form(s, t, n, 1.0, ds(Boundary.INTERFACE))), dg_rows, dg_rows)
+    B = _cell_blocks(_assemble(forms_mixed.divergence_form(s, v)), u_rows, dg_rows)
+    M = _cell_blocks(_assemble(forms_mixed.mass_form(w, v)), u_rows, u_rows)
+    kt = kappa_tilde(fields.lmbda, fields.mu, H) if weight == "lambda+2mu" else 2.0 * fields.mu / H**2
+    S = _cell_blocks(_assemble(kt * ufl.inner(w, v) * ufl.dx), u_rows, u_rows)
+    Gv = fem.assemble_vector(fem.form(forms_mixed.load_form(fields.f, v)))
+    Gv.scatter_reverse(dolfinx.la.InsertMode.add)
+    G = Gv.array[u_rows]
+    # interface data: continuous vector P3 on γ, nodes ordered as sub.gamma_points
+    gamma = ft.find(Boundary.INTERFACE)
+    Lam = fem.functionspace(msh, basix.ufl.element("Lagrange", msh.basix_cell(), 3, shape=(2,)))
+    blocks = fem.locate_dofs_topological(Lam, tdim - 1, gamma)
+    coords = Lam.tabulate_dof_coordinates()[blocks, :2]
+    order = np.lexsort((coords[:, 0], coords[:, 1]))
+    blocks, coords = blocks[order], coords[order]
+    if coords.shape != sub.gamma_points.shape or not np.allclose(coords, sub.gamma_points, atol=1e-12):
+        raise RuntimeError("the γ nodes do not match the Ω₁ subproblem's interface nodes")
+    g = ufl.TrialFunction(Lam)
+    Cfull = _assemble(forms_mixed.robin_data_form(g, t, n, ds(Boundary.INTERFACE)))
+    C = Cfull[dg_rows.ravel()][:, (2 * blocks[:, None] + np.arange(2)).ravel()].tocsr()
+    E = _trace_operator(msh, dg, gamma, coords)
+    P = sub.P[dg_rows.ravel()].tocsr()
+    msh.topology.create_connectivity(tdim - 1, tdim)
+    f2c = msh.topology.connectivity(tdim - 1, tdim)
+    gamma_cells = np.unique(np.concatenate([f2c.links(f) for f in gamma]))
+    return CellOperators(K, K + sub.beta * R, B, M, S, G, C, E, P, dg_rows, u_rows, gamma_cells)
+
+
+# ---------------------------------------------------------------------------------------
+# local stress spaces
+# ---------------------------------------------------------------------------------------
+class _Topology:
+    """Vertex/edge/cell incidences of Ω₁ and the raw AW numbering (3 per vertex, 4 per edge, 3 per cell)."""
+
+    def __init__(self, msh: dmesh.Mesh, num_aw: int) -> None:
+        top = msh.topology
+        for d0, d1 in ((2, 0), (2, 1), (1, 0), (1, 2), (0, 2)):
+            top.create_connectivity(d0, d1)
+        self.nc = top.index_map(2).size_local
+        self.nv = top.index_map(0).size_local
+        self.ne = top.index_map(1).size_local
+        if num_aw != 3 * self.nv + 4 * self.ne + 3 * self.nc:
+            raise RuntimeError("the Ω₁ AW space carries constraints; the local spaces need the unconstrained one")
+        self.c2v = top.connectivity(2, 0).array.reshape(-1, 3)[: self.nc].astype(np.int64)
+        self.c2e = top.connectivity(2, 1).array.reshape(-1, 3)[: self.nc].astype(np.int64)
+        self.e2v = top.connectivity(1, 0).array.reshape(-1, 2).astype(np.int64)
+        self.v_deg = np.bincount(self.c2v.ravel(), minlength=self.nv)
+        self.e_deg = np.bincount(self.c2e.ravel(), minlength=self.ne)
+        x = msh.geometry.x[:, :2]
+        vx = np.empty((self.nv, 2))
+        vx[self.c2v.ravel()] = x[msh.geometry.dofmaps[0][: self.nc].ravel()]
+        self.vx = vx
+
+
+@dataclass(slots=True)
+class LocalSpace:
+    """X_h(ω) on fine cells ω (sorted): basis L (30|ω| × n) in the cell-major rows of ω."""
+
+    cells: np.ndarray
+    L: sp.csr_matrix
+    num_extra: int  #: inner-boundary vertex functions (not in AW(Ω₁))
+
+
+def local_stress_space(ops: CellOperators, topo: _Topology, cells: np.ndarray) -> LocalSpace:
+    """Basis of {τ ∈ AW(ω) : τn = 0 on ∂ω ∩ Ω₁°} in the cell-major layout of ω."""
+    cells = np.sort(np.asarray(cells, dtype=np.int64))
+    inside = np.zeros(topo.nc, dtype=bool)
+    inside[cells] = True
+    v_in = np.bincount(topo.c2v[cells].ravel(), minlength=topo.nv)
+    e_in = np.bincount(topo.c2e[cells].ravel(), minlength=topo.ne)
+    v_int = np.flatnonzero((v_in > 0) & (v_in == topo.v_deg))
+    v_bnd = np.flatnonzero((v_in > 0) & (v_in < topo.v_deg))
+    e_int = np.flatnonzero((e_in > 0) & (e_in == topo.e_deg))
+    e_bnd = np.flatnonzero((e_in == 1) & (topo.e_deg == 2))
+    nv, ne = topo.nv, topo.ne
+    inner = np.concatenate([
+        (3 * v_int[:, None] + np.arange(3)).ravel(),
+        (3 * nv + 4 * e_int[:, None] + np.arange(4)).ravel(),
+        (3 * nv + 4 * ne + 3 * cells[:, None] + np.arange(3)).ravel(),
+    ])
+    # null spaces of τ ↦ τn at the inner-boundary vertices
+    normals: dict[int, list[np.ndarray]] = {}
+    for e in e_bnd:
+        a, b = topo.vx[topo.e2v[e, 0]], topo.vx[topo.e2v[e, 1]]
+        d = (b - a) / np.linalg.norm(b - a)
+        n0, n1 = d[1], -d[0]
+        rows = np.array([[n0, n1, 0.0], [0.0, n0, n1]])
+        for v in topo.e2v[e]:
+            normals.setdefault(int(v), []).append(rows)
+    zr, zc, zv = [], [], []
+    ncol = 0
+    for k, v in enumerate(v_bnd):
+        rows = normals.get(int(v))
+        if rows is None:
+            null = np.eye(3)
+        else:
+            _, sv, vt = np.linalg.svd(np.vstack(rows))
+            null = vt[int(np.sum(sv > 1e-10 * sv.max())) :]
+        for z in null:
+            z = np.where(np.abs(z) < 1e-14, 0.0, z)
+            nz = np.flatnonzero(z)
+            zr.append(3 * k + nz)
+            zc.append(np.full(nz.size, ncol))
+            zv.append(z[nz])
+            ncol += 1
+    Pp = ops.P[_rows(cells, 30)].tocsc()
+    parts = [Pp[:, inner]]
+    if ncol:
+        Zm = sp.csr_matrix(
+            (np.concatenate(zv), (np.concatenate(zr), np.concatenate(zc))), shape=(3 * v_bnd.size, ncol)
+        )
+        parts.append(Pp[:, (3 * v_bnd[:, None] + np.arange(3)).ravel()] @ Zm)
+    L = sp.hstack(parts, format="csr")
+    L.eliminate_zeros()
+    return LocalSpace(cells, L, ncol)
+
+
+def _local_operators(ops: CellOperators, space: LocalSpace) -> tuple[sp.csr_matrix, sp.csr_matrix]:
+    """(Ã, B) of X_h(ω) × U_h(ω): Lᵀ Kt L and B L."""
+    L = space.L
+    At = (L.T @ (_blockdiag(ops.Kt[space.cells]) @ L)).tocsr()
+    Bl = (_blockdiag(ops.B[space.cells]) @ L).tocsr()
+    return At, Bl
+
+
+# ---------------------------------------------------------------------------------------
+# Stage I
+# ---------------------------------------------------------------------------------------
+@dataclass(slots=True)
+class StageI:
+    """U_aux: per coarse cell K_k the eigenvalues and S-orthonormal p_j^k (cell-major (|K|, 6, l_k))."""
+
+    values: list
+    modes: list
+    offsets: np.ndarray  #: first aux index of each coarse cell
+    residuals: np.ndarray  #: max ‖−Bφ − λSp‖ / (λ_max ‖Sp‖) per coarse cell
+
+    @property
+    def size(self) -> int:
+        return int(self.offsets[-1])
+
+
+def stage_one(ops: CellOperators, topo: _Topology, grid: CoarseGrid, nbasis: int | None) -> StageI:
+    """Mixed local spectral problems Ã φ + Bᵀp = 0, −Bφ = λ S p on every coarse cell (dense LAPACK)."""
+    values, modes, res = [], [], []
+    for k in range(grid.size):
+        cells = np.sort(grid.cells[k].astype(np.int64))
+        space = local_stress_space(ops, topo, cells)
+        At, Bl = _local_operators(ops, space)
+        At, Bl = At.toarray(), Bl.toarray()
+        S = sla.block_diag(*ops.S[cells])
+        cho = sla.cho_factor(At)
+        X = sla.cho_solve(cho, Bl.T)
+        schur = Bl @ X
+        schur = 0.5 * (schur + schur.T)
+        lam, vec = sla.eigh(schur, S)
+        lam = np.maximum(lam, 0.0)
+        nk = vec.shape[1] if nbasis is None else min(nbasis, vec.shape[1])
+        p = vec[:, :nk]
+        phi = -X @ p
+        r = -Bl @ phi - S @ p * lam[:nk]
+        # relative to the operator scale: λ_max ‖S p‖ (λ = 0 modes have φ = 0 exactly)
+        scale = np.linalg.norm(S @ p, axis=0) * max(float(lam[-1]), 1e-300)
+        res.append(float(np.max(np.linalg.norm(r, axis=0) / scale)))
+        values.append(lam[:nk])
+        modes.append(p.reshape(cells.size, 6, nk))
+    offsets = np.concatenate([[0], np.cumsum([m.shape[2] for m in modes])])
+    return StageI(values, modes, offsets, np.array(res))
+
+
+# ---------------------------------------------------------------------------------------
+# Stage II and the correction
+# ---------------------------------------------------------------------------------------
+@dataclass(slots=True)
+class PatchFunctions:
+    """Functions on one patch: stresses (|ω|, 30, k), displacements (|ω|, 6, k) and their global indices."""
+
+    cells: np.ndarray
+    sigma: np.ndarray
+    u: np.ndarray
+    index: np.ndarray
+
+
+def _patch_system(ops: CellOperators, topo: _Topology, grid: CoarseGrid, aux: StageI, patch: np.ndarray):
+    """(space, LU of the Stage II matrix, aux column offsets of the patch's coarse cells, n_loc, n_u)."""
+    cells = np.sort(np.concatenate([grid.cells[j] for j in patch]).astype(np.int64))
+    space = local_stress_space(ops, topo, cells)
+    At, Bl = _local_operators(ops, space)
+    # Z = S Π on the patch: the aux functions of its coarse cells
+    zr, zc, zv = [], [], []
+    col = 0
+    aux_cols = {}
+    for j in patch:
+        cj = np.sort(grid.cells[j].astype(np.int64))
+        pos = np.searchsorted(cells, cj)
+        Zj = np.einsum("cab,cbk->cak", ops.S[cj], aux.modes[j])  # (|K_j|, 6, l_j)
+        lj = Zj.shape[2]
+        r = np.broadcast_to(_rows(pos, 6).reshape(cj.size, 6)[:, :, None], Zj.shape)
+        c = np.broadcast_to(col + np.arange(lj)[None, None, :], Zj.shape)
+        zr.append(r.ravel())
+        zc.append(c.ravel())
+        zv.append(Zj.ravel())
+        aux_cols[int(j)] = col
+        col += lj
+    n_u = 6 * cells.size
+    Z = sp.csr_matrix((np.concatenate(zv), (np.concatenate(zr), np.concatenate(zc))), shape=(n_u, col))
+    n_loc = At.shape[0]
+    A = sp.bmat(
+        [[At, Bl.T, None], [Bl, None, -Z], [None, -Z.T, sp.identity(col)]], format="csc"
+    )
+    lu = _MumpsLU(A)
+    return space, lu, Z, aux_cols, n_loc, n_u
+
+
+class _MumpsLU:
+    """MUMPS LU of a sparse matrix (SuperLU was 10–100× slower on these saddle-point systems)."""
+
+    def __init__(self, A: sp.spmatrix) -> None:
+        A = sp.csr_matrix(A)
+        A.sort_indices()
+        self.mat = PETSc.Mat().createAIJ(
+            size=A.shape, csr=(A.indptr.astype(PETSc.IntType), A.indices.astype(PETSc.IntType), A.data),
+            comm=PETSc.COMM_SELF,
+        )
+        self.mat.assemble()
+        self.ksp = PETSc.KSP().create(PETSc.COMM_SELF)
+        self.ksp.setOperators(self.mat)
+        self.ksp.setType("preonly")
+        pc = self.ksp.getPC()
+        pc.setType("lu")
+        pc.setFactorSolverType("mumps")
+        self.ksp.setUp()
+        self.b, self.x = self.mat.createVecs()
+
+    def solve(self, rhs: np.ndarray) -> np.ndarray:
+        out = np.empty_like(rhs)
+        for k in range(rhs.shape[1]):
+            self.b.array[:] = rhs[:, k]
+            self.ksp.solve(self.b, self.x)
+            if self.ksp.getConvergedReason() < 0:
+                raise RuntimeError(f"MUMPS failed on a local mixed CEM problem (reason {self.ksp.getConvergedReason()})")
+            out[:, k] = self.x.array
+        return out
+
+    def destroy(self) -> None:
+        for obj in (self.ksp, self.mat, self.b, self.x):
+            obj.destroy()
+
+
+def _unpack(space: LocalSpace, x: np.ndarray, n_loc: int, n_u: int) -> tuple[np.ndarray, np.ndarray]:
+    k = x.shape[1]
+    nc = space.cells.size
+    sigma = np.asarray(space.L @ x[:n_loc]).reshape(nc, 30, k)
+    u = x[n_loc : n_loc + n_u].reshape(nc, 6, k)
+    return sigma, u
+
+
+def stage_two(
+    ops: CellOperators, topo: _Topology, grid: CoarseGrid, aux: StageI, layers: int
+) -> tuple[list[PatchFunctions], list[PatchFunctions]]:
+    """Basis functions ψ_j^i (index = aux index) and corrections Q_i, N_i (index = γ value index)."""
+    basis, corr = [], []
+    gamma_coarse = set(np.unique(grid.cell_coarse[ops.gamma_cells]).tolist())
+    for i in range(grid.size):
+        patch = grid.patch(i, layers)
+        space, lu, Z, aux_cols, n_loc, n_u = _patch_system(ops, topo, grid, aux, patch)
+        n_tot = n_loc + n_u + Z.shape[1]
+        li = aux.modes[i].shape[2]
+        rhs = np.zeros((n_tot, li))
+        c0 = aux_cols[int(i)]
+        rhs[n_loc : n_loc + n_u] = -Z[:, c0 : c0 + li].toarray()
+        sol = lu.solve(rhs)
+        sigma, u = _unpack(space, sol, n_loc, n_u)
+        basis.append(PatchFunctions(space.cells, sigma, u, aux.offsets[i] + np.arange(li)))
+        if i in gamma_coarse:
+            ci = np.sort(grid.cells[i].astype(np.int64))
+            Ci = ops.C[_rows(ci, 30)]
+            gcols = np.unique(Ci.indices)
+            if gcols.size:
+                coo = Ci[:, gcols].tocoo()
+                pos = _rows(np.searchsorted(space.cells, ci), 30)
+                Cpatch = sp.csr_matrix(
+                    (coo.data, (pos[coo.row], coo.col)), shape=(30 * space.cells.size, gcols.size)
+                )
+                rhs = np.zeros((n_tot, gcols.size))
+                rhs[:n_loc] = (space.L.T @ Cpatch).toarray()
+                sol = lu.solve(rhs)
+                sigma, u = _unpack(space, sol, n_loc, n_u)
+                corr.append(PatchFunctions(space.cells, sigma, u, gcols))
+        lu.destroy()
+    return basis, corr
+
+
+# ---------------------------------------------------------------------------------------
+# the Ω₁ multiscale solver
+# ---------------------------------------------------------------------------------------
+@dataclass(slots=True)
+class CoarseOperators:
+    """Dense coarse matrices of Algorithm 4 (index space [X_ms | g] for stresses, [U_aux | g] for u)."""
+
+    n_ms: int
+    n_aux: int
+    n_g: int
+    Gt: np.ndarray  #: ΦᵀÃΦ
+    Gk: np.ndarray  #: ΦᵀKΦ
+    Bm: np.ndarray  #: Πᵀ B Φ
+    BN: np.ndarray  #: (BΦ)ᵀ N
+    Cphi: np.ndarray  #: Φᵀ C
+    Ephi: np.ndarray  #: E Φ
+    Mu: np.ndarray  #: Gram of [Π | N] in L²
+    PiG: np.ndarray  #: Πᵀ G
+
+
+def coarse_operators(
+    ops: CellOperators, grid: CoarseGrid, aux: StageI, basis: list, corr: list, layers: int
+) -> CoarseOperators:
+    """Accumulate the coarse matrices coarse cell by coarse cell from the patch functions reaching it."""
+    n_ms, n_g = aux.size, ops.num_gamma_values
+    n_tot = n_ms + n_g
+    Gt = np.zeros((n_tot, n_tot))
+    Gk = np.zeros((n_tot, n_tot))
+    Bm = np.zeros((aux.size, n_tot))
+    BN = np.zeros((n_tot, n_g))
+    Cphi = np.zeros((n_tot, n_g))
+    Ephi = np.zeros((n_g, n_tot))
+    Mu = np.zeros((aux.size + n_g, aux.size + n_g))
+    PiG = np.zeros(aux.size)
+    gamma_set = set(ops.gamma_cells.tolist())
+    for K in range(grid.size):
+        cK = np.sort(grid.cells[K].astype(np.int64))
+        funcs = [basis[i] for i in grid.patch(K, layers)]
+        qs = [c for c in corr if _contains(c.cells, cK[0])]
+        sig, idx, uq, gidx = [], [], [], []
+        for f in funcs:
+            pos = np.searchsorted(f.cells, cK)
+            sig.append(f.sigma[pos])
+            idx.append(f.index)
+        for q in qs:
+            pos = np.searchsorted(q.cells, cK)
+            sig.append(q.sigma[pos])
+            idx.append(n_ms + q.index)
+            uq.append(q.u[pos])
+            gidx.append(q.index)
+        Phi = np.concatenate(sig, axis=2)
+        idx = np.concatenate(idx)
+        uniq, inv = np.unique(idx, return_inverse=True)
+        if uniq.size != idx.size:
+            Ph = np.zeros(Phi.shape[:2] + (uniq.size,))
+            for k in range(idx.size):
+                Ph[:, :, inv[k]] += Phi[:, :, k]
+            Phi = Ph
+        nf = uniq.size
+        F = Phi.reshape(-1, nf)
+        KtP = np.einsum("cab,cbk->cak", ops.Kt[cK], Phi).reshape(-1, nf)
+        KP = np.einsum("cab,cbk->cak", ops.K[cK], Phi).reshape(-1, nf)
+        BP = np.einsum("cab,cbk->cak", ops.B[cK], Phi).reshape(-1, nf)
+        ix = np.ix_(uniq, uniq)
+        Gt[ix] += F.T @ KtP
+        Gk[ix] += F.T @ KP
+        a0, a1 = aux.offsets[K], aux.offsets[K + 1]
+        Pi = aux.modes[K].reshape(-1, a1 - a0)
+        Bm[a0:a1, uniq] += Pi.T @ BP
+        Mb = sla.block_diag(*ops.M[cK])
+        Mu[a0:a1, a0:a1] += Pi.T @ Mb @ Pi
+        PiG[a0:a1] += Pi.T @ ops.G[cK].ravel()
+        if uq:
+            N = np.concatenate(uq, axis=2).reshape(-1, sum(x.size for x in gidx))
+            gi = np.concatenate(gidx)
+            gu, ginv = np.unique(gi, return_inverse=True)
+            Nu = np.zeros((N.shape[0], gu.size))
+            for k in range(gi.size):
+                Nu[:, ginv[k]] += N[:, k]
+            BN[np.ix_(uniq, gu)] += BP.T @ Nu
+            Mu[np.ix_(np.arange(a0, a1), aux.size + gu)] += Pi.T @ Mb @ Nu
+            Mu[np.ix_(aux.size + gu, np.arange(a0, a1))] += (Pi.T @ Mb @ Nu).T
+            Mu[np.ix_(aux.size + gu, aux.size + gu)] += Nu.T @ Mb @ Nu
+        if gamma_set.intersection(cK.tolist()):
+            rows = _rows(cK, 30)
+            Cphi[uniq] += (ops.C[rows].T @ F).T
+            Ephi[:, uniq] += ops.E[:, rows] @ F
+    return CoarseOperators(n_ms, aux.size, n_g, Gt, Gk, Bm, BN, Cphi, Ephi, Mu, PiG)
+
+
+class MixedMultiscaleOmega1:
+    """Ω₁ of Algorithm 4: offline stages on an Ω₁ ``MixedSubproblem`` and the online coarse solve.
+
+    ``solve(g)`` returns the coarse state (r, w) for Robin data g (values at the γ
+    nodes); σ₁ = Ψ r + Q g and u₁ = Π w + N g are never formed online: norms and
+    traces use the dense coarse operators (``stress_state``, ``trace``, ...).
+    """
+
+    def __init__(self, sub, grid: CoarseGrid, options: MixedCEMOptions, *, H: float) -> None:
+        require_serial(sub.mesh.comm)
+        self.options = options
+        self.grid = grid
+        self.times: dict[str, float] = {}
+        t = time.perf_counter()
+        self.ops = cell_operators(sub, H, options.weight)
+        self.topo = _Topology(sub.mesh, self.ops.P.shape[1])
+        self.times["assembly"] = time.perf_counter() - t
+        t = time.perf_counter()
+        self.aux = stage_one(self.ops, self.topo, grid, options.nbasis)
+        self.times["eigen"] = time.perf_counter() - t
+        t = time.perf_counter()
+        self.basis, self.corr = stage_two(self.ops, self.topo, grid, self.aux, options.layers)
+        self.times["basis"] = time.perf_counter() - t
+        t = time.perf_counter()
+        self.co = coarse_operators(self.ops, grid, self.aux, self.basis, self.corr, options.layers)
+        co = self.co
+        ms = slice(0, co.n_ms)
+        qg = slice(co.n_ms, co.n_ms + co.n_g)
+        A = np.block([[co.Gt[ms, ms], co.Bm[:, ms].T], [co.Bm[:, ms], np.zeros((co.n_aux, co.n_aux))]])
+        self._lu = sla.lu_factor(A)
+        self._F1 = co.Cphi[ms] - co.Gt[ms, qg] - co.BN[ms]
+        self._F2 = co.Bm[:, qg]
+        self._E_r, self._E_g = co.Ephi[:, ms], co.Ephi[:, qg]
+        self.times["coarse"] = time.perf_counter() - t
+        log.info(
+            "mixed CEM Ω₁ (m=%d, l=%s): dim X_ms %d, dim U_aux %d, max Stage I residual %.1e, times %s",
+            options.layers, options.nbasis, co.n_ms, co.n_aux, float(self.aux.residuals.max()),
+            {k: round(v, 2) for k, v in self.times.items()},
+        )
+
+    @property
+    def num_coarse_dofs(self) -> int:
+        """dim X_ms + dim U_aux."""
+        return self.co.n_ms + self.co.n_aux
+
+    def solve(self, g: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Coarse (r, w) for Robin data g."""
+        n = self.co.n_ms
+        x = sla.lu_solve(self._lu, np.concatenate([self._F1 @ g, self.co.PiG - self._F2 @ g]))
+        return x[:n], x[n:]
+
+    def trace(self, r: np.ndarray, g: np.ndarray) -> np.ndarray:
+        """σ₁n₁ at the γ nodes."""
+        return self._E_r @ r + self._E_g @ g
+
+    def stress_norm2(self, r: np.ndarray, g: np.ndarray) -> float:
+        """‖Ψ r + Q g‖²_A."""
+        x = np.concatenate([r, g])
+        return float(x @ self.co.Gk @ x)
+
+    def l2_norm2(self, w: np.ndarray, g: np.ndarray) -> float:
+        """‖Π w + N g‖²_L²."""
+        x = np.concatenate([w, g])
+        return float(x @ self.co.Mu @ x)
+
+    # -- fine reconstruction (output, errors, tests) ----------------------------------
+    def fine_stress(self, r: np.ndarray, g: np.ndarray) -> np.ndarray:
+        """σ₁ = Ψ r + Q g, cell-major (n_cells, 30)."""
+        out = np.zeros((self.ops.num_cells, 30))
+        for f in self.basis:
+            out[f.cells] += f.sigma @ r[f.index]
+        for q in self.corr:
+            out[q.cells] += q.sigma @ g[q.index]
+        return out
+
+    def fine_displacement(self, w: np.ndarray, g: np.ndarray) -> np.ndarray:
+        """u₁ = Π w + N g, cell-major (n_cells, 6)."""
+        out = np.zeros((self.ops.num_cells, 6))
+        for k in range(self.grid.size):
+            cells = np.sort(self.grid.cells[k].astype(np.int64))
+            out[cells] += self.aux.modes[k] @ w[self.aux.offsets[k] : self.aux.offsets[k + 1]]
+        for q in self.corr:
+            out[q.cells] += q.u @ g[q.index]
+        return out
+
+    def fine_displacement_post(self, r: np.ndarray, g: np.ndarray) -> np.ndarray:
+        """Post-processed fine displacement Σ r_j q_j + N g (cell-major (n_cells, 6)).
+
+        q_j is the displacement part of the Stage II problem of ψ_j (Ãψ_j + Bᵀq_j = 0), so
+        σ₁ = Ψ r + Q g and this u satisfy the discrete constitutive law (Aσ₁, τ) + (div τ, u) +
+        β∫_γ(σ₁n₁)·(τn₁) = ∫_{γ}g·(τn₁) for τ in every local space; unlike u₁ = Π w + N g
+        (coarse, in U_aux) it resolves the fine scales.
+        """
+        out = np.zeros((self.ops.num_cells, 6))
+        for f in self.basis:
+            out[f.cells] += f.u @ r[f.index]
+        for q in self.corr:
+            out[q.cells] += q.u @ g[q.index]
+        return out
+
+    def a_norm2(self, sigma: np.ndarray) -> float:
+        """(Aσ, σ) of a cell-major stress."""
+        return float(np.einsum("ca,cab,cb->", sigma, self.ops.K, sigma))
+
+    def m_norm2(self, u: np.ndarray) -> float:
+        """‖u‖²_L² of a cell-major displacement."""
+        return float(np.einsum("ca,cab,cb->", u, self.ops.M, u))
+
+    def project(self, u: np.ndarray) -> np.ndarray:
+        """π u = Π Πᵀ S u (cell-major)."""
+        out = np.zeros_like(u)
+        for k in range(self.grid.size):
+            cells = np.sort(self.grid.cells[k].astype(np.int64))
+            p = self.aux.modes[k]
+            Su = np.einsum("cab,cb->ca", self.ops.S[cells], u[cells])
+            out[cells] = p @ np.einsum("cak,ca->k", p, Su)
+        return out

@@ -1,0 +1,144 @@
+"""Mixed CEM-GMsFEM (Algorithm 4): local spaces, Stage I, π, reproduction of fine solutions, convergence."""
+
+import numpy as np
+import pytest
+
+import fenics_contact  # noqa: F401  (must precede dolfinx)
+from fenics_contact import geometry, models, multiscale
+from fenics_contact import mixed_multiscale as mm
+from fenics_contact.dd import IterationOptions
+from fenics_contact.errors import InputError
+from fenics_contact.mixed import solve_mixed_monolithic
+from fenics_contact.mixed_hybrid import MixedHybridStep
+from fenics_contact.mixed_ms import solve_mixed_ms_hybrid
+
+
+@pytest.fixture(scope="module")
+def omega1():
+    """Ω₁ of h = 1/16, H = 1/4 (3 × 4 coarse cells): the fine subproblem and its cell operators."""
+    cm = geometry.unit_square(16, 4)
+    step = MixedHybridStep(cm, models.get_model(2), beta="sqrt-h")
+    part = step.parts[0]
+    grid = multiscale.coarse_grid(part.mesh, part.cell_map, cm.coarse_cell, cm.H)
+    ops = mm.cell_operators(step.sub[0], cm.H)
+    topo = mm._Topology(step.sub[0].mesh, ops.P.shape[1])
+    return cm, step, grid, ops, topo
+
+
+def _rigid_motions(sub, ops, cells):
+    """Cell-major DG P1 coefficients (|cells|, 6, 3) of the rigid motions (1,0), (0,1), (−y, x)."""
+    x = sub.U.tabulate_dof_coordinates()
+    out = np.zeros((cells.size, 6, 3))
+    rows = ops.u_rows[cells]  # (|cells|, 6): 2·node + comp
+    node, comp = rows // 2, rows % 2
+    out[:, :, 0] = comp == 0
+    out[:, :, 1] = comp == 1
+    out[:, :, 2] = np.where(comp == 0, -x[node, 1], x[node, 0])
+    return out
+
+
+def test_local_space_is_aw_on_omega1_and_traction_free_inside(omega1):
+    cm, step, grid, ops, topo = omega1
+    whole = mm.local_stress_space(ops, topo, np.arange(ops.num_cells))
+    assert whole.num_extra == 0
+    assert abs(whole.L - ops.P).max() == 0.0
+    # an interior coarse cell: τn = 0 on its whole boundary ⇒ (div τ, r) = 0 for rigid motions r
+    k = int(np.flatnonzero((grid.ij[:, 0] == 1) & (grid.ij[:, 1] == 1))[0])
+    cells = np.sort(grid.cells[k].astype(np.int64))
+    space = mm.local_stress_space(ops, topo, cells)
+    assert space.num_extra > 0  # σ_tt stays free at the inner-boundary vertices
+    _, Bl = mm._local_operators(ops, space)
+    r = _rigid_motions(step.sub[0], ops, cells).reshape(-1, 3)
+    assert np.abs(Bl.T @ r).max() < 1e-12 * abs(Bl).max() * np.abs(r).max() * 10
+
+
+def test_stage_one_residuals_orthonormality_rigid_modes(omega1):
+    cm, step, grid, ops, topo = omega1
+    aux = mm.stage_one(ops, topo, grid, 3)
+    assert aux.residuals.max() < 1e-10
+    for k in range(grid.size):
+        cells = np.sort(grid.cells[k].astype(np.int64))
+        p = aux.modes[k].reshape(-1, 3)
+        S = np.zeros((p.shape[0], p.shape[0]))
+        for i in range(cells.size):
+            S[6 * i : 6 * i + 6, 6 * i : 6 * i + 6] = ops.S[cells[i]]
+        assert np.allclose(p.T @ S @ p, np.eye(3), atol=1e-10)
+        assert np.all(np.diff(aux.values[k]) >= -1e-12)
+    # interior coarse cells (traction-free all round): the three smallest are the rigid motions, λ = 0
+    k = int(np.flatnonzero((grid.ij[:, 0] == 1) & (grid.ij[:, 1] == 1))[0])
+    assert np.abs(aux.values[k]).max() < 1e-8 * aux.values[0].max() + 1e-10
+    # a cell on γ (Robin term) has no zero eigenvalue
+    kg = int(np.flatnonzero(grid.ij[:, 0] == grid.ij[:, 0].max())[0])
+    assert aux.values[kg][0] > 1e-6
+
+
+@pytest.fixture(scope="module")
+def full_space(omega1):
+    """All local modes kept, patches covering Ω₁ (m = 3 on a 3 × 4 coarse grid)."""
+    cm, step, grid, ops, topo = omega1
+    return mm.MixedMultiscaleOmega1(step.sub[0], grid, mm.MixedCEMOptions(layers=3, nbasis=None), H=cm.H)
+
+
+def test_projection(omega1):
+    cm, step, grid, ops, topo = omega1
+    om = mm.MixedMultiscaleOmega1(step.sub[0], grid, mm.MixedCEMOptions(layers=1, nbasis=3), H=cm.H)
+    rng = np.random.default_rng(1)
+    u = rng.standard_normal((ops.num_cells, 6))
+    pu = om.project(u)
+    assert np.allclose(om.project(pu), pu, atol=1e-12 * np.abs(pu).max())
+    # s(u − πu, πv) = 0
+    v = om.project(rng.standard_normal((ops.num_cells, 6)))
+    s = np.einsum("ca,cab,cb->", u - pu, ops.S, v)
+    assert abs(s) < 1e-10 * np.sqrt(np.einsum("ca,cab,cb->", u, ops.S, u) * np.einsum("ca,cab,cb->", v, ops.S, v))
+    # the aux modes are fixed by π
+    p = np.zeros((ops.num_cells, 6))
+    cells = np.sort(grid.cells[0].astype(np.int64))
+    p[cells] = om.aux.modes[0][:, :, 1]
+    assert np.allclose(om.project(p), p, atol=1e-12)
+
+
+def test_full_space_reproduces_fine_robin_solution(omega1, full_space):
+    cm, step, grid, ops, topo = omega1
+    om, sub = full_space, step.sub[0]
+    rng = np.random.default_rng(0)
+    g = rng.standard_normal(om.co.n_g)
+    r, w = om.solve(g)
+    sigma, u = om.fine_stress(r, g), om.fine_displacement(w, g)
+    sub.solve(g)
+    s_ref = (ops.P @ sub.c).reshape(-1, 30)
+    u_ref = sub.u[ops.u_rows]
+    assert np.sqrt(om.a_norm2(sigma - s_ref) / om.a_norm2(s_ref)) < 1e-9
+    assert np.sqrt(om.m_norm2(u - u_ref) / om.m_norm2(u_ref)) < 1e-9
+    u_post = om.fine_displacement_post(r, g)
+    assert np.sqrt(om.m_norm2(u_post - u_ref) / om.m_norm2(u_ref)) < 1e-9
+    # the coarse Gram matrices give the same norms and traces as the fine fields
+    assert np.isclose(om.stress_norm2(r, g), om.a_norm2(sigma), rtol=1e-10)
+    assert np.isclose(om.l2_norm2(w, g), om.m_norm2(u), rtol=1e-10)
+    assert np.allclose(om.trace(r, g), sub.N @ sub.c, atol=1e-9 * np.abs(sub.N @ sub.c).max())
+
+
+def test_algorithm4_converges_and_error_falls_with_layers():
+    cm = geometry.unit_square(32, 8)
+    model = models.get_model(2)
+    ref = solve_mixed_monolithic(cm, model)
+    errors = []
+    for m in (1, 2):
+        res = solve_mixed_ms_hybrid(cm, model, layers=m, nbasis=3, reference=ref,
+                                    options=IterationOptions(accel="none", max_iterations=400))
+        assert res.converged
+        assert res.dofs["X_ms"] == res.dofs["U_aux"] == 3 * 7 * 8
+        assert res.time_online_s < res.time_offline_s
+        errors.append((res.e_sigma, res.e_u, res.e_u_post))
+    assert errors[1][0] < 0.3 * errors[0][0]
+    assert errors[1][1] < errors[0][1]
+    assert errors[1][2] < 0.3 * errors[0][2]  # the post-processed displacement follows the stress error
+    assert errors[0][0] < 0.5
+
+
+def test_options_are_validated():
+    with pytest.raises(InputError):
+        mm.MixedCEMOptions(layers=-1)
+    with pytest.raises(InputError):
+        mm.MixedCEMOptions(nbasis=0)
+    with pytest.raises(InputError):
+        mm.MixedCEMOptions(weight="E")

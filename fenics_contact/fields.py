@@ -4,11 +4,13 @@ from collections.abc import Callable
 from typing import NamedTuple
 
 import numpy as np
+from mpi4py import MPI
 
 import basix.ufl
 from dolfinx import fem, la
 from dolfinx import mesh as dmesh
 
+from fenics_contact.errors import InputError
 from fenics_contact.materials import check_poisson_ratio, check_youngs_modulus, lame
 from fenics_contact.models import TestModel
 
@@ -46,6 +48,11 @@ def material_fields(msh: dmesh.Mesh, model: TestModel) -> MaterialFields:
     lmbda.x.array[:] = lm
     mu.x.array[:] = mu_
     f = cell_function(msh, model.load, shape=(msh.geometry.dim,), name="f")
+    if msh.comm.allreduce(float(np.max(np.abs(f.x.array), initial=0.0)), op=MPI.MAX) == 0.0:
+        raise InputError(
+            f"the body force of {model.name!r} is zero on every cell of this mesh (too coarse to resolve the "
+            "load bands?): the solution would be u = 0. Refine the mesh (the built-in loads act on x >= 15/16)."
+        )
     return MaterialFields(E, nu, lmbda, mu, f)
 
 

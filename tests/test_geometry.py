@@ -140,3 +140,10 @@ def test_stored_mesh_is_the_builder_output():
     xb = np.concatenate(built.comm.allgather(built.mesh.geometry.x[:, :2]))
     order = lambda x: x[np.lexsort((np.round(x[:, 1], 9), np.round(x[:, 0], 9)))]  # noqa: E731
     assert np.allclose(order(np.unique(np.round(xs, 12), axis=0)), order(np.unique(np.round(xb, 12), axis=0)))
+
+
+def test_mesh_too_coarse_for_the_load_is_rejected():
+    """h = 1/4 has no cell midpoint in the load column x >= 15/16: a clear error, not u = 0."""
+    cm = unit_square(4, 2)
+    with pytest.raises(InputError, match="zero on every cell"):
+        material_fields(cm.mesh, model_2())

@@ -203,7 +203,7 @@ def run(args) -> int:
     options = IterationOptions(tol=args.tol, max_iterations=args.max_iterations, accel=args.accel)
     t0 = time.perf_counter()
     cm = _mesh(args)
-    fields = material_fields(cm.mesh, model)
+    fields = material_fields(cm.mesh, model, require_load=True)
     t_mesh = time.perf_counter() - t0
     log.info("model %d (%s), h = %.4g, H = %s, method %s, accel %s",
              args.model, model.description, cm.h, cm.H, args.method, args.accel)

@@ -27,6 +27,7 @@ __all__ = [
     "IterationRecord",
     "IterationHistory",
     "iterate",
+    "IterationResult",
 ]
 
 log = logging.getLogger(__name__)
@@ -144,6 +145,20 @@ class IterationHistory:
     @property
     def rel_changes(self) -> np.ndarray:
         return np.array([r.rel_change for r in self.records])
+
+
+class IterationResult:
+    """Mixin for result dataclasses that hold an ``IterationHistory`` as ``history``."""
+
+    __slots__ = ()
+
+    @property
+    def converged(self) -> bool:
+        return self.history.converged
+
+    @property
+    def iterations(self) -> int:
+        return self.history.iterations
 
 
 def _format(info: dict) -> str:

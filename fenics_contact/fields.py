@@ -36,8 +36,12 @@ def cell_function(msh: dmesh.Mesh, field: Callable[[np.ndarray], np.ndarray], *,
     return fn
 
 
-def material_fields(msh: dmesh.Mesh, model: TestModel) -> MaterialFields:
-    """DG0 material fields of ``model`` on ``msh``; raises InputError on E ≤ 0 or ν ∉ (−1, ½)."""
+def material_fields(msh: dmesh.Mesh, model: TestModel, *, require_load: bool = False) -> MaterialFields:
+    """DG0 material fields of ``model`` on ``msh``; raises InputError on E ≤ 0 or ν ∉ (−1, ½).
+
+    With ``require_load`` (for the whole domain, not a subdomain) a body force that
+    vanishes on every cell is an InputError: the mesh does not resolve the load.
+    """
     E = cell_function(msh, model.youngs_modulus, name="E")
     nu = cell_function(msh, model.poisson_ratio, name="nu")
     check_youngs_modulus(E.x.array)
@@ -48,7 +52,7 @@ def material_fields(msh: dmesh.Mesh, model: TestModel) -> MaterialFields:
     lmbda.x.array[:] = lm
     mu.x.array[:] = mu_
     f = cell_function(msh, model.load, shape=(msh.geometry.dim,), name="f")
-    if msh.comm.allreduce(float(np.max(np.abs(f.x.array), initial=0.0)), op=MPI.MAX) == 0.0:
+    if require_load and msh.comm.allreduce(float(np.max(np.abs(f.x.array), initial=0.0)), op=MPI.MAX) == 0.0:
         raise InputError(
             f"the body force of {model.name!r} is zero on every cell of this mesh (too coarse to resolve the "
             "load bands?): the solution would be u = 0. Refine the mesh (the built-in loads act on x >= 15/16)."

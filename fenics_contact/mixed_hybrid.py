@@ -61,7 +61,7 @@ import basix.ufl
 from dolfinx import fem
 
 from fenics_contact.contact import NewtonOptions
-from fenics_contact.dd import IterationHistory, IterationOptions, iterate
+from fenics_contact.dd import IterationHistory, IterationOptions, IterationResult, iterate
 from fenics_contact.errors import InputError
 from fenics_contact.fields import material_fields
 from fenics_contact.geometry import ContactMesh
@@ -247,7 +247,7 @@ class MixedHybridStep:
 
 
 @dataclass(slots=True)
-class MixedHybridResult:
+class MixedHybridResult(IterationResult):
     """Fields, history, DOF counts, timings and errors of an Algorithm 2 solve."""
 
     sigma: fem.Function  #: DG P3 (σ_xx, σ_xy, σ_yy) on the parent mesh
@@ -266,14 +266,6 @@ class MixedHybridResult:
     beta: float
     epsilon: float
     step: MixedHybridStep
-
-    @property
-    def converged(self) -> bool:
-        return self.history.converged
-
-    @property
-    def iterations(self) -> int:
-        return self.history.iterations
 
 
 def solve_mixed_hybrid(

@@ -38,7 +38,7 @@ import numpy as np
 from dolfinx import fem
 
 from fenics_contact.contact import NewtonOptions
-from fenics_contact.dd import IterationHistory, IterationOptions, iterate
+from fenics_contact.dd import IterationHistory, IterationOptions, IterationResult, iterate
 from fenics_contact.errors import InputError
 from fenics_contact.geometry import ContactMesh
 from fenics_contact.mixed import MixedContactProfile, MixedSolution
@@ -191,7 +191,7 @@ class MixedMultiscaleHybridStep(MixedHybridStep):
 
 
 @dataclass(slots=True)
-class MixedMsResult:
+class MixedMsResult(IterationResult):
     """Fields, history, DOF counts, timings and errors of an Algorithm 4 solve."""
 
     sigma: fem.Function  #: DG P3 (σ_xx, σ_xy, σ_yy) on the parent mesh
@@ -211,14 +211,6 @@ class MixedMsResult:
     layers: int
     nbasis: int | None
     step: MixedMultiscaleHybridStep
-
-    @property
-    def converged(self) -> bool:
-        return self.history.converged
-
-    @property
-    def iterations(self) -> int:
-        return self.history.iterations
 
 
 def solve_mixed_ms_hybrid(

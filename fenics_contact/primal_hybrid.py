@@ -18,7 +18,7 @@ from mpi4py import MPI
 from dolfinx import fem
 
 from fenics_contact.contact import ContactProfile, NewtonOptions
-from fenics_contact.dd import HybridStep, IterationHistory, IterationOptions, iterate
+from fenics_contact.dd import HybridStep, IterationHistory, IterationOptions, IterationResult, iterate
 from fenics_contact.fields import material_fields
 from fenics_contact.geometry import ContactMesh
 from fenics_contact.models import TestModel
@@ -142,7 +142,7 @@ class PrimalHybridStep:
 
 
 @dataclass(slots=True)
-class HybridResult:
+class HybridResult(IterationResult):
     """Fields, history, DOF counts and timings of a hybrid solve."""
 
     u1: fem.Function
@@ -155,14 +155,6 @@ class HybridResult:
     time_online_s: float
     e_u: float | None
     step: HybridStep  #: the step object (PrimalHybridStep, MultiscalePrimalHybridStep, ...)
-
-    @property
-    def converged(self) -> bool:
-        return self.history.converged
-
-    @property
-    def iterations(self) -> int:
-        return self.history.iterations
 
 
 def solve_primal_hybrid(

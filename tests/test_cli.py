@@ -96,3 +96,8 @@ def test_mixed_methods(tmp_path, method):
 def test_mixed_rejects_bad_beta(tmp_path):
     assert main(["run", "--method", "mixed", "--h", "16", "--H", "4", "--beta", "0", "--no-plots",
                  "--out", str(tmp_path / "x")]) == 2
+
+
+def test_mesh_too_coarse_for_the_load(tmp_path):
+    assert main(["run", "--h", "4", "--H", "2", "--no-plots", "--out", str(tmp_path / "x")]) == 2
+    assert not (tmp_path / "x" / "summary.json").exists()

@@ -12,12 +12,17 @@ from fenics_contact.primal import PrimalSubproblem
 from fenics_contact.tags import Boundary
 
 
-def _errors(n: int) -> tuple[float, float]:
+def _clamped_square(n: int):
+    """Unit square, n×n cells, the whole boundary tagged Γ_D (u = 0)."""
     msh = mesh.create_unit_square(MPI.COMM_WORLD, n, n)
     tdim = msh.topology.dim
     msh.topology.create_connectivity(tdim - 1, tdim)
     facets = mesh.exterior_facet_indices(msh.topology)
-    tags = mesh.meshtags(msh, tdim - 1, facets, np.full(facets.size, Boundary.GAMMA_D, dtype=np.int32))
+    return msh, mesh.meshtags(msh, tdim - 1, facets, np.full(facets.size, Boundary.GAMMA_D, dtype=np.int32))
+
+
+def _errors(n: int) -> tuple[float, float]:
+    msh, tags = _clamped_square(n)
     x = ufl.SpatialCoordinate(msh)
     u_exact = ufl.as_vector([ufl.sin(ufl.pi * x[0]) * ufl.sin(ufl.pi * x[1]), 4 * x[0] * (1 - x[0]) * x[1] * (1 - x[1])])
     lm, mu = (float(v) for v in lame(1.0, 0.3))
@@ -44,11 +49,7 @@ def test_p1_convergence_rates():
 
 def _locking_errors(n: int, nu: float) -> float:
     """Relative L² error of P1 for u = curl ψ (divergence free), clamped, at Poisson ratio ν."""
-    msh = mesh.create_unit_square(MPI.COMM_WORLD, n, n)
-    tdim = msh.topology.dim
-    msh.topology.create_connectivity(tdim - 1, tdim)
-    facets = mesh.exterior_facet_indices(msh.topology)
-    tags = mesh.meshtags(msh, tdim - 1, facets, np.full(facets.size, Boundary.GAMMA_D, dtype=np.int32))
+    msh, tags = _clamped_square(n)
     x = ufl.SpatialCoordinate(msh)
     psi = (x[0] * (1 - x[0]) * x[1] * (1 - x[1])) ** 2
     u_exact = ufl.as_vector([psi.dx(1), -psi.dx(0)])

@@ -146,4 +146,4 @@ def test_mesh_too_coarse_for_the_load_is_rejected():
     """h = 1/4 has no cell midpoint in the load column x >= 15/16: a clear error, not u = 0."""
     cm = unit_square(4, 2)
     with pytest.raises(InputError, match="zero on every cell"):
-        material_fields(cm.mesh, model_2())
+        material_fields(cm.mesh, model_2(), require_load=True)

@@ -59,7 +59,7 @@ from petsc4py import PETSc
 
 from fenics_contact import forms_mixed
 from fenics_contact.errors import InputError
-from fenics_contact.multiscale import CoarseGrid, kappa_tilde, require_serial
+from fenics_contact.multiscale import DEFAULT_S_FACTOR, CoarseGrid, kappa_tilde, require_serial
 from fenics_contact.tags import Boundary
 
 __all__ = [
@@ -83,9 +83,14 @@ class MixedCEMOptions:
 
     layers: int = 3
     nbasis: int | None = 3
-    weight: str = "lambda+2mu"  #: κ̃ = (λ+2μ)H⁻² (METHOD §3) or "2mu": κ̃ = 2μ H⁻²
+    weight: str = "lambda+2mu"  #: κ̃ = c(λ+2μ)H⁻² (METHOD §3 has c = 1) or "2mu": κ̃ = c·2μ H⁻²
+    #: c, as for the primal CEM (multiscale.CEMOptions.s_factor). Model 2, h = 1/32, H = 1/8, m = 3:
+    #: e_σ = 4.2e-3 (c = 1), 2.3e-3 (c = 3), 2.6e-3 (c = 10).
+    s_factor: float = DEFAULT_S_FACTOR
 
     def __post_init__(self) -> None:
+        if not (np.isfinite(self.s_factor) and self.s_factor > 0):
+            raise InputError(f"s_factor must be finite and > 0, got {self.s_factor!r}")
         if self.weight not in ("lambda+2mu", "2mu"):
             raise InputError(f"weight must be 'lambda+2mu' or '2mu', got {self.weight!r}")
         if int(self.layers) != self.layers or self.layers < 0:
@@ -214,7 +219,7 @@ def _trace_operator(msh: dmesh.Mesh, dg: fem.FunctionSpace, gamma: np.ndarray, p
     return E
 
 
-def cell_operators(sub, H: float, weight: str = "lambda+2mu") -> CellOperators:
+def cell_operators(sub, H: float, weight: str = "lambda+2mu", s_factor: float = 1.0) -> CellOperators:
     """Cell-major operators of the Ω₁ ``mixed.MixedSubproblem`` ``sub`` (Robin β, no contact)."""
     msh, ft, fields = sub.mesh, sub.facet_tags, sub.fields
     if sub.beta is None:
@@ -232,7 +237,7 @@ def cell_operators(sub, H: float, weight: str = "lambda+2mu") -> CellOperators:
     R = _cell_blocks(_assemble(forms_mixed.robin_form(s, t, n, 1.0, ds(Boundary.INTERFACE))), dg_rows, dg_rows)
     B = _cell_blocks(_assemble(forms_mixed.divergence_form(s, v)), u_rows, dg_rows)
     M = _cell_blocks(_assemble(forms_mixed.mass_form(w, v)), u_rows, u_rows)
-    kt = kappa_tilde(fields.lmbda, fields.mu, H) if weight == "lambda+2mu" else 2.0 * fields.mu / H**2
+    kt = kappa_tilde(fields.lmbda, fields.mu, H, s_factor) if weight == "lambda+2mu" else s_factor * 2.0 * fields.mu / H**2
     S = _cell_blocks(_assemble(kt * ufl.inner(w, v) * ufl.dx), u_rows, u_rows)
     Gv = fem.assemble_vector(fem.form(forms_mixed.load_form(fields.f, v)))
     Gv.scatter_reverse(dolfinx.la.InsertMode.add)
@@ -626,7 +631,7 @@ class MixedMultiscaleOmega1:
         self.grid = grid
         self.times: dict[str, float] = {}
         t = time.perf_counter()
-        self.ops = cell_operators(sub, H, options.weight)
+        self.ops = cell_operators(sub, H, options.weight, options.s_factor)
         self.topo = _Topology(sub.mesh, self.ops.P.shape[1])
         self.times["assembly"] = time.perf_counter() - t
         t = time.perf_counter()

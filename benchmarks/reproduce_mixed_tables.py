@@ -38,7 +38,7 @@ from fenics_contact.io import machine_description
 from fenics_contact.materials import compliance, strain, stress
 from fenics_contact.mixed import solve_mixed_monolithic
 from fenics_contact.mixed_hybrid import solve_mixed_hybrid
-from fenics_contact.models import get_model
+from fenics_contact.models import get_model, paper_phase_model
 from fenics_contact.primal import default_penalty, solve_primal_monolithic
 
 #: Tables 5.1/5.2: (model, 1/h, β) -> (iterations, relative tolerance, e_σ, e_u)
@@ -85,13 +85,10 @@ def at_tolerance(history, tol):
 
 
 def table_model(number: int, ratio: float | None = None, nu1: float = 0.35, nu2: float = 0.35):
-    """Test model ``number``; with ``ratio`` E = ratio in the pattern, 1 elsewhere, ν₁ / ν₂ pattern / rest."""
+    """Test model ``number``; with ``ratio`` the paper's §5.4 form (``models.paper_phase_model``)."""
     if ratio is None:
         return get_model(number, nu=nu1)
-    base = get_model(number, E_high=ratio, E_low=1.0)
-    pattern = get_model(number, E_high=2.0, E_low=1.0).youngs_modulus
-    desc = f"E1/E2={ratio:g}, nu1={nu1:g}, nu2={nu2:g}"
-    return base.with_(poisson_ratio=lambda x: np.where(pattern(x) > 1.5, nu1, nu2), description=desc)
+    return paper_phase_model(number, E_ratio=ratio, nu_pattern=nu1, nu_rest=nu2)
 
 
 def primal_vs_mixed(cm, model, mixed) -> dict:

@@ -5,17 +5,23 @@ import os
 import platform
 from pathlib import Path
 
-import numpy as np
-from mpi4py import MPI
-
 import basix.ufl
 import dolfinx.io
+import numpy as np
 from dolfinx import fem
+from mpi4py import MPI
 
 from fenics_contact.materials import strain, stress
 
-__all__ = ["write_fields", "write_summary", "write_vtx", "cell_markers", "cell_function_of", "stress_field",
-           "machine_description"]
+__all__ = [
+    "cell_function_of",
+    "cell_markers",
+    "machine_description",
+    "stress_field",
+    "write_fields",
+    "write_summary",
+    "write_vtx",
+]
 
 
 def cell_markers(cell_tags, msh) -> fem.Function:
@@ -67,10 +73,16 @@ def write_vtx(path: str | Path, fn: fem.Function) -> Path:
 
 
 def machine_description() -> str:
-    """One line describing this machine (for benchmark tables)."""
+    """One line describing this machine (for benchmark tables): CPU, cores, OS, Python, threads, ranks."""
+    cpu = platform.processor() or platform.machine()
+    try:
+        with open("/proc/cpuinfo") as f:
+            cpu = next((line.split(":", 1)[1].strip() for line in f if line.startswith("model name")), cpu)
+    except OSError:
+        pass
     return (
-        f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
-        f"{platform.system()} {platform.release()}, Python {platform.python_version()}, "
+        f"{cpu}, {os.cpu_count()} logical cores, {platform.system()} {platform.release()}, "
+        f"Python {platform.python_version()}, OMP_NUM_THREADS={os.environ.get('OMP_NUM_THREADS', 'unset')}, "
         f"MPI ranks {MPI.COMM_WORLD.size}"
     )
 

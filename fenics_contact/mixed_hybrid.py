@@ -53,15 +53,19 @@ import logging
 import time
 from dataclasses import dataclass
 
+import basix.ufl
 import numpy as np
 import scipy.sparse.linalg as spla
+from dolfinx import fem
 from scipy.spatial import cKDTree
 
-import basix.ufl
-from dolfinx import fem
-
 from fenics_contact.contact import NewtonOptions
-from fenics_contact.dd import IterationHistory, IterationOptions, IterationResult, iterate
+from fenics_contact.dd import (
+    IterationHistory,
+    IterationOptions,
+    IterationResult,
+    iterate,
+)
 from fenics_contact.errors import InputError
 from fenics_contact.fields import material_fields
 from fenics_contact.geometry import ContactMesh
@@ -74,9 +78,9 @@ from fenics_contact.mixed import (
     default_epsilon,
 )
 from fenics_contact.models import TestModel
-from fenics_contact.transmission import Part, split_mesh
+from fenics_contact.transmission import split_mesh, sub_to_parent_dofs
 
-__all__ = ["transmission_coefficient", "MixedHybridStep", "MixedHybridResult", "solve_mixed_hybrid"]
+__all__ = ["MixedHybridResult", "MixedHybridStep", "solve_mixed_hybrid", "transmission_coefficient"]
 
 log = logging.getLogger(__name__)
 
@@ -97,22 +101,6 @@ def transmission_coefficient(beta: float | str, h: float) -> float:
     if not (np.isfinite(value) and value > 0):
         raise InputError(f"the transmission coefficient β must be > 0, got {beta!r}")
     return value
-
-
-def _sub_to_parent_dofs(part: Part, V_sub: fem.FunctionSpace, V_parent: fem.FunctionSpace) -> tuple[np.ndarray, np.ndarray]:
-    """(sub, parent) indices of the same DOFs of a discontinuous blocked space (checked by coordinates)."""
-    tdim = part.mesh.topology.dim
-    ncell = part.mesh.topology.index_map(tdim).size_local
-    cells = np.arange(ncell, dtype=np.int32)
-    pcells = np.asarray(part.cell_map.sub_topology_to_topology(cells, False), dtype=np.int32)
-    bs = V_sub.dofmap.index_map_bs
-    ds, dp = V_sub.dofmap.list[cells].ravel(), V_parent.dofmap.list[pcells].ravel()
-    xs, xp = V_sub.tabulate_dof_coordinates()[ds], V_parent.tabulate_dof_coordinates()[dp]
-    if not np.allclose(xs, xp, atol=1e-12):
-        raise RuntimeError("submesh and parent cells do not share their local DOF layout")
-    sub = (bs * ds.astype(np.int64)[:, None] + np.arange(bs)).ravel()
-    par = (bs * dp.astype(np.int64)[:, None] + np.arange(bs)).ravel()
-    return sub, par
 
 
 class MixedHybridStep:
@@ -164,7 +152,7 @@ class MixedHybridStep:
         """Restrict the monolithic σ_h, u_h to the parts, as AW / DG P1 coefficients there."""
         self.reference = []
         for part, s in zip(self.parts, self.sub):
-            i_sub, i_par = _sub_to_parent_dofs(part, s.dg, reference.sigma.function_space)
+            i_sub, i_par = sub_to_parent_dofs(part, s.dg, reference.sigma.function_space)
             d = np.zeros(s.P.shape[0])
             d[i_sub] = reference.sigma.x.array[i_par]
             PtP = (s.P.T @ s.P).tocsc()
@@ -172,7 +160,7 @@ class MixedHybridStep:
             miss = np.linalg.norm(s.P @ c - d) / max(np.linalg.norm(d), 1e-300)
             if miss > 1e-8:
                 raise InputError(f"the reference stress is not in the subdomain stress space (misfit {miss:.2e})")
-            j_sub, j_par = _sub_to_parent_dofs(part, s.U, reference.u.function_space)
+            j_sub, j_par = sub_to_parent_dofs(part, s.U, reference.u.function_space)
             u = np.zeros(s.n_u)
             u[j_sub] = reference.u.x.array[j_par]
             self.reference.append((c, u))
@@ -232,17 +220,21 @@ class MixedHybridStep:
         return dict(self._record)
 
     # -- output ----------------------------------------------------------------------------
+    def part_values(self) -> list[tuple[np.ndarray, np.ndarray]]:
+        """Per part: the DG P3 stress coefficients and the DG P1 displacement, in the part's numbering."""
+        return [(s.sigma_function().x.array, s.u) for s in self.sub]
+
     def glued(self) -> tuple[fem.Function, fem.Function]:
-        """σ (DG P3) and u (DG P1) on the parent mesh, each part's values on its cells."""
+        """σ (DG P3) and u (DG P1) on the parent mesh, each part's values (``part_values``) on its cells."""
         msh = self.cm.mesh
         el = basix.ufl.blocked_element(basix.ufl.element("DG", msh.basix_cell(), 3), shape=(3,))
         sigma = fem.Function(fem.functionspace(msh, el), name="sigma")
         u = fem.Function(fem.functionspace(msh, basix.ufl.element("DG", msh.basix_cell(), 1, shape=(2,))), name="u")
-        for part, s in zip(self.parts, self.sub):
-            i_sub, i_par = _sub_to_parent_dofs(part, s.dg, sigma.function_space)
-            sigma.x.array[i_par] = s.sigma_function().x.array[i_sub]
-            j_sub, j_par = _sub_to_parent_dofs(part, s.U, u.function_space)
-            u.x.array[j_par] = s.u[j_sub]
+        for part, s, (sv, uv) in zip(self.parts, self.sub, self.part_values()):
+            i_sub, i_par = sub_to_parent_dofs(part, s.dg, sigma.function_space)
+            sigma.x.array[i_par] = sv[i_sub]
+            j_sub, j_par = sub_to_parent_dofs(part, s.U, u.function_space)
+            u.x.array[j_par] = uv[j_sub]
         return sigma, u
 
 

@@ -33,19 +33,25 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-import basix.ufl
 import numpy as np
+import ufl
 from dolfinx import fem
 
+from fenics_contact import forms_mixed
 from fenics_contact.contact import NewtonOptions
-from fenics_contact.dd import IterationHistory, IterationOptions, IterationResult, iterate
+from fenics_contact.dd import (
+    IterationHistory,
+    IterationOptions,
+    IterationResult,
+    iterate,
+)
 from fenics_contact.errors import InputError
 from fenics_contact.geometry import ContactMesh
 from fenics_contact.mixed import MixedContactProfile, MixedSolution
-from fenics_contact.mixed_hybrid import MixedHybridStep, _sub_to_parent_dofs
+from fenics_contact.mixed_hybrid import MixedHybridStep
 from fenics_contact.mixed_multiscale import MixedCEMOptions, MixedMultiscaleOmega1
 from fenics_contact.models import TestModel
-from fenics_contact.multiscale import coarse_grid, require_serial
+from fenics_contact.multiscale import DEFAULT_S_FACTOR, coarse_grid, require_serial
 
 __all__ = ["MixedMsResult", "MixedMultiscaleHybridStep", "solve_mixed_ms_hybrid"]
 
@@ -169,25 +175,27 @@ class MixedMultiscaleHybridStep(MixedHybridStep):
         self._change = max(np.sqrt(ds / ns), np.sqrt(du / nu)) if ns > 0 and nu > 0 else np.inf
 
     # -- output ----------------------------------------------------------------------------
-    def glued(self) -> tuple[fem.Function, fem.Function]:
-        """σ (DG P3) and u (DG P1) on the parent mesh: the multiscale σ₁, u₁ on Ω₁, σ₂, u₂ on Ω₂."""
-        msh = self.cm.mesh
-        el = basix.ufl.blocked_element(basix.ufl.element("DG", msh.basix_cell(), 3), shape=(3,))
-        sigma = fem.Function(fem.functionspace(msh, el), name="sigma")
-        u = fem.Function(fem.functionspace(msh, basix.ufl.element("DG", msh.basix_cell(), 1, shape=(2,))), name="u")
+    def part_values(self) -> list[tuple[np.ndarray, np.ndarray]]:
+        """The multiscale σ₁, u₁ = Π w + N g on Ω₁ and the fine σ₂, u₂ on Ω₂ (sub numbering)."""
         ops = self.omega1.ops
         s1, u1 = self.fine_omega1()
         sig_sub = np.zeros(3 * self.sub[0].dg.dofmap.index_map.size_local)
         sig_sub[ops.dg_rows.ravel()] = s1.ravel()
         u_sub = np.zeros(self.sub[0].n_u)
         u_sub[ops.u_rows.ravel()] = u1.ravel()
-        values = [(sig_sub, u_sub), (self.sub[1].sigma_function().x.array, self.sub[1].u)]
-        for part, s, (sv, uv) in zip(self.parts, self.sub, values):
-            i_sub, i_par = _sub_to_parent_dofs(part, s.dg, sigma.function_space)
-            sigma.x.array[i_par] = sv[i_sub]
-            j_sub, j_par = _sub_to_parent_dofs(part, s.U, u.function_space)
-            u.x.array[j_par] = uv[j_sub]
-        return sigma, u
+        return [(sig_sub, u_sub), (self.sub[1].sigma_function().x.array, self.sub[1].u)]
+
+
+def l2_stress_error(sigma: fem.Function, reference: fem.Function) -> float:
+    """‖σ_h − σ‖_L² / ‖σ_h‖_L² of two stresses (σ_xx, σ_xy, σ_yy) on the same mesh (σ_xy counted twice)."""
+    s = fem.Function(reference.function_space)
+    s.interpolate(sigma)
+    d = forms_mixed.stress_tensor(s - reference)
+    r = forms_mixed.stress_tensor(reference)
+    comm = reference.function_space.mesh.comm
+    num = comm.allreduce(fem.assemble_scalar(fem.form(ufl.inner(d, d) * ufl.dx)))
+    den = comm.allreduce(fem.assemble_scalar(fem.form(ufl.inner(r, r) * ufl.dx)))
+    return float(np.sqrt(num / den))
 
 
 @dataclass(slots=True)
@@ -206,6 +214,7 @@ class MixedMsResult(IterationResult):
     e_u: float | None
     e_u_projected: float | None  #: e_u with the Ω₁ part measured as ‖π(u_h − u₁)‖
     e_u_post: float | None  #: e_u with the post-processed fine Ω₁ displacement Σ r_j q_j + N g
+    e_sigma_l2: float | None  #: ‖σ_h − σⁿ‖_L²/‖σ_h‖_L² (for ν → ½ the A-norm sees mostly the deviatoric part)
     beta: float
     epsilon: float
     layers: int
@@ -222,6 +231,7 @@ def solve_mixed_ms_hybrid(
     layers: int = 3,
     nbasis: int | None = 3,
     weight: str = "lambda+2mu",
+    s_factor: float = DEFAULT_S_FACTOR,
     options: IterationOptions = IterationOptions(),
     newton: NewtonOptions = NewtonOptions(),
     reference: MixedSolution | None = None,
@@ -240,7 +250,7 @@ def solve_mixed_ms_hybrid(
         log.warning("solve_mixed_ms_hybrid: the mixed offline stage is not cached yet; recomputing it")
     if reference is not None and epsilon is None:
         epsilon = reference.epsilon
-    cem = MixedCEMOptions(layers=layers, nbasis=nbasis, weight=weight)
+    cem = MixedCEMOptions(layers=layers, nbasis=nbasis, weight=weight, s_factor=s_factor)
     step = MixedMultiscaleHybridStep(cm, model, beta=beta, epsilon=epsilon, cem=cem, newton=newton)
     if reference is not None:  # not part of the method: outside the timings
         step.set_reference(reference)
@@ -258,6 +268,7 @@ def solve_mixed_ms_hybrid(
     e_sigma, e_u = step.errors() if reference is not None else (None, None)
     e_u_pi = step.projected_displacement_error() if reference is not None else None
     e_u_post = step.postprocessed_displacement_error() if reference is not None else None
+    e_sigma_l2 = l2_stress_error(sigma, reference.sigma) if reference is not None else None
     log.info(
         "Algorithm 4 (m=%d, l=%s): %d iterations (converged %s), dim X_ms %d + U_aux %d, offline %.2f s, "
         "online %.2f s, e_σ %s, e_u %s",
@@ -266,5 +277,5 @@ def solve_mixed_ms_hybrid(
     )
     return MixedMsResult(
         sigma, u, history, step.sub[1].contact_profile(), dofs, step.time_offline_s, history.time_s,
-        dict(step.offline_times), e_sigma, e_u, e_u_pi, e_u_post, step.beta, step.epsilon, layers, nbasis, step,
+        dict(step.offline_times), e_sigma, e_u, e_u_pi, e_u_post, e_sigma_l2, step.beta, step.epsilon, layers, nbasis, step,
     )

@@ -31,7 +31,7 @@ import numpy.typing as npt
 
 from fenics_contact.errors import InputError
 
-__all__ = ["TestModel", "model_1", "model_2", "get_model", "pixel_field", "constant_field"]
+__all__ = ["TestModel", "constant_field", "get_model", "model_1", "model_2", "paper_phase_model", "pixel_field"]
 
 #: A scalar field: points x of shape (3, N) -> values of shape (N,).
 ScalarField = Callable[[np.ndarray], np.ndarray]
@@ -157,6 +157,20 @@ def model_2(*, E_high: float = 1.0e3, E_low: float = 1.0, nu: float = 0.35, load
         poisson_ratio=constant_field(nu),
         load=_band_load(bands),
         description=f"inclusions, E={E_high:g}/{E_low:g}, nu={nu:g}",
+    )
+
+
+def paper_phase_model(number: int, *, E_ratio: float, nu_pattern: float, nu_rest: float) -> TestModel:
+    """The paper's §5.4 parameterization of test model ``number`` (its Tables 5.4–5.7).
+
+    E = ``E_ratio`` and ν = ``nu_pattern`` in the pattern (channels / inclusions, the paper's
+    "yellow" E₁, ν₁), E = 1 and ν = ``nu_rest`` elsewhere (its "blue" E₂, ν₂; Ω₂ lies there).
+    """
+    base = get_model(number, E_high=E_ratio, E_low=1.0)
+    boxes = _CHANNELS if number == 1 else _INCLUSIONS
+    return base.with_(
+        poisson_ratio=_boxes_field(boxes, nu_pattern, nu_rest),
+        description=f"{base.description.split(',')[0]}, E1/E2={E_ratio:g}, nu1={nu_pattern:g}, nu2={nu_rest:g}",
     )
 
 

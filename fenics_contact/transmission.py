@@ -7,10 +7,9 @@ functions on each submesh when a subproblem needs them.
 
 from typing import NamedTuple
 
+import basix.ufl
 import numpy as np
 import ufl
-
-import basix.ufl
 from dolfinx import fem, la
 from dolfinx import mesh as dmesh
 
@@ -19,7 +18,7 @@ from fenics_contact.fields import SubmeshTransfer
 from fenics_contact.geometry import ContactMesh
 from fenics_contact.tags import Boundary, Subdomain
 
-__all__ = ["Part", "split_mesh", "InterfaceSpace", "robin_coefficient"]
+__all__ = ["InterfaceSpace", "Part", "robin_coefficient", "split_mesh", "sub_to_parent_dofs"]
 
 
 class Part(NamedTuple):
@@ -131,3 +130,19 @@ def robin_coefficient(alpha: float | str, E: fem.Function, space: "InterfaceSpac
     for vec in (num, den):
         vec.scatter_reverse(la.InsertMode.add)
     return scale * num.array[space.dofs] / den.array[space.dofs]
+
+
+def sub_to_parent_dofs(part: Part, V_sub: fem.FunctionSpace, V_parent: fem.FunctionSpace) -> tuple[np.ndarray, np.ndarray]:
+    """(sub, parent) indices of the same DOFs of a discontinuous blocked space (checked by coordinates)."""
+    tdim = part.mesh.topology.dim
+    ncell = part.mesh.topology.index_map(tdim).size_local
+    cells = np.arange(ncell, dtype=np.int32)
+    pcells = np.asarray(part.cell_map.sub_topology_to_topology(cells, False), dtype=np.int32)
+    bs = V_sub.dofmap.index_map_bs
+    ds, dp = V_sub.dofmap.list[cells].ravel(), V_parent.dofmap.list[pcells].ravel()
+    xs, xp = V_sub.tabulate_dof_coordinates()[ds], V_parent.tabulate_dof_coordinates()[dp]
+    if not np.allclose(xs, xp, atol=1e-12):
+        raise RuntimeError("submesh and parent cells do not share their local DOF layout")
+    sub = (bs * ds.astype(np.int64)[:, None] + np.arange(bs)).ravel()
+    par = (bs * dp.astype(np.int64)[:, None] + np.arange(bs)).ravel()
+    return sub, par

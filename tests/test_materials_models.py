@@ -5,7 +5,7 @@ import pytest
 
 from fenics_contact.errors import InputError
 from fenics_contact.materials import Material, lame
-from fenics_contact.models import get_model, model_1, model_2, pixel_field
+from fenics_contact.models import get_model, model_1, model_2, paper_phase_model, pixel_field
 
 
 def test_lame_matches_closed_form():
@@ -49,3 +49,17 @@ def test_unknown_model_and_pixel_field():
     assert np.array_equal(field(pts), [1.0, 2.0, 3.0, 4.0])
     with pytest.raises(InputError):
         pixel_field(np.ones(3))
+
+
+@pytest.mark.parametrize("number", [1, 2])
+def test_paper_phase_model_sets_both_phases(number):
+    """The paper's §5.4 form: E₁, ν₁ in the pattern, E₂ = 1, ν₂ elsewhere (and in the strip)."""
+    model = paper_phase_model(number, E_ratio=1e-4, nu_pattern=0.35, nu_rest=0.499)
+    x = np.random.default_rng(1).random((3, 4000))
+    E, nu = model.youngs_modulus(x), model.poisson_ratio(x)
+    pattern = get_model(number).youngs_modulus(x) > 1.0
+    assert pattern.any() and (~pattern).any()
+    assert np.all(E[pattern] == 1e-4) and np.all(E[~pattern] == 1.0)
+    assert np.all(nu[pattern] == 0.35) and np.all(nu[~pattern] == 0.499)
+    assert np.all(nu[x[0] > 7 / 8] == 0.499)
+    assert np.array_equal(model.load(x), get_model(number).load(x))

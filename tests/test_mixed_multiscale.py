@@ -4,13 +4,15 @@ import numpy as np
 import pytest
 
 import fenics_contact  # noqa: F401  (must precede dolfinx)
+import basix.ufl
+from dolfinx import fem
 from fenics_contact import geometry, models, multiscale
 from fenics_contact import mixed_multiscale as mm
 from fenics_contact.dd import IterationOptions
 from fenics_contact.errors import InputError
 from fenics_contact.mixed import solve_mixed_monolithic
 from fenics_contact.mixed_hybrid import MixedHybridStep
-from fenics_contact.mixed_ms import solve_mixed_ms_hybrid
+from fenics_contact.mixed_ms import l2_stress_error, solve_mixed_ms_hybrid
 
 
 @pytest.fixture(scope="module")
@@ -129,6 +131,7 @@ def test_algorithm4_converges_and_error_falls_with_layers():
         assert res.dofs["X_ms"] == res.dofs["U_aux"] == 3 * 7 * 8
         assert res.time_online_s < res.time_offline_s
         errors.append((res.e_sigma, res.e_u, res.e_u_post))
+        assert 0 < res.e_sigma_l2 < 1
     assert errors[1][0] < 0.3 * errors[0][0]
     assert errors[1][1] < errors[0][1]
     assert errors[1][2] < 0.3 * errors[0][2]  # the post-processed displacement follows the stress error
@@ -142,3 +145,13 @@ def test_options_are_validated():
         mm.MixedCEMOptions(nbasis=0)
     with pytest.raises(InputError):
         mm.MixedCEMOptions(weight="E")
+
+
+def test_l2_stress_error_measures_the_difference():
+    cm = geometry.unit_square(8, 4)
+    V = fem.functionspace(cm.mesh, basix.ufl.element("DG", cm.mesh.basix_cell(), 3, shape=(3,)))
+    ref, other = fem.Function(V), fem.Function(V)
+    ref.interpolate(lambda x: np.stack([1.0 + x[0], x[1], 2.0 - x[0] * x[1]]))
+    other.x.array[:] = 0.75 * ref.x.array
+    assert np.isclose(l2_stress_error(ref, ref), 0.0, atol=1e-14)
+    assert np.isclose(l2_stress_error(other, ref), 0.25, rtol=1e-12)

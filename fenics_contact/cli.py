@@ -141,6 +141,7 @@ def _run_primal(args, cm: ContactMesh, model, fields, options: IterationOptions)
         "max_tensile_sigma_c": float(np.max(result.profile.sigma_c, initial=0.0)),
         "layers": args.layers if args.method == "primal-ms" else None,
         "nbasis": args.nbasis if args.method == "primal-ms" else None,
+        "offline_cache": result.step.omega1.cache_status if args.method == "primal-ms" else None,
     }
 
     def write(out: Path) -> None:
@@ -176,6 +177,7 @@ def _run_mixed(args, cm: ContactMesh, model, fields, options: IterationOptions) 
         "max_tensile_sigma_c": result.profile.max_tensile,
         "layers": args.layers if args.method == "mixed-ms" else None,
         "nbasis": args.nbasis if args.method == "mixed-ms" else None,
+        "offline_cache": result.step.omega1.cache_status if args.method == "mixed-ms" else None,
     }
 
     def write(out: Path) -> None:

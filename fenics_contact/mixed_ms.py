@@ -70,6 +70,7 @@ class MixedMultiscaleHybridStep(MixedHybridStep):
         epsilon: float | None = None,
         cem: MixedCEMOptions = MixedCEMOptions(),
         newton: NewtonOptions = NewtonOptions(),
+        cache_dir: str | Path | None = None,
     ) -> None:
         require_serial(cm.comm)
         if cm.H is None:
@@ -80,7 +81,7 @@ class MixedMultiscaleHybridStep(MixedHybridStep):
         part = self.parts[0]
         grid = coarse_grid(part.mesh, part.cell_map, cm.coarse_cell, cm.H)
         self.cem = cem
-        self.omega1 = MixedMultiscaleOmega1(self.sub[0], grid, cem, H=cm.H)
+        self.omega1 = MixedMultiscaleOmega1(self.sub[0], grid, cem, H=cm.H, cache_dir=cache_dir)
         co = self.omega1.co
         if co.n_g != self.size:
             raise RuntimeError("the multiscale interface data do not match the Ω₂ interface data")
@@ -242,16 +243,15 @@ def solve_mixed_ms_hybrid(
     ``epsilon`` defaults to the reference's ε (else ``mixed.default_epsilon``).  ``dofs`` counts
     the fine Ω₁ problem, dim X_ms, dim U_aux, Ω₂ and the interface data; ``time_offline_s``
     covers the subproblem set-up, Stage I, Stage II, the correction and the coarse
-    factorization (``offline_times``); ``time_online_s`` the iteration.  ``cache_dir`` is
-    accepted for interface compatibility with Algorithm 3; the mixed offline stage is not
-    cached yet (it is recomputed).
+    factorization (``offline_times``); ``time_online_s`` the iteration.  With ``cache_dir`` the
+    offline data are stored there and reused when the configuration matches
+    (``mixed_multiscale.MixedOfflineCache``; ``step.omega1.cache_status``).
     """
-    if cache_dir is not None:
-        log.warning("solve_mixed_ms_hybrid: the mixed offline stage is not cached yet; recomputing it")
     if reference is not None and epsilon is None:
         epsilon = reference.epsilon
     cem = MixedCEMOptions(layers=layers, nbasis=nbasis, weight=weight, s_factor=s_factor)
-    step = MixedMultiscaleHybridStep(cm, model, beta=beta, epsilon=epsilon, cem=cem, newton=newton)
+    step = MixedMultiscaleHybridStep(cm, model, beta=beta, epsilon=epsilon, cem=cem, newton=newton,
+                                     cache_dir=cache_dir)
     if reference is not None:  # not part of the method: outside the timings
         step.set_reference(reference)
     history = iterate(step, options, name=f"mixed CEM hybrid (m={layers}, l={nbasis})")

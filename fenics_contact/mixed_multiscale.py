@@ -41,11 +41,26 @@ coarse cell from the patch functions that reach it: the Robin/compliance Gram
 E Φ (σn₁ at the γ nodes, averaged at vertices where the multiscale trace may
 jump), and the displacement Gram of [Π | N].  The online Ω₁ solve is one dense
 LU solve of size dim X_ms + dim U_aux.
+
+**Implementation.**  A local basis is kept cell by cell (L_c = P_c T_c: the
+AW columns of the cell, combined at inner-boundary vertices), so Lᵀ Ã L and B L
+are assembled from dense cell blocks like element matrices; each patch matrix
+is factorized once by MUMPS (AMD ordering) and all its right-hand sides are
+solved together.  The offline data can be cached (``cache_dir``): one npz file
+per configuration, keyed by a hash of everything they depend on
+(``mixed_offline_key``), checked by a stored checksum, written atomically.
 """
 
+import hashlib
+import json
 import logging
+import os
+import tempfile
 import time
-from dataclasses import dataclass
+import zipfile
+from dataclasses import dataclass, fields
+from pathlib import Path
+from typing import NamedTuple
 
 import basix.ufl
 import dolfinx.fem.petsc
@@ -57,24 +72,38 @@ from dolfinx import fem
 from dolfinx import mesh as dmesh
 from petsc4py import PETSc
 
-from fenics_contact import forms_mixed
+from fenics_contact import __version__, forms_mixed
 from fenics_contact.errors import InputError
-from fenics_contact.multiscale import DEFAULT_S_FACTOR, CoarseGrid, kappa_tilde, require_serial
+from fenics_contact.multiscale import (
+    DEFAULT_S_FACTOR,
+    CoarseGrid,
+    _checksum,
+    _hash_array,
+    kappa_tilde,
+    require_serial,
+)
 from fenics_contact.tags import Boundary
 
 __all__ = [
+    "MIXED_CACHE_FORMAT",
     "CellOperators",
     "LocalSpace",
     "MixedCEMOptions",
     "MixedMultiscaleOmega1",
+    "MixedOfflineCache",
+    "OfflineData",
     "PatchFunctions",
     "StageI",
     "cell_operators",
     "local_stress_space",
+    "mixed_offline_key",
     "stage_one",
 ]
 
 log = logging.getLogger(__name__)
+
+#: Bumped whenever the layout or meaning of the cached mixed offline arrays changes.
+MIXED_CACHE_FORMAT = 1
 
 
 @dataclass(frozen=True, slots=True)
@@ -128,14 +157,6 @@ def _cell_blocks(A: sp.spmatrix, rows: np.ndarray, cols: np.ndarray) -> np.ndarr
     return out
 
 
-def _blockdiag(blocks: np.ndarray) -> sp.csr_matrix:
-    """Sparse block-diagonal matrix of blocks (n, a, b)."""
-    n, a, b = blocks.shape
-    r = np.broadcast_to(a * np.arange(n)[:, None, None] + np.arange(a)[None, :, None], blocks.shape)
-    c = np.broadcast_to(b * np.arange(n)[:, None, None] + np.arange(b)[None, None, :], blocks.shape)
-    return sp.csr_matrix((blocks.ravel(), (r.ravel(), c.ravel())), shape=(n * a, n * b))
-
-
 def _contains(sorted_cells: np.ndarray, c: int) -> bool:
     k = np.searchsorted(sorted_cells, c)
     return bool(k < sorted_cells.size and sorted_cells[k] == c)
@@ -143,6 +164,30 @@ def _contains(sorted_cells: np.ndarray, c: int) -> bool:
 
 def _rows(cells: np.ndarray, width: int) -> np.ndarray:
     return (width * np.asarray(cells, dtype=np.int64)[:, None] + np.arange(width)).ravel()
+
+
+def _column_blocks(P: sp.spmatrix, ncell: int, a: int) -> tuple[np.ndarray, np.ndarray]:
+    """Cell blocks of a matrix with ``a`` cell-major rows per cell: nonzero columns (n, w), −1 padded, and values."""
+    P = sp.csr_matrix(P, copy=True)
+    P.sum_duplicates()
+    P.eliminate_zeros()
+    ncol = P.shape[1]
+    # the columns met by each cell's rows, sorted: the pattern of (row sums per cell) · P
+    R = sp.csr_matrix(
+        (np.ones(a * ncell), (np.repeat(np.arange(ncell), a), np.arange(a * ncell))), shape=(ncell, a * ncell)
+    )
+    pattern = R @ sp.csr_matrix((np.ones(P.nnz), P.indices, P.indptr), shape=P.shape)
+    pattern.sort_indices()
+    counts = np.diff(pattern.indptr)
+    ucell = np.repeat(np.arange(ncell), counts)
+    cols = np.full((ncell, int(counts.max(initial=0))), -1, dtype=np.int64)
+    cols[ucell, np.arange(pattern.nnz) - pattern.indptr[ucell]] = pattern.indices
+    row = np.repeat(np.arange(P.shape[0]), np.diff(P.indptr))
+    cell = row // a
+    slot = np.searchsorted(ucell * ncol + pattern.indices, cell * ncol + P.indices) - pattern.indptr[cell]
+    blocks = np.zeros((ncell, a, cols.shape[1]))
+    blocks[cell, row % a, slot] = P.data
+    return cols, blocks
 
 
 # ---------------------------------------------------------------------------------------
@@ -164,6 +209,8 @@ class CellOperators:
     dg_rows: np.ndarray  #: (n, 30) standard DG P3 index of each cell-major stress entry
     u_rows: np.ndarray  #: (n, 6) standard DG P1 index of each cell-major displacement entry
     gamma_cells: np.ndarray  #: cells with a γ facet
+    P_cols: np.ndarray  #: (n, w) AW indices of the nonzero columns of P in the rows of each cell (sorted, −1 pads)
+    P_blocks: np.ndarray  #: (n, 30, w) those columns of P: P[rows of c][:, P_cols[c]]
 
     @property
     def num_cells(self) -> int:
@@ -259,7 +306,8 @@ def cell_operators(sub, H: float, weight: str = "lambda+2mu", s_factor: float = 
     msh.topology.create_connectivity(tdim - 1, tdim)
     f2c = msh.topology.connectivity(tdim - 1, tdim)
     gamma_cells = np.unique(np.concatenate([f2c.links(f) for f in gamma]))
-    return CellOperators(K, K + sub.beta * R, B, M, S, G, C, E, P, dg_rows, u_rows, gamma_cells)
+    P_cols, P_blocks = _column_blocks(P, ncell, 30)
+    return CellOperators(K, K + sub.beta * R, B, M, S, G, C, E, P, dg_rows, u_rows, gamma_cells, P_cols, P_blocks)
 
 
 # ---------------------------------------------------------------------------------------
@@ -290,18 +338,36 @@ class _Topology:
 
 @dataclass(slots=True)
 class LocalSpace:
-    """X_h(ω) on fine cells ω (sorted): basis L (30|ω| × n) in the cell-major rows of ω."""
+    """X_h(ω) on fine cells ω (sorted), cell by cell: on cell c the basis is L_c = blocks[c] (30 × w).
+
+    Column s of L_c is the restriction to c of local basis function cols[c, s] (−1: padding, a zero
+    column); the basis L (30|ω| × size) stacks these blocks in the cell-major rows of ω.
+    """
 
     cells: np.ndarray
-    L: sp.csr_matrix
+    blocks: np.ndarray  #: (|ω|, 30, w)
+    cols: np.ndarray  #: (|ω|, w) local column of each block column, −1 for none
+    size: int  #: dim X_h(ω)
     num_extra: int  #: inner-boundary vertex functions (not in AW(Ω₁))
+
+    @property
+    def L(self) -> sp.csr_matrix:
+        """The basis as a sparse matrix (30|ω| × dim X_h(ω)) in the cell-major rows of ω."""
+        nc, a, _ = self.blocks.shape
+        rows = np.broadcast_to((a * np.arange(nc)[:, None] + np.arange(a))[:, :, None], self.blocks.shape)
+        cols = np.broadcast_to(self.cols[:, None, :], self.blocks.shape)
+        keep = (cols >= 0) & (self.blocks != 0.0)
+        return sp.csr_matrix((self.blocks[keep], (rows[keep], cols[keep])), shape=(a * nc, self.size))
+
+    def apply(self, x: np.ndarray) -> np.ndarray:
+        """L x for coefficients x (size, k), cell-major (|ω|, 30, k)."""
+        xc = np.where((self.cols >= 0)[:, :, None], x[np.maximum(self.cols, 0)], 0.0)  # (|ω|, w, k)
+        return self.blocks @ xc
 
 
 def local_stress_space(ops: CellOperators, topo: _Topology, cells: np.ndarray) -> LocalSpace:
     """Basis of {τ ∈ AW(ω) : τn = 0 on ∂ω ∩ Ω₁°} in the cell-major layout of ω."""
     cells = np.sort(np.asarray(cells, dtype=np.int64))
-    inside = np.zeros(topo.nc, dtype=bool)
-    inside[cells] = True
     v_in = np.bincount(topo.c2v[cells].ravel(), minlength=topo.nv)
     e_in = np.bincount(topo.c2e[cells].ravel(), minlength=topo.ne)
     v_int = np.flatnonzero((v_in > 0) & (v_in == topo.v_deg))
@@ -314,7 +380,13 @@ def local_stress_space(ops: CellOperators, topo: _Topology, cells: np.ndarray) -
         (3 * nv + 4 * e_int[:, None] + np.arange(4)).ravel(),
         (3 * nv + 4 * ne + 3 * cells[:, None] + np.arange(3)).ravel(),
     ])
-    # null spaces of τ ↦ τn at the inner-boundary vertices
+    # AW functions supported in ω: columns of P, by cell
+    local = np.full(ops.P.shape[1], -1, dtype=np.int64)
+    local[inner] = np.arange(inner.size)
+    pcols = ops.P_cols[cells]
+    cols = np.where(pcols >= 0, local[np.maximum(pcols, 0)], -1)
+    blocks = ops.P_blocks[cells].copy()
+    # null spaces of τ ↦ τn at the inner-boundary vertices: vertex k gets columns z_q (3-vectors)
     normals: dict[int, list[np.ndarray]] = {}
     for e in e_bnd:
         a, b = topo.vx[topo.e2v[e, 0]], topo.vx[topo.e2v[e, 1]]
@@ -323,39 +395,68 @@ def local_stress_space(ops: CellOperators, topo: _Topology, cells: np.ndarray) -
         rows = np.array([[n0, n1, 0.0], [0.0, n0, n1]])
         for v in topo.e2v[e]:
             normals.setdefault(int(v), []).append(rows)
-    zr, zc, zv = [], [], []
+    null = np.zeros((v_bnd.size, 3, 3))  #: null[k][:, q] = z_q of vertex v_bnd[k]
+    extra = np.full((v_bnd.size, 3), -1, dtype=np.int64)
     ncol = 0
     for k, v in enumerate(v_bnd):
         rows = normals.get(int(v))
         if rows is None:
-            null = np.eye(3)
+            zs = np.eye(3)
         else:
             _, sv, vt = np.linalg.svd(np.vstack(rows))
-            null = vt[int(np.sum(sv > 1e-10 * sv.max())) :]
-        for z in null:
-            z = np.where(np.abs(z) < 1e-14, 0.0, z)
-            nz = np.flatnonzero(z)
-            zr.append(3 * k + nz)
-            zc.append(np.full(nz.size, ncol))
-            zv.append(z[nz])
+            zs = vt[int(np.sum(sv > 1e-10 * sv.max())) :]
+        for q, z in enumerate(zs):
+            null[k, :, q] = np.where(np.abs(z) < 1e-14, 0.0, z)
+            extra[k, q] = inner.size + ncol
             ncol += 1
-    Pp = ops.P[_rows(cells, 30)].tocsc()
-    parts = [Pp[:, inner]]
-    if ncol:
-        Zm = sp.csr_matrix(
-            (np.concatenate(zv), (np.concatenate(zr), np.concatenate(zc))), shape=(3 * v_bnd.size, ncol)
-        )
-        parts.append(Pp[:, (3 * v_bnd[:, None] + np.arange(3)).ravel()] @ Zm)
-    L = sp.hstack(parts, format="csr")
-    L.eliminate_zeros()
-    return LocalSpace(cells, L, ncol)
+    if v_bnd.size:
+        # the block columns of 3v, 3v+1, 3v+2 (consecutive: P_cols is sorted) become
+        # L_c[:, q] = Σ_i P_c[:, 3v+i] z_q[i]
+        vert = np.where((pcols >= 0) & (pcols < 3 * nv) & (pcols % 3 == 0), pcols // 3, -1)
+        kpos = np.minimum(np.searchsorted(v_bnd, vert), v_bnd.size - 1)
+        ci, si = np.nonzero((vert >= 0) & (v_bnd[kpos] == vert))
+        ki = kpos[ci, si]
+        slots = si[:, None] + np.arange(3)
+        expected = 3 * v_bnd[ki][:, None] + np.arange(3)
+        if np.any(slots >= pcols.shape[1]) or np.any(pcols[ci[:, None], slots] != expected):
+            raise RuntimeError("an AW vertex function is missing from a cell block")
+        vals = blocks[ci[:, None], :, slots]  # (m, 3 (i), 30)
+        blocks[ci[:, None], :, slots] = np.einsum("mia,miq->mqa", vals, null[ki])
+        cols[ci[:, None], slots] = extra[ki]
+    return LocalSpace(cells, blocks, cols, int(inner.size + ncol), ncol)
+
+
+def _local_blocks(ops: CellOperators, space: LocalSpace) -> tuple[np.ndarray, np.ndarray]:
+    """Cell blocks L_cᵀ Ã_c L_c (|ω|, w, w) and B_c L_c (|ω|, 6, w) of the local operators."""
+    Lb = space.blocks
+    At = np.swapaxes(Lb, 1, 2) @ (ops.Kt[space.cells] @ Lb)
+    Bl = ops.B[space.cells] @ Lb
+    return At, Bl
+
+
+def _local_triplets(ops: CellOperators, space: LocalSpace) -> tuple[tuple, tuple]:
+    """COO triplets (rows, cols, values) of Ã = Lᵀ Ã L and B L on X_h(ω) × U_h(ω) (duplicates to be summed)."""
+    At, Bl = _local_blocks(ops, space)
+    nc = space.cols.shape[0]
+    cols, valid = space.cols, space.cols >= 0
+    both = valid[:, :, None] & valid[:, None, :]
+    r = np.broadcast_to(cols[:, :, None], At.shape)[both]
+    c = np.broadcast_to(cols[:, None, :], At.shape)[both]
+    a_trip = (r, c, At[both])
+    u_rows = np.broadcast_to((6 * np.arange(nc)[:, None] + np.arange(6))[:, :, None], Bl.shape)
+    bv = np.broadcast_to(valid[:, None, :], Bl.shape)
+    b_trip = (u_rows[bv], np.broadcast_to(cols[:, None, :], Bl.shape)[bv], Bl[bv])
+    return a_trip, b_trip
 
 
 def _local_operators(ops: CellOperators, space: LocalSpace) -> tuple[sp.csr_matrix, sp.csr_matrix]:
-    """(Ã, B) of X_h(ω) × U_h(ω): Lᵀ Kt L and B L."""
-    L = space.L
-    At = (L.T @ (_blockdiag(ops.Kt[space.cells]) @ L)).tocsr()
-    Bl = (_blockdiag(ops.B[space.cells]) @ L).tocsr()
+    """(Ã, B) of X_h(ω) × U_h(ω): Lᵀ Kt L and B L, assembled from the cell blocks."""
+    (ar, ac, av), (br, bc, bv) = _local_triplets(ops, space)
+    n = space.size
+    At = sp.csr_matrix((av, (ar, ac)), shape=(n, n))
+    Bl = sp.csr_matrix((bv, (br, bc)), shape=(6 * space.cells.size, n))
+    for X in (At, Bl):
+        X.eliminate_zeros()
     return At, Bl
 
 
@@ -399,7 +500,7 @@ def stage_one(ops: CellOperators, topo: _Topology, grid: CoarseGrid, nbasis: int
         scale = np.linalg.norm(S @ p, axis=0) * max(float(lam[-1]), 1e-300)
         res.append(float(np.max(np.linalg.norm(r, axis=0) / scale)))
         values.append(lam[:nk])
-        modes.append(p.reshape(cells.size, 6, nk))
+        modes.append(np.ascontiguousarray(p).reshape(cells.size, 6, nk))  # as reloaded from the cache
     offsets = np.concatenate([[0], np.cumsum([m.shape[2] for m in modes])])
     return StageI(values, modes, offsets, np.array(res))
 
@@ -418,10 +519,9 @@ class PatchFunctions:
 
 
 def _patch_system(ops: CellOperators, topo: _Topology, grid: CoarseGrid, aux: StageI, patch: np.ndarray):
-    """(space, LU of the Stage II matrix, aux column offsets of the patch's coarse cells, n_loc, n_u)."""
+    """(space, LU of the Stage II matrix, Z, aux column offsets of the patch's coarse cells, n_loc, n_u)."""
     cells = np.sort(np.concatenate([grid.cells[j] for j in patch]).astype(np.int64))
     space = local_stress_space(ops, topo, cells)
-    At, Bl = _local_operators(ops, space)
     # Z = S Π on the patch: the aux functions of its coarse cells
     zr, zc, zv = [], [], []
     col = 0
@@ -439,17 +539,28 @@ def _patch_system(ops: CellOperators, topo: _Topology, grid: CoarseGrid, aux: St
         aux_cols[int(j)] = col
         col += lj
     n_u = 6 * cells.size
-    Z = sp.csr_matrix((np.concatenate(zv), (np.concatenate(zr), np.concatenate(zc))), shape=(n_u, col))
-    n_loc = At.shape[0]
-    A = sp.bmat(
-        [[At, Bl.T, None], [Bl, None, -Z], [None, -Z.T, sp.identity(col)]], format="csc"
-    )
+    zr, zc, zv = np.concatenate(zr), np.concatenate(zc), np.concatenate(zv)
+    Z = sp.csr_matrix((zv, (zr, zc)), shape=(n_u, col))
+    # the symmetric saddle-point matrix [[Ã, Bᵀ, 0], [B, 0, −Z], [0, −Zᵀ, I]], assembled in one pass
+    n_loc = space.size
+    (ar, ac, av), (br, bc, bv) = _local_triplets(ops, space)
+    eye = n_loc + n_u + np.arange(col)
+    rows = np.concatenate([ar, n_loc + br, bc, n_loc + zr, n_loc + n_u + zc, eye])
+    cols = np.concatenate([ac, bc, n_loc + br, n_loc + n_u + zc, n_loc + zr, eye])
+    vals = np.concatenate([av, bv, bv, -zv, -zv, np.ones(col)])
+    n_tot = n_loc + n_u + col
+    A = sp.csr_matrix((vals, (rows, cols)), shape=(n_tot, n_tot))
+    A.eliminate_zeros()
     lu = _MumpsLU(A)
     return space, lu, Z, aux_cols, n_loc, n_u
 
 
 class _MumpsLU:
-    """MUMPS LU of a sparse matrix (SuperLU was 10–100× slower on these saddle-point systems)."""
+    """MUMPS LU of a sparse matrix (SuperLU was 10–100× slower on these saddle-point systems).
+
+    AMD ordering (ICNTL(7) = 0): on the Stage II systems (5·10³–6·10⁴ unknowns) it halves the
+    factorization time of MUMPS' automatic choice (METIS); Cholesky (LDLᵀ) was 2–4× slower.
+    """
 
     def __init__(self, A: sp.spmatrix) -> None:
         A = sp.csr_matrix(A)
@@ -465,28 +576,38 @@ class _MumpsLU:
         pc = self.ksp.getPC()
         pc.setType("lu")
         pc.setFactorSolverType("mumps")
+        pc.setFactorSetUpSolverType()
+        pc.getFactorMatrix().setMumpsIcntl(7, 0)
         self.ksp.setUp()
-        self.b, self.x = self.mat.createVecs()
+        if self.ksp.getConvergedReason() < 0 or pc.getFailedReason() != 0:
+            raise RuntimeError(f"MUMPS failed to factorize a local mixed CEM problem (reason {pc.getFailedReason()})")
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:
-        out = np.empty_like(rhs)
-        for k in range(rhs.shape[1]):
-            self.b.array[:] = rhs[:, k]
-            self.ksp.solve(self.b, self.x)
+        """A⁻¹ rhs for all columns at once (one MatMatSolve)."""
+        n, k = rhs.shape
+        data = np.asfortranarray(rhs, dtype=PETSc.ScalarType)  # PETSc dense storage is column-major
+        B = PETSc.Mat().createDense((n, k), array=data, comm=PETSc.COMM_SELF)
+        X = PETSc.Mat().createDense((n, k), comm=PETSc.COMM_SELF)
+        X.setUp()
+        try:
+            self.ksp.matSolve(B, X)
             if self.ksp.getConvergedReason() < 0:
-                raise RuntimeError(f"MUMPS failed on a local mixed CEM problem (reason {self.ksp.getConvergedReason()})")
-            out[:, k] = self.x.array
-        return out
+                reason = self.ksp.getConvergedReason()
+                raise RuntimeError(f"MUMPS failed on a local mixed CEM problem (reason {reason})")
+            return X.getDenseArray().copy()
+        finally:
+            B.destroy()
+            X.destroy()
 
     def destroy(self) -> None:
-        for obj in (self.ksp, self.mat, self.b, self.x):
+        for obj in (self.ksp, self.mat):
             obj.destroy()
 
 
 def _unpack(space: LocalSpace, x: np.ndarray, n_loc: int, n_u: int) -> tuple[np.ndarray, np.ndarray]:
     k = x.shape[1]
     nc = space.cells.size
-    sigma = np.asarray(space.L @ x[:n_loc]).reshape(nc, 30, k)
+    sigma = space.apply(x[:n_loc])
     u = x[n_loc : n_loc + n_u].reshape(nc, 6, k)
     return sigma, u
 
@@ -528,7 +649,7 @@ def stage_two(
 
 
 # ---------------------------------------------------------------------------------------
-# the Ω₁ multiscale solver
+# coarse operators
 # ---------------------------------------------------------------------------------------
 @dataclass(slots=True)
 class CoarseOperators:
@@ -617,15 +738,214 @@ def coarse_operators(
     return CoarseOperators(n_ms, aux.size, n_g, Gt, Gk, Bm, BN, Cphi, Ephi, Mu, PiG)
 
 
+# ---------------------------------------------------------------------------------------
+# offline cache
+# ---------------------------------------------------------------------------------------
+class OfflineData(NamedTuple):
+    """What the online phase and the output need: U_aux, the patch functions and the coarse matrices."""
+
+    aux: StageI
+    basis: list  #: PatchFunctions ψ_j^i per coarse cell i
+    corr: list  #: PatchFunctions Q_i, N_i per coarse cell touching γ
+    co: CoarseOperators
+
+
+_COARSE_ARRAYS = ("Gt", "Gk", "Bm", "BN", "Cphi", "Ephi", "Mu", "PiG")
+
+
+def mixed_offline_key(sub, ops: CellOperators, grid: CoarseGrid, options: MixedCEMOptions, *, H: float) -> str:
+    """sha256 of everything the mixed offline data depend on.
+
+    Mesh geometry and cells of Ω₁, facet tags, λ, μ, f, β, H, the coarse grid, every
+    ``MixedCEMOptions`` field, the cache format and the package version, and (catching
+    what these miss, e.g. a changed form) the cell operators assembled from them.
+    """
+    hasher = hashlib.sha256()
+    meta = {
+        "format": MIXED_CACHE_FORMAT,
+        "version": __version__,
+        "H": repr(float(H)),
+        "beta": repr(float(sub.beta)),
+        "n_coarse": grid.n_coarse,
+        "grid_H": repr(float(grid.H)),
+        "options": {name: getattr(options, name) for name in sorted(f.name for f in fields(options))},
+    }
+    hasher.update(json.dumps(meta, sort_keys=True).encode())
+    msh, ft, fld = sub.mesh, sub.facet_tags, sub.fields
+    arrays = {
+        "x": msh.geometry.x,
+        "cells": msh.geometry.dofmaps[0],
+        "facet_indices": ft.indices,
+        "facet_values": ft.values,
+        "lambda": fld.lmbda.x.array,
+        "mu": fld.mu.x.array,
+        "f": fld.f.x.array,
+        "gamma_points": sub.gamma_points,
+        "grid_ij": grid.ij,
+        "grid_global_index": grid.global_index,
+        "grid_cell_coarse": grid.cell_coarse,
+    }
+    for name in ("K", "Kt", "B", "M", "S", "G", "dg_rows", "u_rows"):
+        arrays[f"ops_{name}"] = getattr(ops, name)
+    for name in ("C", "E", "P"):
+        X = sp.csr_matrix(getattr(ops, name))
+        arrays[f"ops_{name}_data"], arrays[f"ops_{name}_indices"] = X.data, X.indices
+        arrays[f"ops_{name}_indptr"], arrays[f"ops_{name}_shape"] = X.indptr, np.array(X.shape)
+    for name in sorted(arrays):
+        hasher.update(name.encode())
+        _hash_array(hasher, arrays[name])
+    return hasher.hexdigest()
+
+
+def _concat(parts: list, dtype) -> np.ndarray:
+    return np.concatenate([np.asarray(p, dtype=dtype).ravel() for p in parts]) if parts else np.zeros(0, dtype)
+
+
+def _pack_offline(data: OfflineData) -> dict:
+    aux, co = data.aux, data.co
+    out = {
+        "aux_offsets": np.asarray(aux.offsets, dtype=np.int64),
+        "aux_values": _concat(aux.values, np.float64),
+        "aux_modes": _concat(aux.modes, np.float64),
+        "aux_residuals": np.asarray(aux.residuals, dtype=np.float64),
+        "co_sizes": np.array([co.n_ms, co.n_aux, co.n_g], dtype=np.int64),
+    }
+    for name, funcs in (("basis", data.basis), ("corr", data.corr)):
+        out[f"{name}_num_cells"] = np.array([f.cells.size for f in funcs], dtype=np.int64)
+        out[f"{name}_num_functions"] = np.array([f.index.size for f in funcs], dtype=np.int64)
+        out[f"{name}_cells"] = _concat([f.cells for f in funcs], np.int64)
+        out[f"{name}_index"] = _concat([f.index for f in funcs], np.int64)
+        out[f"{name}_sigma"] = _concat([f.sigma for f in funcs], np.float64)
+        out[f"{name}_u"] = _concat([f.u for f in funcs], np.float64)
+    for name in _COARSE_ARRAYS:
+        out[f"co_{name}"] = getattr(co, name)
+    return out
+
+
+def _split(flat: np.ndarray, sizes: np.ndarray, what: str) -> list:
+    if int(np.sum(sizes)) != flat.size:
+        raise ValueError(f"cached {what} have {flat.size} entries, expected {int(np.sum(sizes))}")
+    return np.split(flat, np.cumsum(sizes)[:-1]) if sizes.size else []
+
+
+def _unpack_offline(arrays: dict, ops: CellOperators, grid: CoarseGrid) -> OfflineData:
+    offsets = arrays["aux_offsets"]
+    if offsets.shape != (grid.size + 1,) or offsets[0] != 0 or np.any(np.diff(offsets) < 0):
+        raise ValueError("cached U_aux does not match the coarse grid")
+    nk = np.diff(offsets)
+    ncell = np.array([c.size for c in grid.cells], dtype=np.int64)
+    values = _split(arrays["aux_values"], nk, "eigenvalues")
+    modes = [m.reshape(nc, 6, k) for m, nc, k in zip(_split(arrays["aux_modes"], 6 * ncell * nk, "modes"), ncell, nk)]
+    aux = StageI(values, modes, offsets, arrays["aux_residuals"])
+    funcs = {}
+    for name in ("basis", "corr"):
+        nc, nf = arrays[f"{name}_num_cells"], arrays[f"{name}_num_functions"]
+        cells = _split(arrays[f"{name}_cells"], nc, f"{name} cells")
+        index = _split(arrays[f"{name}_index"], nf, f"{name} indices")
+        sigma = _split(arrays[f"{name}_sigma"], 30 * nc * nf, f"{name} stresses")
+        u = _split(arrays[f"{name}_u"], 6 * nc * nf, f"{name} displacements")
+        funcs[name] = [
+            PatchFunctions(c, s.reshape(c.size, 30, i.size), v.reshape(c.size, 6, i.size), i)
+            for c, i, s, v in zip(cells, index, sigma, u)
+        ]
+    if len(funcs["basis"]) != grid.size:
+        raise ValueError("cached basis functions do not match the coarse grid")
+    n_ms, n_aux, n_g = (int(s) for s in arrays["co_sizes"])
+    if n_ms != aux.size or n_aux != aux.size or n_g != ops.num_gamma_values:
+        raise ValueError("cached coarse operators do not match U_aux or the interface")
+    mats = {name: arrays[f"co_{name}"] for name in _COARSE_ARRAYS}
+    n = n_ms + n_g
+    shapes = {"Gt": (n, n), "Gk": (n, n), "Bm": (n_aux, n), "BN": (n, n_g), "Cphi": (n, n_g), "Ephi": (n_g, n),
+              "Mu": (n_aux + n_g, n_aux + n_g), "PiG": (n_aux,)}
+    for name, shape in shapes.items():
+        if mats[name].shape != shape:
+            raise ValueError(f"cached coarse matrix {name} has shape {mats[name].shape}, expected {shape}")
+    return OfflineData(aux, funcs["basis"], funcs["corr"], CoarseOperators(n_ms, n_aux, n_g, **mats))
+
+
+class MixedOfflineCache:
+    """npz files ``mixed_cem_<key>.npz`` in a directory, as ``multiscale.OfflineCache``.
+
+    Each file stores its full key and a checksum of its arrays; a file of another
+    configuration or a corrupt one is reported ('invalid: …') and never used.
+    """
+
+    def __init__(self, directory: str | Path) -> None:
+        self.directory = Path(directory)
+
+    def path(self, key: str) -> Path:
+        return self.directory / f"mixed_cem_{key[:24]}.npz"
+
+    def load(self, key: str, ops: CellOperators, grid: CoarseGrid) -> tuple[OfflineData | None, str]:
+        """(data, status): status is 'loaded', 'missing', or 'invalid: <why>' (the file is then ignored)."""
+        path = self.path(key)
+        if not path.is_file():
+            return None, "missing"
+        try:
+            with np.load(path, allow_pickle=False) as npz:
+                arrays = {name: npz[name] for name in npz.files}
+            stored_key = str(arrays.pop("key"))
+            stored_sum = str(arrays.pop("checksum"))
+            if stored_key != key:
+                return None, "invalid: stored key differs (another configuration)"
+            if _checksum(arrays) != stored_sum:
+                return None, "invalid: checksum mismatch (corrupt file)"
+            return _unpack_offline(arrays, ops, grid), "loaded"
+        except (OSError, EOFError, ValueError, KeyError, zipfile.BadZipFile) as err:  # unreadable/malformed: rebuild
+            return None, f"invalid: {type(err).__name__}: {err}"
+
+    def check_writable(self) -> None:
+        """Raise InputError unless a file can be created in the directory (creating the directory if needed)."""
+        try:
+            self.directory.mkdir(parents=True, exist_ok=True)
+            fd, tmp = tempfile.mkstemp(dir=self.directory, suffix=".npz.tmp")
+            os.close(fd)
+            os.remove(tmp)
+        except OSError as err:
+            raise InputError(f"the offline cache directory {self.directory} is not writable: {err}") from err
+
+    def save(self, key: str, data: OfflineData) -> Path:
+        """Write atomically (temporary file + rename)."""
+        self.directory.mkdir(parents=True, exist_ok=True)
+        arrays = _pack_offline(data)
+        arrays["checksum"] = np.array(_checksum(arrays))
+        arrays["key"] = np.array(key)
+        path = self.path(key)
+        fd, tmp = tempfile.mkstemp(dir=self.directory, suffix=".npz.tmp")
+        try:
+            with os.fdopen(fd, "wb") as fh:
+                np.savez(fh, **arrays)
+            os.chmod(tmp, 0o644)
+            os.replace(tmp, path)
+        except BaseException:
+            if os.path.exists(tmp):
+                os.remove(tmp)
+            raise
+        return path
+
+
+# ---------------------------------------------------------------------------------------
+# the Ω₁ multiscale solver
+# ---------------------------------------------------------------------------------------
 class MixedMultiscaleOmega1:
     """Ω₁ of Algorithm 4: offline stages on an Ω₁ ``MixedSubproblem`` and the online coarse solve.
 
     ``solve(g)`` returns the coarse state (r, w) for Robin data g (values at the γ
     nodes); σ₁ = Ψ r + Q g and u₁ = Π w + N g are never formed online: norms and
     traces use the dense coarse operators (``stress_state``, ``trace``, ...).
+
+    With ``cache_dir`` the offline data (U_aux, the patch functions, the coarse
+    matrices) are read from / written to ``cache_dir/mixed_cem_<key>.npz``
+    (``mixed_offline_key``); ``cache_status`` is 'disabled', 'loaded', 'built' (no file yet) or
+    'rebuilt (invalid: <why>)', as for the primal CEM.  A valid file is used even in a read-only directory;
+    when the data must be built and the directory cannot be written, an InputError
+    is raised before the (expensive) build.  A failure of the final write itself
+    only logs a warning: the built data are kept.
     """
 
-    def __init__(self, sub, grid: CoarseGrid, options: MixedCEMOptions, *, H: float) -> None:
+    def __init__(
+        self, sub, grid: CoarseGrid, options: MixedCEMOptions, *, H: float, cache_dir: str | Path | None = None
+    ) -> None:
         require_serial(sub.mesh.comm)
         self.options = options
         self.grid = grid
@@ -634,14 +954,55 @@ class MixedMultiscaleOmega1:
         self.ops = cell_operators(sub, H, options.weight, options.s_factor)
         self.topo = _Topology(sub.mesh, self.ops.P.shape[1])
         self.times["assembly"] = time.perf_counter() - t
-        t = time.perf_counter()
-        self.aux = stage_one(self.ops, self.topo, grid, options.nbasis)
-        self.times["eigen"] = time.perf_counter() - t
-        t = time.perf_counter()
-        self.basis, self.corr = stage_two(self.ops, self.topo, grid, self.aux, options.layers)
-        self.times["basis"] = time.perf_counter() - t
-        t = time.perf_counter()
-        self.co = coarse_operators(self.ops, grid, self.aux, self.basis, self.corr, options.layers)
+        self.cache_status = "disabled"
+        self.cache_path: Path | None = None
+        data = None
+        if cache_dir is not None:
+            t = time.perf_counter()
+            cache = MixedOfflineCache(cache_dir)
+            key = mixed_offline_key(sub, self.ops, grid, options, H=H)
+            self.cache_path = cache.path(key)
+            data, self.cache_status = cache.load(key, self.ops, grid)
+            if data is not None:
+                self._setup_online(data)
+                self.times["load"] = time.perf_counter() - t
+                log.info("mixed CEM offline data loaded from %s", self.cache_path)
+            else:
+                if self.cache_status != "missing":
+                    log.warning(
+                        "mixed CEM offline cache %s rejected (%s); rebuilding", self.cache_path, self.cache_status
+                    )
+                cache.check_writable()
+                self.cache_status = "built" if self.cache_status == "missing" else f"rebuilt ({self.cache_status})"
+        if data is None:
+            t = time.perf_counter()
+            aux = stage_one(self.ops, self.topo, grid, options.nbasis)
+            self.times["eigen"] = time.perf_counter() - t
+            t = time.perf_counter()
+            basis, corr = stage_two(self.ops, self.topo, grid, aux, options.layers)
+            self.times["basis"] = time.perf_counter() - t
+            t = time.perf_counter()
+            data = OfflineData(aux, basis, corr, coarse_operators(self.ops, grid, aux, basis, corr, options.layers))
+            self._setup_online(data)
+            self.times["coarse"] = time.perf_counter() - t
+            if cache_dir is not None:
+                t = time.perf_counter()
+                try:
+                    cache.save(key, data)
+                    log.info("mixed CEM offline data written to %s", self.cache_path)
+                except OSError as err:
+                    log.warning("could not write the mixed CEM offline cache %s (%s)", self.cache_path, err)
+                self.times["save"] = time.perf_counter() - t
+        co = self.co
+        log.info(
+            "mixed CEM Ω₁ (m=%d, l=%s): dim X_ms %d, dim U_aux %d, max Stage I residual %.1e, cache %s, times %s",
+            options.layers, options.nbasis, co.n_ms, co.n_aux, float(self.aux.residuals.max()), self.cache_status,
+            {k: round(v, 2) for k, v in self.times.items()},
+        )
+
+    def _setup_online(self, data: OfflineData) -> None:
+        """Keep the offline data; factorize the coarse matrix [[ΨᵀÃΨ, (ΠᵀBΨ)ᵀ], [ΠᵀBΨ, 0]]."""
+        self.aux, self.basis, self.corr, self.co = data
         co = self.co
         ms = slice(0, co.n_ms)
         qg = slice(co.n_ms, co.n_ms + co.n_g)
@@ -650,12 +1011,6 @@ class MixedMultiscaleOmega1:
         self._F1 = co.Cphi[ms] - co.Gt[ms, qg] - co.BN[ms]
         self._F2 = co.Bm[:, qg]
         self._E_r, self._E_g = co.Ephi[:, ms], co.Ephi[:, qg]
-        self.times["coarse"] = time.perf_counter() - t
-        log.info(
-            "mixed CEM Ω₁ (m=%d, l=%s): dim X_ms %d, dim U_aux %d, max Stage I residual %.1e, times %s",
-            options.layers, options.nbasis, co.n_ms, co.n_aux, float(self.aux.residuals.max()),
-            {k: round(v, 2) for k, v in self.times.items()},
-        )
 
     @property
     def num_coarse_dofs(self) -> int:

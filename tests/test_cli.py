@@ -76,6 +76,18 @@ def test_primal_ms_method_and_offline_cache(tmp_path):
     assert b["e_u"] == a["e_u"] and b["iterations"] == a["iterations"]
     assert b["time_offline_s"] < a["time_offline_s"]
     assert len(list((tmp_path / "cache").iterdir())) == 1
+    assert (a["offline_cache"], b["offline_cache"]) == ("built", "loaded")
+
+
+def test_mixed_ms_offline_cache(tmp_path):
+    args = ["run", "--model", "2", "--method", "mixed-ms", "--h", "16", "--H", "4", "--layers", "1",
+            "--reference", "--no-plots", "--cache-dir", str(tmp_path / "cache")]
+    assert main([*args, "--out", str(tmp_path / "a")]) == 0
+    assert main([*args, "--out", str(tmp_path / "b")]) == 0
+    a, b = (json.loads((tmp_path / d / "summary.json").read_text()) for d in "ab")
+    assert (a["offline_cache"], b["offline_cache"]) == ("built", "loaded")
+    assert b["iterations"] == a["iterations"] and b["e_sigma"] == a["e_sigma"]
+    assert len(list((tmp_path / "cache").iterdir())) == 1
 
 
 @pytest.mark.parametrize("method", ["mixed", "mixed-ms"])

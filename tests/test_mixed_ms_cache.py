@@ -1,0 +1,235 @@
+"""Mixed CEM-GMsFEM (Algorithm 4) offline phase: cell-block assembly, batched MUMPS solves, npz cache.
+
+Verification: the local operators assembled from cell blocks equal the plain sparse
+products Lᵀ·blockdiag(Ã)·L and blockdiag(B)·L of a straightforward construction of
+the local basis; the batched patch solves equal SciPy's sparse LU on the same saddle-
+point system; basis-independent Ω₁ quantities equal the values recorded with the
+previous implementation (sparse products, column-by-column MUMPS solves, METIS).
+Cache: a second construction loads identical data; other options, another β, a
+corrupt file or a file of another configuration are never used; an unwritable
+directory is an InputError raised before the build.
+"""
+
+import logging
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+from mpi4py import MPI
+
+import fenics_contact  # noqa: F401  (must precede dolfinx)
+from fenics_contact import geometry, models, multiscale
+from fenics_contact import mixed_multiscale as mm
+from fenics_contact.errors import InputError
+from fenics_contact.mixed_hybrid import MixedHybridStep
+
+pytestmark = pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="the mixed CEM offline phase is serial")
+
+#: Recorded with the previous implementation (h = 1/16, H = 1/4, model 2, β = √h, m = 1, l = 3,
+#: g = default_rng(0).standard_normal(n_g)): ‖σ₁‖²_A, ‖u₁‖²_L², ‖u_post‖²_L², |σ₁n₁ at γ|.
+#: Basis-independent on purpose: the λ = 0 eigenspace of interior cells (rigid motions) has
+#: no preferred basis, so (r, w) and the coarse matrices change with round-off; σ₁, u₁ do not.
+RECORDED_M1_L3 = (0.7574110178647683, 0.007215034028909427, 0.006159654402197488, 32.165147429047046)
+
+
+@pytest.fixture(scope="module")
+def omega1():
+    """Ω₁ of h = 1/16, H = 1/4 (3 × 4 coarse cells): coarse grid, cell operators, topology."""
+    cm = geometry.unit_square(16, 4)
+    step = MixedHybridStep(cm, models.get_model(2), beta="sqrt-h")
+    part = step.parts[0]
+    grid = multiscale.coarse_grid(part.mesh, part.cell_map, cm.coarse_cell, cm.H)
+    ops = mm.cell_operators(step.sub[0], cm.H, "lambda+2mu", multiscale.DEFAULT_S_FACTOR)
+    topo = mm._Topology(step.sub[0].mesh, ops.P.shape[1])
+    return cm, step, grid, ops, topo
+
+
+def _build(omega1, cache_dir=None, sub=None, **options):
+    cm, step, grid, _, _ = omega1
+    opts = mm.MixedCEMOptions(**{"layers": 1, "nbasis": 3, **options})
+    return mm.MixedMultiscaleOmega1(sub or step.sub[0], grid, opts, H=cm.H, cache_dir=cache_dir)
+
+
+def _blockdiag(blocks):
+    return sp.block_diag([sp.coo_matrix(b) for b in blocks], format="csr")
+
+
+def _patch_cells(grid, i, layers):
+    return np.sort(np.concatenate([grid.cells[j] for j in grid.patch(i, layers)]).astype(np.int64))
+
+
+def _cases(grid):
+    interior = int(np.flatnonzero((grid.ij[:, 0] == 1) & (grid.ij[:, 1] == 1))[0])
+    on_gamma = int(np.flatnonzero(grid.ij[:, 0] == grid.ij[:, 0].max())[0])
+    return [(interior, 0), (interior, 1), (on_gamma, 1), (0, 2)]
+
+
+# -- reference constructions ----------------------------------------------------------------------
+def _reference_basis(ops, topo, cells):
+    """L of X_h(ω) from sparse column slices of P: AW functions inside ω, then P·z at inner-boundary vertices."""
+    v_in = np.bincount(topo.c2v[cells].ravel(), minlength=topo.nv)
+    e_in = np.bincount(topo.c2e[cells].ravel(), minlength=topo.ne)
+    v_int = np.flatnonzero((v_in > 0) & (v_in == topo.v_deg))
+    v_bnd = np.flatnonzero((v_in > 0) & (v_in < topo.v_deg))
+    e_int = np.flatnonzero((e_in > 0) & (e_in == topo.e_deg))
+    e_bnd = np.flatnonzero((e_in == 1) & (topo.e_deg == 2))
+    inner = np.concatenate([
+        (3 * v_int[:, None] + np.arange(3)).ravel(),
+        (3 * topo.nv + 4 * e_int[:, None] + np.arange(4)).ravel(),
+        (3 * topo.nv + 4 * topo.ne + 3 * cells[:, None] + np.arange(3)).ravel(),
+    ])
+    Pp = ops.P[mm._rows(cells, 30)].tocsc()
+    parts = [Pp[:, inner]]
+    for v in v_bnd:
+        rows = []
+        for e in e_bnd[np.any(topo.e2v[e_bnd] == v, axis=1)]:
+            d = topo.vx[topo.e2v[e, 1]] - topo.vx[topo.e2v[e, 0]]
+            d /= np.linalg.norm(d)
+            rows.append([[d[1], -d[0], 0.0], [0.0, d[1], -d[0]]])
+        if rows:
+            _, sv, vt = np.linalg.svd(np.vstack(rows))
+            null = vt[int(np.sum(sv > 1e-10 * sv.max())) :]
+        else:
+            null = np.eye(3)
+        null = np.where(np.abs(null) < 1e-14, 0.0, null)
+        if null.size:
+            parts.append(Pp[:, 3 * v + np.arange(3)] @ sp.csr_matrix(null.T))
+    L = sp.hstack(parts, format="csr")
+    L.eliminate_zeros()
+    return L
+
+
+def test_local_space_and_operators_match_sparse_products(omega1):
+    _, _, grid, ops, topo = omega1
+    for i, layers in _cases(grid):
+        cells = _patch_cells(grid, i, layers)
+        space = mm.local_stress_space(ops, topo, cells)
+        L = _reference_basis(ops, topo, cells)
+        assert space.L.shape == L.shape
+        assert abs(space.L - L).max() <= 1e-14 * abs(L).max()
+        At, Bl = mm._local_operators(ops, space)
+        At_ref = (L.T @ _blockdiag(ops.Kt[cells]) @ L).tocsr()
+        Bl_ref = (_blockdiag(ops.B[cells]) @ L).tocsr()
+        assert abs(At - At_ref).max() <= 1e-13 * abs(At_ref).max()
+        assert abs(Bl - Bl_ref).max() <= 1e-13 * abs(Bl_ref).max()
+        assert abs(At - At.T).max() <= 1e-14 * abs(At).max()
+        x = np.random.default_rng(i).standard_normal((space.size, 2))
+        assert np.allclose(space.apply(x).reshape(-1, 2), L @ x, rtol=0, atol=1e-14 * np.abs(L @ x).max())
+
+
+def test_batched_patch_solve_matches_scipy(omega1):
+    _, _, grid, ops, topo = omega1
+    aux = mm.stage_one(ops, topo, grid, 3)
+    for i, layers in _cases(grid)[1:3]:
+        space, lu, Z, *_ = mm._patch_system(ops, topo, grid, aux, grid.patch(i, layers))
+        L = _reference_basis(ops, topo, space.cells)
+        At = L.T @ _blockdiag(ops.Kt[space.cells]) @ L
+        Bl = _blockdiag(ops.B[space.cells]) @ L
+        A = sp.bmat([[At, Bl.T, None], [Bl, None, -Z], [None, -Z.T, sp.identity(Z.shape[1])]], format="csc")
+        rhs = np.random.default_rng(i).standard_normal((A.shape[0], 5))
+        x = lu.solve(rhs)
+        lu.destroy()
+        x_ref = spla.splu(A).solve(rhs)
+        assert np.linalg.norm(x - x_ref) <= 1e-10 * np.linalg.norm(x_ref)
+
+
+def test_omega1_unchanged_against_recorded_values(omega1):
+    om = _build(omega1)
+    g = np.random.default_rng(0).standard_normal(om.co.n_g)
+    r, w = om.solve(g)
+    values = (om.stress_norm2(r, g), om.l2_norm2(w, g), om.m_norm2(om.fine_displacement_post(r, g)),
+              float(np.linalg.norm(om.trace(r, g))))
+    assert np.allclose(values, RECORDED_M1_L3, rtol=1e-10, atol=0)
+    assert np.isclose(om.a_norm2(om.fine_stress(r, g)), values[0], rtol=1e-12)
+
+
+# -- offline cache ---------------------------------------------------------------------------------
+def _assert_same_online(a, b, exact=True):
+    """Every online and output map of two Ω₁ objects agrees (bitwise when ``exact``)."""
+    same = np.array_equal if exact else (lambda x, y: np.allclose(x, y, rtol=1e-12, atol=1e-12 * np.abs(x).max()))
+    rng = np.random.default_rng(7)
+    g = rng.standard_normal(a.co.n_g)
+    (ra, wa), (rb, wb) = a.solve(g), b.solve(g)
+    assert same(ra, rb) and same(wa, wb)
+    assert same(a.trace(ra, g), b.trace(rb, g))
+    assert same(a.fine_stress(ra, g), b.fine_stress(rb, g))
+    assert same(a.fine_displacement(wa, g), b.fine_displacement(wb, g))
+    assert same(a.fine_displacement_post(ra, g), b.fine_displacement_post(rb, g))
+    u = rng.standard_normal((a.ops.num_cells, 6))
+    assert same(a.project(u), b.project(u))
+    norms = [(x.stress_norm2(r, g), x.l2_norm2(w, g)) for x, r, w in ((a, ra, wa), (b, rb, wb))]
+    assert same(np.array(norms[0]), np.array(norms[1]))
+
+
+def test_cache_round_trip(omega1, tmp_path, caplog):
+    caplog.set_level(logging.INFO, logger="fenics_contact.mixed_multiscale")
+    assert _build(omega1).cache_status == "disabled"
+    first = _build(omega1, tmp_path)
+    assert first.cache_status == "built"
+    assert first.cache_path.is_file() and first.cache_path.parent == tmp_path
+    assert f"written to {first.cache_path}" in caplog.text
+    second = _build(omega1, tmp_path)
+    assert second.cache_status == "loaded"
+    assert f"loaded from {second.cache_path}" in caplog.text
+    assert "load" in second.times and "basis" not in second.times
+    _assert_same_online(first, second)
+    assert len(second.basis) == len(first.basis) and len(second.corr) == len(first.corr)
+    # the build is deterministic: an uncached build agrees too
+    _assert_same_online(_build(omega1), second, exact=False)
+
+
+def test_cache_key_covers_options_and_beta(omega1, tmp_path):
+    cm, step, grid, ops, _ = omega1
+    base = _build(omega1, tmp_path)
+    other = _build(omega1, tmp_path, layers=2)
+    assert other.cache_status == "built" and other.cache_path != base.cache_path
+    sub = step.sub[0]
+    key = mm.mixed_offline_key(sub, ops, grid, base.options, H=cm.H)
+    variants = [{"layers": 2}, {"nbasis": 2}, {"nbasis": None}, {"weight": "2mu"}, {"s_factor": 1.0}]
+    keys = {mm.mixed_offline_key(sub, ops, grid, mm.MixedCEMOptions(**{"layers": 1, "nbasis": 3, **v}), H=cm.H)
+            for v in variants}
+    assert len(keys) == len(variants) and key not in keys
+    assert mm.mixed_offline_key(sub, ops, grid, base.options, H=0.5 * cm.H) != key
+    # another β: another Ω₁ problem (Robin term), never the cached one
+    step2 = MixedHybridStep(cm, models.get_model(2), beta=2.0 * step.beta)
+    beta2 = _build(omega1, tmp_path, sub=step2.sub[0])
+    assert beta2.cache_status == "built" and beta2.cache_path != base.cache_path
+    assert _build(omega1, tmp_path, sub=step2.sub[0]).cache_status == "loaded"
+    assert _build(omega1, tmp_path).cache_status == "loaded"
+
+
+def test_corrupt_or_foreign_cache_file_is_rebuilt(omega1, tmp_path, caplog):
+    first = _build(omega1, tmp_path)
+    path = first.cache_path
+    with np.load(path) as data:
+        arrays = {k: data[k] for k in data.files}
+    # one stored value changed: checksum mismatch
+    bad = dict(arrays)
+    bad["basis_sigma"] = bad["basis_sigma"].copy()
+    bad["basis_sigma"][5] += 1.0
+    np.savez(path, **bad)
+    again = _build(omega1, tmp_path)
+    assert again.cache_status == "rebuilt (invalid: checksum mismatch (corrupt file))"
+    assert "rejected" in caplog.text
+    _assert_same_online(first, again)
+    assert _build(omega1, tmp_path).cache_status == "loaded"  # the rebuild rewrote the file
+    # a file of another configuration under this name
+    np.savez(path, **{**arrays, "key": np.array("0" * 64)})
+    assert _build(omega1, tmp_path).cache_status == "rebuilt (invalid: stored key differs (another configuration))"
+    # a truncated file
+    with open(path, "r+b") as fh:
+        fh.truncate(100)
+    truncated = _build(omega1, tmp_path)
+    assert truncated.cache_status.startswith("rebuilt (invalid: ")
+    _assert_same_online(first, truncated)
+    assert _build(omega1, tmp_path).cache_status == "loaded"
+
+
+def test_unwritable_cache_directory_is_an_error_before_the_build(omega1, tmp_path):
+    blocker = tmp_path / "not_a_directory"
+    blocker.write_text("")
+    with pytest.raises(InputError, match="not writable"):
+        _build(omega1, blocker)
+    with pytest.raises(InputError, match="not writable"):
+        _build(omega1, blocker / "cache")

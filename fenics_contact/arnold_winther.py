@@ -57,6 +57,8 @@ import scipy.sparse as sp
 import ufl
 from petsc4py import PETSc
 
+from fenics_contact.linalg import petsc_to_scipy, scipy_to_petsc
+
 __all__ = [
     "ArnoldWintherSpace",
     "MixedElasticitySolution",
@@ -416,13 +418,7 @@ class ArnoldWintherSpace:
     def prolongation_petsc(self) -> PETSc.Mat:
         """P as a PETSc AIJ matrix (created once)."""
         if self._P_petsc is None:
-            P = self._P
-            self._P_petsc = PETSc.Mat().createAIJ(
-                size=P.shape,
-                csr=(P.indptr.astype(PETSc.IntType), P.indices.astype(PETSc.IntType), P.data),
-                comm=self.mesh.comm,
-            )
-            self._P_petsc.assemble()
+            self._P_petsc = scipy_to_petsc(self._P, self.mesh.comm)
         return self._P_petsc
 
     @property
@@ -508,12 +504,6 @@ class ArnoldWintherSpace:
 # ---------------------------------------------------------------------------
 
 
-def _to_scipy(A: PETSc.Mat) -> sp.csr_matrix:
-    """Copy a sequential PETSc AIJ matrix to scipy CSR."""
-    indptr, indices, data = A.getValuesCSR()
-    return sp.csr_matrix((data.copy(), indices.copy(), indptr.copy()), shape=A.getSize())
-
-
 def solve_saddle_point(
     K: PETSc.Mat, B: PETSc.Mat, F: npt.ArrayLike, G: npt.ArrayLike
 ) -> tuple[np.ndarray, np.ndarray, dict[str, float]]:
@@ -523,16 +513,9 @@ def solve_saddle_point(
     """
     t0 = time.perf_counter()
     comm = K.getComm()
-    Ks, Bs = _to_scipy(K), _to_scipy(B)
+    Ks, Bs = petsc_to_scipy(K), petsc_to_scipy(B)
     # (a MatNest converted to AIJ keeps references into the nest; build the CSR directly)
-    Ms = sp.bmat([[Ks, Bs.T], [Bs, None]], format="csr")
-    Ms.sort_indices()
-    M = PETSc.Mat().createAIJ(
-        size=Ms.shape,
-        csr=(Ms.indptr.astype(PETSc.IntType), Ms.indices.astype(PETSc.IntType), Ms.data),
-        comm=comm,
-    )
-    M.assemble()
+    M = scipy_to_petsc(sp.bmat([[Ks, Bs.T], [Bs, None]], format="csr"), comm)
     t1 = time.perf_counter()
     rhs = M.createVecRight()
     n = K.getSize()[0]

@@ -82,7 +82,7 @@ from fenics_contact.contact import ContactProfile, NewtonHistory, NewtonOptions
 from fenics_contact.errors import ConvergenceError, InputError
 from fenics_contact.fields import MaterialFields, material_fields
 from fenics_contact.geometry import ContactMesh
-from fenics_contact.linalg import DIRECT_OPTIONS, DirectSolver
+from fenics_contact.linalg import DIRECT_OPTIONS, DirectSolver, assemble_scipy, petsc_to_scipy, scipy_to_petsc
 from fenics_contact.models import TestModel
 from fenics_contact.tags import Boundary, Subdomain
 
@@ -298,29 +298,6 @@ def _norm(a: np.ndarray) -> float:
     return float(np.sqrt(_dot(a, a)))
 
 
-def _to_scipy(A: PETSc.Mat) -> sp.csr_matrix:
-    indptr, indices, data = A.getValuesCSR()
-    return sp.csr_matrix((data.copy(), indices.copy(), indptr.copy()), shape=A.getSize())
-
-
-def _to_petsc(A: sp.csr_matrix, comm) -> PETSc.Mat:
-    A = A.tocsr()
-    A.sort_indices()
-    M = PETSc.Mat().createAIJ(
-        size=A.shape, csr=(A.indptr.astype(PETSc.IntType), A.indices.astype(PETSc.IntType), A.data), comm=comm
-    )
-    M.assemble()
-    return M
-
-
-def _assemble_matrix(form) -> sp.csr_matrix:
-    A = dolfinx.fem.petsc.assemble_matrix(fem.form(form))
-    A.assemble()
-    out = _to_scipy(A)
-    A.destroy()
-    return out
-
-
 def _assemble_vector(form) -> np.ndarray:
     b = fem.assemble_vector(fem.form(form))
     b.scatter_reverse(dolfinx.la.InsertMode.add)
@@ -333,7 +310,7 @@ def _pt_a_p(form, P_petsc: PETSc.Mat) -> sp.csr_matrix:
     A.assemble()
     R = A.PtAP(P_petsc)
     A.destroy()
-    out = _to_scipy(R)
+    out = petsc_to_scipy(R)
     R.destroy()
     return out
 
@@ -455,13 +432,13 @@ class MixedSubproblem:
         self.n_u = 2 * self.U.dofmap.index_map.size_local
 
         # -- bulk operators ------------------------------------------------------------
-        P_petsc = _to_petsc(self.P, msh.comm)
+        P_petsc = scipy_to_petsc(self.P, msh.comm)
         s, t = ufl.TrialFunction(self.dg), ufl.TestFunction(self.dg)
         w, v = ufl.TrialFunction(self.U), ufl.TestFunction(self.U)
         n = ufl.FacetNormal(msh)
         self.K = _pt_a_p(forms_mixed.compliance_form(s, t, fields.lmbda, fields.mu), P_petsc)
-        self.B = (_assemble_matrix(forms_mixed.divergence_form(s, v)) @ self.P).tocsr()
-        self.M = _assemble_matrix(forms_mixed.mass_form(w, v))
+        self.B = (assemble_scipy(forms_mixed.divergence_form(s, v)) @ self.P).tocsr()
+        self.M = assemble_scipy(forms_mixed.mass_form(w, v))
         self.G = _assemble_vector(forms_mixed.load_form(fields.f, v))[: self.n_u]
         P_petsc.destroy()
 
@@ -473,7 +450,7 @@ class MixedSubproblem:
             gamma = facet_tags.find(Boundary.INTERFACE)
             if gamma.size == 0:
                 raise InputError("a Robin subproblem needs interface (γ) facets")
-            R = _assemble_matrix(forms_mixed.robin_form(s, t, n, 1.0, ds(Boundary.INTERFACE)))
+            R = assemble_scipy(forms_mixed.robin_form(s, t, n, 1.0, ds(Boundary.INTERFACE)))
             self.R = (self.P.T @ R @ self.P).tocsr()
             self.Kt = (self.K + beta * self.R).tocsr()
             self._setup_interface(gamma, ds, t, n)
@@ -505,7 +482,7 @@ class MixedSubproblem:
         blocks, coords = blocks[order], coords[order]
         self.gamma_points = coords
         g = ufl.TrialFunction(Lam)
-        C = _assemble_matrix(forms_mixed.robin_data_form(g, t, n, ds(Boundary.INTERFACE)))
+        C = assemble_scipy(forms_mixed.robin_data_form(g, t, n, ds(Boundary.INTERFACE)))
         cols = (2 * blocks[:, None] + np.arange(2)).ravel()
         #: d(g; τ) = C g for interface data g = values (x, y) at ``gamma_points`` (flattened)
         self.C = (self.P.T @ C[:, cols]).tocsr()
@@ -582,7 +559,7 @@ class MixedSubproblem:
             M = M + self._penalty_matrix(active, padded=True)
         if self._matrix is not None:
             self._matrix.destroy()
-        self._matrix = _to_petsc(M, self.mesh.comm)
+        self._matrix = scipy_to_petsc(M, self.mesh.comm)
         self.solver.set_operator(self._matrix)
         self._factorized_set = key.copy()
         return True

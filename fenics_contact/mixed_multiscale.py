@@ -74,6 +74,7 @@ from petsc4py import PETSc
 
 from fenics_contact import __version__, forms_mixed
 from fenics_contact.errors import InputError
+from fenics_contact.linalg import assemble_scipy, scipy_to_petsc
 from fenics_contact.multiscale import (
     DEFAULT_S_FACTOR,
     CoarseGrid,
@@ -131,19 +132,6 @@ class MixedCEMOptions:
 # ---------------------------------------------------------------------------------------
 # helpers
 # ---------------------------------------------------------------------------------------
-def _petsc_to_scipy(A) -> sp.csr_matrix:
-    indptr, indices, data = A.getValuesCSR()
-    return sp.csr_matrix((data.copy(), indices.copy(), indptr.copy()), shape=A.getSize())
-
-
-def _assemble(form) -> sp.csr_matrix:
-    A = dolfinx.fem.petsc.assemble_matrix(fem.form(form))
-    A.assemble()
-    out = _petsc_to_scipy(A)
-    A.destroy()
-    return out
-
-
 def _cell_blocks(A: sp.spmatrix, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
     """Diagonal blocks (n, a, b) of a cellwise operator: A[rows[c]][:, cols[c]] (zero blocks allowed)."""
     n, a = rows.shape
@@ -280,12 +268,12 @@ def cell_operators(sub, H: float, weight: str = "lambda+2mu", s_factor: float = 
     w, v = ufl.TrialFunction(U), ufl.TestFunction(U)
     n = ufl.FacetNormal(msh)
     ds = forms_mixed.boundary_measure(msh, ft)
-    K = _cell_blocks(_assemble(forms_mixed.compliance_form(s, t, fields.lmbda, fields.mu)), dg_rows, dg_rows)
-    R = _cell_blocks(_assemble(forms_mixed.robin_form(s, t, n, 1.0, ds(Boundary.INTERFACE))), dg_rows, dg_rows)
-    B = _cell_blocks(_assemble(forms_mixed.divergence_form(s, v)), u_rows, dg_rows)
-    M = _cell_blocks(_assemble(forms_mixed.mass_form(w, v)), u_rows, u_rows)
+    K = _cell_blocks(assemble_scipy(forms_mixed.compliance_form(s, t, fields.lmbda, fields.mu)), dg_rows, dg_rows)
+    R = _cell_blocks(assemble_scipy(forms_mixed.robin_form(s, t, n, 1.0, ds(Boundary.INTERFACE))), dg_rows, dg_rows)
+    B = _cell_blocks(assemble_scipy(forms_mixed.divergence_form(s, v)), u_rows, dg_rows)
+    M = _cell_blocks(assemble_scipy(forms_mixed.mass_form(w, v)), u_rows, u_rows)
     kt = kappa_tilde(fields.lmbda, fields.mu, H, s_factor) if weight == "lambda+2mu" else s_factor * 2.0 * fields.mu / H**2
-    S = _cell_blocks(_assemble(kt * ufl.inner(w, v) * ufl.dx), u_rows, u_rows)
+    S = _cell_blocks(assemble_scipy(kt * ufl.inner(w, v) * ufl.dx), u_rows, u_rows)
     Gv = fem.assemble_vector(fem.form(forms_mixed.load_form(fields.f, v)))
     Gv.scatter_reverse(dolfinx.la.InsertMode.add)
     G = Gv.array[u_rows]
@@ -299,7 +287,7 @@ def cell_operators(sub, H: float, weight: str = "lambda+2mu", s_factor: float = 
     if coords.shape != sub.gamma_points.shape or not np.allclose(coords, sub.gamma_points, atol=1e-12):
         raise RuntimeError("the γ nodes do not match the Ω₁ subproblem's interface nodes")
     g = ufl.TrialFunction(Lam)
-    Cfull = _assemble(forms_mixed.robin_data_form(g, t, n, ds(Boundary.INTERFACE)))
+    Cfull = assemble_scipy(forms_mixed.robin_data_form(g, t, n, ds(Boundary.INTERFACE)))
     C = Cfull[dg_rows.ravel()][:, (2 * blocks[:, None] + np.arange(2)).ravel()].tocsr()
     E = _trace_operator(msh, dg, gamma, coords)
     P = sub.P[dg_rows.ravel()].tocsr()
@@ -563,13 +551,7 @@ class _MumpsLU:
     """
 
     def __init__(self, A: sp.spmatrix) -> None:
-        A = sp.csr_matrix(A)
-        A.sort_indices()
-        self.mat = PETSc.Mat().createAIJ(
-            size=A.shape, csr=(A.indptr.astype(PETSc.IntType), A.indices.astype(PETSc.IntType), A.data),
-            comm=PETSc.COMM_SELF,
-        )
-        self.mat.assemble()
+        self.mat = scipy_to_petsc(A)
         self.ksp = PETSc.KSP().create(PETSc.COMM_SELF)
         self.ksp.setOperators(self.mat)
         self.ksp.setType("preonly")

@@ -57,6 +57,7 @@ from dolfinx import mesh as dmesh
 from fenics_contact import __version__, forms_primal
 from fenics_contact.errors import ConvergenceError, InputError
 from fenics_contact.fields import MaterialFields
+from fenics_contact.linalg import assemble_scipy, scipy_to_petsc
 from fenics_contact.tags import Boundary
 
 __all__ = [
@@ -220,12 +221,6 @@ def interface_mass_form(u, v, weight, ds_gamma):
     return weight * ufl.inner(u, v) * ds_gamma
 
 
-def _to_scipy(form) -> sp.csr_matrix:
-    A = fem.assemble_matrix(fem.form(form))
-    A.scatter_reverse()
-    return A.to_scipy().tocsr()
-
-
 @dataclass(slots=True)
 class FineOperators:
     """SciPy matrices of the Ω₁ P1 space (no boundary conditions applied; ``free`` marks non-Γ_D DOFs).
@@ -282,15 +277,15 @@ def assemble_fine_operators(
     for c in range(4):
         chi = fem.Function(Q0, name=f"chi{c}")
         chi.x.array[cell_dof0] = (grid.colors[grid.cell_coarse] == c).astype(np.float64)
-        Kc.append(_to_scipy(forms_primal.elastic_form(u, v, chi * fields.lmbda, chi * fields.mu)))
-        Sc.append(_to_scipy(cem_mass_form(u, v, chi * kap)))
-        Gc.append(_to_scipy(interface_mass_form(u, v, chi, ds)))
+        Kc.append(assemble_scipy(forms_primal.elastic_form(u, v, chi * fields.lmbda, chi * fields.mu)))
+        Sc.append(assemble_scipy(cem_mass_form(u, v, chi * kap)))
+        Gc.append(assemble_scipy(interface_mass_form(u, v, chi, ds)))
     K = sum(Kc[1:], Kc[0]).tocsr()
     S = sum(Sc[1:], Sc[0]).tocsr()
     G = sum(Gc[1:], Gc[0]).tocsr()
     a = alpha.x.array.copy()
     R = (sp.diags(a) @ G).tocsr()
-    M = _to_scipy(forms_primal.mass_form(u, v))
+    M = assemble_scipy(forms_primal.mass_form(u, v))
     F_vec = fem.assemble_vector(fem.form(ufl.inner(fields.f, v) * ufl.dx))
     F_vec.scatter_reverse(la.InsertMode.add)
     F = F_vec.array.copy()
@@ -325,16 +320,6 @@ def assemble_fine_operators(
 # ---------------------------------------------------------------------------------------
 # local spectral problems
 # ---------------------------------------------------------------------------------------
-def _petsc_aij(X: sp.spmatrix) -> PETSc.Mat:
-    X = sp.csr_matrix(X)
-    X.sort_indices()
-    return PETSc.Mat().createAIJ(
-        size=X.shape,
-        csr=(X.indptr.astype(PETSc.IntType), X.indices.astype(PETSc.IntType), X.data.astype(PETSc.ScalarType)),
-        comm=PETSc.COMM_SELF,
-    )
-
-
 #: Extra eigenpairs requested from Krylov–Schur beyond the wanted ones (a margin for multiplicities).
 _EXTRA_PAIRS = 3
 #: Relative gap above the last wanted eigenvalue at which the inertia count is taken.
@@ -395,7 +380,7 @@ def _eps_pairs(
 
 def count_eigenvalues_below(A: sp.spmatrix, S: sp.spmatrix, sigma: float) -> int:
     """#{λ < σ} for A φ = λ S φ (S ≻ 0): the negative inertia of A − σS (MUMPS LDLᵀ, Sylvester's law)."""
-    X = _petsc_aij((A - sigma * S).tocsr())
+    X = scipy_to_petsc((A - sigma * S).tocsr())
     ksp = PETSc.KSP().create(PETSc.COMM_SELF)
     try:
         ksp.setOperators(X)
@@ -441,7 +426,7 @@ def local_spectral_problem(
     kind = eigensolver
     if kind == "auto":
         kind = "krylovschur" if (n >= 2 * nev + 16 and 3 * nev <= n) else "lapack"
-    Ap, Sp = _petsc_aij(A), _petsc_aij(S)
+    Ap, Sp = scipy_to_petsc(A), scipy_to_petsc(S)
     try:
         if kind == "lapack":
             values, vectors = _eps_pairs(Ap, Sp, nev, kind, target=target, tol=tol, deflation=None)

@@ -14,10 +14,12 @@ can jump at the coarse nodes of γ (the local spaces leave σ_tt free on inner
 patch boundaries); the update uses the average of the two one-sided values
 there.
 
-Online, the Ω₁ side costs one dense triangular solve of size dim X_ms + dim
-U_aux and a few small matrix–vector products (the stopping rule's norms are
-evaluated with the precomputed coarse Gram matrices); σ₁ and u₁ are formed on
-the fine mesh only at the end (output and errors).  Serial only.
+Ω₁ is linear, so its coarse state is an affine function of g₁₂, precomputed
+offline with one coarse solve per interface value
+(``mixed_multiscale.InterfaceResponse``).  Online, the Ω₁ side costs a few
+matrix–vector products of the size of the interface data (trace, and the
+stopping rule's norms from Gram matrices in g); σ₁ and u₁ are formed on the
+fine mesh only at the end (output and errors).  Serial only.
 
 **Displacement errors.**  u₁ = Π w + N g is, as in the paper's algorithm, a coarse
 displacement (U_aux holds l functions per coarse cell, the rigid motions on interior
@@ -85,8 +87,8 @@ class MixedMultiscaleHybridStep(MixedHybridStep):
         co = self.omega1.co
         if co.n_g != self.size:
             raise RuntimeError("the multiscale interface data do not match the Ω₂ interface data")
-        self.r, self.w, self.g12 = np.zeros(co.n_ms), np.zeros(co.n_aux), np.zeros(co.n_g)
-        self._prev1 = (self.r.copy(), self.w.copy(), self.g12.copy())
+        self.g12 = np.zeros(co.n_g)
+        self._prev_g12 = self.g12.copy()
         self.offline_times = {"setup": setup, **self.omega1.times}
         self.time_offline_s = time.perf_counter() - start
 
@@ -100,7 +102,8 @@ class MixedMultiscaleHybridStep(MixedHybridStep):
 
     def fine_omega1(self) -> tuple[np.ndarray, np.ndarray]:
         """σ₁ (n_cells, 30) and u₁ (n_cells, 6) of the current iterate, cell-major (``mixed_multiscale``)."""
-        return self.omega1.fine_stress(self.r, self.g12), self.omega1.fine_displacement(self.w, self.g12)
+        r, w = self.omega1.solve(self.g12)
+        return self.omega1.fine_stress(r, self.g12), self.omega1.fine_displacement(w, self.g12)
 
     def errors(self) -> tuple[float, float]:
         """(e_σ, e_u) against the fine monolithic reference over Ω₁ ∪ Ω₂ (METHOD §6)."""
@@ -131,7 +134,7 @@ class MixedMultiscaleHybridStep(MixedHybridStep):
         """e_u with the post-processed fine Ω₁ displacement Σ r_j q_j + N g (``fine_displacement_post``)."""
         if self.reference is None:
             raise InputError("no reference solution was given")
-        u1 = self.omega1.fine_displacement_post(self.r, self.g12)
+        u1 = self.omega1.fine_displacement_post(self.omega1.solve(self.g12)[0], self.g12)
         s2 = self.sub[1]
         eu = self.omega1.m_norm2(u1 - self._uref1) + s2.l2_norm2(s2.u - self.reference[1][1])
         return float(np.sqrt(eu / self._ref_norm2[1]))
@@ -143,10 +146,9 @@ class MixedMultiscaleHybridStep(MixedHybridStep):
     def apply(self, g: np.ndarray) -> np.ndarray:
         n = self.size
         g12, g21 = g[:n], g[n:]
-        self.r, self.w = self.omega1.solve(g12)
-        self.g12 = g12.copy()
+        self.g12 = g12.copy()  # Ω₁ is linear: its state is the affine response to g12
         newton = self.sub[1].solve(g21[self._perm2])
-        t1 = self.omega1.trace(self.r, g12)
+        t1 = self.omega1.response.trace(g12)
         t2 = np.empty(n)
         t2[self._perm2] = self.sub[1].N @ self.sub[1].c
         self._measure()
@@ -158,13 +160,12 @@ class MixedMultiscaleHybridStep(MixedHybridStep):
         return np.concatenate([g21 - 2.0 * self.beta * t2, g12 - 2.0 * self.beta * t1])
 
     def _measure(self) -> None:
-        om = self.omega1
-        r0, w0, g0 = self._prev1
-        ds = om.stress_norm2(self.r - r0, self.g12 - g0)
-        du = om.l2_norm2(self.w - w0, self.g12 - g0)
-        ns = om.stress_norm2(self.r, self.g12)
-        nu = om.l2_norm2(self.w, self.g12)
-        self._prev1 = (self.r.copy(), self.w.copy(), self.g12.copy())
+        rs = self.omega1.response
+        ds = rs.stress_change2(self.g12, self._prev_g12)
+        du = rs.l2_change2(self.g12, self._prev_g12)
+        ns = rs.stress_norm2(self.g12)
+        nu = rs.l2_norm2(self.g12)
+        self._prev_g12 = self.g12.copy()
         s = self.sub[1]
         c0, u0 = self._prev[1]
         ds += s.stress_norm2(s.c - c0)

@@ -89,6 +89,7 @@ __all__ = [
     "MIXED_CACHE_FORMAT",
     "CellOperators",
     "LocalSpace",
+    "InterfaceResponse",
     "MixedCEMOptions",
     "MixedMultiscaleOmega1",
     "MixedOfflineCache",
@@ -909,6 +910,68 @@ class MixedOfflineCache:
 # ---------------------------------------------------------------------------------------
 # the Ω₁ multiscale solver
 # ---------------------------------------------------------------------------------------
+@dataclass(slots=True)
+class InterfaceResponse:
+    """The Ω₁ multiscale solution as an affine map of the Robin data g (n_g values on γ).
+
+    The coarse problem is linear, so r = R g + r₀, w = W g + w₀ (n_g coarse solves, offline),
+    and everything the iteration needs is a small matrix in g: the trace σ₁n₁ = T g + t₀ and
+    the quadratic forms ‖σ₁‖²_A, ‖u₁‖²_L² (for the stopping rule).  Online, the Ω₁ step of
+    Algorithm 4 then costs O(n_g²) instead of a coarse solve of size dim X_ms + dim U_aux.
+    """
+
+    R: np.ndarray  #: (n_ms, n_g)
+    r0: np.ndarray
+    W: np.ndarray  #: (n_aux, n_g)
+    w0: np.ndarray
+    T: np.ndarray  #: (n_g, n_g) trace map
+    t0: np.ndarray
+    KA: np.ndarray  #: (n_g, n_g): ‖σ₁(g) − σ₁(g')‖²_A = (g − g')ᵀ KA (g − g')
+    kA: np.ndarray  #: ‖σ₁(g)‖²_A = gᵀKA g + 2 kAᵀg + cA
+    cA: float
+    KM: np.ndarray  #: the same for ‖u₁‖²_L²
+    kM: np.ndarray
+    cM: float
+
+    @classmethod
+    def of(cls, om: "MixedMultiscaleOmega1") -> "InterfaceResponse":
+        co = om.co
+        n, n_g = co.n_ms, co.n_g
+        X = sla.lu_solve(om._lu, np.vstack([om._F1, -om._F2]))
+        x0 = sla.lu_solve(om._lu, np.concatenate([np.zeros(n), co.PiG]))
+        R, W, r0, w0 = X[:n], X[n:], x0[:n], x0[n:]
+        eye = np.eye(n_g)
+        forms = []
+        for lift, shift, gram in ((R, r0, co.Gk), (W, w0, co.Mu)):
+            L = np.vstack([lift, eye])
+            s0 = np.concatenate([shift, np.zeros(n_g)])
+            GL, Gs = gram @ L, gram @ s0
+            forms += [0.5 * (L.T @ GL + (L.T @ GL).T), L.T @ Gs, float(s0 @ Gs)]
+        return cls(R, r0, W, w0, om._E_r @ R + om._E_g, om._E_r @ r0, *forms)
+
+    def trace(self, g: np.ndarray) -> np.ndarray:
+        """σ₁n₁ at the γ nodes for data g."""
+        return self.T @ g + self.t0
+
+    def stress_norm2(self, g: np.ndarray) -> float:
+        """‖σ₁(g)‖²_A."""
+        return float(g @ self.KA @ g + 2.0 * self.kA @ g + self.cA)
+
+    def stress_change2(self, g: np.ndarray, g_old: np.ndarray) -> float:
+        """‖σ₁(g) − σ₁(g_old)‖²_A."""
+        d = g - g_old
+        return float(d @ self.KA @ d)
+
+    def l2_norm2(self, g: np.ndarray) -> float:
+        """‖u₁(g)‖²_L²."""
+        return float(g @ self.KM @ g + 2.0 * self.kM @ g + self.cM)
+
+    def l2_change2(self, g: np.ndarray, g_old: np.ndarray) -> float:
+        """‖u₁(g) − u₁(g_old)‖²_L²."""
+        d = g - g_old
+        return float(d @ self.KM @ d)
+
+
 class MixedMultiscaleOmega1:
     """Ω₁ of Algorithm 4: offline stages on an Ω₁ ``MixedSubproblem`` and the online coarse solve.
 
@@ -993,6 +1056,13 @@ class MixedMultiscaleOmega1:
         self._F1 = co.Cphi[ms] - co.Gt[ms, qg] - co.BN[ms]
         self._F2 = co.Bm[:, qg]
         self._E_r, self._E_g = co.Ephi[:, ms], co.Ephi[:, qg]
+        self.response = InterfaceResponse.of(self)
+
+    def solve_lu(self, g: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Coarse (r, w) for Robin data g by the coarse LU (``solve`` uses the precomputed response)."""
+        n = self.co.n_ms
+        x = sla.lu_solve(self._lu, np.concatenate([self._F1 @ g, self.co.PiG - self._F2 @ g]))
+        return x[:n], x[n:]
 
     @property
     def num_coarse_dofs(self) -> int:
@@ -1000,10 +1070,9 @@ class MixedMultiscaleOmega1:
         return self.co.n_ms + self.co.n_aux
 
     def solve(self, g: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Coarse (r, w) for Robin data g."""
-        n = self.co.n_ms
-        x = sla.lu_solve(self._lu, np.concatenate([self._F1 @ g, self.co.PiG - self._F2 @ g]))
-        return x[:n], x[n:]
+        """Coarse (r, w) for Robin data g: r = R g + r₀, w = W g + w₀ (``InterfaceResponse``)."""
+        rs = self.response
+        return rs.R @ g + rs.r0, rs.W @ g + rs.w0
 
     def trace(self, r: np.ndarray, g: np.ndarray) -> np.ndarray:
         """σ₁n₁ at the γ nodes."""

@@ -155,3 +155,49 @@ def test_l2_stress_error_measures_the_difference():
     other.x.array[:] = 0.75 * ref.x.array
     assert np.isclose(l2_stress_error(ref, ref), 0.0, atol=1e-14)
     assert np.isclose(l2_stress_error(other, ref), 0.25, rtol=1e-12)
+
+
+def test_first_nonrigid_eigenvalue_scales_like_mu_over_lambda_plus_2mu():
+    """The documented limit for ν → ½: Λ = λ₄ of Stage I (weight κ̃ ∝ λ+2μ) falls like μ/(λ+2μ).
+
+    Divergence-free displacements cost only μ|ε|², so with l = 3 the decay of the basis
+    (governed by Λ) degrades as ν → ½ (README, Algorithm 4).  Homogeneous material: Λ(ν) ·
+    (λ+2μ)/μ is the same for ν = 0.3 and 0.499 up to the geometry-independent factor.
+    """
+    cm = geometry.unit_square(16, 4)
+    scaled = []
+    for nu in (0.3, 0.499):
+        step = MixedHybridStep(cm, models.get_model(2, E_high=1.0, nu=nu), beta="sqrt-h")
+        part = step.parts[0]
+        grid = multiscale.coarse_grid(part.mesh, part.cell_map, cm.coarse_cell, cm.H)
+        ops = mm.cell_operators(step.sub[0], cm.H)
+        aux = mm.stage_one(ops, mm._Topology(step.sub[0].mesh, ops.P.shape[1]), grid, 4)
+        interior = [k for k in range(grid.size) if grid.ij[k, 0] == 1 and grid.ij[k, 1] in (1, 2)]
+        lam4 = min(float(aux.values[k][3]) for k in interior)
+        scaled.append(lam4 * (1.0 - nu) / (0.5 - nu))  # (λ+2μ)/μ = 2(1−ν)/(1−2ν)
+    assert scaled[0] > 0.1
+    assert scaled[1] == pytest.approx(scaled[0], rel=0.25)
+
+
+def test_interface_response_equals_the_coarse_solve():
+    """The precomputed affine Ω₁ response reproduces the coarse LU solve, traces and norms."""
+    cm = geometry.unit_square(16, 4)
+    body_force = models.get_model(2).with_(load=lambda x: np.stack([np.sin(3 * x[1]), 0.5 + 0 * x[0]]))
+    step = MixedHybridStep(cm, body_force, beta="sqrt-h")  # a load in Ω₁: r₀, w₀ ≠ 0
+    part = step.parts[0]
+    grid = multiscale.coarse_grid(part.mesh, part.cell_map, cm.coarse_cell, cm.H)
+    om = mm.MixedMultiscaleOmega1(step.sub[0], grid, mm.MixedCEMOptions(layers=1), H=cm.H)
+    assert np.abs(om.response.r0).max() > 0 and np.abs(om.response.w0).max() > 0
+    rng = np.random.default_rng(3)
+    g, g_old = rng.standard_normal((2, om.co.n_g))
+    r, w = om.solve_lu(g)
+    r2, w2 = om.solve(g)
+    assert np.allclose(r2, r, rtol=0, atol=1e-10 * np.abs(r).max())
+    assert np.allclose(w2, w, rtol=0, atol=1e-10 * np.abs(w).max())
+    rs = om.response
+    assert np.allclose(rs.trace(g), om.trace(r, g), atol=1e-10 * np.abs(om.trace(r, g)).max())
+    assert rs.stress_norm2(g) == pytest.approx(om.stress_norm2(r, g), rel=1e-9)
+    assert rs.l2_norm2(g) == pytest.approx(om.l2_norm2(w, g), rel=1e-9)
+    r0, w0 = om.solve_lu(g_old)
+    assert rs.stress_change2(g, g_old) == pytest.approx(om.stress_norm2(r - r0, g - g_old), rel=1e-9)
+    assert rs.l2_change2(g, g_old) == pytest.approx(om.l2_norm2(w - w0, g - g_old), rel=1e-9)

@@ -135,7 +135,9 @@ def test_algorithm4_converges_and_error_falls_with_layers():
     assert errors[1][0] < 0.3 * errors[0][0]
     assert errors[1][1] < errors[0][1]
     assert errors[1][2] < 0.3 * errors[0][2]  # the post-processed displacement follows the stress error
-    assert errors[0][0] < 0.5
+    # measured (c = 3): e_σ = 0.18, 0.019 at m = 1, 2; the bounds leave room for round-off, not for a regression
+    assert errors[0][0] < 0.25
+    assert errors[1][0] < 0.03
 
 
 def test_options_are_validated():

@@ -54,10 +54,7 @@ per configuration, keyed by a hash of everything they depend on
 import hashlib
 import json
 import logging
-import os
-import tempfile
 import time
-import zipfile
 from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import NamedTuple
@@ -78,7 +75,7 @@ from fenics_contact.linalg import assemble_scipy, scipy_to_petsc
 from fenics_contact.multiscale import (
     DEFAULT_S_FACTOR,
     CoarseGrid,
-    _checksum,
+    OfflineCache,
     _hash_array,
     kappa_tilde,
     require_serial,
@@ -846,65 +843,18 @@ def _unpack_offline(arrays: dict, ops: CellOperators, grid: CoarseGrid) -> Offli
     return OfflineData(aux, funcs["basis"], funcs["corr"], CoarseOperators(n_ms, n_aux, n_g, **mats))
 
 
-class MixedOfflineCache:
-    """npz files ``mixed_cem_<key>.npz`` in a directory, as ``multiscale.OfflineCache``.
+class MixedOfflineCache(OfflineCache):
+    """npz files ``mixed_cem_<key>.npz``: ``multiscale.OfflineCache`` holding ``OfflineData``."""
 
-    Each file stores its full key and a checksum of its arrays; a file of another
-    configuration or a corrupt one is reported ('invalid: …') and never used.
-    """
+    prefix = "mixed_cem"
 
-    def __init__(self, directory: str | Path) -> None:
-        self.directory = Path(directory)
+    @staticmethod
+    def pack(obj: OfflineData) -> dict[str, np.ndarray]:
+        return _pack_offline(obj)
 
-    def path(self, key: str) -> Path:
-        return self.directory / f"mixed_cem_{key[:24]}.npz"
-
-    def load(self, key: str, ops: CellOperators, grid: CoarseGrid) -> tuple[OfflineData | None, str]:
-        """(data, status): status is 'loaded', 'missing', or 'invalid: <why>' (the file is then ignored)."""
-        path = self.path(key)
-        if not path.is_file():
-            return None, "missing"
-        try:
-            with np.load(path, allow_pickle=False) as npz:
-                arrays = {name: npz[name] for name in npz.files}
-            stored_key = str(arrays.pop("key"))
-            stored_sum = str(arrays.pop("checksum"))
-            if stored_key != key:
-                return None, "invalid: stored key differs (another configuration)"
-            if _checksum(arrays) != stored_sum:
-                return None, "invalid: checksum mismatch (corrupt file)"
-            return _unpack_offline(arrays, ops, grid), "loaded"
-        except (OSError, EOFError, ValueError, KeyError, zipfile.BadZipFile) as err:  # unreadable/malformed: rebuild
-            return None, f"invalid: {type(err).__name__}: {err}"
-
-    def check_writable(self) -> None:
-        """Raise InputError unless a file can be created in the directory (creating the directory if needed)."""
-        try:
-            self.directory.mkdir(parents=True, exist_ok=True)
-            fd, tmp = tempfile.mkstemp(dir=self.directory, suffix=".npz.tmp")
-            os.close(fd)
-            os.remove(tmp)
-        except OSError as err:
-            raise InputError(f"the offline cache directory {self.directory} is not writable: {err}") from err
-
-    def save(self, key: str, data: OfflineData) -> Path:
-        """Write atomically (temporary file + rename)."""
-        self.directory.mkdir(parents=True, exist_ok=True)
-        arrays = _pack_offline(data)
-        arrays["checksum"] = np.array(_checksum(arrays))
-        arrays["key"] = np.array(key)
-        path = self.path(key)
-        fd, tmp = tempfile.mkstemp(dir=self.directory, suffix=".npz.tmp")
-        try:
-            with os.fdopen(fd, "wb") as fh:
-                np.savez(fh, **arrays)
-            os.chmod(tmp, 0o644)
-            os.replace(tmp, path)
-        except BaseException:
-            if os.path.exists(tmp):
-                os.remove(tmp)
-            raise
-        return path
+    @staticmethod
+    def unpack(arrays: dict[str, np.ndarray], *context) -> OfflineData:
+        return _unpack_offline(arrays, *context)
 
 
 # ---------------------------------------------------------------------------------------

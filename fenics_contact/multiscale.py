@@ -815,16 +815,32 @@ def _unpack(arrays: dict, ops: FineOperators, grid: CoarseGrid) -> MultiscaleSpa
 
 
 class OfflineCache:
-    """npz files ``cem_<key>.npz`` in a directory; each stores its full key and a checksum of its arrays."""
+    """npz files ``<prefix>_<key>.npz`` in a directory; each stores its full key and a checksum of its arrays.
+
+    Subclasses set ``prefix`` and the ``pack`` / ``unpack`` hooks (``mixed_multiscale.MixedOfflineCache``).
+    """
+
+    prefix = "cem"
 
     def __init__(self, directory: str | Path) -> None:
         self.directory = Path(directory)
 
     def path(self, key: str) -> Path:
-        return self.directory / f"cem_{key[:24]}.npz"
+        return self.directory / f"{self.prefix}_{key[:24]}.npz"
 
-    def load(self, key: str, ops: FineOperators, grid: CoarseGrid) -> tuple[MultiscaleSpace | None, str]:
-        """(space, status): status is 'loaded', 'missing', or 'invalid: <why>' (the file is then ignored)."""
+    @staticmethod
+    def pack(obj) -> dict[str, np.ndarray]:
+        return _pack(obj)
+
+    @staticmethod
+    def unpack(arrays: dict[str, np.ndarray], *context):
+        return _unpack(arrays, *context)
+
+    def load(self, key: str, *context) -> tuple[object | None, str]:
+        """(data, status): status is 'loaded', 'missing', or 'invalid: <why>' (the file is then ignored).
+
+        ``context`` is passed to ``unpack`` (the operators and grid the data must fit).
+        """
         path = self.path(key)
         if not path.is_file():
             return None, "missing"
@@ -837,14 +853,24 @@ class OfflineCache:
                 return None, "invalid: stored key differs (another configuration)"
             if _checksum(arrays) != stored_sum:
                 return None, "invalid: checksum mismatch (corrupt file)"
-            return _unpack(arrays, ops, grid), "loaded"
+            return self.unpack(arrays, *context), "loaded"
         except (OSError, EOFError, ValueError, KeyError, zipfile.BadZipFile) as err:  # unreadable/malformed: rebuild
             return None, f"invalid: {type(err).__name__}: {err}"
 
-    def save(self, key: str, space: MultiscaleSpace) -> Path:
+    def check_writable(self) -> None:
+        """Raise InputError unless a file can be created in the directory (creating the directory if needed)."""
+        try:
+            self.directory.mkdir(parents=True, exist_ok=True)
+            fd, tmp = tempfile.mkstemp(dir=self.directory, suffix=".npz.tmp")
+            os.close(fd)
+            os.remove(tmp)
+        except OSError as err:
+            raise InputError(f"the offline cache directory {self.directory} is not writable: {err}") from err
+
+    def save(self, key: str, obj) -> Path:
         """Write atomically (temporary file + rename)."""
         self.directory.mkdir(parents=True, exist_ok=True)
-        arrays = _pack(space)
+        arrays = self.pack(obj)
         arrays["checksum"] = np.array(_checksum(arrays))
         arrays["key"] = np.array(key)
         path = self.path(key)

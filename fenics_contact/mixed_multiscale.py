@@ -463,6 +463,21 @@ class StageI:
         return int(self.offsets[-1])
 
 
+def _complete_cluster(lam: np.ndarray, n: int) -> int:
+    """n, raised to the end of the eigenvalue cluster that λ_n belongs to.
+
+    Keeping part of a repeated eigenvalue (the three rigid motions at λ = 0 on interior cells,
+    symmetric pairs) would pick an arbitrary subspace; the whole cluster is kept instead.
+    """
+    tol = 1e-8 * abs(lam[-1])
+    n0 = n
+    while n < lam.size and lam[n] - lam[n - 1] <= tol + 1e-8 * abs(lam[n]):
+        n += 1
+    if n > n0:
+        log.info("Stage I: %d modes requested, %d kept (a repeated eigenvalue %.3e)", n0, n, lam[n0 - 1])
+    return n
+
+
 def stage_one(ops: CellOperators, topo: _Topology, grid: CoarseGrid, nbasis: int | None) -> StageI:
     """Mixed local spectral problems Ã φ + Bᵀp = 0, −Bφ = λ S p on every coarse cell (dense LAPACK)."""
     values, modes, res = [], [], []
@@ -478,7 +493,7 @@ def stage_one(ops: CellOperators, topo: _Topology, grid: CoarseGrid, nbasis: int
         schur = 0.5 * (schur + schur.T)
         lam, vec = sla.eigh(schur, S)
         lam = np.maximum(lam, 0.0)
-        nk = vec.shape[1] if nbasis is None else min(nbasis, vec.shape[1])
+        nk = vec.shape[1] if nbasis is None else _complete_cluster(lam, min(nbasis, vec.shape[1]))
         p = vec[:, :nk]
         phi = -X @ p
         r = -Bl @ phi - S @ p * lam[:nk]

@@ -203,3 +203,15 @@ def test_interface_response_equals_the_coarse_solve():
     r0, w0 = om.solve_lu(g_old)
     assert rs.stress_change2(g, g_old) == pytest.approx(om.stress_norm2(r - r0, g - g_old), rel=1e-9)
     assert rs.l2_change2(g, g_old) == pytest.approx(om.l2_norm2(w - w0, g - g_old), rel=1e-9)
+
+
+def test_stage_one_keeps_whole_eigenvalue_clusters(omega1):
+    """l = 2 would split the triple rigid-motion eigenvalue of interior cells: all three are kept."""
+    cm, step, grid, ops, topo = omega1
+    aux = mm.stage_one(ops, topo, grid, 2)
+    interior = [k for k in range(grid.size) if grid.ij[k, 0] == 1 and grid.ij[k, 1] in (1, 2)]  # no Γ_D, no γ
+    assert len(interior) == 2
+    for k in interior:
+        assert aux.modes[k].shape[2] == 3
+        assert np.abs(aux.values[k]).max() < 1e-8 * max(np.abs(v).max() for v in aux.values)
+    assert min(m.shape[2] for m in aux.modes) >= 2

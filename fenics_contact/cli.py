@@ -178,6 +178,7 @@ def _run_mixed(args, cm: ContactMesh, model, fields, options: IterationOptions) 
         "layers": args.layers if args.method == "mixed-ms" else None,
         "nbasis": args.nbasis if args.method == "mixed-ms" else None,
         "offline_cache": result.step.omega1.cache_status if args.method == "mixed-ms" else None,
+        "stage_one_gap": result.step.omega1.spectral_gap if args.method == "mixed-ms" else None,
     }
 
     def write(out: Path) -> None:

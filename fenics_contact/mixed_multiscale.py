@@ -101,8 +101,12 @@ __all__ = [
 
 log = logging.getLogger(__name__)
 
+#: Λ·c below this triggers a warning: at h = 1/64, H = 1/16, m = 5 the paper's cases gave e_σ ≤ 1e-3 with
+#: Λ·c ≥ 0.07 (ν = 0.35: 0.57; ν = 0.49: 0.07, 0.31) and 9e-3…2e-1 with Λ·c ≤ 0.03 (ν = 0.499).
+SMALL_GAP = 0.05
+
 #: Bumped whenever the layout or meaning of the cached mixed offline arrays changes.
-MIXED_CACHE_FORMAT = 1
+MIXED_CACHE_FORMAT = 2
 
 
 @dataclass(frozen=True, slots=True)
@@ -457,6 +461,7 @@ class StageI:
     modes: list
     offsets: np.ndarray  #: first aux index of each coarse cell
     residuals: np.ndarray  #: max ‖−Bφ − λSp‖ / (λ_max ‖Sp‖) per coarse cell
+    gaps: np.ndarray  #: Λ_k, the first eigenvalue left out on each coarse cell (inf: all kept)
 
     @property
     def size(self) -> int:
@@ -480,7 +485,7 @@ def _complete_cluster(lam: np.ndarray, n: int) -> int:
 
 def stage_one(ops: CellOperators, topo: _Topology, grid: CoarseGrid, nbasis: int | None) -> StageI:
     """Mixed local spectral problems Ã φ + Bᵀp = 0, −Bφ = λ S p on every coarse cell (dense LAPACK)."""
-    values, modes, res = [], [], []
+    values, modes, res, gaps = [], [], [], []
     for k in range(grid.size):
         cells = np.sort(grid.cells[k].astype(np.int64))
         space = local_stress_space(ops, topo, cells)
@@ -501,9 +506,10 @@ def stage_one(ops: CellOperators, topo: _Topology, grid: CoarseGrid, nbasis: int
         scale = np.linalg.norm(S @ p, axis=0) * max(float(lam[-1]), 1e-300)
         res.append(float(np.max(np.linalg.norm(r, axis=0) / scale)))
         values.append(lam[:nk])
+        gaps.append(float(lam[nk]) if nk < lam.size else np.inf)
         modes.append(np.ascontiguousarray(p).reshape(cells.size, 6, nk))  # as reloaded from the cache
     offsets = np.concatenate([[0], np.cumsum([m.shape[2] for m in modes])])
-    return StageI(values, modes, offsets, np.array(res))
+    return StageI(values, modes, offsets, np.array(res), np.array(gaps))
 
 
 # ---------------------------------------------------------------------------------------
@@ -803,6 +809,7 @@ def _pack_offline(data: OfflineData) -> dict:
         "aux_values": _concat(aux.values, np.float64),
         "aux_modes": _concat(aux.modes, np.float64),
         "aux_residuals": np.asarray(aux.residuals, dtype=np.float64),
+        "aux_gaps": np.asarray(aux.gaps, dtype=np.float64),
         "co_sizes": np.array([co.n_ms, co.n_aux, co.n_g], dtype=np.int64),
     }
     for name, funcs in (("basis", data.basis), ("corr", data.corr)):
@@ -831,7 +838,7 @@ def _unpack_offline(arrays: dict, ops: CellOperators, grid: CoarseGrid) -> Offli
     ncell = np.array([c.size for c in grid.cells], dtype=np.int64)
     values = _split(arrays["aux_values"], nk, "eigenvalues")
     modes = [m.reshape(nc, 6, k) for m, nc, k in zip(_split(arrays["aux_modes"], 6 * ncell * nk, "modes"), ncell, nk)]
-    aux = StageI(values, modes, offsets, arrays["aux_residuals"])
+    aux = StageI(values, modes, offsets, arrays["aux_residuals"], arrays["aux_gaps"])
     funcs = {}
     for name in ("basis", "corr"):
         nc, nf = arrays[f"{name}_num_cells"], arrays[f"{name}_num_functions"]
@@ -1005,10 +1012,22 @@ class MixedMultiscaleOmega1:
                 self.times["save"] = time.perf_counter() - t
         co = self.co
         log.info(
-            "mixed CEM Ω₁ (m=%d, l=%s): dim X_ms %d, dim U_aux %d, max Stage I residual %.1e, cache %s, times %s",
-            options.layers, options.nbasis, co.n_ms, co.n_aux, float(self.aux.residuals.max()), self.cache_status,
-            {k: round(v, 2) for k, v in self.times.items()},
+            "mixed CEM Ω₁ (m=%d, l=%s): dim X_ms %d, dim U_aux %d, max Stage I residual %.1e, Λ %.2e, cache %s, "
+            "times %s", options.layers, options.nbasis, co.n_ms, co.n_aux, float(self.aux.residuals.max()),
+            self.spectral_gap, self.cache_status, {k: round(v, 2) for k, v in self.times.items()},
         )
+        if self.spectral_gap * options.s_factor < SMALL_GAP:
+            log.warning(
+                "mixed CEM: the smallest left-out Stage I eigenvalue is Λ = %.2e (Λ·c < %g): the basis functions "
+                "decay slowly with the oversampling layers (expected for ν → ½ in Ω₁); at m = 5 errors of 1e-2 "
+                "and more were measured in such cases. Check with more layers or use Algorithm 2.",
+                self.spectral_gap, SMALL_GAP,
+            )
+
+    @property
+    def spectral_gap(self) -> float:
+        """Λ = min over coarse cells of the first Stage I eigenvalue left out (inf when all are kept)."""
+        return float(np.min(self.aux.gaps, initial=np.inf))
 
     def _setup_online(self, data: OfflineData) -> None:
         """Keep the offline data; factorize the coarse matrix [[ΨᵀÃΨ, (ΠᵀBΨ)ᵀ], [ΠᵀBΨ, 0]]."""

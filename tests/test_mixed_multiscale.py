@@ -215,3 +215,17 @@ def test_stage_one_keeps_whole_eigenvalue_clusters(omega1):
         assert aux.modes[k].shape[2] == 3
         assert np.abs(aux.values[k]).max() < 1e-8 * max(np.abs(v).max() for v in aux.values)
     assert min(m.shape[2] for m in aux.modes) >= 2
+
+
+@pytest.mark.parametrize("nu, warned", [(0.3, False), (0.499, True)])
+def test_small_spectral_gap_is_reported(caplog, nu, warned):
+    """ν → ½ in Ω₁ makes Λ small; the user is warned that the layers then converge slowly."""
+    cm = geometry.unit_square(16, 4)
+    step = MixedHybridStep(cm, models.get_model(2, E_high=1.0, nu=nu), beta="sqrt-h")
+    part = step.parts[0]
+    grid = multiscale.coarse_grid(part.mesh, part.cell_map, cm.coarse_cell, cm.H)
+    with caplog.at_level("WARNING", logger="fenics_contact.mixed_multiscale"):
+        om = mm.MixedMultiscaleOmega1(step.sub[0], grid, mm.MixedCEMOptions(layers=1), H=cm.H)
+    assert 0 < om.spectral_gap < np.inf
+    assert (om.spectral_gap * om.options.s_factor < mm.SMALL_GAP) == warned
+    assert ("decay slowly" in caplog.text) == warned

@@ -15,13 +15,18 @@ from fenics_contact.mixed_hybrid import MixedHybridStep
 from fenics_contact.mixed_ms import l2_stress_error, solve_mixed_ms_hybrid
 
 
+def _step_and_grid(cm, model):
+    """The Algorithm 2 step of ``model`` on ``cm`` (its Ω₁ subproblem) and the coarse grid of Ω₁."""
+    step = MixedHybridStep(cm, model, beta="sqrt-h")
+    part = step.parts[0]
+    return step, multiscale.coarse_grid(part.mesh, part.cell_map, cm.coarse_cell, cm.H)
+
+
 @pytest.fixture(scope="module")
 def omega1():
     """Ω₁ of h = 1/16, H = 1/4 (3 × 4 coarse cells): the fine subproblem and its cell operators."""
     cm = geometry.unit_square(16, 4)
-    step = MixedHybridStep(cm, models.get_model(2), beta="sqrt-h")
-    part = step.parts[0]
-    grid = multiscale.coarse_grid(part.mesh, part.cell_map, cm.coarse_cell, cm.H)
+    step, grid = _step_and_grid(cm, models.get_model(2))
     ops = mm.cell_operators(step.sub[0], cm.H)
     topo = mm._Topology(step.sub[0].mesh, ops.P.shape[1])
     return cm, step, grid, ops, topo
@@ -169,9 +174,7 @@ def test_first_nonrigid_eigenvalue_scales_like_mu_over_lambda_plus_2mu():
     cm = geometry.unit_square(16, 4)
     scaled = []
     for nu in (0.3, 0.499):
-        step = MixedHybridStep(cm, models.get_model(2, E_high=1.0, nu=nu), beta="sqrt-h")
-        part = step.parts[0]
-        grid = multiscale.coarse_grid(part.mesh, part.cell_map, cm.coarse_cell, cm.H)
+        step, grid = _step_and_grid(cm, models.get_model(2, E_high=1.0, nu=nu))
         ops = mm.cell_operators(step.sub[0], cm.H)
         aux = mm.stage_one(ops, mm._Topology(step.sub[0].mesh, ops.P.shape[1]), grid, 4)
         interior = [k for k in range(grid.size) if grid.ij[k, 0] == 1 and grid.ij[k, 1] in (1, 2)]
@@ -185,9 +188,7 @@ def test_interface_response_equals_the_coarse_solve():
     """The precomputed affine Ω₁ response reproduces the coarse LU solve, traces and norms."""
     cm = geometry.unit_square(16, 4)
     body_force = models.get_model(2).with_(load=lambda x: np.stack([np.sin(3 * x[1]), 0.5 + 0 * x[0]]))
-    step = MixedHybridStep(cm, body_force, beta="sqrt-h")  # a load in Ω₁: r₀, w₀ ≠ 0
-    part = step.parts[0]
-    grid = multiscale.coarse_grid(part.mesh, part.cell_map, cm.coarse_cell, cm.H)
+    step, grid = _step_and_grid(cm, body_force)  # a load in Ω₁: r₀, w₀ ≠ 0
     om = mm.MixedMultiscaleOmega1(step.sub[0], grid, mm.MixedCEMOptions(layers=1), H=cm.H)
     assert np.abs(om.response.r0).max() > 0 and np.abs(om.response.w0).max() > 0
     rng = np.random.default_rng(3)
@@ -221,9 +222,7 @@ def test_stage_one_keeps_whole_eigenvalue_clusters(omega1):
 def test_small_spectral_gap_is_reported(caplog, nu, warned):
     """ν → ½ in Ω₁ makes Λ small; the user is warned that the layers then converge slowly."""
     cm = geometry.unit_square(16, 4)
-    step = MixedHybridStep(cm, models.get_model(2, E_high=1.0, nu=nu), beta="sqrt-h")
-    part = step.parts[0]
-    grid = multiscale.coarse_grid(part.mesh, part.cell_map, cm.coarse_cell, cm.H)
+    step, grid = _step_and_grid(cm, models.get_model(2, E_high=1.0, nu=nu))
     with caplog.at_level("WARNING", logger="fenics_contact.mixed_multiscale"):
         om = mm.MixedMultiscaleOmega1(step.sub[0], grid, mm.MixedCEMOptions(layers=1), H=cm.H)
     assert 0 < om.spectral_gap < np.inf

@@ -81,6 +81,10 @@ def build_parser() -> argparse.ArgumentParser:
                      "(.npy, or text/.csv readable by numpy.loadtxt; row 0 = bottom); replaces the model's E map")
     run.add_argument("--layers", type=int, default=4, help="*-ms: oversampling layers m of the multiscale bases")
     run.add_argument("--nbasis", type=int, default=3, help="*-ms: local spectral modes l per coarse cell")
+    run.add_argument("--min-gap", type=float,
+                     help="mixed-ms: add Stage I modes on a coarse cell until the first one left out has "
+                     "eigenvalue >= this (needed for nu -> 1/2; default 0.1; 0 keeps exactly --nbasis)")
+    run.add_argument("--max-nbasis", type=int, default=32, help="mixed-ms: most Stage I modes per coarse cell")
     run.add_argument("--cache-dir", type=Path, help="*-ms: directory for the offline data (reused when valid)")
     run.add_argument("--reference", action="store_true", help="also solve the monolithic problem and report e_u")
     run.add_argument("--out", type=Path, default=Path("results"), help="output directory")
@@ -157,9 +161,10 @@ def _run_primal(args, cm: ContactMesh, model, fields, options: IterationOptions)
 
 def _run_mixed(args, cm: ContactMesh, model, fields, options: IterationOptions) -> _Outcome:
     """Algorithms 2 (mixed) and 4 (mixed-ms), with the monolithic mixed reference (serial)."""
-    from fenics_contact import mixed, mixed_hybrid, mixed_ms
+    from fenics_contact import mixed, mixed_hybrid, mixed_ms, mixed_multiscale
 
     epsilon = args.epsilon
+    min_gap = mixed_multiscale.DEFAULT_MIN_GAP if args.min_gap is None else (args.min_gap or None)
     reference = mixed.solve_mixed_monolithic(cm, model, epsilon=epsilon) if args.reference else None
     if args.method == "mixed":
         result = mixed_hybrid.solve_mixed_hybrid(cm, model, beta=args.beta, epsilon=epsilon, options=options,
@@ -167,6 +172,7 @@ def _run_mixed(args, cm: ContactMesh, model, fields, options: IterationOptions) 
     else:
         result = mixed_ms.solve_mixed_ms_hybrid(cm, model, beta=args.beta, epsilon=epsilon, options=options,
                                                 layers=args.layers, nbasis=args.nbasis, reference=reference,
+                                                min_gap=min_gap, max_nbasis=args.max_nbasis,
                                                 cache_dir=args.cache_dir)
     summary = {
         "beta": args.beta,
@@ -179,6 +185,8 @@ def _run_mixed(args, cm: ContactMesh, model, fields, options: IterationOptions) 
         "nbasis": args.nbasis if args.method == "mixed-ms" else None,
         "offline_cache": result.step.omega1.cache_status if args.method == "mixed-ms" else None,
         "stage_one_gap": result.step.omega1.spectral_gap if args.method == "mixed-ms" else None,
+        "nbasis_per_cell": list(result.step.omega1.nbasis_range) if args.method == "mixed-ms" else None,
+        "dim_X_ms": result.step.omega1.co.n_ms if args.method == "mixed-ms" else None,
     }
 
     def write(out: Path) -> None:

@@ -51,7 +51,7 @@ from fenics_contact.errors import InputError
 from fenics_contact.geometry import ContactMesh
 from fenics_contact.mixed import MixedContactProfile, MixedSolution
 from fenics_contact.mixed_hybrid import MixedHybridStep
-from fenics_contact.mixed_multiscale import MixedCEMOptions, MixedMultiscaleOmega1
+from fenics_contact.mixed_multiscale import DEFAULT_MIN_GAP, MixedCEMOptions, MixedMultiscaleOmega1
 from fenics_contact.models import TestModel
 from fenics_contact.multiscale import DEFAULT_S_FACTOR, coarse_grid, require_serial
 
@@ -232,6 +232,8 @@ def solve_mixed_ms_hybrid(
     epsilon: float | None = None,
     layers: int = 3,
     nbasis: int | None = 3,
+    min_gap: float | None = DEFAULT_MIN_GAP,
+    max_nbasis: int = 32,
     weight: str = "lambda+2mu",
     s_factor: float = DEFAULT_S_FACTOR,
     options: IterationOptions = IterationOptions(),
@@ -246,11 +248,14 @@ def solve_mixed_ms_hybrid(
     covers the subproblem set-up, Stage I, Stage II, the correction and the coarse
     factorization (``offline_times``); ``time_online_s`` the iteration.  With ``cache_dir`` the
     offline data are stored there and reused when the configuration matches
-    (``mixed_multiscale.MixedOfflineCache``; ``step.omega1.cache_status``).
+    (``mixed_multiscale.MixedOfflineCache``; ``step.omega1.cache_status``).  ``nbasis`` is the least
+    number of Stage I modes per coarse cell; ``min_gap`` adds modes where the first eigenvalue left
+    out is below it (up to ``max_nbasis``; ``None`` keeps exactly ``nbasis``, the paper's fixed l).
     """
     if reference is not None and epsilon is None:
         epsilon = reference.epsilon
-    cem = MixedCEMOptions(layers=layers, nbasis=nbasis, weight=weight, s_factor=s_factor)
+    cem = MixedCEMOptions(layers=layers, nbasis=nbasis, min_gap=min_gap, max_nbasis=max_nbasis, weight=weight,
+                          s_factor=s_factor)
     step = MixedMultiscaleHybridStep(cm, model, beta=beta, epsilon=epsilon, cem=cem, newton=newton,
                                      cache_dir=cache_dir)
     if reference is not None:  # not part of the method: outside the timings

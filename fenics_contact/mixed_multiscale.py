@@ -83,7 +83,9 @@ from fenics_contact.multiscale import (
 from fenics_contact.tags import Boundary
 
 __all__ = [
+    "DEFAULT_MIN_GAP",
     "MIXED_CACHE_FORMAT",
+    "SMALL_GAP",
     "CellOperators",
     "LocalSpace",
     "InterfaceResponse",
@@ -93,10 +95,12 @@ __all__ = [
     "OfflineData",
     "PatchFunctions",
     "StageI",
+    "basis_decay_profile",
     "cell_operators",
     "local_stress_space",
     "mixed_offline_key",
     "stage_one",
+    "stage_one_of",
 ]
 
 log = logging.getLogger(__name__)
@@ -105,16 +109,32 @@ log = logging.getLogger(__name__)
 #: Λ·c ≥ 0.07 (ν = 0.35: 0.57; ν = 0.49: 0.07, 0.31) and 9e-3…2e-1 with Λ·c ≤ 0.03 (ν = 0.499).
 SMALL_GAP = 0.05
 
+#: Default Stage I target for Λ, the first eigenvalue left out on each coarse cell (κ̃ with c).
+#: The Stage II bases decay like exp(−ρ·distance/H) with ρ set by Λ: for a global basis function of
+#: an interior cell (h = 1/64, H = 1/16, c = 3) ρ ≈ 2.2 at Λ = 1.5 (ν = 0.3, l = 3), 1.8 at Λ = 0.10
+#: (ν = 0.49, l = 3), 0.58 at Λ = 0.011 (ν = 0.499, l = 3) and 1.9 at Λ = 0.098 (ν = 0.499, l = 20);
+#: benchmarks/mixed_ms_localization.py.  Λ ∝ μ/(λ+2μ) for the near-div-free modes, so ν → ½ needs
+#: more modes per cell; for ν ≤ 0.49 the paper's l = 3 already meets this target.
+DEFAULT_MIN_GAP = 0.1
+
 #: Bumped whenever the layout or meaning of the cached mixed offline arrays changes.
 MIXED_CACHE_FORMAT = 2
 
 
 @dataclass(frozen=True, slots=True)
 class MixedCEMOptions:
-    """Mixed CEM parameters: m oversampling layers, l eigenfunctions per coarse cell (None: all)."""
+    """Mixed CEM parameters: m oversampling layers, l eigenfunctions per coarse cell (None: all).
+
+    ``nbasis`` is the least number of Stage I modes per coarse cell (the paper's l = 3).  With
+    ``min_gap`` a cell keeps further modes, up to ``max_nbasis``, until the first eigenvalue left out
+    is ≥ ``min_gap`` (the decay of the bases with the layers is governed by it, see
+    ``DEFAULT_MIN_GAP``); ``min_gap=None`` keeps exactly ``nbasis`` (the paper's fixed l).
+    """
 
     layers: int = 3
     nbasis: int | None = 3
+    min_gap: float | None = DEFAULT_MIN_GAP
+    max_nbasis: int = 32
     weight: str = "lambda+2mu"  #: κ̃ = c(λ+2μ)H⁻² (METHOD §3 has c = 1) or "2mu": κ̃ = c·2μ H⁻²
     #: c, as for the primal CEM (multiscale.CEMOptions.s_factor). Model 2, h = 1/32, H = 1/8, m = 3:
     #: e_σ = 4.2e-3 (c = 1), 2.3e-3 (c = 3), 2.6e-3 (c = 10).
@@ -129,6 +149,12 @@ class MixedCEMOptions:
             raise InputError(f"the number of oversampling layers must be an integer >= 0, got {self.layers!r}")
         if self.nbasis is not None and (int(self.nbasis) != self.nbasis or self.nbasis < 1):
             raise InputError(f"nbasis must be an integer >= 1 (or None for all modes), got {self.nbasis!r}")
+        if self.min_gap is not None and not (np.isfinite(self.min_gap) and self.min_gap > 0):
+            raise InputError(f"min_gap must be finite and > 0 (or None for a fixed nbasis), got {self.min_gap!r}")
+        if int(self.max_nbasis) != self.max_nbasis or self.max_nbasis < 1:
+            raise InputError(f"max_nbasis must be an integer >= 1, got {self.max_nbasis!r}")
+        if self.nbasis is not None and self.max_nbasis < self.nbasis:
+            raise InputError(f"max_nbasis ({self.max_nbasis}) must be >= nbasis ({self.nbasis})")
 
 
 # ---------------------------------------------------------------------------------------
@@ -483,8 +509,27 @@ def _complete_cluster(lam: np.ndarray, n: int) -> int:
     return n
 
 
-def stage_one(ops: CellOperators, topo: _Topology, grid: CoarseGrid, nbasis: int | None) -> StageI:
-    """Mixed local spectral problems Ã φ + Bᵀp = 0, −Bφ = λ S p on every coarse cell (dense LAPACK)."""
+def _modes_to_keep(lam: np.ndarray, nbasis: int | None, min_gap: float | None, max_nbasis: int) -> int:
+    """l_k: ``nbasis`` modes, more (up to ``max_nbasis``) while λ_{l+1} < ``min_gap``, whole clusters."""
+    if nbasis is None:
+        return lam.size
+    n = min(nbasis, lam.size)
+    if min_gap is not None:
+        cap = min(max(max_nbasis, n), lam.size)
+        while n < cap and lam[n] < min_gap:
+            n += 1
+    return _complete_cluster(lam, n)
+
+
+def stage_one(
+    ops: CellOperators, topo: _Topology, grid: CoarseGrid, nbasis: int | None,
+    min_gap: float | None = None, max_nbasis: int = 32,
+) -> StageI:
+    """Mixed local spectral problems Ã φ + Bᵀp = 0, −Bφ = λ S p on every coarse cell (dense LAPACK).
+
+    Each cell keeps ``_modes_to_keep`` modes: ``nbasis`` (all if None), raised while the first
+    eigenvalue left out is below ``min_gap`` (at most ``max_nbasis``) and to whole clusters.
+    """
     values, modes, res, gaps = [], [], [], []
     for k in range(grid.size):
         cells = np.sort(grid.cells[k].astype(np.int64))
@@ -498,7 +543,7 @@ def stage_one(ops: CellOperators, topo: _Topology, grid: CoarseGrid, nbasis: int
         schur = 0.5 * (schur + schur.T)
         lam, vec = sla.eigh(schur, S)
         lam = np.maximum(lam, 0.0)
-        nk = vec.shape[1] if nbasis is None else _complete_cluster(lam, min(nbasis, vec.shape[1]))
+        nk = _modes_to_keep(lam, nbasis, min_gap, max_nbasis)
         p = vec[:, :nk]
         phi = -X @ p
         r = -Bl @ phi - S @ p * lam[:nk]
@@ -647,6 +692,36 @@ def stage_two(
                 corr.append(PatchFunctions(space.cells, sigma, u, gcols))
         lu.destroy()
     return basis, corr
+
+
+def stage_one_of(
+    sub, grid: CoarseGrid, options: MixedCEMOptions, *, H: float
+) -> tuple[CellOperators, "_Topology", StageI]:
+    """Stage I alone for an Ω₁ ``MixedSubproblem``: (cell operators, local-space topology, U_aux)."""
+    ops = cell_operators(sub, H, options.weight, options.s_factor)
+    topo = _Topology(sub.mesh, ops.P.shape[1])
+    return ops, topo, stage_one(ops, topo, grid, options.nbasis, options.min_gap, options.max_nbasis)
+
+
+def basis_decay_profile(ops: CellOperators, topo: _Topology, grid: CoarseGrid, aux: StageI, k: int) -> np.ndarray:
+    """How fast the Stage II bases of coarse cell ``k`` decay: entry d−1 is √(A-energy at coarse distance ≥ d
+    / total A-energy), maximized over the cell's bases, for the *global* bases (the patch is all of Ω₁).
+
+    A diagnostic (it factorizes the whole Ω₁ saddle-point system): the localization error of m
+    layers follows the profile at d ≈ m (benchmarks/mixed_ms_localization.py).
+    """
+    space, lu, Z, aux_cols, n_loc, n_u = _patch_system(ops, topo, grid, aux, np.arange(grid.size))
+    try:
+        lk = aux.modes[k].shape[2]
+        rhs = np.zeros((n_loc + n_u + Z.shape[1], lk))
+        rhs[n_loc : n_loc + n_u] = -Z[:, aux_cols[int(k)] : aux_cols[int(k)] + lk].toarray()
+        sigma, _ = _unpack(space, lu.solve(rhs), n_loc, n_u)
+    finally:
+        lu.destroy()
+    energy = np.einsum("cak,cab,cbk->ck", sigma, ops.K[space.cells], sigma)
+    dist = np.abs(grid.ij[grid.cell_coarse[space.cells]] - grid.ij[k]).max(axis=1)
+    total = energy.sum(axis=0)
+    return np.array([np.sqrt(energy[dist >= d].sum(axis=0) / total).max() for d in range(1, int(dist.max()) + 1)])
 
 
 # ---------------------------------------------------------------------------------------
@@ -993,7 +1068,7 @@ class MixedMultiscaleOmega1:
                 self.cache_status = "built" if self.cache_status == "missing" else f"rebuilt ({self.cache_status})"
         if data is None:
             t = time.perf_counter()
-            aux = stage_one(self.ops, self.topo, grid, options.nbasis)
+            aux = stage_one(self.ops, self.topo, grid, options.nbasis, options.min_gap, options.max_nbasis)
             self.times["eigen"] = time.perf_counter() - t
             t = time.perf_counter()
             basis, corr = stage_two(self.ops, self.topo, grid, aux, options.layers)
@@ -1011,18 +1086,32 @@ class MixedMultiscaleOmega1:
                     log.warning("could not write the mixed CEM offline cache %s (%s)", self.cache_path, err)
                 self.times["save"] = time.perf_counter() - t
         co = self.co
+        lo, hi = self.nbasis_range
         log.info(
-            "mixed CEM Ω₁ (m=%d, l=%s): dim X_ms %d, dim U_aux %d, max Stage I residual %.1e, Λ %.2e, cache %s, "
-            "times %s", options.layers, options.nbasis, co.n_ms, co.n_aux, float(self.aux.residuals.max()),
+            "mixed CEM Ω₁ (m=%d, l=%d..%d per cell): dim X_ms %d, dim U_aux %d, max Stage I residual %.1e, Λ %.2e, "
+            "cache %s, times %s", options.layers, lo, hi, co.n_ms, co.n_aux, float(self.aux.residuals.max()),
             self.spectral_gap, self.cache_status, {k: round(v, 2) for k, v in self.times.items()},
         )
-        if self.spectral_gap * options.s_factor < SMALL_GAP:
+        if options.min_gap is not None and self.spectral_gap < options.min_gap:
+            log.warning(
+                "mixed CEM: the Stage I target Λ ≥ %g was not reached with at most max_nbasis = %d modes per cell "
+                "(Λ = %.2e): the basis functions decay more slowly with the oversampling layers (ν → ½ in Ω₁). "
+                "Raise max_nbasis, add layers, or use Algorithm 2.", options.min_gap, options.max_nbasis,
+                self.spectral_gap,
+            )
+        elif options.min_gap is None and self.spectral_gap * options.s_factor < SMALL_GAP:
             log.warning(
                 "mixed CEM: the smallest left-out Stage I eigenvalue is Λ = %.2e (Λ·c < %g): the basis functions "
-                "decay slowly with the oversampling layers (expected for ν → ½ in Ω₁); at m = 5 errors of 1e-2 "
-                "and more were measured in such cases. Check with more layers or use Algorithm 2.",
-                self.spectral_gap, SMALL_GAP,
+                "decay slowly with the oversampling layers (expected for ν → ½ in Ω₁ with a fixed l); at m = 5 "
+                "errors of 1e-2 and more were measured in such cases. Set min_gap (e.g. %g) to add modes where "
+                "Λ is small, add layers, or use Algorithm 2.", self.spectral_gap, SMALL_GAP, DEFAULT_MIN_GAP,
             )
+
+    @property
+    def nbasis_range(self) -> tuple[int, int]:
+        """(least, most) Stage I modes kept on a coarse cell."""
+        counts = np.diff(self.aux.offsets)
+        return int(counts.min()), int(counts.max())
 
     @property
     def spectral_gap(self) -> float:

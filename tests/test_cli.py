@@ -88,6 +88,13 @@ def test_mixed_ms_offline_cache(tmp_path):
     assert (a["offline_cache"], b["offline_cache"]) == ("built", "loaded")
     assert b["iterations"] == a["iterations"] and b["e_sigma"] == a["e_sigma"]
     assert len(list((tmp_path / "cache").iterdir())) == 1
+    assert a["nbasis_per_cell"][0] >= 3 and a["stage_one_gap"] >= 0.1  # the default min_gap
+    # --min-gap 0: exactly --nbasis modes per cell (the paper's fixed l), a new cache entry
+    assert main([*args, "--min-gap", "0", "--nbasis", "3", "--out", str(tmp_path / "c")]) == 0
+    c = json.loads((tmp_path / "c" / "summary.json").read_text())
+    assert c["nbasis_per_cell"] == [3, 3] and c["dim_X_ms"] == 3 * 3 * 4
+    assert c["offline_cache"] == "built" and len(list((tmp_path / "cache").iterdir())) == 2
+    assert main([*args, "--min-gap", "-1", "--out", str(tmp_path / "d")]) == 2
 
 
 @pytest.mark.parametrize("method", ["mixed", "mixed-ms"])

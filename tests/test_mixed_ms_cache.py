@@ -47,7 +47,7 @@ def omega1():
 
 def _build(omega1, cache_dir=None, sub=None, **options):
     cm, step, grid, _, _ = omega1
-    opts = mm.MixedCEMOptions(**{"layers": 1, "nbasis": 3, **options})
+    opts = mm.MixedCEMOptions(**{"layers": 1, "nbasis": 3, "min_gap": None, **options})
     return mm.MixedMultiscaleOmega1(sub or step.sub[0], grid, opts, H=cm.H, cache_dir=cache_dir)
 
 
@@ -186,8 +186,10 @@ def test_cache_key_covers_options_and_beta(omega1, tmp_path):
     assert other.cache_status == "built" and other.cache_path != base.cache_path
     sub = step.sub[0]
     key = mm.mixed_offline_key(sub, ops, grid, base.options, H=cm.H)
-    variants = [{"layers": 2}, {"nbasis": 2}, {"nbasis": None}, {"weight": "2mu"}, {"s_factor": 1.0}]
-    keys = {mm.mixed_offline_key(sub, ops, grid, mm.MixedCEMOptions(**{"layers": 1, "nbasis": 3, **v}), H=cm.H)
+    variants = [{"layers": 2}, {"nbasis": 2}, {"nbasis": None}, {"weight": "2mu"}, {"s_factor": 1.0},
+                {"min_gap": 0.5}, {"max_nbasis": 8}]
+    keys = {mm.mixed_offline_key(sub, ops, grid, mm.MixedCEMOptions(**{"layers": 1, "nbasis": 3, "min_gap": None, **v}),
+                                 H=cm.H)
             for v in variants}
     assert len(keys) == len(variants) and key not in keys
     assert mm.mixed_offline_key(sub, ops, grid, base.options, H=0.5 * cm.H) != key

@@ -130,7 +130,7 @@ def test_algorithm4_converges_and_error_falls_with_layers():
     ref = solve_mixed_monolithic(cm, model)
     errors = []
     for m in (1, 2):
-        res = solve_mixed_ms_hybrid(cm, model, layers=m, nbasis=3, reference=ref,
+        res = solve_mixed_ms_hybrid(cm, model, layers=m, nbasis=3, min_gap=None, reference=ref,
                                     options=IterationOptions(accel="none", max_iterations=400))
         assert res.converged
         assert res.dofs["X_ms"] == res.dofs["U_aux"] == 3 * 7 * 8
@@ -152,6 +152,10 @@ def test_options_are_validated():
         mm.MixedCEMOptions(nbasis=0)
     with pytest.raises(InputError):
         mm.MixedCEMOptions(weight="E")
+    with pytest.raises(InputError):
+        mm.MixedCEMOptions(min_gap=-1.0)
+    with pytest.raises(InputError):
+        mm.MixedCEMOptions(nbasis=4, max_nbasis=3)
 
 
 def test_l2_stress_error_measures_the_difference():
@@ -218,13 +222,70 @@ def test_stage_one_keeps_whole_eigenvalue_clusters(omega1):
     assert min(m.shape[2] for m in aux.modes) >= 2
 
 
-@pytest.mark.parametrize("nu, warned", [(0.3, False), (0.499, True)])
-def test_small_spectral_gap_is_reported(caplog, nu, warned):
-    """ν → ½ in Ω₁ makes Λ small; the user is warned that the layers then converge slowly."""
+@pytest.mark.parametrize(
+    "nu, min_gap, warning",
+    [(0.3, None, None), (0.499, None, "decay slowly"), (0.499, mm.DEFAULT_MIN_GAP, None),
+     (0.4999, mm.DEFAULT_MIN_GAP, "was not reached")],
+)
+def test_small_spectral_gap_is_reported(caplog, nu, min_gap, warning):
+    """ν → ½ in Ω₁ makes Λ small: with a fixed l the user is warned that the layers converge slowly;
+    with ``min_gap`` modes are added until Λ ≥ min_gap, and a warning says when max_nbasis stops that."""
     cm = geometry.unit_square(16, 4)
     step, grid = _step_and_grid(cm, models.get_model(2, E_high=1.0, nu=nu))
     with caplog.at_level("WARNING", logger="fenics_contact.mixed_multiscale"):
-        om = mm.MixedMultiscaleOmega1(step.sub[0], grid, mm.MixedCEMOptions(layers=1), H=cm.H)
+        om = mm.MixedMultiscaleOmega1(step.sub[0], grid, mm.MixedCEMOptions(layers=1, min_gap=min_gap), H=cm.H)
     assert 0 < om.spectral_gap < np.inf
-    assert (om.spectral_gap * om.options.s_factor < mm.SMALL_GAP) == warned
-    assert ("decay slowly" in caplog.text) == warned
+    if min_gap is None:
+        assert (om.spectral_gap * om.options.s_factor < mm.SMALL_GAP) == (warning is not None)
+    else:
+        assert (om.spectral_gap < min_gap) == (warning is not None)
+    if warning is None:
+        assert "mixed CEM" not in caplog.text
+    else:
+        assert warning in caplog.text
+
+
+def test_stage_one_adds_modes_until_the_gap_is_reached(omega1):
+    """min_gap: each cell keeps l_k ≥ nbasis modes, the fewest with λ_{l_k+1} ≥ min_gap (≤ max_nbasis)."""
+    cm, step, grid, ops, topo = omega1
+    fixed = mm.stage_one(ops, topo, grid, 3)
+    min_gap = 20.0 * float(np.min(fixed.gaps))  # forces extra modes on some cells, not on all
+    aux = mm.stage_one(ops, topo, grid, 3, min_gap, 12)
+    counts = np.diff(aux.offsets)
+    assert counts.min() >= 3 and counts.max() > 3
+    for k in range(grid.size):
+        values, l_k = aux.values[k], counts[k]
+        assert aux.gaps[k] >= min_gap or l_k >= 12
+        if l_k > 3:  # no more modes than needed: the last one kept was below the target (or ends a cluster)
+            assert values[-1] < min_gap or np.isclose(values[-1], values[-2], rtol=1e-8)
+        n = min(l_k, fixed.modes[k].shape[2])  # the first modes are those of the fixed-l run
+        assert np.allclose(values[:n], fixed.values[k][:n], rtol=1e-10, atol=1e-12)
+    assert aux.residuals.max() < 1e-10
+    # the cap
+    capped = mm.stage_one(ops, topo, grid, 3, 1e30, 5)
+    assert np.diff(capped.offsets).max() <= 6  # 5, or the end of a cluster
+
+
+def test_adaptive_modes_restore_the_decay_for_nearly_incompressible():
+    """ν = 0.499 (the paper's Table 5.7 case): with l = 3 the Ω₁ multiscale solution is far from the fine
+    one at m = 2 (slow decay, Λ ≈ 0.01); keeping modes until Λ ≥ 0.1 recovers the ν = 0.3 accuracy.
+
+    Ω₁ alone with the same Robin data g: the localization error of Algorithm 4's Ω₁ solve.
+    """
+    cm = geometry.unit_square(32, 8)
+    errors = {}
+    for nu in (0.3, 0.499):
+        step, grid = _step_and_grid(cm, models.paper_phase_model(1, E_ratio=1.0, nu_pattern=nu, nu_rest=nu))
+        sub = step.sub[0]
+        pts = sub.gamma_points
+        g = np.column_stack([np.sin(np.pi * pts[:, 1]), 0.3 * np.cos(2 * np.pi * pts[:, 1])]).ravel()
+        sub.solve(g)
+        for min_gap in (None, mm.DEFAULT_MIN_GAP):
+            om = mm.MixedMultiscaleOmega1(sub, grid, mm.MixedCEMOptions(layers=2, min_gap=min_gap), H=cm.H)
+            r, _ = om.solve(g)
+            s_ref = (om.ops.P @ sub.c).reshape(-1, 30)
+            errors[nu, min_gap] = np.sqrt(om.a_norm2(om.fine_stress(r, g) - s_ref) / om.a_norm2(s_ref))
+    # measured: 0.019 (ν = 0.3, either), 0.41 (ν = 0.499, l = 3), 0.024 (ν = 0.499, modes added until Λ ≥ 0.1)
+    assert errors[0.3, None] == errors[0.3, mm.DEFAULT_MIN_GAP]  # ν = 0.3: l = 3 already has Λ ≥ 0.1
+    assert errors[0.499, None] > 10 * errors[0.3, None]  # the ν → ½ degradation with a fixed l ...
+    assert errors[0.499, mm.DEFAULT_MIN_GAP] < 2 * errors[0.3, None]  # ... removed by the extra modes

@@ -195,6 +195,12 @@ def _reference_coordinates(msh: dmesh.Mesh, cells: np.ndarray, x: np.ndarray) ->
     return np.linalg.solve(J, (x - v0)[..., None])[..., 0]
 
 
+def _csr_keys(A: sp.csr_matrix) -> np.ndarray:
+    """row · ncols + column of every stored entry (ascending for a CSR matrix with sorted indices)."""
+    rows = np.repeat(np.arange(A.shape[0], dtype=np.int64), np.diff(A.indptr))
+    return rows * A.shape[1] + A.indices.astype(np.int64)
+
+
 def _stress_evaluation(dg: fem.FunctionSpace, cells: np.ndarray, X: np.ndarray, weights: np.ndarray) -> sp.csr_matrix:
     """Sparse E with (E s)_p = Σ_j weights[p, j] s_j(x_p) for DG P3 stress coefficients s.
 
@@ -552,17 +558,47 @@ class MixedSubproblem:
             return False
         if self._saddle is None:
             self._saddle = sp.bmat([[self.Kt, self.B.T], [self.B, None]], format="csr")
+            self._saddle.sum_duplicates()  # canonical: sorted indices, no duplicates, no stored zeros
+            self._saddle.eliminate_zeros()
             if self.contact:
                 self._Q_padded = sp.hstack([self.Q, sp.csr_matrix((self.Q.shape[0], self.n_u))], format="csr")
-        M = self._saddle
-        if active is not None and active.any():
-            M = M + self._penalty_matrix(active, padded=True)
-        if self._matrix is not None:
-            self._matrix.destroy()
-        self._matrix = scipy_to_petsc(M, self.mesh.comm)
+        if not self.contact:
+            if self._matrix is not None:
+                self._matrix.destroy()
+            self._matrix = scipy_to_petsc(self._saddle, self.mesh.comm)
+        else:
+            # one sparsity pattern for every active set (all Γ_C nodes): when the active set changes
+            # only the penalty values change and MUMPS redoes the numeric factorization, not the analysis
+            if self._matrix is None:
+                Qabs = abs(self._Q_padded)
+                pattern = (abs(self._saddle) + Qabs.T @ Qabs).tocsr()  # structural: no cancellation
+                pattern.sum_duplicates()
+                self._pattern = pattern
+                self._pattern_keys = _csr_keys(pattern)
+                self._saddle_data = np.zeros_like(pattern.data)
+                self._saddle_data[self._pattern_positions(self._saddle)] = self._saddle.data
+                self._matrix = scipy_to_petsc(pattern, self.mesh.comm)
+                self._matrix.setOption(PETSc.Mat.Option.NEW_NONZERO_LOCATION_ERR, True)
+            data = self._saddle_data.copy()
+            if active is not None and active.any():
+                pen = self._penalty_matrix(active, padded=True)
+                pen.sum_duplicates()
+                pen.eliminate_zeros()
+                data[self._pattern_positions(pen)] += pen.data
+            self._matrix.zeroEntries()
+            self._matrix.setValuesCSR(self._pattern.indptr, self._pattern.indices, data)
+            self._matrix.assemble()
         self.solver.set_operator(self._matrix)
         self._factorized_set = key.copy()
         return True
+
+    def _pattern_positions(self, A: sp.csr_matrix) -> np.ndarray:
+        """Where the stored entries of A sit in the data array of the all-active pattern."""
+        keys = _csr_keys(A)
+        pos = np.minimum(np.searchsorted(self._pattern_keys, keys), self._pattern_keys.size - 1)
+        if not np.array_equal(self._pattern_keys[pos], keys):
+            raise RuntimeError("the mixed Jacobian has an entry outside the all-active sparsity pattern")
+        return pos
 
     def _solve(self, r1: np.ndarray, r2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         self._rhs.array[: self.n_sigma] = r1

@@ -84,7 +84,7 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--min-gap", type=float,
                      help="mixed-ms: add Stage I modes on a coarse cell until the first one left out has "
                      "eigenvalue >= this (needed for nu -> 1/2; default 0.1; 0 keeps exactly --nbasis)")
-    run.add_argument("--max-nbasis", type=int, default=32, help="mixed-ms: most Stage I modes per coarse cell")
+    run.add_argument("--max-nbasis", type=int, help="mixed-ms: most Stage I modes per coarse cell (default 32)")
     run.add_argument("--cache-dir", type=Path, help="*-ms: directory for the offline data (reused when valid)")
     run.add_argument("--reference", action="store_true", help="also solve the monolithic problem and report e_u")
     run.add_argument("--out", type=Path, default=Path("results"), help="output directory")
@@ -165,6 +165,7 @@ def _run_mixed(args, cm: ContactMesh, model, fields, options: IterationOptions) 
 
     epsilon = args.epsilon
     min_gap = mixed_multiscale.DEFAULT_MIN_GAP if args.min_gap is None else (args.min_gap or None)
+    max_nbasis = mixed_multiscale.DEFAULT_MAX_NBASIS if args.max_nbasis is None else args.max_nbasis
     reference = mixed.solve_mixed_monolithic(cm, model, epsilon=epsilon) if args.reference else None
     if args.method == "mixed":
         result = mixed_hybrid.solve_mixed_hybrid(cm, model, beta=args.beta, epsilon=epsilon, options=options,
@@ -172,7 +173,7 @@ def _run_mixed(args, cm: ContactMesh, model, fields, options: IterationOptions) 
     else:
         result = mixed_ms.solve_mixed_ms_hybrid(cm, model, beta=args.beta, epsilon=epsilon, options=options,
                                                 layers=args.layers, nbasis=args.nbasis, reference=reference,
-                                                min_gap=min_gap, max_nbasis=args.max_nbasis,
+                                                min_gap=min_gap, max_nbasis=max_nbasis,
                                                 cache_dir=args.cache_dir)
     summary = {
         "beta": args.beta,

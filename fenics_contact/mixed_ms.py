@@ -51,7 +51,12 @@ from fenics_contact.errors import InputError
 from fenics_contact.geometry import ContactMesh
 from fenics_contact.mixed import MixedContactProfile, MixedSolution
 from fenics_contact.mixed_hybrid import MixedHybridStep
-from fenics_contact.mixed_multiscale import DEFAULT_MIN_GAP, MixedCEMOptions, MixedMultiscaleOmega1
+from fenics_contact.mixed_multiscale import (
+    DEFAULT_MAX_NBASIS,
+    DEFAULT_MIN_GAP,
+    MixedCEMOptions,
+    MixedMultiscaleOmega1,
+)
 from fenics_contact.models import TestModel
 from fenics_contact.multiscale import DEFAULT_S_FACTOR, coarse_grid, require_serial
 
@@ -233,7 +238,7 @@ def solve_mixed_ms_hybrid(
     layers: int = 3,
     nbasis: int | None = 3,
     min_gap: float | None = DEFAULT_MIN_GAP,
-    max_nbasis: int = 32,
+    max_nbasis: int = DEFAULT_MAX_NBASIS,
     weight: str = "lambda+2mu",
     s_factor: float = DEFAULT_S_FACTOR,
     options: IterationOptions = IterationOptions(),

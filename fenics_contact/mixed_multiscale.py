@@ -24,9 +24,9 @@ GHEP B Ã⁻¹ Bᵀ p = λ S p, solved with LAPACK (all pairs: repeated eigenval
 e.g. the three rigid motions at λ = 0 on interior cells, are never missed).
 The l smallest, S-orthonormal p_j^i span U_aux; π = Π Πᵀ S.  l is per cell: at
 least ``nbasis`` (the paper's 3), more while the first eigenvalue left out is
-below ``min_gap``.  The Stage II bases decay like exp(−ρ·distance/H) with ρ set
-by that eigenvalue Λ, and for ν → ½ the near-divergence-free modes have
-Λ ∝ μ/(λ+2μ): with l = 3 ρ drops from 2.2 (ν = 0.3) to 0.60 (ν = 0.499) at
+below ``min_gap``.  The Stage II bases decay like exp(−ρ·distance/H), and ρ
+falls with the number of near-divergence-free modes left out (for ν → ½ they
+have Λ ∝ μ/(λ+2μ)): with l = 3 ρ drops from 2.2 (ν = 0.3) to 0.60 (ν = 0.499) at
 h = 1/64, H = 1/16; with the extra modes it is 1.9 again (``DEFAULT_MIN_GAP``,
 ``basis_decay_profile``, benchmarks/mixed_ms_localization.py).
 
@@ -89,6 +89,7 @@ from fenics_contact.multiscale import (
 from fenics_contact.tags import Boundary
 
 __all__ = [
+    "DEFAULT_MAX_NBASIS",
     "DEFAULT_MIN_GAP",
     "MIXED_CACHE_FORMAT",
     "SMALL_GAP",
@@ -123,6 +124,8 @@ SMALL_GAP = 0.05
 #: and, capped at 32 modes (Λ = 0.019), also for ν = 0.4999.  For ν ≤ 0.49 the paper's l = 3
 #: already meets the target.
 DEFAULT_MIN_GAP = 0.1
+#: Default cap on the Stage I modes per coarse cell when ``min_gap`` adds modes.
+DEFAULT_MAX_NBASIS = 32
 
 #: Bumped whenever the layout or meaning of the cached mixed offline arrays changes.
 MIXED_CACHE_FORMAT = 2
@@ -141,7 +144,7 @@ class MixedCEMOptions:
     layers: int = 3
     nbasis: int | None = 3
     min_gap: float | None = DEFAULT_MIN_GAP
-    max_nbasis: int = 32
+    max_nbasis: int = DEFAULT_MAX_NBASIS
     weight: str = "lambda+2mu"  #: κ̃ = c(λ+2μ)H⁻² (METHOD §3 has c = 1) or "2mu": κ̃ = c·2μ H⁻²
     #: c, as for the primal CEM (multiscale.CEMOptions.s_factor). Model 2, h = 1/32, H = 1/8, m = 3:
     #: e_σ = 4.2e-3 (c = 1), 2.3e-3 (c = 3), 2.6e-3 (c = 10).
@@ -530,7 +533,7 @@ def _modes_to_keep(lam: np.ndarray, nbasis: int | None, min_gap: float | None, m
 
 def stage_one(
     ops: CellOperators, topo: _Topology, grid: CoarseGrid, nbasis: int | None,
-    min_gap: float | None = None, max_nbasis: int = 32,
+    min_gap: float | None = None, max_nbasis: int = DEFAULT_MAX_NBASIS,
 ) -> StageI:
     """Mixed local spectral problems Ã φ + Bᵀp = 0, −Bφ = λ S p on every coarse cell (dense LAPACK).
 

@@ -17,10 +17,11 @@ from pathlib import Path
 import numpy as np
 
 import fenics_contact  # noqa: F401  (must precede dolfinx / petsc4py)
-from fenics_contact import geometry, models, multiscale
-from fenics_contact import mixed_multiscale as mm
+from fenics_contact.problem import geometry, models
+from fenics_contact.multiscale import cem
+from fenics_contact.multiscale import mixed_cem as mm
 from fenics_contact.io import machine_description
-from fenics_contact.mixed_hybrid import MixedHybridStep
+from fenics_contact.hybrid.mixed import MixedHybridStep
 
 CASES = {  # the paper's cases: (model, E₁/E₂, ν₁ (pattern), ν₂ (rest))
     "5.3": (2, None, None, None),
@@ -34,7 +35,7 @@ def omega1(n: int, n_coarse: int, model):
     cm = geometry.unit_square(n, n_coarse)
     step = MixedHybridStep(cm, model, beta="sqrt-h")
     part = step.parts[0]
-    return cm, step.sub[0], multiscale.coarse_grid(part.mesh, part.cell_map, cm.coarse_cell, cm.H)
+    return cm, step.sub[0], cem.coarse_grid(part.mesh, part.cell_map, cm.coarse_cell, cm.H)
 
 
 def homogeneous_omega1(n: int, n_coarse: int, nu: float):

@@ -33,9 +33,13 @@ import dolfinx
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from fenics_contact import geometry, models, multiscale, primal, primal_hybrid, primal_ms
-from fenics_contact.dd import IterationOptions
-from fenics_contact.fields import material_fields
+from fenics_contact.fem import primal
+from fenics_contact.hybrid import primal as primal_hybrid
+from fenics_contact.multiscale import cem
+from fenics_contact.multiscale import primal as primal_ms
+from fenics_contact.problem import geometry, models
+from fenics_contact.hybrid.iteration import IterationOptions
+from fenics_contact.problem.fields import material_fields
 
 log = logging.getLogger("multiscale_primal")
 
@@ -229,7 +233,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--contrasts", type=_floats, default=[1e2, 1e3, 1e4, 1e6])
     p.add_argument("--coarse-list", type=_ints, default=[8, 16, 32], help="1/H values for part d")
     p.add_argument("--alpha", default=primal_hybrid.DEFAULT_ALPHA, help="Robin coefficient (see fenics-contact run --help)")
-    p.add_argument("--s-factor", type=float, default=multiscale.DEFAULT_S_FACTOR, help="c in κ̃ = c (λ+2μ) H⁻²")
+    p.add_argument("--s-factor", type=float, default=cem.DEFAULT_S_FACTOR, help="c in κ̃ = c (λ+2μ) H⁻²")
     p.add_argument("--s-factors", type=_floats, default=[1, 2, 3, 10, 30, 100], help="c values for part e")
     p.add_argument("--tol", type=float, default=1e-6, help="relative-change stopping tolerance")
     p.add_argument("--accel", default="anderson", choices=["anderson", "none"])

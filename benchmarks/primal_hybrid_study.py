@@ -16,13 +16,13 @@ import time
 from pathlib import Path
 
 import fenics_contact  # noqa: F401
-from fenics_contact.dd import IterationOptions
-from fenics_contact.fields import material_fields
-from fenics_contact.geometry import unit_square
+from fenics_contact.hybrid.iteration import IterationOptions
+from fenics_contact.problem.fields import material_fields
+from fenics_contact.problem.geometry import unit_square
 from fenics_contact.io import machine_description
-from fenics_contact.models import get_model
-from fenics_contact.primal import default_penalty, solve_primal_monolithic
-from fenics_contact.primal_hybrid import solve_primal_hybrid
+from fenics_contact.problem.models import get_model
+from fenics_contact.fem.primal import default_penalty, solve_primal_monolithic
+from fenics_contact.hybrid.primal import solve_primal_hybrid
 
 
 def setup(n: int, n_coarse: int, number: int):
@@ -50,7 +50,7 @@ def main() -> None:
         f"Machine: {machine_description()}. Date: {datetime.date.today()}. "
         f"Command: `python benchmarks/primal_hybrid_study.py --sizes {' '.join(map(str, args.sizes))} "
         f"--configs {' '.join(args.configs)} --cap {args.cap}`. δ = 1e-3·h, test models of "
-        "`fenics_contact.models`. With 1/H = 16 the interface γ (x = 15/16) lies in the homogeneous E = 1 "
+        "`fenics_contact.problem.models`. With 1/H = 16 the interface γ (x = 15/16) lies in the homogeneous E = 1 "
         "region, so α = E equals α = 1 there; with model 1 and 1/H = 4, γ (x = 3/4) crosses the "
         "10³-modulus channels (and Ω₂ is heterogeneous).",
         "",

@@ -4,7 +4,7 @@
 
 Table 5.3: model 2, h = 1/64, H = 1/16, β = √h, l = 3, m = 1..5: iterations, e_σ (A-norm, and
 L²), e_u against the fine monolithic mixed solution.  Tables 5.5–5.7 (nearly incompressible): the
-paper's §5.4 cases on test model 1 (``models.paper_phase_model``): (E₁/E₂, ν₁, ν₂) = (1e−4, 0.35,
+paper's §5.4 cases on test model 1 (``problem.models.paper_phase_model``): (E₁/E₂, ν₁, ν₂) = (1e−4, 0.35,
 0.499), (1e4, 0.499, 0.35), (1, 0.499, 0.499), E₁, ν₁ in the channels, E₂ = 1, ν₂ elsewhere and in Ω₂.
 Table 5.8: online times of the monolithic semismooth Newton solve, Algorithm 2 and Algorithm 4
 with H = 1/32, 1/16, 1/8 (each H has its own strip Ω₂ = one coarse cell, hence its own reference).
@@ -17,13 +17,13 @@ import time
 from pathlib import Path
 
 import fenics_contact  # noqa: F401  (must precede dolfinx / petsc4py)
-from fenics_contact import geometry, models
-from fenics_contact.dd import IterationOptions
+from fenics_contact.problem import geometry, models
+from fenics_contact.hybrid.iteration import IterationOptions
 from fenics_contact.io import machine_description
-from fenics_contact.mixed import solve_mixed_monolithic
-from fenics_contact.mixed_hybrid import solve_mixed_hybrid
-from fenics_contact.mixed_ms import solve_mixed_ms_hybrid
-from fenics_contact.mixed_multiscale import DEFAULT_MIN_GAP
+from fenics_contact.fem.mixed import solve_mixed_monolithic
+from fenics_contact.hybrid.mixed import solve_mixed_hybrid
+from fenics_contact.multiscale.mixed import solve_mixed_ms_hybrid
+from fenics_contact.multiscale.mixed_cem import DEFAULT_MIN_GAP
 
 #: the paper's Tables 5.3, 5.5–5.7 (h = 1/64, H = 1/16, β = √h, 3 bases): m -> (iterations, e_σ, e_u)
 PAPER = {

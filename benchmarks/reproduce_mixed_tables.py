@@ -30,16 +30,16 @@ import ufl
 import fenics_contact  # noqa: F401  (dolfinx_solver first)
 from dolfinx import fem
 
-from fenics_contact import forms_mixed
-from fenics_contact.dd import IterationOptions
-from fenics_contact.fields import material_fields
-from fenics_contact.geometry import unit_square
+from fenics_contact.fem import forms_mixed
+from fenics_contact.hybrid.iteration import IterationOptions
+from fenics_contact.problem.fields import material_fields
+from fenics_contact.problem.geometry import unit_square
 from fenics_contact.io import machine_description
-from fenics_contact.materials import compliance, strain, stress
-from fenics_contact.mixed import solve_mixed_monolithic
-from fenics_contact.mixed_hybrid import solve_mixed_hybrid
-from fenics_contact.models import get_model, paper_phase_model
-from fenics_contact.primal import default_penalty, solve_primal_monolithic
+from fenics_contact.problem.materials import compliance, strain, stress
+from fenics_contact.fem.mixed import solve_mixed_monolithic
+from fenics_contact.hybrid.mixed import solve_mixed_hybrid
+from fenics_contact.problem.models import get_model, paper_phase_model
+from fenics_contact.fem.primal import default_penalty, solve_primal_monolithic
 
 #: Tables 5.1/5.2: (model, 1/h, β) -> (iterations, relative tolerance, e_σ, e_u)
 PAPER_5_1_2 = {
@@ -85,7 +85,7 @@ def at_tolerance(history, tol):
 
 
 def table_model(number: int, ratio: float | None = None, nu1: float = 0.35, nu2: float = 0.35):
-    """Test model ``number``; with ``ratio`` the paper's §5.4 form (``models.paper_phase_model``)."""
+    """Test model ``number``; with ``ratio`` the paper's §5.4 form (``problem.models.paper_phase_model``)."""
     if ratio is None:
         return get_model(number, nu=nu1)
     return paper_phase_model(number, E_ratio=ratio, nu_pattern=nu1, nu_rest=nu2)

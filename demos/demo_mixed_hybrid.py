@@ -32,11 +32,11 @@ from pathlib import Path
 
 import fenics_contact  # noqa: F401  (imports dolfinx_solver before dolfinx)
 
-from fenics_contact.dd import IterationOptions
-from fenics_contact.geometry import unit_square
-from fenics_contact.mixed import solve_mixed_monolithic
-from fenics_contact.mixed_hybrid import solve_mixed_hybrid
-from fenics_contact.models import model_2
+from fenics_contact.hybrid.iteration import IterationOptions
+from fenics_contact.problem.geometry import unit_square
+from fenics_contact.fem.mixed import solve_mixed_monolithic
+from fenics_contact.hybrid.mixed import solve_mixed_hybrid
+from fenics_contact.problem.models import model_2
 from fenics_contact.plots import plot_contact, plot_displacement, plot_history, plot_stress
 
 n = int(os.environ.get("FENICS_CONTACT_DEMO_N", "64"))

@@ -33,11 +33,11 @@ import fenics_contact  # noqa: F401  (imports dolfinx_solver before dolfinx)
 import matplotlib.pyplot as plt
 import numpy as np
 
-from fenics_contact.dd import IterationOptions
-from fenics_contact.geometry import unit_square
-from fenics_contact.mixed import solve_mixed_monolithic
-from fenics_contact.mixed_ms import solve_mixed_ms_hybrid
-from fenics_contact.models import model_2
+from fenics_contact.hybrid.iteration import IterationOptions
+from fenics_contact.problem.geometry import unit_square
+from fenics_contact.fem.mixed import solve_mixed_monolithic
+from fenics_contact.multiscale.mixed import solve_mixed_ms_hybrid
+from fenics_contact.problem.models import model_2
 from fenics_contact.plots import plot_contact, plot_stress
 
 n = int(os.environ.get("FENICS_CONTACT_DEMO_N", "64"))

@@ -37,13 +37,13 @@ from pathlib import Path
 import fenics_contact  # noqa: F401  (imports dolfinx_solver before dolfinx)
 import numpy as np
 
-from fenics_contact.dd import IterationOptions
-from fenics_contact.fields import material_fields
-from fenics_contact.geometry import unit_square
-from fenics_contact.models import model_1
+from fenics_contact.hybrid.iteration import IterationOptions
+from fenics_contact.problem.fields import material_fields
+from fenics_contact.problem.geometry import unit_square
+from fenics_contact.problem.models import model_1
 from fenics_contact.plots import plot_cell_field, plot_contact, plot_history, render_deformed
-from fenics_contact.primal import default_penalty, solve_primal_monolithic
-from fenics_contact.primal_hybrid import solve_primal_hybrid
+from fenics_contact.fem.primal import default_penalty, solve_primal_monolithic
+from fenics_contact.hybrid.primal import solve_primal_hybrid
 
 n = int(os.environ.get("FENICS_CONTACT_DEMO_N", "64"))
 n_coarse = max(4, n // 4)

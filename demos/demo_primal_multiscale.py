@@ -30,13 +30,13 @@ import fenics_contact  # noqa: F401  (imports dolfinx_solver before dolfinx)
 import matplotlib.pyplot as plt
 import numpy as np
 
-from fenics_contact.dd import IterationOptions
-from fenics_contact.fields import material_fields
-from fenics_contact.geometry import unit_square
-from fenics_contact.models import model_2
+from fenics_contact.hybrid.iteration import IterationOptions
+from fenics_contact.problem.fields import material_fields
+from fenics_contact.problem.geometry import unit_square
+from fenics_contact.problem.models import model_2
 from fenics_contact.plots import plot_contact
-from fenics_contact.primal import default_penalty, solve_primal_monolithic
-from fenics_contact.primal_ms import solve_primal_ms_hybrid
+from fenics_contact.fem.primal import default_penalty, solve_primal_monolithic
+from fenics_contact.multiscale.primal import solve_primal_ms_hybrid
 
 n = int(os.environ.get("FENICS_CONTACT_DEMO_N", "64"))
 n_coarse = n // 4

@@ -6,9 +6,9 @@
 from pathlib import Path
 
 import fenics_contact  # noqa: F401
-from fenics_contact.fields import material_fields
-from fenics_contact.geometry import unit_square
-from fenics_contact.models import get_model
+from fenics_contact.problem.fields import material_fields
+from fenics_contact.problem.geometry import unit_square
+from fenics_contact.problem.models import get_model
 from fenics_contact.plots import plot_cell_field
 
 OUT = Path(__file__).parent / "figures"

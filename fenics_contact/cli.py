@@ -12,13 +12,13 @@ import numpy as np
 from mpi4py import MPI
 
 from fenics_contact import __version__
-from fenics_contact.contact import NewtonOptions
-from fenics_contact.dd import IterationOptions
+from fenics_contact.fem.contact import NewtonOptions
+from fenics_contact.hybrid.iteration import IterationOptions
 from fenics_contact.errors import FenicsContactError, InputError
-from fenics_contact.fields import material_fields
-from fenics_contact.geometry import ContactMesh, read_mesh, unit_square
+from fenics_contact.problem.fields import material_fields
+from fenics_contact.problem.geometry import ContactMesh, read_mesh, unit_square
 from fenics_contact.io import cell_function_of, cell_markers, stress_field, write_fields, write_summary, write_vtx
-from fenics_contact.models import get_model, pixel_field
+from fenics_contact.problem.models import get_model, pixel_field
 from fenics_contact.plots import (
     plot_cell_field,
     plot_contact,
@@ -27,10 +27,10 @@ from fenics_contact.plots import (
     plot_stress,
     render_deformed,
 )
-from fenics_contact.primal import default_penalty, solve_primal_monolithic
-from fenics_contact.primal_hybrid import DEFAULT_ALPHA, solve_primal_hybrid
-from fenics_contact.primal_ms import solve_primal_ms_hybrid
-from fenics_contact.tags import Subdomain
+from fenics_contact.fem.primal import default_penalty, solve_primal_monolithic
+from fenics_contact.hybrid.primal import DEFAULT_ALPHA, solve_primal_hybrid
+from fenics_contact.multiscale.primal import solve_primal_ms_hybrid
+from fenics_contact.problem.tags import Subdomain
 
 __all__ = ["main", "build_parser"]
 
@@ -161,7 +161,10 @@ def _run_primal(args, cm: ContactMesh, model, fields, options: IterationOptions)
 
 def _run_mixed(args, cm: ContactMesh, model, fields, options: IterationOptions) -> _Outcome:
     """Algorithms 2 (mixed) and 4 (mixed-ms), with the monolithic mixed reference (serial)."""
-    from fenics_contact import mixed, mixed_hybrid, mixed_ms, mixed_multiscale
+    from fenics_contact.fem import mixed
+    from fenics_contact.hybrid import mixed as mixed_hybrid
+    from fenics_contact.multiscale import mixed as mixed_ms
+    from fenics_contact.multiscale import mixed_cem as mixed_multiscale
 
     epsilon = args.epsilon
     min_gap = mixed_multiscale.DEFAULT_MIN_GAP if args.min_gap is None else (args.min_gap or None)

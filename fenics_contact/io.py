@@ -11,7 +11,7 @@ import numpy as np
 from dolfinx import fem
 from mpi4py import MPI
 
-from fenics_contact.materials import strain, stress
+from fenics_contact.problem.materials import strain, stress
 
 __all__ = [
     "cell_function_of",

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import gmsh
 
-from fenics_contact.geometry import build_unit_square_model, gmsh_session
+from fenics_contact.problem.geometry import build_unit_square_model, gmsh_session
 
 
 def main() -> None:

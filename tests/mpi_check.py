@@ -13,12 +13,12 @@ from mpi4py import MPI
 
 from dolfinx import fem
 
-from fenics_contact.dd import IterationOptions
-from fenics_contact.fields import material_fields
-from fenics_contact.geometry import unit_square
-from fenics_contact.models import get_model
-from fenics_contact.primal import default_penalty, solve_primal_monolithic
-from fenics_contact.primal_hybrid import solve_primal_hybrid
+from fenics_contact.hybrid.iteration import IterationOptions
+from fenics_contact.problem.fields import material_fields
+from fenics_contact.problem.geometry import unit_square
+from fenics_contact.problem.models import get_model
+from fenics_contact.fem.primal import default_penalty, solve_primal_monolithic
+from fenics_contact.hybrid.primal import solve_primal_hybrid
 
 n, n_coarse, model_number = (int(a) for a in sys.argv[1:4])
 cm = unit_square(n, n_coarse)

@@ -1,4 +1,4 @@
-"""Tests of the Arnold–Winther stress space (fenics_contact.arnold_winther).
+"""Tests of the Arnold–Winther stress space (fenics_contact.fem.arnold_winther).
 
 Run from the repository root:  .venv/bin/python -m pytest tests/test_arnold_winther.py -q
 """
@@ -17,7 +17,7 @@ import pytest
 import ufl
 from mpi4py import MPI
 
-from fenics_contact.arnold_winther import (
+from fenics_contact.fem.arnold_winther import (
     ArnoldWintherSpace,
     lame_parameters,
     local_nodal_basis,

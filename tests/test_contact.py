@@ -3,12 +3,12 @@
 import numpy as np
 import pytest
 
-from fenics_contact.contact import NewtonOptions
+from fenics_contact.fem.contact import NewtonOptions
 from fenics_contact.errors import ConvergenceError, InputError
-from fenics_contact.fields import material_fields
-from fenics_contact.geometry import unit_square
-from fenics_contact.models import get_model
-from fenics_contact.primal import default_penalty, solve_primal_monolithic
+from fenics_contact.problem.fields import material_fields
+from fenics_contact.problem.geometry import unit_square
+from fenics_contact.problem.models import get_model
+from fenics_contact.fem.primal import default_penalty, solve_primal_monolithic
 
 N = 32
 

@@ -6,10 +6,10 @@ from mpi4py import MPI
 
 from dolfinx import fem, mesh
 
-from fenics_contact.fields import MaterialFields
-from fenics_contact.materials import lame, strain, stress
-from fenics_contact.primal import PrimalSubproblem
-from fenics_contact.tags import Boundary
+from fenics_contact.problem.fields import MaterialFields
+from fenics_contact.problem.materials import lame, strain, stress
+from fenics_contact.fem.primal import PrimalSubproblem
+from fenics_contact.problem.tags import Boundary
 
 
 def _clamped_square(n: int):

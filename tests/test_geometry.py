@@ -8,12 +8,12 @@ from mpi4py import MPI
 from dolfinx import fem
 
 from fenics_contact.errors import InputError, MeshTagError
-from fenics_contact.fields import material_fields
-from fenics_contact.geometry import build_unit_square_model, gmsh_session, read_mesh, unit_square
-from fenics_contact.models import model_2
-from fenics_contact.primal import default_penalty, solve_primal_monolithic
-from fenics_contact.tags import PHYSICAL_NAMES, Boundary, Subdomain
-from fenics_contact.transmission import split_mesh
+from fenics_contact.problem.fields import material_fields
+from fenics_contact.problem.geometry import build_unit_square_model, gmsh_session, read_mesh, unit_square
+from fenics_contact.problem.models import model_2
+from fenics_contact.fem.primal import default_penalty, solve_primal_monolithic
+from fenics_contact.problem.tags import PHYSICAL_NAMES, Boundary, Subdomain
+from fenics_contact.hybrid.transmission import split_mesh
 
 
 def _count(tags, value, comm):
@@ -41,7 +41,7 @@ def test_tags_and_coarse_grid():
 def test_submesh_transfer_maps_matching_points():
     cm = unit_square(8, 4)
     parts = split_mesh(cm)
-    from fenics_contact.transmission import InterfaceSpace
+    from fenics_contact.hybrid.transmission import InterfaceSpace
 
     space = InterfaceSpace(cm, parts, shape=(2,))
     xp = space.V.tabulate_dof_coordinates()

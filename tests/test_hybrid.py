@@ -3,13 +3,13 @@
 import numpy as np
 import pytest
 
-from fenics_contact.dd import IterationOptions
+from fenics_contact.hybrid.iteration import IterationOptions
 from fenics_contact.errors import InputError
-from fenics_contact.fields import material_fields
-from fenics_contact.geometry import unit_square
-from fenics_contact.models import get_model
-from fenics_contact.primal import default_penalty, solve_primal_monolithic
-from fenics_contact.primal_hybrid import solve_primal_hybrid
+from fenics_contact.problem.fields import material_fields
+from fenics_contact.problem.geometry import unit_square
+from fenics_contact.problem.models import get_model
+from fenics_contact.fem.primal import default_penalty, solve_primal_monolithic
+from fenics_contact.hybrid.primal import solve_primal_hybrid
 
 
 def _setup(n, n_coarse, number):
@@ -73,7 +73,7 @@ def test_bad_iteration_options(kwargs):
 @pytest.mark.parametrize("alpha, expected", [(2.5, 2.5), ("h^-1/2", 4.0), ("sqrt-h", 0.25), ("2*h^-1/2", 8.0),
                                              ("E*h^-1/2", 4.0), ("0.5E*h^(1/2)", 0.125)])
 def test_alpha_spellings(alpha, expected):
-    from fenics_contact.transmission import InterfaceSpace, robin_coefficient, split_mesh
+    from fenics_contact.hybrid.transmission import InterfaceSpace, robin_coefficient, split_mesh
 
     cm = unit_square(16, 8)
     space = InterfaceSpace(cm, split_mesh(cm), shape=(2,))
@@ -85,7 +85,7 @@ def test_alpha_spellings(alpha, expected):
 
 def test_alpha_scaled_by_the_local_modulus():
     """γ at x = 3/4 crosses the channels of model 1: α_p = c · (area-weighted mean E around p)."""
-    from fenics_contact.transmission import InterfaceSpace, robin_coefficient, split_mesh
+    from fenics_contact.hybrid.transmission import InterfaceSpace, robin_coefficient, split_mesh
 
     cm = unit_square(32, 4)
     space = InterfaceSpace(cm, split_mesh(cm), shape=(2,))

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from fenics_contact.errors import InputError
-from fenics_contact.materials import Material, lame
-from fenics_contact.models import get_model, model_1, model_2, paper_phase_model, pixel_field
+from fenics_contact.problem.materials import Material, lame
+from fenics_contact.problem.models import get_model, model_1, model_2, paper_phase_model, pixel_field
 
 
 def test_lame_matches_closed_form():

@@ -1,4 +1,4 @@
-"""Mixed penalized contact (fenics_contact.mixed, forms_mixed): forms, Newton, complementarity, bad input.
+"""Mixed penalized contact (fenics_contact.fem.mixed, forms_mixed): forms, Newton, complementarity, bad input.
 
 Run from the repository root:  .venv/bin/python -m pytest tests/test_mixed.py -q
 """
@@ -13,15 +13,15 @@ from petsc4py import PETSc
 import dolfinx
 from dolfinx import fem
 
-from fenics_contact import forms_mixed
+from fenics_contact.fem import forms_mixed
 from fenics_contact.errors import InputError
-from fenics_contact.fields import material_fields
-from fenics_contact.geometry import ContactMesh, unit_square
-from fenics_contact.mixed import MixedSubproblem, default_epsilon, solve_mixed_monolithic
-from fenics_contact.models import get_model
-from fenics_contact.primal import default_penalty, solve_primal_monolithic
-from fenics_contact.tags import Boundary
-from fenics_contact.transmission import split_mesh
+from fenics_contact.problem.fields import material_fields
+from fenics_contact.problem.geometry import ContactMesh, unit_square
+from fenics_contact.fem.mixed import MixedSubproblem, default_epsilon, solve_mixed_monolithic
+from fenics_contact.problem.models import get_model
+from fenics_contact.fem.primal import default_penalty, solve_primal_monolithic
+from fenics_contact.problem.tags import Boundary
+from fenics_contact.hybrid.transmission import split_mesh
 
 #: the paper's contact zones (METHOD §5), per model
 CONTACT_ZONE = {1: (0.0, 0.5), 2: (0.4, 0.6)}

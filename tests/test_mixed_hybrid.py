@@ -1,4 +1,4 @@
-"""Algorithm 2 (fenics_contact.mixed_hybrid): fixed point, tolerance 1e-6 errors, β, ν → ½, bad input.
+"""Algorithm 2 (fenics_contact.hybrid.mixed): fixed point, tolerance 1e-6 errors, β, ν → ½, bad input.
 
 Run from the repository root:  .venv/bin/python -m pytest tests/test_mixed_hybrid.py -q
 """
@@ -6,12 +6,12 @@ Run from the repository root:  .venv/bin/python -m pytest tests/test_mixed_hybri
 import numpy as np
 import pytest
 
-from fenics_contact.dd import IterationOptions
+from fenics_contact.hybrid.iteration import IterationOptions
 from fenics_contact.errors import InputError
-from fenics_contact.geometry import unit_square
-from fenics_contact.mixed import solve_mixed_monolithic
-from fenics_contact.mixed_hybrid import MixedHybridStep, solve_mixed_hybrid, transmission_coefficient
-from fenics_contact.models import get_model
+from fenics_contact.problem.geometry import unit_square
+from fenics_contact.fem.mixed import solve_mixed_monolithic
+from fenics_contact.hybrid.mixed import MixedHybridStep, solve_mixed_hybrid, transmission_coefficient
+from fenics_contact.problem.models import get_model
 
 #: H = 1/16 (γ at x = 15/16, three cells of h = 1/32 from the heterogeneity; the loads act on x ≥ 15/16)
 N_COARSE = 16

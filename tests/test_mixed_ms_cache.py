@@ -19,10 +19,11 @@ import scipy.sparse.linalg as spla
 from mpi4py import MPI
 
 import fenics_contact  # noqa: F401  (must precede dolfinx)
-from fenics_contact import geometry, models, multiscale
-from fenics_contact import mixed_multiscale as mm
+from fenics_contact.problem import geometry, models
+from fenics_contact.multiscale import cem
+from fenics_contact.multiscale import mixed_cem as mm
 from fenics_contact.errors import InputError
-from fenics_contact.mixed_hybrid import MixedHybridStep
+from fenics_contact.hybrid.mixed import MixedHybridStep
 
 pytestmark = pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="the mixed CEM offline phase is serial")
 
@@ -39,8 +40,8 @@ def omega1():
     cm = geometry.unit_square(16, 4)
     step = MixedHybridStep(cm, models.get_model(2), beta="sqrt-h")
     part = step.parts[0]
-    grid = multiscale.coarse_grid(part.mesh, part.cell_map, cm.coarse_cell, cm.H)
-    ops = mm.cell_operators(step.sub[0], cm.H, "lambda+2mu", multiscale.DEFAULT_S_FACTOR)
+    grid = cem.coarse_grid(part.mesh, part.cell_map, cm.coarse_cell, cm.H)
+    ops = mm.cell_operators(step.sub[0], cm.H, "lambda+2mu", cem.DEFAULT_S_FACTOR)
     topo = mm._Topology(step.sub[0].mesh, ops.P.shape[1])
     return cm, step, grid, ops, topo
 
@@ -163,7 +164,7 @@ def _assert_same_online(a, b, exact=True):
 
 
 def test_cache_round_trip(omega1, tmp_path, caplog):
-    caplog.set_level(logging.INFO, logger="fenics_contact.mixed_multiscale")
+    caplog.set_level(logging.INFO, logger="fenics_contact.multiscale.mixed_cem")
     assert _build(omega1).cache_status == "disabled"
     first = _build(omega1, tmp_path)
     assert first.cache_status == "built"

@@ -6,20 +6,21 @@ import pytest
 import fenics_contact  # noqa: F401  (must precede dolfinx)
 import basix.ufl
 from dolfinx import fem
-from fenics_contact import geometry, models, multiscale
-from fenics_contact import mixed_multiscale as mm
-from fenics_contact.dd import IterationOptions
+from fenics_contact.problem import geometry, models
+from fenics_contact.multiscale import cem
+from fenics_contact.multiscale import mixed_cem as mm
+from fenics_contact.hybrid.iteration import IterationOptions
 from fenics_contact.errors import InputError
-from fenics_contact.mixed import solve_mixed_monolithic
-from fenics_contact.mixed_hybrid import MixedHybridStep
-from fenics_contact.mixed_ms import l2_stress_error, solve_mixed_ms_hybrid
+from fenics_contact.fem.mixed import solve_mixed_monolithic
+from fenics_contact.hybrid.mixed import MixedHybridStep
+from fenics_contact.multiscale.mixed import l2_stress_error, solve_mixed_ms_hybrid
 
 
 def _step_and_grid(cm, model):
     """The Algorithm 2 step of ``model`` on ``cm`` (its Ω₁ subproblem) and the coarse grid of Ω₁."""
     step = MixedHybridStep(cm, model, beta="sqrt-h")
     part = step.parts[0]
-    return step, multiscale.coarse_grid(part.mesh, part.cell_map, cm.coarse_cell, cm.H)
+    return step, cem.coarse_grid(part.mesh, part.cell_map, cm.coarse_cell, cm.H)
 
 
 @pytest.fixture(scope="module")
@@ -232,7 +233,7 @@ def test_small_spectral_gap_is_reported(caplog, nu, min_gap, warning):
     with ``min_gap`` modes are added until Λ ≥ min_gap, and a warning says when max_nbasis stops that."""
     cm = geometry.unit_square(16, 4)
     step, grid = _step_and_grid(cm, models.get_model(2, E_high=1.0, nu=nu))
-    with caplog.at_level("WARNING", logger="fenics_contact.mixed_multiscale"):
+    with caplog.at_level("WARNING", logger="fenics_contact.multiscale.mixed_cem"):
         om = mm.MixedMultiscaleOmega1(step.sub[0], grid, mm.MixedCEMOptions(layers=1, min_gap=min_gap), H=cm.H)
     assert 0 < om.spectral_gap < np.inf
     if min_gap is None:

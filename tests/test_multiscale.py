@@ -1,4 +1,4 @@
-"""CEM-GMsFEM in Ω₁ (multiscale.py) and Algorithm 3 (primal_ms.py).
+"""CEM-GMsFEM in Ω₁ (cem.py) and Algorithm 3 (primal_ms.py).
 
 Unit checks: coarse grid and colouring, local spectral problems (SLEPc against
 dense LAPACK, residuals, rigid-body modes), π is an s-orthogonal projection,
@@ -19,11 +19,14 @@ import scipy.linalg
 import fenics_contact  # noqa: F401  (imports dolfinx_solver first)
 from mpi4py import MPI
 
-from fenics_contact import geometry, models, multiscale, primal, primal_ms
-from fenics_contact.dd import IterationOptions
+from fenics_contact.fem import primal
+from fenics_contact.multiscale import cem
+from fenics_contact.multiscale import primal as primal_ms
+from fenics_contact.problem import geometry, models
+from fenics_contact.hybrid.iteration import IterationOptions
 from fenics_contact.errors import InputError
-from fenics_contact.fields import material_fields
-from fenics_contact.primal import PrimalSubproblem
+from fenics_contact.problem.fields import material_fields
+from fenics_contact.fem.primal import PrimalSubproblem
 
 pytestmark = pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="Algorithm 3 is serial")
 
@@ -46,7 +49,7 @@ def mesh_32_8():
 def omega1_32_8(mesh_32_8):
     """Ω₁ of model 1 at h = 1/32, H = 1/8 with m = 2, l = 3."""
     om, _, _ = primal_ms.build_omega1_multiscale(
-        mesh_32_8, models.get_model(1), cem=multiscale.CEMOptions(layers=2, nbasis=3)
+        mesh_32_8, models.get_model(1), cem=cem.CEMOptions(layers=2, nbasis=3)
     )
     return om
 
@@ -80,7 +83,7 @@ def test_local_eigenproblems(omega1_32_8):
     aux = om.space.aux
     interior = []
     for k in range(om.grid.size):
-        D, A, S = multiscale.local_matrices(om.ops, om.grid, k)
+        D, A, S = cem.local_matrices(om.ops, om.grid, k)
         lam, Phi = aux.eigenvalues[k], aux.vectors[k]
         assert Phi.shape == (D.size, 3)
         res = A @ Phi - (S @ Phi) * lam
@@ -101,9 +104,9 @@ def test_local_eigenproblems(omega1_32_8):
 def test_krylov_schur_matches_lapack(omega1_32_8):
     om = omega1_32_8
     for k in (0, 20, om.grid.size - 1):
-        _, A, S = multiscale.local_matrices(om.ops, om.grid, k)
-        lam_ks, Phi_ks = multiscale.local_spectral_problem(A, S, 4, eigensolver="krylovschur")
-        lam_la, Phi_la = multiscale.local_spectral_problem(A, S, 4, eigensolver="lapack")
+        _, A, S = cem.local_matrices(om.ops, om.grid, k)
+        lam_ks, Phi_ks = cem.local_spectral_problem(A, S, 4, eigensolver="krylovschur")
+        lam_la, Phi_la = cem.local_spectral_problem(A, S, 4, eigensolver="lapack")
         assert np.allclose(lam_ks, lam_la, rtol=1e-8, atol=1e-9)
         # same spanned subspace (eigenvalues may be multiple): projector difference
         P_ks, P_la = Phi_ks @ Phi_ks.T @ S, Phi_la @ Phi_la.T @ S
@@ -116,7 +119,7 @@ def test_projection_is_s_orthogonal(omega1_32_8):
     aux = om.space.aux
     rng = np.random.default_rng(1)
     u = rng.standard_normal(om.ops.size) * om.ops.free
-    S_local = [multiscale.local_matrices(om.ops, om.grid, k)[2] for k in range(om.grid.size)]
+    S_local = [cem.local_matrices(om.ops, om.grid, k)[2] for k in range(om.grid.size)]
     pu = aux.project(u)
     ppu = aux.project_local(pu, S_local)
     for k, (a, b) in enumerate(zip(pu, ppu)):
@@ -150,7 +153,7 @@ def test_all_modes_reproduce_fine_robin_solution():
     cm = geometry.unit_square(16, 4)
     model = models.get_model(1)
     om, _, _ = primal_ms.build_omega1_multiscale(
-        cm, model, cem=multiscale.CEMOptions(layers=4, nbasis=multiscale.ALL_MODES)
+        cm, model, cem=cem.CEMOptions(layers=4, nbasis=cem.ALL_MODES)
     )
     assert om.solver.factor.rank == int(np.count_nonzero(om.ops.free))
     g = _robin_data(om)
@@ -209,10 +212,10 @@ def test_algorithm3_error_decreases_with_layers(mesh_32_8, number, gain):
 def test_offline_cache(tmp_path, mesh_32_8, caplog):
     cm = mesh_32_8
     model = models.get_model(2)
-    cem = multiscale.CEMOptions(layers=1, nbasis=2)
+    options = cem.CEMOptions(layers=1, nbasis=2)
 
     def build():
-        return primal_ms.build_omega1_multiscale(cm, model, cem=cem, cache_dir=tmp_path)[0]
+        return primal_ms.build_omega1_multiscale(cm, model, cem=options, cache_dir=tmp_path)[0]
 
     first = build()
     assert first.cache_status == "built"
@@ -240,12 +243,12 @@ def test_offline_cache(tmp_path, mesh_32_8, caplog):
         fh.truncate(100)
     assert build().cache_status == "rebuilt"
     # the key changes with the material, α and the options
-    key = multiscale.offline_key(first.ops, first.grid, cem, h=cm.h)
-    other = primal_ms.build_omega1_multiscale(cm, models.get_model(2, E_high=1e4), cem=cem)[0]
-    assert multiscale.offline_key(other.ops, other.grid, cem, h=cm.h) != key
-    assert multiscale.offline_key(first.ops, first.grid, multiscale.CEMOptions(layers=2, nbasis=2), h=cm.h) != key
-    first_alpha2 = primal_ms.build_omega1_multiscale(cm, model, alpha="2E", cem=cem)[0]
-    assert multiscale.offline_key(first_alpha2.ops, first_alpha2.grid, cem, h=cm.h) != key
+    key = cem.offline_key(first.ops, first.grid, options, h=cm.h)
+    other = primal_ms.build_omega1_multiscale(cm, models.get_model(2, E_high=1e4), cem=options)[0]
+    assert cem.offline_key(other.ops, other.grid, options, h=cm.h) != key
+    assert cem.offline_key(first.ops, first.grid, cem.CEMOptions(layers=2, nbasis=2), h=cm.h) != key
+    first_alpha2 = primal_ms.build_omega1_multiscale(cm, model, alpha="2E", cem=options)[0]
+    assert cem.offline_key(first_alpha2.ops, first_alpha2.grid, options, h=cm.h) != key
 
 
 # -- input validation -------------------------------------------------------------------------------
@@ -255,17 +258,17 @@ def test_offline_cache(tmp_path, mesh_32_8, caplog):
 )
 def test_options_validated(kwargs):
     with pytest.raises(InputError):
-        multiscale.CEMOptions(**kwargs)
+        cem.CEMOptions(**kwargs)
 
 
 def test_refuses_parallel_communicator():
     with pytest.raises(InputError, match="one MPI process"):
-        multiscale.require_serial(SimpleNamespace(size=2))
+        cem.require_serial(SimpleNamespace(size=2))
 
 
 def test_threshold_limits_modes(omega1_32_8):
     om = omega1_32_8
-    aux = multiscale.build_auxiliary_space(om.ops, om.grid, multiscale.CEMOptions(nbasis=5, threshold=1e-6))
+    aux = cem.build_auxiliary_space(om.ops, om.grid, cem.CEMOptions(nbasis=5, threshold=1e-6))
     # rigid-body modes only (λ = 0) where the cell floats; one mode at least elsewhere
     counts = np.diff(aux.offsets)
     assert counts.min() >= 1 and counts.max() == 3

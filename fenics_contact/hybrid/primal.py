@@ -17,13 +17,13 @@ from mpi4py import MPI
 
 from dolfinx import fem
 
-from fenics_contact.contact import ContactProfile, NewtonOptions
-from fenics_contact.dd import HybridStep, IterationHistory, IterationOptions, IterationResult, iterate
-from fenics_contact.fields import material_fields
-from fenics_contact.geometry import ContactMesh
-from fenics_contact.models import TestModel
-from fenics_contact.primal import PrimalSubproblem
-from fenics_contact.transmission import InterfaceSpace, robin_coefficient, split_mesh
+from fenics_contact.fem.contact import ContactProfile, NewtonOptions
+from fenics_contact.hybrid.iteration import HybridStep, IterationHistory, IterationOptions, IterationResult, iterate
+from fenics_contact.problem.fields import material_fields
+from fenics_contact.problem.geometry import ContactMesh
+from fenics_contact.problem.models import TestModel
+from fenics_contact.fem.primal import PrimalSubproblem
+from fenics_contact.hybrid.transmission import InterfaceSpace, robin_coefficient, split_mesh
 
 __all__ = ["PrimalHybridStep", "HybridResult", "solve_primal_hybrid", "DEFAULT_ALPHA"]
 

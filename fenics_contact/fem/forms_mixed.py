@@ -29,7 +29,7 @@ cubic on each edge, continuous at vertices):
 
 import ufl
 
-from fenics_contact.materials import compliance
+from fenics_contact.problem.materials import compliance
 
 __all__ = [
     "BOUNDARY_QUADRATURE_DEGREE",
@@ -141,7 +141,7 @@ def mixed_residual(s, u, t, v, *, lmbda, mu, f, n, contact=None, robin=None):
 
         F_τ = (Aσ, τ) + (div τ, u) [+ p_ε(σ; τ)] [+ r_β(σ, τ) − d(g; τ)],   F_v = (div σ, v) + (f, v)
 
-    ``contact`` = (1/ε, ds_C), ``robin`` = (β, g, ds_γ) with g possibly None; both optional.
+    ``fem.contact`` = (1/ε, ds_C), ``robin`` = (β, g, ds_γ) with g possibly None; both optional.
     """
     F = compliance_form(s, t, lmbda, mu) + ufl.inner(ufl.div(stress_tensor(t)), u) * ufl.dx
     if contact is not None:

@@ -7,7 +7,7 @@
 
 Offline (``MultiscalePrimalHybridStep.__init__``): local spectral problems,
 relaxed CEM bases, the Robin correction N and the factorized coarse matrix.
-Online (``dd.iterate``): one coarse solve, one Ω₂ Newton solve and the update per
+Online (``hybrid.iteration.iterate``): one coarse solve, one Ω₂ Newton solve and the update per
 iteration. The fixed point is the CEM-GMsFEM/FEM hybrid solution, whose
 difference to the fine monolithic solution is the multiscale error (it falls
 with the oversampling layers m and the number of local modes).
@@ -22,16 +22,24 @@ from mpi4py import MPI
 
 from dolfinx import fem
 
-from fenics_contact import multiscale
-from fenics_contact.contact import NewtonOptions
-from fenics_contact.dd import IterationOptions, iterate
+from fenics_contact.multiscale.cem import (
+    CEMOptions,
+    DEFAULT_S_FACTOR,
+    MultiscaleRobinSolver,
+    assemble_fine_operators,
+    coarse_grid,
+    offline_stage,
+    require_serial,
+)
+from fenics_contact.fem.contact import NewtonOptions
+from fenics_contact.hybrid.iteration import IterationOptions, iterate
 from fenics_contact.errors import InputError
-from fenics_contact.fields import material_fields
-from fenics_contact.geometry import ContactMesh
-from fenics_contact.models import TestModel
-from fenics_contact.primal import PrimalSubproblem
-from fenics_contact.primal_hybrid import HybridResult
-from fenics_contact.transmission import InterfaceSpace, Part, robin_coefficient, split_mesh
+from fenics_contact.problem.fields import material_fields
+from fenics_contact.problem.geometry import ContactMesh
+from fenics_contact.problem.models import TestModel
+from fenics_contact.fem.primal import PrimalSubproblem
+from fenics_contact.hybrid.primal import HybridResult
+from fenics_contact.hybrid.transmission import InterfaceSpace, Part, robin_coefficient, split_mesh
 
 __all__ = ["Omega1Multiscale", "build_omega1_multiscale", "MultiscalePrimalHybridStep", "solve_primal_ms_hybrid"]
 
@@ -49,10 +57,10 @@ class Omega1Multiscale:
         interface: InterfaceSpace,
         alpha: np.ndarray,
         *,
-        cem: multiscale.CEMOptions,
+        cem: CEMOptions,
         cache_dir: str | Path | None = None,
     ) -> None:
-        multiscale.require_serial(cm.comm)
+        require_serial(cm.comm)
         t0 = time.perf_counter()
         part_index = 0
         part = parts[part_index]
@@ -62,15 +70,15 @@ class Omega1Multiscale:
         self.alpha_fn = fem.Function(self.V, name="alpha")
         interface.to_part(alpha, part_index, self.alpha_fn)
         self.fields = material_fields(part.mesh, model)
-        self.grid = multiscale.coarse_grid(part.mesh, part.cell_map, cm.coarse_cell, cm.H)
-        self.ops = multiscale.assemble_fine_operators(
+        self.grid = coarse_grid(part.mesh, part.cell_map, cm.coarse_cell, cm.H)
+        self.ops = assemble_fine_operators(
             self.V, part.facet_tags, self.fields, self.alpha_fn, self.grid, s_factor=cem.s_factor
         )
         t_assembly = time.perf_counter() - t0
-        self.space, self.cache_status = multiscale.offline_stage(
+        self.space, self.cache_status = offline_stage(
             self.ops, self.grid, cem, h=cm.h, cache_dir=cache_dir
         )
-        self.solver = multiscale.MultiscaleRobinSolver(self.ops, self.space)
+        self.solver = MultiscaleRobinSolver(self.ops, self.space)
         # interface value index (InterfaceSpace ordering) → position in ops.gamma
         probe = fem.Function(self.V)
         interface.to_part(np.arange(1, interface.size + 1, dtype=np.float64), part_index, probe)
@@ -114,11 +122,11 @@ def build_omega1_multiscale(
     model: TestModel,
     *,
     alpha: float | str = "E",
-    cem: multiscale.CEMOptions = multiscale.CEMOptions(),
+    cem: CEMOptions = CEMOptions(),
     cache_dir: str | Path | None = None,
 ) -> tuple[Omega1Multiscale, InterfaceSpace, np.ndarray]:
     """The Ω₁ multiscale solver on its own (for linear Robin problems and tests): (Ω₁ solver, interface, α)."""
-    multiscale.require_serial(cm.comm)
+    require_serial(cm.comm)
     parts = split_mesh(cm)
     interface = InterfaceSpace(cm, parts, shape=(cm.mesh.geometry.dim,))
     alpha_values = robin_coefficient(alpha, material_fields(cm.mesh, model).E, interface, cm.h)
@@ -127,7 +135,7 @@ def build_omega1_multiscale(
 
 
 class MultiscalePrimalHybridStep:
-    """The transmission map T of Algorithm 3 (``dd.HybridStep`` protocol)."""
+    """The transmission map T of Algorithm 3 (``hybrid.iteration.HybridStep`` protocol)."""
 
     def __init__(
         self,
@@ -136,12 +144,12 @@ class MultiscalePrimalHybridStep:
         *,
         alpha: float | str,
         delta: float,
-        cem: multiscale.CEMOptions = multiscale.CEMOptions(),
+        cem: CEMOptions = CEMOptions(),
         newton: NewtonOptions = NewtonOptions(),
         reference: fem.Function | None = None,
         cache_dir: str | Path | None = None,
     ) -> None:
-        multiscale.require_serial(cm.comm)
+        require_serial(cm.comm)
         if cm.H is None:
             raise InputError("Algorithm 3 needs a coarse grid: build the mesh with geometry.unit_square(n, n_coarse)")
         start = time.perf_counter()
@@ -255,7 +263,7 @@ def solve_primal_ms_hybrid(
     layers: int = 3,
     nbasis: int | None = 3,
     threshold: float | None = None,
-    s_factor: float = multiscale.DEFAULT_S_FACTOR,
+    s_factor: float = DEFAULT_S_FACTOR,
     options: IterationOptions = IterationOptions(),
     newton: NewtonOptions = NewtonOptions(),
     reference: fem.Function | None = None,
@@ -267,7 +275,7 @@ def solve_primal_ms_hybrid(
     bases, N and the coarse factorization (breakdown in ``result.step.offline_times``);
     ``time_online_s`` the iteration.
     """
-    cem = multiscale.CEMOptions(layers=layers, nbasis=nbasis, threshold=threshold, s_factor=s_factor)
+    cem = CEMOptions(layers=layers, nbasis=nbasis, threshold=threshold, s_factor=s_factor)
     step = MultiscalePrimalHybridStep(
         cm, model, alpha=alpha, delta=delta, cem=cem, newton=newton, reference=reference, cache_dir=cache_dir
     )

@@ -6,9 +6,9 @@
     update:         g₁₂ ← g₂₁ − 2β σ₂n₂,   g₂₁ ← g₁₂ − 2β σ₁n₁   (old values on the right)
 
 Both subdomains use Arnold–Winther stresses × DG P1 displacements
-(``mixed.MixedSubproblem``); Ω₁ is factorized once, Ω₂ runs the globalized
+(``fem.mixed.MixedSubproblem``); Ω₁ is factorized once, Ω₂ runs the globalized
 semismooth Newton warm-started from its last solution and refactorizes only
-when its active set changes.  The loop is ``dd.iterate`` (plain update as in the
+when its active set changes.  The loop is ``hybrid.iteration.iterate`` (plain update as in the
 paper, or Anderson acceleration).
 
 **Space of the Robin data and quadrature on γ.**  The normal trace σn of an AW
@@ -33,7 +33,7 @@ components at a vertex, X̃_h only the traction σn, so σ_tt (= σ_yy on γ) ma
 differ on the two sides of a γ vertex.  No transmission condition can restore
 that (σ_tt is not a trace quantity), so this is the closest fixed point a
 non-overlapping Robin iteration with AW subdomain spaces can have.
-``mixed.solve_mixed_monolithic(split_interface=True)`` computes it directly; the
+``fem.mixed.solve_mixed_monolithic(split_interface=True)`` computes it directly; the
 iterate converges to it to round-off (1e−10 at tolerance 1e−10).  Its distance
 from the standard AW solution (``split_interface=False``, the paper's
 reference) is a discretization effect, concentrated where the load bands'
@@ -59,17 +59,17 @@ import scipy.sparse.linalg as spla
 from dolfinx import fem
 from scipy.spatial import cKDTree
 
-from fenics_contact.contact import NewtonOptions
-from fenics_contact.dd import (
+from fenics_contact.fem.contact import NewtonOptions
+from fenics_contact.hybrid.iteration import (
     IterationHistory,
     IterationOptions,
     IterationResult,
     iterate,
 )
 from fenics_contact.errors import InputError
-from fenics_contact.fields import material_fields
-from fenics_contact.geometry import ContactMesh
-from fenics_contact.mixed import (
+from fenics_contact.problem.fields import material_fields
+from fenics_contact.problem.geometry import ContactMesh
+from fenics_contact.fem.mixed import (
     MixedContactProfile,
     MixedSolution,
     MixedSubproblem,
@@ -77,8 +77,8 @@ from fenics_contact.mixed import (
     contact_modulus,
     default_epsilon,
 )
-from fenics_contact.models import TestModel
-from fenics_contact.transmission import split_mesh, sub_to_parent_dofs
+from fenics_contact.problem.models import TestModel
+from fenics_contact.hybrid.transmission import split_mesh, sub_to_parent_dofs
 
 __all__ = ["MixedHybridResult", "MixedHybridStep", "solve_mixed_hybrid", "transmission_coefficient"]
 
@@ -104,7 +104,7 @@ def transmission_coefficient(beta: float | str, h: float) -> float:
 
 
 class MixedHybridStep:
-    """The transmission map T of Algorithm 2 on a tagged mesh (implements ``dd.HybridStep``)."""
+    """The transmission map T of Algorithm 2 on a tagged mesh (implements ``hybrid.iteration.HybridStep``)."""
 
     def __init__(
         self,
@@ -272,7 +272,7 @@ def solve_mixed_hybrid(
 ) -> MixedHybridResult:
     """Algorithm 2 to the relative-change tolerance; ``reference`` adds e_σ, e_u (per iteration and final).
 
-    ``epsilon`` defaults to ``mixed.default_epsilon`` (pass the reference's ε when comparing).
+    ``epsilon`` defaults to ``fem.mixed.default_epsilon`` (pass the reference's ε when comparing).
     """
     start = time.perf_counter()
     if reference is not None and epsilon is None:

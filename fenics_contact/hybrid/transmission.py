@@ -14,9 +14,9 @@ from dolfinx import fem, la
 from dolfinx import mesh as dmesh
 
 from fenics_contact.errors import InputError
-from fenics_contact.fields import SubmeshTransfer
-from fenics_contact.geometry import ContactMesh
-from fenics_contact.tags import Boundary, Subdomain
+from fenics_contact.problem.fields import SubmeshTransfer
+from fenics_contact.problem.geometry import ContactMesh
+from fenics_contact.problem.tags import Boundary, Subdomain
 
 __all__ = ["InterfaceSpace", "Part", "robin_coefficient", "split_mesh", "sub_to_parent_dofs"]
 

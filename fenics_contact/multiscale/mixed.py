@@ -3,20 +3,20 @@
     Ω₁ (multiscale, linear): (r, w) ∈ X_ms × U_aux,
         (Ar, τ) + (div τ, w) + β∫_γ (rn₁)·(τn₁) = ∫_γ g₁₂·(τn₁) − [(AQg₁₂, τ) + (div τ, Ng₁₂) + β∫_γ (Qg₁₂n₁)·(τn₁)]
         −(div r, v) = (f, v) + (div Qg₁₂, v);     σ₁ = r + Q g₁₂,  u₁ = w + N g₁₂
-    Ω₂ (fine, nonlinear): as in Algorithm 2 (``mixed.MixedSubproblem``, globalized semismooth Newton)
+    Ω₂ (fine, nonlinear): as in Algorithm 2 (``fem.mixed.MixedSubproblem``, globalized semismooth Newton)
     update:  g₁₂ ← g₂₁ − 2β σ₂n₂,   g₂₁ ← g₁₂ − 2β σ₁n₁
 
-The Robin data and the Ω₂ side are exactly those of ``mixed_hybrid`` (values
+The Robin data and the Ω₂ side are exactly those of ``hybrid.mixed`` (values
 of continuous P3 vector functions at the γ nodes); the step subclasses
 ``MixedHybridStep`` and replaces its Ω₁ solve by the coarse solve of
-``mixed_multiscale.MixedMultiscaleOmega1``.  The multiscale normal trace σ₁n₁
+``multiscale.mixed_cem.MixedMultiscaleOmega1``.  The multiscale normal trace σ₁n₁
 can jump at the coarse nodes of γ (the local spaces leave σ_tt free on inner
 patch boundaries); the update uses the average of the two one-sided values
 there.
 
 Ω₁ is linear, so its coarse state is an affine function of g₁₂, precomputed
 offline with one coarse solve per interface value
-(``mixed_multiscale.InterfaceResponse``).  Online, the Ω₁ side costs a few
+(``multiscale.mixed_cem.InterfaceResponse``).  Online, the Ω₁ side costs a few
 matrix–vector products of the size of the interface data (trace, and the
 stopping rule's norms from Gram matrices in g); σ₁ and u₁ are formed on the
 fine mesh only at the end (output and errors).  Serial only.
@@ -39,26 +39,26 @@ import numpy as np
 import ufl
 from dolfinx import fem
 
-from fenics_contact import forms_mixed
-from fenics_contact.contact import NewtonOptions
-from fenics_contact.dd import (
+from fenics_contact.fem import forms_mixed
+from fenics_contact.fem.contact import NewtonOptions
+from fenics_contact.hybrid.iteration import (
     IterationHistory,
     IterationOptions,
     IterationResult,
     iterate,
 )
 from fenics_contact.errors import InputError
-from fenics_contact.geometry import ContactMesh
-from fenics_contact.mixed import MixedContactProfile, MixedSolution
-from fenics_contact.mixed_hybrid import MixedHybridStep
-from fenics_contact.mixed_multiscale import (
+from fenics_contact.problem.geometry import ContactMesh
+from fenics_contact.fem.mixed import MixedContactProfile, MixedSolution
+from fenics_contact.hybrid.mixed import MixedHybridStep
+from fenics_contact.multiscale.mixed_cem import (
     DEFAULT_MAX_NBASIS,
     DEFAULT_MIN_GAP,
     MixedCEMOptions,
     MixedMultiscaleOmega1,
 )
-from fenics_contact.models import TestModel
-from fenics_contact.multiscale import DEFAULT_S_FACTOR, coarse_grid, require_serial
+from fenics_contact.problem.models import TestModel
+from fenics_contact.multiscale.cem import DEFAULT_S_FACTOR, coarse_grid, require_serial
 
 __all__ = ["MixedMsResult", "MixedMultiscaleHybridStep", "solve_mixed_ms_hybrid"]
 
@@ -66,7 +66,7 @@ log = logging.getLogger(__name__)
 
 
 class MixedMultiscaleHybridStep(MixedHybridStep):
-    """The transmission map T of Algorithm 4 (``dd.HybridStep`` protocol)."""
+    """The transmission map T of Algorithm 4 (``hybrid.iteration.HybridStep`` protocol)."""
 
     def __init__(
         self,
@@ -106,7 +106,7 @@ class MixedMultiscaleHybridStep(MixedHybridStep):
         self._uref1 = u1[ops.u_rows]
 
     def fine_omega1(self) -> tuple[np.ndarray, np.ndarray]:
-        """σ₁ (n_cells, 30) and u₁ (n_cells, 6) of the current iterate, cell-major (``mixed_multiscale``)."""
+        """σ₁ (n_cells, 30) and u₁ (n_cells, 6) of the current iterate, cell-major (``multiscale.mixed_cem``)."""
         r, w = self.omega1.solve(self.g12)
         return self.omega1.fine_stress(r, self.g12), self.omega1.fine_displacement(w, self.g12)
 
@@ -248,12 +248,12 @@ def solve_mixed_ms_hybrid(
 ) -> MixedMsResult:
     """Algorithm 4 to the relative-change tolerance; e_σ, e_u against ``reference`` (fine monolithic mixed).
 
-    ``epsilon`` defaults to the reference's ε (else ``mixed.default_epsilon``).  ``dofs`` counts
+    ``epsilon`` defaults to the reference's ε (else ``fem.mixed.default_epsilon``).  ``dofs`` counts
     the fine Ω₁ problem, dim X_ms, dim U_aux, Ω₂ and the interface data; ``time_offline_s``
     covers the subproblem set-up, Stage I, Stage II, the correction and the coarse
     factorization (``offline_times``); ``time_online_s`` the iteration.  With ``cache_dir`` the
     offline data are stored there and reused when the configuration matches
-    (``mixed_multiscale.MixedOfflineCache``; ``step.omega1.cache_status``).  ``nbasis`` is the least
+    (``multiscale.mixed_cem.MixedOfflineCache``; ``step.omega1.cache_status``).  ``nbasis`` is the least
     number of Stage I modes per coarse cell; ``min_gap`` adds modes where the first eigenvalue left
     out is below it (up to ``max_nbasis``; ``None`` keeps exactly ``nbasis``, the paper's fixed l).
     """

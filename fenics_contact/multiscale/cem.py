@@ -54,11 +54,12 @@ from slepc4py import SLEPc
 from dolfinx import fem, la
 from dolfinx import mesh as dmesh
 
-from fenics_contact import __version__, forms_primal
+from fenics_contact import __version__
+from fenics_contact.fem import forms_primal
 from fenics_contact.errors import ConvergenceError, InputError
-from fenics_contact.fields import MaterialFields
-from fenics_contact.linalg import assemble_scipy, scipy_to_petsc
-from fenics_contact.tags import Boundary
+from fenics_contact.problem.fields import MaterialFields
+from fenics_contact.fem.linalg import assemble_scipy, scipy_to_petsc
+from fenics_contact.problem.tags import Boundary
 
 __all__ = [
     "CEMOptions",
@@ -817,7 +818,7 @@ def _unpack(arrays: dict, ops: FineOperators, grid: CoarseGrid) -> MultiscaleSpa
 class OfflineCache:
     """npz files ``<prefix>_<key>.npz`` in a directory; each stores its full key and a checksum of its arrays.
 
-    Subclasses set ``prefix`` and the ``pack`` / ``unpack`` hooks (``mixed_multiscale.MixedOfflineCache``).
+    Subclasses set ``prefix`` and the ``pack`` / ``unpack`` hooks (``multiscale.mixed_cem.MixedOfflineCache``).
     """
 
     prefix = "cem"

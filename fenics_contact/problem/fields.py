@@ -11,8 +11,8 @@ from dolfinx import fem, la
 from dolfinx import mesh as dmesh
 
 from fenics_contact.errors import InputError
-from fenics_contact.materials import check_poisson_ratio, check_youngs_modulus, lame
-from fenics_contact.models import TestModel
+from fenics_contact.problem.materials import check_poisson_ratio, check_youngs_modulus, lame
+from fenics_contact.problem.models import TestModel
 
 __all__ = ["MaterialFields", "cell_function", "material_fields", "SubmeshTransfer"]
 

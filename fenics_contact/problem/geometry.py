@@ -22,7 +22,7 @@ import dolfinx.io.gmsh
 from dolfinx import mesh as dmesh
 
 from fenics_contact.errors import InputError, MeshTagError
-from fenics_contact.tags import PHYSICAL_NAMES, Boundary, Subdomain
+from fenics_contact.problem.tags import PHYSICAL_NAMES, Boundary, Subdomain
 
 __all__ = ["ContactMesh", "unit_square", "read_mesh", "gmsh_session", "build_unit_square_model"]
 

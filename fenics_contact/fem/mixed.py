@@ -57,9 +57,9 @@ factorizations (MUMPS LU of the saddle-point matrix) are cached by active set.
 the vertices of γ (Ω₁ and Ω₂ keep their own tangential-tangential
 stress there; the normal traction σn stays continuous).  That space X̃_h is
 exactly the space of the converged iterate of Algorithm 2 (see
-``mixed_hybrid``), so this monolithic solve is its exact fixed point.
+``hybrid.mixed``), so this monolithic solve is its exact fixed point.
 
-Serial only (one MPI rank), like ``arnold_winther``.
+Serial only (one MPI rank), like ``fem.arnold_winther``.
 """
 
 import logging
@@ -76,15 +76,15 @@ from dolfinx import fem
 from dolfinx import mesh as dmesh
 import dolfinx.fem.petsc
 
-from fenics_contact import forms_mixed
-from fenics_contact.arnold_winther import ArnoldWintherSpace
-from fenics_contact.contact import ContactProfile, NewtonHistory, NewtonOptions
+from fenics_contact.fem import forms_mixed
+from fenics_contact.fem.arnold_winther import ArnoldWintherSpace
+from fenics_contact.fem.contact import ContactProfile, NewtonHistory, NewtonOptions
 from fenics_contact.errors import ConvergenceError, InputError
-from fenics_contact.fields import MaterialFields, material_fields
-from fenics_contact.geometry import ContactMesh
-from fenics_contact.linalg import DIRECT_OPTIONS, DirectSolver, assemble_scipy, petsc_to_scipy, scipy_to_petsc
-from fenics_contact.models import TestModel
-from fenics_contact.tags import Boundary, Subdomain
+from fenics_contact.problem.fields import MaterialFields, material_fields
+from fenics_contact.problem.geometry import ContactMesh
+from fenics_contact.fem.linalg import DIRECT_OPTIONS, DirectSolver, assemble_scipy, petsc_to_scipy, scipy_to_petsc
+from fenics_contact.problem.models import TestModel
+from fenics_contact.problem.tags import Boundary, Subdomain
 
 __all__ = [
     "MIXED_SOLVER_OPTIONS",
@@ -377,7 +377,7 @@ def _split_interface_columns(
 class MixedSubproblem:
     """(Aσ, τ) + (div τ, u) [+ p_ε(σ; τ)] [+ r_β(σ, τ)] = [d(g; τ)],  (div σ, v) = −(f, v) on one mesh.
 
-    Three roles, like ``primal.PrimalSubproblem``: the monolithic problem
+    Three roles, like ``fem.primal.PrimalSubproblem``: the monolithic problem
     (contact, no Robin), the linear Ω₁ problem (Robin on γ, no contact: one
     factorization, then one solve per call) and the Ω₂ problem (contact and
     Robin: globalized semismooth Newton warm-started from the last solution,

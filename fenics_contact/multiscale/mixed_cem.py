@@ -75,10 +75,11 @@ from dolfinx import fem
 from dolfinx import mesh as dmesh
 from petsc4py import PETSc
 
-from fenics_contact import __version__, forms_mixed
+from fenics_contact import __version__
+from fenics_contact.fem import forms_mixed
 from fenics_contact.errors import InputError
-from fenics_contact.linalg import assemble_scipy, scipy_to_petsc
-from fenics_contact.multiscale import (
+from fenics_contact.fem.linalg import assemble_scipy, scipy_to_petsc
+from fenics_contact.multiscale.cem import (
     DEFAULT_S_FACTOR,
     CoarseGrid,
     OfflineCache,
@@ -86,7 +87,7 @@ from fenics_contact.multiscale import (
     kappa_tilde,
     require_serial,
 )
-from fenics_contact.tags import Boundary
+from fenics_contact.problem.tags import Boundary
 
 __all__ = [
     "DEFAULT_MAX_NBASIS",
@@ -293,7 +294,7 @@ def _trace_operator(msh: dmesh.Mesh, dg: fem.FunctionSpace, gamma: np.ndarray, p
 
 
 def cell_operators(sub, H: float, weight: str = "lambda+2mu", s_factor: float = 1.0) -> CellOperators:
-    """Cell-major operators of the Ω₁ ``mixed.MixedSubproblem`` ``sub`` (Robin β, no contact)."""
+    """Cell-major operators of the Ω₁ ``fem.mixed.MixedSubproblem`` ``sub`` (Robin β, no contact)."""
     msh, ft, fields = sub.mesh, sub.facet_tags, sub.fields
     if sub.beta is None:
         raise InputError("the Ω₁ subproblem needs a Robin coefficient β")
@@ -951,7 +952,7 @@ def _unpack_offline(arrays: dict, ops: CellOperators, grid: CoarseGrid) -> Offli
 
 
 class MixedOfflineCache(OfflineCache):
-    """npz files ``mixed_cem_<key>.npz``: ``multiscale.OfflineCache`` holding ``OfflineData``."""
+    """npz files ``mixed_cem_<key>.npz``: ``multiscale.cem.OfflineCache`` holding ``OfflineData``."""
 
     prefix = "mixed_cem"
 

@@ -57,7 +57,7 @@ import scipy.sparse as sp
 import ufl
 from petsc4py import PETSc
 
-from fenics_contact.linalg import petsc_to_scipy, scipy_to_petsc
+from fenics_contact.fem.linalg import petsc_to_scipy, scipy_to_petsc
 
 __all__ = [
     "ArnoldWintherSpace",
@@ -608,7 +608,7 @@ def solve_mixed_elasticity(
 
 
 # ---------------------------------------------------------------------------
-# Benchmark:  python -m fenics_contact.arnold_winther --sizes 16 32 64 --nu 0.3
+# Benchmark:  python -m fenics_contact.fem.arnold_winther --sizes 16 32 64 --nu 0.3
 # ---------------------------------------------------------------------------
 
 

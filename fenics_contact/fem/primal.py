@@ -19,13 +19,13 @@ from dolfinx import fem
 from dolfinx import mesh as dmesh
 import dolfinx.fem.petsc
 
-from fenics_contact import forms_primal
-from fenics_contact.contact import ContactProfile, NewtonHistory, NewtonOptions, semismooth_newton
+from fenics_contact.fem import forms_primal
+from fenics_contact.fem.contact import ContactProfile, NewtonHistory, NewtonOptions, semismooth_newton
 from fenics_contact.errors import InputError
-from fenics_contact.fields import MaterialFields
-from fenics_contact.linalg import DirectSolver, quadratic_form
-from fenics_contact.materials import strain, stress
-from fenics_contact.tags import Boundary
+from fenics_contact.problem.fields import MaterialFields
+from fenics_contact.fem.linalg import DirectSolver, quadratic_form
+from fenics_contact.problem.materials import strain, stress
+from fenics_contact.problem.tags import Boundary
 
 __all__ = ["PrimalSubproblem", "PrimalSolution", "solve_primal_monolithic", "default_penalty"]
 

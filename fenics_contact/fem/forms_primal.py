@@ -9,7 +9,7 @@ which makes the contact nonlinearity and the Robin transmission nodal (METHOD §
 
 import ufl
 
-from fenics_contact.materials import strain, stress
+from fenics_contact.problem.materials import strain, stress
 
 __all__ = [
     "vertex_measure",

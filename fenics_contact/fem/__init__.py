@@ -1,0 +1,1 @@
+"""Finite elements: pure UFL forms, the Arnold–Winther space, semismooth Newton, primal and mixed subproblems."""

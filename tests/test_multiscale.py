@@ -48,13 +48,13 @@ def mesh_32_8():
 @pytest.fixture(scope="module")
 def omega1_32_8(mesh_32_8):
     """Ω₁ of model 1 at h = 1/32, H = 1/8 with m = 2, l = 3."""
-    om, _, _ = primal_ms.build_omega1_multiscale(
+    om, _, _ = cem.build_omega1_multiscale(
         mesh_32_8, models.get_model(1), cem=cem.CEMOptions(layers=2, nbasis=3)
     )
     return om
 
 
-def _robin_data(om: primal_ms.Omega1Multiscale) -> np.ndarray:
+def _robin_data(om: cem.Omega1Multiscale) -> np.ndarray:
     y = om.V.tabulate_dof_coordinates()[om.ops.gamma // 2, 1]
     return np.where(om.ops.gamma % 2 == 0, np.sin(3.0 * y) + 0.3, 0.5 * np.cos(2.0 * y))
 
@@ -152,7 +152,7 @@ def test_all_modes_reproduce_fine_robin_solution():
     """Patches = Ω₁ and every local mode kept: V_ms = V_h(Ω₁), so u₁ = w + Ng is the fine solution."""
     cm = geometry.unit_square(16, 4)
     model = models.get_model(1)
-    om, _, _ = primal_ms.build_omega1_multiscale(
+    om, _, _ = cem.build_omega1_multiscale(
         cm, model, cem=cem.CEMOptions(layers=4, nbasis=cem.ALL_MODES)
     )
     assert om.solver.factor.rank == int(np.count_nonzero(om.ops.free))
@@ -215,7 +215,7 @@ def test_offline_cache(tmp_path, mesh_32_8, caplog):
     options = cem.CEMOptions(layers=1, nbasis=2)
 
     def build():
-        return primal_ms.build_omega1_multiscale(cm, model, cem=options, cache_dir=tmp_path)[0]
+        return cem.build_omega1_multiscale(cm, model, cem=options, cache_dir=tmp_path)[0]
 
     first = build()
     assert first.cache_status == "built"
@@ -244,10 +244,10 @@ def test_offline_cache(tmp_path, mesh_32_8, caplog):
     assert build().cache_status == "rebuilt"
     # the key changes with the material, α and the options
     key = cem.offline_key(first.ops, first.grid, options, h=cm.h)
-    other = primal_ms.build_omega1_multiscale(cm, models.get_model(2, E_high=1e4), cem=options)[0]
+    other = cem.build_omega1_multiscale(cm, models.get_model(2, E_high=1e4), cem=options)[0]
     assert cem.offline_key(other.ops, other.grid, options, h=cm.h) != key
     assert cem.offline_key(first.ops, first.grid, cem.CEMOptions(layers=2, nbasis=2), h=cm.h) != key
-    first_alpha2 = primal_ms.build_omega1_multiscale(cm, model, alpha="2E", cem=options)[0]
+    first_alpha2 = cem.build_omega1_multiscale(cm, model, alpha="2E", cem=options)[0]
     assert cem.offline_key(first_alpha2.ops, first_alpha2.grid, options, h=cm.h) != key
 
 

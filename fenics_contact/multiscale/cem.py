@@ -34,10 +34,7 @@ stored key or checksum does not match is rebuilt, never used.
 import hashlib
 import json
 import logging
-import os
-import tempfile
 import time
-import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import NamedTuple
@@ -59,6 +56,11 @@ from fenics_contact.fem import forms_primal
 from fenics_contact.errors import ConvergenceError, InputError
 from fenics_contact.problem.fields import MaterialFields
 from fenics_contact.fem.linalg import assemble_scipy, scipy_to_petsc
+from fenics_contact.hybrid.transmission import InterfaceSpace, Part, robin_coefficient, split_mesh
+from fenics_contact.multiscale.cache import OfflineCache, hash_array
+from fenics_contact.problem.fields import material_fields
+from fenics_contact.problem.geometry import ContactMesh
+from fenics_contact.problem.models import TestModel
 from fenics_contact.problem.tags import Boundary
 
 __all__ = [
@@ -76,11 +78,13 @@ __all__ = [
     "CoarseFactor",
     "MultiscaleRobinSolver",
     "offline_key",
-    "OfflineCache",
+    "PrimalOfflineCache",
     "offline_stage",
     "local_matrices",
     "ALL_MODES",
     "require_serial",
+    "Omega1Multiscale",
+    "build_omega1_multiscale",
 ]
 
 log = logging.getLogger(__name__)
@@ -730,13 +734,6 @@ class MultiscaleRobinSolver:
 # ---------------------------------------------------------------------------------------
 # offline cache
 # ---------------------------------------------------------------------------------------
-def _hash_array(h: "hashlib._Hash", a: np.ndarray) -> None:
-    a = np.ascontiguousarray(a)
-    h.update(str(a.dtype).encode())
-    h.update(str(a.shape).encode())
-    h.update(a.tobytes())
-
-
 def offline_key(ops: FineOperators, grid: CoarseGrid, options: CEMOptions, *, h: float) -> str:
     """sha256 of everything the offline data depend on: mesh, coarse grid, E, ν, α, options, package version."""
     hasher = hashlib.sha256()
@@ -759,15 +756,7 @@ def offline_key(ops: FineOperators, grid: CoarseGrid, options: CEMOptions, *, h:
     hasher.update(json.dumps(meta, sort_keys=True).encode())
     for name in sorted(ops.key_data):
         hasher.update(name.encode())
-        _hash_array(hasher, ops.key_data[name])
-    return hasher.hexdigest()
-
-
-def _checksum(arrays: dict) -> str:
-    hasher = hashlib.sha256()
-    for name in sorted(arrays):
-        hasher.update(name.encode())
-        _hash_array(hasher, arrays[name])
+        hash_array(hasher, ops.key_data[name])
     return hasher.hexdigest()
 
 
@@ -815,77 +804,18 @@ def _unpack(arrays: dict, ops: FineOperators, grid: CoarseGrid) -> MultiscaleSpa
                                                                               "correction": 0.0, "total": 0.0})
 
 
-class OfflineCache:
-    """npz files ``<prefix>_<key>.npz`` in a directory; each stores its full key and a checksum of its arrays.
-
-    Subclasses set ``prefix`` and the ``pack`` / ``unpack`` hooks (``multiscale.mixed_cem.MixedOfflineCache``).
-    """
+class PrimalOfflineCache(OfflineCache):
+    """npz files ``cem_<key>.npz`` holding the primal ``MultiscaleSpace`` (``cache.OfflineCache``)."""
 
     prefix = "cem"
 
-    def __init__(self, directory: str | Path) -> None:
-        self.directory = Path(directory)
-
-    def path(self, key: str) -> Path:
-        return self.directory / f"{self.prefix}_{key[:24]}.npz"
-
     @staticmethod
-    def pack(obj) -> dict[str, np.ndarray]:
+    def pack(obj: "MultiscaleSpace") -> dict[str, np.ndarray]:
         return _pack(obj)
 
     @staticmethod
-    def unpack(arrays: dict[str, np.ndarray], *context):
+    def unpack(arrays: dict[str, np.ndarray], *context) -> "MultiscaleSpace":
         return _unpack(arrays, *context)
-
-    def load(self, key: str, *context) -> tuple[object | None, str]:
-        """(data, status): status is 'loaded', 'missing', or 'invalid: <why>' (the file is then ignored).
-
-        ``context`` is passed to ``unpack`` (the operators and grid the data must fit).
-        """
-        path = self.path(key)
-        if not path.is_file():
-            return None, "missing"
-        try:
-            with np.load(path, allow_pickle=False) as data:
-                arrays = {name: data[name] for name in data.files}
-            stored_key = str(arrays.pop("key"))
-            stored_sum = str(arrays.pop("checksum"))
-            if stored_key != key:
-                return None, "invalid: stored key differs (another configuration)"
-            if _checksum(arrays) != stored_sum:
-                return None, "invalid: checksum mismatch (corrupt file)"
-            return self.unpack(arrays, *context), "loaded"
-        except (OSError, EOFError, ValueError, KeyError, zipfile.BadZipFile) as err:  # unreadable/malformed: rebuild
-            return None, f"invalid: {type(err).__name__}: {err}"
-
-    def check_writable(self) -> None:
-        """Raise InputError unless a file can be created in the directory (creating the directory if needed)."""
-        try:
-            self.directory.mkdir(parents=True, exist_ok=True)
-            fd, tmp = tempfile.mkstemp(dir=self.directory, suffix=".npz.tmp")
-            os.close(fd)
-            os.remove(tmp)
-        except OSError as err:
-            raise InputError(f"the offline cache directory {self.directory} is not writable: {err}") from err
-
-    def save(self, key: str, obj) -> Path:
-        """Write atomically (temporary file + rename)."""
-        self.directory.mkdir(parents=True, exist_ok=True)
-        arrays = self.pack(obj)
-        arrays["checksum"] = np.array(_checksum(arrays))
-        arrays["key"] = np.array(key)
-        path = self.path(key)
-        fd, tmp = tempfile.mkstemp(dir=self.directory, suffix=".npz.tmp")
-        try:
-            with os.fdopen(fd, "wb") as fh:
-                np.savez(fh, **arrays)
-            os.chmod(tmp, 0o644)
-            os.replace(tmp, path)
-        except BaseException:
-            if os.path.exists(tmp):
-                os.remove(tmp)
-            raise
-        return path
 
 
 def offline_stage(
@@ -894,7 +824,7 @@ def offline_stage(
     """Build (or load from the cache) the multiscale space; returns (space, cache status)."""
     if cache_dir is None:
         return build_multiscale_space(ops, grid, options), "disabled"
-    cache = OfflineCache(cache_dir)
+    cache = PrimalOfflineCache(cache_dir)
     key = offline_key(ops, grid, options, h=h)
     t0 = time.perf_counter()
     space, status = cache.load(key, ops, grid)
@@ -907,3 +837,94 @@ def offline_stage(
     space = build_multiscale_space(ops, grid, options)
     cache.save(key, space)
     return space, "built" if status == "missing" else "rebuilt"
+
+
+# ---------------------------------------------------------------------------------------
+# the Ω₁ side of Algorithm 3
+# ---------------------------------------------------------------------------------------
+class Omega1Multiscale:
+    """The Ω₁ side of Algorithm 3: fine operators, coarse grid, multiscale space and the online solver."""
+
+    def __init__(
+        self,
+        cm: ContactMesh,
+        model: TestModel,
+        parts: tuple[Part, Part],
+        interface: InterfaceSpace,
+        alpha: np.ndarray,
+        *,
+        cem: CEMOptions,
+        cache_dir: str | Path | None = None,
+    ) -> None:
+        require_serial(cm.comm)
+        t0 = time.perf_counter()
+        part_index = 0
+        part = parts[part_index]
+        self.mesh = part.mesh
+        self.facet_tags = part.facet_tags
+        self.V = interface.spaces[part_index]
+        self.alpha_fn = fem.Function(self.V, name="alpha")
+        interface.to_part(alpha, part_index, self.alpha_fn)
+        self.fields = material_fields(part.mesh, model)
+        self.grid = coarse_grid(part.mesh, part.cell_map, cm.coarse_cell, cm.H)
+        self.ops = assemble_fine_operators(
+            self.V, part.facet_tags, self.fields, self.alpha_fn, self.grid, s_factor=cem.s_factor
+        )
+        t_assembly = time.perf_counter() - t0
+        self.space, self.cache_status = offline_stage(
+            self.ops, self.grid, cem, h=cm.h, cache_dir=cache_dir
+        )
+        self.solver = MultiscaleRobinSolver(self.ops, self.space)
+        # interface value index (InterfaceSpace ordering) → position in ops.gamma
+        probe = fem.Function(self.V)
+        interface.to_part(np.arange(1, interface.size + 1, dtype=np.float64), part_index, probe)
+        value_of_dof = np.rint(probe.x.array[self.ops.gamma]).astype(np.int64) - 1
+        if np.any(value_of_dof < 0) or np.unique(value_of_dof).size != interface.size:
+            raise InputError("the Ω₁ γ DOFs do not match the interface DOFs one to one")
+        self.gamma_of_value = np.empty(interface.size, dtype=np.int64)
+        self.gamma_of_value[value_of_dof] = np.arange(self.ops.gamma.size)
+        self.times = {
+            "assembly": t_assembly,
+            "eigen": self.space.times.get("eigen", 0.0),
+            "basis": self.space.times.get("basis", 0.0),
+            "correction": self.space.times.get("correction", 0.0),
+            "cache_load": self.space.times.get("load", 0.0),
+            "coarse": self.solver.time_s,
+        }
+
+    @property
+    def num_coarse_dofs(self) -> int:
+        """dim V_ms."""
+        return self.space.size
+
+    @property
+    def num_fine_dofs(self) -> int:
+        """Scalar DOFs of the fine Ω₁ P1 space (Γ_D included, as PrimalSubproblem.num_dofs counts them)."""
+        return self.ops.size
+
+    def solve(self, g12: np.ndarray) -> np.ndarray:
+        """u₁ on every Ω₁ DOF for Robin data g₁₂ (InterfaceSpace ordering)."""
+        g = np.zeros(self.ops.gamma.size)
+        g[self.gamma_of_value] = g12
+        return self.solver.solve(g)
+
+    def interface_values(self, u1: np.ndarray) -> np.ndarray:
+        """u₁ at the interface DOFs, in InterfaceSpace ordering."""
+        return u1[self.ops.gamma[self.gamma_of_value]]
+
+
+def build_omega1_multiscale(
+    cm: ContactMesh,
+    model: TestModel,
+    *,
+    alpha: float | str = "E",
+    cem: CEMOptions = CEMOptions(),
+    cache_dir: str | Path | None = None,
+) -> tuple[Omega1Multiscale, InterfaceSpace, np.ndarray]:
+    """The Ω₁ multiscale solver on its own (for linear Robin problems and tests): (Ω₁ solver, interface, α)."""
+    require_serial(cm.comm)
+    parts = split_mesh(cm)
+    interface = InterfaceSpace(cm, parts, shape=(cm.mesh.geometry.dim,))
+    alpha_values = robin_coefficient(alpha, material_fields(cm.mesh, model).E, interface, cm.h)
+    omega1 = Omega1Multiscale(cm, model, parts, interface, alpha_values, cem=cem, cache_dir=cache_dir)
+    return omega1, interface, alpha_values

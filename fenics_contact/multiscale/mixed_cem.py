@@ -79,11 +79,10 @@ from fenics_contact import __version__
 from fenics_contact.fem import forms_mixed
 from fenics_contact.errors import InputError
 from fenics_contact.fem.linalg import assemble_scipy, scipy_to_petsc
+from fenics_contact.multiscale.cache import OfflineCache, hash_array
 from fenics_contact.multiscale.cem import (
     DEFAULT_S_FACTOR,
     CoarseGrid,
-    OfflineCache,
-    _hash_array,
     kappa_tilde,
     require_serial,
 )
@@ -880,7 +879,7 @@ def mixed_offline_key(sub, ops: CellOperators, grid: CoarseGrid, options: MixedC
         arrays[f"ops_{name}_indptr"], arrays[f"ops_{name}_shape"] = X.indptr, np.array(X.shape)
     for name in sorted(arrays):
         hasher.update(name.encode())
-        _hash_array(hasher, arrays[name])
+        hash_array(hasher, arrays[name])
     return hasher.hexdigest()
 
 
@@ -952,7 +951,7 @@ def _unpack_offline(arrays: dict, ops: CellOperators, grid: CoarseGrid) -> Offli
 
 
 class MixedOfflineCache(OfflineCache):
-    """npz files ``mixed_cem_<key>.npz``: ``multiscale.cem.OfflineCache`` holding ``OfflineData``."""
+    """npz files ``mixed_cem_<key>.npz``: ``cache.OfflineCache`` holding ``OfflineData``."""
 
     prefix = "mixed_cem"
 

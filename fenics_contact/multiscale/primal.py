@@ -22,15 +22,7 @@ from mpi4py import MPI
 
 from dolfinx import fem
 
-from fenics_contact.multiscale.cem import (
-    CEMOptions,
-    DEFAULT_S_FACTOR,
-    MultiscaleRobinSolver,
-    assemble_fine_operators,
-    coarse_grid,
-    offline_stage,
-    require_serial,
-)
+from fenics_contact.multiscale.cem import DEFAULT_S_FACTOR, CEMOptions, Omega1Multiscale, require_serial
 from fenics_contact.fem.contact import NewtonOptions
 from fenics_contact.hybrid.iteration import IterationOptions, iterate
 from fenics_contact.errors import InputError
@@ -39,99 +31,11 @@ from fenics_contact.problem.geometry import ContactMesh
 from fenics_contact.problem.models import TestModel
 from fenics_contact.fem.primal import PrimalSubproblem
 from fenics_contact.hybrid.primal import HybridResult
-from fenics_contact.hybrid.transmission import InterfaceSpace, Part, robin_coefficient, split_mesh
+from fenics_contact.hybrid.transmission import InterfaceSpace, robin_coefficient, split_mesh
 
-__all__ = ["Omega1Multiscale", "build_omega1_multiscale", "MultiscalePrimalHybridStep", "solve_primal_ms_hybrid"]
+__all__ = ["MultiscalePrimalHybridStep", "solve_primal_ms_hybrid"]
 
 log = logging.getLogger(__name__)
-
-
-class Omega1Multiscale:
-    """The Ω₁ side of Algorithm 3: fine operators, coarse grid, multiscale space and the online solver."""
-
-    def __init__(
-        self,
-        cm: ContactMesh,
-        model: TestModel,
-        parts: tuple[Part, Part],
-        interface: InterfaceSpace,
-        alpha: np.ndarray,
-        *,
-        cem: CEMOptions,
-        cache_dir: str | Path | None = None,
-    ) -> None:
-        require_serial(cm.comm)
-        t0 = time.perf_counter()
-        part_index = 0
-        part = parts[part_index]
-        self.mesh = part.mesh
-        self.facet_tags = part.facet_tags
-        self.V = interface.spaces[part_index]
-        self.alpha_fn = fem.Function(self.V, name="alpha")
-        interface.to_part(alpha, part_index, self.alpha_fn)
-        self.fields = material_fields(part.mesh, model)
-        self.grid = coarse_grid(part.mesh, part.cell_map, cm.coarse_cell, cm.H)
-        self.ops = assemble_fine_operators(
-            self.V, part.facet_tags, self.fields, self.alpha_fn, self.grid, s_factor=cem.s_factor
-        )
-        t_assembly = time.perf_counter() - t0
-        self.space, self.cache_status = offline_stage(
-            self.ops, self.grid, cem, h=cm.h, cache_dir=cache_dir
-        )
-        self.solver = MultiscaleRobinSolver(self.ops, self.space)
-        # interface value index (InterfaceSpace ordering) → position in ops.gamma
-        probe = fem.Function(self.V)
-        interface.to_part(np.arange(1, interface.size + 1, dtype=np.float64), part_index, probe)
-        value_of_dof = np.rint(probe.x.array[self.ops.gamma]).astype(np.int64) - 1
-        if np.any(value_of_dof < 0) or np.unique(value_of_dof).size != interface.size:
-            raise InputError("the Ω₁ γ DOFs do not match the interface DOFs one to one")
-        self.gamma_of_value = np.empty(interface.size, dtype=np.int64)
-        self.gamma_of_value[value_of_dof] = np.arange(self.ops.gamma.size)
-        self.times = {
-            "assembly": t_assembly,
-            "eigen": self.space.times.get("eigen", 0.0),
-            "basis": self.space.times.get("basis", 0.0),
-            "correction": self.space.times.get("correction", 0.0),
-            "cache_load": self.space.times.get("load", 0.0),
-            "coarse": self.solver.time_s,
-        }
-
-    @property
-    def num_coarse_dofs(self) -> int:
-        """dim V_ms."""
-        return self.space.size
-
-    @property
-    def num_fine_dofs(self) -> int:
-        """Scalar DOFs of the fine Ω₁ P1 space (Γ_D included, as PrimalSubproblem.num_dofs counts them)."""
-        return self.ops.size
-
-    def solve(self, g12: np.ndarray) -> np.ndarray:
-        """u₁ on every Ω₁ DOF for Robin data g₁₂ (InterfaceSpace ordering)."""
-        g = np.zeros(self.ops.gamma.size)
-        g[self.gamma_of_value] = g12
-        return self.solver.solve(g)
-
-    def interface_values(self, u1: np.ndarray) -> np.ndarray:
-        """u₁ at the interface DOFs, in InterfaceSpace ordering."""
-        return u1[self.ops.gamma[self.gamma_of_value]]
-
-
-def build_omega1_multiscale(
-    cm: ContactMesh,
-    model: TestModel,
-    *,
-    alpha: float | str = "E",
-    cem: CEMOptions = CEMOptions(),
-    cache_dir: str | Path | None = None,
-) -> tuple[Omega1Multiscale, InterfaceSpace, np.ndarray]:
-    """The Ω₁ multiscale solver on its own (for linear Robin problems and tests): (Ω₁ solver, interface, α)."""
-    require_serial(cm.comm)
-    parts = split_mesh(cm)
-    interface = InterfaceSpace(cm, parts, shape=(cm.mesh.geometry.dim,))
-    alpha_values = robin_coefficient(alpha, material_fields(cm.mesh, model).E, interface, cm.h)
-    omega1 = Omega1Multiscale(cm, model, parts, interface, alpha_values, cem=cem, cache_dir=cache_dir)
-    return omega1, interface, alpha_values
 
 
 class MultiscalePrimalHybridStep:

@@ -1,0 +1,110 @@
+"""On-disk cache of offline data: npz files keyed by a hash of everything they depend on.
+
+A file stores its full key and a checksum of its arrays; one whose key or
+checksum does not match (another configuration, a corrupt or truncated file) is
+reported and rebuilt, never used. Files are written atomically (temporary file
+in the same directory, then rename). Subclasses set the file ``prefix`` and the
+``pack`` / ``unpack`` hooks (``cem.PrimalOfflineCache``, ``mixed_cem.MixedOfflineCache``).
+"""
+
+import hashlib
+import os
+import tempfile
+import zipfile
+from pathlib import Path
+
+import numpy as np
+
+from fenics_contact.errors import InputError
+
+__all__ = ["OfflineCache", "checksum", "hash_array"]
+
+
+def hash_array(h: "hashlib._Hash", a: np.ndarray) -> None:
+    a = np.ascontiguousarray(a)
+    h.update(str(a.dtype).encode())
+    h.update(str(a.shape).encode())
+    h.update(a.tobytes())
+
+
+def checksum(arrays: dict) -> str:
+    hasher = hashlib.sha256()
+    for name in sorted(arrays):
+        hasher.update(name.encode())
+        hash_array(hasher, arrays[name])
+    return hasher.hexdigest()
+
+
+class OfflineCache:
+    """npz files ``<prefix>_<key>.npz`` in a directory; each stores its full key and a checksum of its arrays.
+
+    Subclasses set ``prefix`` and the ``pack`` / ``unpack`` hooks (``cem.PrimalOfflineCache``, ``mixed_cem.MixedOfflineCache``).
+    """
+
+    prefix = "offline"
+
+    def __init__(self, directory: str | Path) -> None:
+        self.directory = Path(directory)
+
+    def path(self, key: str) -> Path:
+        return self.directory / f"{self.prefix}_{key[:24]}.npz"
+
+    @staticmethod
+    def pack(obj) -> dict[str, np.ndarray]:
+        """The arrays to store for ``obj`` (subclasses)."""
+        raise NotImplementedError
+
+    @staticmethod
+    def unpack(arrays: dict[str, np.ndarray], *context):
+        """The object rebuilt from stored arrays (subclasses)."""
+        raise NotImplementedError
+
+    def load(self, key: str, *context) -> tuple[object | None, str]:
+        """(data, status): status is 'loaded', 'missing', or 'invalid: <why>' (the file is then ignored).
+
+        ``context`` is passed to ``unpack`` (the operators and grid the data must fit).
+        """
+        path = self.path(key)
+        if not path.is_file():
+            return None, "missing"
+        try:
+            with np.load(path, allow_pickle=False) as data:
+                arrays = {name: data[name] for name in data.files}
+            stored_key = str(arrays.pop("key"))
+            stored_sum = str(arrays.pop("checksum"))
+            if stored_key != key:
+                return None, "invalid: stored key differs (another configuration)"
+            if checksum(arrays) != stored_sum:
+                return None, "invalid: checksum mismatch (corrupt file)"
+            return self.unpack(arrays, *context), "loaded"
+        except (OSError, EOFError, ValueError, KeyError, zipfile.BadZipFile) as err:  # unreadable/malformed: rebuild
+            return None, f"invalid: {type(err).__name__}: {err}"
+
+    def check_writable(self) -> None:
+        """Raise InputError unless a file can be created in the directory (creating the directory if needed)."""
+        try:
+            self.directory.mkdir(parents=True, exist_ok=True)
+            fd, tmp = tempfile.mkstemp(dir=self.directory, suffix=".npz.tmp")
+            os.close(fd)
+            os.remove(tmp)
+        except OSError as err:
+            raise InputError(f"the offline cache directory {self.directory} is not writable: {err}") from err
+
+    def save(self, key: str, obj) -> Path:
+        """Write atomically (temporary file + rename)."""
+        self.directory.mkdir(parents=True, exist_ok=True)
+        arrays = self.pack(obj)
+        arrays["checksum"] = np.array(checksum(arrays))
+        arrays["key"] = np.array(key)
+        path = self.path(key)
+        fd, tmp = tempfile.mkstemp(dir=self.directory, suffix=".npz.tmp")
+        try:
+            with os.fdopen(fd, "wb") as fh:
+                np.savez(fh, **arrays)
+            os.chmod(tmp, 0o644)
+            os.replace(tmp, path)
+        except BaseException:
+            if os.path.exists(tmp):
+                os.remove(tmp)
+            raise
+        return path

@@ -1,4 +1,4 @@
-"""Regenerate the figures of the README/docs: the E maps of the two test models (h = 1/64).
+"""Regenerate the figures of the README/docs: the E maps of the three test models (h = 1/64).
 
     .venv/bin/python docs/make_figures.py
 """
@@ -16,7 +16,7 @@ OUT = Path(__file__).parent / "figures"
 if __name__ == "__main__":
     OUT.mkdir(exist_ok=True)
     cm = unit_square(64, 16)
-    for number in (1, 2):
+    for number in (1, 2, 3):
         model = get_model(number)
         E = material_fields(cm.mesh, model).E
         plot_cell_field(E, OUT / f"model{number}_E.png", title=f"Test model {number}: E ({model.description})",

@@ -59,7 +59,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"fenics-contact {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
     run = sub.add_parser("run", help="run one contact simulation and write fields, plots and a summary")
-    run.add_argument("--model", type=int, choices=(1, 2), default=1, help="built-in test model")
+    run.add_argument("--model", type=int, choices=(1, 2, 3), default=1,
+                     help="built-in test model: 1 channels, 2 inclusions, 3 heterogeneous strip (loads in Ω₁)")
     run.add_argument("--method", choices=METHODS, default="primal", help="discretization / algorithm")
     run.add_argument("--h", type=int, default=64, help="fine mesh size given as 1/h (e.g. 64)")
     run.add_argument("--H", type=int, default=16, help="coarse size / strip width given as 1/H (e.g. 16)")

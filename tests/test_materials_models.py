@@ -5,7 +5,7 @@ import pytest
 
 from fenics_contact.errors import InputError
 from fenics_contact.problem.materials import Material, lame
-from fenics_contact.problem.models import get_model, model_1, model_2, paper_phase_model, pixel_field
+from fenics_contact.problem.models import get_model, model_1, model_2, model_3, paper_phase_model, pixel_field
 
 
 def test_lame_matches_closed_form():
@@ -41,9 +41,28 @@ def test_models_keep_the_strip_homogeneous_and_high_contrast():
         assert f.shape == (2, x.shape[1]) and np.all(f[1] == 0.0) and np.all(f[0][x[0] < 15 / 16] == 0.0)
 
 
+def test_model_3_is_hard_where_models_1_and_2_are_easy():
+    """Heterogeneous strip: stiff channels reach Γ_C, γ cuts an inclusion for H = 1/4, 1/8, 1/16, load in Ω₁."""
+    model = model_3(E_high=1e6)
+    s = 1.0 / 32.0
+    y = (np.arange(32) + 0.5) * s
+    for H in (1 / 4, 1 / 8, 1 / 16):
+        xg = 1.0 - H
+        left = model.youngs_modulus(np.array([np.full(32, xg - s / 2), y, np.zeros(32)]))
+        right = model.youngs_modulus(np.array([np.full(32, xg + s / 2), y, np.zeros(32)]))
+        # more stiff cells on γ than the three channels: an inclusion is cut by γ
+        assert np.count_nonzero((left == 1e6) & (right == 1e6)) >= 4, H
+    at_contact = model.youngs_modulus(np.array([np.full(32, 1.0 - s / 2), y, np.zeros(32)]))
+    assert np.count_nonzero(at_contact == 1e6) == 3 and np.count_nonzero(at_contact == 1.0) == 29
+    x = np.random.default_rng(2).random((3, 20000))
+    f = model.load(x)
+    in_omega1 = x[0] < 15 / 16
+    assert np.any(f[0][in_omega1] > 0) and np.any(f[0][in_omega1] < 0) and np.all(f[1] == 0.0)
+
+
 def test_unknown_model_and_pixel_field():
     with pytest.raises(InputError):
-        get_model(3)
+        get_model(4)
     field = pixel_field([[1.0, 2.0], [3.0, 4.0]])
     pts = np.array([[0.25, 0.75, 0.25, 0.75], [0.25, 0.25, 0.75, 0.75], [0, 0, 0, 0]])
     assert np.array_equal(field(pts), [1.0, 2.0, 3.0, 4.0])

@@ -14,6 +14,16 @@ that the contact strip Ω₂ = (1−H, 1)×(0,1) is homogeneous for every H ≤ 
 
 E = ``E_high`` (10³) inside the pattern and ``E_low`` (1) elsewhere; ν = 0.35.
 
+Models 1 and 2 follow the paper's set-up (homogeneous strip, loads next to Γ_C).
+A user's problem generally has neither, so a third model is built to be hard:
+
+* **Test model 3 — heterogeneous strip.** Three high-modulus channels of width
+  1/32 run from x = 3/32 through γ and the strip Ω₂ up to Γ_C (stiff material
+  presses on the obstacle); three inclusions are cut by γ for H = 1/4, 1/8 and
+  1/16 (γ at x = 24/32, 28/32, 30/32); the load acts on x ≥ 1/2, so mostly inside
+  Ω₁ (f₁ = 1 pushes the lower half y < 1/2 onto the obstacle, f₁ = −1 pulls the
+  band y > 3/4 away). Every feature lies on the 1/32 grid.
+
 Loads f = (f₁, 0), f₁ piecewise constant in bands of the column x ≥ 15/16 next
 to Γ_C (inside the strip Ω₂ for every H ≥ 1/16, so that Ω₁ is driven only
 through γ, as in the paper's multiscale tests): model 1 pushes the lower half
@@ -31,7 +41,9 @@ import numpy.typing as npt
 
 from fenics_contact.errors import InputError
 
-__all__ = ["TestModel", "constant_field", "get_model", "model_1", "model_2", "paper_phase_model", "pixel_field"]
+__all__ = [
+    "TestModel", "constant_field", "get_model", "model_1", "model_2", "model_3", "paper_phase_model", "pixel_field",
+]
 
 #: A scalar field: points x of shape (3, N) -> values of shape (N,).
 ScalarField = Callable[[np.ndarray], np.ndarray]
@@ -160,6 +172,25 @@ def model_2(*, E_high: float = 1.0e3, E_low: float = 1.0, nu: float = 0.35, load
     )
 
 
+#: model 3: channels from x = 3/32 through γ up to Γ_C, and inclusions cut by γ at x = 24/32, 28/32, 30/32
+_STRIP_PATTERN = np.array(
+    [[3 * _S, 1.0, 5 * _S, 6 * _S], [3 * _S, 1.0, 13 * _S, 14 * _S], [3 * _S, 1.0, 21 * _S, 22 * _S]]
+    + [[27 * _S, 31 * _S, 9 * _S, 11 * _S], [23 * _S, 25 * _S, 17 * _S, 19 * _S], [29 * _S, 31 * _S, 26 * _S, 28 * _S]]
+)
+
+
+def model_3(*, E_high: float = 1.0e3, E_low: float = 1.0, nu: float = 0.35, load_scale: float = 1.0) -> TestModel:
+    """Test model 3: heterogeneous strip (channels through γ up to Γ_C, γ cutting inclusions), loads in Ω₁."""
+    bands = [(0.5, 1.0, 0.0, 0.5, load_scale), (0.5, 1.0, 0.75, 1.0, -load_scale)]
+    return TestModel(
+        name="model3",
+        youngs_modulus=_boxes_field(_STRIP_PATTERN, E_high, E_low),
+        poisson_ratio=constant_field(nu),
+        load=_band_load(bands),
+        description=f"heterogeneous strip, E={E_high:g}/{E_low:g}, nu={nu:g}",
+    )
+
+
 def paper_phase_model(number: int, *, E_ratio: float, nu_pattern: float, nu_rest: float) -> TestModel:
     """The paper's §5.4 parameterization of test model ``number`` (its Tables 5.4–5.7).
 
@@ -175,8 +206,8 @@ def paper_phase_model(number: int, *, E_ratio: float, nu_pattern: float, nu_rest
 
 
 def get_model(number: int, **kwargs) -> TestModel:
-    """The built-in test model 1 or 2."""
-    builders = {1: model_1, 2: model_2}
+    """The built-in test model 1, 2 or 3."""
+    builders = {1: model_1, 2: model_2, 3: model_3}
     if number not in builders:
-        raise InputError(f"unknown test model {number!r}; the built-in models are 1 and 2")
+        raise InputError(f"unknown test model {number!r}; the built-in models are 1, 2 and 3")
     return builders[number](**kwargs)

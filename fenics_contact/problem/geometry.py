@@ -22,7 +22,7 @@ import dolfinx.io.gmsh
 from dolfinx import mesh as dmesh
 
 from fenics_contact.errors import InputError, MeshTagError
-from fenics_contact.problem.tags import PHYSICAL_NAMES, Boundary, Subdomain
+from fenics_contact.problem.tags import PHYSICAL_NAMES, Boundary, Subdomain, is_neumann_name, neumann_tag
 
 __all__ = ["ContactMesh", "unit_square", "read_mesh", "gmsh_session", "build_unit_square_model"]
 
@@ -38,6 +38,7 @@ class ContactMesh(NamedTuple):
     h: float  #: fine mesh size (largest cell diameter for a user mesh)
     H: float | None  #: coarse size / strip width (None when unknown)
     coarse_cell: np.ndarray  #: coarse-square index of every local cell (-1 if no coarse grid)
+    neumann_names: dict | None = None  #: traction-group tag -> physical name (Gamma_N*)
 
     @property
     def comm(self) -> MPI.Comm:
@@ -72,9 +73,34 @@ def _check_sizes(n: int, n_coarse: int) -> None:
         )
 
 
-def build_unit_square_model(n: int, n_coarse: int, *, diagonal: str = "Right") -> None:
-    """Create the structured, tagged gmsh model of the unit square in the current gmsh session."""
+#: The sides of the unit square that may be clamped or carry a traction group (x = 1 is Γ_C).
+SIDES = ("left", "bottom", "top")
+
+
+def _check_sides(clamped, neumann) -> tuple[tuple[str, ...], dict[str, str]]:
+    clamped = tuple(clamped)
+    neumann = dict(neumann or {})
+    for side in (*clamped, *neumann):
+        if side not in SIDES:
+            raise InputError(f"unknown side {side!r}: the unit square's sides are {SIDES} (x = 1 is Gamma_C)")
+    both = sorted(set(clamped) & set(neumann))
+    if both:
+        raise InputError(f"side(s) {both} cannot be clamped (Gamma_D) and carry a traction group (Gamma_N) at once")
+    for name in neumann.values():
+        neumann_tag(name)  # validates the name
+    return clamped, neumann
+
+
+def build_unit_square_model(
+    n: int, n_coarse: int, *, diagonal: str = "Right", clamped=SIDES, neumann: dict[str, str] | None = None
+) -> None:
+    """Create the structured, tagged gmsh model of the unit square in the current gmsh session.
+
+    ``clamped``: the sides in Γ_D; ``neumann``: side -> traction group name (``Gamma_N*``);
+    other sides are traction free (untagged).
+    """
     _check_sizes(n, n_coarse)
+    clamped, neumann = _check_sides(clamped, neumann)
     H = 1.0 / n_coarse
     xs = 1.0 - H
     geo = gmsh.model.geo
@@ -93,24 +119,45 @@ def build_unit_square_model(n: int, n_coarse: int, *, diagonal: str = "Right") -
         gmsh.model.mesh.setTransfiniteCurve(curve, cells + 1)
     for s in (s1, s2):
         gmsh.model.mesh.setTransfiniteSurface(s, diagonal)
+    side_curves = {"left": [left], "bottom": [bottom1, bottom2], "top": [top1, top2]}
     groups = {
         Subdomain.OMEGA1: (2, [s1]),
         Subdomain.OMEGA2: (2, [s2]),
-        Boundary.GAMMA_D: (1, [bottom1, bottom2, top1, top2, left]),
+        Boundary.GAMMA_D: (1, [c for side in clamped for c in side_curves[side]]),
         Boundary.GAMMA_C: (1, [contact]),
         Boundary.INTERFACE: (1, [interface]),
     }
     for tag, (dim, entities) in groups.items():
-        gmsh.model.addPhysicalGroup(dim, entities, int(tag), name=PHYSICAL_NAMES[tag])
+        if entities:
+            gmsh.model.addPhysicalGroup(dim, entities, int(tag), name=PHYSICAL_NAMES[tag])
+    by_name: dict[str, list[int]] = {}
+    for side, name in neumann.items():
+        by_name.setdefault(name, []).extend(side_curves[side])
+    for name, curves in sorted(by_name.items()):
+        gmsh.model.addPhysicalGroup(1, curves, neumann_tag(name), name=name)
     gmsh.model.mesh.generate(2)
 
 
-def unit_square(n: int, n_coarse: int, *, comm: MPI.Comm = MPI.COMM_WORLD, diagonal: str = "Right") -> ContactMesh:
-    """Tagged structured mesh of (0,1)², h = 1/n, strip Ω₂ of width H = 1/n_coarse."""
+def unit_square(
+    n: int,
+    n_coarse: int,
+    *,
+    comm: MPI.Comm = MPI.COMM_WORLD,
+    diagonal: str = "Right",
+    clamped=SIDES,
+    neumann: dict[str, str] | None = None,
+) -> ContactMesh:
+    """Tagged structured mesh of (0,1)², h = 1/n, strip Ω₂ of width H = 1/n_coarse.
+
+    Γ_C is the side x = 1; ``clamped`` lists the sides in Γ_D (default all three others),
+    ``neumann`` maps sides to traction group names (e.g. ``{"top": "Gamma_N_top"}``);
+    the remaining sides are traction free.
+    """
     _check_sizes(n, n_coarse)
+    clamped, neumann = _check_sides(clamped, neumann)
     with gmsh_session():
         if comm.rank == 0:
-            build_unit_square_model(n, n_coarse, diagonal=diagonal)
+            build_unit_square_model(n, n_coarse, diagonal=diagonal, clamped=clamped, neumann=neumann)
         data = dolfinx.io.gmsh.model_to_mesh(gmsh.model, comm, 0, gdim=2)
     cm = _contact_mesh(data, h=1.0 / n, H=1.0 / n_coarse)
     return cm
@@ -130,7 +177,12 @@ def read_mesh(path: str | Path, *, comm: MPI.Comm = MPI.COMM_WORLD, H: float | N
             gmsh.model.add("user mesh")
             gmsh.merge(str(path))
             names = {gmsh.model.getPhysicalName(d, t) for d, t in gmsh.model.getPhysicalGroups()}
-        names = comm.bcast(names, root=0)
+            overlap = boundary_group_overlaps()
+        else:
+            overlap = None
+        names, overlap = comm.bcast((names, overlap), root=0)
+        if overlap:
+            raise MeshTagError(f"{path}: {overlap}")
         # validate before the collective mesh construction (which aborts on inconsistent tags)
         missing = [name for name in PHYSICAL_NAMES.values() if name not in names]
         if missing:
@@ -144,6 +196,26 @@ def read_mesh(path: str | Path, *, comm: MPI.Comm = MPI.COMM_WORLD, H: float | N
     cells = np.arange(msh.topology.index_map(tdim).size_local, dtype=np.int32)
     h = msh.comm.allreduce(float(np.max(msh.h(tdim, cells))) if cells.size else 0.0, op=MPI.MAX)
     return _contact_mesh(data, h=h, H=H)
+
+
+def boundary_group_overlaps() -> str | None:
+    """In the current gmsh model: a message if two boundary groups (Gamma_D, Gamma_C, gamma, Gamma_N*) share a curve."""
+    standard = {PHYSICAL_NAMES[t] for t in Boundary}
+    curves: dict[str, set[int]] = {}
+    for dim, tag in gmsh.model.getPhysicalGroups(1):
+        name = gmsh.model.getPhysicalName(dim, tag)
+        if name in standard or is_neumann_name(name):
+            curves.setdefault(name, set()).update(int(c) for c in gmsh.model.getEntitiesForPhysicalGroup(dim, tag))
+    names = sorted(curves)
+    for i, a in enumerate(names):
+        for b in names[i + 1 :]:
+            shared = curves[a] & curves[b]
+            if shared:
+                return (
+                    f"the physical groups {a!r} and {b!r} overlap (curves {sorted(shared)}): a boundary facet "
+                    "belongs to one group only"
+                )
+    return None
 
 
 def _retag(tags: dmesh.MeshTags | None, groups: dict, wanted: list, msh: dmesh.Mesh, dim: int) -> dmesh.MeshTags:
@@ -161,6 +233,11 @@ def _retag(tags: dmesh.MeshTags | None, groups: dict, wanted: list, msh: dmesh.M
         found = tags.find(file_tag)
         entities.append(found)
         values.append(np.full(found.size, int(t), dtype=np.int32))
+    for name, group in groups.items():  # traction groups Gamma_N*: tag = neumann_tag(name)
+        if dim == msh.topology.dim - 1 and group.dim == dim and is_neumann_name(name):
+            found = tags.find(group.tag)
+            entities.append(found)
+            values.append(np.full(found.size, neumann_tag(name), dtype=np.int32))
     entities = np.concatenate(entities)
     values = np.concatenate(values)
     order = np.argsort(entities, kind="stable")
@@ -189,4 +266,6 @@ def _contact_mesh(data: dolfinx.io.gmsh.MeshData, *, h: float, H: float | None) 
         i = np.clip(np.floor(mid[:, 0] / H).astype(np.int32), 0, n_coarse - 1)
         j = np.clip(np.floor(mid[:, 1] / H).astype(np.int32), 0, n_coarse - 1)
         coarse = i + n_coarse * j
-    return ContactMesh(msh, cell_tags, facet_tags, float(h), H, coarse)
+    neumann = {neumann_tag(name): name for name, g in data.physical_groups.items()
+               if g.dim == tdim - 1 and is_neumann_name(name)}
+    return ContactMesh(msh, cell_tags, facet_tags, float(h), H, coarse, neumann)

@@ -48,11 +48,43 @@ class NewtonHistory:
 
 
 class ContactProfile(NamedTuple):
-    """Nodal data along Γ_C, sorted by y: position, normal displacement, normal stress."""
+    """Nodal data along Γ_C, sorted by y (then x): position, normal displacement, normal stress.
+
+    ``u_c`` = u·ν − g, the normal displacement relative to the obstacle (> 0: penetration);
+    ``sigma_c`` the normal stress (< 0: contact pressure). The optional fields (issue 14)
+    give the node coordinates, their quadrature weights on Γ_C, the contact direction ν
+    and the initial gap g, from which ``force``, ``resultant`` and ``contact_zone`` follow.
+    """
 
     y: np.ndarray
     u_c: np.ndarray
     sigma_c: np.ndarray
+    points: np.ndarray | None = None  #: (N, 2) node coordinates
+    weights: np.ndarray | None = None  #: (N,) quadrature weights: ∫_ΓC w ds ≈ Σ weights·w(nodes)
+    normals: np.ndarray | None = None  #: (N, 2) contact direction ν (towards the obstacle)
+    gap: np.ndarray | None = None  #: (N,) initial gap g
+
+    @property
+    def force(self) -> float:
+        """Total normal contact force −∫_ΓC σ_c ds (> 0 in compression; needs ``weights``)."""
+        return float(-np.sum(self.weights * self.sigma_c))
+
+    @property
+    def resultant(self) -> np.ndarray:
+        """∫_ΓC σ_c ν ds: the force the obstacle exerts on the body (needs ``weights``, ``normals``)."""
+        return np.sum((self.weights * self.sigma_c)[:, None] * self.normals, axis=0)
+
+    @property
+    def max_pressure(self) -> float:
+        """max −σ_c (0 without contact)."""
+        return float(np.max(-self.sigma_c, initial=0.0))
+
+    def contact_zone(self) -> tuple[tuple[float, float], tuple[float, float]] | None:
+        """End points (first and last node in the profile's order) of the contact zone, or None."""
+        active = np.flatnonzero(self.active)
+        if active.size == 0 or self.points is None:
+            return None
+        return tuple(map(float, self.points[active[0]])), tuple(map(float, self.points[active[-1]]))
 
     @property
     def active(self) -> np.ndarray:

@@ -155,7 +155,7 @@ class MixedMultiscaleHybridStep(MixedHybridStep):
         newton = self.sub[1].solve(g21[self._perm2])
         t1 = self.omega1.response.trace(g12)
         t2 = np.empty(n)
-        t2[self._perm2] = self.sub[1].N @ self.sub[1].c
+        t2[self._perm2] = self.sub[1].gamma_traction()
         self._measure()
         self._record = {
             "newton": newton.steps,

@@ -24,7 +24,10 @@ from dolfinx import mesh as dmesh
 from fenics_contact.errors import InputError, MeshTagError
 from fenics_contact.problem.tags import PHYSICAL_NAMES, Boundary, Subdomain, is_neumann_name, neumann_tag
 
-__all__ = ["ContactMesh", "unit_square", "read_mesh", "gmsh_session", "build_unit_square_model"]
+__all__ = [
+    "ContactMesh", "unit_square", "read_mesh", "gmsh_session", "build_unit_square_model", "contact_mesh_from_model",
+    "boundary_group_overlaps",
+]
 
 log = logging.getLogger(__name__)
 
@@ -161,6 +164,12 @@ def unit_square(
         data = dolfinx.io.gmsh.model_to_mesh(gmsh.model, comm, 0, gdim=2)
     cm = _contact_mesh(data, h=1.0 / n, H=1.0 / n_coarse)
     return cm
+
+
+def contact_mesh_from_model(comm: MPI.Comm, *, h: float, H: float | None = None) -> ContactMesh:
+    """The ContactMesh of the gmsh model built (on rank 0) in the current gmsh session (collective)."""
+    data = dolfinx.io.gmsh.model_to_mesh(gmsh.model, comm, 0, gdim=2)
+    return _contact_mesh(data, h=h, H=H)
 
 
 def read_mesh(path: str | Path, *, comm: MPI.Comm = MPI.COMM_WORLD, H: float | None = None) -> ContactMesh:

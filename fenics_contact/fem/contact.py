@@ -15,7 +15,9 @@ import numpy as np
 
 from fenics_contact.errors import ConvergenceError, InputError
 
-__all__ = ["NewtonOptions", "NewtonHistory", "ContactProfile", "semismooth_newton", "active_interval"]
+__all__ = [
+    "NewtonOptions", "NewtonHistory", "ContactProfile", "semismooth_newton", "active_interval", "profile_order",
+]
 
 
 @dataclass(frozen=True, slots=True)
@@ -48,7 +50,7 @@ class NewtonHistory:
 
 
 class ContactProfile(NamedTuple):
-    """Nodal data along Γ_C, sorted by y (then x): position, normal displacement, normal stress.
+    """Nodal data along Γ_C, in ``profile_order`` (by y on a vertical Γ_C): position, normal displacement, normal stress.
 
     ``u_c`` = u·ν − g, the normal displacement relative to the obstacle (> 0: penetration);
     ``sigma_c`` the normal stress (< 0: contact pressure). The optional fields (issue 14)
@@ -99,6 +101,15 @@ class ContactProfile(NamedTuple):
     def active_interval(self) -> tuple[float, float] | None:
         """[y_min, y_max] of the contact zone, or None when nothing touches."""
         return active_interval(self.y, self.active)
+
+
+def profile_order(points: np.ndarray) -> np.ndarray:
+    """Order of contact nodes along Γ_C: by the coordinate with the larger spread (y for a vertical Γ_C), then the other."""
+    if points.shape[0] == 0:
+        return np.zeros(0, dtype=np.int64)
+    spread = np.ptp(points[:, :2], axis=0)
+    major = 0 if spread[0] > spread[1] else 1
+    return np.lexsort((points[:, 1 - major], points[:, major]))
 
 
 def active_interval(y: np.ndarray, active: np.ndarray) -> tuple[float, float] | None:

@@ -79,7 +79,7 @@ import dolfinx.fem.petsc
 
 from fenics_contact.fem import forms_mixed
 from fenics_contact.fem.arnold_winther import ArnoldWintherSpace
-from fenics_contact.fem.contact import ContactProfile, NewtonHistory, NewtonOptions
+from fenics_contact.fem.contact import ContactProfile, NewtonHistory, NewtonOptions, profile_order
 from fenics_contact.errors import ConvergenceError, InputError
 from fenics_contact.problem.boundary import BoundaryConditions, check_boundary_groups, neumann_groups
 from fenics_contact.problem.fields import MaterialFields, material_fields
@@ -158,8 +158,7 @@ class MixedContactProfile(ContactProfile):
     """σ_c and u_c = −(σ_c)⁺/ε along Γ_C (sorted by y) for the mixed penalty.
 
     The mixed penalty allows no penetration (u_c ≤ 0 everywhere); a point is in
-    contact where the normal stress is compressive or zero, σ_c ≤ 0 (there
-    u_c = 0).  ``max_tensile`` is the penalty error: the tensile stress left
+    contact where the normal stress is compressive, σ_c < 0 (there u_c = 0).  ``max_tensile`` is the penalty error: the tensile stress left
     where the body separates (= ε·max|u_c|).
     """
 
@@ -167,8 +166,13 @@ class MixedContactProfile(ContactProfile):
 
     @property
     def active(self) -> np.ndarray:
-        """Points in contact: σ_c ≤ 0 (the penalty is inactive and u_c = 0)."""
-        return self.sigma_c <= 0.0
+        """Points in contact: σ_c < 0 (compressive: the penalty is inactive and u_c = g).
+
+        (σ_c = 0 up to round-off, 1e−12 of max |σ_c|, only where an essential condition
+        forces it, e.g. a Γ_C end next to a traction-free side: not contact.)
+        """
+        scale = float(np.max(np.abs(self.sigma_c), initial=0.0))
+        return self.sigma_c < -1e-12 * scale
 
     @property
     def max_tensile(self) -> float:
@@ -538,7 +542,7 @@ class MixedSubproblem:
         """Q: σ_c at the Gauss–Lobatto nodes of Γ_C (a Lagrange basis of the σ_c trace space)."""
         bf = _BoundaryFacets(msh, facets)
         pts, wq, cells, normals, vertex = bf.lobatto_nodes(msh)
-        order = np.lexsort((pts[:, 0], pts[:, 1]))
+        order = profile_order(pts)
         pts, wq, cells, normals, vertex = pts[order], wq[order], cells[order], normals[order], vertex[order]
         X = _reference_coordinates(msh, cells, pts)
         Q_dg = _stress_evaluation(self.dg, cells, X, _normal_weights(normals))

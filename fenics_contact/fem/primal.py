@@ -20,7 +20,7 @@ from dolfinx import mesh as dmesh
 import dolfinx.fem.petsc
 
 from fenics_contact.fem import forms_primal
-from fenics_contact.fem.contact import ContactProfile, NewtonHistory, NewtonOptions, semismooth_newton
+from fenics_contact.fem.contact import ContactProfile, NewtonHistory, NewtonOptions, profile_order, semismooth_newton
 from fenics_contact.errors import InputError
 from fenics_contact.problem.boundary import BoundaryConditions, check_boundary_groups, neumann_groups
 from fenics_contact.problem.fields import MaterialFields
@@ -201,12 +201,16 @@ class PrimalSubproblem:
         else:
             points = self.Q.tabulate_dof_coordinates()[nodes]
             g, nu = evaluate_obstacle(obstacle, points, comm=self.mesh.comm)
+        same_direction = self.mesh.comm.allreduce(
+            bool(np.array_equal(self.nu_c.x.array.reshape(-1, gdim)[nodes], nu)), op=MPI.LAND
+        )
         self.nu_c.x.array[:] = 0.0
         self.nu_c.x.array.reshape(-1, gdim)[nodes] = nu
         self.gap.x.array[:] = 0.0
         self.gap.x.array[nodes] = g
         self.obstacle = obstacle
-        self._factorized_set = None  # ν enters the Jacobian
+        if not same_direction:
+            self._factorized_set = None  # ν enters the Jacobian
         if hasattr(self, "_lift_norm"):
             self._lift_norm = self._lifting_norm()
 
@@ -340,7 +344,7 @@ class PrimalSubproblem:
         points, u_c, sigma_c, weights, normal, gap = (
             np.concatenate(comm.allgather(a)) for a in (points, u_c, sigma_c, w[on], normal, gap)
         )
-        order = np.lexsort((points[:, 0], points[:, 1]))
+        order = profile_order(points)
         return ContactProfile(
             points[order, 1], u_c[order], sigma_c[order], points[order], weights[order], normal[order], gap[order]
         )

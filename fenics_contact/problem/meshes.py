@@ -8,8 +8,8 @@
   into its top face (the plane-strain Hertz benchmark): Γ_C the top segment
   |x| ≤ ``contact_width``, the rest of the top and the sides traction free, the
   bottom clamped; Ω₂ the strip y > −``strip``, γ the line y = −``strip``;
-  mesh size ``h_contact`` on the contact zone |x| ≤ ``refine_width`` at the top,
-  growing linearly (rate ``grading``) up to ``h_far``.
+  mesh size ``h_contact`` on the contact zone |x| ≤ ``refine_width``,
+  y ≥ −``refine_depth``, growing linearly (rate ``grading``) up to ``h_far``.
 
 Both use unstructured triangles; the tags follow ``tags.PHYSICAL_NAMES``.
 """
@@ -80,7 +80,8 @@ class HertzBlock:
     depth: float  #: D
     strip: float  #: thickness of Ω₂ below the top face
     contact_width: float  #: Γ_C = top segment |x| <= contact_width
-    refine_width: float  #: mesh size h_contact on |x| <= refine_width at the top face
+    refine_width: float  #: mesh size h_contact on |x| <= refine_width, y >= −refine_depth
+    refine_depth: float
     h_contact: float
     h_far: float
     grading: float  #: growth of the mesh size per unit distance from the refined zone
@@ -95,20 +96,25 @@ def hertz_block(
     strip: float = 2.0,
     contact_width: float = 3.0,
     refine_width: float = 1.5,
+    refine_depth: float = 0.5,
     grading: float = 0.25,
     h_far: float = 4.0,
+    refinement: float = 1.0,
     comm: MPI.Comm = MPI.COMM_WORLD,
 ) -> tuple[ContactMesh, HertzBlock]:
-    """The tagged Hertz block for a contact half-width ``a``; sizes other than ``a`` are multiples of a.
+    """The tagged Hertz block for a contact half-width ``a``; lengths other than ``a`` are multiples of a.
 
-    ``h_contact`` defaults to a/20. Returns the mesh and its ``HertzBlock`` description.
+    ``refinement`` r refines the whole mesh: h_contact = a/(20r) (unless given), far size
+    ``h_far``·a/r, grading/r. Returns the mesh and its ``HertzBlock`` description.
     """
     if not (np.isfinite(a) and a > 0):
         raise InputError(f"the contact half-width a must be > 0, got {a!r}")
-    hc = a / 20.0 if h_contact is None else float(h_contact)
-    spec = HertzBlock(a, 0.5 * width * a, depth * a, strip * a, contact_width * a, refine_width * a, hc,
-                      h_far * a, grading)
-    if not (0 < hc <= spec.refine_width and spec.refine_width <= spec.contact_width < spec.half_width
+    if not (np.isfinite(refinement) and refinement > 0):
+        raise InputError(f"the refinement factor must be > 0, got {refinement!r}")
+    hc = a / (20.0 * refinement) if h_contact is None else float(h_contact)
+    spec = HertzBlock(a, 0.5 * width * a, depth * a, strip * a, contact_width * a, refine_width * a,
+                      refine_depth * a, hc, h_far * a / refinement, grading / refinement)
+    if not (0 < hc <= spec.refine_width and grading > 0 and spec.refine_width <= spec.contact_width < spec.half_width
             and 0 < spec.strip < spec.depth):
         raise InputError(f"inconsistent Hertz block sizes: {spec}")
     L, D, S, W = spec.half_width, spec.depth, spec.strip, spec.contact_width
@@ -138,9 +144,9 @@ def hertz_block(
             gmsh.model.mesh.field.setNumber(zone, "VIn", hc)
             gmsh.model.mesh.field.setNumber(zone, "VOut", spec.h_far)
             for key, value in (("XMin", -spec.refine_width), ("XMax", spec.refine_width),
-                               ("YMin", -spec.refine_width), ("YMax", 0.0)):
+                               ("YMin", -spec.refine_depth), ("YMax", 0.0)):
                 gmsh.model.mesh.field.setNumber(zone, key, value)
-            gmsh.model.mesh.field.setNumber(zone, "Thickness", (spec.h_far - hc) / max(grading, 1e-12))
+            gmsh.model.mesh.field.setNumber(zone, "Thickness", (spec.h_far - hc) / spec.grading)
             gmsh.model.mesh.field.setAsBackgroundMesh(zone)
             for name in ("Mesh.MeshSizeExtendFromBoundary", "Mesh.MeshSizeFromPoints", "Mesh.MeshSizeFromCurvature"):
                 gmsh.option.setNumber(name, 0)

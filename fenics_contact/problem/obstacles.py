@@ -108,7 +108,7 @@ class Plane(Obstacle):
 
 @dataclass(frozen=True, slots=True)
 class Circle(Obstacle):
-    """A rigid disc (a cylinder in plane strain): d = |x − centre| − radius; undefined at the centre."""
+    """A rigid disc (a cylinder in plane strain): d = |x − centre| − radius; undefined within 1e−8·radius of the centre."""
 
     centre: tuple[float, float]
     radius: float
@@ -125,12 +125,12 @@ class Circle(Obstacle):
 
     def distance(self, x: np.ndarray) -> np.ndarray:
         r, rho = self._offset(x)
-        return np.where(rho > 1e-12 * self.radius, rho - self.radius, np.nan)
+        return np.where(rho > 1e-8 * self.radius, rho - self.radius, np.nan)
 
     def outward_normal(self, x: np.ndarray) -> np.ndarray:
         r, rho = self._offset(x)
         with np.errstate(invalid="ignore", divide="ignore"):
-            return np.where(rho > 1e-12 * self.radius, r / rho, np.nan)
+            return np.where(rho > 1e-8 * self.radius, r / rho, np.nan)
 
 
 @dataclass(frozen=True, slots=True)

@@ -25,7 +25,10 @@ from mpi4py import MPI
 from fenics_contact.errors import InputError, MeshTagError
 from fenics_contact.problem.tags import Boundary, PHYSICAL_NAMES, is_neumann_name, neumann_tag
 
-__all__ = ["VectorField", "BoundaryConditions", "constant_vector", "check_boundary_groups", "neumann_groups"]
+__all__ = [
+    "VectorField", "BoundaryConditions", "constant_vector", "check_boundary_groups", "neumann_groups",
+    "boundary_data_on",
+]
 
 #: A vector field: points x of shape (3, N) -> values of shape (2, N).
 VectorField = Callable[[np.ndarray], np.ndarray]
@@ -127,3 +130,28 @@ def check_boundary_groups(msh, facet_tags, boundary: BoundaryConditions, *, name
         raise MeshTagError(
             f"a displacement is prescribed on {PHYSICAL_NAMES[Boundary.GAMMA_D]!r}, but that group has no facets"
         )
+
+
+def boundary_data_on(msh, facet_tags, boundary: BoundaryConditions, *, traction_free: bool = False) -> list[str]:
+    """What boundary data act on this (sub)mesh besides clamping (collective): for methods that cannot take them yet.
+
+    Lists 'a prescribed displacement on Gamma_D', 'a traction on <group>' and, with
+    ``traction_free``, 'traction-free sides' (exterior facets in no group other than γ).
+    """
+    from dolfinx import mesh as dmesh
+
+    comm = msh.comm
+    found = []
+    if boundary.displacement is not None and comm.allreduce(int(facet_tags.find(Boundary.GAMMA_D).size), op=MPI.SUM):
+        found.append("a prescribed displacement on Gamma_D")
+    for tag, name, _ in boundary.traction_tags():
+        if comm.allreduce(int(facet_tags.find(tag).size), op=MPI.SUM):
+            found.append(f"a traction on {name}")
+    if traction_free:
+        tdim = msh.topology.dim
+        msh.topology.create_connectivity(tdim - 1, tdim)
+        exterior = dmesh.exterior_facet_indices(msh.topology)
+        free = np.setdiff1d(exterior, facet_tags.indices)
+        if comm.allreduce(int(free.size), op=MPI.SUM):
+            found.append("traction-free sides")
+    return found

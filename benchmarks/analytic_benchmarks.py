@@ -19,6 +19,8 @@ Sections:
    (bottom clamped, sides traction free), F read off the solution: contact half-width error in
    contact-zone cells, peak pressure error, L² error of the pressure profile; "refinement r"
    refines the whole mesh (contact cells a/(20r)).
+4. The Hertz cylinder pushed in load steps (``indentation.force_indentation``): the
+   force–indentation curve, the Hertz errors at every step, and what the warm start saves.
 """
 
 import argparse
@@ -154,12 +156,39 @@ def hertz_section(refinements: list[float], mixed_max: float, options) -> list[s
     return lines + [""]
 
 
+def indentation_section(refinement: float, steps: int, options) -> list[str]:
+    """Hertz force–indentation in load steps (warm starts) against a cold start at the last depth."""
+    a, R, E, nu = 0.05, 5.0, 1.0, 0.3
+    depths = np.linspace(1e-3 / steps, 1e-3, steps)
+    lines = [f"## 4. Hertz force–indentation in {steps} load steps (r = {refinement:g}; warm starts)", "",
+             "The obstacle moves down by d; F is read off the contact; a, p₀ from F. Iterations: Newton "
+             "steps (monolithic) or hybrid iterations; the last column is a cold start at the last depth.", "",
+             "| method | d | F | a | p_max/p₀ − 1 | L² error | iterations | time [s] | cold start: iterations, time [s] |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    names = {"primal monolithic": "primal-monolithic", "Algorithm 1": "primal",
+             "mixed monolithic": "mixed-monolithic", "Algorithm 2": "mixed"}
+    cm, spec = hertz_block(a, refinement=refinement)
+    base = hertz_model(radius=R, E=E, nu=nu, depth=0.0)
+    for method in METHODS:
+        curve = force_indentation(names[method], cm, base, depths, direction=(0.0, -1.0), options=options)
+        cold = force_indentation(names[method], cm, base, depths[-1:], direction=(0.0, -1.0), options=options)
+        for k, step in enumerate(curve.steps):
+            e = hertz_errors(step.profile, radius=R, E=E, nu=nu, h_contact=spec.h_contact)
+            last = f"{cold.steps[0].iterations}, {cold.steps[0].time_s:.2f}" if k == len(curve.steps) - 1 else ""
+            lines.append(f"| {method} | {step.depth:.3g} | {step.force:.5e} | {e.a:.4f} | {e.peak_error:+.2%} | "
+                         f"{e.l2_error:.2%} | {step.iterations} | {step.time_s:.2f} | {last} |")
+            print(lines[-1], flush=True)
+    return lines + [""]
+
+
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--bar-sizes", type=int, nargs="+", default=[8, 16, 32, 64])
     parser.add_argument("--patch-size", type=int, default=32)
     parser.add_argument("--hertz-refinements", type=float, nargs="+", default=[0.5, 1.0, 2.0])
     parser.add_argument("--hertz-mixed-max", type=float, default=2.0, help="largest refinement for the mixed methods")
+    parser.add_argument("--indentation-steps", type=int, default=4, help="load steps of section 4 (0: skip)")
+    parser.add_argument("--indentation-refinement", type=float, default=1.0)
     parser.add_argument("--tol", type=float, default=1e-8, help="relative-change tolerance of Algorithms 1 and 2")
     parser.add_argument("--out", type=Path, default=Path("benchmarks/results/analytic.md"))
     args = parser.parse_args(argv)
@@ -173,6 +202,8 @@ def main(argv=None) -> None:
     lines += bar_section(args.bar_sizes, options)
     lines += patch_section(args.patch_size, options)
     lines += hertz_section(args.hertz_refinements, args.hertz_mixed_max, options)
+    if args.indentation_steps > 0:
+        lines += indentation_section(args.indentation_refinement, args.indentation_steps, options)
     lines.append(f"Total time {time.perf_counter() - start:.0f} s.")
     if MPI.COMM_WORLD.rank == 0:
         args.out.parent.mkdir(parents=True, exist_ok=True)

@@ -151,3 +151,31 @@ def test_curved_contact_boundary_hybrid_fixed_points(bulged):
     alg2 = solve_mixed_hybrid(bulged, model, reference=split, options=IterationOptions(tol=1e-10))
     assert alg2.converged and alg2.e_sigma < 1e-8 and alg2.e_u < 1e-8
     assert abs(alg2.profile.force / split.profile.force - 1.0) < 1e-8
+
+
+@pytest.mark.parametrize("method", ["primal-monolithic", "primal", pytest.param("mixed", marks=serial)])
+def test_load_steps_warm_start(method):
+    """Repeating a depth restarts at the previous solution: one Newton step / at most two hybrid iterations."""
+    from fenics_contact.indentation import force_indentation
+    from fenics_contact.problem.analytic import layered_model
+
+    cm = unit_square(8, 4, clamped=("left",))
+    model = layered_model([0.0, 0.5, 1.0], [1.0, 100.0], depth=0.0)
+    curve = force_indentation(method, cm, model, [0.01, 0.02, 0.02], direction=(-1.0, 0.0),
+                              options=IterationOptions(tol=1e-9))
+    first, _, again = curve.steps
+    assert again.iterations <= (1 if method.endswith("monolithic") else 2)
+    assert method.endswith("monolithic") or first.iterations > 2
+    assert abs(again.force - curve.steps[1].force) < 1e-9 * abs(again.force)
+    assert curve.forces[1] == pytest.approx(2 * curve.forces[0], rel=1e-9)  # linear: F ∝ d
+
+
+def test_load_steps_bad_input(square):
+    from fenics_contact.indentation import force_indentation
+
+    with pytest.raises(InputError, match="needs a model with an obstacle"):
+        force_indentation("primal", square, _model(None), [0.01], direction=(-1, 0))
+    with pytest.raises(InputError, match="unknown method"):
+        force_indentation("dual", square, _model(Plane((1, 0), (-1, 0))), [0.01], direction=(-1, 0))
+    with pytest.raises(InputError, match="direction"):
+        force_indentation("primal", square, _model(Plane((1, 0), (-1, 0))), [0.01], direction=(0, 0))

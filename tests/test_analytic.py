@@ -136,7 +136,7 @@ def test_layered_patch_mixed_fields_exact():
 
 # -- (b) Hertz ----------------------------------------------------------------------------------
 
-A, R, E, NU, DEPTH = 0.05, 5.0, 1.0, 0.3, 1e-3  # a/R ≈ 0.01: the linear (Hertz) theory applies
+A, R, E, NU, DEPTH = 0.05, 5.0, 1.0, 0.3, 1.2e-3  # a ≈ 0.053, a/R ≈ 0.01: the linear (Hertz) theory applies
 
 
 def _hertz(refinement):
@@ -153,7 +153,7 @@ def _check_hertz(errors, spec):
 
 def test_hertz_primal_monolithic_and_algorithm_1():
     """Contact half-width within two cells, peak pressure within 1 %, L² profile error within 1.5 % at
-    a/20 (measured 0.56 %, 1.48 %); the errors fall as the whole mesh is refined; Algorithm 1 too."""
+    a/21 (measured 0.65 %, 1.22 %); the errors fall as the whole mesh is refined; Algorithm 1 too."""
     results = []
     for r in (0.5, 1.0):
         cm, spec, model = _hertz(r)
@@ -170,16 +170,14 @@ def test_hertz_primal_monolithic_and_algorithm_1():
 
 @serial
 def test_hertz_mixed_monolithic_and_algorithm_2():
-    """The same bounds for the mixed solutions (measured at a/20: peak 0.12 %, L² 0.21 %)."""
-    results = []
-    for r in (0.5, 1.0):
-        cm, spec, model = _hertz(r)
-        sol = solve_mixed_monolithic(cm, model)
-        results.append(hertz_errors(sol.profile, radius=R, E=E, nu=NU, h_contact=spec.h_contact))
-    coarse, fine = results
-    _check_hertz(fine, spec)
-    assert fine.l2_error < coarse.l2_error
-    assert sol.profile.max_tensile < 1e-6 * fine.p0  # the penalty error: tensile stress ε·gap
+    """The same bounds for the mixed solutions, which are far inside them from a/10 on (measured
+    0.2–0.4 % in L², 0.02–0.04 % in the peak, set by where the contact edge falls between nodes)."""
+    cm, spec, model = _hertz(1.0)
+    sol = solve_mixed_monolithic(cm, model)
+    errors = hertz_errors(sol.profile, radius=R, E=E, nu=NU, h_contact=spec.h_contact)
+    _check_hertz(errors, spec)
+    assert errors.l2_error < 0.005 and abs(errors.peak_error) < 0.003
+    assert sol.profile.max_tensile < 1e-6 * errors.p0  # the penalty error: tensile stress ε·gap
     alg2 = solve_mixed_hybrid(cm, model, reference=sol)
     assert alg2.converged and alg2.e_sigma < 1e-3
     _check_hertz(hertz_errors(alg2.profile, radius=R, E=E, nu=NU, h_contact=spec.h_contact), spec)

@@ -64,9 +64,9 @@ def gmsh_session(*, verbosity: int = 0) -> Iterator[None]:
 
 
 def _check_sizes(n: int, n_coarse: int) -> None:
-    if int(n) != n or n < 2:
+    if not _is_integral(n) or n < 2:
         raise InputError(f"1/h must be an integer >= 2, got {n!r}")
-    if int(n_coarse) != n_coarse or n_coarse < 2:
+    if not _is_integral(n_coarse) or n_coarse < 2:
         raise InputError(
             f"1/H must be an integer >= 2 (the strip Ω₂ of width H must leave room for Ω₁), got {n_coarse!r}"
         )
@@ -76,9 +76,14 @@ def _check_sizes(n: int, n_coarse: int) -> None:
         )
 
 
+def _is_integral(value) -> bool:
+    return isinstance(value, (int, float, np.integer, np.floating)) and np.isfinite(value) and int(value) == value
+
+
 def build_unit_square_model(n: int, n_coarse: int, *, diagonal: str = "Right") -> None:
     """Create the structured, tagged gmsh model of the unit square in the current gmsh session."""
     _check_sizes(n, n_coarse)
+    n, n_coarse = int(n), int(n_coarse)
     H = 1.0 / n_coarse
     xs = 1.0 - H
     geo = gmsh.model.geo
@@ -112,6 +117,7 @@ def build_unit_square_model(n: int, n_coarse: int, *, diagonal: str = "Right") -
 def unit_square(n: int, n_coarse: int, *, comm: MPI.Comm = MPI.COMM_WORLD, diagonal: str = "Right") -> ContactMesh:
     """Tagged structured mesh of (0,1)², h = 1/n, strip Ω₂ of width H = 1/n_coarse."""
     _check_sizes(n, n_coarse)
+    n, n_coarse = int(n), int(n_coarse)
     with gmsh_session():
         if comm.rank == 0:
             build_unit_square_model(n, n_coarse, diagonal=diagonal)

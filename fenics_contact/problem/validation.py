@@ -46,6 +46,7 @@ __all__ = [
     "check_mesh_description",
     "describe_contact_mesh",
     "mesh_problems",
+    "require_facet_groups",
     "require_tag_counts",
     "validate_contact_mesh",
 ]
@@ -380,3 +381,19 @@ def require_tag_counts(cm) -> None:
                            f"(physical groups {list(PHYSICAL_NAMES.values())}) or build it with geometry.read_mesh")
     if counts[-1]:
         raise MeshTagError(f"{counts[-1]} cells are not tagged exactly once as Omega1 or Omega2")
+
+
+def require_facet_groups(msh, facet_tags, groups: Iterable[Boundary]) -> None:
+    """Collective: MeshTagError unless ``facet_tags`` are facet tags of ``msh`` with facets in every group."""
+    if not isinstance(facet_tags, dmesh.MeshTags) or facet_tags.dim != msh.topology.dim - 1:
+        got = type(facet_tags).__name__
+        if isinstance(facet_tags, dmesh.MeshTags):
+            got += f" of dimension {facet_tags.dim}"
+        raise MeshTagError(f"facet_tags must be the facet MeshTags of the mesh (dimension {msh.topology.dim - 1}), "
+                           f"got {got}")
+    groups = list(groups)
+    counts = msh.comm.allreduce(np.array([facet_tags.find(g).size for g in groups], dtype=np.int64), op=MPI.SUM)
+    empty = [PHYSICAL_NAMES[g] for g, c in zip(groups, counts) if c == 0]
+    if empty:
+        raise MeshTagError(f"the mesh has no facets tagged {empty} (tag values {[int(g) for g in groups]}): "
+                           "a solve without them would be another problem")

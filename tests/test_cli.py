@@ -45,7 +45,7 @@ def test_bad_input_is_a_clear_error(tmp_path, caplog, capsys, args, message):
     out = tmp_path / "bad"
     code = main(["run", "--h", "16", "--H", "4", "--no-plots", "--out", str(out), *args])
     assert code == 2
-    assert message in capsys.readouterr().out
+    assert message in capsys.readouterr().err
     assert not (out / "summary.json").exists(), "no partial result may be written"
 
 

@@ -9,6 +9,8 @@ the same physical-group names (``tags.PHYSICAL_NAMES``).
 
 import contextlib
 import logging
+import signal
+import threading
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import NamedTuple
@@ -51,16 +53,35 @@ class ContactMesh(NamedTuple):
 
 @contextlib.contextmanager
 def gmsh_session(*, verbosity: int = 0) -> Iterator[None]:
-    """Initialise gmsh for the duration of a ``with`` block (no global state leaks)."""
+    """Initialise gmsh for the duration of a ``with`` block (no global state leaks).
+
+    gmsh's initialisation resets the SIGTERM disposition to the default (die at once); the
+    Python handlers of SIGINT and SIGTERM are put back, so a run can still end cleanly.
+    """
     started = not gmsh.isInitialized()
+    handlers = _signal_handlers()
     if started:
         gmsh.initialize(interruptible=False)
+        _restore_signal_handlers(handlers)
     gmsh.option.setNumber("General.Terminal", verbosity)
     try:
         yield
     finally:
         if started:
             gmsh.finalize()
+            _restore_signal_handlers(handlers)
+
+
+def _signal_handlers() -> dict:
+    if threading.current_thread() is not threading.main_thread():
+        return {}
+    return {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+
+
+def _restore_signal_handlers(handlers: dict) -> None:
+    for s, handler in handlers.items():
+        if handler is not None:
+            signal.signal(s, handler)
 
 
 def _check_sizes(n: int, n_coarse: int) -> None:

@@ -267,9 +267,11 @@ class OutputDirectory:
                 umask = os.umask(0o022)
                 os.umask(umask)
                 result.chmod(0o777 & ~umask)  # mkdtemp makes it private; the results are an ordinary directory
-            except (InputError, OSError) as err:
-                result = InputError(str(err) if isinstance(err, InputError) else
-                                    f"--out {self.target}: cannot create the output directory: {err}")
+            except InputError as err:
+                result = err
+            except OSError as err:
+                result = InputError(f"--out {self.target}: cannot create a directory in "
+                                    f"{self.target.resolve().parent}: {err.strerror or err}")
         result = comm.bcast(result, root=0)
         if isinstance(result, InputError):
             raise result

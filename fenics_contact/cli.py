@@ -206,6 +206,8 @@ class RunOptions:
         _integer("layers", self.layers, 0)
         _integer("nbasis", self.nbasis, 1)
         _integer("max_nbasis", self.max_nbasis, 1)
+        if self.max_nbasis is not None and self.max_nbasis < self.value("nbasis"):
+            raise InputError(f"--max-nbasis {self.max_nbasis} must be >= --nbasis {self.value('nbasis')}")
         if self.min_gap is not None and not (math.isfinite(self.min_gap) and self.min_gap >= 0):
             raise InputError(f"--min-gap must be a finite number >= 0, got {self.min_gap!r}")
         if self.alpha is not None:

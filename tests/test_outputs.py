@@ -157,7 +157,8 @@ def _cli(*args: str, ranks: int = 2) -> subprocess.CompletedProcess:
 @pytest.mark.skipif(_mpiexec() is None, reason="no mpiexec")
 def test_two_ranks_write_one_directory(tmp_path):
     out = tmp_path / "mpi"
-    proc = _cli(*SMALL, "--out", str(out))
+    stored = Path(__file__).parents[1] / "meshes" / "unit_square_n16_H4.msh"  # validated on 2 ranks
+    proc = _cli("--mesh", str(stored), "--H", "4", "--out", str(out))
     assert proc.returncode == 0, proc.stderr[-2000:]
     summary = json.loads((out / "summary.json").read_text())
     assert summary["mpi_ranks"] == 2 and summary["converged"] is True

@@ -153,7 +153,7 @@ def test_bad_boundary_input(tmp_path):
             gmsh.model.addPhysicalGroup(1, list(left), neumann_tag("Gamma_N_load"), name="Gamma_N_load")
             gmsh.write(str(path))
     path = MPI.COMM_WORLD.bcast(path, root=0)
-    with pytest.raises(MeshTagError, match="'Gamma_D' and 'Gamma_N_load' overlap"):
+    with pytest.raises(MeshTagError, match="'Gamma_D' and 'Gamma_N_load' share"):
         read_mesh(path)
 
 

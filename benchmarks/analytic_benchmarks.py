@@ -21,6 +21,8 @@ Sections:
    refines the whole mesh (contact cells a/(20r)).
 4. The Hertz cylinder pushed in load steps (``indentation.force_indentation``): the
    force–indentation curve, the Hertz errors at every step, and what the warm start saves.
+5. (``--sections 5``) the Hertz errors over nine depths: their spread as the contact edge moves
+   across a cell.
 """
 
 import argparse
@@ -181,13 +183,50 @@ def indentation_section(refinement: float, steps: int, options) -> list[str]:
     return lines + [""]
 
 
+def edge_sweep_section(refinements: list[float], mixed_max: float, count: int = 9) -> list[str]:
+    """Hertz errors over depths 1.1–1.3·10⁻³: how much they depend on where the contact edge falls."""
+    from fenics_contact.fem.mixed import MixedSubproblem, default_epsilon
+    from fenics_contact.fem.primal import PrimalSubproblem
+
+    a, R, E, nu = 0.05, 5.0, 1.0, 0.3
+    depths = np.linspace(1.1e-3, 1.3e-3, count)
+    lines = [f"## 5. Hertz errors over {count} depths from 1.1 to 1.3·10⁻³ (the contact edge moves across a cell)", "",
+             "| method | r | a/h | (a_h − a)/h: min, max | p_max/p₀ − 1: min, max | L² error: min, max |",
+             "|---|---|---|---|---|---|"]
+    for method in ("primal monolithic", "mixed monolithic"):
+        for r in refinements:
+            if method.startswith("mixed") and r > mixed_max:
+                continue
+            cm, spec = hertz_block(a, refinement=r)
+            fields = material_fields(cm.mesh, hertz_model(radius=R, E=E, nu=nu, depth=depths[0]))
+            if method.startswith("primal"):
+                sub = PrimalSubproblem(cm.mesh, cm.facet_tags, fields, delta=default_penalty(cm.h, E), alpha=None,
+                                       prefix="fc_bench_edge_p_")
+            else:
+                sub = MixedSubproblem(cm.mesh, cm.facet_tags, fields, epsilon=default_epsilon(cm.h, E), beta=None,
+                                      prefix="fc_bench_edge_m_")
+            rows = []
+            for d in depths:
+                sub.set_obstacle(hertz_model(radius=R, E=E, nu=nu, depth=d).obstacle)
+                sub.solve()
+                e = hertz_errors(sub.contact_profile(), radius=R, E=E, nu=nu, h_contact=spec.h_contact)
+                rows.append((e.a / spec.h_contact, e.half_width_cells, e.peak_error, e.l2_error))
+            rows = np.array(rows)
+            lines.append(f"| {method} | {r:g} | {rows[:, 0].min():.1f}–{rows[:, 0].max():.1f} | "
+                         f"{rows[:, 1].min():+.2f}, {rows[:, 1].max():+.2f} | {rows[:, 2].min():+.2%}, "
+                         f"{rows[:, 2].max():+.2%} | {rows[:, 3].min():.2%}, {rows[:, 3].max():.2%} |")
+            print(lines[-1], flush=True)
+    return lines + [""]
+
+
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--bar-sizes", type=int, nargs="+", default=[8, 16, 32, 64])
     parser.add_argument("--patch-size", type=int, default=32)
     parser.add_argument("--hertz-refinements", type=float, nargs="+", default=[0.5, 1.0, 2.0])
     parser.add_argument("--hertz-mixed-max", type=float, default=2.0, help="largest refinement for the mixed methods")
-    parser.add_argument("--sections", type=int, nargs="+", default=[1, 2, 3, 4], help="which sections to run")
+    parser.add_argument("--sections", type=int, nargs="+", default=[1, 2, 3, 4],
+                        help="which sections to run (5: the Hertz edge-position sweep, not in the default)")
     parser.add_argument("--indentation-steps", type=int, default=4, help="load steps of section 4")
     parser.add_argument("--indentation-refinement", type=float, default=1.0)
     parser.add_argument("--tol", type=float, default=1e-8, help="relative-change tolerance of Algorithms 1 and 2")
@@ -205,10 +244,11 @@ def main(argv=None) -> None:
         2: lambda: patch_section(args.patch_size, options),
         3: lambda: hertz_section(args.hertz_refinements, args.hertz_mixed_max, options),
         4: lambda: indentation_section(args.indentation_refinement, args.indentation_steps, options),
+        5: lambda: edge_sweep_section(args.hertz_refinements, args.hertz_mixed_max),
     }
     for number in args.sections:
         if number not in sections:
-            parser.error(f"unknown section {number}; choose among 1 2 3 4")
+            parser.error(f"unknown section {number}; choose among 1 2 3 4 5")
         lines += sections[number]()
     lines.append(f"Total time {time.perf_counter() - start:.0f} s.")
     if MPI.COMM_WORLD.rank == 0:

@@ -13,10 +13,10 @@
 
 Both use unstructured triangles; the tags follow ``tags.PHYSICAL_NAMES``.
 
-The Hertz block's default size is chosen so that the block does not limit the comparison
-with the half-space solution: with 40a × 20a the P1 and Arnold–Winther pressure profiles
-converged to a finite-block profile 0.2–0.3 % (L²) away from Hertz; with 80a × 40a the
-difference is ≈ 0.1 % (R = 5, a ≈ 0.05, measured with ``benchmarks/analytic_benchmarks.py``).
+The Hertz block's default size (80a × 40a) is chosen so that the block hardly limits the
+comparison with the half-space solution: the discrete pressure profiles converge to the
+finite block's, which differs from Hertz by about 0.2 % in L² (``benchmarks/analytic_benchmarks.py``);
+a smaller block leaves a larger difference.
 """
 
 from dataclasses import dataclass

@@ -121,6 +121,7 @@ class PrimalSubproblem:
         self.A = dolfinx.fem.petsc.create_matrix(self._J)
         self.b = dolfinx.fem.petsc.create_vector(self.V)
         self.du = dolfinx.fem.petsc.create_vector(self.V)
+        self._gap_vec = dolfinx.fem.petsc.create_vector(self.V)  # ghosted, like b (assembly target)
         self.solver = DirectSolver(msh.comm, prefix=prefix)
         self._K = dolfinx.fem.petsc.assemble_matrix(self._a)
         self._K.assemble()
@@ -281,7 +282,7 @@ class PrimalSubproblem:
         load = self._assemble_vector(self._load, self.du)
         if self.contact:
             load.abs()
-            gap = self._assemble_vector(self._gap_terms, self._work)
+            gap = self._assemble_vector(self._gap_terms, self._gap_vec)
             gap.abs()
             load.axpy(1.0, gap)
         return final, self._terms(self.A, self.u.x.petsc_vec, load)
@@ -357,7 +358,7 @@ class PrimalSubproblem:
 
     def destroy(self) -> None:
         """Free the PETSc objects (collective)."""
-        for obj in (self.A, self.b, self.du, self._K, self._M, self._work):
+        for obj in (self.A, self.b, self.du, self._gap_vec, self._K, self._M, self._work):
             obj.destroy()
         self.solver.destroy()
         self._terms.destroy()

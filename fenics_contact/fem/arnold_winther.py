@@ -36,7 +36,9 @@ vertex values solve the stacked vertex constraints with right-hand side t
 (least squares where the data of two edges meeting at a corner disagree), so
 that the stress is σ = P c + σ_t with c free.
 
-Only serial runs (one MPI rank) and affine triangles are supported.
+Serial and distributed meshes (any number of MPI ranks) of affine triangles are
+supported: the numbering, constraints and P are built as described in
+:class:`ArnoldWintherSpace`; the operators are distributed PETSc matrices.
 """
 
 from __future__ import annotations
@@ -60,9 +62,14 @@ import numpy as np
 import numpy.typing as npt
 import scipy.sparse as sp
 import ufl
+from mpi4py import MPI
 from petsc4py import PETSc
 
-from fenics_contact.fem.linalg import petsc_to_scipy, scipy_to_petsc
+from fenics_contact.fem.distributed import SaddlePointMatrix
+from fenics_contact.fem.distributed import local_rows_to_petsc as _local_rows_to_petsc
+from fenics_contact.fem.distributed import offsets as _offsets
+from fenics_contact.fem.distributed import owner_of as _owner_of
+from fenics_contact.fem.distributed import scatter_to_ghosts as _scatter_to_ghosts
 
 __all__ = [
     "ArnoldWintherSpace",
@@ -256,22 +263,36 @@ def _as_form(form) -> dolfinx.fem.Form:
 
 
 class ArnoldWintherSpace:
-    """Lowest-order Arnold–Winther stress space X_h ⊂ H(div; Ω; S) on a triangle mesh.
+    """Lowest-order Arnold–Winther stress space X_h ⊂ H(div; Ω; S) on a (distributed) triangle mesh.
 
     Forms are written on ``self.dg`` (DG P3, value shape (3,) = (σ_xx, σ_xy,
     σ_yy)); use :meth:`stress` to obtain the symmetric tensor and
     :meth:`assemble_matrix` / :meth:`assemble_vector` to obtain the AW
     operators Pᵀ A P, B P, Pᵀ b.
 
+    **Numbering.**  On each rank the *full* local numbering is 3v + j for the
+    local vertices v (owned, then ghosts), 3n_v + 4e + k for the local edges,
+    3n_v + 4n_e + 3c + j for the owned cells.  The (reduced) space numbers its
+    degrees of freedom globally: each rank owns those of its owned vertices, edges
+    and cells — the kept full ones in local order, then the constrained vertices'
+    null-space coefficients, then the split-interface coefficients — and learns the
+    numbers of its ghosts from their owners (DOLFINx scatters over the topology's
+    index maps).  Essential constraints are gathered from all ranks (boundary data,
+    small), so every rank forms the same constraint rows and null spaces at a vertex
+    shared by ranks.  In serial the numbering is the raw one above.
+
     Args:
-        mesh: serial mesh of affine triangles, gdim 2.
-        zero_tangential_facets: facet (edge) indices of straight edges on which
+        mesh: mesh of affine triangles, gdim 2 (serial or distributed).
+        zero_tangential_facets: local facet (edge) indices of straight edges on which
             σn·t = 0 is imposed essentially (frictionless / sliding).
-        zero_traction_facets: facet indices on which σn = 0 is imposed
+        zero_traction_facets: local facet indices on which σn = 0 is imposed
             essentially (traction-free).
         prescribed_tractions: pairs (facets, t) with facets among
             ``zero_traction_facets`` and t a callable x (3, N) -> (2, N): σn = t
             there (outward n), carried by the lifting ``lifting_dg``.
+        split_interface: (facets, cells): at the vertices of these facets (γ) the
+            stress gets extra functions living on ``cells`` only (one side of γ) whose
+            normal trace on γ vanishes: σ_tt may differ on the two sides of a γ vertex.
     """
 
     def __init__(
@@ -281,10 +302,9 @@ class ArnoldWintherSpace:
         zero_tangential_facets: npt.ArrayLike | None = None,
         zero_traction_facets: npt.ArrayLike | None = None,
         prescribed_tractions: list | None = None,
+        split_interface: tuple[npt.ArrayLike, npt.ArrayLike] | None = None,
     ) -> None:
         t0 = time.perf_counter()
-        if mesh.comm.size > 1:
-            raise ValueError("ArnoldWintherSpace supports serial runs only (one MPI rank).")
         if mesh.topology.cell_type != dolfinx.mesh.CellType.triangle:
             raise ValueError(f"Arnold–Winther needs a triangle mesh, got {mesh.topology.cell_type}.")
         if mesh.geometry.dim != 2:
@@ -292,32 +312,34 @@ class ArnoldWintherSpace:
         if len(mesh.geometry.cmaps) != 1 or mesh.geometry.cmaps[0].degree != 1:
             raise ValueError("Arnold–Winther needs an affine (degree 1) geometry.")
         self.mesh = mesh
+        self.comm = mesh.comm
         top = mesh.topology
-        top.create_connectivity(2, 0)
-        top.create_connectivity(2, 1)
-        top.create_connectivity(1, 0)
-        nc = top.index_map(2).size_local
-        nv = top.index_map(0).size_local
-        ne = top.index_map(1).size_local
-        c2v = top.connectivity(2, 0).array.reshape(-1, 3)[:nc].astype(np.int64)
+        for d0, d1 in ((2, 0), (2, 1), (1, 0), (1, 2)):
+            top.create_connectivity(d0, d1)
+        im0, im1, im2 = (top.index_map(d) for d in range(3))
+        nc = im2.size_local
+        nv = im0.size_local + im0.num_ghosts
+        ne = im1.size_local + im1.num_ghosts
+        c2v_all = top.connectivity(2, 0).array.reshape(-1, 3).astype(np.int64)
+        c2v = c2v_all[:nc]
         c2e = top.connectivity(2, 1).array.reshape(-1, 3)[:nc].astype(np.int64)
         e2v = top.connectivity(1, 0).array.reshape(-1, 2).astype(np.int64)
-        gdofs = mesh.geometry.dofmaps[0][:nc]
-        vx = np.empty((nv, 2))
-        vx[c2v.ravel()] = mesh.geometry.x[gdofs.ravel(), :2]
-        self._c2v, self._c2e, self._e2v, self._vx = c2v, c2e, e2v, vx
+        vx = np.zeros((nv, 2))
+        vx[c2v_all.ravel()] = mesh.geometry.x[mesh.geometry.dofmaps[0].ravel(), :2]
+        self._c2v, self._c2e, self._e2v, self._vx, self._c2v_all = c2v, c2e, e2v, vx, c2v_all
         self.num_cells, self.num_vertices, self.num_edges = nc, nv, ne
+        self._vertex_gid = im0.local_to_global(np.arange(nv, dtype=np.int32)).astype(np.int64)
+        self._edge_gid = im1.local_to_global(np.arange(ne, dtype=np.int32)).astype(np.int64)
 
         # sanity: local edge k is opposite local vertex k (basix numbering)
         loc = np.sort(c2v[:, _EDGE_VERTICES], axis=-1)  # (nc, 3, 2)
         if not np.array_equal(loc, np.sort(e2v[c2e], axis=-1)):
             raise RuntimeError("Unexpected local edge numbering in the mesh topology.")
-        gnum = top.index_map(0).local_to_global(np.arange(nv, dtype=np.int32)).astype(np.int64)
+        gnum = self._vertex_gid
         edge_flip = gnum[c2v[:, _EDGE_VERTICES[:, 0]]] > gnum[c2v[:, _EDGE_VERTICES[:, 1]]]
-        self._edge_start = np.where(
-            gnum[e2v[:, 0]] < gnum[e2v[:, 1]], e2v[:, 0], e2v[:, 1]
-        )  # global orientation per edge
-        self._edge_end = np.where(gnum[e2v[:, 0]] < gnum[e2v[:, 1]], e2v[:, 1], e2v[:, 0])
+        lower = gnum[e2v[:, 0]] < gnum[e2v[:, 1]]
+        self._edge_start = np.where(lower, e2v[:, 0], e2v[:, 1])  # orientation from global vertex numbers
+        self._edge_end = np.where(lower, e2v[:, 1], e2v[:, 0])
 
         # DG P3 space for (σ_xx, σ_xy, σ_yy)
         scalar = basix.ufl.element("DG", "triangle", 3)
@@ -326,7 +348,7 @@ class ArnoldWintherSpace:
         ref_pts = np.asarray(bel.points)
         interp = np.asarray(bel.interpolation_matrix)  # (10, 10), identity for Lagrange
 
-        # local AW -> global AW numbering
+        # local AW -> full local numbering
         self.num_dofs_full = 3 * nv + 4 * ne + 3 * nc
         l2g = np.empty((nc, _NUM_LOCAL), dtype=np.int64)
         l2g[:, 0:9] = (3 * c2v[:, :, None] + np.arange(3)).reshape(nc, 9)
@@ -337,127 +359,286 @@ class ArnoldWintherSpace:
         # per-cell nodal basis at the DG nodes -> DG coefficients
         values = local_nodal_basis(vx[c2v], edge_flip, ref_pts)  # (nc, 10, 3, 24)
         coeffs = np.einsum("pq,nqjk->npjk", interp, values)
-        dg_dofs = self.dg.dofmap.list[:nc].astype(np.int64)  # (nc, 10) blocks
+        dg_dofs = self.dg.dofmap.list[:nc].astype(np.int64)  # (nc, 10) blocks (owned: DG)
         rows = (3 * dg_dofs[:, :, None] + np.arange(3)).reshape(nc, 30)
-        n_dg = 3 * self.dg.dofmap.index_map.size_local
+        self._n_dg = 3 * self.dg.dofmap.index_map.size_local
         P = sp.csr_matrix(
             (
                 coeffs.reshape(nc, 30, _NUM_LOCAL).ravel(),
                 (np.repeat(rows, _NUM_LOCAL, axis=1).ravel(), np.tile(l2g, (1, 30)).ravel()),
             ),
-            shape=(n_dg, self.num_dofs_full),
+            shape=(self._n_dg, self.num_dofs_full),
         )
         # (duplicates cannot occur: each DG row belongs to one cell)
         self._P_full = P
-        #: stacked essential constraint rows (k, 3) acting on the vertex value σ(v), per constrained vertex
+        self._dg_rows = rows
+        #: stacked essential constraint rows (k, 3) acting on the vertex value σ(v), per constrained local vertex
         self.vertex_constraints: dict[int, np.ndarray] = {}
-        self._vertex_rhs: dict[int, list[np.ndarray]] = {}
-        self._T = self._constraint_basis(zero_tangential_facets, zero_traction_facets, prescribed_tractions)
-        self._P = P if self._T is None else (P @ self._T).tocsr()
+        self._vertex_rhs: dict[int, np.ndarray] = {}
+        self._constraints(zero_tangential_facets, zero_traction_facets, prescribed_tractions)
+        self._split_bases: dict[int, np.ndarray] = {}
+        if split_interface is not None:
+            self._split_null_spaces(*split_interface)
+        self._number()
+        T = self._T_local
+        self._P = P if T is None else (P @ T).tocsr()
+        if split_interface is not None and self._X_local is not None:
+            mask = np.zeros(self._n_dg)
+            cells = np.asarray(split_interface[1], dtype=np.int64)
+            cells = cells[cells < nc]
+            mask[rows[cells].ravel()] = 1.0
+            self._P = (self._P + sp.diags(mask) @ P @ self._X_local).tocsr()
         #: DG coefficients of the traction lifting σ_t (None without prescribed tractions)
         self.lifting_dg: np.ndarray | None = None
-        #: vertices where the prescribed tractions of two edges are incompatible (least-squares value used)
+        #: local vertices where the prescribed tractions of two edges are incompatible (least-squares value used)
         self.incompatible_vertices: np.ndarray = np.zeros(0, dtype=np.int64)
         if prescribed_tractions:
-            self.lifting_dg = P @ self._lifting(prescribed_tractions)
+            self.lifting_dg = P @ self._lifting()
         self._P.sort_indices()
         self._P_petsc: PETSc.Mat | None = None
         self.build_time = time.perf_counter() - t0
 
     # -- constraints ---------------------------------------------------------
 
-    def _constraint_basis(self, tangential, traction, prescribed=None) -> sp.csr_matrix | None:
-        """Sparse T (reduced AW -> full AW) with orthonormal columns, or None.
+    def _constraints(self, tangential, traction, prescribed) -> None:
+        """Gather the constrained facets of all ranks; constraint rows, right-hand sides and kept edge moments.
 
         On each listed edge e (unit normal n, tangent t) the moments of σn·t
         (and of σn·n for traction-free edges) are dropped, and at its vertices
         the value σ(v) is restricted to the null space of the rows
-        σ ↦ σn·t (resp. σ ↦ σn), stacked over all constrained edges at v.
-        The right-hand sides of the rows (zero, or the prescribed traction at v)
-        are kept in ``_vertex_rhs`` for the lifting.
+        σ ↦ σn·t (resp. σ ↦ σn), stacked over all constrained edges at v (in the order
+        kind, global facet number: the same on every rank).  The right-hand sides of the
+        rows (zero, or the prescribed traction at v) are kept for the lifting.
         """
-        sets = [
-            np.unique(np.asarray([] if f is None else f, dtype=np.int64)) for f in (tangential, traction)
-        ]
-        if all(f.size == 0 for f in sets):
-            return None
+        sets = [np.unique(np.asarray([] if f is None else f, dtype=np.int64)) for f in (tangential, traction)]
         for facets in sets:
             if facets.size and (facets.min() < 0 or facets.max() >= self.num_edges):
                 raise ValueError("Facet index out of range.")
-        traction_at: dict[int, Callable] = {}
-        for facets, value in prescribed or []:
+        group_of = np.full(self.num_edges, -1, dtype=np.int64)
+        for k, (facets, _) in enumerate(prescribed or []):
             facets = np.asarray(facets, dtype=np.int64)
             if not np.all(np.isin(facets, sets[1])):
                 raise ValueError("prescribed-traction facets must be among the zero_traction_facets")
-            traction_at.update({int(f): value for f in facets})
-        nv, ne = self.num_vertices, self.num_edges
-        keep = np.ones(self.num_dofs_full, dtype=bool)
-        rows_at: dict[int, list[np.ndarray]] = {}
-        for facets, dropped, full in ((sets[0], (2, 3), False), (sets[1], (0, 1, 2, 3), True)):
+            group_of[facets] = k
+        self._tractions = [value for _, value in (prescribed or [])]
+        # records: kind (0 tangential, 1 traction), facet gid, vertex gids, rows (2, 3), nrows, rhs (2 vertices, 2), group
+        recs = []
+        for kind, facets in enumerate(sets):
             if facets.size == 0:
                 continue
-            keep[(3 * nv + 4 * facets[:, None] + np.array(dropped)).ravel()] = False
             start, end = self._vx[self._edge_start[facets]], self._vx[self._edge_end[facets]]
             _, wt = _edge_frames(start, end)
-            d = end - start
-            t = d / np.linalg.norm(d, axis=-1, keepdims=True)
+            t = (end - start) / np.linalg.norm(end - start, axis=-1, keepdims=True)
             n0, n1 = t[:, 1], -t[:, 0]
-            outward = self._outward_sign(facets, np.stack([n0, n1], axis=1)) if full else None
-            for i, e in enumerate(facets):
-                if full:  # σn = (n0 σxx + n1 σxy, n0 σxy + n1 σyy)
-                    rows = np.array([[n0[i], n1[i], 0.0], [0.0, n0[i], n1[i]]])
-                else:  # σn·t
-                    rows = wt[i][None, :]
-                for v in self._e2v[e]:
-                    rows_at.setdefault(int(v), []).append(rows)
-                    rhs = np.zeros(rows.shape[0])
-                    if full and int(e) in traction_at:  # σ n_e = ±t(v), n_e = ±(outward normal)
-                        x = np.zeros((3, 1))
-                        x[:2, 0] = self._vx[v]
-                        rhs = outward[i] * np.asarray(traction_at[int(e)](x), dtype=np.float64).reshape(2)
-                    self._vertex_rhs.setdefault(int(v), []).append(rhs)
-        cv = np.fromiter(rows_at.keys(), dtype=np.int64, count=len(rows_at))
-        keep[(3 * cv[:, None] + np.arange(3)).ravel()] = False
-        kept = np.flatnonzero(keep)
-        r_idx, c_idx, vals = [kept], [np.arange(kept.size)], [np.ones(kept.size)]
-        ncol = kept.size
-        for v, rows in rows_at.items():
-            self.vertex_constraints[v] = np.vstack(rows)
-            _, sv, vt = np.linalg.svd(np.vstack(rows))
+            F = facets.size
+            rows = np.zeros((F, 2, 3))
+            rhs = np.zeros((F, 2, 2))
+            if kind == 0:
+                rows[:, 0] = wt
+            else:
+                rows[:, 0, 0], rows[:, 0, 1], rows[:, 1, 1], rows[:, 1, 2] = n0, n1, n0, n1
+                outward = self._outward_sign(facets, np.stack([n0, n1], axis=1))
+                for i, e in enumerate(facets):
+                    if group_of[e] < 0:
+                        continue
+                    x = np.zeros((3, 2))
+                    x[:2] = self._vx[self._e2v[e]].T
+                    val = np.asarray(self._tractions[group_of[e]](x), dtype=np.float64).reshape(2, 2)
+                    rhs[i] = outward[i] * val.T  # σ n_e = ±t(v), n_e = ±(outward normal)
+            recs.append({
+                "kind": np.full(F, kind, dtype=np.int64), "gid": self._edge_gid[facets],
+                "v": self._vertex_gid[self._e2v[facets]], "rows": rows, "rhs": rhs, "group": group_of[facets],
+            })
+        keys = ("kind", "gid", "v", "rows", "rhs", "group")
+        empty = {"kind": np.zeros(0, np.int64), "gid": np.zeros(0, np.int64), "v": np.zeros((0, 2), np.int64),
+                 "rows": np.zeros((0, 2, 3)), "rhs": np.zeros((0, 2, 2)), "group": np.zeros(0, np.int64)}
+        local = {k: np.concatenate([r[k] for r in recs]) if recs else empty[k] for k in keys}
+        if self.comm.size > 1:
+            parts = self.comm.allgather(local)
+            local = {k: np.concatenate([p[k] for p in parts]) for k in keys}
+        _, first = np.unique(np.stack([local["kind"], local["gid"]], axis=1), axis=0, return_index=True)
+        rec = {k: v[first] for k, v in local.items()}  # unique, sorted by (kind, gid)
+        self._constrained = rec
+        # kept edge moments of the local edges
+        keep_edge = np.ones((self.num_edges, 4), dtype=bool)
+        for kind, dropped in ((0, [2, 3]), (1, [0, 1, 2, 3])):
+            hit = np.isin(self._edge_gid, rec["gid"][rec["kind"] == kind])
+            keep_edge[np.ix_(hit, dropped)] = False
+        self._keep_edge = keep_edge
+        # stacked rows and right-hand sides at the local constrained vertices
+        order = np.argsort(self._vertex_gid, kind="stable")
+        gids_sorted = self._vertex_gid[order]
+        rows_at: dict[int, list[np.ndarray]] = {}
+        rhs_at: dict[int, list[np.ndarray]] = {}
+        for i in range(rec["gid"].size):
+            nrow = 1 if rec["kind"][i] == 0 else 2
+            for side in range(2):
+                g = rec["v"][i, side]
+                pos = np.searchsorted(gids_sorted, g)
+                if pos >= gids_sorted.size or gids_sorted[pos] != g:
+                    continue  # the vertex is not on this rank
+                v = int(order[pos])
+                rows_at.setdefault(v, []).append(rec["rows"][i, :nrow])
+                rhs_at.setdefault(v, []).append(rec["rhs"][i, side, :nrow])
+        self._null: dict[int, np.ndarray] = {}
+        for v in sorted(rows_at):
+            stacked = np.vstack(rows_at[v])
+            self.vertex_constraints[v] = stacked
+            self._vertex_rhs[v] = np.concatenate(rhs_at[v])
+            _, sv, vt = np.linalg.svd(stacked)
             null = vt[int(np.sum(sv > 1e-10 * sv.max())) :]  # (k, 3) orthonormal rows
             null[np.abs(null) < 1e-14] = 0.0
-            for vec in null:
-                nz = np.flatnonzero(vec)
+            self._null[v] = null
+
+    def _split_null_spaces(self, facets, cells) -> None:
+        """Extra vertex functions of the split interface: null space of σ ↦ σn (γ) and the vertex's constraints."""
+        facets = np.unique(np.asarray(facets, dtype=np.int64))
+        start, end = self._vx[self._edge_start[facets]], self._vx[self._edge_end[facets]]
+        t = (end - start) / np.linalg.norm(end - start, axis=-1, keepdims=True) if facets.size else np.zeros((0, 2))
+        local = {"gid": self._edge_gid[facets], "v": self._vertex_gid[self._e2v[facets]], "t": t}
+        if self.comm.size > 1:
+            parts = self.comm.allgather(local)
+            local = {k: np.concatenate([p[k] for p in parts]) for k in local}
+        _, first = np.unique(local["gid"], return_index=True)
+        order = np.argsort(self._vertex_gid, kind="stable")
+        gids_sorted = self._vertex_gid[order]
+        rows_at: dict[int, list[np.ndarray]] = {}
+        for i in first:
+            n0, n1 = local["t"][i, 1], -local["t"][i, 0]
+            rows = np.array([[n0, n1, 0.0], [0.0, n0, n1]])
+            for g in local["v"][i]:
+                pos = np.searchsorted(gids_sorted, g)
+                if pos < gids_sorted.size and gids_sorted[pos] == g:
+                    rows_at.setdefault(int(order[pos]), []).append(rows)
+        for v in sorted(rows_at):
+            # the side-2 value z must also satisfy the essential conditions at v (a γ end on a
+            # traction-free, traction or contact side): z in the null space of all rows
+            rows = rows_at[v] + ([self.vertex_constraints[v]] if v in self.vertex_constraints else [])
+            _, sv, vt = np.linalg.svd(np.vstack(rows))
+            null = vt[int(np.sum(sv > 1e-10 * sv.max())) :]
+            if null.shape[0]:
+                self._split_bases[v] = null
+
+    def _number(self) -> None:
+        """Global numbering of the reduced space; T (full local -> reduced local) and the split part X."""
+        comm = self.comm
+        top = self.mesh.topology
+        im0, im1 = top.index_map(0), top.index_map(1)
+        nv_own, ne_own, nc = im0.size_local, im1.size_local, self.num_cells
+        nv, ne = self.num_vertices, self.num_edges
+        constrained = np.zeros(nv, dtype=bool)
+        constrained[list(self._null)] = True
+        k_null = np.zeros(nv, dtype=np.int64)
+        for v, null in self._null.items():
+            k_null[v] = null.shape[0]
+        k_split = np.zeros(nv, dtype=np.int64)
+        for v, z in self._split_bases.items():
+            k_split[v] = z.shape[0]
+        # owned reduced DOFs: kept full DOFs (local full order), null-space coefficients, split coefficients
+        red_v = np.full((nv, 3), -1, dtype=np.int64)
+        red_e = np.full((ne, 4), -1, dtype=np.int64)
+        red_x = np.full((nv, 3), -1, dtype=np.int64)
+        free_v = np.flatnonzero(~constrained[:nv_own])
+        keep_e = self._keep_edge[:ne_own]
+        n_kept_v, n_kept_e = 3 * free_v.size, int(keep_e.sum())
+        cons_v = np.flatnonzero(constrained[:nv_own])
+        split_v = np.flatnonzero(k_split[:nv_own] > 0)
+        n_own = n_kept_v + n_kept_e + 3 * nc + int(k_null[cons_v].sum()) + int(k_split[split_v].sum())
+        offs = _offsets(comm, n_own)
+        off = int(offs[comm.rank])
+        red_v[free_v] = off + np.arange(n_kept_v).reshape(-1, 3)
+        pos = off + n_kept_v
+        red_e[:ne_own][keep_e] = pos + np.arange(n_kept_e)
+        pos += n_kept_e
+        red_c = pos + np.arange(3 * nc).reshape(nc, 3)
+        pos += 3 * nc
+        for v in cons_v:
+            red_v[v, : k_null[v]] = pos + np.arange(k_null[v])
+            pos += k_null[v]
+        for v in split_v:
+            red_x[v, : k_split[v]] = pos + np.arange(k_split[v])
+            pos += k_split[v]
+        assert pos == off + n_own
+        if comm.size > 1:
+            red_v = _scatter_to_ghosts(im0, red_v[:nv_own])
+            red_e = _scatter_to_ghosts(im1, red_e[:ne_own])
+            if comm.allreduce(bool(self._split_bases), op=MPI.LOR):
+                red_x = _scatter_to_ghosts(im0, red_x[:nv_own])
+        # local reduced numbering: owned block, then the ghosts (sorted by global number)
+        used = np.concatenate([red_v.ravel(), red_e.ravel(), red_x.ravel()])
+        used = np.unique(used[(used >= 0) & ((used < off) | (used >= off + n_own))])
+        self.num_owned = n_own
+        self.ghosts = used
+        self.ghost_owners = _owner_of(used, offs)
+        self._offsets = offs
+        self.global_indices = np.concatenate([off + np.arange(n_own), used])  # local reduced -> global
+
+        def to_local(g: np.ndarray) -> np.ndarray:
+            out = np.where(g >= 0, g - off, -1)
+            ghost = (g >= 0) & ((g < off) | (g >= off + n_own))
+            out[ghost] = n_own + np.searchsorted(used, g[ghost])
+            return out
+
+        lv, le, lc, lx = to_local(red_v), to_local(red_e), to_local(red_c), to_local(red_x)
+        n_loc = n_own + used.size
+        # T: full local -> reduced local
+        r_idx, c_idx, vals = [], [], []
+        free = np.flatnonzero(~constrained)
+        r_idx.append((3 * free[:, None] + np.arange(3)).ravel())
+        c_idx.append(lv[free].ravel())
+        vals.append(np.ones(3 * free.size))
+        for v, null in self._null.items():  # σ(v) = Σ_q c_q z_q
+            for q, z in enumerate(null):
+                nz = np.flatnonzero(z)
                 r_idx.append(3 * v + nz)
-                c_idx.append(np.full(nz.size, ncol))
-                vals.append(vec[nz])
-                ncol += 1
-        return sp.csr_matrix(
-            (np.concatenate(vals), (np.concatenate(r_idx), np.concatenate(c_idx))),
-            shape=(self.num_dofs_full, ncol),
-        )
+                c_idx.append(np.full(nz.size, lv[v, q]))
+                vals.append(z[nz])
+        ei, ek = np.nonzero(self._keep_edge)
+        r_idx.append(3 * nv + 4 * ei + ek)
+        c_idx.append(le[ei, ek])
+        vals.append(np.ones(ei.size))
+        r_idx.append(3 * nv + 4 * ne + np.arange(3 * nc))
+        c_idx.append(lc.ravel())
+        vals.append(np.ones(3 * nc))
+        r, c, w = np.concatenate(r_idx), np.concatenate(c_idx), np.concatenate(vals)
+        if np.any(c < 0):
+            raise RuntimeError("an Arnold–Winther degree of freedom has no global number")
+        identity = n_loc == self.num_dofs_full and r.size == n_loc and np.array_equal(r, c) and np.all(w == 1.0)
+        self._T_local = None if identity else sp.csr_matrix((w, (r, c)), shape=(self.num_dofs_full, n_loc))
+        self._X_local = None
+        if self._split_bases:
+            r_idx, c_idx, vals = [], [], []
+            for v, zs in self._split_bases.items():
+                for q, z in enumerate(zs):
+                    nz = np.flatnonzero(z)
+                    r_idx.append(3 * v + nz)
+                    c_idx.append(np.full(nz.size, lx[v, q]))
+                    vals.append(z[nz])
+            self._X_local = sp.csr_matrix(
+                (np.concatenate(vals), (np.concatenate(r_idx), np.concatenate(c_idx))), shape=(self.num_dofs_full, n_loc)
+            )
 
     def _outward_sign(self, facets: np.ndarray, normals: np.ndarray) -> np.ndarray:
         """+1 where the edge normal n_e (global orientation) points out of the mesh, −1 where it points in."""
-        c_idx, l_idx = np.nonzero(np.isin(self._c2e, facets))
-        edge = self._c2e[c_idx, l_idx]
-        order = np.argsort(edge, kind="stable")
-        pos = np.searchsorted(edge[order], facets)
-        if np.any(pos >= edge.size) or not np.array_equal(edge[order][np.minimum(pos, edge.size - 1)], facets):
+        f2c = self.mesh.topology.connectivity(1, 2)
+        counts = np.diff(f2c.offsets)[facets]
+        if np.any(counts < 1):
             raise ValueError("a traction facet does not belong to a cell")
-        cells = c_idx[order][pos]
+        cells = f2c.array[f2c.offsets[facets]]
         mid = 0.5 * (self._vx[self._edge_start[facets]] + self._vx[self._edge_end[facets]])
-        centre = self._vx[self._c2v[cells]].mean(axis=1)
+        centre = self._vx[self._c2v_all[cells]].mean(axis=1)
         return np.where(np.sum(normals * (mid - centre), axis=1) > 0.0, 1.0, -1.0)
 
-    def _lifting(self, prescribed: list) -> np.ndarray:
-        """Full AW coefficients of the traction lifting: edge moments of ±t on the traction edges,
+    def _lifting(self) -> np.ndarray:
+        """Full local AW coefficients of the traction lifting: edge moments of ±t on the traction edges,
         vertex values by least squares on the stacked vertex constraints (min-norm: ⊥ the free part)."""
         nv = self.num_vertices
         d = np.zeros(self.num_dofs_full)
         q = np.stack([_EDGE_W, _EDGE_W * (2.0 * _EDGE_S - 1.0)])  # (2, nq)
-        for facets, value in prescribed:
-            facets = np.unique(np.asarray(facets, dtype=np.int64))
+        rec = self._constrained
+        for k, value in enumerate(self._tractions):
+            gids = rec["gid"][(rec["kind"] == 1) & (rec["group"] == k)]
+            facets = np.flatnonzero(np.isin(self._edge_gid, gids))
             if facets.size == 0:
                 continue
             start, end = self._vx[self._edge_start[facets]], self._vx[self._edge_end[facets]]
@@ -474,7 +655,7 @@ class ArnoldWintherSpace:
             d[(3 * nv + 4 * facets[:, None] + np.arange(4)).ravel()] = moments.ravel()
         bad = []
         for v, rows in self.vertex_constraints.items():
-            rhs = np.concatenate(self._vertex_rhs[v])
+            rhs = self._vertex_rhs[v]
             if not np.any(rhs):
                 continue
             value, *_ = np.linalg.lstsq(rows, rhs, rcond=None)
@@ -485,37 +666,46 @@ class ArnoldWintherSpace:
         return d
 
     def vertex_coordinates(self, vertices: npt.ArrayLike) -> np.ndarray:
-        """Coordinates (N, 2) of topology vertices."""
+        """Coordinates (N, 2) of local topology vertices."""
         return self._vx[np.asarray(vertices, dtype=np.int64)]
 
     # -- public API ----------------------------------------------------------
 
     @property
     def num_dofs(self) -> int:
-        """Number of (reduced) AW degrees of freedom."""
-        return self._P.shape[1]
+        """Global number of (reduced) AW degrees of freedom."""
+        return int(self._offsets[-1])
+
+    @property
+    def owned_range(self) -> tuple[int, int]:
+        """(first, last + 1) global number of the DOFs this rank owns."""
+        return int(self._offsets[self.comm.rank]), int(self._offsets[self.comm.rank + 1])
 
     @property
     def prolongation(self) -> sp.csr_matrix:
-        """Sparse P: AW coefficients -> coefficients of ``self.dg`` (scipy CSR)."""
+        """Local P (SciPy CSR): owned DG coefficients × local AW coefficients (owned, then ``ghosts``).
+
+        In serial: AW coefficients -> coefficients of ``self.dg``.
+        """
         return self._P
 
     @property
     def prolongation_petsc(self) -> PETSc.Mat:
-        """P as a PETSc AIJ matrix (created once)."""
+        """P as a distributed PETSc AIJ matrix (global AW numbering; created once)."""
         if self._P_petsc is None:
-            self._P_petsc = scipy_to_petsc(self._P, self.mesh.comm)
+            self._P_petsc = _local_rows_to_petsc(self.comm, self._P, self.global_indices,
+                                                 (self.num_owned, self.num_dofs))
         return self._P_petsc
 
     @property
     def full_prolongation(self) -> sp.csr_matrix:
-        """P of the unconstrained space: full AW coefficients -> ``dg`` coefficients."""
+        """Local P of the unconstrained space: full local AW coefficients -> owned ``dg`` coefficients."""
         return self._P_full
 
     @property
     def constraint_basis(self) -> sp.csr_matrix:
-        """T: reduced AW coefficients -> full AW coefficients (identity if unconstrained)."""
-        return sp.identity(self.num_dofs_full, format="csr") if self._T is None else self._T
+        """T: reduced local AW coefficients -> full local AW coefficients (identity if unconstrained)."""
+        return sp.identity(self.num_dofs_full, format="csr") if self._T_local is None else self._T_local
 
     @staticmethod
     def stress(s: ufl.core.expr.Expr) -> ufl.core.expr.Expr:
@@ -523,15 +713,20 @@ class ArnoldWintherSpace:
         return symmetric_tensor(s)
 
     def to_dg(self, coeffs: npt.ArrayLike, out: dolfinx.fem.Function | None = None) -> dolfinx.fem.Function:
-        """AW coefficient vector c ↦ DG P3 function with coefficients P c."""
+        """Owned AW coefficients c ↦ DG P3 function with coefficients P c (collective)."""
         out = dolfinx.fem.Function(self.dg) if out is None else out
-        n = self._P.shape[0]
-        out.x.array[:n] = self._P @ np.asarray(coeffs, dtype=np.float64)
+        P = self.prolongation_petsc
+        x, y = P.createVecs()
+        x.array[:] = np.asarray(coeffs, dtype=np.float64)
+        P.mult(x, y)
+        out.x.array[: self._n_dg] = y.array
         out.x.scatter_forward()
+        x.destroy()
+        y.destroy()
         return out
 
     def interpolate(self, sigma: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
-        """AW interpolant: DOF functionals ℓ_i(σ) of a stress field, as (reduced) AW coefficients.
+        """AW interpolant: DOF functionals ℓ_i(σ) of a stress field, as owned (reduced) AW coefficients.
 
         Args:
             sigma: callable x -> components, x of shape (3, N) (dolfinx
@@ -553,7 +748,8 @@ class ArnoldWintherSpace:
         d[3 * nv : 3 * nv + 4 * ne] = _edge_moments(ev, wn, wt).reshape(-1)
         cv = val[nv + epts.shape[0] * epts.shape[1] :].reshape(nc, len(_CELL_W), 3)
         d[3 * nv + 4 * ne :] = np.einsum("q,nqj->nj", _CELL_W, cv).ravel()
-        return d if self._T is None else self._T.T @ d
+        c = d if self._T_local is None else self._T_local.T @ d
+        return c[: self.num_owned]
 
     def is_stress_space(self, V) -> bool:
         """True if V (python or C++ function space) is ``self.dg``."""
@@ -561,7 +757,7 @@ class ArnoldWintherSpace:
         return cpp == self.dg._cpp_object
 
     def assemble_matrix(self, a) -> PETSc.Mat:
-        """Assemble a bilinear form; stress arguments are reduced: Pᵀ A P, Pᵀ A or A P."""
+        """Assemble a bilinear form; stress arguments are reduced: Pᵀ A P, Pᵀ A or A P (distributed)."""
         form = _as_form(a)
         A = dolfinx.fem.petsc.assemble_matrix(form)
         A.assemble()
@@ -579,14 +775,19 @@ class ArnoldWintherSpace:
         return R
 
     def assemble_vector(self, L) -> np.ndarray:
-        """Assemble a linear form to a numpy array; on the stress space returns Pᵀ b."""
+        """Assemble a linear form to a numpy array of owned entries; on the stress space returns Pᵀ b."""
         form = _as_form(L)
         b = dolfinx.fem.petsc.assemble_vector(form)
         b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
-        arr = b.getArray(readonly=True).copy()
-        b.destroy()
         if self.is_stress_space(form.function_spaces[0]):
-            return self._P.T @ arr[: self._P.shape[0]]
+            P = self.prolongation_petsc
+            x = P.createVecRight()
+            P.multTranspose(b, x)
+            arr = x.array.copy()
+            x.destroy()
+        else:
+            arr = b.getArray(readonly=True).copy()
+        b.destroy()
         return arr
 
 
@@ -598,21 +799,19 @@ class ArnoldWintherSpace:
 def solve_saddle_point(
     K: PETSc.Mat, B: PETSc.Mat, F: npt.ArrayLike, G: npt.ArrayLike
 ) -> tuple[np.ndarray, np.ndarray, dict[str, float]]:
-    """Solve [[K, Bᵀ], [B, 0]] [x; y] = [F; G] by MUMPS LU.
+    """Solve [[K, Bᵀ], [B, 0]] [x; y] = [F; G] by MUMPS LU (distributed; F, G, x, y owned entries).
 
     Returns (x, y, timings) with timings 'block' (matrix build) and 'lu'.
     """
     t0 = time.perf_counter()
     comm = K.getComm()
-    Ks, Bs = petsc_to_scipy(K), petsc_to_scipy(B)
-    # (a MatNest converted to AIJ keeps references into the nest; build the CSR directly)
-    M = scipy_to_petsc(sp.bmat([[Ks, Bs.T], [Bs, None]], format="csr"), comm)
+    saddle = SaddlePointMatrix(K, B)
+    M = saddle.mat
     t1 = time.perf_counter()
-    rhs = M.createVecRight()
-    n = K.getSize()[0]
+    rhs, sol = saddle.create_vecs()
+    n = saddle.nx
     rhs.array[:n] = F
     rhs.array[n:] = G
-    sol = M.createVecRight()
     ksp = PETSc.KSP().create(comm)
     ksp.setOperators(M)
     ksp.setType("preonly")
@@ -638,7 +837,7 @@ class MixedElasticitySolution:
 
     sigma: dolfinx.fem.Function  #: stress on ``space.dg`` (σ_xx, σ_xy, σ_yy)
     u: dolfinx.fem.Function  #: displacement, DG P1 vector
-    sigma_coeffs: np.ndarray  #: AW coefficients of σ_h
+    sigma_coeffs: np.ndarray  #: AW coefficients of σ_h (owned entries)
     timings: dict[str, float] = field(default_factory=dict)
 
 
@@ -682,7 +881,7 @@ def solve_mixed_elasticity(
         n = ufl.FacetNormal(mesh)
         F = space.assemble_vector(ufl.inner(u_D, ufl.dot(T, n)) * ufl.ds(mesh))
     else:
-        F = np.zeros(space.num_dofs)
+        F = np.zeros(space.num_owned)
     if f is not None:
         G = space.assemble_vector(-ufl.inner(f, v) * dx)
     else:

@@ -677,6 +677,11 @@ class ArnoldWintherSpace:
         return int(self._offsets[-1])
 
     @property
+    def global_vertex_indices(self) -> np.ndarray:
+        """Global number of every local topology vertex (owned, then ghosts)."""
+        return self._vertex_gid
+
+    @property
     def owned_range(self) -> tuple[int, int]:
         """(first, last + 1) global number of the DOFs this rank owns."""
         return int(self._offsets[self.comm.rank]), int(self._offsets[self.comm.rank + 1])

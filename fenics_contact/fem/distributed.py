@@ -116,7 +116,8 @@ def coo_matrix(
 def local_rows_to_petsc(comm: MPI.Comm, A: sp.csr_matrix, col_global: np.ndarray, col_sizes: tuple[int, int]) -> PETSc.Mat:
     """AIJ matrix whose owned rows are the rows of A (local), column j of A being global column col_global[j]."""
     A = sp.csr_matrix(A)
-    G = sp.csr_matrix((A.data, col_global[A.indices], A.indptr), shape=(A.shape[0], col_sizes[1]))
+    # copies: sum_duplicates / sort_indices below reorder G's arrays in place, which must not touch A's
+    G = sp.csr_matrix((A.data.copy(), col_global[A.indices], A.indptr.copy()), shape=(A.shape[0], col_sizes[1]))
     G.sum_duplicates()
     G.sort_indices()
     nrows = int(comm.allreduce(A.shape[0], op=MPI.SUM)) if comm.size > 1 else A.shape[0]
@@ -160,6 +161,11 @@ class DistributedMatrix:
     @property
     def T(self) -> _Transposed:
         return _Transposed(self)
+
+    def local_csr(self) -> sp.csr_matrix:
+        """The owned rows as SciPy CSR with global column indices (in serial: the whole matrix)."""
+        indptr, indices, data = self.mat.getValuesCSR()
+        return sp.csr_matrix((data.copy(), indices.copy(), indptr.copy()), shape=(self.local_shape[0], self.shape[1]))
 
     def __matmul__(self, x: np.ndarray) -> np.ndarray:
         self._x.array[:] = x

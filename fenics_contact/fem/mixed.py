@@ -59,7 +59,14 @@ stress there; the normal traction σn stays continuous).  That space X̃_h is
 exactly the space of the converged iterate of Algorithm 2 (see
 ``hybrid.mixed``), so this monolithic solve is its exact fixed point.
 
-Serial only (one MPI rank), like ``fem.arnold_winther``.
+**MPI.**  Everything runs on a distributed mesh (``mpiexec -n N``): the AW space
+numbers its DOFs globally (``fem.arnold_winther``), the operators are distributed
+PETSc matrices, MUMPS factorizes the saddle-point matrix in parallel.  The Γ_C node
+data are small and replicated, so every rank takes the same Newton decisions (active
+set, cycle detection, line-search step) from the same numbers; every scalar of the
+iteration (energy, residual, step) is a global reduction.  With N ranks the Newton
+steps, active sets and solution are those of the serial run (to round-off; tested
+for N = 2, 3 in ``tests/test_mpi_mixed.py``).
 """
 
 import logging
@@ -69,7 +76,9 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 import ufl
+from mpi4py import MPI
 from petsc4py import PETSc
+from scipy.spatial import cKDTree
 
 import basix
 import basix.ufl
@@ -85,7 +94,8 @@ from fenics_contact.problem.boundary import BoundaryConditions, check_boundary_g
 from fenics_contact.problem.fields import MaterialFields, material_fields
 from fenics_contact.problem.obstacles import Obstacle, evaluate_obstacle
 from fenics_contact.problem.geometry import ContactMesh
-from fenics_contact.fem.linalg import DIRECT_OPTIONS, DirectSolver, assemble_scipy, petsc_to_scipy, scipy_to_petsc
+from fenics_contact.fem.distributed import DistributedMatrix, SaddlePointMatrix, coo_matrix, gather_rows, global_dot, layout
+from fenics_contact.fem.linalg import DIRECT_OPTIONS, DirectSolver
 from fenics_contact.problem.models import TestModel
 from fenics_contact.problem.tags import Boundary, Subdomain
 
@@ -93,6 +103,7 @@ __all__ = [
     "MIXED_SOLVER_OPTIONS",
     "default_epsilon",
     "check_serial_triangles",
+    "check_triangles",
     "MixedContactProfile",
     "MixedNewtonHistory",
     "MixedSubproblem",
@@ -123,30 +134,35 @@ def default_epsilon(h: float, E_contact: float, factor: float = 1.0e-3) -> float
     return factor * h * E_contact
 
 
-def check_serial_triangles(msh: dmesh.Mesh) -> None:
-    """Raise InputError unless ``msh`` is a serial mesh of affine triangles (what the AW space supports)."""
-    if msh.comm.size > 1:
-        raise InputError(
-            f"the mixed (Arnold–Winther) method runs in serial only; got {msh.comm.size} MPI ranks. "
-            "Run it without mpiexec (the primal method runs in parallel)."
-        )
+def check_triangles(msh: dmesh.Mesh) -> None:
+    """Raise InputError unless ``msh`` is a mesh of affine triangles (what the AW space supports; any number of ranks)."""
     if msh.topology.cell_type != dmesh.CellType.triangle:
         raise InputError(f"the mixed (Arnold–Winther) method needs a triangle mesh, got {msh.topology.cell_type.name}")
     if len(msh.geometry.cmaps) != 1 or msh.geometry.cmaps[0].degree != 1:
         raise InputError("the mixed (Arnold–Winther) method needs an affine (degree 1) triangle mesh")
 
 
+def check_serial_triangles(msh: dmesh.Mesh) -> None:
+    """Raise InputError unless ``msh`` is a serial mesh of affine triangles (for callers that run serially only)."""
+    if msh.comm.size > 1:
+        raise InputError(
+            f"this part of the mixed (Arnold–Winther) method runs in serial only; got {msh.comm.size} MPI ranks. "
+            "Run it without mpiexec."
+        )
+    check_triangles(msh)
+
+
 def contact_modulus(msh: dmesh.Mesh, facet_tags: dmesh.MeshTags, E: fem.Function) -> float:
-    """Largest Young's modulus of the cells touching Γ_C."""
+    """Largest Young's modulus of the cells touching Γ_C (over all ranks)."""
     tdim = msh.topology.dim
     msh.topology.create_connectivity(tdim - 1, tdim)
     f2c = msh.topology.connectivity(tdim - 1, tdim)
-    cells = np.unique(np.concatenate([f2c.links(f) for f in facet_tags.find(Boundary.GAMMA_C)] or [[]])).astype(
-        np.int32
-    )
-    if cells.size == 0:
+    facets = facet_tags.find(Boundary.GAMMA_C)
+    cells = np.unique(np.concatenate([f2c.links(f) for f in facets] or [[]])).astype(np.int32)
+    if msh.comm.allreduce(int(cells.size), op=MPI.SUM) == 0:
         raise InputError("the mesh has no Γ_C facets")
-    return float(np.max(E.x.array[cells]))
+    local = float(np.max(E.x.array[cells], initial=-np.inf))
+    return float(msh.comm.allreduce(local, op=MPI.MAX))
 
 
 # ---------------------------------------------------------------------------
@@ -192,7 +208,7 @@ class MixedNewtonHistory(NewtonHistory):
 
 
 # ---------------------------------------------------------------------------
-# Point evaluation of DG P3 stresses (numpy / scipy)
+# Point evaluation of DG P3 stresses (numpy / scipy, on the owned cells of a rank)
 # ---------------------------------------------------------------------------
 
 
@@ -204,25 +220,21 @@ def _reference_coordinates(msh: dmesh.Mesh, cells: np.ndarray, x: np.ndarray) ->
     return np.linalg.solve(J, (x - v0)[..., None])[..., 0]
 
 
-def _csr_keys(A: sp.csr_matrix) -> np.ndarray:
-    """row · ncols + column of every stored entry (ascending for a CSR matrix with sorted indices)."""
-    rows = np.repeat(np.arange(A.shape[0], dtype=np.int64), np.diff(A.indptr))
-    return rows * A.shape[1] + A.indices.astype(np.int64)
-
-
 def _stress_evaluation(dg: fem.FunctionSpace, cells: np.ndarray, X: np.ndarray, weights: np.ndarray) -> sp.csr_matrix:
-    """Sparse E with (E s)_p = Σ_j weights[p, j] s_j(x_p) for DG P3 stress coefficients s.
+    """Sparse E with (E s)_p = Σ_j weights[p, j] s_j(x_p) for owned DG P3 stress coefficients s.
 
-    ``cells`` (N,), reference points ``X`` (N, 2), component weights (N, 3) on (σ_xx, σ_xy, σ_yy).
+    ``cells`` (N,) owned cells, reference points ``X`` (N, 2), component weights (N, 3) on (σ_xx, σ_xy, σ_yy).
     """
     el = dg.ufl_element().sub_elements[0].basix_element
+    npts = np.asarray(cells).size
+    n_dg = 3 * dg.dofmap.index_map.size_local
+    if npts == 0:
+        return sp.csr_matrix((0, n_dg))
     phi = el.tabulate(0, X)[0, :, :, 0]  # (N, 10): basis function k at point p
     dofs = dg.dofmap.list[cells].astype(np.int64)  # (N, 10) block indices
-    npts = phi.shape[0]
     cols = 3 * dofs[:, :, None] + np.arange(3)  # (N, 10, 3)
     vals = phi[:, :, None] * weights[:, None, :]
     rows = np.broadcast_to(np.arange(npts)[:, None, None], cols.shape)
-    n_dg = 3 * dg.dofmap.index_map.size_local
     E = sp.csr_matrix((vals.ravel(), (rows.ravel(), cols.ravel())), shape=(npts, n_dg))
     E.eliminate_zeros()
     return E
@@ -239,64 +251,102 @@ def _traction_weights(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.stack([n[:, 0], n[:, 1], zero], axis=1), np.stack([zero, n[:, 0], n[:, 1]], axis=1)
 
 
+def _owned_cell_facets(msh: dmesh.Mesh, facets: np.ndarray) -> np.ndarray:
+    """The facets (of a tag) whose first cell is owned by this rank: every exterior facet on exactly one rank."""
+    tdim = msh.topology.dim
+    msh.topology.create_connectivity(tdim - 1, tdim)
+    f2c = msh.topology.connectivity(tdim - 1, tdim)
+    facets = np.asarray(facets, dtype=np.int32)
+    if facets.size == 0:
+        return facets
+    first = f2c.array[f2c.offsets[facets]]
+    return facets[first < msh.topology.index_map(tdim).size_local]
+
+
 class _BoundaryFacets:
-    """Exterior facets of one tag: cells, end points, outward unit normals."""
+    """Exterior facets of one tag whose cell this rank owns: cells, end points, outward unit normals."""
 
     def __init__(self, msh: dmesh.Mesh, facets: np.ndarray) -> None:
         tdim = msh.topology.dim
         msh.topology.create_connectivity(tdim - 1, tdim)
+        msh.topology.create_connectivity(tdim - 1, 0)
+        msh.topology.create_connectivity(0, tdim)
         f2c = msh.topology.connectivity(tdim - 1, tdim)
-        self.facets = np.asarray(facets, dtype=np.int32)
-        self.cells = np.array([f2c.links(f)[0] for f in self.facets], dtype=np.int32)
-        if any(len(f2c.links(f)) != 1 for f in self.facets):
+        self.facets = _owned_cell_facets(msh, facets)
+        counts = np.diff(f2c.offsets)[self.facets]
+        if msh.comm.size == 1 and np.any(counts != 1):
             raise InputError("a boundary-tagged facet is not on the boundary of the (sub)mesh")
-        geo = dmesh.entities_to_geometry(msh, tdim - 1, self.facets)
+        self.cells = f2c.array[f2c.offsets[self.facets]].astype(np.int32)
+        f2v = msh.topology.connectivity(tdim - 1, 0).array.reshape(-1, 2)
+        self.vertices = f2v[self.facets].astype(np.int32)  # topology vertices of the end points a, b
         x = msh.geometry.x[:, :2]
+        if self.facets.size:
+            geo = dmesh.entities_to_geometry(msh, 0, self.vertices.ravel().astype(np.int32)).reshape(-1, 2)
+        else:
+            geo = np.zeros((0, 2), dtype=np.int32)
         self.a, self.b = x[geo[:, 0]], x[geo[:, 1]]
         d = self.b - self.a
         self.length = np.linalg.norm(d, axis=1)
-        n = np.stack([d[:, 1], -d[:, 0]], axis=1) / self.length[:, None]
+        n = np.stack([d[:, 1], -d[:, 0]], axis=1) / np.maximum(self.length[:, None], 1e-300)
         centre = x[msh.geometry.dofmaps[0][self.cells]][:, :, :2].mean(axis=1)
         flip = np.sum(n * (0.5 * (self.a + self.b) - centre), axis=1) < 0
         n[flip] *= -1.0
         self.normal = n
 
-    def lobatto_nodes(self, msh: dmesh.Mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Nodes of the per-edge 4-point Gauss–Lobatto rule, shared vertices merged.
+    def lobatto_nodes(self, vertex_gid: np.ndarray) -> tuple[np.ndarray, ...]:
+        """Nodes of the per-edge 4-point Gauss–Lobatto rule, per facet (not merged).
 
-        Returns points (N, 2), weights (N,), a cell containing each node, the
-        outward normal there, and the geometry node index of vertex nodes (−1 inside edges).
+        Returns points (4F, 2), weights (4F,), the facet's cell, the outward normal, and the
+        global number of vertex nodes (−1 inside edges).
         """
-        tdim = msh.topology.dim
-        geo = dmesh.entities_to_geometry(msh, tdim - 1, self.facets)  # (F, 2) end points a, b
         pts = self.a[:, None, :] + _LOBATTO_S[None, :, None] * (self.b - self.a)[:, None, :]  # (F, 4, 2)
         wts = self.length[:, None] * _LOBATTO_W[None, :]
         F = self.facets.size
         vertex = np.full((F, 4), -1, dtype=np.int64)
-        vertex[:, 0], vertex[:, 3] = geo[:, 0], geo[:, 1]
+        if F:
+            vertex[:, 0], vertex[:, 3] = vertex_gid[self.vertices[:, 0]], vertex_gid[self.vertices[:, 1]]
         cells = np.repeat(self.cells, 4)
         normals = np.repeat(self.normal, 4, axis=0)
-        pts, wts, vertex = pts.reshape(-1, 2), wts.ravel(), vertex.ravel()
-        # merge the copies of a vertex shared by two edges with the same normal
-        key = np.where(vertex >= 0, vertex, -1 - np.arange(vertex.size))
-        nkey = np.round(normals * 1e8).astype(np.int64)
-        _, first, inverse = np.unique(
-            np.stack([key, nkey[:, 0], nkey[:, 1]], axis=1), axis=0, return_index=True, return_inverse=True
-        )
-        merged_w = np.zeros(first.size)
-        np.add.at(merged_w, inverse.ravel(), wts)
-        return pts[first], merged_w, cells[first], normals[first], vertex[first]
+        return pts.reshape(-1, 2), wts.ravel(), cells, normals, vertex.ravel()
 
-    def locate(self, points: np.ndarray, tol: float = 1e-10) -> np.ndarray:
-        """Index of a facet (into ``self.facets``) containing each point; raises if one is off the facets."""
+    def locate(self, points: np.ndarray, tol: float = 1e-10) -> tuple[np.ndarray, np.ndarray]:
+        """(found, facet): whether each point lies on one of these facets, and the index (into ``facets``) of one."""
+        if self.facets.size == 0 or points.shape[0] == 0:
+            return np.zeros(points.shape[0], dtype=bool), np.zeros(points.shape[0], dtype=np.int64)
         d = self.b - self.a
         rel = points[:, None, :] - self.a[None, :, :]  # (P, F, 2)
         s = np.einsum("pfi,fi->pf", rel, d) / self.length[None, :] ** 2
         dist = np.linalg.norm(rel - s[..., None] * d[None], axis=-1)
         ok = (dist <= tol * self.length[None, :]) & (s >= -tol) & (s <= 1 + tol)
-        if not np.all(ok.any(axis=1)):
-            raise RuntimeError("a point does not lie on the boundary facets")
-        return np.argmax(ok, axis=1)
+        return ok.any(axis=1), np.argmax(ok, axis=1)
+
+
+def _merge_contact_nodes(comm, pts, wts, normals, vertex):
+    """Gauss–Lobatto nodes of all ranks, copies of a vertex shared by two edges with the same normal merged.
+
+    Returns the replicated, canonically ordered (``profile_order``) points, weights, normals and vertex
+    numbers, and for this rank (local node index, canonical index) of the copies it evaluates
+    (the first copy of each merged node in rank order).
+    """
+    local_n = pts.shape[0]
+    if comm.size > 1:
+        parts = comm.allgather((pts, wts, normals, vertex))
+        start = int(sum(p[0].shape[0] for p in parts[: comm.rank]))
+        pts, wts, normals, vertex = (np.concatenate([p[i] for p in parts]) for i in range(4))
+    else:
+        start = 0
+    key = np.where(vertex >= 0, vertex, -1 - np.arange(vertex.size))
+    nkey = np.round(normals * 1e8).astype(np.int64)
+    _, first, inverse = np.unique(
+        np.stack([key, nkey[:, 0], nkey[:, 1]], axis=1), axis=0, return_index=True, return_inverse=True
+    )
+    merged_w = np.zeros(first.size)
+    np.add.at(merged_w, inverse.ravel(), wts)
+    order = profile_order(pts[first])
+    first = first[order]
+    mine = (first >= start) & (first < start + local_n)
+    mine_rows = np.flatnonzero(mine)
+    return (pts[first], merged_w[order], normals[first], vertex[first], first[mine] - start, mine_rows)
 
 
 # ---------------------------------------------------------------------------
@@ -304,13 +354,13 @@ class _BoundaryFacets:
 # ---------------------------------------------------------------------------
 
 
-def _dot(a: np.ndarray, b: np.ndarray) -> float:
-    """a·b without BLAS (OpenBLAS threads contend with the MUMPS/OpenMP threads on small machines)."""
-    return float(np.einsum("i,i->", a, b))
+def _norm(a: np.ndarray, comm=None) -> float:
+    return float(np.sqrt(_dot(a, a, comm)))
 
 
-def _norm(a: np.ndarray) -> float:
-    return float(np.sqrt(_dot(a, a)))
+def _dot(a: np.ndarray, b: np.ndarray, comm=None) -> float:
+    """a·b over all ranks (owned entries; no BLAS: OpenBLAS threads contend with MUMPS on small machines)."""
+    return global_dot(comm, a, b) if comm is not None else float(np.einsum("i,i->", a, b))
 
 
 def _assemble_vector(form) -> np.ndarray:
@@ -319,57 +369,10 @@ def _assemble_vector(form) -> np.ndarray:
     return b.array.copy()
 
 
-def _pt_a_p(form, P_petsc: PETSc.Mat) -> sp.csr_matrix:
-    """Pᵀ A P of a bilinear form on the DG stress space (PETSc PtAP)."""
+def _assemble_petsc(form) -> PETSc.Mat:
     A = dolfinx.fem.petsc.assemble_matrix(fem.form(form))
     A.assemble()
-    R = A.PtAP(P_petsc)
-    A.destroy()
-    out = petsc_to_scipy(R)
-    R.destroy()
-    return out
-
-
-def _split_interface_columns(
-    space: ArnoldWintherSpace, msh: dmesh.Mesh, cell_tags: dmesh.MeshTags, facet_tags: dmesh.MeshTags
-) -> sp.csr_matrix:
-    """Extra stress basis functions doubling σ_tt at the vertices of γ on the Ω₂ side.
-
-    At a γ vertex v with γ normals n, the Ω₂-side function equals the AW vertex
-    basis function with value z (z spanning the null space of σ ↦ σn) in the
-    Ω₂ cells and 0 elsewhere; its normal trace on γ vanishes, so it stays in
-    H(div).  Returns the new columns of P (n_dg × n_new).
-    """
-    tdim = msh.topology.dim
-    msh.topology.create_connectivity(tdim - 1, 0)
-    f2v = msh.topology.connectivity(tdim - 1, 0)
-    gamma = facet_tags.find(Boundary.INTERFACE)
-    geo = dmesh.entities_to_geometry(msh, tdim - 1, gamma)
-    x = msh.geometry.x[:, :2]
-    rows_at: dict[int, list[np.ndarray]] = {}
-    for f, g in zip(gamma, geo):
-        d = x[g[1]] - x[g[0]]
-        n = np.array([d[1], -d[0]]) / np.linalg.norm(d)
-        for v in f2v.links(f):
-            rows_at.setdefault(int(v), []).append(np.array([[n[0], n[1], 0.0], [0.0, n[0], n[1]]]))
-    P = space.full_prolongation.tocsc()
-    omega2 = cell_tags.find(Subdomain.OMEGA2)
-    dg_rows = (3 * space.dg.dofmap.list[omega2].astype(np.int64)[:, :, None] + np.arange(3)).ravel()
-    mask = np.zeros(P.shape[0])
-    mask[dg_rows] = 1.0
-    columns = []
-    for v, rows in rows_at.items():
-        # the Ω₂-side value z must also satisfy the essential conditions at v (a γ end on a
-        # traction-free, traction or contact side): z in the null space of all rows
-        stacked = np.vstack(rows + [space.vertex_constraints[v]] if v in space.vertex_constraints else rows)
-        _, sv, vt = np.linalg.svd(stacked)
-        null = vt[int(np.sum(sv > 1e-10 * sv.max())) :]
-        for z in null:
-            col = sum(z[j] * P[:, 3 * v + j] for j in range(3) if z[j] != 0.0)
-            columns.append(col.multiply(mask[:, None]).tocsc())
-    if not columns:
-        return sp.csr_matrix((P.shape[0], 0))
-    return sp.hstack(columns, format="csr")
+    return A
 
 
 # ---------------------------------------------------------------------------
@@ -386,17 +389,27 @@ class MixedSubproblem:
     Robin: globalized semismooth Newton warm-started from the last solution,
     refactorized only when the active set changes).
 
+    **Distributed data.**  The state (``c``: AW coefficients, ``u``: DG P1 coefficients)
+    holds this rank's owned entries; the bulk operators (K, B, M, the Robin term, P) are
+    distributed PETSc matrices (``fem.distributed.DistributedMatrix``).  The Γ_C node data
+    (σ_c, weights, gap, the active set) and the γ node coordinates are replicated: every
+    rank holds all of them in the same order and takes the same Newton decisions from
+    them (active sets, cycle detection, line search), with every scalar of the
+    iteration (energies, norms) a global reduction.  The Robin data g and the trace σn
+    on γ are distributed by blocks of the canonical γ values (``interface_range``).
+
     Args:
         msh, facet_tags, fields: the (sub)mesh, its Γ_C / γ tags and DG0 materials.
         epsilon: mixed penalty ε (None: no contact term; Γ_C facets still get σ_t = 0).
         beta: Robin coefficient β on γ (None: no Robin term).
         prefix: PETSc options prefix of the direct solver.
         newton: step cap and residual tolerances.
-        extra_columns: additional stress basis functions (columns of P), e.g. the
-            interface split of the monolithic reference.
-        space: a prebuilt AW space on ``msh`` (with σ_t = 0 on Γ_C).
+        space: a prebuilt AW space on ``msh`` (with σ_t = 0 on Γ_C), e.g. with the
+            interface split of the monolithic reference (``boundary_stress_space``).
         line_search: ``"on-cycle"`` (full semismooth Newton steps until a cycle
             is detected, then exact line search on J) or ``"always"``.
+        interface_points: the γ nodes in the order to use for the Robin data
+            (replicated; default: this mesh's γ nodes sorted by (y, x)).
     """
 
     def __init__(
@@ -409,25 +422,27 @@ class MixedSubproblem:
         beta: float | None,
         prefix: str,
         newton: NewtonOptions = NewtonOptions(),
-        extra_columns: sp.csr_matrix | None = None,
         space: ArnoldWintherSpace | None = None,
         line_search: str = "on-cycle",
+        interface_points: np.ndarray | None = None,
     ) -> None:
         t0 = time.perf_counter()
         if line_search not in ("on-cycle", "always"):
             raise InputError(f"line_search must be 'on-cycle' or 'always', got {line_search!r}")
         self.line_search = line_search
-        check_serial_triangles(msh)
+        check_triangles(msh)
         if epsilon is not None and not (np.isfinite(epsilon) and epsilon > 0):
             raise InputError(f"the mixed penalty parameter ε must be > 0, got {epsilon}")
         if beta is not None and not (np.isfinite(beta) and beta > 0):
             raise InputError(f"the transmission coefficient β must be > 0, got {beta}")
         self.mesh, self.facet_tags, self.prefix, self.newton = msh, facet_tags, prefix, newton
+        self.comm = msh.comm
         self.epsilon, self.beta = epsilon, beta
         self.contact = epsilon is not None
         self.fields = fields
         contact_facets = facet_tags.find(Boundary.GAMMA_C)
-        if self.contact and contact_facets.size == 0:
+        has_contact = self.comm.allreduce(int(contact_facets.size), op=MPI.SUM) > 0
+        if self.contact and not has_contact:
             if fields.obstacle is not None:
                 raise InputError(
                     "an obstacle is given but the mesh has no contact boundary: the physical group 'Gamma_C' "
@@ -435,63 +450,80 @@ class MixedSubproblem:
                 )
             raise InputError("a contact subproblem needs Γ_C facets")
         self.space = space or boundary_stress_space(msh, facet_tags, fields.boundary)
-        P = self.space.prolongation
-        if extra_columns is not None and extra_columns.shape[1] > 0:
-            P = sp.hstack([P, extra_columns], format="csr")
-        self.P = P.tocsr()
-        self.P.sort_indices()
+        #: local P (SciPy): owned DG rows × local AW columns (owned, then ghosts); in serial the whole P
+        self.P = self.space.prolongation
+        P_petsc = self.space.prolongation_petsc
+        self._Pd = DistributedMatrix(P_petsc)
         self.dg = self.space.dg
         self.U = fem.functionspace(msh, basix.ufl.element("DG", msh.basix_cell(), 1, shape=(2,)))
-        self.n_sigma = self.P.shape[1]
+        self.n_sigma = self.space.num_owned
         self.n_u = 2 * self.U.dofmap.index_map.size_local
+        n_dg = 3 * self.dg.dofmap.index_map.size_local
+        self._n_dg = n_dg
 
         # -- bulk operators ------------------------------------------------------------
-        P_petsc = scipy_to_petsc(self.P, msh.comm)
         s, t = ufl.TrialFunction(self.dg), ufl.TestFunction(self.dg)
         w, v = ufl.TrialFunction(self.U), ufl.TestFunction(self.U)
         n = ufl.FacetNormal(msh)
-        self.K = _pt_a_p(forms_mixed.compliance_form(s, t, fields.lmbda, fields.mu), P_petsc)
-        self.B = (assemble_scipy(forms_mixed.divergence_form(s, v)) @ self.P).tocsr()
-        self.M = assemble_scipy(forms_mixed.mass_form(w, v))
+        A = _assemble_petsc(forms_mixed.compliance_form(s, t, fields.lmbda, fields.mu))
+        self._K = DistributedMatrix(A.PtAP(P_petsc))
+        A.destroy()
+        D = _assemble_petsc(forms_mixed.divergence_form(s, v))
+        self._B = DistributedMatrix(D.matMult(P_petsc))
+        D.destroy()
+        self._M = DistributedMatrix(_assemble_petsc(forms_mixed.mass_form(w, v)))
         self.G = _assemble_vector(forms_mixed.load_form(fields.f, v))[: self.n_u]
-        P_petsc.destroy()
 
         # -- boundary data: traction lifting σ_t (σ = P c + σ_t) and the natural Γ_D term ------
-        n_dg = self.P.shape[0]
-        self.s0 = np.zeros(n_dg) if self.space.lifting_dg is None else self.space.lifting_dg[:n_dg].copy()
-        self._lifted = bool(np.any(self.s0))
+        lifting = self.space.lifting_dg
+        self.s0 = np.zeros(n_dg) if lifting is None else lifting[:n_dg].copy()
+        self._lifted = bool(self.comm.allreduce(bool(np.any(self.s0)), op=MPI.LOR))
         self._F_boundary = np.zeros(self.n_sigma)  # constant stress-side load of the lifting and of u_D
         if self._lifted:
             s0 = fem.Function(self.dg)
             s0.x.array[:n_dg] = self.s0
+            s0.x.scatter_forward()
             self.G -= _assemble_vector(forms_mixed.divergence_form(s0, v))[: self.n_u]
-            self._F_boundary -= self.P.T @ _assemble_vector(forms_mixed.compliance_form(s0, t, fields.lmbda, fields.mu))[:n_dg]
+            self._F_boundary -= self._Pd.T @ _assemble_vector(
+                forms_mixed.compliance_form(s0, t, fields.lmbda, fields.mu))[:n_dg]
             self._s0_function = s0
         self.u_D: fem.Function | None = None
-        if fields.boundary.displacement is not None and facet_tags.find(Boundary.GAMMA_D).size:
+        has_dirichlet = self.comm.allreduce(int(facet_tags.find(Boundary.GAMMA_D).size), op=MPI.SUM) > 0
+        if fields.boundary.displacement is not None and has_dirichlet:
             self.u_D = displacement_trace_function(msh, fields.boundary.displacement)
             dsD = forms_mixed.boundary_measure(msh, facet_tags)(Boundary.GAMMA_D)
-            self._F_boundary += self.P.T @ _assemble_vector(forms_mixed.robin_data_form(self.u_D, t, n, dsD))[:n_dg]
+            self._F_boundary += self._Pd.T @ _assemble_vector(forms_mixed.robin_data_form(self.u_D, t, n, dsD))[:n_dg]
 
         # -- Robin term and data on γ -------------------------------------------------
         ds = forms_mixed.boundary_measure(msh, facet_tags)
-        self.Kt = self.K
+        self._Kt = self._K
         self.gamma_points = np.zeros((0, 2))
+        self.interface_range = (0, 0)
         if beta is not None:
             gamma = facet_tags.find(Boundary.INTERFACE)
-            if gamma.size == 0:
+            if self.comm.allreduce(int(gamma.size), op=MPI.SUM) == 0:
                 raise InputError("a Robin subproblem needs interface (γ) facets")
-            R = assemble_scipy(forms_mixed.robin_form(s, t, n, 1.0, ds(Boundary.INTERFACE)))
-            self.R = (self.P.T @ R @ self.P).tocsr()
-            self.Kt = (self.K + beta * self.R).tocsr()
+            R_dg = _assemble_petsc(forms_mixed.robin_form(s, t, n, 1.0, ds(Boundary.INTERFACE)))
+            self._R = DistributedMatrix(R_dg.PtAP(P_petsc))
+            Kt = self._K.mat.duplicate(copy=True)
+            Kt.axpy(beta, self._R.mat, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
+            self._Kt = DistributedMatrix(Kt)
             if self._lifted:
-                self._F_boundary -= beta * (self.P.T @ (R @ self.s0))
-            self._setup_interface(gamma, ds, t, n)
+                y = R_dg.createVecLeft()
+                x = R_dg.createVecRight()
+                x.array[:] = self.s0
+                R_dg.mult(x, y)
+                self._F_boundary -= beta * (self._Pd.T @ y.array)
+                x.destroy()
+                y.destroy()
+            R_dg.destroy()
+            self._setup_interface(gamma, ds, t, n, interface_points)
 
         # -- contact quadrature and obstacle ----------------------------------------------
         self._F_gap = np.zeros(self.n_sigma)
         self.obstacle = None
-        if contact_facets.size:
+        self._has_contact_nodes = has_contact
+        if has_contact:
             self._setup_contact(msh, facet_tags, contact_facets)
             self.set_obstacle(fields.obstacle)
 
@@ -499,73 +531,156 @@ class MixedSubproblem:
         self.u = np.zeros(self.n_u)
         self._cold = True
         self._solver: DirectSolver | None = None
-        self._matrix: PETSc.Mat | None = None
-        self._saddle: sp.csr_matrix | None = None
+        self._saddle: SaddlePointMatrix | None = None
         self._factorized_set: np.ndarray | None = None
-        self._rhs = PETSc.Vec().createSeq(self.n_sigma + self.n_u, comm=msh.comm)
-        self._sol = self._rhs.duplicate()
+        self._rhs = self._sol = None
         self.build_time = time.perf_counter() - t0
 
+    # -- the operators as SciPy matrices (serial consumers: interface Newton, multiscale, tests) ----
+    def _scipy(self, name: str) -> sp.csr_matrix:
+        cache = self.__dict__.setdefault("_scipy_cache", {})
+        if name not in cache:
+            op = self.__dict__.get(f"_{name}")
+            if op is None:
+                raise AttributeError(f"this subproblem has no operator {name}")
+            cache[name] = op.local_csr()
+        return cache[name]
+
+    K = property(lambda self: self._scipy("K"), doc="Pᵀ A P (compliance) as SciPy CSR: owned rows, global columns.")
+    Kt = property(lambda self: self._scipy("Kt"), doc="K + β R (the stress block of the Jacobian), SciPy CSR.")
+    B = property(lambda self: self._scipy("B"), doc="B P (divergence), SciPy CSR: owned DG P1 rows, global AW columns.")
+    M = property(lambda self: self._scipy("M"), doc="DG P1 mass matrix, SciPy CSR.")
+    R = property(lambda self: self._scipy("R"), doc="Pᵀ R_γ P (the Robin form with β = 1), SciPy CSR.")
+    Q = property(lambda self: self._scipy("Q"), doc="σ_c at the contact nodes, SciPy CSR: this rank's rows, global columns.")
+    C = property(lambda self: self._scipy("C"), doc="Robin data → stress load, SciPy CSR: owned rows, canonical γ columns.")
+    N = property(lambda self: self._scipy("N"), doc="σn at the γ nodes, SciPy CSR: this rank's block of rows, global columns.")
+
+
     # -- setup pieces -----------------------------------------------------------------
-    def _setup_interface(self, gamma: np.ndarray, ds, t, n) -> None:
+    def _setup_interface(self, gamma: np.ndarray, ds, t, n, points: np.ndarray | None) -> None:
         """Robin data space on γ: continuous vector P3 on γ (the normal-trace space of AW)."""
-        msh = self.mesh
+        msh, comm = self.mesh, self.comm
         Lam = fem.functionspace(msh, basix.ufl.element("Lagrange", msh.basix_cell(), 3, shape=(2,)))
         tdim = msh.topology.dim
         blocks = fem.locate_dofs_topological(Lam, tdim - 1, gamma)
         coords = Lam.tabulate_dof_coordinates()[blocks, :2]
-        order = np.lexsort((coords[:, 0], coords[:, 1]))
-        blocks, coords = blocks[order], coords[order]
-        self.gamma_points = coords
+        gblocks = Lam.dofmap.index_map.local_to_global(blocks.astype(np.int32)).astype(np.int64)
+        if comm.size > 1:
+            parts = comm.allgather((gblocks, coords))
+            all_g = np.concatenate([p[0] for p in parts])
+            all_x = np.concatenate([p[1] for p in parts])
+            all_g, first = np.unique(all_g, return_index=True)
+            all_x = all_x[first]
+        else:
+            all_g, all_x = gblocks, coords
+        order = np.lexsort((all_x[:, 0], all_x[:, 1]))
+        all_g, all_x = all_g[order], all_x[order]
+        if points is not None:  # use the given order (the other subdomain's γ nodes)
+            points = np.asarray(points, dtype=np.float64)[:, :2]
+            dist, perm = cKDTree(all_x).query(points)
+            if points.shape != all_x.shape or np.max(dist, initial=0.0) > 1e-10 or np.unique(perm).size != perm.size:
+                raise InputError("the interface nodes of Ω₁ and Ω₂ do not match (γ must be conforming)")
+            all_g, all_x = all_g[perm], all_x[perm]
+        self.gamma_points = all_x
+        n_nodes = all_x.shape[0]
+        n_g = 2 * n_nodes
+        g0, g1 = layout(comm, n_g)
+        #: (start, end) of this rank's block of the γ values (x, y per node, canonical order)
+        self.interface_range = (g0, g1)
+        sort = np.argsort(all_g)
+        g_sorted = all_g[sort]
+
+        def canonical_value(global_dof: np.ndarray) -> np.ndarray:
+            blk, comp = global_dof // 2, global_dof % 2
+            pos = np.minimum(np.searchsorted(g_sorted, blk), max(g_sorted.size - 1, 0))
+            hit = g_sorted[pos] == blk if g_sorted.size else np.zeros(blk.size, dtype=bool)
+            return np.where(hit, 2 * sort[pos] + comp, -1)
+
+        # d(g; τ) = C g:  Pᵀ C_dg S, S the canonical γ values -> P3 functions on γ
         g = ufl.TrialFunction(Lam)
-        C = assemble_scipy(forms_mixed.robin_data_form(g, t, n, ds(Boundary.INTERFACE)))
-        cols = (2 * blocks[:, None] + np.arange(2)).ravel()
-        #: d(g; τ) = C g for interface data g = values (x, y) at ``gamma_points`` (flattened)
-        self.C = (self.P.T @ C[:, cols]).tocsr()
-        # trace σn at the γ nodes (exact: σn is a P3 polynomial on each γ edge, continuous at vertices)
+        Cdg = _assemble_petsc(forms_mixed.robin_data_form(g, t, n, ds(Boundary.INTERFACE)))
+        ci, cj, cv = Cdg.getValuesCSR()
+        Cdg.destroy()
+        rows = np.repeat(np.arange(ci.size - 1), np.diff(ci))
+        cols = canonical_value(cj.astype(np.int64))
+        keep = cols >= 0
+        C_local = sp.csr_matrix((cv[keep], (rows[keep], cols[keep])), shape=(self._n_dg, n_g))
+        C_red = (self.P.T @ C_local).tocoo()  # local AW rows (owned, ghosts) × canonical γ values
+        gi = self.space.global_indices
+        #: d(g; τ) = C g for interface data g = values (x, y) at ``gamma_points`` (this rank's block)
+        self._C = DistributedMatrix(coo_matrix(comm, gi[C_red.row], C_red.col, C_red.data,
+                                              (self.n_sigma, self.space.num_dofs), (g1 - g0, n_g)))
+        # trace σn at the γ nodes (exact: σn is a P3 polynomial on each γ edge, continuous at vertices),
+        # each node evaluated by the lowest rank holding one of its facets with an owned cell
         bf = _BoundaryFacets(msh, gamma)
-        idx = bf.locate(coords)
-        cells, normals = bf.cells[idx], bf.normal[idx]
-        X = _reference_coordinates(msh, cells, coords)
+        found, idx = bf.locate(all_x)
+        mine = np.where(found, comm.rank, comm.size).astype(np.int32)
+        owner = np.empty_like(mine)
+        comm.Allreduce(mine, owner, op=MPI.MIN)
+        if np.any(owner >= comm.size):
+            raise RuntimeError("a γ node does not lie on the γ facets")
+        nodes = np.flatnonzero(owner == comm.rank)
+        cells, normals = bf.cells[idx[nodes]], bf.normal[idx[nodes]]
+        X = _reference_coordinates(msh, cells, all_x[nodes])
         wx, wy = _traction_weights(normals)
-        Ex = _stress_evaluation(self.dg, cells, X, wx)
-        Ey = _stress_evaluation(self.dg, cells, X, wy)
-        E = sp.vstack([Ex, Ey]).tocsr()
-        perm = np.arange(2 * coords.shape[0]).reshape(2, -1).T.ravel()  # interleave (x, y) per node
-        #: σn (outward n of this mesh) at ``gamma_points``, flattened (x, y) per node: N c (+ ``n0``)
-        self.N = (E[perm] @ self.P).tocsr()
-        #: σ_t n at ``gamma_points`` (the traction lifting's trace; zero without tractions)
-        self.n0 = E[perm] @ self.s0
-        self.gamma_normal = normals
+        E = sp.vstack([_stress_evaluation(self.dg, cells, X, wx), _stress_evaluation(self.dg, cells, X, wy)]).tocsr()
+        value_rows = np.concatenate([2 * nodes, 2 * nodes + 1])  # canonical value of each row of E
+        N_loc = (E @ self.P).tocoo()
+        #: σn (outward n of this mesh) at ``gamma_points``, (x, y) per node, this rank's block: N c (+ ``n0``)
+        self._N = DistributedMatrix(coo_matrix(comm, value_rows[N_loc.row], gi[N_loc.col], N_loc.data,
+                                              (g1 - g0, n_g), (self.n_sigma, self.space.num_dofs)))
+        #: σ_t n on γ (the traction lifting's trace; zero without tractions), this rank's block
+        self.n0 = gather_rows(comm, value_rows, E @ self.s0, n_g)[g0:g1]
+        self.gamma_normal = gather_rows(comm, nodes, normals, n_nodes)
 
     def _setup_contact(self, msh: dmesh.Mesh, facet_tags: dmesh.MeshTags, facets: np.ndarray) -> None:
         """Q: σ_c at the Gauss–Lobatto nodes of Γ_C (a Lagrange basis of the σ_c trace space)."""
+        comm = self.comm
         bf = _BoundaryFacets(msh, facets)
-        pts, wq, cells, normals, vertex = bf.lobatto_nodes(msh)
-        order = profile_order(pts)
-        pts, wq, cells, normals, vertex = pts[order], wq[order], cells[order], normals[order], vertex[order]
-        X = _reference_coordinates(msh, cells, pts)
+        vertex_gid = self.space.global_vertex_indices
+        pts, wq, cells, normals, vertex = bf.lobatto_nodes(vertex_gid)
+        (self.q_points, self.q_weights, self.q_normals, q_vertex, local_nodes,
+         rows) = _merge_contact_nodes(comm, pts, wq, normals, vertex)
+        nq = self.q_points.shape[0]
+        self._q_rows = rows  #: canonical index of the contact nodes this rank evaluates
+        self._q_range = layout(comm, nq)
+        cells, normals = cells[local_nodes], normals[local_nodes]
+        X = _reference_coordinates(msh, cells, pts[local_nodes])
         Q_dg = _stress_evaluation(self.dg, cells, X, _normal_weights(normals))
-        self.Q = (Q_dg @ self.P).tocsr()
-        self.Q.eliminate_zeros()
-        #: σ_t,c at the contact nodes (the traction lifting's normal stress; zero without tractions)
-        self.q0 = Q_dg @ self.s0
-        self.q_weights = wq
-        self.q_points = pts
-        self.q_normals = normals
+        Q_loc = (Q_dg @ self.P).tocsr()
+        Q_loc.eliminate_zeros()
+        gi = self.space.global_indices
+        #: this rank's rows of Q with global AW columns (the penalty pattern of the saddle-point matrix)
+        self._Q_rows_global = sp.csr_matrix((Q_loc.data, gi[Q_loc.indices], Q_loc.indptr),
+                                            shape=(Q_loc.shape[0], self.space.num_dofs))
+        self._Q_local = Q_loc
+        Qc = Q_loc.tocoo()
+        #: σ_c at the contact nodes (canonical order), this rank's block of rows: Q c (+ ``q0``)
+        self._Q = DistributedMatrix(coo_matrix(comm, rows[Qc.row], gi[Qc.col], Qc.data,
+                                              (self._q_range[1] - self._q_range[0], nq),
+                                              (self.n_sigma, self.space.num_dofs)))
+        #: σ_t,c at the contact nodes (the traction lifting's normal stress; zero without tractions), replicated
+        self.q0 = gather_rows(comm, rows, Q_dg @ self.s0, nq)
         # u_h·n at the nodes from the DG P1 displacement (one adjacent cell per node)
         el = self.U.ufl_element().sub_elements[0].basix_element
-        phi = el.tabulate(0, X)[0, :, :, 0]  # (N, 3)
-        dofs = self.U.dofmap.list[cells].astype(np.int64)
-        cols = 2 * dofs[:, :, None] + np.arange(2)
-        vals = phi[:, :, None] * normals[:, None, :]
-        rows = np.broadcast_to(np.arange(pts.shape[0])[:, None, None], cols.shape)
-        self._Un = sp.csr_matrix((vals.ravel(), (rows.ravel(), cols.ravel())), shape=(pts.shape[0], self.n_u))
+        if cells.size:
+            phi = el.tabulate(0, X)[0, :, :, 0]  # (N, 3)
+            dofs = self.U.dofmap.list[cells].astype(np.int64)
+            ucols = 2 * dofs[:, :, None] + np.arange(2)
+            vals = phi[:, :, None] * normals[:, None, :]
+            urows = np.broadcast_to(np.arange(cells.size)[:, None, None], ucols.shape)
+            self._Un = sp.csr_matrix((vals.ravel(), (urows.ravel(), ucols.ravel())), shape=(cells.size, self.n_u))
+        else:
+            self._Un = sp.csr_matrix((0, self.n_u))
         # nodes on Γ_D (the clamped corners) are left out of the profile, as in the primal one
         tdim = msh.topology.dim
+        msh.topology.create_connectivity(tdim - 1, 0)
+        f2v = msh.topology.connectivity(tdim - 1, 0).array.reshape(-1, 2)
         dirichlet = facet_tags.find(Boundary.GAMMA_D)
-        clamped = np.unique(dmesh.entities_to_geometry(msh, tdim - 1, dirichlet)) if dirichlet.size else []
-        self._profile_nodes = ~np.isin(vertex, clamped)
+        clamped = vertex_gid[f2v[dirichlet].ravel()] if dirichlet.size else np.zeros(0, np.int64)
+        if comm.size > 1:
+            clamped = np.concatenate(comm.allgather(clamped))
+        self._profile_nodes = ~np.isin(q_vertex, clamped) | (q_vertex < 0)
 
     def set_obstacle(self, obstacle: Obstacle | None) -> None:
         """Set (or move) the obstacle: the gap g at the contact nodes and the load −∫_ΓC g τ_c (Gauss–Lobatto).
@@ -579,41 +694,54 @@ class MixedSubproblem:
             self.q_gap = np.zeros(self.q_points.shape[0])
         else:
             self.q_gap, _ = evaluate_obstacle(obstacle, self.q_points)
-        self._F_gap = self.Q.T @ (self.q_weights * self.q_gap)
+        self._F_gap = self._Q.T @ self._q_block(self.q_weights * self.q_gap)
         self.obstacle = obstacle
+
+    def _q_block(self, values: np.ndarray) -> np.ndarray:
+        """This rank's block (rows of ``Q``) of a replicated array over the contact nodes."""
+        return values[self._q_range[0] : self._q_range[1]]
+
+    def _replicate_q(self, block: np.ndarray) -> np.ndarray:
+        """The replicated array over the contact nodes from every rank's block (canonical order)."""
+        return block if self.comm.size == 1 else np.concatenate(self.comm.allgather(block))
 
     def _stress_load(self, data: np.ndarray | None) -> np.ndarray:
         """The σ-row right-hand side: Robin data C g, traction lifting, ∫_ΓD u_D·τn and ∫_ΓC g τ_c."""
         load = self._F_boundary + self._F_gap
-        return load if data is None else load + self.C @ data
+        return load if data is None else load + self._C @ data
 
     def _contact_stress(self, c: np.ndarray) -> np.ndarray:
-        """σ_c at the contact nodes of the stress P c + σ_t."""
-        return self.Q @ c + self.q0
+        """σ_c at the contact nodes of the stress P c + σ_t (replicated)."""
+        return self._replicate_q(self._Q @ c) + self.q0
+
+    def contact_stress(self) -> np.ndarray:
+        """σ_c at the contact nodes (``q_points``) of the current stress, replicated on every rank."""
+        return self._contact_stress(self.c)
 
     def gamma_traction(self) -> np.ndarray:
-        """σn on γ (outward n of this mesh) at ``gamma_points``, flattened (x, y) per node."""
-        return self.N @ self.c + self.n0
+        """σn on γ (outward n of this mesh) at ``gamma_points``, (x, y) per node, this rank's block."""
+        return self._N @ self.c + self.n0
 
     # -- sizes ------------------------------------------------------------------------
     @property
     def num_dofs(self) -> dict[str, int]:
-        """Stress (AW), displacement and total DOF counts."""
-        return {"sigma": self.n_sigma, "u": self.n_u, "total": self.n_sigma + self.n_u}
+        """Global stress (AW), displacement and total DOF counts."""
+        n_u = self.U.dofmap.index_map.size_global * 2
+        return {"sigma": self.space.num_dofs, "u": n_u, "total": self.space.num_dofs + n_u}
 
     # -- linear algebra -----------------------------------------------------------------
     @property
     def solver(self) -> DirectSolver:
         """The direct solver (created at the first factorization: its PETSc options are set then)."""
         if self._solver is None:
-            self._solver = DirectSolver(self.mesh.comm, prefix=self.prefix, options=MIXED_SOLVER_OPTIONS)
+            self._solver = DirectSolver(self.comm, prefix=self.prefix, options=MIXED_SOLVER_OPTIONS)
         return self._solver
 
-    def _penalty_matrix(self, active: np.ndarray, *, padded: bool = False) -> sp.csr_matrix:
-        """(1/ε) Qᵀ W H Q for the penalty-active nodes (``padded``: as a block of the saddle-point matrix)."""
-        Q = self._Q_padded if padded else self.Q
-        Qa = Q[np.flatnonzero(active)]
-        return (Qa.T @ sp.diags(self.q_weights[active] / self.epsilon) @ Qa).tocsr()
+    def _penalty_matrix(self, active: np.ndarray) -> sp.csr_matrix:
+        """(1/ε) Qᵀ W H Q for the penalty-active nodes, this rank's rows of Q (local AW columns; serial: all)."""
+        act = active[self._q_rows]
+        Qa = self._Q_local[np.flatnonzero(act)]
+        return (Qa.T @ sp.diags(self.q_weights[self._q_rows][act] / self.epsilon) @ Qa).tocsr()
 
     def _factorize_for(self, active: np.ndarray | None) -> bool:
         """Factorize the saddle-point Jacobian unless the cached one has the same active set."""
@@ -621,48 +749,19 @@ class MixedSubproblem:
         if self._factorized_set is not None and np.array_equal(key, self._factorized_set):
             return False
         if self._saddle is None:
-            self._saddle = sp.bmat([[self.Kt, self.B.T], [self.B, None]], format="csr")
-            self._saddle.sum_duplicates()  # canonical: sorted indices, no duplicates, no stored zeros
-            self._saddle.eliminate_zeros()
-            if self.contact:
-                self._Q_padded = sp.hstack([self.Q, sp.csr_matrix((self.Q.shape[0], self.n_u))], format="csr")
-        if not self.contact:
-            if self._matrix is not None:
-                self._matrix.destroy()
-            self._matrix = scipy_to_petsc(self._saddle, self.mesh.comm)
-        else:
             # one sparsity pattern for every active set (all Γ_C nodes): when the active set changes
             # only the penalty values change and MUMPS redoes the numeric factorization, not the analysis
-            if self._matrix is None:
-                Qabs = abs(self._Q_padded)
-                pattern = (abs(self._saddle) + Qabs.T @ Qabs).tocsr()  # structural: no cancellation
-                pattern.sum_duplicates()
-                self._pattern = pattern
-                self._pattern_keys = _csr_keys(pattern)
-                self._saddle_data = np.zeros_like(pattern.data)
-                self._saddle_data[self._pattern_positions(self._saddle)] = self._saddle.data
-                self._matrix = scipy_to_petsc(pattern, self.mesh.comm)
-                self._matrix.setOption(PETSc.Mat.Option.NEW_NONZERO_LOCATION_ERR, True)
-            data = self._saddle_data.copy()
-            if active is not None and active.any():
-                pen = self._penalty_matrix(active, padded=True)
-                pen.sum_duplicates()
-                pen.eliminate_zeros()
-                data[self._pattern_positions(pen)] += pen.data
-            self._matrix.zeroEntries()
-            self._matrix.setValuesCSR(self._pattern.indptr, self._pattern.indices, data)
-            self._matrix.assemble()
-        self.solver.set_operator(self._matrix)
+            Q_rows = self._Q_rows_global if (self.contact and self._has_contact_nodes) else None
+            self._saddle = SaddlePointMatrix(self._Kt.mat, self._B.mat, Q_rows)
+            self._rhs, self._sol = self._saddle.create_vecs()
+        if active is None or not self.contact:
+            self._saddle.set_weights(None)
+        else:
+            rows = self._q_rows
+            self._saddle.set_weights(np.where(active[rows], self.q_weights[rows] / self.epsilon, 0.0))
+        self.solver.set_operator(self._saddle.mat)
         self._factorized_set = key.copy()
         return True
-
-    def _pattern_positions(self, A: sp.csr_matrix) -> np.ndarray:
-        """Where the stored entries of A sit in the data array of the all-active pattern."""
-        keys = _csr_keys(A)
-        pos = np.minimum(np.searchsorted(self._pattern_keys, keys), self._pattern_keys.size - 1)
-        if not np.array_equal(self._pattern_keys[pos], keys):
-            raise RuntimeError("the mixed Jacobian has an entry outside the all-active sparsity pattern")
-        return pos
 
     def _solve(self, r1: np.ndarray, r2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         self._rhs.array[: self.n_sigma] = r1
@@ -673,33 +772,35 @@ class MixedSubproblem:
 
     # -- residual, energy ---------------------------------------------------------------
     def _penalty_force(self, s: np.ndarray) -> np.ndarray:
-        return self.Q.T @ (self.q_weights * np.maximum(s, 0.0)) / self.epsilon
+        """(1/ε) Qᵀ W (σ_c)⁺ for replicated σ_c (owned AW entries)."""
+        return self._Q.T @ self._q_block(self.q_weights * np.maximum(s, 0.0) / self.epsilon)
 
     def _gradient(self, load: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(F_σ, F_u) at the current (σ, u) for the stress-side load (C g)."""
-        F1 = self.Kt @ self.c + self.B.T @ self.u - load
+        F1 = self._Kt @ self.c + self._B.T @ self.u - load
         if self.contact:
             F1 += self._penalty_force(self._contact_stress(self.c))
-        return F1, self.B @ self.c - self.G
+        return F1, self._B @ self.c - self.G
 
     def _scale(self, load: np.ndarray) -> float:
         """Sum of the norms of the terms of the residual (the yardstick of the residual check)."""
-        scale = _norm(self.Kt @ self.c) + _norm(self.B.T @ self.u) + _norm(load)
-        scale += _norm(self.B @ self.c) + _norm(self.G)
+        comm = self.comm
+        scale = _norm(self._Kt @ self.c, comm) + _norm(self._B.T @ self.u, comm) + _norm(load, comm)
+        scale += _norm(self._B @ self.c, comm) + _norm(self.G, comm)
         if self.contact:
-            scale += _norm(self._penalty_force(self._contact_stress(self.c)))
+            scale += _norm(self._penalty_force(self._contact_stress(self.c)), comm)
         return scale
 
     def residual(self, data: np.ndarray | None = None) -> tuple[float, float]:
         """(‖F‖, scale) at the current (σ, u) with Robin data g; scale = sum of the norms of the terms."""
         load = self._stress_load(data)
         F1, F2 = self._gradient(load)
-        return float(np.sqrt(_dot(F1, F1) + _dot(F2, F2))), self._scale(load)
+        return float(np.sqrt(_dot(F1, F1, self.comm) + _dot(F2, F2, self.comm))), self._scale(load)
 
     def _line_search(self, dc: np.ndarray, s: np.ndarray, d: np.ndarray, load: np.ndarray) -> float:
-        """argmin_{t ∈ (0, 1]} J(σ + t dσ): root of the increasing piecewise-linear φ'(t)."""
-        a = _dot(dc, self.Kt @ dc)
-        b0 = _dot(self.Kt @ self.c - load, dc)
+        """argmin_{t ∈ (0, 1]} J(σ + t dσ): root of the increasing piecewise-linear φ'(t) (s, d replicated)."""
+        a = _dot(dc, self._Kt @ dc, self.comm)
+        b0 = _dot(self._Kt @ self.c - load, dc, self.comm)
         w = self.q_weights / self.epsilon
 
         def dphi(t: np.ndarray) -> np.ndarray:
@@ -718,9 +819,10 @@ class MixedSubproblem:
 
     # -- solve --------------------------------------------------------------------------
     def solve(self, data: np.ndarray | None = None) -> MixedNewtonHistory:
-        """Solve with Robin data g (values at ``gamma_points``), warm-started from the current (σ, u)."""
+        """Solve with Robin data g (this rank's block of the γ values), warm-started from the current (σ, u)."""
         load = self._stress_load(data)
         history = MixedNewtonHistory()
+        comm = self.comm
         if not self.contact:  # linear: one solve with the cached factorization
             history.factorizations += self._factorize_for(None)
             self.c, self.u = self._solve(load, self.G)
@@ -737,11 +839,11 @@ class MixedSubproblem:
             active = np.ones_like(s, dtype=bool) if self._cold else s > 0.0
             visited.add(np.packbits(active).tobytes())
             F1, F2 = self._gradient(load)
-            history.residuals.append(float(np.sqrt(_dot(F1, F1) + _dot(F2, F2))))
+            history.residuals.append(float(np.sqrt(_dot(F1, F1, comm) + _dot(F2, F2, comm))))
             history.factorizations += self._factorize_for(active)
-            feasible = _norm(F2) <= 1e-10 * (_norm(self.G) + _norm(self.B @ self.c))
+            feasible = _norm(F2, comm) <= 1e-10 * (_norm(self.G, comm) + _norm(self._B @ self.c, comm))
             dc, du = self._solve(-F1, -F2)
-            d = self.Q @ dc
+            d = self._replicate_q(self._Q @ dc)
             predicted = s + d > 0.0
             settled = np.array_equal(predicted, active)
             if not settled and feasible and not line_search:
@@ -773,9 +875,9 @@ class MixedSubproblem:
 
     # -- output -------------------------------------------------------------------------
     def sigma_function(self, out: fem.Function | None = None, name: str = "sigma") -> fem.Function:
-        """σ_h as a DG P3 function of (σ_xx, σ_xy, σ_yy)."""
+        """σ_h as a DG P3 function of (σ_xx, σ_xy, σ_yy) (collective)."""
         out = fem.Function(self.dg, name=name) if out is None else out
-        out.x.array[: self.P.shape[0]] = self.P @ self.c + self.s0
+        out.x.array[: self._n_dg] = self._Pd @ self.c + self.s0
         out.x.scatter_forward()
         return out
 
@@ -787,22 +889,22 @@ class MixedSubproblem:
         return out
 
     def stress_norm2(self, c: np.ndarray) -> float:
-        """‖σ‖²_A = (Aσ, σ) of AW coefficients c."""
-        return _dot(c, self.K @ c)
+        """‖σ‖²_A = (Aσ, σ) of (owned) AW coefficients c (collective)."""
+        return _dot(c, self._K @ c, self.comm)
 
     def l2_norm2(self, u: np.ndarray) -> float:
-        """‖u‖²_L² of DG P1 coefficients u."""
-        return _dot(u, self.M @ u)
+        """‖u‖²_L² of (owned) DG P1 coefficients u (collective)."""
+        return _dot(u, self._M @ u, self.comm)
 
     def complementary_energy(self, data: np.ndarray | None = None) -> float:
         """J(σ) = ½(Aσ,σ) [+ ½β‖σn‖²_γ − ∫_γ g·σn] + (1/2ε)∫_ΓC ((σ_c)⁺)² at the current σ."""
-        J = 0.5 * _dot(self.c, self.Kt @ self.c) - _dot(self._stress_load(data), self.c)
+        J = 0.5 * _dot(self.c, self._Kt @ self.c, self.comm) - _dot(self._stress_load(data), self.c, self.comm)
         if self.contact:
             J += 0.5 * np.sum(self.q_weights * np.maximum(self._contact_stress(self.c), 0.0) ** 2) / self.epsilon
         return float(J)
 
     def contact_profile(self) -> MixedContactProfile:
-        """σ_c and u_c = −(σ_c)⁺/ε at the Γ_C contact nodes (clamped corners excluded), sorted by y."""
+        """σ_c and u_c = −(σ_c)⁺/ε at the Γ_C contact nodes (clamped corners excluded), sorted; on every rank."""
         if not self.contact:
             raise InputError("this subproblem has no contact boundary")
         keep = self._profile_nodes
@@ -815,7 +917,8 @@ class MixedSubproblem:
     def displacement_normal_trace(self) -> tuple[np.ndarray, np.ndarray]:
         """(y, u_h·n) of the DG P1 displacement at the profile's contact nodes (a diagnostic of u_c)."""
         keep = self._profile_nodes
-        return self.q_points[keep, 1], (self._Un @ self.u)[keep]
+        un = gather_rows(self.comm, self._q_rows, self._Un @ self.u, self.q_points.shape[0])
+        return self.q_points[keep, 1], un[keep]
 
     def ufl_residual_norm(self, data: np.ndarray | None = None) -> tuple[float, float]:
         """‖F‖ of the residual assembled from ``forms_mixed.mixed_residual`` (independent of Q), and its scale."""
@@ -840,21 +943,54 @@ class MixedSubproblem:
             natural.append(forms_mixed.gap_form(gap, t, n, ds_c(Boundary.GAMMA_C)))
         for form in natural:
             Ft -= form
-        r1 = self.P.T @ _assemble_vector(Ft)[: self.P.shape[0]]
+        r1 = self._Pd.T @ _assemble_vector(Ft)[: self._n_dg]
         if data is not None:
-            r1 -= self.C @ data
+            r1 -= self._C @ data
         r2 = _assemble_vector(Fv)[: self.n_u]
         _, scale = self.residual(data)
-        return float(np.sqrt(_dot(r1, r1) + _dot(r2, r2))), scale
+        return float(np.sqrt(_dot(r1, r1, self.comm) + _dot(r2, r2, self.comm))), scale
+
+    def fit_stress(self, values: np.ndarray) -> tuple[np.ndarray, float]:
+        """Owned AW coefficients c with P c + σ_t closest to a DG P3 stress (owned ``dg`` entries) in ℓ².
+
+        Returns c and the relative misfit ‖P c + σ_t − values‖ / ‖values − σ_t‖ (0 when the stress is in
+        the space); PᵀP c = Pᵀ(values − σ_t) is solved with MUMPS (collective).
+        """
+        comm = self.comm
+        P = self.space.prolongation_petsc
+        d = np.asarray(values, dtype=np.float64) - self.s0
+        PtP = P.transposeMatMult(P)
+        solver = DirectSolver(comm, prefix=f"{self.prefix}fit_")
+        try:
+            solver.set_operator(PtP)
+            rhs, x = PtP.createVecs()
+            rhs.array[:] = self._Pd.T @ d
+            solver.solve(rhs, x)
+            c = x.array.copy()
+            for obj in (rhs, x):
+                obj.destroy()
+        finally:
+            solver.destroy()
+            PtP.destroy()
+        r = self._Pd @ c - d
+        misfit = np.sqrt(_dot(r, r, comm)) / max(np.sqrt(_dot(d, d, comm)), 1e-300)
+        return c, float(misfit)
 
     def destroy(self) -> None:
-        """Free the PETSc objects."""
-        if self._matrix is not None:
-            self._matrix.destroy()
+        """Free the PETSc objects (collective)."""
+        if self._saddle is not None:
+            self._saddle.destroy()
         for obj in (self._rhs, self._sol):
-            obj.destroy()
+            if obj is not None:
+                obj.destroy()
         if self._solver is not None:
             self._solver.destroy()
+        for name in ("_K", "_B", "_M", "_R", "_Q", "_C", "_N"):
+            op = self.__dict__.get(name)
+            if op is not None:
+                op.destroy()
+        if self._Kt is not self._K:
+            self._Kt.destroy()
 
 
 def _gll_function(msh: dmesh.Mesh, field) -> fem.Function:
@@ -878,13 +1014,13 @@ def displacement_trace_function(msh: dmesh.Mesh, field) -> fem.Function:
 
 
 def boundary_stress_space(
-    msh: dmesh.Mesh, facet_tags: dmesh.MeshTags, boundary: BoundaryConditions
+    msh: dmesh.Mesh, facet_tags: dmesh.MeshTags, boundary: BoundaryConditions, *, split_interface=None
 ) -> ArnoldWintherSpace:
     """The AW space of a (sub)mesh with the essential stress conditions of its boundary.
 
     σn·t = 0 on Γ_C; σn = t on the Γ_N groups (a lifting); σn = 0 on every other
     exterior facet that is not Γ_D or γ (traction free).  Γ_D (u = u_D) and γ (Robin)
-    are natural.
+    are natural.  ``split_interface`` = (γ facets, cells of one side): see ``ArnoldWintherSpace``.
     """
     tdim = msh.topology.dim
     msh.topology.create_connectivity(tdim - 1, tdim)
@@ -893,10 +1029,8 @@ def boundary_stress_space(
         [facet_tags.find(t) for t in (Boundary.GAMMA_D, Boundary.GAMMA_C, Boundary.INTERFACE)]
     )
     prescribed = []
-    for tag, _, traction in boundary.traction_tags():
-        facets = facet_tags.find(tag)
-        if facets.size:
-            prescribed.append((facets, traction))
+    for tag, _, traction in boundary.traction_tags():  # every group on every rank (same list everywhere)
+        prescribed.append((facet_tags.find(tag), traction))
     all_neumann = set(neumann_groups(facet_tags))
     neumann = np.concatenate([facet_tags.find(t) for t in sorted(all_neumann)] or [np.zeros(0, np.int32)])
     free = np.setdiff1d(exterior, np.concatenate([tagged, neumann]))
@@ -905,6 +1039,7 @@ def boundary_stress_space(
         zero_tangential_facets=facet_tags.find(Boundary.GAMMA_C),
         zero_traction_facets=np.union1d(free, neumann),
         prescribed_tractions=prescribed,
+        split_interface=split_interface,
     )
 
 
@@ -952,26 +1087,24 @@ def solve_mixed_monolithic(
     prefix: str = "fc_mixed_mono_",
     verify: bool = True,
 ) -> MixedSolution:
-    """Mixed penalized contact on the whole mesh (METHOD §2), globalized semismooth Newton.
+    """Mixed penalized contact on the whole mesh (METHOD §2), globalized semismooth Newton (serial or MPI).
 
     ``epsilon`` defaults to ``default_epsilon(h, E_c)``; ``split_interface`` solves on X̃_h
     (σ_tt doubled at the γ vertices: the exact fixed point of Algorithm 2); ``verify``
     re-checks the final residual with the UFL forms.
     """
     start = time.perf_counter()
-    check_serial_triangles(cm.mesh)
+    check_triangles(cm.mesh)
     fields = material_fields(cm.mesh, model)
     if epsilon is None:
         epsilon = default_epsilon(cm.h, contact_modulus(cm.mesh, cm.facet_tags, fields.E))
-    extra = None
     space = None
     check_boundary_groups(cm.mesh, cm.facet_tags, fields.boundary, names=cm.neumann_names)
     if split_interface:
-        space = boundary_stress_space(cm.mesh, cm.facet_tags, fields.boundary)
-        extra = _split_interface_columns(space, cm.mesh, cm.cell_tags, cm.facet_tags)
+        split = (cm.facet_tags.find(Boundary.INTERFACE), cm.cell_tags.find(Subdomain.OMEGA2))
+        space = boundary_stress_space(cm.mesh, cm.facet_tags, fields.boundary, split_interface=split)
     problem = MixedSubproblem(
-        cm.mesh, cm.facet_tags, fields, epsilon=epsilon, beta=None, prefix=prefix, newton=newton,
-        extra_columns=extra, space=space,
+        cm.mesh, cm.facet_tags, fields, epsilon=epsilon, beta=None, prefix=prefix, newton=newton, space=space,
     )
     t0 = time.perf_counter()
     history = problem.solve()

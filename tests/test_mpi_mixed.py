@@ -1,0 +1,111 @@
+"""The mixed method under ``mpiexec -n 2`` and ``-n 3`` gives the serial answer (tests/mpi_mixed_check.py).
+
+Monolithic mixed contact (models 1 and 2, a mesh with traction-free sides, the manufactured problem with
+u_D, tractions and a curved gap) and Algorithm 2: the same Newton steps, active sets and iterations, and
+stresses and displacements equal to 1e-10 of their size; Arnold–Winther rates unchanged on 2 ranks.
+
+The round-off floor of these comparisons is set by the problem, not by the partition: the serial solve
+with another MUMPS ordering (METIS instead of AMF) differs from the default one by 4e-11 (σ at the DG
+nodes, relative to max |σ|) and 9e-11 (σ_c, relative to max |σ_c|) on model 1 (ε = 1e-3·h, h = 1/16);
+the distributed runs differ from the serial one by the same amounts.
+"""
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+SCRIPT = Path(__file__).with_name("mpi_mixed_check.py")
+pytestmark = [pytest.mark.mpi, pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="launches its own MPI job")]
+
+MONO = ["mono-1", "mono-2", "mono-free", "mono-bc"]
+HYBRID = ["hybrid-1", "hybrid-2", "hybrid-free"]
+RATES = np.array([2.0, 3.0, 2.0])  # ‖u − u_h‖, ‖σ − σ_h‖, ‖div(σ − σ_h)‖
+TOL = 1e-10
+
+
+def _mpiexec() -> str | None:
+    local = Path(sys.executable).with_name("mpiexec")
+    return str(local) if local.exists() else shutil.which("mpiexec")
+
+
+def _run(ranks: int, cases: list[str], tmp: Path) -> tuple[dict, dict]:
+    env = dict(os.environ, OMP_NUM_THREADS="1")
+    out = tmp / f"fields_{ranks}.npz"
+    prefix = [] if ranks == 1 else [_mpiexec(), "-n", str(ranks)]
+    proc = subprocess.run([*prefix, sys.executable, str(SCRIPT), str(out), *cases], capture_output=True, text=True,
+                          env=env, timeout=900)
+    assert proc.returncode == 0, (proc.stdout + proc.stderr)[-3000:]
+    line = next(row for row in proc.stdout.splitlines() if row.startswith("RESULT "))
+    with np.load(out) as data:
+        fields = {k: data[k] for k in data.files}
+    return json.loads(line[len("RESULT "):]), fields
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory):
+    if _mpiexec() is None:
+        pytest.skip("no mpiexec")
+    tmp = tmp_path_factory.mktemp("mpi_mixed")
+    return {
+        1: _run(1, MONO + HYBRID + ["rates"], tmp),
+        2: _run(2, MONO + HYBRID + ["rates"], tmp),
+        3: _run(3, MONO + HYBRID, tmp),
+    }
+
+
+def _same_fields(serial: dict, parallel: dict, keys: list[str]) -> None:
+    for key in keys:
+        a, b = serial[key], parallel[key]
+        assert a.shape == b.shape, key
+        assert np.abs(a - b).max() <= TOL * np.abs(a).max(), (key, np.abs(a - b).max() / np.abs(a).max())
+
+
+@pytest.mark.parametrize("ranks", [2, 3])
+@pytest.mark.parametrize("case", MONO)
+def test_monolithic_mixed_matches_serial(runs, ranks, case):
+    (s, sf), (p, pf) = runs[1], runs[ranks]
+    assert s["ranks"] == 1 and p["ranks"] == ranks
+    a, b = s[case], p[case]
+    assert b["newton_steps"] == a["newton_steps"]
+    assert b["active_sizes"] == a["active_sizes"]
+    assert b["step_lengths"] == pytest.approx(a["step_lengths"], abs=1e-12)
+    assert b["active"] == a["active"] and b["dofs"] == a["dofs"]
+    assert np.allclose(b["y"], a["y"], rtol=0, atol=1e-12)
+    # σ_c relative to the stress scale (max |σ| over the DG nodes)
+    scale = np.abs(sf[f"{case}-sigma"]).max()
+    assert np.abs(np.array(b["sigma_c"]) - a["sigma_c"]).max() <= TOL * scale
+    assert b["stress_norm2"] == pytest.approx(a["stress_norm2"], rel=TOL)
+    assert b["l2_norm2"] == pytest.approx(a["l2_norm2"], rel=TOL)
+    _same_fields(sf, pf, [f"{case}-sigma", f"{case}-u"])
+
+
+@pytest.mark.parametrize("ranks", [2, 3])
+@pytest.mark.parametrize("case", HYBRID)
+def test_algorithm_2_matches_serial(runs, ranks, case):
+    (s, sf), (p, pf) = runs[1], runs[ranks]
+    a, b = s[case], p[case]
+    assert a["converged"] and b["converged"]
+    assert b["iterations"] == a["iterations"]
+    assert b["newton"] == a["newton"] and b["newton_active"] == a["newton_active"]
+    assert b["active"] == a["active"] and b["dofs"] == a["dofs"]
+    assert np.allclose(b["rel_changes"], a["rel_changes"], rtol=1e-6, atol=1e-12)
+    assert a["e_sigma"] < 1e-8 and b["e_sigma"] < 1e-8 and b["e_u"] < 1e-8
+    scale = np.abs(sf[f"{case}-sigma"]).max()
+    assert np.abs(np.array(b["sigma_c"]) - a["sigma_c"]).max() <= TOL * scale
+    _same_fields(sf, pf, [f"{case}-sigma", f"{case}-u", f"{case}-ref-sigma"])
+
+
+def test_arnold_winther_rates_on_two_ranks(runs):
+    (s, _), (p, _) = runs[1], runs[2]
+    for key, serial in s["rates"].items():
+        par = p["rates"][key]
+        assert par["dofs"] == serial["dofs"]
+        assert np.all(np.array(par["rates"])[-1] >= 0.9 * RATES), (key, par["rates"])
+        assert np.allclose(par["errors"], serial["errors"], rtol=1e-8), key

@@ -2,7 +2,8 @@
 
 Monolithic mixed contact (models 1 and 2, a mesh with traction-free sides, the manufactured problem with
 u_D, tractions and a curved gap) and Algorithm 2: the same Newton steps, active sets and iterations, and
-stresses and displacements equal to 1e-10 of their size; Arnold–Winther rates unchanged on 2 ranks.
+stresses and displacements equal to 1e-10 of their size; Arnold–Winther rates unchanged on 2 ranks; the
+CLI (``mpiexec -n 2 fenics-contact run --method mixed``) writes the serial summary, fields and plots.
 
 The round-off floor of these comparisons is set by the problem, not by the partition: the serial solve
 with another MUMPS ordering (METIS instead of AMF) differs from the default one by 4e-11 (σ at the DG
@@ -109,3 +110,43 @@ def test_arnold_winther_rates_on_two_ranks(runs):
         assert par["dofs"] == serial["dofs"]
         assert np.all(np.array(par["rates"])[-1] >= 0.9 * RATES), (key, par["rates"])
         assert np.allclose(par["errors"], serial["errors"], rtol=1e-8), key
+
+
+def _cli_run(ranks: int, out: Path) -> subprocess.CompletedProcess:
+    prefix = [] if ranks == 1 else [_mpiexec(), "-n", str(ranks)]
+    command = [*prefix, sys.executable, "-m", "fenics_contact.cli", "run", "--method", "mixed", "--model", "2",
+               "--h", "8", "--H", "4", "--reference", "--out", str(out)]
+    return subprocess.run(command, capture_output=True, text=True, env=dict(os.environ, OMP_NUM_THREADS="1"),
+                          timeout=900)
+
+
+def test_cli_mixed_outputs_from_two_ranks(tmp_path):
+    """``mpiexec -n 2 fenics-contact run --method mixed``: the serial summary, fields and plots, one directory."""
+    from matplotlib.image import imread
+
+    if _mpiexec() is None:
+        pytest.skip("no mpiexec")
+    runs = {}
+    for ranks in (1, 2):
+        out = tmp_path / f"run{ranks}"
+        proc = _cli_run(ranks, out)
+        assert proc.returncode == 0, proc.stderr[-3000:]
+        runs[ranks] = out, json.loads((out / "summary.json").read_text())
+    (out1, s1), (out2, s2) = runs[1], runs[2]
+    assert s1["mpi_ranks"] == 1 and s2["mpi_ranks"] == 2 and s2["converged"]
+    for key in ("iterations", "newton_steps_total", "reference_newton_steps", "dofs", "active_set",
+                "reference_active_set"):
+        assert s2[key] == s1[key], key
+    for key in ("e_sigma", "e_u", "final_rel_change"):
+        assert s2[key] == pytest.approx(s1[key], rel=1e-6), key
+    assert s2["max_tensile_sigma_c"] == pytest.approx(s1["max_tensile_sigma_c"], rel=1e-6, abs=1e-12)
+    names = {p.name for p in out2.iterdir()}
+    assert {"fields.xdmf", "fields.h5", "sigma.bp", "u.bp", "stress.png", "displacement.png", "contact.png",
+            "history.png", "summary.json"} <= names
+    xdmf = (out2 / "fields.xdmf").read_text()
+    geometry = xdmf[xdmf.index("<Geometry"):]
+    assert 'Dimensions="81 2"' in geometry[:geometry.index("</Geometry>")]  # both ranks' parts, 9 x 9 nodes once
+    for png in ("stress.png", "displacement.png", "contact.png"):  # gathered fields: the serial pictures
+        a, b = imread(out1 / png), imread(out2 / png)  # (the triangles come in another order: a few edge pixels
+        assert a.shape == b.shape, png                 # of the shaded DG P1 plot differ by a shade, 1e-5 of them)
+        assert np.mean(np.abs(a - b).max(axis=-1) > 0.02) < 1e-4, png

@@ -8,7 +8,7 @@ Cases: ``mono-1``, ``mono-2`` (models 1, 2 on unit_square(16, 4)), ``mono-free``
 left side clamped: traction-free top and bottom), ``mono-bc`` (u_D, two traction groups, a curved gap:
 the manufactured problem of test_boundary_conditions.py), ``hybrid-1``, ``hybrid-2``, ``hybrid-free``
 (the same meshes with h = 1/8: Algorithm 2 to tolerance 1e-10 against the split-interface monolithic solve), ``rates`` (AW rates on
-unit squares 4, 8, 16).  Fields are stored as the DG values of every owned cell, sorted by (input cell
+unit squares 4, 8, 16), ``indent`` (mixed monolithic Hertz load steps: a moving obstacle).  Fields are stored as the DG values of every owned cell, sorted by (input cell
 number, node coordinates), so that runs on any number of ranks compare entry by entry.
 """
 
@@ -104,6 +104,20 @@ def hybrid(name: str, fields: dict) -> dict:
     }
 
 
+def indent(fields: dict) -> dict:
+    """The Hertz cylinder pressed into a block in two load steps (a moving obstacle), mixed monolithic."""
+    from fenics_contact.indentation import force_indentation
+    from fenics_contact.problem.analytic import hertz_model
+    from fenics_contact.problem.meshes import hertz_block
+
+    block, _ = hertz_block(0.05, refinement=0.5)
+    curve = force_indentation("mixed-monolithic", block, hertz_model(radius=5.0, depth=0.0), [6e-4, 1.2e-3],
+                              direction=(0.0, -1.0))
+    last = curve.steps[-1].profile
+    return {"forces": curve.forces.tolist(), "newton": [s.iterations for s in curve.steps],
+            "zone": last.contact_zone(), **profile_data(last)}
+
+
 def rates(fields: dict) -> dict:
     import test_arnold_winther as aw
 
@@ -145,6 +159,8 @@ def main() -> None:
             out[case] = hybrid(name, fields)
         elif kind == "rates":
             out[case] = rates(fields)
+        elif kind == "indent":
+            out[case] = indent(fields)
         else:
             raise SystemExit(f"unknown case {case}")
     if COMM.rank == 0:

@@ -95,7 +95,14 @@ def hybrid(name: str, fields: dict) -> dict:
     fields[f"hybrid-{name}-sigma"] = sorted_values(res.sigma)
     fields[f"hybrid-{name}-u"] = sorted_values(res.u)
     fields[f"hybrid-{name}-ref-sigma"] = sorted_values(ref.sigma)
+    # the γ mass matrix (the certificate's norm) on the interface data of f = (y³, 1 + y): exact for P3 data
+    s1 = res.step.sub[0]
+    g0, g1 = s1.interface_range
+    y = s1.gamma_points[:, 1]
+    f = np.stack([y**3, 1.0 + y], axis=1).ravel()[g0:g1]
+    gamma_f2 = COMM.allreduce(float(f @ (s1.gamma_mass_matrix() @ f)), op=MPI.SUM)
     return {
+        "gamma_f2": gamma_f2,
         "iterations": res.iterations, "converged": res.converged,
         "newton": [r.info["newton"] for r in res.history.records],
         "newton_active": [r.info["active"] for r in res.history.records],

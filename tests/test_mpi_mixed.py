@@ -97,6 +97,9 @@ def test_algorithm_2_matches_serial(runs, ranks, case):
     assert b["newton"] == a["newton"] and b["newton_active"] == a["newton_active"]
     assert b["active"] == a["active"] and b["dofs"] == a["dofs"]
     assert np.allclose(b["rel_changes"], a["rel_changes"], rtol=1e-6, atol=1e-12)
+    # ‖f‖²_γ of f = (y³, 1 + y) on γ = {3/4} × (0, 1) with the distributed γ mass matrix: ∫ y⁶ + (1 + y)² dy
+    assert a["gamma_f2"] == pytest.approx(1 / 7 + 7 / 3, rel=1e-12)
+    assert b["gamma_f2"] == pytest.approx(a["gamma_f2"], rel=1e-12)
     assert a["e_sigma"] < 1e-8 and b["e_sigma"] < 1e-8 and b["e_u"] < 1e-8
     scale = np.abs(sf[f"{case}-sigma"]).max()
     assert np.abs(np.array(b["sigma_c"]) - a["sigma_c"]).max() <= TOL * scale

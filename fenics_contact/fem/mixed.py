@@ -610,6 +610,17 @@ class MixedSubproblem:
         #: d(g; τ) = C g for interface data g = values (x, y) at ``gamma_points`` (this rank's block)
         self._C = DistributedMatrix(coo_matrix(comm, gi[C_red.row], C_red.col, C_red.data,
                                               (self.n_sigma, self.space.num_dofs), (g1 - g0, n_g)))
+        # L²(γ) mass matrix of the continuous P3 data, canonical values × canonical values (the γ norm of the
+        # convergence certificate); the owned Lagrange rows of every rank, mapped like the columns
+        w = ufl.TestFunction(Lam)
+        Mg = _assemble_petsc(ufl.inner(g, w) * ds(Boundary.INTERFACE))
+        mi, mj, mv = Mg.getValuesCSR()
+        m_rows = canonical_value(Mg.getOwnershipRange()[0] + np.repeat(np.arange(mi.size - 1), np.diff(mi)))
+        Mg.destroy()
+        m_cols = canonical_value(mj.astype(np.int64))
+        keep = (m_rows >= 0) & (m_cols >= 0)
+        self._gamma_mass = DistributedMatrix(coo_matrix(comm, m_rows[keep], m_cols[keep], mv[keep],
+                                                        (g1 - g0, n_g), (g1 - g0, n_g)))
         # trace σn at the γ nodes (exact: σn is a P3 polynomial on each γ edge, continuous at vertices),
         # each node evaluated by the lowest rank holding one of its facets with an owned cell
         bf = _BoundaryFacets(msh, gamma)
@@ -717,6 +728,12 @@ class MixedSubproblem:
     def contact_stress(self) -> np.ndarray:
         """σ_c at the contact nodes (``q_points``) of the current stress, replicated on every rank."""
         return self._contact_stress(self.c)
+
+    def gamma_mass_matrix(self) -> DistributedMatrix:
+        """L²(γ) mass matrix M of the Robin data (canonical γ values, this rank's block): ‖g‖²_γ = Σ_ranks g·(M g)."""
+        if self.beta is None:
+            raise InputError("this subproblem has no interface γ")
+        return self._gamma_mass
 
     def gamma_traction(self) -> np.ndarray:
         """σn on γ (outward n of this mesh) at ``gamma_points``, (x, y) per node, this rank's block."""
@@ -985,7 +1002,7 @@ class MixedSubproblem:
                 obj.destroy()
         if self._solver is not None:
             self._solver.destroy()
-        for name in ("_K", "_B", "_M", "_R", "_Q", "_C", "_N"):
+        for name in ("_K", "_B", "_M", "_R", "_Q", "_C", "_N", "_gamma_mass"):
             op = self.__dict__.get(name)
             if op is not None:
                 op.destroy()

@@ -369,6 +369,14 @@ def _assemble_vector(form) -> np.ndarray:
     return b.array.copy()
 
 
+def _without_product_data(C: PETSc.Mat) -> PETSc.Mat:
+    """A copy of a product C = PᵀAP (or A P) without the intermediate data PETSc keeps in C for a reuse
+    (the size of A P: as much again as P), which is never needed here."""
+    out = C.duplicate(copy=True)
+    C.destroy()
+    return out
+
+
 def _assemble_petsc(form) -> PETSc.Mat:
     A = dolfinx.fem.petsc.assemble_matrix(fem.form(form))
     A.assemble()
@@ -410,6 +418,8 @@ class MixedSubproblem:
             is detected, then exact line search on J) or ``"always"``.
         interface_points: the γ nodes in the order to use for the Robin data
             (replicated; default: this mesh's γ nodes sorted by (y, x)).
+        operators: False builds the spaces, the interface data and the load only, without
+            the global matrices (no solve then; Algorithm 4's Ω₁ assembles its own cell blocks).
     """
 
     def __init__(
@@ -425,6 +435,7 @@ class MixedSubproblem:
         space: ArnoldWintherSpace | None = None,
         line_search: str = "on-cycle",
         interface_points: np.ndarray | None = None,
+        operators: bool = True,
     ) -> None:
         t0 = time.perf_counter()
         if line_search not in ("on-cycle", "always"):
@@ -465,12 +476,15 @@ class MixedSubproblem:
         s, t = ufl.TrialFunction(self.dg), ufl.TestFunction(self.dg)
         w, v = ufl.TrialFunction(self.U), ufl.TestFunction(self.U)
         n = ufl.FacetNormal(msh)
-        A = _assemble_petsc(forms_mixed.compliance_form(s, t, fields.lmbda, fields.mu))
-        self._K = DistributedMatrix(A.PtAP(P_petsc))
-        A.destroy()
-        D = _assemble_petsc(forms_mixed.divergence_form(s, v))
-        self._B = DistributedMatrix(D.matMult(P_petsc))
-        D.destroy()
+        self.has_operators = operators
+        self._K = self._B = self._R = None
+        if operators:
+            A = _assemble_petsc(forms_mixed.compliance_form(s, t, fields.lmbda, fields.mu))
+            self._K = DistributedMatrix(_without_product_data(A.PtAP(P_petsc)))
+            A.destroy()
+            D = _assemble_petsc(forms_mixed.divergence_form(s, v))
+            self._B = DistributedMatrix(_without_product_data(D.matMult(P_petsc)))
+            D.destroy()
         self._M = DistributedMatrix(_assemble_petsc(forms_mixed.mass_form(w, v)))
         self.G = _assemble_vector(forms_mixed.load_form(fields.f, v))[: self.n_u]
 
@@ -503,20 +517,23 @@ class MixedSubproblem:
             gamma = facet_tags.find(Boundary.INTERFACE)
             if self.comm.allreduce(int(gamma.size), op=MPI.SUM) == 0:
                 raise InputError("a Robin subproblem needs interface (γ) facets")
-            R_dg = _assemble_petsc(forms_mixed.robin_form(s, t, n, 1.0, ds(Boundary.INTERFACE)))
-            self._R = DistributedMatrix(R_dg.PtAP(P_petsc))
-            Kt = self._K.mat.duplicate(copy=True)
-            Kt.axpy(beta, self._R.mat, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
-            self._Kt = DistributedMatrix(Kt)
-            if self._lifted:
-                y = R_dg.createVecLeft()
-                x = R_dg.createVecRight()
-                x.array[:] = self.s0
-                R_dg.mult(x, y)
-                self._F_boundary -= beta * (self._Pd.T @ y.array)
-                x.destroy()
-                y.destroy()
-            R_dg.destroy()
+            if operators:
+                R_dg = _assemble_petsc(forms_mixed.robin_form(s, t, n, 1.0, ds(Boundary.INTERFACE)))
+                self._R = DistributedMatrix(_without_product_data(R_dg.PtAP(P_petsc)))
+                Kt = self._K.mat.duplicate(copy=True)
+                Kt.axpy(beta, self._R.mat, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
+                self._Kt = DistributedMatrix(Kt)
+                if self._lifted:
+                    y = R_dg.createVecLeft()
+                    x = R_dg.createVecRight()
+                    x.array[:] = self.s0
+                    R_dg.mult(x, y)
+                    self._F_boundary -= beta * (self._Pd.T @ y.array)
+                    x.destroy()
+                    y.destroy()
+                R_dg.destroy()
+            elif self._lifted:
+                raise InputError("a subproblem without its global operators (Algorithm 4's Ω₁) takes no traction data")
             self._setup_interface(gamma, ds, t, n, interface_points)
 
         # -- contact quadrature and obstacle ----------------------------------------------
@@ -562,6 +579,7 @@ class MixedSubproblem:
         msh, comm = self.mesh, self.comm
         Lam = fem.functionspace(msh, basix.ufl.element("Lagrange", msh.basix_cell(), 3, shape=(2,)))
         tdim = msh.topology.dim
+        msh.topology.create_connectivity(tdim - 1, tdim)
         blocks = fem.locate_dofs_topological(Lam, tdim - 1, gamma)
         coords = Lam.tabulate_dof_coordinates()[blocks, :2]
         gblocks = Lam.dofmap.index_map.local_to_global(blocks.astype(np.int32)).astype(np.int64)
@@ -762,6 +780,8 @@ class MixedSubproblem:
 
     def _factorize_for(self, active: np.ndarray | None) -> bool:
         """Factorize the saddle-point Jacobian unless the cached one has the same active set."""
+        if not self.has_operators:
+            raise InputError("this subproblem was built without its matrices (operators=False): it cannot be solved")
         key = np.zeros(0, dtype=bool) if active is None else active
         if self._factorized_set is not None and np.array_equal(key, self._factorized_set):
             return False
@@ -1006,7 +1026,7 @@ class MixedSubproblem:
             op = self.__dict__.get(name)
             if op is not None:
                 op.destroy()
-        if self._Kt is not self._K:
+        if self._Kt is not None and self._Kt is not self._K:
             self._Kt.destroy()
 
 
@@ -1090,8 +1110,17 @@ class MixedSolution:
     dofs: dict
     time_s: float  #: setup + Newton
     time_newton_s: float  #: Newton only (the online part)
-    problem: MixedSubproblem
+    problem: MixedSubproblem | None  #: None once ``free()`` has been called
     split_interface: bool
+
+    def free(self) -> None:
+        """Release the monolithic problem (its matrices and MUMPS factors); the solution, history and profile stay.
+
+        A reference solve keeps GBs at h = 1/128 otherwise (the factors of the whole mixed problem).
+        """
+        if self.problem is not None:
+            self.problem.destroy()
+            self.problem = None
 
 
 def solve_mixed_monolithic(

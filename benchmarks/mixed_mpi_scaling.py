@@ -140,8 +140,9 @@ def weak_scaling(rows: list[dict], baseline: float, budget: float) -> list[str]:
             continue
         if len(pts) >= 2 and pts[-1][0] > pts[-2][0] and pts[-2][1] > 0:
             p = float(np.log(pts[-1][1] / pts[-2][1]) / np.log(pts[-1][0] / pts[-2][0]))
+            how = "fitted"
         else:
-            p = 1.1
+            p, how = 1.1, "assumed: one size measured"
         n0, m0 = pts[-1]
         par = [r for r in rows if r["method"] == method and r["ranks"] > 1 and r["dofs"] == n0]
         overhead = ""
@@ -152,7 +153,7 @@ def weak_scaling(rows: list[dict], baseline: float, budget: float) -> list[str]:
             factor = total / m0
         else:
             factor = 1.0
-        lines.append(f"**{method}**: memory − baseline ∝ DOFs^{p:.2f} (fitted), {m0:.2f} GiB at {n0:,} DOFs{overhead}.")
+        lines.append(f"**{method}**: memory − baseline ∝ DOFs^{p:.2f} ({how}), {m0:.2f} GiB at {n0:,} DOFs{overhead}.")
         lines.append("")
         lines.append("| 1/h | DOFs | est. total GiB | ranks for ≤ {:.0f} GiB/rank | GiB per rank |".format(budget))
         lines.append("|---|---|---|---|---|")

@@ -25,6 +25,7 @@ import signal
 import sys
 import threading
 import time
+import typing
 from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import dataclass, fields, replace
@@ -372,7 +373,7 @@ def case_run_options(case: Case, given: Mapping[str, object] = {}) -> RunOptions
                 hint = f" ({key} belongs in [{home}])" if home else ""
                 raise InputError(f"case {case.path}: unknown key '{table}.{key}'{hint}; the keys of [{table}] are "
                                  f"{sorted(k.replace('_', '-') for k in keys[table])}")
-            values[name] = Path(value) if name in ("out", "cache_dir") and isinstance(value, str) else value
+            values[name] = _run_value(case, f"{table}.{key}", name, value)
         probe = {"method": values.get("method", "primal") if table == "run" else methods[0]}
         if "out" in given:
             probe["out"] = given["out"]
@@ -390,6 +391,22 @@ def case_run_options(case: Case, given: Mapping[str, object] = {}) -> RunOptions
     if "no_plots" in given:
         values["plots"] = not given["no_plots"]
     return RunOptions(**values, case=case.path)
+
+
+def _run_value(case: Case, key: str, name: str, value):
+    """A run-table value of the type of its RunOptions field (TOML has no argparse to convert it)."""
+    annotation = next(f.type for f in fields(RunOptions) if f.name == name)
+    kind = next((t for t in (typing.get_args(annotation) or (annotation,)) if t is not type(None)), None)
+    number = isinstance(value, (int, float)) and not isinstance(value, bool)
+    if kind is str and name in ("alpha", "beta") and number:
+        return repr(value)  # a coefficient may be written as a number
+    ok = {bool: isinstance(value, bool), int: number and isinstance(value, int), float: number,
+          str: isinstance(value, str), Path: isinstance(value, str)}.get(kind, True)
+    if not ok:
+        what = {bool: "true or false", int: "an integer", float: "a number", str: "a string",
+                Path: "a directory name (a string)"}[kind]
+        raise InputError(f"case {case.path}: {key} must be {what}, got {value!r}")
+    return Path(value) if kind is Path else float(value) if kind is float else value
 
 
 def _options_echo(options: RunOptions) -> dict:

@@ -271,6 +271,8 @@ CASES = [
          "obstacle.direction is required with obstacle.indentation for a circle"),
     Case("case: a bad run option", _case(SQUARE + "[run]\ntol = 0\n"), 2,
          "[run] the relative tolerance must lie in (0, 1)"),
+    Case("case: a run option of the wrong type", _case(SQUARE + '[run]\ntol = "small"\n'), 2,
+         "run.tol must be a number, got 'small'"),
     Case("case: a method option in [run]", _case(SQUARE + "[run]\ndelta = 1e-6\n"), 2,
          "unknown key 'run.delta' (delta belongs in [primal])"),
     Case("case: a bad option in the table of a method not run", _case(SQUARE + "[mixed]\nepsilon = -1\n"), 2,

@@ -101,6 +101,21 @@ def test_a_case_file_reads_into_validated_dataclasses(tmp_path):
     assert echo["material"]["E"] == {"fibres": 1e3, "matrix": 1.0} and echo["obstacle"]["indentation"] == [0.001, 0.002]
 
 
+def test_the_readme_case_file_is_valid(tmp_path):
+    """The annotated case of the README's "Describe your own problem" reads and builds its model."""
+    readme = (Path(__file__).parents[1] / "README.md").read_text()
+    text = readme.split("## Describe your own problem")[1].split("```toml\n")[1].split("```")[0]
+    path = tmp_path / "readme.toml"
+    path.write_text(text.replace('file = "composite.msh"', f'file = "{CASES / "composite.msh"}"'))
+    case = load_case(path)
+    assert case.obstacle.steps and case.boundary.displacement == Uniform((0.0, 0.0))
+    assert case.run["multiscale"] == {"layers": 4}
+    options, _ = _options(["run", "--case", str(path)])
+    assert (options.method, options.alpha, options.layers) == ("primal", "E*h^-1/2", None)
+    model = case.model(case.build_mesh())
+    assert model.boundary.tractions[0][0] == "Gamma_N_top"
+
+
 def test_the_flags_override_the_case_and_only_the_methods_tables_apply(tmp_path):
     path = _write_full(tmp_path)
     options, case = _options(["run", "--case", str(path)])
@@ -169,6 +184,21 @@ def test_bar_case_pushing_and_pulling(tmp_path, method):
         assert abs(s["contact_force"] + 0.5 / (1.0 + 1.0 / s["epsilon"])) < 1e-9
     else:
         assert abs(s["contact_force"]) < 1e-12 and s["max_contact_pressure"] < 1e-12  # the reaction: round-off
+
+
+@pytest.mark.parametrize("method", ["primal", "mixed"])
+def test_bar_case_with_a_prescribed_displacement(tmp_path, method):
+    """No load, Γ_D moved by u_D = (d, 0) from a Python file: the bar is pressed uniformly into the wall,
+    σ_xx = −Ed/(1 + Eδ) (primal penalty; mixed: −Ed), so the contact force is Ed/(1 + Eδ) resp. Ed."""
+    (tmp_path / "u_D.py").write_text("import numpy as np\n\ndef shift(x):\n"
+                                     "    return np.vstack([np.full(x.shape[1], 0.01), np.zeros(x.shape[1])])\n")
+    s = _run(tmp_path, "--case", str(CASES / "bar.toml"), "--set", "mesh.h=8", "--set", "mesh.H=2",
+             "--set", "load.body-force=[0.0, 0.0]", "--set", f"boundary.displacement={{python = '{tmp_path}/u_D.py:shift'}}",
+             "--method", method)
+    exact = 0.01 / (1.0 + s["delta"]) if method == "primal" else 0.01
+    assert abs(s["contact_force"] - exact) < 1e-9 * exact
+    assert abs(s["max_contact_pressure"] - exact) < 1e-9 * exact  # uniform
+    assert s["case"]["boundary"]["displacement"] == {"python": f"{tmp_path}/u_D.py:shift"}
 
 
 def test_hertz_case_small(tmp_path):

@@ -706,8 +706,8 @@ class Case:
         overlays = [name for name in self.material.groups() if name not in SUBDOMAIN_NAMES]
         return self.mesh.build(comm, overlays)
 
-    def model(self, mesh: CaseMesh, *, obstacle: Obstacle | None | str = "final") -> TestModel:
-        """The problem as a TestModel on the built mesh (collective), the obstacle at its last depth by default.
+    def model(self, mesh: CaseMesh) -> TestModel:
+        """The problem as a TestModel on the built mesh (collective), the obstacle at its last depth.
 
         Checked here: every cell has a material (groups, pixel maps), the traction groups match the mesh's.
         """
@@ -731,7 +731,7 @@ class Case:
         return TestModel(
             name=self.path.stem, youngs_modulus=E, poisson_ratio=nu, load=load,
             description=self.description or f"case {self.path.name}", boundary=boundary,
-            obstacle=self.obstacle.final() if obstacle == "final" else obstacle,
+            obstacle=self.obstacle.final(),
         )
 
     def _scalar(self, spec: FieldSpec, key: str, cm: ContactMesh, groups: CellGroups | None,

@@ -210,6 +210,7 @@ def read_mesh(
     H: float | None = None,
     validate: bool = True,
     rules: Iterable[validation.BoundaryRule] = validation.BOUNDARY_RULES,
+    overlay_groups: Iterable[str] = (),
 ) -> ContactMesh:
     """Load a gmsh ``.msh`` file whose physical groups carry the names of ``tags.PHYSICAL_NAMES``.
 
@@ -220,8 +221,11 @@ def read_mesh(
     and Ω₂, Γ_C on ∂Ω₂ away from γ, Γ_D and Γ_C disjoint, a conforming mesh), a MeshTagError
     naming the group otherwise. ``h`` of the result is the mesh size ``mesh_size`` (1/n on the
     built-in meshes), ``H`` the side of the coarse grid of squares from the origin (multiscale methods).
+    ``overlay_groups``: surface groups that overlay Omega1/Omega2 (materials by group, read with
+    ``problem.cell_groups.read_cell_groups``); they are left out of the mesh and its checks.
     """
     path = Path(path)
+    overlay_groups = set(overlay_groups)
     if H is not None and not (isinstance(H, (int, float)) and np.isfinite(H) and 0 < H <= 1
                               and abs(1.0 / H - round(1.0 / H)) <= 1e-9 / H):
         raise InputError(f"the coarse size H must be 1/N for an integer N >= 1 (coarse squares of side H over "
@@ -237,6 +241,9 @@ def read_mesh(
             except Exception as err:  # gmsh raises a bare Exception with its parser's message
                 problem = (InputError, f"cannot read {path} as a gmsh mesh: {err}")
             else:
+                for dim, tag in gmsh.model.getPhysicalGroups(2):  # overlays: read separately, not cell tags
+                    if gmsh.model.getPhysicalName(dim, tag) in overlay_groups:
+                        gmsh.model.removePhysicalGroups([(dim, tag)])
                 problem = _gmsh_model_problem(path)
         problem = comm.bcast(problem, root=0)
         # validate before the collective mesh construction (which aborts on inconsistent tags)

@@ -204,6 +204,7 @@ class SaddlePointMatrix:
             Bt = B.transpose(PETSc.Mat())  # (no argument: in place)
             nest = PETSc.Mat().createNest([[K, Bt], [B, None]], comm=K.getComm())
             self.mat = nest.convert(PETSc.Mat.Type.AIJ, PETSc.Mat())  # (no out: in place)
+            self.mat.assemble()  # (the MPI conversion leaves it unassembled)
             for obj in (nest, Bt):
                 obj.destroy()
             return

@@ -198,7 +198,9 @@ class SaddlePointMatrix:
         self._pen_entry_node = np.zeros(0, dtype=np.int64)
         self._pen_values = np.zeros(0)
         self._base = np.zeros(0)
-        if not comm.allreduce(Q_rows is not None and Q_rows.nnz > 0, op=MPI.LOR):
+        #: no penalty on any rank: the values are fixed (the same on every rank: set_weights is collective)
+        self._fixed = not comm.allreduce(Q_rows is not None and Q_rows.nnz > 0, op=MPI.LOR)
+        if self._fixed:
             # no penalty on any rank: the values never change; MatNest -> AIJ (same layout) holds no COO
             # maps and no copy of the values (about 3x less memory than the COO assembly below)
             Bt = B.transpose(PETSc.Mat())  # (no argument: in place)
@@ -247,7 +249,7 @@ class SaddlePointMatrix:
 
     def set_weights(self, weights: np.ndarray | None) -> None:
         """Values for penalty weights d (one per local row of ``Q_rows``; None: D = 0)."""
-        if not self._base.size:  # no penalty anywhere (MatNest conversion): the values are fixed
+        if self._fixed:  # no penalty anywhere (MatNest conversion): the values are fixed
             return
         if self._pen_values.size:
             w = np.zeros(0) if weights is None else np.asarray(weights, dtype=np.float64)

@@ -168,6 +168,7 @@ def solve_primal_ms_hybrid(
     nbasis: int | None = 3,
     threshold: float | None = None,
     s_factor: float = DEFAULT_S_FACTOR,
+    source_correction: bool = True,
     options: IterationOptions = IterationOptions(),
     newton: NewtonOptions = NewtonOptions(),
     reference: fem.Function | None = None,
@@ -179,7 +180,7 @@ def solve_primal_ms_hybrid(
     bases, N and the coarse factorization (breakdown in ``result.step.offline_times``);
     ``time_online_s`` the iteration.
     """
-    cem = CEMOptions(layers=layers, nbasis=nbasis, threshold=threshold, s_factor=s_factor)
+    cem = CEMOptions(layers=layers, nbasis=nbasis, threshold=threshold, s_factor=s_factor, source_correction=source_correction)
     step = MultiscalePrimalHybridStep(
         cm, model, alpha=alpha, delta=delta, cem=cem, newton=newton, reference=reference, cache_dir=cache_dir
     )

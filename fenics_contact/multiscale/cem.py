@@ -92,7 +92,8 @@ from fenics_contact.errors import ConvergenceError, InputError
 from fenics_contact.fem import forms_primal
 from fenics_contact.fem.linalg import assemble_scipy, scipy_to_petsc
 from fenics_contact.multiscale.cache import OfflineCache, hash_array
-from fenics_contact.multiscale.coarse import CoarseGrid, coarse_grid
+from fenics_contact.multiscale.coarse import CoarseGrid, coarse_grid, grid_from_cells
+from fenics_contact.multiscale.replica import SerialReplica
 from fenics_contact.multiscale.work import gather, my_items, share
 from fenics_contact.problem.fields import MaterialFields
 from fenics_contact.problem.tags import Boundary
@@ -828,6 +829,7 @@ def build_multiscale_space(
                 Nf[r[0].dofs] += r[2]
     times["patches"] = time.perf_counter() - t0
     times["total"] = times["eigen"] + times["patches"]
+    times["patches_here"] = int(np.count_nonzero(owner == comm.rank))  # this rank's share
     space = MultiscaleSpace(aux, basis, correction, Nf, int(options.layers), ops.size, ops.gamma.size,
                             correction_cells, times)
     log.info(
@@ -1118,8 +1120,26 @@ def offline_stage(
 # ---------------------------------------------------------------------------------------
 # the Ω₁ side of Algorithm 3
 # ---------------------------------------------------------------------------------------
+def _allgather_values(comm: MPI.Comm, local: np.ndarray) -> np.ndarray:
+    """The owned interface values of every rank, concatenated in rank order (= global interface order)."""
+    local = np.ascontiguousarray(local, dtype=np.float64)
+    if comm.size == 1:
+        return local
+    counts = np.array(comm.allgather(local.size), dtype=np.int64)
+    out = np.empty(int(counts.sum()))
+    comm.Allgatherv(local, [out, (counts, np.concatenate([[0], np.cumsum(counts)[:-1]]))])
+    return out
+
+
 class Omega1Multiscale:
-    """The Ω₁ side of Algorithm 3: fine operators, coarse grid, multiscale space and the online solver."""
+    """The Ω₁ side of Algorithm 3: fine operators, coarse grid, multiscale space and the online solver.
+
+    Everything lives on a serial copy of Ω₁ (``replica.SerialReplica``), the same on every rank;
+    the offline local problems are shared out across the ranks of ``cm.comm``. Online, every rank
+    solves the (small, dense) coarse problem itself: ``solve`` gathers the owned Robin data of all
+    ranks (one Allgather of the γ values) and returns u₁ on every DOF of the copy;
+    ``interface_values`` gives back this rank's owned γ values.
+    """
 
     def __init__(
         self,
@@ -1132,33 +1152,54 @@ class Omega1Multiscale:
         cem: CEMOptions,
         cache_dir: str | Path | None = None,
     ) -> None:
-        require_serial(cm.comm)
         t0 = time.perf_counter()
-        part_index = 0
-        part = parts[part_index]
-        self.mesh = part.mesh
-        self.facet_tags = part.facet_tags
-        self.V = interface.spaces[part_index]
+        comm = cm.comm
+        self.comm = comm
+        part = parts[0]
+        self.interface = interface
+        tdim = part.mesh.topology.dim
+        imap = part.mesh.topology.index_map(tdim)
+        sub_cells = np.arange(imap.size_local + imap.num_ghosts, dtype=np.int32)
+        parent_cells = np.asarray(part.cell_map.sub_topology_to_topology(sub_cells, False), dtype=np.int64)
+        coarse = np.asarray(cm.coarse_cell)[parent_cells]
+        if cm.H is None and comm.allreduce(int(np.any(coarse >= 0)), op=MPI.MAX) == 0:
+            raise InputError(
+                "the mesh has no coarse grid (ContactMesh.H is None and no coarse partition): build it with "
+                "geometry.unit_square(n, n_coarse), or give read_mesh H or a mesh with a coarse partition"
+            )
+        self.replica = SerialReplica(part.mesh, part.facet_tags, interface.spaces[0], {"coarse": coarse})
+        self.mesh = self.replica.mesh
+        self.facet_tags = self.replica.facet_tags
+        self.V = self.replica.V
+        self.fields = material_fields(self.mesh, model)
+        self.grid = grid_from_cells(self.mesh.geometry.dofmaps[0], self.mesh.geometry.x,
+                                    self.replica.cell_data["coarse"], cm.H)
+        # global interface value index (rank order) of every γ DOF of the copy
+        self._n_local = interface.size
+        self._offset = comm.exscan(self._n_local) or 0
+        self._n_total = comm.allreduce(self._n_local, op=MPI.SUM)
+        probe = fem.Function(interface.spaces[0])
+        interface.to_part(self._offset + np.arange(1, self._n_local + 1, dtype=np.float64), 0, probe)
+        index = np.rint(self.replica.gather(probe)).astype(np.int64) - 1
         self.alpha_fn = fem.Function(self.V, name="alpha")
-        interface.to_part(alpha, part_index, self.alpha_fn)
-        self.fields = material_fields(part.mesh, model)
-        self.grid = coarse_grid(part.mesh, part.cell_map, cm.coarse_cell, cm.H)
+        on = np.flatnonzero(index >= 0)
+        self.alpha_fn.x.array[on] = _allgather_values(comm, alpha)[index[on]]
         self.ops = assemble_fine_operators(
-            self.V, part.facet_tags, self.fields, self.alpha_fn, self.grid, s_factor=cem.s_factor
+            self.V, self.facet_tags, self.fields, self.alpha_fn, self.grid, s_factor=cem.s_factor
         )
+        value_of_dof = index[self.ops.gamma]
+        if np.any(value_of_dof < 0) or np.unique(value_of_dof).size != self._n_total or \
+                self.ops.gamma.size != self._n_total:
+            raise InputError("the Ω₁ γ DOFs do not match the interface DOFs one to one")
+        self.value_of_dof = value_of_dof  #: global interface index of each ops.gamma DOF
+        self.gamma_of_value = np.empty(self._n_total, dtype=np.int64)  #: position in ops.gamma of each value
+        self.gamma_of_value[value_of_dof] = np.arange(self.ops.gamma.size)
+        self._mine = self.gamma_of_value[self._offset:self._offset + self._n_local]
         t_assembly = time.perf_counter() - t0
         self.space, self.cache_status = offline_stage(
-            self.ops, self.grid, cem, h=cm.h, cache_dir=cache_dir
+            self.ops, self.grid, cem, h=cm.h, cache_dir=cache_dir, comm=comm
         )
-        self.solver = MultiscaleRobinSolver(self.ops, self.space, self.grid)
-        # interface value index (InterfaceSpace ordering) → position in ops.gamma
-        probe = fem.Function(self.V)
-        interface.to_part(np.arange(1, interface.size + 1, dtype=np.float64), part_index, probe)
-        value_of_dof = np.rint(probe.x.array[self.ops.gamma]).astype(np.int64) - 1
-        if np.any(value_of_dof < 0) or np.unique(value_of_dof).size != interface.size:
-            raise InputError("the Ω₁ γ DOFs do not match the interface DOFs one to one")
-        self.gamma_of_value = np.empty(interface.size, dtype=np.int64)
-        self.gamma_of_value[value_of_dof] = np.arange(self.ops.gamma.size)
+        self.solver = MultiscaleRobinSolver(self.ops, self.space, self.grid, comm=comm)
         self.times = {
             "assembly": t_assembly,
             "eigen": self.space.times.get("eigen", 0.0),
@@ -1178,23 +1219,42 @@ class Omega1Multiscale:
         return self.ops.size
 
     def solve(self, g12: np.ndarray) -> np.ndarray:
-        """u₁ on every Ω₁ DOF for Robin data g₁₂ (InterfaceSpace ordering)."""
-        g = np.zeros(self.ops.gamma.size)
-        g[self.gamma_of_value] = g12
+        """u₁ on every DOF of the Ω₁ copy for Robin data g₁₂ (this rank's owned values, InterfaceSpace
+        ordering; collective)."""
+        g = _allgather_values(self.comm, g12)[self.value_of_dof]
         return self.solver.solve(g)
 
     def interface_values(self, u1: np.ndarray) -> np.ndarray:
-        """u₁ at the interface DOFs, in InterfaceSpace ordering."""
-        return u1[self.ops.gamma[self.gamma_of_value]]
+        """u₁ at this rank's owned interface DOFs, in InterfaceSpace ordering."""
+        return u1[self.ops.gamma[self._mine]]
 
     def response(self) -> tuple[np.ndarray, np.ndarray]:
-        """The affine interface map of Ω₁, u₁|γ = R g₁₂ + r₀ (InterfaceSpace ordering; R dense n_γ × n_γ).
+        """The affine interface map of Ω₁, u₁|γ = R g₁₂ + r₀.
 
-        ``interface_values(solve(g))`` equals ``R @ g + r0`` to round-off.
+        Rows: this rank's owned interface values (InterfaceSpace ordering); columns: the interface
+        values of all ranks in rank order (serially: R is square, n_γ × n_γ, dense).
+        ``interface_values(solve(g))`` equals ``R @ g_all + r0`` to round-off.
         """
         R, r0 = self.solver.response()
-        sel = self.gamma_of_value
-        return R[np.ix_(sel, sel)], r0[sel]
+        return R[np.ix_(self._mine, self.gamma_of_value)], r0[self._mine]
+
+    def from_parent(self, u: fem.Function) -> np.ndarray:
+        """A parent-mesh P1 function restricted to Ω₁, as values on the copy (collective)."""
+        sub = fem.Function(self.interface.spaces[0])
+        self.interface.transfers[0].to_sub(u, sub)
+        return self.replica.gather(sub)
+
+    def to_part(self, u1: np.ndarray, out: fem.Function) -> None:
+        """out (P1 on the distributed Ω₁ submesh) ← u₁ given on the copy."""
+        self.replica.scatter(u1, out)
+
+    def energy_norm2(self, w: np.ndarray) -> float:
+        """a₁(w, w) (the same on every rank)."""
+        return float(self.ops.K.dot(w).dot(w))
+
+    def l2_norm2(self, w: np.ndarray) -> float:
+        """‖w‖²_L²(Ω₁) (the same on every rank)."""
+        return float(self.ops.M.dot(w).dot(w))
 
 
 def build_omega1_multiscale(
@@ -1206,7 +1266,6 @@ def build_omega1_multiscale(
     cache_dir: str | Path | None = None,
 ) -> tuple[Omega1Multiscale, InterfaceSpace, np.ndarray]:
     """The Ω₁ multiscale solver on its own (for linear Robin problems and tests): (Ω₁ solver, interface, α)."""
-    require_serial(cm.comm)
     parts = split_mesh(cm)
     interface = InterfaceSpace(cm, parts, shape=(cm.mesh.geometry.dim,))
     alpha_values = robin_coefficient(alpha, material_fields(cm.mesh, model).E, interface, cm.h)

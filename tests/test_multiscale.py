@@ -80,7 +80,8 @@ def test_coarse_grid_and_colouring(omega1_32_8):
     inner = np.flatnonzero((grid.ij[:, 0] == 3) & (grid.ij[:, 1] == 4))[0]
     assert grid.patch(inner, 1).size == 9 and grid.patch(inner, 2).size == 25
     # colour-restricted matrices sum to the full ones
-    assert abs(sum(ops.Ac) - ops.A).max() < 1e3 * EPS * abs(ops.A).max()
+    assert abs(sum(ops.Kc) - ops.K).max() < 1e3 * EPS * abs(ops.K).max()
+    assert abs(sum(ops.Mc) - ops.M).max() < 1e3 * EPS * abs(ops.M).max()
 
 
 # -- local spectral problems ------------------------------------------------------------------
@@ -277,10 +278,21 @@ def test_interface_response_is_the_affine_map():
     R, r0 = om.response()
     assert np.abs(r0).max() > 0
     rng = np.random.default_rng(3)
+    prev = None
     for _ in range(2):
         g = rng.standard_normal(R.shape[0])
         u1 = om.solve(g)
         assert np.allclose(om.interface_values(u1), R @ g + r0, rtol=0, atol=1e-12 * np.abs(u1).max())
+        # the online coordinates s (u₁ = Z s): trace and norms from the small Gram matrices
+        s = om.coordinates(g)
+        assert np.array_equal(om.field(s), u1)
+        assert np.allclose(om.trace(s), om.interface_values(u1), rtol=0, atol=1e-12 * np.abs(u1).max())
+        if prev is not None:
+            d = u1 - om.field(prev)
+            ek, em = om.coordinate_norms2(s - prev)
+            assert ek == pytest.approx(om.energy_norm2(d), rel=1e-10)
+            assert em == pytest.approx(om.l2_norm2(d), rel=1e-10)
+        prev = s
 
 
 # -- offline cache --------------------------------------------------------------------------------

@@ -228,7 +228,7 @@ class FineOperators:
     """SciPy matrices of the Ω₁ P1 space (no boundary conditions applied; ``free`` marks non-Γ_D DOFs).
 
     K: a(u, v); R: α∫_γ u·v; A = K + R; M: (u, v); G: ∫_γ u·v (vertex quadrature); F: the load ℓ(v);
-    Ac/Sc/Gc: a + α∫_γ, s and the γ-mass restricted to the cells of one colour (index = colour).
+    Kc/Mc/Sc/Gc: a, the mass, s and the γ-mass restricted to the cells of one colour (index = colour).
     """
 
     V: fem.FunctionSpace
@@ -237,9 +237,10 @@ class FineOperators:
     A: sp.csr_matrix
     M: sp.csr_matrix
     G: sp.csr_matrix
+    Kc: list
+    Mc: list
     Sc: list
     Gc: list
-    Ac: list
     F: np.ndarray
     free: np.ndarray  #: bool, scalar DOF not on Γ_D
     gamma: np.ndarray  #: scalar DOFs on γ (sorted), the columns of N
@@ -286,20 +287,19 @@ def assemble_fine_operators(
     kap = kappa_tilde(fields.lmbda, fields.mu, size, s_factor)
     a = alpha.x.array.copy()
     fine_colour = grid.colors[grid.cell_coarse]
-    Sc, Gc, Ac = [], [], []
+    Kc, Mc, Sc, Gc = [], [], [], []
     for c in range(grid.num_colors):
         chi = fem.Function(Q0, name=f"chi{c}")
         chi.x.array[cell_dof0] = (fine_colour == c).astype(np.float64)
-        Kc = assemble_scipy(forms_primal.elastic_form(u, v, chi * fields.lmbda, chi * fields.mu))
+        Kc.append(assemble_scipy(forms_primal.elastic_form(u, v, chi * fields.lmbda, chi * fields.mu)))
+        Mc.append(assemble_scipy(chi * ufl.inner(u, v) * ufl.dx))
         Gc.append(assemble_scipy(interface_mass_form(u, v, chi, ds)))
-        Ac.append((Kc + sp.diags(a) @ Gc[-1]).tocsr())
-        del Kc
         Sc.append(assemble_scipy(cem_mass_form(u, v, chi * kap)))
-    A = sum(Ac[1:], Ac[0]).tocsr()
+    K = sum(Kc[1:], Kc[0]).tocsr()
+    M = sum(Mc[1:], Mc[0]).tocsr()
     G = sum(Gc[1:], Gc[0]).tocsr()
     R = (sp.diags(a) @ G).tocsr()
-    K = (A - R).tocsr()
-    M = assemble_scipy(forms_primal.mass_form(u, v))
+    A = (K + R).tocsr()
     if load is None:
         F_vec = fem.assemble_vector(fem.form(ufl.inner(fields.f, v) * ufl.dx))
         F_vec.scatter_reverse(la.InsertMode.add)
@@ -332,7 +332,7 @@ def assemble_fine_operators(
         "free": free,
         "load": F,
     }
-    return FineOperators(V, K, R, A, M, G, Sc, Gc, Ac, F, free, gamma, a, node_dofs, cell_nodes, key_data)
+    return FineOperators(V, K, R, A, M, G, Kc, Mc, Sc, Gc, F, free, gamma, a, node_dofs, cell_nodes, key_data)
 
 
 # ---------------------------------------------------------------------------------------
@@ -574,7 +574,8 @@ def local_matrices(ops: FineOperators, grid: CoarseGrid, k: int) -> tuple[np.nda
     """D_k and the matrices of a_k(·,·) + α∫_{γ∩∂K_k} and s_k on it (colour restriction)."""
     c = int(grid.colors[k])
     D = _cell_dofs(ops, grid, k)
-    return D, ops.Ac[c][D][:, D].tocsr(), ops.Sc[c][D][:, D].tocsr()
+    Gk = ops.Gc[c][D][:, D]
+    return D, (ops.Kc[c][D][:, D] + sp.diags(ops.alpha[D]) @ Gk).tocsr(), ops.Sc[c][D][:, D].tocsr()
 
 
 def build_auxiliary_space(
@@ -652,9 +653,9 @@ class MultiscaleSpace:
         """dim V_ms."""
         return self.aux.size
 
-    def apply(self, w: np.ndarray, g: np.ndarray) -> np.ndarray:
-        """Ψ w + N g + N_f on every Ω₁ DOF."""
-        u = np.zeros(self.n) if self.Nf is None else self.Nf.copy()
+    def apply(self, w: np.ndarray, g: np.ndarray, *, with_source: bool = True) -> np.ndarray:
+        """Ψ w + N g (+ N_f) on every Ω₁ DOF."""
+        u = self.Nf.copy() if (with_source and self.Nf is not None) else np.zeros(self.n)
         for pf in self.basis:
             pf.add_to(u, w)
         for pf in self.correction:
@@ -894,98 +895,137 @@ def _rows_on(parts: list, D: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return Z, cols
 
 
-def coarse_products(
+def gram_matrices(
     ops: FineOperators, grid: CoarseGrid, space: MultiscaleSpace, *, comm: MPI.Comm = MPI.COMM_SELF
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(ΨᵀAΨ, ΨᵀAN, ΨᵀAN_f), summed over coarse cells K of Z_Kᵀ A_K Ψ_K (cells shared out over comm, Allreduce)."""
+) -> tuple[np.ndarray, np.ndarray]:
+    """(ZᵀKZ, ZᵀMZ) for Z = [Ψ, N, N_f] (columns: the dim V_ms bases, the γ DOFs, the source correction).
+
+    Summed over coarse cells K of Z_Kᵀ K_K Z_K (K_K the cellwise matrix, Z_K the dense block of the
+    functions covering K); cells shared out over ``comm`` and the sums Allreduced.
+    """
     inc = _Incidence(ops, grid)
     n_ms, ng = space.size, space.n_gamma
+    nz = n_ms + ng + 1
     corr_at = {int(k): p for k, p in zip(space.correction_cells, space.correction)}
-    A_ms = np.zeros((n_ms, n_ms))
-    PAN = np.zeros((n_ms, ng))
-    PANf = np.zeros(n_ms)
+    GK = np.zeros((nz, nz))
+    GM = np.zeros((nz, nz))
     sizes = np.array([c.size for c in grid.cells], dtype=np.float64)
     owner = share(sizes, comm.size)
     for K in my_items(owner, comm):
         K = int(K)
+        c = int(grid.colors[K])
         D = inc.dofs(K, free_only=False)
-        A_K = ops.Ac[int(grid.colors[K])][D][:, D]
         cover = grid.patch(K, space.layers)
-        Zb, cb = _rows_on([space.basis[i] for i in cover], D)
-        Y = A_K @ Zb
-        A_ms[np.ix_(cb, cb)] += Zb.T @ Y
+        Zb, cols = _rows_on([space.basis[i] for i in cover], D)
+        blocks = [Zb]
         cn = [corr_at[int(i)] for i in cover if int(i) in corr_at]
         if cn:
             Zn, cols_n = _rows_on(cn, D)
             # a γ vertex shared by two coarse cells has a column in both corrections: sum them first
             uniq, inv = np.unique(cols_n, return_inverse=True)
             merge = sp.csr_matrix((np.ones(inv.size), (np.arange(inv.size), inv)), shape=(inv.size, uniq.size))
-            PAN[np.ix_(cb, uniq)] += Y.T @ (merge.T @ Zn.T).T
+            blocks.append((merge.T @ Zn.T).T)
+            cols = np.concatenate([cols, n_ms + uniq])
         if space.Nf is not None:
-            PANf[cb] += Y.T @ space.Nf[D]
+            blocks.append(space.Nf[D][:, None])
+            cols = np.concatenate([cols, [nz - 1]])
+        Z = np.hstack(blocks) if len(blocks) > 1 else Zb
+        idx = np.ix_(cols, cols)
+        GK[idx] += Z.T @ (ops.Kc[c][D][:, D] @ Z)
+        GM[idx] += Z.T @ (ops.Mc[c][D][:, D] @ Z)
     if comm.size > 1:
-        for arr in (A_ms, PAN, PANf):
+        for arr in (GK, GM):
             comm.Allreduce(MPI.IN_PLACE, arr, op=MPI.SUM)
-    return A_ms, PAN, PANf
+    return GK, GM
+
+
+def trace_matrix(ops: FineOperators, space: MultiscaleSpace) -> np.ndarray:
+    """Z_γ: the values of Z = [Ψ, N, N_f] at the γ DOFs (``ops.gamma`` ordering), dense n_γ × (dim V_ms + n_γ + 1)."""
+    ng = space.n_gamma
+    gamma = ops.gamma
+    Zg = np.zeros((ng, space.size + ng + 1))
+    for parts, shift in ((space.basis, 0), (space.correction, space.size)):
+        for p in parts:
+            pos = np.minimum(np.searchsorted(p.dofs, gamma), p.dofs.size - 1)
+            hit = np.flatnonzero(p.dofs[pos] == gamma)
+            if hit.size:
+                Zg[np.ix_(hit, shift + p.columns)] += p.values[pos[hit]]
+    if space.Nf is not None:
+        Zg[:, -1] = space.Nf[gamma]
+    return Zg
 
 
 class MultiscaleRobinSolver:
     """The Ω₁ step of Algorithm 3 with source correction: w ∈ V_ms with
-    a₁(w,v) + α∫_γ w·v = ℓ(v) + ∫_γ g·v − [a₁(Ng + N_f,v) + α∫_γ (Ng + N_f)·v], then u₁ = w + N g + N_f;
-    the coarse matrix ΨᵀAΨ is factorized once (offline)."""
+    a₁(w,v) + α∫_γ w·v = ℓ(v) + ∫_γ g·v − [a₁(Ng + N_f,v) + α∫_γ (Ng + N_f)·v], then u₁ = w + N g + N_f.
+
+    Online everything is done in the coordinates s = (w, g, 1) of u₁ = Z s, Z = [Ψ, N, N_f]: the
+    coarse solve w = A_ms⁻¹(b + C g) (A_ms = ΨᵀAΨ factorized offline), the trace u₁|γ = Z_γ s and
+    the norms a₁(u₁, u₁) = sᵀ(ZᵀKZ)s, ‖u₁‖² = sᵀ(ZᵀMZ)s; the fine field Z s only when asked.
+    """
 
     def __init__(self, ops: FineOperators, space: MultiscaleSpace, grid: CoarseGrid, *,
                  comm: MPI.Comm = MPI.COMM_SELF) -> None:
         t0 = time.perf_counter()
         self.ops = ops
         self.space = space
-        A_ms, PAN, PANf = coarse_products(ops, grid, space, comm=comm)
-        self.A_ms = A_ms
-        self.factor = CoarseFactor(A_ms)
+        n_ms, ng = space.size, space.n_gamma
+        self.GK, self.GM = gram_matrices(ops, grid, space, comm=comm)
+        self.Zg = trace_matrix(ops, space)
+        # ZᵀAZ = ZᵀKZ + Z_γᵀ R_γγ Z_γ (R is α times the γ vertex mass: diagonal on γ)
+        Rg = ops.R[ops.gamma][:, ops.gamma]
+        ZAZ = self.GK + self.Zg.T @ (Rg @ self.Zg)
+        self.A_ms = ZAZ[:n_ms, :n_ms]
+        self.factor = CoarseFactor(self.A_ms)
         # Ψᵀℓ and Ψᵀ G[:, γ], patch by patch
-        PsiF = np.zeros(space.size)
-        PsiG = np.zeros((space.size, space.n_gamma))
+        PsiF = np.zeros(n_ms)
         Gg = ops.G[:, ops.gamma].tocsr()
+        PsiG = np.zeros((n_ms, ng))
         for p in space.basis:
             PsiF[p.columns] += p.values.T @ ops.F[p.dofs]
             Gp = Gg[p.dofs]
             if Gp.nnz:
                 PsiG[p.columns] += (Gp.T @ p.values).T
-        self.b_f = PsiF - PANf
+        self.b_f = PsiF - ZAZ[:n_ms, -1]
         # Ψᵀ (G[:, γ] − A N): the action of the interface data on the coarse right-hand side
-        self.C = PsiG - PAN
+        self.C = PsiG - ZAZ[:n_ms, n_ms:n_ms + ng]
         self.time_s = time.perf_counter() - t0
 
     @property
     def size(self) -> int:
         return self.space.size
 
+    def coordinates(self, g: np.ndarray) -> np.ndarray:
+        """s = (w, g, 1): u₁ = Z s for nodal Robin data g on ``ops.gamma``."""
+        w = self.factor.solve(self.b_f + self.C @ g)
+        return np.concatenate([w, g, [1.0]])
+
     def coarse_solution(self, g: np.ndarray) -> np.ndarray:
         """w (coordinates in V_ms) for nodal Robin data g on ``ops.gamma``."""
         return self.factor.solve(self.b_f + self.C @ g)
 
+    def field(self, s: np.ndarray) -> np.ndarray:
+        """u₁ = Z s = Ψ w + N g + s_last N_f on every Ω₁ DOF."""
+        n_ms, ng = self.space.size, self.space.n_gamma
+        u = self.space.apply(s[:n_ms], s[n_ms:n_ms + ng], with_source=False)
+        if self.space.Nf is not None and s[-1] != 0.0:
+            u += s[-1] * self.space.Nf
+        return u
+
     def solve(self, g: np.ndarray) -> np.ndarray:
         """u₁ (all scalar Ω₁ DOFs) for nodal Robin data g on ``ops.gamma``."""
-        return self.space.apply(self.coarse_solution(g), g)
+        return self.field(self.coordinates(g))
+
+    def trace(self, s: np.ndarray) -> np.ndarray:
+        """u₁ at ``ops.gamma`` for coordinates s."""
+        return self.Zg @ s
 
     def response(self) -> tuple[np.ndarray, np.ndarray]:
         """The affine interface map u₁|γ = R g + r₀ (``ops.gamma`` ordering, dense R)."""
-        ng = self.space.n_gamma
-        gamma = self.ops.gamma
-        Psi_g = np.zeros((ng, self.space.size))
-        N_g = np.zeros((ng, ng))
-        for parts, out in ((self.space.basis, Psi_g), (self.space.correction, N_g)):
-            for p in parts:
-                pos = np.searchsorted(p.dofs, gamma)
-                np.minimum(pos, p.dofs.size - 1, out=pos)
-                hit = np.flatnonzero(p.dofs[pos] == gamma)
-                if hit.size:
-                    out[np.ix_(hit, p.columns)] += p.values[pos[hit]]
+        n_ms, ng = self.space.size, self.space.n_gamma
         X = self.factor.solve(np.column_stack([self.C, self.b_f]))
-        R = Psi_g @ X[:, :ng] + N_g
-        r0 = Psi_g @ X[:, ng]
-        if self.space.Nf is not None:
-            r0 = r0 + self.space.Nf[gamma]
+        R = self.Zg[:, :n_ms] @ X[:, :ng] + self.Zg[:, n_ms:n_ms + ng]
+        r0 = self.Zg[:, :n_ms] @ X[:, ng] + self.Zg[:, -1]
         return R, r0
 
 
@@ -1221,12 +1261,320 @@ class Omega1Multiscale:
     def solve(self, g12: np.ndarray) -> np.ndarray:
         """u₁ on every DOF of the Ω₁ copy for Robin data g₁₂ (this rank's owned values, InterfaceSpace
         ordering; collective)."""
-        g = _allgather_values(self.comm, g12)[self.value_of_dof]
-        return self.solver.solve(g)
+        return self.solver.field(self.coordinates(g12))
 
     def interface_values(self, u1: np.ndarray) -> np.ndarray:
         """u₁ at this rank's owned interface DOFs, in InterfaceSpace ordering."""
         return u1[self.ops.gamma[self._mine]]
+
+    # -- online in coarse coordinates: u₁ = Z s, Z = [Ψ, N, N_f], s = (w, g, 1) ----------------------
+    def coordinates(self, g12: np.ndarray) -> np.ndarray:
+        """s with u₁ = Z s for Robin data g₁₂ (owned values; collective: one Allgather of the γ values).
+
+        Costs one dense coarse solve; nothing of fine-mesh size.
+        """
+        g = _allgather_values(self.comm, g12)[self.value_of_dof]
+        return self.solver.coordinates(g)
+
+    def field(self, s: np.ndarray) -> np.ndarray:
+        """u₁ = Z s on every DOF of the Ω₁ copy."""
+        return self.solver.field(s)
+
+    def trace(self, s: np.ndarray) -> np.ndarray:
+        """u₁ = Z s at this rank's owned interface DOFs (InterfaceSpace ordering)."""
+        return self.solver.Zg[self._mine] @ s
+
+    def coordinate_norms2(self, s: np.ndarray) -> tuple[float, float]:
+        """(a₁(Zs, Zs), ‖Zs‖²_L²) from the Gram matrices (s may be a difference of coordinates)."""
+        return float(s @ (self.solver.GK @ s)), float(s @ (self.solver.GM @ s))
+
+    def response(self) -> tuple[np.ndarray, np.ndarray]:
+        """The affine interface map u₁|γ = R g + r₀ (``ops.gamma`` ordering, dense R)."""
+        n_ms, ng = self.space.size, self.space.n_gamma
+        X = self.factor.solve(np.column_stack([self.C, self.b_f]))
+        R = self.Zg[:, :n_ms] @ X[:, :ng] + self.Zg[:, n_ms:n_ms + ng]
+        r0 = self.Zg[:, :n_ms] @ X[:, ng] + self.Zg[:, -1]
+        return R, r0
+
+
+# ---------------------------------------------------------------------------------------
+# offline cache
+# ---------------------------------------------------------------------------------------
+def offline_key(ops: FineOperators, grid: CoarseGrid, options: CEMOptions, *, h: float) -> str:
+    """sha256 of everything the offline data depend on: mesh, coarse grid, E, ν, α, load, options, version."""
+    hasher = hashlib.sha256()
+    meta = {
+        "format": CACHE_FORMAT,
+        "version": __version__,
+        "h": repr(float(h)),
+        "H": repr(float(grid.H)),
+        "options": {
+            "layers": options.layers,
+            "nbasis": options.nbasis,
+            "threshold": options.threshold,
+            "eigensolver": options.eigensolver,
+            "eig_tol": options.eig_tol,
+            "target": options.target,
+            "s_factor": options.s_factor,
+            "source_correction": options.source_correction,
+        },
+    }
+    hasher.update(json.dumps(meta, sort_keys=True).encode())
+    for name in sorted(ops.key_data):
+        if name == "load" and not options.source_correction:
+            continue
+        hasher.update(name.encode())
+        hash_array(hasher, ops.key_data[name])
+    return hasher.hexdigest()
+
+
+def _pack(space: MultiscaleSpace) -> dict:
+    """Arrays to store: the aux space (small, concatenated) and one entry per patch block (no copies)."""
+    aux = space.aux
+    out = {
+        "aux_offsets": aux.offsets,
+        "aux_dof_offsets": np.concatenate([[0], np.cumsum([d.size for d in aux.dofs])]).astype(np.int64),
+        "aux_dofs": np.concatenate(aux.dofs).astype(np.int64),
+        "aux_values": np.concatenate(aux.eigenvalues),
+        "aux_vectors": np.concatenate([Phi.ravel() for Phi in aux.vectors]),
+        "meta": np.array([space.layers, space.n, space.n_gamma, len(space.basis), len(space.correction)]),
+        "correction_cells": np.asarray(space.correction_cells, dtype=np.int64),
+    }
+    for name, parts in (("basis", space.basis), ("corr", space.correction)):
+        for k, p in enumerate(parts):
+            out[f"{name}{k}_dofs"] = p.dofs
+            out[f"{name}{k}_values"] = p.values
+            out[f"{name}{k}_columns"] = p.columns
+    if space.Nf is not None:
+        out["Nf"] = space.Nf
+    return out
+
+
+def _unpack(arrays: dict, ops: FineOperators, grid: CoarseGrid) -> MultiscaleSpace:
+    offs, doffs = arrays["aux_offsets"], arrays["aux_dof_offsets"]
+    if offs.size != grid.size + 1 or doffs.size != grid.size + 1:
+        raise ValueError("cached auxiliary space does not match the coarse grid")
+    dofs, values, vectors, blocks = [], [], [], []
+    pos = 0
+    for k in range(grid.size):
+        D = arrays["aux_dofs"][doffs[k]:doffs[k + 1]]
+        lk = int(offs[k + 1] - offs[k])
+        Phi = arrays["aux_vectors"][pos:pos + D.size * lk].reshape(D.size, lk)
+        pos += D.size * lk
+        S = ops.Sc[int(grid.colors[k])][D][:, D]
+        dofs.append(D)
+        values.append(arrays["aux_values"][offs[k]:offs[k + 1]])
+        vectors.append(Phi)
+        blocks.append(S @ Phi)
+    aux = _aux_from_parts(ops.size, dofs, values, vectors, blocks)
+    layers, n, ng, nb, nc = (int(x) for x in arrays["meta"])
+    if n != ops.size or ng != ops.gamma.size or nb != grid.size:
+        raise ValueError("cached multiscale space does not match the Ω₁ operators")
+    parts = {}
+    for name, count in (("basis", nb), ("corr", nc)):
+        parts[name] = [
+            PatchFunctions(arrays[f"{name}{k}_dofs"], arrays[f"{name}{k}_values"], arrays[f"{name}{k}_columns"])
+            for k in range(count)
+        ]
+    times = {"eigen": 0.0, "patches": 0.0, "total": 0.0}
+    return MultiscaleSpace(aux, parts["basis"], parts["corr"], arrays.get("Nf"), layers, n, ng,
+                           arrays["correction_cells"], times)
+
+
+class PrimalOfflineCache(OfflineCache):
+    """npz files ``cem_<key>.npz`` holding the primal ``MultiscaleSpace`` (``cache.OfflineCache``)."""
+
+    prefix = "cem"
+
+    @staticmethod
+    def pack(obj: "MultiscaleSpace") -> dict[str, np.ndarray]:
+        return _pack(obj)
+
+    @staticmethod
+    def unpack(arrays: dict[str, np.ndarray], *context) -> "MultiscaleSpace":
+        return _unpack(arrays, *context)
+
+
+def offline_stage(
+    ops: FineOperators, grid: CoarseGrid, options: CEMOptions, *, h: float, cache_dir: str | Path | None = None,
+    comm: MPI.Comm = MPI.COMM_SELF,
+) -> tuple[MultiscaleSpace, str]:
+    """Build (or load from the cache) the multiscale space; returns (space, cache status).
+
+    Under MPI every rank reads the cache file; rank 0 alone writes it.
+    """
+    if cache_dir is None:
+        return build_multiscale_space(ops, grid, options, comm=comm), "disabled"
+    cache = PrimalOfflineCache(cache_dir)
+    key = offline_key(ops, grid, options, h=h)
+    t0 = time.perf_counter()
+    space, status = cache.load(key, ops, grid)
+    # every rank must agree on the cache status before the collective build
+    if comm.size > 1 and comm.allreduce(int(space is None), op=MPI.MAX):
+        space, status = None, comm.bcast(status if space is None else "missing", root=0)
+    if space is not None:
+        space.times["load"] = time.perf_counter() - t0
+        log.info("CEM offline data loaded from %s", cache.path(key))
+        return space, status
+    if status != "missing":
+        log.warning("CEM offline cache %s rejected (%s); rebuilding", cache.path(key), status)
+    space = build_multiscale_space(ops, grid, options, comm=comm)
+    if comm.rank == 0:
+        cache.save(key, space)
+    comm.Barrier()
+    return space, "built" if status == "missing" else "rebuilt"
+
+
+# ---------------------------------------------------------------------------------------
+# the Ω₁ side of Algorithm 3
+# ---------------------------------------------------------------------------------------
+def _allgather_values(comm: MPI.Comm, local: np.ndarray) -> np.ndarray:
+    """The owned interface values of every rank, concatenated in rank order (= global interface order)."""
+    local = np.ascontiguousarray(local, dtype=np.float64)
+    if comm.size == 1:
+        return local
+    counts = np.array(comm.allgather(local.size), dtype=np.int64)
+    out = np.empty(int(counts.sum()))
+    comm.Allgatherv(local, [out, (counts, np.concatenate([[0], np.cumsum(counts)[:-1]]))])
+    return out
+
+
+class Omega1Multiscale:
+    """The Ω₁ side of Algorithm 3: fine operators, coarse grid, multiscale space and the online solver.
+
+    Everything lives on a serial copy of Ω₁ (``replica.SerialReplica``), the same on every rank;
+    the offline local problems are shared out across the ranks of ``cm.comm``. Online, every rank
+    solves the (small, dense) coarse problem itself: ``solve`` gathers the owned Robin data of all
+    ranks (one Allgather of the γ values) and returns u₁ on every DOF of the copy;
+    ``interface_values`` gives back this rank's owned γ values.
+    """
+
+    def __init__(
+        self,
+        cm: ContactMesh,
+        model: TestModel,
+        parts: tuple[Part, Part],
+        interface: InterfaceSpace,
+        alpha: np.ndarray,
+        *,
+        cem: CEMOptions,
+        cache_dir: str | Path | None = None,
+    ) -> None:
+        t0 = time.perf_counter()
+        comm = cm.comm
+        self.comm = comm
+        part = parts[0]
+        self.interface = interface
+        tdim = part.mesh.topology.dim
+        imap = part.mesh.topology.index_map(tdim)
+        sub_cells = np.arange(imap.size_local + imap.num_ghosts, dtype=np.int32)
+        parent_cells = np.asarray(part.cell_map.sub_topology_to_topology(sub_cells, False), dtype=np.int64)
+        coarse = np.asarray(cm.coarse_cell)[parent_cells]
+        if cm.H is None and comm.allreduce(int(np.any(coarse >= 0)), op=MPI.MAX) == 0:
+            raise InputError(
+                "the mesh has no coarse grid (ContactMesh.H is None and no coarse partition): build it with "
+                "geometry.unit_square(n, n_coarse), or give read_mesh H or a mesh with a coarse partition"
+            )
+        self.replica = SerialReplica(part.mesh, part.facet_tags, interface.spaces[0], {"coarse": coarse})
+        self.mesh = self.replica.mesh
+        self.facet_tags = self.replica.facet_tags
+        self.V = self.replica.V
+        self.fields = material_fields(self.mesh, model)
+        self.grid = grid_from_cells(self.mesh.geometry.dofmaps[0], self.mesh.geometry.x,
+                                    self.replica.cell_data["coarse"], cm.H)
+        # global interface value index (rank order) of every γ DOF of the copy
+        self._n_local = interface.size
+        self._offset = comm.exscan(self._n_local) or 0
+        self._n_total = comm.allreduce(self._n_local, op=MPI.SUM)
+        probe = fem.Function(interface.spaces[0])
+        interface.to_part(self._offset + np.arange(1, self._n_local + 1, dtype=np.float64), 0, probe)
+        index = np.rint(self.replica.gather(probe)).astype(np.int64) - 1
+        self.alpha_fn = fem.Function(self.V, name="alpha")
+        on = np.flatnonzero(index >= 0)
+        self.alpha_fn.x.array[on] = _allgather_values(comm, alpha)[index[on]]
+        self.ops = assemble_fine_operators(
+            self.V, self.facet_tags, self.fields, self.alpha_fn, self.grid, s_factor=cem.s_factor
+        )
+        value_of_dof = index[self.ops.gamma]
+        if np.any(value_of_dof < 0) or np.unique(value_of_dof).size != self._n_total or \
+                self.ops.gamma.size != self._n_total:
+            raise InputError("the Ω₁ γ DOFs do not match the interface DOFs one to one")
+        self.value_of_dof = value_of_dof  #: global interface index of each ops.gamma DOF
+        self.gamma_of_value = np.empty(self._n_total, dtype=np.int64)  #: position in ops.gamma of each value
+        self.gamma_of_value[value_of_dof] = np.arange(self.ops.gamma.size)
+        self._mine = self.gamma_of_value[self._offset:self._offset + self._n_local]
+        t_assembly = time.perf_counter() - t0
+        self.space, self.cache_status = offline_stage(
+            self.ops, self.grid, cem, h=cm.h, cache_dir=cache_dir, comm=comm
+        )
+        self.solver = MultiscaleRobinSolver(self.ops, self.space, self.grid, comm=comm)
+        self.times = {
+            "assembly": t_assembly,
+            "eigen": self.space.times.get("eigen", 0.0),
+            "patches": self.space.times.get("patches", 0.0),
+            "cache_load": self.space.times.get("load", 0.0),
+            "coarse": self.solver.time_s,
+        }
+
+    @property
+    def num_coarse_dofs(self) -> int:
+        """dim V_ms."""
+        return self.space.size
+
+    @property
+    def num_fine_dofs(self) -> int:
+        """Scalar DOFs of the fine Ω₁ P1 space (Γ_D included, as PrimalSubproblem.num_dofs counts them)."""
+        return self.ops.size
+
+    def solve(self, g12: np.ndarray) -> np.ndarray:
+        """u₁ on every DOF of the Ω₁ copy for Robin data g₁₂ (this rank's owned values, InterfaceSpace
+        ordering; collective)."""
+        return self.solver.field(self.coordinates(g12))
+
+    def interface_values(self, u1: np.ndarray) -> np.ndarray:
+        """u₁ at this rank's owned interface DOFs, in InterfaceSpace ordering."""
+        return u1[self.ops.gamma[self._mine]]
+
+    # -- online in coarse coordinates: u₁ = Z s, Z = [Ψ, N, N_f], s = (w, g, 1) ----------------------
+    def coordinates(self, g12: np.ndarray) -> np.ndarray:
+        """s with u₁ = Z s for Robin data g₁₂ (owned values; collective: one Allgather of the γ values).
+
+        Costs one dense coarse solve; nothing of fine-mesh size.
+        """
+        g = _allgather_values(self.comm, g12)[self.value_of_dof]
+        return self.solver.coordinates(g)
+
+    def field(self, s: np.ndarray) -> np.ndarray:
+        """u₁ = Z s on every DOF of the Ω₁ copy."""
+        return self.solver.field(s)
+
+    def trace(self, s: np.ndarray) -> np.ndarray:
+        """u₁ = Z s at this rank's owned interface DOFs (InterfaceSpace ordering)."""
+        return self.solver.Zg[self._mine] @ s
+
+    def coordinate_norms2(self, s: np.ndarray) -> tuple[float, float]:
+        """(a₁(Zs, Zs), ‖Zs‖²_L²) from the Gram matrices (s may be a difference of coordinates)."""
+        return float(s @ (self.solver.GK @ s)), float(s @ (self.solver.GM @ s))
+
+    def reference_terms(self, r1: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, float]:
+        """(ZᵀK r, ZᵀM r, a₁(r, r), ‖r‖²) of a fine Ω₁ field r, for ``error_norms2``."""
+        Kr, Mr = self.ops.K @ r1, self.ops.M @ r1
+        space = self.space
+        n_ms, ng = space.size, space.n_gamma
+        zk, zm = np.zeros(n_ms + ng + 1), np.zeros(n_ms + ng + 1)
+        for parts, shift in ((space.basis, 0), (space.correction, n_ms)):
+            for p in parts:
+                zk[shift + p.columns] += p.values.T @ Kr[p.dofs]
+                zm[shift + p.columns] += p.values.T @ Mr[p.dofs]
+        if space.Nf is not None:
+            zk[-1], zm[-1] = space.Nf @ Kr, space.Nf @ Mr
+        return zk, zm, float(Kr @ r1), float(Mr @ r1)
+
+    def error_norms2(self, s: np.ndarray, terms: tuple) -> tuple[float, float]:
+        """(a₁(Zs − r, Zs − r), ‖Zs − r‖²) for ``terms = reference_terms(r)``."""
+        zk, zm, rk, rm = terms
+        ek, em = self.coordinate_norms2(s)
+        return max(ek - 2.0 * (s @ zk) + rk, 0.0), max(em - 2.0 * (s @ zm) + rm, 0.0)
 
     def response(self) -> tuple[np.ndarray, np.ndarray]:
         """The affine interface map of Ω₁, u₁|γ = R g₁₂ + r₀.

@@ -65,7 +65,11 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--h", type=int, default=64, help="fine mesh size given as 1/h (e.g. 64)")
     run.add_argument("--H", type=int, default=16, help="coarse size / strip width given as 1/H (e.g. 16)")
     run.add_argument("--mesh", type=Path, help="a gmsh .msh file with the physical groups "
-                     "Omega1, Omega2, Gamma_D, Gamma_C, gamma (replaces the built-in unit square)")
+                     "Omega1, Omega2, Gamma_D, Gamma_C, gamma (replaces the built-in unit square); without "
+                     "Omega1/Omega2/gamma the strip Omega2 is built from the coarse cells along Gamma_C")
+    run.add_argument("--coarse-groups", action="store_true",
+                     help="with --mesh: the 2D physical groups of the file are the coarse cells (a coarse "
+                     "partition of your own) instead of the squares of side 1/H over the bounding box")
     run.add_argument("--alpha", default=DEFAULT_ALPHA, help="Robin coefficient: a number or a product of "
                      "numbers, h^p, sqrt-h and E (E_p: mean E at the γ node), e.g. 1, h^-1/2, 2E*h^-1/2")
     run.add_argument("--accel", choices=("none", "anderson"), default="anderson",
@@ -105,7 +109,7 @@ def _load_array(path: Path) -> np.ndarray:
 
 def _mesh(args) -> ContactMesh:
     if args.mesh is not None:
-        return read_mesh(args.mesh, H=1.0 / args.H)
+        return read_mesh(args.mesh, H=None if args.coarse_groups else 1.0 / args.H)
     return unit_square(args.h, args.H)
 
 

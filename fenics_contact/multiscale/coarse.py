@@ -104,8 +104,12 @@ def grid_from_cells(
     if coarse_index.size == 0:
         raise InputError("Ω₁ has no cells")
     if np.any(coarse_index < 0):
+        bad = int(np.count_nonzero(coarse_index < 0))
         raise InputError(
-            "some Ω₁ cells lie in no coarse cell (coarse_cell = -1): the mesh has no coarse partition there"
+            f"{bad} of the {coarse_index.size} fine cells of Ω₁ lie in no coarse cell: the fine mesh does not "
+            f"resolve the coarse grid (squares of side H = {H} over the bounding box; every fine cell must lie "
+            "inside one square). Use a mesh whose edges follow the grid lines, another H, or give the coarse "
+            "partition as 2D physical groups (one per coarse cell)"
         )
     global_index, cell_coarse = np.unique(coarse_index, return_inverse=True)
     n_k = global_index.size
@@ -141,7 +145,8 @@ def grid_from_cells(
             ij = ij_lo
             if np.unique(ij, axis=0).shape[0] != n_k:
                 ij = None
-        if ij is not None and np.allclose(coords[:, :2].min(axis=0), 0.0) and abs(1.0 / H - round(1.0 / H)) < 1e-9:
+        in_unit_square = np.allclose(coords[:, :2].min(axis=0), 0.0) and np.all(coords[:, :2].max(axis=0) <= 1 + 1e-12)
+        if ij is not None and in_unit_square and abs(1.0 / H - round(1.0 / H)) < 1e-9:
             n_coarse = int(round(1.0 / H))
     H_out = float(H) if H is not None else float(cell_size.max())
     return CoarseGrid(H_out, global_index, cell_coarse.astype(np.int32), cells, adjacency, cell_size, ij, n_coarse)

@@ -133,7 +133,9 @@ def read_mesh(path: str | Path, *, comm: MPI.Comm = MPI.COMM_WORLD, H: float | N
         names = comm.bcast(names, root=0)
         # validate before the collective mesh construction (which aborts on inconsistent tags)
         missing = [name for name in PHYSICAL_NAMES.values() if name not in names]
-        if missing:
+        strip = {PHYSICAL_NAMES[t] for t in (Subdomain.OMEGA1, Subdomain.OMEGA2, Boundary.INTERFACE)}
+        auto_strip = bool(missing) and set(missing) <= strip  # Ω₁/Ω₂/γ built along Γ_C (problem.partition)
+        if missing and not auto_strip:
             raise MeshTagError(
                 f"{path} lacks the physical group(s) {missing}; it has {sorted(names)}. "
                 f"Required names: {list(PHYSICAL_NAMES.values())}"
@@ -143,7 +145,37 @@ def read_mesh(path: str | Path, *, comm: MPI.Comm = MPI.COMM_WORLD, H: float | N
     tdim = msh.topology.dim
     cells = np.arange(msh.topology.index_map(tdim).size_local, dtype=np.int32)
     h = msh.comm.allreduce(float(np.max(msh.h(tdim, cells))) if cells.size else 0.0, op=MPI.MAX)
+    if auto_strip:
+        return _strip_contact_mesh(data, h=h, H=H, source=str(path))
     return _contact_mesh(data, h=h, H=H)
+
+
+def _strip_contact_mesh(data: dolfinx.io.gmsh.MeshData, *, h: float, H: float | None, source: str) -> ContactMesh:
+    """A mesh without Ω₁/Ω₂/γ: coarse cells from H (Cartesian grid over the bounding box) or from the 2D
+    physical groups (the user's coarse partition), then Ω₂ = the coarse cells along Γ_C (problem.partition)."""
+    from fenics_contact.problem import partition
+
+    msh = data.mesh
+    tdim = msh.topology.dim
+    if msh.topology.cell_type != dmesh.CellType.triangle:
+        raise InputError(f"fenics-contact needs a triangular mesh, got {msh.topology.cell_type.name}")
+    msh.topology.create_connectivity(tdim - 1, tdim)
+    facet_tags = _retag(data.facet_tags, data.physical_groups, [Boundary.GAMMA_D, Boundary.GAMMA_C], msh, tdim - 1)
+    skip = {PHYSICAL_NAMES[Subdomain.OMEGA1], PHYSICAL_NAMES[Subdomain.OMEGA2]}
+    groups = sorted(g.tag for name, g in data.physical_groups.items() if g.dim == tdim and name not in skip)
+    if H is not None:
+        coarse, _ = partition.cartesian_coarse_cells(msh, H)
+    elif len(groups) >= 2:
+        coarse = partition.group_coarse_cells(msh, data.cell_tags, groups)
+        H = float(partition.coarse_sizes(msh, coarse).max())
+    else:
+        raise InputError(
+            f"{source} tags neither Omega1/Omega2/gamma nor a coarse partition: give the coarse size H (the "
+            "strip Ω₂ is then the squares of side H along Gamma_C) or split the domain into 2D physical groups "
+            "(one per coarse cell)"
+        )
+    cell_tags, facet_tags = partition.contact_strip(msh, facet_tags, coarse)
+    return ContactMesh(msh, cell_tags, facet_tags, float(h), H, coarse.astype(np.int32))
 
 
 def _retag(tags: dmesh.MeshTags | None, groups: dict, wanted: list, msh: dmesh.Mesh, dim: int) -> dmesh.MeshTags:
@@ -183,10 +215,8 @@ def _contact_mesh(data: dolfinx.io.gmsh.MeshData, *, h: float, H: float | None) 
                 raise MeshTagError(f"the physical group {PHYSICAL_NAMES[t]!r} is empty")
     num_cells = msh.topology.index_map(tdim).size_local + msh.topology.index_map(tdim).num_ghosts
     coarse = np.full(num_cells, -1, dtype=np.int32)
-    if H is not None:
-        n_coarse = int(round(1.0 / H))
-        mid = dmesh.compute_midpoints(msh, tdim, np.arange(num_cells, dtype=np.int32))
-        i = np.clip(np.floor(mid[:, 0] / H).astype(np.int32), 0, n_coarse - 1)
-        j = np.clip(np.floor(mid[:, 1] / H).astype(np.int32), 0, n_coarse - 1)
-        coarse = i + n_coarse * j
+    if H is not None:  # squares of side H over the bounding box; -1 where a cell straddles a grid line
+        from fenics_contact.problem.partition import cartesian_coarse_cells
+
+        coarse = cartesian_coarse_cells(msh, H)[0].astype(np.int32)
     return ContactMesh(msh, cell_tags, facet_tags, float(h), H, coarse)

@@ -125,16 +125,18 @@ def read_mesh(path: str | Path, *, comm: MPI.Comm = MPI.COMM_WORLD, H: float | N
     if not path.is_file():
         raise InputError(f"mesh file {path} does not exist")
     with gmsh_session():
-        names = None
+        names, surfaces = None, 0
         if comm.rank == 0:
             gmsh.model.add("user mesh")
             gmsh.merge(str(path))
             names = {gmsh.model.getPhysicalName(d, t) for d, t in gmsh.model.getPhysicalGroups()}
-        names = comm.bcast(names, root=0)
+            surfaces = len(gmsh.model.getPhysicalGroups(2))
+        names, surfaces = comm.bcast((names, surfaces), root=0)
         # validate before the collective mesh construction (which aborts on inconsistent tags)
         missing = [name for name in PHYSICAL_NAMES.values() if name not in names]
         strip = {PHYSICAL_NAMES[t] for t in (Subdomain.OMEGA1, Subdomain.OMEGA2, Boundary.INTERFACE)}
-        auto_strip = bool(missing) and set(missing) <= strip  # Ω₁/Ω₂/γ built along Γ_C (problem.partition)
+        # none of Ω₁/Ω₂/γ tagged: they are built along Γ_C from the coarse cells (problem.partition)
+        auto_strip = set(missing) == strip and surfaces > 0
         if missing and not auto_strip:
             raise MeshTagError(
                 f"{path} lacks the physical group(s) {missing}; it has {sorted(names)}. "

@@ -1150,9 +1150,14 @@ def offline_stage(
         return space, status
     if status != "missing":
         log.warning("CEM offline cache %s rejected (%s); rebuilding", cache.path(key), status)
+    if comm.rank == 0:
+        cache.check_writable()  # before the expensive build, not after it
     space = build_multiscale_space(ops, grid, options, comm=comm)
     if comm.rank == 0:
-        cache.save(key, space)
+        try:
+            cache.save(key, space)
+        except OSError as err:  # the directory went away or filled up meanwhile: keep the built data
+            log.warning("CEM offline data could not be saved to %s: %s", cache.path(key), err)
     comm.Barrier()
     return space, "built" if status == "missing" else "rebuilt"
 

@@ -41,6 +41,7 @@ from dolfinx import fem
 
 from fenics_contact.fem import forms_mixed
 from fenics_contact.fem.contact import NewtonOptions
+from fenics_contact.hybrid.inputs import check_solve_inputs, require_instance
 from fenics_contact.hybrid.iteration import (
     IterationHistory,
     IterationOptions,
@@ -257,6 +258,9 @@ def solve_mixed_ms_hybrid(
     number of Stage I modes per coarse cell; ``min_gap`` adds modes where the first eigenvalue left
     out is below it (up to ``max_nbasis``; ``None`` keeps exactly ``nbasis``, the paper's fixed l).
     """
+    check_solve_inputs(cm, model, options=options, newton=newton)
+    if reference is not None:
+        require_instance(reference, MixedSolution, "the reference", " (from fem.mixed.solve_mixed_monolithic)")
     if reference is not None and epsilon is None:
         epsilon = reference.epsilon
     cem = MixedCEMOptions(layers=layers, nbasis=nbasis, min_gap=min_gap, max_nbasis=max_nbasis, weight=weight,

@@ -1423,9 +1423,21 @@ def offline_stage(
         return space, status
     if status != "missing":
         log.warning("CEM offline cache %s rejected (%s); rebuilding", cache.path(key), status)
+    error = None
+    if comm.rank == 0:
+        try:
+            cache.check_writable()  # before the expensive build, not after it
+        except InputError as err:
+            error = str(err)
+    error = comm.bcast(error, root=0)  # every rank raises, none waits in the collective build
+    if error is not None:
+        raise InputError(error)
     space = build_multiscale_space(ops, grid, options, comm=comm)
     if comm.rank == 0:
-        cache.save(key, space)
+        try:
+            cache.save(key, space)
+        except OSError as err:  # the directory went away or filled up meanwhile: keep the built data
+            log.warning("CEM offline data could not be saved to %s: %s", cache.path(key), err)
     comm.Barrier()
     return space, "built" if status == "missing" else "rebuilt"
 

@@ -49,8 +49,9 @@ def cartesian_coarse_cells(msh: dmesh.Mesh, H: float) -> tuple[np.ndarray, int]:
         raise InputError(f"the coarse size H must be a positive number, got {H!r}")
     comm = msh.comm
     x = msh.geometry.x[:, :2]
-    lo = comm.allreduce(x.min(axis=0) if x.size else np.full(2, np.inf), op=MPI.MIN)
-    hi = comm.allreduce(x.max(axis=0) if x.size else np.full(2, -np.inf), op=MPI.MAX)
+    lo, hi = np.empty(2), np.empty(2)
+    comm.Allreduce(x.min(axis=0) if x.size else np.full(2, np.inf), lo, op=MPI.MIN)
+    comm.Allreduce(x.max(axis=0) if x.size else np.full(2, -np.inf), hi, op=MPI.MAX)
     nx = max(1, int(np.ceil((hi[0] - lo[0]) / H - 1e-9)))
     cells = _local_cells(msh)
     if cells.size == 0:
@@ -89,8 +90,10 @@ def coarse_sizes(msh: dmesh.Mesh, coarse_cell: np.ndarray) -> np.ndarray:
     idx = np.asarray(coarse_cell)[:n_owned]
     n = msh.comm.allreduce(int(idx.max()) + 1 if idx.size else 0, op=MPI.MAX)
     ok = idx >= 0
-    local = np.bincount(idx[ok], weights=area[ok], minlength=n)
-    return np.sqrt(msh.comm.allreduce(local, op=MPI.SUM))
+    local = np.bincount(idx[ok], weights=area[ok], minlength=n).astype(np.float64)
+    total = np.empty_like(local)
+    msh.comm.Allreduce(local, total, op=MPI.SUM)
+    return np.sqrt(total)
 
 
 def contact_strip(

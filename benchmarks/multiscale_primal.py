@@ -249,9 +249,18 @@ def part_e(run: Runner) -> list[str]:
     return lines
 
 
+def _cases(text: str) -> list[tuple[str, float]]:
+    """'1L:1e3,3:1e6' → [('1L', 1000.0), ('3', 1e6)]."""
+    out = []
+    for item in text.split(","):
+        name, _, contrast = item.partition(":")
+        out.append((name, float(contrast or 1e3)))
+    return out
+
+
 def part_f(run: Runner) -> list[str]:
     a = run.args
-    cases = [("1L", 1e3), ("2L", 1e3), ("3", 1e3), ("3", 1e6)]
+    cases = a.f_cases
     lines = [
         f"### (f) Loads inside Ω₁: the source correction (h = 1/{a.n}, l = {a.nbasis})", "",
         "Models 1L and 2L are models 1 and 2 with their load bands moved to x ∈ [1/2, 15/16] (1L: f₁ = 1 on "
@@ -281,7 +290,7 @@ def part_f(run: Runner) -> list[str]:
 def part_i(run: Runner) -> list[str]:
     """Ω₁ alone: the multiscale Robin solve with the exact interface data of the monolithic solution."""
     a = run.args
-    cases = [("1L", 1e3), ("2L", 1e3), ("3", 1e3), ("3", 1e6)]
+    cases = a.f_cases
     lines = [
         f"### (i) Ω₁ alone with the exact interface data (h = 1/{a.n}, l = {a.nbasis})", "",
         "The multiscale Ω₁ Robin problem with the data g₁₂ for which the fine Ω₁ solution is the fine "
@@ -439,7 +448,9 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--contrasts", type=_floats, default=[1e2, 1e3, 1e4, 1e6])
     p.add_argument("--coarse-list", type=_ints, default=[8, 16, 32], help="1/H values for part d")
     p.add_argument("--f-coarse", type=_ints, default=[16, 8], help="1/H values for part f")
-    p.add_argument("--f-layers", type=_ints, default=[1, 2, 3, 4], help="m values for part f")
+    p.add_argument("--f-layers", type=_ints, default=[1, 2, 3, 4], help="m values for parts f, i")
+    p.add_argument("--f-cases", type=_cases, default=_cases("1L:1e3,2L:1e3,3:1e3,3:1e6"),
+                   help="model:E_high pairs for parts f, i (1L/2L: models 1/2 with the loads in Omega1)")
     p.add_argument("--scaling-n", type=_ints, default=[64, 128, 256], help="1/h values for part g")
     p.add_argument("--scaling-model", default="2", help="model of parts g, h")
     p.add_argument("--scaling-layers", type=int, default=3, help="m for parts g, h")

@@ -31,9 +31,12 @@ load: with Â = A + BBᵀ, u − Â⁻¹ℓ = A⁻¹B (Bᵀ Â⁻¹ℓ) lies in 
 The correctors decay away from K_i like the basis functions (outside K_i their
 equation is the same), so the error falls exponentially with m for any load,
 as for localized orthogonal decomposition with a right-hand-side corrector.
-Any load that is an assembled functional on Ω₁ (a traction on a boundary of
-Ω₁, a lifted prescribed displacement −a(u_D, v)) is split and corrected the
-same way: ``assemble_fine_operators(load=...)`` takes the vector.
+Any load that is an assembled functional on Ω₁ is split and corrected the
+same way: ``assemble_fine_operators(load=...)`` takes the vector. The Γ_N
+tractions on ∂Ω₁ are such a load (``omega1_load``: ℓ(v) = (f, v) + Σ_k ∫_ΓN,k
+t_k·v ds), so Algorithm 3 takes them; a prescribed displacement u_D on Γ_D ∩ ∂Ω₁
+would need its lifting −a(u_D, v) and u_D in the trace and the field, and is
+refused (``multiscale.primal``).
 ``CEMOptions(source_correction=False)`` is the paper's algorithm (N_f = 0).
 
 **Linear algebra.** The s(π·, π·) term is low rank: with B the matrix whose
@@ -333,6 +336,31 @@ def assemble_fine_operators(
         "load": F,
     }
     return FineOperators(V, K, R, A, M, G, Kc, Mc, Sc, Gc, F, free, gamma, a, node_dofs, cell_nodes, key_data)
+
+
+def omega1_load(V: fem.FunctionSpace, facet_tags, fields: MaterialFields) -> np.ndarray | None:
+    """The Ω₁ load vector ℓ(v) = (f, v) + Σ_k ∫_ΓN,k t_k·v ds on a serial Ω₁ mesh, or None without tractions.
+
+    The tractions of ``fields.boundary`` whose Γ_N groups have facets in ``facet_tags`` enter
+    as in the fine methods (``fem.primal``: t_k interpolated in P1, the boundary integral
+    assembled); the source correction then treats them as it treats f (module docstring).
+    """
+    require_serial(V.mesh.comm)
+    present = set(np.unique(facet_tags.values).tolist())
+    tractions = [(tag, field_) for tag, _, field_ in fields.boundary.traction_tags() if tag in present]
+    if not tractions:
+        return None
+    v = ufl.TestFunction(V)
+    ds = ufl.Measure("ds", domain=V.mesh, subdomain_data=facet_tags)
+    pairs = []
+    for tag, field_ in tractions:
+        t = fem.Function(V)
+        t.interpolate(field_)
+        pairs.append((t, ds(tag)))
+    form = ufl.inner(fields.f, v) * ufl.dx + forms_primal.traction_form(pairs, v)
+    vec = fem.assemble_vector(fem.form(form))
+    vec.scatter_reverse(la.InsertMode.add)
+    return vec.array.copy()
 
 
 # ---------------------------------------------------------------------------------------
@@ -1150,279 +1178,6 @@ def offline_stage(
         return space, status
     if status != "missing":
         log.warning("CEM offline cache %s rejected (%s); rebuilding", cache.path(key), status)
-    if comm.rank == 0:
-        cache.check_writable()  # before the expensive build, not after it
-    space = build_multiscale_space(ops, grid, options, comm=comm)
-    if comm.rank == 0:
-        try:
-            cache.save(key, space)
-        except OSError as err:  # the directory went away or filled up meanwhile: keep the built data
-            log.warning("CEM offline data could not be saved to %s: %s", cache.path(key), err)
-    comm.Barrier()
-    return space, "built" if status == "missing" else "rebuilt"
-
-
-# ---------------------------------------------------------------------------------------
-# the Ω₁ side of Algorithm 3
-# ---------------------------------------------------------------------------------------
-def _allgather_values(comm: MPI.Comm, local: np.ndarray) -> np.ndarray:
-    """The owned interface values of every rank, concatenated in rank order (= global interface order)."""
-    local = np.ascontiguousarray(local, dtype=np.float64)
-    if comm.size == 1:
-        return local
-    counts = np.array(comm.allgather(local.size), dtype=np.int64)
-    out = np.empty(int(counts.sum()))
-    comm.Allgatherv(local, [out, (counts, np.concatenate([[0], np.cumsum(counts)[:-1]]))])
-    return out
-
-
-class Omega1Multiscale:
-    """The Ω₁ side of Algorithm 3: fine operators, coarse grid, multiscale space and the online solver.
-
-    Everything lives on a serial copy of Ω₁ (``replica.SerialReplica``), the same on every rank;
-    the offline local problems are shared out across the ranks of ``cm.comm``. Online, every rank
-    solves the (small, dense) coarse problem itself: ``solve`` gathers the owned Robin data of all
-    ranks (one Allgather of the γ values) and returns u₁ on every DOF of the copy;
-    ``interface_values`` gives back this rank's owned γ values.
-    """
-
-    def __init__(
-        self,
-        cm: ContactMesh,
-        model: TestModel,
-        parts: tuple[Part, Part],
-        interface: InterfaceSpace,
-        alpha: np.ndarray,
-        *,
-        cem: CEMOptions,
-        cache_dir: str | Path | None = None,
-    ) -> None:
-        t0 = time.perf_counter()
-        comm = cm.comm
-        self.comm = comm
-        part = parts[0]
-        self.interface = interface
-        tdim = part.mesh.topology.dim
-        imap = part.mesh.topology.index_map(tdim)
-        sub_cells = np.arange(imap.size_local + imap.num_ghosts, dtype=np.int32)
-        parent_cells = np.asarray(part.cell_map.sub_topology_to_topology(sub_cells, False), dtype=np.int64)
-        coarse = np.asarray(cm.coarse_cell)[parent_cells]
-        if cm.H is None and comm.allreduce(int(np.any(coarse >= 0)), op=MPI.MAX) == 0:
-            raise InputError(
-                "the mesh has no coarse grid (ContactMesh.H is None and no coarse partition): build it with "
-                "geometry.unit_square(n, n_coarse), or give read_mesh H or a mesh with a coarse partition"
-            )
-        self.replica = SerialReplica(part.mesh, part.facet_tags, interface.spaces[0], {"coarse": coarse})
-        self.mesh = self.replica.mesh
-        self.facet_tags = self.replica.facet_tags
-        self.V = self.replica.V
-        self.fields = material_fields(self.mesh, model)
-        self.grid = grid_from_cells(self.mesh.geometry.dofmaps[0], self.mesh.geometry.x,
-                                    self.replica.cell_data["coarse"], cm.H)
-        # global interface value index (rank order) of every γ DOF of the copy
-        self._n_local = interface.size
-        self._offset = comm.exscan(self._n_local) or 0
-        self._n_total = comm.allreduce(self._n_local, op=MPI.SUM)
-        probe = fem.Function(interface.spaces[0])
-        interface.to_part(self._offset + np.arange(1, self._n_local + 1, dtype=np.float64), 0, probe)
-        index = np.rint(self.replica.gather(probe)).astype(np.int64) - 1
-        self.alpha_fn = fem.Function(self.V, name="alpha")
-        on = np.flatnonzero(index >= 0)
-        self.alpha_fn.x.array[on] = _allgather_values(comm, alpha)[index[on]]
-        self.ops = assemble_fine_operators(
-            self.V, self.facet_tags, self.fields, self.alpha_fn, self.grid, s_factor=cem.s_factor
-        )
-        value_of_dof = index[self.ops.gamma]
-        if np.any(value_of_dof < 0) or np.unique(value_of_dof).size != self._n_total or \
-                self.ops.gamma.size != self._n_total:
-            raise InputError("the Ω₁ γ DOFs do not match the interface DOFs one to one")
-        self.value_of_dof = value_of_dof  #: global interface index of each ops.gamma DOF
-        self.gamma_of_value = np.empty(self._n_total, dtype=np.int64)  #: position in ops.gamma of each value
-        self.gamma_of_value[value_of_dof] = np.arange(self.ops.gamma.size)
-        self._mine = self.gamma_of_value[self._offset:self._offset + self._n_local]
-        t_assembly = time.perf_counter() - t0
-        self.space, self.cache_status = offline_stage(
-            self.ops, self.grid, cem, h=cm.h, cache_dir=cache_dir, comm=comm
-        )
-        self.solver = MultiscaleRobinSolver(self.ops, self.space, self.grid, comm=comm)
-        self.times = {
-            "assembly": t_assembly,
-            "eigen": self.space.times.get("eigen", 0.0),
-            "patches": self.space.times.get("patches", 0.0),
-            "cache_load": self.space.times.get("load", 0.0),
-            "coarse": self.solver.time_s,
-        }
-
-    @property
-    def num_coarse_dofs(self) -> int:
-        """dim V_ms."""
-        return self.space.size
-
-    @property
-    def num_fine_dofs(self) -> int:
-        """Scalar DOFs of the fine Ω₁ P1 space (Γ_D included, as PrimalSubproblem.num_dofs counts them)."""
-        return self.ops.size
-
-    def solve(self, g12: np.ndarray) -> np.ndarray:
-        """u₁ on every DOF of the Ω₁ copy for Robin data g₁₂ (this rank's owned values, InterfaceSpace
-        ordering; collective)."""
-        return self.solver.field(self.coordinates(g12))
-
-    def interface_values(self, u1: np.ndarray) -> np.ndarray:
-        """u₁ at this rank's owned interface DOFs, in InterfaceSpace ordering."""
-        return u1[self.ops.gamma[self._mine]]
-
-    # -- online in coarse coordinates: u₁ = Z s, Z = [Ψ, N, N_f], s = (w, g, 1) ----------------------
-    def coordinates(self, g12: np.ndarray) -> np.ndarray:
-        """s with u₁ = Z s for Robin data g₁₂ (owned values; collective: one Allgather of the γ values).
-
-        Costs one dense coarse solve; nothing of fine-mesh size.
-        """
-        g = _allgather_values(self.comm, g12)[self.value_of_dof]
-        return self.solver.coordinates(g)
-
-    def field(self, s: np.ndarray) -> np.ndarray:
-        """u₁ = Z s on every DOF of the Ω₁ copy."""
-        return self.solver.field(s)
-
-    def trace(self, s: np.ndarray) -> np.ndarray:
-        """u₁ = Z s at this rank's owned interface DOFs (InterfaceSpace ordering)."""
-        return self.solver.Zg[self._mine] @ s
-
-    def coordinate_norms2(self, s: np.ndarray) -> tuple[float, float]:
-        """(a₁(Zs, Zs), ‖Zs‖²_L²) from the Gram matrices (s may be a difference of coordinates)."""
-        return float(s @ (self.solver.GK @ s)), float(s @ (self.solver.GM @ s))
-
-    def response(self) -> tuple[np.ndarray, np.ndarray]:
-        """The affine interface map u₁|γ = R g + r₀ (``ops.gamma`` ordering, dense R)."""
-        n_ms, ng = self.space.size, self.space.n_gamma
-        X = self.factor.solve(np.column_stack([self.C, self.b_f]))
-        R = self.Zg[:, :n_ms] @ X[:, :ng] + self.Zg[:, n_ms:n_ms + ng]
-        r0 = self.Zg[:, :n_ms] @ X[:, ng] + self.Zg[:, -1]
-        return R, r0
-
-
-# ---------------------------------------------------------------------------------------
-# offline cache
-# ---------------------------------------------------------------------------------------
-def offline_key(ops: FineOperators, grid: CoarseGrid, options: CEMOptions, *, h: float) -> str:
-    """sha256 of everything the offline data depend on: mesh, coarse grid, E, ν, α, load, options, version."""
-    hasher = hashlib.sha256()
-    meta = {
-        "format": CACHE_FORMAT,
-        "version": __version__,
-        "h": repr(float(h)),
-        "H": repr(float(grid.H)),
-        "options": {
-            "layers": options.layers,
-            "nbasis": options.nbasis,
-            "threshold": options.threshold,
-            "eigensolver": options.eigensolver,
-            "eig_tol": options.eig_tol,
-            "target": options.target,
-            "s_factor": options.s_factor,
-            "source_correction": options.source_correction,
-        },
-    }
-    hasher.update(json.dumps(meta, sort_keys=True).encode())
-    for name in sorted(ops.key_data):
-        if name == "load" and not options.source_correction:
-            continue
-        hasher.update(name.encode())
-        hash_array(hasher, ops.key_data[name])
-    return hasher.hexdigest()
-
-
-def _pack(space: MultiscaleSpace) -> dict:
-    """Arrays to store: the aux space (small, concatenated) and one entry per patch block (no copies)."""
-    aux = space.aux
-    out = {
-        "aux_offsets": aux.offsets,
-        "aux_dof_offsets": np.concatenate([[0], np.cumsum([d.size for d in aux.dofs])]).astype(np.int64),
-        "aux_dofs": np.concatenate(aux.dofs).astype(np.int64),
-        "aux_values": np.concatenate(aux.eigenvalues),
-        "aux_vectors": np.concatenate([Phi.ravel() for Phi in aux.vectors]),
-        "meta": np.array([space.layers, space.n, space.n_gamma, len(space.basis), len(space.correction)]),
-        "correction_cells": np.asarray(space.correction_cells, dtype=np.int64),
-    }
-    for name, parts in (("basis", space.basis), ("corr", space.correction)):
-        for k, p in enumerate(parts):
-            out[f"{name}{k}_dofs"] = p.dofs
-            out[f"{name}{k}_values"] = p.values
-            out[f"{name}{k}_columns"] = p.columns
-    if space.Nf is not None:
-        out["Nf"] = space.Nf
-    return out
-
-
-def _unpack(arrays: dict, ops: FineOperators, grid: CoarseGrid) -> MultiscaleSpace:
-    offs, doffs = arrays["aux_offsets"], arrays["aux_dof_offsets"]
-    if offs.size != grid.size + 1 or doffs.size != grid.size + 1:
-        raise ValueError("cached auxiliary space does not match the coarse grid")
-    dofs, values, vectors, blocks = [], [], [], []
-    pos = 0
-    for k in range(grid.size):
-        D = arrays["aux_dofs"][doffs[k]:doffs[k + 1]]
-        lk = int(offs[k + 1] - offs[k])
-        Phi = arrays["aux_vectors"][pos:pos + D.size * lk].reshape(D.size, lk)
-        pos += D.size * lk
-        S = ops.Sc[int(grid.colors[k])][D][:, D]
-        dofs.append(D)
-        values.append(arrays["aux_values"][offs[k]:offs[k + 1]])
-        vectors.append(Phi)
-        blocks.append(S @ Phi)
-    aux = _aux_from_parts(ops.size, dofs, values, vectors, blocks)
-    layers, n, ng, nb, nc = (int(x) for x in arrays["meta"])
-    if n != ops.size or ng != ops.gamma.size or nb != grid.size:
-        raise ValueError("cached multiscale space does not match the Ω₁ operators")
-    parts = {}
-    for name, count in (("basis", nb), ("corr", nc)):
-        parts[name] = [
-            PatchFunctions(arrays[f"{name}{k}_dofs"], arrays[f"{name}{k}_values"], arrays[f"{name}{k}_columns"])
-            for k in range(count)
-        ]
-    times = {"eigen": 0.0, "patches": 0.0, "total": 0.0}
-    return MultiscaleSpace(aux, parts["basis"], parts["corr"], arrays.get("Nf"), layers, n, ng,
-                           arrays["correction_cells"], times)
-
-
-class PrimalOfflineCache(OfflineCache):
-    """npz files ``cem_<key>.npz`` holding the primal ``MultiscaleSpace`` (``cache.OfflineCache``)."""
-
-    prefix = "cem"
-
-    @staticmethod
-    def pack(obj: "MultiscaleSpace") -> dict[str, np.ndarray]:
-        return _pack(obj)
-
-    @staticmethod
-    def unpack(arrays: dict[str, np.ndarray], *context) -> "MultiscaleSpace":
-        return _unpack(arrays, *context)
-
-
-def offline_stage(
-    ops: FineOperators, grid: CoarseGrid, options: CEMOptions, *, h: float, cache_dir: str | Path | None = None,
-    comm: MPI.Comm = MPI.COMM_SELF,
-) -> tuple[MultiscaleSpace, str]:
-    """Build (or load from the cache) the multiscale space; returns (space, cache status).
-
-    Under MPI every rank reads the cache file; rank 0 alone writes it.
-    """
-    if cache_dir is None:
-        return build_multiscale_space(ops, grid, options, comm=comm), "disabled"
-    cache = PrimalOfflineCache(cache_dir)
-    key = offline_key(ops, grid, options, h=h)
-    t0 = time.perf_counter()
-    space, status = cache.load(key, ops, grid)
-    # every rank must agree on the cache status before the collective build
-    if comm.size > 1 and comm.allreduce(int(space is None), op=MPI.MAX):
-        space, status = None, comm.bcast(status if space is None else "missing", root=0)
-    if space is not None:
-        space.times["load"] = time.perf_counter() - t0
-        log.info("CEM offline data loaded from %s", cache.path(key))
-        return space, status
-    if status != "missing":
-        log.warning("CEM offline cache %s rejected (%s); rebuilding", cache.path(key), status)
     error = None
     if comm.rank == 0:
         try:
@@ -1510,7 +1265,8 @@ class Omega1Multiscale:
         on = np.flatnonzero(index >= 0)
         self.alpha_fn.x.array[on] = _allgather_values(comm, alpha)[index[on]]
         self.ops = assemble_fine_operators(
-            self.V, self.facet_tags, self.fields, self.alpha_fn, self.grid, s_factor=cem.s_factor
+            self.V, self.facet_tags, self.fields, self.alpha_fn, self.grid, s_factor=cem.s_factor,
+            load=omega1_load(self.V, self.facet_tags, self.fields),
         )
         value_of_dof = index[self.ops.gamma]
         if np.any(value_of_dof < 0) or np.unique(value_of_dof).size != self._n_total or \

@@ -271,7 +271,7 @@ def build_parser(*, given_only: bool = False) -> argparse.ArgumentParser:
     run.add_argument("--h", type=int, help=f"fine size of the built-in mesh as 1/h (default {DEFAULT_H}); "
                      "not with --mesh, whose size is h = sqrt(2 x largest cell area) (1/n on an n x n grid)")
     run.add_argument("--H", type=int, default=16, help="coarse size / strip width as 1/H (e.g. 16); with --mesh the "
-                     "coarse grid of squares of side H from the origin (multiscale methods)")
+                     "coarse grid of squares of side 1/H over the bounding box (multiscale methods)")
     run.add_argument("--mesh", type=Path, help="a gmsh .msh file of planar triangles with the physical groups "
                      "Omega1, Omega2, Gamma_D, Gamma_C, gamma (checked against the contact problem); a file with "
                      "none of Omega1/Omega2/gamma gets Omega2 = the coarse cells along Gamma_C")

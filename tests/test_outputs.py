@@ -175,9 +175,6 @@ def test_two_ranks_write_one_directory(tmp_path):
     assert len(lines) == 1 and "not on the boundary of Omega2" in lines[0], proc.stderr
     assert _snapshot(out) == before
     assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.msh", "mpi"]
-    # Algorithm 4 (serial offline stage) refuses MPI with a clear message (the mixed method runs: test_mpi_mixed.py)
-    proc = _cli(*SMALL, "--method", "mixed-ms", "--no-plots", "--out", str(tmp_path / "mixed"))
-    assert proc.returncode == 2 and "runs serially" in proc.stderr, proc.stderr
-    assert not (tmp_path / "mixed").exists()
+    # (the mixed method under mpiexec: tests/test_mpi_mixed.py writes the serial outputs from 2 ranks)
     np.testing.assert_equal(summary["dofs"]["omega1"] + summary["dofs"]["omega2"] - summary["dofs"]["interface"],
                             2 * 17 * 17)

@@ -67,8 +67,12 @@ def _cases(grid):
 
 
 # -- reference constructions ----------------------------------------------------------------------
-def _reference_basis(ops, topo, cells):
-    """L of X_h(ω) from sparse column slices of P: AW functions inside ω, then P·z at inner-boundary vertices."""
+def _reference_basis(ops, topo, cells, space):
+    """L of X_h(ω) from sparse column slices of P: AW functions inside ω, then P·z at inner-boundary vertices.
+
+    The null vector z at an inner-boundary vertex is defined up to its sign: the columns take
+    the signs of ``space`` (the construction under test), after checking the shapes agree.
+    """
     v_in = np.bincount(topo.c2v[cells].ravel(), minlength=topo.nv)
     e_in = np.bincount(topo.c2e[cells].ravel(), minlength=topo.ne)
     v_int = np.flatnonzero((v_in > 0) & (v_in == topo.v_deg))
@@ -98,7 +102,9 @@ def _reference_basis(ops, topo, cells):
             parts.append(Pp[:, 3 * v + np.arange(3)] @ sp.csr_matrix(null.T))
     L = sp.hstack(parts, format="csr")
     L.eliminate_zeros()
-    return L
+    assert space.L.shape == L.shape
+    sign = np.where(np.asarray(space.L.multiply(L).sum(axis=0)).ravel() < 0, -1.0, 1.0)
+    return (L @ sp.diags(sign)).tocsr()
 
 
 def test_local_space_and_operators_match_sparse_products(omega1):
@@ -106,8 +112,7 @@ def test_local_space_and_operators_match_sparse_products(omega1):
     for i, layers in _cases(grid):
         cells = _patch_cells(grid, i, layers)
         space = mm.local_stress_space(ops, topo, cells)
-        L = _reference_basis(ops, topo, cells)
-        assert space.L.shape == L.shape
+        L = _reference_basis(ops, topo, cells, space)
         assert abs(space.L - L).max() <= 1e-14 * abs(L).max()
         At, Bl = mm._local_operators(ops, space)
         At_ref = (L.T @ _blockdiag(ops.Kt[cells]) @ L).tocsr()
@@ -124,7 +129,7 @@ def test_batched_patch_solve_matches_scipy(omega1):
     aux = mm.stage_one(ops, topo, grid, 3)
     for i, layers in _cases(grid)[1:3]:
         space, lu, Z, *_ = mm._patch_system(ops, topo, grid, aux, grid.patch(i, layers))
-        L = _reference_basis(ops, topo, space.cells)
+        L = _reference_basis(ops, topo, space.cells, space)
         At = L.T @ _blockdiag(ops.Kt[space.cells]) @ L
         Bl = _blockdiag(ops.B[space.cells]) @ L
         A = sp.bmat([[At, Bl.T, None], [Bl, None, -Z], [None, -Z.T, sp.identity(Z.shape[1])]], format="csc")

@@ -70,14 +70,16 @@ import dolfinx.fem.petsc
 import numpy as np
 import scipy.linalg as sla
 import scipy.sparse as sp
+import scipy.sparse.linalg as spla
 import ufl
 from dolfinx import fem
 from dolfinx import mesh as dmesh
 from petsc4py import PETSc
+from slepc4py import SLEPc
 
 from fenics_contact import __version__
 from fenics_contact.fem import forms_mixed
-from fenics_contact.errors import InputError
+from fenics_contact.errors import ConvergenceError, InputError
 from fenics_contact.fem.linalg import assemble_scipy, scipy_to_petsc
 from fenics_contact.multiscale.cache import OfflineCache, hash_array
 from fenics_contact.multiscale.cem import (
@@ -128,7 +130,7 @@ DEFAULT_MIN_GAP = 0.1
 DEFAULT_MAX_NBASIS = 32
 
 #: Bumped whenever the layout or meaning of the cached mixed offline arrays changes.
-MIXED_CACHE_FORMAT = 2
+MIXED_CACHE_FORMAT = 3
 
 
 @dataclass(frozen=True, slots=True)
@@ -149,6 +151,13 @@ class MixedCEMOptions:
     #: c, as for the primal CEM (multiscale.CEMOptions.s_factor). Model 2, h = 1/32, H = 1/8, m = 3:
     #: e_σ = 4.2e-3 (c = 1), 2.3e-3 (c = 3), 2.6e-3 (c = 10).
     s_factor: float = DEFAULT_S_FACTOR
+    #: Localized source correctors (METHOD §9): the Ω₁ response to f is computed on the oversampled
+    #: patches and the coarse problem solves for the remainder, so that the error falls with m for any
+    #: load.  False: the paper's Algorithm 4 (f seen only through U_aux: an O(H Λ^{-1/2}) floor).
+    source_correction: bool = True
+    #: Stage I eigensolver: "auto" (dense LAPACK for small coarse cells, else "krylovschur"), "lapack"
+    #: (all pairs, dense) or "krylovschur" (SLEPc shift-and-invert for the pairs kept, inertia-checked).
+    eigensolver: str = "auto"
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.s_factor) and self.s_factor > 0):
@@ -165,6 +174,10 @@ class MixedCEMOptions:
             raise InputError(f"max_nbasis must be an integer >= 1, got {self.max_nbasis!r}")
         if self.nbasis is not None and self.max_nbasis < self.nbasis:
             raise InputError(f"max_nbasis ({self.max_nbasis}) must be >= nbasis ({self.nbasis})")
+        if self.eigensolver not in ("auto", "lapack", "krylovschur"):
+            raise InputError(f"eigensolver must be 'auto', 'lapack' or 'krylovschur', got {self.eigensolver!r}")
+        if not isinstance(self.source_correction, (bool, np.bool_)):
+            raise InputError(f"source_correction must be True or False, got {self.source_correction!r}")
 
 
 # ---------------------------------------------------------------------------------------
@@ -181,6 +194,14 @@ def _cell_blocks(A: sp.spmatrix, rows: np.ndarray, cols: np.ndarray) -> np.ndarr
         raise RuntimeError("the operator is not block diagonal in the cell-major layout")
     out[brow] = Ap.data
     return out
+
+
+def _block_diag(blocks: np.ndarray) -> sp.csr_matrix:
+    """The block-diagonal CSR matrix of dense blocks (n, a, b)."""
+    n, a, b = blocks.shape
+    rows = np.broadcast_to((a * np.arange(n)[:, None, None] + np.arange(a)[None, :, None]), blocks.shape)
+    cols = np.broadcast_to((b * np.arange(n)[:, None, None] + np.arange(b)[None, None, :]), blocks.shape)
+    return sp.csr_matrix((blocks.ravel(), (rows.ravel(), cols.ravel())), shape=(n * a, n * b))
 
 
 def _contains(sorted_cells: np.ndarray, c: int) -> bool:
@@ -391,6 +412,49 @@ class LocalSpace:
         return self.blocks @ xc
 
 
+def _boundary_vertex_null_spaces(
+    topo: _Topology, v_bnd: np.ndarray, e_bnd: np.ndarray, first: int
+) -> tuple[np.ndarray, np.ndarray, int]:
+    """Null spaces of τ ↦ τn at the inner-boundary vertices ``v_bnd`` (sorted) for the normals of their
+    inner-boundary edges ``e_bnd``: (null (|v_bnd|, 3, 3) with null[k][:, q] = z_q, the local column of
+    each z_q (−1: none) numbered from ``first``, the number of columns).
+
+    No edge: all of R³ (z = e_x, e_y, e_z); parallel normals n: z = t⊗t (σ_tt free, t ⊥ n, unit
+    norm in (xx, xy, yy)); two directions (a corner of ω): nothing.
+    """
+    nv = v_bnd.size
+    null = np.zeros((nv, 3, 3))
+    extra = np.full((nv, 3), -1, dtype=np.int64)
+    if nv == 0:
+        return null, extra, 0
+    a, b = topo.vx[topo.e2v[e_bnd, 0]], topo.vx[topo.e2v[e_bnd, 1]]
+    d = (b - a) / np.linalg.norm(b - a, axis=1)[:, None]
+    normal = np.stack([d[:, 1], -d[:, 0]], axis=1)
+    vert = topo.e2v[e_bnd].ravel()  # (2E,) each edge's two vertices
+    nrm = np.repeat(normal, 2, axis=0)
+    k = np.searchsorted(v_bnd, vert)
+    inside = (k < nv) & (v_bnd[np.minimum(k, nv - 1)] == vert)
+    k, nrm = k[inside], nrm[inside]
+    count = np.bincount(k, minlength=nv)
+    first_normal = np.zeros((nv, 2))
+    first_normal[k[::-1]] = nrm[::-1]  # any one normal per vertex
+    cross = np.abs(first_normal[k, 0] * nrm[:, 1] - first_normal[k, 1] * nrm[:, 0])
+    bent = np.bincount(k, weights=(cross > 1e-10).astype(float), minlength=nv) > 0
+    ncols = np.where(count == 0, 3, np.where(bent, 0, 1))
+    free = count == 0
+    null[free] = np.eye(3)
+    line = (count > 0) & ~bent
+    n0, n1 = first_normal[line, 0], first_normal[line, 1]
+    z = np.stack([n1 * n1, -n0 * n1, n0 * n0], axis=1)
+    z /= np.linalg.norm(z, axis=1)[:, None]
+    null[line, :, 0] = np.where(np.abs(z) < 1e-14, 0.0, z)
+    start = first + np.concatenate([[0], np.cumsum(ncols)[:-1]])
+    for q in range(3):
+        has = ncols > q
+        extra[has, q] = start[has] + q
+    return null, extra, int(ncols.sum())
+
+
 def local_stress_space(ops: CellOperators, topo: _Topology, cells: np.ndarray) -> LocalSpace:
     """Basis of {τ ∈ AW(ω) : τn = 0 on ∂ω ∩ Ω₁°} in the cell-major layout of ω."""
     cells = np.sort(np.asarray(cells, dtype=np.int64))
@@ -412,29 +476,7 @@ def local_stress_space(ops: CellOperators, topo: _Topology, cells: np.ndarray) -
     pcols = ops.P_cols[cells]
     cols = np.where(pcols >= 0, local[np.maximum(pcols, 0)], -1)
     blocks = ops.P_blocks[cells].copy()
-    # null spaces of τ ↦ τn at the inner-boundary vertices: vertex k gets columns z_q (3-vectors)
-    normals: dict[int, list[np.ndarray]] = {}
-    for e in e_bnd:
-        a, b = topo.vx[topo.e2v[e, 0]], topo.vx[topo.e2v[e, 1]]
-        d = (b - a) / np.linalg.norm(b - a)
-        n0, n1 = d[1], -d[0]
-        rows = np.array([[n0, n1, 0.0], [0.0, n0, n1]])
-        for v in topo.e2v[e]:
-            normals.setdefault(int(v), []).append(rows)
-    null = np.zeros((v_bnd.size, 3, 3))  #: null[k][:, q] = z_q of vertex v_bnd[k]
-    extra = np.full((v_bnd.size, 3), -1, dtype=np.int64)
-    ncol = 0
-    for k, v in enumerate(v_bnd):
-        rows = normals.get(int(v))
-        if rows is None:
-            zs = np.eye(3)
-        else:
-            _, sv, vt = np.linalg.svd(np.vstack(rows))
-            zs = vt[int(np.sum(sv > 1e-10 * sv.max())) :]
-        for q, z in enumerate(zs):
-            null[k, :, q] = np.where(np.abs(z) < 1e-14, 0.0, z)
-            extra[k, q] = inner.size + ncol
-            ncol += 1
+    null, extra, ncol = _boundary_vertex_null_spaces(topo, v_bnd, e_bnd, inner.size)
     if v_bnd.size:
         # the block columns of 3v, 3v+1, 3v+2 (consecutive: P_cols is sorted) become
         # L_c[:, q] = Σ_i P_c[:, 3v+i] z_q[i]
@@ -496,7 +538,7 @@ class StageI:
     values: list
     modes: list
     offsets: np.ndarray  #: first aux index of each coarse cell
-    residuals: np.ndarray  #: max ‖−Bφ − λSp‖ / (λ_max ‖Sp‖) per coarse cell
+    residuals: np.ndarray  #: max backward error of the kept pairs per coarse cell (``_pair_residuals``)
     gaps: np.ndarray  #: Λ_k, the first eigenvalue left out on each coarse cell (inf: all kept)
 
     @property
@@ -504,67 +546,253 @@ class StageI:
         return int(self.offsets[-1])
 
 
+#: Stage I eigenvalues are dimensionless (κ̃ = c(λ+2μ)H⁻²; the modes kept have λ = O(10⁻²…10)):
+#: two consecutive ones belong to one cluster when they differ by at most atol + rtol·λ.
+_CLUSTER_ATOL = 1.0e-8
+_CLUSTER_RTOL = 1.0e-6
+#: Shift of the shift-and-invert transform: below the spectrum (which starts at λ = 0, the rigid motions).
+_SHIFT = -0.05
+#: Pairs requested from Krylov–Schur beyond those needed (a margin for multiplicities and the gap).
+_EXTRA_PAIRS = 4
+#: ``eigensolver="auto"`` uses dense LAPACK up to this many displacement DOFs of a coarse cell.
+_DENSE_MAX_U = 400
+#: Tolerance of the Krylov–Schur solves (relative, on the transformed eigenvalue).
+_EPS_TOL = 1.0e-12
+
+
 def _complete_cluster(lam: np.ndarray, n: int) -> int:
-    """n, raised to the end of the eigenvalue cluster that λ_n belongs to.
+    """n, raised to the end of the eigenvalue cluster that λ_n belongs to (``lam`` ascending).
 
     Keeping part of a repeated eigenvalue (the three rigid motions at λ = 0 on interior cells,
     symmetric pairs) would pick an arbitrary subspace; the whole cluster is kept instead.
     """
-    tol = 1e-8 * abs(lam[-1])
     n0 = n
-    while n < lam.size and lam[n] - lam[n - 1] <= tol + 1e-8 * abs(lam[n]):
+    while 0 < n < lam.size and lam[n] - lam[n - 1] <= _CLUSTER_ATOL + _CLUSTER_RTOL * abs(lam[n]):
         n += 1
     if n > n0:
-        log.info("Stage I: %d modes requested, %d kept (a repeated eigenvalue %.3e)", n0, n, lam[n0 - 1])
+        log.debug("Stage I: %d modes requested, %d kept (a repeated eigenvalue %.3e)", n0, n, lam[n0 - 1])
     return n
 
 
-def _modes_to_keep(lam: np.ndarray, nbasis: int | None, min_gap: float | None, max_nbasis: int) -> int:
-    """l_k: ``nbasis`` modes, more (up to ``max_nbasis``) while λ_{l+1} < ``min_gap``, whole clusters."""
+def _modes_to_keep(
+    lam: np.ndarray, nbasis: int | None, min_gap: float | None, max_nbasis: int, complete: bool = True
+) -> int | None:
+    """l_k: ``nbasis`` modes, more (up to ``max_nbasis``) while λ_{l+1} < ``min_gap``, whole clusters.
+
+    ``lam``: the smallest eigenvalues, ascending; all of them when ``complete``.  Otherwise None
+    when they do not suffice to decide (the first eigenvalue left out must be among them).
+    """
     if nbasis is None:
-        return lam.size
+        return lam.size if complete else None
     n = min(nbasis, lam.size)
     if min_gap is not None:
         cap = min(max(max_nbasis, n), lam.size)
         while n < cap and lam[n] < min_gap:
             n += 1
-    return _complete_cluster(lam, n)
+    n = _complete_cluster(lam, n)
+    if not complete and n >= lam.size:
+        return None
+    return n
+
+
+def _pair_residuals(At, Bl, S, lam: np.ndarray, phi: np.ndarray, p: np.ndarray) -> float:
+    """Largest normwise backward error of the pairs: ‖(Ãφ + Bᵀp, −Bφ − λSp)‖ / ((‖Ã‖+2‖B‖+λ‖S‖)‖(φ, p)‖)."""
+    if lam.size == 0:
+        return 0.0
+    nA, nB, nS = (float(sp.linalg.norm(X)) if sp.issparse(X) else float(np.linalg.norm(X)) for X in (At, Bl, S))
+    r1 = At @ phi + Bl.T @ p
+    r2 = -(Bl @ phi) - (S @ p) * lam
+    res = np.sqrt(np.sum(r1 * r1, axis=0) + np.sum(r2 * r2, axis=0))
+    scale = (nA + 2.0 * nB + np.abs(lam) * nS) * np.sqrt(np.sum(phi * phi, axis=0) + np.sum(p * p, axis=0))
+    return float(np.max(res / scale))
+
+
+def _s_orthonormalize(p: np.ndarray, S) -> np.ndarray:
+    """P L⁻ᵀ with PᵀSP = LLᵀ (fixes scaling, and the bases of repeated eigenvalues)."""
+    gram = p.T @ (S @ p)
+    try:
+        L = np.linalg.cholesky(0.5 * (gram + gram.T))
+    except np.linalg.LinAlgError as err:
+        raise ConvergenceError(f"Stage I eigenvectors are dependent in the s-inner product: {err}") from None
+    return np.linalg.solve(L, p.T).T
+
+
+def _cell_pairs_dense(At: sp.spmatrix, Bl: sp.spmatrix, S: sp.spmatrix) -> tuple[np.ndarray, np.ndarray]:
+    """All pairs (λ ascending, p S-orthonormal) of B Ã⁻¹ Bᵀ p = λ S p by dense LAPACK."""
+    Ad, Bd, Sd = At.toarray(), Bl.toarray(), S.toarray()
+    X = sla.cho_solve(sla.cho_factor(Ad), Bd.T)
+    schur = Bd @ X
+    lam, vec = sla.eigh(0.5 * (schur + schur.T), Sd)
+    return np.maximum(lam, 0.0), vec
+
+
+def _eps_smallest(Af: PETSc.Mat, Bf: PETSc.Mat, nev: int, deflation: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    """Converged pairs nearest ``_SHIFT`` of Af x = λ Bf x (SLEPc GHEP, Bf ⪰ 0; Krylov–Schur, shift-and-invert)."""
+    eps = SLEPc.EPS().create(PETSc.COMM_SELF)
+    defl = []
+    try:
+        eps.setOperators(Af, Bf)
+        eps.setProblemType(SLEPc.EPS.ProblemType.GHEP)
+        eps.setType(SLEPc.EPS.Type.KRYLOVSCHUR)
+        eps.setDimensions(nev)
+        st = eps.getST()
+        st.setType(SLEPc.ST.Type.SINVERT)
+        ksp = st.getKSP()
+        ksp.setType(PETSc.KSP.Type.PREONLY)
+        pc = ksp.getPC()
+        pc.setType(PETSc.PC.Type.LU)
+        pc.setFactorSolverType("mumps")
+        eps.setTarget(_SHIFT)
+        eps.setWhichEigenpairs(SLEPc.EPS.Which.TARGET_REAL)
+        if deflation is not None and deflation.shape[1]:
+            for col in deflation.T:
+                vec = Af.createVecRight()
+                vec.array[:] = col
+                defl.append(vec)
+            eps.setDeflationSpace(defl)
+        eps.setTolerances(_EPS_TOL, 1000)
+        eps.solve()
+        nconv = eps.getConverged()
+        if nconv < nev:
+            raise ConvergenceError(
+                f"Stage I eigenproblem (n = {Af.getSize()[0]}): only {nconv} of {nev} pairs converged "
+                f"(reason {eps.getConvergedReason()})"
+            )
+        vr = Af.createVecRight()
+        values = np.empty(nconv)
+        vectors = np.empty((Af.getSize()[0], nconv))
+        for j in range(nconv):
+            values[j] = eps.getEigenpair(j, vr).real
+            vectors[:, j] = vr.array
+        vr.destroy()
+    finally:
+        eps.destroy()
+        for vec in defl:
+            vec.destroy()
+    return values, vectors
+
+
+def _count_below(K: sp.spmatrix, n_loc: int, t: float, M: sp.spmatrix) -> int:
+    """#{λ < t} of B Ã⁻¹ Bᵀ p = λ S p: neg. inertia of K − tM = −[[Ã, Bᵀ], [B, tS]] minus dim X (MUMPS LDLᵀ).
+
+    Sylvester and Haynsworth: In([[Ã, Bᵀ], [B, tS]]) = In(Ã) + In(tS − BÃ⁻¹Bᵀ), Ã ≻ 0.
+    """
+    X = scipy_to_petsc((K - t * M).tocsr())
+    ksp = PETSc.KSP().create(PETSc.COMM_SELF)
+    try:
+        ksp.setOperators(X)
+        ksp.setType(PETSc.KSP.Type.PREONLY)
+        pc = ksp.getPC()
+        pc.setType(PETSc.PC.Type.CHOLESKY)
+        pc.setFactorSolverType("mumps")
+        pc.setFactorSetUpSolverType()
+        pc.getFactorMatrix().setMumpsIcntl(24, 1)  # null-pivot detection: required for the inertia
+        ksp.setUp()
+        if pc.getFailedReason() != 0:
+            raise ConvergenceError(f"Stage I inertia: LDLᵀ failed (PETSc reason {pc.getFailedReason()})")
+        nneg, _, _ = pc.getFactorMatrix().getInertia()
+    finally:
+        ksp.destroy()
+        X.destroy()
+    return int(nneg) - n_loc
+
+
+def _cell_pairs_sparse(
+    At: sp.spmatrix, Bl: sp.spmatrix, S: sp.spmatrix, nbasis: int, min_gap: float | None, max_nbasis: int
+) -> tuple[np.ndarray, np.ndarray, float]:
+    """The kept pairs (λ, p S-orthonormal) and Λ of one coarse cell: sparse shift-and-invert.
+
+    The pencil −[[Ã, Bᵀ], [B, 0]] x = λ [[0, 0], [0, S]] x (x = (φ, p); the φ block of the right-hand
+    matrix is zero: infinite eigenvalues, mapped to 0 by the transform) is solved by SLEPc
+    Krylov–Schur about ``_SHIFT`` < 0.  Enough pairs are requested to decide ``_modes_to_keep``
+    (more when the first eigenvalue left out is not yet among them); then Sylvester's inertia just
+    above the gap Λ checks that no eigenvalue below it was missed (a Krylov method can miss copies
+    of a repeated one, e.g. the three rigid motions), and missing ones are searched again with the
+    found ones deflated.
+    """
+    n_loc, n_u = At.shape[0], S.shape[0]
+    K = -sp.bmat([[At, Bl.T], [Bl, None]], format="csr")
+    M = sp.block_diag([sp.csr_matrix((n_loc, n_loc)), S], format="csr")
+    Kp, Mp = scipy_to_petsc(K), scipy_to_petsc(M)
+    try:
+        want = min(nbasis + _EXTRA_PAIRS, n_u)
+        lam, X = _eps_smallest(Kp, Mp, want, None)
+        for _ in range(50):
+            order = np.argsort(lam, kind="stable")
+            lam, X = lam[order], X[:, order]
+            nk = _modes_to_keep(lam, nbasis, min_gap, max_nbasis, complete=lam.size >= n_u)
+            if nk is None:  # the first eigenvalue left out is not among them yet
+                want = min(max(2 * want, lam.size + _EXTRA_PAIRS), n_u)
+                more_v, more_x = _eps_smallest(Kp, Mp, min(want - lam.size + _EXTRA_PAIRS, n_u - lam.size), X)
+                lam, X = np.concatenate([lam, more_v]), np.concatenate([X, more_x], axis=1)
+                continue
+            cut = lam[nk] if nk < lam.size else lam[-1]
+            t = cut + _CLUSTER_ATOL + _CLUSTER_RTOL * abs(cut)
+            below, have = _count_below(K, n_loc, t, M), int(np.count_nonzero(lam < t))
+            if below <= have:
+                break
+            log.debug("Stage I: Krylov–Schur missed %d pair(s) below %.3e; deflating and searching again",
+                      below - have, t)
+            keep = lam < t
+            more_v, more_x = _eps_smallest(Kp, Mp, min(below - have + _EXTRA_PAIRS, n_u - have), X[:, keep])
+            lam, X = np.concatenate([lam[keep], more_v]), np.concatenate([X[:, keep], more_x], axis=1)
+        else:
+            raise ConvergenceError(f"Stage I (n = {n_u}): could not find the smallest eigenpairs")
+    finally:
+        Kp.destroy()
+        Mp.destroy()
+    gap = float(lam[nk]) if nk < lam.size else np.inf
+    return np.maximum(lam[:nk], 0.0), X[n_loc:, :nk], gap
+
+
+def stage_one_cell(
+    ops: CellOperators, topo: _Topology, cells: np.ndarray, nbasis: int | None,
+    min_gap: float | None = None, max_nbasis: int = DEFAULT_MAX_NBASIS, eigensolver: str = "auto",
+) -> tuple[np.ndarray, np.ndarray, float, float]:
+    """Stage I on one coarse cell (fine ``cells``): (λ kept, p (|K|, 6, l) S-orthonormal, Λ, residual).
+
+    ``eigensolver``: "lapack" (all pairs, dense), "krylovschur" (sparse, ``_cell_pairs_sparse``) or
+    "auto" (dense up to ``_DENSE_MAX_U`` displacement DOFs, and for ``nbasis=None``).
+    """
+    cells = np.sort(np.asarray(cells, dtype=np.int64))
+    space = local_stress_space(ops, topo, cells)
+    At, Bl = _local_operators(ops, space)
+    S = _block_diag(ops.S[cells])
+    n_u = S.shape[0]
+    dense = eigensolver == "lapack" or nbasis is None or (eigensolver == "auto" and n_u <= _DENSE_MAX_U)
+    if dense:
+        lam, vec = _cell_pairs_dense(At, Bl, S)
+        nk = _modes_to_keep(lam, nbasis, min_gap, max_nbasis)
+        gap = float(lam[nk]) if nk < lam.size else np.inf
+        lam, p = lam[:nk], vec[:, :nk]
+    else:
+        lam, p, gap = _cell_pairs_sparse(At, Bl, S, nbasis, min_gap, max_nbasis)
+    p = _s_orthonormalize(p, S)
+    # φ = −Ã⁻¹Bᵀp for the residual check (sparse LU of the local Ã)
+    phi = -spla.splu(At.tocsc()).solve(np.asarray(Bl.T @ p))
+    res = _pair_residuals(At, Bl, S, lam, phi, p)
+    return lam, np.ascontiguousarray(p).reshape(cells.size, 6, lam.size), gap, res
 
 
 def stage_one(
     ops: CellOperators, topo: _Topology, grid: CoarseGrid, nbasis: int | None,
-    min_gap: float | None = None, max_nbasis: int = DEFAULT_MAX_NBASIS,
+    min_gap: float | None = None, max_nbasis: int = DEFAULT_MAX_NBASIS, eigensolver: str = "auto",
 ) -> StageI:
-    """Mixed local spectral problems Ã φ + Bᵀp = 0, −Bφ = λ S p on every coarse cell (dense LAPACK).
+    """Mixed local spectral problems Ã φ + Bᵀp = 0, −Bφ = λ S p on every coarse cell (``stage_one_cell``).
 
     Each cell keeps ``_modes_to_keep`` modes: ``nbasis`` (all if None), raised while the first
     eigenvalue left out is below ``min_gap`` (at most ``max_nbasis``) and to whole clusters.
     """
-    values, modes, res, gaps = [], [], [], []
-    for k in range(grid.size):
-        cells = np.sort(grid.cells[k].astype(np.int64))
-        space = local_stress_space(ops, topo, cells)
-        At, Bl = _local_operators(ops, space)
-        At, Bl = At.toarray(), Bl.toarray()
-        S = sla.block_diag(*ops.S[cells])
-        cho = sla.cho_factor(At)
-        X = sla.cho_solve(cho, Bl.T)
-        schur = Bl @ X
-        schur = 0.5 * (schur + schur.T)
-        lam, vec = sla.eigh(schur, S)
-        lam = np.maximum(lam, 0.0)
-        nk = _modes_to_keep(lam, nbasis, min_gap, max_nbasis)
-        p = vec[:, :nk]
-        phi = -X @ p
-        r = -Bl @ phi - S @ p * lam[:nk]
-        # relative to the operator scale: λ_max ‖S p‖ (λ = 0 modes have φ = 0 exactly)
-        scale = np.linalg.norm(S @ p, axis=0) * max(float(lam[-1]), 1e-300)
-        res.append(float(np.max(np.linalg.norm(r, axis=0) / scale)))
-        values.append(lam[:nk])
-        gaps.append(float(lam[nk]) if nk < lam.size else np.inf)
-        modes.append(np.ascontiguousarray(p).reshape(cells.size, 6, nk))  # as reloaded from the cache
-    offsets = np.concatenate([[0], np.cumsum([m.shape[2] for m in modes])])
-    return StageI(values, modes, offsets, np.array(res), np.array(gaps))
+    out = [stage_one_cell(ops, topo, grid.cells[k], nbasis, min_gap, max_nbasis, eigensolver)
+           for k in range(grid.size)]
+    return _stage_one_from(out)
+
+
+def _stage_one_from(out: list) -> StageI:
+    values = [o[0] for o in out]
+    modes = [o[1] for o in out]
+    offsets = np.concatenate([[0], np.cumsum([m.shape[2] for m in modes])]).astype(np.int64)
+    return StageI(values, modes, offsets, np.array([o[3] for o in out]), np.array([o[2] for o in out]))
 
 
 # ---------------------------------------------------------------------------------------
@@ -669,38 +897,48 @@ def _unpack(space: LocalSpace, x: np.ndarray, n_loc: int, n_u: int) -> tuple[np.
 
 
 def stage_two(
-    ops: CellOperators, topo: _Topology, grid: CoarseGrid, aux: StageI, layers: int
+    ops: CellOperators, topo: _Topology, grid: CoarseGrid, aux: StageI, layers: int, source: bool = True
 ) -> tuple[list[PatchFunctions], list[PatchFunctions]]:
-    """Basis functions ψ_j^i (index = aux index) and corrections Q_i, N_i (index = γ value index)."""
+    """Basis functions ψ_j^i (index = aux index) and data correctors (index = data index).
+
+    The data are d = [g; 1]: the γ values g (index 0..n_g−1; Robin correctors Q_i, N_i on the
+    patches of the coarse cells touching γ) and, with ``source``, the load (index n_g; the source
+    correctors of the coarse cells where f ≠ 0).  A coarse cell's data correctors share one
+    ``PatchFunctions``.
+    """
     basis, corr = [], []
-    gamma_coarse = set(np.unique(grid.cell_coarse[ops.gamma_cells]).tolist())
+    n_g = ops.num_gamma_values
     for i in range(grid.size):
         patch = grid.patch(i, layers)
         space, lu, Z, aux_cols, n_loc, n_u = _patch_system(ops, topo, grid, aux, patch)
         n_tot = n_loc + n_u + Z.shape[1]
         li = aux.modes[i].shape[2]
-        rhs = np.zeros((n_tot, li))
+        ci = np.sort(grid.cells[i].astype(np.int64))
+        pos = np.searchsorted(space.cells, ci)
         c0 = aux_cols[int(i)]
-        rhs[n_loc : n_loc + n_u] = -Z[:, c0 : c0 + li].toarray()
+        # Robin data on γ ∩ ∂K_i: C_i g in the τ rows
+        Ci = ops.C[_rows(ci, 30)]
+        gcols = np.unique(Ci.indices)
+        load = source and bool(np.any(ops.G[ci] != 0.0))
+        nd = gcols.size + int(load)
+        rhs = np.zeros((n_tot, li + nd))
+        rhs[n_loc : n_loc + n_u, :li] = -Z[:, c0 : c0 + li].toarray()
+        if gcols.size:
+            coo = Ci[:, gcols].tocoo()
+            Cpatch = sp.csr_matrix((coo.data, (_rows(pos, 30)[coo.row], coo.col)),
+                                   shape=(30 * space.cells.size, gcols.size))
+            rhs[:n_loc, li : li + gcols.size] = (space.L.T @ Cpatch).toarray()
+        if load:
+            # −(div ψ, v) + s(πq, πv) = (f χ_{K_i}, v): Bψ − Zy = −F_i = G on K_i
+            rhs[n_loc + _rows(pos, 6), -1] = ops.G[ci].ravel()
         sol = lu.solve(rhs)
-        sigma, u = _unpack(space, sol, n_loc, n_u)
-        basis.append(PatchFunctions(space.cells, sigma, u, aux.offsets[i] + np.arange(li)))
-        if i in gamma_coarse:
-            ci = np.sort(grid.cells[i].astype(np.int64))
-            Ci = ops.C[_rows(ci, 30)]
-            gcols = np.unique(Ci.indices)
-            if gcols.size:
-                coo = Ci[:, gcols].tocoo()
-                pos = _rows(np.searchsorted(space.cells, ci), 30)
-                Cpatch = sp.csr_matrix(
-                    (coo.data, (pos[coo.row], coo.col)), shape=(30 * space.cells.size, gcols.size)
-                )
-                rhs = np.zeros((n_tot, gcols.size))
-                rhs[:n_loc] = (space.L.T @ Cpatch).toarray()
-                sol = lu.solve(rhs)
-                sigma, u = _unpack(space, sol, n_loc, n_u)
-                corr.append(PatchFunctions(space.cells, sigma, u, gcols))
         lu.destroy()
+        sigma, u = _unpack(space, sol, n_loc, n_u)
+        basis.append(PatchFunctions(space.cells, sigma[:, :, :li].copy(), u[:, :, :li].copy(),
+                                    aux.offsets[i] + np.arange(li)))
+        if nd:
+            index = np.concatenate([gcols, [n_g]]) if load else gcols
+            corr.append(PatchFunctions(space.cells, sigma[:, :, li:].copy(), u[:, :, li:].copy(), index))
     return basis, corr
 
 
@@ -710,7 +948,8 @@ def stage_one_of(
     """Stage I alone for an Ω₁ ``MixedSubproblem``: (cell operators, local-space topology, U_aux)."""
     ops = cell_operators(sub, H, options.weight, options.s_factor)
     topo = _Topology(sub.mesh, ops.P.shape[1])
-    return ops, topo, stage_one(ops, topo, grid, options.nbasis, options.min_gap, options.max_nbasis)
+    return ops, topo, stage_one(ops, topo, grid, options.nbasis, options.min_gap, options.max_nbasis,
+                                options.eigensolver)
 
 
 def basis_decay_profile(ops: CellOperators, topo: _Topology, grid: CoarseGrid, aux: StageI, k: int) -> np.ndarray:
@@ -739,19 +978,38 @@ def basis_decay_profile(ops: CellOperators, topo: _Topology, grid: CoarseGrid, a
 # ---------------------------------------------------------------------------------------
 @dataclass(slots=True)
 class CoarseOperators:
-    """Dense coarse matrices of Algorithm 4 (index space [X_ms | g] for stresses, [U_aux | g] for u)."""
+    """Dense coarse matrices of Algorithm 4.
+
+    Index spaces: [X_ms | d] for stresses and [U_aux | d] for displacements, with the data
+    d = [g; 1] (n_g γ values, then the load: the source correctors, zero without them).
+    """
 
     n_ms: int
     n_aux: int
     n_g: int
-    Gt: np.ndarray  #: ΦᵀÃΦ
+    Gt: np.ndarray  #: ΦᵀÃΦ, Φ = [Ψ | Q | σ_f]
     Gk: np.ndarray  #: ΦᵀKΦ
     Bm: np.ndarray  #: Πᵀ B Φ
-    BN: np.ndarray  #: (BΦ)ᵀ N
-    Cphi: np.ndarray  #: Φᵀ C
+    BN: np.ndarray  #: (BΦ)ᵀ [N | u_f]
+    Cphi: np.ndarray  #: Φᵀ C (n_ms + n_d, n_g)
     Ephi: np.ndarray  #: E Φ
-    Mu: np.ndarray  #: Gram of [Π | N] in L²
+    Mu: np.ndarray  #: Gram of [Π | N | u_f] in L²
     PiG: np.ndarray  #: Πᵀ G
+
+    @property
+    def n_d(self) -> int:
+        """Number of data columns: n_g γ values and the load."""
+        return self.n_g + 1
+
+
+def _merge_columns(X: np.ndarray, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Sum the columns (last axis) of X with equal index: (unique indices, merged X)."""
+    uniq, inv = np.unique(idx, return_inverse=True)
+    if uniq.size == idx.size:
+        return uniq, X[..., np.argsort(inv)] if np.any(np.diff(idx) < 0) else X
+    out = np.zeros(X.shape[:-1] + (uniq.size,))
+    np.add.at(np.moveaxis(out, -1, 0), inv, np.moveaxis(X, -1, 0))
+    return uniq, out
 
 
 def coarse_operators(
@@ -759,14 +1017,15 @@ def coarse_operators(
 ) -> CoarseOperators:
     """Accumulate the coarse matrices coarse cell by coarse cell from the patch functions reaching it."""
     n_ms, n_g = aux.size, ops.num_gamma_values
-    n_tot = n_ms + n_g
+    n_d = n_g + 1
+    n_tot = n_ms + n_d
     Gt = np.zeros((n_tot, n_tot))
     Gk = np.zeros((n_tot, n_tot))
     Bm = np.zeros((aux.size, n_tot))
-    BN = np.zeros((n_tot, n_g))
+    BN = np.zeros((n_tot, n_d))
     Cphi = np.zeros((n_tot, n_g))
     Ephi = np.zeros((n_g, n_tot))
-    Mu = np.zeros((aux.size + n_g, aux.size + n_g))
+    Mu = np.zeros((aux.size + n_d, aux.size + n_d))
     PiG = np.zeros(aux.size)
     gamma_set = set(ops.gamma_cells.tolist())
     for K in range(grid.size):
@@ -784,14 +1043,7 @@ def coarse_operators(
             idx.append(n_ms + q.index)
             uq.append(q.u[pos])
             gidx.append(q.index)
-        Phi = np.concatenate(sig, axis=2)
-        idx = np.concatenate(idx)
-        uniq, inv = np.unique(idx, return_inverse=True)
-        if uniq.size != idx.size:
-            Ph = np.zeros(Phi.shape[:2] + (uniq.size,))
-            for k in range(idx.size):
-                Ph[:, :, inv[k]] += Phi[:, :, k]
-            Phi = Ph
+        uniq, Phi = _merge_columns(np.concatenate(sig, axis=2), np.concatenate(idx))
         nf = uniq.size
         F = Phi.reshape(-1, nf)
         KtP = np.einsum("cab,cbk->cak", ops.Kt[cK], Phi).reshape(-1, nf)
@@ -802,20 +1054,17 @@ def coarse_operators(
         Gk[ix] += F.T @ KP
         a0, a1 = aux.offsets[K], aux.offsets[K + 1]
         Pi = aux.modes[K].reshape(-1, a1 - a0)
-        Bm[a0:a1, uniq] += Pi.T @ BP
         Mb = sla.block_diag(*ops.M[cK])
+        Bm[a0:a1, uniq] += Pi.T @ BP
         Mu[a0:a1, a0:a1] += Pi.T @ Mb @ Pi
         PiG[a0:a1] += Pi.T @ ops.G[cK].ravel()
         if uq:
-            N = np.concatenate(uq, axis=2).reshape(-1, sum(x.size for x in gidx))
-            gi = np.concatenate(gidx)
-            gu, ginv = np.unique(gi, return_inverse=True)
-            Nu = np.zeros((N.shape[0], gu.size))
-            for k in range(gi.size):
-                Nu[:, ginv[k]] += N[:, k]
+            gu, Nu = _merge_columns(np.concatenate(uq, axis=2), np.concatenate(gidx))
+            Nu = Nu.reshape(-1, gu.size)
             BN[np.ix_(uniq, gu)] += BP.T @ Nu
-            Mu[np.ix_(np.arange(a0, a1), aux.size + gu)] += Pi.T @ Mb @ Nu
-            Mu[np.ix_(aux.size + gu, np.arange(a0, a1))] += (Pi.T @ Mb @ Nu).T
+            PMN = Pi.T @ Mb @ Nu
+            Mu[np.ix_(np.arange(a0, a1), aux.size + gu)] += PMN
+            Mu[np.ix_(aux.size + gu, np.arange(a0, a1))] += PMN.T
             Mu[np.ix_(aux.size + gu, aux.size + gu)] += Nu.T @ Mb @ Nu
         if gamma_set.intersection(cK.tolist()):
             rows = _rows(cK, 30)
@@ -941,9 +1190,10 @@ def _unpack_offline(arrays: dict, ops: CellOperators, grid: CoarseGrid) -> Offli
     if n_ms != aux.size or n_aux != aux.size or n_g != ops.num_gamma_values:
         raise ValueError("cached coarse operators do not match U_aux or the interface")
     mats = {name: arrays[f"co_{name}"] for name in _COARSE_ARRAYS}
-    n = n_ms + n_g
-    shapes = {"Gt": (n, n), "Gk": (n, n), "Bm": (n_aux, n), "BN": (n, n_g), "Cphi": (n, n_g), "Ephi": (n_g, n),
-              "Mu": (n_aux + n_g, n_aux + n_g), "PiG": (n_aux,)}
+    n_d = n_g + 1
+    n = n_ms + n_d
+    shapes = {"Gt": (n, n), "Gk": (n, n), "Bm": (n_aux, n), "BN": (n, n_d), "Cphi": (n, n_g), "Ephi": (n_g, n),
+              "Mu": (n_aux + n_d, n_aux + n_d), "PiG": (n_aux,)}
     for name, shape in shapes.items():
         if mats[name].shape != shape:
             raise ValueError(f"cached coarse matrix {name} has shape {mats[name].shape}, expected {shape}")
@@ -994,17 +1244,20 @@ class InterfaceResponse:
     def of(cls, om: "MixedMultiscaleOmega1") -> "InterfaceResponse":
         co = om.co
         n, n_g = co.n_ms, co.n_g
-        X = sla.lu_solve(om._lu, np.vstack([om._F1, -om._F2]))
-        x0 = sla.lu_solve(om._lu, np.concatenate([np.zeros(n), co.PiG]))
+        X = sla.lu_solve(om._lu, np.vstack([om._F1[:, :n_g], -om._F2[:, :n_g]]))  # a column per γ value
+        x0 = sla.lu_solve(om._lu, np.concatenate([om._F1[:, n_g], co.PiG - om._F2[:, n_g]]))  # g = 0
         R, W, r0, w0 = X[:n], X[n:], x0[:n], x0[n:]
-        eye = np.eye(n_g)
+        lift_d = np.vstack([np.eye(n_g), np.zeros((1, n_g))])  # g ↦ d − e_load
+        e_load = np.zeros(n_g + 1)
+        e_load[n_g] = 1.0
         forms = []
         for lift, shift, gram in ((R, r0, co.Gk), (W, w0, co.Mu)):
-            L = np.vstack([lift, eye])
-            s0 = np.concatenate([shift, np.zeros(n_g)])
+            L = np.vstack([lift, lift_d])
+            s0 = np.concatenate([shift, e_load])
             GL, Gs = gram @ L, gram @ s0
             forms += [0.5 * (L.T @ GL + (L.T @ GL).T), L.T @ Gs, float(s0 @ Gs)]
-        return cls(R, r0, W, w0, om._E_r @ R + om._E_g, om._E_r @ r0, *forms)
+        T = om._E_r @ R + om._E_g[:, :n_g]
+        return cls(R, r0, W, w0, T, om._E_r @ r0 + om._E_g[:, n_g], *forms)
 
     def trace(self, g: np.ndarray) -> np.ndarray:
         """σ₁n₁ at the γ nodes for data g."""
@@ -1078,10 +1331,11 @@ class MixedMultiscaleOmega1:
                 self.cache_status = "built" if self.cache_status == "missing" else f"rebuilt ({self.cache_status})"
         if data is None:
             t = time.perf_counter()
-            aux = stage_one(self.ops, self.topo, grid, options.nbasis, options.min_gap, options.max_nbasis)
+            aux = stage_one(self.ops, self.topo, grid, options.nbasis, options.min_gap, options.max_nbasis,
+                            options.eigensolver)
             self.times["eigen"] = time.perf_counter() - t
             t = time.perf_counter()
-            basis, corr = stage_two(self.ops, self.topo, grid, aux, options.layers)
+            basis, corr = stage_two(self.ops, self.topo, grid, aux, options.layers, options.source_correction)
             self.times["basis"] = time.perf_counter() - t
             t = time.perf_counter()
             data = OfflineData(aux, basis, corr, coarse_operators(self.ops, grid, aux, basis, corr, options.layers))
@@ -1134,18 +1388,24 @@ class MixedMultiscaleOmega1:
         self.aux, self.basis, self.corr, self.co = data
         co = self.co
         ms = slice(0, co.n_ms)
-        qg = slice(co.n_ms, co.n_ms + co.n_g)
+        qd = slice(co.n_ms, co.n_ms + co.n_d)
         A = np.block([[co.Gt[ms, ms], co.Bm[:, ms].T], [co.Bm[:, ms], np.zeros((co.n_aux, co.n_aux))]])
         self._lu = sla.lu_factor(A)
-        self._F1 = co.Cphi[ms] - co.Gt[ms, qg] - co.BN[ms]
-        self._F2 = co.Bm[:, qg]
-        self._E_r, self._E_g = co.Ephi[:, ms], co.Ephi[:, qg]
+        # right-hand sides for the data d = [g; 1]: τ rows F1 d, v rows Πᵀ G − F2 d
+        self._F1 = np.hstack([co.Cphi[ms], np.zeros((co.n_ms, 1))]) - co.Gt[ms, qd] - co.BN[ms]
+        self._F2 = co.Bm[:, qd]
+        self._E_r, self._E_g = co.Ephi[:, ms], co.Ephi[:, qd]
         self.response = InterfaceResponse.of(self)
+
+    @staticmethod
+    def data(g: np.ndarray) -> np.ndarray:
+        """The data vector d = [g; 1] (γ values, then the load's weight)."""
+        return np.append(np.asarray(g, dtype=float), 1.0)
 
     def solve_lu(self, g: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Coarse (r, w) for Robin data g by the coarse LU (``solve`` uses the precomputed response)."""
-        n = self.co.n_ms
-        x = sla.lu_solve(self._lu, np.concatenate([self._F1 @ g, self.co.PiG - self._F2 @ g]))
+        n, d = self.co.n_ms, self.data(g)
+        x = sla.lu_solve(self._lu, np.concatenate([self._F1 @ d, self.co.PiG - self._F2 @ d]))
         return x[:n], x[n:]
 
     @property
@@ -1160,36 +1420,38 @@ class MixedMultiscaleOmega1:
 
     def trace(self, r: np.ndarray, g: np.ndarray) -> np.ndarray:
         """σ₁n₁ at the γ nodes."""
-        return self._E_r @ r + self._E_g @ g
+        return self._E_r @ r + self._E_g @ self.data(g)
 
     def stress_norm2(self, r: np.ndarray, g: np.ndarray) -> float:
-        """‖Ψ r + Q g‖²_A."""
-        x = np.concatenate([r, g])
+        """‖Ψ r + Q g + σ_f‖²_A."""
+        x = np.concatenate([r, self.data(g)])
         return float(x @ self.co.Gk @ x)
 
     def l2_norm2(self, w: np.ndarray, g: np.ndarray) -> float:
-        """‖Π w + N g‖²_L²."""
-        x = np.concatenate([w, g])
+        """‖Π w + N g + u_f‖²_L²."""
+        x = np.concatenate([w, self.data(g)])
         return float(x @ self.co.Mu @ x)
 
     # -- fine reconstruction (output, errors, tests) ----------------------------------
     def fine_stress(self, r: np.ndarray, g: np.ndarray) -> np.ndarray:
-        """σ₁ = Ψ r + Q g, cell-major (n_cells, 30)."""
+        """σ₁ = Ψ r + Q g + σ_f, cell-major (n_cells, 30)."""
         out = np.zeros((self.ops.num_cells, 30))
+        d = self.data(g)
         for f in self.basis:
             out[f.cells] += f.sigma @ r[f.index]
         for q in self.corr:
-            out[q.cells] += q.sigma @ g[q.index]
+            out[q.cells] += q.sigma @ d[q.index]
         return out
 
     def fine_displacement(self, w: np.ndarray, g: np.ndarray) -> np.ndarray:
-        """u₁ = Π w + N g, cell-major (n_cells, 6)."""
+        """u₁ = Π w + N g + u_f, cell-major (n_cells, 6)."""
         out = np.zeros((self.ops.num_cells, 6))
+        d = self.data(g)
         for k in range(self.grid.size):
             cells = np.sort(self.grid.cells[k].astype(np.int64))
             out[cells] += self.aux.modes[k] @ w[self.aux.offsets[k] : self.aux.offsets[k + 1]]
         for q in self.corr:
-            out[q.cells] += q.u @ g[q.index]
+            out[q.cells] += q.u @ d[q.index]
         return out
 
     def fine_displacement_post(self, r: np.ndarray, g: np.ndarray) -> np.ndarray:
@@ -1201,10 +1463,11 @@ class MixedMultiscaleOmega1:
         (coarse, in U_aux) it resolves the fine scales.
         """
         out = np.zeros((self.ops.num_cells, 6))
+        d = self.data(g)
         for f in self.basis:
             out[f.cells] += f.u @ r[f.index]
         for q in self.corr:
-            out[q.cells] += q.u @ g[q.index]
+            out[q.cells] += q.u @ d[q.index]
         return out
 
     def a_norm2(self, sigma: np.ndarray) -> float:

@@ -74,6 +74,7 @@ import scipy.sparse.linalg as spla
 import ufl
 from dolfinx import fem
 from dolfinx import mesh as dmesh
+from mpi4py import MPI
 from petsc4py import PETSc
 from slepc4py import SLEPc
 
@@ -82,6 +83,7 @@ from fenics_contact.fem import forms_mixed
 from fenics_contact.errors import ConvergenceError, InputError
 from fenics_contact.fem.linalg import assemble_scipy, scipy_to_petsc
 from fenics_contact.multiscale.cache import OfflineCache, hash_array
+from fenics_contact.progress import Progress
 from fenics_contact.multiscale.cem import (
     DEFAULT_S_FACTOR,
     CoarseGrid,
@@ -396,6 +398,9 @@ class LocalSpace:
     cols: np.ndarray  #: (|ω|, w) local column of each block column, −1 for none
     size: int  #: dim X_h(ω)
     num_extra: int  #: inner-boundary vertex functions (not in AW(Ω₁))
+    aw_inner: np.ndarray  #: the AW function of each of the first size − num_extra local columns
+    extra_vertex: np.ndarray  #: the vertex v of each inner-boundary vertex function (the last num_extra)
+    extra_z: np.ndarray  #: (num_extra, 3): its value z, i.e. the function is Σ_i z_i (AW function 3v + i) on ω
 
     @property
     def L(self) -> sp.csr_matrix:
@@ -491,7 +496,8 @@ def local_stress_space(ops: CellOperators, topo: _Topology, cells: np.ndarray) -
         vals = blocks[ci[:, None], :, slots]  # (m, 3 (i), 30)
         blocks[ci[:, None], :, slots] = np.einsum("mia,miq->mqa", vals, null[ki])
         cols[ci[:, None], slots] = extra[ki]
-    return LocalSpace(cells, blocks, cols, int(inner.size + ncol), ncol)
+    kk, qq = np.nonzero(extra >= 0)  # row-major: in the order of the extra columns
+    return LocalSpace(cells, blocks, cols, int(inner.size + ncol), ncol, inner, v_bnd[kk], null[kk, :, qq])
 
 
 def _local_blocks(ops: CellOperators, space: LocalSpace) -> tuple[np.ndarray, np.ndarray]:
@@ -777,15 +783,21 @@ def stage_one_cell(
 def stage_one(
     ops: CellOperators, topo: _Topology, grid: CoarseGrid, nbasis: int | None,
     min_gap: float | None = None, max_nbasis: int = DEFAULT_MAX_NBASIS, eigensolver: str = "auto",
+    *, comm: MPI.Comm = MPI.COMM_SELF,
 ) -> StageI:
     """Mixed local spectral problems Ã φ + Bᵀp = 0, −Bφ = λ S p on every coarse cell (``stage_one_cell``).
 
     Each cell keeps ``_modes_to_keep`` modes: ``nbasis`` (all if None), raised while the first
     eigenvalue left out is below ``min_gap`` (at most ``max_nbasis``) and to whole clusters.
+    Under ``comm`` the coarse cells are shared out and every rank gets all results.
     """
-    out = [stage_one_cell(ops, topo, grid.cells[k], nbasis, min_gap, max_nbasis, eigensolver)
-           for k in range(grid.size)]
-    return _stage_one_from(out)
+    mine = _share(np.array([len(c) for c in grid.cells], dtype=float), comm)
+    results = {}
+    with Progress(mine.size, "mixed CEM Stage I (coarse cells)", comm=comm, logger=log) as bar:
+        for k in mine:
+            results[int(k)] = stage_one_cell(ops, topo, grid.cells[k], nbasis, min_gap, max_nbasis, eigensolver)
+            bar.update()
+    return _stage_one_from(_gather(results, grid.size, comm))
 
 
 def _stage_one_from(out: list) -> StageI:
@@ -799,13 +811,63 @@ def _stage_one_from(out: list) -> StageI:
 # Stage II and the correction
 # ---------------------------------------------------------------------------------------
 @dataclass(slots=True)
-class PatchFunctions:
-    """Functions on one patch: stresses (|ω|, 30, k), displacements (|ω|, 6, k) and their global indices."""
+class CoarseCellDofs:
+    """Per coarse cell K: its fine cells (sorted) and the AW DOFs touching them (sorted).
 
-    cells: np.ndarray
-    sigma: np.ndarray
-    u: np.ndarray
+    A stress supported on a patch is stored, on each coarse cell K of the patch, by its coefficients
+    in the AW functions touching K (restricted to K): on K it is P_K c_K with P_K = P[rows of K][:, aw_K]
+    (``p_blocks``).  These are about 11 numbers per fine cell instead of the 30 of DG P3.
+    """
+
+    cells: list  #: sorted fine cells of each K
+    aw: list  #: sorted AW DOFs touching K
+    slots: list  #: (|K|, w): position in aw of each column of ops.P_cols[cells] (−1 for padding)
+
+    @classmethod
+    def of(cls, ops: CellOperators, grid: CoarseGrid) -> "CoarseCellDofs":
+        cells, aw, slots = [], [], []
+        for k in range(grid.size):
+            ck = np.sort(np.asarray(grid.cells[k], dtype=np.int64))
+            pc = ops.P_cols[ck]
+            awk = np.unique(pc[pc >= 0])
+            cells.append(ck)
+            aw.append(awk)
+            slots.append(np.where(pc >= 0, np.searchsorted(awk, np.maximum(pc, 0)), -1))
+        return cls(cells, aw, slots)
+
+    def P(self, ops: CellOperators, k: int) -> sp.csr_matrix:
+        """P_K (30|K| × |aw_K|): the AW functions touching K, restricted to K, cell-major."""
+        blocks, slots = ops.P_blocks[self.cells[k]], self.slots[k]
+        nc, a, w = blocks.shape
+        rows = np.broadcast_to((a * np.arange(nc)[:, None, None] + np.arange(a)[None, :, None]), blocks.shape)
+        cols = np.broadcast_to(slots[:, None, :], blocks.shape)
+        keep = (cols >= 0) & (blocks != 0.0)
+        return sp.csr_matrix((blocks[keep], (rows[keep], cols[keep])), shape=(a * nc, self.aw[k].size))
+
+    def dg(self, ops: CellOperators, k: int, c: np.ndarray) -> np.ndarray:
+        """The cell-major DG P3 values (|K|, 30, ...) of AW coefficients c (|aw_K|, ...) on K."""
+        slots = self.slots[k]
+        cc = np.where((slots >= 0).reshape(slots.shape + (1,) * (c.ndim - 1)), c[np.maximum(slots, 0)], 0.0)
+        return np.einsum("cab,cb...->ca...", ops.P_blocks[self.cells[k]], cc)
+
+
+@dataclass(slots=True)
+class PatchFunctions:
+    """Functions on one patch, stored per coarse cell of the patch (``CoarseCellDofs``).
+
+    sigma[j]: AW coefficients (|aw_K|, k) on coarse cell K = coarse[j]; u[j]: displacements
+    (6|K|, k), cell-major on K's sorted cells; index: the global function indices (aux index for
+    basis functions, data index for correctors).
+    """
+
+    coarse: np.ndarray
     index: np.ndarray
+    sigma: list
+    u: list
+
+    @property
+    def nbytes(self) -> int:
+        return sum(a.nbytes for a in self.sigma) + sum(a.nbytes for a in self.u)
 
 
 def _patch_system(ops: CellOperators, topo: _Topology, grid: CoarseGrid, aux: StageI, patch: np.ndarray):
@@ -839,9 +901,7 @@ def _patch_system(ops: CellOperators, topo: _Topology, grid: CoarseGrid, aux: St
     cols = np.concatenate([ac, bc, n_loc + br, n_loc + n_u + zc, n_loc + zr, eye])
     vals = np.concatenate([av, bv, bv, -zv, -zv, np.ones(col)])
     n_tot = n_loc + n_u + col
-    A = sp.csr_matrix((vals, (rows, cols)), shape=(n_tot, n_tot))
-    A.eliminate_zeros()
-    lu = _MumpsLU(A)
+    lu = _MumpsLU.from_coo(rows, cols, vals, n_tot)
     return space, lu, Z, aux_cols, n_loc, n_u
 
 
@@ -852,8 +912,8 @@ class _MumpsLU:
     factorization time of MUMPS' automatic choice (METIS); Cholesky (LDLᵀ) was 2–4× slower.
     """
 
-    def __init__(self, A: sp.spmatrix) -> None:
-        self.mat = scipy_to_petsc(A)
+    def __init__(self, mat: PETSc.Mat) -> None:
+        self.mat = mat
         self.ksp = PETSc.KSP().create(PETSc.COMM_SELF)
         self.ksp.setOperators(self.mat)
         self.ksp.setType("preonly")
@@ -864,7 +924,18 @@ class _MumpsLU:
         pc.getFactorMatrix().setMumpsIcntl(7, 0)
         self.ksp.setUp()
         if self.ksp.getConvergedReason() < 0 or pc.getFailedReason() != 0:
-            raise RuntimeError(f"MUMPS failed to factorize a local mixed CEM problem (reason {pc.getFailedReason()})")
+            raise ConvergenceError(
+                f"MUMPS failed to factorize a local mixed CEM problem (reason {pc.getFailedReason()})"
+            )
+
+    @classmethod
+    def from_coo(cls, rows: np.ndarray, cols: np.ndarray, vals: np.ndarray, n: int) -> "_MumpsLU":
+        """Factorize the n × n matrix of COO triplets (duplicates summed, by PETSc)."""
+        mat = PETSc.Mat().createAIJ((n, n), comm=PETSc.COMM_SELF)
+        mat.setPreallocationCOO(rows.astype(PETSc.IntType), cols.astype(PETSc.IntType))
+        mat.setValuesCOO(vals.astype(PETSc.ScalarType), addv=PETSc.InsertMode.INSERT_VALUES)
+        mat.assemble()
+        return cls(mat)
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:
         """A⁻¹ rhs for all columns at once (one MatMatSolve)."""
@@ -877,11 +948,14 @@ class _MumpsLU:
             self.ksp.matSolve(B, X)
             if self.ksp.getConvergedReason() < 0:
                 reason = self.ksp.getConvergedReason()
-                raise RuntimeError(f"MUMPS failed on a local mixed CEM problem (reason {reason})")
-            return X.getDenseArray().copy()
+                raise ConvergenceError(f"MUMPS failed on a local mixed CEM problem (reason {reason})")
+            out = X.getDenseArray().copy()
         finally:
             B.destroy()
             X.destroy()
+        if not np.all(np.isfinite(out)):
+            raise ConvergenceError("a local mixed CEM solve produced non-finite values")
+        return out
 
     def destroy(self) -> None:
         for obj in (self.ksp, self.mat):
@@ -889,6 +963,7 @@ class _MumpsLU:
 
 
 def _unpack(space: LocalSpace, x: np.ndarray, n_loc: int, n_u: int) -> tuple[np.ndarray, np.ndarray]:
+    """Cell-major DG stresses (|ω|, 30, k) and displacements (|ω|, 6, k) of patch solutions x."""
     k = x.shape[1]
     nc = space.cells.size
     sigma = space.apply(x[:n_loc])
@@ -896,50 +971,129 @@ def _unpack(space: LocalSpace, x: np.ndarray, n_loc: int, n_u: int) -> tuple[np.
     return sigma, u
 
 
-def stage_two(
-    ops: CellOperators, topo: _Topology, grid: CoarseGrid, aux: StageI, layers: int, source: bool = True
-) -> tuple[list[PatchFunctions], list[PatchFunctions]]:
-    """Basis functions ψ_j^i (index = aux index) and data correctors (index = data index).
+def _aw_map(space: LocalSpace, aw: np.ndarray) -> sp.csr_matrix:
+    """(|aw| × dim X_h(ω)): AW coefficients (on the sorted DOFs ``aw``) of the local basis functions.
 
-    The data are d = [g; 1]: the γ values g (index 0..n_g−1; Robin correctors Q_i, N_i on the
-    patches of the coarse cells touching γ) and, with ``source``, the load (index n_g; the source
-    correctors of the coarse cells where f ≠ 0).  A coarse cell's data correctors share one
-    ``PatchFunctions``.
+    Inner functions are AW functions (one coefficient 1); an inner-boundary vertex function with
+    value z is Σ_i z_i (AW function 3v + i) restricted to ω.
     """
-    basis, corr = [], []
+    rows = [np.searchsorted(aw, space.aw_inner)]
+    cols = [np.arange(space.aw_inner.size)]
+    vals = [np.ones(space.aw_inner.size)]
+    if space.num_extra:
+        ext = space.aw_inner.size + np.arange(space.num_extra)
+        for i in range(3):
+            rows.append(np.searchsorted(aw, 3 * space.extra_vertex + i))
+            cols.append(ext)
+            vals.append(space.extra_z[:, i])
+    rows, cols, vals = np.concatenate(rows), np.concatenate(cols), np.concatenate(vals)
+    keep = vals != 0.0
+    return sp.csr_matrix((vals[keep], (rows[keep], cols[keep])), shape=(aw.size, space.size))
+
+
+def _split_by_coarse(
+    dofs: CoarseCellDofs, patch: np.ndarray, space: LocalSpace, aw: np.ndarray, T: sp.csr_matrix, x: np.ndarray,
+    n_loc: int, n_u: int,
+) -> tuple[list, list]:
+    """Patch solutions x → per coarse cell of the patch: (AW coefficients, displacements); T = _aw_map(space, aw)."""
+    a = T @ x[:n_loc]
+    xu = x[n_loc : n_loc + n_u]
+    sig, dis = [], []
+    for j in patch:
+        sig.append(np.ascontiguousarray(a[np.searchsorted(aw, dofs.aw[j])]))
+        dis.append(np.ascontiguousarray(xu[_rows(np.searchsorted(space.cells, dofs.cells[j]), 6)]))
+    return sig, dis
+
+
+def _patch_functions(
+    ops: CellOperators, topo: _Topology, grid: CoarseGrid, dofs: CoarseCellDofs, aux: StageI, i: int,
+    layers: int, source: bool,
+) -> tuple[PatchFunctions, PatchFunctions | None]:
+    """The Stage II basis functions ψ_j^i and the data correctors of coarse cell i on K_{i,m}."""
     n_g = ops.num_gamma_values
-    for i in range(grid.size):
-        patch = grid.patch(i, layers)
-        space, lu, Z, aux_cols, n_loc, n_u = _patch_system(ops, topo, grid, aux, patch)
+    patch = np.sort(np.asarray(grid.patch(i, layers), dtype=np.int64))
+    space, lu, Z, aux_cols, n_loc, n_u = _patch_system(ops, topo, grid, aux, patch)
+    try:
         n_tot = n_loc + n_u + Z.shape[1]
         li = aux.modes[i].shape[2]
-        ci = np.sort(grid.cells[i].astype(np.int64))
+        ci = dofs.cells[i]
         pos = np.searchsorted(space.cells, ci)
         c0 = aux_cols[int(i)]
-        # Robin data on γ ∩ ∂K_i: C_i g in the τ rows
+        # Robin data on γ ∩ ∂K_i: C_i g in the τ rows, mapped to the local basis through the AW coefficients
         Ci = ops.C[_rows(ci, 30)]
         gcols = np.unique(Ci.indices)
         load = source and bool(np.any(ops.G[ci] != 0.0))
         nd = gcols.size + int(load)
         rhs = np.zeros((n_tot, li + nd))
         rhs[n_loc : n_loc + n_u, :li] = -Z[:, c0 : c0 + li].toarray()
+        aw = np.unique(np.concatenate([dofs.aw[j] for j in patch]))  # the AW functions touching the patch
+        T = _aw_map(space, aw)
         if gcols.size:
-            coo = Ci[:, gcols].tocoo()
-            Cpatch = sp.csr_matrix((coo.data, (_rows(pos, 30)[coo.row], coo.col)),
-                                   shape=(30 * space.cells.size, gcols.size))
-            rhs[:n_loc, li : li + gcols.size] = (space.L.T @ Cpatch).toarray()
+            Caw = dofs.P(ops, i).T @ Ci[:, gcols]  # (|aw_K_i|, n) sparse
+            rhs[:n_loc, li : li + gcols.size] = (T[np.searchsorted(aw, dofs.aw[i])].T @ Caw).toarray()
         if load:
             # −(div ψ, v) + s(πq, πv) = (f χ_{K_i}, v): Bψ − Zy = −F_i = G on K_i
             rhs[n_loc + _rows(pos, 6), -1] = ops.G[ci].ravel()
         sol = lu.solve(rhs)
+    finally:
         lu.destroy()
-        sigma, u = _unpack(space, sol, n_loc, n_u)
-        basis.append(PatchFunctions(space.cells, sigma[:, :, :li].copy(), u[:, :, :li].copy(),
-                                    aux.offsets[i] + np.arange(li)))
-        if nd:
-            index = np.concatenate([gcols, [n_g]]) if load else gcols
-            corr.append(PatchFunctions(space.cells, sigma[:, :, li:].copy(), u[:, :, li:].copy(), index))
+    sig, dis = _split_by_coarse(dofs, patch, space, aw, T, sol, n_loc, n_u)
+    basis = PatchFunctions(patch, aux.offsets[i] + np.arange(li), [s[:, :li] for s in sig], [d[:, :li] for d in dis])
+    if not nd:
+        return basis, None
+    index = np.concatenate([gcols, [n_g]]) if load else gcols
+    corr = PatchFunctions(patch, index, [np.ascontiguousarray(s[:, li:]) for s in sig],
+                          [np.ascontiguousarray(d[:, li:]) for d in dis])
     return basis, corr
+
+
+def stage_two(
+    ops: CellOperators, topo: _Topology, grid: CoarseGrid, aux: StageI, layers: int, source: bool = True,
+    *, dofs: CoarseCellDofs | None = None, comm: MPI.Comm = MPI.COMM_SELF,
+) -> tuple[list[PatchFunctions], list[PatchFunctions]]:
+    """Basis functions ψ_j^i (index = aux index) and data correctors (index = data index), per coarse cell.
+
+    The data are d = [g; 1]: the γ values g (index 0..n_g−1; Robin correctors Q_i, N_i on the
+    patches of the coarse cells touching γ) and, with ``source``, the load (index n_g; the source
+    correctors of the coarse cells where f ≠ 0).  ``corr[i]`` is None for a cell with neither.
+    Under ``comm`` the patches are shared out (``_share``) and every rank gets all results.
+    """
+    dofs = dofs or CoarseCellDofs.of(ops, grid)
+    mine = _share(np.array([grid.patch(i, layers).size for i in range(grid.size)], dtype=float), comm)
+    results = {}
+    with Progress(mine.size, "mixed CEM Stage II (patches)", comm=comm, logger=log) as bar:
+        for i in mine:
+            results[int(i)] = _patch_functions(ops, topo, grid, dofs, aux, int(i), layers, source)
+            bar.update()
+    out = _gather(results, grid.size, comm)
+    return [b for b, _ in out], [c for _, c in out]
+
+
+def _share(cost: np.ndarray, comm: MPI.Comm) -> np.ndarray:
+    """The items this rank computes: greedy by decreasing cost onto the least loaded rank (all ranks agree)."""
+    if comm.size == 1:
+        return np.arange(cost.size)
+    load = np.zeros(comm.size)
+    owner = np.empty(cost.size, dtype=np.int64)
+    for k in np.argsort(-cost, kind="stable"):
+        r = int(np.argmin(load))
+        owner[k] = r
+        load[r] += cost[k]
+    return np.flatnonzero(owner == comm.rank)
+
+
+def _gather(results: dict, n: int, comm: MPI.Comm) -> list:
+    """The list of all n items, computed by the ranks as dicts {index: item} (each item once)."""
+    if comm.size == 1:
+        return [results[i] for i in range(n)]
+    owners = comm.allgather(sorted(results))
+    out = [None] * n
+    for rank, keys in enumerate(owners):
+        for k in keys:
+            out[k] = comm.bcast(results[k] if rank == comm.rank else None, root=rank)
+    if any(o is None for o in out) and n:
+        raise RuntimeError("an offline item was computed by no rank")
+    return out
 
 
 def stage_one_of(
@@ -950,6 +1104,27 @@ def stage_one_of(
     topo = _Topology(sub.mesh, ops.P.shape[1])
     return ops, topo, stage_one(ops, topo, grid, options.nbasis, options.min_gap, options.max_nbasis,
                                 options.eigensolver)
+
+
+def _cell_coarse(grid: CoarseGrid) -> np.ndarray:
+    """The coarse cell of each fine Ω₁ cell."""
+    out = np.full(sum(len(c) for c in grid.cells), -1, dtype=np.int64)
+    for k in range(grid.size):
+        out[np.asarray(grid.cells[k], dtype=np.int64)] = k
+    return out
+
+
+def _coarse_distance(grid: CoarseGrid, k: int) -> np.ndarray:
+    """Layers from coarse cell k: the least m with K_j in K_{k,m}, for every coarse cell j."""
+    dist = np.full(grid.size, -1, dtype=np.int64)
+    m = 0
+    while np.any(dist < 0):
+        reached = np.asarray(grid.patch(k, m), dtype=np.int64)
+        dist[reached[dist[reached] < 0]] = m
+        m += 1
+        if m > grid.size:
+            raise RuntimeError("the coarse patches do not reach every coarse cell")
+    return dist
 
 
 def basis_decay_profile(ops: CellOperators, topo: _Topology, grid: CoarseGrid, aux: StageI, k: int) -> np.ndarray:
@@ -968,7 +1143,7 @@ def basis_decay_profile(ops: CellOperators, topo: _Topology, grid: CoarseGrid, a
     finally:
         lu.destroy()
     energy = np.einsum("cak,cab,cbk->ck", sigma, ops.K[space.cells], sigma)
-    dist = np.abs(grid.ij[grid.cell_coarse[space.cells]] - grid.ij[k]).max(axis=1)
+    dist = _coarse_distance(grid, k)[_cell_coarse(grid)[space.cells]]
     total = energy.sum(axis=0)
     return np.array([np.sqrt(energy[dist >= d].sum(axis=0) / total).max() for d in range(1, int(dist.max()) + 1)])
 
@@ -1001,9 +1176,13 @@ class CoarseOperators:
         """Number of data columns: n_g γ values and the load."""
         return self.n_g + 1
 
+    def __add__(self, other: "CoarseOperators") -> "CoarseOperators":
+        names = ("Gt", "Gk", "Bm", "BN", "Cphi", "Ephi", "Mu", "PiG")
+        return CoarseOperators(self.n_ms, self.n_aux, self.n_g, *(getattr(self, n) + getattr(other, n) for n in names))
+
 
 def _merge_columns(X: np.ndarray, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Sum the columns (last axis) of X with equal index: (unique indices, merged X)."""
+    """Sum the columns (last axis) of X with equal index: (sorted unique indices, merged X)."""
     uniq, inv = np.unique(idx, return_inverse=True)
     if uniq.size == idx.size:
         return uniq, X[..., np.argsort(inv)] if np.any(np.diff(idx) < 0) else X
@@ -1012,10 +1191,27 @@ def _merge_columns(X: np.ndarray, idx: np.ndarray) -> tuple[np.ndarray, np.ndarr
     return uniq, out
 
 
+def _reaching(funcs: list, n: int) -> list:
+    """For each coarse cell K: the (PatchFunctions, position of K in it) of the functions reaching K."""
+    out = [[] for _ in range(n)]
+    for f in funcs:
+        if f is None:
+            continue
+        for pos, K in enumerate(f.coarse):
+            out[int(K)].append((f, pos))
+    return out
+
+
 def coarse_operators(
-    ops: CellOperators, grid: CoarseGrid, aux: StageI, basis: list, corr: list, layers: int
+    ops: CellOperators, grid: CoarseGrid, aux: StageI, basis: list, corr: list, *,
+    dofs: CoarseCellDofs | None = None, comm: MPI.Comm = MPI.COMM_SELF,
 ) -> CoarseOperators:
-    """Accumulate the coarse matrices coarse cell by coarse cell from the patch functions reaching it."""
+    """Accumulate the coarse matrices coarse cell by coarse cell from the patch functions reaching it.
+
+    On K the stresses are P_K F (F: their AW coefficients on K), so ΦᵀÃΦ|_K = Fᵀ (P_Kᵀ Ã_K P_K) F etc.
+    Under ``comm`` the coarse cells are shared out and the matrices summed.
+    """
+    dofs = dofs or CoarseCellDofs.of(ops, grid)
     n_ms, n_g = aux.size, ops.num_gamma_values
     n_d = n_g + 1
     n_tot = n_ms + n_d
@@ -1027,50 +1223,52 @@ def coarse_operators(
     Ephi = np.zeros((n_g, n_tot))
     Mu = np.zeros((aux.size + n_d, aux.size + n_d))
     PiG = np.zeros(aux.size)
-    gamma_set = set(ops.gamma_cells.tolist())
-    for K in range(grid.size):
-        cK = np.sort(grid.cells[K].astype(np.int64))
-        funcs = [basis[i] for i in grid.patch(K, layers)]
-        qs = [c for c in corr if _contains(c.cells, cK[0])]
-        sig, idx, uq, gidx = [], [], [], []
-        for f in funcs:
-            pos = np.searchsorted(f.cells, cK)
-            sig.append(f.sigma[pos])
-            idx.append(f.index)
-        for q in qs:
-            pos = np.searchsorted(q.cells, cK)
-            sig.append(q.sigma[pos])
-            idx.append(n_ms + q.index)
-            uq.append(q.u[pos])
-            gidx.append(q.index)
-        uniq, Phi = _merge_columns(np.concatenate(sig, axis=2), np.concatenate(idx))
-        nf = uniq.size
-        F = Phi.reshape(-1, nf)
-        KtP = np.einsum("cab,cbk->cak", ops.Kt[cK], Phi).reshape(-1, nf)
-        KP = np.einsum("cab,cbk->cak", ops.K[cK], Phi).reshape(-1, nf)
-        BP = np.einsum("cab,cbk->cak", ops.B[cK], Phi).reshape(-1, nf)
-        ix = np.ix_(uniq, uniq)
-        Gt[ix] += F.T @ KtP
-        Gk[ix] += F.T @ KP
-        a0, a1 = aux.offsets[K], aux.offsets[K + 1]
-        Pi = aux.modes[K].reshape(-1, a1 - a0)
-        Mb = sla.block_diag(*ops.M[cK])
-        Bm[a0:a1, uniq] += Pi.T @ BP
-        Mu[a0:a1, a0:a1] += Pi.T @ Mb @ Pi
-        PiG[a0:a1] += Pi.T @ ops.G[cK].ravel()
-        if uq:
-            gu, Nu = _merge_columns(np.concatenate(uq, axis=2), np.concatenate(gidx))
-            Nu = Nu.reshape(-1, gu.size)
-            BN[np.ix_(uniq, gu)] += BP.T @ Nu
-            PMN = Pi.T @ Mb @ Nu
-            Mu[np.ix_(np.arange(a0, a1), aux.size + gu)] += PMN
-            Mu[np.ix_(aux.size + gu, np.arange(a0, a1))] += PMN.T
-            Mu[np.ix_(aux.size + gu, aux.size + gu)] += Nu.T @ Mb @ Nu
-        if gamma_set.intersection(cK.tolist()):
-            rows = _rows(cK, 30)
-            Cphi[uniq] += (ops.C[rows].T @ F).T
-            Ephi[:, uniq] += ops.E[:, rows] @ F
-    return CoarseOperators(n_ms, aux.size, n_g, Gt, Gk, Bm, BN, Cphi, Ephi, Mu, PiG)
+    gamma = np.zeros(ops.num_cells, dtype=bool)
+    gamma[ops.gamma_cells] = True
+    reach_b, reach_c = _reaching(basis, grid.size), _reaching(corr, grid.size)
+    mine = _share(np.array([len(reach_b[K]) + len(reach_c[K]) for K in range(grid.size)], dtype=float), comm)
+    with Progress(mine.size, "mixed CEM coarse operators", comm=comm, logger=log) as bar:
+        for K in mine:
+            cK = dofs.cells[K]
+            sig = [f.sigma[p] for f, p in reach_b[K]] + [q.sigma[p] for q, p in reach_c[K]]
+            idx = [f.index for f, _ in reach_b[K]] + [n_ms + q.index for q, _ in reach_c[K]]
+            uniq, F = _merge_columns(np.concatenate(sig, axis=1), np.concatenate(idx))
+            PK = dofs.P(ops, K)
+            ix = np.ix_(uniq, uniq)
+            PF = (PK @ F).reshape(cK.size, 30, -1)  # cell-major DG values on K
+            KtF = PK.T @ np.einsum("cab,cbk->cak", ops.Kt[cK], PF).reshape(30 * cK.size, -1)
+            KF = PK.T @ np.einsum("cab,cbk->cak", ops.K[cK], PF).reshape(30 * cK.size, -1)
+            Gt[ix] += F.T @ KtF
+            Gk[ix] += F.T @ KF
+            BP = np.einsum("cab,cbk->cak", ops.B[cK], PF).reshape(6 * cK.size, -1)
+            a0, a1 = aux.offsets[K], aux.offsets[K + 1]
+            Pi = aux.modes[K].reshape(-1, a1 - a0)
+            MPi = np.einsum("cab,cbk->cak", ops.M[cK], aux.modes[K]).reshape(-1, a1 - a0)
+            Bm[a0:a1, uniq] += Pi.T @ BP
+            Mu[a0:a1, a0:a1] += Pi.T @ MPi
+            PiG[a0:a1] += Pi.T @ ops.G[cK].ravel()
+            if reach_c[K]:
+                gu, Nu = _merge_columns(np.concatenate([q.u[p] for q, p in reach_c[K]], axis=1),
+                                        np.concatenate([q.index for q, _ in reach_c[K]]))
+                MNu = np.einsum("cab,cbk->cak", ops.M[cK], Nu.reshape(cK.size, 6, -1)).reshape(6 * cK.size, -1)
+                BN[np.ix_(uniq, gu)] += BP.T @ Nu
+                PMN = MPi.T @ Nu
+                du = aux.size + gu
+                Mu[np.ix_(np.arange(a0, a1), du)] += PMN
+                Mu[np.ix_(du, np.arange(a0, a1))] += PMN.T
+                Mu[np.ix_(du, du)] += Nu.T @ MNu
+            if gamma[cK].any():
+                rows = _rows(cK, 30)
+                PFf = PF.reshape(30 * cK.size, -1)
+                Cphi[uniq] += (ops.C[rows].T @ PFf).T
+                Ephi[:, uniq] += ops.E[:, rows] @ PFf
+            bar.update()
+    co = CoarseOperators(n_ms, aux.size, n_g, Gt, Gk, Bm, BN, Cphi, Ephi, Mu, PiG)
+    if comm.size > 1:
+        for name in ("Gt", "Gk", "Bm", "BN", "Cphi", "Ephi", "Mu", "PiG"):
+            arr = getattr(co, name)
+            comm.Allreduce(MPI.IN_PLACE, arr, op=MPI.SUM)
+    return co
 
 
 # ---------------------------------------------------------------------------------------
@@ -1081,18 +1279,21 @@ class OfflineData(NamedTuple):
 
     aux: StageI
     basis: list  #: PatchFunctions ψ_j^i per coarse cell i
-    corr: list  #: PatchFunctions Q_i, N_i per coarse cell touching γ
+    corr: list  #: PatchFunctions of the data correctors per coarse cell (None: no γ facet, no load)
     co: CoarseOperators
 
 
 _COARSE_ARRAYS = ("Gt", "Gk", "Bm", "BN", "Cphi", "Ephi", "Mu", "PiG")
+#: Stored precision of the patch functions (AW coefficients, displacements) in the cache: they serve
+#: only the fine output fields (relative rounding 6e-8); U_aux and the coarse matrices are float64.
+_FUNCTION_DTYPE = np.float32
 
 
 def mixed_offline_key(sub, ops: CellOperators, grid: CoarseGrid, options: MixedCEMOptions, *, H: float) -> str:
     """sha256 of everything the mixed offline data depend on.
 
-    Mesh geometry and cells of Ω₁, facet tags, λ, μ, f, β, H, the coarse grid, every
-    ``MixedCEMOptions`` field, the cache format and the package version, and (catching
+    Mesh geometry and cells of Ω₁, facet tags, λ, μ, f, β, H, the coarse cells and their patches,
+    every ``MixedCEMOptions`` field, the cache format and the package version, and (catching
     what these miss, e.g. a changed form) the cell operators assembled from them.
     """
     hasher = hashlib.sha256()
@@ -1101,12 +1302,12 @@ def mixed_offline_key(sub, ops: CellOperators, grid: CoarseGrid, options: MixedC
         "version": __version__,
         "H": repr(float(H)),
         "beta": repr(float(sub.beta)),
-        "n_coarse": grid.n_coarse,
-        "grid_H": repr(float(grid.H)),
+        "num_coarse": int(grid.size),
         "options": {name: getattr(options, name) for name in sorted(f.name for f in fields(options))},
     }
     hasher.update(json.dumps(meta, sort_keys=True).encode())
     msh, ft, fld = sub.mesh, sub.facet_tags, sub.fields
+    patches = [np.sort(np.asarray(grid.patch(k, options.layers), dtype=np.int64)) for k in range(grid.size)]
     arrays = {
         "x": msh.geometry.x,
         "cells": msh.geometry.dofmaps[0],
@@ -1116,9 +1317,10 @@ def mixed_offline_key(sub, ops: CellOperators, grid: CoarseGrid, options: MixedC
         "mu": fld.mu.x.array,
         "f": fld.f.x.array,
         "gamma_points": sub.gamma_points,
-        "grid_ij": grid.ij,
-        "grid_global_index": grid.global_index,
-        "grid_cell_coarse": grid.cell_coarse,
+        "coarse_cells": np.concatenate([np.sort(np.asarray(c, dtype=np.int64)) for c in grid.cells]),
+        "coarse_sizes": np.array([len(c) for c in grid.cells], dtype=np.int64),
+        "patches": np.concatenate(patches),
+        "patch_sizes": np.array([p.size for p in patches], dtype=np.int64),
     }
     for name in ("K", "Kt", "B", "M", "S", "G", "dg_rows", "u_rows"):
         arrays[f"ops_{name}"] = getattr(ops, name)
@@ -1136,26 +1338,25 @@ def _concat(parts: list, dtype) -> np.ndarray:
     return np.concatenate([np.asarray(p, dtype=dtype).ravel() for p in parts]) if parts else np.zeros(0, dtype)
 
 
-def _pack_offline(data: OfflineData) -> dict:
+def _pack_offline(data: OfflineData):
+    """(name, array) pairs in sorted name order, one patch at a time (no second copy of the functions)."""
     aux, co = data.aux, data.co
-    out = {
-        "aux_offsets": np.asarray(aux.offsets, dtype=np.int64),
-        "aux_values": _concat(aux.values, np.float64),
-        "aux_modes": _concat(aux.modes, np.float64),
-        "aux_residuals": np.asarray(aux.residuals, dtype=np.float64),
-        "aux_gaps": np.asarray(aux.gaps, dtype=np.float64),
-        "co_sizes": np.array([co.n_ms, co.n_aux, co.n_g], dtype=np.int64),
-    }
-    for name, funcs in (("basis", data.basis), ("corr", data.corr)):
-        out[f"{name}_num_cells"] = np.array([f.cells.size for f in funcs], dtype=np.int64)
-        out[f"{name}_num_functions"] = np.array([f.index.size for f in funcs], dtype=np.int64)
-        out[f"{name}_cells"] = _concat([f.cells for f in funcs], np.int64)
-        out[f"{name}_index"] = _concat([f.index for f in funcs], np.int64)
-        out[f"{name}_sigma"] = _concat([f.sigma for f in funcs], np.float64)
-        out[f"{name}_u"] = _concat([f.u for f in funcs], np.float64)
-    for name in _COARSE_ARRAYS:
-        out[f"co_{name}"] = getattr(co, name)
-    return out
+    yield "aux_gaps", np.asarray(aux.gaps, dtype=np.float64)
+    yield "aux_modes", _concat(aux.modes, np.float64)
+    yield "aux_offsets", np.asarray(aux.offsets, dtype=np.int64)
+    yield "aux_residuals", np.asarray(aux.residuals, dtype=np.float64)
+    yield "aux_values", _concat(aux.values, np.float64)
+    for name in sorted(_COARSE_ARRAYS):
+        yield f"co_{name}", getattr(co, name)
+    yield "co_sizes", np.array([co.n_ms, co.n_aux, co.n_g], dtype=np.int64)
+    for kind, funcs in (("b", data.basis), ("c", data.corr)):
+        for i, f in enumerate(funcs):
+            if f is None:
+                continue
+            yield f"fn_{kind}_{i:07d}_coarse", np.asarray(f.coarse, dtype=np.int64)
+            yield f"fn_{kind}_{i:07d}_index", np.asarray(f.index, dtype=np.int64)
+            yield f"fn_{kind}_{i:07d}_sigma", _concat(f.sigma, _FUNCTION_DTYPE)
+            yield f"fn_{kind}_{i:07d}_u", _concat(f.u, _FUNCTION_DTYPE)
 
 
 def _split(flat: np.ndarray, sizes: np.ndarray, what: str) -> list:
@@ -1164,31 +1365,37 @@ def _split(flat: np.ndarray, sizes: np.ndarray, what: str) -> list:
     return np.split(flat, np.cumsum(sizes)[:-1]) if sizes.size else []
 
 
+def _unpack_functions(arrays: dict, prefix: str, dofs: CoarseCellDofs, n_index: int) -> PatchFunctions:
+    coarse, index = arrays.pop(f"{prefix}_coarse"), arrays.pop(f"{prefix}_index")
+    if coarse.size == 0 or coarse.min() < 0 or coarse.max() >= len(dofs.cells) or np.any(np.diff(coarse) <= 0):
+        raise ValueError(f"cached {prefix}: invalid coarse cells")
+    if index.size == 0 or index.min() < 0 or index.max() >= n_index:
+        raise ValueError(f"cached {prefix}: invalid function indices")
+    k = index.size
+    na = np.array([dofs.aw[K].size for K in coarse])
+    nu = np.array([6 * dofs.cells[K].size for K in coarse])
+    sig = _split(arrays.pop(f"{prefix}_sigma"), na * k, f"{prefix} stresses")
+    dis = _split(arrays.pop(f"{prefix}_u"), nu * k, f"{prefix} displacements")
+    return PatchFunctions(coarse, index, [s.astype(np.float64).reshape(-1, k) for s in sig],
+                          [d.astype(np.float64).reshape(-1, k) for d in dis])
+
+
 def _unpack_offline(arrays: dict, ops: CellOperators, grid: CoarseGrid) -> OfflineData:
     offsets = arrays["aux_offsets"]
     if offsets.shape != (grid.size + 1,) or offsets[0] != 0 or np.any(np.diff(offsets) < 0):
         raise ValueError("cached U_aux does not match the coarse grid")
     nk = np.diff(offsets)
-    ncell = np.array([c.size for c in grid.cells], dtype=np.int64)
+    ncell = np.array([len(c) for c in grid.cells], dtype=np.int64)
     values = _split(arrays["aux_values"], nk, "eigenvalues")
     modes = [m.reshape(nc, 6, k) for m, nc, k in zip(_split(arrays["aux_modes"], 6 * ncell * nk, "modes"), ncell, nk)]
     aux = StageI(values, modes, offsets, arrays["aux_residuals"], arrays["aux_gaps"])
-    funcs = {}
-    for name in ("basis", "corr"):
-        nc, nf = arrays[f"{name}_num_cells"], arrays[f"{name}_num_functions"]
-        cells = _split(arrays[f"{name}_cells"], nc, f"{name} cells")
-        index = _split(arrays[f"{name}_index"], nf, f"{name} indices")
-        sigma = _split(arrays[f"{name}_sigma"], 30 * nc * nf, f"{name} stresses")
-        u = _split(arrays[f"{name}_u"], 6 * nc * nf, f"{name} displacements")
-        funcs[name] = [
-            PatchFunctions(c, s.reshape(c.size, 30, i.size), v.reshape(c.size, 6, i.size), i)
-            for c, i, s, v in zip(cells, index, sigma, u)
-        ]
-    if len(funcs["basis"]) != grid.size:
-        raise ValueError("cached basis functions do not match the coarse grid")
     n_ms, n_aux, n_g = (int(s) for s in arrays["co_sizes"])
     if n_ms != aux.size or n_aux != aux.size or n_g != ops.num_gamma_values:
         raise ValueError("cached coarse operators do not match U_aux or the interface")
+    dofs = CoarseCellDofs.of(ops, grid)
+    basis = [_unpack_functions(arrays, f"fn_b_{i:07d}", dofs, n_ms) for i in range(grid.size)]
+    corr = [_unpack_functions(arrays, f"fn_c_{i:07d}", dofs, n_g + 1) if f"fn_c_{i:07d}_index" in arrays else None
+            for i in range(grid.size)]
     mats = {name: arrays[f"co_{name}"] for name in _COARSE_ARRAYS}
     n_d = n_g + 1
     n = n_ms + n_d
@@ -1197,16 +1404,16 @@ def _unpack_offline(arrays: dict, ops: CellOperators, grid: CoarseGrid) -> Offli
     for name, shape in shapes.items():
         if mats[name].shape != shape:
             raise ValueError(f"cached coarse matrix {name} has shape {mats[name].shape}, expected {shape}")
-    return OfflineData(aux, funcs["basis"], funcs["corr"], CoarseOperators(n_ms, n_aux, n_g, **mats))
+    return OfflineData(aux, basis, corr, CoarseOperators(n_ms, n_aux, n_g, **mats))
 
 
 class MixedOfflineCache(OfflineCache):
-    """npz files ``mixed_cem_<key>.npz``: ``cache.OfflineCache`` holding ``OfflineData``."""
+    """npz files ``mixed_cem_<key>.npz``: ``cache.OfflineCache`` holding ``OfflineData``, written patch by patch."""
 
     prefix = "mixed_cem"
 
     @staticmethod
-    def pack(obj: OfflineData) -> dict[str, np.ndarray]:
+    def pack(obj: OfflineData):
         return _pack_offline(obj)
 
     @staticmethod
@@ -1299,11 +1506,13 @@ class MixedMultiscaleOmega1:
     """
 
     def __init__(
-        self, sub, grid: CoarseGrid, options: MixedCEMOptions, *, H: float, cache_dir: str | Path | None = None
+        self, sub, grid: CoarseGrid, options: MixedCEMOptions, *, H: float, cache_dir: str | Path | None = None,
+        comm: MPI.Comm = MPI.COMM_SELF,
     ) -> None:
         require_serial(sub.mesh.comm)
         self.options = options
         self.grid = grid
+        self.comm = comm
         self.times: dict[str, float] = {}
         t = time.perf_counter()
         self.ops = cell_operators(sub, H, options.weight, options.s_factor)
@@ -1318,6 +1527,9 @@ class MixedMultiscaleOmega1:
             key = mixed_offline_key(sub, self.ops, grid, options, H=H)
             self.cache_path = cache.path(key)
             data, self.cache_status = cache.load(key, self.ops, grid)
+            statuses = comm.allgather(self.cache_status)  # every rank builds, or none
+            if any(st != "loaded" for st in statuses) and data is not None:
+                data, self.cache_status = None, next(st for st in statuses if st != "loaded")
             if data is not None:
                 self._setup_online(data)
                 self.times["load"] = time.perf_counter() - t
@@ -1327,27 +1539,33 @@ class MixedMultiscaleOmega1:
                     log.warning(
                         "mixed CEM offline cache %s rejected (%s); rebuilding", self.cache_path, self.cache_status
                     )
-                cache.check_writable()
+                if comm.rank == 0:
+                    cache.check_writable()
                 self.cache_status = "built" if self.cache_status == "missing" else f"rebuilt ({self.cache_status})"
         if data is None:
             t = time.perf_counter()
             aux = stage_one(self.ops, self.topo, grid, options.nbasis, options.min_gap, options.max_nbasis,
-                            options.eigensolver)
+                            options.eigensolver, comm=comm)
             self.times["eigen"] = time.perf_counter() - t
             t = time.perf_counter()
-            basis, corr = stage_two(self.ops, self.topo, grid, aux, options.layers, options.source_correction)
+            self.dofs = CoarseCellDofs.of(self.ops, grid)
+            basis, corr = stage_two(self.ops, self.topo, grid, aux, options.layers, options.source_correction,
+                                    dofs=self.dofs, comm=comm)
             self.times["basis"] = time.perf_counter() - t
             t = time.perf_counter()
-            data = OfflineData(aux, basis, corr, coarse_operators(self.ops, grid, aux, basis, corr, options.layers))
+            data = OfflineData(aux, basis, corr, coarse_operators(self.ops, grid, aux, basis, corr, dofs=self.dofs,
+                                                                  comm=comm))
             self._setup_online(data)
             self.times["coarse"] = time.perf_counter() - t
             if cache_dir is not None:
                 t = time.perf_counter()
-                try:
-                    cache.save(key, data)
-                    log.info("mixed CEM offline data written to %s", self.cache_path)
-                except OSError as err:
-                    log.warning("could not write the mixed CEM offline cache %s (%s)", self.cache_path, err)
+                if comm.rank == 0:
+                    try:
+                        cache.save(key, data)
+                        log.info("mixed CEM offline data written to %s", self.cache_path)
+                    except OSError as err:
+                        log.warning("could not write the mixed CEM offline cache %s (%s)", self.cache_path, err)
+                comm.Barrier()
                 self.times["save"] = time.perf_counter() - t
         co = self.co
         lo, hi = self.nbasis_range
@@ -1386,6 +1604,10 @@ class MixedMultiscaleOmega1:
     def _setup_online(self, data: OfflineData) -> None:
         """Keep the offline data; factorize the coarse matrix [[ΨᵀÃΨ, (ΠᵀBΨ)ᵀ], [ΠᵀBΨ, 0]]."""
         self.aux, self.basis, self.corr, self.co = data
+        if getattr(self, "dofs", None) is None:
+            self.dofs = CoarseCellDofs.of(self.ops, self.grid)
+        self._reach_b = _reaching(self.basis, self.grid.size)
+        self._reach_c = _reaching(self.corr, self.grid.size)
         co = self.co
         ms = slice(0, co.n_ms)
         qd = slice(co.n_ms, co.n_ms + co.n_d)
@@ -1433,41 +1655,46 @@ class MixedMultiscaleOmega1:
         return float(x @ self.co.Mu @ x)
 
     # -- fine reconstruction (output, errors, tests) ----------------------------------
+    def _combine(self, K: int, r: np.ndarray | None, d: np.ndarray, part: str) -> np.ndarray:
+        """Σ over the functions reaching K of their ``part`` ('sigma' or 'u') on K times their coefficient."""
+        out = None
+        terms = ([] if r is None else [(f, p, r) for f, p in self._reach_b[K]]) + [(q, p, d) for q, p in self._reach_c[K]]
+        for f, p, coef in terms:
+            x = getattr(f, part)[p] @ coef[f.index]
+            out = x if out is None else out + x
+        return out
+
     def fine_stress(self, r: np.ndarray, g: np.ndarray) -> np.ndarray:
         """σ₁ = Ψ r + Q g + σ_f, cell-major (n_cells, 30)."""
         out = np.zeros((self.ops.num_cells, 30))
         d = self.data(g)
-        for f in self.basis:
-            out[f.cells] += f.sigma @ r[f.index]
-        for q in self.corr:
-            out[q.cells] += q.sigma @ d[q.index]
+        for K in range(self.grid.size):
+            out[self.dofs.cells[K]] = self.dofs.dg(self.ops, K, self._combine(K, r, d, "sigma"))
         return out
 
     def fine_displacement(self, w: np.ndarray, g: np.ndarray) -> np.ndarray:
         """u₁ = Π w + N g + u_f, cell-major (n_cells, 6)."""
         out = np.zeros((self.ops.num_cells, 6))
         d = self.data(g)
-        for k in range(self.grid.size):
-            cells = np.sort(self.grid.cells[k].astype(np.int64))
-            out[cells] += self.aux.modes[k] @ w[self.aux.offsets[k] : self.aux.offsets[k + 1]]
-        for q in self.corr:
-            out[q.cells] += q.u @ d[q.index]
+        for K in range(self.grid.size):
+            cells = self.dofs.cells[K]
+            out[cells] = self.aux.modes[K] @ w[self.aux.offsets[K] : self.aux.offsets[K + 1]]
+            if self._reach_c[K]:
+                out[cells] += self._combine(K, None, d, "u").reshape(-1, 6)
         return out
 
     def fine_displacement_post(self, r: np.ndarray, g: np.ndarray) -> np.ndarray:
-        """Post-processed fine displacement Σ r_j q_j + N g (cell-major (n_cells, 6)).
+        """Post-processed fine displacement Σ r_j q_j + N g + u_f (cell-major (n_cells, 6)).
 
         q_j is the displacement part of the Stage II problem of ψ_j (Ãψ_j + Bᵀq_j = 0), so
-        σ₁ = Ψ r + Q g and this u satisfy the discrete constitutive law (Aσ₁, τ) + (div τ, u) +
-        β∫_γ(σ₁n₁)·(τn₁) = ∫_{γ}g·(τn₁) for τ in every local space; unlike u₁ = Π w + N g
+        σ₁ = Ψ r + Q g + σ_f and this u satisfy the discrete constitutive law (Aσ₁, τ) + (div τ, u) +
+        β∫_γ(σ₁n₁)·(τn₁) = ∫_{γ}g·(τn₁) for τ in every local space; unlike u₁ = Π w + N g + u_f
         (coarse, in U_aux) it resolves the fine scales.
         """
         out = np.zeros((self.ops.num_cells, 6))
         d = self.data(g)
-        for f in self.basis:
-            out[f.cells] += f.u @ r[f.index]
-        for q in self.corr:
-            out[q.cells] += q.u @ d[q.index]
+        for K in range(self.grid.size):
+            out[self.dofs.cells[K]] = self._combine(K, r, d, "u").reshape(-1, 6)
         return out
 
     def a_norm2(self, sigma: np.ndarray) -> float:

@@ -914,6 +914,7 @@ class _MumpsLU:
 
     def __init__(self, mat: PETSc.Mat) -> None:
         self.mat = mat
+        self._arrays = None  # the CSR arrays a matrix made by from_coo shares
         self.ksp = PETSc.KSP().create(PETSc.COMM_SELF)
         self.ksp.setOperators(self.mat)
         self.ksp.setType("preonly")
@@ -930,12 +931,17 @@ class _MumpsLU:
 
     @classmethod
     def from_coo(cls, rows: np.ndarray, cols: np.ndarray, vals: np.ndarray, n: int) -> "_MumpsLU":
-        """Factorize the n × n matrix of COO triplets (duplicates summed, by PETSc)."""
-        mat = PETSc.Mat().createAIJ((n, n), comm=PETSc.COMM_SELF)
-        mat.setPreallocationCOO(rows.astype(PETSc.IntType), cols.astype(PETSc.IntType))
-        mat.setValuesCOO(vals.astype(PETSc.ScalarType), addv=PETSc.InsertMode.INSERT_VALUES)
+        """Factorize the n × n matrix of COO triplets (duplicates summed; SciPy's conversion was 2–4× faster
+        than PETSc's COO assembly here)."""
+        A = sp.csr_matrix((vals, (rows, cols)), shape=(n, n))  # canonical: sorted, duplicates summed
+        A.eliminate_zeros()
+        csr = (A.indptr.astype(PETSc.IntType, copy=False), A.indices.astype(PETSc.IntType, copy=False),
+               A.data.astype(PETSc.ScalarType, copy=False))
+        mat = PETSc.Mat().createAIJWithArrays(A.shape, csr, comm=PETSc.COMM_SELF)  # no copy: keep csr alive
         mat.assemble()
-        return cls(mat)
+        lu = cls(mat)
+        lu._arrays = csr
+        return lu
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:
         """A⁻¹ rhs for all columns at once (one MatMatSolve)."""
@@ -960,6 +966,7 @@ class _MumpsLU:
     def destroy(self) -> None:
         for obj in (self.ksp, self.mat):
             obj.destroy()
+        self._arrays = None
 
 
 def _unpack(space: LocalSpace, x: np.ndarray, n_loc: int, n_u: int) -> tuple[np.ndarray, np.ndarray]:

@@ -60,6 +60,7 @@ from dolfinx import fem
 from scipy.spatial import cKDTree
 
 from fenics_contact.fem.contact import NewtonOptions
+from fenics_contact.hybrid.inputs import check_solve_inputs, require_instance
 from fenics_contact.hybrid.iteration import (
     IterationHistory,
     IterationOptions,
@@ -274,6 +275,9 @@ def solve_mixed_hybrid(
 
     ``epsilon`` defaults to ``fem.mixed.default_epsilon`` (pass the reference's ε when comparing).
     """
+    check_solve_inputs(cm, model, options=options, newton=newton)
+    if reference is not None:
+        require_instance(reference, MixedSolution, "the reference", " (from fem.mixed.solve_mixed_monolithic)")
     start = time.perf_counter()
     if reference is not None and epsilon is None:
         epsilon = reference.epsilon

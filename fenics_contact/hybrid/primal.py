@@ -18,6 +18,7 @@ from mpi4py import MPI
 from dolfinx import fem
 
 from fenics_contact.fem.contact import ContactProfile, NewtonOptions
+from fenics_contact.hybrid.inputs import check_reference_displacement, check_solve_inputs
 from fenics_contact.hybrid.iteration import HybridStep, IterationHistory, IterationOptions, IterationResult, iterate
 from fenics_contact.problem.fields import material_fields
 from fenics_contact.problem.geometry import ContactMesh
@@ -168,6 +169,9 @@ def solve_primal_hybrid(
     reference: fem.Function | None = None,
 ) -> HybridResult:
     """Algorithm 1 to the relative-change tolerance; `reference` adds e_u per iteration."""
+    check_solve_inputs(cm, model, options=options, newton=newton)
+    if reference is not None:
+        check_reference_displacement(reference, cm)
     start = time.perf_counter()
     step = PrimalHybridStep(cm, model, alpha=alpha, delta=delta, newton=newton, reference=reference)
     step.prepare()

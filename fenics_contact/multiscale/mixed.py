@@ -41,6 +41,7 @@ from dolfinx import fem
 
 from fenics_contact.fem import forms_mixed
 from fenics_contact.fem.contact import NewtonOptions
+from fenics_contact.hybrid.inputs import check_solve_inputs, require_instance
 from fenics_contact.hybrid.iteration import (
     IterationHistory,
     IterationOptions,
@@ -263,6 +264,9 @@ def solve_mixed_ms_hybrid(
     ``source_correction`` (default) adds the localized source correctors of METHOD §9 (the error then
     falls with m for loads inside Ω₁ too); ``False`` is the paper's Algorithm 4.
     """
+    check_solve_inputs(cm, model, options=options, newton=newton)
+    if reference is not None:
+        require_instance(reference, MixedSolution, "the reference", " (from fem.mixed.solve_mixed_monolithic)")
     if reference is not None and epsilon is None:
         epsilon = reference.epsilon
     cem = MixedCEMOptions(layers=layers, nbasis=nbasis, min_gap=min_gap, max_nbasis=max_nbasis, weight=weight,

@@ -24,6 +24,7 @@ from dolfinx import fem
 
 from fenics_contact.multiscale.cem import DEFAULT_S_FACTOR, CEMOptions, Omega1Multiscale, require_serial
 from fenics_contact.fem.contact import NewtonOptions
+from fenics_contact.hybrid.inputs import check_reference_displacement, check_solve_inputs
 from fenics_contact.hybrid.iteration import IterationOptions, iterate
 from fenics_contact.errors import InputError
 from fenics_contact.problem.fields import material_fields
@@ -179,6 +180,9 @@ def solve_primal_ms_hybrid(
     bases, N and the coarse factorization (breakdown in ``result.step.offline_times``);
     ``time_online_s`` the iteration.
     """
+    check_solve_inputs(cm, model, options=options, newton=newton)
+    if reference is not None:
+        check_reference_displacement(reference, cm)
     cem = CEMOptions(layers=layers, nbasis=nbasis, threshold=threshold, s_factor=s_factor)
     step = MultiscalePrimalHybridStep(
         cm, model, alpha=alpha, delta=delta, cem=cem, newton=newton, reference=reference, cache_dir=cache_dir

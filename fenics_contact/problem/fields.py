@@ -31,7 +31,12 @@ def cell_function(msh: dmesh.Mesh, field: Callable[[np.ndarray], np.ndarray], *,
     """A DG0 function with the values of ``field`` at the cell midpoints."""
     V = fem.functionspace(msh, basix.ufl.element("DG", msh.basix_cell(), 0, shape=shape))
     fn = fem.Function(V, name=name)
-    fn.interpolate(field)
+    try:
+        fn.interpolate(field)
+    except (TypeError, ValueError, IndexError, RuntimeError) as err:
+        expected = "(" + ", ".join([*map(str, shape), "N"]) + (",)" if not shape else ")")
+        raise InputError(f"the field {name or 'given'} must map points x of shape (3, N) to values of shape "
+                         f"{expected}: {type(err).__name__}: {str(err).splitlines()[0]}") from None
     fn.x.scatter_forward()
     return fn
 

@@ -79,7 +79,10 @@ def pixel_field(values: npt.ArrayLike, extent=(0.0, 1.0, 0.0, 1.0)) -> ScalarFie
     Row 0 is the bottom row (y = extent[2]); column 0 is the left (x = extent[0]).
     Points outside the extent take the nearest pixel.
     """
-    values = np.asarray(values, dtype=np.float64)
+    try:
+        values = np.asarray(values, dtype=np.float64)
+    except (TypeError, ValueError) as err:
+        raise InputError(f"a pixel field needs a 2D array of numbers: {err}") from None
     if values.ndim != 2 or values.size == 0:
         raise InputError(f"a pixel field needs a non-empty 2D array, got shape {values.shape}")
     x0, x1, y0, y1 = extent

@@ -38,6 +38,7 @@ from pathlib import Path
 import numpy as np
 import ufl
 from dolfinx import fem
+from mpi4py import MPI
 
 from fenics_contact.fem import forms_mixed
 from fenics_contact.fem.contact import NewtonOptions
@@ -59,11 +60,22 @@ from fenics_contact.multiscale.mixed_cem import (
     MixedMultiscaleOmega1,
 )
 from fenics_contact.problem.models import TestModel
-from fenics_contact.multiscale.cem import DEFAULT_S_FACTOR, coarse_grid, require_serial
+from fenics_contact.multiscale.cem import DEFAULT_S_FACTOR, coarse_grid
 
 __all__ = ["MixedMsResult", "MixedMultiscaleHybridStep", "solve_mixed_ms_hybrid"]
 
 log = logging.getLogger(__name__)
+
+
+def _require_replicated_mesh(cm: ContactMesh, offline_comm: MPI.Comm) -> None:
+    """The Arnold–Winther spaces are serial: every rank holds the whole mesh (``cm`` on COMM_SELF)."""
+    if cm.comm.size > 1:
+        raise InputError(
+            f"Algorithm 4 needs the whole mesh on every rank (the Arnold–Winther space is serial); got a mesh "
+            f"distributed over {cm.comm.size} ranks. Build it on MPI.COMM_SELF on each rank (e.g. "
+            "geometry.unit_square(n, n_coarse, comm=MPI.COMM_SELF)) and pass offline_comm=MPI.COMM_WORLD: the "
+            "offline local problems are then shared out over the ranks."
+        )
 
 
 class MixedMultiscaleHybridStep(MixedHybridStep):
@@ -79,8 +91,9 @@ class MixedMultiscaleHybridStep(MixedHybridStep):
         cem: MixedCEMOptions = MixedCEMOptions(),
         newton: NewtonOptions = NewtonOptions(),
         cache_dir: str | Path | None = None,
+        offline_comm: MPI.Comm = MPI.COMM_SELF,
     ) -> None:
-        require_serial(cm.comm)
+        _require_replicated_mesh(cm, offline_comm)
         if cm.H is None:
             raise InputError("Algorithm 4 needs a coarse grid: build the mesh with geometry.unit_square(n, n_coarse)")
         start = time.perf_counter()
@@ -89,7 +102,7 @@ class MixedMultiscaleHybridStep(MixedHybridStep):
         part = self.parts[0]
         grid = coarse_grid(part.mesh, part.cell_map, cm.coarse_cell, cm.H)
         self.cem = cem
-        self.omega1 = MixedMultiscaleOmega1(self.sub[0], grid, cem, H=cm.H, cache_dir=cache_dir)
+        self.omega1 = MixedMultiscaleOmega1(self.sub[0], grid, cem, H=cm.H, cache_dir=cache_dir, comm=offline_comm)
         co = self.omega1.co
         if co.n_g != self.size:
             raise RuntimeError("the multiscale interface data do not match the Ω₂ interface data")
@@ -246,6 +259,7 @@ def solve_mixed_ms_hybrid(
     weight: str = "lambda+2mu",
     s_factor: float = DEFAULT_S_FACTOR,
     source_correction: bool = True,
+    offline_comm: MPI.Comm = MPI.COMM_SELF,
     options: IterationOptions = IterationOptions(),
     newton: NewtonOptions = NewtonOptions(),
     reference: MixedSolution | None = None,
@@ -263,6 +277,12 @@ def solve_mixed_ms_hybrid(
     out is below it (up to ``max_nbasis``; ``None`` keeps exactly ``nbasis``, the paper's fixed l).
     ``source_correction`` (default) adds the localized source correctors of METHOD §9 (the error then
     falls with m for loads inside Ω₁ too); ``False`` is the paper's Algorithm 4.
+
+    MPI: the Arnold–Winther spaces are serial, so every rank holds the whole mesh (``cm`` built on
+    COMM_SELF) and ``offline_comm`` (e.g. COMM_WORLD) shares out the offline local problems (Stage I
+    cells, Stage II patches, coarse-operator cells; each computed once, results broadcast, coarse
+    matrices summed).  The online iteration then runs replicated on every rank (identical results,
+    no communication; the Ω₂ solves are serial anyway).
     """
     check_solve_inputs(cm, model, options=options, newton=newton)
     if reference is not None:
@@ -272,7 +292,7 @@ def solve_mixed_ms_hybrid(
     cem = MixedCEMOptions(layers=layers, nbasis=nbasis, min_gap=min_gap, max_nbasis=max_nbasis, weight=weight,
                           s_factor=s_factor, source_correction=source_correction)
     step = MixedMultiscaleHybridStep(cm, model, beta=beta, epsilon=epsilon, cem=cem, newton=newton,
-                                     cache_dir=cache_dir)
+                                     cache_dir=cache_dir, offline_comm=offline_comm)
     if reference is not None:  # not part of the method: outside the timings
         step.set_reference(reference)
     history = iterate(step, options, name=f"mixed CEM hybrid (m={layers}, l={nbasis})")

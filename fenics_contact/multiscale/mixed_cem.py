@@ -791,13 +791,9 @@ def stage_one(
     eigenvalue left out is below ``min_gap`` (at most ``max_nbasis``) and to whole clusters.
     Under ``comm`` the coarse cells are shared out and every rank gets all results.
     """
-    mine = _share(np.array([len(c) for c in grid.cells], dtype=float), comm)
-    results = {}
-    with Progress(mine.size, "mixed CEM Stage I (coarse cells)", comm=comm, logger=log) as bar:
-        for k in mine:
-            results[int(k)] = stage_one_cell(ops, topo, grid.cells[k], nbasis, min_gap, max_nbasis, eigensolver)
-            bar.update()
-    return _stage_one_from(_gather(results, grid.size, comm))
+    out = _run_shared(np.array([len(c) for c in grid.cells], dtype=float), comm, "mixed CEM Stage I (coarse cells)",
+                      lambda k: stage_one_cell(ops, topo, grid.cells[k], nbasis, min_gap, max_nbasis, eigensolver))
+    return _stage_one_from(out)
 
 
 def _stage_one_from(out: list) -> StageI:
@@ -1066,14 +1062,32 @@ def stage_two(
     Under ``comm`` the patches are shared out (``_share``) and every rank gets all results.
     """
     dofs = dofs or CoarseCellDofs.of(ops, grid)
-    mine = _share(np.array([grid.patch(i, layers).size for i in range(grid.size)], dtype=float), comm)
-    results = {}
-    with Progress(mine.size, "mixed CEM Stage II (patches)", comm=comm, logger=log) as bar:
-        for i in mine:
-            results[int(i)] = _patch_functions(ops, topo, grid, dofs, aux, int(i), layers, source)
-            bar.update()
-    out = _gather(results, grid.size, comm)
+    cost = np.array([sum(len(grid.cells[j]) for j in grid.patch(i, layers)) for i in range(grid.size)], dtype=float)
+    out = _run_shared(cost ** 1.5, comm, "mixed CEM Stage II (patches)",
+                      lambda i: _patch_functions(ops, topo, grid, dofs, aux, i, layers, source))
     return [b for b, _ in out], [c for _, c in out]
+
+
+def _run_shared(cost: np.ndarray, comm: MPI.Comm, desc: str, work, *, gather: bool = True) -> list | None:
+    """work(i) for the items i of this rank (``_share``), with progress; every rank gets all results.
+
+    Collective-safe: an exception on one rank is raised on every rank (after all have stopped).
+    """
+    mine = _share(cost, comm)
+    results, error = {}, None
+    with Progress(mine.size, desc, comm=comm, logger=log) as bar:
+        try:
+            for i in mine:
+                results[int(i)] = work(int(i))
+                bar.update()
+        except Exception as err:  # noqa: BLE001 -- re-raised below on every rank
+            error = err
+    failures = comm.allgather(None if error is None else f"{type(error).__name__}: {error}")
+    if error is not None:
+        raise error
+    if any(failures):
+        raise ConvergenceError(f"{desc}: another rank failed ({next(f for f in failures if f)})")
+    return _gather(results, cost.size, comm) if gather else None
 
 
 def _share(cost: np.ndarray, comm: MPI.Comm) -> np.ndarray:
@@ -1233,43 +1247,44 @@ def coarse_operators(
     gamma = np.zeros(ops.num_cells, dtype=bool)
     gamma[ops.gamma_cells] = True
     reach_b, reach_c = _reaching(basis, grid.size), _reaching(corr, grid.size)
-    mine = _share(np.array([len(reach_b[K]) + len(reach_c[K]) for K in range(grid.size)], dtype=float), comm)
-    with Progress(mine.size, "mixed CEM coarse operators", comm=comm, logger=log) as bar:
-        for K in mine:
-            cK = dofs.cells[K]
-            sig = [f.sigma[p] for f, p in reach_b[K]] + [q.sigma[p] for q, p in reach_c[K]]
-            idx = [f.index for f, _ in reach_b[K]] + [n_ms + q.index for q, _ in reach_c[K]]
-            uniq, F = _merge_columns(np.concatenate(sig, axis=1), np.concatenate(idx))
-            PK = dofs.P(ops, K)
-            ix = np.ix_(uniq, uniq)
-            PF = (PK @ F).reshape(cK.size, 30, -1)  # cell-major DG values on K
-            KtF = PK.T @ np.einsum("cab,cbk->cak", ops.Kt[cK], PF).reshape(30 * cK.size, -1)
-            KF = PK.T @ np.einsum("cab,cbk->cak", ops.K[cK], PF).reshape(30 * cK.size, -1)
-            Gt[ix] += F.T @ KtF
-            Gk[ix] += F.T @ KF
-            BP = np.einsum("cab,cbk->cak", ops.B[cK], PF).reshape(6 * cK.size, -1)
-            a0, a1 = aux.offsets[K], aux.offsets[K + 1]
-            Pi = aux.modes[K].reshape(-1, a1 - a0)
-            MPi = np.einsum("cab,cbk->cak", ops.M[cK], aux.modes[K]).reshape(-1, a1 - a0)
-            Bm[a0:a1, uniq] += Pi.T @ BP
-            Mu[a0:a1, a0:a1] += Pi.T @ MPi
-            PiG[a0:a1] += Pi.T @ ops.G[cK].ravel()
-            if reach_c[K]:
-                gu, Nu = _merge_columns(np.concatenate([q.u[p] for q, p in reach_c[K]], axis=1),
-                                        np.concatenate([q.index for q, _ in reach_c[K]]))
-                MNu = np.einsum("cab,cbk->cak", ops.M[cK], Nu.reshape(cK.size, 6, -1)).reshape(6 * cK.size, -1)
-                BN[np.ix_(uniq, gu)] += BP.T @ Nu
-                PMN = MPi.T @ Nu
-                du = aux.size + gu
-                Mu[np.ix_(np.arange(a0, a1), du)] += PMN
-                Mu[np.ix_(du, np.arange(a0, a1))] += PMN.T
-                Mu[np.ix_(du, du)] += Nu.T @ MNu
-            if gamma[cK].any():
-                rows = _rows(cK, 30)
-                PFf = PF.reshape(30 * cK.size, -1)
-                Cphi[uniq] += (ops.C[rows].T @ PFf).T
-                Ephi[:, uniq] += ops.E[:, rows] @ PFf
-            bar.update()
+
+    def accumulate(K: int) -> None:
+        cK = dofs.cells[K]
+        sig = [f.sigma[p] for f, p in reach_b[K]] + [q.sigma[p] for q, p in reach_c[K]]
+        idx = [f.index for f, _ in reach_b[K]] + [n_ms + q.index for q, _ in reach_c[K]]
+        uniq, F = _merge_columns(np.concatenate(sig, axis=1), np.concatenate(idx))
+        PK = dofs.P(ops, K)
+        ix = np.ix_(uniq, uniq)
+        PF = (PK @ F).reshape(cK.size, 30, -1)  # cell-major DG values on K
+        KtF = PK.T @ np.einsum("cab,cbk->cak", ops.Kt[cK], PF).reshape(30 * cK.size, -1)
+        KF = PK.T @ np.einsum("cab,cbk->cak", ops.K[cK], PF).reshape(30 * cK.size, -1)
+        Gt[ix] += F.T @ KtF
+        Gk[ix] += F.T @ KF
+        BP = np.einsum("cab,cbk->cak", ops.B[cK], PF).reshape(6 * cK.size, -1)
+        a0, a1 = aux.offsets[K], aux.offsets[K + 1]
+        Pi = aux.modes[K].reshape(-1, a1 - a0)
+        MPi = np.einsum("cab,cbk->cak", ops.M[cK], aux.modes[K]).reshape(-1, a1 - a0)
+        Bm[a0:a1, uniq] += Pi.T @ BP
+        Mu[a0:a1, a0:a1] += Pi.T @ MPi
+        PiG[a0:a1] += Pi.T @ ops.G[cK].ravel()
+        if reach_c[K]:
+            gu, Nu = _merge_columns(np.concatenate([q.u[p] for q, p in reach_c[K]], axis=1),
+                                    np.concatenate([q.index for q, _ in reach_c[K]]))
+            MNu = np.einsum("cab,cbk->cak", ops.M[cK], Nu.reshape(cK.size, 6, -1)).reshape(6 * cK.size, -1)
+            BN[np.ix_(uniq, gu)] += BP.T @ Nu
+            PMN = MPi.T @ Nu
+            du = aux.size + gu
+            Mu[np.ix_(np.arange(a0, a1), du)] += PMN
+            Mu[np.ix_(du, np.arange(a0, a1))] += PMN.T
+            Mu[np.ix_(du, du)] += Nu.T @ MNu
+        if gamma[cK].any():
+            rows = _rows(cK, 30)
+            PFf = PF.reshape(30 * cK.size, -1)
+            Cphi[uniq] += (ops.C[rows].T @ PFf).T
+            Ephi[:, uniq] += ops.E[:, rows] @ PFf
+
+    cost = np.array([sum(f.index.size for f, _ in reach_b[K] + reach_c[K]) for K in range(grid.size)], dtype=float)
+    _run_shared(cost ** 2, comm, "mixed CEM coarse operators", accumulate, gather=False)
     co = CoarseOperators(n_ms, aux.size, n_g, Gt, Gk, Bm, BN, Cphi, Ephi, Mu, PiG)
     if comm.size > 1:
         for name in ("Gt", "Gk", "Bm", "BN", "Cphi", "Ephi", "Mu", "PiG"):
@@ -1546,8 +1561,15 @@ class MixedMultiscaleOmega1:
                     log.warning(
                         "mixed CEM offline cache %s rejected (%s); rebuilding", self.cache_path, self.cache_status
                     )
+                problem = None
                 if comm.rank == 0:
-                    cache.check_writable()
+                    try:
+                        cache.check_writable()
+                    except InputError as err:
+                        problem = str(err)
+                problem = comm.bcast(problem, root=0)
+                if problem is not None:
+                    raise InputError(problem)
                 self.cache_status = "built" if self.cache_status == "missing" else f"rebuilt ({self.cache_status})"
         if data is None:
             t = time.perf_counter()

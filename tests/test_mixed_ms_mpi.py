@@ -47,3 +47,24 @@ def test_two_ranks_match_serial(tmp_path):
     assert (parallel["cache"], again["cache"]) == ("built", "loaded")
     assert again["iterations"] == serial["iterations"]
     assert abs(again["e_sigma"] - serial["e_sigma"]) <= 1e-6 * serial["e_sigma"]
+
+
+@pytest.mark.skipif(_mpiexec() is None, reason="no mpiexec")
+def test_cli_mixed_ms_on_two_ranks(tmp_path):
+    """``mpiexec -n 2 fenics-contact run --method mixed-ms``: one complete output, the serial numbers."""
+    args = ["run", "--model", "2", "--method", "mixed-ms", "--h", "16", "--H", "4", "--layers", "1", "--reference"]
+    env = dict(os.environ, OMP_NUM_THREADS="1")
+    summaries = {}
+    for label, prefix in (("serial", []), ("mpi", [_mpiexec(), "-n", "2"])):
+        out = tmp_path / label
+        proc = subprocess.run([*prefix, sys.executable, "-m", "fenics_contact.cli", *args, "--out", str(out)],
+                              capture_output=True, text=True, env=env, timeout=600)
+        assert proc.returncode == 0, proc.stderr[-3000:]
+        summaries[label] = json.loads((out / "summary.json").read_text())
+        for name in ("sigma.bp", "u.bp", "fields.xdmf", "contact.png", "history.png"):
+            assert (out / name).exists(), name
+    serial, mpi = summaries["serial"], summaries["mpi"]
+    assert (serial["mpi_ranks"], mpi["mpi_ranks"]) == (1, 2)
+    assert mpi["iterations"] == serial["iterations"] and mpi["converged"]
+    assert mpi["e_sigma"] == pytest.approx(serial["e_sigma"], rel=1e-10)
+    assert mpi["dim_X_ms"] == serial["dim_X_ms"]

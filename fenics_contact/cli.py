@@ -444,6 +444,8 @@ def _run_mixed(options: RunOptions, cm: ContactMesh, model, fields, comm: MPI.Co
     max_nbasis = mixed_multiscale.DEFAULT_MAX_NBASIS if options.max_nbasis is None else options.max_nbasis
     reference = (mixed.solve_mixed_monolithic(cm, model, epsilon=epsilon)
                  if options.reference and comm.rank == 0 else None)
+    if reference is not None:
+        reference.free()  # only its solution is used: the factors of the whole problem go now
     if not ms:
         result = mixed_hybrid.solve_mixed_hybrid(cm, model, beta=beta, epsilon=epsilon,
                                                  options=options.iteration_options(), reference=reference)

@@ -814,8 +814,17 @@ class MixedSolution:
     dofs: dict
     time_s: float  #: setup + Newton
     time_newton_s: float  #: Newton only (the online part)
-    problem: MixedSubproblem
+    problem: MixedSubproblem | None  #: None once ``free()`` has been called
     split_interface: bool
+
+    def free(self) -> None:
+        """Release the monolithic problem (its matrices and MUMPS factors); the solution, history and profile stay.
+
+        A reference solve keeps GBs at h = 1/128 otherwise (the factors of the whole mixed problem).
+        """
+        if self.problem is not None:
+            self.problem.destroy()
+            self.problem = None
 
 
 def solve_mixed_monolithic(

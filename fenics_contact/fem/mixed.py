@@ -394,6 +394,8 @@ class MixedSubproblem:
         space: a prebuilt AW space on ``msh`` (with σ_t = 0 on Γ_C).
         line_search: ``"on-cycle"`` (full semismooth Newton steps until a cycle
             is detected, then exact line search on J) or ``"always"``.
+        operators: False builds the spaces, the interface data and the load only, without
+            the global matrices (no solve then; Algorithm 4's Ω₁ assembles its own cell blocks).
     """
 
     def __init__(
@@ -409,6 +411,7 @@ class MixedSubproblem:
         extra_columns: sp.csr_matrix | None = None,
         space: ArnoldWintherSpace | None = None,
         line_search: str = "on-cycle",
+        operators: bool = True,
     ) -> None:
         t0 = time.perf_counter()
         if line_search not in ("on-cycle", "always"):
@@ -438,15 +441,19 @@ class MixedSubproblem:
         self.n_u = 2 * self.U.dofmap.index_map.size_local
 
         # -- bulk operators ------------------------------------------------------------
-        P_petsc = scipy_to_petsc(self.P, msh.comm)
+        self.has_operators = operators
         s, t = ufl.TrialFunction(self.dg), ufl.TestFunction(self.dg)
         w, v = ufl.TrialFunction(self.U), ufl.TestFunction(self.U)
         n = ufl.FacetNormal(msh)
-        self.K = _pt_a_p(forms_mixed.compliance_form(s, t, fields.lmbda, fields.mu), P_petsc)
-        self.B = (assemble_scipy(forms_mixed.divergence_form(s, v)) @ self.P).tocsr()
+        if operators:
+            P_petsc = scipy_to_petsc(self.P, msh.comm)
+            self.K = _pt_a_p(forms_mixed.compliance_form(s, t, fields.lmbda, fields.mu), P_petsc)
+            self.B = (assemble_scipy(forms_mixed.divergence_form(s, v)) @ self.P).tocsr()
+            P_petsc.destroy()
+        else:  # the spaces and the interface data only (Algorithm 4's Ω₁ assembles its own cell blocks)
+            self.K = self.B = None
         self.M = assemble_scipy(forms_mixed.mass_form(w, v))
         self.G = _assemble_vector(forms_mixed.load_form(fields.f, v))[: self.n_u]
-        P_petsc.destroy()
 
         # -- Robin term and data on γ -------------------------------------------------
         ds = forms_mixed.boundary_measure(msh, facet_tags)
@@ -456,9 +463,10 @@ class MixedSubproblem:
             gamma = facet_tags.find(Boundary.INTERFACE)
             if gamma.size == 0:
                 raise InputError("a Robin subproblem needs interface (γ) facets")
-            R = assemble_scipy(forms_mixed.robin_form(s, t, n, 1.0, ds(Boundary.INTERFACE)))
-            self.R = (self.P.T @ R @ self.P).tocsr()
-            self.Kt = (self.K + beta * self.R).tocsr()
+            if operators:
+                R = assemble_scipy(forms_mixed.robin_form(s, t, n, 1.0, ds(Boundary.INTERFACE)))
+                self.R = (self.P.T @ R @ self.P).tocsr()
+                self.Kt = (self.K + beta * self.R).tocsr()
             self._setup_interface(gamma, ds, t, n)
 
         # -- contact quadrature ---------------------------------------------------------
@@ -482,6 +490,7 @@ class MixedSubproblem:
         msh = self.mesh
         Lam = fem.functionspace(msh, basix.ufl.element("Lagrange", msh.basix_cell(), 3, shape=(2,)))
         tdim = msh.topology.dim
+        msh.topology.create_connectivity(tdim - 1, tdim)
         blocks = fem.locate_dofs_topological(Lam, tdim - 1, gamma)
         coords = Lam.tabulate_dof_coordinates()[blocks, :2]
         order = np.lexsort((coords[:, 0], coords[:, 1]))
@@ -553,6 +562,8 @@ class MixedSubproblem:
 
     def _factorize_for(self, active: np.ndarray | None) -> bool:
         """Factorize the saddle-point Jacobian unless the cached one has the same active set."""
+        if not self.has_operators:
+            raise InputError("this subproblem was built without its matrices (operators=False): it cannot be solved")
         key = np.zeros(0, dtype=bool) if active is None else active
         if self._factorized_set is not None and np.array_equal(key, self._factorized_set):
             return False

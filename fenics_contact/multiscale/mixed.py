@@ -81,6 +81,8 @@ def _require_replicated_mesh(cm: ContactMesh, offline_comm: MPI.Comm) -> None:
 class MixedMultiscaleHybridStep(MixedHybridStep):
     """The transmission map T of Algorithm 4 (``hybrid.iteration.HybridStep`` protocol)."""
 
+    omega1_operators = False  # Ω₁ is solved in the multiscale space: no fine Ω₁ matrices
+
     def __init__(
         self,
         cm: ContactMesh,
@@ -113,11 +115,16 @@ class MixedMultiscaleHybridStep(MixedHybridStep):
 
     # -- reference and errors ------------------------------------------------------------
     def set_reference(self, reference: MixedSolution) -> None:
-        super().set_reference(reference)
+        """σ_h, u_h on Ω₁ as cell-major DG values (``omega1.ops``), on Ω₂ as in Algorithm 2."""
         ops = self.omega1.ops
-        c1, u1 = self.reference[0]
-        self._sref1 = (ops.P @ c1).reshape(-1, 30)
+        d1, u1 = self._part_reference(0, reference, dg=True)
+        self._sref1 = d1[ops.dg_rows]
         self._uref1 = u1[ops.u_rows]
+        c2, u2 = self._part_reference(1, reference)
+        self.reference = [None, (c2, u2)]  # Ω₁ has no fine AW problem here (omega1_operators = False)
+        s2 = self.sub[1]
+        self._ref_norm2 = (self.omega1.a_norm2(self._sref1) + s2.stress_norm2(c2),
+                           self.omega1.m_norm2(self._uref1) + s2.l2_norm2(u2))
 
     def fine_omega1(self) -> tuple[np.ndarray, np.ndarray]:
         """σ₁ (n_cells, 30) and u₁ (n_cells, 6) of the current iterate, cell-major (``multiscale.mixed_cem``)."""

@@ -340,6 +340,7 @@ def cell_operators(sub, H: float, weight: str = "lambda+2mu", s_factor: float = 
     G = Gv.array[u_rows]
     # interface data: continuous vector P3 on γ, nodes ordered as sub.gamma_points
     gamma = ft.find(Boundary.INTERFACE)
+    msh.topology.create_connectivity(tdim - 1, tdim)
     Lam = fem.functionspace(msh, basix.ufl.element("Lagrange", msh.basix_cell(), 3, shape=(2,)))
     blocks = fem.locate_dofs_topological(Lam, tdim - 1, gamma)
     coords = Lam.tabulate_dof_coordinates()[blocks, :2]

@@ -115,7 +115,7 @@ def test_local_space_and_operators_match_sparse_products(omega1):
         L = _reference_basis(ops, topo, cells, space)
         assert abs(space.L - L).max() <= 1e-14 * abs(L).max()
         At, Bl = mm._local_operators(ops, space)
-        At_ref = (L.T @ _blockdiag(ops.Kt[cells]) @ L).tocsr()
+        At_ref = (L.T @ _blockdiag(ops.kt(cells)) @ L).tocsr()
         Bl_ref = (_blockdiag(ops.B[cells]) @ L).tocsr()
         assert abs(At - At_ref).max() <= 1e-13 * abs(At_ref).max()
         assert abs(Bl - Bl_ref).max() <= 1e-13 * abs(Bl_ref).max()
@@ -130,7 +130,7 @@ def test_batched_patch_solve_matches_scipy(omega1):
     for i, layers in _cases(grid)[1:3]:
         space, lu, Z, *_ = mm._patch_system(ops, topo, grid, aux, grid.patch(i, layers))
         L = _reference_basis(ops, topo, space.cells, space)
-        At = L.T @ _blockdiag(ops.Kt[space.cells]) @ L
+        At = L.T @ _blockdiag(ops.kt(space.cells)) @ L
         Bl = _blockdiag(ops.B[space.cells]) @ L
         A = sp.bmat([[At, Bl.T, None], [Bl, None, -Z], [None, -Z.T, sp.identity(Z.shape[1])]], format="csc")
         rhs = np.random.default_rng(i).standard_normal((A.shape[0], 5))

@@ -247,23 +247,42 @@ class CellOperators:
     """Cell blocks and interface maps of the Ω₁ mixed problem in the cell-major layout."""
 
     K: np.ndarray  #: (n, 30, 30) compliance (Aσ, τ)
-    Kt: np.ndarray  #: (n, 30, 30) compliance + β ∫_γ (σn)·(τn)
+    R: np.ndarray  #: (n_γ, 30, 30) β ∫_γ (σn)·(τn) on the cells ``gamma_cells`` (zero elsewhere)
     B: np.ndarray  #: (n, 6, 30) (div σ, v)
     M: np.ndarray  #: (n, 6, 6) L² mass of DG P1
     S: np.ndarray  #: (n, 6, 6) κ̃-weighted mass, κ̃ = (λ+2μ)H⁻²
     G: np.ndarray  #: (n, 6) −(f, v)
     C: sp.csr_matrix  #: (30 n, n_g) ∫_γ g·(τn₁), g by values (x, y) at the γ nodes
     E: sp.csr_matrix  #: (n_g, 30 n) σn₁ at the γ nodes (average of the two sides at vertices)
-    P: sp.csr_matrix  #: (30 n, n_AW) AW prolongation, rows cell-major
+    num_aw: int  #: dim AW(Ω₁)
     dg_rows: np.ndarray  #: (n, 30) standard DG P3 index of each cell-major stress entry
     u_rows: np.ndarray  #: (n, 6) standard DG P1 index of each cell-major displacement entry
-    gamma_cells: np.ndarray  #: cells with a γ facet
+    gamma_cells: np.ndarray  #: sorted cells with a γ facet
     P_cols: np.ndarray  #: (n, w) AW indices of the nonzero columns of P in the rows of each cell (sorted, −1 pads)
     P_blocks: np.ndarray  #: (n, 30, w) those columns of P: P[rows of c][:, P_cols[c]]
 
     @property
     def num_cells(self) -> int:
         return self.K.shape[0]
+
+    def kt(self, cells: np.ndarray) -> np.ndarray:
+        """Blocks (|cells|, 30, 30) of Ã = compliance + β ∫_γ (σn)·(τn) (only γ cells carry the Robin term)."""
+        cells = np.asarray(cells, dtype=np.int64)
+        out = self.K[cells]
+        k = np.searchsorted(self.gamma_cells, cells)
+        on = (k < self.gamma_cells.size) & (self.gamma_cells[np.minimum(k, self.gamma_cells.size - 1)] == cells)
+        if np.any(on):
+            out[on] += self.R[k[on]]
+        return out
+
+    @property
+    def P(self) -> sp.csr_matrix:
+        """The AW prolongation (30 n × dim AW), rows cell-major (rebuilt from the cell blocks)."""
+        n, a, w = self.P_blocks.shape
+        rows = np.broadcast_to((a * np.arange(n)[:, None, None] + np.arange(a)[None, :, None]), self.P_blocks.shape)
+        cols = np.broadcast_to(self.P_cols[:, None, :], self.P_blocks.shape)
+        keep = (cols >= 0) & (self.P_blocks != 0.0)
+        return sp.csr_matrix((self.P_blocks[keep], (rows[keep], cols[keep])), shape=(a * n, self.num_aw))
 
     @property
     def num_gamma_values(self) -> int:
@@ -280,7 +299,7 @@ def _trace_operator(msh: dmesh.Mesh, dg: fem.FunctionSpace, gamma: np.ndarray, p
     a, b = x[geo[:, 0]], x[geo[:, 1]]
     d = b - a
     length = np.linalg.norm(d, axis=1)
-    cells = np.array([f2c.links(f)[0] for f in gamma], dtype=np.int64)
+    cells = f2c.array[f2c.offsets[gamma]].astype(np.int64)  # a γ facet is on ∂Ω₁: one cell
     n = np.stack([d[:, 1], -d[:, 0]], axis=1) / length[:, None]
     centre = x[msh.geometry.dofmaps[0][cells]].mean(axis=1)
     n[np.sum(n * (0.5 * (a + b) - centre), axis=1) < 0] *= -1.0
@@ -329,8 +348,13 @@ def cell_operators(sub, H: float, weight: str = "lambda+2mu", s_factor: float = 
     w, v = ufl.TrialFunction(U), ufl.TestFunction(U)
     n = ufl.FacetNormal(msh)
     ds = forms_mixed.boundary_measure(msh, ft)
+    gamma = ft.find(Boundary.INTERFACE)
+    msh.topology.create_connectivity(tdim - 1, tdim)
+    f2c = msh.topology.connectivity(tdim - 1, tdim)
+    gamma_cells = np.unique(f2c.array[f2c.offsets[gamma]]).astype(np.int64)  # a γ facet is on ∂Ω₁: one cell
     K = _cell_blocks(assemble_scipy(forms_mixed.compliance_form(s, t, fields.lmbda, fields.mu)), dg_rows, dg_rows)
-    R = _cell_blocks(assemble_scipy(forms_mixed.robin_form(s, t, n, 1.0, ds(Boundary.INTERFACE))), dg_rows, dg_rows)
+    R = _cell_blocks(assemble_scipy(forms_mixed.robin_form(s, t, n, 1.0, ds(Boundary.INTERFACE))),
+                     dg_rows[gamma_cells], dg_rows[gamma_cells])
     B = _cell_blocks(assemble_scipy(forms_mixed.divergence_form(s, v)), u_rows, dg_rows)
     M = _cell_blocks(assemble_scipy(forms_mixed.mass_form(w, v)), u_rows, u_rows)
     kt = kappa_tilde(fields.lmbda, fields.mu, H, s_factor) if weight == "lambda+2mu" else s_factor * 2.0 * fields.mu / H**2
@@ -339,8 +363,6 @@ def cell_operators(sub, H: float, weight: str = "lambda+2mu", s_factor: float = 
     Gv.scatter_reverse(dolfinx.la.InsertMode.add)
     G = Gv.array[u_rows]
     # interface data: continuous vector P3 on γ, nodes ordered as sub.gamma_points
-    gamma = ft.find(Boundary.INTERFACE)
-    msh.topology.create_connectivity(tdim - 1, tdim)
     Lam = fem.functionspace(msh, basix.ufl.element("Lagrange", msh.basix_cell(), 3, shape=(2,)))
     blocks = fem.locate_dofs_topological(Lam, tdim - 1, gamma)
     coords = Lam.tabulate_dof_coordinates()[blocks, :2]
@@ -352,12 +374,9 @@ def cell_operators(sub, H: float, weight: str = "lambda+2mu", s_factor: float = 
     Cfull = assemble_scipy(forms_mixed.robin_data_form(g, t, n, ds(Boundary.INTERFACE)))
     C = Cfull[dg_rows.ravel()][:, (2 * blocks[:, None] + np.arange(2)).ravel()].tocsr()
     E = _trace_operator(msh, dg, gamma, coords)
-    P = sub.P[dg_rows.ravel()].tocsr()
-    msh.topology.create_connectivity(tdim - 1, tdim)
-    f2c = msh.topology.connectivity(tdim - 1, tdim)
-    gamma_cells = np.unique(np.concatenate([f2c.links(f) for f in gamma]))
-    P_cols, P_blocks = _column_blocks(P, ncell, 30)
-    return CellOperators(K, K + sub.beta * R, B, M, S, G, C, E, P, dg_rows, u_rows, gamma_cells, P_cols, P_blocks)
+    P_cols, P_blocks = _column_blocks(sub.P[dg_rows.ravel()], ncell, 30)
+    return CellOperators(K, sub.beta * R, B, M, S, G, C, E, int(sub.P.shape[1]), dg_rows, u_rows, gamma_cells,
+                         P_cols, P_blocks)
 
 
 # ---------------------------------------------------------------------------------------
@@ -477,7 +496,7 @@ def local_stress_space(ops: CellOperators, topo: _Topology, cells: np.ndarray) -
         (3 * nv + 4 * ne + 3 * cells[:, None] + np.arange(3)).ravel(),
     ])
     # AW functions supported in ω: columns of P, by cell
-    local = np.full(ops.P.shape[1], -1, dtype=np.int64)
+    local = np.full(ops.num_aw, -1, dtype=np.int64)
     local[inner] = np.arange(inner.size)
     pcols = ops.P_cols[cells]
     cols = np.where(pcols >= 0, local[np.maximum(pcols, 0)], -1)
@@ -504,7 +523,7 @@ def local_stress_space(ops: CellOperators, topo: _Topology, cells: np.ndarray) -
 def _local_blocks(ops: CellOperators, space: LocalSpace) -> tuple[np.ndarray, np.ndarray]:
     """Cell blocks L_cᵀ Ã_c L_c (|ω|, w, w) and B_c L_c (|ω|, 6, w) of the local operators."""
     Lb = space.blocks
-    At = np.swapaxes(Lb, 1, 2) @ (ops.Kt[space.cells] @ Lb)
+    At = np.swapaxes(Lb, 1, 2) @ (ops.kt(space.cells) @ Lb)
     Bl = ops.B[space.cells] @ Lb
     return At, Bl
 
@@ -1123,7 +1142,7 @@ def stage_one_of(
 ) -> tuple[CellOperators, "_Topology", StageI]:
     """Stage I alone for an Ω₁ ``MixedSubproblem``: (cell operators, local-space topology, U_aux)."""
     ops = cell_operators(sub, H, options.weight, options.s_factor)
-    topo = _Topology(sub.mesh, ops.P.shape[1])
+    topo = _Topology(sub.mesh, ops.num_aw)
     return ops, topo, stage_one(ops, topo, grid, options.nbasis, options.min_gap, options.max_nbasis,
                                 options.eigensolver)
 
@@ -1257,7 +1276,7 @@ def coarse_operators(
         PK = dofs.P(ops, K)
         ix = np.ix_(uniq, uniq)
         PF = (PK @ F).reshape(cK.size, 30, -1)  # cell-major DG values on K
-        KtF = PK.T @ np.einsum("cab,cbk->cak", ops.Kt[cK], PF).reshape(30 * cK.size, -1)
+        KtF = PK.T @ np.einsum("cab,cbk->cak", ops.kt(cK), PF).reshape(30 * cK.size, -1)
         KF = PK.T @ np.einsum("cab,cbk->cak", ops.K[cK], PF).reshape(30 * cK.size, -1)
         Gt[ix] += F.T @ KtF
         Gk[ix] += F.T @ KF
@@ -1345,9 +1364,9 @@ def mixed_offline_key(sub, ops: CellOperators, grid: CoarseGrid, options: MixedC
         "patches": np.concatenate(patches),
         "patch_sizes": np.array([p.size for p in patches], dtype=np.int64),
     }
-    for name in ("K", "Kt", "B", "M", "S", "G", "dg_rows", "u_rows"):
+    for name in ("K", "R", "B", "M", "S", "G", "dg_rows", "u_rows", "gamma_cells", "P_cols", "P_blocks"):
         arrays[f"ops_{name}"] = getattr(ops, name)
-    for name in ("C", "E", "P"):
+    for name in ("C", "E"):
         X = sp.csr_matrix(getattr(ops, name))
         arrays[f"ops_{name}_data"], arrays[f"ops_{name}_indices"] = X.data, X.indices
         arrays[f"ops_{name}_indptr"], arrays[f"ops_{name}_shape"] = X.indptr, np.array(X.shape)
@@ -1539,7 +1558,7 @@ class MixedMultiscaleOmega1:
         self.times: dict[str, float] = {}
         t = time.perf_counter()
         self.ops = cell_operators(sub, H, options.weight, options.s_factor)
-        self.topo = _Topology(sub.mesh, self.ops.P.shape[1])
+        self.topo = _Topology(sub.mesh, self.ops.num_aw)
         self.times["assembly"] = time.perf_counter() - t
         self.cache_status = "disabled"
         self.cache_path: Path | None = None

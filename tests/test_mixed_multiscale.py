@@ -2,10 +2,12 @@
 
 import numpy as np
 import pytest
+import scipy.sparse.linalg as spla
 
 import fenics_contact  # noqa: F401  (must precede dolfinx)
 import basix.ufl
 from dolfinx import fem
+from dolfinx import mesh as dmesh
 from fenics_contact.problem import geometry, models
 from fenics_contact.multiscale import cem
 from fenics_contact.multiscale import mixed_cem as mm
@@ -391,3 +393,40 @@ def test_basis_decay_rate_with_nu_and_adaptive_modes():
     assert rate[0.3, None] > 2.0
     assert rate[0.499, None] < 0.4 * rate[0.3, None]
     assert rate[0.499, mm.DEFAULT_MIN_GAP] > 0.8 * rate[0.3, None]
+
+
+def test_traction_free_side_of_omega1(omega1):
+    """Essential τn = 0 on a side of Ω₁ (a traction-free boundary, issue 14): the local spaces treat it as
+    inner boundary, the whole-Ω₁ local space is the constrained AW space, and with all modes and patches
+    covering Ω₁ the multiscale solution is the fine one of the constrained problem."""
+    from fenics_contact.fem.arnold_winther import ArnoldWintherSpace
+    from fenics_contact.fem.mixed import MixedSubproblem
+
+    cm, step, grid, ops, topo = omega1
+    sub = step.sub[0]
+    msh = sub.mesh
+    msh.topology.create_connectivity(1, 2)
+    bfacets = dmesh.exterior_facet_indices(msh.topology)
+    mid = dmesh.compute_midpoints(msh, 1, bfacets)
+    top = bfacets[np.isclose(mid[:, 1], 1.0)]
+    space_tf = ArnoldWintherSpace(msh, zero_traction_facets=top)
+    topo_tf = mm._Topology(msh, ops.num_aw, top)
+    whole = mm.local_stress_space(ops, topo_tf, np.arange(ops.num_cells))
+    P_tf = space_tf.prolongation[ops.dg_rows.ravel()].tocsc()
+    L = whole.L.tocsc()
+    assert whole.size == P_tf.shape[1]
+    # the same column space: equal dimensions (both bases independent: SPD Gram matrices) and L ⊂ range(P_tf)
+    for X in (L, P_tf):
+        spla.splu((X.T @ X).tocsc())  # raises if singular
+    coef = spla.splu((P_tf.T @ P_tf).tocsc()).solve((P_tf.T @ L).toarray())
+    assert np.abs(P_tf @ coef - L.toarray()).max() < 1e-10 * abs(L).max()
+    # the constrained fine Robin problem, reproduced by the multiscale method with everything kept
+    fine = MixedSubproblem(msh, sub.facet_tags, sub.fields, epsilon=None, beta=sub.beta, prefix="tf_omega1_",
+                           space=space_tf)
+    om = mm.MixedMultiscaleOmega1(fine, grid, mm.MixedCEMOptions(layers=3, nbasis=None), H=cm.H,
+                                  traction_free_facets=top)
+    g = np.random.default_rng(5).standard_normal(om.co.n_g)
+    fine.solve(g)
+    r, _ = om.solve(g)
+    s_ref = (space_tf.prolongation @ fine.c)[ops.dg_rows]
+    assert np.sqrt(om.a_norm2(om.fine_stress(r, g) - s_ref) / om.a_norm2(s_ref)) < 1e-8

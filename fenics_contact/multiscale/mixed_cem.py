@@ -80,6 +80,7 @@ from slepc4py import SLEPc
 
 from fenics_contact import __version__
 from fenics_contact.fem import forms_mixed
+from fenics_contact.fem.arnold_winther import ArnoldWintherSpace
 from fenics_contact.errors import ConvergenceError, InputError
 from fenics_contact.fem.linalg import assemble_scipy, scipy_to_petsc
 from fenics_contact.multiscale.cache import OfflineCache, hash_array
@@ -374,8 +375,12 @@ def cell_operators(sub, H: float, weight: str = "lambda+2mu", s_factor: float = 
     Cfull = assemble_scipy(forms_mixed.robin_data_form(g, t, n, ds(Boundary.INTERFACE)))
     C = Cfull[dg_rows.ravel()][:, (2 * blocks[:, None] + np.arange(2)).ravel()].tocsr()
     E = _trace_operator(msh, dg, gamma, coords)
-    P_cols, P_blocks = _column_blocks(sub.P[dg_rows.ravel()], ncell, 30)
-    return CellOperators(K, sub.beta * R, B, M, S, G, C, E, int(sub.P.shape[1]), dg_rows, u_rows, gamma_cells,
+    P = sub.P
+    num_full = 3 * msh.topology.index_map(0).size_local + 4 * msh.topology.index_map(1).size_local + 3 * ncell
+    if P.shape[1] != num_full:  # a constrained space (τn = 0 sides): the local spaces start from the full one
+        P = ArnoldWintherSpace(msh).prolongation
+    P_cols, P_blocks = _column_blocks(P[dg_rows.ravel()], ncell, 30)
+    return CellOperators(K, sub.beta * R, B, M, S, G, C, E, int(P.shape[1]), dg_rows, u_rows, gamma_cells,
                          P_cols, P_blocks)
 
 
@@ -383,9 +388,13 @@ def cell_operators(sub, H: float, weight: str = "lambda+2mu", s_factor: float = 
 # local stress spaces
 # ---------------------------------------------------------------------------------------
 class _Topology:
-    """Vertex/edge/cell incidences of Ω₁ and the raw AW numbering (3 per vertex, 4 per edge, 3 per cell)."""
+    """Vertex/edge/cell incidences of Ω₁ and the raw AW numbering (3 per vertex, 4 per edge, 3 per cell).
 
-    def __init__(self, msh: dmesh.Mesh, num_aw: int) -> None:
+    ``traction_free_facets``: edges of ∂Ω₁ with the essential condition τn = 0 (traction-free sides);
+    every local space treats them like its inner boundary (``local_stress_space``).
+    """
+
+    def __init__(self, msh: dmesh.Mesh, num_aw: int, traction_free_facets: np.ndarray | None = None) -> None:
         top = msh.topology
         for d0, d1 in ((2, 0), (2, 1), (1, 0), (1, 2), (0, 2)):
             top.create_connectivity(d0, d1)
@@ -393,7 +402,8 @@ class _Topology:
         self.nv = top.index_map(0).size_local
         self.ne = top.index_map(1).size_local
         if num_aw != 3 * self.nv + 4 * self.ne + 3 * self.nc:
-            raise RuntimeError("the Ω₁ AW space carries constraints; the local spaces need the unconstrained one")
+            raise RuntimeError("the local spaces are built on the unconstrained AW numbering of Ω₁ (cell_operators "
+                               "takes care of that); essential τn = 0 sides enter through traction_free_facets")
         self.c2v = top.connectivity(2, 0).array.reshape(-1, 3)[: self.nc].astype(np.int64)
         self.c2e = top.connectivity(2, 1).array.reshape(-1, 3)[: self.nc].astype(np.int64)
         self.e2v = top.connectivity(1, 0).array.reshape(-1, 2).astype(np.int64)
@@ -403,6 +413,14 @@ class _Topology:
         vx = np.empty((self.nv, 2))
         vx[self.c2v.ravel()] = x[msh.geometry.dofmaps[0][: self.nc].ravel()]
         self.vx = vx
+        self.tf_edge = np.zeros(self.ne, dtype=bool)
+        if traction_free_facets is not None and len(traction_free_facets):
+            tf = np.asarray(traction_free_facets, dtype=np.int64)
+            if np.any(self.e_deg[tf] != 1):
+                raise InputError("traction-free facets must lie on the boundary of Ω₁")
+            self.tf_edge[tf] = True
+        self.tf_vertex = np.zeros(self.nv, dtype=bool)
+        self.tf_vertex[self.e2v[self.tf_edge].ravel()] = True
 
 
 @dataclass(slots=True)
@@ -481,14 +499,14 @@ def _boundary_vertex_null_spaces(
 
 
 def local_stress_space(ops: CellOperators, topo: _Topology, cells: np.ndarray) -> LocalSpace:
-    """Basis of {τ ∈ AW(ω) : τn = 0 on ∂ω ∩ Ω₁°} in the cell-major layout of ω."""
+    """Basis of {τ ∈ AW(ω) : τn = 0 on ∂ω ∩ Ω₁° and on the traction-free sides} in the cell-major layout of ω."""
     cells = np.sort(np.asarray(cells, dtype=np.int64))
     v_in = np.bincount(topo.c2v[cells].ravel(), minlength=topo.nv)
     e_in = np.bincount(topo.c2e[cells].ravel(), minlength=topo.ne)
-    v_int = np.flatnonzero((v_in > 0) & (v_in == topo.v_deg))
-    v_bnd = np.flatnonzero((v_in > 0) & (v_in < topo.v_deg))
-    e_int = np.flatnonzero((e_in > 0) & (e_in == topo.e_deg))
-    e_bnd = np.flatnonzero((e_in == 1) & (topo.e_deg == 2))
+    v_int = np.flatnonzero((v_in > 0) & (v_in == topo.v_deg) & ~topo.tf_vertex)
+    v_bnd = np.flatnonzero((v_in > 0) & ((v_in < topo.v_deg) | topo.tf_vertex))
+    e_int = np.flatnonzero((e_in > 0) & (e_in == topo.e_deg) & ~topo.tf_edge)
+    e_bnd = np.flatnonzero(((e_in == 1) & (topo.e_deg == 2)) | ((e_in > 0) & topo.tf_edge))
     nv, ne = topo.nv, topo.ne
     inner = np.concatenate([
         (3 * v_int[:, None] + np.arange(3)).ravel(),
@@ -1138,11 +1156,11 @@ def _gather(results: dict, n: int, comm: MPI.Comm) -> list:
 
 
 def stage_one_of(
-    sub, grid: CoarseGrid, options: MixedCEMOptions, *, H: float
+    sub, grid: CoarseGrid, options: MixedCEMOptions, *, H: float, traction_free_facets: np.ndarray | None = None,
 ) -> tuple[CellOperators, "_Topology", StageI]:
     """Stage I alone for an Ω₁ ``MixedSubproblem``: (cell operators, local-space topology, U_aux)."""
     ops = cell_operators(sub, H, options.weight, options.s_factor)
-    topo = _Topology(sub.mesh, ops.num_aw)
+    topo = _Topology(sub.mesh, ops.num_aw, traction_free_facets)
     return ops, topo, stage_one(ops, topo, grid, options.nbasis, options.min_gap, options.max_nbasis,
                                 options.eigensolver)
 
@@ -1331,7 +1349,10 @@ _COARSE_ARRAYS = ("Gt", "Gk", "Bm", "BN", "Cphi", "Ephi", "Mu", "PiG")
 _FUNCTION_DTYPE = np.float32
 
 
-def mixed_offline_key(sub, ops: CellOperators, grid: CoarseGrid, options: MixedCEMOptions, *, H: float) -> str:
+def mixed_offline_key(
+    sub, ops: CellOperators, grid: CoarseGrid, options: MixedCEMOptions, *, H: float,
+    traction_free: np.ndarray | None = None,
+) -> str:
     """sha256 of everything the mixed offline data depend on.
 
     Mesh geometry and cells of Ω₁, facet tags, λ, μ, f, β, H, the coarse cells and their patches,
@@ -1363,6 +1384,7 @@ def mixed_offline_key(sub, ops: CellOperators, grid: CoarseGrid, options: MixedC
         "coarse_sizes": np.array([len(c) for c in grid.cells], dtype=np.int64),
         "patches": np.concatenate(patches),
         "patch_sizes": np.array([p.size for p in patches], dtype=np.int64),
+        "traction_free_edges": np.flatnonzero(traction_free) if traction_free is not None else np.zeros(0, np.int64),
     }
     for name in ("K", "R", "B", "M", "S", "G", "dg_rows", "u_rows", "gamma_cells", "P_cols", "P_blocks"):
         arrays[f"ops_{name}"] = getattr(ops, name)
@@ -1549,7 +1571,7 @@ class MixedMultiscaleOmega1:
 
     def __init__(
         self, sub, grid: CoarseGrid, options: MixedCEMOptions, *, H: float, cache_dir: str | Path | None = None,
-        comm: MPI.Comm = MPI.COMM_SELF,
+        comm: MPI.Comm = MPI.COMM_SELF, traction_free_facets: np.ndarray | None = None,
     ) -> None:
         require_serial(sub.mesh.comm)
         self.options = options
@@ -1558,7 +1580,7 @@ class MixedMultiscaleOmega1:
         self.times: dict[str, float] = {}
         t = time.perf_counter()
         self.ops = cell_operators(sub, H, options.weight, options.s_factor)
-        self.topo = _Topology(sub.mesh, self.ops.num_aw)
+        self.topo = _Topology(sub.mesh, self.ops.num_aw, traction_free_facets)
         self.times["assembly"] = time.perf_counter() - t
         self.cache_status = "disabled"
         self.cache_path: Path | None = None
@@ -1566,7 +1588,7 @@ class MixedMultiscaleOmega1:
         if cache_dir is not None:
             t = time.perf_counter()
             cache = MixedOfflineCache(cache_dir)
-            key = mixed_offline_key(sub, self.ops, grid, options, H=H)
+            key = mixed_offline_key(sub, self.ops, grid, options, H=H, traction_free=self.topo.tf_edge)
             self.cache_path = cache.path(key)
             data, self.cache_status = cache.load(key, self.ops, grid)
             statuses = comm.allgather(self.cache_status)  # every rank builds, or none

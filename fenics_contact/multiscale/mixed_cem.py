@@ -882,7 +882,7 @@ class CoarseCellDofs:
         """The cell-major DG P3 values (|K|, 30, ...) of AW coefficients c (|aw_K|, ...) on K."""
         slots = self.slots[k]
         cc = np.where((slots >= 0).reshape(slots.shape + (1,) * (c.ndim - 1)), c[np.maximum(slots, 0)], 0.0)
-        return np.einsum("cab,cb...->ca...", ops.P_blocks[self.cells[k]], cc)
+        return ops.P_blocks[self.cells[k]] @ cc if c.ndim > 1 else np.einsum("cab,cb->ca", ops.P_blocks[self.cells[k]], cc)
 
 
 @dataclass(slots=True)
@@ -915,7 +915,7 @@ def _patch_system(ops: CellOperators, topo: _Topology, grid: CoarseGrid, aux: St
     for j in patch:
         cj = np.sort(grid.cells[j].astype(np.int64))
         pos = np.searchsorted(cells, cj)
-        Zj = np.einsum("cab,cbk->cak", ops.S[cj], aux.modes[j])  # (|K_j|, 6, l_j)
+        Zj = ops.S[cj] @ aux.modes[j]  # (|K_j|, 6, l_j)
         lj = Zj.shape[2]
         r = np.broadcast_to(_rows(pos, 6).reshape(cj.size, 6)[:, :, None], Zj.shape)
         c = np.broadcast_to(col + np.arange(lj)[None, None, :], Zj.shape)
@@ -1241,13 +1241,12 @@ class CoarseOperators:
 
 
 def _merge_columns(X: np.ndarray, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Sum the columns (last axis) of X with equal index: (sorted unique indices, merged X)."""
+    """Sum the columns of the matrix X with equal index: (sorted unique indices, merged X)."""
     uniq, inv = np.unique(idx, return_inverse=True)
     if uniq.size == idx.size:
-        return uniq, X[..., np.argsort(inv)] if np.any(np.diff(idx) < 0) else X
-    out = np.zeros(X.shape[:-1] + (uniq.size,))
-    np.add.at(np.moveaxis(out, -1, 0), inv, np.moveaxis(X, -1, 0))
-    return uniq, out
+        return uniq, X[:, np.argsort(inv)] if np.any(np.diff(idx) < 0) else X
+    sel = sp.csr_matrix((np.ones(idx.size), (np.arange(idx.size), inv)), shape=(idx.size, uniq.size))
+    return uniq, np.asarray((sel.T @ X.T).T)
 
 
 def _reaching(funcs: list, n: int) -> list:
@@ -1294,21 +1293,21 @@ def coarse_operators(
         PK = dofs.P(ops, K)
         ix = np.ix_(uniq, uniq)
         PF = (PK @ F).reshape(cK.size, 30, -1)  # cell-major DG values on K
-        KtF = PK.T @ np.einsum("cab,cbk->cak", ops.kt(cK), PF).reshape(30 * cK.size, -1)
-        KF = PK.T @ np.einsum("cab,cbk->cak", ops.K[cK], PF).reshape(30 * cK.size, -1)
+        KtF = PK.T @ (ops.kt(cK) @ PF).reshape(30 * cK.size, -1)  # batched matmul (BLAS), not einsum
+        KF = PK.T @ (ops.K[cK] @ PF).reshape(30 * cK.size, -1)
         Gt[ix] += F.T @ KtF
         Gk[ix] += F.T @ KF
-        BP = np.einsum("cab,cbk->cak", ops.B[cK], PF).reshape(6 * cK.size, -1)
+        BP = (ops.B[cK] @ PF).reshape(6 * cK.size, -1)
         a0, a1 = aux.offsets[K], aux.offsets[K + 1]
         Pi = aux.modes[K].reshape(-1, a1 - a0)
-        MPi = np.einsum("cab,cbk->cak", ops.M[cK], aux.modes[K]).reshape(-1, a1 - a0)
+        MPi = (ops.M[cK] @ aux.modes[K]).reshape(-1, a1 - a0)
         Bm[a0:a1, uniq] += Pi.T @ BP
         Mu[a0:a1, a0:a1] += Pi.T @ MPi
         PiG[a0:a1] += Pi.T @ ops.G[cK].ravel()
         if reach_c[K]:
             gu, Nu = _merge_columns(np.concatenate([q.u[p] for q, p in reach_c[K]], axis=1),
                                     np.concatenate([q.index for q, _ in reach_c[K]]))
-            MNu = np.einsum("cab,cbk->cak", ops.M[cK], Nu.reshape(cK.size, 6, -1)).reshape(6 * cK.size, -1)
+            MNu = (ops.M[cK] @ Nu.reshape(cK.size, 6, -1)).reshape(6 * cK.size, -1)
             BN[np.ix_(uniq, gu)] += BP.T @ Nu
             PMN = MPi.T @ Nu
             du = aux.size + gu
@@ -1328,6 +1327,10 @@ def coarse_operators(
         for name in ("Gt", "Gk", "Bm", "BN", "Cphi", "Ephi", "Mu", "PiG"):
             arr = getattr(co, name)
             comm.Allreduce(MPI.IN_PLACE, arr, op=MPI.SUM)
+    for name in _SYMMETRIC:  # Gram matrices: exactly symmetric (the cache stores one triangle)
+        X = getattr(co, name)
+        X += X.T
+        X *= 0.5
     return co
 
 
@@ -1344,6 +1347,7 @@ class OfflineData(NamedTuple):
 
 
 _COARSE_ARRAYS = ("Gt", "Gk", "Bm", "BN", "Cphi", "Ephi", "Mu", "PiG")
+_SYMMETRIC = ("Gt", "Gk", "Mu")  #: stored as their upper triangle
 #: Stored precision of the patch functions (AW coefficients, displacements) in the cache: they serve
 #: only the fine output fields (relative rounding 6e-8); U_aux and the coarse matrices are float64.
 _FUNCTION_DTYPE = np.float32
@@ -1411,7 +1415,8 @@ def _pack_offline(data: OfflineData):
     yield "aux_residuals", np.asarray(aux.residuals, dtype=np.float64)
     yield "aux_values", _concat(aux.values, np.float64)
     for name in sorted(_COARSE_ARRAYS):
-        yield f"co_{name}", getattr(co, name)
+        X = getattr(co, name)
+        yield f"co_{name}", X[np.triu_indices(X.shape[0])] if name in _SYMMETRIC else X
     yield "co_sizes", np.array([co.n_ms, co.n_aux, co.n_g], dtype=np.int64)
     for kind, funcs in (("b", data.basis), ("c", data.corr)):
         for i, f in enumerate(funcs):
@@ -1460,9 +1465,16 @@ def _unpack_offline(arrays: dict, ops: CellOperators, grid: CoarseGrid) -> Offli
     basis = [_unpack_functions(arrays, f"fn_b_{i:07d}", dofs, n_ms) for i in range(grid.size)]
     corr = [_unpack_functions(arrays, f"fn_c_{i:07d}", dofs, n_g + 1) if f"fn_c_{i:07d}_index" in arrays else None
             for i in range(grid.size)]
-    mats = {name: arrays[f"co_{name}"] for name in _COARSE_ARRAYS}
     n_d = n_g + 1
     n = n_ms + n_d
+    mats = {name: arrays[f"co_{name}"] for name in _COARSE_ARRAYS}
+    for name, size in (("Gt", n), ("Gk", n), ("Mu", n_aux + n_d)):
+        tri = mats[name]
+        if tri.shape != (size * (size + 1) // 2,):
+            raise ValueError(f"cached coarse matrix {name} has {tri.size} entries, expected a triangle of {size}")
+        X = np.zeros((size, size))
+        X[np.triu_indices(size)] = tri
+        mats[name] = X + np.triu(X, 1).T
     shapes = {"Gt": (n, n), "Gk": (n, n), "Bm": (n_aux, n), "BN": (n, n_d), "Cphi": (n, n_g), "Ephi": (n_g, n),
               "Mu": (n_aux + n_d, n_aux + n_d), "PiG": (n_aux,)}
     for name, shape in shapes.items():

@@ -1,8 +1,10 @@
 """Algorithm 4: mixed CEM-GMsFEM in Ω₁, mixed FEM with penalty contact in Ω₂ (METHOD §3).
 
-    Ω₁ (multiscale, linear): (r, w) ∈ X_ms × U_aux,
-        (Ar, τ) + (div τ, w) + β∫_γ (rn₁)·(τn₁) = ∫_γ g₁₂·(τn₁) − [(AQg₁₂, τ) + (div τ, Ng₁₂) + β∫_γ (Qg₁₂n₁)·(τn₁)]
-        −(div r, v) = (f, v) + (div Qg₁₂, v);     σ₁ = r + Q g₁₂,  u₁ = w + N g₁₂
+    Ω₁ (multiscale, linear): (r, w) ∈ X_ms × U_aux, with the Robin correctors (Q g₁₂, N g₁₂) and the
+    source correctors (σ_f, u_f) (METHOD §9; zero with ``source_correction=False``, the paper's algorithm),
+        (Ar, τ) + (div τ, w) + β∫_γ (rn₁)·(τn₁) = ∫_γ g₁₂·(τn₁) − [(A(Qg₁₂ + σ_f), τ) + (div τ, Ng₁₂ + u_f)
+                                                   + β∫_γ ((Qg₁₂ + σ_f)n₁)·(τn₁)]
+        −(div r, v) = (f, v) + (div (Qg₁₂ + σ_f), v);     σ₁ = r + Q g₁₂ + σ_f,  u₁ = w + N g₁₂ + u_f
     Ω₂ (fine, nonlinear): as in Algorithm 2 (``fem.mixed.MixedSubproblem``, globalized semismooth Newton)
     update:  g₁₂ ← g₂₁ − 2β σ₂n₂,   g₂₁ ← g₁₂ − 2β σ₁n₁
 
@@ -19,14 +21,16 @@ offline with one coarse solve per interface value
 (``multiscale.mixed_cem.InterfaceResponse``).  Online, the Ω₁ side costs a few
 matrix–vector products of the size of the interface data (trace, and the
 stopping rule's norms from Gram matrices in g); σ₁ and u₁ are formed on the
-fine mesh only at the end (output and errors).  Serial only.
+fine mesh only at the end (output and errors).  MPI: every rank holds the whole mesh,
+the offline local problems are shared out (``offline_comm``), the online phase runs
+replicated.
 
 **Displacement errors.**  u₁ = Π w + N g is, as in the paper's algorithm, a coarse
 displacement (U_aux holds l functions per coarse cell, the rigid motions on interior
 cells), so e_u over Ω₁ ∪ Ω₂ levels off at the best-approximation error of u_h in
 U_aux (≈ 6e−2 at h = 1/64, H = 1/16, l = 3).  Two further measures are reported:
 ``e_u_projected`` (the Ω₁ part as ‖π(u_h − u₁)‖) and ``e_u_post`` with the fine
-displacement Σ r_j q_j + N g assembled from the Stage II displacement parts q_j (it
+displacement Σ r_j q_j + N g + u_f assembled from the Stage II displacement parts q_j (it
 satisfies the discrete constitutive law with σ₁ in every local space and follows e_σ).
 """
 

@@ -130,6 +130,8 @@ __all__ = [
     "MIXED_CACHE_FORMAT",
     "SMALL_GAP",
     "CellOperators",
+    "CoarseCellDofs",
+    "CoarseOperators",
     "LocalSpace",
     "InterfaceResponse",
     "MixedCEMOptions",
@@ -140,10 +142,13 @@ __all__ = [
     "StageI",
     "basis_decay_profile",
     "cell_operators",
+    "coarse_operators",
     "local_stress_space",
     "mixed_offline_key",
     "stage_one",
+    "stage_one_cell",
     "stage_one_of",
+    "stage_two",
 ]
 
 log = logging.getLogger(__name__)
@@ -236,11 +241,6 @@ def _block_diag(blocks: np.ndarray) -> sp.csr_matrix:
     rows = np.broadcast_to((a * np.arange(n)[:, None, None] + np.arange(a)[None, :, None]), blocks.shape)
     cols = np.broadcast_to((b * np.arange(n)[:, None, None] + np.arange(b)[None, None, :]), blocks.shape)
     return sp.csr_matrix((blocks.ravel(), (rows.ravel(), cols.ravel())), shape=(n * a, n * b))
-
-
-def _contains(sorted_cells: np.ndarray, c: int) -> bool:
-    k = np.searchsorted(sorted_cells, c)
-    return bool(k < sorted_cells.size and sorted_cells[k] == c)
 
 
 def _rows(cells: np.ndarray, width: int) -> np.ndarray:
@@ -1186,11 +1186,24 @@ def _gather(results: dict, n: int, comm: MPI.Comm) -> list:
     return out
 
 
+def _scale_to_cell_sizes(ops: CellOperators, grid: CoarseGrid, H: float) -> None:
+    """κ̃ = c κ H_k⁻² with the size H_k of each coarse cell when the grid gives one (``cell_size``: √|K_k|,
+    a user partition); a Cartesian grid has H_k = H and nothing changes."""
+    sizes = getattr(grid, "cell_size", None)
+    if sizes is None:
+        return
+    for k, Hk in enumerate(np.asarray(sizes, dtype=float)):
+        factor = (H / Hk) ** 2
+        if abs(factor - 1.0) > 1e-10:
+            ops.S[np.asarray(grid.cells[k], dtype=np.int64)] *= factor
+
+
 def stage_one_of(
     sub, grid: CoarseGrid, options: MixedCEMOptions, *, H: float, traction_free_facets: np.ndarray | None = None,
 ) -> tuple[CellOperators, "_Topology", StageI]:
     """Stage I alone for an Ω₁ ``MixedSubproblem``: (cell operators, local-space topology, U_aux)."""
     ops = cell_operators(sub, H, options.weight, options.s_factor)
+    _scale_to_cell_sizes(ops, grid, H)
     topo = _Topology(sub.mesh, ops.num_aw, traction_free_facets)
     return ops, topo, stage_one(ops, topo, grid, options.nbasis, options.min_gap, options.max_nbasis,
                                 options.eigensolver)
@@ -1623,6 +1636,7 @@ class MixedMultiscaleOmega1:
         self.times: dict[str, float] = {}
         t = time.perf_counter()
         self.ops = cell_operators(sub, H, options.weight, options.s_factor)
+        _scale_to_cell_sizes(self.ops, grid, H)
         self.topo = _Topology(sub.mesh, self.ops.num_aw, traction_free_facets)
         self.times["assembly"] = time.perf_counter() - t
         self.cache_status = "disabled"

@@ -164,7 +164,7 @@ class MixedHybridStep:
         """σ_h, u_h on part i: AW coefficients (``dg``: the DG P3 values) and DG P1 values of the part."""
         part, s = self.parts[i], self.sub[i]
         i_sub, i_par = sub_to_parent_dofs(part, s.dg, reference.sigma.function_space)
-        d = np.zeros(s.P.shape[0])
+        d = np.zeros(s.dg.dofmap.index_map.size_local * s.dg.dofmap.index_map_bs)
         d[i_sub] = reference.sigma.x.array[i_par]
         j_sub, j_par = sub_to_parent_dofs(part, s.U, reference.u.function_space)
         u = np.zeros(s.n_u)

@@ -109,6 +109,7 @@ class MixedMultiscaleHybridStep(MixedHybridStep):
         grid = coarse_grid(part.mesh, part.cell_map, cm.coarse_cell, cm.H)
         self.cem = cem
         self.omega1 = MixedMultiscaleOmega1(self.sub[0], grid, cem, H=cm.H, cache_dir=cache_dir, comm=offline_comm)
+        self.sub[0].P = None  # the fine Ω₁ AW prolongation (1 GB at h = 1/256): omega1.ops holds its cell blocks
         co = self.omega1.co
         if co.n_g != self.size:
             raise RuntimeError("the multiscale interface data do not match the Ω₂ interface data")

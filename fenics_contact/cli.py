@@ -25,9 +25,10 @@ import signal
 import sys
 import threading
 import time
-from collections.abc import Callable, Iterator
+import typing
+from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, replace
 from pathlib import Path
 from typing import NamedTuple
 
@@ -55,10 +56,13 @@ from fenics_contact.plots import (
     plot_cell_field,
     plot_contact,
     plot_displacement,
+    plot_force_indentation,
     plot_history,
     plot_stress,
     render_deformed,
 )
+from fenics_contact.problem.case import RUN_TABLES, Case, load_case, parse_override
+from fenics_contact.problem.cell_groups import bounding_box
 from fenics_contact.problem.fields import material_fields
 from fenics_contact.problem.geometry import ContactMesh, read_mesh, unit_square
 from fenics_contact.problem.materials import check_poisson_ratio
@@ -82,6 +86,7 @@ EXIT_CODES = {
     143: "interrupted by SIGTERM; --out left as it was",
 }
 EXIT_BAD_INPUT, EXIT_NOT_CONVERGED, EXIT_NUMERICAL = 2, 3, 4
+NOT_GIVEN = object()  #: an option the command line did not give (``build_parser(given_only=True)``)
 
 #: options that only some methods use: giving one to another method is refused, not ignored
 _METHOD_OPTIONS: dict[str, tuple[tuple[str, ...], str]] = {
@@ -172,6 +177,7 @@ class RunOptions:
     reference: bool = False
     out: Path = Path("results")
     plots: bool = True
+    case: Path | None = None  #: the case file the problem came from (``--case``; see ``problem.case``)
 
     def __post_init__(self) -> None:
         if self.method not in METHODS:
@@ -243,7 +249,7 @@ class RunOptions:
         return IterationOptions(tol=self.tol, max_iterations=self.max_iterations, accel=self.accel)
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(*, given_only: bool = False) -> argparse.ArgumentParser:
     codes = "\n".join(f"  {code:<4} {meaning}" for code, meaning in EXIT_CODES.items())
     parser = argparse.ArgumentParser(prog="fenics-contact", description=__doc__.split("\n")[0])
     parser.add_argument("--version", action="version", version=f"fenics-contact {__version__}")
@@ -292,7 +298,170 @@ def build_parser() -> argparse.ArgumentParser:
                      "run, so it must be new, empty or an earlier run's")
     run.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
     run.add_argument("-v", "--verbose", action="store_true")
+    # case files (issue 14): the problem from a TOML file; flags override it
+    run.add_argument("--case", type=Path, help="a case file (TOML) describing the whole problem: mesh, materials, "
+                     "loads, boundary conditions, obstacle and run options (cases/*.toml, README); the flags "
+                     "override it: --h, --H, --mesh, --nu, --E-map, --model, --E-high, --E-low change its problem, "
+                     "the others its run options")
+    run.add_argument("--set", action="append", metavar="KEY=VALUE", help="with --case: replace one key of the "
+                     "case file, VALUE in TOML syntax, e.g. --set mesh.refinement=0.5 --set "
+                     "'obstacle.indentation=[1e-3, 2e-3]' (repeatable)")
+    if given_only:  # only the options the command line gives (the others absent): they override a case file
+        run.set_defaults(**{dest: NOT_GIVEN for dest in vars(run.parse_args([])) if dest != "set"})  # append: a list
     return parser
+
+
+# ---------------------------------------------------------------------------------------------
+# case files (issue 14): the problem from --case FILE.toml, the flags overriding it
+# ---------------------------------------------------------------------------------------------
+#: RunOptions fields that describe the problem: with --case each one changes a key of the case
+_PROBLEM_FLAGS = {"h": "mesh.h", "H": "mesh.H", "mesh": "mesh", "nu": "material.nu", "E_map": "material.E",
+                  "model": "material.model", "E_high": "material.E-high", "E_low": "material.E-low"}
+
+
+def options_from_arguments(args: argparse.Namespace, argv: list[str] | None = None) -> tuple[RunOptions, Case | None]:
+    """The validated RunOptions of a command line and, with ``--case``, the Case it runs (InputError otherwise)."""
+    if args.case is None:
+        if args.set:
+            raise InputError("--set changes a key of a case file: it needs --case FILE")
+        return RunOptions.from_namespace(args), None
+    given = {k: v for k, v in vars(build_parser(given_only=True).parse_args(argv)).items() if v is not NOT_GIVEN}
+    case = load_case(args.case, _case_overrides(given))
+    return case_run_options(case, given), case
+
+
+def _case_overrides(given: dict) -> list[tuple[str, object]]:
+    """The problem flags as case keys (``--h 16`` -> mesh.h = 16), then the ``--set`` items."""
+    overrides = []
+    for name, key in _PROBLEM_FLAGS.items():
+        if name not in given:
+            continue
+        value = given[name]
+        if name == "mesh":  # a mesh file replaces the [mesh] table
+            value = {"file": str(Path(value).resolve())}
+        elif name == "E_map":  # the flag's meaning: a pixel map over the unit square
+            value = {"pixels": str(Path(value).resolve()), "extent": [0.0, 1.0, 0.0, 1.0]}
+        overrides.append((key, value))
+    return overrides + [parse_override(text) for text in given.get("set") or ()]
+
+
+def _run_table_keys() -> dict[str, set[str]]:
+    """The RunOptions fields each run table of a case file may set (the method options in their methods' table)."""
+    general = {f.name for f in fields(RunOptions)} - set(_PROBLEM_FLAGS) - {"case"} - set(_METHOD_OPTIONS)
+    keys = {table: set() for table in RUN_TABLES} | {"run": general}
+    for name, (methods, _) in _METHOD_OPTIONS.items():
+        table = next((t for t, m in RUN_TABLES.items() if t != "run" and set(m) == set(methods)), "run")
+        keys[table].add(name)
+    return keys
+
+
+def case_run_options(case: Case, given: Mapping[str, object] = {}) -> RunOptions:
+    """RunOptions from the case's run tables ([run] and the chosen method's), then the flags ``given`` (dest -> value).
+
+    Each table is validated on its own (with a method that uses it), so a bad value is reported
+    with its table even when the chosen method does not use it.
+    """
+    keys = _run_table_keys()
+    names = {f.name for f in fields(RunOptions)}
+    tables = {}
+    for table, methods in RUN_TABLES.items():
+        values = {}
+        for key, value in case.run[table].items():
+            name = key.replace("-", "_")
+            if name not in keys[table]:
+                home = next((t for t, k in keys.items() if name in k), None)
+                hint = f" ({key} belongs in [{home}])" if home else ""
+                raise InputError(f"case {case.path}: unknown key '{table}.{key}'{hint}; the keys of [{table}] are "
+                                 f"{sorted(k.replace('_', '-') for k in keys[table])}")
+            values[name] = _run_value(case, f"{table}.{key}", name, value)
+        probe = {"method": values.get("method", "primal") if table == "run" else methods[0]}
+        if "out" in given:
+            probe["out"] = given["out"]
+        try:
+            RunOptions(**(probe | values))
+        except InputError as err:
+            raise InputError(f"case {case.path}: [{table}] {err}") from None
+        tables[table] = values
+    method = given.get("method", tables["run"].get("method", "primal"))
+    values = dict(tables["run"])
+    for table, methods in RUN_TABLES.items():
+        if table != "run" and method in methods:
+            values |= tables[table]
+    values |= {k: v for k, v in given.items() if k in names and k not in _PROBLEM_FLAGS and k != "case"}
+    if "no_plots" in given:
+        values["plots"] = not given["no_plots"]
+    return RunOptions(**values, case=case.path)
+
+
+def _run_value(case: Case, key: str, name: str, value):
+    """A run-table value of the type of its RunOptions field (TOML has no argparse to convert it)."""
+    annotation = next(f.type for f in fields(RunOptions) if f.name == name)
+    kind = next((t for t in (typing.get_args(annotation) or (annotation,)) if t is not type(None)), None)
+    number = isinstance(value, (int, float)) and not isinstance(value, bool)
+    if kind is str and name in ("alpha", "beta") and number:
+        return repr(value)  # a coefficient may be written as a number
+    ok = {bool: isinstance(value, bool), int: number and isinstance(value, int), float: number,
+          str: isinstance(value, str), Path: isinstance(value, str)}.get(kind, True)
+    if not ok:
+        what = {bool: "true or false", int: "an integer", float: "a number", str: "a string",
+                Path: "a directory name (a string)"}[kind]
+        raise InputError(f"case {case.path}: {key} must be {what}, got {value!r}")
+    return Path(value) if kind is Path else float(value) if kind is float else value
+
+
+def _options_echo(options: RunOptions) -> dict:
+    """The run options of a case run (case-file spelling), for the summary."""
+    echo = {}
+    for f in fields(RunOptions):
+        if f.name in _PROBLEM_FLAGS or f.name == "case":
+            continue
+        if f.name in _METHOD_OPTIONS and options.method not in _METHOD_OPTIONS[f.name][0]:
+            continue  # not used by this method
+        value = options.value(f.name)
+        echo[f.name.replace("_", "-")] = str(value) if isinstance(value, Path) else value
+    return echo
+
+
+def _curve_row(depth: float, direction: np.ndarray, profile, iterations: int, converged: bool, time_s: float) -> dict:
+    zone = profile.contact_zone()
+    return {"depth": float(depth), "force": float(profile.resultant @ direction), "normal_force": profile.force,
+            "max_pressure": profile.max_pressure, "contact_zone": [list(p) for p in zone] if zone else None,
+            "iterations": int(iterations), "converged": bool(converged), "time_s": time_s}
+
+
+def _indentation_curve(options: RunOptions, case: Case, cm: ContactMesh, model: TestModel, outcome,
+                       family: Callable) -> dict:
+    """The force-indentation curve of the case's load steps (the last step is the run's solve).
+
+    primal, mixed: ``indentation.force_indentation`` (warm starts, factorizations kept) with the
+    run's penalty and transmission coefficient; the multiscale methods: one solve per step
+    (the offline data reused through --cache-dir when given).
+    """
+    from fenics_contact.indentation import force_indentation
+
+    spec = case.obstacle
+    direction = np.asarray(spec.direction)
+    rows = []
+    if options.method in ("primal", "mixed"):
+        if options.method == "primal":
+            penalty = {"delta": outcome.summary["delta"], "alpha": options.value("alpha")}
+        else:
+            penalty = {"epsilon": outcome.summary["epsilon"], "beta": options.value("beta")}
+        curve = force_indentation(options.method, cm, model.with_(obstacle=spec.base()), spec.depths,
+                                  direction=direction, options=options.iteration_options(), **penalty)
+        rows = [_curve_row(s.depth, direction, s.profile, s.iterations, s.converged, s.time_s) for s in curve.steps]
+    else:
+        step_options = replace(options, reference=False, plots=False)
+        for depth in spec.depths[:-1]:
+            start = time.perf_counter()
+            stepped = model.with_(obstacle=spec.at(depth))
+            result = family(step_options, cm, stepped, material_fields(cm.mesh, stepped)).result
+            rows.append(_curve_row(depth, direction, result.profile, result.iterations, result.converged,
+                                   time.perf_counter() - start))
+        final = outcome.result
+        rows.append(_curve_row(spec.depths[-1], direction, final.profile, final.iterations, final.converged,
+                               final.time_offline_s + final.time_online_s))
+    return {"direction": direction.tolist(), "steps": rows}
 
 
 # ---------------------------------------------------------------------------------------------
@@ -354,10 +523,7 @@ def _replicated(options: RunOptions, comm: MPI.Comm) -> bool:
 
 
 def _bounding_box(cm: ContactMesh) -> tuple[float, float, float, float]:
-    x = cm.mesh.geometry.x
-    lo = cm.comm.allreduce(np.min(x[:, :2], axis=0, initial=np.inf), op=MPI.MIN)
-    hi = cm.comm.allreduce(np.max(x[:, :2], axis=0, initial=-np.inf), op=MPI.MAX)
-    return float(lo[0]), float(hi[0]), float(lo[1]), float(hi[1])
+    return bounding_box(cm.mesh)  # (an elementwise allreduce of arrays failed under MPI)
 
 
 def _check_coarse_grid(cm: ContactMesh, options: RunOptions) -> None:
@@ -368,6 +534,20 @@ def _check_coarse_grid(cm: ContactMesh, options: RunOptions) -> None:
         raise InputError(f"--method {options.method} with --mesh {options.mesh}: {crossing} Omega1 cells cross the "
                          f"edges of the coarse grid of squares of side 1/{options.H} from the origin; the "
                          "multiscale methods need a mesh that resolves it (choose --H accordingly)")
+
+
+def _check_case_coarse_grid(cm: ContactMesh, options: RunOptions, case: Case) -> None:
+    """The multiscale methods need a coarse grid that the case's mesh resolves."""
+    if cm.H is None:
+        raise InputError(f"--method {options.method}: the mesh of case {case.path.name} ({case.mesh.kind}) has no "
+                         "coarse grid; the multiscale methods need the unit-square mesh or a mesh file with mesh.H "
+                         "(a coarse grid of squares of side 1/H that the mesh resolves)")
+    cells = cm.cell_tags.find(Subdomain.OMEGA1)
+    crossing = cm.comm.allreduce(int(np.count_nonzero(cm.coarse_cell[cells] < 0)), op=MPI.SUM)
+    if crossing:
+        raise InputError(f"--method {options.method} with case {case.path.name}: {crossing} Omega1 cells cross the "
+                         f"edges of the coarse grid of squares of side {cm.H:g} from the origin; the multiscale "
+                         "methods need a mesh that resolves it (choose mesh.H accordingly)")
 
 
 def _contact_modulus(cm: ContactMesh, E) -> float:
@@ -487,16 +667,18 @@ def _run_mixed(options: RunOptions, cm: ContactMesh, model, fields, comm: MPI.Co
 # ---------------------------------------------------------------------------------------------
 # one run
 # ---------------------------------------------------------------------------------------------
-def run(options: RunOptions, comm: MPI.Comm = MPI.COMM_WORLD) -> int:
+def run(options: RunOptions, comm: MPI.Comm = MPI.COMM_WORLD, *, case: Case | None = None) -> int:
     """Run one simulation into ``options.out``; returns 0 (converged) or 3 (not converged), raises otherwise.
 
-    An ``Interrupted`` raised meanwhile carries ``output_complete``: whether ``--out`` already holds the run.
+    ``case``: the problem from a case file (``options_from_arguments``); else the built-in model of
+    the options. An ``Interrupted`` raised meanwhile carries ``output_complete``: whether ``--out``
+    already holds the run.
     """
-    model, pixels = _model(options)
+    model, pixels = _model(options) if case is None else (None, None)
     output = OutputDirectory(options.out, comm)
     try:
         with output:
-            result, summary = _solve_and_write(options, comm, model, pixels, output)
+            result, summary = _solve_and_write(options, comm, model, pixels, output, case)
     except Interrupted as stop:
         stop.output_complete = output.committed
         raise
@@ -505,44 +687,63 @@ def run(options: RunOptions, comm: MPI.Comm = MPI.COMM_WORLD) -> int:
               f"{summary['final_rel_change']:.3e} > --tol {options.tol:g}); results in {options.out} with "
               '"converged": false', comm)
         return EXIT_NOT_CONVERGED
+    if not summary["converged"]:  # a load step of the force-indentation curve
+        depths = [s["depth"] for s in summary["force_indentation"]["steps"] if not s["converged"]]
+        _fail(f"not converged: the load step(s) at depth {depths} hit --max-iterations {options.max_iterations}; "
+              f'results in {options.out} with "converged": false', comm)
+        return EXIT_NOT_CONVERGED
     log.info("converged after %d iterations; e_u = %s; active set %s; summary in %s",
              result.iterations, result.e_u, result.profile.active_interval(), options.out / "summary.json")
     return 0
 
 
-def _solve_and_write(options: RunOptions, comm: MPI.Comm, model: TestModel, pixels: np.ndarray | None,
-                     output: OutputDirectory) -> tuple[object, dict]:
+def _solve_and_write(options: RunOptions, comm: MPI.Comm, model: TestModel | None, pixels: np.ndarray | None,
+                     output: OutputDirectory, case: Case | None = None) -> tuple[object, dict]:
     """Mesh, solve, write everything into the staging directory and move it into place."""
     t0 = time.perf_counter()
     replicated = _replicated(options, comm)
-    cm = _mesh(options, MPI.COMM_SELF if replicated else comm)
-    if pixels is not None and options.mesh is not None:
-        check_pixel_modulus(pixels, _bounding_box(cm), f"--E-map {options.E_map}")
-    if options.mesh is not None and options.method.endswith("-ms"):
-        _check_coarse_grid(cm, options)
+    mesh_comm = MPI.COMM_SELF if replicated else comm  # replicated: every rank holds the whole mesh (mixed-ms)
+    if case is None:
+        cm = _mesh(options, mesh_comm)
+        if pixels is not None and options.mesh is not None:
+            check_pixel_modulus(pixels, _bounding_box(cm), f"--E-map {options.E_map}")
+        if options.mesh is not None and options.method.endswith("-ms"):
+            _check_coarse_grid(cm, options)
+    else:
+        case_mesh = case.build_mesh(mesh_comm)
+        cm = case_mesh.cm
+        model = case.model(case_mesh)
+        if options.method.endswith("-ms"):
+            _check_case_coarse_grid(cm, options, case)
     fields = material_fields(cm.mesh, model, require_load=True)
     t_mesh = time.perf_counter() - t0
-    log.info("model %d (%s), h = %.4g, H = %s, method %s, accel %s",
-             options.model, model.description, cm.h, cm.H, options.method, options.accel)
-    if options.method.startswith("primal"):
+    name = f"model {options.model}" if case is None else f"case {case.path.name}"
+    log.info("%s (%s), h = %.4g, H = %s, method %s, accel %s",
+             name, model.description, cm.h, cm.H, options.method, options.accel)
+    family = _run_primal if options.method.startswith("primal") else _run_mixed
+    if family is _run_primal:
         outcome = _run_primal(options, cm, model, fields)
     else:
         outcome = _run_mixed(options, cm, model, fields, comm if replicated else MPI.COMM_SELF)
     result, reference = outcome.result, outcome.reference
     profile = result.profile
+    curve = _indentation_curve(options, case, cm, model, outcome, family) if case and case.obstacle.steps else None
     summary = {
         "method": options.method,
-        "model": options.model,
+        "model": options.model if case is None else None,
         "mesh": str(options.mesh) if options.mesh is not None else None,
         "h": cm.h,
         "H": cm.H,
         "accel": options.accel,
         "iterations": result.iterations,
-        "converged": result.converged,
+        "converged": result.converged and (curve is None or all(s["converged"] for s in curve["steps"])),
         "rel_tolerance": options.tol,
         "final_rel_change": float(result.history.rel_changes[-1]),
         **outcome.summary,
         "active_set": profile.active_interval(),
+        "contact_force": profile.force,
+        "contact_zone": [list(p) for p in profile.contact_zone()] if profile.contact_zone() else None,
+        "max_contact_pressure": profile.max_pressure,
         "newton_steps_total": int(sum(r.info.get("newton", 0) for r in result.history.records)),
         "dofs": result.dofs,
         "time_mesh_s": t_mesh,
@@ -552,13 +753,17 @@ def _solve_and_write(options: RunOptions, comm: MPI.Comm, model: TestModel, pixe
         "reference_newton_steps": reference.newton.steps if reference is not None else None,
         "reference_active_set": reference.profile.active_interval() if reference is not None else None,
         "mpi_ranks": comm.size,
+        "force_indentation": curve,
+        "case": case.to_dict() | {"run": _options_echo(options)} if case is not None else None,
     }
     out = output.path
     writer = MPI.COMM_SELF if replicated else comm  # replicated: rank 0 holds the whole run and writes it
     if not replicated or comm.rank == 0:
         outcome.write(out)
         if options.plots:
-            plot_cell_field(fields.E, out / "E.png", title=f"Young's modulus, model {options.model}", log=True)
+            plot_cell_field(fields.E, out / "E.png", title=f"Young's modulus, {name}", log=True)
+            if curve is not None:
+                plot_force_indentation({options.method: curve}, out / "force_indentation.png", comm=writer)
             profiles = {f"{options.method} hybrid": profile}
             if reference is not None:
                 profiles["monolithic"] = reference.profile
@@ -625,7 +830,8 @@ def main(argv: list[str] | None = None) -> int:
     out = getattr(args, "out", None)
     with _interruptible():
         try:
-            return run(RunOptions.from_namespace(args), comm)
+            options, case = options_from_arguments(args, argv)
+            return run(options, comm, case=case)
         except Interrupted as stop:
             where = (f"the results in {out} are complete" if getattr(stop, "output_complete", False)
                      else f"{out} left as it was (no partial output)")

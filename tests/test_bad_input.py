@@ -94,6 +94,61 @@ def _cache(make: Callable[[Path], str], method: str = "primal-ms"):
     return lambda tmp: [*SMALL, "--method", method, "--layers", "1", "--cache-dir", make(tmp)]
 
 
+# case files (issue 14)
+CASES_DIR = Path(__file__).parents[1] / "cases"
+#: a small bar on the unit square (clamped on the left), to be spoiled by each case below
+SQUARE = """[mesh]
+builtin = "unit-square"
+h = 8
+H = 2
+clamped = ["left"]
+[material]
+E = 1.0
+nu = 0.0
+[load]
+body-force = [1.0, 0.0]
+"""
+#: the composite of cases/ (materials by group, a traction group on the top)
+COMPOSITE = f"""[mesh]
+file = "{CASES_DIR / 'composite.msh'}"
+[material]
+E = {{matrix = 1.0, fibres = 1e3}}
+nu = 0.3
+[boundary]
+tractions = {{Gamma_N_top = [0.0, -0.01]}}
+"""
+PLANE = """[obstacle]
+shape = "plane"
+point = [1.0, 0.0]
+normal = [-1.0, 0.0]
+"""
+
+
+def _case(text: str, *args: str, files: dict | None = None):
+    """A case file with ``text`` (and ``files`` beside it: name -> text, or an array for .npy)."""
+    def prepare(tmp: Path) -> list[str]:
+        for name, content in (files or {}).items():
+            if isinstance(content, np.ndarray):
+                np.save(tmp / name, content)
+            else:
+                (tmp / name).write_text(content)
+        (tmp / "case.toml").write_text(text)
+        return ["--case", str(tmp / "case.toml"), *args]
+    return prepare
+
+
+def _case_mesh(text: str, **kwargs):
+    """A case on a mesh file of three columns (test_validation.build_columns) tagged as asked."""
+    def prepare(tmp: Path) -> list[str]:
+        mesh = build_columns(tmp / "user.msh", **kwargs)
+        (tmp / "case.toml").write_text(f'[mesh]\nfile = "{mesh}"\n' + text)
+        return ["--case", str(tmp / "case.toml")]
+    return prepare
+
+
+_MATERIAL = "[material]\nE = 1.0\nnu = 0.3\n[load]\nbody-force = [1.0, 0.0]\n"
+
+
 CASES = [
     # options
     Case("ν = 0.5", _args("--nu", "0.5"), 2, "Poisson ratio"),
@@ -166,6 +221,68 @@ CASES = [
          "offline cache directory /proc/fenics-contact-cache is not writable"),
     Case("--cache-dir for Algorithm 1", lambda tmp: [*SMALL, "--cache-dir", str(tmp)], 2,
          "--cache-dir does not apply to --method primal"),
+    # case files (--case): schema, groups, boundary conditions, obstacle, run tables
+    Case("case file missing", lambda tmp: ["--case", str(tmp / "none.toml")], 2, "none.toml does not exist"),
+    Case("case file not TOML", _case("[mesh\nh = 8\n"), 2, "not a valid TOML file"),
+    Case("case: unknown table", _case(SQUARE + "[solver]\ntol = 1e-6\n"), 2, "unknown key or table 'solver'"),
+    Case("case: unknown key", _case(SQUARE.replace("h = 8", "hh = 8")), 2, "unknown key 'mesh.hh'"),
+    Case("case: wrong type", _case(SQUARE.replace("h = 8", 'h = "eight"')), 2,
+         "mesh.h must be an integer >= 2, got 'eight'"),
+    Case("case: h not a multiple of H", _case(SQUARE.replace("H = 2", "H = 3")), 2,
+         "mesh.h = 8 is not a multiple of mesh.H = 3"),
+    Case("case: ν = 0.5", _case(SQUARE.replace("nu = 0.0", "nu = 0.5")), 2, "material.nu must lie in (-1, 0.5)"),
+    Case("case: negative E", _case(SQUARE.replace("E = 1.0", "E = -1.0")), 2, "material.E must be > 0, got -1.0"),
+    Case("case: E pixel map with a negative pixel under the domain",
+         _case(SQUARE.replace("E = 1.0", 'E = {pixels = "E.npy"}'), files={"E.npy": np.array([[1.0, -1.0]])}), 2,
+         "material.E: 1 pixels of E.npy under the domain lie outside (0, inf)"),
+    Case("case: python field without that function",
+         _case(SQUARE.replace("body-force = [1.0, 0.0]", 'body-force = {python = "f.py:force"}'),
+               files={"f.py": "def other(x):\n    return x\n"}), 2, "has no callable 'force'"),
+    Case("case: a material group on a built-in mesh", _case(SQUARE.replace("E = 1.0", "E = {Omega1 = 1.0, fibres = 5.0}")),
+         2, "the cell group 'fibres' is named in [material]/[load], but the built-in unit-square mesh has only"),
+    Case("case: a material group the mesh file lacks", _case(COMPOSITE.replace("fibres = 1e3", "fibers = 1e3")), 2,
+         "has no surface group 'fibers' (named in the case)"),
+    Case("case: cells without a material", _case(COMPOSITE.replace("matrix = 1.0, ", "")), 2,
+         "material.E: 1113 cells lie in none of the groups given (['fibres'])"),
+    Case("case: a traction on a group the unit square lacks",
+         _case(SQUARE + "[boundary]\ntractions = {Gamma_N_side = [0.0, 1.0]}\n"), 2,
+         "boundary.tractions.Gamma_N_side: the mesh has no traction group 'Gamma_N_side'"),
+    Case("case: a traction on a group the mesh file lacks",
+         _case(COMPOSITE.replace("tractions = {", "tractions = {Gamma_N_bottom = [0.0, 1.0], ")), 2,
+         "a traction is given on the group 'Gamma_N_bottom', but the mesh has no facets"),
+    Case("case: a traction group of the mesh without a traction", _case(COMPOSITE.replace(
+        "[boundary]\ntractions = {Gamma_N_top = [0.0, -0.01]}\n", "")), 2,
+         "the mesh has traction group(s) ['Gamma_N_top'] but the model gives no traction"),
+    Case("case: Gamma_N overlapping Gamma_D (unit square)", _case(SQUARE.replace(
+        'clamped = ["left"]', 'clamped = ["left", "top"]\nneumann = {top = "Gamma_N_top"}')), 2,
+         "mesh.neumann: side 'top' is also in mesh.clamped"),
+    Case("case: Gamma_N overlapping Gamma_D (mesh file)", _case_mesh(
+        _MATERIAL + "[boundary]\ntractions = {Gamma_N_load = [0.0, -1.0]}\n", curve_groups={"Gamma_N_load": ("t0",)}),
+         2, "'Gamma_D' and 'Gamma_N_load' share 3 segments"),
+    Case("case: an obstacle and no Gamma_C", _case_mesh(_MATERIAL + PLANE, gamma_c=()), 2,
+         "lacks the physical group(s) ['Gamma_C']"),
+    Case("case: the gap undefined at a contact node",
+         _case(SQUARE + '[obstacle]\nshape = "circle"\ncentre = [1.0, 0.5]\nradius = 0.2\n'), 2,
+         "the obstacle's gap is undefined at 1 contact node(s) of Gamma_C"),
+    Case("case: indentation of the flush wall", _case(SQUARE + "[obstacle]\nindentation = 0.01\n"), 2,
+         "obstacle.indentation moves a plane or a circle"),
+    Case("case: a circle's indentation with no direction",
+         _case(SQUARE + '[obstacle]\nshape = "circle"\ncentre = [1.5, 0.5]\nradius = 0.5\nindentation = 0.01\n'), 2,
+         "obstacle.direction is required with obstacle.indentation for a circle"),
+    Case("case: a bad run option", _case(SQUARE + "[run]\ntol = 0\n"), 2,
+         "[run] the relative tolerance must lie in (0, 1)"),
+    Case("case: a run option of the wrong type", _case(SQUARE + '[run]\ntol = "small"\n'), 2,
+         "run.tol must be a number, got 'small'"),
+    Case("case: a method option in [run]", _case(SQUARE + "[run]\ndelta = 1e-6\n"), 2,
+         "unknown key 'run.delta' (delta belongs in [primal])"),
+    Case("case: a bad option in the table of a method not run", _case(SQUARE + "[mixed]\nepsilon = -1\n"), 2,
+         "[mixed] --epsilon (the mixed penalty ε) must be a finite number > 0"),
+    Case("case: --h on the Hertz block", lambda tmp: ["--case", str(CASES_DIR / "hertz.toml"), "--h", "16"], 2,
+         "unknown key 'mesh.h' for builtin = \"hertz-block\""),
+    Case("case: a multiscale method on a mesh without a coarse grid",
+         lambda tmp: ["--case", str(CASES_DIR / "hertz.toml"), "--set", "mesh.refinement=0.25", "--method",
+                      "primal-ms"], 2, "has no coarse grid"),
+    Case("--set without --case", _args("--set", "mesh.h=8"), 2, "--set changes a key of a case file"),
     # numbers out of range and numerical failure
     Case("E = 1e308 (overflow)", _args("--E-high", "1e308"), 2, "Rescale the units"),
     Case("contrast 1e100 (beyond double precision)", _args("--E-high", "1e100"), 4,

@@ -19,7 +19,9 @@ from fenics_contact.errors import ConvergenceError, InputError
 #: residual to the check: iterative refinement of a solve whose pivots lost digits (tiny δ).
 MAX_REFINEMENTS = 2
 
-__all__ = ["NewtonOptions", "NewtonHistory", "ContactProfile", "semismooth_newton", "active_interval"]
+__all__ = [
+    "NewtonOptions", "NewtonHistory", "ContactProfile", "semismooth_newton", "active_interval", "profile_order",
+]
 
 
 @dataclass(frozen=True, slots=True)
@@ -60,11 +62,43 @@ class NewtonHistory:
 
 
 class ContactProfile(NamedTuple):
-    """Nodal data along Γ_C, sorted by y: position, normal displacement, normal stress."""
+    """Nodal data along Γ_C, in ``profile_order`` (by y on a vertical Γ_C): position, normal displacement, normal stress.
+
+    ``u_c`` = u·ν − g, the normal displacement relative to the obstacle (> 0: penetration);
+    ``sigma_c`` the normal stress (< 0: contact pressure). The optional fields (issue 14)
+    give the node coordinates, their quadrature weights on Γ_C, the contact direction ν
+    and the initial gap g, from which ``force``, ``resultant`` and ``contact_zone`` follow.
+    """
 
     y: np.ndarray
     u_c: np.ndarray
     sigma_c: np.ndarray
+    points: np.ndarray | None = None  #: (N, 2) node coordinates
+    weights: np.ndarray | None = None  #: (N,) quadrature weights: ∫_ΓC w ds ≈ Σ weights·w(nodes)
+    normals: np.ndarray | None = None  #: (N, 2) contact direction ν (towards the obstacle)
+    gap: np.ndarray | None = None  #: (N,) initial gap g
+
+    @property
+    def force(self) -> float:
+        """Total normal contact force −∫_ΓC σ_c ds (> 0 in compression; needs ``weights``)."""
+        return float(-np.sum(self.weights * self.sigma_c))
+
+    @property
+    def resultant(self) -> np.ndarray:
+        """∫_ΓC σ_c ν ds: the force the obstacle exerts on the body (needs ``weights``, ``normals``)."""
+        return np.sum((self.weights * self.sigma_c)[:, None] * self.normals, axis=0)
+
+    @property
+    def max_pressure(self) -> float:
+        """max −σ_c (0 without contact)."""
+        return float(np.max(-self.sigma_c, initial=0.0))
+
+    def contact_zone(self) -> tuple[tuple[float, float], tuple[float, float]] | None:
+        """End points (first and last node in the profile's order) of the contact zone, or None."""
+        active = np.flatnonzero(self.active)
+        if active.size == 0 or self.points is None:
+            return None
+        return tuple(map(float, self.points[active[0]])), tuple(map(float, self.points[active[-1]]))
 
     @property
     def active(self) -> np.ndarray:
@@ -79,6 +113,15 @@ class ContactProfile(NamedTuple):
     def active_interval(self) -> tuple[float, float] | None:
         """[y_min, y_max] of the contact zone, or None when nothing touches."""
         return active_interval(self.y, self.active)
+
+
+def profile_order(points: np.ndarray) -> np.ndarray:
+    """Order of contact nodes along Γ_C: by the coordinate with the larger spread (y for a vertical Γ_C), then the other."""
+    if points.shape[0] == 0:
+        return np.zeros(0, dtype=np.int64)
+    spread = np.ptp(points[:, :2], axis=0)
+    major = 0 if spread[0] > spread[1] else 1
+    return np.lexsort((points[:, 1 - major], points[:, major]))
 
 
 def active_interval(y: np.ndarray, active: np.ndarray) -> tuple[float, float] | None:

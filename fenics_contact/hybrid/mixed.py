@@ -68,6 +68,7 @@ from fenics_contact.hybrid.iteration import (
     iterate,
 )
 from fenics_contact.errors import InputError
+from fenics_contact.problem.boundary import check_boundary_groups
 from fenics_contact.problem.fields import material_fields
 from fenics_contact.problem.geometry import ContactMesh
 from fenics_contact.fem.mixed import (
@@ -124,6 +125,7 @@ class MixedHybridStep:
         self.comm = cm.comm
         self.beta = transmission_coefficient(beta, cm.h)
         parent_fields = material_fields(cm.mesh, model)
+        check_boundary_groups(cm.mesh, cm.facet_tags, parent_fields.boundary, names=cm.neumann_names)
         if epsilon is None:
             epsilon = default_epsilon(cm.h, contact_modulus(cm.mesh, cm.facet_tags, parent_fields.E))
         self.epsilon = float(epsilon)
@@ -166,6 +168,7 @@ class MixedHybridStep:
         i_sub, i_par = sub_to_parent_dofs(part, s.dg, reference.sigma.function_space)
         d = np.zeros(s.dg.dofmap.index_map.size_local * s.dg.dofmap.index_map_bs)
         d[i_sub] = reference.sigma.x.array[i_par]
+        d -= s.s0  # the traction lifting is not in the span of P
         j_sub, j_par = sub_to_parent_dofs(part, s.U, reference.u.function_space)
         u = np.zeros(s.n_u)
         u[j_sub] = reference.u.x.array[j_par]
@@ -198,9 +201,9 @@ class MixedHybridStep:
         g12, g21 = g[:n], g[n:]
         self.sub[0].solve(g12)
         newton = self.sub[1].solve(g21[self._perm2])
-        t1 = self.sub[0].N @ self.sub[0].c  # σ₁n₁ at the canonical nodes
+        t1 = self.sub[0].gamma_traction()  # σ₁n₁ at the canonical nodes
         t2 = np.empty(n)
-        t2[self._perm2] = self.sub[1].N @ self.sub[1].c  # σ₂n₂
+        t2[self._perm2] = self.sub[1].gamma_traction()  # σ₂n₂
         self._measure()
         self._record = {
             "newton": newton.steps,

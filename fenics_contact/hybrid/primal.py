@@ -20,6 +20,7 @@ from dolfinx import fem
 from fenics_contact.fem.contact import ContactProfile, NewtonOptions
 from fenics_contact.hybrid.inputs import check_reference_displacement, check_solve_inputs
 from fenics_contact.hybrid.iteration import HybridStep, IterationHistory, IterationOptions, IterationResult, iterate
+from fenics_contact.problem.boundary import check_boundary_groups
 from fenics_contact.problem.fields import material_fields
 from fenics_contact.problem.geometry import ContactMesh
 from fenics_contact.problem.models import TestModel
@@ -52,6 +53,7 @@ class PrimalHybridStep:
         gdim = cm.mesh.geometry.dim
         self.interface = InterfaceSpace(cm, self.parts, shape=(gdim,))
         parent_fields = material_fields(cm.mesh, model)
+        check_boundary_groups(cm.mesh, cm.facet_tags, parent_fields.boundary, names=cm.neumann_names)
         self.alpha = robin_coefficient(alpha, parent_fields.E, self.interface, cm.h)
         self.sub = []
         for i, part in enumerate(self.parts):

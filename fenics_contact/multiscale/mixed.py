@@ -54,6 +54,7 @@ from fenics_contact.hybrid.iteration import (
     iterate,
 )
 from fenics_contact.errors import InputError
+from fenics_contact.problem.boundary import boundary_data_on
 from fenics_contact.problem.geometry import ContactMesh
 from fenics_contact.fem.mixed import MixedContactProfile, MixedSolution
 from fenics_contact.hybrid.mixed import MixedHybridStep
@@ -106,6 +107,13 @@ class MixedMultiscaleHybridStep(MixedHybridStep):
         super().__init__(cm, model, beta=beta, epsilon=epsilon, newton=newton)
         setup = time.perf_counter() - start
         part = self.parts[0]
+        # (issue 14) the Ω₁ local AW spaces do not yet impose σn = 0 / σn = t nor take u_D
+        unsupported = boundary_data_on(part.mesh, part.facet_tags, model.boundary, traction_free=True)
+        if unsupported:
+            raise InputError(
+                f"Algorithm 4 cannot yet take {' and '.join(unsupported)} on Ω₁ (its local stress spaces would "
+                "clamp them); use the fine Algorithm 2 (method 'mixed') or clamp those sides (Gamma_D)"
+            )
         grid = coarse_grid(part.mesh, part.cell_map, cm.coarse_cell, cm.H)
         self.cem = cem
         self.omega1 = MixedMultiscaleOmega1(self.sub[0], grid, cem, H=cm.H, cache_dir=cache_dir, comm=offline_comm)
@@ -181,7 +189,7 @@ class MixedMultiscaleHybridStep(MixedHybridStep):
         newton = self.sub[1].solve(g21[self._perm2])
         t1 = self.omega1.response.trace(g12)
         t2 = np.empty(n)
-        t2[self._perm2] = self.sub[1].N @ self.sub[1].c
+        t2[self._perm2] = self.sub[1].gamma_traction()
         self._measure()
         self._record = {
             "newton": newton.steps,

@@ -25,9 +25,12 @@ from dolfinx import mesh as dmesh
 
 from fenics_contact.errors import InputError, MeshTagError
 from fenics_contact.problem import validation
-from fenics_contact.problem.tags import PHYSICAL_NAMES, Boundary, Subdomain
+from fenics_contact.problem.tags import PHYSICAL_NAMES, Boundary, Subdomain, is_neumann_name, neumann_tag
 
-__all__ = ["ContactMesh", "unit_square", "read_mesh", "mesh_size", "gmsh_session", "build_unit_square_model"]
+__all__ = [
+    "ContactMesh", "unit_square", "read_mesh", "mesh_size", "gmsh_session", "build_unit_square_model",
+    "contact_mesh_from_model",
+]
 
 log = logging.getLogger(__name__)
 
@@ -44,6 +47,7 @@ class ContactMesh(NamedTuple):
     h: float  #: fine mesh size: 1/n, or ``mesh_size`` (√(2·largest cell area)) for a user mesh
     H: float | None  #: coarse size / strip width (None when unknown)
     coarse_cell: np.ndarray  #: coarse-square index of every local cell (-1 if no coarse grid)
+    neumann_names: dict | None = None  #: traction-group tag -> physical name (Gamma_N*)
 
     @property
     def comm(self) -> MPI.Comm:
@@ -101,9 +105,34 @@ def _is_integral(value) -> bool:
     return isinstance(value, (int, float, np.integer, np.floating)) and np.isfinite(value) and int(value) == value
 
 
-def build_unit_square_model(n: int, n_coarse: int, *, diagonal: str = "Right") -> None:
-    """Create the structured, tagged gmsh model of the unit square in the current gmsh session."""
+#: The sides of the unit square that may be clamped or carry a traction group (x = 1 is Γ_C).
+SIDES = ("left", "bottom", "top")
+
+
+def _check_sides(clamped, neumann) -> tuple[tuple[str, ...], dict[str, str]]:
+    clamped = tuple(clamped)
+    neumann = dict(neumann or {})
+    for side in (*clamped, *neumann):
+        if side not in SIDES:
+            raise InputError(f"unknown side {side!r}: the unit square's sides are {SIDES} (x = 1 is Gamma_C)")
+    both = sorted(set(clamped) & set(neumann))
+    if both:
+        raise InputError(f"side(s) {both} cannot be clamped (Gamma_D) and carry a traction group (Gamma_N) at once")
+    for name in neumann.values():
+        neumann_tag(name)  # validates the name
+    return clamped, neumann
+
+
+def build_unit_square_model(
+    n: int, n_coarse: int, *, diagonal: str = "Right", clamped=SIDES, neumann: dict[str, str] | None = None
+) -> None:
+    """Create the structured, tagged gmsh model of the unit square in the current gmsh session.
+
+    ``clamped``: the sides in Γ_D; ``neumann``: side -> traction group name (``Gamma_N*``);
+    other sides are traction free (untagged).
+    """
     _check_sizes(n, n_coarse)
+    clamped, neumann = _check_sides(clamped, neumann)
     n, n_coarse = int(n), int(n_coarse)
     H = 1.0 / n_coarse
     xs = 1.0 - H
@@ -123,28 +152,55 @@ def build_unit_square_model(n: int, n_coarse: int, *, diagonal: str = "Right") -
         gmsh.model.mesh.setTransfiniteCurve(curve, cells + 1)
     for s in (s1, s2):
         gmsh.model.mesh.setTransfiniteSurface(s, diagonal)
+    side_curves = {"left": [left], "bottom": [bottom1, bottom2], "top": [top1, top2]}
     groups = {
         Subdomain.OMEGA1: (2, [s1]),
         Subdomain.OMEGA2: (2, [s2]),
-        Boundary.GAMMA_D: (1, [bottom1, bottom2, top1, top2, left]),
+        Boundary.GAMMA_D: (1, [c for side in clamped for c in side_curves[side]]),
         Boundary.GAMMA_C: (1, [contact]),
         Boundary.INTERFACE: (1, [interface]),
     }
     for tag, (dim, entities) in groups.items():
-        gmsh.model.addPhysicalGroup(dim, entities, int(tag), name=PHYSICAL_NAMES[tag])
+        if entities:
+            gmsh.model.addPhysicalGroup(dim, entities, int(tag), name=PHYSICAL_NAMES[tag])
+    by_name: dict[str, list[int]] = {}
+    for side, name in neumann.items():
+        by_name.setdefault(name, []).extend(side_curves[side])
+    for name, curves in sorted(by_name.items()):
+        gmsh.model.addPhysicalGroup(1, curves, neumann_tag(name), name=name)
     gmsh.model.mesh.generate(2)
 
 
-def unit_square(n: int, n_coarse: int, *, comm: MPI.Comm = MPI.COMM_WORLD, diagonal: str = "Right") -> ContactMesh:
-    """Tagged structured mesh of (0,1)², h = 1/n, strip Ω₂ of width H = 1/n_coarse."""
+def unit_square(
+    n: int,
+    n_coarse: int,
+    *,
+    comm: MPI.Comm = MPI.COMM_WORLD,
+    diagonal: str = "Right",
+    clamped=SIDES,
+    neumann: dict[str, str] | None = None,
+) -> ContactMesh:
+    """Tagged structured mesh of (0,1)², h = 1/n, strip Ω₂ of width H = 1/n_coarse.
+
+    Γ_C is the side x = 1; ``clamped`` lists the sides in Γ_D (default all three others),
+    ``neumann`` maps sides to traction group names (e.g. ``{"top": "Gamma_N_top"}``);
+    the remaining sides are traction free.
+    """
     _check_sizes(n, n_coarse)
+    clamped, neumann = _check_sides(clamped, neumann)
     n, n_coarse = int(n), int(n_coarse)
     with gmsh_session():
         if comm.rank == 0:
-            build_unit_square_model(n, n_coarse, diagonal=diagonal)
+            build_unit_square_model(n, n_coarse, diagonal=diagonal, clamped=clamped, neumann=neumann)
         data = dolfinx.io.gmsh.model_to_mesh(gmsh.model, comm, 0, gdim=2)
     cm = _contact_mesh(data, h=1.0 / n, H=1.0 / n_coarse)
     return cm
+
+
+def contact_mesh_from_model(comm: MPI.Comm, *, h: float, H: float | None = None) -> ContactMesh:
+    """The ContactMesh of the gmsh model built (on rank 0) in the current gmsh session (collective)."""
+    data = dolfinx.io.gmsh.model_to_mesh(gmsh.model, comm, 0, gdim=2)
+    return _contact_mesh(data, h=h, H=H)
 
 
 def read_mesh(
@@ -154,6 +210,7 @@ def read_mesh(
     H: float | None = None,
     validate: bool = True,
     rules: Iterable[validation.BoundaryRule] = validation.BOUNDARY_RULES,
+    overlay_groups: Iterable[str] = (),
 ) -> ContactMesh:
     """Load a gmsh ``.msh`` file whose physical groups carry the names of ``tags.PHYSICAL_NAMES``.
 
@@ -164,8 +221,11 @@ def read_mesh(
     and Ω₂, Γ_C on ∂Ω₂ away from γ, Γ_D and Γ_C disjoint, a conforming mesh), a MeshTagError
     naming the group otherwise. ``h`` of the result is the mesh size ``mesh_size`` (1/n on the
     built-in meshes), ``H`` the side of the coarse grid of squares from the origin (multiscale methods).
+    ``overlay_groups``: surface groups that overlay Omega1/Omega2 (materials by group, read with
+    ``problem.cell_groups.read_cell_groups``); they are left out of the mesh and its checks.
     """
     path = Path(path)
+    overlay_groups = set(overlay_groups)
     if H is not None and not (isinstance(H, (int, float)) and np.isfinite(H) and 0 < H <= 1
                               and abs(1.0 / H - round(1.0 / H)) <= 1e-9 / H):
         raise InputError(f"the coarse size H must be 1/N for an integer N >= 1 (coarse squares of side H over "
@@ -181,6 +241,9 @@ def read_mesh(
             except Exception as err:  # gmsh raises a bare Exception with its parser's message
                 problem = (InputError, f"cannot read {path} as a gmsh mesh: {err}")
             else:
+                for dim, tag in gmsh.model.getPhysicalGroups(2):  # overlays: read separately, not cell tags
+                    if gmsh.model.getPhysicalName(dim, tag) in overlay_groups:
+                        gmsh.model.removePhysicalGroups([(dim, tag)])
                 problem = _gmsh_model_problem(path)
         problem = comm.bcast(problem, root=0)
         # validate before the collective mesh construction (which aborts on inconsistent tags)
@@ -330,6 +393,11 @@ def _retag(tags: dmesh.MeshTags | None, groups: dict, wanted: list, msh: dmesh.M
         found = tags.find(file_tag)
         entities.append(found)
         values.append(np.full(found.size, int(t), dtype=np.int32))
+    for name, group in groups.items():  # traction groups Gamma_N*: tag = neumann_tag(name)
+        if dim == msh.topology.dim - 1 and group.dim == dim and is_neumann_name(name):
+            found = tags.find(group.tag)
+            entities.append(found)
+            values.append(np.full(found.size, neumann_tag(name), dtype=np.int32))
     entities = np.concatenate(entities)
     values = np.concatenate(values)
     order = np.argsort(entities, kind="stable")
@@ -365,4 +433,6 @@ def _contact_mesh(data: dolfinx.io.gmsh.MeshData, *, h: float, H: float | None) 
         lo = np.stack([i, j], axis=1)[:, None, :] * H - tol
         inside = np.all((x >= lo) & (x <= lo + H + 2 * tol), axis=(1, 2))
         coarse[~inside] = -1
-    return ContactMesh(msh, cell_tags, facet_tags, float(h), H, coarse)
+    neumann = {neumann_tag(name): name for name, g in data.physical_groups.items()
+               if g.dim == tdim - 1 and is_neumann_name(name)}
+    return ContactMesh(msh, cell_tags, facet_tags, float(h), H, coarse, neumann)

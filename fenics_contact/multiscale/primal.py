@@ -22,7 +22,7 @@ from mpi4py import MPI
 
 from dolfinx import fem
 
-from fenics_contact.multiscale.cem import DEFAULT_S_FACTOR, CEMOptions, Omega1Multiscale, require_serial
+from fenics_contact.multiscale.cem import DEFAULT_S_FACTOR, CEMOptions, Omega1Multiscale
 from fenics_contact.fem.contact import NewtonOptions
 from fenics_contact.hybrid.inputs import check_reference_displacement, check_solve_inputs
 from fenics_contact.hybrid.iteration import IterationOptions, iterate
@@ -55,18 +55,20 @@ class MultiscalePrimalHybridStep:
         reference: fem.Function | None = None,
         cache_dir: str | Path | None = None,
     ) -> None:
-        require_serial(cm.comm)
-        if cm.H is None:
-            raise InputError("Algorithm 3 needs a coarse grid: build the mesh with geometry.unit_square(n, n_coarse)")
+        if cm.H is None and cm.comm.allreduce(int(np.any(np.asarray(cm.coarse_cell) >= 0)), op=MPI.MAX) == 0:
+            raise InputError("Algorithm 3 needs a coarse grid: build the mesh with geometry.unit_square(n, n_coarse), "
+                             "or give read_mesh H or a mesh with a coarse partition")
         start = time.perf_counter()
         self.comm = cm.comm
         self.parts = split_mesh(cm)
-        # (issue 14) the Ω₁ CEM space takes clamped and traction-free sides, not yet u_D or tractions
-        unsupported = boundary_data_on(self.parts[0].mesh, self.parts[0].facet_tags, model.boundary)
+        # (issue 14) the Ω₁ CEM space takes clamped and traction-free sides and Γ_N tractions (a load
+        # functional, source-corrected like f: cem.omega1_load), not yet a prescribed displacement
+        unsupported = [what for what in boundary_data_on(self.parts[0].mesh, self.parts[0].facet_tags, model.boundary)
+                       if not what.startswith("a traction")]
         if unsupported:
             raise InputError(
-                f"Algorithm 3 cannot yet take {' and '.join(unsupported)} on Ω₁ (its multiscale space ignores "
-                "them); use the fine Algorithm 1 (method 'primal') or move that boundary into Ω₂"
+                f"Algorithm 3 cannot yet take {' and '.join(unsupported)} on Ω₁ (its multiscale space would ignore "
+                "it); use the fine Algorithm 1 (method 'primal') or move that boundary into Ω₂"
             )
         gdim = cm.mesh.geometry.dim
         self.interface = InterfaceSpace(cm, self.parts, shape=(gdim,))
@@ -82,21 +84,21 @@ class MultiscalePrimalHybridStep:
             p2.mesh, p2.facet_tags, material_fields(p2.mesh, model), delta=delta, alpha=alpha2,
             prefix="fc_primal_ms_omega2_", newton=newton, V=self.interface.spaces[1],
         )
-        self.u1 = fem.Function(self.interface.spaces[0], name="u1")
-        self._prev = [np.zeros(self.omega1.ops.size), np.zeros_like(self.omega2.u.x.array)]
+        self.u1 = fem.Function(self.interface.spaces[0], name="u1")  # filled by glued()
+        # u₁ = Z s in the coordinates s of Omega1Multiscale (online nothing of fine-mesh size in Ω₁)
+        self._s = np.zeros(self.omega1.solver.GK.shape[0])
+        self._prev = [self._s.copy(), np.zeros_like(self.omega2.u.x.array)]
         self._diff2 = fem.Function(self.omega2.V)
         self._change = np.inf
         self._record: dict = {}
         self.reference = None
         if reference is not None:
-            r1 = fem.Function(self.interface.spaces[0])
+            r1 = self.omega1.from_parent(reference)
             r2 = fem.Function(self.interface.spaces[1])
-            self.interface.transfers[0].to_sub(reference, r1)
             self.interface.transfers[1].to_sub(reference, r2)
-            self.reference = (r1.x.array.copy(), r2)
-            ops = self.omega1.ops
-            self._ref_l2 = ops.M.dot(r1.x.array).dot(r1.x.array) + self.omega2.l2_norm2(r2)
-            self._ref_energy = ops.K.dot(r1.x.array).dot(r1.x.array) + self.omega2.energy_norm2(r2)
+            self.reference = (r1, r2)
+            self._ref_l2 = self.omega1.l2_norm2(r1) + self.omega2.l2_norm2(r2)
+            self._ref_energy = self.omega1.energy_norm2(r1) + self.omega2.energy_norm2(r2)
         self.offline_times = dict(self.omega1.times)
         self.offline_times["setup"] = time.perf_counter() - start - sum(self.omega1.times.values())
         self.time_offline_s = time.perf_counter() - start
@@ -108,11 +110,10 @@ class MultiscalePrimalHybridStep:
     def apply(self, g: np.ndarray) -> np.ndarray:
         n = self.interface.size
         g12, g21 = g[:n], g[n:]
-        u1 = self.omega1.solve(g12)
-        self.u1.x.array[:] = u1
+        self._s = self.omega1.coordinates(g12)
         self.interface.to_part(g21, 1, self.omega2.g)
         newton = self.omega2.solve()
-        u1g = self.omega1.interface_values(u1)
+        u1g = self.omega1.trace(self._s)
         u2g = self.interface.from_part(self.omega2.u, 1)
         self._measure()
         self._record = {"newton": newton.steps, "active": newton.active_sizes[-1], "refactor": newton.factorizations}
@@ -128,15 +129,15 @@ class MultiscalePrimalHybridStep:
 
     # -- measures -------------------------------------------------------------------------
     def _measure(self) -> None:
-        ops = self.omega1.ops
-        u1 = self.u1.x.array
-        d1 = u1 - self._prev[0]
+        om1 = self.omega1
+        de1, dl1 = om1.coordinate_norms2(self._s - self._prev[0])
+        ne1, nl1 = om1.coordinate_norms2(self._s)
         self._diff2.x.array[:] = self.omega2.u.x.array - self._prev[1]
-        de = ops.K.dot(d1).dot(d1) + self.omega2.energy_norm2(self._diff2)
-        dl = ops.M.dot(d1).dot(d1) + self.omega2.l2_norm2(self._diff2)
-        ne = ops.K.dot(u1).dot(u1) + self.omega2.energy_norm2(self.omega2.u)
-        nl = ops.M.dot(u1).dot(u1) + self.omega2.l2_norm2(self.omega2.u)
-        self._prev[0][:] = u1
+        de = de1 + self.omega2.energy_norm2(self._diff2)
+        dl = dl1 + self.omega2.l2_norm2(self._diff2)
+        ne = ne1 + self.omega2.energy_norm2(self.omega2.u)
+        nl = nl1 + self.omega2.l2_norm2(self.omega2.u)
+        self._prev[0][:] = self._s
         self._prev[1][:] = self.omega2.u.x.array
         self._change = max(np.sqrt(de / ne), np.sqrt(dl / nl)) if ne > 0 and nl > 0 else np.inf
 
@@ -144,11 +145,10 @@ class MultiscalePrimalHybridStep:
         if self.reference is None:
             raise InputError("no reference solution was given")
         r1, r2 = self.reference
-        ops = self.omega1.ops
-        d1 = self.u1.x.array - r1
+        d1 = self.omega1.field(self._s) - r1  # the fine field (no cancellation in the error norms)
         self._diff2.x.array[:] = self.omega2.u.x.array - r2.x.array
-        l2 = ops.M.dot(d1).dot(d1) + self.omega2.l2_norm2(self._diff2)
-        en = ops.K.dot(d1).dot(d1) + self.omega2.energy_norm2(self._diff2)
+        l2 = self.omega1.l2_norm2(d1) + self.omega2.l2_norm2(self._diff2)
+        en = self.omega1.energy_norm2(d1) + self.omega2.energy_norm2(self._diff2)
         return float(np.sqrt(l2 / self._ref_l2)), float(np.sqrt(en / self._ref_energy))
 
     def error_l2(self) -> float:
@@ -162,6 +162,7 @@ class MultiscalePrimalHybridStep:
     def glued(self, V: fem.FunctionSpace) -> fem.Function:
         """u on the parent mesh: u₁ on Ω₁, u₂ on Ω₂ (u₂ on γ)."""
         u = fem.Function(V, name="u")
+        self.omega1.to_part(self.omega1.field(self._s), self.u1)
         self.interface.transfers[0].to_parent(self.u1, u)
         self.interface.transfers[1].to_parent(self.omega2.u, u)
         return u
@@ -177,6 +178,7 @@ def solve_primal_ms_hybrid(
     nbasis: int | None = 3,
     threshold: float | None = None,
     s_factor: float = DEFAULT_S_FACTOR,
+    source_correction: bool = True,
     options: IterationOptions = IterationOptions(),
     newton: NewtonOptions = NewtonOptions(),
     reference: fem.Function | None = None,
@@ -191,7 +193,8 @@ def solve_primal_ms_hybrid(
     check_solve_inputs(cm, model, options=options, newton=newton)
     if reference is not None:
         check_reference_displacement(reference, cm)
-    cem = CEMOptions(layers=layers, nbasis=nbasis, threshold=threshold, s_factor=s_factor)
+    cem = CEMOptions(layers=layers, nbasis=nbasis, threshold=threshold, s_factor=s_factor,
+                     source_correction=source_correction)
     step = MultiscalePrimalHybridStep(
         cm, model, alpha=alpha, delta=delta, cem=cem, newton=newton, reference=reference, cache_dir=cache_dir
     )

@@ -13,7 +13,7 @@ from mpi4py import MPI
 
 from fenics_contact import __version__
 from fenics_contact.fem.contact import NewtonOptions
-from fenics_contact.hybrid.iteration import IterationOptions
+from fenics_contact.hybrid.iteration import ACCELERATIONS, IterationOptions
 from fenics_contact.errors import FenicsContactError, InputError
 from fenics_contact.problem.fields import material_fields
 from fenics_contact.problem.geometry import ContactMesh, read_mesh, unit_square
@@ -68,9 +68,11 @@ def build_parser() -> argparse.ArgumentParser:
                      "Omega1, Omega2, Gamma_D, Gamma_C, gamma (replaces the built-in unit square)")
     run.add_argument("--alpha", default=DEFAULT_ALPHA, help="Robin coefficient: a number or a product of "
                      "numbers, h^p, sqrt-h and E (E_p: mean E at the γ node), e.g. 1, h^-1/2, 2E*h^-1/2")
-    run.add_argument("--accel", choices=("none", "anderson"), default="anderson",
-                     help="update of the interface data: the paper's plain update or Anderson acceleration")
-    run.add_argument("--tol", type=float, default=1e-6, help="relative-change tolerance (METHOD §6)")
+    run.add_argument("--accel", choices=ACCELERATIONS, default="anderson",
+                     help="update of the interface data: the paper's plain update, Anderson acceleration, or "
+                     "the interface Newton method")
+    run.add_argument("--tol", type=float, default=1e-6,
+                     help="tolerance of the transmission residual (relative jump and traction imbalance on γ)")
     run.add_argument("--max-iterations", type=int, default=2000)
     run.add_argument("--delta", type=float, help="primal penalty δ (default 1e-3·h/E on Γ_C)")
     run.add_argument("--beta", default="sqrt-h", help="mixed: transmission coefficient β (1, sqrt-h or a number)")
@@ -237,6 +239,8 @@ def run(args) -> int:
         "converged": result.converged,
         "rel_tolerance": args.tol,
         "final_rel_change": float(result.history.rel_changes[-1]),
+        "transmission_residual": result.history.transmission_residual,
+        "interface_newton_steps": result.history.newton_steps if args.accel == "newton" else None,
         **outcome.summary,
         "active_set": profile.active_interval(),
         "newton_steps_total": int(sum(r.info.get("newton", 0) for r in result.history.records)),
@@ -244,6 +248,8 @@ def run(args) -> int:
         "time_mesh_s": t_mesh,
         "time_offline_s": result.time_offline_s,
         "time_online_s": result.time_online_s,
+        "time_interface_offline_s": result.history.time_offline_s,
+        "time_error_evaluation_s": result.history.time_monitor_s,
         "time_reference_s": reference.time_s if reference is not None else None,
         "reference_newton_steps": reference.newton.steps if reference is not None else None,
         "reference_active_set": reference.profile.active_interval() if reference is not None else None,

@@ -222,6 +222,51 @@ class PrimalSubproblem:
         order = np.argsort(y, kind="stable")
         return ContactProfile(y[order], u_c[order], sigma_c[order])
 
+    # -- interface Newton support (hybrid.newton): the affine pieces of the problem ---------------
+    def contact_free_matrix(self) -> PETSc.Mat:
+        """A new matrix J₀ = a + α∫_γ (the Jacobian with no contact node active), Γ_D rows = identity."""
+        keep = self.u.x.array.copy()
+        self.u.x.array[:] = 0.0  # H(0) = 0: no penalty term
+        A = dolfinx.fem.petsc.create_matrix(self._J)
+        dolfinx.fem.petsc.assemble_matrix(A, self._J, bcs=self.bcs)
+        A.assemble()
+        self.u.x.array[:] = keep
+        return A
+
+    def body_load(self, out: PETSc.Vec) -> PETSc.Vec:
+        """out ← −F(0) with zero Robin data: (f, v), zero on Γ_D rows (so J(u) u = body_load + data at a solution)."""
+        keep_u = self.u.x.array.copy()
+        keep_g = self.g.x.array.copy() if self.g is not None else None
+        self.u.x.array[:] = 0.0
+        if self.g is not None:
+            self.g.x.array[:] = 0.0
+        self._assemble_vector(self._F, out)
+        out.scale(-1.0)
+        self.u.x.array[:] = keep_u
+        if self.g is not None:
+            self.g.x.array[:] = keep_g
+        return out
+
+    def contact_nodes(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Owned Γ_C nodes off Γ_D: (node = block index of u, unit normal (k, gdim), vertex weight w_p).
+
+        The penalty term is Σ_p (w_p/δ) (u_p·n_p)⁺ (v_p·n_p) when the facets at each node share
+        one normal (a straight Γ_C); n_p is the weight-averaged facet normal otherwise.
+        """
+        if not self.contact:
+            raise InputError("this subproblem has no contact boundary")
+        nloc = self.Q.dofmap.index_map.size_local
+        w = dolfinx.fem.assemble_vector(self._weights)
+        w.scatter_reverse(dolfinx.la.InsertMode.add)
+        N = dolfinx.fem.assemble_vector(self._normals)
+        N.scatter_reverse(dolfinx.la.InsertMode.add)
+        on = w.array[:nloc] > 0.0
+        on[self._dirichlet_q[self._dirichlet_q < nloc]] = False
+        nodes = np.flatnonzero(on)
+        gdim = self.mesh.geometry.dim
+        Nn = N.array.reshape(-1, gdim)[nodes]
+        return nodes, Nn / np.linalg.norm(Nn, axis=1)[:, None], w.array[nodes].copy()
+
     def destroy(self) -> None:
         """Free the PETSc objects (collective)."""
         for obj in (self.A, self.b, self.du, self._K, self._M, self._work):

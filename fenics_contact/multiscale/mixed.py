@@ -41,7 +41,9 @@ from dolfinx import fem
 
 from fenics_contact.fem import forms_mixed
 from fenics_contact.fem.contact import NewtonOptions
+from fenics_contact.hybrid.certificate import mixed_certificate
 from fenics_contact.hybrid.iteration import (
+    InterfaceNewtonOptions,
     IterationHistory,
     IterationOptions,
     IterationResult,
@@ -157,12 +159,20 @@ class MixedMultiscaleHybridStep(MixedHybridStep):
         t2 = np.empty(n)
         t2[self._perm2] = self.sub[1].N @ self.sub[1].c
         self._measure()
+        self._certificate = mixed_certificate(t1, t2, g12, g21, self.beta, self.gamma_mass)
         self._record = {
             "newton": newton.steps,
             "active": newton.active_sizes[-1],
             "refactor": newton.factorizations,
         }
         return np.concatenate([g21 - 2.0 * self.beta * t2, g12 - 2.0 * self.beta * t1])
+
+    def _omega1_response(self, options: InterfaceNewtonOptions):
+        """Ω₁'s affine trace σ₁n₁ = T g + t₀ (``InterfaceResponse``, precomputed offline with the bases)."""
+        from fenics_contact.hybrid.newton import MatrixResponse
+
+        rs = self.omega1.response
+        return MatrixResponse(rs.T, rs.t0)
 
     def _measure(self) -> None:
         rs = self.omega1.response
@@ -227,6 +237,7 @@ class MixedMsResult(IterationResult):
     layers: int
     nbasis: int | None
     step: MixedMultiscaleHybridStep
+    time_interface_offline_s: float = 0.0  #: offline interface response of the Newton method (in time_offline_s)
 
 
 def solve_mixed_ms_hybrid(
@@ -245,6 +256,8 @@ def solve_mixed_ms_hybrid(
     newton: NewtonOptions = NewtonOptions(),
     reference: MixedSolution | None = None,
     cache_dir: str | Path | None = None,
+    initial_data: np.ndarray | None = None,
+    step: MixedMultiscaleHybridStep | None = None,
 ) -> MixedMsResult:
     """Algorithm 4 to the relative-change tolerance; e_σ, e_u against ``reference`` (fine monolithic mixed).
 
@@ -261,11 +274,12 @@ def solve_mixed_ms_hybrid(
         epsilon = reference.epsilon
     cem = MixedCEMOptions(layers=layers, nbasis=nbasis, min_gap=min_gap, max_nbasis=max_nbasis, weight=weight,
                           s_factor=s_factor)
-    step = MixedMultiscaleHybridStep(cm, model, beta=beta, epsilon=epsilon, cem=cem, newton=newton,
-                                     cache_dir=cache_dir)
+    if step is None:
+        step = MixedMultiscaleHybridStep(cm, model, beta=beta, epsilon=epsilon, cem=cem, newton=newton,
+                                         cache_dir=cache_dir)
     if reference is not None:  # not part of the method: outside the timings
         step.set_reference(reference)
-    history = iterate(step, options, name=f"mixed CEM hybrid (m={layers}, l={nbasis})")
+    history = iterate(step, options, name=f"mixed CEM hybrid (m={layers}, l={nbasis})", initial=initial_data)
     sigma, u = step.glued()
     co = step.omega1.co
     dofs = {
@@ -276,9 +290,10 @@ def solve_mixed_ms_hybrid(
         "omega2": step.sub[1].num_dofs["total"],
         "interface": 2 * step.size,
     }
-    e_sigma, e_u = step.errors() if reference is not None else (None, None)
-    e_u_pi = step.projected_displacement_error() if reference is not None else None
-    e_u_post = step.postprocessed_displacement_error() if reference is not None else None
+    has_ref = step.reference is not None
+    e_sigma, e_u = step.errors() if has_ref else (None, None)
+    e_u_pi = step.projected_displacement_error() if has_ref else None
+    e_u_post = step.postprocessed_displacement_error() if has_ref else None
     e_sigma_l2 = l2_stress_error(sigma, reference.sigma) if reference is not None else None
     log.info(
         "Algorithm 4 (m=%d, l=%s): %d iterations (converged %s), dim X_ms %d + U_aux %d, offline %.2f s, "
@@ -286,7 +301,11 @@ def solve_mixed_ms_hybrid(
         layers, nbasis, history.iterations, history.converged, co.n_ms, co.n_aux, step.time_offline_s,
         history.time_s, e_sigma, e_u,
     )
+    offline_times = dict(step.offline_times)
+    if history.time_offline_s:
+        offline_times["interface_response"] = history.time_offline_s
     return MixedMsResult(
-        sigma, u, history, step.sub[1].contact_profile(), dofs, step.time_offline_s, history.time_s,
-        dict(step.offline_times), e_sigma, e_u, e_u_pi, e_u_post, e_sigma_l2, step.beta, step.epsilon, layers, nbasis, step,
+        sigma, u, history, step.sub[1].contact_profile(), dofs, step.time_offline_s + history.time_offline_s,
+        history.time_s, offline_times, e_sigma, e_u, e_u_pi, e_u_post, e_sigma_l2, step.beta, step.epsilon, layers,
+        nbasis, step, history.time_offline_s,
     )

@@ -223,6 +223,10 @@ class PrimalSubproblem:
         return ContactProfile(y[order], u_c[order], sigma_c[order])
 
     # -- interface Newton support (hybrid.newton): the affine pieces of the problem ---------------
+    def residual_norm(self) -> tuple[float, float]:
+        """(‖F(u)‖, ‖b‖) at the current u and data: ``solve`` accepts u when ‖F‖ ≤ rtol‖b‖ + atol."""
+        return self._residual(), self.load_norm()
+
     def contact_free_matrix(self) -> PETSc.Mat:
         """A new matrix J₀ = a + α∫_γ (the Jacobian with no contact node active), Γ_D rows = identity."""
         keep = self.u.x.array.copy()

@@ -54,8 +54,12 @@ class HybridStep(Protocol):
     def initial_data(self) -> np.ndarray:
         """g⁰ (zeros), as a local array of owned interface values."""
 
-    def apply(self, g: np.ndarray) -> np.ndarray:
-        """Solve both subproblems with data g and return T(g)."""
+    def apply(self, g: np.ndarray, *, omega2_warm: bool = False) -> np.ndarray:
+        """Solve both subproblems with data g and return T(g).
+
+        ``omega2_warm``: Ω₂'s state was set to a candidate solution for this g (interface Newton):
+        verify its residual, and run Ω₂'s Newton only if the check fails.
+        """
 
     def relative_change(self) -> float:
         """max of the relative energy and L² changes of the last two solutions."""
@@ -138,7 +142,7 @@ class InterfaceNewtonOptions:
     strategy: str = "condensed"
     max_steps: int = 50
     max_corrections: int = 8
-    chunk: int = 256  #: right-hand sides per multi-RHS back-solve of the offline condensation
+    chunk: int = 128  #: right-hand sides per multi-RHS back-solve of the offline condensation
 
     def __post_init__(self) -> None:
         if self.strategy not in ("condensed", "interface"):
@@ -240,9 +244,9 @@ def _format(info: dict) -> str:
 
 
 def evaluate(step: HybridStep, g: np.ndarray, history: IterationHistory, *, name: str,
-             monitor: Callable[[], dict] | None = None) -> tuple[np.ndarray, IterationRecord]:
+             monitor: Callable[[], dict] | None = None, omega2_warm: bool = False) -> tuple[np.ndarray, IterationRecord]:
     """Apply T once at g, certify the pair and append the record (the monitor's time is booked apart)."""
-    Tg = step.apply(g)
+    Tg = step.apply(g, omega2_warm=omega2_warm) if omega2_warm else step.apply(g)
     change = step.relative_change()
     cert = step.certificate()
     finite = bool(np.all(np.isfinite(Tg))) and np.isfinite(cert.value)

@@ -56,8 +56,8 @@ from petsc4py import PETSc
 
 import dolfinx.fem.petsc
 
-from fenics_contact.errors import ConvergenceError, InputError
-from fenics_contact.fem.linalg import DIRECT_OPTIONS, DirectSolver, scipy_to_petsc
+from fenics_contact.errors import ConvergenceError
+from fenics_contact.fem.linalg import DirectSolver, scipy_to_petsc
 from fenics_contact.hybrid.iteration import (
     IterationHistory,
     IterationOptions,
@@ -85,21 +85,27 @@ log = logging.getLogger(__name__)
 # ---------------------------------------------------------------------------------------
 # multi-right-hand-side solves
 # ---------------------------------------------------------------------------------------
-def block_solve(ksp: PETSc.KSP, B: np.ndarray, comm: MPI.Comm) -> np.ndarray:
-    """X = A⁻¹ B for a dense block B (local rows × columns) with the factorization held by ``ksp``."""
+def block_solve(ksp: PETSc.KSP, B: np.ndarray, comm: MPI.Comm, *projections) -> list[np.ndarray]:
+    """[P(A⁻¹ B) for P in projections] for a dense block B (local rows × columns, Fortran order) with the
+    factorization held by ``ksp`` (one multi-RHS solve; the solution block is never copied whole)."""
     nloc, k = B.shape
-    Bm = PETSc.Mat().createDense(((nloc, PETSc.DECIDE), (PETSc.DECIDE, k)), array=np.asfortranarray(B), comm=comm)
+    size = ((nloc, PETSc.DECIDE), (PETSc.DECIDE, k))
+    Bm = PETSc.Mat().createDense(size, array=np.asfortranarray(B), comm=comm)
     Bm.assemble()
-    Xm = PETSc.Mat().createDense(((nloc, PETSc.DECIDE), (PETSc.DECIDE, k)), comm=comm)
+    Xm = PETSc.Mat().createDense(size, comm=comm)
     Xm.setUp()
     Xm.assemble()
-    ksp.matSolve(Bm, Xm)
-    X = np.array(Xm.getDenseArray(readonly=True))
-    Bm.destroy()
-    Xm.destroy()
-    if not comm.allreduce(bool(np.all(np.isfinite(X))), op=MPI.LAND):
+    try:
+        ksp.matSolve(Bm, Xm)
+        X = Xm.getDenseArray(readonly=True)
+        finite = bool(np.isfinite(X).all())
+        out = [P(X) for P in projections] if comm.allreduce(finite, op=MPI.LAND) else None
+    finally:
+        Bm.destroy()
+        Xm.destroy()
+    if out is None:
         raise ConvergenceError(f"{ksp.getOptionsPrefix()}: multi-RHS back-solve produced non-finite values")
-    return X
+    return out
 
 
 # ---------------------------------------------------------------------------------------
@@ -134,22 +140,21 @@ class AffinePart:
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(Yc, Sc, Yq, Sq): trace and contact rows of J⁻¹C and J⁻¹Qᵀ (chunked multi-RHS back-solves)."""
         ksp = (solver or self.solver).ksp
+        rows = (self.trace_rows, self.contact_rows) if self.n_c else (self.trace_rows,)
         Yc = np.zeros((self.n_g, self.n_g))
         Sc = np.zeros((self.n_c, self.n_g))
         for j0 in range(0, self.n_g, chunk):
             j1 = min(j0 + chunk, self.n_g)
-            X = block_solve(ksp, self.data_block(j0, j1), self.comm)
-            Yc[:, j0:j1] = self.trace_rows(X)
+            out = block_solve(ksp, self.data_block(j0, j1), self.comm, *rows)
+            Yc[:, j0:j1] = out[0]
             if self.n_c:
-                Sc[:, j0:j1] = self.contact_rows(X)
+                Sc[:, j0:j1] = out[1]
         Yq = np.zeros((self.n_g, self.n_c))
         Sq = np.zeros((self.n_c, self.n_c))
         if contact:
             for k0 in range(0, self.n_c, chunk):
                 k1 = min(k0 + chunk, self.n_c)
-                X = block_solve(ksp, self.contact_block(k0, k1), self.comm)
-                Yq[:, k0:k1] = self.trace_rows(X)
-                Sq[:, k0:k1] = self.contact_rows(X)
+                Yq[:, k0:k1], Sq[:, k0:k1] = block_solve(ksp, self.contact_block(k0, k1), self.comm, *rows)
         return Yc, Sc, Yq, Sq
 
     def load_response(self) -> tuple[np.ndarray, np.ndarray]:
@@ -216,13 +221,13 @@ class PrimalPart(AffinePart):
         return free
 
     def data_block(self, j0: int, j1: int) -> np.ndarray:
-        B = np.zeros((self.nown, j1 - j0))
+        B = np.zeros((self.nown, j1 - j0), order="F")
         sel = (self.data_index >= j0) & (self.data_index < j1)
         B[self.data_at[sel], self.data_index[sel] - j0] = self.data_w[sel]
         return B
 
     def contact_block(self, k0: int, k1: int) -> np.ndarray:
-        B = np.zeros((self.nown, k1 - k0))
+        B = np.zeros((self.nown, k1 - k0), order="F")
         k = self.c_offset + np.arange(self.c_nodes.size)
         sel = (k >= k0) & (k < k1)
         for c in range(self.bs):
@@ -307,12 +312,12 @@ class MixedPart(AffinePart):
         return np.diff(self.C.indptr) > 0
 
     def data_block(self, j0: int, j1: int) -> np.ndarray:
-        B = np.zeros((self.nown, j1 - j0))
+        B = np.zeros((self.nown, j1 - j0), order="F")
         B[: self.ns] = self.C[:, j0:j1].toarray()
         return B
 
     def contact_block(self, k0: int, k1: int) -> np.ndarray:
-        B = np.zeros((self.nown, k1 - k0))
+        B = np.zeros((self.nown, k1 - k0), order="F")
         B[: self.ns] = self.QT[:, k0:k1].toarray()
         return B
 
@@ -477,8 +482,7 @@ class CondensedInterface:
         """Contact Newton, then (g₁₂, g₂₁, λ) global."""
         p = self.problem
         s_load, g21_0, y20 = self.load_terms()
-        s, hist = contact_newton(s_load, self.M, self.D, max_steps=options.max_steps, name=name)
-        lam = self.D * np.maximum(s, 0.0)
+        _, lam, hist = contact_newton(s_load, self.M, self.D, max_steps=options.max_steps, name=name)
         g21 = g21_0 - self.Gq @ lam
         y2 = y20 + self.Yc @ g21 - self.Yq @ lam
         g12 = np.where(p.free, p.a * y2 + p.b * g21, 0.0)
@@ -487,7 +491,7 @@ class CondensedInterface:
 
 @dataclass(slots=True)
 class ContactNewtonHistory:
-    """Active-set sizes, step lengths and residuals ‖F(s)‖ of the contact Newton."""
+    """Active-set sizes, step lengths and contact-law violations ‖μ − D s⁺‖ of the contact Newton."""
 
     active_sizes: list[int] = field(default_factory=list)
     step_lengths: list[float] = field(default_factory=list)
@@ -522,12 +526,14 @@ def _line_search(mu: np.ndarray, dmu: np.ndarray, s: np.ndarray, ds: np.ndarray,
 
 
 def contact_newton(s_load: np.ndarray, M: np.ndarray, D: np.ndarray, *, max_steps: int = 50,
-                   name: str = "contact Newton", rtol: float = 1e-9) -> tuple[np.ndarray, ContactNewtonHistory]:
-    """Solve F(s) = s − s_L + M D s⁺ = 0 by semismooth Newton (finite termination, globalized).
+                   name: str = "contact Newton", rtol: float = 1e-10
+                   ) -> tuple[np.ndarray, np.ndarray, ContactNewtonHistory]:
+    """Solve s = s_L − M μ, μ = D s⁺ by semismooth Newton (finite termination, globalized): (s, μ).
 
-    Starts from s = s_L (no contact force).  A full step solves the problem linearized at the
-    current active set 𝒜 = {s > 0}: (I + M_𝒜𝒜 D_𝒜) s_𝒜 = s_L,𝒜.  It stops at the first step whose
-    result has the set it was computed for (then F = 0 exactly) and checks ‖F‖.
+    Starts from μ = 0 (no contact force).  A full step solves the problem linearized at the
+    current active set 𝒜 = {s > 0} for the forces: (D_𝒜⁻¹ + M_𝒜𝒜) μ_𝒜 = s_L,𝒜, s = s_L − M_:𝒜 μ_𝒜
+    (on 𝒜, s = μ/D: no cancellation with a stiff penalty).  It stops at the first step whose result
+    has the set it was computed for (then both equations hold exactly) and checks that solve.
     """
     hist = ContactNewtonHistory()
     n = s_load.size
@@ -535,17 +541,20 @@ def contact_newton(s_load: np.ndarray, M: np.ndarray, D: np.ndarray, *, max_step
     active = s > 0.0
     visited: set[bytes] = set()
     line_search = False
-    scale = np.linalg.norm(s_load) + 1e-300
     for _ in range(max_steps):
         visited.add(np.packbits(active).tobytes())
         A = np.flatnonzero(active)
-        s_new = s_load.copy()
-        mu_new = np.zeros(n)
+        s_new, mu_new = s_load.copy(), np.zeros(n)
         if A.size:
-            sA = np.linalg.solve(np.eye(A.size) + M[np.ix_(A, A)] * D[A][None, :], s_load[A])
-            mu_new[A] = D[A] * sA
+            K = M[np.ix_(A, A)] + np.diag(1.0 / D[A])
+            mu_new[A] = np.linalg.solve(K, s_load[A])
+            r = K @ mu_new[A] - s_load[A]
             s_new = s_load - M[:, A] @ mu_new[A]
-            s_new[A] = sA
+            s_new[A] = mu_new[A] / D[A]
+            size = np.linalg.norm(s_load[A]) + np.linalg.norm(M[np.ix_(A, A)] @ mu_new[A]) + 1e-300
+            if not np.isfinite(r).all() or np.linalg.norm(r) > rtol * size:
+                raise ConvergenceError(f"{name}: the condensed contact system is singular or ill-conditioned "
+                                       f"(relative residual {np.linalg.norm(r) / size:.1e})")
         predicted = s_new > 0.0
         settled = np.array_equal(predicted, active)
         if not settled and not line_search:
@@ -556,14 +565,9 @@ def contact_newton(s_load: np.ndarray, M: np.ndarray, D: np.ndarray, *, max_step
         s, mu = s + t * (s_new - s), mu + t * (mu_new - mu)
         hist.step_lengths.append(t)
         hist.active_sizes.append(int(np.count_nonzero(s > 0.0)))
-        res = float(np.linalg.norm(s - s_load + M @ (D * np.maximum(s, 0.0))))
-        hist.residuals.append(res)
-        if not np.isfinite(res):
-            raise ConvergenceError(f"{name}: non-finite contact values")
+        hist.residuals.append(float(np.linalg.norm(mu - D * np.maximum(s, 0.0))))  # contact-law violation
         if settled:
-            if res > rtol * (scale + np.linalg.norm(M @ (D * np.maximum(s, 0.0)))):
-                raise ConvergenceError(f"{name}: active set settled but ‖F‖ = {res:.3e} (ill-conditioned condensation?)")
-            return s, hist
+            return s, mu, hist
         active = s > 0.0
     raise ConvergenceError(
         f"{name}: contact Newton did not converge in {max_steps} steps (active-set sizes "
@@ -611,7 +615,8 @@ def newton_iterate(step, options: IterationOptions, *, name: str, monitor=None,
     # with Ω₂'s own factorization (the "interface" strategy, and the fallback when a condensed step fails:
     # with a stiff penalty the Woodbury update loses digits)
     exact = nopt.strategy == "interface"
-    Tg, rec = evaluate(step, g, history, name=name, monitor=monitor)
+    # certify: Ω₁ is solved, Ω₂'s warm state is checked against its own equations (solved only if that fails)
+    Tg, rec = evaluate(step, g, history, name=name, monitor=monitor, omega2_warm=nopt.strategy == "condensed")
     rec.info["newton_steps"] = history.newton_steps
 
     def residual_norm(g: np.ndarray, Tg: np.ndarray) -> float:
@@ -645,7 +650,7 @@ def newton_iterate(step, options: IterationOptions, *, name: str, monitor=None,
             exact = True  # back to g0 and retry with the exact Jacobian of Ω₂
             g = g0
             Tg, rec = evaluate(step, g, history, name=name, monitor=monitor)
-    history.converged = rec.residual < options.tol
+    history.converged = bool(rec.residual < options.tol)
     history.time_s = time.perf_counter() - start - history.time_monitor_s
     log.info("%s: %s, %d Newton steps, %d applications of T, transmission residual %.3e, online %.3f s "
              "(interface response offline %.3f s)", name, "converged" if history.converged else "NOT converged",

@@ -52,7 +52,8 @@ from fenics_contact.hybrid.iteration import (
 from fenics_contact.errors import InputError
 from fenics_contact.problem.geometry import ContactMesh
 from fenics_contact.fem.mixed import MixedContactProfile, MixedSolution
-from fenics_contact.hybrid.mixed import MixedHybridStep
+from fenics_contact.hybrid.mixed import MixedHybridStep, solve_or_verify
+from fenics_contact.hybrid.primal import omega2_record
 from fenics_contact.multiscale.mixed_cem import (
     DEFAULT_MAX_NBASIS,
     DEFAULT_MIN_GAP,
@@ -150,21 +151,17 @@ class MixedMultiscaleHybridStep(MixedHybridStep):
     def prepare(self) -> None:
         """Nothing to do: the coarse operator was factorized offline."""
 
-    def apply(self, g: np.ndarray) -> np.ndarray:
+    def apply(self, g: np.ndarray, *, omega2_warm: bool = False) -> np.ndarray:
         n = self.size
         g12, g21 = g[:n], g[n:]
         self.g12 = g12.copy()  # Ω₁ is linear: its state is the affine response to g12
-        newton = self.sub[1].solve(g21[self._perm2])
+        newton = solve_or_verify(self.sub[1], g21[self._perm2], omega2_warm)
         t1 = self.omega1.response.trace(g12)
         t2 = np.empty(n)
         t2[self._perm2] = self.sub[1].N @ self.sub[1].c
         self._measure()
         self._certificate = mixed_certificate(t1, t2, g12, g21, self.beta, self.gamma_mass)
-        self._record = {
-            "newton": newton.steps,
-            "active": newton.active_sizes[-1],
-            "refactor": newton.factorizations,
-        }
+        self._record = omega2_record(newton)
         return np.concatenate([g21 - 2.0 * self.beta * t2, g12 - 2.0 * self.beta * t1])
 
     def _omega1_response(self, options: InterfaceNewtonOptions):

@@ -31,7 +31,7 @@ from fenics_contact.problem.fields import material_fields
 from fenics_contact.problem.geometry import ContactMesh
 from fenics_contact.problem.models import TestModel
 from fenics_contact.fem.primal import PrimalSubproblem
-from fenics_contact.hybrid.primal import HybridResult
+from fenics_contact.hybrid.primal import HybridResult, omega2_record, solve_or_verify
 from fenics_contact.hybrid.transmission import InterfaceSpace, robin_coefficient, split_mesh
 
 __all__ = ["MultiscalePrimalHybridStep", "solve_primal_ms_hybrid"]
@@ -99,18 +99,18 @@ class MultiscalePrimalHybridStep:
     def initial_data(self) -> np.ndarray:
         return np.zeros(2 * self.interface.size)
 
-    def apply(self, g: np.ndarray) -> np.ndarray:
+    def apply(self, g: np.ndarray, *, omega2_warm: bool = False) -> np.ndarray:
         n = self.interface.size
         g12, g21 = g[:n], g[n:]
         u1 = self.omega1.solve(g12)
         self.u1.x.array[:] = u1
         self.interface.to_part(g21, 1, self.omega2.g)
-        newton = self.omega2.solve()
+        newton = solve_or_verify(self.omega2, omega2_warm)
         u1g = self.omega1.interface_values(u1)
         u2g = self.interface.from_part(self.omega2.u, 1)
         self._measure()
         self._certificate = primal_certificate(u1g, u2g, g12, g21, self.alpha, self.interface.weights, self.comm)
-        self._record = {"newton": newton.steps, "active": newton.active_sizes[-1], "refactor": newton.factorizations}
+        self._record = omega2_record(newton)
         return np.concatenate([2.0 * self.alpha * u2g - g21, 2.0 * self.alpha * u1g - g12])
 
     def relative_change(self) -> float:

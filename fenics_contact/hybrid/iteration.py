@@ -89,10 +89,12 @@ class AndersonUpdate:
 
     name = "anderson"
 
-    def __init__(self, comm: MPI.Comm, depth: int = 10, regularization: float = 1e-12) -> None:
+    def __init__(self, comm: MPI.Comm, depth: int = 10, regularization: float = 1e-12,
+                 weights: np.ndarray | None = None) -> None:
         if depth < 1:
             raise InputError(f"Anderson depth must be >= 1, got {depth}")
         self.comm, self.depth, self.reg = comm, depth, regularization
+        self.w = weights
         self._g: list[np.ndarray] = []
         self._r: list[np.ndarray] = []
 
@@ -107,8 +109,9 @@ class AndersonUpdate:
             return Tg
         dG = np.stack([b - a for a, b in zip(self._g[:-1], self._g[1:])], axis=1)
         dR = np.stack([b - a for a, b in zip(self._r[:-1], self._r[1:])], axis=1)
-        gram = self.comm.allreduce(dR.T @ dR, op=MPI.SUM)
-        rhs = self.comm.allreduce(dR.T @ r, op=MPI.SUM)
+        wdR = dR if self.w is None else self.w[:, None] * dR
+        gram = self.comm.allreduce(wdR.T @ dR, op=MPI.SUM)
+        rhs = self.comm.allreduce(wdR.T @ r, op=MPI.SUM)
         scale = np.trace(gram) / gram.shape[0] if gram.size else 1.0
         theta = np.linalg.solve(gram + self.reg * max(scale, 1e-300) * np.eye(gram.shape[0]), rhs)
         return g + r - (dG + dR) @ theta
@@ -118,12 +121,12 @@ class AndersonUpdate:
 ACCELERATIONS = ("none", "anderson", "newton")
 
 
-def make_update(name: str, comm: MPI.Comm, *, depth: int = 10):
-    """'none' → PlainUpdate, 'anderson' → AndersonUpdate(depth)."""
+def make_update(name: str, comm: MPI.Comm, *, depth: int = 10, weights: np.ndarray | None = None):
+    """'none' → PlainUpdate, 'anderson' → AndersonUpdate(depth, weights of the least-squares inner product)."""
     if name == "none":
         return PlainUpdate()
     if name == "anderson":
-        return AndersonUpdate(comm, depth)
+        return AndersonUpdate(comm, depth, weights=weights)
     raise InputError(f"unknown update {name!r}; choose 'none' or 'anderson' ('newton' is run by iterate)")
 
 
@@ -201,6 +204,7 @@ class IterationHistory:
     time_offline_s: float = 0.0
     time_monitor_s: float = 0.0
     newton_steps: int = 0  #: interface Newton steps (contact Newton + corrections); 0 for the fixed-point updates
+    data: np.ndarray | None = None  #: the interface data g of the final pair (``initial`` of a warm-started solve)
 
     @property
     def iterations(self) -> int:
@@ -247,6 +251,7 @@ def evaluate(step: HybridStep, g: np.ndarray, history: IterationHistory, *, name
              monitor: Callable[[], dict] | None = None, omega2_warm: bool = False) -> tuple[np.ndarray, IterationRecord]:
     """Apply T once at g, certify the pair and append the record (the monitor's time is booked apart)."""
     Tg = step.apply(g, omega2_warm=omega2_warm) if omega2_warm else step.apply(g)
+    history.data = np.array(g, dtype=float)
     change = step.relative_change()
     cert = step.certificate()
     finite = bool(np.all(np.isfinite(Tg))) and np.isfinite(cert.value)
@@ -285,7 +290,8 @@ def iterate(
         from fenics_contact.hybrid.newton import newton_iterate
 
         return newton_iterate(step, options, name=name, monitor=monitor, initial=g)
-    update = make_update(options.accel, step.comm, depth=options.depth)
+    weights = step.data_weights() if hasattr(step, "data_weights") else None
+    update = make_update(options.accel, step.comm, depth=options.depth, weights=weights)
     history = IterationHistory()
     start = time.perf_counter()
     for k in range(1, options.max_iterations + 1):

@@ -128,6 +128,11 @@ class PrimalHybridStep:
     def certificate(self) -> Certificate:
         return self._certificate
 
+    def data_weights(self) -> np.ndarray:
+        """w_p/α_p per data value: Robin data g ~ α u + t, so this balances stiff and soft γ nodes in Anderson."""
+        w = self.interface.weights / self.alpha
+        return np.concatenate([w, w])
+
     def interface_problem(self, options: InterfaceNewtonOptions):
         """The affine pieces for ``hybrid.newton`` (built once: fine Ω₁ response, Ω₂ with J₀)."""
         from fenics_contact.hybrid.newton import FineResponse, InterfaceProblem, PrimalPart

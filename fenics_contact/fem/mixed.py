@@ -775,6 +775,14 @@ class MixedSubproblem:
         return float(np.sqrt(_dot(r1, r1) + _dot(r2, r2))), scale
 
     # -- interface Newton support (hybrid.newton) -------------------------------------------------
+    def reset(self) -> None:
+        """Forget the solution and the cached factorization (the next ``solve`` starts cold)."""
+        self.c = np.zeros(self.n_sigma)
+        self.u = np.zeros(self.n_u)
+        self._cold = True
+        if self.contact:
+            self._factorized_set = None
+
     def set_state(self, c: np.ndarray, u: np.ndarray) -> None:
         """Set (σ, u) (AW and DG P1 coefficients): the warm start of the next ``solve``."""
         self.c = np.array(c, dtype=float).reshape(self.n_sigma)

@@ -223,6 +223,11 @@ class PrimalSubproblem:
         return ContactProfile(y[order], u_c[order], sigma_c[order])
 
     # -- interface Newton support (hybrid.newton): the affine pieces of the problem ---------------
+    def reset(self) -> None:
+        """Forget the solution and the cached factorization (the next ``solve`` starts cold from u = 0)."""
+        self.u.x.array[:] = 0.0
+        self._factorized_set = None
+
     def residual_norm(self) -> tuple[float, float]:
         """(‖F(u)‖, ‖b‖) at the current u and data: ``solve`` accepts u when ‖F‖ ≤ rtol‖b‖ + atol."""
         return self._residual(), self.load_norm()

@@ -70,6 +70,10 @@ class HybridStep(Protocol):
     def record(self) -> dict:
         """Diagnostics of the last application (Newton steps, active set, errors...)."""
 
+    # Optional: ``interface_problem(options)`` (the affine pieces for ``accel="newton"``, see
+    # ``hybrid.newton.InterfaceProblem``), ``data_weights()`` (weights of Anderson's least squares),
+    # ``reset()`` (cold subdomain states for the next solve, offline data kept).
+
 
 class PlainUpdate:
     """g ← T(g): the paper's update."""

@@ -9,7 +9,8 @@ Both subdomains use Arnold–Winther stresses × DG P1 displacements
 (``fem.mixed.MixedSubproblem``); Ω₁ is factorized once, Ω₂ runs the globalized
 semismooth Newton warm-started from its last solution and refactorizes only
 when its active set changes.  The loop is ``hybrid.iteration.iterate`` (plain update as in the
-paper, or Anderson acceleration).
+paper, Anderson acceleration, or the interface Newton method of ``hybrid.newton``), stopped by the
+transmission residual of ``hybrid.certificate``.
 
 **Space of the Robin data and quadrature on γ.**  The normal trace σn of an AW
 stress on a straight edge is a cubic vector polynomial, and it is continuous at
@@ -217,6 +218,13 @@ class MixedHybridStep:
 
     def certificate(self) -> Certificate:
         return self._certificate
+
+    def reset(self) -> None:
+        """Start the next solve cold: zero subdomain states, Ω₂ factorization dropped (offline data kept)."""
+        self.sub[1].reset()
+        for c0, u0 in self._prev:
+            c0[:] = 0.0
+            u0[:] = 0.0
 
     def _omega1_response(self, options: InterfaceNewtonOptions):
         """Ω₁'s affine trace response (fine Ω₁: back-solves with its factorization)."""

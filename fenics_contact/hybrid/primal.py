@@ -128,6 +128,13 @@ class PrimalHybridStep:
     def certificate(self) -> Certificate:
         return self._certificate
 
+    def reset(self) -> None:
+        """Start the next solve cold: zero subdomain states, Ω₂ factorization dropped (offline data kept)."""
+        self.sub[1].reset()
+        self.sub[0].u.x.array[:] = 0.0
+        for prev in self._prev:
+            prev[:] = 0.0
+
     def data_weights(self) -> np.ndarray:
         """w_p/α_p per data value: Robin data g ~ α u + t, so this balances stiff and soft γ nodes in Anderson."""
         w = self.interface.weights / self.alpha

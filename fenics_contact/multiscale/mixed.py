@@ -164,6 +164,11 @@ class MixedMultiscaleHybridStep(MixedHybridStep):
         self._record = omega2_record(newton)
         return np.concatenate([g21 - 2.0 * self.beta * t2, g12 - 2.0 * self.beta * t1])
 
+    def reset(self) -> None:
+        super().reset()
+        self.g12[:] = 0.0
+        self._prev_g12[:] = 0.0
+
     def _omega1_response(self, options: InterfaceNewtonOptions):
         """Ω₁'s affine trace σ₁n₁ = T g + t₀ (``InterfaceResponse``, precomputed offline with the bases)."""
         from fenics_contact.hybrid.newton import MatrixResponse
@@ -256,7 +261,9 @@ def solve_mixed_ms_hybrid(
     initial_data: np.ndarray | None = None,
     step: MixedMultiscaleHybridStep | None = None,
 ) -> MixedMsResult:
-    """Algorithm 4 to the relative-change tolerance; e_σ, e_u against ``reference`` (fine monolithic mixed).
+    """Algorithm 4 until the transmission residual is below ``options.tol``; e_σ, e_u against ``reference``
+    (fine monolithic mixed), outside the online time.  ``initial_data`` warm-starts the interface data,
+    ``step`` reuses a step (and its offline data) from an earlier solve.
 
     ``epsilon`` defaults to the reference's ε (else ``fem.mixed.default_epsilon``).  ``dofs`` counts
     the fine Ω₁ problem, dim X_ms, dim U_aux, Ω₂ and the interface data; ``time_offline_s``

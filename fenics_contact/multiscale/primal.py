@@ -119,6 +119,13 @@ class MultiscalePrimalHybridStep:
     def certificate(self) -> Certificate:
         return self._certificate
 
+    def reset(self) -> None:
+        """Start the next solve cold: zero subdomain states, Ω₂ factorization dropped (offline data kept)."""
+        self.omega2.reset()
+        self.u1.x.array[:] = 0.0
+        for prev in self._prev:
+            prev[:] = 0.0
+
     def interface_problem(self, options: InterfaceNewtonOptions):
         """The affine pieces for ``hybrid.newton``: Ω₁'s trace response probed through the public affine
         solve (n_γ coarse solves, offline), Ω₂ with J₀ (built once)."""
@@ -193,7 +200,9 @@ def solve_primal_ms_hybrid(
     initial_data: np.ndarray | None = None,
     step: MultiscalePrimalHybridStep | None = None,
 ) -> HybridResult:
-    """Algorithm 3 to the relative-change tolerance; e_u is measured against ``reference`` (fine monolithic).
+    """Algorithm 3 until the transmission residual is below ``options.tol``; e_u is measured against
+    ``reference`` (fine monolithic), outside the online time.  ``initial_data`` warm-starts the interface
+    data, ``step`` reuses a step (and its offline data) from an earlier solve.
 
     ``dofs["omega1_ms"]`` is dim V_ms; ``time_offline_s`` covers assembly, eigenproblems,
     bases, N and the coarse factorization (breakdown in ``result.step.offline_times``);

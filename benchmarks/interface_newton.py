@@ -229,7 +229,9 @@ def main() -> None:
     logging.basicConfig(level=logging.WARNING)
     lines = ["# Interface Newton", "", f"Machine: {machine_description()}.", "",
              "Command: `OMP_NUM_THREADS=1 python benchmarks/interface_newton.py "
-             f"--parts {args.parts} --methods {args.methods} --h-primal {args.h_primal} --h-mixed {args.h_mixed} --factors {args.factors}`", ""]
+             f"--parts {args.parts} --methods {args.methods} --h-primal {args.h_primal} --h-mixed {args.h_mixed} "
+             f"--factors {args.factors} --h-ms-max {args.h_ms_max} --updates-h {args.updates_h} --cap {args.cap} "
+             f"--speed-h {args.speed_h} --speed-model {args.speed_model} --out {args.out}`", ""]
     start = time.perf_counter()
     ints = lambda text: [int(x) for x in text.split(",")]  # noqa: E731
     for part in args.parts.split(","):

@@ -24,14 +24,17 @@ load term s_L.  Two strategies solve it (``InterfaceNewtonOptions.strategy``):
 * ``"condensed"`` (default): offline, factorize J₀ and back-solve it for the
   n_γ data and n_c contact columns (Yc, Sc, Yq, Sq), form the interface matrix
   K = I − P₁P₂ (P₁ = a⊙T₁ + b, P₂ = a⊙Yc + b) and M.  Online: one J₀ back-solve
-  and one Ω₁ load solve for s_L, a semismooth Newton on s (dense, size n_c:
-  its steps are those of the monolithic semismooth Newton, since the
-  condensation is exact), then the data g and one application of T with the
-  real subdomain solvers (Ω₂ warm-started by one more J₀ back-solve), whose
-  transmission residual certifies the result.  Should it be above the
-  tolerance (round-off for extreme α, β), Newton steps on F(g) = g − T(g)
-  follow, with the generalized Jacobian of Ω₂ from the same offline data
-  (Woodbury: no new factorization).
+  and one Ω₁ load solve for s_L, then a semismooth Newton on the contact forces μ
+  (dense, size n_c; with Algorithm 1 the condensation is exact and its active
+  sets are those of the monolithic semismooth Newton from its second step on),
+  then the data g and one application of T with the real subdomain solvers:
+  Ω₁ is solved, Ω₂'s state (one more J₀ back-solve) is checked against its own
+  equations with the acceptance test of its Newton solver and solved only if
+  that fails.  The transmission residual of that pair certifies the result.
+  Should it be above the tolerance (round-off for extreme α, β or contrast),
+  Newton steps on F(g) = g − T(g) follow, with Ω₂'s generalized Jacobian from
+  the same offline data (Woodbury on J₀, no factorization), or, when such a step
+  does not reduce the residual, exactly by back-solves with Ω₂'s own factorization.
 * ``"interface"``: Newton on F(g) = g − T(g) from g⁰, each step an application
   of T (the Ω₂ semismooth Newton) and Ω₂'s generalized Jacobian by n_γ
   back-solves with the factorization Ω₂ keeps; a backtracking line search on
@@ -39,10 +42,12 @@ load term s_L.  Two strategies solve it (``InterfaceNewtonOptions.strategy``):
 
 Both land on the fixed point of the Robin iteration (the same equations).  The
 contact Newton takes full steps until an active set recurs and from then on
-minimizes, along each Newton direction, ψ(s) = ½ μᵀMμ + ½ Σ D (s⁺)² with
+minimizes, along each Newton direction, ψ = ½ μᵀMμ + ½ Σ D (s⁺)² with
 s = s_L − Mμ (exact line search on a piecewise-linear derivative): ψ is the
 convex energy of the glued problem when M is symmetric (Algorithms 1, 2), so no
-cycle can recur.
+cycle can recur.  A Newton method that fails (no convergence in ``max_steps``,
+a singular condensed system) raises ConvergenceError; a pair whose transmission
+residual stays above the tolerance ends with ``converged = False``.
 """
 
 import logging
@@ -399,7 +404,7 @@ class InterfaceProblem:
     """What the Newton method needs from a step: Ω₁ response, Ω₂ pieces, the update y ↦ a⊙y + b g.
 
     ``gather``/``local`` map one half of the step's data (g₁₂ or g₂₁, local owned values) to the
-    global numbering and back; ``time_s`` is the offline time spent building it.
+    global numbering and back; ``condensed`` caches the offline condensation.
     """
 
     omega1: object

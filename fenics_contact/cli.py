@@ -1,10 +1,34 @@
-"""Command line: ``fenics-contact run …`` (one simulation with fields, plots and a summary)."""
+"""Command line: ``fenics-contact run …`` (one simulation with fields, plots and a summary).
+
+A run goes: parse → one validated ``RunOptions`` (every option and file checked before
+any mesh is built) → inputs (E map) → output staging directory → mesh (a user mesh is
+validated against the contact problem) → solve → write into the staging directory →
+move it into place. Exit codes:
+
+  0    converged
+  2    bad input: an option, a file (--mesh, --E-map, --out, --cache-dir) or a mesh whose
+       tags contradict the problem; nothing is written
+  3    not converged: the iteration hit --max-iterations; the results are written with
+       "converged": false
+  4    numerical failure: Newton did not converge, non-finite values, a failed
+       factorization; nothing is written
+  130  interrupted by SIGINT (Ctrl-C), 143 by SIGTERM: --out is left as it was
+
+Every failure ends with one line on stderr.
+"""
 
 import argparse
 import logging
+import math
+import re
+import signal
 import sys
+import threading
 import time
-from collections.abc import Callable
+import typing
+from collections.abc import Callable, Iterator, Mapping
+from contextlib import contextmanager
+from dataclasses import dataclass, fields, replace
 from pathlib import Path
 from typing import NamedTuple
 
@@ -12,62 +36,243 @@ import numpy as np
 from mpi4py import MPI
 
 from fenics_contact import __version__
+from fenics_contact.errors import ConvergenceError, FenicsContactError, InputError
 from fenics_contact.fem.contact import NewtonOptions
+from fenics_contact.fem.primal import default_penalty, solve_primal_monolithic
 from fenics_contact.hybrid.iteration import ACCELERATIONS, IterationOptions
-from fenics_contact.errors import FenicsContactError, InputError
-from fenics_contact.problem.fields import material_fields
-from fenics_contact.problem.geometry import ContactMesh, read_mesh, unit_square
-from fenics_contact.io import cell_function_of, cell_markers, stress_field, write_fields, write_summary, write_vtx
-from fenics_contact.problem.models import get_model, pixel_field
+from fenics_contact.hybrid.primal import DEFAULT_ALPHA, solve_primal_hybrid
+from fenics_contact.io import (
+    OutputDirectory,
+    cell_function_of,
+    cell_markers,
+    check_output_target,
+    stress_field,
+    write_fields,
+    write_summary,
+    write_vtx,
+)
+from fenics_contact.multiscale.primal import solve_primal_ms_hybrid
 from fenics_contact.plots import (
     plot_cell_field,
     plot_contact,
     plot_displacement,
+    plot_force_indentation,
     plot_history,
     plot_stress,
     render_deformed,
 )
-from fenics_contact.fem.primal import default_penalty, solve_primal_monolithic
-from fenics_contact.hybrid.primal import DEFAULT_ALPHA, solve_primal_hybrid
-from fenics_contact.multiscale.primal import solve_primal_ms_hybrid
+from fenics_contact.problem.case import RUN_TABLES, Case, load_case, parse_override
+from fenics_contact.problem.cell_groups import bounding_box
+from fenics_contact.problem.fields import material_fields
+from fenics_contact.problem.geometry import ContactMesh, read_mesh, unit_square
+from fenics_contact.problem.materials import check_poisson_ratio
+from fenics_contact.problem.models import TestModel, get_model, pixel_field
 from fenics_contact.problem.tags import Subdomain
 
-__all__ = ["main", "build_parser"]
+__all__ = ["main", "build_parser", "run", "RunOptions", "EXIT_CODES"]
 
 log = logging.getLogger("fenics_contact")
 
 METHODS = ("primal", "primal-ms", "mixed", "mixed-ms")
+DEFAULT_H = 64  #: 1/h of the built-in mesh when --h is not given
+
+#: exit code -> meaning (``--help``, README)
+EXIT_CODES = {
+    0: "converged",
+    2: "bad input (an option, a file or the mesh tags; nothing written)",
+    3: "not converged: the iteration hit --max-iterations (results written, \"converged\": false)",
+    4: "numerical failure: Newton did not converge, non-finite values, a failed factorization (nothing written)",
+    130: "interrupted by SIGINT (Ctrl-C); --out left as it was",
+    143: "interrupted by SIGTERM; --out left as it was",
+}
+EXIT_BAD_INPUT, EXIT_NOT_CONVERGED, EXIT_NUMERICAL = 2, 3, 4
+NOT_GIVEN = object()  #: an option the command line did not give (``build_parser(given_only=True)``)
+
+#: options that only some methods use: giving one to another method is refused, not ignored
+_METHOD_OPTIONS: dict[str, tuple[tuple[str, ...], str]] = {
+    "alpha": (("primal", "primal-ms"), "the primal Robin coefficient; the mixed methods take --beta"),
+    "delta": (("primal", "primal-ms"), "the primal penalty; the mixed methods take --epsilon"),
+    "beta": (("mixed", "mixed-ms"), "the mixed transmission coefficient; the primal methods take --alpha"),
+    "epsilon": (("mixed", "mixed-ms"), "the mixed penalty; the primal methods take --delta"),
+    "layers": (("primal-ms", "mixed-ms"), "a multiscale option"),
+    "nbasis": (("primal-ms", "mixed-ms"), "a multiscale option"),
+    "cache_dir": (("primal-ms", "mixed-ms"), "the multiscale offline cache"),
+    "min_gap": (("mixed-ms",), "a mixed-ms option"),
+    "max_nbasis": (("mixed-ms",), "a mixed-ms option"),
+}
+#: one factor of an α spelling (hybrid.transmission.robin_coefficient): a number [E], E, sqrt-h, h^p
+_ALPHA_FACTOR = re.compile(r"^((?P<number>(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?)E?|E|sqrt-h|h\^\(?[+-]?\d+(\.\d*)?(/\d+)?\)?)$")
+#: what a positive option is, for its message
+_MEANING = {"delta": "the primal penalty δ", "epsilon": "the mixed penalty ε", "E_high": "a Young's modulus",
+            "E_low": "a Young's modulus"}
 
 
-class _RankZero(logging.Filter):
-    def filter(self, record: logging.LogRecord) -> bool:
-        return MPI.COMM_WORLD.rank == 0
+def _flag(name: str) -> str:
+    return "--" + name.replace("_", "-")
 
 
-def _setup_logging(verbose: bool) -> None:
-    handler = logging.StreamHandler(sys.stdout)
-    handler.addFilter(_RankZero())
-    handler.setFormatter(logging.Formatter("%(message)s"))
-    root = logging.getLogger("fenics_contact")
-    root.handlers[:] = [handler]
-    root.setLevel(logging.DEBUG if verbose else logging.INFO)
-    root.propagate = False
+def _finite_positive(name: str, value) -> None:
+    if value is not None and not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+        raise InputError(f"{_flag(name)} ({_MEANING.get(name, 'a size')}) must be a finite number > 0, got {value!r}")
 
 
-def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="fenics-contact", description=__doc__)
+def _integer(name: str, value, minimum: int) -> None:
+    if value is not None and not (isinstance(value, int) and value >= minimum):
+        raise InputError(f"{_flag(name)} must be an integer >= {minimum}, got {value!r}")
+
+
+def _check_alpha(alpha: str) -> None:
+    for token in alpha.replace(" ", "").split("*"):
+        match = _ALPHA_FACTOR.match(token)
+        if match is not None and (match["number"] is None or 0 < float(match["number"]) < math.inf):
+            continue
+        raise InputError(f"cannot read the transmission coefficient --alpha {alpha!r}: give a number > 0 or a "
+                         "product of numbers, h^p, sqrt-h and E, e.g. 1, h^-1/2, 2E*h^-1/2")
+
+
+def _check_directory(flag: str, path: Path) -> None:
+    """A directory that exists, or can be created: not a file, not below a file."""
+    if not str(path).strip():
+        raise InputError(f"{flag} must name a directory (got an empty string)")
+    resolved = Path(path).resolve()
+    if resolved.exists() and not resolved.is_dir():
+        raise InputError(f"{flag} {path} exists and is a file, not a directory")
+    existing = resolved
+    while not existing.exists():
+        existing = existing.parent
+    if not existing.is_dir():
+        raise InputError(f"{flag} {path} lies below {existing}, which is a file, not a directory")
+
+
+@dataclass(frozen=True, slots=True)
+class RunOptions:
+    """What ``fenics-contact run`` was asked to do, validated on construction (InputError).
+
+    ``None`` means "not given": the method's default is used, and an option that the chosen
+    method does not use is refused rather than ignored. ``h`` is 1/h of the built-in mesh and
+    is refused with ``mesh`` (a user mesh has its own size, ``geometry.mesh_size``).
+    """
+
+    model: int = 1
+    method: str = "primal"
+    h: int | None = None
+    H: int = 16
+    mesh: Path | None = None
+    alpha: str | None = None
+    accel: str = "anderson"
+    tol: float = 1e-6
+    max_iterations: int = 2000
+    delta: float | None = None
+    beta: str | None = None
+    epsilon: float | None = None
+    E_high: float | None = None
+    E_low: float | None = None
+    nu: float = 0.35
+    E_map: Path | None = None
+    layers: int | None = None
+    nbasis: int | None = None
+    min_gap: float | None = None
+    max_nbasis: int | None = None
+    cache_dir: Path | None = None
+    reference: bool = False
+    out: Path = Path("results")
+    plots: bool = True
+    case: Path | None = None  #: the case file the problem came from (``--case``; see ``problem.case``)
+
+    def __post_init__(self) -> None:
+        if self.method not in METHODS:
+            raise InputError(f"unknown --method {self.method!r}; choose one of {METHODS}")
+        get_model(self.model)  # InputError for an unknown model
+        for name, (methods, what) in _METHOD_OPTIONS.items():
+            if getattr(self, name) is not None and self.method not in methods:
+                raise InputError(f"{_flag(name)} does not apply to --method {self.method} (it is {what})")
+        if self.mesh is not None:
+            if self.h is not None:
+                raise InputError("--h sets the size of the built-in mesh; with --mesh the size comes from the file "
+                                 "(h = sqrt(2 x largest cell area), reported in the summary): leave --h out")
+            if not Path(self.mesh).is_file():
+                raise InputError(f"--mesh {self.mesh} does not exist" if not Path(self.mesh).exists()
+                                 else f"--mesh {self.mesh} is not a file")
+        _integer("h", self.h, 2)
+        _integer("H", self.H, 2)
+        if self.mesh is None and self.n % self.H:
+            raise InputError(f"--h {self.n} is not a multiple of --H {self.H}: the coarse grid must be a union of fine "
+                             "cells")
+        for name in ("delta", "epsilon", "E_high", "E_low"):
+            _finite_positive(name, getattr(self, name))
+        if self.E_map is not None:
+            if self.E_high is not None or self.E_low is not None:
+                raise InputError("--E-high/--E-low set the model's E map; --E-map replaces it: give one or the other")
+            if not Path(self.E_map).is_file():
+                raise InputError(f"--E-map {self.E_map} does not exist or is not a file")
+        if not (isinstance(self.nu, (int, float)) and math.isfinite(self.nu)):
+            raise InputError(f"--nu must be a finite number, got {self.nu!r}")
+        check_poisson_ratio(self.nu)
+        IterationOptions(tol=self.tol, max_iterations=self.max_iterations, accel=self.accel)
+        _integer("layers", self.layers, 0)
+        _integer("nbasis", self.nbasis, 1)
+        _integer("max_nbasis", self.max_nbasis, 1)
+        if self.max_nbasis is not None and self.max_nbasis < self.value("nbasis"):
+            raise InputError(f"--max-nbasis {self.max_nbasis} must be >= --nbasis {self.value('nbasis')}")
+        if self.min_gap is not None and not (math.isfinite(self.min_gap) and self.min_gap >= 0):
+            raise InputError(f"--min-gap must be a finite number >= 0, got {self.min_gap!r}")
+        if self.alpha is not None:
+            _check_alpha(self.alpha)
+        if self.beta is not None:
+            from fenics_contact.hybrid.mixed import transmission_coefficient
+
+            transmission_coefficient(self.beta, 0.5)
+        if self.cache_dir is not None:
+            _check_directory("--cache-dir", self.cache_dir)
+        object.__setattr__(self, "out", check_output_target(self.out))
+
+    @classmethod
+    def from_namespace(cls, args: argparse.Namespace) -> "RunOptions":
+        """From the parsed command line (``build_parser``)."""
+        values = {f.name: getattr(args, f.name) for f in fields(cls) if f.name != "plots" and hasattr(args, f.name)}
+        return cls(**values, plots=not args.no_plots)
+
+    @property
+    def n(self) -> int:
+        """1/h of the built-in mesh."""
+        return self.h if self.h is not None else DEFAULT_H
+
+    def value(self, name: str):
+        """The option, or the method's default when it was not given."""
+        given = getattr(self, name)
+        if given is not None:
+            return given
+        return {"alpha": DEFAULT_ALPHA, "beta": "sqrt-h", "E_high": 1e3, "E_low": 1.0, "layers": 4,
+                "nbasis": 3}.get(name)
+
+    def iteration_options(self) -> IterationOptions:
+        return IterationOptions(tol=self.tol, max_iterations=self.max_iterations, accel=self.accel)
+
+
+def build_parser(*, given_only: bool = False) -> argparse.ArgumentParser:
+    codes = "\n".join(f"  {code:<4} {meaning}" for code, meaning in EXIT_CODES.items())
+    parser = argparse.ArgumentParser(prog="fenics-contact", description=__doc__.split("\n")[0])
     parser.add_argument("--version", action="version", version=f"fenics-contact {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
-    run = sub.add_parser("run", help="run one contact simulation and write fields, plots and a summary")
+    run = sub.add_parser(
+        "run", help="run one contact simulation and write fields, plots and a summary",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        description="Run one contact simulation. Every option and file is checked before the mesh is built; the "
+        "results are written into a temporary directory beside --out that replaces --out when the run ends "
+        "(an earlier run there is replaced whole; an interrupted or failed run leaves --out as it was).",
+        epilog=f"exit codes:\n{codes}\nEvery failure ends with one line on stderr.",
+    )
     run.add_argument("--model", type=int, choices=(1, 2, 3), default=1,
                      help="built-in test model: 1 channels, 2 inclusions, 3 heterogeneous strip (loads in Ω₁)")
     run.add_argument("--method", choices=METHODS, default="primal", help="discretization / algorithm")
-    run.add_argument("--h", type=int, default=64, help="fine mesh size given as 1/h (e.g. 64)")
-    run.add_argument("--H", type=int, default=16, help="coarse size / strip width given as 1/H (e.g. 16)")
-    run.add_argument("--mesh", type=Path, help="a gmsh .msh file with the physical groups "
-                     "Omega1, Omega2, Gamma_D, Gamma_C, gamma (replaces the built-in unit square)")
-    run.add_argument("--alpha", default=DEFAULT_ALPHA, help="Robin coefficient: a number or a product of "
-                     "numbers, h^p, sqrt-h and E (E_p: mean E at the γ node), e.g. 1, h^-1/2, 2E*h^-1/2")
+    run.add_argument("--h", type=int, help=f"fine size of the built-in mesh as 1/h (default {DEFAULT_H}); "
+                     "not with --mesh, whose size is h = sqrt(2 x largest cell area) (1/n on an n x n grid)")
+    run.add_argument("--H", type=int, default=16, help="coarse size / strip width as 1/H (e.g. 16); with --mesh the "
+                     "coarse grid of squares of side H from the origin (multiscale methods)")
+    run.add_argument("--mesh", type=Path, help="a gmsh .msh file of planar triangles with the physical groups "
+                     "Omega1, Omega2, Gamma_D, Gamma_C, gamma (checked against the contact problem)")
+    run.add_argument("--alpha", help=f"primal Robin coefficient (default {DEFAULT_ALPHA}): a number or a product "
+                     "of numbers, h^p, sqrt-h and E (E_p: mean E at the γ node), e.g. 1, h^-1/2, 2E*h^-1/2")
     run.add_argument("--accel", choices=ACCELERATIONS, default="anderson",
                      help="update of the interface data: the paper's plain update, Anderson acceleration, or "
                      "the interface Newton method")
@@ -75,40 +280,271 @@ def build_parser() -> argparse.ArgumentParser:
                      help="tolerance of the transmission residual (relative jump and traction imbalance on γ)")
     run.add_argument("--max-iterations", type=int, default=2000)
     run.add_argument("--delta", type=float, help="primal penalty δ (default 1e-3·h/E on Γ_C)")
-    run.add_argument("--beta", default="sqrt-h", help="mixed: transmission coefficient β (1, sqrt-h or a number)")
+    run.add_argument("--beta", help="mixed transmission coefficient β: sqrt-h (default) or a number")
     run.add_argument("--epsilon", type=float, help="mixed penalty ε (default 1e-3·h·E on Γ_C)")
-    run.add_argument("--E-high", type=float, default=1e3, help="E in the high-modulus pattern")
-    run.add_argument("--E-low", type=float, default=1.0, help="E elsewhere")
+    run.add_argument("--E-high", type=float, help="E in the high-modulus pattern (default 1e3)")
+    run.add_argument("--E-low", type=float, help="E elsewhere (default 1)")
     run.add_argument("--nu", type=float, default=0.35, help="Poisson ratio")
     run.add_argument("--E-map", type=Path, help="Young's modulus as a pixel array over the unit square "
-                     "(.npy, or text/.csv readable by numpy.loadtxt; row 0 = bottom); replaces the model's E map")
-    run.add_argument("--layers", type=int, default=4, help="*-ms: oversampling layers m of the multiscale bases")
-    run.add_argument("--nbasis", type=int, default=3, help="*-ms: local spectral modes l per coarse cell")
+                     "(.npy, or text/.csv readable by numpy.loadtxt; row 0 = bottom); replaces the model's E map; "
+                     "every pixel the domain covers must be finite and > 0")
+    run.add_argument("--layers", type=int, help="*-ms: oversampling layers m of the multiscale bases (default 4)")
+    run.add_argument("--nbasis", type=int, help="*-ms: local spectral modes l per coarse cell (default 3)")
     run.add_argument("--min-gap", type=float,
                      help="mixed-ms: add Stage I modes on a coarse cell until the first one left out has "
                      "eigenvalue >= this (needed for nu -> 1/2; default 0.1; 0 keeps exactly --nbasis)")
     run.add_argument("--max-nbasis", type=int, help="mixed-ms: most Stage I modes per coarse cell (default 32)")
     run.add_argument("--cache-dir", type=Path, help="*-ms: directory for the offline data (reused when valid)")
     run.add_argument("--reference", action="store_true", help="also solve the monolithic problem and report e_u")
-    run.add_argument("--out", type=Path, default=Path("results"), help="output directory")
+    run.add_argument("--out", default="results", help="output directory (default results); replaced whole by the "
+                     "run, so it must be new, empty or an earlier run's")
     run.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
     run.add_argument("-v", "--verbose", action="store_true")
+    # case files (issue 14): the problem from a TOML file; flags override it
+    run.add_argument("--case", type=Path, help="a case file (TOML) describing the whole problem: mesh, materials, "
+                     "loads, boundary conditions, obstacle and run options (cases/*.toml, README); the flags "
+                     "override it: --h, --H, --mesh, --nu, --E-map, --model, --E-high, --E-low change its problem, "
+                     "the others its run options")
+    run.add_argument("--set", action="append", metavar="KEY=VALUE", help="with --case: replace one key of the "
+                     "case file, VALUE in TOML syntax, e.g. --set mesh.refinement=0.5 --set "
+                     "'obstacle.indentation=[1e-3, 2e-3]' (repeatable)")
+    if given_only:  # only the options the command line gives (the others absent): they override a case file
+        run.set_defaults(**{dest: NOT_GIVEN for dest in vars(run.parse_args([])) if dest != "set"})  # append: a list
     return parser
 
 
-def _load_array(path: Path) -> np.ndarray:
-    if not path.is_file():
-        raise InputError(f"{path} does not exist")
+# ---------------------------------------------------------------------------------------------
+# case files (issue 14): the problem from --case FILE.toml, the flags overriding it
+# ---------------------------------------------------------------------------------------------
+#: RunOptions fields that describe the problem: with --case each one changes a key of the case
+_PROBLEM_FLAGS = {"h": "mesh.h", "H": "mesh.H", "mesh": "mesh", "nu": "material.nu", "E_map": "material.E",
+                  "model": "material.model", "E_high": "material.E-high", "E_low": "material.E-low"}
+
+
+def options_from_arguments(args: argparse.Namespace, argv: list[str] | None = None) -> tuple[RunOptions, Case | None]:
+    """The validated RunOptions of a command line and, with ``--case``, the Case it runs (InputError otherwise)."""
+    if args.case is None:
+        if args.set:
+            raise InputError("--set changes a key of a case file: it needs --case FILE")
+        return RunOptions.from_namespace(args), None
+    given = {k: v for k, v in vars(build_parser(given_only=True).parse_args(argv)).items() if v is not NOT_GIVEN}
+    case = load_case(args.case, _case_overrides(given))
+    return case_run_options(case, given), case
+
+
+def _case_overrides(given: dict) -> list[tuple[str, object]]:
+    """The problem flags as case keys (``--h 16`` -> mesh.h = 16), then the ``--set`` items."""
+    overrides = []
+    for name, key in _PROBLEM_FLAGS.items():
+        if name not in given:
+            continue
+        value = given[name]
+        if name == "mesh":  # a mesh file replaces the [mesh] table
+            value = {"file": str(Path(value).resolve())}
+        elif name == "E_map":  # the flag's meaning: a pixel map over the unit square
+            value = {"pixels": str(Path(value).resolve()), "extent": [0.0, 1.0, 0.0, 1.0]}
+        overrides.append((key, value))
+    return overrides + [parse_override(text) for text in given.get("set") or ()]
+
+
+def _run_table_keys() -> dict[str, set[str]]:
+    """The RunOptions fields each run table of a case file may set (the method options in their methods' table)."""
+    general = {f.name for f in fields(RunOptions)} - set(_PROBLEM_FLAGS) - {"case"} - set(_METHOD_OPTIONS)
+    keys = {table: set() for table in RUN_TABLES} | {"run": general}
+    for name, (methods, _) in _METHOD_OPTIONS.items():
+        table = next((t for t, m in RUN_TABLES.items() if t != "run" and set(m) == set(methods)), "run")
+        keys[table].add(name)
+    return keys
+
+
+def case_run_options(case: Case, given: Mapping[str, object] = {}) -> RunOptions:
+    """RunOptions from the case's run tables ([run] and the chosen method's), then the flags ``given`` (dest -> value).
+
+    Each table is validated on its own (with a method that uses it), so a bad value is reported
+    with its table even when the chosen method does not use it.
+    """
+    keys = _run_table_keys()
+    names = {f.name for f in fields(RunOptions)}
+    tables = {}
+    for table, methods in RUN_TABLES.items():
+        values = {}
+        for key, value in case.run[table].items():
+            name = key.replace("-", "_")
+            if name not in keys[table]:
+                home = next((t for t, k in keys.items() if name in k), None)
+                hint = f" ({key} belongs in [{home}])" if home else ""
+                raise InputError(f"case {case.path}: unknown key '{table}.{key}'{hint}; the keys of [{table}] are "
+                                 f"{sorted(k.replace('_', '-') for k in keys[table])}")
+            values[name] = _run_value(case, f"{table}.{key}", name, value)
+        probe = {"method": values.get("method", "primal") if table == "run" else methods[0]}
+        if "out" in given:
+            probe["out"] = given["out"]
+        try:
+            RunOptions(**(probe | values))
+        except InputError as err:
+            raise InputError(f"case {case.path}: [{table}] {err}") from None
+        tables[table] = values
+    method = given.get("method", tables["run"].get("method", "primal"))
+    values = dict(tables["run"])
+    for table, methods in RUN_TABLES.items():
+        if table != "run" and method in methods:
+            values |= tables[table]
+    values |= {k: v for k, v in given.items() if k in names and k not in _PROBLEM_FLAGS and k != "case"}
+    if "no_plots" in given:
+        values["plots"] = not given["no_plots"]
+    return RunOptions(**values, case=case.path)
+
+
+def _run_value(case: Case, key: str, name: str, value):
+    """A run-table value of the type of its RunOptions field (TOML has no argparse to convert it)."""
+    annotation = next(f.type for f in fields(RunOptions) if f.name == name)
+    kind = next((t for t in (typing.get_args(annotation) or (annotation,)) if t is not type(None)), None)
+    number = isinstance(value, (int, float)) and not isinstance(value, bool)
+    if kind is str and name in ("alpha", "beta") and number:
+        return repr(value)  # a coefficient may be written as a number
+    ok = {bool: isinstance(value, bool), int: number and isinstance(value, int), float: number,
+          str: isinstance(value, str), Path: isinstance(value, str)}.get(kind, True)
+    if not ok:
+        what = {bool: "true or false", int: "an integer", float: "a number", str: "a string",
+                Path: "a directory name (a string)"}[kind]
+        raise InputError(f"case {case.path}: {key} must be {what}, got {value!r}")
+    return Path(value) if kind is Path else float(value) if kind is float else value
+
+
+def _options_echo(options: RunOptions) -> dict:
+    """The run options of a case run (case-file spelling), for the summary."""
+    echo = {}
+    for f in fields(RunOptions):
+        if f.name in _PROBLEM_FLAGS or f.name == "case":
+            continue
+        if f.name in _METHOD_OPTIONS and options.method not in _METHOD_OPTIONS[f.name][0]:
+            continue  # not used by this method
+        value = options.value(f.name)
+        echo[f.name.replace("_", "-")] = str(value) if isinstance(value, Path) else value
+    return echo
+
+
+def _curve_row(depth: float, direction: np.ndarray, profile, iterations: int, converged: bool, time_s: float) -> dict:
+    zone = profile.contact_zone()
+    return {"depth": float(depth), "force": float(profile.resultant @ direction), "normal_force": profile.force,
+            "max_pressure": profile.max_pressure, "contact_zone": [list(p) for p in zone] if zone else None,
+            "iterations": int(iterations), "converged": bool(converged), "time_s": time_s}
+
+
+def _indentation_curve(options: RunOptions, case: Case, cm: ContactMesh, model: TestModel, outcome,
+                       family: Callable) -> dict:
+    """The force-indentation curve of the case's load steps (the last step is the run's solve).
+
+    primal, mixed: ``indentation.force_indentation`` (warm starts, factorizations kept) with the
+    run's penalty and transmission coefficient; the multiscale methods: one solve per step
+    (the offline data reused through --cache-dir when given).
+    """
+    from fenics_contact.indentation import force_indentation
+
+    spec = case.obstacle
+    direction = np.asarray(spec.direction)
+    rows = []
+    if options.method in ("primal", "mixed"):
+        if options.method == "primal":
+            penalty = {"delta": outcome.summary["delta"], "alpha": options.value("alpha")}
+        else:
+            penalty = {"epsilon": outcome.summary["epsilon"], "beta": options.value("beta")}
+        curve = force_indentation(options.method, cm, model.with_(obstacle=spec.base()), spec.depths,
+                                  direction=direction, options=options.iteration_options(), **penalty)
+        rows = [_curve_row(s.depth, direction, s.profile, s.iterations, s.converged, s.time_s) for s in curve.steps]
+    else:
+        step_options = replace(options, reference=False, plots=False)
+        for depth in spec.depths[:-1]:
+            start = time.perf_counter()
+            stepped = model.with_(obstacle=spec.at(depth))
+            result = family(step_options, cm, stepped, material_fields(cm.mesh, stepped)).result
+            rows.append(_curve_row(depth, direction, result.profile, result.iterations, result.converged,
+                                   time.perf_counter() - start))
+        final = outcome.result
+        rows.append(_curve_row(spec.depths[-1], direction, final.profile, final.iterations, final.converged,
+                               final.time_offline_s + final.time_online_s))
+    return {"direction": direction.tolist(), "steps": rows}
+
+
+# ---------------------------------------------------------------------------------------------
+# inputs
+# ---------------------------------------------------------------------------------------------
+def load_pixel_map(path: Path) -> np.ndarray:
+    """A 2D array of pixels from .npy or text (InputError if unreadable, empty or not 2D)."""
     try:
-        return np.load(path) if path.suffix == ".npy" else np.loadtxt(path, delimiter="," if path.suffix == ".csv" else None)
-    except ValueError as err:
-        raise InputError(f"cannot read a pixel array from {path}: {err}") from None
+        if path.suffix == ".npy":
+            values = np.load(path, allow_pickle=False)
+        else:
+            values = np.loadtxt(path, delimiter="," if path.suffix == ".csv" else None, ndmin=2)
+    except (OSError, ValueError, EOFError) as err:
+        raise InputError(f"cannot read a pixel array from {path}: {type(err).__name__}: {err}") from None
+    try:
+        values = np.asarray(values, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise InputError(f"--E-map {path} does not hold numbers (dtype {values.dtype})") from None
+    if values.ndim != 2 or values.size == 0:
+        raise InputError(f"--E-map {path} must hold a non-empty 2D array, got shape {values.shape}")
+    return values
 
 
-def _mesh(args) -> ContactMesh:
-    if args.mesh is not None:
-        return read_mesh(args.mesh, H=1.0 / args.H)
-    return unit_square(args.h, args.H)
+def check_pixel_modulus(values: np.ndarray, box: tuple[float, float, float, float], source: str) -> None:
+    """Every pixel of the unit-square map that the box (x0, x1, y0, y1) covers is a finite E > 0."""
+    ny, nx = values.shape
+    x0, x1, y0, y1 = box
+    i0, i1 = (int(np.clip(np.floor(x * nx), 0, nx - 1)) for x in (x0, x1))
+    j0, j1 = (int(np.clip(np.floor(y * ny), 0, ny - 1)) for y in (y0, y1))
+    covered = values[j0:j1 + 1, i0:i1 + 1]
+    bad = ~(np.isfinite(covered) & (covered > 0))
+    if np.any(bad):
+        j, i = np.argwhere(bad)[0]
+        raise InputError(f"{source}: {np.count_nonzero(bad)} pixels the domain covers are not a finite Young's "
+                         f"modulus > 0 (first: row {j + j0}, column {i + i0}, value {float(covered[j, i])!r})")
+
+
+def _model(options: RunOptions) -> tuple[TestModel, np.ndarray | None]:
+    model = get_model(options.model, E_high=options.value("E_high"), E_low=options.value("E_low"), nu=options.nu)
+    if options.E_map is None:
+        return model, None
+    values = load_pixel_map(options.E_map)
+    if options.mesh is None:  # the built-in mesh covers the unit square: check before building it
+        check_pixel_modulus(values, (0.0, 1.0, 0.0, 1.0), f"--E-map {options.E_map}")
+    model = model.with_(youngs_modulus=pixel_field(values), description=f"E from {options.E_map.name}, "
+                        f"nu={options.nu:g}")
+    return model, values
+
+
+def _mesh(options: RunOptions) -> ContactMesh:
+    if options.mesh is not None:
+        return read_mesh(options.mesh, H=1.0 / options.H)
+    return unit_square(options.n, options.H)
+
+
+def _bounding_box(cm: ContactMesh) -> tuple[float, float, float, float]:
+    return bounding_box(cm.mesh)  # (an elementwise allreduce of arrays failed under MPI)
+
+
+def _check_coarse_grid(cm: ContactMesh, options: RunOptions) -> None:
+    """The multiscale methods need the coarse grid of squares of side H to be a union of fine cells."""
+    cells = cm.cell_tags.find(Subdomain.OMEGA1)
+    crossing = cm.comm.allreduce(int(np.count_nonzero(cm.coarse_cell[cells] < 0)), op=MPI.SUM)
+    if crossing:
+        raise InputError(f"--method {options.method} with --mesh {options.mesh}: {crossing} Omega1 cells cross the "
+                         f"edges of the coarse grid of squares of side 1/{options.H} from the origin; the "
+                         "multiscale methods need a mesh that resolves it (choose --H accordingly)")
+
+
+def _check_case_coarse_grid(cm: ContactMesh, options: RunOptions, case: Case) -> None:
+    """The multiscale methods need a coarse grid that the case's mesh resolves."""
+    if cm.H is None:
+        raise InputError(f"--method {options.method}: the mesh of case {case.path.name} ({case.mesh.kind}) has no "
+                         "coarse grid; the multiscale methods need the unit-square mesh or a mesh file with mesh.H "
+                         "(a coarse grid of squares of side 1/H that the mesh resolves)")
+    cells = cm.cell_tags.find(Subdomain.OMEGA1)
+    crossing = cm.comm.allreduce(int(np.count_nonzero(cm.coarse_cell[cells] < 0)), op=MPI.SUM)
+    if crossing:
+        raise InputError(f"--method {options.method} with case {case.path.name}: {crossing} Omega1 cells cross the "
+                         f"edges of the coarse grid of squares of side {cm.H:g} from the origin; the multiscale "
+                         "methods need a mesh that resolves it (choose mesh.H accordingly)")
 
 
 def _contact_modulus(cm: ContactMesh, E) -> float:
@@ -118,6 +554,9 @@ def _contact_modulus(cm: ContactMesh, E) -> float:
     return cm.comm.allreduce(local, op=MPI.MAX)
 
 
+# ---------------------------------------------------------------------------------------------
+# the two method families
+# ---------------------------------------------------------------------------------------------
 class _Outcome(NamedTuple):
     """What a method family hands back to ``run``: its result, summary entries and output writer."""
 
@@ -127,73 +566,77 @@ class _Outcome(NamedTuple):
     write: Callable[[Path], None]
 
 
-def _run_primal(args, cm: ContactMesh, model, fields, options: IterationOptions) -> _Outcome:
+def _run_primal(options: RunOptions, cm: ContactMesh, model, fields) -> _Outcome:
     """Algorithms 1 (primal) and 3 (primal-ms), with the monolithic primal reference."""
-    delta = args.delta if args.delta is not None else default_penalty(cm.h, _contact_modulus(cm, fields.E))
-    reference = solve_primal_monolithic(cm.mesh, cm.facet_tags, fields, delta=delta) if args.reference else None
+    delta = options.delta if options.delta is not None else default_penalty(cm.h, _contact_modulus(cm, fields.E))
+    alpha = options.value("alpha")
+    reference = solve_primal_monolithic(cm.mesh, cm.facet_tags, fields, delta=delta) if options.reference else None
     ref_u = reference.u if reference is not None else None
-    if args.method == "primal":
-        result = solve_primal_hybrid(cm, model, alpha=args.alpha, delta=delta, options=options,
+    ms = options.method == "primal-ms"
+    if not ms:
+        result = solve_primal_hybrid(cm, model, alpha=alpha, delta=delta, options=options.iteration_options(),
                                      newton=NewtonOptions(), reference=ref_u)
     else:
-        result = solve_primal_ms_hybrid(cm, model, alpha=args.alpha, delta=delta, options=options,
-                                        layers=args.layers, nbasis=args.nbasis, reference=ref_u,
-                                        cache_dir=args.cache_dir)
+        result = solve_primal_ms_hybrid(cm, model, alpha=alpha, delta=delta, options=options.iteration_options(),
+                                        layers=options.value("layers"), nbasis=options.value("nbasis"),
+                                        reference=ref_u, cache_dir=options.cache_dir)
     summary = {
-        "alpha": args.alpha,
+        "alpha": alpha,
         "delta": delta,
         "e_u": result.e_u,
         "e_energy": result.step.error_energy() if reference is not None else None,
         "penetration": result.profile.penetration,
         "max_tensile_sigma_c": float(np.max(result.profile.sigma_c, initial=0.0)),
-        "layers": args.layers if args.method == "primal-ms" else None,
-        "nbasis": args.nbasis if args.method == "primal-ms" else None,
-        "offline_cache": result.step.omega1.cache_status if args.method == "primal-ms" else None,
+        "layers": options.value("layers") if ms else None,
+        "nbasis": options.value("nbasis") if ms else None,
+        "offline_cache": result.step.omega1.cache_status if ms else None,
     }
 
     def write(out: Path) -> None:
         sigma = stress_field(result.u, fields.lmbda, fields.mu)
         markers = cell_markers(cm.cell_tags, cm.mesh)
         write_fields(out / "fields.xdmf", cm.mesh, [result.u, sigma, fields.E, markers])
-        if not args.no_plots:
-            plot_displacement(result.u, out / "displacement.png", title=f"({args.method} hybrid)")
-            render_deformed(result.u, out / "deformed.png", title=f"model {args.model}, {args.method} hybrid")
+        if options.plots:
+            plot_displacement(result.u, out / "displacement.png", title=f"({options.method} hybrid)")
+            render_deformed(result.u, out / "deformed.png", title=f"model {options.model}, {options.method} hybrid")
 
     return _Outcome(result, reference, summary, write)
 
 
-def _run_mixed(args, cm: ContactMesh, model, fields, options: IterationOptions) -> _Outcome:
+def _run_mixed(options: RunOptions, cm: ContactMesh, model, fields) -> _Outcome:
     """Algorithms 2 (mixed) and 4 (mixed-ms), with the monolithic mixed reference (serial)."""
     from fenics_contact.fem import mixed
     from fenics_contact.hybrid import mixed as mixed_hybrid
     from fenics_contact.multiscale import mixed as mixed_ms
     from fenics_contact.multiscale import mixed_cem as mixed_multiscale
 
-    epsilon = args.epsilon
-    min_gap = mixed_multiscale.DEFAULT_MIN_GAP if args.min_gap is None else (args.min_gap or None)
-    max_nbasis = mixed_multiscale.DEFAULT_MAX_NBASIS if args.max_nbasis is None else args.max_nbasis
-    reference = mixed.solve_mixed_monolithic(cm, model, epsilon=epsilon) if args.reference else None
-    if args.method == "mixed":
-        result = mixed_hybrid.solve_mixed_hybrid(cm, model, beta=args.beta, epsilon=epsilon, options=options,
-                                                 reference=reference)
+    epsilon = options.epsilon
+    beta = options.value("beta")
+    ms = options.method == "mixed-ms"
+    min_gap = mixed_multiscale.DEFAULT_MIN_GAP if options.min_gap is None else (options.min_gap or None)
+    max_nbasis = mixed_multiscale.DEFAULT_MAX_NBASIS if options.max_nbasis is None else options.max_nbasis
+    reference = mixed.solve_mixed_monolithic(cm, model, epsilon=epsilon) if options.reference else None
+    if not ms:
+        result = mixed_hybrid.solve_mixed_hybrid(cm, model, beta=beta, epsilon=epsilon,
+                                                 options=options.iteration_options(), reference=reference)
     else:
-        result = mixed_ms.solve_mixed_ms_hybrid(cm, model, beta=args.beta, epsilon=epsilon, options=options,
-                                                layers=args.layers, nbasis=args.nbasis, reference=reference,
-                                                min_gap=min_gap, max_nbasis=max_nbasis,
-                                                cache_dir=args.cache_dir)
+        result = mixed_ms.solve_mixed_ms_hybrid(cm, model, beta=beta, epsilon=epsilon,
+                                                options=options.iteration_options(), layers=options.value("layers"),
+                                                nbasis=options.value("nbasis"), reference=reference,
+                                                min_gap=min_gap, max_nbasis=max_nbasis, cache_dir=options.cache_dir)
     summary = {
-        "beta": args.beta,
+        "beta": beta,
         "beta_value": result.beta,
         "epsilon": result.epsilon,
         "e_sigma": result.e_sigma,
         "e_u": result.e_u,
         "max_tensile_sigma_c": result.profile.max_tensile,
-        "layers": args.layers if args.method == "mixed-ms" else None,
-        "nbasis": args.nbasis if args.method == "mixed-ms" else None,
-        "offline_cache": result.step.omega1.cache_status if args.method == "mixed-ms" else None,
-        "stage_one_gap": result.step.omega1.spectral_gap if args.method == "mixed-ms" else None,
-        "nbasis_per_cell": list(result.step.omega1.nbasis_range) if args.method == "mixed-ms" else None,
-        "dim_X_ms": result.step.omega1.co.n_ms if args.method == "mixed-ms" else None,
+        "layers": options.value("layers") if ms else None,
+        "nbasis": options.value("nbasis") if ms else None,
+        "offline_cache": result.step.omega1.cache_status if ms else None,
+        "stage_one_gap": result.step.omega1.spectral_gap if ms else None,
+        "nbasis_per_cell": list(result.step.omega1.nbasis_range) if ms else None,
+        "dim_X_ms": result.step.omega1.co.n_ms if ms else None,
     }
 
     def write(out: Path) -> None:
@@ -203,46 +646,92 @@ def _run_mixed(args, cm: ContactMesh, model, fields, options: IterationOptions) 
         write_fields(out / "fields.xdmf", cm.mesh, [sigma_cells, u_cells, fields.E, markers])
         write_vtx(out / "sigma.bp", result.sigma)
         write_vtx(out / "u.bp", result.u)
-        if not args.no_plots:
-            plot_stress(result.sigma, out / "stress.png", title=f"({args.method} hybrid)")
-            plot_displacement(result.u, out / "displacement.png", title=f"({args.method} hybrid)")
+        if options.plots:
+            plot_stress(result.sigma, out / "stress.png", title=f"({options.method} hybrid)")
+            plot_displacement(result.u, out / "displacement.png", title=f"({options.method} hybrid)")
 
     return _Outcome(result, reference, summary, write)
 
 
-def run(args) -> int:
-    """Run one simulation; returns the exit code (0 converged, 3 not converged)."""
-    comm = MPI.COMM_WORLD
-    out: Path = args.out
-    model = get_model(args.model, E_high=args.E_high, E_low=args.E_low, nu=args.nu)
-    if args.E_map is not None:
-        model = model.with_(youngs_modulus=pixel_field(_load_array(args.E_map)),
-                            description=f"E from {args.E_map.name}, nu={args.nu:g}")
-    options = IterationOptions(tol=args.tol, max_iterations=args.max_iterations, accel=args.accel)
+# ---------------------------------------------------------------------------------------------
+# one run
+# ---------------------------------------------------------------------------------------------
+def run(options: RunOptions, comm: MPI.Comm = MPI.COMM_WORLD, *, case: Case | None = None) -> int:
+    """Run one simulation into ``options.out``; returns 0 (converged) or 3 (not converged), raises otherwise.
+
+    ``case``: the problem from a case file (``options_from_arguments``); else the built-in model of
+    the options. An ``Interrupted`` raised meanwhile carries ``output_complete``: whether ``--out``
+    already holds the run.
+    """
+    model, pixels = _model(options) if case is None else (None, None)
+    output = OutputDirectory(options.out, comm)
+    try:
+        with output:
+            result, summary = _solve_and_write(options, comm, model, pixels, output, case)
+    except Interrupted as stop:
+        stop.output_complete = output.committed
+        raise
+    if not result.converged:
+        capped = result.iterations >= options.max_iterations
+        why = (f"the iteration hit --max-iterations {options.max_iterations}" if capped
+               else f"stopped after {result.iterations} iterations (the Newton corrections ran out)")
+        _fail(f"not converged: {why} (transmission residual {summary['transmission_residual']:.3e} > --tol "
+              f"{options.tol:g}); results in {options.out} with \"converged\": false", comm)
+        return EXIT_NOT_CONVERGED
+    if not summary["converged"]:  # a load step of the force-indentation curve
+        depths = [s["depth"] for s in summary["force_indentation"]["steps"] if not s["converged"]]
+        _fail(f"not converged: the load step(s) at depth {depths} hit --max-iterations {options.max_iterations}; "
+              f'results in {options.out} with "converged": false', comm)
+        return EXIT_NOT_CONVERGED
+    log.info("converged after %d iterations; e_u = %s; active set %s; summary in %s",
+             result.iterations, result.e_u, result.profile.active_interval(), options.out / "summary.json")
+    return 0
+
+
+def _solve_and_write(options: RunOptions, comm: MPI.Comm, model: TestModel | None, pixels: np.ndarray | None,
+                     output: OutputDirectory, case: Case | None = None) -> tuple[object, dict]:
+    """Mesh, solve, write everything into the staging directory and move it into place."""
     t0 = time.perf_counter()
-    cm = _mesh(args)
+    if case is None:
+        cm = _mesh(options)
+        if pixels is not None and options.mesh is not None:
+            check_pixel_modulus(pixels, _bounding_box(cm), f"--E-map {options.E_map}")
+        if options.mesh is not None and options.method.endswith("-ms"):
+            _check_coarse_grid(cm, options)
+    else:
+        case_mesh = case.build_mesh(comm)
+        cm = case_mesh.cm
+        model = case.model(case_mesh)
+        if options.method.endswith("-ms"):
+            _check_case_coarse_grid(cm, options, case)
     fields = material_fields(cm.mesh, model, require_load=True)
     t_mesh = time.perf_counter() - t0
-    log.info("model %d (%s), h = %.4g, H = %s, method %s, accel %s",
-             args.model, model.description, cm.h, cm.H, args.method, args.accel)
-    family = _run_primal if args.method.startswith("primal") else _run_mixed
-    outcome = family(args, cm, model, fields, options)
+    name = f"model {options.model}" if case is None else f"case {case.path.name}"
+    log.info("%s (%s), h = %.4g, H = %s, method %s, accel %s",
+             name, model.description, cm.h, cm.H, options.method, options.accel)
+    family = _run_primal if options.method.startswith("primal") else _run_mixed
+    outcome = family(options, cm, model, fields)
     result, reference = outcome.result, outcome.reference
     profile = result.profile
+    curve = _indentation_curve(options, case, cm, model, outcome, family) if case and case.obstacle.steps else None
     summary = {
-        "method": args.method,
-        "model": args.model,
+        "method": options.method,
+        "model": options.model if case is None else None,
+        "mesh": str(options.mesh) if options.mesh is not None else None,
         "h": cm.h,
         "H": cm.H,
-        "accel": args.accel,
+        "accel": options.accel,
         "iterations": result.iterations,
-        "converged": result.converged,
-        "rel_tolerance": args.tol,
+        "converged": result.converged and (curve is None or all(s["converged"] for s in curve["steps"])),
+        "rel_tolerance": options.tol,
         "final_rel_change": float(result.history.rel_changes[-1]),
         "transmission_residual": result.history.transmission_residual,
-        "interface_newton_steps": result.history.newton_steps if args.accel == "newton" else None,
+        "interface_newton_steps": result.history.newton_steps if options.accel == "newton" else None,
         **outcome.summary,
         "active_set": profile.active_interval(),
+        "contact_force": profile.force,
+        "contact_zone": [list(p) for p in profile.contact_zone()] if profile.contact_zone() else None,
+        "max_contact_pressure": profile.max_pressure,
         "newton_steps_total": int(sum(r.info.get("newton", 0) for r in result.history.records)),
         "dofs": result.dofs,
         "time_mesh_s": t_mesh,
@@ -254,33 +743,94 @@ def run(args) -> int:
         "reference_newton_steps": reference.newton.steps if reference is not None else None,
         "reference_active_set": reference.profile.active_interval() if reference is not None else None,
         "mpi_ranks": comm.size,
+        "force_indentation": curve,
+        "case": case.to_dict() | {"run": _options_echo(options)} if case is not None else None,
     }
-    if comm.rank == 0:
-        out.mkdir(parents=True, exist_ok=True)
-    comm.Barrier()
+    out = output.path
     outcome.write(out)
-    if not args.no_plots:
-        plot_cell_field(fields.E, out / "E.png", title=f"Young's modulus, model {args.model}", log=True)
-        profiles = {f"{args.method} hybrid": profile}
+    if options.plots:
+        plot_cell_field(fields.E, out / "E.png", title=f"Young's modulus, {name}", log=True)
+        if curve is not None:
+            plot_force_indentation({options.method: curve}, out / "force_indentation.png", comm=comm)
+        profiles = {f"{options.method} hybrid": profile}
         if reference is not None:
             profiles["monolithic"] = reference.profile
         plot_contact(profiles, out / "contact.png", comm=comm)
-        plot_history({f"{args.method}, {args.accel}": result.history}, out / "history.png", comm=comm, tol=args.tol)
+        plot_history({f"{options.method}, {options.accel}": result.history}, out / "history.png", comm=comm,
+                     tol=options.tol)
     write_summary(out, summary, comm)
-    status = "converged" if result.converged else "NOT CONVERGED"
-    log.info("%s after %d iterations; e_u = %s; active set %s; summary in %s",
-             status, result.iterations, result.e_u, profile.active_interval(), out / "summary.json")
-    return 0 if result.converged else 3
+    output.commit()
+    return result, summary
+
+
+# ---------------------------------------------------------------------------------------------
+# the command
+# ---------------------------------------------------------------------------------------------
+class Interrupted(BaseException):
+    """SIGINT or SIGTERM arrived (raised by the handlers of ``_interruptible``)."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signal.Signals(signum).name)
+        self.signum = signum
+
+
+@contextmanager
+def _interruptible() -> Iterator[None]:
+    """SIGINT and SIGTERM raise ``Interrupted`` (so that cleanup runs); the previous handlers come back after."""
+    def handler(signum, frame):
+        raise Interrupted(signum)
+
+    main_thread = threading.current_thread() is threading.main_thread()
+    previous = {s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM)} if main_thread else {}
+    try:
+        yield
+    finally:
+        for s, h in previous.items():
+            signal.signal(s, h)
+
+
+class _RankZero(logging.Filter):
+    def filter(self, record: logging.LogRecord) -> bool:
+        return MPI.COMM_WORLD.rank == 0
+
+
+def _setup_logging(verbose: bool) -> None:
+    """The log (progress and warnings) on stdout, rank 0 only; stderr is kept for the one-line outcome."""
+    out = logging.StreamHandler(sys.stdout)
+    out.addFilter(_RankZero())
+    out.setFormatter(logging.Formatter("%(message)s"))
+    root = logging.getLogger("fenics_contact")
+    root.handlers[:] = [out]
+    root.setLevel(logging.DEBUG if verbose else logging.INFO)
+    root.propagate = False
+
+
+def _fail(message: str, comm: MPI.Comm = MPI.COMM_WORLD) -> None:
+    """One line on stderr (rank 0)."""
+    if comm.rank == 0:
+        print(" ".join(str(message).split()), file=sys.stderr, flush=True)
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    args = build_parser().parse_args(argv)  # argparse errors exit with 2 (bad input) too
     _setup_logging(getattr(args, "verbose", False))
-    try:
-        return run(args)
-    except FenicsContactError as err:
-        log.error("error: %s", err)
-        return 2
+    comm = MPI.COMM_WORLD
+    out = getattr(args, "out", None)
+    with _interruptible():
+        try:
+            options, case = options_from_arguments(args, argv)
+            return run(options, comm, case=case)
+        except Interrupted as stop:
+            where = (f"the results in {out} are complete" if getattr(stop, "output_complete", False)
+                     else f"{out} left as it was (no partial output)")
+            _fail(f"interrupted by {stop}: {where}", comm)
+            return 128 + stop.signum
+        except ConvergenceError as err:
+            _fail(f"numerical failure: {err}", comm)
+            return EXIT_NUMERICAL
+        except FenicsContactError as err:  # InputError, MeshTagError
+            _fail(f"error: {err}", comm)
+            return EXIT_BAD_INPUT
 
 
 if __name__ == "__main__":

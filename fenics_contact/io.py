@@ -1,8 +1,21 @@
-"""Output: ParaView fields (XDMF/HDF5) and the run summary (JSON + markdown table)."""
+"""Output: ParaView fields (XDMF/HDF5), the run summary (JSON + markdown table), and the run directory.
 
+A run's directory is written whole or not at all (``OutputDirectory``): every file goes
+into a hidden staging directory beside the target, which replaces the target only when
+the run has finished; an interrupted or failed run leaves the target as it was.
+"""
+
+import contextlib
 import json
 import os
 import platform
+import re
+import shutil
+import signal
+import socket
+import tempfile
+import time
+from collections.abc import Iterator
 from pathlib import Path
 
 import basix.ufl
@@ -11,11 +24,14 @@ import numpy as np
 from dolfinx import fem
 from mpi4py import MPI
 
+from fenics_contact.errors import InputError
 from fenics_contact.problem.materials import strain, stress
 
 __all__ = [
+    "OutputDirectory",
     "cell_function_of",
     "cell_markers",
+    "check_output_target",
     "machine_description",
     "stress_field",
     "write_fields",
@@ -110,3 +126,197 @@ def write_summary(directory: str | Path, summary: dict, comm: MPI.Comm = MPI.COM
             value = "[" + ", ".join(f"{v:.4g}" for v in value) + "]"
         lines.append(f"| {key} | {value} |")
     (directory / "summary.md").write_text("\n".join(lines) + "\n")
+
+
+# ---------------------------------------------------------------------------------------------
+# the run directory: whole or absent
+# ---------------------------------------------------------------------------------------------
+#: marker file in every run directory: a directory holding it (or a run's summary.json) may be replaced
+RUN_MARKER = ".fenics-contact-run"
+#: staging / previous-contents directories beside the target: .fenics-contact-<pid>@<host>-<random>.{partial,old}
+_STAGING = re.compile(r"^\.fenics-contact-(?P<pid>\d+)@(?P<host>.+)-[^-]+\.(partial|old)$")
+_STALE_AGE_S = 24 * 3600.0
+
+
+def _is_run_directory(path: Path) -> bool:
+    """True if ``path`` is empty or was written by a fenics-contact run (so it may be replaced)."""
+    entries = list(path.iterdir())
+    if not entries or (path / RUN_MARKER).is_file():
+        return True
+    try:
+        return "method" in json.loads((path / "summary.json").read_text())
+    except (OSError, ValueError, TypeError):
+        return False
+
+
+def check_output_target(target: str | Path) -> Path:
+    """The output directory ``target`` as a Path; InputError unless a run can be written there and replace it.
+
+    Refused: an empty name, the current directory or one containing it, an existing file, a
+    directory that is not an earlier run's (it would be replaced as a whole), a path below a file,
+    names longer than the file system allows, a parent that is not writable.
+    """
+    if not str(target).strip():
+        raise InputError("--out must name a directory (got an empty string)")
+    target = Path(target)
+    absolute = Path(os.path.abspath(target))
+    existing = _nearest_existing(absolute)
+    name_max = os.pathconf(existing if existing.is_dir() else existing.parent, "PC_NAME_MAX")
+    long_names = [part for part in absolute.parts if len(os.fsencode(part)) > name_max]
+    if long_names:
+        raise InputError(f"--out: the name {long_names[0][:40]}… is longer than the {name_max} bytes the file "
+                         "system allows")
+    if len(os.fsencode(str(absolute))) + 64 > os.pathconf(existing if existing.is_dir() else existing.parent,
+                                                          "PC_PATH_MAX"):
+        raise InputError(f"--out: the path {str(absolute)[:60]}… is too long for the file system")
+    resolved = target.resolve()
+    cwd = Path.cwd().resolve()
+    if resolved == cwd or resolved in cwd.parents:
+        raise InputError(f"--out {target} is the current directory or contains it: the run replaces --out as a "
+                         "whole, so name a directory of its own (e.g. results/run1)")
+    existing = _nearest_existing(resolved)
+    if existing != resolved and not existing.is_dir():
+        raise InputError(f"--out {target} lies below {existing}, which is a file, not a directory")
+    if resolved.exists():
+        if not resolved.is_dir():
+            raise InputError(f"--out {target} exists and is a file, not a directory")
+        if not os.access(resolved, os.R_OK | os.X_OK):
+            raise InputError(f"--out {target} cannot be read")
+        if not _is_run_directory(resolved):
+            raise InputError(f"--out {target} holds files that are not the output of a fenics-contact run; the run "
+                             "would replace the directory as a whole. Choose another directory or empty it.")
+    parent = resolved.parent if resolved.exists() else existing
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise InputError(f"--out {target}: {parent} is not writable")
+    return target
+
+
+def _nearest_existing(path: Path) -> Path:
+    """``path`` or its nearest ancestor that exists."""
+    while True:
+        try:
+            if path.exists() or path == path.parent:
+                return path
+        except OSError:  # e.g. a name too long to look up
+            pass
+        path = path.parent
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def _remove_stale_staging(parent: Path) -> None:
+    """Remove staging / previous-contents directories of runs that died (kill -9) in ``parent``."""
+    host = socket.gethostname()
+    now = time.time()
+    for path in parent.glob(".fenics-contact-*"):
+        match = _STAGING.match(path.name)
+        if match is None or not path.is_dir():
+            continue
+        try:
+            stale = (not _alive(int(match["pid"])) if match["host"] == host
+                     else now - path.stat().st_mtime > _STALE_AGE_S)
+        except OSError:
+            continue
+        if stale:
+            shutil.rmtree(path, ignore_errors=True)
+
+
+@contextlib.contextmanager
+def _signals_blocked() -> Iterator[None]:
+    """SIGINT and SIGTERM held back (delivered at the end) for a few file-system operations."""
+    signals = {signal.SIGINT, signal.SIGTERM}
+    previous = signal.pthread_sigmask(signal.SIG_BLOCK, signals)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, previous)
+
+
+class OutputDirectory:
+    """A run directory written whole or not at all (collective over ``comm``).
+
+    ``path`` is a hidden staging directory beside ``target`` (created on rank 0, the same
+    path on every rank); write every file there. ``commit()`` puts it in the place of
+    ``target`` (whose previous contents are removed only then: a reused ``--out`` ends
+    holding exactly one run); leaving the ``with`` block without ``commit()`` (an error, an
+    interrupt) removes it and leaves ``target`` as it was. Staging directories of runs that
+    were killed are removed when the next run starts beside them.
+    """
+
+    def __init__(self, target: str | Path, comm: MPI.Comm = MPI.COMM_WORLD) -> None:
+        self.target = Path(target)
+        self.comm = comm
+        self.committed = False
+        result = None
+        if comm.rank == 0:
+            try:
+                check_output_target(self.target)
+                parent = self.target.resolve().parent
+                parent.mkdir(parents=True, exist_ok=True)
+                _remove_stale_staging(parent)
+                prefix = f".fenics-contact-{os.getpid()}@{socket.gethostname()}-"
+                result = Path(tempfile.mkdtemp(prefix=prefix, suffix=".partial", dir=parent))
+                umask = os.umask(0o022)
+                os.umask(umask)
+                result.chmod(0o777 & ~umask)  # mkdtemp makes it private; the results are an ordinary directory
+            except InputError as err:
+                result = err
+            except OSError as err:
+                result = InputError(f"--out {self.target}: cannot create a directory in "
+                                    f"{self.target.resolve().parent}: {err.strerror or err}")
+        result = comm.bcast(result, root=0)
+        if isinstance(result, InputError):
+            raise result
+        self.path: Path = result
+
+    def __enter__(self) -> "OutputDirectory":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        if not self.committed:
+            self.discard()
+
+    def commit(self) -> None:
+        """Replace ``target`` by the staging directory (collective; SIGINT/SIGTERM held back until it is done)."""
+        error = None
+        with _signals_blocked():
+            self.comm.Barrier()  # every rank has closed its files
+            if self.comm.rank == 0:
+                try:
+                    (self.path / RUN_MARKER).write_text("written by fenics-contact: the next run replaces it whole\n")
+                    self._swap()
+                except OSError as err:
+                    error = f"--out {self.target}: could not move the results into place: {err}"
+            error = self.comm.bcast(error, root=0)
+            self.committed = self.comm.bcast(self.committed, root=0)
+        if error is not None:
+            raise InputError(error)
+
+    def _swap(self) -> None:
+        target = self.target.resolve()
+        old = None
+        if target.exists():
+            old = self.path.with_suffix(".old")
+            os.rename(target, old)
+        try:
+            os.rename(self.path, target)
+        except OSError:
+            if old is not None:
+                os.rename(old, target)  # put the previous run back
+            raise
+        self.committed = True
+        if old is not None:
+            shutil.rmtree(old, ignore_errors=True)
+
+    def discard(self) -> None:
+        """Remove the staging directory (rank 0); ``target`` is untouched."""
+        if self.comm.rank == 0:
+            shutil.rmtree(self.path, ignore_errors=True)

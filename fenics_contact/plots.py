@@ -18,7 +18,7 @@ from dolfinx import fem  # noqa: E402
 from fenics_contact.io import cell_function_of  # noqa: E402
 
 __all__ = ["gather_cells", "plot_cell_field", "plot_displacement", "plot_stress", "plot_contact", "plot_history",
-           "render_deformed"]
+           "render_deformed", "plot_force_indentation"]
 
 
 def gather_cells(fn: fem.Function, component: int | None = None):
@@ -112,13 +112,18 @@ def plot_contact(profiles: dict, path: str | Path, *, comm) -> Path | None:
         return None
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.8))
     styles = ["-", "--", ":", "-."]
+    axis = "y"
     for (label, prof), style in zip(profiles.items(), styles):
-        axes[0].plot(prof.y, prof.u_c, style, label=label)
-        axes[1].plot(prof.y, prof.sigma_c, style, label=label)
+        along = prof.y
+        if prof.points is not None and len(prof.points):  # along the coordinate Gamma_C spans (x on a top face)
+            major = int(np.argmax(np.ptp(prof.points[:, :2], axis=0)))
+            along, axis = prof.points[:, major], "xy"[major]
+        axes[0].plot(along, prof.u_c, style, label=label)
+        axes[1].plot(along, prof.sigma_c, style, label=label)
     axes[0].set_title("normal displacement $u_c$ on $\\Gamma_C$")
     axes[1].set_title("normal stress $\\sigma_c$ on $\\Gamma_C$")
     for ax in axes:
-        ax.set_xlabel("y")
+        ax.set_xlabel(axis)
         ax.axhline(0.0, color="k", lw=0.5)
         ax.legend()
     return _save(fig, Path(path))
@@ -190,3 +195,19 @@ def render_deformed(u: fem.Function, path: str | Path, *, scale: float | None = 
     plotter.screenshot(str(path))
     plotter.close()
     return Path(path)
+
+
+def plot_force_indentation(curves: dict, path: str | Path, *, comm) -> Path | None:
+    """Force against indentation depth, one line per labelled curve ({"direction", "steps": [{depth, force}]})."""
+    if comm.rank != 0:
+        return None
+    fig, ax = plt.subplots(figsize=(6, 4))
+    for label, curve in curves.items():
+        depths = [s["depth"] for s in curve["steps"]]
+        forces = [s["force"] for s in curve["steps"]]
+        ax.plot(depths, forces, "o-", label=label)
+    ax.set_xlabel("indentation depth")
+    ax.set_ylabel("contact force (along the indentation)")
+    ax.legend()
+    ax.grid(True, alpha=0.3)
+    return _save(fig, Path(path))

@@ -45,7 +45,7 @@ def test_bad_input_is_a_clear_error(tmp_path, caplog, capsys, args, message):
     out = tmp_path / "bad"
     code = main(["run", "--h", "16", "--H", "4", "--no-plots", "--out", str(out), *args])
     assert code == 2
-    assert message in capsys.readouterr().out
+    assert message in capsys.readouterr().err
     assert not (out / "summary.json").exists(), "no partial result may be written"
 
 
@@ -120,3 +120,17 @@ def test_mixed_rejects_bad_beta(tmp_path):
 def test_mesh_too_coarse_for_the_load(tmp_path):
     assert main(["run", "--h", "4", "--H", "2", "--no-plots", "--out", str(tmp_path / "x")]) == 2
     assert not (tmp_path / "x" / "summary.json").exists()
+
+
+def test_a_stored_mesh_runs_as_the_same_built_in_grid(tmp_path):
+    """h of a user mesh is √(2·largest cell area), 1/n on an n × n grid: the stored 16 × 16 mesh gets the δ and α of
+    --h 16 --H 4 and the same run (before, h was the largest cell diameter, √2/16, so δ and α were √2 off)."""
+    from pathlib import Path
+
+    stored = Path(__file__).parents[1] / "meshes" / "unit_square_n16_H4.msh"
+    assert main(["run", "--mesh", str(stored), "--H", "4", "--no-plots", "--out", str(tmp_path / "file")]) == 0
+    assert main(["run", "--h", "16", "--H", "4", "--no-plots", "--out", str(tmp_path / "built")]) == 0
+    a, b = (json.loads((tmp_path / d / "summary.json").read_text()) for d in ("file", "built"))
+    assert abs(a["h"] - 1 / 16) < 1e-9 and abs(a["delta"] / b["delta"] - 1) < 1e-9
+    assert a["iterations"] == b["iterations"] and abs(a["final_rel_change"] / b["final_rel_change"] - 1) < 1e-6
+    assert a["active_set"] == pytest.approx(b["active_set"], abs=1e-9)

@@ -29,7 +29,12 @@ AW matrices are then Pᵀ A P, B P, Pᵀ b.
 
 Essential conditions σn·t = 0 and σn = 0 on straight facets are imposed by
 removing columns of ``P`` (edge moments dropped; vertex values restricted to
-the null space of the vertex constraints, which also handles corners).
+the null space of the vertex constraints, which also handles corners).  A
+prescribed traction σn = t on some of the σn = 0 facets is a *lifting*: a
+fixed stress σ_t (``lifting_dg``) whose edge moments are those of t and whose
+vertex values solve the stacked vertex constraints with right-hand side t
+(least squares where the data of two edges meeting at a corner disagree), so
+that the stress is σ = P c + σ_t with c free.
 
 Only serial runs (one MPI rank) and affine triangles are supported.
 """
@@ -264,6 +269,9 @@ class ArnoldWintherSpace:
             σn·t = 0 is imposed essentially (frictionless / sliding).
         zero_traction_facets: facet indices on which σn = 0 is imposed
             essentially (traction-free).
+        prescribed_tractions: pairs (facets, t) with facets among
+            ``zero_traction_facets`` and t a callable x (3, N) -> (2, N): σn = t
+            there (outward n), carried by the lifting ``lifting_dg``.
     """
 
     def __init__(
@@ -272,6 +280,7 @@ class ArnoldWintherSpace:
         *,
         zero_tangential_facets: npt.ArrayLike | None = None,
         zero_traction_facets: npt.ArrayLike | None = None,
+        prescribed_tractions: list | None = None,
     ) -> None:
         t0 = time.perf_counter()
         if mesh.comm.size > 1:
@@ -339,21 +348,33 @@ class ArnoldWintherSpace:
             shape=(n_dg, self.num_dofs_full),
         )
         # (duplicates cannot occur: each DG row belongs to one cell)
-        self._T = self._constraint_basis(zero_tangential_facets, zero_traction_facets)
+        self._P_full = P
+        #: stacked essential constraint rows (k, 3) acting on the vertex value σ(v), per constrained vertex
+        self.vertex_constraints: dict[int, np.ndarray] = {}
+        self._vertex_rhs: dict[int, list[np.ndarray]] = {}
+        self._T = self._constraint_basis(zero_tangential_facets, zero_traction_facets, prescribed_tractions)
         self._P = P if self._T is None else (P @ self._T).tocsr()
+        #: DG coefficients of the traction lifting σ_t (None without prescribed tractions)
+        self.lifting_dg: np.ndarray | None = None
+        #: vertices where the prescribed tractions of two edges are incompatible (least-squares value used)
+        self.incompatible_vertices: np.ndarray = np.zeros(0, dtype=np.int64)
+        if prescribed_tractions:
+            self.lifting_dg = P @ self._lifting(prescribed_tractions)
         self._P.sort_indices()
         self._P_petsc: PETSc.Mat | None = None
         self.build_time = time.perf_counter() - t0
 
     # -- constraints ---------------------------------------------------------
 
-    def _constraint_basis(self, tangential, traction) -> sp.csr_matrix | None:
+    def _constraint_basis(self, tangential, traction, prescribed=None) -> sp.csr_matrix | None:
         """Sparse T (reduced AW -> full AW) with orthonormal columns, or None.
 
         On each listed edge e (unit normal n, tangent t) the moments of σn·t
         (and of σn·n for traction-free edges) are dropped, and at its vertices
         the value σ(v) is restricted to the null space of the rows
         σ ↦ σn·t (resp. σ ↦ σn), stacked over all constrained edges at v.
+        The right-hand sides of the rows (zero, or the prescribed traction at v)
+        are kept in ``_vertex_rhs`` for the lifting.
         """
         sets = [
             np.unique(np.asarray([] if f is None else f, dtype=np.int64)) for f in (tangential, traction)
@@ -363,6 +384,12 @@ class ArnoldWintherSpace:
         for facets in sets:
             if facets.size and (facets.min() < 0 or facets.max() >= self.num_edges):
                 raise ValueError("Facet index out of range.")
+        traction_at: dict[int, Callable] = {}
+        for facets, value in prescribed or []:
+            facets = np.asarray(facets, dtype=np.int64)
+            if not np.all(np.isin(facets, sets[1])):
+                raise ValueError("prescribed-traction facets must be among the zero_traction_facets")
+            traction_at.update({int(f): value for f in facets})
         nv, ne = self.num_vertices, self.num_edges
         keep = np.ones(self.num_dofs_full, dtype=bool)
         rows_at: dict[int, list[np.ndarray]] = {}
@@ -375,6 +402,7 @@ class ArnoldWintherSpace:
             d = end - start
             t = d / np.linalg.norm(d, axis=-1, keepdims=True)
             n0, n1 = t[:, 1], -t[:, 0]
+            outward = self._outward_sign(facets, np.stack([n0, n1], axis=1)) if full else None
             for i, e in enumerate(facets):
                 if full:  # σn = (n0 σxx + n1 σxy, n0 σxy + n1 σyy)
                     rows = np.array([[n0[i], n1[i], 0.0], [0.0, n0[i], n1[i]]])
@@ -382,12 +410,19 @@ class ArnoldWintherSpace:
                     rows = wt[i][None, :]
                 for v in self._e2v[e]:
                     rows_at.setdefault(int(v), []).append(rows)
+                    rhs = np.zeros(rows.shape[0])
+                    if full and int(e) in traction_at:  # σ n_e = ±t(v), n_e = ±(outward normal)
+                        x = np.zeros((3, 1))
+                        x[:2, 0] = self._vx[v]
+                        rhs = outward[i] * np.asarray(traction_at[int(e)](x), dtype=np.float64).reshape(2)
+                    self._vertex_rhs.setdefault(int(v), []).append(rhs)
         cv = np.fromiter(rows_at.keys(), dtype=np.int64, count=len(rows_at))
         keep[(3 * cv[:, None] + np.arange(3)).ravel()] = False
         kept = np.flatnonzero(keep)
         r_idx, c_idx, vals = [kept], [np.arange(kept.size)], [np.ones(kept.size)]
         ncol = kept.size
         for v, rows in rows_at.items():
+            self.vertex_constraints[v] = np.vstack(rows)
             _, sv, vt = np.linalg.svd(np.vstack(rows))
             null = vt[int(np.sum(sv > 1e-10 * sv.max())) :]  # (k, 3) orthonormal rows
             null[np.abs(null) < 1e-14] = 0.0
@@ -401,6 +436,57 @@ class ArnoldWintherSpace:
             (np.concatenate(vals), (np.concatenate(r_idx), np.concatenate(c_idx))),
             shape=(self.num_dofs_full, ncol),
         )
+
+    def _outward_sign(self, facets: np.ndarray, normals: np.ndarray) -> np.ndarray:
+        """+1 where the edge normal n_e (global orientation) points out of the mesh, −1 where it points in."""
+        c_idx, l_idx = np.nonzero(np.isin(self._c2e, facets))
+        edge = self._c2e[c_idx, l_idx]
+        order = np.argsort(edge, kind="stable")
+        pos = np.searchsorted(edge[order], facets)
+        if np.any(pos >= edge.size) or not np.array_equal(edge[order][np.minimum(pos, edge.size - 1)], facets):
+            raise ValueError("a traction facet does not belong to a cell")
+        cells = c_idx[order][pos]
+        mid = 0.5 * (self._vx[self._edge_start[facets]] + self._vx[self._edge_end[facets]])
+        centre = self._vx[self._c2v[cells]].mean(axis=1)
+        return np.where(np.sum(normals * (mid - centre), axis=1) > 0.0, 1.0, -1.0)
+
+    def _lifting(self, prescribed: list) -> np.ndarray:
+        """Full AW coefficients of the traction lifting: edge moments of ±t on the traction edges,
+        vertex values by least squares on the stacked vertex constraints (min-norm: ⊥ the free part)."""
+        nv = self.num_vertices
+        d = np.zeros(self.num_dofs_full)
+        q = np.stack([_EDGE_W, _EDGE_W * (2.0 * _EDGE_S - 1.0)])  # (2, nq)
+        for facets, value in prescribed:
+            facets = np.unique(np.asarray(facets, dtype=np.int64))
+            if facets.size == 0:
+                continue
+            start, end = self._vx[self._edge_start[facets]], self._vx[self._edge_end[facets]]
+            tan = (end - start) / np.linalg.norm(end - start, axis=1, keepdims=True)
+            nrm = np.stack([tan[:, 1], -tan[:, 0]], axis=1)
+            sign = self._outward_sign(facets, nrm)
+            pts = _edge_points(start, end)  # (F, nq, 2)
+            x = np.zeros((3, pts.shape[0] * pts.shape[1]))
+            x[:2] = pts.reshape(-1, 2).T
+            t = np.asarray(value(x), dtype=np.float64).reshape(2, -1).T.reshape(pts.shape)  # (F, nq, 2)
+            tn = sign[:, None] * np.einsum("fqi,fi->fq", t, nrm)  # σn_e·n_e
+            tt = sign[:, None] * np.einsum("fqi,fi->fq", t, tan)  # σn_e·t_e
+            moments = np.concatenate([tn @ q.T, tt @ q.T], axis=1)  # (F, 4)
+            d[(3 * nv + 4 * facets[:, None] + np.arange(4)).ravel()] = moments.ravel()
+        bad = []
+        for v, rows in self.vertex_constraints.items():
+            rhs = np.concatenate(self._vertex_rhs[v])
+            if not np.any(rhs):
+                continue
+            value, *_ = np.linalg.lstsq(rows, rhs, rcond=None)
+            if np.linalg.norm(rows @ value - rhs) > 1e-10 * max(np.linalg.norm(rhs), 1e-300):
+                bad.append(v)
+            d[3 * v : 3 * v + 3] = value
+        self.incompatible_vertices = np.asarray(bad, dtype=np.int64)
+        return d
+
+    def vertex_coordinates(self, vertices: npt.ArrayLike) -> np.ndarray:
+        """Coordinates (N, 2) of topology vertices."""
+        return self._vx[np.asarray(vertices, dtype=np.int64)]
 
     # -- public API ----------------------------------------------------------
 
@@ -420,6 +506,11 @@ class ArnoldWintherSpace:
         if self._P_petsc is None:
             self._P_petsc = scipy_to_petsc(self._P, self.mesh.comm)
         return self._P_petsc
+
+    @property
+    def full_prolongation(self) -> sp.csr_matrix:
+        """P of the unconstrained space: full AW coefficients -> ``dg`` coefficients."""
+        return self._P_full
 
     @property
     def constraint_basis(self) -> sp.csr_matrix:

@@ -15,22 +15,36 @@ import numpy as np
 
 from fenics_contact.errors import ConvergenceError, InputError
 
-__all__ = ["NewtonOptions", "NewtonHistory", "ContactProfile", "semismooth_newton", "active_interval"]
+#: Newton steps with a settled active set (and so the same factorization) allowed to bring the
+#: residual to the check: iterative refinement of a solve whose pivots lost digits (tiny δ).
+MAX_REFINEMENTS = 2
+
+__all__ = [
+    "NewtonOptions", "NewtonHistory", "ContactProfile", "semismooth_newton", "active_interval", "profile_order",
+]
 
 
 @dataclass(frozen=True, slots=True)
 class NewtonOptions:
-    """Semismooth Newton options: step cap, and the residual check ‖F‖ ≤ rtol‖b‖ + atol at termination."""
+    """Semismooth Newton options: step cap, and the residual check at termination.
+
+    The check is normwise backward stability: ‖F(u)‖ ≤ rtol·(size of the terms F balances) + atol,
+    the size being ‖J‖‖u‖ + ‖b‖ (stiffness, penalty and Robin terms, load and data) for the primal
+    solve and the sum of the norms of the terms for the mixed one. A backward-stable direct solve
+    meets it with rtol ~ 1e-16·growth whatever δ, ε or the contrast, so rtol = 1e-8 only rejects a
+    solve whose linear algebra failed.
+    """
 
     max_iterations: int = 50
     rtol: float = 1e-8
     atol: float = 1e-13
 
     def __post_init__(self) -> None:
-        if self.max_iterations < 1:
-            raise InputError("max_iterations must be >= 1")
-        if not (self.rtol > 0 and self.atol >= 0):
-            raise InputError("Newton tolerances must be positive")
+        if not isinstance(self.max_iterations, (int, np.integer)) or self.max_iterations < 1:
+            raise InputError(f"max_iterations must be an integer >= 1, got {self.max_iterations!r}")
+        if not (np.isfinite(self.rtol) and np.isfinite(self.atol) and 0 < self.rtol < 1 and self.atol >= 0):
+            raise InputError(f"Newton tolerances must be finite, 0 < rtol < 1 and atol >= 0; got {self.rtol!r}, "
+                             f"{self.atol!r}")
 
 
 @dataclass(slots=True)
@@ -48,11 +62,43 @@ class NewtonHistory:
 
 
 class ContactProfile(NamedTuple):
-    """Nodal data along Γ_C, sorted by y: position, normal displacement, normal stress."""
+    """Nodal data along Γ_C, in ``profile_order`` (by y on a vertical Γ_C): position, normal displacement, normal stress.
+
+    ``u_c`` = u·ν − g, the normal displacement relative to the obstacle (> 0: penetration);
+    ``sigma_c`` the normal stress (< 0: contact pressure). The optional fields (issue 14)
+    give the node coordinates, their quadrature weights on Γ_C, the contact direction ν
+    and the initial gap g, from which ``force``, ``resultant`` and ``contact_zone`` follow.
+    """
 
     y: np.ndarray
     u_c: np.ndarray
     sigma_c: np.ndarray
+    points: np.ndarray | None = None  #: (N, 2) node coordinates
+    weights: np.ndarray | None = None  #: (N,) quadrature weights: ∫_ΓC w ds ≈ Σ weights·w(nodes)
+    normals: np.ndarray | None = None  #: (N, 2) contact direction ν (towards the obstacle)
+    gap: np.ndarray | None = None  #: (N,) initial gap g
+
+    @property
+    def force(self) -> float:
+        """Total normal contact force −∫_ΓC σ_c ds (> 0 in compression; needs ``weights``)."""
+        return float(-np.sum(self.weights * self.sigma_c))
+
+    @property
+    def resultant(self) -> np.ndarray:
+        """∫_ΓC σ_c ν ds: the force the obstacle exerts on the body (needs ``weights``, ``normals``)."""
+        return np.sum((self.weights * self.sigma_c)[:, None] * self.normals, axis=0)
+
+    @property
+    def max_pressure(self) -> float:
+        """max −σ_c (0 without contact)."""
+        return float(np.max(-self.sigma_c, initial=0.0))
+
+    def contact_zone(self) -> tuple[tuple[float, float], tuple[float, float]] | None:
+        """End points (first and last node in the profile's order) of the contact zone, or None."""
+        active = np.flatnonzero(self.active)
+        if active.size == 0 or self.points is None:
+            return None
+        return tuple(map(float, self.points[active[0]])), tuple(map(float, self.points[active[-1]]))
 
     @property
     def active(self) -> np.ndarray:
@@ -69,6 +115,15 @@ class ContactProfile(NamedTuple):
         return active_interval(self.y, self.active)
 
 
+def profile_order(points: np.ndarray) -> np.ndarray:
+    """Order of contact nodes along Γ_C: by the coordinate with the larger spread (y for a vertical Γ_C), then the other."""
+    if points.shape[0] == 0:
+        return np.zeros(0, dtype=np.int64)
+    spread = np.ptp(points[:, :2], axis=0)
+    major = 0 if spread[0] > spread[1] else 1
+    return np.lexsort((points[:, 1 - major], points[:, major]))
+
+
 def active_interval(y: np.ndarray, active: np.ndarray) -> tuple[float, float] | None:
     """[min y, max y] over the active nodes, or None."""
     if not np.any(active):
@@ -83,7 +138,7 @@ def semismooth_newton(
     same_sets: Callable[[np.ndarray, np.ndarray], bool],
     factorize: Callable[[np.ndarray], bool],
     step: Callable[[], None],
-    load_norm: float,
+    residual_check: Callable[[], tuple[float, float]],
     options: NewtonOptions,
     name: str,
     comm,
@@ -94,10 +149,15 @@ def semismooth_newton(
     local active-set indicator of the current u; ``factorize(active)`` makes the
     factorization of J at the current u available, returning True if it had to
     refactorize (the caller caches it by active set: J depends on u only through
-    the active set); ``step()`` solves J du = −F and updates u.
+    the active set); ``step()`` solves J du = −F and updates u; ``residual_check()`` returns
+    (‖F(u)‖, the size of the terms F balances) in one norm, e.g. (‖F‖∞, ‖J‖∞‖u‖∞ + ‖b‖∞).
+    A settled step whose residual fails the check is followed by up to ``MAX_REFINEMENTS`` steps
+    with the same factorization (iterative refinement). Raises ConvergenceError when the step cap is
+    hit or the residual still fails the check.
     """
     history = NewtonHistory()
     current = active_set()
+    refinements = 0
     for _ in range(options.max_iterations):
         history.residuals.append(residual())
         history.factorizations += bool(factorize(current))
@@ -106,14 +166,17 @@ def semismooth_newton(
         current = active_set()
         history.active_sizes.append(comm.allreduce(int(np.count_nonzero(current))))
         if same_sets(current, linearized_at):
-            final = residual()
-            history.residuals.append(final)
-            if final > options.rtol * load_norm + options.atol:
+            final, scale = residual_check()
+            if np.isfinite(final) and final <= options.rtol * scale + options.atol:
+                history.residuals.append(residual())
+                return history
+            if not np.isfinite(final) or refinements == MAX_REFINEMENTS:
                 raise ConvergenceError(
-                    f"{name}: active set settled but residual {final:.3e} exceeds "
-                    f"{options.rtol:g}·‖b‖ = {options.rtol * load_norm:.3e} (ill-conditioned solve?)"
+                    f"{name}: active set settled but the residual {final:.3e} exceeds {options.rtol:g} x the size "
+                    f"of the terms it balances ({scale:.3e}) after {refinements} refinement steps: the linear "
+                    "solve failed (ill-conditioned?)"
                 )
-            return history
+            refinements += 1  # iterative refinement: one more step with the same factorization
     raise ConvergenceError(
         f"{name}: semismooth Newton did not converge in {options.max_iterations} steps "
         f"(active-set sizes {history.active_sizes[-5:]}, residuals {history.residuals[-3:]})"

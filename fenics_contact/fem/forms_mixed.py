@@ -49,6 +49,7 @@ __all__ = [
     "complementary_energy",
     "robin_form",
     "robin_data_form",
+    "gap_form",
     "mixed_residual",
 ]
 
@@ -134,6 +135,11 @@ def robin_form(s, t, n, beta, ds_gamma):
 def robin_data_form(g, t, n, ds_gamma):
     """d(g; τ) = ∫_γ g·(τn) ds (g a vector function on γ, or a trial function)."""
     return ufl.inner(g, ufl.dot(stress_tensor(t), n)) * ds_gamma
+
+
+def gap_form(g, t, n, ds_contact):
+    """∫_ΓC g τ_c ds: the obstacle's gap in the natural boundary term (F_τ gets −∫ g τ_c, METHOD §9)."""
+    return g * normal_stress(t, n) * ds_contact
 
 
 def mixed_residual(s, u, t, v, *, lmbda, mu, f, n, contact=None, robin=None):

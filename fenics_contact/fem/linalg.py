@@ -1,13 +1,18 @@
 """PETSc helpers: a checked direct solver, PETSc ↔ SciPy matrix copies, small norms."""
 
 import dolfinx.fem.petsc
+import numpy as np
 import scipy.sparse as sp
 from dolfinx import fem
+from mpi4py import MPI
 from petsc4py import PETSc
 
-from fenics_contact.errors import ConvergenceError
+from fenics_contact.errors import ConvergenceError, InputError
 
-__all__ = ["DirectSolver", "assemble_scipy", "petsc_to_scipy", "quadratic_form", "scipy_to_petsc"]
+__all__ = ["AbsoluteTerms", "DirectSolver", "assemble_scipy", "petsc_to_scipy", "quadratic_form", "scipy_to_petsc"]
+
+#: |entries| of a matrix a factorization handles safely in double precision (squares stay finite)
+SAFE_RANGE = (1e-150, 1e150)
 
 #: Default options of every direct solve (each solver gets its own prefix).
 DIRECT_OPTIONS = {"ksp_type": "preonly", "pc_type": "lu", "pc_factor_mat_solver_type": "mumps"}
@@ -27,13 +32,32 @@ class DirectSolver:
         self.factorizations = 0
 
     def set_operator(self, A: PETSc.Mat) -> None:
-        """Use A from now on; the factorization happens at the next solve."""
+        """Use A from now on and factorize it.
+
+        Raises InputError when A has non-finite entries (overflowing data, e.g. E = 1e308) or its
+        largest entry is outside the range a double-precision factorization handles (``SAFE_RANGE``:
+        squares and residual norms must stay finite); ConvergenceError when the factorization fails
+        (a singular matrix).
+        """
+        _, _, values = A.getValuesCSR()
+        finite = A.getComm().tompi4py().allreduce(bool(np.all(np.isfinite(values))), op=MPI.LAND)
+        largest = A.getComm().tompi4py().allreduce(float(np.max(np.abs(values), initial=0.0)), op=MPI.MAX)
+        if not finite:
+            raise InputError(self._range_message("non-finite values"))
+        if not SAFE_RANGE[0] <= largest <= SAFE_RANGE[1]:
+            raise InputError(self._range_message(f"entries up to {largest:.3g}"))
         self.ksp.setOperators(A)
         self.ksp.setUp()
         reason = self.ksp.getPC().getFailedReason()
         if reason != 0:
-            raise ConvergenceError(f"{self.prefix}: factorization failed (PETSc PC failed reason {reason})")
+            raise ConvergenceError(f"{self.prefix}: factorization failed (PETSc PC failed reason {reason}; "
+                                   "a singular matrix?)")
         self.factorizations += 1
+
+    def _range_message(self, what: str) -> str:
+        return (f"{self.prefix}: the matrix has {what}: the data overflow the range of a double-precision "
+                f"factorization (about {SAFE_RANGE[0]:g} to {SAFE_RANGE[1]:g}): Young's modulus, 1/δ, α or 1/ε too "
+                "large or too small. Rescale the units (the displacement scales as load/E).")
 
     def solve(self, b: PETSc.Vec, x: PETSc.Vec) -> None:
         """x = A⁻¹ b, raising ConvergenceError on any PETSc failure."""
@@ -44,6 +68,39 @@ class DirectSolver:
 
     def destroy(self) -> None:
         self.ksp.destroy()
+
+
+class AbsoluteTerms:
+    """‖ |A||x| + |b| ‖∞: the size of the terms of the residual A x − b, row by row.
+
+    The yardstick of a residual check: rounding leaves |A x − b| ≲ ε(|A||x| + |b|) componentwise
+    (Oettli–Prager), whatever the scaling of the rows (a penalty row of 1/δ times a tiny normal
+    displacement, a stiff row beside a soft one). Keeps a matrix with the pattern of A between calls.
+    """
+
+    def __init__(self) -> None:
+        self._abs: PETSc.Mat | None = None
+
+    def __call__(self, A: PETSc.Mat, x: PETSc.Vec, b: PETSc.Vec) -> float:
+        if self._abs is None:
+            self._abs = A.duplicate(copy=True)
+        else:
+            A.copy(self._abs, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
+        rows, cols, values = self._abs.getValuesCSR()
+        self._abs.setValuesCSR(rows, cols, np.abs(values))
+        self._abs.assemble()
+        ax, terms = x.copy(), b.copy()
+        ax.abs()
+        terms.abs()
+        self._abs.multAdd(ax, terms, terms)
+        size = terms.norm(PETSc.NormType.NORM_INFINITY)
+        ax.destroy()
+        terms.destroy()
+        return size
+
+    def destroy(self) -> None:
+        if self._abs is not None:
+            self._abs.destroy()
 
 
 def quadratic_form(A: PETSc.Mat, x: PETSc.Vec, work: PETSc.Vec) -> float:

@@ -71,6 +71,7 @@ import scipy.sparse as sp
 import ufl
 from petsc4py import PETSc
 
+import basix
 import basix.ufl
 from dolfinx import fem
 from dolfinx import mesh as dmesh
@@ -78,9 +79,11 @@ import dolfinx.fem.petsc
 
 from fenics_contact.fem import forms_mixed
 from fenics_contact.fem.arnold_winther import ArnoldWintherSpace
-from fenics_contact.fem.contact import ContactProfile, NewtonHistory, NewtonOptions
+from fenics_contact.fem.contact import ContactProfile, NewtonHistory, NewtonOptions, profile_order
 from fenics_contact.errors import ConvergenceError, InputError
+from fenics_contact.problem.boundary import BoundaryConditions, check_boundary_groups, neumann_groups
 from fenics_contact.problem.fields import MaterialFields, material_fields
+from fenics_contact.problem.obstacles import Obstacle, evaluate_obstacle
 from fenics_contact.problem.geometry import ContactMesh
 from fenics_contact.fem.linalg import DIRECT_OPTIONS, DirectSolver, assemble_scipy, petsc_to_scipy, scipy_to_petsc
 from fenics_contact.problem.models import TestModel
@@ -97,6 +100,8 @@ __all__ = [
     "solve_mixed_monolithic",
     "contact_modulus",
     "interpolate_stress",
+    "boundary_stress_space",
+    "displacement_trace_function",
 ]
 
 log = logging.getLogger(__name__)
@@ -153,8 +158,7 @@ class MixedContactProfile(ContactProfile):
     """σ_c and u_c = −(σ_c)⁺/ε along Γ_C (sorted by y) for the mixed penalty.
 
     The mixed penalty allows no penetration (u_c ≤ 0 everywhere); a point is in
-    contact where the normal stress is compressive or zero, σ_c ≤ 0 (there
-    u_c = 0).  ``max_tensile`` is the penalty error: the tensile stress left
+    contact where the normal stress is compressive, σ_c < 0 (there u_c = 0).  ``max_tensile`` is the penalty error: the tensile stress left
     where the body separates (= ε·max|u_c|).
     """
 
@@ -162,8 +166,13 @@ class MixedContactProfile(ContactProfile):
 
     @property
     def active(self) -> np.ndarray:
-        """Points in contact: σ_c ≤ 0 (the penalty is inactive and u_c = 0)."""
-        return self.sigma_c <= 0.0
+        """Points in contact: σ_c < 0 (compressive: the penalty is inactive and u_c = g).
+
+        (σ_c = 0 up to round-off, 1e−12 of max |σ_c|, only where an essential condition
+        forces it, e.g. a Γ_C end next to a traction-free side: not contact.)
+        """
+        scale = float(np.max(np.abs(self.sigma_c), initial=0.0))
+        return self.sigma_c < -1e-12 * scale
 
     @property
     def max_tensile(self) -> float:
@@ -343,26 +352,20 @@ def _split_interface_columns(
         n = np.array([d[1], -d[0]]) / np.linalg.norm(d)
         for v in f2v.links(f):
             rows_at.setdefault(int(v), []).append(np.array([[n[0], n[1], 0.0], [0.0, n[0], n[1]]]))
-    T = space.constraint_basis.tocsr()
-    P = space.prolongation.tocsc()
+    P = space.full_prolongation.tocsc()
     omega2 = cell_tags.find(Subdomain.OMEGA2)
     dg_rows = (3 * space.dg.dofmap.list[omega2].astype(np.int64)[:, :, None] + np.arange(3)).ravel()
     mask = np.zeros(P.shape[0])
     mask[dg_rows] = 1.0
     columns = []
     for v, rows in rows_at.items():
-        _, sv, vt = np.linalg.svd(np.vstack(rows))
+        # the Ω₂-side value z must also satisfy the essential conditions at v (a γ end on a
+        # traction-free, traction or contact side): z in the null space of all rows
+        stacked = np.vstack(rows + [space.vertex_constraints[v]] if v in space.vertex_constraints else rows)
+        _, sv, vt = np.linalg.svd(stacked)
         null = vt[int(np.sum(sv > 1e-10 * sv.max())) :]
-        if null.size == 0:
-            continue
-        reduced = []
-        for j in range(3):
-            row = T[3 * v + j]
-            if row.nnz != 1 or not np.isclose(row.data[0], 1.0):
-                raise InputError("the interface γ must not touch a boundary with essential stress conditions")
-            reduced.append(row.indices[0])
         for z in null:
-            col = sum(z[j] * P[:, reduced[j]] for j in range(3) if z[j] != 0.0)
+            col = sum(z[j] * P[:, 3 * v + j] for j in range(3) if z[j] != 0.0)
             columns.append(col.multiply(mask[:, None]).tocsc())
     if not columns:
         return sp.csr_matrix((P.shape[0], 0))
@@ -425,8 +428,13 @@ class MixedSubproblem:
         self.fields = fields
         contact_facets = facet_tags.find(Boundary.GAMMA_C)
         if self.contact and contact_facets.size == 0:
+            if fields.obstacle is not None:
+                raise InputError(
+                    "an obstacle is given but the mesh has no contact boundary: the physical group 'Gamma_C' "
+                    "has no facets (tag the facets that may touch the obstacle as Gamma_C)"
+                )
             raise InputError("a contact subproblem needs Γ_C facets")
-        self.space = space or ArnoldWintherSpace(msh, zero_tangential_facets=contact_facets)
+        self.space = space or boundary_stress_space(msh, facet_tags, fields.boundary)
         P = self.space.prolongation
         if extra_columns is not None and extra_columns.shape[1] > 0:
             P = sp.hstack([P, extra_columns], format="csr")
@@ -448,6 +456,23 @@ class MixedSubproblem:
         self.G = _assemble_vector(forms_mixed.load_form(fields.f, v))[: self.n_u]
         P_petsc.destroy()
 
+        # -- boundary data: traction lifting σ_t (σ = P c + σ_t) and the natural Γ_D term ------
+        n_dg = self.P.shape[0]
+        self.s0 = np.zeros(n_dg) if self.space.lifting_dg is None else self.space.lifting_dg[:n_dg].copy()
+        self._lifted = bool(np.any(self.s0))
+        self._F_boundary = np.zeros(self.n_sigma)  # constant stress-side load of the lifting and of u_D
+        if self._lifted:
+            s0 = fem.Function(self.dg)
+            s0.x.array[:n_dg] = self.s0
+            self.G -= _assemble_vector(forms_mixed.divergence_form(s0, v))[: self.n_u]
+            self._F_boundary -= self.P.T @ _assemble_vector(forms_mixed.compliance_form(s0, t, fields.lmbda, fields.mu))[:n_dg]
+            self._s0_function = s0
+        self.u_D: fem.Function | None = None
+        if fields.boundary.displacement is not None and facet_tags.find(Boundary.GAMMA_D).size:
+            self.u_D = displacement_trace_function(msh, fields.boundary.displacement)
+            dsD = forms_mixed.boundary_measure(msh, facet_tags)(Boundary.GAMMA_D)
+            self._F_boundary += self.P.T @ _assemble_vector(forms_mixed.robin_data_form(self.u_D, t, n, dsD))[:n_dg]
+
         # -- Robin term and data on γ -------------------------------------------------
         ds = forms_mixed.boundary_measure(msh, facet_tags)
         self.Kt = self.K
@@ -459,11 +484,16 @@ class MixedSubproblem:
             R = assemble_scipy(forms_mixed.robin_form(s, t, n, 1.0, ds(Boundary.INTERFACE)))
             self.R = (self.P.T @ R @ self.P).tocsr()
             self.Kt = (self.K + beta * self.R).tocsr()
+            if self._lifted:
+                self._F_boundary -= beta * (self.P.T @ (R @ self.s0))
             self._setup_interface(gamma, ds, t, n)
 
-        # -- contact quadrature ---------------------------------------------------------
+        # -- contact quadrature and obstacle ----------------------------------------------
+        self._F_gap = np.zeros(self.n_sigma)
+        self.obstacle = None
         if contact_facets.size:
             self._setup_contact(msh, facet_tags, contact_facets)
+            self.set_obstacle(fields.obstacle)
 
         self.c = np.zeros(self.n_sigma)
         self.u = np.zeros(self.n_u)
@@ -502,21 +532,27 @@ class MixedSubproblem:
         Ey = _stress_evaluation(self.dg, cells, X, wy)
         E = sp.vstack([Ex, Ey]).tocsr()
         perm = np.arange(2 * coords.shape[0]).reshape(2, -1).T.ravel()  # interleave (x, y) per node
-        #: σn (outward n of this mesh) at ``gamma_points``, flattened (x, y) per node: N c
+        #: σn (outward n of this mesh) at ``gamma_points``, flattened (x, y) per node: N c (+ ``n0``)
         self.N = (E[perm] @ self.P).tocsr()
+        #: σ_t n at ``gamma_points`` (the traction lifting's trace; zero without tractions)
+        self.n0 = E[perm] @ self.s0
         self.gamma_normal = normals
 
     def _setup_contact(self, msh: dmesh.Mesh, facet_tags: dmesh.MeshTags, facets: np.ndarray) -> None:
         """Q: σ_c at the Gauss–Lobatto nodes of Γ_C (a Lagrange basis of the σ_c trace space)."""
         bf = _BoundaryFacets(msh, facets)
         pts, wq, cells, normals, vertex = bf.lobatto_nodes(msh)
-        order = np.lexsort((pts[:, 0], pts[:, 1]))
+        order = profile_order(pts)
         pts, wq, cells, normals, vertex = pts[order], wq[order], cells[order], normals[order], vertex[order]
         X = _reference_coordinates(msh, cells, pts)
-        self.Q = (_stress_evaluation(self.dg, cells, X, _normal_weights(normals)) @ self.P).tocsr()
+        Q_dg = _stress_evaluation(self.dg, cells, X, _normal_weights(normals))
+        self.Q = (Q_dg @ self.P).tocsr()
         self.Q.eliminate_zeros()
+        #: σ_t,c at the contact nodes (the traction lifting's normal stress; zero without tractions)
+        self.q0 = Q_dg @ self.s0
         self.q_weights = wq
         self.q_points = pts
+        self.q_normals = normals
         # u_h·n at the nodes from the DG P1 displacement (one adjacent cell per node)
         el = self.U.ufl_element().sub_elements[0].basix_element
         phi = el.tabulate(0, X)[0, :, :, 0]  # (N, 3)
@@ -530,6 +566,34 @@ class MixedSubproblem:
         dirichlet = facet_tags.find(Boundary.GAMMA_D)
         clamped = np.unique(dmesh.entities_to_geometry(msh, tdim - 1, dirichlet)) if dirichlet.size else []
         self._profile_nodes = ~np.isin(vertex, clamped)
+
+    def set_obstacle(self, obstacle: Obstacle | None) -> None:
+        """Set (or move) the obstacle: the gap g at the contact nodes and the load −∫_ΓC g τ_c (Gauss–Lobatto).
+
+        The mixed law is u·n = g − (σ_c)⁺/ε with the body's normal n; the Jacobian does not
+        change, so the factorizations stay valid and the next solve warm-starts.
+        """
+        if not hasattr(self, "q_points"):
+            raise InputError("this subproblem has no contact boundary")
+        if obstacle is None:
+            self.q_gap = np.zeros(self.q_points.shape[0])
+        else:
+            self.q_gap, _ = evaluate_obstacle(obstacle, self.q_points)
+        self._F_gap = self.Q.T @ (self.q_weights * self.q_gap)
+        self.obstacle = obstacle
+
+    def _stress_load(self, data: np.ndarray | None) -> np.ndarray:
+        """The σ-row right-hand side: Robin data C g, traction lifting, ∫_ΓD u_D·τn and ∫_ΓC g τ_c."""
+        load = self._F_boundary + self._F_gap
+        return load if data is None else load + self.C @ data
+
+    def _contact_stress(self, c: np.ndarray) -> np.ndarray:
+        """σ_c at the contact nodes of the stress P c + σ_t."""
+        return self.Q @ c + self.q0
+
+    def gamma_traction(self) -> np.ndarray:
+        """σn on γ (outward n of this mesh) at ``gamma_points``, flattened (x, y) per node."""
+        return self.N @ self.c + self.n0
 
     # -- sizes ------------------------------------------------------------------------
     @property
@@ -615,7 +679,7 @@ class MixedSubproblem:
         """(F_σ, F_u) at the current (σ, u) for the stress-side load (C g)."""
         F1 = self.Kt @ self.c + self.B.T @ self.u - load
         if self.contact:
-            F1 += self._penalty_force(self.Q @ self.c)
+            F1 += self._penalty_force(self._contact_stress(self.c))
         return F1, self.B @ self.c - self.G
 
     def _scale(self, load: np.ndarray) -> float:
@@ -623,12 +687,12 @@ class MixedSubproblem:
         scale = _norm(self.Kt @ self.c) + _norm(self.B.T @ self.u) + _norm(load)
         scale += _norm(self.B @ self.c) + _norm(self.G)
         if self.contact:
-            scale += _norm(self._penalty_force(self.Q @ self.c))
+            scale += _norm(self._penalty_force(self._contact_stress(self.c)))
         return scale
 
     def residual(self, data: np.ndarray | None = None) -> tuple[float, float]:
         """(‖F‖, scale) at the current (σ, u) with Robin data g; scale = sum of the norms of the terms."""
-        load = np.zeros(self.n_sigma) if data is None else self.C @ data
+        load = self._stress_load(data)
         F1, F2 = self._gradient(load)
         return float(np.sqrt(_dot(F1, F1) + _dot(F2, F2))), self._scale(load)
 
@@ -655,7 +719,7 @@ class MixedSubproblem:
     # -- solve --------------------------------------------------------------------------
     def solve(self, data: np.ndarray | None = None) -> MixedNewtonHistory:
         """Solve with Robin data g (values at ``gamma_points``), warm-started from the current (σ, u)."""
-        load = np.zeros(self.n_sigma) if data is None else self.C @ data
+        load = self._stress_load(data)
         history = MixedNewtonHistory()
         if not self.contact:  # linear: one solve with the cached factorization
             history.factorizations += self._factorize_for(None)
@@ -667,7 +731,7 @@ class MixedSubproblem:
         visited: set[bytes] = set()
         line_search = self.line_search == "always"
         for _ in range(self.newton.max_iterations):
-            s = self.Q @ self.c
+            s = self._contact_stress(self.c)
             # cold start: linearize at "penalty everywhere" (traction-free Γ_C); its solution has
             # σ_c < 0 exactly where a free body would penetrate, a good first contact set
             active = np.ones_like(s, dtype=bool) if self._cold else s > 0.0
@@ -691,7 +755,7 @@ class MixedSubproblem:
             self.u += t * du
             history.step_lengths.append(t)
             history.energies.append(self.complementary_energy(data))
-            history.active_sizes.append(int(np.count_nonzero(self.Q @ self.c <= 0.0)))
+            history.active_sizes.append(int(np.count_nonzero(self._contact_stress(self.c) <= 0.0)))
             if settled:
                 final, scale = self.residual(data)
                 history.residuals.append(final)
@@ -711,7 +775,7 @@ class MixedSubproblem:
     def sigma_function(self, out: fem.Function | None = None, name: str = "sigma") -> fem.Function:
         """σ_h as a DG P3 function of (σ_xx, σ_xy, σ_yy)."""
         out = fem.Function(self.dg, name=name) if out is None else out
-        out.x.array[: self.P.shape[0]] = self.P @ self.c
+        out.x.array[: self.P.shape[0]] = self.P @ self.c + self.s0
         out.x.scatter_forward()
         return out
 
@@ -732,11 +796,9 @@ class MixedSubproblem:
 
     def complementary_energy(self, data: np.ndarray | None = None) -> float:
         """J(σ) = ½(Aσ,σ) [+ ½β‖σn‖²_γ − ∫_γ g·σn] + (1/2ε)∫_ΓC ((σ_c)⁺)² at the current σ."""
-        J = 0.5 * _dot(self.c, self.Kt @ self.c)
-        if data is not None:
-            J -= _dot(self.C @ data, self.c)
+        J = 0.5 * _dot(self.c, self.Kt @ self.c) - _dot(self._stress_load(data), self.c)
         if self.contact:
-            J += 0.5 * np.sum(self.q_weights * np.maximum(self.Q @ self.c, 0.0) ** 2) / self.epsilon
+            J += 0.5 * np.sum(self.q_weights * np.maximum(self._contact_stress(self.c), 0.0) ** 2) / self.epsilon
         return float(J)
 
     def contact_profile(self) -> MixedContactProfile:
@@ -744,8 +806,11 @@ class MixedSubproblem:
         if not self.contact:
             raise InputError("this subproblem has no contact boundary")
         keep = self._profile_nodes
-        sigma_c = (self.Q @ self.c)[keep]
-        return MixedContactProfile(self.q_points[keep, 1], -np.maximum(sigma_c, 0.0) / self.epsilon, sigma_c)
+        sigma_c = self._contact_stress(self.c)[keep]
+        return MixedContactProfile(
+            self.q_points[keep, 1], -np.maximum(sigma_c, 0.0) / self.epsilon, sigma_c, self.q_points[keep],
+            self.q_weights[keep], self.q_normals[keep], self.q_gap[keep],
+        )
 
     def displacement_normal_trace(self) -> tuple[np.ndarray, np.ndarray]:
         """(y, u_h·n) of the DG P1 displacement at the profile's contact nodes (a diagnostic of u_c)."""
@@ -767,6 +832,14 @@ class MixedSubproblem:
             robin = (fem.Constant(msh, PETSc.ScalarType(self.beta)), None, ds(Boundary.INTERFACE))
         Ft, Fv = forms_mixed.mixed_residual(sig, uh, t, v, lmbda=self.fields.lmbda, mu=self.fields.mu,
                                             f=self.fields.f, n=n, contact=contact, robin=robin)
+        natural = []  # ∫_ΓD u_D·τn and ∫_ΓC g τ_c (g as a P3 function with its nodes at the Gauss–Lobatto points)
+        if self.u_D is not None:
+            natural.append(forms_mixed.robin_data_form(self.u_D, t, n, ds(Boundary.GAMMA_D)))
+        if self.contact and self.obstacle is not None:
+            gap = _gll_function(msh, self.obstacle.gap)
+            natural.append(forms_mixed.gap_form(gap, t, n, ds_c(Boundary.GAMMA_C)))
+        for form in natural:
+            Ft -= form
         r1 = self.P.T @ _assemble_vector(Ft)[: self.P.shape[0]]
         if data is not None:
             r1 -= self.C @ data
@@ -813,6 +886,57 @@ class MixedSubproblem:
             obj.destroy()
         if self._solver is not None:
             self._solver.destroy()
+
+
+def _gll_function(msh: dmesh.Mesh, field) -> fem.Function:
+    """A scalar P3 function with its edge nodes at the 4-point Gauss–Lobatto points, interpolating ``field``.
+
+    Non-finite values (a signed distance undefined away from Γ_C) are set to 0.
+    """
+    el = basix.ufl.element("Lagrange", msh.basix_cell(), 3, lagrange_variant=basix.LagrangeVariant.gll_warped)
+    fn = fem.Function(fem.functionspace(msh, el))
+    with np.errstate(invalid="ignore"):
+        fn.interpolate(lambda x: np.asarray(field(x), dtype=np.float64).reshape(-1))
+    fn.x.array[~np.isfinite(fn.x.array)] = 0.0
+    return fn
+
+
+def displacement_trace_function(msh: dmesh.Mesh, field) -> fem.Function:
+    """u_D interpolated into continuous vector P3 (for the natural term ∫_ΓD u_D·τn ds)."""
+    fn = fem.Function(fem.functionspace(msh, basix.ufl.element("Lagrange", msh.basix_cell(), 3, shape=(2,))))
+    fn.interpolate(field)
+    return fn
+
+
+def boundary_stress_space(
+    msh: dmesh.Mesh, facet_tags: dmesh.MeshTags, boundary: BoundaryConditions
+) -> ArnoldWintherSpace:
+    """The AW space of a (sub)mesh with the essential stress conditions of its boundary.
+
+    σn·t = 0 on Γ_C; σn = t on the Γ_N groups (a lifting); σn = 0 on every other
+    exterior facet that is not Γ_D or γ (traction free).  Γ_D (u = u_D) and γ (Robin)
+    are natural.
+    """
+    tdim = msh.topology.dim
+    msh.topology.create_connectivity(tdim - 1, tdim)
+    exterior = dmesh.exterior_facet_indices(msh.topology)
+    tagged = np.concatenate(
+        [facet_tags.find(t) for t in (Boundary.GAMMA_D, Boundary.GAMMA_C, Boundary.INTERFACE)]
+    )
+    prescribed = []
+    for tag, _, traction in boundary.traction_tags():
+        facets = facet_tags.find(tag)
+        if facets.size:
+            prescribed.append((facets, traction))
+    all_neumann = set(neumann_groups(facet_tags))
+    neumann = np.concatenate([facet_tags.find(t) for t in sorted(all_neumann)] or [np.zeros(0, np.int32)])
+    free = np.setdiff1d(exterior, np.concatenate([tagged, neumann]))
+    return ArnoldWintherSpace(
+        msh,
+        zero_tangential_facets=facet_tags.find(Boundary.GAMMA_C),
+        zero_traction_facets=np.union1d(free, neumann),
+        prescribed_tractions=prescribed,
+    )
 
 
 def interpolate_stress(sigma: fem.Function, degree: int = 1, name: str = "sigma") -> fem.Function:
@@ -872,8 +996,9 @@ def solve_mixed_monolithic(
         epsilon = default_epsilon(cm.h, contact_modulus(cm.mesh, cm.facet_tags, fields.E))
     extra = None
     space = None
+    check_boundary_groups(cm.mesh, cm.facet_tags, fields.boundary, names=cm.neumann_names)
     if split_interface:
-        space = ArnoldWintherSpace(cm.mesh, zero_tangential_facets=cm.facet_tags.find(Boundary.GAMMA_C))
+        space = boundary_stress_space(cm.mesh, cm.facet_tags, fields.boundary)
         extra = _split_interface_columns(space, cm.mesh, cm.cell_tags, cm.facet_tags)
     problem = MixedSubproblem(
         cm.mesh, cm.facet_tags, fields, epsilon=epsilon, beta=None, prefix=prefix, newton=newton,

@@ -20,12 +20,15 @@ from dolfinx import mesh as dmesh
 import dolfinx.fem.petsc
 
 from fenics_contact.fem import forms_primal
-from fenics_contact.fem.contact import ContactProfile, NewtonHistory, NewtonOptions, semismooth_newton
+from fenics_contact.fem.contact import ContactProfile, NewtonHistory, NewtonOptions, profile_order, semismooth_newton
 from fenics_contact.errors import InputError
+from fenics_contact.problem.boundary import BoundaryConditions, check_boundary_groups, neumann_groups
 from fenics_contact.problem.fields import MaterialFields
-from fenics_contact.fem.linalg import DirectSolver, quadratic_form
+from fenics_contact.problem.obstacles import Obstacle, evaluate_obstacle
+from fenics_contact.fem.linalg import AbsoluteTerms, DirectSolver, quadratic_form
 from fenics_contact.problem.materials import strain, stress
 from fenics_contact.problem.tags import Boundary
+from fenics_contact.problem.validation import require_facet_groups
 
 __all__ = ["PrimalSubproblem", "PrimalSolution", "solve_primal_monolithic", "default_penalty"]
 
@@ -34,11 +37,22 @@ log = logging.getLogger(__name__)
 
 def default_penalty(h: float, E_contact: float, factor: float = 1.0e-3) -> float:
     """δ = factor · h / E_c: penalty stiffness 1/δ a factor 1/factor above the element stiffness E_c/h."""
+    if not all(isinstance(v, (int, float, np.number)) and np.isfinite(v) and v > 0 for v in (h, E_contact, factor)):
+        raise InputError(f"default_penalty needs finite h, E_c, factor > 0; got {h!r}, {E_contact!r}, {factor!r}")
     return factor * h / E_contact
 
 
 class PrimalSubproblem:
-    """a(u, v) [+ (1/δ)∫_ΓC (u·n)⁺ v·n] [+ α∫_γ u·v − ∫_γ g·v] = (f, v), u = 0 on Γ_D, P1."""
+    """a(u, v) [+ (1/δ)∫_ΓC (u·ν − g)⁺ v·ν] [+ α∫_γ u·v − ∫_γ g·v] = (f, v) + Σ∫_ΓN t·v, u = u_D on Γ_D, P1.
+
+    Boundary conditions and obstacle come with ``fields`` (``fields.boundary``,
+    ``fields.obstacle``): u_D is imposed strongly (Newton works with homogeneous
+    increments), tractions enter the load, other facets are traction free.  The
+    contact direction ν and the gap g are nodal (P1) on Γ_C: the obstacle's at
+    the Γ_C vertices, or for a wall flush with Γ_C (``obstacle=None``) the body's
+    nodal normal (facet normals averaged with the vertex weights) and g = 0.  One
+    ν per node keeps the active set a set of nodes on a curved Γ_C too.
+    """
 
     def __init__(
         self,
@@ -52,8 +66,8 @@ class PrimalSubproblem:
         newton: NewtonOptions = NewtonOptions(),
         V: fem.FunctionSpace | None = None,
     ) -> None:
-        if delta is not None and not delta > 0:
-            raise InputError(f"the penalty parameter δ must be > 0, got {delta}")
+        if delta is not None and not (isinstance(delta, (int, float, np.number)) and np.isfinite(delta) and delta > 0):
+            raise InputError(f"the penalty parameter δ must be a finite number > 0, got {delta!r}")
         self.mesh = msh
         self.prefix = prefix
         self.newton = newton
@@ -66,40 +80,48 @@ class PrimalSubproblem:
         self.u = fem.Function(self.V, name="u")
         self.g = fem.Function(self.V, name="g") if alpha is not None else None
         self.fields = fields
+        self.facet_tags = facet_tags
 
         msh.topology.create_connectivity(tdim - 1, tdim)
-        dirichlet = facet_tags.find(Boundary.GAMMA_D)
-        dofs = fem.locate_dofs_topological(self.V, tdim - 1, dirichlet)
-        self.bcs = [fem.dirichletbc(np.zeros(gdim, dtype=PETSc.ScalarType), dofs, self.V)]
-        self._dirichlet_q = fem.locate_dofs_topological(self.Q, tdim - 1, dirichlet)
-
+        self._setup_dirichlet(facet_tags, fields.boundary)
         ds = forms_primal.vertex_measure(msh, facet_tags)
+        ds_c = ds(Boundary.GAMMA_C)
+        if self.contact:
+            self._setup_contact_geometry(facet_tags, fields.obstacle, ds_c)
+        tractions = self._setup_tractions(facet_tags, fields.boundary)
+
         n = ufl.FacetNormal(msh)
         v, du = ufl.TestFunction(self.V), ufl.TrialFunction(self.V)
         q = ufl.TestFunction(self.Q)
         lm, mu = fields.lmbda, fields.mu
-        penalty = (fem.Constant(msh, PETSc.ScalarType(1.0 / delta)), n) if self.contact else None
+        penalty = (fem.Constant(msh, PETSc.ScalarType(1.0 / delta)), self.nu_c, self.gap) if self.contact else None
         robin = (alpha, self.g, ds(Boundary.INTERFACE)) if alpha is not None else None
-        kw = dict(lmbda=lm, mu=mu, penalty=penalty, ds_contact=ds(Boundary.GAMMA_C), robin=robin)
-        self._F = fem.form(forms_primal.contact_residual(self.u, v, f=fields.f, **kw))
+        kw = dict(lmbda=lm, mu=mu, penalty=penalty, ds_contact=ds_c, robin=robin)
+        self._F = fem.form(forms_primal.contact_residual(self.u, v, f=fields.f, tractions=tractions, **kw))
         self._J = fem.form(forms_primal.contact_jacobian(self.u, du, v, **kw))
         load = ufl.inner(fields.f, v) * ufl.dx
+        if tractions:
+            load += forms_primal.traction_form(tractions, v)
         if robin is not None:
             load += ufl.inner(self.g, v) * ds(Boundary.INTERFACE)
         self._load = fem.form(load)
         self._a = fem.form(forms_primal.elastic_form(du, v, lm, mu))
         self._m = fem.form(forms_primal.mass_form(du, v))
         if self.contact:
-            self._indicator = fem.form(forms_primal.nodal_indicator(ufl.dot(self.u, n), q, ds(Boundary.GAMMA_C)))
-            self._weights = fem.form(q * ds(Boundary.GAMMA_C))
-            self._normals = fem.form(ufl.dot(v, n) * ds(Boundary.GAMMA_C))
-            self._reaction = fem.form(
-                ufl.inner(stress(strain(self.u), lm, mu), strain(v)) * ufl.dx - ufl.inner(fields.f, v) * ufl.dx
+            s = forms_primal.gap_function(self.u, self.nu_c, self.gap)
+            self._indicator = fem.form(forms_primal.nodal_indicator(s, q, ds_c))
+            self._gap_terms = fem.form(
+                penalty[0] * forms_primal.heaviside(s) * self.gap * ufl.dot(v, self.nu_c) * ds_c
             )
+            reaction = ufl.inner(stress(strain(self.u), lm, mu), strain(v)) * ufl.dx - ufl.inner(fields.f, v) * ufl.dx
+            if tractions:
+                reaction -= forms_primal.traction_form(tractions, v)
+            self._reaction = fem.form(reaction)
 
         self.A = dolfinx.fem.petsc.create_matrix(self._J)
         self.b = dolfinx.fem.petsc.create_vector(self.V)
         self.du = dolfinx.fem.petsc.create_vector(self.V)
+        self._gap_vec = dolfinx.fem.petsc.create_vector(self.V)  # ghosted, like b (assembly target)
         self.solver = DirectSolver(msh.comm, prefix=prefix)
         self._K = dolfinx.fem.petsc.assemble_matrix(self._a)
         self._K.assemble()
@@ -108,6 +130,94 @@ class PrimalSubproblem:
         self._work = self._K.createVecLeft()
         self._linear_ready = False
         self._factorized_set: np.ndarray | None = None
+        self._terms = AbsoluteTerms()
+
+    # -- boundary conditions and contact geometry ------------------------------------------
+    def _setup_dirichlet(self, facet_tags: dmesh.MeshTags, boundary: BoundaryConditions) -> None:
+        """Homogeneous BCs for the Newton increments; u ← u_D on the Γ_D DOFs (kept through warm starts)."""
+        tdim = self.mesh.topology.dim
+        gdim = self.mesh.geometry.dim
+        dirichlet = facet_tags.find(Boundary.GAMMA_D)
+        dofs = fem.locate_dofs_topological(self.V, tdim - 1, dirichlet)
+        self.bcs = [fem.dirichletbc(np.zeros(gdim, dtype=PETSc.ScalarType), dofs, self.V)]
+        self._dirichlet_dofs = dofs
+        self._dirichlet_q = fem.locate_dofs_topological(self.Q, tdim - 1, dirichlet)
+        self.u_D: fem.Function | None = None
+        if boundary.displacement is not None:
+            self.u_D = fem.Function(self.V, name="u_D")
+            self.u_D.interpolate(boundary.displacement)
+            self.u_D.x.scatter_forward()
+            fem.dirichletbc(self.u_D, dofs).set(self.u.x.array)
+            self.u.x.scatter_forward()
+
+    def _setup_tractions(self, facet_tags: dmesh.MeshTags, boundary: BoundaryConditions) -> list:
+        """(t_k, ds_k) for every traction group with facets on this mesh; t_k P1-interpolated."""
+        ds = ufl.Measure("ds", domain=self.mesh, subdomain_data=facet_tags)
+        present = set(self.mesh.comm.allreduce(neumann_groups(facet_tags)))
+        self.tractions: list[fem.Function] = []
+        out = []
+        for tag, name, field in boundary.traction_tags():
+            if tag not in present:
+                continue  # on another subdomain
+            t = fem.Function(self.V, name=f"t_{name}")
+            t.interpolate(field)
+            t.x.scatter_forward()
+            self.tractions.append(t)
+            out.append((t, ds(tag)))
+        return out
+
+    def _setup_contact_geometry(self, facet_tags: dmesh.MeshTags, obstacle: Obstacle | None, ds_c) -> None:
+        """Nodal contact direction ν (vector P1) and gap g (P1) at the Γ_C vertices."""
+        msh = self.mesh
+        tdim = msh.topology.dim
+        contact = facet_tags.find(Boundary.GAMMA_C)
+        if msh.comm.allreduce(int(contact.size), op=MPI.SUM) == 0:
+            if obstacle is not None:
+                raise InputError(
+                    "an obstacle is given but the mesh has no contact boundary: the physical group 'Gamma_C' "
+                    "has no facets (tag the facets that may touch the obstacle as Gamma_C)"
+                )
+        self._contact_q = fem.locate_dofs_topological(self.Q, tdim - 1, contact)
+        self.nu_c = fem.Function(self.V, name="nu")
+        self.gap = fem.Function(self.Q, name="gap")
+        q = ufl.TestFunction(self.Q)
+        v = ufl.TestFunction(self.V)
+        w = dolfinx.fem.assemble_vector(fem.form(q * ds_c))
+        w.scatter_reverse(dolfinx.la.InsertMode.add)
+        w.scatter_forward()
+        N = dolfinx.fem.assemble_vector(fem.form(ufl.dot(v, ufl.FacetNormal(msh)) * ds_c))
+        N.scatter_reverse(dolfinx.la.InsertMode.add)
+        N.scatter_forward()
+        gdim = msh.geometry.dim
+        nodes = self._contact_q
+        Nn = N.array.reshape(-1, gdim)[nodes]
+        self._surface_normal = Nn / np.linalg.norm(Nn, axis=1)[:, None] if nodes.size else Nn
+        self._contact_weights = w.array
+        self.obstacle = None
+        self.set_obstacle(obstacle)
+
+    def set_obstacle(self, obstacle: Obstacle | None) -> None:
+        """Set (or move) the obstacle: ν and g at the Γ_C vertices (collective); the next solve warm-starts."""
+        if not self.contact:
+            raise InputError("this subproblem has no contact boundary")
+        nodes = self._contact_q
+        gdim = self.mesh.geometry.dim
+        if obstacle is None:
+            g = np.zeros(nodes.size)
+            nu = self._surface_normal
+        else:
+            points = self.Q.tabulate_dof_coordinates()[nodes]
+            g, nu = evaluate_obstacle(obstacle, points, comm=self.mesh.comm)
+        same_direction = self.mesh.comm.allreduce(
+            bool(np.array_equal(self.nu_c.x.array.reshape(-1, gdim)[nodes], nu)), op=MPI.LAND
+        )
+        self.nu_c.x.array[:] = 0.0
+        self.nu_c.x.array.reshape(-1, gdim)[nodes] = nu
+        self.gap.x.array[:] = 0.0
+        self.gap.x.array[nodes] = g
+        self.obstacle = obstacle
+        if not same_direction:
+            self._factorized_set = None  # ν enters the Jacobian
 
     # -- sizes ---------------------------------------------------------------------------
     @property
@@ -157,8 +267,25 @@ class PrimalSubproblem:
         return self.mesh.comm.allreduce(bool(np.array_equal(a, b)), op=MPI.LAND)
 
     def load_norm(self) -> float:
-        """‖b‖ of the load vector (f and Robin data)."""
+        """‖b‖ of the load vector (f, tractions and Robin data)."""
         return self._assemble_vector(self._load, self.b).norm()
+
+    def residual_check(self) -> tuple[float, float]:
+        """(‖F(u)‖∞, ‖ |J||u| + |b| + |p_g| ‖∞): the residual and the size of the terms it balances.
+
+        J (the factorized Jacobian: stiffness, penalty on the active set, Robin) applied to u gives
+        the stiffness, penalty and Robin terms (u carries u_D on Γ_D), b the load, tractions and the
+        Robin data, p_g = (1/δ)∫ H(u·ν − g) g v·ν the gap's share of the penalty; a backward-stable
+        solve leaves a residual of about 1e-16 of their size row by row, whatever δ, α or the contrast.
+        """
+        final = self._assemble_vector(self._F, self.b).norm(PETSc.NormType.NORM_INFINITY)
+        load = self._assemble_vector(self._load, self.du)
+        if self.contact:
+            load.abs()
+            gap = self._assemble_vector(self._gap_terms, self._gap_vec)
+            gap.abs()
+            load.axpy(1.0, gap)
+        return final, self._terms(self.A, self.u.x.petsc_vec, load)
 
     # -- solve ---------------------------------------------------------------------------
     def factorize(self) -> None:
@@ -182,7 +309,7 @@ class PrimalSubproblem:
             same_sets=self._same_sets,
             factorize=self._factorize_for,
             step=self._step,
-            load_norm=self.load_norm(),
+            residual_check=self.residual_check,
             options=self.newton,
             name=self.prefix.rstrip("_"),
             comm=self.mesh.comm,
@@ -198,34 +325,68 @@ class PrimalSubproblem:
         return quadratic_form(self._M, w.x.petsc_vec, self._work)
 
     def contact_profile(self) -> ContactProfile:
-        """u_c and the consistent nodal normal stress σ_c = (R·n_p)/w_p along Γ_C, on every rank."""
+        """u_c = u·ν − g and the consistent nodal normal stress σ_c = (R·ν_p)/w_p along Γ_C, on every rank.
+
+        R is the residual of the equations without the contact term (the reaction of the
+        obstacle), w_p the vertex weights; clamped (Γ_D) nodes are left out.
+        """
         if not self.contact:
             raise InputError("this subproblem has no contact boundary")
         nloc = self.Q.dofmap.index_map.size_local
-        w = dolfinx.fem.assemble_vector(self._weights)
-        w.scatter_reverse(dolfinx.la.InsertMode.add)
-        N = dolfinx.fem.assemble_vector(self._normals)
-        N.scatter_reverse(dolfinx.la.InsertMode.add)
         R = dolfinx.fem.assemble_vector(self._reaction)
         R.scatter_reverse(dolfinx.la.InsertMode.add)
-        on_contact = w.array[:nloc] > 0.0
+        w = self._contact_weights
+        on_contact = np.zeros(nloc, dtype=bool)
+        on_contact[self._contact_q[self._contact_q < nloc]] = True
+        on_contact &= w[:nloc] > 0.0
         on_contact[self._dirichlet_q[self._dirichlet_q < nloc]] = False  # clamped corners: not contact
         on = np.flatnonzero(on_contact)
         gdim = self.mesh.geometry.dim
-        Nn = N.array.reshape(-1, gdim)[on]
-        normal = Nn / np.linalg.norm(Nn, axis=1)[:, None]
-        u_c = np.sum(self.u.x.array.reshape(-1, gdim)[on] * normal, axis=1)
-        sigma_c = np.sum(R.array.reshape(-1, gdim)[on] * normal, axis=1) / w.array[on]
-        y = self.Q.tabulate_dof_coordinates()[on, 1]
+        normal = self.nu_c.x.array.reshape(-1, gdim)[on]
+        gap = self.gap.x.array[on]
+        u_c = np.sum(self.u.x.array.reshape(-1, gdim)[on] * normal, axis=1) - gap
+        sigma_c = np.sum(R.array.reshape(-1, gdim)[on] * normal, axis=1) / w[on]
+        points = self.Q.tabulate_dof_coordinates()[on, :2]
         comm = self.mesh.comm
-        y, u_c, sigma_c = (np.concatenate(comm.allgather(a)) for a in (y, u_c, sigma_c))
-        order = np.argsort(y, kind="stable")
-        return ContactProfile(y[order], u_c[order], sigma_c[order])
+        points, u_c, sigma_c, weights, normal, gap = (
+            np.concatenate(comm.allgather(a)) for a in (points, u_c, sigma_c, w[on], normal, gap)
+        )
+        order = profile_order(points)
+        return ContactProfile(
+            points[order, 1], u_c[order], sigma_c[order], points[order], weights[order], normal[order], gap[order]
+        )
 
     # -- interface Newton support (hybrid.newton): the affine pieces of the problem ---------------
-    def reset(self) -> None:
-        """Forget the solution and the cached factorization (the next ``solve`` starts cold from u = 0)."""
+    def _set_lifting(self) -> None:
+        """u ← u_D on the Γ_D DOFs and 0 elsewhere (the state every Newton solve starts from)."""
         self.u.x.array[:] = 0.0
+        if self.u_D is not None:
+            fem.dirichletbc(self.u_D, self._dirichlet_dofs).set(self.u.x.array)
+        self.u.x.scatter_forward()
+
+    def _with_lifting_no_contact(self, action):
+        """Run ``action()`` at u = lifting of u_D, zero Robin data and every contact node inactive
+        (the gap raised above u·ν), then restore u, g and the gap."""
+        keep_u = self.u.x.array.copy()
+        keep_g = self.g.x.array.copy() if self.g is not None else None
+        keep_gap = self.gap.x.array.copy() if self.contact else None
+        try:
+            self._set_lifting()
+            if self.g is not None:
+                self.g.x.array[:] = 0.0
+            if self.contact:
+                self.gap.x.array[:] = 1.0 + float(np.max(np.abs(self.u.x.array), initial=0.0))
+            return action()
+        finally:
+            self.u.x.array[:] = keep_u
+            if self.g is not None:
+                self.g.x.array[:] = keep_g
+            if self.contact:
+                self.gap.x.array[:] = keep_gap
+
+    def reset(self) -> None:
+        """Forget the solution and the cached factorization (the next ``solve`` starts cold from u_D's lifting)."""
+        self._set_lifting()
         self._factorized_set = None
 
     def residual_norm(self) -> tuple[float, float]:
@@ -233,54 +394,51 @@ class PrimalSubproblem:
         return self._residual(), self.load_norm()
 
     def contact_free_matrix(self) -> PETSc.Mat:
-        """A new matrix J₀ = a + α∫_γ (the Jacobian with no contact node active), Γ_D rows = identity."""
-        keep = self.u.x.array.copy()
-        self.u.x.array[:] = 0.0  # H(0) = 0: no penalty term
+        """A new matrix J₀ = a + α∫_γ (the Jacobian with no contact node active), identity on Γ_D."""
         A = dolfinx.fem.petsc.create_matrix(self._J)
-        dolfinx.fem.petsc.assemble_matrix(A, self._J, bcs=self.bcs)
-        A.assemble()
-        self.u.x.array[:] = keep
+
+        def assemble():
+            dolfinx.fem.petsc.assemble_matrix(A, self._J, bcs=self.bcs)
+            A.assemble()
+
+        self._with_lifting_no_contact(assemble)
         return A
 
     def body_load(self, out: PETSc.Vec) -> PETSc.Vec:
-        """out ← −F(0) with zero Robin data: (f, v), zero on Γ_D rows (so J(u) u = body_load + data at a solution)."""
-        keep_u = self.u.x.array.copy()
-        keep_g = self.g.x.array.copy() if self.g is not None else None
-        self.u.x.array[:] = 0.0
-        if self.g is not None:
-            self.g.x.array[:] = 0.0
-        self._assemble_vector(self._F, out)
-        out.scale(-1.0)
-        self.u.x.array[:] = keep_u
-        if self.g is not None:
-            self.g.x.array[:] = keep_g
-        return out
+        """out ← the right-hand side of J₀ x = out + data − contact forces at zero Robin data and no contact:
+        (f, v) + Σ∫_ΓN t·v − a(u_D lifting, v) on the free rows, u_D on the Γ_D rows."""
 
-    def contact_nodes(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Owned Γ_C nodes off Γ_D: (node = block index of u, unit normal (k, gdim), vertex weight w_p).
+        def assemble():
+            self._assemble_vector(self._F, out)  # Γ_D rows 0
+            out.scale(-1.0)
+            if self.u_D is not None:
+                dolfinx.fem.petsc.set_bc(out, [fem.dirichletbc(self.u_D, self._dirichlet_dofs)])
+            return out
 
-        The penalty term is Σ_p (w_p/δ) (u_p·n_p)⁺ (v_p·n_p) when the facets at each node share
-        one normal (a straight Γ_C); n_p is the weight-averaged facet normal otherwise.
-        """
+        return self._with_lifting_no_contact(assemble)
+
+    def contact_nodes(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Owned Γ_C nodes off Γ_D: (node = block index of u, contact direction ν_p (k, gdim), vertex weight w_p,
+        gap g_p): the penalty term is Σ_p (w_p/δ) (u_p·ν_p − g_p)⁺ (v_p·ν_p)."""
         if not self.contact:
             raise InputError("this subproblem has no contact boundary")
         nloc = self.Q.dofmap.index_map.size_local
-        w = dolfinx.fem.assemble_vector(self._weights)
-        w.scatter_reverse(dolfinx.la.InsertMode.add)
-        N = dolfinx.fem.assemble_vector(self._normals)
-        N.scatter_reverse(dolfinx.la.InsertMode.add)
-        on = w.array[:nloc] > 0.0
+        w = self._contact_weights
+        on = np.zeros(nloc, dtype=bool)
+        on[self._contact_q[self._contact_q < nloc]] = True
+        on &= w[:nloc] > 0.0
         on[self._dirichlet_q[self._dirichlet_q < nloc]] = False
         nodes = np.flatnonzero(on)
         gdim = self.mesh.geometry.dim
-        Nn = N.array.reshape(-1, gdim)[nodes]
-        return nodes, Nn / np.linalg.norm(Nn, axis=1)[:, None], w.array[nodes].copy()
+        nu = self.nu_c.x.array.reshape(-1, gdim)[nodes].copy()
+        return nodes, nu, w[nodes].copy(), self.gap.x.array[nodes].copy()
 
     def destroy(self) -> None:
         """Free the PETSc objects (collective)."""
-        for obj in (self.A, self.b, self.du, self._K, self._M, self._work):
+        for obj in (self.A, self.b, self.du, self._gap_vec, self._K, self._M, self._work):
             obj.destroy()
         self.solver.destroy()
+        self._terms.destroy()
 
 
 @dataclass(slots=True)
@@ -306,7 +464,9 @@ def solve_primal_monolithic(
     prefix: str = "fc_primal_mono_",
 ) -> PrimalSolution:
     """Penalized primal contact on the whole mesh (METHOD §2) by semismooth Newton."""
+    require_facet_groups(msh, facet_tags, (Boundary.GAMMA_D, Boundary.GAMMA_C))
     start = time.perf_counter()
+    check_boundary_groups(msh, facet_tags, fields.boundary)
     problem = PrimalSubproblem(msh, facet_tags, fields, delta=delta, alpha=None, prefix=prefix, newton=newton)
     history = problem.solve()
     elapsed = time.perf_counter() - start

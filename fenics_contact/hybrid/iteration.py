@@ -173,14 +173,14 @@ class IterationOptions:
     newton: InterfaceNewtonOptions = InterfaceNewtonOptions()
 
     def __post_init__(self) -> None:
-        if not (0 < self.tol < 1):
-            raise InputError(f"the relative tolerance must lie in (0, 1), got {self.tol}")
-        if self.max_iterations < 1:
-            raise InputError("max_iterations must be >= 1")
+        if not (isinstance(self.tol, (int, float, np.number)) and 0 < self.tol < 1):
+            raise InputError(f"the relative tolerance must lie in (0, 1), got {self.tol!r}")
+        if not isinstance(self.max_iterations, (int, np.integer)) or self.max_iterations < 1:
+            raise InputError(f"max_iterations must be an integer >= 1, got {self.max_iterations!r}")
         if self.accel not in ACCELERATIONS:
             raise InputError(f"unknown acceleration {self.accel!r}; choose one of {', '.join(ACCELERATIONS)}")
-        if self.depth < 1:
-            raise InputError(f"the Anderson depth must be >= 1, got {self.depth}")
+        if not isinstance(self.depth, (int, np.integer)) or self.depth < 1:
+            raise InputError(f"the Anderson depth must be an integer >= 1, got {self.depth!r}")
 
 
 @dataclass(slots=True)

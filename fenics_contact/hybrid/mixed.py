@@ -62,6 +62,7 @@ from scipy.spatial import cKDTree
 
 from fenics_contact.fem.contact import NewtonOptions
 from fenics_contact.hybrid.certificate import Certificate, mixed_certificate
+from fenics_contact.hybrid.inputs import check_solve_inputs, require_instance
 from fenics_contact.hybrid.iteration import (
     InterfaceNewtonOptions,
     IterationHistory,
@@ -70,6 +71,7 @@ from fenics_contact.hybrid.iteration import (
     iterate,
 )
 from fenics_contact.errors import InputError
+from fenics_contact.problem.boundary import check_boundary_groups
 from fenics_contact.problem.fields import material_fields
 from fenics_contact.problem.geometry import ContactMesh
 from fenics_contact.fem.mixed import (
@@ -135,6 +137,7 @@ class MixedHybridStep:
         self.comm = cm.comm
         self.beta = transmission_coefficient(beta, cm.h)
         parent_fields = material_fields(cm.mesh, model)
+        check_boundary_groups(cm.mesh, cm.facet_tags, parent_fields.boundary, names=cm.neumann_names)
         if epsilon is None:
             epsilon = default_epsilon(cm.h, contact_modulus(cm.mesh, cm.facet_tags, parent_fields.E))
         self.epsilon = float(epsilon)
@@ -174,6 +177,7 @@ class MixedHybridStep:
             i_sub, i_par = sub_to_parent_dofs(part, s.dg, reference.sigma.function_space)
             d = np.zeros(s.P.shape[0])
             d[i_sub] = reference.sigma.x.array[i_par]
+            d -= s.s0  # the traction lifting is not in the span of P
             PtP = (s.P.T @ s.P).tocsc()
             c = spla.splu(PtP).solve(s.P.T @ d)
             miss = np.linalg.norm(s.P @ c - d) / max(np.linalg.norm(d), 1e-300)
@@ -207,10 +211,10 @@ class MixedHybridStep:
         n = self.size
         g12, g21 = g[:n], g[n:]
         self.sub[0].solve(g12)
-        newton = solve_or_verify(self.sub[1], g21[self._perm2], omega2_warm)
-        t1 = self.sub[0].N @ self.sub[0].c  # σ₁n₁ at the canonical nodes
+        newton = self.sub[1].solve(g21[self._perm2])
+        t1 = self.sub[0].gamma_traction()  # σ₁n₁ at the canonical nodes
         t2 = np.empty(n)
-        t2[self._perm2] = self.sub[1].N @ self.sub[1].c  # σ₂n₂
+        t2[self._perm2] = self.sub[1].gamma_traction()  # σ₂n₂
         self._measure()
         self._certificate = mixed_certificate(t1, t2, g12, g21, self.beta, self.gamma_mass)
         self._record = omega2_record(newton)
@@ -321,6 +325,9 @@ def solve_mixed_hybrid(
     ``epsilon`` defaults to ``fem.mixed.default_epsilon`` (pass the reference's ε when comparing).
     ``initial_data`` warm-starts the interface data; ``step`` reuses a step (and its offline data).
     """
+    check_solve_inputs(cm, model, options=options, newton=newton)
+    if reference is not None:
+        require_instance(reference, MixedSolution, "the reference", " (from fem.mixed.solve_mixed_monolithic)")
     start = time.perf_counter()
     if reference is not None and epsilon is None:
         epsilon = reference.epsilon

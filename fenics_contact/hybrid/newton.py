@@ -128,6 +128,8 @@ class AffinePart:
     n_g: int  #: global number of interface values
     n_c: int  #: global number of contact rows (0 without contact)
     D: np.ndarray  #: penalty weights (n_c,): λ = D s⁺
+    gap: np.ndarray  #: contact offsets (n_c,): s = Q x − gap (the obstacle's gap; 0 for a flush wall)
+    trace_offset: np.ndarray | float = 0.0  #: y = N x + trace_offset (mixed: the traction lifting's σ_t n)
     solver: DirectSolver
 
     # -- provided by subclasses ----------------------------------------------------------
@@ -165,11 +167,16 @@ class AffinePart:
     def load_response(self) -> tuple[np.ndarray, np.ndarray]:
         """(y₀, s₀): trace and contact values of J⁻¹ b (zero data, no contact force)."""
         x0 = self.solve(self.body_load())[:, None]
-        return self.trace_rows(x0)[:, 0], (self.contact_rows(x0)[:, 0] if self.n_c else np.zeros(0))
+        y0 = self.trace_rows(x0)[:, 0] + self.trace_offset
+        return y0, (self.contact_rows(x0)[:, 0] - self.gap if self.n_c else np.zeros(0))
+
+    def refresh(self) -> bool:
+        """Re-read the contact geometry (an obstacle may have moved): True when the condensation is stale."""
+        return False
 
     def contact_values(self) -> np.ndarray:
-        """s = Q x of the current subproblem state (global)."""
-        return self.contact_rows(self.state()[:, None])[:, 0]
+        """s = Q x − gap of the current subproblem state (global)."""
+        return self.contact_rows(self.state()[:, None])[:, 0] - self.gap
 
     def data_free(self) -> np.ndarray:
         """Interface values whose data act on this subproblem (False e.g. at γ nodes on Γ_D)."""
@@ -202,13 +209,14 @@ class PrimalPart(AffinePart):
         self.trace_at, self.trace_index = rows, cols  # owned γ DOFs and their interface value
         self.data_at, self.data_index, self.data_w = rows[free], cols[free], w[free]
         self.n_c = 0
-        self.D = np.zeros(0)
+        self.D = self.gap = np.zeros(0)
         if contact:
-            nodes, normals, weights = sub.contact_nodes()
+            nodes, normals, weights, gap = sub.contact_nodes()
             self.c_nodes, self.c_normals = nodes, normals
             self.c_offset = comm.exscan(nodes.size) or 0
             self.n_c = comm.allreduce(nodes.size, op=MPI.SUM)
             self.D = np.concatenate(comm.allgather(weights / sub.delta))
+            self.gap = np.concatenate(comm.allgather(gap))
             self._J0 = None
             if factorize:  # J₀ (only the condensed strategy needs it)
                 self.solver = DirectSolver(comm, prefix=f"{sub.prefix}j0_")
@@ -219,6 +227,15 @@ class PrimalPart(AffinePart):
             self.solver = sub.solver
         self._b = sub.b.duplicate()
         self._x = sub.b.duplicate()
+
+    def refresh(self) -> bool:
+        if not self.n_c:
+            return False
+        _, normals, _, gap = self.sub.contact_nodes()
+        self.gap = np.concatenate(self.comm.allgather(gap))  # enters online only (s_L)
+        moved = self.comm.allreduce(not np.array_equal(normals, self.c_normals), op=MPI.LOR)
+        self.c_normals = normals  # ν enters the contact columns: condense again
+        return bool(moved)
 
     def data_free(self) -> np.ndarray:
         free = np.zeros(self.n_g, dtype=bool)
@@ -299,6 +316,8 @@ class MixedPart(AffinePart):
         self.ns, self.nown = sub.n_sigma, sub.n_sigma + sub.n_u
         self.n_c = sub.Q.shape[0] if contact else 0
         self.D = sub.q_weights / sub.epsilon if contact else np.zeros(0)
+        self.gap = -sub.q0 if contact else np.zeros(0)  # σ_c = Q c + q0 (q0: the traction lifting's)
+        self.trace_offset = sub.n0[inv] if sub.beta is not None else 0.0  # σn = N c + n0
         self._J0 = None
         if contact:
             self.QT = sub.Q.T.tocsc()
@@ -334,6 +353,7 @@ class MixedPart(AffinePart):
 
     def body_load(self) -> np.ndarray:
         b = np.zeros(self.nown)
+        b[: self.ns] = self.sub._stress_load(None)  # traction lifting, ∫_ΓD u_D·τn, gap term ∫_ΓC g τ_c
         b[self.ns :] = self.sub.G
         return b
 
@@ -598,6 +618,8 @@ def newton_iterate(step, options: IterationOptions, *, name: str, monitor=None,
     history = IterationHistory()
     t_off = time.perf_counter()
     problem = step.interface_problem(nopt)
+    if problem.omega2.refresh():
+        problem.condensed = None
     if nopt.strategy == "condensed" and problem.condensed is None:
         problem.condensed = CondensedInterface(problem)
     history.time_offline_s = time.perf_counter() - t_off

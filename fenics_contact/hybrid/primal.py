@@ -29,6 +29,8 @@ from fenics_contact.hybrid.iteration import (
     IterationResult,
     iterate,
 )
+from fenics_contact.hybrid.inputs import check_reference_displacement, check_solve_inputs
+from fenics_contact.problem.boundary import check_boundary_groups
 from fenics_contact.problem.fields import material_fields
 from fenics_contact.problem.geometry import ContactMesh
 from fenics_contact.problem.models import TestModel
@@ -80,6 +82,7 @@ class PrimalHybridStep:
         gdim = cm.mesh.geometry.dim
         self.interface = InterfaceSpace(cm, self.parts, shape=(gdim,))
         parent_fields = material_fields(cm.mesh, model)
+        check_boundary_groups(cm.mesh, cm.facet_tags, parent_fields.boundary, names=cm.neumann_names)
         self.alpha = robin_coefficient(alpha, parent_fields.E, self.interface, cm.h)
         self.sub = []
         for i, part in enumerate(self.parts):
@@ -230,6 +233,9 @@ def solve_primal_hybrid(
     ``initial_data`` warm-starts the interface data; ``step`` reuses a step (and its offline
     data) from an earlier solve on the same mesh and model.
     """
+    check_solve_inputs(cm, model, options=options, newton=newton)
+    if reference is not None:
+        check_reference_displacement(reference, cm)
     start = time.perf_counter()
     if step is None:
         step = PrimalHybridStep(cm, model, alpha=alpha, delta=delta, newton=newton, reference=reference)

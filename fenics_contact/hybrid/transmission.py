@@ -142,7 +142,11 @@ def robin_coefficient(alpha: float | str, E: fem.Function, space: "InterfaceSpac
                 f"cannot read alpha={alpha!r}: give a number or a product like 'h^-1/2', 'sqrt-h', 'E', '2E*h^-1/2'"
             ) from None
     else:
-        scale = float(alpha)
+        try:
+            scale = float(alpha)
+        except (TypeError, ValueError):
+            raise InputError(f"the transmission coefficient must be a number or a string like 'E*h^-1/2', "
+                             f"got {alpha!r}") from None
     if not (np.isfinite(scale) and scale > 0):
         raise InputError(f"the transmission coefficient must be > 0, got {alpha!r}")
     if not with_E:

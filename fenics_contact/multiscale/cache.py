@@ -3,13 +3,19 @@
 A file stores its full key and a checksum of its arrays; one whose key or
 checksum does not match (another configuration, a corrupt or truncated file) is
 reported and rebuilt, never used. Files are written atomically (temporary file
-in the same directory, then rename). Subclasses set the file ``prefix`` and the
+in the same directory, then rename); a temporary left by a writer that died (kill -9
+during a save) carries its process id and host in its name and is removed by the next
+``load`` or ``save`` in that directory. Subclasses set the file ``prefix`` and the
 ``pack`` / ``unpack`` hooks (``cem.PrimalOfflineCache``, ``mixed_cem.MixedOfflineCache``).
 """
 
 import hashlib
+import logging
 import os
+import re
+import socket
 import tempfile
+import time
 import zipfile
 from pathlib import Path
 
@@ -17,7 +23,58 @@ import numpy as np
 
 from fenics_contact.errors import InputError
 
-__all__ = ["OfflineCache", "checksum", "hash_array"]
+__all__ = ["OfflineCache", "checksum", "hash_array", "remove_stale_temporaries"]
+
+log = logging.getLogger(__name__)
+
+#: temporaries are named ``<stem>.<random>.pid<pid>@<host>.npz.tmp``
+_TEMPORARY = re.compile(r"\.pid(?P<pid>\d+)@(?P<host>.+)\.npz\.tmp$")
+#: age after which a temporary of another host, or without a process id (older versions), is stale
+_STALE_AGE_S = 3600.0
+
+
+def _host() -> str:
+    return socket.gethostname() or "localhost"
+
+
+def _temporary_suffix() -> str:
+    return f".pid{os.getpid()}@{_host()}.npz.tmp"
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # another user's process
+        return True
+    return True
+
+
+def remove_stale_temporaries(directory: str | Path) -> list[Path]:
+    """Remove ``*.npz.tmp`` files whose writer is gone: a dead process of this host, or older than an hour."""
+    removed = []
+    try:
+        candidates = list(Path(directory).glob("*.npz.tmp"))
+    except OSError:
+        return removed
+    now = time.time()
+    for path in candidates:
+        match = _TEMPORARY.search(path.name)
+        try:
+            if match is not None and match["host"] == _host():
+                stale = not _alive(int(match["pid"]))
+            else:
+                stale = now - path.stat().st_mtime > _STALE_AGE_S
+            if stale:
+                path.unlink()
+                removed.append(path)
+        except OSError:  # gone meanwhile, or a read-only directory
+            continue
+    if removed:
+        log.info("removed %d stale temporary file(s) in %s (writers that died during a save)", len(removed),
+                 directory)
+    return removed
 
 
 def hash_array(h: "hashlib._Hash", a: np.ndarray) -> None:
@@ -65,6 +122,7 @@ class OfflineCache:
         ``context`` is passed to ``unpack`` (the operators and grid the data must fit).
         """
         path = self.path(key)
+        remove_stale_temporaries(self.directory)
         if not path.is_file():
             return None, "missing"
         try:
@@ -84,7 +142,7 @@ class OfflineCache:
         """Raise InputError unless a file can be created in the directory (creating the directory if needed)."""
         try:
             self.directory.mkdir(parents=True, exist_ok=True)
-            fd, tmp = tempfile.mkstemp(dir=self.directory, suffix=".npz.tmp")
+            fd, tmp = tempfile.mkstemp(dir=self.directory, prefix="write-test.", suffix=_temporary_suffix())
             os.close(fd)
             os.remove(tmp)
         except OSError as err:
@@ -97,7 +155,8 @@ class OfflineCache:
         arrays["checksum"] = np.array(checksum(arrays))
         arrays["key"] = np.array(key)
         path = self.path(key)
-        fd, tmp = tempfile.mkstemp(dir=self.directory, suffix=".npz.tmp")
+        remove_stale_temporaries(self.directory)
+        fd, tmp = tempfile.mkstemp(dir=self.directory, prefix=f"{path.stem}.", suffix=_temporary_suffix())
         try:
             with os.fdopen(fd, "wb") as fh:
                 np.savez(fh, **arrays)

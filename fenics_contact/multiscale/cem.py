@@ -834,8 +834,12 @@ def offline_stage(
         return space, status
     if status != "missing":
         log.warning("CEM offline cache %s rejected (%s); rebuilding", cache.path(key), status)
+    cache.check_writable()  # before the expensive build, not after it
     space = build_multiscale_space(ops, grid, options)
-    cache.save(key, space)
+    try:
+        cache.save(key, space)
+    except OSError as err:  # the directory went away or filled up meanwhile: keep the built data
+        log.warning("CEM offline data could not be saved to %s: %s", cache.path(key), err)
     return space, "built" if status == "missing" else "rebuilt"
 
 

@@ -42,6 +42,7 @@ from dolfinx import fem
 from fenics_contact.fem import forms_mixed
 from fenics_contact.fem.contact import NewtonOptions
 from fenics_contact.hybrid.certificate import mixed_certificate
+from fenics_contact.hybrid.inputs import check_solve_inputs, require_instance
 from fenics_contact.hybrid.iteration import (
     InterfaceNewtonOptions,
     IterationHistory,
@@ -50,6 +51,7 @@ from fenics_contact.hybrid.iteration import (
     iterate,
 )
 from fenics_contact.errors import InputError
+from fenics_contact.problem.boundary import boundary_data_on
 from fenics_contact.problem.geometry import ContactMesh
 from fenics_contact.fem.mixed import MixedContactProfile, MixedSolution
 from fenics_contact.hybrid.mixed import MixedHybridStep, solve_or_verify
@@ -89,6 +91,13 @@ class MixedMultiscaleHybridStep(MixedHybridStep):
         super().__init__(cm, model, beta=beta, epsilon=epsilon, newton=newton)
         setup = time.perf_counter() - start
         part = self.parts[0]
+        # (issue 14) the Ω₁ local AW spaces do not yet impose σn = 0 / σn = t nor take u_D
+        unsupported = boundary_data_on(part.mesh, part.facet_tags, model.boundary, traction_free=True)
+        if unsupported:
+            raise InputError(
+                f"Algorithm 4 cannot yet take {' and '.join(unsupported)} on Ω₁ (its local stress spaces would "
+                "clamp them); use the fine Algorithm 2 (method 'mixed') or clamp those sides (Gamma_D)"
+            )
         grid = coarse_grid(part.mesh, part.cell_map, cm.coarse_cell, cm.H)
         self.cem = cem
         self.omega1 = MixedMultiscaleOmega1(self.sub[0], grid, cem, H=cm.H, cache_dir=cache_dir)
@@ -158,7 +167,7 @@ class MixedMultiscaleHybridStep(MixedHybridStep):
         newton = solve_or_verify(self.sub[1], g21[self._perm2], omega2_warm)
         t1 = self.omega1.response.trace(g12)
         t2 = np.empty(n)
-        t2[self._perm2] = self.sub[1].N @ self.sub[1].c
+        t2[self._perm2] = self.sub[1].gamma_traction()
         self._measure()
         self._certificate = mixed_certificate(t1, t2, g12, g21, self.beta, self.gamma_mass)
         self._record = omega2_record(newton)
@@ -274,6 +283,9 @@ def solve_mixed_ms_hybrid(
     number of Stage I modes per coarse cell; ``min_gap`` adds modes where the first eigenvalue left
     out is below it (up to ``max_nbasis``; ``None`` keeps exactly ``nbasis``, the paper's fixed l).
     """
+    check_solve_inputs(cm, model, options=options, newton=newton)
+    if reference is not None:
+        require_instance(reference, MixedSolution, "the reference", " (from fem.mixed.solve_mixed_monolithic)")
     if reference is not None and epsilon is None:
         epsilon = reference.epsilon
     cem = MixedCEMOptions(layers=layers, nbasis=nbasis, min_gap=min_gap, max_nbasis=max_nbasis, weight=weight,

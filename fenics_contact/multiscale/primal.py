@@ -26,7 +26,9 @@ from fenics_contact.multiscale.cem import DEFAULT_S_FACTOR, CEMOptions, Omega1Mu
 from fenics_contact.fem.contact import NewtonOptions
 from fenics_contact.hybrid.certificate import Certificate, primal_certificate
 from fenics_contact.hybrid.iteration import InterfaceNewtonOptions, IterationOptions, iterate
+from fenics_contact.hybrid.inputs import check_reference_displacement, check_solve_inputs
 from fenics_contact.errors import InputError
+from fenics_contact.problem.boundary import boundary_data_on
 from fenics_contact.problem.fields import material_fields
 from fenics_contact.problem.geometry import ContactMesh
 from fenics_contact.problem.models import TestModel
@@ -60,6 +62,13 @@ class MultiscalePrimalHybridStep:
         start = time.perf_counter()
         self.comm = cm.comm
         self.parts = split_mesh(cm)
+        # (issue 14) the Ω₁ CEM space takes clamped and traction-free sides, not yet u_D or tractions
+        unsupported = boundary_data_on(self.parts[0].mesh, self.parts[0].facet_tags, model.boundary)
+        if unsupported:
+            raise InputError(
+                f"Algorithm 3 cannot yet take {' and '.join(unsupported)} on Ω₁ (its multiscale space ignores "
+                "them); use the fine Algorithm 1 (method 'primal') or move that boundary into Ω₂"
+            )
         gdim = cm.mesh.geometry.dim
         self.interface = InterfaceSpace(cm, self.parts, shape=(gdim,))
         parent_fields = material_fields(cm.mesh, model)
@@ -208,6 +217,9 @@ def solve_primal_ms_hybrid(
     bases, N and the coarse factorization (breakdown in ``result.step.offline_times``);
     ``time_online_s`` the iteration.
     """
+    check_solve_inputs(cm, model, options=options, newton=newton)
+    if reference is not None:
+        check_reference_displacement(reference, cm)
     cem = CEMOptions(layers=layers, nbasis=nbasis, threshold=threshold, s_factor=s_factor)
     if step is None:
         step = MultiscalePrimalHybridStep(

@@ -11,27 +11,40 @@ from dolfinx import fem, la
 from dolfinx import mesh as dmesh
 
 from fenics_contact.errors import InputError
+from fenics_contact.problem.boundary import BoundaryConditions
 from fenics_contact.problem.materials import check_poisson_ratio, check_youngs_modulus, lame
 from fenics_contact.problem.models import TestModel
+from fenics_contact.problem.obstacles import Obstacle
 
 __all__ = ["MaterialFields", "cell_function", "material_fields", "SubmeshTransfer"]
 
 
 class MaterialFields(NamedTuple):
-    """Piecewise-constant (DG0) E, ν, λ, μ and body force f on a mesh."""
+    """Piecewise-constant (DG0) E, ν, λ, μ and body force f on a mesh, with the model's boundary data.
+
+    ``boundary`` (Γ_D displacement, Γ_N tractions) and ``obstacle`` (None: a wall flush
+    with Γ_C) ride along so that every subproblem built from the fields sees them.
+    """
 
     E: fem.Function
     nu: fem.Function
     lmbda: fem.Function
     mu: fem.Function
     f: fem.Function
+    boundary: BoundaryConditions = BoundaryConditions()
+    obstacle: Obstacle | None = None
 
 
 def cell_function(msh: dmesh.Mesh, field: Callable[[np.ndarray], np.ndarray], *, shape=(), name="") -> fem.Function:
     """A DG0 function with the values of ``field`` at the cell midpoints."""
     V = fem.functionspace(msh, basix.ufl.element("DG", msh.basix_cell(), 0, shape=shape))
     fn = fem.Function(V, name=name)
-    fn.interpolate(field)
+    try:
+        fn.interpolate(field)
+    except (TypeError, ValueError, IndexError, RuntimeError) as err:
+        expected = "(" + ", ".join([*map(str, shape), "N"]) + (",)" if not shape else ")")
+        raise InputError(f"the field {name or 'given'} must map points x of shape (3, N) to values of shape "
+                         f"{expected}: {type(err).__name__}: {str(err).splitlines()[0]}") from None
     fn.x.scatter_forward()
     return fn
 
@@ -40,7 +53,8 @@ def material_fields(msh: dmesh.Mesh, model: TestModel, *, require_load: bool = F
     """DG0 material fields of ``model`` on ``msh``; raises InputError on E ≤ 0 or ν ∉ (−1, ½).
 
     With ``require_load`` (for the whole domain, not a subdomain) a body force that
-    vanishes on every cell is an InputError: the mesh does not resolve the load.
+    vanishes on every cell is an InputError (the mesh does not resolve the load),
+    unless the model is loaded otherwise (a Γ_D displacement, tractions or an obstacle).
     """
     E = cell_function(msh, model.youngs_modulus, name="E")
     nu = cell_function(msh, model.poisson_ratio, name="nu")
@@ -52,12 +66,13 @@ def material_fields(msh: dmesh.Mesh, model: TestModel, *, require_load: bool = F
     lmbda.x.array[:] = lm
     mu.x.array[:] = mu_
     f = cell_function(msh, model.load, shape=(msh.geometry.dim,), name="f")
-    if require_load and msh.comm.allreduce(float(np.max(np.abs(f.x.array), initial=0.0)), op=MPI.MAX) == 0.0:
+    loaded_otherwise = not model.boundary.is_default or model.obstacle is not None
+    if require_load and not loaded_otherwise and msh.comm.allreduce(float(np.max(np.abs(f.x.array), initial=0.0)), op=MPI.MAX) == 0.0:
         raise InputError(
             f"the body force of {model.name!r} is zero on every cell of this mesh (too coarse to resolve the "
             "load bands?): the solution would be u = 0. Refine the mesh (the built-in loads act on x >= 15/16)."
         )
-    return MaterialFields(E, nu, lmbda, mu, f)
+    return MaterialFields(E, nu, lmbda, mu, f, model.boundary, model.obstacle)
 
 
 class SubmeshTransfer:

@@ -9,7 +9,9 @@ the same physical-group names (``tags.PHYSICAL_NAMES``).
 
 import contextlib
 import logging
-from collections.abc import Iterator
+import signal
+import threading
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import NamedTuple
 
@@ -22,11 +24,18 @@ import dolfinx.io.gmsh
 from dolfinx import mesh as dmesh
 
 from fenics_contact.errors import InputError, MeshTagError
-from fenics_contact.problem.tags import PHYSICAL_NAMES, Boundary, Subdomain
+from fenics_contact.problem import validation
+from fenics_contact.problem.tags import PHYSICAL_NAMES, Boundary, Subdomain, is_neumann_name, neumann_tag
 
-__all__ = ["ContactMesh", "unit_square", "read_mesh", "gmsh_session", "build_unit_square_model"]
+__all__ = [
+    "ContactMesh", "unit_square", "read_mesh", "mesh_size", "gmsh_session", "build_unit_square_model",
+    "contact_mesh_from_model",
+]
 
 log = logging.getLogger(__name__)
+
+#: gmsh element type of the 3-node triangle
+_TRIANGLE = 2
 
 
 class ContactMesh(NamedTuple):
@@ -35,9 +44,10 @@ class ContactMesh(NamedTuple):
     mesh: dmesh.Mesh
     cell_tags: dmesh.MeshTags
     facet_tags: dmesh.MeshTags
-    h: float  #: fine mesh size (largest cell diameter for a user mesh)
+    h: float  #: fine mesh size: 1/n, or ``mesh_size`` (√(2·largest cell area)) for a user mesh
     H: float | None  #: coarse size / strip width (None when unknown)
     coarse_cell: np.ndarray  #: coarse-square index of every local cell (-1 if no coarse grid)
+    neumann_names: dict | None = None  #: traction-group tag -> physical name (Gamma_N*)
 
     @property
     def comm(self) -> MPI.Comm:
@@ -47,22 +57,41 @@ class ContactMesh(NamedTuple):
 
 @contextlib.contextmanager
 def gmsh_session(*, verbosity: int = 0) -> Iterator[None]:
-    """Initialise gmsh for the duration of a ``with`` block (no global state leaks)."""
+    """Initialise gmsh for the duration of a ``with`` block (no global state leaks).
+
+    gmsh's initialisation resets the SIGTERM disposition to the default (die at once); the
+    Python handlers of SIGINT and SIGTERM are put back, so a run can still end cleanly.
+    """
     started = not gmsh.isInitialized()
+    handlers = _signal_handlers()
     if started:
         gmsh.initialize(interruptible=False)
+        _restore_signal_handlers(handlers)
     gmsh.option.setNumber("General.Terminal", verbosity)
     try:
         yield
     finally:
         if started:
             gmsh.finalize()
+            _restore_signal_handlers(handlers)
+
+
+def _signal_handlers() -> dict:
+    if threading.current_thread() is not threading.main_thread():
+        return {}
+    return {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+
+
+def _restore_signal_handlers(handlers: dict) -> None:
+    for s, handler in handlers.items():
+        if handler is not None:
+            signal.signal(s, handler)
 
 
 def _check_sizes(n: int, n_coarse: int) -> None:
-    if int(n) != n or n < 2:
+    if not _is_integral(n) or n < 2:
         raise InputError(f"1/h must be an integer >= 2, got {n!r}")
-    if int(n_coarse) != n_coarse or n_coarse < 2:
+    if not _is_integral(n_coarse) or n_coarse < 2:
         raise InputError(
             f"1/H must be an integer >= 2 (the strip Ω₂ of width H must leave room for Ω₁), got {n_coarse!r}"
         )
@@ -72,9 +101,39 @@ def _check_sizes(n: int, n_coarse: int) -> None:
         )
 
 
-def build_unit_square_model(n: int, n_coarse: int, *, diagonal: str = "Right") -> None:
-    """Create the structured, tagged gmsh model of the unit square in the current gmsh session."""
+def _is_integral(value) -> bool:
+    return isinstance(value, (int, float, np.integer, np.floating)) and np.isfinite(value) and int(value) == value
+
+
+#: The sides of the unit square that may be clamped or carry a traction group (x = 1 is Γ_C).
+SIDES = ("left", "bottom", "top")
+
+
+def _check_sides(clamped, neumann) -> tuple[tuple[str, ...], dict[str, str]]:
+    clamped = tuple(clamped)
+    neumann = dict(neumann or {})
+    for side in (*clamped, *neumann):
+        if side not in SIDES:
+            raise InputError(f"unknown side {side!r}: the unit square's sides are {SIDES} (x = 1 is Gamma_C)")
+    both = sorted(set(clamped) & set(neumann))
+    if both:
+        raise InputError(f"side(s) {both} cannot be clamped (Gamma_D) and carry a traction group (Gamma_N) at once")
+    for name in neumann.values():
+        neumann_tag(name)  # validates the name
+    return clamped, neumann
+
+
+def build_unit_square_model(
+    n: int, n_coarse: int, *, diagonal: str = "Right", clamped=SIDES, neumann: dict[str, str] | None = None
+) -> None:
+    """Create the structured, tagged gmsh model of the unit square in the current gmsh session.
+
+    ``clamped``: the sides in Γ_D; ``neumann``: side -> traction group name (``Gamma_N*``);
+    other sides are traction free (untagged).
+    """
     _check_sizes(n, n_coarse)
+    clamped, neumann = _check_sides(clamped, neumann)
+    n, n_coarse = int(n), int(n_coarse)
     H = 1.0 / n_coarse
     xs = 1.0 - H
     geo = gmsh.model.geo
@@ -93,57 +152,230 @@ def build_unit_square_model(n: int, n_coarse: int, *, diagonal: str = "Right") -
         gmsh.model.mesh.setTransfiniteCurve(curve, cells + 1)
     for s in (s1, s2):
         gmsh.model.mesh.setTransfiniteSurface(s, diagonal)
+    side_curves = {"left": [left], "bottom": [bottom1, bottom2], "top": [top1, top2]}
     groups = {
         Subdomain.OMEGA1: (2, [s1]),
         Subdomain.OMEGA2: (2, [s2]),
-        Boundary.GAMMA_D: (1, [bottom1, bottom2, top1, top2, left]),
+        Boundary.GAMMA_D: (1, [c for side in clamped for c in side_curves[side]]),
         Boundary.GAMMA_C: (1, [contact]),
         Boundary.INTERFACE: (1, [interface]),
     }
     for tag, (dim, entities) in groups.items():
-        gmsh.model.addPhysicalGroup(dim, entities, int(tag), name=PHYSICAL_NAMES[tag])
+        if entities:
+            gmsh.model.addPhysicalGroup(dim, entities, int(tag), name=PHYSICAL_NAMES[tag])
+    by_name: dict[str, list[int]] = {}
+    for side, name in neumann.items():
+        by_name.setdefault(name, []).extend(side_curves[side])
+    for name, curves in sorted(by_name.items()):
+        gmsh.model.addPhysicalGroup(1, curves, neumann_tag(name), name=name)
     gmsh.model.mesh.generate(2)
 
 
-def unit_square(n: int, n_coarse: int, *, comm: MPI.Comm = MPI.COMM_WORLD, diagonal: str = "Right") -> ContactMesh:
-    """Tagged structured mesh of (0,1)², h = 1/n, strip Ω₂ of width H = 1/n_coarse."""
+def unit_square(
+    n: int,
+    n_coarse: int,
+    *,
+    comm: MPI.Comm = MPI.COMM_WORLD,
+    diagonal: str = "Right",
+    clamped=SIDES,
+    neumann: dict[str, str] | None = None,
+) -> ContactMesh:
+    """Tagged structured mesh of (0,1)², h = 1/n, strip Ω₂ of width H = 1/n_coarse.
+
+    Γ_C is the side x = 1; ``clamped`` lists the sides in Γ_D (default all three others),
+    ``neumann`` maps sides to traction group names (e.g. ``{"top": "Gamma_N_top"}``);
+    the remaining sides are traction free.
+    """
     _check_sizes(n, n_coarse)
+    clamped, neumann = _check_sides(clamped, neumann)
+    n, n_coarse = int(n), int(n_coarse)
     with gmsh_session():
         if comm.rank == 0:
-            build_unit_square_model(n, n_coarse, diagonal=diagonal)
+            build_unit_square_model(n, n_coarse, diagonal=diagonal, clamped=clamped, neumann=neumann)
         data = dolfinx.io.gmsh.model_to_mesh(gmsh.model, comm, 0, gdim=2)
     cm = _contact_mesh(data, h=1.0 / n, H=1.0 / n_coarse)
     return cm
 
 
-def read_mesh(path: str | Path, *, comm: MPI.Comm = MPI.COMM_WORLD, H: float | None = None) -> ContactMesh:
+def contact_mesh_from_model(comm: MPI.Comm, *, h: float, H: float | None = None) -> ContactMesh:
+    """The ContactMesh of the gmsh model built (on rank 0) in the current gmsh session (collective)."""
+    data = dolfinx.io.gmsh.model_to_mesh(gmsh.model, comm, 0, gdim=2)
+    return _contact_mesh(data, h=h, H=H)
+
+
+def read_mesh(
+    path: str | Path,
+    *,
+    comm: MPI.Comm = MPI.COMM_WORLD,
+    H: float | None = None,
+    validate: bool = True,
+    rules: Iterable[validation.BoundaryRule] = validation.BOUNDARY_RULES,
+    overlay_groups: Iterable[str] = (),
+) -> ContactMesh:
     """Load a gmsh ``.msh`` file whose physical groups carry the names of ``tags.PHYSICAL_NAMES``.
 
-    Tags are matched by physical *name*, so any integers may be used in the file.
+    Tags are matched by physical *name*, so any integers may be used in the file. The file
+    must hold a planar (z = 0) mesh of 3-node triangles; anything else is an InputError, raised
+    before the mesh is built. With ``validate`` the tags are then checked against the contact
+    problem (``validation.validate_contact_mesh`` with ``rules``: γ the common boundary of Ω₁
+    and Ω₂, Γ_C on ∂Ω₂ away from γ, Γ_D and Γ_C disjoint, a conforming mesh), a MeshTagError
+    naming the group otherwise. ``h`` of the result is the mesh size ``mesh_size`` (1/n on the
+    built-in meshes), ``H`` the side of the coarse grid of squares from the origin (multiscale methods).
+    ``overlay_groups``: surface groups that overlay Omega1/Omega2 (materials by group, read with
+    ``problem.cell_groups.read_cell_groups``); they are left out of the mesh and its checks.
     """
     path = Path(path)
+    overlay_groups = set(overlay_groups)
+    if H is not None and not (isinstance(H, (int, float)) and np.isfinite(H) and 0 < H <= 1
+                              and abs(1.0 / H - round(1.0 / H)) <= 1e-9 / H):
+        raise InputError(f"the coarse size H must be 1/N for an integer N >= 1 (coarse squares of side H over "
+                         f"the unit square), got {H!r}")
     if not path.is_file():
-        raise InputError(f"mesh file {path} does not exist")
+        raise InputError(f"mesh file {path} does not exist" if not path.exists() else f"mesh file {path} is not a file")
     with gmsh_session():
-        names = None
+        problem = None
         if comm.rank == 0:
             gmsh.model.add("user mesh")
-            gmsh.merge(str(path))
-            names = {gmsh.model.getPhysicalName(d, t) for d, t in gmsh.model.getPhysicalGroups()}
-        names = comm.bcast(names, root=0)
+            try:
+                gmsh.merge(str(path))
+            except Exception as err:  # gmsh raises a bare Exception with its parser's message
+                problem = (InputError, f"cannot read {path} as a gmsh mesh: {err}")
+            else:
+                for dim, tag in gmsh.model.getPhysicalGroups(2):  # overlays: read separately, not cell tags
+                    if gmsh.model.getPhysicalName(dim, tag) in overlay_groups:
+                        gmsh.model.removePhysicalGroups([(dim, tag)])
+                problem = _gmsh_model_problem(path)
+        problem = comm.bcast(problem, root=0)
         # validate before the collective mesh construction (which aborts on inconsistent tags)
-        missing = [name for name in PHYSICAL_NAMES.values() if name not in names]
-        if missing:
-            raise MeshTagError(
-                f"{path} lacks the physical group(s) {missing}; it has {sorted(names)}. "
-                f"Required names: {list(PHYSICAL_NAMES.values())}"
-            )
+        if problem is not None:
+            error, message = problem
+            raise error(message)
         data = dolfinx.io.gmsh.model_to_mesh(gmsh.model, comm, 0, gdim=2)
-    msh = data.mesh
+    cm = _contact_mesh(data, h=mesh_size(data.mesh), H=H)
+    if validate:
+        validation.validate_contact_mesh(cm, rules, source=str(path))
+    return cm
+
+
+def mesh_size(msh: dmesh.Mesh) -> float:
+    """h = max over the cells of √(2|T|): the leg of the right isosceles triangle of the largest cell's area.
+
+    On the built-in meshes (squares of side 1/n cut in two) this is 1/n, so a user mesh of the same
+    grid gets the same h, and with it the same default penalty δ and Robin coefficient α.
+    """
     tdim = msh.topology.dim
     cells = np.arange(msh.topology.index_map(tdim).size_local, dtype=np.int32)
-    h = msh.comm.allreduce(float(np.max(msh.h(tdim, cells))) if cells.size else 0.0, op=MPI.MAX)
-    return _contact_mesh(data, h=h, H=H)
+    geo = dmesh.entities_to_geometry(msh, tdim, cells)
+    x = msh.geometry.x[geo][:, :, :2]
+    d1, d2 = x[:, 1] - x[:, 0], x[:, 2] - x[:, 0]
+    area = 0.5 * np.abs(d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0])
+    return msh.comm.allreduce(float(np.sqrt(2.0 * area.max())) if area.size else 0.0, op=MPI.MAX)
+
+
+def _gmsh_model_problem(path: Path) -> tuple[type, str] | None:
+    """(error class, message) if the current gmsh model is not a planar triangle mesh with the named groups."""
+    def names_of(types) -> list[str]:
+        return [gmsh.model.mesh.getElementProperties(t)[0] for t in types]
+
+    solid = gmsh.model.mesh.getElementTypes(3)
+    if len(solid):
+        return InputError, (f"{path} is a 3D mesh (it has {names_of(solid)} elements); fenics-contact needs a "
+                            "planar 2D mesh of triangles")
+    surface = list(gmsh.model.mesh.getElementTypes(2))
+    if not surface:
+        return InputError, (f"{path} holds no triangles (no 2D mesh elements): is it a mesh? A .geo model must be "
+                            "meshed first (gmsh -2 model.geo -o model.msh)")
+    if surface != [_TRIANGLE]:
+        other = names_of(t for t in surface if t != _TRIANGLE)
+        return InputError, (f"{path} has {other} elements; fenics-contact needs 3-node triangles only "
+                            "(no quadrangles, no second-order elements)")
+    _, coords, _ = gmsh.model.mesh.getNodes()
+    z = np.abs(np.asarray(coords).reshape(-1, 3)[:, 2])
+    if np.any(z > 0.0):
+        return InputError, (f"{path}: {np.count_nonzero(z > 0)} nodes have z ≠ 0 (largest |z| = {z.max():.3g}); "
+                            "the mesh must lie in the plane z = 0 (it is not projected)")
+    dims: dict[str, set[int]] = {}
+    for dim, tag in gmsh.model.getPhysicalGroups():
+        dims.setdefault(gmsh.model.getPhysicalName(dim, tag), set()).add(dim)
+    wrong = []
+    for tag, name in PHYSICAL_NAMES.items():
+        want = 2 if isinstance(tag, Subdomain) else 1
+        if name in dims and want not in dims[name]:
+            kinds = {0: "a point", 1: "a curve", 2: "a surface", 3: "a volume"}
+            got = " and ".join(kinds[d] for d in sorted(dims[name]))
+            wrong.append(f"{name!r} is {got} group (dimension {sorted(dims[name])}); it must be {kinds[want]} "
+                         f"group (dimension {want})")
+    if wrong:
+        return MeshTagError, f"{path}: " + "; ".join(wrong)
+    missing = [name for name in PHYSICAL_NAMES.values() if name not in dims]
+    if missing:
+        return MeshTagError, (f"{path} lacks the physical group(s) {missing}; it has {sorted(dims)}. "
+                              f"Required names: {list(PHYSICAL_NAMES.values())}")
+    return _surface_groups_problem(path) or _curve_groups_problem(path)
+
+
+def _curve_groups_problem(path: Path) -> tuple[type, str] | None:
+    """No segment may be in two curve groups: a mesh facet carries one tag (dolfinx would keep one of them)."""
+    keys, owner, names = [], [], []
+    for dim, tag in gmsh.model.getPhysicalGroups(1):
+        names.append(gmsh.model.getPhysicalName(dim, tag))
+        segments = [np.zeros((0, 2), dtype=np.int64)]
+        for entity in gmsh.model.getEntitiesForPhysicalGroup(dim, tag):
+            types, _, nodes = gmsh.model.mesh.getElements(1, entity)
+            segments += [np.asarray(n, dtype=np.int64).reshape(-1, 2) for t, n in zip(types, nodes) if t == 1]
+        segments = np.unique(np.sort(np.concatenate(segments), axis=1), axis=0)
+        keys.append(segments)
+        owner.append(np.full(segments.shape[0], len(names) - 1))
+    if not keys:
+        return None
+    keys, owner = np.concatenate(keys), np.concatenate(owner)
+    _, inverse, counts = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
+    shared = counts[inverse.reshape(-1)] > 1
+    if not np.any(shared):
+        return None
+    pairs: dict[tuple[str, str], int] = {}
+    groups_of: dict[int, list[int]] = {}
+    for segment, group in zip(inverse.reshape(-1)[shared], owner[shared]):
+        groups_of.setdefault(int(segment), []).append(int(group))
+    for groups in groups_of.values():
+        for a in range(len(groups)):
+            for b in range(a + 1, len(groups)):
+                pair = tuple(sorted((names[groups[a]], names[groups[b]])))
+                pairs[pair] = pairs.get(pair, 0) + 1
+    text = "; ".join(f"{a!r} and {b!r} share {n} segments" for (a, b), n in pairs.items())
+    return MeshTagError, (f"{path} does not describe the contact problem: {text}: they must be disjoint "
+                          "(a mesh facet carries one tag)")
+
+
+def _surface_groups_problem(path: Path) -> tuple[type, str] | None:
+    """Every triangle must be in exactly one surface group, and that group Omega1 or Omega2."""
+    _, element_tags, _ = gmsh.model.mesh.getElements(2)
+    triangles = np.concatenate([np.asarray(t, dtype=np.int64) for t in element_tags])
+    count = np.zeros(triangles.size, dtype=np.int64)
+    known = np.zeros(triangles.size, dtype=bool)
+    order = np.argsort(triangles)
+    others = []
+    for dim, tag in gmsh.model.getPhysicalGroups(2):
+        name = gmsh.model.getPhysicalName(dim, tag)
+        members = [np.zeros(0, dtype=np.int64)]
+        for entity in gmsh.model.getEntitiesForPhysicalGroup(dim, tag):
+            members += [np.asarray(t, dtype=np.int64) for t in gmsh.model.mesh.getElements(2, entity)[1]]
+        members = np.unique(np.concatenate(members))
+        pos = order[np.searchsorted(triangles, members, sorter=order)]
+        np.add.at(count, pos, 1)
+        if name in (PHYSICAL_NAMES[Subdomain.OMEGA1], PHYSICAL_NAMES[Subdomain.OMEGA2]):
+            known[pos] = True
+        elif members.size:
+            others.append(name)
+    problems = []
+    if np.any(~known):
+        problems.append(f"{np.count_nonzero(~known)} of {triangles.size} triangles are in neither Omega1 nor Omega2")
+    if np.any(count > 1):
+        problems.append(f"{np.count_nonzero(count > 1)} triangles are in more than one surface group (of Omega1, "
+                        f"Omega2 and {others}); every triangle must be in exactly one")
+    if problems:
+        return MeshTagError, f"{path} does not describe the contact problem: " + "; ".join(problems)
+    return None
 
 
 def _retag(tags: dmesh.MeshTags | None, groups: dict, wanted: list, msh: dmesh.Mesh, dim: int) -> dmesh.MeshTags:
@@ -161,6 +393,11 @@ def _retag(tags: dmesh.MeshTags | None, groups: dict, wanted: list, msh: dmesh.M
         found = tags.find(file_tag)
         entities.append(found)
         values.append(np.full(found.size, int(t), dtype=np.int32))
+    for name, group in groups.items():  # traction groups Gamma_N*: tag = neumann_tag(name)
+        if dim == msh.topology.dim - 1 and group.dim == dim and is_neumann_name(name):
+            found = tags.find(group.tag)
+            entities.append(found)
+            values.append(np.full(found.size, neumann_tag(name), dtype=np.int32))
     entities = np.concatenate(entities)
     values = np.concatenate(values)
     order = np.argsort(entities, kind="stable")
@@ -185,8 +422,17 @@ def _contact_mesh(data: dolfinx.io.gmsh.MeshData, *, h: float, H: float | None) 
     coarse = np.full(num_cells, -1, dtype=np.int32)
     if H is not None:
         n_coarse = int(round(1.0 / H))
-        mid = dmesh.compute_midpoints(msh, tdim, np.arange(num_cells, dtype=np.int32))
+        all_cells = np.arange(num_cells, dtype=np.int32)
+        mid = dmesh.compute_midpoints(msh, tdim, all_cells)
         i = np.clip(np.floor(mid[:, 0] / H).astype(np.int32), 0, n_coarse - 1)
         j = np.clip(np.floor(mid[:, 1] / H).astype(np.int32), 0, n_coarse - 1)
         coarse = i + n_coarse * j
-    return ContactMesh(msh, cell_tags, facet_tags, float(h), H, coarse)
+        # a cell that leaves the coarse square of its midpoint lies in no coarse cell (-1)
+        x = msh.geometry.x[dmesh.entities_to_geometry(msh, tdim, all_cells)][:, :, :2]
+        tol = 1e-9 * H
+        lo = np.stack([i, j], axis=1)[:, None, :] * H - tol
+        inside = np.all((x >= lo) & (x <= lo + H + 2 * tol), axis=(1, 2))
+        coarse[~inside] = -1
+    neumann = {neumann_tag(name): name for name, g in data.physical_groups.items()
+               if g.dim == tdim - 1 and is_neumann_name(name)}
+    return ContactMesh(msh, cell_tags, facet_tags, float(h), H, coarse, neumann)

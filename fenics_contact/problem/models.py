@@ -40,6 +40,8 @@ import numpy as np
 import numpy.typing as npt
 
 from fenics_contact.errors import InputError
+from fenics_contact.problem.boundary import BoundaryConditions
+from fenics_contact.problem.obstacles import Obstacle
 
 __all__ = [
     "TestModel", "constant_field", "get_model", "model_1", "model_2", "model_3", "paper_phase_model", "pixel_field",
@@ -53,7 +55,12 @@ VectorField = Callable[[np.ndarray], np.ndarray]
 
 @dataclass(frozen=True, slots=True)
 class TestModel:
-    """A contact test model: E(x), ν(x) and body force f(x) on Ω = (0,1)²."""
+    """A contact problem's data: E(x), ν(x), body force f(x), boundary conditions and obstacle.
+
+    ``boundary``: Γ_D displacement and Γ_N tractions (default: Γ_D clamped, no traction
+    groups; every other exterior facet is traction free). ``obstacle``: the rigid
+    obstacle in contact with Γ_C (default None: a wall flush with Γ_C, zero gap).
+    """
 
     __test__ = False  # not a pytest test class
 
@@ -62,6 +69,14 @@ class TestModel:
     poisson_ratio: ScalarField
     load: VectorField
     description: str = ""
+    boundary: BoundaryConditions = BoundaryConditions()
+    obstacle: Obstacle | None = None
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.boundary, BoundaryConditions):
+            raise InputError(f"TestModel.boundary must be a BoundaryConditions, got {type(self.boundary).__name__}")
+        if self.obstacle is not None and not isinstance(self.obstacle, Obstacle):
+            raise InputError(f"TestModel.obstacle must be an Obstacle or None, got {type(self.obstacle).__name__}")
 
     def with_(self, **changes) -> "TestModel":
         """A copy with some fields replaced (``dataclasses.replace``)."""
@@ -79,7 +94,10 @@ def pixel_field(values: npt.ArrayLike, extent=(0.0, 1.0, 0.0, 1.0)) -> ScalarFie
     Row 0 is the bottom row (y = extent[2]); column 0 is the left (x = extent[0]).
     Points outside the extent take the nearest pixel.
     """
-    values = np.asarray(values, dtype=np.float64)
+    try:
+        values = np.asarray(values, dtype=np.float64)
+    except (TypeError, ValueError) as err:
+        raise InputError(f"a pixel field needs a 2D array of numbers: {err}") from None
     if values.ndim != 2 or values.size == 0:
         raise InputError(f"a pixel field needs a non-empty 2D array, got shape {values.shape}")
     x0, x1, y0, y1 = extent

@@ -1,0 +1,261 @@
+"""Analytic benchmarks (METHOD §9) for the fine discretizations: errors and rates per method.
+
+Methods: the primal P1 and mixed Arnold–Winther monolithic penalty solves and Algorithms 1 and 2.
+Writes a markdown report. Example (about 10 min on 2 cores):
+
+    OMP_NUM_THREADS=1 .venv/bin/python benchmarks/analytic_benchmarks.py \
+        --bar-sizes 8 16 32 64 --hertz-refinements 0.5 1 2 --out benchmarks/results/analytic.md
+
+Sections:
+1. The bar (ν = 0, E = 1, clamped at x = 0 only, top and bottom traction free, body force
+   (±1, 0), wall at x = 1): pushing (full contact) and pulling (no contact). Errors against the
+   exact solution (δ, ε → 0): e_u = ‖u_h − u‖/‖u‖, e_σ = ‖σ_h − σ‖/‖σ‖ (primal σ_h = σ(u_h)),
+   e_F = |F_h − F|/|f₁|, F the contact force; rates between successive h.
+2. The layered patch test (E = 1 | 10³ | 10 across γ, ν = 0, no load, traction-free top and
+   bottom, a plane moved in by d₀): max-norm errors of σ_xx and of the force against the
+   closed forms with the penalty (F = d₀/(C + δ) primal, d₀/C mixed), as a force–indentation
+   curve in load steps (warm starts).
+3. Plane-strain Hertz: a rigid cylinder (R = 5) pressed by d₀ = 1.2·10⁻³ into a block 80a × 40a
+   (bottom clamped, sides traction free), F read off the solution: contact half-width error in
+   contact-zone cells, peak pressure error, L² error of the pressure profile; "refinement r"
+   refines the whole mesh (contact cells a/(20r)).
+4. The Hertz cylinder pushed in load steps (``indentation.force_indentation``): the
+   force–indentation curve, the Hertz errors at every step, and what the warm start saves.
+5. (``--sections 5``) the Hertz errors over nine depths: their spread as the contact edge moves
+   across a cell.
+"""
+
+import argparse
+import datetime
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import ufl
+
+import fenics_contact  # noqa: F401  (dolfinx_solver first)
+from dolfinx import fem
+from mpi4py import MPI
+
+from fenics_contact.fem.mixed import solve_mixed_monolithic
+from fenics_contact.fem.primal import default_penalty, solve_primal_monolithic
+from fenics_contact.hybrid.iteration import IterationOptions
+from fenics_contact.hybrid.mixed import solve_mixed_hybrid
+from fenics_contact.hybrid.primal import solve_primal_hybrid
+from fenics_contact.indentation import force_indentation
+from fenics_contact.io import machine_description
+from fenics_contact.problem.analytic import (
+    bar_model, bar_solution, hertz_errors, hertz_model, layered_model, layered_pressure,
+)
+from fenics_contact.problem.fields import material_fields
+from fenics_contact.problem.geometry import unit_square
+from fenics_contact.problem.materials import strain, stress
+from fenics_contact.problem.meshes import hertz_block
+
+METHODS = ("primal monolithic", "Algorithm 1", "mixed monolithic", "Algorithm 2")
+
+
+def _l2(expr, msh) -> float:
+    form = fem.form(ufl.inner(expr, expr) * ufl.dx(domain=msh, metadata={"quadrature_degree": 6}))
+    return float(np.sqrt(msh.comm.allreduce(fem.assemble_scalar(form), op=MPI.SUM)))
+
+
+def _rate(prev: float | None, cur: float) -> str:
+    if prev is None or prev <= 0 or cur <= 0:
+        return ""
+    return f"{np.log2(prev / cur):.2f}"
+
+
+def _solve(method: str, cm, model, options):
+    """(σ as a UFL vector (xx, xy, yy), u, contact profile, iterations, time) of one method."""
+    t0 = time.perf_counter()
+    if method.startswith("primal") or method == "Algorithm 1":
+        fields = material_fields(cm.mesh, model)
+        delta = default_penalty(cm.h, float(np.max(fields.E.x.array)))
+        if method == "Algorithm 1":
+            res = solve_primal_hybrid(cm, model, delta=delta, options=options)
+            u, profile, its = res.u, res.profile, res.iterations
+        else:
+            ref = solve_primal_monolithic(cm.mesh, cm.facet_tags, fields, delta=delta)
+            u, profile, its = ref.u, ref.profile, ref.newton.steps
+        s = stress(strain(u), fields.lmbda, fields.mu)
+        return ufl.as_vector([s[0, 0], s[0, 1], s[1, 1]]), u, profile, its, time.perf_counter() - t0
+    if method == "Algorithm 2":
+        res = solve_mixed_hybrid(cm, model, options=options)
+        return res.sigma, res.u, res.profile, res.iterations, time.perf_counter() - t0
+    ref = solve_mixed_monolithic(cm, model)
+    return ref.sigma, ref.u, ref.profile, ref.newton.steps, time.perf_counter() - t0
+
+
+def bar_section(sizes: list[int], options) -> list[str]:
+    lines = ["## 1. The bar (clamped at x = 0 only; top and bottom traction free)", "",
+             "| method | case | 1/h | e_u | rate | e_σ | rate | e_F | iterations | time [s] |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
+    for method in METHODS:
+        for f1, case in ((1.0, "push"), (-1.0, "pull")):
+            prev_u = prev_s = None
+            exact = bar_solution(f1)
+            for n in sizes:
+                cm = unit_square(n, 4, clamped=("left",))
+                sigma, u, profile, its, elapsed = _solve(method, cm, bar_model(f1), options)
+                X = ufl.SpatialCoordinate(cm.mesh)
+                s_ex = ufl.as_vector([exact.sigma_xx(X), 0.0, 0.0])
+                u_ex = ufl.as_vector([exact.u_x(X), 0.0])
+                e_u = _l2(u - u_ex, cm.mesh) / _l2(u_ex, cm.mesh)
+                e_s = _l2(sigma - s_ex, cm.mesh) / _l2(s_ex, cm.mesh)
+                e_F = abs(profile.force + exact.sigma_end) / abs(f1)
+                lines.append(f"| {method} | {case} | {n} | {e_u:.2e} | {_rate(prev_u, e_u)} | {e_s:.2e} | "
+                             f"{_rate(prev_s, e_s)} | {e_F:.1e} | {its} | {elapsed:.2f} |")
+                prev_u, prev_s = e_u, e_s
+                print(lines[-1], flush=True)
+    return lines + [""]
+
+
+def patch_section(n: int, options) -> list[str]:
+    bounds, moduli = [0.0, 6 / 16, 13 / 16, 1.0], [1.0, 1e3, 10.0]
+    depths = [0.01, 0.02, 0.03]
+    lines = [f"## 2. Layered patch test (E = {moduli}, layers at x = 6/16, 13/16, γ at x = 3/4; 1/h = {n})", "",
+             "Force–indentation in load steps; errors against the closed forms with the penalty.", "",
+             "| method | depth | force | max rel. force error | max |σ_xx + p|/p | iterations | time [s] |",
+             "|---|---|---|---|---|---|---|"]
+    names = {"primal monolithic": "primal-monolithic", "Algorithm 1": "primal",
+             "mixed monolithic": "mixed-monolithic", "Algorithm 2": "mixed"}
+    cm = unit_square(n, 4, clamped=("left",))
+    for method in METHODS:
+        curve = force_indentation(names[method], cm, layered_model(bounds, moduli, depth=0.0), depths,
+                                  direction=(-1.0, 0.0), options=options)
+        delta = default_penalty(cm.h, moduli[-1]) if "primal" in names[method] else 0.0
+        for step in curve.steps:
+            p = layered_pressure(bounds, moduli, step.depth, delta=delta)
+            lines.append(f"| {method} | {step.depth:g} | {step.force:.10f} | {abs(step.force / p - 1):.1e} | "
+                         f"{np.max(np.abs(-step.profile.sigma_c / p - 1)):.1e} | {step.iterations} | "
+                         f"{step.time_s:.2f} |")
+            print(lines[-1], flush=True)
+    return lines + [""]
+
+
+def hertz_section(refinements: list[float], mixed_max: float, options) -> list[str]:
+    a, R, E, nu, d0 = 0.05, 5.0, 1.0, 0.3, 1.2e-3
+    lines = ["## 3. Plane-strain Hertz (R = 5, E = 1, ν = 0.3, d₀ = 1.2e-3, block 80a × 40a, a ≈ 0.053)", "",
+             "| method | r | cells | a/h | F | (a_h − a)/h | p_max/p₀ − 1 | L² error | rate | iterations | time [s] |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
+    for method in METHODS:
+        prev = None
+        for r in refinements:
+            if "mixed" in method.lower() or method == "Algorithm 2":
+                if r > mixed_max:
+                    continue
+            cm, spec = hertz_block(a, refinement=r)
+            _, _, profile, its, elapsed = _solve(method, cm, hertz_model(radius=R, E=E, nu=nu, depth=d0), options)
+            e = hertz_errors(profile, radius=R, E=E, nu=nu, h_contact=spec.h_contact)
+            cells = cm.mesh.topology.index_map(2).size_local
+            lines.append(f"| {method} | {r:g} | {cells} | {e.a / spec.h_contact:.1f} | {e.force:.5e} | "
+                         f"{e.half_width_cells:+.2f} | {e.peak_error:+.2%} | {e.l2_error:.2%} | "
+                         f"{_rate(prev, e.l2_error)} | {its} | {elapsed:.2f} |")
+            prev = e.l2_error
+            print(lines[-1], flush=True)
+    return lines + [""]
+
+
+def indentation_section(refinement: float, steps: int, options) -> list[str]:
+    """Hertz force–indentation in load steps (warm starts) against a cold start at the last depth."""
+    a, R, E, nu = 0.05, 5.0, 1.0, 0.3
+    depths = np.linspace(1.2e-3 / steps, 1.2e-3, steps)
+    lines = [f"## 4. Hertz force–indentation in {steps} load steps (r = {refinement:g}; warm starts)", "",
+             "The obstacle moves down by d; F is read off the contact; a, p₀ from F. Iterations: Newton "
+             "steps (monolithic) or hybrid iterations; the last column is a cold start at the last depth.", "",
+             "| method | d | F | a | p_max/p₀ − 1 | L² error | iterations | time [s] | cold start: iterations, time [s] |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    names = {"primal monolithic": "primal-monolithic", "Algorithm 1": "primal",
+             "mixed monolithic": "mixed-monolithic", "Algorithm 2": "mixed"}
+    cm, spec = hertz_block(a, refinement=refinement)
+    base = hertz_model(radius=R, E=E, nu=nu, depth=0.0)
+    for method in METHODS:
+        curve = force_indentation(names[method], cm, base, depths, direction=(0.0, -1.0), options=options)
+        cold = force_indentation(names[method], cm, base, depths[-1:], direction=(0.0, -1.0), options=options)
+        for k, step in enumerate(curve.steps):
+            e = hertz_errors(step.profile, radius=R, E=E, nu=nu, h_contact=spec.h_contact)
+            last = f"{cold.steps[0].iterations}, {cold.steps[0].time_s:.2f}" if k == len(curve.steps) - 1 else ""
+            lines.append(f"| {method} | {step.depth:.3g} | {step.force:.5e} | {e.a:.4f} | {e.peak_error:+.2%} | "
+                         f"{e.l2_error:.2%} | {step.iterations} | {step.time_s:.2f} | {last} |")
+            print(lines[-1], flush=True)
+    return lines + [""]
+
+
+def edge_sweep_section(refinements: list[float], mixed_max: float, count: int = 9) -> list[str]:
+    """Hertz errors over depths 1.1–1.3·10⁻³: how much they depend on where the contact edge falls."""
+    from fenics_contact.fem.mixed import MixedSubproblem, default_epsilon
+    from fenics_contact.fem.primal import PrimalSubproblem
+
+    a, R, E, nu = 0.05, 5.0, 1.0, 0.3
+    depths = np.linspace(1.1e-3, 1.3e-3, count)
+    lines = [f"## 5. Hertz errors over {count} depths from 1.1 to 1.3·10⁻³ (the contact edge moves across a cell)", "",
+             "| method | r | a/h | (a_h − a)/h: min, max | p_max/p₀ − 1: min, max | L² error: min, max |",
+             "|---|---|---|---|---|---|"]
+    for method in ("primal monolithic", "mixed monolithic"):
+        for r in refinements:
+            if method.startswith("mixed") and r > mixed_max:
+                continue
+            cm, spec = hertz_block(a, refinement=r)
+            fields = material_fields(cm.mesh, hertz_model(radius=R, E=E, nu=nu, depth=depths[0]))
+            if method.startswith("primal"):
+                sub = PrimalSubproblem(cm.mesh, cm.facet_tags, fields, delta=default_penalty(cm.h, E), alpha=None,
+                                       prefix="fc_bench_edge_p_")
+            else:
+                sub = MixedSubproblem(cm.mesh, cm.facet_tags, fields, epsilon=default_epsilon(cm.h, E), beta=None,
+                                      prefix="fc_bench_edge_m_")
+            rows = []
+            for d in depths:
+                sub.set_obstacle(hertz_model(radius=R, E=E, nu=nu, depth=d).obstacle)
+                sub.solve()
+                e = hertz_errors(sub.contact_profile(), radius=R, E=E, nu=nu, h_contact=spec.h_contact)
+                rows.append((e.a / spec.h_contact, e.half_width_cells, e.peak_error, e.l2_error))
+            rows = np.array(rows)
+            lines.append(f"| {method} | {r:g} | {rows[:, 0].min():.1f}–{rows[:, 0].max():.1f} | "
+                         f"{rows[:, 1].min():+.2f}, {rows[:, 1].max():+.2f} | {rows[:, 2].min():+.2%}, "
+                         f"{rows[:, 2].max():+.2%} | {rows[:, 3].min():.2%}, {rows[:, 3].max():.2%} |")
+            print(lines[-1], flush=True)
+    return lines + [""]
+
+
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--bar-sizes", type=int, nargs="+", default=[8, 16, 32, 64])
+    parser.add_argument("--patch-size", type=int, default=32)
+    parser.add_argument("--hertz-refinements", type=float, nargs="+", default=[0.5, 1.0, 2.0])
+    parser.add_argument("--hertz-mixed-max", type=float, default=2.0, help="largest refinement for the mixed methods")
+    parser.add_argument("--sections", type=int, nargs="+", default=[1, 2, 3, 4],
+                        help="which sections to run (5: the Hertz edge-position sweep, not in the default)")
+    parser.add_argument("--indentation-steps", type=int, default=4, help="load steps of section 4")
+    parser.add_argument("--indentation-refinement", type=float, default=1.0)
+    parser.add_argument("--tol", type=float, default=1e-8, help="relative-change tolerance of Algorithms 1 and 2")
+    parser.add_argument("--out", type=Path, default=Path("benchmarks/results/analytic.md"))
+    args = parser.parse_args(argv)
+    options = IterationOptions(tol=args.tol)
+    start = time.perf_counter()
+    lines = ["# Analytic benchmarks of the fine discretizations", "",
+             f"{datetime.date.today()}; {machine_description()}", "",
+             "Command: `" + " ".join(["python", *sys.argv]) + "`", "",
+             f"Algorithms 1 and 2 run to the relative-change tolerance {args.tol:g} (Anderson update); "
+             "the penalties are the defaults δ = 1e-3·h/E_c, ε = 1e-3·h·E_c.", ""]
+    sections = {
+        1: lambda: bar_section(args.bar_sizes, options),
+        2: lambda: patch_section(args.patch_size, options),
+        3: lambda: hertz_section(args.hertz_refinements, args.hertz_mixed_max, options),
+        4: lambda: indentation_section(args.indentation_refinement, args.indentation_steps, options),
+        5: lambda: edge_sweep_section(args.hertz_refinements, args.hertz_mixed_max),
+    }
+    for number in args.sections:
+        if number not in sections:
+            parser.error(f"unknown section {number}; choose among 1 2 3 4 5")
+        lines += sections[number]()
+    lines.append(f"Total time {time.perf_counter() - start:.0f} s.")
+    if MPI.COMM_WORLD.rank == 0:
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        args.out.write_text("\n".join(lines) + "\n")
+        print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,153 @@
+"""Analytic contact solutions (METHOD §9 "Analytic checks") and the problems that have them.
+
+* **Bar**: ν = 0, Young's modulus E, clamped at x = 0 only (top and bottom traction
+  free), body force (f₁, 0), a wall flush with x = 1.  Pushing (f₁ > 0) gives full
+  contact, pulling (f₁ < 0) none.  With the penalty the law at x = 1 is
+  u(1) = −δσ(1) (primal, in contact) or u(1) = −σ(1)⁺/ε (mixed), so the penalized
+  solutions are known in closed form too:
+
+      σ(x) = σ₁ + f₁(1 − x),   u(x) = (σ₁ + f₁) x/E − f₁x²/(2E),
+      σ₁ = −f₁/(2(1 + Eδ)) (primal, push), 0 (primal, pull),
+           −f₁/2 (mixed, push),  −f₁/(2(1 + E/ε)) (mixed, pull; tensile).
+
+* **Layered patch**: ν = 0, E piecewise constant in x, clamped at x = 0, no load,
+  traction-free top and bottom, a plane obstacle moved into the body by d₀ at
+  x = 1: σ_xx = −p uniform, u_x(x) = −p ∫₀ˣ dx/E, p = d₀/(C + δ) (primal),
+  p = d₀/C (mixed and exact), C = ∫₀¹ dx/E.  P1 and Arnold–Winther reproduce it
+  to round-off.
+* **Hertz** (plane strain): a rigid cylinder of radius R on a half-space,
+  force F per unit thickness: E* = E/(1 − ν²), a = 2√(RF/(πE*)),
+  p(x) = p₀√(1 − x²/a²), p₀ = 2F/(πa).  ``hertz_errors`` compares a computed
+  contact profile with it, F read off the profile.
+"""
+
+from collections.abc import Callable
+from typing import NamedTuple
+
+import numpy as np
+
+from fenics_contact.errors import InputError
+from fenics_contact.fem.contact import ContactProfile
+from fenics_contact.problem.models import TestModel, constant_field
+from fenics_contact.problem.obstacles import Circle, Plane
+
+__all__ = [
+    "BarSolution", "bar_model", "bar_solution", "layered_model", "layered_pressure", "layered_displacement",
+    "hertz_model", "hertz_force_for", "HertzErrors", "hertz_errors",
+]
+
+
+class BarSolution(NamedTuple):
+    """σ_xx(x) and u_x(x) of the bar (σ_xy = σ_yy = u_y = 0), and the stress at x = 1."""
+
+    sigma_xx: Callable[[np.ndarray], np.ndarray]
+    u_x: Callable[[np.ndarray], np.ndarray]
+    sigma_end: float
+
+
+def _uniform_load(f1: float):
+    return lambda x: np.vstack([np.full(x.shape[1], float(f1)), np.zeros(x.shape[1])])
+
+
+def bar_model(f1: float, *, E: float = 1.0) -> TestModel:
+    """The bar: ν = 0, E, body force (f₁, 0); use it on ``unit_square(n, N, clamped=("left",))``."""
+    return TestModel("bar", constant_field(E), constant_field(0.0), _uniform_load(f1),
+                     description=f"bar, E={E:g}, f1={f1:g}")
+
+
+def bar_solution(f1: float, *, E: float = 1.0, delta: float = 0.0, epsilon: float | None = None) -> BarSolution:
+    """The bar's solution: exact (default), primal-penalized (``delta``) or mixed-penalized (``epsilon``)."""
+    if delta and epsilon is not None:
+        raise InputError("give delta (primal) or epsilon (mixed), not both")
+    if f1 > 0:  # push: full contact
+        sigma_end = -f1 / 2.0 if epsilon is not None else -f1 / (2.0 * (1.0 + E * delta))
+    elif epsilon is not None:  # pull, mixed penalty: tensile σ₁ = ε|u(1)|
+        sigma_end = -f1 / (2.0 * (1.0 + E / epsilon))
+    else:
+        sigma_end = 0.0
+    return BarSolution(
+        lambda x: sigma_end + f1 * (1.0 - x[0]),
+        lambda x: ((sigma_end + f1) * x[0] - 0.5 * f1 * x[0] ** 2) / E,
+        sigma_end,
+    )
+
+
+def _check_layers(bounds, moduli) -> tuple[np.ndarray, np.ndarray]:
+    bounds = np.asarray(bounds, dtype=np.float64)
+    moduli = np.asarray(moduli, dtype=np.float64)
+    if bounds.size != moduli.size + 1 or bounds[0] != 0.0 or bounds[-1] != 1.0 or np.any(np.diff(bounds) <= 0):
+        raise InputError(f"layer bounds must rise from 0 to 1 with one more entry than the moduli; got {bounds}")
+    if np.any(moduli <= 0):
+        raise InputError(f"layer moduli must be > 0, got {moduli}")
+    return bounds, moduli
+
+
+def layered_model(bounds, moduli, *, depth: float) -> TestModel:
+    """Layers E = moduli[i] on bounds[i] < x < bounds[i+1], ν = 0, no load, plane obstacle moved in by ``depth``."""
+    bounds, moduli = _check_layers(bounds, moduli)
+
+    def E(x: np.ndarray) -> np.ndarray:
+        i = np.clip(np.searchsorted(bounds, x[0], side="right") - 1, 0, moduli.size - 1)
+        return moduli[i]
+
+    wall = Plane((1.0, 0.0), (-1.0, 0.0)).indented(depth, (-1.0, 0.0))
+    return TestModel("layers", E, constant_field(0.0), lambda x: np.zeros((2, x.shape[1])), obstacle=wall,
+                     description=f"layered patch, E={moduli.tolist()}, d0={depth:g}")
+
+
+def layered_pressure(bounds, moduli, depth: float, *, delta: float = 0.0) -> float:
+    """p = d₀/(C + δ), C = Σ Lᵢ/Eᵢ (δ = 0: exact and mixed)."""
+    bounds, moduli = _check_layers(bounds, moduli)
+    return depth / (float(np.sum(np.diff(bounds) / moduli)) + delta)
+
+
+def layered_displacement(bounds, moduli, pressure: float) -> Callable[[np.ndarray], np.ndarray]:
+    """u_x(x) = −p ∫₀ˣ dx/E (piecewise linear)."""
+    bounds, moduli = _check_layers(bounds, moduli)
+    compliance = np.concatenate([[0.0], np.cumsum(np.diff(bounds) / moduli)])
+    return lambda x: -pressure * np.interp(x[0], bounds, compliance)
+
+
+def hertz_model(*, radius: float = 1.0, E: float = 1.0, nu: float = 0.3, depth: float) -> TestModel:
+    """A rigid cylinder of radius R touching the top face y = 0 at x = 0, moved down by ``depth``."""
+    cylinder = Circle((0.0, radius), radius).indented(depth, (0.0, -1.0))
+    return TestModel("hertz", constant_field(E), constant_field(nu), lambda x: np.zeros((2, x.shape[1])),
+                     obstacle=cylinder, description=f"Hertz, R={radius:g}, E={E:g}, nu={nu:g}, d={depth:g}")
+
+
+def hertz_force_for(a: float, *, radius: float = 1.0, E: float = 1.0, nu: float = 0.3) -> float:
+    """F = π a² E*/(4R): the force per unit thickness that gives the half-width a."""
+    return np.pi * a**2 * E / (1.0 - nu**2) / (4.0 * radius)
+
+
+class HertzErrors(NamedTuple):
+    """A computed Hertz contact against the analytic one for its own force F."""
+
+    force: float  #: F = −∫ σ_c ds
+    a: float  #: 2√(RF/(πE*))
+    p0: float  #: 2F/(πa)
+    half_width: float  #: half the extent of the computed contact zone
+    half_width_cells: float  #: (half_width − a)/h_contact
+    peak_error: float  #: max p_h / p₀ − 1
+    l2_error: float  #: ‖p_h − p‖_L²(Γ_C) / ‖p‖_L²(Γ_C)
+
+
+def hertz_errors(profile: ContactProfile, *, radius: float, E: float, nu: float, h_contact: float,
+                 centre: float = 0.0) -> HertzErrors:
+    """Half-width, peak pressure and pressure-profile errors of a Hertz contact profile (F read off it)."""
+    if profile.weights is None or profile.points is None:
+        raise InputError("hertz_errors needs a contact profile with points and weights")
+    F = profile.force
+    if not F > 0:
+        raise InputError(f"no compressive contact force (F = {F:.3e}): the cylinder does not touch")
+    E_star = E / (1.0 - nu**2)
+    a = 2.0 * np.sqrt(radius * F / (np.pi * E_star))
+    p0 = 2.0 * F / (np.pi * a)
+    x = profile.points[:, 0] - centre
+    p = -profile.sigma_c
+    exact = p0 * np.sqrt(np.maximum(1.0 - (x / a) ** 2, 0.0))
+    active = profile.active
+    half = 0.5 * float(x[active].max() - x[active].min()) if active.any() else 0.0
+    w = profile.weights
+    l2 = float(np.sqrt(np.sum(w * (p - exact) ** 2) / np.sum(w * exact**2)))
+    return HertzErrors(F, a, p0, half, (half - a) / h_contact, float(p.max() / p0 - 1.0), l2)

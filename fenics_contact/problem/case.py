@@ -1,0 +1,857 @@
+"""Case files: a whole contact problem in one TOML file (``fenics-contact run --case FILE.toml``).
+
+A case names the mesh (built-in or a gmsh file), the materials, the loads, the boundary
+conditions, the obstacle with its indentation steps, and the run options; ``load_case`` reads
+it into a ``Case`` of small frozen dataclasses, validated on construction (InputError /
+MeshTagError naming the key, e.g. ``mesh.h``, or the group).  Every table and key is optional
+unless said; unknown keys are refused.  Relative file names are relative to the case file.
+
+    description = "..."                      # free text, echoed in the summary
+
+    [mesh]                                   # one of builtin = ... or file = ...
+    builtin = "unit-square"                  # h = 64 (1/h), H = 16 (1/H: strip width), clamped = [sides],
+                                             #   neumann = {side = "Gamma_N_<label>"}  (sides: left, bottom, top)
+    builtin = "hertz-block"                  # a (contact half-width, required), refinement = 1,
+                                             #   width = 80, depth = 40, strip = 2, contact-width = 3 (x a)
+    builtin = "bulged-square"                # h = 32, H = 4, bulge = 0.1, clamped = ["left"]
+    file = "my.msh"                          # H = 1/H of the coarse grid (multiscale methods)
+
+    [material]                               # E and nu: required unless model is given
+    E  = 1.0 | {Omega1 = 1.0, fibres = 1e3} | {pixels = "E.npy", extent = [x0, x1, y0, y1]}
+         | {python = "fields.py:E"}          # a number, by cell group, a pixel map, a callable x -> (N,)
+    nu = 0.3                                 # the same forms
+    model = 1                                # E, nu and body force of built-in model 1, 2, 3
+    E-high = 1e3                             # with model: its E in / outside the pattern
+    E-low = 1.0
+
+    [load]
+    body-force = [fx, fy] | {group = [fx, fy], ...} | {python = "fields.py:f"}   # default zero
+
+    [boundary]
+    displacement = [ux, uy] | {python = "fields.py:u_D"}      # on Gamma_D; default clamped
+    tractions = {Gamma_N_top = [tx, ty] | {python = ...}, ...} # one per Gamma_N group of the mesh
+
+    [obstacle]
+    shape = "wall"                           # flush with Gamma_C, zero gap (the default)
+    shape = "plane"                          # point = [x, y], normal = [nx, ny] (outward, towards the body)
+    shape = "circle"                         # centre = [x, y], radius = R
+    indentation = 1e-3 | [2e-4, 4e-4, ...]   # rigid motion by depth x direction; a list = load steps
+    direction = [dx, dy]                     # default: the plane's normal (into the body); required for a circle
+
+    [run]          method, accel, tol, max-iterations, reference, out, plots
+    [primal]       alpha, delta            (primal, primal-ms)
+    [mixed]        beta, epsilon           (mixed, mixed-ms)
+    [multiscale]   layers, nbasis, cache-dir   (primal-ms, mixed-ms)
+    [mixed-ms]     min-gap, max-nbasis
+
+The run tables use the command line's option names; the command line validates them
+(``cli.RunOptions``) and its flags override them.  A method's table is used only when
+that method runs, so one case runs with every method.  Cell groups (``Omega1``,
+``Omega2`` and, in a gmsh file, any other surface group) set a material or a load by
+group: an overlay group's value wins over its Omega group's; every cell needs a
+material value.  ``overrides`` (``--set mesh.h=16``) replace single keys before the
+validation.
+
+A ``python`` reference runs that file's code: use it only with case files you trust.
+"""
+
+import importlib.util
+import math
+import sys
+import tomllib
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, NamedTuple
+
+import numpy as np
+from mpi4py import MPI
+
+from fenics_contact.errors import InputError, MeshTagError
+from fenics_contact.problem.boundary import BoundaryConditions, check_boundary_groups
+from fenics_contact.problem.cell_groups import SUBDOMAIN_NAMES, CellGroups, bounding_box, read_cell_groups
+from fenics_contact.problem.geometry import SIDES, ContactMesh, read_mesh, unit_square
+from fenics_contact.problem.models import TestModel, constant_field, get_model, pixel_field
+from fenics_contact.problem.obstacles import Circle, Obstacle, Plane
+from fenics_contact.problem.tags import is_neumann_name
+
+__all__ = [
+    "RUN_TABLES", "Case", "CaseMesh", "load_case", "parse_override",
+    "UnitSquareMesh", "HertzBlockMesh", "BulgedSquareMesh", "MeshFile",
+    "Uniform", "ByGroup", "Pixels", "PythonField", "Material", "Boundary", "ObstacleSpec",
+]
+
+#: the run-option tables and the methods whose runs use them
+RUN_TABLES: dict[str, tuple[str, ...]] = {
+    "run": ("primal", "primal-ms", "mixed", "mixed-ms"),
+    "primal": ("primal", "primal-ms"),
+    "mixed": ("mixed", "mixed-ms"),
+    "multiscale": ("primal-ms", "mixed-ms"),
+    "mixed-ms": ("mixed-ms",),
+}
+_PROBLEM_TABLES = ("mesh", "material", "load", "boundary", "obstacle")
+
+
+class _Bad(Exception):
+    """A value of the wrong type or range (the message completes "KEY ...")."""
+
+
+# ---------------------------------------------------------------------------------------------
+# reading typed values
+# ---------------------------------------------------------------------------------------------
+def _show(value) -> str:
+    return repr(value) if not isinstance(value, dict) else "a table"
+
+
+def _number(*, positive: bool = False, low: float | None = None, high: float | None = None) -> Callable:
+    def convert(value) -> float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            raise _Bad(f"must be a finite number, got {_show(value)}")
+        if positive and not value > 0:
+            raise _Bad(f"must be > 0, got {value!r}")
+        if (low is not None and not value > low) or (high is not None and not value < high):
+            raise _Bad(f"must lie in ({low:g}, {high:g}), got {value!r}")
+        return float(value)
+    return convert
+
+
+def _integer(minimum: int) -> Callable:
+    def convert(value) -> int:
+        if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
+            raise _Bad(f"must be an integer >= {minimum}, got {_show(value)}")
+        return int(value)
+    return convert
+
+
+def _vector(value) -> tuple[float, float]:
+    if not isinstance(value, (list, tuple)) or len(value) != 2:
+        raise _Bad(f"must be a vector [x, y] of two numbers, got {_show(value)}")
+    return tuple(_number()(v) for v in value)
+
+
+def _unit(value) -> tuple[float, float]:
+    v = _vector(value)
+    if math.hypot(*v) == 0.0:
+        raise _Bad("must be a non-zero vector")
+    return v
+
+
+def _string(choices: Sequence[str] | None = None) -> Callable:
+    def convert(value) -> str:
+        if not isinstance(value, str):
+            raise _Bad(f"must be a string, got {_show(value)}")
+        if choices is not None and value not in choices:
+            raise _Bad(f"must be one of {list(choices)}, got {value!r}")
+        return value
+    return convert
+
+
+def _strings(choices: Sequence[str]) -> Callable:
+    def convert(value) -> tuple[str, ...]:
+        if not isinstance(value, (list, tuple)):
+            raise _Bad(f"must be a list of strings, got {_show(value)}")
+        items = tuple(_string(choices)(v) for v in value)
+        if len(set(items)) != len(items):
+            raise _Bad(f"lists a value twice: {list(items)}")
+        return items
+    return convert
+
+
+class _Source:
+    """The case file being read: its path and directory (for relative file names) and error messages."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self.directory = path.parent
+
+    def error(self, message: str, kind: type = InputError) -> Exception:
+        return kind(f"case {self.path}: {message}")
+
+    def file(self, value, key: str) -> Path:
+        if not isinstance(value, str) or not value.strip():
+            raise self.error(f"{key} must name a file, got {_show(value)}")
+        path = (self.directory / value).resolve()
+        if not path.is_file():
+            raise self.error(f"{key}: {path} does not exist" if not path.exists() else f"{key}: {path} is not a file")
+        return path
+
+
+class _Table:
+    """One table of the case: typed reads by key; ``finish`` refuses the keys nobody read."""
+
+    def __init__(self, source: _Source, name: str, data) -> None:
+        if not isinstance(data, dict):
+            raise source.error(f"{name} must be a table ([{name}]), got {_show(data)}")
+        self.source, self.name, self.data, self.known = source, name, dict(data), []
+
+    def key(self, key: str) -> str:
+        return f"{self.name}.{key}"
+
+    def has(self, key: str) -> bool:
+        return key in self.data
+
+    def get(self, key: str, convert: Callable, default=None, *, required: bool = False):
+        self.known.append(key)
+        if key not in self.data:
+            if required:
+                raise self.source.error(f"{self.key(key)} is required")
+            return default
+        value = self.data.pop(key)
+        try:
+            return convert(value)
+        except _Bad as bad:
+            raise self.source.error(f"{self.key(key)} {bad}") from None
+
+    def raw(self, key: str):
+        self.known.append(key)
+        return self.data.pop(key, None)
+
+    def finish(self, what: str = "") -> None:
+        if self.data:
+            unknown = sorted(self.data)
+            raise self.source.error(f"unknown key {self.key(unknown[0])!r}{what}; the keys of [{self.name}] are "
+                                    f"{self.known}")
+
+
+# ---------------------------------------------------------------------------------------------
+# fields: a number or vector, by cell group, a pixel map, a Python callable
+# ---------------------------------------------------------------------------------------------
+@dataclass(frozen=True, slots=True)
+class Uniform:
+    """One value everywhere."""
+
+    value: float | tuple[float, float]
+
+    def echo(self):
+        return list(self.value) if isinstance(self.value, tuple) else self.value
+
+
+@dataclass(frozen=True, slots=True)
+class ByGroup:
+    """A value per cell group (Omega1, Omega2, or a surface group of the mesh file)."""
+
+    values: tuple[tuple[str, Any], ...]
+
+    def echo(self):
+        return {name: list(v) if isinstance(v, tuple) else v for name, v in self.values}
+
+
+@dataclass(frozen=True, slots=True)
+class Pixels:
+    """A pixel map ``values[row, col]`` (row 0 at the bottom) over ``extent`` (default: the mesh's bounding box)."""
+
+    path: Path
+    values: np.ndarray = field(compare=False, repr=False)
+    extent: tuple[float, float, float, float] | None = None
+
+    def echo(self):
+        return {"pixels": str(self.path), "shape": list(self.values.shape),
+                "extent": list(self.extent) if self.extent is not None else "bounding box"}
+
+
+@dataclass(frozen=True, slots=True)
+class PythonField:
+    """A callable ``file.py:name`` (points x (3, N) -> values)."""
+
+    reference: str
+    function: Callable = field(compare=False, repr=False)
+
+    def echo(self):
+        return {"python": self.reference}
+
+
+FieldSpec = Uniform | ByGroup | Pixels | PythonField
+
+
+def _python(source: _Source, key: str, reference) -> PythonField:
+    if not isinstance(reference, str) or reference.count(":") != 1:
+        raise source.error(f"{key}: a python reference is 'file.py:name', got {_show(reference)}")
+    filename, name = reference.split(":")
+    path = source.file(filename, key)
+    module_name = f"fenics_contact_case_{abs(hash(str(path)))}"
+    module = sys.modules.get(module_name)
+    if module is None:
+        spec = importlib.util.spec_from_file_location(module_name, path)
+        if spec is None or spec.loader is None:
+            raise source.error(f"{key}: cannot import {path} as Python")
+        module = importlib.util.module_from_spec(spec)
+        try:
+            spec.loader.exec_module(module)
+        except Exception as err:  # the user's code: any failure is bad input
+            raise source.error(f"{key}: importing {path} failed: {type(err).__name__}: {err}") from None
+        sys.modules[module_name] = module
+    function = getattr(module, name, None)
+    if not callable(function):
+        raise source.error(f"{key}: {path} has no callable {name!r}")
+    return PythonField(f"{path}:{name}", function)
+
+
+def _pixels(source: _Source, key: str, table: dict) -> Pixels:
+    t = _Table(source, key, table)
+    path = t.get("pixels", lambda v: source.file(v, f"{key}.pixels"))
+    extent = t.get("extent", _extent)
+    t.finish()
+    try:
+        values = np.load(path, allow_pickle=False) if path.suffix == ".npy" else np.loadtxt(
+            path, delimiter="," if path.suffix == ".csv" else None, ndmin=2)
+        values = np.asarray(values, dtype=np.float64)
+    except (OSError, ValueError, EOFError, TypeError) as err:
+        raise source.error(f"{key}.pixels: cannot read a pixel array from {path}: {type(err).__name__}: {err}") from None
+    if values.ndim != 2 or values.size == 0:
+        raise source.error(f"{key}.pixels: {path} must hold a non-empty 2D array, got shape {values.shape}")
+    return Pixels(path, values, extent)
+
+
+def _extent(value) -> tuple[float, float, float, float]:
+    if not isinstance(value, (list, tuple)) or len(value) != 4:
+        raise _Bad(f"must be [x0, x1, y0, y1], got {_show(value)}")
+    x0, x1, y0, y1 = (_number()(v) for v in value)
+    if not (x1 > x0 and y1 > y0):
+        raise _Bad(f"must have x1 > x0 and y1 > y0, got {list(value)}")
+    return x0, x1, y0, y1
+
+
+def _field(source: _Source, key: str, value, check: Callable, *, vector: bool, pixels: bool = True) -> FieldSpec:
+    """A field from its case value; ``check`` validates one value (a number, or a vector)."""
+    def checked(v, where):
+        try:
+            return check(v)
+        except _Bad as bad:
+            raise source.error(f"{where} {bad}") from None
+
+    if isinstance(value, dict):
+        if "python" in value:
+            if len(value) != 1:
+                raise source.error(f"{key}: a python field takes no other keys, got {sorted(value)}")
+            return _python(source, key, value["python"])
+        if "pixels" in value:
+            if not pixels:
+                raise source.error(f"{key}: a pixel map gives a scalar field; give a vector, a table by group "
+                                   "or a python callable")
+            return _pixels(source, key, value)
+        if not value:
+            raise source.error(f"{key} is an empty table: give a value per cell group")
+        return ByGroup(tuple((name, checked(v, f"{key}.{name}")) for name, v in sorted(value.items())))
+    if vector and not isinstance(value, (list, tuple)) or not vector and isinstance(value, (list, tuple)):
+        kind = "a vector [x, y]" if vector else "a number"
+        raise source.error(f"{key} must be {kind}, a table by cell group or {{python = 'file.py:name'}}, got "
+                           f"{_show(value)}")
+    return Uniform(checked(value, key))
+
+
+# ---------------------------------------------------------------------------------------------
+# meshes
+# ---------------------------------------------------------------------------------------------
+class CaseMesh(NamedTuple):
+    """A built mesh with the case's cell groups (overlay centroids) and, for the Hertz block, its sizes."""
+
+    cm: ContactMesh
+    overlays: dict
+    hertz: object | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class UnitSquareMesh:
+    """The structured unit square: 1/h, 1/H, the clamped sides and the traction groups by side (x = 1 is Gamma_C)."""
+
+    h: int = 64
+    H: int = 16
+    clamped: tuple[str, ...] = SIDES
+    neumann: tuple[tuple[str, str], ...] = ()
+    kind = "unit-square"
+
+    def build(self, comm: MPI.Comm, overlays: Iterable[str] = ()) -> CaseMesh:
+        return CaseMesh(unit_square(self.h, self.H, comm=comm, clamped=self.clamped, neumann=dict(self.neumann)), {})
+
+    @property
+    def traction_groups(self) -> set[str] | None:
+        return {name for _, name in self.neumann}
+
+    def echo(self) -> dict:
+        return {"builtin": self.kind, "h": self.h, "H": self.H, "clamped": list(self.clamped),
+                "neumann": dict(self.neumann)}
+
+
+@dataclass(frozen=True, slots=True)
+class BulgedSquareMesh:
+    """The unit square with a curved contact side bulging out by ``bulge`` (``meshes.bulged_square``)."""
+
+    h: int = 32
+    H: int = 4
+    bulge: float = 0.1
+    clamped: tuple[str, ...] = ("left",)
+    kind = "bulged-square"
+
+    def build(self, comm: MPI.Comm, overlays: Iterable[str] = ()) -> CaseMesh:
+        from fenics_contact.problem.meshes import bulged_square
+
+        return CaseMesh(bulged_square(1.0 / self.h, 1.0 / self.H, bulge=self.bulge, clamped=self.clamped, comm=comm),
+                        {})
+
+    @property
+    def traction_groups(self) -> set[str] | None:
+        return set()
+
+    def echo(self) -> dict:
+        return {"builtin": self.kind, "h": self.h, "H": self.H, "bulge": self.bulge, "clamped": list(self.clamped)}
+
+
+@dataclass(frozen=True, slots=True)
+class HertzBlockMesh:
+    """The Hertz block (``meshes.hertz_block``): sizes in multiples of the contact half-width a."""
+
+    a: float
+    refinement: float = 1.0
+    width: float = 80.0
+    depth: float = 40.0
+    strip: float = 2.0
+    contact_width: float = 3.0
+    kind = "hertz-block"
+
+    def build(self, comm: MPI.Comm, overlays: Iterable[str] = ()) -> CaseMesh:
+        from fenics_contact.problem.meshes import hertz_block
+
+        cm, spec = hertz_block(self.a, refinement=self.refinement, width=self.width, depth=self.depth,
+                               strip=self.strip, contact_width=self.contact_width, comm=comm)
+        return CaseMesh(cm, {}, spec)
+
+    @property
+    def traction_groups(self) -> set[str] | None:
+        return set()
+
+    def echo(self) -> dict:
+        return {"builtin": self.kind, "a": self.a, "refinement": self.refinement, "width": self.width,
+                "depth": self.depth, "strip": self.strip, "contact-width": self.contact_width}
+
+
+@dataclass(frozen=True, slots=True)
+class MeshFile:
+    """A gmsh file with the groups Omega1, Omega2, Gamma_D, Gamma_C, gamma (and Gamma_N*, material groups)."""
+
+    path: Path
+    H: int | None = None
+    kind = "file"
+
+    def build(self, comm: MPI.Comm, overlays: Iterable[str] = ()) -> CaseMesh:
+        """The mesh; every surface group but Omega1/Omega2 is an overlay (materials), ``overlays`` must exist."""
+        centroids = read_cell_groups(self.path, overlays, comm=comm)
+        cm = read_mesh(self.path, comm=comm, H=1.0 / self.H if self.H else None, overlay_groups=list(centroids))
+        return CaseMesh(cm, centroids)
+
+    @property
+    def traction_groups(self) -> set[str] | None:
+        return None  # known once the file is read
+
+    def echo(self) -> dict:
+        return {"file": str(self.path), "H": self.H}
+
+
+MeshSpec = UnitSquareMesh | BulgedSquareMesh | HertzBlockMesh | MeshFile
+_BUILTINS = ("unit-square", "hertz-block", "bulged-square")
+
+
+def _mesh(source: _Source, data) -> MeshSpec:
+    t = _Table(source, "mesh", data)
+    if t.has("builtin") == t.has("file"):
+        raise source.error("[mesh] needs exactly one of builtin = " + " | ".join(f'"{b}"' for b in _BUILTINS)
+                           + ' and file = "my.msh"')
+    if t.has("file"):
+        path = t.get("file", lambda v: source.file(v, "mesh.file"))
+        spec = MeshFile(path, t.get("H", _integer(1)))
+        t.finish(" for a mesh file")
+        return spec
+    kind = t.get("builtin", _string(_BUILTINS))
+    if kind == "hertz-block":
+        positive = _number(positive=True)
+        spec = HertzBlockMesh(t.get("a", positive, required=True), t.get("refinement", positive, 1.0),
+                              t.get("width", positive, 80.0), t.get("depth", positive, 40.0),
+                              t.get("strip", positive, 2.0), t.get("contact-width", positive, 3.0))
+    elif kind == "bulged-square":
+        spec = BulgedSquareMesh(t.get("h", _integer(4), 32), t.get("H", _integer(2), 4),
+                                t.get("bulge", _number(low=0.0, high=0.5), 0.1),
+                                t.get("clamped", _strings(SIDES), ("left",)))
+        if spec.H >= spec.h:
+            raise source.error(f"mesh.H = {spec.H} must be < mesh.h = {spec.h} (the strip is 1/H wide)")
+    else:
+        spec = UnitSquareMesh(t.get("h", _integer(2), 64), t.get("H", _integer(2), 16),
+                              t.get("clamped", _strings(SIDES), SIDES), _neumann_sides(source, t))
+        if spec.h % spec.H:
+            raise source.error(f"mesh.h = {spec.h} is not a multiple of mesh.H = {spec.H}: the coarse grid must be "
+                               "a union of fine cells")
+        both = sorted(set(spec.clamped) & {side for side, _ in spec.neumann})
+        if both:
+            raise source.error(f"mesh.neumann: side {both[0]!r} is also in mesh.clamped: a side is clamped (Gamma_D) "
+                               "or carries a traction (Gamma_N), not both")
+    t.finish(f' for builtin = "{kind}"')
+    return spec
+
+
+def _neumann_sides(source: _Source, t: _Table) -> tuple[tuple[str, str], ...]:
+    table = t.raw("neumann")
+    if table is None:
+        return ()
+    if not isinstance(table, dict):
+        raise source.error(f"mesh.neumann must be a table {{side = \"Gamma_N_<label>\"}}, got {_show(table)}")
+    pairs = []
+    for side, name in sorted(table.items()):
+        if side not in SIDES:
+            raise source.error(f"mesh.neumann.{side}: unknown side; the sides are {list(SIDES)} (x = 1 is Gamma_C)")
+        if not isinstance(name, str) or not is_neumann_name(name):
+            raise source.error(f"mesh.neumann.{side}: a traction group is named 'Gamma_N' or 'Gamma_N_<label>', "
+                               f"got {_show(name)}")
+        pairs.append((side, name))
+    return tuple(pairs)
+
+
+# ---------------------------------------------------------------------------------------------
+# material, load, boundary conditions, obstacle
+# ---------------------------------------------------------------------------------------------
+@dataclass(frozen=True, slots=True)
+class Material:
+    """Young's modulus and Poisson ratio (fields), or a built-in model's, and the body force."""
+
+    E: FieldSpec | None = None
+    nu: FieldSpec | None = None
+    model: int | None = None
+    E_high: float | None = None
+    E_low: float | None = None
+    body_force: FieldSpec | None = None
+
+    def groups(self) -> set[str]:
+        return {name for f in (self.E, self.nu, self.body_force) if isinstance(f, ByGroup) for name, _ in f.values}
+
+    def echo(self) -> dict:
+        out = {"E": self.E.echo() if self.E else None, "nu": self.nu.echo() if self.nu else None}
+        if self.model is not None:
+            out |= {"model": self.model, "E-high": self.E_high, "E-low": self.E_low}
+        return out
+
+
+def _material(source: _Source, data, load) -> Material:
+    t = _Table(source, "material", data or {})
+    model = t.get("model", _integer(1))
+    if model is not None and model not in (1, 2, 3):
+        raise source.error(f"material.model must be 1, 2 or 3 (the built-in models), got {model}")
+    E_high = t.get("E-high", _number(positive=True))
+    E_low = t.get("E-low", _number(positive=True))
+    if model is None and (E_high is not None or E_low is not None):
+        raise source.error("material.E-high and material.E-low set a built-in model's moduli: they need material.model")
+    E = t.raw("E")
+    nu = t.raw("nu")
+    E = _field(source, "material.E", E, _number(positive=True), vector=False) if E is not None else None
+    nu = (_field(source, "material.nu", nu, _number(low=-1.0, high=0.5), vector=False) if nu is not None else None)
+    if model is None and (E is None or nu is None):
+        raise source.error(f"material.{'E' if E is None else 'nu'} is required (or material.model = 1, 2 or 3)")
+    t.finish()
+    lt = _Table(source, "load", load or {})
+    force = lt.raw("body-force")
+    lt.finish()
+    force = _field(source, "load.body-force", force, _vector, vector=True, pixels=False) if force is not None else None
+    return Material(E, nu, model, E_high if model else None, E_low if model else None, force)
+
+
+@dataclass(frozen=True, slots=True)
+class Boundary:
+    """u_D on Gamma_D (None: clamped) and the traction of every Gamma_N group."""
+
+    displacement: Uniform | PythonField | None = None
+    tractions: tuple[tuple[str, Uniform | PythonField], ...] = ()
+
+    def conditions(self) -> BoundaryConditions:
+        def value(spec):
+            return spec.value if isinstance(spec, Uniform) else spec.function
+        return BoundaryConditions(
+            displacement=value(self.displacement) if self.displacement is not None else None,
+            tractions={name: value(spec) for name, spec in self.tractions},
+        )
+
+    def echo(self) -> dict:
+        return {"displacement": self.displacement.echo() if self.displacement else "clamped",
+                "tractions": {name: spec.echo() for name, spec in self.tractions}}
+
+
+def _vector_or_python(source: _Source, key: str, value) -> Uniform | PythonField:
+    spec = _field(source, key, value, _vector, vector=True, pixels=False)
+    if isinstance(spec, ByGroup):
+        raise source.error(f"{key} must be a vector [x, y] or {{python = 'file.py:name'}}, got a table")
+    return spec
+
+
+def _boundary(source: _Source, data, mesh: MeshSpec) -> Boundary:
+    t = _Table(source, "boundary", data or {})
+    displacement = t.raw("displacement")
+    tractions = t.raw("tractions")
+    t.finish()
+    displacement = (_vector_or_python(source, "boundary.displacement", displacement)
+                    if displacement is not None else None)
+    if tractions is not None and not isinstance(tractions, dict):
+        raise source.error(f"boundary.tractions must be a table {{Gamma_N_<label> = [tx, ty]}}, got {_show(tractions)}")
+    pairs = []
+    for name, value in sorted((tractions or {}).items()):
+        if not is_neumann_name(name):
+            raise source.error(f"boundary.tractions.{name}: a traction group is named 'Gamma_N' or "
+                               "'Gamma_N_<label>' (a facet group of the mesh)")
+        pairs.append((name, _vector_or_python(source, f"boundary.tractions.{name}", value)))
+    known = mesh.traction_groups
+    if known is not None:
+        for name, _ in pairs:
+            if name not in known:
+                raise source.error(f"boundary.tractions.{name}: the mesh has no traction group {name!r} (its groups: "
+                                   f"{sorted(known)}; on the unit square name one with mesh.neumann)", MeshTagError)
+        given = {name for name, _ in pairs}
+        if known - given:
+            raise source.error(f"the mesh has the traction group {sorted(known - given)[0]!r} but "
+                               "boundary.tractions gives it no traction")
+    return Boundary(displacement, tuple(pairs))
+
+
+@dataclass(frozen=True, slots=True)
+class ObstacleSpec:
+    """The rigid obstacle and its indentation steps (depths along ``direction``)."""
+
+    shape: str = "wall"
+    point: tuple[float, float] | None = None
+    normal: tuple[float, float] | None = None
+    centre: tuple[float, float] | None = None
+    radius: float | None = None
+    depths: tuple[float, ...] = ()
+    direction: tuple[float, float] | None = None
+    steps: bool = False  #: ``indentation`` was a list: load steps, a force–indentation curve
+
+    def base(self) -> Obstacle | None:
+        """The obstacle where the case places it (None: the wall flush with Gamma_C)."""
+        if self.shape == "plane":
+            return Plane(self.point, self.normal)
+        if self.shape == "circle":
+            return Circle(self.centre, self.radius)
+        return None
+
+    def at(self, depth: float) -> Obstacle:
+        return self.base().indented(depth, self.direction)
+
+    def final(self) -> Obstacle | None:
+        """The obstacle at the last indentation depth (the one the run solves for)."""
+        return self.at(self.depths[-1]) if self.depths else self.base()
+
+    def echo(self) -> dict:
+        out = {"shape": self.shape}
+        if self.shape == "plane":
+            out |= {"point": list(self.point), "normal": list(self.normal)}
+        elif self.shape == "circle":
+            out |= {"centre": list(self.centre), "radius": self.radius}
+        if self.depths:
+            out |= {"indentation": list(self.depths) if self.steps else self.depths[0],
+                    "direction": list(self.direction)}
+        return out
+
+
+def _obstacle(source: _Source, data) -> ObstacleSpec:
+    t = _Table(source, "obstacle", data or {})
+    shape = t.get("shape", _string(("wall", "plane", "circle")), "wall")
+    point = normal = centre = radius = None
+    if shape == "plane":
+        point = t.get("point", _vector, required=True)
+        normal = t.get("normal", _unit, required=True)
+    elif shape == "circle":
+        centre = t.get("centre", _vector, required=True)
+        radius = t.get("radius", _number(positive=True), required=True)
+    indentation = t.raw("indentation")
+    direction = t.get("direction", _unit)
+    t.finish(f' for shape = "{shape}"')
+    steps = isinstance(indentation, list)
+    if indentation is None:
+        depths = ()
+    else:
+        values = indentation if steps else [indentation]
+        if steps and not values:
+            raise source.error("obstacle.indentation is an empty list: give the depths of the load steps")
+        try:
+            depths = tuple(_number()(v) for v in values)
+        except _Bad as bad:
+            raise source.error(f"obstacle.indentation {bad}") from None
+    if depths and shape == "wall":
+        raise source.error('obstacle.indentation moves a plane or a circle: give shape = "plane" or "circle" (the '
+                           'default wall is flush with Gamma_C)')
+    if direction is not None and not depths:
+        raise source.error("obstacle.direction is the direction of obstacle.indentation, which is not given")
+    if depths and direction is None:
+        if shape != "plane":
+            raise source.error("obstacle.direction is required with obstacle.indentation for a circle (the direction "
+                               "it moves in, e.g. [0, -1])")
+        direction = normal  # along its outward normal: into the body
+    if direction is not None:
+        length = math.hypot(*direction)
+        direction = (direction[0] / length, direction[1] / length)
+    return ObstacleSpec(shape, point, normal, centre, radius, depths, direction, steps)
+
+
+# ---------------------------------------------------------------------------------------------
+# the case
+# ---------------------------------------------------------------------------------------------
+@dataclass(frozen=True, slots=True)
+class Case:
+    """A validated case file: the problem (mesh, material, boundary, obstacle) and the raw run tables."""
+
+    path: Path
+    description: str
+    mesh: MeshSpec
+    material: Material
+    boundary: Boundary
+    obstacle: ObstacleSpec
+    run: Mapping[str, Mapping[str, Any]]  #: {table: {option: value}} (validated by the command line)
+    overrides: tuple[tuple[str, Any], ...] = ()
+
+    def build_mesh(self, comm: MPI.Comm = MPI.COMM_WORLD) -> CaseMesh:
+        """The mesh (collective); a mesh file's material groups are read on rank 0."""
+        overlays = [name for name in self.material.groups() if name not in SUBDOMAIN_NAMES]
+        return self.mesh.build(comm, overlays)
+
+    def model(self, mesh: CaseMesh) -> TestModel:
+        """The problem as a TestModel on the built mesh (collective), the obstacle at its last depth.
+
+        Checked here: every cell has a material (groups, pixel maps), the traction groups match the mesh's.
+        """
+        cm = mesh.cm
+        material = self.material
+        groups = CellGroups(cm, mesh.overlays) if material.groups() else None
+        base = None
+        if material.model is not None:
+            kwargs = {k: v for k, v in (("E_high", material.E_high), ("E_low", material.E_low)) if v is not None}
+            base = get_model(material.model, **kwargs)
+        E = self._scalar(material.E, "material.E", cm, groups, (0.0, math.inf)) if material.E else base.youngs_modulus
+        nu = self._scalar(material.nu, "material.nu", cm, groups, (-1.0, 0.5)) if material.nu else base.poisson_ratio
+        if material.body_force is not None:
+            load = self._vector(material.body_force, groups)
+        elif base is not None:
+            load = base.load
+        else:
+            load = lambda x: np.zeros((2, x.shape[1]))  # noqa: E731
+        boundary = self.boundary.conditions()
+        check_boundary_groups(cm.mesh, cm.facet_tags, boundary, names=cm.neumann_names)
+        return TestModel(
+            name=self.path.stem, youngs_modulus=E, poisson_ratio=nu, load=load,
+            description=self.description or f"case {self.path.name}", boundary=boundary,
+            obstacle=self.obstacle.final(),
+        )
+
+    def _scalar(self, spec: FieldSpec, key: str, cm: ContactMesh, groups: CellGroups | None,
+                bounds: tuple[float, float]) -> Callable:
+        if isinstance(spec, Uniform):
+            return constant_field(spec.value)
+        if isinstance(spec, PythonField):
+            return spec.function
+        if isinstance(spec, Pixels):
+            box = bounding_box(cm.mesh)
+            extent = spec.extent or box
+            _check_pixels(spec, extent, box, key, bounds, self.path)
+            return pixel_field(spec.values, extent)
+        fn = groups.field(dict(spec.values))
+        missing = groups.uncovered(fn)
+        if missing:
+            raise MeshTagError(f"case {self.path}: {key}: {missing} cells lie in none of the groups given "
+                               f"({[n for n, _ in spec.values]}); give a value for Omega1 and Omega2 or for groups "
+                               "that cover the domain")
+        return fn
+
+    def _vector(self, spec: FieldSpec, groups: CellGroups | None) -> Callable:
+        if isinstance(spec, Uniform):
+            value = np.asarray(spec.value)
+            return lambda x: np.repeat(value[:, None], x.shape[1], axis=1)
+        if isinstance(spec, PythonField):
+            return spec.function
+        return groups.field(dict(spec.values), shape=(2,), default=0.0)
+
+    def to_dict(self) -> dict:
+        """The resolved case (defaults filled in, file names absolute), for the summary."""
+        return {
+            "file": str(self.path),
+            "description": self.description,
+            "mesh": self.mesh.echo(),
+            "material": self.material.echo(),
+            "load": {"body-force": self.material.body_force.echo() if self.material.body_force else
+                     ("model" if self.material.model else [0.0, 0.0])},
+            "boundary": self.boundary.echo(),
+            "obstacle": self.obstacle.echo(),
+            "overrides": {key: value for key, value in self.overrides},
+        }
+
+
+def _check_pixels(spec: Pixels, extent, box, key: str, bounds: tuple[float, float], path: Path) -> None:
+    """Every pixel under the mesh's bounding box lies in the open interval ``bounds``."""
+    ny, nx = spec.values.shape
+    x0, x1, y0, y1 = extent
+    i0, i1 = (int(np.clip(np.floor((x - x0) / (x1 - x0) * nx), 0, nx - 1)) for x in (box[0], box[1]))
+    j0, j1 = (int(np.clip(np.floor((y - y0) / (y1 - y0) * ny), 0, ny - 1)) for y in (box[2], box[3]))
+    covered = spec.values[j0:j1 + 1, i0:i1 + 1]
+    with np.errstate(invalid="ignore"):
+        bad = ~(np.isfinite(covered) & (covered > bounds[0]) & (covered < bounds[1]))
+    if np.any(bad):
+        j, i = np.argwhere(bad)[0]
+        raise InputError(f"case {path}: {key}: {np.count_nonzero(bad)} pixels of {spec.path.name} under the domain "
+                         f"lie outside ({bounds[0]:g}, {bounds[1]:g}) (first: row {j + j0}, column {i + i0}, value "
+                         f"{float(covered[j, i])!r})")
+
+
+def parse_override(text: str) -> tuple[str, Any]:
+    """``KEY=VALUE`` (``--set``): VALUE read as a TOML value, else as a string (``mesh.builtin=unit-square``)."""
+    key, sep, value = text.partition("=")
+    key = key.strip()
+    if not sep or not key or any(not part for part in key.split(".")):
+        raise InputError(f"--set {text!r}: write KEY=VALUE with a dotted key, e.g. --set mesh.h=16")
+    try:
+        return key, tomllib.loads(f"v = {value}")["v"]
+    except tomllib.TOMLDecodeError:
+        return key, value.strip()
+
+
+def _apply(data: dict, key: str, value, source: _Source) -> None:
+    parts = key.split(".")
+    table = data
+    for depth, part in enumerate(parts[:-1]):
+        inner = table.setdefault(part, {})
+        if not isinstance(inner, dict):
+            raise source.error(f"override {key}: {'.'.join(parts[:depth + 1])} is not a table")
+        table = inner
+    table[parts[-1]] = value
+
+
+def load_case(path: str | Path, overrides: Sequence[tuple[str, Any]] = ()) -> Case:
+    """Read and validate a case file; ``overrides`` ((dotted key, value), ...) replace keys first."""
+    path = Path(path).resolve()
+    source = _Source(path)
+    if not path.is_file():
+        raise InputError(f"--case {path} does not exist" if not path.exists() else f"--case {path} is not a file")
+    try:
+        with path.open("rb") as stream:
+            data = tomllib.load(stream)
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
+        raise source.error(f"not a valid TOML file: {err}") from None
+    except OSError as err:
+        raise InputError(f"cannot read the case file {path}: {err}") from None
+    for key, value in overrides:
+        _apply(data, key, value, source)
+    unknown = sorted(set(data) - {"description", *_PROBLEM_TABLES, *RUN_TABLES})
+    if unknown:
+        raise source.error(f"unknown key or table {unknown[0]!r}; the tables are {[*_PROBLEM_TABLES, *RUN_TABLES]} "
+                           "(and the key description)")
+    description = data.get("description", "")
+    if not isinstance(description, str):
+        raise source.error(f"description must be a string, got {_show(description)}")
+    if "mesh" not in data:
+        raise source.error("[mesh] is required (builtin = \"unit-square\" | ... or file = \"my.msh\")")
+    mesh = _mesh(source, data["mesh"])
+    material = _material(source, data.get("material"), data.get("load"))
+    if not isinstance(mesh, MeshFile):
+        other = sorted(material.groups() - set(SUBDOMAIN_NAMES))
+        if other:
+            raise source.error(f"the cell group {other[0]!r} is named in [material]/[load], but the built-in "
+                               f"{mesh.kind} mesh has only {list(SUBDOMAIN_NAMES)}", MeshTagError)
+    boundary = _boundary(source, data.get("boundary"), mesh)
+    obstacle = _obstacle(source, data.get("obstacle"))
+    run = {}
+    for table in RUN_TABLES:
+        values = data.get(table, {})
+        if not isinstance(values, dict):
+            raise source.error(f"{table} must be a table ([{table}]), got {_show(values)}")
+        run[table] = dict(values)
+    return Case(path, description, mesh, material, boundary, obstacle, run, tuple(overrides))

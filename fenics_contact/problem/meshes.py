@@ -1,0 +1,160 @@
+"""Tagged gmsh meshes beyond the unit square: a curved contact boundary and the Hertz block.
+
+* ``bulged_square(h, H, bulge)``: the unit square whose side x = 1 is replaced by
+  a circle arc through (1, 0), (1 + bulge, ½), (1, 1) (Γ_C, curved); Ω₂ is the
+  part right of γ = {x = 1 − H}; Γ_D the sides listed in ``clamped``, the other
+  straight sides traction free.
+* ``hertz_block(a, ...)``: the block (−L, L) × (−D, 0) (default 80a × 40a) for a
+  cylinder pressed into its top face (the plane-strain Hertz benchmark): Γ_C the top segment
+  |x| ≤ ``contact_width``, the rest of the top and the sides traction free, the
+  bottom clamped; Ω₂ the strip y > −``strip``, γ the line y = −``strip``;
+  mesh size ``h_contact`` on the contact zone |x| ≤ ``refine_width``,
+  y ≥ −``refine_depth``, growing linearly (rate ``grading``) up to ``h_far``.
+
+Both use unstructured triangles; the tags follow ``tags.PHYSICAL_NAMES``.
+
+The Hertz block's default size (80a × 40a) is chosen so that the block hardly limits the
+comparison with the half-space solution: the discrete pressure profiles converge to the
+finite block's, which differs from Hertz by about 0.2 % in L² (``benchmarks/analytic_benchmarks.py``);
+a smaller block leaves a larger difference.
+"""
+
+from dataclasses import dataclass
+
+import gmsh
+import numpy as np
+from mpi4py import MPI
+
+from fenics_contact.errors import InputError
+from fenics_contact.problem.geometry import ContactMesh, contact_mesh_from_model, gmsh_session
+from fenics_contact.problem.tags import PHYSICAL_NAMES, Boundary, Subdomain
+
+__all__ = ["bulged_square", "HertzBlock", "hertz_block"]
+
+
+def _add_groups(groups: dict) -> None:
+    for tag, (dim, entities) in groups.items():
+        if entities:
+            gmsh.model.addPhysicalGroup(dim, entities, int(tag), name=PHYSICAL_NAMES[tag])
+
+
+def bulged_square(
+    h: float, H: float, *, bulge: float = 0.1, clamped=("left",), comm: MPI.Comm = MPI.COMM_WORLD
+) -> ContactMesh:
+    """The unit square with a curved contact side (circle arc bulging out by ``bulge`` at y = ½)."""
+    if not (0 < h <= 0.25 and 0 < H < 1 and 0 < bulge < 0.5):
+        raise InputError(f"bulged_square needs 0 < h <= 1/4, 0 < H < 1, 0 < bulge < 1/2; got {h}, {H}, {bulge}")
+    sides = ("left", "bottom", "top")
+    if any(side not in sides for side in clamped):
+        raise InputError(f"clamped sides must be among {sides}, got {clamped}")
+    s = (0.25 - bulge**2) / (2.0 * bulge)  # arc centre at (1 − s, ½)
+    with gmsh_session():
+        if comm.rank == 0:
+            geo = gmsh.model.geo
+            gmsh.model.add("bulged_square")
+            xs = 1.0 - H
+            p = [geo.addPoint(x, y, 0.0, h) for x, y in [(0, 0), (xs, 0), (1, 0), (1, 1), (xs, 1), (0, 1)]]
+            centre = geo.addPoint(1.0 - s, 0.5, 0.0, h)
+            b1, b2 = geo.addLine(p[0], p[1]), geo.addLine(p[1], p[2])
+            arc = geo.addCircleArc(p[2], centre, p[3])
+            t2, t1 = geo.addLine(p[3], p[4]), geo.addLine(p[4], p[5])
+            left = geo.addLine(p[5], p[0])
+            gam = geo.addLine(p[1], p[4])
+            s1 = geo.addPlaneSurface([geo.addCurveLoop([b1, gam, t1, left])])
+            s2 = geo.addPlaneSurface([geo.addCurveLoop([b2, arc, t2, -gam])])
+            geo.synchronize()
+            side = {"left": [left], "bottom": [b1, b2], "top": [t1, t2]}
+            _add_groups({
+                Subdomain.OMEGA1: (2, [s1]),
+                Subdomain.OMEGA2: (2, [s2]),
+                Boundary.GAMMA_D: (1, [c for name in clamped for c in side[name]]),
+                Boundary.GAMMA_C: (1, [arc]),
+                Boundary.INTERFACE: (1, [gam]),
+            })
+            gmsh.option.setNumber("Mesh.MeshSizeMax", h)
+            gmsh.model.mesh.generate(2)
+        return contact_mesh_from_model(comm, h=h, H=None)  # unstructured: no coarse grid
+
+
+@dataclass(frozen=True, slots=True)
+class HertzBlock:
+    """Geometry and mesh sizes of the Hertz block (lengths in the units of a)."""
+
+    a: float  #: expected contact half-width (sets the sizes below)
+    half_width: float  #: L: the block is (−L, L) × (−D, 0)
+    depth: float  #: D
+    strip: float  #: thickness of Ω₂ below the top face
+    contact_width: float  #: Γ_C = top segment |x| <= contact_width
+    refine_width: float  #: mesh size h_contact on |x| <= refine_width, y >= −refine_depth
+    refine_depth: float
+    h_contact: float
+    h_far: float
+    grading: float  #: growth of the mesh size per unit distance from the refined zone
+
+
+def hertz_block(
+    a: float,
+    *,
+    h_contact: float | None = None,
+    width: float = 80.0,
+    depth: float = 40.0,
+    strip: float = 2.0,
+    contact_width: float = 3.0,
+    refine_width: float = 1.5,
+    refine_depth: float = 0.5,
+    grading: float = 0.25,
+    h_far: float = 8.0,
+    refinement: float = 1.0,
+    comm: MPI.Comm = MPI.COMM_WORLD,
+) -> tuple[ContactMesh, HertzBlock]:
+    """The tagged Hertz block for a contact half-width ``a``; lengths other than ``a`` are multiples of a.
+
+    ``refinement`` r refines the whole mesh: h_contact = a/(20r) (unless given), far size
+    ``h_far``·a/r, grading/r. Returns the mesh and its ``HertzBlock`` description.
+    """
+    if not (np.isfinite(a) and a > 0):
+        raise InputError(f"the contact half-width a must be > 0, got {a!r}")
+    if not (np.isfinite(refinement) and refinement > 0):
+        raise InputError(f"the refinement factor must be > 0, got {refinement!r}")
+    hc = a / (20.0 * refinement) if h_contact is None else float(h_contact)
+    spec = HertzBlock(a, 0.5 * width * a, depth * a, strip * a, contact_width * a, refine_width * a,
+                      refine_depth * a, hc, h_far * a / refinement, grading / refinement)
+    if not (0 < hc <= spec.refine_width and grading > 0 and spec.refine_width <= spec.contact_width < spec.half_width
+            and 0 < spec.strip < spec.depth):
+        raise InputError(f"inconsistent Hertz block sizes: {spec}")
+    L, D, S, W = spec.half_width, spec.depth, spec.strip, spec.contact_width
+    with gmsh_session():
+        if comm.rank == 0:
+            geo = gmsh.model.geo
+            gmsh.model.add("hertz_block")
+            coords = [(-L, -D), (L, -D), (L, -S), (L, 0), (W, 0), (-W, 0), (-L, 0), (-L, -S)]
+            p = [geo.addPoint(x, y, 0.0) for x, y in coords]
+            bottom = geo.addLine(p[0], p[1])
+            r1, r2 = geo.addLine(p[1], p[2]), geo.addLine(p[2], p[3])
+            top_r, contact, top_l = geo.addLine(p[3], p[4]), geo.addLine(p[4], p[5]), geo.addLine(p[5], p[6])
+            l2, l1 = geo.addLine(p[6], p[7]), geo.addLine(p[7], p[0])
+            gam = geo.addLine(p[7], p[2])
+            s1 = geo.addPlaneSurface([geo.addCurveLoop([bottom, r1, -gam, l1])])
+            s2 = geo.addPlaneSurface([geo.addCurveLoop([gam, r2, top_r, contact, top_l, l2])])
+            geo.synchronize()
+            _add_groups({
+                Subdomain.OMEGA1: (2, [s1]),
+                Subdomain.OMEGA2: (2, [s2]),
+                Boundary.GAMMA_D: (1, [bottom]),
+                Boundary.GAMMA_C: (1, [contact]),
+                Boundary.INTERFACE: (1, [gam]),
+            })
+            # size: h_contact on the refined zone, + grading·distance, capped at h_far
+            zone = gmsh.model.mesh.field.add("Box")
+            gmsh.model.mesh.field.setNumber(zone, "VIn", hc)
+            gmsh.model.mesh.field.setNumber(zone, "VOut", spec.h_far)
+            for key, value in (("XMin", -spec.refine_width), ("XMax", spec.refine_width),
+                               ("YMin", -spec.refine_depth), ("YMax", 0.0)):
+                gmsh.model.mesh.field.setNumber(zone, key, value)
+            gmsh.model.mesh.field.setNumber(zone, "Thickness", (spec.h_far - hc) / spec.grading)
+            gmsh.model.mesh.field.setAsBackgroundMesh(zone)
+            for name in ("Mesh.MeshSizeExtendFromBoundary", "Mesh.MeshSizeFromPoints", "Mesh.MeshSizeFromCurvature"):
+                gmsh.option.setNumber(name, 0)
+            gmsh.model.mesh.generate(2)
+        cm = contact_mesh_from_model(comm, h=hc, H=None)  # graded: no coarse grid
+    return cm, spec

@@ -1,0 +1,234 @@
+"""Rigid obstacles: a signed distance d(x) (> 0 outside the obstacle) and the contact direction ν(x).
+
+Small-deformation frictionless contact with a rigid obstacle (METHOD §9) reads
+
+    u·ν ≤ g  on Γ_C,   g(x) = d(x),   ν(x) = −∇d(x)/|∇d(x)|,
+
+ν the unit vector from a body point towards the obstacle (for an obstacle
+flush with a straight Γ_C it is the body's outward normal n).  The primal
+penalty acts on (u·ν − g)⁺ at the Γ_C vertices, the mixed one on u·n = g at the
+Gauss–Lobatto nodes (``fem.primal``, ``fem.mixed``).  Obstacles:
+
+* ``Plane(point, normal)``: the half-plane {(x − point)·normal ≤ 0}; ``normal``
+  is the obstacle's outward unit normal (pointing towards the body).
+* ``Circle(centre, radius)``: a rigid disc / cylinder (indenter);
+  d = |x − c| − R, undefined at the centre.
+* ``SignedDistance(distance, normal=None)``: any callable d; ``normal`` (the
+  obstacle's outward normal ∇d/|∇d|) by central differences when not given.
+  A callable may return NaN where its gap is undefined: a contact node there
+  is refused (InputError).
+
+``obstacle.translated(t)`` moves an obstacle rigidly by the vector t (its
+first-order effect on the gap is g − t·ν, METHOD §9); ``indented(depth,
+direction)`` moves it by depth·direction (unit direction).
+
+Points are numpy arrays of shape (3, N) or (2, N) (DOLFINx convention); gaps
+come back with shape (N,), directions ν with shape (2, N).
+"""
+
+from abc import ABC, abstractmethod
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from fenics_contact.errors import InputError
+
+__all__ = ["Obstacle", "Plane", "Circle", "SignedDistance", "Translated", "evaluate_obstacle"]
+
+
+def _as_vector(value: npt.ArrayLike, name: str, *, unit: bool = False) -> np.ndarray:
+    v = np.asarray(value, dtype=np.float64).ravel()
+    if v.size == 3 and v[2] == 0.0:
+        v = v[:2]
+    if v.size != 2 or not np.all(np.isfinite(v)):
+        raise InputError(f"{name} must be a finite 2D vector, got {value!r}")
+    if unit:
+        norm = float(np.linalg.norm(v))
+        if norm == 0.0:
+            raise InputError(f"{name} must be non-zero")
+        v = v / norm
+    return v
+
+
+def _xy(x: np.ndarray) -> np.ndarray:
+    x = np.asarray(x, dtype=np.float64)
+    return x[:2]
+
+
+class Obstacle(ABC):
+    """A rigid obstacle: signed distance d (> 0 outside) and outward normal ∇d/|∇d|."""
+
+    @abstractmethod
+    def distance(self, x: np.ndarray) -> np.ndarray:
+        """d(x), shape (N,): > 0 outside the obstacle (NaN where undefined)."""
+
+    @abstractmethod
+    def outward_normal(self, x: np.ndarray) -> np.ndarray:
+        """∇d/|∇d| at x, shape (2, N): the obstacle's outward unit normal (NaN where undefined)."""
+
+    def gap(self, x: np.ndarray) -> np.ndarray:
+        """g(x) = d(x): the initial gap along ν."""
+        return self.distance(x)
+
+    def direction(self, x: np.ndarray) -> np.ndarray:
+        """ν(x) = −∇d/|∇d|, shape (2, N): the unit direction from a body point towards the obstacle."""
+        return -self.outward_normal(x)
+
+    def translated(self, t: npt.ArrayLike) -> "Obstacle":
+        """The obstacle moved rigidly by the vector t."""
+        return Translated(self, _as_vector(t, "the translation"))
+
+    def indented(self, depth: float, direction: npt.ArrayLike) -> "Obstacle":
+        """The obstacle moved by ``depth`` along the unit vector ``direction`` (into the body)."""
+        if not np.isfinite(depth):
+            raise InputError(f"the indentation depth must be finite, got {depth!r}")
+        return self.translated(float(depth) * _as_vector(direction, "the indentation direction", unit=True))
+
+
+@dataclass(frozen=True, slots=True)
+class Plane(Obstacle):
+    """The half-plane {(x − point)·normal ≤ 0}; ``normal``: its outward unit normal (towards the body)."""
+
+    point: tuple[float, float]
+    normal: tuple[float, float]
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "point", tuple(map(float, _as_vector(self.point, "Plane point"))))
+        object.__setattr__(self, "normal", tuple(map(float, _as_vector(self.normal, "Plane normal", unit=True))))
+
+    def distance(self, x: np.ndarray) -> np.ndarray:
+        p, n = np.asarray(self.point), np.asarray(self.normal)
+        return np.einsum("i,in->n", n, _xy(x) - p[:, None])
+
+    def outward_normal(self, x: np.ndarray) -> np.ndarray:
+        return np.repeat(np.asarray(self.normal)[:, None], np.shape(x)[1], axis=1)
+
+
+@dataclass(frozen=True, slots=True)
+class Circle(Obstacle):
+    """A rigid disc (a cylinder in plane strain): d = |x − centre| − radius; undefined within 1e−8·radius of the centre."""
+
+    centre: tuple[float, float]
+    radius: float
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "centre", tuple(map(float, _as_vector(self.centre, "Circle centre"))))
+        if not (np.isfinite(self.radius) and self.radius > 0):
+            raise InputError(f"the circle radius must be > 0, got {self.radius!r}")
+        object.__setattr__(self, "radius", float(self.radius))
+
+    def _offset(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        r = _xy(x) - np.asarray(self.centre)[:, None]
+        return r, np.linalg.norm(r, axis=0)
+
+    def distance(self, x: np.ndarray) -> np.ndarray:
+        r, rho = self._offset(x)
+        return np.where(rho > 1e-8 * self.radius, rho - self.radius, np.nan)
+
+    def outward_normal(self, x: np.ndarray) -> np.ndarray:
+        r, rho = self._offset(x)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return np.where(rho > 1e-8 * self.radius, r / rho, np.nan)
+
+
+@dataclass(frozen=True, slots=True)
+class SignedDistance(Obstacle):
+    """Any signed distance callable d(x) (> 0 outside), with its outward normal or by central differences.
+
+    ``step`` is the finite-difference step (absolute length) used when ``normal`` is None.
+    """
+
+    function: Callable[[np.ndarray], np.ndarray]
+    normal: Callable[[np.ndarray], np.ndarray] | None = None
+    step: float = 1e-6
+
+    def __post_init__(self) -> None:
+        if not callable(self.function):
+            raise InputError("SignedDistance needs a callable d(x)")
+        if self.normal is not None and not callable(self.normal):
+            raise InputError("the normal of a SignedDistance must be a callable x -> (2, N) or None")
+        if not (np.isfinite(self.step) and self.step > 0):
+            raise InputError(f"the finite-difference step must be > 0, got {self.step!r}")
+
+    def _call(self, x: np.ndarray) -> np.ndarray:
+        x = np.asarray(x, dtype=np.float64)
+        if x.shape[0] == 2:
+            x = np.vstack([x, np.zeros((1, x.shape[1]))])
+        return np.asarray(self.function(x), dtype=np.float64).reshape(-1)
+
+    def distance(self, x: np.ndarray) -> np.ndarray:
+        return self._call(x)
+
+    def outward_normal(self, x: np.ndarray) -> np.ndarray:
+        x = np.asarray(x, dtype=np.float64)
+        if self.normal is not None:
+            xx = x if x.shape[0] == 3 else np.vstack([x, np.zeros((1, x.shape[1]))])
+            n = np.asarray(self.normal(xx), dtype=np.float64).reshape(2, -1)
+        else:
+            n = np.empty((2, x.shape[1]))
+            for i in range(2):
+                e = np.zeros((x.shape[0], 1))
+                e[i] = self.step
+                n[i] = (self._call(x + e) - self._call(x - e)) / (2.0 * self.step)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return n / np.linalg.norm(n, axis=0)
+
+
+@dataclass(frozen=True, slots=True)
+class Translated(Obstacle):
+    """``base`` moved rigidly by the vector ``shift``: d(x) = d_base(x − shift)."""
+
+    base: Obstacle
+    shift: tuple[float, float]
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "shift", tuple(map(float, _as_vector(self.shift, "the translation"))))
+
+    def _back(self, x: np.ndarray) -> np.ndarray:
+        y = np.array(x, dtype=np.float64, copy=True)
+        y[:2] -= np.asarray(self.shift)[:, None]
+        return y
+
+    def distance(self, x: np.ndarray) -> np.ndarray:
+        return self.base.distance(self._back(x))
+
+    def outward_normal(self, x: np.ndarray) -> np.ndarray:
+        return self.base.outward_normal(self._back(x))
+
+    def translated(self, t: npt.ArrayLike) -> Obstacle:
+        return Translated(self.base, tuple(np.asarray(self.shift) + _as_vector(t, "the translation")))
+
+
+def evaluate_obstacle(obstacle: Obstacle, points: np.ndarray, *, comm=None) -> tuple[np.ndarray, np.ndarray]:
+    """Gap g (N,) and direction ν (N, 2) at contact nodes ``points`` (N, 2 or 3); InputError if undefined.
+
+    The gap is undefined where d or ν is not finite or ν is not a unit vector (a
+    signed distance returning NaN, the centre of a circle, a zero gradient).
+    With ``comm`` the check is collective: every rank raises if any rank has a bad node.
+    """
+    points = np.asarray(points, dtype=np.float64).reshape(-1, points.shape[-1] if np.ndim(points) == 2 else 2)
+    x = np.zeros((3, points.shape[0]))
+    x[: points.shape[1]] = points.T
+    g = np.asarray(obstacle.gap(x), dtype=np.float64).reshape(-1) if points.shape[0] else np.zeros(0)
+    nu = np.asarray(obstacle.direction(x), dtype=np.float64).reshape(2, -1).T if points.shape[0] else np.zeros((0, 2))
+    if g.shape != (points.shape[0],) or nu.shape != (points.shape[0], 2):
+        raise InputError(
+            f"the obstacle returned gaps of shape {g.shape} and normals of shape {nu.shape} "
+            f"for {points.shape[0]} points (expected ({points.shape[0]},) and (2, {points.shape[0]}))"
+        )
+    with np.errstate(invalid="ignore"):
+        bad = ~(np.isfinite(g) & np.all(np.isfinite(nu), axis=1) & (np.abs(np.linalg.norm(nu, axis=1) - 1.0) < 1e-6))
+    where = points[bad][:3, :2].tolist()
+    count = int(np.count_nonzero(bad))
+    if comm is not None:
+        count = comm.allreduce(count)
+        where = [p for part in comm.allgather(where) for p in part][:3]
+    if count:
+        raise InputError(
+            f"the obstacle's gap is undefined at {count} contact node(s) of Gamma_C, e.g. at {where} "
+            "(a signed distance returning NaN or a zero gradient, or a node at the centre of a circle): "
+            "move the obstacle or restrict Gamma_C to where the gap is defined"
+        )
+    return g, nu

@@ -1,0 +1,173 @@
+"""Boundary conditions, the same in every fine method: Γ_D (clamped or u_D), Γ_N tractions, traction free.
+
+A manufactured solution exercises all of them at once with active contact against a
+curved gap: u quadratic with ε_xy = 0 (so σ is linear, σ_xy = 0: frictionless on x = 1),
+u = u_D on the left side, the exact tractions on two groups (top, bottom), and the gap
+g(y) = u_x(1, y) along ν = (1, 0), so that the whole of Γ_C is in contact with σ_c < 0.
+Arnold–Winther contains the linear stress, so the mixed solution is exact to round-off
+(stress) and Algorithm 2 reaches it; P1 converges at rate 2 in L².
+"""
+
+import gmsh
+import numpy as np
+import pytest
+import ufl
+from dolfinx import fem
+from mpi4py import MPI
+
+import fenics_contact  # noqa: F401
+from fenics_contact.errors import InputError, MeshTagError
+from fenics_contact.fem.arnold_winther import ArnoldWintherSpace
+from fenics_contact.fem.mixed import boundary_stress_space, solve_mixed_monolithic
+from fenics_contact.fem.primal import default_penalty, solve_primal_monolithic
+from fenics_contact.hybrid.iteration import IterationOptions
+from fenics_contact.hybrid.mixed import solve_mixed_hybrid
+from fenics_contact.hybrid.primal import solve_primal_hybrid
+from fenics_contact.problem.boundary import BoundaryConditions, check_boundary_groups
+from fenics_contact.problem.fields import material_fields
+from fenics_contact.problem.geometry import build_unit_square_model, gmsh_session, read_mesh, unit_square
+from fenics_contact.problem.models import TestModel, constant_field
+from fenics_contact.problem.obstacles import SignedDistance
+from fenics_contact.problem.tags import neumann_tag
+
+serial = pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="mixed (Arnold–Winther) methods are serial")
+
+E, NU = 1.0, 0.3
+LAM, MU = E * NU / ((1 + NU) * (1 - 2 * NU)), E / (2 * (1 + NU))
+GROUPS = {"top": "Gamma_N_top", "bottom": "Gamma_N_bottom"}
+
+
+def _u(x):
+    return np.vstack([-0.1 * x[0] ** 2 + 0.05 * x[1] ** 2 - 0.2 * x[0], -0.1 * x[0] * x[1] + 0.02 * x[1] ** 2])
+
+
+def _sigma(x):
+    exx, eyy = -0.2 * x[0] - 0.2, -0.1 * x[0] + 0.04 * x[1]
+    return np.vstack([(LAM + 2 * MU) * exx + LAM * eyy, 0 * x[0], LAM * exx + (LAM + 2 * MU) * eyy])
+
+
+def manufactured_model() -> TestModel:
+    f = np.array([0.2 * (LAM + 2 * MU) + 0.1 * LAM, -0.04 * (LAM + 2 * MU)])  # −div σ (constant)
+    top = lambda x: np.vstack([0 * x[0], _sigma(x)[2]])  # noqa: E731  σn, n = (0, 1)
+    bottom = lambda x: np.vstack([0 * x[0], -_sigma(x)[2]])  # noqa: E731  n = (0, −1)
+    gap = SignedDistance(lambda x: 0.05 * x[1] ** 2 - 0.3 + (1.0 - x[0]),
+                         normal=lambda x: np.vstack([-np.ones(x.shape[1]), np.zeros(x.shape[1])]))
+    return TestModel(
+        "manufactured", constant_field(E), constant_field(NU), lambda x: np.repeat(f[:, None], x.shape[1], axis=1),
+        boundary=BoundaryConditions(displacement=_u, tractions={GROUPS["top"]: top, GROUPS["bottom"]: bottom}),
+        obstacle=gap,
+    )
+
+
+def _mesh(n):
+    return unit_square(n, 4, clamped=("left",), neumann=GROUPS)
+
+
+def _l2(expr, msh):
+    return np.sqrt(msh.comm.allreduce(fem.assemble_scalar(fem.form(ufl.inner(expr, expr) * ufl.dx(
+        domain=msh, metadata={"quadrature_degree": 8}))), op=MPI.SUM))
+
+
+def _exact_u(msh):
+    X = ufl.SpatialCoordinate(msh)
+    return ufl.as_vector([-0.1 * X[0] ** 2 + 0.05 * X[1] ** 2 - 0.2 * X[0], -0.1 * X[0] * X[1] + 0.02 * X[1] ** 2])
+
+
+def _exact_sigma(msh):
+    X = ufl.SpatialCoordinate(msh)
+    exx, eyy = -0.2 * X[0] - 0.2, -0.1 * X[0] + 0.04 * X[1]
+    return ufl.as_vector([(LAM + 2 * MU) * exx + LAM * eyy, 0.0, LAM * exx + (LAM + 2 * MU) * eyy])
+
+
+def test_primal_manufactured_rate_and_algorithm_1():
+    errors = []
+    for n in (8, 16):
+        cm = _mesh(n)
+        fields = material_fields(cm.mesh, manufactured_model())
+        delta = default_penalty(cm.h, E)
+        sol = solve_primal_monolithic(cm.mesh, cm.facet_tags, fields, delta=delta)
+        assert np.all(sol.profile.active)  # the whole of Γ_C is in contact
+        errors.append(_l2(sol.u - _exact_u(cm.mesh), cm.mesh) / _l2(_exact_u(cm.mesh), cm.mesh))
+    assert errors[1] < 2e-3 and np.log2(errors[0] / errors[1]) > 1.8, errors
+    hybrid = solve_primal_hybrid(cm, manufactured_model(), delta=delta, reference=sol.u,
+                                 options=IterationOptions(tol=1e-10))
+    assert hybrid.converged and hybrid.e_u < 1e-8
+
+
+@serial
+def test_mixed_manufactured_exact_and_algorithm_2():
+    cm = _mesh(8)
+    model = manufactured_model()
+    sol = solve_mixed_monolithic(cm, model)
+    assert np.all(sol.profile.active)
+    s_ex = _exact_sigma(cm.mesh)
+    assert _l2(sol.sigma - s_ex, cm.mesh) / _l2(s_ex, cm.mesh) < 1e-11
+    # u_h is the L² projection of the quadratic u: O(h²)
+    assert _l2(sol.u - _exact_u(cm.mesh), cm.mesh) / _l2(_exact_u(cm.mesh), cm.mesh) < 5e-3
+    split = solve_mixed_monolithic(cm, model, split_interface=True)
+    alg2 = solve_mixed_hybrid(cm, model, reference=split, options=IterationOptions(tol=1e-11))
+    assert alg2.converged
+    assert _l2(alg2.sigma - s_ex, cm.mesh) / _l2(s_ex, cm.mesh) < 1e-8
+
+
+@serial
+def test_arnold_winther_traction_lifting():
+    """σn = t on traction edges (moments and vertex values), σn = 0 on free edges: the exact linear
+    stress lies in {P c + σ_t} (and not in the span of P alone)."""
+    cm = _mesh(4)
+    boundary = manufactured_model().boundary
+    space = boundary_stress_space(cm.mesh, cm.facet_tags, boundary)
+    assert space.lifting_dg is not None and space.incompatible_vertices.size == 0
+    full = ArnoldWintherSpace(cm.mesh)  # on the unconstrained space the interpolant of a linear σ is exact
+    target = full.prolongation @ full.interpolate(_sigma)
+    P = space.prolongation
+    c, *_ = np.linalg.lstsq(P.toarray(), target - space.lifting_dg, rcond=None)
+    assert np.linalg.norm(P @ c + space.lifting_dg - target) < 1e-10 * np.linalg.norm(target)
+    # without the lifting the stress is not representable (σn ≠ 0 on Γ_N)
+    c0, *_ = np.linalg.lstsq(P.toarray(), target, rcond=None)
+    assert np.linalg.norm(P @ c0 - target) > 1e-2 * np.linalg.norm(target)
+
+
+def test_bad_boundary_input(tmp_path):
+    with pytest.raises(InputError, match="Gamma_N"):
+        BoundaryConditions(tractions={"top": (0, 1)})
+    with pytest.raises(InputError, match="constant 2-vector"):
+        BoundaryConditions(tractions={"Gamma_N": (0, 1, 2)})
+    with pytest.raises(InputError, match="cannot be clamped"):
+        unit_square(4, 2, clamped=("left", "top"), neumann={"top": "Gamma_N"})
+    with pytest.raises(InputError, match="unknown side"):
+        unit_square(4, 2, clamped=("right",))
+    cm = unit_square(4, 2, clamped=("left",), neumann={"top": "Gamma_N_top"})
+    assert cm.neumann_names == {neumann_tag("Gamma_N_top"): "Gamma_N_top"}
+    with pytest.raises(MeshTagError, match="'Gamma_N_side'"):
+        check_boundary_groups(cm.mesh, cm.facet_tags, BoundaryConditions(
+            tractions={"Gamma_N_top": (0, 1), "Gamma_N_side": (1, 0)}))
+    with pytest.raises(InputError, match="Gamma_N_top.*no traction"):
+        check_boundary_groups(cm.mesh, cm.facet_tags, BoundaryConditions(), names=cm.neumann_names)
+    # a Gamma_N group overlapping Gamma_D in a user's file
+    path = tmp_path / "overlap.msh"
+    if MPI.COMM_WORLD.rank == 0:
+        with gmsh_session():
+            build_unit_square_model(4, 2, clamped=("left", "bottom"))
+            left = gmsh.model.getEntitiesForPhysicalGroup(1, 11)[:1]
+            gmsh.model.addPhysicalGroup(1, list(left), neumann_tag("Gamma_N_load"), name="Gamma_N_load")
+            gmsh.write(str(path))
+    path = MPI.COMM_WORLD.bcast(path, root=0)
+    with pytest.raises(MeshTagError, match="'Gamma_D' and 'Gamma_N_load' share"):
+        read_mesh(path)
+
+
+@serial
+def test_multiscale_methods_refuse_what_their_omega1_spaces_ignore():
+    """Until the CEM spaces take them (issue 11 streams), Algorithms 3 and 4 refuse boundary data on Ω₁
+    that their multiscale spaces would silently drop (clear InputError, not a wrong answer)."""
+    from fenics_contact.multiscale.mixed import solve_mixed_ms_hybrid
+    from fenics_contact.multiscale.primal import solve_primal_ms_hybrid
+
+    cm = _mesh(8)
+    with pytest.raises(InputError, match="Algorithm 3 cannot yet take a prescribed displacement.*Gamma_N_bottom"):
+        solve_primal_ms_hybrid(cm, manufactured_model(), delta=1e-4)
+    free = unit_square(8, 4, clamped=("left",))
+    with pytest.raises(InputError, match="Algorithm 4 cannot yet take traction-free sides"):
+        solve_mixed_ms_hybrid(free, TestModel("bar", constant_field(1.0), constant_field(0.0),
+                                              lambda x: np.vstack([np.ones(x.shape[1]), 0 * x[0]])))

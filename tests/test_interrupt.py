@@ -1,0 +1,45 @@
+"""Ctrl-C (SIGINT) or SIGTERM during a run: exit 130 / 143, one line on stderr, --out left as it was."""
+
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+from mpi4py import MPI
+
+from fenics_contact.cli import main
+
+pytestmark = pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="launches its own process")
+
+#: a run that takes minutes: the plain update to a tolerance near round-off
+LONG_RUN = ["--h", "64", "--H", "16", "--accel", "none", "--tol", "1e-14", "--max-iterations", "100000", "--no-plots"]
+
+
+@pytest.mark.parametrize("signum, code", [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
+def test_interrupted_run_leaves_the_previous_results(tmp_path, signum, code):
+    out = tmp_path / "run"
+    assert main(["run", "--h", "16", "--H", "4", "--no-plots", "--out", str(out)]) == 0
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    log = tmp_path / "stdout.txt"
+    env = dict(os.environ, OMP_NUM_THREADS="1")
+    with open(log, "w") as stdout:
+        proc = subprocess.Popen([sys.executable, "-m", "fenics_contact.cli", "run", *LONG_RUN, "--out", str(out)],
+                                stdout=stdout, stderr=subprocess.PIPE, text=True, env=env)
+        try:
+            deadline = time.monotonic() + 300
+            while " it " not in log.read_text():  # the iteration is under way (the staging directory exists)
+                assert proc.poll() is None and time.monotonic() < deadline, log.read_text()
+                time.sleep(0.2)
+            assert list(tmp_path.glob(".fenics-contact-*.partial"))
+            proc.send_signal(signum)
+            _, err = proc.communicate(timeout=120)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+    assert proc.returncode == code, err
+    lines = err.strip().splitlines()
+    assert lines == [f"interrupted by {signal.Signals(signum).name}: {out} left as it was (no partial output)"], err
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run", "stdout.txt"], "no staging directory is left"

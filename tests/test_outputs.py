@@ -1,0 +1,183 @@
+"""Outputs whole or absent: a reused --out holds exactly one run, a failed or killed run leaves it as it was,
+stale temporaries are cleaned, and ranks of an MPI run write one directory together."""
+
+import json
+import os
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+from fenics_contact.cli import main
+from fenics_contact.io import RUN_MARKER, OutputDirectory
+from fenics_contact.multiscale.cache import OfflineCache, remove_stale_temporaries
+
+from test_validation import build_columns
+
+pytestmark = pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="launches its own processes")
+
+SMALL = ["--h", "16", "--H", "4"]
+RUN_FILES = {"fields.xdmf", "fields.h5", "summary.json", "summary.md", RUN_MARKER}
+
+
+def _dead_pid() -> int:
+    proc = subprocess.Popen([sys.executable, "-c", "pass"])
+    proc.wait()
+    return proc.pid
+
+
+def _snapshot(directory: Path) -> dict[str, bytes]:
+    return {p.name: p.read_bytes() for p in sorted(directory.iterdir()) if p.is_file()}
+
+
+def test_a_reused_out_holds_exactly_one_run(tmp_path):
+    out = tmp_path / "run"
+    assert main(["run", *SMALL, "--method", "mixed", "--out", str(out)]) == 0
+    assert {"sigma.bp", "u.bp", "stress.png", "E.png"} <= {p.name for p in out.iterdir()}
+    assert main(["run", *SMALL, "--model", "2", "--no-plots", "--out", str(out)]) == 0
+    assert {p.name for p in out.iterdir()} == RUN_FILES  # nothing of the mixed run is left
+    summary = json.loads((out / "summary.json").read_text())
+    assert (summary["method"], summary["model"]) == ("primal", 2)
+    assert [p.name for p in tmp_path.iterdir()] == ["run"], "no staging or old directory is left beside it"
+
+
+def test_an_older_run_directory_is_replaced_and_a_foreign_one_refused(tmp_path):
+    old = tmp_path / "old"
+    old.mkdir()
+    (old / "summary.json").write_text(json.dumps({"method": "primal", "model": 1}))  # an earlier version's run
+    (old / "sigma.bp").mkdir()
+    assert main(["run", *SMALL, "--no-plots", "--out", str(old)]) == 0
+    assert {p.name for p in old.iterdir()} == RUN_FILES
+    foreign = tmp_path / "foreign"
+    foreign.mkdir()
+    (foreign / "notes.txt").write_text("mine")
+    assert main(["run", *SMALL, "--no-plots", "--out", str(foreign)]) == 2
+    assert [p.name for p in foreign.iterdir()] == ["notes.txt"]
+
+
+def test_a_failed_run_leaves_the_previous_results_intact(tmp_path, capsys):
+    out = tmp_path / "run"
+    assert main(["run", *SMALL, "--no-plots", "--out", str(out)]) == 0
+    before = _snapshot(out)
+    # a numerical failure after the mesh and the staging directory exist
+    assert main(["run", *SMALL, "--no-plots", "--E-high", "1e100", "--out", str(out)]) == 4
+    assert capsys.readouterr().err.startswith("numerical failure:")
+    assert _snapshot(out) == before
+    # a user mesh refused after it was read
+    bad = build_columns(tmp_path / "bad.msh", gamma=("v1",))
+    assert main(["run", "--mesh", str(bad), "--no-plots", "--out", str(out)]) == 2
+    assert _snapshot(out) == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.msh", "run"]
+
+
+def test_staging_left_by_a_killed_run_is_removed(tmp_path):
+    host = socket.gethostname()
+    dead = tmp_path / f".fenics-contact-{_dead_pid()}@{host}-abc.partial"
+    alive = tmp_path / f".fenics-contact-{os.getppid()}@{host}-def.partial"  # a live process: kept
+    for d in (dead, alive):
+        d.mkdir()
+        (d / "fields.h5").write_bytes(b"truncated")
+    with OutputDirectory(tmp_path / "run") as output:
+        assert output.path.parent == tmp_path and output.path.name.endswith(".partial")
+        assert not dead.exists() and alive.exists()
+    assert not output.path.exists(), "an uncommitted staging directory is removed"
+    assert not (tmp_path / "run").exists()
+    shutil.rmtree(alive)
+
+
+def test_stale_cache_temporaries_are_removed(tmp_path):
+    host = socket.gethostname()
+    dead = tmp_path / f"cem_x.abc.pid{_dead_pid()}@{host}.npz.tmp"
+    live = tmp_path / f"cem_x.def.pid{os.getpid()}@{host}.npz.tmp"
+    legacy_old, legacy_new = tmp_path / "tmp1.npz.tmp", tmp_path / "tmp2.npz.tmp"
+    for p in (dead, live, legacy_old, legacy_new):
+        p.write_bytes(b"partial")
+    os.utime(legacy_old, (time.time() - 7200, time.time() - 7200))
+    assert sorted(remove_stale_temporaries(tmp_path)) == sorted([dead, legacy_old])
+    assert live.exists() and legacy_new.exists()
+
+
+_KILLED_SAVE = """
+import os, signal, sys
+import numpy as np
+import fenics_contact
+from fenics_contact.multiscale.cache import OfflineCache
+
+class Cache(OfflineCache):
+    prefix = "test"
+    @staticmethod
+    def pack(obj):
+        return {"a": obj}
+
+def savez_then_die(fh, **arrays):
+    fh.write(b"PK" + bytes(1 << 20))  # part of the file, then kill -9 in the middle of the save
+    fh.flush()
+    os.kill(os.getpid(), signal.SIGKILL)
+
+np.savez = savez_then_die
+Cache(sys.argv[1]).save("k" * 40, np.ones(10))
+"""
+
+
+def test_kill_9_during_a_cache_save_leaves_a_temporary_that_the_next_use_removes(tmp_path):
+    proc = subprocess.run([sys.executable, "-c", _KILLED_SAVE, str(tmp_path)], capture_output=True, timeout=120)
+    assert proc.returncode == -signal.SIGKILL
+    orphans = list(tmp_path.glob("*.npz.tmp"))
+    assert len(orphans) == 1 and orphans[0].stat().st_size > 1 << 20
+
+    class Cache(OfflineCache):
+        prefix = "test"
+
+    assert Cache(tmp_path).load("k" * 40) == (None, "missing")
+    assert not list(tmp_path.glob("*.npz.tmp"))
+
+
+# ---------------------------------------------------------------------------------------------
+# MPI: rank 0 handles the directory, every rank writes its part of the fields
+# ---------------------------------------------------------------------------------------------
+def _mpiexec() -> str | None:
+    local = Path(sys.executable).with_name("mpiexec")
+    return str(local) if local.exists() else shutil.which("mpiexec")
+
+
+def _cli(*args: str, ranks: int = 2) -> subprocess.CompletedProcess:
+    command = [_mpiexec(), "-n", str(ranks), sys.executable, "-m", "fenics_contact.cli", "run", *args]
+    env = dict(os.environ, OMP_NUM_THREADS="1")
+    return subprocess.run(command, capture_output=True, text=True, env=env, timeout=600)
+
+
+@pytest.mark.mpi
+@pytest.mark.skipif(_mpiexec() is None, reason="no mpiexec")
+def test_two_ranks_write_one_directory(tmp_path):
+    out = tmp_path / "mpi"
+    stored = Path(__file__).parents[1] / "meshes" / "unit_square_n16_H4.msh"  # validated on 2 ranks
+    proc = _cli("--mesh", str(stored), "--H", "4", "--out", str(out))
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["mpi_ranks"] == 2 and summary["converged"] is True
+    assert {"E.png", "contact.png", "displacement.png", "history.png"} <= {p.name for p in out.iterdir()}
+    xdmf = (out / "fields.xdmf").read_text()
+    geometry = xdmf[xdmf.index("<Geometry"):]
+    assert 'Dimensions="289 2"' in geometry[:geometry.index("</Geometry>")]  # both ranks' parts, 17 x 17 nodes once
+    # a bad mesh: exit 2, one line on stderr (rank 0), the run before untouched (reuse: serial tests above)
+    before = _snapshot(out)
+    bad = build_columns(tmp_path / "bad.msh", gamma_c=("v0",), gamma_d=("b0", "b1", "b2", "t0", "t1", "t2", "v3"))
+    proc = _cli("--mesh", str(bad), "--no-plots", "--out", str(out))
+    assert proc.returncode == 2
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and "not on the boundary of Omega2" in lines[0], proc.stderr
+    assert _snapshot(out) == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.msh", "mpi"]
+    # the mixed method refuses MPI with a clear message
+    proc = _cli(*SMALL, "--method", "mixed", "--no-plots", "--out", str(tmp_path / "mixed"))
+    assert proc.returncode == 2 and "serial only" in proc.stderr, proc.stderr
+    assert not (tmp_path / "mixed").exists()
+    np.testing.assert_equal(summary["dofs"]["omega1"] + summary["dofs"]["omega2"] - summary["dofs"]["interface"],
+                            2 * 17 * 17)

@@ -102,7 +102,7 @@ def monolithic_steps(method: int, cm, number: int, E_high: float) -> str:
         return f"error: {type(err).__name__}"
 
 
-def part_steps(lines, h_primal, h_mixed, factors, big_default_only, methods, h_ms_max) -> None:
+def part_steps(lines, h_primal, h_mixed, factors, big_default_only, methods, h_ms_max, models=MODELS) -> None:
     lines += [
         "## Newton steps to a transmission residual of 1e-6 (H = 1/16)",
         "",
@@ -117,7 +117,7 @@ def part_steps(lines, h_primal, h_mixed, factors, big_default_only, methods, h_m
         sizes = h_primal if method in (1, 3) else h_mixed
         if method in (3, 4):  # the multiscale offline phase grows fast with 1/h (877 s of bases at 1/256)
             sizes = [n for n in sizes if n <= h_ms_max]
-        for label, number, E_high in MODELS:
+        for label, number, E_high in models:
             for n in sizes:
                 cm = unit_square(n, 16)
                 cells = []
@@ -224,6 +224,7 @@ def main() -> None:
     parser.add_argument("--cap", type=int, default=2000, help="iteration cap of the fixed-point updates")
     parser.add_argument("--speed-h", type=int, default=256)
     parser.add_argument("--speed-model", type=int, default=2)
+    parser.add_argument("--models", default="1,2,3,3e6", help="models of the steps part: 1, 2, 3 (E_high 1e3), 3e6")
     parser.add_argument("--out", type=Path, default=Path("benchmarks/results/interface_newton.md"))
     args = parser.parse_args()
     logging.basicConfig(level=logging.WARNING)
@@ -231,13 +232,18 @@ def main() -> None:
              "Command: `OMP_NUM_THREADS=1 python benchmarks/interface_newton.py "
              f"--parts {args.parts} --methods {args.methods} --h-primal {args.h_primal} --h-mixed {args.h_mixed} "
              f"--factors {args.factors} --h-ms-max {args.h_ms_max} --updates-h {args.updates_h} --cap {args.cap} "
-             f"--speed-h {args.speed_h} --speed-model {args.speed_model} --out {args.out}`", ""]
+             f"--speed-h {args.speed_h} --speed-model {args.speed_model} --models {args.models} --out {args.out}`", ""]
+    chosen = {"1": MODELS[0], "2": MODELS[1], "3": MODELS[2], "3e6": MODELS[3]}
+    try:
+        models = [chosen[m] for m in args.models.split(",")]
+    except KeyError as err:
+        raise SystemExit(f"unknown model {err}; choose from {', '.join(chosen)}") from None
     start = time.perf_counter()
     ints = lambda text: [int(x) for x in text.split(",")]  # noqa: E731
     for part in args.parts.split(","):
         if part == "steps":
             part_steps(lines, ints(args.h_primal), ints(args.h_mixed), [float(x) for x in args.factors.split(",")],
-                       args.big_default_only, ints(args.methods), args.h_ms_max)
+                       args.big_default_only, ints(args.methods), args.h_ms_max, models)
         elif part == "updates":
             part_updates(lines, args.updates_h, args.cap, ints(args.methods))
         elif part == "speed":

@@ -8,7 +8,8 @@ move it into place. Exit codes:
   0    converged
   2    bad input: an option, a file (--mesh, --E-map, --out, --cache-dir) or a mesh whose
        tags contradict the problem; nothing is written
-  3    not converged: the iteration hit --max-iterations; the results are written with
+  3    not converged: the transmission residual stayed above --tol (the iteration hit
+       --max-iterations, or the interface Newton's corrections ran out); the results are written with
        "converged": false
   4    numerical failure: Newton did not converge, non-finite values, a failed
        factorization; nothing is written
@@ -80,7 +81,8 @@ DEFAULT_H = 64  #: 1/h of the built-in mesh when --h is not given
 EXIT_CODES = {
     0: "converged",
     2: "bad input (an option, a file or the mesh tags; nothing written)",
-    3: "not converged: the iteration hit --max-iterations (results written, \"converged\": false)",
+    3: "not converged: the transmission residual stayed above --tol (--max-iterations hit, or the interface Newton's "
+       "corrections ran out; results written, \"converged\": false)",
     4: "numerical failure: Newton did not converge, non-finite values, a failed factorization (nothing written)",
     130: "interrupted by SIGINT (Ctrl-C); --out left as it was",
     143: "interrupted by SIGTERM; --out left as it was",

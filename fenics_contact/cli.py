@@ -160,6 +160,7 @@ class RunOptions:
     h: int | None = None
     H: int = 16
     mesh: Path | None = None
+    coarse_groups: bool = False
     alpha: str | None = None
     accel: str = "newton"
     tol: float = 1e-6
@@ -188,6 +189,8 @@ class RunOptions:
         for name, (methods, what) in _METHOD_OPTIONS.items():
             if getattr(self, name) is not None and self.method not in methods:
                 raise InputError(f"{_flag(name)} does not apply to --method {self.method} (it is {what})")
+        if self.coarse_groups and self.mesh is None:
+            raise InputError("--coarse-groups takes the coarse cells from the surface groups of --mesh: give --mesh")
         if self.mesh is not None:
             if self.h is not None:
                 raise InputError("--h sets the size of the built-in mesh; with --mesh the size comes from the file "
@@ -270,9 +273,13 @@ def build_parser(*, given_only: bool = False) -> argparse.ArgumentParser:
     run.add_argument("--h", type=int, help=f"fine size of the built-in mesh as 1/h (default {DEFAULT_H}); "
                      "not with --mesh, whose size is h = sqrt(2 x largest cell area) (1/n on an n x n grid)")
     run.add_argument("--H", type=int, default=16, help="coarse size / strip width as 1/H (e.g. 16); with --mesh the "
-                     "coarse grid of squares of side H from the origin (multiscale methods)")
+                     "coarse grid of squares of side 1/H over the bounding box (multiscale methods)")
     run.add_argument("--mesh", type=Path, help="a gmsh .msh file of planar triangles with the physical groups "
-                     "Omega1, Omega2, Gamma_D, Gamma_C, gamma (checked against the contact problem)")
+                     "Omega1, Omega2, Gamma_D, Gamma_C, gamma (checked against the contact problem); a file with "
+                     "none of Omega1/Omega2/gamma gets Omega2 = the coarse cells along Gamma_C")
+    run.add_argument("--coarse-groups", action="store_true",
+                     help="with --mesh: the surface groups of the file are the coarse cells (a coarse partition of "
+                     "your own) instead of the squares of side 1/H over the bounding box")
     run.add_argument("--alpha", help=f"primal Robin coefficient (default {DEFAULT_ALPHA}): a number or a product "
                      "of numbers, h^p, sqrt-h and E (E_p: mean E at the γ node), e.g. 1, h^-1/2, 2E*h^-1/2")
     run.add_argument("--accel", choices=ACCELERATIONS, default="newton",
@@ -517,7 +524,7 @@ def _model(options: RunOptions) -> tuple[TestModel, np.ndarray | None]:
 
 def _mesh(options: RunOptions) -> ContactMesh:
     if options.mesh is not None:
-        return read_mesh(options.mesh, H=1.0 / options.H)
+        return read_mesh(options.mesh, H=None if options.coarse_groups else 1.0 / options.H)
     return unit_square(options.n, options.H)
 
 
@@ -531,7 +538,7 @@ def _check_coarse_grid(cm: ContactMesh, options: RunOptions) -> None:
     crossing = cm.comm.allreduce(int(np.count_nonzero(cm.coarse_cell[cells] < 0)), op=MPI.SUM)
     if crossing:
         raise InputError(f"--method {options.method} with --mesh {options.mesh}: {crossing} Omega1 cells cross the "
-                         f"edges of the coarse grid of squares of side 1/{options.H} from the origin; the "
+                         f"edges of the coarse grid of squares of side 1/{options.H} over the bounding box; the "
                          "multiscale methods need a mesh that resolves it (choose --H accordingly)")
 
 

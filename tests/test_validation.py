@@ -180,9 +180,12 @@ def test_a_directory_or_bad_H_is_refused(tmp_path):
     with pytest.raises(InputError, match="not a file"):
         read_mesh(tmp_path)
     path = build_columns(tmp_path / "good.msh")
-    for H in (0, -0.25, 0.3, float("nan"), 2.0):
+    for H in (0, -0.25, float("nan"), float("inf"), "1/4"):
         with pytest.raises(InputError, match="coarse size H"):
             read_mesh(path, H=H)
+    # any positive H is a grid of squares over the bounding box; cells that straddle its lines lie in no
+    # coarse cell (-1), which the multiscale methods refuse (test_coarse_partition)
+    assert np.any(read_mesh(path, H=0.3).coarse_cell < 0)
 
 
 def test_a_part_not_held_by_gamma_d_and_extra_rules():

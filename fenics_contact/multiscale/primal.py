@@ -22,11 +22,11 @@ from mpi4py import MPI
 
 from dolfinx import fem
 
-from fenics_contact.multiscale.cem import DEFAULT_S_FACTOR, CEMOptions, Omega1Multiscale, require_serial
+from fenics_contact.multiscale.cem import DEFAULT_S_FACTOR, CEMOptions, Omega1Multiscale
 from fenics_contact.fem.contact import NewtonOptions
 from fenics_contact.hybrid.certificate import Certificate, primal_certificate
-from fenics_contact.hybrid.iteration import InterfaceNewtonOptions, IterationOptions, iterate
 from fenics_contact.hybrid.inputs import check_reference_displacement, check_solve_inputs
+from fenics_contact.hybrid.iteration import InterfaceNewtonOptions, IterationOptions, iterate
 from fenics_contact.errors import InputError
 from fenics_contact.problem.boundary import boundary_data_on
 from fenics_contact.problem.fields import material_fields
@@ -56,18 +56,20 @@ class MultiscalePrimalHybridStep:
         reference: fem.Function | None = None,
         cache_dir: str | Path | None = None,
     ) -> None:
-        require_serial(cm.comm)
-        if cm.H is None:
-            raise InputError("Algorithm 3 needs a coarse grid: build the mesh with geometry.unit_square(n, n_coarse)")
+        if cm.H is None and cm.comm.allreduce(int(np.any(np.asarray(cm.coarse_cell) >= 0)), op=MPI.MAX) == 0:
+            raise InputError("Algorithm 3 needs a coarse grid: build the mesh with geometry.unit_square(n, n_coarse), "
+                             "or give read_mesh H or a mesh with a coarse partition")
         start = time.perf_counter()
         self.comm = cm.comm
         self.parts = split_mesh(cm)
-        # (issue 14) the Ω₁ CEM space takes clamped and traction-free sides, not yet u_D or tractions
-        unsupported = boundary_data_on(self.parts[0].mesh, self.parts[0].facet_tags, model.boundary)
+        # (issue 14) the Ω₁ CEM space takes clamped and traction-free sides and Γ_N tractions (a load
+        # functional, source-corrected like f: cem.omega1_load), not yet a prescribed displacement
+        unsupported = [what for what in boundary_data_on(self.parts[0].mesh, self.parts[0].facet_tags, model.boundary)
+                       if not what.startswith("a traction")]
         if unsupported:
             raise InputError(
-                f"Algorithm 3 cannot yet take {' and '.join(unsupported)} on Ω₁ (its multiscale space ignores "
-                "them); use the fine Algorithm 1 (method 'primal') or move that boundary into Ω₂"
+                f"Algorithm 3 cannot yet take {' and '.join(unsupported)} on Ω₁ (its multiscale space would ignore "
+                "it); use the fine Algorithm 1 (method 'primal') or move that boundary into Ω₂"
             )
         gdim = cm.mesh.geometry.dim
         self.interface = InterfaceSpace(cm, self.parts, shape=(gdim,))
@@ -83,8 +85,10 @@ class MultiscalePrimalHybridStep:
             p2.mesh, p2.facet_tags, material_fields(p2.mesh, model), delta=delta, alpha=alpha2,
             prefix="fc_primal_ms_omega2_", newton=newton, V=self.interface.spaces[1],
         )
-        self.u1 = fem.Function(self.interface.spaces[0], name="u1")
-        self._prev = [np.zeros(self.omega1.ops.size), np.zeros_like(self.omega2.u.x.array)]
+        self.u1 = fem.Function(self.interface.spaces[0], name="u1")  # filled by glued()
+        # u₁ = Z s in the coordinates s of Omega1Multiscale (online nothing of fine-mesh size in Ω₁)
+        self._s = np.zeros(self.omega1.solver.GK.shape[0])
+        self._prev = [self._s.copy(), np.zeros_like(self.omega2.u.x.array)]
         self._diff2 = fem.Function(self.omega2.V)
         self._change = np.inf
         self._certificate = Certificate(np.inf, np.inf)
@@ -92,14 +96,12 @@ class MultiscalePrimalHybridStep:
         self._newton = None
         self.reference = None
         if reference is not None:
-            r1 = fem.Function(self.interface.spaces[0])
+            r1 = self.omega1.from_parent(reference)
             r2 = fem.Function(self.interface.spaces[1])
-            self.interface.transfers[0].to_sub(reference, r1)
             self.interface.transfers[1].to_sub(reference, r2)
-            self.reference = (r1.x.array.copy(), r2)
-            ops = self.omega1.ops
-            self._ref_l2 = ops.M.dot(r1.x.array).dot(r1.x.array) + self.omega2.l2_norm2(r2)
-            self._ref_energy = ops.K.dot(r1.x.array).dot(r1.x.array) + self.omega2.energy_norm2(r2)
+            self.reference = (r1, r2)
+            self._ref_l2 = self.omega1.l2_norm2(r1) + self.omega2.l2_norm2(r2)
+            self._ref_energy = self.omega1.energy_norm2(r1) + self.omega2.energy_norm2(r2)
         self.offline_times = dict(self.omega1.times)
         self.offline_times["setup"] = time.perf_counter() - start - sum(self.omega1.times.values())
         self.time_offline_s = time.perf_counter() - start
@@ -111,15 +113,14 @@ class MultiscalePrimalHybridStep:
     def apply(self, g: np.ndarray, *, omega2_warm: bool = False) -> np.ndarray:
         n = self.interface.size
         g12, g21 = g[:n], g[n:]
-        u1 = self.omega1.solve(g12)
-        self.u1.x.array[:] = u1
+        self._s = self.omega1.coordinates(g12)
         self.interface.to_part(g21, 1, self.omega2.g)
         newton = solve_or_verify(self.omega2, omega2_warm)
-        u1g = self.omega1.interface_values(u1)
+        u1g = self.omega1.trace(self._s)
         u2g = self.interface.from_part(self.omega2.u, 1)
         self._measure()
         self._certificate = primal_certificate(u1g, u2g, g12, g21, self.alpha, self.interface.weights, self.comm)
-        self._record = omega2_record(newton)
+        self._record = omega2_record(newton)  # e_u: the solve's monitor, outside the online time
         return np.concatenate([2.0 * self.alpha * u2g - g21, 2.0 * self.alpha * u1g - g12])
 
     def relative_change(self) -> float:
@@ -131,18 +132,20 @@ class MultiscalePrimalHybridStep:
     def reset(self) -> None:
         """Start the next solve cold: zero subdomain states, Ω₂ factorization dropped (offline data kept)."""
         self.omega2.reset()
-        self.u1.x.array[:] = 0.0
+        self._s[:] = 0.0
         for prev in self._prev:
             prev[:] = 0.0
 
     def interface_problem(self, options: InterfaceNewtonOptions):
-        """The affine pieces for ``hybrid.newton``: Ω₁'s trace response probed through the public affine
-        solve (n_γ coarse solves, offline), Ω₂ with J₀ (built once)."""
-        from fenics_contact.hybrid.newton import InterfaceProblem, PrimalPart, ProbedResponse
+        """The affine pieces for ``hybrid.newton``: Ω₁'s interface response u₁|γ = R g₁₂ + r₀ from the
+        coarse solver (``Omega1Multiscale.response``: one dense coarse solve with n_γ + 1 right-hand sides,
+        nothing of fine-mesh size), Ω₂ with J₀ (built once)."""
+        from fenics_contact.hybrid.newton import InterfaceProblem, MatrixResponse, PrimalPart
 
         if self._newton is None or self._newton.options.strategy != options.strategy:
             iface = self.interface
-            omega1 = ProbedResponse(lambda g: self.omega1.interface_values(self.omega1.solve(g)), iface.size)
+            R, r0 = self.omega1.response()  # rows: this rank's owned values; columns: all ranks' (rank order)
+            omega1 = MatrixResponse(np.vstack(self.comm.allgather(R)), iface.gather(r0))
             omega2 = PrimalPart(self.omega2, iface, 1, contact=True, factorize=options.strategy == "condensed")
             self._newton = InterfaceProblem(omega1, omega2, iface.gather(2.0 * self.alpha), -1.0,
                                             iface.gather, iface.local, options)
@@ -153,15 +156,15 @@ class MultiscalePrimalHybridStep:
 
     # -- measures -------------------------------------------------------------------------
     def _measure(self) -> None:
-        ops = self.omega1.ops
-        u1 = self.u1.x.array
-        d1 = u1 - self._prev[0]
+        om1 = self.omega1
+        de1, dl1 = om1.coordinate_norms2(self._s - self._prev[0])
+        ne1, nl1 = om1.coordinate_norms2(self._s)
         self._diff2.x.array[:] = self.omega2.u.x.array - self._prev[1]
-        de = ops.K.dot(d1).dot(d1) + self.omega2.energy_norm2(self._diff2)
-        dl = ops.M.dot(d1).dot(d1) + self.omega2.l2_norm2(self._diff2)
-        ne = ops.K.dot(u1).dot(u1) + self.omega2.energy_norm2(self.omega2.u)
-        nl = ops.M.dot(u1).dot(u1) + self.omega2.l2_norm2(self.omega2.u)
-        self._prev[0][:] = u1
+        de = de1 + self.omega2.energy_norm2(self._diff2)
+        dl = dl1 + self.omega2.l2_norm2(self._diff2)
+        ne = ne1 + self.omega2.energy_norm2(self.omega2.u)
+        nl = nl1 + self.omega2.l2_norm2(self.omega2.u)
+        self._prev[0][:] = self._s
         self._prev[1][:] = self.omega2.u.x.array
         self._change = max(np.sqrt(de / ne), np.sqrt(dl / nl)) if ne > 0 and nl > 0 else np.inf
 
@@ -169,11 +172,10 @@ class MultiscalePrimalHybridStep:
         if self.reference is None:
             raise InputError("no reference solution was given")
         r1, r2 = self.reference
-        ops = self.omega1.ops
-        d1 = self.u1.x.array - r1
+        d1 = self.omega1.field(self._s) - r1  # the fine field (no cancellation in the error norms)
         self._diff2.x.array[:] = self.omega2.u.x.array - r2.x.array
-        l2 = ops.M.dot(d1).dot(d1) + self.omega2.l2_norm2(self._diff2)
-        en = ops.K.dot(d1).dot(d1) + self.omega2.energy_norm2(self._diff2)
+        l2 = self.omega1.l2_norm2(d1) + self.omega2.l2_norm2(self._diff2)
+        en = self.omega1.energy_norm2(d1) + self.omega2.energy_norm2(self._diff2)
         return float(np.sqrt(l2 / self._ref_l2)), float(np.sqrt(en / self._ref_energy))
 
     def error_l2(self) -> float:
@@ -187,6 +189,7 @@ class MultiscalePrimalHybridStep:
     def glued(self, V: fem.FunctionSpace) -> fem.Function:
         """u on the parent mesh: u₁ on Ω₁, u₂ on Ω₂ (u₂ on γ)."""
         u = fem.Function(V, name="u")
+        self.omega1.to_part(self.omega1.field(self._s), self.u1)
         self.interface.transfers[0].to_parent(self.u1, u)
         self.interface.transfers[1].to_parent(self.omega2.u, u)
         return u
@@ -202,6 +205,7 @@ def solve_primal_ms_hybrid(
     nbasis: int | None = 3,
     threshold: float | None = None,
     s_factor: float = DEFAULT_S_FACTOR,
+    source_correction: bool = True,
     options: IterationOptions = IterationOptions(),
     newton: NewtonOptions = NewtonOptions(),
     reference: fem.Function | None = None,
@@ -220,7 +224,8 @@ def solve_primal_ms_hybrid(
     check_solve_inputs(cm, model, options=options, newton=newton)
     if reference is not None:
         check_reference_displacement(reference, cm)
-    cem = CEMOptions(layers=layers, nbasis=nbasis, threshold=threshold, s_factor=s_factor)
+    cem = CEMOptions(layers=layers, nbasis=nbasis, threshold=threshold, s_factor=s_factor,
+                     source_correction=source_correction)
     if step is None:
         step = MultiscalePrimalHybridStep(
             cm, model, alpha=alpha, delta=delta, cem=cem, newton=newton, reference=reference, cache_dir=cache_dir

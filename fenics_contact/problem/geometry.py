@@ -220,20 +220,25 @@ def read_mesh(
     problem (``validation.validate_contact_mesh`` with ``rules``: γ the common boundary of Ω₁
     and Ω₂, Γ_C on ∂Ω₂ away from γ, Γ_D and Γ_C disjoint, a conforming mesh), a MeshTagError
     naming the group otherwise. ``h`` of the result is the mesh size ``mesh_size`` (1/n on the
-    built-in meshes), ``H`` the side of the coarse grid of squares from the origin (multiscale methods).
+    built-in meshes), ``H`` the side of the coarse grid of squares over the bounding box (multiscale
+    methods; a fine cell that straddles a grid line lies in no coarse cell).
     ``overlay_groups``: surface groups that overlay Omega1/Omega2 (materials by group, read with
     ``problem.cell_groups.read_cell_groups``); they are left out of the mesh and its checks.
+
+    A file that tags none of Omega1, Omega2 and gamma (only Gamma_D, Gamma_C, Gamma_N* and surface
+    groups of any names) gets them built (``problem.partition.contact_strip``): Ω₂ = the coarse cells
+    along Γ_C, from the squares of side ``H``, or, with ``H=None``, from the surface groups (overlays
+    excepted) as the coarse cells (the user's coarse partition).
     """
     path = Path(path)
     overlay_groups = set(overlay_groups)
-    if H is not None and not (isinstance(H, (int, float)) and np.isfinite(H) and 0 < H <= 1
-                              and abs(1.0 / H - round(1.0 / H)) <= 1e-9 / H):
-        raise InputError(f"the coarse size H must be 1/N for an integer N >= 1 (coarse squares of side H over "
-                         f"the unit square), got {H!r}")
+    if H is not None and not (isinstance(H, (int, float)) and np.isfinite(H) and H > 0):
+        raise InputError(f"the coarse size H must be a positive number (the side of the coarse squares over the "
+                         f"bounding box), got {H!r}")
     if not path.is_file():
         raise InputError(f"mesh file {path} does not exist" if not path.exists() else f"mesh file {path} is not a file")
     with gmsh_session():
-        problem = None
+        problem, auto_strip = None, False
         if comm.rank == 0:
             gmsh.model.add("user mesh")
             try:
@@ -244,17 +249,50 @@ def read_mesh(
                 for dim, tag in gmsh.model.getPhysicalGroups(2):  # overlays: read separately, not cell tags
                     if gmsh.model.getPhysicalName(dim, tag) in overlay_groups:
                         gmsh.model.removePhysicalGroups([(dim, tag)])
-                problem = _gmsh_model_problem(path)
-        problem = comm.bcast(problem, root=0)
+                auto_strip = _needs_strip()
+                problem = _gmsh_model_problem(path, auto_strip=auto_strip)
+        problem, auto_strip = comm.bcast((problem, auto_strip), root=0)
         # validate before the collective mesh construction (which aborts on inconsistent tags)
         if problem is not None:
             error, message = problem
             raise error(message)
         data = dolfinx.io.gmsh.model_to_mesh(gmsh.model, comm, 0, gdim=2)
-    cm = _contact_mesh(data, h=mesh_size(data.mesh), H=H)
+    if auto_strip:
+        cm = _strip_contact_mesh(data, h=mesh_size(data.mesh), H=H, source=str(path))
+    else:
+        cm = _contact_mesh(data, h=mesh_size(data.mesh), H=H)
     if validate:
         validation.validate_contact_mesh(cm, rules, source=str(path))
     return cm
+
+
+def _strip_contact_mesh(data: dolfinx.io.gmsh.MeshData, *, h: float, H: float | None, source: str) -> ContactMesh:
+    """A mesh without Ω₁/Ω₂/γ: coarse cells from H (Cartesian grid over the bounding box) or from the 2D
+    physical groups (the user's coarse partition), then Ω₂ = the coarse cells along Γ_C (problem.partition)."""
+    from fenics_contact.problem import partition
+
+    msh = data.mesh
+    tdim = msh.topology.dim
+    if msh.topology.cell_type != dmesh.CellType.triangle:
+        raise InputError(f"fenics-contact needs a triangular mesh, got {msh.topology.cell_type.name}")
+    msh.topology.create_connectivity(tdim - 1, tdim)
+    facet_tags = _retag(data.facet_tags, data.physical_groups, [Boundary.GAMMA_D, Boundary.GAMMA_C], msh, tdim - 1)
+    skip = {PHYSICAL_NAMES[Subdomain.OMEGA1], PHYSICAL_NAMES[Subdomain.OMEGA2]}
+    groups = sorted(g.tag for name, g in data.physical_groups.items() if g.dim == tdim and name not in skip)
+    if H is not None:
+        coarse, _ = partition.cartesian_coarse_cells(msh, H)
+    elif len(groups) >= 2:
+        coarse = partition.group_coarse_cells(msh, data.cell_tags, groups)
+        H = float(partition.coarse_sizes(msh, coarse).max())
+    else:
+        raise InputError(
+            f"{source} tags neither Omega1/Omega2/gamma nor a coarse partition: give the coarse size H (the "
+            "strip Ω₂ is then the squares of side H along Gamma_C) or split the domain into 2D physical groups "
+            "(one per coarse cell)"
+        )
+    cell_tags, facet_tags = partition.contact_strip(msh, facet_tags, coarse)
+    return ContactMesh(msh, cell_tags, facet_tags, float(h), H, coarse.astype(np.int32), _neumann_names(data))
+
 
 
 def mesh_size(msh: dmesh.Mesh) -> float:
@@ -272,7 +310,7 @@ def mesh_size(msh: dmesh.Mesh) -> float:
     return msh.comm.allreduce(float(np.sqrt(2.0 * area.max())) if area.size else 0.0, op=MPI.MAX)
 
 
-def _gmsh_model_problem(path: Path) -> tuple[type, str] | None:
+def _gmsh_model_problem(path: Path, *, auto_strip: bool = False) -> tuple[type, str] | None:
     """(error class, message) if the current gmsh model is not a planar triangle mesh with the named groups."""
     def names_of(types) -> list[str]:
         return [gmsh.model.mesh.getElementProperties(t)[0] for t in types]
@@ -308,10 +346,24 @@ def _gmsh_model_problem(path: Path) -> tuple[type, str] | None:
     if wrong:
         return MeshTagError, f"{path}: " + "; ".join(wrong)
     missing = [name for name in PHYSICAL_NAMES.values() if name not in dims]
+    if auto_strip:
+        missing = [name for name in missing if name not in _STRIP_NAMES]
     if missing:
         return MeshTagError, (f"{path} lacks the physical group(s) {missing}; it has {sorted(dims)}. "
-                              f"Required names: {list(PHYSICAL_NAMES.values())}")
-    return _surface_groups_problem(path) or _curve_groups_problem(path)
+                              f"Required names: {list(PHYSICAL_NAMES.values())}"
+                              + ("" if auto_strip else f" (or none of {sorted(_STRIP_NAMES)}: Omega2 is then "
+                                 "built along Gamma_C from the coarse cells)"))
+    return _surface_groups_problem(path, auto_strip=auto_strip) or _curve_groups_problem(path)
+
+
+#: the groups built by the automatic strip when a file has none of them
+_STRIP_NAMES = frozenset(PHYSICAL_NAMES[t] for t in (Subdomain.OMEGA1, Subdomain.OMEGA2, Boundary.INTERFACE))
+
+
+def _needs_strip() -> bool:
+    """True if the current gmsh model tags none of Omega1/Omega2/gamma but has a surface group."""
+    names = {gmsh.model.getPhysicalName(d, t) for d, t in gmsh.model.getPhysicalGroups()}
+    return not (names & _STRIP_NAMES) and len(gmsh.model.getPhysicalGroups(2)) > 0
 
 
 def _curve_groups_problem(path: Path) -> tuple[type, str] | None:
@@ -347,8 +399,9 @@ def _curve_groups_problem(path: Path) -> tuple[type, str] | None:
                           "(a mesh facet carries one tag)")
 
 
-def _surface_groups_problem(path: Path) -> tuple[type, str] | None:
-    """Every triangle must be in exactly one surface group, and that group Omega1 or Omega2."""
+def _surface_groups_problem(path: Path, *, auto_strip: bool = False) -> tuple[type, str] | None:
+    """Every triangle must be in exactly one surface group, and that group Omega1 or Omega2 (with
+    ``auto_strip``: any surface group, the coarse cells or the material regions of the user)."""
     _, element_tags, _ = gmsh.model.mesh.getElements(2)
     triangles = np.concatenate([np.asarray(t, dtype=np.int64) for t in element_tags])
     count = np.zeros(triangles.size, dtype=np.int64)
@@ -363,13 +416,14 @@ def _surface_groups_problem(path: Path) -> tuple[type, str] | None:
         members = np.unique(np.concatenate(members))
         pos = order[np.searchsorted(triangles, members, sorter=order)]
         np.add.at(count, pos, 1)
-        if name in (PHYSICAL_NAMES[Subdomain.OMEGA1], PHYSICAL_NAMES[Subdomain.OMEGA2]):
+        if auto_strip or name in (PHYSICAL_NAMES[Subdomain.OMEGA1], PHYSICAL_NAMES[Subdomain.OMEGA2]):
             known[pos] = True
         elif members.size:
             others.append(name)
     problems = []
     if np.any(~known):
-        problems.append(f"{np.count_nonzero(~known)} of {triangles.size} triangles are in neither Omega1 nor Omega2")
+        where = "no surface group" if auto_strip else "neither Omega1 nor Omega2"
+        problems.append(f"{np.count_nonzero(~known)} of {triangles.size} triangles are in {where}")
     if np.any(count > 1):
         problems.append(f"{np.count_nonzero(count > 1)} triangles are in more than one surface group (of Omega1, "
                         f"Omega2 and {others}); every triangle must be in exactly one")
@@ -420,19 +474,15 @@ def _contact_mesh(data: dolfinx.io.gmsh.MeshData, *, h: float, H: float | None) 
                 raise MeshTagError(f"the physical group {PHYSICAL_NAMES[t]!r} is empty")
     num_cells = msh.topology.index_map(tdim).size_local + msh.topology.index_map(tdim).num_ghosts
     coarse = np.full(num_cells, -1, dtype=np.int32)
-    if H is not None:
-        n_coarse = int(round(1.0 / H))
-        all_cells = np.arange(num_cells, dtype=np.int32)
-        mid = dmesh.compute_midpoints(msh, tdim, all_cells)
-        i = np.clip(np.floor(mid[:, 0] / H).astype(np.int32), 0, n_coarse - 1)
-        j = np.clip(np.floor(mid[:, 1] / H).astype(np.int32), 0, n_coarse - 1)
-        coarse = i + n_coarse * j
-        # a cell that leaves the coarse square of its midpoint lies in no coarse cell (-1)
-        x = msh.geometry.x[dmesh.entities_to_geometry(msh, tdim, all_cells)][:, :, :2]
-        tol = 1e-9 * H
-        lo = np.stack([i, j], axis=1)[:, None, :] * H - tol
-        inside = np.all((x >= lo) & (x <= lo + H + 2 * tol), axis=(1, 2))
-        coarse[~inside] = -1
-    neumann = {neumann_tag(name): name for name, g in data.physical_groups.items()
-               if g.dim == tdim - 1 and is_neumann_name(name)}
-    return ContactMesh(msh, cell_tags, facet_tags, float(h), H, coarse, neumann)
+    if H is not None:  # squares of side H over the bounding box; -1 where a cell straddles a grid line
+        from fenics_contact.problem.partition import cartesian_coarse_cells
+
+        coarse = cartesian_coarse_cells(msh, H)[0].astype(np.int32)
+    return ContactMesh(msh, cell_tags, facet_tags, float(h), H, coarse, _neumann_names(data))
+
+
+def _neumann_names(data: dolfinx.io.gmsh.MeshData) -> dict[int, str]:
+    """Traction-group tag -> physical name (Gamma_N*) of the mesh data."""
+    tdim = data.mesh.topology.dim
+    return {neumann_tag(name): name for name, g in data.physical_groups.items()
+            if g.dim == tdim - 1 and is_neumann_name(name)}

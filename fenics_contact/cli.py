@@ -522,10 +522,15 @@ def _model(options: RunOptions) -> tuple[TestModel, np.ndarray | None]:
     return model, values
 
 
-def _mesh(options: RunOptions) -> ContactMesh:
+def _mesh(options: RunOptions, comm: MPI.Comm = MPI.COMM_WORLD) -> ContactMesh:
     if options.mesh is not None:
-        return read_mesh(options.mesh, H=None if options.coarse_groups else 1.0 / options.H)
-    return unit_square(options.n, options.H)
+        return read_mesh(options.mesh, H=None if options.coarse_groups else 1.0 / options.H, comm=comm)
+    return unit_square(options.n, options.H, comm=comm)
+
+
+def _replicated(options: RunOptions, comm: MPI.Comm) -> bool:
+    """mixed-ms under MPI: every rank holds the whole mesh (the AW space is serial), the offline phase is shared."""
+    return options.method == "mixed-ms" and comm.size > 1
 
 
 def _bounding_box(cm: ContactMesh) -> tuple[float, float, float, float]:
@@ -612,8 +617,12 @@ def _run_primal(options: RunOptions, cm: ContactMesh, model, fields) -> _Outcome
     return _Outcome(result, reference, summary, write)
 
 
-def _run_mixed(options: RunOptions, cm: ContactMesh, model, fields) -> _Outcome:
-    """Algorithms 2 (mixed) and 4 (mixed-ms), with the monolithic mixed reference (serial)."""
+def _run_mixed(options: RunOptions, cm: ContactMesh, model, fields, comm: MPI.Comm = MPI.COMM_SELF) -> _Outcome:
+    """Algorithms 2 (mixed) and 4 (mixed-ms), with the monolithic mixed reference (serial).
+
+    ``comm``: the ranks sharing the mixed-ms offline phase (each holds the whole mesh ``cm``); the
+    reference is then solved on rank 0 only, which alone reports the errors and writes.
+    """
     from fenics_contact.fem import mixed
     from fenics_contact.hybrid import mixed as mixed_hybrid
     from fenics_contact.multiscale import mixed as mixed_ms
@@ -624,7 +633,10 @@ def _run_mixed(options: RunOptions, cm: ContactMesh, model, fields) -> _Outcome:
     ms = options.method == "mixed-ms"
     min_gap = mixed_multiscale.DEFAULT_MIN_GAP if options.min_gap is None else (options.min_gap or None)
     max_nbasis = mixed_multiscale.DEFAULT_MAX_NBASIS if options.max_nbasis is None else options.max_nbasis
-    reference = mixed.solve_mixed_monolithic(cm, model, epsilon=epsilon) if options.reference else None
+    reference = (mixed.solve_mixed_monolithic(cm, model, epsilon=epsilon)
+                 if options.reference and comm.rank == 0 else None)
+    if reference is not None:
+        reference.free()  # only its solution is used: the factors of the whole problem go now
     if not ms:
         result = mixed_hybrid.solve_mixed_hybrid(cm, model, beta=beta, epsilon=epsilon,
                                                  options=options.iteration_options(), reference=reference)
@@ -632,7 +644,8 @@ def _run_mixed(options: RunOptions, cm: ContactMesh, model, fields) -> _Outcome:
         result = mixed_ms.solve_mixed_ms_hybrid(cm, model, beta=beta, epsilon=epsilon,
                                                 options=options.iteration_options(), layers=options.value("layers"),
                                                 nbasis=options.value("nbasis"), reference=reference,
-                                                min_gap=min_gap, max_nbasis=max_nbasis, cache_dir=options.cache_dir)
+                                                min_gap=min_gap, max_nbasis=max_nbasis, cache_dir=options.cache_dir,
+                                                offline_comm=comm)
     summary = {
         "beta": beta,
         "beta_value": result.beta,
@@ -701,14 +714,16 @@ def _solve_and_write(options: RunOptions, comm: MPI.Comm, model: TestModel | Non
                      output: OutputDirectory, case: Case | None = None) -> tuple[object, dict]:
     """Mesh, solve, write everything into the staging directory and move it into place."""
     t0 = time.perf_counter()
+    replicated = _replicated(options, comm)
+    mesh_comm = MPI.COMM_SELF if replicated else comm  # replicated: every rank holds the whole mesh (mixed-ms)
     if case is None:
-        cm = _mesh(options)
+        cm = _mesh(options, mesh_comm)
         if pixels is not None and options.mesh is not None:
             check_pixel_modulus(pixels, _bounding_box(cm), f"--E-map {options.E_map}")
         if options.mesh is not None and options.method.endswith("-ms"):
             _check_coarse_grid(cm, options)
     else:
-        case_mesh = case.build_mesh(comm)
+        case_mesh = case.build_mesh(mesh_comm)
         cm = case_mesh.cm
         model = case.model(case_mesh)
         if options.method.endswith("-ms"):
@@ -719,7 +734,10 @@ def _solve_and_write(options: RunOptions, comm: MPI.Comm, model: TestModel | Non
     log.info("%s (%s), h = %.4g, H = %s, method %s, accel %s",
              name, model.description, cm.h, cm.H, options.method, options.accel)
     family = _run_primal if options.method.startswith("primal") else _run_mixed
-    outcome = family(options, cm, model, fields)
+    if family is _run_primal:
+        outcome = _run_primal(options, cm, model, fields)
+    else:
+        outcome = _run_mixed(options, cm, model, fields, comm if replicated else MPI.COMM_SELF)
     result, reference = outcome.result, outcome.reference
     profile = result.profile
     curve = _indentation_curve(options, case, cm, model, outcome, family) if case and case.obstacle.steps else None
@@ -756,18 +774,20 @@ def _solve_and_write(options: RunOptions, comm: MPI.Comm, model: TestModel | Non
         "case": case.to_dict() | {"run": _options_echo(options)} if case is not None else None,
     }
     out = output.path
-    outcome.write(out)
-    if options.plots:
-        plot_cell_field(fields.E, out / "E.png", title=f"Young's modulus, {name}", log=True)
-        if curve is not None:
-            plot_force_indentation({options.method: curve}, out / "force_indentation.png", comm=comm)
-        profiles = {f"{options.method} hybrid": profile}
-        if reference is not None:
-            profiles["monolithic"] = reference.profile
-        plot_contact(profiles, out / "contact.png", comm=comm)
-        plot_history({f"{options.method}, {options.accel}": result.history}, out / "history.png", comm=comm,
-                     tol=options.tol)
-    write_summary(out, summary, comm)
+    writer = MPI.COMM_SELF if replicated else comm  # replicated: rank 0 holds the whole run and writes it
+    if not replicated or comm.rank == 0:
+        outcome.write(out)
+        if options.plots:
+            plot_cell_field(fields.E, out / "E.png", title=f"Young's modulus, {name}", log=True)
+            if curve is not None:
+                plot_force_indentation({options.method: curve}, out / "force_indentation.png", comm=writer)
+            profiles = {f"{options.method} hybrid": profile}
+            if reference is not None:
+                profiles["monolithic"] = reference.profile
+            plot_contact(profiles, out / "contact.png", comm=writer)
+            plot_history({f"{options.method}, {options.accel}": result.history}, out / "history.png", comm=writer,
+                         tol=options.tol)
+        write_summary(out, summary, writer)
     output.commit()
     return result, summary
 

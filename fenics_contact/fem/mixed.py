@@ -397,6 +397,8 @@ class MixedSubproblem:
         space: a prebuilt AW space on ``msh`` (with σ_t = 0 on Γ_C).
         line_search: ``"on-cycle"`` (full semismooth Newton steps until a cycle
             is detected, then exact line search on J) or ``"always"``.
+        operators: False builds the spaces, the interface data and the load only, without
+            the global matrices (no solve then; Algorithm 4's Ω₁ assembles its own cell blocks).
     """
 
     def __init__(
@@ -412,6 +414,7 @@ class MixedSubproblem:
         extra_columns: sp.csr_matrix | None = None,
         space: ArnoldWintherSpace | None = None,
         line_search: str = "on-cycle",
+        operators: bool = True,
     ) -> None:
         t0 = time.perf_counter()
         if line_search not in ("on-cycle", "always"):
@@ -446,15 +449,19 @@ class MixedSubproblem:
         self.n_u = 2 * self.U.dofmap.index_map.size_local
 
         # -- bulk operators ------------------------------------------------------------
-        P_petsc = scipy_to_petsc(self.P, msh.comm)
+        self.has_operators = operators
         s, t = ufl.TrialFunction(self.dg), ufl.TestFunction(self.dg)
         w, v = ufl.TrialFunction(self.U), ufl.TestFunction(self.U)
         n = ufl.FacetNormal(msh)
-        self.K = _pt_a_p(forms_mixed.compliance_form(s, t, fields.lmbda, fields.mu), P_petsc)
-        self.B = (assemble_scipy(forms_mixed.divergence_form(s, v)) @ self.P).tocsr()
+        if operators:
+            P_petsc = scipy_to_petsc(self.P, msh.comm)
+            self.K = _pt_a_p(forms_mixed.compliance_form(s, t, fields.lmbda, fields.mu), P_petsc)
+            self.B = (assemble_scipy(forms_mixed.divergence_form(s, v)) @ self.P).tocsr()
+            P_petsc.destroy()
+        else:  # the spaces and the interface data only (Algorithm 4's Ω₁ assembles its own cell blocks)
+            self.K = self.B = None
         self.M = assemble_scipy(forms_mixed.mass_form(w, v))
         self.G = _assemble_vector(forms_mixed.load_form(fields.f, v))[: self.n_u]
-        P_petsc.destroy()
 
         # -- boundary data: traction lifting σ_t (σ = P c + σ_t) and the natural Γ_D term ------
         n_dg = self.P.shape[0]
@@ -481,11 +488,14 @@ class MixedSubproblem:
             gamma = facet_tags.find(Boundary.INTERFACE)
             if gamma.size == 0:
                 raise InputError("a Robin subproblem needs interface (γ) facets")
-            R = assemble_scipy(forms_mixed.robin_form(s, t, n, 1.0, ds(Boundary.INTERFACE)))
-            self.R = (self.P.T @ R @ self.P).tocsr()
-            self.Kt = (self.K + beta * self.R).tocsr()
-            if self._lifted:
-                self._F_boundary -= beta * (self.P.T @ (R @ self.s0))
+            if operators:
+                R = assemble_scipy(forms_mixed.robin_form(s, t, n, 1.0, ds(Boundary.INTERFACE)))
+                self.R = (self.P.T @ R @ self.P).tocsr()
+                self.Kt = (self.K + beta * self.R).tocsr()
+                if self._lifted:
+                    self._F_boundary -= beta * (self.P.T @ (R @ self.s0))
+            elif self._lifted:
+                raise InputError("a subproblem without its global operators (Algorithm 4's Ω₁) takes no traction data")
             self._setup_interface(gamma, ds, t, n)
 
         # -- contact quadrature and obstacle ----------------------------------------------
@@ -512,6 +522,7 @@ class MixedSubproblem:
         msh = self.mesh
         Lam = fem.functionspace(msh, basix.ufl.element("Lagrange", msh.basix_cell(), 3, shape=(2,)))
         tdim = msh.topology.dim
+        msh.topology.create_connectivity(tdim - 1, tdim)
         blocks = fem.locate_dofs_topological(Lam, tdim - 1, gamma)
         coords = Lam.tabulate_dof_coordinates()[blocks, :2]
         order = np.lexsort((coords[:, 0], coords[:, 1]))
@@ -617,6 +628,8 @@ class MixedSubproblem:
 
     def _factorize_for(self, active: np.ndarray | None) -> bool:
         """Factorize the saddle-point Jacobian unless the cached one has the same active set."""
+        if not self.has_operators:
+            raise InputError("this subproblem was built without its matrices (operators=False): it cannot be solved")
         key = np.zeros(0, dtype=bool) if active is None else active
         if self._factorized_set is not None and np.array_equal(key, self._factorized_set):
             return False
@@ -969,8 +982,17 @@ class MixedSolution:
     dofs: dict
     time_s: float  #: setup + Newton
     time_newton_s: float  #: Newton only (the online part)
-    problem: MixedSubproblem
+    problem: MixedSubproblem | None  #: None once ``free()`` has been called
     split_interface: bool
+
+    def free(self) -> None:
+        """Release the monolithic problem (its matrices and MUMPS factors); the solution, history and profile stay.
+
+        A reference solve keeps GBs at h = 1/128 otherwise (the factors of the whole mixed problem).
+        """
+        if self.problem is not None:
+            self.problem.destroy()
+            self.problem = None
 
 
 def solve_mixed_monolithic(

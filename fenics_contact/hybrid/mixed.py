@@ -123,6 +123,9 @@ def transmission_coefficient(beta: float | str, h: float) -> float:
 class MixedHybridStep:
     """The transmission map T of Algorithm 2 on a tagged mesh (implements ``hybrid.iteration.HybridStep``)."""
 
+    #: whether the Ω₁ subproblem assembles its global matrices (Algorithm 4's Ω₁ does not need them)
+    omega1_operators = True
+
     def __init__(
         self,
         cm: ContactMesh,
@@ -147,7 +150,7 @@ class MixedHybridStep:
             MixedSubproblem(
                 part.mesh, part.facet_tags, material_fields(part.mesh, model),
                 epsilon=self.epsilon if i == 1 else None, beta=self.beta,
-                prefix=f"fc_mixed_omega{i + 1}_", newton=newton,
+                prefix=f"fc_mixed_omega{i + 1}_", newton=newton, operators=i == 1 or self.omega1_operators,
             )
             for i, part in enumerate(self.parts)
         ]
@@ -172,25 +175,30 @@ class MixedHybridStep:
     # -- reference --------------------------------------------------------------------
     def set_reference(self, reference: MixedSolution) -> None:
         """Restrict the monolithic σ_h, u_h to the parts, as AW / DG P1 coefficients there."""
-        self.reference = []
-        for part, s in zip(self.parts, self.sub):
-            i_sub, i_par = sub_to_parent_dofs(part, s.dg, reference.sigma.function_space)
-            d = np.zeros(s.P.shape[0])
-            d[i_sub] = reference.sigma.x.array[i_par]
-            d -= s.s0  # the traction lifting is not in the span of P
-            PtP = (s.P.T @ s.P).tocsc()
-            c = spla.splu(PtP).solve(s.P.T @ d)
-            miss = np.linalg.norm(s.P @ c - d) / max(np.linalg.norm(d), 1e-300)
-            if miss > 1e-8:
-                raise InputError(f"the reference stress is not in the subdomain stress space (misfit {miss:.2e})")
-            j_sub, j_par = sub_to_parent_dofs(part, s.U, reference.u.function_space)
-            u = np.zeros(s.n_u)
-            u[j_sub] = reference.u.x.array[j_par]
-            self.reference.append((c, u))
+        self.reference = [self._part_reference(i, reference) for i in range(len(self.parts))]
         self._ref_norm2 = (
             sum(s.stress_norm2(c) for s, (c, _) in zip(self.sub, self.reference)),
             sum(s.l2_norm2(u) for s, (_, u) in zip(self.sub, self.reference)),
         )
+
+    def _part_reference(self, i: int, reference: MixedSolution, *, dg: bool = False) -> tuple[np.ndarray, np.ndarray]:
+        """σ_h, u_h on part i: AW coefficients (``dg``: the DG P3 values) and DG P1 values of the part."""
+        part, s = self.parts[i], self.sub[i]
+        i_sub, i_par = sub_to_parent_dofs(part, s.dg, reference.sigma.function_space)
+        d = np.zeros(s.dg.dofmap.index_map.size_local * s.dg.dofmap.index_map_bs)
+        d[i_sub] = reference.sigma.x.array[i_par]
+        d -= s.s0  # the traction lifting is not in the span of P
+        j_sub, j_par = sub_to_parent_dofs(part, s.U, reference.u.function_space)
+        u = np.zeros(s.n_u)
+        u[j_sub] = reference.u.x.array[j_par]
+        if dg:
+            return d, u
+        PtP = (s.P.T @ s.P).tocsc()
+        c = spla.splu(PtP).solve(s.P.T @ d)
+        miss = np.linalg.norm(s.P @ c - d) / max(np.linalg.norm(d), 1e-300)
+        if miss > 1e-8:
+            raise InputError(f"the reference stress is not in the subdomain stress space (misfit {miss:.2e})")
+        return c, u
 
     def errors(self) -> tuple[float, float]:
         """(e_σ, e_u) = (‖σ_h − σⁿ‖_A/‖σ_h‖_A, ‖u_h − uⁿ‖/‖u_h‖) against the reference (METHOD §6)."""

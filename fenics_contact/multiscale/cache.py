@@ -3,10 +3,13 @@
 A file stores its full key and a checksum of its arrays; one whose key or
 checksum does not match (another configuration, a corrupt or truncated file) is
 reported and rebuilt, never used. Files are written atomically (temporary file
-in the same directory, then rename); a temporary left by a writer that died (kill -9
-during a save) carries its process id and host in its name and is removed by the next
-``load`` or ``save`` in that directory. Subclasses set the file ``prefix`` and the
-``pack`` / ``unpack`` hooks (``cem.PrimalOfflineCache``, ``mixed_cem.MixedOfflineCache``).
+in the same directory, then rename) and streamed: array by array into the zip
+archive, the checksum computed on the way, so that writing never holds a second
+copy of the data (``pack`` may return a dict or yield (name, array) pairs in sorted
+name order); a temporary left by a writer that died (kill -9 during a save) carries
+its process id and host in its name and is removed by the next ``load`` or ``save``
+in that directory. Subclasses set the file ``prefix`` and the ``pack`` / ``unpack``
+hooks (``cem.PrimalOfflineCache``, ``mixed_cem.MixedOfflineCache``).
 """
 
 import hashlib
@@ -23,7 +26,7 @@ import numpy as np
 
 from fenics_contact.errors import InputError
 
-__all__ = ["OfflineCache", "checksum", "hash_array", "remove_stale_temporaries"]
+__all__ = ["OfflineCache", "checksum", "hash_array", "remove_stale_temporaries", "write_npz"]
 
 log = logging.getLogger(__name__)
 
@@ -81,7 +84,7 @@ def hash_array(h: "hashlib._Hash", a: np.ndarray) -> None:
     a = np.ascontiguousarray(a)
     h.update(str(a.dtype).encode())
     h.update(str(a.shape).encode())
-    h.update(a.tobytes())
+    h.update(memoryview(a).cast("B") if a.dtype.kind in "biuf" and a.ndim else a.tobytes())  # no copy
 
 
 def checksum(arrays: dict) -> str:
@@ -90,6 +93,30 @@ def checksum(arrays: dict) -> str:
         hasher.update(name.encode())
         hash_array(hasher, arrays[name])
     return hasher.hexdigest()
+
+
+def write_npz(fh, items, key: str) -> None:
+    """An npz archive of (name, array) pairs (sorted by name) followed by their ``checksum`` and ``key``.
+
+    Each array is written straight into the zip entry ``name.npy``; the checksum is that of
+    ``checksum`` (names in sorted order), computed while writing.
+    """
+    hasher = hashlib.sha256()
+    last = None
+    with zipfile.ZipFile(fh, mode="w", compression=zipfile.ZIP_STORED, allowZip64=True) as zf:
+        for name, arr in items:
+            if name in ("checksum", "key") or (last is not None and name <= last):
+                raise ValueError(f"cache arrays must come in strictly increasing name order ({last!r}, {name!r})")
+            last = name
+            arr = np.asanyarray(arr)
+            hasher.update(name.encode())
+            hash_array(hasher, arr)
+            with zf.open(f"{name}.npy", mode="w", force_zip64=True) as entry:
+                np.lib.format.write_array(entry, arr if arr.ndim == 0 else np.ascontiguousarray(arr),
+                                          allow_pickle=False)
+        for name, value in (("checksum", hasher.hexdigest()), ("key", key)):
+            with zf.open(f"{name}.npy", mode="w", force_zip64=True) as entry:
+                np.lib.format.write_array(entry, np.array(value), allow_pickle=False)
 
 
 class OfflineCache:
@@ -149,17 +176,16 @@ class OfflineCache:
             raise InputError(f"the offline cache directory {self.directory} is not writable: {err}") from err
 
     def save(self, key: str, obj) -> Path:
-        """Write atomically (temporary file + rename)."""
+        """Write atomically (temporary file + rename), array by array (``write_npz``)."""
         self.directory.mkdir(parents=True, exist_ok=True)
-        arrays = self.pack(obj)
-        arrays["checksum"] = np.array(checksum(arrays))
-        arrays["key"] = np.array(key)
+        packed = self.pack(obj)
+        items = ((name, packed[name]) for name in sorted(packed)) if isinstance(packed, dict) else packed
         path = self.path(key)
         remove_stale_temporaries(self.directory)
         fd, tmp = tempfile.mkstemp(dir=self.directory, prefix=f"{path.stem}.", suffix=_temporary_suffix())
         try:
             with os.fdopen(fd, "wb") as fh:
-                np.savez(fh, **arrays)
+                write_npz(fh, items, key)
             os.chmod(tmp, 0o644)
             os.replace(tmp, path)
         except BaseException:

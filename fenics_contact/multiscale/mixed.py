@@ -1,8 +1,10 @@
 """Algorithm 4: mixed CEM-GMsFEM in Ω₁, mixed FEM with penalty contact in Ω₂ (METHOD §3).
 
-    Ω₁ (multiscale, linear): (r, w) ∈ X_ms × U_aux,
-        (Ar, τ) + (div τ, w) + β∫_γ (rn₁)·(τn₁) = ∫_γ g₁₂·(τn₁) − [(AQg₁₂, τ) + (div τ, Ng₁₂) + β∫_γ (Qg₁₂n₁)·(τn₁)]
-        −(div r, v) = (f, v) + (div Qg₁₂, v);     σ₁ = r + Q g₁₂,  u₁ = w + N g₁₂
+    Ω₁ (multiscale, linear): (r, w) ∈ X_ms × U_aux, with the Robin correctors (Q g₁₂, N g₁₂) and the
+    source correctors (σ_f, u_f) (METHOD §9; zero with ``source_correction=False``, the paper's algorithm),
+        (Ar, τ) + (div τ, w) + β∫_γ (rn₁)·(τn₁) = ∫_γ g₁₂·(τn₁) − [(A(Qg₁₂ + σ_f), τ) + (div τ, Ng₁₂ + u_f)
+                                                   + β∫_γ ((Qg₁₂ + σ_f)n₁)·(τn₁)]
+        −(div r, v) = (f, v) + (div (Qg₁₂ + σ_f), v);     σ₁ = r + Q g₁₂ + σ_f,  u₁ = w + N g₁₂ + u_f
     Ω₂ (fine, nonlinear): as in Algorithm 2 (``fem.mixed.MixedSubproblem``, globalized semismooth Newton)
     update:  g₁₂ ← g₂₁ − 2β σ₂n₂,   g₂₁ ← g₁₂ − 2β σ₁n₁
 
@@ -19,14 +21,16 @@ offline with one coarse solve per interface value
 (``multiscale.mixed_cem.InterfaceResponse``).  Online, the Ω₁ side costs a few
 matrix–vector products of the size of the interface data (trace, and the
 stopping rule's norms from Gram matrices in g); σ₁ and u₁ are formed on the
-fine mesh only at the end (output and errors).  Serial only.
+fine mesh only at the end (output and errors).  MPI: every rank holds the whole mesh,
+the offline local problems are shared out (``offline_comm``), the online phase runs
+replicated.
 
 **Displacement errors.**  u₁ = Π w + N g is, as in the paper's algorithm, a coarse
 displacement (U_aux holds l functions per coarse cell, the rigid motions on interior
 cells), so e_u over Ω₁ ∪ Ω₂ levels off at the best-approximation error of u_h in
 U_aux (≈ 6e−2 at h = 1/64, H = 1/16, l = 3).  Two further measures are reported:
 ``e_u_projected`` (the Ω₁ part as ‖π(u_h − u₁)‖) and ``e_u_post`` with the fine
-displacement Σ r_j q_j + N g assembled from the Stage II displacement parts q_j (it
+displacement Σ r_j q_j + N g + u_f assembled from the Stage II displacement parts q_j (it
 satisfies the discrete constitutive law with σ₁ in every local space and follows e_σ).
 """
 
@@ -38,6 +42,7 @@ from pathlib import Path
 import numpy as np
 import ufl
 from dolfinx import fem
+from mpi4py import MPI
 
 from fenics_contact.fem import forms_mixed
 from fenics_contact.fem.contact import NewtonOptions
@@ -63,15 +68,28 @@ from fenics_contact.multiscale.mixed_cem import (
     MixedMultiscaleOmega1,
 )
 from fenics_contact.problem.models import TestModel
-from fenics_contact.multiscale.cem import DEFAULT_S_FACTOR, coarse_grid, require_serial
+from fenics_contact.multiscale.cem import DEFAULT_S_FACTOR, coarse_grid
 
 __all__ = ["MixedMsResult", "MixedMultiscaleHybridStep", "solve_mixed_ms_hybrid"]
 
 log = logging.getLogger(__name__)
 
 
+def _require_replicated_mesh(cm: ContactMesh, offline_comm: MPI.Comm) -> None:
+    """The Arnold–Winther spaces are serial: every rank holds the whole mesh (``cm`` on COMM_SELF)."""
+    if cm.comm.size > 1:
+        raise InputError(
+            f"Algorithm 4 needs the whole mesh on every rank (the Arnold–Winther space is serial); got a mesh "
+            f"distributed over {cm.comm.size} ranks. Build it on MPI.COMM_SELF on each rank (e.g. "
+            "geometry.unit_square(n, n_coarse, comm=MPI.COMM_SELF)) and pass offline_comm=MPI.COMM_WORLD: the "
+            "offline local problems are then shared out over the ranks."
+        )
+
+
 class MixedMultiscaleHybridStep(MixedHybridStep):
     """The transmission map T of Algorithm 4 (``hybrid.iteration.HybridStep`` protocol)."""
+
+    omega1_operators = False  # Ω₁ is solved in the multiscale space: no fine Ω₁ matrices
 
     def __init__(
         self,
@@ -83,8 +101,9 @@ class MixedMultiscaleHybridStep(MixedHybridStep):
         cem: MixedCEMOptions = MixedCEMOptions(),
         newton: NewtonOptions = NewtonOptions(),
         cache_dir: str | Path | None = None,
+        offline_comm: MPI.Comm = MPI.COMM_SELF,
     ) -> None:
-        require_serial(cm.comm)
+        _require_replicated_mesh(cm, offline_comm)
         if cm.H is None:
             raise InputError("Algorithm 4 needs a coarse grid: build the mesh with geometry.unit_square(n, n_coarse)")
         start = time.perf_counter()
@@ -100,22 +119,28 @@ class MixedMultiscaleHybridStep(MixedHybridStep):
             )
         grid = coarse_grid(part.mesh, part.cell_map, cm.coarse_cell, cm.H)
         self.cem = cem
-        self.omega1 = MixedMultiscaleOmega1(self.sub[0], grid, cem, H=cm.H, cache_dir=cache_dir)
+        self.omega1 = MixedMultiscaleOmega1(self.sub[0], grid, cem, H=cm.H, cache_dir=cache_dir, comm=offline_comm)
+        self.sub[0].P = None  # the fine Ω₁ AW prolongation (1 GB at h = 1/256): omega1.ops holds its cell blocks
         co = self.omega1.co
         if co.n_g != self.size:
             raise RuntimeError("the multiscale interface data do not match the Ω₂ interface data")
         self.g12 = np.zeros(co.n_g)
-        self._prev_g12 = self.g12.copy()
+        self._prev_g12: np.ndarray | None = None  # no Ω₁ state yet: the first change is measured from zero
         self.offline_times = {"setup": setup, **self.omega1.times}
         self.time_offline_s = time.perf_counter() - start
 
     # -- reference and errors ------------------------------------------------------------
     def set_reference(self, reference: MixedSolution) -> None:
-        super().set_reference(reference)
+        """σ_h, u_h on Ω₁ as cell-major DG values (``omega1.ops``), on Ω₂ as in Algorithm 2."""
         ops = self.omega1.ops
-        c1, u1 = self.reference[0]
-        self._sref1 = (ops.P @ c1).reshape(-1, 30)
+        d1, u1 = self._part_reference(0, reference, dg=True)
+        self._sref1 = d1[ops.dg_rows]
         self._uref1 = u1[ops.u_rows]
+        c2, u2 = self._part_reference(1, reference)
+        self.reference = [None, (c2, u2)]  # Ω₁ has no fine AW problem here (omega1_operators = False)
+        s2 = self.sub[1]
+        self._ref_norm2 = (self.omega1.a_norm2(self._sref1) + s2.stress_norm2(c2),
+                           self.omega1.m_norm2(self._uref1) + s2.l2_norm2(u2))
 
     def fine_omega1(self) -> tuple[np.ndarray, np.ndarray]:
         """σ₁ (n_cells, 30) and u₁ (n_cells, 6) of the current iterate, cell-major (``multiscale.mixed_cem``)."""
@@ -187,10 +212,13 @@ class MixedMultiscaleHybridStep(MixedHybridStep):
 
     def _measure(self) -> None:
         rs = self.omega1.response
-        ds = rs.stress_change2(self.g12, self._prev_g12)
-        du = rs.l2_change2(self.g12, self._prev_g12)
         ns = rs.stress_norm2(self.g12)
         nu = rs.l2_norm2(self.g12)
+        if self._prev_g12 is None:  # the state before the first step is zero (as in Algorithm 2), not σ₁(0)
+            ds, du = ns, nu
+        else:
+            ds = rs.stress_change2(self.g12, self._prev_g12)
+            du = rs.l2_change2(self.g12, self._prev_g12)
         self._prev_g12 = self.g12.copy()
         s = self.sub[1]
         c0, u0 = self._prev[1]
@@ -263,6 +291,8 @@ def solve_mixed_ms_hybrid(
     max_nbasis: int = DEFAULT_MAX_NBASIS,
     weight: str = "lambda+2mu",
     s_factor: float = DEFAULT_S_FACTOR,
+    source_correction: bool = True,
+    offline_comm: MPI.Comm = MPI.COMM_SELF,
     options: IterationOptions = IterationOptions(),
     newton: NewtonOptions = NewtonOptions(),
     reference: MixedSolution | None = None,
@@ -282,6 +312,14 @@ def solve_mixed_ms_hybrid(
     (``multiscale.mixed_cem.MixedOfflineCache``; ``step.omega1.cache_status``).  ``nbasis`` is the least
     number of Stage I modes per coarse cell; ``min_gap`` adds modes where the first eigenvalue left
     out is below it (up to ``max_nbasis``; ``None`` keeps exactly ``nbasis``, the paper's fixed l).
+    ``source_correction`` (default) adds the localized source correctors of METHOD §9 (the error then
+    falls with m for loads inside Ω₁ too); ``False`` is the paper's Algorithm 4.
+
+    MPI: the Arnold–Winther spaces are serial, so every rank holds the whole mesh (``cm`` built on
+    COMM_SELF) and ``offline_comm`` (e.g. COMM_WORLD) shares out the offline local problems (Stage I
+    cells, Stage II patches, coarse-operator cells; each computed once, results broadcast, coarse
+    matrices summed).  The online iteration then runs replicated on every rank (identical results,
+    no communication; the Ω₂ solves are serial anyway).
     """
     check_solve_inputs(cm, model, options=options, newton=newton)
     if reference is not None:
@@ -289,10 +327,10 @@ def solve_mixed_ms_hybrid(
     if reference is not None and epsilon is None:
         epsilon = reference.epsilon
     cem = MixedCEMOptions(layers=layers, nbasis=nbasis, min_gap=min_gap, max_nbasis=max_nbasis, weight=weight,
-                          s_factor=s_factor)
+                          s_factor=s_factor, source_correction=source_correction)
     if step is None:
         step = MixedMultiscaleHybridStep(cm, model, beta=beta, epsilon=epsilon, cem=cem, newton=newton,
-                                         cache_dir=cache_dir)
+                                         cache_dir=cache_dir, offline_comm=offline_comm)
     if reference is not None:  # not part of the method: outside the timings
         step.set_reference(reference)
     history = iterate(step, options, name=f"mixed CEM hybrid (m={layers}, l={nbasis})", initial=initial_data)

@@ -1,4 +1,4 @@
-"""Mixed CEM-GMsFEM on Ω₁ (METHOD §3, Algorithm 4): local spaces, Stage I, Stage II, Robin correction.
+"""Mixed CEM-GMsFEM on Ω₁ (METHOD §3, Algorithm 4): local spaces, Stage I, Stage II, Robin and source correctors.
 
 All fine quantities live in a *cell-major* discontinuous layout: a stress is an
 array (n_cells, 30) of DG P3 coefficients (10 Lagrange nodes × (σ_xx, σ_xy,
@@ -7,54 +7,85 @@ operator is block diagonal in this layout (compliance, Robin term on γ,
 divergence, masses), so local problems are assembled from cell blocks.
 
 **Local stress spaces.**  For a set of fine cells ω (a coarse cell K_i or an
-oversampled patch K_{i,m}) X_h(ω) = {τ ∈ AW(ω) : τn = 0 on ∂ω ∩ Ω₁°}.  Its basis:
-the global AW basis functions supported in ω (interior vertices, edges not on
-the inner boundary, cells) plus, at every vertex v on the inner boundary, the
-restrictions to ω of the AW vertex functions with value z, z in the null space
-of τ ↦ τn for the normals of the inner-boundary edges at v (so σ_tt stays free
-there, as in the restriction of AW to ω; at a patch corner nothing is left).
-The zero extension of such a function is H(div)-conforming but not vertex
-continuous, so X_ms ⊄ AW(Ω₁); everything is therefore computed on the DG P3
-representation.  With ω = Ω₁ the space is exactly AW(Ω₁).
+oversampled patch K_{i,m}) X_h(ω) = {τ ∈ AW(ω) : τn = 0 on ∂ω ∩ Ω₁° and on the
+traction-free sides of Ω₁}.  Its basis: the global AW basis functions supported in
+ω (interior vertices, edges not on the inner boundary, cells) plus, at every vertex
+v on the inner boundary, the restrictions to ω of the AW vertex functions with value
+z, z in the null space of τ ↦ τn for the normals of the inner-boundary edges at v
+(σ_tt stays free there, as in the restriction of AW to ω; at a patch corner nothing
+is left).  Essential τn = 0 sides of ∂Ω₁ (``traction_free_facets``) are treated like
+inner boundary, so with ω = Ω₁ the space is the constrained AW(Ω₁).  The zero
+extension of such a function is H(div)-conforming but not vertex continuous, so
+X_ms ⊄ AW(Ω₁); everything is computed on the DG P3 representation.
 
-**Stage I** (per coarse cell, dense): Ã φ + Bᵀp = 0, −Bφ = λ S p with
-Ã = (A·,·) + β∫_{γ∩∂K}(·n)·(·n) and S the κ̃-weighted mass, κ̃ = (λ+2μ)H⁻² (the
-weight of the primal method, METHOD §3).  Eliminating φ gives the symmetric
-GHEP B Ã⁻¹ Bᵀ p = λ S p, solved with LAPACK (all pairs: repeated eigenvalues,
-e.g. the three rigid motions at λ = 0 on interior cells, are never missed).
-The l smallest, S-orthonormal p_j^i span U_aux; π = Π Πᵀ S.  l is per cell: at
-least ``nbasis`` (the paper's 3), more while the first eigenvalue left out is
-below ``min_gap``.  The Stage II bases decay like exp(−ρ·distance/H), and ρ
-falls with the number of near-divergence-free modes left out (for ν → ½ they
-have Λ ∝ μ/(λ+2μ)): with l = 3 ρ drops from 2.2 (ν = 0.3) to 0.60 (ν = 0.499) at
-h = 1/64, H = 1/16; with the extra modes it is 1.9 again (``DEFAULT_MIN_GAP``,
-``basis_decay_profile``, benchmarks/mixed_ms_localization.py).
+**Stage I** (per coarse cell): Ã φ + Bᵀp = 0, −Bφ = λ S p with
+Ã = (A·,·) + β∫_{γ∩∂K}(·n)·(·n) and S the κ̃-weighted mass, κ̃ = c(λ+2μ)H⁻² (the
+weight of the primal method, METHOD §3).  Large cells: the pencil
+−[[Ã, Bᵀ], [B, 0]] x = λ [[0, 0], [0, S]] x by SLEPc Krylov–Schur with
+shift-and-invert (MUMPS) for the few pairs kept, checked by Sylvester's inertia just
+above the gap (a Krylov method can miss copies of a repeated eigenvalue, e.g. the
+three rigid motions at λ = 0 on interior cells; missing pairs are searched again
+with the found ones deflated); small cells: dense LAPACK on B Ã⁻¹ Bᵀ p = λ S p
+(``eigensolver``).  The l smallest, S-orthonormal p_j^i span U_aux; π = Π Πᵀ S.
+l is per cell: at least ``nbasis`` (the paper's 3), more while the first eigenvalue
+left out is below ``min_gap``, and whole clusters.  The Stage II bases decay like
+exp(−ρ·distance/H), and ρ falls with the number of near-divergence-free modes left
+out (for ν → ½ they have Λ ∝ μ/(λ+2μ)): with l = 3 ρ drops from 2.2 (ν = 0.3) to
+0.60 (ν = 0.499) at h = 1/64, H = 1/16; with the extra modes it is 1.9 again
+(``DEFAULT_MIN_GAP``, ``basis_decay_profile``, benchmarks/mixed_ms_localization.py).
 
-**Stage II** and the correction (sparse LU per patch): with Z = S Π (patch
+**Stage II** and the correctors (sparse LU per patch): with Z = S Π (patch
 columns) and y = Zᵀ q the relaxed problem s(πq, πv) − (div ψ, v) = s(p, πv)
 becomes the sparse symmetric system
 
-    [Ã   Bᵀ   0 ] [ψ]   [ 0     ]      [Ã   Bᵀ   0 ] [Q]   [C_i g]
-    [B   0   −Z ] [q] = [−Z e_j ],     [B   0   −Z ] [N] = [ 0   ]
-    [0  −Zᵀ   I ] [y]   [ 0     ]      [0  −Zᵀ   I ] [y]   [ 0   ]
+    [Ã   Bᵀ   0 ] [ψ]   [ 0     ]      [Ã   Bᵀ   0 ] [Q]   [C_i g]      [Ã   Bᵀ   0 ] [σ_f]   [ 0      ]
+    [B   0   −Z ] [q] = [−Z e_j ],     [B   0   −Z ] [N] = [ 0   ],     [B   0   −Z ] [u_f] = [ G|K_i  ]
+    [0  −Zᵀ   I ] [y]   [ 0     ]      [0  −Zᵀ   I ] [y]   [ 0   ]      [0  −Zᵀ   I ] [ y ]   [ 0      ]
 
-(C_i g = ∫_{γ∩∂K_i} g·τn₁, nonzero only for the coarse cells touching γ).
+(C_i g = ∫_{γ∩∂K_i} g·τn₁ on the coarse cells touching γ; G|K_i = −(f χ_{K_i}, v)).
 
-**Coarse operators.**  With Φ = [Ψ | Q] (Q per interface value of g) the
-online problem needs only small dense matrices, accumulated coarse cell by
-coarse cell from the patch functions that reach it: the Robin/compliance Gram
-ΦᵀÃΦ, the compliance Gram ΦᵀKΦ (A-norms), Πᵀ B Φ, (BΦ)ᵀN, ΦᵀC, the trace map
-E Φ (σn₁ at the γ nodes, averaged at vertices where the multiscale trace may
-jump), and the displacement Gram of [Π | N].  The online Ω₁ solve is one dense
-LU solve of size dim X_ms + dim U_aux.
+**Source correction** (METHOD §9; ``MixedCEMOptions.source_correction``, default on;
+off is the paper's algorithm).  The divergence of X_ms lies in S·U_aux, so the
+paper's Ω₁ step sees the load only through its moments against U_aux: an
+O(H Λ^{-1/2}) error that no number of layers removes (e_σ = 0.33 at m = 3 for a load
+in Ω₁, h = 1/32, H = 1/8).  For each coarse cell with f|K_i ≠ 0 the third system above
+gives the localized corrector (σ_{f,i}, u_{f,i}) on K_{i,m}:
+
+    (Aσ_{f,i}, τ) + (div τ, u_{f,i}) + β∫_γ (σ_{f,i}n₁)·(τn₁) = 0,
+    s(π u_{f,i}, πv) − (div σ_{f,i}, v) = (f χ_{K_i}, v)        on X_h(K_{i,m}) × U_h(K_{i,m}),
+
+σ_f = Σ_i σ_{f,i}, u_f = Σ_i u_{f,i}, and the coarse problem solves for the
+remainder: σ₁ = r + Q g + σ_f, u₁ = w + N g + u_f.  With global correctors σ_h − σ_f − Q g
+lies in the global multiscale space (its relaxed divergence equation has a right-hand
+side in S·U_aux), so the error is the localization error of correctors and bases,
+which decays exponentially with m for any load.  In the code σ_f is one more column
+of the data: d = [g; 1] (n_g γ values, then the load).
+
+**Coarse operators.**  With Φ = [Ψ | Q | σ_f] the online problem needs only small dense
+matrices, accumulated coarse cell by coarse cell from the patch functions that
+reach it: the Robin/compliance Gram ΦᵀÃΦ, the compliance Gram ΦᵀKΦ (A-norms),
+Πᵀ B Φ, (BΦ)ᵀ[N | u_f], ΦᵀC, the trace map E Φ (σn₁ at the γ nodes, averaged at
+vertices where the multiscale trace may jump), and the displacement Gram of
+[Π | N | u_f].  The online Ω₁ solve is one dense LU solve of size dim X_ms + dim U_aux,
+precomputed once per interface value (``InterfaceResponse``).
+
+**Storage.**  A patch function is kept only on its patch, per coarse cell K of the
+patch: its coefficients in the AW functions touching K (≈ 11 numbers per fine cell
+instead of the 30 of DG P3, ``CoarseCellDofs``) and its displacement (6 per cell).
 
 **Implementation.**  A local basis is kept cell by cell (L_c = P_c T_c: the
 AW columns of the cell, combined at inner-boundary vertices), so Lᵀ Ã L and B L
 are assembled from dense cell blocks like element matrices; each patch matrix
 is factorized once by MUMPS (AMD ordering) and all its right-hand sides are
-solved together.  The offline data can be cached (``cache_dir``): one npz file
-per configuration, keyed by a hash of everything they depend on
-(``mixed_offline_key``), checked by a stored checksum, written atomically.
+solved together.  The Stage I cells, Stage II patches and coarse-operator cells
+can be shared out over an MPI communicator (``comm``; every rank holds the whole
+Ω₁ mesh): each is computed once, the results are broadcast and the coarse
+matrices summed.  Offline phases report progress (``fenics_contact.progress``).
+The offline data can be cached (``cache_dir``): one npz file per configuration,
+keyed by a hash of everything they depend on (``mixed_offline_key``), checked by
+a stored checksum, written atomically and patch by patch (no second copy); the
+patch functions are stored in float32 (they only rebuild the fine output fields,
+relative rounding 6·10⁻⁸), U_aux and the coarse matrices in float64.
 """
 
 import hashlib
@@ -70,16 +101,21 @@ import dolfinx.fem.petsc
 import numpy as np
 import scipy.linalg as sla
 import scipy.sparse as sp
+import scipy.sparse.linalg as spla
 import ufl
 from dolfinx import fem
 from dolfinx import mesh as dmesh
+from mpi4py import MPI
 from petsc4py import PETSc
+from slepc4py import SLEPc
 
 from fenics_contact import __version__
 from fenics_contact.fem import forms_mixed
-from fenics_contact.errors import InputError
+from fenics_contact.fem.arnold_winther import ArnoldWintherSpace
+from fenics_contact.errors import ConvergenceError, InputError
 from fenics_contact.fem.linalg import assemble_scipy, scipy_to_petsc
 from fenics_contact.multiscale.cache import OfflineCache, hash_array
+from fenics_contact.progress import Progress
 from fenics_contact.multiscale.cem import (
     DEFAULT_S_FACTOR,
     CoarseGrid,
@@ -94,6 +130,8 @@ __all__ = [
     "MIXED_CACHE_FORMAT",
     "SMALL_GAP",
     "CellOperators",
+    "CoarseCellDofs",
+    "CoarseOperators",
     "LocalSpace",
     "InterfaceResponse",
     "MixedCEMOptions",
@@ -104,10 +142,13 @@ __all__ = [
     "StageI",
     "basis_decay_profile",
     "cell_operators",
+    "coarse_operators",
     "local_stress_space",
     "mixed_offline_key",
     "stage_one",
+    "stage_one_cell",
     "stage_one_of",
+    "stage_two",
 ]
 
 log = logging.getLogger(__name__)
@@ -128,7 +169,7 @@ DEFAULT_MIN_GAP = 0.1
 DEFAULT_MAX_NBASIS = 32
 
 #: Bumped whenever the layout or meaning of the cached mixed offline arrays changes.
-MIXED_CACHE_FORMAT = 2
+MIXED_CACHE_FORMAT = 3
 
 
 @dataclass(frozen=True, slots=True)
@@ -149,6 +190,13 @@ class MixedCEMOptions:
     #: c, as for the primal CEM (multiscale.CEMOptions.s_factor). Model 2, h = 1/32, H = 1/8, m = 3:
     #: e_σ = 4.2e-3 (c = 1), 2.3e-3 (c = 3), 2.6e-3 (c = 10).
     s_factor: float = DEFAULT_S_FACTOR
+    #: Localized source correctors (METHOD §9): the Ω₁ response to f is computed on the oversampled
+    #: patches and the coarse problem solves for the remainder, so that the error falls with m for any
+    #: load.  False: the paper's Algorithm 4 (f seen only through U_aux: an O(H Λ^{-1/2}) floor).
+    source_correction: bool = True
+    #: Stage I eigensolver: "auto" (dense LAPACK for small coarse cells, else "krylovschur"), "lapack"
+    #: (all pairs, dense) or "krylovschur" (SLEPc shift-and-invert for the pairs kept, inertia-checked).
+    eigensolver: str = "auto"
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.s_factor) and self.s_factor > 0):
@@ -165,6 +213,10 @@ class MixedCEMOptions:
             raise InputError(f"max_nbasis must be an integer >= 1, got {self.max_nbasis!r}")
         if self.nbasis is not None and self.max_nbasis < self.nbasis:
             raise InputError(f"max_nbasis ({self.max_nbasis}) must be >= nbasis ({self.nbasis})")
+        if self.eigensolver not in ("auto", "lapack", "krylovschur"):
+            raise InputError(f"eigensolver must be 'auto', 'lapack' or 'krylovschur', got {self.eigensolver!r}")
+        if not isinstance(self.source_correction, (bool, np.bool_)):
+            raise InputError(f"source_correction must be True or False, got {self.source_correction!r}")
 
 
 # ---------------------------------------------------------------------------------------
@@ -183,9 +235,12 @@ def _cell_blocks(A: sp.spmatrix, rows: np.ndarray, cols: np.ndarray) -> np.ndarr
     return out
 
 
-def _contains(sorted_cells: np.ndarray, c: int) -> bool:
-    k = np.searchsorted(sorted_cells, c)
-    return bool(k < sorted_cells.size and sorted_cells[k] == c)
+def _block_diag(blocks: np.ndarray) -> sp.csr_matrix:
+    """The block-diagonal CSR matrix of dense blocks (n, a, b)."""
+    n, a, b = blocks.shape
+    rows = np.broadcast_to((a * np.arange(n)[:, None, None] + np.arange(a)[None, :, None]), blocks.shape)
+    cols = np.broadcast_to((b * np.arange(n)[:, None, None] + np.arange(b)[None, None, :]), blocks.shape)
+    return sp.csr_matrix((blocks.ravel(), (rows.ravel(), cols.ravel())), shape=(n * a, n * b))
 
 
 def _rows(cells: np.ndarray, width: int) -> np.ndarray:
@@ -224,23 +279,42 @@ class CellOperators:
     """Cell blocks and interface maps of the Ω₁ mixed problem in the cell-major layout."""
 
     K: np.ndarray  #: (n, 30, 30) compliance (Aσ, τ)
-    Kt: np.ndarray  #: (n, 30, 30) compliance + β ∫_γ (σn)·(τn)
+    R: np.ndarray  #: (n_γ, 30, 30) β ∫_γ (σn)·(τn) on the cells ``gamma_cells`` (zero elsewhere)
     B: np.ndarray  #: (n, 6, 30) (div σ, v)
     M: np.ndarray  #: (n, 6, 6) L² mass of DG P1
     S: np.ndarray  #: (n, 6, 6) κ̃-weighted mass, κ̃ = (λ+2μ)H⁻²
     G: np.ndarray  #: (n, 6) −(f, v)
     C: sp.csr_matrix  #: (30 n, n_g) ∫_γ g·(τn₁), g by values (x, y) at the γ nodes
     E: sp.csr_matrix  #: (n_g, 30 n) σn₁ at the γ nodes (average of the two sides at vertices)
-    P: sp.csr_matrix  #: (30 n, n_AW) AW prolongation, rows cell-major
+    num_aw: int  #: dim AW(Ω₁)
     dg_rows: np.ndarray  #: (n, 30) standard DG P3 index of each cell-major stress entry
     u_rows: np.ndarray  #: (n, 6) standard DG P1 index of each cell-major displacement entry
-    gamma_cells: np.ndarray  #: cells with a γ facet
+    gamma_cells: np.ndarray  #: sorted cells with a γ facet
     P_cols: np.ndarray  #: (n, w) AW indices of the nonzero columns of P in the rows of each cell (sorted, −1 pads)
     P_blocks: np.ndarray  #: (n, 30, w) those columns of P: P[rows of c][:, P_cols[c]]
 
     @property
     def num_cells(self) -> int:
         return self.K.shape[0]
+
+    def kt(self, cells: np.ndarray) -> np.ndarray:
+        """Blocks (|cells|, 30, 30) of Ã = compliance + β ∫_γ (σn)·(τn) (only γ cells carry the Robin term)."""
+        cells = np.asarray(cells, dtype=np.int64)
+        out = self.K[cells]
+        k = np.searchsorted(self.gamma_cells, cells)
+        on = (k < self.gamma_cells.size) & (self.gamma_cells[np.minimum(k, self.gamma_cells.size - 1)] == cells)
+        if np.any(on):
+            out[on] += self.R[k[on]]
+        return out
+
+    @property
+    def P(self) -> sp.csr_matrix:
+        """The AW prolongation (30 n × dim AW), rows cell-major (rebuilt from the cell blocks)."""
+        n, a, w = self.P_blocks.shape
+        rows = np.broadcast_to((a * np.arange(n)[:, None, None] + np.arange(a)[None, :, None]), self.P_blocks.shape)
+        cols = np.broadcast_to(self.P_cols[:, None, :], self.P_blocks.shape)
+        keep = (cols >= 0) & (self.P_blocks != 0.0)
+        return sp.csr_matrix((self.P_blocks[keep], (rows[keep], cols[keep])), shape=(a * n, self.num_aw))
 
     @property
     def num_gamma_values(self) -> int:
@@ -257,7 +331,7 @@ def _trace_operator(msh: dmesh.Mesh, dg: fem.FunctionSpace, gamma: np.ndarray, p
     a, b = x[geo[:, 0]], x[geo[:, 1]]
     d = b - a
     length = np.linalg.norm(d, axis=1)
-    cells = np.array([f2c.links(f)[0] for f in gamma], dtype=np.int64)
+    cells = f2c.array[f2c.offsets[gamma]].astype(np.int64)  # a γ facet is on ∂Ω₁: one cell
     n = np.stack([d[:, 1], -d[:, 0]], axis=1) / length[:, None]
     centre = x[msh.geometry.dofmaps[0][cells]].mean(axis=1)
     n[np.sum(n * (0.5 * (a + b) - centre), axis=1) < 0] *= -1.0
@@ -306,8 +380,13 @@ def cell_operators(sub, H: float, weight: str = "lambda+2mu", s_factor: float = 
     w, v = ufl.TrialFunction(U), ufl.TestFunction(U)
     n = ufl.FacetNormal(msh)
     ds = forms_mixed.boundary_measure(msh, ft)
+    gamma = ft.find(Boundary.INTERFACE)
+    msh.topology.create_connectivity(tdim - 1, tdim)
+    f2c = msh.topology.connectivity(tdim - 1, tdim)
+    gamma_cells = np.unique(f2c.array[f2c.offsets[gamma]]).astype(np.int64)  # a γ facet is on ∂Ω₁: one cell
     K = _cell_blocks(assemble_scipy(forms_mixed.compliance_form(s, t, fields.lmbda, fields.mu)), dg_rows, dg_rows)
-    R = _cell_blocks(assemble_scipy(forms_mixed.robin_form(s, t, n, 1.0, ds(Boundary.INTERFACE))), dg_rows, dg_rows)
+    R = _cell_blocks(assemble_scipy(forms_mixed.robin_form(s, t, n, 1.0, ds(Boundary.INTERFACE))),
+                     dg_rows[gamma_cells], dg_rows[gamma_cells])
     B = _cell_blocks(assemble_scipy(forms_mixed.divergence_form(s, v)), u_rows, dg_rows)
     M = _cell_blocks(assemble_scipy(forms_mixed.mass_form(w, v)), u_rows, u_rows)
     kt = kappa_tilde(fields.lmbda, fields.mu, H, s_factor) if weight == "lambda+2mu" else s_factor * 2.0 * fields.mu / H**2
@@ -316,7 +395,6 @@ def cell_operators(sub, H: float, weight: str = "lambda+2mu", s_factor: float = 
     Gv.scatter_reverse(dolfinx.la.InsertMode.add)
     G = Gv.array[u_rows]
     # interface data: continuous vector P3 on γ, nodes ordered as sub.gamma_points
-    gamma = ft.find(Boundary.INTERFACE)
     Lam = fem.functionspace(msh, basix.ufl.element("Lagrange", msh.basix_cell(), 3, shape=(2,)))
     blocks = fem.locate_dofs_topological(Lam, tdim - 1, gamma)
     coords = Lam.tabulate_dof_coordinates()[blocks, :2]
@@ -328,21 +406,26 @@ def cell_operators(sub, H: float, weight: str = "lambda+2mu", s_factor: float = 
     Cfull = assemble_scipy(forms_mixed.robin_data_form(g, t, n, ds(Boundary.INTERFACE)))
     C = Cfull[dg_rows.ravel()][:, (2 * blocks[:, None] + np.arange(2)).ravel()].tocsr()
     E = _trace_operator(msh, dg, gamma, coords)
-    P = sub.P[dg_rows.ravel()].tocsr()
-    msh.topology.create_connectivity(tdim - 1, tdim)
-    f2c = msh.topology.connectivity(tdim - 1, tdim)
-    gamma_cells = np.unique(np.concatenate([f2c.links(f) for f in gamma]))
-    P_cols, P_blocks = _column_blocks(P, ncell, 30)
-    return CellOperators(K, K + sub.beta * R, B, M, S, G, C, E, P, dg_rows, u_rows, gamma_cells, P_cols, P_blocks)
+    P = sub.P
+    num_full = 3 * msh.topology.index_map(0).size_local + 4 * msh.topology.index_map(1).size_local + 3 * ncell
+    if P.shape[1] != num_full:  # a constrained space (τn = 0 sides): the local spaces start from the full one
+        P = ArnoldWintherSpace(msh).prolongation
+    P_cols, P_blocks = _column_blocks(P[dg_rows.ravel()], ncell, 30)
+    return CellOperators(K, sub.beta * R, B, M, S, G, C, E, int(P.shape[1]), dg_rows, u_rows, gamma_cells,
+                         P_cols, P_blocks)
 
 
 # ---------------------------------------------------------------------------------------
 # local stress spaces
 # ---------------------------------------------------------------------------------------
 class _Topology:
-    """Vertex/edge/cell incidences of Ω₁ and the raw AW numbering (3 per vertex, 4 per edge, 3 per cell)."""
+    """Vertex/edge/cell incidences of Ω₁ and the raw AW numbering (3 per vertex, 4 per edge, 3 per cell).
 
-    def __init__(self, msh: dmesh.Mesh, num_aw: int) -> None:
+    ``traction_free_facets``: edges of ∂Ω₁ with the essential condition τn = 0 (traction-free sides);
+    every local space treats them like its inner boundary (``local_stress_space``).
+    """
+
+    def __init__(self, msh: dmesh.Mesh, num_aw: int, traction_free_facets: np.ndarray | None = None) -> None:
         top = msh.topology
         for d0, d1 in ((2, 0), (2, 1), (1, 0), (1, 2), (0, 2)):
             top.create_connectivity(d0, d1)
@@ -350,7 +433,8 @@ class _Topology:
         self.nv = top.index_map(0).size_local
         self.ne = top.index_map(1).size_local
         if num_aw != 3 * self.nv + 4 * self.ne + 3 * self.nc:
-            raise RuntimeError("the Ω₁ AW space carries constraints; the local spaces need the unconstrained one")
+            raise RuntimeError("the local spaces are built on the unconstrained AW numbering of Ω₁ (cell_operators "
+                               "takes care of that); essential τn = 0 sides enter through traction_free_facets")
         self.c2v = top.connectivity(2, 0).array.reshape(-1, 3)[: self.nc].astype(np.int64)
         self.c2e = top.connectivity(2, 1).array.reshape(-1, 3)[: self.nc].astype(np.int64)
         self.e2v = top.connectivity(1, 0).array.reshape(-1, 2).astype(np.int64)
@@ -360,6 +444,14 @@ class _Topology:
         vx = np.empty((self.nv, 2))
         vx[self.c2v.ravel()] = x[msh.geometry.dofmaps[0][: self.nc].ravel()]
         self.vx = vx
+        self.tf_edge = np.zeros(self.ne, dtype=bool)
+        if traction_free_facets is not None and len(traction_free_facets):
+            tf = np.asarray(traction_free_facets, dtype=np.int64)
+            if np.any(self.e_deg[tf] != 1):
+                raise InputError("traction-free facets must lie on the boundary of Ω₁")
+            self.tf_edge[tf] = True
+        self.tf_vertex = np.zeros(self.nv, dtype=bool)
+        self.tf_vertex[self.e2v[self.tf_edge].ravel()] = True
 
 
 @dataclass(slots=True)
@@ -375,6 +467,9 @@ class LocalSpace:
     cols: np.ndarray  #: (|ω|, w) local column of each block column, −1 for none
     size: int  #: dim X_h(ω)
     num_extra: int  #: inner-boundary vertex functions (not in AW(Ω₁))
+    aw_inner: np.ndarray  #: the AW function of each of the first size − num_extra local columns
+    extra_vertex: np.ndarray  #: the vertex v of each inner-boundary vertex function (the last num_extra)
+    extra_z: np.ndarray  #: (num_extra, 3): its value z, i.e. the function is Σ_i z_i (AW function 3v + i) on ω
 
     @property
     def L(self) -> sp.csr_matrix:
@@ -391,15 +486,58 @@ class LocalSpace:
         return self.blocks @ xc
 
 
+def _boundary_vertex_null_spaces(
+    topo: _Topology, v_bnd: np.ndarray, e_bnd: np.ndarray, first: int
+) -> tuple[np.ndarray, np.ndarray, int]:
+    """Null spaces of τ ↦ τn at the inner-boundary vertices ``v_bnd`` (sorted) for the normals of their
+    inner-boundary edges ``e_bnd``: (null (|v_bnd|, 3, 3) with null[k][:, q] = z_q, the local column of
+    each z_q (−1: none) numbered from ``first``, the number of columns).
+
+    No edge: all of R³ (z = e_x, e_y, e_z); parallel normals n: z = t⊗t (σ_tt free, t ⊥ n, unit
+    norm in (xx, xy, yy)); two directions (a corner of ω): nothing.
+    """
+    nv = v_bnd.size
+    null = np.zeros((nv, 3, 3))
+    extra = np.full((nv, 3), -1, dtype=np.int64)
+    if nv == 0:
+        return null, extra, 0
+    a, b = topo.vx[topo.e2v[e_bnd, 0]], topo.vx[topo.e2v[e_bnd, 1]]
+    d = (b - a) / np.linalg.norm(b - a, axis=1)[:, None]
+    normal = np.stack([d[:, 1], -d[:, 0]], axis=1)
+    vert = topo.e2v[e_bnd].ravel()  # (2E,) each edge's two vertices
+    nrm = np.repeat(normal, 2, axis=0)
+    k = np.searchsorted(v_bnd, vert)
+    inside = (k < nv) & (v_bnd[np.minimum(k, nv - 1)] == vert)
+    k, nrm = k[inside], nrm[inside]
+    count = np.bincount(k, minlength=nv)
+    first_normal = np.zeros((nv, 2))
+    first_normal[k[::-1]] = nrm[::-1]  # any one normal per vertex
+    cross = np.abs(first_normal[k, 0] * nrm[:, 1] - first_normal[k, 1] * nrm[:, 0])
+    bent = np.bincount(k, weights=(cross > 1e-10).astype(float), minlength=nv) > 0
+    ncols = np.where(count == 0, 3, np.where(bent, 0, 1))
+    free = count == 0
+    null[free] = np.eye(3)
+    line = (count > 0) & ~bent
+    n0, n1 = first_normal[line, 0], first_normal[line, 1]
+    z = np.stack([n1 * n1, -n0 * n1, n0 * n0], axis=1)
+    z /= np.linalg.norm(z, axis=1)[:, None]
+    null[line, :, 0] = np.where(np.abs(z) < 1e-14, 0.0, z)
+    start = first + np.concatenate([[0], np.cumsum(ncols)[:-1]])
+    for q in range(3):
+        has = ncols > q
+        extra[has, q] = start[has] + q
+    return null, extra, int(ncols.sum())
+
+
 def local_stress_space(ops: CellOperators, topo: _Topology, cells: np.ndarray) -> LocalSpace:
-    """Basis of {τ ∈ AW(ω) : τn = 0 on ∂ω ∩ Ω₁°} in the cell-major layout of ω."""
+    """Basis of {τ ∈ AW(ω) : τn = 0 on ∂ω ∩ Ω₁° and on the traction-free sides} in the cell-major layout of ω."""
     cells = np.sort(np.asarray(cells, dtype=np.int64))
     v_in = np.bincount(topo.c2v[cells].ravel(), minlength=topo.nv)
     e_in = np.bincount(topo.c2e[cells].ravel(), minlength=topo.ne)
-    v_int = np.flatnonzero((v_in > 0) & (v_in == topo.v_deg))
-    v_bnd = np.flatnonzero((v_in > 0) & (v_in < topo.v_deg))
-    e_int = np.flatnonzero((e_in > 0) & (e_in == topo.e_deg))
-    e_bnd = np.flatnonzero((e_in == 1) & (topo.e_deg == 2))
+    v_int = np.flatnonzero((v_in > 0) & (v_in == topo.v_deg) & ~topo.tf_vertex)
+    v_bnd = np.flatnonzero((v_in > 0) & ((v_in < topo.v_deg) | topo.tf_vertex))
+    e_int = np.flatnonzero((e_in > 0) & (e_in == topo.e_deg) & ~topo.tf_edge)
+    e_bnd = np.flatnonzero(((e_in == 1) & (topo.e_deg == 2)) | ((e_in > 0) & topo.tf_edge))
     nv, ne = topo.nv, topo.ne
     inner = np.concatenate([
         (3 * v_int[:, None] + np.arange(3)).ravel(),
@@ -407,34 +545,12 @@ def local_stress_space(ops: CellOperators, topo: _Topology, cells: np.ndarray) -
         (3 * nv + 4 * ne + 3 * cells[:, None] + np.arange(3)).ravel(),
     ])
     # AW functions supported in ω: columns of P, by cell
-    local = np.full(ops.P.shape[1], -1, dtype=np.int64)
+    local = np.full(ops.num_aw, -1, dtype=np.int64)
     local[inner] = np.arange(inner.size)
     pcols = ops.P_cols[cells]
     cols = np.where(pcols >= 0, local[np.maximum(pcols, 0)], -1)
     blocks = ops.P_blocks[cells].copy()
-    # null spaces of τ ↦ τn at the inner-boundary vertices: vertex k gets columns z_q (3-vectors)
-    normals: dict[int, list[np.ndarray]] = {}
-    for e in e_bnd:
-        a, b = topo.vx[topo.e2v[e, 0]], topo.vx[topo.e2v[e, 1]]
-        d = (b - a) / np.linalg.norm(b - a)
-        n0, n1 = d[1], -d[0]
-        rows = np.array([[n0, n1, 0.0], [0.0, n0, n1]])
-        for v in topo.e2v[e]:
-            normals.setdefault(int(v), []).append(rows)
-    null = np.zeros((v_bnd.size, 3, 3))  #: null[k][:, q] = z_q of vertex v_bnd[k]
-    extra = np.full((v_bnd.size, 3), -1, dtype=np.int64)
-    ncol = 0
-    for k, v in enumerate(v_bnd):
-        rows = normals.get(int(v))
-        if rows is None:
-            zs = np.eye(3)
-        else:
-            _, sv, vt = np.linalg.svd(np.vstack(rows))
-            zs = vt[int(np.sum(sv > 1e-10 * sv.max())) :]
-        for q, z in enumerate(zs):
-            null[k, :, q] = np.where(np.abs(z) < 1e-14, 0.0, z)
-            extra[k, q] = inner.size + ncol
-            ncol += 1
+    null, extra, ncol = _boundary_vertex_null_spaces(topo, v_bnd, e_bnd, inner.size)
     if v_bnd.size:
         # the block columns of 3v, 3v+1, 3v+2 (consecutive: P_cols is sorted) become
         # L_c[:, q] = Σ_i P_c[:, 3v+i] z_q[i]
@@ -449,13 +565,14 @@ def local_stress_space(ops: CellOperators, topo: _Topology, cells: np.ndarray) -
         vals = blocks[ci[:, None], :, slots]  # (m, 3 (i), 30)
         blocks[ci[:, None], :, slots] = np.einsum("mia,miq->mqa", vals, null[ki])
         cols[ci[:, None], slots] = extra[ki]
-    return LocalSpace(cells, blocks, cols, int(inner.size + ncol), ncol)
+    kk, qq = np.nonzero(extra >= 0)  # row-major: in the order of the extra columns
+    return LocalSpace(cells, blocks, cols, int(inner.size + ncol), ncol, inner, v_bnd[kk], null[kk, :, qq])
 
 
 def _local_blocks(ops: CellOperators, space: LocalSpace) -> tuple[np.ndarray, np.ndarray]:
     """Cell blocks L_cᵀ Ã_c L_c (|ω|, w, w) and B_c L_c (|ω|, 6, w) of the local operators."""
     Lb = space.blocks
-    At = np.swapaxes(Lb, 1, 2) @ (ops.Kt[space.cells] @ Lb)
+    At = np.swapaxes(Lb, 1, 2) @ (ops.kt(space.cells) @ Lb)
     Bl = ops.B[space.cells] @ Lb
     return At, Bl
 
@@ -496,7 +613,7 @@ class StageI:
     values: list
     modes: list
     offsets: np.ndarray  #: first aux index of each coarse cell
-    residuals: np.ndarray  #: max ‖−Bφ − λSp‖ / (λ_max ‖Sp‖) per coarse cell
+    residuals: np.ndarray  #: max backward error of the kept pairs per coarse cell (``_pair_residuals``)
     gaps: np.ndarray  #: Λ_k, the first eigenvalue left out on each coarse cell (inf: all kept)
 
     @property
@@ -504,80 +621,318 @@ class StageI:
         return int(self.offsets[-1])
 
 
+#: Stage I eigenvalues are dimensionless (κ̃ = c(λ+2μ)H⁻²; the modes kept have λ = O(10⁻²…10)):
+#: two consecutive ones belong to one cluster when they differ by at most atol + rtol·λ.
+_CLUSTER_ATOL = 1.0e-8
+_CLUSTER_RTOL = 1.0e-6
+#: Shift of the shift-and-invert transform: below the spectrum (which starts at λ = 0, the rigid motions).
+_SHIFT = -0.05
+#: Pairs requested from Krylov–Schur beyond those needed (a margin for multiplicities and the gap).
+_EXTRA_PAIRS = 4
+#: ``eigensolver="auto"`` uses dense LAPACK up to this many displacement DOFs of a coarse cell.
+_DENSE_MAX_U = 400
+#: Tolerance of the Krylov–Schur solves (relative, on the transformed eigenvalue).
+_EPS_TOL = 1.0e-12
+
+
 def _complete_cluster(lam: np.ndarray, n: int) -> int:
-    """n, raised to the end of the eigenvalue cluster that λ_n belongs to.
+    """n, raised to the end of the eigenvalue cluster that λ_n belongs to (``lam`` ascending).
 
     Keeping part of a repeated eigenvalue (the three rigid motions at λ = 0 on interior cells,
     symmetric pairs) would pick an arbitrary subspace; the whole cluster is kept instead.
     """
-    tol = 1e-8 * abs(lam[-1])
     n0 = n
-    while n < lam.size and lam[n] - lam[n - 1] <= tol + 1e-8 * abs(lam[n]):
+    while 0 < n < lam.size and lam[n] - lam[n - 1] <= _CLUSTER_ATOL + _CLUSTER_RTOL * abs(lam[n]):
         n += 1
     if n > n0:
-        log.info("Stage I: %d modes requested, %d kept (a repeated eigenvalue %.3e)", n0, n, lam[n0 - 1])
+        log.debug("Stage I: %d modes requested, %d kept (a repeated eigenvalue %.3e)", n0, n, lam[n0 - 1])
     return n
 
 
-def _modes_to_keep(lam: np.ndarray, nbasis: int | None, min_gap: float | None, max_nbasis: int) -> int:
-    """l_k: ``nbasis`` modes, more (up to ``max_nbasis``) while λ_{l+1} < ``min_gap``, whole clusters."""
+def _modes_to_keep(
+    lam: np.ndarray, nbasis: int | None, min_gap: float | None, max_nbasis: int, complete: bool = True
+) -> int | None:
+    """l_k: ``nbasis`` modes, more (up to ``max_nbasis``) while λ_{l+1} < ``min_gap``, whole clusters.
+
+    ``lam``: the smallest eigenvalues, ascending; all of them when ``complete``.  Otherwise None
+    when they do not suffice to decide (the first eigenvalue left out must be among them).
+    """
     if nbasis is None:
-        return lam.size
+        return lam.size if complete else None
     n = min(nbasis, lam.size)
     if min_gap is not None:
         cap = min(max(max_nbasis, n), lam.size)
         while n < cap and lam[n] < min_gap:
             n += 1
-    return _complete_cluster(lam, n)
+    n = _complete_cluster(lam, n)
+    if not complete and n >= lam.size:
+        return None
+    return n
+
+
+def _pair_residuals(At, Bl, S, lam: np.ndarray, phi: np.ndarray, p: np.ndarray) -> float:
+    """Largest normwise backward error of the pairs: ‖(Ãφ + Bᵀp, −Bφ − λSp)‖ / ((‖Ã‖+2‖B‖+λ‖S‖)‖(φ, p)‖)."""
+    if lam.size == 0:
+        return 0.0
+    nA, nB, nS = (float(sp.linalg.norm(X)) if sp.issparse(X) else float(np.linalg.norm(X)) for X in (At, Bl, S))
+    r1 = At @ phi + Bl.T @ p
+    r2 = -(Bl @ phi) - (S @ p) * lam
+    res = np.sqrt(np.sum(r1 * r1, axis=0) + np.sum(r2 * r2, axis=0))
+    scale = (nA + 2.0 * nB + np.abs(lam) * nS) * np.sqrt(np.sum(phi * phi, axis=0) + np.sum(p * p, axis=0))
+    return float(np.max(res / scale))
+
+
+def _s_orthonormalize(p: np.ndarray, S) -> np.ndarray:
+    """P L⁻ᵀ with PᵀSP = LLᵀ (fixes scaling, and the bases of repeated eigenvalues)."""
+    gram = p.T @ (S @ p)
+    try:
+        L = np.linalg.cholesky(0.5 * (gram + gram.T))
+    except np.linalg.LinAlgError as err:
+        raise ConvergenceError(f"Stage I eigenvectors are dependent in the s-inner product: {err}") from None
+    return np.linalg.solve(L, p.T).T
+
+
+def _cell_pairs_dense(At: sp.spmatrix, Bl: sp.spmatrix, S: sp.spmatrix) -> tuple[np.ndarray, np.ndarray]:
+    """All pairs (λ ascending, p S-orthonormal) of B Ã⁻¹ Bᵀ p = λ S p by dense LAPACK."""
+    Ad, Bd, Sd = At.toarray(), Bl.toarray(), S.toarray()
+    X = sla.cho_solve(sla.cho_factor(Ad), Bd.T)
+    schur = Bd @ X
+    lam, vec = sla.eigh(0.5 * (schur + schur.T), Sd)
+    return np.maximum(lam, 0.0), vec
+
+
+def _eps_smallest(Af: PETSc.Mat, Bf: PETSc.Mat, nev: int, deflation: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    """Converged pairs nearest ``_SHIFT`` of Af x = λ Bf x (SLEPc GHEP, Bf ⪰ 0; Krylov–Schur, shift-and-invert)."""
+    eps = SLEPc.EPS().create(PETSc.COMM_SELF)
+    defl = []
+    try:
+        eps.setOperators(Af, Bf)
+        eps.setProblemType(SLEPc.EPS.ProblemType.GHEP)
+        eps.setType(SLEPc.EPS.Type.KRYLOVSCHUR)
+        eps.setDimensions(nev)
+        st = eps.getST()
+        st.setType(SLEPc.ST.Type.SINVERT)
+        ksp = st.getKSP()
+        ksp.setType(PETSc.KSP.Type.PREONLY)
+        pc = ksp.getPC()
+        pc.setType(PETSc.PC.Type.LU)
+        pc.setFactorSolverType("mumps")
+        eps.setTarget(_SHIFT)
+        eps.setWhichEigenpairs(SLEPc.EPS.Which.TARGET_REAL)
+        if deflation is not None and deflation.shape[1]:
+            for col in deflation.T:
+                vec = Af.createVecRight()
+                vec.array[:] = col
+                defl.append(vec)
+            eps.setDeflationSpace(defl)
+        eps.setTolerances(_EPS_TOL, 1000)
+        eps.solve()
+        nconv = eps.getConverged()
+        if nconv < nev:
+            raise ConvergenceError(
+                f"Stage I eigenproblem (n = {Af.getSize()[0]}): only {nconv} of {nev} pairs converged "
+                f"(reason {eps.getConvergedReason()})"
+            )
+        vr = Af.createVecRight()
+        values = np.empty(nconv)
+        vectors = np.empty((Af.getSize()[0], nconv))
+        for j in range(nconv):
+            values[j] = eps.getEigenpair(j, vr).real
+            vectors[:, j] = vr.array
+        vr.destroy()
+    finally:
+        eps.destroy()
+        for vec in defl:
+            vec.destroy()
+    return values, vectors
+
+
+def _count_below(K: sp.spmatrix, n_loc: int, t: float, M: sp.spmatrix) -> int:
+    """#{λ < t} of B Ã⁻¹ Bᵀ p = λ S p: neg. inertia of K − tM = −[[Ã, Bᵀ], [B, tS]] minus dim X (MUMPS LDLᵀ).
+
+    Sylvester and Haynsworth: In([[Ã, Bᵀ], [B, tS]]) = In(Ã) + In(tS − BÃ⁻¹Bᵀ), Ã ≻ 0.
+    """
+    X = scipy_to_petsc((K - t * M).tocsr())
+    ksp = PETSc.KSP().create(PETSc.COMM_SELF)
+    try:
+        ksp.setOperators(X)
+        ksp.setType(PETSc.KSP.Type.PREONLY)
+        pc = ksp.getPC()
+        pc.setType(PETSc.PC.Type.CHOLESKY)
+        pc.setFactorSolverType("mumps")
+        pc.setFactorSetUpSolverType()
+        pc.getFactorMatrix().setMumpsIcntl(24, 1)  # null-pivot detection: required for the inertia
+        ksp.setUp()
+        if pc.getFailedReason() != 0:
+            raise ConvergenceError(f"Stage I inertia: LDLᵀ failed (PETSc reason {pc.getFailedReason()})")
+        nneg, _, _ = pc.getFactorMatrix().getInertia()
+    finally:
+        ksp.destroy()
+        X.destroy()
+    return int(nneg) - n_loc
+
+
+def _cell_pairs_sparse(
+    At: sp.spmatrix, Bl: sp.spmatrix, S: sp.spmatrix, nbasis: int, min_gap: float | None, max_nbasis: int
+) -> tuple[np.ndarray, np.ndarray, float]:
+    """The kept pairs (λ, p S-orthonormal) and Λ of one coarse cell: sparse shift-and-invert.
+
+    The pencil −[[Ã, Bᵀ], [B, 0]] x = λ [[0, 0], [0, S]] x (x = (φ, p); the φ block of the right-hand
+    matrix is zero: infinite eigenvalues, mapped to 0 by the transform) is solved by SLEPc
+    Krylov–Schur about ``_SHIFT`` < 0.  Enough pairs are requested to decide ``_modes_to_keep``
+    (more when the first eigenvalue left out is not yet among them); then Sylvester's inertia just
+    above the gap Λ checks that no eigenvalue below it was missed (a Krylov method can miss copies
+    of a repeated one, e.g. the three rigid motions), and missing ones are searched again with the
+    found ones deflated.
+    """
+    n_loc, n_u = At.shape[0], S.shape[0]
+    K = -sp.bmat([[At, Bl.T], [Bl, None]], format="csr")
+    M = sp.block_diag([sp.csr_matrix((n_loc, n_loc)), S], format="csr")
+    Kp, Mp = scipy_to_petsc(K), scipy_to_petsc(M)
+    try:
+        want = min(nbasis + _EXTRA_PAIRS, n_u)
+        lam, X = _eps_smallest(Kp, Mp, want, None)
+        for _ in range(50):
+            order = np.argsort(lam, kind="stable")
+            lam, X = lam[order], X[:, order]
+            nk = _modes_to_keep(lam, nbasis, min_gap, max_nbasis, complete=lam.size >= n_u)
+            if nk is None:  # the first eigenvalue left out is not among them yet
+                want = min(max(2 * want, lam.size + _EXTRA_PAIRS), n_u)
+                more_v, more_x = _eps_smallest(Kp, Mp, min(want - lam.size + _EXTRA_PAIRS, n_u - lam.size), X)
+                lam, X = np.concatenate([lam, more_v]), np.concatenate([X, more_x], axis=1)
+                continue
+            cut = lam[nk] if nk < lam.size else lam[-1]
+            t = cut + _CLUSTER_ATOL + _CLUSTER_RTOL * abs(cut)
+            below, have = _count_below(K, n_loc, t, M), int(np.count_nonzero(lam < t))
+            if below <= have:
+                break
+            log.debug("Stage I: Krylov–Schur missed %d pair(s) below %.3e; deflating and searching again",
+                      below - have, t)
+            keep = lam < t
+            more_v, more_x = _eps_smallest(Kp, Mp, min(below - have + _EXTRA_PAIRS, n_u - have), X[:, keep])
+            lam, X = np.concatenate([lam[keep], more_v]), np.concatenate([X[:, keep], more_x], axis=1)
+        else:
+            raise ConvergenceError(f"Stage I (n = {n_u}): could not find the smallest eigenpairs")
+    finally:
+        Kp.destroy()
+        Mp.destroy()
+    gap = float(lam[nk]) if nk < lam.size else np.inf
+    return np.maximum(lam[:nk], 0.0), X[n_loc:, :nk], gap
+
+
+def stage_one_cell(
+    ops: CellOperators, topo: _Topology, cells: np.ndarray, nbasis: int | None,
+    min_gap: float | None = None, max_nbasis: int = DEFAULT_MAX_NBASIS, eigensolver: str = "auto",
+) -> tuple[np.ndarray, np.ndarray, float, float]:
+    """Stage I on one coarse cell (fine ``cells``): (λ kept, p (|K|, 6, l) S-orthonormal, Λ, residual).
+
+    ``eigensolver``: "lapack" (all pairs, dense), "krylovschur" (sparse, ``_cell_pairs_sparse``) or
+    "auto" (dense up to ``_DENSE_MAX_U`` displacement DOFs, and for ``nbasis=None``).
+    """
+    cells = np.sort(np.asarray(cells, dtype=np.int64))
+    space = local_stress_space(ops, topo, cells)
+    At, Bl = _local_operators(ops, space)
+    S = _block_diag(ops.S[cells])
+    n_u = S.shape[0]
+    dense = eigensolver == "lapack" or nbasis is None or (eigensolver == "auto" and n_u <= _DENSE_MAX_U)
+    if dense:
+        lam, vec = _cell_pairs_dense(At, Bl, S)
+        nk = _modes_to_keep(lam, nbasis, min_gap, max_nbasis)
+        gap = float(lam[nk]) if nk < lam.size else np.inf
+        lam, p = lam[:nk], vec[:, :nk]
+    else:
+        lam, p, gap = _cell_pairs_sparse(At, Bl, S, nbasis, min_gap, max_nbasis)
+    p = _s_orthonormalize(p, S)
+    # φ = −Ã⁻¹Bᵀp for the residual check (sparse LU of the local Ã)
+    phi = -spla.splu(At.tocsc()).solve(np.asarray(Bl.T @ p))
+    res = _pair_residuals(At, Bl, S, lam, phi, p)
+    return lam, np.ascontiguousarray(p).reshape(cells.size, 6, lam.size), gap, res
 
 
 def stage_one(
     ops: CellOperators, topo: _Topology, grid: CoarseGrid, nbasis: int | None,
-    min_gap: float | None = None, max_nbasis: int = DEFAULT_MAX_NBASIS,
+    min_gap: float | None = None, max_nbasis: int = DEFAULT_MAX_NBASIS, eigensolver: str = "auto",
+    *, comm: MPI.Comm = MPI.COMM_SELF,
 ) -> StageI:
-    """Mixed local spectral problems Ã φ + Bᵀp = 0, −Bφ = λ S p on every coarse cell (dense LAPACK).
+    """Mixed local spectral problems Ã φ + Bᵀp = 0, −Bφ = λ S p on every coarse cell (``stage_one_cell``).
 
     Each cell keeps ``_modes_to_keep`` modes: ``nbasis`` (all if None), raised while the first
     eigenvalue left out is below ``min_gap`` (at most ``max_nbasis``) and to whole clusters.
+    Under ``comm`` the coarse cells are shared out and every rank gets all results.
     """
-    values, modes, res, gaps = [], [], [], []
-    for k in range(grid.size):
-        cells = np.sort(grid.cells[k].astype(np.int64))
-        space = local_stress_space(ops, topo, cells)
-        At, Bl = _local_operators(ops, space)
-        At, Bl = At.toarray(), Bl.toarray()
-        S = sla.block_diag(*ops.S[cells])
-        cho = sla.cho_factor(At)
-        X = sla.cho_solve(cho, Bl.T)
-        schur = Bl @ X
-        schur = 0.5 * (schur + schur.T)
-        lam, vec = sla.eigh(schur, S)
-        lam = np.maximum(lam, 0.0)
-        nk = _modes_to_keep(lam, nbasis, min_gap, max_nbasis)
-        p = vec[:, :nk]
-        phi = -X @ p
-        r = -Bl @ phi - S @ p * lam[:nk]
-        # relative to the operator scale: λ_max ‖S p‖ (λ = 0 modes have φ = 0 exactly)
-        scale = np.linalg.norm(S @ p, axis=0) * max(float(lam[-1]), 1e-300)
-        res.append(float(np.max(np.linalg.norm(r, axis=0) / scale)))
-        values.append(lam[:nk])
-        gaps.append(float(lam[nk]) if nk < lam.size else np.inf)
-        modes.append(np.ascontiguousarray(p).reshape(cells.size, 6, nk))  # as reloaded from the cache
-    offsets = np.concatenate([[0], np.cumsum([m.shape[2] for m in modes])])
-    return StageI(values, modes, offsets, np.array(res), np.array(gaps))
+    out = _run_shared(np.array([len(c) for c in grid.cells], dtype=float), comm, "mixed CEM Stage I (coarse cells)",
+                      lambda k: stage_one_cell(ops, topo, grid.cells[k], nbasis, min_gap, max_nbasis, eigensolver))
+    return _stage_one_from(out)
+
+
+def _stage_one_from(out: list) -> StageI:
+    values = [o[0] for o in out]
+    modes = [o[1] for o in out]
+    offsets = np.concatenate([[0], np.cumsum([m.shape[2] for m in modes])]).astype(np.int64)
+    return StageI(values, modes, offsets, np.array([o[3] for o in out]), np.array([o[2] for o in out]))
 
 
 # ---------------------------------------------------------------------------------------
 # Stage II and the correction
 # ---------------------------------------------------------------------------------------
 @dataclass(slots=True)
-class PatchFunctions:
-    """Functions on one patch: stresses (|ω|, 30, k), displacements (|ω|, 6, k) and their global indices."""
+class CoarseCellDofs:
+    """Per coarse cell K: its fine cells (sorted) and the AW DOFs touching them (sorted).
 
-    cells: np.ndarray
-    sigma: np.ndarray
-    u: np.ndarray
+    A stress supported on a patch is stored, on each coarse cell K of the patch, by its coefficients
+    in the AW functions touching K (restricted to K): on K it is P_K c_K with P_K = P[rows of K][:, aw_K]
+    (``p_blocks``).  These are about 11 numbers per fine cell instead of the 30 of DG P3.
+    """
+
+    cells: list  #: sorted fine cells of each K
+    aw: list  #: sorted AW DOFs touching K
+    slots: list  #: (|K|, w): position in aw of each column of ops.P_cols[cells] (−1 for padding)
+
+    @classmethod
+    def of(cls, ops: CellOperators, grid: CoarseGrid) -> "CoarseCellDofs":
+        cells, aw, slots = [], [], []
+        for k in range(grid.size):
+            ck = np.sort(np.asarray(grid.cells[k], dtype=np.int64))
+            pc = ops.P_cols[ck]
+            awk = np.unique(pc[pc >= 0])
+            cells.append(ck)
+            aw.append(awk)
+            slots.append(np.where(pc >= 0, np.searchsorted(awk, np.maximum(pc, 0)), -1))
+        return cls(cells, aw, slots)
+
+    def P(self, ops: CellOperators, k: int) -> sp.csr_matrix:
+        """P_K (30|K| × |aw_K|): the AW functions touching K, restricted to K, cell-major."""
+        blocks, slots = ops.P_blocks[self.cells[k]], self.slots[k]
+        nc, a, w = blocks.shape
+        rows = np.broadcast_to((a * np.arange(nc)[:, None, None] + np.arange(a)[None, :, None]), blocks.shape)
+        cols = np.broadcast_to(slots[:, None, :], blocks.shape)
+        keep = (cols >= 0) & (blocks != 0.0)
+        return sp.csr_matrix((blocks[keep], (rows[keep], cols[keep])), shape=(a * nc, self.aw[k].size))
+
+    def dg(self, ops: CellOperators, k: int, c: np.ndarray) -> np.ndarray:
+        """The cell-major DG P3 values (|K|, 30, ...) of AW coefficients c (|aw_K|, ...) on K."""
+        slots = self.slots[k]
+        cc = np.where((slots >= 0).reshape(slots.shape + (1,) * (c.ndim - 1)), c[np.maximum(slots, 0)], 0.0)
+        return ops.P_blocks[self.cells[k]] @ cc if c.ndim > 1 else np.einsum("cab,cb->ca", ops.P_blocks[self.cells[k]], cc)
+
+
+@dataclass(slots=True)
+class PatchFunctions:
+    """Functions on one patch, stored per coarse cell of the patch (``CoarseCellDofs``).
+
+    sigma[j]: AW coefficients (|aw_K|, k) on coarse cell K = coarse[j]; u[j]: displacements
+    (6|K|, k), cell-major on K's sorted cells; index: the global function indices (aux index for
+    basis functions, data index for correctors).
+    """
+
+    coarse: np.ndarray
     index: np.ndarray
+    sigma: list
+    u: list
+
+    @property
+    def nbytes(self) -> int:
+        return sum(a.nbytes for a in self.sigma) + sum(a.nbytes for a in self.u)
 
 
 def _patch_system(ops: CellOperators, topo: _Topology, grid: CoarseGrid, aux: StageI, patch: np.ndarray):
@@ -591,7 +946,7 @@ def _patch_system(ops: CellOperators, topo: _Topology, grid: CoarseGrid, aux: St
     for j in patch:
         cj = np.sort(grid.cells[j].astype(np.int64))
         pos = np.searchsorted(cells, cj)
-        Zj = np.einsum("cab,cbk->cak", ops.S[cj], aux.modes[j])  # (|K_j|, 6, l_j)
+        Zj = ops.S[cj] @ aux.modes[j]  # (|K_j|, 6, l_j)
         lj = Zj.shape[2]
         r = np.broadcast_to(_rows(pos, 6).reshape(cj.size, 6)[:, :, None], Zj.shape)
         c = np.broadcast_to(col + np.arange(lj)[None, None, :], Zj.shape)
@@ -611,9 +966,7 @@ def _patch_system(ops: CellOperators, topo: _Topology, grid: CoarseGrid, aux: St
     cols = np.concatenate([ac, bc, n_loc + br, n_loc + n_u + zc, n_loc + zr, eye])
     vals = np.concatenate([av, bv, bv, -zv, -zv, np.ones(col)])
     n_tot = n_loc + n_u + col
-    A = sp.csr_matrix((vals, (rows, cols)), shape=(n_tot, n_tot))
-    A.eliminate_zeros()
-    lu = _MumpsLU(A)
+    lu = _MumpsLU.from_coo(rows, cols, vals, n_tot)
     return space, lu, Z, aux_cols, n_loc, n_u
 
 
@@ -624,8 +977,9 @@ class _MumpsLU:
     factorization time of MUMPS' automatic choice (METIS); Cholesky (LDLᵀ) was 2–4× slower.
     """
 
-    def __init__(self, A: sp.spmatrix) -> None:
-        self.mat = scipy_to_petsc(A)
+    def __init__(self, mat: PETSc.Mat) -> None:
+        self.mat = mat
+        self._arrays = None  # the CSR arrays a matrix made by from_coo shares
         self.ksp = PETSc.KSP().create(PETSc.COMM_SELF)
         self.ksp.setOperators(self.mat)
         self.ksp.setType("preonly")
@@ -636,7 +990,23 @@ class _MumpsLU:
         pc.getFactorMatrix().setMumpsIcntl(7, 0)
         self.ksp.setUp()
         if self.ksp.getConvergedReason() < 0 or pc.getFailedReason() != 0:
-            raise RuntimeError(f"MUMPS failed to factorize a local mixed CEM problem (reason {pc.getFailedReason()})")
+            raise ConvergenceError(
+                f"MUMPS failed to factorize a local mixed CEM problem (reason {pc.getFailedReason()})"
+            )
+
+    @classmethod
+    def from_coo(cls, rows: np.ndarray, cols: np.ndarray, vals: np.ndarray, n: int) -> "_MumpsLU":
+        """Factorize the n × n matrix of COO triplets (duplicates summed; SciPy's conversion was 2–4× faster
+        than PETSc's COO assembly here)."""
+        A = sp.csr_matrix((vals, (rows, cols)), shape=(n, n))  # canonical: sorted, duplicates summed
+        A.eliminate_zeros()
+        csr = (A.indptr.astype(PETSc.IntType, copy=False), A.indices.astype(PETSc.IntType, copy=False),
+               A.data.astype(PETSc.ScalarType, copy=False))
+        mat = PETSc.Mat().createAIJWithArrays(A.shape, csr, comm=PETSc.COMM_SELF)  # no copy: keep csr alive
+        mat.assemble()
+        lu = cls(mat)
+        lu._arrays = csr
+        return lu
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:
         """A⁻¹ rhs for all columns at once (one MatMatSolve)."""
@@ -649,18 +1019,23 @@ class _MumpsLU:
             self.ksp.matSolve(B, X)
             if self.ksp.getConvergedReason() < 0:
                 reason = self.ksp.getConvergedReason()
-                raise RuntimeError(f"MUMPS failed on a local mixed CEM problem (reason {reason})")
-            return X.getDenseArray().copy()
+                raise ConvergenceError(f"MUMPS failed on a local mixed CEM problem (reason {reason})")
+            out = X.getDenseArray().copy()
         finally:
             B.destroy()
             X.destroy()
+        if not np.all(np.isfinite(out)):
+            raise ConvergenceError("a local mixed CEM solve produced non-finite values")
+        return out
 
     def destroy(self) -> None:
         for obj in (self.ksp, self.mat):
             obj.destroy()
+        self._arrays = None
 
 
 def _unpack(space: LocalSpace, x: np.ndarray, n_loc: int, n_u: int) -> tuple[np.ndarray, np.ndarray]:
+    """Cell-major DG stresses (|ω|, 30, k) and displacements (|ω|, 6, k) of patch solutions x."""
     k = x.shape[1]
     nc = space.cells.size
     sigma = space.apply(x[:n_loc])
@@ -668,49 +1043,191 @@ def _unpack(space: LocalSpace, x: np.ndarray, n_loc: int, n_u: int) -> tuple[np.
     return sigma, u
 
 
-def stage_two(
-    ops: CellOperators, topo: _Topology, grid: CoarseGrid, aux: StageI, layers: int
-) -> tuple[list[PatchFunctions], list[PatchFunctions]]:
-    """Basis functions ψ_j^i (index = aux index) and corrections Q_i, N_i (index = γ value index)."""
-    basis, corr = [], []
-    gamma_coarse = set(np.unique(grid.cell_coarse[ops.gamma_cells]).tolist())
-    for i in range(grid.size):
-        patch = grid.patch(i, layers)
-        space, lu, Z, aux_cols, n_loc, n_u = _patch_system(ops, topo, grid, aux, patch)
+def _aw_map(space: LocalSpace, aw: np.ndarray) -> sp.csr_matrix:
+    """(|aw| × dim X_h(ω)): AW coefficients (on the sorted DOFs ``aw``) of the local basis functions.
+
+    Inner functions are AW functions (one coefficient 1); an inner-boundary vertex function with
+    value z is Σ_i z_i (AW function 3v + i) restricted to ω.
+    """
+    rows = [np.searchsorted(aw, space.aw_inner)]
+    cols = [np.arange(space.aw_inner.size)]
+    vals = [np.ones(space.aw_inner.size)]
+    if space.num_extra:
+        ext = space.aw_inner.size + np.arange(space.num_extra)
+        for i in range(3):
+            rows.append(np.searchsorted(aw, 3 * space.extra_vertex + i))
+            cols.append(ext)
+            vals.append(space.extra_z[:, i])
+    rows, cols, vals = np.concatenate(rows), np.concatenate(cols), np.concatenate(vals)
+    keep = vals != 0.0
+    return sp.csr_matrix((vals[keep], (rows[keep], cols[keep])), shape=(aw.size, space.size))
+
+
+def _split_by_coarse(
+    dofs: CoarseCellDofs, patch: np.ndarray, space: LocalSpace, aw: np.ndarray, T: sp.csr_matrix, x: np.ndarray,
+    n_loc: int, n_u: int,
+) -> tuple[list, list]:
+    """Patch solutions x → per coarse cell of the patch: (AW coefficients, displacements); T = _aw_map(space, aw)."""
+    a = T @ x[:n_loc]
+    xu = x[n_loc : n_loc + n_u]
+    sig, dis = [], []
+    for j in patch:
+        sig.append(np.ascontiguousarray(a[np.searchsorted(aw, dofs.aw[j])]))
+        dis.append(np.ascontiguousarray(xu[_rows(np.searchsorted(space.cells, dofs.cells[j]), 6)]))
+    return sig, dis
+
+
+def _patch_functions(
+    ops: CellOperators, topo: _Topology, grid: CoarseGrid, dofs: CoarseCellDofs, aux: StageI, i: int,
+    layers: int, source: bool,
+) -> tuple[PatchFunctions, PatchFunctions | None]:
+    """The Stage II basis functions ψ_j^i and the data correctors of coarse cell i on K_{i,m}."""
+    n_g = ops.num_gamma_values
+    patch = np.sort(np.asarray(grid.patch(i, layers), dtype=np.int64))
+    space, lu, Z, aux_cols, n_loc, n_u = _patch_system(ops, topo, grid, aux, patch)
+    try:
         n_tot = n_loc + n_u + Z.shape[1]
         li = aux.modes[i].shape[2]
-        rhs = np.zeros((n_tot, li))
+        ci = dofs.cells[i]
+        pos = np.searchsorted(space.cells, ci)
         c0 = aux_cols[int(i)]
-        rhs[n_loc : n_loc + n_u] = -Z[:, c0 : c0 + li].toarray()
+        # Robin data on γ ∩ ∂K_i: C_i g in the τ rows, mapped to the local basis through the AW coefficients
+        Ci = ops.C[_rows(ci, 30)]
+        gcols = np.unique(Ci.indices)
+        load = source and bool(np.any(ops.G[ci] != 0.0))
+        nd = gcols.size + int(load)
+        rhs = np.zeros((n_tot, li + nd))
+        rhs[n_loc : n_loc + n_u, :li] = -Z[:, c0 : c0 + li].toarray()
+        aw = np.unique(np.concatenate([dofs.aw[j] for j in patch]))  # the AW functions touching the patch
+        T = _aw_map(space, aw)
+        if gcols.size:
+            Caw = dofs.P(ops, i).T @ Ci[:, gcols]  # (|aw_K_i|, n) sparse
+            rhs[:n_loc, li : li + gcols.size] = (T[np.searchsorted(aw, dofs.aw[i])].T @ Caw).toarray()
+        if load:
+            # −(div ψ, v) + s(πq, πv) = (f χ_{K_i}, v): Bψ − Zy = −F_i = G on K_i
+            rhs[n_loc + _rows(pos, 6), -1] = ops.G[ci].ravel()
         sol = lu.solve(rhs)
-        sigma, u = _unpack(space, sol, n_loc, n_u)
-        basis.append(PatchFunctions(space.cells, sigma, u, aux.offsets[i] + np.arange(li)))
-        if i in gamma_coarse:
-            ci = np.sort(grid.cells[i].astype(np.int64))
-            Ci = ops.C[_rows(ci, 30)]
-            gcols = np.unique(Ci.indices)
-            if gcols.size:
-                coo = Ci[:, gcols].tocoo()
-                pos = _rows(np.searchsorted(space.cells, ci), 30)
-                Cpatch = sp.csr_matrix(
-                    (coo.data, (pos[coo.row], coo.col)), shape=(30 * space.cells.size, gcols.size)
-                )
-                rhs = np.zeros((n_tot, gcols.size))
-                rhs[:n_loc] = (space.L.T @ Cpatch).toarray()
-                sol = lu.solve(rhs)
-                sigma, u = _unpack(space, sol, n_loc, n_u)
-                corr.append(PatchFunctions(space.cells, sigma, u, gcols))
+    finally:
         lu.destroy()
+    sig, dis = _split_by_coarse(dofs, patch, space, aw, T, sol, n_loc, n_u)
+    basis = PatchFunctions(patch, aux.offsets[i] + np.arange(li), [s[:, :li] for s in sig], [d[:, :li] for d in dis])
+    if not nd:
+        return basis, None
+    index = np.concatenate([gcols, [n_g]]) if load else gcols
+    corr = PatchFunctions(patch, index, [np.ascontiguousarray(s[:, li:]) for s in sig],
+                          [np.ascontiguousarray(d[:, li:]) for d in dis])
     return basis, corr
 
 
+def stage_two(
+    ops: CellOperators, topo: _Topology, grid: CoarseGrid, aux: StageI, layers: int, source: bool = True,
+    *, dofs: CoarseCellDofs | None = None, comm: MPI.Comm = MPI.COMM_SELF,
+) -> tuple[list[PatchFunctions], list[PatchFunctions]]:
+    """Basis functions ψ_j^i (index = aux index) and data correctors (index = data index), per coarse cell.
+
+    The data are d = [g; 1]: the γ values g (index 0..n_g−1; Robin correctors Q_i, N_i on the
+    patches of the coarse cells touching γ) and, with ``source``, the load (index n_g; the source
+    correctors of the coarse cells where f ≠ 0).  ``corr[i]`` is None for a cell with neither.
+    Under ``comm`` the patches are shared out (``_share``) and every rank gets all results.
+    """
+    dofs = dofs or CoarseCellDofs.of(ops, grid)
+    cost = np.array([sum(len(grid.cells[j]) for j in grid.patch(i, layers)) for i in range(grid.size)], dtype=float)
+    out = _run_shared(cost ** 1.5, comm, "mixed CEM Stage II (patches)",
+                      lambda i: _patch_functions(ops, topo, grid, dofs, aux, i, layers, source))
+    return [b for b, _ in out], [c for _, c in out]
+
+
+def _run_shared(cost: np.ndarray, comm: MPI.Comm, desc: str, work, *, gather: bool = True) -> list | None:
+    """work(i) for the items i of this rank (``_share``), with progress; every rank gets all results.
+
+    Collective-safe: an exception on one rank is raised on every rank (after all have stopped).
+    """
+    mine = _share(cost, comm)
+    results, error = {}, None
+    with Progress(mine.size, desc, comm=comm, logger=log) as bar:
+        try:
+            for i in mine:
+                results[int(i)] = work(int(i))
+                bar.update()
+        except Exception as err:  # noqa: BLE001 -- re-raised below on every rank
+            error = err
+    failures = comm.allgather(None if error is None else f"{type(error).__name__}: {error}")
+    if error is not None:
+        raise error
+    if any(failures):
+        raise ConvergenceError(f"{desc}: another rank failed ({next(f for f in failures if f)})")
+    return _gather(results, cost.size, comm) if gather else None
+
+
+def _share(cost: np.ndarray, comm: MPI.Comm) -> np.ndarray:
+    """The items this rank computes: greedy by decreasing cost onto the least loaded rank (all ranks agree)."""
+    if comm.size == 1:
+        return np.arange(cost.size)
+    load = np.zeros(comm.size)
+    owner = np.empty(cost.size, dtype=np.int64)
+    for k in np.argsort(-cost, kind="stable"):
+        r = int(np.argmin(load))
+        owner[k] = r
+        load[r] += cost[k]
+    return np.flatnonzero(owner == comm.rank)
+
+
+def _gather(results: dict, n: int, comm: MPI.Comm) -> list:
+    """The list of all n items, computed by the ranks as dicts {index: item} (each item once)."""
+    if comm.size == 1:
+        return [results[i] for i in range(n)]
+    owners = comm.allgather(sorted(results))
+    out = [None] * n
+    for rank, keys in enumerate(owners):
+        for k in keys:
+            out[k] = comm.bcast(results[k] if rank == comm.rank else None, root=rank)
+    if any(o is None for o in out) and n:
+        raise RuntimeError("an offline item was computed by no rank")
+    return out
+
+
+def _scale_to_cell_sizes(ops: CellOperators, grid: CoarseGrid, H: float) -> None:
+    """κ̃ = c κ H_k⁻² with the size H_k of each coarse cell when the grid gives one (``cell_size``: √|K_k|,
+    a user partition); a Cartesian grid has H_k = H and nothing changes."""
+    sizes = getattr(grid, "cell_size", None)
+    if sizes is None:
+        return
+    for k, Hk in enumerate(np.asarray(sizes, dtype=float)):
+        factor = (H / Hk) ** 2
+        if abs(factor - 1.0) > 1e-10:
+            ops.S[np.asarray(grid.cells[k], dtype=np.int64)] *= factor
+
+
 def stage_one_of(
-    sub, grid: CoarseGrid, options: MixedCEMOptions, *, H: float
+    sub, grid: CoarseGrid, options: MixedCEMOptions, *, H: float, traction_free_facets: np.ndarray | None = None,
 ) -> tuple[CellOperators, "_Topology", StageI]:
     """Stage I alone for an Ω₁ ``MixedSubproblem``: (cell operators, local-space topology, U_aux)."""
     ops = cell_operators(sub, H, options.weight, options.s_factor)
-    topo = _Topology(sub.mesh, ops.P.shape[1])
-    return ops, topo, stage_one(ops, topo, grid, options.nbasis, options.min_gap, options.max_nbasis)
+    _scale_to_cell_sizes(ops, grid, H)
+    topo = _Topology(sub.mesh, ops.num_aw, traction_free_facets)
+    return ops, topo, stage_one(ops, topo, grid, options.nbasis, options.min_gap, options.max_nbasis,
+                                options.eigensolver)
+
+
+def _cell_coarse(grid: CoarseGrid) -> np.ndarray:
+    """The coarse cell of each fine Ω₁ cell."""
+    out = np.full(sum(len(c) for c in grid.cells), -1, dtype=np.int64)
+    for k in range(grid.size):
+        out[np.asarray(grid.cells[k], dtype=np.int64)] = k
+    return out
+
+
+def _coarse_distance(grid: CoarseGrid, k: int) -> np.ndarray:
+    """Layers from coarse cell k: the least m with K_j in K_{k,m}, for every coarse cell j."""
+    dist = np.full(grid.size, -1, dtype=np.int64)
+    m = 0
+    while np.any(dist < 0):
+        reached = np.asarray(grid.patch(k, m), dtype=np.int64)
+        dist[reached[dist[reached] < 0]] = m
+        m += 1
+        if m > grid.size:
+            raise RuntimeError("the coarse patches do not reach every coarse cell")
+    return dist
 
 
 def basis_decay_profile(ops: CellOperators, topo: _Topology, grid: CoarseGrid, aux: StageI, k: int) -> np.ndarray:
@@ -729,7 +1246,7 @@ def basis_decay_profile(ops: CellOperators, topo: _Topology, grid: CoarseGrid, a
     finally:
         lu.destroy()
     energy = np.einsum("cak,cab,cbk->ck", sigma, ops.K[space.cells], sigma)
-    dist = np.abs(grid.ij[grid.cell_coarse[space.cells]] - grid.ij[k]).max(axis=1)
+    dist = _coarse_distance(grid, k)[_cell_coarse(grid)[space.cells]]
     total = energy.sum(axis=0)
     return np.array([np.sqrt(energy[dist >= d].sum(axis=0) / total).max() for d in range(1, int(dist.max()) + 1)])
 
@@ -739,89 +1256,126 @@ def basis_decay_profile(ops: CellOperators, topo: _Topology, grid: CoarseGrid, a
 # ---------------------------------------------------------------------------------------
 @dataclass(slots=True)
 class CoarseOperators:
-    """Dense coarse matrices of Algorithm 4 (index space [X_ms | g] for stresses, [U_aux | g] for u)."""
+    """Dense coarse matrices of Algorithm 4.
+
+    Index spaces: [X_ms | d] for stresses and [U_aux | d] for displacements, with the data
+    d = [g; 1] (n_g γ values, then the load: the source correctors, zero without them).
+    """
 
     n_ms: int
     n_aux: int
     n_g: int
-    Gt: np.ndarray  #: ΦᵀÃΦ
+    Gt: np.ndarray  #: ΦᵀÃΦ, Φ = [Ψ | Q | σ_f]
     Gk: np.ndarray  #: ΦᵀKΦ
     Bm: np.ndarray  #: Πᵀ B Φ
-    BN: np.ndarray  #: (BΦ)ᵀ N
-    Cphi: np.ndarray  #: Φᵀ C
+    BN: np.ndarray  #: (BΦ)ᵀ [N | u_f]
+    Cphi: np.ndarray  #: Φᵀ C (n_ms + n_d, n_g)
     Ephi: np.ndarray  #: E Φ
-    Mu: np.ndarray  #: Gram of [Π | N] in L²
+    Mu: np.ndarray  #: Gram of [Π | N | u_f] in L²
     PiG: np.ndarray  #: Πᵀ G
+
+    @property
+    def n_d(self) -> int:
+        """Number of data columns: n_g γ values and the load."""
+        return self.n_g + 1
+
+    def __add__(self, other: "CoarseOperators") -> "CoarseOperators":
+        names = ("Gt", "Gk", "Bm", "BN", "Cphi", "Ephi", "Mu", "PiG")
+        return CoarseOperators(self.n_ms, self.n_aux, self.n_g, *(getattr(self, n) + getattr(other, n) for n in names))
+
+
+def _merge_columns(X: np.ndarray, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Sum the columns of the matrix X with equal index: (sorted unique indices, merged X)."""
+    uniq, inv = np.unique(idx, return_inverse=True)
+    if uniq.size == idx.size:
+        return uniq, X[:, np.argsort(inv)] if np.any(np.diff(idx) < 0) else X
+    sel = sp.csr_matrix((np.ones(idx.size), (np.arange(idx.size), inv)), shape=(idx.size, uniq.size))
+    return uniq, np.asarray((sel.T @ X.T).T)
+
+
+def _reaching(funcs: list, n: int) -> list:
+    """For each coarse cell K: the (PatchFunctions, position of K in it) of the functions reaching K."""
+    out = [[] for _ in range(n)]
+    for f in funcs:
+        if f is None:
+            continue
+        for pos, K in enumerate(f.coarse):
+            out[int(K)].append((f, pos))
+    return out
 
 
 def coarse_operators(
-    ops: CellOperators, grid: CoarseGrid, aux: StageI, basis: list, corr: list, layers: int
+    ops: CellOperators, grid: CoarseGrid, aux: StageI, basis: list, corr: list, *,
+    dofs: CoarseCellDofs | None = None, comm: MPI.Comm = MPI.COMM_SELF,
 ) -> CoarseOperators:
-    """Accumulate the coarse matrices coarse cell by coarse cell from the patch functions reaching it."""
+    """Accumulate the coarse matrices coarse cell by coarse cell from the patch functions reaching it.
+
+    On K the stresses are P_K F (F: their AW coefficients on K), so ΦᵀÃΦ|_K = Fᵀ (P_Kᵀ Ã_K P_K) F etc.
+    Under ``comm`` the coarse cells are shared out and the matrices summed.
+    """
+    dofs = dofs or CoarseCellDofs.of(ops, grid)
     n_ms, n_g = aux.size, ops.num_gamma_values
-    n_tot = n_ms + n_g
+    n_d = n_g + 1
+    n_tot = n_ms + n_d
     Gt = np.zeros((n_tot, n_tot))
     Gk = np.zeros((n_tot, n_tot))
     Bm = np.zeros((aux.size, n_tot))
-    BN = np.zeros((n_tot, n_g))
+    BN = np.zeros((n_tot, n_d))
     Cphi = np.zeros((n_tot, n_g))
     Ephi = np.zeros((n_g, n_tot))
-    Mu = np.zeros((aux.size + n_g, aux.size + n_g))
+    Mu = np.zeros((aux.size + n_d, aux.size + n_d))
     PiG = np.zeros(aux.size)
-    gamma_set = set(ops.gamma_cells.tolist())
-    for K in range(grid.size):
-        cK = np.sort(grid.cells[K].astype(np.int64))
-        funcs = [basis[i] for i in grid.patch(K, layers)]
-        qs = [c for c in corr if _contains(c.cells, cK[0])]
-        sig, idx, uq, gidx = [], [], [], []
-        for f in funcs:
-            pos = np.searchsorted(f.cells, cK)
-            sig.append(f.sigma[pos])
-            idx.append(f.index)
-        for q in qs:
-            pos = np.searchsorted(q.cells, cK)
-            sig.append(q.sigma[pos])
-            idx.append(n_ms + q.index)
-            uq.append(q.u[pos])
-            gidx.append(q.index)
-        Phi = np.concatenate(sig, axis=2)
-        idx = np.concatenate(idx)
-        uniq, inv = np.unique(idx, return_inverse=True)
-        if uniq.size != idx.size:
-            Ph = np.zeros(Phi.shape[:2] + (uniq.size,))
-            for k in range(idx.size):
-                Ph[:, :, inv[k]] += Phi[:, :, k]
-            Phi = Ph
-        nf = uniq.size
-        F = Phi.reshape(-1, nf)
-        KtP = np.einsum("cab,cbk->cak", ops.Kt[cK], Phi).reshape(-1, nf)
-        KP = np.einsum("cab,cbk->cak", ops.K[cK], Phi).reshape(-1, nf)
-        BP = np.einsum("cab,cbk->cak", ops.B[cK], Phi).reshape(-1, nf)
+    gamma = np.zeros(ops.num_cells, dtype=bool)
+    gamma[ops.gamma_cells] = True
+    reach_b, reach_c = _reaching(basis, grid.size), _reaching(corr, grid.size)
+
+    def accumulate(K: int) -> None:
+        cK = dofs.cells[K]
+        sig = [f.sigma[p] for f, p in reach_b[K]] + [q.sigma[p] for q, p in reach_c[K]]
+        idx = [f.index for f, _ in reach_b[K]] + [n_ms + q.index for q, _ in reach_c[K]]
+        uniq, F = _merge_columns(np.concatenate(sig, axis=1), np.concatenate(idx))
+        PK = dofs.P(ops, K)
         ix = np.ix_(uniq, uniq)
-        Gt[ix] += F.T @ KtP
-        Gk[ix] += F.T @ KP
+        PF = (PK @ F).reshape(cK.size, 30, -1)  # cell-major DG values on K
+        KtF = PK.T @ (ops.kt(cK) @ PF).reshape(30 * cK.size, -1)  # batched matmul (BLAS), not einsum
+        KF = PK.T @ (ops.K[cK] @ PF).reshape(30 * cK.size, -1)
+        Gt[ix] += F.T @ KtF
+        Gk[ix] += F.T @ KF
+        BP = (ops.B[cK] @ PF).reshape(6 * cK.size, -1)
         a0, a1 = aux.offsets[K], aux.offsets[K + 1]
         Pi = aux.modes[K].reshape(-1, a1 - a0)
+        MPi = (ops.M[cK] @ aux.modes[K]).reshape(-1, a1 - a0)
         Bm[a0:a1, uniq] += Pi.T @ BP
-        Mb = sla.block_diag(*ops.M[cK])
-        Mu[a0:a1, a0:a1] += Pi.T @ Mb @ Pi
+        Mu[a0:a1, a0:a1] += Pi.T @ MPi
         PiG[a0:a1] += Pi.T @ ops.G[cK].ravel()
-        if uq:
-            N = np.concatenate(uq, axis=2).reshape(-1, sum(x.size for x in gidx))
-            gi = np.concatenate(gidx)
-            gu, ginv = np.unique(gi, return_inverse=True)
-            Nu = np.zeros((N.shape[0], gu.size))
-            for k in range(gi.size):
-                Nu[:, ginv[k]] += N[:, k]
+        if reach_c[K]:
+            gu, Nu = _merge_columns(np.concatenate([q.u[p] for q, p in reach_c[K]], axis=1),
+                                    np.concatenate([q.index for q, _ in reach_c[K]]))
+            MNu = (ops.M[cK] @ Nu.reshape(cK.size, 6, -1)).reshape(6 * cK.size, -1)
             BN[np.ix_(uniq, gu)] += BP.T @ Nu
-            Mu[np.ix_(np.arange(a0, a1), aux.size + gu)] += Pi.T @ Mb @ Nu
-            Mu[np.ix_(aux.size + gu, np.arange(a0, a1))] += (Pi.T @ Mb @ Nu).T
-            Mu[np.ix_(aux.size + gu, aux.size + gu)] += Nu.T @ Mb @ Nu
-        if gamma_set.intersection(cK.tolist()):
+            PMN = MPi.T @ Nu
+            du = aux.size + gu
+            Mu[np.ix_(np.arange(a0, a1), du)] += PMN
+            Mu[np.ix_(du, np.arange(a0, a1))] += PMN.T
+            Mu[np.ix_(du, du)] += Nu.T @ MNu
+        if gamma[cK].any():
             rows = _rows(cK, 30)
-            Cphi[uniq] += (ops.C[rows].T @ F).T
-            Ephi[:, uniq] += ops.E[:, rows] @ F
-    return CoarseOperators(n_ms, aux.size, n_g, Gt, Gk, Bm, BN, Cphi, Ephi, Mu, PiG)
+            PFf = PF.reshape(30 * cK.size, -1)
+            Cphi[uniq] += (ops.C[rows].T @ PFf).T
+            Ephi[:, uniq] += ops.E[:, rows] @ PFf
+
+    cost = np.array([sum(f.index.size for f, _ in reach_b[K] + reach_c[K]) for K in range(grid.size)], dtype=float)
+    _run_shared(cost ** 2, comm, "mixed CEM coarse operators", accumulate, gather=False)
+    co = CoarseOperators(n_ms, aux.size, n_g, Gt, Gk, Bm, BN, Cphi, Ephi, Mu, PiG)
+    if comm.size > 1:
+        for name in ("Gt", "Gk", "Bm", "BN", "Cphi", "Ephi", "Mu", "PiG"):
+            arr = getattr(co, name)
+            comm.Allreduce(MPI.IN_PLACE, arr, op=MPI.SUM)
+    for name in _SYMMETRIC:  # Gram matrices: exactly symmetric (the cache stores one triangle)
+        X = getattr(co, name)
+        X += X.T
+        X *= 0.5
+    return co
 
 
 # ---------------------------------------------------------------------------------------
@@ -832,18 +1386,25 @@ class OfflineData(NamedTuple):
 
     aux: StageI
     basis: list  #: PatchFunctions ψ_j^i per coarse cell i
-    corr: list  #: PatchFunctions Q_i, N_i per coarse cell touching γ
+    corr: list  #: PatchFunctions of the data correctors per coarse cell (None: no γ facet, no load)
     co: CoarseOperators
 
 
 _COARSE_ARRAYS = ("Gt", "Gk", "Bm", "BN", "Cphi", "Ephi", "Mu", "PiG")
+_SYMMETRIC = ("Gt", "Gk", "Mu")  #: stored as their upper triangle
+#: Stored precision of the patch functions (AW coefficients, displacements) in the cache: they serve
+#: only the fine output fields (relative rounding 6e-8); U_aux and the coarse matrices are float64.
+_FUNCTION_DTYPE = np.float32
 
 
-def mixed_offline_key(sub, ops: CellOperators, grid: CoarseGrid, options: MixedCEMOptions, *, H: float) -> str:
+def mixed_offline_key(
+    sub, ops: CellOperators, grid: CoarseGrid, options: MixedCEMOptions, *, H: float,
+    traction_free: np.ndarray | None = None,
+) -> str:
     """sha256 of everything the mixed offline data depend on.
 
-    Mesh geometry and cells of Ω₁, facet tags, λ, μ, f, β, H, the coarse grid, every
-    ``MixedCEMOptions`` field, the cache format and the package version, and (catching
+    Mesh geometry and cells of Ω₁, facet tags, λ, μ, f, β, H, the coarse cells and their patches,
+    every ``MixedCEMOptions`` field, the cache format and the package version, and (catching
     what these miss, e.g. a changed form) the cell operators assembled from them.
     """
     hasher = hashlib.sha256()
@@ -852,12 +1413,12 @@ def mixed_offline_key(sub, ops: CellOperators, grid: CoarseGrid, options: MixedC
         "version": __version__,
         "H": repr(float(H)),
         "beta": repr(float(sub.beta)),
-        "n_coarse": grid.n_coarse,
-        "grid_H": repr(float(grid.H)),
+        "num_coarse": int(grid.size),
         "options": {name: getattr(options, name) for name in sorted(f.name for f in fields(options))},
     }
     hasher.update(json.dumps(meta, sort_keys=True).encode())
     msh, ft, fld = sub.mesh, sub.facet_tags, sub.fields
+    patches = [np.sort(np.asarray(grid.patch(k, options.layers), dtype=np.int64)) for k in range(grid.size)]
     arrays = {
         "x": msh.geometry.x,
         "cells": msh.geometry.dofmaps[0],
@@ -867,13 +1428,15 @@ def mixed_offline_key(sub, ops: CellOperators, grid: CoarseGrid, options: MixedC
         "mu": fld.mu.x.array,
         "f": fld.f.x.array,
         "gamma_points": sub.gamma_points,
-        "grid_ij": grid.ij,
-        "grid_global_index": grid.global_index,
-        "grid_cell_coarse": grid.cell_coarse,
+        "coarse_cells": np.concatenate([np.sort(np.asarray(c, dtype=np.int64)) for c in grid.cells]),
+        "coarse_sizes": np.array([len(c) for c in grid.cells], dtype=np.int64),
+        "patches": np.concatenate(patches),
+        "patch_sizes": np.array([p.size for p in patches], dtype=np.int64),
+        "traction_free_edges": np.flatnonzero(traction_free) if traction_free is not None else np.zeros(0, np.int64),
     }
-    for name in ("K", "Kt", "B", "M", "S", "G", "dg_rows", "u_rows"):
+    for name in ("K", "R", "B", "M", "S", "G", "dg_rows", "u_rows", "gamma_cells", "P_cols", "P_blocks"):
         arrays[f"ops_{name}"] = getattr(ops, name)
-    for name in ("C", "E", "P"):
+    for name in ("C", "E"):
         X = sp.csr_matrix(getattr(ops, name))
         arrays[f"ops_{name}_data"], arrays[f"ops_{name}_indices"] = X.data, X.indices
         arrays[f"ops_{name}_indptr"], arrays[f"ops_{name}_shape"] = X.indptr, np.array(X.shape)
@@ -887,26 +1450,26 @@ def _concat(parts: list, dtype) -> np.ndarray:
     return np.concatenate([np.asarray(p, dtype=dtype).ravel() for p in parts]) if parts else np.zeros(0, dtype)
 
 
-def _pack_offline(data: OfflineData) -> dict:
+def _pack_offline(data: OfflineData):
+    """(name, array) pairs in sorted name order, one patch at a time (no second copy of the functions)."""
     aux, co = data.aux, data.co
-    out = {
-        "aux_offsets": np.asarray(aux.offsets, dtype=np.int64),
-        "aux_values": _concat(aux.values, np.float64),
-        "aux_modes": _concat(aux.modes, np.float64),
-        "aux_residuals": np.asarray(aux.residuals, dtype=np.float64),
-        "aux_gaps": np.asarray(aux.gaps, dtype=np.float64),
-        "co_sizes": np.array([co.n_ms, co.n_aux, co.n_g], dtype=np.int64),
-    }
-    for name, funcs in (("basis", data.basis), ("corr", data.corr)):
-        out[f"{name}_num_cells"] = np.array([f.cells.size for f in funcs], dtype=np.int64)
-        out[f"{name}_num_functions"] = np.array([f.index.size for f in funcs], dtype=np.int64)
-        out[f"{name}_cells"] = _concat([f.cells for f in funcs], np.int64)
-        out[f"{name}_index"] = _concat([f.index for f in funcs], np.int64)
-        out[f"{name}_sigma"] = _concat([f.sigma for f in funcs], np.float64)
-        out[f"{name}_u"] = _concat([f.u for f in funcs], np.float64)
-    for name in _COARSE_ARRAYS:
-        out[f"co_{name}"] = getattr(co, name)
-    return out
+    yield "aux_gaps", np.asarray(aux.gaps, dtype=np.float64)
+    yield "aux_modes", _concat(aux.modes, np.float64)
+    yield "aux_offsets", np.asarray(aux.offsets, dtype=np.int64)
+    yield "aux_residuals", np.asarray(aux.residuals, dtype=np.float64)
+    yield "aux_values", _concat(aux.values, np.float64)
+    for name in sorted(_COARSE_ARRAYS):
+        X = getattr(co, name)
+        yield f"co_{name}", X[np.triu_indices(X.shape[0])] if name in _SYMMETRIC else X
+    yield "co_sizes", np.array([co.n_ms, co.n_aux, co.n_g], dtype=np.int64)
+    for kind, funcs in (("b", data.basis), ("c", data.corr)):
+        for i, f in enumerate(funcs):
+            if f is None:
+                continue
+            yield f"fn_{kind}_{i:07d}_coarse", np.asarray(f.coarse, dtype=np.int64)
+            yield f"fn_{kind}_{i:07d}_index", np.asarray(f.index, dtype=np.int64)
+            yield f"fn_{kind}_{i:07d}_sigma", _concat(f.sigma, _FUNCTION_DTYPE)
+            yield f"fn_{kind}_{i:07d}_u", _concat(f.u, _FUNCTION_DTYPE)
 
 
 def _split(flat: np.ndarray, sizes: np.ndarray, what: str) -> list:
@@ -915,48 +1478,62 @@ def _split(flat: np.ndarray, sizes: np.ndarray, what: str) -> list:
     return np.split(flat, np.cumsum(sizes)[:-1]) if sizes.size else []
 
 
+def _unpack_functions(arrays: dict, prefix: str, dofs: CoarseCellDofs, n_index: int) -> PatchFunctions:
+    coarse, index = arrays.pop(f"{prefix}_coarse"), arrays.pop(f"{prefix}_index")
+    if coarse.size == 0 or coarse.min() < 0 or coarse.max() >= len(dofs.cells) or np.any(np.diff(coarse) <= 0):
+        raise ValueError(f"cached {prefix}: invalid coarse cells")
+    if index.size == 0 or index.min() < 0 or index.max() >= n_index:
+        raise ValueError(f"cached {prefix}: invalid function indices")
+    k = index.size
+    na = np.array([dofs.aw[K].size for K in coarse])
+    nu = np.array([6 * dofs.cells[K].size for K in coarse])
+    sig = _split(arrays.pop(f"{prefix}_sigma"), na * k, f"{prefix} stresses")
+    dis = _split(arrays.pop(f"{prefix}_u"), nu * k, f"{prefix} displacements")
+    return PatchFunctions(coarse, index, [s.astype(np.float64).reshape(-1, k) for s in sig],
+                          [d.astype(np.float64).reshape(-1, k) for d in dis])
+
+
 def _unpack_offline(arrays: dict, ops: CellOperators, grid: CoarseGrid) -> OfflineData:
     offsets = arrays["aux_offsets"]
     if offsets.shape != (grid.size + 1,) or offsets[0] != 0 or np.any(np.diff(offsets) < 0):
         raise ValueError("cached U_aux does not match the coarse grid")
     nk = np.diff(offsets)
-    ncell = np.array([c.size for c in grid.cells], dtype=np.int64)
+    ncell = np.array([len(c) for c in grid.cells], dtype=np.int64)
     values = _split(arrays["aux_values"], nk, "eigenvalues")
     modes = [m.reshape(nc, 6, k) for m, nc, k in zip(_split(arrays["aux_modes"], 6 * ncell * nk, "modes"), ncell, nk)]
     aux = StageI(values, modes, offsets, arrays["aux_residuals"], arrays["aux_gaps"])
-    funcs = {}
-    for name in ("basis", "corr"):
-        nc, nf = arrays[f"{name}_num_cells"], arrays[f"{name}_num_functions"]
-        cells = _split(arrays[f"{name}_cells"], nc, f"{name} cells")
-        index = _split(arrays[f"{name}_index"], nf, f"{name} indices")
-        sigma = _split(arrays[f"{name}_sigma"], 30 * nc * nf, f"{name} stresses")
-        u = _split(arrays[f"{name}_u"], 6 * nc * nf, f"{name} displacements")
-        funcs[name] = [
-            PatchFunctions(c, s.reshape(c.size, 30, i.size), v.reshape(c.size, 6, i.size), i)
-            for c, i, s, v in zip(cells, index, sigma, u)
-        ]
-    if len(funcs["basis"]) != grid.size:
-        raise ValueError("cached basis functions do not match the coarse grid")
     n_ms, n_aux, n_g = (int(s) for s in arrays["co_sizes"])
     if n_ms != aux.size or n_aux != aux.size or n_g != ops.num_gamma_values:
         raise ValueError("cached coarse operators do not match U_aux or the interface")
+    dofs = CoarseCellDofs.of(ops, grid)
+    basis = [_unpack_functions(arrays, f"fn_b_{i:07d}", dofs, n_ms) for i in range(grid.size)]
+    corr = [_unpack_functions(arrays, f"fn_c_{i:07d}", dofs, n_g + 1) if f"fn_c_{i:07d}_index" in arrays else None
+            for i in range(grid.size)]
+    n_d = n_g + 1
+    n = n_ms + n_d
     mats = {name: arrays[f"co_{name}"] for name in _COARSE_ARRAYS}
-    n = n_ms + n_g
-    shapes = {"Gt": (n, n), "Gk": (n, n), "Bm": (n_aux, n), "BN": (n, n_g), "Cphi": (n, n_g), "Ephi": (n_g, n),
-              "Mu": (n_aux + n_g, n_aux + n_g), "PiG": (n_aux,)}
+    for name, size in (("Gt", n), ("Gk", n), ("Mu", n_aux + n_d)):
+        tri = mats[name]
+        if tri.shape != (size * (size + 1) // 2,):
+            raise ValueError(f"cached coarse matrix {name} has {tri.size} entries, expected a triangle of {size}")
+        X = np.zeros((size, size))
+        X[np.triu_indices(size)] = tri
+        mats[name] = X + np.triu(X, 1).T
+    shapes = {"Gt": (n, n), "Gk": (n, n), "Bm": (n_aux, n), "BN": (n, n_d), "Cphi": (n, n_g), "Ephi": (n_g, n),
+              "Mu": (n_aux + n_d, n_aux + n_d), "PiG": (n_aux,)}
     for name, shape in shapes.items():
         if mats[name].shape != shape:
             raise ValueError(f"cached coarse matrix {name} has shape {mats[name].shape}, expected {shape}")
-    return OfflineData(aux, funcs["basis"], funcs["corr"], CoarseOperators(n_ms, n_aux, n_g, **mats))
+    return OfflineData(aux, basis, corr, CoarseOperators(n_ms, n_aux, n_g, **mats))
 
 
 class MixedOfflineCache(OfflineCache):
-    """npz files ``mixed_cem_<key>.npz``: ``cache.OfflineCache`` holding ``OfflineData``."""
+    """npz files ``mixed_cem_<key>.npz``: ``cache.OfflineCache`` holding ``OfflineData``, written patch by patch."""
 
     prefix = "mixed_cem"
 
     @staticmethod
-    def pack(obj: OfflineData) -> dict[str, np.ndarray]:
+    def pack(obj: OfflineData):
         return _pack_offline(obj)
 
     @staticmethod
@@ -994,17 +1571,20 @@ class InterfaceResponse:
     def of(cls, om: "MixedMultiscaleOmega1") -> "InterfaceResponse":
         co = om.co
         n, n_g = co.n_ms, co.n_g
-        X = sla.lu_solve(om._lu, np.vstack([om._F1, -om._F2]))
-        x0 = sla.lu_solve(om._lu, np.concatenate([np.zeros(n), co.PiG]))
+        X = sla.lu_solve(om._lu, np.vstack([om._F1[:, :n_g], -om._F2[:, :n_g]]))  # a column per γ value
+        x0 = sla.lu_solve(om._lu, np.concatenate([om._F1[:, n_g], co.PiG - om._F2[:, n_g]]))  # g = 0
         R, W, r0, w0 = X[:n], X[n:], x0[:n], x0[n:]
-        eye = np.eye(n_g)
+        lift_d = np.vstack([np.eye(n_g), np.zeros((1, n_g))])  # g ↦ d − e_load
+        e_load = np.zeros(n_g + 1)
+        e_load[n_g] = 1.0
         forms = []
         for lift, shift, gram in ((R, r0, co.Gk), (W, w0, co.Mu)):
-            L = np.vstack([lift, eye])
-            s0 = np.concatenate([shift, np.zeros(n_g)])
+            L = np.vstack([lift, lift_d])
+            s0 = np.concatenate([shift, e_load])
             GL, Gs = gram @ L, gram @ s0
             forms += [0.5 * (L.T @ GL + (L.T @ GL).T), L.T @ Gs, float(s0 @ Gs)]
-        return cls(R, r0, W, w0, om._E_r @ R + om._E_g, om._E_r @ r0, *forms)
+        T = om._E_r @ R + om._E_g[:, :n_g]
+        return cls(R, r0, W, w0, T, om._E_r @ r0 + om._E_g[:, n_g], *forms)
 
     def trace(self, g: np.ndarray) -> np.ndarray:
         """σ₁n₁ at the γ nodes for data g."""
@@ -1046,15 +1626,18 @@ class MixedMultiscaleOmega1:
     """
 
     def __init__(
-        self, sub, grid: CoarseGrid, options: MixedCEMOptions, *, H: float, cache_dir: str | Path | None = None
+        self, sub, grid: CoarseGrid, options: MixedCEMOptions, *, H: float, cache_dir: str | Path | None = None,
+        comm: MPI.Comm = MPI.COMM_SELF, traction_free_facets: np.ndarray | None = None,
     ) -> None:
         require_serial(sub.mesh.comm)
         self.options = options
         self.grid = grid
+        self.comm = comm
         self.times: dict[str, float] = {}
         t = time.perf_counter()
         self.ops = cell_operators(sub, H, options.weight, options.s_factor)
-        self.topo = _Topology(sub.mesh, self.ops.P.shape[1])
+        _scale_to_cell_sizes(self.ops, grid, H)
+        self.topo = _Topology(sub.mesh, self.ops.num_aw, traction_free_facets)
         self.times["assembly"] = time.perf_counter() - t
         self.cache_status = "disabled"
         self.cache_path: Path | None = None
@@ -1062,9 +1645,12 @@ class MixedMultiscaleOmega1:
         if cache_dir is not None:
             t = time.perf_counter()
             cache = MixedOfflineCache(cache_dir)
-            key = mixed_offline_key(sub, self.ops, grid, options, H=H)
+            key = mixed_offline_key(sub, self.ops, grid, options, H=H, traction_free=self.topo.tf_edge)
             self.cache_path = cache.path(key)
             data, self.cache_status = cache.load(key, self.ops, grid)
+            statuses = comm.allgather(self.cache_status)  # every rank builds, or none
+            if any(st != "loaded" for st in statuses) and data is not None:
+                data, self.cache_status = None, next(st for st in statuses if st != "loaded")
             if data is not None:
                 self._setup_online(data)
                 self.times["load"] = time.perf_counter() - t
@@ -1074,26 +1660,40 @@ class MixedMultiscaleOmega1:
                     log.warning(
                         "mixed CEM offline cache %s rejected (%s); rebuilding", self.cache_path, self.cache_status
                     )
-                cache.check_writable()
+                problem = None
+                if comm.rank == 0:
+                    try:
+                        cache.check_writable()
+                    except InputError as err:
+                        problem = str(err)
+                problem = comm.bcast(problem, root=0)
+                if problem is not None:
+                    raise InputError(problem)
                 self.cache_status = "built" if self.cache_status == "missing" else f"rebuilt ({self.cache_status})"
         if data is None:
             t = time.perf_counter()
-            aux = stage_one(self.ops, self.topo, grid, options.nbasis, options.min_gap, options.max_nbasis)
+            aux = stage_one(self.ops, self.topo, grid, options.nbasis, options.min_gap, options.max_nbasis,
+                            options.eigensolver, comm=comm)
             self.times["eigen"] = time.perf_counter() - t
             t = time.perf_counter()
-            basis, corr = stage_two(self.ops, self.topo, grid, aux, options.layers)
+            self.dofs = CoarseCellDofs.of(self.ops, grid)
+            basis, corr = stage_two(self.ops, self.topo, grid, aux, options.layers, options.source_correction,
+                                    dofs=self.dofs, comm=comm)
             self.times["basis"] = time.perf_counter() - t
             t = time.perf_counter()
-            data = OfflineData(aux, basis, corr, coarse_operators(self.ops, grid, aux, basis, corr, options.layers))
+            data = OfflineData(aux, basis, corr, coarse_operators(self.ops, grid, aux, basis, corr, dofs=self.dofs,
+                                                                  comm=comm))
             self._setup_online(data)
             self.times["coarse"] = time.perf_counter() - t
             if cache_dir is not None:
                 t = time.perf_counter()
-                try:
-                    cache.save(key, data)
-                    log.info("mixed CEM offline data written to %s", self.cache_path)
-                except OSError as err:
-                    log.warning("could not write the mixed CEM offline cache %s (%s)", self.cache_path, err)
+                if comm.rank == 0:
+                    try:
+                        cache.save(key, data)
+                        log.info("mixed CEM offline data written to %s", self.cache_path)
+                    except OSError as err:
+                        log.warning("could not write the mixed CEM offline cache %s (%s)", self.cache_path, err)
+                comm.Barrier()
                 self.times["save"] = time.perf_counter() - t
         co = self.co
         lo, hi = self.nbasis_range
@@ -1132,20 +1732,30 @@ class MixedMultiscaleOmega1:
     def _setup_online(self, data: OfflineData) -> None:
         """Keep the offline data; factorize the coarse matrix [[ΨᵀÃΨ, (ΠᵀBΨ)ᵀ], [ΠᵀBΨ, 0]]."""
         self.aux, self.basis, self.corr, self.co = data
+        if getattr(self, "dofs", None) is None:
+            self.dofs = CoarseCellDofs.of(self.ops, self.grid)
+        self._reach_b = _reaching(self.basis, self.grid.size)
+        self._reach_c = _reaching(self.corr, self.grid.size)
         co = self.co
         ms = slice(0, co.n_ms)
-        qg = slice(co.n_ms, co.n_ms + co.n_g)
+        qd = slice(co.n_ms, co.n_ms + co.n_d)
         A = np.block([[co.Gt[ms, ms], co.Bm[:, ms].T], [co.Bm[:, ms], np.zeros((co.n_aux, co.n_aux))]])
         self._lu = sla.lu_factor(A)
-        self._F1 = co.Cphi[ms] - co.Gt[ms, qg] - co.BN[ms]
-        self._F2 = co.Bm[:, qg]
-        self._E_r, self._E_g = co.Ephi[:, ms], co.Ephi[:, qg]
+        # right-hand sides for the data d = [g; 1]: τ rows F1 d, v rows Πᵀ G − F2 d
+        self._F1 = np.hstack([co.Cphi[ms], np.zeros((co.n_ms, 1))]) - co.Gt[ms, qd] - co.BN[ms]
+        self._F2 = co.Bm[:, qd]
+        self._E_r, self._E_g = co.Ephi[:, ms], co.Ephi[:, qd]
         self.response = InterfaceResponse.of(self)
+
+    @staticmethod
+    def data(g: np.ndarray) -> np.ndarray:
+        """The data vector d = [g; 1] (γ values, then the load's weight)."""
+        return np.append(np.asarray(g, dtype=float), 1.0)
 
     def solve_lu(self, g: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Coarse (r, w) for Robin data g by the coarse LU (``solve`` uses the precomputed response)."""
-        n = self.co.n_ms
-        x = sla.lu_solve(self._lu, np.concatenate([self._F1 @ g, self.co.PiG - self._F2 @ g]))
+        n, d = self.co.n_ms, self.data(g)
+        x = sla.lu_solve(self._lu, np.concatenate([self._F1 @ d, self.co.PiG - self._F2 @ d]))
         return x[:n], x[n:]
 
     @property
@@ -1160,51 +1770,59 @@ class MixedMultiscaleOmega1:
 
     def trace(self, r: np.ndarray, g: np.ndarray) -> np.ndarray:
         """σ₁n₁ at the γ nodes."""
-        return self._E_r @ r + self._E_g @ g
+        return self._E_r @ r + self._E_g @ self.data(g)
 
     def stress_norm2(self, r: np.ndarray, g: np.ndarray) -> float:
-        """‖Ψ r + Q g‖²_A."""
-        x = np.concatenate([r, g])
+        """‖Ψ r + Q g + σ_f‖²_A."""
+        x = np.concatenate([r, self.data(g)])
         return float(x @ self.co.Gk @ x)
 
     def l2_norm2(self, w: np.ndarray, g: np.ndarray) -> float:
-        """‖Π w + N g‖²_L²."""
-        x = np.concatenate([w, g])
+        """‖Π w + N g + u_f‖²_L²."""
+        x = np.concatenate([w, self.data(g)])
         return float(x @ self.co.Mu @ x)
 
     # -- fine reconstruction (output, errors, tests) ----------------------------------
+    def _combine(self, K: int, r: np.ndarray | None, d: np.ndarray, part: str) -> np.ndarray:
+        """Σ over the functions reaching K of their ``part`` ('sigma' or 'u') on K times their coefficient."""
+        out = None
+        terms = ([] if r is None else [(f, p, r) for f, p in self._reach_b[K]]) + [(q, p, d) for q, p in self._reach_c[K]]
+        for f, p, coef in terms:
+            x = getattr(f, part)[p] @ coef[f.index]
+            out = x if out is None else out + x
+        return out
+
     def fine_stress(self, r: np.ndarray, g: np.ndarray) -> np.ndarray:
-        """σ₁ = Ψ r + Q g, cell-major (n_cells, 30)."""
+        """σ₁ = Ψ r + Q g + σ_f, cell-major (n_cells, 30)."""
         out = np.zeros((self.ops.num_cells, 30))
-        for f in self.basis:
-            out[f.cells] += f.sigma @ r[f.index]
-        for q in self.corr:
-            out[q.cells] += q.sigma @ g[q.index]
+        d = self.data(g)
+        for K in range(self.grid.size):
+            out[self.dofs.cells[K]] = self.dofs.dg(self.ops, K, self._combine(K, r, d, "sigma"))
         return out
 
     def fine_displacement(self, w: np.ndarray, g: np.ndarray) -> np.ndarray:
-        """u₁ = Π w + N g, cell-major (n_cells, 6)."""
+        """u₁ = Π w + N g + u_f, cell-major (n_cells, 6)."""
         out = np.zeros((self.ops.num_cells, 6))
-        for k in range(self.grid.size):
-            cells = np.sort(self.grid.cells[k].astype(np.int64))
-            out[cells] += self.aux.modes[k] @ w[self.aux.offsets[k] : self.aux.offsets[k + 1]]
-        for q in self.corr:
-            out[q.cells] += q.u @ g[q.index]
+        d = self.data(g)
+        for K in range(self.grid.size):
+            cells = self.dofs.cells[K]
+            out[cells] = self.aux.modes[K] @ w[self.aux.offsets[K] : self.aux.offsets[K + 1]]
+            if self._reach_c[K]:
+                out[cells] += self._combine(K, None, d, "u").reshape(-1, 6)
         return out
 
     def fine_displacement_post(self, r: np.ndarray, g: np.ndarray) -> np.ndarray:
-        """Post-processed fine displacement Σ r_j q_j + N g (cell-major (n_cells, 6)).
+        """Post-processed fine displacement Σ r_j q_j + N g + u_f (cell-major (n_cells, 6)).
 
         q_j is the displacement part of the Stage II problem of ψ_j (Ãψ_j + Bᵀq_j = 0), so
-        σ₁ = Ψ r + Q g and this u satisfy the discrete constitutive law (Aσ₁, τ) + (div τ, u) +
-        β∫_γ(σ₁n₁)·(τn₁) = ∫_{γ}g·(τn₁) for τ in every local space; unlike u₁ = Π w + N g
+        σ₁ = Ψ r + Q g + σ_f and this u satisfy the discrete constitutive law (Aσ₁, τ) + (div τ, u) +
+        β∫_γ(σ₁n₁)·(τn₁) = ∫_{γ}g·(τn₁) for τ in every local space; unlike u₁ = Π w + N g + u_f
         (coarse, in U_aux) it resolves the fine scales.
         """
         out = np.zeros((self.ops.num_cells, 6))
-        for f in self.basis:
-            out[f.cells] += f.u @ r[f.index]
-        for q in self.corr:
-            out[q.cells] += q.u @ g[q.index]
+        d = self.data(g)
+        for K in range(self.grid.size):
+            out[self.dofs.cells[K]] = self._combine(K, r, d, "u").reshape(-1, 6)
         return out
 
     def a_norm2(self, sigma: np.ndarray) -> float:

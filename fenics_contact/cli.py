@@ -8,7 +8,8 @@ move it into place. Exit codes:
   0    converged
   2    bad input: an option, a file (--mesh, --E-map, --out, --cache-dir) or a mesh whose
        tags contradict the problem; nothing is written
-  3    not converged: the iteration hit --max-iterations; the results are written with
+  3    not converged: the transmission residual stayed above --tol (the iteration hit
+       --max-iterations, or the interface Newton's corrections ran out); the results are written with
        "converged": false
   4    numerical failure: Newton did not converge, non-finite values, a failed
        factorization; nothing is written
@@ -39,7 +40,7 @@ from fenics_contact import __version__
 from fenics_contact.errors import ConvergenceError, FenicsContactError, InputError
 from fenics_contact.fem.contact import NewtonOptions
 from fenics_contact.fem.primal import default_penalty, solve_primal_monolithic
-from fenics_contact.hybrid.iteration import IterationOptions
+from fenics_contact.hybrid.iteration import ACCELERATIONS, IterationOptions
 from fenics_contact.hybrid.primal import DEFAULT_ALPHA, solve_primal_hybrid
 from fenics_contact.io import (
     OutputDirectory,
@@ -80,7 +81,8 @@ DEFAULT_H = 64  #: 1/h of the built-in mesh when --h is not given
 EXIT_CODES = {
     0: "converged",
     2: "bad input (an option, a file or the mesh tags; nothing written)",
-    3: "not converged: the iteration hit --max-iterations (results written, \"converged\": false)",
+    3: "not converged: the transmission residual stayed above --tol (--max-iterations hit, or the interface Newton's "
+       "corrections ran out; results written, \"converged\": false)",
     4: "numerical failure: Newton did not converge, non-finite values, a failed factorization (nothing written)",
     130: "interrupted by SIGINT (Ctrl-C); --out left as it was",
     143: "interrupted by SIGTERM; --out left as it was",
@@ -160,7 +162,7 @@ class RunOptions:
     mesh: Path | None = None
     coarse_groups: bool = False
     alpha: str | None = None
-    accel: str = "anderson"
+    accel: str = "newton"
     tol: float = 1e-6
     max_iterations: int = 2000
     delta: float | None = None
@@ -280,9 +282,11 @@ def build_parser(*, given_only: bool = False) -> argparse.ArgumentParser:
                      "your own) instead of the squares of side 1/H over the bounding box")
     run.add_argument("--alpha", help=f"primal Robin coefficient (default {DEFAULT_ALPHA}): a number or a product "
                      "of numbers, h^p, sqrt-h and E (E_p: mean E at the γ node), e.g. 1, h^-1/2, 2E*h^-1/2")
-    run.add_argument("--accel", choices=("none", "anderson"), default="anderson",
-                     help="update of the interface data: the paper's plain update or Anderson acceleration")
-    run.add_argument("--tol", type=float, default=1e-6, help="relative-change tolerance (METHOD §6)")
+    run.add_argument("--accel", choices=ACCELERATIONS, default="newton",
+                     help="how the interface fixed point is solved: the interface Newton method (default: robust "
+                     "on every tested model), Anderson acceleration, or none (the paper's plain update)")
+    run.add_argument("--tol", type=float, default=1e-6,
+                     help="tolerance of the transmission residual (relative jump and traction imbalance on γ)")
     run.add_argument("--max-iterations", type=int, default=2000)
     run.add_argument("--delta", type=float, help="primal penalty δ (default 1e-3·h/E on Γ_C)")
     run.add_argument("--beta", help="mixed transmission coefficient β: sqrt-h (default) or a number")
@@ -690,9 +694,11 @@ def run(options: RunOptions, comm: MPI.Comm = MPI.COMM_WORLD, *, case: Case | No
         stop.output_complete = output.committed
         raise
     if not result.converged:
-        _fail(f"not converged: the iteration hit --max-iterations {options.max_iterations} (last relative change "
-              f"{summary['final_rel_change']:.3e} > --tol {options.tol:g}); results in {options.out} with "
-              '"converged": false', comm)
+        capped = result.iterations >= options.max_iterations
+        why = (f"the iteration hit --max-iterations {options.max_iterations}" if capped
+               else f"stopped after {result.iterations} iterations (the Newton corrections ran out)")
+        _fail(f"not converged: {why} (transmission residual {summary['transmission_residual']:.3e} > --tol "
+              f"{options.tol:g}); results in {options.out} with \"converged\": false", comm)
         return EXIT_NOT_CONVERGED
     if not summary["converged"]:  # a load step of the force-indentation curve
         depths = [s["depth"] for s in summary["force_indentation"]["steps"] if not s["converged"]]
@@ -746,6 +752,8 @@ def _solve_and_write(options: RunOptions, comm: MPI.Comm, model: TestModel | Non
         "converged": result.converged and (curve is None or all(s["converged"] for s in curve["steps"])),
         "rel_tolerance": options.tol,
         "final_rel_change": float(result.history.rel_changes[-1]),
+        "transmission_residual": result.history.transmission_residual,
+        "interface_newton_steps": result.history.newton_steps if options.accel == "newton" else None,
         **outcome.summary,
         "active_set": profile.active_interval(),
         "contact_force": profile.force,
@@ -756,6 +764,8 @@ def _solve_and_write(options: RunOptions, comm: MPI.Comm, model: TestModel | Non
         "time_mesh_s": t_mesh,
         "time_offline_s": result.time_offline_s,
         "time_online_s": result.time_online_s,
+        "time_interface_offline_s": result.history.time_offline_s,
+        "time_error_evaluation_s": result.history.time_monitor_s,
         "time_reference_s": reference.time_s if reference is not None else None,
         "reference_newton_steps": reference.newton.steps if reference is not None else None,
         "reference_active_set": reference.profile.active_interval() if reference is not None else None,

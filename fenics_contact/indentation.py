@@ -86,9 +86,13 @@ class WarmStart:
     def initial_data(self) -> np.ndarray:
         return self.step.initial_data() if self._last is None else self._last.copy()
 
-    def apply(self, g: np.ndarray) -> np.ndarray:
+    def apply(self, g: np.ndarray, **kwargs) -> np.ndarray:
         self._last = np.array(g, copy=True)
-        return self.step.apply(g)
+        return self.step.apply(g, **kwargs)
+
+    def __getattr__(self, name: str):
+        # everything else of the step (certificate, data_weights, interface_problem for --accel newton)
+        return getattr(self.step, name)
 
     def relative_change(self) -> float:
         return self.step.relative_change()

@@ -130,20 +130,22 @@ def plot_contact(profiles: dict, path: str | Path, *, comm) -> Path | None:
 
 
 def plot_history(histories: dict, path: str | Path, *, comm, tol: float | None = None) -> Path | None:
-    """Relative change (solid) and true error (dashed, when known) per iteration (cf. Fig. 5.5)."""
+    """Transmission residual (solid), relative change (dotted) and true error (dashed, when known) per
+    iteration (cf. Fig. 5.5)."""
     if comm.rank != 0:
         return None
     fig, ax = plt.subplots(figsize=(6, 4))
     for label, hist in histories.items():
         its = np.arange(1, hist.iterations + 1)
-        line, = ax.semilogy(its, hist.rel_changes, label=f"{label}: rel. change")
+        line, = ax.semilogy(its, hist.residuals, label=f"{label}: transmission residual")
+        ax.semilogy(its, hist.rel_changes, ":", color=line.get_color(), label=f"{label}: rel. change")
         errs = [r.info.get("e_u") for r in hist.records]
         if all(e is not None for e in errs) and errs:
             ax.semilogy(its, errs, "--", color=line.get_color(), label=f"{label}: $e_u$")
     if tol is not None:
         ax.axhline(tol, color="k", lw=0.5, ls=":")
     ax.set_xlabel("iteration")
-    ax.set_ylabel("relative change / error")
+    ax.set_ylabel("residual / change / error")
     ax.legend()
     ax.grid(True, which="both", alpha=0.3)
     return _save(fig, Path(path))

@@ -1,7 +1,8 @@
 """Primal solves with boundary conditions and obstacles; key numbers as JSON (rank 0).
 
 Used by test_mpi_boundary.py, once serially and once under ``mpiexec -n 2``: u_D, two traction
-groups, a curved gap (the manufactured problem of test_boundary_conditions.py), Algorithm 1, and
+groups, a curved gap (the manufactured problem of test_boundary_conditions.py), Algorithm 1 (Anderson
+and the interface Newton), and
 the Hertz cylinder with a moving obstacle (load steps).
 """
 
@@ -28,6 +29,7 @@ model = bc.manufactured_model()
 delta = default_penalty(cm.h, 1.0)
 ref = solve_primal_monolithic(cm.mesh, cm.facet_tags, material_fields(cm.mesh, model), delta=delta)
 alg1 = solve_primal_hybrid(cm, model, delta=delta, reference=ref.u, options=IterationOptions(tol=1e-10))
+newton = solve_primal_hybrid(cm, model, delta=delta, reference=ref.u, options=IterationOptions(tol=1e-10, accel="newton"))
 block, _ = hertz_block(0.05, refinement=0.5)
 curve = force_indentation("primal-monolithic", block, hertz_model(radius=5.0, depth=0.0), [6e-4, 1.2e-3],
                           direction=(0.0, -1.0))
@@ -37,6 +39,9 @@ out = {
     "l2": ref.problem.l2_norm2(ref.u),
     "alg1_iterations": alg1.iterations,
     "alg1_e_u": alg1.e_u,
+    "newton_converged": newton.converged,
+    "newton_steps": newton.history.newton_steps,
+    "newton_e_u": newton.e_u,
     "hertz_forces": curve.forces.tolist(),
     "hertz_zone": curve.steps[-1].profile.contact_zone(),
 }

@@ -1,7 +1,8 @@
 """Algorithm 3 (primal CEM hybrid) on a model with loads in Ω₁; key numbers as JSON (rank 0).
 
 Used by test_multiscale.py: once serially (writing the solution to ``out``) and once under
-``mpiexec -n 2`` (comparing its solution with the serial one, DOF by DOF, matched by coordinates).
+``mpiexec -n 2`` (comparing its solution with the serial one, DOF by DOF, matched by coordinates);
+then the interface Newton on the same step (its fields against the Robin iteration's).
 
     python mpi_check_primal_ms.py n n_coarse out.npz [serial.npz]
 """
@@ -41,6 +42,11 @@ delta = default_penalty(cm.h, 1.0)
 ref = solve_primal_monolithic(cm.mesh, cm.facet_tags, fields, delta=delta)
 res = solve_primal_ms_hybrid(cm, model, delta=delta, layers=2, nbasis=3, reference=ref.u,
                              options=IterationOptions(tol=1e-10))
+# the interface Newton on the same step (Ω₁'s response from the coarse solver, gathered over the ranks)
+newton = solve_primal_ms_hybrid(cm, model, delta=delta, layers=2, nbasis=3, step=res.step,
+                                options=IterationOptions(tol=1e-10, accel="newton"))
+scale = comm.allreduce(float(np.abs(res.u.x.array).max()), op=MPI.MAX)
+newton_vs_robin = comm.allreduce(float(np.abs(newton.u.x.array - res.u.x.array).max()), op=MPI.MAX) / scale
 V = res.u.function_space
 n_owned = V.dofmap.index_map.size_local
 bs = V.dofmap.index_map_bs
@@ -59,6 +65,9 @@ out = {
     "e_a": res.step.error_energy(),
     "rel_changes": res.history.rel_changes.tolist(),
     "dim_ms": res.dofs["omega1_ms"],
+    "newton_converged": bool(newton.converged),
+    "newton_steps": newton.history.newton_steps,
+    "newton_vs_robin": newton_vs_robin,
     "patches_here": comm.allgather(res.step.omega1.space.times["patches_here"]),
 }
 if compare is not None:

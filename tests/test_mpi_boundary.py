@@ -37,5 +37,7 @@ def test_two_ranks_match_serial_with_boundary_conditions_and_obstacles():
     assert parallel["force"] == pytest.approx(serial["force"], rel=1e-10)
     assert parallel["l2"] == pytest.approx(serial["l2"], rel=1e-10)
     assert parallel["alg1_iterations"] == serial["alg1_iterations"] and parallel["alg1_e_u"] < 1e-8
+    assert parallel["newton_converged"] and parallel["newton_steps"] == serial["newton_steps"] <= 8
+    assert parallel["newton_e_u"] < 1e-10 and serial["newton_e_u"] < 1e-10
     assert np.allclose(parallel["hertz_forces"], serial["hertz_forces"], rtol=1e-10)
     assert np.allclose(parallel["hertz_zone"], serial["hertz_zone"], atol=1e-12)

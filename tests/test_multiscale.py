@@ -413,6 +413,9 @@ def test_two_ranks_match_serial(tmp_path):
     for key in ("e_u", "e_a"):
         assert abs(parallel[key] - serial[key]) <= 1e-8 * serial[key], key
     assert np.allclose(parallel["rel_changes"], serial["rel_changes"], rtol=1e-6, atol=1e-12)
+    for run in (serial, parallel):  # --accel newton: the same fixed point, the same steps on 1 and 2 ranks
+        assert run["newton_converged"] and run["newton_vs_robin"] < 1e-8, run
+    assert parallel["newton_steps"] == serial["newton_steps"] <= 8
 
 
 def test_threshold_limits_modes(omega1_32_8):

@@ -1013,6 +1013,37 @@ class MixedSubproblem:
         misfit = np.sqrt(_dot(r, r, comm)) / max(np.sqrt(_dot(d, d, comm)), 1e-300)
         return c, float(misfit)
 
+    # -- interface Newton support (hybrid.newton) -------------------------------------------------
+    def reset(self) -> None:
+        """Forget the solution and the cached factorization (the next ``solve`` starts cold)."""
+        self.c = np.zeros(self.n_sigma)
+        self.u = np.zeros(self.n_u)
+        self._cold = True
+        if self.contact:
+            self._factorized_set = None
+
+    def set_state(self, c: np.ndarray, u: np.ndarray) -> None:
+        """Set (σ, u) (AW and DG P1 coefficients): the warm start of the next ``solve``."""
+        self.c = np.array(c, dtype=float).reshape(self.n_sigma)
+        self.u = np.array(u, dtype=float).reshape(self.n_u)
+        self._cold = False
+
+    def gamma_mass(self) -> sp.csr_matrix:
+        """The L²(γ) mass matrix of the continuous P3 vector data at ``gamma_points`` (flattened (x, y))."""
+        if self.beta is None:
+            raise InputError("this subproblem has no interface γ")
+        msh = self.mesh
+        Lam = fem.functionspace(msh, basix.ufl.element("Lagrange", msh.basix_cell(), 3, shape=(2,)))
+        gamma = self.facet_tags.find(Boundary.INTERFACE)
+        blocks = fem.locate_dofs_topological(Lam, msh.topology.dim - 1, gamma)
+        coords = Lam.tabulate_dof_coordinates()[blocks, :2]
+        blocks = blocks[np.lexsort((coords[:, 0], coords[:, 1]))]  # the order of ``gamma_points``
+        g, w = ufl.TrialFunction(Lam), ufl.TestFunction(Lam)
+        ds = forms_mixed.boundary_measure(msh, self.facet_tags)
+        M = assemble_scipy(ufl.inner(g, w) * ds(Boundary.INTERFACE))
+        cols = (2 * blocks[:, None] + np.arange(2)).ravel()
+        return M[cols][:, cols].tocsr()
+
     def destroy(self) -> None:
         """Free the PETSc objects (collective)."""
         if self._saddle is not None:

@@ -356,6 +356,83 @@ class PrimalSubproblem:
             points[order, 1], u_c[order], sigma_c[order], points[order], weights[order], normal[order], gap[order]
         )
 
+    # -- interface Newton support (hybrid.newton): the affine pieces of the problem ---------------
+    def _set_lifting(self) -> None:
+        """u ← u_D on the Γ_D DOFs and 0 elsewhere (the state every Newton solve starts from)."""
+        self.u.x.array[:] = 0.0
+        if self.u_D is not None:
+            fem.dirichletbc(self.u_D, self._dirichlet_dofs).set(self.u.x.array)
+        self.u.x.scatter_forward()
+
+    def _with_lifting_no_contact(self, action):
+        """Run ``action()`` at u = lifting of u_D, zero Robin data and every contact node inactive
+        (the gap raised above u·ν), then restore u, g and the gap."""
+        keep_u = self.u.x.array.copy()
+        keep_g = self.g.x.array.copy() if self.g is not None else None
+        keep_gap = self.gap.x.array.copy() if self.contact else None
+        try:
+            self._set_lifting()
+            if self.g is not None:
+                self.g.x.array[:] = 0.0
+            if self.contact:
+                self.gap.x.array[:] = 1.0 + float(np.max(np.abs(self.u.x.array), initial=0.0))
+            return action()
+        finally:
+            self.u.x.array[:] = keep_u
+            if self.g is not None:
+                self.g.x.array[:] = keep_g
+            if self.contact:
+                self.gap.x.array[:] = keep_gap
+
+    def reset(self) -> None:
+        """Forget the solution and the cached factorization (the next ``solve`` starts cold from u_D's lifting)."""
+        self._set_lifting()
+        self._factorized_set = None
+
+    def residual_norm(self) -> tuple[float, float]:
+        """(‖F(u)‖, ‖b‖) at the current u and data: ``solve`` accepts u when ‖F‖ ≤ rtol‖b‖ + atol."""
+        return self._residual(), self.load_norm()
+
+    def contact_free_matrix(self) -> PETSc.Mat:
+        """A new matrix J₀ = a + α∫_γ (the Jacobian with no contact node active), identity on Γ_D."""
+        A = dolfinx.fem.petsc.create_matrix(self._J)
+
+        def assemble():
+            dolfinx.fem.petsc.assemble_matrix(A, self._J, bcs=self.bcs)
+            A.assemble()
+
+        self._with_lifting_no_contact(assemble)
+        return A
+
+    def body_load(self, out: PETSc.Vec) -> PETSc.Vec:
+        """out ← the right-hand side of J₀ x = out + data − contact forces at zero Robin data and no contact:
+        (f, v) + Σ∫_ΓN t·v − a(u_D lifting, v) on the free rows, u_D on the Γ_D rows."""
+
+        def assemble():
+            self._assemble_vector(self._F, out)  # Γ_D rows 0
+            out.scale(-1.0)
+            if self.u_D is not None:
+                dolfinx.fem.petsc.set_bc(out, [fem.dirichletbc(self.u_D, self._dirichlet_dofs)])
+            return out
+
+        return self._with_lifting_no_contact(assemble)
+
+    def contact_nodes(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Owned Γ_C nodes off Γ_D: (node = block index of u, contact direction ν_p (k, gdim), vertex weight w_p,
+        gap g_p): the penalty term is Σ_p (w_p/δ) (u_p·ν_p − g_p)⁺ (v_p·ν_p)."""
+        if not self.contact:
+            raise InputError("this subproblem has no contact boundary")
+        nloc = self.Q.dofmap.index_map.size_local
+        w = self._contact_weights
+        on = np.zeros(nloc, dtype=bool)
+        on[self._contact_q[self._contact_q < nloc]] = True
+        on &= w[:nloc] > 0.0
+        on[self._dirichlet_q[self._dirichlet_q < nloc]] = False
+        nodes = np.flatnonzero(on)
+        gdim = self.mesh.geometry.dim
+        nu = self.nu_c.x.array.reshape(-1, gdim)[nodes].copy()
+        return nodes, nu, w[nodes].copy(), self.gap.x.array[nodes].copy()
+
     def destroy(self) -> None:
         """Free the PETSc objects (collective)."""
         for obj in (self.A, self.b, self.du, self._gap_vec, self._K, self._M, self._work):

@@ -9,7 +9,8 @@ Both subdomains use Arnold–Winther stresses × DG P1 displacements
 (``fem.mixed.MixedSubproblem``); Ω₁ is factorized once, Ω₂ runs the globalized
 semismooth Newton warm-started from its last solution and refactorizes only
 when its active set changes.  The loop is ``hybrid.iteration.iterate`` (plain update as in the
-paper, or Anderson acceleration).
+paper, Anderson acceleration, or the interface Newton method of ``hybrid.newton``), stopped by the
+transmission residual of ``hybrid.certificate``.
 
 **Space of the Robin data and quadrature on γ.**  The normal trace σn of an AW
 stress on a straight edge is a cubic vector polynomial, and it is continuous at
@@ -62,8 +63,10 @@ import numpy as np
 from dolfinx import fem
 
 from fenics_contact.fem.contact import NewtonOptions
+from fenics_contact.hybrid.certificate import Certificate, mixed_certificate
 from fenics_contact.hybrid.inputs import check_solve_inputs, require_instance
 from fenics_contact.hybrid.iteration import (
+    InterfaceNewtonOptions,
     IterationHistory,
     IterationOptions,
     IterationResult,
@@ -75,6 +78,7 @@ from fenics_contact.problem.fields import material_fields
 from fenics_contact.problem.geometry import ContactMesh
 from fenics_contact.fem.mixed import (
     MixedContactProfile,
+    MixedNewtonHistory,
     MixedSolution,
     MixedSubproblem,
     check_triangles,
@@ -82,11 +86,22 @@ from fenics_contact.fem.mixed import (
     default_epsilon,
 )
 from fenics_contact.problem.models import TestModel
+from fenics_contact.hybrid.primal import omega2_record
 from fenics_contact.hybrid.transmission import split_mesh, sub_to_parent_dofs
 
-__all__ = ["MixedHybridResult", "MixedHybridStep", "solve_mixed_hybrid", "transmission_coefficient"]
+__all__ = ["MixedHybridResult", "MixedHybridStep", "solve_mixed_hybrid", "solve_or_verify", "transmission_coefficient"]
 
 log = logging.getLogger(__name__)
+
+
+def solve_or_verify(sub: MixedSubproblem, data: np.ndarray, warm: bool) -> MixedNewtonHistory:
+    """Solve Ω₂ with Robin data; with ``warm`` (its state is a candidate solution, e.g. from the interface
+    Newton) first check the residual with the Newton solver's own acceptance test and solve only if it fails."""
+    if warm:
+        res, scale = sub.residual(data)
+        if res <= sub.newton.rtol * scale + sub.newton.atol:
+            return MixedNewtonHistory(residuals=[res])
+    return sub.solve(data)
 
 
 def transmission_coefficient(beta: float | str, h: float) -> float:
@@ -151,7 +166,11 @@ class MixedHybridStep:
         self._perm2 = np.arange(self.size)  # Ω₂ uses the canonical order (kept for subclasses)
         self._prev = [(s.c.copy(), s.u.copy()) for s in self.sub]
         self._change = np.inf
+        self._certificate = Certificate(np.inf, np.inf)
         self._record: dict = {}
+        self._newton = None
+        #: L²(γ) mass matrix of the interface data (canonical order: Ω₁'s γ nodes), for the certificate
+        self.gamma_mass = self.sub[0].gamma_mass()
         self.reference = None
         if reference is not None:
             self.set_reference(reference)
@@ -197,7 +216,7 @@ class MixedHybridStep:
         """Offline work: factorize the linear Ω₁ saddle-point operator once."""
         self.sub[0]._factorize_for(None)
 
-    def apply(self, g: np.ndarray) -> np.ndarray:
+    def apply(self, g: np.ndarray, *, omega2_warm: bool = False) -> np.ndarray:
         n = self.size
         g12, g21 = g[:n], g[n:]
         self.sub[0].solve(g12)
@@ -206,14 +225,37 @@ class MixedHybridStep:
         t2 = np.empty(n)
         t2[self._perm2] = self.sub[1].gamma_traction()  # σ₂n₂
         self._measure()
-        self._record = {
-            "newton": newton.steps,
-            "active": newton.active_sizes[-1],
-            "refactor": newton.factorizations,
-        }
-        if self.reference is not None:
-            self._record["e_sigma"], self._record["e_u"] = self.errors()
+        self._certificate = mixed_certificate(t1, t2, g12, g21, self.beta, self.gamma_mass)
+        self._record = omega2_record(newton)
         return np.concatenate([g21 - 2.0 * self.beta * t2, g12 - 2.0 * self.beta * t1])
+
+    def certificate(self) -> Certificate:
+        return self._certificate
+
+    def reset(self) -> None:
+        """Start the next solve cold: zero subdomain states, Ω₂ factorization dropped (offline data kept)."""
+        self.sub[1].reset()
+        for c0, u0 in self._prev:
+            c0[:] = 0.0
+            u0[:] = 0.0
+
+    def _omega1_response(self, options: InterfaceNewtonOptions):
+        """Ω₁'s affine trace response (fine Ω₁: back-solves with its factorization)."""
+        from fenics_contact.hybrid.newton import FineResponse, MixedPart
+
+        self.prepare()
+        return FineResponse(MixedPart(self.sub[0], perm=None, contact=False), chunk=options.chunk)
+
+    def interface_problem(self, options: InterfaceNewtonOptions):
+        """The affine pieces for ``hybrid.newton`` (built once)."""
+        from fenics_contact.hybrid.newton import InterfaceProblem, MixedPart
+
+        if self._newton is None or self._newton.options.strategy != options.strategy:
+            omega2 = MixedPart(self.sub[1], perm=self._perm2, contact=True, factorize=options.strategy == "condensed")
+            same = lambda v: np.asarray(v)  # noqa: E731  (serial: local = global numbering)
+            self._newton = InterfaceProblem(self._omega1_response(options), omega2, np.full(self.size, -2.0 * self.beta),
+                                            1.0, same, same, options)
+        return self._newton
 
     def _measure(self) -> None:
         ds = du = ns = nu = 0.0
@@ -273,6 +315,7 @@ class MixedHybridResult(IterationResult):
     beta: float
     epsilon: float
     step: MixedHybridStep
+    time_interface_offline_s: float = 0.0  #: offline interface response of the Newton method (in time_offline_s)
 
 
 def solve_mixed_hybrid(
@@ -284,10 +327,14 @@ def solve_mixed_hybrid(
     options: IterationOptions = IterationOptions(),
     newton: NewtonOptions = NewtonOptions(),
     reference: MixedSolution | None = None,
+    initial_data: np.ndarray | None = None,
+    step: MixedHybridStep | None = None,
 ) -> MixedHybridResult:
-    """Algorithm 2 to the relative-change tolerance; ``reference`` adds e_σ, e_u (per iteration and final).
+    """Algorithm 2 until the transmission residual is below ``options.tol``; ``reference`` adds e_σ, e_u
+    (per iteration, outside the online time, and final).
 
     ``epsilon`` defaults to ``fem.mixed.default_epsilon`` (pass the reference's ε when comparing).
+    ``initial_data`` warm-starts the interface data; ``step`` reuses a step (and its offline data).
     """
     check_solve_inputs(cm, model, options=options, newton=newton)
     if reference is not None:
@@ -295,12 +342,16 @@ def solve_mixed_hybrid(
     start = time.perf_counter()
     if reference is not None and epsilon is None:
         epsilon = reference.epsilon
-    step = MixedHybridStep(cm, model, beta=beta, epsilon=epsilon, newton=newton)
+    if step is None:
+        step = MixedHybridStep(cm, model, beta=beta, epsilon=epsilon, newton=newton)
     step.prepare()
     offline = time.perf_counter() - start
     if reference is not None:  # not part of the method: outside the timings
         step.set_reference(reference)
-    history = iterate(step, options, name="mixed hybrid")
+    monitor = None
+    if step.reference is not None:
+        monitor = lambda: dict(zip(("e_sigma", "e_u"), step.errors()))  # noqa: E731
+    history = iterate(step, options, name="mixed hybrid", monitor=monitor, initial=initial_data)
     sigma, u = step.glued()
     s1, s2 = step.sub
     dofs = {
@@ -308,8 +359,9 @@ def solve_mixed_hybrid(
         "omega2": s2.num_dofs["total"],
         "interface": 2 * step.size_global,
     }
-    e_sigma, e_u = step.errors() if reference is not None else (None, None)
+    e_sigma, e_u = step.errors() if step.reference is not None else (None, None)
     return MixedHybridResult(
         sigma, u, s1.sigma_function(), s2.sigma_function(), s1.u_function(), s2.u_function(), history,
-        s2.contact_profile(), dofs, offline, history.time_s, e_sigma, e_u, step.beta, step.epsilon, step,
+        s2.contact_profile(), dofs, offline + history.time_offline_s, history.time_s, e_sigma, e_u, step.beta,
+        step.epsilon, step, history.time_offline_s,
     )

@@ -5,7 +5,9 @@
     update at every γ node p:  g₁₂ ← 2α u₂(p) − g₂₁(p),  g₂₁ ← 2α u₁(p) − g₁₂(p)
 
 With vertex quadrature on γ its fixed point is the monolithic penalized
-solution (Theorem 3.1).
+solution (Theorem 3.1).  The iteration stops on the transmission residual of
+the pair (``hybrid.certificate``); ``accel="newton"`` solves the fixed point by
+the interface Newton method (``hybrid.newton``) instead of iterating.
 """
 
 import logging
@@ -17,9 +19,17 @@ from mpi4py import MPI
 
 from dolfinx import fem
 
-from fenics_contact.fem.contact import ContactProfile, NewtonOptions
+from fenics_contact.fem.contact import ContactProfile, NewtonHistory, NewtonOptions
+from fenics_contact.hybrid.certificate import Certificate, primal_certificate
+from fenics_contact.hybrid.iteration import (
+    HybridStep,
+    InterfaceNewtonOptions,
+    IterationHistory,
+    IterationOptions,
+    IterationResult,
+    iterate,
+)
 from fenics_contact.hybrid.inputs import check_reference_displacement, check_solve_inputs
-from fenics_contact.hybrid.iteration import HybridStep, IterationHistory, IterationOptions, IterationResult, iterate
 from fenics_contact.problem.boundary import check_boundary_groups
 from fenics_contact.problem.fields import material_fields
 from fenics_contact.problem.geometry import ContactMesh
@@ -27,12 +37,31 @@ from fenics_contact.problem.models import TestModel
 from fenics_contact.fem.primal import PrimalSubproblem
 from fenics_contact.hybrid.transmission import InterfaceSpace, robin_coefficient, split_mesh
 
-__all__ = ["PrimalHybridStep", "HybridResult", "solve_primal_hybrid", "DEFAULT_ALPHA"]
+__all__ = ["PrimalHybridStep", "HybridResult", "solve_primal_hybrid", "solve_or_verify", "DEFAULT_ALPHA"]
 
 #: Default transmission coefficient α_p = E_p h^(-1/2) (chosen from benchmarks/primal_hybrid_study.py).
 DEFAULT_ALPHA = "E*h^-1/2"
 
 log = logging.getLogger(__name__)
+
+
+def solve_or_verify(sub: PrimalSubproblem, warm: bool) -> NewtonHistory:
+    """Solve Ω₂; with ``warm`` (its state is a candidate solution, e.g. from the interface Newton) first
+    check the residual with the semismooth Newton's own acceptance test and solve only if it fails."""
+    if warm:
+        res, load = sub.residual_norm()
+        if res <= sub.newton.rtol * load + sub.newton.atol:
+            return NewtonHistory(residuals=[res])
+    return sub.solve()
+
+
+def omega2_record(history: NewtonHistory) -> dict:
+    """Newton steps, final active-set size and factorizations of an Ω₂ solve (for the iteration record)."""
+    return {
+        "newton": history.steps,
+        "active": history.active_sizes[-1] if history.active_sizes else None,
+        "refactor": history.factorizations,
+    }
 
 
 class PrimalHybridStep:
@@ -69,7 +98,9 @@ class PrimalHybridStep:
         self._prev = [np.zeros_like(s.u.x.array) for s in self.sub]
         self._diff = [fem.Function(s.V) for s in self.sub]
         self._change = np.inf
+        self._certificate = Certificate(np.inf, np.inf)
         self._record: dict = {}
+        self._newton = None
         self.reference = None
         if reference is not None:
             self.reference = [fem.Function(s.V) for s in self.sub]
@@ -84,23 +115,46 @@ class PrimalHybridStep:
         """Offline work: factorize the linear Ω₁ operator once."""
         self.sub[0].factorize()
 
-    def apply(self, g: np.ndarray) -> np.ndarray:
+    def apply(self, g: np.ndarray, *, omega2_warm: bool = False) -> np.ndarray:
         n = self.interface.size
         g12, g21 = g[:n], g[n:]
         for i, data in enumerate((g12, g21)):
             self.interface.to_part(data, i, self.sub[i].g)
-        newton = [s.solve() for s in self.sub]
+        newton = [self.sub[0].solve(), solve_or_verify(self.sub[1], omega2_warm)]
         u1 = self.interface.from_part(self.sub[0].u, 0)
         u2 = self.interface.from_part(self.sub[1].u, 1)
         self._measure()
-        self._record = {
-            "newton": newton[1].steps,
-            "active": newton[1].active_sizes[-1],
-            "refactor": newton[1].factorizations,
-        }
-        if self.reference is not None:
-            self._record["e_u"] = self.error_l2()
+        self._certificate = primal_certificate(u1, u2, g12, g21, self.alpha, self.interface.weights, self.comm)
+        self._record = omega2_record(newton[1])
         return np.concatenate([2.0 * self.alpha * u2 - g21, 2.0 * self.alpha * u1 - g12])
+
+    def certificate(self) -> Certificate:
+        return self._certificate
+
+    def reset(self) -> None:
+        """Start the next solve cold: zero subdomain states, Ω₂ factorization dropped (offline data kept)."""
+        self.sub[1].reset()
+        self.sub[0].u.x.array[:] = 0.0
+        for prev in self._prev:
+            prev[:] = 0.0
+
+    def data_weights(self) -> np.ndarray:
+        """w_p/α_p per data value: Robin data g ~ α u + t, so this balances stiff and soft γ nodes in Anderson."""
+        w = self.interface.weights / self.alpha
+        return np.concatenate([w, w])
+
+    def interface_problem(self, options: InterfaceNewtonOptions):
+        """The affine pieces for ``hybrid.newton`` (built once: fine Ω₁ response, Ω₂ with J₀)."""
+        from fenics_contact.hybrid.newton import FineResponse, InterfaceProblem, PrimalPart
+
+        if self._newton is None or self._newton.options.strategy != options.strategy:
+            self.prepare()
+            iface = self.interface
+            omega1 = FineResponse(PrimalPart(self.sub[0], iface, 0, contact=False), chunk=options.chunk)
+            omega2 = PrimalPart(self.sub[1], iface, 1, contact=True, factorize=options.strategy == "condensed")
+            self._newton = InterfaceProblem(omega1, omega2, iface.gather(2.0 * self.alpha), -1.0,
+                                            iface.gather, iface.local, options)
+        return self._newton
 
     def _measure(self) -> None:
         de = du = ne = nu = 0.0
@@ -158,6 +212,7 @@ class HybridResult(IterationResult):
     time_online_s: float
     e_u: float | None
     step: HybridStep  #: the step object (PrimalHybridStep, MultiscalePrimalHybridStep, ...)
+    time_interface_offline_s: float = 0.0  #: offline interface response of the Newton method (in time_offline_s)
 
 
 def solve_primal_hybrid(
@@ -169,16 +224,25 @@ def solve_primal_hybrid(
     options: IterationOptions = IterationOptions(),
     newton: NewtonOptions = NewtonOptions(),
     reference: fem.Function | None = None,
+    initial_data: np.ndarray | None = None,
+    step: PrimalHybridStep | None = None,
 ) -> HybridResult:
-    """Algorithm 1 to the relative-change tolerance; `reference` adds e_u per iteration."""
+    """Algorithm 1 until the transmission residual is below ``options.tol``.
+
+    ``reference`` (the monolithic solution) adds e_u per iteration, outside the online time;
+    ``initial_data`` warm-starts the interface data; ``step`` reuses a step (and its offline
+    data) from an earlier solve on the same mesh and model.
+    """
     check_solve_inputs(cm, model, options=options, newton=newton)
     if reference is not None:
         check_reference_displacement(reference, cm)
     start = time.perf_counter()
-    step = PrimalHybridStep(cm, model, alpha=alpha, delta=delta, newton=newton, reference=reference)
+    if step is None:
+        step = PrimalHybridStep(cm, model, alpha=alpha, delta=delta, newton=newton, reference=reference)
     step.prepare()
     offline = time.perf_counter() - start
-    history = iterate(step, options, name="primal hybrid")
+    monitor = (lambda: {"e_u": step.error_l2()}) if step.reference is not None else None
+    history = iterate(step, options, name="primal hybrid", monitor=monitor, initial=initial_data)
     V = reference.function_space if reference is not None else None
     if V is None:
         V = fem.functionspace(cm.mesh, ("Lagrange", 1, (cm.mesh.geometry.dim,)))
@@ -188,8 +252,8 @@ def solve_primal_hybrid(
         "omega2": step.sub[1].num_dofs,
         "interface": step.comm.allreduce(step.interface.size, op=MPI.SUM),
     }
-    e_u = step.error_l2() if reference is not None else None
+    e_u = step.error_l2() if step.reference is not None else None
     return HybridResult(
         step.sub[0].u, step.sub[1].u, u, history, step.sub[1].contact_profile(), dofs,
-        offline, history.time_s, e_u, step,
+        offline + history.time_offline_s, history.time_s, e_u, step, history.time_offline_s,
     )

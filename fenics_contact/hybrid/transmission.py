@@ -59,6 +59,30 @@ class InterfaceSpace:
         self.transfers = [SubmeshTransfer(self.V, Vs, p.cell_map) for Vs, p in zip(self.spaces, parts)]
         self._scratch = fem.Function(self.V)
         self.coordinates = self.V.tabulate_dof_coordinates()[blocks]
+        #: vertex-quadrature weight w_p of the node of every owned interface value: ∫_γ w·v ds = Σ_p w_p w(p)·v(p)
+        self.weights = self._vertex_weights(parts[0])
+
+    def _vertex_weights(self, part: Part) -> np.ndarray:
+        """w_p = ∫_γ φ_p ds for the P1 hat functions, assembled on Ω₁ (where γ is a boundary)."""
+        V = self.spaces[0]
+        v = ufl.TestFunction(V)
+        ones = ufl.as_vector([1.0] * self.bs)
+        ds = ufl.Measure("ds", domain=part.mesh, subdomain_data=part.facet_tags)
+        vec = fem.assemble_vector(fem.form(ufl.dot(v, ones) * ds(Boundary.INTERFACE)))
+        vec.scatter_reverse(la.InsertMode.add)
+        w = fem.Function(V)
+        w.x.array[:] = vec.array
+        w.x.scatter_forward()
+        return self.from_part(w, 0)
+
+    def gather(self, values: np.ndarray) -> np.ndarray:
+        """All owned interface values of every rank, concatenated in rank order (the global numbering)."""
+        return np.concatenate(self.comm.allgather(np.asarray(values)))
+
+    def local(self, values: np.ndarray) -> np.ndarray:
+        """This rank's owned part of globally numbered interface values (inverse of ``gather``)."""
+        offset = self.comm.exscan(self.size) or 0
+        return np.asarray(values[offset : offset + self.size])
 
     @property
     def size(self) -> int:

@@ -46,8 +46,10 @@ from mpi4py import MPI
 
 from fenics_contact.fem import forms_mixed
 from fenics_contact.fem.contact import NewtonOptions
+from fenics_contact.hybrid.certificate import mixed_certificate
 from fenics_contact.hybrid.inputs import check_solve_inputs, require_instance
 from fenics_contact.hybrid.iteration import (
+    InterfaceNewtonOptions,
     IterationHistory,
     IterationOptions,
     IterationResult,
@@ -57,7 +59,8 @@ from fenics_contact.errors import InputError
 from fenics_contact.problem.boundary import boundary_data_on
 from fenics_contact.problem.geometry import ContactMesh
 from fenics_contact.fem.mixed import MixedContactProfile, MixedSolution
-from fenics_contact.hybrid.mixed import MixedHybridStep
+from fenics_contact.hybrid.mixed import MixedHybridStep, solve_or_verify
+from fenics_contact.hybrid.primal import omega2_record
 from fenics_contact.multiscale.mixed_cem import (
     DEFAULT_MAX_NBASIS,
     DEFAULT_MIN_GAP,
@@ -182,21 +185,30 @@ class MixedMultiscaleHybridStep(MixedHybridStep):
     def prepare(self) -> None:
         """Nothing to do: the coarse operator was factorized offline."""
 
-    def apply(self, g: np.ndarray) -> np.ndarray:
+    def apply(self, g: np.ndarray, *, omega2_warm: bool = False) -> np.ndarray:
         n = self.size
         g12, g21 = g[:n], g[n:]
         self.g12 = g12.copy()  # Ω₁ is linear: its state is the affine response to g12
-        newton = self.sub[1].solve(g21[self._perm2])
+        newton = solve_or_verify(self.sub[1], g21[self._perm2], omega2_warm)
         t1 = self.omega1.response.trace(g12)
         t2 = np.empty(n)
         t2[self._perm2] = self.sub[1].gamma_traction()
         self._measure()
-        self._record = {
-            "newton": newton.steps,
-            "active": newton.active_sizes[-1],
-            "refactor": newton.factorizations,
-        }
+        self._certificate = mixed_certificate(t1, t2, g12, g21, self.beta, self.gamma_mass)
+        self._record = omega2_record(newton)
         return np.concatenate([g21 - 2.0 * self.beta * t2, g12 - 2.0 * self.beta * t1])
+
+    def reset(self) -> None:
+        super().reset()
+        self.g12[:] = 0.0
+        self._prev_g12[:] = 0.0
+
+    def _omega1_response(self, options: InterfaceNewtonOptions):
+        """Ω₁'s affine trace σ₁n₁ = T g + t₀ (``InterfaceResponse``, precomputed offline with the bases)."""
+        from fenics_contact.hybrid.newton import MatrixResponse
+
+        rs = self.omega1.response
+        return MatrixResponse(rs.T, rs.t0)
 
     def _measure(self) -> None:
         rs = self.omega1.response
@@ -264,6 +276,7 @@ class MixedMsResult(IterationResult):
     layers: int
     nbasis: int | None
     step: MixedMultiscaleHybridStep
+    time_interface_offline_s: float = 0.0  #: offline interface response of the Newton method (in time_offline_s)
 
 
 def solve_mixed_ms_hybrid(
@@ -284,8 +297,12 @@ def solve_mixed_ms_hybrid(
     newton: NewtonOptions = NewtonOptions(),
     reference: MixedSolution | None = None,
     cache_dir: str | Path | None = None,
+    initial_data: np.ndarray | None = None,
+    step: MixedMultiscaleHybridStep | None = None,
 ) -> MixedMsResult:
-    """Algorithm 4 to the relative-change tolerance; e_σ, e_u against ``reference`` (fine monolithic mixed).
+    """Algorithm 4 until the transmission residual is below ``options.tol``; e_σ, e_u against ``reference``
+    (fine monolithic mixed), outside the online time.  ``initial_data`` warm-starts the interface data,
+    ``step`` reuses a step (and its offline data) from an earlier solve.
 
     ``epsilon`` defaults to the reference's ε (else ``fem.mixed.default_epsilon``).  ``dofs`` counts
     the fine Ω₁ problem, dim X_ms, dim U_aux, Ω₂ and the interface data; ``time_offline_s``
@@ -311,11 +328,12 @@ def solve_mixed_ms_hybrid(
         epsilon = reference.epsilon
     cem = MixedCEMOptions(layers=layers, nbasis=nbasis, min_gap=min_gap, max_nbasis=max_nbasis, weight=weight,
                           s_factor=s_factor, source_correction=source_correction)
-    step = MixedMultiscaleHybridStep(cm, model, beta=beta, epsilon=epsilon, cem=cem, newton=newton,
-                                     cache_dir=cache_dir, offline_comm=offline_comm)
+    if step is None:
+        step = MixedMultiscaleHybridStep(cm, model, beta=beta, epsilon=epsilon, cem=cem, newton=newton,
+                                         cache_dir=cache_dir, offline_comm=offline_comm)
     if reference is not None:  # not part of the method: outside the timings
         step.set_reference(reference)
-    history = iterate(step, options, name=f"mixed CEM hybrid (m={layers}, l={nbasis})")
+    history = iterate(step, options, name=f"mixed CEM hybrid (m={layers}, l={nbasis})", initial=initial_data)
     sigma, u = step.glued()
     co = step.omega1.co
     dofs = {
@@ -326,9 +344,10 @@ def solve_mixed_ms_hybrid(
         "omega2": step.sub[1].num_dofs["total"],
         "interface": 2 * step.size,
     }
-    e_sigma, e_u = step.errors() if reference is not None else (None, None)
-    e_u_pi = step.projected_displacement_error() if reference is not None else None
-    e_u_post = step.postprocessed_displacement_error() if reference is not None else None
+    has_ref = step.reference is not None
+    e_sigma, e_u = step.errors() if has_ref else (None, None)
+    e_u_pi = step.projected_displacement_error() if has_ref else None
+    e_u_post = step.postprocessed_displacement_error() if has_ref else None
     e_sigma_l2 = l2_stress_error(sigma, reference.sigma) if reference is not None else None
     log.info(
         "Algorithm 4 (m=%d, l=%s): %d iterations (converged %s), dim X_ms %d + U_aux %d, offline %.2f s, "
@@ -336,7 +355,11 @@ def solve_mixed_ms_hybrid(
         layers, nbasis, history.iterations, history.converged, co.n_ms, co.n_aux, step.time_offline_s,
         history.time_s, e_sigma, e_u,
     )
+    offline_times = dict(step.offline_times)
+    if history.time_offline_s:
+        offline_times["interface_response"] = history.time_offline_s
     return MixedMsResult(
-        sigma, u, history, step.sub[1].contact_profile(), dofs, step.time_offline_s, history.time_s,
-        dict(step.offline_times), e_sigma, e_u, e_u_pi, e_u_post, e_sigma_l2, step.beta, step.epsilon, layers, nbasis, step,
+        sigma, u, history, step.sub[1].contact_profile(), dofs, step.time_offline_s + history.time_offline_s,
+        history.time_s, offline_times, e_sigma, e_u, e_u_pi, e_u_post, e_sigma_l2, step.beta, step.epsilon, layers,
+        nbasis, step, history.time_offline_s,
     )

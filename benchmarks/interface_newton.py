@@ -1,0 +1,260 @@
+"""Interface Newton (``--accel newton``) against the fixed-point updates, for all four algorithms.
+
+    OMP_NUM_THREADS=1 python benchmarks/interface_newton.py --parts steps,updates,speed \\
+        --out benchmarks/results/interface_newton.md
+
+Parts (each a table; all ratios are taken within one run, on one machine):
+
+* ``steps``: Newton steps (contact Newton + corrections on F(g)) to a transmission residual of
+  1e-6 for every algorithm, models 1, 2, 3 (E_high 1e3, 1e6), H = 1/16, h = 1/32 … 1/256 (primal)
+  and 1/32 … 1/128 (mixed), α = c·E·h^-1/2 and β = c·√h for c = 1e-2, 1, 1e4 (``--h-primal``,
+  ``--h-mixed``, ``--factors``; the multiscale Ω₁ of Algorithms 3/4 is rebuilt for every α, β, so
+  their largest h only at c = 1: ``--big-default-only``).
+* ``updates``: none / anderson / newton on every model and algorithm at h = 1/64, H = 1/16:
+  converged?, applications of T, online time, final transmission residual (the CLI default is the
+  update that converges everywhere fastest).
+* ``speed``: online time / monolithic semismooth Newton (Newton only, same run) for Algorithms 1 and
+  3 at h = 1/256, H = 1/16, model 2 (Algorithms 2, 4: ``reproduce_mixed_ms_tables.py --tables 5.8``),
+  with the offline interface response beside it.
+
+Model 3 at contrast 1e6 uses the Ω₂ Newton acceptance test ‖F‖ ≤ 1e-6‖b‖ (the default 1e-8 is
+below the round-off of its penalty and Robin stiffness there).
+"""
+
+import argparse
+import logging
+import time
+from pathlib import Path
+
+import numpy as np
+
+import fenics_contact  # noqa: F401  (must precede dolfinx / petsc4py)
+from fenics_contact.errors import FenicsContactError
+from fenics_contact.fem.contact import NewtonOptions
+from fenics_contact.fem.mixed import contact_modulus, default_epsilon
+from fenics_contact.fem.primal import PrimalSubproblem, default_penalty
+from fenics_contact.hybrid.iteration import IterationOptions, iterate
+from fenics_contact.hybrid.mixed import MixedHybridStep
+from fenics_contact.hybrid.primal import PrimalHybridStep
+from fenics_contact.io import machine_description
+from fenics_contact.multiscale.cem import CEMOptions
+from fenics_contact.multiscale.mixed import MixedMultiscaleHybridStep
+from fenics_contact.multiscale.mixed_cem import MixedCEMOptions
+from fenics_contact.multiscale.primal import MultiscalePrimalHybridStep
+from fenics_contact.problem.fields import material_fields
+from fenics_contact.problem.geometry import unit_square
+from fenics_contact.problem.models import get_model
+from fenics_contact.problem.tags import Subdomain
+
+#: (label, model number, E_high)
+MODELS = [("1", 1, 1e3), ("2", 2, 1e3), ("3 (1e3)", 3, 1e3), ("3 (1e6)", 3, 1e6)]
+LAYERS = 3
+
+
+def _strip_modulus(cm, E) -> float:
+    return float(np.max(E.x.array[cm.cell_tags.find(Subdomain.OMEGA2)]))
+
+
+def build_step(method: int, cm, number: int, E_high: float, factor: float = 1.0):
+    """The step of Algorithm ``method`` with α = factor·E·h^-1/2 or β = factor·√h (penalties as the CLI)."""
+    model = get_model(number, E_high=E_high)
+    newton = NewtonOptions(rtol=1e-6) if E_high > 1e3 else NewtonOptions()
+    if method in (1, 3):
+        fields = material_fields(cm.mesh, model)
+        delta = default_penalty(cm.h, _strip_modulus(cm, fields.E))
+        alpha = f"{factor:g}*E*h^-1/2"
+        if method == 1:
+            step = PrimalHybridStep(cm, model, alpha=alpha, delta=delta, newton=newton)
+            step.prepare()
+            return step
+        return MultiscalePrimalHybridStep(cm, model, alpha=alpha, delta=delta, newton=newton,
+                                          cem=CEMOptions(layers=LAYERS))
+    fields = material_fields(cm.mesh, model)
+    epsilon = default_epsilon(cm.h, contact_modulus(cm.mesh, cm.facet_tags, fields.E))
+    beta = factor * np.sqrt(cm.h)
+    if method == 2:
+        step = MixedHybridStep(cm, model, beta=beta, epsilon=epsilon, newton=newton)
+        step.prepare()
+        return step
+    return MixedMultiscaleHybridStep(cm, model, beta=beta, epsilon=epsilon, newton=newton,
+                                     cem=MixedCEMOptions(layers=LAYERS))
+
+
+def monolithic_steps(method: int, cm, number: int, E_high: float) -> str:
+    """Steps of the monolithic semismooth Newton (Algorithm 1 / 2 discretization; '—' for 3, 4)."""
+    if method in (3, 4):
+        return "—"
+    model = get_model(number, E_high=E_high)
+    newton = NewtonOptions(rtol=1e-6) if E_high > 1e3 else NewtonOptions()
+    fields = material_fields(cm.mesh, model)
+    try:
+        if method == 1:
+            delta = default_penalty(cm.h, _strip_modulus(cm, fields.E))
+            mono = PrimalSubproblem(cm.mesh, cm.facet_tags, fields, delta=delta, alpha=None, prefix="fc_bench_mono_",
+                                    newton=newton)
+            steps = mono.solve().steps
+            mono.destroy()
+            return str(steps)
+        from fenics_contact.fem.mixed import solve_mixed_monolithic
+
+        return str(solve_mixed_monolithic(cm, model, newton=newton, split_interface=True, verify=False).newton.steps)
+    except FenicsContactError as err:
+        return f"error: {type(err).__name__}"
+
+
+def part_steps(lines, h_primal, h_mixed, factors, big_default_only, methods, h_ms_max, models=MODELS) -> None:
+    lines += [
+        "## Newton steps to a transmission residual of 1e-6 (H = 1/16)",
+        "",
+        "Cell: Newton steps (contact Newton + corrections), and the final transmission residual; "
+        "α = c·E·h^-1/2 (Algorithms 1, 3), β = c·√h (Algorithms 2, 4); '—' not run.",
+        "",
+        "| algorithm | model | 1/h | " + " | ".join(f"c = {c:g}" for c in factors) + " | monolithic Newton |",
+        "|---|---|---|" + "---|" * len(factors) + "---|",
+    ]
+    worst = 0
+    for method in methods:
+        sizes = h_primal if method in (1, 3) else h_mixed
+        if method in (3, 4):  # the multiscale offline phase grows fast with 1/h (877 s of bases at 1/256)
+            sizes = [n for n in sizes if n <= h_ms_max]
+        for label, number, E_high in models:
+            for n in sizes:
+                cm = unit_square(n, 16)
+                cells = []
+                for c in factors:
+                    if method in (3, 4) and n == max(sizes) and big_default_only and c != 1.0:
+                        cells.append("—")
+                        continue
+                    try:
+                        step = build_step(method, cm, number, E_high, c)
+                        hist = iterate(step, IterationOptions(accel="newton"))
+                        worst = max(worst, hist.newton_steps)
+                        mark = "" if hist.converged else " (not conv.)"
+                        cells.append(f"{hist.newton_steps} ({hist.transmission_residual:.0e}){mark}")
+                        del step
+                    except FenicsContactError as err:
+                        cells.append(f"error: {type(err).__name__}")
+                        logging.warning("Algorithm %d, model %s, h = 1/%d, c = %g: %s", method, label, n, c, err)
+                row = f"| {method} | {label} | {n} | " + " | ".join(cells) + f" | {monolithic_steps(method, cm, number, E_high)} |"
+                print(row, flush=True)
+                lines.append(row)
+    lines += ["", f"Largest Newton step count: {worst}. 'monolithic Newton': steps of the monolithic semismooth "
+              "Newton on the same mesh (Algorithms 1, 2: the same discrete problem, cold start).", ""]
+
+
+def part_updates(lines, n: int, cap: int, methods) -> None:
+    lines += [
+        f"## Updates compared: h = 1/{n}, H = 1/16, default α, β, tolerance 1e-6 on the transmission residual",
+        "",
+        "Cell: converged?, applications of T (Newton: + Newton steps), online s (Newton: + offline interface "
+        f"response s), final transmission residual; cap {cap} iterations.",
+        "",
+        "| algorithm | model | none (paper) | anderson | newton |",
+        "|---|---|---|---|---|",
+    ]
+    cm = unit_square(n, 16)
+    for method in methods:
+        for label, number, E_high in MODELS:
+            step = build_step(method, cm, number, E_high)
+            cells = []
+            for accel in ("none", "anderson", "newton"):
+                try:
+                    step.reset()  # a cold start each time: the step keeps only its offline data
+                    hist = iterate(step, IterationOptions(accel=accel, max_iterations=cap),
+                                   initial=np.zeros_like(step.initial_data()))
+                    extra = f" + {hist.newton_steps} Newton" if accel == "newton" else ""
+                    off = f" + {hist.time_offline_s:.2f} offline" if accel == "newton" else ""
+                    cells.append(f"{'yes' if hist.converged else '**no**'}, {hist.iterations}{extra}, "
+                                 f"{hist.time_s:.2f}{off} s, {hist.transmission_residual:.0e}")
+                except FenicsContactError as err:
+                    cells.append(f"**{type(err).__name__}**")
+                    logging.warning("Algorithm %d, model %s, %s: %s", method, label, accel, err)
+            row = f"| {method} | {label} | " + " | ".join(cells) + " |"
+            print(row, flush=True)
+            lines.append(row)
+            del step
+    lines.append("")
+
+
+def part_speed(lines, n: int, number: int) -> None:
+    cm = unit_square(n, 16)
+    model = get_model(number)
+    fields = material_fields(cm.mesh, model)
+    delta = default_penalty(cm.h, _strip_modulus(cm, fields.E))
+    mono = PrimalSubproblem(cm.mesh, cm.facet_tags, fields, delta=delta, alpha=None, prefix="fc_bench_mono_")
+    t0 = time.perf_counter()
+    mh = mono.solve()
+    t_mono = time.perf_counter() - t0
+    lines += [
+        f"## Online time / monolithic: primal, model {number}, h = 1/{n}, H = 1/16",
+        "",
+        f"Monolithic semismooth Newton: {mono.num_dofs} DOFs, {mh.steps} steps, {t_mono:.2f} s (Newton only).",
+        "",
+        "| algorithm | update | converged | applications of T (Newton steps) | online s | online / monolithic "
+        "| offline s (of which interface response) |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for method in (1, 3):
+        t0 = time.perf_counter()
+        step = build_step(method, cm, number, 1e3)
+        build = time.perf_counter() - t0
+        for accel in ("newton", "anderson"):
+            step.reset()
+            hist = iterate(step, IterationOptions(accel=accel), initial=np.zeros_like(step.initial_data()))
+            row = (f"| {method} | {accel} | {hist.converged} | {hist.iterations} ({hist.newton_steps}) | "
+                   f"{hist.time_s:.3f} | **{hist.time_s / t_mono:.3f}** | {build + hist.time_offline_s:.1f} "
+                   f"({hist.time_offline_s:.2f}) |")
+            print(row, flush=True)
+            lines.append(row)
+        del step
+    lines.append("")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--parts", default="steps,updates,speed")
+    parser.add_argument("--methods", default="1,3,2,4", help="algorithms of the steps and updates parts")
+    parser.add_argument("--h-primal", default="32,64,128,256")
+    parser.add_argument("--h-mixed", default="32,64,128")
+    parser.add_argument("--factors", default="0.01,1,1e4")
+    parser.add_argument("--big-default-only", action="store_true", default=True,
+                        help="Algorithms 3, 4 at their largest h only with the default α, β")
+    parser.add_argument("--h-ms-max", type=int, default=128, help="largest 1/h for Algorithms 3, 4 in the steps part")
+    parser.add_argument("--updates-h", type=int, default=64)
+    parser.add_argument("--cap", type=int, default=2000, help="iteration cap of the fixed-point updates")
+    parser.add_argument("--speed-h", type=int, default=256)
+    parser.add_argument("--speed-model", type=int, default=2)
+    parser.add_argument("--models", default="1,2,3,3e6", help="models of the steps part: 1, 2, 3 (E_high 1e3), 3e6")
+    parser.add_argument("--out", type=Path, default=Path("benchmarks/results/interface_newton.md"))
+    args = parser.parse_args()
+    logging.basicConfig(level=logging.WARNING)
+    lines = ["# Interface Newton", "", f"Machine: {machine_description()}.", "",
+             "Command: `OMP_NUM_THREADS=1 python benchmarks/interface_newton.py "
+             f"--parts {args.parts} --methods {args.methods} --h-primal {args.h_primal} --h-mixed {args.h_mixed} "
+             f"--factors {args.factors} --h-ms-max {args.h_ms_max} --updates-h {args.updates_h} --cap {args.cap} "
+             f"--speed-h {args.speed_h} --speed-model {args.speed_model} --models {args.models} --out {args.out}`", ""]
+    chosen = {"1": MODELS[0], "2": MODELS[1], "3": MODELS[2], "3e6": MODELS[3]}
+    try:
+        models = [chosen[m] for m in args.models.split(",")]
+    except KeyError as err:
+        raise SystemExit(f"unknown model {err}; choose from {', '.join(chosen)}") from None
+    start = time.perf_counter()
+    ints = lambda text: [int(x) for x in text.split(",")]  # noqa: E731
+    for part in args.parts.split(","):
+        if part == "steps":
+            part_steps(lines, ints(args.h_primal), ints(args.h_mixed), [float(x) for x in args.factors.split(",")],
+                       args.big_default_only, ints(args.methods), args.h_ms_max, models)
+        elif part == "updates":
+            part_updates(lines, args.updates_h, args.cap, ints(args.methods))
+        elif part == "speed":
+            part_speed(lines, args.speed_h, args.speed_model)
+        else:
+            raise SystemExit(f"unknown part {part!r}")
+    lines.append(f"Total wall time {time.perf_counter() - start:.0f} s.")
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text("\n".join(lines) + "\n")
+    print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()

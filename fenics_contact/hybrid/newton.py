@@ -1,0 +1,685 @@
+"""Interface Newton: solve the hybrid fixed point g = T(g) by semismooth Newton (METHOD §9).
+
+Every algorithm exchanges Robin data g = (g₁₂, g₂₁) on γ through traces y_i
+(u_i on γ for the primal methods, σ_in_i for the mixed ones):
+
+    T(g) = (a ⊙ y₂(g₂₁) + b g₂₁,  a ⊙ y₁(g₁₂) + b g₁₂)       (primal a = 2α, b = −1; mixed a = −2β, b = 1).
+
+Ω₁ is linear, so y₁ = T₁ g₁₂ + t₁ with a dense n_γ × n_γ matrix T₁ computed once
+(offline: fine Ω₁, one factorization and one back-solve per interface unknown;
+multiscale Ω₁, its precomputed affine map).  Ω₂ is linear except for the penalty
+on Γ_C: with the contact values s = Q x (u_c at the Γ_C nodes, or σ_c at the
+Gauss–Lobatto nodes) and the penalty force λ = D s⁺ (D = w/δ or w/ε),
+
+    J₀ x = b₂ + C₂ g₂₁ − Qᵀ λ,   y₂ = N₂ x,
+
+where J₀ is the Ω₂ operator with no contact node active.  Eliminating x and g
+(everything but λ enters linearly) leaves an equation on the Γ_C unknowns alone,
+
+    s = s_L − M D s⁺,
+
+with M (n_c × n_c, the contact compliance of the glued problem) and the
+load term s_L.  Two strategies solve it (``InterfaceNewtonOptions.strategy``):
+
+* ``"condensed"`` (default): offline, factorize J₀ and back-solve it for the
+  n_γ data and n_c contact columns (Yc, Sc, Yq, Sq), form the interface matrix
+  K = I − P₁P₂ (P₁ = a⊙T₁ + b, P₂ = a⊙Yc + b) and M.  Online: one J₀ back-solve
+  and one Ω₁ load solve for s_L, then a semismooth Newton on the contact forces μ
+  (dense, size n_c; with Algorithm 1 the condensation is exact and its active
+  sets are those of the monolithic semismooth Newton from its second step on),
+  then the data g and one application of T with the real subdomain solvers:
+  Ω₁ is solved, Ω₂'s state (one more J₀ back-solve) is checked against its own
+  equations with the acceptance test of its Newton solver and solved only if
+  that fails.  The transmission residual of that pair certifies the result.
+  Should it be above the tolerance (round-off for extreme α, β or contrast),
+  Newton steps on F(g) = g − T(g) follow, with Ω₂'s generalized Jacobian from
+  the same offline data (Woodbury on J₀, no factorization), or, when such a step
+  does not reduce the residual, exactly by back-solves with Ω₂'s own factorization.
+* ``"interface"``: Newton on F(g) = g − T(g) from g⁰, each step an application
+  of T (the Ω₂ semismooth Newton) and Ω₂'s generalized Jacobian by n_γ
+  back-solves with the factorization Ω₂ keeps; a backtracking line search on
+  ‖F‖ globalizes it.  It needs no J₀ but n_γ back-solves per step.
+
+Both land on the fixed point of the Robin iteration (the same equations).  The
+contact Newton takes full steps until an active set recurs and from then on
+minimizes, along each Newton direction, ψ = ½ μᵀMμ + ½ Σ D (s⁺)² with
+s = s_L − Mμ (exact line search on a piecewise-linear derivative): ψ is the
+convex energy of the glued problem when M is symmetric (Algorithms 1, 2), so no
+cycle can recur.  A Newton method that fails (no convergence in ``max_steps``,
+a singular condensed system) raises ConvergenceError; a pair whose transmission
+residual stays above the tolerance ends with ``converged = False``.
+"""
+
+import logging
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.linalg as sla
+from mpi4py import MPI
+from petsc4py import PETSc
+
+import dolfinx.fem.petsc
+
+from fenics_contact.errors import ConvergenceError
+from fenics_contact.fem.linalg import DirectSolver, scipy_to_petsc
+from fenics_contact.hybrid.iteration import (
+    IterationHistory,
+    IterationOptions,
+    InterfaceNewtonOptions,
+    evaluate,
+)
+
+__all__ = [
+    "AffinePart",
+    "PrimalPart",
+    "MixedPart",
+    "FineResponse",
+    "ProbedResponse",
+    "MatrixResponse",
+    "InterfaceProblem",
+    "CondensedInterface",
+    "ContactNewtonHistory",
+    "contact_newton",
+    "newton_iterate",
+]
+
+log = logging.getLogger(__name__)
+
+
+# ---------------------------------------------------------------------------------------
+# multi-right-hand-side solves
+# ---------------------------------------------------------------------------------------
+def block_solve(ksp: PETSc.KSP, B: np.ndarray, comm: MPI.Comm, *projections) -> list[np.ndarray]:
+    """[P(A⁻¹ B) for P in projections] for a dense block B (local rows × columns, Fortran order) with the
+    factorization held by ``ksp`` (one multi-RHS solve; the solution block is never copied whole)."""
+    nloc, k = B.shape
+    size = ((nloc, PETSc.DECIDE), (PETSc.DECIDE, k))
+    Bm = PETSc.Mat().createDense(size, array=np.asfortranarray(B), comm=comm)
+    Bm.assemble()
+    Xm = PETSc.Mat().createDense(size, comm=comm)
+    Xm.setUp()
+    Xm.assemble()
+    try:
+        ksp.matSolve(Bm, Xm)
+        X = Xm.getDenseArray(readonly=True)
+        finite = bool(np.isfinite(X).all())
+        out = [P(X) for P in projections] if comm.allreduce(finite, op=MPI.LAND) else None
+    finally:
+        Bm.destroy()
+        Xm.destroy()
+    if out is None:
+        raise ConvergenceError(f"{ksp.getOptionsPrefix()}: multi-RHS back-solve produced non-finite values")
+    return out
+
+
+# ---------------------------------------------------------------------------------------
+# the affine pieces of one subdomain
+# ---------------------------------------------------------------------------------------
+class AffinePart:
+    """A subdomain problem seen through its interface: J x = b + C g − Qᵀλ, trace y = N x, contact s = Q x.
+
+    Subclasses provide the local blocks of C and Qᵀ, the global rows of N X and Q X, the
+    body load b, and get/set of the subproblem state.  ``solver`` holds the factorization of
+    the operator the responses are taken with (J₀ for Ω₂, the only operator for Ω₁).
+    """
+
+    comm: MPI.Comm
+    n_g: int  #: global number of interface values
+    n_c: int  #: global number of contact rows (0 without contact)
+    D: np.ndarray  #: penalty weights (n_c,): λ = D s⁺
+    gap: np.ndarray  #: contact offsets (n_c,): s = Q x − gap (the obstacle's gap; 0 for a flush wall)
+    trace_offset: np.ndarray | float = 0.0  #: y = N x + trace_offset (mixed: the traction lifting's σ_t n)
+    solver: DirectSolver
+
+    # -- provided by subclasses ----------------------------------------------------------
+    def data_block(self, j0: int, j1: int) -> np.ndarray: ...
+    def contact_block(self, k0: int, k1: int) -> np.ndarray: ...
+    def trace_rows(self, X: np.ndarray) -> np.ndarray: ...
+    def contact_rows(self, X: np.ndarray) -> np.ndarray: ...
+    def body_load(self) -> np.ndarray: ...
+    def state(self) -> np.ndarray: ...
+    def set_state(self, x: np.ndarray) -> None: ...
+    def solve(self, b: np.ndarray, solver: DirectSolver | None = None) -> np.ndarray: ...
+
+    # -- generic -------------------------------------------------------------------------
+    def responses(self, *, contact: bool, chunk: int, solver: DirectSolver | None = None
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(Yc, Sc, Yq, Sq): trace and contact rows of J⁻¹C and J⁻¹Qᵀ (chunked multi-RHS back-solves)."""
+        ksp = (solver or self.solver).ksp
+        rows = (self.trace_rows, self.contact_rows) if self.n_c else (self.trace_rows,)
+        Yc = np.zeros((self.n_g, self.n_g))
+        Sc = np.zeros((self.n_c, self.n_g))
+        for j0 in range(0, self.n_g, chunk):
+            j1 = min(j0 + chunk, self.n_g)
+            out = block_solve(ksp, self.data_block(j0, j1), self.comm, *rows)
+            Yc[:, j0:j1] = out[0]
+            if self.n_c:
+                Sc[:, j0:j1] = out[1]
+        Yq = np.zeros((self.n_g, self.n_c))
+        Sq = np.zeros((self.n_c, self.n_c))
+        if contact:
+            for k0 in range(0, self.n_c, chunk):
+                k1 = min(k0 + chunk, self.n_c)
+                Yq[:, k0:k1], Sq[:, k0:k1] = block_solve(ksp, self.contact_block(k0, k1), self.comm, *rows)
+        return Yc, Sc, Yq, Sq
+
+    def load_response(self) -> tuple[np.ndarray, np.ndarray]:
+        """(y₀, s₀): trace and contact values of J⁻¹ b (zero data, no contact force)."""
+        x0 = self.solve(self.body_load())[:, None]
+        y0 = self.trace_rows(x0)[:, 0] + self.trace_offset
+        return y0, (self.contact_rows(x0)[:, 0] - self.gap if self.n_c else np.zeros(0))
+
+    def refresh(self) -> bool:
+        """Re-read the contact geometry (an obstacle may have moved): True when the condensation is stale."""
+        return False
+
+    def contact_values(self) -> np.ndarray:
+        """s = Q x − gap of the current subproblem state (global)."""
+        return self.contact_rows(self.state()[:, None])[:, 0] - self.gap
+
+    def data_free(self) -> np.ndarray:
+        """Interface values whose data act on this subproblem (False e.g. at γ nodes on Γ_D)."""
+        raise NotImplementedError
+
+
+class PrimalPart(AffinePart):
+    """A ``fem.primal.PrimalSubproblem`` on part ``part`` of an ``InterfaceSpace`` (MPI-parallel)."""
+
+    def __init__(self, sub, iface, part: int, *, contact: bool, factorize: bool = True) -> None:
+        self.sub, self.comm = sub, iface.comm
+        comm = self.comm
+        V = sub.V
+        self.bs = V.dofmap.index_map_bs
+        self.nown = V.dofmap.index_map.size_local * self.bs
+        offset = comm.exscan(iface.size) or 0
+        self.n_g = comm.allreduce(iface.size, op=MPI.SUM)
+        probe = dolfinx.fem.Function(V)
+        iface.to_part(offset + np.arange(iface.size) + 1.0, part, probe)
+        vals = probe.x.array[: self.nown]
+        rows = np.flatnonzero(vals > 0.5)
+        cols = np.rint(vals[rows]).astype(np.int64) - 1
+        iface.to_part(iface.weights, part, probe)
+        w = probe.x.array[rows].copy()
+        mask = dolfinx.fem.petsc.create_vector(V)
+        mask.set(1.0)
+        dolfinx.fem.petsc.set_bc(mask, sub.bcs)
+        free = mask.getArray(readonly=True)[rows] != 0.0
+        mask.destroy()
+        self.trace_at, self.trace_index = rows, cols  # owned γ DOFs and their interface value
+        self.data_at, self.data_index, self.data_w = rows[free], cols[free], w[free]
+        self.n_c = 0
+        self.D = self.gap = np.zeros(0)
+        if contact:
+            nodes, normals, weights, gap = sub.contact_nodes()
+            self.c_nodes, self.c_normals = nodes, normals
+            self.c_offset = comm.exscan(nodes.size) or 0
+            self.n_c = comm.allreduce(nodes.size, op=MPI.SUM)
+            self.D = np.concatenate(comm.allgather(weights / sub.delta))
+            self.gap = np.concatenate(comm.allgather(gap))
+            self._J0 = None
+            if factorize:  # J₀ (only the condensed strategy needs it)
+                self.solver = DirectSolver(comm, prefix=f"{sub.prefix}j0_")
+                self._J0 = sub.contact_free_matrix()
+                self.solver.set_operator(self._J0)
+        else:
+            sub.factorize()
+            self.solver = sub.solver
+        self._b = sub.b.duplicate()
+        self._x = sub.b.duplicate()
+
+    def refresh(self) -> bool:
+        if not self.n_c:
+            return False
+        _, normals, _, gap = self.sub.contact_nodes()
+        self.gap = np.concatenate(self.comm.allgather(gap))  # enters online only (s_L)
+        moved = self.comm.allreduce(not np.array_equal(normals, self.c_normals), op=MPI.LOR)
+        self.c_normals = normals  # ν enters the contact columns: condense again
+        return bool(moved)
+
+    def data_free(self) -> np.ndarray:
+        free = np.zeros(self.n_g, dtype=bool)
+        free[np.concatenate(self.comm.allgather(self.data_index))] = True
+        return free
+
+    def data_block(self, j0: int, j1: int) -> np.ndarray:
+        B = np.zeros((self.nown, j1 - j0), order="F")
+        sel = (self.data_index >= j0) & (self.data_index < j1)
+        B[self.data_at[sel], self.data_index[sel] - j0] = self.data_w[sel]
+        return B
+
+    def contact_block(self, k0: int, k1: int) -> np.ndarray:
+        B = np.zeros((self.nown, k1 - k0), order="F")
+        k = self.c_offset + np.arange(self.c_nodes.size)
+        sel = (k >= k0) & (k < k1)
+        for c in range(self.bs):
+            B[self.bs * self.c_nodes[sel] + c, k[sel] - k0] = self.c_normals[sel, c]
+        return B
+
+    def trace_rows(self, X: np.ndarray) -> np.ndarray:
+        parts = self.comm.allgather((self.trace_index, X[self.trace_at]))
+        Y = np.zeros((self.n_g, X.shape[1]))
+        for idx, vals in parts:
+            Y[idx] = vals
+        return Y
+
+    def contact_rows(self, X: np.ndarray) -> np.ndarray:
+        s = sum(self.c_normals[:, c, None] * X[self.bs * self.c_nodes + c] for c in range(self.bs))
+        return np.concatenate(self.comm.allgather(np.asarray(s).reshape(-1, X.shape[1])), axis=0)
+
+    def body_load(self) -> np.ndarray:
+        return self.sub.body_load(self._b).getArray(readonly=True).copy()
+
+    def state(self) -> np.ndarray:
+        return self.sub.u.x.petsc_vec.getArray(readonly=True).copy()
+
+    def set_state(self, x: np.ndarray) -> None:
+        self.sub.u.x.petsc_vec.getArray()[:] = x
+        self.sub.u.x.scatter_forward()
+
+    def solve(self, b: np.ndarray, solver: DirectSolver | None = None) -> np.ndarray:
+        self._b.getArray()[:] = b
+        (solver or self.solver).solve(self._b, self._x)
+        return self._x.getArray(readonly=True).copy()
+
+    def rhs(self, g: np.ndarray, lam: np.ndarray) -> np.ndarray:
+        """b + C g − Qᵀ λ (local) for global data g and contact forces λ."""
+        r = self.body_load()
+        r[self.data_at] += self.data_w * g[self.data_index]
+        if self.n_c:
+            mine = lam[self.c_offset : self.c_offset + self.c_nodes.size]
+            for c in range(self.bs):
+                r[self.bs * self.c_nodes + c] -= self.c_normals[:, c] * mine
+        return r
+
+    def destroy(self) -> None:
+        for obj in (self._b, self._x):
+            obj.destroy()
+        if self.n_c and self._J0 is not None:
+            self._J0.destroy()
+            self.solver.destroy()
+
+
+class MixedPart(AffinePart):
+    """A ``fem.mixed.MixedSubproblem`` (serial); ``perm``: its interface value k is canonical value perm[k]."""
+
+    def __init__(self, sub, *, perm: np.ndarray | None, contact: bool, factorize: bool = True) -> None:
+        import scipy.sparse as sp
+
+        from fenics_contact.fem.mixed import MIXED_SOLVER_OPTIONS
+
+        self.sub, self.comm = sub, sub.mesh.comm
+        inv = np.arange(sub.C.shape[1]) if perm is None else np.argsort(perm)
+        self.C = sub.C[:, inv].tocsc()  # data (canonical order) → stress rows
+        self.N = sub.N[inv].tocsr()  # stress → trace (canonical order)
+        self.n_g = self.C.shape[1]
+        self.ns, self.nown = sub.n_sigma, sub.n_sigma + sub.n_u
+        self.n_c = sub.Q.shape[0] if contact else 0
+        self.D = sub.q_weights / sub.epsilon if contact else np.zeros(0)
+        self.gap = -sub.q0 if contact else np.zeros(0)  # σ_c = Q c + q0 (q0: the traction lifting's)
+        self.trace_offset = sub.n0[inv] if sub.beta is not None else 0.0  # σn = N c + n0
+        self._J0 = None
+        if contact:
+            self.QT = sub.Q.T.tocsc()
+        if contact and factorize:
+            saddle = sp.bmat([[sub.Kt, sub.B.T], [sub.B, None]], format="csr")
+            self._J0 = scipy_to_petsc(saddle, self.comm)
+            self.solver = DirectSolver(self.comm, prefix=f"{sub.prefix}j0_", options=MIXED_SOLVER_OPTIONS)
+            self.solver.set_operator(self._J0)
+        elif not contact:
+            sub._factorize_for(None)
+            self.solver = sub.solver
+        self._b = PETSc.Vec().createSeq(self.nown, comm=self.comm)
+        self._x = self._b.duplicate()
+
+    def data_free(self) -> np.ndarray:
+        return np.diff(self.C.indptr) > 0
+
+    def data_block(self, j0: int, j1: int) -> np.ndarray:
+        B = np.zeros((self.nown, j1 - j0), order="F")
+        B[: self.ns] = self.C[:, j0:j1].toarray()
+        return B
+
+    def contact_block(self, k0: int, k1: int) -> np.ndarray:
+        B = np.zeros((self.nown, k1 - k0), order="F")
+        B[: self.ns] = self.QT[:, k0:k1].toarray()
+        return B
+
+    def trace_rows(self, X: np.ndarray) -> np.ndarray:
+        return self.N @ X[: self.ns]
+
+    def contact_rows(self, X: np.ndarray) -> np.ndarray:
+        return self.sub.Q @ X[: self.ns]
+
+    def body_load(self) -> np.ndarray:
+        b = np.zeros(self.nown)
+        b[: self.ns] = self.sub._stress_load(None)  # traction lifting, ∫_ΓD u_D·τn, gap term ∫_ΓC g τ_c
+        b[self.ns :] = self.sub.G
+        return b
+
+    def state(self) -> np.ndarray:
+        return np.concatenate([self.sub.c, self.sub.u])
+
+    def set_state(self, x: np.ndarray) -> None:
+        self.sub.set_state(x[: self.ns], x[self.ns :])
+
+    def solve(self, b: np.ndarray, solver: DirectSolver | None = None) -> np.ndarray:
+        self._b.array[:] = b
+        (solver or self.solver).solve(self._b, self._x)
+        return self._x.array.copy()
+
+    def rhs(self, g: np.ndarray, lam: np.ndarray) -> np.ndarray:
+        r = self.body_load()
+        r[: self.ns] += self.C @ g
+        if self.n_c:
+            r[: self.ns] -= self.QT @ lam
+        return r
+
+    def destroy(self) -> None:
+        for obj in (self._b, self._x):
+            obj.destroy()
+        if self._J0 is not None:
+            self._J0.destroy()
+            self.solver.destroy()
+
+
+# ---------------------------------------------------------------------------------------
+# the affine Ω₁ response y₁ = T₁ g₁₂ + t₁
+# ---------------------------------------------------------------------------------------
+class FineResponse:
+    """Fine Ω₁: T₁ = N₁ J₁⁻¹ C₁ by one multi-RHS back-solve of its factorization; t₁ by one solve."""
+
+    def __init__(self, part: AffinePart, *, chunk: int) -> None:
+        self.part = part
+        self.T = part.responses(contact=False, chunk=chunk)[0]
+
+    def load(self) -> np.ndarray:
+        return self.part.load_response()[0]
+
+
+class ProbedResponse:
+    """Ω₁ through a public affine solve y₁(g) (e.g. ``cem.Omega1Multiscale``): T₁ e_j = y₁(e_j) − y₁(0)."""
+
+    def __init__(self, trace_of, n_g: int) -> None:
+        self.trace_of = trace_of
+        y0 = trace_of(np.zeros(n_g))
+        self.T = np.column_stack([trace_of(e) - y0 for e in np.eye(n_g)]) if n_g else np.zeros((0, 0))
+
+    def load(self) -> np.ndarray:
+        return self.trace_of(np.zeros(self.T.shape[0]))
+
+
+class MatrixResponse:
+    """Ω₁ given as y₁ = T g + t₀ (``multiscale.mixed_cem.InterfaceResponse``)."""
+
+    def __init__(self, T: np.ndarray, t0: np.ndarray) -> None:
+        self.T, self.t0 = T, t0
+
+    def load(self) -> np.ndarray:
+        return self.t0
+
+
+@dataclass(slots=True)
+class InterfaceProblem:
+    """What the Newton method needs from a step: Ω₁ response, Ω₂ pieces, the update y ↦ a⊙y + b g.
+
+    ``gather``/``local`` map one half of the step's data (g₁₂ or g₂₁, local owned values) to the
+    global numbering and back; ``condensed`` caches the offline condensation.
+    """
+
+    omega1: object
+    omega2: AffinePart
+    a: np.ndarray
+    b: float
+    gather: object
+    local: object
+    options: InterfaceNewtonOptions
+    condensed: "CondensedInterface | None" = None
+    free: np.ndarray = None  #: interface values whose data act on a subdomain (others stay 0: γ ∩ Γ_D)
+
+    def __post_init__(self) -> None:
+        if self.free is None:
+            self.free = self.omega2.data_free() | (np.abs(self.omega1.T).sum(axis=0) > 0.0)
+
+    def halves(self, g: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Global (g₁₂, g₂₁) from the step's local data."""
+        n = g.size // 2
+        return self.gather(g[:n]), self.gather(g[n:])
+
+    def data(self, g12: np.ndarray, g21: np.ndarray) -> np.ndarray:
+        """The step's local data from global halves."""
+        return np.concatenate([self.local(g12), self.local(g21)])
+
+    def step_direction(self, F12: np.ndarray, F21: np.ndarray, D2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Newton direction of F(g) = g − T(g) with ∂y₂/∂g₂₁ = D2: (I − P₁P₂) d₂₁ = −F₂₁ − P₁F₁₂, d₁₂ = P₂d₂₁ − F₁₂."""
+        f = np.flatnonzero(self.free)
+        a, eye = self.a[f], np.eye(f.size)
+        P1 = a[:, None] * self.omega1.T[np.ix_(f, f)] + self.b * eye
+        P2 = a[:, None] * D2[np.ix_(f, f)] + self.b * eye
+        d12, d21 = np.zeros(self.a.size), np.zeros(self.a.size)
+        d21[f] = sla.solve(eye - P1 @ P2, -F21[f] - P1 @ F12[f])
+        d12[f] = P2 @ d21[f] - F12[f]
+        return d12, d21
+
+
+# ---------------------------------------------------------------------------------------
+# the condensed problem on Γ_C and its semismooth Newton
+# ---------------------------------------------------------------------------------------
+class CondensedInterface:
+    """Offline condensation of the glued linear problem onto the Γ_C unknowns: s = s_L − M λ."""
+
+    def __init__(self, problem: InterfaceProblem) -> None:
+        om2 = problem.omega2
+        self.problem = problem
+        self.Yc, self.Sc, self.Yq, self.Sq = om2.responses(contact=True, chunk=problem.options.chunk)
+        f = self.f = np.flatnonzero(problem.free)  # the data at the other values stay zero
+        a, b, eye = problem.a[f], problem.b, np.eye(f.size)
+        self.P1 = a[:, None] * problem.omega1.T[np.ix_(f, f)] + b * eye
+        P2 = a[:, None] * self.Yc[np.ix_(f, f)] + b * eye
+        self.lu = sla.lu_factor(eye - self.P1 @ P2)
+        self.Gq = np.zeros((problem.a.size, self.Sq.shape[0]))  # ∂g₂₁/∂λ = −Gq
+        self.Gq[f] = sla.lu_solve(self.lu, self.P1 @ (a[:, None] * self.Yq[f]))
+        self.M = self.Sq + self.Sc @ self.Gq
+
+    def load_terms(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Online: (s_L, g₂₁ at λ = 0, y₂₀) from one Ω₂ back-solve and the Ω₁ load response."""
+        p, f = self.problem, self.f
+        t1 = p.omega1.load()
+        y20, s00 = p.omega2.load_response()
+        g21 = np.zeros(p.a.size)
+        g21[f] = sla.lu_solve(self.lu, self.P1 @ (p.a[f] * y20[f]) + p.a[f] * t1[f])
+        return s00 + self.Sc @ g21, g21, y20
+
+    def jacobian(self, active: np.ndarray) -> np.ndarray:
+        """∂y₂/∂g₂₁ for the Ω₂ active set (Woodbury on J₀: no factorization)."""
+        A = np.flatnonzero(active)
+        if A.size == 0:
+            return self.Yc
+        DA = self.D[A]
+        S = np.eye(A.size) + self.Sq[np.ix_(A, A)] * DA[None, :]
+        return self.Yc - (self.Yq[:, A] * DA[None, :]) @ np.linalg.solve(S, self.Sc[A])
+
+    @property
+    def D(self) -> np.ndarray:
+        return self.problem.omega2.D
+
+    def solve(self, options: InterfaceNewtonOptions, name: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, "ContactNewtonHistory"]:
+        """Contact Newton, then (g₁₂, g₂₁, λ) global."""
+        p = self.problem
+        s_load, g21_0, y20 = self.load_terms()
+        _, lam, hist = contact_newton(s_load, self.M, self.D, max_steps=options.max_steps, name=name)
+        g21 = g21_0 - self.Gq @ lam
+        y2 = y20 + self.Yc @ g21 - self.Yq @ lam
+        g12 = np.where(p.free, p.a * y2 + p.b * g21, 0.0)
+        return g12, g21, lam, hist
+
+
+@dataclass(slots=True)
+class ContactNewtonHistory:
+    """Active-set sizes, step lengths and contact-law violations ‖μ − D s⁺‖ of the contact Newton."""
+
+    active_sizes: list[int] = field(default_factory=list)
+    step_lengths: list[float] = field(default_factory=list)
+    residuals: list[float] = field(default_factory=list)
+
+    @property
+    def steps(self) -> int:
+        return len(self.step_lengths)
+
+
+def _line_search(mu: np.ndarray, dmu: np.ndarray, s: np.ndarray, ds: np.ndarray, s_load: np.ndarray,
+                 D: np.ndarray) -> float:
+    """argmin over t ∈ (0, 1] of ψ(s + t ds): root of the increasing piecewise-linear φ'(t).
+
+    φ'(t) = dμᵀ(s_L − s − t ds) + Σ D (s + t ds)⁺ ds  (ψ = ½μᵀMμ + ½ΣD(s⁺)², s = s_L − Mμ).
+    """
+    c0, c1 = dmu @ (s_load - s), -(dmu @ ds)
+
+    def dphi(t: np.ndarray) -> np.ndarray:
+        return c0 + c1 * t + (D * ds * np.maximum(s[None, :] + t[:, None] * ds[None, :], 0.0)).sum(axis=1)
+
+    ends = dphi(np.array([0.0, 1.0]))
+    if ends[0] >= 0.0 or ends[1] <= 0.0:
+        return 1.0
+    nz = ds != 0.0
+    bp = -s[nz] / ds[nz]
+    bp = np.unique(np.concatenate([[0.0, 1.0], bp[(bp > 0.0) & (bp < 1.0)]]))
+    vals = dphi(bp)
+    k = int(np.argmax(vals > 0.0))
+    t0, t1, v0, v1 = bp[k - 1], bp[k], vals[k - 1], vals[k]
+    return float(t0 - v0 * (t1 - t0) / (v1 - v0))
+
+
+def contact_newton(s_load: np.ndarray, M: np.ndarray, D: np.ndarray, *, max_steps: int = 50,
+                   name: str = "contact Newton", rtol: float = 1e-10
+                   ) -> tuple[np.ndarray, np.ndarray, ContactNewtonHistory]:
+    """Solve s = s_L − M μ, μ = D s⁺ by semismooth Newton (finite termination, globalized): (s, μ).
+
+    Starts from μ = 0 (no contact force).  A full step solves the problem linearized at the
+    current active set 𝒜 = {s > 0} for the forces: (D_𝒜⁻¹ + M_𝒜𝒜) μ_𝒜 = s_L,𝒜, s = s_L − M_:𝒜 μ_𝒜
+    (on 𝒜, s = μ/D: no cancellation with a stiff penalty).  It stops at the first step whose result
+    has the set it was computed for (then both equations hold exactly) and checks that solve.
+    """
+    hist = ContactNewtonHistory()
+    n = s_load.size
+    s, mu = s_load.copy(), np.zeros(n)
+    active = s > 0.0
+    visited: set[bytes] = set()
+    line_search = False
+    for _ in range(max_steps):
+        visited.add(np.packbits(active).tobytes())
+        A = np.flatnonzero(active)
+        s_new, mu_new = s_load.copy(), np.zeros(n)
+        if A.size:
+            K = M[np.ix_(A, A)] + np.diag(1.0 / D[A])
+            mu_new[A] = np.linalg.solve(K, s_load[A])
+            r = K @ mu_new[A] - s_load[A]
+            s_new = s_load - M[:, A] @ mu_new[A]
+            s_new[A] = mu_new[A] / D[A]
+            size = np.linalg.norm(s_load[A]) + np.linalg.norm(M[np.ix_(A, A)] @ mu_new[A]) + 1e-300
+            if not np.isfinite(r).all() or np.linalg.norm(r) > rtol * size:
+                raise ConvergenceError(f"{name}: the condensed contact system is singular or ill-conditioned "
+                                       f"(relative residual {np.linalg.norm(r) / size:.1e})")
+        predicted = s_new > 0.0
+        settled = np.array_equal(predicted, active)
+        if not settled and not line_search:
+            line_search = np.packbits(predicted).tobytes() in visited
+        t = 1.0
+        if line_search and not settled:
+            t = _line_search(mu, mu_new - mu, s, s_new - s, s_load, D)
+        s, mu = s + t * (s_new - s), mu + t * (mu_new - mu)
+        hist.step_lengths.append(t)
+        hist.active_sizes.append(int(np.count_nonzero(s > 0.0)))
+        hist.residuals.append(float(np.linalg.norm(mu - D * np.maximum(s, 0.0))))  # contact-law violation
+        if settled:
+            return s, mu, hist
+        active = s > 0.0
+    raise ConvergenceError(
+        f"{name}: contact Newton did not converge in {max_steps} steps (active-set sizes "
+        f"{hist.active_sizes[-5:]}, step lengths {hist.step_lengths[-5:]}, residuals {hist.residuals[-3:]})"
+    )
+
+
+# ---------------------------------------------------------------------------------------
+# the driver
+# ---------------------------------------------------------------------------------------
+def _norm(v: np.ndarray) -> float:
+    return float(np.linalg.norm(v))
+
+
+def newton_iterate(step, options: IterationOptions, *, name: str, monitor=None,
+                   initial: np.ndarray | None = None) -> IterationHistory:
+    """Interface Newton on g = T(g) (``accel="newton"``); each record is one application of T.
+
+    The step provides ``interface_problem(options.newton)`` (an ``InterfaceProblem``, built once
+    and cached by the step: its time is the offline ``history.time_offline_s``).
+    """
+    nopt = options.newton
+    history = IterationHistory()
+    t_off = time.perf_counter()
+    problem = step.interface_problem(nopt)
+    if problem.omega2.refresh():
+        problem.condensed = None
+    if nopt.strategy == "condensed" and problem.condensed is None:
+        problem.condensed = CondensedInterface(problem)
+    history.time_offline_s = time.perf_counter() - t_off
+    start = time.perf_counter()
+    comm = step.comm
+    om2 = problem.omega2
+    if nopt.strategy == "condensed":
+        g12, g21, lam, ch = problem.condensed.solve(nopt, name)
+        # broadcast: every rank continues from rank 0's (identical) dense result
+        g12, g21, lam = comm.bcast((g12, g21, lam), root=0)
+        om2.set_state(om2.solve(om2.rhs(g21, lam)))  # warm start of Ω₂: one J₀ back-solve
+        history.newton_steps = ch.steps
+        log.info("%s: contact Newton %d steps, active-set sizes %s, step lengths %s", name, ch.steps,
+                 ch.active_sizes, [round(t, 3) for t in ch.step_lengths])
+        g = problem.data(g12, g21)
+    else:
+        g = step.initial_data() if initial is None else initial
+    steps_left = nopt.max_corrections if nopt.strategy == "condensed" else nopt.max_steps
+    # Jacobian of Ω₂: from the offline condensation (Woodbury, no factorization), or exact by n_γ back-solves
+    # with Ω₂'s own factorization (the "interface" strategy, and the fallback when a condensed step fails:
+    # with a stiff penalty the Woodbury update loses digits)
+    exact = nopt.strategy == "interface"
+    # certify: Ω₁ is solved, Ω₂'s warm state is checked against its own equations (solved only if that fails)
+    Tg, rec = evaluate(step, g, history, name=name, monitor=monitor, omega2_warm=nopt.strategy == "condensed")
+    rec.info["newton_steps"] = history.newton_steps
+
+    def residual_norm(g: np.ndarray, Tg: np.ndarray) -> float:
+        return _norm(np.concatenate([a - b for a, b in zip(problem.halves(g), problem.halves(Tg))]))
+
+    while rec.residual >= options.tol and steps_left > 0 and history.iterations < options.max_iterations:
+        F12, F21 = (a - b for a, b in zip(problem.halves(g), problem.halves(Tg)))
+        fnorm = _norm(np.concatenate([F12, F21]))
+        if exact:
+            D2 = om2.responses(contact=False, chunk=nopt.chunk, solver=om2.sub.solver)[0]
+        else:
+            D2 = problem.condensed.jacobian(om2.contact_values() > 0.0)
+        d12, d21 = problem.step_direction(F12, F21, D2)
+        d12, d21 = comm.bcast((d12, d21), root=0)
+        steps_left -= 1
+        history.newton_steps += 1
+        g0, rec0, t = g, rec, 1.0
+        for _ in range(6 if exact else 1):  # backtracking (each trial is one application of T)
+            g = g0 + t * problem.data(d12, d21)
+            Tg, rec = evaluate(step, g, history, name=name, monitor=monitor)
+            accepted = (rec.residual < options.tol or residual_norm(g, Tg) <= (1.0 - 1e-4 * t) * fnorm
+                        or rec.residual < 0.5 * rec0.residual)
+            rec.info["newton_steps"] = history.newton_steps
+            rec.info["step_length"] = t
+            if accepted or history.iterations >= options.max_iterations:
+                break
+            t *= 0.5
+        log.info("%s: Newton step %d (%s Jacobian), step length %g, residual %.3e", name, history.newton_steps,
+                 "exact" if exact else "condensed", t, rec.residual)
+        if not accepted and not exact and history.iterations < options.max_iterations:
+            exact = True  # back to g0 and retry with the exact Jacobian of Ω₂
+            g = g0
+            Tg, rec = evaluate(step, g, history, name=name, monitor=monitor)
+    history.converged = bool(rec.residual < options.tol)
+    history.time_s = time.perf_counter() - start - history.time_monitor_s
+    log.info("%s: %s, %d Newton steps, %d applications of T, transmission residual %.3e, online %.3f s "
+             "(interface response offline %.3f s)", name, "converged" if history.converged else "NOT converged",
+             history.newton_steps, history.iterations, rec.residual, history.time_s, history.time_offline_s)
+    return history

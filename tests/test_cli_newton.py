@@ -1,0 +1,44 @@
+"""The command line with the certificate and the interface Newton: exit 3 instead of a wrong 'converged'."""
+
+import json
+
+import pytest
+from mpi4py import MPI
+
+from fenics_contact.cli import main
+
+pytestmark = pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="the CLI tests run serially")
+
+
+def _summary(out):
+    return json.loads((out / "summary.json").read_text())
+
+
+def test_huge_alpha_ends_not_converged(tmp_path):
+    """`--h 32 --H 8 --alpha 1e8 --reference` exited 0 after 2 iterations with e_u = 0.79: now exit 3."""
+    out = tmp_path / "alpha"
+    code = main(["run", "--h", "32", "--H", "8", "--alpha", "1e8", "--accel", "anderson", "--max-iterations", "40",
+                 "--reference", "--no-plots", "--out", str(out)])
+    s = _summary(out)
+    assert code == 3 and s["converged"] is False
+    assert s["transmission_residual"] > 1e-6 and s["e_u"] > 1e-3
+
+
+def test_huge_beta_ends_not_converged(tmp_path):
+    out = tmp_path / "beta"
+    code = main(["run", "--method", "mixed", "--h", "16", "--H", "4", "--beta", "1e12", "--accel", "anderson",
+                 "--max-iterations", "30", "--no-plots", "--out", str(out)])
+    assert code == 3 and _summary(out)["transmission_residual"] > 1e-6
+
+
+@pytest.mark.parametrize("method", ["primal", "mixed"])
+def test_newton_run_reports_its_certificate(tmp_path, method):
+    out = tmp_path / method
+    code = main(["run", "--method", method, "--model", "3", "--h", "16", "--H", "4", "--accel", "newton",
+                 "--reference", "--no-plots", "--out", str(out)])
+    s = _summary(out)
+    assert code == 0 and s["converged"] is True and s["accel"] == "newton"
+    assert s["transmission_residual"] < 1e-6 and 1 <= s["interface_newton_steps"] <= 8
+    assert s["time_interface_offline_s"] > 0 and s["time_offline_s"] >= s["time_interface_offline_s"]
+    # Algorithm 1's fixed point is the monolithic solution; Algorithm 2's differs by the X̃_h/X_h space gap
+    assert s["e_u"] < (1e-8 if method == "primal" else 1e-3)

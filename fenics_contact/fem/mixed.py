@@ -1028,21 +1028,10 @@ class MixedSubproblem:
         self.u = np.array(u, dtype=float).reshape(self.n_u)
         self._cold = False
 
-    def gamma_mass(self) -> sp.csr_matrix:
-        """The L²(γ) mass matrix of the continuous P3 vector data at ``gamma_points`` (flattened (x, y))."""
-        if self.beta is None:
-            raise InputError("this subproblem has no interface γ")
-        msh = self.mesh
-        Lam = fem.functionspace(msh, basix.ufl.element("Lagrange", msh.basix_cell(), 3, shape=(2,)))
-        gamma = self.facet_tags.find(Boundary.INTERFACE)
-        blocks = fem.locate_dofs_topological(Lam, msh.topology.dim - 1, gamma)
-        coords = Lam.tabulate_dof_coordinates()[blocks, :2]
-        blocks = blocks[np.lexsort((coords[:, 0], coords[:, 1]))]  # the order of ``gamma_points``
-        g, w = ufl.TrialFunction(Lam), ufl.TestFunction(Lam)
-        ds = forms_mixed.boundary_measure(msh, self.facet_tags)
-        M = assemble_scipy(ufl.inner(g, w) * ds(Boundary.INTERFACE))
-        cols = (2 * blocks[:, None] + np.arange(2)).ravel()
-        return M[cols][:, cols].tocsr()
+    def gamma_mass(self) -> DistributedMatrix:
+        """The L²(γ) mass matrix of the continuous P3 vector data at ``gamma_points`` (flattened (x, y)), acting
+        on this rank's block of the canonical γ values (``interface_range``; serial: all): ``gamma_mass_matrix``."""
+        return self.gamma_mass_matrix()
 
     def destroy(self) -> None:
         """Free the PETSc objects (collective)."""

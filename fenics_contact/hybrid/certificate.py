@@ -25,7 +25,6 @@ g = T(g)).
 from typing import NamedTuple
 
 import numpy as np
-import scipy.sparse as sp
 from mpi4py import MPI
 
 __all__ = ["Certificate", "primal_certificate", "mixed_certificate", "relative"]
@@ -63,14 +62,20 @@ def primal_certificate(
 
 
 def mixed_certificate(
-    t1: np.ndarray, t2: np.ndarray, g12: np.ndarray, g21: np.ndarray, beta: float, mass: sp.spmatrix
+    t1: np.ndarray, t2: np.ndarray, g12: np.ndarray, g21: np.ndarray, beta: float, mass, comm: MPI.Comm | None = None
 ) -> Certificate:
-    """Certificate of Algorithms 2 and 4 from the traces σ_in_i at the γ nodes (serial)."""
+    """Certificate of Algorithms 2 and 4 from the traces σ_in_i at the γ nodes.
+
+    ``mass``: the γ mass matrix acting on the given values (serial: all of them; with ``comm``: this rank's
+    block of a distributed vector, ``fem.mixed.MixedSubproblem.gamma_mass``), norms summed over ``comm``.
+    """
     u1 = g12 - beta * t1
     u2 = g21 - beta * t2
 
     def norm(v: np.ndarray) -> float:
-        return float(np.sqrt(max(v @ (mass @ v), 0.0)))
+        local = float(v @ (mass @ v))
+        total = comm.allreduce(local, op=MPI.SUM) if comm is not None and comm.size > 1 else local
+        return float(np.sqrt(max(total, 0.0)))
 
     return Certificate(
         relative(norm(u1 - u2), max(norm(u1), norm(u2))), relative(norm(t1 + t2), max(norm(t1), norm(t2)))

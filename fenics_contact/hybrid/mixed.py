@@ -225,7 +225,7 @@ class MixedHybridStep:
         t2 = np.empty(n)
         t2[self._perm2] = self.sub[1].gamma_traction()  # σ₂n₂
         self._measure()
-        self._certificate = mixed_certificate(t1, t2, g12, g21, self.beta, self.gamma_mass)
+        self._certificate = mixed_certificate(t1, t2, g12, g21, self.beta, self.gamma_mass, self.comm)
         self._record = omega2_record(newton)
         return np.concatenate([g21 - 2.0 * self.beta * t2, g12 - 2.0 * self.beta * t1])
 
@@ -248,6 +248,11 @@ class MixedHybridStep:
 
     def interface_problem(self, options: InterfaceNewtonOptions):
         """The affine pieces for ``hybrid.newton`` (built once)."""
+        if self.comm.size > 1:  # (issue 13) MixedPart holds serial SciPy operators
+            raise InputError(
+                f"the interface Newton method (--accel newton) of the mixed method runs serially; got {self.comm.size} "
+                "MPI ranks. Use --accel anderson (or none) under mpiexec, or run without mpiexec."
+            )
         from fenics_contact.hybrid.newton import InterfaceProblem, MixedPart
 
         if self._newton is None or self._newton.options.strategy != options.strategy:

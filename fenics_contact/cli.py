@@ -146,6 +146,11 @@ def _check_directory(flag: str, path: Path) -> None:
         raise InputError(f"{flag} {path} lies below {existing}, which is a file, not a directory")
 
 
+def default_accel(method: str) -> str:
+    """The interface Newton, except for Algorithm 2 on several ranks (its interface Newton is serial): Anderson."""
+    return "anderson" if method == "mixed" and MPI.COMM_WORLD.size > 1 else "newton"
+
+
 @dataclass(frozen=True, slots=True)
 class RunOptions:
     """What ``fenics-contact run`` was asked to do, validated on construction (InputError).
@@ -162,7 +167,7 @@ class RunOptions:
     mesh: Path | None = None
     coarse_groups: bool = False
     alpha: str | None = None
-    accel: str = "newton"
+    accel: str | None = None  #: None: "newton", or "anderson" for the mixed method on several ranks (default_accel)
     tol: float = 1e-6
     max_iterations: int = 2000
     delta: float | None = None
@@ -186,6 +191,8 @@ class RunOptions:
         if self.method not in METHODS:
             raise InputError(f"unknown --method {self.method!r}; choose one of {METHODS}")
         get_model(self.model)  # InputError for an unknown model
+        if self.accel is None:
+            object.__setattr__(self, "accel", default_accel(self.method))
         for name, (methods, what) in _METHOD_OPTIONS.items():
             if getattr(self, name) is not None and self.method not in methods:
                 raise InputError(f"{_flag(name)} does not apply to --method {self.method} (it is {what})")
@@ -282,9 +289,10 @@ def build_parser(*, given_only: bool = False) -> argparse.ArgumentParser:
                      "your own) instead of the squares of side 1/H over the bounding box")
     run.add_argument("--alpha", help=f"primal Robin coefficient (default {DEFAULT_ALPHA}): a number or a product "
                      "of numbers, h^p, sqrt-h and E (E_p: mean E at the γ node), e.g. 1, h^-1/2, 2E*h^-1/2")
-    run.add_argument("--accel", choices=ACCELERATIONS, default="newton",
+    run.add_argument("--accel", choices=ACCELERATIONS, default=None,
                      help="how the interface fixed point is solved: the interface Newton method (default: robust "
-                     "on every tested model), Anderson acceleration, or none (the paper's plain update)")
+                     "on every tested model), Anderson acceleration, or none (the paper's plain update); under "
+                     "mpiexec --method mixed defaults to anderson (its interface Newton is serial)")
     run.add_argument("--tol", type=float, default=1e-6,
                      help="tolerance of the transmission residual (relative jump and traction imbalance on γ)")
     run.add_argument("--max-iterations", type=int, default=2000)

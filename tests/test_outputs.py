@@ -108,6 +108,7 @@ _KILLED_SAVE = """
 import os, signal, sys
 import numpy as np
 import fenics_contact
+from fenics_contact.multiscale import cache
 from fenics_contact.multiscale.cache import OfflineCache
 
 class Cache(OfflineCache):
@@ -116,13 +117,15 @@ class Cache(OfflineCache):
     def pack(obj):
         return {"a": obj}
 
-def savez_then_die(fh, **arrays):
-    fh.write(b"PK" + bytes(1 << 20))  # part of the file, then kill -9 in the middle of the save
+write_array = np.lib.format.write_array
+
+def write_then_die(fh, arr, **kwargs):
+    write_array(fh, arr, **kwargs)  # the first array reaches the file, then kill -9 in the middle of the save
     fh.flush()
     os.kill(os.getpid(), signal.SIGKILL)
 
-np.savez = savez_then_die
-Cache(sys.argv[1]).save("k" * 40, np.ones(10))
+np.lib.format.write_array = write_then_die  # what cache.write_npz streams each array with
+Cache(sys.argv[1]).save("k" * 40, np.ones(1 << 18))
 """
 
 

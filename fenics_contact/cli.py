@@ -146,6 +146,13 @@ def _check_directory(flag: str, path: Path) -> None:
         raise InputError(f"{flag} {path} lies below {existing}, which is a file, not a directory")
 
 
+def default_out(method: str, model: int, mesh: Path | None = None, case: Path | None = None) -> Path:
+    """``results/<name>-<method>``, the name from the case file, else the mesh file, else the model: each problem
+    and method its own directory, so runs (and ``make demo``'s) do not replace one another by default."""
+    name = Path(case).stem if case is not None else Path(mesh).stem if mesh is not None else f"model{model}"
+    return Path("results") / f"{name}-{method}"
+
+
 def default_accel(method: str) -> str:
     """The interface Newton, except for Algorithm 2 on several ranks (its interface Newton is serial): Anderson."""
     return "anderson" if method == "mixed" and MPI.COMM_WORLD.size > 1 else "newton"
@@ -183,7 +190,7 @@ class RunOptions:
     max_nbasis: int | None = None
     cache_dir: Path | None = None
     reference: bool = False
-    out: Path = Path("results")
+    out: Path | None = None  #: None: results/<model N | mesh or case file stem>-<method> (default_out)
     plots: bool = True
     case: Path | None = None  #: the case file the problem came from (``--case``; see ``problem.case``)
 
@@ -236,7 +243,8 @@ class RunOptions:
             transmission_coefficient(self.beta, 0.5)
         if self.cache_dir is not None:
             _check_directory("--cache-dir", self.cache_dir)
-        object.__setattr__(self, "out", check_output_target(self.out))
+        out = self.out if self.out is not None else default_out(self.method, self.model, self.mesh, self.case)
+        object.__setattr__(self, "out", check_output_target(out))
 
     @classmethod
     def from_namespace(cls, args: argparse.Namespace) -> "RunOptions":
@@ -313,8 +321,9 @@ def build_parser(*, given_only: bool = False) -> argparse.ArgumentParser:
     run.add_argument("--max-nbasis", type=int, help="mixed-ms: most Stage I modes per coarse cell (default 32)")
     run.add_argument("--cache-dir", type=Path, help="*-ms: directory for the offline data (reused when valid)")
     run.add_argument("--reference", action="store_true", help="also solve the monolithic problem and report e_u")
-    run.add_argument("--out", default="results", help="output directory (default results); replaced whole by the "
-                     "run, so it must be new, empty or an earlier run's")
+    run.add_argument("--out", default=None, help="output directory (default results/<model N, mesh or case file>-"
+                     "<method>, e.g. results/model1-primal); replaced whole by the run, so it must be new, empty "
+                     "or an earlier run's")
     run.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
     run.add_argument("-v", "--verbose", action="store_true")
     # case files (issue 14): the problem from a TOML file; flags override it
@@ -856,6 +865,7 @@ def main(argv: list[str] | None = None) -> int:
     with _interruptible():
         try:
             options, case = options_from_arguments(args, argv)
+            out = options.out
             return run(options, comm, case=case)
         except Interrupted as stop:
             where = (f"the results in {out} are complete" if getattr(stop, "output_complete", False)

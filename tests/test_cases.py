@@ -83,6 +83,13 @@ def _write_full(tmp_path: Path) -> Path:
     return path
 
 
+@pytest.fixture(autouse=True)
+def _in_tmp_path(tmp_path, monkeypatch):
+    """Each test in its own working directory: the default --out (results/...) is relative, and the checkout's
+    results/ may hold anything (``make demo``'s runs)."""
+    monkeypatch.chdir(tmp_path)
+
+
 def test_a_case_file_reads_into_validated_dataclasses(tmp_path):
     case = load_case(_write_full(tmp_path))
     assert isinstance(case.mesh, MeshFile) and case.mesh.H == 4 and case.mesh.path == CASES / "composite.msh"

@@ -136,3 +136,21 @@ def test_a_stored_mesh_runs_as_the_same_built_in_grid(tmp_path):
     assert abs(a["h"] - 1 / 16) < 1e-9 and abs(a["delta"] / b["delta"] - 1) < 1e-9
     assert a["iterations"] == b["iterations"] and abs(a["final_rel_change"] / b["final_rel_change"] - 1) < 1e-6
     assert a["active_set"] == pytest.approx(b["active_set"], abs=1e-9)
+
+
+def test_default_out_is_one_directory_per_problem_and_method(tmp_path, monkeypatch):
+    """Without --out a run writes results/<model N | mesh or case stem>-<method>: after `make demo` filled
+    results/model1-primal, a run of another problem or method neither replaces it nor is refused."""
+    from pathlib import Path
+
+    from fenics_contact.cli import RunOptions
+
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "results" / "model1-primal").mkdir(parents=True)
+    (tmp_path / "results" / "model1-primal" / ".fenics-contact-run").write_text("")  # an earlier run's output
+    assert RunOptions().out == Path("results/model1-primal")
+    assert RunOptions(method="mixed", model=2).out == Path("results/model2-mixed")
+    mesh = tmp_path / "plate.msh"
+    mesh.write_text("")
+    assert RunOptions(mesh=mesh).out == Path("results/plate-primal")
+    assert RunOptions(out=tmp_path / "mine").out == tmp_path / "mine"

@@ -66,31 +66,12 @@ def _floats(text: str) -> list[float]:
     return [float(t) for t in text.split(",") if t]
 
 
-def band_load(bands):
-    """f = (f₁, 0) with f₁ = value on each box (x0, x1, y0, y1, value)."""
-
-    def load(x):
-        f = np.zeros((2, x.shape[1]))
-        for x0, x1, y0, y1, value in bands:
-            f[0, (x[0] > x0) & (x[0] < x1) & (x[1] > y0) & (x[1] < y1)] = value
-        return f
-
-    return load
-
-
-#: the built-in models' load bands moved into Ω₁ (x ∈ [1/2, 15/16]), same pattern of pushing and pulling
-LOADS_IN_OMEGA1 = {
-    1: [(0.5, 15 / 16, 0.0, 0.5, 1.0), (0.5, 15 / 16, 0.5, 1.0, -1.0)],
-    2: [(0.5, 15 / 16, 0.0, 0.375, -1.0), (0.5, 15 / 16, 0.375, 0.625, 2.0), (0.5, 15 / 16, 0.625, 1.0, -1.0)],
-}
-
-
 def make_model(name: str, contrast: float = 1e3) -> models.TestModel:
     """'1', '2', '3' (built-in) or '1L', '2L' (built-in with the loads moved into Ω₁)."""
     number = int(name[0])
     model = models.get_model(number, E_high=contrast)
     if name.endswith("L"):
-        model = model.with_(load=band_load(LOADS_IN_OMEGA1[number]),
+        model = model.with_(load=models.band_load(models.LOADS_IN_OMEGA1[number]),
                             description=model.description + ", loads in Omega1")
     return model
 

@@ -136,28 +136,10 @@ def table_58(n: int, layers: int, accels: list[str], lines: list[str]) -> None:
     lines.append("")
 
 
-def band_load(bands):
-    """f = (f₁, 0) with f₁ = value on each box (x0, x1, y0, y1, value)."""
-
-    def load(x):
-        f = np.zeros((2, x.shape[1]))
-        for x0, x1, y0, y1, value in bands:
-            f[0, (x[0] > x0) & (x[0] < x1) & (x[1] > y0) & (x[1] < y1)] = value
-        return f
-
-    return load
-
-
-#: the built-in models' load bands moved into Ω₁ (x ∈ [1/2, 15/16]), same pattern of pushing and pulling
-#: (the same as benchmarks/multiscale_primal.py part (f) for Algorithm 3)
-LOADS_IN_OMEGA1 = {
-    1: [(0.5, 15 / 16, 0.0, 0.5, 1.0), (0.5, 15 / 16, 0.5, 1.0, -1.0)],
-    2: [(0.5, 15 / 16, 0.0, 0.375, -1.0), (0.5, 15 / 16, 0.375, 0.625, 2.0), (0.5, 15 / 16, 0.625, 1.0, -1.0)],
-}
 #: the loads-in-Ω₁ cases: name -> (model number, E_high, bands or None for the model's own loads)
 SOURCE_CASES = {
-    "1L": (1, 1.0e3, LOADS_IN_OMEGA1[1]),
-    "2L": (2, 1.0e3, LOADS_IN_OMEGA1[2]),
+    "1L": (1, 1.0e3, models.LOADS_IN_OMEGA1[1]),
+    "2L": (2, 1.0e3, models.LOADS_IN_OMEGA1[2]),
     "3": (3, 1.0e3, None),
     "3 (E 1e6)": (3, 1.0e6, None),
 }
@@ -186,7 +168,7 @@ def table_source(n: int, layers: list[int], n_coarse: list[int], cases: list[str
         number, contrast, bands = SOURCE_CASES[name]
         model = models.get_model(number, E_high=contrast)
         if bands is not None:
-            model = model.with_(load=band_load(bands))
+            model = model.with_(load=models.band_load(bands))
         for nc in n_coarse:
             cm = geometry.unit_square(n, nc)
             ref = solve_mixed_monolithic(cm, model)

@@ -148,16 +148,6 @@ def test_algorithm4_converges_and_error_falls_with_layers():
     assert errors[1][0] < 0.03
 
 
-def _band_load(bands):
-    """f = (f₁, 0), f₁ = value on each box (x0, x1, y0, y1, value)."""
-
-    def load(x):
-        f = np.zeros((2, x.shape[1]))
-        for x0, x1, y0, y1, value in bands:
-            f[0, (x[0] > x0) & (x[0] < x1) & (x[1] > y0) & (x[1] < y1)] = value
-        return f
-
-    return load
 
 
 def _omega1_error(om, sub, g):
@@ -175,7 +165,7 @@ def test_source_correction_removes_the_load_floor():
     Ω₁ alone, h = 1/32, H = 1/8, l = 3, fine Robin solution with the same data g as reference.
     """
     cm = geometry.unit_square(32, 8)
-    model = models.get_model(1).with_(load=_band_load([(0.5, 0.875, 0.0, 0.5, 1.0), (0.5, 0.875, 0.5, 1.0, -1.0)]))
+    model = models.get_model(1).with_(load=models.band_load([(0.5, 0.875, 0.0, 0.5, 1.0), (0.5, 0.875, 0.5, 1.0, -1.0)]))
     step, grid = _step_and_grid(cm, model)
     sub = step.sub[0]
     pts = sub.gamma_points
@@ -193,7 +183,7 @@ def test_source_correction_removes_the_load_floor():
 def test_load_only_in_omega1_is_iterated_to_the_reference():
     """f = 0 in Ω₂ and g⁰ = 0: the first Ω₂ solve is zero, yet the iteration must not stop there."""
     cm = geometry.unit_square(32, 8)
-    model = models.get_model(2).with_(load=_band_load([(0.5, 0.875, 0.3, 0.7, 2.0), (0.5, 0.875, 0.7, 1.0, -1.0)]))
+    model = models.get_model(2).with_(load=models.band_load([(0.5, 0.875, 0.3, 0.7, 2.0), (0.5, 0.875, 0.7, 1.0, -1.0)]))
     ref = solve_mixed_monolithic(cm, model, split_interface=True)  # the fixed point of the fine splitting
     res = solve_mixed_ms_hybrid(cm, model, layers=3, reference=ref,
                                 options=IterationOptions(tol=1e-9, accel="anderson", max_iterations=400))

@@ -215,23 +215,7 @@ def test_algorithm3_error_decreases_with_layers(mesh_32_8, number, gain):
     assert e_u[-1] < gain * e_u[0]
 
 
-def _bands(bands):
-    """f = (f₁, 0), f₁ = value on each box (x0, x1, y0, y1, value)."""
-
-    def load(x):
-        f = np.zeros((2, x.shape[1]))
-        for x0, x1, y0, y1, value in bands:
-            f[0, (x[0] > x0) & (x[0] < x1) & (x[1] > y0) & (x[1] < y1)] = value
-        return f
-
-    return load
-
-
-#: the built-in models with their load bands moved into Ω₁ (x ∈ [1/2, 15/16]; pushing and pulling)
-LOADS_IN_OMEGA1 = {
-    1: _bands([(0.5, 15 / 16, 0.0, 0.5, 1.0), (0.5, 15 / 16, 0.5, 1.0, -1.0)]),
-    2: _bands([(0.5, 15 / 16, 0.0, 0.375, -1.0), (0.5, 15 / 16, 0.375, 0.625, 2.0), (0.5, 15 / 16, 0.625, 1.0, -1.0)]),
-}
+LOADS_IN_OMEGA1 = {n: models.band_load(bands) for n, bands in models.LOADS_IN_OMEGA1.items()}
 
 
 def _errors_with_layers(cm, model, layers, **kwargs):

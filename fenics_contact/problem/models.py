@@ -125,7 +125,7 @@ def _boxes_field(boxes: np.ndarray, inside: float, outside: float) -> ScalarFiel
     return field
 
 
-def _band_load(bands: list[tuple[float, float, float, float, float]]) -> VectorField:
+def band_load(bands: list[tuple[float, float, float, float, float]]) -> VectorField:
     """f = (f₁, 0) with f₁ = value on each box (x0, x1, y0, y1, value), 0 elsewhere."""
 
     def load(x: np.ndarray) -> np.ndarray:
@@ -137,6 +137,13 @@ def _band_load(bands: list[tuple[float, float, float, float, float]]) -> VectorF
 
     return load
 
+
+#: the load bands of models 1 and 2 moved into Ω₁ (x ∈ [1/2, 15/16]), the same pattern of pushing and pulling
+#: (for ``band_load``): the source-correction checks of Algorithms 3 and 4 (tests and benchmarks)
+LOADS_IN_OMEGA1 = {
+    1: [(0.5, 15 / 16, 0.0, 0.5, 1.0), (0.5, 15 / 16, 0.5, 1.0, -1.0)],
+    2: [(0.5, 15 / 16, 0.0, 0.375, -1.0), (0.5, 15 / 16, 0.375, 0.625, 2.0), (0.5, 15 / 16, 0.625, 1.0, -1.0)],
+}
 
 _S = 1.0 / 32.0
 _X_LOAD = 15.0 / 16.0  #: loads act on x >= 15/16 (inside Ω₂ for H >= 1/16)
@@ -169,7 +176,7 @@ def model_1(*, E_high: float = 1.0e3, E_low: float = 1.0, nu: float = 0.35, load
         name="model1",
         youngs_modulus=_boxes_field(_CHANNELS, E_high, E_low),
         poisson_ratio=constant_field(nu),
-        load=_band_load(bands),
+        load=band_load(bands),
         description=f"channels, E={E_high:g}/{E_low:g}, nu={nu:g}",
     )
 
@@ -185,7 +192,7 @@ def model_2(*, E_high: float = 1.0e3, E_low: float = 1.0, nu: float = 0.35, load
         name="model2",
         youngs_modulus=_boxes_field(_INCLUSIONS, E_high, E_low),
         poisson_ratio=constant_field(nu),
-        load=_band_load(bands),
+        load=band_load(bands),
         description=f"inclusions, E={E_high:g}/{E_low:g}, nu={nu:g}",
     )
 
@@ -204,7 +211,7 @@ def model_3(*, E_high: float = 1.0e3, E_low: float = 1.0, nu: float = 0.35, load
         name="model3",
         youngs_modulus=_boxes_field(_STRIP_PATTERN, E_high, E_low),
         poisson_ratio=constant_field(nu),
-        load=_band_load(bands),
+        load=band_load(bands),
         description=f"heterogeneous strip, E={E_high:g}/{E_low:g}, nu={nu:g}",
     )
 

@@ -210,6 +210,109 @@ def part_speed(lines, n: int, number: int) -> None:
     lines.append("")
 
 
+# ---------------------------------------------------------------------------------------------
+# fronts: why the contact Newton needs more steps at contrast 1e6 (issue 10), and what does not help
+# ---------------------------------------------------------------------------------------------
+def _galerkin_coarse(s_load, M, D, y):
+    """The condensed problem on every other Γ_C node (gaps interpolated linearly, Galerkin on M⁻¹): (s_L, M, D, y, P)."""
+    n = s_load.size
+    keep = np.unique(np.r_[np.arange(0, n, 2), n - 1])
+    P = np.zeros((n, keep.size))
+    P[keep, np.arange(keep.size)] = 1.0
+    for i in np.setdiff1d(np.arange(n), keep):
+        j = np.searchsorted(keep, i)
+        t = (y[i] - y[keep[j - 1]]) / (y[keep[j]] - y[keep[j - 1]])
+        P[i, j - 1], P[i, j] = 1.0 - t, t
+    Minv = np.linalg.inv(M)
+    Mc = np.linalg.inv(P.T @ Minv @ P)
+    return Mc @ (P.T @ Minv @ s_load), Mc, P.T @ D, y[keep], P
+
+
+def _nested(s_load, M, D, y, smallest=16):
+    """Nested iteration over Γ_C: solve the Galerkin-coarsened problem, start from its prolonged active set."""
+    from fenics_contact.hybrid.newton import contact_newton
+
+    if s_load.size <= smallest:
+        s, _, hist = contact_newton(s_load, M, D, max_steps=200)
+        return [hist.steps], s
+    sc_load, Mc, Dc, yc, P = _galerkin_coarse(s_load, M, D, y)
+    counts, sc = _nested(sc_load, Mc, Dc, yc, smallest)
+    s, _, hist = contact_newton(s_load, M, D, max_steps=200, active=P @ sc > 0.0)
+    return counts + [hist.steps], s
+
+
+def _continuation(s_load, M, D, factor=1e3, start=1e-9):
+    """Path in the penalty: D·start, ·factor, ... up to D, each solve started from the last active set."""
+    from fenics_contact.hybrid.newton import contact_newton
+
+    counts, scale, active = [], start, s_load > 0.0
+    while True:
+        s, _, hist = contact_newton(s_load, M, D * scale, max_steps=200, active=active)
+        counts.append(hist.steps)
+        active = s > 0.0
+        if scale >= 1.0:
+            return counts, s
+        scale = min(scale * factor, 1.0)
+
+
+def part_fronts(lines, sizes, E_high: float) -> None:
+    """Contact Newton of Algorithm 1 (= the monolithic semismooth Newton from its 2nd step): active-set changes
+    per step on model 3, and the step counts of other starts / globalizations on the same condensed problem."""
+    from fenics_contact.hybrid.iteration import InterfaceNewtonOptions
+    from fenics_contact.hybrid.newton import CondensedInterface, contact_newton
+
+    lines += [
+        f"## Contact Newton on model 3, E_high {E_high:g}: active-set fronts and alternatives (Algorithm 1, c = 1)",
+        "",
+        "Same condensed problem s = s_L − M D s⁺ on Γ_C for every column (the fixed point does not change: "
+        "'same' = all variants end on the default's active set and its s to 1e-10). Default: start from the "
+        "contact-free penetration pattern {s_L > 0}, full steps, exact line search once a set recurs. "
+        "all active: start from 𝒜 = Γ_C. nested: Galerkin-coarsened Γ_C problems (every other node, down to "
+        "≤ 16 nodes), each level started from the prolonged coarser solution (steps per level, coarse → fine). "
+        "penalty path: D·1e-9, ·1e3 … D, each started from the last set. line search: exact line search on "
+        "the energy at every step.",
+        "",
+        "| 1/h | Γ_C rows | default | all active | nested (per level) | penalty path (per level) | line search | "
+        "monolithic Newton | same |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    traces = []
+    for n in sizes:
+        cm = unit_square(n, 16)
+        step = build_step(1, cm, 3, E_high)
+        problem = step.interface_problem(InterfaceNewtonOptions())
+        cond = CondensedInterface(problem)
+        s_load = cond.load_terms()[0]
+        M, D = cond.M, problem.omega2.D
+        om2 = problem.omega2
+        y = om2.sub.V.tabulate_dof_coordinates()[om2.c_nodes][:, 1]
+        order = np.argsort(y)
+        s_load, M, D, y = s_load[order], M[np.ix_(order, order)], D[order], y[order]
+        s0, _, h0 = contact_newton(s_load, M, D, max_steps=200)
+        _, _, h_all = contact_newton(s_load, M, D, max_steps=200, active=np.ones(s_load.size, dtype=bool))
+        nest, s_nest = _nested(s_load, M, D, y)
+        path, s_path = _continuation(s_load, M, D)
+        s_ls, _, h_ls = contact_newton(s_load, M, D, max_steps=200, line_search=True)
+        scale = np.abs(s0).max()
+        same = all(np.array_equal(s > 0, s0 > 0) and np.abs(s - s0).max() <= 1e-10 * scale
+                   for s in (s_nest, s_path, s_ls))
+        row = (f"| {n} | {s_load.size} | {h0.steps} | {h_all.steps} | {sum(nest)} ({', '.join(map(str, nest))}) | "
+               f"{sum(path)} ({', '.join(map(str, path))}) | {h_ls.steps} | {monolithic_steps(1, cm, 3, E_high)} | "
+               f"{same} |")
+        print(row, flush=True)
+        lines.append(row)
+        at = lambda idx: ", ".join(f"{32 * y[i]:g}" for i in idx) or "—"  # noqa: E731
+        traces.append((n, [(k + 1, h0.active_sizes[k], at(a), at(r)) for k, (a, r) in
+                           enumerate(zip(h0.added, h0.removed))]))
+        del step
+    for n, rows in traces:
+        lines += ["", f"Default contact Newton at h = 1/{n}: Γ_C nodes (y in units of 1/32; the stiff channels touch "
+                  "Γ_C on y ∈ [5, 6], [13, 14], [21, 22]) that each step adds to / removes from the active set:", "",
+                  "| step | active nodes after it | added | removed |", "|---|---|---|---|"]
+        lines += [f"| {k} | {size} | {a} | {r} |" for k, size, a, r in rows]
+    lines.append("")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--parts", default="steps,updates,speed")
@@ -246,6 +349,8 @@ def main() -> None:
                        args.big_default_only, ints(args.methods), args.h_ms_max, models)
         elif part == "updates":
             part_updates(lines, args.updates_h, args.cap, ints(args.methods))
+        elif part == "fronts":
+            part_fronts(lines, ints(args.h_primal), 1e6)
         elif part == "speed":
             part_speed(lines, args.speed_h, args.speed_model)
         else:

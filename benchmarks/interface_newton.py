@@ -33,7 +33,7 @@ from fenics_contact.errors import FenicsContactError
 from fenics_contact.fem.contact import NewtonOptions
 from fenics_contact.fem.mixed import contact_modulus, default_epsilon
 from fenics_contact.fem.primal import PrimalSubproblem, default_penalty
-from fenics_contact.hybrid.iteration import IterationOptions, iterate
+from fenics_contact.hybrid.iteration import InterfaceNewtonOptions, IterationOptions, iterate
 from fenics_contact.hybrid.mixed import MixedHybridStep
 from fenics_contact.hybrid.primal import PrimalHybridStep
 from fenics_contact.io import machine_description
@@ -46,6 +46,8 @@ from fenics_contact.problem.geometry import unit_square
 from fenics_contact.problem.models import get_model
 from fenics_contact.problem.tags import Subdomain
 
+#: interface Newton options of the steps part (``--chunk``: right-hand sides per multi-RHS back-solve)
+NEWTON = InterfaceNewtonOptions()
 #: (label, model number, E_high)
 MODELS = [("1", 1, 1e3), ("2", 2, 1e3), ("3 (1e3)", 3, 1e3), ("3 (1e6)", 3, 1e6)]
 LAYERS = 3
@@ -102,7 +104,8 @@ def monolithic_steps(method: int, cm, number: int, E_high: float) -> str:
         return f"error: {type(err).__name__}"
 
 
-def part_steps(lines, h_primal, h_mixed, factors, big_default_only, methods, h_ms_max, models=MODELS) -> None:
+def part_steps(lines, h_primal, h_mixed, factors, big_default_only, methods, h_ms_max, models=MODELS,
+               monolithic=True) -> None:
     lines += [
         "## Newton steps to a transmission residual of 1e-6 (H = 1/16)",
         "",
@@ -127,7 +130,7 @@ def part_steps(lines, h_primal, h_mixed, factors, big_default_only, methods, h_m
                         continue
                     try:
                         step = build_step(method, cm, number, E_high, c)
-                        hist = iterate(step, IterationOptions(accel="newton"))
+                        hist = iterate(step, IterationOptions(accel="newton", newton=NEWTON))
                         worst = max(worst, hist.newton_steps)
                         mark = "" if hist.converged else " (not conv.)"
                         cells.append(f"{hist.newton_steps} ({hist.transmission_residual:.0e}){mark}")
@@ -135,7 +138,8 @@ def part_steps(lines, h_primal, h_mixed, factors, big_default_only, methods, h_m
                     except FenicsContactError as err:
                         cells.append(f"error: {type(err).__name__}")
                         logging.warning("Algorithm %d, model %s, h = 1/%d, c = %g: %s", method, label, n, c, err)
-                row = f"| {method} | {label} | {n} | " + " | ".join(cells) + f" | {monolithic_steps(method, cm, number, E_high)} |"
+                mono = monolithic_steps(method, cm, number, E_high) if monolithic else "not run"
+                row = f"| {method} | {label} | {n} | " + " | ".join(cells) + f" | {mono} |"
                 print(row, flush=True)
                 lines.append(row)
     lines += ["", f"Largest Newton step count: {worst}. 'monolithic Newton': steps of the monolithic semismooth "
@@ -182,17 +186,19 @@ def part_speed(lines, n: int, number: int) -> None:
     fields = material_fields(cm.mesh, model)
     delta = default_penalty(cm.h, _strip_modulus(cm, fields.E))
     mono = PrimalSubproblem(cm.mesh, cm.facet_tags, fields, delta=delta, alpha=None, prefix="fc_bench_mono_")
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     mh = mono.solve()
-    t_mono = time.perf_counter() - t0
+    t_mono, c_mono = time.perf_counter() - t0, time.process_time() - c0
     lines += [
         f"## Online time / monolithic: primal, model {number}, h = 1/{n}, H = 1/16",
         "",
-        f"Monolithic semismooth Newton: {mono.num_dofs} DOFs, {mh.steps} steps, {t_mono:.2f} s (Newton only).",
+        f"Monolithic semismooth Newton: {mono.num_dofs} DOFs, {mh.steps} steps, {t_mono:.2f} s wall, {c_mono:.2f} s "
+        "CPU (Newton only). CPU = this process's CPU time around the solve (less skewed by other jobs than the "
+        "wall time; it includes the error-free iteration only).",
         "",
-        "| algorithm | update | converged | applications of T (Newton steps) | online s | online / monolithic "
-        "| offline s (of which interface response) |",
-        "|---|---|---|---|---|---|---|",
+        "| algorithm | update | converged | applications of T (Newton steps) | online s (wall) | online / monolithic "
+        "(wall) | online CPU s | online / monolithic (CPU) | offline s (of which interface response) |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     for method in (1, 3):
         t0 = time.perf_counter()
@@ -200,10 +206,21 @@ def part_speed(lines, n: int, number: int) -> None:
         build = time.perf_counter() - t0
         for accel in ("newton", "anderson"):
             step.reset()
+            if accel == "newton":  # the offline interface response, outside the CPU clock of the online phase
+                from fenics_contact.hybrid.newton import CondensedInterface
+
+                t_off = time.perf_counter()
+                problem = step.interface_problem(InterfaceNewtonOptions())
+                problem.condensed = problem.condensed or CondensedInterface(problem)
+                pre = time.perf_counter() - t_off
+            else:
+                pre = 0.0
+            c0 = time.process_time()
             hist = iterate(step, IterationOptions(accel=accel), initial=np.zeros_like(step.initial_data()))
+            cpu = time.process_time() - c0
             row = (f"| {method} | {accel} | {hist.converged} | {hist.iterations} ({hist.newton_steps}) | "
-                   f"{hist.time_s:.3f} | **{hist.time_s / t_mono:.3f}** | {build + hist.time_offline_s:.1f} "
-                   f"({hist.time_offline_s:.2f}) |")
+                   f"{hist.time_s:.3f} | **{hist.time_s / t_mono:.3f}** | {cpu:.3f} | **{cpu / c_mono:.3f}** | "
+                   f"{build + pre + hist.time_offline_s:.1f} ({pre + hist.time_offline_s:.2f}) |")
             print(row, flush=True)
             lines.append(row)
         del step
@@ -258,7 +275,6 @@ def _continuation(s_load, M, D, factor=1e3, start=1e-9):
 def part_fronts(lines, sizes, E_high: float) -> None:
     """Contact Newton of Algorithm 1 (= the monolithic semismooth Newton from its 2nd step): active-set changes
     per step on model 3, and the step counts of other starts / globalizations on the same condensed problem."""
-    from fenics_contact.hybrid.iteration import InterfaceNewtonOptions
     from fenics_contact.hybrid.newton import CondensedInterface, contact_newton
 
     lines += [
@@ -328,6 +344,11 @@ def main() -> None:
     parser.add_argument("--speed-h", type=int, default=256)
     parser.add_argument("--speed-model", type=int, default=2)
     parser.add_argument("--models", default="1,2,3,3e6", help="models of the steps part: 1, 2, 3 (E_high 1e3), 3e6")
+    parser.add_argument("--chunk", type=int, default=InterfaceNewtonOptions().chunk,
+                        help="steps part: right-hand sides per multi-RHS back-solve of the interface responses "
+                        "(smaller: less memory for the mixed h = 1/128)")
+    parser.add_argument("--no-monolithic", action="store_true",
+                        help="steps part: skip the monolithic Newton column (the mixed one needs ~10 GB at h = 1/128)")
     parser.add_argument("--out", type=Path, default=Path("benchmarks/results/interface_newton.md"))
     args = parser.parse_args()
     logging.basicConfig(level=logging.WARNING)
@@ -335,18 +356,22 @@ def main() -> None:
              "Command: `OMP_NUM_THREADS=1 python benchmarks/interface_newton.py "
              f"--parts {args.parts} --methods {args.methods} --h-primal {args.h_primal} --h-mixed {args.h_mixed} "
              f"--factors {args.factors} --h-ms-max {args.h_ms_max} --updates-h {args.updates_h} --cap {args.cap} "
-             f"--speed-h {args.speed_h} --speed-model {args.speed_model} --models {args.models} --out {args.out}`", ""]
+             f"--speed-h {args.speed_h} --speed-model {args.speed_model} --models {args.models}"
+             f"{' --no-monolithic' if args.no_monolithic else ''} --chunk {args.chunk} --out {args.out}`", ""]
     chosen = {"1": MODELS[0], "2": MODELS[1], "3": MODELS[2], "3e6": MODELS[3]}
     try:
         models = [chosen[m] for m in args.models.split(",")]
     except KeyError as err:
         raise SystemExit(f"unknown model {err}; choose from {', '.join(chosen)}") from None
+    global NEWTON
+    NEWTON = InterfaceNewtonOptions(chunk=args.chunk)
     start = time.perf_counter()
     ints = lambda text: [int(x) for x in text.split(",")]  # noqa: E731
     for part in args.parts.split(","):
         if part == "steps":
             part_steps(lines, ints(args.h_primal), ints(args.h_mixed), [float(x) for x in args.factors.split(",")],
-                       args.big_default_only, ints(args.methods), args.h_ms_max, models)
+                       args.big_default_only, ints(args.methods), args.h_ms_max, models,
+                       monolithic=not args.no_monolithic)
         elif part == "updates":
             part_updates(lines, args.updates_h, args.cap, ints(args.methods))
         elif part == "fronts":

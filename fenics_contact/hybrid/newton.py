@@ -527,7 +527,7 @@ class CondensedInterface:
                     f"contact compliance has the eigenvalue {lowest:.2e} < 0), so its contact problem need not "
                     "have a solution: Ω₁'s interface response is not that of an elastic body at this transmission "
                     "coefficient (a multiscale Ω₁ whose approximation error the Robin coefficient amplifies). Use a "
-                    "smaller α or β (e.g. alpha='0.01*E*h^-1/2'), or more oversampling layers") from err
+                    "smaller α or β (Algorithm 3's default alpha='Emin*h^-1/2'), or more oversampling layers") from err
             raise
         g21 = g21_0 - self.Gq @ lam
         y2 = y20 + self.Yc @ g21 - self.Yq @ lam

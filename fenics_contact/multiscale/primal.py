@@ -33,7 +33,7 @@ from fenics_contact.problem.fields import material_fields
 from fenics_contact.problem.geometry import ContactMesh
 from fenics_contact.problem.models import TestModel
 from fenics_contact.fem.primal import PrimalSubproblem
-from fenics_contact.hybrid.primal import HybridResult, omega2_record, solve_or_verify
+from fenics_contact.hybrid.primal import DEFAULT_ALPHA_MS, HybridResult, omega2_record, solve_or_verify
 from fenics_contact.hybrid.transmission import InterfaceSpace, robin_coefficient, split_mesh
 
 __all__ = ["MultiscalePrimalHybridStep", "solve_primal_ms_hybrid"]
@@ -199,7 +199,7 @@ def solve_primal_ms_hybrid(
     cm: ContactMesh,
     model: TestModel,
     *,
-    alpha: float | str = "E",
+    alpha: float | str = DEFAULT_ALPHA_MS,
     delta: float,
     layers: int = 3,
     nbasis: int | None = 3,

@@ -7,12 +7,16 @@ Parts (each a table; all ratios are taken within one run, on one machine):
 
 * ``steps``: Newton steps (contact Newton + corrections on F(g)) to a transmission residual of
   1e-6 for every algorithm, models 1, 2, 3 (E_high 1e3, 1e6), H = 1/16, h = 1/32 … 1/256 (primal)
-  and 1/32 … 1/128 (mixed), α = c·E·h^-1/2 and β = c·√h for c = 1e-2, 1, 1e4 (``--h-primal``,
+  and 1/32 … 1/128 (mixed), α = c × the default (Algorithm 1 E·h^-1/2, Algorithm 3 Emin·h^-1/2) and
+  β = c·√h for c = 1e-2, 1, 1e4 (``--h-primal``,
   ``--h-mixed``, ``--factors``; the multiscale Ω₁ of Algorithms 3/4 is rebuilt for every α, β, so
   their largest h only at c = 1: ``--big-default-only``).
 * ``updates``: none / anderson / newton on every model and algorithm at h = 1/64, H = 1/16:
   converged?, applications of T, online time, final transmission residual (the CLI default is the
   update that converges everywhere fastest).
+* ``fronts``: the contact Newton of Algorithm 1 on model 3 at contrast 1e6 (h from ``--h-primal``): the
+  Γ_C nodes each step adds / removes, and the step counts of other starts (all active, nested
+  Galerkin-coarsened Γ_C levels, a path in the penalty) and of the line search at every step.
 * ``speed``: online time / monolithic semismooth Newton (Newton only, same run) for Algorithms 1 and
   3 at h = 1/256, H = 1/16, model 2 (Algorithms 2, 4: ``reproduce_mixed_ms_tables.py --tables 5.8``),
   with the offline interface response beside it.
@@ -58,13 +62,14 @@ def _strip_modulus(cm, E) -> float:
 
 
 def build_step(method: int, cm, number: int, E_high: float, factor: float = 1.0):
-    """The step of Algorithm ``method`` with α = factor·E·h^-1/2 or β = factor·√h (penalties as the CLI)."""
+    """The step of Algorithm ``method`` with α = factor × its default (Algorithm 1: E·h^-1/2, 3: Emin·h^-1/2)
+    or β = factor·√h (penalties as the CLI)."""
     model = get_model(number, E_high=E_high)
     newton = NewtonOptions(rtol=1e-6) if E_high > 1e3 else NewtonOptions()
     if method in (1, 3):
         fields = material_fields(cm.mesh, model)
         delta = default_penalty(cm.h, _strip_modulus(cm, fields.E))
-        alpha = f"{factor:g}*E*h^-1/2"
+        alpha = f"{factor:g}*E*h^-1/2" if method == 1 else f"{factor:g}*Emin*h^-1/2"  # each method's default × c
         if method == 1:
             step = PrimalHybridStep(cm, model, alpha=alpha, delta=delta, newton=newton)
             step.prepare()
@@ -110,7 +115,7 @@ def part_steps(lines, h_primal, h_mixed, factors, big_default_only, methods, h_m
         "## Newton steps to a transmission residual of 1e-6 (H = 1/16)",
         "",
         "Cell: Newton steps (contact Newton + corrections), and the final transmission residual; "
-        "α = c·E·h^-1/2 (Algorithms 1, 3), β = c·√h (Algorithms 2, 4); '—' not run.",
+        "α = c·E·h^-1/2 (Algorithm 1), c·Emin·h^-1/2 (Algorithm 3), β = c·√h (Algorithms 2, 4); '—' not run.",
         "",
         "| algorithm | model | 1/h | " + " | ".join(f"c = {c:g}" for c in factors) + " | monolithic Newton |",
         "|---|---|---|" + "---|" * len(factors) + "---|",

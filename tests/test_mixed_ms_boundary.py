@@ -111,3 +111,28 @@ def test_algorithm4_free_sides_heterogeneous_strip_against_algorithm2():
     # measured: (2.7e-4, 9.2e-5) at m = 2, (7e-11, 1e-12) at m = 3
     assert diff[2][0] < 1e-3 and diff[2][1] < 1e-3, diff
     assert diff[3][0] < 1e-8 and diff[3][1] < 1e-9, diff
+
+
+def test_cache_keeps_and_keys_the_boundary_data(tmp_path):
+    """The offline cache stores the boundary data's load (Φᵀ F) and is keyed by it: another traction is a new file;
+    the loaded data give the same trace and stresses (lifting included in the trace)."""
+    cm = _mesh(8, 4)
+    built = {}
+    for name, t in (("a", (0.2, -0.5)), ("b", (0.2, -0.6))):
+        model = models.get_model(2).with_(boundary=BoundaryConditions(displacement=_data,
+                                                                      tractions={"Gamma_N_top": t}))
+        step = MixedHybridStep(cm, model, beta="sqrt-h")
+        part = step.parts[0]
+        grid = cem.coarse_grid(part.mesh, part.cell_map, cm.coarse_cell, cm.H)
+        tf = essential_traction_facets(part.mesh, part.facet_tags)
+        oms = [mm.MixedMultiscaleOmega1(step.sub[0], grid, mm.MixedCEMOptions(layers=1), H=cm.H, cache_dir=tmp_path,
+                                        traction_free_facets=tf) for _ in range(2)]
+        assert [om.cache_status for om in oms] == ["built", "loaded"]
+        g = np.random.default_rng(3).standard_normal(oms[0].co.n_g)
+        (r0, _), (r1, _) = oms[0].solve(g), oms[1].solve(g)
+        assert np.array_equal(oms[0].response.trace(g), oms[1].response.trace(g))
+        s0, s1 = oms[0].fine_stress(r0, g), oms[1].fine_stress(r1, g)
+        assert np.abs(s0 - s1).max() < 1e-6 * np.abs(s0).max()  # patch functions stored in float32
+        built[name] = oms[0]
+    assert built["a"].cache_path != built["b"].cache_path
+    assert not np.allclose(built["a"].co.Fphi, built["b"].co.Fphi)

@@ -8,6 +8,13 @@
     Ω₂ (fine, nonlinear): as in Algorithm 2 (``fem.mixed.MixedSubproblem``, globalized semismooth Newton)
     update:  g₁₂ ← g₂₁ − 2β σ₂n₂,   g₂₁ ← g₁₂ − 2β σ₁n₁
 
+**Boundary conditions on Ω₁** (issue 14): those of the fine mixed method (``fem.mixed.boundary_stress_space``).
+Every exterior facet of Ω₁ that is not Γ_D or γ (untagged: traction free; Γ_N groups) carries the essential
+condition τn = 0 in every local stress space (``essential_traction_facets``); a traction σn = t is the lifting
+s₀ of the fine Ω₁ subproblem (σ₁ = r + Q g₁₂ + σ_f + s₀), whose effect −(A s₀, τ) − β∫_γ(s₀n)·(τn),
+−(div s₀, v) is a load, and u_D on Γ_D is the stress-side load ∫_ΓD u_D·(τn): both enter the source correctors
+(so the error still falls with m) and the coarse right-hand side.  Γ_C facets on Ω₁ are refused (InputError).
+
 The Robin data and the Ω₂ side are exactly those of ``hybrid.mixed`` (values
 of continuous P3 vector functions at the γ nodes); the step subclasses
 ``MixedHybridStep`` and replaces its Ω₁ solve by the coarse solve of

@@ -61,6 +61,13 @@ side in S·U_aux), so the error is the localization error of correctors and base
 which decays exponentially with m for any load.  In the code σ_f is one more column
 of the data: d = [g; 1] (n_g γ values, then the load).
 
+**Boundary data** (issue 14).  Tractions on Γ_N: σ = σ̂ + s₀ with the lifting s₀ (s₀n = t) of the fine
+Ω₁ subproblem and σ̂n = 0 there (``traction_free_facets``, like the traction-free sides); s₀ moves to the
+right-hand side as G ← G − (div s₀, v) and the stress-side load F = −(A s₀, τ) − β∫_γ(s₀n)·(τn); a
+prescribed u_D on Γ_D adds ∫_ΓD u_D·(τn) to F (``CellOperators.F``, ``.s0``).  F|K_i enters the τ rows of
+the source corrector's system above (the load column), Ψᵀ F the coarse right-hand side (``CoarseOperators.Fphi``),
+and the trace σ₁n₁ gets s₀'s (``_E_g``).  Without source correctors F is seen only through Ψᵀ F (a warning).
+
 **Coarse operators.**  With Φ = [Ψ | Q | σ_f] the online problem needs only small dense
 matrices, accumulated coarse cell by coarse cell from the patch functions that
 reach it: the Robin/compliance Gram ΦᵀÃΦ, the compliance Gram ΦᵀKΦ (A-norms),

@@ -41,7 +41,7 @@ import fenics_contact  # noqa: F401  (dolfinx_solver first)
 from dolfinx import fem
 from mpi4py import MPI
 
-from fenics_contact.fem.mixed import solve_mixed_monolithic
+from fenics_contact.fem.mixed import contact_modulus, solve_mixed_monolithic
 from fenics_contact.fem.primal import default_penalty, solve_primal_monolithic
 from fenics_contact.hybrid.iteration import IterationOptions
 from fenics_contact.hybrid.mixed import solve_mixed_hybrid
@@ -95,7 +95,7 @@ def _solve(method: str, cm, model, options, layers: int = 3):
     t0 = time.perf_counter()
     if method.startswith("primal") or method in ("Algorithm 1", "Algorithm 3"):
         fields = material_fields(cm.mesh, model)
-        delta = default_penalty(cm.h, float(np.max(fields.E.x.array)))
+        delta = default_penalty(cm.h, contact_modulus(cm.mesh, cm.facet_tags, fields.E))  # as force_indentation
         if method == "Algorithm 1":
             res = solve_primal_hybrid(cm, model, delta=delta, options=options)
             u, profile, its = res.u, res.profile, res.iterations

@@ -126,8 +126,10 @@ class MixedMultiscaleHybridStep(MixedHybridStep):
         offline_comm: MPI.Comm = MPI.COMM_SELF,
     ) -> None:
         _require_replicated_mesh(cm, offline_comm)
-        if cm.H is None:
-            raise InputError("Algorithm 4 needs a coarse grid: build the mesh with geometry.unit_square(n, n_coarse)")
+        if cm.H is None and not np.any(np.asarray(cm.coarse_cell) >= 0):
+            raise InputError("Algorithm 4 needs a coarse grid: build the mesh with geometry.unit_square(n, n_coarse), "
+                             "give read_mesh H or a mesh with a coarse partition, or set cm.coarse_cell (e.g. "
+                             "problem.partition.centroid_coarse_cells on an unstructured mesh)")
         start = time.perf_counter()
         super().__init__(cm, model, beta=beta, epsilon=epsilon, newton=newton)
         setup = time.perf_counter() - start
@@ -136,7 +138,7 @@ class MixedMultiscaleHybridStep(MixedHybridStep):
         self.cem = cem
         # (issue 14) the boundary conditions of the fine mixed method on Ω₁: σn = 0 (traction free) and σn = t
         # (Γ_N, homogeneous part + the lifting s₀) essential in every local space, u_D and the lifting as loads
-        self.omega1 = MixedMultiscaleOmega1(self.sub[0], grid, cem, H=cm.H, cache_dir=cache_dir, comm=offline_comm,
+        self.omega1 = MixedMultiscaleOmega1(self.sub[0], grid, cem, H=grid.H, cache_dir=cache_dir, comm=offline_comm,
                                             traction_free_facets=essential_traction_facets(part.mesh, part.facet_tags))
         self.sub[0].P = None  # the fine Ω₁ AW prolongation (1 GB at h = 1/256): omega1.ops holds its cell blocks
         co = self.omega1.co

@@ -132,3 +132,26 @@ def test_multiscale_load_steps_bad_input():
     with pytest.raises(InputError, match="step= takes"):
         force_indentation("primal-monolithic", cm, _model(), [0.01], direction=DIRECTION, step=object())
     assert "primal-ms" in indentation.METHODS and "mixed-ms" in indentation.METHODS
+
+
+def test_case_load_steps_primal_ms_reuse_the_runs_offline_phase(tmp_path, monkeypatch):
+    """``--case cases/composite.toml --method primal-ms`` (fibres E = 10³ across γ, traction on the top, bottom
+    free, a wall moved in by four steps): the curve goes through ``force_indentation`` with the run's step (the
+    Ω₁ offline phase once for the run and its four steps), every step certified, the last = the run."""
+    import json
+    from pathlib import Path
+
+    from fenics_contact.cli import main
+
+    calls = _counting(monkeypatch, primal_ms, "Omega1Multiscale")
+    out = tmp_path / "ms"
+    case = Path(__file__).parents[1] / "cases" / "composite.toml"
+    assert main(["run", "--no-plots", "--case", str(case), "--method", "primal-ms", "--layers", "3",
+                 "--tol", "1e-8", "--out", str(out)]) == 0
+    assert len(calls) == 1
+    s = json.loads((out / "summary.json").read_text())
+    steps = s["force_indentation"]["steps"]
+    assert len(steps) == 4 and all(st["converged"] and st["transmission_residual"] < 1e-8 for st in steps)
+    assert all(st["complementarity"]["penetration"] < 1e-3 for st in steps)
+    assert np.all(np.diff([st["force"] for st in steps]) > 0)
+    assert steps[-1]["normal_force"] == pytest.approx(s["contact_force"], rel=1e-6)

@@ -111,6 +111,7 @@ class IndentationCurve:
     steps: list[IndentationStep] = field(default_factory=list)
     time_offline_s: float = 0.0  #: building the solver before the first step (multiscale: the whole Ω₁ offline phase)
     step: object | None = None  #: the hybrid step (HybridStep; ``force_indentation(step=...)`` reuses it)
+    contact: object | None = None  #: the subproblem holding Γ_C (monolithic: the whole problem; hybrid: Ω₂)
 
     @property
     def depths(self) -> np.ndarray:
@@ -269,7 +270,8 @@ def force_indentation(
         step.prepare()
         contact, hybrid = step.sub[1], WarmStart(step)
 
-    curve = IndentationCurve(method, direction, time_offline_s=time.perf_counter() - start, step=step)
+    curve = IndentationCurve(method, direction, time_offline_s=time.perf_counter() - start, step=step,
+                             contact=contact)
     for depth in depths:
         start = time.perf_counter()
         contact.set_obstacle(base.indented(depth, direction))

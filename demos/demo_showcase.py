@@ -33,10 +33,12 @@
 # the previous step. The contact pressure is compared with plane-strain Hertz,
 # p(x) = p₀√(1 − x²/a²) for the same force, and with the same block made homogeneous.
 #
-# `FENICS_CONTACT_DEMO_N` sets the mesh (default 64: contact cells a/40, a few minutes;
-# the test suite runs 16: a/10); `FENICS_CONTACT_DEMO_OUT` the output directory.
+# `FENICS_CONTACT_DEMO_N` sets the mesh (default 32: contact cells a/20, about 5,000 triangles, a minute
+# or two and 1 GB; 64: a/40, 18,000 triangles, a few minutes and several GB; the test suite runs 16: a/10,
+# two load steps and fewer oversampling layers); `FENICS_CONTACT_DEMO_OUT` the output directory.
 
 # %%
+import gc
 import os
 import time
 from pathlib import Path
@@ -58,8 +60,8 @@ from fenics_contact.problem.meshes import composite_block
 from fenics_contact.problem.models import TestModel, constant_field
 from fenics_contact.problem.obstacles import Circle
 
-N = int(os.environ.get("FENICS_CONTACT_DEMO_N", "64"))
-refinement = N / 32  # contact cells a/(20 r): a/10 at N = 16, a/40 at N = 64
+N = int(os.environ.get("FENICS_CONTACT_DEMO_N", "32"))
+refinement = N / 32  # contact cells a/(20 r): a/10 at N = 16 (the tests), a/20 at N = 32, a/40 at N = 64
 out = Path(os.environ.get("FENICS_CONTACT_DEMO_OUT", "results/demo_showcase"))
 out.mkdir(parents=True, exist_ok=True)
 
@@ -105,13 +107,23 @@ METHODS = {  # label: (method, extra keywords)
     "Algorithm 4 (mixed-ms)": ("mixed-ms", {"options": options, "cem": MixedCEMOptions(layers=layers["mixed-ms"])}),
 }
 direction = (0.0, -1.0)
-curves = {}
+V = fem.functionspace(cm.mesh, ("Lagrange", 1, (2,)))
+curves, output = {}, {}  # output: the fields of the last depth, for ParaView
 for label, (method, kwargs) in METHODS.items():
     start = time.perf_counter()
-    curves[label] = force_indentation(method, cm, composite, depths, direction=direction, **kwargs)
-    c = curves[label]
+    c = curves[label] = force_indentation(method, cm, composite, depths, direction=direction, **kwargs)
     print(f"{label}: {time.perf_counter() - start:.1f} s (set-up/offline {c.time_offline_s:.1f} s)")
     print(c.table())
+    if method == "primal-monolithic":
+        output["u_primal"] = c.contact.u.copy()
+    elif method == "mixed-monolithic":
+        output["sigma_mixed"] = c.contact.sigma_function()
+    elif method == "primal-ms":
+        output["u_alg3"] = c.step.glued(V)
+    elif method == "mixed-ms":
+        output["sigma_alg4"], output["u_alg4"] = c.step.glued()
+    c.step = c.contact = None  # the solvers (factorizations, bases) are not needed any more
+    gc.collect()
 homogeneous_curve = force_indentation("primal-monolithic", cm, homogeneous, depths, direction=direction)
 
 # %% [markdown]
@@ -223,19 +235,15 @@ plot_force_indentation(as_rows, out / "force_indentation.png", comm=cm.comm)
 # monolithic stress. All at the last depth.
 
 # %%
-u_primal = curves["primal monolithic"].contact.u
-u_primal.name = "u_primal"
-u_alg3 = curves["Algorithm 3 (primal-ms)"].step.glued(u_primal.function_space)
-u_alg3.name = "u_alg3"
-V0 = fem.functionspace(cm.mesh, ("DG", 0))
-E_out = fem.Function(V0, name="E")
+for name, fn in output.items():
+    fn.name = name
+E_out = fem.Function(fem.functionspace(cm.mesh, ("DG", 0)), name="E")
 E_out.x.array[:] = fields.E.x.array
-write_fields(out / "fields.xdmf", cm.mesh, [u_primal, u_alg3, stress_field(u_primal, fields.lmbda, fields.mu),
+write_fields(out / "fields.xdmf", cm.mesh, [output["u_primal"], output["u_alg3"],
+                                            stress_field(output["u_primal"], fields.lmbda, fields.mu),
                                             E_out, cell_markers(cm.cell_tags, cm.mesh)])
-sigma4, u4 = curves["Algorithm 4 (mixed-ms)"].step.glued()
-write_vtx(out / "sigma_alg4.bp", sigma4)
-write_vtx(out / "u_alg4.bp", u4)
-write_vtx(out / "sigma_mixed.bp", curves["mixed monolithic"].contact.sigma_function())
+for name in ("sigma_alg4", "u_alg4", "sigma_mixed"):
+    write_vtx(out / f"{name}.bp", output[name])
 
 
 # %% [markdown]
@@ -243,7 +251,7 @@ write_vtx(out / "sigma_mixed.bp", curves["mixed monolithic"].contact.sigma_funct
 # midpoints; inclusions outlined): the stiff fibre under the cylinder carries the load down through γ.
 
 # %%
-panels = [("Algorithm 4", sigma4), ("mixed monolithic", curves["mixed monolithic"].contact.sigma_function())]
+panels = [("Algorithm 4", output["sigma_alg4"]), ("mixed monolithic", output["sigma_mixed"])]
 fig, axes = plt.subplots(1, 2, figsize=(11, 4.2), sharey=True)
 zoom = 8 * a
 for ax, (label, sigma) in zip(axes, panels):

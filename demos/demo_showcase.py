@@ -53,7 +53,7 @@ from fenics_contact.indentation import force_indentation
 from fenics_contact.io import cell_function_of, cell_markers, stress_field, write_fields, write_vtx
 from fenics_contact.multiscale.cem import CEMOptions
 from fenics_contact.multiscale.mixed_cem import MixedCEMOptions
-from fenics_contact.plots import gather_cells, plot_cell_field, plot_force_indentation
+from fenics_contact.plots import gather_cells, plot_force_indentation
 from fenics_contact.problem.analytic import hertz_errors
 from fenics_contact.problem.fields import material_fields
 from fenics_contact.problem.meshes import composite_block
@@ -88,7 +88,29 @@ composite = TestModel("composite", block.modulus(E_inclusion, E_matrix), constan
                       obstacle=cylinder, description="stiff inclusions (E = 1e3) in a soft matrix (E = 1)")
 homogeneous = composite.with_(youngs_modulus=constant_field(E_matrix), description="homogeneous (E = 1)")
 fields = material_fields(cm.mesh, composite)
-plot_cell_field(fields.E, out / "E.png", title="Young's modulus: stiff inclusions in a soft matrix", log=True)
+
+# %% [markdown]
+# The block, its Young's modulus and the mesh near the contact (Ω₂ above the dashed line γ; Γ_C
+# thick; the cylinder's outline at the last depth).
+
+# %%
+tri, E_cells = gather_cells(fields.E)
+fig, axes = plt.subplots(1, 2, figsize=(12, 3.6), gridspec_kw={"width_ratios": [2.2, 1]})
+for ax, zoom in zip(axes, (None, 6 * a)):
+    pc = ax.tripcolor(tri, facecolors=np.log10(np.ravel(E_cells)), cmap="viridis",
+                      edgecolors="w" if zoom else "none", linewidth=0.1)
+    ax.axhline(-block.H, color="r", ls="--", lw=0.8)
+    ax.plot([-block.contact_width, block.contact_width], [0, 0], "r-", lw=2.5)
+    half = zoom if zoom else block.half_width
+    t = np.linspace(-1.0, 1.0, 201) * np.arcsin(half / R)
+    ax.plot(R * np.sin(t), R - depths[-1] - R * np.cos(t), "k-", lw=1)
+    ax.set_xlim(-half, half)
+    ax.set_ylim(-zoom, 0.5 * zoom) if zoom else ax.set_ylim(-block.depth, 0.25 * block.depth)
+    ax.set_aspect("equal")
+axes[0].set_title(f"log10 E: soft matrix (E = {E_matrix:g}), stiff inclusions (E = {E_inclusion:g})")
+axes[1].set_title("near the contact (mesh)")
+fig.colorbar(pc, ax=axes, shrink=0.8)
+fig.savefig(out / "composite.png", dpi=130)
 
 # %% [markdown]
 # ## The load steps, method by method

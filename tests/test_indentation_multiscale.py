@@ -121,6 +121,13 @@ def test_mixed_ms_curve_converges_with_layers_offline_once(monkeypatch):
                               step=curve.step)
     assert len(calls) == 3
     assert again.forces[0] == pytest.approx(curve.forces[-1], rel=1e-8)
+    # Anderson on the same step: the Newton forces up to the tolerance; a repeated depth restarts converged
+    anderson = force_indentation("mixed-ms", cm, model, [DEPTHS[-1], DEPTHS[-1]], direction=DIRECTION,
+                                 options=IterationOptions(tol=TOL), step=curve.step)
+    assert len(calls) == 3
+    assert anderson.steps[0].force == pytest.approx(curve.forces[-1], rel=1e-6)
+    assert anderson.steps[1].iterations <= 2 < anderson.steps[0].iterations
+    assert all(s.transmission_residual < TOL for s in anderson.steps)
 
 
 def test_multiscale_load_steps_bad_input():

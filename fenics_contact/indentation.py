@@ -29,7 +29,7 @@ import logging
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 import numpy.typing as npt
@@ -40,6 +40,11 @@ from fenics_contact.hybrid.iteration import IterationOptions, iterate
 from fenics_contact.problem.geometry import ContactMesh
 from fenics_contact.problem.models import TestModel
 from fenics_contact.problem.obstacles import Obstacle
+
+if TYPE_CHECKING:  # the multiscale modules are imported when a multiscale method runs
+    from fenics_contact.hybrid.iteration import HybridStep
+    from fenics_contact.multiscale.cem import CEMOptions
+    from fenics_contact.multiscale.mixed_cem import MixedCEMOptions
 
 __all__ = [
     "METHODS", "MULTISCALE_METHODS", "Complementarity", "complementarity", "IndentationStep", "IndentationCurve",
@@ -178,9 +183,9 @@ def force_indentation(
     beta: float | str = "sqrt-h",
     options: IterationOptions = IterationOptions(),
     newton: NewtonOptions = NewtonOptions(),
-    cem=None,
+    cem: "CEMOptions | MixedCEMOptions | None" = None,
     cache_dir: str | Path | None = None,
-    step=None,
+    step: "HybridStep | None" = None,
 ) -> IndentationCurve:
     """Move ``model.obstacle`` by each depth along ``direction`` in turn; solve with warm starts.
 

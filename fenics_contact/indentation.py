@@ -105,6 +105,7 @@ class IndentationStep:
     transmission_residual: float | None = None  #: certificate of the final pair (hybrid methods)
     complementarity: Complementarity | None = None  #: of the profile, relative to the depth and peak pressure
     time_offline_s: float = 0.0  #: offline work done inside this step (the interface Newton's Ω₁ response)
+    interface_newton_steps: int = 0  #: steps of the interface Newton (``accel="newton"``), else 0
 
 
 @dataclass(slots=True)
@@ -114,7 +115,7 @@ class IndentationCurve:
     method: str
     direction: np.ndarray
     steps: list[IndentationStep] = field(default_factory=list)
-    time_offline_s: float = 0.0  #: building the solver before the first step (multiscale: the whole Ω₁ offline phase)
+    time_offline_s: float = 0.0  #: building the solver before the first step (multiscale: Ω₁'s offline phase)
     step: object | None = None  #: the hybrid step (HybridStep; ``force_indentation(step=...)`` reuses it)
     contact: object | None = None  #: the subproblem holding Γ_C (monolithic: the whole problem; hybrid: Ω₂)
 
@@ -280,7 +281,7 @@ def force_indentation(
     for depth in depths:
         start = time.perf_counter()
         contact.set_obstacle(base.indented(depth, direction))
-        residual, offline = None, 0.0
+        residual, offline, newton_steps = None, 0.0, 0
         if hybrid is None:
             history = contact.solve()
             iterations, converged = history.steps, True
@@ -288,12 +289,13 @@ def force_indentation(
             history = iterate(hybrid, options, name=f"{method} indentation")
             iterations, converged = history.iterations, history.converged
             residual, offline = history.transmission_residual, history.time_offline_s
+            newton_steps = history.newton_steps
         profile = contact.contact_profile()
         force = float(profile.resultant @ direction)
         scale = abs(float(depth)) if depth != 0 else None
         curve.steps.append(IndentationStep(
             float(depth), force, profile.force, profile.max_pressure, profile, iterations, converged,
-            time.perf_counter() - start - offline, residual, complementarity(profile, scale), offline,
+            time.perf_counter() - start - offline, residual, complementarity(profile, scale), offline, newton_steps,
         ))
         log.info("%s: depth %.4g force %.6g (normal %.6g), %d iterations, transmission residual %s, %.2f s", method,
                  depth, force, profile.force, iterations, residual, curve.steps[-1].time_s)

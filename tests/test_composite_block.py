@@ -43,9 +43,13 @@ def test_composite_block_tags_coarse_grid_and_inclusions():
     fx = cm.mesh.geometry.x
     cm.mesh.topology.create_connectivity(1, 0)
     f2v = cm.mesh.topology.connectivity(1, 0)
-    for tag, check in [(Boundary.GAMMA_C, lambda p: np.all(np.abs(p[:, 1]) < 1e-12) and np.all(np.abs(p[:, 0]) <= 3 * a + 1e-12)),
-                       (Boundary.GAMMA_D, lambda p: np.all((np.abs(np.abs(p[:, 0]) - block.half_width) < 1e-12)
-                                                          | (np.abs(p[:, 1] + block.depth) < 1e-12)))]:
+    def on_contact(p):
+        return np.all(np.abs(p[:, 1]) < 1e-12) and np.all(np.abs(p[:, 0]) <= 3 * a + 1e-12)
+
+    def on_clamped(p):
+        return np.all((np.abs(np.abs(p[:, 0]) - block.half_width) < 1e-12) | (np.abs(p[:, 1] + block.depth) < 1e-12))
+
+    for tag, check in [(Boundary.GAMMA_C, on_contact), (Boundary.GAMMA_D, on_clamped)]:
         facets = cm.facet_tags.find(tag)
         points = fx[np.concatenate([f2v.links(f) for f in facets])] if facets.size else np.zeros((0, 3))
         assert check(points)

@@ -84,6 +84,7 @@ def test_primal_ms_curve_converges_with_layers_offline_once(monkeypatch):
                                   cem=CEMOptions(layers=m))
         assert len(calls) == m, "the Ω₁ offline phase runs once per curve, not once per step"
         _check_evidence(curve, penetration=1e-4, tension=1e-10)
+        assert all(s.iterations == 1 and s.interface_newton_steps >= 1 for s in curve.steps)  # Newton, then T once
         errors.append(_relative_error(curve, fine))
         print(f"m = {m}: force error {errors[-1]:.2e}, offline {curve.time_offline_s:.2f} s, steps "
               + ", ".join(f"{s.time_s:.3f} s" for s in curve.steps))
@@ -95,6 +96,7 @@ def test_primal_ms_curve_converges_with_layers_offline_once(monkeypatch):
     assert len(calls) == 3
     assert again.steps[0].force == pytest.approx(curve.steps[-1].force, rel=1e-6)
     assert again.steps[1].iterations <= 2 < again.steps[0].iterations  # warm start at the same depth
+    assert all(s.interface_newton_steps == 0 for s in again.steps)  # Anderson
     _check_evidence(again.__class__(again.method, again.direction, again.steps[:1]), penetration=1e-4,
                     tension=1e-10)
 

@@ -482,7 +482,8 @@ def _indentation_curve(options: RunOptions, case: Case, cm: ContactMesh, model: 
     curve = force_indentation(options.method, cm, model.with_(obstacle=spec.base()), spec.depths,
                               direction=direction, options=options.iteration_options(), **penalty)
     rows = [_curve_row(s.depth, direction, s.profile, s.iterations, s.converged, s.time_s) | {
-        "transmission_residual": s.transmission_residual, "complementarity": s.complementarity._asdict()}
+        "transmission_residual": s.transmission_residual, "complementarity": s.complementarity._asdict(),
+        "interface_newton_steps": s.interface_newton_steps}
         for s in curve.steps]
     return {"direction": direction.tolist(), "steps": rows}
 

@@ -16,8 +16,8 @@
 # A block of soft matrix (E = 1) with a lattice of stiff square inclusions (E = 10³, contrast 10³)
 # is indented by a rigid cylinder of radius R = 5 in load steps (`problem.meshes.composite_block`,
 # lengths in units of a = 0.05, about the final contact half-width). The contact strip Ω₂ is the
-# top row of coarse squares (side H = 4a); the interface γ cuts a row of inclusions in two, one of
-# them right under the contact. The block is clamped on the bottom and on both sides (Γ_D, 26a from
+# top row of coarse squares (side H = 4a); the interface γ cuts a row of inclusions in two and a stiff
+# fibre right under the contact. The block is clamped on the bottom and on both sides (Γ_D, 26a from
 # the contact, so that Hertz's half-space solution still applies to a homogeneous block); the top
 # outside the contact zone is traction free.
 #
@@ -34,7 +34,7 @@
 # p(x) = p₀√(1 − x²/a²) for the same force, and with the same block made homogeneous.
 #
 # `FENICS_CONTACT_DEMO_N` sets the mesh (default 32: contact cells a/20, about 5,000 triangles, a minute
-# or two and 1 GB; 64: a/40, 18,000 triangles, a few minutes and several GB; the test suite runs 16: a/10,
+# or two and 1 GB; 64: a/40, 18,000 triangles, about 5 CPU minutes and 3 GB; the test suite runs 16: a/10,
 # two load steps and fewer oversampling layers); `FENICS_CONTACT_DEMO_OUT` the output directory.
 
 # %%

@@ -34,7 +34,7 @@
 # p(x) = p₀√(1 − x²/a²) for the same force, and with the same block made homogeneous.
 #
 # `FENICS_CONTACT_DEMO_N` sets the mesh (default 32: contact cells a/20, about 5,000 triangles, a minute
-# or two and 1 GB; 64: a/40, 18,000 triangles, about 5 CPU minutes and 3 GB; the test suite runs 16: a/10,
+# or two and 1 GB; 64: a/40, 18,000 triangles, about 4 CPU minutes and 3 GB; the test suite runs 16: a/10,
 # two load steps and fewer oversampling layers); `FENICS_CONTACT_DEMO_OUT` the output directory.
 
 # %%

@@ -159,16 +159,11 @@ def test_bad_boundary_input(tmp_path):
 
 @serial
 def test_multiscale_methods_refuse_what_their_omega1_spaces_ignore():
-    """Until the CEM spaces take them (issue 11 streams), Algorithms 3 and 4 refuse boundary data on Ω₁
-    that their multiscale spaces would silently drop (clear InputError, not a wrong answer). Algorithm 3
-    takes the tractions (tests/test_multiscale.py), not yet u_D."""
-    from fenics_contact.multiscale.mixed import solve_mixed_ms_hybrid
+    """Until the CEM space takes it, Algorithm 3 refuses u_D on Ω₁, which its multiscale space would silently
+    drop (clear InputError, not a wrong answer); it takes the tractions (tests/test_multiscale.py).
+    Algorithm 4 takes free sides, tractions and u_D (tests/test_mixed_ms_boundary.py)."""
     from fenics_contact.multiscale.primal import solve_primal_ms_hybrid
 
     cm = _mesh(8)
     with pytest.raises(InputError, match="Algorithm 3 cannot yet take a prescribed displacement on Gamma_D on Ω₁"):
         solve_primal_ms_hybrid(cm, manufactured_model(), delta=1e-4)
-    free = unit_square(8, 4, clamped=("left",))
-    with pytest.raises(InputError, match="Algorithm 4 cannot yet take traction-free sides"):
-        solve_mixed_ms_hybrid(free, TestModel("bar", constant_field(1.0), constant_field(0.0),
-                                              lambda x: np.vstack([np.ones(x.shape[1]), 0 * x[0]])))

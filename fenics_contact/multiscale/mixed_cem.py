@@ -1238,8 +1238,31 @@ def _condense(system: _CellSystem) -> tuple[np.ndarray, np.ndarray, np.ndarray, 
     return system.skel, S, c, np.ascontiguousarray(X[:, n_G:])
 
 
+def _skeleton_columns(topo: _Topology, skeleton: tuple, cells: np.ndarray, G: np.ndarray) -> sp.csr_matrix:
+    """T_Γ (|G| × n): the functions of X_h(ω) (``local_stress_space`` of the fine cells ω) on the skeleton DOFs G
+    of ω: the AW functions of the skeleton vertices and edges inside ω, the inner-boundary vertex functions
+    (null-space values z) of the skeleton vertices on ∂ω or on a traction-free side; edges there are dropped."""
+    v_in = np.bincount(topo.c2v[cells].ravel(), minlength=topo.nv)
+    e_in = np.bincount(topo.c2e[cells].ravel(), minlength=topo.ne)
+    skel_v, skel_e = skeleton
+    v_int = np.flatnonzero(skel_v & (v_in > 0) & (v_in == topo.v_deg) & ~topo.tf_vertex)
+    v_bnd = np.flatnonzero(skel_v & (v_in > 0) & ((v_in < topo.v_deg) | topo.tf_vertex))
+    e_int = np.flatnonzero(skel_e & (e_in > 0) & (e_in == topo.e_deg) & ~topo.tf_edge)
+    e_bnd = np.flatnonzero(((e_in == 1) & (topo.e_deg == 2)) | ((e_in > 0) & topo.tf_edge))
+    inner = np.concatenate([(3 * v_int[:, None] + np.arange(3)).ravel(),
+                            (3 * topo.nv + 4 * e_int[:, None] + np.arange(4)).ravel()])
+    null, extra, ncol = _boundary_vertex_null_spaces(topo, v_bnd, e_bnd, inner.size)
+    kk, qq = np.nonzero(extra >= 0)
+    rows = [np.searchsorted(G, inner)] + [np.searchsorted(G, 3 * v_bnd[kk] + i) for i in range(3)]
+    cols = [np.arange(inner.size)] + [extra[kk, qq]] * 3
+    vals = [np.ones(inner.size)] + [null[kk, i, qq] for i in range(3)]
+    rows, cols, vals = np.concatenate(rows), np.concatenate(cols), np.concatenate(vals)
+    keep = vals != 0.0
+    return sp.csr_matrix((vals[keep], (rows[keep], cols[keep])), shape=(G.size, inner.size + ncol))
+
+
 def _skeleton_solve(
-    ops: CellOperators, topo: _Topology, grid: CoarseGrid, dofs: CoarseCellDofs, skel_aw: np.ndarray, condensed: list,
+    ops: CellOperators, topo: _Topology, grid: CoarseGrid, dofs: CoarseCellDofs, skeleton: tuple, condensed: list,
     i: int, layers: int,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The patch K_{i,m} condensed onto its skeleton: (skeleton AW DOFs G, their values (|G|, k) for coarse
@@ -1251,17 +1274,9 @@ def _skeleton_solve(
     c = condensed[i][2]
     rhs = np.zeros((G.size, c.shape[1]))
     rhs[np.searchsorted(G, condensed[i][0])] = c
-    space = local_stress_space(ops, topo, np.concatenate([dofs.cells[j] for j in patch]))
-    inner = np.flatnonzero(skel_aw[space.aw_inner])
-    extra = np.flatnonzero(skel_aw[3 * space.extra_vertex])
-    n_t = inner.size + extra.size
-    if n_t == 0:
+    TG = _skeleton_columns(topo, skeleton, np.concatenate([dofs.cells[j] for j in patch]), G)
+    if TG.shape[1] == 0:
         return G, np.zeros_like(rhs)
-    rows = [np.searchsorted(G, space.aw_inner[inner])] + [np.searchsorted(G, 3 * space.extra_vertex[extra] + q)
-                                                           for q in range(3)]
-    cols = [np.arange(inner.size)] + [inner.size + np.arange(extra.size)] * 3
-    vals = [np.ones(inner.size)] + [space.extra_z[extra, q] for q in range(3)]
-    TG = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(G.size, n_t))
     rows, cols, vals = [], [], []
     for j in patch:
         pos = np.searchsorted(G, condensed[j][0])
@@ -1269,9 +1284,10 @@ def _skeleton_solve(
         cols.append(np.tile(pos, pos.size))
         vals.append(condensed[j][1].ravel())
     SG = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(G.size, G.size))
-    lu = _MumpsLU.from_csr((TG.T @ SG @ TG).tocsr())
+    TGt = TG.T.tocsr()
+    lu = _MumpsLU.from_csr(TGt @ (SG @ TG))
     try:
-        xs = lu.solve(np.asarray(TG.T @ rhs))
+        xs = lu.solve(np.asarray(TGt @ rhs))
     finally:
         lu.destroy()
     return G, np.asarray(TG @ xs)
@@ -1327,7 +1343,7 @@ def _stage_two_condensed(
     condensed = [c[:3] for c in condensed]
     cost = np.array([sum(condensed[j][0].size for j in p) for p in patches], dtype=float)
     values = _run_shared(cost ** 1.5, comm, "mixed CEM Stage II (patch skeletons)",
-                         lambda i: _skeleton_solve(ops, topo, grid, dofs, skel_aw, condensed, i, layers))
+                         lambda i: _skeleton_solve(ops, topo, grid, dofs, skeleton, condensed, i, layers))
     del condensed
     reach = [[] for _ in range(grid.size)]
     for i, p in enumerate(patches):

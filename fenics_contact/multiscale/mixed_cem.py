@@ -75,9 +75,17 @@ instead of the 30 of DG P3, ``CoarseCellDofs``) and its displacement (6 per cell
 
 **Implementation.**  A local basis is kept cell by cell (L_c = P_c T_c: the
 AW columns of the cell, combined at inner-boundary vertices), so Lᵀ Ã L and B L
-are assembled from dense cell blocks like element matrices; each patch matrix
-is factorized once by MUMPS (AMD ordering) and all its right-hand sides are
-solved together.  The Stage I cells, Stage II patches and coarse-operator cells
+are assembled from dense cell blocks like element matrices.  Stage II is solved by
+static condensation along the coarse skeleton (``_stage_two_condensed``): a patch
+system is the sum of its coarse cells' blocks, coupled only through the AW vertex
+and edge DOFs shared by two coarse cells, so each coarse cell's own unknowns (its
+inner stress functions, displacements and aux multipliers) are eliminated once
+(Schur complement S_K on its skeleton, MUMPS), each patch factorizes only
+Σ_K T_Γᵀ S_K T_Γ on its skeleton (4.7·10³ instead of 1.0·10⁵ unknowns for an interior
+patch at h = 1/128, H = 1/16, m = 3; half the flops, none of the per-patch
+assembly) and the own unknowns are recovered coarse cell by coarse cell for all
+the patches reaching it in one multi-right-hand-side solve.  The same linear
+systems as one LU per patch (``_stage_two_reference``, kept for the tests).  The Stage I cells, Stage II patches and coarse-operator cells
 can be shared out over an MPI communicator (``comm``; every rank holds the whole
 Ω₁ mesh): each is computed once, the results are broadcast and the coarse
 matrices summed.  Offline phases report progress (``fenics_contact.progress``).

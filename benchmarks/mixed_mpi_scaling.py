@@ -195,15 +195,18 @@ def main() -> None:
     base = run_job(1, 8, "baseline", args)
     baseline = max(base["peak_gib_per_rank"])
     rows = []
+    loads = [os.getloadavg()[0]]
     for n in args.sizes:
         for method in args.methods:
             for ranks in args.ranks:
                 rows.append(run_job(ranks, n, method, args))
+                loads.append(os.getloadavg()[0])
     lines = [
         "# Mixed method under MPI: strong scaling and memory",
         "",
         f"{datetime.date.today()}; {machine_description()}; wall time of this report "
-        f"{time.perf_counter() - start:.0f} s.",
+        f"{time.perf_counter() - start:.0f} s; 1-minute load average {min(loads):.1f}–{max(loads):.1f} while it ran "
+        "(above 2 the machine was shared: contended times, the ratios within one row pair say little).",
         "",
         f"Command: `{' '.join([Path(sys.executable).name, *sys.argv])}`",
         "",

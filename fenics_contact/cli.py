@@ -203,6 +203,10 @@ class RunOptions:
         for name, (methods, what) in _METHOD_OPTIONS.items():
             if getattr(self, name) is not None and self.method not in methods:
                 raise InputError(f"{_flag(name)} does not apply to --method {self.method} (it is {what})")
+        if self.coarse_groups and self.case is not None:
+            raise InputError("--coarse-groups does not apply to --case: a case file's surface groups are material "
+                             "groups; its coarse grid is the Cartesian grid of side 1/H over the bounding box "
+                             "(mesh.H in the case file)")
         if self.coarse_groups and self.mesh is None:
             raise InputError("--coarse-groups takes the coarse cells from the surface groups of --mesh: give --mesh")
         if self.mesh is not None:

@@ -223,6 +223,8 @@ CASES = [
          "--cache-dir does not apply to --method primal"),
     # case files (--case): schema, groups, boundary conditions, obstacle, run tables
     Case("case file missing", lambda tmp: ["--case", str(tmp / "none.toml")], 2, "none.toml does not exist"),
+    Case("case with --coarse-groups", _case(SQUARE, "--method", "primal-ms", "--coarse-groups"), 2,
+         "--coarse-groups does not apply to --case"),
     Case("case file not TOML", _case("[mesh\nh = 8\n"), 2, "not a valid TOML file"),
     Case("case: unknown table", _case(SQUARE + "[solver]\ntol = 1e-6\n"), 2, "unknown key or table 'solver'"),
     Case("case: unknown key", _case(SQUARE.replace("h = 8", "hh = 8")), 2, "unknown key 'mesh.hh'"),

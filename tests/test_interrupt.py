@@ -43,3 +43,30 @@ def test_interrupted_run_leaves_the_previous_results(tmp_path, signum, code):
     assert lines == [f"interrupted by {signal.Signals(signum).name}: {out} left as it was (no partial output)"], err
     assert {p.name: p.read_bytes() for p in out.iterdir()} == before
     assert sorted(p.name for p in tmp_path.iterdir()) == ["run", "stdout.txt"], "no staging directory is left"
+
+
+def test_interrupt_while_starting_up(tmp_path):
+    """Ctrl-C while the console script still imports DOLFINx: exit 130, one line, no traceback, nothing written."""
+    out = tmp_path / "run"
+    env = dict(os.environ, OMP_NUM_THREADS="1")
+    # the console script's own code path (pyproject: fenics-contact = fenics_contact.launch:main); the SIGINT
+    # arrives once the package itself is imported (the marker file), while the command line's imports run
+    marker = tmp_path / "imported"
+    code = ("import sys, pathlib, fenics_contact; pathlib.Path(sys.argv[1]).touch(); "
+            "from fenics_contact.launch import main; sys.exit(main(sys.argv[2:]))")
+    proc = subprocess.Popen([sys.executable, "-c", code, str(marker), "run", "--h", "16", "--H", "4", "--out",
+                             str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    try:
+        deadline = time.monotonic() + 120
+        while not marker.exists():
+            assert proc.poll() is None and time.monotonic() < deadline
+            time.sleep(0.01)
+        time.sleep(0.2)  # inside main(): the import of the command line (1-5 s here) is under way
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 130, err
+    assert err.strip().splitlines() == ["interrupted by SIGINT while starting up: nothing was written"], err
+    assert not out.exists()

@@ -1,6 +1,9 @@
-"""Analytic benchmarks (METHOD §9) for the fine discretizations: errors and rates per method.
+"""Analytic benchmarks (METHOD §9): errors and rates per method.
 
-Methods: the primal P1 and mixed Arnold–Winther monolithic penalty solves and Algorithms 1 and 2.
+Methods: the primal P1 and mixed Arnold–Winther monolithic penalty solves, Algorithms 1 and 2, and the
+multiscale Algorithms 3 and 4 for each number of oversampling layers m in ``--layers`` (coarse grid
+H = 1/4 on the unit square; on the Hertz block the squares of side ``--hertz-coarse`` holding the fine
+cells' centroids, ``problem.partition.centroid_coarse_cells``; the interface Newton method, Ω₁ being linear).
 Writes a markdown report. Example (about 10 min on 2 cores):
 
     OMP_NUM_THREADS=1 .venv/bin/python benchmarks/analytic_benchmarks.py \
@@ -38,7 +41,7 @@ import fenics_contact  # noqa: F401  (dolfinx_solver first)
 from dolfinx import fem
 from mpi4py import MPI
 
-from fenics_contact.fem.mixed import solve_mixed_monolithic
+from fenics_contact.fem.mixed import contact_modulus, solve_mixed_monolithic
 from fenics_contact.fem.primal import default_penalty, solve_primal_monolithic
 from fenics_contact.hybrid.iteration import IterationOptions
 from fenics_contact.hybrid.mixed import solve_mixed_hybrid
@@ -51,9 +54,28 @@ from fenics_contact.problem.analytic import (
 from fenics_contact.problem.fields import material_fields
 from fenics_contact.problem.geometry import unit_square
 from fenics_contact.problem.materials import strain, stress
+from fenics_contact.multiscale.mixed import solve_mixed_ms_hybrid
+from fenics_contact.multiscale.primal import solve_primal_ms_hybrid
 from fenics_contact.problem.meshes import hertz_block
+from fenics_contact.problem.partition import centroid_coarse_cells
 
 METHODS = ("primal monolithic", "Algorithm 1", "mixed monolithic", "Algorithm 2")
+MULTISCALE = ("Algorithm 3", "Algorithm 4")
+#: the multiscale methods iterate with the interface Newton method (Ω₁ is linear: one or two steps)
+MS_ACCEL = "newton"
+
+
+def _ms_options(options: IterationOptions) -> IterationOptions:
+    return IterationOptions(tol=options.tol, accel=MS_ACCEL, max_iterations=options.max_iterations)
+
+
+def _hertz_mesh(a: float, r: float, coarse: float | None = None):
+    """The Hertz block; with ``coarse``, coarse cells = squares of that side holding the fine cells' centroids."""
+    cm, spec = hertz_block(a, refinement=r)
+    if coarse is not None:
+        cells, _ = centroid_coarse_cells(cm.mesh, coarse)
+        cm = cm._replace(coarse_cell=cells.astype(np.int32), H=coarse)
+    return cm, spec
 
 
 def _l2(expr, msh) -> float:
@@ -67,14 +89,18 @@ def _rate(prev: float | None, cur: float) -> str:
     return f"{np.log2(prev / cur):.2f}"
 
 
-def _solve(method: str, cm, model, options):
-    """(σ as a UFL vector (xx, xy, yy), u, contact profile, iterations, time) of one method."""
+def _solve(method: str, cm, model, options, layers: int = 3):
+    """(σ as a UFL vector (xx, xy, yy), u, contact profile, iterations, time) of one method (``layers``: m of
+    Algorithms 3 and 4)."""
     t0 = time.perf_counter()
-    if method.startswith("primal") or method == "Algorithm 1":
+    if method.startswith("primal") or method in ("Algorithm 1", "Algorithm 3"):
         fields = material_fields(cm.mesh, model)
-        delta = default_penalty(cm.h, float(np.max(fields.E.x.array)))
+        delta = default_penalty(cm.h, contact_modulus(cm.mesh, cm.facet_tags, fields.E))  # as force_indentation
         if method == "Algorithm 1":
             res = solve_primal_hybrid(cm, model, delta=delta, options=options)
+            u, profile, its = res.u, res.profile, res.iterations
+        elif method == "Algorithm 3":
+            res = solve_primal_ms_hybrid(cm, model, delta=delta, layers=layers, options=_ms_options(options))
             u, profile, its = res.u, res.profile, res.iterations
         else:
             ref = solve_primal_monolithic(cm.mesh, cm.facet_tags, fields, delta=delta)
@@ -84,35 +110,50 @@ def _solve(method: str, cm, model, options):
     if method == "Algorithm 2":
         res = solve_mixed_hybrid(cm, model, options=options)
         return res.sigma, res.u, res.profile, res.iterations, time.perf_counter() - t0
+    if method == "Algorithm 4":
+        res = solve_mixed_ms_hybrid(cm, model, layers=layers, options=_ms_options(options))
+        return res.sigma, res.u, res.profile, res.iterations, time.perf_counter() - t0
     ref = solve_mixed_monolithic(cm, model)
     return ref.sigma, ref.u, ref.profile, ref.newton.steps, time.perf_counter() - t0
 
 
-def bar_section(sizes: list[int], options) -> list[str]:
+def _runs(methods, layers):
+    """(method, label, m) for the fine methods and for Algorithms 3 and 4 with each m in ``layers``."""
+    out = []
+    for method in methods:
+        if method in MULTISCALE:
+            out += [(method, f"{method} (m = {m})", m) for m in layers]
+        else:
+            out.append((method, method, 3))
+    return out
+
+
+def bar_section(sizes: list[int], options, layers=(), ms_sizes=()) -> list[str]:
     lines = ["## 1. The bar (clamped at x = 0 only; top and bottom traction free)", "",
+             "Algorithms 3 and 4: coarse grid H = 1/4 (3 × 4 coarse cells in Ω₁; m = 3 covers Ω₁).", "",
              "| method | case | 1/h | e_u | rate | e_σ | rate | e_F | iterations | time [s] |",
              "|---|---|---|---|---|---|---|---|---|---|"]
-    for method in METHODS:
+    for method, label, m in _runs(METHODS + MULTISCALE, layers):
         for f1, case in ((1.0, "push"), (-1.0, "pull")):
             prev_u = prev_s = None
             exact = bar_solution(f1)
-            for n in sizes:
+            for n in (ms_sizes if method in MULTISCALE else sizes):
                 cm = unit_square(n, 4, clamped=("left",))
-                sigma, u, profile, its, elapsed = _solve(method, cm, bar_model(f1), options)
+                sigma, u, profile, its, elapsed = _solve(method, cm, bar_model(f1), options, m)
                 X = ufl.SpatialCoordinate(cm.mesh)
                 s_ex = ufl.as_vector([exact.sigma_xx(X), 0.0, 0.0])
                 u_ex = ufl.as_vector([exact.u_x(X), 0.0])
                 e_u = _l2(u - u_ex, cm.mesh) / _l2(u_ex, cm.mesh)
                 e_s = _l2(sigma - s_ex, cm.mesh) / _l2(s_ex, cm.mesh)
                 e_F = abs(profile.force + exact.sigma_end) / abs(f1)
-                lines.append(f"| {method} | {case} | {n} | {e_u:.2e} | {_rate(prev_u, e_u)} | {e_s:.2e} | "
+                lines.append(f"| {label} | {case} | {n} | {e_u:.2e} | {_rate(prev_u, e_u)} | {e_s:.2e} | "
                              f"{_rate(prev_s, e_s)} | {e_F:.1e} | {its} | {elapsed:.2f} |")
                 prev_u, prev_s = e_u, e_s
                 print(lines[-1], flush=True)
     return lines + [""]
 
 
-def patch_section(n: int, options) -> list[str]:
+def patch_section(n: int, options, layers=()) -> list[str]:
     bounds, moduli = [0.0, 6 / 16, 13 / 16, 1.0], [1.0, 1e3, 10.0]
     depths = [0.01, 0.02, 0.03]
     lines = [f"## 2. Layered patch test (E = {moduli}, layers at x = 6/16, 13/16, γ at x = 3/4; 1/h = {n})", "",
@@ -132,25 +173,36 @@ def patch_section(n: int, options) -> list[str]:
                          f"{np.max(np.abs(-step.profile.sigma_c / p - 1)):.1e} | {step.iterations} | "
                          f"{step.time_s:.2f} |")
             print(lines[-1], flush=True)
+    # the multiscale methods: one solve per depth (coarse grid H = 1/4; m = 3 covers Ω₁)
+    for method, label, m in _runs(MULTISCALE, layers):
+        for d in depths:
+            _, _, profile, its, elapsed = _solve(method, cm, layered_model(bounds, moduli, depth=d), options, m)
+            delta = default_penalty(cm.h, moduli[-1]) if method == "Algorithm 3" else 0.0
+            p = layered_pressure(bounds, moduli, d, delta=delta)
+            lines.append(f"| {label} | {d:g} | {profile.force:.10f} | {abs(profile.force / p - 1):.1e} | "
+                         f"{np.max(np.abs(-profile.sigma_c / p - 1)):.1e} | {its} | {elapsed:.2f} |")
+            print(lines[-1], flush=True)
     return lines + [""]
 
 
-def hertz_section(refinements: list[float], mixed_max: float, options) -> list[str]:
+def hertz_section(refinements: list[float], mixed_max: float, options, layers=(), ms_refinements=(),
+                  coarse: float = 0.5) -> list[str]:
     a, R, E, nu, d0 = 0.05, 5.0, 1.0, 0.3, 1.2e-3
     lines = ["## 3. Plane-strain Hertz (R = 5, E = 1, ν = 0.3, d₀ = 1.2e-3, block 80a × 40a, a ≈ 0.053)", "",
+             f"Algorithms 3 and 4: coarse cells = the squares of side {coarse:g} holding the fine cells' centroids.", "",
              "| method | r | cells | a/h | F | (a_h − a)/h | p_max/p₀ − 1 | L² error | rate | iterations | time [s] |",
              "|---|---|---|---|---|---|---|---|---|---|---|"]
-    for method in METHODS:
+    for method, label, m in _runs(METHODS + MULTISCALE, layers):
         prev = None
-        for r in refinements:
-            if "mixed" in method.lower() or method == "Algorithm 2":
+        for r in (ms_refinements if method in MULTISCALE else refinements):
+            if "mixed" in method.lower() or method in ("Algorithm 2", "Algorithm 4"):
                 if r > mixed_max:
                     continue
-            cm, spec = hertz_block(a, refinement=r)
-            _, _, profile, its, elapsed = _solve(method, cm, hertz_model(radius=R, E=E, nu=nu, depth=d0), options)
+            cm, spec = _hertz_mesh(a, r, coarse if method in MULTISCALE else None)
+            _, _, profile, its, elapsed = _solve(method, cm, hertz_model(radius=R, E=E, nu=nu, depth=d0), options, m)
             e = hertz_errors(profile, radius=R, E=E, nu=nu, h_contact=spec.h_contact)
             cells = cm.mesh.topology.index_map(2).size_local
-            lines.append(f"| {method} | {r:g} | {cells} | {e.a / spec.h_contact:.1f} | {e.force:.5e} | "
+            lines.append(f"| {label} | {r:g} | {cells} | {e.a / spec.h_contact:.1f} | {e.force:.5e} | "
                          f"{e.half_width_cells:+.2f} | {e.peak_error:+.2%} | {e.l2_error:.2%} | "
                          f"{_rate(prev, e.l2_error)} | {its} | {elapsed:.2f} |")
             prev = e.l2_error
@@ -229,20 +281,28 @@ def main(argv=None) -> None:
                         help="which sections to run (5: the Hertz edge-position sweep, not in the default)")
     parser.add_argument("--indentation-steps", type=int, default=4, help="load steps of section 4")
     parser.add_argument("--indentation-refinement", type=float, default=1.0)
-    parser.add_argument("--tol", type=float, default=1e-8, help="relative-change tolerance of Algorithms 1 and 2")
+    parser.add_argument("--tol", type=float, default=1e-8, help="tolerance of Algorithms 1–4 (transmission residual)")
+    parser.add_argument("--layers", type=int, nargs="*", default=[1, 2, 3],
+                        help="oversampling layers m of Algorithms 3 and 4 (none: skip them)")
+    parser.add_argument("--ms-bar-sizes", type=int, nargs="+", default=[16, 32], help="1/h of the bar, Algorithms 3, 4")
+    parser.add_argument("--ms-hertz-refinements", type=float, nargs="+", default=[0.5, 1.0],
+                        help="Hertz refinements of Algorithms 3 and 4")
+    parser.add_argument("--hertz-coarse", type=float, default=0.5, help="coarse-cell side on the Hertz block")
     parser.add_argument("--out", type=Path, default=Path("benchmarks/results/analytic.md"))
     args = parser.parse_args(argv)
     options = IterationOptions(tol=args.tol)
     start = time.perf_counter()
-    lines = ["# Analytic benchmarks of the fine discretizations", "",
+    lines = ["# Analytic benchmarks (fine discretizations and the multiscale Algorithms 3 and 4)", "",
              f"{datetime.date.today()}; {machine_description()}", "",
              "Command: `" + " ".join(["python", *sys.argv]) + "`", "",
-             f"Algorithms 1 and 2 run to the relative-change tolerance {args.tol:g} (Anderson update); "
-             "the penalties are the defaults δ = 1e-3·h/E_c, ε = 1e-3·h·E_c.", ""]
+             f"Algorithms 1 and 2 run to the tolerance {args.tol:g} (Anderson update), Algorithms 3 and 4 to the "
+             f"same with the interface Newton method; the penalties are the defaults δ = 1e-3·h/E_c, ε = 1e-3·h·E_c.",
+             ""]
     sections = {
-        1: lambda: bar_section(args.bar_sizes, options),
-        2: lambda: patch_section(args.patch_size, options),
-        3: lambda: hertz_section(args.hertz_refinements, args.hertz_mixed_max, options),
+        1: lambda: bar_section(args.bar_sizes, options, args.layers, args.ms_bar_sizes),
+        2: lambda: patch_section(args.patch_size, options, args.layers),
+        3: lambda: hertz_section(args.hertz_refinements, args.hertz_mixed_max, options, args.layers,
+                                 args.ms_hertz_refinements, args.hertz_coarse),
         4: lambda: indentation_section(args.indentation_refinement, args.indentation_steps, options),
         5: lambda: edge_sweep_section(args.hertz_refinements, args.hertz_mixed_max),
     }

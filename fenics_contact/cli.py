@@ -29,7 +29,7 @@ import time
 import typing
 from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import NamedTuple
 
@@ -461,38 +461,30 @@ def _curve_row(depth: float, direction: np.ndarray, profile, iterations: int, co
             "iterations": int(iterations), "converged": bool(converged), "time_s": time_s}
 
 
-def _indentation_curve(options: RunOptions, case: Case, cm: ContactMesh, model: TestModel, outcome,
-                       family: Callable) -> dict:
-    """The force-indentation curve of the case's load steps (the last step is the run's solve).
+def _indentation_curve(options: RunOptions, case: Case, cm: ContactMesh, model: TestModel, outcome) -> dict:
+    """The force-indentation curve of the case's load steps (the last step is the run's depth).
 
     primal, mixed: ``indentation.force_indentation`` (warm starts, factorizations kept) with the
-    run's penalty and transmission coefficient; the multiscale methods: one solve per step
-    (the offline data reused through --cache-dir when given).
+    run's penalty and transmission coefficient; primal-ms, mixed-ms: the same with the run's hybrid
+    step, so the Ω₁ offline phase of the run serves every step.
     """
     from fenics_contact.indentation import force_indentation
 
     spec = case.obstacle
     direction = np.asarray(spec.direction)
-    rows = []
     if options.method in ("primal", "mixed"):
         if options.method == "primal":
             penalty = {"delta": outcome.summary["delta"], "alpha": options.value("alpha")}
         else:
             penalty = {"epsilon": outcome.summary["epsilon"], "beta": options.value("beta")}
-        curve = force_indentation(options.method, cm, model.with_(obstacle=spec.base()), spec.depths,
-                                  direction=direction, options=options.iteration_options(), **penalty)
-        rows = [_curve_row(s.depth, direction, s.profile, s.iterations, s.converged, s.time_s) for s in curve.steps]
-    else:
-        step_options = replace(options, reference=False, plots=False)
-        for depth in spec.depths[:-1]:
-            start = time.perf_counter()
-            stepped = model.with_(obstacle=spec.at(depth))
-            result = family(step_options, cm, stepped, material_fields(cm.mesh, stepped)).result
-            rows.append(_curve_row(depth, direction, result.profile, result.iterations, result.converged,
-                                   time.perf_counter() - start))
-        final = outcome.result
-        rows.append(_curve_row(spec.depths[-1], direction, final.profile, final.iterations, final.converged,
-                               final.time_offline_s + final.time_online_s))
+    else:  # the run's step: its Ω₁ offline data, penalty and coefficients
+        penalty = {"step": outcome.result.step}
+    curve = force_indentation(options.method, cm, model.with_(obstacle=spec.base()), spec.depths,
+                              direction=direction, options=options.iteration_options(), **penalty)
+    rows = [_curve_row(s.depth, direction, s.profile, s.iterations, s.converged, s.time_s) | {
+        "transmission_residual": s.transmission_residual, "complementarity": s.complementarity._asdict(),
+        "interface_newton_steps": s.interface_newton_steps}
+        for s in curve.steps]
     return {"direction": direction.tolist(), "steps": rows}
 
 
@@ -761,7 +753,7 @@ def _solve_and_write(options: RunOptions, comm: MPI.Comm, model: TestModel | Non
         outcome = _run_mixed(options, cm, model, fields, comm if replicated else MPI.COMM_SELF)
     result, reference = outcome.result, outcome.reference
     profile = result.profile
-    curve = _indentation_curve(options, case, cm, model, outcome, family) if case and case.obstacle.steps else None
+    curve = _indentation_curve(options, case, cm, model, outcome) if case and case.obstacle.steps else None
     summary = {
         "method": options.method,
         "model": options.model if case is None else None,

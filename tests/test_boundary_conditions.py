@@ -158,17 +158,30 @@ def test_bad_boundary_input(tmp_path):
 
 
 @serial
-def test_multiscale_methods_refuse_what_their_omega1_spaces_ignore():
-    """Until the CEM spaces take them (issue 11 streams), Algorithms 3 and 4 refuse boundary data on Ω₁
-    that their multiscale spaces would silently drop (clear InputError, not a wrong answer). Algorithm 3
-    takes the tractions (tests/test_multiscale.py), not yet u_D."""
-    from fenics_contact.multiscale.mixed import solve_mixed_ms_hybrid
+def test_algorithm_3_takes_a_prescribed_displacement():
+    """Algorithm 3 with u_D on Ω₁'s Γ_D (its lifting u_g, issue 14), the tractions and the curved gap of the
+    manufactured problem (whole Γ_C in contact): the error against Algorithm 1's fixed point falls with the
+    oversampling m, and with patches covering Ω₁ (m = 3 on a 3 × 4 coarse Ω₁) it is that fixed point to the
+    CEM's round-off; without the lifting (clamped instead) the answer is a different problem."""
     from fenics_contact.multiscale.primal import solve_primal_ms_hybrid
 
-    cm = _mesh(8)
-    with pytest.raises(InputError, match="Algorithm 3 cannot yet take a prescribed displacement on Gamma_D on Ω₁"):
-        solve_primal_ms_hybrid(cm, manufactured_model(), delta=1e-4)
-    free = unit_square(8, 4, clamped=("left",))
-    with pytest.raises(InputError, match="Algorithm 4 cannot yet take traction-free sides"):
-        solve_mixed_ms_hybrid(free, TestModel("bar", constant_field(1.0), constant_field(0.0),
-                                              lambda x: np.vstack([np.ones(x.shape[1]), 0 * x[0]])))
+    cm = _mesh(16)
+    model = manufactured_model()
+    delta = default_penalty(cm.h, E)
+    fields = material_fields(cm.mesh, model)
+    mono = solve_primal_monolithic(cm.mesh, cm.facet_tags, fields, delta=delta)
+    options = IterationOptions(tol=1e-10, accel="newton")
+    alg1 = solve_primal_hybrid(cm, model, delta=delta, reference=mono.u, options=options)
+    assert alg1.converged and alg1.e_u < 1e-8
+    errors = []
+    for m in (1, 2, 3):
+        res = solve_primal_ms_hybrid(cm, model, delta=delta, layers=m, nbasis=3, reference=mono.u, options=options)
+        assert res.converged
+        errors.append(res.e_u)
+    print("Algorithm 3 with u_D, e_u for m = 1, 2, 3:", errors)
+    assert errors[2] < 1e-6 and errors[1] < errors[0] / 5 and errors[2] < errors[1] / 5, errors
+    exact = _l2(_exact_u(cm.mesh), cm.mesh)
+    assert _l2(mono.u - _exact_u(cm.mesh), cm.mesh) / exact < 2e-3
+    clamped = solve_primal_ms_hybrid(cm, model.with_(boundary=BoundaryConditions(tractions=dict(
+        model.boundary.tractions))), delta=delta, layers=3, nbasis=3, reference=mono.u, options=options)
+    assert clamped.e_u > 1e-2  # u_D matters: dropping it is not a small error

@@ -31,3 +31,7 @@ def test_demo_runs(demo, tmp_path):
                           timeout=900)
     assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-4000:]
     assert any(tmp_path.glob("*.png")), "a demo writes its figures"
+    if demo.stem == "demo_showcase":  # the fields for ParaView and the table of all methods
+        assert (tmp_path / "fields.xdmf").is_file() and (tmp_path / "sigma_alg4.bp").is_dir()
+        table = (tmp_path / "showcase.md").read_text()
+        assert all(f"Algorithm {k}" in table for k in (1, 2, 3, 4)) and "monolithic" in table

@@ -517,13 +517,14 @@ class MixedSubproblem:
             gamma = facet_tags.find(Boundary.INTERFACE)
             if self.comm.allreduce(int(gamma.size), op=MPI.SUM) == 0:
                 raise InputError("a Robin subproblem needs interface (γ) facets")
-            if operators:
+            if operators or self._lifted:
                 R_dg = _assemble_petsc(forms_mixed.robin_form(s, t, n, 1.0, ds(Boundary.INTERFACE)))
-                self._R = DistributedMatrix(_without_product_data(R_dg.PtAP(P_petsc)))
-                Kt = self._K.mat.duplicate(copy=True)
-                Kt.axpy(beta, self._R.mat, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
-                self._Kt = DistributedMatrix(Kt)
-                if self._lifted:
+                if operators:
+                    self._R = DistributedMatrix(_without_product_data(R_dg.PtAP(P_petsc)))
+                    Kt = self._K.mat.duplicate(copy=True)
+                    Kt.axpy(beta, self._R.mat, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
+                    self._Kt = DistributedMatrix(Kt)
+                if self._lifted:  # (also without operators: Algorithm 4's Ω₁ reads s0, G and n0)
                     y = R_dg.createVecLeft()
                     x = R_dg.createVecRight()
                     x.array[:] = self.s0
@@ -532,8 +533,6 @@ class MixedSubproblem:
                     x.destroy()
                     y.destroy()
                 R_dg.destroy()
-            elif self._lifted:
-                raise InputError("a subproblem without its global operators (Algorithm 4's Ω₁) takes no traction data")
             self._setup_interface(gamma, ds, t, n, interface_points)
 
         # -- contact quadrature and obstacle ----------------------------------------------

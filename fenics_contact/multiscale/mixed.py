@@ -8,6 +8,13 @@
     Ω₂ (fine, nonlinear): as in Algorithm 2 (``fem.mixed.MixedSubproblem``, globalized semismooth Newton)
     update:  g₁₂ ← g₂₁ − 2β σ₂n₂,   g₂₁ ← g₁₂ − 2β σ₁n₁
 
+**Boundary conditions on Ω₁** (issue 14): those of the fine mixed method (``fem.mixed.boundary_stress_space``).
+Every exterior facet of Ω₁ that is not Γ_D or γ (untagged: traction free; Γ_N groups) carries the essential
+condition τn = 0 in every local stress space (``essential_traction_facets``); a traction σn = t is the lifting
+s₀ of the fine Ω₁ subproblem (σ₁ = r + Q g₁₂ + σ_f + s₀), whose effect −(A s₀, τ) − β∫_γ(s₀n)·(τn),
+−(div s₀, v) is a load, and u_D on Γ_D is the stress-side load ∫_ΓD u_D·(τn): both enter the source correctors
+(so the error still falls with m) and the coarse right-hand side.  Γ_C facets on Ω₁ are refused (InputError).
+
 The Robin data and the Ω₂ side are exactly those of ``hybrid.mixed`` (values
 of continuous P3 vector functions at the γ nodes); the step subclasses
 ``MixedHybridStep`` and replaces its Ω₁ solve by the coarse solve of
@@ -42,6 +49,7 @@ from pathlib import Path
 import numpy as np
 import ufl
 from dolfinx import fem
+from dolfinx import mesh as dmesh
 from mpi4py import MPI
 
 from fenics_contact.fem import forms_mixed
@@ -56,7 +64,7 @@ from fenics_contact.hybrid.iteration import (
     iterate,
 )
 from fenics_contact.errors import InputError
-from fenics_contact.problem.boundary import boundary_data_on
+from fenics_contact.problem.tags import Boundary
 from fenics_contact.problem.geometry import ContactMesh
 from fenics_contact.fem.mixed import MixedContactProfile, MixedSolution
 from fenics_contact.hybrid.mixed import MixedHybridStep, solve_or_verify
@@ -73,6 +81,20 @@ from fenics_contact.multiscale.cem import DEFAULT_S_FACTOR, coarse_grid
 __all__ = ["MixedMsResult", "MixedMultiscaleHybridStep", "solve_mixed_ms_hybrid"]
 
 log = logging.getLogger(__name__)
+
+
+def essential_traction_facets(msh, facet_tags) -> np.ndarray:
+    """Facets of Ω₁ where the stress space imposes τn = 0: every exterior facet that is not Γ_D or γ (the untagged,
+    traction-free sides and the Γ_N groups; as ``fem.mixed.boundary_stress_space``).  Γ_C on Ω₁ is refused: the local
+    spaces impose τn = 0 or nothing, not τn·t = 0 alone."""
+    tdim = msh.topology.dim
+    msh.topology.create_connectivity(tdim - 1, tdim)
+    if facet_tags.find(Boundary.GAMMA_C).size:
+        raise InputError("Algorithm 4 needs Γ_C inside Ω₂ (the fine strip): Ω₁ has Gamma_C facets; move γ so that the "
+                         "contact boundary lies in Ω₂, or use Algorithm 2")
+    exterior = dmesh.exterior_facet_indices(msh.topology)
+    natural = np.concatenate([facet_tags.find(Boundary.GAMMA_D), facet_tags.find(Boundary.INTERFACE)])
+    return np.setdiff1d(exterior, natural).astype(np.int64)
 
 
 def _require_replicated_mesh(cm: ContactMesh, offline_comm: MPI.Comm) -> None:
@@ -104,22 +126,20 @@ class MixedMultiscaleHybridStep(MixedHybridStep):
         offline_comm: MPI.Comm = MPI.COMM_SELF,
     ) -> None:
         _require_replicated_mesh(cm, offline_comm)
-        if cm.H is None:
-            raise InputError("Algorithm 4 needs a coarse grid: build the mesh with geometry.unit_square(n, n_coarse)")
+        if cm.H is None and not np.any(np.asarray(cm.coarse_cell) >= 0):
+            raise InputError("Algorithm 4 needs a coarse grid: build the mesh with geometry.unit_square(n, n_coarse), "
+                             "give read_mesh H or a mesh with a coarse partition, or set cm.coarse_cell (e.g. "
+                             "problem.partition.centroid_coarse_cells on an unstructured mesh)")
         start = time.perf_counter()
         super().__init__(cm, model, beta=beta, epsilon=epsilon, newton=newton)
         setup = time.perf_counter() - start
         part = self.parts[0]
-        # (issue 14) the Ω₁ local AW spaces do not yet impose σn = 0 / σn = t nor take u_D
-        unsupported = boundary_data_on(part.mesh, part.facet_tags, model.boundary, traction_free=True)
-        if unsupported:
-            raise InputError(
-                f"Algorithm 4 cannot yet take {' and '.join(unsupported)} on Ω₁ (its local stress spaces would "
-                "clamp them); use the fine Algorithm 2 (method 'mixed') or clamp those sides (Gamma_D)"
-            )
         grid = coarse_grid(part.mesh, part.cell_map, cm.coarse_cell, cm.H)
         self.cem = cem
-        self.omega1 = MixedMultiscaleOmega1(self.sub[0], grid, cem, H=cm.H, cache_dir=cache_dir, comm=offline_comm)
+        # (issue 14) the boundary conditions of the fine mixed method on Ω₁: σn = 0 (traction free) and σn = t
+        # (Γ_N, homogeneous part + the lifting s₀) essential in every local space, u_D and the lifting as loads
+        self.omega1 = MixedMultiscaleOmega1(self.sub[0], grid, cem, H=grid.H, cache_dir=cache_dir, comm=offline_comm,
+                                            traction_free_facets=essential_traction_facets(part.mesh, part.facet_tags))
         self.sub[0].P = None  # the fine Ω₁ AW prolongation (1 GB at h = 1/256): omega1.ops holds its cell blocks
         co = self.omega1.co
         if co.n_g != self.size:
@@ -232,11 +252,13 @@ class MixedMultiscaleHybridStep(MixedHybridStep):
 
     # -- output ----------------------------------------------------------------------------
     def part_values(self) -> list[tuple[np.ndarray, np.ndarray]]:
-        """The multiscale σ₁, u₁ = Π w + N g on Ω₁ and the fine σ₂, u₂ on Ω₂ (sub numbering)."""
+        """The multiscale σ₁ (with the traction lifting), u₁ = Π w + N g on Ω₁ and the fine σ₂, u₂ on Ω₂ (sub numbering)."""
         ops = self.omega1.ops
         s1, u1 = self.fine_omega1()
         sig_sub = np.zeros(3 * self.sub[0].dg.dofmap.index_map.size_local)
         sig_sub[ops.dg_rows.ravel()] = s1.ravel()
+        if self.omega1.lifting is not None:  # the traction lifting s₀ (σ₁ = homogeneous part + s₀)
+            sig_sub[ops.dg_rows.ravel()] += self.omega1.lifting.ravel()
         u_sub = np.zeros(self.sub[0].n_u)
         u_sub[ops.u_rows.ravel()] = u1.ravel()
         return [(sig_sub, u_sub), (self.sub[1].sigma_function().x.array, self.sub[1].u)]

@@ -61,6 +61,13 @@ side in S·U_aux), so the error is the localization error of correctors and base
 which decays exponentially with m for any load.  In the code σ_f is one more column
 of the data: d = [g; 1] (n_g γ values, then the load).
 
+**Boundary data** (issue 14).  Tractions on Γ_N: σ = σ̂ + s₀ with the lifting s₀ (s₀n = t) of the fine
+Ω₁ subproblem and σ̂n = 0 there (``traction_free_facets``, like the traction-free sides); s₀ moves to the
+right-hand side as G ← G − (div s₀, v) and the stress-side load F = −(A s₀, τ) − β∫_γ(s₀n)·(τn); a
+prescribed u_D on Γ_D adds ∫_ΓD u_D·(τn) to F (``CellOperators.F``, ``.s0``).  F|K_i enters the τ rows of
+the source corrector's system above (the load column), Ψᵀ F the coarse right-hand side (``CoarseOperators.Fphi``),
+and the trace σ₁n₁ gets s₀'s (``_E_g``).  Without source correctors F is seen only through Ψᵀ F (a warning).
+
 **Coarse operators.**  With Φ = [Ψ | Q | σ_f] the online problem needs only small dense
 matrices, accumulated coarse cell by coarse cell from the patch functions that
 reach it: the Robin/compliance Gram ΦᵀÃΦ, the compliance Gram ΦᵀKΦ (A-norms),
@@ -177,7 +184,7 @@ DEFAULT_MIN_GAP = 0.1
 DEFAULT_MAX_NBASIS = 32
 
 #: Bumped whenever the layout or meaning of the cached mixed offline arrays changes.
-MIXED_CACHE_FORMAT = 3
+MIXED_CACHE_FORMAT = 4  # 4: Fphi (issue 14: the boundary data's stress-side load)
 
 
 @dataclass(frozen=True, slots=True)
@@ -300,6 +307,16 @@ class CellOperators:
     gamma_cells: np.ndarray  #: sorted cells with a γ facet
     P_cols: np.ndarray  #: (n, w) AW indices of the nonzero columns of P in the rows of each cell (sorted, −1 pads)
     P_blocks: np.ndarray  #: (n, 30, w) those columns of P: P[rows of c][:, P_cols[c]]
+    #: (n, 30) stress-side load of the boundary data (issue 14), a functional on DG P3 stresses:
+    #: −(A s₀, τ) − β∫_γ (s₀n)·(τn) + ∫_ΓD u_D·(τn); None (zero) without tractions and u_D
+    F: np.ndarray | None = None
+    #: (n, 30) the traction lifting s₀ (σ₁ = homogeneous part + s₀, s₀n = t on Γ_N); None without tractions
+    s0: np.ndarray | None = None
+
+    @property
+    def has_boundary_data(self) -> bool:
+        """Whether tractions or a prescribed displacement act on Ω₁ (a stress-side load F or a lifting s₀)."""
+        return self.F is not None or self.s0 is not None
 
     @property
     def num_cells(self) -> int:
@@ -402,6 +419,7 @@ def cell_operators(sub, H: float, weight: str = "lambda+2mu", s_factor: float = 
     Gv = fem.assemble_vector(fem.form(forms_mixed.load_form(fields.f, v)))
     Gv.scatter_reverse(dolfinx.la.InsertMode.add)
     G = Gv.array[u_rows]
+    F, s0 = _boundary_loads(sub, dg_rows, t, n, ds)
     # interface data: continuous vector P3 on γ, nodes ordered as sub.gamma_points
     Lam = fem.functionspace(msh, basix.ufl.element("Lagrange", msh.basix_cell(), 3, shape=(2,)))
     blocks = fem.locate_dofs_topological(Lam, tdim - 1, gamma)
@@ -419,8 +437,31 @@ def cell_operators(sub, H: float, weight: str = "lambda+2mu", s_factor: float = 
     if P.shape[1] != num_full:  # a constrained space (τn = 0 sides): the local spaces start from the full one
         P = ArnoldWintherSpace(msh).prolongation
     P_cols, P_blocks = _column_blocks(P[dg_rows.ravel()], ncell, 30)
+    if s0 is not None:  # the lifting is a load: (div σ̂, v) = −(f, v) − (div s₀, v), σ = σ̂ + s₀
+        G = G - np.einsum("cab,cb->ca", B, s0)
+        lift = -np.einsum("cab,cb->ca", K, s0)
+        lift[gamma_cells] -= sub.beta * np.einsum("cab,cb->ca", R, s0[gamma_cells])
+        F = lift if F is None else F + lift
     return CellOperators(K, sub.beta * R, B, M, S, G, C, E, int(P.shape[1]), dg_rows, u_rows, gamma_cells,
-                         P_cols, P_blocks)
+                         P_cols, P_blocks, F, s0)
+
+
+def _boundary_loads(sub, dg_rows: np.ndarray, t, n, ds) -> tuple:
+    """(∫_ΓD u_D·(τn) as a cell-major (n, 30) functional or None, the lifting s₀ cell-major or None).
+
+    The boundary data of the Ω₁ ``MixedSubproblem`` ``sub`` (issue 14): its traction lifting ``sub.s0``
+    (DG P3; σn = t on Γ_N) and its prescribed displacement ``sub.u_D`` (P3 on Γ_D).  Traction-free
+    and traction sides are essential in the local spaces (``_Topology(traction_free_facets=)``).
+    """
+    s0 = None
+    if getattr(sub, "_lifted", False):
+        s0 = np.ascontiguousarray(sub.s0[dg_rows])
+    F = None
+    if getattr(sub, "u_D", None) is not None:
+        Fv = fem.assemble_vector(fem.form(forms_mixed.robin_data_form(sub.u_D, t, n, ds(Boundary.GAMMA_D))))
+        Fv.scatter_reverse(dolfinx.la.InsertMode.add)
+        F = np.ascontiguousarray(Fv.array[dg_rows])
+    return F, s0
 
 
 # ---------------------------------------------------------------------------------------
@@ -1115,7 +1156,7 @@ def _patch_functions(
         # Robin data on γ ∩ ∂K_i: C_i g in the τ rows, mapped to the local basis through the AW coefficients
         Ci = ops.C[_rows(ci, 30)]
         gcols = np.unique(Ci.indices)
-        load = source and bool(np.any(ops.G[ci] != 0.0))
+        load = source and bool(np.any(ops.G[ci] != 0.0) or (ops.F is not None and np.any(ops.F[ci] != 0.0)))
         nd = gcols.size + int(load)
         rhs = np.zeros((n_tot, li + nd))
         rhs[n_loc : n_loc + n_u, :li] = -Z[:, c0 : c0 + li].toarray()
@@ -1127,6 +1168,8 @@ def _patch_functions(
         if load:
             # −(div ψ, v) + s(πq, πv) = (f χ_{K_i}, v): Bψ − Zy = −F_i = G on K_i
             rhs[n_loc + _rows(pos, 6), -1] = ops.G[ci].ravel()
+            if ops.F is not None:  # (issue 14) the boundary data's stress-side load F|K_i in the τ rows
+                rhs[:n_loc, -1] = T[np.searchsorted(aw, dofs.aw[i])].T @ (dofs.P(ops, i).T @ ops.F[ci].ravel())
         sol = lu.solve(rhs)
     finally:
         lu.destroy()
@@ -1543,6 +1586,7 @@ class CoarseOperators:
     Ephi: np.ndarray  #: E Φ
     Mu: np.ndarray  #: Gram of [Π | N | u_f] in L²
     PiG: np.ndarray  #: Πᵀ G
+    Fphi: np.ndarray | None = None  #: Φᵀ F (n_ms + n_d,): the stress-side load of the boundary data (None: zero)
 
     @property
     def n_d(self) -> int:
@@ -1551,7 +1595,10 @@ class CoarseOperators:
 
     def __add__(self, other: "CoarseOperators") -> "CoarseOperators":
         names = ("Gt", "Gk", "Bm", "BN", "Cphi", "Ephi", "Mu", "PiG")
-        return CoarseOperators(self.n_ms, self.n_aux, self.n_g, *(getattr(self, n) + getattr(other, n) for n in names))
+        fphi = None if self.Fphi is None and other.Fphi is None else (
+            (0.0 if self.Fphi is None else self.Fphi) + (0.0 if other.Fphi is None else other.Fphi))
+        return CoarseOperators(self.n_ms, self.n_aux, self.n_g, *(getattr(self, n) + getattr(other, n) for n in names),
+                               fphi)
 
 
 def _merge_columns(X: np.ndarray, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -1595,6 +1642,7 @@ def coarse_operators(
     Ephi = np.zeros((n_g, n_tot))
     Mu = np.zeros((aux.size + n_d, aux.size + n_d))
     PiG = np.zeros(aux.size)
+    Fphi = np.zeros(n_tot)
     gamma = np.zeros(ops.num_cells, dtype=bool)
     gamma[ops.gamma_cells] = True
     reach_b, reach_c = _reaching(basis, grid.size), _reaching(corr, grid.size)
@@ -1618,6 +1666,8 @@ def coarse_operators(
         Bm[a0:a1, uniq] += Pi.T @ BP
         Mu[a0:a1, a0:a1] += Pi.T @ MPi
         PiG[a0:a1] += Pi.T @ ops.G[cK].ravel()
+        if ops.F is not None:
+            Fphi[uniq] += PF.reshape(30 * cK.size, -1).T @ ops.F[cK].ravel()
         if reach_c[K]:
             gu, Nu = _merge_columns(np.concatenate([q.u[p] for q, p in reach_c[K]], axis=1),
                                     np.concatenate([q.index for q, _ in reach_c[K]]))
@@ -1636,9 +1686,9 @@ def coarse_operators(
 
     cost = np.array([sum(f.index.size for f, _ in reach_b[K] + reach_c[K]) for K in range(grid.size)], dtype=float)
     _run_shared(cost ** 2, comm, "mixed CEM coarse operators", accumulate, gather=False)
-    co = CoarseOperators(n_ms, aux.size, n_g, Gt, Gk, Bm, BN, Cphi, Ephi, Mu, PiG)
+    co = CoarseOperators(n_ms, aux.size, n_g, Gt, Gk, Bm, BN, Cphi, Ephi, Mu, PiG, Fphi)
     if comm.size > 1:
-        for name in ("Gt", "Gk", "Bm", "BN", "Cphi", "Ephi", "Mu", "PiG"):
+        for name in _COARSE_ARRAYS:
             arr = getattr(co, name)
             comm.Allreduce(MPI.IN_PLACE, arr, op=MPI.SUM)
     for name in _SYMMETRIC:  # Gram matrices: exactly symmetric (the cache stores one triangle)
@@ -1660,7 +1710,7 @@ class OfflineData(NamedTuple):
     co: CoarseOperators
 
 
-_COARSE_ARRAYS = ("Gt", "Gk", "Bm", "BN", "Cphi", "Ephi", "Mu", "PiG")
+_COARSE_ARRAYS = ("Gt", "Gk", "Bm", "BN", "Cphi", "Ephi", "Mu", "PiG", "Fphi")
 _SYMMETRIC = ("Gt", "Gk", "Mu")  #: stored as their upper triangle
 #: Stored precision of the patch functions (AW coefficients, displacements) in the cache: they serve
 #: only the fine output fields (relative rounding 6e-8); U_aux and the coarse matrices are float64.
@@ -1706,6 +1756,9 @@ def mixed_offline_key(
     }
     for name in ("K", "R", "B", "M", "S", "G", "dg_rows", "u_rows", "gamma_cells", "P_cols", "P_blocks"):
         arrays[f"ops_{name}"] = getattr(ops, name)
+    for name in ("F", "s0"):  # (issue 14) boundary data: tractions (lifting) and u_D
+        if getattr(ops, name) is not None:
+            arrays[f"ops_{name}"] = getattr(ops, name)
     for name in ("C", "E"):
         X = sp.csr_matrix(getattr(ops, name))
         arrays[f"ops_{name}_data"], arrays[f"ops_{name}_indices"] = X.data, X.indices
@@ -1790,7 +1843,7 @@ def _unpack_offline(arrays: dict, ops: CellOperators, grid: CoarseGrid) -> Offli
         X[np.triu_indices(size)] = tri
         mats[name] = X + np.triu(X, 1).T
     shapes = {"Gt": (n, n), "Gk": (n, n), "Bm": (n_aux, n), "BN": (n, n_d), "Cphi": (n, n_g), "Ephi": (n_g, n),
-              "Mu": (n_aux + n_d, n_aux + n_d), "PiG": (n_aux,)}
+              "Mu": (n_aux + n_d, n_aux + n_d), "PiG": (n_aux,), "Fphi": (n,)}
     for name, shape in shapes.items():
         if mats[name].shape != shape:
             raise ValueError(f"cached coarse matrix {name} has shape {mats[name].shape}, expected {shape}")
@@ -1979,6 +2032,13 @@ class MixedMultiscaleOmega1:
             "cache %s, times %s", options.layers, lo, hi, co.n_ms, co.n_aux, float(self.aux.residuals.max()),
             self.spectral_gap, self.cache_status, {k: round(v, 2) for k, v in self.times.items()},
         )
+        if not options.source_correction and self.ops.F is not None:
+            log.warning(
+                "mixed CEM without source correctors: the Ω₁ boundary data (a prescribed displacement on Gamma_D or "
+                "the traction lifting) act on the stresses, which X_ms sees only through Ψᵀ F, an error no number of "
+                "layers removes (e_σ = 0.13 with all modes and patches covering Ω₁, h = 1/16, H = 1/4); keep "
+                "source_correction=True (the default)"
+            )
         if options.min_gap is not None and self.spectral_gap < options.min_gap:
             log.warning(
                 "mixed CEM: the Stage I target Λ ≥ %g was not reached with at most max_nbasis = %d modes per cell "
@@ -2019,9 +2079,12 @@ class MixedMultiscaleOmega1:
         A = np.block([[co.Gt[ms, ms], co.Bm[:, ms].T], [co.Bm[:, ms], np.zeros((co.n_aux, co.n_aux))]])
         self._lu = sla.lu_factor(A)
         # right-hand sides for the data d = [g; 1]: τ rows F1 d, v rows Πᵀ G − F2 d
-        self._F1 = np.hstack([co.Cphi[ms], np.zeros((co.n_ms, 1))]) - co.Gt[ms, qd] - co.BN[ms]
+        load = np.zeros((co.n_ms, 1)) if co.Fphi is None else co.Fphi[ms, None]  # Ψᵀ F: boundary data
+        self._F1 = np.hstack([co.Cphi[ms], load]) - co.Gt[ms, qd] - co.BN[ms]
         self._F2 = co.Bm[:, qd]
-        self._E_r, self._E_g = co.Ephi[:, ms], co.Ephi[:, qd]
+        self._E_r, self._E_g = co.Ephi[:, ms], co.Ephi[:, qd].copy()
+        if self.ops.s0 is not None:  # σ₁n₁ of the traction lifting s₀ (σ₁ = Ψ r + Q g + σ_f + s₀)
+            self._E_g[:, co.n_g] += self.ops.E @ self.ops.s0.ravel()
         self.response = InterfaceResponse.of(self)
 
     @staticmethod
@@ -2070,7 +2133,7 @@ class MixedMultiscaleOmega1:
         return out
 
     def fine_stress(self, r: np.ndarray, g: np.ndarray) -> np.ndarray:
-        """σ₁ = Ψ r + Q g + σ_f, cell-major (n_cells, 30)."""
+        """σ₁ = Ψ r + Q g + σ_f, cell-major (n_cells, 30): without the traction lifting ``lifting``."""
         out = np.zeros((self.ops.num_cells, 30))
         d = self.data(g)
         for K in range(self.grid.size):
@@ -2101,6 +2164,11 @@ class MixedMultiscaleOmega1:
         for K in range(self.grid.size):
             out[self.dofs.cells[K]] = self._combine(K, r, d, "u").reshape(-1, 6)
         return out
+
+    @property
+    def lifting(self) -> np.ndarray | None:
+        """The traction lifting s₀ (n_cells, 30), cell-major: the stress is ``fine_stress`` + s₀ (None: no tractions)."""
+        return self.ops.s0
 
     def a_norm2(self, sigma: np.ndarray) -> float:
         """(Aσ, σ) of a cell-major stress."""

@@ -28,7 +28,6 @@ from fenics_contact.hybrid.certificate import Certificate, primal_certificate
 from fenics_contact.hybrid.inputs import check_reference_displacement, check_solve_inputs
 from fenics_contact.hybrid.iteration import InterfaceNewtonOptions, IterationOptions, iterate
 from fenics_contact.errors import InputError
-from fenics_contact.problem.boundary import boundary_data_on
 from fenics_contact.problem.fields import material_fields
 from fenics_contact.problem.geometry import ContactMesh
 from fenics_contact.problem.models import TestModel
@@ -62,15 +61,8 @@ class MultiscalePrimalHybridStep:
         start = time.perf_counter()
         self.comm = cm.comm
         self.parts = split_mesh(cm)
-        # (issue 14) the Ω₁ CEM space takes clamped and traction-free sides and Γ_N tractions (a load
-        # functional, source-corrected like f: cem.omega1_load), not yet a prescribed displacement
-        unsupported = [what for what in boundary_data_on(self.parts[0].mesh, self.parts[0].facet_tags, model.boundary)
-                       if not what.startswith("a traction")]
-        if unsupported:
-            raise InputError(
-                f"Algorithm 3 cannot yet take {' and '.join(unsupported)} on Ω₁ (its multiscale space would ignore "
-                "it); use the fine Algorithm 1 (method 'primal') or move that boundary into Ω₂"
-            )
+        # (issue 14) the Ω₁ CEM space takes clamped and traction-free sides, Γ_N tractions (a load functional,
+        # source-corrected like f: cem.omega1_load) and a prescribed u_D (its lifting: cem.assemble_fine_operators)
         gdim = cm.mesh.geometry.dim
         self.interface = InterfaceSpace(cm, self.parts, shape=(gdim,))
         parent_fields = material_fields(cm.mesh, model)

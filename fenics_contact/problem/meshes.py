@@ -11,7 +11,15 @@
   mesh size ``h_contact`` on the contact zone |x| ≤ ``refine_width``,
   y ≥ −``refine_depth``, growing linearly (rate ``grading``) up to ``h_far``.
 
-Both use unstructured triangles; the tags follow ``tags.PHYSICAL_NAMES``.
+* ``composite_block(a, ...)``: a block (−L, L) × (−D, 0) (default 52a × 24a) of soft matrix with
+  a lattice of stiff square inclusions, for a cylinder pressed into its top face (the
+  showcase): the mesh resolves the inclusions and the Cartesian coarse grid of squares of side H
+  (default 4a) from the corner (−L, −D), so all four methods run on it; Ω₂ the top row of coarse
+  cells (γ: y = −H, which cuts a row of inclusions and a stiff fibre right under the contact); Γ_C the top
+  segment |x| ≤ ``contact_width``, the rest of the top traction free; the bottom and both
+  sides clamped (Γ_D), ≥ 20a from the contact by default.
+
+All use unstructured triangles; the tags follow ``tags.PHYSICAL_NAMES``.
 
 The Hertz block's default size (80a × 40a) is chosen so that the block hardly limits the
 comparison with the half-space solution: the discrete pressure profiles converge to the
@@ -29,7 +37,7 @@ from fenics_contact.errors import InputError
 from fenics_contact.problem.geometry import ContactMesh, contact_mesh_from_model, gmsh_session
 from fenics_contact.problem.tags import PHYSICAL_NAMES, Boundary, Subdomain
 
-__all__ = ["bulged_square", "HertzBlock", "hertz_block"]
+__all__ = ["bulged_square", "HertzBlock", "hertz_block", "CompositeBlock", "composite_block"]
 
 
 def _add_groups(groups: dict) -> None:
@@ -157,4 +165,137 @@ def hertz_block(
                 gmsh.option.setNumber(name, 0)
             gmsh.model.mesh.generate(2)
         cm = contact_mesh_from_model(comm, h=hc, H=None)  # graded: no coarse grid
+    return cm, spec
+
+
+@dataclass(frozen=True, slots=True)
+class CompositeBlock:
+    """Geometry, inclusions and mesh sizes of the composite block (lengths in the units of a)."""
+
+    a: float  #: the length unit: the expected contact half-width
+    half_width: float  #: L: the block is (−L, L) × (−D, 0)
+    depth: float  #: D
+    H: float  #: side of the coarse squares (from the corner (−L, −D)); Ω₂ is the top row, γ: y = −H
+    contact_width: float  #: Γ_C = top segment |x| <= contact_width
+    inclusions: tuple  #: stiff squares (x0, x1, y0, y1)
+    h_contact: float
+    h_far: float
+    grading: float
+
+    def modulus(self, inclusion: float, matrix: float):
+        """E(x): ``inclusion`` inside the squares, ``matrix`` elsewhere (a field x (3, N) -> (N,))."""
+        boxes = np.asarray(self.inclusions, dtype=float).reshape(-1, 4)
+
+        def E(x: np.ndarray) -> np.ndarray:
+            inside = np.zeros(x.shape[1], dtype=bool)
+            for x0, x1, y0, y1 in boxes:
+                inside |= (x[0] > x0) & (x[0] < x1) & (x[1] > y0) & (x[1] < y1)
+            return np.where(inside, float(inclusion), float(matrix))
+
+        return E
+
+
+def _lattice(L: float, D: float, H: float, side: float) -> list[tuple[float, float, float, float]]:
+    """The stiff squares of the composite block, every one inside a coarse column (none on a grid line):
+
+    * under the contact (the middle column, x = 0) a fibre of width side/2 from y = −3H/8 down through γ
+      to y = −13H/8 (its top part in Ω₂);
+    * in every other column but the outer ones a square of side ``side`` centred on γ (y = −H), cut in two;
+    * one square in the middle of every coarse cell from the third row down (not the bottom row).
+    """
+    nx, ny = int(round(2 * L / H)), int(round(D / H))
+    boxes = [(-side / 4, side / 4, -13 * H / 8, -3 * H / 8)]
+    centres = [(-L + (i + 0.5) * H, -H) for i in range(1, nx - 1) if i != nx // 2]
+    centres += [(-L + (i + 0.5) * H, -(j + 0.5) * H) for j in range(2, ny - 1) for i in range(1, nx - 1)]
+    return boxes + [(x - side / 2, x + side / 2, y - side / 2, y + side / 2) for x, y in centres]
+
+
+def composite_block(
+    a: float,
+    *,
+    width: float = 52.0,
+    depth: float = 24.0,
+    coarse: float = 4.0,
+    inclusion: float = 2.0,
+    contact_width: float = 3.0,
+    refine_width: float = 1.5,
+    refine_depth: float = 1.0,
+    refinement: float = 1.0,
+    comm: MPI.Comm = MPI.COMM_WORLD,
+) -> tuple[ContactMesh, CompositeBlock]:
+    """The tagged composite block for a contact half-width ``a``; the other lengths are multiples of a.
+
+    ``width`` × ``depth``: the block; ``coarse``: the side H of the coarse squares (``width``/H an odd and
+    ``depth``/H a whole number, so that x = 0 is the middle of a coarse column); ``inclusion``: the side of
+    the stiff squares (``_lattice``: a fibre from 3H/8 below the contact down through γ, a row of squares cut
+    by γ, and one in every coarse cell from the third row down, away from the clamped sides). ``refinement`` r:
+    h_contact = a/(20r) on |x| <= ``refine_width``, y >= −``refine_depth``, growing by 0.5/r per unit
+    distance up to h_far = min(H/2, 2a/r). Returns the mesh (``ContactMesh.H`` = H, the coarse grid
+    resolved) and its ``CompositeBlock``.
+    """
+    if not (np.isfinite(a) and a > 0 and np.isfinite(refinement) and refinement > 0):
+        raise InputError(f"composite_block needs a > 0 and refinement > 0, got {a!r}, {refinement!r}")
+    nx, ny = width / coarse, depth / coarse
+    if not (abs(nx - round(nx)) < 1e-9 and abs(ny - round(ny)) < 1e-9 and round(ny) >= 2 and round(nx) >= 3
+            and round(nx) % 2 == 1):
+        raise InputError(f"composite_block: width/coarse must be an odd and depth/coarse a whole number >= 2, got "
+                         f"{width}/{coarse}, {depth}/{coarse}")
+    if not (0 < inclusion < coarse and 0 < refine_width <= contact_width < width / 2 and 0 < refine_depth < coarse):
+        raise InputError(f"composite_block: inconsistent sizes (inclusion {inclusion}, coarse {coarse}, contact width "
+                         f"{contact_width}, refine {refine_width} x {refine_depth})")
+    nx, ny = int(round(nx)), int(round(ny))
+    L, D, H, W = 0.5 * width * a, depth * a, coarse * a, contact_width * a
+    hc = a / (20.0 * refinement)
+    h_far = min(0.5 * H, 2.0 * a / refinement)
+    grading = 0.5 / refinement
+    boxes = _lattice(L, D, H, inclusion * a)
+    spec = CompositeBlock(a, L, D, H, W, tuple(boxes), hc, h_far, grading)
+    tol = 1e-4 * a  # (OCC bounding boxes are padded by ~1e-7)
+    with gmsh_session():
+        if comm.rank == 0:
+            occ = gmsh.model.occ
+            gmsh.model.add("composite_block")
+            cells = [(2, occ.addRectangle(-L + i * H, -D + j * H, 0.0, H, H)) for j in range(ny) for i in range(nx)]
+            squares = [(2, occ.addRectangle(x0, y0, 0.0, x1 - x0, y1 - y0)) for x0, x1, y0, y1 in boxes]
+            marks = [(0, occ.addPoint(x, 0.0, 0.0)) for x in (-W, W)]
+            occ.fragment(cells + squares, marks)
+            occ.synchronize()
+
+            def centre(dim, tag):
+                return np.array(gmsh.model.occ.getCenterOfMass(dim, tag)[:2])
+
+            surfaces = [t for _, t in gmsh.model.getEntities(2)]
+            omega2 = [t for t in surfaces if centre(2, t)[1] > -H]
+            omega1 = [t for t in surfaces if t not in omega2]
+            groups = {"bottom": [], "sides": [], "contact": [], "gamma": []}
+            for _, c in gmsh.model.getEntities(1):
+                x0, y0, _, x1, y1, _ = gmsh.model.getBoundingBox(1, c)
+                if abs(y0 + D) < tol and abs(y1 + D) < tol:
+                    groups["bottom"].append(c)
+                elif (abs(x0 + L) < tol and abs(x1 + L) < tol) or (abs(x0 - L) < tol and abs(x1 - L) < tol):
+                    groups["sides"].append(c)
+                elif abs(y0) < tol and abs(y1) < tol and x0 > -W - tol and x1 < W + tol:
+                    groups["contact"].append(c)
+                elif abs(y0 + H) < tol and abs(y1 + H) < tol:
+                    groups["gamma"].append(c)
+            _add_groups({
+                Subdomain.OMEGA1: (2, omega1),
+                Subdomain.OMEGA2: (2, omega2),
+                Boundary.GAMMA_D: (1, groups["bottom"] + groups["sides"]),
+                Boundary.GAMMA_C: (1, groups["contact"]),
+                Boundary.INTERFACE: (1, groups["gamma"]),
+            })
+            field = gmsh.model.mesh.field
+            zone = field.add("Box")
+            field.setNumber(zone, "VIn", hc)
+            field.setNumber(zone, "VOut", h_far)
+            for key, value in (("XMin", -refine_width * a), ("XMax", refine_width * a),
+                               ("YMin", -refine_depth * a), ("YMax", 0.0)):
+                field.setNumber(zone, key, value)
+            field.setNumber(zone, "Thickness", (h_far - hc) / grading)
+            field.setAsBackgroundMesh(zone)
+            for name in ("Mesh.MeshSizeExtendFromBoundary", "Mesh.MeshSizeFromPoints", "Mesh.MeshSizeFromCurvature"):
+                gmsh.option.setNumber(name, 0)
+            gmsh.model.mesh.generate(2)
+        cm = contact_mesh_from_model(comm, h=hc, H=H)
     return cm, spec

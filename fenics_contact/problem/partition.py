@@ -25,7 +25,7 @@ from dolfinx import mesh as dmesh
 from fenics_contact.errors import InputError, MeshTagError
 from fenics_contact.problem.tags import Boundary, Subdomain
 
-__all__ = ["cartesian_coarse_cells", "group_coarse_cells", "contact_strip", "coarse_sizes", "UNRESOLVED"]
+__all__ = ["cartesian_coarse_cells", "centroid_coarse_cells", "group_coarse_cells", "contact_strip", "coarse_sizes", "UNRESOLVED"]
 
 #: coarse index of a fine cell that lies in no coarse cell (straddles a line of the Cartesian grid)
 UNRESOLVED = -1
@@ -63,6 +63,28 @@ def cartesian_coarse_cells(msh: dmesh.Mesh, H: float) -> tuple[np.ndarray, int]:
     index = ij_lo[:, 0] + nx * ij_lo[:, 1]
     index[np.any(ij_lo != ij_hi, axis=1)] = UNRESOLVED
     return index, nx
+
+
+def centroid_coarse_cells(msh: dmesh.Mesh, H: float) -> tuple[np.ndarray, int]:
+    """(coarse index of every local cell, nx): the square of side H (grid over the bounding box, as
+    ``cartesian_coarse_cells``) that holds the cell's centroid.  Every cell gets a coarse cell, also on
+    an unstructured mesh that does not resolve the grid lines: the coarse cells are then unions of fine
+    cells with jagged boundaries, which the multiscale methods accept as any partition (collective)."""
+    if not (isinstance(H, (int, float, np.floating)) and np.isfinite(H) and H > 0):
+        raise InputError(f"the coarse size H must be a positive number, got {H!r}")
+    comm = msh.comm
+    x = msh.geometry.x[:, :2]
+    lo, hi = np.empty(2), np.empty(2)
+    comm.Allreduce(x.min(axis=0) if x.size else np.full(2, np.inf), lo, op=MPI.MIN)
+    comm.Allreduce(x.max(axis=0) if x.size else np.full(2, -np.inf), hi, op=MPI.MAX)
+    nx = max(1, int(np.ceil((hi[0] - lo[0]) / H - 1e-9)))
+    ny = max(1, int(np.ceil((hi[1] - lo[1]) / H - 1e-9)))
+    cells = _local_cells(msh)
+    if cells.size == 0:
+        return np.zeros(0, dtype=np.int64), nx
+    ij = np.floor((_cell_vertices(msh, cells).mean(axis=1) - lo) / H).astype(np.int64)
+    ij = np.minimum(np.maximum(ij, 0), [nx - 1, ny - 1])
+    return ij[:, 0] + nx * ij[:, 1], nx
 
 
 def group_coarse_cells(msh: dmesh.Mesh, cell_tags: dmesh.MeshTags, tags: list[int]) -> np.ndarray:

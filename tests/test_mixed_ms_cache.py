@@ -300,7 +300,7 @@ def _relative_difference(ops, dofs, a, b):
 def test_condensed_stage_two_equals_per_patch_lu(omega1):
     """The substructured Stage II (coarse cells condensed onto the skeleton) solves the same patch systems
     as one sparse LU per patch: bases, Robin and source correctors agree to rounding, also with a
-    traction-free side of Ω₁ (vertex functions on it), a load on every coarse cell and 1–2 layers.
+    traction-free side of Ω₁ (vertex functions on it), loads f and F on every coarse cell and 1–2 layers.
 
     (m = 0 is left out: on an interior coarse cell, whose whole boundary is traction free, the stress part of
     the Stage II solution is not unique and both constructions return different ones; measured stress-equation
@@ -314,7 +314,9 @@ def test_condensed_stage_two_equals_per_patch_lu(omega1):
     msh.topology.create_connectivity(1, 2)
     bfacets = dmesh.exterior_facet_indices(msh.topology)
     top = bfacets[np.isclose(dmesh.compute_midpoints(msh, 1, bfacets)[:, 1], 1.0)]
-    loaded = dataclasses.replace(ops, G=np.random.default_rng(3).standard_normal(ops.G.shape))
+    rng = np.random.default_rng(3)
+    loaded = dataclasses.replace(ops, G=rng.standard_normal(ops.G.shape),  # f, and the stress-side load F
+                                 F=rng.standard_normal((ops.num_cells, 30)))  # of boundary data (issue 14)
     dofs = mm.CoarseCellDofs.of(ops, grid)
     for tp in (topo, mm._Topology(msh, ops.num_aw, top)):
         aux = mm.stage_one(loaded, tp, grid, 3)

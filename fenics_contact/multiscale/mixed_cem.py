@@ -1232,6 +1232,11 @@ class _CellSystem:
         return self.M_II.shape[0]
 
 
+def _has_load(ops: CellOperators, cells: np.ndarray, source: bool) -> bool:
+    """Whether a coarse cell gets a source corrector: f or the boundary data's stress-side load F act on it."""
+    return source and bool(np.any(ops.G[cells] != 0.0) or (ops.F is not None and np.any(ops.F[cells] != 0.0)))
+
+
 def _cell_system(
     ops: CellOperators, topo: _Topology, dofs: CoarseCellDofs, aux: StageI, skeleton: tuple, skel_aw: np.ndarray,
     K: int, source: bool,
@@ -1262,13 +1267,15 @@ def _cell_system(
     # K's own right-hand sides (as in _patch_functions): −Z e_j; Robin data C_K g; the load on K
     Ci = ops.C[_rows(cK, 30)]
     gcols = np.unique(Ci.indices)
-    load = source and bool(np.any(ops.G[cK] != 0.0))
+    load = _has_load(ops, cK, source)
     b = np.zeros((n_I + n_G, lk + gcols.size + int(load)))
     b[n_s : n_s + 6 * nK, :lk] = -Zk
     if gcols.size:
         b[new, lk : lk + gcols.size] = (T.T @ (dofs.P(ops, K).T @ Ci[:, gcols])).toarray()
     if load:
         b[n_s : n_s + 6 * nK, -1] = ops.G[cK].ravel()
+        if ops.F is not None:  # (issue 14) the boundary data's stress-side load F|K in the τ rows
+            b[new, -1] = T.T @ (dofs.P(ops, K).T @ ops.F[cK].ravel())
     skel = space.aw_inner[skel_cols]
     return _CellSystem(skel, T[:, own_cols].tocsr(), np.searchsorted(awK, skel), n_s, 6 * nK,
                        M[:n_I, :n_I], M[:n_I, n_I:], M[n_I:, n_I:].toarray(), b)
@@ -1416,7 +1423,7 @@ def _stage_two_condensed(
             continue
         cK = dofs.cells[i]
         gcols = np.unique(ops.C[_rows(cK, 30)].indices)
-        load = source and bool(np.any(ops.G[cK] != 0.0))
+        load = _has_load(ops, cK, source)
         corr.append(PatchFunctions(p, np.concatenate([gcols, [n_g]]) if load else gcols,
                                    [np.ascontiguousarray(a[:, li:]) for a, _ in pieces],
                                    [np.ascontiguousarray(u[:, li:]) for _, u in pieces]))

@@ -20,6 +20,7 @@ e_σ with the source correctors (default) per layer, their ratio, and without th
 
 import argparse
 import logging
+import sys
 import time
 from pathlib import Path
 
@@ -89,7 +90,7 @@ def table_53(n: int, layers: list[int], accel: str, lines: list[str], title: str
     lines.append("")
 
 
-def table_58(n: int, layers: int, accels: list[str], lines: list[str]) -> None:
+def table_58(n: int, layers: int, accels: list[str], lines: list[str], coarse: tuple[int, ...] = (32, 16, 8)) -> None:
     lines += [
         f"### Table 5.8 analogue: online times, model 2, h = 1/{n}, β = √h, l ≥ 3 (default Stage I rule), m = {layers}, "
         f"updates {', '.join(accels)}",
@@ -103,7 +104,7 @@ def table_58(n: int, layers: int, accels: list[str], lines: list[str]) -> None:
         "|---|---|---|---|---|---|---|---|---|---|",
     ]
     model = models.get_model(2)
-    for nc in (32, 16, 8):
+    for nc in coarse:
         cm = geometry.unit_square(n, nc)
         ref = solve_mixed_monolithic(cm, model)
         ref.free()
@@ -216,6 +217,7 @@ def main() -> None:
     parser.add_argument("--n", type=int, default=64, help="fine cells per side (h = 1/n)")
     parser.add_argument("--layers", default="1,2,3,4,5", help="oversampling layers for Tables 5.3, 5.5-5.7")
     parser.add_argument("--layers-58", type=int, default=3, help="oversampling layers for Table 5.8")
+    parser.add_argument("--coarse-58", default="32,16,8", help="Table 5.8: 1/H values (comma list)")
     parser.add_argument("--accel", default="none",
                         help="update: none, anderson or newton (Table 5.8: a comma list, e.g. none,anderson,newton)")
     parser.add_argument("--nu-high", type=float, default=0.499,
@@ -235,6 +237,8 @@ def main() -> None:
         "",
         f"Machine: {machine_description()}; MUMPS LU. Paper: MATLAB on a 24-core desktop.",
         "",
+        "Command: `OMP_NUM_THREADS=1 python " + " ".join(sys.argv) + "`",
+        "",
     ]
     start = time.perf_counter()
     for t in args.tables.split(","):
@@ -242,7 +246,8 @@ def main() -> None:
         if t == "5.3" or t in INCOMPRESSIBLE:
             table_53(args.n, layers, args.accel, lines, title=t, nu_high=args.nu_high, min_gap=args.min_gap or None)
         elif t == "5.8":
-            table_58(args.n, args.layers_58, args.accel.split(","), lines)
+            table_58(args.n, args.layers_58, args.accel.split(","), lines,
+                     tuple(int(c) for c in args.coarse_58.split(",")))
         elif t == "source":
             table_source(args.n, layers, [int(c) for c in args.n_coarse.split(",")],
                          [c.strip() for c in args.cases.split(";")], lines)

@@ -41,7 +41,7 @@ from fenics_contact.errors import ConvergenceError, FenicsContactError, InputErr
 from fenics_contact.fem.contact import NewtonOptions
 from fenics_contact.fem.primal import default_penalty, solve_primal_monolithic
 from fenics_contact.hybrid.iteration import ACCELERATIONS, IterationOptions
-from fenics_contact.hybrid.primal import DEFAULT_ALPHA, solve_primal_hybrid
+from fenics_contact.hybrid.primal import DEFAULT_ALPHA, DEFAULT_ALPHA_MS, solve_primal_hybrid
 from fenics_contact.io import (
     OutputDirectory,
     cell_function_of,
@@ -102,8 +102,9 @@ _METHOD_OPTIONS: dict[str, tuple[tuple[str, ...], str]] = {
     "min_gap": (("mixed-ms",), "a mixed-ms option"),
     "max_nbasis": (("mixed-ms",), "a mixed-ms option"),
 }
-#: one factor of an α spelling (hybrid.transmission.robin_coefficient): a number [E], E, sqrt-h, h^p
-_ALPHA_FACTOR = re.compile(r"^((?P<number>(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?)E?|E|sqrt-h|h\^\(?[+-]?\d+(\.\d*)?(/\d+)?\)?)$")
+#: one factor of an α spelling (hybrid.transmission.robin_coefficient): a number [E or Emin], E, Emin, sqrt-h, h^p
+_ALPHA_FACTOR = re.compile(
+    r"^((?P<number>(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?)(Emin|E)?|Emin|E|sqrt-h|h\^\(?[+-]?\d+(\.\d*)?(/\d+)?\)?)$")
 #: what a positive option is, for its message
 _MEANING = {"delta": "the primal penalty δ", "epsilon": "the mixed penalty ε", "E_high": "a Young's modulus",
             "E_low": "a Young's modulus"}
@@ -129,7 +130,7 @@ def _check_alpha(alpha: str) -> None:
         if match is not None and (match["number"] is None or 0 < float(match["number"]) < math.inf):
             continue
         raise InputError(f"cannot read the transmission coefficient --alpha {alpha!r}: give a number > 0 or a "
-                         "product of numbers, h^p, sqrt-h and E, e.g. 1, h^-1/2, 2E*h^-1/2")
+                         "product of numbers, h^p, sqrt-h and E (or Emin), e.g. 1, h^-1/2, 2E*h^-1/2, Emin*h^-1/2")
 
 
 def _check_directory(flag: str, path: Path) -> None:
@@ -266,7 +267,7 @@ class RunOptions:
         given = getattr(self, name)
         if given is not None:
             return given
-        return {"alpha": DEFAULT_ALPHA, "beta": "sqrt-h", "E_high": 1e3, "E_low": 1.0, "layers": 4,
+        return {"alpha": DEFAULT_ALPHA_MS if self.method == "primal-ms" else DEFAULT_ALPHA, "beta": "sqrt-h", "E_high": 1e3, "E_low": 1.0, "layers": 4,
                 "nbasis": 3}.get(name)
 
     def iteration_options(self) -> IterationOptions:
@@ -299,8 +300,9 @@ def build_parser(*, given_only: bool = False) -> argparse.ArgumentParser:
     run.add_argument("--coarse-groups", action="store_true",
                      help="with --mesh: the surface groups of the file are the coarse cells (a coarse partition of "
                      "your own) instead of the squares of side 1/H over the bounding box")
-    run.add_argument("--alpha", help=f"primal Robin coefficient (default {DEFAULT_ALPHA}): a number or a product "
-                     "of numbers, h^p, sqrt-h and E (E_p: mean E at the γ node), e.g. 1, h^-1/2, 2E*h^-1/2")
+    run.add_argument("--alpha", help=f"primal Robin coefficient (default {DEFAULT_ALPHA}; primal-ms: "
+                     f"{DEFAULT_ALPHA_MS}): a number or a product of numbers, h^p, sqrt-h and E (E_p: mean E at the "
+                     "γ node) or Emin (the smallest E_p on γ), e.g. 1, h^-1/2, 2E*h^-1/2")
     run.add_argument("--accel", choices=ACCELERATIONS, default=None,
                      help="how the interface fixed point is solved: the interface Newton method (default: robust "
                      "on every tested model), Anderson acceleration, or none (the paper's plain update); under "

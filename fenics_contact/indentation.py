@@ -201,7 +201,7 @@ def force_indentation(
     from fenics_contact.fem.mixed import MixedSubproblem, contact_modulus, default_epsilon
     from fenics_contact.fem.primal import PrimalSubproblem, default_penalty
     from fenics_contact.hybrid.mixed import MixedHybridStep
-    from fenics_contact.hybrid.primal import DEFAULT_ALPHA, PrimalHybridStep
+    from fenics_contact.hybrid.primal import DEFAULT_ALPHA, DEFAULT_ALPHA_MS, PrimalHybridStep
     from fenics_contact.problem.boundary import check_boundary_groups
     from fenics_contact.problem.fields import material_fields
 
@@ -260,7 +260,7 @@ def force_indentation(
             cem = CEMOptions() if cem is None else cem
             if not isinstance(cem, CEMOptions):
                 raise InputError(f"primal-ms takes multiscale.cem.CEMOptions, got {type(cem).__name__}")
-            step = MultiscalePrimalHybridStep(cm, first, alpha=DEFAULT_ALPHA if alpha is None else alpha,
+            step = MultiscalePrimalHybridStep(cm, first, alpha=DEFAULT_ALPHA_MS if alpha is None else alpha,
                                               delta=delta, cem=cem, newton=newton, cache_dir=cache_dir)
         contact, hybrid = step.omega2, WarmStart(step)
     else:  # mixed-ms

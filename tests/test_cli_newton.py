@@ -42,3 +42,20 @@ def test_newton_run_reports_its_certificate(tmp_path, method):
     assert s["time_interface_offline_s"] > 0 and s["time_offline_s"] >= s["time_interface_offline_s"]
     # Algorithm 1's fixed point is the monolithic solution; Algorithm 2's differs by the X̃_h/X_h space gap
     assert s["e_u"] < (1e-8 if method == "primal" else 1e-3)
+
+
+def test_multiscale_default_alpha_at_contrast_1e6(tmp_path, capsys):
+    """`--model 3 --E-high 1e6 --method primal-ms` with the defaults (m = 4, α = Emin·h^-1/2): converged and
+    close to the fine solution (α = E·h^-1/2, the former default, gave e_u = 0.33 at h = 1/32; at m = 3 a
+    ConvergenceError, exit 4); --alpha with E·h^-1/2 and m = 3 ends with exit 4 and the message naming it."""
+    out = tmp_path / "ms"
+    code = main(["run", "--method", "primal-ms", "--model", "3", "--E-high", "1e6", "--h", "32", "--reference",
+                 "--no-plots", "--out", str(out)])
+    s = _summary(out)
+    assert code == 0 and s["converged"] is True and s["alpha"] == "Emin*h^-1/2" and s["layers"] == 4
+    assert s["transmission_residual"] < 1e-6 and s["e_u"] < 0.03
+    bad = tmp_path / "bad"
+    code = main(["run", "--method", "primal-ms", "--model", "3", "--E-high", "1e6", "--h", "32", "--layers", "3",
+                 "--alpha", "E*h^-1/2", "--no-plots", "--out", str(bad)])
+    assert code == 4 and not bad.exists()
+    assert "not positive definite" in capsys.readouterr().err

@@ -209,6 +209,9 @@ class IterationHistory:
     time_monitor_s: float = 0.0
     newton_steps: int = 0  #: interface Newton steps (contact Newton + corrections); 0 for the fixed-point updates
     data: np.ndarray | None = None  #: the interface data g of the final pair (``initial`` of a warm-started solve)
+    #: the condensed contact Newton's history (``hybrid.newton.ContactNewtonHistory``: active-set sizes,
+    #: rows added / removed per step, step lengths); None for the fixed-point updates
+    contact_newton: object = None
 
     @property
     def iterations(self) -> int:

@@ -503,11 +503,32 @@ class CondensedInterface:
     def D(self) -> np.ndarray:
         return self.problem.omega2.D
 
+    def lowest_eigenvalue(self) -> float:
+        """Smallest eigenvalue of ½(M + Mᵀ): > 0 when the glued problem is an elastic (positive definite) one.
+
+        Always so with a fine Ω₁ (M is then the symmetric compliance of the monolithic problem on Γ_C); a
+        multiscale Ω₁ whose interface response is not a Robin map of an elastic body can make it negative.
+        """
+        if not self.M.size:
+            return np.inf
+        return float(np.linalg.eigvalsh(0.5 * (self.M + self.M.T))[0])
+
     def solve(self, options: InterfaceNewtonOptions, name: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, "ContactNewtonHistory"]:
         """Contact Newton, then (g₁₂, g₂₁, λ) global."""
         p = self.problem
         s_load, g21_0, y20 = self.load_terms()
-        _, lam, hist = contact_newton(s_load, self.M, self.D, max_steps=options.max_steps, name=name)
+        try:
+            _, lam, hist = contact_newton(s_load, self.M, self.D, max_steps=options.max_steps, name=name)
+        except ConvergenceError as err:
+            lowest = self.lowest_eigenvalue()
+            if lowest < 0.0:
+                raise ConvergenceError(
+                    f"{name}: the glued problem is not positive definite (the symmetric part of its condensed "
+                    f"contact compliance has the eigenvalue {lowest:.2e} < 0), so its contact problem need not "
+                    "have a solution: Ω₁'s interface response is not that of an elastic body at this transmission "
+                    "coefficient (a multiscale Ω₁ whose approximation error the Robin coefficient amplifies). Use a "
+                    "smaller α or β (Algorithm 3's default alpha='Emin*h^-1/2'), or more oversampling layers") from err
+            raise
         g21 = g21_0 - self.Gq @ lam
         y2 = y20 + self.Yc @ g21 - self.Yq @ lam
         g12 = np.where(p.free, p.a * y2 + p.b * g21, 0.0)
@@ -516,11 +537,17 @@ class CondensedInterface:
 
 @dataclass(slots=True)
 class ContactNewtonHistory:
-    """Active-set sizes, step lengths and contact-law violations ‖μ − D s⁺‖ of the contact Newton."""
+    """Active-set sizes, step lengths and contact-law violations ‖μ − D s⁺‖ of the contact Newton.
+
+    ``added`` / ``removed``: the contact rows each step brought into / took out of the active set
+    (indices into the Γ_C unknowns; the step that confirms the set adds and removes none).
+    """
 
     active_sizes: list[int] = field(default_factory=list)
     step_lengths: list[float] = field(default_factory=list)
     residuals: list[float] = field(default_factory=list)
+    added: list[np.ndarray] = field(default_factory=list)
+    removed: list[np.ndarray] = field(default_factory=list)
 
     @property
     def steps(self) -> int:
@@ -551,11 +578,14 @@ def _line_search(mu: np.ndarray, dmu: np.ndarray, s: np.ndarray, ds: np.ndarray,
 
 
 def contact_newton(s_load: np.ndarray, M: np.ndarray, D: np.ndarray, *, max_steps: int = 50,
-                   name: str = "contact Newton", rtol: float = 1e-10
-                   ) -> tuple[np.ndarray, np.ndarray, ContactNewtonHistory]:
+                   name: str = "contact Newton", rtol: float = 1e-10, active: np.ndarray | None = None,
+                   line_search: bool = False) -> tuple[np.ndarray, np.ndarray, ContactNewtonHistory]:
     """Solve s = s_L − M μ, μ = D s⁺ by semismooth Newton (finite termination, globalized): (s, μ).
 
-    Starts from μ = 0 (no contact force).  A full step solves the problem linearized at the
+    Starts from μ = 0 (no contact force) with the active set 𝒜 = {s_L > 0} (the contact-free
+    solution's penetration pattern), or from the set ``active`` (a guess, e.g. a coarser solve's);
+    ``line_search``: the exact line search at every step (by default only once an active set
+    recurs).  A full step solves the problem linearized at the
     current active set 𝒜 = {s > 0} for the forces: (D_𝒜⁻¹ + M_𝒜𝒜) μ_𝒜 = s_L,𝒜, s = s_L − M_:𝒜 μ_𝒜
     (on 𝒜, s = μ/D: no cancellation with a stiff penalty).  It stops at the first step whose result
     has the set it was computed for (then both equations hold exactly) and checks that solve.
@@ -563,9 +593,8 @@ def contact_newton(s_load: np.ndarray, M: np.ndarray, D: np.ndarray, *, max_step
     hist = ContactNewtonHistory()
     n = s_load.size
     s, mu = s_load.copy(), np.zeros(n)
-    active = s > 0.0
+    active = s > 0.0 if active is None else np.asarray(active, dtype=bool).copy()
     visited: set[bytes] = set()
-    line_search = False
     for _ in range(max_steps):
         visited.add(np.packbits(active).tobytes())
         A = np.flatnonzero(active)
@@ -590,6 +619,8 @@ def contact_newton(s_load: np.ndarray, M: np.ndarray, D: np.ndarray, *, max_step
         s, mu = s + t * (s_new - s), mu + t * (mu_new - mu)
         hist.step_lengths.append(t)
         hist.active_sizes.append(int(np.count_nonzero(s > 0.0)))
+        hist.added.append(np.flatnonzero((s > 0.0) & ~active))
+        hist.removed.append(np.flatnonzero(active & ~(s > 0.0)))
         hist.residuals.append(float(np.linalg.norm(mu - D * np.maximum(s, 0.0))))  # contact-law violation
         if settled:
             return s, mu, hist
@@ -632,8 +663,10 @@ def newton_iterate(step, options: IterationOptions, *, name: str, monitor=None,
         g12, g21, lam = comm.bcast((g12, g21, lam), root=0)
         om2.set_state(om2.solve(om2.rhs(g21, lam)))  # warm start of Ω₂: one J₀ back-solve
         history.newton_steps = ch.steps
-        log.info("%s: contact Newton %d steps, active-set sizes %s, step lengths %s", name, ch.steps,
-                 ch.active_sizes, [round(t, 3) for t in ch.step_lengths])
+        log.info("%s: contact Newton %d steps, active-set sizes %s, step lengths %s, rows added/removed per "
+                 "step %s", name, ch.steps, ch.active_sizes, [round(t, 3) for t in ch.step_lengths],
+                 [f"+{a.size}/-{r.size}" for a, r in zip(ch.added, ch.removed)])
+        history.contact_newton = ch
         g = problem.data(g12, g21)
     else:
         g = step.initial_data() if initial is None else initial

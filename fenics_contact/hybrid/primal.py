@@ -37,10 +37,16 @@ from fenics_contact.problem.models import TestModel
 from fenics_contact.fem.primal import PrimalSubproblem
 from fenics_contact.hybrid.transmission import InterfaceSpace, robin_coefficient, split_mesh
 
-__all__ = ["PrimalHybridStep", "HybridResult", "solve_primal_hybrid", "solve_or_verify", "DEFAULT_ALPHA"]
+__all__ = ["PrimalHybridStep", "HybridResult", "solve_primal_hybrid", "solve_or_verify", "DEFAULT_ALPHA",
+           "DEFAULT_ALPHA_MS"]
 
 #: Default transmission coefficient α_p = E_p h^(-1/2) (chosen from benchmarks/primal_hybrid_study.py).
 DEFAULT_ALPHA = "E*h^-1/2"
+#: Default α of Algorithm 3 (multiscale Ω₁): h^(-1/2) times the smallest E_p on γ.  The multiscale Ω₁'s
+#: interface response is a Robin map only up to its approximation error ε, and the glued problem sees
+#: that error multiplied by α: α_p = E_p h^(-1/2) (≈ 6e6 in the stiff channels of model 3 at contrast
+#: 1e6) made it indefinite (h = 1/32, m = 3) or 20–200× less accurate (m = 4); README, issue 10.
+DEFAULT_ALPHA_MS = "Emin*h^-1/2"
 
 log = logging.getLogger(__name__)
 

@@ -10,6 +10,7 @@ from typing import NamedTuple
 import basix.ufl
 import numpy as np
 import ufl
+from mpi4py import MPI
 from dolfinx import fem, la
 from dolfinx import mesh as dmesh
 
@@ -107,10 +108,12 @@ class InterfaceSpace:
         return u.x.array[self.dofs].copy()
 
 
-def _parse_factor(token: str, h: float) -> tuple[float, bool]:
-    """One factor of an α spelling: a number, 'E', 'sqrt-h' or 'h^p' → (value, is_E)."""
+def _parse_factor(token: str, h: float) -> tuple[float, bool | str]:
+    """One factor of an α spelling: a number, 'E', 'Emin', 'sqrt-h' or 'h^p' → (value, 'E' / 'Emin' / False)."""
     if token == "E":
         return 1.0, True
+    if token.endswith("Emin"):
+        return float(token[:-4] or 1.0), "Emin"
     if token == "sqrt-h":
         return h**0.5, False
     if token.startswith("h^"):
@@ -126,17 +129,19 @@ def robin_coefficient(alpha: float | str, E: fem.Function, space: "InterfaceSpac
     """Nodal α on the owned interface DOFs from a number or a product spelling.
 
     ``alpha`` is a number, or a product of factors joined by ``*``: numbers,
-    ``h^p`` (e.g. ``h^-1/2``), ``sqrt-h`` (= h^½) and ``E``, where E stands for
-    E_p, the area-weighted mean of Young's modulus over the cells touching node p.
-    Examples: ``"1"``, ``"h^-1/2"``, ``"E"``, ``"2E"``, ``"E*h^-1/2"``.
+    ``h^p`` (e.g. ``h^-1/2``), ``sqrt-h`` (= h^½), ``E``, where E stands for
+    E_p, the area-weighted mean of Young's modulus over the cells touching node p,
+    and ``Emin``, the smallest E_p on γ (one number for all nodes).
+    Examples: ``"1"``, ``"h^-1/2"``, ``"E"``, ``"2E"``, ``"E*h^-1/2"``, ``"Emin*h^-1/2"``.
     """
-    scale, with_E = 1.0, False
+    scale, with_E, with_Emin = 1.0, False, False
     if isinstance(alpha, str):
         try:
             for token in alpha.replace(" ", "").split("*"):
-                value, is_E = _parse_factor(token, h)
+                value, kind = _parse_factor(token, h)
                 scale *= value
-                with_E |= is_E
+                with_E |= kind is True
+                with_Emin |= kind == "Emin"
         except (ValueError, ZeroDivisionError):
             raise InputError(
                 f"cannot read alpha={alpha!r}: give a number or a product like 'h^-1/2', 'sqrt-h', 'E', '2E*h^-1/2'"
@@ -149,7 +154,9 @@ def robin_coefficient(alpha: float | str, E: fem.Function, space: "InterfaceSpac
                              f"got {alpha!r}") from None
     if not (np.isfinite(scale) and scale > 0):
         raise InputError(f"the transmission coefficient must be > 0, got {alpha!r}")
-    if not with_E:
+    if with_E and with_Emin:
+        raise InputError(f"alpha={alpha!r}: use E (nodal) or Emin (its smallest value on γ), not both")
+    if not (with_E or with_Emin):
         return np.full(space.size, scale)
     v = ufl.TestFunction(space.V)
     ones = ufl.as_vector([1.0] * space.bs)
@@ -157,7 +164,11 @@ def robin_coefficient(alpha: float | str, E: fem.Function, space: "InterfaceSpac
     den = fem.assemble_vector(fem.form(ufl.dot(v, ones) * ufl.dx))
     for vec in (num, den):
         vec.scatter_reverse(la.InsertMode.add)
-    return scale * num.array[space.dofs] / den.array[space.dofs]
+    E_p = num.array[space.dofs] / den.array[space.dofs]
+    if with_Emin:
+        lowest = space.comm.allreduce(float(E_p.min(initial=np.inf)), op=MPI.MIN)
+        return np.full(space.size, scale * lowest)
+    return scale * E_p
 
 
 def sub_to_parent_dofs(part: Part, V_sub: fem.FunctionSpace, V_parent: fem.FunctionSpace) -> tuple[np.ndarray, np.ndarray]:

@@ -191,7 +191,7 @@ def solve_primal_ms_hybrid(
     cm: ContactMesh,
     model: TestModel,
     *,
-    alpha: float | str = "E",
+    alpha: float | str = "Emin",
     delta: float,
     layers: int = 3,
     nbasis: int | None = 3,
@@ -209,6 +209,9 @@ def solve_primal_ms_hybrid(
     ``reference`` (fine monolithic), outside the online time.  ``initial_data`` warm-starts the interface
     data, ``step`` reuses a step (and its offline data) from an earlier solve.
 
+    ``alpha`` defaults to ``"Emin"`` (the smallest nodal E on γ; it was ``"E"``, the same wherever γ is
+    homogeneous: a nodal E·c amplifies the multiscale error in stiff channels through γ, README issue 10;
+    the CLI's default is ``hybrid.primal.DEFAULT_ALPHA_MS``).
     ``dofs["omega1_ms"]`` is dim V_ms; ``time_offline_s`` covers assembly, eigenproblems,
     bases, N and the coarse factorization (breakdown in ``result.step.offline_times``);
     ``time_online_s`` the iteration.

@@ -34,6 +34,12 @@ import numpy as np
 RESULT = "RESULT "
 
 
+def _cpu_s() -> float:
+    """CPU seconds (user + system) of this process so far."""
+    ru = resource.getrusage(resource.RUSAGE_SELF)
+    return ru.ru_utime + ru.ru_stime
+
+
 def _peak_rss_gb(comm=None) -> float:
     rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6  # kB -> GB
     if comm is not None and comm.size > 1:
@@ -59,9 +65,10 @@ def worker(args: argparse.Namespace) -> dict:
     cm = geometry.unit_square(args.n, args.n_coarse, comm=MPI.COMM_SELF)
     out = {"n": args.n, "ranks": comm.size, "time_mesh_s": time.perf_counter() - t0}
     if args.worker == "monolithic":
+        cpu0 = _cpu_s()
         ref = solve_mixed_monolithic(cm, model)
         out.update(dofs=ref.dofs["total"], time_s=ref.time_s, time_newton_s=ref.time_newton_s,
-                   newton_steps=ref.newton.steps)
+                   newton_steps=ref.newton.steps, cpu_s=_cpu_s() - cpu0)
         ref.free()
     else:
         res = solve_mixed_ms_hybrid(cm, model, layers=args.layers, offline_comm=comm, cache_dir=args.cache_dir,
@@ -72,6 +79,9 @@ def worker(args: argparse.Namespace) -> dict:
                    dofs_omega2=res.dofs["omega2"], iterations=res.iterations, converged=res.converged,
                    time_offline_s=res.time_offline_s, time_online_s=res.time_online_s,
                    offline_times={k: round(v, 2) for k, v in res.offline_times.items()},
+                   offline_cpu={k: round(v, 2) for k, v in om.cpu_times.items()},
+                   cpu_offline_omega1_s=sum(v for k, v in om.cpu_times.items() if k != "load"),
+                   cpu_total_s=_cpu_s(),
                    cache_status=om.cache_status,
                    cache_gb=cache.stat().st_size / 1e9 if cache is not None and cache.is_file() else None,
                    functions_gb=sum(f.nbytes for f in om.basis + om.corr if f is not None) / 1e9,
@@ -139,28 +149,34 @@ def main() -> None:
         rows.append(row)
         print(json.dumps(row), flush=True)
 
+    load = os.getloadavg()
     lines = [
         "# Algorithm 4 cost against the fine mesh (`benchmarks/mixed_ms_scaling.py`)",
         "",
-        f"Machine: {machine_description()}. Model 2, H = 1/{args.n_coarse}, m = {args.layers}, β = √h, default "
+        f"Machine: {machine_description()}. Load average at the end of the run: "
+        f"{load[0]:.1f} / {load[1]:.1f} / {load[2]:.1f} (1 / 5 / 15 min; above the core count the wall times are "
+        f"contended, the CPU times less so). Model 2, H = 1/{args.n_coarse}, m = {args.layers}, β = √h, default "
         "Stage I rule, source correctors on. Each entry is a separate process (peak RSS of that process; "
-        "under MPI the largest over the ranks). Offline: assembly of the cell operators, Stage I, Stage II, "
-        "coarse operators, cache write; the subproblem set-up (meshes, AW spaces of Ω₁ and Ω₂) is 'setup'.",
+        "under MPI the largest over the ranks; no reference solve in the Algorithm 4 process). Offline: "
+        "assembly of the cell operators, Stage I, Stage II, coarse operators, cache write (wall s, CPU s in "
+        "parentheses); the subproblem set-up (meshes, AW spaces of Ω₁ and Ω₂) is 'setup' (wall only).",
         "",
-        "| h | DOFs (fine) | monolithic s (Newton s) | mono. peak GB | offline s | offline / mono. | setup, Stage I, "
-        "Stage II, coarse s | online s | online / mono. Newton | peak GB | cache GB | cache load s | "
-        f"offline s, {args.ranks} ranks | speed-up |",
+        "| h | DOFs (fine) | monolithic s (Newton s) [CPU s] | mono. peak GB | offline s [Ω₁ CPU s] | offline / mono. | "
+        "setup; assembly, Stage I, Stage II, coarse, save s (CPU) | online s | online / mono. Newton | peak GB | "
+        f"cache GB | cache load s | offline s, {args.ranks} ranks | speed-up |",
         "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         mono, b, ld, par = r["mono"], r["built"], r["loaded"], r["par"]
-        t = b["offline_times"]
-        parts = ", ".join(f"{t.get(k, 0):.1f}" for k in ("setup", "eigen", "basis", "coarse"))
+        t, c = b["offline_times"], b["offline_cpu"]
+        parts = f"{t.get('setup', 0):.1f}; " + ", ".join(
+            f"{t.get(k, 0):.1f} ({c.get(k, 0):.1f})" for k in ("assembly", "eigen", "basis", "coarse", "save"))
         par_cols = (f"{par['time_offline_s']:.1f} | {b['time_offline_s'] / par['time_offline_s']:.2f}"
                     if par else "— | —")
         lines.append(
-            f"| 1/{r['n']} | {mono['dofs']} | {mono['time_s']:.1f} ({mono['time_newton_s']:.1f}) | "
-            f"{mono['peak_rss_gb']:.2f} | {b['time_offline_s']:.1f} | {b['time_offline_s'] / mono['time_s']:.1f} | "
+            f"| 1/{r['n']} | {mono['dofs']} | {mono['time_s']:.1f} ({mono['time_newton_s']:.1f}) "
+            f"[{mono['cpu_s']:.1f}] | {mono['peak_rss_gb']:.2f} | {b['time_offline_s']:.1f} "
+            f"[{b['cpu_offline_omega1_s']:.1f}] | {b['time_offline_s'] / mono['time_s']:.1f} | "
             f"{parts} | {b['time_online_s']:.2f} | {b['time_online_s'] / mono['time_newton_s']:.2f} | "
             f"{b['peak_rss_gb']:.2f} | {b['cache_gb']:.3f} | {ld['offline_times'].get('load', float('nan')):.1f} | "
             f"{par_cols} |"
@@ -169,8 +185,11 @@ def main() -> None:
     fits = {
         "monolithic solve (time)": [r["mono"]["time_s"] for r in rows],
         "monolithic peak memory": [r["mono"]["peak_rss_gb"] for r in rows],
+        "monolithic solve (CPU)": [r["mono"]["cpu_s"] for r in rows],
         "Algorithm 4 offline (time)": [r["built"]["time_offline_s"] for r in rows],
-        "Algorithm 4 Stage II (time)": [r["built"]["offline_times"]["basis"] for r in rows],
+        "Algorithm 4 offline, Ω₁ parts (CPU)": [r["built"]["cpu_offline_omega1_s"] for r in rows],
+        "Algorithm 4 Stage I (CPU)": [r["built"]["offline_cpu"]["eigen"] for r in rows],
+        "Algorithm 4 Stage II (CPU)": [r["built"]["offline_cpu"]["basis"] for r in rows],
         "Algorithm 4 online (time)": [r["built"]["time_online_s"] for r in rows],
         "Algorithm 4 peak memory": [r["built"]["peak_rss_gb"] for r in rows],
         "Algorithm 4 cache size": [r["built"]["cache_gb"] for r in rows],

@@ -6,12 +6,16 @@ exit 130 and one line on stderr (nothing has been written yet).  Only the import
 itself (``dolfinx_solver``, a few tenths of a second) comes before the guard.
 """
 
+import signal
 import sys
 
 __all__ = ["main"]
 
 
 def main(argv: list[str] | None = None) -> int:
+    # Ctrl-C raises KeyboardInterrupt here, as during the run (``cli._interruptible`` installs its own
+    # handlers), also when the process inherited an ignored SIGINT (a background job of a script)
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     try:
         from fenics_contact.cli import main as cli_main
     except KeyboardInterrupt:

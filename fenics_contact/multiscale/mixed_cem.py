@@ -134,6 +134,7 @@ from fenics_contact.progress import Progress
 from fenics_contact.multiscale.cem import (
     DEFAULT_S_FACTOR,
     CoarseGrid,
+    count_eigenvalues_below,
     kappa_tilde,
     require_serial,
 )
@@ -808,24 +809,7 @@ def _count_below(K: sp.spmatrix, n_loc: int, t: float, M: sp.spmatrix) -> int:
 
     Sylvester and Haynsworth: In([[Ã, Bᵀ], [B, tS]]) = In(Ã) + In(tS − BÃ⁻¹Bᵀ), Ã ≻ 0.
     """
-    X = scipy_to_petsc((K - t * M).tocsr())
-    ksp = PETSc.KSP().create(PETSc.COMM_SELF)
-    try:
-        ksp.setOperators(X)
-        ksp.setType(PETSc.KSP.Type.PREONLY)
-        pc = ksp.getPC()
-        pc.setType(PETSc.PC.Type.CHOLESKY)
-        pc.setFactorSolverType("mumps")
-        pc.setFactorSetUpSolverType()
-        pc.getFactorMatrix().setMumpsIcntl(24, 1)  # null-pivot detection: required for the inertia
-        ksp.setUp()
-        if pc.getFailedReason() != 0:
-            raise ConvergenceError(f"Stage I inertia: LDLᵀ failed (PETSc reason {pc.getFailedReason()})")
-        nneg, _, _ = pc.getFactorMatrix().getInertia()
-    finally:
-        ksp.destroy()
-        X.destroy()
-    return int(nneg) - n_loc
+    return count_eigenvalues_below(K, M, t) - n_loc  # the primal CEM's inertia count (MUMPS LDLᵀ)
 
 
 def _cell_pairs_sparse(

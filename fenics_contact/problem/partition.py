@@ -42,9 +42,9 @@ def _cell_vertices(msh: dmesh.Mesh, cells: np.ndarray) -> np.ndarray:
     return msh.geometry.x[geo][:, :, :2]
 
 
-def cartesian_coarse_cells(msh: dmesh.Mesh, H: float) -> tuple[np.ndarray, int]:
-    """(coarse index of every local cell, number of columns nx) for the grid of squares of side H over the
-    bounding box; index i + nx·j, or ``UNRESOLVED`` for a cell not inside one square (collective)."""
+def _bounding_grid(msh: dmesh.Mesh, H: float) -> tuple[np.ndarray, int, int]:
+    """(lower-left corner, columns nx, rows ny) of the grid of squares of side H over the mesh's bounding box
+    (collective; InputError for an H that is not a positive number)."""
     if not (isinstance(H, (int, float, np.floating)) and np.isfinite(H) and H > 0):
         raise InputError(f"the coarse size H must be a positive number, got {H!r}")
     comm = msh.comm
@@ -53,6 +53,14 @@ def cartesian_coarse_cells(msh: dmesh.Mesh, H: float) -> tuple[np.ndarray, int]:
     comm.Allreduce(x.min(axis=0) if x.size else np.full(2, np.inf), lo, op=MPI.MIN)
     comm.Allreduce(x.max(axis=0) if x.size else np.full(2, -np.inf), hi, op=MPI.MAX)
     nx = max(1, int(np.ceil((hi[0] - lo[0]) / H - 1e-9)))
+    ny = max(1, int(np.ceil((hi[1] - lo[1]) / H - 1e-9)))
+    return lo, nx, ny
+
+
+def cartesian_coarse_cells(msh: dmesh.Mesh, H: float) -> tuple[np.ndarray, int]:
+    """(coarse index of every local cell, number of columns nx) for the grid of squares of side H over the
+    bounding box; index i + nx·j, or ``UNRESOLVED`` for a cell not inside one square (collective)."""
+    lo, nx, _ = _bounding_grid(msh, H)
     cells = _local_cells(msh)
     if cells.size == 0:
         return np.zeros(0, dtype=np.int64), nx
@@ -70,15 +78,7 @@ def centroid_coarse_cells(msh: dmesh.Mesh, H: float) -> tuple[np.ndarray, int]:
     ``cartesian_coarse_cells``) that holds the cell's centroid.  Every cell gets a coarse cell, also on
     an unstructured mesh that does not resolve the grid lines: the coarse cells are then unions of fine
     cells with jagged boundaries, which the multiscale methods accept as any partition (collective)."""
-    if not (isinstance(H, (int, float, np.floating)) and np.isfinite(H) and H > 0):
-        raise InputError(f"the coarse size H must be a positive number, got {H!r}")
-    comm = msh.comm
-    x = msh.geometry.x[:, :2]
-    lo, hi = np.empty(2), np.empty(2)
-    comm.Allreduce(x.min(axis=0) if x.size else np.full(2, np.inf), lo, op=MPI.MIN)
-    comm.Allreduce(x.max(axis=0) if x.size else np.full(2, -np.inf), hi, op=MPI.MAX)
-    nx = max(1, int(np.ceil((hi[0] - lo[0]) / H - 1e-9)))
-    ny = max(1, int(np.ceil((hi[1] - lo[1]) / H - 1e-9)))
+    lo, nx, ny = _bounding_grid(msh, H)
     cells = _local_cells(msh)
     if cells.size == 0:
         return np.zeros(0, dtype=np.int64), nx

@@ -14,7 +14,6 @@ example cases of ``cases/`` run at a small size against what is known of their s
 import importlib.util
 import json
 import os
-import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -26,6 +25,8 @@ from mpi4py import MPI
 from fenics_contact.cli import build_parser, main, options_from_arguments
 from fenics_contact.errors import InputError
 from fenics_contact.problem.case import ByGroup, MeshFile, Pixels, PythonField, Uniform, load_case, parse_override
+
+from mpi_jobs import mpiexec as _mpiexec
 
 pytestmark = pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="the CLI tests run serially (MPI: launched below)")
 
@@ -296,11 +297,6 @@ def test_composite_case_mixed_agrees_with_primal(tmp_path):
     assert primal["force_indentation"] is None and mixed["force_indentation"] is None  # one depth: no curve
     assert abs(mixed["contact_force"] / primal["contact_force"] - 1.0) < 0.02
     assert abs(mixed["contact_zone"][0][1] - primal["contact_zone"][0][1]) <= primal["h"]
-
-
-def _mpiexec() -> str | None:
-    local = Path(sys.executable).with_name("mpiexec")
-    return str(local) if local.exists() else shutil.which("mpiexec")
 
 
 @pytest.mark.mpi

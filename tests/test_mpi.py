@@ -1,32 +1,19 @@
 """The monolithic solve and Algorithm 1 give the serial answer under ``mpiexec -n 2``."""
 
-import json
-import os
-import shutil
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 from mpi4py import MPI
 
+from mpi_jobs import mpiexec as _mpiexec, run_result
+
 SCRIPT = Path(__file__).with_name("mpi_check.py")
 pytestmark = [pytest.mark.mpi, pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="launches its own MPI job")]
 
 
-def _mpiexec() -> str | None:
-    local = Path(sys.executable).with_name("mpiexec")
-    return str(local) if local.exists() else shutil.which("mpiexec")
-
-
 def _run(prefix: list[str], *args: str) -> dict:
-    env = dict(os.environ, OMP_NUM_THREADS="1")
-    proc = subprocess.run([*prefix, sys.executable, str(SCRIPT), *args], capture_output=True, text=True,
-                          env=env, timeout=600)
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    line = next(l for l in proc.stdout.splitlines() if l.startswith("RESULT "))
-    return json.loads(line[len("RESULT "):])
+    return run_result(SCRIPT, prefix, *args, timeout=600)
 
 
 @pytest.mark.skipif(_mpiexec() is None, reason="no mpiexec")

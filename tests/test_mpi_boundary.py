@@ -2,7 +2,6 @@
 
 import json
 import os
-import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -11,13 +10,10 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
+from mpi_jobs import mpiexec as _mpiexec
+
 SCRIPT = Path(__file__).with_name("mpi_boundary_check.py")
 pytestmark = [pytest.mark.mpi, pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="launches its own MPI job")]
-
-
-def _mpiexec() -> str | None:
-    local = Path(sys.executable).with_name("mpiexec")
-    return str(local) if local.exists() else shutil.which("mpiexec")
 
 
 def _run(prefix: list[str]) -> dict:

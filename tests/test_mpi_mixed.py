@@ -13,7 +13,6 @@ the distributed runs differ from the serial one by the same amounts.
 
 import json
 import os
-import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -22,6 +21,8 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
+from mpi_jobs import mpiexec as _mpiexec
+
 SCRIPT = Path(__file__).with_name("mpi_mixed_check.py")
 pytestmark = [pytest.mark.mpi, pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="launches its own MPI job")]
 
@@ -29,11 +30,6 @@ MONO = ["mono-1", "mono-2", "mono-free", "mono-bc"]
 HYBRID = ["hybrid-1", "hybrid-2", "hybrid-free"]
 RATES = np.array([2.0, 3.0, 2.0])  # ‖u − u_h‖, ‖σ − σ_h‖, ‖div(σ − σ_h)‖
 TOL = 1e-10
-
-
-def _mpiexec() -> str | None:
-    local = Path(sys.executable).with_name("mpiexec")
-    return str(local) if local.exists() else shutil.which("mpiexec")
 
 
 def _run(ranks: int, cases: list[str], tmp: Path) -> tuple[dict, dict]:

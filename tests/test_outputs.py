@@ -21,6 +21,8 @@ from fenics_contact.multiscale.cache import OfflineCache, remove_stale_temporari
 
 from test_validation import build_columns
 
+from mpi_jobs import mpiexec as _mpiexec
+
 pytestmark = pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="launches its own processes")
 
 SMALL = ["--h", "16", "--H", "4"]
@@ -145,11 +147,6 @@ def test_kill_9_during_a_cache_save_leaves_a_temporary_that_the_next_use_removes
 # ---------------------------------------------------------------------------------------------
 # MPI: rank 0 handles the directory, every rank writes its part of the fields
 # ---------------------------------------------------------------------------------------------
-def _mpiexec() -> str | None:
-    local = Path(sys.executable).with_name("mpiexec")
-    return str(local) if local.exists() else shutil.which("mpiexec")
-
-
 def _cli(*args: str, ranks: int = 2) -> subprocess.CompletedProcess:
     command = [_mpiexec(), "-n", str(ranks), sys.executable, "-m", "fenics_contact.cli", "run", *args]
     env = dict(os.environ, OMP_NUM_THREADS="1")

@@ -9,7 +9,14 @@ paper's §5.4 cases on test model 1 (``problem.models.paper_phase_model``): (E�
 Table 5.8: online times of the monolithic semismooth Newton solve, Algorithm 2 and Algorithm 4
 with H = 1/32, 1/16, 1/8 (each H has its own strip Ω₂ = one coarse cell, hence its own reference).
 The iteration is the paper's plain update unless ``--accel anderson`` or ``newton`` (Table 5.8 takes
-a comma list, the offline data reused between the updates).
+a comma list, the offline data reused between the updates).  Tables 5.3, 5.5–5.7 stop at a transmission
+residual < ``--tol`` (1e-6; the row also gives where the relative change first fell below it, the
+rule of the paper), give e_σ against the monolithic and against the split fine solution (Algorithm 2's
+fixed point), offline wall and CPU seconds and the peak RSS; ``--load omega1`` moves the model's load
+bands into Ω₁ (x ∈ [1/2, 15/16], ``models.LOADS_IN_OMEGA1``: the paper-like loads of issue 11) and
+``--without-source`` adds the paper's Ω₁ step (no source correctors) at the largest m:
+
+    OMP_NUM_THREADS=1 python benchmarks/reproduce_mixed_ms_tables.py --tables 5.3 --load omega1 --without-source
 
 Table 'source' (``--tables source``): loads inside Ω₁ (models 1 and 2 with their bands moved to
 x ∈ [1/2, 15/16], model 3 with E_high = 1e3 and 1e6), h = 1/n, H = ``--n-coarse``, m = ``--layers``:
@@ -20,6 +27,7 @@ e_σ with the source correctors (default) per layer, their ratio, and without th
 
 import argparse
 import logging
+import resource
 import sys
 import time
 from pathlib import Path
@@ -51,42 +59,100 @@ PAPER_58 = {"monolithic": 15.29, "alg2": 6.48, 32: 4.94, 16: 2.13, 8: 1.69}
 INCOMPRESSIBLE = {"5.5": (1.0e-4, 0.35, 0.499), "5.6": (1.0e4, 0.499, 0.35), "5.7": (1.0, 0.499, 0.499)}
 
 
+def _peak_rss_gb() -> float:
+    """Peak resident memory of this process so far (GB; Linux reports ru_maxrss in kB)."""
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024**2
+
+
 def table_53(n: int, layers: list[int], accel: str, lines: list[str], title: str = "5.3",
-             nu_high: float = 0.499, min_gap: float | None = DEFAULT_MIN_GAP) -> None:
+             nu_high: float = 0.499, min_gap: float | None = DEFAULT_MIN_GAP, load: str = "builtin",
+             tol: float = 1.0e-6, without_source: bool = False) -> None:
+    """One Table 5.3 / 5.5–5.7 analogue, m = ``layers``.
+
+    ``load="omega1"`` moves the model's load bands into Ω₁ (``models.LOADS_IN_OMEGA1``: x ∈ [1/2, 15/16],
+    pushing and pulling), the paper-like loads of issue 11; ``without_source`` adds, at the largest m, the
+    paper's Ω₁ step (no source correctors).  Per row: the iterations of the stopping rule (transmission
+    residual < ``tol``) and, in brackets, where the relative change of the iterates first fell below
+    ``tol`` (the rule of the paper and of the runs before the certificate); offline wall and CPU
+    seconds (process time of the Ω₁ offline parts); the process's peak RSS so far.
+    """
     cm = geometry.unit_square(n, 16)
     if title == "5.3":
+        number = 2
         model = models.get_model(2)
         desc = "model 2 (E 1000/1, ν = 0.35)"
     else:
+        number = 1
         ratio, nu1, nu2 = INCOMPRESSIBLE[title]
         nu1, nu2 = (nu_high if nu == 0.499 else nu for nu in (nu1, nu2))
         model = models.paper_phase_model(1, E_ratio=ratio, nu_pattern=nu1, nu_rest=nu2)
         desc = f"model 1, E₁/E₂ = {ratio:g}, ν₁ = {nu1:g} (channels), ν₂ = {nu2:g} (rest, Ω₂)"
+    if load == "omega1":
+        bands = models.LOADS_IN_OMEGA1[number]
+        model = model.with_(load=models.band_load(bands))
+        desc += ", load in Ω₁ (bands x ∈ [1/2, 15/16]: " + ", ".join(
+            f"f₁ = {b[4]:+g} on y ∈ [{b[2]:g}, {b[3]:g}]" for b in bands) + ")"
+    elif load != "builtin":
+        raise SystemExit(f"unknown load {load!r} (builtin or omega1)")
     ref = solve_mixed_monolithic(cm, model)
     ref.free()
+    split = solve_mixed_monolithic(cm, model, split_interface=True, epsilon=ref.epsilon)
+    split.free()
+    floor = _reference_distance(cm, model, ref, split)
+    paper_cols = load == "builtin" and nu_high == 0.499
     lines += [
         f"### Table {title} analogue: {desc}, h = 1/{n}, H = 1/16, β = √h, "
         + (f"l ≥ 3 per cell, more where Λ < {min_gap:g} (min_gap)" if min_gap else "l = 3 (fixed)")
-        + f", update '{accel}'",
+        + f", update '{accel}', tol {tol:g}",
         "",
-        "| m | its | e_σ | e_σ (L²) | e_u | e_u (π on Ω₁) | e_u (post-proc.) | converged | l per cell | Λ "
-        "| dim X_ms + U_aux | offline s | online s | paper its | paper e_σ | paper e_u |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "its: to a transmission residual < tol (in brackets: first iteration with a relative change < tol). "
+        "ratio: e_σ(m−1)/e_σ(m). e_σ (split): against the split fine solution (Algorithm 2's fixed point, what the "
+        f"multiscale method approximates); the two fine solutions differ by {floor:.2e} (A-norm, relative: the floor "
+        "of e_σ against the monolithic one). offline: wall s [CPU s of the Ω₁ offline parts]. RSS: peak of the "
+        "process so far.",
+        "",
+        "| m | its | e_σ | ratio | e_σ (split) | ratio (split) | e_σ (L²) | e_u | e_u (π on Ω₁) | e_u (post-proc.) | converged | l per cell | Λ "
+        "| dim X_ms + U_aux | offline s [CPU] | online s | peak RSS GB | paper its | paper e_σ | paper e_u |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
+    prev = prev_split = None
     for m in layers:
         res = solve_mixed_ms_hybrid(cm, model, layers=m, nbasis=3, min_gap=min_gap, reference=ref,
-                                    options=IterationOptions(accel=accel, max_iterations=1000))
+                                    options=IterationOptions(accel=accel, max_iterations=1000, tol=tol))
         om = res.step.omega1
         lo, hi = om.nbasis_range
-        p = PAPER[title].get(m) if nu_high == 0.499 else None
+        below = np.flatnonzero(res.history.rel_changes < tol)
+        its_rel = f"{below[0] + 1}" if below.size else "—"
+        p = PAPER[title].get(m) if paper_cols else None
         paper = f" {p[0]} | {p[1]:.2e} | {p[2]:.2e} |" if p else " — | — | — |"
-        row = (f"| {m} | {res.iterations} | {res.e_sigma:.2e} | {res.e_sigma_l2:.2e} | {res.e_u:.2e} | "
-               f"{res.e_u_projected:.2e} | {res.e_u_post:.2e} | {res.converged} | {lo}–{hi} | "
+        ratio = f"{prev / res.e_sigma:.1f}" if prev else "—"
+        res.step.set_reference(split)
+        e_split = res.step.errors()[0]
+        ratio_s = f"{prev_split / e_split:.1f}" if prev_split else "—"
+        row = (f"| {m} | {res.iterations} ({its_rel}) | {res.e_sigma:.2e} | {ratio} | {e_split:.2e} | {ratio_s} | "
+               f"{res.e_sigma_l2:.2e} | "
+               f"{res.e_u:.2e} | {res.e_u_projected:.2e} | {res.e_u_post:.2e} | {res.converged} | {lo}–{hi} | "
                f"{om.spectral_gap:.2g} | {res.dofs['omega1_ms']} | "
-               f"{res.time_offline_s:.1f} | {res.time_online_s:.2f} |" + paper)
+               f"{res.time_offline_s:.1f} [{sum(om.cpu_times.values()):.1f}] | {res.time_online_s:.2f} | "
+               f"{_peak_rss_gb():.2f} |" + paper)
         lines.append(row)
         print(row, flush=True)
+        prev, prev_split = res.e_sigma, e_split
         del res, om  # the offline data of one m (GBs with many modes) is freed before the next is built
+    if without_source:
+        m = max(layers)
+        res = solve_mixed_ms_hybrid(cm, model, layers=m, nbasis=3, min_gap=min_gap, reference=ref,
+                                    source_correction=False,
+                                    options=IterationOptions(accel=accel, max_iterations=1000, tol=tol))
+        res.step.set_reference(split)
+        e_split = res.step.errors()[0]
+        row = (f"| {m}, without source correctors (the paper's Ω₁ step) | {res.iterations} | {res.e_sigma:.2e} | — | "
+               f"{e_split:.2e} | — | {res.e_sigma_l2:.2e} | {res.e_u:.2e} | {res.e_u_projected:.2e} | {res.e_u_post:.2e} | "
+               f"{res.converged} | | | {res.dofs['omega1_ms']} | {res.time_offline_s:.1f} | "
+               f"{res.time_online_s:.2f} | {_peak_rss_gb():.2f} | — | — | — |")
+        lines.append(row)
+        print(row, flush=True)
+        del res
     lines.append("")
 
 
@@ -225,6 +291,13 @@ def main() -> None:
     parser.add_argument("--min-gap", type=float, default=DEFAULT_MIN_GAP,
                         help="Stage I: more modes where the first eigenvalue left out is below this "
                         "(0: the paper's fixed l = 3)")
+    parser.add_argument("--load", default="builtin", choices=("builtin", "omega1"),
+                        help="Tables 5.3, 5.5-5.7: the model's own load bands (in Ω₂) or the same bands moved into "
+                        "Ω₁ (x ∈ [1/2, 15/16], models.LOADS_IN_OMEGA1)")
+    parser.add_argument("--tol", type=float, default=1.0e-6,
+                        help="Tables 5.3, 5.5-5.7: stopping rule, transmission residual < tol (the paper's 1e-6)")
+    parser.add_argument("--without-source", action="store_true",
+                        help="Tables 5.3, 5.5-5.7: also the paper's Ω₁ step (no source correctors) at the largest m")
     parser.add_argument("--n-coarse", default="16,8", help="table 'source': 1/H values")
     parser.add_argument("--cases", default=";".join(SOURCE_CASES),
                         help="table 'source': ';'-separated cases among " + ", ".join(SOURCE_CASES))
@@ -240,11 +313,12 @@ def main() -> None:
         "Command: `OMP_NUM_THREADS=1 python " + " ".join(sys.argv) + "`",
         "",
     ]
-    start = time.perf_counter()
+    start, cpu = time.perf_counter(), time.process_time()
     for t in args.tables.split(","):
         t = t.strip()
         if t == "5.3" or t in INCOMPRESSIBLE:
-            table_53(args.n, layers, args.accel, lines, title=t, nu_high=args.nu_high, min_gap=args.min_gap or None)
+            table_53(args.n, layers, args.accel, lines, title=t, nu_high=args.nu_high, min_gap=args.min_gap or None,
+                     load=args.load, tol=args.tol, without_source=args.without_source)
         elif t == "5.8":
             table_58(args.n, args.layers_58, args.accel.split(","), lines,
                      tuple(int(c) for c in args.coarse_58.split(",")))
@@ -253,7 +327,8 @@ def main() -> None:
                          [c.strip() for c in args.cases.split(";")], lines)
         else:
             raise SystemExit(f"unknown table {t!r}")
-    lines.append(f"Total wall time {time.perf_counter() - start:.0f} s.")
+    lines.append(f"Total wall time {time.perf_counter() - start:.0f} s, CPU time {time.process_time() - cpu:.0f} s, "
+                 f"peak RSS {_peak_rss_gb():.2f} GB.")
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text("\n".join(lines) + "\n")
     print(f"wrote {args.out}")

@@ -1054,6 +1054,33 @@ class _MumpsLU:
         lu._arrays = csr
         return lu
 
+    @classmethod
+    def symmetric(cls, upper: sp.csr_matrix) -> "_MumpsLU":
+        """Factorize the symmetric matrix whose upper triangle (canonical CSR) is ``upper``: MUMPS Cholesky
+        (positive definite, no pivoting; 1.5× faster than LU on the Stage II skeleton systems), or, when
+        a pivot is not positive (a matrix that is not positive definite after all), the LU of the full
+        matrix."""
+        csr = (upper.indptr.astype(PETSc.IntType, copy=False), upper.indices.astype(PETSc.IntType, copy=False),
+               upper.data.astype(PETSc.ScalarType, copy=False))
+        mat = PETSc.Mat().createSBAIJ(upper.shape, 1, csr=csr, comm=PETSc.COMM_SELF)
+        mat.setOption(PETSc.Mat.Option.SPD, True)
+        mat.assemble()
+        self = cls.__new__(cls)
+        self.mat, self._arrays = mat, None
+        self.ksp = PETSc.KSP().create(PETSc.COMM_SELF)
+        self.ksp.setOperators(mat)
+        self.ksp.setType("preonly")
+        pc = self.ksp.getPC()
+        pc.setType("cholesky")
+        pc.setFactorSolverType("mumps")
+        pc.setFactorSetUpSolverType()
+        self.ksp.setUp()
+        if pc.getFailedReason() == 0 and pc.getFactorMatrix().getMumpsInfog(12) == 0:
+            return self
+        self.destroy()
+        log.debug("Stage II skeleton matrix not positive definite: LU instead of Cholesky")
+        return cls.from_csr(upper + sp.triu(upper, 1).T)
+
     def solve(self, rhs: np.ndarray) -> np.ndarray:
         """A⁻¹ rhs for all columns at once (one MatMatSolve)."""
         n, k = rhs.shape
@@ -1319,20 +1346,40 @@ def _skeleton_solve(
     TG = _skeleton_columns(topo, skeleton, np.concatenate([dofs.cells[j] for j in patch]), G)
     if TG.shape[1] == 0:
         return G, np.zeros_like(rhs)
-    rows, cols, vals = [], [], []
-    for j in patch:
-        pos = np.searchsorted(G, condensed[j][0])
-        rows.append(np.repeat(pos, pos.size))
-        cols.append(np.tile(pos, pos.size))
-        vals.append(condensed[j][1].ravel())
-    SG = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(G.size, G.size))
-    TGt = TG.T.tocsr()
-    lu = _MumpsLU.from_csr(TGt @ (SG @ TG))
+    lu = _MumpsLU.symmetric(_skeleton_matrix(G, TG, [condensed[j][:2] for j in patch]))
     try:
-        xs = lu.solve(np.asarray(TGt @ rhs))
+        xs = lu.solve(np.asarray(TG.T @ rhs))
     finally:
         lu.destroy()
     return G, np.asarray(TG @ xs)
+
+
+def _skeleton_matrix(G: np.ndarray, TG: sp.csr_matrix, blocks: list) -> sp.csr_matrix:
+    """Upper triangle (canonical CSR) of T_Γᵀ (Σ_K S_K) T_Γ, the patch skeleton matrix, from the coarse cells'
+    dense Schur complements ``blocks`` = [(skeleton DOFs of K, S_K)].  Each S_K is transformed on its own
+    (on a cell inside the patch T_Γ only selects rows), so the sum is formed once, in the reduced unknowns."""
+    n = TG.shape[1]
+    rows, cols, vals = [], [], []
+    for skel, S in blocks:
+        T = TG[np.searchsorted(G, skel)]
+        counts = np.diff(T.indptr)
+        if np.all(counts <= 1) and np.all(T.data == 1.0):
+            keep = np.flatnonzero(counts)
+            idx, Sh = T.indices, S[np.ix_(keep, keep)]
+        else:
+            idx = np.unique(T.indices)
+            Td = T[:, idx].toarray()
+            Sh = Td.T @ S @ Td
+        iu, ju = np.triu_indices(idx.size)
+        r, c = idx[iu], idx[ju]
+        swap = r > c
+        r[swap], c[swap] = c[swap], r[swap].copy()
+        rows.append(r)
+        cols.append(c)
+        vals.append(Sh[iu, ju])
+    A = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n))
+    A.sum_duplicates()
+    return A
 
 
 def _cell_values(

@@ -739,14 +739,15 @@ def _pair_residuals(At, Bl, S, lam: np.ndarray, phi: np.ndarray, p: np.ndarray) 
     return float(np.max(res / scale))
 
 
-def _s_orthonormalize(p: np.ndarray, S) -> np.ndarray:
-    """P L⁻ᵀ with PᵀSP = LLᵀ (fixes scaling, and the bases of repeated eigenvalues)."""
+def _s_orthonormalize(p: np.ndarray, S, phi: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray | None]:
+    """(P L⁻ᵀ, Φ L⁻ᵀ) with PᵀSP = LLᵀ (fixes scaling, and the bases of repeated eigenvalues); Φ (the stress
+    parts of the pairs, optional) gets the same combination."""
     gram = p.T @ (S @ p)
     try:
         L = np.linalg.cholesky(0.5 * (gram + gram.T))
     except np.linalg.LinAlgError as err:
         raise ConvergenceError(f"Stage I eigenvectors are dependent in the s-inner product: {err}") from None
-    return np.linalg.solve(L, p.T).T
+    return np.linalg.solve(L, p.T).T, None if phi is None else np.linalg.solve(L, phi.T).T
 
 
 def _cell_pairs_dense(At: sp.spmatrix, Bl: sp.spmatrix, S: sp.spmatrix) -> tuple[np.ndarray, np.ndarray]:
@@ -857,7 +858,7 @@ def _cell_pairs_sparse(
         Kp.destroy()
         Mp.destroy()
     gap = float(lam[nk]) if nk < lam.size else np.inf
-    return np.maximum(lam[:nk], 0.0), X[n_loc:, :nk], gap
+    return np.maximum(lam[:nk], 0.0), X[n_loc:, :nk], gap, X[:n_loc, :nk]
 
 
 def stage_one_cell(
@@ -880,11 +881,12 @@ def stage_one_cell(
         nk = _modes_to_keep(lam, nbasis, min_gap, max_nbasis)
         gap = float(lam[nk]) if nk < lam.size else np.inf
         lam, p = lam[:nk], vec[:, :nk]
-    else:
-        lam, p, gap = _cell_pairs_sparse(At, Bl, S, nbasis, min_gap, max_nbasis)
-    p = _s_orthonormalize(p, S)
-    # φ = −Ã⁻¹Bᵀp for the residual check (sparse LU of the local Ã)
-    phi = -spla.splu(At.tocsc()).solve(np.asarray(Bl.T @ p))
+        p, _ = _s_orthonormalize(p, S)
+        phi = -spla.splu(At.tocsc()).solve(np.asarray(Bl.T @ p))  # φ = −Ã⁻¹Bᵀp (sparse LU of the local Ã)
+    else:  # the pencil's eigenvectors carry φ
+        lam, p, gap, phi = _cell_pairs_sparse(At, Bl, S, nbasis, min_gap, max_nbasis)
+        p, phi = _s_orthonormalize(p, S, phi)
+    # the backward error of the pairs, from the equations (not the eigensolver's own estimate)
     res = _pair_residuals(At, Bl, S, lam, phi, p)
     return lam, np.ascontiguousarray(p).reshape(cells.size, 6, lam.size), gap, res
 

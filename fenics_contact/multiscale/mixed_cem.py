@@ -103,6 +103,7 @@ patch functions are stored in float32 (they only rebuild the fine output fields,
 relative rounding 6·10⁻⁸), U_aux and the coarse matrices in float64.
 """
 
+import functools
 import hashlib
 import json
 import logging
@@ -1309,10 +1310,12 @@ def _condense(system: _CellSystem) -> tuple[np.ndarray, np.ndarray, np.ndarray, 
     return system.skel, S, c, np.ascontiguousarray(X[:, n_G:])
 
 
-def _skeleton_columns(topo: _Topology, skeleton: tuple, cells: np.ndarray, G: np.ndarray) -> sp.csr_matrix:
+def _skeleton_columns(topo: _Topology, skeleton: tuple, cells: np.ndarray, G: np.ndarray
+                      ) -> tuple[sp.csr_matrix, np.ndarray]:
     """T_Γ (|G| × n): the functions of X_h(ω) (``local_stress_space`` of the fine cells ω) on the skeleton DOFs G
     of ω: the AW functions of the skeleton vertices and edges inside ω, the inner-boundary vertex functions
-    (null-space values z) of the skeleton vertices on ∂ω or on a traction-free side; edges there are dropped."""
+    (null-space values z) of the skeleton vertices on ∂ω or on a traction-free side; edges there are dropped.
+    Also returns the inner DOFs (sorted global AW DOFs; column k < |inner| of T_Γ is the unit vector of inner[k])."""
     v_in = np.bincount(topo.c2v[cells].ravel(), minlength=topo.nv)
     e_in = np.bincount(topo.c2e[cells].ravel(), minlength=topo.ne)
     skel_v, skel_e = skeleton
@@ -1329,12 +1332,12 @@ def _skeleton_columns(topo: _Topology, skeleton: tuple, cells: np.ndarray, G: np
     vals = [np.ones(inner.size)] + [null[kk, i, qq] for i in range(3)]
     rows, cols, vals = np.concatenate(rows), np.concatenate(cols), np.concatenate(vals)
     keep = vals != 0.0
-    return sp.csr_matrix((vals[keep], (rows[keep], cols[keep])), shape=(G.size, inner.size + ncol))
+    return sp.csr_matrix((vals[keep], (rows[keep], cols[keep])), shape=(G.size, inner.size + ncol)), inner
 
 
 def _skeleton_solve(
     ops: CellOperators, topo: _Topology, grid: CoarseGrid, dofs: CoarseCellDofs, skeleton: tuple, condensed: list,
-    i: int, layers: int,
+    i: int, layers: int, glob: "_GlobalSkeleton",
 ) -> tuple[np.ndarray, np.ndarray]:
     """The patch K_{i,m} condensed onto its skeleton: (skeleton AW DOFs G, their values (|G|, k) for coarse
     cell i's right-hand sides).  On the skeleton the patch space X_h(K_{i,m}) is T_Γ: the AW functions of
@@ -1345,10 +1348,10 @@ def _skeleton_solve(
     c = condensed[i][2]
     rhs = np.zeros((G.size, c.shape[1]))
     rhs[np.searchsorted(G, condensed[i][0])] = c
-    TG = _skeleton_columns(topo, skeleton, np.concatenate([dofs.cells[j] for j in patch]), G)
+    TG, inner = _skeleton_columns(topo, skeleton, np.concatenate([dofs.cells[j] for j in patch]), G)
     if TG.shape[1] == 0:
         return G, np.zeros_like(rhs)
-    lu = _MumpsLU.symmetric(_skeleton_matrix(G, TG, [condensed[j][:2] for j in patch]))
+    lu = _MumpsLU.symmetric(glob.patch_matrix(G, TG, inner, [condensed[j][:2] for j in patch]))
     try:
         xs = lu.solve(np.asarray(TG.T @ rhs))
     finally:
@@ -1356,31 +1359,64 @@ def _skeleton_solve(
     return G, np.asarray(TG @ xs)
 
 
-def _skeleton_matrix(G: np.ndarray, TG: sp.csr_matrix, blocks: list) -> sp.csr_matrix:
-    """Upper triangle (canonical CSR) of T_Γᵀ (Σ_K S_K) T_Γ, the patch skeleton matrix, from the coarse cells'
-    dense Schur complements ``blocks`` = [(skeleton DOFs of K, S_K)].  Each S_K is transformed on its own
-    (on a cell inside the patch T_Γ only selects rows), so the sum is formed once, in the reduced unknowns."""
-    n = TG.shape[1]
-    rows, cols, vals = [], [], []
-    for skel, S in blocks:
-        T = TG[np.searchsorted(G, skel)]
-        counts = np.diff(T.indptr)
-        if np.all(counts <= 1) and np.all(T.data == 1.0):
-            keep = np.flatnonzero(counts)
-            idx, Sh = T.indices, S[np.ix_(keep, keep)]
-        else:
-            idx = np.unique(T.indices)
-            Td = T[:, idx].toarray()
-            Sh = Td.T @ S @ Td
-        iu, ju = np.triu_indices(idx.size)
-        r, c = idx[iu], idx[ju]
-        swap = r > c
-        r[swap], c[swap] = c[swap], r[swap].copy()
-        rows.append(r)
-        cols.append(c)
-        vals.append(Sh[iu, ju])
-    A = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n))
-    A.sum_duplicates()
+class _GlobalSkeleton:
+    """Σ_K S_K over all coarse cells of Ω₁ (upper triangle, canonical CSR, on the sorted skeleton DOFs ``dofs``).
+
+    A patch skeleton matrix T_Γᵀ (Σ_{K in the patch} S_K) T_Γ takes its inner block from here: an inner DOF of
+    a patch lies on a skeleton vertex or edge all of whose coarse cells are in the patch, so every entry in an
+    inner row has all its contributions from patch cells.  Only the columns of the patch-boundary vertex
+    functions (null-space combinations, a few dozen) are summed from the patch's own cells.
+    """
+
+    def __init__(self, condensed: list) -> None:
+        self.dofs = np.unique(np.concatenate([c[0] for c in condensed]))
+        n = self.dofs.size
+        rows, cols, vals = [], [], []
+        for skel, S, *_ in condensed:
+            pos = np.searchsorted(self.dofs, skel)  # skel sorted: the local upper triangle is the global one
+            iu, ju = _triu(pos.size)
+            rows.append(pos[iu])
+            cols.append(pos[ju])
+            vals.append(S[iu, ju])
+        self.upper = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n))
+        self.upper.sum_duplicates()
+
+    def patch_matrix(self, G: np.ndarray, TG: sp.csr_matrix, inner: np.ndarray, blocks: list) -> sp.csr_matrix:
+        """Upper triangle (canonical CSR) of T_Γᵀ (Σ_K S_K) T_Γ for a patch with skeleton DOFs G, T_Γ and inner
+        DOFs from ``_skeleton_columns`` and its cells' ``blocks`` = [(skeleton DOFs of K, S_K)]."""
+        pos = np.searchsorted(self.dofs, inner)
+        A = _sorted(self.upper[pos][:, pos])  # the inner block (pos increasing: still upper triangular)
+        n_I, n_B = inner.size, TG.shape[1] - inner.size
+        if n_B == 0:
+            return A
+        NB = TG[:, n_I:].tocsr()  # the boundary vertex functions on G
+        on_b = np.diff(NB.indptr) > 0
+        X = np.zeros((G.size, n_B))  # (Σ_K S_K) N_B on the rows of G
+        for skel, S in blocks:
+            rows = np.searchsorted(G, skel)
+            b = on_b[rows]
+            if b.any():
+                X[rows] += S[:, b] @ NB[rows[b]].toarray()
+        BB = NB.T @ X
+        top = sp.hstack([A, sp.csr_matrix(X[np.searchsorted(G, inner)])], format="csr")
+        bottom = sp.hstack([sp.csr_matrix((n_B, n_I)), sp.csr_matrix(np.triu(0.5 * (BB + BB.T)))], format="csr")
+        return _sorted(sp.vstack([top, bottom], format="csr"))
+
+
+@functools.lru_cache(maxsize=64)
+def _triu(n: int) -> tuple[np.ndarray, np.ndarray]:
+    return np.triu_indices(n)
+
+
+def _sorted(A: sp.csr_matrix) -> sp.csr_matrix:
+    """A in canonical form (sorted column indices, no duplicates), sorting only if a row is out of order."""
+    d = np.diff(A.indices)
+    starts = A.indptr[1:-1] - 1  # positions in d that cross a row boundary
+    d[starts[(starts >= 0) & (starts < d.size)]] = 1
+    if d.size and d.min() <= 0:
+        A.sum_duplicates()
+    else:
+        A.has_canonical_format = True
     return A
 
 
@@ -1433,8 +1469,10 @@ def _stage_two_condensed(
     own = [c[3] for c in condensed]
     condensed = [c[:3] for c in condensed]
     cost = np.array([sum(condensed[j][0].size for j in p) for p in patches], dtype=float)
+    glob = _GlobalSkeleton(condensed)
     values = _run_shared(cost ** 1.5, comm, "mixed CEM Stage II (patch skeletons)",
-                         lambda i: _skeleton_solve(ops, topo, grid, dofs, skeleton, condensed, i, layers))
+                         lambda i: _skeleton_solve(ops, topo, grid, dofs, skeleton, condensed, i, layers, glob))
+    del glob
     del condensed
     reach = [[] for _ in range(grid.size)]
     for i, p in enumerate(patches):

@@ -1435,16 +1435,14 @@ def _cell_values(
         XI = lu.solve(-np.asarray(system.M_IG @ XG))
     finally:
         lu.destroy()
-    out = {}
     start = np.concatenate([[0], np.cumsum(widths)])
-    for q, i in enumerate(reach):
-        xi, xgi = XI[:, start[q] : start[q + 1]], XG[:, start[q] : start[q + 1]]
-        if i == K:
-            xi = xi + own
-        a = np.asarray(system.WI @ xi[: system.n_s])
-        a[system.gpos] += xgi
-        out[int(i)] = (a, xi[system.n_s : system.n_s + system.n_u])
-    return out
+    if K in reach:  # K's own right-hand sides
+        q = reach.index(K)
+        XI[:, start[q] : start[q + 1]] += own
+    A = np.asarray(system.WI @ XI[: system.n_s])  # AW coefficients on K, all patches in one product
+    A[system.gpos] += XG
+    U = XI[system.n_s : system.n_s + system.n_u]
+    return {int(i): (A[:, start[q] : start[q + 1]], U[:, start[q] : start[q + 1]]) for q, i in enumerate(reach)}
 
 
 def _stage_two_condensed(

@@ -1393,14 +1393,14 @@ class _GlobalSkeleton:
         n_I, n_B = inner.size, TG.shape[1] - inner.size
         if n_B == 0:
             return A
-        NB = TG[:, n_I:].tocsr()  # the boundary vertex functions on G
-        on_b = np.diff(NB.indptr) > 0
+        NB = TG[:, n_I:].toarray()  # the boundary vertex functions on G (a few dozen columns)
+        on_b = np.any(NB != 0.0, axis=1)
         X = np.zeros((G.size, n_B))  # (Σ_K S_K) N_B on the rows of G
         for skel, S in blocks:
             rows = np.searchsorted(G, skel)
             b = on_b[rows]
             if b.any():
-                X[rows] += S[:, b] @ NB[rows[b]].toarray()
+                X[rows] += S[:, b] @ NB[rows[b]]
         BB = NB.T @ X
         top = sp.hstack([A, sp.csr_matrix(X[np.searchsorted(G, inner)])], format="csr")
         bottom = sp.hstack([sp.csr_matrix((n_B, n_I)), sp.csr_matrix(np.triu(0.5 * (BB + BB.T)))], format="csr")

@@ -136,6 +136,7 @@ from fenics_contact.errors import ConvergenceError, InputError
 from fenics_contact.fem.linalg import assemble_scipy, scipy_to_petsc
 from fenics_contact.multiscale.cache import OfflineCache, hash_array
 from fenics_contact.progress import Progress
+from fenics_contact.multiscale.work import gather_dict
 from fenics_contact.multiscale.cem import (
     DEFAULT_S_FACTOR,
     CoarseGrid,
@@ -1446,7 +1447,8 @@ def _cell_values(
     A = np.asarray(system.WI @ XI[: system.n_s])  # AW coefficients on K, all patches in one product
     A[system.gpos] += XG
     U = XI[system.n_s : system.n_s + system.n_u]
-    return {int(i): (A[:, start[q] : start[q + 1]], U[:, start[q] : start[q + 1]]) for q, i in enumerate(reach)}
+    cut = lambda X, q: np.ascontiguousarray(X[:, start[q] : start[q + 1]])  # noqa: E731 (contiguous: MPI out of band)
+    return {int(i): (cut(A, q), cut(U, q)) for q, i in enumerate(reach)}
 
 
 def _stage_two_condensed(
@@ -1549,7 +1551,7 @@ def _run_shared(cost: np.ndarray, comm: MPI.Comm, desc: str, work, *, gather: bo
         raise error
     if any(failures):
         raise ConvergenceError(f"{desc}: another rank failed ({next(f for f in failures if f)})")
-    return _gather(results, cost.size, comm) if gather else None
+    return gather_dict(results, cost.size, comm) if gather else None
 
 
 def _share(cost: np.ndarray, comm: MPI.Comm) -> np.ndarray:
@@ -1563,20 +1565,6 @@ def _share(cost: np.ndarray, comm: MPI.Comm) -> np.ndarray:
         owner[k] = r
         load[r] += cost[k]
     return np.flatnonzero(owner == comm.rank)
-
-
-def _gather(results: dict, n: int, comm: MPI.Comm) -> list:
-    """The list of all n items, computed by the ranks as dicts {index: item} (each item once)."""
-    if comm.size == 1:
-        return [results[i] for i in range(n)]
-    owners = comm.allgather(sorted(results))
-    out = [None] * n
-    for rank, keys in enumerate(owners):
-        for k in keys:
-            out[k] = comm.bcast(results[k] if rank == comm.rank else None, root=rank)
-    if any(o is None for o in out) and n:
-        raise RuntimeError("an offline item was computed by no rank")
-    return out
 
 
 def _scale_to_cell_sizes(ops: CellOperators, grid: CoarseGrid, H: float) -> None:

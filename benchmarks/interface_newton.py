@@ -15,8 +15,9 @@ Parts (each a table; all ratios are taken within one run, on one machine):
   converged?, applications of T, online time, final transmission residual (the CLI default is the
   update that converges everywhere fastest).
 * ``fronts``: the contact Newton of Algorithm 1 on model 3 at contrast 1e6 (h from ``--h-primal``): the
-  Γ_C nodes each step adds / removes, and the step counts of other starts (all active, nested
-  Galerkin-coarsened Γ_C levels, a path in the penalty) and of the line search at every step.
+  Γ_C nodes each step adds / removes (plain and front-extrapolating, the default), and the step counts
+  of other starts (all active, nested Galerkin-coarsened Γ_C levels, a path in the penalty) and of the
+  line search at every step.
 * ``speed``: online time / monolithic semismooth Newton (Newton only, same run) for Algorithms 1 and
   3 at h = 1/256, H = 1/16, model 2 (Algorithms 2, 4: ``reproduce_mixed_ms_tables.py --tables 5.8``),
   with the offline interface response beside it.
@@ -109,12 +110,34 @@ def monolithic_steps(method: int, cm, number: int, E_high: float) -> str:
         return f"error: {type(err).__name__}"
 
 
+def plain_steps(step, hist) -> str:
+    """Steps the solve would have taken with the plain semismooth contact Newton (``fronts=False``): the same
+    condensed problem, the plain Newton's steps + the corrections on F(g) that followed; '=' when it ends on
+    the default's active set and s to 1e-10 (then the corrections are the same)."""
+    from fenics_contact.hybrid.newton import contact_newton
+
+    ch = hist.contact_newton
+    if ch is None:
+        return "—"
+    cond = step.interface_problem(NEWTON).condensed
+    s_load = cond.load_terms()[0]
+    s_f, _, _ = contact_newton(s_load, cond.M, cond.D, max_steps=NEWTON.max_steps, chains=cond.chains)
+    try:
+        s_p, _, h_p = contact_newton(s_load, cond.M, cond.D, max_steps=NEWTON.max_steps)
+    except FenicsContactError as err:
+        return f"error: {type(err).__name__}"
+    same = np.array_equal(s_p > 0, s_f > 0) and np.abs(s_p - s_f).max() <= 1e-10 * np.abs(s_f).max()
+    return f"{h_p.steps + hist.newton_steps - ch.steps}{'=' if same else ' (other solution)'}"
+
+
 def part_steps(lines, h_primal, h_mixed, factors, big_default_only, methods, h_ms_max, models=MODELS,
                monolithic=True) -> None:
     lines += [
         "## Newton steps to a transmission residual of 1e-6 (H = 1/16)",
         "",
-        "Cell: Newton steps (contact Newton + corrections), and the final transmission residual; "
+        "Cell: Newton steps (contact Newton + corrections) with the default contact Newton (front extrapolation), "
+        "[the same with the plain semismooth contact Newton on the same condensed problem; '=' marks that it ends "
+        "on the same active set and s to 1e-10], and the final transmission residual; "
         "α = c·E·h^-1/2 (Algorithm 1), c·Emin·h^-1/2 (Algorithm 3), β = c·√h (Algorithms 2, 4); '—' not run.",
         "",
         "| algorithm | model | 1/h | " + " | ".join(f"c = {c:g}" for c in factors) + " | monolithic Newton |",
@@ -138,7 +161,8 @@ def part_steps(lines, h_primal, h_mixed, factors, big_default_only, methods, h_m
                         hist = iterate(step, IterationOptions(accel="newton", newton=NEWTON))
                         worst = max(worst, hist.newton_steps)
                         mark = "" if hist.converged else " (not conv.)"
-                        cells.append(f"{hist.newton_steps} ({hist.transmission_residual:.0e}){mark}")
+                        plain = plain_steps(step, hist)
+                        cells.append(f"{hist.newton_steps} [{plain}] ({hist.transmission_residual:.0e}){mark}")
                         del step
                     except FenicsContactError as err:
                         cells.append(f"error: {type(err).__name__}")
@@ -280,22 +304,26 @@ def _continuation(s_load, M, D, factor=1e3, start=1e-9):
 def part_fronts(lines, sizes, E_high: float) -> None:
     """Contact Newton of Algorithm 1 (= the monolithic semismooth Newton from its 2nd step): active-set changes
     per step on model 3, and the step counts of other starts / globalizations on the same condensed problem."""
-    from fenics_contact.hybrid.newton import CondensedInterface, contact_newton
+    from fenics_contact.hybrid.newton import CondensedInterface, contact_chains, contact_newton
 
     lines += [
         f"## Contact Newton on model 3, E_high {E_high:g}: active-set fronts and alternatives (Algorithm 1, c = 1)",
         "",
         "Same condensed problem s = s_L − M D s⁺ on Γ_C for every column (the fixed point does not change: "
-        "'same' = all variants end on the default's active set and its s to 1e-10). Default: start from the "
+        "'same' = all variants end on the plain Newton's active set and its s to 1e-10). fronts (the default "
+        "since issue 10's second pass): the plain Newton whose next set is, where a front of the active set moved "
+        "the same way twice, the secant prediction of that front (`hybrid.newton.FrontExtrapolation`; every set "
+        "solved is a step, predicted or not; in brackets the steps whose set was a prediction). "
+        "Plain: start from the "
         "contact-free penetration pattern {s_L > 0}, full steps, exact line search once a set recurs. "
         "all active: start from 𝒜 = Γ_C. nested: Galerkin-coarsened Γ_C problems (every other node, down to "
         "≤ 16 nodes), each level started from the prolonged coarser solution (steps per level, coarse → fine). "
         "penalty path: D·1e-9, ·1e3 … D, each started from the last set. line search: exact line search on "
         "the energy at every step.",
         "",
-        "| 1/h | Γ_C rows | default | all active | nested (per level) | penalty path (per level) | line search | "
-        "monolithic Newton | same |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "| 1/h | Γ_C rows | fronts (predicted sets) | plain | all active | nested (per level) | penalty path "
+        "(per level) | line search | monolithic Newton | same |",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
     traces = []
     for n in sizes:
@@ -306,31 +334,38 @@ def part_fronts(lines, sizes, E_high: float) -> None:
         s_load = cond.load_terms()[0]
         M, D = cond.M, problem.omega2.D
         om2 = problem.omega2
-        y = om2.sub.V.tabulate_dof_coordinates()[om2.c_nodes][:, 1]
+        points = om2.contact_points()
+        y = points[:, 1]
         order = np.argsort(y)
         s_load, M, D, y = s_load[order], M[np.ix_(order, order)], D[order], y[order]
         s0, _, h0 = contact_newton(s_load, M, D, max_steps=200)
+        s_f, _, h_f = contact_newton(s_load, M, D, max_steps=200, chains=contact_chains(points[order]))
+        predicted = sum(1 for e in h_f.extrapolated if e.size)
         _, _, h_all = contact_newton(s_load, M, D, max_steps=200, active=np.ones(s_load.size, dtype=bool))
         nest, s_nest = _nested(s_load, M, D, y)
         path, s_path = _continuation(s_load, M, D)
         s_ls, _, h_ls = contact_newton(s_load, M, D, max_steps=200, line_search=True)
         scale = np.abs(s0).max()
         same = all(np.array_equal(s > 0, s0 > 0) and np.abs(s - s0).max() <= 1e-10 * scale
-                   for s in (s_nest, s_path, s_ls))
-        row = (f"| {n} | {s_load.size} | {h0.steps} | {h_all.steps} | {sum(nest)} ({', '.join(map(str, nest))}) | "
+                   for s in (s_nest, s_path, s_ls, s_f))
+        row = (f"| {n} | {s_load.size} | **{h_f.steps}** ({predicted}) | {h0.steps} | {h_all.steps} | {sum(nest)} ({', '.join(map(str, nest))}) | "
                f"{sum(path)} ({', '.join(map(str, path))}) | {h_ls.steps} | {monolithic_steps(1, cm, 3, E_high)} | "
                f"{same} |")
         print(row, flush=True)
         lines.append(row)
         at = lambda idx: ", ".join(f"{32 * y[i]:g}" for i in idx) or "—"  # noqa: E731
-        traces.append((n, [(k + 1, h0.active_sizes[k], at(a), at(r)) for k, (a, r) in
-                           enumerate(zip(h0.added, h0.removed))]))
+        traces.append((n, "Plain", [(k + 1, h0.active_sizes[k], at(a), at(r), "") for k, (a, r) in
+                                    enumerate(zip(h0.added, h0.removed))]))
+        traces.append((n, "Front-extrapolating (default)",
+                       [(k + 1, h_f.active_sizes[k], at(a), at(r), at(x)) for k, (a, r, x) in
+                        enumerate(zip(h_f.added, h_f.removed, h_f.extrapolated))]))
         del step
-    for n, rows in traces:
-        lines += ["", f"Default contact Newton at h = 1/{n}: Γ_C nodes (y in units of 1/32; the stiff channels touch "
-                  "Γ_C on y ∈ [5, 6], [13, 14], [21, 22]) that each step adds to / removes from the active set:", "",
-                  "| step | active nodes after it | added | removed |", "|---|---|---|---|"]
-        lines += [f"| {k} | {size} | {a} | {r} |" for k, size, a, r in rows]
+    for n, label, rows in traces:
+        lines += ["", f"{label} contact Newton at h = 1/{n}: Γ_C nodes (y in units of 1/32; the stiff channels touch "
+                  "Γ_C on y ∈ [5, 6], [13, 14], [21, 22]) that each step adds to / removes from the active set it "
+                  "solves next (of them, predicted by the front extrapolation):", "",
+                  "| step | active nodes after it | added | removed | of them predicted |", "|---|---|---|---|---|"]
+        lines += [f"| {k} | {size} | {a} | {r} | {x or '—'} |" for k, size, a, r, x in rows]
     lines.append("")
 
 

@@ -143,13 +143,16 @@ class InterfaceNewtonOptions:
     application of T to certify) or ``"interface"`` (Newton on F(g) = g − T(g), Ω₂'s generalized
     Jacobian by back-solves with its current factorization at every step).
     ``max_steps`` caps the contact Newton, ``max_corrections`` the Newton steps on F(g) that
-    follow it (or, for ``"interface"``, all steps).
+    follow it (or, for ``"interface"``, all steps).  ``fronts``: the condensed contact Newton
+    extrapolates the fronts of its active set along Γ_C (``hybrid.newton.FrontExtrapolation``;
+    same fixed point, fewer steps where a stiff body rests on Γ_C); False: the plain semismooth Newton.
     """
 
     strategy: str = "condensed"
     max_steps: int = 50
     max_corrections: int = 8
     chunk: int = 128  #: right-hand sides per multi-RHS back-solve of the offline condensation
+    fronts: bool = True
 
     def __post_init__(self) -> None:
         if self.strategy not in ("condensed", "interface"):

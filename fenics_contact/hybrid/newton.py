@@ -591,12 +591,20 @@ def contact_chains(points: np.ndarray, *, cut: float = 4.0) -> list[tuple[np.nda
     from scipy.sparse.csgraph import connected_components, minimum_spanning_tree
     from scipy.spatial.distance import cdist
 
-    n = points.shape[0]
-    dist = cdist(points, points) if n >= 3 else np.zeros((0, 0))
-    if n < 3 or dist.max() == 0.0:
+    if points.shape[0] < 3:
         return []
-    dist = np.maximum(dist, 1e-12 * dist.max())  # a zero entry would be no edge
-    np.fill_diagonal(dist, 0.0)
+    dist = cdist(points, points)
+    if dist.max() == 0.0:
+        return []
+    # coincident points (copies of a vertex) are one node of the tree, expanded again in the chain
+    _, group = connected_components(dist <= 1e-12 * dist.max(), directed=False)
+    first = np.unique(group, return_index=True)[1]
+    members = [np.flatnonzero(group == g) for g in range(first.size)]
+    points = points[first]
+    n = points.shape[0]
+    dist = dist[np.ix_(first, first)]
+    if n < 3:
+        return []
     tree = minimum_spanning_tree(dist).tocoo()
     keep = tree.data <= cut * np.median(tree.data)
     adj = coo_matrix((tree.data[keep], (tree.row[keep], tree.col[keep])), shape=(n, n)).tocsr()
@@ -616,8 +624,9 @@ def contact_chains(points: np.ndarray, *, cut: float = 4.0) -> list[tuple[np.nda
             prev = order[-1]
             order.append(int(nbrs[0]))
         order = np.array(order)
-        steps = np.linalg.norm(np.diff(points[order], axis=0), axis=1)
-        chains.append((order, np.concatenate([[0.0], np.cumsum(steps)])))
+        arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points[order], axis=0), axis=1))])
+        chains.append((np.concatenate([members[k] for k in order]),
+                       np.concatenate([np.full(members[k].size, a) for k, a in zip(order, arc)])))
     return chains
 
 
@@ -671,11 +680,19 @@ class FrontExtrapolation:
         a, b = s[idx[j]], s[idx[j + o]]
         return pos[j] + (pos[j + o] - pos[j]) * a / (a - b), j
 
+    def missed(self, predicted: np.ndarray) -> bool:
+        """Whether the step that solved the last prediction undid it (changed back a row it had changed);
+        if so the prediction is dropped, its records with it, and one miss counted."""
+        miss = bool(self.changed.size) and bool(np.any(predicted[self.changed] != self.target))
+        if miss:
+            self.misses += 1
+            self.records = {}
+        self.changed = np.zeros(0, dtype=np.int64)
+        return miss
+
     def trial(self, active: np.ndarray, s_new: np.ndarray, predicted: np.ndarray) -> np.ndarray:
         """The next set: ``predicted`` (the semismooth step's {s_new > 0} after solving on ``active``), with
         the fronts that qualify moved to their secant prediction."""
-        if self.changed.size and np.any(predicted[self.changed] != self.target):
-            self.misses += 1  # the last prediction went too far: the step undid it
         trial = predicted.copy()
         records = {}
         for c, (idx, pos) in enumerate(self.chains):
@@ -695,7 +712,7 @@ class FrontExtrapolation:
                     if np.sign(f0) == np.sign(f1) != 0.0 and abs(f1) < abs(f0):
                         star = pos[e] - f1 * (pos[e] - e0) / (f1 - f0)
                         spacing = 0.5 * abs(pos[min(j + 1, idx.size - 1)] - pos[max(j - 1, 0)])
-                        star += o * self.margin * spacing
+                        star -= np.sign(f1) * self.margin * spacing  # back towards where the front came from
                         if f1 * o < 0.0:  # the segment shrinks: free its nodes beyond e*
                             while (0 <= k - o < idx.size and trial[idx[k - o]] and o * pos[k] > o * star
                                    and self._same_material(idx[k], idx[k - o])):
@@ -711,6 +728,7 @@ class FrontExtrapolation:
         self.changed = np.flatnonzero(trial != predicted)
         self.target = trial[self.changed]
         return trial
+
 
 
 def _line_search(mu: np.ndarray, dmu: np.ndarray, s: np.ndarray, ds: np.ndarray, s_load: np.ndarray,
@@ -774,6 +792,8 @@ def contact_newton(s_load: np.ndarray, M: np.ndarray, D: np.ndarray, *, max_step
                                        f"(relative residual {np.linalg.norm(r) / size:.1e})")
         predicted = s_new > 0.0
         settled = np.array_equal(predicted, active)
+        if fronts is not None and not settled:
+            fronts.missed(predicted)
         if not settled and not line_search:
             line_search = np.packbits(predicted).tobytes() in visited
         t = 1.0

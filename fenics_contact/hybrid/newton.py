@@ -643,9 +643,12 @@ class FrontExtrapolation:
     z(e) − e shrinks slowly.  When a front has moved the same way in two consecutive steps and z(e) − e
     contracts, the secant through (e₀, z₀), (e₁, z₁) predicts the fixed point e* = z(e*); the trial set
     moves the front to the last node before e* + ``margin`` node spacing in the direction it came from
-    (a conservative rounding: one node too far can make a near-rigid body pivot).  The prediction stays
-    inside the stretch of Γ_C of one local compliance (M_ii·D_i within a factor ``clamp`` of its
-    neighbour's: a material boundary of Γ_C is where such a front stops, and the secant's smooth model
+    (a conservative rounding: one node too far can make a near-rigid body pivot).  Only fronts of a
+    stretch of Γ_C made of another material than most of it are extrapolated (local compliance M_ii·D_i
+    more than ``inclusion`` times off its median: a stiff or soft inclusion on Γ_C, where the slow fronts
+    are; elsewhere the plain steps converge fast and a prediction that is one node off costs a step), and
+    the prediction stays inside the stretch of one local compliance (M_ii·D_i within a factor ``clamp`` of
+    its neighbour's: a material boundary of Γ_C is where such a front stops, and the secant's smooth model
     does not hold across it).  Every trial set is then solved (a counted step) and must confirm itself;
     after ``max_misses`` predictions that the next step undid (a row the prediction changed is changed
     back) no more are made.  The fixed point is that of the semismooth Newton: the trial set is only a
@@ -653,10 +656,13 @@ class FrontExtrapolation:
     """
 
     def __init__(self, chains, M: np.ndarray, D: np.ndarray, *, margin: float = 0.5, clamp: float = 2.0,
-                 max_misses: int = 2) -> None:
+                 inclusion: float = 4.0, max_misses: int = 2) -> None:
         self.chains = [(np.asarray(idx), np.asarray(pos, dtype=float)) for idx, pos in chains]
         self.compliance = np.abs(np.diag(M)) * D
         self.margin, self.clamp, self.max_misses = margin, clamp, max_misses
+        typical = np.median(self.compliance) if self.compliance.size else 0.0
+        #: rows whose fronts may be extrapolated: local compliance more than ``inclusion`` times off the median
+        self.eligible = np.maximum(self.compliance, typical) > inclusion * np.minimum(self.compliance, typical)
         self.records: dict = {}
         self.misses = 0
         self.changed = np.zeros(0, dtype=np.int64)  # rows the last prediction changed
@@ -710,7 +716,7 @@ class FrontExtrapolation:
                 z, j = found
                 last = self.records.get((c, o, e))
                 k = j
-                if last is not None and j != e and self.misses < self.max_misses:
+                if last is not None and j != e and self.misses < self.max_misses and self.eligible[idx[e]]:
                     e0, z0 = last
                     f0, f1 = z0 - e0, z - pos[e]
                     if np.sign(f0) == np.sign(f1) != 0.0 and abs(f1) < abs(f0):

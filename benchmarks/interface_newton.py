@@ -15,7 +15,7 @@ Parts (each a table; all ratios are taken within one run, on one machine):
   converged?, applications of T, online time, final transmission residual (the CLI default is the
   update that converges everywhere fastest).
 * ``fronts``: the contact Newton of Algorithm 1 on model 3 at contrast 1e6 (h from ``--h-primal``): the
-  Γ_C nodes each step adds / removes (plain and front-extrapolating, the default), and the step counts
+  Γ_C nodes each step adds / removes (plain, the default, and front-extrapolating), and the step counts
   of other starts (all active, nested Galerkin-coarsened Γ_C levels, a path in the penalty) and of the
   line search at every step.
 * ``speed``: online time / monolithic semismooth Newton (Newton only, same run) for Algorithms 1 and
@@ -56,6 +56,8 @@ NEWTON = InterfaceNewtonOptions()
 #: (label, model number, E_high)
 MODELS = [("1", 1, 1e3), ("2", 2, 1e3), ("3 (1e3)", 3, 1e3), ("3 (1e6)", 3, 1e6)]
 LAYERS = 3
+#: ``--dump DIR``: the steps part saves every condensed contact problem (s_L, M, D, coordinates) there
+DUMP: Path | None = None
 
 
 def _strip_modulus(cm, E) -> float:
@@ -110,10 +112,10 @@ def monolithic_steps(method: int, cm, number: int, E_high: float) -> str:
         return f"error: {type(err).__name__}"
 
 
-def plain_steps(step, hist) -> str:
-    """Steps the solve would have taken with the plain semismooth contact Newton (``fronts=False``): the same
-    condensed problem, the plain Newton's steps + the corrections on F(g) that followed; '=' when it ends on
-    the default's active set and s to 1e-10 (then the corrections are the same)."""
+def other_steps(step, hist) -> str:
+    """Steps the solve takes with the other contact Newton (``fronts`` flipped): the same condensed problem, its
+    contact Newton steps + the corrections on F(g) that followed; '=' when it ends on the same active set and s
+    to 1e-10 (then the corrections are the same)."""
     from fenics_contact.hybrid.newton import contact_newton
 
     ch = hist.contact_newton
@@ -121,13 +123,20 @@ def plain_steps(step, hist) -> str:
         return "—"
     cond = step.interface_problem(NEWTON).condensed
     s_load = cond.load_terms()[0]
-    s_f, _, _ = contact_newton(s_load, cond.M, cond.D, max_steps=NEWTON.max_steps, chains=cond.chains)
+    if DUMP is not None:  # --dump: the condensed contact problem, to study the contact Newton offline
+        DUMP.mkdir(parents=True, exist_ok=True)
+        name = f"{type(step).__name__}_{len(s_load)}_{abs(hash(s_load.tobytes())) % 10**6}.npz"
+        np.savez(DUMP / name, s_load=s_load, M=cond.M, D=cond.D,
+                 points=step.interface_problem(NEWTON).omega2.contact_points())
+    chains = cond.chains if NEWTON.fronts else None
+    s_d, _, _ = contact_newton(s_load, cond.M, cond.D, max_steps=NEWTON.max_steps, chains=chains)
     try:
-        s_p, _, h_p = contact_newton(s_load, cond.M, cond.D, max_steps=NEWTON.max_steps)
+        s_o, _, h_o = contact_newton(s_load, cond.M, cond.D, max_steps=NEWTON.max_steps,
+                                     chains=None if NEWTON.fronts else cond.chains)
     except FenicsContactError as err:
         return f"error: {type(err).__name__}"
-    same = np.array_equal(s_p > 0, s_f > 0) and np.abs(s_p - s_f).max() <= 1e-10 * np.abs(s_f).max()
-    return f"{h_p.steps + hist.newton_steps - ch.steps}{'=' if same else ' (other solution)'}"
+    same = np.array_equal(s_o > 0, s_d > 0) and np.abs(s_o - s_d).max() <= 1e-10 * np.abs(s_d).max()
+    return f"{h_o.steps + hist.newton_steps - ch.steps}{'=' if same else ' (other solution)'}"
 
 
 def part_steps(lines, h_primal, h_mixed, factors, big_default_only, methods, h_ms_max, models=MODELS,
@@ -135,9 +144,10 @@ def part_steps(lines, h_primal, h_mixed, factors, big_default_only, methods, h_m
     lines += [
         "## Newton steps to a transmission residual of 1e-6 (H = 1/16)",
         "",
-        "Cell: Newton steps (contact Newton + corrections) with the default contact Newton (front extrapolation), "
-        "[the same with the plain semismooth contact Newton on the same condensed problem; '=' marks that it ends "
-        "on the same active set and s to 1e-10], and the final transmission residual; "
+        f"Cell: Newton steps (contact Newton + corrections) with the {'front-extrapolating' if NEWTON.fronts else 'plain'} "
+        f"contact Newton (InterfaceNewtonOptions(fronts={NEWTON.fronts})), [the same with fronts={not NEWTON.fronts} on "
+        "the same condensed problem; '=' marks that it ends on the same active set and s to 1e-10], and the final "
+        "transmission residual; "
         "α = c·E·h^-1/2 (Algorithm 1), c·Emin·h^-1/2 (Algorithm 3), β = c·√h (Algorithms 2, 4); '—' not run.",
         "",
         "| algorithm | model | 1/h | " + " | ".join(f"c = {c:g}" for c in factors) + " | monolithic Newton |",
@@ -161,8 +171,8 @@ def part_steps(lines, h_primal, h_mixed, factors, big_default_only, methods, h_m
                         hist = iterate(step, IterationOptions(accel="newton", newton=NEWTON))
                         worst = max(worst, hist.newton_steps)
                         mark = "" if hist.converged else " (not conv.)"
-                        plain = plain_steps(step, hist)
-                        cells.append(f"{hist.newton_steps} [{plain}] ({hist.transmission_residual:.0e}){mark}")
+                        other = other_steps(step, hist)
+                        cells.append(f"{hist.newton_steps} [{other}] ({hist.transmission_residual:.0e}){mark}")
                         del step
                     except FenicsContactError as err:
                         cells.append(f"error: {type(err).__name__}")
@@ -310,11 +320,11 @@ def part_fronts(lines, sizes, E_high: float) -> None:
         f"## Contact Newton on model 3, E_high {E_high:g}: active-set fronts and alternatives (Algorithm 1, c = 1)",
         "",
         "Same condensed problem s = s_L − M D s⁺ on Γ_C for every column (the fixed point does not change: "
-        "'same' = all variants end on the plain Newton's active set and its s to 1e-10). fronts (the default "
-        "since issue 10's second pass): the plain Newton whose next set is, where a front of the active set moved "
+        "'same' = all variants end on the plain Newton's active set and its s to 1e-10). fronts "
+        "(InterfaceNewtonOptions(fronts=True), not the default): the plain Newton whose next set is, where a front of the active set moved "
         "the same way twice, the secant prediction of that front (`hybrid.newton.FrontExtrapolation`; every set "
         "solved is a step, predicted or not; in brackets the steps whose set was a prediction). "
-        "Plain: start from the "
+        "Plain (the default): start from the "
         "contact-free penetration pattern {s_L > 0}, full steps, exact line search once a set recurs. "
         "all active: start from 𝒜 = Γ_C. nested: Galerkin-coarsened Γ_C problems (every other node, down to "
         "≤ 16 nodes), each level started from the prolonged coarser solution (steps per level, coarse → fine). "
@@ -356,7 +366,7 @@ def part_fronts(lines, sizes, E_high: float) -> None:
         at = lambda idx: ", ".join(f"{32 * y[i]:g}" for i in idx) or "—"  # noqa: E731
         traces.append((n, "Plain", [(k + 1, h0.active_sizes[k], at(a), at(r), "") for k, (a, r) in
                                     enumerate(zip(h0.added, h0.removed))]))
-        traces.append((n, "Front-extrapolating (default)",
+        traces.append((n, "Front-extrapolating (fronts=True)",
                        [(k + 1, h_f.active_sizes[k], at(a), at(r), at(x)) for k, (a, r, x) in
                         enumerate(zip(h_f.added, h_f.removed, h_f.extrapolated))]))
         del step
@@ -389,6 +399,10 @@ def main() -> None:
                         "(smaller: less memory for the mixed h = 1/128)")
     parser.add_argument("--no-monolithic", action="store_true",
                         help="steps part: skip the monolithic Newton column (the mixed one needs ~10 GB at h = 1/128)")
+    parser.add_argument("--fronts", action="store_true",
+                        help="steps part: the front-extrapolating contact Newton as the main count (plain in brackets)")
+    parser.add_argument("--dump", type=Path, default=None,
+                        help="steps part: save each condensed contact problem (s_L, M, D, coordinates) as .npz here")
     parser.add_argument("--out", type=Path, default=Path("benchmarks/results/interface_newton.md"))
     args = parser.parse_args()
     logging.basicConfig(level=logging.WARNING)
@@ -397,14 +411,16 @@ def main() -> None:
              f"--parts {args.parts} --methods {args.methods} --h-primal {args.h_primal} --h-mixed {args.h_mixed} "
              f"--factors {args.factors} --h-ms-max {args.h_ms_max} --updates-h {args.updates_h} --cap {args.cap} "
              f"--speed-h {args.speed_h} --speed-model {args.speed_model} --models {args.models}"
-             f"{' --no-monolithic' if args.no_monolithic else ''} --chunk {args.chunk} --out {args.out}`", ""]
+             f"{' --no-monolithic' if args.no_monolithic else ''}{' --fronts' if args.fronts else ''} --chunk {args.chunk} "
+             f"--out {args.out}`", ""]
     chosen = {"1": MODELS[0], "2": MODELS[1], "3": MODELS[2], "3e6": MODELS[3]}
     try:
         models = [chosen[m] for m in args.models.split(",")]
     except KeyError as err:
         raise SystemExit(f"unknown model {err}; choose from {', '.join(chosen)}") from None
-    global NEWTON
-    NEWTON = InterfaceNewtonOptions(chunk=args.chunk)
+    global NEWTON, DUMP
+    NEWTON = InterfaceNewtonOptions(chunk=args.chunk, fronts=args.fronts)
+    DUMP = args.dump
     start = time.perf_counter()
     ints = lambda text: [int(x) for x in text.split(",")]  # noqa: E731
     for part in args.parts.split(","):

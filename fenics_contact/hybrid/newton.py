@@ -499,8 +499,7 @@ class CondensedInterface:
         self.Gq = np.zeros((problem.a.size, self.Sq.shape[0]))  # ∂g₂₁/∂λ = −Gq
         self.Gq[f] = sla.lu_solve(self.lu, self.P1 @ (a[:, None] * self.Yq[f]))
         self.M = self.Sq + self.Sc @ self.Gq
-        #: the Γ_C unknowns ordered along the boundary (the front extrapolation's chains)
-        self.chains = contact_chains(om2.contact_points()) if self.M.size else []
+        self._chains = None
 
     def load_terms(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Online: (s_L, g₂₁ at λ = 0, y₂₀) from one Ω₂ back-solve and the Ω₁ load response."""
@@ -523,6 +522,14 @@ class CondensedInterface:
     @property
     def D(self) -> np.ndarray:
         return self.problem.omega2.D
+
+    @property
+    def chains(self) -> list:
+        """The Γ_C unknowns ordered along the boundary (``contact_chains``; the front extrapolation's), built on
+        first use (collective: the contact points are gathered from all ranks)."""
+        if self._chains is None:
+            self._chains = contact_chains(self.problem.omega2.contact_points()) if self.M.size else []
+        return self._chains
 
     def lowest_eigenvalue(self) -> float:
         """Smallest eigenvalue of ½(M + Mᵀ): > 0 when the glued problem is an elastic (positive definite) one.

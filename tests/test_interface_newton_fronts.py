@@ -5,6 +5,7 @@
   a separate piece is its own chain; a piece that is not a curve is left out.
 * Random strictly convex contact problems with near-rigid stretches: with or without the extrapolation,
   the same solution (it only chooses the sets the Newton method tries, never what it accepts).
+* Under ``mpiexec -n 2`` the extrapolating contact Newton keeps the serial record and data.
 * On the heterogeneous strip at contrast 1e6 (model 3, Algorithm 1, h = 1/128, where a stiff channel
   rests on Γ_C and the plain semismooth Newton frees one node per step), the front-extrapolating
   contact Newton takes fewer steps than the plain one and ends on the same active set and the same s
@@ -14,8 +15,11 @@
   (transmission residual below the tolerance).
 """
 
+from pathlib import Path
+
 import numpy as np
 import pytest
+from mpi4py import MPI
 
 from fenics_contact.fem.contact import NewtonOptions
 from fenics_contact.fem.primal import default_penalty
@@ -24,6 +28,7 @@ from fenics_contact.hybrid.newton import contact_chains, contact_newton
 from fenics_contact.hybrid.primal import DEFAULT_ALPHA, PrimalHybridStep
 from fenics_contact.problem.geometry import unit_square
 from fenics_contact.problem.models import get_model
+from mpi_jobs import mpiexec, run_result
 
 
 def test_contact_chains_orders_points_along_the_boundary():
@@ -133,3 +138,20 @@ def test_front_extrapolation_takes_fewer_steps_to_the_same_solution(strip):
     plain = iterate(step, IterationOptions(accel="newton"))
     assert plain.converged and plain.newton_steps == history.newton_steps + h_p.steps - h_f.steps
     assert np.abs(plain.data - history.data).max() <= 1e-8 * np.abs(history.data).max()
+
+
+@pytest.mark.mpi
+@pytest.mark.skipif(mpiexec() is None or MPI.COMM_WORLD.size > 1, reason="launches its own MPI job")
+def test_front_extrapolation_under_mpi_gives_the_serial_record():
+    """The chains come from the contact points of all ranks: 2 ranks take the same steps, predict the same
+    number of rows at the same steps and end on the same data g as 1."""
+    script = Path(__file__).with_name("mpi_fronts_check.py")
+    serial = run_result(script, [], timeout=600)
+    parallel = run_result(script, [mpiexec(), "-n", "2"], timeout=600)
+    assert parallel["ranks"] == 2
+    for run in (serial, parallel):
+        assert run["converged"] and run["residual"] < 1e-6 and run["chains"] == [127], run
+    for key in ("steps", "active_sizes", "predicted"):
+        assert parallel[key] == serial[key], key
+    assert any(serial["predicted"])
+    assert abs(parallel["norm"] - serial["norm"]) <= 1e-8 * serial["norm"]

@@ -45,9 +45,9 @@ Both land on the fixed point of the Robin iteration (the same equations).  With
 set by extrapolating its fronts along Γ_C where a front moved the same way twice
 (``FrontExtrapolation``: where a near-rigid body rests on Γ_C the plain semismooth
 Newton frees one node per step); every set it solves is a step, and a set is
-accepted only when the solve on it reproduces it.  The contact Newton takes full steps until an active set recurs and from then on
-minimizes, along each Newton direction, ψ = ½ μᵀMμ + ½ Σ D (s⁺)² with
-s = s_L − Mμ (exact line search on a piecewise-linear derivative): ψ is the
+accepted only when the solve on it reproduces it.  The contact Newton takes full
+steps until an active set recurs and from then on minimizes, along each Newton
+direction, ψ = ½ μᵀMμ + ½ Σ D (s⁺)² with s = s_L − Mμ (exact line search on a piecewise-linear derivative): ψ is the
 convex energy of the glued problem when M is symmetric (Algorithms 1, 2), so no
 cycle can recur.  A Newton method that fails (no convergence in ``max_steps``,
 a singular condensed system) raises ConvergenceError; a pair whose transmission
@@ -586,7 +586,6 @@ class ContactNewtonHistory:
         return len(self.step_lengths)
 
 
-
 # ---------------------------------------------------------------------------------------
 # front extrapolation: Γ_C ordered along the boundary, secant on the fronts of the active set
 # ---------------------------------------------------------------------------------------
@@ -747,7 +746,6 @@ class FrontExtrapolation:
         return trial
 
 
-
 def _line_search(mu: np.ndarray, dmu: np.ndarray, s: np.ndarray, ds: np.ndarray, s_load: np.ndarray,
                  D: np.ndarray) -> float:
     """argmin over t ∈ (0, 1] of ψ(s + t ds): root of the increasing piecewise-linear φ'(t).
@@ -773,7 +771,8 @@ def _line_search(mu: np.ndarray, dmu: np.ndarray, s: np.ndarray, ds: np.ndarray,
 
 def contact_newton(s_load: np.ndarray, M: np.ndarray, D: np.ndarray, *, max_steps: int = 50,
                    name: str = "contact Newton", rtol: float = 1e-10, active: np.ndarray | None = None,
-                   line_search: bool = False, chains=None) -> tuple[np.ndarray, np.ndarray, ContactNewtonHistory]:
+                   line_search: bool = False,
+                   chains=None) -> tuple[np.ndarray, np.ndarray, ContactNewtonHistory]:
     """Solve s = s_L − M μ, μ = D s⁺ by semismooth Newton (finite termination, globalized): (s, μ).
 
     Starts from μ = 0 (no contact force) with the active set 𝒜 = {s_L > 0} (the contact-free

@@ -47,8 +47,8 @@ set by extrapolating its fronts along Γ_C where a front moved the same way twic
 Newton frees one node per step); every set it solves is a step, and a set is
 accepted only when the solve on it reproduces it.  The contact Newton takes full
 steps until an active set recurs and from then on minimizes, along each Newton
-direction, ψ = ½ μᵀMμ + ½ Σ D (s⁺)² with s = s_L − Mμ (exact line search on a piecewise-linear derivative): ψ is the
-convex energy of the glued problem when M is symmetric (Algorithms 1, 2), so no
+direction, ψ = ½ μᵀMμ + ½ Σ D (s⁺)² with s = s_L − Mμ (exact line search on a
+piecewise-linear derivative): ψ is the convex energy of the glued problem when M is symmetric (Algorithms 1, 2), so no
 cycle can recur.  A Newton method that fails (no convergence in ``max_steps``,
 a singular condensed system) raises ConvergenceError; a pair whose transmission
 residual stays above the tolerance ends with ``converged = False``.

@@ -40,18 +40,19 @@ load term s_L.  Two strategies solve it (``InterfaceNewtonOptions.strategy``):
   back-solves with the factorization Ω₂ keeps; a backtracking line search on
   ‖F‖ globalizes it.  It needs no J₀ but n_γ back-solves per step.
 
-Both land on the fixed point of the Robin iteration (the same equations).  With
+Both land on the fixed point of the Robin iteration (the same equations). With
 ``InterfaceNewtonOptions(fronts=True)`` the contact Newton chooses the next active
 set by extrapolating its fronts along Γ_C where a front moved the same way twice
 (``FrontExtrapolation``: where a near-rigid body rests on Γ_C the plain semismooth
 Newton frees one node per step); every set it solves is a step, and a set is
-accepted only when the solve on it reproduces it.  The contact Newton takes full
+accepted only when the solve on it reproduces it. The contact Newton takes full
 steps until an active set recurs and from then on minimizes, along each Newton
 direction, ψ = ½ μᵀMμ + ½ Σ D (s⁺)² with s = s_L − Mμ (exact line search on a
-piecewise-linear derivative): ψ is the convex energy of the glued problem when M is symmetric (Algorithms 1, 2), so no
-cycle can recur.  A Newton method that fails (no convergence in ``max_steps``,
-a singular condensed system) raises ConvergenceError; a pair whose transmission
-residual stays above the tolerance ends with ``converged = False``.
+piecewise-linear derivative): ψ is the convex energy of the glued problem when M is
+symmetric (Algorithms 1, 2), so no cycle can recur. A Newton method that fails (no
+convergence in ``max_steps``, a singular condensed system) raises ConvergenceError;
+a pair whose transmission residual stays above the tolerance ends with ``converged =
+False``.
 """
 
 import logging

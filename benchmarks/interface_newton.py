@@ -10,7 +10,10 @@ Parts (each a table; all ratios are taken within one run, on one machine):
   and 1/32 … 1/128 (mixed), α = c × the default (Algorithm 1 E·h^-1/2, Algorithm 3 Emin·h^-1/2) and
   β = c·√h for c = 1e-2, 1, 1e4 (``--h-primal``,
   ``--h-mixed``, ``--factors``; the multiscale Ω₁ of Algorithms 3/4 is rebuilt for every α, β, so
-  their largest h only at c = 1: ``--big-default-only``).
+  their largest h only at c = 1: ``--big-default-only``).  Each cell also gives, in brackets, the count
+  of the other contact Newton on the same condensed problem (plain vs front extrapolation,
+  ``InterfaceNewtonOptions.fronts``; ``--fronts`` makes the extrapolating one the main count);
+  ``--dump DIR`` saves every condensed contact problem (s_L, M, D, coordinates) for offline study.
 * ``updates``: none / anderson / newton on every model and algorithm at h = 1/64, H = 1/16:
   converged?, applications of T, online time, final transmission residual (the CLI default is the
   update that converges everywhere fastest).

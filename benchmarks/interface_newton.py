@@ -10,13 +10,17 @@ Parts (each a table; all ratios are taken within one run, on one machine):
   and 1/32 … 1/128 (mixed), α = c × the default (Algorithm 1 E·h^-1/2, Algorithm 3 Emin·h^-1/2) and
   β = c·√h for c = 1e-2, 1, 1e4 (``--h-primal``,
   ``--h-mixed``, ``--factors``; the multiscale Ω₁ of Algorithms 3/4 is rebuilt for every α, β, so
-  their largest h only at c = 1: ``--big-default-only``).
+  their largest h only at c = 1: ``--big-default-only``).  Each cell also gives, in brackets, the count
+  of the other contact Newton on the same condensed problem (plain vs front extrapolation,
+  ``InterfaceNewtonOptions.fronts``; ``--fronts`` makes the extrapolating one the main count);
+  ``--dump DIR`` saves every condensed contact problem (s_L, M, D, coordinates) for offline study.
 * ``updates``: none / anderson / newton on every model and algorithm at h = 1/64, H = 1/16:
   converged?, applications of T, online time, final transmission residual (the CLI default is the
   update that converges everywhere fastest).
 * ``fronts``: the contact Newton of Algorithm 1 on model 3 at contrast 1e6 (h from ``--h-primal``): the
-  Γ_C nodes each step adds / removes, and the step counts of other starts (all active, nested
-  Galerkin-coarsened Γ_C levels, a path in the penalty) and of the line search at every step.
+  Γ_C nodes each step adds / removes (plain, the default, and front-extrapolating), and the step counts
+  of other starts (all active, nested Galerkin-coarsened Γ_C levels, a path in the penalty) and of the
+  line search at every step.
 * ``speed``: online time / monolithic semismooth Newton (Newton only, same run) for Algorithms 1 and
   3 at h = 1/256, H = 1/16, model 2 (Algorithms 2, 4: ``reproduce_mixed_ms_tables.py --tables 5.8``),
   with the offline interface response beside it.
@@ -55,6 +59,8 @@ NEWTON = InterfaceNewtonOptions()
 #: (label, model number, E_high)
 MODELS = [("1", 1, 1e3), ("2", 2, 1e3), ("3 (1e3)", 3, 1e3), ("3 (1e6)", 3, 1e6)]
 LAYERS = 3
+#: ``--dump DIR``: the steps part saves every condensed contact problem (s_L, M, D, coordinates) there
+DUMP: Path | None = None
 
 
 def _strip_modulus(cm, E) -> float:
@@ -109,12 +115,42 @@ def monolithic_steps(method: int, cm, number: int, E_high: float) -> str:
         return f"error: {type(err).__name__}"
 
 
+def other_steps(step, hist) -> str:
+    """Steps the solve takes with the other contact Newton (``fronts`` flipped): the same condensed problem, its
+    contact Newton steps + the corrections on F(g) that followed; '=' when it ends on the same active set and s
+    to 1e-10 (then the corrections are the same)."""
+    from fenics_contact.hybrid.newton import contact_newton
+
+    ch = hist.contact_newton
+    if ch is None:
+        return "—"
+    cond = step.interface_problem(NEWTON).condensed
+    s_load = cond.load_terms()[0]
+    if DUMP is not None:  # --dump: the condensed contact problem, to study the contact Newton offline
+        DUMP.mkdir(parents=True, exist_ok=True)
+        name = f"{type(step).__name__}_{len(s_load)}_{abs(hash(s_load.tobytes())) % 10**6}.npz"
+        np.savez(DUMP / name, s_load=s_load, M=cond.M, D=cond.D,
+                 points=step.interface_problem(NEWTON).omega2.contact_points())
+    chains = cond.chains if NEWTON.fronts else None
+    s_d, _, _ = contact_newton(s_load, cond.M, cond.D, max_steps=NEWTON.max_steps, chains=chains)
+    try:
+        s_o, _, h_o = contact_newton(s_load, cond.M, cond.D, max_steps=NEWTON.max_steps,
+                                     chains=None if NEWTON.fronts else cond.chains)
+    except FenicsContactError as err:
+        return f"error: {type(err).__name__}"
+    same = np.array_equal(s_o > 0, s_d > 0) and np.abs(s_o - s_d).max() <= 1e-10 * np.abs(s_d).max()
+    return f"{h_o.steps + hist.newton_steps - ch.steps}{'=' if same else ' (other solution)'}"
+
+
 def part_steps(lines, h_primal, h_mixed, factors, big_default_only, methods, h_ms_max, models=MODELS,
                monolithic=True) -> None:
     lines += [
         "## Newton steps to a transmission residual of 1e-6 (H = 1/16)",
         "",
-        "Cell: Newton steps (contact Newton + corrections), and the final transmission residual; "
+        f"Cell: Newton steps (contact Newton + corrections) with the {'front-extrapolating' if NEWTON.fronts else 'plain'} "
+        f"contact Newton (InterfaceNewtonOptions(fronts={NEWTON.fronts})), [the same with fronts={not NEWTON.fronts} on "
+        "the same condensed problem; '=' marks that it ends on the same active set and s to 1e-10], and the final "
+        "transmission residual; "
         "α = c·E·h^-1/2 (Algorithm 1), c·Emin·h^-1/2 (Algorithm 3), β = c·√h (Algorithms 2, 4); '—' not run.",
         "",
         "| algorithm | model | 1/h | " + " | ".join(f"c = {c:g}" for c in factors) + " | monolithic Newton |",
@@ -138,7 +174,8 @@ def part_steps(lines, h_primal, h_mixed, factors, big_default_only, methods, h_m
                         hist = iterate(step, IterationOptions(accel="newton", newton=NEWTON))
                         worst = max(worst, hist.newton_steps)
                         mark = "" if hist.converged else " (not conv.)"
-                        cells.append(f"{hist.newton_steps} ({hist.transmission_residual:.0e}){mark}")
+                        other = other_steps(step, hist)
+                        cells.append(f"{hist.newton_steps} [{other}] ({hist.transmission_residual:.0e}){mark}")
                         del step
                     except FenicsContactError as err:
                         cells.append(f"error: {type(err).__name__}")
@@ -280,22 +317,26 @@ def _continuation(s_load, M, D, factor=1e3, start=1e-9):
 def part_fronts(lines, sizes, E_high: float) -> None:
     """Contact Newton of Algorithm 1 (= the monolithic semismooth Newton from its 2nd step): active-set changes
     per step on model 3, and the step counts of other starts / globalizations on the same condensed problem."""
-    from fenics_contact.hybrid.newton import CondensedInterface, contact_newton
+    from fenics_contact.hybrid.newton import CondensedInterface, contact_chains, contact_newton
 
     lines += [
         f"## Contact Newton on model 3, E_high {E_high:g}: active-set fronts and alternatives (Algorithm 1, c = 1)",
         "",
         "Same condensed problem s = s_L − M D s⁺ on Γ_C for every column (the fixed point does not change: "
-        "'same' = all variants end on the default's active set and its s to 1e-10). Default: start from the "
+        "'same' = all variants end on the plain Newton's active set and its s to 1e-10). fronts "
+        "(InterfaceNewtonOptions(fronts=True), not the default): the plain Newton whose next set is, where a front of the active set moved "
+        "the same way twice, the secant prediction of that front (`hybrid.newton.FrontExtrapolation`; every set "
+        "solved is a step, predicted or not; in brackets the steps whose set was a prediction). "
+        "Plain (the default): start from the "
         "contact-free penetration pattern {s_L > 0}, full steps, exact line search once a set recurs. "
         "all active: start from 𝒜 = Γ_C. nested: Galerkin-coarsened Γ_C problems (every other node, down to "
         "≤ 16 nodes), each level started from the prolonged coarser solution (steps per level, coarse → fine). "
         "penalty path: D·1e-9, ·1e3 … D, each started from the last set. line search: exact line search on "
         "the energy at every step.",
         "",
-        "| 1/h | Γ_C rows | default | all active | nested (per level) | penalty path (per level) | line search | "
-        "monolithic Newton | same |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "| 1/h | Γ_C rows | fronts (predicted sets) | plain | all active | nested (per level) | penalty path "
+        "(per level) | line search | monolithic Newton | same |",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
     traces = []
     for n in sizes:
@@ -306,31 +347,38 @@ def part_fronts(lines, sizes, E_high: float) -> None:
         s_load = cond.load_terms()[0]
         M, D = cond.M, problem.omega2.D
         om2 = problem.omega2
-        y = om2.sub.V.tabulate_dof_coordinates()[om2.c_nodes][:, 1]
+        points = om2.contact_points()
+        y = points[:, 1]
         order = np.argsort(y)
         s_load, M, D, y = s_load[order], M[np.ix_(order, order)], D[order], y[order]
         s0, _, h0 = contact_newton(s_load, M, D, max_steps=200)
+        s_f, _, h_f = contact_newton(s_load, M, D, max_steps=200, chains=contact_chains(points[order]))
+        predicted = sum(1 for e in h_f.extrapolated if e.size)
         _, _, h_all = contact_newton(s_load, M, D, max_steps=200, active=np.ones(s_load.size, dtype=bool))
         nest, s_nest = _nested(s_load, M, D, y)
         path, s_path = _continuation(s_load, M, D)
         s_ls, _, h_ls = contact_newton(s_load, M, D, max_steps=200, line_search=True)
         scale = np.abs(s0).max()
         same = all(np.array_equal(s > 0, s0 > 0) and np.abs(s - s0).max() <= 1e-10 * scale
-                   for s in (s_nest, s_path, s_ls))
-        row = (f"| {n} | {s_load.size} | {h0.steps} | {h_all.steps} | {sum(nest)} ({', '.join(map(str, nest))}) | "
+                   for s in (s_nest, s_path, s_ls, s_f))
+        row = (f"| {n} | {s_load.size} | **{h_f.steps}** ({predicted}) | {h0.steps} | {h_all.steps} | {sum(nest)} ({', '.join(map(str, nest))}) | "
                f"{sum(path)} ({', '.join(map(str, path))}) | {h_ls.steps} | {monolithic_steps(1, cm, 3, E_high)} | "
                f"{same} |")
         print(row, flush=True)
         lines.append(row)
         at = lambda idx: ", ".join(f"{32 * y[i]:g}" for i in idx) or "—"  # noqa: E731
-        traces.append((n, [(k + 1, h0.active_sizes[k], at(a), at(r)) for k, (a, r) in
-                           enumerate(zip(h0.added, h0.removed))]))
+        traces.append((n, "Plain", [(k + 1, h0.active_sizes[k], at(a), at(r), "") for k, (a, r) in
+                                    enumerate(zip(h0.added, h0.removed))]))
+        traces.append((n, "Front-extrapolating (fronts=True)",
+                       [(k + 1, h_f.active_sizes[k], at(a), at(r), at(x)) for k, (a, r, x) in
+                        enumerate(zip(h_f.added, h_f.removed, h_f.extrapolated))]))
         del step
-    for n, rows in traces:
-        lines += ["", f"Default contact Newton at h = 1/{n}: Γ_C nodes (y in units of 1/32; the stiff channels touch "
-                  "Γ_C on y ∈ [5, 6], [13, 14], [21, 22]) that each step adds to / removes from the active set:", "",
-                  "| step | active nodes after it | added | removed |", "|---|---|---|---|"]
-        lines += [f"| {k} | {size} | {a} | {r} |" for k, size, a, r in rows]
+    for n, label, rows in traces:
+        lines += ["", f"{label} contact Newton at h = 1/{n}: Γ_C nodes (y in units of 1/32; the stiff channels touch "
+                  "Γ_C on y ∈ [5, 6], [13, 14], [21, 22]) that each step adds to / removes from the active set it "
+                  "solves next (of them, predicted by the front extrapolation):", "",
+                  "| step | active nodes after it | added | removed | of them predicted |", "|---|---|---|---|---|"]
+        lines += [f"| {k} | {size} | {a} | {r} | {x or '—'} |" for k, size, a, r, x in rows]
     lines.append("")
 
 
@@ -354,6 +402,10 @@ def main() -> None:
                         "(smaller: less memory for the mixed h = 1/128)")
     parser.add_argument("--no-monolithic", action="store_true",
                         help="steps part: skip the monolithic Newton column (the mixed one needs ~10 GB at h = 1/128)")
+    parser.add_argument("--fronts", action="store_true",
+                        help="steps part: the front-extrapolating contact Newton as the main count (plain in brackets)")
+    parser.add_argument("--dump", type=Path, default=None,
+                        help="steps part: save each condensed contact problem (s_L, M, D, coordinates) as .npz here")
     parser.add_argument("--out", type=Path, default=Path("benchmarks/results/interface_newton.md"))
     args = parser.parse_args()
     logging.basicConfig(level=logging.WARNING)
@@ -362,14 +414,16 @@ def main() -> None:
              f"--parts {args.parts} --methods {args.methods} --h-primal {args.h_primal} --h-mixed {args.h_mixed} "
              f"--factors {args.factors} --h-ms-max {args.h_ms_max} --updates-h {args.updates_h} --cap {args.cap} "
              f"--speed-h {args.speed_h} --speed-model {args.speed_model} --models {args.models}"
-             f"{' --no-monolithic' if args.no_monolithic else ''} --chunk {args.chunk} --out {args.out}`", ""]
+             f"{' --no-monolithic' if args.no_monolithic else ''}{' --fronts' if args.fronts else ''} --chunk {args.chunk} "
+             f"--out {args.out}`", ""]
     chosen = {"1": MODELS[0], "2": MODELS[1], "3": MODELS[2], "3e6": MODELS[3]}
     try:
         models = [chosen[m] for m in args.models.split(",")]
     except KeyError as err:
         raise SystemExit(f"unknown model {err}; choose from {', '.join(chosen)}") from None
-    global NEWTON
-    NEWTON = InterfaceNewtonOptions(chunk=args.chunk)
+    global NEWTON, DUMP
+    NEWTON = InterfaceNewtonOptions(chunk=args.chunk, fronts=args.fronts)
+    DUMP = args.dump
     start = time.perf_counter()
     ints = lambda text: [int(x) for x in text.split(",")]  # noqa: E731
     for part in args.parts.split(","):

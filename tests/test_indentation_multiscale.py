@@ -176,9 +176,10 @@ def test_case_load_steps_multiscale_reuse_the_runs_offline_phase(tmp_path, monke
 
 
 @pytest.mark.mpi
-def test_case_load_steps_primal_ms_on_two_ranks_match_serial(tmp_path):
-    """The same case's Algorithm 3 load steps under ``mpiexec -n 2``: the forces of the serial run (measured 6e-12),
-    one application of T per step, every step certified."""
+@pytest.mark.parametrize("method, layers", [("primal-ms", "3"), ("mixed-ms", "2")])
+def test_case_load_steps_multiscale_on_two_ranks_match_serial(tmp_path, method, layers):
+    """The same case's Algorithm 3 and 4 load steps under ``mpiexec -n 2`` (offline phase shared out): the forces
+    of the serial run (measured 6e-12 for Algorithm 3), the same iterations, every step certified."""
     import json
     import os
     import shutil
@@ -193,7 +194,7 @@ def test_case_load_steps_primal_ms_on_two_ranks_match_serial(tmp_path):
     if mpiexec is None or MPI.COMM_WORLD.size > 1:
         pytest.skip("needs mpiexec, run serially")
     case = Path(__file__).parents[1] / "cases" / "composite.toml"
-    args = ["run", "--no-plots", "--case", str(case), "--method", "primal-ms", "--layers", "3", "--tol", "1e-8"]
+    args = ["run", "--no-plots", "--case", str(case), "--method", method, "--layers", layers, "--tol", "1e-8"]
     assert main([*args, "--out", str(tmp_path / "serial")]) == 0
     proc = subprocess.run([mpiexec, "-n", "2", sys.executable, "-m", "fenics_contact.cli", *args, "--out",
                            str(tmp_path / "parallel")], capture_output=True, text=True,

@@ -297,6 +297,29 @@ def _relative_difference(ops, dofs, a, b):
     return worst
 
 
+def test_symmetric_factorization_and_its_lu_fallback(caplog):
+    """``_MumpsLU.symmetric`` (Stage II skeleton systems, given by their upper triangle) solves an SPD system
+    by Cholesky, and an indefinite symmetric one (where Cholesky meets a negative pivot) through the LU of
+    the full matrix, both to rounding."""
+    rng = np.random.default_rng(5)
+    n = 60
+    Q = sp.random(n, n, density=0.1, random_state=7) + sp.eye(n)
+    spd = (Q @ Q.T + sp.eye(n)).tocsr()
+    indefinite = (spd - 3.0 * sp.diags(np.linspace(0.0, 1.0, n)) * spd.diagonal().max()).tocsr()
+    assert np.linalg.eigvalsh(indefinite.toarray()).min() < 0
+    b = rng.standard_normal((n, 3))
+    for A, fallback in ((spd, False), (indefinite, True)):
+        caplog.clear()
+        with caplog.at_level(logging.DEBUG, logger=mm.log.name):
+            lu = mm._MumpsLU.symmetric(sp.triu(A).tocsr())
+        assert ("LU instead of Cholesky" in caplog.text) == fallback
+        try:
+            x = lu.solve(b)
+        finally:
+            lu.destroy()
+        assert np.linalg.norm(A @ x - b) <= 1e-10 * np.linalg.norm(b)
+
+
 def test_condensed_stage_two_equals_per_patch_lu(omega1):
     """The substructured Stage II (coarse cells condensed onto the skeleton) solves the same patch systems
     as one sparse LU per patch: bases, Robin and source correctors agree to rounding, also with a

@@ -40,14 +40,19 @@ load term s_L.  Two strategies solve it (``InterfaceNewtonOptions.strategy``):
   back-solves with the factorization Ω₂ keeps; a backtracking line search on
   ‖F‖ globalizes it.  It needs no J₀ but n_γ back-solves per step.
 
-Both land on the fixed point of the Robin iteration (the same equations).  The
-contact Newton takes full steps until an active set recurs and from then on
-minimizes, along each Newton direction, ψ = ½ μᵀMμ + ½ Σ D (s⁺)² with
-s = s_L − Mμ (exact line search on a piecewise-linear derivative): ψ is the
-convex energy of the glued problem when M is symmetric (Algorithms 1, 2), so no
-cycle can recur.  A Newton method that fails (no convergence in ``max_steps``,
-a singular condensed system) raises ConvergenceError; a pair whose transmission
-residual stays above the tolerance ends with ``converged = False``.
+Both land on the fixed point of the Robin iteration (the same equations). With
+``InterfaceNewtonOptions(fronts=True)`` the contact Newton chooses the next active
+set by extrapolating its fronts along Γ_C where a front moved the same way twice
+(``FrontExtrapolation``: where a near-rigid body rests on Γ_C the plain semismooth
+Newton frees one node per step); every set it solves is a step, and a set is
+accepted only when the solve on it reproduces it. The contact Newton takes full
+steps until an active set recurs and from then on minimizes, along each Newton
+direction, ψ = ½ μᵀMμ + ½ Σ D (s⁺)² with s = s_L − Mμ (exact line search on a
+piecewise-linear derivative): ψ is the convex energy of the glued problem when M is
+symmetric (Algorithms 1, 2), so no cycle can recur. A Newton method that fails (no
+convergence in ``max_steps``, a singular condensed system) raises ConvergenceError;
+a pair whose transmission residual stays above the tolerance ends with ``converged =
+False``.
 """
 
 import logging
@@ -80,6 +85,8 @@ __all__ = [
     "InterfaceProblem",
     "CondensedInterface",
     "ContactNewtonHistory",
+    "FrontExtrapolation",
+    "contact_chains",
     "contact_newton",
     "newton_iterate",
 ]
@@ -182,6 +189,11 @@ class AffinePart:
         """Interface values whose data act on this subproblem (False e.g. at γ nodes on Γ_D)."""
         raise NotImplementedError
 
+    def contact_points(self) -> np.ndarray:
+        """Coordinates of the contact unknowns (n_c × gdim, global order): the front extrapolation orders them
+        along Γ_C (``contact_chains``)."""
+        raise NotImplementedError
+
 
 class PrimalPart(AffinePart):
     """A ``fem.primal.PrimalSubproblem`` on part ``part`` of an ``InterfaceSpace`` (MPI-parallel)."""
@@ -236,6 +248,11 @@ class PrimalPart(AffinePart):
         moved = self.comm.allreduce(not np.array_equal(normals, self.c_normals), op=MPI.LOR)
         self.c_normals = normals  # ν enters the contact columns: condense again
         return bool(moved)
+
+    def contact_points(self) -> np.ndarray:
+        gdim = self.sub.mesh.geometry.dim
+        x = self.sub.V.tabulate_dof_coordinates()[self.c_nodes][:, :gdim]
+        return np.concatenate(self.comm.allgather(x)).reshape(-1, gdim)
 
     def data_free(self) -> np.ndarray:
         free = np.zeros(self.n_g, dtype=bool)
@@ -334,6 +351,9 @@ class MixedPart(AffinePart):
 
     def data_free(self) -> np.ndarray:
         return np.diff(self.C.indptr) > 0
+
+    def contact_points(self) -> np.ndarray:
+        return np.asarray(self.sub.q_points)[:, : self.sub.mesh.geometry.dim]
 
     def data_block(self, j0: int, j1: int) -> np.ndarray:
         B = np.zeros((self.nown, j1 - j0), order="F")
@@ -480,6 +500,7 @@ class CondensedInterface:
         self.Gq = np.zeros((problem.a.size, self.Sq.shape[0]))  # ∂g₂₁/∂λ = −Gq
         self.Gq[f] = sla.lu_solve(self.lu, self.P1 @ (a[:, None] * self.Yq[f]))
         self.M = self.Sq + self.Sc @ self.Gq
+        self._chains = None
 
     def load_terms(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Online: (s_L, g₂₁ at λ = 0, y₂₀) from one Ω₂ back-solve and the Ω₁ load response."""
@@ -503,6 +524,14 @@ class CondensedInterface:
     def D(self) -> np.ndarray:
         return self.problem.omega2.D
 
+    @property
+    def chains(self) -> list:
+        """The Γ_C unknowns ordered along the boundary (``contact_chains``; the front extrapolation's), built on
+        first use (collective: the contact points are gathered from all ranks)."""
+        if self._chains is None:
+            self._chains = contact_chains(self.problem.omega2.contact_points()) if self.M.size else []
+        return self._chains
+
     def lowest_eigenvalue(self) -> float:
         """Smallest eigenvalue of ½(M + Mᵀ): > 0 when the glued problem is an elastic (positive definite) one.
 
@@ -518,7 +547,8 @@ class CondensedInterface:
         p = self.problem
         s_load, g21_0, y20 = self.load_terms()
         try:
-            _, lam, hist = contact_newton(s_load, self.M, self.D, max_steps=options.max_steps, name=name)
+            _, lam, hist = contact_newton(s_load, self.M, self.D, max_steps=options.max_steps, name=name,
+                                          chains=self.chains if options.fronts else None)
         except ConvergenceError as err:
             lowest = self.lowest_eigenvalue()
             if lowest < 0.0:
@@ -539,8 +569,8 @@ class CondensedInterface:
 class ContactNewtonHistory:
     """Active-set sizes, step lengths and contact-law violations ‖μ − D s⁺‖ of the contact Newton.
 
-    ``added`` / ``removed``: the contact rows each step brought into / took out of the active set
-    (indices into the Γ_C unknowns; the step that confirms the set adds and removes none).
+    ``added`` / ``removed``: the contact rows each step brought into / took out of the active set it
+    solves next (indices into the Γ_C unknowns; the step that confirms the set adds and removes none).
     """
 
     active_sizes: list[int] = field(default_factory=list)
@@ -548,10 +578,173 @@ class ContactNewtonHistory:
     residuals: list[float] = field(default_factory=list)
     added: list[np.ndarray] = field(default_factory=list)
     removed: list[np.ndarray] = field(default_factory=list)
+    #: rows the front extrapolation changed beyond the semismooth step's own set, per step (empty: none);
+    #: the next step solves that trial set, and ``added``/``removed`` of a step count them
+    extrapolated: list[np.ndarray] = field(default_factory=list)
 
     @property
     def steps(self) -> int:
         return len(self.step_lengths)
+
+
+# ---------------------------------------------------------------------------------------
+# front extrapolation: Γ_C ordered along the boundary, secant on the fronts of the active set
+# ---------------------------------------------------------------------------------------
+def contact_chains(points: np.ndarray, *, cut: float = 4.0) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The contact unknowns ordered along Γ_C: one (indices, arc-length positions) pair per piece of Γ_C.
+
+    The pieces are the paths of the Euclidean minimum spanning tree of ``points`` once its edges longer than
+    ``cut`` × the median edge are removed (separate components of Γ_C); a piece that is not a path (a
+    node with three tree neighbours: points too far from a curve) is left out, and its fronts are then
+    simply not extrapolated.  Coincident points (a vertex copied at a corner) follow each other.
+    """
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components, minimum_spanning_tree
+    from scipy.spatial.distance import cdist
+
+    if points.shape[0] < 3:
+        return []
+    dist = cdist(points, points)
+    if dist.max() == 0.0:
+        return []
+    # coincident points (copies of a vertex) are one node of the tree, expanded again in the chain
+    _, group = connected_components(dist <= 1e-12 * dist.max(), directed=False)
+    first = np.unique(group, return_index=True)[1]
+    members = [np.flatnonzero(group == g) for g in range(first.size)]
+    points = points[first]
+    n = points.shape[0]
+    dist = dist[np.ix_(first, first)]
+    if n < 3:
+        return []
+    tree = minimum_spanning_tree(dist).tocoo()
+    keep = tree.data <= cut * np.median(tree.data)
+    adj = coo_matrix((tree.data[keep], (tree.row[keep], tree.col[keep])), shape=(n, n)).tocsr()
+    adj = (adj + adj.T).tocsr()
+    count, label = connected_components(adj, directed=False)
+    degree = np.diff(adj.indptr)
+    chains = []
+    for c in range(count):
+        nodes = np.flatnonzero(label == c)
+        if nodes.size < 3 or degree[nodes].max() > 2:
+            continue
+        order, prev = [int(nodes[degree[nodes] == 1][0])], -1
+        while True:
+            nbrs = [k for k in adj.indices[adj.indptr[order[-1]] : adj.indptr[order[-1] + 1]] if k != prev]
+            if not nbrs:
+                break
+            prev = order[-1]
+            order.append(int(nbrs[0]))
+        order = np.array(order)
+        arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points[order], axis=0), axis=1))])
+        chains.append((np.concatenate([members[k] for k in order]),
+                       np.concatenate([np.full(members[k].size, a) for k, a in zip(order, arc)])))
+    return chains
+
+
+class FrontExtrapolation:
+    """Secant prediction of the fronts of the contact Newton's active set along Γ_C (``contact_chains``).
+
+    A front is the end e of a contiguous active segment of a chain.  A semismooth step solved on the set
+    moves it to the zero crossing z of the new s along the chain (its last node on the active side of z).
+    Where a stiff body rests on Γ_C (a near-rigid punch on the penalty), the front moves one node per step:
+    z(e) − e shrinks slowly.  When a front has moved the same way in two consecutive steps and z(e) − e
+    contracts, the secant through (e₀, z₀), (e₁, z₁) predicts the fixed point e* = z(e*); the trial set
+    moves the front to the last node before e* + ``margin`` node spacing in the direction it came from
+    (a conservative rounding: one node too far can make a near-rigid body pivot).  Only fronts of a
+    stretch of Γ_C made of another material than most of it are extrapolated (local compliance M_ii·D_i
+    more than ``inclusion`` times off its median: a stiff or soft inclusion on Γ_C, where the slow fronts
+    are; elsewhere the plain steps converge fast and a prediction that is one node off costs a step), and
+    the prediction stays inside the stretch of one local compliance (M_ii·D_i within a factor ``clamp`` of
+    its neighbour's: a material boundary of Γ_C is where such a front stops, and the secant's smooth model
+    does not hold across it).  Every trial set is then solved (a counted step) and must confirm itself;
+    after ``max_misses`` predictions that the next step undid (a row the prediction changed is changed
+    back) no more are made.  The fixed point is that of the semismooth Newton: the trial set is only a
+    start for its next step.
+    """
+
+    def __init__(self, chains, M: np.ndarray, D: np.ndarray, *, margin: float = 0.5, clamp: float = 2.0,
+                 inclusion: float = 4.0, max_misses: int = 2) -> None:
+        self.chains = [(np.asarray(idx), np.asarray(pos, dtype=float)) for idx, pos in chains]
+        self.compliance = np.abs(np.diag(M)) * D
+        self.margin, self.clamp, self.max_misses = margin, clamp, max_misses
+        typical = np.median(self.compliance) if self.compliance.size else 0.0
+        #: rows whose fronts may be extrapolated: local compliance more than ``inclusion`` times off the median
+        self.eligible = np.maximum(self.compliance, typical) > inclusion * np.minimum(self.compliance, typical)
+        self.records: dict = {}
+        self.misses = 0
+        self.changed = np.zeros(0, dtype=np.int64)  # rows the last prediction changed
+        self.target = np.zeros(0, dtype=bool)  # and their predicted state
+
+    def _same_material(self, i: int, k: int) -> bool:
+        a, b = self.compliance[i], self.compliance[k]
+        return max(a, b) <= self.clamp * min(a, b)
+
+    @staticmethod
+    def _crossing(s: np.ndarray, idx: np.ndarray, pos: np.ndarray, e: int, o: int):
+        """Zero crossing z of s near the front (end e, active side −o) and the node before it, or None."""
+        n = idx.size
+        j = e
+        if s[idx[e]] > 0.0:
+            while 0 <= j + o < n and s[idx[j + o]] > 0.0:
+                j += o
+            if not 0 <= j + o < n:
+                return None
+        else:
+            while 0 <= j - o < n and s[idx[j]] <= 0.0:
+                j -= o
+            if s[idx[j]] <= 0.0:
+                return None
+        a, b = s[idx[j]], s[idx[j + o]]
+        return pos[j] + (pos[j + o] - pos[j]) * a / (a - b), j
+
+    def missed(self, predicted: np.ndarray) -> bool:
+        """Whether the step that solved the last prediction undid it (changed back a row it had changed);
+        if so the prediction is dropped, its records with it, and one miss counted."""
+        miss = bool(self.changed.size) and bool(np.any(predicted[self.changed] != self.target))
+        if miss:
+            self.misses += 1
+            self.records = {}
+        self.changed = np.zeros(0, dtype=np.int64)
+        return miss
+
+    def trial(self, active: np.ndarray, s_new: np.ndarray, predicted: np.ndarray) -> np.ndarray:
+        """The next set: ``predicted`` (the semismooth step's {s_new > 0} after solving on ``active``), with
+        the fronts that qualify moved to their secant prediction."""
+        trial = predicted.copy()
+        records = {}
+        for c, (idx, pos) in enumerate(self.chains):
+            act = active[idx]
+            ends = [(i, 1) for i in np.flatnonzero(act[:-1] & ~act[1:])]  # o = +1: active below the end
+            ends += [(i + 1, -1) for i in np.flatnonzero(~act[:-1] & act[1:])]
+            for e, o in ends:
+                found = self._crossing(s_new, idx, pos, e, o)
+                if found is None:
+                    continue
+                z, j = found
+                last = self.records.get((c, o, e))
+                k = j
+                if last is not None and j != e and self.misses < self.max_misses and self.eligible[idx[e]]:
+                    e0, z0 = last
+                    f0, f1 = z0 - e0, z - pos[e]
+                    if np.sign(f0) == np.sign(f1) != 0.0 and abs(f1) < abs(f0):
+                        star = pos[e] - f1 * (pos[e] - e0) / (f1 - f0)
+                        spacing = 0.5 * abs(pos[min(j + 1, idx.size - 1)] - pos[max(j - 1, 0)])
+                        star -= np.sign(f1) * self.margin * spacing  # back towards where the front came from
+                        if f1 * o < 0.0:  # the segment shrinks: free its nodes beyond e*
+                            while (0 <= k - o < idx.size and trial[idx[k - o]] and o * pos[k] > o * star
+                                   and self._same_material(idx[k], idx[k - o])):
+                                trial[idx[k]] = False
+                                k -= o
+                        else:  # it grows: activate the nodes up to e*
+                            while (0 <= k + o < idx.size and not trial[idx[k + o]] and o * pos[k + o] <= o * star
+                                   and self._same_material(idx[k], idx[k + o])):
+                                k += o
+                                trial[idx[k]] = True
+                records[(c, o, k)] = (pos[e], z)
+        self.records = records
+        self.changed = np.flatnonzero(trial != predicted)
+        self.target = trial[self.changed]
+        return trial
 
 
 def _line_search(mu: np.ndarray, dmu: np.ndarray, s: np.ndarray, ds: np.ndarray, s_load: np.ndarray,
@@ -579,7 +772,8 @@ def _line_search(mu: np.ndarray, dmu: np.ndarray, s: np.ndarray, ds: np.ndarray,
 
 def contact_newton(s_load: np.ndarray, M: np.ndarray, D: np.ndarray, *, max_steps: int = 50,
                    name: str = "contact Newton", rtol: float = 1e-10, active: np.ndarray | None = None,
-                   line_search: bool = False) -> tuple[np.ndarray, np.ndarray, ContactNewtonHistory]:
+                   line_search: bool = False,
+                   chains=None) -> tuple[np.ndarray, np.ndarray, ContactNewtonHistory]:
     """Solve s = s_L − M μ, μ = D s⁺ by semismooth Newton (finite termination, globalized): (s, μ).
 
     Starts from μ = 0 (no contact force) with the active set 𝒜 = {s_L > 0} (the contact-free
@@ -589,12 +783,16 @@ def contact_newton(s_load: np.ndarray, M: np.ndarray, D: np.ndarray, *, max_step
     current active set 𝒜 = {s > 0} for the forces: (D_𝒜⁻¹ + M_𝒜𝒜) μ_𝒜 = s_L,𝒜, s = s_L − M_:𝒜 μ_𝒜
     (on 𝒜, s = μ/D: no cancellation with a stiff penalty).  It stops at the first step whose result
     has the set it was computed for (then both equations hold exactly) and checks that solve.
+    ``chains`` (``contact_chains`` of the Γ_C unknowns' coordinates): the next set is the front
+    extrapolation's trial set (``FrontExtrapolation``) until the line search starts; every set
+    solved, predicted or not, is one step.
     """
     hist = ContactNewtonHistory()
     n = s_load.size
     s, mu = s_load.copy(), np.zeros(n)
     active = s > 0.0 if active is None else np.asarray(active, dtype=bool).copy()
     visited: set[bytes] = set()
+    fronts = FrontExtrapolation(chains, M, D) if chains else None
     for _ in range(max_steps):
         visited.add(np.packbits(active).tobytes())
         A = np.flatnonzero(active)
@@ -611,20 +809,31 @@ def contact_newton(s_load: np.ndarray, M: np.ndarray, D: np.ndarray, *, max_step
                                        f"(relative residual {np.linalg.norm(r) / size:.1e})")
         predicted = s_new > 0.0
         settled = np.array_equal(predicted, active)
+        if fronts is not None and not settled:
+            fronts.missed(predicted)
         if not settled and not line_search:
             line_search = np.packbits(predicted).tobytes() in visited
         t = 1.0
         if line_search and not settled:
             t = _line_search(mu, mu_new - mu, s, s_new - s, s_load, D)
         s, mu = s + t * (s_new - s), mu + t * (mu_new - mu)
+        following = s > 0.0
+        extrapolated = np.zeros(0, dtype=np.int64)
+        if fronts is not None and not line_search and not settled:
+            trial = fronts.trial(active, s_new, following)
+            if np.packbits(trial).tobytes() in visited:
+                fronts.changed = extrapolated  # already solved: no prediction this step
+            else:
+                extrapolated, following = np.flatnonzero(trial != following), trial
         hist.step_lengths.append(t)
-        hist.active_sizes.append(int(np.count_nonzero(s > 0.0)))
-        hist.added.append(np.flatnonzero((s > 0.0) & ~active))
-        hist.removed.append(np.flatnonzero(active & ~(s > 0.0)))
+        hist.active_sizes.append(int(np.count_nonzero(following)))
+        hist.added.append(np.flatnonzero(following & ~active))
+        hist.removed.append(np.flatnonzero(active & ~following))
+        hist.extrapolated.append(extrapolated)
         hist.residuals.append(float(np.linalg.norm(mu - D * np.maximum(s, 0.0))))  # contact-law violation
         if settled:
             return s, mu, hist
-        active = s > 0.0
+        active = following
     raise ConvergenceError(
         f"{name}: contact Newton did not converge in {max_steps} steps (active-set sizes "
         f"{hist.active_sizes[-5:]}, step lengths {hist.step_lengths[-5:]}, residuals {hist.residuals[-3:]})"
@@ -664,8 +873,9 @@ def newton_iterate(step, options: IterationOptions, *, name: str, monitor=None,
         om2.set_state(om2.solve(om2.rhs(g21, lam)))  # warm start of Ω₂: one J₀ back-solve
         history.newton_steps = ch.steps
         log.info("%s: contact Newton %d steps, active-set sizes %s, step lengths %s, rows added/removed per "
-                 "step %s", name, ch.steps, ch.active_sizes, [round(t, 3) for t in ch.step_lengths],
-                 [f"+{a.size}/-{r.size}" for a, r in zip(ch.added, ch.removed)])
+                 "step %s (of them by the front extrapolation %s)", name, ch.steps, ch.active_sizes,
+                 [round(t, 3) for t in ch.step_lengths], [f"+{a.size}/-{r.size}" for a, r in zip(ch.added, ch.removed)],
+                 [e.size for e in ch.extrapolated])
         history.contact_newton = ch
         g = problem.data(g12, g21)
     else:

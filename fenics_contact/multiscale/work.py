@@ -3,14 +3,18 @@
 Every rank holds the same list of items with an estimated cost; ``share``
 assigns each item to one rank (longest first, to the least loaded rank: the
 same answer on every rank, no communication), so no item is computed twice.
-``gather`` then gives every rank every result: each item is broadcast from the
-rank that computed it, one at a time, so no message holds more than one item.
+``gather`` then gives every rank every result: each rank broadcasts its results
+in one pickle (protocol 5) whose NumPy arrays travel out of band, one ``Bcast`` per
+array straight into the receivers' buffers (no pickling copy of the data, no message
+larger than one array).
 """
+
+import pickle
 
 import numpy as np
 from mpi4py import MPI
 
-__all__ = ["share", "my_items", "gather"]
+__all__ = ["share", "my_items", "gather", "gather_dict"]
 
 
 def share(costs: np.ndarray, size: int) -> np.ndarray:
@@ -33,7 +37,45 @@ def my_items(owner: np.ndarray, comm: MPI.Comm) -> np.ndarray:
 
 
 def gather(comm: MPI.Comm, owner: np.ndarray, mine: dict) -> list:
-    """Every item's result on every rank: item i is broadcast from rank owner[i] (``mine`` holds this rank's)."""
+    """Every item's result on every rank: item i is computed by rank owner[i] (``mine`` holds this rank's)."""
+    return gather_dict(mine, owner.size, comm)
+
+
+def gather_dict(results: dict, n: int, comm: MPI.Comm) -> list:
+    """The list of all n items on every rank, from the ranks' dicts {index: item} (each item on one rank).
+
+    Each rank in turn broadcasts its dict: a protocol-5 pickle whose contiguous NumPy arrays travel out of
+    band, packed into one byte buffer (``Bcast`` in chunks of at most 2³⁰ bytes) that the unpickled arrays of
+    the receivers then view; other objects and non-contiguous arrays travel inside the pickle.
+    """
     if comm.size == 1:
-        return [mine[i] for i in range(owner.size)]
-    return [comm.bcast(mine.get(i) if owner[i] == comm.rank else None, root=int(owner[i])) for i in range(owner.size)]
+        return [results[i] for i in range(n)]
+    out = [None] * n
+    for root in range(comm.size):
+        if root == comm.rank:
+            buffers = []
+            head = pickle.dumps(results, protocol=5, buffer_callback=buffers.append)
+            sizes = [b.raw().nbytes for b in buffers]
+            comm.bcast((head, sizes), root=root)
+            packed = np.empty(sum(sizes), dtype=np.uint8)
+            offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+            for b, a, z in zip(buffers, offsets[:-1], offsets[1:]):
+                packed[a:z] = np.frombuffer(b.raw(), dtype=np.uint8)
+            _bcast_bytes(comm, packed, root)
+            items = results
+        else:
+            head, sizes = comm.bcast(None, root=root)
+            packed = np.empty(sum(sizes), dtype=np.uint8)
+            _bcast_bytes(comm, packed, root)
+            offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+            items = pickle.loads(head, buffers=[packed[a:z] for a, z in zip(offsets[:-1], offsets[1:])])
+        for k, v in items.items():
+            out[k] = v
+    if any(o is None for o in out) and n:
+        raise RuntimeError("an offline item was computed by no rank")
+    return out
+
+
+def _bcast_bytes(comm: MPI.Comm, data: np.ndarray, root: int, chunk: int = 1 << 30) -> None:
+    for start in range(0, data.size, chunk):
+        comm.Bcast([data[start : start + chunk], MPI.BYTE], root=root)

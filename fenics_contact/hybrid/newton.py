@@ -872,10 +872,11 @@ def newton_iterate(step, options: IterationOptions, *, name: str, monitor=None,
         g12, g21, lam = comm.bcast((g12, g21, lam), root=0)
         om2.set_state(om2.solve(om2.rhs(g21, lam)))  # warm start of Ω₂: one J₀ back-solve
         history.newton_steps = ch.steps
+        predicted = [e.size for e in ch.extrapolated]
         log.info("%s: contact Newton %d steps, active-set sizes %s, step lengths %s, rows added/removed per "
-                 "step %s (of them by the front extrapolation %s)", name, ch.steps, ch.active_sizes,
-                 [round(t, 3) for t in ch.step_lengths], [f"+{a.size}/-{r.size}" for a, r in zip(ch.added, ch.removed)],
-                 [e.size for e in ch.extrapolated])
+                 "step %s%s", name, ch.steps, ch.active_sizes, [round(t, 3) for t in ch.step_lengths],
+                 [f"+{a.size}/-{r.size}" for a, r in zip(ch.added, ch.removed)],
+                 f" (of them by the front extrapolation {predicted})" if any(predicted) else "")
         history.contact_newton = ch
         g = problem.data(g12, g21)
     else:

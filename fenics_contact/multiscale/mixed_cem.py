@@ -95,11 +95,11 @@ unknowns are recovered coarse cell by coarse cell for all the patches reaching i
 one multi-right-hand-side solve.  The patch skeleton matrices are not summed cell by
 cell: their inner block is a principal submatrix of one global Σ_K S_K
 (``_GlobalSkeleton``; an inner skeleton DOF has all its coarse cells in the patch),
-and only the columns of the patch-boundary vertex functions are summed per cell.  The same linear
-systems as one LU per patch (``_stage_two_reference``, kept for the tests).  The Stage I cells, Stage II patches and coarse-operator cells
-can be shared out over an MPI communicator (``comm``; every rank holds the whole
-Ω₁ mesh): each is computed once, the results are broadcast and the coarse
-matrices summed.  Offline phases report progress (``fenics_contact.progress``).
+and only the columns of the patch-boundary vertex functions are summed per cell.  The same
+linear systems as one LU per patch (``_stage_two_reference``, kept for the tests).  The Stage I
+cells, Stage II patches and coarse-operator cells can be shared out over an MPI communicator
+(``comm``; every rank holds the whole Ω₁ mesh): each is computed once, the results are broadcast
+and the coarse matrices summed.  Offline phases report progress (``fenics_contact.progress``).
 The offline data can be cached (``cache_dir``): one npz file per configuration,
 keyed by a hash of everything they depend on (``mixed_offline_key``), checked by
 a stored checksum, written atomically and patch by patch (no second copy); the
@@ -107,7 +107,6 @@ patch functions are stored in float32 (they only rebuild the fine output fields,
 relative rounding 6·10⁻⁸), U_aux and the coarse matrices in float64.
 """
 
-import functools
 import hashlib
 import json
 import logging
@@ -1025,19 +1024,24 @@ class _MumpsLU:
     factorization time of MUMPS' automatic choice (METIS); Cholesky (LDLᵀ) was 2–4× slower.
     """
 
-    def __init__(self, mat: PETSc.Mat) -> None:
+    def __init__(self, mat: PETSc.Mat, *, cholesky: bool = False) -> None:
+        """Factorize ``mat`` (LU; with ``cholesky`` an SPD matrix by Cholesky: then a failure or a
+        non-positive pivot only sets ``positive`` False instead of raising)."""
         self.mat = mat
         self._arrays = None  # the CSR arrays a matrix made by from_coo shares
         self.ksp = PETSc.KSP().create(PETSc.COMM_SELF)
         self.ksp.setOperators(self.mat)
         self.ksp.setType("preonly")
         pc = self.ksp.getPC()
-        pc.setType("lu")
+        pc.setType("cholesky" if cholesky else "lu")
         pc.setFactorSolverType("mumps")
         pc.setFactorSetUpSolverType()
-        pc.getFactorMatrix().setMumpsIcntl(7, 0)
+        if not cholesky:
+            pc.getFactorMatrix().setMumpsIcntl(7, 0)
         self.ksp.setUp()
-        if self.ksp.getConvergedReason() < 0 or pc.getFailedReason() != 0:
+        failed = self.ksp.getConvergedReason() < 0 or pc.getFailedReason() != 0
+        self.positive = cholesky and not failed and pc.getFactorMatrix().getMumpsInfog(12) == 0
+        if failed and not cholesky:
             raise ConvergenceError(
                 f"MUMPS failed to factorize a local mixed CEM problem (reason {pc.getFailedReason()})"
             )
@@ -1073,19 +1077,10 @@ class _MumpsLU:
         mat = PETSc.Mat().createSBAIJ(upper.shape, 1, csr=csr, comm=PETSc.COMM_SELF)
         mat.setOption(PETSc.Mat.Option.SPD, True)
         mat.assemble()
-        self = cls.__new__(cls)
-        self.mat, self._arrays = mat, None
-        self.ksp = PETSc.KSP().create(PETSc.COMM_SELF)
-        self.ksp.setOperators(mat)
-        self.ksp.setType("preonly")
-        pc = self.ksp.getPC()
-        pc.setType("cholesky")
-        pc.setFactorSolverType("mumps")
-        pc.setFactorSetUpSolverType()
-        self.ksp.setUp()
-        if pc.getFailedReason() == 0 and pc.getFactorMatrix().getMumpsInfog(12) == 0:
-            return self
-        self.destroy()
+        chol = cls(mat, cholesky=True)
+        if chol.positive:
+            return chol
+        chol.destroy()
         log.debug("Stage II skeleton matrix not positive definite: LU instead of Cholesky")
         return cls.from_csr(upper + sp.triu(upper, 1).T)
 
@@ -1379,7 +1374,7 @@ class _GlobalSkeleton:
         rows, cols, vals = [], [], []
         for skel, S, *_ in condensed:
             pos = np.searchsorted(self.dofs, skel)  # skel sorted: the local upper triangle is the global one
-            iu, ju = _triu(pos.size)
+            iu, ju = np.triu_indices(pos.size)
             rows.append(pos[iu])
             cols.append(pos[ju])
             vals.append(S[iu, ju])
@@ -1390,7 +1385,8 @@ class _GlobalSkeleton:
         """Upper triangle (canonical CSR) of T_Γᵀ (Σ_K S_K) T_Γ for a patch with skeleton DOFs G, T_Γ and inner
         DOFs from ``_skeleton_columns`` and its cells' ``blocks`` = [(skeleton DOFs of K, S_K)]."""
         pos = np.searchsorted(self.dofs, inner)
-        A = _sorted(self.upper[pos][:, pos])  # the inner block (pos increasing: still upper triangular)
+        A = self.upper[pos][:, pos]  # the inner block (pos increasing: still upper triangular)
+        A.sum_duplicates()  # canonical for PETSc (SciPy checks first: no sort when already sorted)
         n_I, n_B = inner.size, TG.shape[1] - inner.size
         if n_B == 0:
             return A
@@ -1405,24 +1401,9 @@ class _GlobalSkeleton:
         BB = NB.T @ X
         top = sp.hstack([A, sp.csr_matrix(X[np.searchsorted(G, inner)])], format="csr")
         bottom = sp.hstack([sp.csr_matrix((n_B, n_I)), sp.csr_matrix(np.triu(0.5 * (BB + BB.T)))], format="csr")
-        return _sorted(sp.vstack([top, bottom], format="csr"))
-
-
-@functools.lru_cache(maxsize=64)
-def _triu(n: int) -> tuple[np.ndarray, np.ndarray]:
-    return np.triu_indices(n)
-
-
-def _sorted(A: sp.csr_matrix) -> sp.csr_matrix:
-    """A in canonical form (sorted column indices, no duplicates), sorting only if a row is out of order."""
-    d = np.diff(A.indices)
-    starts = A.indptr[1:-1] - 1  # positions in d that cross a row boundary
-    d[starts[(starts >= 0) & (starts < d.size)]] = 1
-    if d.size and d.min() <= 0:
+        A = sp.vstack([top, bottom], format="csr")
         A.sum_duplicates()
-    else:
-        A.has_canonical_format = True
-    return A
+        return A
 
 
 def _cell_values(
@@ -1447,8 +1428,8 @@ def _cell_values(
     A = np.asarray(system.WI @ XI[: system.n_s])  # AW coefficients on K, all patches in one product
     A[system.gpos] += XG
     U = XI[system.n_s : system.n_s + system.n_u]
-    cut = lambda X, q: np.ascontiguousarray(X[:, start[q] : start[q + 1]])  # noqa: E731 (contiguous: MPI out of band)
-    return {int(i): (cut(A, q), cut(U, q)) for q, i in enumerate(reach)}
+    cols = [slice(start[q], start[q + 1]) for q in range(len(reach))]  # contiguous pieces: sent out of band by MPI
+    return {int(i): (np.ascontiguousarray(A[:, c]), np.ascontiguousarray(U[:, c])) for i, c in zip(reach, cols)}
 
 
 def _stage_two_condensed(
@@ -1476,8 +1457,7 @@ def _stage_two_condensed(
     glob = _GlobalSkeleton(condensed)
     values = _run_shared(cost ** 1.5, comm, "mixed CEM Stage II (patch skeletons)",
                          lambda i: _skeleton_solve(ops, topo, grid, dofs, skeleton, condensed, i, layers, glob))
-    del glob
-    del condensed
+    del glob, condensed
     reach = [[] for _ in range(grid.size)]
     for i, p in enumerate(patches):
         for K in p:

@@ -99,7 +99,7 @@ from fenics_contact.fem.linalg import assemble_scipy, scipy_to_petsc
 from fenics_contact.multiscale.cache import OfflineCache, hash_array
 from fenics_contact.multiscale.coarse import CoarseGrid, coarse_grid, grid_from_cells
 from fenics_contact.multiscale.replica import SerialReplica
-from fenics_contact.multiscale.work import gather, my_items, share
+from fenics_contact.multiscale.work import gather_dict, my_items, share
 from fenics_contact.problem.fields import MaterialFields
 from fenics_contact.problem.tags import Boundary
 from fenics_contact.problem.fields import material_fields
@@ -662,7 +662,7 @@ def build_auxiliary_space(
                 lam, Phi = lam[:keep], Phi[:, :keep]
             mine[int(k)] = (D, lam, Phi)
             bar.update()
-    parts = gather(comm, owner, mine)
+    parts = gather_dict(mine, owner.size, comm)
     dofs = [p[0] for p in parts]
     values = [p[1] for p in parts]
     vectors = [p[2] for p in parts]
@@ -882,7 +882,7 @@ def build_multiscale_space(
                 bar.update()
     finally:
         saddle.destroy()
-    results = gather(comm, owner, mine)
+    results = gather_dict(mine, owner.size, comm)
     del mine
     basis = [r[0] for r in results]
     correction = [r[1] for r in results if r[1] is not None]

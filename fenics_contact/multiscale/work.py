@@ -3,7 +3,7 @@
 Every rank holds the same list of items with an estimated cost; ``share``
 assigns each item to one rank (longest first, to the least loaded rank: the
 same answer on every rank, no communication), so no item is computed twice.
-``gather`` then gives every rank every result: each rank broadcasts its results
+``gather_dict`` then gives every rank every result: each rank broadcasts its results
 in one pickle (protocol 5) whose NumPy arrays travel out of band, one ``Bcast`` per
 array straight into the receivers' buffers (no pickling copy of the data, no message
 larger than one array).
@@ -14,7 +14,7 @@ import pickle
 import numpy as np
 from mpi4py import MPI
 
-__all__ = ["share", "my_items", "gather", "gather_dict"]
+__all__ = ["share", "my_items", "gather_dict"]
 
 
 def share(costs: np.ndarray, size: int) -> np.ndarray:
@@ -36,11 +36,6 @@ def my_items(owner: np.ndarray, comm: MPI.Comm) -> np.ndarray:
     return np.flatnonzero(owner == comm.rank)
 
 
-def gather(comm: MPI.Comm, owner: np.ndarray, mine: dict) -> list:
-    """Every item's result on every rank: item i is computed by rank owner[i] (``mine`` holds this rank's)."""
-    return gather_dict(mine, owner.size, comm)
-
-
 def gather_dict(results: dict, n: int, comm: MPI.Comm) -> list:
     """The list of all n items on every rank, from the ranks' dicts {index: item} (each item on one rank).
 
@@ -52,23 +47,17 @@ def gather_dict(results: dict, n: int, comm: MPI.Comm) -> list:
         return [results[i] for i in range(n)]
     out = [None] * n
     for root in range(comm.size):
-        if root == comm.rank:
+        mine = root == comm.rank
+        if mine:
             buffers = []
             head = pickle.dumps(results, protocol=5, buffer_callback=buffers.append)
-            sizes = [b.raw().nbytes for b in buffers]
-            comm.bcast((head, sizes), root=root)
-            packed = np.empty(sum(sizes), dtype=np.uint8)
-            offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
-            for b, a, z in zip(buffers, offsets[:-1], offsets[1:]):
-                packed[a:z] = np.frombuffer(b.raw(), dtype=np.uint8)
-            _bcast_bytes(comm, packed, root)
-            items = results
-        else:
-            head, sizes = comm.bcast(None, root=root)
-            packed = np.empty(sum(sizes), dtype=np.uint8)
-            _bcast_bytes(comm, packed, root)
-            offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
-            items = pickle.loads(head, buffers=[packed[a:z] for a, z in zip(offsets[:-1], offsets[1:])])
+            raw = [np.frombuffer(b.raw(), dtype=np.uint8) for b in buffers]
+        head, sizes = comm.bcast((head, [r.size for r in raw]) if mine else None, root=root)
+        offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+        packed = np.concatenate(raw) if mine and raw else np.empty(offsets[-1], dtype=np.uint8)
+        _bcast_bytes(comm, packed, root)
+        views = [packed[a:z] for a, z in zip(offsets[:-1], offsets[1:])]
+        items = results if mine else pickle.loads(head, buffers=views)
         for k, v in items.items():
             out[k] = v
     if any(o is None for o in out) and n:

@@ -47,7 +47,7 @@ from fenics_contact.hybrid.iteration import IterationOptions
 from fenics_contact.hybrid.mixed import solve_mixed_hybrid
 from fenics_contact.hybrid.primal import solve_primal_hybrid
 from fenics_contact.indentation import force_indentation
-from fenics_contact.io import machine_description
+from fenics_contact.io import machine_description, write_report
 from fenics_contact.problem.analytic import (
     bar_model, bar_solution, hertz_errors, hertz_model, layered_model, layered_pressure,
 )
@@ -311,10 +311,7 @@ def main(argv=None) -> None:
             parser.error(f"unknown section {number}; choose among 1 2 3 4 5")
         lines += sections[number]()
     lines.append(f"Total time {time.perf_counter() - start:.0f} s.")
-    if MPI.COMM_WORLD.rank == 0:
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text("\n".join(lines) + "\n")
-        print(f"wrote {args.out}")
+    write_report(args.out, lines)
 
 
 if __name__ == "__main__":

@@ -44,7 +44,7 @@ from fenics_contact.fem.primal import PrimalSubproblem, default_penalty
 from fenics_contact.hybrid.iteration import InterfaceNewtonOptions, IterationOptions, iterate
 from fenics_contact.hybrid.mixed import MixedHybridStep
 from fenics_contact.hybrid.primal import PrimalHybridStep
-from fenics_contact.io import machine_description
+from fenics_contact.io import machine_description, write_report
 from fenics_contact.multiscale.cem import CEMOptions
 from fenics_contact.multiscale.mixed import MixedMultiscaleHybridStep
 from fenics_contact.multiscale.mixed_cem import MixedCEMOptions
@@ -440,9 +440,7 @@ def main() -> None:
         else:
             raise SystemExit(f"unknown part {part!r}")
     lines.append(f"Total wall time {time.perf_counter() - start:.0f} s.")
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text("\n".join(lines) + "\n")
-    print(f"wrote {args.out}")
+    write_report(args.out, lines)
 
 
 if __name__ == "__main__":

@@ -20,12 +20,11 @@ from pathlib import Path
 import numpy as np
 
 import fenics_contact  # noqa: F401  (dolfinx_solver first)
-from mpi4py import MPI
 
 from fenics_contact.fem.mixed import solve_mixed_monolithic
 from fenics_contact.hybrid.iteration import IterationOptions
 from fenics_contact.hybrid.mixed import solve_mixed_hybrid
-from fenics_contact.io import machine_description
+from fenics_contact.io import machine_description, write_report
 from fenics_contact.multiscale.mixed import l2_stress_error, solve_mixed_ms_hybrid
 from fenics_contact.problem import geometry, models
 from fenics_contact.problem.boundary import BoundaryConditions
@@ -104,10 +103,7 @@ def main(argv=None) -> None:
     lines += case_a(args.h, args.H_a, args.layers, options)
     lines += case_b(args.h, args.H_b, args.layers_b, args.contrast, options)
     lines.append(f"Total time {time.perf_counter() - start:.0f} s.")
-    if MPI.COMM_WORLD.rank == 0:
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text("\n".join(lines) + "\n")
-        print(f"wrote {args.out}")
+    write_report(args.out, lines)
 
 
 if __name__ == "__main__":

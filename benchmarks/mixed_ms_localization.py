@@ -20,7 +20,7 @@ import fenics_contact  # noqa: F401  (must precede dolfinx / petsc4py)
 from fenics_contact.problem import geometry, models
 from fenics_contact.multiscale import cem
 from fenics_contact.multiscale import mixed_cem as mm
-from fenics_contact.io import machine_description
+from fenics_contact.io import machine_description, write_report
 from fenics_contact.hybrid.mixed import MixedHybridStep
 
 CASES = {  # the paper's cases: (model, E₁/E₂, ν₁ (pattern), ν₂ (rest))
@@ -126,9 +126,7 @@ def main() -> None:
         lines.append(row)
         print(row, flush=True)
     lines += ["", f"Total wall time {time.perf_counter() - start:.0f} s."]
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text("\n".join(lines) + "\n")
-    print(f"wrote {args.out}")
+    write_report(args.out, lines)
 
 
 if __name__ == "__main__":

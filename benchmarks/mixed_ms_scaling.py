@@ -125,7 +125,7 @@ def main() -> None:
             print(RESULT + json.dumps(result), flush=True)
         return
 
-    from fenics_contact.io import machine_description
+    from fenics_contact.io import machine_description, write_report
 
     sizes = [int(s) for s in args.sizes.split(",")]
     mpi_sizes = [int(s) for s in args.mpi_sizes.split(",")] if args.mpi_sizes else sizes[-1:]
@@ -200,9 +200,7 @@ def main() -> None:
         p = _slope(dofs, ys)
         lines.append(f"| {name} | {p:.2f} |" if p is not None else f"| {name} | — |")
     lines += ["", f"Total wall time {time.perf_counter() - start:.0f} s.", ""]
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text("\n".join(lines) + "\n")
-    print(f"wrote {args.out}")
+    write_report(args.out, lines)
 
 
 if __name__ == "__main__":

@@ -18,12 +18,11 @@ import time
 from pathlib import Path
 
 import fenics_contact  # noqa: F401  (dolfinx_solver first)
-from mpi4py import MPI
 
 from fenics_contact.fem.primal import default_penalty
 from fenics_contact.hybrid.iteration import IterationOptions
 from fenics_contact.hybrid.primal import solve_primal_hybrid
-from fenics_contact.io import machine_description
+from fenics_contact.io import machine_description, write_report
 from fenics_contact.multiscale.primal import solve_primal_ms_hybrid
 from fenics_contact.problem import geometry, models
 from fenics_contact.problem.boundary import BoundaryConditions
@@ -72,10 +71,7 @@ def main(argv=None) -> None:
     for contrast in args.contrasts:
         lines += contrast_rows(args.h, args.H, contrast, args.layers, options)
     lines += ["", f"Total time {time.perf_counter() - start:.0f} s."]
-    if MPI.COMM_WORLD.rank == 0:
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text("\n".join(lines) + "\n")
-        print(f"wrote {args.out}")
+    write_report(args.out, lines)
 
 
 if __name__ == "__main__":

@@ -37,7 +37,7 @@ import numpy as np
 import fenics_contact  # noqa: F401  (must precede dolfinx / petsc4py)
 from fenics_contact.problem import geometry, models
 from fenics_contact.hybrid.iteration import IterationOptions
-from fenics_contact.io import machine_description
+from fenics_contact.io import machine_description, write_report
 from fenics_contact.fem.mixed import solve_mixed_monolithic
 from fenics_contact.hybrid.mixed import MixedHybridStep, solve_mixed_hybrid
 from fenics_contact.multiscale.mixed import solve_mixed_ms_hybrid
@@ -333,9 +333,7 @@ def main() -> None:
             raise SystemExit(f"unknown table {t!r}")
     lines.append(f"Total wall time {time.perf_counter() - start:.0f} s, CPU time {time.process_time() - cpu:.0f} s, "
                  f"peak RSS {_peak_rss_gb():.2f} GB.")
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text("\n".join(lines) + "\n")
-    print(f"wrote {args.out}")
+    write_report(args.out, lines)
 
 
 if __name__ == "__main__":

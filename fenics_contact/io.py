@@ -35,6 +35,7 @@ __all__ = [
     "machine_description",
     "stress_field",
     "write_fields",
+    "write_report",
     "write_summary",
     "write_vtx",
 ]
@@ -101,6 +102,16 @@ def machine_description() -> str:
         f"Python {platform.python_version()}, OMP_NUM_THREADS={os.environ.get('OMP_NUM_THREADS', 'unset')}, "
         f"MPI ranks {MPI.COMM_WORLD.size}"
     )
+
+
+def write_report(path: str | Path, lines: list[str], comm: MPI.Comm = MPI.COMM_WORLD) -> None:
+    """A benchmark's Markdown results file (its lines), written on rank 0 (parent directories made)."""
+    if comm.rank != 0:
+        return
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text("\n".join(lines) + "\n")
+    print(f"wrote {path}")
 
 
 def write_summary(directory: str | Path, summary: dict, comm: MPI.Comm = MPI.COMM_WORLD) -> None:

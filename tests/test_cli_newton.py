@@ -59,3 +59,24 @@ def test_multiscale_default_alpha_at_contrast_1e6(tmp_path, capsys):
                  "--alpha", "E*h^-1/2", "--no-plots", "--out", str(bad)])
     assert code == 4 and not bad.exists()
     assert "not positive definite" in capsys.readouterr().err
+
+
+def test_fronts_flag_same_solution_fewer_steps(tmp_path):
+    """`--fronts` (the contact Newton's front extrapolation) on the case it was built for, Algorithm 1 on model 3 at
+    contrast 1e6, h = 1/128 (a near-rigid channel on Γ_C: 8 steps plain, 7 with it, README): the same solution
+    (active set, e_u to 1e-10 of the fine solution), no more steps; refused without --accel newton."""
+    runs = {}
+    for flag in ([], ["--fronts"]):
+        out = tmp_path / ("fronts" if flag else "plain")
+        code = main(["run", "--model", "3", "--E-high", "1e6", "--h", "128", "--H", "16", "--reference", "--no-plots",
+                     "--out", str(out), *flag])
+        assert code == 0
+        runs[bool(flag)] = _summary(out)
+    plain, fronts = runs[False], runs[True]
+    assert fronts["fronts"] is True and plain["fronts"] is False
+    assert fronts["transmission_residual"] < 1e-6 and fronts["active_set"] == plain["active_set"]
+    assert abs(fronts["e_u"] - plain["e_u"]) < 1e-10 and fronts["e_u"] < 1e-8
+    assert fronts["interface_newton_steps"] < plain["interface_newton_steps"]
+    code = main(["run", "--h", "16", "--H", "4", "--accel", "anderson", "--fronts", "--no-plots",
+                 "--out", str(tmp_path / "refused")])
+    assert code == 2 and not (tmp_path / "refused").exists()

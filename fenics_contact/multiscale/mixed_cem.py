@@ -1074,10 +1074,14 @@ class _MumpsLU:
         matrix."""
         csr = (upper.indptr.astype(PETSc.IntType, copy=False), upper.indices.astype(PETSc.IntType, copy=False),
                upper.data.astype(PETSc.ScalarType, copy=False))
-        mat = PETSc.Mat().createSBAIJ(upper.shape, 1, csr=csr, comm=PETSc.COMM_SELF)
+        # an AIJ matrix holding the upper triangle only, on the CSR arrays (no copy): PETSc hands MUMPS' Cholesky
+        # the entries from the diagonal on of every row (MatConvertToTriples_seqaij_seqsbaij), i.e. exactly
+        # these (an SBAIJ matrix was built by copying row by row: 20 ms of the 0.17 s at h = 1/128)
+        mat = PETSc.Mat().createAIJWithArrays(upper.shape, csr, comm=PETSc.COMM_SELF)
         mat.setOption(PETSc.Mat.Option.SPD, True)
         mat.assemble()
         chol = cls(mat, cholesky=True)
+        chol._arrays = csr
         if chol.positive:
             return chol
         chol.destroy()
@@ -1295,19 +1299,33 @@ def _cell_system(
                        M[:n_I, :n_I], M[:n_I, n_I:], M[n_I:, n_I:].toarray(), b)
 
 
-def _condense(system: _CellSystem) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+class _CellElimination:
+    """What the back substitution on a coarse cell K needs from its condensation (kept on the rank that
+    condensed K): the LU of M_II, M_IΓ, the AW coefficients of the owned stress functions and M_II⁻¹ b_I."""
+
+    def __init__(self, system: _CellSystem, lu: "_MumpsLU", own: np.ndarray) -> None:
+        self.skel, self.WI, self.gpos = system.skel, system.WI, system.gpos
+        self.n_s, self.n_u, self.M_IG = system.n_s, system.n_u, system.M_IG
+        self.lu, self.own = lu, own
+
+    def destroy(self) -> None:
+        self.lu.destroy()
+
+
+def _condense(system: _CellSystem) -> tuple[np.ndarray, np.ndarray, np.ndarray, _CellElimination]:
     """(skeleton DOFs, Schur complement S_K = M_ΓΓ − M_ΓI M_II⁻¹ M_IΓ, condensed own data b_Γ − M_ΓI M_II⁻¹ b_I,
-    M_II⁻¹ b_I)."""
+    the data of the back substitution: M_II's LU is kept, not factorized again)."""
     n_I, n_G = system.n_I, system.skel.size
     lu = _MumpsLU.from_csr(system.M_II)
     try:
         X = lu.solve(np.hstack([system.M_IG.toarray(), system.b[:n_I]]))
-    finally:
+    except Exception:
         lu.destroy()
+        raise
     S = system.M_GG - system.M_IG.T @ X[:, :n_G]
     S = 0.5 * (S + S.T)
     c = system.b[n_I:] - system.M_IG.T @ X[:, n_G:]
-    return system.skel, S, c, np.ascontiguousarray(X[:, n_G:])
+    return system.skel, S, c, _CellElimination(system, lu, np.ascontiguousarray(X[:, n_G:]))
 
 
 def _skeleton_columns(topo: _Topology, skeleton: tuple, cells: np.ndarray, G: np.ndarray
@@ -1390,44 +1408,42 @@ class _GlobalSkeleton:
         n_I, n_B = inner.size, TG.shape[1] - inner.size
         if n_B == 0:
             return A
-        NB = TG[:, n_I:].toarray()  # the boundary vertex functions on G (a few dozen columns)
-        on_b = np.any(NB != 0.0, axis=1)
-        X = np.zeros((G.size, n_B))  # (Σ_K S_K) N_B on the rows of G
-        for skel, S in blocks:
+        NB = TG[:, n_I:].tocsr()  # the boundary vertex functions on G (a few hundred columns, ≤ 3 rows each)
+        on_b = np.diff(NB.indptr) > 0
+        rows_x, cols_x, vals_x = [], [], []
+        for skel, S in blocks:  # (Σ_K S_K) N_B, from the cells touching the patch boundary
             rows = np.searchsorted(G, skel)
             b = on_b[rows]
             if b.any():
-                X[rows] += S[:, b] @ NB[rows[b]]
-        BB = NB.T @ X
-        top = sp.hstack([A, sp.csr_matrix(X[np.searchsorted(G, inner)])], format="csr")
-        bottom = sp.hstack([sp.csr_matrix((n_B, n_I)), sp.csr_matrix(np.triu(0.5 * (BB + BB.T)))], format="csr")
-        A = sp.vstack([top, bottom], format="csr")
+                Nk = NB[rows[b]]
+                cols = np.unique(Nk.indices)
+                Nk = sp.csr_matrix((Nk.data, np.searchsorted(cols, Nk.indices), Nk.indptr), shape=(Nk.shape[0], cols.size))
+                rows_x.append(np.repeat(rows, cols.size))
+                cols_x.append(np.tile(cols, rows.size))
+                vals_x.append(np.asarray(Nk.T @ S[b]).T.ravel())  # S[:, b] N_k (S symmetric)
+        X = sp.csr_matrix((np.concatenate(vals_x), (np.concatenate(rows_x), np.concatenate(cols_x))),
+                          shape=(G.size, n_B))
+        BB = (NB.T @ X).toarray()
+        A = sp.bmat([[A, X[np.searchsorted(G, inner)]], [None, sp.csr_matrix(np.triu(0.5 * (BB + BB.T)))]], format="csr")
         A.sum_duplicates()
+        A.sort_indices()
         return A
 
 
-def _cell_values(
-    ops: CellOperators, topo: _Topology, dofs: CoarseCellDofs, aux: StageI, skeleton: tuple, skel_aw: np.ndarray,
-    K: int, source: bool, reach: list, values: list, own: np.ndarray,
-) -> dict:
+def _cell_values(elim: _CellElimination, K: int, reach: list, values: list) -> dict:
     """Back substitution on coarse cell K for every patch i reaching it: {i: (AW coefficients on K (|aw_K|, k_i),
-    displacements (6|K|, k_i))}, x_I = M_II⁻¹(b_I δ_{iK} − M_IΓ x_Γ)."""
-    system = _cell_system(ops, topo, dofs, aux, skeleton, skel_aw, K, source)
-    xg = [values[i][1][np.searchsorted(values[i][0], system.skel)] for i in reach]
+    displacements (6|K|, k_i))}, x_I = M_II⁻¹(b_I δ_{iK} − M_IΓ x_Γ) with K's kept LU."""
+    xg = [values[i][1][np.searchsorted(values[i][0], elim.skel)] for i in reach]
     widths = np.array([x.shape[1] for x in xg])
     XG = np.hstack(xg)
-    lu = _MumpsLU.from_csr(system.M_II)
-    try:
-        XI = lu.solve(-np.asarray(system.M_IG @ XG))
-    finally:
-        lu.destroy()
+    XI = elim.lu.solve(-np.asarray(elim.M_IG @ XG))
     start = np.concatenate([[0], np.cumsum(widths)])
     if K in reach:  # K's own right-hand sides
         q = reach.index(K)
-        XI[:, start[q] : start[q + 1]] += own
-    A = np.asarray(system.WI @ XI[: system.n_s])  # AW coefficients on K, all patches in one product
-    A[system.gpos] += XG
-    U = XI[system.n_s : system.n_s + system.n_u]
+        XI[:, start[q] : start[q + 1]] += elim.own
+    A = np.asarray(elim.WI @ XI[: elim.n_s])  # AW coefficients on K, all patches in one product
+    A[elim.gpos] += XG
+    U = XI[elim.n_s : elim.n_s + elim.n_u]
     cols = [slice(start[q], start[q + 1]) for q in range(len(reach))]  # contiguous pieces: sent out of band by MPI
     return {int(i): (np.ascontiguousarray(A[:, c]), np.ascontiguousarray(U[:, c])) for i, c in zip(reach, cols)}
 
@@ -1449,23 +1465,35 @@ def _stage_two_condensed(
     skel_aw = _skeleton_aw(topo, skeleton)
     size = np.array([len(c) for c in dofs.cells], dtype=float)
     patches = [np.sort(np.asarray(grid.patch(i, layers), dtype=np.int64)) for i in range(grid.size)]
-    condensed = _run_shared(size ** 1.5, comm, "mixed CEM Stage II (coarse cells)",
-                            lambda K: _condense(_cell_system(ops, topo, dofs, aux, skeleton, skel_aw, K, source)))
-    own = [c[3] for c in condensed]
-    condensed = [c[:3] for c in condensed]
-    cost = np.array([sum(condensed[j][0].size for j in p) for p in patches], dtype=float)
-    glob = _GlobalSkeleton(condensed)
-    values = _run_shared(cost ** 1.5, comm, "mixed CEM Stage II (patch skeletons)",
-                         lambda i: _skeleton_solve(ops, topo, grid, dofs, skeleton, condensed, i, layers, glob))
-    del glob, condensed
-    reach = [[] for _ in range(grid.size)]
-    for i, p in enumerate(patches):
-        for K in p:
-            reach[int(K)].append(i)
-    parts = _run_shared(size ** 1.5, comm, "mixed CEM Stage II (back substitution)",
-                        lambda K: _cell_values(ops, topo, dofs, aux, skeleton, skel_aw, K, source, reach[K], values,
-                                               own[K]))
-    del values, own
+    kept: dict[int, _CellElimination] = {}  # this rank's coarse cells: condensed here, recovered here (same _share)
+
+    def condense(K: int) -> tuple:
+        skel, S, c, kept[K] = _condense(_cell_system(ops, topo, dofs, aux, skeleton, skel_aw, K, source))
+        return skel, S, c
+
+    def recover(K: int) -> dict:
+        elim = kept.pop(K)
+        try:
+            return _cell_values(elim, K, reach[K], values)
+        finally:
+            elim.destroy()
+
+    try:
+        condensed = _run_shared(size ** 1.5, comm, "mixed CEM Stage II (coarse cells)", condense)
+        cost = np.array([sum(condensed[j][0].size for j in p) for p in patches], dtype=float)
+        glob = _GlobalSkeleton(condensed)
+        values = _run_shared(cost ** 1.5, comm, "mixed CEM Stage II (patch skeletons)",
+                             lambda i: _skeleton_solve(ops, topo, grid, dofs, skeleton, condensed, i, layers, glob))
+        del glob, condensed
+        reach = [[] for _ in range(grid.size)]
+        for i, p in enumerate(patches):
+            for K in p:
+                reach[int(K)].append(i)
+        parts = _run_shared(size ** 1.5, comm, "mixed CEM Stage II (back substitution)", recover)
+    finally:
+        for elim in kept.values():  # left over only after a failure
+            elim.destroy()
+    del values
     n_g = ops.num_gamma_values
     basis, corr = [], []
     for i, p in enumerate(patches):

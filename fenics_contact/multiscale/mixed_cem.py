@@ -92,7 +92,8 @@ inner stress functions, displacements and aux multipliers) are eliminated once
 patch at h = 1/128, H = 1/16, m = 3; symmetric positive definite: MUMPS Cholesky,
 7.5·10⁸ flops against 2.8·10⁹ for the LU of the whole patch system) and the own
 unknowns are recovered coarse cell by coarse cell for all the patches reaching it in
-one multi-right-hand-side solve.  The patch skeleton matrices are not summed cell by
+one multi-right-hand-side solve with the LU kept from the condensation (on the rank that
+made it: both phases share the coarse cells out alike).  The patch skeleton matrices are not summed cell by
 cell: their inner block is a principal submatrix of one global Σ_K S_K
 (``_GlobalSkeleton``; an inner skeleton DOF has all its coarse cells in the patch),
 and only the columns of the patch-boundary vertex functions are summed per cell.  The same

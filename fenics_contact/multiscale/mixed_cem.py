@@ -1300,14 +1300,34 @@ def _cell_system(
                        M[:n_I, :n_I], M[:n_I, n_I:], M[n_I:, n_I:].toarray(), b)
 
 
-class _CellElimination:
-    """What the back substitution on a coarse cell K needs from its condensation (kept on the rank that
-    condensed K): the LU of M_II, M_IΓ, the AW coefficients of the owned stress functions and M_II⁻¹ b_I."""
+#: Bytes of coarse-cell LUs (and what goes with them) a rank keeps from the condensation for the back substitution;
+#: beyond it a cell is assembled and factorized again.  By this count (``_CellElimination.nbytes``, 12 bytes per
+#: factor entry) h = 1/128, H = 1/16 holds 0.79 GB in all (3–4 MB per cell: all kept; the benchmark's peak RSS
+#: rose by 0.08 GB), h = 1/256 about 4× that (a third kept).
+KEEP_FACTORS_BYTES = 1.0e9
 
-    def __init__(self, system: _CellSystem, lu: "_MumpsLU", own: np.ndarray) -> None:
+
+class _CellElimination:
+    """What the back substitution on a coarse cell K needs: the LU of M_II, M_IΓ, the AW coefficients of the
+    owned stress functions, and M_II⁻¹ b_I (``own``, kept from the condensation) or b_I (a new LU)."""
+
+    def __init__(self, system: _CellSystem, lu: "_MumpsLU", own: np.ndarray | None) -> None:
         self.skel, self.WI, self.gpos = system.skel, system.WI, system.gpos
         self.n_s, self.n_u, self.M_IG = system.n_s, system.n_u, system.M_IG
         self.lu, self.own = lu, own
+        self.b_I = system.b[: system.n_I] if own is None else None
+
+    @classmethod
+    def factorized(cls, system: _CellSystem) -> "_CellElimination":
+        return cls(system, _MumpsLU.from_csr(system.M_II), None)
+
+    @property
+    def nbytes(self) -> int:
+        """Memory held: the LU factors (MUMPS' INFOG(9) reals, ×10⁶ when negative) and the arrays."""
+        entries = self.lu.ksp.getPC().getFactorMatrix().getMumpsInfog(9)
+        entries = -entries * 10**6 if entries < 0 else entries
+        arrays = sum(a.nbytes for a in (self.lu._arrays or ())) + (0 if self.own is None else self.own.nbytes)
+        return int(12 * entries + arrays + self.M_IG.data.nbytes * 2 + self.WI.data.nbytes * 2)
 
     def destroy(self) -> None:
         self.lu.destroy()
@@ -1437,10 +1457,13 @@ def _cell_values(elim: _CellElimination, K: int, reach: list, values: list) -> d
     xg = [values[i][1][np.searchsorted(values[i][0], elim.skel)] for i in reach]
     widths = np.array([x.shape[1] for x in xg])
     XG = np.hstack(xg)
-    XI = elim.lu.solve(-np.asarray(elim.M_IG @ XG))
+    rhs = -np.asarray(elim.M_IG @ XG)
     start = np.concatenate([[0], np.cumsum(widths)])
-    if K in reach:  # K's own right-hand sides
-        q = reach.index(K)
+    q = reach.index(K) if K in reach else None  # K's own right-hand sides
+    if q is not None and elim.own is None:
+        rhs[:, start[q] : start[q + 1]] += elim.b_I
+    XI = elim.lu.solve(rhs)
+    if q is not None and elim.own is not None:
         XI[:, start[q] : start[q + 1]] += elim.own
     A = np.asarray(elim.WI @ XI[: elim.n_s])  # AW coefficients on K, all patches in one product
     A[elim.gpos] += XG
@@ -1467,13 +1490,21 @@ def _stage_two_condensed(
     size = np.array([len(c) for c in dofs.cells], dtype=float)
     patches = [np.sort(np.asarray(grid.patch(i, layers), dtype=np.int64)) for i in range(grid.size)]
     kept: dict[int, _CellElimination] = {}  # this rank's coarse cells: condensed here, recovered here (same _share)
+    held = [0]
 
     def condense(K: int) -> tuple:
-        skel, S, c, kept[K] = _condense(_cell_system(ops, topo, dofs, aux, skeleton, skel_aw, K, source))
+        skel, S, c, elim = _condense(_cell_system(ops, topo, dofs, aux, skeleton, skel_aw, K, source))
+        size = elim.nbytes
+        if held[0] + size <= KEEP_FACTORS_BYTES:
+            kept[K], held[0] = elim, held[0] + size
+        else:
+            elim.destroy()
         return skel, S, c
 
     def recover(K: int) -> dict:
-        elim = kept.pop(K)
+        elim = kept.pop(K, None)
+        if elim is None:  # not kept (KEEP_FACTORS_BYTES): assembled and factorized again
+            elim = _CellElimination.factorized(_cell_system(ops, topo, dofs, aux, skeleton, skel_aw, K, source))
         try:
             return _cell_values(elim, K, reach[K], values)
         finally:

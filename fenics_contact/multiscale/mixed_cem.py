@@ -1490,13 +1490,14 @@ def _stage_two_condensed(
     size = np.array([len(c) for c in dofs.cells], dtype=float)
     patches = [np.sort(np.asarray(grid.patch(i, layers), dtype=np.int64)) for i in range(grid.size)]
     kept: dict[int, _CellElimination] = {}  # this rank's coarse cells: condensed here, recovered here (same _share)
-    held = [0]
+    held = 0  # bytes in ``kept``
 
     def condense(K: int) -> tuple:
+        nonlocal held
         skel, S, c, elim = _condense(_cell_system(ops, topo, dofs, aux, skeleton, skel_aw, K, source))
-        size = elim.nbytes
-        if held[0] + size <= KEEP_FACTORS_BYTES:
-            kept[K], held[0] = elim, held[0] + size
+        if held + elim.nbytes <= KEEP_FACTORS_BYTES:
+            kept[K] = elim
+            held += elim.nbytes
         else:
             elim.destroy()
         return skel, S, c

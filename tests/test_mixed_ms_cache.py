@@ -320,6 +320,19 @@ def test_symmetric_factorization_and_its_lu_fallback(caplog):
         assert np.linalg.norm(A @ x - b) <= 1e-10 * np.linalg.norm(b)
 
 
+def test_gram_of_cell_blocks():
+    """``_gram`` (the coarse operators' Σ_c F_cᵀ A_c F_c by batched Cholesky and a symmetric product) equals the plain
+    sum, also when a block is not positive definite (then the general product is taken)."""
+    rng = np.random.default_rng(6)
+    X = rng.standard_normal((5, 24, 24))
+    spd = X @ np.swapaxes(X, 1, 2) + 0.1 * np.eye(24)
+    F = rng.standard_normal((5, 24, 7))
+    for A in (spd, spd - 50.0 * np.eye(24)):
+        ref = sum(F[c].T @ A[c] @ F[c] for c in range(5))
+        assert np.linalg.norm(mm._gram(A, F) - ref) <= 1e-12 * np.linalg.norm(ref)
+    assert np.linalg.eigvalsh(spd - 50.0 * np.eye(24)).min() < 0
+
+
 def test_condensed_stage_two_equals_per_patch_lu(omega1):
     """The substructured Stage II (coarse cells condensed onto the skeleton) solves the same patch systems
     as one sparse LU per patch: bases, Robin and source correctors agree to rounding, also with a

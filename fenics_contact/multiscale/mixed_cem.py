@@ -957,10 +957,14 @@ class CoarseCellDofs:
         keep = (cols >= 0) & (blocks != 0.0)
         return sp.csr_matrix((blocks[keep], (rows[keep], cols[keep])), shape=(a * nc, self.aw[k].size))
 
+    def per_cell(self, k: int, c: np.ndarray) -> np.ndarray:
+        """AW coefficients c (|aw_K|, ...) on K by fine cell: (|K|, w, ...), the columns ops.P_cols of each cell."""
+        slots = self.slots[k]
+        return np.where((slots >= 0).reshape(slots.shape + (1,) * (c.ndim - 1)), c[np.maximum(slots, 0)], 0.0)
+
     def dg(self, ops: CellOperators, k: int, c: np.ndarray) -> np.ndarray:
         """The cell-major DG P3 values (|K|, 30, ...) of AW coefficients c (|aw_K|, ...) on K."""
-        slots = self.slots[k]
-        cc = np.where((slots >= 0).reshape(slots.shape + (1,) * (c.ndim - 1)), c[np.maximum(slots, 0)], 0.0)
+        cc = self.per_cell(k, c)
         return ops.P_blocks[self.cells[k]] @ cc if c.ndim > 1 else np.einsum("cab,cb->ca", ops.P_blocks[self.cells[k]], cc)
 
 
@@ -1308,25 +1312,31 @@ KEEP_FACTORS_BYTES = 1.0e9
 
 
 class _CellElimination:
-    """What the back substitution on a coarse cell K needs: the LU of M_II, M_IΓ, the AW coefficients of the
-    owned stress functions, and M_II⁻¹ b_I (``own``, kept from the condensation) or b_I (a new LU)."""
+    """What the back substitution on a coarse cell K needs: the LU of M_II (kept from the condensation, or a new
+    one), M_IΓ, the AW coefficients of the owned stress functions and M_II⁻¹ b_I (``own``; added after the solve
+    with −M_IΓ x_Γ: with b_I put into that right-hand side instead, Algorithm 4 moved 1e-10 off the per-patch LUs)."""
 
-    def __init__(self, system: _CellSystem, lu: "_MumpsLU", own: np.ndarray | None) -> None:
+    def __init__(self, system: _CellSystem, lu: "_MumpsLU", own: np.ndarray) -> None:
         self.skel, self.WI, self.gpos = system.skel, system.WI, system.gpos
         self.n_s, self.n_u, self.M_IG = system.n_s, system.n_u, system.M_IG
         self.lu, self.own = lu, own
-        self.b_I = system.b[: system.n_I] if own is None else None
 
     @classmethod
     def factorized(cls, system: _CellSystem) -> "_CellElimination":
-        return cls(system, _MumpsLU.from_csr(system.M_II), None)
+        """A new LU of M_II (a cell whose condensation was not kept)."""
+        lu = _MumpsLU.from_csr(system.M_II)
+        try:
+            return cls(system, lu, lu.solve(system.b[: system.n_I]))
+        except Exception:
+            lu.destroy()
+            raise
 
     @property
     def nbytes(self) -> int:
         """Memory held: the LU factors (MUMPS' INFOG(9) reals, ×10⁶ when negative) and the arrays."""
         entries = self.lu.ksp.getPC().getFactorMatrix().getMumpsInfog(9)
         entries = -entries * 10**6 if entries < 0 else entries
-        arrays = sum(a.nbytes for a in (self.lu._arrays or ())) + (0 if self.own is None else self.own.nbytes)
+        arrays = sum(a.nbytes for a in (self.lu._arrays or ())) + self.own.nbytes
         return int(12 * entries + arrays + self.M_IG.data.nbytes * 2 + self.WI.data.nbytes * 2)
 
     def destroy(self) -> None:
@@ -1446,8 +1456,7 @@ class _GlobalSkeleton:
                           shape=(G.size, n_B))
         BB = (NB.T @ X).toarray()
         A = sp.bmat([[A, X[np.searchsorted(G, inner)]], [None, sp.csr_matrix(np.triu(0.5 * (BB + BB.T)))]], format="csr")
-        A.sum_duplicates()
-        A.sort_indices()
+        A.sum_duplicates()  # sorts the indices too: canonical for PETSc
         return A
 
 
@@ -1459,11 +1468,9 @@ def _cell_values(elim: _CellElimination, K: int, reach: list, values: list) -> d
     XG = np.hstack(xg)
     rhs = -np.asarray(elim.M_IG @ XG)
     start = np.concatenate([[0], np.cumsum(widths)])
-    q = reach.index(K) if K in reach else None  # K's own right-hand sides
-    if q is not None and elim.own is None:
-        rhs[:, start[q] : start[q + 1]] += elim.b_I
     XI = elim.lu.solve(rhs)
-    if q is not None and elim.own is not None:
+    if K in reach:  # K's own right-hand sides
+        q = reach.index(K)
         XI[:, start[q] : start[q + 1]] += elim.own
     A = np.asarray(elim.WI @ XI[: elim.n_s])  # AW coefficients on K, all patches in one product
     A[elim.gpos] += XG
@@ -1495,9 +1502,10 @@ def _stage_two_condensed(
     def condense(K: int) -> tuple:
         nonlocal held
         skel, S, c, elim = _condense(_cell_system(ops, topo, dofs, aux, skeleton, skel_aw, K, source))
-        if held + elim.nbytes <= KEEP_FACTORS_BYTES:
+        nbytes = elim.nbytes
+        if held + nbytes <= KEEP_FACTORS_BYTES:
             kept[K] = elim
-            held += elim.nbytes
+            held += nbytes
         else:
             elim.destroy()
         return skel, S, c
@@ -1779,10 +1787,8 @@ def coarse_operators(
         ix = np.ix_(uniq, uniq)
         # per fine cell c of K: its AW coefficients F_c (w × n_f) and P_c (30 × w), so that the Grams are
         # Σ_c F_cᵀ (P_cᵀ Ã_c P_c) F_c: batched cell products and one BLAS product each, no sparse P_K products
-        slots, PB = dofs.slots[K], ops.P_blocks[cK]
-        Fc = F[np.maximum(slots, 0)]  # (|K|, w, n_f)
-        if np.any(slots < 0):
-            Fc[slots < 0] = 0.0
+        PB = ops.P_blocks[cK]
+        Fc = dofs.per_cell(K, F)  # (|K|, w, n_f)
         PBt = np.swapaxes(PB, 1, 2)
         Fcf = Fc.reshape(-1, Fc.shape[2])
         Gt[ix] += _gram(PBt @ (ops.kt(cK) @ PB), Fc)

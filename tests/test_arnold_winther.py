@@ -392,3 +392,25 @@ def test_timing_report():
     sol = solve_mixed_elasticity(space, E=1.0, nu=0.3, f=f, u_D=u)
     print(f"\nAW dofs {space.num_dofs}, u dofs {sol.u.x.array.size}, timings {sol.timings}")
     assert space.num_dofs == 3 * 33**2 + 4 * (3 * 32 * 32 + 2 * 32) + 3 * 2 * 32 * 32
+
+
+def test_prolongation_built_from_cell_blocks_equals_coo():
+    """``_cell_rows_csr`` (the CSR matrix of P built straight from the cell blocks, sorted) equals SciPy's COO
+    construction, with its general path taken when the rows do not cover the matrix once."""
+    import scipy.sparse as sp
+
+    from fenics_contact.fem.arnold_winther import _cell_rows_csr
+
+    rng = np.random.default_rng(3)
+    n, a, b = 5, 4, 3
+    rows = rng.permutation(n * a).reshape(n, a)
+    cols = rng.integers(0, 9, size=(n, b))
+    cols[:, 1] = (cols[:, 0] + 1) % 9
+    cols[:, 2] = (cols[:, 0] + 4) % 9  # distinct columns per cell, in any order
+    blocks = rng.standard_normal((n, a, b))
+    coo = sp.csr_matrix((blocks.ravel(), (np.repeat(rows, b, axis=1).ravel(), np.tile(cols, (1, a)).ravel())),
+                        shape=(n * a, 9))
+    for shape in ((n * a, 9), (n * a + 2, 9)):  # the second: two empty rows, the general path
+        P = _cell_rows_csr(blocks, rows, cols, shape)
+        assert P.has_sorted_indices and P.shape == shape
+        assert np.array_equal(P[: n * a].toarray(), coo.toarray())

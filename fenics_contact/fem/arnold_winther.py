@@ -135,12 +135,22 @@ def _span_coefficients() -> np.ndarray:
 _SPAN = _span_coefficients()
 
 
+def _monomials(xi: np.ndarray) -> np.ndarray:
+    """Monomials of degree ≤ 3 at scaled points ξ (..., 2) -> (..., 10), in ``_MONOMIALS`` order."""
+    x, y = xi[..., 0], xi[..., 1]
+    x2, y2 = x * x, y * y
+    return np.stack([np.ones_like(x), x, y, x2, x * y, y2, x2 * x, x2 * y, x * y2, y2 * y], axis=-1)
+
+
+def _span_of(mono: np.ndarray) -> np.ndarray:
+    """Monomial coefficients (..., 10) -> values (..., 3, 24) of the spanning functions (one 2-D product)."""
+    return (mono.reshape(-1, len(_MONOMIALS)) @ _SPAN.reshape(len(_MONOMIALS), -1)).reshape(
+        mono.shape[:-1] + (3, _NUM_LOCAL))
+
+
 def _eval_span(xi: np.ndarray) -> np.ndarray:
     """Spanning functions at scaled points ξ (..., 2) -> values (..., 3, 24)."""
-    px = xi[..., 0, None] ** np.arange(4)  # (..., 4)
-    py = xi[..., 1, None] ** np.arange(4)
-    mono = px[..., _MONOMIALS[:, 0]] * py[..., _MONOMIALS[:, 1]]  # (..., 10)
-    return (mono @ _SPAN.reshape(len(_MONOMIALS), -1)).reshape(xi.shape[:-1] + (3, _NUM_LOCAL))
+    return _span_of(_monomials(xi))
 
 
 def _edge_frames(start: np.ndarray, end: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -216,21 +226,24 @@ def local_nodal_basis(
     D = np.empty((n, _NUM_LOCAL, _NUM_LOCAL))
     # vertex values
     D[:, 0:9, :] = _eval_span(scaled(vertices)).reshape(n, 9, _NUM_LOCAL)
-    # edge moments
+    # edge moments, taken on the monomials first (10 numbers per moment, not 72 per Gauss point)
     a = np.where(edge_flip, _EDGE_VERTICES[:, 1], _EDGE_VERTICES[:, 0])  # (n, 3)
     b = np.where(edge_flip, _EDGE_VERTICES[:, 0], _EDGE_VERTICES[:, 1])
     rows = np.arange(n)[:, None]
     start, end = vertices[rows, a], vertices[rows, b]  # (n, 3, 2)
     wn, wt = _edge_frames(start, end)
-    values = _eval_span(scaled(_edge_points(start, end)))  # (n, 3, nq, 3, 24)
-    D[:, 9:21, :] = _edge_moments(values, wn, wt).reshape(n, 12, _NUM_LOCAL)
+    q = np.stack([_EDGE_W, _EDGE_W * (2.0 * _EDGE_S - 1.0)])  # (2, nq)
+    moments = _span_of(np.einsum("lq,neqm->nelm", q, _monomials(scaled(_edge_points(start, end)))))
+    D[:, 9:21, :] = np.concatenate(
+        [np.einsum("nej,nelji->neli", wn, moments), np.einsum("nej,nelji->neli", wt, moments)], axis=2
+    ).reshape(n, 12, _NUM_LOCAL)
     # cell averages
-    values = _eval_span(scaled(_map_to_cells(vertices, _CELL_Q)))  # (n, nq, 3, 24)
-    D[:, 21:24, :] = np.einsum("q,nqjk->njk", _CELL_W, values)
+    D[:, 21:24, :] = _span_of(np.einsum("q,nqm->nm", _CELL_W, _monomials(scaled(_map_to_cells(vertices, _CELL_Q)))))
 
     C = np.linalg.solve(D, np.broadcast_to(np.eye(_NUM_LOCAL), D.shape))  # span coeffs
-    values = _eval_span(scaled(_map_to_cells(vertices, np.asarray(points, dtype=np.float64))))
-    return values @ C[:, None, :, :]
+    points = np.asarray(points, dtype=np.float64)
+    values = _eval_span(scaled(_map_to_cells(vertices, points)))  # (n, m, 3, 24)
+    return (values.reshape(n, 3 * points.shape[0], _NUM_LOCAL) @ C).reshape(n, points.shape[0], 3, _NUM_LOCAL)
 
 
 # ---------------------------------------------------------------------------
@@ -256,6 +269,29 @@ def compliance(sigma: ufl.core.expr.Expr, lmbda, mu) -> ufl.core.expr.Expr:
 # ---------------------------------------------------------------------------
 # The space
 # ---------------------------------------------------------------------------
+
+
+def _cell_rows_csr(blocks: np.ndarray, rows: np.ndarray, cols: np.ndarray, shape: tuple[int, int]) -> sp.csr_matrix:
+    """CSR matrix with rows[c, i] holding blocks[c, i, :] at columns cols[c] (each row in one cell), sorted.
+
+    Built straight from the cell blocks (no COO conversion) when the cells' rows cover 0..shape[0]-1 once.
+    """
+    nc, a, b = blocks.shape
+    flat = rows.ravel()
+    if flat.size != shape[0] or not np.array_equal(np.bincount(flat, minlength=shape[0]), np.ones(shape[0], np.int64)):
+        P = sp.csr_matrix((blocks.ravel(), (np.repeat(rows, b, axis=1).ravel(), np.tile(cols, (1, a)).ravel())),
+                          shape=shape)
+        P.sort_indices()
+        return P
+    order = np.argsort(cols, axis=1, kind="stable")
+    scols = np.take_along_axis(cols, order, axis=1)  # (nc, b)
+    sblocks = np.take_along_axis(blocks, order[:, None, :], axis=2)  # (nc, a, b)
+    where = np.empty(shape[0], dtype=np.int64)
+    where[flat] = np.arange(flat.size)  # row -> (cell, i) position
+    cell = where // a
+    data = sblocks.reshape(-1, b)[where].ravel()
+    indices = scols[cell].ravel()
+    return sp.csr_matrix((data, indices, b * np.arange(shape[0] + 1, dtype=np.int64)), shape=shape)
 
 
 def _as_form(form) -> dolfinx.fem.Form:
@@ -358,17 +394,11 @@ class ArnoldWintherSpace:
 
         # per-cell nodal basis at the DG nodes -> DG coefficients
         values = local_nodal_basis(vx[c2v], edge_flip, ref_pts)  # (nc, 10, 3, 24)
-        coeffs = np.einsum("pq,nqjk->npjk", interp, values)
+        coeffs = values if np.array_equal(interp, np.eye(interp.shape[0])) else np.einsum("pq,nqjk->npjk", interp, values)
         dg_dofs = self.dg.dofmap.list[:nc].astype(np.int64)  # (nc, 10) blocks (owned: DG)
         rows = (3 * dg_dofs[:, :, None] + np.arange(3)).reshape(nc, 30)
         self._n_dg = 3 * self.dg.dofmap.index_map.size_local
-        P = sp.csr_matrix(
-            (
-                coeffs.reshape(nc, 30, _NUM_LOCAL).ravel(),
-                (np.repeat(rows, _NUM_LOCAL, axis=1).ravel(), np.tile(l2g, (1, 30)).ravel()),
-            ),
-            shape=(self._n_dg, self.num_dofs_full),
-        )
+        P = _cell_rows_csr(coeffs.reshape(nc, 30, _NUM_LOCAL), rows, l2g, (self._n_dg, self.num_dofs_full))
         # (duplicates cannot occur: each DG row belongs to one cell)
         self._P_full = P
         self._dg_rows = rows

@@ -116,14 +116,20 @@ def coo_matrix(
 def local_rows_to_petsc(comm: MPI.Comm, A: sp.csr_matrix, col_global: np.ndarray, col_sizes: tuple[int, int]) -> PETSc.Mat:
     """AIJ matrix whose owned rows are the rows of A (local), column j of A being global column col_global[j]."""
     A = sp.csr_matrix(A)
-    # copies: sum_duplicates / sort_indices below reorder G's arrays in place, which must not touch A's
-    G = sp.csr_matrix((A.data.copy(), col_global[A.indices], A.indptr.copy()), shape=(A.shape[0], col_sizes[1]))
-    G.sum_duplicates()
-    G.sort_indices()
+    col_global = np.asarray(col_global)
+    if A.shape[1] == col_sizes[1] and np.array_equal(col_global, np.arange(A.shape[1])) and A.has_canonical_format:
+        G = A  # (serial) the columns are the global ones already; createAIJ copies the arrays
+    elif A.has_canonical_format and np.all(np.diff(col_global) > 0):  # no duplicates, order kept
+        G = sp.csr_matrix((A.data, col_global[A.indices], A.indptr), shape=(A.shape[0], col_sizes[1]))
+    else:
+        # copies: sum_duplicates / sort_indices below reorder G's arrays in place, which must not touch A's
+        G = sp.csr_matrix((A.data.copy(), col_global[A.indices], A.indptr.copy()), shape=(A.shape[0], col_sizes[1]))
+        G.sum_duplicates()
+        G.sort_indices()
     nrows = int(comm.allreduce(A.shape[0], op=MPI.SUM)) if comm.size > 1 else A.shape[0]
     M = PETSc.Mat().createAIJ(
         size=((A.shape[0], nrows), col_sizes),
-        csr=(G.indptr.astype(PETSc.IntType), G.indices.astype(PETSc.IntType), G.data),
+        csr=(G.indptr.astype(PETSc.IntType, copy=False), G.indices.astype(PETSc.IntType, copy=False), G.data),
         comm=comm,
     )
     M.assemble()

@@ -111,8 +111,8 @@ def quadratic_form(A: PETSc.Mat, x: PETSc.Vec, work: PETSc.Vec) -> float:
 
 def petsc_to_scipy(A: PETSc.Mat) -> sp.csr_matrix:
     """Copy a sequential PETSc AIJ matrix to SciPy CSR."""
-    indptr, indices, data = A.getValuesCSR()
-    return sp.csr_matrix((data.copy(), indices.copy(), indptr.copy()), shape=A.getSize())
+    indptr, indices, data = A.getValuesCSR()  # fresh arrays (petsc4py copies), owned by the result
+    return sp.csr_matrix((data, indices, indptr), shape=A.getSize())
 
 
 def scipy_to_petsc(A: sp.spmatrix, comm=PETSc.COMM_SELF) -> PETSc.Mat:

@@ -131,7 +131,6 @@ from slepc4py import SLEPc
 
 from fenics_contact import __version__
 from fenics_contact.fem import forms_mixed
-from fenics_contact.fem.arnold_winther import ArnoldWintherSpace
 from fenics_contact.errors import ConvergenceError, InputError
 from fenics_contact.fem.linalg import assemble_scipy, scipy_to_petsc
 from fenics_contact.multiscale.cache import OfflineCache, hash_array
@@ -248,7 +247,17 @@ def _cell_blocks(A: sp.spmatrix, rows: np.ndarray, cols: np.ndarray) -> np.ndarr
     """Diagonal blocks (n, a, b) of a cellwise operator: A[rows[c]][:, cols[c]] (zero blocks allowed)."""
     n, a = rows.shape
     b = cols.shape[1]
-    Ap = sp.csr_matrix(A)[rows.ravel()][:, cols.ravel()].tobsr(blocksize=(a, b))
+    A = sp.csr_matrix(A)
+    if n and A.has_sorted_indices and np.all(np.diff(A.indptr)[rows] == b):
+        # each row holds exactly its cell's columns (a DG form's pattern): read the blocks off the CSR arrays
+        order = np.argsort(cols, axis=1)
+        at = A.indptr[rows][..., None] + np.arange(b)  # (n, a, b)
+        if np.array_equal(A.indices[at], np.broadcast_to(np.take_along_axis(cols, order, axis=1)[:, None, :], at.shape)):
+            if np.all(np.diff(cols, axis=1) > 0):  # the cells' columns in increasing order: no permutation
+                return A.data[at]
+            inverse = np.argsort(order, axis=1)
+            return np.take_along_axis(A.data[at], inverse[:, None, :], axis=2)
+    Ap = A[rows.ravel()][:, cols.ravel()].tobsr(blocksize=(a, b))
     out = np.zeros((n, a, b))
     brow = np.repeat(np.arange(n), np.diff(Ap.indptr))
     if not np.array_equal(brow, Ap.indices):
@@ -291,6 +300,21 @@ def _column_blocks(P: sp.spmatrix, ncell: int, a: int) -> tuple[np.ndarray, np.n
     blocks = np.zeros((ncell, a, cols.shape[1]))
     blocks[cell, row % a, slot] = P.data
     return cols, blocks
+
+
+def _row_blocks(P: sp.spmatrix, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``_column_blocks(P[rows.ravel()], ...)`` read straight from the CSR arrays when every cell's rows hold
+    the same sorted columns (as the AW prolongation's rows do: each DG row lives in one cell); else that."""
+    P = sp.csr_matrix(P)
+    if P.has_sorted_indices:
+        counts = np.diff(P.indptr)[rows]  # (n, a)
+        w = int(counts[0, 0]) if counts.size else 0
+        if counts.size and np.all(counts == w):
+            at = P.indptr[rows][..., None] + np.arange(w)  # (n, a, w)
+            cols = P.indices[at[:, 0]].astype(np.int64)
+            if np.array_equal(P.indices[at], np.broadcast_to(cols[:, None, :], at.shape)):
+                return cols, P.data[at]
+    return _column_blocks(P[rows.ravel()], rows.shape[0], rows.shape[1])
 
 
 # ---------------------------------------------------------------------------------------
@@ -439,11 +463,12 @@ def cell_operators(sub, H: float, weight: str = "lambda+2mu", s_factor: float = 
     Cfull = assemble_scipy(forms_mixed.robin_data_form(g, t, n, ds(Boundary.INTERFACE)))
     C = Cfull[dg_rows.ravel()][:, (2 * blocks[:, None] + np.arange(2)).ravel()].tocsr()
     E = _trace_operator(msh, dg, gamma, coords)
-    P = sub.P
+    # the local spaces start from the full (unconstrained) AW space, also where τn = 0 sides constrain sub.space
+    P = sub.space.full_prolongation
     num_full = 3 * msh.topology.index_map(0).size_local + 4 * msh.topology.index_map(1).size_local + 3 * ncell
-    if P.shape[1] != num_full:  # a constrained space (τn = 0 sides): the local spaces start from the full one
-        P = ArnoldWintherSpace(msh).prolongation
-    P_cols, P_blocks = _column_blocks(P[dg_rows.ravel()], ncell, 30)
+    if P.shape[1] != num_full:
+        raise RuntimeError("the full AW prolongation does not have the raw serial numbering")
+    P_cols, P_blocks = _row_blocks(P, dg_rows)
     if s0 is not None:  # the lifting is a load: (div σ̂, v) = −(f, v) − (div s₀, v), σ = σ̂ + s₀
         G = G - np.einsum("cab,cb->ca", B, s0)
         lift = -np.einsum("cab,cb->ca", K, s0)

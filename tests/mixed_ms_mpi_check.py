@@ -48,6 +48,8 @@ out = {
     "stress_norm2": om.a_norm2(om.fine_stress(r, res.step.g12)),
     "trace": om.response.trace(res.step.g12).tolist(),
     "rel_changes": [float(x) for x in res.history.rel_changes],
+    "distributed": om.distributed,
+    "function_bytes": int(comm.allreduce(sum(f.nbytes for f in om.basis + om.corr if f is not None), op=MPI.MAX)),
 }
 # every rank iterated to the same state
 same = comm.allgather(res.step.g12.copy())

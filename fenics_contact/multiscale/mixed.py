@@ -163,9 +163,31 @@ class MixedMultiscaleHybridStep(MixedHybridStep):
                            self.omega1.m_norm2(self._uref1) + s2.l2_norm2(u2))
 
     def fine_omega1(self) -> tuple[np.ndarray, np.ndarray]:
-        """σ₁ (n_cells, 30) and u₁ (n_cells, 6) of the current iterate, cell-major (``multiscale.mixed_cem``)."""
-        r, w = self.omega1.solve(self.g12)
-        return self.omega1.fine_stress(r, self.g12), self.omega1.fine_displacement(w, self.g12)
+        """σ₁ (n_cells, 30) and u₁ (n_cells, 6) of the current iterate, cell-major (``multiscale.mixed_cem``).
+
+        Kept for the current g₁₂ (collective when the patch functions are distributed over ranks, so that the
+        errors of a rank holding a reference then need no other rank: ``fine_fields``)."""
+        return self._fine("fields", lambda r, w: (self.omega1.fine_stress(r, self.g12),
+                                                  self.omega1.fine_displacement(w, self.g12)))
+
+    def fine_displacement_post(self) -> np.ndarray:
+        """The post-processed fine Ω₁ displacement of the current iterate (kept like ``fine_omega1``)."""
+        return self._fine("post", lambda r, w: self.omega1.fine_displacement_post(r, self.g12))
+
+    def _fine(self, what: str, make):
+        kept = self.__dict__.setdefault("_fine_kept", {})
+        key = self.g12.tobytes()
+        if what not in kept or kept[what][0] != key:
+            kept[what] = (key, make(*self.omega1.solve(self.g12)))
+        return kept[what][1]
+
+    def fine_fields(self, errors: bool) -> None:
+        """Collective over the offline ranks when the patch functions are distributed: form (and keep) the
+        fine Ω₁ fields every rank needs, and those the errors need if any rank holds a reference (``errors``)."""
+        om = self.omega1
+        if om.distributed and om.comm.allreduce(bool(errors), op=MPI.LOR):
+            self.fine_omega1()
+            self.fine_displacement_post()
 
     def errors(self) -> tuple[float, float]:
         """(e_σ, e_u) against the fine monolithic reference over Ω₁ ∪ Ω₂ (METHOD §6)."""
@@ -196,7 +218,7 @@ class MixedMultiscaleHybridStep(MixedHybridStep):
         """e_u with the post-processed fine Ω₁ displacement Σ r_j q_j + N g (``fine_displacement_post``)."""
         if self.reference is None:
             raise InputError("no reference solution was given")
-        u1 = self.omega1.fine_displacement_post(self.omega1.solve(self.g12)[0], self.g12)
+        u1 = self.fine_displacement_post()
         s2 = self.sub[1]
         eu = self.omega1.m_norm2(u1 - self._uref1) + s2.l2_norm2(s2.u - self.reference[1][1])
         return float(np.sqrt(eu / self._ref_norm2[1]))
@@ -356,6 +378,7 @@ def solve_mixed_ms_hybrid(
     if reference is not None:  # not part of the method: outside the timings
         step.set_reference(reference)
     history = iterate(step, options, name=f"mixed CEM hybrid (m={layers}, l={nbasis})", initial=initial_data)
+    step.fine_fields(errors=step.reference is not None)  # (collective when Ω₁'s functions are distributed)
     sigma, u = step.glued()
     co = step.omega1.co
     dofs = {

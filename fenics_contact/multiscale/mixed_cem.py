@@ -164,6 +164,7 @@ __all__ = [
     "basis_decay_profile",
     "cell_operators",
     "coarse_operators",
+    "held_cells",
     "local_stress_space",
     "mixed_offline_key",
     "stage_one",
@@ -934,7 +935,8 @@ def stage_one(
     Under ``comm`` the coarse cells are shared out and every rank gets all results.
     """
     out = _run_shared(np.array([len(c) for c in grid.cells], dtype=float), comm, "mixed CEM Stage I (coarse cells)",
-                      lambda k: stage_one_cell(ops, topo, grid.cells[k], nbasis, min_gap, max_nbasis, eigensolver))
+                      lambda k: stage_one_cell(ops, topo, grid.cells[k], nbasis, min_gap, max_nbasis, eigensolver),
+                      balanced=True)
     return _stage_one_from(out)
 
 
@@ -999,7 +1001,8 @@ class PatchFunctions:
 
     sigma[j]: AW coefficients (|aw_K|, k) on coarse cell K = coarse[j]; u[j]: displacements
     (6|K|, k), cell-major on K's sorted cells; index: the global function indices (aux index for
-    basis functions, data index for correctors).
+    basis functions, data index for correctors).  Under MPI without a cache the pieces stay on the
+    rank that computed them (``held_cells``): sigma[j] and u[j] are None for the other coarse cells.
     """
 
     coarse: np.ndarray
@@ -1009,7 +1012,7 @@ class PatchFunctions:
 
     @property
     def nbytes(self) -> int:
-        return sum(a.nbytes for a in self.sigma) + sum(a.nbytes for a in self.u)
+        return sum(a.nbytes for a in self.sigma if a is not None) + sum(a.nbytes for a in self.u if a is not None)
 
 
 def _patch_system(ops: CellOperators, topo: _Topology, grid: CoarseGrid, aux: StageI, patch: np.ndarray):
@@ -1506,7 +1509,7 @@ def _cell_values(elim: _CellElimination, K: int, reach: list, values: list) -> d
 
 def _stage_two_condensed(
     ops: CellOperators, topo: _Topology, grid: CoarseGrid, dofs: CoarseCellDofs, aux: StageI, layers: int,
-    source: bool, comm: MPI.Comm,
+    source: bool, comm: MPI.Comm, distributed: bool = False,
 ) -> tuple[list[PatchFunctions], list[PatchFunctions]]:
     """Stage II by static condensation (a substructuring of every patch along the coarse skeleton).
 
@@ -1519,7 +1522,7 @@ def _stage_two_condensed(
     """
     skeleton = _skeleton_entities(topo, grid)
     skel_aw = _skeleton_aw(topo, skeleton)
-    size = np.array([len(c) for c in dofs.cells], dtype=float)
+    size = _cell_cost(dofs)
     patches = [np.sort(np.asarray(grid.patch(i, layers), dtype=np.int64)) for i in range(grid.size)]
     kept: dict[int, _CellElimination] = {}  # this rank's coarse cells: condensed here, recovered here (same _share)
     held = 0  # bytes in ``kept``
@@ -1545,17 +1548,23 @@ def _stage_two_condensed(
             elim.destroy()
 
     try:
-        condensed = _run_shared(size ** 1.5, comm, "mixed CEM Stage II (coarse cells)", condense)
+        cell_owner = np.empty(grid.size, dtype=np.int64)  # who condensed K keeps its LU: it back-substitutes K
+        condensed = _run_shared(size, comm, "mixed CEM Stage II (coarse cells)", condense, balanced=True,
+                                owner=cell_owner)
         cost = np.array([sum(condensed[j][0].size for j in p) for p in patches], dtype=float)
         glob = _GlobalSkeleton(condensed)
         values = _run_shared(cost ** 1.5, comm, "mixed CEM Stage II (patch skeletons)",
-                             lambda i: _skeleton_solve(ops, topo, grid, dofs, skeleton, condensed, i, layers, glob))
+                             lambda i: _skeleton_solve(ops, topo, grid, dofs, skeleton, condensed, i, layers, glob),
+                             balanced=True)
         del glob, condensed
         reach = [[] for _ in range(grid.size)]
         for i, p in enumerate(patches):
             for K in p:
                 reach[int(K)].append(i)
-        parts = _run_shared(size ** 1.5, comm, "mixed CEM Stage II (back substitution)", recover)
+        parts = _run_shared(size, comm, "mixed CEM Stage II (back substitution)", recover, gather=not distributed,
+                            items=np.flatnonzero(cell_owner == comm.rank))
+        if distributed and comm.size > 1:  # pieces for the coarse cells this rank recovered (``held_cells``) only
+            parts = [parts.get(K) for K in range(grid.size)]
     finally:
         for elim in kept.values():  # left over only after a failure
             elim.destroy()
@@ -1564,41 +1573,52 @@ def _stage_two_condensed(
     basis, corr = [], []
     for i, p in enumerate(patches):
         li = aux.modes[i].shape[2]
-        pieces = [parts[int(K)].pop(i) for K in p]
-        basis.append(PatchFunctions(p, aux.offsets[i] + np.arange(li), [np.ascontiguousarray(a[:, :li]) for a, _ in pieces],
-                                    [np.ascontiguousarray(u[:, :li]) for _, u in pieces]))
-        if pieces[0][0].shape[1] == li:
-            corr.append(None)
-            continue
+        pieces = [(None, None) if parts[int(K)] is None else parts[int(K)].pop(i) for K in p]
+        if pieces[0][0] is None:  # (distributed) a piece held elsewhere: take the widths from one held here, if any
+            shown = next((q for q in pieces if q[0] is not None), None)
+            width = None if shown is None else shown[0].shape[1]
+        else:
+            width = pieces[0][0].shape[1]
+        cut = lambda x, sl: None if x is None else np.ascontiguousarray(x[:, sl])  # noqa: E731
+        first, rest = slice(0, li), slice(li, None)
+        basis.append(PatchFunctions(p, aux.offsets[i] + np.arange(li), [cut(a, first) for a, _ in pieces],
+                                    [cut(u, first) for _, u in pieces]))
         cK = dofs.cells[i]
         gcols = np.unique(ops.C[_rows(cK, 30)].indices)
         load = _has_load(ops, cK, source)
+        n_corr = gcols.size + int(load)
+        if width is not None and width != li + n_corr:
+            raise RuntimeError(f"patch {i}: {width} back-substituted columns, expected {li} + {n_corr}")
+        if n_corr == 0:
+            corr.append(None)
+            continue
         corr.append(PatchFunctions(p, np.concatenate([gcols, [n_g]]) if load else gcols,
-                                   [np.ascontiguousarray(a[:, li:]) for a, _ in pieces],
-                                   [np.ascontiguousarray(u[:, li:]) for _, u in pieces]))
+                                   [cut(a, rest) for a, _ in pieces], [cut(u, rest) for _, u in pieces]))
     return basis, corr
 
 
 def stage_two(
     ops: CellOperators, topo: _Topology, grid: CoarseGrid, aux: StageI, layers: int, source: bool = True,
-    *, dofs: CoarseCellDofs | None = None, comm: MPI.Comm = MPI.COMM_SELF,
+    *, dofs: CoarseCellDofs | None = None, comm: MPI.Comm = MPI.COMM_SELF, distributed: bool = False,
 ) -> tuple[list[PatchFunctions], list[PatchFunctions]]:
     """Basis functions ψ_j^i (index = aux index) and data correctors (index = data index), per coarse cell.
 
     The data are d = [g; 1]: the γ values g (index 0..n_g−1; Robin correctors Q_i, N_i on the
     patches of the coarse cells touching γ) and, with ``source``, the load (index n_g; the source
     correctors of the coarse cells where f ≠ 0).  ``corr[i]`` is None for a cell with neither.
-    Under ``comm`` the patches are shared out (``_share``) and every rank gets all results.
+    Under ``comm`` the patches are shared out (``_share``) and every rank gets all results; with
+    ``distributed`` each rank keeps only the pieces on its ``held_cells`` (no gather of the functions).
     """
     dofs = dofs or CoarseCellDofs.of(ops, grid)
-    return _stage_two_condensed(ops, topo, grid, dofs, aux, layers, source, comm)
+    return _stage_two_condensed(ops, topo, grid, dofs, aux, layers, source, comm, distributed)
 
 
 def _stage_two_reference(
     ops: CellOperators, topo: _Topology, grid: CoarseGrid, aux: StageI, layers: int, source: bool = True,
-    *, dofs: CoarseCellDofs | None = None, comm: MPI.Comm = MPI.COMM_SELF,
+    *, dofs: CoarseCellDofs | None = None, comm: MPI.Comm = MPI.COMM_SELF, distributed: bool = False,
 ) -> tuple[list[PatchFunctions], list[PatchFunctions]]:
-    """``stage_two`` with one sparse LU of the whole saddle-point system per patch (the reference of the tests)."""
+    """``stage_two`` with one sparse LU of the whole saddle-point system per patch (the reference of the tests;
+    every rank gets every function, ``distributed`` or not)."""
     dofs = dofs or CoarseCellDofs.of(ops, grid)
     cost = np.array([sum(len(grid.cells[j]) for j in grid.patch(i, layers)) for i in range(grid.size)], dtype=float)
     out = _run_shared(cost ** 1.5, comm, "mixed CEM Stage II (patches)",
@@ -1606,12 +1626,38 @@ def _stage_two_reference(
     return [b for b, _ in out], [c for _, c in out]
 
 
-def _run_shared(cost: np.ndarray, comm: MPI.Comm, desc: str, work, *, gather: bool = True) -> list | None:
-    """work(i) for the items i of this rank (``_share``), with progress; every rank gets all results.
+def _cell_cost(dofs: CoarseCellDofs) -> np.ndarray:
+    """The estimated cost of a coarse cell's condensation and back substitution: |K|^1.5."""
+    return np.array([len(c) for c in dofs.cells], dtype=float) ** 1.5
 
-    Collective-safe: an exception on one rank is raised on every rank (after all have stopped).
+
+def held_cells(basis: list[PatchFunctions]) -> np.ndarray:
+    """The coarse cells K whose pieces this rank holds (all, unless ``stage_two(distributed=True)`` under MPI):
+    those where the basis of K's own patch has its piece on K."""
+    return np.array([i for i, f in enumerate(basis) if f.sigma[int(np.searchsorted(f.coarse, i))] is not None],
+                    dtype=np.int64)
+
+
+def _run_shared(cost: np.ndarray, comm: MPI.Comm, desc: str, work, *, gather: bool = True,
+                items: np.ndarray | None = None, balanced: bool = False,
+                owner: np.ndarray | None = None) -> list | dict:
+    """work(i) for the items i of this rank (``_share``, or ``items``), with progress; every rank gets all
+    results (``gather``), or this rank's as a dict {i: result}.
+
+    ``balanced`` (under MPI, without ``items``): the items are handed out in rounds (``_balanced_rounds``)
+    so that a rank that runs slower (a busier core, costs off the estimate) gets less; ``owner`` (n,) is
+    then filled with the rank that computed each item.  Collective-safe: an exception on one rank is raised
+    on every rank (after all have stopped).
     """
-    mine = _share(cost, comm)
+    if balanced and items is None and comm.size > 1:
+        results = _balanced_rounds(cost, comm, desc, work, owner)
+        return gather_dict(results, cost.size, comm) if gather else results
+    mine = _share(cost, comm) if items is None else np.asarray(items, dtype=np.int64)
+    if owner is not None:
+        owner[:] = -1
+        owner[mine] = comm.rank
+        if comm.size > 1:
+            comm.Allreduce(MPI.IN_PLACE, owner, op=MPI.MAX)
     results, error = {}, None
     with Progress(mine.size, desc, comm=comm, logger=log) as bar:
         try:
@@ -1625,7 +1671,75 @@ def _run_shared(cost: np.ndarray, comm: MPI.Comm, desc: str, work, *, gather: bo
         raise error
     if any(failures):
         raise ConvergenceError(f"{desc}: another rank failed ({next(f for f in failures if f)})")
-    return gather_dict(results, cost.size, comm) if gather else None
+    return gather_dict(results, cost.size, comm) if gather else results
+
+
+#: measured relative speeds of the ranks (cost units per second), carried from one shared phase to the next
+_RANK_SPEEDS: dict[tuple[int, int], np.ndarray] = {}
+#: a round hands out this fraction of each rank's share (the first round of a communicator a quarter)
+_ROUND_FRACTION = 0.5
+#: the last round hands out everything once the remaining estimated cost is below this fraction of the total
+_LAST_ROUND = 0.1
+
+
+def _balanced_rounds(cost: np.ndarray, comm: MPI.Comm, desc: str, work, owner: np.ndarray | None) -> dict:
+    """This rank's results {i: work(i)}: the items are dealt out in rounds (longest first, each to the rank that
+    would finish it first at the speeds measured so far); a round takes half of each rank's share (a quarter
+    in the first round, speeds unknown), everything once less than ``_LAST_ROUND`` of the cost is left.
+    Between rounds the ranks exchange what they did and how long it took (one allgather; no one-sided MPI:
+    it needs the target rank to enter MPI, which a rank busy in a local solve does not).  The results do not
+    depend on who computes what (each item is a pure function of its index)."""
+    cost = np.asarray(cost, dtype=float)
+    n = cost.size
+    key = (comm.py2f(), comm.size)
+    speed = _RANK_SPEEDS.get(key)
+    fraction = _ROUND_FRACTION if speed is not None else 0.5 * _ROUND_FRACTION
+    speed = np.ones(comm.size) if speed is None else speed.copy()
+    who = np.full(n, -1, dtype=np.int64)
+    remaining = np.argsort(-cost, kind="stable")
+    total = float(cost.sum()) or 1.0
+    results, error = {}, None
+    with Progress(n, desc, comm=comm, logger=log) as bar:
+        while remaining.size:
+            load = np.zeros(comm.size)
+            dealt = np.empty(remaining.size, dtype=np.int64)
+            for k, i in enumerate(remaining):
+                r = int(np.argmin(load + cost[i] / speed))
+                dealt[k] = r
+                load[r] += cost[i] / speed[r]
+            mine = remaining[dealt == comm.rank]
+            last = float(cost[remaining].sum()) <= _LAST_ROUND * total or remaining.size <= 2 * comm.size
+            if not last and mine.size:
+                upto = np.cumsum(cost[mine]) <= fraction * float(cost[mine].sum())
+                mine = mine[: max(1, int(np.count_nonzero(upto)))]
+            fraction = _ROUND_FRACTION
+            t0 = time.perf_counter()
+            if error is None:
+                try:
+                    for i in mine:
+                        results[int(i)] = work(int(i))
+                        bar.update()
+                except Exception as err:  # noqa: BLE001 -- re-raised below on every rank
+                    error = err
+            elapsed = time.perf_counter() - t0
+            rounds = comm.allgather((mine, elapsed, None if error is None else f"{type(error).__name__}: {error}"))
+            failures = [f for _, _, f in rounds if f]
+            if error is not None:
+                raise error
+            if failures:
+                raise ConvergenceError(f"{desc}: another rank failed ({failures[0]})")
+            for r, (items, took, _) in enumerate(rounds):
+                who[items] = r
+                if items.size and took > 0.0:
+                    speed[r] = float(cost[items].sum()) / took
+                if r != comm.rank:
+                    bar.update(items.size)
+            remaining = remaining[who[remaining] < 0]
+    speed /= speed.max()
+    _RANK_SPEEDS[key] = speed
+    if owner is not None:
+        owner[:] = who
+    return results
 
 
 def _share(cost: np.ndarray, comm: MPI.Comm) -> np.ndarray:
@@ -1772,20 +1886,22 @@ def _reaching(funcs: list, n: int) -> list:
         if f is None:
             continue
         for pos, K in enumerate(f.coarse):
-            out[int(K)].append((f, pos))
+            if f.sigma[pos] is not None:  # (held by another rank otherwise)
+                out[int(K)].append((f, pos))
     return out
 
 
 def coarse_operators(
     ops: CellOperators, grid: CoarseGrid, aux: StageI, basis: list, corr: list, *,
-    dofs: CoarseCellDofs | None = None, comm: MPI.Comm = MPI.COMM_SELF,
+    dofs: CoarseCellDofs | None = None, comm: MPI.Comm = MPI.COMM_SELF, cells: np.ndarray | None = None,
 ) -> CoarseOperators:
     """Accumulate the coarse matrices coarse cell by coarse cell from the patch functions reaching it.
 
     On K the stresses are P_K F (F: their AW coefficients on K), so ΦᵀÃΦ|_K = Fᵀ (P_Kᵀ Ã_K P_K) F etc., formed fine
     cell by fine cell (Σ_c F_cᵀ (P_cᵀ Ã_c P_c) F_c: batched 24 × 24 blocks, their Cholesky factors and one symmetric
     BLAS product, ``_gram``; at h = 1/128 the sparse products with P_K took 30 % longer, the general product 15 %).
-    Under ``comm`` the coarse cells are shared out and the matrices summed.
+    Under ``comm`` the coarse cells are shared out (or this rank takes ``cells``, those whose pieces it holds)
+    and the matrices summed.
     """
     dofs = dofs or CoarseCellDofs.of(ops, grid)
     n_ms, n_g = aux.size, ops.num_gamma_values
@@ -1844,7 +1960,7 @@ def coarse_operators(
             Ephi[:, uniq] += ops.E[:, rows] @ PFf
 
     cost = np.array([sum(f.index.size for f, _ in reach_b[K] + reach_c[K]) for K in range(grid.size)], dtype=float)
-    _run_shared(cost ** 2, comm, "mixed CEM coarse operators", accumulate, gather=False)
+    _run_shared(cost ** 2, comm, "mixed CEM coarse operators", accumulate, gather=False, items=cells)
     co = CoarseOperators(n_ms, aux.size, n_g, Gt, Gk, Bm, BN, Cphi, Ephi, Mu, PiG, Fphi)
     if comm.size > 1:
         for name in _COARSE_ARRAYS:
@@ -2125,6 +2241,9 @@ class MixedMultiscaleOmega1:
         self.cpu_times["assembly"] = time.process_time() - c
         self.cache_status = "disabled"
         self.cache_path: Path | None = None
+        #: the coarse cells whose patch-function pieces this rank holds (None: all).  Under MPI without a cache
+        #: the pieces are not gathered: the coarse operators and the fine fields are formed where they lie.
+        self._held: np.ndarray | None = None
         data = None
         if cache_dir is not None:
             t, c = time.perf_counter(), time.process_time()
@@ -2163,13 +2282,16 @@ class MixedMultiscaleOmega1:
             self.cpu_times["eigen"] = time.process_time() - c
             t, c = time.perf_counter(), time.process_time()
             self.dofs = CoarseCellDofs.of(self.ops, grid)
+            distributed = comm.size > 1 and cache_dir is None  # (the cache file needs every function on rank 0)
             basis, corr = stage_two(self.ops, self.topo, grid, aux, options.layers, options.source_correction,
-                                    dofs=self.dofs, comm=comm)
+                                    dofs=self.dofs, comm=comm, distributed=distributed)
+            if distributed and comm.allreduce(any(a is None for f in basis for a in f.sigma), op=MPI.LOR):
+                self._held = held_cells(basis)
             self.times["basis"] = time.perf_counter() - t
             self.cpu_times["basis"] = time.process_time() - c
             t, c = time.perf_counter(), time.process_time()
             data = OfflineData(aux, basis, corr, coarse_operators(self.ops, grid, aux, basis, corr, dofs=self.dofs,
-                                                                  comm=comm))
+                                                                  comm=comm, cells=self._held))
             self._setup_online(data)
             self.times["coarse"] = time.perf_counter() - t
             self.cpu_times["coarse"] = time.process_time() - c
@@ -2291,24 +2413,41 @@ class MixedMultiscaleOmega1:
             out = x if out is None else out + x
         return out
 
+    @property
+    def distributed(self) -> bool:
+        """Whether the patch functions are spread over the ranks of ``comm`` (each coarse cell's pieces on one):
+        then ``fine_stress`` and the other fine fields are collective over ``comm``."""
+        return self._held is not None
+
+    def _here(self) -> np.ndarray:
+        """The coarse cells whose fine fields this rank forms (``_held``; all without MPI or with a cache)."""
+        return np.arange(self.grid.size) if self._held is None else self._held
+
+    def _summed(self, out: np.ndarray) -> np.ndarray:
+        """A fine field formed on the held coarse cells, completed by the other ranks' (each cell from one rank)."""
+        if self._held is not None:
+            self.comm.Allreduce(MPI.IN_PLACE, out, op=MPI.SUM)
+        return out
+
     def fine_stress(self, r: np.ndarray, g: np.ndarray) -> np.ndarray:
-        """σ₁ = Ψ r + Q g + σ_f, cell-major (n_cells, 30): without the traction lifting ``lifting``."""
+        """σ₁ = Ψ r + Q g + σ_f, cell-major (n_cells, 30): without the traction lifting ``lifting`` (collective
+        over ``comm`` when the patch functions are distributed)."""
         out = np.zeros((self.ops.num_cells, 30))
         d = self.data(g)
-        for K in range(self.grid.size):
+        for K in self._here():
             out[self.dofs.cells[K]] = self.dofs.dg(self.ops, K, self._combine(K, r, d, "sigma"))
-        return out
+        return self._summed(out)
 
     def fine_displacement(self, w: np.ndarray, g: np.ndarray) -> np.ndarray:
         """u₁ = Π w + N g + u_f, cell-major (n_cells, 6)."""
         out = np.zeros((self.ops.num_cells, 6))
         d = self.data(g)
-        for K in range(self.grid.size):
+        for K in self._here():
             cells = self.dofs.cells[K]
             out[cells] = self.aux.modes[K] @ w[self.aux.offsets[K] : self.aux.offsets[K + 1]]
             if self._reach_c[K]:
                 out[cells] += self._combine(K, None, d, "u").reshape(-1, 6)
-        return out
+        return self._summed(out)
 
     def fine_displacement_post(self, r: np.ndarray, g: np.ndarray) -> np.ndarray:
         """Post-processed fine displacement Σ r_j q_j + N g + u_f (cell-major (n_cells, 6)).
@@ -2320,9 +2459,9 @@ class MixedMultiscaleOmega1:
         """
         out = np.zeros((self.ops.num_cells, 6))
         d = self.data(g)
-        for K in range(self.grid.size):
+        for K in self._here():
             out[self.dofs.cells[K]] = self._combine(K, r, d, "u").reshape(-1, 6)
-        return out
+        return self._summed(out)
 
     @property
     def lifting(self) -> np.ndarray | None:

@@ -1,0 +1,40 @@
+"""The balanced sharing of offline items (``mixed_cem._run_shared(balanced=True)``) under ``mpiexec -n 2``.
+
+Rank 1 is made three times slower per item (a sleep); the items are dealt out in rounds at the measured
+speeds, so rank 1 must end with clearly fewer items, every item computed exactly once, every rank getting
+every result, and ``owner`` telling who computed what.  Prints the numbers as JSON (rank 0).
+"""
+
+import json
+import time
+
+import fenics_contact  # noqa: F401
+import numpy as np
+from mpi4py import MPI
+
+from fenics_contact.multiscale import mixed_cem as mm
+
+comm = MPI.COMM_WORLD
+n = 60
+cost = np.linspace(1.0, 3.0, n)  # the estimate; the true time is cost × (1 on rank 0, 3 on rank 1)
+done = []
+
+
+def work(i: int) -> float:
+    done.append(i)
+    time.sleep(0.004 * cost[i] * (3.0 if comm.rank == 1 else 1.0))
+    return float(i) ** 2
+
+
+owner = np.empty(n, dtype=np.int64)
+results = mm._run_shared(cost, comm, "balance check", work, balanced=True, owner=owner)
+counts = comm.allgather(len(done))
+everything = comm.allgather(sorted(done))
+out = {
+    "counts": counts,
+    "once": sorted(i for d in everything for i in d) == list(range(n)),
+    "results": bool(np.array_equal(results, np.arange(n, dtype=float) ** 2)),
+    "owner_matches": bool(all(np.array_equal(np.flatnonzero(owner == r), everything[r]) for r in range(comm.size))),
+}
+if comm.rank == 0:
+    print("RESULT " + json.dumps(out), flush=True)

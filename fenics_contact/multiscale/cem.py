@@ -99,7 +99,7 @@ from fenics_contact.fem.linalg import assemble_scipy, scipy_to_petsc
 from fenics_contact.multiscale.cache import OfflineCache, hash_array
 from fenics_contact.multiscale.coarse import CoarseGrid, coarse_grid, grid_from_cells
 from fenics_contact.multiscale.replica import SerialReplica
-from fenics_contact.multiscale.work import gather_dict, my_items, share
+from fenics_contact.multiscale.work import gather_dict, my_items, run_balanced, share
 from fenics_contact.problem.fields import MaterialFields
 from fenics_contact.problem.tags import Boundary
 from fenics_contact.problem.fields import material_fields
@@ -643,26 +643,38 @@ def local_matrices(ops: FineOperators, grid: CoarseGrid, k: int) -> tuple[np.nda
     return D, (ops.Kc[c][D][:, D] + sp.diags(ops.alpha[D]) @ Gk).tocsr(), ops.Sc[c][D][:, D].tocsr()
 
 
+def _shared(cost: np.ndarray, comm: MPI.Comm, desc: str, work) -> tuple[list, int]:
+    """([work(i) for every item i], how many this rank computed) on every rank: serially in order, under MPI
+    dealt out in rounds at the ranks' measured speeds (``work.run_balanced``; each item computed once) and
+    gathered."""
+    with Progress(cost.size, desc, comm=comm, logger=log) as bar:
+        if comm.size == 1:
+            out = []
+            for i in range(cost.size):
+                out.append(work(i))
+                bar.update()
+            return out, cost.size
+        mine = run_balanced(cost, comm, work, bar=bar, desc=desc)
+    return gather_dict(mine, cost.size, comm), len(mine)
+
+
 def build_auxiliary_space(
     ops: FineOperators, grid: CoarseGrid, options: CEMOptions, *, comm: MPI.Comm = MPI.COMM_SELF
 ) -> AuxiliarySpace:
     """Solve every local spectral problem (shared out over ``comm``) and keep l_k s-normalized eigenfunctions."""
     sizes = np.array([c.size for c in grid.cells], dtype=np.float64)
-    owner = share(sizes**1.5, comm.size)
-    mine = {}
-    with Progress(int(np.count_nonzero(owner == comm.rank)), "CEM local eigenproblems", comm=comm,
-                  logger=log) as bar:
-        for k in my_items(owner, comm):
-            D, A, S = local_matrices(ops, grid, int(k))
-            lam, Phi = local_spectral_problem(
-                A, S, options.nbasis, eigensolver=options.eigensolver, target=options.target, tol=options.eig_tol
-            )
-            if options.threshold is not None:
-                keep = max(1, int(np.count_nonzero(lam <= options.threshold)))
-                lam, Phi = lam[:keep], Phi[:, :keep]
-            mine[int(k)] = (D, lam, Phi)
-            bar.update()
-    parts = gather_dict(mine, owner.size, comm)
+
+    def eigenproblem(k: int) -> tuple:
+        D, A, S = local_matrices(ops, grid, k)
+        lam, Phi = local_spectral_problem(
+            A, S, options.nbasis, eigensolver=options.eigensolver, target=options.target, tol=options.eig_tol
+        )
+        if options.threshold is not None:
+            keep = max(1, int(np.count_nonzero(lam <= options.threshold)))
+            lam, Phi = lam[:keep], Phi[:, :keep]
+        return D, lam, Phi
+
+    parts, _ = _shared(sizes**1.5, comm, "CEM local eigenproblems", eigenproblem)
     dofs = [p[0] for p in parts]
     values = [p[1] for p in parts]
     vectors = [p[2] for p in parts]
@@ -870,20 +882,13 @@ def build_multiscale_space(
     inc = _Incidence(ops, grid)
     patches = [grid.patch(i, options.layers) for i in range(grid.size)]
     inner = [inc.interior_dofs(p) for p in patches]
-    owner = share(np.array([d.size for d in inner], dtype=np.float64) ** 1.5, comm.size)
-    mine = {}
     saddle = global_saddle_matrix(ops, aux)
     try:
-        with Progress(int(np.count_nonzero(owner == comm.rank)), "CEM patch problems", comm=comm,
-                      logger=log) as bar:
-            for i in my_items(owner, comm):
-                mine[int(i)] = _patch_problem(ops, grid, aux, inc, saddle, int(i), patches[i], inner[i],
-                                              source=options.source_correction)
-                bar.update()
+        results, here = _shared(np.array([d.size for d in inner], dtype=np.float64) ** 1.5, comm, "CEM patch problems",
+                          lambda i: _patch_problem(ops, grid, aux, inc, saddle, i, patches[i], inner[i],
+                                                   source=options.source_correction))
     finally:
         saddle.destroy()
-    results = gather_dict(mine, owner.size, comm)
-    del mine
     basis = [r[0] for r in results]
     correction = [r[1] for r in results if r[1] is not None]
     correction_cells = np.array([i for i, r in enumerate(results) if r[1] is not None], dtype=np.int64)
@@ -897,7 +902,7 @@ def build_multiscale_space(
         Nf = ops.lifting.copy() if Nf is None else Nf + ops.lifting
     times["patches"] = time.perf_counter() - t0
     times["total"] = times["eigen"] + times["patches"]
-    times["patches_here"] = int(np.count_nonzero(owner == comm.rank))  # this rank's share
+    times["patches_here"] = here  # this rank's share
     space = MultiscaleSpace(aux, basis, correction, Nf, int(options.layers), ops.size, ops.gamma.size,
                             correction_cells, times)
     log.info(

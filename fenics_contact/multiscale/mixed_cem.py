@@ -135,7 +135,7 @@ from fenics_contact.errors import ConvergenceError, InputError
 from fenics_contact.fem.linalg import assemble_scipy, scipy_to_petsc
 from fenics_contact.multiscale.cache import OfflineCache, hash_array
 from fenics_contact.progress import Progress
-from fenics_contact.multiscale.work import gather_dict
+from fenics_contact.multiscale.work import gather_dict, run_balanced
 from fenics_contact.multiscale.cem import (
     DEFAULT_S_FACTOR,
     CoarseGrid,
@@ -1674,72 +1674,10 @@ def _run_shared(cost: np.ndarray, comm: MPI.Comm, desc: str, work, *, gather: bo
     return gather_dict(results, cost.size, comm) if gather else results
 
 
-#: measured relative speeds of the ranks (cost units per second), carried from one shared phase to the next
-_RANK_SPEEDS: dict[tuple[int, int], np.ndarray] = {}
-#: a round hands out this fraction of each rank's share (the first round of a communicator a quarter)
-_ROUND_FRACTION = 0.5
-#: the last round hands out everything once the remaining estimated cost is below this fraction of the total
-_LAST_ROUND = 0.1
-
-
 def _balanced_rounds(cost: np.ndarray, comm: MPI.Comm, desc: str, work, owner: np.ndarray | None) -> dict:
-    """This rank's results {i: work(i)}: the items are dealt out in rounds (longest first, each to the rank that
-    would finish it first at the speeds measured so far); a round takes half of each rank's share (a quarter
-    in the first round, speeds unknown), everything once less than ``_LAST_ROUND`` of the cost is left.
-    Between rounds the ranks exchange what they did and how long it took (one allgather; no one-sided MPI:
-    it needs the target rank to enter MPI, which a rank busy in a local solve does not).  The results do not
-    depend on who computes what (each item is a pure function of its index)."""
-    cost = np.asarray(cost, dtype=float)
-    n = cost.size
-    key = (comm.py2f(), comm.size)
-    speed = _RANK_SPEEDS.get(key)
-    fraction = _ROUND_FRACTION if speed is not None else 0.5 * _ROUND_FRACTION
-    speed = np.ones(comm.size) if speed is None else speed.copy()
-    who = np.full(n, -1, dtype=np.int64)
-    remaining = np.argsort(-cost, kind="stable")
-    total = float(cost.sum()) or 1.0
-    results, error = {}, None
-    with Progress(n, desc, comm=comm, logger=log) as bar:
-        while remaining.size:
-            load = np.zeros(comm.size)
-            dealt = np.empty(remaining.size, dtype=np.int64)
-            for k, i in enumerate(remaining):
-                r = int(np.argmin(load + cost[i] / speed))
-                dealt[k] = r
-                load[r] += cost[i] / speed[r]
-            mine = remaining[dealt == comm.rank]
-            last = float(cost[remaining].sum()) <= _LAST_ROUND * total or remaining.size <= 2 * comm.size
-            if not last and mine.size:
-                upto = np.cumsum(cost[mine]) <= fraction * float(cost[mine].sum())
-                mine = mine[: max(1, int(np.count_nonzero(upto)))]
-            fraction = _ROUND_FRACTION
-            t0 = time.perf_counter()
-            if error is None:
-                try:
-                    for i in mine:
-                        results[int(i)] = work(int(i))
-                        bar.update()
-                except Exception as err:  # noqa: BLE001 -- re-raised below on every rank
-                    error = err
-            elapsed = time.perf_counter() - t0
-            rounds = comm.allgather((mine, elapsed, None if error is None else f"{type(error).__name__}: {error}"))
-            failures = [f for _, _, f in rounds if f]
-            if error is not None:
-                raise error
-            if failures:
-                raise ConvergenceError(f"{desc}: another rank failed ({failures[0]})")
-            for r, (items, took, _) in enumerate(rounds):
-                who[items] = r
-                if items.size and took > 0.0:
-                    speed[r] = float(cost[items].sum()) / took
-                if r != comm.rank:
-                    bar.update(items.size)
-            remaining = remaining[who[remaining] < 0]
-    speed /= speed.max()
-    _RANK_SPEEDS[key] = speed
-    if owner is not None:
-        owner[:] = who
-    return results
+    """This rank's results {i: work(i)}, the items dealt out in rounds at the measured speeds (``work.run_balanced``)."""
+    with Progress(cost.size, desc, comm=comm, logger=log) as bar:
+        return run_balanced(cost, comm, work, bar=bar, owner=owner, desc=desc)
 
 
 def _share(cost: np.ndarray, comm: MPI.Comm) -> np.ndarray:

@@ -3,6 +3,9 @@
 Every rank holds the same list of items with an estimated cost; ``share``
 assigns each item to one rank (longest first, to the least loaded rank: the
 same answer on every rank, no communication), so no item is computed twice.
+``run_balanced`` deals the items out in rounds instead, at the ranks' measured
+speeds (a rank on a busier core, or whose items cost more than estimated, gets
+less; one allgather per round).
 ``gather_dict`` then gives every rank every result: each rank broadcasts its results
 in one pickle (protocol 5) whose NumPy arrays travel out of band, one ``Bcast`` per
 array straight into the receivers' buffers (no pickling copy of the data, no message
@@ -10,11 +13,14 @@ larger than one array).
 """
 
 import pickle
+import time
 
 import numpy as np
 from mpi4py import MPI
 
-__all__ = ["share", "my_items", "gather_dict"]
+from fenics_contact.errors import ConvergenceError
+
+__all__ = ["share", "my_items", "gather_dict", "run_balanced"]
 
 
 def share(costs: np.ndarray, size: int) -> np.ndarray:
@@ -68,3 +74,72 @@ def gather_dict(results: dict, n: int, comm: MPI.Comm) -> list:
 def _bcast_bytes(comm: MPI.Comm, data: np.ndarray, root: int, chunk: int = 1 << 30) -> None:
     for start in range(0, data.size, chunk):
         comm.Bcast([data[start : start + chunk], MPI.BYTE], root=root)
+
+
+#: measured relative speeds of the ranks (cost units per second), carried from one shared phase to the next
+_RANK_SPEEDS: dict[tuple[int, int], np.ndarray] = {}
+#: a round hands out this fraction of each rank's share (the first round of a communicator a quarter)
+_ROUND_FRACTION = 0.5
+#: the last round hands out everything once the remaining estimated cost is below this fraction of the total
+_LAST_ROUND = 0.1
+
+
+def run_balanced(cost: np.ndarray, comm: MPI.Comm, work, *, bar=None, owner: np.ndarray | None = None,
+                 desc: str = "offline items") -> dict:
+    """This rank's results {i: work(i)}: the items are dealt out in rounds (longest first, each to the rank that
+    would finish it first at the speeds measured so far); a round takes half of each rank's share (a quarter
+    in the first round, speeds unknown), everything once less than ``_LAST_ROUND`` of the cost is left.
+    Between rounds the ranks exchange what they did and how long it took (one allgather; no one-sided MPI:
+    it needs the target rank to enter MPI, which a rank busy in a local solve does not).  The results do not
+    depend on who computes what (each item is a pure function of its index)."""
+    cost = np.asarray(cost, dtype=float)
+    n = cost.size
+    key = (comm.py2f(), comm.size)
+    speed = _RANK_SPEEDS.get(key)
+    fraction = _ROUND_FRACTION if speed is not None else 0.5 * _ROUND_FRACTION
+    speed = np.ones(comm.size) if speed is None else speed.copy()
+    who = np.full(n, -1, dtype=np.int64)
+    remaining = np.argsort(-cost, kind="stable")
+    total = float(cost.sum()) or 1.0
+    results, error = {}, None
+    while remaining.size:
+        load = np.zeros(comm.size)
+        dealt = np.empty(remaining.size, dtype=np.int64)
+        for k, i in enumerate(remaining):
+            r = int(np.argmin(load + cost[i] / speed))
+            dealt[k] = r
+            load[r] += cost[i] / speed[r]
+        mine = remaining[dealt == comm.rank]
+        last = float(cost[remaining].sum()) <= _LAST_ROUND * total or remaining.size <= 2 * comm.size
+        if not last and mine.size:
+            upto = np.cumsum(cost[mine]) <= fraction * float(cost[mine].sum())
+            mine = mine[: max(1, int(np.count_nonzero(upto)))]
+        fraction = _ROUND_FRACTION
+        t0 = time.perf_counter()
+        if error is None:
+            try:
+                for i in mine:
+                    results[int(i)] = work(int(i))
+                    if bar is not None:
+                        bar.update()
+            except Exception as err:  # noqa: BLE001 -- re-raised below on every rank
+                error = err
+        elapsed = time.perf_counter() - t0
+        rounds = comm.allgather((mine, elapsed, None if error is None else f"{type(error).__name__}: {error}"))
+        failures = [f for _, _, f in rounds if f]
+        if error is not None:
+            raise error
+        if failures:
+            raise ConvergenceError(f"{desc}: another rank failed ({failures[0]})")
+        for r, (items, took, _) in enumerate(rounds):
+            who[items] = r
+            if items.size and took > 0.0:
+                speed[r] = float(cost[items].sum()) / took
+            if r != comm.rank and bar is not None:
+                bar.update(items.size)
+        remaining = remaining[who[remaining] < 0]
+    speed /= speed.max()
+    _RANK_SPEEDS[key] = speed
+    if owner is not None:
+        owner[:] = who
+    return results

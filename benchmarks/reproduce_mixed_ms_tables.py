@@ -27,7 +27,6 @@ e_σ with the source correctors (default) per layer, their ratio, and without th
 
 import argparse
 import logging
-import resource
 import sys
 import time
 from pathlib import Path
@@ -60,8 +59,10 @@ INCOMPRESSIBLE = {"5.5": (1.0e-4, 0.35, 0.499), "5.6": (1.0e4, 0.499, 0.35), "5.
 
 
 def _peak_rss_gb() -> float:
-    """Peak resident memory of this process so far (GB; Linux reports ru_maxrss in kB)."""
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024**2
+    """Peak resident memory of this process so far, GB = 10⁹ bytes (before 2026-12-02: GiB labelled GB)."""
+    from fenics_contact.io import peak_rss_bytes
+
+    return peak_rss_bytes() / 1e9
 
 
 def table_53(n: int, layers: list[int], accel: str, lines: list[str], title: str = "5.3",

@@ -10,6 +10,7 @@ import json
 import os
 import platform
 import re
+import resource
 import shutil
 import signal
 import socket
@@ -28,6 +29,7 @@ from fenics_contact.errors import InputError
 from fenics_contact.problem.materials import strain, stress
 
 __all__ = [
+    "peak_rss_bytes",
     "OutputDirectory",
     "cell_function_of",
     "cell_markers",
@@ -87,6 +89,14 @@ def write_vtx(path: str | Path, fn: fem.Function) -> Path:
     with dolfinx.io.VTXWriter(fn.function_space.mesh.comm, str(path), [fn], engine="BP4") as writer:
         writer.write(0.0)
     return path
+
+
+def peak_rss_bytes() -> int:
+    """The high-water mark of this process's resident set, in bytes (Linux reports ``ru_maxrss`` in KiB).
+
+    Benchmarks report it as GB = 10⁹ bytes or MB = 10⁶ bytes (before 2026-12-02 some divided the KiB
+    figure by 10⁶ or 1024 and called it GB or MB: 2.4 % and 4.9 % under the true figure)."""
+    return int(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss) * 1024
 
 
 def machine_description() -> str:

@@ -178,3 +178,15 @@ def test_two_ranks_write_one_directory(tmp_path):
     # (the mixed method under mpiexec: tests/test_mpi_mixed.py writes the serial outputs from 2 ranks)
     np.testing.assert_equal(summary["dofs"]["omega1"] + summary["dofs"]["omega2"] - summary["dofs"]["interface"],
                             2 * 17 * 17)
+
+
+def test_peak_rss_is_in_bytes():
+    """``io.peak_rss_bytes`` (the benchmarks' peak memory) counts bytes: touching 300 MB more than the process
+    ever held raises it by at least that much (a figure left in KiB or MiB would be 10³–10⁶ times too small)."""
+    from fenics_contact.io import peak_rss_bytes
+
+    before = peak_rss_bytes()
+    extra = np.ones(before // 8 + 300_000_000 // 8)  # more than the old peak, so the peak must move
+    after = peak_rss_bytes()
+    assert after >= extra.nbytes - 50_000_000  # the array alone, up to the interpreter's share of the old peak
+    assert after < 10 * (extra.nbytes + before)

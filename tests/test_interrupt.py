@@ -70,3 +70,29 @@ def test_interrupt_while_starting_up(tmp_path):
     assert proc.returncode == 130, err
     assert err.strip().splitlines() == ["interrupted by SIGINT while starting up: nothing was written"], err
     assert not out.exists()
+
+
+def test_interrupt_during_the_imports_is_held_until_they_finish(tmp_path):
+    """A SIGINT that arrives while the command line is being imported does not break into the import (where it
+    could land in a callback of DOLFINx's C++ module initialisation and abort the process): the import runs to
+    its end, then the run stops with exit 130 and the one line.  The signal is sent from inside the import."""
+    out = tmp_path / "run"
+    code = (
+        "import builtins, os, signal, sys, fenics_contact.launch as launch\n"
+        "real = builtins.__import__\n"
+        "def hooked(name, *args, **kwargs):\n"
+        "    if name == 'fenics_contact.cli':\n"
+        "        builtins.__import__ = real\n"
+        "        os.kill(os.getpid(), signal.SIGINT)\n"
+        "    return real(name, *args, **kwargs)\n"
+        "builtins.__import__ = hooked\n"
+        "code = launch.main(sys.argv[1:])\n"
+        "print('imported', 'fenics_contact.cli' in sys.modules, 'dolfinx.fem' in sys.modules)\n"
+        "sys.exit(code)\n"
+    )
+    proc = subprocess.run([sys.executable, "-c", code, "run", "--h", "16", "--H", "4", "--out", str(out)],
+                          capture_output=True, text=True, env=dict(os.environ, OMP_NUM_THREADS="1"), timeout=300)
+    assert proc.returncode == 130, proc.stderr
+    assert proc.stderr.strip().splitlines() == ["interrupted by SIGINT while starting up: nothing was written"]
+    assert proc.stdout.split() == ["imported", "True", "True"]  # the import was not cut short
+    assert not out.exists()

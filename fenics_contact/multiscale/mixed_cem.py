@@ -1507,6 +1507,11 @@ def _cell_values(elim: _CellElimination, K: int, reach: list, values: list) -> d
     return {int(i): (np.ascontiguousarray(A[:, c]), np.ascontiguousarray(U[:, c])) for i, c in zip(reach, cols)}
 
 
+def _columns(x: np.ndarray | None, cols: slice) -> np.ndarray | None:
+    """A contiguous copy of the columns ``cols`` of a patch-function piece (None: held by another rank)."""
+    return None if x is None else np.ascontiguousarray(x[:, cols])
+
+
 def _stage_two_condensed(
     ops: CellOperators, topo: _Topology, grid: CoarseGrid, dofs: CoarseCellDofs, aux: StageI, layers: int,
     source: bool, comm: MPI.Comm, distributed: bool = False,
@@ -1579,10 +1584,9 @@ def _stage_two_condensed(
             width = None if shown is None else shown[0].shape[1]
         else:
             width = pieces[0][0].shape[1]
-        cut = lambda x, sl: None if x is None else np.ascontiguousarray(x[:, sl])  # noqa: E731
         first, rest = slice(0, li), slice(li, None)
-        basis.append(PatchFunctions(p, aux.offsets[i] + np.arange(li), [cut(a, first) for a, _ in pieces],
-                                    [cut(u, first) for _, u in pieces]))
+        basis.append(PatchFunctions(p, aux.offsets[i] + np.arange(li), [_columns(a, first) for a, _ in pieces],
+                                    [_columns(u, first) for _, u in pieces]))
         cK = dofs.cells[i]
         gcols = np.unique(ops.C[_rows(cK, 30)].indices)
         load = _has_load(ops, cK, source)
@@ -1593,7 +1597,7 @@ def _stage_two_condensed(
             corr.append(None)
             continue
         corr.append(PatchFunctions(p, np.concatenate([gcols, [n_g]]) if load else gcols,
-                                   [cut(a, rest) for a, _ in pieces], [cut(u, rest) for _, u in pieces]))
+                                   [_columns(a, rest) for a, _ in pieces], [_columns(u, rest) for _, u in pieces]))
     return basis, corr
 
 

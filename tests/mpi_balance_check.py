@@ -1,4 +1,4 @@
-"""The balanced sharing of offline items (``mixed_cem._run_shared(balanced=True)``) under ``mpiexec -n 2``.
+"""The balanced sharing of offline items (``multiscale.work.run_shared(balanced=True)``) under ``mpiexec -n 2``.
 
 Rank 1 is made three times slower per item (a sleep); the items are dealt out in rounds at the measured
 speeds, so rank 1 must end with clearly fewer items, every item computed exactly once, every rank getting
@@ -12,7 +12,7 @@ import fenics_contact  # noqa: F401
 import numpy as np
 from mpi4py import MPI
 
-from fenics_contact.multiscale import mixed_cem as mm
+from fenics_contact.multiscale.work import run_shared
 
 comm = MPI.COMM_WORLD
 n = 60
@@ -27,7 +27,7 @@ def work(i: int) -> float:
 
 
 owner = np.empty(n, dtype=np.int64)
-results = mm._run_shared(cost, comm, "balance check", work, balanced=True, owner=owner)
+results = run_shared(cost, comm, "balance check", work, balanced=True, owner=owner)
 counts = comm.allgather(len(done))
 everything = comm.allgather(sorted(done))
 out = {

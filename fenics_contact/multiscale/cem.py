@@ -99,14 +99,13 @@ from fenics_contact.fem.linalg import assemble_scipy, scipy_to_petsc
 from fenics_contact.multiscale.cache import OfflineCache, hash_array
 from fenics_contact.multiscale.coarse import CoarseGrid, coarse_grid, grid_from_cells
 from fenics_contact.multiscale.replica import SerialReplica
-from fenics_contact.multiscale.work import gather_dict, my_items, run_balanced, share
+from fenics_contact.multiscale.work import my_items, run_shared, share
 from fenics_contact.problem.fields import MaterialFields
 from fenics_contact.problem.tags import Boundary
 from fenics_contact.problem.fields import material_fields
 from fenics_contact.problem.geometry import ContactMesh
 from fenics_contact.problem.models import TestModel
 from fenics_contact.hybrid.transmission import InterfaceSpace, Part, robin_coefficient, split_mesh
-from fenics_contact.progress import Progress
 
 __all__ = [
     "CEMOptions",
@@ -643,21 +642,6 @@ def local_matrices(ops: FineOperators, grid: CoarseGrid, k: int) -> tuple[np.nda
     return D, (ops.Kc[c][D][:, D] + sp.diags(ops.alpha[D]) @ Gk).tocsr(), ops.Sc[c][D][:, D].tocsr()
 
 
-def _shared(cost: np.ndarray, comm: MPI.Comm, desc: str, work) -> tuple[list, int]:
-    """([work(i) for every item i], how many this rank computed) on every rank: serially in order, under MPI
-    dealt out in rounds at the ranks' measured speeds (``work.run_balanced``; each item computed once) and
-    gathered."""
-    with Progress(cost.size, desc, comm=comm, logger=log) as bar:
-        if comm.size == 1:
-            out = []
-            for i in range(cost.size):
-                out.append(work(i))
-                bar.update()
-            return out, cost.size
-        mine = run_balanced(cost, comm, work, bar=bar, desc=desc)
-    return gather_dict(mine, cost.size, comm), len(mine)
-
-
 def build_auxiliary_space(
     ops: FineOperators, grid: CoarseGrid, options: CEMOptions, *, comm: MPI.Comm = MPI.COMM_SELF
 ) -> AuxiliarySpace:
@@ -674,7 +658,7 @@ def build_auxiliary_space(
             lam, Phi = lam[:keep], Phi[:, :keep]
         return D, lam, Phi
 
-    parts, _ = _shared(sizes**1.5, comm, "CEM local eigenproblems", eigenproblem)
+    parts = run_shared(sizes**1.5, comm, "CEM local eigenproblems", eigenproblem, balanced=True, logger=log)
     dofs = [p[0] for p in parts]
     values = [p[1] for p in parts]
     vectors = [p[2] for p in parts]
@@ -884,9 +868,11 @@ def build_multiscale_space(
     inner = [inc.interior_dofs(p) for p in patches]
     saddle = global_saddle_matrix(ops, aux)
     try:
-        results, here = _shared(np.array([d.size for d in inner], dtype=np.float64) ** 1.5, comm, "CEM patch problems",
-                          lambda i: _patch_problem(ops, grid, aux, inc, saddle, i, patches[i], inner[i],
-                                                   source=options.source_correction))
+        owner = np.empty(grid.size, dtype=np.int64)
+        results = run_shared(np.array([d.size for d in inner], dtype=np.float64) ** 1.5, comm, "CEM patch problems",
+                             lambda i: _patch_problem(ops, grid, aux, inc, saddle, i, patches[i], inner[i],
+                                                      source=options.source_correction),
+                             balanced=True, owner=owner, logger=log)
     finally:
         saddle.destroy()
     basis = [r[0] for r in results]
@@ -902,7 +888,7 @@ def build_multiscale_space(
         Nf = ops.lifting.copy() if Nf is None else Nf + ops.lifting
     times["patches"] = time.perf_counter() - t0
     times["total"] = times["eigen"] + times["patches"]
-    times["patches_here"] = here  # this rank's share
+    times["patches_here"] = int(np.count_nonzero(owner == comm.rank))  # this rank's share
     space = MultiscaleSpace(aux, basis, correction, Nf, int(options.layers), ops.size, ops.gamma.size,
                             correction_cells, times)
     log.info(

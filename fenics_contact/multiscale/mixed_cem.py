@@ -134,8 +134,7 @@ from fenics_contact.fem import forms_mixed
 from fenics_contact.errors import ConvergenceError, InputError
 from fenics_contact.fem.linalg import assemble_scipy, scipy_to_petsc
 from fenics_contact.multiscale.cache import OfflineCache, hash_array
-from fenics_contact.progress import Progress
-from fenics_contact.multiscale.work import gather_dict, run_balanced
+from fenics_contact.multiscale.work import run_shared
 from fenics_contact.multiscale.cem import (
     DEFAULT_S_FACTOR,
     CoarseGrid,
@@ -1529,7 +1528,7 @@ def _stage_two_condensed(
     skel_aw = _skeleton_aw(topo, skeleton)
     size = _cell_cost(dofs)
     patches = [np.sort(np.asarray(grid.patch(i, layers), dtype=np.int64)) for i in range(grid.size)]
-    kept: dict[int, _CellElimination] = {}  # this rank's coarse cells: condensed here, recovered here (same _share)
+    kept: dict[int, _CellElimination] = {}  # this rank's coarse cells: condensed here, recovered here (cell_owner)
     held = 0  # bytes in ``kept``
 
     def condense(K: int) -> tuple:
@@ -1579,11 +1578,8 @@ def _stage_two_condensed(
     for i, p in enumerate(patches):
         li = aux.modes[i].shape[2]
         pieces = [(None, None) if parts[int(K)] is None else parts[int(K)].pop(i) for K in p]
-        if pieces[0][0] is None:  # (distributed) a piece held elsewhere: take the widths from one held here, if any
-            shown = next((q for q in pieces if q[0] is not None), None)
-            width = None if shown is None else shown[0].shape[1]
-        else:
-            width = pieces[0][0].shape[1]
+        held_here = next((a for a, _ in pieces if a is not None), None)  # (distributed: some pieces are elsewhere)
+        width = None if held_here is None else held_here.shape[1]
         first, rest = slice(0, li), slice(li, None)
         basis.append(PatchFunctions(p, aux.offsets[i] + np.arange(li), [_columns(a, first) for a, _ in pieces],
                                     [_columns(u, first) for _, u in pieces]))
@@ -1610,7 +1606,7 @@ def stage_two(
     The data are d = [g; 1]: the γ values g (index 0..n_g−1; Robin correctors Q_i, N_i on the
     patches of the coarse cells touching γ) and, with ``source``, the load (index n_g; the source
     correctors of the coarse cells where f ≠ 0).  ``corr[i]`` is None for a cell with neither.
-    Under ``comm`` the patches are shared out (``_share``) and every rank gets all results; with
+    Under ``comm`` the patches are shared out (``work.run_shared``) and every rank gets all results; with
     ``distributed`` each rank keeps only the pieces on its ``held_cells`` (no gather of the functions).
     """
     dofs = dofs or CoarseCellDofs.of(ops, grid)
@@ -1642,59 +1638,9 @@ def held_cells(basis: list[PatchFunctions]) -> np.ndarray:
                     dtype=np.int64)
 
 
-def _run_shared(cost: np.ndarray, comm: MPI.Comm, desc: str, work, *, gather: bool = True,
-                items: np.ndarray | None = None, balanced: bool = False,
-                owner: np.ndarray | None = None) -> list | dict:
-    """work(i) for the items i of this rank (``_share``, or ``items``), with progress; every rank gets all
-    results (``gather``), or this rank's as a dict {i: result}.
-
-    ``balanced`` (under MPI, without ``items``): the items are handed out in rounds (``_balanced_rounds``)
-    so that a rank that runs slower (a busier core, costs off the estimate) gets less; ``owner`` (n,) is
-    then filled with the rank that computed each item.  Collective-safe: an exception on one rank is raised
-    on every rank (after all have stopped).
-    """
-    if balanced and items is None and comm.size > 1:
-        results = _balanced_rounds(cost, comm, desc, work, owner)
-        return gather_dict(results, cost.size, comm) if gather else results
-    mine = _share(cost, comm) if items is None else np.asarray(items, dtype=np.int64)
-    if owner is not None:
-        owner[:] = -1
-        owner[mine] = comm.rank
-        if comm.size > 1:
-            comm.Allreduce(MPI.IN_PLACE, owner, op=MPI.MAX)
-    results, error = {}, None
-    with Progress(mine.size, desc, comm=comm, logger=log) as bar:
-        try:
-            for i in mine:
-                results[int(i)] = work(int(i))
-                bar.update()
-        except Exception as err:  # noqa: BLE001 -- re-raised below on every rank
-            error = err
-    failures = comm.allgather(None if error is None else f"{type(error).__name__}: {error}")
-    if error is not None:
-        raise error
-    if any(failures):
-        raise ConvergenceError(f"{desc}: another rank failed ({next(f for f in failures if f)})")
-    return gather_dict(results, cost.size, comm) if gather else results
-
-
-def _balanced_rounds(cost: np.ndarray, comm: MPI.Comm, desc: str, work, owner: np.ndarray | None) -> dict:
-    """This rank's results {i: work(i)}, the items dealt out in rounds at the measured speeds (``work.run_balanced``)."""
-    with Progress(cost.size, desc, comm=comm, logger=log) as bar:
-        return run_balanced(cost, comm, work, bar=bar, owner=owner, desc=desc)
-
-
-def _share(cost: np.ndarray, comm: MPI.Comm) -> np.ndarray:
-    """The items this rank computes: greedy by decreasing cost onto the least loaded rank (all ranks agree)."""
-    if comm.size == 1:
-        return np.arange(cost.size)
-    load = np.zeros(comm.size)
-    owner = np.empty(cost.size, dtype=np.int64)
-    for k in np.argsort(-cost, kind="stable"):
-        r = int(np.argmin(load))
-        owner[k] = r
-        load[r] += cost[k]
-    return np.flatnonzero(owner == comm.rank)
+def _run_shared(cost: np.ndarray, comm: MPI.Comm, desc: str, work, **kwargs) -> list | dict:
+    """``work.run_shared`` with this module's logger for the progress lines."""
+    return run_shared(cost, comm, desc, work, logger=log, **kwargs)
 
 
 def _scale_to_cell_sizes(ops: CellOperators, grid: CoarseGrid, H: float) -> None:

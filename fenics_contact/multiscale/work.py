@@ -12,6 +12,7 @@ array straight into the receivers' buffers (no pickling copy of the data, no mes
 larger than one array).
 """
 
+import logging
 import pickle
 import time
 
@@ -19,8 +20,11 @@ import numpy as np
 from mpi4py import MPI
 
 from fenics_contact.errors import ConvergenceError
+from fenics_contact.progress import Progress
 
-__all__ = ["share", "my_items", "gather_dict", "run_balanced"]
+__all__ = ["share", "my_items", "gather_dict", "run_balanced", "run_shared"]
+
+log = logging.getLogger(__name__)
 
 
 def share(costs: np.ndarray, size: int) -> np.ndarray:
@@ -101,7 +105,8 @@ def run_balanced(cost: np.ndarray, comm: MPI.Comm, work, *, bar=None, owner: np.
     who = np.full(n, -1, dtype=np.int64)
     remaining = np.argsort(-cost, kind="stable")
     total = float(cost.sum()) or 1.0
-    results, error = {}, None
+    results: dict = {}
+    error = None
     while remaining.size:
         load = np.zeros(comm.size)
         dealt = np.empty(remaining.size, dtype=np.int64)
@@ -116,14 +121,13 @@ def run_balanced(cost: np.ndarray, comm: MPI.Comm, work, *, bar=None, owner: np.
             mine = mine[: max(1, int(np.count_nonzero(upto)))]
         fraction = _ROUND_FRACTION
         t0 = time.perf_counter()
-        if error is None:
-            try:
-                for i in mine:
-                    results[int(i)] = work(int(i))
-                    if bar is not None:
-                        bar.update()
-            except Exception as err:  # noqa: BLE001 -- re-raised below on every rank
-                error = err
+        try:
+            for i in mine:
+                results[int(i)] = work(int(i))
+                if bar is not None:
+                    bar.update()
+        except Exception as err:  # noqa: BLE001 -- re-raised below on every rank
+            error = err
         elapsed = time.perf_counter() - t0
         rounds = comm.allgather((mine, elapsed, None if error is None else f"{type(error).__name__}: {error}"))
         failures = [f for _, _, f in rounds if f]
@@ -143,3 +147,40 @@ def run_balanced(cost: np.ndarray, comm: MPI.Comm, work, *, bar=None, owner: np.
     if owner is not None:
         owner[:] = who
     return results
+
+
+def run_shared(cost: np.ndarray, comm: MPI.Comm, desc: str, work, *, gather: bool = True,
+               items: np.ndarray | None = None, balanced: bool = False, owner: np.ndarray | None = None,
+               logger: logging.Logger = log) -> list | dict:
+    """work(i) for the items i of this rank (``share``, or ``items``), with progress; every rank gets all
+    results (``gather``), or this rank's as a dict {i: result}.
+
+    ``balanced`` (under MPI, without ``items``): the items are dealt out in rounds (``run_balanced``) so that
+    a rank that runs slower (a busier core, costs off the estimate) gets less.  ``owner`` (n,) is filled with
+    the rank that computed each item.  Collective-safe: an exception on one rank is raised on every rank
+    (after all have stopped).
+    """
+    if balanced and items is None and comm.size > 1:
+        with Progress(cost.size, desc, comm=comm, logger=logger) as bar:
+            results = run_balanced(cost, comm, work, bar=bar, owner=owner, desc=desc)
+        return gather_dict(results, cost.size, comm) if gather else results
+    mine = my_items(share(cost, comm.size), comm) if items is None else np.asarray(items, dtype=np.int64)
+    if owner is not None:
+        owner[:] = -1
+        owner[mine] = comm.rank
+        if comm.size > 1:
+            comm.Allreduce(MPI.IN_PLACE, owner, op=MPI.MAX)
+    results, error = {}, None
+    with Progress(mine.size, desc, comm=comm, logger=logger) as bar:
+        try:
+            for i in mine:
+                results[int(i)] = work(int(i))
+                bar.update()
+        except Exception as err:  # noqa: BLE001 -- re-raised below on every rank
+            error = err
+    failures = comm.allgather(None if error is None else f"{type(error).__name__}: {error}")
+    if error is not None:
+        raise error
+    if any(failures):
+        raise ConvergenceError(f"{desc}: another rank failed ({next(f for f in failures if f)})")
+    return gather_dict(results, cost.size, comm) if gather else results

@@ -58,13 +58,15 @@ def test_two_ranks_without_cache_keep_the_functions_where_computed():
 
 @pytest.mark.skipif(_mpiexec() is None, reason="no mpiexec")
 def test_balanced_sharing_gives_a_slower_rank_less():
-    """The offline items dealt out in rounds at the measured speeds: with rank 1 three times slower per item,
+    """The offline items handed out on request (``work.run_balanced``): with rank 1 three times slower per item,
     rank 1 computes clearly fewer items (a static share by cost would give it half), each item once, and
-    every rank gets every result."""
+    every rank gets every result; with equal items and ranks each computes about half."""
     out = run_result(Path(__file__).with_name("mpi_balance_check.py"), [_mpiexec(), "-n", "2"], timeout=300)
     assert out["once"] and out["results"] and out["owner_matches"]
     assert sum(out["counts"]) == 60
     assert out["counts"][1] < 0.4 * 60, out["counts"]  # at speeds 1 : 3 a quarter would be ideal
+    assert sum(out["equal_counts"]) == 100
+    assert min(out["equal_counts"]) >= 40, out["equal_counts"]  # 50 : 50 ideal; one Iprobe only gave 33 : 67
 
 
 @pytest.mark.skipif(_mpiexec() is None, reason="no mpiexec")

@@ -90,6 +90,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 from slepc4py import SLEPc
 
+import dolfinx.mesh
 from dolfinx import fem, la
 
 from fenics_contact import __version__
@@ -99,7 +100,7 @@ from fenics_contact.fem.linalg import assemble_scipy, scipy_to_petsc
 from fenics_contact.multiscale.cache import OfflineCache, hash_array
 from fenics_contact.multiscale.coarse import CoarseGrid, coarse_grid, grid_from_cells
 from fenics_contact.multiscale.replica import SerialReplica
-from fenics_contact.multiscale.work import my_items, run_shared, share
+from fenics_contact.multiscale.work import run_shared
 from fenics_contact.problem.fields import MaterialFields
 from fenics_contact.problem.tags import Boundary
 from fenics_contact.problem.fields import material_fields
@@ -272,6 +273,12 @@ class FineOperators:
         return self.node_dofs.shape[1]
 
 
+def _over(form: ufl.Form, measure: ufl.Measure) -> ufl.Form:
+    """The one cell integral of ``form`` (written with ``ufl.dx``) over ``measure`` instead."""
+    (integral,) = form.integrals()
+    return integral.integrand() * measure
+
+
 def assemble_fine_operators(
     V: fem.FunctionSpace,
     facet_tags,
@@ -305,13 +312,19 @@ def assemble_fine_operators(
     a = alpha.x.array.copy()
     fine_colour = grid.colors[grid.cell_coarse]
     Kc, Mc, Sc, Gc = [], [], [], []
+    num_cells = msh.topology.index_map(tdim).size_local
+    cells = np.arange(num_cells, dtype=np.int32)
     for c in range(grid.num_colors):
+        # the cell integrals over the cells of colour c only (tagged 0 here: one compiled form for all colours);
+        # the γ facet integral keeps the indicator χ (γ's few facets cost nothing)
+        in_c = dolfinx.mesh.meshtags(msh, tdim, cells, (fine_colour[:num_cells] != c).astype(np.int32))
+        dx_c = ufl.Measure("dx", domain=msh, subdomain_data=in_c)(0)
         chi = fem.Function(Q0, name=f"chi{c}")
         chi.x.array[cell_dof0] = (fine_colour == c).astype(np.float64)
-        Kc.append(assemble_scipy(forms_primal.elastic_form(u, v, chi * fields.lmbda, chi * fields.mu)))
-        Mc.append(assemble_scipy(chi * ufl.inner(u, v) * ufl.dx))
+        Kc.append(assemble_scipy(_over(forms_primal.elastic_form(u, v, fields.lmbda, fields.mu), dx_c)))
+        Mc.append(assemble_scipy(ufl.inner(u, v) * dx_c))
         Gc.append(assemble_scipy(interface_mass_form(u, v, chi, ds)))
-        Sc.append(assemble_scipy(cem_mass_form(u, v, chi * kap)))
+        Sc.append(assemble_scipy(_over(cem_mass_form(u, v, kap), dx_c)))
     K = sum(Kc[1:], Kc[0]).tocsr()
     M = sum(Mc[1:], Mc[0]).tocsr()
     G = sum(Gc[1:], Gc[0]).tocsr()
@@ -959,7 +972,8 @@ def gram_matrices(
     """(ZᵀKZ, ZᵀMZ) for Z = [Ψ, N, N_f] (columns: the dim V_ms bases, the γ DOFs, the source correction).
 
     Summed over coarse cells K of Z_Kᵀ K_K Z_K (K_K the cellwise matrix, Z_K the dense block of the
-    functions covering K); cells shared out over ``comm`` and the sums Allreduced.
+    functions covering K); cells handed out over ``comm`` on request (``work.run_shared``) and the sums
+    Allreduced.
     """
     inc = _Incidence(ops, grid)
     n_ms, ng = space.size, space.n_gamma
@@ -968,9 +982,8 @@ def gram_matrices(
     GK = np.zeros((nz, nz))
     GM = np.zeros((nz, nz))
     sizes = np.array([c.size for c in grid.cells], dtype=np.float64)
-    owner = share(sizes, comm.size)
-    for K in my_items(owner, comm):
-        K = int(K)
+
+    def add_cell(K: int) -> None:
         c = int(grid.colors[K])
         D = inc.dofs(K, free_only=False)
         cover = grid.patch(K, space.layers)
@@ -991,6 +1004,8 @@ def gram_matrices(
         idx = np.ix_(cols, cols)
         GK[idx] += Z.T @ (ops.Kc[c][D][:, D] @ Z)
         GM[idx] += Z.T @ (ops.Mc[c][D][:, D] @ Z)
+
+    run_shared(sizes, comm, "CEM Gram matrices", add_cell, gather=False, balanced=True, logger=log)
     if comm.size > 1:
         for arr in (GK, GM):
             comm.Allreduce(MPI.IN_PLACE, arr, op=MPI.SUM)

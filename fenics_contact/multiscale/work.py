@@ -3,9 +3,9 @@
 Every rank holds the same list of items with an estimated cost; ``share``
 assigns each item to one rank (longest first, to the least loaded rank: the
 same answer on every rank, no communication), so no item is computed twice.
-``run_balanced`` deals the items out in rounds instead, at the ranks' measured
-speeds (a rank on a busier core, or whose items cost more than estimated, gets
-less; one allgather per round).
+``run_balanced`` hands them out one at a time on request instead (rank 0
+answers between its own items), so a rank on a busier core, or whose items
+cost more than estimated, gets less.
 ``gather_dict`` then gives every rank every result: each rank broadcasts its results
 in one pickle (protocol 5) whose NumPy arrays travel out of band, one ``Bcast`` per
 array straight into the receivers' buffers (no pickling copy of the data, no message
@@ -14,7 +14,6 @@ larger than one array).
 
 import logging
 import pickle
-import time
 
 import numpy as np
 from mpi4py import MPI
@@ -80,71 +79,106 @@ def _bcast_bytes(comm: MPI.Comm, data: np.ndarray, root: int, chunk: int = 1 << 
         comm.Bcast([data[start : start + chunk], MPI.BYTE], root=root)
 
 
-#: measured relative speeds of the ranks (cost units per second), carried from one shared phase to the next
-_RANK_SPEEDS: dict[tuple[int, int], np.ndarray] = {}
-#: a round hands out this fraction of each rank's share (the first round of a communicator a quarter)
-_ROUND_FRACTION = 0.5
-#: the last round hands out everything once the remaining estimated cost is below this fraction of the total
-_LAST_ROUND = 0.1
+#: tags of the dispatcher's messages (on a duplicate of the caller's communicator: no clash with other traffic)
+_REQUEST, _ITEM = 71, 72
+#: Iprobe calls before rank 0 decides that no request is waiting
+_PROBES = 3
+#: one duplicate communicator per (communicator, size), made on first use
+_DISPATCH_COMMS: dict[tuple[int, int], MPI.Comm] = {}
+
+
+def _dispatch_comm(comm: MPI.Comm) -> MPI.Comm:
+    key = (comm.py2f(), comm.size)
+    if key not in _DISPATCH_COMMS:
+        _DISPATCH_COMMS[key] = comm.Dup()
+    return _DISPATCH_COMMS[key]
 
 
 def run_balanced(cost: np.ndarray, comm: MPI.Comm, work, *, bar=None, owner: np.ndarray | None = None,
                  desc: str = "offline items") -> dict:
-    """This rank's results {i: work(i)}: the items are dealt out in rounds (longest first, each to the rank that
-    would finish it first at the speeds measured so far); a round takes half of each rank's share (a quarter
-    in the first round, speeds unknown), everything once less than ``_LAST_ROUND`` of the cost is left.
-    Between rounds the ranks exchange what they did and how long it took (one allgather; no one-sided MPI:
-    it needs the target rank to enter MPI, which a rank busy in a local solve does not).  The results do not
-    depend on who computes what (each item is a pure function of its index)."""
+    """This rank's results {i: work(i)}, the items handed out one at a time on request.
+
+    Ranks r > 0 take items from the front of the cost order (largest first): each starts with item r − 1 and
+    asks rank 0 for its next item *before* it computes the one it holds (one request always in flight, so its
+    answer is waiting when the item is done).  Rank 0 computes items from the back (cheapest first) and
+    answers the requests between its own items (point-to-point messages of one integer; no
+    one-sided MPI: with MPICH ch4 a passive-target atomic waits until the target rank enters MPI, which a rank
+    busy in a local solve does not).  A rank that runs slower (a busier core, items costlier than estimated)
+    therefore asks less often and gets less; the ranks finish within about one item of each other (the last
+    items are those where front and back meet).  The results do not depend on who computes what (each item is a pure function of
+    its index).  An error on any rank stops the handing out and is raised on every rank.
+    """
     cost = np.asarray(cost, dtype=float)
     n = cost.size
-    key = (comm.py2f(), comm.size)
-    speed = _RANK_SPEEDS.get(key)
-    fraction = _ROUND_FRACTION if speed is not None else 0.5 * _ROUND_FRACTION
-    speed = np.ones(comm.size) if speed is None else speed.copy()
-    who = np.full(n, -1, dtype=np.int64)
-    remaining = np.argsort(-cost, kind="stable")
-    total = float(cost.sum()) or 1.0
+    order = np.argsort(-cost, kind="stable")
+    dc = _dispatch_comm(comm)
+    size, rank = dc.size, dc.rank
     results: dict = {}
     error = None
-    while remaining.size:
-        load = np.zeros(comm.size)
-        dealt = np.empty(remaining.size, dtype=np.int64)
-        for k, i in enumerate(remaining):
-            r = int(np.argmin(load + cost[i] / speed))
-            dealt[k] = r
-            load[r] += cost[i] / speed[r]
-        mine = remaining[dealt == comm.rank]
-        last = float(cost[remaining].sum()) <= _LAST_ROUND * total or remaining.size <= 2 * comm.size
-        if not last and mine.size:
-            upto = np.cumsum(cost[mine]) <= fraction * float(cost[mine].sum())
-            mine = mine[: max(1, int(np.count_nonzero(upto)))]
-        fraction = _ROUND_FRACTION
-        t0 = time.perf_counter()
+    who = np.full(n, -1, dtype=np.int64)
+
+    def compute(i: int) -> None:
+        nonlocal error
+        if error is not None:
+            return
         try:
-            for i in mine:
-                results[int(i)] = work(int(i))
-                if bar is not None:
-                    bar.update()
+            results[i] = work(i)
         except Exception as err:  # noqa: BLE001 -- re-raised below on every rank
             error = err
-        elapsed = time.perf_counter() - t0
-        rounds = comm.allgather((mine, elapsed, None if error is None else f"{type(error).__name__}: {error}"))
-        failures = [f for _, _, f in rounds if f]
-        if error is not None:
-            raise error
-        if failures:
-            raise ConvergenceError(f"{desc}: another rank failed ({failures[0]})")
-        for r, (items, took, _) in enumerate(rounds):
-            who[items] = r
-            if items.size and took > 0.0:
-                speed[r] = float(cost[items].sum()) / took
-            if r != comm.rank and bar is not None:
-                bar.update(items.size)
-        remaining = remaining[who[remaining] < 0]
-    speed /= speed.max()
-    _RANK_SPEEDS[key] = speed
+        if bar is not None:
+            bar.update()
+
+    if rank == 0:
+        # the other ranks take items from the front of the cost order (largest first), rank 0 from the back (the
+        # cheapest): it answers between its own items, so a request never waits longer than the cheapest item
+        front = min(size - 1, n)
+        who[order[:front]] = np.arange(1, front + 1)
+        back = n - 1
+        finished, failed = 1 + (size - 1 - front), False  # ranks without a first item never ask
+        status = MPI.Status()
+
+        def answer(block: bool) -> None:
+            nonlocal front, finished, failed
+            # Iprobe more than once: after a long computation the first call only lets MPI take in what has
+            # arrived (measured with MPICH ch4:ucx: a request sent long before is seen by the second call)
+            while finished < size and (block or any(dc.Iprobe(source=MPI.ANY_SOURCE, tag=_REQUEST)
+                                                    for _ in range(_PROBES))):
+                report = dc.recv(source=MPI.ANY_SOURCE, tag=_REQUEST, status=status)
+                r = status.Get_source()
+                failed = failed or report is not None
+                if front <= back and not failed and error is None:
+                    i = int(order[front])
+                    front += 1
+                    who[i] = r
+                else:
+                    i = -1
+                    finished += 1
+                dc.send(i, dest=r, tag=_ITEM)
+                if bar is not None and report is None:
+                    bar.update()  # (approximately: one item late) an item of rank r is done
+
+        while True:
+            answer(False)
+            if front > back or failed or error is not None:
+                break
+            i = int(order[back])
+            back -= 1
+            who[i] = 0
+            compute(i)
+        answer(True)
+    elif rank <= n:
+        held = int(order[rank - 1])
+        while held >= 0:
+            dc.send(None if error is None else f"{type(error).__name__}: {error}", dest=0, tag=_REQUEST)
+            compute(held)
+            held = dc.recv(source=0, tag=_ITEM)
+    failures = dc.allgather(None if error is None else f"{type(error).__name__}: {error}")
+    if error is not None:
+        raise error
+    if any(failures):
+        raise ConvergenceError(f"{desc}: another rank failed ({next(f for f in failures if f)})")
     if owner is not None:
+        dc.Bcast(who, root=0)
         owner[:] = who
     return results
 
@@ -155,8 +189,8 @@ def run_shared(cost: np.ndarray, comm: MPI.Comm, desc: str, work, *, gather: boo
     """work(i) for the items i of this rank (``share``, or ``items``), with progress; every rank gets all
     results (``gather``), or this rank's as a dict {i: result}.
 
-    ``balanced`` (under MPI, without ``items``): the items are dealt out in rounds (``run_balanced``) so that
-    a rank that runs slower (a busier core, costs off the estimate) gets less.  ``owner`` (n,) is filled with
+    ``balanced`` (under MPI, without ``items``): the items are handed out on request (``run_balanced``) so
+    that a rank that runs slower (a busier core, costs off the estimate) gets less.  ``owner`` (n,) is filled with
     the rank that computed each item.  Collective-safe: an exception on one rank is raised on every rank
     (after all have stopped).
     """

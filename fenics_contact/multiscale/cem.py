@@ -972,8 +972,8 @@ def gram_matrices(
     """(ZᵀKZ, ZᵀMZ) for Z = [Ψ, N, N_f] (columns: the dim V_ms bases, the γ DOFs, the source correction).
 
     Summed over coarse cells K of Z_Kᵀ K_K Z_K (K_K the cellwise matrix, Z_K the dense block of the
-    functions covering K); cells handed out over ``comm`` on request (``work.run_shared``) and the sums
-    Allreduced.
+    functions covering K); cells shared out over ``comm`` (a static share: a fixed summation order) and the
+    sums Allreduced.
     """
     inc = _Incidence(ops, grid)
     n_ms, ng = space.size, space.n_gamma
@@ -1005,7 +1005,9 @@ def gram_matrices(
         GK[idx] += Z.T @ (ops.Kc[c][D][:, D] @ Z)
         GM[idx] += Z.T @ (ops.Mc[c][D][:, D] @ Z)
 
-    run_shared(sizes, comm, "CEM Gram matrices", add_cell, gather=False, balanced=True, logger=log)
+    # a static share (not handed out on request): the same cells on the same rank in every run, so the sums
+    # and the Allreduce below round the same way every time
+    run_shared(sizes, comm, "CEM Gram matrices", add_cell, gather=False, logger=log)
     if comm.size > 1:
         for arr in (GK, GM):
             comm.Allreduce(MPI.IN_PLACE, arr, op=MPI.SUM)

@@ -101,11 +101,11 @@ def run_balanced(cost: np.ndarray, comm: MPI.Comm, work, *, bar=None, owner: np.
     Ranks r > 0 take items from the front of the cost order (largest first): each starts with item r − 1 and
     asks rank 0 for its next item *before* it computes the one it holds (one request always in flight, so its
     answer is waiting when the item is done).  Rank 0 computes items from the back (cheapest first) and
-    answers the requests between its own items (point-to-point messages of one integer; no
-    one-sided MPI: with MPICH ch4 a passive-target atomic waits until the target rank enters MPI, which a rank
-    busy in a local solve does not).  A rank that runs slower (a busier core, items costlier than estimated)
-    therefore asks less often and gets less; the ranks finish within about one item of each other (the last
-    items are those where front and back meet).  The results do not depend on who computes what (each item is a pure function of
+    answers the requests between its own items (point-to-point messages of one integer; no one-sided MPI:
+    with MPICH ch4 a passive-target atomic waits until the target rank enters MPI, which a rank busy in a
+    local solve does not).  A rank that runs slower (a busier core, items costlier than estimated) therefore
+    asks less often and gets less; the ranks finish within about one item of each other (the items where
+    front and back meet).  The results do not depend on who computes what (each item is a pure function of
     its index).  An error on any rank stops the handing out and is raised on every rank.
     """
     cost = np.asarray(cost, dtype=float)

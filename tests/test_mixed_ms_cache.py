@@ -336,16 +336,22 @@ def test_gram_of_cell_blocks():
 def test_cell_blocks_read_off_the_csr_arrays():
     """``_cell_blocks`` and ``_row_blocks`` read the blocks straight off the CSR arrays when each cell's rows hold
     exactly the cell's columns; the result equals the general sparse extraction for cells whose columns are in
-    increasing order, in another order, and for a matrix whose pattern does not allow the shortcut."""
+    increasing order, in another order, and for a matrix whose pattern does not allow the shortcut; for rows
+    scattered over the matrix, for each cell's rows a whole block of consecutive rows (cells permuted), and for
+    the cells' rows in row order (then the blocks are a view of the matrix data)."""
     rng = np.random.default_rng(7)
     n, a, b = 6, 3, 4
     perm = rng.permutation(n * b)
-    for cols in (np.arange(n * b).reshape(n, b), perm.reshape(n, b)):
-        rows = rng.permutation(n * a).reshape(n, a)
+    layouts = [rng.permutation(n * a).reshape(n, a), a * rng.permutation(n)[:, None] + np.arange(a),
+               np.arange(n * a).reshape(n, a)]
+    for cols, rows in ((c, r) for c in (np.arange(n * b).reshape(n, b), perm.reshape(n, b)) for r in layouts):
         blocks = rng.standard_normal((n, a, b))
         A = sp.csr_matrix((blocks.ravel(), (np.repeat(rows, b, axis=1).ravel(), np.tile(cols, (1, a)).ravel())),
                           shape=(n * a, n * b + 1))
-        assert np.array_equal(mm._cell_blocks(A, rows, cols), blocks)
+        got = mm._cell_blocks(A, rows, cols)
+        assert np.array_equal(got, blocks)
+        if rows is layouts[2] and np.all(np.diff(cols, axis=1) > 0):
+            assert np.shares_memory(got, A.data)  # the cells in row order, columns increasing: no copy
         general = A.tolil()
         general[rows[0, 0], n * b] = 1.0  # a row with a column outside its cell: no shortcut
         general = general.tocsr()

@@ -244,19 +244,34 @@ class MixedCEMOptions:
 # helpers
 # ---------------------------------------------------------------------------------------
 def _cell_blocks(A: sp.spmatrix, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
-    """Diagonal blocks (n, a, b) of a cellwise operator: A[rows[c]][:, cols[c]] (zero blocks allowed)."""
+    """Diagonal blocks (n, a, b) of a cellwise operator: A[rows[c]][:, cols[c]] (zero blocks allowed).
+
+    Where every row of A holds b entries and the cells' rows are the consecutive blocks of A's rows in order
+    (a DG form on a serial mesh), the result is a view of ``A.data`` (no copy).
+    """
     n, a = rows.shape
     b = cols.shape[1]
     A = sp.csr_matrix(A)
     if n and A.has_sorted_indices and np.all(np.diff(A.indptr)[rows] == b):
         # each row holds exactly its cell's columns (a DG form's pattern): read the blocks off the CSR arrays
         order = np.argsort(cols, axis=1)
-        at = A.indptr[rows][..., None] + np.arange(b)  # (n, a, b)
-        if np.array_equal(A.indices[at], np.broadcast_to(np.take_along_axis(cols, order, axis=1)[:, None, :], at.shape)):
+        first = rows[:, 0]
+        if (A.shape[0] % a == 0 and np.all(np.diff(A.indptr) == b) and np.all(first % a == 0)
+                and np.array_equal(rows - first[:, None], np.broadcast_to(np.arange(a), rows.shape))):
+            # the cells' rows are whole blocks of a consecutive rows, each row of b entries: the CSR arrays
+            # are the blocks already (views when the cells come in row order; one gather of blocks otherwise)
+            data, ind = A.data.reshape(-1, a, b), A.indices.reshape(-1, a, b)
+            k = first // a
+            if not (k.size == data.shape[0] and np.array_equal(k, np.arange(k.size))):
+                data, ind = data[k], ind[k]
+        else:
+            at = A.indptr[rows][..., None] + np.arange(b)  # (n, a, b)
+            data, ind = A.data[at], A.indices[at]
+        if np.array_equal(ind, np.broadcast_to(np.take_along_axis(cols, order, axis=1)[:, None, :], ind.shape)):
             if np.all(np.diff(cols, axis=1) > 0):  # the cells' columns in increasing order: no permutation
-                return A.data[at]
+                return data
             inverse = np.argsort(order, axis=1)
-            return np.take_along_axis(A.data[at], inverse[:, None, :], axis=2)
+            return np.take_along_axis(data, inverse[:, None, :], axis=2)
     Ap = A[rows.ravel()][:, cols.ravel()].tobsr(blocksize=(a, b))
     out = np.zeros((n, a, b))
     brow = np.repeat(np.arange(n), np.diff(Ap.indptr))

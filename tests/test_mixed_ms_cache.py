@@ -464,3 +464,49 @@ def test_algorithm4_unchanged_by_the_condensed_stage_two(monkeypatch):
         assert abs(getattr(new, attr) - getattr(old, attr)) <= 1e-10, attr
     for a, b in ((new.sigma, old.sigma), (new.u, old.u)):
         assert np.linalg.norm(a.x.array - b.x.array) <= 1e-10 * np.linalg.norm(b.x.array)
+
+
+def test_skeleton_factorizations_reuse_the_analysis_of_a_pattern():
+    """``_ReusedAnalysis``: a second SPD matrix with the pattern of a kept one is factorized on the kept analysis
+    (no new factorization object) and solves exactly as a fresh factorization does; a matrix of that pattern that
+    is not positive definite falls back to a fresh LU that the caller owns; other patterns are factorized afresh,
+    and at most ``keep`` factorizations are kept."""
+    rng = np.random.default_rng(3)
+    n = 40
+
+    def spd(pattern_seed: int, shift: float = 0.0) -> sp.csr_matrix:
+        r = np.random.default_rng(pattern_seed)
+        mask = sp.random(n, n, density=0.15, random_state=r, format="csr")
+        mask = mask + mask.T + sp.eye(n)
+        vals = mask.copy()
+        vals.data = rng.standard_normal(vals.nnz)
+        vals = vals + vals.T
+        vals = vals + sp.diags(np.abs(vals).sum(axis=1).A1 + 1.0 - shift)  # diagonally dominant unless shifted
+        return sp.triu(vals, format="csr")
+
+    cache = mm._ReusedAnalysis(keep=2)
+    b = rng.standard_normal((n, 3))
+    first = spd(0)
+    lu0, own0 = cache.factor(first)
+    assert not own0 and lu0.positive and len(cache.entries) == 1
+    second = spd(0)  # the same pattern, other values
+    assert np.array_equal(second.indptr, first.indptr) and np.array_equal(second.indices, first.indices)
+    lu1, own1 = cache.factor(second)
+    assert lu1 is lu0 and not own1  # the kept factorization, refactorized
+    fresh = mm._MumpsLU.symmetric(second.copy())
+    x, x_fresh = lu1.solve(b), fresh.solve(b)
+    fresh.destroy()
+    full = (second + sp.triu(second, 1).T).toarray()
+    assert np.abs(full @ x - b).max() < 1e-10 * np.abs(b).max()
+    assert np.array_equal(x, x_fresh)  # the same ordering: the same factors
+    indefinite = spd(0, shift=1e3)  # same pattern, negative pivots
+    lu2, own2 = cache.factor(indefinite)
+    assert own2 and not lu2.positive and not cache.entries  # the kept one was dropped, the LU is the caller's
+    full = (indefinite + sp.triu(indefinite, 1).T).toarray()
+    assert np.abs(full @ lu2.solve(b) - b).max() < 1e-8 * np.abs(b).max() * np.linalg.cond(full)
+    lu2.destroy()
+    for seed in (1, 2, 3):
+        cache.factor(spd(seed))
+    assert len(cache.entries) == 2  # the two most recent patterns
+    cache.release()
+    assert not cache.entries

@@ -1085,9 +1085,7 @@ class _MumpsLU:
         pc.setFactorSetUpSolverType()
         if not cholesky:
             pc.getFactorMatrix().setMumpsIcntl(7, 0)
-        self.ksp.setUp()
-        failed = self.ksp.getConvergedReason() < 0 or pc.getFailedReason() != 0
-        self.positive = cholesky and not failed and pc.getFactorMatrix().getMumpsInfog(12) == 0
+        failed = not self._factorize()
         if failed and not cholesky:
             raise ConvergenceError(
                 f"MUMPS failed to factorize a local mixed CEM problem (reason {pc.getFailedReason()})"
@@ -1135,6 +1133,17 @@ class _MumpsLU:
         log.debug("Stage II skeleton matrix not positive definite: LU instead of Cholesky")
         return cls.from_csr(upper + sp.triu(upper, 1).T)
 
+    def _factorize(self) -> bool:
+        """Set up the factorization of ``mat`` (MUMPS keeps its analysis for a matrix of the same pattern);
+        sets ``positive`` (Cholesky without failure and without a non-positive pivot) and returns whether it
+        succeeded (for Cholesky: ``positive``)."""
+        self.ksp.setUp()
+        pc = self.ksp.getPC()
+        failed = self.ksp.getConvergedReason() < 0 or pc.getFailedReason() != 0
+        cholesky = pc.getType() == "cholesky"
+        self.positive = cholesky and not failed and pc.getFactorMatrix().getMumpsInfog(12) == 0
+        return self.positive if cholesky else not failed
+
     def refactor(self, data: np.ndarray) -> bool:
         """New values ``data`` on the pattern this factorization was made for (a matrix from ``from_csr`` or
         ``symmetric``): the numeric factorization only, on MUMPS' kept ordering and symbolic analysis.  Returns
@@ -1142,12 +1151,7 @@ class _MumpsLU:
         self._arrays[2][:] = data
         self.mat.assemble()
         self.ksp.setOperators(self.mat)
-        self.ksp.setUp()
-        pc = self.ksp.getPC()
-        failed = self.ksp.getConvergedReason() < 0 or pc.getFailedReason() != 0
-        cholesky = pc.getType() == "cholesky"
-        self.positive = cholesky and not failed and pc.getFactorMatrix().getMumpsInfog(12) == 0
-        return not failed and (self.positive or not cholesky)
+        return self._factorize()
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:
         """A⁻¹ rhs for all columns at once (one MatMatSolve)."""
@@ -1452,7 +1456,10 @@ class _ReusedAnalysis:
         self.entries: list[tuple[np.ndarray, np.ndarray, "_MumpsLU"]] = []  # most recent first
 
     def factor(self, upper: sp.csr_matrix) -> tuple["_MumpsLU", bool]:
-        """(factorization of the symmetric matrix with upper triangle ``upper``, whether the caller destroys it)."""
+        """(factorization of the symmetric matrix with upper triangle ``upper``, whether the caller destroys it).
+
+        A kept factorization takes over ``upper``'s arrays (its later values are written into them): the
+        caller must not use ``upper`` afterwards (``_GlobalSkeleton.patch_matrix`` makes a new one per patch)."""
         for k, (indptr, indices, lu) in enumerate(self.entries):
             if np.array_equal(indptr, upper.indptr) and np.array_equal(indices, upper.indices):
                 self.entries.pop(k)
@@ -1461,7 +1468,6 @@ class _ReusedAnalysis:
                     return lu, False
                 lu.destroy()  # a pivot that is not positive: factorize afresh (LU) below
                 break
-        upper = upper.copy()  # the kept factorization reads its values from these arrays
         lu = _MumpsLU.symmetric(upper)
         if not lu.positive:
             return lu, True

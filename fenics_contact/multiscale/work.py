@@ -94,6 +94,19 @@ def _dispatch_comm(comm: MPI.Comm) -> MPI.Comm:
     return _DISPATCH_COMMS[key]
 
 
+def _describe(error: Exception | None) -> str | None:
+    return None if error is None else f"{type(error).__name__}: {error}"
+
+
+def _raise_failures(comm: MPI.Comm, error: Exception | None, desc: str) -> None:
+    """Collective: re-raise this rank's error, or a ConvergenceError naming another rank's, on every rank."""
+    failures = comm.allgather(_describe(error))
+    if error is not None:
+        raise error
+    if any(failures):
+        raise ConvergenceError(f"{desc}: another rank failed ({next(f for f in failures if f)})")
+
+
 def run_balanced(cost: np.ndarray, comm: MPI.Comm, work, *, bar=None, owner: np.ndarray | None = None,
                  desc: str = "offline items") -> dict:
     """This rank's results {i: work(i)}, the items handed out one at a time on request.
@@ -169,14 +182,10 @@ def run_balanced(cost: np.ndarray, comm: MPI.Comm, work, *, bar=None, owner: np.
     elif rank <= n:
         held = int(order[rank - 1])
         while held >= 0:
-            dc.send(None if error is None else f"{type(error).__name__}: {error}", dest=0, tag=_REQUEST)
+            dc.send(_describe(error), dest=0, tag=_REQUEST)
             compute(held)
             held = dc.recv(source=0, tag=_ITEM)
-    failures = dc.allgather(None if error is None else f"{type(error).__name__}: {error}")
-    if error is not None:
-        raise error
-    if any(failures):
-        raise ConvergenceError(f"{desc}: another rank failed ({next(f for f in failures if f)})")
+    _raise_failures(dc, error, desc)
     if owner is not None:
         dc.Bcast(who, root=0)
         owner[:] = who
@@ -212,9 +221,5 @@ def run_shared(cost: np.ndarray, comm: MPI.Comm, desc: str, work, *, gather: boo
                 bar.update()
         except Exception as err:  # noqa: BLE001 -- re-raised below on every rank
             error = err
-    failures = comm.allgather(None if error is None else f"{type(error).__name__}: {error}")
-    if error is not None:
-        raise error
-    if any(failures):
-        raise ConvergenceError(f"{desc}: another rank failed ({next(f for f in failures if f)})")
+    _raise_failures(comm, error, desc)
     return gather_dict(results, cost.size, comm) if gather else results

@@ -115,8 +115,14 @@ def monolithic_steps(method: int, cm, number: int, E_high: float) -> str:
         return f"error: {type(err).__name__}"
 
 
+def _main_kind() -> str:
+    """The contact Newton of the main count: 'local' (the default front windows), 'extrapolation' or 'plain'."""
+    return "extrapolation" if NEWTON.fronts else ("local" if NEWTON.front_window else "plain")
+
+
 def other_steps(step, hist) -> str:
-    """Steps the solve takes with the other contact Newton (``fronts`` flipped): the same condensed problem, its
+    """Steps the solve takes with the plain contact Newton (no front windows, no extrapolation), or with the
+    default local front resolution when the main count is the plain one: the same condensed problem, its
     contact Newton steps + the corrections on F(g) that followed; '=' when it ends on the same active set and s
     to 1e-10 (then the corrections are the same)."""
     from fenics_contact.hybrid.newton import contact_newton
@@ -131,11 +137,16 @@ def other_steps(step, hist) -> str:
         name = f"{type(step).__name__}_{len(s_load)}_{abs(hash(s_load.tobytes())) % 10**6}.npz"
         np.savez(DUMP / name, s_load=s_load, M=cond.M, D=cond.D,
                  points=step.interface_problem(NEWTON).omega2.contact_points())
-    chains = cond.chains if NEWTON.fronts else None
-    s_d, _, _ = contact_newton(s_load, cond.M, cond.D, max_steps=NEWTON.max_steps, chains=chains)
+    kind = _main_kind()
+    window = 0 if NEWTON.fronts else NEWTON.front_window
+    s_d, _, _ = contact_newton(s_load, cond.M, cond.D, max_steps=NEWTON.max_steps,
+                               chains=None if kind == "plain" else cond.chains, window=window)
     try:
-        s_o, _, h_o = contact_newton(s_load, cond.M, cond.D, max_steps=NEWTON.max_steps,
-                                     chains=None if NEWTON.fronts else cond.chains)
+        if kind == "plain":
+            s_o, _, h_o = contact_newton(s_load, cond.M, cond.D, max_steps=NEWTON.max_steps, chains=cond.chains,
+                                         window=InterfaceNewtonOptions().front_window)
+        else:
+            s_o, _, h_o = contact_newton(s_load, cond.M, cond.D, max_steps=NEWTON.max_steps)
     except FenicsContactError as err:
         return f"error: {type(err).__name__}"
     same = np.array_equal(s_o > 0, s_d > 0) and np.abs(s_o - s_d).max() <= 1e-10 * np.abs(s_d).max()
@@ -147,8 +158,11 @@ def part_steps(lines, h_primal, h_mixed, factors, big_default_only, methods, h_m
     lines += [
         "## Newton steps to a transmission residual of 1e-6 (H = 1/16)",
         "",
-        f"Cell: Newton steps (contact Newton + corrections) with the {'front-extrapolating' if NEWTON.fronts else 'plain'} "
-        f"contact Newton (InterfaceNewtonOptions(fronts={NEWTON.fronts})), [the same with fronts={not NEWTON.fronts} on "
+        f"Cell: Newton steps (contact Newton + corrections) with the {_main_kind()} contact Newton "
+        f"(InterfaceNewtonOptions(fronts={NEWTON.fronts}, front_window={NEWTON.front_window})), "
+        "{the semismooth iterations of its local front problems, each a dense solve of at most the largest window "
+        "(/ that size)}, "
+        f"[the same with the {'default local' if _main_kind() == 'plain' else 'plain'} contact Newton on "
         "the same condensed problem; '=' marks that it ends on the same active set and s to 1e-10], and the final "
         "transmission residual; "
         "α = c·E·h^-1/2 (Algorithm 1), c·Emin·h^-1/2 (Algorithm 3), β = c·√h (Algorithms 2, 4); '—' not run.",
@@ -175,7 +189,10 @@ def part_steps(lines, h_primal, h_mixed, factors, big_default_only, methods, h_m
                         worst = max(worst, hist.newton_steps)
                         mark = "" if hist.converged else " (not conv.)"
                         other = other_steps(step, hist)
-                        cells.append(f"{hist.newton_steps} [{other}] ({hist.transmission_residual:.0e}){mark}")
+                        ch = hist.contact_newton
+                        local = "" if ch is None or not any(w for w, _, _ in ch.local) else \
+                            f" {{{ch.local_iterations}/{max(m for _, _, m in ch.local)}}}"
+                        cells.append(f"{hist.newton_steps}{local} [{other}] ({hist.transmission_residual:.0e}){mark}")
                         del step
                     except FenicsContactError as err:
                         cells.append(f"error: {type(err).__name__}")
@@ -323,20 +340,24 @@ def part_fronts(lines, sizes, E_high: float) -> None:
         f"## Contact Newton on model 3, E_high {E_high:g}: active-set fronts and alternatives (Algorithm 1, c = 1)",
         "",
         "Same condensed problem s = s_L − M D s⁺ on Γ_C for every column (the fixed point does not change: "
-        "'same' = all variants end on the plain Newton's active set and its s to 1e-10). fronts "
-        "(InterfaceNewtonOptions(fronts=True), not the default): the plain Newton whose next set is, where a front of the active set moved "
+        "'same' = all variants end on the plain Newton's active set and its s to 1e-10). local (the default, "
+        "InterfaceNewtonOptions(front_window=8)): the next set takes, around every front of the semismooth step's set, "
+        "the solution of the contact equations on the 8 Γ_C unknowns on either side of it with the forces elsewhere "
+        "held (`hybrid.newton.LocalFronts`; in braces the semismooth iterations of those local problems / the largest "
+        "window). fronts "
+        "(InterfaceNewtonOptions(fronts=True)): the plain Newton whose next set is, where a front of the active set moved "
         "the same way twice, the secant prediction of that front (`hybrid.newton.FrontExtrapolation`; every set "
         "solved is a step, predicted or not; in brackets the steps whose set was a prediction). "
-        "Plain (the default): start from the "
+        "Plain (front_window=0): start from the "
         "contact-free penetration pattern {s_L > 0}, full steps, exact line search once a set recurs. "
         "all active: start from 𝒜 = Γ_C. nested: Galerkin-coarsened Γ_C problems (every other node, down to "
         "≤ 16 nodes), each level started from the prolonged coarser solution (steps per level, coarse → fine). "
         "penalty path: D·1e-9, ·1e3 … D, each started from the last set. line search: exact line search on "
         "the energy at every step.",
         "",
-        "| 1/h | Γ_C rows | fronts (predicted sets) | plain | all active | nested (per level) | penalty path "
+        "| 1/h | Γ_C rows | local {iterations/window} | fronts (predicted sets) | plain | all active | nested (per level) | penalty path "
         "(per level) | line search | monolithic Newton | same |",
-        "|---|---|---|---|---|---|---|---|---|---|",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     traces = []
     for n in sizes:
@@ -354,14 +375,17 @@ def part_fronts(lines, sizes, E_high: float) -> None:
         s0, _, h0 = contact_newton(s_load, M, D, max_steps=200)
         s_f, _, h_f = contact_newton(s_load, M, D, max_steps=200, chains=contact_chains(points[order]))
         predicted = sum(1 for e in h_f.extrapolated if e.size)
+        s_w, _, h_w = contact_newton(s_load, M, D, max_steps=200, chains=contact_chains(points[order]),
+                                     window=InterfaceNewtonOptions().front_window)
         _, _, h_all = contact_newton(s_load, M, D, max_steps=200, active=np.ones(s_load.size, dtype=bool))
         nest, s_nest = _nested(s_load, M, D, y)
         path, s_path = _continuation(s_load, M, D)
         s_ls, _, h_ls = contact_newton(s_load, M, D, max_steps=200, line_search=True)
         scale = np.abs(s0).max()
         same = all(np.array_equal(s > 0, s0 > 0) and np.abs(s - s0).max() <= 1e-10 * scale
-                   for s in (s_nest, s_path, s_ls, s_f))
-        row = (f"| {n} | {s_load.size} | **{h_f.steps}** ({predicted}) | {h0.steps} | {h_all.steps} | {sum(nest)} ({', '.join(map(str, nest))}) | "
+                   for s in (s_nest, s_path, s_ls, s_f, s_w))
+        row = (f"| {n} | {s_load.size} | **{h_w.steps}** {{{h_w.local_iterations}/{max(m for _, _, m in h_w.local)}}} | "
+               f"{h_f.steps} ({predicted}) | {h0.steps} | {h_all.steps} | {sum(nest)} ({', '.join(map(str, nest))}) | "
                f"{sum(path)} ({', '.join(map(str, path))}) | {h_ls.steps} | {monolithic_steps(1, cm, 3, E_high)} | "
                f"{same} |")
         print(row, flush=True)
@@ -369,6 +393,9 @@ def part_fronts(lines, sizes, E_high: float) -> None:
         at = lambda idx: ", ".join(f"{32 * y[i]:g}" for i in idx) or "—"  # noqa: E731
         traces.append((n, "Plain", [(k + 1, h0.active_sizes[k], at(a), at(r), "") for k, (a, r) in
                                     enumerate(zip(h0.added, h0.removed))]))
+        traces.append((n, "Local front resolution (the default, front_window=8)",
+                       [(k + 1, h_w.active_sizes[k], at(a), at(r), at(x)) for k, (a, r, x) in
+                        enumerate(zip(h_w.added, h_w.removed, h_w.extrapolated))]))
         traces.append((n, "Front-extrapolating (fronts=True)",
                        [(k + 1, h_f.active_sizes[k], at(a), at(r), at(x)) for k, (a, r, x) in
                         enumerate(zip(h_f.added, h_f.removed, h_f.extrapolated))]))
@@ -376,7 +403,7 @@ def part_fronts(lines, sizes, E_high: float) -> None:
     for n, label, rows in traces:
         lines += ["", f"{label} contact Newton at h = 1/{n}: Γ_C nodes (y in units of 1/32; the stiff channels touch "
                   "Γ_C on y ∈ [5, 6], [13, 14], [21, 22]) that each step adds to / removes from the active set it "
-                  "solves next (of them, predicted by the front extrapolation):", "",
+                  "solves next (of them, set by the local front resolution or the front extrapolation):", "",
                   "| step | active nodes after it | added | removed | of them predicted |", "|---|---|---|---|---|"]
         lines += [f"| {k} | {size} | {a} | {r} | {x or '—'} |" for k, size, a, r, x in rows]
     lines.append("")
@@ -404,6 +431,9 @@ def main() -> None:
                         help="steps part: skip the monolithic Newton column (the mixed one needs ~10 GB at h = 1/128)")
     parser.add_argument("--fronts", action="store_true",
                         help="steps part: the front-extrapolating contact Newton as the main count (plain in brackets)")
+    parser.add_argument("--front-window", type=int, default=InterfaceNewtonOptions().front_window,
+                        help="steps part: the local front resolution's window (0: the plain contact Newton as the "
+                        "main count, the default window in brackets)")
     parser.add_argument("--dump", type=Path, default=None,
                         help="steps part: save each condensed contact problem (s_L, M, D, coordinates) as .npz here")
     parser.add_argument("--out", type=Path, default=Path("benchmarks/results/interface_newton.md"))
@@ -414,7 +444,7 @@ def main() -> None:
              f"--parts {args.parts} --methods {args.methods} --h-primal {args.h_primal} --h-mixed {args.h_mixed} "
              f"--factors {args.factors} --h-ms-max {args.h_ms_max} --updates-h {args.updates_h} --cap {args.cap} "
              f"--speed-h {args.speed_h} --speed-model {args.speed_model} --models {args.models}"
-             f"{' --no-monolithic' if args.no_monolithic else ''}{' --fronts' if args.fronts else ''} --chunk {args.chunk} "
+             f"{' --no-monolithic' if args.no_monolithic else ''}{' --fronts' if args.fronts else ''} --front-window {args.front_window} --chunk {args.chunk} "
              f"--out {args.out}`", ""]
     chosen = {"1": MODELS[0], "2": MODELS[1], "3": MODELS[2], "3e6": MODELS[3]}
     try:
@@ -422,7 +452,7 @@ def main() -> None:
     except KeyError as err:
         raise SystemExit(f"unknown model {err}; choose from {', '.join(chosen)}") from None
     global NEWTON, DUMP
-    NEWTON = InterfaceNewtonOptions(chunk=args.chunk, fronts=args.fronts)
+    NEWTON = InterfaceNewtonOptions(chunk=args.chunk, fronts=args.fronts, front_window=args.front_window)
     DUMP = args.dump
     start = time.perf_counter()
     ints = lambda text: [int(x) for x in text.split(",")]  # noqa: E731

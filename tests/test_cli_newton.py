@@ -61,22 +61,30 @@ def test_multiscale_default_alpha_at_contrast_1e6(tmp_path, capsys):
     assert "not positive definite" in capsys.readouterr().err
 
 
-def test_fronts_flag_same_solution_fewer_steps(tmp_path):
-    """`--fronts` (the contact Newton's front extrapolation) on the case it was built for, Algorithm 1 on model 3 at
-    contrast 1e6, h = 1/128 (a near-rigid channel on Γ_C: 8 steps plain, 7 with it, README): the same solution
-    (active set, e_u to 1e-10 of the fine solution), no more steps; refused without --accel newton."""
+def test_front_options_same_solution_fewer_steps(tmp_path):
+    """The contact Newton's front options on the case they were built for, Algorithm 1 on model 3 at contrast 1e6,
+    h = 1/128 (a near-rigid channel on Γ_C): the default local front resolution (4 steps measured),
+    `--front-window 0` (the plain semismooth Newton, 8) and `--fronts` (the front extrapolation, 7) give the same
+    solution (active set, e_u to 1e-10 of the fine solution); the default and `--fronts` take fewer steps than
+    the plain Newton; both options are refused without --accel newton, a negative window always."""
     runs = {}
-    for flag in ([], ["--fronts"]):
-        out = tmp_path / ("fronts" if flag else "plain")
+    for name, flag in (("default", []), ("plain", ["--front-window", "0"]), ("fronts", ["--fronts"])):
+        out = tmp_path / name
         code = main(["run", "--model", "3", "--E-high", "1e6", "--h", "128", "--H", "16", "--reference", "--no-plots",
                      "--out", str(out), *flag])
         assert code == 0
-        runs[bool(flag)] = _summary(out)
-    plain, fronts = runs[False], runs[True]
-    assert fronts["fronts"] is True and plain["fronts"] is False
-    assert fronts["transmission_residual"] < 1e-6 and fronts["active_set"] == plain["active_set"]
-    assert abs(fronts["e_u"] - plain["e_u"]) < 1e-10 and fronts["e_u"] < 1e-8
-    assert fronts["interface_newton_steps"] < plain["interface_newton_steps"]
-    code = main(["run", "--h", "16", "--H", "4", "--accel", "anderson", "--fronts", "--no-plots",
-                 "--out", str(tmp_path / "refused")])
-    assert code == 2 and not (tmp_path / "refused").exists()
+        runs[name] = _summary(out)
+    default, plain, fronts = runs["default"], runs["plain"], runs["fronts"]
+    assert fronts["fronts"] is True and plain["fronts"] is False and default["fronts"] is False
+    assert default["front_window"] == 8 and plain["front_window"] == 0
+    for run in (default, fronts):
+        assert run["transmission_residual"] < 1e-6 and run["active_set"] == plain["active_set"]
+        assert abs(run["e_u"] - plain["e_u"]) < 1e-10 and run["e_u"] < 1e-8
+        assert run["interface_newton_steps"] < plain["interface_newton_steps"]
+    assert default["interface_newton_steps"] <= 5
+    for flag in (["--fronts"], ["--front-window", "4"]):
+        code = main(["run", "--h", "16", "--H", "4", "--accel", "anderson", *flag, "--no-plots",
+                     "--out", str(tmp_path / "refused")])
+        assert code == 2 and not (tmp_path / "refused").exists()
+    code = main(["run", "--h", "16", "--H", "4", "--front-window", "-1", "--no-plots", "--out", str(tmp_path / "neg")])
+    assert code == 2 and not (tmp_path / "neg").exists()

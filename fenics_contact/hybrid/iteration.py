@@ -143,10 +143,12 @@ class InterfaceNewtonOptions:
     application of T to certify) or ``"interface"`` (Newton on F(g) = g − T(g), Ω₂'s generalized
     Jacobian by back-solves with its current factorization at every step).
     ``max_steps`` caps the contact Newton, ``max_corrections`` the Newton steps on F(g) that
-    follow it (or, for ``"interface"``, all steps).  ``fronts=True``: the condensed contact Newton
-    extrapolates the fronts of its active set along Γ_C (``hybrid.newton.FrontExtrapolation``; the
-    same fixed point; fewer steps where a near-rigid body rests on Γ_C, e.g. 8 against 11 at contrast
-    1e6, but more on some cases, so not the default: README, "Interface Newton").
+    follow it (or, for ``"interface"``, all steps).  ``front_window`` (default 8; 0: off): the condensed
+    contact Newton resolves every front of its next active set locally, on the ``front_window`` Γ_C
+    unknowns on either side of it with the forces elsewhere held (``hybrid.newton.LocalFronts``; the same
+    fixed point; 3–5 steps instead of 8–11 where a near-rigid body rests on Γ_C at contrast 1e6: README,
+    "Interface Newton").  ``fronts=True``: instead, the front extrapolation of an earlier version
+    (``hybrid.newton.FrontExtrapolation``; fewer steps on some cases, more on others).
     """
 
     strategy: str = "condensed"
@@ -154,8 +156,13 @@ class InterfaceNewtonOptions:
     max_corrections: int = 8
     chunk: int = 128  #: right-hand sides per multi-RHS back-solve of the offline condensation
     fronts: bool = False
+    front_window: int = 8
 
     def __post_init__(self) -> None:
+        if isinstance(self.front_window, bool) or not isinstance(self.front_window, (int, np.integer)) \
+                or self.front_window < 0:
+            raise InputError(f"interface Newton: front_window must be an integer >= 0 (0: off), got "
+                             f"{self.front_window!r}")
         if self.strategy not in ("condensed", "interface"):
             raise InputError(f"unknown interface Newton strategy {self.strategy!r}; choose 'condensed' or 'interface'")
         if self.max_steps < 1 or self.max_corrections < 0 or self.chunk < 1:

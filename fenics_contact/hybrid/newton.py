@@ -40,11 +40,17 @@ load term s_L.  Two strategies solve it (``InterfaceNewtonOptions.strategy``):
   back-solves with the factorization Ω₂ keeps; a backtracking line search on
   ‖F‖ globalizes it.  It needs no J₀ but n_γ back-solves per step.
 
-Both land on the fixed point of the Robin iteration (the same equations). With
-``InterfaceNewtonOptions(fronts=True)`` the contact Newton chooses the next active
-set by extrapolating its fronts along Γ_C where a front moved the same way twice
-(``FrontExtrapolation``: where a near-rigid body rests on Γ_C the plain semismooth
-Newton frees one node per step); every set it solves is a step, and a set is
+Both land on the fixed point of the Robin iteration (the same equations). Where a
+near-rigid body rests on Γ_C (a channel 10⁶ times stiffer than its surroundings) the
+plain semismooth Newton frees one node per step, and in the mixed method fronts in
+the bulk creep one Gauss–Lobatto point per step. By default
+(``InterfaceNewtonOptions(front_window=8)``) the contact Newton therefore resolves
+every front of its next active set locally (``LocalFronts``, a nonlinear
+elimination): the contact equations on the 8 Γ_C unknowns on either side of it, with
+the forces elsewhere held, are solved exactly (small dense solves) and the next set
+takes their active sets. With ``fronts=True`` it instead extrapolates the fronts along
+Γ_C where a front moved the same way twice (``FrontExtrapolation``, an earlier
+attempt). Every set solved on all of Γ_C is a step, and a set is
 accepted only when the solve on it reproduces it. The contact Newton takes full
 steps until an active set recurs and from then on minimizes, along each Newton
 direction, ψ = ½ μᵀMμ + ½ Σ D (s⁺)² with s = s_L − Mμ (exact line search on a
@@ -86,6 +92,7 @@ __all__ = [
     "CondensedInterface",
     "ContactNewtonHistory",
     "FrontExtrapolation",
+    "LocalFronts",
     "contact_chains",
     "contact_newton",
     "newton_iterate",
@@ -501,6 +508,8 @@ class CondensedInterface:
         self.Gq[f] = sla.lu_solve(self.lu, self.P1 @ (a[:, None] * self.Yq[f]))
         self.M = self.Sq + self.Sc @ self.Gq
         self._chains = None
+        if problem.options.fronts or problem.options.front_window:  # offline (collective: all ranks' points)
+            self._chains = contact_chains(om2.contact_points()) if self.M.size else []
 
     def load_terms(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Online: (s_L, g₂₁ at λ = 0, y₂₀) from one Ω₂ back-solve and the Ω₁ load response."""
@@ -547,8 +556,9 @@ class CondensedInterface:
         p = self.problem
         s_load, g21_0, y20 = self.load_terms()
         try:
+            window = 0 if options.fronts else options.front_window
             _, lam, hist = contact_newton(s_load, self.M, self.D, max_steps=options.max_steps, name=name,
-                                          chains=self.chains if options.fronts else None)
+                                          chains=self.chains if options.fronts or window else None, window=window)
         except ConvergenceError as err:
             lowest = self.lowest_eigenvalue()
             if lowest < 0.0:
@@ -578,13 +588,22 @@ class ContactNewtonHistory:
     residuals: list[float] = field(default_factory=list)
     added: list[np.ndarray] = field(default_factory=list)
     removed: list[np.ndarray] = field(default_factory=list)
-    #: rows the front extrapolation changed beyond the semismooth step's own set, per step (empty: none);
-    #: the next step solves that trial set, and ``added``/``removed`` of a step count them
+    #: rows the front extrapolation or the local front resolution changed beyond the semismooth step's own
+    #: set, per step (empty: none); the next step solves that trial set, and ``added``/``removed`` of a step
+    #: count them
     extrapolated: list[np.ndarray] = field(default_factory=list)
+    #: per step: (local problems, their semismooth iterations, largest window) of the local front resolution
+    #: (``LocalFronts``; (0, 0, 0) when none was solved)
+    local: list[tuple[int, int, int]] = field(default_factory=list)
 
     @property
     def steps(self) -> int:
         return len(self.step_lengths)
+
+    @property
+    def local_iterations(self) -> int:
+        """Semismooth iterations of all the local front problems (each a solve of at most 2w + 1 unknowns)."""
+        return sum(it for _, it, _ in self.local)
 
 
 # ---------------------------------------------------------------------------------------
@@ -747,6 +766,80 @@ class FrontExtrapolation:
         return trial
 
 
+class LocalFronts:
+    """Local resolution of the fronts of the contact Newton's active set (a nonlinear elimination).
+
+    After a step has solved the set 𝒜 for (s, μ), the semismooth step's next set is {s > 0}.  Where a stiff
+    body rests on Γ_C (a channel 10⁶ times stiffer than its surroundings on the penalty) that set frees or
+    takes one node per step, and in the mixed method fronts in the bulk creep one Gauss–Lobatto point per
+    step.  Here every front of the next set (the end of a contiguous active segment of a ``contact_chains``
+    chain) gets a window of the ``width`` unknowns on either side of it (overlapping windows merged), and on
+    each window R the penalized contact equations are solved exactly with the forces elsewhere held at the
+    step's μ:
+
+        s_R = r_R − M_RR μ_R,  μ_R = D_R s_R⁺,  r_R = s_L,R − M_R,R̄ μ_R̄,
+
+    by the same semismooth Newton (full steps from the next set's rows; at most 2|R| + 10 iterations, and a
+    window whose iteration does not settle keeps the plain set).  The next set takes the windows' active
+    sets.  Each local iteration is one dense solve of at most |R| unknowns (≤ 2w + 1 for an isolated front),
+    against the n_c of a step.  The trial set is only the start of the next step: a set is accepted only when
+    the step solved on it reproduces it, so the fixed point is the plain Newton's.  (Nonlinear elimination,
+    Lanzkron, Rose & Wilkes 1996; Cai & Keyes 2002: the unknowns that hold a Newton method back are
+    eliminated by local nonlinear solves.)
+    """
+
+    def __init__(self, chains, M: np.ndarray, D: np.ndarray, width: int) -> None:
+        self.chains = [np.asarray(idx) for idx, _ in chains]
+        self.M, self.D, self.width = M, D, int(width)
+
+    def windows(self, active: np.ndarray) -> list[np.ndarray]:
+        """The merged windows (rows of the contact unknowns) around the fronts of ``active``."""
+        out, w = [], self.width
+        for idx in self.chains:
+            a = active[idx]
+            mark = np.zeros(idx.size, dtype=bool)
+            for e in np.flatnonzero(a[:-1] != a[1:]):  # a front between positions e and e + 1
+                mark[max(0, e - w + 1) : e + w + 1] = True
+            edges = np.flatnonzero(np.diff(np.concatenate([[0], mark.astype(np.int8), [0]])))
+            out += [idx[a0:a1] for a0, a1 in zip(edges[::2], edges[1::2])]
+        return out
+
+    def _solve(self, R: np.ndarray, r: np.ndarray, start: np.ndarray) -> tuple[np.ndarray | None, int]:
+        """The active set of the window's equations (None: no settled set), and the iterations taken."""
+        MRR, DR = self.M[np.ix_(R, R)], self.D[R]
+        act, seen = start.copy(), set()
+        for it in range(2 * R.size + 10):
+            seen.add(np.packbits(act).tobytes())
+            A = np.flatnonzero(act)
+            s = r.copy()
+            if A.size:
+                x = np.linalg.solve(MRR[np.ix_(A, A)] + np.diag(1.0 / DR[A]), r[A])
+                s -= MRR[:, A] @ x
+                s[A] = x / DR[A]
+            new = s > 0.0
+            if np.array_equal(new, act):
+                return new, it + 1
+            if np.packbits(new).tobytes() in seen:  # a cycle (possible for a non-symmetric M)
+                return None, it + 1
+            act = new
+        return None, 2 * R.size + 10
+
+    def trial(self, predicted: np.ndarray, s_load: np.ndarray, mu: np.ndarray) -> tuple[np.ndarray, tuple]:
+        """The next set: ``predicted`` with every front window's own solution; and (windows, iterations,
+        largest window)."""
+        trial = predicted.copy()
+        iterations, largest = 0, 0
+        wins = self.windows(predicted)
+        for R in wins:
+            r = s_load[R] - self.M[R] @ mu + self.M[np.ix_(R, R)] @ mu[R]
+            found, it = self._solve(R, r, predicted[R])
+            iterations += it
+            largest = max(largest, R.size)
+            if found is not None:
+                trial[R] = found
+        return trial, (len(wins), iterations, largest)
+
+
 def _line_search(mu: np.ndarray, dmu: np.ndarray, s: np.ndarray, ds: np.ndarray, s_load: np.ndarray,
                  D: np.ndarray) -> float:
     """argmin over t ∈ (0, 1] of ψ(s + t ds): root of the increasing piecewise-linear φ'(t).
@@ -772,8 +865,8 @@ def _line_search(mu: np.ndarray, dmu: np.ndarray, s: np.ndarray, ds: np.ndarray,
 
 def contact_newton(s_load: np.ndarray, M: np.ndarray, D: np.ndarray, *, max_steps: int = 50,
                    name: str = "contact Newton", rtol: float = 1e-10, active: np.ndarray | None = None,
-                   line_search: bool = False,
-                   chains=None) -> tuple[np.ndarray, np.ndarray, ContactNewtonHistory]:
+                   line_search: bool = False, chains=None,
+                   window: int = 0) -> tuple[np.ndarray, np.ndarray, ContactNewtonHistory]:
     """Solve s = s_L − M μ, μ = D s⁺ by semismooth Newton (finite termination, globalized): (s, μ).
 
     Starts from μ = 0 (no contact force) with the active set 𝒜 = {s_L > 0} (the contact-free
@@ -785,14 +878,20 @@ def contact_newton(s_load: np.ndarray, M: np.ndarray, D: np.ndarray, *, max_step
     has the set it was computed for (then both equations hold exactly) and checks that solve.
     ``chains`` (``contact_chains`` of the Γ_C unknowns' coordinates): the next set is the front
     extrapolation's trial set (``FrontExtrapolation``) until the line search starts; every set
-    solved, predicted or not, is one step.
+    solved, predicted or not, is one step.  ``window`` > 0 (with ``chains``, instead of the
+    extrapolation): the next set is that of the local front resolution (``LocalFronts``, ``window``
+    unknowns on either side of every front), also until the line search starts.
     """
     hist = ContactNewtonHistory()
     n = s_load.size
     s, mu = s_load.copy(), np.zeros(n)
     active = s > 0.0 if active is None else np.asarray(active, dtype=bool).copy()
     visited: set[bytes] = set()
-    fronts = FrontExtrapolation(chains, M, D) if chains else None
+    fronts = local = None
+    if chains and window > 0:
+        local = LocalFronts(chains, M, D, window)
+    elif chains:
+        fronts = FrontExtrapolation(chains, M, D)
     for _ in range(max_steps):
         visited.add(np.packbits(active).tobytes())
         A = np.flatnonzero(active)
@@ -819,12 +918,18 @@ def contact_newton(s_load: np.ndarray, M: np.ndarray, D: np.ndarray, *, max_step
         s, mu = s + t * (s_new - s), mu + t * (mu_new - mu)
         following = s > 0.0
         extrapolated = np.zeros(0, dtype=np.int64)
+        local_work = (0, 0, 0)
         if fronts is not None and not line_search and not settled:
             trial = fronts.trial(active, s_new, following)
             if np.packbits(trial).tobytes() in visited:
                 fronts.changed = extrapolated  # already solved: no prediction this step
             else:
                 extrapolated, following = np.flatnonzero(trial != following), trial
+        if local is not None and not line_search and not settled:
+            trial, local_work = local.trial(following, s_load, mu_new)
+            if np.packbits(trial).tobytes() not in visited:  # (a set already solved: the plain one instead)
+                extrapolated, following = np.flatnonzero(trial != following), trial
+        hist.local.append(local_work)
         hist.step_lengths.append(t)
         hist.active_sizes.append(int(np.count_nonzero(following)))
         hist.added.append(np.flatnonzero(following & ~active))
@@ -873,10 +978,13 @@ def newton_iterate(step, options: IterationOptions, *, name: str, monitor=None,
         om2.set_state(om2.solve(om2.rhs(g21, lam)))  # warm start of Ω₂: one J₀ back-solve
         history.newton_steps = ch.steps
         predicted = [e.size for e in ch.extrapolated]
+        by = "the front extrapolation" if nopt.fronts else "the local front resolution"
         log.info("%s: contact Newton %d steps, active-set sizes %s, step lengths %s, rows added/removed per "
-                 "step %s%s", name, ch.steps, ch.active_sizes, [round(t, 3) for t in ch.step_lengths],
+                 "step %s%s%s", name, ch.steps, ch.active_sizes, [round(t, 3) for t in ch.step_lengths],
                  [f"+{a.size}/-{r.size}" for a, r in zip(ch.added, ch.removed)],
-                 f" (of them by the front extrapolation {predicted})" if any(predicted) else "")
+                 f" (of them by {by} {predicted})" if any(predicted) else "",
+                 f"; local front problems {sum(w for w, _, _ in ch.local)}, {ch.local_iterations} iterations, "
+                 f"largest window {max(m for _, _, m in ch.local)}" if any(w for w, _, _ in ch.local) else "")
         history.contact_newton = ch
         g = problem.data(g12, g21)
     else:

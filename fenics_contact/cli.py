@@ -210,8 +210,12 @@ class RunOptions:
             raise InputError(f"--front-window is an option of the interface Newton (--accel newton), not of --accel "
                              f"{self.accel}")
         if self.front_window is not None and (isinstance(self.front_window, bool)
-                                              or not isinstance(self.front_window, int) or self.front_window < 0):
+                                              or not isinstance(self.front_window, (int, np.integer))
+                                              or self.front_window < 0):
             raise InputError(f"--front-window must be an integer >= 0 (0: off), got {self.front_window!r}")
+        if self.fronts and self.front_window:
+            raise InputError("--fronts (the front extrapolation) replaces the local front resolution: give it "
+                             f"without --front-window {self.front_window} (or with --front-window 0)")
         for name, (methods, what) in _METHOD_OPTIONS.items():
             if getattr(self, name) is not None and self.method not in methods:
                 raise InputError(f"{_flag(name)} does not apply to --method {self.method} (it is {what})")
@@ -286,8 +290,9 @@ class RunOptions:
                                 newton=self.newton_options())
 
     def newton_options(self) -> InterfaceNewtonOptions:
-        window = InterfaceNewtonOptions().front_window if self.front_window is None else self.front_window
-        return InterfaceNewtonOptions(fronts=self.fronts, front_window=window)
+        """The interface Newton's options (the front window 0 with --fronts, which replaces it)."""
+        window = InterfaceNewtonOptions().front_window if self.front_window is None else int(self.front_window)
+        return InterfaceNewtonOptions(fronts=self.fronts, front_window=0 if self.fronts else window)
 
 
 def build_parser(*, given_only: bool = False) -> argparse.ArgumentParser:

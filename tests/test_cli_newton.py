@@ -66,7 +66,8 @@ def test_front_options_same_solution_fewer_steps(tmp_path):
     h = 1/128 (a near-rigid channel on Γ_C): the default local front resolution (4 steps measured),
     `--front-window 0` (the plain semismooth Newton, 8) and `--fronts` (the front extrapolation, 7) give the same
     solution (active set, e_u to 1e-10 of the fine solution); the default and `--fronts` take fewer steps than
-    the plain Newton; both options are refused without --accel newton, a negative window always."""
+    the plain Newton; both options are refused without --accel newton, a negative window always, and a window
+    together with --fronts."""
     runs = {}
     for name, flag in (("default", []), ("plain", ["--front-window", "0"]), ("fronts", ["--fronts"])):
         out = tmp_path / name
@@ -76,7 +77,7 @@ def test_front_options_same_solution_fewer_steps(tmp_path):
         runs[name] = _summary(out)
     default, plain, fronts = runs["default"], runs["plain"], runs["fronts"]
     assert fronts["fronts"] is True and plain["fronts"] is False and default["fronts"] is False
-    assert default["front_window"] == 8 and plain["front_window"] == 0
+    assert default["front_window"] == 8 and plain["front_window"] == 0 and fronts["front_window"] == 0
     for run in (default, fronts):
         assert run["transmission_residual"] < 1e-6 and run["active_set"] == plain["active_set"]
         assert abs(run["e_u"] - plain["e_u"]) < 1e-10 and run["e_u"] < 1e-8
@@ -86,5 +87,6 @@ def test_front_options_same_solution_fewer_steps(tmp_path):
         code = main(["run", "--h", "16", "--H", "4", "--accel", "anderson", *flag, "--no-plots",
                      "--out", str(tmp_path / "refused")])
         assert code == 2 and not (tmp_path / "refused").exists()
-    code = main(["run", "--h", "16", "--H", "4", "--front-window", "-1", "--no-plots", "--out", str(tmp_path / "neg")])
-    assert code == 2 and not (tmp_path / "neg").exists()
+    for flag in (["--front-window", "-1"], ["--fronts", "--front-window", "4"]):  # (--fronts replaces the window)
+        code = main(["run", "--h", "16", "--H", "4", *flag, "--no-plots", "--out", str(tmp_path / "bad")])
+        assert code == 2 and not (tmp_path / "bad").exists()

@@ -9,18 +9,21 @@
 * On the heterogeneous strip at contrast 1e6 (model 3, Algorithm 1, h = 1/128, where a stiff channel rests on
   Γ_C and the plain Newton frees one node per step: 8 steps), the interface Newton with the default options
   takes at most 5 steps (4 measured), ends on the same data g as with ``front_window=0``, and its record adds
-  up (the rows the local problems changed are among those a step adds or removes, the last step confirms its
-  set, every step before it reports its local work).
+  up (the last step confirms its set, every step before it reports its local work).
+* A non-symmetric compliance (as a multiscale Ω₁ gives; here a random problem with a 1e-3 antisymmetric part)
+  on which the local front resolution runs into a cycle its line search cannot break while the plain Newton
+  converges: ``contact_solve`` (what ``CondensedInterface.solve`` calls) falls back to the plain Newton, ends
+  on its solution and counts the failed attempt's steps.
 """
 
 import numpy as np
 import pytest
 
-from fenics_contact.errors import InputError
+from fenics_contact.errors import ConvergenceError, InputError
 from fenics_contact.fem.contact import NewtonOptions
 from fenics_contact.fem.primal import default_penalty
 from fenics_contact.hybrid.iteration import InterfaceNewtonOptions, IterationOptions, iterate
-from fenics_contact.hybrid.newton import LocalFronts, contact_chains, contact_newton
+from fenics_contact.hybrid.newton import LocalFronts, contact_chains, contact_newton, contact_solve
 from fenics_contact.hybrid.primal import DEFAULT_ALPHA, PrimalHybridStep
 from fenics_contact.problem.geometry import unit_square
 from fenics_contact.problem.models import get_model
@@ -92,6 +95,25 @@ def test_local_fronts_never_change_the_fixed_point_and_never_cost_a_step():
     assert totals["local"] < 0.5 * totals["plain"], totals
 
 
+def test_a_failed_local_resolution_falls_back_to_the_plain_newton(caplog):
+    rng = np.random.default_rng(2)
+    s_load, M, D, points = _random_problem(rng)
+    E = rng.uniform(-1.0, 1.0, M.shape)
+    M = M + 1e-3 * np.abs(M) * 0.5 * (E - E.T)  # (the symmetric part stays positive definite)
+    assert np.linalg.eigvalsh(0.5 * (M + M.T))[0] > 0.0
+    chains = contact_chains(points)
+    with pytest.raises(ConvergenceError) as failed:  # measured: a cycle from step 9 on
+        contact_newton(s_load, M, D, max_steps=50, chains=chains, window=8)
+    assert failed.value.steps == 50
+    s_p, mu_p, h_p = contact_newton(s_load, M, D, max_steps=50)  # 13 steps
+    s, mu, hist = contact_solve(s_load, M, D, InterfaceNewtonOptions(), "test", chains)
+    assert np.array_equal(s > 0, s_p > 0) and np.abs(s - s_p).max() <= 1e-12 * np.abs(s_p).max()
+    assert hist.discarded == 50 and hist.steps == 50 + h_p.steps
+    assert "the plain contact Newton instead" in caplog.text
+    with pytest.raises(ValueError, match="window"):
+        contact_newton(s_load, M, D, chains=chains, window=-1)
+
+
 def test_front_window_option_is_checked():
     assert InterfaceNewtonOptions().front_window == 8
     for bad in (-1, 2.5, True):
@@ -121,7 +143,6 @@ def test_local_fronts_take_fewer_steps_to_the_same_data_on_the_strip(strip):
     s_load = cond.load_terms()[0]
     sizes = [int(np.count_nonzero(s_load > 0))] + ch.active_sizes
     assert all(b == a + add.size - rem.size for a, b, add, rem in zip(sizes, sizes[1:], ch.added, ch.removed))
-    assert all(np.isin(x, np.union1d(a, r)).all() for x, a, r in zip(ch.extrapolated, ch.added, ch.removed))
     assert any(x.size for x in ch.extrapolated)  # the local problems changed the sets
     assert ch.added[-1].size == ch.removed[-1].size == 0 and ch.local[-1] == (0, 0, 0)
     assert all(count >= 1 and its >= count and 1 <= largest <= cond.M.shape[0] for count, its, largest in ch.local[:-1])

@@ -95,6 +95,7 @@ __all__ = [
     "LocalFronts",
     "contact_chains",
     "contact_newton",
+    "contact_solve",
     "newton_iterate",
 ]
 
@@ -557,8 +558,8 @@ class CondensedInterface:
         s_load, g21_0, y20 = self.load_terms()
         try:
             window = 0 if options.fronts else options.front_window
-            _, lam, hist = contact_newton(s_load, self.M, self.D, max_steps=options.max_steps, name=name,
-                                          chains=self.chains if options.fronts or window else None, window=window)
+            chains = self.chains if options.fronts or window else None
+            _, lam, hist = contact_solve(s_load, self.M, self.D, options, name, chains)
         except ConvergenceError as err:
             lowest = self.lowest_eigenvalue()
             if lowest < 0.0:
@@ -575,6 +576,27 @@ class CondensedInterface:
         return g12, g21, lam, hist
 
 
+def contact_solve(s_load: np.ndarray, M: np.ndarray, D: np.ndarray, options: InterfaceNewtonOptions, name: str,
+                  chains) -> tuple[np.ndarray, np.ndarray, "ContactNewtonHistory"]:
+    """``contact_newton`` with the options' front handling (``chains`` given: the front extrapolation with
+    ``options.fronts``, else the local front resolution), and the plain contact Newton afresh should that not
+    converge: with a non-symmetric M (a multiscale Ω₁) the energy line search that stops cycles is no merit
+    function, and a predicted set can lead into a cycle the plain Newton avoids.  The failed attempt's steps
+    stay counted (``ContactNewtonHistory.discarded``)."""
+    window = 0 if options.fronts else options.front_window
+    try:
+        return contact_newton(s_load, M, D, max_steps=options.max_steps, name=name, chains=chains,
+                              window=window if chains else 0)
+    except ConvergenceError as first:
+        if not chains:
+            raise
+        log.warning("%s: the contact Newton with %s did not converge (%s); the plain contact Newton instead", name,
+                    "the front extrapolation" if options.fronts else "the local front resolution", first)
+        s, mu, hist = contact_newton(s_load, M, D, max_steps=options.max_steps, name=name)
+        hist.discarded = first.steps
+        return s, mu, hist
+
+
 @dataclass(slots=True)
 class ContactNewtonHistory:
     """Active-set sizes, step lengths and contact-law violations ‖μ − D s⁺‖ of the contact Newton.
@@ -588,21 +610,26 @@ class ContactNewtonHistory:
     residuals: list[float] = field(default_factory=list)
     added: list[np.ndarray] = field(default_factory=list)
     removed: list[np.ndarray] = field(default_factory=list)
-    #: rows the front extrapolation or the local front resolution changed beyond the semismooth step's own
-    #: set, per step (empty: none); the next step solves that trial set, and ``added``/``removed`` of a step
-    #: count them
+    #: rows where the next set differs from the semismooth step's own set {s > 0} because the front
+    #: extrapolation or the local front resolution set them, per step (empty: none); the next step solves
+    #: that trial set.  A row may be one the step would have flipped and the local problem kept as it was
+    #: (then it is in neither ``added`` nor ``removed``)
     extrapolated: list[np.ndarray] = field(default_factory=list)
     #: per step: (local problems, their semismooth iterations, largest window) of the local front resolution
     #: (``LocalFronts``; (0, 0, 0) when none was solved)
     local: list[tuple[int, int, int]] = field(default_factory=list)
+    #: steps of a first attempt that did not converge (``CondensedInterface.solve`` then starts the plain
+    #: contact Newton afresh; the records above are the second attempt's), counted in ``steps``
+    discarded: int = 0
 
     @property
     def steps(self) -> int:
-        return len(self.step_lengths)
+        return len(self.step_lengths) + self.discarded
 
     @property
     def local_iterations(self) -> int:
-        """Semismooth iterations of all the local front problems (each a solve of at most 2w + 1 unknowns)."""
+        """Semismooth iterations of all the local front problems (each a solve of at most 2w unknowns for an
+        isolated front)."""
         return sum(it for _, it, _ in self.local)
 
 
@@ -781,7 +808,7 @@ class LocalFronts:
 
     by the same semismooth Newton (full steps from the next set's rows; at most 2|R| + 10 iterations, and a
     window whose iteration does not settle keeps the plain set).  The next set takes the windows' active
-    sets.  Each local iteration is one dense solve of at most |R| unknowns (≤ 2w + 1 for an isolated front),
+    sets.  Each local iteration is one dense solve of at most |R| unknowns (2w for an isolated front),
     against the n_c of a step.  The trial set is only the start of the next step: a set is accepted only when
     the step solved on it reproduces it, so the fixed point is the plain Newton's.  (Nonlinear elimination,
     Lanzkron, Rose & Wilkes 1996; Cai & Keyes 2002: the unknowns that hold a Newton method back are
@@ -887,6 +914,8 @@ def contact_newton(s_load: np.ndarray, M: np.ndarray, D: np.ndarray, *, max_step
     s, mu = s_load.copy(), np.zeros(n)
     active = s > 0.0 if active is None else np.asarray(active, dtype=bool).copy()
     visited: set[bytes] = set()
+    if window < 0:
+        raise ValueError(f"contact_newton: window must be >= 0, got {window}")
     fronts = local = None
     if chains and window > 0:
         local = LocalFronts(chains, M, D, window)
@@ -904,8 +933,10 @@ def contact_newton(s_load: np.ndarray, M: np.ndarray, D: np.ndarray, *, max_step
             s_new[A] = mu_new[A] / D[A]
             size = np.linalg.norm(s_load[A]) + np.linalg.norm(M[np.ix_(A, A)] @ mu_new[A]) + 1e-300
             if not np.isfinite(r).all() or np.linalg.norm(r) > rtol * size:
-                raise ConvergenceError(f"{name}: the condensed contact system is singular or ill-conditioned "
-                                       f"(relative residual {np.linalg.norm(r) / size:.1e})")
+                error = ConvergenceError(f"{name}: the condensed contact system is singular or ill-conditioned "
+                                         f"(relative residual {np.linalg.norm(r) / size:.1e})")
+                error.steps = hist.steps + 1
+                raise error
         predicted = s_new > 0.0
         settled = np.array_equal(predicted, active)
         if fronts is not None and not settled:
@@ -939,10 +970,12 @@ def contact_newton(s_load: np.ndarray, M: np.ndarray, D: np.ndarray, *, max_step
         if settled:
             return s, mu, hist
         active = following
-    raise ConvergenceError(
+    error = ConvergenceError(
         f"{name}: contact Newton did not converge in {max_steps} steps (active-set sizes "
         f"{hist.active_sizes[-5:]}, step lengths {hist.step_lengths[-5:]}, residuals {hist.residuals[-3:]})"
     )
+    error.steps = hist.steps
+    raise error
 
 
 # ---------------------------------------------------------------------------------------
@@ -982,7 +1015,7 @@ def newton_iterate(step, options: IterationOptions, *, name: str, monitor=None,
         log.info("%s: contact Newton %d steps, active-set sizes %s, step lengths %s, rows added/removed per "
                  "step %s%s%s", name, ch.steps, ch.active_sizes, [round(t, 3) for t in ch.step_lengths],
                  [f"+{a.size}/-{r.size}" for a, r in zip(ch.added, ch.removed)],
-                 f" (of them by {by} {predicted})" if any(predicted) else "",
+                 f" (rows {by} set otherwise than the plain step: {predicted})" if any(predicted) else "",
                  f"; local front problems {sum(w for w, _, _ in ch.local)}, {ch.local_iterations} iterations, "
                  f"largest window {max(m for _, _, m in ch.local)}" if any(w for w, _, _ in ch.local) else "")
         history.contact_newton = ch

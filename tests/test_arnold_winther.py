@@ -17,7 +17,6 @@ import pytest
 import ufl
 from mpi4py import MPI
 
-from fenics_contact.fem import arnold_winther as aw
 from fenics_contact.fem.arnold_winther import (
     ArnoldWintherSpace,
     lame_parameters,
@@ -199,36 +198,6 @@ def test_local_basis_is_nodal():
     err = np.abs(dofs - np.eye(24)).max()
     print(f"\nmax |ℓ_i(φ_j) - δ_ij| = {err:.2e}")
     assert err < 1e-10, err
-
-
-def test_local_basis_computes_each_cell_shape_once(monkeypatch):
-    """Cells that are translated copies of one another (to a 1e-12 relative jitter; a gmsh structured mesh has 1e-11) get the
-    basis of one representative: equal to the cell-by-cell computation to 1e-10; distinct shapes (random
-    triangles, scaled 1e-3 … 1e2, with their translated copies mixed in) are never merged."""
-    rng = np.random.default_rng(3)
-    ref = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
-    shapes = (ref[None] + 0.25 * rng.uniform(-1, 1, (40, 3, 2))) * 10.0 ** rng.uniform(-3, 2, 40)[:, None, None]
-    pick = rng.integers(0, 40, 400)
-    verts = shapes[pick] + rng.uniform(-10, 10, (400, 1, 2))
-    size = np.abs(verts - verts[:, :1]).max(axis=(1, 2))[:, None, None]
-    verts = verts + 1e-12 * size * rng.uniform(-1, 1, verts.shape) * (np.arange(400) % 2)[:, None, None]
-    flip = rng.integers(0, 2, (40, 3)).astype(bool)[pick]
-    pts = np.array([[0.0, 0.0], [0.2, 0.3], [1 / 3, 1 / 3], [0.5, 0.5]])
-    computed, cellwise_of = [], aw._nodal_basis_of
-
-    def counting(v, f, p):
-        computed.append(v.shape[0])
-        return cellwise_of(v, f, p)
-
-    monkeypatch.setattr(aw, "_nodal_basis_of", counting)
-    grouped = local_nodal_basis(verts, flip, pts)
-    assert len(computed) == 1 and 40 <= computed[0] <= 80, computed  # 40 shapes (a jittered copy may bin apart)
-    cellwise = cellwise_of(verts, flip, pts)
-    scale = np.abs(cellwise).max(axis=(1, 2, 3), keepdims=True)
-    assert (np.abs(grouped - cellwise) / scale).max() < 1e-10
-    # distinct shapes stay distinct: the 40 shapes' own bases, each from its own cell
-    first = np.array([np.flatnonzero(pick == k)[0] for k in np.unique(pick)])
-    assert np.allclose(grouped[first], cellwise_of(verts[first], flip[first], pts), rtol=0, atol=1e-10 * scale.max())
 
 
 def test_rejects_non_triangles():

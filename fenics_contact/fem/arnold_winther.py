@@ -191,14 +191,6 @@ def _map_to_cells(vertices: np.ndarray, ref: np.ndarray) -> np.ndarray:
     return v0[:, None, :] + np.einsum("nij,mj->nmi", J, ref)
 
 
-#: cells per batch above which ``local_nodal_basis`` computes each shape of cell once
-_SHAPE_GROUPING_MIN = 64
-#: a cell's shape: its vertex offsets relative to its size and its size, each binned to 2^-36 (1.5e-11 relative).
-#: Cells in one bin differ by less than that, and so do their bases (the values depend smoothly on the shape:
-#: measured 9e-12 on the gmsh mesh of unit_square(128, 16), whose coordinates carry a 1e-11 jitter)
-_SHAPE_BINS = 2.0**36
-
-
 def local_nodal_basis(
     vertices: npt.NDArray[np.floating],
     edge_flip: npt.NDArray[np.bool_],
@@ -207,11 +199,6 @@ def local_nodal_basis(
     """Values of the AW nodal basis of a batch of cells at reference points.
 
     φ_i ∈ X_T with ℓ_j(φ_i) = δ_ij, evaluated at x = F_T(points).
-
-    The values depend on a cell only through its shape (vertex offsets from the first vertex) and its edge
-    orientations, not its position: cells of one shape (on a structured mesh all cells are a few shapes) are
-    computed once (``_nodal_basis_of`` on one representative; shapes are equal to 1.5e-11 relative, ``_SHAPE_BINS``,
-    and so are their bases).
 
     Args:
         vertices: (n, 3, 2) physical vertex coordinates, basix local order.
@@ -227,22 +214,6 @@ def local_nodal_basis(
     """
     vertices = np.asarray(vertices, dtype=np.float64)
     edge_flip = np.asarray(edge_flip, dtype=bool)
-    n = vertices.shape[0]
-    if n >= _SHAPE_GROUPING_MIN:
-        offsets = (vertices[:, 1:] - vertices[:, :1]).reshape(n, 4)
-        size = np.abs(offsets).max(axis=1)
-        if np.all(size > 0.0):
-            key = np.concatenate([np.rint(offsets / size[:, None] * _SHAPE_BINS),
-                                  np.rint(np.log2(size) * _SHAPE_BINS)[:, None],
-                                  edge_flip], axis=1).astype(np.int64)
-            _, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
-            if first.size < n:
-                return _nodal_basis_of(vertices[first], edge_flip[first], points)[inverse.ravel()]
-    return _nodal_basis_of(vertices, edge_flip, points)
-
-
-def _nodal_basis_of(vertices: np.ndarray, edge_flip: np.ndarray, points) -> np.ndarray:
-    """``local_nodal_basis`` cell by cell (batched)."""
     n = vertices.shape[0]
     centre = vertices.mean(axis=1)  # (n, 2)
     edges = vertices[:, _EDGE_VERTICES[:, 1]] - vertices[:, _EDGE_VERTICES[:, 0]]

@@ -338,7 +338,7 @@ def test_cell_blocks_read_off_the_csr_arrays():
     exactly the cell's columns; the result equals the general sparse extraction for cells whose columns are in
     increasing order, in another order, and for a matrix whose pattern does not allow the shortcut; for rows
     scattered over the matrix, for each cell's rows a whole block of consecutive rows (cells permuted), and for
-    the cells' rows in row order (then the blocks are a view of the matrix data)."""
+    the cells' rows in row order (then the blocks of both are views of the matrix data)."""
     rng = np.random.default_rng(7)
     n, a, b = 6, 3, 4
     perm = rng.permutation(n * b)
@@ -359,6 +359,8 @@ def test_cell_blocks_read_off_the_csr_arrays():
         c, v = mm._row_blocks(A, rows)
         c0, v0 = mm._column_blocks(A[rows.ravel()], n, a)
         assert np.array_equal(c, c0) and np.array_equal(v, v0)
+        if rows is layouts[2]:
+            assert np.shares_memory(v, A.data)  # the cells' rows in row order: a view, no index array
         c, v = mm._row_blocks(general, rows)  # cell 0's rows differ in their columns: the general path
         c0, v0 = mm._column_blocks(general[rows.ravel()], n, a)
         assert np.array_equal(c, c0) and np.array_equal(v, v0)

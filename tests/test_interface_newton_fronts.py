@@ -21,13 +21,9 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from fenics_contact.fem.contact import NewtonOptions
-from fenics_contact.fem.primal import default_penalty
 from fenics_contact.hybrid.iteration import InterfaceNewtonOptions, IterationOptions, iterate
 from fenics_contact.hybrid.newton import contact_chains, contact_newton
-from fenics_contact.hybrid.primal import DEFAULT_ALPHA, PrimalHybridStep
-from fenics_contact.problem.geometry import unit_square
-from fenics_contact.problem.models import get_model
+from contact_problems import random_contact_problem
 from mpi_jobs import mpiexec, run_result
 
 
@@ -67,25 +63,11 @@ def test_front_extrapolation_never_changes_the_fixed_point():
     and pulling out): with and without the front extrapolation the contact Newton ends on the same active set
     and s (to 1e-10)."""
     rng = np.random.default_rng(1)
-    n = 80
-    x = np.linspace(0.0, 1.0, n)
     steps = {"plain": 0, "fronts": 0, "predicted": 0}
     for trial in range(30):
-        stiff, ground = np.ones(n - 1), np.ones(n)
-        for _ in range(rng.integers(1, 4)):  # stiff stretches (near-rigid punches) on a stiffer foundation
-            a, width, c = rng.integers(0, n - 8), rng.integers(3, 8), 10.0 ** rng.uniform(2, 6)
-            stiff[a : a + width] = c
-            ground[a : a + width + 1] = 10.0 ** rng.uniform(1, 3)
-        K = np.diag(np.r_[stiff, 0.0] + np.r_[0.0, stiff]) - np.diag(stiff, 1) - np.diag(stiff, -1)
-        K = K * (n - 1) + np.diag(ground) / (n - 1)  # string + foundation: SPD
-        M = np.linalg.inv(K)
-        s_load = M @ np.sin(rng.uniform(2, 12) * x + rng.uniform(0, 6)) * rng.uniform(0.5, 2)
-        D = np.full(n, 10.0 ** rng.uniform(3, 9)) * np.r_[0.5, np.ones(n - 2), 0.5]
-        perm = rng.permutation(n)  # the unknowns in any order: the chains come from the coordinates
-        points = np.c_[x, np.zeros(n)][perm]
-        s_p, mu_p, h_p = contact_newton(s_load[perm], M[np.ix_(perm, perm)], D[perm], max_steps=200)
-        s_f, mu_f, h_f = contact_newton(s_load[perm], M[np.ix_(perm, perm)], D[perm], max_steps=200,
-                                        chains=contact_chains(points))
+        s_load, M, D, points = random_contact_problem(rng)
+        s_p, mu_p, h_p = contact_newton(s_load, M, D, max_steps=200)
+        s_f, mu_f, h_f = contact_newton(s_load, M, D, max_steps=200, chains=contact_chains(points))
         scale = np.abs(s_p).max()
         assert np.array_equal(s_f > 0, s_p > 0) and np.abs(s_f - s_p).max() <= 1e-10 * scale, trial
         assert np.allclose(mu_f, mu_p, rtol=1e-8, atol=1e-12 * max(np.abs(mu_p).max(), 1e-300)), trial
@@ -97,20 +79,8 @@ def test_front_extrapolation_never_changes_the_fixed_point():
     assert steps["predicted"] > 0 and steps["fronts"] <= 1.05 * steps["plain"], steps
 
 
-@pytest.fixture(scope="module")
-def strip():
-    """Algorithm 1 on model 3 at contrast 1e6, h = 1/128, H = 1/16 (1.6 s): the stiff channel at y ∈ [5/32, 6/32]
-    has five Γ_C nodes, and the plain contact Newton frees them one per step (h ≤ 1/64: at most three, no
-    slow front to extrapolate)."""
-    cm = unit_square(128, 16)
-    step = PrimalHybridStep(cm, get_model(3, E_high=1e6), alpha=DEFAULT_ALPHA, delta=default_penalty(cm.h, 1e6),
-                            newton=NewtonOptions(rtol=1e-6))
-    step.prepare()
-    return step
-
-
-def test_front_extrapolation_takes_fewer_steps_to_the_same_solution(strip):
-    step = strip
+def test_front_extrapolation_takes_fewer_steps_to_the_same_solution(channel_strip):
+    step = channel_strip
     fronts = IterationOptions(accel="newton", newton=InterfaceNewtonOptions(fronts=True))
     history = iterate(step, fronts)
     assert history.converged and history.transmission_residual < 1e-6

@@ -4,7 +4,7 @@
   held: s_R = r_R − M_RR μ_R and μ_R = D_R s_R⁺ hold on the window (checked by hand), and the windows are
   the merged neighbourhoods of the fronts.
 * Random strictly convex contact problems with near-rigid stretches (the generator of
-  ``test_interface_newton_fronts``, three seeds): the same active set and s as the plain semismooth Newton to
+  ``contact_problems.random_contact_problem``, three seeds): the same active set and s as the plain semismooth Newton to
   1e-10, never more steps on any problem, and fewer in total (measured 75 against 295 for seed 1).
 * On the heterogeneous strip at contrast 1e6 (model 3, Algorithm 1, h = 1/128, where a stiff channel rests on
   Γ_C and the plain Newton frees one node per step: 8 steps), the interface Newton with the default options
@@ -20,36 +20,15 @@ import numpy as np
 import pytest
 
 from fenics_contact.errors import ConvergenceError, InputError
-from fenics_contact.fem.contact import NewtonOptions
-from fenics_contact.fem.primal import default_penalty
 from fenics_contact.hybrid.iteration import InterfaceNewtonOptions, IterationOptions, iterate
 from fenics_contact.hybrid.newton import LocalFronts, contact_chains, contact_newton, contact_solve
-from fenics_contact.hybrid.primal import DEFAULT_ALPHA, PrimalHybridStep
-from fenics_contact.problem.geometry import unit_square
-from fenics_contact.problem.models import get_model
 
-
-def _random_problem(rng, n: int = 80):
-    """String on a foundation with stiff stretches on a stiffer foundation (SPD compliance M), a penalty 1e3–1e9
-    times stiffer, a load pushing in and pulling out; the unknowns shuffled (chains from the coordinates)."""
-    x = np.linspace(0.0, 1.0, n)
-    stiff, ground = np.ones(n - 1), np.ones(n)
-    for _ in range(rng.integers(1, 4)):
-        a, width, c = rng.integers(0, n - 8), rng.integers(3, 8), 10.0 ** rng.uniform(2, 6)
-        stiff[a : a + width] = c
-        ground[a : a + width + 1] = 10.0 ** rng.uniform(1, 3)
-    K = np.diag(np.r_[stiff, 0.0] + np.r_[0.0, stiff]) - np.diag(stiff, 1) - np.diag(stiff, -1)
-    K = K * (n - 1) + np.diag(ground) / (n - 1)
-    M = np.linalg.inv(K)
-    s_load = M @ np.sin(rng.uniform(2, 12) * x + rng.uniform(0, 6)) * rng.uniform(0.5, 2)
-    D = np.full(n, 10.0 ** rng.uniform(3, 9)) * np.r_[0.5, np.ones(n - 2), 0.5]
-    perm = rng.permutation(n)
-    return s_load[perm], M[np.ix_(perm, perm)], D[perm], np.c_[x, np.zeros(n)][perm]
+from contact_problems import random_contact_problem
 
 
 def test_local_problem_solves_the_window_equations_with_the_rest_held():
     rng = np.random.default_rng(7)
-    s_load, M, D, points = _random_problem(rng)
+    s_load, M, D, points = random_contact_problem(rng)
     chains = contact_chains(points)
     local = LocalFronts(chains, M, D, width=3)
     idx = chains[0][0]
@@ -81,7 +60,7 @@ def test_local_fronts_never_change_the_fixed_point_and_never_cost_a_step():
     for seed in (1, 2, 3):
         rng = np.random.default_rng(seed)
         for trial in range(30):
-            s_load, M, D, points = _random_problem(rng)
+            s_load, M, D, points = random_contact_problem(rng)
             s_p, mu_p, h_p = contact_newton(s_load, M, D, max_steps=200)
             s_w, mu_w, h_w = contact_newton(s_load, M, D, max_steps=200, chains=contact_chains(points), window=8)
             scale = np.abs(s_p).max()
@@ -97,7 +76,7 @@ def test_local_fronts_never_change_the_fixed_point_and_never_cost_a_step():
 
 def test_a_failed_local_resolution_falls_back_to_the_plain_newton(caplog):
     rng = np.random.default_rng(2)
-    s_load, M, D, points = _random_problem(rng)
+    s_load, M, D, points = random_contact_problem(rng)
     E = rng.uniform(-1.0, 1.0, M.shape)
     M = M + 1e-3 * np.abs(M) * 0.5 * (E - E.T)  # (the symmetric part stays positive definite)
     assert np.linalg.eigvalsh(0.5 * (M + M.T))[0] > 0.0
@@ -121,18 +100,8 @@ def test_front_window_option_is_checked():
             InterfaceNewtonOptions(front_window=bad)
 
 
-@pytest.fixture(scope="module")
-def strip():
-    """Algorithm 1 on model 3 at contrast 1e6, h = 1/128, H = 1/16: a stiff channel rests on Γ_C."""
-    cm = unit_square(128, 16)
-    step = PrimalHybridStep(cm, get_model(3, E_high=1e6), alpha=DEFAULT_ALPHA, delta=default_penalty(cm.h, 1e6),
-                            newton=NewtonOptions(rtol=1e-6))
-    step.prepare()
-    return step
-
-
-def test_local_fronts_take_fewer_steps_to_the_same_data_on_the_strip(strip):
-    step = strip
+def test_local_fronts_take_fewer_steps_to_the_same_data_on_the_strip(channel_strip):
+    step = channel_strip
     default = iterate(step, IterationOptions(accel="newton"))
     plain = iterate(step, IterationOptions(accel="newton", newton=InterfaceNewtonOptions(front_window=0)))
     assert default.converged and plain.converged and default.transmission_residual < 1e-6

@@ -509,8 +509,8 @@ class CondensedInterface:
         self.Gq[f] = sla.lu_solve(self.lu, self.P1 @ (a[:, None] * self.Yq[f]))
         self.M = self.Sq + self.Sc @ self.Gq
         self._chains = None
-        if problem.options.fronts or problem.options.front_window:  # offline (collective: all ranks' points)
-            self._chains = contact_chains(om2.contact_points()) if self.M.size else []
+        if problem.options.fronts or problem.options.front_window:
+            self.chains  # noqa: B018 -- formed offline (collective: all ranks' points), not in the timed solve
 
     def load_terms(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Online: (s_L, g₂₁ at λ = 0, y₂₀) from one Ω₂ back-solve and the Ω₁ load response."""
@@ -557,8 +557,7 @@ class CondensedInterface:
         p = self.problem
         s_load, g21_0, y20 = self.load_terms()
         try:
-            window = 0 if options.fronts else options.front_window
-            chains = self.chains if options.fronts or window else None
+            chains = self.chains if options.fronts or options.front_window else None
             _, lam, hist = contact_solve(s_load, self.M, self.D, options, name, chains)
         except ConvergenceError as err:
             lowest = self.lowest_eigenvalue()
@@ -583,10 +582,9 @@ def contact_solve(s_load: np.ndarray, M: np.ndarray, D: np.ndarray, options: Int
     converge: with a non-symmetric M (a multiscale Ω₁) the energy line search that stops cycles is no merit
     function, and a predicted set can lead into a cycle the plain Newton avoids.  The failed attempt's steps
     stay counted (``ContactNewtonHistory.discarded``)."""
-    window = 0 if options.fronts else options.front_window
     try:
         return contact_newton(s_load, M, D, max_steps=options.max_steps, name=name, chains=chains,
-                              window=window if chains else 0)
+                              window=0 if options.fronts else options.front_window)
     except ConvergenceError as first:
         if not chains:
             raise
@@ -837,13 +835,7 @@ class LocalFronts:
         act, seen = start.copy(), set()
         for it in range(2 * R.size + 10):
             seen.add(np.packbits(act).tobytes())
-            A = np.flatnonzero(act)
-            s = r.copy()
-            if A.size:
-                x = np.linalg.solve(MRR[np.ix_(A, A)] + np.diag(1.0 / DR[A]), r[A])
-                s -= MRR[:, A] @ x
-                s[A] = x / DR[A]
-            new = s > 0.0
+            new = _solve_on(r, MRR, DR, np.flatnonzero(act))[0] > 0.0
             if np.array_equal(new, act):
                 return new, it + 1
             if np.packbits(new).tobytes() in seen:  # a cycle (possible for a non-symmetric M)
@@ -865,6 +857,22 @@ class LocalFronts:
             if found is not None:
                 trial[R] = found
         return trial, (len(wins), iterations, largest)
+
+
+def _solve_on(s_load: np.ndarray, M: np.ndarray, D: np.ndarray, A: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """The contact equations s = s_L − M μ, μ = D s⁺ linearized on the set A (indices): (s, μ, the relative residual
+    of the solve).  (D_A⁻¹ + M_AA) μ_A = s_L,A, μ = 0 off A, s = s_L − M_:A μ_A and on A s = μ_A / D_A (no
+    cancellation with a stiff penalty); the residual is 0 for an empty A and infinite when not finite."""
+    s, mu = s_load.copy(), np.zeros(s_load.size)
+    if not A.size:
+        return s, mu, 0.0
+    K = M[np.ix_(A, A)] + np.diag(1.0 / D[A])
+    mu[A] = np.linalg.solve(K, s_load[A])
+    r = K @ mu[A] - s_load[A]
+    s = s_load - M[:, A] @ mu[A]
+    s[A] = mu[A] / D[A]
+    size = np.linalg.norm(s_load[A]) + np.linalg.norm(M[np.ix_(A, A)] @ mu[A]) + 1e-300
+    return s, mu, float(np.linalg.norm(r) / size) if np.isfinite(r).all() else np.inf
 
 
 def _line_search(mu: np.ndarray, dmu: np.ndarray, s: np.ndarray, ds: np.ndarray, s_load: np.ndarray,
@@ -923,20 +931,12 @@ def contact_newton(s_load: np.ndarray, M: np.ndarray, D: np.ndarray, *, max_step
         fronts = FrontExtrapolation(chains, M, D)
     for _ in range(max_steps):
         visited.add(np.packbits(active).tobytes())
-        A = np.flatnonzero(active)
-        s_new, mu_new = s_load.copy(), np.zeros(n)
-        if A.size:
-            K = M[np.ix_(A, A)] + np.diag(1.0 / D[A])
-            mu_new[A] = np.linalg.solve(K, s_load[A])
-            r = K @ mu_new[A] - s_load[A]
-            s_new = s_load - M[:, A] @ mu_new[A]
-            s_new[A] = mu_new[A] / D[A]
-            size = np.linalg.norm(s_load[A]) + np.linalg.norm(M[np.ix_(A, A)] @ mu_new[A]) + 1e-300
-            if not np.isfinite(r).all() or np.linalg.norm(r) > rtol * size:
-                error = ConvergenceError(f"{name}: the condensed contact system is singular or ill-conditioned "
-                                         f"(relative residual {np.linalg.norm(r) / size:.1e})")
-                error.steps = hist.steps + 1
-                raise error
+        s_new, mu_new, residual = _solve_on(s_load, M, D, np.flatnonzero(active))
+        if residual > rtol:
+            error = ConvergenceError(f"{name}: the condensed contact system is singular or ill-conditioned "
+                                     f"(relative residual {residual:.1e})")
+            error.steps = hist.steps + 1
+            raise error
         predicted = s_new > 0.0
         settled = np.array_equal(predicted, active)
         if fronts is not None and not settled:

@@ -243,6 +243,24 @@ class MixedCEMOptions:
 # ---------------------------------------------------------------------------------------
 # helpers
 # ---------------------------------------------------------------------------------------
+def _csr_cell_blocks(A: sp.csr_matrix, rows: np.ndarray, b: int) -> tuple[np.ndarray, np.ndarray]:
+    """(values, columns), each (n, a, b): the CSR entries of the cells' rows ``rows`` (n, a), every one of which holds
+    b entries.  Where every row of A holds b entries and each cell's rows are a whole block of a consecutive rows
+    (a DG form, the AW prolongation on a serial mesh), the CSR arrays are the blocks already: views when the
+    cells come in row order, one gather of blocks otherwise; else one (n, a, b) index gather."""
+    n, a = rows.shape
+    first = rows[:, 0]
+    if (A.shape[0] % a == 0 and np.all(np.diff(A.indptr) == b) and np.all(first % a == 0)
+            and np.array_equal(rows - first[:, None], np.broadcast_to(np.arange(a), rows.shape))):
+        data, ind = A.data.reshape(-1, a, b), A.indices.reshape(-1, a, b)
+        k = first // a
+        if not (k.size == data.shape[0] and np.array_equal(k, np.arange(k.size))):
+            data, ind = data[k], ind[k]
+        return data, ind
+    at = A.indptr[rows][..., None] + np.arange(b)  # (n, a, b)
+    return A.data[at], A.indices[at]
+
+
 def _cell_blocks(A: sp.spmatrix, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
     """Diagonal blocks (n, a, b) of a cellwise operator: A[rows[c]][:, cols[c]] (zero blocks allowed).
 
@@ -255,18 +273,7 @@ def _cell_blocks(A: sp.spmatrix, rows: np.ndarray, cols: np.ndarray) -> np.ndarr
     if n and A.has_sorted_indices and np.all(np.diff(A.indptr)[rows] == b):
         # each row holds exactly its cell's columns (a DG form's pattern): read the blocks off the CSR arrays
         order = np.argsort(cols, axis=1)
-        first = rows[:, 0]
-        if (A.shape[0] % a == 0 and np.all(np.diff(A.indptr) == b) and np.all(first % a == 0)
-                and np.array_equal(rows - first[:, None], np.broadcast_to(np.arange(a), rows.shape))):
-            # the cells' rows are whole blocks of a consecutive rows, each row of b entries: the CSR arrays
-            # are the blocks already (views when the cells come in row order; one gather of blocks otherwise)
-            data, ind = A.data.reshape(-1, a, b), A.indices.reshape(-1, a, b)
-            k = first // a
-            if not (k.size == data.shape[0] and np.array_equal(k, np.arange(k.size))):
-                data, ind = data[k], ind[k]
-        else:
-            at = A.indptr[rows][..., None] + np.arange(b)  # (n, a, b)
-            data, ind = A.data[at], A.indices[at]
+        data, ind = _csr_cell_blocks(A, rows, b)
         if np.array_equal(ind, np.broadcast_to(np.take_along_axis(cols, order, axis=1)[:, None, :], ind.shape)):
             if np.all(np.diff(cols, axis=1) > 0):  # the cells' columns in increasing order: no permutation
                 return data
@@ -321,23 +328,14 @@ def _row_blocks(P: sp.spmatrix, rows: np.ndarray) -> tuple[np.ndarray, np.ndarra
     """``_column_blocks(P[rows.ravel()], ...)`` read straight from the CSR arrays when every cell's rows hold
     the same sorted columns (as the AW prolongation's rows do: each DG row lives in one cell); else that."""
     P = sp.csr_matrix(P)
-    if P.has_sorted_indices:
-        n, a = rows.shape
-        counts = np.diff(P.indptr)[rows]  # (n, a)
-        w = int(counts[0, 0]) if counts.size else 0
-        if (counts.size and P.shape[0] == n * a and P.indptr[-1] == n * a * w
-                and np.array_equal(P.indptr, w * np.arange(n * a + 1)) and np.array_equal(rows.ravel(), np.arange(n * a))):
-            # every row holds w entries and the cells' rows are consecutive (Ω₁'s serial DG numbering): views of the
-            # CSR arrays, no (n, a, w) index array (173 MB at h = 1/128)
-            idx = P.indices.reshape(n, a, w)
-            cols = idx[:, 0].astype(np.int64)
-            if np.array_equal(idx, np.broadcast_to(idx[:, :1], idx.shape)):
-                return cols, P.data.reshape(n, a, w)
-        if counts.size and np.all(counts == w):
-            at = P.indptr[rows][..., None] + np.arange(w)  # (n, a, w)
-            cols = P.indices[at[:, 0]].astype(np.int64)
-            if np.array_equal(P.indices[at], np.broadcast_to(cols[:, None, :], at.shape)):
-                return cols, P.data[at]
+    counts = np.diff(P.indptr)[rows]  # (n, a)
+    w = int(counts[0, 0]) if counts.size else 0
+    if P.has_sorted_indices and counts.size and np.all(counts == w):
+        # (views of the CSR arrays for Ω₁'s serial DG numbering: no (n, a, w) index array, 173 MB at h = 1/128)
+        data, ind = _csr_cell_blocks(P, rows, w)
+        cols = ind[:, 0].astype(np.int64)
+        if np.array_equal(ind, np.broadcast_to(cols[:, None, :], ind.shape)):
+            return cols, data
     return _column_blocks(P[rows.ravel()], rows.shape[0], rows.shape[1])
 
 

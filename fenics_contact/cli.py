@@ -626,6 +626,10 @@ class _Outcome(NamedTuple):
     write: Callable[[Path], None]
 
 
+def _finite_or_none(x: float) -> float | None:
+    return float(x) if math.isfinite(x) else None
+
+
 def _run_primal(options: RunOptions, cm: ContactMesh, model, fields) -> _Outcome:
     """Algorithms 1 (primal) and 3 (primal-ms), with the monolithic primal reference."""
     delta = options.delta if options.delta is not None else default_penalty(cm.h, _contact_modulus(cm, fields.E))
@@ -650,6 +654,8 @@ def _run_primal(options: RunOptions, cm: ContactMesh, model, fields) -> _Outcome
         "layers": options.value("layers") if ms else None,
         "nbasis": options.value("nbasis") if ms else None,
         "offline_cache": result.step.omega1.cache_status if ms else None,
+        # Λ, the smallest local eigenvalue left out (it falls like μ/(λ+2μ) as ν → ½, and with inclusions)
+        "spectral_gap": _finite_or_none(result.step.omega1.spectral_gap) if ms else None,
     }
 
     def write(out: Path) -> None:

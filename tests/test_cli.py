@@ -77,6 +77,8 @@ def test_primal_ms_method_and_offline_cache(tmp_path):
     assert b["time_offline_s"] < a["time_offline_s"]
     assert len(list((tmp_path / "cache").iterdir())) == 1
     assert (a["offline_cache"], b["offline_cache"]) == ("built", "loaded")
+    # Λ, the smallest local eigenvalue left out, is reported and survives the cache
+    assert b["spectral_gap"] == a["spectral_gap"] > 0
 
 
 def test_mixed_ms_offline_cache(tmp_path):

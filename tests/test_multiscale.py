@@ -100,8 +100,9 @@ def test_local_eigenproblems(omega1_32_8):
         assert np.max(np.linalg.norm(res, axis=0) / scale) < 1e-9
         assert np.allclose(Phi.T @ S @ Phi, np.eye(3), atol=1e-10)
         # independent reference: dense LAPACK via SciPy
-        ref = scipy.linalg.eigh(A.toarray(), S.toarray(), eigvals_only=True, subset_by_index=[0, 2])
-        assert np.allclose(lam, ref, rtol=1e-8, atol=1e-9)
+        ref = scipy.linalg.eigh(A.toarray(), S.toarray(), eigvals_only=True, subset_by_index=[0, 3])
+        assert np.allclose(lam, ref[:3], rtol=1e-8, atol=1e-9)
+        assert aux.gaps[k] == pytest.approx(ref[3], rel=1e-8)  # Λ_k, the first eigenvalue left out
         i, j = om.grid.ij[k]
         if 0 < i < 6 and 0 < j < 7:
             interior.append(lam)
@@ -154,6 +155,37 @@ def test_basis_supported_in_patch(omega1_32_8):
     # strictly inside K_{k,2} = [1, 6]H × [2, 7]H
     assert x[:, 0].min() > 1 * H and x[:, 0].max() < 6 * H
     assert x[:, 1].min() > 2 * H and x[:, 1].max() < 7 * H
+
+
+def _fine_robin_error(om: cem.Omega1Multiscale, g: np.ndarray) -> float:
+    """Relative energy error of the multiscale Ω₁ Robin solution against an independent fine solve."""
+    fine = PrimalSubproblem(om.ops.V.mesh, om.facet_tags, om.fields, delta=None, alpha=om.alpha_fn,
+                            prefix="test_ms_fine_gap_", V=om.V)
+    try:
+        fine.g.x.array[:] = 0.0
+        fine.g.x.array[om.ops.gamma] = g
+        fine.solve()
+        ref = fine.u.x.array.copy()
+    finally:
+        fine.destroy()
+    d = om.solver.solve(g) - ref
+    return float(np.sqrt(d @ om.ops.K @ d / (ref @ om.ops.K @ ref)))
+
+
+def test_nearly_incompressible_omega1_is_reported(mesh_32_8, caplog):
+    """ν → ½: Λ (the first local eigenvalue left out) falls like μ/(λ+2μ), the bases localize slowly and the
+    Ω₁ error at a fixed m grows many times; Algorithm 3 says so (no silent loss of accuracy)."""
+    errors, gaps = {}, {}
+    for nu in (0.35, 0.49):
+        caplog.clear()
+        om, _, _ = cem.build_omega1_multiscale(mesh_32_8, models.get_model(1, nu=nu),
+                                               cem=cem.CEMOptions(layers=2, nbasis=3))
+        assert om.nu_max == pytest.approx(nu)
+        assert ("localize slowly" in caplog.text) == (nu > cem.NEARLY_INCOMPRESSIBLE)
+        gaps[nu] = om.spectral_gap
+        errors[nu] = _fine_robin_error(om, _robin_data(om))
+    assert gaps[0.49] < 0.2 * gaps[0.35]  # Λ ∝ μ/(λ+2μ): 0.54 → 0.07 in λ/(λ+2μ) units
+    assert errors[0.49] > 5 * errors[0.35], errors  # the loss the warning is about (0.43 against 0.045)
 
 
 # -- verification: full space ------------------------------------------------------------------

@@ -139,9 +139,19 @@ log = logging.getLogger(__name__)
 ALL_MODES = None
 
 #: Bumped whenever the layout or meaning of the cached arrays changes.
-CACHE_FORMAT = 2
+CACHE_FORMAT = 3  # 3: aux_gaps (the first eigenvalue left out on each coarse cell)
 
 _EIGENSOLVERS = ("auto", "krylovschur", "lapack")
+
+#: Algorithm 3 warns when ν in Ω₁ exceeds this.  As ν → ½ the smallest local eigenvalue left out, Λ,
+#: falls like μ/(λ+2μ) and the bases localize slowly: model 3 at E 1e6, h = 1/64, H = 1/16, l = 3, m = 4
+#: (``benchmarks/multiscale_primal.py --parts j``): energy error 3.3e-3 (ν = 0.35, Λ·c = 0.78), 3.2e-3
+#: (0.4, 0.59), 2.9e-2 (0.45, 0.34), 0.30 (0.48, 0.15), 0.51 (0.49, 0.08), 0.82 (0.499, 0.01).  Adding
+#: modes does not cure it: with l_k raised until Λ ≥ 0.3 (a prototype of Algorithm 4's rule) the error at
+#: ν = 0.48, m = 4 stays 0.29 (the slow decay comes from λ/μ in a(·,·) itself, not only from Λ).  A small Λ
+#: alone is no reason to warn: high-contrast inclusions inside a coarse cell give one too (model 2 at
+#: H = 1/8, ν = 0.35: Λ·c = 0.34), which the CEM bases are built for.
+NEARLY_INCOMPRESSIBLE = 0.42
 
 
 # ---------------------------------------------------------------------------------------
@@ -578,6 +588,13 @@ class AuxiliarySpace:
     vectors: list  #: Φ_k, |D_k| × l_k
     B: sp.csr_matrix
     offsets: np.ndarray  #: columns of cell k in B: offsets[k]:offsets[k+1]
+    #: Λ_k, the first eigenvalue left out on each coarse cell (inf when all are kept)
+    gaps: np.ndarray
+
+    @property
+    def spectral_gap(self) -> float:
+        """Λ = min_k Λ_k (inf when every cell keeps all its modes)."""
+        return float(self.gaps.min()) if self.gaps.size else np.inf
 
     @property
     def size(self) -> int:
@@ -663,23 +680,30 @@ def build_auxiliary_space(
 
     def eigenproblem(k: int) -> tuple:
         D, A, S = local_matrices(ops, grid, k)
+        # one pair more than kept: Λ_k, the first eigenvalue left out (for the small-gap warning)
+        nev = options.nbasis if options.nbasis is None or options.nbasis >= D.size else options.nbasis + 1
         lam, Phi = local_spectral_problem(
-            A, S, options.nbasis, eigensolver=options.eigensolver, target=options.target, tol=options.eig_tol
+            A, S, nev, eigensolver=options.eigensolver, target=options.target, tol=options.eig_tol
         )
+        gap = np.inf
+        if options.nbasis is not None and lam.size > options.nbasis:
+            gap = float(lam[options.nbasis])
+            lam, Phi = lam[:options.nbasis], Phi[:, :options.nbasis]
         if options.threshold is not None:
             keep = max(1, int(np.count_nonzero(lam <= options.threshold)))
+            gap = float(lam[keep]) if keep < lam.size else gap
             lam, Phi = lam[:keep], Phi[:, :keep]
-        return D, lam, Phi
+        return D, lam, Phi, gap
 
     parts = run_shared(sizes**1.5, comm, "CEM local eigenproblems", eigenproblem, balanced=True, logger=log)
     dofs = [p[0] for p in parts]
     values = [p[1] for p in parts]
     vectors = [p[2] for p in parts]
     blocks = [ops.Sc[int(grid.colors[k])][D][:, D] @ Phi for k, (D, Phi) in enumerate(zip(dofs, vectors))]
-    return _aux_from_parts(ops.size, dofs, values, vectors, blocks)
+    return _aux_from_parts(ops.size, dofs, values, vectors, blocks, np.array([p[3] for p in parts]))
 
 
-def _aux_from_parts(n: int, dofs, values, vectors, blocks) -> AuxiliarySpace:
+def _aux_from_parts(n: int, dofs, values, vectors, blocks, gaps: np.ndarray) -> AuxiliarySpace:
     offsets = np.concatenate([[0], np.cumsum([Phi.shape[1] for Phi in vectors])]).astype(np.int64)
     rows = np.concatenate([np.repeat(D, b.shape[1]) for D, b in zip(dofs, blocks)])
     cols = np.concatenate(
@@ -687,7 +711,7 @@ def _aux_from_parts(n: int, dofs, values, vectors, blocks) -> AuxiliarySpace:
     )
     data = np.concatenate([b.ravel() for b in blocks])
     B = sp.csr_matrix((data, (rows, cols)), shape=(n, int(offsets[-1])))
-    return AuxiliarySpace(list(dofs), list(values), list(vectors), B, offsets)
+    return AuxiliarySpace(list(dofs), list(values), list(vectors), B, offsets, np.asarray(gaps, dtype=np.float64))
 
 
 # ---------------------------------------------------------------------------------------
@@ -1143,6 +1167,7 @@ def _pack(space: MultiscaleSpace) -> dict:
         "aux_dof_offsets": np.concatenate([[0], np.cumsum([d.size for d in aux.dofs])]).astype(np.int64),
         "aux_dofs": np.concatenate(aux.dofs).astype(np.int64),
         "aux_values": np.concatenate(aux.eigenvalues),
+        "aux_gaps": aux.gaps,
         "aux_vectors": np.concatenate([Phi.ravel() for Phi in aux.vectors]),
         "meta": np.array([space.layers, space.n, space.n_gamma, len(space.basis), len(space.correction)]),
         "correction_cells": np.asarray(space.correction_cells, dtype=np.int64),
@@ -1173,7 +1198,7 @@ def _unpack(arrays: dict, ops: FineOperators, grid: CoarseGrid) -> MultiscaleSpa
         values.append(arrays["aux_values"][offs[k]:offs[k + 1]])
         vectors.append(Phi)
         blocks.append(S @ Phi)
-    aux = _aux_from_parts(ops.size, dofs, values, vectors, blocks)
+    aux = _aux_from_parts(ops.size, dofs, values, vectors, blocks, arrays["aux_gaps"])
     layers, n, ng, nb, nc = (int(x) for x in arrays["meta"])
     if n != ops.size or ng != ops.gamma.size or nb != grid.size:
         raise ValueError("cached multiscale space does not match the Ω₁ operators")
@@ -1328,6 +1353,16 @@ class Omega1Multiscale:
             self.ops, self.grid, cem, h=cm.h, cache_dir=cache_dir, comm=comm
         )
         self.solver = MultiscaleRobinSolver(self.ops, self.space, self.grid, comm=comm)
+        self.nu_max = float(np.max(self.fields.nu.x.array, initial=0.0))  #: largest ν in Ω₁
+        if self.nu_max > NEARLY_INCOMPRESSIBLE and comm.rank == 0:
+            log.warning(
+                "primal CEM with ν up to %.4g in Ω₁ (Λ·c = %.2f, Λ the smallest local eigenvalue left out): the "
+                "bases localize slowly as ν → ½ and the Ω₁ error at m = %d layers may be large (model 3 at E 1e6, "
+                "h = 1/64, H = 1/16, m = 4: energy error 3.2e-3 at ν = 0.4, 2.9e-2 at 0.45, 0.30 at 0.48, 0.51 at "
+                "0.49; P1 itself locks as ν → ½). Check with --reference; more layers help up to ν ≈ 0.48 (8.9e-2 "
+                "at m = 5, 1.7e-2 at m = 6), not at ν = 0.499 (0.79 at m = 6); --method mixed-ms is robust in ν.",
+                self.nu_max, self.spectral_gap * cem.s_factor, cem.layers,
+            )
         self.times = {
             "assembly": t_assembly,
             "eigen": self.space.times.get("eigen", 0.0),
@@ -1335,6 +1370,17 @@ class Omega1Multiscale:
             "cache_load": self.space.times.get("load", 0.0),
             "coarse": self.solver.time_s,
         }
+
+    @property
+    def spectral_gap(self) -> float:
+        """Λ = min over the coarse cells of the first local eigenvalue left out (inf when all are kept)."""
+        return self.space.aux.spectral_gap
+
+    @property
+    def nbasis_range(self) -> tuple[int, int]:
+        """(least, most) local modes kept on a coarse cell."""
+        counts = np.diff(self.space.aux.offsets)
+        return int(counts.min()), int(counts.max())
 
     @property
     def num_coarse_dofs(self) -> int:

@@ -26,6 +26,9 @@ Sections:
    force–indentation curve, the Hertz errors at every step, and what the warm start saves.
 5. (``--sections 5``) the Hertz errors over nine depths: their spread as the contact edge moves
    across a cell.
+6. (``--sections 6``) P1 locking: the relative L² error of P1 for a divergence-free u = curl ψ on the
+   clamped unit square (``problem.analytic.p1_locking_error``) against ν and h; the primal methods warn
+   from ν = ``fem.primal.P1_LOCKING_NU`` on.
 """
 
 import argparse
@@ -271,6 +274,22 @@ def edge_sweep_section(refinements: list[float], mixed_max: float, count: int = 
     return lines + [""]
 
 
+def locking_section(sizes: list[int], nus=(0.3, 0.4, 0.45, 0.48, 0.49, 0.499, 0.4999)) -> list[str]:
+    """P1 on u = curl ψ, clamped square: the L² error against ν and h (no contact)."""
+    from fenics_contact.problem.analytic import p1_locking_error
+
+    lines = ["## 6. P1 locking: u = curl ψ on the clamped unit square (no contact)", "",
+             "| ν | " + " | ".join(f"e_u h = 1/{n}" for n in sizes) + " | ratio to ν = 0.3 (finest h) |",
+             "|---|" + "---|" * len(sizes) + "---|"]
+    base = None
+    for nu in nus:
+        e = [p1_locking_error(n, nu) for n in sizes]
+        base = e[-1] if base is None else base
+        lines.append(f"| {nu} | " + " | ".join(f"{x:.2e}" for x in e) + f" | {e[-1] / base:.1f} |")
+        print(lines[-1], flush=True)
+    return lines + [""]
+
+
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--bar-sizes", type=int, nargs="+", default=[8, 16, 32, 64])
@@ -278,7 +297,8 @@ def main(argv=None) -> None:
     parser.add_argument("--hertz-refinements", type=float, nargs="+", default=[0.5, 1.0, 2.0])
     parser.add_argument("--hertz-mixed-max", type=float, default=2.0, help="largest refinement for the mixed methods")
     parser.add_argument("--sections", type=int, nargs="+", default=[1, 2, 3, 4],
-                        help="which sections to run (5: the Hertz edge-position sweep, not in the default)")
+                        help="which sections to run (5: the Hertz edge-position sweep, 6: P1 locking; not in the "
+                        "default)")
     parser.add_argument("--indentation-steps", type=int, default=4, help="load steps of section 4")
     parser.add_argument("--indentation-refinement", type=float, default=1.0)
     parser.add_argument("--tol", type=float, default=1e-8, help="tolerance of Algorithms 1–4 (transmission residual)")
@@ -288,6 +308,7 @@ def main(argv=None) -> None:
     parser.add_argument("--ms-hertz-refinements", type=float, nargs="+", default=[0.5, 1.0],
                         help="Hertz refinements of Algorithms 3 and 4")
     parser.add_argument("--hertz-coarse", type=float, default=0.5, help="coarse-cell side on the Hertz block")
+    parser.add_argument("--locking-sizes", type=int, nargs="+", default=[16, 32, 64], help="1/h of section 6")
     parser.add_argument("--out", type=Path, default=Path("benchmarks/results/analytic.md"))
     args = parser.parse_args(argv)
     options = IterationOptions(tol=args.tol)
@@ -305,10 +326,11 @@ def main(argv=None) -> None:
                                  args.ms_hertz_refinements, args.hertz_coarse),
         4: lambda: indentation_section(args.indentation_refinement, args.indentation_steps, options),
         5: lambda: edge_sweep_section(args.hertz_refinements, args.hertz_mixed_max),
+        6: lambda: locking_section(args.locking_sizes),
     }
     for number in args.sections:
         if number not in sections:
-            parser.error(f"unknown section {number}; choose among 1 2 3 4 5")
+            parser.error(f"unknown section {number}; choose among 1 2 3 4 5 6")
         lines += sections[number]()
     lines.append(f"Total time {time.perf_counter() - start:.0f} s.")
     write_report(args.out, lines)

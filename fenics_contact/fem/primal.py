@@ -454,6 +454,28 @@ class PrimalSolution:
     problem: PrimalSubproblem
 
 
+#: The primal (P1) methods warn when ν reaches this.  P1 locks as ν → ½: on u = curl ψ, the clamped unit
+#: square (``problem.analytic.p1_locking_error``; ``benchmarks/analytic_benchmarks.py --sections 6``), the
+#: relative L² error at h = 1/64 is 3.4e-3 at ν = 0.3, 1.7e-2 at 0.48, 3.2e-2 at 0.49, 0.21 at 0.499 and
+#: 0.68 at 0.4999 (0.89 at h = 1/32): about 10× the compressible error at ν = 0.49, 60× at 0.499.
+P1_LOCKING_NU = 0.49
+
+
+def warn_if_locking(nu: fem.Function | None, comm) -> None:
+    """Log a warning when ν reaches ``P1_LOCKING_NU``: P1 locks as ν → ½."""
+    if nu is None:
+        return
+    local = float(np.max(nu.x.array, initial=0.0))
+    nu_max = comm.allreduce(local, op=MPI.MAX)
+    if nu_max >= P1_LOCKING_NU and comm.rank == 0:
+        log.warning(
+            "ν reaches %.6g: P1 displacement elements lock as ν → ½ (a divergence-free test solution on the "
+            "clamped square, h = 1/64: L² error 3.4e-3 at ν = 0.3, 3.2e-2 at 0.49, 0.21 at 0.499, 0.68 at 0.4999), "
+            "so the primal methods (monolithic, Algorithms 1 and 3) may be far from the elastic solution; "
+            "--method mixed or mixed-ms (Arnold–Winther stress) is robust in ν.", nu_max,
+        )
+
+
 def solve_primal_monolithic(
     msh: dmesh.Mesh,
     facet_tags: dmesh.MeshTags,
@@ -467,6 +489,7 @@ def solve_primal_monolithic(
     require_facet_groups(msh, facet_tags, (Boundary.GAMMA_D, Boundary.GAMMA_C))
     start = time.perf_counter()
     check_boundary_groups(msh, facet_tags, fields.boundary)
+    warn_if_locking(fields.nu, msh.comm)
     problem = PrimalSubproblem(msh, facet_tags, fields, delta=delta, alpha=None, prefix=prefix, newton=newton)
     history = problem.solve()
     elapsed = time.perf_counter() - start

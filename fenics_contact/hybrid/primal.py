@@ -34,7 +34,7 @@ from fenics_contact.problem.boundary import check_boundary_groups
 from fenics_contact.problem.fields import material_fields
 from fenics_contact.problem.geometry import ContactMesh
 from fenics_contact.problem.models import TestModel
-from fenics_contact.fem.primal import PrimalSubproblem
+from fenics_contact.fem.primal import PrimalSubproblem, warn_if_locking
 from fenics_contact.hybrid.transmission import InterfaceSpace, robin_coefficient, split_mesh
 
 __all__ = ["PrimalHybridStep", "HybridResult", "solve_primal_hybrid", "solve_or_verify", "DEFAULT_ALPHA",
@@ -88,6 +88,7 @@ class PrimalHybridStep:
         gdim = cm.mesh.geometry.dim
         self.interface = InterfaceSpace(cm, self.parts, shape=(gdim,))
         parent_fields = material_fields(cm.mesh, model)
+        warn_if_locking(parent_fields.nu, cm.comm)
         check_boundary_groups(cm.mesh, cm.facet_tags, parent_fields.boundary, names=cm.neumann_names)
         self.alpha = robin_coefficient(alpha, parent_fields.E, self.interface, cm.h)
         self.sub = []

@@ -31,7 +31,7 @@ from fenics_contact.errors import InputError
 from fenics_contact.problem.fields import material_fields
 from fenics_contact.problem.geometry import ContactMesh
 from fenics_contact.problem.models import TestModel
-from fenics_contact.fem.primal import PrimalSubproblem
+from fenics_contact.fem.primal import PrimalSubproblem, warn_if_locking
 from fenics_contact.hybrid.primal import HybridResult, omega2_record, solve_or_verify
 from fenics_contact.hybrid.transmission import InterfaceSpace, robin_coefficient, split_mesh
 
@@ -66,6 +66,7 @@ class MultiscalePrimalHybridStep:
         gdim = cm.mesh.geometry.dim
         self.interface = InterfaceSpace(cm, self.parts, shape=(gdim,))
         parent_fields = material_fields(cm.mesh, model)
+        warn_if_locking(parent_fields.nu, cm.comm)
         self.alpha = robin_coefficient(alpha, parent_fields.E, self.interface, cm.h)
         self.omega1 = Omega1Multiscale(
             cm, model, self.parts, self.interface, self.alpha, cem=cem, cache_dir=cache_dir

@@ -199,7 +199,7 @@ def force_indentation(
     ``alpha``, ``beta``, ``delta``, ``epsilon`` and ``cem`` are then the step's.
     """
     from fenics_contact.fem.mixed import MixedSubproblem, contact_modulus, default_epsilon
-    from fenics_contact.fem.primal import PrimalSubproblem, default_penalty
+    from fenics_contact.fem.primal import PrimalSubproblem, default_penalty, warn_if_locking
     from fenics_contact.hybrid.mixed import MixedHybridStep
     from fenics_contact.hybrid.primal import DEFAULT_ALPHA, DEFAULT_ALPHA_MS, PrimalHybridStep
     from fenics_contact.problem.boundary import check_boundary_groups
@@ -234,6 +234,7 @@ def force_indentation(
             epsilon = default_epsilon(cm.h, E_c) if epsilon is None else epsilon
 
     if method == "primal-monolithic":
+        warn_if_locking(fields.nu, cm.comm)
         sub = PrimalSubproblem(cm.mesh, cm.facet_tags, fields, delta=delta, alpha=None,
                                prefix="fc_indent_primal_", newton=newton)
         contact, hybrid = sub, None

@@ -7,6 +7,7 @@ nonlinear Ω₂ problem (contact and Robin). Forms come from ``forms_primal``.
 
 import logging
 import time
+import weakref
 from dataclasses import dataclass
 
 import numpy as np
@@ -459,15 +460,21 @@ class PrimalSolution:
 #: relative L² error at h = 1/64 is 3.4e-3 at ν = 0.3, 1.7e-2 at 0.48, 3.2e-2 at 0.49, 0.21 at 0.499 and
 #: 0.68 at 0.4999 (0.89 at h = 1/32): about 10× the compressible error at ν = 0.49, 60× at 0.499.
 P1_LOCKING_NU = 0.49
+_locking_warned = weakref.WeakSet()  #: meshes already warned about (one warning per mesh, not per solve)
 
 
 def warn_if_locking(nu: fem.Function | None, comm) -> None:
-    """Log a warning when ν reaches ``P1_LOCKING_NU``: P1 locks as ν → ½."""
+    """Log a warning when ν reaches ``P1_LOCKING_NU``: P1 locks as ν → ½ (once per mesh: a run with its
+    monolithic reference warns once).  Collective on ``comm``."""
     if nu is None:
         return
     local = float(np.max(nu.x.array, initial=0.0))
     nu_max = comm.allreduce(local, op=MPI.MAX)
-    if nu_max >= P1_LOCKING_NU and comm.rank == 0:
+    msh = nu.function_space.mesh
+    if nu_max < P1_LOCKING_NU or msh in _locking_warned:
+        return
+    _locking_warned.add(msh)
+    if comm.rank == 0:
         log.warning(
             "ν reaches %.6g: P1 displacement elements lock as ν → ½ (a divergence-free test solution on the "
             "clamped square, h = 1/64: L² error 3.4e-3 at ν = 0.3, 3.2e-2 at 0.49, 0.21 at 0.499, 0.68 at 0.4999), "

@@ -88,8 +88,8 @@ class PrimalHybridStep:
         gdim = cm.mesh.geometry.dim
         self.interface = InterfaceSpace(cm, self.parts, shape=(gdim,))
         parent_fields = material_fields(cm.mesh, model)
-        warn_if_locking(parent_fields.nu, cm.comm)
         check_boundary_groups(cm.mesh, cm.facet_tags, parent_fields.boundary, names=cm.neumann_names)
+        warn_if_locking(parent_fields.nu, cm.comm)
         self.alpha = robin_coefficient(alpha, parent_fields.E, self.interface, cm.h)
         self.sub = []
         for i, part in enumerate(self.parts):

@@ -12,7 +12,10 @@ Every measurement runs in a fresh process (its peak resident memory is that of t
   (the iteration), peak RSS, cache size; then a second process that loads the cache;
 * ``mixed-ms`` under ``mpiexec -n R`` (``--ranks R``): the offline phase shared out, without a cache
   (so the patch functions stay on the rank that computed them); speed-up = serial offline without its
-  cache write / parallel offline, both of the same run of this script.
+  cache write / parallel offline, both of the same run of this script;
+* ``--repeats K`` (sizes of ``--mpi-sizes``): K interleaved pairs, a serial process without a cache then
+  the R-rank one, each pair's ratio and their median (on a VM whose speed drifts by 10–20 % within
+  minutes, one pair is one sample, not the speed-up).
 
 Cost exponents are least-squares slopes of log(cost) against log(DOFs) over the sizes run
 (DOFs: the fine mixed problem on Ω, AW + displacement). Times on a shared machine vary by 1.5–2×;
@@ -115,6 +118,8 @@ def main() -> None:
     parser.add_argument("--layers", type=int, default=3)
     parser.add_argument("--ranks", type=int, default=2, help="MPI ranks for the shared offline phase (0: skip)")
     parser.add_argument("--mpi-sizes", default=None, help="sizes for the MPI run (default: the largest)")
+    parser.add_argument("--repeats", type=int, default=0,
+                        help="interleaved (serial without cache, R ranks) pairs per MPI size, median ratio (0: none)")
     parser.add_argument("--out", type=Path, default=Path("benchmarks/results/mixed_ms_scaling.md"))
     parser.add_argument("--worker", choices=("monolithic", "mixed-ms"), help=argparse.SUPPRESS)
     parser.add_argument("--n", type=int, help=argparse.SUPPRESS)
@@ -148,7 +153,15 @@ def main() -> None:
                 par = _run([mpiexec, "-n", str(args.ranks), *me, "--worker", "mixed-ms", "--n", str(n)])
         finally:
             shutil.rmtree(tmp, ignore_errors=True)
-        row = {"n": n, "mono": mono, "built": built, "loaded": loaded, "par": par}
+        pairs = []
+        if args.ranks > 1 and n in mpi_sizes and mpiexec is not None:
+            for _ in range(args.repeats):
+                serial = _run([*me, "--worker", "mixed-ms", "--n", str(n)])
+                ranks = _run([mpiexec, "-n", str(args.ranks), *me, "--worker", "mixed-ms", "--n", str(n)])
+                pairs.append((serial["time_offline_s"], ranks["time_offline_s"], serial["offline_times"],
+                              ranks["offline_times"]))
+                print(json.dumps({"n": n, "pair": pairs[-1][:2]}), flush=True)
+        row = {"n": n, "mono": mono, "built": built, "loaded": loaded, "par": par, "pairs": pairs}
         rows.append(row)
         print(json.dumps(row), flush=True)
 
@@ -187,6 +200,22 @@ def main() -> None:
             f"{b['peak_rss_gb']:.2f} | {b['cache_gb']:.3f} | {ld['offline_times'].get('load', float('nan')):.1f} | "
             f"{par_cols} |"
         )
+    if any(r["pairs"] for r in rows):
+        lines += ["", f"Interleaved pairs (`--repeats {args.repeats}`): a serial process without a cache, then "
+                  f"{args.ranks} ranks; offline wall s (set-up; Stage I, Stage II, coarse):", "",
+                  f"| h | pair | serial s | {args.ranks} ranks s | ratio |", "|---|---|---|---|---|"]
+
+        def parts(t: dict) -> str:
+            return f"{t.get('setup', 0):.1f}; " + ", ".join(f"{t.get(k, 0):.1f}" for k in ("eigen", "basis", "coarse"))
+
+        for r in rows:
+            ratios = [s / p for s, p, *_ in r["pairs"]]
+            for k, (s, p, ts, tp) in enumerate(r["pairs"]):
+                lines.append(f"| 1/{r['n']} | {k + 1} | {s:.1f} ({parts(ts)}) | {p:.1f} ({parts(tp)}) | "
+                             f"{s / p:.2f} |")
+            if ratios:
+                lines.append(f"| 1/{r['n']} | median | {np.median([s for s, *_ in r['pairs']]):.1f} | "
+                             f"{np.median([p for _, p, *_ in r['pairs']]):.1f} | **{np.median(ratios):.2f}** |")
     dofs = [r["mono"]["dofs"] for r in rows]
     fits = {
         "monolithic solve (time)": [r["mono"]["time_s"] for r in rows],

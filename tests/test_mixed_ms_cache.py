@@ -512,3 +512,31 @@ def test_skeleton_factorizations_reuse_the_analysis_of_a_pattern():
     assert len(cache.entries) == 2  # the two most recent patterns
     cache.release()
     assert not cache.entries
+
+
+def test_stage_two_analyses_each_skeleton_pattern_once(monkeypatch):
+    """Serially the patches are grouped by class (``_patch_classes``: translates), so MUMPS analyses each
+    distinct skeleton sparsity pattern once (h = 1/64, H = 1/16, m = 3: 81 patterns among 240 patches against 144
+    analyses in index order; here h = 1/32, H = 1/8, m = 2)."""
+    import hashlib
+
+    patterns, fresh = [], []
+    factor, symmetric = mm._ReusedAnalysis.factor, mm._MumpsLU.symmetric.__func__
+
+    def counting_factor(self, upper):
+        patterns.append(hashlib.sha1(upper.indptr.tobytes() + upper.indices.tobytes()).hexdigest())
+        return factor(self, upper)
+
+    def counting_symmetric(cls, upper):
+        fresh.append(1)
+        return symmetric(cls, upper)
+
+    monkeypatch.setattr(mm._ReusedAnalysis, "factor", counting_factor)
+    monkeypatch.setattr(mm._MumpsLU, "symmetric", classmethod(counting_symmetric))
+    cm = geometry.unit_square(32, 8)
+    step = MixedHybridStep(cm, models.get_model(2), beta="sqrt-h")
+    grid = cem.coarse_grid(step.parts[0].mesh, step.parts[0].cell_map, cm.coarse_cell, cm.H)
+    ops, topo, aux = mm.stage_one_of(step.sub[0], grid, mm.MixedCEMOptions(layers=2), H=cm.H)
+    mm.stage_two(ops, topo, grid, aux, 2)
+    assert len(patterns) == grid.size == 56
+    assert len(fresh) == len(set(patterns)) < grid.size  # one analysis per pattern, not one per patch

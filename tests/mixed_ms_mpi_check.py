@@ -5,6 +5,7 @@ Every rank holds the whole mesh (COMM_SELF: the Arnold–Winther space is serial
 Stage II patches and coarse-operator cells are shared out over COMM_WORLD.
 """
 
+import hashlib
 import json
 import sys
 
@@ -51,6 +52,9 @@ out = {
     "distributed": om.distributed,
     "function_bytes": int(comm.allreduce(sum(f.nbytes for f in om.basis + om.corr if f is not None), op=MPI.MAX)),
 }
+# Ω₁'s AW space (its cells' nodal bases shared out over the ranks): the same on every rank, bit for bit
+P = res.step.sub[0].space.prolongation
+out["P_sha1"] = comm.allgather(hashlib.sha1(P.data.tobytes() + P.indices.tobytes() + P.indptr.tobytes()).hexdigest())
 # every rank iterated to the same state
 same = comm.allgather(res.step.g12.copy())
 out["ranks_agree"] = bool(all(np.array_equal(same[0], g) for g in same))

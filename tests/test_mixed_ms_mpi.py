@@ -27,6 +27,7 @@ def test_two_ranks_match_serial(tmp_path):
     assert serial["ranks"] == 1 and parallel["ranks"] == 2
     assert parallel["ranks_agree"]  # the replicated online phase: every rank ends in the same state
     assert parallel["iterations"] == serial["iterations"] and parallel["nbasis"] == serial["nbasis"]
+    assert parallel["P_sha1"] == serial["P_sha1"] * 2  # the AW space built with shared-out nodal bases: bitwise
     for key in ("e_sigma", "e_u_post", "gap", "Gt_norm", "stress_norm2"):
         assert abs(parallel[key] - serial[key]) <= 1e-10 * abs(serial[key]), key
     t_s, t_p = np.array(serial["trace"]), np.array(parallel["trace"])

@@ -246,6 +246,22 @@ def local_nodal_basis(
     return (values.reshape(n, 3 * points.shape[0], _NUM_LOCAL) @ C).reshape(n, points.shape[0], 3, _NUM_LOCAL)
 
 
+def shared_nodal_basis(
+    vertices: npt.NDArray[np.floating], edge_flip: npt.NDArray[np.bool_], points: npt.NDArray[np.floating],
+    comm: MPI.Comm,
+) -> np.ndarray:
+    """``local_nodal_basis`` of all cells on every rank of ``comm``, each rank computing a contiguous share
+    (the ranks hold the same cells: a replicated serial mesh) and one ``Allgatherv`` joining them."""
+    n = vertices.shape[0]
+    bounds = np.linspace(0, n, comm.size + 1).astype(np.int64)
+    lo, hi = bounds[comm.rank], bounds[comm.rank + 1]
+    mine = local_nodal_basis(vertices[lo:hi], edge_flip[lo:hi], points)
+    out = np.empty((n,) + mine.shape[1:])
+    width = int(np.prod(mine.shape[1:], dtype=np.int64))
+    comm.Allgatherv(np.ascontiguousarray(mine), [out, (np.diff(bounds) * width, bounds[:-1] * width), MPI.DOUBLE])
+    return out
+
+
 # ---------------------------------------------------------------------------
 # UFL helpers
 # ---------------------------------------------------------------------------
@@ -339,7 +355,10 @@ class ArnoldWintherSpace:
         zero_traction_facets: npt.ArrayLike | None = None,
         prescribed_tractions: list | None = None,
         split_interface: tuple[npt.ArrayLike, npt.ArrayLike] | None = None,
+        basis_comm: MPI.Comm | None = None,
     ) -> None:
+        """``basis_comm``: ranks that each hold this same serial mesh (a replicated Ω₁ of Algorithm 4) and
+        share out the cells' nodal bases (``shared_nodal_basis``); the space is the same as without."""
         t0 = time.perf_counter()
         if mesh.topology.cell_type != dolfinx.mesh.CellType.triangle:
             raise ValueError(f"Arnold–Winther needs a triangle mesh, got {mesh.topology.cell_type}.")
@@ -393,7 +412,10 @@ class ArnoldWintherSpace:
         self._l2g = l2g
 
         # per-cell nodal basis at the DG nodes -> DG coefficients
-        values = local_nodal_basis(vx[c2v], edge_flip, ref_pts)  # (nc, 10, 3, 24)
+        if basis_comm is not None and basis_comm.size > 1 and self.comm.size == 1:
+            values = shared_nodal_basis(vx[c2v], edge_flip, ref_pts, basis_comm)  # (nc, 10, 3, 24)
+        else:
+            values = local_nodal_basis(vx[c2v], edge_flip, ref_pts)
         coeffs = values if np.array_equal(interp, np.eye(interp.shape[0])) else np.einsum("pq,nqjk->npjk", interp, values)
         dg_dofs = self.dg.dofmap.list[:nc].astype(np.int64)  # (nc, 10) blocks (owned: DG)
         rows = (3 * dg_dofs[:, :, None] + np.arange(3)).reshape(nc, 30)

@@ -62,6 +62,7 @@ import basix.ufl
 import numpy as np
 from dolfinx import fem
 
+from fenics_contact.fem.arnold_winther import ArnoldWintherSpace
 from fenics_contact.fem.contact import NewtonOptions
 from fenics_contact.hybrid.certificate import Certificate, mixed_certificate
 from fenics_contact.hybrid.inputs import check_solve_inputs, require_instance
@@ -151,10 +152,12 @@ class MixedHybridStep:
         # Ω₂ takes its Robin data at Ω₁'s γ nodes (canonical order, distributed in blocks over the ranks)
         self.sub = []
         for i, part in enumerate(self.parts):
+            fields = material_fields(part.mesh, model)
             self.sub.append(MixedSubproblem(
-                part.mesh, part.facet_tags, material_fields(part.mesh, model),
+                part.mesh, part.facet_tags, fields,
                 epsilon=self.epsilon if i == 1 else None, beta=self.beta,
                 prefix=f"fc_mixed_omega{i + 1}_", newton=newton, operators=i == 1 or self.omega1_operators,
+                space=self._omega1_space(part, fields) if i == 0 else None,
                 interface_points=self.sub[0].gamma_points if i == 1 else None,
             ))
         if self.sub[0].interface_range != self.sub[1].interface_range:
@@ -174,6 +177,12 @@ class MixedHybridStep:
         self.reference = None
         if reference is not None:
             self.set_reference(reference)
+
+    def _omega1_space(self, part, fields) -> ArnoldWintherSpace | None:
+        """Ω₁'s stress space (``fem.arnold_winther.ArnoldWintherSpace``) for the ``transmission.Part`` ``part``
+        with its material ``fields``, or None for the one ``MixedSubproblem`` builds (Algorithm 4 shares out its
+        set-up)."""
+        return None
 
     # -- reference --------------------------------------------------------------------
     def set_reference(self, reference: MixedSolution) -> None:

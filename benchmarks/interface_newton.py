@@ -83,7 +83,7 @@ def build_step(method: int, cm, number: int, E_high: float, factor: float = 1.0)
         return MultiscalePrimalHybridStep(cm, model, alpha=alpha, delta=delta, newton=newton,
                                           cem=CEMOptions(layers=LAYERS))
     fields = material_fields(cm.mesh, model)
-    epsilon = default_epsilon(cm.h, contact_modulus(cm.mesh, cm.facet_tags, fields.E))
+    epsilon = default_epsilon(cm.h, contact_modulus(cm.mesh, cm.facet_tags, fields.E, smallest=True))
     beta = factor * np.sqrt(cm.h)
     if method == 2:
         step = MixedHybridStep(cm, model, beta=beta, epsilon=epsilon, newton=newton)

@@ -80,7 +80,7 @@ def worker(args: argparse.Namespace) -> None:
         from fenics_contact.problem.fields import material_fields
 
         fields = material_fields(cm.mesh, model)
-        eps = default_epsilon(cm.h, contact_modulus(cm.mesh, cm.facet_tags, fields.E))
+        eps = default_epsilon(cm.h, contact_modulus(cm.mesh, cm.facet_tags, fields.E, smallest=True))
         part = split_mesh(cm)[1]
         sub = MixedSubproblem(part.mesh, part.facet_tags, material_fields(part.mesh, model), epsilon=eps,
                               beta=float(np.sqrt(cm.h)), prefix="bench_omega2_")

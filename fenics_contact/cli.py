@@ -343,7 +343,7 @@ def build_parser(*, given_only: bool = False) -> argparse.ArgumentParser:
     run.add_argument("--max-iterations", type=int, default=2000)
     run.add_argument("--delta", type=float, help="primal penalty δ (default 1e-3·h/E on Γ_C)")
     run.add_argument("--beta", help="mixed transmission coefficient β: sqrt-h (default) or a number")
-    run.add_argument("--epsilon", type=float, help="mixed penalty ε (default 1e-3·h·E on Γ_C)")
+    run.add_argument("--epsilon", type=float, help="mixed penalty ε (default 1e-3·h·E, the smallest E on Gamma_C)")
     run.add_argument("--E-high", type=float, help="E in the high-modulus pattern (default 1e3)")
     run.add_argument("--E-low", type=float, help="E elsewhere (default 1)")
     run.add_argument("--nu", type=float, default=0.35, help="Poisson ratio")

@@ -191,7 +191,7 @@ def force_indentation(
     """Move ``model.obstacle`` by each depth along ``direction`` in turn; solve with warm starts.
 
     ``delta`` (primal) defaults to ``default_penalty(h, E_c)``, ``epsilon`` (mixed) to
-    ``default_epsilon(h, E_c)``, E_c the largest E on Γ_C.  The multiscale methods take ``cem``
+    ``default_epsilon(h, E_c)``, E_c the largest (primal) or smallest (mixed) E on Γ_C.  The multiscale methods take ``cem``
     (``multiscale.cem.CEMOptions`` for ``primal-ms``, ``multiscale.mixed_cem.MixedCEMOptions`` for
     ``mixed-ms``; default: their defaults) and ``cache_dir`` (the offline cache); their Ω₁ offline
     phase runs once, before the first step.  ``step``: a hybrid step of this method built earlier
@@ -227,10 +227,11 @@ def force_indentation(
     if step is None:
         fields = material_fields(cm.mesh, first)
         check_boundary_groups(cm.mesh, cm.facet_tags, fields.boundary, names=cm.neumann_names)
-        E_c = contact_modulus(cm.mesh, cm.facet_tags, fields.E)
         if method.startswith("primal"):
+            E_c = contact_modulus(cm.mesh, cm.facet_tags, fields.E)
             delta = default_penalty(cm.h, E_c) if delta is None else delta
         else:
+            E_c = contact_modulus(cm.mesh, cm.facet_tags, fields.E, smallest=True)
             epsilon = default_epsilon(cm.h, E_c) if epsilon is None else epsilon
 
     if method == "primal-monolithic":

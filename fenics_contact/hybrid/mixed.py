@@ -145,7 +145,7 @@ class MixedHybridStep:
         parent_fields = material_fields(cm.mesh, model)
         check_boundary_groups(cm.mesh, cm.facet_tags, parent_fields.boundary, names=cm.neumann_names)
         if epsilon is None:
-            epsilon = default_epsilon(cm.h, contact_modulus(cm.mesh, cm.facet_tags, parent_fields.E))
+            epsilon = default_epsilon(cm.h, contact_modulus(cm.mesh, cm.facet_tags, parent_fields.E, smallest=True))
         self.epsilon = float(epsilon)
         self.cm = cm
         self.parts = split_mesh(cm)

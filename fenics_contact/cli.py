@@ -237,6 +237,10 @@ class RunOptions:
         if self.mesh is None and self.n % self.H:
             raise InputError(f"--h {self.n} is not a multiple of --H {self.H}: the coarse grid must be a union of fine "
                              "cells")
+        if self.mesh is None and self.H is not None and self.method.endswith("-ms") and self.n < 2 * self.H:
+            raise InputError(f"--H {self.H} with --h {self.n}: a coarse cell of the multiscale methods must span at "
+                             "least 2 fine cells per side (--H at most --h/2; H = h left a mixed-ms local problem "
+                             "singular)")
         for name in ("delta", "epsilon", "E_high", "E_low"):
             _finite_positive(name, getattr(self, name))
         if self.E_map is not None:
@@ -704,6 +708,8 @@ def _run_mixed(options: RunOptions, cm: ContactMesh, model, fields, comm: MPI.Co
         "epsilon": result.epsilon,
         "e_sigma": result.e_sigma,
         "e_u": result.e_u,
+        # mixed-ms: e_u is that of a coarse displacement (U_aux); e_u_post that of the fine one (README)
+        "e_u_post": getattr(result, "e_u_post", None) if ms else None,
         "max_tensile_sigma_c": result.profile.max_tensile,
         "layers": options.value("layers") if ms else None,
         "nbasis": options.value("nbasis") if ms else None,

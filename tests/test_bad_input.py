@@ -170,6 +170,8 @@ CASES = [
     Case("negative layers", _args("--method", "primal-ms", "--layers", "-1"), 2, "--layers must be an integer >= 0"),
     Case("no modes", _args("--method", "primal-ms", "--nbasis", "0"), 2, "--nbasis must be an integer >= 1"),
     Case("negative min-gap", _args("--method", "mixed-ms", "--min-gap", "-1"), 2, "--min-gap must be"),
+    Case("H = h for a multiscale method", lambda tmp: ["--h", "8", "--H", "8", "--method", "mixed-ms"], 2,
+         "must span at least 2 fine cells per side"),
     Case("δ for a mixed method", _args("--method", "mixed", "--delta", "1e-4"), 2,
          "--delta does not apply to --method mixed"),
     Case("layers for Algorithm 1", _args("--layers", "3"), 2, "--layers does not apply to --method primal"),

@@ -110,6 +110,10 @@ def test_mixed_methods(tmp_path, method):
     summary = json.loads((out / "summary.json").read_text())
     assert summary["converged"] is True
     assert summary["e_sigma"] is not None and summary["e_u"] is not None
+    if method == "mixed-ms":  # the fine (post-processed) displacement error, far below the coarse e_u
+        assert summary["e_u_post"] is not None and summary["e_u_post"] < 0.1 * summary["e_u"]
+    else:
+        assert summary["e_u_post"] is None
     assert summary["max_tensile_sigma_c"] >= 0.0
     for name in ("sigma.bp", "u.bp", "fields.xdmf", "stress.png", "displacement.png", "contact.png", "history.png"):
         assert (out / name).exists(), name

@@ -759,9 +759,10 @@ def run(options: RunOptions, comm: MPI.Comm = MPI.COMM_WORLD, *, case: Case | No
               f"{options.tol:g}); results in {options.out} with \"converged\": false", comm)
         return EXIT_NOT_CONVERGED
     if not summary["converged"]:  # a load step of the force-indentation curve
-        depths = [s["depth"] for s in summary["force_indentation"]["steps"] if not s["converged"]]
-        _fail(f"not converged: the load step(s) at depth {depths} hit --max-iterations {options.max_iterations}; "
-              f'results in {options.out} with "converged": false', comm)
+        bad = [s for s in summary["force_indentation"]["steps"] if not s["converged"]]
+        steps = ", ".join(f"depth {s['depth']:g} after {s['iterations']} iterations" for s in bad)
+        _fail(f"not converged: the load step(s) at {steps} (--max-iterations {options.max_iterations}, --tol "
+              f'{options.tol:g}); results in {options.out} with "converged": false', comm)
         return EXIT_NOT_CONVERGED
     log.info("converged after %d iterations; e_u = %s; active set %s; summary in %s",
              result.iterations, result.e_u, result.profile.active_interval(), options.out / "summary.json")

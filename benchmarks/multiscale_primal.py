@@ -306,7 +306,6 @@ def part_i(run: Runner) -> list[str]:
     return lines
 
 
-# -- (g) scaling and (h) MPI: measurements in fresh processes ---------------------------------------------
 def part_j(run: Runner) -> list[str]:
     a = run.args
     lines = [
@@ -327,6 +326,7 @@ def part_j(run: Runner) -> list[str]:
     return lines
 
 
+# -- (g) scaling and (h) MPI: measurements in fresh processes ---------------------------------------------
 def _worker(args: argparse.Namespace) -> dict:
     """One measurement (``--worker mono|alg3``) in this process: times and peak RSS, as JSON on rank 0."""
     comm = MPI.COMM_WORLD

@@ -683,8 +683,8 @@ def build_auxiliary_space(
 
     def eigenproblem(k: int) -> tuple:
         D, A, S = local_matrices(ops, grid, k)
-        # one pair more than kept: Λ_k, the first eigenvalue left out (for the small-gap warning)
-        l = None if options.nbasis is None else int(options.nbasis)
+        # one pair more than kept: Λ_k, the first eigenvalue left out (reported as ``spectral_gap``)
+        l = options.nbasis  # an int (CEMOptions) or None
         lam, Phi = local_spectral_problem(
             A, S, l if l is None or l >= D.size else l + 1, eigensolver=options.eigensolver,
             target=options.target, tol=options.eig_tol,

@@ -420,3 +420,45 @@ def test_traction_free_side_of_omega1(omega1):
     r, _ = om.solve(g)
     s_ref = (space_tf.prolongation @ fine.c)[ops.dg_rows]
     assert np.sqrt(om.a_norm2(om.fine_stress(r, g) - s_ref) / om.a_norm2(s_ref)) < 1e-8
+
+
+def test_algorithm4_never_forms_the_fine_omega1_prolongation():
+    """Ω₁'s AW prolongation P (CSR, 0.35 GB at h = 1/128) is not made by Algorithm 4: the cell operators
+    read the space's cell blocks (no copy) and the interface maps use P's rows in the γ cells only, which
+    are P's rows exactly; here also on the split-interface space of the monolithic solve."""
+    import scipy.sparse as sp
+
+    from fenics_contact.fem.mixed import boundary_stress_space
+    from fenics_contact.multiscale.mixed import MixedMultiscaleHybridStep
+    from fenics_contact.problem.fields import material_fields
+    from fenics_contact.problem.tags import Boundary, Subdomain
+
+    cm = geometry.unit_square(16, 4)
+    model = models.get_model(3)
+    step = MixedMultiscaleHybridStep(cm, model, beta="sqrt-h", cem=mm.MixedCEMOptions(layers=1))
+    space = step.sub[0].space
+    assert space._P_csr is None and space._P_full_csr is None
+    assert np.shares_memory(step.omega1.ops.P_blocks, space.cell_prolongation()[1])
+    # the interface maps equal those made with the whole P (Algorithm 2's Ω₁ subproblem: same mesh, same tags)
+    ref = MixedHybridStep(cm, model, beta="sqrt-h").sub[0]
+    for name in ("C", "N"):
+        assert (getattr(step.sub[0], name) != getattr(ref, name)).nnz == 0
+    fields = material_fields(cm.mesh, model)
+    split = (cm.facet_tags.find(Boundary.INTERFACE), cm.cell_tags.find(Subdomain.OMEGA2))
+    for sp_kw in ({}, {"split_interface": split}):
+        sp_space = boundary_stress_space(cm.mesh, cm.facet_tags, fields.boundary, **sp_kw)
+        rng = np.random.default_rng(0)
+        rows = rng.choice(3 * sp_space.dg.dofmap.index_map.size_local, size=200, replace=False)
+        P_rows = sp_space.prolongation_for_rows(rows)
+        assert sp_space._P_csr is None
+        cells = np.unique(np.nonzero(np.isin(sp_space.dg_rows, rows))[0])
+        kept = sp_space.dg_rows[cells].ravel()
+        if sp_kw:  # the split functions' rows are among them
+            assert np.intersect1d(sp_space._split_cells, cells).size > 10
+        P = sp_space.prolongation
+        assert (P_rows[kept] != P[kept]).nnz == 0  # the same numbers, row by row
+        others = np.setdiff1d(np.arange(P.shape[0]), kept)
+        assert P_rows[others].nnz == 0
+        Q = sp.random(7, P.shape[0], density=1.0, random_state=1).tocsr()[:, rows]
+        Q = sp.csr_matrix((Q.data, rows[Q.indices], Q.indptr), shape=(7, P.shape[0]))
+        assert (Q @ P_rows != Q @ P).nnz == 0

@@ -191,10 +191,17 @@ def _map_to_cells(vertices: np.ndarray, ref: np.ndarray) -> np.ndarray:
     return v0[:, None, :] + np.einsum("nij,mj->nmi", J, ref)
 
 
+#: cells per batch of ``local_nodal_basis`` (its temporaries, ~20 MB at 2048 cells, are reused from batch to batch
+#: instead of growing with the mesh: fresh memory costs 2–4 s/GiB to touch on the virtual machines we run on)
+NODAL_BASIS_BATCH = 2048
+
+
 def local_nodal_basis(
     vertices: npt.NDArray[np.floating],
     edge_flip: npt.NDArray[np.bool_],
     points: npt.NDArray[np.floating],
+    out: np.ndarray | None = None,
+    column_order: np.ndarray | None = None,
 ) -> np.ndarray:
     """Values of the AW nodal basis of a batch of cells at reference points.
 
@@ -207,13 +214,33 @@ def local_nodal_basis(
             must come from global vertex numbers so that neighbours agree).
         points: (m, 2) points on the reference triangle.
 
+        out: optional (n, m, 3, 24) float64 array to write into.
+        column_order: optional (n, 24): the basis functions of cell c in the order column_order[c] (out[c, …, k]
+            is function column_order[c, k]).
+
     Returns:
         (n, m, 3, 24) array: component j ∈ (xx, xy, yy) of basis function i.
         Local DOF order: vertex v comp j -> 3v+j; edge k moment l -> 9+4k+l
         (l: nn·1, nn·(2s-1), nt·1, nt·(2s-1)); cell average comp j -> 21+j.
+        Cells are done in batches of ``NODAL_BASIS_BATCH`` (each cell's numbers do not depend on the batch).
     """
     vertices = np.asarray(vertices, dtype=np.float64)
     edge_flip = np.asarray(edge_flip, dtype=bool)
+    points = np.asarray(points, dtype=np.float64)
+    n = vertices.shape[0]
+    if out is None:
+        out = np.empty((n, points.shape[0], 3, _NUM_LOCAL))
+    for lo in range(0, n, NODAL_BASIS_BATCH):
+        hi = min(n, lo + NODAL_BASIS_BATCH)
+        batch = _nodal_basis_batch(vertices[lo:hi], edge_flip[lo:hi], points)
+        if column_order is not None:
+            batch = np.take_along_axis(batch, column_order[lo:hi, None, None, :], axis=3)
+        out[lo:hi] = batch
+    return out
+
+
+def _nodal_basis_batch(vertices: np.ndarray, edge_flip: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """``local_nodal_basis`` of one batch of cells."""
     n = vertices.shape[0]
     centre = vertices.mean(axis=1)  # (n, 2)
     edges = vertices[:, _EDGE_VERTICES[:, 1]] - vertices[:, _EDGE_VERTICES[:, 0]]
@@ -241,24 +268,24 @@ def local_nodal_basis(
     D[:, 21:24, :] = _span_of(np.einsum("q,nqm->nm", _CELL_W, _monomials(scaled(_map_to_cells(vertices, _CELL_Q)))))
 
     C = np.linalg.solve(D, np.broadcast_to(np.eye(_NUM_LOCAL), D.shape))  # span coeffs
-    points = np.asarray(points, dtype=np.float64)
     values = _eval_span(scaled(_map_to_cells(vertices, points)))  # (n, m, 3, 24)
     return (values.reshape(n, 3 * points.shape[0], _NUM_LOCAL) @ C).reshape(n, points.shape[0], 3, _NUM_LOCAL)
 
 
 def shared_nodal_basis(
     vertices: npt.NDArray[np.floating], edge_flip: npt.NDArray[np.bool_], points: npt.NDArray[np.floating],
-    comm: MPI.Comm,
+    comm: MPI.Comm, column_order: np.ndarray | None = None,
 ) -> np.ndarray:
     """``local_nodal_basis`` of all cells on every rank of ``comm``, each rank computing a contiguous share
     (the ranks hold the same cells: a replicated serial mesh) and one ``Allgatherv`` joining them."""
     n = vertices.shape[0]
     bounds = np.linspace(0, n, comm.size + 1).astype(np.int64)
     lo, hi = bounds[comm.rank], bounds[comm.rank + 1]
-    mine = local_nodal_basis(vertices[lo:hi], edge_flip[lo:hi], points)
-    out = np.empty((n,) + mine.shape[1:])
-    width = int(np.prod(mine.shape[1:], dtype=np.int64))
-    comm.Allgatherv(np.ascontiguousarray(mine), [out, (np.diff(bounds) * width, bounds[:-1] * width), MPI.DOUBLE])
+    out = np.empty((n, np.asarray(points).shape[0], 3, _NUM_LOCAL))
+    local_nodal_basis(vertices[lo:hi], edge_flip[lo:hi], points, out=out[lo:hi],
+                      column_order=None if column_order is None else column_order[lo:hi])
+    width = int(np.prod(out.shape[1:], dtype=np.int64))
+    comm.Allgatherv(MPI.IN_PLACE, [out, (np.diff(bounds) * width, bounds[:-1] * width), MPI.DOUBLE])
     return out
 
 
@@ -287,26 +314,28 @@ def compliance(sigma: ufl.core.expr.Expr, lmbda, mu) -> ufl.core.expr.Expr:
 # ---------------------------------------------------------------------------
 
 
-def _cell_rows_csr(blocks: np.ndarray, rows: np.ndarray, cols: np.ndarray, shape: tuple[int, int]) -> sp.csr_matrix:
-    """CSR matrix with rows[c, i] holding blocks[c, i, :] at columns cols[c] (each row in one cell), sorted.
+def _cell_rows_csr(sblocks: np.ndarray, rows: np.ndarray, scols: np.ndarray, shape: tuple[int, int]) -> sp.csr_matrix:
+    """CSR matrix with rows[c, i] holding sblocks[c, i, :] at columns scols[c] (each row in one cell), sorted.
 
-    Built straight from the cell blocks (no COO conversion) when the cells' rows cover 0..shape[0]-1 once.
+    Each cell's columns ``scols[c]`` increasing.  Built straight from the cell blocks (no COO
+    conversion) when the cells' rows cover 0..shape[0]-1 once; when they are 0, 1, 2, … in cell-major order
+    (a serial DG numbering) the matrix's data is a view of ``sblocks`` (no copy).
     """
-    nc, a, b = blocks.shape
+    nc, a, b = sblocks.shape
     flat = rows.ravel()
     if flat.size != shape[0] or not np.array_equal(np.bincount(flat, minlength=shape[0]), np.ones(shape[0], np.int64)):
-        P = sp.csr_matrix((blocks.ravel(), (np.repeat(rows, b, axis=1).ravel(), np.tile(cols, (1, a)).ravel())),
+        P = sp.csr_matrix((sblocks.ravel(), (np.repeat(rows, b, axis=1).ravel(), np.tile(scols, (1, a)).ravel())),
                           shape=shape)
         P.sort_indices()
         return P
-    order = np.argsort(cols, axis=1, kind="stable")
-    scols = np.take_along_axis(cols, order, axis=1)  # (nc, b)
-    sblocks = np.take_along_axis(blocks, order[:, None, :], axis=2)  # (nc, a, b)
-    where = np.empty(shape[0], dtype=np.int64)
-    where[flat] = np.arange(flat.size)  # row -> (cell, i) position
-    cell = where // a
-    data = sblocks.reshape(-1, b)[where].ravel()
-    indices = scols[cell].ravel()
+    if np.array_equal(flat, np.arange(shape[0])):
+        data = sblocks.reshape(-1)
+        indices = np.repeat(scols, a, axis=0).ravel()
+    else:
+        where = np.empty(shape[0], dtype=np.int64)
+        where[flat] = np.arange(flat.size)  # row -> (cell, i) position
+        data = sblocks.reshape(-1, b)[where].ravel()
+        indices = scols[where // a].ravel()
     return sp.csr_matrix((data, indices, b * np.arange(shape[0] + 1, dtype=np.int64)), shape=shape)
 
 
@@ -411,18 +440,26 @@ class ArnoldWintherSpace:
         l2g[:, 21:24] = 3 * nv + 4 * ne + 3 * np.arange(nc)[:, None] + np.arange(3)
         self._l2g = l2g
 
-        # per-cell nodal basis at the DG nodes -> DG coefficients
+        # per-cell nodal basis at the DG nodes -> DG coefficients: the cells' blocks of the full P, each cell's
+        # columns (AW numbers) increasing.  Read-only: the CSR P_full may share their memory.  The CSR matrices
+        # P_full and P are made when first asked for (Algorithm 4's Ω₁ never asks: its cell operators read the
+        # blocks, its interface maps the γ cells' rows, ``prolongation_for_rows``)
+        order = np.argsort(l2g, axis=1, kind="stable")
+        self._cell_cols = np.take_along_axis(l2g, order, axis=1)  # (nc, 24)
         if basis_comm is not None and basis_comm.size > 1 and self.comm.size == 1:
-            values = shared_nodal_basis(vx[c2v], edge_flip, ref_pts, basis_comm)  # (nc, 10, 3, 24)
+            values = shared_nodal_basis(vx[c2v], edge_flip, ref_pts, basis_comm, column_order=order)
         else:
-            values = local_nodal_basis(vx[c2v], edge_flip, ref_pts)
-        coeffs = values if np.array_equal(interp, np.eye(interp.shape[0])) else np.einsum("pq,nqjk->npjk", interp, values)
+            values = local_nodal_basis(vx[c2v], edge_flip, ref_pts, column_order=order)  # (nc, 10, 3, 24)
+        if not np.array_equal(interp, np.eye(interp.shape[0])):
+            values = np.einsum("pq,nqjk->npjk", interp, values)
+        self._cell_P = values.reshape(nc, 30, _NUM_LOCAL)
+        self._cell_P.flags.writeable = False
+        del values
         dg_dofs = self.dg.dofmap.list[:nc].astype(np.int64)  # (nc, 10) blocks (owned: DG)
         rows = (3 * dg_dofs[:, :, None] + np.arange(3)).reshape(nc, 30)
         self._n_dg = 3 * self.dg.dofmap.index_map.size_local
-        P = _cell_rows_csr(coeffs.reshape(nc, 30, _NUM_LOCAL), rows, l2g, (self._n_dg, self.num_dofs_full))
-        # (duplicates cannot occur: each DG row belongs to one cell)
-        self._P_full = P
+        self._P_full_csr: sp.csr_matrix | None = None
+        self._P_csr: sp.csr_matrix | None = None
         self._dg_rows = rows
         #: stacked essential constraint rows (k, 3) acting on the vertex value σ(v), per constrained local vertex
         self.vertex_constraints: dict[int, np.ndarray] = {}
@@ -432,21 +469,16 @@ class ArnoldWintherSpace:
         if split_interface is not None:
             self._split_null_spaces(*split_interface)
         self._number()
-        T = self._T_local
-        self._P = P if T is None else (P @ T).tocsr()
+        self._split_cells: np.ndarray | None = None
         if split_interface is not None and self._X_local is not None:
-            mask = np.zeros(self._n_dg)
             cells = np.asarray(split_interface[1], dtype=np.int64)
-            cells = cells[cells < nc]
-            mask[rows[cells].ravel()] = 1.0
-            self._P = (self._P + sp.diags(mask) @ P @ self._X_local).tocsr()
+            self._split_cells = cells[cells < nc]
         #: DG coefficients of the traction lifting σ_t (None without prescribed tractions)
         self.lifting_dg: np.ndarray | None = None
         #: local vertices where the prescribed tractions of two edges are incompatible (least-squares value used)
         self.incompatible_vertices: np.ndarray = np.zeros(0, dtype=np.int64)
         if prescribed_tractions:
-            self.lifting_dg = P @ self._lifting()
-        self._P.sort_indices()
+            self.lifting_dg = self._P_full @ self._lifting()
         self._P_petsc: PETSc.Mat | None = None
         self.build_time = time.perf_counter() - t0
 
@@ -739,12 +771,71 @@ class ArnoldWintherSpace:
         return int(self._offsets[self.comm.rank]), int(self._offsets[self.comm.rank + 1])
 
     @property
+    def _P_full(self) -> sp.csr_matrix:
+        if self._P_full_csr is None:
+            self._P_full_csr = _cell_rows_csr(self._cell_P, self._dg_rows, self._cell_cols,
+                                              (self._n_dg, self.num_dofs_full))
+        return self._P_full_csr
+
+    def _constrain_rows(self, P_full: sp.csr_matrix, split_cells: np.ndarray | None) -> sp.csr_matrix:
+        """P = P_full T (+ the split-interface functions on ``split_cells``), row by row from ``P_full``."""
+        T = self._T_local
+        P = P_full if T is None else (P_full @ T).tocsr()
+        if split_cells is not None:
+            mask = np.zeros(self._n_dg)
+            mask[self._dg_rows[split_cells].ravel()] = 1.0
+            P = (P + sp.diags(mask) @ P_full @ self._X_local).tocsr()
+        P.sort_indices()
+        return P
+
+    @property
+    def _P(self) -> sp.csr_matrix:
+        if self._P_csr is None:
+            self._P_csr = self._constrain_rows(self._P_full, self._split_cells)
+        return self._P_csr
+
+    @property
     def prolongation(self) -> sp.csr_matrix:
         """Local P (SciPy CSR): owned DG coefficients × local AW coefficients (owned, then ``ghosts``).
 
-        In serial: AW coefficients -> coefficients of ``self.dg``.
+        In serial: AW coefficients -> coefficients of ``self.dg``.  Made when first asked for and kept
+        (``release_prolongation`` drops it).
         """
         return self._P
+
+    def prolongation_for_rows(self, rows: npt.ArrayLike) -> sp.csr_matrix:
+        """P where it has been made; else P's rows in the cells holding the given ``dg`` rows, the other rows
+        empty (same shape): Q P = Q P_rows for any Q whose nonzero columns are among ``rows``.
+
+        Row for row the same numbers as P (each row is formed from its own row of P_full); it costs only those
+        cells (e.g. the interface maps of Algorithm 4's Ω₁: the γ cells, where P is never made).
+        """
+        if self._P_csr is not None:
+            return self._P_csr
+        cell_of = np.empty(self._n_dg, dtype=np.int64)
+        cell_of[self._dg_rows.ravel()] = np.repeat(np.arange(self.num_cells), self._dg_rows.shape[1])
+        cells = np.unique(cell_of[np.asarray(rows, dtype=np.int64)])
+        P_full = _cell_rows_csr(self._cell_P[cells], self._dg_rows[cells], self._cell_cols[cells],
+                                (self._n_dg, self.num_dofs_full))
+        split = None if self._split_cells is None else np.intersect1d(self._split_cells, cells)
+        return self._constrain_rows(P_full, split)
+
+    def cell_prolongation(self) -> tuple[np.ndarray, np.ndarray]:
+        """(cols (n, 24), blocks (n, 30, 24)): P_full's rows of each owned cell (``dg_rows`` order) at its AW
+        columns, columns increasing (read-only arrays, kept by the space)."""
+        return self._cell_cols, self._cell_P
+
+    @property
+    def dg_rows(self) -> np.ndarray:
+        """(n, 30) the ``dg`` coefficient (3·DOF + component) of each owned cell's local stress entries."""
+        return self._dg_rows
+
+    def release_prolongation(self) -> None:
+        """Drop the CSR (and PETSc) P and P_full (made again when asked for); the cell blocks stay."""
+        self._P_full_csr = self._P_csr = None
+        if self._P_petsc is not None:
+            self._P_petsc.destroy()
+            self._P_petsc = None
 
     @property
     def prolongation_petsc(self) -> PETSc.Mat:

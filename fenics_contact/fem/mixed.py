@@ -470,8 +470,6 @@ class MixedSubproblem:
                 )
             raise InputError("a contact subproblem needs Γ_C facets")
         self.space = space or boundary_stress_space(msh, facet_tags, fields.boundary)
-        #: local P (SciPy): owned DG rows × local AW columns (owned, then ghosts); in serial the whole P
-        self.P = self.space.prolongation
         # P as a PETSc matrix (0.34 s and 270 MB for Ω₁ at h = 1/128): made when first used, unless the operators
         # need it now or the mesh is distributed (its creation is collective)
         self._Pd_matrix: DistributedMatrix | None = None
@@ -566,6 +564,12 @@ class MixedSubproblem:
         self.build_time = time.perf_counter() - t0
 
     @property
+    def P(self) -> sp.csr_matrix:
+        """Local P (SciPy): owned DG rows × local AW columns (owned, then ghosts); in serial the whole P (made
+        when first asked for: ``ArnoldWintherSpace.prolongation``)."""
+        return self.space.prolongation
+
+    @property
     def _Pd(self) -> DistributedMatrix:
         """P (owned DG rows × AW DOFs) as a ``DistributedMatrix``."""
         if self._Pd_matrix is None:
@@ -642,7 +646,8 @@ class MixedSubproblem:
         cols = canonical_value(cj.astype(np.int64))
         keep = cols >= 0
         C_local = sp.csr_matrix((cv[keep], (rows[keep], cols[keep])), shape=(self._n_dg, n_g))
-        C_red = (self.P.T @ C_local).tocoo()  # local AW rows (owned, ghosts) × canonical γ values
+        P_gamma = self.space.prolongation_for_rows(np.flatnonzero(np.diff(C_local.indptr)))
+        C_red = (P_gamma.T @ C_local).tocoo()  # local AW rows (owned, ghosts) × canonical γ values
         gi = self.space.global_indices
         #: d(g; τ) = C g for interface data g = values (x, y) at ``gamma_points`` (this rank's block)
         self._C = DistributedMatrix(coo_matrix(comm, gi[C_red.row], C_red.col, C_red.data,
@@ -673,7 +678,7 @@ class MixedSubproblem:
         wx, wy = _traction_weights(normals)
         E = sp.vstack([_stress_evaluation(self.dg, cells, X, wx), _stress_evaluation(self.dg, cells, X, wy)]).tocsr()
         value_rows = np.concatenate([2 * nodes, 2 * nodes + 1])  # canonical value of each row of E
-        N_loc = (E @ self.P).tocoo()
+        N_loc = (E @ self.space.prolongation_for_rows(np.unique(E.indices))).tocoo()
         #: σn (outward n of this mesh) at ``gamma_points``, (x, y) per node, this rank's block: N c (+ ``n0``)
         self._N = DistributedMatrix(coo_matrix(comm, value_rows[N_loc.row], gi[N_loc.col], N_loc.data,
                                               (g1 - g0, n_g), (self.n_sigma, self.space.num_dofs)))
@@ -695,7 +700,7 @@ class MixedSubproblem:
         cells, normals = cells[local_nodes], normals[local_nodes]
         X = _reference_coordinates(msh, cells, pts[local_nodes])
         Q_dg = _stress_evaluation(self.dg, cells, X, _normal_weights(normals))
-        Q_loc = (Q_dg @ self.P).tocsr()
+        Q_loc = (Q_dg @ self.space.prolongation_for_rows(np.unique(Q_dg.tocsr().indices))).tocsr()
         Q_loc.eliminate_zeros()
         gi = self.space.global_indices
         #: this rank's rows of Q with global AW columns (the penalty pattern of the saddle-point matrix)

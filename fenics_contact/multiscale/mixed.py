@@ -141,7 +141,9 @@ class MixedMultiscaleHybridStep(MixedHybridStep):
         # (Γ_N, homogeneous part + the lifting s₀) essential in every local space, u_D and the lifting as loads
         self.omega1 = MixedMultiscaleOmega1(self.sub[0], grid, cem, H=grid.H, cache_dir=cache_dir, comm=offline_comm,
                                             traction_free_facets=essential_traction_facets(part.mesh, part.facet_tags))
-        self.sub[0].P = None  # the fine Ω₁ AW prolongation (1 GB at h = 1/256): omega1.ops holds its cell blocks
+        # the fine Ω₁ AW prolongation (1 GB at h = 1/256) is never made here (omega1.ops reads its cell blocks);
+        # drop it should anything have made it
+        self.sub[0].space.release_prolongation()
         co = self.omega1.co
         if co.n_g != self.size:
             raise RuntimeError("the multiscale interface data do not match the Ω₂ interface data")

@@ -486,17 +486,20 @@ def cell_operators(sub, H: float, weight: str = "lambda+2mu", s_factor: float = 
     C = Cfull[dg_rows.ravel()][:, (2 * blocks[:, None] + np.arange(2)).ravel()].tocsr()
     E = _trace_operator(msh, dg, gamma, coords)
     # the local spaces start from the full (unconstrained) AW space, also where τn = 0 sides constrain sub.space
-    P = sub.space.full_prolongation
+    space = sub.space
     num_full = 3 * msh.topology.index_map(0).size_local + 4 * msh.topology.index_map(1).size_local + 3 * ncell
-    if P.shape[1] != num_full:
+    if space.num_dofs_full != num_full:
         raise RuntimeError("the full AW prolongation does not have the raw serial numbering")
-    P_cols, P_blocks = _row_blocks(P, dg_rows)
+    if space.dg is dg and np.array_equal(space.dg_rows, dg_rows):  # the space's own blocks (no CSR P, no copy)
+        P_cols, P_blocks = space.cell_prolongation()
+    else:
+        P_cols, P_blocks = _row_blocks(space.full_prolongation, dg_rows)
     if s0 is not None:  # the lifting is a load: (div σ̂, v) = −(f, v) − (div s₀, v), σ = σ̂ + s₀
         G = G - np.einsum("cab,cb->ca", B, s0)
         lift = -np.einsum("cab,cb->ca", K, s0)
         lift[gamma_cells] -= sub.beta * np.einsum("cab,cb->ca", R, s0[gamma_cells])
         F = lift if F is None else F + lift
-    return CellOperators(K, sub.beta * R, B, M, S, G, C, E, int(P.shape[1]), dg_rows, u_rows, gamma_cells,
+    return CellOperators(K, sub.beta * R, B, M, S, G, C, E, int(num_full), dg_rows, u_rows, gamma_cells,
                          P_cols, P_blocks, F, s0)
 
 

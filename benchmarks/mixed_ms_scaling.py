@@ -15,7 +15,11 @@ Every measurement runs in a fresh process (its peak resident memory is that of t
   cache write / parallel offline, both of the same run of this script;
 * ``--repeats K`` (sizes of ``--mpi-sizes``): K interleaved pairs, a serial process without a cache then
   the R-rank one, each pair's ratio and their median (on a VM whose speed drifts by 10–20 % within
-  minutes, one pair is one sample, not the speed-up).
+  minutes, one pair is one sample, not the speed-up).  Before each pair, the machine's own ceiling:
+  a fixed CPU-bound probe (dense 300 × 300 LU solves and a Python loop, ~1.5 s) run in one process, then
+  in R processes at once (``mpiexec``); the ceiling is Σ_r t_alone / t_r, the speed-up that perfectly
+  shared work would get from these cores at that moment (two vCPUs of this VM at once ran the probe at
+  1.0× to 0.65× of one alone, varying from minute to minute).
 
 Cost exponents are least-squares slopes of log(cost) against log(DOFs) over the sizes run
 (DOFs: the fine mixed problem on Ω, AW + displacement). Times on a shared machine vary by 1.5–2×;
@@ -55,6 +59,19 @@ def _peak_rss_gb(comm=None) -> float:
     return rss
 
 
+def probe() -> float:
+    """Seconds for a fixed CPU-bound load (dense LU solves like MUMPS' fronts, then interpreted Python)."""
+    rng = np.random.default_rng(0)
+    A = rng.random((300, 300)) + 300.0 * np.eye(300)
+    t = time.perf_counter()
+    for _ in range(200):
+        np.linalg.solve(A, A)
+    x = 0
+    for i in range(4_000_000):
+        x += i
+    return time.perf_counter() - t
+
+
 def worker(args: argparse.Namespace) -> dict:
     """One measurement in this process (``--worker``)."""
     import fenics_contact  # noqa: F401  (must precede dolfinx / petsc4py)
@@ -66,6 +83,9 @@ def worker(args: argparse.Namespace) -> dict:
     from fenics_contact.problem import geometry, models
 
     comm = MPI.COMM_WORLD
+    if args.worker == "probe":
+        comm.Barrier()
+        return {"probe_s": comm.allgather(probe())}
     model = models.get_model(2)
     t0 = time.perf_counter()
     cm = geometry.unit_square(args.n, args.n_coarse, comm=MPI.COMM_SELF)
@@ -121,7 +141,7 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=0,
                         help="interleaved (serial without cache, R ranks) pairs per MPI size, median ratio (0: none)")
     parser.add_argument("--out", type=Path, default=Path("benchmarks/results/mixed_ms_scaling.md"))
-    parser.add_argument("--worker", choices=("monolithic", "mixed-ms"), help=argparse.SUPPRESS)
+    parser.add_argument("--worker", choices=("monolithic", "mixed-ms", "probe"), help=argparse.SUPPRESS)
     parser.add_argument("--n", type=int, help=argparse.SUPPRESS)
     parser.add_argument("--cache-dir", help=argparse.SUPPRESS)
     args = parser.parse_args()
@@ -156,11 +176,14 @@ def main() -> None:
         pairs = []
         if args.ranks > 1 and n in mpi_sizes and mpiexec is not None:
             for _ in range(args.repeats):
+                alone = _run([*me, "--worker", "probe"])["probe_s"][0]
+                together = _run([mpiexec, "-n", str(args.ranks), *me, "--worker", "probe"])["probe_s"]
+                ceiling = sum(alone / t for t in together)
                 serial = _run([*me, "--worker", "mixed-ms", "--n", str(n)])
                 ranks = _run([mpiexec, "-n", str(args.ranks), *me, "--worker", "mixed-ms", "--n", str(n)])
                 pairs.append((serial["time_offline_s"], ranks["time_offline_s"], serial["offline_times"],
-                              ranks["offline_times"]))
-                print(json.dumps({"n": n, "pair": pairs[-1][:2]}), flush=True)
+                              ranks["offline_times"], ceiling))
+                print(json.dumps({"n": n, "pair": pairs[-1][:2], "ceiling": ceiling}), flush=True)
         row = {"n": n, "mono": mono, "built": built, "loaded": loaded, "par": par, "pairs": pairs}
         rows.append(row)
         print(json.dumps(row), flush=True)
@@ -202,20 +225,26 @@ def main() -> None:
         )
     if any(r["pairs"] for r in rows):
         lines += ["", f"Interleaved pairs (`--repeats {args.repeats}`): a serial process without a cache, then "
-                  f"{args.ranks} ranks; offline wall s (set-up; Stage I, Stage II, coarse):", "",
-                  f"| h | pair | serial s | {args.ranks} ranks s | ratio |", "|---|---|---|---|---|"]
+                  f"{args.ranks} ranks; offline wall s (set-up; Stage I, Stage II, coarse); the machine's ceiling "
+                  f"just before the pair (Σ_r t_alone / t_r of a CPU-bound probe in one, then {args.ranks} processes)"
+                  " and the ratio's share of it:", "",
+                  f"| h | pair | serial s | {args.ranks} ranks s | ratio | ceiling | ratio / ceiling |",
+                  "|---|---|---|---|---|---|---|"]
 
         def parts(t: dict) -> str:
             return f"{t.get('setup', 0):.1f}; " + ", ".join(f"{t.get(k, 0):.1f}" for k in ("eigen", "basis", "coarse"))
 
         for r in rows:
             ratios = [s / p for s, p, *_ in r["pairs"]]
-            for k, (s, p, ts, tp) in enumerate(r["pairs"]):
+            ceilings = [c for *_, c in r["pairs"]]
+            for k, (s, p, ts, tp, c) in enumerate(r["pairs"]):
                 lines.append(f"| 1/{r['n']} | {k + 1} | {s:.1f} ({parts(ts)}) | {p:.1f} ({parts(tp)}) | "
-                             f"{s / p:.2f} |")
+                             f"{s / p:.2f} | {c:.2f} | {s / p / c:.2f} |")
             if ratios:
                 lines.append(f"| 1/{r['n']} | median | {np.median([s for s, *_ in r['pairs']]):.1f} | "
-                             f"{np.median([p for _, p, *_ in r['pairs']]):.1f} | **{np.median(ratios):.2f}** |")
+                             f"{np.median([p for _, p, *_ in r['pairs']]):.1f} | **{np.median(ratios):.2f}** | "
+                             f"{np.median(ceilings):.2f} | "
+                             f"{np.median([a / c for a, c in zip(ratios, ceilings)]):.2f} |")
     dofs = [r["mono"]["dofs"] for r in rows]
     fits = {
         "monolithic solve (time)": [r["mono"]["time_s"] for r in rows],

@@ -12,6 +12,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.colors import LogNorm, TwoSlopeNorm  # noqa: E402
 from matplotlib.tri import Triangulation  # noqa: E402
+from matplotlib.ticker import MaxNLocator  # noqa: E402
 
 from dolfinx import fem  # noqa: E402
 
@@ -135,13 +136,36 @@ def plot_history(histories: dict, path: str | Path, *, comm, tol: float | None =
     if comm.rank != 0:
         return None
     fig, ax = plt.subplots(figsize=(6, 4))
-    for label, hist in histories.items():
+    ax.set_yscale("log")
+    positive = []  # zeros (an exactly glued pair, e.g. a vanishing solution) cannot go on a log axis: left out
+
+    def plot(its, values, style, **kwargs):
+        v = np.asarray(values, dtype=float)
+        v = np.where(v > 0.0, v, np.nan)
+        if np.isfinite(v).any():
+            positive.extend(v[np.isfinite(v)])
+            ax.plot(its, v, style, **kwargs)
+
+    for k, (label, hist) in enumerate(histories.items()):
         its = np.arange(1, hist.iterations + 1)
-        line, = ax.semilogy(its, hist.residuals, label=f"{label}: transmission residual")
-        ax.semilogy(its, hist.rel_changes, ":", color=line.get_color(), label=f"{label}: rel. change")
+        zero = bool(hist.iterations) and hist.residuals[-1] == 0.0
+        color = f"C{k}"
+        plot(its, hist.residuals, ".-" if hist.iterations < 20 else "-", color=color,
+             label=f"{label}: transmission residual")
+        if zero:
+            ax.plot([], [], "-", color=color, label=f"{label}: transmission residual exactly 0 at iteration "
+                    f"{hist.iterations}")
+        plot(its, hist.rel_changes, ":", color=color, label=f"{label}: rel. change")
         errs = [r.info.get("e_u") for r in hist.records]
         if all(e is not None for e in errs) and errs:
-            ax.semilogy(its, errs, "--", color=line.get_color(), label=f"{label}: $e_u$")
+            plot(its, errs, "--", color=color, label=f"{label}: $e_u$")
+    longest = max((h.iterations for h in histories.values()), default=1)
+    ax.set_xlim(0.5, max(longest, 1) + 0.5)
+    ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+    if tol is not None:
+        positive.append(tol)
+    if positive:  # (before axhline: a lone horizontal line would autoscale to an empty range)
+        ax.set_ylim(0.5 * min(positive), 2.0 * max(positive))
     if tol is not None:
         ax.axhline(tol, color="k", lw=0.5, ls=":")
     ax.set_xlabel("iteration")

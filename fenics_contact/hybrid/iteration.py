@@ -40,6 +40,7 @@ __all__ = [
     "IterationHistory",
     "iterate",
     "evaluate",
+    "zero_is_the_fixed_point",
     "IterationResult",
 ]
 
@@ -286,6 +287,38 @@ def evaluate(step: HybridStep, g: np.ndarray, history: IterationHistory, *, name
     return Tg, record
 
 
+#: the iterates have collapsed when the interface data fall below this fraction of the largest seen in the solve
+COLLAPSE = 1.0e-6
+
+
+def data_norm(g: np.ndarray, comm: MPI.Comm) -> float:
+    """Euclidean norm of the interface data over the ranks (only ratios of it are used)."""
+    return float(np.sqrt(comm.allreduce(float(np.dot(g, g)), op=MPI.SUM)))
+
+
+def zero_is_the_fixed_point(step: HybridStep, history: IterationHistory, options: IterationOptions, *,
+                            name: str, monitor: Callable[[], dict] | None = None) -> bool:
+    """Apply T at g = 0 and certify that pair: True (history converged) if it glues.
+
+    The certificate is relative (``hybrid.certificate``), so iterates that decay towards a vanishing solution
+    (unloading to zero data, an obstacle the body leaves) never certify: their relative jump stays O(1) while
+    their size falls like a power iteration.  A zero solution is recognised instead by its own evidence: with
+    g = 0 both subproblems see only the problem's data, and if they return a pair that glues (both exactly
+    zero: 0/0 counts as 0, or any pair below ``tol``), g = 0 is a fixed point of T, the unique one.  The
+    subproblems start cold (``reset``): warm-started from the collapsed state, Ω₂'s Newton would shrink it by
+    a factor of rounding per step into subnormal numbers, whose rounding flips its active set.  Costs one
+    application of T (and Ω₂'s factorization); the step's state is then that pair, the last record of ``history``.
+    """
+    zero = np.zeros_like(step.initial_data())
+    if hasattr(step, "reset"):
+        step.reset()
+    _, rec = evaluate(step, zero, history, name=name, monitor=monitor)
+    log.info("%s: the interface data collapsed; the pair at g = 0 has transmission residual %.3e (%s)", name,
+             rec.residual, "the fixed point is g = 0" if rec.residual < options.tol else "not a fixed point")
+    history.converged = bool(rec.residual < options.tol)
+    return history.converged
+
+
 def iterate(
     step: HybridStep,
     options: IterationOptions,
@@ -312,6 +345,8 @@ def iterate(
     update = make_update(options.accel, step.comm, depth=options.depth, weights=weights)
     history = IterationHistory()
     start = time.perf_counter()
+    largest = data_norm(g, step.comm)
+    zero_tried = False
     for k in range(1, options.max_iterations + 1):
         Tg, rec = evaluate(step, g, history, name=name, monitor=monitor)
         done = rec.residual < options.tol
@@ -321,6 +356,12 @@ def iterate(
         if done:
             history.converged = True
             break
+        size = data_norm(Tg, step.comm)
+        largest = max(largest, size)
+        if not zero_tried and size <= COLLAPSE * largest and k < options.max_iterations:
+            zero_tried = True
+            if zero_is_the_fixed_point(step, history, options, name=name, monitor=monitor):
+                break
         g = update(g, Tg)
     history.time_s = time.perf_counter() - start - history.time_monitor_s
     if not history.converged:

@@ -92,6 +92,22 @@ def test_gap_undefined_at_a_contact_node_is_refused(square):
             solve_mixed_monolithic(square, _model(holes))
 
 
+def test_obstacle_on_the_wrong_side_is_refused(square):
+    """A flipped plane normal (the wall at x = 1 with normal +x: the whole body inside it) or a disc covering
+    the body is refused with the reason, not solved as a huge indentation pushing the wrong way."""
+    for obstacle in (Plane((1.0, 0.0), (1.0, 0.0)), Circle((0.5, 0.5), 2.0)):
+        fields = material_fields(square.mesh, _model(obstacle))
+        with pytest.raises(InputError, match="wrong side of Gamma_C.*normal points from the obstacle"):
+            solve_primal_monolithic(square.mesh, square.facet_tags, fields, delta=1e-4)
+        if MPI.COMM_WORLD.size == 1:
+            with pytest.raises(InputError, match="wrong side of Gamma_C"):
+                solve_mixed_monolithic(square, _model(obstacle))
+    # indented by a tenth of the body: still mostly outside, accepted
+    deep = _model(Plane((0.9, 0.0), (-1.0, 0.0)))
+    result = solve_primal_monolithic(square.mesh, square.facet_tags, material_fields(square.mesh, deep), delta=1e-4)
+    assert result.profile.force > 0.0
+
+
 def test_obstacle_without_contact_boundary_is_refused(square, tmp_path):
     """An obstacle on a (sub)mesh with no Γ_C facets, and a mesh file lacking Gamma_C."""
     omega1 = split_mesh(square)[0]  # Ω₁ has no Γ_C facets

@@ -92,7 +92,7 @@ from fenics_contact.fem.contact import ContactProfile, NewtonHistory, NewtonOpti
 from fenics_contact.errors import ConvergenceError, InputError
 from fenics_contact.problem.boundary import BoundaryConditions, check_boundary_groups, neumann_groups
 from fenics_contact.problem.fields import MaterialFields, material_fields
-from fenics_contact.problem.obstacles import Obstacle, evaluate_obstacle
+from fenics_contact.problem.obstacles import Obstacle, check_obstacle_side, evaluate_obstacle
 from fenics_contact.problem.geometry import ContactMesh
 from fenics_contact.fem.distributed import DistributedMatrix, SaddlePointMatrix, coo_matrix, gather_rows, global_dot, layout
 from fenics_contact.fem.linalg import DIRECT_OPTIONS, DirectSolver
@@ -746,7 +746,8 @@ class MixedSubproblem:
         if obstacle is None:
             self.q_gap = np.zeros(self.q_points.shape[0])
         else:
-            self.q_gap, _ = evaluate_obstacle(obstacle, self.q_points)
+            self.q_gap, nu = evaluate_obstacle(obstacle, self.q_points)
+            check_obstacle_side(obstacle, nu, self.q_normals)  # (replicated contact nodes: no comm)
         self._F_gap = self._Q.T @ self._q_block(self.q_weights * self.q_gap)
         self.obstacle = obstacle
 

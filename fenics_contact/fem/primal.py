@@ -25,7 +25,7 @@ from fenics_contact.fem.contact import ContactProfile, NewtonHistory, NewtonOpti
 from fenics_contact.errors import InputError
 from fenics_contact.problem.boundary import BoundaryConditions, check_boundary_groups, neumann_groups
 from fenics_contact.problem.fields import MaterialFields
-from fenics_contact.problem.obstacles import Obstacle, evaluate_obstacle
+from fenics_contact.problem.obstacles import Obstacle, check_obstacle_side, evaluate_obstacle
 from fenics_contact.fem.linalg import AbsoluteTerms, DirectSolver, quadratic_form
 from fenics_contact.problem.materials import strain, stress
 from fenics_contact.problem.tags import Boundary
@@ -209,6 +209,7 @@ class PrimalSubproblem:
         else:
             points = self.Q.tabulate_dof_coordinates()[nodes]
             g, nu = evaluate_obstacle(obstacle, points, comm=self.mesh.comm)
+            check_obstacle_side(obstacle, nu, self._surface_normal, comm=self.mesh.comm)
         same_direction = self.mesh.comm.allreduce(
             bool(np.array_equal(self.nu_c.x.array.reshape(-1, gdim)[nodes], nu)), op=MPI.LAND
         )

@@ -35,7 +35,7 @@ import numpy.typing as npt
 
 from fenics_contact.errors import InputError
 
-__all__ = ["Obstacle", "Plane", "Circle", "SignedDistance", "Translated", "evaluate_obstacle"]
+__all__ = ["Obstacle", "Plane", "Circle", "SignedDistance", "Translated", "evaluate_obstacle", "check_obstacle_side"]
 
 
 def _as_vector(value: npt.ArrayLike, name: str, *, unit: bool = False) -> np.ndarray:
@@ -199,6 +199,32 @@ class Translated(Obstacle):
 
     def translated(self, t: npt.ArrayLike) -> Obstacle:
         return Translated(self.base, tuple(np.asarray(self.shift) + _as_vector(t, "the translation")))
+
+
+def check_obstacle_side(obstacle: Obstacle, nu: np.ndarray, normals: np.ndarray, *, comm=None) -> None:
+    """InputError if the obstacle's direction ν points into the body at most of the contact nodes.
+
+    ``nu`` (N, 2): ν from ``evaluate_obstacle`` at the Γ_C nodes; ``normals`` (N, 2): the body's outward unit
+    normals there.  The obstacle lies outside the body, so ν (from the body towards the obstacle) points out of
+    it, ν·n > 0, wherever the two can touch; ν·n < 0 at more than half of the nodes means the obstacle is on the
+    wrong side: a flipped plane normal (a plane's normal points from the obstacle into the body), a circle
+    centred inside the body.  Solved, it would be a huge indentation pushing the wrong way.  With ``comm`` the
+    counts are summed over the ranks.
+    """
+    nu = np.asarray(nu, dtype=np.float64).reshape(-1, 2)
+    normals = np.asarray(normals, dtype=np.float64)[:, :2].reshape(-1, 2)
+    cosine = np.einsum("ij,ij->i", nu, normals)
+    counts = np.array([np.count_nonzero(cosine < -0.1), cosine.size], dtype=np.int64)
+    if comm is not None:
+        counts = comm.allreduce(counts)
+    inward, total = (int(c) for c in counts)
+    if total and inward > total / 2:
+        raise InputError(
+            f"the obstacle is on the wrong side of Gamma_C: its direction towards the obstacle points into the body "
+            f"at {inward} of {total} contact nodes ({obstacle!r}). A plane's normal points from the obstacle into "
+            "the body (the wall at x = 1 of a body on x < 1 has normal [-1, 0]); a circle's centre lies outside "
+            "the body"
+        )
 
 
 def evaluate_obstacle(obstacle: Obstacle, points: np.ndarray, *, comm=None) -> tuple[np.ndarray, np.ndarray]:

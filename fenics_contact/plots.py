@@ -150,18 +150,19 @@ def plot_history(histories: dict, path: str | Path, *, comm, tol: float | None =
         its = np.arange(1, hist.iterations + 1)
         zero = bool(hist.iterations) and hist.residuals[-1] == 0.0
         color = f"C{k}"
-        plot(its, hist.residuals, ".-" if hist.iterations < 20 else "-", color=color,
+        dot = "." if hist.iterations < 20 else ""  # (a lone point of a line without markers is not drawn)
+        plot(its, hist.residuals, dot + "-", color=color,
              label=f"{label}: transmission residual")
         if zero:
             ax.plot([], [], "-", color=color, label=f"{label}: transmission residual exactly 0 at iteration "
                     f"{hist.iterations}")
-        plot(its, hist.rel_changes, ":", color=color, label=f"{label}: rel. change")
+        plot(its, hist.rel_changes, dot + ":", color=color, label=f"{label}: rel. change")
         errs = [r.info.get("e_u") for r in hist.records]
         if all(e is not None for e in errs) and errs:
-            plot(its, errs, "--", color=color, label=f"{label}: $e_u$")
+            plot(its, errs, dot.replace(".", "x") + "--", color=color, label=f"{label}: $e_u$")
     longest = max((h.iterations for h in histories.values()), default=1)
     ax.set_xlim(0.5, max(longest, 1) + 0.5)
-    ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+    ax.xaxis.set_major_locator(MaxNLocator(integer=True, min_n_ticks=1))
     if tol is not None:
         positive.append(tol)
     if positive:  # (before axhline: a lone horizontal line would autoscale to an empty range)

@@ -69,6 +69,7 @@ from fenics_contact.problem.geometry import ContactMesh, read_mesh, unit_square
 from fenics_contact.problem.materials import check_poisson_ratio
 from fenics_contact.problem.models import TestModel, get_model, pixel_field
 from fenics_contact.problem.tags import Subdomain
+from fenics_contact.problem.validation import contact_open_ends
 
 __all__ = ["main", "build_parser", "run", "RunOptions", "EXIT_CODES"]
 
@@ -491,11 +492,40 @@ def _options_echo(options: RunOptions) -> dict:
     return echo
 
 
-def _curve_row(depth: float, direction: np.ndarray, profile, iterations: int, converged: bool, time_s: float) -> dict:
+def _at_open_ends(profile, ends: np.ndarray) -> list[list[float]]:
+    """The open ends of Γ_C (``validation.open_ends``) at which ``profile`` is in contact."""
+    hits = []
+    for p in profile.active_ends():
+        if ends.size and np.min(np.linalg.norm(ends - np.asarray(p), axis=1)) <= 1e-9 * max(1.0, np.abs(ends).max()):
+            hits.append([float(v) for v in p])
+    return hits
+
+
+def _contact_summary(profile, ends: np.ndarray) -> dict:
+    """Contact zone(s) of a profile for the summary: the span, each separate zone, open ends reached."""
     zone = profile.contact_zone()
+    return {"contact_zone": [list(p) for p in zone] if zone else None,
+            "contact_zones": [[list(a), list(b)] for a, b in profile.contact_zones()],
+            "contact_at_open_end": _at_open_ends(profile, ends)}
+
+
+def _curve_row(depth: float, direction: np.ndarray, profile, iterations: int, converged: bool, time_s: float,
+               ends: np.ndarray) -> dict:
     return {"depth": float(depth), "force": float(profile.resultant @ direction), "normal_force": profile.force,
-            "max_pressure": profile.max_pressure, "contact_zone": [list(p) for p in zone] if zone else None,
+            "max_pressure": profile.max_pressure, **_contact_summary(profile, ends),
             "iterations": int(iterations), "converged": bool(converged), "time_s": time_s}
+
+
+def _warn_open_ends(summary: dict, comm: MPI.Comm) -> None:
+    """Warn (rank 0) when a solve's contact zone reaches an end of Γ_C where the boundary goes on straight."""
+    hits = [("the run", summary["contact_at_open_end"])] if summary["contact_at_open_end"] else []
+    steps = (summary.get("force_indentation") or {}).get("steps", [])
+    hits += [(f"depth {s['depth']:g}", s["contact_at_open_end"]) for s in steps if s["contact_at_open_end"]]
+    if hits and comm.rank == 0:
+        where = "; ".join(f"{what} at {', '.join(f'({x:.6g}, {y:.6g})' for x, y in pts)}" for what, pts in hits)
+        log.warning("the contact zone reaches an end of Gamma_C where the boundary goes on straight (%s): the "
+                    "true zone is wider than Gamma_C, so the contact force and pressure are those of a contact "
+                    "cut short by the tags, not of the body. Extend Gamma_C along that side.", where)
 
 
 def _indentation_curve(options: RunOptions, case: Case, cm: ContactMesh, model: TestModel, outcome) -> dict:
@@ -518,7 +548,8 @@ def _indentation_curve(options: RunOptions, case: Case, cm: ContactMesh, model: 
         penalty = {"step": outcome.result.step}
     curve = force_indentation(options.method, cm, model.with_(obstacle=spec.base()), spec.depths,
                               direction=direction, options=options.iteration_options(), **penalty)
-    rows = [_curve_row(s.depth, direction, s.profile, s.iterations, s.converged, s.time_s) | {
+    ends = contact_open_ends(cm)
+    rows = [_curve_row(s.depth, direction, s.profile, s.iterations, s.converged, s.time_s, ends) | {
         "transmission_residual": s.transmission_residual, "complementarity": s.complementarity._asdict(),
         "interface_newton_steps": s.interface_newton_steps}
         for s in curve.steps]
@@ -818,7 +849,7 @@ def _solve_and_write(options: RunOptions, comm: MPI.Comm, model: TestModel | Non
         **outcome.summary,
         "active_set": profile.active_interval(),
         "contact_force": profile.force,
-        "contact_zone": [list(p) for p in profile.contact_zone()] if profile.contact_zone() else None,
+        **_contact_summary(profile, contact_open_ends(cm)),
         "max_contact_pressure": profile.max_pressure,
         "newton_steps_total": int(sum(r.info.get("newton", 0) for r in result.history.records)),
         "dofs": result.dofs,
@@ -834,6 +865,7 @@ def _solve_and_write(options: RunOptions, comm: MPI.Comm, model: TestModel | Non
         "force_indentation": curve,
         "case": case.to_dict() | {"run": _options_echo(options)} if case is not None else None,
     }
+    _warn_open_ends(summary, comm)
     out = output.path
     writer = MPI.COMM_SELF if replicated else comm  # replicated: rank 0 holds the whole run and writes it
     if not replicated or comm.rank == 0:
@@ -864,17 +896,47 @@ class Interrupted(BaseException):
         self.signum = signum
 
 
+#: a signal that arrives inside a ``__del__`` is raised again this much later (s)
+DEFERRED_SIGNAL_S = 0.05
+
+
+def _in_finalizer(frame) -> bool:
+    while frame is not None:
+        if frame.f_code.co_name == "__del__":
+            return True
+        frame = frame.f_back
+    return False
+
+
 @contextmanager
 def _interruptible() -> Iterator[None]:
-    """SIGINT and SIGTERM raise ``Interrupted`` (so that cleanup runs); the previous handlers come back after."""
+    """SIGINT and SIGTERM raise ``Interrupted`` (so that cleanup runs); the previous handlers come back after.
+
+    Python ignores an exception raised in a ``__del__`` (it prints "Exception ignored in ...") and goes on: a
+    SIGTERM that arrived while DOLFINx freed a vector was lost and the run went on to exit 0.  A signal that
+    arrives in a finalizer is therefore raised again ``DEFERRED_SIGNAL_S`` later (SIGALRM), outside it.
+    """
+    pending: list[int] = []
+
     def handler(signum, frame):
+        if _in_finalizer(frame):
+            pending.append(signum)
+            signal.setitimer(signal.ITIMER_REAL, DEFERRED_SIGNAL_S)
+            return
         raise Interrupted(signum)
 
+    def deferred(_signum, frame):
+        if pending:
+            handler(pending[-1], frame)
+
     main_thread = threading.current_thread() is threading.main_thread()
-    previous = {s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM)} if main_thread else {}
+    signals = (signal.SIGINT, signal.SIGTERM, signal.SIGALRM) if main_thread else ()
+    previous = {s: signal.signal(s, deferred if s == signal.SIGALRM else handler) for s in signals}
     try:
         yield
     finally:
+        if main_thread:
+            signal.setitimer(signal.ITIMER_REAL, 0.0)
         for s, h in previous.items():
             signal.signal(s, h)
 

@@ -228,6 +228,26 @@ def test_hertz_case_small(tmp_path):
     assert abs(steps[-1]["normal_force"] - F) <= 1e-6 * F  # warm-started load steps reach the run's solution
     assert abs(steps[-1]["force"] - F) <= 1e-4 * F  # the resultant along the indentation ≈ the normal force
     assert steps[1]["force"] / 1.2e-3 > steps[0]["force"] / 6e-4  # stiffening: the contact widens
+    # the active set is an x-interval on this horizontal Γ_C (it was the y-interval [0, 0]); one zone, no open end
+    assert s["active_set"] == pytest.approx([xl, xr]) and len(s["contact_zones"]) == 1
+    assert s["contact_at_open_end"] == [] and all(st["contact_at_open_end"] == [] for st in steps)
+
+
+def test_contact_cut_short_by_the_end_of_gamma_c_is_warned(tmp_path, capsys):
+    """Indented 17× deeper, the Hertz contact zone reaches both ends of Γ_C (|x| = 3a), where the top face goes
+    on straight: the result is a contact cut short by the tags (force 7 % low, peak 4× high against a wider
+    Γ_C, measured by the probe that found it), reported with a warning and in the summary; the bar's full
+    contact reaches the ends of its Γ_C at the body's corners and is not warned about."""
+    s = _run(tmp_path, "--case", str(CASES / "hertz.toml"), "--set", "mesh.refinement=0.5",
+             "--set", "obstacle.indentation=[0.02]")
+    ends = sorted(p[0] for p in s["contact_at_open_end"])
+    assert ends == pytest.approx([-0.15, 0.15]) and s["force_indentation"]["steps"][-1]["contact_at_open_end"]
+    printed = capsys.readouterr()
+    assert "reaches an end of Gamma_C where the boundary goes on straight" in printed.out + printed.err
+    bar = _run(tmp_path, "--case", str(CASES / "bar.toml"), name="bar")
+    assert bar["active_set"] == pytest.approx([0.0, 1.0]) and bar["contact_at_open_end"] == []
+    printed = capsys.readouterr()
+    assert "Gamma_C where the boundary" not in printed.out + printed.err
 
 
 LAYERS = np.array([1.0] * 6 + [1e3] * 7 + [10.0] * 3)  #: E on the 16 columns of [0, 1]: 1 | 10³ | 10

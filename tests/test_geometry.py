@@ -148,3 +148,28 @@ def test_mesh_too_coarse_for_the_load_is_rejected():
     cm = unit_square(4, 2)
     with pytest.raises(InputError, match="zero on every cell"):
         material_fields(cm.mesh, model_2(), require_load=True)
+
+
+def test_open_ends_of_the_contact_boundary():
+    """Γ_C ends openly where the boundary goes on straight (the Hertz block's top face at |x| = 3a), not at the
+    body's corners (unit square, bulged square); on every rank."""
+    from fenics_contact.problem.meshes import bulged_square, hertz_block
+    from fenics_contact.problem.validation import contact_open_ends
+
+    assert contact_open_ends(unit_square(8, 4, clamped=("left",))).shape == (0, 2)
+    assert contact_open_ends(bulged_square(1 / 16, 1 / 4, clamped=("left",))).shape == (0, 2)
+    ends = contact_open_ends(hertz_block(0.05, refinement=0.25)[0])
+    assert np.allclose(sorted(ends[:, 0]), [-0.15, 0.15]) and np.allclose(ends[:, 1], 0.0)
+
+
+def test_contact_profile_zones_along_a_horizontal_boundary():
+    """The active interval is taken along Γ_C (x on a horizontal one); separate zones are listed apart."""
+    from fenics_contact.fem.contact import ContactProfile
+
+    x = np.linspace(-1.0, 1.0, 9)
+    u_c = np.array([1, 1, 0, -1, -1, -1, 0.5, 0.5, -1.0]) * 1e-3  # > 0: in contact
+    prof = ContactProfile(np.zeros_like(x), u_c, -u_c, points=np.stack([x, np.zeros_like(x)], axis=1))
+    assert prof.active_interval() == (-1.0, 0.75)
+    assert prof.contact_zones() == [((-1.0, 0.0), (-0.75, 0.0)), ((0.5, 0.0), (0.75, 0.0))]
+    assert prof.active_ends() == [(-1.0, 0.0)]
+    assert prof.contact_zone() == ((-1.0, 0.0), (0.75, 0.0))  # the span of both

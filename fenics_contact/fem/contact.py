@@ -110,9 +110,34 @@ class ContactProfile(NamedTuple):
         """max (u_c)⁺: the penetration the penalty leaves."""
         return float(np.max(np.maximum(self.u_c, 0.0), initial=0.0))
 
+    @property
+    def along(self) -> np.ndarray:
+        """Each node's coordinate along Γ_C: the one of larger spread (y on a vertical Γ_C, x on a horizontal
+        one; ``y`` when the profile has no ``points``)."""
+        if self.points is None or self.points.shape[0] == 0:
+            return self.y
+        return self.points[:, int(np.argmax(np.ptp(self.points[:, :2], axis=0)))]
+
     def active_interval(self) -> tuple[float, float] | None:
-        """[y_min, y_max] of the contact zone, or None when nothing touches."""
-        return active_interval(self.y, self.active)
+        """[min, max] of the contact nodes' coordinate along Γ_C (``along``: y on a vertical Γ_C, x on a
+        horizontal one), or None when nothing touches; the span of all zones (``contact_zones``)."""
+        return active_interval(self.along, self.active)
+
+    def contact_zones(self) -> list[tuple[tuple[float, float], tuple[float, float]]]:
+        """End points of each separate contact zone: maximal runs of consecutive contact nodes in profile order."""
+        if self.points is None:
+            return []
+        active = self.active.astype(np.int8)
+        edges = np.diff(np.concatenate([[0], active, [0]]))
+        starts, stops = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1) - 1
+        return [(tuple(map(float, self.points[a])), tuple(map(float, self.points[b]))) for a, b in zip(starts, stops)]
+
+    def active_ends(self) -> list[tuple[float, float]]:
+        """The end nodes of the profile (first, last) that are in contact."""
+        if self.points is None or self.points.shape[0] == 0:
+            return []
+        ends = {0, self.points.shape[0] - 1}
+        return [tuple(map(float, self.points[i])) for i in sorted(ends) if self.active[i]]
 
 
 def profile_order(points: np.ndarray) -> np.ndarray:

@@ -44,7 +44,9 @@ __all__ = [
     "BOUNDARY_RULES",
     "MeshDescription",
     "check_mesh_description",
+    "contact_open_ends",
     "describe_contact_mesh",
+    "open_ends",
     "mesh_problems",
     "require_facet_groups",
     "require_tag_counts",
@@ -347,6 +349,47 @@ def describe_contact_mesh(cm, names: Iterable[str] | None = None) -> MeshDescrip
     groups = {name: np.unique(np.sort(np.concatenate([g[4][name] for g in gathered]).reshape(-1, 2), axis=1), axis=0)
               for name in wanted}
     return MeshDescription(points, triangles, labels, groups)
+
+
+#: Γ_C "ends openly" where the boundary goes on within this angle of Γ_C's own direction (degrees)
+OPEN_END_ANGLE = 30.0
+
+
+def open_ends(desc: MeshDescription, group: str = GAMMA_C, angle: float = OPEN_END_ANGLE) -> np.ndarray:
+    """(k, 2) end points of the facet group where the boundary continues nearly straight (within ``angle``).
+
+    An end of Γ_C at a corner of the body (the bar's wall side) is a true end of the possible contact zone; an
+    end where the boundary goes on straight (Γ_C a part of one side, as in a Hertz block) is not: a contact zone
+    that reaches it is cut short by the tags, not by the mechanics.
+    """
+    seg = np.asarray(desc.facets.get(group, np.zeros((0, 2), np.int64)), dtype=np.int64).reshape(-1, 2)
+    pts = np.asarray(desc.points, dtype=np.float64)
+    if seg.shape[0] == 0:
+        return np.zeros((0, 2))
+    degree = np.bincount(seg.ravel(), minlength=pts.shape[0])
+    edges = _Edges(desc)
+    outer = edges.nodes[edges.exterior]
+    _, in_group = edges.find(seg)
+    keys = edges.keys(outer)
+    others = outer[~np.isin(keys, edges.keys(seg[in_group]))]  # exterior edges not in the group
+    cos_max = np.cos(np.radians(angle))
+    found = []
+    for e in np.flatnonzero(degree == 1):
+        own = seg[np.any(seg == e, axis=1)][0]
+        d1 = pts[e] - pts[own[0] if own[1] == e else own[1]]  # along Γ_C, out of its end
+        for q in others[np.any(others == e, axis=1)]:
+            d2 = pts[q[0] if q[1] == e else q[1]] - pts[e]
+            if d1 @ d2 > cos_max * np.linalg.norm(d1) * np.linalg.norm(d2):
+                found.append(pts[e])
+                break
+    return np.array(found, dtype=np.float64).reshape(-1, 2)
+
+
+def contact_open_ends(cm) -> np.ndarray:
+    """``open_ends`` of Γ_C on every rank (collective: the mesh is described on rank 0)."""
+    desc = describe_contact_mesh(cm, [GAMMA_C])
+    ends = open_ends(desc) if cm.comm.rank == 0 else None
+    return cm.comm.bcast(ends, root=0)
 
 
 def validate_contact_mesh(cm, rules: Iterable[BoundaryRule] = BOUNDARY_RULES, *, source: str = "the mesh") -> None:

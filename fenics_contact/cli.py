@@ -631,9 +631,14 @@ def _check_coarse_grid(cm: ContactMesh, options: RunOptions) -> None:
 def _check_case_coarse_grid(cm: ContactMesh, options: RunOptions, case: Case) -> None:
     """The multiscale methods need a coarse grid that the case's mesh resolves."""
     if cm.H is None:
+        builtin = case.mesh.kind in ("hertz-block", "bulged-square")
         raise InputError(f"--method {options.method}: the mesh of case {case.path.name} ({case.mesh.kind}) has no "
                          "coarse grid; the multiscale methods need the unit-square mesh or a mesh file with mesh.H "
-                         "(a coarse grid of squares of side 1/H that the mesh resolves)")
+                         "(a coarse grid of squares of side 1/H that the mesh resolves)"
+                         + (f" — the built-in {case.mesh.kind} mesh takes no mesh.H (its graded cells cross any "
+                            "such grid): use --method primal or mixed on it, or a mesh file of your own that a "
+                            "coarse grid resolves (mesh.H) or that carries its own coarse partition (README, 'Any "
+                            "domain')" if builtin else ""))
     cells = cm.cell_tags.find(Subdomain.OMEGA1)
     crossing = cm.comm.allreduce(int(np.count_nonzero(cm.coarse_cell[cells] < 0)), op=MPI.SUM)
     if crossing:

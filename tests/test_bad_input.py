@@ -271,6 +271,8 @@ CASES = [
     Case("case: a plane obstacle with its normal flipped (the body inside it)",
          _case(SQUARE + PLANE.replace("normal = [-1.0, 0.0]", "normal = [1.0, 0.0]")), 2,
          "the obstacle is on the wrong side of Gamma_C"),
+    Case("case: no side clamped", _case(SQUARE.replace('clamped = ["left"]', "clamped = []")), 2,
+         "mesh.clamped = [] leaves no Gamma_D: nothing holds the body"),
     Case("case: indentation of the flush wall", _case(SQUARE + "[obstacle]\nindentation = 0.01\n"), 2,
          "obstacle.indentation moves a plane or a circle"),
     Case("case: a circle's indentation with no direction",
@@ -294,6 +296,9 @@ CASES = [
     Case("E = 1e308 (overflow)", _args("--E-high", "1e308"), 2, "Rescale the units"),
     Case("contrast 1e100 (beyond double precision)", _args("--E-high", "1e100"), 4,
          "numerical failure: fc_primal_omega2: semismooth Newton did not converge"),
+    Case("mixed with ε thousands of times below its default (ill-conditioned reference)",
+         _args("--method", "mixed", "--epsilon", "1e-8", "--reference"), 4,
+         "times below the default 1e-3·h·E_min"),
 ]
 
 

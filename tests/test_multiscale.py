@@ -461,3 +461,18 @@ def test_nbasis_as_float_and_a_cut_through_the_rigid_motions():
                                            cem=cem.CEMOptions(layers=1, nbasis=2.0))
     assert om.nbasis_range == (2, 2)
     assert np.all(om.space.aux.gaps >= 0.0) and om.spectral_gap == 0.0
+
+
+def test_few_oversampling_layers_are_warned_about(caplog):
+    """m = 0 or 1 cut the bases short (the Ω₁ error stays O(1): the per-layer rates tested above start at m = 1);
+    both multiscale methods warn, m >= 2 does not."""
+    import logging
+
+    from fenics_contact.multiscale.cem import FEW_LAYERS, warn_if_few_layers
+
+    assert FEW_LAYERS == 2
+    with caplog.at_level(logging.WARNING, logger="fenics_contact"):
+        for m in (0, 1, 2, 3):
+            warn_if_few_layers(m, "test", MPI.COMM_SELF)
+    warned = [r.message for r in caplog.records if "oversampling layer" in r.message]
+    assert len(warned) == 2 and "m = 0" in warned[0] and "m = 1" in warned[1]

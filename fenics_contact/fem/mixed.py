@@ -1206,7 +1206,13 @@ def solve_mixed_monolithic(
     if verify:
         norm, scale = problem.ufl_residual_norm()
         if norm > newton.rtol * scale + newton.atol:
-            raise ConvergenceError(f"mixed monolithic: UFL residual {norm:.3e} exceeds {newton.rtol:g}·{scale:.3e}")
+            usual = default_epsilon(cm.h, contact_modulus(cm.mesh, cm.facet_tags, fields.E, smallest=True))
+            hint = (f"; ε = {epsilon:g} is {usual / epsilon:.0e} times below the default 1e-3·h·E_min = {usual:.3g} "
+                    "on Gamma_C, which makes the contact block ill-conditioned: use a larger --epsilon"
+                    if epsilon < 1e-3 * usual else "")
+            raise ConvergenceError(f"mixed monolithic: the solution misses its own equations (UFL residual "
+                                   f"{norm:.3e} > {newton.rtol:g}·{scale:.3e}, the size of their terms): the linear "
+                                   f"solves lost accuracy{hint}")
     elapsed = time.perf_counter() - start
     profile = problem.contact_profile()
     log.info(

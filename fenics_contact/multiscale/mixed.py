@@ -76,7 +76,7 @@ from fenics_contact.multiscale.mixed_cem import (
     MixedMultiscaleOmega1,
 )
 from fenics_contact.problem.models import TestModel
-from fenics_contact.multiscale.cem import DEFAULT_S_FACTOR, coarse_grid
+from fenics_contact.multiscale.cem import DEFAULT_S_FACTOR, coarse_grid, warn_if_few_layers
 
 __all__ = ["MixedMsResult", "MixedMultiscaleHybridStep", "solve_mixed_ms_hybrid"]
 
@@ -137,6 +137,7 @@ class MixedMultiscaleHybridStep(MixedHybridStep):
         part = self.parts[0]
         grid = coarse_grid(part.mesh, part.cell_map, cm.coarse_cell, cm.H)
         self.cem = cem
+        warn_if_few_layers(cem.layers, "mixed CEM (Algorithm 4)", offline_comm)
         # (issue 14) the boundary conditions of the fine mixed method on Ω₁: σn = 0 (traction free) and σn = t
         # (Γ_N, homogeneous part + the lifting s₀) essential in every local space, u_D and the lifting as loads
         self.omega1 = MixedMultiscaleOmega1(self.sub[0], grid, cem, H=grid.H, cache_dir=cache_dir, comm=offline_comm,

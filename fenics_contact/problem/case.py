@@ -482,6 +482,10 @@ def _mesh(source: _Source, data) -> MeshSpec:
         if both:
             raise source.error(f"mesh.neumann: side {both[0]!r} is also in mesh.clamped: a side is clamped (Gamma_D) "
                                "or carries a traction (Gamma_N), not both")
+    if not getattr(spec, "clamped", True):
+        raise source.error("mesh.clamped = [] leaves no Gamma_D: nothing holds the body, whose rigid motions make "
+                           "the problem singular; clamp at least one side (boundary.displacement prescribes u on "
+                           "the clamped sides instead of 0)")
     t.finish(f' for builtin = "{kind}"')
     return spec
 

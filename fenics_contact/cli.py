@@ -21,6 +21,7 @@ Every failure ends with one line on stderr.
 import argparse
 import logging
 import math
+import os
 import re
 import signal
 import sys
@@ -493,11 +494,16 @@ def _options_echo(options: RunOptions) -> dict:
 
 
 def _at_open_ends(profile, ends: np.ndarray) -> list[list[float]]:
-    """The open ends of Γ_C (``validation.open_ends``) at which ``profile`` is in contact."""
+    """The open ends of Γ_C (``validation.open_ends``: x, y, end facet length) that ``profile``'s contact reaches:
+    a contact node within one facet of the end (the mixed method's σ_c vanishes at the end node itself next to
+    a traction-free side), whatever the order of the profile's nodes."""
+    if not ends.size or profile.points is None or not np.any(profile.active):
+        return []
+    touching = profile.points[profile.active][:, :2]
     hits = []
-    for p in profile.active_ends():
-        if ends.size and np.min(np.linalg.norm(ends - np.asarray(p), axis=1)) <= 1e-9 * max(1.0, np.abs(ends).max()):
-            hits.append([float(v) for v in p])
+    for x, y, length in ends:
+        if np.min(np.linalg.norm(touching - [x, y], axis=1)) <= 1.01 * length:
+            hits.append([float(x), float(y)])
     return hits
 
 
@@ -914,34 +920,37 @@ def _in_finalizer(frame) -> bool:
 
 
 @contextmanager
-def _interruptible() -> Iterator[None]:
+def _interruptible() -> Iterator[list[int]]:
     """SIGINT and SIGTERM raise ``Interrupted`` (so that cleanup runs); the previous handlers come back after.
 
     Python ignores an exception raised in a ``__del__`` (it prints "Exception ignored in ...") and goes on: a
     SIGTERM that arrived while DOLFINx freed a vector was lost and the run went on to exit 0.  A signal that
-    arrives in a finalizer is therefore raised again ``DEFERRED_SIGNAL_S`` later (SIGALRM), outside it.
+    arrives in a finalizer is therefore sent again ``DEFERRED_SIGNAL_S`` later (a timer thread; no SIGALRM, so
+    a caller's alarms are left alone), and it is kept in the yielded list until it has been raised: a signal
+    still listed when the block ends (it landed in the last finalizers) is the caller's to report.
     """
     pending: list[int] = []
+    timers: list[threading.Timer] = []
 
     def handler(signum, frame):
         if _in_finalizer(frame):
             pending.append(signum)
-            signal.setitimer(signal.ITIMER_REAL, DEFERRED_SIGNAL_S)
+            timer = threading.Timer(DEFERRED_SIGNAL_S, os.kill, (os.getpid(), signum))
+            timer.daemon = True
+            timers.append(timer)
+            timer.start()
             return
+        pending.clear()
         raise Interrupted(signum)
 
-    def deferred(_signum, frame):
-        if pending:
-            handler(pending[-1], frame)
-
     main_thread = threading.current_thread() is threading.main_thread()
-    signals = (signal.SIGINT, signal.SIGTERM, signal.SIGALRM) if main_thread else ()
-    previous = {s: signal.signal(s, deferred if s == signal.SIGALRM else handler) for s in signals}
+    signals = (signal.SIGINT, signal.SIGTERM) if main_thread else ()
+    previous = {s: signal.signal(s, handler) for s in signals}
     try:
-        yield
+        yield pending
     finally:
-        if main_thread:
-            signal.setitimer(signal.ITIMER_REAL, 0.0)
+        for timer in timers:
+            timer.cancel()
         for s, h in previous.items():
             signal.signal(s, h)
 
@@ -973,11 +982,11 @@ def main(argv: list[str] | None = None) -> int:
     _setup_logging(getattr(args, "verbose", False))
     comm = MPI.COMM_WORLD
     out = getattr(args, "out", None)
-    with _interruptible():
+    with _interruptible() as pending:
         try:
             options, case = options_from_arguments(args, argv)
             out = options.out
-            return run(options, comm, case=case)
+            code = run(options, comm, case=case)
         except Interrupted as stop:
             where = (f"the results in {out} are complete" if getattr(stop, "output_complete", False)
                      else f"{out} left as it was (no partial output)")
@@ -989,6 +998,11 @@ def main(argv: list[str] | None = None) -> int:
         except FenicsContactError as err:  # InputError, MeshTagError
             _fail(f"error: {err}", comm)
             return EXIT_BAD_INPUT
+    if pending:  # a signal landed in the last finalizers of a run that had ended: its results are written
+        signum = pending[-1]
+        _fail(f"interrupted by {signal.Signals(signum).name}: the results in {out} are complete", comm)
+        return 128 + signum
+    return code
 
 
 if __name__ == "__main__":

@@ -156,10 +156,11 @@ def test_open_ends_of_the_contact_boundary():
     from fenics_contact.problem.meshes import bulged_square, hertz_block
     from fenics_contact.problem.validation import contact_open_ends
 
-    assert contact_open_ends(unit_square(8, 4, clamped=("left",))).shape == (0, 2)
-    assert contact_open_ends(bulged_square(1 / 16, 1 / 4, clamped=("left",))).shape == (0, 2)
-    ends = contact_open_ends(hertz_block(0.05, refinement=0.25)[0])
+    assert contact_open_ends(unit_square(8, 4, clamped=("left",))).shape == (0, 3)
+    assert contact_open_ends(bulged_square(1 / 16, 1 / 4, clamped=("left",))).shape == (0, 3)
+    ends = contact_open_ends(hertz_block(0.05, refinement=0.25)[0])  # x, y, length of the end facet
     assert np.allclose(sorted(ends[:, 0]), [-0.15, 0.15]) and np.allclose(ends[:, 1], 0.0)
+    assert np.all((ends[:, 2] > 0.0) & (ends[:, 2] < 0.05))
 
 
 def test_contact_profile_zones_along_a_horizontal_boundary():
@@ -171,5 +172,4 @@ def test_contact_profile_zones_along_a_horizontal_boundary():
     prof = ContactProfile(np.zeros_like(x), u_c, -u_c, points=np.stack([x, np.zeros_like(x)], axis=1))
     assert prof.active_interval() == (-1.0, 0.75)
     assert prof.contact_zones() == [((-1.0, 0.0), (-0.75, 0.0)), ((0.5, 0.0), (0.75, 0.0))]
-    assert prof.active_ends() == [(-1.0, 0.0)]
     assert prof.contact_zone() == ((-1.0, 0.0), (0.75, 0.0))  # the span of both

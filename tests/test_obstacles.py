@@ -102,6 +102,18 @@ def test_obstacle_on_the_wrong_side_is_refused(square):
         if MPI.COMM_WORLD.size == 1:
             with pytest.raises(InputError, match="wrong side of Gamma_C"):
                 solve_mixed_monolithic(square, _model(obstacle))
+    # a strongly curved Γ_C (a half-disc arc) under a small indenter at its apex: most of the arc faces away from
+    # the obstacle, only the nodes nearest it count (a first version counted all and refused this)
+    from fenics_contact.problem.obstacles import check_obstacle_side
+
+    theta = np.linspace(-np.pi / 2, np.pi / 2, 101)
+    arc = np.stack([np.cos(theta), np.sin(theta)], axis=1)  # the body's outward normals too (unit disc)
+    for r in (0.3, 0.1):
+        gap, nu = evaluate_obstacle(Circle((1.0 + 0.95 * r, 0.0), r), arc)
+        check_obstacle_side(Circle((1.0 + 0.95 * r, 0.0), r), nu, arc, gap)  # accepted
+        gap, nu = evaluate_obstacle(Circle((1.0 - 1.05 * r, 0.0), r), arc)  # centred inside the body
+        with pytest.raises(InputError, match="wrong side"):
+            check_obstacle_side(Circle((1.0 - 1.05 * r, 0.0), r), nu, arc, gap)
     # indented by a tenth of the body: still mostly outside, accepted
     deep = _model(Plane((0.9, 0.0), (-1.0, 0.0)))
     result = solve_primal_monolithic(square.mesh, square.facet_tags, material_fields(square.mesh, deep), delta=1e-4)

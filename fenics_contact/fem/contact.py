@@ -124,20 +124,15 @@ class ContactProfile(NamedTuple):
         return active_interval(self.along, self.active)
 
     def contact_zones(self) -> list[tuple[tuple[float, float], tuple[float, float]]]:
-        """End points of each separate contact zone: maximal runs of consecutive contact nodes in profile order."""
+        """End points of each separate contact zone: maximal runs of consecutive contact nodes in profile order
+        (``profile_order``: right for a Γ_C that is one curve monotone in its major coordinate, as every built-in
+        one; on a Γ_C of several sides or pieces the runs interleave and the count is not meaningful)."""
         if self.points is None:
             return []
         active = self.active.astype(np.int8)
         edges = np.diff(np.concatenate([[0], active, [0]]))
         starts, stops = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1) - 1
         return [(tuple(map(float, self.points[a])), tuple(map(float, self.points[b]))) for a, b in zip(starts, stops)]
-
-    def active_ends(self) -> list[tuple[float, float]]:
-        """The end nodes of the profile (first, last) that are in contact."""
-        if self.points is None or self.points.shape[0] == 0:
-            return []
-        ends = {0, self.points.shape[0] - 1}
-        return [tuple(map(float, self.points[i])) for i in sorted(ends) if self.active[i]]
 
 
 def profile_order(points: np.ndarray) -> np.ndarray:

@@ -747,7 +747,7 @@ class MixedSubproblem:
             self.q_gap = np.zeros(self.q_points.shape[0])
         else:
             self.q_gap, nu = evaluate_obstacle(obstacle, self.q_points)
-            check_obstacle_side(obstacle, nu, self.q_normals)  # (replicated contact nodes: no comm)
+            check_obstacle_side(obstacle, nu, self.q_normals, self.q_gap)  # (replicated contact nodes: no comm)
         self._F_gap = self._Q.T @ self._q_block(self.q_weights * self.q_gap)
         self.obstacle = obstacle
 

@@ -209,7 +209,7 @@ class PrimalSubproblem:
         else:
             points = self.Q.tabulate_dof_coordinates()[nodes]
             g, nu = evaluate_obstacle(obstacle, points, comm=self.mesh.comm)
-            check_obstacle_side(obstacle, nu, self._surface_normal, comm=self.mesh.comm)
+            check_obstacle_side(obstacle, nu, self._surface_normal, g, comm=self.mesh.comm)
         same_direction = self.mesh.comm.allreduce(
             bool(np.array_equal(self.nu_c.x.array.reshape(-1, gdim)[nodes], nu)), op=MPI.LAND
         )

@@ -201,19 +201,30 @@ class Translated(Obstacle):
         return Translated(self.base, tuple(np.asarray(self.shift) + _as_vector(t, "the translation")))
 
 
-def check_obstacle_side(obstacle: Obstacle, nu: np.ndarray, normals: np.ndarray, *, comm=None) -> None:
-    """InputError if the obstacle's direction ν points into the body at most of the contact nodes.
+def check_obstacle_side(obstacle: Obstacle, nu: np.ndarray, normals: np.ndarray, gap: np.ndarray, *,
+                        comm=None) -> None:
+    """InputError if the obstacle's direction ν points into the body at most of the contact nodes nearest it.
 
-    ``nu`` (N, 2): ν from ``evaluate_obstacle`` at the Γ_C nodes; ``normals`` (N, 2): the body's outward unit
-    normals there.  The obstacle lies outside the body, so ν (from the body towards the obstacle) points out of
-    it, ν·n > 0, wherever the two can touch; ν·n < 0 at more than half of the nodes means the obstacle is on the
-    wrong side: a flipped plane normal (a plane's normal points from the obstacle into the body), a circle
-    centred inside the body.  Solved, it would be a huge indentation pushing the wrong way.  With ``comm`` the
-    counts are summed over the ranks.
+    ``nu`` (N, 2), ``gap`` (N,): ν and the gap from ``evaluate_obstacle`` at the Γ_C nodes; ``normals`` (N, 2):
+    the body's outward unit normals there.  The obstacle lies outside the body, so ν (from the body towards the
+    obstacle) points out of it, ν·n > 0, where the two touch.  Among the nodes nearest the obstacle (gap within
+    a tenth of the gaps' spread of the smallest: all of a flat Γ_C facing a plane, the apex of a curved Γ_C under
+    a small indenter, not the parts of a curved Γ_C that face away), ν·n < 0 at more than half means the obstacle
+    is on the wrong side: a flipped plane normal (a plane's normal points from the obstacle into the body), a
+    circle centred inside the body.  Solved, it would be a huge indentation pushing the wrong way.  With ``comm``
+    the counts are summed over the ranks.
     """
+    from mpi4py import MPI
+
     nu = np.asarray(nu, dtype=np.float64).reshape(-1, 2)
     normals = np.asarray(normals, dtype=np.float64)[:, :2].reshape(-1, 2)
-    cosine = np.einsum("ij,ij->i", nu, normals)
+    gap = np.asarray(gap, dtype=np.float64).reshape(-1)
+    low = float(gap.min(initial=np.inf))
+    high = float(gap.max(initial=-np.inf))
+    if comm is not None:
+        low, high = comm.allreduce(low, op=MPI.MIN), comm.allreduce(high, op=MPI.MAX)
+    near = gap <= low + 0.1 * (high - low) + 1e-12 * max(abs(low), abs(high), 1e-300)
+    cosine = np.einsum("ij,ij->i", nu[near], normals[near])
     counts = np.array([np.count_nonzero(cosine < -0.1), cosine.size], dtype=np.int64)
     if comm is not None:
         counts = comm.allreduce(counts)
@@ -221,9 +232,9 @@ def check_obstacle_side(obstacle: Obstacle, nu: np.ndarray, normals: np.ndarray,
     if total and inward > total / 2:
         raise InputError(
             f"the obstacle is on the wrong side of Gamma_C: its direction towards the obstacle points into the body "
-            f"at {inward} of {total} contact nodes ({obstacle!r}). A plane's normal points from the obstacle into "
-            "the body (the wall at x = 1 of a body on x < 1 has normal [-1, 0]); a circle's centre lies outside "
-            "the body"
+            f"at {inward} of the {total} contact nodes nearest it ({obstacle!r}). A plane's normal points from the "
+            "obstacle into the body (the wall at x = 1 of a body on x < 1 has normal [-1, 0]); a circle's centre "
+            "lies outside the body"
         )
 
 

@@ -356,7 +356,8 @@ OPEN_END_ANGLE = 30.0
 
 
 def open_ends(desc: MeshDescription, group: str = GAMMA_C, angle: float = OPEN_END_ANGLE) -> np.ndarray:
-    """(k, 2) end points of the facet group where the boundary continues nearly straight (within ``angle``).
+    """(k, 3): x, y of each end point of the facet group where the boundary continues nearly straight (within
+    ``angle``), and the length of the group's facet that ends there.
 
     An end of Γ_C at a corner of the body (the bar's wall side) is a true end of the possible contact zone; an
     end where the boundary goes on straight (Γ_C a part of one side, as in a Hertz block) is not: a contact zone
@@ -365,7 +366,7 @@ def open_ends(desc: MeshDescription, group: str = GAMMA_C, angle: float = OPEN_E
     seg = np.asarray(desc.facets.get(group, np.zeros((0, 2), np.int64)), dtype=np.int64).reshape(-1, 2)
     pts = np.asarray(desc.points, dtype=np.float64)
     if seg.shape[0] == 0:
-        return np.zeros((0, 2))
+        return np.zeros((0, 3))
     degree = np.bincount(seg.ravel(), minlength=pts.shape[0])
     edges = _Edges(desc)
     outer = edges.nodes[edges.exterior]
@@ -380,9 +381,9 @@ def open_ends(desc: MeshDescription, group: str = GAMMA_C, angle: float = OPEN_E
         for q in others[np.any(others == e, axis=1)]:
             d2 = pts[q[0] if q[1] == e else q[1]] - pts[e]
             if d1 @ d2 > cos_max * np.linalg.norm(d1) * np.linalg.norm(d2):
-                found.append(pts[e])
+                found.append([pts[e][0], pts[e][1], np.linalg.norm(d1)])
                 break
-    return np.array(found, dtype=np.float64).reshape(-1, 2)
+    return np.array(found, dtype=np.float64).reshape(-1, 3)
 
 
 def contact_open_ends(cm) -> np.ndarray:

@@ -476,3 +476,17 @@ def test_few_oversampling_layers_are_warned_about(caplog):
             warn_if_few_layers(m, "test", MPI.COMM_SELF)
     warned = [r.message for r in caplog.records if "oversampling layer" in r.message]
     assert len(warned) == 2 and "m = 0" in warned[0] and "m = 1" in warned[1]
+
+
+@pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="the CLI test runs serially")
+@pytest.mark.parametrize("method", ["primal-ms", "mixed-ms"])
+def test_both_multiscale_methods_warn_about_few_layers(tmp_path, capsys, method):
+    """The warning reaches the user of either method from the command line (m = 1), and not at m = 2."""
+    from fenics_contact.cli import main
+
+    for m, expected in ((1, True), (2, False)):
+        out = tmp_path / f"m{m}"
+        assert main(["run", "--h", "16", "--H", "4", "--method", method, "--layers", str(m), "--no-plots",
+                     "--out", str(out)]) == 0
+        printed = capsys.readouterr()
+        assert (f"with m = {m} oversampling layer" in printed.out + printed.err) is expected, (method, m)

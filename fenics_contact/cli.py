@@ -534,7 +534,8 @@ def _warn_open_ends(summary: dict, comm: MPI.Comm) -> None:
                     "cut short by the tags, not of the body. Extend Gamma_C along that side.", where)
 
 
-def _indentation_curve(options: RunOptions, case: Case, cm: ContactMesh, model: TestModel, outcome) -> dict:
+def _indentation_curve(options: RunOptions, case: Case, cm: ContactMesh, model: TestModel, outcome,
+                       ends: np.ndarray) -> dict:
     """The force-indentation curve of the case's load steps (the last step is the run's depth).
 
     primal, mixed: ``indentation.force_indentation`` (warm starts, factorizations kept) with the
@@ -554,7 +555,6 @@ def _indentation_curve(options: RunOptions, case: Case, cm: ContactMesh, model: 
         penalty = {"step": outcome.result.step}
     curve = force_indentation(options.method, cm, model.with_(obstacle=spec.base()), spec.depths,
                               direction=direction, options=options.iteration_options(), **penalty)
-    ends = contact_open_ends(cm)
     rows = [_curve_row(s.depth, direction, s.profile, s.iterations, s.converged, s.time_s, ends) | {
         "transmission_residual": s.transmission_residual, "complementarity": s.complementarity._asdict(),
         "interface_newton_steps": s.interface_newton_steps}
@@ -841,7 +841,8 @@ def _solve_and_write(options: RunOptions, comm: MPI.Comm, model: TestModel | Non
         outcome = _run_mixed(options, cm, model, fields, comm if replicated else MPI.COMM_SELF)
     result, reference = outcome.result, outcome.reference
     profile = result.profile
-    curve = _indentation_curve(options, case, cm, model, outcome) if case and case.obstacle.steps else None
+    ends = contact_open_ends(cm)  # (the open ends of Γ_C, for every solve's contact summary)
+    curve = _indentation_curve(options, case, cm, model, outcome, ends) if case and case.obstacle.steps else None
     summary = {
         "method": options.method,
         "model": options.model if case is None else None,
@@ -860,7 +861,7 @@ def _solve_and_write(options: RunOptions, comm: MPI.Comm, model: TestModel | Non
         **outcome.summary,
         "active_set": profile.active_interval(),
         "contact_force": profile.force,
-        **_contact_summary(profile, contact_open_ends(cm)),
+        **_contact_summary(profile, ends),
         "max_contact_pressure": profile.max_pressure,
         "newton_steps_total": int(sum(r.info.get("newton", 0) for r in result.history.records)),
         "dofs": result.dofs,

@@ -1190,8 +1190,8 @@ def solve_mixed_monolithic(
     start = time.perf_counter()
     check_triangles(cm.mesh)
     fields = material_fields(cm.mesh, model)
-    if epsilon is None:
-        epsilon = default_epsilon(cm.h, contact_modulus(cm.mesh, cm.facet_tags, fields.E, smallest=True))
+    usual = default_epsilon(cm.h, contact_modulus(cm.mesh, cm.facet_tags, fields.E, smallest=True))
+    epsilon = usual if epsilon is None else epsilon
     space = None
     check_boundary_groups(cm.mesh, cm.facet_tags, fields.boundary, names=cm.neumann_names)
     if split_interface:
@@ -1206,7 +1206,6 @@ def solve_mixed_monolithic(
     if verify:
         norm, scale = problem.ufl_residual_norm()
         if norm > newton.rtol * scale + newton.atol:
-            usual = default_epsilon(cm.h, contact_modulus(cm.mesh, cm.facet_tags, fields.E, smallest=True))
             hint = (f"; ε = {epsilon:g} is {usual / epsilon:.0e} times below the default 1e-3·h·E_min = {usual:.3g} "
                     "on Gamma_C, which makes the contact block ill-conditioned: use a larger --epsilon"
                     if epsilon < 1e-3 * usual else "")

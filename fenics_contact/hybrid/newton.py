@@ -1034,18 +1034,21 @@ def newton_iterate(step, options: IterationOptions, *, name: str, monitor=None,
     Tg, rec = evaluate(step, g, history, name=name, monitor=monitor, omega2_warm=nopt.strategy == "condensed")
     rec.info["newton_steps"] = history.newton_steps
     # iterates that collapse towards a vanishing solution never certify (a relative residual): try g = 0 once,
-    # before corrections would iterate on noise (on two ranks an Ω₂ solve there failed its own residual check)
+    # before corrections would iterate on noise (on two ranks an Ω₂ solve there failed its own residual check),
+    # else after them
     initial_size = data_norm(np.asarray(initial, dtype=float), comm) if initial is not None else 0.0
-    zero_tried = False
-    if rec.residual >= options.tol and data_norm(g, comm) <= COLLAPSE * initial_size \
-            and history.iterations < options.max_iterations:
-        zero_tried = True
-        if zero_is_the_fixed_point(step, history, options, name=name, monitor=monitor):
-            steps_left = 0
-        else:
-            Tg, rec = evaluate(step, g, history, name=name, monitor=monitor)  # back to the certified pair's g
-        rec = history.records[-1]
     first_size = data_norm(g, comm)
+
+    def zero_or_back(g: np.ndarray):
+        """The pair at g = 0 if it glues, else the pair at g again: (T(g) or None, the last record)."""
+        if zero_is_the_fixed_point(step, history, options, name=name, monitor=monitor):
+            return None, history.records[-1]
+        return evaluate(step, g, history, name=name, monitor=monitor)
+
+    zero_tried = rec.residual >= options.tol and first_size <= COLLAPSE * initial_size \
+        and history.iterations < options.max_iterations
+    if zero_tried:
+        Tg, rec = zero_or_back(g)  # (glued: rec.residual < tol ends the corrections before they start)
 
     def residual_norm(g: np.ndarray, Tg: np.ndarray) -> float:
         return _norm(np.concatenate([a - b for a, b in zip(problem.halves(g), problem.halves(Tg))]))
@@ -1079,12 +1082,9 @@ def newton_iterate(step, options: IterationOptions, *, name: str, monitor=None,
             g = g0
             Tg, rec = evaluate(step, g, history, name=name, monitor=monitor)
     history.converged = bool(rec.residual < options.tol)
-    if not history.converged and not zero_tried and history.iterations < options.max_iterations:
-        largest = max(initial_size, first_size)
-        if data_norm(g, comm) <= COLLAPSE * largest and not zero_is_the_fixed_point(
-                step, history, options, name=name, monitor=monitor):
-            Tg, rec = evaluate(step, g, history, name=name, monitor=monitor)  # back to the last iterate's pair
-        rec = history.records[-1]
+    if not history.converged and not zero_tried and history.iterations < options.max_iterations \
+            and data_norm(g, comm) <= COLLAPSE * max(initial_size, first_size):
+        Tg, rec = zero_or_back(g)
     history.time_s = time.perf_counter() - start - history.time_monitor_s
     log.info("%s: %s, %d Newton steps, %d applications of T, transmission residual %.3e, online %.3f s "
              "(interface response offline %.3f s)", name, "converged" if history.converged else "NOT converged",

@@ -370,9 +370,7 @@ def open_ends(desc: MeshDescription, group: str = GAMMA_C, angle: float = OPEN_E
     degree = np.bincount(seg.ravel(), minlength=pts.shape[0])
     edges = _Edges(desc)
     outer = edges.nodes[edges.exterior]
-    _, in_group = edges.find(seg)
-    keys = edges.keys(outer)
-    others = outer[~np.isin(keys, edges.keys(seg[in_group]))]  # exterior edges not in the group
+    others = outer[~np.isin(edges.keys(outer), edges.keys(seg))]  # exterior edges not in the group
     cos_max = np.cos(np.radians(angle))
     found = []
     for e in np.flatnonzero(degree == 1):

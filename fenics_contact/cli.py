@@ -39,10 +39,10 @@ from mpi4py import MPI
 
 from fenics_contact import __version__
 from fenics_contact.errors import ConvergenceError, FenicsContactError, InputError
-from fenics_contact.fem.contact import NewtonOptions
-from fenics_contact.fem.primal import default_penalty, solve_primal_monolithic
 from fenics_contact.hybrid.iteration import ACCELERATIONS, InterfaceNewtonOptions, IterationOptions
-from fenics_contact.hybrid.primal import DEFAULT_ALPHA, DEFAULT_ALPHA_MS, solve_primal_hybrid
+from fenics_contact.hybrid.primal import DEFAULT_ALPHA, DEFAULT_ALPHA_MS
+from fenics_contact.indentation import force_indentation
+from fenics_contact.methods import HYBRID_METHODS, METHODS as CATALOGUE, get_method
 from fenics_contact.io import (
     OutputDirectory,
     cell_function_of,
@@ -53,7 +53,7 @@ from fenics_contact.io import (
     write_summary,
     write_vtx,
 )
-from fenics_contact.multiscale.primal import solve_primal_ms_hybrid
+from fenics_contact.multiscale.mixed_cem import DEFAULT_MAX_NBASIS, DEFAULT_MIN_GAP
 from fenics_contact.plots import (
     plot_cell_field,
     plot_contact,
@@ -63,12 +63,12 @@ from fenics_contact.plots import (
     plot_stress,
     render_deformed,
 )
-from fenics_contact.problem.case import RUN_TABLES, Case, load_case, parse_override
+from fenics_contact.problem.case import Case, load_case, parse_override
 from fenics_contact.problem.cell_groups import bounding_box
-from fenics_contact.problem.fields import material_fields
 from fenics_contact.problem.geometry import ContactMesh, read_mesh, unit_square
 from fenics_contact.problem.materials import check_poisson_ratio
-from fenics_contact.problem.models import TestModel, get_model, pixel_field
+from fenics_contact.problem.models import get_model, pixel_field
+from fenics_contact.problem.problem import ContactProblem
 from fenics_contact.problem.tags import Subdomain
 from fenics_contact.problem.validation import contact_open_ends
 
@@ -76,7 +76,7 @@ __all__ = ["main", "build_parser", "run", "RunOptions", "EXIT_CODES"]
 
 log = logging.getLogger("fenics_contact")
 
-METHODS = ("primal", "primal-ms", "mixed", "mixed-ms")
+METHODS = HYBRID_METHODS  #: the ``--method`` choices: Algorithms 1–4 (``methods.METHODS``)
 DEFAULT_H = 64  #: 1/h of the built-in mesh when --h is not given
 
 #: exit code -> meaning (``--help``, README)
@@ -92,17 +92,31 @@ EXIT_CODES = {
 EXIT_BAD_INPUT, EXIT_NOT_CONVERGED, EXIT_NUMERICAL = 2, 3, 4
 NOT_GIVEN = object()  #: an option the command line did not give (``build_parser(given_only=True)``)
 
-#: options that only some methods use: giving one to another method is refused, not ignored
+#: what each option that only some methods use is (its message when another method is given it)
+_METHOD_OPTION_HINTS = {
+    "alpha": "the primal Robin coefficient; the mixed methods take --beta",
+    "delta": "the primal penalty; the mixed methods take --epsilon",
+    "beta": "the mixed transmission coefficient; the primal methods take --alpha",
+    "epsilon": "the mixed penalty; the primal methods take --delta",
+    "layers": "a multiscale option",
+    "nbasis": "a multiscale option",
+    "cache_dir": "the multiscale offline cache",
+    "min_gap": "a mixed-ms option",
+    "max_nbasis": "a mixed-ms option",
+}
+#: the options that only some methods use, and those methods (from the catalogue): giving one to another
+#: method is refused, not ignored
 _METHOD_OPTIONS: dict[str, tuple[tuple[str, ...], str]] = {
-    "alpha": (("primal", "primal-ms"), "the primal Robin coefficient; the mixed methods take --beta"),
-    "delta": (("primal", "primal-ms"), "the primal penalty; the mixed methods take --epsilon"),
-    "beta": (("mixed", "mixed-ms"), "the mixed transmission coefficient; the primal methods take --alpha"),
-    "epsilon": (("mixed", "mixed-ms"), "the mixed penalty; the primal methods take --delta"),
-    "layers": (("primal-ms", "mixed-ms"), "a multiscale option"),
-    "nbasis": (("primal-ms", "mixed-ms"), "a multiscale option"),
-    "cache_dir": (("primal-ms", "mixed-ms"), "the multiscale offline cache"),
-    "min_gap": (("mixed-ms",), "a mixed-ms option"),
-    "max_nbasis": (("mixed-ms",), "a mixed-ms option"),
+    name: (tuple(m for m in METHODS if name in CATALOGUE[m].flat_options()), hint)
+    for name, hint in _METHOD_OPTION_HINTS.items()
+}
+#: the run tables of a case file and the methods that read each (``problem.case.RUN_TABLES``)
+TABLE_METHODS: dict[str, tuple[str, ...]] = {
+    "run": METHODS,
+    "primal": tuple(m for m in METHODS if CATALOGUE[m].family == "primal"),
+    "mixed": tuple(m for m in METHODS if CATALOGUE[m].family == "mixed"),
+    "multiscale": tuple(m for m in METHODS if CATALOGUE[m].multiscale),
+    "mixed-ms": ("mixed-ms",),
 }
 #: one factor of an α spelling (hybrid.transmission.robin_coefficient): a number [E or Emin], E, Emin, sqrt-h, h^p
 _ALPHA_FACTOR = re.compile(
@@ -157,8 +171,8 @@ def default_out(method: str, model: int, mesh: Path | None = None, case: Path | 
 
 
 def default_accel(method: str) -> str:
-    """The interface Newton, except for Algorithm 2 on several ranks (its interface Newton is serial): Anderson."""
-    return "anderson" if method == "mixed" and MPI.COMM_WORLD.size > 1 else "newton"
+    """The method's default update (``methods.Method.default_accel``)."""
+    return get_method(method).default_accel(MPI.COMM_WORLD)
 
 
 @dataclass(frozen=True, slots=True)
@@ -288,8 +302,22 @@ class RunOptions:
         given = getattr(self, name)
         if given is not None:
             return given
-        return {"alpha": DEFAULT_ALPHA_MS if self.method == "primal-ms" else DEFAULT_ALPHA, "beta": "sqrt-h", "E_high": 1e3, "E_low": 1.0, "layers": 4,
-                "nbasis": 3}.get(name)
+        if name in ("E_high", "E_low"):
+            return {"E_high": 1e3, "E_low": 1.0}[name]
+        method = get_method(self.method)
+        defaults = method.defaults()
+        if name in defaults:
+            return defaults[name]
+        if method.cem_type is not None and name in (f.name for f in fields(method.cem_type)):
+            return getattr(method.cem_type(), name)
+        return None
+
+    def method_options(self) -> dict:
+        """The chosen method's options given on the command line (its defaults otherwise), for the catalogue."""
+        flat = {name: getattr(self, name) for name in _METHOD_OPTIONS if getattr(self, name) is not None}
+        if "min_gap" in flat:  # --min-gap 0: exactly --nbasis modes (the option's None)
+            flat["min_gap"] = flat["min_gap"] or None
+        return flat | {"options": self.iteration_options()}
 
     def iteration_options(self) -> IterationOptions:
         return IterationOptions(tol=self.tol, max_iterations=self.max_iterations, accel=self.accel,
@@ -419,9 +447,9 @@ def _case_overrides(given: dict) -> list[tuple[str, object]]:
 def _run_table_keys() -> dict[str, set[str]]:
     """The RunOptions fields each run table of a case file may set (the method options in their methods' table)."""
     general = {f.name for f in fields(RunOptions)} - set(_PROBLEM_FLAGS) - {"case"} - set(_METHOD_OPTIONS)
-    keys = {table: set() for table in RUN_TABLES} | {"run": general}
+    keys = {table: set() for table in TABLE_METHODS} | {"run": general}
     for name, (methods, _) in _METHOD_OPTIONS.items():
-        table = next((t for t, m in RUN_TABLES.items() if t != "run" and set(m) == set(methods)), "run")
+        table = next((t for t, m in TABLE_METHODS.items() if t != "run" and set(m) == set(methods)), "run")
         keys[table].add(name)
     return keys
 
@@ -435,7 +463,7 @@ def case_run_options(case: Case, given: Mapping[str, object] = {}) -> RunOptions
     keys = _run_table_keys()
     names = {f.name for f in fields(RunOptions)}
     tables = {}
-    for table, methods in RUN_TABLES.items():
+    for table, methods in TABLE_METHODS.items():
         values = {}
         for key, value in case.run[table].items():
             name = key.replace("-", "_")
@@ -455,7 +483,7 @@ def case_run_options(case: Case, given: Mapping[str, object] = {}) -> RunOptions
         tables[table] = values
     method = given.get("method", tables["run"].get("method", "primal"))
     values = dict(tables["run"])
-    for table, methods in RUN_TABLES.items():
+    for table, methods in TABLE_METHODS.items():
         if table != "run" and method in methods:
             values |= tables[table]
     values |= {k: v for k, v in given.items() if k in names and k not in _PROBLEM_FLAGS and k != "case"}
@@ -534,16 +562,13 @@ def _warn_open_ends(summary: dict, comm: MPI.Comm) -> None:
                     "cut short by the tags, not of the body. Extend Gamma_C along that side.", where)
 
 
-def _indentation_curve(options: RunOptions, case: Case, cm: ContactMesh, model: TestModel, outcome,
-                       ends: np.ndarray) -> dict:
+def _indentation_curve(options: RunOptions, case: Case, problem: ContactProblem, outcome, ends: np.ndarray) -> dict:
     """The force-indentation curve of the case's load steps (the last step is the run's depth).
 
     primal, mixed: ``indentation.force_indentation`` (warm starts, factorizations kept) with the
     run's penalty and transmission coefficient; primal-ms, mixed-ms: the same with the run's hybrid
     step, so the Ω₁ offline phase of the run serves every step.
     """
-    from fenics_contact.indentation import force_indentation
-
     spec = case.obstacle
     direction = np.asarray(spec.direction)
     if options.method in ("primal", "mixed"):
@@ -553,7 +578,7 @@ def _indentation_curve(options: RunOptions, case: Case, cm: ContactMesh, model: 
             penalty = {"epsilon": outcome.summary["epsilon"], "beta": options.value("beta")}
     else:  # the run's step: its Ω₁ offline data, penalty and coefficients
         penalty = {"step": outcome.result.step}
-    curve = force_indentation(options.method, cm, model.with_(obstacle=spec.base()), spec.depths,
+    curve = force_indentation(problem.with_(obstacle=spec.base()), options.method, spec.depths,
                               direction=direction, options=options.iteration_options(), **penalty)
     rows = [_curve_row(s.depth, direction, s.profile, s.iterations, s.converged, s.time_s, ends) | {
         "transmission_residual": s.transmission_residual, "complementarity": s.complementarity._asdict(),
@@ -597,7 +622,7 @@ def check_pixel_modulus(values: np.ndarray, box: tuple[float, float, float, floa
                          f"modulus > 0 (first: row {j + j0}, column {i + i0}, value {float(covered[j, i])!r})")
 
 
-def _model(options: RunOptions) -> tuple[TestModel, np.ndarray | None]:
+def _model(options: RunOptions) -> tuple[ContactProblem, np.ndarray | None]:
     model = get_model(options.model, E_high=options.value("E_high"), E_low=options.value("E_low"), nu=options.nu)
     if options.E_map is None:
         return model, None
@@ -653,13 +678,6 @@ def _check_case_coarse_grid(cm: ContactMesh, options: RunOptions, case: Case) ->
                          "methods need a mesh that resolves it (choose mesh.H accordingly)")
 
 
-def _contact_modulus(cm: ContactMesh, E) -> float:
-    """Largest E in the contact strip Ω₂."""
-    cells = cm.cell_tags.find(Subdomain.OMEGA2)
-    local = float(np.max(E.x.array[cells])) if cells.size else 0.0
-    return cm.comm.allreduce(local, op=MPI.MAX)
-
-
 # ---------------------------------------------------------------------------------------------
 # the two method families
 # ---------------------------------------------------------------------------------------------
@@ -676,33 +694,27 @@ def _finite_or_none(x: float) -> float | None:
     return float(x) if math.isfinite(x) else None
 
 
-def _run_primal(options: RunOptions, cm: ContactMesh, model, fields) -> _Outcome:
+def _run_primal(options: RunOptions, problem: ContactProblem) -> _Outcome:
     """Algorithms 1 (primal) and 3 (primal-ms), with the monolithic primal reference."""
-    delta = options.delta if options.delta is not None else default_penalty(cm.h, _contact_modulus(cm, fields.E))
-    alpha = options.value("alpha")
-    reference = solve_primal_monolithic(cm.mesh, cm.facet_tags, fields, delta=delta) if options.reference else None
-    ref_u = reference.u if reference is not None else None
-    ms = options.method == "primal-ms"
-    if not ms:
-        result = solve_primal_hybrid(cm, model, alpha=alpha, delta=delta, options=options.iteration_options(),
-                                     newton=NewtonOptions(), reference=ref_u)
-    else:
-        result = solve_primal_ms_hybrid(cm, model, alpha=alpha, delta=delta, options=options.iteration_options(),
-                                        layers=options.value("layers"), nbasis=options.value("nbasis"),
-                                        reference=ref_u, cache_dir=options.cache_dir)
+    method = get_method(options.method)
+    flat = options.method_options()
+    reference = (CATALOGUE["primal-monolithic"].solve(problem, delta=options.delta) if options.reference else None)
+    result = method.solve(problem, **flat, reference=reference.u if reference is not None else None)
+    ms = method.multiscale
     summary = {
-        "alpha": alpha,
-        "delta": delta,
+        "alpha": options.value("alpha"),
+        "delta": result.step.delta,
         "e_u": result.e_u,
         "e_energy": result.step.error_energy() if reference is not None else None,
         "penetration": result.profile.penetration,
         "max_tensile_sigma_c": float(np.max(result.profile.sigma_c, initial=0.0)),
-        "layers": options.value("layers") if ms else None,
-        "nbasis": options.value("nbasis") if ms else None,
+        "layers": result.step.cem.layers if ms else None,
+        "nbasis": result.step.cem.nbasis if ms else None,
         "offline_cache": result.step.omega1.cache_status if ms else None,
         # Λ, the smallest local eigenvalue left out (it falls like μ/(λ+2μ) as ν → ½, and with inclusions)
         "spectral_gap": _finite_or_none(result.step.omega1.spectral_gap) if ms else None,
     }
+    fields, cm = problem.fields, problem.cm
 
     def write(out: Path) -> None:
         sigma = stress_field(result.u, fields.lmbda, fields.mu)
@@ -715,37 +727,23 @@ def _run_primal(options: RunOptions, cm: ContactMesh, model, fields) -> _Outcome
     return _Outcome(result, reference, summary, write)
 
 
-def _run_mixed(options: RunOptions, cm: ContactMesh, model, fields, comm: MPI.Comm = MPI.COMM_SELF) -> _Outcome:
+def _run_mixed(options: RunOptions, problem: ContactProblem, comm: MPI.Comm = MPI.COMM_SELF) -> _Outcome:
     """Algorithms 2 (mixed) and 4 (mixed-ms), with the monolithic mixed reference (serial).
 
-    ``comm``: the ranks sharing the mixed-ms offline phase (each holds the whole mesh ``cm``); the
+    ``comm``: the ranks sharing the mixed-ms offline phase (each holds the whole mesh); the
     reference is then solved on rank 0 only, which alone reports the errors and writes.
     """
-    from fenics_contact.fem import mixed
-    from fenics_contact.hybrid import mixed as mixed_hybrid
-    from fenics_contact.multiscale import mixed as mixed_ms
-    from fenics_contact.multiscale import mixed_cem as mixed_multiscale
-
-    epsilon = options.epsilon
-    beta = options.value("beta")
-    ms = options.method == "mixed-ms"
-    min_gap = mixed_multiscale.DEFAULT_MIN_GAP if options.min_gap is None else (options.min_gap or None)
-    max_nbasis = mixed_multiscale.DEFAULT_MAX_NBASIS if options.max_nbasis is None else options.max_nbasis
-    reference = (mixed.solve_mixed_monolithic(cm, model, epsilon=epsilon)
+    method = get_method(options.method)
+    ms = method.multiscale
+    flat = options.method_options()
+    reference = (CATALOGUE["mixed-monolithic"].solve(problem, epsilon=options.epsilon)
                  if options.reference and comm.rank == 0 else None)
     if reference is not None:
         reference.free()  # only its solution is used: the factors of the whole problem go now
-    if not ms:
-        result = mixed_hybrid.solve_mixed_hybrid(cm, model, beta=beta, epsilon=epsilon,
-                                                 options=options.iteration_options(), reference=reference)
-    else:
-        result = mixed_ms.solve_mixed_ms_hybrid(cm, model, beta=beta, epsilon=epsilon,
-                                                options=options.iteration_options(), layers=options.value("layers"),
-                                                nbasis=options.value("nbasis"), reference=reference,
-                                                min_gap=min_gap, max_nbasis=max_nbasis, cache_dir=options.cache_dir,
-                                                offline_comm=comm)
+    extra = {"offline_comm": comm} if ms else {}
+    result = method.solve(problem, **flat, reference=reference, **extra)
     summary = {
-        "beta": beta,
+        "beta": options.value("beta"),
         "beta_value": result.beta,
         "epsilon": result.epsilon,
         "e_sigma": result.e_sigma,
@@ -753,13 +751,14 @@ def _run_mixed(options: RunOptions, cm: ContactMesh, model, fields, comm: MPI.Co
         # mixed-ms: e_u is that of a coarse displacement (U_aux); e_u_post that of the fine one (README)
         "e_u_post": getattr(result, "e_u_post", None) if ms else None,
         "max_tensile_sigma_c": result.profile.max_tensile,
-        "layers": options.value("layers") if ms else None,
-        "nbasis": options.value("nbasis") if ms else None,
+        "layers": result.step.cem.layers if ms else None,
+        "nbasis": result.step.cem.nbasis if ms else None,
         "offline_cache": result.step.omega1.cache_status if ms else None,
         "stage_one_gap": result.step.omega1.spectral_gap if ms else None,
         "nbasis_per_cell": list(result.step.omega1.nbasis_range) if ms else None,
         "dim_X_ms": result.step.omega1.co.n_ms if ms else None,
     }
+    fields, cm = problem.fields, problem.cm
 
     def write(out: Path) -> None:
         sigma_cells = cell_function_of(result.sigma, name="sigma_cell_mean")
@@ -811,7 +810,7 @@ def run(options: RunOptions, comm: MPI.Comm = MPI.COMM_WORLD, *, case: Case | No
     return 0
 
 
-def _solve_and_write(options: RunOptions, comm: MPI.Comm, model: TestModel | None, pixels: np.ndarray | None,
+def _solve_and_write(options: RunOptions, comm: MPI.Comm, model: ContactProblem | None, pixels: np.ndarray | None,
                      output: OutputDirectory, case: Case | None = None) -> tuple[object, dict]:
     """Mesh, solve, write everything into the staging directory and move it into place."""
     t0 = time.perf_counter()
@@ -826,23 +825,24 @@ def _solve_and_write(options: RunOptions, comm: MPI.Comm, model: TestModel | Non
     else:
         case_mesh = case.build_mesh(mesh_comm)
         cm = case_mesh.cm
-        model = case.model(case_mesh)
+        model = case.problem(case_mesh)
         if options.method.endswith("-ms"):
             _check_case_coarse_grid(cm, options, case)
-    fields = material_fields(cm.mesh, model, require_load=True)
+    problem = model.on(cm)
+    problem.check_loaded()
+    fields = problem.fields
     t_mesh = time.perf_counter() - t0
     name = f"model {options.model}" if case is None else f"case {case.path.name}"
     log.info("%s (%s), h = %.4g, H = %s, method %s, accel %s",
              name, model.description, cm.h, cm.H, options.method, options.accel)
-    family = _run_primal if options.method.startswith("primal") else _run_mixed
-    if family is _run_primal:
-        outcome = _run_primal(options, cm, model, fields)
+    if get_method(options.method).family == "primal":
+        outcome = _run_primal(options, problem)
     else:
-        outcome = _run_mixed(options, cm, model, fields, comm if replicated else MPI.COMM_SELF)
+        outcome = _run_mixed(options, problem, comm if replicated else MPI.COMM_SELF)
     result, reference = outcome.result, outcome.reference
     profile = result.profile
     ends = contact_open_ends(cm)  # (the open ends of Γ_C, for every solve's contact summary)
-    curve = _indentation_curve(options, case, cm, model, outcome, ends) if case and case.obstacle.steps else None
+    curve = _indentation_curve(options, case, problem, outcome, ends) if case and case.obstacle.steps else None
     summary = {
         "method": options.method,
         "model": options.model if case is None else None,

@@ -1,6 +1,6 @@
 """Prescribed rigid motion of the obstacle in load steps, and the force–indentation curve.
 
-At every step the obstacle ``model.obstacle`` is moved by depth·direction
+At every step the obstacle ``problem.obstacle`` is moved by depth·direction
 (``Obstacle.indented``); the solver keeps everything it built (meshes, spaces,
 the factorization of the linear Ω₁ problem, the Ω₂ factorizations cached by
 active set) and starts from the previous solution: the Newton iterations from
@@ -9,9 +9,8 @@ interface data.  The force is the contact resultant along the indentation
 direction, ∫_ΓC σ_c ν·direction ds (σ_c < 0 in compression: the obstacle pushes
 the body along the direction), and the total normal force −∫_ΓC σ_c ds.
 
-Methods: ``"primal-monolithic"``, ``"mixed-monolithic"``, ``"primal"``
-(Algorithm 1), ``"mixed"`` (Algorithm 2), ``"primal-ms"`` (Algorithm 3) and
-``"mixed-ms"`` (Algorithm 4).  The obstacle acts on Γ_C ⊂ Ω₂ only, so the
+Methods: every method of ``methods.METHODS`` (the monolithic solves and Algorithms
+1–4), built once by its factory (``Method.build``).  The obstacle acts on Γ_C ⊂ Ω₂ only, so the
 multiscale Ω₁ (local spectral problems, bases, Robin and source correctors, the
 factorized coarse operator and, with ``accel="newton"``, its interface response)
 is built once, before the first step, and every step reuses it: a step costs
@@ -28,34 +27,22 @@ tensile contact stress and max |σ_c u_c|, each relative to the step's scale).
 import logging
 import time
 from dataclasses import dataclass, field
-from pathlib import Path
-from typing import TYPE_CHECKING, NamedTuple
+from typing import NamedTuple
 
 import numpy as np
 import numpy.typing as npt
 
 from fenics_contact.errors import InputError
-from fenics_contact.fem.contact import ContactProfile, NewtonOptions
-from fenics_contact.hybrid.iteration import IterationOptions, iterate
-from fenics_contact.problem.geometry import ContactMesh
-from fenics_contact.problem.models import TestModel
+from fenics_contact.fem.contact import ContactProfile
+from fenics_contact.hybrid.iteration import HybridStep, iterate
+from fenics_contact.methods import Method, get_method
 from fenics_contact.problem.obstacles import Obstacle
+from fenics_contact.problem.problem import ContactProblem
 
-if TYPE_CHECKING:  # the multiscale modules are imported when a multiscale method runs
-    from fenics_contact.hybrid.iteration import HybridStep
-    from fenics_contact.multiscale.cem import CEMOptions
-    from fenics_contact.multiscale.mixed_cem import MixedCEMOptions
-
-__all__ = [
-    "METHODS", "MULTISCALE_METHODS", "Complementarity", "complementarity", "IndentationStep", "IndentationCurve",
-    "WarmStart", "force_indentation",
-]
+__all__ = ["Complementarity", "complementarity", "IndentationStep", "IndentationCurve", "WarmStart",
+           "force_indentation"]
 
 log = logging.getLogger(__name__)
-
-METHODS = ("primal-monolithic", "mixed-monolithic", "primal", "mixed", "primal-ms", "mixed-ms")
-#: the methods whose Ω₁ is a multiscale space built offline (once per curve)
-MULTISCALE_METHODS = ("primal-ms", "mixed-ms")
 
 
 class Complementarity(NamedTuple):
@@ -172,123 +159,58 @@ class WarmStart:
 
 
 def force_indentation(
+    problem: ContactProblem,
     method: str,
-    cm: ContactMesh,
-    model: TestModel,
     depths: npt.ArrayLike,
     *,
     direction: npt.ArrayLike,
-    delta: float | None = None,
-    epsilon: float | None = None,
-    alpha: float | str | None = None,
-    beta: float | str = "sqrt-h",
-    options: IterationOptions = IterationOptions(),
-    newton: NewtonOptions = NewtonOptions(),
-    cem: "CEMOptions | MixedCEMOptions | None" = None,
-    cache_dir: str | Path | None = None,
-    step: "HybridStep | None" = None,
+    step: HybridStep | None = None,
+    **options,
 ) -> IndentationCurve:
-    """Move ``model.obstacle`` by each depth along ``direction`` in turn; solve with warm starts.
+    """Move ``problem.obstacle`` by each depth along ``direction`` in turn; solve with warm starts.
 
-    ``delta`` (primal) defaults to ``default_penalty(h, E_c)``, ``epsilon`` (mixed) to
-    ``default_epsilon(h, E_c)``, E_c the largest (primal) or smallest (mixed) E on Γ_C.  The multiscale methods take ``cem``
-    (``multiscale.cem.CEMOptions`` for ``primal-ms``, ``multiscale.mixed_cem.MixedCEMOptions`` for
-    ``mixed-ms``; default: their defaults) and ``cache_dir`` (the offline cache); their Ω₁ offline
-    phase runs once, before the first step.  ``step``: a hybrid step of this method built earlier
-    (e.g. ``curve.step`` of another curve, or a solve's ``result.step``) to reuse with everything it holds;
-    ``alpha``, ``beta``, ``delta``, ``epsilon`` and ``cem`` are then the step's.
+    ``method``: a name of ``methods.METHODS``; ``options``: its options (``methods.Method.options``:
+    δ or ε, α or β, ``cem``/``layers``/``nbasis``, ``cache_dir``, the iteration's ``tol``, ``accel``…),
+    its defaults otherwise.  The multiscale methods' Ω₁ offline phase runs once, before the first step.
+    ``step``: a hybrid step of this method built earlier (e.g. ``curve.step`` of another curve, or a
+    solve's ``result.step``) to reuse with everything it holds; it carries its own α or β, δ or ε and
+    multiscale space, so only the iteration's options may be given with it.
     """
-    from fenics_contact.fem.mixed import MixedSubproblem, contact_modulus, default_epsilon
-    from fenics_contact.fem.primal import PrimalSubproblem, default_penalty, warn_if_locking
-    from fenics_contact.hybrid.mixed import MixedHybridStep
-    from fenics_contact.hybrid.primal import DEFAULT_ALPHA, DEFAULT_ALPHA_MS, PrimalHybridStep
-    from fenics_contact.problem.boundary import check_boundary_groups
-    from fenics_contact.problem.fields import material_fields
-
-    if method not in METHODS:
-        raise InputError(f"unknown method {method!r} for force_indentation; choose one of {METHODS}")
-    if not isinstance(model.obstacle, Obstacle):
-        raise InputError("force_indentation needs a model with an obstacle (model.with_(obstacle=...))")
+    spec = get_method(method)
+    if not isinstance(problem, ContactProblem) or not isinstance(problem.obstacle, Obstacle):
+        raise InputError("force_indentation needs a ContactProblem with an obstacle (problem.with_(obstacle=...))")
     depths = np.asarray(depths, dtype=np.float64).ravel()
     if depths.size == 0 or not np.all(np.isfinite(depths)):
         raise InputError(f"indentation depths must be finite numbers, got {depths}")
     direction = np.asarray(direction, dtype=np.float64).ravel()
-    if direction.size != 2 or not np.linalg.norm(direction) > 0:
-        raise InputError(f"the indentation direction must be a non-zero 2-vector, got {direction}")
+    if direction.size != problem.dim or not np.linalg.norm(direction) > 0:
+        raise InputError(f"the indentation direction must be a non-zero {problem.dim}-vector, got {direction}")
     direction = direction / np.linalg.norm(direction)
-    if cem is not None and method not in MULTISCALE_METHODS:
-        raise InputError(f"cem options are for the multiscale methods {MULTISCALE_METHODS}, not {method!r}")
+    iteration = spec.iteration(options, comm=problem.comm) if spec.hybrid else None
     if step is not None:
         step = step.step if isinstance(step, WarmStart) else step
-        _check_step(method, step)
-    base = model.obstacle
-    first = model.with_(obstacle=base.indented(depths[0], direction))
+        _check_step(spec, step)
+        own = sorted(k for k in spec.options(options, comm=problem.comm) if k != "options")
+        if own:
+            raise InputError(f"step= carries its own options; give only the iteration's with it, not {own}")
+    base = problem.obstacle
+    first = problem.with_(obstacle=base.indented(depths[0], direction))
     start = time.perf_counter()
-    if step is None:
-        fields = material_fields(cm.mesh, first)
-        check_boundary_groups(cm.mesh, cm.facet_tags, fields.boundary, names=cm.neumann_names)
-        if method.startswith("primal"):
-            E_c = contact_modulus(cm.mesh, cm.facet_tags, fields.E)
-            delta = default_penalty(cm.h, E_c) if delta is None else delta
-        else:
-            E_c = contact_modulus(cm.mesh, cm.facet_tags, fields.E, smallest=True)
-            epsilon = default_epsilon(cm.h, E_c) if epsilon is None else epsilon
-
-    if method == "primal-monolithic":
-        warn_if_locking(fields.nu, cm.comm)
-        sub = PrimalSubproblem(cm.mesh, cm.facet_tags, fields, delta=delta, alpha=None,
-                               prefix="fc_indent_primal_", newton=newton)
-        contact, hybrid = sub, None
-    elif method == "mixed-monolithic":
-        sub = MixedSubproblem(cm.mesh, cm.facet_tags, fields, epsilon=epsilon, beta=None,
-                              prefix="fc_indent_mixed_", newton=newton)
-        contact, hybrid = sub, None
-    elif method == "primal":
-        if step is None:
-            step = PrimalHybridStep(cm, first, alpha=DEFAULT_ALPHA if alpha is None else alpha, delta=delta,
-                                    newton=newton)
-        step.prepare()
-        contact, hybrid = step.sub[1], WarmStart(step)
-    elif method == "mixed":
-        if step is None:
-            step = MixedHybridStep(cm, first, beta=beta, epsilon=epsilon, newton=newton)
-        step.prepare()
-        contact, hybrid = step.sub[1], WarmStart(step)
-    elif method == "primal-ms":
-        from fenics_contact.multiscale.cem import CEMOptions
-        from fenics_contact.multiscale.primal import MultiscalePrimalHybridStep
-
-        if step is None:
-            cem = CEMOptions() if cem is None else cem
-            if not isinstance(cem, CEMOptions):
-                raise InputError(f"primal-ms takes multiscale.cem.CEMOptions, got {type(cem).__name__}")
-            step = MultiscalePrimalHybridStep(cm, first, alpha=DEFAULT_ALPHA_MS if alpha is None else alpha,
-                                              delta=delta, cem=cem, newton=newton, cache_dir=cache_dir)
-        contact, hybrid = step.omega2, WarmStart(step)
-    else:  # mixed-ms
-        from fenics_contact.multiscale.mixed import MixedMultiscaleHybridStep
-        from fenics_contact.multiscale.mixed_cem import MixedCEMOptions
-
-        if step is None:
-            cem = MixedCEMOptions() if cem is None else cem
-            if not isinstance(cem, MixedCEMOptions):
-                raise InputError(f"mixed-ms takes multiscale.mixed_cem.MixedCEMOptions, got {type(cem).__name__}")
-            step = MixedMultiscaleHybridStep(cm, first, beta=beta, epsilon=epsilon, cem=cem, newton=newton,
-                                             cache_dir=cache_dir)
-        step.prepare()
-        contact, hybrid = step.sub[1], WarmStart(step)
-
-    curve = IndentationCurve(method, direction, time_offline_s=time.perf_counter() - start, step=step,
+    solver = spec.build(first, comm=problem.comm, **options) if step is None else step
+    solver_step = solver if spec.hybrid else None
+    contact = solver.contact
+    hybrid = WarmStart(solver) if spec.hybrid else None
+    curve = IndentationCurve(method, direction, time_offline_s=time.perf_counter() - start, step=solver_step,
                              contact=contact)
     for depth in depths:
         start = time.perf_counter()
         contact.set_obstacle(base.indented(depth, direction))
         residual, offline, newton_steps = None, 0.0, 0
         if hybrid is None:
-            history = contact.solve()
+            history = solver.solve()
             iterations, converged = history.steps, True
         else:
-            history = iterate(hybrid, options, name=f"{method} indentation")
+            history = iterate(hybrid, iteration, name=f"{method} indentation")
             iterations, converged = history.iterations, history.converged
             residual, offline = history.transmission_residual, history.time_offline_s
             newton_steps = history.newton_steps
@@ -304,18 +226,9 @@ def force_indentation(
     return curve
 
 
-def _check_step(method: str, step) -> None:
+def _check_step(method: Method, step) -> None:
     """``step`` must be a hybrid step of ``method`` (monolithic methods take none)."""
-    from fenics_contact.hybrid.mixed import MixedHybridStep
-    from fenics_contact.hybrid.primal import PrimalHybridStep
-    from fenics_contact.multiscale.mixed import MixedMultiscaleHybridStep
-    from fenics_contact.multiscale.primal import MultiscalePrimalHybridStep
-
-    kinds = {"primal": PrimalHybridStep, "mixed": MixedHybridStep, "primal-ms": MultiscalePrimalHybridStep,
-             "mixed-ms": MixedMultiscaleHybridStep}
-    step = step.step if isinstance(step, WarmStart) else step
-    kind = kinds.get(method)
-    exact = kind is not None and type(step) is kind  # (MixedMultiscaleHybridStep is a MixedHybridStep)
-    if not exact:
-        raise InputError(f"step= takes a {kind.__name__ if kind else 'hybrid step'} for method {method!r}, "
-                         f"got {type(step).__name__}")
+    kind = getattr(method.factory, "__wrapped__", None)
+    if not method.hybrid or type(step) is not kind:
+        name = kind.__name__ if method.hybrid else "hybrid step (none: the method is monolithic)"
+        raise InputError(f"step= takes a {name} for method {method.name!r}, got {type(step).__name__}")

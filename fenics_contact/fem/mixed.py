@@ -96,7 +96,7 @@ from fenics_contact.problem.obstacles import Obstacle, check_obstacle_side, eval
 from fenics_contact.problem.geometry import ContactMesh
 from fenics_contact.fem.distributed import DistributedMatrix, SaddlePointMatrix, coo_matrix, gather_rows, global_dot, layout
 from fenics_contact.fem.linalg import DIRECT_OPTIONS, DirectSolver
-from fenics_contact.problem.models import TestModel
+from fenics_contact.problem.problem import ContactProblem
 from fenics_contact.problem.tags import Boundary, Subdomain
 
 __all__ = [
@@ -109,6 +109,7 @@ __all__ = [
     "MixedSubproblem",
     "MixedSolution",
     "solve_mixed_monolithic",
+    "epsilon_for",
     "contact_modulus",
     "interpolate_stress",
     "boundary_stress_space",
@@ -1171,9 +1172,18 @@ class MixedSolution:
             self.problem = None
 
 
+def epsilon_for(problem: ContactProblem, epsilon: float | None = None) -> float:
+    """ε, or when None the default ``default_epsilon(h, E_c)`` with E_c the smallest E on Γ_C."""
+    if epsilon is None:
+        return default_epsilon(problem.h, problem.contact_modulus(smallest=True))
+    if isinstance(epsilon, bool) or not isinstance(epsilon, (int, float, np.number)) \
+            or not (np.isfinite(epsilon) and epsilon > 0):
+        raise InputError(f"the mixed penalty ε must be a finite number > 0 (or None: the default), got {epsilon!r}")
+    return float(epsilon)
+
+
 def solve_mixed_monolithic(
-    cm: ContactMesh,
-    model: TestModel,
+    problem: ContactProblem,
     *,
     epsilon: float | None = None,
     newton: NewtonOptions = NewtonOptions(),
@@ -1188,12 +1198,12 @@ def solve_mixed_monolithic(
     re-checks the final residual with the UFL forms.
     """
     start = time.perf_counter()
+    cm = problem.cm
     check_triangles(cm.mesh)
-    fields = material_fields(cm.mesh, model)
-    usual = default_epsilon(cm.h, contact_modulus(cm.mesh, cm.facet_tags, fields.E, smallest=True))
-    epsilon = usual if epsilon is None else epsilon
+    fields = problem.fields
+    usual = epsilon_for(problem)
+    epsilon = epsilon_for(problem, epsilon)
     space = None
-    check_boundary_groups(cm.mesh, cm.facet_tags, fields.boundary, names=cm.neumann_names)
     if split_interface:
         split = (cm.facet_tags.find(Boundary.INTERFACE), cm.cell_tags.find(Subdomain.OMEGA2))
         space = boundary_stress_space(cm.mesh, cm.facet_tags, fields.boundary, split_interface=split)

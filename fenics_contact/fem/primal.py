@@ -26,12 +26,13 @@ from fenics_contact.errors import InputError
 from fenics_contact.problem.boundary import BoundaryConditions, check_boundary_groups, neumann_groups
 from fenics_contact.problem.fields import MaterialFields
 from fenics_contact.problem.obstacles import Obstacle, check_obstacle_side, evaluate_obstacle
+from fenics_contact.problem.problem import ContactProblem
 from fenics_contact.fem.linalg import AbsoluteTerms, DirectSolver, quadratic_form
 from fenics_contact.problem.materials import strain, stress
 from fenics_contact.problem.tags import Boundary
 from fenics_contact.problem.validation import require_facet_groups
 
-__all__ = ["PrimalSubproblem", "PrimalSolution", "solve_primal_monolithic", "default_penalty"]
+__all__ = ["PrimalSubproblem", "PrimalSolution", "solve_primal_monolithic", "default_penalty", "penalty_for"]
 
 log = logging.getLogger(__name__)
 
@@ -484,26 +485,39 @@ def warn_if_locking(nu: fem.Function | None, comm) -> None:
         )
 
 
+def penalty_for(problem: ContactProblem, delta: float | None = None) -> float:
+    """δ, or when None the default ``default_penalty(h, E_c)`` with E_c the largest E on Γ_C."""
+    if delta is None:
+        return default_penalty(problem.h, problem.contact_modulus())
+    if isinstance(delta, bool) or not isinstance(delta, (int, float, np.number)) or not (np.isfinite(delta) and delta > 0):
+        raise InputError(f"the primal penalty δ must be a finite number > 0 (or None: the default), got {delta!r}")
+    return float(delta)
+
+
 def solve_primal_monolithic(
-    msh: dmesh.Mesh,
-    facet_tags: dmesh.MeshTags,
-    fields: MaterialFields,
+    problem: ContactProblem,
     *,
-    delta: float,
+    delta: float | None = None,
     newton: NewtonOptions = NewtonOptions(),
     prefix: str = "fc_primal_mono_",
 ) -> PrimalSolution:
-    """Penalized primal contact on the whole mesh (METHOD §2) by semismooth Newton."""
+    """Penalized primal contact on the whole mesh (METHOD §2) by semismooth Newton.
+
+    ``delta`` defaults to ``default_penalty(h, E_c)``, E_c the largest E on Γ_C (``penalty_for``).
+    """
+    cm = problem.cm
+    msh, facet_tags = cm.mesh, cm.facet_tags
     require_facet_groups(msh, facet_tags, (Boundary.GAMMA_D, Boundary.GAMMA_C))
     start = time.perf_counter()
-    check_boundary_groups(msh, facet_tags, fields.boundary)
+    fields = problem.fields
+    delta = penalty_for(problem, delta)
     warn_if_locking(fields.nu, msh.comm)
-    problem = PrimalSubproblem(msh, facet_tags, fields, delta=delta, alpha=None, prefix=prefix, newton=newton)
-    history = problem.solve()
+    sub = PrimalSubproblem(msh, facet_tags, fields, delta=delta, alpha=None, prefix=prefix, newton=newton)
+    history = sub.solve()
     elapsed = time.perf_counter() - start
-    profile = problem.contact_profile()
+    profile = sub.contact_profile()
     log.info(
         "monolithic primal: %d Newton steps, active-set sizes %s, penetration %.3e, %.2f s",
         history.steps, history.active_sizes, profile.penetration, elapsed,
     )
-    return PrimalSolution(problem.u, history, profile, delta, problem.num_dofs, elapsed, problem)
+    return PrimalSolution(sub.u, history, profile, delta, sub.num_dofs, elapsed, sub)

@@ -11,9 +11,8 @@ from dolfinx import fem
 from fenics_contact.errors import InputError
 from fenics_contact.fem.contact import NewtonOptions
 from fenics_contact.hybrid.iteration import IterationOptions
-from fenics_contact.problem.fields import material_fields
 from fenics_contact.problem.geometry import ContactMesh
-from fenics_contact.problem.models import TestModel
+from fenics_contact.problem.problem import ContactProblem
 from fenics_contact.problem.validation import require_tag_counts
 
 __all__ = ["check_solve_inputs", "check_reference_displacement", "require_instance"]
@@ -26,21 +25,21 @@ def require_instance(value, cls, what: str, hint: str = "") -> None:
 
 
 def check_solve_inputs(
-    cm: ContactMesh,
-    model: TestModel,
+    problem: ContactProblem,
     *,
     options: IterationOptions,
     newton: NewtonOptions,
     require_load: bool = True,
 ) -> None:
-    """Types of the common arguments, the tags of ``cm``, and a load that does not vanish on the mesh."""
-    require_instance(cm, ContactMesh, "the mesh", " (from geometry.unit_square or geometry.read_mesh)")
-    require_instance(model, TestModel, "the model", " (problem.models.model_1/2/3, get_model or TestModel(...))")
+    """Types of the common arguments, the tags of the problem's mesh, and a load that does not vanish on it."""
+    require_instance(problem, ContactProblem, "the problem",
+                     " (problem.models.model_1/2/3(...).on(mesh), or ContactProblem(..., mesh=mesh))")
+    require_instance(problem.cm, ContactMesh, "the mesh", " (from geometry.unit_square or geometry.read_mesh)")
     require_instance(options, IterationOptions, "options", " (hybrid.iteration.IterationOptions)")
     require_instance(newton, NewtonOptions, "newton", " (fem.contact.NewtonOptions)")
-    require_tag_counts(cm)
+    require_tag_counts(problem.cm)
     if require_load:
-        material_fields(cm.mesh, model, require_load=True)
+        problem.check_loaded()
 
 
 def check_reference_displacement(reference, cm: ContactMesh) -> None:

@@ -74,25 +74,25 @@ from fenics_contact.hybrid.iteration import (
     iterate,
 )
 from fenics_contact.errors import InputError
-from fenics_contact.problem.boundary import check_boundary_groups
-from fenics_contact.problem.fields import material_fields
-from fenics_contact.problem.geometry import ContactMesh
+from fenics_contact.problem.problem import ContactProblem
 from fenics_contact.fem.mixed import (
     MixedContactProfile,
     MixedNewtonHistory,
     MixedSolution,
     MixedSubproblem,
     check_triangles,
-    contact_modulus,
-    default_epsilon,
+    epsilon_for,
 )
-from fenics_contact.problem.models import TestModel
 from fenics_contact.hybrid.primal import omega2_record
 from fenics_contact.hybrid.transmission import split_mesh, sub_to_parent_dofs
 
-__all__ = ["MixedHybridResult", "MixedHybridStep", "solve_mixed_hybrid", "solve_or_verify", "transmission_coefficient"]
+__all__ = ["DEFAULT_BETA", "MixedHybridResult", "MixedHybridStep", "solve_mixed_hybrid", "solve_or_verify",
+           "transmission_coefficient"]
 
 log = logging.getLogger(__name__)
+
+#: Default transmission coefficient β = √h of Algorithms 2 and 4 (the paper's faster choice, METHOD §4).
+DEFAULT_BETA = "sqrt-h"
 
 
 def solve_or_verify(sub: MixedSubproblem, data: np.ndarray, warm: bool) -> MixedNewtonHistory:
@@ -131,28 +131,24 @@ class MixedHybridStep:
 
     def __init__(
         self,
-        cm: ContactMesh,
-        model: TestModel,
+        problem: ContactProblem,
         *,
-        beta: float | str,
+        beta: float | str = DEFAULT_BETA,
         epsilon: float | None = None,
         newton: NewtonOptions = NewtonOptions(),
         reference: MixedSolution | None = None,
     ) -> None:
+        cm = problem.cm
         check_triangles(cm.mesh)
         self.comm = cm.comm
         self.beta = transmission_coefficient(beta, cm.h)
-        parent_fields = material_fields(cm.mesh, model)
-        check_boundary_groups(cm.mesh, cm.facet_tags, parent_fields.boundary, names=cm.neumann_names)
-        if epsilon is None:
-            epsilon = default_epsilon(cm.h, contact_modulus(cm.mesh, cm.facet_tags, parent_fields.E, smallest=True))
-        self.epsilon = float(epsilon)
+        self.epsilon = epsilon_for(problem, epsilon)
         self.cm = cm
         self.parts = split_mesh(cm)
         # Ω₂ takes its Robin data at Ω₁'s γ nodes (canonical order, distributed in blocks over the ranks)
         self.sub = []
         for i, part in enumerate(self.parts):
-            fields = material_fields(part.mesh, model)
+            fields = problem.fields_on(part.mesh)
             self.sub.append(MixedSubproblem(
                 part.mesh, part.facet_tags, fields,
                 epsilon=self.epsilon if i == 1 else None, beta=self.beta,
@@ -177,6 +173,11 @@ class MixedHybridStep:
         self.reference = None
         if reference is not None:
             self.set_reference(reference)
+
+    @property
+    def contact(self) -> MixedSubproblem:
+        """The subproblem holding Γ_C (Ω₂)."""
+        return self.sub[1]
 
     def _omega1_space(self, part, fields) -> ArnoldWintherSpace | None:
         """Ω₁'s stress space (``fem.arnold_winther.ArnoldWintherSpace``) for the ``transmission.Part`` ``part``
@@ -333,10 +334,9 @@ class MixedHybridResult(IterationResult):
 
 
 def solve_mixed_hybrid(
-    cm: ContactMesh,
-    model: TestModel,
+    problem: ContactProblem,
     *,
-    beta: float | str = "sqrt-h",
+    beta: float | str = DEFAULT_BETA,
     epsilon: float | None = None,
     options: IterationOptions = IterationOptions(),
     newton: NewtonOptions = NewtonOptions(),
@@ -350,14 +350,14 @@ def solve_mixed_hybrid(
     ``epsilon`` defaults to ``fem.mixed.default_epsilon`` (pass the reference's ε when comparing).
     ``initial_data`` warm-starts the interface data; ``step`` reuses a step (and its offline data).
     """
-    check_solve_inputs(cm, model, options=options, newton=newton)
+    check_solve_inputs(problem, options=options, newton=newton)
     if reference is not None:
         require_instance(reference, MixedSolution, "the reference", " (from fem.mixed.solve_mixed_monolithic)")
     start = time.perf_counter()
     if reference is not None and epsilon is None:
         epsilon = reference.epsilon
     if step is None:
-        step = MixedHybridStep(cm, model, beta=beta, epsilon=epsilon, newton=newton)
+        step = MixedHybridStep(problem, beta=beta, epsilon=epsilon, newton=newton)
     step.prepare()
     offline = time.perf_counter() - start
     if reference is not None:  # not part of the method: outside the timings

@@ -30,11 +30,8 @@ from fenics_contact.hybrid.iteration import (
     iterate,
 )
 from fenics_contact.hybrid.inputs import check_reference_displacement, check_solve_inputs
-from fenics_contact.problem.boundary import check_boundary_groups
-from fenics_contact.problem.fields import material_fields
-from fenics_contact.problem.geometry import ContactMesh
-from fenics_contact.problem.models import TestModel
-from fenics_contact.fem.primal import PrimalSubproblem, warn_if_locking
+from fenics_contact.problem.problem import ContactProblem
+from fenics_contact.fem.primal import PrimalSubproblem, penalty_for, warn_if_locking
 from fenics_contact.hybrid.transmission import InterfaceSpace, robin_coefficient, split_mesh
 
 __all__ = ["PrimalHybridStep", "HybridResult", "solve_primal_hybrid", "solve_or_verify", "DEFAULT_ALPHA",
@@ -75,29 +72,29 @@ class PrimalHybridStep:
 
     def __init__(
         self,
-        cm: ContactMesh,
-        model: TestModel,
+        problem: ContactProblem,
         *,
-        alpha: float | str,
-        delta: float,
+        alpha: float | str = DEFAULT_ALPHA,
+        delta: float | None = None,
         newton: NewtonOptions = NewtonOptions(),
         reference: fem.Function | None = None,
     ) -> None:
+        cm = problem.cm
         self.comm = cm.comm
         self.parts = split_mesh(cm)
         gdim = cm.mesh.geometry.dim
         self.interface = InterfaceSpace(cm, self.parts, shape=(gdim,))
-        parent_fields = material_fields(cm.mesh, model)
-        check_boundary_groups(cm.mesh, cm.facet_tags, parent_fields.boundary, names=cm.neumann_names)
+        parent_fields = problem.fields
         warn_if_locking(parent_fields.nu, cm.comm)
         self.alpha = robin_coefficient(alpha, parent_fields.E, self.interface, cm.h)
+        self.delta = delta = penalty_for(problem, delta)
         self.sub = []
         for i, part in enumerate(self.parts):
             alpha_fn = fem.Function(self.interface.spaces[i], name="alpha")
             self.interface.to_part(self.alpha, i, alpha_fn)
             self.sub.append(
                 PrimalSubproblem(
-                    part.mesh, part.facet_tags, material_fields(part.mesh, model),
+                    part.mesh, part.facet_tags, problem.fields_on(part.mesh),
                     delta=delta if i == 1 else None, alpha=alpha_fn,
                     prefix=f"fc_primal_omega{i + 1}_", newton=newton, V=self.interface.spaces[i],
                 )
@@ -114,6 +111,11 @@ class PrimalHybridStep:
             for i, ref in enumerate(self.reference):
                 self.interface.transfers[i].to_sub(reference, ref)
             self._ref_norm2 = sum(s.l2_norm2(r) for s, r in zip(self.sub, self.reference))
+
+    @property
+    def contact(self) -> PrimalSubproblem:
+        """The subproblem holding Γ_C (Ω₂)."""
+        return self.sub[1]
 
     def initial_data(self) -> np.ndarray:
         return np.zeros(2 * self.interface.size)
@@ -223,11 +225,10 @@ class HybridResult(IterationResult):
 
 
 def solve_primal_hybrid(
-    cm: ContactMesh,
-    model: TestModel,
+    problem: ContactProblem,
     *,
     alpha: float | str = DEFAULT_ALPHA,
-    delta: float,
+    delta: float | None = None,
     options: IterationOptions = IterationOptions(),
     newton: NewtonOptions = NewtonOptions(),
     reference: fem.Function | None = None,
@@ -236,16 +237,17 @@ def solve_primal_hybrid(
 ) -> HybridResult:
     """Algorithm 1 until the transmission residual is below ``options.tol``.
 
-    ``reference`` (the monolithic solution) adds e_u per iteration, outside the online time;
+    ``delta`` defaults to ``fem.primal.default_penalty(h, E_c)``, E_c the largest E on Γ_C; ``reference`` (the monolithic solution) adds e_u per iteration, outside the online time;
     ``initial_data`` warm-starts the interface data; ``step`` reuses a step (and its offline
     data) from an earlier solve on the same mesh and model.
     """
-    check_solve_inputs(cm, model, options=options, newton=newton)
+    check_solve_inputs(problem, options=options, newton=newton)
+    cm = problem.cm
     if reference is not None:
         check_reference_displacement(reference, cm)
     start = time.perf_counter()
     if step is None:
-        step = PrimalHybridStep(cm, model, alpha=alpha, delta=delta, newton=newton, reference=reference)
+        step = PrimalHybridStep(problem, alpha=alpha, delta=delta, newton=newton, reference=reference)
     step.prepare()
     offline = time.perf_counter() - start
     monitor = (lambda: {"e_u": step.error_l2()}) if step.reference is not None else None

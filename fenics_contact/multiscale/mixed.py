@@ -67,7 +67,7 @@ from fenics_contact.errors import InputError
 from fenics_contact.problem.tags import Boundary
 from fenics_contact.problem.geometry import ContactMesh
 from fenics_contact.fem.mixed import MixedContactProfile, MixedSolution, boundary_stress_space
-from fenics_contact.hybrid.mixed import MixedHybridStep, solve_or_verify
+from fenics_contact.hybrid.mixed import DEFAULT_BETA, MixedHybridStep, solve_or_verify
 from fenics_contact.hybrid.primal import omega2_record
 from fenics_contact.multiscale.mixed_cem import (
     DEFAULT_MAX_NBASIS,
@@ -75,7 +75,7 @@ from fenics_contact.multiscale.mixed_cem import (
     MixedCEMOptions,
     MixedMultiscaleOmega1,
 )
-from fenics_contact.problem.models import TestModel
+from fenics_contact.problem.problem import ContactProblem
 from fenics_contact.multiscale.cem import DEFAULT_S_FACTOR, coarse_grid, warn_if_few_layers
 
 __all__ = ["MixedMsResult", "MixedMultiscaleHybridStep", "solve_mixed_ms_hybrid"]
@@ -115,16 +115,16 @@ class MixedMultiscaleHybridStep(MixedHybridStep):
 
     def __init__(
         self,
-        cm: ContactMesh,
-        model: TestModel,
+        problem: ContactProblem,
         *,
-        beta: float | str,
+        beta: float | str = DEFAULT_BETA,
         epsilon: float | None = None,
         cem: MixedCEMOptions = MixedCEMOptions(),
         newton: NewtonOptions = NewtonOptions(),
         cache_dir: str | Path | None = None,
         offline_comm: MPI.Comm = MPI.COMM_SELF,
     ) -> None:
+        cm = problem.cm
         _require_replicated_mesh(cm, offline_comm)
         if cm.H is None and not np.any(np.asarray(cm.coarse_cell) >= 0):
             raise InputError("Algorithm 4 needs a coarse grid: build the mesh with geometry.unit_square(n, n_coarse), "
@@ -132,7 +132,7 @@ class MixedMultiscaleHybridStep(MixedHybridStep):
                              "problem.partition.centroid_coarse_cells on an unstructured mesh)")
         start = time.perf_counter()
         self._offline_comm = offline_comm  # (before the base class builds Ω₁'s space: ``_omega1_space``)
-        super().__init__(cm, model, beta=beta, epsilon=epsilon, newton=newton)
+        super().__init__(problem, beta=beta, epsilon=epsilon, newton=newton)
         setup = time.perf_counter() - start
         part = self.parts[0]
         grid = coarse_grid(part.mesh, part.cell_map, cm.coarse_cell, cm.H)
@@ -333,18 +333,11 @@ class MixedMsResult(IterationResult):
 
 
 def solve_mixed_ms_hybrid(
-    cm: ContactMesh,
-    model: TestModel,
+    problem: ContactProblem,
     *,
-    beta: float | str = "sqrt-h",
+    beta: float | str = DEFAULT_BETA,
     epsilon: float | None = None,
-    layers: int = 3,
-    nbasis: int | None = 3,
-    min_gap: float | None = DEFAULT_MIN_GAP,
-    max_nbasis: int = DEFAULT_MAX_NBASIS,
-    weight: str = "lambda+2mu",
-    s_factor: float = DEFAULT_S_FACTOR,
-    source_correction: bool = True,
+    cem: MixedCEMOptions = MixedCEMOptions(),
     offline_comm: MPI.Comm = MPI.COMM_SELF,
     options: IterationOptions = IterationOptions(),
     newton: NewtonOptions = NewtonOptions(),
@@ -366,7 +359,8 @@ def solve_mixed_ms_hybrid(
     number of Stage I modes per coarse cell; ``min_gap`` adds modes where the first eigenvalue left
     out is below it (up to ``max_nbasis``; ``None`` keeps exactly ``nbasis``, the paper's fixed l).
     ``source_correction`` (default) adds the localized source correctors of METHOD §9 (the error then
-    falls with m for loads inside Ω₁ too); ``False`` is the paper's Algorithm 4.
+    falls with m for loads inside Ω₁ too); ``False`` is the paper's Algorithm 4. These are the fields of
+    ``cem`` (``multiscale.mixed_cem.MixedCEMOptions``).
 
     MPI: the Arnold–Winther spaces are serial, so every rank holds the whole mesh (``cm`` built on
     COMM_SELF) and ``offline_comm`` (e.g. COMM_WORLD) shares out the offline local problems (Stage I
@@ -374,16 +368,16 @@ def solve_mixed_ms_hybrid(
     matrices summed).  The online iteration then runs replicated on every rank (identical results,
     no communication; the Ω₂ solves are serial anyway).
     """
-    check_solve_inputs(cm, model, options=options, newton=newton)
+    check_solve_inputs(problem, options=options, newton=newton)
+    require_instance(cem, MixedCEMOptions, "cem", " (multiscale.mixed_cem.MixedCEMOptions)")
     if reference is not None:
         require_instance(reference, MixedSolution, "the reference", " (from fem.mixed.solve_mixed_monolithic)")
     if reference is not None and epsilon is None:
         epsilon = reference.epsilon
-    cem = MixedCEMOptions(layers=layers, nbasis=nbasis, min_gap=min_gap, max_nbasis=max_nbasis, weight=weight,
-                          s_factor=s_factor, source_correction=source_correction)
     if step is None:
-        step = MixedMultiscaleHybridStep(cm, model, beta=beta, epsilon=epsilon, cem=cem, newton=newton,
+        step = MixedMultiscaleHybridStep(problem, beta=beta, epsilon=epsilon, cem=cem, newton=newton,
                                          cache_dir=cache_dir, offline_comm=offline_comm)
+    layers, nbasis = step.cem.layers, step.cem.nbasis
     if reference is not None:  # not part of the method: outside the timings
         step.set_reference(reference)
     history = iterate(step, options, name=f"mixed CEM hybrid (m={layers}, l={nbasis})", initial=initial_data)

@@ -25,14 +25,12 @@ from dolfinx import fem
 from fenics_contact.multiscale.cem import DEFAULT_S_FACTOR, CEMOptions, Omega1Multiscale
 from fenics_contact.fem.contact import NewtonOptions
 from fenics_contact.hybrid.certificate import Certificate, primal_certificate
-from fenics_contact.hybrid.inputs import check_reference_displacement, check_solve_inputs
+from fenics_contact.hybrid.inputs import check_reference_displacement, check_solve_inputs, require_instance
 from fenics_contact.hybrid.iteration import InterfaceNewtonOptions, IterationOptions, iterate
 from fenics_contact.errors import InputError
-from fenics_contact.problem.fields import material_fields
-from fenics_contact.problem.geometry import ContactMesh
-from fenics_contact.problem.models import TestModel
-from fenics_contact.fem.primal import PrimalSubproblem, warn_if_locking
-from fenics_contact.hybrid.primal import HybridResult, omega2_record, solve_or_verify
+from fenics_contact.problem.problem import ContactProblem
+from fenics_contact.fem.primal import PrimalSubproblem, penalty_for, warn_if_locking
+from fenics_contact.hybrid.primal import DEFAULT_ALPHA_MS, HybridResult, omega2_record, solve_or_verify
 from fenics_contact.hybrid.transmission import InterfaceSpace, robin_coefficient, split_mesh
 
 __all__ = ["MultiscalePrimalHybridStep", "solve_primal_ms_hybrid"]
@@ -45,16 +43,16 @@ class MultiscalePrimalHybridStep:
 
     def __init__(
         self,
-        cm: ContactMesh,
-        model: TestModel,
+        problem: ContactProblem,
         *,
-        alpha: float | str,
-        delta: float,
+        alpha: float | str = DEFAULT_ALPHA_MS,
+        delta: float | None = None,
         cem: CEMOptions = CEMOptions(),
         newton: NewtonOptions = NewtonOptions(),
         reference: fem.Function | None = None,
         cache_dir: str | Path | None = None,
     ) -> None:
+        cm = problem.cm
         if cm.H is None and cm.comm.allreduce(int(np.any(np.asarray(cm.coarse_cell) >= 0)), op=MPI.MAX) == 0:
             raise InputError("Algorithm 3 needs a coarse grid: build the mesh with geometry.unit_square(n, n_coarse), "
                              "or give read_mesh H or a mesh with a coarse partition")
@@ -65,17 +63,19 @@ class MultiscalePrimalHybridStep:
         # source-corrected like f: cem.omega1_load) and a prescribed u_D (its lifting: cem.assemble_fine_operators)
         gdim = cm.mesh.geometry.dim
         self.interface = InterfaceSpace(cm, self.parts, shape=(gdim,))
-        parent_fields = material_fields(cm.mesh, model)
+        parent_fields = problem.fields
         warn_if_locking(parent_fields.nu, cm.comm)
         self.alpha = robin_coefficient(alpha, parent_fields.E, self.interface, cm.h)
+        self.delta = delta = penalty_for(problem, delta)
+        self.cem = cem
         self.omega1 = Omega1Multiscale(
-            cm, model, self.parts, self.interface, self.alpha, cem=cem, cache_dir=cache_dir
+            cm, problem, self.parts, self.interface, self.alpha, cem=cem, cache_dir=cache_dir
         )
         alpha2 = fem.Function(self.interface.spaces[1], name="alpha")
         self.interface.to_part(self.alpha, 1, alpha2)
         p2 = self.parts[1]
         self.omega2 = PrimalSubproblem(
-            p2.mesh, p2.facet_tags, material_fields(p2.mesh, model), delta=delta, alpha=alpha2,
+            p2.mesh, p2.facet_tags, problem.fields_on(p2.mesh), delta=delta, alpha=alpha2,
             prefix="fc_primal_ms_omega2_", newton=newton, V=self.interface.spaces[1],
         )
         self.u1 = fem.Function(self.interface.spaces[0], name="u1")  # filled by glued()
@@ -98,6 +98,14 @@ class MultiscalePrimalHybridStep:
         self.offline_times = dict(self.omega1.times)
         self.offline_times["setup"] = time.perf_counter() - start - sum(self.omega1.times.values())
         self.time_offline_s = time.perf_counter() - start
+
+    @property
+    def contact(self) -> PrimalSubproblem:
+        """The subproblem holding Γ_C (Ω₂)."""
+        return self.omega2
+
+    def prepare(self) -> None:
+        """Offline work: done on construction (bases, correctors, the coarse factorization)."""
 
     # -- HybridStep protocol --------------------------------------------------------------
     def initial_data(self) -> np.ndarray:
@@ -189,16 +197,11 @@ class MultiscalePrimalHybridStep:
 
 
 def solve_primal_ms_hybrid(
-    cm: ContactMesh,
-    model: TestModel,
+    problem: ContactProblem,
     *,
-    alpha: float | str = "Emin",
-    delta: float,
-    layers: int = 3,
-    nbasis: int | None = 3,
-    threshold: float | None = None,
-    s_factor: float = DEFAULT_S_FACTOR,
-    source_correction: bool = True,
+    alpha: float | str = DEFAULT_ALPHA_MS,
+    delta: float | None = None,
+    cem: CEMOptions = CEMOptions(),
     options: IterationOptions = IterationOptions(),
     newton: NewtonOptions = NewtonOptions(),
     reference: fem.Function | None = None,
@@ -210,22 +213,23 @@ def solve_primal_ms_hybrid(
     ``reference`` (fine monolithic), outside the online time.  ``initial_data`` warm-starts the interface
     data, ``step`` reuses a step (and its offline data) from an earlier solve.
 
-    ``alpha`` defaults to ``"Emin"`` (the smallest nodal E on γ; it was ``"E"``, the same wherever γ is
-    homogeneous: a nodal E·c amplifies the multiscale error in stiff channels through γ, README issue 10;
-    the CLI's default is ``hybrid.primal.DEFAULT_ALPHA_MS``).
+    ``alpha`` defaults to ``hybrid.primal.DEFAULT_ALPHA_MS`` (h^(-1/2) times the smallest nodal E on γ: a
+    nodal E amplifies the multiscale error in stiff channels through γ), ``delta`` to
+    ``fem.primal.default_penalty(h, E_c)``; ``cem`` holds the CEM-GMsFEM parameters (layers m, modes l).
     ``dofs["omega1_ms"]`` is dim V_ms; ``time_offline_s`` covers assembly, eigenproblems,
     bases, N and the coarse factorization (breakdown in ``result.step.offline_times``);
     ``time_online_s`` the iteration.
     """
-    check_solve_inputs(cm, model, options=options, newton=newton)
+    check_solve_inputs(problem, options=options, newton=newton)
+    require_instance(cem, CEMOptions, "cem", " (multiscale.cem.CEMOptions)")
+    cm = problem.cm
     if reference is not None:
         check_reference_displacement(reference, cm)
-    cem = CEMOptions(layers=layers, nbasis=nbasis, threshold=threshold, s_factor=s_factor,
-                     source_correction=source_correction)
     if step is None:
         step = MultiscalePrimalHybridStep(
-            cm, model, alpha=alpha, delta=delta, cem=cem, newton=newton, reference=reference, cache_dir=cache_dir
+            problem, alpha=alpha, delta=delta, cem=cem, newton=newton, reference=reference, cache_dir=cache_dir
         )
+    layers, nbasis = step.cem.layers, step.cem.nbasis
     monitor = (lambda: {"e_u": step.error_l2()}) if step.reference is not None else None
     history = iterate(step, options, name=f"primal CEM hybrid (m={layers}, l={nbasis})", monitor=monitor,
                       initial=initial_data)

@@ -19,9 +19,8 @@
   force F per unit thickness: E* = E/(1 − ν²), a = 2√(RF/(πE*)),
   p(x) = p₀√(1 − x²/a²), p₀ = 2F/(πa).  ``hertz_errors`` compares a computed
   contact profile with it, F read off the profile.
-* **P1 locking** (no contact): u = curl ψ, ψ = (x(1−x)y(1−y))², divergence free, on the
-  clamped unit square with the body force it needs; ``p1_locking_error`` is the relative
-  L² error of P1 at Poisson ratio ν, which grows without bound as ν → ½ at fixed h.
+
+The P1 locking measurement (u = curl ψ on the clamped square) is ``fem.locking``.
 """
 
 from collections.abc import Callable
@@ -30,8 +29,7 @@ from typing import NamedTuple
 import numpy as np
 
 from fenics_contact.errors import InputError
-from fenics_contact.fem.contact import ContactProfile
-from fenics_contact.problem.models import TestModel, constant_field
+from fenics_contact.problem.problem import ContactProblem
 from fenics_contact.problem.obstacles import Circle, Plane
 
 __all__ = [
@@ -52,10 +50,10 @@ def _uniform_load(f1: float):
     return lambda x: np.vstack([np.full(x.shape[1], float(f1)), np.zeros(x.shape[1])])
 
 
-def bar_model(f1: float, *, E: float = 1.0) -> TestModel:
+def bar_model(f1: float, *, E: float = 1.0) -> ContactProblem:
     """The bar: ν = 0, E, body force (f₁, 0); use it on ``unit_square(n, N, clamped=("left",))``."""
-    return TestModel("bar", constant_field(E), constant_field(0.0), _uniform_load(f1),
-                     description=f"bar, E={E:g}, f1={f1:g}")
+    return ContactProblem(name="bar", youngs_modulus=E, poisson_ratio=0.0, load=_uniform_load(f1),
+                          description=f"bar, E={E:g}, f1={f1:g}")
 
 
 def bar_solution(f1: float, *, E: float = 1.0, delta: float = 0.0, epsilon: float | None = None) -> BarSolution:
@@ -85,7 +83,7 @@ def _check_layers(bounds, moduli) -> tuple[np.ndarray, np.ndarray]:
     return bounds, moduli
 
 
-def layered_model(bounds, moduli, *, depth: float) -> TestModel:
+def layered_model(bounds, moduli, *, depth: float) -> ContactProblem:
     """Layers E = moduli[i] on bounds[i] < x < bounds[i+1], ν = 0, no load, plane obstacle moved in by ``depth``."""
     bounds, moduli = _check_layers(bounds, moduli)
 
@@ -94,8 +92,8 @@ def layered_model(bounds, moduli, *, depth: float) -> TestModel:
         return moduli[i]
 
     wall = Plane((1.0, 0.0), (-1.0, 0.0)).indented(depth, (-1.0, 0.0))
-    return TestModel("layers", E, constant_field(0.0), lambda x: np.zeros((2, x.shape[1])), obstacle=wall,
-                     description=f"layered patch, E={moduli.tolist()}, d0={depth:g}")
+    return ContactProblem(name="layers", youngs_modulus=E, poisson_ratio=0.0, obstacle=wall,
+                          description=f"layered patch, E={moduli.tolist()}, d0={depth:g}")
 
 
 def layered_pressure(bounds, moduli, depth: float, *, delta: float = 0.0) -> float:
@@ -111,11 +109,11 @@ def layered_displacement(bounds, moduli, pressure: float) -> Callable[[np.ndarra
     return lambda x: -pressure * np.interp(x[0], bounds, compliance)
 
 
-def hertz_model(*, radius: float = 1.0, E: float = 1.0, nu: float = 0.3, depth: float) -> TestModel:
+def hertz_model(*, radius: float = 1.0, E: float = 1.0, nu: float = 0.3, depth: float) -> ContactProblem:
     """A rigid cylinder of radius R touching the top face y = 0 at x = 0, moved down by ``depth``."""
     cylinder = Circle((0.0, radius), radius).indented(depth, (0.0, -1.0))
-    return TestModel("hertz", constant_field(E), constant_field(nu), lambda x: np.zeros((2, x.shape[1])),
-                     obstacle=cylinder, description=f"Hertz, R={radius:g}, E={E:g}, nu={nu:g}, d={depth:g}")
+    return ContactProblem(name="hertz", youngs_modulus=E, poisson_ratio=nu, obstacle=cylinder,
+                          description=f"Hertz, R={radius:g}, E={E:g}, nu={nu:g}, d={depth:g}")
 
 
 def hertz_force_for(a: float, *, radius: float = 1.0, E: float = 1.0, nu: float = 0.3) -> float:
@@ -135,9 +133,10 @@ class HertzErrors(NamedTuple):
     l2_error: float  #: ‖p_h − p‖_L²(Γ_C) / ‖p‖_L²(Γ_C)
 
 
-def hertz_errors(profile: ContactProfile, *, radius: float, E: float, nu: float, h_contact: float,
+def hertz_errors(profile, *, radius: float, E: float, nu: float, h_contact: float,
                  centre: float = 0.0) -> HertzErrors:
-    """Half-width, peak pressure and pressure-profile errors of a Hertz contact profile (F read off it)."""
+    """Half-width, peak pressure and pressure-profile errors of a Hertz contact profile (``fem.contact.ContactProfile``;
+    F read off it)."""
     if profile.weights is None or profile.points is None:
         raise InputError("hertz_errors needs a contact profile with points and weights")
     F = profile.force
@@ -154,45 +153,3 @@ def hertz_errors(profile: ContactProfile, *, radius: float, E: float, nu: float,
     w = profile.weights
     l2 = float(np.sqrt(np.sum(w * (p - exact) ** 2) / np.sum(w * exact**2)))
     return HertzErrors(F, a, p0, half, (half - a) / h_contact, float(p.max() / p0 - 1.0), l2)
-
-
-def clamped_square(n: int, comm=None):
-    """Unit square, n×n cells (``comm``, default COMM_WORLD), the whole boundary tagged Γ_D (u = 0)."""
-    from mpi4py import MPI
-    from dolfinx import mesh
-
-    from fenics_contact.problem.tags import Boundary
-
-    msh = mesh.create_unit_square(MPI.COMM_WORLD if comm is None else comm, n, n)
-    tdim = msh.topology.dim
-    msh.topology.create_connectivity(tdim - 1, tdim)
-    facets = mesh.exterior_facet_indices(msh.topology)
-    return msh, mesh.meshtags(msh, tdim - 1, facets, np.full(facets.size, Boundary.GAMMA_D, dtype=np.int32))
-
-
-def p1_locking_error(n: int, nu: float, comm=None) -> float:
-    """Relative L² error of P1 for u = curl ψ (divergence free) on the clamped square, h = 1/n, E = 1, ν."""
-    import ufl
-    from mpi4py import MPI
-    from dolfinx import fem
-
-    from fenics_contact.fem.primal import PrimalSubproblem
-    from fenics_contact.problem.fields import MaterialFields
-    from fenics_contact.problem.materials import lame, strain, stress
-
-    msh, tags = clamped_square(n, comm)
-    x = ufl.SpatialCoordinate(msh)
-    psi = (x[0] * (1 - x[0]) * x[1] * (1 - x[1])) ** 2
-    u_exact = ufl.as_vector([psi.dx(1), -psi.dx(0)])
-    lm, mu = (float(v) for v in lame(1.0, nu))
-    f = -ufl.div(stress(strain(u_exact), lm, mu))
-    fields = MaterialFields(None, None, fem.Constant(msh, lm), fem.Constant(msh, mu), f)
-    problem = PrimalSubproblem(msh, tags, fields, delta=None, alpha=None, prefix=f"lock{n}_{nu}_")
-    try:
-        problem.solve()
-        e = problem.u - u_exact
-        err = msh.comm.allreduce(fem.assemble_scalar(fem.form(ufl.inner(e, e) * ufl.dx)), op=MPI.SUM)
-        ref = msh.comm.allreduce(fem.assemble_scalar(fem.form(ufl.inner(u_exact, u_exact) * ufl.dx)), op=MPI.SUM)
-    finally:
-        problem.destroy()
-    return float(np.sqrt(err / ref))

@@ -10,7 +10,7 @@ the mixed methods impose σn = t (and σn = 0) essentially in the stress space
 and u_D as the natural term ∫_ΓD u_D·τn ds.  Fields are numpy callables
 x (3, N) -> (2, N), or a constant 2-vector.
 
-``BoundaryConditions`` travels with the model (``TestModel.boundary``) and
+``BoundaryConditions`` travels with the problem (``ContactProblem.boundary``) and
 through ``problem.fields.material_fields`` into every subproblem;
 ``check_boundary_groups`` matches it against a mesh's facet groups.
 """

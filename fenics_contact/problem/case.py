@@ -71,7 +71,8 @@ from fenics_contact.errors import InputError, MeshTagError
 from fenics_contact.problem.boundary import BoundaryConditions, check_boundary_groups
 from fenics_contact.problem.cell_groups import SUBDOMAIN_NAMES, CellGroups, bounding_box, read_cell_groups
 from fenics_contact.problem.geometry import SIDES, ContactMesh, read_mesh, unit_square
-from fenics_contact.problem.models import TestModel, constant_field, get_model, pixel_field
+from fenics_contact.problem.models import get_model, pixel_field
+from fenics_contact.problem.problem import ContactProblem, constant_field
 from fenics_contact.problem.obstacles import Circle, Obstacle, Plane
 from fenics_contact.problem.tags import is_neumann_name
 
@@ -81,14 +82,8 @@ __all__ = [
     "Uniform", "ByGroup", "Pixels", "PythonField", "Material", "Boundary", "ObstacleSpec",
 ]
 
-#: the run-option tables and the methods whose runs use them
-RUN_TABLES: dict[str, tuple[str, ...]] = {
-    "run": ("primal", "primal-ms", "mixed", "mixed-ms"),
-    "primal": ("primal", "primal-ms"),
-    "mixed": ("mixed", "mixed-ms"),
-    "multiscale": ("primal-ms", "mixed-ms"),
-    "mixed-ms": ("mixed-ms",),
-}
+#: the run-option tables (the command line says which methods read each: ``cli.TABLE_METHODS``)
+RUN_TABLES = ("run", "primal", "mixed", "multiscale", "mixed-ms")
 _PROBLEM_TABLES = ("mesh", "material", "load", "boundary", "obstacle")
 
 
@@ -710,8 +705,8 @@ class Case:
         overlays = [name for name in self.material.groups() if name not in SUBDOMAIN_NAMES]
         return self.mesh.build(comm, overlays)
 
-    def model(self, mesh: CaseMesh) -> TestModel:
-        """The problem as a TestModel on the built mesh (collective), the obstacle at its last depth.
+    def problem(self, mesh: CaseMesh) -> ContactProblem:
+        """The problem on the built mesh (collective), the obstacle at its last depth.
 
         Checked here: every cell has a material (groups, pixel maps), the traction groups match the mesh's.
         """
@@ -730,12 +725,10 @@ class Case:
             load = base.load
         else:
             load = lambda x: np.zeros((2, x.shape[1]))  # noqa: E731
-        boundary = self.boundary.conditions()
-        check_boundary_groups(cm.mesh, cm.facet_tags, boundary, names=cm.neumann_names)
-        return TestModel(
+        return ContactProblem(
             name=self.path.stem, youngs_modulus=E, poisson_ratio=nu, load=load,
-            description=self.description or f"case {self.path.name}", boundary=boundary,
-            obstacle=self.obstacle.final(),
+            description=self.description or f"case {self.path.name}", boundary=self.boundary.conditions(),
+            obstacle=self.obstacle.final(), mesh=cm,
         )
 
     def _scalar(self, spec: FieldSpec, key: str, cm: ContactMesh, groups: CellGroups | None,

@@ -1,10 +1,9 @@
 """Cellwise material data on a mesh, and copies of P1 data between a mesh and its submeshes."""
 
 from collections.abc import Callable
-from typing import NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
-from mpi4py import MPI
 
 import basix.ufl
 from dolfinx import fem, la
@@ -13,8 +12,10 @@ from dolfinx import mesh as dmesh
 from fenics_contact.errors import InputError
 from fenics_contact.problem.boundary import BoundaryConditions
 from fenics_contact.problem.materials import check_poisson_ratio, check_youngs_modulus, lame
-from fenics_contact.problem.models import TestModel
 from fenics_contact.problem.obstacles import Obstacle
+
+if TYPE_CHECKING:  # (problem.problem builds its fields with material_fields)
+    from fenics_contact.problem.problem import ContactProblem
 
 __all__ = ["MaterialFields", "cell_function", "material_fields", "SubmeshTransfer"]
 
@@ -49,13 +50,9 @@ def cell_function(msh: dmesh.Mesh, field: Callable[[np.ndarray], np.ndarray], *,
     return fn
 
 
-def material_fields(msh: dmesh.Mesh, model: TestModel, *, require_load: bool = False) -> MaterialFields:
-    """DG0 material fields of ``model`` on ``msh``; raises InputError on E ≤ 0 or ν ∉ (−1, ½).
-
-    With ``require_load`` (for the whole domain, not a subdomain) a body force that
-    vanishes on every cell is an InputError (the mesh does not resolve the load),
-    unless the model is loaded otherwise (a Γ_D displacement, tractions or an obstacle).
-    """
+def material_fields(msh: dmesh.Mesh, model: "ContactProblem") -> MaterialFields:
+    """DG0 material fields of the problem ``model`` on ``msh`` (``ContactProblem.fields_on`` keeps them);
+    raises InputError on E ≤ 0 or ν ∉ (−1, ½)."""
     E = cell_function(msh, model.youngs_modulus, name="E")
     nu = cell_function(msh, model.poisson_ratio, name="nu")
     check_youngs_modulus(E.x.array)
@@ -66,12 +63,6 @@ def material_fields(msh: dmesh.Mesh, model: TestModel, *, require_load: bool = F
     lmbda.x.array[:] = lm
     mu.x.array[:] = mu_
     f = cell_function(msh, model.load, shape=(msh.geometry.dim,), name="f")
-    loaded_otherwise = not model.boundary.is_default or model.obstacle is not None
-    if require_load and not loaded_otherwise and msh.comm.allreduce(float(np.max(np.abs(f.x.array), initial=0.0)), op=MPI.MAX) == 0.0:
-        raise InputError(
-            f"the body force of {model.name!r} is zero on every cell of this mesh (too coarse to resolve the "
-            "load bands?): the solution would be u = 0. Refine the mesh (the built-in loads act on x >= 15/16)."
-        )
     return MaterialFields(E, nu, lmbda, mu, f, model.boundary, model.obstacle)
 
 

@@ -33,59 +33,25 @@ and pulls the rest (f₁ = −8), giving contact on about y ∈ [0.4, 0.6]. The
 total force per unit height is that of a unit load on x ≥ 1/2.
 """
 
-from collections.abc import Callable
-from dataclasses import dataclass, replace
+import warnings
 
 import numpy as np
 import numpy.typing as npt
 
 from fenics_contact.errors import InputError
-from fenics_contact.problem.boundary import BoundaryConditions
-from fenics_contact.problem.obstacles import Obstacle
+from fenics_contact.problem.problem import ContactProblem, ScalarField, VectorField, constant_field
 
 __all__ = [
-    "TestModel", "constant_field", "get_model", "model_1", "model_2", "model_3", "paper_phase_model", "pixel_field",
+    "constant_field", "get_model", "model_1", "model_2", "model_3", "paper_phase_model", "pixel_field",
 ]
 
-#: A scalar field: points x of shape (3, N) -> values of shape (N,).
-ScalarField = Callable[[np.ndarray], np.ndarray]
-#: A vector field: points x of shape (3, N) -> values of shape (2, N).
-VectorField = Callable[[np.ndarray], np.ndarray]
 
-
-@dataclass(frozen=True, slots=True)
-class TestModel:
-    """A contact problem's data: E(x), ν(x), body force f(x), boundary conditions and obstacle.
-
-    ``boundary``: Γ_D displacement and Γ_N tractions (default: Γ_D clamped, no traction
-    groups; every other exterior facet is traction free). ``obstacle``: the rigid
-    obstacle in contact with Γ_C (default None: a wall flush with Γ_C, zero gap).
-    """
-
-    __test__ = False  # not a pytest test class
-
-    name: str
-    youngs_modulus: ScalarField
-    poisson_ratio: ScalarField
-    load: VectorField
-    description: str = ""
-    boundary: BoundaryConditions = BoundaryConditions()
-    obstacle: Obstacle | None = None
-
-    def __post_init__(self) -> None:
-        if not isinstance(self.boundary, BoundaryConditions):
-            raise InputError(f"TestModel.boundary must be a BoundaryConditions, got {type(self.boundary).__name__}")
-        if self.obstacle is not None and not isinstance(self.obstacle, Obstacle):
-            raise InputError(f"TestModel.obstacle must be an Obstacle or None, got {type(self.obstacle).__name__}")
-
-    def with_(self, **changes) -> "TestModel":
-        """A copy with some fields replaced (``dataclasses.replace``)."""
-        return replace(self, **changes)
-
-
-def constant_field(value: float) -> ScalarField:
-    """x ↦ value, as a scalar field."""
-    return lambda x: np.full(x.shape[1], float(value))
+def __getattr__(name: str):
+    if name == "TestModel":
+        warnings.warn("fenics_contact.problem.models.TestModel is deprecated: it is ContactProblem "
+                      "(fenics_contact.problem.problem), whose fields it had", DeprecationWarning, stacklevel=2)
+        return ContactProblem
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def pixel_field(values: npt.ArrayLike, extent=(0.0, 1.0, 0.0, 1.0)) -> ScalarField:
@@ -169,10 +135,10 @@ def _inclusion_boxes() -> np.ndarray:
 _INCLUSIONS = _inclusion_boxes()
 
 
-def model_1(*, E_high: float = 1.0e3, E_low: float = 1.0, nu: float = 0.35, load_scale: float = 1.0) -> TestModel:
+def model_1(*, E_high: float = 1.0e3, E_low: float = 1.0, nu: float = 0.35, load_scale: float = 1.0) -> ContactProblem:
     """Test model 1: thin high-modulus channels; contact on about y ∈ [0, 0.5]."""
     bands = [(_X_LOAD, 1.0, 0.0, 0.5, _F * load_scale), (_X_LOAD, 1.0, 0.5, 1.0, -_F * load_scale)]
-    return TestModel(
+    return ContactProblem(
         name="model1",
         youngs_modulus=_boxes_field(_CHANNELS, E_high, E_low),
         poisson_ratio=constant_field(nu),
@@ -181,14 +147,14 @@ def model_1(*, E_high: float = 1.0e3, E_low: float = 1.0, nu: float = 0.35, load
     )
 
 
-def model_2(*, E_high: float = 1.0e3, E_low: float = 1.0, nu: float = 0.35, load_scale: float = 1.0) -> TestModel:
+def model_2(*, E_high: float = 1.0e3, E_low: float = 1.0, nu: float = 0.35, load_scale: float = 1.0) -> ContactProblem:
     """Test model 2: a field of inclusions; contact on about y ∈ [0.4, 0.6]."""
     bands = [
         (_X_LOAD, 1.0, 0.0, 0.375, -_F * load_scale),
         (_X_LOAD, 1.0, 0.375, 0.625, 2.0 * _F * load_scale),
         (_X_LOAD, 1.0, 0.625, 1.0, -_F * load_scale),
     ]
-    return TestModel(
+    return ContactProblem(
         name="model2",
         youngs_modulus=_boxes_field(_INCLUSIONS, E_high, E_low),
         poisson_ratio=constant_field(nu),
@@ -204,10 +170,10 @@ _STRIP_PATTERN = np.array(
 )
 
 
-def model_3(*, E_high: float = 1.0e3, E_low: float = 1.0, nu: float = 0.35, load_scale: float = 1.0) -> TestModel:
+def model_3(*, E_high: float = 1.0e3, E_low: float = 1.0, nu: float = 0.35, load_scale: float = 1.0) -> ContactProblem:
     """Test model 3: heterogeneous strip (channels through γ up to Γ_C, γ cutting inclusions), loads in Ω₁."""
     bands = [(0.5, 1.0, 0.0, 0.5, load_scale), (0.5, 1.0, 0.75, 1.0, -load_scale)]
-    return TestModel(
+    return ContactProblem(
         name="model3",
         youngs_modulus=_boxes_field(_STRIP_PATTERN, E_high, E_low),
         poisson_ratio=constant_field(nu),
@@ -216,7 +182,7 @@ def model_3(*, E_high: float = 1.0e3, E_low: float = 1.0, nu: float = 0.35, load
     )
 
 
-def paper_phase_model(number: int, *, E_ratio: float, nu_pattern: float, nu_rest: float) -> TestModel:
+def paper_phase_model(number: int, *, E_ratio: float, nu_pattern: float, nu_rest: float) -> ContactProblem:
     """The paper's §5.4 parameterization of test model ``number`` (its Tables 5.4–5.7).
 
     E = ``E_ratio`` and ν = ``nu_pattern`` in the pattern (channels / inclusions, the paper's
@@ -230,7 +196,7 @@ def paper_phase_model(number: int, *, E_ratio: float, nu_pattern: float, nu_rest
     )
 
 
-def get_model(number: int, **kwargs) -> TestModel:
+def get_model(number: int, **kwargs) -> ContactProblem:
     """The built-in test model 1, 2 or 3."""
     builders = {1: model_1, 2: model_2, 3: model_3}
     if number not in builders:

@@ -1,0 +1,225 @@
+"""The methods by name: what can be run on a ``ContactProblem``, with which options, built by one factory.
+
+=====================  ==========  =============================================================
+name                   algorithm   what it solves
+=====================  ==========  =============================================================
+``primal-monolithic``  —           penalized primal P1 contact on the whole mesh (semismooth Newton)
+``mixed-monolithic``   —           penalized mixed Arnold–Winther contact on the whole mesh
+``primal``             1           primal P1 in Ω₁ and Ω₂, Robin transmission on γ
+``mixed``              2           mixed Arnold–Winther in Ω₁ and Ω₂
+``primal-ms``          3           primal CEM-GMsFEM in Ω₁, primal P1 in Ω₂
+``mixed-ms``           4           mixed CEM-GMsFEM in Ω₁, mixed Arnold–Winther in Ω₂
+=====================  ==========  =============================================================
+
+Every method is one entry of ``METHODS``; the command line, case files and load steps look
+methods up here. A method's options and their defaults are the keyword-only parameters of its
+solve function (written once there, with the named constants ``DEFAULT_ALPHA``, ``DEFAULT_BETA``…);
+``Method.options`` also takes them flat, as the command line and case files give them
+(``tol``, ``accel``, ``max_iterations`` for the iteration; ``layers``, ``nbasis``, ``min_gap``,
+``max_nbasis`` for the multiscale space), and refuses an option the method does not use.
+
+    result = solve(problem, "primal", tol=1e-8)          # Algorithm 1 with its defaults otherwise
+    step = METHODS["primal-ms"].build(problem, layers=4)  # the offline phase, kept for many solves
+"""
+
+import dataclasses
+import inspect
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from typing import Any
+
+from mpi4py import MPI
+
+from fenics_contact.errors import InputError
+from fenics_contact.fem.contact import NewtonOptions
+from fenics_contact.fem.mixed import MixedSubproblem, epsilon_for, solve_mixed_monolithic
+from fenics_contact.fem.primal import PrimalSubproblem, penalty_for, solve_primal_monolithic, warn_if_locking
+from fenics_contact.hybrid.iteration import InterfaceNewtonOptions, IterationOptions
+from fenics_contact.hybrid.mixed import MixedHybridStep, solve_mixed_hybrid
+from fenics_contact.hybrid.primal import PrimalHybridStep, solve_primal_hybrid
+from fenics_contact.multiscale.cem import CEMOptions
+from fenics_contact.multiscale.mixed import MixedMultiscaleHybridStep, solve_mixed_ms_hybrid
+from fenics_contact.multiscale.mixed_cem import MixedCEMOptions
+from fenics_contact.multiscale.primal import MultiscalePrimalHybridStep, solve_primal_ms_hybrid
+from fenics_contact.problem.problem import ContactProblem
+
+__all__ = ["METHODS", "Method", "MonolithicSolver", "get_method", "solve"]
+
+#: keyword parameters of the solve functions that are not options of the method
+_NOT_OPTIONS = ("reference", "initial_data", "step", "offline_comm", "prefix", "verify", "split_interface")
+#: flat option names and the nested options they set: name -> (parameter of the solve, field of its type)
+_ITERATION_FIELDS = tuple(f.name for f in dataclasses.fields(IterationOptions) if f.name != "newton")
+_INTERFACE_NEWTON_FIELDS = tuple(f.name for f in dataclasses.fields(InterfaceNewtonOptions))
+
+
+class MonolithicSolver:
+    """A monolithic penalized problem kept for many solves (load steps): its subproblem is the contact side."""
+
+    def __init__(self, sub: PrimalSubproblem | MixedSubproblem) -> None:
+        self.contact = sub
+
+    def solve(self):
+        """One semismooth Newton solve (warm-started from the last solution)."""
+        return self.contact.solve()
+
+
+def _primal_monolithic_solver(problem: ContactProblem, *, delta: float | None = None,
+                              newton: NewtonOptions = NewtonOptions()) -> MonolithicSolver:
+    fields = problem.fields
+    warn_if_locking(fields.nu, problem.comm)
+    cm = problem.cm
+    return MonolithicSolver(PrimalSubproblem(cm.mesh, cm.facet_tags, fields, delta=penalty_for(problem, delta),
+                                             alpha=None, prefix="fc_steps_primal_", newton=newton))
+
+
+def _mixed_monolithic_solver(problem: ContactProblem, *, epsilon: float | None = None,
+                             newton: NewtonOptions = NewtonOptions()) -> MonolithicSolver:
+    cm = problem.cm
+    return MonolithicSolver(MixedSubproblem(cm.mesh, cm.facet_tags, problem.fields,
+                                            epsilon=epsilon_for(problem, epsilon), beta=None,
+                                            prefix="fc_steps_mixed_", newton=newton))
+
+
+def _prepared(step_class: type) -> Callable:
+    def build(problem: ContactProblem, **options):
+        step = step_class(problem, **options)
+        step.prepare()
+        return step
+
+    build.__wrapped__ = step_class  # (inspect.signature follows it: the step's options)
+    return build
+
+
+@dataclass(frozen=True, slots=True)
+class Method:
+    """One method of the catalogue: its name, what it is, its solve function and its step factory."""
+
+    name: str
+    family: str  #: "primal" (P1 displacements) or "mixed" (Arnold–Winther stresses)
+    algorithm: int | None  #: 1–4 for the hybrid methods, None for the monolithic solves
+    summary: str
+    solve_function: Callable
+    factory: Callable  #: problem, **options -> a solver kept for many solves (load steps)
+    cem_type: type | None = None  #: the multiscale options type (``cem=``), None for fine Ω₁
+
+    @property
+    def hybrid(self) -> bool:
+        """Ω₁/Ω₂ with Robin transmission on γ (Algorithms 1–4)."""
+        return self.algorithm is not None
+
+    @property
+    def multiscale(self) -> bool:
+        """Ω₁ is a CEM-GMsFEM space built offline (Algorithms 3 and 4)."""
+        return self.cem_type is not None
+
+    def defaults(self) -> dict[str, Any]:
+        """The method's options and their defaults (the keyword-only parameters of its solve function)."""
+        params = inspect.signature(self.solve_function).parameters.values()
+        return {p.name: p.default for p in params if p.kind is p.KEYWORD_ONLY and p.name not in _NOT_OPTIONS}
+
+    def flat_options(self) -> tuple[str, ...]:
+        """Every option name the method takes, flat (as ``options`` accepts them)."""
+        names = list(self.defaults())
+        if self.hybrid:
+            names += [*_ITERATION_FIELDS, *_INTERFACE_NEWTON_FIELDS]
+        if self.cem_type is not None:
+            names += [f.name for f in dataclasses.fields(self.cem_type)]
+        return tuple(dict.fromkeys(names))
+
+    def default_accel(self, comm: MPI.Comm = MPI.COMM_WORLD) -> str:
+        """The interface Newton, except for Algorithm 2 on several ranks (its interface Newton is serial)."""
+        return "anderson" if self.name == "mixed" and comm.size > 1 else "newton"
+
+    def options(self, values: Mapping[str, Any] | None = None, /, *, comm: MPI.Comm = MPI.COMM_WORLD,
+                **more) -> dict[str, Any]:
+        """Keyword arguments for the solve function from flat or nested options (InputError for an option
+        the method does not use). Not given: the method's defaults, ``accel`` from ``default_accel``."""
+        given = {**(values or {}), **more}
+        known = self.defaults()
+        out = {k: v for k, v in given.items() if k in known}
+        iteration = {k: given.pop(k) for k in list(given) if k in _ITERATION_FIELDS and self.hybrid}
+        interface = {k: given.pop(k) for k in list(given) if k in _INTERFACE_NEWTON_FIELDS and self.hybrid}
+        cem_fields = () if self.cem_type is None else [f.name for f in dataclasses.fields(self.cem_type)]
+        cem = {k: given.pop(k) for k in list(given) if k in cem_fields}
+        unknown = sorted(k for k in given if k not in known)
+        if unknown:
+            raise InputError(f"{self.name}: no option(s) {unknown}; {self.name} takes {list(self.flat_options())}"
+                             + _elsewhere(unknown))
+        if self.hybrid:
+            nested = out.get("options")
+            if nested is not None and (iteration or interface):
+                raise InputError(f"{self.name}: give the iteration either as options=IterationOptions(...) or as "
+                                 f"{sorted({*iteration, *interface})}, not both")
+            if nested is None:
+                if interface:
+                    iteration["newton"] = InterfaceNewtonOptions(**interface)
+                iteration.setdefault("accel", self.default_accel(comm))
+                out["options"] = IterationOptions(**iteration)
+        if cem:
+            if out.get("cem") is not None:
+                raise InputError(f"{self.name}: give the multiscale options either as cem={self.cem_type.__name__}"
+                                 f"(...) or as {sorted(cem)}, not both")
+            out["cem"] = self.cem_type(**cem)
+        return out
+
+    def solve(self, problem: ContactProblem, /, *, comm: MPI.Comm = MPI.COMM_WORLD, **values):
+        """Solve ``problem`` with this method (``values``: its options, flat or nested, and the solve's own
+        keyword arguments such as ``reference``)."""
+        extra = {k: values.pop(k) for k in list(values) if k in _NOT_OPTIONS}
+        return self.solve_function(problem, **self.options(values, comm=comm), **extra)
+
+    def build(self, problem: ContactProblem, /, *, comm: MPI.Comm = MPI.COMM_WORLD, **values):
+        """The solver kept for many solves (``factory``): a prepared hybrid step, or a ``MonolithicSolver``;
+        its ``contact`` is the subproblem holding Γ_C."""
+        extra = {k: values.pop(k) for k in list(values) if k in _NOT_OPTIONS}
+        options = self.options(values, comm=comm) | extra
+        accepted = inspect.signature(self.factory).parameters
+        refused = sorted(k for k in extra if k not in accepted)
+        if refused:
+            raise InputError(f"{self.name}: the solver it builds takes no {refused}")
+        return self.factory(problem, **{k: v for k, v in options.items() if k in accepted})
+
+    def iteration(self, values: Mapping[str, Any] | None = None, *, comm: MPI.Comm = MPI.COMM_WORLD
+                  ) -> IterationOptions | None:
+        """The hybrid iteration's options among ``values`` (None for a monolithic method)."""
+        return self.options(values, comm=comm).get("options") if self.hybrid else None
+
+
+def _elsewhere(names: list[str]) -> str:
+    """Which methods take the options ``names`` (for the message of a refused option)."""
+    users = {name: [m.name for m in METHODS.values() if name in m.flat_options()] for name in names}
+    known = [f"{name} is an option of {', '.join(methods)}" for name, methods in users.items() if methods]
+    return f" ({'; '.join(known)})" if known else ""
+
+
+METHODS: dict[str, Method] = {
+    m.name: m
+    for m in (
+        Method("primal-monolithic", "primal", None, "penalized primal P1 contact on the whole mesh",
+               solve_primal_monolithic, _primal_monolithic_solver),
+        Method("mixed-monolithic", "mixed", None, "penalized mixed Arnold–Winther contact on the whole mesh",
+               solve_mixed_monolithic, _mixed_monolithic_solver),
+        Method("primal", "primal", 1, "Algorithm 1: primal P1 in Ω₁ and Ω₂", solve_primal_hybrid,
+               _prepared(PrimalHybridStep)),
+        Method("mixed", "mixed", 2, "Algorithm 2: mixed Arnold–Winther in Ω₁ and Ω₂", solve_mixed_hybrid,
+               _prepared(MixedHybridStep)),
+        Method("primal-ms", "primal", 3, "Algorithm 3: primal CEM-GMsFEM in Ω₁, primal P1 in Ω₂",
+               solve_primal_ms_hybrid, _prepared(MultiscalePrimalHybridStep), CEMOptions),
+        Method("mixed-ms", "mixed", 4, "Algorithm 4: mixed CEM-GMsFEM in Ω₁, mixed Arnold–Winther in Ω₂",
+               solve_mixed_ms_hybrid, _prepared(MixedMultiscaleHybridStep), MixedCEMOptions),
+    )
+}
+#: the hybrid methods (Algorithms 1–4), the ``fenics-contact run --method`` choices
+HYBRID_METHODS = tuple(name for name, m in METHODS.items() if m.hybrid)
+
+
+def get_method(name: str) -> Method:
+    """The method called ``name`` (InputError naming the methods otherwise)."""
+    if name not in METHODS:
+        raise InputError(f"unknown method {name!r}; choose one of {', '.join(METHODS)}")
+    return METHODS[name]
+
+
+def solve(problem: ContactProblem, method: str = "primal", /, **options):
+    """Solve ``problem`` with the method called ``method`` (``METHODS``) and its ``options``."""
+    return get_method(method).solve(problem, **options)

@@ -1,0 +1,215 @@
+"""The contact problem a user describes: one validated ``ContactProblem``.
+
+A problem is a body — its tagged mesh (``geometry.ContactMesh``), Young's modulus E(x) and
+Poisson ratio ν(x), body force f(x), boundary conditions (Γ_D displacement, Γ_N tractions) —
+and what it touches on Γ_C: a rigid obstacle (``problem.obstacles``; None: a wall flush with
+Γ_C) through a contact law (``Frictionless``). Every solver takes a problem, and only a
+problem: the monolithic solves, Algorithms 1–4 and the load steps alike.
+
+The physics can be given before the mesh (``model_1()``, or ``ContactProblem(youngs_modulus=…)``)
+and put on a mesh with ``problem.on(mesh)``; a problem on a mesh is validated once, there (the
+boundary groups against the mesh's facet groups, E > 0 and ν ∈ (−1, ½) on every cell), and its
+cellwise material fields are built once per mesh (``fields``, ``fields_on``): the subproblems,
+the CLI and the load steps share them. The dimension is the mesh's.
+"""
+
+import math
+import weakref
+from collections.abc import Callable
+from dataclasses import dataclass, field, fields as dataclass_fields
+
+import numpy as np
+from mpi4py import MPI
+
+from dolfinx import mesh as dmesh
+
+from fenics_contact.errors import InputError
+from fenics_contact.problem.boundary import BoundaryConditions, check_boundary_groups
+from fenics_contact.problem.fields import MaterialFields, material_fields
+from fenics_contact.problem.geometry import ContactMesh
+from fenics_contact.problem.obstacles import Obstacle
+from fenics_contact.problem.tags import Boundary
+
+__all__ = ["ContactProblem", "ContactLaw", "Frictionless", "ScalarField", "VectorField", "constant_field",
+           "zero_load"]
+
+#: A scalar field: points x of shape (3, N) -> values of shape (N,).
+ScalarField = Callable[[np.ndarray], np.ndarray]
+#: A vector field: points x of shape (3, N) -> values of shape (gdim, N).
+VectorField = Callable[[np.ndarray], np.ndarray]
+
+
+def constant_field(value: float) -> ScalarField:
+    """x ↦ value, as a scalar field."""
+    return lambda x: np.full(x.shape[1], float(value))
+
+
+def zero_load(x: np.ndarray) -> np.ndarray:
+    """f = 0 (two components; a body force field for the plane problems)."""
+    return np.zeros((2, x.shape[1]))
+
+
+@dataclass(frozen=True, slots=True)
+class Frictionless:
+    """Frictionless unilateral contact on Γ_C: u·ν ≤ g, σ_c ≤ 0, σ_c (u·ν − g) = 0, σ_t = 0."""
+
+    name = "frictionless"
+
+
+#: The contact laws a problem can carry (friction laws join this union).
+ContactLaw = Frictionless
+
+
+def _scalar(value, what: str) -> ScalarField:
+    if callable(value):
+        return value
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.number)) or not math.isfinite(value):
+        raise InputError(f"{what} must be a callable x (3, N) -> (N,) or a finite number, got {value!r}")
+    return constant_field(float(value))
+
+
+def _vector(value, what: str) -> VectorField:
+    if callable(value):
+        return value
+    v = np.asarray(value, dtype=np.float64).ravel() if not isinstance(value, str) else np.array([])
+    if v.size not in (2, 3) or not np.all(np.isfinite(v)):
+        raise InputError(f"{what} must be a callable x (3, N) -> (gdim, N) or a constant vector, got {value!r}")
+    return lambda x: np.repeat(v[:, None], x.shape[1], axis=1)
+
+
+#: the fields that describe the materials and the load: a change of any of them rebuilds the cellwise fields
+_MATERIAL_FIELDS = ("youngs_modulus", "poisson_ratio", "load")
+
+
+@dataclass(frozen=True, eq=False)
+class ContactProblem:
+    """A body in contact with a rigid obstacle: mesh, E(x), ν(x), body force f(x), boundary conditions, obstacle.
+
+    ``youngs_modulus``, ``poisson_ratio``: numbers or callables x (3, N) -> (N,); ``load``: a constant
+    vector or a callable x (3, N) -> (gdim, N) (default zero); ``boundary``: Γ_D displacement and Γ_N
+    tractions (default: Γ_D clamped; every other exterior facet traction free); ``obstacle``: the rigid
+    obstacle facing Γ_C (None: a wall flush with Γ_C, zero gap); ``law``: the contact law on Γ_C;
+    ``mesh``: the tagged mesh (None until ``on(mesh)``). Validated on construction (InputError /
+    MeshTagError naming what is wrong).
+    """
+
+    youngs_modulus: ScalarField
+    poisson_ratio: ScalarField
+    load: VectorField = zero_load
+    boundary: BoundaryConditions = BoundaryConditions()
+    obstacle: Obstacle | None = None
+    law: ContactLaw = Frictionless()
+    mesh: ContactMesh | None = None
+    name: str = "problem"
+    description: str = ""
+    _fields: weakref.WeakKeyDictionary = field(default_factory=weakref.WeakKeyDictionary, init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        set_ = object.__setattr__
+        set_(self, "youngs_modulus", _scalar(self.youngs_modulus, "youngs_modulus (E)"))
+        set_(self, "poisson_ratio", _scalar(self.poisson_ratio, "poisson_ratio (nu)"))
+        set_(self, "load", _vector(self.load, "the body force (load)"))
+        if not isinstance(self.boundary, BoundaryConditions):
+            raise InputError(f"ContactProblem.boundary must be a BoundaryConditions, got "
+                             f"{type(self.boundary).__name__}")
+        if self.obstacle is not None and not isinstance(self.obstacle, Obstacle):
+            raise InputError(f"ContactProblem.obstacle must be an Obstacle or None, got "
+                             f"{type(self.obstacle).__name__}")
+        if not isinstance(self.law, Frictionless):
+            raise InputError(f"ContactProblem.law must be a contact law ({ContactLaw.__name__}), got "
+                             f"{type(self.law).__name__}")
+        if not isinstance(self.name, str) or not isinstance(self.description, str):
+            raise InputError("ContactProblem.name and .description must be strings")
+        if self.mesh is not None:
+            if not isinstance(self.mesh, ContactMesh):
+                raise InputError(f"ContactProblem.mesh must be a ContactMesh (geometry.unit_square, read_mesh, …), "
+                                 f"got {type(self.mesh).__name__}")
+            check_boundary_groups(self.mesh.mesh, self.mesh.facet_tags, self.boundary, names=self.mesh.neumann_names)
+            self.fields_on(self.mesh.mesh)  # E > 0 and ν ∈ (−1, ½) on every cell, checked once, here
+
+    # -- building new problems ----------------------------------------------------------------
+    def on(self, mesh: ContactMesh) -> "ContactProblem":
+        """The same physics on ``mesh`` (validated there)."""
+        return self.with_(mesh=mesh)
+
+    def with_(self, **changes) -> "ContactProblem":
+        """A copy with some fields replaced. The cellwise fields are kept when the materials, the load and
+        the mesh stay (a moved obstacle, new boundary data)."""
+        names = {f.name for f in dataclass_fields(self) if f.init}
+        unknown = sorted(set(changes) - names)
+        if unknown:
+            raise InputError(f"ContactProblem has no field(s) {unknown}; its fields are {sorted(names)}")
+        values = {name: changes.get(name, getattr(self, name)) for name in names}
+        keep = changes.get("mesh", self.mesh) is self.mesh and not any(
+            name in changes and changes[name] is not getattr(self, name) for name in _MATERIAL_FIELDS)
+        if not keep:
+            return ContactProblem(**values)
+        copy = object.__new__(ContactProblem)
+        for name, value in values.items():
+            object.__setattr__(copy, name, value)
+        object.__setattr__(copy, "_fields", weakref.WeakKeyDictionary(self._fields))
+        copy.__post_init__()
+        return copy
+
+    # -- what the solvers read -----------------------------------------------------------------
+    @property
+    def cm(self) -> ContactMesh:
+        """The tagged mesh (InputError when the problem has none: give it one with ``on(mesh)``)."""
+        if self.mesh is None:
+            raise InputError(f"the problem {self.name!r} has no mesh: put it on one with problem.on(mesh) "
+                             "(e.g. geometry.unit_square(64, 16) or geometry.read_mesh('my.msh'))")
+        return self.mesh
+
+    @property
+    def comm(self) -> MPI.Comm:
+        return self.cm.comm
+
+    @property
+    def dim(self) -> int:
+        """The geometric dimension (the mesh's)."""
+        return self.cm.mesh.geometry.dim
+
+    @property
+    def h(self) -> float:
+        """The fine mesh size (``ContactMesh.h``)."""
+        return self.cm.h
+
+    def contact_modulus(self, *, smallest: bool = False) -> float:
+        """The largest (``smallest``: smallest) Young's modulus of the cells touching Γ_C, over all ranks."""
+        msh, E = self.cm.mesh, self.fields.E
+        tdim = msh.topology.dim
+        msh.topology.create_connectivity(tdim - 1, tdim)
+        f2c = msh.topology.connectivity(tdim - 1, tdim)
+        facets = self.cm.facet_tags.find(Boundary.GAMMA_C)
+        cells = np.unique(np.concatenate([f2c.links(f) for f in facets] or [[]])).astype(np.int32)
+        if msh.comm.allreduce(int(cells.size), op=MPI.SUM) == 0:
+            raise InputError("the mesh has no Γ_C facets")
+        if smallest:
+            return float(msh.comm.allreduce(float(np.min(E.x.array[cells], initial=np.inf)), op=MPI.MIN))
+        return float(msh.comm.allreduce(float(np.max(E.x.array[cells], initial=-np.inf)), op=MPI.MAX))
+
+    @property
+    def fields(self) -> MaterialFields:
+        """E, ν, λ, μ and f (DG0) on the problem's mesh, with its boundary data and obstacle."""
+        return self.fields_on(self.cm.mesh)
+
+    def fields_on(self, msh: dmesh.Mesh) -> MaterialFields:
+        """The problem's cellwise fields on ``msh`` (the mesh, a part of it, a replica), built once per mesh."""
+        built = self._fields.get(msh)
+        if built is None:
+            built = material_fields(msh, self)
+            self._fields[msh] = built
+        return built._replace(boundary=self.boundary, obstacle=self.obstacle)
+
+    def check_loaded(self) -> None:
+        """InputError when nothing loads the body: a body force that vanishes on every cell of the mesh, no
+        Γ_D displacement, no tractions and no obstacle (the solution would be u = 0)."""
+        loaded_otherwise = not self.boundary.is_default or self.obstacle is not None
+        f = self.fields.f
+        if loaded_otherwise:
+            return
+        if self.comm.allreduce(float(np.max(np.abs(f.x.array), initial=0.0)), op=MPI.MAX) == 0.0:
+            raise InputError(
+                f"the body force of {self.name!r} is zero on every cell of this mesh (too coarse to resolve the "
+                "load bands?): the solution would be u = 0. Refine the mesh (the built-in loads act on x >= 15/16)."
+            )

@@ -14,7 +14,8 @@ unless said; unknown keys are refused.  Relative file names are relative to the 
     builtin = "hertz-block"                  # a (contact half-width, required), refinement = 1,
                                              #   width = 80, depth = 40, strip = 2, contact-width = 3 (x a)
     builtin = "bulged-square"                # h = 32, H = 4, bulge = 0.1, clamped = ["left"]
-    file = "my.msh"                          # H = 1/H of the coarse grid (multiscale methods)
+    file = "my.msh"                          # coarse-size = H (a length) or H = 1/H: the coarse grid (multiscale
+                                             #   methods) and, without Omega1/Omega2/gamma in the file, the strip
 
     [material]                               # E and nu: required unless model is given
     E  = 1.0 | {Omega1 = 1.0, fibres = 1e3} | {pixels = "E.npy", extent = [x0, x1, y0, y1]}
@@ -421,16 +422,27 @@ class HertzBlockMesh:
 
 @dataclass(frozen=True, slots=True)
 class MeshFile:
-    """A gmsh file with the groups Omega1, Omega2, Gamma_D, Gamma_C, gamma (and Gamma_N*, material groups)."""
+    """A gmsh file with the groups Gamma_D, Gamma_C (and Gamma_N*, material groups), and Omega1, Omega2, gamma
+    or none of them (the strip is then built along Gamma_C).
+
+    ``H`` is 1/H of the coarse grid (a unit-square mesh), ``coarse_size`` the coarse size itself (a length,
+    in the mesh's units); at most one of them.
+    """
 
     path: Path
     H: int | None = None
+    coarse_size: float | None = None
     kind = "file"
+
+    @property
+    def coarse(self) -> float | None:
+        """The coarse size H (a length), None when the case gives none."""
+        return self.coarse_size if self.coarse_size is not None else 1.0 / self.H if self.H else None
 
     def build(self, comm: MPI.Comm, overlays: Iterable[str] = ()) -> CaseMesh:
         """The mesh; every surface group but Omega1/Omega2 is an overlay (materials), ``overlays`` must exist."""
         centroids = read_cell_groups(self.path, overlays, comm=comm)
-        cm = read_mesh(self.path, comm=comm, H=1.0 / self.H if self.H else None, overlay_groups=list(centroids))
+        cm = read_mesh(self.path, comm=comm, H=self.coarse, overlay_groups=list(centroids))
         return CaseMesh(cm, centroids)
 
     @property
@@ -438,7 +450,7 @@ class MeshFile:
         return None  # known once the file is read
 
     def echo(self) -> dict:
-        return {"file": str(self.path), "H": self.H}
+        return {"file": str(self.path), "H": self.H, "coarse-size": self.coarse_size}
 
 
 MeshSpec = UnitSquareMesh | BulgedSquareMesh | HertzBlockMesh | MeshFile
@@ -452,7 +464,10 @@ def _mesh(source: _Source, data) -> MeshSpec:
                            + ' and file = "my.msh"')
     if t.has("file"):
         path = t.get("file", lambda v: source.file(v, "mesh.file"))
-        spec = MeshFile(path, t.get("H", _integer(1)))
+        spec = MeshFile(path, t.get("H", _integer(1)), t.get("coarse-size", _number(positive=True)))
+        if spec.H is not None and spec.coarse_size is not None:
+            raise source.error("mesh.H (1/H) and mesh.coarse-size (H itself, a length) give the same coarse size: "
+                               "give one of them")
         t.finish(" for a mesh file")
         return spec
     kind = t.get("builtin", _string(_BUILTINS))

@@ -1,12 +1,21 @@
-"""Cellwise material data on a mesh, and copies of P1 data between a mesh and its submeshes."""
+"""Cellwise material data on a mesh, fields given as DOLFINx functions or by cell tag, and copies of P1 data
+between a mesh and its submeshes.
 
-from collections.abc import Callable
+Every material field of a problem is a callable x (3, N) -> values, evaluated at cell midpoints
+(``cell_function``: DG0 interpolation) on the mesh, its parts and its replicas. A field given as a
+DOLFINx ``Function`` (``FunctionField``: the function's values at the points, found by a bounding-box
+search of its mesh) or as values by cell tag (``tag_function``) becomes such a callable, so it serves
+every mesh whose cells lie in the function's (a submesh, or the mesh itself).
+"""
+
+from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
+from mpi4py import MPI
 
 import basix.ufl
-from dolfinx import fem, la
+from dolfinx import fem, geometry, la
 from dolfinx import mesh as dmesh
 
 from fenics_contact.errors import InputError
@@ -17,7 +26,7 @@ from fenics_contact.problem.obstacles import Obstacle
 if TYPE_CHECKING:  # (problem.problem builds its fields with material_fields)
     from fenics_contact.problem.problem import ContactProblem
 
-__all__ = ["MaterialFields", "cell_function", "material_fields", "SubmeshTransfer"]
+__all__ = ["MaterialFields", "cell_function", "material_fields", "FunctionField", "tag_function", "SubmeshTransfer"]
 
 
 class MaterialFields(NamedTuple):
@@ -46,6 +55,62 @@ def cell_function(msh: dmesh.Mesh, field: Callable[[np.ndarray], np.ndarray], *,
         expected = "(" + ", ".join([*map(str, shape), "N"]) + (",)" if not shape else ")")
         raise InputError(f"the field {name or 'given'} must map points x of shape (3, N) to values of shape "
                          f"{expected}: {type(err).__name__}: {str(err).splitlines()[0]}") from None
+    fn.x.scatter_forward()
+    return fn
+
+
+class FunctionField:
+    """x ↦ the values of the DOLFINx function ``fn`` at the points x: shape (N,) for a scalar, (bs, N) else.
+
+    Points are located in the cells of ``fn``'s mesh held by this rank (owned and ghost), as the midpoints
+    of the cells of that mesh and of its submeshes are; a point outside them is an InputError.
+    """
+
+    def __init__(self, fn: fem.Function) -> None:
+        if not isinstance(fn, fem.Function):
+            raise InputError(f"a field given as a function must be a dolfinx.fem.Function, got {type(fn).__name__}")
+        self.fn = fn
+        msh = fn.function_space.mesh
+        imap = msh.topology.index_map(msh.topology.dim)
+        cells = np.arange(imap.size_local + imap.num_ghosts, dtype=np.int32)
+        self._tree = geometry.bb_tree(msh, msh.topology.dim, entities=cells)
+
+    def __call__(self, x: np.ndarray) -> np.ndarray:
+        msh = self.fn.function_space.mesh
+        points = np.ascontiguousarray(x.T, dtype=np.float64)
+        candidates = geometry.compute_collisions_points(self._tree, points)
+        colliding = geometry.compute_colliding_cells(msh, candidates, points)
+        counts = np.diff(colliding.offsets)
+        if np.any(counts == 0):
+            where = points[np.argmax(counts == 0)]
+            raise InputError(f"the field {self.fn.name!r} is asked for at {np.count_nonzero(counts == 0)} points "
+                             f"outside its mesh (first at {where.tolist()}): give it on the problem's mesh")
+        cells = colliding.array[colliding.offsets[:-1]]
+        values = self.fn.eval(points, cells)
+        return values[:, 0] if values.shape[1] == 1 and not self.fn.function_space.value_shape else values.T
+
+
+def tag_function(msh: dmesh.Mesh, cell_tags: dmesh.MeshTags, values: Mapping[int, float], *, name: str = ""
+                 ) -> fem.Function:
+    """A DG0 function with ``values[tag]`` on the cells of each tag (InputError when a cell gets no value)."""
+    if not isinstance(cell_tags, dmesh.MeshTags) or cell_tags.dim != msh.topology.dim:
+        raise InputError(f"{name or 'a field'} by cell tag needs the mesh's cell tags (MeshTags of dimension "
+                         f"{msh.topology.dim})")
+    V = fem.functionspace(msh, basix.ufl.element("DG", msh.basix_cell(), 0))
+    fn = fem.Function(V, name=name)
+    fn.x.array[:] = np.nan
+    for tag, value in values.items():
+        if isinstance(value, bool) or not isinstance(value, (int, float, np.number)) or not np.isfinite(value):
+            raise InputError(f"{name or 'a field'}: the value for cell tag {tag!r} must be a finite number, got "
+                             f"{value!r}")
+        cells = cell_tags.find(int(tag))
+        fn.x.array[V.dofmap.list[cells, 0]] = float(value)
+    n_owned = msh.topology.index_map(msh.topology.dim).size_local
+    missing = msh.comm.allreduce(int(np.count_nonzero(np.isnan(fn.x.array[:n_owned]))), op=MPI.SUM)
+    if missing:
+        present = sorted({int(t) for t in np.unique(cell_tags.values)})
+        raise InputError(f"{name or 'a field'} by cell tag: {missing} cells get no value (the values are given for "
+                         f"tags {sorted(values)}; the mesh's cell tags are {present}); give a value for every tag")
     fn.x.scatter_forward()
     return fn
 

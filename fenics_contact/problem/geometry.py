@@ -24,7 +24,7 @@ import dolfinx.io.gmsh
 from dolfinx import mesh as dmesh
 
 from fenics_contact.errors import InputError, MeshTagError
-from fenics_contact.problem import validation
+from fenics_contact.problem import partition, strip, validation
 from fenics_contact.problem.tags import PHYSICAL_NAMES, Boundary, Subdomain, is_neumann_name, neumann_tag
 
 __all__ = [
@@ -226,9 +226,10 @@ def read_mesh(
     ``problem.cell_groups.read_cell_groups``); they are left out of the mesh and its checks.
 
     A file that tags none of Omega1, Omega2 and gamma (only Gamma_D, Gamma_C, Gamma_N* and surface
-    groups of any names) gets them built (``problem.partition.contact_strip``): Ω₂ = the coarse cells
-    along Γ_C, from the squares of side ``H``, or, with ``H=None``, from the surface groups (overlays
-    excepted) as the coarse cells (the user's coarse partition).
+    groups of any names) gets them built (``problem.strip``, rules in ``_strip_contact_mesh``): Ω₂ = a strip
+    along Γ_C of width ``H`` (on any mesh), or, with ``H=None``, the coarse cells along Γ_C of the surface
+    groups that are not ``overlay_groups`` (the user's coarse partition), or a band of a few cells. The
+    overlay (material) groups are then the cells' groups of the file and stay in the mesh.
     """
     path = Path(path)
     overlay_groups = set(overlay_groups)
@@ -246,10 +247,11 @@ def read_mesh(
             except Exception as err:  # gmsh raises a bare Exception with its parser's message
                 problem = (InputError, f"cannot read {path} as a gmsh mesh: {err}")
             else:
-                for dim, tag in gmsh.model.getPhysicalGroups(2):  # overlays: read separately, not cell tags
-                    if gmsh.model.getPhysicalName(dim, tag) in overlay_groups:
-                        gmsh.model.removePhysicalGroups([(dim, tag)])
                 auto_strip = _needs_strip()
+                if not auto_strip:  # overlays: read separately, not cell tags (with the automatic strip they are
+                    for dim, tag in gmsh.model.getPhysicalGroups(2):  # the cells' groups: kept)
+                        if gmsh.model.getPhysicalName(dim, tag) in overlay_groups:
+                            gmsh.model.removePhysicalGroups([(dim, tag)])
                 problem = _gmsh_model_problem(path, auto_strip=auto_strip)
         problem, auto_strip = comm.bcast((problem, auto_strip), root=0)
         # validate before the collective mesh construction (which aborts on inconsistent tags)
@@ -258,7 +260,7 @@ def read_mesh(
             raise error(message)
         data = dolfinx.io.gmsh.model_to_mesh(gmsh.model, comm, 0, gdim=2)
     if auto_strip:
-        cm = _strip_contact_mesh(data, h=mesh_size(data.mesh), H=H, source=str(path))
+        cm = _strip_contact_mesh(data, h=mesh_size(data.mesh), H=H, materials=overlay_groups)
     else:
         cm = _contact_mesh(data, h=mesh_size(data.mesh), H=H)
     if validate:
@@ -266,33 +268,24 @@ def read_mesh(
     return cm
 
 
-def _strip_contact_mesh(data: dolfinx.io.gmsh.MeshData, *, h: float, H: float | None, source: str) -> ContactMesh:
-    """A mesh without Ω₁/Ω₂/γ: coarse cells from H (Cartesian grid over the bounding box) or from the 2D
-    physical groups (the user's coarse partition), then Ω₂ = the coarse cells along Γ_C (problem.partition)."""
-    from fenics_contact.problem import partition
-
+def _strip_contact_mesh(data: dolfinx.io.gmsh.MeshData, *, h: float, H: float | None,
+                        materials: Iterable[str] = ()) -> ContactMesh:
+    """A mesh without Ω₁/Ω₂/γ gets them built (``strip.automatic_split``): with ``H``, a strip of width H
+    along Γ_C; without, the surface groups that are not ``materials`` as the coarse cells (two or more: the
+    user's partition) or a band of a few cells."""
     msh = data.mesh
     tdim = msh.topology.dim
     if msh.topology.cell_type != dmesh.CellType.triangle:
         raise InputError(f"fenics-contact needs a triangular mesh, got {msh.topology.cell_type.name}")
     msh.topology.create_connectivity(tdim - 1, tdim)
     facet_tags = _retag(data.facet_tags, data.physical_groups, [Boundary.GAMMA_D, Boundary.GAMMA_C], msh, tdim - 1)
-    skip = {PHYSICAL_NAMES[Subdomain.OMEGA1], PHYSICAL_NAMES[Subdomain.OMEGA2]}
+    skip = {PHYSICAL_NAMES[Subdomain.OMEGA1], PHYSICAL_NAMES[Subdomain.OMEGA2], *materials}
     groups = sorted(g.tag for name, g in data.physical_groups.items() if g.dim == tdim and name not in skip)
-    if H is not None:
-        coarse, _ = partition.cartesian_coarse_cells(msh, H)
-    elif len(groups) >= 2:
-        coarse = partition.group_coarse_cells(msh, data.cell_tags, groups)
-        H = float(partition.coarse_sizes(msh, coarse).max())
-    else:
-        raise InputError(
-            f"{source} tags neither Omega1/Omega2/gamma nor a coarse partition: give the coarse size H (the "
-            "strip Ω₂ is then the squares of side H along Gamma_C) or split the domain into 2D physical groups "
-            "(one per coarse cell)"
-        )
-    cell_tags, facet_tags = partition.contact_strip(msh, facet_tags, coarse)
-    return ContactMesh(msh, cell_tags, facet_tags, float(h), H, coarse.astype(np.int32), _neumann_names(data))
-
+    user_partition = partition.group_coarse_cells(msh, data.cell_tags, groups) if H is None and len(groups) >= 2 \
+        else None
+    split = strip.automatic_split(msh, facet_tags, H=H, partition=user_partition)
+    return ContactMesh(msh, split.cell_tags, split.facet_tags, float(h), split.H, split.coarse_cell,
+                       _neumann_names(data))
 
 
 def mesh_size(msh: dmesh.Mesh) -> float:
@@ -475,9 +468,7 @@ def _contact_mesh(data: dolfinx.io.gmsh.MeshData, *, h: float, H: float | None) 
     num_cells = msh.topology.index_map(tdim).size_local + msh.topology.index_map(tdim).num_ghosts
     coarse = np.full(num_cells, -1, dtype=np.int32)
     if H is not None:  # squares of side H over the bounding box; -1 where a cell straddles a grid line
-        from fenics_contact.problem.partition import cartesian_coarse_cells
-
-        coarse = cartesian_coarse_cells(msh, H)[0].astype(np.int32)
+        coarse = partition.cartesian_coarse_cells(msh, H)[0].astype(np.int32)
     return ContactMesh(msh, cell_tags, facet_tags, float(h), H, coarse, _neumann_names(data))
 
 

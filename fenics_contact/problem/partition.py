@@ -10,9 +10,7 @@ The multiscale methods need every fine cell of Ω₁ in one coarse cell K
 * **A partition given by the user**: in a gmsh file, every 2D physical group other than
   ``Omega1``/``Omega2`` is one coarse cell (``read_mesh`` reads them, ``group_coarse_cells``).
 
-When a mesh does not tag Ω₁, Ω₂ and γ, ``contact_strip`` builds them: Ω₂ is the set of coarse
-cells that hold a cell with a facet on Γ_C (one coarse layer along the contact boundary, as in
-the paper), Ω₁ the rest, and γ the facets between the two.
+When a mesh does not tag Ω₁, Ω₂ and γ, ``problem.strip`` builds them from these partitions.
 """
 
 import numpy as np
@@ -25,7 +23,7 @@ from dolfinx import mesh as dmesh
 from fenics_contact.errors import InputError, MeshTagError
 from fenics_contact.problem.tags import Boundary, Subdomain
 
-__all__ = ["cartesian_coarse_cells", "centroid_coarse_cells", "group_coarse_cells", "contact_strip", "coarse_sizes", "UNRESOLVED"]
+__all__ = ["cartesian_coarse_cells", "centroid_coarse_cells", "group_coarse_cells", "coarse_sizes", "UNRESOLVED"]
 
 #: coarse index of a fine cell that lies in no coarse cell (straddles a line of the Cartesian grid)
 UNRESOLVED = -1
@@ -116,54 +114,3 @@ def coarse_sizes(msh: dmesh.Mesh, coarse_cell: np.ndarray) -> np.ndarray:
     total = np.empty_like(local)
     msh.comm.Allreduce(local, total, op=MPI.SUM)
     return np.sqrt(total)
-
-
-def contact_strip(
-    msh: dmesh.Mesh, facet_tags: dmesh.MeshTags, coarse_cell: np.ndarray
-) -> tuple[dmesh.MeshTags, dmesh.MeshTags]:
-    """(cell tags Ω₁/Ω₂, facet tags + γ): Ω₂ = the coarse cells holding a cell with a facet on Γ_C.
-
-    ``facet_tags`` must tag Γ_C (``Boundary.GAMMA_C``); the returned facet tags are those
-    given plus the γ facets (between a cell of Ω₁ and a cell of Ω₂). Collective.
-    """
-    comm = msh.comm
-    tdim = msh.topology.dim
-    msh.topology.create_connectivity(tdim - 1, tdim)
-    f2c = msh.topology.connectivity(tdim - 1, tdim)
-    coarse_cell = np.asarray(coarse_cell)
-    contact = facet_tags.find(Boundary.GAMMA_C)
-    if comm.allreduce(contact.size, op=MPI.SUM) == 0:
-        raise MeshTagError("the contact strip Ω₂ is built along Γ_C, but the mesh has no Gamma_C facets")
-    touching = np.unique(f2c.array[f2c.offsets[contact]])  # exterior facets: one cell each
-    strip_local = coarse_cell[touching]
-    if np.any(strip_local < 0):
-        raise InputError(
-            "cannot build the contact strip Ω₂: some cells along Γ_C lie in no coarse cell (the fine mesh does not "
-            "resolve the coarse grid there); give a coarse partition, another H, or tag Omega1/Omega2/gamma"
-        )
-    strip = np.unique(np.concatenate(comm.allgather(np.unique(strip_local))))
-    cells = _local_cells(msh)
-    in_strip = np.isin(coarse_cell[cells], strip)
-    n_total = comm.allreduce(msh.topology.index_map(tdim).size_local, op=MPI.SUM)
-    n_strip = comm.allreduce(int(np.count_nonzero(in_strip[: msh.topology.index_map(tdim).size_local])),
-                             op=MPI.SUM)
-    if n_strip == n_total:
-        raise InputError("the contact strip Ω₂ (the coarse cells along Γ_C) is the whole domain: use a finer "
-                         "coarse grid (smaller H) or more coarse cells")
-    values = np.where(in_strip, int(Subdomain.OMEGA2), int(Subdomain.OMEGA1)).astype(np.int32)
-    cell_tags = dmesh.meshtags(msh, tdim, cells, values)
-    # γ: facets with one cell on each side of the strip boundary
-    num_facets = msh.topology.index_map(tdim - 1).size_local + msh.topology.index_map(tdim - 1).num_ghosts
-    offsets = f2c.offsets
-    two = np.flatnonzero(np.diff(offsets)[:num_facets] == 2)
-    c0 = f2c.array[offsets[two]]
-    c1 = f2c.array[offsets[two] + 1]
-    gamma = two[in_strip[c0] != in_strip[c1]].astype(np.int32)
-    if comm.allreduce(gamma.size, op=MPI.SUM) == 0:
-        raise InputError("the contact strip Ω₂ has no interface γ with Ω₁")
-    keep = ~np.isin(facet_tags.indices, gamma)
-    entities = np.concatenate([facet_tags.indices[keep], gamma])
-    tag_values = np.concatenate([facet_tags.values[keep], np.full(gamma.size, int(Boundary.INTERFACE), np.int32)])
-    order = np.argsort(entities, kind="stable")
-    return cell_tags, dmesh.meshtags(msh, tdim - 1, entities[order].astype(np.int32),
-                                     tag_values[order].astype(np.int32))

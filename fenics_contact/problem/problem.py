@@ -15,20 +15,22 @@ the CLI and the load steps share them. The dimension is the mesh's.
 
 import math
 import weakref
-from collections.abc import Callable
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, fields as dataclass_fields
 
 import numpy as np
 from mpi4py import MPI
 
+from dolfinx import fem
 from dolfinx import mesh as dmesh
 
 from fenics_contact.errors import InputError
 from fenics_contact.problem.boundary import BoundaryConditions, check_boundary_groups
-from fenics_contact.problem.fields import MaterialFields, material_fields
-from fenics_contact.problem.geometry import ContactMesh
+from fenics_contact.problem import strip, validation
+from fenics_contact.problem.fields import FunctionField, MaterialFields, material_fields, tag_function
+from fenics_contact.problem.geometry import ContactMesh, mesh_size
 from fenics_contact.problem.obstacles import Obstacle
-from fenics_contact.problem.tags import Boundary
+from fenics_contact.problem.tags import Boundary, Subdomain, neumann_tag
 
 __all__ = ["ContactProblem", "ContactLaw", "Frictionless", "ScalarField", "VectorField", "constant_field",
            "zero_load"]
@@ -61,6 +63,8 @@ ContactLaw = Frictionless
 
 
 def _scalar(value, what: str) -> ScalarField:
+    if isinstance(value, fem.Function):
+        return FunctionField(value)
     if callable(value):
         return value
     if isinstance(value, bool) or not isinstance(value, (int, float, np.number)) or not math.isfinite(value):
@@ -69,6 +73,8 @@ def _scalar(value, what: str) -> ScalarField:
 
 
 def _vector(value, what: str) -> VectorField:
+    if isinstance(value, fem.Function):
+        return FunctionField(value)
     if callable(value):
         return value
     v = np.asarray(value, dtype=np.float64).ravel() if not isinstance(value, str) else np.array([])
@@ -126,6 +132,72 @@ class ContactProblem:
                                  f"got {type(self.mesh).__name__}")
             check_boundary_groups(self.mesh.mesh, self.mesh.facet_tags, self.boundary, names=self.mesh.neumann_names)
             self.fields_on(self.mesh.mesh)  # E > 0 and ν ∈ (−1, ½) on every cell, checked once, here
+
+    # -- building problems ---------------------------------------------------------------------
+    @classmethod
+    def from_meshtags(
+        cls,
+        mesh: dmesh.Mesh,
+        facet_tags: dmesh.MeshTags,
+        cell_tags: dmesh.MeshTags | None = None,
+        *,
+        contact: int | Sequence[int],
+        clamped: int | Sequence[int],
+        youngs_modulus,
+        poisson_ratio,
+        load=zero_load,
+        displacement=None,
+        tractions: Mapping[int, object] | None = None,
+        obstacle: Obstacle | None = None,
+        strip_cells: int | Sequence[int] | None = None,
+        H: float | None = None,
+        strip_width: float | None = None,
+        name: str = "problem",
+        description: str = "",
+    ) -> "ContactProblem":
+        """A problem on a DOLFINx mesh with its own tags (e.g. from ``dolfinx.io.gmsh.model_to_mesh``).
+
+        ``contact``, ``clamped``: the facet tag(s) of Γ_C and Γ_D; ``tractions``: facet tag -> traction
+        (σn = t there; a constant vector or a callable); ``displacement``: u on Γ_D (default 0).
+        ``youngs_modulus``, ``poisson_ratio``: a number, a callable x (3, N) -> (N,), a ``dolfinx.fem.Function``
+        or ``{cell tag: value}`` (needs ``cell_tags``). The strip Ω₂ along Γ_C and the interface γ are
+        built (``strip.automatic_split``: of width ``strip_width``, default H, or a few contact cells
+        without H; with ``H`` also the coarse cells of the multiscale methods); or give Ω₂ yourself as the
+        cells of the tag(s) ``strip_cells`` (γ is then its boundary with the rest).
+        """
+        if not isinstance(facet_tags, dmesh.MeshTags) or facet_tags.dim != mesh.topology.dim - 1:
+            raise InputError("facet_tags must be the facet MeshTags of the mesh (dimension "
+                             f"{mesh.topology.dim - 1})")
+        tractions = dict(tractions or {})
+        groups = [(_tags(contact, "contact"), int(Boundary.GAMMA_C)), (_tags(clamped, "clamped"), int(Boundary.GAMMA_D))]
+        names = {neumann_tag(f"Gamma_N_{int(t)}"): f"Gamma_N_{int(t)}" for t in tractions}
+        groups += [((int(t),), tag) for t, tag in zip(tractions, names)]
+        tags = _retagged(mesh, facet_tags, groups)
+        if strip_cells is not None:
+            if cell_tags is None:
+                raise InputError("strip_cells names cell tags: give cell_tags")
+            in_strip = np.isin(cell_tags.values, _tags(strip_cells, "strip_cells"))
+            mask = np.zeros(_num_cells(mesh), dtype=bool)
+            mask[cell_tags.indices[in_strip]] = True
+            cell_omega, tags = strip.strip_tags(mesh, tags, mask)
+            coarse = (strip.coarse_partition(mesh, ~mask, H) if H is not None
+                      else np.full(_num_cells(mesh), -1, dtype=np.int32))
+            split = strip.Split(cell_omega, tags, coarse, H)
+        else:
+            split = strip.automatic_split(mesh, tags, H=H, width=strip_width)
+        cm = ContactMesh(mesh, split.cell_tags, split.facet_tags, mesh_size(mesh), split.H, split.coarse_cell, names)
+        validation.validate_contact_mesh(cm, source="the mesh given to ContactProblem.from_meshtags")
+        fields = {}
+        for key, value in (("youngs_modulus", youngs_modulus), ("poisson_ratio", poisson_ratio)):
+            if isinstance(value, Mapping):
+                if cell_tags is None:
+                    raise InputError(f"{key} by cell tag needs cell_tags")
+                value = tag_function(mesh, cell_tags, value, name=key)
+            fields[key] = value
+        boundary = BoundaryConditions(displacement=displacement,
+                                      tractions={names[tag]: tractions[t] for t, tag in zip(tractions, names)})
+        return cls(**fields, load=load, boundary=boundary, obstacle=obstacle, mesh=cm, name=name,
+                   description=description)
 
     # -- building new problems ----------------------------------------------------------------
     def on(self, mesh: ContactMesh) -> "ContactProblem":
@@ -213,3 +285,35 @@ class ContactProblem:
                 f"the body force of {self.name!r} is zero on every cell of this mesh (too coarse to resolve the "
                 "load bands?): the solution would be u = 0. Refine the mesh (the built-in loads act on x >= 15/16)."
             )
+
+
+def _tags(value, what: str) -> tuple[int, ...]:
+    values = (value,) if isinstance(value, (int, np.integer)) else tuple(value)
+    if not values or not all(isinstance(v, (int, np.integer)) and not isinstance(v, bool) for v in values):
+        raise InputError(f"{what} must be a tag (an integer) or a list of tags, got {value!r}")
+    return tuple(int(v) for v in values)
+
+
+def _num_cells(msh: dmesh.Mesh) -> int:
+    imap = msh.topology.index_map(msh.topology.dim)
+    return imap.size_local + imap.num_ghosts
+
+
+def _retagged(msh: dmesh.Mesh, facet_tags: dmesh.MeshTags, groups: list[tuple[tuple[int, ...], int]]
+              ) -> dmesh.MeshTags:
+    """The facets of each group of user tags, tagged with the package's tag (``tags.Boundary``, Γ_N groups)."""
+    entities, values, used = [], [], {}
+    for user, tag in groups:
+        for t in user:
+            if t in used:
+                raise InputError(f"facet tag {t} is given for two boundaries (tags {used[t]} and {tag})")
+            used[t] = tag
+            found = facet_tags.find(t)
+            if msh.comm.allreduce(found.size, op=MPI.SUM) == 0:
+                present = sorted({int(v) for v in np.concatenate(msh.comm.allgather(np.unique(facet_tags.values)))})
+                raise InputError(f"no facet has the tag {t} (the facet tags are {present})")
+            entities.append(found)
+            values.append(np.full(found.size, tag, dtype=np.int32))
+    entities, values = np.concatenate(entities), np.concatenate(values)
+    order = np.argsort(entities, kind="stable")
+    return dmesh.meshtags(msh, msh.topology.dim - 1, entities[order].astype(np.int32), values[order])

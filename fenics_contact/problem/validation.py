@@ -45,6 +45,8 @@ __all__ = [
     "MeshDescription",
     "check_mesh_description",
     "contact_open_ends",
+    "interface_bends",
+    "interface_bends_of",
     "describe_contact_mesh",
     "open_ends",
     "mesh_problems",
@@ -270,8 +272,11 @@ def mesh_problems(desc: MeshDescription, rules: Iterable[BoundaryRule] = BOUNDAR
             common = np.intersect1d(node_sets[rule.name], node_sets.get(other, np.zeros(0, dtype=np.int64)))
             if common.size:
                 x, y = pts[common[0]]
+                hint = ("; the contact must lie inside the strip Omega2: extend Omega2 past the ends of Gamma_C, or "
+                        "leave out Omega1, Omega2 and gamma and the strip is built along Gamma_C"
+                        if (rule.name, other) == (GAMMA_C, GAMMA) else "")
                 problems.append(f"{rule.name!r} touches {other!r} at {common.size} nodes (first at ({x:.6g}, {y:.6g})): "
-                                f"{rule.name} must lie away from {other}")
+                                f"{rule.name} must lie away from {other}{hint}")
 
     # every connected part is held by Gamma_D
     inner = np.flatnonzero(edges.count == 2)
@@ -389,6 +394,34 @@ def contact_open_ends(cm) -> np.ndarray:
     desc = describe_contact_mesh(cm, [GAMMA_C])
     ends = open_ends(desc) if cm.comm.rank == 0 else None
     return cm.comm.bcast(ends, root=0)
+
+
+#: sin of the angle between two γ facets at a common vertex above which γ bends there
+BEND = 1e-8
+
+
+def interface_bends(desc: MeshDescription) -> np.ndarray:
+    """(k, 2): the vertices where the interface γ bends (two γ facets meet at an angle) or branches."""
+    seg = np.asarray(desc.facets.get(GAMMA, np.zeros((0, 2), np.int64)), dtype=np.int64).reshape(-1, 2)
+    pts = np.asarray(desc.points, dtype=np.float64)
+    if seg.shape[0] == 0:
+        return np.zeros((0, 2))
+    degree = np.bincount(seg.ravel(), minlength=pts.shape[0])
+    found = [pts[v, :2] for v in np.flatnonzero(degree > 2)]
+    d = pts[seg[:, 1], :2] - pts[seg[:, 0], :2]
+    d /= np.linalg.norm(d, axis=1)[:, None]
+    for v in np.flatnonzero(degree == 2):
+        a, b = np.flatnonzero(np.any(seg == v, axis=1))
+        if abs(d[a, 0] * d[b, 1] - d[a, 1] * d[b, 0]) > BEND:
+            found.append(pts[v, :2])
+    return np.array(found, dtype=np.float64).reshape(-1, 2)
+
+
+def interface_bends_of(cm) -> np.ndarray:
+    """``interface_bends`` of γ on every rank (collective: the mesh is described on rank 0)."""
+    desc = describe_contact_mesh(cm, [GAMMA])
+    bends = interface_bends(desc) if cm.comm.rank == 0 else None
+    return cm.comm.bcast(bends, root=0)
 
 
 def validate_contact_mesh(cm, rules: Iterable[BoundaryRule] = BOUNDARY_RULES, *, source: str = "the mesh") -> None:

@@ -55,6 +55,7 @@ from fenics_contact.io import (
 )
 from fenics_contact.multiscale.mixed_cem import DEFAULT_MAX_NBASIS, DEFAULT_MIN_GAP
 from fenics_contact.plots import (
+    hertz_curve_for,
     plot_cell_field,
     plot_contact,
     plot_displacement,
@@ -694,6 +695,19 @@ def _finite_or_none(x: float) -> float | None:
     return float(x) if math.isfinite(x) else None
 
 
+def _title(options: RunOptions, problem: ContactProblem) -> str:
+    """The figures' name of the run: the case or mesh file, else the built-in model, and the method."""
+    name = (f"case {Path(options.case).name}" if options.case is not None else
+            f"mesh {Path(options.mesh).name}" if options.mesh is not None else f"model {options.model}")
+    return f"{name}, {options.method}"
+
+
+def _render_deformed(u, path: Path, options: RunOptions, problem: ContactProblem, profile) -> None:
+    """The deformed body with the problem's own obstacle (a wall flush with Γ_C when it has none)."""
+    wall = profile.points if problem.obstacle is None else None
+    render_deformed(u, path, title=_title(options, problem), obstacle=problem.obstacle, wall=wall)
+
+
 def _run_primal(options: RunOptions, problem: ContactProblem) -> _Outcome:
     """Algorithms 1 (primal) and 3 (primal-ms), with the monolithic primal reference."""
     method = get_method(options.method)
@@ -722,7 +736,7 @@ def _run_primal(options: RunOptions, problem: ContactProblem) -> _Outcome:
         write_fields(out / "fields.xdmf", cm.mesh, [result.u, sigma, fields.E, markers])
         if options.plots:
             plot_displacement(result.u, out / "displacement.png", title=f"({options.method} hybrid)")
-            render_deformed(result.u, out / "deformed.png", title=f"model {options.model}, {options.method} hybrid")
+            _render_deformed(result.u, out / "deformed.png", options, problem, result.profile)
 
     return _Outcome(result, reference, summary, write)
 
@@ -770,6 +784,7 @@ def _run_mixed(options: RunOptions, problem: ContactProblem, comm: MPI.Comm = MP
         if options.plots:
             plot_stress(result.sigma, out / "stress.png", title=f"({options.method} hybrid)")
             plot_displacement(result.u, out / "displacement.png", title=f"({options.method} hybrid)")
+            _render_deformed(result.u, out / "deformed.png", options, problem, result.profile)
 
     return _Outcome(result, reference, summary, write)
 
@@ -889,7 +904,10 @@ def _solve_and_write(options: RunOptions, comm: MPI.Comm, model: ContactProblem 
             profiles = {f"{options.method} hybrid": profile}
             if reference is not None:
                 profiles["monolithic"] = reference.profile
-            plot_contact(profiles, out / "contact.png", comm=writer)
+            (E_lo, E_hi), (nu_lo, nu_hi) = problem.contact_range("E"), problem.contact_range("nu")
+            hertz = hertz_curve_for(problem.obstacle, profile.points, E_hi, nu_hi) \
+                if (E_lo, nu_lo) == (E_hi, nu_hi) else None  # (Hertz: a homogeneous body at the contact)
+            plot_contact(profiles, out / "contact.png", comm=writer, hertz=hertz)
             plot_history({f"{options.method}, {options.accel}": result.history}, out / "history.png", comm=writer,
                          tol=options.tol)
         write_summary(out, summary, writer)

@@ -14,12 +14,15 @@ from matplotlib.colors import LogNorm, TwoSlopeNorm  # noqa: E402
 from matplotlib.tri import Triangulation  # noqa: E402
 from matplotlib.ticker import MaxNLocator  # noqa: E402
 
-from dolfinx import fem  # noqa: E402
+from typing import NamedTuple  # noqa: E402
+
+from dolfinx import fem, la  # noqa: E402
 
 from fenics_contact.io import cell_function_of  # noqa: E402
+from fenics_contact.problem.obstacles import Circle, Translated  # noqa: E402
 
-__all__ = ["gather_cells", "plot_cell_field", "plot_displacement", "plot_stress", "plot_contact", "plot_history",
-           "render_deformed", "plot_force_indentation"]
+__all__ = ["gather_cells", "plot_cell_field", "plot_displacement", "plot_stress", "HertzCurve", "hertz_curve_for",
+           "plot_contact", "plot_history", "nodal_average", "obstacle_outline", "render_deformed", "plot_force_indentation"]
 
 
 def gather_cells(fn: fem.Function, component: int | None = None):
@@ -107,8 +110,36 @@ def plot_stress(sigma: fem.Function, path: str | Path, *, title: str = "") -> Pa
     return _save(fig, Path(path))
 
 
-def plot_contact(profiles: dict, path: str | Path, *, comm) -> Path | None:
-    """u_c and σ_c along Γ_C for one or more labelled ContactProfiles (cf. the paper's Fig. 5.4)."""
+class HertzCurve(NamedTuple):
+    """What the plane-strain Hertz pressure of a contact profile needs: cylinder radius, E, ν of the body at
+    the contact, and the coordinate (along Γ_C) of the cylinder's centre."""
+
+    radius: float
+    E: float
+    nu: float
+    centre: float
+
+
+def hertz_curve_for(obstacle, points: np.ndarray | None, E: float, nu: float) -> HertzCurve | None:
+    """The Hertz comparison of a profile when the obstacle is a (moved) circle and Γ_C is straight, else None."""
+    base, shift = obstacle, np.zeros(2)
+    while isinstance(base, Translated):
+        shift, base = shift + np.asarray(base.shift), base.base
+    if not isinstance(base, Circle) or points is None or len(points) < 3:
+        return None
+    xy = np.asarray(points)[:, :2]
+    d = xy - xy.mean(axis=0)
+    _, sv, vt = np.linalg.svd(d, full_matrices=False)
+    if sv[1] > 1e-9 * max(sv[0], 1e-300):  # Γ_C is not a straight segment
+        return None
+    major = int(np.argmax(np.ptp(xy, axis=0)))
+    return HertzCurve(base.radius, E, nu, float(np.asarray(base.centre)[major] + shift[major]))
+
+
+def plot_contact(profiles: dict, path: str | Path, *, comm, hertz: HertzCurve | None = None) -> Path | None:
+    """Normal displacement u_c and contact pressure p = −σ_c along Γ_C for labelled ContactProfiles, with the
+    plane-strain Hertz pressure for the force of the first profile when ``hertz`` is given (a cylinder on a
+    straight Γ_C: E* = E/(1 − ν²), a = 2√(RF/(πE*)), p = p₀√(1 − x²/a²), p₀ = 2F/(πa))."""
     if comm.rank != 0:
         return None
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.8))
@@ -120,9 +151,19 @@ def plot_contact(profiles: dict, path: str | Path, *, comm) -> Path | None:
             major = int(np.argmax(np.ptp(prof.points[:, :2], axis=0)))
             along, axis = prof.points[:, major], "xy"[major]
         axes[0].plot(along, prof.u_c, style, label=label)
-        axes[1].plot(along, prof.sigma_c, style, label=label)
+        axes[1].plot(along, -np.asarray(prof.sigma_c), style, label=label)
+    if hertz is not None and profiles:
+        first = next(iter(profiles.values()))
+        force = first.force
+        if force > 0:
+            E_star = hertz.E / (1.0 - hertz.nu**2)
+            a = 2.0 * np.sqrt(hertz.radius * force / (np.pi * E_star))
+            p0 = 2.0 * force / (np.pi * a)
+            x = hertz.centre + np.linspace(-1.2 * a, 1.2 * a, 241)
+            axes[1].plot(x, p0 * np.sqrt(np.maximum(1.0 - ((x - hertz.centre) / a) ** 2, 0.0)), "k:", lw=1.2,
+                         label=f"Hertz (a = {a:.3g}, p₀ = {p0:.3g})")
     axes[0].set_title("normal displacement $u_c$ on $\\Gamma_C$")
-    axes[1].set_title("normal stress $\\sigma_c$ on $\\Gamma_C$")
+    axes[1].set_title("contact pressure $p = -\\sigma_c$ on $\\Gamma_C$")
     for ax in axes:
         ax.set_xlabel(axis)
         ax.axhline(0.0, color="k", lw=0.5)
@@ -176,9 +217,57 @@ def plot_history(histories: dict, path: str | Path, *, comm, tol: float | None =
     return _save(fig, Path(path))
 
 
-def render_deformed(u: fem.Function, path: str | Path, *, scale: float | None = None,
-                    title: str = "") -> Path | None:
-    """The mesh deformed by u (magnified), coloured by |u|, rendered off-screen with pyvista (rank 0)."""
+def nodal_average(u: fem.Function) -> fem.Function:
+    """A discontinuous P1 vector field (the mixed displacement) as a continuous one: at every vertex the mean of
+    the values the cells around it give (collective)."""
+    msh = u.function_space.mesh
+    gdim = msh.geometry.dim
+    V = fem.functionspace(msh, ("Lagrange", 1, (gdim,)))
+    tdim = msh.topology.dim
+    n_cells = msh.topology.index_map(tdim).size_local
+    cell_dofs_dg = u.function_space.dofmap.list[:n_cells]
+    cell_dofs_p1 = V.dofmap.list[:n_cells]  # (the same reference vertex order as the DG P1 dofs)
+    bs = V.dofmap.index_map_bs
+    total = la.vector(V.dofmap.index_map, bs)
+    count = la.vector(V.dofmap.index_map, bs)
+    for c in range(bs):
+        np.add.at(total.array, bs * cell_dofs_p1.ravel() + c, u.x.array[bs * cell_dofs_dg.ravel() + c])
+        np.add.at(count.array, bs * cell_dofs_p1.ravel() + c, 1.0)
+    total.scatter_reverse(la.InsertMode.add)
+    count.scatter_reverse(la.InsertMode.add)
+    out = fem.Function(V, name=u.name)
+    n = V.dofmap.index_map.size_local * bs
+    out.x.array[:n] = total.array[:n] / np.maximum(count.array[:n], 1.0)
+    out.x.scatter_forward()
+    return out
+
+
+def obstacle_outline(obstacle, box: tuple[float, float, float, float], *, scale: float = 1.0,
+                     resolution: int = 600) -> list[np.ndarray]:
+    """Polylines (k, 2) of the obstacle's boundary d = 0 inside ``box`` (x0, x1, y0, y1): the zero contour of its
+    signed distance, any obstacle. Its rigid motion (``Translated``) is magnified by ``scale``, as the
+    displacements of a deformed plot are, so that the drawn obstacle meets the drawn body where they touch."""
+    shift = np.zeros(2)
+    base = obstacle
+    while isinstance(base, Translated):
+        shift, base = shift + np.asarray(base.shift), base.base
+    x0, x1, y0, y1 = box
+    X, Y = np.meshgrid(np.linspace(x0, x1, resolution), np.linspace(y0, y1, resolution))
+    points = np.vstack([X.ravel() - scale * shift[0], Y.ravel() - scale * shift[1], np.zeros(X.size)])
+    with np.errstate(invalid="ignore"):
+        d = np.asarray(base.distance(points), dtype=float).reshape(X.shape)
+    if not (np.nanmin(d, initial=np.inf) < 0.0 < np.nanmax(d, initial=-np.inf)):
+        return []
+    fig, ax = plt.subplots()
+    lines = [np.asarray(seg) for seg in ax.contour(X, Y, d, levels=[0.0]).allsegs[0] if len(seg) > 1]
+    plt.close(fig)
+    return lines
+
+
+def render_deformed(u: fem.Function, path: str | Path, *, scale: float | None = None, title: str = "",
+                    obstacle=None, wall: np.ndarray | None = None) -> Path | None:
+    """The mesh deformed by u (magnified), coloured by |u|, with the obstacle (its motion magnified alike), or
+    with ``wall`` (the Γ_C points in order: a wall flush with Γ_C), rendered off-screen with pyvista (rank 0)."""
     import os
 
     if not os.environ.get("DISPLAY"):  # off-screen OpenGL, no X server needed
@@ -187,6 +276,8 @@ def render_deformed(u: fem.Function, path: str | Path, *, scale: float | None = 
 
     from dolfinx import plot
 
+    if u.function_space.ufl_element().discontinuous:
+        u = nodal_average(u)
     V = u.function_space
     msh = V.mesh
     topology, cell_types, x = plot.vtk_mesh(V)
@@ -214,8 +305,17 @@ def render_deformed(u: fem.Function, path: str | Path, *, scale: float | None = 
     plotter = pyvista.Plotter(off_screen=True, window_size=(900, 800))
     plotter.add_mesh(grid, style="wireframe", color="lightgray", opacity=0.3)
     plotter.add_mesh(warped, scalars="|u|", show_edges=False, cmap="viridis")
-    plotter.add_mesh(pyvista.Line((1.0, -0.02, 0.0), (1.0, 1.02, 0.0)), color="red", line_width=4)  # obstacle
-    plotter.add_text(f"{title} (displacement x{scale:.3g})".strip(), font_size=10)
+    if obstacle is not None:
+        lo, hi = warped.points.min(axis=0), warped.points.max(axis=0)
+        margin = 0.15 * float(np.max(hi - lo))
+        box = (lo[0] - margin, hi[0] + margin, lo[1] - margin, hi[1] + margin)
+        for line in obstacle_outline(obstacle, box, scale=scale):
+            plotter.add_mesh(pyvista.lines_from_points(np.column_stack([line, np.zeros(len(line))])),
+                             color="red", line_width=4)
+    elif wall is not None and len(wall) > 1:
+        plotter.add_mesh(pyvista.lines_from_points(np.column_stack([np.asarray(wall)[:, :2], np.zeros(len(wall))])),
+                         color="red", line_width=4)
+    plotter.add_text(f"{title} (displacement and obstacle motion x{scale:.3g})".strip(), font_size=10)
     plotter.view_xy()
     plotter.screenshot(str(path))
     plotter.close()

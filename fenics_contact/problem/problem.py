@@ -246,9 +246,10 @@ class ContactProblem:
         """The fine mesh size (``ContactMesh.h``)."""
         return self.cm.h
 
-    def contact_modulus(self, *, smallest: bool = False) -> float:
-        """The largest (``smallest``: smallest) Young's modulus of the cells touching Γ_C, over all ranks."""
-        msh, E = self.cm.mesh, self.fields.E
+    def contact_range(self, name: str = "E") -> tuple[float, float]:
+        """(smallest, largest) of the cellwise field ``name`` ("E", "nu", "lmbda", "mu") over the cells touching
+        Γ_C, over all ranks."""
+        msh, values = self.cm.mesh, getattr(self.fields, name).x.array
         tdim = msh.topology.dim
         msh.topology.create_connectivity(tdim - 1, tdim)
         f2c = msh.topology.connectivity(tdim - 1, tdim)
@@ -256,9 +257,13 @@ class ContactProblem:
         cells = np.unique(np.concatenate([f2c.links(f) for f in facets] or [[]])).astype(np.int32)
         if msh.comm.allreduce(int(cells.size), op=MPI.SUM) == 0:
             raise InputError("the mesh has no Γ_C facets")
-        if smallest:
-            return float(msh.comm.allreduce(float(np.min(E.x.array[cells], initial=np.inf)), op=MPI.MIN))
-        return float(msh.comm.allreduce(float(np.max(E.x.array[cells], initial=-np.inf)), op=MPI.MAX))
+        lo = msh.comm.allreduce(float(np.min(values[cells], initial=np.inf)), op=MPI.MIN)
+        hi = msh.comm.allreduce(float(np.max(values[cells], initial=-np.inf)), op=MPI.MAX)
+        return float(lo), float(hi)
+
+    def contact_modulus(self, *, smallest: bool = False) -> float:
+        """The largest (``smallest``: smallest) Young's modulus of the cells touching Γ_C, over all ranks."""
+        return self.contact_range("E")[0 if smallest else 1]
 
     @property
     def fields(self) -> MaterialFields:

@@ -37,6 +37,8 @@ from typing import NamedTuple
 import numpy as np
 from mpi4py import MPI
 
+from dolfinx import fem
+
 from fenics_contact import __version__
 from fenics_contact.errors import ConvergenceError, FenicsContactError, InputError
 from fenics_contact.hybrid.iteration import ACCELERATIONS, InterfaceNewtonOptions, IterationOptions
@@ -45,17 +47,19 @@ from fenics_contact.indentation import force_indentation
 from fenics_contact.methods import HYBRID_METHODS, METHODS as CATALOGUE, get_method
 from fenics_contact.io import (
     OutputDirectory,
+    provenance,
     cell_function_of,
     cell_markers,
     check_output_target,
     stress_field,
-    write_fields,
     write_summary,
     write_vtx,
 )
 from fenics_contact.multiscale.mixed_cem import DEFAULT_MAX_NBASIS, DEFAULT_MIN_GAP
+from fenics_contact.paraview import Series, contact_grid, field_grid
 from fenics_contact.plots import (
     hertz_curve_for,
+    nodal_average,
     plot_cell_field,
     plot_contact,
     plot_displacement,
@@ -563,8 +567,10 @@ def _warn_open_ends(summary: dict, comm: MPI.Comm) -> None:
                     "cut short by the tags, not of the body. Extend Gamma_C along that side.", where)
 
 
-def _indentation_curve(options: RunOptions, case: Case, problem: ContactProblem, outcome, ends: np.ndarray) -> dict:
-    """The force-indentation curve of the case's load steps (the last step is the run's depth).
+def _indentation_curve(options: RunOptions, case: Case, problem: ContactProblem, outcome, ends: np.ndarray,
+                       out: Path, writes: bool) -> dict:
+    """The force-indentation curve of the case's load steps (the last step is the run's depth), each step's
+    fields and contact written into ``out`` as ParaView series (by the ranks with ``writes``).
 
     primal, mixed: ``indentation.force_indentation`` (warm starts, factorizations kept) with the
     run's penalty and transmission coefficient; primal-ms, mixed-ms: the same with the run's hybrid
@@ -579,8 +585,21 @@ def _indentation_curve(options: RunOptions, case: Case, problem: ContactProblem,
             penalty = {"epsilon": outcome.summary["epsilon"], "beta": options.value("beta")}
     else:  # the run's step: its Ω₁ offline data, penalty and coefficients
         penalty = {"step": outcome.result.step}
+    comm = problem.comm if writes else MPI.COMM_SELF
+    fields, contact = Series(out, "fields", comm), Series(out, "contact", comm)
+    primal = get_method(options.method).family == "primal"
+    V = fem.functionspace(problem.cm.mesh, ("Lagrange", 1, (problem.dim,))) if primal else None
+
+    def write_step(step, solver) -> None:
+        if not writes:
+            return
+        state = (solver.glued(V),) if primal else solver.glued()[::-1]
+        fields.add(step.depth, _field_grid(problem, *state))
+        contact.add(step.depth, contact_grid(step.profile, comm))
+
     curve = force_indentation(problem.with_(obstacle=spec.base()), options.method, spec.depths,
-                              direction=direction, options=options.iteration_options(), **penalty)
+                              direction=direction, options=options.iteration_options(), on_step=write_step,
+                              **penalty)
     rows = [_curve_row(s.depth, direction, s.profile, s.iterations, s.converged, s.time_s, ends) | {
         "transmission_residual": s.transmission_residual, "complementarity": s.complementarity._asdict(),
         "interface_newton_steps": s.interface_newton_steps}
@@ -695,6 +714,27 @@ def _finite_or_none(x: float) -> float | None:
     return float(x) if math.isfinite(x) else None
 
 
+def _field_grid(problem: ContactProblem, u, sigma=None):
+    """The ParaView grid of a state: the P1 displacement ``u`` (primal; the stress from it), or the mixed
+    stress ``sigma`` (DG P3: xx, xy, yy) and displacement ``u`` (DG P1, averaged at the vertices)."""
+    fields, cm = problem.fields, problem.cm
+    if sigma is None:
+        s = _cell_array(stress_field(u, fields.lmbda, fields.mu))
+        stress = np.column_stack([s[:, 0], s[:, 3], s[:, 1]])
+    else:
+        s = _cell_array(cell_function_of(sigma, name="sigma"))
+        stress, u = np.column_stack([s[:, 0], s[:, 2], s[:, 1]]), nodal_average(u)
+    return field_grid(u, stress, {"E": fields.E, "subdomain": cell_markers(cm.cell_tags, cm.mesh)}, fields.nu)
+
+
+def _cell_array(fn) -> np.ndarray:
+    """(local cells, components) of a DG0 function."""
+    V = fn.function_space
+    bs = V.dofmap.index_map_bs
+    n = V.mesh.topology.index_map(V.mesh.topology.dim).size_local
+    return fn.x.array.reshape(-1, bs)[V.dofmap.list[:n, 0]]
+
+
 def _title(options: RunOptions, problem: ContactProblem) -> str:
     """The figures' name of the run: the case or mesh file, else the built-in model, and the method."""
     name = (f"case {Path(options.case).name}" if options.case is not None else
@@ -731,9 +771,9 @@ def _run_primal(options: RunOptions, problem: ContactProblem) -> _Outcome:
     fields, cm = problem.fields, problem.cm
 
     def write(out: Path) -> None:
-        sigma = stress_field(result.u, fields.lmbda, fields.mu)
-        markers = cell_markers(cm.cell_tags, cm.mesh)
-        write_fields(out / "fields.xdmf", cm.mesh, [result.u, sigma, fields.E, markers])
+        if not (out / "fields.pvd").exists():  # (load steps write their own series)
+            Series(out, "fields", problem.comm).add(0.0, _field_grid(problem, result.u))
+            Series(out, "contact", problem.comm).add(0.0, contact_grid(result.profile, problem.comm))
         if options.plots:
             plot_displacement(result.u, out / "displacement.png", title=f"({options.method} hybrid)")
             _render_deformed(result.u, out / "deformed.png", options, problem, result.profile)
@@ -775,10 +815,9 @@ def _run_mixed(options: RunOptions, problem: ContactProblem, comm: MPI.Comm = MP
     fields, cm = problem.fields, problem.cm
 
     def write(out: Path) -> None:
-        sigma_cells = cell_function_of(result.sigma, name="sigma_cell_mean")
-        u_cells = cell_function_of(result.u, name="u_cell_mean")
-        markers = cell_markers(cm.cell_tags, cm.mesh)
-        write_fields(out / "fields.xdmf", cm.mesh, [sigma_cells, u_cells, fields.E, markers])
+        if not (out / "fields.pvd").exists():  # (load steps write their own series)
+            Series(out, "fields", MPI.COMM_SELF).add(0.0, _field_grid(problem, result.u, result.sigma))
+            Series(out, "contact", MPI.COMM_SELF).add(0.0, contact_grid(result.profile, MPI.COMM_SELF))
         write_vtx(out / "sigma.bp", result.sigma)
         write_vtx(out / "u.bp", result.u)
         if options.plots:
@@ -857,7 +896,9 @@ def _solve_and_write(options: RunOptions, comm: MPI.Comm, model: ContactProblem 
     result, reference = outcome.result, outcome.reference
     profile = result.profile
     ends = contact_open_ends(cm)  # (the open ends of Γ_C, for every solve's contact summary)
-    curve = _indentation_curve(options, case, problem, outcome, ends) if case and case.obstacle.steps else None
+    writes = not replicated or comm.rank == 0  # replicated: rank 0 holds the whole run and writes it
+    curve = (_indentation_curve(options, case, problem, outcome, ends, output.path, writes)
+             if case and case.obstacle.steps else None)
     summary = {
         "method": options.method,
         "model": options.model if case is None else None,
@@ -870,7 +911,9 @@ def _solve_and_write(options: RunOptions, comm: MPI.Comm, model: ContactProblem 
         "iterations": result.iterations,
         "converged": result.converged and (curve is None or all(s["converged"] for s in curve["steps"])),
         "rel_tolerance": options.tol,
-        "final_rel_change": float(result.history.rel_changes[-1]),
+        # the relative change of the last two iterates (the paper's rule): not defined for the interface Newton,
+        # which applies T once, to certify its solution
+        "final_rel_change": float(result.history.rel_changes[-1]) if options.accel != "newton" else None,
         "transmission_residual": result.history.transmission_residual,
         "interface_newton_steps": result.history.newton_steps if options.accel == "newton" else None,
         **outcome.summary,
@@ -878,7 +921,9 @@ def _solve_and_write(options: RunOptions, comm: MPI.Comm, model: ContactProblem 
         "contact_force": profile.force,
         **_contact_summary(profile, ends),
         "max_contact_pressure": profile.max_pressure,
-        "newton_steps_total": int(sum(r.info.get("newton", 0) for r in result.history.records)),
+        # Ω₂'s semismooth Newton steps over the iteration (the interface Newton solves Ω₂ within its own steps)
+        "newton_steps_total": (int(sum(r.info.get("newton", 0) for r in result.history.records))
+                               if options.accel != "newton" else None),
         "dofs": result.dofs,
         "time_mesh_s": t_mesh,
         "time_offline_s": result.time_offline_s,
@@ -889,6 +934,7 @@ def _solve_and_write(options: RunOptions, comm: MPI.Comm, model: ContactProblem 
         "reference_newton_steps": reference.newton.steps if reference is not None else None,
         "reference_active_set": reference.profile.active_interval() if reference is not None else None,
         "mpi_ranks": comm.size,
+        "provenance": provenance(),
         "force_indentation": curve,
         "case": case.to_dict() | {"run": _options_echo(options)} if case is not None else None,
     }
@@ -979,13 +1025,24 @@ class _RankZero(logging.Filter):
         return MPI.COMM_WORLD.rank == 0
 
 
+class _BelowWarning(logging.Filter):
+    def filter(self, record: logging.LogRecord) -> bool:
+        return record.levelno < logging.WARNING
+
+
 def _setup_logging(verbose: bool) -> None:
-    """The log (progress and warnings) on stdout, rank 0 only; stderr is kept for the one-line outcome."""
+    """The progress log on stdout, warnings on stderr prefixed ``warning:``, rank 0 only; a failure ends with one
+    line on stderr (``_fail``), the last."""
     out = logging.StreamHandler(sys.stdout)
     out.addFilter(_RankZero())
+    out.addFilter(_BelowWarning())
     out.setFormatter(logging.Formatter("%(message)s"))
+    warn = logging.StreamHandler(sys.stderr)
+    warn.setLevel(logging.WARNING)
+    warn.addFilter(_RankZero())
+    warn.setFormatter(logging.Formatter("warning: %(message)s"))
     root = logging.getLogger("fenics_contact")
-    root.handlers[:] = [out]
+    root.handlers[:] = [out, warn]
     root.setLevel(logging.DEBUG if verbose else logging.INFO)
     root.propagate = False
 

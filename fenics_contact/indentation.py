@@ -26,6 +26,7 @@ tensile contact stress and max |σ_c u_c|, each relative to the step's scale).
 
 import logging
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
@@ -165,6 +166,7 @@ def force_indentation(
     *,
     direction: npt.ArrayLike,
     step: HybridStep | None = None,
+    on_step: Callable[[IndentationStep, object], None] | None = None,
     **options,
 ) -> IndentationCurve:
     """Move ``problem.obstacle`` by each depth along ``direction`` in turn; solve with warm starts.
@@ -174,7 +176,8 @@ def force_indentation(
     its defaults otherwise.  The multiscale methods' Ω₁ offline phase runs once, before the first step.
     ``step``: a hybrid step of this method built earlier (e.g. ``curve.step`` of another curve, or a
     solve's ``result.step``) to reuse with everything it holds; it carries its own α or β, δ or ε and
-    multiscale space, so only the iteration's options may be given with it.
+    multiscale space, so only the iteration's options may be given with it.  ``on_step(step, solver)`` is
+    called after every load step with its record and the solver in that state (e.g. to write its fields).
     """
     spec = get_method(method)
     if not isinstance(problem, ContactProblem) or not isinstance(problem.obstacle, Obstacle):
@@ -223,6 +226,8 @@ def force_indentation(
         ))
         log.info("%s: depth %.4g force %.6g (normal %.6g), %d iterations, transmission residual %s, %.2f s", method,
                  depth, force, profile.force, iterations, residual, curve.steps[-1].time_s)
+        if on_step is not None:
+            on_step(curve.steps[-1], solver)
     return curve
 
 

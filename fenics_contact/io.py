@@ -14,6 +14,7 @@ import resource
 import shutil
 import signal
 import socket
+import sys
 import tempfile
 import time
 from collections.abc import Iterator
@@ -30,6 +31,7 @@ from fenics_contact.problem.materials import strain, stress
 
 __all__ = [
     "peak_rss_bytes",
+    "provenance",
     "OutputDirectory",
     "cell_function_of",
     "cell_markers",
@@ -124,8 +126,60 @@ def write_report(path: str | Path, lines: list[str], comm: MPI.Comm = MPI.COMM_W
     print(f"wrote {path}")
 
 
+def provenance() -> dict:
+    """What made a result: the package, DOLFINx, PETSc and Python versions, the command line, the UTC time and
+    the machine."""
+    import dolfinx
+    from petsc4py import PETSc
+
+    from fenics_contact import __version__
+
+    return {
+        "fenics_contact": __version__,
+        "dolfinx": dolfinx.__version__,
+        "petsc": ".".join(map(str, PETSc.Sys.getVersion())),
+        "python": platform.python_version(),
+        "command": " ".join([Path(sys.argv[0]).name, *sys.argv[1:]]),
+        "utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+        "machine": machine_description(),
+    }
+
+
+def _cell(value) -> str:
+    """A summary value for a table cell: numbers to 4 significant digits, short lists inline."""
+    if isinstance(value, bool) or value is None:
+        return str(value)
+    if isinstance(value, float):
+        return f"{value:.4g}"
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(_cell(v) for v in value) + "]"
+    return str(value)
+
+
+def _markdown(summary: dict, title: str, level: int = 1) -> list[str]:
+    """A table of the plain entries of ``summary``, then a section per nested table (a list of records as one
+    table with a row per record)."""
+    plain = {k: v for k, v in summary.items() if not isinstance(v, dict) and not _records(v)}
+    lines = [f"{'#' * level} {title}", ""]
+    if plain:
+        lines += ["| quantity | value |", "|---|---|"] + [f"| {k} | {_cell(v)} |" for k, v in plain.items()] + [""]
+    for key, value in summary.items():
+        if isinstance(value, dict):
+            lines += _markdown(value, key, level + 1)
+        elif _records(value):
+            columns = list(dict.fromkeys(k for row in value for k, v in row.items() if not isinstance(v, dict)))
+            lines += [f"{'#' * (level + 1)} {key}", "", "| " + " | ".join(columns) + " |",
+                      "|" + "---|" * len(columns)]
+            lines += ["| " + " | ".join(_cell(row.get(c)) for c in columns) + " |" for row in value] + [""]
+    return lines
+
+
+def _records(value) -> bool:
+    return isinstance(value, list) and bool(value) and all(isinstance(v, dict) for v in value)
+
+
 def write_summary(directory: str | Path, summary: dict, comm: MPI.Comm = MPI.COMM_WORLD) -> None:
-    """DIR/summary.json and DIR/summary.md (a two-column table), written on rank 0."""
+    """DIR/summary.json and DIR/summary.md (tables: the run's quantities, then one per nested result), rank 0."""
     if comm.rank != 0:
         return
     directory = Path(directory)
@@ -139,14 +193,8 @@ def write_summary(directory: str | Path, summary: dict, comm: MPI.Comm = MPI.COM
         raise TypeError(f"cannot serialize {type(value)}")
 
     (directory / "summary.json").write_text(json.dumps(summary, indent=2, default=plain) + "\n")
-    lines = ["| quantity | value |", "|---|---|"]
-    for key, value in summary.items():
-        if isinstance(value, float):
-            value = f"{value:.4g}"
-        elif isinstance(value, (list, tuple)) and value and isinstance(value[0], float):
-            value = "[" + ", ".join(f"{v:.4g}" for v in value) + "]"
-        lines.append(f"| {key} | {value} |")
-    (directory / "summary.md").write_text("\n".join(lines) + "\n")
+    title = f"fenics-contact run: {summary.get('method', '')}".strip()
+    (directory / "summary.md").write_text("\n".join(_markdown(summary, title)) + "\n")
 
 
 # ---------------------------------------------------------------------------------------------

@@ -1,6 +1,7 @@
 # Two commands do everything on a fresh machine:
 #   make demo   - creates .venv if needed, runs a real contact simulation, writes results/
 #   make test   - creates .venv if needed, runs the test suite
+# .venv gets fenics-contact (editable) with DOLFINx from the binary wheel: pip install -e ".[wheel,test,docs]"
 VENV ?= .venv
 OUT ?= results
 # one thread per process: MUMPS/OpenBLAS threads spinning on 2 cores slow the sparse solves badly
@@ -8,7 +9,7 @@ export OMP_NUM_THREADS ?= 1
 
 .PHONY: demo test env clean
 
-$(VENV)/.installed: pyproject.toml scripts/bootstrap.sh
+$(VENV)/.installed: pyproject.toml setup.py install/fenics_contact_import_order.py scripts/bootstrap.sh
 	VENV=$(VENV) scripts/bootstrap.sh
 
 env: $(VENV)/.installed

@@ -1,6 +1,8 @@
-"""What pyproject.toml cannot state for the build: a start-up hook.
+"""What pyproject.toml cannot state for the build: the package list with the example files, and a start-up hook.
 
-* The packages are ``fenics_contact`` and its subpackages.
+* The packages are ``fenics_contact`` and its subpackages (found), plus the repository's ``cases/``,
+  ``meshes/`` and ``demos/`` mapped to ``fenics_contact.example_files.{cases,meshes,demos}`` as package data
+  (no copies in the repository; ``fenics-contact examples DIR`` copies them out of an installed package).
 * ``install/fenics_contact_import_order.pth`` and the module it runs go into the top of site-packages, in a
   wheel and in an editable install alike: where the ``dolfinx-solver-real`` wheel is installed they import
   ``dolfinx_solver`` before the first ``dolfinx``/``petsc4py``/``slepc4py`` import of any process (the
@@ -12,6 +14,8 @@ import os
 from setuptools import find_packages, setup
 from setuptools.command.build_py import build_py
 
+EXAMPLES = "fenics_contact.example_files"
+EXAMPLE_DIRS = ("cases", "meshes", "demos")
 STARTUP_FILES = ("install/fenics_contact_import_order.py", "install/fenics_contact_import_order.pth")
 
 
@@ -36,6 +40,8 @@ class BuildPyWithStartupHook(build_py):
 
 
 setup(
-    packages=find_packages(include=["fenics_contact", "fenics_contact.*"]),
+    packages=find_packages(include=["fenics_contact", "fenics_contact.*"]) + [f"{EXAMPLES}.{d}" for d in EXAMPLE_DIRS],
+    package_dir={f"{EXAMPLES}.{d}": d for d in EXAMPLE_DIRS},
+    package_data={f"{EXAMPLES}.{d}": ["*.toml", "*.msh", "*.md", "*.npy", "*.csv", "*.txt"] for d in EXAMPLE_DIRS},
     cmdclass={"build_py": BuildPyWithStartupHook},
 )

@@ -1,7 +1,9 @@
-"""Sphinx configuration of the fenics-contact documentation: MyST Markdown pages.
+"""Sphinx configuration of the fenics-contact documentation: MyST Markdown pages, the demos as notebooks.
 
 Made at each build, before Sphinx reads the sources (all ignored by git, docs/.gitignore):
 
+* ``demos/*.ipynb``: the jupytext percent scripts of the repository's ``demos/`` as notebooks, executed by
+  MyST-NB with their figures inline, at the size ``FENICS_CONTACT_DEMO_N`` (``make docs DEMO_N=…``);
 * ``user_guide/generated/``: the ``--help`` of the command line and of each subcommand (from
   ``fenics_contact.cli.build_parser``) and the exit-code table (``fenics_contact.cli.EXIT_CODES``),
   included by the user guide's pages.
@@ -13,10 +15,19 @@ import os
 import re
 from pathlib import Path
 
+import jupytext
+
 import fenics_contact
 from fenics_contact.cli import EXIT_CODES, build_parser
 
 DOCS = Path(__file__).resolve().parent
+ROOT = DOCS.parent
+
+# the demos run at 1/h = FENICS_CONTACT_DEMO_N, and write their PNGs with a non-interactive backend (the
+# pages show the PNG files, not matplotlib's own inline figures)
+DEMO_N = os.environ.setdefault("FENICS_CONTACT_DEMO_N", "32")
+os.environ["MPLBACKEND"] = "Agg"
+os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 project = "fenics-contact"
 author = "the fenics-contact developers"
@@ -33,6 +44,15 @@ exclude_patterns = ["_build", "make_figures.py", "**/.ipynb_checkpoints", "user_
 myst_enable_extensions = ["dollarmath", "amsmath", "colon_fence", "deflist"]
 myst_heading_anchors = 3
 
+# MyST-NB: execute each demo notebook (cached per DEMO_N; a failing cell fails the build)
+nb_execution_mode = "cache"
+nb_execution_cache_path = str(DOCS / "_build" / ".jupyter_cache" / f"n{DEMO_N}")
+nb_execution_timeout = 3600
+nb_execution_raise_on_error = True
+nb_execution_in_temp = True
+nb_output_stderr = "remove"
+nb_merge_streams = True
+
 html_theme = "furo"
 html_title = f"fenics-contact {release}"
 
@@ -42,6 +62,16 @@ def _write_if_changed(path: Path, text: str) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     if not path.is_file() or path.read_text() != text:
         path.write_text(text)
+
+
+def _demo_notebooks() -> None:
+    """``demos/<name>.ipynb`` for every ``<root>/demos/demo_*.py``; notebooks of removed demos are removed."""
+    scripts = sorted((ROOT / "demos").glob("demo_*.py"))
+    for script in scripts:
+        _write_if_changed(DOCS / "demos" / f"{script.stem}.ipynb", jupytext.writes(jupytext.read(script), fmt="ipynb"))
+    for notebook in (DOCS / "demos").glob("*.ipynb"):
+        if notebook.stem not in {s.stem for s in scripts}:
+            notebook.unlink()
 
 
 def _exit_code_table() -> None:
@@ -63,5 +93,6 @@ def _cli_help() -> None:
     _write_if_changed(DOCS / "user_guide" / "generated" / "cli_help.md", "\n".join(blocks))
 
 
+_demo_notebooks()
 _exit_code_table()
 _cli_help()

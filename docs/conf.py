@@ -72,6 +72,9 @@ autodoc_typehints = "signature"
 # plain_text_docstring below; an attribute's one-line doc is prose (napoleon would read "(n, 3) …: …" as a type)
 NAPOLEON = napoleon.Config(napoleon_google_docstring=True, napoleon_numpy_docstring=False, napoleon_use_rtype=False)
 
+# literal blocks without a language (the docstrings' displayed formulas and tables) are not Python
+highlight_language = "none"
+
 html_theme = "furo"
 html_title = f"fenics-contact {release}"
 

@@ -1,14 +1,18 @@
 # Two commands do everything on a fresh machine:
 #   make demo   - creates .venv if needed, runs a real contact simulation, writes results/
 #   make test   - creates .venv if needed, runs the test suite
+# and one builds the documentation site:
+#   make docs   - builds docs/_build/html (warnings are errors; the demos run as notebooks at 1/h = DEMO_N)
+# .venv gets fenics-contact (editable) with DOLFINx from the binary wheel: pip install -e ".[wheel,test,docs]"
 VENV ?= .venv
 OUT ?= results
+DEMO_N ?= 32
 # one thread per process: MUMPS/OpenBLAS threads spinning on 2 cores slow the sparse solves badly
 export OMP_NUM_THREADS ?= 1
 
-.PHONY: demo test env clean
+.PHONY: demo test env docs clean
 
-$(VENV)/.installed: pyproject.toml scripts/bootstrap.sh
+$(VENV)/.installed: pyproject.toml setup.py install/fenics_contact_import_order.py scripts/bootstrap.sh
 	VENV=$(VENV) scripts/bootstrap.sh
 
 env: $(VENV)/.installed
@@ -21,5 +25,11 @@ demo: $(VENV)/.installed
 test: $(VENV)/.installed
 	$(VENV)/bin/python -m pytest -ra
 
+# warnings are errors, so a broken internal link (a document, a section anchor) fails the build: Sphinx and
+# MyST warn on each; external links are not checked (no network needed)
+docs: $(VENV)/.installed
+	FENICS_CONTACT_DEMO_N=$(DEMO_N) $(VENV)/bin/python -m sphinx -W --keep-going -b html docs docs/_build/html
+	@echo "open docs/_build/html/index.html"
+
 clean:
-	rm -rf $(OUT) .pytest_cache
+	rm -rf $(OUT) .pytest_cache docs/_build

@@ -28,6 +28,7 @@
 
 # %%
 import os
+import sys
 from pathlib import Path
 
 import fenics_contact  # noqa: F401  (imports dolfinx_solver before dolfinx)
@@ -90,3 +91,14 @@ plot_displacement(best.u, out / "displacement.png", title="(Algorithm 2)")
 plot_contact({"Algorithm 2": best.profile, "monolithic": reference.profile}, out / "contact.png", comm=cm.comm)
 plot_history({k: r.history for k, r in runs.items()}, out / "history.png", comm=cm.comm, tol=1e-6)
 print("figures in", out)
+
+# %% [markdown]
+# ## The figures
+# Inline when this file runs as a notebook; run as a script, it leaves them as the PNG files above.
+
+# %%
+if "ipykernel" in sys.modules:  # a notebook kernel: show the figures written above
+    from IPython.display import Image, display
+
+    for png in ("stress.png", "displacement.png", "contact.png", "history.png"):
+        display(Image(filename=str(out / png)))

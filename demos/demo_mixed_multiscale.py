@@ -29,6 +29,7 @@
 
 # %%
 import os
+import sys
 from pathlib import Path
 
 import fenics_contact  # noqa: F401  (imports dolfinx_solver before dolfinx)
@@ -121,3 +122,14 @@ ax.legend()
 ax.grid(True, which="both", alpha=0.3)
 fig.tight_layout()
 fig.savefig(out / "error_vs_layers_load_in_omega1.png", dpi=120)
+
+# %% [markdown]
+# ## The figures
+# Inline when this file runs as a notebook; run as a script, it leaves them as the PNG files above.
+
+# %%
+if "ipykernel" in sys.modules:  # a notebook kernel: show the figures written above
+    from IPython.display import Image, display
+
+    for png in ("error_vs_layers.png", "stress.png", "contact.png", "error_vs_layers_load_in_omega1.png"):
+        display(Image(filename=str(out / png)))

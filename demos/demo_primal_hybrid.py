@@ -32,6 +32,7 @@
 
 # %%
 import os
+import sys
 from pathlib import Path
 
 import fenics_contact  # noqa: F401  (imports dolfinx_solver before dolfinx)
@@ -109,3 +110,14 @@ plot_contact({"hybrid": p, "monolithic": reference.profile}, out / "contact.png"
 plot_history({k: r.history for k, r in runs.items()}, out / "history.png", comm=cm.comm, tol=1e-8)
 render_deformed(best.u, out / "deformed.png", title="model 1, Algorithm 1")
 print("figures in", out)
+
+# %% [markdown]
+# ## The figures
+# Inline when this file runs as a notebook; run as a script, it leaves them as the PNG files above.
+
+# %%
+if "ipykernel" in sys.modules:  # a notebook kernel: show the figures written above
+    from IPython.display import Image, display
+
+    for png in ("E.png", "contact.png", "history.png", "deformed.png"):
+        display(Image(filename=str(out / png)))

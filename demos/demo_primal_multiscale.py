@@ -26,6 +26,7 @@
 
 # %%
 import os
+import sys
 from pathlib import Path
 
 import fenics_contact  # noqa: F401  (imports dolfinx_solver before dolfinx)
@@ -124,3 +125,14 @@ for source in (True, False):
 assert all(a <= b * (1 + 1e-8) for a, b in zip(table[True], table[False]))
 assert table[True][2] < table[True][1] < table[True][0]
 print("figures in", out)
+
+# %% [markdown]
+# ## The figures
+# Inline when this file runs as a notebook; run as a script, it leaves them as the PNG files above.
+
+# %%
+if "ipykernel" in sys.modules:  # a notebook kernel: show the figures written above
+    from IPython.display import Image, display
+
+    for png in ("error_vs_layers.png", "contact.png"):
+        display(Image(filename=str(out / png)))

@@ -40,6 +40,7 @@
 # %%
 import gc
 import os
+import sys
 import time
 from pathlib import Path
 
@@ -299,3 +300,14 @@ for ax, (label, sigma) in zip(axes, panels):
 fig.tight_layout()
 fig.savefig(out / "stress.png", dpi=130)
 print("figures, fields and the table in", out)
+
+# %% [markdown]
+# ## The figures
+# Inline when this file runs as a notebook; run as a script, it leaves them as the PNG files above.
+
+# %%
+if "ipykernel" in sys.modules:  # a notebook kernel: show the figures written above
+    from IPython.display import Image, display
+
+    for png in ("composite.png", "pressure.png", "force_indentation.png", "stress.png"):
+        display(Image(filename=str(out / png)))

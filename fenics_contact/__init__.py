@@ -1,16 +1,48 @@
 """fenics-contact: iterative contact-resolving hybrid methods for heterogeneous elasticity on DOLFINx.
 
-Import this package before DOLFINx-dependent code; it imports ``dolfinx_solver``
-first, as the binary wheel requires.
+DOLFINx 0.11 is found here, once.  With the ``dolfinx-solver-real`` binary wheel (the ``wheel`` extra),
+``dolfinx_solver`` is imported first, as that wheel requires (it loads MPI ahead of ``dolfinx``,
+``petsc4py`` and ``slepc4py``), and the DOLFINx it ships is its ``DOLFINX_VERSION``; any other DOLFINx
+(conda-forge, Docker, spack, a source build) is imported directly.  Without DOLFINx 0.11 the import
+fails with an ImportError that says how to get it (:data:`HOW_TO_GET_DOLFINX`).
 """
 
-import dolfinx_solver  # noqa: F401  (must precede dolfinx, petsc4py, slepc4py)
-
+import importlib.util
+import re
 from importlib.metadata import PackageNotFoundError, version
+
+__all__ = ["DOLFINX_SERIES", "HOW_TO_GET_DOLFINX", "__version__", "dolfinx_version"]
+
+#: the DOLFINx release series this package is written for (its public API only)
+DOLFINX_SERIES = "0.11"
+
+#: the three ways to an environment with DOLFINx 0.11
+HOW_TO_GET_DOLFINX = (
+    "Get DOLFINx 0.11 one of these ways: "
+    '(1) pip install "fenics-contact[wheel]" (the dolfinx-solver-real binary wheel: Linux, Python >= 3.12); '
+    '(2) conda install -c conda-forge "fenics-dolfinx=0.11", then pip install fenics-contact in that environment; '
+    "(3) the DOLFINx Docker image (docker run -ti dolfinx/dolfinx:v0.11.0), then pip install fenics-contact in it."
+)
 
 try:
     __version__ = version("fenics-contact")
 except PackageNotFoundError:  # running from a source tree that is not installed
     __version__ = "0.0.0+unknown"
 
-__all__ = ["__version__"]
+#: the version of the DOLFINx this package runs on
+dolfinx_version: str
+if importlib.util.find_spec("dolfinx_solver") is not None:
+    import dolfinx_solver  # (must precede dolfinx, petsc4py, slepc4py)
+
+    dolfinx_version = dolfinx_solver.DOLFINX_VERSION
+else:
+    try:
+        import dolfinx
+    except ImportError as error:
+        raise ImportError(f"fenics-contact needs DOLFINx {DOLFINX_SERIES}, and 'import dolfinx' failed ({error}). "
+                          f"{HOW_TO_GET_DOLFINX}") from error
+    dolfinx_version = dolfinx.__version__
+
+if not re.match(rf"{re.escape(DOLFINX_SERIES)}(\.|$)", dolfinx_version):
+    raise ImportError(f"fenics-contact needs DOLFINx {DOLFINX_SERIES}; this environment has DOLFINx {dolfinx_version}. "
+                      f"{HOW_TO_GET_DOLFINX}")

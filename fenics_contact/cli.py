@@ -41,6 +41,7 @@ from dolfinx import fem
 
 from fenics_contact import __version__
 from fenics_contact.errors import ConvergenceError, FenicsContactError, InputError
+from fenics_contact.examples import add_examples_parser, run_examples_command
 from fenics_contact.hybrid.iteration import ACCELERATIONS, InterfaceNewtonOptions, IterationOptions
 from fenics_contact.hybrid.primal import DEFAULT_ALPHA, DEFAULT_ALPHA_MS
 from fenics_contact.indentation import force_indentation
@@ -410,6 +411,7 @@ def build_parser(*, given_only: bool = False) -> argparse.ArgumentParser:
     run.add_argument("--set", action="append", metavar="KEY=VALUE", help="with --case: replace one key of the "
                      "case file, VALUE in TOML syntax, e.g. --set mesh.refinement=0.5 --set "
                      "'obstacle.indentation=[1e-3, 2e-3]' (repeatable)")
+    add_examples_parser(sub)
     if given_only:  # only the options the command line gives (the others absent): they override a case file
         run.set_defaults(**{dest: NOT_GIVEN for dest in vars(run.parse_args([])) if dest != "set"})  # append: a list
     return parser
@@ -1055,6 +1057,8 @@ def _fail(message: str, comm: MPI.Comm = MPI.COMM_WORLD) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)  # argparse errors exit with 2 (bad input) too
+    if args.command == "examples":
+        return run_examples_command(args)
     _setup_logging(getattr(args, "verbose", False))
     comm = MPI.COMM_WORLD
     out = getattr(args, "out", None)

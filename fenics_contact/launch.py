@@ -1,12 +1,13 @@
 """The ``fenics-contact`` console script: ``cli.main`` behind a guard for Ctrl-C during start-up.
 
-Importing the command line loads DOLFINx, UFL, FFCx and PETSc (seconds on a cold disk).  A Ctrl-C
-in that time used to end with a KeyboardInterrupt traceback; here it ends like an interrupted run:
-exit 130 and one line on stderr (nothing has been written yet).  The signal is held until the import
-has finished: raised as KeyboardInterrupt inside it, it can land in a Python callback of DOLFINx's C++
-module initialisation, which then aborts the whole process (SIGABRT, "terminate called after throwing an
-instance of 'nanobind::python_error'": seen once in CI on 2026-12-02).  Only the import of this package
-itself (``dolfinx_solver``, a few tenths of a second) comes before the guard.
+Importing the command line loads DOLFINx, UFL, FFCx and PETSc (seconds on a cold disk).  A Ctrl-C in
+that time ends like an interrupted run: exit 130 and one line on stderr (nothing has been written yet),
+not a KeyboardInterrupt traceback.  The signal is held until the import has finished: raised as
+KeyboardInterrupt inside it, it can land in a Python callback of DOLFINx's C++ module initialisation,
+which then aborts the whole process (SIGABRT, "terminate called after throwing an instance of
+'nanobind::python_error'").  Only the import of this package itself comes before the guard: with the
+binary wheel that is ``dolfinx_solver`` (a few tenths of a second); with any other DOLFINx it is
+``dolfinx`` itself, which ``fenics_contact/__init__.py`` imports to check its version.
 """
 
 import signal

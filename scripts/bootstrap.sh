@@ -1,9 +1,11 @@
 #!/usr/bin/env bash
-# Create .venv with a Python >= 3.12 found on this machine and install fenics-contact into it.
-# Usage: scripts/bootstrap.sh   (called by `make demo` / `make test` when .venv is missing or stale)
+# Create .venv with a Python >= 3.12 found on this machine and install fenics-contact into it (editable),
+# with DOLFINx 0.11 from the binary wheel (the `wheel` extra) and the extras named in EXTRAS (default: test,docs).
+# Usage: scripts/bootstrap.sh   (called by `make demo` / `make test` / `make docs` when .venv is missing or stale)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 VENV=${VENV:-.venv}
+EXTRAS=${EXTRAS:-test,docs}
 
 is_ok() { "$1" -c 'import sys; sys.exit(0 if sys.version_info >= (3, 12) else 1)' >/dev/null 2>&1; }
 
@@ -39,6 +41,6 @@ if [ ! -x "$VENV/bin/python" ] || ! is_ok "$VENV/bin/python"; then
     "$PY" -m venv "$VENV"
 fi
 "$VENV/bin/python" -m pip install --quiet --upgrade pip
-"$VENV/bin/python" -m pip install --quiet -e ".[test]"
+"$VENV/bin/python" -m pip install --quiet -e ".[wheel,$EXTRAS]"
 "$VENV/bin/python" -c "import fenics_contact, dolfinx; print('fenics-contact', fenics_contact.__version__, 'with DOLFINx', dolfinx.__version__)"
 touch "$VENV/.installed"

@@ -5,13 +5,46 @@ DOLFINx 0.11 is found here, once.  With the ``dolfinx-solver-real`` binary wheel
 ``petsc4py`` and ``slepc4py``), and the DOLFINx it ships is its ``DOLFINX_VERSION``; any other DOLFINx
 (conda-forge, Docker, spack, a source build) is imported directly.  Without DOLFINx 0.11 the import
 fails with an ImportError that says how to get it (:data:`HOW_TO_GET_DOLFINX`).
+
+The user's API is here, loaded when first used (so ``import fenics_contact`` stays light)::
+
+    import fenics_contact as fc
+    problem = fc.models.model_1().on(fc.unit_square(64, 16))   # or fc.ContactProblem(...), from_meshtags(...)
+    result = fc.solve(problem, "primal")                        # a method of fc.METHODS, with its options
 """
 
+import importlib
 import importlib.util
 import re
 from importlib.metadata import PackageNotFoundError, version
 
-__all__ = ["DOLFINX_SERIES", "HOW_TO_GET_DOLFINX", "__version__", "dolfinx_version"]
+#: the user's API: name -> the module that defines it (imported on first use)
+_API = {
+    "ContactProblem": "fenics_contact.problem.problem",
+    "BoundaryConditions": "fenics_contact.problem.boundary",
+    "Plane": "fenics_contact.problem.obstacles",
+    "Circle": "fenics_contact.problem.obstacles",
+    "SignedDistance": "fenics_contact.problem.obstacles",
+    "unit_square": "fenics_contact.problem.geometry",
+    "read_mesh": "fenics_contact.problem.geometry",
+    "METHODS": "fenics_contact.methods",
+    "solve": "fenics_contact.methods",
+    "force_indentation": "fenics_contact.indentation",
+    "IterationOptions": "fenics_contact.hybrid.iteration",
+    "CEMOptions": "fenics_contact.multiscale.cem",
+    "MixedCEMOptions": "fenics_contact.multiscale.mixed_cem",
+}
+_MODULES = {"models": "fenics_contact.problem.models", "analytic": "fenics_contact.problem.analytic"}
+
+__all__ = ["DOLFINX_SERIES", "HOW_TO_GET_DOLFINX", "__version__", "dolfinx_version", *_API, *_MODULES]
+
+
+def __getattr__(name: str):
+    if name in _API:
+        return getattr(importlib.import_module(_API[name]), name)
+    if name in _MODULES:
+        return importlib.import_module(_MODULES[name])
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 #: the DOLFINx release series this package is written for (its public API only)
 DOLFINX_SERIES = "0.11"

@@ -125,7 +125,7 @@ def other_steps(step, hist) -> str:
     default local front resolution when the main count is the plain one: the same condensed problem, its
     contact Newton steps + the corrections on F(g) that followed; '=' when it ends on the same active set and s
     to 1e-10 (then the corrections are the same)."""
-    from fenics_contact.hybrid.newton import contact_newton
+    from fenics_contact.hybrid.contact_newton import contact_newton
 
     ch = hist.contact_newton
     if ch is None:
@@ -266,7 +266,7 @@ def part_speed(lines, n: int, number: int) -> None:
         for accel in ("newton", "anderson"):
             step.reset()
             if accel == "newton":  # the offline interface response, outside the CPU clock of the online phase
-                from fenics_contact.hybrid.newton import CondensedInterface
+                from fenics_contact.hybrid.condensation import CondensedInterface
 
                 t_off = time.perf_counter()
                 problem = step.interface_problem(InterfaceNewtonOptions())
@@ -306,7 +306,7 @@ def _galerkin_coarse(s_load, M, D, y):
 
 def _nested(s_load, M, D, y, smallest=16):
     """Nested iteration over Γ_C: solve the Galerkin-coarsened problem, start from its prolonged active set."""
-    from fenics_contact.hybrid.newton import contact_newton
+    from fenics_contact.hybrid.contact_newton import contact_newton
 
     if s_load.size <= smallest:
         s, _, hist = contact_newton(s_load, M, D, max_steps=200)
@@ -319,7 +319,7 @@ def _nested(s_load, M, D, y, smallest=16):
 
 def _continuation(s_load, M, D, factor=1e3, start=1e-9):
     """Path in the penalty: D·start, ·factor, ... up to D, each solve started from the last active set."""
-    from fenics_contact.hybrid.newton import contact_newton
+    from fenics_contact.hybrid.contact_newton import contact_newton
 
     counts, scale, active = [], start, s_load > 0.0
     while True:
@@ -334,7 +334,9 @@ def _continuation(s_load, M, D, factor=1e3, start=1e-9):
 def part_fronts(lines, sizes, E_high: float) -> None:
     """Contact Newton of Algorithm 1 (= the monolithic semismooth Newton from its 2nd step): active-set changes
     per step on model 3, and the step counts of other starts / globalizations on the same condensed problem."""
-    from fenics_contact.hybrid.newton import CondensedInterface, contact_chains, contact_newton
+    from fenics_contact.hybrid.condensation import CondensedInterface
+    from fenics_contact.hybrid.contact_newton import contact_newton
+    from fenics_contact.hybrid.fronts import contact_chains
 
     lines += [
         f"## Contact Newton on model 3, E_high {E_high:g}: active-set fronts and alternatives (Algorithm 1, c = 1)",
@@ -343,10 +345,10 @@ def part_fronts(lines, sizes, E_high: float) -> None:
         "'same' = all variants end on the plain Newton's active set and its s to 1e-10). local (the default, "
         "InterfaceNewtonOptions(front_window=8)): the next set takes, around every front of the semismooth step's set, "
         "the solution of the contact equations on the 8 Γ_C unknowns on either side of it with the forces elsewhere "
-        "held (`hybrid.newton.LocalFronts`; in braces the semismooth iterations of those local problems / the largest "
+        "held (`hybrid.fronts.LocalFronts`; in braces the semismooth iterations of those local problems / the largest "
         "window). fronts "
         "(InterfaceNewtonOptions(fronts=True)): the plain Newton whose next set is, where a front of the active set moved "
-        "the same way twice, the secant prediction of that front (`hybrid.newton.FrontExtrapolation`; every set "
+        "the same way twice, the secant prediction of that front (`hybrid.fronts.FrontExtrapolation`; every set "
         "solved is a step, predicted or not; in brackets the steps whose set was a prediction). "
         "Plain (front_window=0): start from the "
         "contact-free penetration pattern {s_L > 0}, full steps, exact line search once a set recurs. "

@@ -22,7 +22,8 @@ import pytest
 from mpi4py import MPI
 
 from fenics_contact.hybrid.iteration import InterfaceNewtonOptions, IterationOptions, iterate
-from fenics_contact.hybrid.newton import contact_chains, contact_newton
+from fenics_contact.hybrid.contact_newton import contact_newton
+from fenics_contact.hybrid.fronts import contact_chains
 from contact_problems import random_contact_problem
 from mpi_jobs import mpiexec, run_result
 

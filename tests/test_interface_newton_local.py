@@ -1,4 +1,4 @@
-"""The contact Newton's local front resolution (issue 10, third pass; ``hybrid.newton.LocalFronts``, the default).
+"""The contact Newton's local front resolution (``hybrid.fronts.LocalFronts``, the default).
 
 * A local problem's answer is the solution of the contact equations on its window with the forces elsewhere
   held: s_R = r_R − M_RR μ_R and μ_R = D_R s_R⁺ hold on the window (checked by hand), and the windows are
@@ -21,7 +21,8 @@ import pytest
 
 from fenics_contact.errors import ConvergenceError, InputError
 from fenics_contact.hybrid.iteration import InterfaceNewtonOptions, IterationOptions, iterate
-from fenics_contact.hybrid.newton import LocalFronts, contact_chains, contact_newton, contact_solve
+from fenics_contact.hybrid.contact_newton import contact_newton, contact_solve
+from fenics_contact.hybrid.fronts import LocalFronts, contact_chains
 
 from contact_problems import random_contact_problem
 

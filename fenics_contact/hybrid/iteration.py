@@ -5,7 +5,7 @@ owned interface values) is the only state carried between iterations. One
 application of T solves both subproblems with the current data and returns the
 updated data; an *update* (plain, or Anderson acceleration) combines the
 history into the next input, or the interface Newton method
-(``hybrid.newton``) solves g = T(g) directly.
+(``hybrid.interface_newton``) solves g = T(g) directly.
 
 **Stopping rule.**  The loop stops when the *transmission residual* of the
 current pair of subdomain solutions (``hybrid.certificate``: the relative
@@ -72,7 +72,7 @@ class HybridStep(Protocol):
         """Diagnostics of the last application (Newton steps, active set, errors...)."""
 
     # Optional: ``interface_problem(options)`` (the affine pieces for ``accel="newton"``, see
-    # ``hybrid.newton.InterfaceProblem``), ``data_weights()`` (weights of Anderson's least squares),
+    # ``hybrid.condensation.InterfaceProblem``), ``data_weights()`` (weights of Anderson's least squares),
     # ``reset()`` (cold subdomain states for the next solve, offline data kept).
 
 
@@ -137,7 +137,7 @@ def make_update(name: str, comm: MPI.Comm, *, depth: int = 10, weights: np.ndarr
 
 @dataclass(frozen=True, slots=True)
 class InterfaceNewtonOptions:
-    """Interface Newton (``hybrid.newton``): strategy and step caps.
+    """Interface Newton (``hybrid.interface_newton``): strategy and step caps.
 
     ``strategy``: ``"condensed"`` (Ω₁'s affine interface response and the contact-free Ω₂
     condensed offline onto γ and Γ_C; online a semismooth Newton on the Γ_C unknowns, then one
@@ -146,10 +146,10 @@ class InterfaceNewtonOptions:
     ``max_steps`` caps the contact Newton, ``max_corrections`` the Newton steps on F(g) that
     follow it (or, for ``"interface"``, all steps).  ``front_window`` (default 8; 0: off): the condensed
     contact Newton resolves every front of its next active set locally, on the ``front_window`` Γ_C
-    unknowns on either side of it with the forces elsewhere held (``hybrid.newton.LocalFronts``; the same
+    unknowns on either side of it with the forces elsewhere held (``hybrid.fronts.LocalFronts``; the same
     fixed point; 3–5 steps instead of 8–11 where a near-rigid body rests on Γ_C at contrast 1e6: README,
     "Interface Newton").  ``fronts=True``: instead, the front extrapolation of an earlier version
-    (``hybrid.newton.FrontExtrapolation``; fewer steps on some cases, more on others).
+    (``hybrid.fronts.FrontExtrapolation``; fewer steps on some cases, more on others).
     """
 
     strategy: str = "condensed"
@@ -175,7 +175,7 @@ class IterationOptions:
     """Stopping rule: transmission residual < tol (``hybrid.certificate``), at most max_iterations.
 
     ``accel`` is the update: ``"none"`` (the paper's), ``"anderson"`` (depth ``depth``) or
-    ``"newton"`` (``hybrid.newton``, options ``newton``).
+    ``"newton"`` (``hybrid.interface_newton``, options ``newton``).
     """
 
     tol: float = 1.0e-6
@@ -221,7 +221,7 @@ class IterationHistory:
     time_monitor_s: float = 0.0
     newton_steps: int = 0  #: interface Newton steps (contact Newton + corrections); 0 for the fixed-point updates
     data: np.ndarray | None = None  #: the interface data g of the final pair (``initial`` of a warm-started solve)
-    #: the condensed contact Newton's history (``hybrid.newton.ContactNewtonHistory``: active-set sizes,
+    #: the condensed contact Newton's history (``hybrid.contact_newton.ContactNewtonHistory``: active-set sizes,
     #: rows added / removed per step, step lengths); None for the fixed-point updates
     contact_newton: object = None
 
@@ -338,7 +338,7 @@ def iterate(
     if g.shape != step.initial_data().shape:
         raise InputError(f"initial interface data have shape {g.shape}, expected {step.initial_data().shape}")
     if options.accel == "newton":
-        from fenics_contact.hybrid.newton import newton_iterate
+        from fenics_contact.hybrid.interface_newton import newton_iterate
 
         return newton_iterate(step, options, name=name, monitor=monitor, initial=g)
     weights = step.data_weights() if hasattr(step, "data_weights") else None

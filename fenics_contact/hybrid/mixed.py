@@ -9,7 +9,7 @@ Both subdomains use Arnold–Winther stresses × DG P1 displacements
 (``fem.mixed.MixedSubproblem``); Ω₁ is factorized once, Ω₂ runs the globalized
 semismooth Newton warm-started from its last solution and refactorizes only
 when its active set changes.  The loop is ``hybrid.iteration.iterate`` (plain update as in the
-paper, Anderson acceleration, or the interface Newton method of ``hybrid.newton``), stopped by the
+paper, Anderson acceleration, or the interface Newton method of ``hybrid.interface_newton``), stopped by the
 transmission residual of ``hybrid.certificate``.
 
 **Space of the Robin data and quadrature on γ.**  The normal trace σn of an AW
@@ -250,19 +250,20 @@ class MixedHybridStep:
 
     def _omega1_response(self, options: InterfaceNewtonOptions):
         """Ω₁'s affine trace response (fine Ω₁: back-solves with its factorization)."""
-        from fenics_contact.hybrid.newton import FineResponse, MixedPart
+        from fenics_contact.hybrid.response import FineResponse, MixedPart
 
         self.prepare()
         return FineResponse(MixedPart(self.sub[0], perm=None, contact=False), chunk=options.chunk)
 
     def interface_problem(self, options: InterfaceNewtonOptions):
-        """The affine pieces for ``hybrid.newton`` (built once)."""
+        """The affine pieces for ``hybrid.interface_newton`` (built once)."""
         if self.comm.size > 1:  # (issue 13) MixedPart holds serial SciPy operators
             raise InputError(
                 f"the interface Newton method (--accel newton) of the mixed method runs serially; got {self.comm.size} "
                 "MPI ranks. Use --accel anderson (or none) under mpiexec, or run without mpiexec."
             )
-        from fenics_contact.hybrid.newton import InterfaceProblem, MixedPart
+        from fenics_contact.hybrid.condensation import InterfaceProblem
+        from fenics_contact.hybrid.response import MixedPart
 
         if self._newton is None or self._newton.options.strategy != options.strategy:
             omega2 = MixedPart(self.sub[1], perm=self._perm2, contact=True, factorize=options.strategy == "condensed")

@@ -7,7 +7,7 @@
 With vertex quadrature on γ its fixed point is the monolithic penalized
 solution (Theorem 3.1).  The iteration stops on the transmission residual of
 the pair (``hybrid.certificate``); ``accel="newton"`` solves the fixed point by
-the interface Newton method (``hybrid.newton``) instead of iterating.
+the interface Newton method (``hybrid.interface_newton``) instead of iterating.
 """
 
 import logging
@@ -151,8 +151,9 @@ class PrimalHybridStep:
         return np.concatenate([w, w])
 
     def interface_problem(self, options: InterfaceNewtonOptions):
-        """The affine pieces for ``hybrid.newton`` (built once: fine Ω₁ response, Ω₂ with J₀)."""
-        from fenics_contact.hybrid.newton import FineResponse, InterfaceProblem, PrimalPart
+        """The affine pieces for ``hybrid.interface_newton`` (built once: fine Ω₁ response, Ω₂ with J₀)."""
+        from fenics_contact.hybrid.condensation import InterfaceProblem
+        from fenics_contact.hybrid.response import FineResponse, PrimalPart
 
         if self._newton is None or self._newton.options.strategy != options.strategy:
             self.prepare()

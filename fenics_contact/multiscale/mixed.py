@@ -256,7 +256,7 @@ class MixedMultiscaleHybridStep(MixedHybridStep):
 
     def _omega1_response(self, options: InterfaceNewtonOptions):
         """Ω₁'s affine trace σ₁n₁ = T g + t₀ (``InterfaceResponse``, precomputed offline with the bases)."""
-        from fenics_contact.hybrid.newton import MatrixResponse
+        from fenics_contact.hybrid.response import MatrixResponse
 
         rs = self.omega1.response
         return MatrixResponse(rs.T, rs.t0)

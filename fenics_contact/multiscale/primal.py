@@ -130,10 +130,11 @@ class MultiscalePrimalHybridStep:
             prev[:] = 0.0
 
     def interface_problem(self, options: InterfaceNewtonOptions):
-        """The affine pieces for ``hybrid.newton``: Ω₁'s interface response u₁|γ = R g₁₂ + r₀ from the
+        """The affine pieces for ``hybrid.interface_newton``: Ω₁'s interface response u₁|γ = R g₁₂ + r₀ from the
         coarse solver (``Omega1Multiscale.response``: one dense coarse solve with n_γ + 1 right-hand sides,
         nothing of fine-mesh size), Ω₂ with J₀ (built once)."""
-        from fenics_contact.hybrid.newton import InterfaceProblem, MatrixResponse, PrimalPart
+        from fenics_contact.hybrid.condensation import InterfaceProblem
+        from fenics_contact.hybrid.response import MatrixResponse, PrimalPart
 
         if self._newton is None or self._newton.options.strategy != options.strategy:
             iface = self.interface

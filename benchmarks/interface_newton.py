@@ -39,8 +39,11 @@ import numpy as np
 import fenics_contact  # noqa: F401  (must precede dolfinx / petsc4py)
 from fenics_contact.errors import FenicsContactError
 from fenics_contact.fem.contact import NewtonOptions
-from fenics_contact.fem.mixed import contact_modulus, default_epsilon
+from fenics_contact.fem.mixed import contact_modulus, default_epsilon, solve_mixed_monolithic
 from fenics_contact.fem.primal import PrimalSubproblem, default_penalty
+from fenics_contact.hybrid.condensation import CondensedInterface
+from fenics_contact.hybrid.contact_newton import contact_newton
+from fenics_contact.hybrid.fronts import contact_chains
 from fenics_contact.hybrid.iteration import InterfaceNewtonOptions, IterationOptions, iterate
 from fenics_contact.hybrid.mixed import MixedHybridStep
 from fenics_contact.hybrid.primal import PrimalHybridStep
@@ -108,8 +111,6 @@ def monolithic_steps(method: int, cm, number: int, E_high: float) -> str:
             steps = mono.solve().steps
             mono.destroy()
             return str(steps)
-        from fenics_contact.fem.mixed import solve_mixed_monolithic
-
         return str(solve_mixed_monolithic(cm, model, newton=newton, split_interface=True, verify=False).newton.steps)
     except FenicsContactError as err:
         return f"error: {type(err).__name__}"
@@ -125,8 +126,6 @@ def other_steps(step, hist) -> str:
     default local front resolution when the main count is the plain one: the same condensed problem, its
     contact Newton steps + the corrections on F(g) that followed; '=' when it ends on the same active set and s
     to 1e-10 (then the corrections are the same)."""
-    from fenics_contact.hybrid.contact_newton import contact_newton
-
     ch = hist.contact_newton
     if ch is None:
         return "—"
@@ -266,8 +265,6 @@ def part_speed(lines, n: int, number: int) -> None:
         for accel in ("newton", "anderson"):
             step.reset()
             if accel == "newton":  # the offline interface response, outside the CPU clock of the online phase
-                from fenics_contact.hybrid.condensation import CondensedInterface
-
                 t_off = time.perf_counter()
                 problem = step.interface_problem(InterfaceNewtonOptions())
                 problem.condensed = problem.condensed or CondensedInterface(problem)
@@ -306,8 +303,6 @@ def _galerkin_coarse(s_load, M, D, y):
 
 def _nested(s_load, M, D, y, smallest=16):
     """Nested iteration over Γ_C: solve the Galerkin-coarsened problem, start from its prolonged active set."""
-    from fenics_contact.hybrid.contact_newton import contact_newton
-
     if s_load.size <= smallest:
         s, _, hist = contact_newton(s_load, M, D, max_steps=200)
         return [hist.steps], s
@@ -319,8 +314,6 @@ def _nested(s_load, M, D, y, smallest=16):
 
 def _continuation(s_load, M, D, factor=1e3, start=1e-9):
     """Path in the penalty: D·start, ·factor, ... up to D, each solve started from the last active set."""
-    from fenics_contact.hybrid.contact_newton import contact_newton
-
     counts, scale, active = [], start, s_load > 0.0
     while True:
         s, _, hist = contact_newton(s_load, M, D * scale, max_steps=200, active=active)
@@ -334,10 +327,6 @@ def _continuation(s_load, M, D, factor=1e3, start=1e-9):
 def part_fronts(lines, sizes, E_high: float) -> None:
     """Contact Newton of Algorithm 1 (= the monolithic semismooth Newton from its 2nd step): active-set changes
     per step on model 3, and the step counts of other starts / globalizations on the same condensed problem."""
-    from fenics_contact.hybrid.condensation import CondensedInterface
-    from fenics_contact.hybrid.contact_newton import contact_newton
-    from fenics_contact.hybrid.fronts import contact_chains
-
     lines += [
         f"## Contact Newton on model 3, E_high {E_high:g}: active-set fronts and alternatives (Algorithm 1, c = 1)",
         "",

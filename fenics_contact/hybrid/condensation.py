@@ -31,7 +31,7 @@ import scipy.linalg as sla
 from fenics_contact.errors import ConvergenceError
 from fenics_contact.hybrid.contact_newton import ContactNewtonHistory, contact_solve
 from fenics_contact.hybrid.fronts import contact_chains
-from fenics_contact.hybrid.iteration import InterfaceNewtonOptions
+from fenics_contact.hybrid.options import InterfaceNewtonOptions
 from fenics_contact.hybrid.response import AffinePart
 
 __all__ = ["InterfaceProblem", "CondensedInterface"]

@@ -21,7 +21,7 @@ import numpy as np
 from fenics_contact.errors import ConvergenceError
 from fenics_contact.hybrid.contact_equations import energy_line_search, solve_on
 from fenics_contact.hybrid.fronts import FrontExtrapolation, LocalFronts
-from fenics_contact.hybrid.iteration import InterfaceNewtonOptions
+from fenics_contact.hybrid.options import InterfaceNewtonOptions
 
 __all__ = ["ContactNewtonHistory", "contact_newton", "contact_solve"]
 

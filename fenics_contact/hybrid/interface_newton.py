@@ -28,14 +28,8 @@ import time
 import numpy as np
 
 from fenics_contact.hybrid.condensation import CondensedInterface
-from fenics_contact.hybrid.iteration import (
-    COLLAPSE,
-    IterationHistory,
-    IterationOptions,
-    data_norm,
-    evaluate,
-    zero_is_the_fixed_point,
-)
+from fenics_contact.hybrid.options import IterationOptions
+from fenics_contact.hybrid.step import COLLAPSE, IterationHistory, data_norm, evaluate, zero_is_the_fixed_point
 
 __all__ = ["newton_iterate"]
 

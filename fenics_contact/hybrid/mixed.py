@@ -65,6 +65,7 @@ from dolfinx import fem
 from fenics_contact.fem.arnold_winther import ArnoldWintherSpace
 from fenics_contact.fem.contact import NewtonOptions
 from fenics_contact.hybrid.certificate import Certificate, mixed_certificate
+from fenics_contact.hybrid.condensation import InterfaceProblem
 from fenics_contact.hybrid.inputs import check_solve_inputs, require_instance
 from fenics_contact.hybrid.iteration import (
     InterfaceNewtonOptions,
@@ -88,6 +89,7 @@ from fenics_contact.fem.mixed import (
 )
 from fenics_contact.problem.models import TestModel
 from fenics_contact.hybrid.primal import omega2_record
+from fenics_contact.hybrid.response import FineResponse, MixedPart
 from fenics_contact.hybrid.transmission import split_mesh, sub_to_parent_dofs
 
 __all__ = ["MixedHybridResult", "MixedHybridStep", "solve_mixed_hybrid", "solve_or_verify", "transmission_coefficient"]
@@ -250,8 +252,6 @@ class MixedHybridStep:
 
     def _omega1_response(self, options: InterfaceNewtonOptions):
         """Ω₁'s affine trace response (fine Ω₁: back-solves with its factorization)."""
-        from fenics_contact.hybrid.response import FineResponse, MixedPart
-
         self.prepare()
         return FineResponse(MixedPart(self.sub[0], perm=None, contact=False), chunk=options.chunk)
 
@@ -262,9 +262,6 @@ class MixedHybridStep:
                 f"the interface Newton method (--accel newton) of the mixed method runs serially; got {self.comm.size} "
                 "MPI ranks. Use --accel anderson (or none) under mpiexec, or run without mpiexec."
             )
-        from fenics_contact.hybrid.condensation import InterfaceProblem
-        from fenics_contact.hybrid.response import MixedPart
-
         if self._newton is None or self._newton.options.strategy != options.strategy:
             omega2 = MixedPart(self.sub[1], perm=self._perm2, contact=True, factorize=options.strategy == "condensed")
             same = lambda v: np.asarray(v)  # noqa: E731  (serial: local = global numbering)

@@ -21,6 +21,7 @@ from dolfinx import fem
 
 from fenics_contact.fem.contact import ContactProfile, NewtonHistory, NewtonOptions
 from fenics_contact.hybrid.certificate import Certificate, primal_certificate
+from fenics_contact.hybrid.condensation import InterfaceProblem
 from fenics_contact.hybrid.iteration import (
     HybridStep,
     InterfaceNewtonOptions,
@@ -30,6 +31,7 @@ from fenics_contact.hybrid.iteration import (
     iterate,
 )
 from fenics_contact.hybrid.inputs import check_reference_displacement, check_solve_inputs
+from fenics_contact.hybrid.response import FineResponse, PrimalPart
 from fenics_contact.problem.boundary import check_boundary_groups
 from fenics_contact.problem.fields import material_fields
 from fenics_contact.problem.geometry import ContactMesh
@@ -152,9 +154,6 @@ class PrimalHybridStep:
 
     def interface_problem(self, options: InterfaceNewtonOptions):
         """The affine pieces for ``hybrid.interface_newton`` (built once: fine Ω₁ response, Ω₂ with J₀)."""
-        from fenics_contact.hybrid.condensation import InterfaceProblem
-        from fenics_contact.hybrid.response import FineResponse, PrimalPart
-
         if self._newton is None or self._newton.options.strategy != options.strategy:
             self.prepare()
             iface = self.interface

@@ -113,7 +113,7 @@ def test_local_fronts_take_fewer_steps_to_the_same_data_on_the_strip(channel_str
     s_load = cond.load_terms()[0]
     sizes = [int(np.count_nonzero(s_load > 0))] + ch.active_sizes
     assert all(b == a + add.size - rem.size for a, b, add, rem in zip(sizes, sizes[1:], ch.added, ch.removed))
-    assert any(x.size for x in ch.extrapolated)  # the local problems changed the sets
+    assert any(x.size for x in ch.resolved)  # the local problems changed the sets
     assert ch.added[-1].size == ch.removed[-1].size == 0 and ch.local[-1] == (0, 0, 0)
     assert all(count >= 1 and its >= count and 1 <= largest <= cond.M.shape[0] for count, its, largest in ch.local[:-1])
     # the contact law and the condensed equation at the end

@@ -96,7 +96,7 @@ class CondensedInterface:
         self.Gq[f] = sla.lu_solve(self.lu, self.P1 @ (a[:, None] * self.Yq[f]))
         self.M = self.Sq + self.Sc @ self.Gq
         self._chains = None
-        if problem.options.fronts or problem.options.front_window:
+        if problem.options.front_window:
             self.chains  # noqa: B018 -- formed offline (collective: all ranks' points), not in the timed solve
 
     def load_terms(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -123,7 +123,7 @@ class CondensedInterface:
 
     @property
     def chains(self) -> list:
-        """The Γ_C unknowns ordered along the boundary (``contact_chains``; the front extrapolation's), built on
+        """The Γ_C unknowns ordered along the boundary (``contact_chains``; the local front resolution's), built on
         first use (collective: the contact points are gathered from all ranks)."""
         if self._chains is None:
             self._chains = contact_chains(self.problem.omega2.contact_points()) if self.M.size else []
@@ -144,7 +144,7 @@ class CondensedInterface:
         p = self.problem
         s_load, g21_0, y20 = self.load_terms()
         try:
-            chains = self.chains if options.fronts or options.front_window else None
+            chains = self.chains if options.front_window else None
             _, lam, hist = contact_solve(s_load, self.M, self.D, options, name, chains)
         except ConvergenceError as err:
             lowest = self.lowest_eigenvalue()

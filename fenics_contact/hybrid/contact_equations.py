@@ -1,8 +1,8 @@
 """The contact equations on the condensed Γ_C unknowns, s = s_L − M μ, μ = D s⁺ (``hybrid.condensation``).
 
-``solve_on`` solves them linearized on a given active set; ``energy_line_search`` is the exact line search along
-a step on the energy ψ = ½ μᵀMμ + ½ Σ D (s⁺)² (the convex energy of the glued problem when M is
-symmetric).  The contact Newton (``hybrid.contact_newton``) and the local front problems
+``solve_on`` solves them linearized on a given active set; ``energy_line_search`` is the exact line
+search along a step on the energy ψ = ½ μᵀMμ + ½ Σ D (s⁺)² (the convex energy of the glued problem when
+M is symmetric).  The contact Newton (``hybrid.contact_newton``) and the local front problems
 (``hybrid.fronts``) take their steps with them.
 """
 

@@ -1,15 +1,14 @@
-"""The fronts of the contact Newton's active set: Γ_C's unknowns ordered along the boundary, and two ways
-of moving the fronts faster than one node per step.
+"""The fronts of the contact Newton's active set: Γ_C's unknowns ordered along the boundary, and the fronts
+resolved locally.
 
 A front is the end of a contiguous active segment of a chain of Γ_C unknowns (``contact_chains``: the
 unknowns ordered along each piece of Γ_C from their coordinates alone).  Where a near-rigid body rests on
 Γ_C (a channel 10⁶ times stiffer than its surroundings) the plain semismooth Newton frees one node per
 step, and in the mixed method fronts in the bulk creep one Gauss–Lobatto point per step.  ``LocalFronts``
-(the default, ``InterfaceNewtonOptions.front_window``) solves the contact equations exactly on a window
-around every front of the next active set, the forces elsewhere held (a nonlinear elimination);
-``FrontExtrapolation`` (``InterfaceNewtonOptions.fronts``) instead predicts, where a front moved the same
-way twice, its fixed point by a secant.  Either only proposes the next set of the contact Newton
-(``hybrid.contact_newton``): a set is accepted only when the solve on it reproduces it.
+(``InterfaceNewtonOptions.front_window``, default 8) solves the contact equations exactly on a window
+around every front of the next active set, the forces elsewhere held (a nonlinear elimination).  It only
+proposes the next set of the contact Newton (``hybrid.contact_newton``): a set is accepted only when the
+solve on it reproduces it.
 """
 
 import numpy as np
@@ -19,7 +18,7 @@ from scipy.spatial.distance import cdist
 
 from fenics_contact.hybrid.contact_equations import solve_on
 
-__all__ = ["contact_chains", "FrontExtrapolation", "LocalFronts"]
+__all__ = ["contact_chains", "LocalFronts"]
 
 
 def contact_chains(points: np.ndarray, *, cut: float = 4.0) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -28,7 +27,7 @@ def contact_chains(points: np.ndarray, *, cut: float = 4.0) -> list[tuple[np.nda
     The pieces are the paths of the Euclidean minimum spanning tree of ``points`` once its edges longer than
     ``cut`` × the median edge are removed (separate components of Γ_C); a piece that is not a path (a
     node with three tree neighbours: points too far from a curve) is left out, and its fronts are then
-    simply not extrapolated.  Coincident points (a vertex copied at a corner) follow each other.
+    not resolved locally (the plain step's set stands there).  Coincident points (a vertex copied at a corner) follow each other.
     """
     if points.shape[0] < 3:
         return []
@@ -67,112 +66,6 @@ def contact_chains(points: np.ndarray, *, cut: float = 4.0) -> list[tuple[np.nda
         chains.append((np.concatenate([members[k] for k in order]),
                        np.concatenate([np.full(members[k].size, a) for k, a in zip(order, arc)])))
     return chains
-
-
-class FrontExtrapolation:
-    """Secant prediction of the fronts of the contact Newton's active set along Γ_C (``contact_chains``).
-
-    A front is the end e of a contiguous active segment of a chain.  A semismooth step solved on the set
-    moves it to the zero crossing z of the new s along the chain (its last node on the active side of z).
-    Where a stiff body rests on Γ_C (a near-rigid punch on the penalty), the front moves one node per step:
-    z(e) − e shrinks slowly.  When a front has moved the same way in two consecutive steps and z(e) − e
-    contracts, the secant through (e₀, z₀), (e₁, z₁) predicts the fixed point e* = z(e*); the trial set
-    moves the front to the last node before e* + ``margin`` node spacing in the direction it came from
-    (a conservative rounding: one node too far can make a near-rigid body pivot).  Only fronts of a
-    stretch of Γ_C made of another material than most of it are extrapolated (local compliance M_ii·D_i
-    more than ``inclusion`` times off its median: a stiff or soft inclusion on Γ_C, where the slow fronts
-    are; elsewhere the plain steps converge fast and a prediction that is one node off costs a step), and
-    the prediction stays inside the stretch of one local compliance (M_ii·D_i within a factor ``clamp`` of
-    its neighbour's: a material boundary of Γ_C is where such a front stops, and the secant's smooth model
-    does not hold across it).  Every trial set is then solved (a counted step) and must confirm itself;
-    after ``max_misses`` predictions that the next step undid (a row the prediction changed is changed
-    back) no more are made.  The fixed point is that of the semismooth Newton: the trial set is only a
-    start for its next step.
-    """
-
-    def __init__(self, chains, M: np.ndarray, D: np.ndarray, *, margin: float = 0.5, clamp: float = 2.0,
-                 inclusion: float = 4.0, max_misses: int = 2) -> None:
-        self.chains = [(np.asarray(idx), np.asarray(pos, dtype=float)) for idx, pos in chains]
-        self.compliance = np.abs(np.diag(M)) * D
-        self.margin, self.clamp, self.max_misses = margin, clamp, max_misses
-        typical = np.median(self.compliance) if self.compliance.size else 0.0
-        #: rows whose fronts may be extrapolated: local compliance more than ``inclusion`` times off the median
-        self.eligible = np.maximum(self.compliance, typical) > inclusion * np.minimum(self.compliance, typical)
-        self.records: dict = {}
-        self.misses = 0
-        self.changed = np.zeros(0, dtype=np.int64)  # rows the last prediction changed
-        self.target = np.zeros(0, dtype=bool)  # and their predicted state
-
-    def _same_material(self, i: int, k: int) -> bool:
-        a, b = self.compliance[i], self.compliance[k]
-        return max(a, b) <= self.clamp * min(a, b)
-
-    @staticmethod
-    def _crossing(s: np.ndarray, idx: np.ndarray, pos: np.ndarray, e: int, o: int):
-        """Zero crossing z of s near the front (end e, active side −o) and the node before it, or None."""
-        n = idx.size
-        j = e
-        if s[idx[e]] > 0.0:
-            while 0 <= j + o < n and s[idx[j + o]] > 0.0:
-                j += o
-            if not 0 <= j + o < n:
-                return None
-        else:
-            while 0 <= j - o < n and s[idx[j]] <= 0.0:
-                j -= o
-            if s[idx[j]] <= 0.0:
-                return None
-        a, b = s[idx[j]], s[idx[j + o]]
-        return pos[j] + (pos[j + o] - pos[j]) * a / (a - b), j
-
-    def missed(self, predicted: np.ndarray) -> bool:
-        """Whether the step that solved the last prediction undid it (changed back a row it had changed);
-        if so the prediction is dropped, its records with it, and one miss counted."""
-        miss = bool(self.changed.size) and bool(np.any(predicted[self.changed] != self.target))
-        if miss:
-            self.misses += 1
-            self.records = {}
-        self.changed = np.zeros(0, dtype=np.int64)
-        return miss
-
-    def trial(self, active: np.ndarray, s_new: np.ndarray, predicted: np.ndarray) -> np.ndarray:
-        """The next set: ``predicted`` (the semismooth step's {s_new > 0} after solving on ``active``), with
-        the fronts that qualify moved to their secant prediction."""
-        trial = predicted.copy()
-        records = {}
-        for c, (idx, pos) in enumerate(self.chains):
-            act = active[idx]
-            ends = [(i, 1) for i in np.flatnonzero(act[:-1] & ~act[1:])]  # o = +1: active below the end
-            ends += [(i + 1, -1) for i in np.flatnonzero(~act[:-1] & act[1:])]
-            for e, o in ends:
-                found = self._crossing(s_new, idx, pos, e, o)
-                if found is None:
-                    continue
-                z, j = found
-                last = self.records.get((c, o, e))
-                k = j
-                if last is not None and j != e and self.misses < self.max_misses and self.eligible[idx[e]]:
-                    e0, z0 = last
-                    f0, f1 = z0 - e0, z - pos[e]
-                    if np.sign(f0) == np.sign(f1) != 0.0 and abs(f1) < abs(f0):
-                        star = pos[e] - f1 * (pos[e] - e0) / (f1 - f0)
-                        spacing = 0.5 * abs(pos[min(j + 1, idx.size - 1)] - pos[max(j - 1, 0)])
-                        star -= np.sign(f1) * self.margin * spacing  # back towards where the front came from
-                        if f1 * o < 0.0:  # the segment shrinks: free its nodes beyond e*
-                            while (0 <= k - o < idx.size and trial[idx[k - o]] and o * pos[k] > o * star
-                                   and self._same_material(idx[k], idx[k - o])):
-                                trial[idx[k]] = False
-                                k -= o
-                        else:  # it grows: activate the nodes up to e*
-                            while (0 <= k + o < idx.size and not trial[idx[k + o]] and o * pos[k + o] <= o * star
-                                   and self._same_material(idx[k], idx[k + o])):
-                                k += o
-                                trial[idx[k]] = True
-                records[(c, o, k)] = (pos[e], z)
-        self.records = records
-        self.changed = np.flatnonzero(trial != predicted)
-        self.target = trial[self.changed]
-        return trial
 
 
 class LocalFronts:

@@ -65,12 +65,12 @@ def newton_iterate(step, options: IterationOptions, *, name: str, monitor=None,
         g12, g21, lam = comm.bcast((g12, g21, lam), root=0)
         om2.set_state(om2.solve(om2.rhs(g21, lam)))  # warm start of Ω₂: one J₀ back-solve
         history.newton_steps = ch.steps
-        predicted = [e.size for e in ch.extrapolated]
-        by = "the front extrapolation" if nopt.fronts else "the local front resolution"
+        resolved = [e.size for e in ch.resolved]
         log.info("%s: contact Newton %d steps, active-set sizes %s, step lengths %s, rows added/removed per "
                  "step %s%s%s", name, ch.steps, ch.active_sizes, [round(t, 3) for t in ch.step_lengths],
                  [f"+{a.size}/-{r.size}" for a, r in zip(ch.added, ch.removed)],
-                 f" (rows {by} set otherwise than the plain step: {predicted})" if any(predicted) else "",
+                 f" (rows the local front resolution set otherwise than the plain step: {resolved})"
+                 if any(resolved) else "",
                  f"; local front problems {sum(w for w, _, _ in ch.local)}, {ch.local_iterations} iterations, "
                  f"largest window {max(m for _, _, m in ch.local)}" if any(w for w, _, _ in ch.local) else "")
         history.contact_newton = ch

@@ -18,6 +18,7 @@ __all__ = ["ACCELERATIONS", "InterfaceNewtonOptions", "IterationOptions"]
 #: The updates of the interface data: the paper's plain update, Anderson acceleration, interface Newton.
 ACCELERATIONS = ("none", "anderson", "newton")
 
+
 @dataclass(frozen=True, slots=True)
 class InterfaceNewtonOptions:
     """Interface Newton (``hybrid.interface_newton``): strategy and step caps.
@@ -31,15 +32,13 @@ class InterfaceNewtonOptions:
     contact Newton resolves every front of its next active set locally, on the ``front_window`` Γ_C
     unknowns on either side of it with the forces elsewhere held (``hybrid.fronts.LocalFronts``; the same
     fixed point; 3–5 steps instead of 8–11 where a near-rigid body rests on Γ_C at contrast 1e6: README,
-    "Interface Newton").  ``fronts=True``: instead, the front extrapolation of an earlier version
-    (``hybrid.fronts.FrontExtrapolation``; fewer steps on some cases, more on others).
+    "Interface Newton").
     """
 
     strategy: str = "condensed"
     max_steps: int = 50
     max_corrections: int = 8
     chunk: int = 128  #: right-hand sides per multi-RHS back-solve of the offline condensation
-    fronts: bool = False
     front_window: int = 8
 
     def __post_init__(self) -> None:

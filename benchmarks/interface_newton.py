@@ -11,14 +11,14 @@ Parts (each a table; all ratios are taken within one run, on one machine):
   β = c·√h for c = 1e-2, 1, 1e4 (``--h-primal``,
   ``--h-mixed``, ``--factors``; the multiscale Ω₁ of Algorithms 3/4 is rebuilt for every α, β, so
   their largest h only at c = 1: ``--big-default-only``).  Each cell also gives, in brackets, the count
-  of the other contact Newton on the same condensed problem (plain vs front extrapolation,
-  ``InterfaceNewtonOptions.fronts``; ``--fronts`` makes the extrapolating one the main count);
+  of the other contact Newton on the same condensed problem (the plain one; the default local front
+  resolution when ``--front-window 0`` makes the plain one the main count);
   ``--dump DIR`` saves every condensed contact problem (s_L, M, D, coordinates) for offline study.
 * ``updates``: none / anderson / newton on every model and algorithm at h = 1/64, H = 1/16:
   converged?, applications of T, online time, final transmission residual (the CLI default is the
   update that converges everywhere fastest).
 * ``fronts``: the contact Newton of Algorithm 1 on model 3 at contrast 1e6 (h from ``--h-primal``): the
-  Γ_C nodes each step adds / removes (plain, the default, and front-extrapolating), and the step counts
+  Γ_C nodes each step adds / removes (plain and the default local front resolution), and the step counts
   of other starts (all active, nested Galerkin-coarsened Γ_C levels, a path in the penalty) and of the
   line search at every step.
 * ``speed``: online time / monolithic semismooth Newton (Newton only, same run) for Algorithms 1 and
@@ -39,8 +39,11 @@ import numpy as np
 import fenics_contact  # noqa: F401  (must precede dolfinx / petsc4py)
 from fenics_contact.errors import FenicsContactError
 from fenics_contact.fem.contact import NewtonOptions
-from fenics_contact.fem.mixed import contact_modulus, default_epsilon
+from fenics_contact.fem.mixed import contact_modulus, default_epsilon, solve_mixed_monolithic
 from fenics_contact.fem.primal import PrimalSubproblem, default_penalty
+from fenics_contact.hybrid.condensation import CondensedInterface
+from fenics_contact.hybrid.contact_newton import contact_newton
+from fenics_contact.hybrid.fronts import contact_chains
 from fenics_contact.hybrid.iteration import InterfaceNewtonOptions, IterationOptions, iterate
 from fenics_contact.hybrid.mixed import MixedHybridStep
 from fenics_contact.hybrid.primal import PrimalHybridStep
@@ -108,25 +111,21 @@ def monolithic_steps(method: int, cm, number: int, E_high: float) -> str:
             steps = mono.solve().steps
             mono.destroy()
             return str(steps)
-        from fenics_contact.fem.mixed import solve_mixed_monolithic
-
         return str(solve_mixed_monolithic(cm, model, newton=newton, split_interface=True, verify=False).newton.steps)
     except FenicsContactError as err:
         return f"error: {type(err).__name__}"
 
 
 def _main_kind() -> str:
-    """The contact Newton of the main count: 'local' (the default front windows), 'extrapolation' or 'plain'."""
-    return "extrapolation" if NEWTON.fronts else ("local" if NEWTON.front_window else "plain")
+    """The contact Newton of the main count: 'local' (the default front windows) or 'plain'."""
+    return "local" if NEWTON.front_window else "plain"
 
 
 def other_steps(step, hist) -> str:
-    """Steps the solve takes with the plain contact Newton (no front windows, no extrapolation), or with the
+    """Steps the solve takes with the plain contact Newton (no front windows), or with the
     default local front resolution when the main count is the plain one: the same condensed problem, its
     contact Newton steps + the corrections on F(g) that followed; '=' when it ends on the same active set and s
     to 1e-10 (then the corrections are the same)."""
-    from fenics_contact.hybrid.newton import contact_newton
-
     ch = hist.contact_newton
     if ch is None:
         return "—"
@@ -138,9 +137,8 @@ def other_steps(step, hist) -> str:
         np.savez(DUMP / name, s_load=s_load, M=cond.M, D=cond.D,
                  points=step.interface_problem(NEWTON).omega2.contact_points())
     kind = _main_kind()
-    window = 0 if NEWTON.fronts else NEWTON.front_window
     s_d, _, _ = contact_newton(s_load, cond.M, cond.D, max_steps=NEWTON.max_steps,
-                               chains=None if kind == "plain" else cond.chains, window=window)
+                               chains=None if kind == "plain" else cond.chains, window=NEWTON.front_window)
     try:
         if kind == "plain":
             s_o, _, h_o = contact_newton(s_load, cond.M, cond.D, max_steps=NEWTON.max_steps, chains=cond.chains,
@@ -159,7 +157,7 @@ def part_steps(lines, h_primal, h_mixed, factors, big_default_only, methods, h_m
         "## Newton steps to a transmission residual of 1e-6 (H = 1/16)",
         "",
         f"Cell: Newton steps (contact Newton + corrections) with the {_main_kind()} contact Newton "
-        f"(InterfaceNewtonOptions(fronts={NEWTON.fronts}, front_window={NEWTON.front_window})), "
+        f"(InterfaceNewtonOptions(front_window={NEWTON.front_window})), "
         "{the semismooth iterations of its local front problems, each a dense solve of at most the largest window "
         "(/ that size)}, "
         f"[the same with the {'default local' if _main_kind() == 'plain' else 'plain'} contact Newton on "
@@ -266,8 +264,6 @@ def part_speed(lines, n: int, number: int) -> None:
         for accel in ("newton", "anderson"):
             step.reset()
             if accel == "newton":  # the offline interface response, outside the CPU clock of the online phase
-                from fenics_contact.hybrid.newton import CondensedInterface
-
                 t_off = time.perf_counter()
                 problem = step.interface_problem(InterfaceNewtonOptions())
                 problem.condensed = problem.condensed or CondensedInterface(problem)
@@ -287,7 +283,7 @@ def part_speed(lines, n: int, number: int) -> None:
 
 
 # ---------------------------------------------------------------------------------------------
-# fronts: why the contact Newton needs more steps at contrast 1e6 (issue 10), and what does not help
+# fronts: why the contact Newton needs more steps at contrast 1e6, and what does not help
 # ---------------------------------------------------------------------------------------------
 def _galerkin_coarse(s_load, M, D, y):
     """The condensed problem on every other Γ_C node (gaps interpolated linearly, Galerkin on M⁻¹): (s_L, M, D, y, P)."""
@@ -306,8 +302,6 @@ def _galerkin_coarse(s_load, M, D, y):
 
 def _nested(s_load, M, D, y, smallest=16):
     """Nested iteration over Γ_C: solve the Galerkin-coarsened problem, start from its prolonged active set."""
-    from fenics_contact.hybrid.newton import contact_newton
-
     if s_load.size <= smallest:
         s, _, hist = contact_newton(s_load, M, D, max_steps=200)
         return [hist.steps], s
@@ -319,8 +313,6 @@ def _nested(s_load, M, D, y, smallest=16):
 
 def _continuation(s_load, M, D, factor=1e3, start=1e-9):
     """Path in the penalty: D·start, ·factor, ... up to D, each solve started from the last active set."""
-    from fenics_contact.hybrid.newton import contact_newton
-
     counts, scale, active = [], start, s_load > 0.0
     while True:
         s, _, hist = contact_newton(s_load, M, D * scale, max_steps=200, active=active)
@@ -334,8 +326,6 @@ def _continuation(s_load, M, D, factor=1e3, start=1e-9):
 def part_fronts(lines, sizes, E_high: float) -> None:
     """Contact Newton of Algorithm 1 (= the monolithic semismooth Newton from its 2nd step): active-set changes
     per step on model 3, and the step counts of other starts / globalizations on the same condensed problem."""
-    from fenics_contact.hybrid.newton import CondensedInterface, contact_chains, contact_newton
-
     lines += [
         f"## Contact Newton on model 3, E_high {E_high:g}: active-set fronts and alternatives (Algorithm 1, c = 1)",
         "",
@@ -343,21 +333,17 @@ def part_fronts(lines, sizes, E_high: float) -> None:
         "'same' = all variants end on the plain Newton's active set and its s to 1e-10). local (the default, "
         "InterfaceNewtonOptions(front_window=8)): the next set takes, around every front of the semismooth step's set, "
         "the solution of the contact equations on the 8 Γ_C unknowns on either side of it with the forces elsewhere "
-        "held (`hybrid.newton.LocalFronts`; in braces the semismooth iterations of those local problems / the largest "
-        "window). fronts "
-        "(InterfaceNewtonOptions(fronts=True)): the plain Newton whose next set is, where a front of the active set moved "
-        "the same way twice, the secant prediction of that front (`hybrid.newton.FrontExtrapolation`; every set "
-        "solved is a step, predicted or not; in brackets the steps whose set was a prediction). "
-        "Plain (front_window=0): start from the "
+        "held (`hybrid.fronts.LocalFronts`; in braces the semismooth iterations of those local problems / the largest "
+        "window). Plain (front_window=0): start from the "
         "contact-free penetration pattern {s_L > 0}, full steps, exact line search once a set recurs. "
         "all active: start from 𝒜 = Γ_C. nested: Galerkin-coarsened Γ_C problems (every other node, down to "
         "≤ 16 nodes), each level started from the prolonged coarser solution (steps per level, coarse → fine). "
         "penalty path: D·1e-9, ·1e3 … D, each started from the last set. line search: exact line search on "
         "the energy at every step.",
         "",
-        "| 1/h | Γ_C rows | local {iterations/window} | fronts (predicted sets) | plain | all active | nested (per level) | penalty path "
+        "| 1/h | Γ_C rows | local {iterations/window} | plain | all active | nested (per level) | penalty path "
         "(per level) | line search | monolithic Newton | same |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
     traces = []
     for n in sizes:
@@ -373,8 +359,6 @@ def part_fronts(lines, sizes, E_high: float) -> None:
         order = np.argsort(y)
         s_load, M, D, y = s_load[order], M[np.ix_(order, order)], D[order], y[order]
         s0, _, h0 = contact_newton(s_load, M, D, max_steps=200)
-        s_f, _, h_f = contact_newton(s_load, M, D, max_steps=200, chains=contact_chains(points[order]))
-        predicted = sum(1 for e in h_f.extrapolated if e.size)
         s_w, _, h_w = contact_newton(s_load, M, D, max_steps=200, chains=contact_chains(points[order]),
                                      window=InterfaceNewtonOptions().front_window)
         _, _, h_all = contact_newton(s_load, M, D, max_steps=200, active=np.ones(s_load.size, dtype=bool))
@@ -383,9 +367,9 @@ def part_fronts(lines, sizes, E_high: float) -> None:
         s_ls, _, h_ls = contact_newton(s_load, M, D, max_steps=200, line_search=True)
         scale = np.abs(s0).max()
         same = all(np.array_equal(s > 0, s0 > 0) and np.abs(s - s0).max() <= 1e-10 * scale
-                   for s in (s_nest, s_path, s_ls, s_f, s_w))
+                   for s in (s_nest, s_path, s_ls, s_w))
         row = (f"| {n} | {s_load.size} | **{h_w.steps}** {{{h_w.local_iterations}/{max(m for _, _, m in h_w.local)}}} | "
-               f"{h_f.steps} ({predicted}) | {h0.steps} | {h_all.steps} | {sum(nest)} ({', '.join(map(str, nest))}) | "
+               f"{h0.steps} | {h_all.steps} | {sum(nest)} ({', '.join(map(str, nest))}) | "
                f"{sum(path)} ({', '.join(map(str, path))}) | {h_ls.steps} | {monolithic_steps(1, cm, 3, E_high)} | "
                f"{same} |")
         print(row, flush=True)
@@ -395,16 +379,13 @@ def part_fronts(lines, sizes, E_high: float) -> None:
                                     enumerate(zip(h0.added, h0.removed))]))
         traces.append((n, "Local front resolution (the default, front_window=8)",
                        [(k + 1, h_w.active_sizes[k], at(a), at(r), at(x)) for k, (a, r, x) in
-                        enumerate(zip(h_w.added, h_w.removed, h_w.extrapolated))]))
-        traces.append((n, "Front-extrapolating (fronts=True)",
-                       [(k + 1, h_f.active_sizes[k], at(a), at(r), at(x)) for k, (a, r, x) in
-                        enumerate(zip(h_f.added, h_f.removed, h_f.extrapolated))]))
+                        enumerate(zip(h_w.added, h_w.removed, h_w.resolved))]))
         del step
     for n, label, rows in traces:
         lines += ["", f"{label} contact Newton at h = 1/{n}: Γ_C nodes (y in units of 1/32; the stiff channels touch "
                   "Γ_C on y ∈ [5, 6], [13, 14], [21, 22]) that each step adds to / removes from the active set it "
-                  "solves next (of them, set by the local front resolution or the front extrapolation):", "",
-                  "| step | active nodes after it | added | removed | of them predicted |", "|---|---|---|---|---|"]
+                  "solves next (of them, set by the local front resolution):", "",
+                  "| step | active nodes after it | added | removed | of them set locally |", "|---|---|---|---|---|"]
         lines += [f"| {k} | {size} | {a} | {r} | {x or '—'} |" for k, size, a, r, x in rows]
     lines.append("")
 
@@ -429,8 +410,6 @@ def main() -> None:
                         "(smaller: less memory for the mixed h = 1/128)")
     parser.add_argument("--no-monolithic", action="store_true",
                         help="steps part: skip the monolithic Newton column (the mixed one needs ~10 GB at h = 1/128)")
-    parser.add_argument("--fronts", action="store_true",
-                        help="steps part: the front-extrapolating contact Newton as the main count (plain in brackets)")
     parser.add_argument("--front-window", type=int, default=InterfaceNewtonOptions().front_window,
                         help="steps part: the local front resolution's window (0: the plain contact Newton as the "
                         "main count, the default window in brackets)")
@@ -444,7 +423,7 @@ def main() -> None:
              f"--parts {args.parts} --methods {args.methods} --h-primal {args.h_primal} --h-mixed {args.h_mixed} "
              f"--factors {args.factors} --h-ms-max {args.h_ms_max} --updates-h {args.updates_h} --cap {args.cap} "
              f"--speed-h {args.speed_h} --speed-model {args.speed_model} --models {args.models}"
-             f"{' --no-monolithic' if args.no_monolithic else ''}{' --fronts' if args.fronts else ''} --front-window {args.front_window} --chunk {args.chunk} "
+             f"{' --no-monolithic' if args.no_monolithic else ''} --front-window {args.front_window} --chunk {args.chunk} "
              f"--out {args.out}`", ""]
     chosen = {"1": MODELS[0], "2": MODELS[1], "3": MODELS[2], "3e6": MODELS[3]}
     try:
@@ -452,7 +431,7 @@ def main() -> None:
     except KeyError as err:
         raise SystemExit(f"unknown model {err}; choose from {', '.join(chosen)}") from None
     global NEWTON, DUMP
-    NEWTON = InterfaceNewtonOptions(chunk=args.chunk, fronts=args.fronts, front_window=args.front_window)
+    NEWTON = InterfaceNewtonOptions(chunk=args.chunk, front_window=args.front_window)
     DUMP = args.dump
     start = time.perf_counter()
     ints = lambda text: [int(x) for x in text.split(",")]  # noqa: E731

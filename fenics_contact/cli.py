@@ -200,7 +200,6 @@ class RunOptions:
     accel: str | None = None  #: None: "newton", or "anderson" for the mixed method on several ranks (default_accel)
     tol: float = 1e-6
     max_iterations: int = 2000
-    fronts: bool = False  #: the contact Newton extrapolates the fronts of its active set (--accel newton only)
     front_window: int | None = None  #: the contact Newton's local front resolution (None: the default 8; 0: off)
     delta: float | None = None
     beta: str | None = None
@@ -225,9 +224,6 @@ class RunOptions:
         get_model(self.model)  # InputError for an unknown model
         if self.accel is None:
             object.__setattr__(self, "accel", default_accel(self.method))
-        if self.fronts and self.accel != "newton":
-            raise InputError(f"--fronts is an option of the interface Newton (--accel newton), not of --accel "
-                             f"{self.accel}")
         if self.front_window is not None and self.accel != "newton":
             raise InputError(f"--front-window is an option of the interface Newton (--accel newton), not of --accel "
                              f"{self.accel}")
@@ -235,9 +231,6 @@ class RunOptions:
                                               or not isinstance(self.front_window, (int, np.integer))
                                               or self.front_window < 0):
             raise InputError(f"--front-window must be an integer >= 0 (0: off), got {self.front_window!r}")
-        if self.fronts and self.front_window:
-            raise InputError("--fronts (the front extrapolation) replaces the local front resolution: give it "
-                             f"without --front-window {self.front_window} (or with --front-window 0)")
         for name, (methods, what) in _METHOD_OPTIONS.items():
             if getattr(self, name) is not None and self.method not in methods:
                 raise InputError(f"{_flag(name)} does not apply to --method {self.method} (it is {what})")
@@ -330,9 +323,9 @@ class RunOptions:
                                 newton=self.newton_options())
 
     def newton_options(self) -> InterfaceNewtonOptions:
-        """The interface Newton's options (the front window 0 with --fronts, which replaces it)."""
+        """The interface Newton's options (the front window of --front-window, else the default)."""
         window = InterfaceNewtonOptions().front_window if self.front_window is None else int(self.front_window)
-        return InterfaceNewtonOptions(fronts=self.fronts, front_window=0 if self.fronts else window)
+        return InterfaceNewtonOptions(front_window=window)
 
 
 def build_parser(*, given_only: bool = False) -> argparse.ArgumentParser:
@@ -368,11 +361,6 @@ def build_parser(*, given_only: bool = False) -> argparse.ArgumentParser:
                      help="how the interface fixed point is solved: the interface Newton method (default: robust "
                      "on every tested model), Anderson acceleration, or none (the paper's plain update); under "
                      "mpiexec --method mixed defaults to anderson (its interface Newton is serial)")
-    run.add_argument("--fronts", action="store_true",
-                     help="with --accel newton: the contact Newton extrapolates the fronts of its active set along "
-                     "Gamma_C (the same solution; fewer steps where a near-rigid body rests on Gamma_C, e.g. 8 "
-                     "instead of 11 at contrast 1e6, h = 1/256, but 10 instead of 8 on one tested case: README, "
-                     "'Interface Newton'); replaces the local front resolution (--front-window)")
     run.add_argument("--front-window", type=int, default=None, metavar="W",
                      help="with --accel newton: the contact Newton solves the contact equations locally on the W "
                      "Gamma_C unknowns on either side of every front of its next active set, the forces elsewhere "
@@ -908,7 +896,6 @@ def _solve_and_write(options: RunOptions, comm: MPI.Comm, model: ContactProblem 
         "h": cm.h,
         "H": cm.H,
         "accel": options.accel,
-        "fronts": options.fronts,
         "front_window": options.newton_options().front_window if options.accel == "newton" else None,
         "iterations": result.iterations,
         "converged": result.converged and (curve is None or all(s["converged"] for s in curve["steps"])),

@@ -1,4 +1,4 @@
-"""Contact problems shared by the contact-Newton tests (``test_interface_newton_fronts``, ``..._local``)."""
+"""Contact problems of the contact-Newton tests (``test_interface_newton_local``): random condensed ones, the strip."""
 
 import numpy as np
 import pytest

@@ -62,31 +62,26 @@ def test_multiscale_default_alpha_at_contrast_1e6(tmp_path, capsys):
 
 
 def test_front_options_same_solution_fewer_steps(tmp_path):
-    """The contact Newton's front options on the case they were built for, Algorithm 1 on model 3 at contrast 1e6,
-    h = 1/128 (a near-rigid channel on Γ_C): the default local front resolution (4 steps measured),
-    `--front-window 0` (the plain semismooth Newton, 8) and `--fronts` (the front extrapolation, 7) give the same
-    solution (active set, e_u to 1e-10 of the fine solution); the default and `--fronts` take fewer steps than
-    the plain Newton; both options are refused without --accel newton, a negative window always, and a window
-    together with --fronts."""
+    """The contact Newton's front option on the case it was built for, Algorithm 1 on model 3 at contrast 1e6,
+    h = 1/128 (a near-rigid channel on Γ_C): the default local front resolution (4 steps measured) and
+    `--front-window 0` (the plain semismooth Newton, 8) give the same solution (active set, e_u to 1e-10 of the
+    fine solution); the default takes fewer steps than the plain Newton; the option is refused without
+    --accel newton, and a negative window always."""
     runs = {}
-    for name, flag in (("default", []), ("plain", ["--front-window", "0"]), ("fronts", ["--fronts"])):
+    for name, flag in (("default", []), ("plain", ["--front-window", "0"])):
         out = tmp_path / name
         code = main(["run", "--model", "3", "--E-high", "1e6", "--h", "128", "--H", "16", "--reference", "--no-plots",
                      "--out", str(out), *flag])
         assert code == 0
         runs[name] = _summary(out)
-    default, plain, fronts = runs["default"], runs["plain"], runs["fronts"]
-    assert fronts["fronts"] is True and plain["fronts"] is False and default["fronts"] is False
-    assert default["front_window"] == 8 and plain["front_window"] == 0 and fronts["front_window"] == 0
-    for run in (default, fronts):
-        assert run["transmission_residual"] < 1e-6 and run["active_set"] == plain["active_set"]
-        assert abs(run["e_u"] - plain["e_u"]) < 1e-10 and run["e_u"] < 1e-8
-        assert run["interface_newton_steps"] < plain["interface_newton_steps"]
+    default, plain = runs["default"], runs["plain"]
+    assert default["front_window"] == 8 and plain["front_window"] == 0
+    assert default["transmission_residual"] < 1e-6 and default["active_set"] == plain["active_set"]
+    assert abs(default["e_u"] - plain["e_u"]) < 1e-10 and default["e_u"] < 1e-8
+    assert default["interface_newton_steps"] < plain["interface_newton_steps"]
     assert default["interface_newton_steps"] <= 5
-    for flag in (["--fronts"], ["--front-window", "4"]):
-        code = main(["run", "--h", "16", "--H", "4", "--accel", "anderson", *flag, "--no-plots",
-                     "--out", str(tmp_path / "refused")])
-        assert code == 2 and not (tmp_path / "refused").exists()
-    for flag in (["--front-window", "-1"], ["--fronts", "--front-window", "4"]):  # (--fronts replaces the window)
-        code = main(["run", "--h", "16", "--H", "4", *flag, "--no-plots", "--out", str(tmp_path / "bad")])
-        assert code == 2 and not (tmp_path / "bad").exists()
+    code = main(["run", "--h", "16", "--H", "4", "--accel", "anderson", "--front-window", "4", "--no-plots",
+                 "--out", str(tmp_path / "refused")])
+    assert code == 2 and not (tmp_path / "refused").exists()
+    code = main(["run", "--h", "16", "--H", "4", "--front-window", "-1", "--no-plots", "--out", str(tmp_path / "bad")])
+    assert code == 2 and not (tmp_path / "bad").exists()

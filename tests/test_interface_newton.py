@@ -1,4 +1,4 @@
-"""Interface Newton (hybrid.newton) and the convergence certificate (hybrid.certificate).
+"""Interface Newton (hybrid.interface_newton) and the convergence certificate (hybrid.certificate).
 
 * Newton lands on the fixed point of the Robin iteration (same step object, Anderson run to a
   transmission residual of 1e-10) for all four algorithms on models 1, 2 and the heterogeneous

@@ -20,7 +20,8 @@ from fenics_contact.errors import ConvergenceError, InputError
 from fenics_contact.fem.contact import NewtonOptions
 from fenics_contact.fem.primal import default_penalty, solve_primal_monolithic
 from fenics_contact.hybrid.iteration import InterfaceNewtonOptions, IterationOptions, iterate
-from fenics_contact.hybrid.newton import CondensedInterface, contact_newton
+from fenics_contact.hybrid.condensation import CondensedInterface
+from fenics_contact.hybrid.contact_newton import contact_newton
 from fenics_contact.hybrid.primal import DEFAULT_ALPHA, DEFAULT_ALPHA_MS, PrimalHybridStep
 from fenics_contact.hybrid.transmission import InterfaceSpace, robin_coefficient, split_mesh
 from fenics_contact.multiscale.cem import CEMOptions

@@ -1,4 +1,4 @@
-"""The contact Newton's local front resolution (issue 10, third pass; ``hybrid.newton.LocalFronts``, the default).
+"""The contact Newton's local front resolution (``hybrid.fronts.LocalFronts``, the default).
 
 * A local problem's answer is the solution of the contact equations on its window with the forces elsewhere
   held: s_R = r_R − M_RR μ_R and μ_R = D_R s_R⁺ hold on the window (checked by hand), and the windows are
@@ -21,7 +21,8 @@ import pytest
 
 from fenics_contact.errors import ConvergenceError, InputError
 from fenics_contact.hybrid.iteration import InterfaceNewtonOptions, IterationOptions, iterate
-from fenics_contact.hybrid.newton import LocalFronts, contact_chains, contact_newton, contact_solve
+from fenics_contact.hybrid.contact_newton import contact_newton, contact_solve
+from fenics_contact.hybrid.fronts import LocalFronts, contact_chains
 
 from contact_problems import random_contact_problem
 
@@ -112,7 +113,7 @@ def test_local_fronts_take_fewer_steps_to_the_same_data_on_the_strip(channel_str
     s_load = cond.load_terms()[0]
     sizes = [int(np.count_nonzero(s_load > 0))] + ch.active_sizes
     assert all(b == a + add.size - rem.size for a, b, add, rem in zip(sizes, sizes[1:], ch.added, ch.removed))
-    assert any(x.size for x in ch.extrapolated)  # the local problems changed the sets
+    assert any(x.size for x in ch.resolved)  # the local problems changed the sets
     assert ch.added[-1].size == ch.removed[-1].size == 0 and ch.local[-1] == (0, 0, 0)
     assert all(count >= 1 and its >= count and 1 <= largest <= cond.M.shape[0] for count, its, largest in ch.local[:-1])
     # the contact law and the condensed equation at the end

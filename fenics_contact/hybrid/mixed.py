@@ -9,7 +9,7 @@ Both subdomains use Arnold–Winther stresses × DG P1 displacements
 (``fem.mixed.MixedSubproblem``); Ω₁ is factorized once, Ω₂ runs the globalized
 semismooth Newton warm-started from its last solution and refactorizes only
 when its active set changes.  The loop is ``hybrid.iteration.iterate`` (plain update as in the
-paper, Anderson acceleration, or the interface Newton method of ``hybrid.newton``), stopped by the
+paper, Anderson acceleration, or the interface Newton method of ``hybrid.interface_newton``), stopped by the
 transmission residual of ``hybrid.certificate``.
 
 **Space of the Robin data and quadrature on γ.**  The normal trace σn of an AW
@@ -65,6 +65,7 @@ from dolfinx import fem
 from fenics_contact.fem.arnold_winther import ArnoldWintherSpace
 from fenics_contact.fem.contact import NewtonOptions
 from fenics_contact.hybrid.certificate import Certificate, mixed_certificate
+from fenics_contact.hybrid.condensation import InterfaceProblem
 from fenics_contact.hybrid.inputs import check_solve_inputs, require_instance
 from fenics_contact.hybrid.iteration import (
     InterfaceNewtonOptions,
@@ -85,6 +86,7 @@ from fenics_contact.fem.mixed import (
     epsilon_for,
 )
 from fenics_contact.hybrid.primal import omega2_record
+from fenics_contact.hybrid.response import FineResponse, MixedPart
 from fenics_contact.hybrid.transmission import split_mesh, sub_to_parent_dofs
 
 __all__ = ["DEFAULT_BETA", "check_straight_interface", "MixedHybridResult", "MixedHybridStep", "solve_mixed_hybrid", "solve_or_verify",
@@ -268,20 +270,16 @@ class MixedHybridStep:
 
     def _omega1_response(self, options: InterfaceNewtonOptions):
         """Ω₁'s affine trace response (fine Ω₁: back-solves with its factorization)."""
-        from fenics_contact.hybrid.newton import FineResponse, MixedPart
-
         self.prepare()
         return FineResponse(MixedPart(self.sub[0], perm=None, contact=False), chunk=options.chunk)
 
     def interface_problem(self, options: InterfaceNewtonOptions):
-        """The affine pieces for ``hybrid.newton`` (built once)."""
+        """The affine pieces for ``hybrid.interface_newton`` (built once)."""
         if self.comm.size > 1:  # (issue 13) MixedPart holds serial SciPy operators
             raise InputError(
                 f"the interface Newton method (--accel newton) of the mixed method runs serially; got {self.comm.size} "
                 "MPI ranks. Use --accel anderson (or none) under mpiexec, or run without mpiexec."
             )
-        from fenics_contact.hybrid.newton import InterfaceProblem, MixedPart
-
         if self._newton is None or self._newton.options.strategy != options.strategy:
             omega2 = MixedPart(self.sub[1], perm=self._perm2, contact=True, factorize=options.strategy == "condensed")
             same = lambda v: np.asarray(v)  # noqa: E731  (serial: local = global numbering)

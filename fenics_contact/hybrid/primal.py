@@ -7,7 +7,7 @@
 With vertex quadrature on γ its fixed point is the monolithic penalized
 solution (Theorem 3.1).  The iteration stops on the transmission residual of
 the pair (``hybrid.certificate``); ``accel="newton"`` solves the fixed point by
-the interface Newton method (``hybrid.newton``) instead of iterating.
+the interface Newton method (``hybrid.interface_newton``) instead of iterating.
 """
 
 import logging
@@ -21,6 +21,7 @@ from dolfinx import fem
 
 from fenics_contact.fem.contact import ContactProfile, NewtonHistory, NewtonOptions
 from fenics_contact.hybrid.certificate import Certificate, primal_certificate
+from fenics_contact.hybrid.condensation import InterfaceProblem
 from fenics_contact.hybrid.iteration import (
     HybridStep,
     InterfaceNewtonOptions,
@@ -30,6 +31,7 @@ from fenics_contact.hybrid.iteration import (
     iterate,
 )
 from fenics_contact.hybrid.inputs import check_reference_displacement, check_solve_inputs
+from fenics_contact.hybrid.response import FineResponse, PrimalPart
 from fenics_contact.problem.problem import ContactProblem
 from fenics_contact.fem.primal import PrimalSubproblem, penalty_for, warn_if_locking
 from fenics_contact.hybrid.transmission import InterfaceSpace, robin_coefficient, split_mesh
@@ -153,9 +155,7 @@ class PrimalHybridStep:
         return np.concatenate([w, w])
 
     def interface_problem(self, options: InterfaceNewtonOptions):
-        """The affine pieces for ``hybrid.newton`` (built once: fine Ω₁ response, Ω₂ with J₀)."""
-        from fenics_contact.hybrid.newton import FineResponse, InterfaceProblem, PrimalPart
-
+        """The affine pieces for ``hybrid.interface_newton`` (built once: fine Ω₁ response, Ω₂ with J₀)."""
         if self._newton is None or self._newton.options.strategy != options.strategy:
             self.prepare()
             iface = self.interface

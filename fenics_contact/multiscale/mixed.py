@@ -69,6 +69,7 @@ from fenics_contact.problem.geometry import ContactMesh
 from fenics_contact.fem.mixed import MixedContactProfile, MixedSolution, boundary_stress_space
 from fenics_contact.hybrid.mixed import DEFAULT_BETA, MixedHybridStep, solve_or_verify
 from fenics_contact.hybrid.primal import omega2_record
+from fenics_contact.hybrid.response import MatrixResponse
 from fenics_contact.multiscale.mixed_cem import (
     DEFAULT_MAX_NBASIS,
     DEFAULT_MIN_GAP,
@@ -256,8 +257,6 @@ class MixedMultiscaleHybridStep(MixedHybridStep):
 
     def _omega1_response(self, options: InterfaceNewtonOptions):
         """Ω₁'s affine trace σ₁n₁ = T g + t₀ (``InterfaceResponse``, precomputed offline with the bases)."""
-        from fenics_contact.hybrid.newton import MatrixResponse
-
         rs = self.omega1.response
         return MatrixResponse(rs.T, rs.t0)
 

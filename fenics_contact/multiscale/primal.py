@@ -25,12 +25,14 @@ from dolfinx import fem
 from fenics_contact.multiscale.cem import DEFAULT_S_FACTOR, CEMOptions, Omega1Multiscale
 from fenics_contact.fem.contact import NewtonOptions
 from fenics_contact.hybrid.certificate import Certificate, primal_certificate
+from fenics_contact.hybrid.condensation import InterfaceProblem
 from fenics_contact.hybrid.inputs import check_reference_displacement, check_solve_inputs, require_instance
 from fenics_contact.hybrid.iteration import InterfaceNewtonOptions, IterationOptions, iterate
 from fenics_contact.errors import InputError
 from fenics_contact.problem.problem import ContactProblem
 from fenics_contact.fem.primal import PrimalSubproblem, penalty_for, warn_if_locking
 from fenics_contact.hybrid.primal import DEFAULT_ALPHA_MS, HybridResult, omega2_record, solve_or_verify
+from fenics_contact.hybrid.response import MatrixResponse, PrimalPart
 from fenics_contact.hybrid.transmission import InterfaceSpace, robin_coefficient, split_mesh
 
 __all__ = ["MultiscalePrimalHybridStep", "solve_primal_ms_hybrid"]
@@ -138,11 +140,9 @@ class MultiscalePrimalHybridStep:
             prev[:] = 0.0
 
     def interface_problem(self, options: InterfaceNewtonOptions):
-        """The affine pieces for ``hybrid.newton``: Ω₁'s interface response u₁|γ = R g₁₂ + r₀ from the
+        """The affine pieces for ``hybrid.interface_newton``: Ω₁'s interface response u₁|γ = R g₁₂ + r₀ from the
         coarse solver (``Omega1Multiscale.response``: one dense coarse solve with n_γ + 1 right-hand sides,
         nothing of fine-mesh size), Ω₂ with J₀ (built once)."""
-        from fenics_contact.hybrid.newton import InterfaceProblem, MatrixResponse, PrimalPart
-
         if self._newton is None or self._newton.options.strategy != options.strategy:
             iface = self.interface
             R, r0 = self.omega1.response()  # rows: this rank's owned values; columns: all ranks' (rank order)

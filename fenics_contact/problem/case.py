@@ -39,7 +39,7 @@ unless said; unknown keys are refused.  Relative file names are relative to the 
     indentation = 1e-3 | [2e-4, 4e-4, ...]   # rigid motion by depth x direction; a list = load steps
     direction = [dx, dy]                     # default: the plane's normal (into the body); required for a circle
 
-    [run]          method, accel, fronts, front-window, tol, max-iterations, reference, out, plots
+    [run]          method, accel, front-window, tol, max-iterations, reference, out, plots
     [primal]       alpha, delta            (primal, primal-ms)
     [mixed]        beta, epsilon           (mixed, mixed-ms)
     [multiscale]   layers, nbasis, cache-dir   (primal-ms, mixed-ms)

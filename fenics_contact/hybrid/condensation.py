@@ -1,0 +1,162 @@
+"""The interface problem of the Newton method and its condensation onto the Γ_C unknowns (METHOD §9).
+
+Every algorithm exchanges Robin data g = (g₁₂, g₂₁) on γ through traces y_i (u_i on γ for the primal
+methods, σ_in_i for the mixed ones):
+
+    T(g) = (a ⊙ y₂(g₂₁) + b g₂₁,  a ⊙ y₁(g₁₂) + b g₁₂)       (primal a = 2α, b = −1; mixed a = −2β, b = 1).
+
+``InterfaceProblem`` holds what the Newton method needs: Ω₁'s affine response y₁ = T₁ g₁₂ + t₁, Ω₂'s
+affine pieces (``response.AffinePart``) and this update.  Ω₂ is linear except for the penalty on Γ_C:
+with the contact values s = Q x (u_c at the Γ_C nodes, or σ_c at the Gauss–Lobatto nodes) and the
+penalty force λ = D s⁺ (D = w/δ or w/ε),
+
+    J₀ x = b₂ + C₂ g₂₁ − Qᵀ λ,   y₂ = N₂ x,
+
+where J₀ is the Ω₂ operator with no contact node active.  Eliminating x and g (everything but λ enters
+linearly) leaves an equation on the Γ_C unknowns alone (``CondensedInterface``),
+
+    s = s_L − M D s⁺,
+
+with M (n_c × n_c, the contact compliance of the glued problem) and the load term s_L.  Offline: J₀ is
+back-solved for the n_γ data and n_c contact columns (Yc, Sc, Yq, Sq) and the interface matrix
+K = I − P₁P₂ (P₁ = a⊙T₁ + b, P₂ = a⊙Yc + b) factorized; online: one J₀ back-solve and one Ω₁ load solve
+give s_L.  With Algorithm 1 the condensation is exact.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg as sla
+
+from fenics_contact.errors import ConvergenceError
+from fenics_contact.hybrid.contact_newton import ContactNewtonHistory, contact_solve
+from fenics_contact.hybrid.fronts import contact_chains
+from fenics_contact.hybrid.options import InterfaceNewtonOptions
+from fenics_contact.hybrid.response import AffinePart
+
+__all__ = ["InterfaceProblem", "CondensedInterface"]
+
+
+@dataclass(slots=True)
+class InterfaceProblem:
+    """What the Newton method needs from a step: Ω₁ response, Ω₂ pieces, the update y ↦ a⊙y + b g.
+
+    ``gather``/``local`` map one half of the step's data (g₁₂ or g₂₁, local owned values) to the
+    global numbering and back; ``condensed`` caches the offline condensation.
+    """
+
+    omega1: object
+    omega2: AffinePart
+    a: np.ndarray
+    b: float
+    gather: object
+    local: object
+    options: InterfaceNewtonOptions
+    condensed: "CondensedInterface | None" = None
+    free: np.ndarray = None  #: interface values whose data act on a subdomain (others stay 0: γ ∩ Γ_D)
+
+    def __post_init__(self) -> None:
+        if self.free is None:
+            self.free = self.omega2.data_free() | (np.abs(self.omega1.T).sum(axis=0) > 0.0)
+
+    def halves(self, g: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Global (g₁₂, g₂₁) from the step's local data."""
+        n = g.size // 2
+        return self.gather(g[:n]), self.gather(g[n:])
+
+    def data(self, g12: np.ndarray, g21: np.ndarray) -> np.ndarray:
+        """The step's local data from global halves."""
+        return np.concatenate([self.local(g12), self.local(g21)])
+
+    def step_direction(self, F12: np.ndarray, F21: np.ndarray, D2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Newton direction of F(g) = g − T(g) with ∂y₂/∂g₂₁ = D2: (I − P₁P₂) d₂₁ = −F₂₁ − P₁F₁₂, d₁₂ = P₂d₂₁ − F₁₂."""
+        f = np.flatnonzero(self.free)
+        a, eye = self.a[f], np.eye(f.size)
+        P1 = a[:, None] * self.omega1.T[np.ix_(f, f)] + self.b * eye
+        P2 = a[:, None] * D2[np.ix_(f, f)] + self.b * eye
+        d12, d21 = np.zeros(self.a.size), np.zeros(self.a.size)
+        d21[f] = sla.solve(eye - P1 @ P2, -F21[f] - P1 @ F12[f])
+        d12[f] = P2 @ d21[f] - F12[f]
+        return d12, d21
+
+
+class CondensedInterface:
+    """Offline condensation of the glued linear problem onto the Γ_C unknowns: s = s_L − M λ."""
+
+    def __init__(self, problem: InterfaceProblem) -> None:
+        om2 = problem.omega2
+        self.problem = problem
+        self.Yc, self.Sc, self.Yq, self.Sq = om2.responses(contact=True, chunk=problem.options.chunk)
+        f = self.f = np.flatnonzero(problem.free)  # the data at the other values stay zero
+        a, b, eye = problem.a[f], problem.b, np.eye(f.size)
+        self.P1 = a[:, None] * problem.omega1.T[np.ix_(f, f)] + b * eye
+        P2 = a[:, None] * self.Yc[np.ix_(f, f)] + b * eye
+        self.lu = sla.lu_factor(eye - self.P1 @ P2)
+        self.Gq = np.zeros((problem.a.size, self.Sq.shape[0]))  # ∂g₂₁/∂λ = −Gq
+        self.Gq[f] = sla.lu_solve(self.lu, self.P1 @ (a[:, None] * self.Yq[f]))
+        self.M = self.Sq + self.Sc @ self.Gq
+        self._chains = None
+        if problem.options.front_window:
+            self.chains  # noqa: B018 -- formed offline (collective: all ranks' points), not in the timed solve
+
+    def load_terms(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Online: (s_L, g₂₁ at λ = 0, y₂₀) from one Ω₂ back-solve and the Ω₁ load response."""
+        p, f = self.problem, self.f
+        t1 = p.omega1.load()
+        y20, s00 = p.omega2.load_response()
+        g21 = np.zeros(p.a.size)
+        g21[f] = sla.lu_solve(self.lu, self.P1 @ (p.a[f] * y20[f]) + p.a[f] * t1[f])
+        return s00 + self.Sc @ g21, g21, y20
+
+    def jacobian(self, active: np.ndarray) -> np.ndarray:
+        """∂y₂/∂g₂₁ for the Ω₂ active set (Woodbury on J₀: no factorization)."""
+        A = np.flatnonzero(active)
+        if A.size == 0:
+            return self.Yc
+        DA = self.D[A]
+        S = np.eye(A.size) + self.Sq[np.ix_(A, A)] * DA[None, :]
+        return self.Yc - (self.Yq[:, A] * DA[None, :]) @ np.linalg.solve(S, self.Sc[A])
+
+    @property
+    def D(self) -> np.ndarray:
+        return self.problem.omega2.D
+
+    @property
+    def chains(self) -> list:
+        """The Γ_C unknowns ordered along the boundary (``contact_chains``; the local front resolution's), built on
+        first use (collective: the contact points are gathered from all ranks)."""
+        if self._chains is None:
+            self._chains = contact_chains(self.problem.omega2.contact_points()) if self.M.size else []
+        return self._chains
+
+    def lowest_eigenvalue(self) -> float:
+        """Smallest eigenvalue of ½(M + Mᵀ): > 0 when the glued problem is an elastic (positive definite) one.
+
+        Always so with a fine Ω₁ (M is then the symmetric compliance of the monolithic problem on Γ_C); a
+        multiscale Ω₁ whose interface response is not a Robin map of an elastic body can make it negative.
+        """
+        if not self.M.size:
+            return np.inf
+        return float(np.linalg.eigvalsh(0.5 * (self.M + self.M.T))[0])
+
+    def solve(self, options: InterfaceNewtonOptions, name: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, "ContactNewtonHistory"]:
+        """Contact Newton, then (g₁₂, g₂₁, λ) global."""
+        p = self.problem
+        s_load, g21_0, y20 = self.load_terms()
+        try:
+            chains = self.chains if options.front_window else None
+            _, lam, hist = contact_solve(s_load, self.M, self.D, options, name, chains)
+        except ConvergenceError as err:
+            lowest = self.lowest_eigenvalue()
+            if lowest < 0.0:
+                raise ConvergenceError(
+                    f"{name}: the glued problem is not positive definite (the symmetric part of its condensed "
+                    f"contact compliance has the eigenvalue {lowest:.2e} < 0), so its contact problem need not "
+                    "have a solution: Ω₁'s interface response is not that of an elastic body at this transmission "
+                    "coefficient (a multiscale Ω₁ whose approximation error the Robin coefficient amplifies). Use a "
+                    "smaller α or β (Algorithm 3's default alpha='Emin*h^-1/2'), or more oversampling layers") from err
+            raise
+        g21 = g21_0 - self.Gq @ lam
+        y2 = y20 + self.Yc @ g21 - self.Yq @ lam
+        g12 = np.where(p.free, p.a * y2 + p.b * g21, 0.0)
+        return g12, g21, lam, hist

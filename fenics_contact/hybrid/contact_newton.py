@@ -1,0 +1,150 @@
+"""The contact Newton: s = s_L − M D s⁺ on the condensed Γ_C unknowns by semismooth Newton (METHOD §9).
+
+M (n_c × n_c) is the contact compliance of the glued problem and s_L its load term
+(``hybrid.condensation``).  Each step solves the contact equations linearized on the current active set
+𝒜 for the forces (``contact_equations.solve_on``); the next set is {s > 0}, or, by default, the one the
+local front resolution proposes (``fronts.LocalFronts``).  Every set solved on all of Γ_C is a step, and
+a set is accepted only when the solve on it reproduces it.  The Newton method takes full steps until an
+active set recurs and from then on minimizes, along each Newton direction, ψ = ½ μᵀMμ + ½ Σ D (s⁺)² with
+s = s_L − Mμ (exact line search on a piecewise-linear derivative, ``contact_equations.energy_line_search``):
+ψ is the convex energy of the glued problem when M is symmetric (Algorithms 1, 2), so no cycle can recur.
+A Newton method that does not converge in ``max_steps`` or meets a singular system raises
+ConvergenceError; ``contact_solve`` then starts the plain Newton afresh.
+"""
+
+import logging
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from fenics_contact.errors import ConvergenceError
+from fenics_contact.hybrid.contact_equations import energy_line_search, solve_on
+from fenics_contact.hybrid.fronts import LocalFronts
+from fenics_contact.hybrid.options import InterfaceNewtonOptions
+
+__all__ = ["ContactNewtonHistory", "contact_newton", "contact_solve"]
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(slots=True)
+class ContactNewtonHistory:
+    """Active-set sizes, step lengths and contact-law violations ‖μ − D s⁺‖ of the contact Newton.
+
+    ``added`` / ``removed``: the contact rows each step brought into / took out of the active set it
+    solves next (indices into the Γ_C unknowns; the step that confirms the set adds and removes none).
+    """
+
+    active_sizes: list[int] = field(default_factory=list)
+    step_lengths: list[float] = field(default_factory=list)
+    residuals: list[float] = field(default_factory=list)
+    added: list[np.ndarray] = field(default_factory=list)
+    removed: list[np.ndarray] = field(default_factory=list)
+    #: rows where the next set differs from the semismooth step's own set {s > 0} because the local front
+    #: resolution set them, per step (empty: none); the next step solves that trial set.  A row may be one
+    #: the step would have flipped and the local problem kept as it was (then it is in neither ``added``
+    #: nor ``removed``)
+    resolved: list[np.ndarray] = field(default_factory=list)
+    #: per step: (local problems, their semismooth iterations, largest window) of the local front resolution
+    #: (``LocalFronts``; (0, 0, 0) when none was solved)
+    local: list[tuple[int, int, int]] = field(default_factory=list)
+    #: steps of a first attempt that did not converge (``CondensedInterface.solve`` then starts the plain
+    #: contact Newton afresh; the records above are the second attempt's), counted in ``steps``
+    discarded: int = 0
+
+    @property
+    def steps(self) -> int:
+        return len(self.step_lengths) + self.discarded
+
+    @property
+    def local_iterations(self) -> int:
+        """Semismooth iterations of all the local front problems (each a solve of at most 2w unknowns for an
+        isolated front)."""
+        return sum(it for _, it, _ in self.local)
+
+
+def contact_newton(s_load: np.ndarray, M: np.ndarray, D: np.ndarray, *, max_steps: int = 50,
+                   name: str = "contact Newton", rtol: float = 1e-10, active: np.ndarray | None = None,
+                   line_search: bool = False, chains=None,
+                   window: int = 0) -> tuple[np.ndarray, np.ndarray, ContactNewtonHistory]:
+    """Solve s = s_L − M μ, μ = D s⁺ by semismooth Newton (finite termination, globalized): (s, μ).
+
+    Starts from μ = 0 (no contact force) with the active set 𝒜 = {s_L > 0} (the contact-free
+    solution's penetration pattern), or from the set ``active`` (a guess, e.g. a coarser solve's);
+    ``line_search``: the exact line search at every step (by default only once an active set
+    recurs).  A full step solves the problem linearized at the
+    current active set 𝒜 = {s > 0} for the forces: (D_𝒜⁻¹ + M_𝒜𝒜) μ_𝒜 = s_L,𝒜, s = s_L − M_:𝒜 μ_𝒜
+    (on 𝒜, s = μ/D: no cancellation with a stiff penalty).  It stops at the first step whose result
+    has the set it was computed for (then both equations hold exactly) and checks that solve.
+    ``chains`` (``contact_chains`` of the Γ_C unknowns' coordinates) and ``window`` > 0: the next set
+    is that of the local front resolution (``LocalFronts``, ``window`` unknowns on either side of every
+    front) until the line search starts; every set solved, proposed or not, is one step.  Without
+    them (``window`` = 0): the plain semismooth Newton.
+    """
+    hist = ContactNewtonHistory()
+    n = s_load.size
+    s, mu = s_load.copy(), np.zeros(n)
+    active = s > 0.0 if active is None else np.asarray(active, dtype=bool).copy()
+    visited: set[bytes] = set()
+    if window < 0:
+        raise ValueError(f"contact_newton: window must be >= 0, got {window}")
+    local = LocalFronts(chains, M, D, window) if chains and window > 0 else None
+    for _ in range(max_steps):
+        visited.add(np.packbits(active).tobytes())
+        s_new, mu_new, residual = solve_on(s_load, M, D, np.flatnonzero(active))
+        if residual > rtol:
+            error = ConvergenceError(f"{name}: the condensed contact system is singular or ill-conditioned "
+                                     f"(relative residual {residual:.1e})")
+            error.steps = hist.steps + 1
+            raise error
+        predicted = s_new > 0.0
+        settled = np.array_equal(predicted, active)
+        if not settled and not line_search:
+            line_search = np.packbits(predicted).tobytes() in visited
+        t = 1.0
+        if line_search and not settled:
+            t = energy_line_search(mu, mu_new - mu, s, s_new - s, s_load, D)
+        s, mu = s + t * (s_new - s), mu + t * (mu_new - mu)
+        following = s > 0.0
+        resolved = np.zeros(0, dtype=np.int64)
+        local_work = (0, 0, 0)
+        if local is not None and not line_search and not settled:
+            trial, local_work = local.trial(following, s_load, mu_new)
+            if np.packbits(trial).tobytes() not in visited:  # (a set already solved: the plain one instead)
+                resolved, following = np.flatnonzero(trial != following), trial
+        hist.local.append(local_work)
+        hist.step_lengths.append(t)
+        hist.active_sizes.append(int(np.count_nonzero(following)))
+        hist.added.append(np.flatnonzero(following & ~active))
+        hist.removed.append(np.flatnonzero(active & ~following))
+        hist.resolved.append(resolved)
+        hist.residuals.append(float(np.linalg.norm(mu - D * np.maximum(s, 0.0))))  # contact-law violation
+        if settled:
+            return s, mu, hist
+        active = following
+    error = ConvergenceError(
+        f"{name}: contact Newton did not converge in {max_steps} steps (active-set sizes "
+        f"{hist.active_sizes[-5:]}, step lengths {hist.step_lengths[-5:]}, residuals {hist.residuals[-3:]})"
+    )
+    error.steps = hist.steps
+    raise error
+
+
+def contact_solve(s_load: np.ndarray, M: np.ndarray, D: np.ndarray, options: InterfaceNewtonOptions, name: str,
+                  chains) -> tuple[np.ndarray, np.ndarray, "ContactNewtonHistory"]:
+    """``contact_newton`` with the options' local front resolution (``chains`` given, ``options.front_window``
+    unknowns on either side of every front), and the plain contact Newton afresh should that not converge:
+    with a non-symmetric M (a multiscale Ω₁) the energy line search that stops cycles is no merit function,
+    and a set the local problems chose can lead into a cycle the plain Newton avoids.  The failed attempt's steps
+    stay counted (``ContactNewtonHistory.discarded``)."""
+    try:
+        return contact_newton(s_load, M, D, max_steps=options.max_steps, name=name, chains=chains,
+                              window=options.front_window)
+    except ConvergenceError as first:
+        if not chains:
+            raise
+        log.warning("%s: the contact Newton with the local front resolution did not converge (%s); the plain "
+                    "contact Newton instead", name, first)
+        s, mu, hist = contact_newton(s_load, M, D, max_steps=options.max_steps, name=name)
+        hist.discarded = first.steps
+        return s, mu, hist

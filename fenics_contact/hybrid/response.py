@@ -1,0 +1,367 @@
+"""Affine responses of the subdomains on the interface γ and on Γ_C: what the interface Newton needs of Ω₁, Ω₂.
+
+A subdomain problem seen through its interface (``AffinePart``) is
+
+    J x = b + C g − Qᵀ λ,   y = N x + y_off (trace on γ),   s = Q x − gap (contact values on Γ_C),
+
+with J the operator the responses are taken with (Ω₂: J₀, no contact node active; Ω₁: its only operator).
+``AffinePart.responses`` back-solves J for the columns of C and Qᵀ (chunked multi-right-hand-side solves
+with the factorization it holds, ``block_solve``) and keeps their trace and contact rows: Yc = N J⁻¹C,
+Sc = Q J⁻¹C, Yq = N J⁻¹Qᵀ, Sq = Q J⁻¹Qᵀ.  ``PrimalPart`` is a P1 subproblem (MPI-parallel),
+``MixedPart`` an Arnold–Winther one (serial).  Ω₁'s affine trace response y₁ = T₁ g₁₂ + t₁ is
+``FineResponse`` (a fine Ω₁: T₁ by back-solves), ``ProbedResponse`` (a public affine solve, probed column
+by column) or ``MatrixResponse`` (given, e.g. by a multiscale Ω₁).
+"""
+
+import numpy as np
+import scipy.sparse as sp
+from mpi4py import MPI
+from petsc4py import PETSc
+
+import dolfinx.fem.petsc
+
+from fenics_contact.errors import ConvergenceError
+from fenics_contact.fem.linalg import DirectSolver, scipy_to_petsc
+from fenics_contact.fem.mixed import MIXED_SOLVER_OPTIONS
+
+__all__ = [
+    "block_solve",
+    "AffinePart",
+    "PrimalPart",
+    "MixedPart",
+    "FineResponse",
+    "ProbedResponse",
+    "MatrixResponse",
+]
+
+
+def block_solve(ksp: PETSc.KSP, B: np.ndarray, comm: MPI.Comm, *projections) -> list[np.ndarray]:
+    """[P(A⁻¹ B) for P in projections] for a dense block B (local rows × columns, Fortran order) with the
+    factorization held by ``ksp`` (one multi-RHS solve; the solution block is never copied whole)."""
+    nloc, k = B.shape
+    size = ((nloc, PETSc.DECIDE), (PETSc.DECIDE, k))
+    Bm = PETSc.Mat().createDense(size, array=np.asfortranarray(B), comm=comm)
+    Bm.assemble()
+    Xm = PETSc.Mat().createDense(size, comm=comm)
+    Xm.setUp()
+    Xm.assemble()
+    try:
+        ksp.matSolve(Bm, Xm)
+        X = Xm.getDenseArray(readonly=True)
+        finite = bool(np.isfinite(X).all())
+        out = [P(X) for P in projections] if comm.allreduce(finite, op=MPI.LAND) else None
+    finally:
+        Bm.destroy()
+        Xm.destroy()
+    if out is None:
+        raise ConvergenceError(f"{ksp.getOptionsPrefix()}: multi-RHS back-solve produced non-finite values")
+    return out
+
+
+class AffinePart:
+    """A subdomain problem seen through its interface: J x = b + C g − Qᵀλ, trace y = N x, contact s = Q x.
+
+    Subclasses provide the local blocks of C and Qᵀ, the global rows of N X and Q X, the
+    body load b, and get/set of the subproblem state.  ``solver`` holds the factorization of
+    the operator the responses are taken with (J₀ for Ω₂, the only operator for Ω₁).
+    """
+
+    comm: MPI.Comm
+    n_g: int  #: global number of interface values
+    n_c: int  #: global number of contact rows (0 without contact)
+    D: np.ndarray  #: penalty weights (n_c,): λ = D s⁺
+    gap: np.ndarray  #: contact offsets (n_c,): s = Q x − gap (the obstacle's gap; 0 for a flush wall)
+    trace_offset: np.ndarray | float = 0.0  #: y = N x + trace_offset (mixed: the traction lifting's σ_t n)
+    solver: DirectSolver
+
+    # -- provided by subclasses ----------------------------------------------------------
+    def data_block(self, j0: int, j1: int) -> np.ndarray: ...
+    def contact_block(self, k0: int, k1: int) -> np.ndarray: ...
+    def trace_rows(self, X: np.ndarray) -> np.ndarray: ...
+    def contact_rows(self, X: np.ndarray) -> np.ndarray: ...
+    def body_load(self) -> np.ndarray: ...
+    def state(self) -> np.ndarray: ...
+    def set_state(self, x: np.ndarray) -> None: ...
+    def solve(self, b: np.ndarray, solver: DirectSolver | None = None) -> np.ndarray: ...
+
+    # -- generic -------------------------------------------------------------------------
+    def responses(self, *, contact: bool, chunk: int, solver: DirectSolver | None = None
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(Yc, Sc, Yq, Sq): trace and contact rows of J⁻¹C and J⁻¹Qᵀ (chunked multi-RHS back-solves)."""
+        ksp = (solver or self.solver).ksp
+        rows = (self.trace_rows, self.contact_rows) if self.n_c else (self.trace_rows,)
+        Yc = np.zeros((self.n_g, self.n_g))
+        Sc = np.zeros((self.n_c, self.n_g))
+        for j0 in range(0, self.n_g, chunk):
+            j1 = min(j0 + chunk, self.n_g)
+            out = block_solve(ksp, self.data_block(j0, j1), self.comm, *rows)
+            Yc[:, j0:j1] = out[0]
+            if self.n_c:
+                Sc[:, j0:j1] = out[1]
+        Yq = np.zeros((self.n_g, self.n_c))
+        Sq = np.zeros((self.n_c, self.n_c))
+        if contact:
+            for k0 in range(0, self.n_c, chunk):
+                k1 = min(k0 + chunk, self.n_c)
+                Yq[:, k0:k1], Sq[:, k0:k1] = block_solve(ksp, self.contact_block(k0, k1), self.comm, *rows)
+        return Yc, Sc, Yq, Sq
+
+    def load_response(self) -> tuple[np.ndarray, np.ndarray]:
+        """(y₀, s₀): trace and contact values of J⁻¹ b (zero data, no contact force)."""
+        x0 = self.solve(self.body_load())[:, None]
+        y0 = self.trace_rows(x0)[:, 0] + self.trace_offset
+        return y0, (self.contact_rows(x0)[:, 0] - self.gap if self.n_c else np.zeros(0))
+
+    def refresh(self) -> bool:
+        """Re-read the contact geometry (an obstacle may have moved): True when the condensation is stale."""
+        return False
+
+    def contact_values(self) -> np.ndarray:
+        """s = Q x − gap of the current subproblem state (global)."""
+        return self.contact_rows(self.state()[:, None])[:, 0] - self.gap
+
+    def data_free(self) -> np.ndarray:
+        """Interface values whose data act on this subproblem (False e.g. at γ nodes on Γ_D)."""
+        raise NotImplementedError
+
+    def contact_points(self) -> np.ndarray:
+        """Coordinates of the contact unknowns (n_c × gdim, global order): the contact Newton's front handling
+        orders them along Γ_C (``fronts.contact_chains``)."""
+        raise NotImplementedError
+
+
+class PrimalPart(AffinePart):
+    """A ``fem.primal.PrimalSubproblem`` on part ``part`` of an ``InterfaceSpace`` (MPI-parallel)."""
+
+    def __init__(self, sub, iface, part: int, *, contact: bool, factorize: bool = True) -> None:
+        self.sub, self.comm = sub, iface.comm
+        comm = self.comm
+        V = sub.V
+        self.bs = V.dofmap.index_map_bs
+        self.nown = V.dofmap.index_map.size_local * self.bs
+        offset = comm.exscan(iface.size) or 0
+        self.n_g = comm.allreduce(iface.size, op=MPI.SUM)
+        probe = dolfinx.fem.Function(V)
+        iface.to_part(offset + np.arange(iface.size) + 1.0, part, probe)
+        vals = probe.x.array[: self.nown]
+        rows = np.flatnonzero(vals > 0.5)
+        cols = np.rint(vals[rows]).astype(np.int64) - 1
+        iface.to_part(iface.weights, part, probe)
+        w = probe.x.array[rows].copy()
+        mask = dolfinx.fem.petsc.create_vector(V)
+        mask.set(1.0)
+        dolfinx.fem.petsc.set_bc(mask, sub.bcs)
+        free = mask.getArray(readonly=True)[rows] != 0.0
+        mask.destroy()
+        self.trace_at, self.trace_index = rows, cols  # owned γ DOFs and their interface value
+        self.data_at, self.data_index, self.data_w = rows[free], cols[free], w[free]
+        self.n_c = 0
+        self.D = self.gap = np.zeros(0)
+        if contact:
+            nodes, normals, weights, gap = sub.contact_nodes()
+            self.c_nodes, self.c_normals = nodes, normals
+            self.c_offset = comm.exscan(nodes.size) or 0
+            self.n_c = comm.allreduce(nodes.size, op=MPI.SUM)
+            self.D = np.concatenate(comm.allgather(weights / sub.delta))
+            self.gap = np.concatenate(comm.allgather(gap))
+            self._J0 = None
+            if factorize:  # J₀ (only the condensed strategy needs it)
+                self.solver = DirectSolver(comm, prefix=f"{sub.prefix}j0_")
+                self._J0 = sub.contact_free_matrix()
+                self.solver.set_operator(self._J0)
+        else:
+            sub.factorize()
+            self.solver = sub.solver
+        self._b = sub.b.duplicate()
+        self._x = sub.b.duplicate()
+
+    def refresh(self) -> bool:
+        if not self.n_c:
+            return False
+        _, normals, _, gap = self.sub.contact_nodes()
+        self.gap = np.concatenate(self.comm.allgather(gap))  # enters online only (s_L)
+        moved = self.comm.allreduce(not np.array_equal(normals, self.c_normals), op=MPI.LOR)
+        self.c_normals = normals  # ν enters the contact columns: condense again
+        return bool(moved)
+
+    def contact_points(self) -> np.ndarray:
+        gdim = self.sub.mesh.geometry.dim
+        x = self.sub.V.tabulate_dof_coordinates()[self.c_nodes][:, :gdim]
+        return np.concatenate(self.comm.allgather(x)).reshape(-1, gdim)
+
+    def data_free(self) -> np.ndarray:
+        free = np.zeros(self.n_g, dtype=bool)
+        free[np.concatenate(self.comm.allgather(self.data_index))] = True
+        return free
+
+    def data_block(self, j0: int, j1: int) -> np.ndarray:
+        B = np.zeros((self.nown, j1 - j0), order="F")
+        sel = (self.data_index >= j0) & (self.data_index < j1)
+        B[self.data_at[sel], self.data_index[sel] - j0] = self.data_w[sel]
+        return B
+
+    def contact_block(self, k0: int, k1: int) -> np.ndarray:
+        B = np.zeros((self.nown, k1 - k0), order="F")
+        k = self.c_offset + np.arange(self.c_nodes.size)
+        sel = (k >= k0) & (k < k1)
+        for c in range(self.bs):
+            B[self.bs * self.c_nodes[sel] + c, k[sel] - k0] = self.c_normals[sel, c]
+        return B
+
+    def trace_rows(self, X: np.ndarray) -> np.ndarray:
+        parts = self.comm.allgather((self.trace_index, X[self.trace_at]))
+        Y = np.zeros((self.n_g, X.shape[1]))
+        for idx, vals in parts:
+            Y[idx] = vals
+        return Y
+
+    def contact_rows(self, X: np.ndarray) -> np.ndarray:
+        s = sum(self.c_normals[:, c, None] * X[self.bs * self.c_nodes + c] for c in range(self.bs))
+        return np.concatenate(self.comm.allgather(np.asarray(s).reshape(-1, X.shape[1])), axis=0)
+
+    def body_load(self) -> np.ndarray:
+        return self.sub.body_load(self._b).getArray(readonly=True).copy()
+
+    def state(self) -> np.ndarray:
+        return self.sub.u.x.petsc_vec.getArray(readonly=True).copy()
+
+    def set_state(self, x: np.ndarray) -> None:
+        self.sub.u.x.petsc_vec.getArray()[:] = x
+        self.sub.u.x.scatter_forward()
+
+    def solve(self, b: np.ndarray, solver: DirectSolver | None = None) -> np.ndarray:
+        self._b.getArray()[:] = b
+        (solver or self.solver).solve(self._b, self._x)
+        return self._x.getArray(readonly=True).copy()
+
+    def rhs(self, g: np.ndarray, lam: np.ndarray) -> np.ndarray:
+        """b + C g − Qᵀ λ (local) for global data g and contact forces λ."""
+        r = self.body_load()
+        r[self.data_at] += self.data_w * g[self.data_index]
+        if self.n_c:
+            mine = lam[self.c_offset : self.c_offset + self.c_nodes.size]
+            for c in range(self.bs):
+                r[self.bs * self.c_nodes + c] -= self.c_normals[:, c] * mine
+        return r
+
+    def destroy(self) -> None:
+        for obj in (self._b, self._x):
+            obj.destroy()
+        if self.n_c and self._J0 is not None:
+            self._J0.destroy()
+            self.solver.destroy()
+
+
+class MixedPart(AffinePart):
+    """A ``fem.mixed.MixedSubproblem`` (serial); ``perm``: its interface value k is canonical value perm[k]."""
+
+    def __init__(self, sub, *, perm: np.ndarray | None, contact: bool, factorize: bool = True) -> None:
+        self.sub, self.comm = sub, sub.mesh.comm
+        inv = np.arange(sub.C.shape[1]) if perm is None else np.argsort(perm)
+        self.C = sub.C[:, inv].tocsc()  # data (canonical order) → stress rows
+        self.N = sub.N[inv].tocsr()  # stress → trace (canonical order)
+        self.n_g = self.C.shape[1]
+        self.ns, self.nown = sub.n_sigma, sub.n_sigma + sub.n_u
+        self.n_c = sub.Q.shape[0] if contact else 0
+        self.D = sub.q_weights / sub.epsilon if contact else np.zeros(0)
+        self.gap = -sub.q0 if contact else np.zeros(0)  # σ_c = Q c + q0 (q0: the traction lifting's)
+        self.trace_offset = sub.n0[inv] if sub.beta is not None else 0.0  # σn = N c + n0
+        self._J0 = None
+        if contact:
+            self.QT = sub.Q.T.tocsc()
+        if contact and factorize:
+            saddle = sp.bmat([[sub.Kt, sub.B.T], [sub.B, None]], format="csr")
+            self._J0 = scipy_to_petsc(saddle, self.comm)
+            self.solver = DirectSolver(self.comm, prefix=f"{sub.prefix}j0_", options=MIXED_SOLVER_OPTIONS)
+            self.solver.set_operator(self._J0)
+        elif not contact:
+            sub._factorize_for(None)
+            self.solver = sub.solver
+        self._b = PETSc.Vec().createSeq(self.nown, comm=self.comm)
+        self._x = self._b.duplicate()
+
+    def data_free(self) -> np.ndarray:
+        return np.diff(self.C.indptr) > 0
+
+    def contact_points(self) -> np.ndarray:
+        return np.asarray(self.sub.q_points)[:, : self.sub.mesh.geometry.dim]
+
+    def data_block(self, j0: int, j1: int) -> np.ndarray:
+        B = np.zeros((self.nown, j1 - j0), order="F")
+        B[: self.ns] = self.C[:, j0:j1].toarray()
+        return B
+
+    def contact_block(self, k0: int, k1: int) -> np.ndarray:
+        B = np.zeros((self.nown, k1 - k0), order="F")
+        B[: self.ns] = self.QT[:, k0:k1].toarray()
+        return B
+
+    def trace_rows(self, X: np.ndarray) -> np.ndarray:
+        return self.N @ X[: self.ns]
+
+    def contact_rows(self, X: np.ndarray) -> np.ndarray:
+        return self.sub.Q @ X[: self.ns]
+
+    def body_load(self) -> np.ndarray:
+        b = np.zeros(self.nown)
+        b[: self.ns] = self.sub._stress_load(None)  # traction lifting, ∫_ΓD u_D·τn, gap term ∫_ΓC g τ_c
+        b[self.ns :] = self.sub.G
+        return b
+
+    def state(self) -> np.ndarray:
+        return np.concatenate([self.sub.c, self.sub.u])
+
+    def set_state(self, x: np.ndarray) -> None:
+        self.sub.set_state(x[: self.ns], x[self.ns :])
+
+    def solve(self, b: np.ndarray, solver: DirectSolver | None = None) -> np.ndarray:
+        self._b.array[:] = b
+        (solver or self.solver).solve(self._b, self._x)
+        return self._x.array.copy()
+
+    def rhs(self, g: np.ndarray, lam: np.ndarray) -> np.ndarray:
+        r = self.body_load()
+        r[: self.ns] += self.C @ g
+        if self.n_c:
+            r[: self.ns] -= self.QT @ lam
+        return r
+
+    def destroy(self) -> None:
+        for obj in (self._b, self._x):
+            obj.destroy()
+        if self._J0 is not None:
+            self._J0.destroy()
+            self.solver.destroy()
+
+
+class FineResponse:
+    """Fine Ω₁: T₁ = N₁ J₁⁻¹ C₁ by one multi-RHS back-solve of its factorization; t₁ by one solve."""
+
+    def __init__(self, part: AffinePart, *, chunk: int) -> None:
+        self.part = part
+        self.T = part.responses(contact=False, chunk=chunk)[0]
+
+    def load(self) -> np.ndarray:
+        return self.part.load_response()[0]
+
+
+class ProbedResponse:
+    """Ω₁ through a public affine solve y₁(g) (e.g. ``cem.Omega1Multiscale``): T₁ e_j = y₁(e_j) − y₁(0)."""
+
+    def __init__(self, trace_of, n_g: int) -> None:
+        self.trace_of = trace_of
+        y0 = trace_of(np.zeros(n_g))
+        self.T = np.column_stack([trace_of(e) - y0 for e in np.eye(n_g)]) if n_g else np.zeros((0, 0))
+
+    def load(self) -> np.ndarray:
+        return self.trace_of(np.zeros(self.T.shape[0]))
+
+
+class MatrixResponse:
+    """Ω₁ given as y₁ = T g + t₀ (``multiscale.mixed_cem.InterfaceResponse``)."""
+
+    def __init__(self, T: np.ndarray, t0: np.ndarray) -> None:
+        self.T, self.t0 = T, t0
+
+    def load(self) -> np.ndarray:
+        return self.t0

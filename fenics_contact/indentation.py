@@ -198,7 +198,8 @@ def force_indentation(
     (e.g. ``curve.step`` of another curve, or a solve's ``result.step``) to reuse with everything it holds;
     ``alpha``, ``beta``, ``delta``, ``epsilon`` and ``cem`` are then the step's.
     """
-    from fenics_contact.fem.mixed import MixedSubproblem, contact_modulus, default_epsilon
+    from fenics_contact.fem.mixed import contact_modulus, default_epsilon
+    from fenics_contact.fem.mixed_subproblem import MixedSubproblem
     from fenics_contact.fem.primal import PrimalSubproblem, default_penalty, warn_if_locking
     from fenics_contact.hybrid.mixed import MixedHybridStep
     from fenics_contact.hybrid.primal import DEFAULT_ALPHA, DEFAULT_ALPHA_MS, PrimalHybridStep

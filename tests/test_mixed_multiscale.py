@@ -390,7 +390,7 @@ def test_traction_free_side_of_omega1(omega1):
     inner boundary, the whole-Ω₁ local space is the constrained AW space, and with all modes and patches
     covering Ω₁ the multiscale solution is the fine one of the constrained problem."""
     from fenics_contact.fem.arnold_winther import ArnoldWintherSpace
-    from fenics_contact.fem.mixed import MixedSubproblem
+    from fenics_contact.fem.mixed_subproblem import MixedSubproblem
 
     cm, step, grid, ops, topo = omega1
     sub = step.sub[0]
@@ -428,7 +428,7 @@ def test_algorithm4_never_forms_the_fine_omega1_prolongation():
     are P's rows exactly; here also on the split-interface space of the monolithic solve."""
     import scipy.sparse as sp
 
-    from fenics_contact.fem.mixed import boundary_stress_space
+    from fenics_contact.fem.mixed_spaces import boundary_stress_space
     from fenics_contact.multiscale.mixed import MixedMultiscaleHybridStep
     from fenics_contact.problem.fields import material_fields
     from fenics_contact.problem.tags import Boundary, Subdomain

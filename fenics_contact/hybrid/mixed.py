@@ -77,15 +77,11 @@ from fenics_contact.errors import InputError
 from fenics_contact.problem.boundary import check_boundary_groups
 from fenics_contact.problem.fields import material_fields
 from fenics_contact.problem.geometry import ContactMesh
-from fenics_contact.fem.mixed import (
-    MixedContactProfile,
-    MixedNewtonHistory,
-    MixedSolution,
-    MixedSubproblem,
-    check_triangles,
-    contact_modulus,
-    default_epsilon,
-)
+from fenics_contact.fem.mixed import MixedSolution, contact_modulus, default_epsilon
+from fenics_contact.fem.mixed_contact import MixedContactProfile
+from fenics_contact.fem.mixed_newton import MixedNewtonHistory
+from fenics_contact.fem.mixed_spaces import check_triangles
+from fenics_contact.fem.mixed_subproblem import MixedSubproblem
 from fenics_contact.problem.models import TestModel
 from fenics_contact.hybrid.primal import omega2_record
 from fenics_contact.hybrid.transmission import split_mesh, sub_to_parent_dofs

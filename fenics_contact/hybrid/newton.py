@@ -334,7 +334,7 @@ class MixedPart(AffinePart):
     def __init__(self, sub, *, perm: np.ndarray | None, contact: bool, factorize: bool = True) -> None:
         import scipy.sparse as sp
 
-        from fenics_contact.fem.mixed import MIXED_SOLVER_OPTIONS
+        from fenics_contact.fem.mixed_linear import MIXED_SOLVER_OPTIONS
 
         self.sub, self.comm = sub, sub.mesh.comm
         inv = np.arange(sub.C.shape[1]) if perm is None else np.argsort(perm)

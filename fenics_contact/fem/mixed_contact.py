@@ -24,10 +24,11 @@ import scipy.sparse as sp
 from dolfinx import mesh as dmesh
 
 from fenics_contact.fem.contact import ContactProfile, profile_order
+from fenics_contact.fem.contact_boundary import obstacle_at_nodes
 from fenics_contact.fem.distributed import DistributedMatrix, coo_matrix, gather_rows, layout
 from fenics_contact.fem.mixed_spaces import MixedSpaces
 from fenics_contact.fem.mixed_traces import BoundaryFacets, normal_weights, reference_coordinates, stress_evaluation
-from fenics_contact.problem.obstacles import Obstacle, check_obstacle_side, evaluate_obstacle
+from fenics_contact.problem.obstacles import Obstacle
 from fenics_contact.problem.tags import Boundary
 
 __all__ = ["ContactNodes", "MixedContactProfile", "merge_contact_nodes"]
@@ -148,11 +149,7 @@ class ContactNodes:
 
     def set_obstacle(self, obstacle: Obstacle | None) -> None:
         """The gap g at the nodes and the load F_g = Qᵀ W g (−∫_ΓC g τ_c moved to the right-hand side)."""
-        if obstacle is None:
-            self.q_gap = np.zeros(self.q_points.shape[0])
-        else:
-            self.q_gap, nu = evaluate_obstacle(obstacle, self.q_points)
-            check_obstacle_side(obstacle, nu, self.q_normals, self.q_gap)  # (replicated contact nodes: no comm)
+        self.q_gap, _ = obstacle_at_nodes(obstacle, self.q_points, self.q_normals)  # replicated nodes: no comm
         self.F_gap = self.Q.T @ self.block(self.q_weights * self.q_gap)
         self.obstacle = obstacle
 

@@ -26,7 +26,6 @@ import time
 
 import numpy as np
 import scipy.sparse as sp
-from mpi4py import MPI
 
 from dolfinx import fem
 from dolfinx import mesh as dmesh
@@ -34,6 +33,7 @@ from dolfinx import mesh as dmesh
 from fenics_contact.errors import InputError
 from fenics_contact.fem.arnold_winther import ArnoldWintherSpace
 from fenics_contact.fem.contact import NewtonOptions
+from fenics_contact.fem.contact_boundary import contact_boundary_present
 from fenics_contact.fem.distributed import DistributedMatrix
 from fenics_contact.fem.mixed_assembly import MixedOperators, dot, norm
 from fenics_contact.fem.mixed_contact import ContactNodes, MixedContactProfile
@@ -107,13 +107,8 @@ class MixedSubproblem:
         self.contact = epsilon is not None
         self.fields = fields
         contact_facets = facet_tags.find(Boundary.GAMMA_C)
-        has_contact = self.comm.allreduce(int(contact_facets.size), op=MPI.SUM) > 0
+        has_contact = contact_boundary_present(self.comm, contact_facets, fields.obstacle if self.contact else None)
         if self.contact and not has_contact:
-            if fields.obstacle is not None:
-                raise InputError(
-                    "an obstacle is given but the mesh has no contact boundary: the physical group 'Gamma_C' "
-                    "has no facets (tag the facets that may touch the obstacle as Gamma_C)"
-                )
             raise InputError("a contact subproblem needs Γ_C facets")
         self.spaces = MixedSpaces(msh, facet_tags, fields.boundary, space=space,
                                   distribute_P=operators or self.comm.size > 1)

@@ -60,7 +60,7 @@ from fenics_contact.problem.geometry import ContactMesh
 from fenics_contact.problem.models import TestModel
 from fenics_contact.problem.tags import Boundary, Subdomain
 
-__all__ = ["MixedSolution", "contact_modulus", "default_epsilon", "solve_mixed_monolithic"]
+__all__ = ["MixedSolution", "contact_modulus", "default_epsilon", "epsilon_hint", "solve_mixed_monolithic"]
 
 log = logging.getLogger(__name__)
 
@@ -77,6 +77,15 @@ def default_epsilon(h: float, E_contact: float, factor: float = 1.0e-3) -> float
     if not (h > 0 and E_contact > 0 and factor > 0):
         raise InputError(f"default_epsilon needs h, E_c, factor > 0; got {h}, {E_contact}, {factor}")
     return factor * h * E_contact
+
+
+def epsilon_hint(epsilon: float, default: float) -> str:
+    """What a failed mixed solve adds to its message when ε < 1e-3·``default``: the penalty weights w/ε then
+    dwarf the stress block, so the saddle-point solves lose digits in proportion (empty otherwise)."""
+    if not epsilon < 1e-3 * default:
+        return ""
+    return (f"; ε = {epsilon:g} is {default / epsilon:.0e} times below the default 1e-3·h·E_min = {default:.3g} "
+            "on Gamma_C, which makes the contact block ill-conditioned: use a larger --epsilon")
 
 
 def contact_modulus(msh: dmesh.Mesh, facet_tags: dmesh.MeshTags, E: fem.Function, *, smallest: bool = False
@@ -149,17 +158,17 @@ def solve_mixed_monolithic(
         cm.mesh, cm.facet_tags, fields, epsilon=epsilon, beta=None, prefix=prefix, newton=newton, space=space,
     )
     t0 = time.perf_counter()
-    history = problem.solve()
-    t_newton = time.perf_counter() - t0
-    if verify:
-        norm, scale = problem.ufl_residual_norm()
-        if norm > newton.rtol * scale + newton.atol:
-            hint = (f"; ε = {epsilon:g} is {usual / epsilon:.0e} times below the default 1e-3·h·E_min = {usual:.3g} "
-                    "on Gamma_C, which makes the contact block ill-conditioned: use a larger --epsilon"
-                    if epsilon < 1e-3 * usual else "")
-            raise ConvergenceError(f"mixed monolithic: the solution misses its own equations (UFL residual "
-                                   f"{norm:.3e} > {newton.rtol:g}·{scale:.3e}, the size of their terms): the linear "
-                                   f"solves lost accuracy{hint}")
+    try:  # every numerical failure of the solve and of its check says when ε is far below its default
+        history = problem.solve()
+        t_newton = time.perf_counter() - t0
+        if verify:
+            norm, scale = problem.ufl_residual_norm()
+            if norm > newton.rtol * scale + newton.atol:
+                raise ConvergenceError(f"mixed monolithic: the solution misses its own equations (UFL residual "
+                                       f"{norm:.3e} > {newton.rtol:g}·{scale:.3e}, the size of their terms): the "
+                                       "linear solves lost accuracy")
+    except ConvergenceError as err:
+        raise ConvergenceError(f"{err}{epsilon_hint(epsilon, usual)}") from err
     elapsed = time.perf_counter() - start
     profile = problem.contact_profile()
     log.info(

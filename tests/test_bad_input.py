@@ -1,7 +1,7 @@
 """The command line on bad input: a table of cases, each with the exit code and the one-line message it gets.
 
-Every case is refused before the solve (most before the mesh is built), prints exactly one
-line on stderr, no traceback, and writes nothing. ``scripts/bad_input_table.py`` prints this
+Every case is refused — most before the mesh is built, the numerical failures (exit 4) by the solve's
+own checks — and prints exactly one line on stderr, no traceback, and writes nothing. ``scripts/bad_input_table.py`` prints this
 table with the messages as the package gives them (docs/bad_input.md).
 """
 
@@ -51,7 +51,7 @@ def _e_map(values, name="E.npy", *, raw: bytes | None = None, text: str | None =
 
 
 def _nan_pixel_between_cell_centres() -> np.ndarray:
-    """64 x 64 pixels, one NaN where no cell centre of the h = 1/16 mesh samples it (accepted before)."""
+    """64 x 64 pixels, one NaN where no cell centre of the h = 1/16 mesh samples it (refused all the same)."""
     values = np.ones((64, 64))
     values[0, 0] = np.nan  # the corner pixel [0, 1/64)²: the nearest cell centre is at (1/48, 1/48)
     return values
@@ -95,7 +95,7 @@ def _cache(make: Callable[[Path], str], method: str = "primal-ms"):
     return lambda tmp: [*SMALL, "--method", method, "--layers", "1", "--cache-dir", make(tmp)]
 
 
-# case files (issue 14)
+# case files
 CASES_DIR = Path(__file__).parents[1] / "cases"
 #: a small bar on the unit square (clamped on the left), to be spoiled by each case below
 SQUARE = """[mesh]

@@ -240,7 +240,8 @@ def indentation_section(refinement: float, steps: int, options) -> list[str]:
 
 def edge_sweep_section(refinements: list[float], mixed_max: float, count: int = 9) -> list[str]:
     """Hertz errors over depths 1.1–1.3·10⁻³: how much they depend on where the contact edge falls."""
-    from fenics_contact.fem.mixed import MixedSubproblem, default_epsilon
+    from fenics_contact.fem.mixed import default_epsilon
+    from fenics_contact.fem.mixed_subproblem import MixedSubproblem
     from fenics_contact.fem.primal import PrimalSubproblem
 
     a, R, E, nu = 0.05, 5.0, 1.0, 0.3

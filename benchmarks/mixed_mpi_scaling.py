@@ -75,7 +75,8 @@ def worker(args: argparse.Namespace) -> None:
                    converged=res.converged, time_online_s=res.time_online_s, time_setup_s=res.time_offline_s)
         out["time_s"] = out["time_online_s"] + out["time_setup_s"]
     elif args.method == "omega2":  # the Ω₂ strip alone: what Algorithm 4's online phase solves
-        from fenics_contact.fem.mixed import MixedSubproblem, contact_modulus, default_epsilon
+        from fenics_contact.fem.mixed import contact_modulus, default_epsilon
+        from fenics_contact.fem.mixed_subproblem import MixedSubproblem
         from fenics_contact.hybrid.transmission import split_mesh
         from fenics_contact.problem.fields import material_fields
 

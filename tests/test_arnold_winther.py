@@ -395,11 +395,11 @@ def test_timing_report():
 
 
 def test_prolongation_built_from_cell_blocks_equals_coo():
-    """``_cell_rows_csr`` (the CSR matrix of P built straight from the cell blocks, sorted) equals SciPy's COO
+    """``cell_rows_csr`` (the CSR matrix of P built straight from the cell blocks, sorted) equals SciPy's COO
     construction, with its general path taken when the rows do not cover the matrix once."""
     import scipy.sparse as sp
 
-    from fenics_contact.fem.arnold_winther import _cell_rows_csr
+    from fenics_contact.fem.arnold_winther.prolongation import cell_rows_csr
 
     rng = np.random.default_rng(3)
     n, a, b = 5, 4, 3
@@ -414,12 +414,12 @@ def test_prolongation_built_from_cell_blocks_equals_coo():
     scols, sblocks = np.take_along_axis(cols, order, axis=1), np.take_along_axis(blocks, order[:, None, :], axis=2)
     assert np.all(np.diff(scols, axis=1) > 0)
     for shape in ((n * a, 9), (n * a + 2, 9)):  # the second: two empty rows, the general path
-        P = _cell_rows_csr(sblocks, rows, scols, shape)
+        P = cell_rows_csr(sblocks, rows, scols, shape)
         assert P.has_sorted_indices and P.shape == shape
         assert np.array_equal(P[: n * a].toarray(), coo.toarray())
     # rows 0, 1, 2, … cell by cell (a serial DG numbering): the data is a view of the blocks
     inorder = np.arange(n * a).reshape(n, a)
-    P = _cell_rows_csr(sblocks, inorder, scols, (n * a, 9))
+    P = cell_rows_csr(sblocks, inorder, scols, (n * a, 9))
     assert np.shares_memory(P.data, sblocks) and P.has_sorted_indices
     assert np.array_equal(P.toarray(), sp.csr_matrix(
         (blocks.ravel(), (np.repeat(inorder, b, axis=1).ravel(), np.tile(cols, (1, a)).ravel())), shape=(n * a, 9)

@@ -17,7 +17,9 @@ from fenics_contact.fem import forms_mixed
 from fenics_contact.errors import InputError
 from fenics_contact.problem.fields import material_fields
 from fenics_contact.problem.geometry import ContactMesh, unit_square
-from fenics_contact.fem.mixed import MixedSubproblem, default_epsilon, solve_mixed_monolithic
+from fenics_contact.fem.mixed import default_epsilon, solve_mixed_monolithic
+from fenics_contact.fem.mixed_newton import exact_line_search
+from fenics_contact.fem.mixed_subproblem import MixedSubproblem
 from fenics_contact.problem.models import get_model
 from fenics_contact.fem.primal import default_penalty, solve_primal_monolithic
 from fenics_contact.problem.tags import Boundary
@@ -59,12 +61,12 @@ def test_contact_term_matches_the_ufl_form():
     inv = fem.Constant(cm.mesh, PETSc.ScalarType(1 / eps))
     r_ufl = dolfinx.fem.assemble_vector(fem.form(forms_mixed.contact_penalty(sig, t, n, inv, dc)))
     r_ufl = prob.P.T @ r_ufl.array[: prob.P.shape[0]]
-    r_q = prob._penalty_force(s)
+    r_q = prob.contact_nodes.penalty_force(s)
     assert np.allclose(r_ufl, r_q, atol=1e-10 * np.abs(r_q).max())
     J = dolfinx.fem.petsc.assemble_matrix(fem.form(forms_mixed.contact_penalty_jacobian(sig, ds_, t, n, inv, dc)))
     J.assemble()
     J_ufl = (prob.P.T @ _scipy(J) @ prob.P).toarray()
-    J_q = prob._penalty_matrix(s > 0).toarray()
+    J_q = prob.contact_nodes.penalty_matrix(s > 0).toarray()
     assert np.allclose(J_ufl, J_q, atol=1e-10 * np.abs(J_q).max())
     # the energy's derivative is the residual: J(σ + h e_k) − J(σ − h e_k) ≈ 2h r_k
     k = int(np.argmax(np.abs(r_q)))
@@ -145,10 +147,10 @@ def test_line_search_path_reaches_the_same_solution(mesh32, solutions):
     rng = np.random.default_rng(1)
     prob.c += 1e-2 * np.abs(prob.c).max() * rng.standard_normal(prob.n_sigma)
     s = prob.Q @ prob.c
-    F1, F2 = prob._gradient(np.zeros(prob.n_sigma))
-    prob._factorize_for(s > 0)
-    dc, _ = prob._solve(-F1, np.zeros_like(F2))
-    t = prob._line_search(dc, s, prob.Q @ dc, np.zeros(prob.n_sigma))
+    F1, F2 = prob.gradient(np.zeros(prob.n_sigma))
+    prob.factorize_for(s > 0)
+    dc, _ = prob.linear_solve(-F1, np.zeros_like(F2))
+    t = exact_line_search(prob, dc, s, prob.Q @ dc, np.zeros(prob.n_sigma))
     c0 = prob.c.copy()
 
     def energy(tau):

@@ -390,7 +390,7 @@ def test_traction_free_side_of_omega1(omega1):
     inner boundary, the whole-Ω₁ local space is the constrained AW space, and with all modes and patches
     covering Ω₁ the multiscale solution is the fine one of the constrained problem."""
     from fenics_contact.fem.arnold_winther import ArnoldWintherSpace
-    from fenics_contact.fem.mixed import MixedSubproblem
+    from fenics_contact.fem.mixed_subproblem import MixedSubproblem
 
     cm, step, grid, ops, topo = omega1
     sub = step.sub[0]
@@ -428,7 +428,7 @@ def test_algorithm4_never_forms_the_fine_omega1_prolongation():
     are P's rows exactly; here also on the split-interface space of the monolithic solve."""
     import scipy.sparse as sp
 
-    from fenics_contact.fem.mixed import boundary_stress_space
+    from fenics_contact.fem.mixed_spaces import boundary_stress_space
     from fenics_contact.multiscale.mixed import MixedMultiscaleHybridStep
     from fenics_contact.problem.fields import material_fields
     from fenics_contact.problem.tags import Boundary, Subdomain
@@ -437,7 +437,7 @@ def test_algorithm4_never_forms_the_fine_omega1_prolongation():
     model = models.get_model(3)
     step = MixedMultiscaleHybridStep(cm, model, beta="sqrt-h", cem=mm.MixedCEMOptions(layers=1))
     space = step.sub[0].space
-    assert space._P_csr is None and space._P_full_csr is None
+    assert space.prolongator.csr is None and space.prolongator.full_csr is None
     assert np.shares_memory(step.omega1.ops.P_blocks, space.cell_prolongation()[1])
     # the interface maps equal those made with the whole P (Algorithm 2's Ω₁ subproblem: same mesh, same tags)
     ref = MixedHybridStep(cm, model, beta="sqrt-h").sub[0]
@@ -450,11 +450,11 @@ def test_algorithm4_never_forms_the_fine_omega1_prolongation():
         rng = np.random.default_rng(0)
         rows = rng.choice(3 * sp_space.dg.dofmap.index_map.size_local, size=200, replace=False)
         P_rows = sp_space.prolongation_for_rows(rows)
-        assert sp_space._P_csr is None
+        assert sp_space.prolongator.csr is None
         cells = np.unique(np.nonzero(np.isin(sp_space.dg_rows, rows))[0])
         kept = sp_space.dg_rows[cells].ravel()
         if sp_kw:  # the split functions' rows are among them
-            assert np.intersect1d(sp_space._split_cells, cells).size > 10
+            assert np.intersect1d(sp_space.prolongator.split_cells, cells).size > 10
         P = sp_space.prolongation
         assert (P_rows[kept] != P[kept]).nnz == 0  # the same numbers, row by row
         others = np.setdiff1d(np.arange(P.shape[0]), kept)

@@ -9,7 +9,8 @@ from mpi4py import MPI
 
 import fenics_contact  # noqa: F401
 from fenics_contact.errors import InputError, MeshTagError
-from fenics_contact.fem.mixed import MixedSubproblem, solve_mixed_monolithic
+from fenics_contact.fem.mixed import solve_mixed_monolithic
+from fenics_contact.fem.mixed_subproblem import MixedSubproblem
 from fenics_contact.fem.primal import PrimalSubproblem, default_penalty, solve_primal_monolithic
 from fenics_contact.hybrid.iteration import IterationOptions
 from fenics_contact.hybrid.mixed import solve_mixed_hybrid

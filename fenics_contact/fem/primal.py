@@ -2,7 +2,8 @@
 
 One class, ``PrimalSubproblem``, serves three roles: the monolithic problem on Ω
 (contact, no Robin), the linear Ω₁ problem (Robin on γ, no contact) and the
-nonlinear Ω₂ problem (contact and Robin). Forms come from ``forms_primal``.
+nonlinear Ω₂ problem (contact and Robin). Forms come from ``forms_primal``, the boundary data
+(u_D, tractions) and the nodal contact geometry (ν, g) from ``primal_boundary``.
 """
 
 import logging
@@ -21,12 +22,13 @@ from dolfinx import mesh as dmesh
 import dolfinx.fem.petsc
 
 from fenics_contact.fem import forms_primal
-from fenics_contact.fem.contact import ContactProfile, NewtonHistory, NewtonOptions, profile_order, semismooth_newton
+from fenics_contact.fem.contact import ContactProfile, NewtonHistory, NewtonOptions, semismooth_newton
 from fenics_contact.errors import InputError
-from fenics_contact.problem.boundary import BoundaryConditions, check_boundary_groups, neumann_groups
+from fenics_contact.problem.boundary import check_boundary_groups
 from fenics_contact.problem.fields import MaterialFields
-from fenics_contact.problem.obstacles import Obstacle, check_obstacle_side, evaluate_obstacle
+from fenics_contact.problem.obstacles import Obstacle
 from fenics_contact.problem.problem import ContactProblem
+from fenics_contact.fem.primal_boundary import NodalContactGeometry, PrimalBoundaryData
 from fenics_contact.fem.linalg import AbsoluteTerms, DirectSolver, quadratic_form
 from fenics_contact.problem.materials import strain, stress
 from fenics_contact.problem.tags import Boundary
@@ -85,18 +87,23 @@ class PrimalSubproblem:
         self.facet_tags = facet_tags
 
         msh.topology.create_connectivity(tdim - 1, tdim)
-        self._setup_dirichlet(facet_tags, fields.boundary)
+        self.boundary = PrimalBoundaryData(self.V, self.Q, facet_tags, fields.boundary)
+        self.bcs, self.u_D, self.tractions = self.boundary.bcs, self.boundary.u_D, self.boundary.tractions
+        self.boundary.set_lifting(self.u)  # u_D on the Γ_D DOFs, kept through warm starts
         ds = forms_primal.vertex_measure(msh, facet_tags)
         ds_c = ds(Boundary.GAMMA_C)
+        self.geometry: NodalContactGeometry | None = None
         if self.contact:
-            self._setup_contact_geometry(facet_tags, fields.obstacle, ds_c)
-        tractions = self._setup_tractions(facet_tags, fields.boundary)
+            self.geometry = NodalContactGeometry(self.V, self.Q, facet_tags, ds_c, self.boundary.dirichlet_q,
+                                                 fields.obstacle)
+        tractions = self.boundary.traction_terms
 
         n = ufl.FacetNormal(msh)
         v, du = ufl.TestFunction(self.V), ufl.TrialFunction(self.V)
         q = ufl.TestFunction(self.Q)
         lm, mu = fields.lmbda, fields.mu
-        penalty = (fem.Constant(msh, PETSc.ScalarType(1.0 / delta)), self.nu_c, self.gap) if self.contact else None
+        geo = self.geometry
+        penalty = (fem.Constant(msh, PETSc.ScalarType(1.0 / delta)), geo.nu, geo.gap) if self.contact else None
         robin = (alpha, self.g, ds(Boundary.INTERFACE)) if alpha is not None else None
         kw = dict(lmbda=lm, mu=mu, penalty=penalty, ds_contact=ds_c, robin=robin)
         self._F = fem.form(forms_primal.contact_residual(self.u, v, f=fields.f, tractions=tractions, **kw))
@@ -110,11 +117,9 @@ class PrimalSubproblem:
         self._a = fem.form(forms_primal.elastic_form(du, v, lm, mu))
         self._m = fem.form(forms_primal.mass_form(du, v))
         if self.contact:
-            s = forms_primal.gap_function(self.u, self.nu_c, self.gap)
+            s = forms_primal.gap_function(self.u, geo.nu, geo.gap)
             self._indicator = fem.form(forms_primal.nodal_indicator(s, q, ds_c))
-            self._gap_terms = fem.form(
-                penalty[0] * forms_primal.heaviside(s) * self.gap * ufl.dot(v, self.nu_c) * ds_c
-            )
+            self._gap_terms = fem.form(penalty[0] * forms_primal.heaviside(s) * geo.gap * ufl.dot(v, geo.nu) * ds_c)
             reaction = ufl.inner(stress(strain(self.u), lm, mu), strain(v)) * ufl.dx - ufl.inner(fields.f, v) * ufl.dx
             if tractions:
                 reaction -= forms_primal.traction_form(tractions, v)
@@ -134,92 +139,17 @@ class PrimalSubproblem:
         self._factorized_set: np.ndarray | None = None
         self._terms = AbsoluteTerms()
 
-    # -- boundary conditions and contact geometry ------------------------------------------
-    def _setup_dirichlet(self, facet_tags: dmesh.MeshTags, boundary: BoundaryConditions) -> None:
-        """Homogeneous BCs for the Newton increments; u ← u_D on the Γ_D DOFs (kept through warm starts)."""
-        tdim = self.mesh.topology.dim
-        gdim = self.mesh.geometry.dim
-        dirichlet = facet_tags.find(Boundary.GAMMA_D)
-        dofs = fem.locate_dofs_topological(self.V, tdim - 1, dirichlet)
-        self.bcs = [fem.dirichletbc(np.zeros(gdim, dtype=PETSc.ScalarType), dofs, self.V)]
-        self._dirichlet_dofs = dofs
-        self._dirichlet_q = fem.locate_dofs_topological(self.Q, tdim - 1, dirichlet)
-        self.u_D: fem.Function | None = None
-        if boundary.displacement is not None:
-            self.u_D = fem.Function(self.V, name="u_D")
-            self.u_D.interpolate(boundary.displacement)
-            self.u_D.x.scatter_forward()
-            fem.dirichletbc(self.u_D, dofs).set(self.u.x.array)
-            self.u.x.scatter_forward()
-
-    def _setup_tractions(self, facet_tags: dmesh.MeshTags, boundary: BoundaryConditions) -> list:
-        """(t_k, ds_k) for every traction group with facets on this mesh; t_k P1-interpolated."""
-        ds = ufl.Measure("ds", domain=self.mesh, subdomain_data=facet_tags)
-        present = set(self.mesh.comm.allreduce(neumann_groups(facet_tags)))
-        self.tractions: list[fem.Function] = []
-        out = []
-        for tag, name, field in boundary.traction_tags():
-            if tag not in present:
-                continue  # on another subdomain
-            t = fem.Function(self.V, name=f"t_{name}")
-            t.interpolate(field)
-            t.x.scatter_forward()
-            self.tractions.append(t)
-            out.append((t, ds(tag)))
-        return out
-
-    def _setup_contact_geometry(self, facet_tags: dmesh.MeshTags, obstacle: Obstacle | None, ds_c) -> None:
-        """Nodal contact direction ν (vector P1) and gap g (P1) at the Γ_C vertices."""
-        msh = self.mesh
-        tdim = msh.topology.dim
-        contact = facet_tags.find(Boundary.GAMMA_C)
-        if msh.comm.allreduce(int(contact.size), op=MPI.SUM) == 0:
-            if obstacle is not None:
-                raise InputError(
-                    "an obstacle is given but the mesh has no contact boundary: the physical group 'Gamma_C' "
-                    "has no facets (tag the facets that may touch the obstacle as Gamma_C)"
-                )
-        self._contact_q = fem.locate_dofs_topological(self.Q, tdim - 1, contact)
-        self.nu_c = fem.Function(self.V, name="nu")
-        self.gap = fem.Function(self.Q, name="gap")
-        q = ufl.TestFunction(self.Q)
-        v = ufl.TestFunction(self.V)
-        w = dolfinx.fem.assemble_vector(fem.form(q * ds_c))
-        w.scatter_reverse(dolfinx.la.InsertMode.add)
-        w.scatter_forward()
-        N = dolfinx.fem.assemble_vector(fem.form(ufl.dot(v, ufl.FacetNormal(msh)) * ds_c))
-        N.scatter_reverse(dolfinx.la.InsertMode.add)
-        N.scatter_forward()
-        gdim = msh.geometry.dim
-        nodes = self._contact_q
-        Nn = N.array.reshape(-1, gdim)[nodes]
-        self._surface_normal = Nn / np.linalg.norm(Nn, axis=1)[:, None] if nodes.size else Nn
-        self._contact_weights = w.array
-        self.obstacle = None
-        self.set_obstacle(obstacle)
+    # -- contact geometry ------------------------------------------------------------------
+    @property
+    def obstacle(self) -> Obstacle | None:
+        """The obstacle (None: a wall flush with Γ_C)."""
+        return None if self.geometry is None else self.geometry.obstacle
 
     def set_obstacle(self, obstacle: Obstacle | None) -> None:
         """Set (or move) the obstacle: ν and g at the Γ_C vertices (collective); the next solve warm-starts."""
         if not self.contact:
             raise InputError("this subproblem has no contact boundary")
-        nodes = self._contact_q
-        gdim = self.mesh.geometry.dim
-        if obstacle is None:
-            g = np.zeros(nodes.size)
-            nu = self._surface_normal
-        else:
-            points = self.Q.tabulate_dof_coordinates()[nodes]
-            g, nu = evaluate_obstacle(obstacle, points, comm=self.mesh.comm)
-            check_obstacle_side(obstacle, nu, self._surface_normal, g, comm=self.mesh.comm)
-        same_direction = self.mesh.comm.allreduce(
-            bool(np.array_equal(self.nu_c.x.array.reshape(-1, gdim)[nodes], nu)), op=MPI.LAND
-        )
-        self.nu_c.x.array[:] = 0.0
-        self.nu_c.x.array.reshape(-1, gdim)[nodes] = nu
-        self.gap.x.array[:] = 0.0
-        self.gap.x.array[nodes] = g
-        self.obstacle = obstacle
-        if not same_direction:
+        if self.geometry.set_obstacle(obstacle):
             self._factorized_set = None  # ν enters the Jacobian
 
     # -- sizes ---------------------------------------------------------------------------
@@ -335,61 +265,35 @@ class PrimalSubproblem:
         """
         if not self.contact:
             raise InputError("this subproblem has no contact boundary")
-        nloc = self.Q.dofmap.index_map.size_local
         R = dolfinx.fem.assemble_vector(self._reaction)
         R.scatter_reverse(dolfinx.la.InsertMode.add)
-        w = self._contact_weights
-        on_contact = np.zeros(nloc, dtype=bool)
-        on_contact[self._contact_q[self._contact_q < nloc]] = True
-        on_contact &= w[:nloc] > 0.0
-        on_contact[self._dirichlet_q[self._dirichlet_q < nloc]] = False  # clamped corners: not contact
-        on = np.flatnonzero(on_contact)
-        gdim = self.mesh.geometry.dim
-        normal = self.nu_c.x.array.reshape(-1, gdim)[on]
-        gap = self.gap.x.array[on]
-        u_c = np.sum(self.u.x.array.reshape(-1, gdim)[on] * normal, axis=1) - gap
-        sigma_c = np.sum(R.array.reshape(-1, gdim)[on] * normal, axis=1) / w[on]
-        points = self.Q.tabulate_dof_coordinates()[on, :2]
-        comm = self.mesh.comm
-        points, u_c, sigma_c, weights, normal, gap = (
-            np.concatenate(comm.allgather(a)) for a in (points, u_c, sigma_c, w[on], normal, gap)
-        )
-        order = profile_order(points)
-        return ContactProfile(
-            points[order, 1], u_c[order], sigma_c[order], points[order], weights[order], normal[order], gap[order]
-        )
+        return self.geometry.profile(self.u, R.array)
 
     # -- interface Newton support (hybrid.newton): the affine pieces of the problem ---------------
-    def _set_lifting(self) -> None:
-        """u ← u_D on the Γ_D DOFs and 0 elsewhere (the state every Newton solve starts from)."""
-        self.u.x.array[:] = 0.0
-        if self.u_D is not None:
-            fem.dirichletbc(self.u_D, self._dirichlet_dofs).set(self.u.x.array)
-        self.u.x.scatter_forward()
-
     def _with_lifting_no_contact(self, action):
         """Run ``action()`` at u = lifting of u_D, zero Robin data and every contact node inactive
         (the gap raised above u·ν), then restore u, g and the gap."""
         keep_u = self.u.x.array.copy()
         keep_g = self.g.x.array.copy() if self.g is not None else None
-        keep_gap = self.gap.x.array.copy() if self.contact else None
+        gap = self.geometry.gap if self.contact else None
+        keep_gap = gap.x.array.copy() if self.contact else None
         try:
-            self._set_lifting()
+            self.boundary.set_lifting(self.u)
             if self.g is not None:
                 self.g.x.array[:] = 0.0
             if self.contact:
-                self.gap.x.array[:] = 1.0 + float(np.max(np.abs(self.u.x.array), initial=0.0))
+                gap.x.array[:] = 1.0 + float(np.max(np.abs(self.u.x.array), initial=0.0))
             return action()
         finally:
             self.u.x.array[:] = keep_u
             if self.g is not None:
                 self.g.x.array[:] = keep_g
             if self.contact:
-                self.gap.x.array[:] = keep_gap
+                gap.x.array[:] = keep_gap
 
     def reset(self) -> None:
         """Forget the solution and the cached factorization (the next ``solve`` starts cold from u_D's lifting)."""
-        self._set_lifting()
+        self.boundary.set_lifting(self.u)
         self._factorized_set = None
 
     def residual_norm(self) -> tuple[float, float]:
@@ -415,7 +319,7 @@ class PrimalSubproblem:
             self._assemble_vector(self._F, out)  # Γ_D rows 0
             out.scale(-1.0)
             if self.u_D is not None:
-                dolfinx.fem.petsc.set_bc(out, [fem.dirichletbc(self.u_D, self._dirichlet_dofs)])
+                dolfinx.fem.petsc.set_bc(out, [fem.dirichletbc(self.u_D, self.boundary.dirichlet_dofs)])
             return out
 
         return self._with_lifting_no_contact(assemble)
@@ -425,16 +329,7 @@ class PrimalSubproblem:
         gap g_p): the penalty term is Σ_p (w_p/δ) (u_p·ν_p − g_p)⁺ (v_p·ν_p)."""
         if not self.contact:
             raise InputError("this subproblem has no contact boundary")
-        nloc = self.Q.dofmap.index_map.size_local
-        w = self._contact_weights
-        on = np.zeros(nloc, dtype=bool)
-        on[self._contact_q[self._contact_q < nloc]] = True
-        on &= w[:nloc] > 0.0
-        on[self._dirichlet_q[self._dirichlet_q < nloc]] = False
-        nodes = np.flatnonzero(on)
-        gdim = self.mesh.geometry.dim
-        nu = self.nu_c.x.array.reshape(-1, gdim)[nodes].copy()
-        return nodes, nu, w[nodes].copy(), self.gap.x.array[nodes].copy()
+        return self.geometry.nodes()
 
     def destroy(self) -> None:
         """Free the PETSc objects (collective)."""

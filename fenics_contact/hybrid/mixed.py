@@ -77,14 +77,11 @@ from fenics_contact.hybrid.iteration import (
 from fenics_contact.errors import InputError
 from fenics_contact.problem.problem import ContactProblem
 from fenics_contact.problem.validation import interface_bends_of
-from fenics_contact.fem.mixed import (
-    MixedContactProfile,
-    MixedNewtonHistory,
-    MixedSolution,
-    MixedSubproblem,
-    check_triangles,
-    epsilon_for,
-)
+from fenics_contact.fem.mixed import MixedSolution, epsilon_for
+from fenics_contact.fem.mixed_contact import MixedContactProfile
+from fenics_contact.fem.mixed_newton import MixedNewtonHistory
+from fenics_contact.fem.mixed_spaces import check_triangles
+from fenics_contact.fem.mixed_subproblem import MixedSubproblem
 from fenics_contact.hybrid.primal import omega2_record
 from fenics_contact.hybrid.response import FineResponse, MixedPart
 from fenics_contact.hybrid.transmission import split_mesh, sub_to_parent_dofs

@@ -22,7 +22,7 @@ import dolfinx.fem.petsc
 
 from fenics_contact.errors import ConvergenceError
 from fenics_contact.fem.linalg import DirectSolver, scipy_to_petsc
-from fenics_contact.fem.mixed import MIXED_SOLVER_OPTIONS
+from fenics_contact.fem.mixed_linear import MIXED_SOLVER_OPTIONS
 
 __all__ = [
     "block_solve",

@@ -66,7 +66,9 @@ from fenics_contact.hybrid.iteration import (
 from fenics_contact.errors import InputError
 from fenics_contact.problem.tags import Boundary
 from fenics_contact.problem.geometry import ContactMesh
-from fenics_contact.fem.mixed import MixedContactProfile, MixedSolution, boundary_stress_space
+from fenics_contact.fem.mixed import MixedSolution
+from fenics_contact.fem.mixed_contact import MixedContactProfile
+from fenics_contact.fem.mixed_spaces import boundary_stress_space
 from fenics_contact.hybrid.mixed import DEFAULT_BETA, MixedHybridStep, solve_or_verify
 from fenics_contact.hybrid.primal import omega2_record
 from fenics_contact.hybrid.response import MatrixResponse

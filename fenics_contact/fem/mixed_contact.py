@@ -1,0 +1,205 @@
+"""The contact boundary Γ_C of the mixed subproblem: its Gauss–Lobatto nodes, the map Q to σ_c, the penalty.
+
+**Contact quadrature.**  The penalty is integrated with the 4-point Gauss–Lobatto rule per Γ_C edge
+(``forms_mixed.contact_measure``).  Its nodes (3 per edge, vertices shared) are a Lagrange basis of the σ_c
+trace space (continuous P3 on Γ_C), so the penalty acts on nodal values of σ_c with a diagonal weight, as
+the primal method's vertex quadrature does for u_c.  Newton works with the sparse matrix Q of nodal values
+σ_c(x_q) (a DG P3 evaluation times the prolongation P): it gives the active set, the penalty residual
+(1/ε) Qᵀ W (Qσ)⁺, its generalized Jacobian (1/ε) Qᵀ W H(Qσ) Q and the energy.  The same term assembled from
+the UFL form ``forms_mixed.contact_penalty`` agrees to round-off (tested).  (With 4 Gauss–Legendre points
+per edge — more points than trace DOFs — full semismooth Newton steps wander for 50+ steps at h = 1/64 and
+the line search creeps one point per step; with the nodal rule full steps converge in about 5.)
+
+**Penalty.**  The natural boundary term says u_c = −(σ_c)⁺/ε on Γ_C: where the body presses on the obstacle
+(σ_c ≤ 0) u_c = 0 exactly; where it separates, a small tensile stress σ_c = ε|u_c| remains
+(``MixedContactProfile.max_tensile``).
+
+**MPI.**  The node data (σ_c, weights, gap, the active set) are small and replicated: every rank holds all
+of them in the same (``profile_order``) order; Q has this rank's block of rows.
+"""
+
+import numpy as np
+import scipy.sparse as sp
+
+from dolfinx import mesh as dmesh
+
+from fenics_contact.fem.contact import ContactProfile, profile_order
+from fenics_contact.fem.contact_boundary import obstacle_at_nodes
+from fenics_contact.fem.distributed import DistributedMatrix, coo_matrix, gather_rows, layout
+from fenics_contact.fem.mixed_spaces import MixedSpaces
+from fenics_contact.fem.mixed_traces import BoundaryFacets, normal_weights, reference_coordinates, stress_evaluation
+from fenics_contact.problem.obstacles import Obstacle
+from fenics_contact.problem.tags import Boundary
+
+__all__ = ["ContactNodes", "MixedContactProfile", "merge_contact_nodes"]
+
+
+class MixedContactProfile(ContactProfile):
+    """σ_c and u_c = −(σ_c)⁺/ε along Γ_C (sorted by y) for the mixed penalty.
+
+    The mixed penalty allows no penetration (u_c ≤ 0 everywhere); a point is in
+    contact where the normal stress is compressive, σ_c < 0 (there u_c = 0).  ``max_tensile`` is the penalty error: the tensile stress left
+    where the body separates (= ε·max|u_c|).
+    """
+
+    __slots__ = ()
+
+    @property
+    def active(self) -> np.ndarray:
+        """Points in contact: σ_c < 0 (compressive: the penalty is inactive and u_c = g).
+
+        (σ_c = 0 up to round-off, 1e−12 of max |σ_c|, only where an essential condition
+        forces it, e.g. a Γ_C end next to a traction-free side: not contact.)
+        """
+        scale = float(np.max(np.abs(self.sigma_c), initial=0.0))
+        return self.sigma_c < -1e-12 * scale
+
+    @property
+    def max_tensile(self) -> float:
+        """max (σ_c)⁺: the tensile contact stress the penalty leaves."""
+        return float(np.max(np.maximum(self.sigma_c, 0.0), initial=0.0))
+
+
+def merge_contact_nodes(comm, pts, wts, normals, vertex):
+    """Gauss–Lobatto nodes of all ranks, copies of a vertex shared by two edges with the same normal merged.
+
+    Returns the replicated, canonically ordered (``profile_order``) points, weights, normals and vertex
+    numbers, and for this rank (local node index, canonical index) of the copies it evaluates
+    (the first copy of each merged node in rank order).
+    """
+    local_n = pts.shape[0]
+    if comm.size > 1:
+        parts = comm.allgather((pts, wts, normals, vertex))
+        start = int(sum(p[0].shape[0] for p in parts[: comm.rank]))
+        pts, wts, normals, vertex = (np.concatenate([p[i] for p in parts]) for i in range(4))
+    else:
+        start = 0
+    key = np.where(vertex >= 0, vertex, -1 - np.arange(vertex.size))
+    nkey = np.round(normals * 1e8).astype(np.int64)
+    _, first, inverse = np.unique(
+        np.stack([key, nkey[:, 0], nkey[:, 1]], axis=1), axis=0, return_index=True, return_inverse=True
+    )
+    merged_w = np.zeros(first.size)
+    np.add.at(merged_w, inverse.ravel(), wts)
+    order = profile_order(pts[first])
+    first = first[order]
+    mine = (first >= start) & (first < start + local_n)
+    mine_rows = np.flatnonzero(mine)
+    return (pts[first], merged_w[order], normals[first], vertex[first], first[mine] - start, mine_rows)
+
+
+class ContactNodes:
+    """The Γ_C contact nodes (replicated ``q_points``, ``q_weights``, ``q_normals``, gap ``q_gap``), Q and the penalty.
+
+    σ_c at the nodes is Q c + ``q0`` (``q0``: the traction lifting's share); this rank evaluates the nodes
+    ``rows`` (canonical indices), Q holds its block ``range`` of rows.  ``epsilon``: the penalty ε (None: no
+    contact term; the nodes still serve the profile and the gap load).
+    """
+
+    def __init__(self, msh: dmesh.Mesh, facet_tags: dmesh.MeshTags, facets: np.ndarray, spaces: MixedSpaces,
+                 epsilon: float | None) -> None:
+        comm = self.comm = msh.comm
+        self.epsilon = epsilon
+        self.obstacle: Obstacle | None = None  #: set with the gap by ``set_obstacle``
+        bf = BoundaryFacets(msh, facets)
+        vertex_gid = spaces.space.global_vertex_indices
+        pts, wq, cells, normals, vertex = bf.lobatto_nodes(vertex_gid)
+        (self.q_points, self.q_weights, self.q_normals, q_vertex, local_nodes,
+         rows) = merge_contact_nodes(comm, pts, wq, normals, vertex)
+        nq = self.q_points.shape[0]
+        self.rows = rows  #: canonical index of the contact nodes this rank evaluates
+        self.range = layout(comm, nq)
+        cells, normals = cells[local_nodes], normals[local_nodes]
+        X = reference_coordinates(msh, cells, pts[local_nodes])
+        Q_dg = stress_evaluation(spaces.dg, cells, X, normal_weights(normals))
+        Q_loc = (Q_dg @ spaces.space.prolongation_for_rows(np.unique(Q_dg.tocsr().indices))).tocsr()
+        Q_loc.eliminate_zeros()
+        gi = spaces.space.global_indices
+        #: this rank's rows of Q with global AW columns (the penalty pattern of the saddle-point matrix)
+        self.Q_rows_global = sp.csr_matrix((Q_loc.data, gi[Q_loc.indices], Q_loc.indptr),
+                                           shape=(Q_loc.shape[0], spaces.space.num_dofs))
+        self.Q_local = Q_loc
+        Qc = Q_loc.tocoo()
+        #: σ_c at the contact nodes (canonical order), this rank's block of rows: Q c (+ ``q0``)
+        self.Q = DistributedMatrix(coo_matrix(comm, rows[Qc.row], gi[Qc.col], Qc.data,
+                                             (self.range[1] - self.range[0], nq),
+                                             (spaces.n_sigma, spaces.space.num_dofs)))
+        #: σ_t,c at the contact nodes (the traction lifting's normal stress; zero without tractions), replicated
+        self.q0 = gather_rows(comm, rows, Q_dg @ spaces.s0, nq)
+        # u_h·n at the nodes from the DG P1 displacement (one adjacent cell per node)
+        el = spaces.U.ufl_element().sub_elements[0].basix_element
+        if cells.size:
+            phi = el.tabulate(0, X)[0, :, :, 0]  # (N, 3)
+            dofs = spaces.U.dofmap.list[cells].astype(np.int64)
+            ucols = 2 * dofs[:, :, None] + np.arange(2)
+            vals = phi[:, :, None] * normals[:, None, :]
+            urows = np.broadcast_to(np.arange(cells.size)[:, None, None], ucols.shape)
+            self.Un = sp.csr_matrix((vals.ravel(), (urows.ravel(), ucols.ravel())), shape=(cells.size, spaces.n_u))
+        else:
+            self.Un = sp.csr_matrix((0, spaces.n_u))
+        # nodes on Γ_D (the clamped corners) are left out of the profile, as in the primal one
+        tdim = msh.topology.dim
+        msh.topology.create_connectivity(tdim - 1, 0)
+        f2v = msh.topology.connectivity(tdim - 1, 0).array.reshape(-1, 2)
+        dirichlet = facet_tags.find(Boundary.GAMMA_D)
+        clamped = vertex_gid[f2v[dirichlet].ravel()] if dirichlet.size else np.zeros(0, np.int64)
+        if comm.size > 1:
+            clamped = np.concatenate(comm.allgather(clamped))
+        self.profile_nodes = ~np.isin(q_vertex, clamped) | (q_vertex < 0)
+
+    def set_obstacle(self, obstacle: Obstacle | None) -> None:
+        """The gap g at the nodes and the load F_g = Qᵀ W g (−∫_ΓC g τ_c moved to the right-hand side)."""
+        self.q_gap, _ = obstacle_at_nodes(obstacle, self.q_points, self.q_normals)  # replicated nodes: no comm
+        self.F_gap = self.Q.T @ self.block(self.q_weights * self.q_gap)
+        self.obstacle = obstacle
+
+    def block(self, values: np.ndarray) -> np.ndarray:
+        """This rank's block (rows of ``Q``) of a replicated array over the contact nodes."""
+        return values[self.range[0] : self.range[1]]
+
+    def replicate(self, block: np.ndarray) -> np.ndarray:
+        """The replicated array over the contact nodes from every rank's block (canonical order)."""
+        return block if self.comm.size == 1 else np.concatenate(self.comm.allgather(block))
+
+    def stress(self, c: np.ndarray) -> np.ndarray:
+        """σ_c at the contact nodes of the stress P c + σ_t (replicated)."""
+        return self.replicate(self.Q @ c) + self.q0
+
+    def penalty_force(self, s: np.ndarray) -> np.ndarray:
+        """(1/ε) Qᵀ W (σ_c)⁺ for replicated σ_c (owned AW entries)."""
+        return self.Q.T @ self.block(self.q_weights * np.maximum(s, 0.0) / self.epsilon)
+
+    def penalty_matrix(self, active: np.ndarray) -> sp.csr_matrix:
+        """(1/ε) Qᵀ W H Q for the penalty-active nodes, this rank's rows of Q (local AW columns; serial: all)."""
+        act = active[self.rows]
+        Qa = self.Q_local[np.flatnonzero(act)]
+        return (Qa.T @ sp.diags(self.q_weights[self.rows][act] / self.epsilon) @ Qa).tocsr()
+
+    def penalty_weights(self, active: np.ndarray) -> np.ndarray:
+        """w_q/ε at the nodes this rank evaluates where ``active`` (replicated), else 0: the diagonal of the
+        penalty block Qᵀ (W/ε) H Q of the saddle-point Jacobian."""
+        rows = self.rows
+        return np.where(active[rows], self.q_weights[rows] / self.epsilon, 0.0)
+
+    def penalty_energy(self, s: np.ndarray) -> float:
+        """(1/2ε) Σ_q w_q ((σ_c)⁺)² for replicated σ_c: the penalty's part of the complementary energy."""
+        return 0.5 * np.sum(self.q_weights * np.maximum(s, 0.0) ** 2) / self.epsilon
+
+    def profile(self, c: np.ndarray) -> MixedContactProfile:
+        """σ_c and u_c = −(σ_c)⁺/ε at the nodes (clamped corners excluded), sorted; on every rank."""
+        keep = self.profile_nodes
+        sigma_c = self.stress(c)[keep]
+        return MixedContactProfile(
+            self.q_points[keep, 1], -np.maximum(sigma_c, 0.0) / self.epsilon, sigma_c, self.q_points[keep],
+            self.q_weights[keep], self.q_normals[keep], self.q_gap[keep],
+        )
+
+    def normal_trace(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(y, u_h·n) of the DG P1 displacement u (owned coefficients) at the profile's nodes."""
+        keep = self.profile_nodes
+        un = gather_rows(self.comm, self.rows, self.Un @ u, self.q_points.shape[0])
+        return self.q_points[keep, 1], un[keep]
+
+    def destroy(self) -> None:
+        """Free the PETSc matrix Q (collective)."""
+        self.Q.destroy()

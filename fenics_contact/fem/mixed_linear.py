@@ -1,0 +1,88 @@
+"""The saddle-point Jacobian of the mixed subproblem and its MUMPS factorization, cached by active set.
+
+    J = [[K̃ + (1/ε) Qᵀ W H Q, Bᵀ], [B, 0]]
+
+depends on the iterate only through the active set H, so a factorization is reused until the set
+changes.  The sparsity pattern holds every Γ_C node's penalty entries (``SaddlePointMatrix``): when the
+set changes only values change, and MUMPS redoes the numeric factorization, not the analysis.
+"""
+
+import numpy as np
+from mpi4py import MPI
+
+from fenics_contact.errors import InputError
+from fenics_contact.fem.distributed import SaddlePointMatrix
+from fenics_contact.fem.linalg import DIRECT_OPTIONS, DirectSolver
+from fenics_contact.fem.mixed_assembly import MixedOperators
+from fenics_contact.fem.mixed_contact import ContactNodes
+
+__all__ = ["MIXED_SOLVER_OPTIONS", "SaddlePointFactorization"]
+
+#: MUMPS LU with the AMF ordering: half the factorization time of the default ordering on the
+#: AW saddle-point matrices (3.8 s instead of 7.5 s at h = 1/128, 0.7 s instead of 1.3 s at 1/64).
+MIXED_SOLVER_OPTIONS = {**DIRECT_OPTIONS, "mat_mumps_icntl_7": "2"}
+
+
+class SaddlePointFactorization:
+    """J for a given active set (None: no penalty), factorized once per set, and solves with it.
+
+    ``n_sigma``: owned AW coefficients (the first block); ``contact``: whether J has a penalty block (ε
+    given); ``nodes``: the Γ_C nodes (None without Γ_C facets).
+    """
+
+    def __init__(self, comm: MPI.Comm, prefix: str, n_sigma: int, operators: MixedOperators,
+                 nodes: ContactNodes | None, *, contact: bool, has_operators: bool) -> None:
+        self.comm, self.prefix, self.n_sigma = comm, prefix, n_sigma
+        self.operators, self.nodes = operators, nodes
+        self.contact, self.has_operators = contact, has_operators
+        self._solver: DirectSolver | None = None
+        self._saddle: SaddlePointMatrix | None = None
+        self.factorized_set: np.ndarray | None = None  #: the active set of the current factorization
+        self._rhs = self._sol = None
+
+    @property
+    def solver(self) -> DirectSolver:
+        """The direct solver (created at the first factorization: its PETSc options are set then)."""
+        if self._solver is None:
+            self._solver = DirectSolver(self.comm, prefix=self.prefix, options=MIXED_SOLVER_OPTIONS)
+        return self._solver
+
+    def factorize_for(self, active: np.ndarray | None) -> bool:
+        """Factorize the saddle-point Jacobian unless the cached one has the same active set."""
+        if not self.has_operators:
+            raise InputError("this subproblem was built without its matrices (operators=False): it cannot be solved")
+        key = np.zeros(0, dtype=bool) if active is None else active
+        if self.factorized_set is not None and np.array_equal(key, self.factorized_set):
+            return False
+        if self._saddle is None:
+            # one sparsity pattern for every active set (all Γ_C nodes): when the active set changes
+            # only the penalty values change and MUMPS redoes the numeric factorization, not the analysis
+            Q_rows = self.nodes.Q_rows_global if (self.contact and self.nodes is not None) else None
+            self._saddle = SaddlePointMatrix(self.operators.Kt.mat, self.operators.B.mat, Q_rows)
+            self._rhs, self._sol = self._saddle.create_vecs()
+        if active is None or not self.contact:
+            self._saddle.set_weights(None)
+        else:
+            self._saddle.set_weights(self.nodes.penalty_weights(active))
+        self.solver.set_operator(self._saddle.mat)
+        self.factorized_set = key.copy()
+        return True
+
+    def solve(self, r1: np.ndarray, r2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(x1, x2) with J [x1; x2] = [r1; r2] (owned entries) by the current factorization."""
+        n_sigma = self.n_sigma
+        self._rhs.array[:n_sigma] = r1
+        self._rhs.array[n_sigma:] = r2
+        self.solver.solve(self._rhs, self._sol)
+        x = self._sol.array
+        return x[:n_sigma].copy(), x[n_sigma:].copy()
+
+    def destroy(self) -> None:
+        """Free the PETSc objects (collective)."""
+        if self._saddle is not None:
+            self._saddle.destroy()
+        for obj in (self._rhs, self._sol):
+            if obj is not None:
+                obj.destroy()
+        if self._solver is not None:
+            self._solver.destroy()

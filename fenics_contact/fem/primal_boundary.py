@@ -1,0 +1,157 @@
+"""The boundary of the primal P1 subproblem: u = u_D on Γ_D, the tractions on Γ_N and the nodal contact geometry on Γ_C.
+
+u_D is imposed strongly (Newton works with homogeneous increments; the iterate carries u_D on the Γ_D
+DOFs), the tractions t_k are P1-interpolated and enter the load, the other facets are traction free.  The
+contact direction ν and the gap g are nodal (P1) on Γ_C: the obstacle's at the Γ_C vertices, or for a wall
+flush with Γ_C (no obstacle) the body's nodal normal (facet normals averaged with the vertex weights) and
+g = 0.  One ν per node keeps the active set a set of nodes on a curved Γ_C too.
+"""
+
+import numpy as np
+import ufl
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from dolfinx import fem
+from dolfinx import mesh as dmesh
+import dolfinx.fem.petsc
+
+from fenics_contact.fem.contact import ContactProfile, profile_order
+from fenics_contact.fem.contact_boundary import contact_boundary_present, obstacle_at_nodes
+from fenics_contact.problem.boundary import BoundaryConditions, neumann_groups
+from fenics_contact.problem.obstacles import Obstacle
+from fenics_contact.problem.tags import Boundary
+
+__all__ = ["NodalContactGeometry", "PrimalBoundaryData"]
+
+
+class PrimalBoundaryData:
+    """u = u_D on Γ_D (``bcs``: the homogeneous conditions of the Newton increments) and the tractions on Γ_N.
+
+    ``traction_terms``: (t_k, ds_k) for every traction group with facets on this mesh (t_k in P1, also in
+    ``tractions``); ``dirichlet_dofs`` / ``dirichlet_q``: the Γ_D DOFs of V and of the scalar P1 space Q.
+    """
+
+    def __init__(self, V: fem.FunctionSpace, Q: fem.FunctionSpace, facet_tags: dmesh.MeshTags,
+                 boundary: BoundaryConditions) -> None:
+        msh = V.mesh
+        tdim = msh.topology.dim
+        gdim = msh.geometry.dim
+        dirichlet = facet_tags.find(Boundary.GAMMA_D)
+        dofs = fem.locate_dofs_topological(V, tdim - 1, dirichlet)
+        self.bcs = [fem.dirichletbc(np.zeros(gdim, dtype=PETSc.ScalarType), dofs, V)]
+        self.dirichlet_dofs = dofs
+        self.dirichlet_q = fem.locate_dofs_topological(Q, tdim - 1, dirichlet)
+        self.u_D: fem.Function | None = None
+        if boundary.displacement is not None:
+            self.u_D = fem.Function(V, name="u_D")
+            self.u_D.interpolate(boundary.displacement)
+            self.u_D.x.scatter_forward()
+        ds = ufl.Measure("ds", domain=msh, subdomain_data=facet_tags)
+        present = set(msh.comm.allreduce(neumann_groups(facet_tags)))
+        self.tractions: list[fem.Function] = []
+        self.traction_terms: list = []
+        for tag, name, field in boundary.traction_tags():
+            if tag not in present:
+                continue  # on another subdomain
+            t = fem.Function(V, name=f"t_{name}")
+            t.interpolate(field)
+            t.x.scatter_forward()
+            self.tractions.append(t)
+            self.traction_terms.append((t, ds(tag)))
+
+    def set_lifting(self, u: fem.Function) -> None:
+        """u ← u_D on the Γ_D DOFs and 0 elsewhere (the state every cold Newton solve starts from)."""
+        u.x.array[:] = 0.0
+        if self.u_D is not None:
+            fem.dirichletbc(self.u_D, self.dirichlet_dofs).set(u.x.array)
+        u.x.scatter_forward()
+
+
+class NodalContactGeometry:
+    """Nodal contact direction ν (vector P1 ``nu``) and gap g (P1 ``gap``) at the Γ_C vertices.
+
+    ``weights``: the vertex weights ∫_ΓC φ_p ds; ``surface_normal``: the body's nodal outward normal at the
+    Γ_C vertices; Γ_D vertices (``dirichlet_q``, clamped corners) are not contact nodes.  InputError if an
+    obstacle is given and Γ_C has no facets.
+    """
+
+    def __init__(self, V: fem.FunctionSpace, Q: fem.FunctionSpace, facet_tags: dmesh.MeshTags, ds_c,
+                 dirichlet_q: np.ndarray, obstacle: Obstacle | None) -> None:
+        msh = V.mesh
+        self.V, self.Q, self.dirichlet_q = V, Q, dirichlet_q
+        self.comm = msh.comm
+        tdim = msh.topology.dim
+        contact = facet_tags.find(Boundary.GAMMA_C)
+        contact_boundary_present(self.comm, contact, obstacle)
+        self.contact_q = fem.locate_dofs_topological(Q, tdim - 1, contact)
+        self.nu = fem.Function(V, name="nu")
+        self.gap = fem.Function(Q, name="gap")
+        q = ufl.TestFunction(Q)
+        v = ufl.TestFunction(V)
+        w = dolfinx.fem.assemble_vector(fem.form(q * ds_c))
+        w.scatter_reverse(dolfinx.la.InsertMode.add)
+        w.scatter_forward()
+        N = dolfinx.fem.assemble_vector(fem.form(ufl.dot(v, ufl.FacetNormal(msh)) * ds_c))
+        N.scatter_reverse(dolfinx.la.InsertMode.add)
+        N.scatter_forward()
+        gdim = msh.geometry.dim
+        nodes = self.contact_q
+        Nn = N.array.reshape(-1, gdim)[nodes]
+        self.surface_normal = Nn / np.linalg.norm(Nn, axis=1)[:, None] if nodes.size else Nn
+        self.weights = w.array
+        self.obstacle: Obstacle | None = None
+        self.set_obstacle(obstacle)
+
+    def set_obstacle(self, obstacle: Obstacle | None) -> bool:
+        """ν and g at the Γ_C vertices for ``obstacle`` (collective); True when ν changed (ν enters the Jacobian)."""
+        nodes = self.contact_q
+        gdim = self.V.mesh.geometry.dim
+        points = self.Q.tabulate_dof_coordinates()[nodes]
+        g, nu = obstacle_at_nodes(obstacle, points, self.surface_normal, comm=self.comm)
+        same_direction = self.comm.allreduce(
+            bool(np.array_equal(self.nu.x.array.reshape(-1, gdim)[nodes], nu)), op=MPI.LAND
+        )
+        self.nu.x.array[:] = 0.0
+        self.nu.x.array.reshape(-1, gdim)[nodes] = nu
+        self.gap.x.array[:] = 0.0
+        self.gap.x.array[nodes] = g
+        self.obstacle = obstacle
+        return not same_direction
+
+    def owned_nodes(self) -> np.ndarray:
+        """Owned Γ_C vertices off Γ_D with a positive weight (indices into Q's DOFs)."""
+        nloc = self.Q.dofmap.index_map.size_local
+        w = self.weights
+        on = np.zeros(nloc, dtype=bool)
+        on[self.contact_q[self.contact_q < nloc]] = True
+        on &= w[:nloc] > 0.0
+        on[self.dirichlet_q[self.dirichlet_q < nloc]] = False  # clamped corners: not contact
+        return np.flatnonzero(on)
+
+    def nodes(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(node = block index of u, ν_p (k, gdim), vertex weight w_p, gap g_p) at the ``owned_nodes``."""
+        nodes = self.owned_nodes()
+        gdim = self.V.mesh.geometry.dim
+        nu = self.nu.x.array.reshape(-1, gdim)[nodes].copy()
+        return nodes, nu, self.weights[nodes].copy(), self.gap.x.array[nodes].copy()
+
+    def profile(self, u: fem.Function, reaction: np.ndarray) -> ContactProfile:
+        """u_c = u·ν − g and σ_c = (R·ν_p)/w_p at the ``owned_nodes`` of all ranks, in ``profile_order``
+        (``reaction``: the assembled residual without the contact term, local entries)."""
+        on = self.owned_nodes()
+        w = self.weights
+        gdim = self.V.mesh.geometry.dim
+        normal = self.nu.x.array.reshape(-1, gdim)[on]
+        gap = self.gap.x.array[on]
+        u_c = np.sum(u.x.array.reshape(-1, gdim)[on] * normal, axis=1) - gap
+        sigma_c = np.sum(reaction.reshape(-1, gdim)[on] * normal, axis=1) / w[on]
+        points = self.Q.tabulate_dof_coordinates()[on, :2]
+        comm = self.comm
+        points, u_c, sigma_c, weights, normal, gap = (
+            np.concatenate(comm.allgather(a)) for a in (points, u_c, sigma_c, w[on], normal, gap)
+        )
+        order = profile_order(points)
+        return ContactProfile(
+            points[order, 1], u_c[order], sigma_c[order], points[order], weights[order], normal[order], gap[order]
+        )

@@ -88,7 +88,6 @@ import scipy.sparse as sp
 import ufl
 from mpi4py import MPI
 from petsc4py import PETSc
-from slepc4py import SLEPc
 
 import dolfinx.mesh
 from dolfinx import fem, la
@@ -96,6 +95,7 @@ from dolfinx import fem, la
 from fenics_contact import __version__
 from fenics_contact.errors import ConvergenceError, InputError
 from fenics_contact.fem import forms_primal
+from fenics_contact.fem.eigen import count_eigenvalues_below, generalized_eigenpairs
 from fenics_contact.fem.linalg import assemble_scipy, scipy_to_petsc
 from fenics_contact.multiscale.cache import OfflineCache, hash_array
 from fenics_contact.multiscale.coarse import CoarseGrid, coarse_grid, grid_from_cells
@@ -441,80 +441,6 @@ _INERTIA_GAP = 1.0e-6
 _DENSE_FALLBACK = 3000
 
 
-def _eps_pairs(
-    Ap: PETSc.Mat, Sp: PETSc.Mat, nev: int, kind: str, *, target: float, tol: float, deflation: np.ndarray | None
-) -> tuple[np.ndarray, np.ndarray]:
-    """All converged eigenpairs of one SLEPc GHEP solve (Krylov–Schur + shift-and-invert, or LAPACK)."""
-    n = Ap.getSize()[0]
-    eps = SLEPc.EPS().create(PETSc.COMM_SELF)
-    defl = []
-    try:
-        eps.setOperators(Ap, Sp)
-        eps.setProblemType(SLEPc.EPS.ProblemType.GHEP)
-        if kind == "krylovschur":
-            eps.setType(SLEPc.EPS.Type.KRYLOVSCHUR)
-            eps.setDimensions(nev)
-            st = eps.getST()
-            st.setType(SLEPc.ST.Type.SINVERT)
-            ksp = st.getKSP()
-            ksp.setType(PETSc.KSP.Type.PREONLY)
-            ksp.getPC().setType(PETSc.PC.Type.LU)
-            eps.setTarget(target)
-            eps.setWhichEigenpairs(SLEPc.EPS.Which.TARGET_REAL)
-            if deflation is not None and deflation.shape[1]:
-                for col in deflation.T:
-                    vec = Ap.createVecRight()
-                    vec.array[:] = col
-                    defl.append(vec)
-                eps.setDeflationSpace(defl)
-        else:
-            eps.setType(SLEPc.EPS.Type.LAPACK)
-            eps.setDimensions(n)
-            eps.setWhichEigenpairs(SLEPc.EPS.Which.SMALLEST_REAL)
-        eps.setTolerances(tol, 1000)
-        eps.solve()
-        nconv = eps.getConverged()
-        if nconv < nev:
-            raise ConvergenceError(
-                f"local spectral problem ({kind}, n = {n}): only {nconv} of {nev} eigenpairs converged "
-                f"(reason {eps.getConvergedReason()})"
-            )
-        vr = Ap.createVecRight()
-        values = np.empty(nconv)
-        vectors = np.empty((n, nconv))
-        for j in range(nconv):
-            values[j] = eps.getEigenpair(j, vr).real
-            vectors[:, j] = vr.array
-        vr.destroy()
-    finally:
-        eps.destroy()
-        for vec in defl:
-            vec.destroy()
-    return values, vectors
-
-
-def count_eigenvalues_below(A: sp.spmatrix, S: sp.spmatrix, sigma: float) -> int:
-    """#{λ < σ} for A φ = λ S φ (S ≻ 0): the negative inertia of A − σS (MUMPS LDLᵀ, Sylvester's law)."""
-    X = scipy_to_petsc((A - sigma * S).tocsr())
-    ksp = PETSc.KSP().create(PETSc.COMM_SELF)
-    try:
-        ksp.setOperators(X)
-        ksp.setType(PETSc.KSP.Type.PREONLY)
-        pc = ksp.getPC()
-        pc.setType(PETSc.PC.Type.CHOLESKY)
-        pc.setFactorSolverType("mumps")
-        pc.setFactorSetUpSolverType()
-        pc.getFactorMatrix().setMumpsIcntl(24, 1)  # null-pivot detection: required for the inertia
-        ksp.setUp()
-        if pc.getFailedReason() != 0:
-            raise ConvergenceError(f"LDLᵀ of A − σS failed (PETSc reason {pc.getFailedReason()})")
-        nneg, _, _ = pc.getFactorMatrix().getInertia()
-    finally:
-        ksp.destroy()
-        X.destroy()
-    return int(nneg)
-
-
 def local_spectral_problem(
     A: sp.spmatrix,
     S: sp.spmatrix,
@@ -544,10 +470,12 @@ def local_spectral_problem(
     Ap, Sp = scipy_to_petsc(A), scipy_to_petsc(S)
     try:
         if kind == "lapack":
-            values, vectors = _eps_pairs(Ap, Sp, nev, kind, target=target, tol=tol, deflation=None)
+            values, vectors = generalized_eigenpairs(Ap, Sp, nev, kind, target=target, tol=tol, deflation=None,
+                                                     label="local spectral problem")
         else:
             want = min(nev + _EXTRA_PAIRS, n)
-            values, vectors = _eps_pairs(Ap, Sp, want, kind, target=target, tol=tol, deflation=None)
+            values, vectors = generalized_eigenpairs(Ap, Sp, want, kind, target=target, tol=tol, deflation=None,
+                                                     label="local spectral problem")
             for _ in range(10):
                 order = np.argsort(values, kind="stable")
                 values, vectors = values[order], vectors[:, order]
@@ -559,9 +487,9 @@ def local_spectral_problem(
                     break
                 log.debug("Krylov–Schur missed %d eigenpair(s) below %.3e; deflating and searching again",
                           below - have, sigma)
-                more_v, more_x = _eps_pairs(
+                more_v, more_x = generalized_eigenpairs(
                     Ap, Sp, min(below - have + _EXTRA_PAIRS, n - have), kind, target=target, tol=tol,
-                    deflation=vectors[:, values < sigma],
+                    deflation=vectors[:, values < sigma], label="local spectral problem",
                 )
                 keep = values < sigma
                 values = np.concatenate([values[keep], more_v])
@@ -574,7 +502,8 @@ def local_spectral_problem(
                     raise ConvergenceError(f"local spectral problem (n = {n}): could not find all {nev} smallest "
                                            "pairs")
                 log.info("local spectral problem (n = %d): Krylov–Schur missed pairs; dense LAPACK instead", n)
-                values, vectors = _eps_pairs(Ap, Sp, nev, "lapack", target=target, tol=tol, deflation=None)
+                values, vectors = generalized_eigenpairs(Ap, Sp, nev, "lapack", target=target, tol=tol, deflation=None,
+                                                         label="local spectral problem")
     finally:
         Ap.destroy()
         Sp.destroy()

@@ -127,18 +127,17 @@ from dolfinx import fem
 from dolfinx import mesh as dmesh
 from mpi4py import MPI
 from petsc4py import PETSc
-from slepc4py import SLEPc
 
 from fenics_contact import __version__
 from fenics_contact.fem import forms_mixed
 from fenics_contact.errors import ConvergenceError, InputError
+from fenics_contact.fem.eigen import count_eigenvalues_below, generalized_eigenpairs
 from fenics_contact.fem.linalg import assemble_scipy, scipy_to_petsc
 from fenics_contact.multiscale.cache import OfflineCache, hash_array
 from fenics_contact.multiscale.work import run_shared
 from fenics_contact.multiscale.cem import (
     DEFAULT_S_FACTOR,
     CoarseGrid,
-    count_eigenvalues_below,
     kappa_tilde,
     require_serial,
 )
@@ -816,49 +815,9 @@ def _cell_pairs_dense(At: sp.spmatrix, Bl: sp.spmatrix, S: sp.spmatrix) -> tuple
 
 
 def _eps_smallest(Af: PETSc.Mat, Bf: PETSc.Mat, nev: int, deflation: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
-    """Converged pairs nearest ``_SHIFT`` of Af x = λ Bf x (SLEPc GHEP, Bf ⪰ 0; Krylov–Schur, shift-and-invert)."""
-    eps = SLEPc.EPS().create(PETSc.COMM_SELF)
-    defl = []
-    try:
-        eps.setOperators(Af, Bf)
-        eps.setProblemType(SLEPc.EPS.ProblemType.GHEP)
-        eps.setType(SLEPc.EPS.Type.KRYLOVSCHUR)
-        eps.setDimensions(nev)
-        st = eps.getST()
-        st.setType(SLEPc.ST.Type.SINVERT)
-        ksp = st.getKSP()
-        ksp.setType(PETSc.KSP.Type.PREONLY)
-        pc = ksp.getPC()
-        pc.setType(PETSc.PC.Type.LU)
-        pc.setFactorSolverType("mumps")
-        eps.setTarget(_SHIFT)
-        eps.setWhichEigenpairs(SLEPc.EPS.Which.TARGET_REAL)
-        if deflation is not None and deflation.shape[1]:
-            for col in deflation.T:
-                vec = Af.createVecRight()
-                vec.array[:] = col
-                defl.append(vec)
-            eps.setDeflationSpace(defl)
-        eps.setTolerances(_EPS_TOL, 1000)
-        eps.solve()
-        nconv = eps.getConverged()
-        if nconv < nev:
-            raise ConvergenceError(
-                f"Stage I eigenproblem (n = {Af.getSize()[0]}): only {nconv} of {nev} pairs converged "
-                f"(reason {eps.getConvergedReason()})"
-            )
-        vr = Af.createVecRight()
-        values = np.empty(nconv)
-        vectors = np.empty((Af.getSize()[0], nconv))
-        for j in range(nconv):
-            values[j] = eps.getEigenpair(j, vr).real
-            vectors[:, j] = vr.array
-        vr.destroy()
-    finally:
-        eps.destroy()
-        for vec in defl:
-            vec.destroy()
-    return values, vectors
+    """Converged pairs nearest ``_SHIFT`` of Af x = λ Bf x (Bf ⪰ 0; Krylov–Schur, shift-and-invert by MUMPS)."""
+    return generalized_eigenpairs(Af, Bf, nev, "krylovschur", target=_SHIFT, tol=_EPS_TOL, factor_solver="mumps",
+                                  deflation=deflation, label="Stage I eigenproblem")
 
 
 def _count_below(K: sp.spmatrix, n_loc: int, t: float, M: sp.spmatrix) -> int:
@@ -866,7 +825,7 @@ def _count_below(K: sp.spmatrix, n_loc: int, t: float, M: sp.spmatrix) -> int:
 
     Sylvester and Haynsworth: In([[Ã, Bᵀ], [B, tS]]) = In(Ã) + In(tS − BÃ⁻¹Bᵀ), Ã ≻ 0.
     """
-    return count_eigenvalues_below(K, M, t) - n_loc  # the primal CEM's inertia count (MUMPS LDLᵀ)
+    return count_eigenvalues_below(K, M, t) - n_loc  # Sylvester's inertia count (MUMPS LDLᵀ, ``fem.eigen``)
 
 
 def _cell_pairs_sparse(

@@ -19,6 +19,7 @@ import scipy.sparse.linalg as spla
 from mpi4py import MPI
 
 import fenics_contact  # noqa: F401  (must precede dolfinx)
+from fenics_contact.fem import linalg
 from fenics_contact.problem import geometry, models
 from fenics_contact.multiscale import cem
 from fenics_contact.multiscale import mixed_cem as mm
@@ -298,7 +299,7 @@ def _relative_difference(ops, dofs, a, b):
 
 
 def test_symmetric_factorization_and_its_lu_fallback(caplog):
-    """``_MumpsLU.symmetric`` (Stage II skeleton systems, given by their upper triangle) solves an SPD system
+    """``LocalFactor.symmetric`` (Stage II skeleton systems, given by their upper triangle) solves an SPD system
     by Cholesky, and an indefinite symmetric one (where Cholesky meets a negative pivot) through the LU of
     the full matrix, both to rounding."""
     rng = np.random.default_rng(5)
@@ -310,8 +311,8 @@ def test_symmetric_factorization_and_its_lu_fallback(caplog):
     b = rng.standard_normal((n, 3))
     for A, fallback in ((spd, False), (indefinite, True)):
         caplog.clear()
-        with caplog.at_level(logging.DEBUG, logger=mm.log.name):
-            lu = mm._MumpsLU.symmetric(sp.triu(A).tocsr())
+        with caplog.at_level(logging.DEBUG, logger=linalg.log.name):
+            lu = mm.LocalFactor.symmetric(sp.triu(A).tocsr())
         assert ("LU instead of Cholesky" in caplog.text) == fallback
         try:
             x = lu.solve(b)
@@ -469,7 +470,7 @@ def test_algorithm4_unchanged_by_the_condensed_stage_two(monkeypatch):
 
 
 def test_skeleton_factorizations_reuse_the_analysis_of_a_pattern():
-    """``_ReusedAnalysis``: a second SPD matrix with the pattern of a kept one is factorized on the kept analysis
+    """``ReusedAnalysis``: a second SPD matrix with the pattern of a kept one is factorized on the kept analysis
     (no new factorization object) and solves exactly as a fresh factorization does; a matrix of that pattern that
     is not positive definite falls back to a fresh LU that the caller owns; other patterns are factorized afresh,
     and at most ``keep`` factorizations are kept."""
@@ -486,7 +487,7 @@ def test_skeleton_factorizations_reuse_the_analysis_of_a_pattern():
         vals = vals + sp.diags(np.abs(vals).sum(axis=1).A1 + 1.0 - shift)  # diagonally dominant unless shifted
         return sp.triu(vals, format="csr")
 
-    cache = mm._ReusedAnalysis(keep=2)
+    cache = linalg.ReusedAnalysis(keep=2)
     b = rng.standard_normal((n, 3))
     first = spd(0)
     lu0, own0 = cache.factor(first)
@@ -495,7 +496,7 @@ def test_skeleton_factorizations_reuse_the_analysis_of_a_pattern():
     assert np.array_equal(second.indptr, first.indptr) and np.array_equal(second.indices, first.indices)
     lu1, own1 = cache.factor(second)
     assert lu1 is lu0 and not own1  # the kept factorization, refactorized
-    fresh = mm._MumpsLU.symmetric(second.copy())
+    fresh = linalg.SparseFactor.symmetric(second.copy())
     x, x_fresh = lu1.solve(b), fresh.solve(b)
     fresh.destroy()
     full = (second + sp.triu(second, 1).T).toarray()
@@ -521,7 +522,7 @@ def test_stage_two_analyses_each_skeleton_pattern_once(monkeypatch):
     import hashlib
 
     patterns, fresh = [], []
-    factor, symmetric = mm._ReusedAnalysis.factor, mm._MumpsLU.symmetric.__func__
+    factor, symmetric = linalg.ReusedAnalysis.factor, mm.LocalFactor.symmetric.__func__
 
     def counting_factor(self, upper):
         patterns.append(hashlib.sha1(upper.indptr.tobytes() + upper.indices.tobytes()).hexdigest())
@@ -531,8 +532,8 @@ def test_stage_two_analyses_each_skeleton_pattern_once(monkeypatch):
         fresh.append(1)
         return symmetric(cls, upper)
 
-    monkeypatch.setattr(mm._ReusedAnalysis, "factor", counting_factor)
-    monkeypatch.setattr(mm._MumpsLU, "symmetric", classmethod(counting_symmetric))
+    monkeypatch.setattr(linalg.ReusedAnalysis, "factor", counting_factor)
+    monkeypatch.setattr(mm.LocalFactor, "symmetric", classmethod(counting_symmetric))
     cm = geometry.unit_square(32, 8)
     step = MixedHybridStep(cm, models.get_model(2), beta="sqrt-h")
     grid = cem.coarse_grid(step.parts[0].mesh, step.parts[0].cell_map, cm.coarse_cell, cm.H)

@@ -14,7 +14,7 @@ from petsc4py import PETSc
 from slepc4py import SLEPc
 
 from fenics_contact.errors import ConvergenceError, InputError
-from fenics_contact.fem.linalg import scipy_to_petsc
+from fenics_contact.fem.linalg import SparseFactor, scipy_to_petsc
 
 __all__ = ["EIGEN_METHODS", "count_eigenvalues_below", "generalized_eigenpairs"]
 
@@ -100,21 +100,10 @@ def generalized_eigenpairs(
 
 def count_eigenvalues_below(A: sp.spmatrix, S: sp.spmatrix, sigma: float) -> int:
     """#{λ < σ} for A φ = λ S φ (S ≻ 0): the negative inertia of A − σS (MUMPS LDLᵀ, Sylvester's law)."""
-    X = scipy_to_petsc((A - sigma * S).tocsr())
-    ksp = PETSc.KSP().create(PETSc.COMM_SELF)
+    # null-pivot detection (ICNTL(24)) is required for the inertia; the factor owns (destroys) the matrix
+    factor = SparseFactor(scipy_to_petsc((A - sigma * S).tocsr()), cholesky=True, icntl={24: 1}, what="A − σS")
     try:
-        ksp.setOperators(X)
-        ksp.setType(PETSc.KSP.Type.PREONLY)
-        pc = ksp.getPC()
-        pc.setType(PETSc.PC.Type.CHOLESKY)
-        pc.setFactorSolverType("mumps")
-        pc.setFactorSetUpSolverType()
-        pc.getFactorMatrix().setMumpsIcntl(24, 1)  # null-pivot detection: required for the inertia
-        ksp.setUp()
-        if pc.getFailedReason() != 0:
-            raise ConvergenceError(f"LDLᵀ of A − σS failed (PETSc reason {pc.getFailedReason()})")
-        nneg, _, _ = pc.getFactorMatrix().getInertia()
+        nneg, _, _ = factor.inertia()
     finally:
-        ksp.destroy()
-        X.destroy()
-    return int(nneg)
+        factor.destroy()
+    return nneg

@@ -83,7 +83,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-import scipy.linalg
 import scipy.sparse as sp
 import ufl
 from mpi4py import MPI
@@ -96,7 +95,7 @@ from fenics_contact import __version__
 from fenics_contact.errors import ConvergenceError, InputError
 from fenics_contact.fem import forms_primal
 from fenics_contact.fem.eigen import count_eigenvalues_below, generalized_eigenpairs
-from fenics_contact.fem.linalg import assemble_scipy, scipy_to_petsc
+from fenics_contact.fem.linalg import PivotedCholesky, SparseFactor, assemble_scipy, scipy_to_petsc
 from fenics_contact.multiscale.cache import OfflineCache, hash_array
 from fenics_contact.multiscale.coarse import CoarseGrid, coarse_grid, grid_from_cells
 from fenics_contact.multiscale.replica import SerialReplica
@@ -121,7 +120,6 @@ __all__ = [
     "PatchFunctions",
     "MultiscaleSpace",
     "build_multiscale_space",
-    "CoarseFactor",
     "MultiscaleRobinSolver",
     "offline_key",
     "PrimalOfflineCache",
@@ -735,48 +733,10 @@ class MultiscaleSpace:
         return total + (self.Nf.nbytes if self.Nf is not None else 0)
 
 
-class _SaddleFactor:
-    """MUMPS LDLᵀ (symmetric indefinite, QAMD ordering) of a sparse saddle-point patch matrix; multi-RHS solves.
-
-    Measured on a 7×7-cell patch at h = 1/256 (24.6k DOFs): LDLᵀ with QAMD 0.13 s, LDLᵀ with AMD
-    0.21 s, LU with AMD 0.39 s, SuperLU 1.8 s; QAMD copes with the μ rows (one per aux function,
-    dense over its coarse cell).
-    """
-
-    def __init__(self, A: PETSc.Mat) -> None:
-        self.mat = A
-        self.mat.setOption(PETSc.Mat.Option.SYMMETRIC, True)
-        self.ksp = PETSc.KSP().create(PETSc.COMM_SELF)
-        self.ksp.setOperators(self.mat)
-        self.ksp.setType(PETSc.KSP.Type.PREONLY)
-        pc = self.ksp.getPC()
-        pc.setType(PETSc.PC.Type.CHOLESKY)
-        pc.setFactorSolverType("mumps")
-        pc.setFactorSetUpSolverType()
-        pc.getFactorMatrix().setMumpsIcntl(7, 6)  # QAMD
-        self.ksp.setUp()
-        if pc.getFailedReason() != 0:
-            self.destroy()
-            raise ConvergenceError(f"MUMPS failed to factorize a CEM patch problem (reason {pc.getFailedReason()})")
-
-    def solve(self, rhs: np.ndarray) -> np.ndarray:
-        """A⁻¹ rhs for all columns at once (one MatMatSolve)."""
-        n, k = rhs.shape
-        B = PETSc.Mat().createDense((n, k), array=np.asfortranarray(rhs, dtype=PETSc.ScalarType), comm=PETSc.COMM_SELF)
-        X = PETSc.Mat().createDense((n, k), comm=PETSc.COMM_SELF)
-        X.setUp()
-        try:
-            self.ksp.matSolve(B, X)
-            if self.ksp.getConvergedReason() < 0:
-                raise ConvergenceError(f"MUMPS failed on a CEM patch problem (reason {self.ksp.getConvergedReason()})")
-            return X.getDenseArray().copy()
-        finally:
-            B.destroy()
-            X.destroy()
-
-    def destroy(self) -> None:
-        self.ksp.destroy()
-        self.mat.destroy()
+#: MUMPS controls of the patch LDLᵀ: the QAMD ordering (ICNTL(7) = 6).  Measured on a 7×7-cell patch at
+#: h = 1/256 (24.6k DOFs): LDLᵀ with QAMD 0.13 s, LDLᵀ with AMD 0.21 s, LU with AMD 0.39 s, SuperLU 1.8 s;
+#: QAMD copes with the μ rows (one per aux function, dense over its coarse cell).
+PATCH_ICNTL = {7: 6}
 
 
 def global_saddle_matrix(ops: FineOperators, aux: AuxiliarySpace) -> PETSc.Mat:
@@ -820,8 +780,9 @@ def _patch_problem(
         rhs[:nI, li:li + ng] = G_I[:, used].toarray()
     if F_i is not None:
         rhs[:nI, -1] = F_i
-    try:
-        lu = _SaddleFactor(M)
+    M.setOption(PETSc.Mat.Option.SYMMETRIC, True)
+    try:  # symmetric indefinite: MUMPS LDLᵀ
+        lu = SparseFactor(M, cholesky=True, icntl=PATCH_ICNTL, what="a CEM patch problem")
     except BaseException:
         M.destroy()
         raise
@@ -886,41 +847,6 @@ def build_multiscale_space(
 # ---------------------------------------------------------------------------------------
 # the coarse (online) solve
 # ---------------------------------------------------------------------------------------
-class CoarseFactor:
-    """Pivoted Cholesky of an SPSD matrix, Jacobi-scaled; columns that are numerically dependent are dropped.
-
-    Solves A x = b for consistent b; x is zero on the dropped (pivot < tolerance) coordinates.
-    """
-
-    def __init__(self, A: np.ndarray) -> None:
-        A = 0.5 * (A + A.T)
-        d = np.diag(A).copy()
-        if np.any(d <= 0):
-            raise ConvergenceError("the coarse matrix has a non-positive diagonal entry (empty basis function?)")
-        self.scale = 1.0 / np.sqrt(d)
-        As = A * self.scale[:, None] * self.scale[None, :]
-        c, piv, rank, info = scipy.linalg.lapack.dpstrf(As, lower=1)
-        if info < 0:
-            raise ConvergenceError(f"pivoted Cholesky failed (LAPACK info {info})")
-        self.n = A.shape[0]
-        self.rank = int(rank)
-        self.keep = piv[: self.rank] - 1
-        self.L = np.asfortranarray(np.tril(c[: self.rank, : self.rank]))
-        if self.rank < self.n:
-            log.info("coarse matrix: rank %d of %d, dependent basis functions dropped", self.rank, self.n)
-
-    def solve(self, b: np.ndarray) -> np.ndarray:
-        bs = (b * self.scale[:, None]) if b.ndim == 2 else b * self.scale
-        z, info = scipy.linalg.lapack.dpotrs(self.L, bs[self.keep], lower=1)
-        if info != 0:
-            raise ConvergenceError(f"coarse solve failed (LAPACK dpotrs info {info})")
-        x = np.zeros_like(bs)
-        x[self.keep] = z
-        return (x * self.scale[:, None]) if b.ndim == 2 else x * self.scale
-
-
-
-
 def _rows_on(parts: list, D: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Dense block (|D| × Σ k) of the patch functions ``parts`` at the DOFs D, and their global columns."""
     ncols = sum(p.columns.size for p in parts)
@@ -1023,7 +949,7 @@ class MultiscaleRobinSolver:
         Rg = ops.R[ops.gamma][:, ops.gamma]
         ZAZ = self.GK + self.Zg.T @ (Rg @ self.Zg)
         self.A_ms = ZAZ[:n_ms, :n_ms]
-        self.factor = CoarseFactor(self.A_ms)
+        self.factor = PivotedCholesky(self.A_ms, what="the coarse matrix")
         # Ψᵀℓ and Ψᵀ G[:, γ], patch by patch
         PsiF = np.zeros(n_ms)
         Gg = ops.G[:, ops.gamma].tocsr()

@@ -132,7 +132,7 @@ from fenics_contact import __version__
 from fenics_contact.fem import forms_mixed
 from fenics_contact.errors import ConvergenceError, InputError
 from fenics_contact.fem.eigen import count_eigenvalues_below, generalized_eigenpairs
-from fenics_contact.fem.linalg import assemble_scipy, scipy_to_petsc
+from fenics_contact.fem.linalg import ReusedAnalysis, SparseFactor, assemble_scipy, scipy_to_petsc
 from fenics_contact.multiscale.cache import OfflineCache, hash_array
 from fenics_contact.multiscale.work import run_shared
 from fenics_contact.multiscale.cem import (
@@ -1029,123 +1029,20 @@ def _patch_system(ops: CellOperators, topo: _Topology, grid: CoarseGrid, aux: St
     cols = np.concatenate([ac, bc, n_loc + br, n_loc + n_u + zc, n_loc + zr, eye])
     vals = np.concatenate([av, bv, bv, -zv, -zv, np.ones(col)])
     n_tot = n_loc + n_u + col
-    lu = _MumpsLU.from_coo(rows, cols, vals, n_tot)
+    lu = LocalFactor.from_coo(rows, cols, vals, n_tot)
     return space, lu, Z, aux_cols, n_loc, n_u
 
 
-class _MumpsLU:
-    """MUMPS LU of a sparse matrix (SuperLU was 10–100× slower on these saddle-point systems).
+class LocalFactor(SparseFactor):
+    """MUMPS factorizations of the local mixed CEM problems (Stage II patch, coarse-cell and skeleton systems;
+    SuperLU was 10–100× slower on these saddle-point systems).
 
-    AMD ordering (ICNTL(7) = 0): on the Stage II systems (5·10³–6·10⁴ unknowns) it halves the
+    AMD ordering for LU (ICNTL(7) = 0): on the Stage II systems (5·10³–6·10⁴ unknowns) it halves the
     factorization time of MUMPS' automatic choice (METIS); Cholesky (LDLᵀ) was 2–4× slower.
     """
 
-    def __init__(self, mat: PETSc.Mat, *, cholesky: bool = False) -> None:
-        """Factorize ``mat`` (LU; with ``cholesky`` an SPD matrix by Cholesky: then a failure or a
-        non-positive pivot only sets ``positive`` False instead of raising)."""
-        self.mat = mat
-        self._arrays = None  # the CSR arrays a matrix made by from_coo shares
-        self.ksp = PETSc.KSP().create(PETSc.COMM_SELF)
-        self.ksp.setOperators(self.mat)
-        self.ksp.setType("preonly")
-        pc = self.ksp.getPC()
-        pc.setType("cholesky" if cholesky else "lu")
-        pc.setFactorSolverType("mumps")
-        pc.setFactorSetUpSolverType()
-        if not cholesky:
-            pc.getFactorMatrix().setMumpsIcntl(7, 0)
-        failed = not self._factorize()
-        if failed and not cholesky:
-            raise ConvergenceError(
-                f"MUMPS failed to factorize a local mixed CEM problem (reason {pc.getFailedReason()})"
-            )
-
-    @classmethod
-    def from_coo(cls, rows: np.ndarray, cols: np.ndarray, vals: np.ndarray, n: int) -> "_MumpsLU":
-        """Factorize the n × n matrix of COO triplets (duplicates summed; SciPy's conversion was 2–4× faster
-        than PETSc's COO assembly here)."""
-        return cls.from_csr(sp.csr_matrix((vals, (rows, cols)), shape=(n, n)))  # canonical: sorted, summed
-
-    @classmethod
-    def from_csr(cls, A: sp.csr_matrix) -> "_MumpsLU":
-        """Factorize a square SciPy CSR matrix (canonical form: sorted indices, no duplicates)."""
-        A = sp.csr_matrix(A)
-        A.sum_duplicates()
-        A.eliminate_zeros()
-        csr = (A.indptr.astype(PETSc.IntType, copy=False), A.indices.astype(PETSc.IntType, copy=False),
-               A.data.astype(PETSc.ScalarType, copy=False))
-        mat = PETSc.Mat().createAIJWithArrays(A.shape, csr, comm=PETSc.COMM_SELF)  # no copy: keep csr alive
-        mat.assemble()
-        lu = cls(mat)
-        lu._arrays = csr
-        return lu
-
-    @classmethod
-    def symmetric(cls, upper: sp.csr_matrix) -> "_MumpsLU":
-        """Factorize the symmetric matrix whose upper triangle (canonical CSR) is ``upper``: MUMPS Cholesky
-        (positive definite, no pivoting; 1.5× faster than LU on the Stage II skeleton systems), or, when
-        a pivot is not positive (a matrix that is not positive definite after all), the LU of the full
-        matrix."""
-        csr = (upper.indptr.astype(PETSc.IntType, copy=False), upper.indices.astype(PETSc.IntType, copy=False),
-               upper.data.astype(PETSc.ScalarType, copy=False))
-        # an AIJ matrix holding the upper triangle only, on the CSR arrays (no copy): PETSc hands MUMPS' Cholesky
-        # the entries from the diagonal on of every row (MatConvertToTriples_seqaij_seqsbaij), i.e. exactly
-        # these (an SBAIJ matrix was built by copying row by row: 20 ms of the 0.17 s at h = 1/128)
-        mat = PETSc.Mat().createAIJWithArrays(upper.shape, csr, comm=PETSc.COMM_SELF)
-        mat.setOption(PETSc.Mat.Option.SPD, True)
-        mat.assemble()
-        chol = cls(mat, cholesky=True)
-        chol._arrays = csr
-        if chol.positive:
-            return chol
-        chol.destroy()
-        log.debug("Stage II skeleton matrix not positive definite: LU instead of Cholesky")
-        return cls.from_csr(upper + sp.triu(upper, 1).T)
-
-    def _factorize(self) -> bool:
-        """Set up the factorization of ``mat`` (MUMPS keeps its analysis for a matrix of the same pattern);
-        sets ``positive`` (Cholesky without failure and without a non-positive pivot) and returns whether it
-        succeeded (for Cholesky: ``positive``)."""
-        self.ksp.setUp()
-        pc = self.ksp.getPC()
-        failed = self.ksp.getConvergedReason() < 0 or pc.getFailedReason() != 0
-        cholesky = pc.getType() == "cholesky"
-        self.positive = cholesky and not failed and pc.getFactorMatrix().getMumpsInfog(12) == 0
-        return self.positive if cholesky else not failed
-
-    def refactor(self, data: np.ndarray) -> bool:
-        """New values ``data`` on the pattern this factorization was made for (a matrix from ``from_csr`` or
-        ``symmetric``): the numeric factorization only, on MUMPS' kept ordering and symbolic analysis.  Returns
-        whether it succeeded (for a Cholesky factorization: with positive pivots only)."""
-        self._arrays[2][:] = data
-        self.mat.assemble()
-        self.ksp.setOperators(self.mat)
-        return self._factorize()
-
-    def solve(self, rhs: np.ndarray) -> np.ndarray:
-        """A⁻¹ rhs for all columns at once (one MatMatSolve)."""
-        n, k = rhs.shape
-        data = np.asfortranarray(rhs, dtype=PETSc.ScalarType)  # PETSc dense storage is column-major
-        B = PETSc.Mat().createDense((n, k), array=data, comm=PETSc.COMM_SELF)
-        X = PETSc.Mat().createDense((n, k), comm=PETSc.COMM_SELF)
-        X.setUp()
-        try:
-            self.ksp.matSolve(B, X)
-            if self.ksp.getConvergedReason() < 0:
-                reason = self.ksp.getConvergedReason()
-                raise ConvergenceError(f"MUMPS failed on a local mixed CEM problem (reason {reason})")
-            out = X.getDenseArray().copy()
-        finally:
-            B.destroy()
-            X.destroy()
-        if not np.all(np.isfinite(out)):
-            raise ConvergenceError("a local mixed CEM solve produced non-finite values")
-        return out
-
-    def destroy(self) -> None:
-        for obj in (self.ksp, self.mat):
-            obj.destroy()
-        self._arrays = None
+    what = "a local mixed CEM problem"
+    lu_icntl = ((7, 0),)
 
 
 def _unpack(space: LocalSpace, x: np.ndarray, n_loc: int, n_u: int) -> tuple[np.ndarray, np.ndarray]:
@@ -1345,7 +1242,7 @@ class _CellElimination:
     one), M_IΓ, the AW coefficients of the owned stress functions and M_II⁻¹ b_I (``own``; added after the solve
     with −M_IΓ x_Γ: with b_I put into that right-hand side instead, Algorithm 4 moved 1e-10 off the per-patch LUs)."""
 
-    def __init__(self, system: _CellSystem, lu: "_MumpsLU", own: np.ndarray) -> None:
+    def __init__(self, system: _CellSystem, lu: LocalFactor, own: np.ndarray) -> None:
         self.skel, self.WI, self.gpos = system.skel, system.WI, system.gpos
         self.n_s, self.n_u, self.M_IG = system.n_s, system.n_u, system.M_IG
         self.lu, self.own = lu, own
@@ -1353,7 +1250,7 @@ class _CellElimination:
     @classmethod
     def factorized(cls, system: _CellSystem) -> "_CellElimination":
         """A new LU of M_II (a cell whose condensation was not kept)."""
-        lu = _MumpsLU.from_csr(system.M_II)
+        lu = LocalFactor.from_csr(system.M_II)
         try:
             return cls(system, lu, lu.solve(system.b[: system.n_I]))
         except Exception:
@@ -1362,11 +1259,8 @@ class _CellElimination:
 
     @property
     def nbytes(self) -> int:
-        """Memory held: the LU factors (MUMPS' INFOG(9) reals, ×10⁶ when negative) and the arrays."""
-        entries = self.lu.ksp.getPC().getFactorMatrix().getMumpsInfog(9)
-        entries = -entries * 10**6 if entries < 0 else entries
-        arrays = sum(a.nbytes for a in (self.lu._arrays or ())) + self.own.nbytes
-        return int(12 * entries + arrays + self.M_IG.data.nbytes * 2 + self.WI.data.nbytes * 2)
+        """Memory held: the LU (``SparseFactor.nbytes``) and the arrays."""
+        return int(self.lu.nbytes + self.own.nbytes + self.M_IG.data.nbytes * 2 + self.WI.data.nbytes * 2)
 
     def destroy(self) -> None:
         self.lu.destroy()
@@ -1376,7 +1270,7 @@ def _condense(system: _CellSystem) -> tuple[np.ndarray, np.ndarray, np.ndarray, 
     """(skeleton DOFs, Schur complement S_K = M_ΓΓ − M_ΓI M_II⁻¹ M_IΓ, condensed own data b_Γ − M_ΓI M_II⁻¹ b_I,
     the data of the back substitution: M_II's LU is kept, not factorized again)."""
     n_I, n_G = system.n_I, system.skel.size
-    lu = _MumpsLU.from_csr(system.M_II)
+    lu = LocalFactor.from_csr(system.M_II)
     try:
         X = lu.solve(np.hstack([system.M_IG.toarray(), system.b[:n_I]]))
     except Exception:
@@ -1413,45 +1307,6 @@ def _skeleton_columns(topo: _Topology, skeleton: tuple, cells: np.ndarray, G: np
     return sp.csr_matrix((vals[keep], (rows[keep], cols[keep])), shape=(G.size, inner.size + ncol)), inner
 
 
-class _ReusedAnalysis:
-    """Cholesky factorizations of the skeleton matrices, kept for the last ``keep`` sparsity patterns: a matrix
-    with one of their patterns is factorized numerically on the kept ordering and symbolic analysis (a third of
-    MUMPS' time on a 4.7·10³ skeleton at h = 1/128: 116 ms with the analysis, 75 ms without).  The patches of
-    one class (``_patch_classes``: translates, e.g. all interior patches of a structured mesh) share one pattern
-    and come one after the other (serially grouped by class; in the cost order of ``work.run_balanced``, where a
-    class's patches have one cost and classes of equal cost are kept apart)."""
-
-    def __init__(self, keep: int = 2) -> None:
-        self.keep = keep
-        self.entries: list[tuple[np.ndarray, np.ndarray, "_MumpsLU"]] = []  # most recent first
-
-    def factor(self, upper: sp.csr_matrix) -> tuple["_MumpsLU", bool]:
-        """(factorization of the symmetric matrix with upper triangle ``upper``, whether the caller destroys it).
-
-        A kept factorization takes over ``upper``'s arrays (its later values are written into them): the
-        caller must not use ``upper`` afterwards (``_GlobalSkeleton.patch_matrix`` makes a new one per patch)."""
-        for k, (indptr, indices, lu) in enumerate(self.entries):
-            if np.array_equal(indptr, upper.indptr) and np.array_equal(indices, upper.indices):
-                self.entries.pop(k)
-                if lu.refactor(upper.data):
-                    self.entries.insert(0, (indptr, indices, lu))
-                    return lu, False
-                lu.destroy()  # a pivot that is not positive: factorize afresh (LU) below
-                break
-        lu = _MumpsLU.symmetric(upper)
-        if not lu.positive:
-            return lu, True
-        self.entries.insert(0, (upper.indptr, upper.indices, lu))
-        while len(self.entries) > self.keep:
-            self.entries.pop()[2].destroy()
-        return lu, False
-
-    def release(self) -> None:
-        for *_, lu in self.entries:
-            lu.destroy()
-        self.entries = []
-
-
 def _skeleton_solve(
     ops: CellOperators, topo: _Topology, grid: CoarseGrid, dofs: CoarseCellDofs, skeleton: tuple, condensed: list,
     i: int, layers: int, glob: "_GlobalSkeleton",
@@ -1480,7 +1335,7 @@ def _skeleton_solve(
 def _patch_classes(grid: CoarseGrid, patches: list, condensed: list) -> np.ndarray:
     """A label per patch: patches with one label are translates of each other with the same number of skeleton
     DOFs on every coarse cell, which on a Cartesian grid gives them one skeleton sparsity pattern (h = 1/128,
-    H = 1/16, m = 3: 81 patterns among 240 patches; ``_ReusedAnalysis`` checks the pattern itself, a label
+    H = 1/16, m = 3: 81 patterns among 240 patches; ``ReusedAnalysis`` checks the pattern itself, a label
     only orders the work).  All labels distinct on a general partition (no ``grid.ij``)."""
     if grid.ij is None:
         return np.arange(len(patches), dtype=np.int64)
@@ -1503,7 +1358,12 @@ class _GlobalSkeleton:
     """
 
     def __init__(self, condensed: list) -> None:
-        self.factors = _ReusedAnalysis()  #: the patch skeleton factorizations, reusing MUMPS' analysis per pattern
+        #: the patch skeleton factorizations, reusing MUMPS' analysis per pattern: a third of MUMPS' time on a
+        #: 4.7·10³ skeleton at h = 1/128 (116 ms with the analysis, 75 ms without).  The patches of one class
+        #: (``_patch_classes``: translates, e.g. all interior patches of a structured mesh) share one pattern and
+        #: come one after the other (serially grouped by class; in the cost order of ``work.run_balanced``, where
+        #: a class's patches have one cost and classes of equal cost are kept apart).
+        self.factors = ReusedAnalysis(keep=2, factor_class=LocalFactor)
         self.dofs = np.unique(np.concatenate([c[0] for c in condensed]))
         n = self.dofs.size
         rows, cols, vals = [], [], []
@@ -1615,7 +1475,7 @@ def _stage_two_condensed(
         condensed = _run_shared(size, comm, "mixed CEM Stage II (coarse cells)", condense, balanced=True,
                                 owner=cell_owner)
         cost = np.array([sum(condensed[j][0].size for j in p) for p in patches], dtype=float)
-        # patches of one class one after the other (MUMPS' analysis reused: ``_ReusedAnalysis``); a class's
+        # patches of one class one after the other (MUMPS' analysis reused: ``ReusedAnalysis``); a class's
         # patches have one cost, so a relative 1e-9 per class label groups them in the cost order of MPI too
         label = _patch_classes(grid, patches, condensed)
         glob = _GlobalSkeleton(condensed)

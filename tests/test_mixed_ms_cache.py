@@ -21,7 +21,8 @@ from mpi4py import MPI
 import fenics_contact  # noqa: F401  (must precede dolfinx)
 from fenics_contact.fem import linalg
 from fenics_contact.problem import geometry, models
-from fenics_contact.multiscale import cem
+from fenics_contact.multiscale.cem.options import DEFAULT_S_FACTOR
+from fenics_contact.multiscale.coarse import coarse_grid
 from fenics_contact.multiscale import mixed_cem as mm
 from fenics_contact.errors import InputError
 from fenics_contact.hybrid.mixed import MixedHybridStep
@@ -41,8 +42,8 @@ def omega1():
     cm = geometry.unit_square(16, 4)
     step = MixedHybridStep(cm, models.get_model(2), beta="sqrt-h")
     part = step.parts[0]
-    grid = cem.coarse_grid(part.mesh, part.cell_map, cm.coarse_cell, cm.H)
-    ops = mm.cell_operators(step.sub[0], cm.H, "lambda+2mu", cem.DEFAULT_S_FACTOR)
+    grid = coarse_grid(part.mesh, part.cell_map, cm.coarse_cell, cm.H)
+    ops = mm.cell_operators(step.sub[0], cm.H, "lambda+2mu", DEFAULT_S_FACTOR)
     topo = mm._Topology(step.sub[0].mesh, ops.P.shape[1])
     return cm, step, grid, ops, topo
 
@@ -204,7 +205,7 @@ def test_cache_with_the_load_corrector(tmp_path):
     model = models.get_model(2).with_(load=lambda x: np.stack([np.sin(3 * x[1]), 0.5 + 0 * x[0]]))
     step = MixedHybridStep(cm, model, beta="sqrt-h")
     part = step.parts[0]
-    grid = cem.coarse_grid(part.mesh, part.cell_map, cm.coarse_cell, cm.H)
+    grid = coarse_grid(part.mesh, part.cell_map, cm.coarse_cell, cm.H)
     opts = mm.MixedCEMOptions(layers=1)
     first = mm.MixedMultiscaleOmega1(step.sub[0], grid, opts, H=cm.H, cache_dir=tmp_path)
     second = mm.MixedMultiscaleOmega1(step.sub[0], grid, opts, H=cm.H, cache_dir=tmp_path)
@@ -428,8 +429,8 @@ def test_condensed_stage_two_at_contrast_1e6_nearly_incompressible():
     cm = geometry.unit_square(16, 4, clamped=("left",))
     step = MixedHybridStep(cm, models.get_model(3, E_high=1e6, nu=0.4999), beta="sqrt-h")
     part = step.parts[0]
-    grid = cem.coarse_grid(part.mesh, part.cell_map, cm.coarse_cell, cm.H)
-    ops = mm.cell_operators(step.sub[0], cm.H, "lambda+2mu", cem.DEFAULT_S_FACTOR)
+    grid = coarse_grid(part.mesh, part.cell_map, cm.coarse_cell, cm.H)
+    ops = mm.cell_operators(step.sub[0], cm.H, "lambda+2mu", DEFAULT_S_FACTOR)
     topo = mm._Topology(step.sub[0].mesh, ops.P.shape[1], essential_traction_facets(part.mesh, part.facet_tags))
     dofs = mm.CoarseCellDofs.of(ops, grid)
     aux = mm.stage_one(ops, topo, grid, 3, 0.1, 32)
@@ -536,7 +537,7 @@ def test_stage_two_analyses_each_skeleton_pattern_once(monkeypatch):
     monkeypatch.setattr(mm.LocalFactor, "symmetric", classmethod(counting_symmetric))
     cm = geometry.unit_square(32, 8)
     step = MixedHybridStep(cm, models.get_model(2), beta="sqrt-h")
-    grid = cem.coarse_grid(step.parts[0].mesh, step.parts[0].cell_map, cm.coarse_cell, cm.H)
+    grid = coarse_grid(step.parts[0].mesh, step.parts[0].cell_map, cm.coarse_cell, cm.H)
     ops, topo, aux = mm.stage_one_of(step.sub[0], grid, mm.MixedCEMOptions(layers=2), H=cm.H)
     mm.stage_two(ops, topo, grid, aux, 2)
     assert len(patterns) == grid.size == 56

@@ -9,7 +9,7 @@ import basix.ufl
 from dolfinx import fem
 from dolfinx import mesh as dmesh
 from fenics_contact.problem import geometry, models
-from fenics_contact.multiscale import cem
+from fenics_contact.multiscale.coarse import coarse_grid
 from fenics_contact.multiscale import mixed_cem as mm
 from fenics_contact.hybrid.iteration import IterationOptions
 from fenics_contact.errors import InputError
@@ -22,7 +22,7 @@ def _step_and_grid(cm, model):
     """The Algorithm 2 step of ``model`` on ``cm`` (its Ω₁ subproblem) and the coarse grid of Ω₁."""
     step = MixedHybridStep(cm, model, beta="sqrt-h")
     part = step.parts[0]
-    return step, cem.coarse_grid(part.mesh, part.cell_map, cm.coarse_cell, cm.H)
+    return step, coarse_grid(part.mesh, part.cell_map, cm.coarse_cell, cm.H)
 
 
 @pytest.fixture(scope="module")

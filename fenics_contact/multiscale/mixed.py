@@ -76,7 +76,8 @@ from fenics_contact.multiscale.mixed_cem import (
     MixedMultiscaleOmega1,
 )
 from fenics_contact.problem.models import TestModel
-from fenics_contact.multiscale.cem import DEFAULT_S_FACTOR, coarse_grid, warn_if_few_layers
+from fenics_contact.multiscale.cem.options import DEFAULT_S_FACTOR, warn_if_few_layers
+from fenics_contact.multiscale.coarse import coarse_grid
 
 __all__ = ["MixedMsResult", "MixedMultiscaleHybridStep", "solve_mixed_ms_hybrid"]
 

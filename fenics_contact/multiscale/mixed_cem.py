@@ -135,12 +135,9 @@ from fenics_contact.fem.eigen import count_eigenvalues_below, generalized_eigenp
 from fenics_contact.fem.linalg import ReusedAnalysis, SparseFactor, assemble_scipy, scipy_to_petsc
 from fenics_contact.multiscale.cache import OfflineCache, hash_array
 from fenics_contact.multiscale.work import run_shared
-from fenics_contact.multiscale.cem import (
-    DEFAULT_S_FACTOR,
-    CoarseGrid,
-    kappa_tilde,
-    require_serial,
-)
+from fenics_contact.multiscale.cem.operators import kappa_tilde, require_serial
+from fenics_contact.multiscale.cem.options import DEFAULT_S_FACTOR
+from fenics_contact.multiscale.coarse import CoarseGrid
 from fenics_contact.problem.tags import Boundary
 
 __all__ = [

@@ -22,7 +22,8 @@ from mpi4py import MPI
 
 from dolfinx import fem
 
-from fenics_contact.multiscale.cem import DEFAULT_S_FACTOR, CEMOptions, Omega1Multiscale
+from fenics_contact.multiscale.cem.omega1 import Omega1Multiscale
+from fenics_contact.multiscale.cem.options import DEFAULT_S_FACTOR, CEMOptions
 from fenics_contact.fem.contact import NewtonOptions
 from fenics_contact.hybrid.certificate import Certificate, primal_certificate
 from fenics_contact.hybrid.inputs import check_reference_displacement, check_solve_inputs

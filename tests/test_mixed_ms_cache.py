@@ -26,6 +26,7 @@ from fenics_contact.multiscale.coarse import coarse_grid
 from fenics_contact.multiscale import mixed_cem as mm
 from fenics_contact.errors import InputError
 from fenics_contact.hybrid.mixed import MixedHybridStep
+from multiscale_oracles import stage_two_reference
 
 pytestmark = pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="the mixed CEM offline phase is serial")
 
@@ -86,7 +87,7 @@ def _reference_basis(ops, topo, cells, space):
         (3 * topo.nv + 4 * e_int[:, None] + np.arange(4)).ravel(),
         (3 * topo.nv + 4 * topo.ne + 3 * cells[:, None] + np.arange(3)).ravel(),
     ])
-    Pp = ops.P[mm._rows(cells, 30)].tocsc()
+    Pp = ops.P[mm.cell_rows(cells, 30)].tocsc()
     parts = [Pp[:, inner]]
     for v in v_bnd:
         rows = []
@@ -130,7 +131,7 @@ def test_batched_patch_solve_matches_scipy(omega1):
     _, _, grid, ops, topo = omega1
     aux = mm.stage_one(ops, topo, grid, 3)
     for i, layers in _cases(grid)[1:3]:
-        space, lu, Z, *_ = mm._patch_system(ops, topo, grid, aux, grid.patch(i, layers))
+        space, lu, Z, *_ = mm.patch_system(ops, topo, grid, aux, grid.patch(i, layers))
         L = _reference_basis(ops, topo, space.cells, space)
         At = L.T @ _blockdiag(ops.kt(space.cells)) @ L
         Bl = _blockdiag(ops.B[space.cells]) @ L
@@ -393,7 +394,7 @@ def test_condensed_stage_two_equals_per_patch_lu(omega1):
         aux = mm.stage_one(loaded, tp, grid, 3)
         for layers in (1, 2):
             new = mm.stage_two(loaded, tp, grid, aux, layers, dofs=dofs)
-            ref = mm._stage_two_reference(loaded, tp, grid, aux, layers, dofs=dofs)
+            ref = stage_two_reference(loaded, tp, grid, aux, layers, dofs=dofs)
             assert all(c is not None and c.index[-1] == ops.num_gamma_values for c in new[1])  # load everywhere
             assert _relative_difference(loaded, dofs, ref[0], new[0]) < 1e-10
             assert _relative_difference(loaded, dofs, ref[1], new[1]) < 1e-10
@@ -435,14 +436,14 @@ def test_condensed_stage_two_at_contrast_1e6_nearly_incompressible():
     dofs = mm.CoarseCellDofs.of(ops, grid)
     aux = mm.stage_one(ops, topo, grid, 3, 0.1, 32)
     new = mm.stage_two(ops, topo, grid, aux, 1, dofs=dofs)
-    ref = mm._stage_two_reference(ops, topo, grid, aux, 1, dofs=dofs)
+    ref = stage_two_reference(ops, topo, grid, aux, 1, dofs=dofs)
     assert _relative_difference(ops, dofs, ref[0], new[0]) < 1e-5
     assert _relative_difference(ops, dofs, ref[1], new[1]) < 1e-6
 
 
 def test_algorithm4_unchanged_by_the_condensed_stage_two(monkeypatch):
     """Algorithm 4 end to end (load in Ω₁ and Ω₂): coarse operators, e_σ, e_u and the solution fields equal
-    those computed with one LU per patch (``_stage_two_reference``) to 1e-10."""
+    those computed with one LU per patch (``stage_two_reference``) to 1e-10."""
     from fenics_contact.fem.mixed import solve_mixed_monolithic
     from fenics_contact.hybrid.iteration import IterationOptions
     from fenics_contact.multiscale.mixed import solve_mixed_ms_hybrid
@@ -451,7 +452,7 @@ def test_algorithm4_unchanged_by_the_condensed_stage_two(monkeypatch):
     model = models.get_model(2).with_(load=models.band_load([(0.25, 0.875, 0.3, 0.7, 2.0), (0.5, 0.875, 0.7, 1.0, -1.0)]))
     ref = solve_mixed_monolithic(cm, model)
     runs = []
-    for stage_two in (mm.stage_two, mm._stage_two_reference):
+    for stage_two in (mm.stage_two, stage_two_reference):
         monkeypatch.setattr(mm, "stage_two", stage_two)
         runs.append(solve_mixed_ms_hybrid(cm, model, layers=2, reference=ref,
                                           options=IterationOptions(tol=1e-10, max_iterations=400)))

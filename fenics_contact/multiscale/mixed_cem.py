@@ -97,7 +97,7 @@ made it: both phases share the coarse cells out alike).  The patch skeleton matr
 cell: their inner block is a principal submatrix of one global Σ_K S_K
 (``_GlobalSkeleton``; an inner skeleton DOF has all its coarse cells in the patch),
 and only the columns of the patch-boundary vertex functions are summed per cell.  The same
-linear systems as one LU per patch (``_stage_two_reference``, kept for the tests).  The Stage I
+linear systems as one LU per patch (the test oracle ``tests/multiscale_oracles.stage_two_reference``).  The Stage I
 cells, Stage II patches and coarse-operator cells can be shared out over an MPI communicator
 (``comm``; every rank holds the whole Ω₁ mesh): each is computed once, the results are broadcast
 and the coarse matrices summed.  Offline phases report progress (``fenics_contact.progress``).
@@ -156,6 +156,9 @@ __all__ = [
     "OfflineData",
     "PatchFunctions",
     "StageI",
+    "aw_map",
+    "cell_rows",
+    "patch_system",
     "basis_decay_profile",
     "cell_operators",
     "coarse_operators",
@@ -292,7 +295,8 @@ def _block_diag(blocks: np.ndarray) -> sp.csr_matrix:
     return sp.csr_matrix((blocks.ravel(), (rows.ravel(), cols.ravel())), shape=(n * a, n * b))
 
 
-def _rows(cells: np.ndarray, width: int) -> np.ndarray:
+def cell_rows(cells: np.ndarray, width: int) -> np.ndarray:
+    """The cell-major rows of ``cells`` in a layout of ``width`` rows per cell (cell by cell, in order)."""
     return (width * np.asarray(cells, dtype=np.int64)[:, None] + np.arange(width)).ravel()
 
 
@@ -995,7 +999,7 @@ class PatchFunctions:
         return sum(a.nbytes for a in self.sigma if a is not None) + sum(a.nbytes for a in self.u if a is not None)
 
 
-def _patch_system(ops: CellOperators, topo: _Topology, grid: CoarseGrid, aux: StageI, patch: np.ndarray):
+def patch_system(ops: CellOperators, topo: _Topology, grid: CoarseGrid, aux: StageI, patch: np.ndarray):
     """(space, LU of the Stage II matrix, Z, aux column offsets of the patch's coarse cells, n_loc, n_u)."""
     cells = np.sort(np.concatenate([grid.cells[j] for j in patch]).astype(np.int64))
     space = local_stress_space(ops, topo, cells)
@@ -1008,7 +1012,7 @@ def _patch_system(ops: CellOperators, topo: _Topology, grid: CoarseGrid, aux: St
         pos = np.searchsorted(cells, cj)
         Zj = ops.S[cj] @ aux.modes[j]  # (|K_j|, 6, l_j)
         lj = Zj.shape[2]
-        r = np.broadcast_to(_rows(pos, 6).reshape(cj.size, 6)[:, :, None], Zj.shape)
+        r = np.broadcast_to(cell_rows(pos, 6).reshape(cj.size, 6)[:, :, None], Zj.shape)
         c = np.broadcast_to(col + np.arange(lj)[None, None, :], Zj.shape)
         zr.append(r.ravel())
         zc.append(c.ravel())
@@ -1051,7 +1055,7 @@ def _unpack(space: LocalSpace, x: np.ndarray, n_loc: int, n_u: int) -> tuple[np.
     return sigma, u
 
 
-def _aw_map(space: LocalSpace, aw: np.ndarray) -> sp.csr_matrix:
+def aw_map(space: LocalSpace, aw: np.ndarray) -> sp.csr_matrix:
     """(|aw| × dim X_h(ω)): AW coefficients (on the sorted DOFs ``aw``) of the local basis functions.
 
     Inner functions are AW functions (one coefficient 1); an inner-boundary vertex function with
@@ -1069,64 +1073,6 @@ def _aw_map(space: LocalSpace, aw: np.ndarray) -> sp.csr_matrix:
     rows, cols, vals = np.concatenate(rows), np.concatenate(cols), np.concatenate(vals)
     keep = vals != 0.0
     return sp.csr_matrix((vals[keep], (rows[keep], cols[keep])), shape=(aw.size, space.size))
-
-
-def _split_by_coarse(
-    dofs: CoarseCellDofs, patch: np.ndarray, space: LocalSpace, aw: np.ndarray, T: sp.csr_matrix, x: np.ndarray,
-    n_loc: int, n_u: int,
-) -> tuple[list, list]:
-    """Patch solutions x → per coarse cell of the patch: (AW coefficients, displacements); T = _aw_map(space, aw)."""
-    a = T @ x[:n_loc]
-    xu = x[n_loc : n_loc + n_u]
-    sig, dis = [], []
-    for j in patch:
-        sig.append(np.ascontiguousarray(a[np.searchsorted(aw, dofs.aw[j])]))
-        dis.append(np.ascontiguousarray(xu[_rows(np.searchsorted(space.cells, dofs.cells[j]), 6)]))
-    return sig, dis
-
-
-def _patch_functions(
-    ops: CellOperators, topo: _Topology, grid: CoarseGrid, dofs: CoarseCellDofs, aux: StageI, i: int,
-    layers: int, source: bool,
-) -> tuple[PatchFunctions, PatchFunctions | None]:
-    """The Stage II basis functions ψ_j^i and the data correctors of coarse cell i on K_{i,m}."""
-    n_g = ops.num_gamma_values
-    patch = np.sort(np.asarray(grid.patch(i, layers), dtype=np.int64))
-    space, lu, Z, aux_cols, n_loc, n_u = _patch_system(ops, topo, grid, aux, patch)
-    try:
-        n_tot = n_loc + n_u + Z.shape[1]
-        li = aux.modes[i].shape[2]
-        ci = dofs.cells[i]
-        pos = np.searchsorted(space.cells, ci)
-        c0 = aux_cols[int(i)]
-        # Robin data on γ ∩ ∂K_i: C_i g in the τ rows, mapped to the local basis through the AW coefficients
-        Ci = ops.C[_rows(ci, 30)]
-        gcols = np.unique(Ci.indices)
-        load = source and bool(np.any(ops.G[ci] != 0.0) or (ops.F is not None and np.any(ops.F[ci] != 0.0)))
-        nd = gcols.size + int(load)
-        rhs = np.zeros((n_tot, li + nd))
-        rhs[n_loc : n_loc + n_u, :li] = -Z[:, c0 : c0 + li].toarray()
-        aw = np.unique(np.concatenate([dofs.aw[j] for j in patch]))  # the AW functions touching the patch
-        T = _aw_map(space, aw)
-        if gcols.size:
-            Caw = dofs.P(ops, i).T @ Ci[:, gcols]  # (|aw_K_i|, n) sparse
-            rhs[:n_loc, li : li + gcols.size] = (T[np.searchsorted(aw, dofs.aw[i])].T @ Caw).toarray()
-        if load:
-            # −(div ψ, v) + s(πq, πv) = (f χ_{K_i}, v): Bψ − Zy = −F_i = G on K_i
-            rhs[n_loc + _rows(pos, 6), -1] = ops.G[ci].ravel()
-            if ops.F is not None:  # (issue 14) the boundary data's stress-side load F|K_i in the τ rows
-                rhs[:n_loc, -1] = T[np.searchsorted(aw, dofs.aw[i])].T @ (dofs.P(ops, i).T @ ops.F[ci].ravel())
-        sol = lu.solve(rhs)
-    finally:
-        lu.destroy()
-    sig, dis = _split_by_coarse(dofs, patch, space, aw, T, sol, n_loc, n_u)
-    basis = PatchFunctions(patch, aux.offsets[i] + np.arange(li), [s[:, :li] for s in sig], [d[:, :li] for d in dis])
-    if not nd:
-        return basis, None
-    index = np.concatenate([gcols, [n_g]]) if load else gcols
-    corr = PatchFunctions(patch, index, [np.ascontiguousarray(s[:, li:]) for s in sig],
-                          [np.ascontiguousarray(d[:, li:]) for d in dis])
-    return basis, corr
 
 
 # ---------------------------------------------------------------------------------------
@@ -1209,9 +1155,9 @@ def _cell_system(
     cols = np.concatenate([new[ac], new[bc], n_s + br, n_s + 6 * nK + zc, n_s + zr, eye])
     vals = np.concatenate([av, bv, bv, -zv, -zv, np.ones(lk)])
     M = sp.csr_matrix((vals, (rows, cols)), shape=(n_I + n_G, n_I + n_G))
-    T = _aw_map(space, awK)
-    # K's own right-hand sides (as in _patch_functions): −Z e_j; Robin data C_K g; the load on K
-    Ci = ops.C[_rows(cK, 30)]
+    T = aw_map(space, awK)
+    # K's own right-hand sides (those of the patch systems): −Z e_j; Robin data C_K g; the load on K
+    Ci = ops.C[cell_rows(cK, 30)]
     gcols = np.unique(Ci.indices)
     load = _has_load(ops, cK, source)
     b = np.zeros((n_I + n_G, lk + gcols.size + int(load)))
@@ -1438,7 +1384,7 @@ def _stage_two_condensed(
     skeleton, and its own right-hand sides condensed); 2. each patch factorizes only its skeleton system
     Σ_K T_Γᵀ S_K T_Γ (a few thousand unknowns instead of 10⁵ at h = 1/128); 3. the owned unknowns are
     recovered coarse cell by coarse cell, for all patches reaching it in one multi-right-hand-side solve.
-    Exact (the same linear systems as ``_stage_two_reference``, up to rounding).
+    Exact (the same linear systems as one LU per patch, up to rounding).
     """
     skeleton = _skeleton_entities(topo, grid)
     skel_aw = _skeleton_aw(topo, skeleton)
@@ -1509,7 +1455,7 @@ def _stage_two_condensed(
         basis.append(PatchFunctions(p, aux.offsets[i] + np.arange(li), [_columns(a, first) for a, _ in pieces],
                                     [_columns(u, first) for _, u in pieces]))
         cK = dofs.cells[i]
-        gcols = np.unique(ops.C[_rows(cK, 30)].indices)
+        gcols = np.unique(ops.C[cell_rows(cK, 30)].indices)
         load = _has_load(ops, cK, source)
         n_corr = gcols.size + int(load)
         if width is not None and width != li + n_corr:
@@ -1536,19 +1482,6 @@ def stage_two(
     """
     dofs = dofs or CoarseCellDofs.of(ops, grid)
     return _stage_two_condensed(ops, topo, grid, dofs, aux, layers, source, comm, distributed)
-
-
-def _stage_two_reference(
-    ops: CellOperators, topo: _Topology, grid: CoarseGrid, aux: StageI, layers: int, source: bool = True,
-    *, dofs: CoarseCellDofs | None = None, comm: MPI.Comm = MPI.COMM_SELF, distributed: bool = False,
-) -> tuple[list[PatchFunctions], list[PatchFunctions]]:
-    """``stage_two`` with one sparse LU of the whole saddle-point system per patch (the reference of the tests;
-    every rank gets every function, ``distributed`` or not)."""
-    dofs = dofs or CoarseCellDofs.of(ops, grid)
-    cost = np.array([sum(len(grid.cells[j]) for j in grid.patch(i, layers)) for i in range(grid.size)], dtype=float)
-    out = _run_shared(cost ** 1.5, comm, "mixed CEM Stage II (patches)",
-                      lambda i: _patch_functions(ops, topo, grid, dofs, aux, i, layers, source))
-    return [b for b, _ in out], [c for _, c in out]
 
 
 def _cell_cost(dofs: CoarseCellDofs) -> np.ndarray:
@@ -1619,7 +1552,7 @@ def basis_decay_profile(ops: CellOperators, topo: _Topology, grid: CoarseGrid, a
     A diagnostic (it factorizes the whole Ω₁ saddle-point system): the localization error of m
     layers follows the profile at d ≈ m (benchmarks/mixed_ms_localization.py).
     """
-    space, lu, Z, aux_cols, n_loc, n_u = _patch_system(ops, topo, grid, aux, np.arange(grid.size))
+    space, lu, Z, aux_cols, n_loc, n_u = patch_system(ops, topo, grid, aux, np.arange(grid.size))
     try:
         lk = aux.modes[k].shape[2]
         rhs = np.zeros((n_loc + n_u + Z.shape[1], lk))
@@ -1767,7 +1700,7 @@ def coarse_operators(
             Mu[np.ix_(du, np.arange(a0, a1))] += PMN.T
             Mu[np.ix_(du, du)] += Nu.T @ MNu
         if gamma[cK].any():
-            rows = _rows(cK, 30)
+            rows = cell_rows(cK, 30)
             PFf = (PB @ Fc).reshape(30 * cK.size, -1)  # cell-major DG values on K
             Cphi[uniq] += (ops.C[rows].T @ PFf).T
             Ephi[:, uniq] += ops.E[:, rows] @ PFf

@@ -9,8 +9,9 @@ import numpy as np
 import scipy.sparse as sp
 from mpi4py import MPI
 
-import fenics_contact  # noqa: F401  (imports dolfinx_solver first)
-from fenics_contact.multiscale.mixed_cem import CoarseCellDofs, PatchFunctions, aw_map, cell_rows, patch_system
+from fenics_contact.multiscale.mixed_cem.bases import CoarseCellDofs, PatchFunctions, patch_system
+from fenics_contact.multiscale.mixed_cem.blocks import cell_rows
+from fenics_contact.multiscale.mixed_cem.local_space import aw_map
 from fenics_contact.multiscale.work import run_shared
 
 __all__ = ["stage_two_reference"]

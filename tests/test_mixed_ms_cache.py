@@ -24,6 +24,8 @@ from fenics_contact.problem import geometry, models
 from fenics_contact.multiscale.cem.options import DEFAULT_S_FACTOR
 from fenics_contact.multiscale.coarse import coarse_grid
 from fenics_contact.multiscale import mixed_cem as mm
+from fenics_contact.multiscale.mixed_cem import omega1 as mixed_omega1
+from fenics_contact.multiscale.mixed_cem import skeleton
 from fenics_contact.errors import InputError
 from fenics_contact.hybrid.mixed import MixedHybridStep
 from multiscale_oracles import stage_two_reference
@@ -45,7 +47,7 @@ def omega1():
     part = step.parts[0]
     grid = coarse_grid(part.mesh, part.cell_map, cm.coarse_cell, cm.H)
     ops = mm.cell_operators(step.sub[0], cm.H, "lambda+2mu", DEFAULT_S_FACTOR)
-    topo = mm._Topology(step.sub[0].mesh, ops.P.shape[1])
+    topo = mm.Topology(step.sub[0].mesh, ops.P.shape[1])
     return cm, step, grid, ops, topo
 
 
@@ -117,7 +119,7 @@ def test_local_space_and_operators_match_sparse_products(omega1):
         space = mm.local_stress_space(ops, topo, cells)
         L = _reference_basis(ops, topo, cells, space)
         assert abs(space.L - L).max() <= 1e-14 * abs(L).max()
-        At, Bl = mm._local_operators(ops, space)
+        At, Bl = mm.local_operators(ops, space)
         At_ref = (L.T @ _blockdiag(ops.kt(cells)) @ L).tocsr()
         Bl_ref = (_blockdiag(ops.B[cells]) @ L).tocsr()
         assert abs(At - At_ref).max() <= 1e-13 * abs(At_ref).max()
@@ -324,7 +326,7 @@ def test_symmetric_factorization_and_its_lu_fallback(caplog):
 
 
 def test_gram_of_cell_blocks():
-    """``_gram`` (the coarse operators' Σ_c F_cᵀ A_c F_c by batched Cholesky and a symmetric product) equals the plain
+    """``gram`` (the coarse operators' Σ_c F_cᵀ A_c F_c by batched Cholesky and a symmetric product) equals the plain
     sum, also when a block is not positive definite (then the general product is taken)."""
     rng = np.random.default_rng(6)
     X = rng.standard_normal((5, 24, 24))
@@ -332,12 +334,12 @@ def test_gram_of_cell_blocks():
     F = rng.standard_normal((5, 24, 7))
     for A in (spd, spd - 50.0 * np.eye(24)):
         ref = sum(F[c].T @ A[c] @ F[c] for c in range(5))
-        assert np.linalg.norm(mm._gram(A, F) - ref) <= 1e-12 * np.linalg.norm(ref)
+        assert np.linalg.norm(mm.gram(A, F) - ref) <= 1e-12 * np.linalg.norm(ref)
     assert np.linalg.eigvalsh(spd - 50.0 * np.eye(24)).min() < 0
 
 
 def test_cell_blocks_read_off_the_csr_arrays():
-    """``_cell_blocks`` and ``_row_blocks`` read the blocks straight off the CSR arrays when each cell's rows hold
+    """``cell_blocks`` and ``row_blocks`` read the blocks straight off the CSR arrays when each cell's rows hold
     exactly the cell's columns; the result equals the general sparse extraction for cells whose columns are in
     increasing order, in another order, and for a matrix whose pattern does not allow the shortcut; for rows
     scattered over the matrix, for each cell's rows a whole block of consecutive rows (cells permuted), and for
@@ -351,21 +353,21 @@ def test_cell_blocks_read_off_the_csr_arrays():
         blocks = rng.standard_normal((n, a, b))
         A = sp.csr_matrix((blocks.ravel(), (np.repeat(rows, b, axis=1).ravel(), np.tile(cols, (1, a)).ravel())),
                           shape=(n * a, n * b + 1))
-        got = mm._cell_blocks(A, rows, cols)
+        got = mm.cell_blocks(A, rows, cols)
         assert np.array_equal(got, blocks)
         if rows is layouts[2] and np.all(np.diff(cols, axis=1) > 0):
             assert np.shares_memory(got, A.data)  # the cells in row order, columns increasing: no copy
         general = A.tolil()
         general[rows[0, 0], n * b] = 1.0  # a row with a column outside its cell: no shortcut
         general = general.tocsr()
-        assert np.array_equal(mm._cell_blocks(general, rows, cols), blocks)
-        c, v = mm._row_blocks(A, rows)
-        c0, v0 = mm._column_blocks(A[rows.ravel()], n, a)
+        assert np.array_equal(mm.cell_blocks(general, rows, cols), blocks)
+        c, v = mm.row_blocks(A, rows)
+        c0, v0 = mm.column_blocks(A[rows.ravel()], n, a)
         assert np.array_equal(c, c0) and np.array_equal(v, v0)
         if rows is layouts[2]:
             assert np.shares_memory(v, A.data)  # the cells' rows in row order: a view, no index array
-        c, v = mm._row_blocks(general, rows)  # cell 0's rows differ in their columns: the general path
-        c0, v0 = mm._column_blocks(general[rows.ravel()], n, a)
+        c, v = mm.row_blocks(general, rows)  # cell 0's rows differ in their columns: the general path
+        c0, v0 = mm.column_blocks(general[rows.ravel()], n, a)
         assert np.array_equal(c, c0) and np.array_equal(v, v0)
 
 
@@ -390,7 +392,7 @@ def test_condensed_stage_two_equals_per_patch_lu(omega1):
     loaded = dataclasses.replace(ops, G=rng.standard_normal(ops.G.shape),  # f, and the stress-side load F
                                  F=rng.standard_normal((ops.num_cells, 30)))  # of boundary data (issue 14)
     dofs = mm.CoarseCellDofs.of(ops, grid)
-    for tp in (topo, mm._Topology(msh, ops.num_aw, top)):
+    for tp in (topo, mm.Topology(msh, ops.num_aw, top)):
         aux = mm.stage_one(loaded, tp, grid, 3)
         for layers in (1, 2):
             new = mm.stage_two(loaded, tp, grid, aux, layers, dofs=dofs)
@@ -413,7 +415,7 @@ def test_back_substitution_with_and_without_the_kept_factors(omega1, monkeypatch
     aux = mm.stage_one(loaded, topo, grid, 3)
     ref = mm.stage_two(loaded, topo, grid, aux, 1, dofs=dofs)
     for budget in (0.0, 2.0e6):  # none kept; two of the 12 kept (0.6–0.8 MB each)
-        monkeypatch.setattr(mm, "KEEP_FACTORS_BYTES", budget)
+        monkeypatch.setattr(skeleton, "KEEP_FACTORS_BYTES", budget)
         new = mm.stage_two(loaded, topo, grid, aux, 1, dofs=dofs)
         assert _relative_difference(loaded, dofs, ref[0], new[0]) < 1e-10
         assert _relative_difference(loaded, dofs, ref[1], new[1]) < 1e-10
@@ -432,7 +434,7 @@ def test_condensed_stage_two_at_contrast_1e6_nearly_incompressible():
     part = step.parts[0]
     grid = coarse_grid(part.mesh, part.cell_map, cm.coarse_cell, cm.H)
     ops = mm.cell_operators(step.sub[0], cm.H, "lambda+2mu", DEFAULT_S_FACTOR)
-    topo = mm._Topology(step.sub[0].mesh, ops.P.shape[1], essential_traction_facets(part.mesh, part.facet_tags))
+    topo = mm.Topology(step.sub[0].mesh, ops.P.shape[1], essential_traction_facets(part.mesh, part.facet_tags))
     dofs = mm.CoarseCellDofs.of(ops, grid)
     aux = mm.stage_one(ops, topo, grid, 3, 0.1, 32)
     new = mm.stage_two(ops, topo, grid, aux, 1, dofs=dofs)
@@ -453,13 +455,13 @@ def test_algorithm4_unchanged_by_the_condensed_stage_two(monkeypatch):
     ref = solve_mixed_monolithic(cm, model)
     runs = []
     for stage_two in (mm.stage_two, stage_two_reference):
-        monkeypatch.setattr(mm, "stage_two", stage_two)
+        monkeypatch.setattr(mixed_omega1, "stage_two", stage_two)
         runs.append(solve_mixed_ms_hybrid(cm, model, layers=2, reference=ref,
                                           options=IterationOptions(tol=1e-10, max_iterations=400)))
     new, old = runs
     assert new.converged and old.converged
     co_new, co_old = new.step.omega1.co, old.step.omega1.co
-    for name in mm._COARSE_ARRAYS:
+    for name in mm.COARSE_ARRAYS:
         x, y = getattr(co_new, name), getattr(co_old, name)
         assert np.linalg.norm(x - y) <= 1e-10 * np.linalg.norm(y), name
     # the errors are relative to the reference's norm: a change δ·‖u‖ of the solution moves them by up to δ, so

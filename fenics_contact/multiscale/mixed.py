@@ -69,12 +69,8 @@ from fenics_contact.problem.geometry import ContactMesh
 from fenics_contact.fem.mixed import MixedContactProfile, MixedSolution, boundary_stress_space
 from fenics_contact.hybrid.mixed import MixedHybridStep, solve_or_verify
 from fenics_contact.hybrid.primal import omega2_record
-from fenics_contact.multiscale.mixed_cem import (
-    DEFAULT_MAX_NBASIS,
-    DEFAULT_MIN_GAP,
-    MixedCEMOptions,
-    MixedMultiscaleOmega1,
-)
+from fenics_contact.multiscale.mixed_cem.omega1 import MixedMultiscaleOmega1
+from fenics_contact.multiscale.mixed_cem.options import DEFAULT_MAX_NBASIS, DEFAULT_MIN_GAP, MixedCEMOptions
 from fenics_contact.problem.models import TestModel
 from fenics_contact.multiscale.cem.options import DEFAULT_S_FACTOR, warn_if_few_layers
 from fenics_contact.multiscale.coarse import coarse_grid

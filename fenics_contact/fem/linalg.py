@@ -5,8 +5,8 @@ the factors of its operator; the factorization and every solve are checked, a fa
 
 * ``DirectSolver``: a (distributed) operator configured through the PETSc options database under its own
   prefix (the fine subproblems, the interface Newton), refactorized by ``set_operator``; PETSc vector solves.
-* ``SparseFactor``: a sequential MUMPS LU or Cholesky (LLᵀ of a matrix flagged SPD, else LDLᵀ) of a matrix it
-  owns, configured in code (the multiscale local problems, thousands of them: no options-database entries),
+* ``SparseFactor``: a sequential MUMPS LU or Cholesky (without pivoting for a matrix flagged SPD, else LDLᵀ
+  with pivoting) of a matrix it owns, configured in code (the multiscale local problems, thousands of them: no options-database entries),
   with MUMPS ICNTL controls per factorization; solves of dense blocks of right-hand sides (one MatMatSolve);
   a SciPy CSR matrix wrapped without a copy (``from_csr``), a symmetric one given by its upper triangle
   (``symmetric``: Cholesky, or LU where it is not positive definite), new values refactorized on the kept
@@ -133,8 +133,8 @@ class SparseFactor(_Factorization):
         self, mat: PETSc.Mat, *, cholesky: bool = False, icntl: dict[int, int] | None = None, trial: bool = False,
         what: str | None = None,
     ) -> None:
-        """Factorize ``mat`` (destroyed with this factor): LU, or with ``cholesky`` MUMPS' Cholesky (LLᵀ when
-        ``mat`` is flagged SPD, else LDLᵀ with pivoting); ``icntl`` MUMPS controls (default: ``lu_icntl``
+        """Factorize ``mat`` (destroyed with this factor): LU, or with ``cholesky`` MUMPS' Cholesky (no pivoting
+        when ``mat`` is flagged SPD, else LDLᵀ with pivoting); ``icntl`` MUMPS controls (default: ``lu_icntl``
         for an LU, none for Cholesky).  A failed factorization raises ConvergenceError, unless ``trial``
         (a Cholesky of a matrix flagged SPD): then a failure or a non-positive pivot only sets ``positive``
         False (the caller factorizes otherwise, as ``symmetric`` does).  ``what`` overrides the class's name of

@@ -18,7 +18,7 @@ import numpy as np
 
 import fenics_contact  # noqa: F401  (must precede dolfinx / petsc4py)
 from fenics_contact.problem import geometry, models
-from fenics_contact.multiscale import cem
+from fenics_contact.multiscale.coarse import coarse_grid
 from fenics_contact.multiscale import mixed_cem as mm
 from fenics_contact.io import machine_description, write_report
 from fenics_contact.hybrid.mixed import MixedHybridStep
@@ -35,7 +35,7 @@ def omega1(n: int, n_coarse: int, model):
     cm = geometry.unit_square(n, n_coarse)
     step = MixedHybridStep(cm, model, beta="sqrt-h")
     part = step.parts[0]
-    return cm, step.sub[0], cem.coarse_grid(part.mesh, part.cell_map, cm.coarse_cell, cm.H)
+    return cm, step.sub[0], coarse_grid(part.mesh, part.cell_map, cm.coarse_cell, cm.H)
 
 
 def homogeneous_omega1(n: int, n_coarse: int, nu: float):

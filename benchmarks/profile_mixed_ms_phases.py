@@ -4,7 +4,7 @@
     OMP_NUM_THREADS=1 .venv/bin/mpiexec -n 2 .venv/bin/python benchmarks/profile_mixed_ms_phases.py [--n 128]
 
 Runs the offline + online of ``mixed_ms_scaling.py --worker mixed-ms`` (model 2, H = 1/16, m = 3, no cache) with
-``multiscale.work.run_balanced`` / ``gather_dict`` and ``mixed_cem.run_shared`` wrapped by timers, and prints per
+``multiscale.work.run_balanced`` / ``gather_dict`` / ``run_shared`` wrapped by timers, and prints per
 rank: each handed-out phase's wall time, the CPU of its items (``work``), how many items the rank computed and
 how long it waited at the phase's end for the other ranks; each gather's time; each ``run_shared`` call's wall
 time.  Compare the serial run's phases with the ranks' to see which phase does not scale (README, issue 11).
@@ -18,11 +18,10 @@ from pathlib import Path
 import dolfinx_solver  # noqa: F401  (before dolfinx / petsc4py)
 from mpi4py import MPI
 
-import fenics_contact.multiscale.mixed_cem as mixed_cem
 import fenics_contact.multiscale.work as work
 
 records = []
-_run_balanced, _gather_dict, _run_shared = work.run_balanced, work.gather_dict, mixed_cem.run_shared
+_run_balanced, _gather_dict, _run_shared = work.run_balanced, work.gather_dict, work.run_shared
 
 
 def run_balanced(cost, comm, item, **kwargs):
@@ -58,7 +57,7 @@ def run_shared(cost, comm, desc, item, **kwargs):
     return out
 
 
-work.run_balanced, work.gather_dict, mixed_cem.run_shared = run_balanced, gather_dict, run_shared
+work.run_balanced, work.gather_dict, work.run_shared = run_balanced, gather_dict, run_shared
 n = sys.argv[sys.argv.index("--n") + 1] if "--n" in sys.argv else "128"
 sys.argv = ["mixed_ms_scaling.py", "--worker", "mixed-ms", "--n", n]
 try:

@@ -40,7 +40,7 @@ from fenics_contact.io import machine_description, write_report
 from fenics_contact.fem.mixed import solve_mixed_monolithic
 from fenics_contact.hybrid.mixed import MixedHybridStep, solve_mixed_hybrid
 from fenics_contact.multiscale.mixed import solve_mixed_ms_hybrid
-from fenics_contact.multiscale.mixed_cem import DEFAULT_MIN_GAP
+from fenics_contact.multiscale.mixed_cem.options import DEFAULT_MIN_GAP
 
 #: the paper's Tables 5.3, 5.5–5.7 (h = 1/64, H = 1/16, β = √h, 3 bases): m -> (iterations, e_σ, e_u)
 PAPER = {

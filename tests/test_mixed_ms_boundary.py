@@ -15,7 +15,7 @@ import fenics_contact  # noqa: F401  (must precede dolfinx)
 from fenics_contact.fem.mixed import solve_mixed_monolithic
 from fenics_contact.hybrid.iteration import IterationOptions
 from fenics_contact.hybrid.mixed import MixedHybridStep, solve_mixed_hybrid
-from fenics_contact.multiscale import cem
+from fenics_contact.multiscale.coarse import coarse_grid
 from fenics_contact.multiscale import mixed_cem as mm
 from fenics_contact.multiscale.mixed import essential_traction_facets, l2_stress_error, solve_mixed_ms_hybrid
 from fenics_contact.problem import geometry, models
@@ -48,7 +48,7 @@ def test_full_space_reproduces_the_fine_problem_with_boundary_data():
     step = MixedHybridStep(cm, models.get_model(2).with_(boundary=BOUNDARY), beta="sqrt-h")
     part, sub = step.parts[0], step.sub[0]
     assert sub._lifted and sub.u_D is not None
-    grid = cem.coarse_grid(part.mesh, part.cell_map, cm.coarse_cell, cm.H)
+    grid = coarse_grid(part.mesh, part.cell_map, cm.coarse_cell, cm.H)
     tf = essential_traction_facets(part.mesh, part.facet_tags)
     assert tf.size == 6 + 6  # bottom (free) and top (Γ_N) of Ω₁: 3/4 · 8 facets each
     om = mm.MixedMultiscaleOmega1(sub, grid, mm.MixedCEMOptions(layers=3, nbasis=None), H=cm.H,
@@ -70,7 +70,7 @@ def test_without_source_correctors_boundary_data_warn(caplog):
     cm = _mesh(8, 4)
     step = MixedHybridStep(cm, models.get_model(2).with_(boundary=BOUNDARY), beta="sqrt-h")
     part = step.parts[0]
-    grid = cem.coarse_grid(part.mesh, part.cell_map, cm.coarse_cell, cm.H)
+    grid = coarse_grid(part.mesh, part.cell_map, cm.coarse_cell, cm.H)
     with caplog.at_level(logging.WARNING, logger="fenics_contact.multiscale.mixed_cem"):
         mm.MixedMultiscaleOmega1(step.sub[0], grid, mm.MixedCEMOptions(layers=1, source_correction=False), H=cm.H,
                                  traction_free_facets=essential_traction_facets(part.mesh, part.facet_tags))
@@ -123,7 +123,7 @@ def test_cache_keeps_and_keys_the_boundary_data(tmp_path):
                                                                       tractions={"Gamma_N_top": t}))
         step = MixedHybridStep(cm, model, beta="sqrt-h")
         part = step.parts[0]
-        grid = cem.coarse_grid(part.mesh, part.cell_map, cm.coarse_cell, cm.H)
+        grid = coarse_grid(part.mesh, part.cell_map, cm.coarse_cell, cm.H)
         tf = essential_traction_facets(part.mesh, part.facet_tags)
         oms = [mm.MixedMultiscaleOmega1(step.sub[0], grid, mm.MixedCEMOptions(layers=1), H=cm.H, cache_dir=tmp_path,
                                         traction_free_facets=tf) for _ in range(2)]

@@ -19,11 +19,16 @@ import scipy.sparse.linalg as spla
 from mpi4py import MPI
 
 import fenics_contact  # noqa: F401  (must precede dolfinx)
+from fenics_contact.fem import linalg
 from fenics_contact.problem import geometry, models
-from fenics_contact.multiscale import cem
+from fenics_contact.multiscale.cem.options import DEFAULT_S_FACTOR
+from fenics_contact.multiscale.coarse import coarse_grid
 from fenics_contact.multiscale import mixed_cem as mm
+from fenics_contact.multiscale.mixed_cem import omega1 as mixed_omega1
+from fenics_contact.multiscale.mixed_cem import skeleton
 from fenics_contact.errors import InputError
 from fenics_contact.hybrid.mixed import MixedHybridStep
+from multiscale_oracles import stage_two_reference
 
 pytestmark = pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="the mixed CEM offline phase is serial")
 
@@ -40,9 +45,9 @@ def omega1():
     cm = geometry.unit_square(16, 4)
     step = MixedHybridStep(cm, models.get_model(2), beta="sqrt-h")
     part = step.parts[0]
-    grid = cem.coarse_grid(part.mesh, part.cell_map, cm.coarse_cell, cm.H)
-    ops = mm.cell_operators(step.sub[0], cm.H, "lambda+2mu", cem.DEFAULT_S_FACTOR)
-    topo = mm._Topology(step.sub[0].mesh, ops.P.shape[1])
+    grid = coarse_grid(part.mesh, part.cell_map, cm.coarse_cell, cm.H)
+    ops = mm.cell_operators(step.sub[0], cm.H, "lambda+2mu", DEFAULT_S_FACTOR)
+    topo = mm.Topology(step.sub[0].mesh, ops.P.shape[1])
     return cm, step, grid, ops, topo
 
 
@@ -84,7 +89,7 @@ def _reference_basis(ops, topo, cells, space):
         (3 * topo.nv + 4 * e_int[:, None] + np.arange(4)).ravel(),
         (3 * topo.nv + 4 * topo.ne + 3 * cells[:, None] + np.arange(3)).ravel(),
     ])
-    Pp = ops.P[mm._rows(cells, 30)].tocsc()
+    Pp = ops.P[mm.cell_rows(cells, 30)].tocsc()
     parts = [Pp[:, inner]]
     for v in v_bnd:
         rows = []
@@ -114,7 +119,7 @@ def test_local_space_and_operators_match_sparse_products(omega1):
         space = mm.local_stress_space(ops, topo, cells)
         L = _reference_basis(ops, topo, cells, space)
         assert abs(space.L - L).max() <= 1e-14 * abs(L).max()
-        At, Bl = mm._local_operators(ops, space)
+        At, Bl = mm.local_operators(ops, space)
         At_ref = (L.T @ _blockdiag(ops.kt(cells)) @ L).tocsr()
         Bl_ref = (_blockdiag(ops.B[cells]) @ L).tocsr()
         assert abs(At - At_ref).max() <= 1e-13 * abs(At_ref).max()
@@ -128,7 +133,7 @@ def test_batched_patch_solve_matches_scipy(omega1):
     _, _, grid, ops, topo = omega1
     aux = mm.stage_one(ops, topo, grid, 3)
     for i, layers in _cases(grid)[1:3]:
-        space, lu, Z, *_ = mm._patch_system(ops, topo, grid, aux, grid.patch(i, layers))
+        space, lu, Z, *_ = mm.patch_system(ops, topo, grid, aux, grid.patch(i, layers))
         L = _reference_basis(ops, topo, space.cells, space)
         At = L.T @ _blockdiag(ops.kt(space.cells)) @ L
         Bl = _blockdiag(ops.B[space.cells]) @ L
@@ -203,7 +208,7 @@ def test_cache_with_the_load_corrector(tmp_path):
     model = models.get_model(2).with_(load=lambda x: np.stack([np.sin(3 * x[1]), 0.5 + 0 * x[0]]))
     step = MixedHybridStep(cm, model, beta="sqrt-h")
     part = step.parts[0]
-    grid = cem.coarse_grid(part.mesh, part.cell_map, cm.coarse_cell, cm.H)
+    grid = coarse_grid(part.mesh, part.cell_map, cm.coarse_cell, cm.H)
     opts = mm.MixedCEMOptions(layers=1)
     first = mm.MixedMultiscaleOmega1(step.sub[0], grid, opts, H=cm.H, cache_dir=tmp_path)
     second = mm.MixedMultiscaleOmega1(step.sub[0], grid, opts, H=cm.H, cache_dir=tmp_path)
@@ -298,7 +303,7 @@ def _relative_difference(ops, dofs, a, b):
 
 
 def test_symmetric_factorization_and_its_lu_fallback(caplog):
-    """``_MumpsLU.symmetric`` (Stage II skeleton systems, given by their upper triangle) solves an SPD system
+    """``LocalFactor.symmetric`` (Stage II skeleton systems, given by their upper triangle) solves an SPD system
     by Cholesky, and an indefinite symmetric one (where Cholesky meets a negative pivot) through the LU of
     the full matrix, both to rounding."""
     rng = np.random.default_rng(5)
@@ -310,8 +315,8 @@ def test_symmetric_factorization_and_its_lu_fallback(caplog):
     b = rng.standard_normal((n, 3))
     for A, fallback in ((spd, False), (indefinite, True)):
         caplog.clear()
-        with caplog.at_level(logging.DEBUG, logger=mm.log.name):
-            lu = mm._MumpsLU.symmetric(sp.triu(A).tocsr())
+        with caplog.at_level(logging.DEBUG, logger=linalg.log.name):
+            lu = mm.LocalFactor.symmetric(sp.triu(A).tocsr())
         assert ("LU instead of Cholesky" in caplog.text) == fallback
         try:
             x = lu.solve(b)
@@ -321,7 +326,7 @@ def test_symmetric_factorization_and_its_lu_fallback(caplog):
 
 
 def test_gram_of_cell_blocks():
-    """``_gram`` (the coarse operators' Σ_c F_cᵀ A_c F_c by batched Cholesky and a symmetric product) equals the plain
+    """``gram`` (the coarse operators' Σ_c F_cᵀ A_c F_c by batched Cholesky and a symmetric product) equals the plain
     sum, also when a block is not positive definite (then the general product is taken)."""
     rng = np.random.default_rng(6)
     X = rng.standard_normal((5, 24, 24))
@@ -329,12 +334,12 @@ def test_gram_of_cell_blocks():
     F = rng.standard_normal((5, 24, 7))
     for A in (spd, spd - 50.0 * np.eye(24)):
         ref = sum(F[c].T @ A[c] @ F[c] for c in range(5))
-        assert np.linalg.norm(mm._gram(A, F) - ref) <= 1e-12 * np.linalg.norm(ref)
+        assert np.linalg.norm(mm.gram(A, F) - ref) <= 1e-12 * np.linalg.norm(ref)
     assert np.linalg.eigvalsh(spd - 50.0 * np.eye(24)).min() < 0
 
 
 def test_cell_blocks_read_off_the_csr_arrays():
-    """``_cell_blocks`` and ``_row_blocks`` read the blocks straight off the CSR arrays when each cell's rows hold
+    """``cell_blocks`` and ``row_blocks`` read the blocks straight off the CSR arrays when each cell's rows hold
     exactly the cell's columns; the result equals the general sparse extraction for cells whose columns are in
     increasing order, in another order, and for a matrix whose pattern does not allow the shortcut; for rows
     scattered over the matrix, for each cell's rows a whole block of consecutive rows (cells permuted), and for
@@ -348,21 +353,21 @@ def test_cell_blocks_read_off_the_csr_arrays():
         blocks = rng.standard_normal((n, a, b))
         A = sp.csr_matrix((blocks.ravel(), (np.repeat(rows, b, axis=1).ravel(), np.tile(cols, (1, a)).ravel())),
                           shape=(n * a, n * b + 1))
-        got = mm._cell_blocks(A, rows, cols)
+        got = mm.cell_blocks(A, rows, cols)
         assert np.array_equal(got, blocks)
         if rows is layouts[2] and np.all(np.diff(cols, axis=1) > 0):
             assert np.shares_memory(got, A.data)  # the cells in row order, columns increasing: no copy
         general = A.tolil()
         general[rows[0, 0], n * b] = 1.0  # a row with a column outside its cell: no shortcut
         general = general.tocsr()
-        assert np.array_equal(mm._cell_blocks(general, rows, cols), blocks)
-        c, v = mm._row_blocks(A, rows)
-        c0, v0 = mm._column_blocks(A[rows.ravel()], n, a)
+        assert np.array_equal(mm.cell_blocks(general, rows, cols), blocks)
+        c, v = mm.row_blocks(A, rows)
+        c0, v0 = mm.column_blocks(A[rows.ravel()], n, a)
         assert np.array_equal(c, c0) and np.array_equal(v, v0)
         if rows is layouts[2]:
             assert np.shares_memory(v, A.data)  # the cells' rows in row order: a view, no index array
-        c, v = mm._row_blocks(general, rows)  # cell 0's rows differ in their columns: the general path
-        c0, v0 = mm._column_blocks(general[rows.ravel()], n, a)
+        c, v = mm.row_blocks(general, rows)  # cell 0's rows differ in their columns: the general path
+        c0, v0 = mm.column_blocks(general[rows.ravel()], n, a)
         assert np.array_equal(c, c0) and np.array_equal(v, v0)
 
 
@@ -387,11 +392,11 @@ def test_condensed_stage_two_equals_per_patch_lu(omega1):
     loaded = dataclasses.replace(ops, G=rng.standard_normal(ops.G.shape),  # f, and the stress-side load F
                                  F=rng.standard_normal((ops.num_cells, 30)))  # of boundary data (issue 14)
     dofs = mm.CoarseCellDofs.of(ops, grid)
-    for tp in (topo, mm._Topology(msh, ops.num_aw, top)):
+    for tp in (topo, mm.Topology(msh, ops.num_aw, top)):
         aux = mm.stage_one(loaded, tp, grid, 3)
         for layers in (1, 2):
             new = mm.stage_two(loaded, tp, grid, aux, layers, dofs=dofs)
-            ref = mm._stage_two_reference(loaded, tp, grid, aux, layers, dofs=dofs)
+            ref = stage_two_reference(loaded, tp, grid, aux, layers, dofs=dofs)
             assert all(c is not None and c.index[-1] == ops.num_gamma_values for c in new[1])  # load everywhere
             assert _relative_difference(loaded, dofs, ref[0], new[0]) < 1e-10
             assert _relative_difference(loaded, dofs, ref[1], new[1]) < 1e-10
@@ -410,7 +415,7 @@ def test_back_substitution_with_and_without_the_kept_factors(omega1, monkeypatch
     aux = mm.stage_one(loaded, topo, grid, 3)
     ref = mm.stage_two(loaded, topo, grid, aux, 1, dofs=dofs)
     for budget in (0.0, 2.0e6):  # none kept; two of the 12 kept (0.6–0.8 MB each)
-        monkeypatch.setattr(mm, "KEEP_FACTORS_BYTES", budget)
+        monkeypatch.setattr(skeleton, "KEEP_FACTORS_BYTES", budget)
         new = mm.stage_two(loaded, topo, grid, aux, 1, dofs=dofs)
         assert _relative_difference(loaded, dofs, ref[0], new[0]) < 1e-10
         assert _relative_difference(loaded, dofs, ref[1], new[1]) < 1e-10
@@ -427,20 +432,20 @@ def test_condensed_stage_two_at_contrast_1e6_nearly_incompressible():
     cm = geometry.unit_square(16, 4, clamped=("left",))
     step = MixedHybridStep(cm, models.get_model(3, E_high=1e6, nu=0.4999), beta="sqrt-h")
     part = step.parts[0]
-    grid = cem.coarse_grid(part.mesh, part.cell_map, cm.coarse_cell, cm.H)
-    ops = mm.cell_operators(step.sub[0], cm.H, "lambda+2mu", cem.DEFAULT_S_FACTOR)
-    topo = mm._Topology(step.sub[0].mesh, ops.P.shape[1], essential_traction_facets(part.mesh, part.facet_tags))
+    grid = coarse_grid(part.mesh, part.cell_map, cm.coarse_cell, cm.H)
+    ops = mm.cell_operators(step.sub[0], cm.H, "lambda+2mu", DEFAULT_S_FACTOR)
+    topo = mm.Topology(step.sub[0].mesh, ops.P.shape[1], essential_traction_facets(part.mesh, part.facet_tags))
     dofs = mm.CoarseCellDofs.of(ops, grid)
     aux = mm.stage_one(ops, topo, grid, 3, 0.1, 32)
     new = mm.stage_two(ops, topo, grid, aux, 1, dofs=dofs)
-    ref = mm._stage_two_reference(ops, topo, grid, aux, 1, dofs=dofs)
+    ref = stage_two_reference(ops, topo, grid, aux, 1, dofs=dofs)
     assert _relative_difference(ops, dofs, ref[0], new[0]) < 1e-5
     assert _relative_difference(ops, dofs, ref[1], new[1]) < 1e-6
 
 
 def test_algorithm4_unchanged_by_the_condensed_stage_two(monkeypatch):
     """Algorithm 4 end to end (load in Ω₁ and Ω₂): coarse operators, e_σ, e_u and the solution fields equal
-    those computed with one LU per patch (``_stage_two_reference``) to 1e-10."""
+    those computed with one LU per patch (``stage_two_reference``) to 1e-10."""
     from fenics_contact.fem.mixed import solve_mixed_monolithic
     from fenics_contact.hybrid.iteration import IterationOptions
     from fenics_contact.multiscale.mixed import solve_mixed_ms_hybrid
@@ -449,14 +454,14 @@ def test_algorithm4_unchanged_by_the_condensed_stage_two(monkeypatch):
     model = models.get_model(2).with_(load=models.band_load([(0.25, 0.875, 0.3, 0.7, 2.0), (0.5, 0.875, 0.7, 1.0, -1.0)]))
     ref = solve_mixed_monolithic(cm, model)
     runs = []
-    for stage_two in (mm.stage_two, mm._stage_two_reference):
-        monkeypatch.setattr(mm, "stage_two", stage_two)
+    for stage_two in (mm.stage_two, stage_two_reference):
+        monkeypatch.setattr(mixed_omega1, "stage_two", stage_two)
         runs.append(solve_mixed_ms_hybrid(cm, model, layers=2, reference=ref,
                                           options=IterationOptions(tol=1e-10, max_iterations=400)))
     new, old = runs
     assert new.converged and old.converged
     co_new, co_old = new.step.omega1.co, old.step.omega1.co
-    for name in mm._COARSE_ARRAYS:
+    for name in mm.COARSE_ARRAYS:
         x, y = getattr(co_new, name), getattr(co_old, name)
         assert np.linalg.norm(x - y) <= 1e-10 * np.linalg.norm(y), name
     # the errors are relative to the reference's norm: a change δ·‖u‖ of the solution moves them by up to δ, so
@@ -469,7 +474,7 @@ def test_algorithm4_unchanged_by_the_condensed_stage_two(monkeypatch):
 
 
 def test_skeleton_factorizations_reuse_the_analysis_of_a_pattern():
-    """``_ReusedAnalysis``: a second SPD matrix with the pattern of a kept one is factorized on the kept analysis
+    """``ReusedAnalysis``: a second SPD matrix with the pattern of a kept one is factorized on the kept analysis
     (no new factorization object) and solves exactly as a fresh factorization does; a matrix of that pattern that
     is not positive definite falls back to a fresh LU that the caller owns; other patterns are factorized afresh,
     and at most ``keep`` factorizations are kept."""
@@ -486,7 +491,7 @@ def test_skeleton_factorizations_reuse_the_analysis_of_a_pattern():
         vals = vals + sp.diags(np.abs(vals).sum(axis=1).A1 + 1.0 - shift)  # diagonally dominant unless shifted
         return sp.triu(vals, format="csr")
 
-    cache = mm._ReusedAnalysis(keep=2)
+    cache = linalg.ReusedAnalysis(keep=2)
     b = rng.standard_normal((n, 3))
     first = spd(0)
     lu0, own0 = cache.factor(first)
@@ -495,7 +500,7 @@ def test_skeleton_factorizations_reuse_the_analysis_of_a_pattern():
     assert np.array_equal(second.indptr, first.indptr) and np.array_equal(second.indices, first.indices)
     lu1, own1 = cache.factor(second)
     assert lu1 is lu0 and not own1  # the kept factorization, refactorized
-    fresh = mm._MumpsLU.symmetric(second.copy())
+    fresh = linalg.SparseFactor.symmetric(second.copy())
     x, x_fresh = lu1.solve(b), fresh.solve(b)
     fresh.destroy()
     full = (second + sp.triu(second, 1).T).toarray()
@@ -521,7 +526,7 @@ def test_stage_two_analyses_each_skeleton_pattern_once(monkeypatch):
     import hashlib
 
     patterns, fresh = [], []
-    factor, symmetric = mm._ReusedAnalysis.factor, mm._MumpsLU.symmetric.__func__
+    factor, symmetric = linalg.ReusedAnalysis.factor, mm.LocalFactor.symmetric.__func__
 
     def counting_factor(self, upper):
         patterns.append(hashlib.sha1(upper.indptr.tobytes() + upper.indices.tobytes()).hexdigest())
@@ -531,11 +536,11 @@ def test_stage_two_analyses_each_skeleton_pattern_once(monkeypatch):
         fresh.append(1)
         return symmetric(cls, upper)
 
-    monkeypatch.setattr(mm._ReusedAnalysis, "factor", counting_factor)
-    monkeypatch.setattr(mm._MumpsLU, "symmetric", classmethod(counting_symmetric))
+    monkeypatch.setattr(linalg.ReusedAnalysis, "factor", counting_factor)
+    monkeypatch.setattr(mm.LocalFactor, "symmetric", classmethod(counting_symmetric))
     cm = geometry.unit_square(32, 8)
     step = MixedHybridStep(cm, models.get_model(2), beta="sqrt-h")
-    grid = cem.coarse_grid(step.parts[0].mesh, step.parts[0].cell_map, cm.coarse_cell, cm.H)
+    grid = coarse_grid(step.parts[0].mesh, step.parts[0].cell_map, cm.coarse_cell, cm.H)
     ops, topo, aux = mm.stage_one_of(step.sub[0], grid, mm.MixedCEMOptions(layers=2), H=cm.H)
     mm.stage_two(ops, topo, grid, aux, 2)
     assert len(patterns) == grid.size == 56

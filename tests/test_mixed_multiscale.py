@@ -9,7 +9,7 @@ import basix.ufl
 from dolfinx import fem
 from dolfinx import mesh as dmesh
 from fenics_contact.problem import geometry, models
-from fenics_contact.multiscale import cem
+from fenics_contact.multiscale.coarse import coarse_grid
 from fenics_contact.multiscale import mixed_cem as mm
 from fenics_contact.hybrid.iteration import IterationOptions
 from fenics_contact.errors import InputError
@@ -22,7 +22,7 @@ def _step_and_grid(cm, model):
     """The Algorithm 2 step of ``model`` on ``cm`` (its Ω₁ subproblem) and the coarse grid of Ω₁."""
     step = MixedHybridStep(cm, model, beta="sqrt-h")
     part = step.parts[0]
-    return step, cem.coarse_grid(part.mesh, part.cell_map, cm.coarse_cell, cm.H)
+    return step, coarse_grid(part.mesh, part.cell_map, cm.coarse_cell, cm.H)
 
 
 @pytest.fixture(scope="module")
@@ -31,7 +31,7 @@ def omega1():
     cm = geometry.unit_square(16, 4)
     step, grid = _step_and_grid(cm, models.get_model(2))
     ops = mm.cell_operators(step.sub[0], cm.H)
-    topo = mm._Topology(step.sub[0].mesh, ops.P.shape[1])
+    topo = mm.Topology(step.sub[0].mesh, ops.P.shape[1])
     return cm, step, grid, ops, topo
 
 
@@ -57,7 +57,7 @@ def test_local_space_is_aw_on_omega1_and_traction_free_inside(omega1):
     cells = np.sort(grid.cells[k].astype(np.int64))
     space = mm.local_stress_space(ops, topo, cells)
     assert space.num_extra > 0  # σ_tt stays free at the inner-boundary vertices
-    _, Bl = mm._local_operators(ops, space)
+    _, Bl = mm.local_operators(ops, space)
     r = _rigid_motions(step.sub[0], ops, cells).reshape(-1, 3)
     assert np.abs(Bl.T @ r).max() < 1e-12 * abs(Bl).max() * np.abs(r).max() * 10
 
@@ -205,7 +205,7 @@ def test_stage_one_krylovschur_equals_lapack(omega1):
         assert krylov.residuals.max() < 1e-10
         for k in range(grid.size):
             assert np.allclose(dense.values[k], krylov.values[k], rtol=1e-9, atol=1e-11)
-            S = mm._block_diag(ops.S[np.sort(grid.cells[k].astype(np.int64))]).toarray()
+            S = mm.block_diag(ops.S[np.sort(grid.cells[k].astype(np.int64))]).toarray()
             p, q = (a.modes[k].reshape(-1, a.modes[k].shape[2]) for a in (dense, krylov))
             assert np.allclose(q.T @ S @ q, np.eye(q.shape[1]), atol=1e-10)
             assert np.abs(p @ (p.T @ S) - q @ (q.T @ S)).max() < 1e-8  # the same S-orthogonal projector
@@ -250,7 +250,7 @@ def test_first_nonrigid_eigenvalue_scales_like_mu_over_lambda_plus_2mu():
     for nu in (0.3, 0.499):
         step, grid = _step_and_grid(cm, models.get_model(2, E_high=1.0, nu=nu))
         ops = mm.cell_operators(step.sub[0], cm.H)
-        aux = mm.stage_one(ops, mm._Topology(step.sub[0].mesh, ops.P.shape[1]), grid, 4)
+        aux = mm.stage_one(ops, mm.Topology(step.sub[0].mesh, ops.P.shape[1]), grid, 4)
         interior = [k for k in range(grid.size) if grid.ij[k, 0] == 1 and grid.ij[k, 1] in (1, 2)]
         lam4 = min(float(aux.values[k][3]) for k in interior)
         scaled.append(lam4 * (1.0 - nu) / (0.5 - nu))  # (λ+2μ)/μ = 2(1−ν)/(1−2ν)
@@ -400,7 +400,7 @@ def test_traction_free_side_of_omega1(omega1):
     mid = dmesh.compute_midpoints(msh, 1, bfacets)
     top = bfacets[np.isclose(mid[:, 1], 1.0)]
     space_tf = ArnoldWintherSpace(msh, zero_traction_facets=top)
-    topo_tf = mm._Topology(msh, ops.num_aw, top)
+    topo_tf = mm.Topology(msh, ops.num_aw, top)
     whole = mm.local_stress_space(ops, topo_tf, np.arange(ops.num_cells))
     P_tf = space_tf.prolongation[ops.dg_rows.ravel()].tocsc()
     L = whole.L.tocsc()

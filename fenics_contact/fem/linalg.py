@@ -1,8 +1,27 @@
-"""PETSc helpers: a checked direct solver, PETSc ↔ SciPy matrix copies, small norms."""
+"""PETSc helpers: the checked factorizations of the package, PETSc ↔ SciPy matrix copies, small norms.
+
+Every factorization lives here, on one core (``_Factorization``: a KSP of type preonly whose direct PC holds
+the factors of its operator; the factorization and every solve are checked, a failure is a ConvergenceError):
+
+* ``DirectSolver``: a (distributed) operator configured through the PETSc options database under its own
+  prefix (the fine subproblems, the interface Newton), refactorized by ``set_operator``; PETSc vector solves.
+* ``SparseFactor``: a sequential MUMPS LU or Cholesky (without pivoting for a matrix flagged SPD, else LDLᵀ
+  with pivoting) of a matrix it owns, configured in code (the multiscale local problems, thousands of them: no options-database entries),
+  with MUMPS ICNTL controls per factorization; solves of dense blocks of right-hand sides (one MatMatSolve);
+  a SciPy CSR matrix wrapped without a copy (``from_csr``), a symmetric one given by its upper triangle
+  (``symmetric``: Cholesky, or LU where it is not positive definite), new values refactorized on the kept
+  symbolic analysis (``refactor``; ``ReusedAnalysis`` keeps one per sparsity pattern), the inertia of an LDLᵀ.
+* ``PivotedCholesky``: a dense rank-revealing Cholesky of a small symmetric positive semi-definite matrix
+  (LAPACK ``dpstrf``).  It stays outside the PETSc core: MUMPS has no pivoting by size that drops the
+  numerically dependent columns, and a dense MUMPS factor would round differently.
+"""
+
+import logging
 
 import dolfinx.fem.petsc
 import dolfinx.la
 import numpy as np
+import scipy.linalg
 import scipy.sparse as sp
 from dolfinx import fem
 from mpi4py import MPI
@@ -10,7 +29,19 @@ from petsc4py import PETSc
 
 from fenics_contact.errors import ConvergenceError, InputError
 
-__all__ = ["AbsoluteTerms", "DirectSolver", "assemble_scipy", "petsc_to_scipy", "quadratic_form", "scipy_to_petsc"]
+__all__ = [
+    "AbsoluteTerms",
+    "DirectSolver",
+    "PivotedCholesky",
+    "ReusedAnalysis",
+    "SparseFactor",
+    "assemble_scipy",
+    "petsc_to_scipy",
+    "quadratic_form",
+    "scipy_to_petsc",
+]
+
+log = logging.getLogger(__name__)
 
 #: |entries| of a matrix a factorization handles safely in double precision (squares stay finite)
 SAFE_RANGE = (1e-150, 1e150)
@@ -19,7 +50,25 @@ SAFE_RANGE = (1e-150, 1e150)
 DIRECT_OPTIONS = {"ksp_type": "preonly", "pc_type": "lu", "pc_factor_mat_solver_type": "mumps"}
 
 
-class DirectSolver:
+class _Factorization:
+    """The shared core: ``ksp`` (type preonly) whose direct PC holds the factors of its operator."""
+
+    ksp: PETSc.KSP
+
+    def _set_up(self) -> int:
+        """Factorize the operator (KSP set-up); the PETSc PC failure reason, 0 on success."""
+        self.ksp.setUp()
+        return self.ksp.getPC().getFailedReason()
+
+    def _solve_reason(self) -> int:
+        """The KSP reason of the last solve (negative: failed; PETSc leaves the check to the caller)."""
+        return self.ksp.getConvergedReason()
+
+    def destroy(self) -> None:
+        self.ksp.destroy()
+
+
+class DirectSolver(_Factorization):
     """A factorized operator (MUMPS LU by default) whose every solve is checked."""
 
     def __init__(self, comm, *, prefix: str, options: dict | None = None) -> None:
@@ -48,8 +97,7 @@ class DirectSolver:
         if not SAFE_RANGE[0] <= largest <= SAFE_RANGE[1]:
             raise InputError(self._range_message(f"entries up to {largest:.3g}"))
         self.ksp.setOperators(A)
-        self.ksp.setUp()
-        reason = self.ksp.getPC().getFailedReason()
+        reason = self._set_up()
         if reason != 0:
             raise ConvergenceError(f"{self.prefix}: factorization failed (PETSc PC failed reason {reason}; "
                                    "a singular matrix?)")
@@ -63,12 +111,227 @@ class DirectSolver:
     def solve(self, b: PETSc.Vec, x: PETSc.Vec) -> None:
         """x = A⁻¹ b, raising ConvergenceError on any PETSc failure."""
         self.ksp.solve(b, x)
-        reason = self.ksp.getConvergedReason()
+        reason = self._solve_reason()
         if reason < 0:
             raise ConvergenceError(f"{self.prefix}: linear solve failed, KSP reason {reason}")
 
+
+class SparseFactor(_Factorization):
+    """MUMPS LU or Cholesky of a sequential sparse matrix it owns; solves of dense blocks of right-hand sides.
+
+    Subclasses name their matrices (``what``, in the messages) and choose the ICNTL controls of their LU
+    factorizations (``lu_icntl``, e.g. the ordering ICNTL(7)), also for the LU that ``symmetric`` falls
+    back to.
+    """
+
+    #: the matrices, in messages
+    what: str = "a sparse matrix"
+    #: MUMPS ICNTL controls (index, value) of an LU when the constructor gets none
+    lu_icntl: tuple[tuple[int, int], ...] = ()
+
+    def __init__(
+        self, mat: PETSc.Mat, *, cholesky: bool = False, icntl: dict[int, int] | None = None, trial: bool = False,
+        what: str | None = None,
+    ) -> None:
+        """Factorize ``mat`` (destroyed with this factor): LU, or with ``cholesky`` MUMPS' Cholesky (no pivoting
+        when ``mat`` is flagged SPD, else LDLᵀ with pivoting); ``icntl`` MUMPS controls (default: ``lu_icntl``
+        for an LU, none for Cholesky).  A failed factorization raises ConvergenceError, unless ``trial``
+        (a Cholesky of a matrix flagged SPD): then a failure or a non-positive pivot only sets ``positive``
+        False (the caller factorizes otherwise, as ``symmetric`` does).  ``what`` overrides the class's name of
+        the matrix in messages."""
+        if what is not None:
+            self.what = what
+        self.mat = mat
+        self.trial = trial
+        self._arrays = None  # the CSR arrays a matrix made by from_csr shares
+        self.ksp = PETSc.KSP().create(PETSc.COMM_SELF)
+        self.ksp.setOperators(self.mat)
+        self.ksp.setType("preonly")
+        pc = self.ksp.getPC()
+        pc.setType("cholesky" if cholesky else "lu")
+        pc.setFactorSolverType("mumps")
+        pc.setFactorSetUpSolverType()
+        controls = icntl if icntl is not None else ({} if cholesky else dict(self.lu_icntl))
+        for key, value in controls.items():
+            pc.getFactorMatrix().setMumpsIcntl(key, value)
+        if not self._factorize() and not trial:
+            reason = pc.getFailedReason()
+            self.destroy()
+            raise ConvergenceError(f"MUMPS failed to factorize {self.what} (reason {reason})")
+
+    @classmethod
+    def from_csr(cls, A: sp.csr_matrix, **kwargs) -> "SparseFactor":
+        """Factorize a square SciPy CSR matrix (put into canonical form: sorted indices, no duplicates, no
+        explicit zeros); the PETSc matrix shares its arrays (no copy)."""
+        A = sp.csr_matrix(A)
+        A.sum_duplicates()
+        A.eliminate_zeros()
+        csr = (A.indptr.astype(PETSc.IntType, copy=False), A.indices.astype(PETSc.IntType, copy=False),
+               A.data.astype(PETSc.ScalarType, copy=False))
+        mat = PETSc.Mat().createAIJWithArrays(A.shape, csr, comm=PETSc.COMM_SELF)  # no copy: keep csr alive
+        mat.assemble()
+        lu = cls(mat, **kwargs)
+        lu._arrays = csr
+        return lu
+
+    @classmethod
+    def from_coo(cls, rows: np.ndarray, cols: np.ndarray, vals: np.ndarray, n: int, **kwargs) -> "SparseFactor":
+        """Factorize the n × n matrix of COO triplets (duplicates summed; SciPy's conversion was 2–4× faster
+        than PETSc's COO assembly on the multiscale patch systems)."""
+        return cls.from_csr(sp.csr_matrix((vals, (rows, cols)), shape=(n, n)), **kwargs)  # canonical: sorted, summed
+
+    @classmethod
+    def symmetric(cls, upper: sp.csr_matrix) -> "SparseFactor":
+        """Factorize the symmetric matrix whose upper triangle (canonical CSR) is ``upper``: MUMPS Cholesky
+        (positive definite, no pivoting; 1.5× faster than LU on the mixed CEM skeleton systems), or, when a
+        pivot is not positive (a matrix that is not positive definite after all), the LU of the full matrix."""
+        csr = (upper.indptr.astype(PETSc.IntType, copy=False), upper.indices.astype(PETSc.IntType, copy=False),
+               upper.data.astype(PETSc.ScalarType, copy=False))
+        # an AIJ matrix holding the upper triangle only, on the CSR arrays (no copy): PETSc hands MUMPS' Cholesky
+        # the entries from the diagonal on of every row (MatConvertToTriples_seqaij_seqsbaij), i.e. exactly
+        # these (an SBAIJ matrix would be built by copying row by row: 20 ms of 0.17 s at h = 1/128)
+        mat = PETSc.Mat().createAIJWithArrays(upper.shape, csr, comm=PETSc.COMM_SELF)
+        mat.setOption(PETSc.Mat.Option.SPD, True)
+        mat.assemble()
+        chol = cls(mat, cholesky=True, trial=True)
+        chol._arrays = csr
+        if chol.positive:
+            return chol
+        chol.destroy()
+        log.debug("%s: not positive definite, LU instead of Cholesky", cls.what)
+        return cls.from_csr(upper + sp.triu(upper, 1).T)
+
+    def _factorize(self) -> bool:
+        """Set up the factorization of ``mat`` (MUMPS keeps its analysis for a matrix of the same pattern);
+        sets ``positive`` (Cholesky without failure and without a non-positive pivot) and returns whether it
+        succeeded (for a ``trial`` Cholesky: ``positive``)."""
+        failed = self._set_up() != 0 or self.ksp.getConvergedReason() < 0
+        pc = self.ksp.getPC()
+        cholesky = pc.getType() == "cholesky"
+        self.positive = cholesky and not failed and pc.getFactorMatrix().getMumpsInfog(12) == 0
+        return self.positive if self.trial else not failed
+
+    def refactor(self, data: np.ndarray) -> bool:
+        """New values ``data`` on the pattern this factorization was made for (a matrix from ``from_csr`` or
+        ``symmetric``): the numeric factorization only, on MUMPS' kept ordering and symbolic analysis.  Returns
+        whether it succeeded (for a Cholesky factorization: with positive pivots only)."""
+        self._arrays[2][:] = data
+        self.mat.assemble()
+        self.ksp.setOperators(self.mat)
+        return self._factorize()
+
+    def solve(self, rhs: np.ndarray) -> np.ndarray:
+        """A⁻¹ rhs for all columns at once (one MatMatSolve); ConvergenceError on a failure or non-finite values."""
+        n, k = rhs.shape
+        data = np.asfortranarray(rhs, dtype=PETSc.ScalarType)  # PETSc dense storage is column-major
+        B = PETSc.Mat().createDense((n, k), array=data, comm=PETSc.COMM_SELF)
+        X = PETSc.Mat().createDense((n, k), comm=PETSc.COMM_SELF)
+        X.setUp()
+        try:
+            self.ksp.matSolve(B, X)
+            reason = self._solve_reason()
+            if reason < 0:
+                raise ConvergenceError(f"MUMPS failed on {self.what} (reason {reason})")
+            out = X.getDenseArray().copy()
+        finally:
+            B.destroy()
+            X.destroy()
+        if not np.all(np.isfinite(out)):
+            raise ConvergenceError(f"a solve of {self.what} produced non-finite values")
+        return out
+
+    def inertia(self) -> tuple[int, int, int]:
+        """(negative, zero, positive) pivots of a Cholesky (LDLᵀ) factorization made with null-pivot detection
+        (``icntl={24: 1}``): by Sylvester's law of inertia, the signs of the eigenvalues of the matrix."""
+        nneg, nzero, npos = self.ksp.getPC().getFactorMatrix().getInertia()
+        return int(nneg), int(nzero), int(npos)
+
+    @property
+    def nbytes(self) -> int:
+        """Memory held: the factors (MUMPS' INFOG(9) reals, ×10⁶ when negative, at 12 bytes per entry: value and
+        index) and the CSR arrays shared with the matrix."""
+        entries = self.ksp.getPC().getFactorMatrix().getMumpsInfog(9)
+        entries = -entries * 10**6 if entries < 0 else entries
+        return int(12 * entries + sum(a.nbytes for a in (self._arrays or ())))
+
     def destroy(self) -> None:
-        self.ksp.destroy()
+        for obj in (self.ksp, self.mat):
+            obj.destroy()
+        self._arrays = None
+
+
+class ReusedAnalysis:
+    """Cholesky factorizations (``SparseFactor.symmetric`` of ``factor_class``) kept for the last ``keep``
+    sparsity patterns: a matrix with one of their patterns is factorized numerically on the kept ordering and
+    symbolic analysis (``SparseFactor.refactor``).  Worth it when matrices of one pattern come one after
+    the other."""
+
+    def __init__(self, keep: int = 2, factor_class: type[SparseFactor] = SparseFactor) -> None:
+        self.keep = keep
+        self.factor_class = factor_class
+        self.entries: list[tuple[np.ndarray, np.ndarray, SparseFactor]] = []  # most recent first
+
+    def factor(self, upper: sp.csr_matrix) -> tuple[SparseFactor, bool]:
+        """(factorization of the symmetric matrix with upper triangle ``upper``, whether the caller destroys it).
+
+        A kept factorization takes over ``upper``'s arrays (its later values are written into them): the
+        caller must not use ``upper`` afterwards."""
+        for k, (indptr, indices, lu) in enumerate(self.entries):
+            if np.array_equal(indptr, upper.indptr) and np.array_equal(indices, upper.indices):
+                self.entries.pop(k)
+                if lu.refactor(upper.data):
+                    self.entries.insert(0, (indptr, indices, lu))
+                    return lu, False
+                lu.destroy()  # a pivot that is not positive: factorize afresh (LU) below
+                break
+        lu = self.factor_class.symmetric(upper)
+        if not lu.positive:
+            return lu, True
+        self.entries.insert(0, (upper.indptr, upper.indices, lu))
+        while len(self.entries) > self.keep:
+            self.entries.pop()[2].destroy()
+        return lu, False
+
+    def release(self) -> None:
+        for *_, lu in self.entries:
+            lu.destroy()
+        self.entries = []
+
+
+class PivotedCholesky:
+    """Pivoted Cholesky of a dense SPSD matrix, Jacobi-scaled; columns that are numerically dependent are dropped.
+
+    Solves A x = b for consistent b; x is zero on the dropped (pivot < tolerance) coordinates.
+    ``what`` names the matrix in messages.
+    """
+
+    def __init__(self, A: np.ndarray, *, what: str = "the matrix") -> None:
+        self.what = what
+        A = 0.5 * (A + A.T)
+        d = np.diag(A).copy()
+        if np.any(d <= 0):
+            raise ConvergenceError(f"{what} has a non-positive diagonal entry (empty basis function?)")
+        self.scale = 1.0 / np.sqrt(d)
+        As = A * self.scale[:, None] * self.scale[None, :]
+        c, piv, rank, info = scipy.linalg.lapack.dpstrf(As, lower=1)
+        if info < 0:
+            raise ConvergenceError(f"pivoted Cholesky failed (LAPACK info {info})")
+        self.n = A.shape[0]
+        self.rank = int(rank)
+        self.keep = piv[: self.rank] - 1
+        self.L = np.asfortranarray(np.tril(c[: self.rank, : self.rank]))
+        if self.rank < self.n:
+            log.info("%s: rank %d of %d, dependent basis functions dropped", what, self.rank, self.n)
+
+    def solve(self, b: np.ndarray) -> np.ndarray:
+        """x with A x = b (b a vector or columns), zero on the dropped coordinates."""
+        bs = (b * self.scale[:, None]) if b.ndim == 2 else b * self.scale
+        z, info = scipy.linalg.lapack.dpotrs(self.L, bs[self.keep], lower=1)
+        if info != 0:
+            raise ConvergenceError(f"solve with {self.what} failed (LAPACK dpotrs info {info})")
+        x = np.zeros_like(bs)
+        x[self.keep] = z
+        return (x * self.scale[:, None]) if b.ndim == 2 else x * self.scale
 
 
 class AbsoluteTerms:

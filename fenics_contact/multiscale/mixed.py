@@ -72,14 +72,11 @@ from fenics_contact.fem.mixed_spaces import boundary_stress_space
 from fenics_contact.hybrid.mixed import DEFAULT_BETA, MixedHybridStep, solve_or_verify
 from fenics_contact.hybrid.primal import omega2_record
 from fenics_contact.hybrid.response import MatrixResponse
-from fenics_contact.multiscale.mixed_cem import (
-    DEFAULT_MAX_NBASIS,
-    DEFAULT_MIN_GAP,
-    MixedCEMOptions,
-    MixedMultiscaleOmega1,
-)
+from fenics_contact.multiscale.mixed_cem.omega1 import MixedMultiscaleOmega1
+from fenics_contact.multiscale.mixed_cem.options import DEFAULT_MAX_NBASIS, DEFAULT_MIN_GAP, MixedCEMOptions
 from fenics_contact.problem.problem import ContactProblem
-from fenics_contact.multiscale.cem import DEFAULT_S_FACTOR, coarse_grid, warn_if_few_layers
+from fenics_contact.multiscale.cem.options import DEFAULT_S_FACTOR, warn_if_few_layers
+from fenics_contact.multiscale.coarse import coarse_grid
 
 __all__ = ["MixedMsResult", "MixedMultiscaleHybridStep", "solve_mixed_ms_hybrid"]
 

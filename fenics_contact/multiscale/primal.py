@@ -22,7 +22,8 @@ from mpi4py import MPI
 
 from dolfinx import fem
 
-from fenics_contact.multiscale.cem import DEFAULT_S_FACTOR, CEMOptions, Omega1Multiscale
+from fenics_contact.multiscale.cem.omega1 import Omega1Multiscale
+from fenics_contact.multiscale.cem.options import DEFAULT_S_FACTOR, CEMOptions
 from fenics_contact.fem.contact import NewtonOptions
 from fenics_contact.hybrid.certificate import Certificate, primal_certificate
 from fenics_contact.hybrid.condensation import InterfaceProblem
@@ -70,9 +71,7 @@ class MultiscalePrimalHybridStep:
         self.alpha = robin_coefficient(alpha, parent_fields.E, self.interface, cm.h)
         self.delta = delta = penalty_for(problem, delta)
         self.cem = cem
-        self.omega1 = Omega1Multiscale(
-            cm, problem, self.parts, self.interface, self.alpha, cem=cem, cache_dir=cache_dir
-        )
+        self.omega1 = Omega1Multiscale(problem, self.parts, self.interface, self.alpha, cem=cem, cache_dir=cache_dir)
         alpha2 = fem.Function(self.interface.spaces[1], name="alpha")
         self.interface.to_part(self.alpha, 1, alpha2)
         p2 = self.parts[1]

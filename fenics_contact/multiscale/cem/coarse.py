@@ -1,0 +1,179 @@
+"""The coarse (online) step of the primal CEM (Algorithm 3): Gram and trace matrices, the Robin solver.
+
+Online everything is done in the coordinates s = (w, g, 1) of u₁ = Z s, Z = [Ψ, N, N_f]: the coarse solve
+(ΨᵀAΨ factorized once, ``fem.linalg.PivotedCholesky``), the trace Z_γ s, the norms sᵀ(ZᵀKZ)s and sᵀ(ZᵀMZ)s.
+The Gram matrices are summed over the coarse cells K from dense blocks of the functions that cover K (one
+BLAS product per K with the cellwise matrix), the cells shared out over the ranks and the sums Allreduced.
+"""
+
+import logging
+import time
+
+import numpy as np
+import scipy.sparse as sp
+from mpi4py import MPI
+
+from fenics_contact.fem.linalg import PivotedCholesky
+from fenics_contact.multiscale.cem.bases import Incidence, MultiscaleSpace
+from fenics_contact.multiscale.cem.operators import FineOperators
+from fenics_contact.multiscale.coarse import CoarseGrid
+from fenics_contact.multiscale.work import run_shared
+
+__all__ = ["MultiscaleRobinSolver", "gram_matrices", "trace_matrix"]
+
+log = logging.getLogger(__name__)
+
+
+def _rows_on(parts: list, D: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Dense block (|D| × Σ k) of the patch functions ``parts`` at the DOFs D, and their global columns."""
+    ncols = sum(p.columns.size for p in parts)
+    Z = np.zeros((D.size, ncols))
+    cols = np.empty(ncols, dtype=np.int64)
+    at = 0
+    for p in parts:
+        k = p.columns.size
+        pos = np.searchsorted(p.dofs, D)
+        np.minimum(pos, p.dofs.size - 1, out=pos)
+        hit = p.dofs[pos] == D
+        Z[hit, at:at + k] = p.values[pos[hit]]
+        cols[at:at + k] = p.columns
+        at += k
+    return Z, cols
+
+
+def gram_matrices(
+    ops: FineOperators, grid: CoarseGrid, space: MultiscaleSpace, *, comm: MPI.Comm = MPI.COMM_SELF
+) -> tuple[np.ndarray, np.ndarray]:
+    """(ZᵀKZ, ZᵀMZ) for Z = [Ψ, N, N_f] (columns: the dim V_ms bases, the γ DOFs, the source correction).
+
+    Summed over coarse cells K of Z_Kᵀ K_K Z_K (K_K the cellwise matrix, Z_K the dense block of the
+    functions covering K); cells shared out over ``comm`` (a static share: a fixed summation order) and the
+    sums Allreduced.
+    """
+    inc = Incidence(ops, grid)
+    n_ms, ng = space.size, space.n_gamma
+    nz = n_ms + ng + 1
+    corr_at = {int(k): p for k, p in zip(space.correction_cells, space.correction)}
+    GK = np.zeros((nz, nz))
+    GM = np.zeros((nz, nz))
+    sizes = np.array([c.size for c in grid.cells], dtype=np.float64)
+
+    def add_cell(K: int) -> None:
+        c = int(grid.colors[K])
+        D = inc.dofs(K, free_only=False)
+        cover = grid.patch(K, space.layers)
+        Zb, cols = _rows_on([space.basis[i] for i in cover], D)
+        blocks = [Zb]
+        cn = [corr_at[int(i)] for i in cover if int(i) in corr_at]
+        if cn:
+            Zn, cols_n = _rows_on(cn, D)
+            # a γ vertex shared by two coarse cells has a column in both corrections: sum them first
+            uniq, inv = np.unique(cols_n, return_inverse=True)
+            merge = sp.csr_matrix((np.ones(inv.size), (np.arange(inv.size), inv)), shape=(inv.size, uniq.size))
+            blocks.append((merge.T @ Zn.T).T)
+            cols = np.concatenate([cols, n_ms + uniq])
+        if space.Nf is not None:
+            blocks.append(space.Nf[D][:, None])
+            cols = np.concatenate([cols, [nz - 1]])
+        Z = np.hstack(blocks) if len(blocks) > 1 else Zb
+        idx = np.ix_(cols, cols)
+        GK[idx] += Z.T @ (ops.Kc[c][D][:, D] @ Z)
+        GM[idx] += Z.T @ (ops.Mc[c][D][:, D] @ Z)
+
+    # a static share (not handed out on request): the same cells on the same rank in every run, so the sums
+    # and the Allreduce below round the same way every time
+    run_shared(sizes, comm, "CEM Gram matrices", add_cell, gather=False, logger=log)
+    if comm.size > 1:
+        for arr in (GK, GM):
+            comm.Allreduce(MPI.IN_PLACE, arr, op=MPI.SUM)
+    return GK, GM
+
+
+def trace_matrix(ops: FineOperators, space: MultiscaleSpace) -> np.ndarray:
+    """Z_γ: the values of Z = [Ψ, N, N_f] at the γ DOFs (``ops.gamma`` ordering), dense n_γ × (dim V_ms + n_γ + 1)."""
+    ng = space.n_gamma
+    gamma = ops.gamma
+    Zg = np.zeros((ng, space.size + ng + 1))
+    for parts, shift in ((space.basis, 0), (space.correction, space.size)):
+        for p in parts:
+            pos = np.minimum(np.searchsorted(p.dofs, gamma), p.dofs.size - 1)
+            hit = np.flatnonzero(p.dofs[pos] == gamma)
+            if hit.size:
+                Zg[np.ix_(hit, shift + p.columns)] += p.values[pos[hit]]
+    if space.Nf is not None:
+        Zg[:, -1] = space.Nf[gamma]
+    return Zg
+
+
+class MultiscaleRobinSolver:
+    """The Ω₁ step of Algorithm 3 with source correction: w ∈ V_ms with
+    a₁(w,v) + α∫_γ w·v = ℓ(v) + ∫_γ g·v − [a₁(Ng + N_f,v) + α∫_γ (Ng + N_f)·v], then u₁ = w + N g + N_f.
+
+    Online everything is done in the coordinates s = (w, g, 1) of u₁ = Z s, Z = [Ψ, N, N_f]: the
+    coarse solve w = A_ms⁻¹(b + C g) (A_ms = ΨᵀAΨ factorized offline), the trace u₁|γ = Z_γ s and
+    the norms a₁(u₁, u₁) = sᵀ(ZᵀKZ)s, ‖u₁‖² = sᵀ(ZᵀMZ)s; the fine field Z s only when asked.
+    """
+
+    def __init__(self, ops: FineOperators, space: MultiscaleSpace, grid: CoarseGrid, *,
+                 comm: MPI.Comm = MPI.COMM_SELF) -> None:
+        t0 = time.perf_counter()
+        self.ops = ops
+        self.space = space
+        n_ms, ng = space.size, space.n_gamma
+        self.GK, self.GM = gram_matrices(ops, grid, space, comm=comm)
+        self.Zg = trace_matrix(ops, space)
+        # ZᵀAZ = ZᵀKZ + Z_γᵀ R_γγ Z_γ (R is α times the γ vertex mass: diagonal on γ)
+        Rg = ops.R[ops.gamma][:, ops.gamma]
+        ZAZ = self.GK + self.Zg.T @ (Rg @ self.Zg)
+        self.A_ms = ZAZ[:n_ms, :n_ms]
+        self.factor = PivotedCholesky(self.A_ms, what="the coarse matrix")
+        # Ψᵀℓ and Ψᵀ G[:, γ], patch by patch
+        PsiF = np.zeros(n_ms)
+        Gg = ops.G[:, ops.gamma].tocsr()
+        PsiG = np.zeros((n_ms, ng))
+        for p in space.basis:
+            PsiF[p.columns] += p.values.T @ ops.F[p.dofs]
+            Gp = Gg[p.dofs]
+            if Gp.nnz:
+                PsiG[p.columns] += (Gp.T @ p.values).T
+        self.b_f = PsiF - ZAZ[:n_ms, -1]
+        # Ψᵀ (G[:, γ] − A N): the action of the interface data on the coarse right-hand side
+        self.C = PsiG - ZAZ[:n_ms, n_ms:n_ms + ng]
+        self.time_s = time.perf_counter() - t0
+
+    @property
+    def size(self) -> int:
+        return self.space.size
+
+    def coordinates(self, g: np.ndarray) -> np.ndarray:
+        """s = (w, g, 1): u₁ = Z s for nodal Robin data g on ``ops.gamma``."""
+        w = self.factor.solve(self.b_f + self.C @ g)
+        return np.concatenate([w, g, [1.0]])
+
+    def coarse_solution(self, g: np.ndarray) -> np.ndarray:
+        """w (coordinates in V_ms) for nodal Robin data g on ``ops.gamma``."""
+        return self.factor.solve(self.b_f + self.C @ g)
+
+    def field(self, s: np.ndarray) -> np.ndarray:
+        """u₁ = Z s = Ψ w + N g + s_last N_f on every Ω₁ DOF."""
+        n_ms, ng = self.space.size, self.space.n_gamma
+        u = self.space.apply(s[:n_ms], s[n_ms:n_ms + ng], with_source=False)
+        if self.space.Nf is not None and s[-1] != 0.0:
+            u += s[-1] * self.space.Nf
+        return u
+
+    def solve(self, g: np.ndarray) -> np.ndarray:
+        """u₁ (all scalar Ω₁ DOFs) for nodal Robin data g on ``ops.gamma``."""
+        return self.field(self.coordinates(g))
+
+    def trace(self, s: np.ndarray) -> np.ndarray:
+        """u₁ at ``ops.gamma`` for coordinates s."""
+        return self.Zg @ s
+
+    def response(self) -> tuple[np.ndarray, np.ndarray]:
+        """The affine interface map u₁|γ = R g + r₀ (``ops.gamma`` ordering, dense R)."""
+        n_ms, ng = self.space.size, self.space.n_gamma
+        X = self.factor.solve(np.column_stack([self.C, self.b_f]))
+        R = self.Zg[:, :n_ms] @ X[:, :ng] + self.Zg[:, n_ms:n_ms + ng]
+        r0 = self.Zg[:, :n_ms] @ X[:, ng] + self.Zg[:, -1]
+        return R, r0

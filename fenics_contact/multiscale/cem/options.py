@@ -1,0 +1,107 @@
+"""Parameters of the primal CEM-GMsFEM (Algorithm 3): ``CEMOptions`` and the warnings about risky choices.
+
+``FEW_LAYERS`` and ``NEARLY_INCOMPRESSIBLE`` are the thresholds of the warnings (m too small for the bases to
+decay; ν so close to ½ that they localize slowly), each with the measurements that placed it.
+"""
+
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+
+from fenics_contact.errors import InputError
+from fenics_contact.fem.eigen import EIGEN_METHODS
+
+__all__ = [
+    "ALL_MODES", "DEFAULT_S_FACTOR", "EIGENSOLVERS", "FEW_LAYERS", "NEARLY_INCOMPRESSIBLE", "CEMOptions",
+    "warn_if_few_layers",
+]
+
+log = logging.getLogger(__name__)
+
+#: ``nbasis`` value that keeps every local eigenfunction (V_aux = the broken fine space).
+ALL_MODES = None
+
+#: default c in κ̃ = c (λ + 2μ) H⁻² (see CEMOptions)
+DEFAULT_S_FACTOR = 3.0
+
+#: ``CEMOptions.eigensolver`` values: "auto" chooses between the two methods of ``fem.eigen``
+EIGENSOLVERS = ("auto", *EIGEN_METHODS)
+
+#: Algorithm 3 warns when ν in Ω₁ exceeds this.  As ν → ½ the smallest local eigenvalue left out, Λ,
+#: falls like μ/(λ+2μ) and the bases localize slowly: model 3 at E 1e6, h = 1/64, H = 1/16, l = 3, m = 4
+#: (``benchmarks/multiscale_primal.py --parts j``): energy error 3.3e-3 (ν = 0.35, Λ·c = 0.78), 3.2e-3
+#: (0.4, 0.59), 2.9e-2 (0.45, 0.34), 0.30 (0.48, 0.15), 0.51 (0.49, 0.08), 0.82 (0.499, 0.01).  More modes
+#: help only partly: with l_k raised until Λ ≥ 0.3 (Algorithm 4's rule tried on Algorithm 3) the error at
+#: m = 4 is 0.29 at ν = 0.48, 0.22 at 0.49 and 0.10 at 0.499 (18 modes per cell, 5× the coarse space), far
+#: from the 3e-3 of ν ≤ 0.4: the slow decay comes from λ/μ in a(·,·) itself, not only from Λ.  A small Λ alone
+#: is no reason to warn: inclusions inside a coarse cell give one too (model 2 at h = 1/32, H = 1/8, ν = 0.35:
+#: Λ·c = 0.34), which the CEM bases are built for.
+NEARLY_INCOMPRESSIBLE = 0.42
+
+#: fewer oversampling layers than this cut the bases short: warned about (``warn_if_few_layers``)
+FEW_LAYERS = 2
+
+
+def warn_if_few_layers(layers: int, method: str, comm) -> None:
+    """Warn (rank 0) when m < ``FEW_LAYERS``: the bases are cut off at one coarse cell (m = 0) or two, and the
+    error stays O(1) whatever the number of modes (measured below)."""
+    if layers < FEW_LAYERS and comm.rank == 0:
+        log.warning(
+            "%s with m = %d oversampling layer(s): the multiscale bases are cut off where they have not decayed, "
+            "and the Ω₁ error stays large (model 1, h = 1/32, H = 1/8: primal-ms e_u 0.72, 0.36, 5.1e-3, 3.9e-4 "
+            "and mixed-ms e_σ 3.1, 0.44, 2.0e-2, 2.5e-3 for m = 0, 1, 2, 3). Use m >= 2 (default 3); check against "
+            "the fine solution with --reference.", method, layers)
+
+
+@dataclass(frozen=True, slots=True)
+class CEMOptions:
+    """CEM-GMsFEM parameters: m oversampling layers, l_i eigenfunctions per coarse cell.
+
+    ``nbasis=None`` (``ALL_MODES``) keeps every local eigenfunction. With
+    ``threshold`` set, only eigenpairs with λ ≤ threshold among the ``nbasis``
+    smallest are kept (at least one per coarse cell). ``eigensolver`` is
+    ``"krylovschur"`` (shift-and-invert about ``target``), ``"lapack"`` (dense,
+    all pairs) or ``"auto"`` (Krylov–Schur unless the local problem is too small
+    for a Krylov subspace or most of its pairs are wanted).
+
+    ``s_factor`` c scales the weight of the CEM inner product, κ̃ = c (λ + 2μ) H⁻²
+    (METHOD §3 has c = 1; the CEM literature's κ Σ_j|∇χ_j|² with a bilinear
+    partition of unity gives c between 2 and 4). Default 3, chosen from the sweep
+    c ∈ {1, 2, 3, 10, 30, 100} recorded in benchmarks/results/multiscale_primal.md:
+    at h = 1/64, H = 1/16, l = 3, m = 5 the energy error of model 1 is 1.0e-2 with
+    c = 1 and 1.2e-4 with c = 3.
+
+    ``source_correction`` (default on, METHOD §9) corrects the Ω₁ load on the
+    patches as the Robin data are (N_f); off, the coarse problem sees the load
+    directly, as in the paper, and the error stalls once the load acts in Ω₁.
+    """
+
+    layers: int = 3
+    nbasis: int | None = 3
+    threshold: float | None = None
+    eigensolver: str = "auto"
+    eig_tol: float = 1.0e-12
+    target: float = -1.0
+    s_factor: float = DEFAULT_S_FACTOR
+    source_correction: bool = True
+
+    def __post_init__(self) -> None:
+        if not (np.isfinite(self.s_factor) and self.s_factor > 0):
+            raise InputError(f"s_factor must be finite and > 0, got {self.s_factor!r}")
+        if int(self.layers) != self.layers or self.layers < 0:
+            raise InputError(f"the number of oversampling layers must be an integer >= 0, got {self.layers!r}")
+        if self.nbasis is not None and (int(self.nbasis) != self.nbasis or self.nbasis < 1):
+            raise InputError(f"nbasis must be an integer >= 1 (or None for all modes), got {self.nbasis!r}")
+        if self.nbasis is not None:
+            object.__setattr__(self, "nbasis", int(self.nbasis))  # 3.0 → 3 (an index below)
+        if self.threshold is not None and not (np.isfinite(self.threshold) and self.threshold > 0):
+            raise InputError(f"the eigenvalue threshold must be finite and > 0, got {self.threshold!r}")
+        if self.eigensolver not in EIGENSOLVERS:
+            raise InputError(f"unknown eigensolver {self.eigensolver!r}; choose one of {EIGENSOLVERS}")
+        if not (0 < self.eig_tol < 1e-2):
+            raise InputError(f"eig_tol must lie in (0, 1e-2), got {self.eig_tol}")
+        if not self.target < 0:
+            raise InputError(f"the shift-and-invert target must be < 0 (A is only semi-definite), got {self.target}")
+        if not isinstance(self.source_correction, bool):
+            raise InputError(f"source_correction must be True or False, got {self.source_correction!r}")

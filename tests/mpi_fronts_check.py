@@ -17,7 +17,7 @@ from fenics_contact.problem.geometry import unit_square
 from fenics_contact.problem.models import get_model
 
 cm = unit_square(128, 16)
-step = PrimalHybridStep(cm, get_model(3, E_high=1e6), alpha=DEFAULT_ALPHA, delta=default_penalty(cm.h, 1e6),
+step = PrimalHybridStep(get_model(3, E_high=1e6).on(cm), alpha=DEFAULT_ALPHA, delta=default_penalty(cm.h, 1e6),
                         newton=NewtonOptions(rtol=1e-6))
 step.prepare()
 history = iterate(step, IterationOptions(accel="newton", newton=InterfaceNewtonOptions(fronts=True)))

@@ -105,7 +105,7 @@ from fenics_contact.problem.fields import MaterialFields
 from fenics_contact.problem.tags import Boundary
 from fenics_contact.problem.fields import material_fields
 from fenics_contact.problem.geometry import ContactMesh
-from fenics_contact.problem.models import TestModel
+from fenics_contact.problem.problem import ContactProblem
 from fenics_contact.hybrid.transmission import InterfaceSpace, Part, robin_coefficient, split_mesh
 
 __all__ = [
@@ -1315,7 +1315,7 @@ class Omega1Multiscale:
     def __init__(
         self,
         cm: ContactMesh,
-        model: TestModel,
+        model: ContactProblem,
         parts: tuple[Part, Part],
         interface: InterfaceSpace,
         alpha: np.ndarray,
@@ -1494,7 +1494,7 @@ class Omega1Multiscale:
 
 def build_omega1_multiscale(
     cm: ContactMesh,
-    model: TestModel,
+    model: ContactProblem,
     *,
     alpha: float | str = "E",
     cem: CEMOptions = CEMOptions(),

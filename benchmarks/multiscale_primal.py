@@ -55,6 +55,7 @@ from fenics_contact.multiscale import cem
 from fenics_contact.multiscale import primal as primal_ms
 from fenics_contact.problem import geometry, models
 from fenics_contact.problem.fields import material_fields
+from fenics_contact.problem.problem import ContactProblem
 
 log = logging.getLogger("multiscale_primal")
 
@@ -67,7 +68,7 @@ def _floats(text: str) -> list[float]:
     return [float(t) for t in text.split(",") if t]
 
 
-def make_model(name: str, contrast: float = 1e3, nu: float = 0.35) -> models.TestModel:
+def make_model(name: str, contrast: float = 1e3, nu: float = 0.35) -> ContactProblem:
     """'1', '2', '3' (built-in) or '1L', '2L' (built-in with the loads moved into Ω₁)."""
     number = int(name[0])
     model = models.get_model(number, E_high=contrast, nu=nu)

@@ -27,7 +27,7 @@ Sections:
 5. (``--sections 5``) the Hertz errors over nine depths: their spread as the contact edge moves
    across a cell.
 6. (``--sections 6``) P1 locking: the relative L² error of P1 for a divergence-free u = curl ψ on the
-   clamped unit square (``problem.analytic.p1_locking_error``) against ν and h; the primal methods warn
+   clamped unit square (``fem.locking.p1_locking_error``) against ν and h; the primal methods warn
    from ν = ``fem.primal.P1_LOCKING_NU`` on.
 """
 
@@ -57,7 +57,9 @@ from fenics_contact.problem.analytic import (
 from fenics_contact.problem.fields import material_fields
 from fenics_contact.problem.geometry import unit_square
 from fenics_contact.problem.materials import strain, stress
+from fenics_contact.multiscale.cem import CEMOptions
 from fenics_contact.multiscale.mixed import solve_mixed_ms_hybrid
+from fenics_contact.multiscale.mixed_cem import MixedCEMOptions
 from fenics_contact.multiscale.primal import solve_primal_ms_hybrid
 from fenics_contact.problem.meshes import hertz_block
 from fenics_contact.problem.partition import centroid_coarse_cells
@@ -97,26 +99,29 @@ def _solve(method: str, cm, model, options, layers: int = 3):
     Algorithms 3 and 4)."""
     t0 = time.perf_counter()
     if method.startswith("primal") or method in ("Algorithm 1", "Algorithm 3"):
-        fields = material_fields(cm.mesh, model)
-        delta = default_penalty(cm.h, contact_modulus(cm.mesh, cm.facet_tags, fields.E))  # as force_indentation
+        problem = model.on(cm)
+        fields = problem.fields
+        delta = default_penalty(cm.h, problem.contact_modulus())  # as force_indentation
         if method == "Algorithm 1":
-            res = solve_primal_hybrid(cm, model, delta=delta, options=options)
+            res = solve_primal_hybrid(problem, delta=delta, options=options)
             u, profile, its = res.u, res.profile, res.iterations
         elif method == "Algorithm 3":
-            res = solve_primal_ms_hybrid(cm, model, delta=delta, layers=layers, options=_ms_options(options))
+            res = solve_primal_ms_hybrid(problem, alpha="Emin", delta=delta, cem=CEMOptions(layers=layers),
+                                         options=_ms_options(options))
             u, profile, its = res.u, res.profile, res.iterations
         else:
-            ref = solve_primal_monolithic(cm.mesh, cm.facet_tags, fields, delta=delta)
+            ref = solve_primal_monolithic(problem, delta=delta)
             u, profile, its = ref.u, ref.profile, ref.newton.steps
         s = stress(strain(u), fields.lmbda, fields.mu)
         return ufl.as_vector([s[0, 0], s[0, 1], s[1, 1]]), u, profile, its, time.perf_counter() - t0
     if method == "Algorithm 2":
-        res = solve_mixed_hybrid(cm, model, options=options)
+        res = solve_mixed_hybrid(model.on(cm), options=options)
         return res.sigma, res.u, res.profile, res.iterations, time.perf_counter() - t0
     if method == "Algorithm 4":
-        res = solve_mixed_ms_hybrid(cm, model, layers=layers, options=_ms_options(options))
+        res = solve_mixed_ms_hybrid(model.on(cm), cem=MixedCEMOptions(layers=layers),
+                                    options=_ms_options(options))
         return res.sigma, res.u, res.profile, res.iterations, time.perf_counter() - t0
-    ref = solve_mixed_monolithic(cm, model)
+    ref = solve_mixed_monolithic(model.on(cm))
     return ref.sigma, ref.u, ref.profile, ref.newton.steps, time.perf_counter() - t0
 
 
@@ -167,8 +172,9 @@ def patch_section(n: int, options, layers=()) -> list[str]:
              "mixed monolithic": "mixed-monolithic", "Algorithm 2": "mixed"}
     cm = unit_square(n, 4, clamped=("left",))
     for method in METHODS:
-        curve = force_indentation(names[method], cm, layered_model(bounds, moduli, depth=0.0), depths,
-                                  direction=(-1.0, 0.0), options=options)
+        iteration = {} if names[method].endswith("monolithic") else {"options": options}
+        curve = force_indentation(layered_model(bounds, moduli, depth=0.0).on(cm), names[method], depths,
+                                  direction=(-1.0, 0.0), **iteration)
         delta = default_penalty(cm.h, moduli[-1]) if "primal" in names[method] else 0.0
         for step in curve.steps:
             p = layered_pressure(bounds, moduli, step.depth, delta=delta)
@@ -227,8 +233,9 @@ def indentation_section(refinement: float, steps: int, options) -> list[str]:
     cm, spec = hertz_block(a, refinement=refinement)
     base = hertz_model(radius=R, E=E, nu=nu, depth=0.0)
     for method in METHODS:
-        curve = force_indentation(names[method], cm, base, depths, direction=(0.0, -1.0), options=options)
-        cold = force_indentation(names[method], cm, base, depths[-1:], direction=(0.0, -1.0), options=options)
+        iteration = {} if names[method].endswith("monolithic") else {"options": options}
+        curve = force_indentation(base.on(cm), names[method], depths, direction=(0.0, -1.0), **iteration)
+        cold = force_indentation(base.on(cm), names[method], depths[-1:], direction=(0.0, -1.0), **iteration)
         for k, step in enumerate(curve.steps):
             e = hertz_errors(step.profile, radius=R, E=E, nu=nu, h_contact=spec.h_contact)
             last = f"{cold.steps[0].iterations}, {cold.steps[0].time_s:.2f}" if k == len(curve.steps) - 1 else ""
@@ -277,7 +284,7 @@ def edge_sweep_section(refinements: list[float], mixed_max: float, count: int = 
 
 def locking_section(sizes: list[int], nus=(0.3, 0.4, 0.45, 0.48, 0.49, 0.499, 0.4999)) -> list[str]:
     """P1 on u = curl ψ, clamped square: the L² error against ν and h (no contact)."""
-    from fenics_contact.problem.analytic import p1_locking_error
+    from fenics_contact.fem.locking import p1_locking_error
 
     lines = ["## 6. P1 locking: u = curl ψ on the clamped unit square (no contact)", "",
              "| ν | " + " | ".join(f"e_u h = 1/{n}" for n in sizes) + " | ratio to ν = 0.3 (finest h) |",

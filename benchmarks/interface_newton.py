@@ -73,26 +73,26 @@ def _strip_modulus(cm, E) -> float:
 def build_step(method: int, cm, number: int, E_high: float, factor: float = 1.0):
     """The step of Algorithm ``method`` with α = factor × its default (Algorithm 1: E·h^-1/2, 3: Emin·h^-1/2)
     or β = factor·√h (penalties as the CLI)."""
-    model = get_model(number, E_high=E_high)
+    problem = get_model(number, E_high=E_high).on(cm)
     newton = NewtonOptions(rtol=1e-6) if E_high > 1e3 else NewtonOptions()
     if method in (1, 3):
-        fields = material_fields(cm.mesh, model)
+        fields = problem.fields
         delta = default_penalty(cm.h, _strip_modulus(cm, fields.E))
         alpha = f"{factor:g}*E*h^-1/2" if method == 1 else f"{factor:g}*Emin*h^-1/2"  # each method's default × c
         if method == 1:
-            step = PrimalHybridStep(cm, model, alpha=alpha, delta=delta, newton=newton)
+            step = PrimalHybridStep(problem, alpha=alpha, delta=delta, newton=newton)
             step.prepare()
             return step
-        return MultiscalePrimalHybridStep(cm, model, alpha=alpha, delta=delta, newton=newton,
+        return MultiscalePrimalHybridStep(problem, alpha=alpha, delta=delta, newton=newton,
                                           cem=CEMOptions(layers=LAYERS))
-    fields = material_fields(cm.mesh, model)
+    fields = problem.fields
     epsilon = default_epsilon(cm.h, contact_modulus(cm.mesh, cm.facet_tags, fields.E, smallest=True))
     beta = factor * np.sqrt(cm.h)
     if method == 2:
-        step = MixedHybridStep(cm, model, beta=beta, epsilon=epsilon, newton=newton)
+        step = MixedHybridStep(problem, beta=beta, epsilon=epsilon, newton=newton)
         step.prepare()
         return step
-    return MixedMultiscaleHybridStep(cm, model, beta=beta, epsilon=epsilon, newton=newton,
+    return MixedMultiscaleHybridStep(problem, beta=beta, epsilon=epsilon, newton=newton,
                                      cem=MixedCEMOptions(layers=LAYERS))
 
 
@@ -111,7 +111,8 @@ def monolithic_steps(method: int, cm, number: int, E_high: float) -> str:
             steps = mono.solve().steps
             mono.destroy()
             return str(steps)
-        return str(solve_mixed_monolithic(cm, model, newton=newton, split_interface=True, verify=False).newton.steps)
+        return str(solve_mixed_monolithic(model.on(cm), newton=newton, split_interface=True,
+                                          verify=False).newton.steps)
     except FenicsContactError as err:
         return f"error: {type(err).__name__}"
 

@@ -66,11 +66,11 @@ def worker(args: argparse.Namespace) -> None:
     comm.Barrier()
     t0 = time.perf_counter()
     if args.method == "mono":
-        sol = solve_mixed_monolithic(cm, model)
+        sol = solve_mixed_monolithic(model.on(cm))
         out.update(dofs=sol.dofs["total"], newton=sol.newton.steps, time_s=sol.time_s,
                    time_online_s=sol.time_newton_s, time_setup_s=sol.time_s - sol.time_newton_s)
     elif args.method == "hybrid":
-        res = solve_mixed_hybrid(cm, model, options=IterationOptions(tol=args.tol))
+        res = solve_mixed_hybrid(model.on(cm), options=IterationOptions(tol=args.tol))
         out.update(dofs=res.dofs["omega1"] + res.dofs["omega2"], iterations=res.iterations,
                    converged=res.converged, time_online_s=res.time_online_s, time_setup_s=res.time_offline_s)
         out["time_s"] = out["time_online_s"] + out["time_setup_s"]

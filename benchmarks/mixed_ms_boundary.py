@@ -26,6 +26,7 @@ from fenics_contact.hybrid.iteration import IterationOptions
 from fenics_contact.hybrid.mixed import solve_mixed_hybrid
 from fenics_contact.io import machine_description, write_report
 from fenics_contact.multiscale.mixed import l2_stress_error, solve_mixed_ms_hybrid
+from fenics_contact.multiscale.mixed_cem import MixedCEMOptions
 from fenics_contact.problem import geometry, models
 from fenics_contact.problem.boundary import BoundaryConditions
 
@@ -45,9 +46,9 @@ def case_a(n: int, n_coarse: int, layers: list[int], options) -> list[str]:
     lines = [f"## A. Model 2, u_D on x = 0, traction on the top, bottom free (h = 1/{n}, H = 1/{n_coarse})", "",
              "| method | m | source correctors | e_σ (A) | e_σ (L²) | e_u (post) | force error | iterations | "
              "offline [s] | CPU [s] |", "|---|---|---|---|---|---|---|---|---|---|"]
-    ref = solve_mixed_monolithic(cm, model)
+    ref = solve_mixed_monolithic(model.on(cm))
     c = time.process_time()
-    alg2 = solve_mixed_hybrid(cm, model, reference=ref, options=options)
+    alg2 = solve_mixed_hybrid(model.on(cm), reference=ref, options=options)
     lines.append(f"| Algorithm 2 | | | {alg2.e_sigma:.2e} | {l2_stress_error(alg2.sigma, ref.sigma):.2e} | "
                  f"{alg2.e_u:.2e} | {abs(alg2.profile.force / ref.profile.force - 1):.1e} | {alg2.iterations} | | "
                  f"{time.process_time() - c:.1f} |")
@@ -55,7 +56,8 @@ def case_a(n: int, n_coarse: int, layers: list[int], options) -> list[str]:
     runs = [(m, True) for m in layers] + [(max(layers), False)]
     for m, sc in runs:
         c = time.process_time()
-        res = solve_mixed_ms_hybrid(cm, model, layers=m, source_correction=sc, reference=ref, options=options)
+        res = solve_mixed_ms_hybrid(model.on(cm), cem=MixedCEMOptions(layers=m, source_correction=sc), reference=ref,
+                                    options=options)
         lines.append(f"| Algorithm 4 | {m} | {'yes' if sc else 'no'} | {res.e_sigma:.2e} | {res.e_sigma_l2:.2e} | "
                      f"{res.e_u_post:.2e} | {abs(res.profile.force / ref.profile.force - 1):.1e} | {res.iterations} | "
                      f"{res.time_offline_s:.1f} | {time.process_time() - c:.1f} |")
@@ -72,10 +74,10 @@ def case_b(n: int, n_coarse: int, layers: list[int], contrast: float, options) -
         cm = geometry.unit_square(n, n_coarse, clamped=clamped, neumann={"top": "Gamma_N_top"})
         model = models.get_model(3, E_high=contrast).with_(
             boundary=BoundaryConditions(tractions={"Gamma_N_top": (0.2, -0.5)}))
-        alg2 = solve_mixed_hybrid(cm, model, options=options)
+        alg2 = solve_mixed_hybrid(model.on(cm), options=options)
         for m in layers:
             c = time.process_time()
-            res = solve_mixed_ms_hybrid(cm, model, layers=m, options=options)
+            res = solve_mixed_ms_hybrid(model.on(cm), cem=MixedCEMOptions(layers=m), options=options)
             lines.append(f"| {label} | {m} | {l2_stress_error(res.sigma, alg2.sigma):.2e} | "
                          f"{abs(res.profile.force / alg2.profile.force - 1):.1e} | {res.iterations} | "
                          f"{res.time_offline_s:.1f} | {time.process_time() - c:.1f} |")

@@ -33,7 +33,7 @@ CASES = {  # the paper's cases: (model, E₁/E₂, ν₁ (pattern), ν₂ (rest)
 
 def omega1(n: int, n_coarse: int, model):
     cm = geometry.unit_square(n, n_coarse)
-    step = MixedHybridStep(cm, model, beta="sqrt-h")
+    step = MixedHybridStep(model.on(cm), beta="sqrt-h")
     part = step.parts[0]
     return cm, step.sub[0], coarse_grid(part.mesh, part.cell_map, cm.coarse_cell, cm.H)
 

@@ -80,6 +80,7 @@ def worker(args: argparse.Namespace) -> dict:
     from fenics_contact.fem.mixed import solve_mixed_monolithic
     from fenics_contact.hybrid.iteration import IterationOptions
     from fenics_contact.multiscale.mixed import solve_mixed_ms_hybrid
+    from fenics_contact.multiscale.mixed_cem import MixedCEMOptions
     from fenics_contact.problem import geometry, models
 
     comm = MPI.COMM_WORLD
@@ -92,13 +93,13 @@ def worker(args: argparse.Namespace) -> dict:
     out = {"n": args.n, "ranks": comm.size, "time_mesh_s": time.perf_counter() - t0}
     if args.worker == "monolithic":
         cpu0 = _cpu_s()
-        ref = solve_mixed_monolithic(cm, model)
+        ref = solve_mixed_monolithic(model.on(cm))
         out.update(dofs=ref.dofs["total"], time_s=ref.time_s, time_newton_s=ref.time_newton_s,
                    newton_steps=ref.newton.steps, cpu_s=_cpu_s() - cpu0)
         ref.free()
     else:
-        res = solve_mixed_ms_hybrid(cm, model, layers=args.layers, offline_comm=comm, cache_dir=args.cache_dir,
-                                    options=IterationOptions(max_iterations=1000))
+        res = solve_mixed_ms_hybrid(model.on(cm), cem=MixedCEMOptions(layers=args.layers), offline_comm=comm,
+                                    cache_dir=args.cache_dir, options=IterationOptions(max_iterations=1000))
         om = res.step.omega1
         cache = om.cache_path
         out.update(dofs_fine=res.dofs["omega1"] + res.dofs["omega2"], dofs_ms=res.dofs["omega1_ms"],

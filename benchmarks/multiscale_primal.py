@@ -55,6 +55,7 @@ from fenics_contact.multiscale import cem
 from fenics_contact.multiscale import primal as primal_ms
 from fenics_contact.problem import geometry, models
 from fenics_contact.problem.fields import material_fields
+from fenics_contact.problem.problem import ContactProblem
 
 log = logging.getLogger("multiscale_primal")
 
@@ -67,7 +68,7 @@ def _floats(text: str) -> list[float]:
     return [float(t) for t in text.split(",") if t]
 
 
-def make_model(name: str, contrast: float = 1e3, nu: float = 0.35) -> models.TestModel:
+def make_model(name: str, contrast: float = 1e3, nu: float = 0.35) -> ContactProblem:
     """'1', '2', '3' (built-in) or '1L', '2L' (built-in with the loads moved into Ω₁)."""
     number = int(name[0])
     model = models.get_model(number, E_high=contrast, nu=nu)
@@ -99,7 +100,7 @@ class Runner:
             fields = material_fields(cm.mesh, model)
             E_c = cm.comm.allreduce(float(np.max(fields.E.x.array[cm.cell_tags.find(2)], initial=0.0)), op=MPI.MAX)
             delta = primal.default_penalty(cm.h, E_c)
-            ref = primal.solve_primal_monolithic(cm.mesh, cm.facet_tags, fields, delta=delta,
+            ref = primal.solve_primal_monolithic(model.on(cm), delta=delta,
                                                  prefix=f"bench_mono_{len(self._refs)}_")
             self._refs[key] = (model, delta, ref)
         return self._refs[key]
@@ -110,9 +111,10 @@ class Runner:
         model, delta, ref = self.reference(n, N, str(name), contrast, nu)
         start = time.perf_counter()
         res = primal_ms.solve_primal_ms_hybrid(
-            cm, model, alpha=self.args.alpha, delta=delta, layers=layers, nbasis=nbasis,
-            options=self.options, reference=ref.u, source_correction=source_correction,
-            s_factor=self.args.s_factor if s_factor is None else s_factor,
+            model.on(cm), alpha=self.args.alpha, delta=delta,
+            cem=cem.CEMOptions(layers=layers, nbasis=nbasis, source_correction=source_correction,
+                               s_factor=self.args.s_factor if s_factor is None else s_factor),
+            options=self.options, reference=ref.u,
         )
         row = {
             "model": name, "H": f"1/{N}", "h": f"1/{n}", "m": layers, "l": nbasis, "contrast": contrast,
@@ -128,7 +130,7 @@ class Runner:
         cm = self.mesh(n, N)
         model, delta, ref = self.reference(n, N, str(name), 1e3)
         res = primal_hybrid.solve_primal_hybrid(
-            cm, model, alpha=self.args.alpha, delta=delta, options=self.options, reference=ref.u
+            model.on(cm), alpha=self.args.alpha, delta=delta, options=self.options, reference=ref.u
         )
         return {"its": res.iterations, "e_u": res.e_u, "offline": res.time_offline_s, "online": res.time_online_s,
                 "dofs": res.dofs}
@@ -333,15 +335,15 @@ def _worker(args: argparse.Namespace) -> dict:
     t0 = time.perf_counter()
     cm = geometry.unit_square(args.n, args.n_coarse)
     model = make_model(str(args.models[0]))
-    fields = material_fields(cm.mesh, model)
     delta = primal.default_penalty(cm.h, 1.0)
     out = {"n": args.n, "ranks": comm.size, "mesh": time.perf_counter() - t0}
     if args.worker == "mono":
-        ref = primal.solve_primal_monolithic(cm.mesh, cm.facet_tags, fields, delta=delta)
+        ref = primal.solve_primal_monolithic(model.on(cm), delta=delta)
         out.update(time=ref.time_s, dofs=2 * (args.n + 1) ** 2, newton=ref.newton.steps)
     else:
-        res = primal_ms.solve_primal_ms_hybrid(cm, model, alpha=args.alpha, delta=delta, layers=args.fixed_layers,
-                                               nbasis=args.nbasis, options=IterationOptions(tol=args.tol))
+        res = primal_ms.solve_primal_ms_hybrid(model.on(cm), alpha=args.alpha, delta=delta,
+                                               cem=cem.CEMOptions(layers=args.fixed_layers, nbasis=args.nbasis),
+                                               options=IterationOptions(tol=args.tol))
         om = res.step.omega1
         out.update(offline=res.time_offline_s, online=res.time_online_s, its=res.iterations,
                    converged=bool(res.converged), parts=res.step.offline_times, dofs=2 * (args.n + 1) ** 2,

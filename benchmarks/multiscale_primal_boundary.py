@@ -23,6 +23,7 @@ from fenics_contact.fem.primal import default_penalty
 from fenics_contact.hybrid.iteration import IterationOptions
 from fenics_contact.hybrid.primal import solve_primal_hybrid
 from fenics_contact.io import machine_description, write_report
+from fenics_contact.multiscale.cem import CEMOptions
 from fenics_contact.multiscale.primal import solve_primal_ms_hybrid
 from fenics_contact.problem import geometry, models
 from fenics_contact.problem.boundary import BoundaryConditions
@@ -34,13 +35,14 @@ def contrast_rows(n: int, n_coarse: int, contrast: float, layers: list[int], opt
     cm = geometry.unit_square(n, n_coarse, clamped=("left",))  # top and bottom traction free
     model = models.get_model(3, E_high=contrast).with_(boundary=BoundaryConditions(displacement=U_D))
     delta = default_penalty(cm.h, contrast)  # the channels reach Γ_C: E_c = E_high
-    fine = solve_primal_hybrid(cm, model, delta=delta, options=options)
+    fine = solve_primal_hybrid(model.on(cm), delta=delta, options=options)
     if not fine.converged:
         raise RuntimeError(f"Algorithm 1 did not converge at contrast {contrast:g}")
     rows = []
     for m in layers:
         c = time.process_time()
-        res = solve_primal_ms_hybrid(cm, model, delta=delta, layers=m, nbasis=3, reference=fine.u, options=options)
+        res = solve_primal_ms_hybrid(model.on(cm), alpha="Emin", delta=delta, cem=CEMOptions(layers=m, nbasis=3),
+                                     reference=fine.u, options=options)
         rows.append(f"| {contrast:.0e} | {m} | {res.step.error_energy():.2e} | {res.e_u:.2e} | "
                     f"{abs(res.profile.force / fine.profile.force - 1):.1e} | {res.converged} | "
                     f"{res.transmission_residual:.1e} | {res.time_offline_s:.1f} | "

@@ -17,7 +17,6 @@ from pathlib import Path
 
 import fenics_contact  # noqa: F401
 from fenics_contact.hybrid.iteration import IterationOptions
-from fenics_contact.problem.fields import material_fields
 from fenics_contact.problem.geometry import unit_square
 from fenics_contact.io import machine_description
 from fenics_contact.problem.models import get_model
@@ -30,7 +29,7 @@ def setup(n: int, n_coarse: int, number: int):
     cm = unit_square(n, n_coarse)
     model = get_model(number)
     delta = default_penalty(cm.h, 1.0)
-    ref = solve_primal_monolithic(cm.mesh, cm.facet_tags, material_fields(cm.mesh, model), delta=delta)
+    ref = solve_primal_monolithic(model.on(cm), delta=delta)
     return cm, model, delta, ref, time.perf_counter() - t0
 
 
@@ -73,7 +72,7 @@ def main() -> None:
         number, n_coarse = (int(v) for v in config.split(":"))
         for n in args.sizes:
             cm, model, delta, ref, t_ref = setup(n, n_coarse, number)
-            res = solve_primal_hybrid(cm, model, alpha="E*h^-1/2", delta=delta, reference=ref.u,
+            res = solve_primal_hybrid(model.on(cm), alpha="E*h^-1/2", delta=delta, reference=ref.u,
                                       options=IterationOptions(tol=1e-10, accel="anderson"))
             d = res.dofs
             lines.append(
@@ -85,7 +84,7 @@ def main() -> None:
             for alpha in args.alphas:
                 for accel in ("none", "anderson"):
                     cap = args.cap if accel == "none" else 5000
-                    r = solve_primal_hybrid(cm, model, alpha=alpha, delta=delta, reference=ref.u,
+                    r = solve_primal_hybrid(model.on(cm), alpha=alpha, delta=delta, reference=ref.u,
                                             options=IterationOptions(tol=1e-6, accel=accel, max_iterations=cap))
                     its = f"{r.iterations}" if r.converged else f"> {r.iterations} (cap)"
                     study.append(f"| {number} | {n_coarse} | {n} | {alpha} | {accel} | {its} | {r.converged} | "

@@ -40,7 +40,7 @@ from fenics_contact.io import machine_description, write_report
 from fenics_contact.fem.mixed import solve_mixed_monolithic
 from fenics_contact.hybrid.mixed import MixedHybridStep, solve_mixed_hybrid
 from fenics_contact.multiscale.mixed import solve_mixed_ms_hybrid
-from fenics_contact.multiscale.mixed_cem.options import DEFAULT_MIN_GAP
+from fenics_contact.multiscale.mixed_cem.options import DEFAULT_MIN_GAP, MixedCEMOptions
 
 #: the paper's Tables 5.3, 5.5–5.7 (h = 1/64, H = 1/16, β = √h, 3 bases): m -> (iterations, e_σ, e_u)
 PAPER = {
@@ -95,9 +95,9 @@ def table_53(n: int, layers: list[int], accel: str, lines: list[str], title: str
             f"f₁ = {b[4]:+g} on y ∈ [{b[2]:g}, {b[3]:g}]" for b in bands) + ")"
     elif load != "builtin":
         raise SystemExit(f"unknown load {load!r} (builtin or omega1)")
-    ref = solve_mixed_monolithic(cm, model)
+    ref = solve_mixed_monolithic(model.on(cm))
     ref.free()
-    split = solve_mixed_monolithic(cm, model, split_interface=True, epsilon=ref.epsilon)
+    split = solve_mixed_monolithic(model.on(cm), split_interface=True, epsilon=ref.epsilon)
     split.free()
     floor = _reference_distance(cm, model, ref, split)
     paper_cols = load == "builtin" and nu_high == 0.499
@@ -120,8 +120,8 @@ def table_53(n: int, layers: list[int], accel: str, lines: list[str], title: str
     ]
     prev = prev_split = None
     for m in layers:
-        res = solve_mixed_ms_hybrid(cm, model, layers=m, nbasis=3, min_gap=min_gap, reference=ref,
-                                    options=IterationOptions(accel=accel, max_iterations=1000, tol=tol))
+        res = solve_mixed_ms_hybrid(model.on(cm), cem=MixedCEMOptions(layers=m, nbasis=3, min_gap=min_gap),
+                                    reference=ref, options=IterationOptions(accel=accel, max_iterations=1000, tol=tol))
         om = res.step.omega1
         lo, hi = om.nbasis_range
         below = np.flatnonzero(res.history.rel_changes < tol)
@@ -145,9 +145,9 @@ def table_53(n: int, layers: list[int], accel: str, lines: list[str], title: str
         del res, om  # the offline data of one m (GBs with many modes) is freed before the next is built
     if without_source:
         m = max(layers)
-        res = solve_mixed_ms_hybrid(cm, model, layers=m, nbasis=3, min_gap=min_gap, reference=ref,
-                                    source_correction=False,
-                                    options=IterationOptions(accel=accel, max_iterations=1000, tol=tol))
+        res = solve_mixed_ms_hybrid(model.on(cm),
+                                    cem=MixedCEMOptions(layers=m, nbasis=3, min_gap=min_gap, source_correction=False),
+                                    reference=ref, options=IterationOptions(accel=accel, max_iterations=1000, tol=tol))
         res.step.set_reference(split)
         e_split = res.step.errors()[0]
         row = (f"| {m}, without source correctors (the paper's Ω₁ step) | {res.iterations} | {res.e_sigma:.2e} | — | "
@@ -177,7 +177,7 @@ def table_58(n: int, layers: int, accels: list[str], lines: list[str], coarse: t
     model = models.get_model(2)
     for nc in coarse:
         cm = geometry.unit_square(n, nc)
-        ref = solve_mixed_monolithic(cm, model)
+        ref = solve_mixed_monolithic(model.on(cm))
         ref.free()
         t_ref = ref.time_newton_s
         rows = [f"| 1/{nc} | monolithic (semismooth Newton) | — | {ref.dofs['total']} | {ref.newton.steps} | "
@@ -189,8 +189,9 @@ def table_58(n: int, layers: int, accels: list[str], lines: list[str], coarse: t
                 if step is not None:
                     step.reset()  # cold subdomain states and factorizations; the offline data are kept
             opts = IterationOptions(accel=accel, max_iterations=1000)
-            a2 = solve_mixed_hybrid(cm, model, reference=ref, options=opts, step=step2)
-            a4 = solve_mixed_ms_hybrid(cm, model, layers=layers, nbasis=3, reference=ref, options=opts, step=step4)
+            a2 = solve_mixed_hybrid(model.on(cm), reference=ref, options=opts, step=step2)
+            a4 = solve_mixed_ms_hybrid(model.on(cm), cem=MixedCEMOptions(layers=layers, nbasis=3), reference=ref,
+                                       options=opts, step=step4)
             step2, step4 = a2.step, a4.step  # the offline data are reused by the next update
             for name, res, dofs, paper in (
                 ("Algorithm 2", a2, a2.dofs["omega1"] + a2.dofs["omega2"], PAPER_58["alg2"]),
@@ -243,9 +244,9 @@ def table_source(n: int, layers: list[int], n_coarse: list[int], cases: list[str
             model = model.with_(load=models.band_load(bands))
         for nc in n_coarse:
             cm = geometry.unit_square(n, nc)
-            ref = solve_mixed_monolithic(cm, model)
+            ref = solve_mixed_monolithic(model.on(cm))
             ref.free()
-            split = solve_mixed_monolithic(cm, model, split_interface=True, epsilon=ref.epsilon)
+            split = solve_mixed_monolithic(model.on(cm), split_interface=True, epsilon=ref.epsilon)
             split.free()
             floor = _reference_distance(cm, model, ref, split)
             prev = prev_split = None
@@ -254,7 +255,8 @@ def table_source(n: int, layers: list[int], n_coarse: list[int], cases: list[str
                 for sc in (True, False):
                     if not sc and m != max(layers):
                         continue
-                    res = solve_mixed_ms_hybrid(cm, model, layers=m, reference=ref, options=opts, source_correction=sc)
+                    res = solve_mixed_ms_hybrid(model.on(cm), cem=MixedCEMOptions(layers=m, source_correction=sc),
+                                                reference=ref, options=opts)
                     res.step.set_reference(split)
                     row[sc] = (res, res.step.errors()[0])
                 res, e_split = row[True]
@@ -274,7 +276,7 @@ def table_source(n: int, layers: list[int], n_coarse: list[int], cases: list[str
 
 def _reference_distance(cm, model, ref, split) -> float:
     """‖σ_h − σ̃_h‖_A / ‖σ_h‖_A of the monolithic and the split fine solutions (the 'floor' of e_σ)."""
-    step = MixedHybridStep(cm, model, beta="sqrt-h")
+    step = MixedHybridStep(model.on(cm), beta="sqrt-h")
     step.set_reference(split)
     c_split = [c for c, _ in step.reference]
     step.set_reference(ref)

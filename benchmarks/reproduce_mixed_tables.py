@@ -32,7 +32,6 @@ from dolfinx import fem
 
 from fenics_contact.fem import forms_mixed
 from fenics_contact.hybrid.iteration import IterationOptions
-from fenics_contact.problem.fields import material_fields
 from fenics_contact.problem.geometry import unit_square
 from fenics_contact.io import machine_description
 from fenics_contact.problem.materials import compliance, strain, stress
@@ -93,9 +92,10 @@ def table_model(number: int, ratio: float | None = None, nu1: float = 0.35, nu2:
 
 def primal_vs_mixed(cm, model, mixed) -> dict:
     """Relative differences of the primal P1 and the mixed AW solutions of one model."""
-    fields = material_fields(cm.mesh, model)
+    problem = model.on(cm)
+    fields = problem.fields
     t0 = time.perf_counter()
-    primal = solve_primal_monolithic(cm.mesh, cm.facet_tags, fields, delta=default_penalty(cm.h, 1.0))
+    primal = solve_primal_monolithic(problem, delta=default_penalty(cm.h, 1.0))
     t_primal = time.perf_counter() - t0
     S_m = forms_mixed.stress_tensor(mixed.sigma)
     S_p = stress(strain(primal.u), fields.lmbda, fields.mu)
@@ -195,12 +195,12 @@ def main() -> None:
         for n in args.sizes:
             cm = unit_square(n, args.coarse)
             log(f"model {number}, 1/h = {n}: monolithic solves")
-            aw = solve_mixed_monolithic(cm, model)
-            split = solve_mixed_monolithic(cm, model, split_interface=True)
+            aw = solve_mixed_monolithic(model.on(cm))
+            split = solve_mixed_monolithic(model.on(cm), split_interface=True)
             mixed_refs[(number, n)] = (cm, aw)
             for beta in ("1", "sqrt-h"):
                 for accel in ("none", "anderson"):
-                    res = solve_mixed_hybrid(cm, model, beta=beta, reference=aw,
+                    res = solve_mixed_hybrid(model.on(cm), beta=beta, reference=aw,
                                              options=IterationOptions(tol=args.tol, accel=accel, max_iterations=5000))
                     at5 = at_tolerance(res.history, 1e-5)
                     paper = PAPER_5_1_2.get((number, n, beta)) if accel == "none" else None
@@ -225,7 +225,7 @@ def main() -> None:
                             f"{1e3 * res.time_online_s / res.iterations:.0f} | {newton} / {lus} |"
                         )
             # the fixed point
-            res = solve_mixed_hybrid(cm, model, beta="sqrt-h", reference=split,
+            res = solve_mixed_hybrid(model.on(cm), beta="sqrt-h", reference=split,
                                      options=IterationOptions(tol=min(args.tight), accel="anderson", max_iterations=5000))
             res.step.set_reference(aw)
             floor = res.step.errors()  # the final iterate = the X̃ solution to ~tol: the X̃/X distance
@@ -255,8 +255,8 @@ def main() -> None:
         cm = unit_square(n, args.coarse)
         for (ratio, nu1, nu2), paper in PAPER_5_4.items():
             model = table_model(1, ratio, nu1, nu2)
-            aw = solve_mixed_monolithic(cm, model)
-            res = solve_mixed_hybrid(cm, model, beta="sqrt-h", reference=aw,
+            aw = solve_mixed_monolithic(model.on(cm))
+            res = solve_mixed_hybrid(model.on(cm), beta="sqrt-h", reference=aw,
                                      options=IterationOptions(tol=args.tol, accel="none", max_iterations=5000))
             at5 = at_tolerance(res.history, 1e-5)
             t54.append(
@@ -289,7 +289,7 @@ def main() -> None:
                     cm, mixed = mixed_refs[(number, n)]
                 else:
                     cm = unit_square(n, args.coarse)
-                    mixed = solve_mixed_monolithic(cm, model)
+                    mixed = solve_mixed_monolithic(model.on(cm))
                 c = primal_vs_mixed(cm, model, mixed)
                 tpm.append(
                     f"| {number} | {n} | {c['e_sigma']:.2e} | {c['e_u']:.2e} | {zone(c['primal_zone'])} | "

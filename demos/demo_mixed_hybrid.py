@@ -45,7 +45,7 @@ n_coarse = max(4, n // 4)
 out = Path(os.environ.get("FENICS_CONTACT_DEMO_OUT", "results/demo_mixed_hybrid"))
 out.mkdir(parents=True, exist_ok=True)
 cm = unit_square(n, n_coarse)
-model = model_2()
+problem = model_2().on(cm)
 
 # %% [markdown]
 # ## The monolithic mixed penalized solution
@@ -53,7 +53,7 @@ model = model_2()
 # (plain semismooth Newton cycles on this problem).
 
 # %%
-reference = solve_mixed_monolithic(cm, model)
+reference = solve_mixed_monolithic(problem)
 print(f"epsilon = {reference.epsilon:.3g}, Newton steps {reference.newton.steps}, "
       f"contact zone {reference.profile.active_interval()}, max tensile sigma_c {reference.profile.max_tensile:.2e}")
 
@@ -63,7 +63,7 @@ print(f"epsilon = {reference.epsilon:.3g}, Newton steps {reference.newton.steps}
 # %%
 runs = {}
 for beta in ("1", "sqrt-h"):
-    r = solve_mixed_hybrid(cm, model, beta=beta, reference=reference,
+    r = solve_mixed_hybrid(problem, beta=beta, reference=reference,
                            options=IterationOptions(tol=1e-6, accel="none", max_iterations=3000))
     runs[f"beta = {beta}"] = r
     print(f"beta = {beta:>6}: converged={r.converged} after {r.iterations} iterations, "
@@ -78,7 +78,7 @@ for beta in ("1", "sqrt-h"):
 # the converged iterate is accurate to the stopping tolerance.
 
 # %%
-split = solve_mixed_monolithic(cm, model, split_interface=True, epsilon=reference.epsilon)
+split = solve_mixed_monolithic(problem, split_interface=True, epsilon=reference.epsilon)
 best = runs["beta = sqrt-h"]
 best.step.set_reference(split)
 e_sigma_split, e_u_split = best.step.errors()

@@ -40,6 +40,7 @@ from fenics_contact.hybrid.iteration import IterationOptions
 from fenics_contact.problem.geometry import unit_square
 from fenics_contact.fem.mixed import solve_mixed_monolithic
 from fenics_contact.multiscale.mixed import solve_mixed_ms_hybrid
+from fenics_contact.multiscale.mixed_cem import MixedCEMOptions
 from fenics_contact.problem.models import model_2
 from fenics_contact.plots import plot_contact, plot_stress
 
@@ -48,8 +49,8 @@ n_coarse = n // 4
 out = Path(os.environ.get("FENICS_CONTACT_DEMO_OUT", "results/demo_mixed_multiscale"))
 out.mkdir(parents=True, exist_ok=True)
 cm = unit_square(n, n_coarse)
-model = model_2()
-reference = solve_mixed_monolithic(cm, model)
+problem = model_2().on(cm)
+reference = solve_mixed_monolithic(problem)
 print("fine reference: contact zone", reference.profile.active_interval())
 
 # %% [markdown]
@@ -59,7 +60,7 @@ print("fine reference: contact zone", reference.profile.active_interval())
 layers = [1, 2, 3]
 results = {}
 for m in layers:
-    r = solve_mixed_ms_hybrid(cm, model, beta="sqrt-h", layers=m, nbasis=3, reference=reference,
+    r = solve_mixed_ms_hybrid(problem, beta="sqrt-h", cem=MixedCEMOptions(layers=m, nbasis=3), reference=reference,
                               options=IterationOptions(tol=1e-8))
     results[m] = r
     print(f"m = {m}: {r.iterations} iterations, e_sigma = {r.e_sigma:.2e}, e_u = {r.e_u:.2e} "
@@ -101,14 +102,14 @@ def band_load(x):
     return f
 
 
-model_in = model.with_(load=band_load)
-reference_in = solve_mixed_monolithic(cm, model_in)
+problem_in = problem.with_(load=band_load)
+reference_in = solve_mixed_monolithic(problem_in)
 reference_in.free()  # only its solution is needed
 errors = {}
 for corrected in (True, False):
     errors[corrected] = [
-        solve_mixed_ms_hybrid(cm, model_in, layers=m, reference=reference_in, source_correction=corrected,
-                              options=IterationOptions(tol=1e-8, accel="anderson")).e_sigma
+        solve_mixed_ms_hybrid(problem_in, cem=MixedCEMOptions(layers=m, source_correction=corrected),
+                              reference=reference_in, options=IterationOptions(tol=1e-8, accel="anderson")).e_sigma
         for m in layers
     ]
     print("source correctors" if corrected else "paper's algorithm", ["%.2e" % e for e in errors[corrected]])

@@ -39,7 +39,6 @@ import fenics_contact  # noqa: F401  (imports dolfinx_solver before dolfinx)
 import numpy as np
 
 from fenics_contact.hybrid.iteration import IterationOptions
-from fenics_contact.problem.fields import material_fields
 from fenics_contact.problem.geometry import unit_square
 from fenics_contact.problem.models import model_1
 from fenics_contact.plots import plot_cell_field, plot_contact, plot_history, render_deformed
@@ -57,9 +56,8 @@ out.mkdir(parents=True, exist_ok=True)
 
 # %%
 cm = unit_square(n, n_coarse)
-model = model_1()
-fields = material_fields(cm.mesh, model)
-plot_cell_field(fields.E, out / "E.png", title="Young's modulus (model 1)", log=True)
+problem = model_1().on(cm)
+plot_cell_field(problem.fields.E, out / "E.png", title="Young's modulus (model 1)", log=True)
 delta = default_penalty(cm.h, 1.0)  # δ = 1e-3 h / E_Ω₂: penetration far below the P1 error
 print(f"h = 1/{n}, H = 1/{n_coarse}, delta = {delta:.3g}")
 
@@ -67,7 +65,7 @@ print(f"h = 1/{n}, H = 1/{n_coarse}, delta = {delta:.3g}")
 # ## The monolithic penalized solution (the reference)
 
 # %%
-reference = solve_primal_monolithic(cm.mesh, cm.facet_tags, fields, delta=delta)
+reference = solve_primal_monolithic(problem, delta=delta)
 print("Newton steps:", reference.newton.steps, "active-set sizes:", reference.newton.active_sizes)
 print("contact zone:", reference.profile.active_interval(), "penetration:", reference.profile.penetration)
 
@@ -84,7 +82,7 @@ print("contact zone:", reference.profile.active_interval(), "penetration:", refe
 # %%
 runs = {}
 for accel in ("none", "anderson", "newton"):
-    runs[accel] = solve_primal_hybrid(cm, model, alpha="E", delta=delta, reference=reference.u,
+    runs[accel] = solve_primal_hybrid(problem, alpha="E", delta=delta, reference=reference.u,
                                       options=IterationOptions(tol=1e-8, accel=accel, max_iterations=5000))
     r = runs[accel]
     print(f"{accel:>8}: converged={r.converged} after {r.iterations} applications of T "

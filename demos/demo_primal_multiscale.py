@@ -34,11 +34,11 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from fenics_contact.hybrid.iteration import IterationOptions
-from fenics_contact.problem.fields import material_fields
 from fenics_contact.problem.geometry import unit_square
 from fenics_contact.problem.models import model_2
 from fenics_contact.plots import plot_contact
 from fenics_contact.fem.primal import default_penalty, solve_primal_monolithic
+from fenics_contact.multiscale.cem import CEMOptions
 from fenics_contact.multiscale.primal import solve_primal_ms_hybrid
 
 n = int(os.environ.get("FENICS_CONTACT_DEMO_N", "64"))
@@ -46,14 +46,14 @@ n_coarse = n // 4
 out = Path(os.environ.get("FENICS_CONTACT_DEMO_OUT", "results/demo_primal_multiscale"))
 out.mkdir(parents=True, exist_ok=True)
 cm = unit_square(n, n_coarse)
-model = model_2()
+problem = model_2().on(cm)
 delta = default_penalty(cm.h, 1.0)
 
 # %% [markdown]
 # ## Fine-scale reference (monolithic penalized contact)
 
 # %%
-reference = solve_primal_monolithic(cm.mesh, cm.facet_tags, material_fields(cm.mesh, model), delta=delta)
+reference = solve_primal_monolithic(problem, delta=delta)
 print("contact zone:", reference.profile.active_interval())
 
 # %% [markdown]
@@ -63,8 +63,8 @@ print("contact zone:", reference.profile.active_interval())
 layers = [1, 2, 3, 4]
 errors, results = [], {}
 for m in layers:
-    r = solve_primal_ms_hybrid(cm, model, delta=delta, layers=m, nbasis=3, reference=reference.u,
-                               options=IterationOptions(tol=1e-8))
+    r = solve_primal_ms_hybrid(problem, alpha="Emin", delta=delta, cem=CEMOptions(layers=m, nbasis=3),
+                               reference=reference.u, options=IterationOptions(tol=1e-8))
     results[m] = r
     errors.append((r.e_u, r.step.error_energy()))
     print(f"m = {m}: {r.iterations} iterations, dim V_ms = {r.dofs['omega1_ms']} "
@@ -109,14 +109,15 @@ def bands_in_omega1(x):
     return f
 
 
-loaded = model.with_(load=bands_in_omega1)
-reference_l = solve_primal_monolithic(cm.mesh, cm.facet_tags, material_fields(cm.mesh, loaded), delta=delta)
+loaded = problem.with_(load=bands_in_omega1)
+reference_l = solve_primal_monolithic(loaded, delta=delta)
 table = {}
 for source in (True, False):
     table[source] = []
     for m in (1, 2, 3):
-        r = solve_primal_ms_hybrid(cm, loaded, delta=delta, layers=m, nbasis=3, reference=reference_l.u,
-                                   source_correction=source, options=IterationOptions(tol=1e-8))
+        r = solve_primal_ms_hybrid(loaded, alpha="Emin", delta=delta,
+                                   cem=CEMOptions(layers=m, nbasis=3, source_correction=source),
+                                   reference=reference_l.u, options=IterationOptions(tol=1e-8))
         assert r.converged
         table[source].append(r.step.error_energy())
     print(("with N_f  " if source else "paper     ") + "energy error m = 1, 2, 3: "

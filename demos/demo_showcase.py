@@ -57,10 +57,9 @@ from fenics_contact.multiscale.cem import CEMOptions
 from fenics_contact.multiscale.mixed_cem import MixedCEMOptions
 from fenics_contact.plots import gather_cells, plot_force_indentation
 from fenics_contact.problem.analytic import hertz_errors
-from fenics_contact.problem.fields import material_fields
 from fenics_contact.problem.meshes import composite_block
-from fenics_contact.problem.models import TestModel, constant_field
 from fenics_contact.problem.obstacles import Circle
+from fenics_contact.problem.problem import ContactProblem, constant_field
 
 N = int(os.environ.get("FENICS_CONTACT_DEMO_N", "32"))
 refinement = N / 32  # contact cells a/(20 r): a/10 at N = 16 (the tests), a/20 at N = 32, a/40 at N = 64
@@ -86,10 +85,11 @@ def zero_load(x):
 
 
 cylinder = Circle((0.0, R), R)  # touching the top face y = 0 at x = 0
-composite = TestModel("composite", block.modulus(E_inclusion, E_matrix), constant_field(nu), zero_load,
-                      obstacle=cylinder, description="stiff inclusions (E = 1e3) in a soft matrix (E = 1)")
+composite = ContactProblem(name="composite", youngs_modulus=block.modulus(E_inclusion, E_matrix),
+                           poisson_ratio=constant_field(nu), load=zero_load, obstacle=cylinder,
+                           description="stiff inclusions (E = 1e3) in a soft matrix (E = 1)").on(cm)
 homogeneous = composite.with_(youngs_modulus=constant_field(E_matrix), description="homogeneous (E = 1)")
-fields = material_fields(cm.mesh, composite)
+fields = composite.fields
 
 # %% [markdown]
 # The block, its Young's modulus and the mesh near the contact (Ω₂ above the dashed line γ; Γ_C
@@ -135,7 +135,7 @@ V = fem.functionspace(cm.mesh, ("Lagrange", 1, (2,)))
 curves, output = {}, {}  # output: the fields of the last depth, for ParaView
 for label, (method, kwargs) in METHODS.items():
     start = time.perf_counter()
-    c = curves[label] = force_indentation(method, cm, composite, depths, direction=direction, **kwargs)
+    c = curves[label] = force_indentation(composite, method, depths, direction=direction, **kwargs)
     print(f"{label}: {time.perf_counter() - start:.1f} s (set-up/offline {c.time_offline_s:.1f} s)")
     print(c.table())
     if method == "primal-monolithic":
@@ -148,7 +148,7 @@ for label, (method, kwargs) in METHODS.items():
         output["sigma_alg4"], output["u_alg4"] = c.step.glued()
     c.step = c.contact = None  # the solvers (factorizations, bases) are not needed any more
     gc.collect()
-homogeneous_curve = force_indentation("primal-monolithic", cm, homogeneous, depths, direction=direction)
+homogeneous_curve = force_indentation(homogeneous, "primal-monolithic", depths, direction=direction)
 
 # %% [markdown]
 # ## Evidence, and errors against the monolithic solves

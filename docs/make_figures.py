@@ -6,7 +6,6 @@
 from pathlib import Path
 
 import fenics_contact  # noqa: F401
-from fenics_contact.problem.fields import material_fields
 from fenics_contact.problem.geometry import unit_square
 from fenics_contact.problem.models import get_model
 from fenics_contact.plots import plot_cell_field
@@ -17,8 +16,8 @@ if __name__ == "__main__":
     OUT.mkdir(exist_ok=True)
     cm = unit_square(64, 16)
     for number in (1, 2, 3):
-        model = get_model(number)
-        E = material_fields(cm.mesh, model).E
-        plot_cell_field(E, OUT / f"model{number}_E.png", title=f"Test model {number}: E ({model.description})",
+        problem = get_model(number).on(cm)
+        plot_cell_field(problem.fields.E, OUT / f"model{number}_E.png",
+                        title=f"Test model {number}: E ({problem.description})",
                         log=True)
         print("written", OUT / f"model{number}_E.png")

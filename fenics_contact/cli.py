@@ -84,6 +84,8 @@ log = logging.getLogger("fenics_contact")
 
 METHODS = HYBRID_METHODS  #: the ``--method`` choices: Algorithms 1–4 (``methods.METHODS``)
 DEFAULT_H = 64  #: 1/h of the built-in mesh when --h is not given
+#: oversampling layers m of the multiscale methods when --layers is not given (the API's CEMOptions take 3)
+DEFAULT_LAYERS = 4
 
 #: exit code -> meaning (``--help``, README)
 EXIT_CODES = {
@@ -304,6 +306,8 @@ class RunOptions:
         if name in ("E_high", "E_low"):
             return {"E_high": 1e3, "E_low": 1.0}[name]
         method = get_method(self.method)
+        if name == "layers" and method.multiscale:
+            return DEFAULT_LAYERS
         defaults = method.defaults()
         if name in defaults:
             return defaults[name]
@@ -316,6 +320,8 @@ class RunOptions:
         flat = {name: getattr(self, name) for name in _METHOD_OPTIONS if getattr(self, name) is not None}
         if "min_gap" in flat:  # --min-gap 0: exactly --nbasis modes (the option's None)
             flat["min_gap"] = flat["min_gap"] or None
+        if get_method(self.method).multiscale:
+            flat.setdefault("layers", DEFAULT_LAYERS)
         return flat | {"options": self.iteration_options()}
 
     def iteration_options(self) -> IterationOptions:
@@ -378,7 +384,8 @@ def build_parser(*, given_only: bool = False) -> argparse.ArgumentParser:
     run.add_argument("--E-map", type=Path, help="Young's modulus as a pixel array over the unit square "
                      "(.npy, or text/.csv readable by numpy.loadtxt; row 0 = bottom); replaces the model's E map; "
                      "every pixel the domain covers must be finite and > 0")
-    run.add_argument("--layers", type=int, help="*-ms: oversampling layers m of the multiscale bases (default 4)")
+    run.add_argument("--layers", type=int, help=f"*-ms: oversampling layers m of the multiscale bases (default "
+                     f"{DEFAULT_LAYERS})")
     run.add_argument("--nbasis", type=int, help="*-ms: local spectral modes l per coarse cell (default 3)")
     run.add_argument("--min-gap", type=float,
                      help="mixed-ms: add Stage I modes on a coarse cell until the first one left out has "

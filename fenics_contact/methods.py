@@ -161,6 +161,9 @@ class Method:
                 raise InputError(f"{self.name}: give the multiscale options either as cem={self.cem_type.__name__}"
                                  f"(...) or as {sorted(cem)}, not both")
             out["cem"] = self.cem_type(**cem)
+        if out.get("cem") is not None and not isinstance(out["cem"], self.cem_type):
+            where = self.cem_type.__module__.removeprefix("fenics_contact.")
+            raise InputError(f"{self.name} takes {where}.{self.cem_type.__name__}, got {type(out['cem']).__name__}")
         return out
 
     def solve(self, problem: ContactProblem, /, *, comm: MPI.Comm = MPI.COMM_WORLD, **values):

@@ -16,6 +16,7 @@ from mpi4py import MPI
 from fenics_contact.fem.mixed import solve_mixed_monolithic
 from fenics_contact.hybrid.iteration import IterationOptions
 from fenics_contact.multiscale.mixed import solve_mixed_ms_hybrid
+from fenics_contact.multiscale.mixed_cem import MixedCEMOptions
 from fenics_contact.problem.geometry import unit_square
 from fenics_contact.problem.models import get_model
 
@@ -32,9 +33,9 @@ cache_dir = sys.argv[4] if len(sys.argv) > 4 else None
 comm = MPI.COMM_WORLD
 cm = unit_square(n, n_coarse, comm=MPI.COMM_SELF)
 model = get_model(1).with_(load=band_load)
-ref = solve_mixed_monolithic(cm, model)
-res = solve_mixed_ms_hybrid(cm, model, layers=layers, reference=ref, offline_comm=comm, cache_dir=cache_dir,
-                            options=IterationOptions(tol=1e-8, accel="anderson"))
+ref = solve_mixed_monolithic(model.on(cm))
+res = solve_mixed_ms_hybrid(model.on(cm), cem=MixedCEMOptions(layers=layers), reference=ref, offline_comm=comm,
+                            cache_dir=cache_dir, options=IterationOptions(tol=1e-8, accel="anderson"))
 om = res.step.omega1
 r, w = om.solve(res.step.g12)
 out = {

@@ -21,17 +21,17 @@ from fenics_contact.hybrid.iteration import IterationOptions  # noqa: E402
 from fenics_contact.hybrid.primal import solve_primal_hybrid  # noqa: E402
 from fenics_contact.indentation import force_indentation  # noqa: E402
 from fenics_contact.problem.analytic import hertz_model  # noqa: E402
-from fenics_contact.problem.fields import material_fields  # noqa: E402
 from fenics_contact.problem.meshes import hertz_block  # noqa: E402
 
 cm = bc._mesh(16)
 model = bc.manufactured_model()
 delta = default_penalty(cm.h, 1.0)
-ref = solve_primal_monolithic(cm.mesh, cm.facet_tags, material_fields(cm.mesh, model), delta=delta)
-alg1 = solve_primal_hybrid(cm, model, delta=delta, reference=ref.u, options=IterationOptions(tol=1e-10))
-newton = solve_primal_hybrid(cm, model, delta=delta, reference=ref.u, options=IterationOptions(tol=1e-10, accel="newton"))
+ref = solve_primal_monolithic(model.on(cm), delta=delta)
+alg1 = solve_primal_hybrid(model.on(cm), delta=delta, reference=ref.u, options=IterationOptions(tol=1e-10))
+newton = solve_primal_hybrid(model.on(cm), delta=delta, reference=ref.u,
+                             options=IterationOptions(tol=1e-10, accel="newton"))
 block, _ = hertz_block(0.05, refinement=0.5)
-curve = force_indentation("primal-monolithic", block, hertz_model(radius=5.0, depth=0.0), [6e-4, 1.2e-3],
+curve = force_indentation(hertz_model(radius=5.0, depth=0.0).on(block), "primal-monolithic", [6e-4, 1.2e-3],
                           direction=(0.0, -1.0))
 out = {
     "ranks": MPI.COMM_WORLD.size,

@@ -16,7 +16,6 @@ from mpi4py import MPI
 from dolfinx import fem
 
 from fenics_contact.hybrid.iteration import IterationOptions
-from fenics_contact.problem.fields import material_fields
 from fenics_contact.problem.geometry import unit_square
 from fenics_contact.problem.models import get_model
 from fenics_contact.fem.primal import default_penalty, solve_primal_monolithic
@@ -25,11 +24,10 @@ from fenics_contact.hybrid.primal import solve_primal_hybrid
 n, n_coarse, model_number = (int(a) for a in sys.argv[1:4])
 accel = sys.argv[4] if len(sys.argv) > 4 else "anderson"
 cm = unit_square(n, n_coarse)
-model = get_model(model_number)
-fields = material_fields(cm.mesh, model)
+problem = get_model(model_number).on(cm)
 delta = default_penalty(cm.h, 1e3 if model_number == 3 else 1.0)  # model 3: stiff channels reach Γ_C
-ref = solve_primal_monolithic(cm.mesh, cm.facet_tags, fields, delta=delta)
-res = solve_primal_hybrid(cm, model, alpha="E", delta=delta, reference=ref.u,
+ref = solve_primal_monolithic(problem, delta=delta)
+res = solve_primal_hybrid(problem, alpha="E", delta=delta, reference=ref.u,
                           options=IterationOptions(tol=1e-8 if accel == "anderson" else 1e-10, accel=accel))
 
 

@@ -16,8 +16,8 @@ from mpi4py import MPI
 
 from fenics_contact.fem.primal import default_penalty, solve_primal_monolithic
 from fenics_contact.hybrid.iteration import IterationOptions
+from fenics_contact.multiscale.cem import CEMOptions
 from fenics_contact.multiscale.primal import solve_primal_ms_hybrid
-from fenics_contact.problem.fields import material_fields
 from fenics_contact.problem.geometry import unit_square
 from fenics_contact.problem.models import get_model
 
@@ -36,14 +36,13 @@ out_path = sys.argv[3]
 compare = sys.argv[4] if len(sys.argv) > 4 else None
 cm = unit_square(n, n_coarse)
 comm = cm.comm
-model = get_model(1).with_(load=load)
-fields = material_fields(cm.mesh, model)
+problem = get_model(1).with_(load=load).on(cm)
 delta = default_penalty(cm.h, 1.0)
-ref = solve_primal_monolithic(cm.mesh, cm.facet_tags, fields, delta=delta)
-res = solve_primal_ms_hybrid(cm, model, delta=delta, layers=2, nbasis=3, reference=ref.u,
+ref = solve_primal_monolithic(problem, delta=delta)
+res = solve_primal_ms_hybrid(problem, alpha="Emin", delta=delta, cem=CEMOptions(layers=2, nbasis=3), reference=ref.u,
                              options=IterationOptions(tol=1e-10))
 # the interface Newton on the same step (Ω₁'s response from the coarse solver, gathered over the ranks)
-newton = solve_primal_ms_hybrid(cm, model, delta=delta, layers=2, nbasis=3, step=res.step,
+newton = solve_primal_ms_hybrid(problem, alpha="Emin", delta=delta, cem=CEMOptions(layers=2, nbasis=3), step=res.step,
                                 options=IterationOptions(tol=1e-10, accel="newton"))
 scale = comm.allreduce(float(np.abs(res.u.x.array).max()), op=MPI.MAX)
 newton_vs_robin = comm.allreduce(float(np.abs(newton.u.x.array - res.u.x.array).max()), op=MPI.MAX) / scale

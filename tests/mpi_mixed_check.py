@@ -74,7 +74,7 @@ def profile_data(profile) -> dict:
 
 def mono(name: str, fields: dict) -> dict:
     cm, model = mesh_and_model(name)
-    sol = solve_mixed_monolithic(cm, model)
+    sol = solve_mixed_monolithic(model.on(cm))
     prob = sol.problem
     fields[f"mono-{name}-sigma"] = sorted_values(sol.sigma)
     fields[f"mono-{name}-u"] = sorted_values(sol.u)
@@ -90,8 +90,8 @@ def hybrid(name: str, fields: dict) -> dict:
     from fenics_contact.hybrid.mixed import solve_mixed_hybrid
 
     cm, model = mesh_and_model(name, 8)
-    ref = solve_mixed_monolithic(cm, model, split_interface=True)
-    res = solve_mixed_hybrid(cm, model, reference=ref, options=IterationOptions(tol=1e-10))
+    ref = solve_mixed_monolithic(model.on(cm), split_interface=True)
+    res = solve_mixed_hybrid(model.on(cm), reference=ref, options=IterationOptions(tol=1e-10))
     fields[f"hybrid-{name}-sigma"] = sorted_values(res.sigma)
     fields[f"hybrid-{name}-u"] = sorted_values(res.u)
     fields[f"hybrid-{name}-ref-sigma"] = sorted_values(ref.sigma)
@@ -118,7 +118,7 @@ def indent(fields: dict) -> dict:
     from fenics_contact.problem.meshes import hertz_block
 
     block, _ = hertz_block(0.05, refinement=0.5)
-    curve = force_indentation("mixed-monolithic", block, hertz_model(radius=5.0, depth=0.0), [6e-4, 1.2e-3],
+    curve = force_indentation(hertz_model(radius=5.0, depth=0.0).on(block), "mixed-monolithic", [6e-4, 1.2e-3],
                               direction=(0.0, -1.0))
     last = curve.steps[-1].profile
     return {"forces": curve.forces.tolist(), "newton": [s.iterations for s in curve.steps],

@@ -20,7 +20,7 @@ from fenics_contact.problem.geometry import unit_square
 method, accel = sys.argv[1:3]
 cm = unit_square(8, 4, clamped=("left",))
 model = layered_model([0.0, 0.5, 1.0], [1.0, 100.0], depth=0.0)
-curve = force_indentation(method, cm, model, [0.01, 0.0, -0.01], direction=(-1.0, 0.0),
+curve = force_indentation(model.on(cm), method, [0.01, 0.0, -0.01], direction=(-1.0, 0.0),
                           options=IterationOptions(tol=1e-9, accel=accel, max_iterations=300))
 if MPI.COMM_WORLD.rank == 0:
     print("RESULT " + json.dumps({

@@ -25,12 +25,13 @@ from fenics_contact.hybrid.iteration import IterationOptions
 from fenics_contact.hybrid.mixed import solve_mixed_hybrid
 from fenics_contact.hybrid.primal import solve_primal_hybrid
 from fenics_contact.indentation import force_indentation
+from fenics_contact.multiscale.cem import CEMOptions
 from fenics_contact.multiscale.mixed import l2_stress_error, solve_mixed_ms_hybrid
+from fenics_contact.multiscale.mixed_cem import MixedCEMOptions
 from fenics_contact.multiscale.primal import solve_primal_ms_hybrid
 from fenics_contact.problem.analytic import (
     bar_model, bar_solution, hertz_errors, hertz_model, layered_displacement, layered_model, layered_pressure,
 )
-from fenics_contact.problem.fields import material_fields
 from fenics_contact.problem.geometry import unit_square
 from fenics_contact.problem.meshes import hertz_block
 from fenics_contact.problem.partition import centroid_coarse_cells
@@ -62,14 +63,14 @@ def test_bar_primal_monolithic_and_algorithm_1(f1):
     for n in (8, 16):
         cm = unit_square(n, 4, clamped=("left",))
         delta = default_penalty(cm.h, 1.0)
-        sol = solve_primal_monolithic(cm.mesh, cm.facet_tags, material_fields(cm.mesh, bar_model(f1)), delta=delta)
+        sol = solve_primal_monolithic(bar_model(f1).on(cm), delta=delta)
         exact = bar_solution(f1, delta=delta)
         _, u_ex = _bar_exact(cm.mesh, exact)
         errors.append(_l2(sol.u - u_ex, cm.mesh) / _l2(u_ex, cm.mesh))
         assert abs(sol.profile.force + exact.sigma_end) < 1e-6 * abs(f1)
         assert np.all(sol.profile.active) == (f1 > 0) and np.any(sol.profile.active) == (f1 > 0)
     assert errors[1] < 1e-2 and np.log2(errors[0] / errors[1]) > 1.8, errors
-    alg1 = solve_primal_hybrid(cm, bar_model(f1), delta=delta, reference=sol.u, options=TIGHT)
+    alg1 = solve_primal_hybrid(bar_model(f1).on(cm), delta=delta, reference=sol.u, options=TIGHT)
     assert alg1.converged and alg1.e_u < 1e-8
 
 
@@ -80,8 +81,9 @@ def test_bar_algorithm_3(f1):
     (H = 1/4), so the multiscale space holds the fine solution: equal to the monolithic solve."""
     cm = unit_square(16, 4, clamped=("left",))
     delta = default_penalty(cm.h, 1.0)
-    sol = solve_primal_monolithic(cm.mesh, cm.facet_tags, material_fields(cm.mesh, bar_model(f1)), delta=delta)
-    errors = [solve_primal_ms_hybrid(cm, bar_model(f1), delta=delta, layers=m, reference=sol.u, options=TIGHT)
+    sol = solve_primal_monolithic(bar_model(f1).on(cm), delta=delta)
+    errors = [solve_primal_ms_hybrid(bar_model(f1).on(cm), alpha="Emin", delta=delta, cem=CEMOptions(layers=m),
+                                     reference=sol.u, options=TIGHT)
               for m in (1, 2, 3)]
     assert all(r.converged for r in errors)
     e = [r.e_u for r in errors]
@@ -94,7 +96,7 @@ def test_bar_mixed_exact_and_algorithm_2(f1):
     """Arnold–Winther with traction-free top and bottom: the stress is the penalized bar's to round-off
     (it was 65 %/83 % off when every side but Γ_C was silently clamped); Algorithm 2 reaches it."""
     cm = unit_square(16, 4, clamped=("left",))
-    sol = solve_mixed_monolithic(cm, bar_model(f1))
+    sol = solve_mixed_monolithic(bar_model(f1).on(cm))
     exact = bar_solution(f1, epsilon=sol.epsilon)
     s_ex, u_ex = _bar_exact(cm.mesh, exact)
     assert _l2(sol.sigma - s_ex, cm.mesh) < 1e-12 * _l2(s_ex, cm.mesh)
@@ -102,7 +104,7 @@ def test_bar_mixed_exact_and_algorithm_2(f1):
     assert abs(sol.profile.force + exact.sigma_end) < 1e-12
     # pushing: no penalty error (σ_c < 0 everywhere); pulling: the tensile stress ε|u(1)| = O(ε)
     assert sol.profile.max_tensile == pytest.approx(max(exact.sigma_end, 0.0), abs=1e-14)
-    alg2 = solve_mixed_hybrid(cm, bar_model(f1), options=TIGHT)
+    alg2 = solve_mixed_hybrid(bar_model(f1).on(cm), options=TIGHT)
     assert alg2.converged
     assert _l2(alg2.sigma - s_ex, cm.mesh) < 1e-9 * _l2(s_ex, cm.mesh)
 
@@ -114,10 +116,11 @@ def test_bar_algorithm_4(f1):
     everywhere): e_σ against the mixed monolithic solve falls ≥ 10× per layer; with m = 3 the patches cover Ω₁
     (H = 1/4): the stress is the penalized bar's to round-off, as the fine mixed solve's."""
     cm = unit_square(16, 4, clamped=("left",))
-    sol = solve_mixed_monolithic(cm, bar_model(f1))
+    sol = solve_mixed_monolithic(bar_model(f1).on(cm))
     exact = bar_solution(f1, epsilon=sol.epsilon)
     s_ex, _ = _bar_exact(cm.mesh, exact)
-    res = [solve_mixed_ms_hybrid(cm, bar_model(f1), layers=m, reference=sol, options=NEWTON) for m in (1, 2, 3)]
+    res = [solve_mixed_ms_hybrid(bar_model(f1).on(cm), cem=MixedCEMOptions(layers=m), reference=sol,
+                                 options=NEWTON) for m in (1, 2, 3)]
     assert all(r.converged for r in res)
     e = [r.e_sigma for r in res]
     # measured: 3.8e-2, 1.1e-3, 1e-13 (push); 4.0e-2, 1.7e-3, 2e-13 (pull)
@@ -141,7 +144,8 @@ def test_layered_patch_force_indentation(method):
     cm = unit_square(16, 4, clamped=("left",))
     depths = [0.01, 0.02, 0.015]
     model = layered_model(BOUNDS, MODULI, depth=0.0)
-    curve = force_indentation(method, cm, model, depths, direction=(-1.0, 0.0), options=TIGHT)
+    iteration = {} if method.endswith("monolithic") else {"options": TIGHT}  # (a monolithic solve has no iteration)
+    curve = force_indentation(model.on(cm), method, depths, direction=(-1.0, 0.0), **iteration)
     delta = default_penalty(cm.h, MODULI[-1]) if method.startswith("primal") else 0.0
     expected = [layered_pressure(BOUNDS, MODULI, d, delta=delta) for d in depths]
     assert np.allclose(curve.forces, expected, rtol=1e-10, atol=0)
@@ -155,7 +159,7 @@ def test_layered_patch_primal_fields_exact():
     d0 = 0.02
     model = layered_model(BOUNDS, MODULI, depth=d0)
     delta = default_penalty(cm.h, MODULI[-1])
-    sol = solve_primal_monolithic(cm.mesh, cm.facet_tags, material_fields(cm.mesh, model), delta=delta)
+    sol = solve_primal_monolithic(model.on(cm), delta=delta)
     p = layered_pressure(BOUNDS, MODULI, d0, delta=delta)
     x = sol.u.function_space.tabulate_dof_coordinates().T
     u = sol.u.x.array.reshape(-1, 2)
@@ -167,7 +171,7 @@ def test_layered_patch_primal_fields_exact():
 def test_layered_patch_mixed_fields_exact():
     cm = unit_square(16, 4, clamped=("left",))
     d0 = 0.02
-    sol = solve_mixed_monolithic(cm, layered_model(BOUNDS, MODULI, depth=d0))
+    sol = solve_mixed_monolithic(layered_model(BOUNDS, MODULI, depth=d0).on(cm))
     p = layered_pressure(BOUNDS, MODULI, d0)
     s = sol.sigma.x.array.reshape(-1, 3)
     assert np.max(np.abs(s - [-p, 0.0, 0.0])) < 1e-9 * p  # contrast 10³: round-off ~1e-10
@@ -188,8 +192,9 @@ def test_layered_patch_algorithm_3():
     model = layered_model(BOUNDS, MODULI, depth=d0)
     delta = default_penalty(cm.h, MODULI[-1])
     p = layered_pressure(BOUNDS, MODULI, d0, delta=delta)
-    sol = solve_primal_monolithic(cm.mesh, cm.facet_tags, material_fields(cm.mesh, model), delta=delta)
-    res = {m: solve_primal_ms_hybrid(cm, model, delta=delta, layers=m, reference=sol.u, options=NEWTON)
+    sol = solve_primal_monolithic(model.on(cm), delta=delta)
+    res = {m: solve_primal_ms_hybrid(model.on(cm), alpha="Emin", delta=delta, cem=CEMOptions(layers=m),
+                                     reference=sol.u, options=NEWTON)
            for m in (2, 3)}
     assert all(r.converged for r in res.values())
     force = {m: abs(r.profile.force / p - 1) for m, r in res.items()}
@@ -208,8 +213,9 @@ def test_layered_patch_algorithm_4():
     d0 = 0.02
     model = layered_model(BOUNDS, MODULI, depth=d0)
     p = layered_pressure(BOUNDS, MODULI, d0)
-    sol = solve_mixed_monolithic(cm, model)
-    res = {m: solve_mixed_ms_hybrid(cm, model, layers=m, reference=sol, options=NEWTON) for m in (2, 3)}
+    sol = solve_mixed_monolithic(model.on(cm))
+    res = {m: solve_mixed_ms_hybrid(model.on(cm), cem=MixedCEMOptions(layers=m), reference=sol,
+                                    options=NEWTON) for m in (2, 3)}
     assert all(r.converged for r in res.values())
     assert res[3].e_sigma < 1e-8 < res[2].e_sigma < 0.2  # measured 3e-10, 0.10
     assert abs(res[3].profile.force / p - 1) < 1e-10
@@ -236,7 +242,7 @@ def _hertz(refinement, coarse: float | None = None):
 def hertz_mixed():
     """The mixed monolithic Hertz solve at a/20 (r = 1), on the mesh with coarse cells of side ½."""
     cm, spec, model = _hertz(1.0, coarse=0.5)
-    return cm, spec, model, solve_mixed_monolithic(cm, model)
+    return cm, spec, model, solve_mixed_monolithic(model.on(cm))
 
 
 def _check_hertz(errors, spec):
@@ -253,12 +259,12 @@ def test_hertz_primal_monolithic_and_algorithm_1():
     for r in (0.5, 1.0):
         cm, spec, model = _hertz(r)
         delta = default_penalty(cm.h, E)
-        sol = solve_primal_monolithic(cm.mesh, cm.facet_tags, material_fields(cm.mesh, model), delta=delta)
+        sol = solve_primal_monolithic(model.on(cm), delta=delta)
         results.append(hertz_errors(sol.profile, radius=R, E=E, nu=NU, h_contact=spec.h_contact))
     coarse, fine = results
     _check_hertz(fine, spec)
     assert fine.l2_error < coarse.l2_error and abs(fine.peak_error) < abs(coarse.peak_error)
-    alg1 = solve_primal_hybrid(cm, model, delta=delta, reference=sol.u)
+    alg1 = solve_primal_hybrid(model.on(cm), delta=delta, reference=sol.u)
     assert alg1.converged and alg1.e_u < 1e-4
     _check_hertz(hertz_errors(alg1.profile, radius=R, E=E, nu=NU, h_contact=spec.h_contact), spec)
 
@@ -272,7 +278,7 @@ def test_hertz_mixed_monolithic_and_algorithm_2(hertz_mixed):
     _check_hertz(errors, spec)
     assert errors.l2_error < 0.005 and abs(errors.peak_error) < 0.003
     assert sol.profile.max_tensile < 1e-6 * errors.p0  # the penalty error: tensile stress ε·gap
-    alg2 = solve_mixed_hybrid(cm, model, reference=sol)
+    alg2 = solve_mixed_hybrid(model.on(cm), reference=sol)
     assert alg2.converged and alg2.e_sigma < 1e-3
     _check_hertz(hertz_errors(alg2.profile, radius=R, E=E, nu=NU, h_contact=spec.h_contact), spec)
 
@@ -283,9 +289,10 @@ def test_hertz_algorithm_3():
     bounds hold (measured peak 0.67 %, L² 1.24 %; the fine solve 0.65 %, 1.23 %)."""
     cm, spec, model = _hertz(1.0, coarse=0.5)
     delta = default_penalty(cm.h, E)
-    sol = solve_primal_monolithic(cm.mesh, cm.facet_tags, material_fields(cm.mesh, model), delta=delta)
+    sol = solve_primal_monolithic(model.on(cm), delta=delta)
     fine = hertz_errors(sol.profile, radius=R, E=E, nu=NU, h_contact=spec.h_contact)
-    res = {m: solve_primal_ms_hybrid(cm, model, delta=delta, layers=m, reference=sol.u, options=NEWTON)
+    res = {m: solve_primal_ms_hybrid(model.on(cm), alpha="Emin", delta=delta, cem=CEMOptions(layers=m),
+                                     reference=sol.u, options=NEWTON)
            for m in (1, 2)}
     assert all(r.converged for r in res.values())
     assert res[2].e_u < res[1].e_u / 20 and res[2].e_u < 1e-2, (res[1].e_u, res[2].e_u)
@@ -300,7 +307,8 @@ def test_hertz_algorithm_4(hertz_mixed):
     jagged boundaries): e_σ against the mixed monolithic solve falls ≥ 10× per layer (0.27, 0.023); from m = 2 on
     the Hertz bounds hold (measured peak 0.03 %, L² 0.23 %; the fine solve 0.04 %, 0.37 %)."""
     cm, spec, model, sol = hertz_mixed
-    res = {m: solve_mixed_ms_hybrid(cm, model, layers=m, reference=sol, options=NEWTON) for m in (1, 2)}
+    res = {m: solve_mixed_ms_hybrid(model.on(cm), cem=MixedCEMOptions(layers=m), reference=sol,
+                                    options=NEWTON) for m in (1, 2)}
     assert all(r.converged for r in res.values())
     assert res[2].e_sigma < res[1].e_sigma / 10 and res[2].e_sigma < 0.05, (res[1].e_sigma, res[2].e_sigma)
     errors = hertz_errors(res[2].profile, radius=R, E=E, nu=NU, h_contact=spec.h_contact)

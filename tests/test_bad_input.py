@@ -295,7 +295,8 @@ CASES = [
     Case("--set without --case", _args("--set", "mesh.h=8"), 2, "--set changes a key of a case file"),
     # numbers out of range and numerical failure
     Case("E = 1e308 (overflow)", _args("--E-high", "1e308"), 2, "Rescale the units"),
-    Case("contrast 1e100 (beyond double precision)", _args("--E-high", "1e100"), 4,
+    # δ = 1e-3·h/E_high given: the default takes E_c on Gamma_C, which the channels of model 1 do not reach at H = 1/4
+    Case("contrast 1e100 (beyond double precision)", _args("--E-high", "1e100", "--delta", "6.25e-105"), 4,
          "numerical failure: fc_primal_omega2: semismooth Newton did not converge"),
     # ε 6e6 times below the default: the saddle-point solves lose digits in proportion to 1/ε, and the Newton
     # and UFL residual checks miss their tolerance by ~10³ (serial, 2 ranks, models 1 and 2); near ε = 1e-8

@@ -25,10 +25,9 @@ from fenics_contact.hybrid.iteration import IterationOptions
 from fenics_contact.hybrid.mixed import solve_mixed_hybrid
 from fenics_contact.hybrid.primal import solve_primal_hybrid
 from fenics_contact.problem.boundary import BoundaryConditions, check_boundary_groups
-from fenics_contact.problem.fields import material_fields
 from fenics_contact.problem.geometry import build_unit_square_model, gmsh_session, read_mesh, unit_square
-from fenics_contact.problem.models import TestModel, constant_field
 from fenics_contact.problem.obstacles import SignedDistance
+from fenics_contact.problem.problem import ContactProblem, constant_field
 from fenics_contact.problem.tags import neumann_tag
 
 serial = pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="mixed (Arnold–Winther) methods are serial")
@@ -47,14 +46,15 @@ def _sigma(x):
     return np.vstack([(LAM + 2 * MU) * exx + LAM * eyy, 0 * x[0], LAM * exx + (LAM + 2 * MU) * eyy])
 
 
-def manufactured_model() -> TestModel:
+def manufactured_model() -> ContactProblem:
     f = np.array([0.2 * (LAM + 2 * MU) + 0.1 * LAM, -0.04 * (LAM + 2 * MU)])  # −div σ (constant)
     top = lambda x: np.vstack([0 * x[0], _sigma(x)[2]])  # noqa: E731  σn, n = (0, 1)
     bottom = lambda x: np.vstack([0 * x[0], -_sigma(x)[2]])  # noqa: E731  n = (0, −1)
     gap = SignedDistance(lambda x: 0.05 * x[1] ** 2 - 0.3 + (1.0 - x[0]),
                          normal=lambda x: np.vstack([-np.ones(x.shape[1]), np.zeros(x.shape[1])]))
-    return TestModel(
-        "manufactured", constant_field(E), constant_field(NU), lambda x: np.repeat(f[:, None], x.shape[1], axis=1),
+    return ContactProblem(
+        name="manufactured", youngs_modulus=constant_field(E), poisson_ratio=constant_field(NU),
+        load=lambda x: np.repeat(f[:, None], x.shape[1], axis=1),
         boundary=BoundaryConditions(displacement=_u, tractions={GROUPS["top"]: top, GROUPS["bottom"]: bottom}),
         obstacle=gap,
     )
@@ -84,13 +84,12 @@ def test_primal_manufactured_rate_and_algorithm_1():
     errors = []
     for n in (8, 16):
         cm = _mesh(n)
-        fields = material_fields(cm.mesh, manufactured_model())
         delta = default_penalty(cm.h, E)
-        sol = solve_primal_monolithic(cm.mesh, cm.facet_tags, fields, delta=delta)
+        sol = solve_primal_monolithic(manufactured_model().on(cm), delta=delta)
         assert np.all(sol.profile.active)  # the whole of Γ_C is in contact
         errors.append(_l2(sol.u - _exact_u(cm.mesh), cm.mesh) / _l2(_exact_u(cm.mesh), cm.mesh))
     assert errors[1] < 2e-3 and np.log2(errors[0] / errors[1]) > 1.8, errors
-    hybrid = solve_primal_hybrid(cm, manufactured_model(), delta=delta, reference=sol.u,
+    hybrid = solve_primal_hybrid(manufactured_model().on(cm), delta=delta, reference=sol.u,
                                  options=IterationOptions(tol=1e-10))
     assert hybrid.converged and hybrid.e_u < 1e-8
 
@@ -99,14 +98,14 @@ def test_primal_manufactured_rate_and_algorithm_1():
 def test_mixed_manufactured_exact_and_algorithm_2():
     cm = _mesh(8)
     model = manufactured_model()
-    sol = solve_mixed_monolithic(cm, model)
+    sol = solve_mixed_monolithic(model.on(cm))
     assert np.all(sol.profile.active)
     s_ex = _exact_sigma(cm.mesh)
     assert _l2(sol.sigma - s_ex, cm.mesh) / _l2(s_ex, cm.mesh) < 1e-11
     # u_h is the L² projection of the quadratic u: O(h²)
     assert _l2(sol.u - _exact_u(cm.mesh), cm.mesh) / _l2(_exact_u(cm.mesh), cm.mesh) < 5e-3
-    split = solve_mixed_monolithic(cm, model, split_interface=True)
-    alg2 = solve_mixed_hybrid(cm, model, reference=split, options=IterationOptions(tol=1e-11))
+    split = solve_mixed_monolithic(model.on(cm), split_interface=True)
+    alg2 = solve_mixed_hybrid(model.on(cm), reference=split, options=IterationOptions(tol=1e-11))
     assert alg2.converged
     assert _l2(alg2.sigma - s_ex, cm.mesh) / _l2(s_ex, cm.mesh) < 1e-8
 
@@ -164,25 +163,27 @@ def test_algorithm_3_takes_a_prescribed_displacement():
     manufactured problem (whole Γ_C in contact): the error against Algorithm 1's fixed point falls with the
     oversampling m, and with patches covering Ω₁ (m = 3 on a 3 × 4 coarse Ω₁) it is that fixed point to the
     CEM's round-off; without the lifting (clamped instead) the answer is a different problem."""
+    from fenics_contact.multiscale.cem import CEMOptions
     from fenics_contact.multiscale.primal import solve_primal_ms_hybrid
 
     cm = _mesh(16)
     model = manufactured_model()
     delta = default_penalty(cm.h, E)
-    fields = material_fields(cm.mesh, model)
-    mono = solve_primal_monolithic(cm.mesh, cm.facet_tags, fields, delta=delta)
+    mono = solve_primal_monolithic(model.on(cm), delta=delta)
     options = IterationOptions(tol=1e-10, accel="newton")
-    alg1 = solve_primal_hybrid(cm, model, delta=delta, reference=mono.u, options=options)
+    alg1 = solve_primal_hybrid(model.on(cm), delta=delta, reference=mono.u, options=options)
     assert alg1.converged and alg1.e_u < 1e-8
     errors = []
     for m in (1, 2, 3):
-        res = solve_primal_ms_hybrid(cm, model, delta=delta, layers=m, nbasis=3, reference=mono.u, options=options)
+        res = solve_primal_ms_hybrid(model.on(cm), alpha="Emin", delta=delta, cem=CEMOptions(layers=m, nbasis=3),
+                                     reference=mono.u, options=options)
         assert res.converged
         errors.append(res.e_u)
     print("Algorithm 3 with u_D, e_u for m = 1, 2, 3:", errors)
     assert errors[2] < 1e-6 and errors[1] < errors[0] / 5 and errors[2] < errors[1] / 5, errors
     exact = _l2(_exact_u(cm.mesh), cm.mesh)
     assert _l2(mono.u - _exact_u(cm.mesh), cm.mesh) / exact < 2e-3
-    clamped = solve_primal_ms_hybrid(cm, model.with_(boundary=BoundaryConditions(tractions=dict(
-        model.boundary.tractions))), delta=delta, layers=3, nbasis=3, reference=mono.u, options=options)
+    clamped = solve_primal_ms_hybrid(model.with_(boundary=BoundaryConditions(tractions=dict(
+        model.boundary.tractions))).on(cm), alpha="Emin", delta=delta, cem=CEMOptions(layers=3, nbasis=3),
+        reference=mono.u, options=options)
     assert clamped.e_u > 1e-2  # u_D matters: dropping it is not a small error

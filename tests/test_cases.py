@@ -110,7 +110,7 @@ def test_a_case_file_reads_into_validated_dataclasses(tmp_path):
 
 
 def test_the_readme_case_file_is_valid(tmp_path):
-    """The annotated case of the README's "Describe your own problem" reads and builds its model."""
+    """The annotated case of the README's "Describe your own problem" reads and builds its problem."""
     readme = (Path(__file__).parents[1] / "README.md").read_text()
     text = readme.split("## Describe your own problem")[1].split("```toml\n")[1].split("```")[0]
     path = tmp_path / "readme.toml"
@@ -120,8 +120,8 @@ def test_the_readme_case_file_is_valid(tmp_path):
     assert case.run["multiscale"] == {"layers": 4}
     options, _ = _options(["run", "--case", str(path)])
     assert (options.method, options.alpha, options.layers) == ("primal", "E*h^-1/2", None)
-    model = case.model(case.build_mesh())
-    assert model.boundary.tractions[0][0] == "Gamma_N_top"
+    problem = case.problem(case.build_mesh())
+    assert problem.boundary.tractions[0][0] == "Gamma_N_top"
 
 
 def test_the_flags_override_the_case_and_only_the_methods_tables_apply(tmp_path):
@@ -150,15 +150,13 @@ def test_materials_by_group_follow_the_fibres(tmp_path):
     sagitta), 1 elsewhere; ν likewise from its own table."""
     from dolfinx import mesh as dmesh
 
-    from fenics_contact.problem.fields import material_fields
-
     spec = importlib.util.spec_from_file_location("make_composite_mesh", CASES / "make_composite_mesh.py")
     composite = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(composite)
 
     case = load_case(CASES / "composite.toml")
     mesh = case.build_mesh()
-    fields = material_fields(mesh.cm.mesh, case.model(mesh))
+    fields = case.problem(mesh).fields
     tdim = mesh.cm.mesh.topology.dim
     cells = np.arange(mesh.cm.mesh.topology.index_map(tdim).size_local, dtype=np.int32)
     x = dmesh.compute_midpoints(mesh.cm.mesh, tdim, cells)[:, :2]

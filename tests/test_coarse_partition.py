@@ -21,7 +21,6 @@ from fenics_contact.hybrid.iteration import IterationOptions
 from fenics_contact.multiscale import cem
 from fenics_contact.multiscale import primal as primal_ms
 from fenics_contact.problem import geometry, models
-from fenics_contact.problem.fields import material_fields
 from fenics_contact.problem.tags import Boundary, Subdomain
 from multiscale_layers import layer_errors
 
@@ -213,10 +212,10 @@ def test_algorithm3_on_any_domain_matches_monolithic_with_all_modes(case, reques
     """All local modes and global patches: V_ms is the fine space, so Algorithm 3 lands on the monolithic
     solution (loads in Ω₁, traction-free sides)."""
     cm = request.getfixturevalue(case)
-    fields = material_fields(cm.mesh, MODEL)
     delta = primal.default_penalty(cm.h, 1.0)
-    ref = primal.solve_primal_monolithic(cm.mesh, cm.facet_tags, fields, delta=delta)
-    res = primal_ms.solve_primal_ms_hybrid(cm, MODEL, delta=delta, layers=50, nbasis=None, reference=ref.u,
+    ref = primal.solve_primal_monolithic(MODEL.on(cm), delta=delta)
+    res = primal_ms.solve_primal_ms_hybrid(MODEL.on(cm), alpha="Emin", delta=delta,
+                                           cem=cem.CEMOptions(layers=50, nbasis=None), reference=ref.u,
                                            options=IterationOptions(tol=1e-11))
     assert res.converged
     assert res.e_u < 1e-9 and res.step.error_energy() < 1e-8
@@ -225,9 +224,8 @@ def test_algorithm3_on_any_domain_matches_monolithic_with_all_modes(case, reques
 @pytest.mark.parametrize("case", ["l_shape", "partitioned"])
 def test_algorithm3_on_any_domain_error_falls_with_layers(case, request):
     cm = request.getfixturevalue(case)
-    fields = material_fields(cm.mesh, MODEL)
     delta = primal.default_penalty(cm.h, 1.0)
-    ref = primal.solve_primal_monolithic(cm.mesh, cm.facet_tags, fields, delta=delta)
+    ref = primal.solve_primal_monolithic(MODEL.on(cm), delta=delta)
     e = layer_errors(cm, MODEL, (1, 2, 3), delta=delta, reference=ref.u)
     assert np.all(e[:-1] / e[1:] > 3.0), e
 
@@ -240,12 +238,13 @@ def test_algorithm4_on_any_domain_error_falls_with_layers(case, request):
     L-shape 0.25, 2.6e-2, 2.6e-3; user partition 0.51, 2.7e-2, 1.3e-3)."""
     from fenics_contact.fem.mixed import solve_mixed_monolithic
     from fenics_contact.multiscale.mixed import solve_mixed_ms_hybrid
+    from fenics_contact.multiscale.mixed_cem import MixedCEMOptions
 
     cm = request.getfixturevalue(case)
-    ref = solve_mixed_monolithic(cm, MODEL)
+    ref = solve_mixed_monolithic(MODEL.on(cm))
     errors = []
     for layers in (1, 2, 3):
-        res = solve_mixed_ms_hybrid(cm, MODEL, layers=layers, reference=ref,
+        res = solve_mixed_ms_hybrid(MODEL.on(cm), cem=MixedCEMOptions(layers=layers), reference=ref,
                                     options=IterationOptions(tol=1e-10, accel="newton"))
         assert res.converged and res.history.transmission_residual < 1e-10
         errors.append(res.e_sigma)

@@ -5,7 +5,6 @@ import pytest
 
 from fenics_contact.fem.contact import NewtonOptions
 from fenics_contact.errors import ConvergenceError, InputError
-from fenics_contact.problem.fields import material_fields
 from fenics_contact.problem.geometry import unit_square
 from fenics_contact.problem.models import get_model
 from fenics_contact.fem.primal import default_penalty, solve_primal_monolithic
@@ -21,9 +20,9 @@ def mesh32():
 @pytest.mark.parametrize("number, expected", [(1, (0.0, 0.5)), (2, (0.4, 0.6))])
 def test_complementarity_and_active_set(mesh32, number, expected):
     cm = mesh32
-    fields = material_fields(cm.mesh, get_model(number))
+    problem = get_model(number).on(cm)
     delta = default_penalty(cm.h, 1.0)
-    sol = solve_primal_monolithic(cm.mesh, cm.facet_tags, fields, delta=delta)
+    sol = solve_primal_monolithic(problem, delta=delta)
     assert 1 <= sol.newton.steps <= 8
     p = sol.profile
     scale = np.max(np.abs(p.sigma_c))
@@ -41,8 +40,8 @@ def test_complementarity_and_active_set(mesh32, number, expected):
 
 def test_penetration_vanishes_with_the_penalty(mesh32):
     cm = mesh32
-    fields = material_fields(cm.mesh, get_model(1))
-    pen = [solve_primal_monolithic(cm.mesh, cm.facet_tags, fields, delta=f * cm.h).profile.penetration
+    problem = get_model(1).on(cm)
+    pen = [solve_primal_monolithic(problem, delta=f * cm.h).profile.penetration
            for f in (1e-1, 1e-3, 1e-5)]
     ratios = np.array(pen[:-1]) / np.array(pen[1:])
     assert np.all((ratios > 50) & (ratios < 200)), pen  # penetration = O(δ)
@@ -50,9 +49,9 @@ def test_penetration_vanishes_with_the_penalty(mesh32):
 
 def test_bad_penalty_and_newton_cap(mesh32):
     cm = mesh32
-    fields = material_fields(cm.mesh, get_model(2))
+    problem = get_model(2).on(cm)
     with pytest.raises(InputError, match="δ"):
-        solve_primal_monolithic(cm.mesh, cm.facet_tags, fields, delta=0.0)
+        solve_primal_monolithic(problem, delta=0.0)
     with pytest.raises(ConvergenceError, match="did not converge"):
-        solve_primal_monolithic(cm.mesh, cm.facet_tags, fields, delta=default_penalty(cm.h, 1.0),
+        solve_primal_monolithic(problem, delta=default_penalty(cm.h, 1.0),
                                 newton=NewtonOptions(max_iterations=1), prefix="capped_")

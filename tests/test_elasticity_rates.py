@@ -9,7 +9,7 @@ from dolfinx import fem
 from fenics_contact.problem.fields import MaterialFields
 from fenics_contact.problem.materials import lame, strain, stress
 from fenics_contact.fem.primal import PrimalSubproblem
-from fenics_contact.problem.analytic import clamped_square, p1_locking_error
+from fenics_contact.fem.locking import clamped_square, p1_locking_error
 
 
 def _errors(n: int) -> tuple[float, float]:
@@ -56,21 +56,20 @@ def test_primal_methods_warn_when_p1_locks(caplog):
     from fenics_contact.hybrid.iteration import IterationOptions
     from fenics_contact.hybrid.primal import solve_primal_hybrid
     from fenics_contact.problem import geometry, models
-    from fenics_contact.problem.fields import material_fields
 
     assert p1_locking_error(16, P1_LOCKING_NU) > 5 * p1_locking_error(16, 0.3)  # 0.31 against 0.051
     for nu, warned in ((0.35, False), (P1_LOCKING_NU, True)):
         cm = geometry.unit_square(16, 4)
         caplog.clear()
-        fields = material_fields(cm.mesh, models.get_model(1, nu=nu))
-        solve_primal_monolithic(cm.mesh, cm.facet_tags, fields, delta=default_penalty(cm.h, 1.0)).problem.destroy()
+        problem = models.get_model(1, nu=nu).on(cm)
+        solve_primal_monolithic(problem, delta=default_penalty(cm.h, 1.0)).problem.destroy()
         assert caplog.text.count("P1 displacement elements lock") == int(warned), nu
         # Algorithm 1 on the same mesh: not warned twice; on a new mesh it warns itself
-        solve_primal_hybrid(cm, models.get_model(1, nu=nu), delta=default_penalty(cm.h, 1.0),
+        solve_primal_hybrid(problem, delta=default_penalty(cm.h, 1.0),
                             options=IterationOptions(tol=1e-3))
         assert caplog.text.count("P1 displacement elements lock") == int(warned), nu
         caplog.clear()
         other = geometry.unit_square(16, 4)
-        solve_primal_hybrid(other, models.get_model(1, nu=nu), delta=default_penalty(other.h, 1.0),
+        solve_primal_hybrid(models.get_model(1, nu=nu).on(other), delta=default_penalty(other.h, 1.0),
                             options=IterationOptions(tol=1e-3))
         assert caplog.text.count("P1 displacement elements lock") == int(warned), nu

@@ -93,9 +93,8 @@ def test_user_mesh_with_other_tag_numbers(tmp_path_factory):
     # and it solves to the same answer as the built-in mesh
     norms = []
     for cm in (user, built):
-        fields = material_fields(cm.mesh, model_2())
         # same δ on both
-        sol = solve_primal_monolithic(cm.mesh, cm.facet_tags, fields, delta=default_penalty(1 / 8, 1.0))
+        sol = solve_primal_monolithic(model_2().on(cm), delta=default_penalty(1 / 8, 1.0))
         norms.append(sol.u.x.petsc_vec.norm())
     assert np.isclose(norms[0], norms[1], rtol=1e-12)
     # h of a user mesh is √(2·largest cell area): 1/n on the same grid as the built-in mesh
@@ -147,7 +146,7 @@ def test_mesh_too_coarse_for_the_load_is_rejected():
     """h = 1/4 has no cell midpoint in the load column x >= 15/16: a clear error, not u = 0."""
     cm = unit_square(4, 2)
     with pytest.raises(InputError, match="zero on every cell"):
-        material_fields(cm.mesh, model_2(), require_load=True)
+        model_2().on(cm).check_loaded()
 
 
 def test_open_ends_of_the_contact_boundary():

@@ -14,17 +14,17 @@ from fenics_contact.hybrid.primal import solve_primal_hybrid
 
 def _setup(n, n_coarse, number):
     cm = unit_square(n, n_coarse)
-    model = get_model(number)
+    problem = get_model(number).on(cm)
     delta = default_penalty(cm.h, 1.0)
-    ref = solve_primal_monolithic(cm.mesh, cm.facet_tags, material_fields(cm.mesh, model), delta=delta)
-    return cm, model, delta, ref
+    ref = solve_primal_monolithic(problem, delta=delta)
+    return cm, problem, delta, ref
 
 
 @pytest.mark.parametrize("number", [1, 2])
 def test_fixed_point_is_the_monolithic_solution(number):
     """Theorem 3.1: with vertex quadrature on γ the converged iterate equals the monolithic solve."""
-    cm, model, delta, ref = _setup(32, 8, number)
-    res = solve_primal_hybrid(cm, model, alpha="E", delta=delta, reference=ref.u,
+    cm, problem, delta, ref = _setup(32, 8, number)
+    res = solve_primal_hybrid(problem, alpha="E", delta=delta, reference=ref.u,
                               options=IterationOptions(tol=1e-10, accel="anderson"))
     assert res.converged
     assert res.e_u <= 1e-8, res.e_u
@@ -38,8 +38,8 @@ def test_fixed_point_is_the_monolithic_solution(number):
 
 
 def test_plain_and_anderson_updates_reach_the_same_solution():
-    cm, model, delta, ref = _setup(16, 4, 1)
-    runs = {accel: solve_primal_hybrid(cm, model, alpha="E", delta=delta, reference=ref.u,
+    cm, problem, delta, ref = _setup(16, 4, 1)
+    runs = {accel: solve_primal_hybrid(problem, alpha="E", delta=delta, reference=ref.u,
                                        options=IterationOptions(tol=1e-6, accel=accel))
             for accel in ("none", "anderson")}
     for res in runs.values():
@@ -51,17 +51,17 @@ def test_plain_and_anderson_updates_reach_the_same_solution():
 
 
 def test_iteration_cap_reports_not_converged():
-    cm, model, delta, _ = _setup(16, 4, 2)
-    res = solve_primal_hybrid(cm, model, delta=delta, options=IterationOptions(max_iterations=4, accel="none"))
+    cm, problem, delta, _ = _setup(16, 4, 2)
+    res = solve_primal_hybrid(problem, delta=delta, options=IterationOptions(max_iterations=4, accel="none"))
     assert not res.converged and res.iterations == 4
     assert res.history.rel_changes[-1] > 1e-6
 
 
 @pytest.mark.parametrize("alpha", [0.0, -1.0, "foo", "-2E", "0E", float("nan"), "E*h^x", "h^1/0", "E*-1"])
 def test_bad_transmission_coefficient(alpha):
-    cm, model, delta, _ = _setup(8, 4, 1)
+    cm, problem, delta, _ = _setup(8, 4, 1)
     with pytest.raises(InputError):
-        solve_primal_hybrid(cm, model, alpha=alpha, delta=delta)
+        solve_primal_hybrid(problem, alpha=alpha, delta=delta)
 
 
 @pytest.mark.parametrize("kwargs", [{"tol": 0.0}, {"tol": 2.0}, {"max_iterations": 0}, {"accel": "magic"}])

@@ -17,7 +17,7 @@ import pytest
 from mpi4py import MPI
 
 import fenics_contact  # noqa: F401
-from fenics_contact import indentation
+from fenics_contact import methods
 from fenics_contact.errors import InputError
 from fenics_contact.hybrid.iteration import IterationOptions
 from fenics_contact.indentation import complementarity, force_indentation
@@ -76,11 +76,11 @@ def test_primal_ms_curve_converges_with_layers_offline_once(monkeypatch):
     """Algorithm 3 load steps: error against the fine curve falls with m; Ω₁ built once per curve."""
     cm = unit_square(32, 8)
     model = _model()
-    fine = force_indentation("primal-monolithic", cm, model, DEPTHS, direction=DIRECTION)
+    fine = force_indentation(model.on(cm), "primal-monolithic", DEPTHS, direction=DIRECTION)
     calls = _counting(monkeypatch, primal_ms, "Omega1Multiscale")
     errors = []
     for m in (1, 2, 3):
-        curve = force_indentation("primal-ms", cm, model, DEPTHS, direction=DIRECTION, options=NEWTON,
+        curve = force_indentation(model.on(cm), "primal-ms", DEPTHS, direction=DIRECTION, options=NEWTON,
                                   cem=CEMOptions(layers=m))
         assert len(calls) == m, "the Ω₁ offline phase runs once per curve, not once per step"
         _check_evidence(curve, penetration=1e-4, tension=1e-10)
@@ -91,7 +91,7 @@ def test_primal_ms_curve_converges_with_layers_offline_once(monkeypatch):
     # measured (h = 1/32, H = 1/8): 1.1, 7.3e-3, 2.0e-4
     assert errors[0] > 10 * errors[1] > 100 * errors[2] and errors[2] < 1e-3, errors
     # (b) the same step again: no offline work, warm Anderson starts from the previous data
-    again = force_indentation("primal-ms", cm, model, [DEPTHS[-1], DEPTHS[-1]], direction=DIRECTION,
+    again = force_indentation(model.on(cm), "primal-ms", [DEPTHS[-1], DEPTHS[-1]], direction=DIRECTION,
                               options=IterationOptions(tol=TOL), step=curve.step)
     assert len(calls) == 3
     assert again.steps[0].force == pytest.approx(curve.steps[-1].force, rel=1e-6)
@@ -106,12 +106,12 @@ def test_mixed_ms_curve_converges_with_layers_offline_once(monkeypatch):
     """Algorithm 4 load steps: error against Algorithm 2's curve falls with m; Ω₁ built once per curve."""
     cm = unit_square(16, 4)
     model = _model()
-    fine = force_indentation("mixed", cm, model, DEPTHS, direction=DIRECTION, options=NEWTON)
+    fine = force_indentation(model.on(cm), "mixed", DEPTHS, direction=DIRECTION, options=NEWTON)
     _check_evidence(fine, penetration=0.0, tension=1e-2)
     calls = _counting(monkeypatch, mixed_ms, "MixedMultiscaleOmega1")
     errors = []
     for m in (1, 2, 3):
-        curve = force_indentation("mixed-ms", cm, model, DEPTHS, direction=DIRECTION, options=NEWTON,
+        curve = force_indentation(model.on(cm), "mixed-ms", DEPTHS, direction=DIRECTION, options=NEWTON,
                                   cem=MixedCEMOptions(layers=m))
         assert len(calls) == m, "the Ω₁ offline phase runs once per curve, not once per step"
         _check_evidence(curve, penetration=0.0, tension=1e-2)
@@ -119,12 +119,12 @@ def test_mixed_ms_curve_converges_with_layers_offline_once(monkeypatch):
         print(f"m = {m}: force error {errors[-1]:.2e}, offline {curve.time_offline_s:.2f} s, steps "
               + ", ".join(f"{s.time_s:.3f} s" for s in curve.steps))
     assert errors[0] > errors[1] > errors[2] and errors[2] < 0.1 * errors[0], errors
-    again = force_indentation("mixed-ms", cm, model, DEPTHS[-1:], direction=DIRECTION, options=NEWTON,
+    again = force_indentation(model.on(cm), "mixed-ms", DEPTHS[-1:], direction=DIRECTION, options=NEWTON,
                               step=curve.step)
     assert len(calls) == 3
     assert again.forces[0] == pytest.approx(curve.forces[-1], rel=1e-8)
     # Anderson on the same step: the Newton forces up to the tolerance; a repeated depth restarts converged
-    anderson = force_indentation("mixed-ms", cm, model, [DEPTHS[-1], DEPTHS[-1]], direction=DIRECTION,
+    anderson = force_indentation(model.on(cm), "mixed-ms", [DEPTHS[-1], DEPTHS[-1]], direction=DIRECTION,
                                  options=IterationOptions(tol=TOL), step=curve.step)
     assert len(calls) == 3
     assert anderson.steps[0].force == pytest.approx(curve.forces[-1], rel=1e-6)
@@ -134,13 +134,13 @@ def test_mixed_ms_curve_converges_with_layers_offline_once(monkeypatch):
 
 def test_multiscale_load_steps_bad_input():
     cm = unit_square(8, 2)
-    with pytest.raises(InputError, match="cem options are for the multiscale"):
-        force_indentation("primal", cm, _model(), [0.01], direction=DIRECTION, cem=CEMOptions())
+    with pytest.raises(InputError, match=r"no option\(s\) \['cem'\].*cem is an option of primal-ms, mixed-ms"):
+        force_indentation(_model().on(cm), "primal", [0.01], direction=DIRECTION, cem=CEMOptions())
     with pytest.raises(InputError, match="CEMOptions"):
-        force_indentation("primal-ms", cm, _model(), [0.01], direction=DIRECTION, cem=MixedCEMOptions())
+        force_indentation(_model().on(cm), "primal-ms", [0.01], direction=DIRECTION, cem=MixedCEMOptions())
     with pytest.raises(InputError, match="step= takes"):
-        force_indentation("primal-monolithic", cm, _model(), [0.01], direction=DIRECTION, step=object())
-    assert "primal-ms" in indentation.METHODS and "mixed-ms" in indentation.METHODS
+        force_indentation(_model().on(cm), "primal-monolithic", [0.01], direction=DIRECTION, step=object())
+    assert "primal-ms" in methods.METHODS and "mixed-ms" in methods.METHODS
 
 
 def test_case_load_steps_multiscale_reuse_the_runs_offline_phase(tmp_path, monkeypatch):

@@ -28,7 +28,6 @@ from fenics_contact.multiscale.cem import CEMOptions
 from fenics_contact.multiscale.mixed import MixedMultiscaleHybridStep
 from fenics_contact.multiscale.mixed_cem import MixedCEMOptions
 from fenics_contact.multiscale.primal import MultiscalePrimalHybridStep
-from fenics_contact.problem.fields import material_fields
 from fenics_contact.problem.geometry import unit_square
 from fenics_contact.problem.models import get_model
 
@@ -67,10 +66,10 @@ def _primal_step(method, number, E_high):
     # penalty and Robin stiffness (the Robin iteration stops with ConvergenceError): relax it there
     newton = NewtonOptions(rtol=1e-6) if E_high > 1e3 else NewtonOptions()
     if method == 1:
-        step = PrimalHybridStep(cm, model, alpha=DEFAULT_ALPHA, delta=delta, newton=newton)
+        step = PrimalHybridStep(model.on(cm), alpha=DEFAULT_ALPHA, delta=delta, newton=newton)
         step.prepare()
     else:
-        step = MultiscalePrimalHybridStep(cm, model, alpha=DEFAULT_ALPHA, delta=delta, newton=newton,
+        step = MultiscalePrimalHybridStep(model.on(cm), alpha=DEFAULT_ALPHA, delta=delta, newton=newton,
                                           cem=CEMOptions(layers=2))
     return cm, model, delta, step
 
@@ -79,10 +78,10 @@ def _mixed_step(method, number, E_high):
     cm = unit_square(16, 4)
     model = get_model(number, E_high=E_high)
     if method == 2:
-        step = MixedHybridStep(cm, model, beta="sqrt-h")
+        step = MixedHybridStep(model.on(cm), beta="sqrt-h")
         step.prepare()
     else:
-        step = MixedMultiscaleHybridStep(cm, model, beta="sqrt-h", cem=MixedCEMOptions(layers=2))
+        step = MixedMultiscaleHybridStep(model.on(cm), beta="sqrt-h", cem=MixedCEMOptions(layers=2))
     return cm, model, step
 
 
@@ -121,7 +120,7 @@ def test_primal_newton_is_the_robin_fixed_point(method, number, E_high):
         assert _distance(robin_fields, newton_fields) <= 1e-8
     if method == 1:  # Theorem 3.1: the fixed point is the monolithic solution
         newton_opts = NewtonOptions(rtol=1e-6) if stiff else NewtonOptions()
-        ref = solve_primal_monolithic(cm.mesh, cm.facet_tags, material_fields(cm.mesh, model), delta=delta,
+        ref = solve_primal_monolithic(model.on(cm), delta=delta,
                                       newton=newton_opts)
         assert _distance([ref.u], newton_fields) <= (1e-8 if stiff else 1e-10)
 
@@ -135,7 +134,7 @@ def test_mixed_newton_is_the_robin_fixed_point(method, number, E_high):
     assert robin.converged
     assert _distance(robin_fields, newton_fields) <= 1e-8
     if method == 2 and number == 3:  # the exact fixed point: the monolithic solution on X̃_h
-        split = solve_mixed_monolithic(cm, model, split_interface=True, epsilon=step.epsilon)
+        split = solve_mixed_monolithic(model.on(cm), split_interface=True, epsilon=step.epsilon)
         step.set_reference(split)
         assert max(step.errors()) <= 1e-10, step.errors()
 
@@ -145,9 +144,9 @@ def test_strategies_agree_and_newton_matches_monolithic():
     cm = unit_square(32, 8)
     model = get_model(3)
     delta = default_penalty(cm.h, 1e3)
-    ref = solve_primal_monolithic(cm.mesh, cm.facet_tags, material_fields(cm.mesh, model), delta=delta)
+    ref = solve_primal_monolithic(model.on(cm), delta=delta)
     for strategy in ("interface", "condensed"):
-        res = solve_primal_hybrid(cm, model, delta=delta, reference=ref.u, options=IterationOptions(
+        res = solve_primal_hybrid(model.on(cm), delta=delta, reference=ref.u, options=IterationOptions(
             tol=TIGHT, accel="newton", newton=InterfaceNewtonOptions(strategy=strategy)))
         assert res.converged and res.e_u <= 1e-10 and res.history.newton_steps <= 8, (strategy, res.e_u)
         assert res.time_interface_offline_s > 0 and res.time_offline_s >= res.time_interface_offline_s
@@ -161,8 +160,8 @@ def test_extreme_alpha_is_never_a_wrong_converged(alpha, accel):
     cm = unit_square(32, 8)
     model = get_model(1)
     delta = default_penalty(cm.h, 1.0)
-    ref = solve_primal_monolithic(cm.mesh, cm.facet_tags, material_fields(cm.mesh, model), delta=delta)
-    res = solve_primal_hybrid(cm, model, alpha=alpha, delta=delta, reference=ref.u,
+    ref = solve_primal_monolithic(model.on(cm), delta=delta)
+    res = solve_primal_hybrid(model.on(cm), alpha=alpha, delta=delta, reference=ref.u,
                               options=IterationOptions(accel=accel, max_iterations=60))
     assert res.e_u <= 1e-5 if res.converged else res.transmission_residual >= 1e-6, (res.converged, res.e_u)
     if accel == "anderson":
@@ -173,8 +172,8 @@ def test_extreme_alpha_is_never_a_wrong_converged(alpha, accel):
 def test_extreme_beta_is_never_a_wrong_converged(accel):
     cm = unit_square(16, 4)
     model = get_model(2)
-    split = solve_mixed_monolithic(cm, model, split_interface=True)
-    res = solve_mixed_hybrid(cm, model, beta=1e12, reference=split,
+    split = solve_mixed_monolithic(model.on(cm), split_interface=True)
+    res = solve_mixed_hybrid(model.on(cm), beta=1e12, reference=split,
                              options=IterationOptions(accel=accel, max_iterations=60))
     assert max(res.e_sigma, res.e_u) <= 1e-5 if res.converged else res.transmission_residual >= 1e-6
 
@@ -203,22 +202,22 @@ def test_warm_start_reuses_the_step_and_its_offline_data():
     cm = unit_square(16, 4)
     model = get_model(2)
     delta = default_penalty(cm.h, 1.0)
-    step = PrimalHybridStep(cm, model, alpha=DEFAULT_ALPHA, delta=delta)
-    first = solve_primal_hybrid(cm, model, delta=delta, step=step, options=IterationOptions(accel="anderson"))
-    again = solve_primal_hybrid(cm, model, delta=delta, step=step, initial_data=first.history.data,
+    step = PrimalHybridStep(model.on(cm), alpha=DEFAULT_ALPHA, delta=delta)
+    first = solve_primal_hybrid(model.on(cm), delta=delta, step=step, options=IterationOptions(accel="anderson"))
+    again = solve_primal_hybrid(model.on(cm), delta=delta, step=step, initial_data=first.history.data,
                                 options=IterationOptions(accel="anderson"))
     assert first.iterations > 5 and again.iterations == 1 and again.converged
-    n1 = solve_primal_hybrid(cm, model, delta=delta, step=step, options=IterationOptions(accel="newton"))
-    n2 = solve_primal_hybrid(cm, model, delta=delta, step=step, options=IterationOptions(accel="newton"))
+    n1 = solve_primal_hybrid(model.on(cm), delta=delta, step=step, options=IterationOptions(accel="newton"))
+    n2 = solve_primal_hybrid(model.on(cm), delta=delta, step=step, options=IterationOptions(accel="newton"))
     assert n1.time_interface_offline_s > 0 and n2.time_interface_offline_s < n1.time_interface_offline_s
     assert n2.converged and np.allclose(n2.u.x.array, first.u.x.array, atol=1e-5 * np.abs(first.u.x.array).max())
     with pytest.raises(InputError):
-        solve_primal_hybrid(cm, model, delta=delta, step=step, initial_data=np.zeros(3))
+        solve_primal_hybrid(model.on(cm), delta=delta, step=step, initial_data=np.zeros(3))
 
 
 def test_online_time_excludes_the_monitor():
     cm = unit_square(16, 4)
-    step = PrimalHybridStep(cm, get_model(1), alpha=DEFAULT_ALPHA, delta=default_penalty(cm.h, 1.0))
+    step = PrimalHybridStep(get_model(1).on(cm), alpha=DEFAULT_ALPHA, delta=default_penalty(cm.h, 1.0))
     step.prepare()
     start = time.perf_counter()
     history = iterate(step, IterationOptions(accel="anderson", max_iterations=5),

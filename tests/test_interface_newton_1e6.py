@@ -39,13 +39,13 @@ def strip():
     cm = unit_square(32, 16)
     model = get_model(3, E_high=1e6)
     delta = default_penalty(cm.h, 1e6)
-    ref = solve_primal_monolithic(cm.mesh, cm.facet_tags, material_fields(cm.mesh, model), delta=delta, newton=STIFF)
+    ref = solve_primal_monolithic(model.on(cm), delta=delta, newton=STIFF)
     return cm, model, delta, ref
 
 
 def test_contact_newton_records_its_fronts_and_every_start_ends_on_one_solution(strip):
     cm, model, delta, ref = strip
-    step = PrimalHybridStep(cm, model, alpha=DEFAULT_ALPHA, delta=delta, newton=STIFF)
+    step = PrimalHybridStep(model.on(cm), alpha=DEFAULT_ALPHA, delta=delta, newton=STIFF)
     step.prepare()
     history = iterate(step, IterationOptions(accel="newton"))
     assert history.converged
@@ -88,7 +88,7 @@ def test_alpha_emin_is_the_smallest_nodal_modulus_on_gamma():
 def test_multiscale_alpha_amplifying_its_error_is_a_clear_error_and_the_default_is_accurate(strip):
     cm, model, delta, ref = strip
     # α = E·h^-1/2, m = 3: the glued problem is indefinite -> ConvergenceError naming it (CLI exit 4)
-    step = MultiscalePrimalHybridStep(cm, model, alpha=DEFAULT_ALPHA, delta=delta, newton=STIFF,
+    step = MultiscalePrimalHybridStep(model.on(cm), alpha=DEFAULT_ALPHA, delta=delta, newton=STIFF,
                                       cem=CEMOptions(layers=3))
     assert CondensedInterface(step.interface_problem(InterfaceNewtonOptions())).lowest_eigenvalue() < 0
     with pytest.raises(ConvergenceError, match="not positive definite"):
@@ -96,7 +96,7 @@ def test_multiscale_alpha_amplifying_its_error_is_a_clear_error_and_the_default_
     # m = 4 (the CLI default): both converge, E·h^-1/2 to a solution 0.33 off the fine one, the default to 0.015
     errors = {}
     for alpha in (DEFAULT_ALPHA, DEFAULT_ALPHA_MS):
-        res = solve_primal_ms_hybrid(cm, model, alpha=alpha, delta=delta, layers=4, newton=STIFF,
+        res = solve_primal_ms_hybrid(model.on(cm), alpha=alpha, delta=delta, cem=CEMOptions(layers=4), newton=STIFF,
                                      reference=ref.u, options=IterationOptions(accel="newton"))
         assert res.converged and res.transmission_residual < 1e-6
         errors[alpha] = res.e_u

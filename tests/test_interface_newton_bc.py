@@ -23,7 +23,6 @@ from fenics_contact.hybrid.mixed import MixedHybridStep, solve_mixed_hybrid
 from fenics_contact.hybrid.primal import DEFAULT_ALPHA, PrimalHybridStep, solve_primal_hybrid
 from fenics_contact.indentation import force_indentation
 from fenics_contact.problem.boundary import BoundaryConditions
-from fenics_contact.problem.fields import material_fields
 from fenics_contact.problem.geometry import unit_square
 from fenics_contact.problem.models import get_model
 from fenics_contact.problem.obstacles import Circle, Plane
@@ -54,12 +53,14 @@ def _relative_l2(a: fem.Function, b: fem.Function) -> float:
 def test_primal_newton_with_displacement_traction_and_gap():
     cm, model = _mesh(), _model()
     delta = default_penalty(cm.h, 1.0)
-    ref = solve_primal_monolithic(cm.mesh, cm.facet_tags, material_fields(cm.mesh, model), delta=delta)
+    ref = solve_primal_monolithic(model.on(cm), delta=delta)
     active = ref.profile.active
     assert 0 < active.sum() < active.size  # the gap matters: partial contact
-    step = PrimalHybridStep(cm, model, alpha=DEFAULT_ALPHA, delta=delta)
-    robin = solve_primal_hybrid(cm, model, delta=delta, step=step, options=IterationOptions(tol=TIGHT, max_iterations=3000))
-    newton = solve_primal_hybrid(cm, model, delta=delta, step=step, options=IterationOptions(tol=TIGHT, accel="newton"))
+    step = PrimalHybridStep(model.on(cm), alpha=DEFAULT_ALPHA, delta=delta)
+    robin = solve_primal_hybrid(model.on(cm), delta=delta, step=step,
+                                options=IterationOptions(tol=TIGHT, max_iterations=3000))
+    newton = solve_primal_hybrid(model.on(cm), delta=delta, step=step,
+                                 options=IterationOptions(tol=TIGHT, accel="newton"))
     assert robin.converged and newton.converged and newton.history.newton_steps <= 8
     assert _relative_l2(robin.u, newton.u) < 1e-8
     assert _relative_l2(ref.u, newton.u) < 1e-10  # Theorem 3.1: the monolithic solution
@@ -73,8 +74,8 @@ def test_certificate_with_boundary_data_refuses_a_wrong_answer(accel):
     """α = 1e8: the relative change falls below 1e-6 at once; only a right answer may be 'converged'."""
     cm, model = _mesh(), _model()
     delta = default_penalty(cm.h, 1.0)
-    ref = solve_primal_monolithic(cm.mesh, cm.facet_tags, material_fields(cm.mesh, model), delta=delta)
-    result = solve_primal_hybrid(cm, model, alpha=1e8, delta=delta, reference=ref.u,
+    ref = solve_primal_monolithic(model.on(cm), delta=delta)
+    result = solve_primal_hybrid(model.on(cm), alpha=1e8, delta=delta, reference=ref.u,
                                  options=IterationOptions(tol=1e-6, accel=accel, max_iterations=200))
     assert not result.converged or result.e_u < 1e-5, (result.converged, result.e_u)
     if accel == "anderson":  # stalls far from the solution, and says so
@@ -87,13 +88,14 @@ def test_certificate_with_boundary_data_refuses_a_wrong_answer(accel):
 @serial
 def test_mixed_newton_with_displacement_traction_and_gap():
     cm, model = _mesh(), _model()
-    split = solve_mixed_monolithic(cm, model, split_interface=True)
+    split = solve_mixed_monolithic(model.on(cm), split_interface=True)
     assert 0 < split.profile.active.sum() < split.profile.active.size
-    step = MixedHybridStep(cm, model, beta="sqrt-h")
+    step = MixedHybridStep(model.on(cm), beta="sqrt-h")
     step.prepare()
-    robin = solve_mixed_hybrid(cm, model, step=step, reference=split, options=IterationOptions(tol=TIGHT))
+    robin = solve_mixed_hybrid(model.on(cm), step=step, reference=split, options=IterationOptions(tol=TIGHT))
     robin_fields = [f.copy() for f in step.glued()]
-    newton = solve_mixed_hybrid(cm, model, step=step, reference=split, options=IterationOptions(tol=TIGHT, accel="newton"))
+    newton = solve_mixed_hybrid(model.on(cm), step=step, reference=split,
+                                options=IterationOptions(tol=TIGHT, accel="newton"))
     assert robin.converged and newton.converged and newton.history.newton_steps <= 8
     assert newton.e_sigma < 1e-10 and newton.e_u < 1e-10  # the monolithic solution on X̃_h
     assert max(_relative_l2(a, b) for a, b in zip(robin_fields, step.glued())) < 1e-8
@@ -105,9 +107,9 @@ def test_load_steps_with_newton_and_a_moving_circle():
     cm = unit_square(16, 4, clamped=("left",))
     model = get_model(2, E_high=1e3).with_(obstacle=Circle((3.0, 0.5), 2.0))
     depths = [0.5, 1.0, 1.0]
-    newton = force_indentation("primal", cm, model, depths, direction=(-1.0, 0.0),
+    newton = force_indentation(model.on(cm), "primal", depths, direction=(-1.0, 0.0),
                                options=IterationOptions(tol=TIGHT, accel="newton"))
-    mono = force_indentation("primal-monolithic", cm, model, depths, direction=(-1.0, 0.0))
+    mono = force_indentation(model.on(cm), "primal-monolithic", depths, direction=(-1.0, 0.0))
     assert all(s.converged and s.iterations == 1 for s in newton.steps)
     assert np.allclose(newton.forces, mono.forces, rtol=1e-8, atol=0.0), (newton.forces, mono.forces)
     assert newton.steps[0].profile.active.sum() < newton.steps[1].profile.active.sum()

@@ -36,7 +36,7 @@ def mesh32():
 
 @pytest.fixture(scope="module")
 def solutions(mesh32):
-    return {m: solve_mixed_monolithic(mesh32, get_model(m)) for m in (1, 2)}
+    return {m: solve_mixed_monolithic(get_model(m).on(mesh32)) for m in (1, 2)}
 
 
 def _scipy(A):
@@ -121,9 +121,7 @@ def test_monolithic_contact_and_complementarity(mesh32, solutions, number):
     lo, hi = prof.active_interval()
     zone = CONTACT_ZONE[number]
     assert abs(lo - zone[0]) < 0.02 and abs(hi - zone[1]) < 0.04, (lo, hi)
-    primal = solve_primal_monolithic(
-        cm.mesh, cm.facet_tags, material_fields(cm.mesh, get_model(number)), delta=default_penalty(cm.h, 1.0)
-    )
+    primal = solve_primal_monolithic(get_model(number).on(cm), delta=default_penalty(cm.h, 1.0))
     plo, phi = primal.profile.active_interval()
     assert abs(lo - plo) <= 1.5 * cm.h and abs(hi - phi) <= 1.5 * cm.h, ((lo, hi), (plo, phi))
 
@@ -166,7 +164,7 @@ def test_penalty_limit():
     """The tensile stress left is ε·max|u_c| and the solutions converge as ε → 0 (linearly)."""
     cm = unit_square(16, 4)
     model = get_model(1)
-    sols = [solve_mixed_monolithic(cm, model, epsilon=eps) for eps in (1e-3, 1e-4, 1e-5)]
+    sols = [solve_mixed_monolithic(model.on(cm), epsilon=eps) for eps in (1e-3, 1e-4, 1e-5)]
     tensile = [s.profile.max_tensile for s in sols]
     assert tensile[0] > 5 * tensile[1] > 25 * tensile[2]
     prob = sols[-1].problem
@@ -177,7 +175,7 @@ def test_penalty_limit():
 def test_split_interface_space(mesh32, solutions):
     """X̃_h adds one σ_tt function per γ vertex; its solution is close to the AW one at this H."""
     cm = mesh32
-    split = solve_mixed_monolithic(cm, get_model(1), split_interface=True)
+    split = solve_mixed_monolithic(get_model(1).on(cm), split_interface=True)
     ref = solutions[1]
     assert split.dofs["sigma"] == ref.dofs["sigma"] + 33
     diff = split.sigma.x.array - ref.sigma.x.array
@@ -188,7 +186,7 @@ def test_split_interface_space(mesh32, solutions):
 def test_nearly_incompressible_monolithic():
     """ν = 0.4999: Newton converges and the stress stays bounded (no locking blow-up)."""
     cm = unit_square(16, 4)
-    sols = [solve_mixed_monolithic(cm, get_model(1, nu=nu)) for nu in (0.35, 0.4999)]
+    sols = [solve_mixed_monolithic(get_model(1, nu=nu).on(cm)) for nu in (0.35, 0.4999)]
     norms = [np.sqrt(s.problem.stress_norm2(s.problem.c)) for s in sols]
     assert all(s.newton.steps <= 12 for s in sols)
     smax = [np.abs(s.sigma.x.array).max() for s in sols]
@@ -203,7 +201,7 @@ def test_rejects_poisson_ratio_out_of_range():
     cm = unit_square(8, 4)
     for nu in (0.5, 0.6, -1.0):
         with pytest.raises(InputError, match="Poisson"):
-            solve_mixed_monolithic(cm, get_model(1, nu=nu))
+            solve_mixed_monolithic(get_model(1, nu=nu).on(cm))
 
 
 def test_rejects_non_triangular_mesh():
@@ -216,14 +214,14 @@ def test_rejects_non_triangular_mesh():
     ct = dolfinx.mesh.meshtags(msh, tdim, cells, np.ones_like(cells))
     cm = ContactMesh(msh, ct, ft, 0.25, 0.25, np.full(cells.size, -1, dtype=np.int32))
     with pytest.raises(InputError, match="triangle"):
-        solve_mixed_monolithic(cm, get_model(1))
+        solve_mixed_monolithic(get_model(1).on(cm))
 
 
 @pytest.mark.parametrize("eps", [0.0, -1e-3, float("nan")])
 def test_rejects_bad_penalty(eps):
     cm = unit_square(8, 4)
     with pytest.raises(InputError):
-        solve_mixed_monolithic(cm, get_model(1), epsilon=eps)
+        solve_mixed_monolithic(get_model(1).on(cm), epsilon=eps)
 
 
 def test_default_epsilon_does_not_glue_the_soft_part_of_a_heterogeneous_contact_boundary(mesh32):
@@ -234,13 +232,13 @@ def test_default_epsilon_does_not_glue_the_soft_part_of_a_heterogeneous_contact_
     from fenics_contact.fem.mixed import contact_modulus
 
     cm = mesh32
-    model = get_model(3, E_high=1e6)
-    fields = material_fields(cm.mesh, model)
+    problem = get_model(3, E_high=1e6).on(cm)
+    fields = problem.fields
     assert contact_modulus(cm.mesh, cm.facet_tags, fields.E, smallest=True) == pytest.approx(1.0)
     assert contact_modulus(cm.mesh, cm.facet_tags, fields.E) == pytest.approx(1e6)
-    mixed = solve_mixed_monolithic(cm, model)
+    mixed = solve_mixed_monolithic(problem)
     assert mixed.epsilon == pytest.approx(default_epsilon(cm.h, 1.0))
-    primal = solve_primal_monolithic(cm.mesh, cm.facet_tags, fields, delta=default_penalty(cm.h, 1e6))
+    primal = solve_primal_monolithic(problem, delta=default_penalty(cm.h, 1e6))
     f_mixed, f_primal = mixed.profile.force, primal.profile.force
     assert abs(f_mixed - f_primal) < 0.01 * abs(f_primal), (f_mixed, f_primal)
     assert mixed.profile.max_tensile < 1e-4 * np.abs(mixed.profile.sigma_c).max()

@@ -39,7 +39,8 @@ def mesh64():
 def references(mesh):
     """Per model at h = 1/32: the AW monolithic solution and the one on X̃_h (σ_tt split at the γ vertices)."""
     return {
-        m: (solve_mixed_monolithic(mesh, get_model(m)), solve_mixed_monolithic(mesh, get_model(m), split_interface=True))
+        m: (solve_mixed_monolithic(get_model(m).on(mesh)),
+            solve_mixed_monolithic(get_model(m).on(mesh), split_interface=True))
         for m in (1, 2)
     }
 
@@ -47,7 +48,7 @@ def references(mesh):
 @pytest.fixture(scope="module")
 def references64(mesh64):
     """Per model at h = 1/64: the AW monolithic solution."""
-    return {m: solve_mixed_monolithic(mesh64, get_model(m)) for m in (1, 2)}
+    return {m: solve_mixed_monolithic(get_model(m).on(mesh64)) for m in (1, 2)}
 
 
 def _distance(step, solution):
@@ -58,7 +59,7 @@ def _distance(step, solution):
 
 def _space_gap(cm, model, aw, split):
     """(e_σ, e_u) between the monolithic solutions on X̃_h and X_h (restricted to the parts)."""
-    step = MixedHybridStep(cm, model, beta=1.0, epsilon=aw.epsilon)
+    step = MixedHybridStep(model.on(cm), beta=1.0, epsilon=aw.epsilon)
     step.set_reference(split)
     for sub, (c, u) in zip(step.sub, step.reference):
         sub.c[:], sub.u[:] = c, u
@@ -70,7 +71,7 @@ def test_fixed_point_is_the_split_monolithic_solution(mesh, references, number):
     """At tight tolerance the iterate is the monolithic solution on X̃_h to round-off, and its distance
     to the AW monolithic solution is exactly the X̃_h/X_h space difference."""
     aw, split = references[number]
-    res = solve_mixed_hybrid(mesh, get_model(number), beta="sqrt-h", reference=split,
+    res = solve_mixed_hybrid(get_model(number).on(mesh), beta="sqrt-h", reference=split,
                              options=IterationOptions(tol=1e-11, accel="anderson"))
     assert res.converged
     assert res.e_sigma < 1e-8 and res.e_u < 1e-8, (res.e_sigma, res.e_u)
@@ -91,7 +92,7 @@ def test_space_difference_shrinks_with_h(mesh, mesh64, references, references64)
     """The X̃_h/X_h difference is a discretization effect: ≥ 4× smaller at h = 1/64 (measured 6.4×)."""
     model = get_model(1)
     gap32 = _space_gap(mesh, model, *references[1])
-    split64 = solve_mixed_monolithic(mesh64, model, split_interface=True)
+    split64 = solve_mixed_monolithic(model.on(mesh64), split_interface=True)
     gap64 = _space_gap(mesh64, model, references64[1], split64)
     assert gap64[0] < gap32[0] / 4 and gap64[1] < gap32[1] / 4, (gap32, gap64)
     assert gap64[0] < 3e-4, gap64
@@ -105,7 +106,7 @@ def test_paper_tolerance_and_beta(mesh, references, number):
     aw, split = references[number]
     gap = _space_gap(mesh, get_model(number), aw, split)
     runs = {
-        beta: solve_mixed_hybrid(mesh, get_model(number), beta=beta, reference=split,
+        beta: solve_mixed_hybrid(get_model(number).on(mesh), beta=beta, reference=split,
                                  options=IterationOptions(tol=1e-6, accel="none"))
         for beta in (1.0, "sqrt-h")
     }
@@ -125,7 +126,7 @@ def test_paper_tolerance_and_beta(mesh, references, number):
 @pytest.mark.parametrize("number", [1, 2])
 def test_paper_tolerance_against_the_aw_solution(mesh64, references64, number):
     """h = 1/64, β = √h, plain update, tolerance 1e-6: e_σ, e_u ≤ 1e-3 against the monolithic AW solution."""
-    res = solve_mixed_hybrid(mesh64, get_model(number), beta="sqrt-h", reference=references64[number],
+    res = solve_mixed_hybrid(get_model(number).on(mesh64), beta="sqrt-h", reference=references64[number],
                              options=IterationOptions(tol=1e-6, accel="none"))
     assert res.converged
     assert res.e_sigma <= 1e-3 and res.e_u <= 1e-3, (res.e_sigma, res.e_u)
@@ -134,9 +135,9 @@ def test_paper_tolerance_against_the_aw_solution(mesh64, references64, number):
 def test_anderson_acceleration(mesh, references):
     """Anderson on the interface data: same fixed point, fewer iterations than the plain update."""
     _, split = references[2]
-    plain = solve_mixed_hybrid(mesh, get_model(2), beta="sqrt-h", reference=split,
+    plain = solve_mixed_hybrid(get_model(2).on(mesh), beta="sqrt-h", reference=split,
                                options=IterationOptions(tol=1e-6, accel="none"))
-    anderson = solve_mixed_hybrid(mesh, get_model(2), beta="sqrt-h", reference=split,
+    anderson = solve_mixed_hybrid(get_model(2).on(mesh), beta="sqrt-h", reference=split,
                                   options=IterationOptions(tol=1e-6, accel="anderson"))
     assert anderson.converged and anderson.iterations < plain.iterations
     assert anderson.e_sigma < 1e-4 and anderson.e_u < 1e-4
@@ -147,8 +148,9 @@ def test_nearly_incompressible(mesh, nu1, nu2, ratio):
     """Table 5.4 cases at ν = 0.4999, h = 1/32, plain update, β = √h: converged at 1e-6 with
     e_σ, e_u ≤ 1e-4 against the exact fixed point (X̃_h)."""
     model = _incompressible(ratio, nu1, nu2)
-    split = solve_mixed_monolithic(mesh, model, split_interface=True)
-    res = solve_mixed_hybrid(mesh, model, beta="sqrt-h", reference=split, options=IterationOptions(tol=1e-6, accel="none"))
+    split = solve_mixed_monolithic(model.on(mesh), split_interface=True)
+    res = solve_mixed_hybrid(model.on(mesh), beta="sqrt-h", reference=split,
+                             options=IterationOptions(tol=1e-6, accel="none"))
     assert res.converged
     assert res.e_sigma <= 1e-4 and res.e_u <= 1e-4, (res.e_sigma, res.e_u)
 
@@ -156,14 +158,15 @@ def test_nearly_incompressible(mesh, nu1, nu2, ratio):
 def test_nearly_incompressible_against_the_aw_solution(mesh64):
     """ν₁ = ν₂ = 0.4999 at h = 1/64: e_σ, e_u ≤ 1e-3 against the monolithic AW solution."""
     model = _incompressible(1.0, 0.4999, 0.4999)
-    aw = solve_mixed_monolithic(mesh64, model)
-    res = solve_mixed_hybrid(mesh64, model, beta="sqrt-h", reference=aw, options=IterationOptions(tol=1e-6, accel="none"))
+    aw = solve_mixed_monolithic(model.on(mesh64))
+    res = solve_mixed_hybrid(model.on(mesh64), beta="sqrt-h", reference=aw,
+                             options=IterationOptions(tol=1e-6, accel="none"))
     assert res.converged
     assert res.e_sigma <= 1e-3 and res.e_u <= 1e-3, (res.e_sigma, res.e_u)
 
 
 def test_iteration_cap_reports_not_converged(mesh):
-    res = solve_mixed_hybrid(mesh, get_model(1), beta=1.0, options=IterationOptions(max_iterations=3, accel="none"))
+    res = solve_mixed_hybrid(get_model(1).on(mesh), beta=1.0, options=IterationOptions(max_iterations=3, accel="none"))
     assert not res.converged and res.iterations == 3 and res.e_sigma is None
 
 
@@ -178,10 +181,10 @@ def test_rejects_bad_beta(beta):
         transmission_coefficient(beta, 1 / 16)
     cm = unit_square(8, 4)
     with pytest.raises(InputError):
-        solve_mixed_hybrid(cm, get_model(1), beta=beta)
+        solve_mixed_hybrid(get_model(1).on(cm), beta=beta)
 
 
 def test_rejects_poisson_ratio_out_of_range():
     cm = unit_square(8, 4)
     with pytest.raises(InputError, match="Poisson"):
-        solve_mixed_hybrid(cm, get_model(2, nu=0.5))
+        solve_mixed_hybrid(get_model(2, nu=0.5).on(cm))

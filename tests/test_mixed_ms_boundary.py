@@ -45,7 +45,7 @@ def test_full_space_reproduces_the_fine_problem_with_boundary_data():
     """All Stage I modes and patches covering Ω₁: the multiscale Ω₁ solution is the fine one of the constrained
     AW space with the lifting and u_D (stress, displacement, trace σn₁ incl. the lifting's, to round-off)."""
     cm = _mesh(8, 4)
-    step = MixedHybridStep(cm, models.get_model(2).with_(boundary=BOUNDARY), beta="sqrt-h")
+    step = MixedHybridStep(models.get_model(2).with_(boundary=BOUNDARY).on(cm), beta="sqrt-h")
     part, sub = step.parts[0], step.sub[0]
     assert sub._lifted and sub.u_D is not None
     grid = coarse_grid(part.mesh, part.cell_map, cm.coarse_cell, cm.H)
@@ -68,7 +68,7 @@ def test_full_space_reproduces_the_fine_problem_with_boundary_data():
 
 def test_without_source_correctors_boundary_data_warn(caplog):
     cm = _mesh(8, 4)
-    step = MixedHybridStep(cm, models.get_model(2).with_(boundary=BOUNDARY), beta="sqrt-h")
+    step = MixedHybridStep(models.get_model(2).with_(boundary=BOUNDARY).on(cm), beta="sqrt-h")
     part = step.parts[0]
     grid = coarse_grid(part.mesh, part.cell_map, cm.coarse_cell, cm.H)
     with caplog.at_level(logging.WARNING, logger="fenics_contact.multiscale.mixed_cem"):
@@ -83,10 +83,11 @@ def test_algorithm4_with_boundary_data_converges_to_algorithm2():
     multiscale space holds the fine solution: Algorithm 4 gives Algorithm 2's fixed point."""
     cm = _mesh(16, 4)
     model = models.get_model(2).with_(boundary=BOUNDARY)
-    ref = solve_mixed_monolithic(cm, model)
-    alg2 = solve_mixed_hybrid(cm, model, reference=ref, options=NEWTON)
+    ref = solve_mixed_monolithic(model.on(cm))
+    alg2 = solve_mixed_hybrid(model.on(cm), reference=ref, options=NEWTON)
     assert alg2.converged and alg2.e_sigma < 1e-2  # the split-interface floor, O(h²): measured 3.2e-3
-    res = {m: solve_mixed_ms_hybrid(cm, model, layers=m, reference=ref, options=NEWTON) for m in (1, 2, 3)}
+    res = {m: solve_mixed_ms_hybrid(model.on(cm), cem=mm.MixedCEMOptions(layers=m), reference=ref,
+                                    options=NEWTON) for m in (1, 2, 3)}
     assert all(r.converged for r in res.values())
     e = [res[m].e_sigma for m in (1, 2, 3)]
     assert e[1] < e[0] / 10, e
@@ -101,11 +102,11 @@ def test_algorithm4_free_sides_heterogeneous_strip_against_algorithm2():
     Algorithm 2: L² stress difference 2.7e-4 at m = 2, round-off at m = 3 (patches covering Ω₁)."""
     cm = geometry.unit_square(32, 4, clamped=("left",), neumann={"top": "Gamma_N_top"})
     model = models.get_model(3, E_high=1e3).with_(boundary=BoundaryConditions(tractions={"Gamma_N_top": (0.2, -0.5)}))
-    alg2 = solve_mixed_hybrid(cm, model, options=NEWTON)
+    alg2 = solve_mixed_hybrid(model.on(cm), options=NEWTON)
     assert alg2.converged
     diff = {}
     for m in (2, 3):
-        res = solve_mixed_ms_hybrid(cm, model, layers=m, options=NEWTON)
+        res = solve_mixed_ms_hybrid(model.on(cm), cem=mm.MixedCEMOptions(layers=m), options=NEWTON)
         assert res.converged
         diff[m] = (l2_stress_error(res.sigma, alg2.sigma), abs(res.profile.force / alg2.profile.force - 1))
     # measured: (2.7e-4, 9.2e-5) at m = 2, (7e-11, 1e-12) at m = 3
@@ -121,7 +122,7 @@ def test_cache_keeps_and_keys_the_boundary_data(tmp_path):
     for name, t in (("a", (0.2, -0.5)), ("b", (0.2, -0.6))):
         model = models.get_model(2).with_(boundary=BoundaryConditions(displacement=_data,
                                                                       tractions={"Gamma_N_top": t}))
-        step = MixedHybridStep(cm, model, beta="sqrt-h")
+        step = MixedHybridStep(model.on(cm), beta="sqrt-h")
         part = step.parts[0]
         grid = coarse_grid(part.mesh, part.cell_map, cm.coarse_cell, cm.H)
         tf = essential_traction_facets(part.mesh, part.facet_tags)

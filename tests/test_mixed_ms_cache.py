@@ -43,7 +43,7 @@ RECORDED_M1_L3 = (0.7574110178647683, 0.007215034028909427, 0.006159654402197488
 def omega1():
     """Ω₁ of h = 1/16, H = 1/4 (3 × 4 coarse cells): coarse grid, cell operators, topology."""
     cm = geometry.unit_square(16, 4)
-    step = MixedHybridStep(cm, models.get_model(2), beta="sqrt-h")
+    step = MixedHybridStep(models.get_model(2).on(cm), beta="sqrt-h")
     part = step.parts[0]
     grid = coarse_grid(part.mesh, part.cell_map, cm.coarse_cell, cm.H)
     ops = mm.cell_operators(step.sub[0], cm.H, "lambda+2mu", DEFAULT_S_FACTOR)
@@ -206,7 +206,7 @@ def test_cache_with_the_load_corrector(tmp_path):
     """A load in Ω₁ (source correctors, data index n_g) and γ correctors on one cell: the round trip keeps them."""
     cm = geometry.unit_square(16, 4)
     model = models.get_model(2).with_(load=lambda x: np.stack([np.sin(3 * x[1]), 0.5 + 0 * x[0]]))
-    step = MixedHybridStep(cm, model, beta="sqrt-h")
+    step = MixedHybridStep(model.on(cm), beta="sqrt-h")
     part = step.parts[0]
     grid = coarse_grid(part.mesh, part.cell_map, cm.coarse_cell, cm.H)
     opts = mm.MixedCEMOptions(layers=1)
@@ -232,7 +232,7 @@ def test_cache_key_covers_options_and_beta(omega1, tmp_path):
     assert len(keys) == len(variants) and key not in keys
     assert mm.mixed_offline_key(sub, ops, grid, base.options, H=0.5 * cm.H) != key
     # another β: another Ω₁ problem (Robin term), never the cached one
-    step2 = MixedHybridStep(cm, models.get_model(2), beta=2.0 * step.beta)
+    step2 = MixedHybridStep(models.get_model(2).on(cm), beta=2.0 * step.beta)
     beta2 = _build(omega1, tmp_path, sub=step2.sub[0])
     assert beta2.cache_status == "built" and beta2.cache_path != base.cache_path
     assert _build(omega1, tmp_path, sub=step2.sub[0]).cache_status == "loaded"
@@ -430,7 +430,7 @@ def test_condensed_stage_two_at_contrast_1e6_nearly_incompressible():
     from fenics_contact.multiscale.mixed import essential_traction_facets
 
     cm = geometry.unit_square(16, 4, clamped=("left",))
-    step = MixedHybridStep(cm, models.get_model(3, E_high=1e6, nu=0.4999), beta="sqrt-h")
+    step = MixedHybridStep(models.get_model(3, E_high=1e6, nu=0.4999).on(cm), beta="sqrt-h")
     part = step.parts[0]
     grid = coarse_grid(part.mesh, part.cell_map, cm.coarse_cell, cm.H)
     ops = mm.cell_operators(step.sub[0], cm.H, "lambda+2mu", DEFAULT_S_FACTOR)
@@ -452,11 +452,11 @@ def test_algorithm4_unchanged_by_the_condensed_stage_two(monkeypatch):
 
     cm = geometry.unit_square(16, 4)
     model = models.get_model(2).with_(load=models.band_load([(0.25, 0.875, 0.3, 0.7, 2.0), (0.5, 0.875, 0.7, 1.0, -1.0)]))
-    ref = solve_mixed_monolithic(cm, model)
+    ref = solve_mixed_monolithic(model.on(cm))
     runs = []
     for stage_two in (mm.stage_two, stage_two_reference):
         monkeypatch.setattr(mixed_omega1, "stage_two", stage_two)
-        runs.append(solve_mixed_ms_hybrid(cm, model, layers=2, reference=ref,
+        runs.append(solve_mixed_ms_hybrid(model.on(cm), cem=mm.MixedCEMOptions(layers=2), reference=ref,
                                           options=IterationOptions(tol=1e-10, max_iterations=400)))
     new, old = runs
     assert new.converged and old.converged
@@ -539,7 +539,7 @@ def test_stage_two_analyses_each_skeleton_pattern_once(monkeypatch):
     monkeypatch.setattr(linalg.ReusedAnalysis, "factor", counting_factor)
     monkeypatch.setattr(mm.LocalFactor, "symmetric", classmethod(counting_symmetric))
     cm = geometry.unit_square(32, 8)
-    step = MixedHybridStep(cm, models.get_model(2), beta="sqrt-h")
+    step = MixedHybridStep(models.get_model(2).on(cm), beta="sqrt-h")
     grid = coarse_grid(step.parts[0].mesh, step.parts[0].cell_map, cm.coarse_cell, cm.H)
     ops, topo, aux = mm.stage_one_of(step.sub[0], grid, mm.MixedCEMOptions(layers=2), H=cm.H)
     mm.stage_two(ops, topo, grid, aux, 2)

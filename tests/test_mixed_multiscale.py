@@ -20,7 +20,7 @@ from fenics_contact.multiscale.mixed import l2_stress_error, solve_mixed_ms_hybr
 
 def _step_and_grid(cm, model):
     """The Algorithm 2 step of ``model`` on ``cm`` (its Ω₁ subproblem) and the coarse grid of Ω₁."""
-    step = MixedHybridStep(cm, model, beta="sqrt-h")
+    step = MixedHybridStep(model.on(cm), beta="sqrt-h")
     part = step.parts[0]
     return step, coarse_grid(part.mesh, part.cell_map, cm.coarse_cell, cm.H)
 
@@ -130,11 +130,11 @@ def test_full_space_reproduces_fine_robin_solution(omega1, full_space):
 def test_algorithm4_converges_and_error_falls_with_layers():
     cm = geometry.unit_square(32, 8)
     model = models.get_model(2)
-    ref = solve_mixed_monolithic(cm, model)
+    ref = solve_mixed_monolithic(model.on(cm))
     errors = []
     for m in (1, 2):
-        res = solve_mixed_ms_hybrid(cm, model, layers=m, nbasis=3, min_gap=None, reference=ref,
-                                    options=IterationOptions(accel="none", max_iterations=400))
+        res = solve_mixed_ms_hybrid(model.on(cm), cem=mm.MixedCEMOptions(layers=m, nbasis=3, min_gap=None),
+                                    reference=ref, options=IterationOptions(accel="none", max_iterations=400))
         assert res.converged
         assert res.dofs["X_ms"] == res.dofs["U_aux"] == 3 * 7 * 8
         assert res.time_online_s < res.time_offline_s
@@ -184,8 +184,8 @@ def test_load_only_in_omega1_is_iterated_to_the_reference():
     """f = 0 in Ω₂ and g⁰ = 0: the first Ω₂ solve is zero, yet the iteration must not stop there."""
     cm = geometry.unit_square(32, 8)
     model = models.get_model(2).with_(load=models.band_load([(0.5, 0.875, 0.3, 0.7, 2.0), (0.5, 0.875, 0.7, 1.0, -1.0)]))
-    ref = solve_mixed_monolithic(cm, model, split_interface=True)  # the fixed point of the fine splitting
-    res = solve_mixed_ms_hybrid(cm, model, layers=3, reference=ref,
+    ref = solve_mixed_monolithic(model.on(cm), split_interface=True)  # the fixed point of the fine splitting
+    res = solve_mixed_ms_hybrid(model.on(cm), cem=mm.MixedCEMOptions(layers=3), reference=ref,
                                 options=IterationOptions(tol=1e-9, accel="anderson", max_iterations=400))
     assert res.converged and res.iterations > 5
     assert res.e_sigma < 1e-2  # measured 3.9e-3 in 48 iterations (without the source correctors: 0.33)
@@ -435,12 +435,12 @@ def test_algorithm4_never_forms_the_fine_omega1_prolongation():
 
     cm = geometry.unit_square(16, 4)
     model = models.get_model(3)
-    step = MixedMultiscaleHybridStep(cm, model, beta="sqrt-h", cem=mm.MixedCEMOptions(layers=1))
+    step = MixedMultiscaleHybridStep(model.on(cm), beta="sqrt-h", cem=mm.MixedCEMOptions(layers=1))
     space = step.sub[0].space
     assert space.prolongator.csr is None and space.prolongator.full_csr is None
     assert np.shares_memory(step.omega1.ops.P_blocks, space.cell_prolongation()[1])
     # the interface maps equal those made with the whole P (Algorithm 2's Ω₁ subproblem: same mesh, same tags)
-    ref = MixedHybridStep(cm, model, beta="sqrt-h").sub[0]
+    ref = MixedHybridStep(model.on(cm), beta="sqrt-h").sub[0]
     for name in ("C", "N"):
         assert (getattr(step.sub[0], name) != getattr(ref, name)).nnz == 0
     fields = material_fields(cm.mesh, model)

@@ -30,7 +30,6 @@ from fenics_contact.multiscale import primal as primal_ms
 from fenics_contact.problem import geometry, models
 from fenics_contact.hybrid.iteration import IterationOptions
 from fenics_contact.errors import InputError
-from fenics_contact.problem.fields import material_fields
 from multiscale_layers import layer_errors
 from fenics_contact.fem.primal import PrimalSubproblem
 
@@ -216,11 +215,11 @@ def test_algorithm3_full_space_matches_monolithic():
     """All modes, global patches: the Algorithm 3 fixed point is the fine monolithic solution."""
     cm = geometry.unit_square(16, 4)
     model = models.get_model(2)
-    fields = material_fields(cm.mesh, model)
     delta = primal.default_penalty(cm.h, 1.0)
-    ref = primal.solve_primal_monolithic(cm.mesh, cm.facet_tags, fields, delta=delta)
+    ref = primal.solve_primal_monolithic(model.on(cm), delta=delta)
     res = primal_ms.solve_primal_ms_hybrid(
-        cm, model, delta=delta, layers=4, nbasis=None, reference=ref.u, options=IterationOptions(tol=1e-11)
+        model.on(cm), alpha="Emin", delta=delta, cem=cem.CEMOptions(layers=4, nbasis=None), reference=ref.u,
+        options=IterationOptions(tol=1e-11)
     )
     assert res.converged
     assert res.e_u < 1e-9
@@ -233,12 +232,12 @@ def test_algorithm3_full_space_matches_monolithic():
 def test_algorithm3_error_decreases_with_layers(mesh_32_8, number, gain):
     cm = mesh_32_8
     model = models.get_model(number)
-    fields = material_fields(cm.mesh, model)
     delta = primal.default_penalty(cm.h, 1.0)
-    ref = primal.solve_primal_monolithic(cm.mesh, cm.facet_tags, fields, delta=delta)
+    ref = primal.solve_primal_monolithic(model.on(cm), delta=delta)
     errors = []
     for m in (1, 2, 3, 4):
-        res = primal_ms.solve_primal_ms_hybrid(cm, model, delta=delta, layers=m, nbasis=3, reference=ref.u)
+        res = primal_ms.solve_primal_ms_hybrid(model.on(cm), alpha="Emin", delta=delta,
+                                               cem=cem.CEMOptions(layers=m, nbasis=3), reference=ref.u)
         assert res.converged and res.iterations < 200
         assert res.dofs["omega1_ms"] == 3 * 56
         assert res.time_offline_s > 0 and res.time_online_s > 0
@@ -253,9 +252,8 @@ LOADS_IN_OMEGA1 = {n: models.band_load(bands) for n, bands in models.LOADS_IN_OM
 
 
 def _errors_with_layers(cm, model, layers, **kwargs):
-    fields = material_fields(cm.mesh, model)
     delta = primal.default_penalty(cm.h, 1.0)
-    ref = primal.solve_primal_monolithic(cm.mesh, cm.facet_tags, fields, delta=delta)
+    ref = primal.solve_primal_monolithic(model.on(cm), delta=delta)
     return layer_errors(cm, model, layers, delta=delta, reference=ref.u, **kwargs)
 
 
@@ -294,7 +292,7 @@ def test_tractions_on_omega1_are_source_corrected():
     clamped_to = model.with_(boundary=BoundaryConditions(displacement=(0.01, 0.0),
                                                          tractions={"Gamma_N_top": (1.0, -0.5)}))
     for case in (model, clamped_to):
-        fine = solve_primal_hybrid(cm, case, delta=delta, options=IterationOptions(tol=1e-10))
+        fine = solve_primal_hybrid(case.on(cm), delta=delta, options=IterationOptions(tol=1e-10))
         assert fine.converged
         if case is model:
             assert np.any(fine.profile.active)  # the traction presses Γ_C against the wall
@@ -315,7 +313,7 @@ def test_prescribed_displacement_free_sides_heterogeneous_strip():
     for contrast, layers in ((1e3, (1, 2, 3)), (1e6, (4,))):
         model = models.get_model(3, E_high=contrast).with_(boundary=BoundaryConditions(displacement=(0.01, 0.002)))
         delta = primal.default_penalty(cm.h, contrast)
-        fine = solve_primal_hybrid(cm, model, delta=delta, options=options)
+        fine = solve_primal_hybrid(model.on(cm), delta=delta, options=options)
         assert fine.converged and fine.transmission_residual < 1e-10
         e = layer_errors(cm, model, layers, delta=delta, reference=fine.u, residual_below=1e-10, options=options)
         if contrast == 1e3:

@@ -19,8 +19,8 @@ from fenics_contact.hybrid.transmission import split_mesh
 from fenics_contact.problem.fields import material_fields
 from fenics_contact.problem.geometry import build_unit_square_model, gmsh_session, read_mesh, unit_square
 from fenics_contact.problem.meshes import bulged_square
-from fenics_contact.problem.models import TestModel, constant_field
 from fenics_contact.problem.obstacles import Circle, Plane, SignedDistance, evaluate_obstacle
+from fenics_contact.problem.problem import ContactProblem, constant_field
 
 serial = pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="mixed (Arnold–Winther) methods are serial")
 
@@ -76,33 +76,32 @@ def square():
 
 def _model(obstacle, nu=0.3):
     load = lambda x: np.vstack([np.where(x[0] > 0.5, 1.0, 0.0), np.zeros(x.shape[1])])  # noqa: E731
-    return TestModel("pushed", constant_field(1.0), constant_field(nu), load, obstacle=obstacle)
+    return ContactProblem(name="pushed", youngs_modulus=constant_field(1.0), poisson_ratio=constant_field(nu), load=load,
+                          obstacle=obstacle)
 
 
 def test_gap_undefined_at_a_contact_node_is_refused(square):
     """A signed distance returning NaN at Γ_C nodes, or a contact node at a circle's centre."""
     holes = SignedDistance(lambda x: np.where(x[1] > 0.6, np.nan, 1.0 - x[0]))
-    fields = material_fields(square.mesh, _model(holes))
     with pytest.raises(InputError, match="undefined at .* contact node.*Gamma_C"):
-        solve_primal_monolithic(square.mesh, square.facet_tags, fields, delta=1e-4)
+        solve_primal_monolithic(_model(holes).on(square), delta=1e-4)
     centred = _model(Circle((1.0, 0.5), 0.3))
     with pytest.raises(InputError, match="centre of a circle"):
-        solve_primal_monolithic(square.mesh, square.facet_tags, material_fields(square.mesh, centred), delta=1e-4)
+        solve_primal_monolithic(centred.on(square), delta=1e-4)
     if MPI.COMM_WORLD.size == 1:
         with pytest.raises(InputError, match="undefined"):
-            solve_mixed_monolithic(square, _model(holes))
+            solve_mixed_monolithic(_model(holes).on(square))
 
 
 def test_obstacle_on_the_wrong_side_is_refused(square):
     """A flipped plane normal (the wall at x = 1 with normal +x: the whole body inside it) or a disc covering
     the body is refused with the reason, not solved as a huge indentation pushing the wrong way."""
     for obstacle in (Plane((1.0, 0.0), (1.0, 0.0)), Circle((0.5, 0.5), 2.0)):
-        fields = material_fields(square.mesh, _model(obstacle))
         with pytest.raises(InputError, match="wrong side of Gamma_C.*normal points from the obstacle"):
-            solve_primal_monolithic(square.mesh, square.facet_tags, fields, delta=1e-4)
+            solve_primal_monolithic(_model(obstacle).on(square), delta=1e-4)
         if MPI.COMM_WORLD.size == 1:
             with pytest.raises(InputError, match="wrong side of Gamma_C"):
-                solve_mixed_monolithic(square, _model(obstacle))
+                solve_mixed_monolithic(_model(obstacle).on(square))
     # a strongly curved Γ_C (a half-disc arc) under a small indenter at its apex: most of the arc faces away from
     # the obstacle, only the nodes nearest it count (a first version counted all and refused this)
     from fenics_contact.problem.obstacles import check_obstacle_side
@@ -117,7 +116,7 @@ def test_obstacle_on_the_wrong_side_is_refused(square):
             check_obstacle_side(Circle((1.0 - 1.05 * r, 0.0), r), nu, arc, gap)
     # indented by a tenth of the body: still mostly outside, accepted
     deep = _model(Plane((0.9, 0.0), (-1.0, 0.0)))
-    result = solve_primal_monolithic(square.mesh, square.facet_tags, material_fields(square.mesh, deep), delta=1e-4)
+    result = solve_primal_monolithic(deep.on(square), delta=1e-4)
     assert result.profile.force > 0.0
 
 
@@ -153,7 +152,7 @@ def test_curved_contact_boundary_primal_and_mixed(bulged, obstacle):
     with per-facet normals), the contact is compressive, and primal and mixed agree on the force."""
     model = _model(obstacle)
     delta = default_penalty(bulged.h, 1.0)
-    primal = solve_primal_monolithic(bulged.mesh, bulged.facet_tags, material_fields(bulged.mesh, model), delta=delta)
+    primal = solve_primal_monolithic(model.on(bulged), delta=delta)
     pr = primal.profile
     assert primal.newton.steps <= 6
     assert pr.force > 0.2 and pr.active.sum() >= 5
@@ -161,7 +160,7 @@ def test_curved_contact_boundary_primal_and_mixed(bulged, obstacle):
     assert np.all(pr.sigma_c[pr.active] < 0) and np.all(pr.sigma_c[~pr.active] > -1e-8 * pr.max_pressure)
     if MPI.COMM_WORLD.size > 1:
         return
-    mixed = solve_mixed_monolithic(bulged, model)
+    mixed = solve_mixed_monolithic(model.on(bulged))
     pm = mixed.profile
     assert pm.force > 0.2
     # two discretizations of one problem at h = 1/16 (measured: 3 % flush, 1 % plane gap)
@@ -175,11 +174,11 @@ def test_curved_contact_boundary_hybrid_fixed_points(bulged):
     """Algorithms 1 and 2 with a plane obstacle at a gap on the curved Γ_C reach their monolithic solutions."""
     model = _model(Plane((1.1, 0.5), (-1.0, 0.0)))
     delta = default_penalty(bulged.h, 1.0)
-    ref = solve_primal_monolithic(bulged.mesh, bulged.facet_tags, material_fields(bulged.mesh, model), delta=delta)
-    alg1 = solve_primal_hybrid(bulged, model, delta=delta, reference=ref.u, options=IterationOptions(tol=1e-10))
+    ref = solve_primal_monolithic(model.on(bulged), delta=delta)
+    alg1 = solve_primal_hybrid(model.on(bulged), delta=delta, reference=ref.u, options=IterationOptions(tol=1e-10))
     assert alg1.converged and alg1.e_u < 1e-8
-    split = solve_mixed_monolithic(bulged, model, split_interface=True)
-    alg2 = solve_mixed_hybrid(bulged, model, reference=split, options=IterationOptions(tol=1e-10))
+    split = solve_mixed_monolithic(model.on(bulged), split_interface=True)
+    alg2 = solve_mixed_hybrid(model.on(bulged), reference=split, options=IterationOptions(tol=1e-10))
     assert alg2.converged and alg2.e_sigma < 1e-8 and alg2.e_u < 1e-8
     assert abs(alg2.profile.force / split.profile.force - 1.0) < 1e-8
 
@@ -192,8 +191,8 @@ def test_load_steps_warm_start(method):
 
     cm = unit_square(8, 4, clamped=("left",))
     model = layered_model([0.0, 0.5, 1.0], [1.0, 100.0], depth=0.0)
-    curve = force_indentation(method, cm, model, [0.01, 0.02, 0.02], direction=(-1.0, 0.0),
-                              options=IterationOptions(tol=1e-9))
+    iteration = {} if method.endswith("monolithic") else {"options": IterationOptions(tol=1e-9)}
+    curve = force_indentation(model.on(cm), method, [0.01, 0.02, 0.02], direction=(-1.0, 0.0), **iteration)
     first, _, again = curve.steps
     assert again.iterations <= (1 if method.endswith("monolithic") else 2)
     assert method.endswith("monolithic") or first.iterations > 2
@@ -214,7 +213,7 @@ def test_unloading_to_a_vanishing_solution_is_certified(method, accel):
 
     cm = unit_square(8, 4, clamped=("left",))
     model = layered_model([0.0, 0.5, 1.0], [1.0, 100.0], depth=0.0)
-    curve = force_indentation(method, cm, model, [0.01, 0.0, -0.01], direction=(-1.0, 0.0),
+    curve = force_indentation(model.on(cm), method, [0.01, 0.0, -0.01], direction=(-1.0, 0.0),
                               options=IterationOptions(tol=1e-9, accel=accel, max_iterations=300))
     pushed, unloaded, withdrawn = curve.steps
     assert pushed.converged and pushed.force > 0.0
@@ -248,9 +247,9 @@ def test_unloading_to_a_vanishing_solution_on_two_ranks(accel):
 def test_load_steps_bad_input(square):
     from fenics_contact.indentation import force_indentation
 
-    with pytest.raises(InputError, match="needs a model with an obstacle"):
-        force_indentation("primal", square, _model(None), [0.01], direction=(-1, 0))
+    with pytest.raises(InputError, match="needs a ContactProblem with an obstacle"):
+        force_indentation(_model(None).on(square), "primal", [0.01], direction=(-1, 0))
     with pytest.raises(InputError, match="unknown method"):
-        force_indentation("dual", square, _model(Plane((1, 0), (-1, 0))), [0.01], direction=(-1, 0))
+        force_indentation(_model(Plane((1, 0), (-1, 0))).on(square), "dual", [0.01], direction=(-1, 0))
     with pytest.raises(InputError, match="direction"):
-        force_indentation("primal", square, _model(Plane((1, 0), (-1, 0))), [0.01], direction=(0, 0))
+        force_indentation(_model(Plane((1, 0), (-1, 0))).on(square), "primal", [0.01], direction=(0, 0))

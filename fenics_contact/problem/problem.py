@@ -31,6 +31,7 @@ from fenics_contact.problem.fields import FunctionField, MaterialFields, materia
 from fenics_contact.problem.geometry import ContactMesh, mesh_size
 from fenics_contact.problem.obstacles import Obstacle
 from fenics_contact.problem.tags import Boundary, Subdomain, neumann_tag
+from fenics_contact.problem.validation import require_facet_groups
 
 __all__ = ["ContactProblem", "ContactLaw", "Frictionless", "ScalarField", "VectorField", "constant_field",
            "zero_load"]
@@ -130,6 +131,7 @@ class ContactProblem:
             if not isinstance(self.mesh, ContactMesh):
                 raise InputError(f"ContactProblem.mesh must be a ContactMesh (geometry.unit_square, read_mesh, …), "
                                  f"got {type(self.mesh).__name__}")
+            require_facet_groups(self.mesh.mesh, self.mesh.facet_tags, ())  # facet tags (not e.g. the cell tags)
             check_boundary_groups(self.mesh.mesh, self.mesh.facet_tags, self.boundary, names=self.mesh.neumann_names)
             self.fields_on(self.mesh.mesh)  # E > 0 and ν ∈ (−1, ½) on every cell, checked once, here
 

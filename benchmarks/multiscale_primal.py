@@ -291,8 +291,7 @@ def part_i(run: Runner) -> list[str]:
             for source in (True, False):
                 errors = []
                 for m in a.f_layers:
-                    om, _, _ = cem.build_omega1_multiscale(
-                        cm, model, alpha=a.alpha, cem=cem.CEMOptions(layers=m, nbasis=a.nbasis, s_factor=a.s_factor,
+                    om, _, _ = cem.build_omega1_multiscale(model.on(cm), alpha=a.alpha, cem=cem.CEMOptions(layers=m, nbasis=a.nbasis, s_factor=a.s_factor,
                                                                      source_correction=source))
                     ops = om.ops
                     r1 = om.from_parent(ref.u)

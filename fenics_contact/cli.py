@@ -56,6 +56,7 @@ from fenics_contact.io import (
     write_summary,
     write_vtx,
 )
+from fenics_contact.multiscale.cem import CEMOptions
 from fenics_contact.multiscale.mixed_cem import DEFAULT_MAX_NBASIS, DEFAULT_MIN_GAP
 from fenics_contact.paraview import Series, contact_grid, field_grid
 from fenics_contact.plots import (
@@ -84,8 +85,6 @@ log = logging.getLogger("fenics_contact")
 
 METHODS = HYBRID_METHODS  #: the ``--method`` choices: Algorithms 1–4 (``methods.METHODS``)
 DEFAULT_H = 64  #: 1/h of the built-in mesh when --h is not given
-#: oversampling layers m of the multiscale methods when --layers is not given (the API's CEMOptions take 3)
-DEFAULT_LAYERS = 4
 
 #: exit code -> meaning (``--help``, README)
 EXIT_CODES = {
@@ -306,8 +305,6 @@ class RunOptions:
         if name in ("E_high", "E_low"):
             return {"E_high": 1e3, "E_low": 1.0}[name]
         method = get_method(self.method)
-        if name == "layers" and method.multiscale:
-            return DEFAULT_LAYERS
         defaults = method.defaults()
         if name in defaults:
             return defaults[name]
@@ -320,8 +317,6 @@ class RunOptions:
         flat = {name: getattr(self, name) for name in _METHOD_OPTIONS if getattr(self, name) is not None}
         if "min_gap" in flat:  # --min-gap 0: exactly --nbasis modes (the option's None)
             flat["min_gap"] = flat["min_gap"] or None
-        if get_method(self.method).multiscale:
-            flat.setdefault("layers", DEFAULT_LAYERS)
         return flat | {"options": self.iteration_options()}
 
     def iteration_options(self) -> IterationOptions:
@@ -385,7 +380,7 @@ def build_parser(*, given_only: bool = False) -> argparse.ArgumentParser:
                      "(.npy, or text/.csv readable by numpy.loadtxt; row 0 = bottom); replaces the model's E map; "
                      "every pixel the domain covers must be finite and > 0")
     run.add_argument("--layers", type=int, help=f"*-ms: oversampling layers m of the multiscale bases (default "
-                     f"{DEFAULT_LAYERS})")
+                     f"{CEMOptions().layers})")
     run.add_argument("--nbasis", type=int, help="*-ms: local spectral modes l per coarse cell (default 3)")
     run.add_argument("--min-gap", type=float,
                      help="mixed-ms: add Stage I modes on a coarse cell until the first one left out has "

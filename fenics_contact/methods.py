@@ -35,7 +35,7 @@ from fenics_contact.fem.contact import NewtonOptions
 from fenics_contact.fem.mixed import epsilon_for, solve_mixed_monolithic
 from fenics_contact.fem.mixed_subproblem import MixedSubproblem
 from fenics_contact.fem.primal import PrimalSubproblem, penalty_for, solve_primal_monolithic, warn_if_locking
-from fenics_contact.hybrid.iteration import InterfaceNewtonOptions, IterationOptions
+from fenics_contact.hybrid.options import InterfaceNewtonOptions, IterationOptions, default_accel
 from fenics_contact.hybrid.mixed import MixedHybridStep, solve_mixed_hybrid
 from fenics_contact.hybrid.primal import PrimalHybridStep, solve_primal_hybrid
 from fenics_contact.multiscale.cem import CEMOptions
@@ -127,9 +127,10 @@ class Method:
             names += [f.name for f in dataclasses.fields(self.cem_type)]
         return tuple(dict.fromkeys(names))
 
-    def default_accel(self, comm: MPI.Comm = MPI.COMM_WORLD) -> str:
-        """The interface Newton, except for Algorithm 2 on several ranks (its interface Newton is serial)."""
-        return "anderson" if self.name == "mixed" and comm.size > 1 else "newton"
+    def default_accel(self, comm: MPI.Comm = MPI.COMM_WORLD) -> str | None:
+        """The update of a hybrid method when none is given (``hybrid.options.default_accel``: the interface
+        Newton, Anderson for Algorithm 2 on several ranks); None for a monolithic one."""
+        return default_accel(self.factory.__wrapped__, comm) if self.hybrid else None
 
     def options(self, values: Mapping[str, Any] | None = None, /, *, comm: MPI.Comm = MPI.COMM_WORLD,
                 **more) -> dict[str, Any]:
@@ -154,7 +155,6 @@ class Method:
             if nested is None:
                 if interface:
                     iteration["newton"] = InterfaceNewtonOptions(**interface)
-                iteration.setdefault("accel", self.default_accel(comm))
                 out["options"] = IterationOptions(**iteration)
         if cem:
             if out.get("cem") is not None:

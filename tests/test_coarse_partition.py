@@ -125,7 +125,7 @@ def test_strip_built_along_contact_boundary(l_shape, rectangle):
 
 
 def test_cartesian_grid_over_the_bounding_box(l_shape, rectangle):
-    om, _, _ = cem.build_omega1_multiscale(l_shape, MODEL, cem=cem.CEMOptions(layers=1))
+    om, _, _ = cem.build_omega1_multiscale(MODEL.on(l_shape), cem=cem.CEMOptions(layers=1))
     grid = om.grid
     # L-shape minus the strip: 3 quadrants of 16 squares, minus the 4 strip squares
     assert grid.size == 3 * 16 - 4
@@ -138,12 +138,12 @@ def test_cartesian_grid_over_the_bounding_box(l_shape, rectangle):
     # (|Δi|, |Δj| ≤ 2) but 3 adjacency steps away around the re-entrant corner
     assert grid.distance(at[3, 5])[at[5, 3]] == 3
     assert at[5, 3] not in grid.patch(at[3, 5], 2) and at[5, 3] in grid.patch(at[3, 5], 3)
-    om_r, _, _ = cem.build_omega1_multiscale(rectangle, MODEL, cem=cem.CEMOptions(layers=1))
+    om_r, _, _ = cem.build_omega1_multiscale(MODEL.on(rectangle), cem=cem.CEMOptions(layers=1))
     assert om_r.grid.size == 7 * 4 and om_r.grid.n_coarse is None
 
 
 def test_colouring_separates_cells_sharing_a_vertex(l_shape):
-    om, _, _ = cem.build_omega1_multiscale(l_shape, MODEL, cem=cem.CEMOptions(layers=1))
+    om, _, _ = cem.build_omega1_multiscale(MODEL.on(l_shape), cem=cem.CEMOptions(layers=1))
     grid, ops = om.grid, om.ops
     nodes = [set(np.unique(ops.cell_nodes[c]).tolist()) for c in grid.cells]
     for a in range(grid.size):
@@ -161,7 +161,7 @@ def test_unresolved_grid_is_refused(l_shape):
     assert np.any(coarse < 0)
     bad = cm._replace(H=1 / 6, coarse_cell=coarse.astype(np.int32))
     with pytest.raises(InputError, match="does not resolve the coarse grid"):
-        cem.build_omega1_multiscale(bad, MODEL, cem=cem.CEMOptions(layers=1))
+        cem.build_omega1_multiscale(MODEL.on(bad), cem=cem.CEMOptions(layers=1))
 
 
 def _partitioned_model(nx: int, ny: int, side: float, h: float) -> None:
@@ -199,7 +199,7 @@ def test_user_partition_from_physical_groups(partitioned):
     cm = partitioned
     assert cm.H == pytest.approx(0.25)
     assert _cell_area(cm, cm.cell_tags.find(Subdomain.OMEGA2)) == pytest.approx(0.25)  # the 4 squares at x = 2
-    om, _, _ = cem.build_omega1_multiscale(cm, MODEL, cem=cem.CEMOptions(layers=1))
+    om, _, _ = cem.build_omega1_multiscale(MODEL.on(cm), cem=cem.CEMOptions(layers=1))
     grid = om.grid
     assert grid.size == 7 * 4
     assert np.allclose(grid.cell_size, 0.25)

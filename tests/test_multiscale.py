@@ -55,8 +55,7 @@ def mesh_32_8():
 @pytest.fixture(scope="module")
 def omega1_32_8(mesh_32_8):
     """Ω₁ of model 1 at h = 1/32, H = 1/8 with m = 2, l = 3."""
-    om, _, _ = cem.build_omega1_multiscale(
-        mesh_32_8, models.get_model(1), cem=cem.CEMOptions(layers=2, nbasis=3)
+    om, _, _ = cem.build_omega1_multiscale(models.get_model(1).on(mesh_32_8), cem=cem.CEMOptions(layers=2, nbasis=3)
     )
     return om
 
@@ -177,7 +176,7 @@ def test_nearly_incompressible_omega1_is_reported(mesh_32_8, caplog):
     errors, gaps = {}, {}
     for nu in (0.35, 0.49):
         caplog.clear()
-        om, _, _ = cem.build_omega1_multiscale(mesh_32_8, models.get_model(1, nu=nu),
+        om, _, _ = cem.build_omega1_multiscale(models.get_model(1, nu=nu).on(mesh_32_8),
                                                cem=cem.CEMOptions(layers=2, nbasis=3))
         assert om.nu_max == pytest.approx(nu)
         assert ("localize slowly" in caplog.text) == (nu > cem.NEARLY_INCOMPRESSIBLE)
@@ -192,8 +191,7 @@ def test_all_modes_reproduce_fine_robin_solution():
     """Patches = Ω₁ and every local mode kept: V_ms = V_h(Ω₁), so u₁ = w + Ng is the fine solution."""
     cm = geometry.unit_square(16, 4)
     model = models.get_model(1)
-    om, _, _ = cem.build_omega1_multiscale(
-        cm, model, cem=cem.CEMOptions(layers=4, nbasis=cem.ALL_MODES)
+    om, _, _ = cem.build_omega1_multiscale(model.on(cm), cem=cem.CEMOptions(layers=4, nbasis=cem.ALL_MODES)
     )
     assert om.solver.factor.rank == int(np.count_nonzero(om.ops.free))
     g = _robin_data(om)
@@ -331,7 +329,7 @@ def test_source_correction_vanishes_for_loads_in_omega2(omega1_32_8):
 def test_interface_response_is_the_affine_map():
     """response() gives u₁|γ = R g + r₀ (Robin data and a load in Ω₁), equal to solve() to round-off."""
     model = models.get_model(1).with_(load=LOADS_IN_OMEGA1[1])
-    om, _, _ = cem.build_omega1_multiscale(geometry.unit_square(16, 4), model, cem=cem.CEMOptions(layers=1))
+    om, _, _ = cem.build_omega1_multiscale(model.on(geometry.unit_square(16, 4)), cem=cem.CEMOptions(layers=1))
     R, r0 = om.response()
     assert np.abs(r0).max() > 0
     rng = np.random.default_rng(3)
@@ -359,7 +357,7 @@ def test_offline_cache(tmp_path, mesh_32_8, caplog):
     options = cem.CEMOptions(layers=1, nbasis=2)
 
     def build():
-        return cem.build_omega1_multiscale(cm, model, cem=options, cache_dir=tmp_path)[0]
+        return cem.build_omega1_multiscale(model.on(cm), cem=options, cache_dir=tmp_path)[0]
 
     first = build()
     assert first.cache_status == "built"
@@ -388,10 +386,10 @@ def test_offline_cache(tmp_path, mesh_32_8, caplog):
     assert build().cache_status == "rebuilt"
     # the key changes with the material, α and the options
     key = cem.offline_key(first.ops, first.grid, options, h=cm.h)
-    other = cem.build_omega1_multiscale(cm, models.get_model(2, E_high=1e4), cem=options)[0]
+    other = cem.build_omega1_multiscale(models.get_model(2, E_high=1e4).on(cm), cem=options)[0]
     assert cem.offline_key(other.ops, other.grid, options, h=cm.h) != key
     assert cem.offline_key(first.ops, first.grid, cem.CEMOptions(layers=2, nbasis=2), h=cm.h) != key
-    first_alpha2 = cem.build_omega1_multiscale(cm, model, alpha="2E", cem=options)[0]
+    first_alpha2 = cem.build_omega1_multiscale(model.on(cm), alpha="2E", cem=options)[0]
     assert cem.offline_key(first_alpha2.ops, first_alpha2.grid, options, h=cm.h) != key
 
 
@@ -455,7 +453,7 @@ def test_threshold_limits_modes(omega1_32_8):
 def test_nbasis_as_float_and_a_cut_through_the_rigid_motions():
     """nbasis = 2.0 is 2 modes; cutting the triple zero of an interior cell (rigid motions) leaves Λ = 0, not
     a negative rounding value."""
-    om, _, _ = cem.build_omega1_multiscale(geometry.unit_square(16, 4), models.get_model(1),
+    om, _, _ = cem.build_omega1_multiscale(models.get_model(1).on(geometry.unit_square(16, 4)),
                                            cem=cem.CEMOptions(layers=1, nbasis=2.0))
     assert om.nbasis_range == (2, 2)
     assert np.all(om.space.aux.gaps >= 0.0) and om.spectral_gap == 0.0

@@ -25,7 +25,7 @@ from mpi4py import MPI
 
 from fenics_contact.errors import InputError
 from fenics_contact.hybrid.interface_newton import newton_iterate
-from fenics_contact.hybrid.options import ACCELERATIONS, InterfaceNewtonOptions, IterationOptions
+from fenics_contact.hybrid.options import ACCELERATIONS, InterfaceNewtonOptions, IterationOptions, default_accel
 from fenics_contact.hybrid.step import (
     COLLAPSE,
     HybridStep,
@@ -132,11 +132,14 @@ def iterate(
     g = step.initial_data() if initial is None else np.array(initial, dtype=float)
     if g.shape != step.initial_data().shape:
         raise InputError(f"initial interface data have shape {g.shape}, expected {step.initial_data().shape}")
-    if options.accel == "newton":
-        return newton_iterate(step, options, name=name, monitor=monitor, initial=g)
+    accel = options.accel if options.accel is not None else default_accel(step, step.comm)
+    if accel == "newton":
+        history = newton_iterate(step, options, name=name, monitor=monitor, initial=g)
+        history.accel = accel
+        return history
     weights = step.data_weights() if hasattr(step, "data_weights") else None
-    update = make_update(options.accel, step.comm, depth=options.depth, weights=weights)
-    history = IterationHistory()
+    update = make_update(accel, step.comm, depth=options.depth, weights=weights)
+    history = IterationHistory(accel=accel)
     start = time.perf_counter()
     largest = data_norm(g, step.comm)
     zero_tried = False

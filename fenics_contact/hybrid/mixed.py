@@ -143,6 +143,8 @@ class MixedHybridStep:
 
     #: whether the Ω₁ subproblem assembles its global matrices (Algorithm 4's Ω₁ does not need them)
     omega1_operators = True
+    #: the interface Newton holds serial SciPy operators: on several ranks the default update is Anderson
+    serial_interface_newton = True
 
     def __init__(
         self,

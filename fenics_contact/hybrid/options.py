@@ -12,7 +12,7 @@ import numpy as np
 
 from fenics_contact.errors import InputError
 
-__all__ = ["ACCELERATIONS", "InterfaceNewtonOptions", "IterationOptions"]
+__all__ = ["default_accel", "ACCELERATIONS", "InterfaceNewtonOptions", "IterationOptions"]
 
 
 #: The updates of the interface data: the paper's plain update, Anderson acceleration, interface Newton.
@@ -57,12 +57,14 @@ class IterationOptions:
     """Stopping rule: transmission residual < tol (``hybrid.certificate``), at most max_iterations.
 
     ``accel`` is the update: ``"none"`` (the paper's), ``"anderson"`` (depth ``depth``) or
-    ``"newton"`` (``hybrid.interface_newton``, options ``newton``).
+    ``"newton"`` (``hybrid.interface_newton``, options ``newton``); None: ``default_accel`` of the step (the
+    interface Newton, measured the fastest on every tested model; Anderson where a step's interface Newton is
+    serial and the run has several ranks).
     """
 
     tol: float = 1.0e-6
     max_iterations: int = 2000
-    accel: str = "anderson"
+    accel: str | None = None
     depth: int = 10
     newton: InterfaceNewtonOptions = InterfaceNewtonOptions()
 
@@ -71,7 +73,13 @@ class IterationOptions:
             raise InputError(f"the relative tolerance must lie in (0, 1), got {self.tol!r}")
         if not isinstance(self.max_iterations, (int, np.integer)) or self.max_iterations < 1:
             raise InputError(f"max_iterations must be an integer >= 1, got {self.max_iterations!r}")
-        if self.accel not in ACCELERATIONS:
+        if self.accel is not None and self.accel not in ACCELERATIONS:
             raise InputError(f"unknown acceleration {self.accel!r}; choose one of {', '.join(ACCELERATIONS)}")
         if not isinstance(self.depth, (int, np.integer)) or self.depth < 1:
             raise InputError(f"the Anderson depth must be an integer >= 1, got {self.depth!r}")
+
+
+def default_accel(step, comm) -> str:
+    """The update when none is given: the interface Newton, or Anderson when the step (a hybrid step or its class)
+    has ``serial_interface_newton`` and ``comm`` several ranks."""
+    return "anderson" if getattr(step, "serial_interface_newton", False) and comm.size > 1 else "newton"

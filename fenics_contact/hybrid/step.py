@@ -84,6 +84,7 @@ class IterationHistory:
 
     records: list[IterationRecord] = field(default_factory=list)
     converged: bool = False
+    accel: str = ""  #: the update that ran ("none", "anderson", "newton")
     time_s: float = 0.0
     time_offline_s: float = 0.0
     time_monitor_s: float = 0.0

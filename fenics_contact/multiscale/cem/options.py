@@ -77,7 +77,7 @@ class CEMOptions:
     directly, as in the paper, and the error stalls once the load acts in Ω₁.
     """
 
-    layers: int = 3
+    layers: int = 4
     nbasis: int | None = 3
     threshold: float | None = None
     eigensolver: str = "auto"

@@ -43,7 +43,7 @@ class MixedCEMOptions:
     ``DEFAULT_MIN_GAP``); ``min_gap=None`` keeps exactly ``nbasis`` (the paper's fixed l).
     """
 
-    layers: int = 3
+    layers: int = 4
     nbasis: int | None = 3
     min_gap: float | None = DEFAULT_MIN_GAP
     max_nbasis: int = DEFAULT_MAX_NBASIS

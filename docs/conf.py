@@ -170,8 +170,18 @@ def plain_text_docstring(app, what, name, obj, options, lines: list[str]) -> Non
     lines[:] = out
 
 
+def skip_top_level_reexports(app, what, name, obj, skip, options):
+    """The package's top-level names (``fenics_contact.solve``, ``ContactProblem``…) are documented where they
+    are defined; the package page only lists them (its docstring), so nothing is described twice."""
+    on_package_page = app.env.docname == "api/fenics_contact"
+    if on_package_page and what == "module" and name in fenics_contact._API:
+        return True
+    return skip
+
+
 def setup(app) -> None:
     app.connect("autodoc-process-docstring", plain_text_docstring)
+    app.connect("autodoc-skip-member", skip_top_level_reexports)
 
 
 _demo_notebooks()

@@ -79,3 +79,7 @@ else:
 if not re.match(rf"{re.escape(DOLFINX_SERIES)}(\.|$)", dolfinx_version):
     raise ImportError(f"fenics-contact needs DOLFINx {DOLFINX_SERIES}; this environment has DOLFINx {dolfinx_version}. "
                       f"{HOW_TO_GET_DOLFINX}")
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *_API, *_MODULES})

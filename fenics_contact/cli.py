@@ -583,9 +583,9 @@ def _indentation_curve(options: RunOptions, case: Case, problem: ContactProblem,
     V = fem.functionspace(problem.cm.mesh, ("Lagrange", 1, (problem.dim,))) if primal else None
 
     def write_step(step, solver) -> None:
+        state = (solver.glued(V),) if primal else solver.glued()[::-1]  # (collective over the offline ranks)
         if not writes:
             return
-        state = (solver.glued(V),) if primal else solver.glued()[::-1]
         fields.add(step.depth, _field_grid(problem, *state))
         contact.add(step.depth, contact_grid(step.profile, comm))
 
@@ -808,8 +808,8 @@ def _run_mixed(options: RunOptions, problem: ContactProblem, comm: MPI.Comm = MP
 
     def write(out: Path) -> None:
         if not (out / "fields.pvd").exists():  # (load steps write their own series)
-            Series(out, "fields", MPI.COMM_SELF).add(0.0, _field_grid(problem, result.u, result.sigma))
-            Series(out, "contact", MPI.COMM_SELF).add(0.0, contact_grid(result.profile, MPI.COMM_SELF))
+            Series(out, "fields", problem.comm).add(0.0, _field_grid(problem, result.u, result.sigma))
+            Series(out, "contact", problem.comm).add(0.0, contact_grid(result.profile, problem.comm))
         write_vtx(out / "sigma.bp", result.sigma)
         write_vtx(out / "u.bp", result.u)
         if options.plots:

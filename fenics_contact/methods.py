@@ -100,7 +100,7 @@ class Method:
     algorithm: int | None  #: 1–4 for the hybrid methods, None for the monolithic solves
     summary: str
     solve_function: Callable
-    factory: Callable  #: problem, **options -> a solver kept for many solves (load steps)
+    factory: Callable  #: (problem, options) -> a solver kept for many solves (load steps)
     cem_type: type | None = None  #: the multiscale options type (``cem=``), None for fine Ω₁
 
     @property

@@ -52,28 +52,33 @@ class Series:
 
 
 def _gather_grid(V: fem.FunctionSpace, point_values: dict, cell_values: dict) -> pyvista.UnstructuredGrid | None:
-    """The cells of ``V``'s mesh (owned) as one grid on rank 0, with point data at V's dofs and cell data."""
+    """The owned cells of ``V``'s mesh as one grid on rank 0, its points the dofs of the P1 space V numbered
+    globally (a point shared by ranks appears once), with point data at V's dofs and cell data."""
     msh = V.mesh
     tdim = msh.topology.dim
     n_cells = msh.topology.index_map(tdim).size_local
     topology, cell_types, x = plot.vtk_mesh(V)
-    per_cell = topology.reshape(-1, topology.size // max(len(cell_types), 1))[:n_cells]
-    parts = msh.comm.gather((per_cell, cell_types[:n_cells], x, point_values,
+    per_cell = topology.reshape(-1, topology.size // max(len(cell_types), 1))[:n_cells].copy()
+    imap = V.dofmap.index_map
+    to_global = imap.local_to_global(np.arange(x.shape[0], dtype=np.int32))
+    per_cell[:, 1:] = to_global[per_cell[:, 1:]]
+    parts = msh.comm.gather((per_cell, cell_types[:n_cells], to_global, x, point_values,
                              {k: v[:n_cells] for k, v in cell_values.items()}), root=0)
     if msh.comm.rank != 0:
         return None
-    offset, cells = 0, []
-    for top, _, pts, _, _ in parts:
-        top = top.copy()
-        top[:, 1:] += offset
-        cells.append(top.ravel())
-        offset += pts.shape[0]
-    grid = pyvista.UnstructuredGrid(np.concatenate(cells), np.concatenate([p[1] for p in parts]),
-                                    np.concatenate([p[2] for p in parts]))
+    n_points = imap.size_global
+    points = np.zeros((n_points, 3))
+    data = {key: np.zeros((n_points, *np.shape(parts[0][4][key])[1:])) for key in point_values}
+    for _, _, glob, pts, values, _ in parts:
+        points[glob] = pts
+        for key in point_values:
+            data[key][glob] = values[key]
+    grid = pyvista.UnstructuredGrid(np.concatenate([p[0].ravel() for p in parts]),
+                                    np.concatenate([p[1] for p in parts]), points)
     for key in point_values:
-        grid.point_data[key] = np.concatenate([p[3][key] for p in parts])
+        grid.point_data[key] = data[key]
     for key in cell_values:
-        grid.cell_data[key] = np.concatenate([p[4][key] for p in parts])
+        grid.cell_data[key] = np.concatenate([p[5][key] for p in parts])
     return grid
 
 

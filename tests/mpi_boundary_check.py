@@ -27,7 +27,7 @@ cm = bc._mesh(16)
 model = bc.manufactured_model()
 delta = default_penalty(cm.h, 1.0)
 ref = solve_primal_monolithic(model.on(cm), delta=delta)
-alg1 = solve_primal_hybrid(model.on(cm), delta=delta, reference=ref.u, options=IterationOptions(tol=1e-10))
+alg1 = solve_primal_hybrid(model.on(cm), delta=delta, reference=ref.u, options=IterationOptions(tol=1e-10, accel="anderson"))
 newton = solve_primal_hybrid(model.on(cm), delta=delta, reference=ref.u,
                              options=IterationOptions(tol=1e-10, accel="newton"))
 block, _ = hertz_block(0.05, refinement=0.5)

@@ -40,7 +40,7 @@ problem = get_model(1).with_(load=load).on(cm)
 delta = default_penalty(cm.h, 1.0)
 ref = solve_primal_monolithic(problem, delta=delta)
 res = solve_primal_ms_hybrid(problem, alpha="Emin", delta=delta, cem=CEMOptions(layers=2, nbasis=3), reference=ref.u,
-                             options=IterationOptions(tol=1e-10))
+                             options=IterationOptions(tol=1e-10, accel="anderson"))
 # the interface Newton on the same step (Ω₁'s response from the coarse solver, gathered over the ranks)
 newton = solve_primal_ms_hybrid(problem, alpha="Emin", delta=delta, cem=CEMOptions(layers=2, nbasis=3), step=res.step,
                                 options=IterationOptions(tol=1e-10, accel="newton"))

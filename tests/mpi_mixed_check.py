@@ -91,7 +91,7 @@ def hybrid(name: str, fields: dict) -> dict:
 
     cm, model = mesh_and_model(name, 8)
     ref = solve_mixed_monolithic(model.on(cm), split_interface=True)
-    res = solve_mixed_hybrid(model.on(cm), reference=ref, options=IterationOptions(tol=1e-10))
+    res = solve_mixed_hybrid(model.on(cm), reference=ref, options=IterationOptions(tol=1e-10, accel="anderson"))
     fields[f"hybrid-{name}-sigma"] = sorted_values(res.sigma)
     fields[f"hybrid-{name}-u"] = sorted_values(res.u)
     fields[f"hybrid-{name}-ref-sigma"] = sorted_values(ref.sigma)

@@ -11,6 +11,7 @@ from typing import Callable, NamedTuple
 
 import numpy as np
 import pytest
+from outcome import outcome_lines
 from mpi4py import MPI
 
 from fenics_contact.cli import main
@@ -321,7 +322,7 @@ def run_case(case: Case, tmp: Path, capsys) -> tuple[int, str, str]:
 def test_bad_input_table(case, tmp_path, capsys, monkeypatch):
     monkeypatch.chdir(tmp_path)
     code, out, err = run_case(case, tmp_path, capsys)
-    lines = err.strip().splitlines()
+    lines = outcome_lines(err)
     assert code == case.code, err
     assert len(lines) == 1 and case.message in lines[0], err
     assert lines[0].startswith("numerical failure: " if code == 4 else "error: ")
@@ -345,6 +346,6 @@ def test_argparse_errors_exit_2(capsys):
 def test_not_converged_is_exit_3_with_results(tmp_path, capsys):
     out = tmp_path / "capped"
     assert main(["run", *SMALL, "--accel", "none", "--max-iterations", "3", "--no-plots", "--out", str(out)]) == 3
-    err = capsys.readouterr().err.strip().splitlines()
+    err = outcome_lines(capsys.readouterr().err)
     assert len(err) == 1 and err[0].startswith("not converged: the iteration hit --max-iterations 3"), err
     assert json.loads((out / "summary.json").read_text())["converged"] is False

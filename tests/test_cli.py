@@ -2,7 +2,10 @@
 
 import json
 
+import numpy as np
+
 import pytest
+import pyvista
 from mpi4py import MPI
 
 from fenics_contact.cli import main
@@ -22,9 +25,17 @@ def test_run_writes_summary_fields_and_plots(tmp_path):
     lo, hi = summary["active_set"]
     assert 0.3 <= lo < hi <= 0.7
     assert summary["dofs"]["omega1"] + summary["dofs"]["omega2"] - summary["dofs"]["interface"] == 2 * 17 * 17
-    for name in ("fields.xdmf", "fields.h5", "E.png", "displacement.png", "deformed.png", "contact.png",
+    for name in ("fields.pvd", "contact.pvd", "E.png", "displacement.png", "deformed.png", "contact.png",
                  "history.png", "summary.md"):
         assert (out / name).stat().st_size > 0, name
+    # the ParaView fields read back: the mesh with u and the stress, Γ_C with the contact pressure and gap
+    fields, contact = pyvista.read(out / "fields.pvd")[0], pyvista.read(out / "contact.pvd")[0]
+    assert fields.n_points == 17 * 17 and fields.n_cells == 2 * 16 * 16
+    assert set(fields.point_data.keys()) == {"u"} and {"sigma", "E", "subdomain"} <= set(fields.cell_data.keys())
+    assert fields.cell_data["sigma"].shape == (2 * 16 * 16, 6)
+    pressure, gap, active = (contact.point_data[k] for k in ("pressure", "gap", "active"))
+    assert np.all(pressure[active > 0] > 0) and np.all(gap[active == 0] > 0)  # contact where the gap closes
+    assert pressure.max() == pytest.approx(summary["max_contact_pressure"], rel=1e-12)
 
 
 def test_not_converged_exits_nonzero(tmp_path):
@@ -51,7 +62,6 @@ def test_bad_input_is_a_clear_error(tmp_path, caplog, capsys, args, message):
 
 def test_user_pixel_map_of_E(tmp_path):
     """A homogeneous pixel map gives the same answer as the model with E_high = E_low."""
-    import numpy as np
 
     np.save(tmp_path / "E.npy", np.full((8, 8), 5.0))
     args = ["run", "--model", "1", "--h", "16", "--H", "4", "--no-plots"]
@@ -115,7 +125,8 @@ def test_mixed_methods(tmp_path, method):
     else:
         assert summary["e_u_post"] is None
     assert summary["max_tensile_sigma_c"] >= 0.0
-    for name in ("sigma.bp", "u.bp", "fields.xdmf", "stress.png", "displacement.png", "contact.png", "history.png"):
+    for name in ("sigma.bp", "u.bp", "fields.pvd", "contact.pvd", "stress.png", "displacement.png", "deformed.png",
+                 "contact.png", "history.png"):
         assert (out / name).exists(), name
 
 

@@ -52,7 +52,7 @@ def test_every_demo_is_executed_with_its_figures_inline(site):
 
 def test_every_module_has_an_api_page_with_its_public_names(site):
     """The reference walks the package: a page per module (subpackages too), each documenting the classes and
-    functions of its ``__all__``."""
+    functions of its ``__all__`` (the package's top-level API: on the pages of the modules that define it)."""
     modules = ["fenics_contact"] + [m.name for m in pkgutil.walk_packages(fenics_contact.__path__, "fenics_contact.")
                                     if not m.name.rsplit(".", 1)[-1].startswith("_")]
     undocumented = {}
@@ -63,6 +63,9 @@ def test_every_module_has_an_api_page_with_its_public_names(site):
         module = importlib.import_module(name)
         public = [n for n in getattr(module, "__all__", [])
                   if inspect.isclass(getattr(module, n)) or inspect.isfunction(getattr(module, n))]
-        if missing := [n for n in public if f'id="{name}.{n}"' not in html]:
+        home = {n: getattr(module, n).__module__ if name == "fenics_contact" else name for n in public}
+        # (the package's top-level API is documented on the pages of the modules that define it)
+        if missing := [n for n in public if f'id="{home[n]}.{n}"' not in
+                       (html if home[n] == name else (site / "api" / f"{home[n]}.html").read_text())]:
             undocumented[name] = missing
     assert not undocumented

@@ -92,7 +92,7 @@ def test_primal_ms_curve_converges_with_layers_offline_once(monkeypatch):
     assert errors[0] > 10 * errors[1] > 100 * errors[2] and errors[2] < 1e-3, errors
     # (b) the same step again: no offline work, warm Anderson starts from the previous data
     again = force_indentation(model.on(cm), "primal-ms", [DEPTHS[-1], DEPTHS[-1]], direction=DIRECTION,
-                              options=IterationOptions(tol=TOL), step=curve.step)
+                              options=IterationOptions(tol=TOL, accel="anderson"), step=curve.step)
     assert len(calls) == 3
     assert again.steps[0].force == pytest.approx(curve.steps[-1].force, rel=1e-6)
     assert again.steps[1].iterations <= 2 < again.steps[0].iterations  # warm start at the same depth
@@ -125,7 +125,7 @@ def test_mixed_ms_curve_converges_with_layers_offline_once(monkeypatch):
     assert again.forces[0] == pytest.approx(curve.forces[-1], rel=1e-8)
     # Anderson on the same step: the Newton forces up to the tolerance; a repeated depth restarts converged
     anderson = force_indentation(model.on(cm), "mixed-ms", [DEPTHS[-1], DEPTHS[-1]], direction=DIRECTION,
-                                 options=IterationOptions(tol=TOL), step=curve.step)
+                                 options=IterationOptions(tol=TOL, accel="anderson"), step=curve.step)
     assert len(calls) == 3
     assert anderson.steps[0].force == pytest.approx(curve.forces[-1], rel=1e-6)
     assert anderson.steps[1].iterations <= 2 < anderson.steps[0].iterations

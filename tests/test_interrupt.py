@@ -7,6 +7,7 @@ import sys
 import time
 
 import pytest
+from outcome import outcome_lines, run_files
 from mpi4py import MPI
 
 from fenics_contact.cli import main
@@ -21,7 +22,7 @@ LONG_RUN = ["--h", "64", "--H", "16", "--accel", "none", "--tol", "1e-14", "--ma
 def test_interrupted_run_leaves_the_previous_results(tmp_path, signum, code):
     out = tmp_path / "run"
     assert main(["run", "--h", "16", "--H", "4", "--no-plots", "--out", str(out)]) == 0
-    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    before = run_files(out)
     log = tmp_path / "stdout.txt"
     env = dict(os.environ, OMP_NUM_THREADS="1")
     with open(log, "w") as stdout:
@@ -39,9 +40,9 @@ def test_interrupted_run_leaves_the_previous_results(tmp_path, signum, code):
             if proc.poll() is None:
                 proc.kill()
     assert proc.returncode == code, err
-    lines = err.strip().splitlines()
+    lines = outcome_lines(err)
     assert lines == [f"interrupted by {signal.Signals(signum).name}: {out} left as it was (no partial output)"], err
-    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+    assert run_files(out) == before
     assert sorted(p.name for p in tmp_path.iterdir()) == ["run", "stdout.txt"], "no staging directory is left"
 
 

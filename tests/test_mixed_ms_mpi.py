@@ -82,7 +82,7 @@ def test_cli_mixed_ms_on_two_ranks(tmp_path):
                               capture_output=True, text=True, env=env, timeout=600)
         assert proc.returncode == 0, proc.stderr[-3000:]
         summaries[label] = json.loads((out / "summary.json").read_text())
-        for name in ("sigma.bp", "u.bp", "fields.xdmf", "contact.png", "history.png"):
+        for name in ("sigma.bp", "u.bp", "fields.pvd", "contact.pvd", "contact.png", "history.png"):
             assert (out / name).exists(), name
     serial, mpi = summaries["serial"], summaries["mpi"]
     assert (serial["mpi_ranks"], mpi["mpi_ranks"]) == (1, 2)

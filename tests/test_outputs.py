@@ -13,6 +13,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import pyvista
+from outcome import outcome_lines, run_files
 from mpi4py import MPI
 
 from fenics_contact.cli import main
@@ -26,7 +28,7 @@ from mpi_jobs import mpiexec as _mpiexec
 pytestmark = pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="launches its own processes")
 
 SMALL = ["--h", "16", "--H", "4"]
-RUN_FILES = {"fields.xdmf", "fields.h5", "summary.json", "summary.md", RUN_MARKER}
+RUN_FILES = {"fields.pvd", "fields", "contact.pvd", "contact", "summary.json", "summary.md", RUN_MARKER}
 
 
 def _dead_pid() -> int:
@@ -36,7 +38,7 @@ def _dead_pid() -> int:
 
 
 def _snapshot(directory: Path) -> dict[str, bytes]:
-    return {p.name: p.read_bytes() for p in sorted(directory.iterdir()) if p.is_file()}
+    return run_files(directory)
 
 
 def test_a_reused_out_holds_exactly_one_run(tmp_path):
@@ -163,15 +165,14 @@ def test_two_ranks_write_one_directory(tmp_path):
     summary = json.loads((out / "summary.json").read_text())
     assert summary["mpi_ranks"] == 2 and summary["converged"] is True
     assert {"E.png", "contact.png", "displacement.png", "history.png"} <= {p.name for p in out.iterdir()}
-    xdmf = (out / "fields.xdmf").read_text()
-    geometry = xdmf[xdmf.index("<Geometry"):]
-    assert 'Dimensions="289 2"' in geometry[:geometry.index("</Geometry>")]  # both ranks' parts, 17 x 17 nodes once
+    fields = pyvista.read(out / "fields.pvd")[0]
+    assert fields.n_points == 289 and fields.n_cells == 2 * 16 * 16  # both ranks' parts, 17 x 17 nodes once
     # a bad mesh: exit 2, one line on stderr (rank 0), the run before untouched (reuse: serial tests above)
     before = _snapshot(out)
     bad = build_columns(tmp_path / "bad.msh", gamma_c=("v0",), gamma_d=("b0", "b1", "b2", "t0", "t1", "t2", "v3"))
     proc = _cli("--mesh", str(bad), "--no-plots", "--out", str(out))
     assert proc.returncode == 2
-    lines = proc.stderr.strip().splitlines()
+    lines = outcome_lines(proc.stderr)
     assert len(lines) == 1 and "not on the boundary of Omega2" in lines[0], proc.stderr
     assert _snapshot(out) == before
     assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.msh", "mpi"]

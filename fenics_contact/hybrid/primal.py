@@ -222,6 +222,9 @@ class HybridResult(IterationResult):
     e_u: float | None
     step: HybridStep  #: the step object (PrimalHybridStep, MultiscalePrimalHybridStep, ...)
     time_interface_offline_s: float = 0.0  #: offline interface response of the Newton method (in time_offline_s)
+    #: Algorithm 3: the multiscale Ω₁ against the fine Ω₁ solve for the final interface data (relative energy
+    #: norm; ``Omega1Multiscale.fine_check``), None when not checked
+    omega1_check: float | None = None
 
 
 def solve_primal_hybrid(

@@ -1,4 +1,4 @@
-"""Analytic contact solutions (METHOD §9 "Analytic checks") and the problems that have them.
+"""Analytic contact solutions and the problems that have them (the docs' verification page).
 
 * **Bar**: ν = 0, Young's modulus E, clamped at x = 0 only (top and bottom traction
   free), body force (f₁, 0), a wall flush with x = 1.  Pushing (f₁ > 0) gives full

@@ -109,7 +109,7 @@ def hertz_block(
     strip: float = 2.0,
     contact_width: float = 3.0,
     refine_width: float = 1.5,
-    refine_depth: float = 0.5,
+    refine_depth: float = 1.0,
     grading: float = 0.25,
     h_far: float = 8.0,
     refinement: float = 1.0,

@@ -1,4 +1,4 @@
-"""The built-in test models (METHOD §5) as data: Young's modulus map, ν, load.
+"""The built-in test models as data (the paper's test set-up): Young's modulus map, ν, load.
 
 The paper's Figure 5.1 is not available, so the two heterogeneity maps are
 documented stand-ins on Ω = (0,1)², every feature aligned with the 1/32 grid

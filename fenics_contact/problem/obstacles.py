@@ -1,6 +1,6 @@
 """Rigid obstacles: a signed distance d(x) (> 0 outside the obstacle) and the contact direction ν(x).
 
-Small-deformation frictionless contact with a rigid obstacle (METHOD §9) reads
+Small-deformation frictionless contact with a rigid obstacle (the docs' theory page, 'Gap and obstacles') reads
 
     u·ν ≤ g  on Γ_C,   g(x) = d(x),   ν(x) = −∇d(x)/|∇d(x)|,
 
@@ -19,7 +19,7 @@ Gauss–Lobatto nodes (``fem.primal``, ``fem.mixed``).  Obstacles:
   is refused (InputError).
 
 ``obstacle.translated(t)`` moves an obstacle rigidly by the vector t (its
-first-order effect on the gap is g − t·ν, METHOD §9); ``indented(depth,
+first-order effect on the gap is g − t·ν); ``indented(depth,
 direction)`` moves it by depth·direction (unit direction).
 
 Points are numpy arrays of shape (3, N) or (2, N) (DOLFINx convention); gaps

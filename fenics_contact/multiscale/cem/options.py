@@ -50,8 +50,8 @@ def warn_if_few_layers(layers: int, method: str, comm) -> None:
         log.warning(
             "%s with m = %d oversampling layer(s): the multiscale bases are cut off where they have not decayed, "
             "and the Ω₁ error stays large (model 1, h = 1/32, H = 1/8: primal-ms e_u 0.72, 0.36, 5.1e-3, 3.9e-4 "
-            "and mixed-ms e_σ 3.1, 0.44, 2.0e-2, 2.5e-3 for m = 0, 1, 2, 3). Use m >= 2 (default 3); check against "
-            "the fine solution with --reference.", method, layers)
+            "and mixed-ms e_σ 3.1, 0.44, 2.0e-2, 2.5e-3 for m = 0, 1, 2, 3). Use m >= 2 (default %d); check against "
+            "the fine solution with --reference.", method, layers, CEMOptions().layers)
 
 
 @dataclass(frozen=True, slots=True)

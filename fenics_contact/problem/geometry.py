@@ -44,7 +44,7 @@ class ContactMesh(NamedTuple):
     mesh: dmesh.Mesh
     cell_tags: dmesh.MeshTags
     facet_tags: dmesh.MeshTags
-    h: float  #: fine mesh size: 1/n, or ``mesh_size`` (√(2·largest cell area)) for a user mesh
+    h: float  #: fine mesh size at Γ_C: 1/n, or ``mesh_size(mesh, facet_tags)`` (√(2·largest area of a cell on Γ_C)) for a user mesh
     H: float | None  #: coarse size / strip width (None when unknown)
     coarse_cell: np.ndarray  #: coarse-square index of every local cell (-1 if no coarse grid)
     neumann_names: dict | None = None  #: traction-group tag -> physical name (Gamma_N*)
@@ -263,6 +263,8 @@ def read_mesh(
         cm = _strip_contact_mesh(data, h=mesh_size(data.mesh), H=H, materials=overlay_groups)
     else:
         cm = _contact_mesh(data, h=mesh_size(data.mesh), H=H)
+    if cm.comm.allreduce(int(np.count_nonzero(cm.facet_tags.values == Boundary.GAMMA_C)), op=MPI.SUM):
+        cm = cm._replace(h=mesh_size(cm.mesh, cm.facet_tags))
     if validate:
         validation.validate_contact_mesh(cm, rules, source=str(path))
     return cm
@@ -288,14 +290,23 @@ def _strip_contact_mesh(data: dolfinx.io.gmsh.MeshData, *, h: float, H: float | 
                        _neumann_names(data))
 
 
-def mesh_size(msh: dmesh.Mesh) -> float:
-    """h = max over the cells of √(2|T|): the leg of the right isosceles triangle of the largest cell's area.
+def mesh_size(msh: dmesh.Mesh, facet_tags: dmesh.MeshTags | None = None) -> float:
+    """h = max over the cells of √(2|T|): the leg of the right isosceles triangle of the largest cell's area; with
+    ``facet_tags``, over the cells with a facet on Γ_C only (the contact cell size, which sets the default
+    penalties δ, ε and the Robin coefficient α, so a mesh graded towards Γ_C gets the penalties of its contact
+    cells, not of its largest cell far away).
 
     On the built-in meshes (squares of side 1/n cut in two) this is 1/n, so a user mesh of the same
     grid gets the same h, and with it the same default penalty δ and Robin coefficient α.
     """
     tdim = msh.topology.dim
     cells = np.arange(msh.topology.index_map(tdim).size_local, dtype=np.int32)
+    if facet_tags is not None:
+        msh.topology.create_connectivity(tdim - 1, tdim)
+        f2c = msh.topology.connectivity(tdim - 1, tdim)
+        facets = facet_tags.indices[facet_tags.values == Boundary.GAMMA_C]
+        touching = np.unique(np.concatenate([f2c.links(f) for f in facets] or [np.zeros(0, np.int32)]))
+        cells = touching[touching < cells.size].astype(np.int32)
     geo = dmesh.entities_to_geometry(msh, tdim, cells)
     x = msh.geometry.x[geo][:, :, :2]
     d1, d2 = x[:, 1] - x[:, 0], x[:, 2] - x[:, 0]

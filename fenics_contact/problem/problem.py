@@ -187,7 +187,8 @@ class ContactProblem:
             split = strip.Split(cell_omega, tags, coarse, H)
         else:
             split = strip.automatic_split(mesh, tags, H=H, width=strip_width)
-        cm = ContactMesh(mesh, split.cell_tags, split.facet_tags, mesh_size(mesh), split.H, split.coarse_cell, names)
+        cm = ContactMesh(mesh, split.cell_tags, split.facet_tags, mesh_size(mesh, split.facet_tags), split.H,
+                         split.coarse_cell, names)
         validation.validate_contact_mesh(cm, source="the mesh given to ContactProblem.from_meshtags")
         fields = {}
         for key, value in (("youngs_modulus", youngs_modulus), ("poisson_ratio", poisson_ratio)):

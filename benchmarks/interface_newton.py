@@ -47,7 +47,9 @@ from fenics_contact.hybrid.fronts import contact_chains
 from fenics_contact.hybrid.iteration import InterfaceNewtonOptions, IterationOptions, iterate
 from fenics_contact.hybrid.mixed import MixedHybridStep
 from fenics_contact.hybrid.primal import PrimalHybridStep
-from fenics_contact.io import machine_description, write_report
+from fenics_contact.io import machine_description
+
+from common import write_report
 from fenics_contact.multiscale.cem import CEMOptions
 from fenics_contact.multiscale.mixed import MixedMultiscaleHybridStep
 from fenics_contact.multiscale.mixed_cem import MixedCEMOptions

@@ -24,7 +24,9 @@ import fenics_contact  # noqa: F401  (dolfinx_solver first)
 from fenics_contact.fem.mixed import solve_mixed_monolithic
 from fenics_contact.hybrid.iteration import IterationOptions
 from fenics_contact.hybrid.mixed import solve_mixed_hybrid
-from fenics_contact.io import machine_description, write_report
+from fenics_contact.io import machine_description
+
+from common import write_report
 from fenics_contact.multiscale.mixed import l2_stress_error, solve_mixed_ms_hybrid
 from fenics_contact.multiscale.mixed_cem import MixedCEMOptions
 from fenics_contact.problem import geometry, models

@@ -51,7 +51,7 @@ def _cpu_s() -> float:
 def _peak_rss_gb(comm=None) -> float:
     from fenics_contact.io import peak_rss_bytes
 
-    rss = peak_rss_bytes() / 1e9  # GB (10⁹ bytes; before 2026-12-02: KiB / 10⁶, 2.4 % lower)
+    rss = peak_rss_bytes() / 1e9  # GB (10⁹ bytes)
     if comm is not None and comm.size > 1:
         from mpi4py import MPI
 
@@ -154,7 +154,8 @@ def main() -> None:
             print(RESULT + json.dumps(result), flush=True)
         return
 
-    from fenics_contact.io import machine_description, write_report
+    from common import write_report
+    from fenics_contact.io import machine_description
 
     sizes = [int(s) for s in args.sizes.split(",")]
     mpi_sizes = [int(s) for s in args.mpi_sizes.split(",")] if args.mpi_sizes else sizes[-1:]

@@ -349,7 +349,7 @@ def _worker(args: argparse.Namespace) -> dict:
                    dim_ms=om.num_coarse_dofs, bases_mb=om.space.nbytes / 1e6)
     from fenics_contact.io import peak_rss_bytes
 
-    rss = peak_rss_bytes() / 1e6  # MB (10⁶ bytes; before 2026-12-02: KiB / 1024, i.e. MiB, 4.9 % lower)
+    rss = peak_rss_bytes() / 1e6  # MB (10⁶ bytes)
     out["peak_rss_mb"] = comm.allreduce(rss, op=MPI.MAX)
     out["peak_rss_sum_mb"] = comm.allreduce(rss, op=MPI.SUM)
     return out

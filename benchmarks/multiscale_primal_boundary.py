@@ -22,7 +22,9 @@ import fenics_contact  # noqa: F401  (dolfinx_solver first)
 from fenics_contact.fem.primal import default_penalty
 from fenics_contact.hybrid.iteration import IterationOptions
 from fenics_contact.hybrid.primal import solve_primal_hybrid
-from fenics_contact.io import machine_description, write_report
+from fenics_contact.io import machine_description
+
+from common import write_report
 from fenics_contact.multiscale.cem import CEMOptions
 from fenics_contact.multiscale.primal import solve_primal_ms_hybrid
 from fenics_contact.problem import geometry, models

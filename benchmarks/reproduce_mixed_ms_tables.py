@@ -59,7 +59,7 @@ INCOMPRESSIBLE = {"5.5": (1.0e-4, 0.35, 0.499), "5.6": (1.0e4, 0.499, 0.35), "5.
 
 
 def _peak_rss_gb() -> float:
-    """Peak resident memory of this process so far, GB = 10⁹ bytes (before 2026-12-02: GiB labelled GB)."""
+    """Peak resident memory of this process so far, GB = 10⁹ bytes."""
     from fenics_contact.io import peak_rss_bytes
 
     return peak_rss_bytes() / 1e9

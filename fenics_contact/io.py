@@ -39,7 +39,6 @@ __all__ = [
     "machine_description",
     "stress_field",
     "write_fields",
-    "write_report",
     "write_summary",
     "write_vtx",
 ]
@@ -96,8 +95,7 @@ def write_vtx(path: str | Path, fn: fem.Function) -> Path:
 def peak_rss_bytes() -> int:
     """The high-water mark of this process's resident set, in bytes (Linux reports ``ru_maxrss`` in KiB).
 
-    Benchmarks report it as GB = 10⁹ bytes or MB = 10⁶ bytes (before 2026-12-02 some divided the KiB
-    figure by 10⁶ or 1024 and called it GB or MB: 2.4 % and 4.9 % under the true figure)."""
+    Summaries and benchmarks report it as GB = 10⁹ bytes (or MB = 10⁶ bytes)."""
     return int(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss) * 1024
 
 
@@ -116,19 +114,9 @@ def machine_description() -> str:
     )
 
 
-def write_report(path: str | Path, lines: list[str], comm: MPI.Comm = MPI.COMM_WORLD) -> None:
-    """A benchmark's Markdown results file (its lines), written on rank 0 (parent directories made)."""
-    if comm.rank != 0:
-        return
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text("\n".join(lines) + "\n")
-    print(f"wrote {path}")
-
-
 def provenance() -> dict:
     """What made a result: the package, DOLFINx, PETSc and Python versions, the command line, the UTC time and
-    the machine."""
+    the machine, and the peak memory of this process so far (rank 0's, GB = 10⁹ bytes)."""
     import dolfinx
     from petsc4py import PETSc
 
@@ -142,6 +130,7 @@ def provenance() -> dict:
         "command": " ".join([Path(sys.argv[0]).name, *sys.argv[1:]]),
         "utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
         "machine": machine_description(),
+        "peak_memory_gb": round(peak_rss_bytes() / 1e9, 3),
     }
 
 

@@ -36,6 +36,7 @@ __all__ = [
     "cell_function_of",
     "cell_markers",
     "check_output_target",
+    "check_outside_output",
     "machine_description",
     "stress_field",
     "write_fields",
@@ -189,22 +190,41 @@ def write_summary(directory: str | Path, summary: dict, comm: MPI.Comm = MPI.COM
 # ---------------------------------------------------------------------------------------------
 # the run directory: whole or absent
 # ---------------------------------------------------------------------------------------------
-#: marker file in every run directory: a directory holding it (or a run's summary.json) may be replaced
+#: marker file in every run directory, listing what the run wrote: a directory holding it and nothing else may be
+#: replaced
 RUN_MARKER = ".fenics-contact-run"
+#: the marker's first line (then one line per entry the run wrote)
+RUN_MARKER_HEADER = "written by fenics-contact: the next run replaces it whole; the entries it wrote:"
 #: staging / previous-contents directories beside the target: .fenics-contact-<pid>@<host>-<random>.{partial,old}
 _STAGING = re.compile(r"^\.fenics-contact-(?P<pid>\d+)@(?P<host>.+)-[^-]+\.(partial|old)$")
 _STALE_AGE_S = 24 * 3600.0
 
 
 def _is_run_directory(path: Path) -> bool:
-    """True if ``path`` is empty or was written by a fenics-contact run (so it may be replaced)."""
-    entries = list(path.iterdir())
-    if not entries or (path / RUN_MARKER).is_file():
+    """True if ``path`` is empty or holds exactly what a fenics-contact run wrote there (so it may be replaced):
+    its marker lists the entries the run wrote, and nothing else is there (a file the user added, a copied
+    summary, a case file or a cache directory kept inside it make it the user's)."""
+    entries = {entry.name for entry in path.iterdir()}
+    if not entries:
         return True
     try:
-        return "method" in json.loads((path / "summary.json").read_text())
-    except (OSError, ValueError, TypeError):
+        lines = (path / RUN_MARKER).read_text().splitlines()
+    except (OSError, UnicodeDecodeError):
         return False
+    if not lines or lines[0] != RUN_MARKER_HEADER:
+        return False
+    return entries <= {RUN_MARKER, *lines[1:]}
+
+
+def check_outside_output(target: str | Path, path: str | Path | None, what: str) -> None:
+    """InputError when ``path`` (an input file or the cache directory, named ``what``) lies inside the output
+    directory ``target``: the run replaces ``target`` whole and would delete it."""
+    if path is None:
+        return
+    out, inner = Path(target).resolve(), Path(path).resolve()
+    if inner == out or out in inner.parents:
+        raise InputError(f"{what} {path} lies inside --out {target}, which the run replaces whole: keep it outside "
+                         "the output directory (or choose another --out)")
 
 
 def check_output_target(target: str | Path) -> Path:
@@ -349,7 +369,8 @@ class OutputDirectory:
             self.comm.Barrier()  # every rank has closed its files
             if self.comm.rank == 0:
                 try:
-                    (self.path / RUN_MARKER).write_text("written by fenics-contact: the next run replaces it whole\n")
+                    names = sorted(entry.name for entry in self.path.iterdir())
+                    (self.path / RUN_MARKER).write_text("\n".join([RUN_MARKER_HEADER, *names]) + "\n")
                     self._swap()
                 except OSError as err:
                     error = f"--out {self.target}: could not move the results into place: {err}"

@@ -164,7 +164,9 @@ def test_default_out_is_one_directory_per_problem_and_method(tmp_path, monkeypat
 
     monkeypatch.chdir(tmp_path)
     (tmp_path / "results" / "model1-primal").mkdir(parents=True)
-    (tmp_path / "results" / "model1-primal" / ".fenics-contact-run").write_text("")  # an earlier run's output
+    from fenics_contact.io import RUN_MARKER, RUN_MARKER_HEADER
+
+    (tmp_path / "results" / "model1-primal" / RUN_MARKER).write_text(RUN_MARKER_HEADER + "\n")  # an earlier run's
     assert RunOptions().out == Path("results/model1-primal")
     assert RunOptions(method="mixed", model=2).out == Path("results/model2-mixed")
     mesh = tmp_path / "plate.msh"

@@ -52,18 +52,22 @@ def test_a_reused_out_holds_exactly_one_run(tmp_path):
     assert [p.name for p in tmp_path.iterdir()] == ["run"], "no staging or old directory is left beside it"
 
 
-def test_an_older_run_directory_is_replaced_and_a_foreign_one_refused(tmp_path):
-    old = tmp_path / "old"
-    old.mkdir()
-    (old / "summary.json").write_text(json.dumps({"method": "primal", "model": 1}))  # an earlier version's run
-    (old / "sigma.bp").mkdir()
-    assert main(["run", *SMALL, "--no-plots", "--out", str(old)]) == 0
-    assert {p.name for p in old.iterdir()} == RUN_FILES
+def test_only_a_directory_holding_just_a_runs_output_is_replaced(tmp_path):
+    """A run's directory is replaced by the next run; once the user adds a file to it, or a directory holds a copied
+    summary.json beside notes, it is the user's: refused (exit 2), nothing deleted."""
+    out = tmp_path / "run"
+    assert main(["run", *SMALL, "--no-plots", "--out", str(out)]) == 0
+    assert main(["run", *SMALL, "--no-plots", "--out", str(out)]) == 0
+    assert {p.name for p in out.iterdir()} == RUN_FILES
+    (out / "notes.txt").write_text("mine")
+    assert main(["run", *SMALL, "--no-plots", "--out", str(out)]) == 2
+    assert (out / "notes.txt").read_text() == "mine" and {p.name for p in out.iterdir()} == RUN_FILES | {"notes.txt"}
     foreign = tmp_path / "foreign"
     foreign.mkdir()
     (foreign / "notes.txt").write_text("mine")
+    (foreign / "summary.json").write_text((out / "summary.json").read_text())
     assert main(["run", *SMALL, "--no-plots", "--out", str(foreign)]) == 2
-    assert [p.name for p in foreign.iterdir()] == ["notes.txt"]
+    assert {p.name for p in foreign.iterdir()} == {"notes.txt", "summary.json"}
 
 
 def test_a_failed_run_leaves_the_previous_results_intact(tmp_path, capsys):

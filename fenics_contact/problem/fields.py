@@ -46,17 +46,39 @@ class MaterialFields(NamedTuple):
 
 
 def cell_function(msh: dmesh.Mesh, field: Callable[[np.ndarray], np.ndarray], *, shape=(), name="") -> fem.Function:
-    """A DG0 function with the values of ``field`` at the cell midpoints."""
+    """A DG0 function with the values of ``field`` at the cell midpoints; InputError when ``field`` raises or
+    returns values of another shape, not real numbers, or not finite ones."""
     V = fem.functionspace(msh, basix.ufl.element("DG", msh.basix_cell(), 0, shape=shape))
     fn = fem.Function(V, name=name)
-    try:
-        fn.interpolate(field)
-    except (TypeError, ValueError, IndexError, RuntimeError) as err:
-        expected = "(" + ", ".join([*map(str, shape), "N"]) + (",)" if not shape else ")")
-        raise InputError(f"the field {name or 'given'} must map points x of shape (3, N) to values of shape "
-                         f"{expected}: {type(err).__name__}: {str(err).splitlines()[0]}") from None
+    fn.interpolate(_checked(field, shape, name or "given"))
     fn.x.scatter_forward()
     return fn
+
+
+def _checked(field: Callable[[np.ndarray], np.ndarray], shape: tuple, name: str) -> Callable:
+    """``field`` with its values checked: shape ``(*shape, N)`` for N points (``(N,)`` for a scalar), real, finite."""
+    def evaluate(x: np.ndarray) -> np.ndarray:
+        expected = (*shape, x.shape[1])
+        try:
+            values = field(x)
+        except Exception as err:  # the user's callable: any error it raises is a bad input
+            raise InputError(f"the field {name} raised {type(err).__name__} at the cell midpoints: "
+                             f"{str(err).splitlines()[0] if str(err) else ''}") from None
+        values = np.asarray(values)
+        if values.shape != expected:
+            raise InputError(f"the field {name} must map points x of shape (3, N) to values of shape "
+                             f"({', '.join([*map(str, shape), 'N'])}{',' if not shape else ''}), got shape "
+                             f"{values.shape} for N = {x.shape[1]}")
+        if not (np.issubdtype(values.dtype, np.floating) or np.issubdtype(values.dtype, np.integer)) \
+                or values.dtype == np.bool_:
+            raise InputError(f"the field {name} must give real numbers, got values of type {values.dtype}")
+        if not np.all(np.isfinite(values)):
+            bad = np.argmax(~np.isfinite(values.reshape(-1, x.shape[1])).all(axis=0))
+            raise InputError(f"the field {name} is not finite at {np.count_nonzero(~np.isfinite(values))} "
+                             f"value(s) (first at x = {x[:, bad].tolist()})")
+        return values.astype(np.float64)
+
+    return evaluate
 
 
 class FunctionField:

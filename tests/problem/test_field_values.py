@@ -1,0 +1,31 @@
+"""A user's field (a Python callable for E, ν or the body force) is checked where it is evaluated: a wrong shape,
+an exception, complex or non-finite values are refused with the field's name, never read past or kept."""
+
+import numpy as np
+import pytest
+
+import fenics_contact as fc
+from fenics_contact.errors import InputError
+
+
+@pytest.mark.parametrize("load, message", [
+    (lambda x: np.ones((2, x.shape[1] - 100)), "values of shape (2, N), got shape (2, 28) for N = 128"),
+    (lambda x: np.ones(x.shape[1]), "values of shape (2, N), got shape (128,)"),
+    (lambda x: np.full((2, x.shape[1]), np.inf), "is not finite at 256 value(s)"),
+    (lambda x: 1 / 0, "raised ZeroDivisionError"),
+    (lambda x: np.ones((2, x.shape[1])) * (1 + 1j), "must give real numbers"),
+])
+def test_a_bad_body_force_is_refused(load, message):
+    cm = fc.unit_square(8, 2)
+    with pytest.raises(InputError, match="the field f") as error:
+        fc.models.model_1().with_(load=load).on(cm).fields
+    assert message in str(error.value)
+
+
+def test_a_bad_youngs_modulus_is_refused_and_a_good_one_kept():
+    cm = fc.unit_square(8, 2)
+    with pytest.raises(InputError, match=r"the field E .*got shape \(1, 128\)"):
+        fc.models.model_1().with_(youngs_modulus=lambda x: np.ones((1, x.shape[1]))).on(cm).fields
+    fields = fc.models.model_1().with_(youngs_modulus=lambda x: 2.0 + x[0]).on(cm).fields
+    E = fields.E.x.array  # 2 + x at the cell midpoints of the 8 × 8 grid: x = (2k + 1)/24 or (2k + 2)/24 (k < 8)
+    assert 2.0 < E.min() < 2.1 and 2.9 < E.max() < 3.0

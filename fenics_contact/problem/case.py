@@ -789,9 +789,15 @@ class Case:
 
 
 def _check_pixels(spec: Pixels, extent, box, key: str, bounds: tuple[float, float], path: Path) -> None:
-    """Every pixel under the mesh's bounding box lies in the open interval ``bounds``."""
+    """The map's extent covers the mesh's bounding box, and every pixel under it lies in the open interval
+    ``bounds``."""
     ny, nx = spec.values.shape
     x0, x1, y0, y1 = extent
+    tol = 1e-9 * max(x1 - x0, y1 - y0, box[1] - box[0], box[3] - box[2])
+    if box[0] < x0 - tol or box[1] > x1 + tol or box[2] < y0 - tol or box[3] > y1 + tol:
+        raise InputError(f"case {path}: {key}: the pixel map {spec.path.name} covers x in [{x0:g}, {x1:g}], y in "
+                         f"[{y0:g}, {y1:g}], but the mesh spans x in [{box[0]:g}, {box[1]:g}], y in [{box[2]:g}, "
+                         f"{box[3]:g}]: give the map's extent (extent = [x0, x1, y0, y1]) so that it covers the mesh")
     i0, i1 = (int(np.clip(np.floor((x - x0) / (x1 - x0) * nx), 0, nx - 1)) for x in (box[0], box[1]))
     j0, j1 = (int(np.clip(np.floor((y - y0) / (y1 - y0) * ny), 0, ny - 1)) for y in (box[2], box[3]))
     covered = spec.values[j0:j1 + 1, i0:i1 + 1]

@@ -29,3 +29,17 @@ def test_a_bad_youngs_modulus_is_refused_and_a_good_one_kept():
     fields = fc.models.model_1().with_(youngs_modulus=lambda x: 2.0 + x[0]).on(cm).fields
     E = fields.E.x.array  # 2 + x at the cell midpoints of the 8 × 8 grid: x = (2k + 1)/24 or (2k + 2)/24 (k < 8)
     assert 2.0 < E.min() < 2.1 and 2.9 < E.max() < 3.0
+
+
+def test_a_pixel_map_that_does_not_cover_the_mesh_is_refused(tmp_path, capsys):
+    """A map of E whose extent leaves part of the mesh uncovered is refused (exit 2), not extrapolated."""
+    from fenics_contact.cli import main
+
+    np.save(tmp_path / "E.npy", np.ones((4, 4)))
+    case = tmp_path / "half.toml"
+    case.write_text('[mesh]\nbuiltin = "unit-square"\nh = 8\nH = 2\nclamped = ["left"]\n'
+                    '[material]\nE = {pixels = "E.npy", extent = [0.0, 0.5, 0.0, 1.0]}\nnu = 0.3\n'
+                    '[load]\nbody-force = [1.0, 0.0]\n')
+    assert main(["run", "--case", str(case), "--no-plots", "--out", str(tmp_path / "out")]) == 2
+    assert "covers x in [0, 0.5], y in [0, 1], but the mesh spans x in [0, 1]" in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()

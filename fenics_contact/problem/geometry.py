@@ -9,6 +9,7 @@ the same physical-group names (``tags.PHYSICAL_NAMES``).
 
 import contextlib
 import logging
+import os
 import signal
 import threading
 from collections.abc import Iterable, Iterator
@@ -28,7 +29,7 @@ from fenics_contact.problem import partition, strip, validation
 from fenics_contact.problem.tags import PHYSICAL_NAMES, Boundary, Subdomain, is_neumann_name, neumann_tag
 
 __all__ = [
-    "ContactMesh", "unit_square", "read_mesh", "mesh_size", "gmsh_session", "build_unit_square_model",
+    "ContactMesh", "unit_square", "read_mesh", "mesh_size", "check_memory", "gmsh_session", "build_unit_square_model",
     "contact_mesh_from_model",
 ]
 
@@ -134,6 +135,7 @@ def build_unit_square_model(
     _check_sizes(n, n_coarse)
     clamped, neumann = _check_sides(clamped, neumann)
     n, n_coarse = int(n), int(n_coarse)
+    check_memory((n + 1.0) ** 2, f"the unit square with h = 1/{n}")
     H = 1.0 / n_coarse
     xs = 1.0 - H
     geo = gmsh.model.geo
@@ -171,6 +173,25 @@ def build_unit_square_model(
     gmsh.model.mesh.generate(2)
 
 
+#: memory per mesh vertex of a primal run (Algorithm 1 on the bar, h = 1/256: 0.82 GB peak for 66,049 vertices,
+#: ``/usr/bin/time -v fenics-contact run --case cases/bar.toml --set mesh.h=256 --no-plots``); the mixed and
+#: multiscale methods need more
+BYTES_PER_VERTEX = 8.0e3
+
+
+def check_memory(vertices: float, what: str) -> None:
+    """InputError when a mesh of about ``vertices`` vertices would need more memory than this machine has (by
+    ``BYTES_PER_VERTEX``), before gmsh runs out of memory making it."""
+    try:
+        available = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (ValueError, OSError, AttributeError):
+        return
+    need = vertices * BYTES_PER_VERTEX
+    if need > available:
+        raise InputError(f"{what} has about {vertices:.3g} vertices and would need about {need / 1e9:.3g} GB of "
+                         f"memory; this machine has {available / 1e9:.3g} GB: choose a coarser mesh")
+
+
 def unit_square(
     n: int,
     n_coarse: int,
@@ -189,6 +210,7 @@ def unit_square(
     _check_sizes(n, n_coarse)
     clamped, neumann = _check_sides(clamped, neumann)
     n, n_coarse = int(n), int(n_coarse)
+    check_memory((n + 1.0) ** 2, f"the unit square with h = 1/{n}")
     with gmsh_session():
         if comm.rank == 0:
             build_unit_square_model(n, n_coarse, diagonal=diagonal, clamped=clamped, neumann=neumann)

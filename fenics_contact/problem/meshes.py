@@ -34,7 +34,7 @@ import numpy as np
 from mpi4py import MPI
 
 from fenics_contact.errors import InputError
-from fenics_contact.problem.geometry import ContactMesh, contact_mesh_from_model, gmsh_session
+from fenics_contact.problem.geometry import ContactMesh, check_memory, contact_mesh_from_model, gmsh_session
 from fenics_contact.problem.tags import PHYSICAL_NAMES, Boundary, Subdomain
 
 __all__ = ["bulged_square", "HertzBlock", "hertz_block", "CompositeBlock", "composite_block"]
@@ -130,6 +130,12 @@ def hertz_block(
     if not (0 < hc <= spec.refine_width and grading > 0 and spec.refine_width <= spec.contact_width < spec.half_width
             and 0 < spec.strip < spec.depth):
         raise InputError(f"inconsistent Hertz block sizes: {spec}")
+    # vertices ≈ area / size²: the refined box (size hc, with a factor 2 to spare), the graded zone around it
+    # (size hc + grading·r up to h_far: ∫ perimeter dr / size² = perimeter (1/hc − 1/h_far) / grading)
+    perimeter = 4.0 * (spec.refine_width + spec.refine_depth)
+    check_memory(4.0 * spec.refine_width * spec.refine_depth / hc ** 2
+                 + perimeter * (1.0 / hc - 1.0 / max(spec.h_far, hc)) / spec.grading,
+                 f"the Hertz block with a contact cell of {hc:g}")
     L, D, S, W = spec.half_width, spec.depth, spec.strip, spec.contact_width
     with gmsh_session():
         if comm.rank == 0:

@@ -56,6 +56,7 @@ validation.
 A ``python`` reference runs that file's code: use it only with case files you trust.
 """
 
+import codecs
 import importlib.util
 import math
 import sys
@@ -105,6 +106,8 @@ def _number(*, positive: bool = False, low: float | None = None, high: float | N
             raise _Bad(f"must be a finite number, got {_show(value)}")
         if positive and not value > 0:
             raise _Bad(f"must be > 0, got {value!r}")
+        if positive and value < sys.float_info.min:  # subnormal: 1/value overflows, products lose all digits
+            raise _Bad(f"must be at least {sys.float_info.min:.3g} (a normal floating-point number), got {value!r}")
         if (low is not None and not value > low) or (high is not None and not value < high):
             raise _Bad(f"must lie in ({low:g}, {high:g}), got {value!r}")
         return float(value)
@@ -840,8 +843,8 @@ def load_case(path: str | Path, overrides: Sequence[tuple[str, Any]] = ()) -> Ca
     if not path.is_file():
         raise InputError(f"--case {path} does not exist" if not path.exists() else f"--case {path} is not a file")
     try:
-        with path.open("rb") as stream:
-            data = tomllib.load(stream)
+        text = path.read_bytes().removeprefix(codecs.BOM_UTF8).decode("utf-8")  # editors may write a BOM
+        data = tomllib.loads(text)
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
         raise source.error(f"not a valid TOML file: {err}") from None
     except OSError as err:

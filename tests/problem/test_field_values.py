@@ -43,3 +43,18 @@ def test_a_pixel_map_that_does_not_cover_the_mesh_is_refused(tmp_path, capsys):
     assert main(["run", "--case", str(case), "--no-plots", "--out", str(tmp_path / "out")]) == 2
     assert "covers x in [0, 0.5], y in [0, 1], but the mesh spans x in [0, 1]" in capsys.readouterr().err
     assert not (tmp_path / "out").exists()
+
+
+def test_a_case_file_with_a_byte_order_mark_reads_and_a_subnormal_modulus_is_refused(tmp_path):
+    """Editors on some systems write a UTF-8 BOM: the file reads as without it. A subnormal number (1e-320) would pass
+    as > 0 and end in NaN: a Young's modulus of 1e-320 is refused with the smallest normal number named."""
+    from fenics_contact.problem.case import load_case
+
+    text = ('[mesh]\nbuiltin = "unit-square"\nh = 8\nH = 2\nclamped = ["left"]\n[material]\nE = 1.0\nnu = 0.3\n'
+            '[load]\nbody-force = [1.0, 0.0]\n')
+    (tmp_path / "bom.toml").write_bytes(b"\xef\xbb\xbf" + text.encode())
+    (tmp_path / "plain.toml").write_text(text)
+    assert load_case(tmp_path / "bom.toml").to_dict()["mesh"] == load_case(tmp_path / "plain.toml").to_dict()["mesh"]
+    (tmp_path / "tiny.toml").write_text(text.replace("E = 1.0", "E = 1e-320"))
+    with pytest.raises(InputError, match=r"material.E.*at least 2.23e-308"):
+        load_case(tmp_path / "tiny.toml")

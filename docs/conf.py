@@ -52,7 +52,7 @@ extensions = [
     "sphinx.ext.mathjax",
 ]
 templates_path = ["_templates"]
-exclude_patterns = ["_build", "make_figures.py", "make_case_reference.py", "**/.ipynb_checkpoints", "user_guide/generated"]
+exclude_patterns = ["_build", "*.py", "**/.ipynb_checkpoints", "user_guide/generated"]
 
 # MyST: $…$ and $$…$$ math, ::: fences, heading anchors for links to sections
 myst_enable_extensions = ["dollarmath", "amsmath", "colon_fence", "deflist"]

@@ -7,8 +7,9 @@ Made at each build, before Sphinx reads the sources (all ignored by git, docs/.g
 * ``api/``: one page per module of the package, found recursively (autosummary), so the reference follows
   the package layout;
 * ``user_guide/generated/``: the ``--help`` of the command line and of each subcommand (from
-  ``fenics_contact.cli.build_parser``) and the exit-code table (``fenics_contact.cli.EXIT_CODES``),
-  included by the user guide's pages.
+  ``fenics_contact.cli.build_parser``), the exit-code table (``fenics_contact.cli.EXIT_CODES``) and the
+  key reference of the case files (``make_case_reference.py``, from the code that reads them), included
+  by the user guide's pages.
 
 The package's docstrings are plain text (Unicode math, double-backquoted literals, Google-style
 ``Args:``/``Returns:`` sections); ``plain_text_docstring`` reads them as such for autodoc.
@@ -18,6 +19,7 @@ import contextlib
 import io
 import os
 import re
+import sys
 from pathlib import Path
 
 import jupytext
@@ -29,6 +31,8 @@ from fenics_contact.cli import EXIT_CODES, build_parser
 
 DOCS = Path(__file__).resolve().parent
 ROOT = DOCS.parent
+sys.path.insert(0, str(DOCS))
+import make_case_reference  # noqa: E402  (a script beside this file)
 
 # the demos run at 1/h = FENICS_CONTACT_DEMO_N, and write their PNGs with a non-interactive backend (the
 # pages show the PNG files, not matplotlib's own inline figures)
@@ -48,7 +52,7 @@ extensions = [
     "sphinx.ext.mathjax",
 ]
 templates_path = ["_templates"]
-exclude_patterns = ["_build", "make_figures.py", "**/.ipynb_checkpoints", "user_guide/generated"]
+exclude_patterns = ["_build", "*.py", "**/.ipynb_checkpoints", "user_guide/generated"]
 
 # MyST: $…$ and $$…$$ math, ::: fences, heading anchors for links to sections
 myst_enable_extensions = ["dollarmath", "amsmath", "colon_fence", "deflist"]
@@ -184,6 +188,11 @@ def setup(app) -> None:
     app.connect("autodoc-skip-member", skip_top_level_reexports)
 
 
+def _case_keys() -> None:
+    _write_if_changed(DOCS / "user_guide" / "generated" / "case_keys.md", make_case_reference.markdown())
+
+
 _demo_notebooks()
 _exit_code_table()
 _cli_help()
+_case_keys()

@@ -1,0 +1,220 @@
+"""The key reference of the case files, made from the code that reads them (called by ``conf.py`` at each build).
+
+The set of keys of every table is taken from the package itself: a case with an unknown key in a table is
+refused with a message that lists the keys that table accepts (``problem.case.load_case`` for the problem
+tables, ``cli.case_run_options`` for the run tables), and that list is what this script tabulates, for each
+variant of a table (each ``[mesh] builtin``, each ``[obstacle] shape``). The defaults of the mesh keys are the
+fields of the mesh specifications (``problem.case.UnitSquareMesh``, ...); the type, default and meaning of a run
+key are its ``cli.RunOptions`` field and its ``fenics-contact run`` flag's help. The meaning of a problem key is
+written below, in ``PROBLEM_KEYS``; a key the code accepts and ``PROBLEM_KEYS`` does not describe (or the
+reverse) fails the build, so the table cannot drift from the code.
+
+    python docs/make_case_reference.py     # prints the Markdown (the build writes user_guide/generated/case_keys.md)
+"""
+
+import dataclasses
+import re
+import tempfile
+import typing
+from pathlib import Path
+
+from fenics_contact import cli
+from fenics_contact.errors import InputError
+from fenics_contact.problem import case as case_module
+
+ROOT = Path(__file__).resolve().parent.parent
+
+#: the variants of the problem tables: (table, variant label, the case text that selects the variant,
+#: the mesh specification whose fields give the defaults)
+VARIANTS = [
+    ("mesh", 'builtin = "unit-square"', '[mesh]\nbuiltin = "unit-square"\n', case_module.UnitSquareMesh),
+    ("mesh", 'builtin = "hertz-block"', '[mesh]\nbuiltin = "hertz-block"\na = 1.0\n', case_module.HertzBlockMesh),
+    ("mesh", 'builtin = "bulged-square"', '[mesh]\nbuiltin = "bulged-square"\n', case_module.BulgedSquareMesh),
+    ("mesh", 'file = "..."', f'[mesh]\nfile = "{ROOT / "cases" / "pad.msh"}"\n', case_module.MeshFile),
+    ("material", "", "[material]\nE = 1.0\nnu = 0.3\n", None),
+    ("load", "", "[load]\n", None),
+    ("boundary", "", "[boundary]\n", None),
+    ("obstacle", 'shape = "wall"', "[obstacle]\n", None),
+    ("obstacle", 'shape = "plane"', '[obstacle]\nshape = "plane"\npoint = [1.0, 0.0]\nnormal = [-1.0, 0.0]\n', None),
+    ("obstacle", 'shape = "circle"', '[obstacle]\nshape = "circle"\ncentre = [2.0, 0.5]\nradius = 1.0\n', None),
+]
+
+_SIDES = "a list of `left`, `bottom`, `top`"
+#: (table, key) -> (type, default or None (taken from the mesh specification), meaning)
+PROBLEM_KEYS = {
+    ("mesh", "builtin"): ("string", "—", "a built-in mesh: `unit-square` (the paper's (0,1)², Γ_C at x = 1), "
+                          "`hertz-block` (a block under a cylinder, graded towards the contact) or `bulged-square` "
+                          "(the unit square with a curved contact side); exactly one of `builtin` and `file`"),
+    ("mesh", "file"): ("file name", "—", "a gmsh `.msh` file of planar triangles (relative to the case file): physical "
+                       "groups `Gamma_C`, `Gamma_D`, optionally `Gamma_N*` and material groups, and either all of "
+                       "`Omega1`, `Omega2`, `gamma` or none (the strip Ω₂ and γ are then built along Γ_C)"),
+    ("mesh", "h"): ("integer ≥ 2", None, "1/h, the fine mesh size (a multiple of 1/H)"),
+    ("mesh", "H"): ("integer", None, "1/H: the coarse grid of squares of side 1/H (the width of the strip Ω₂ of "
+                    "the unit square; with `file`, the coarse grid over the bounding box that the multiscale "
+                    "methods use and, without Omega1/Omega2/gamma in the file, the strip width)"),
+    ("mesh", "coarse-size"): ("number > 0", None, "with `file`: the coarse size H itself, a length in the mesh's "
+                              "units (instead of `H` = 1/H)"),
+    ("mesh", "clamped"): (_SIDES, None, "the sides in Γ_D (u = 0, or `boundary.displacement`); the other sides "
+                          "without a traction are traction free"),
+    ("mesh", "neumann"): ('table `{side = "Gamma_N_<label>"}`', "{}", "sides that carry a traction group (its "
+                          "traction in `boundary.tractions`)"),
+    ("mesh", "a"): ("number > 0", "required", "the expected contact half-width; the block and the cell sizes are "
+                    "multiples of it"),
+    ("mesh", "refinement"): ("number > 0", None, "r: contact cells of size a/(20 r)"),
+    ("mesh", "width"): ("number > 0", None, "the block's width, in multiples of a"),
+    ("mesh", "depth"): ("number > 0", None, "the block's depth, in multiples of a"),
+    ("mesh", "strip"): ("number > 0", None, "the depth of the strip Ω₂ below the top face, in multiples of a"),
+    ("mesh", "contact-width"): ("number > 0", None, "Γ_C is the top segment \\|x\\| ≤ contact-width·a"),
+    ("mesh", "bulge"): ("number in (0, ½)", None, "how far the circular arc of Γ_C bulges out at y = ½"),
+    ("material", "E"): ("number, table by group, pixel map or python", "required (or `model`)",
+                        "Young's modulus: a number; `{group = value, ...}` by cell group (`Omega1`, `Omega2` or the "
+                        "mesh file's surface groups); `{pixels = \"E.npy\", extent = [x0, x1, y0, y1]}` (a 2D array, "
+                        "row 0 at the bottom, `.npy` or text/`.csv`; extent default the bounding box); "
+                        "`{python = \"file.py:name\"}` (a callable x (3, N) → (N,))"),
+    ("material", "nu"): ("as `E`", "required (or `model`)", "the Poisson ratio, in (−1, ½), in the same forms"),
+    ("material", "model"): ("1, 2 or 3", "—", "the E, ν and body force of a built-in test model"),
+    ("material", "E-high"): ("number > 0", "1e3", "with `model`: E in the high-modulus pattern"),
+    ("material", "E-low"): ("number > 0", "1", "with `model`: E elsewhere"),
+    ("load", "body-force"): ("vector, table by group or python", "[0, 0]", "the body force f: `[fx, fy]`, "
+                             "`{group = [fx, fy], ...}` (0 on cells in no group given) or "
+                             "`{python = \"file.py:name\"}` (x (3, N) → (2, N))"),
+    ("boundary", "displacement"): ("vector or python", "clamped", "u on Γ_D: `[ux, uy]` or "
+                                   "`{python = \"file.py:name\"}`"),
+    ("boundary", "tractions"): ('table `{Gamma_N_<label> = [tx, ty] or {python = ...}}`', "{}",
+                                "σn on each traction group; every traction group of the mesh needs one"),
+    ("obstacle", "shape"): ('`"wall"`, `"plane"` or `"circle"`', '"wall"', "the rigid obstacle: a wall flush with "
+                            "Γ_C (zero gap), a half-plane or a disc (a cylinder in plane strain)"),
+    ("obstacle", "point"): ("vector", "required", "a point of the plane"),
+    ("obstacle", "normal"): ("vector ≠ 0", "required", "the plane's outward normal, pointing towards the body"),
+    ("obstacle", "centre"): ("vector", "required", "the centre of the circle (outside the body)"),
+    ("obstacle", "radius"): ("number > 0", "required", "the radius of the circle"),
+    ("obstacle", "indentation"): ("number or list of numbers", "none", "a depth by which the obstacle is moved "
+                                  "along `direction`; a list is a sequence of load steps (a force–indentation "
+                                  "curve); the run's fields are those of the last depth; not for the wall"),
+    ("obstacle", "direction"): ("vector ≠ 0", "the plane's normal", "the direction the obstacle moves in "
+                                "(normalized); required for a circle with `indentation`"),
+}
+
+#: run keys whose flag's help does not say what the key does in a case file: key -> (default, meaning)
+RUN_NOTES = {
+    "plots": ("true", "write the PNG figures (the flag `--no-plots` sets it false)"),
+    "max-iterations": ("2000", "the most iterations of the hybrid method; a run that reaches it unconverged "
+                       "writes its results with `\"converged\": false` (exit 3)"),
+    "coarse-groups": ("false", "not with a case file (refused): a case file's surface groups are material "
+                      "groups; its coarse grid is `mesh.H` or `mesh.coarse-size`"),
+    "out": ("`results/<case>-<method>`", "the output directory (relative to the working directory); replaced "
+            "whole by the run, so it must be new, empty or an earlier run's"),
+}
+
+TABLES = {
+    "mesh": "the mesh (required)",
+    "material": "the materials",
+    "load": "the body force",
+    "boundary": "the boundary conditions on Γ_D and Γ_N",
+    "obstacle": "the rigid obstacle and its load steps",
+}
+
+
+def accepted_keys(text: str) -> tuple[str, list[str]]:
+    """(table, its keys) from the message with which the package refuses an unknown key ``zz`` in ``text``'s
+    last table."""
+    with tempfile.TemporaryDirectory() as directory:
+        path = Path(directory) / "probe.toml"
+        mesh = "" if text.startswith("[mesh]") else '[mesh]\nbuiltin = "unit-square"\n'
+        material = "" if "[material]" in text else "[material]\nE = 1.0\nnu = 0.3\n"
+        path.write_text(mesh + material + text + "zz = 1\n")
+        try:
+            cli.case_run_options(case_module.load_case(path))
+        except InputError as error:
+            found = re.search(r"the keys of \[([\w-]+)\] are \[(.*?)\]", str(error))
+            if found:
+                return found.group(1), re.findall(r"'([\w-]+)'", found.group(2))
+            raise
+    raise RuntimeError(f"the package accepted the unknown key zz in {text!r}")
+
+
+def _default(spec, key: str) -> str:
+    field = next(f for f in dataclasses.fields(spec) if f.name == key.replace("-", "_"))
+    if field.default is dataclasses.MISSING:
+        return "required"
+    value = field.default
+    if value is None:
+        return "none"
+    if isinstance(value, tuple):
+        return "[" + ", ".join(f'"{v}"' if isinstance(v, str) else str(v) for v in value) + "]" if value else "{}"
+    return repr(value) if isinstance(value, str) else f"{value:g}"
+
+
+def _row(key: str, kind: str, default: str, meaning: str) -> str:
+    return f"| `{key}` | {kind} | {default} | {meaning} |"
+
+
+def problem_tables() -> str:
+    seen, blocks = set(), []
+    for table, variant, text, spec in VARIANTS:
+        found, keys = accepted_keys(text)
+        assert found == table, (found, table)
+        rows = []
+        for key in keys:
+            if (table, key) not in PROBLEM_KEYS:
+                raise KeyError(f"[{table}] accepts the key {key!r}, which PROBLEM_KEYS does not describe")
+            seen.add((table, key))
+            kind, default, meaning = PROBLEM_KEYS[table, key]
+            if default is None:
+                default = _default(spec, key)
+            rows.append(_row(key, kind, default, meaning))
+        title = f"`[{table}]` with `{variant}`" if variant else f"`[{table}]`: {TABLES[table]}"
+        blocks.append(f"### {title}\n\n| key | type | default | meaning |\n|---|---|---|---|\n" + "\n".join(rows))
+    unused = sorted(set(PROBLEM_KEYS) - seen)
+    if unused:
+        raise KeyError(f"PROBLEM_KEYS describes keys the package does not accept: {unused}")
+    return "\n\n".join(blocks)
+
+
+def _run_actions() -> dict[str, object]:
+    """dest -> the argparse action of ``fenics-contact run``."""
+    parser = cli.build_parser()
+    sub = next(a for a in parser._actions if a.dest == "command")  # argparse has no public accessor
+    return {action.dest: action for action in sub.choices["run"]._actions}
+
+
+def _type(annotation) -> str:
+    kinds = [t for t in (typing.get_args(annotation) or (annotation,)) if t is not type(None)]
+    return {bool: "boolean", int: "integer", float: "number", str: "string", Path: "directory name"}.get(kinds[0],
+                                                                                                        str(kinds[0]))
+
+
+def run_tables() -> str:
+    actions = _run_actions()
+    options = {f.name: f for f in dataclasses.fields(cli.RunOptions)}
+    blocks = []
+    for table, methods in cli.TABLE_METHODS.items():
+        _, keys = accepted_keys(f"[{table}]\n")
+        rows = []
+        for key in keys:
+            name = key.replace("-", "_")
+            field = options[name]
+            if key in RUN_NOTES:
+                default, meaning = RUN_NOTES[key]
+            else:
+                action = actions[name]
+                meaning = (action.help or "").replace("|", "\\|")
+                if action.choices:
+                    meaning += " (one of " + ", ".join(f"`{c}`" for c in action.choices) + ")"
+                default = field.default
+                default = "method's default" if default is None else str(default).lower() if isinstance(
+                    default, bool) else f"`{default}`" if isinstance(default, str) else f"{default:g}"
+            rows.append(_row(key, _type(field.type), default, meaning))
+        used = ", ".join(f"`{m}`" for m in methods)
+        blocks.append(f"### `[{table}]`\n\nRead by {used}; each key is overridden by the command line's flag of "
+                      f"its name (`--{keys[0]}`, ...).\n\n| key | type | default | meaning |\n|---|---|---|---|\n"
+                      + "\n".join(rows))
+    return "\n\n".join(blocks)
+
+
+def markdown() -> str:
+    return ("## The problem tables\n\n" + problem_tables() + "\n\n## The run tables\n\n" + run_tables() + "\n")
+
+
+if __name__ == "__main__":
+    print(markdown())

@@ -66,7 +66,7 @@ def main() -> None:
     lines = ["# The multiscale Ω₁ check of Algorithm 3 against the true error", "",
              f"`OMP_NUM_THREADS=1 .venv/bin/python benchmarks/omega1_indicator.py --h {args.h} --H {args.H}`; "
              f"h = 1/{args.h}, H = 1/{args.H}, 3 modes per coarse cell, the interface Newton to tol 1e-8; a run warns "
-             f"when the check exceeds {OMEGA1_CHECK_WARN:g}.", "", f"Machine: {machine_description()}.", "",
+             f"when the check exceeds {OMEGA1_CHECK_WARN:g}.", "", f"Machine: {machine_description()}.", "", "## Check against the true error", "",
              "| problem | m | e_a (true, energy) | check | check / e_a | warns | time (s) |", "|---|---|---|---|---|---|---|"]
     for name, problem in problems(args.h, args.H).items():
         reference = fc.solve(problem, "primal-monolithic")

@@ -115,12 +115,13 @@ def _key(active: np.ndarray) -> bytes:
 
 def semismooth_newton_loop(system: ContactSystem, active: np.ndarray, *, name: str, max_steps: int,
                            line_search: str = "on-cycle", rtol: float = 0.0, atol: float = 0.0,
-                           refinements: int = 0) -> NewtonTrace:
+                           refinements: int = 0, sizes: str = "active-set sizes") -> NewtonTrace:
     """Semismooth Newton on ``system`` from its current iterate, linearized first at ``active``.
 
     A settled step is accepted when the system has no check or ‖F‖ ≤ rtol·(size of its terms) + atol with ‖F‖
     finite; otherwise up to ``refinements`` further steps follow before ConvergenceError.  ConvergenceError
-    too at ``max_steps`` steps, and for a failure inside a step (``steps`` counts that step).
+    too at ``max_steps`` steps, and for a failure inside a step (``steps`` counts that step).  ``sizes`` names
+    what ``Advance.size`` counts, for the messages.
     """
     if line_search not in LINE_SEARCHES:
         raise InputError(f"{name}: line_search must be one of {', '.join(LINE_SEARCHES)}, got {line_search!r}")
@@ -171,8 +172,8 @@ def semismooth_newton_loop(system: ContactSystem, active: np.ndarray, *, name: s
             raise
     lengths = f", step lengths {trace.step_lengths[-5:]}" if cycles else ""
     error = ConvergenceError(
-        f"{name}: semismooth Newton did not converge in {max_steps} steps (active-set sizes "
-        f"{trace.active_sizes[-5:]}{lengths}, residuals {trace.residuals[-3:]})"
+        f"{name}: semismooth Newton did not converge in {max_steps} steps ({sizes} {trace.active_sizes[-5:]}"
+        f"{lengths}, residuals {trace.residuals[-3:]})"
     )
     error.steps = max_steps
     raise error

@@ -1,10 +1,12 @@
-"""Semismooth Newton for penalized contact, and what it reports: history and contact profile.
+"""The primal semismooth Newton for penalized contact, and what the contact solves report: options, history,
+contact profile.
 
 The generalized derivative of s ↦ (s)⁺ is the Heaviside function, so for a
 fixed active set 𝒜 (the Γ_C nodes with u_c > 0) the penalized problem is
 linear; Newton stops after the first step whose new iterate has the same active
 set as the one it was linearized at (finite termination), after checking the
-residual.
+residual.  The loop is ``fem.newton.semismooth_newton_loop``; ``semismooth_newton``
+gives it the primal solve's callbacks (full steps, iterative refinement).
 """
 
 from collections.abc import Callable
@@ -13,7 +15,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from fenics_contact.errors import ConvergenceError, InputError
+from fenics_contact.errors import InputError
+from fenics_contact.fem.newton import Advance, Check, Direction, StepState, semismooth_newton_loop
 
 #: Newton steps with a settled active set (and so the same factorization) allowed to bring the
 #: residual to the check: iterative refinement of a solve whose pivots lost digits (tiny δ).
@@ -151,6 +154,36 @@ def active_interval(y: np.ndarray, active: np.ndarray) -> tuple[float, float] | 
     return float(np.min(y[active])), float(np.max(y[active]))
 
 
+class _PrimalSystem:
+    """The primal solve's callbacks as a ``ContactSystem``: full steps only, the step taken by ``solve``."""
+
+    def __init__(self, residual, active_set, same_sets, factorize, step, residual_check, comm) -> None:
+        self._residual, self._active_set, self.same = residual, active_set, same_sets
+        self._factorize, self._step, self._residual_check, self._comm = factorize, step, residual_check, comm
+        self._landed: np.ndarray | None = None
+
+    def residual(self) -> float:
+        return self._residual()
+
+    def jacobian(self, active: np.ndarray) -> bool:
+        return self._factorize(active)
+
+    def solve(self, active: np.ndarray) -> Direction:
+        self._step()
+        self._landed = self._active_set()
+        return Direction(self._landed, searchable=False)
+
+    def line_search(self) -> float:
+        raise AssertionError("the primal semismooth Newton takes full steps")
+
+    def advance(self, t: float, state: StepState) -> Advance:
+        return Advance(self._landed, self._comm.allreduce(int(np.count_nonzero(self._landed))))
+
+    def check(self) -> Check:
+        final, scale = self._residual_check()
+        return Check(final, scale, self._residual())
+
+
 def semismooth_newton(
     *,
     residual: Callable[[], float],
@@ -163,7 +196,7 @@ def semismooth_newton(
     name: str,
     comm,
 ) -> NewtonHistory:
-    """Generic semismooth Newton loop over callbacks.
+    """The primal semismooth Newton over callbacks (``fem.newton.semismooth_newton_loop``, full steps).
 
     ``comm`` sums the active-set sizes over ranks. ``residual()`` assembles F(u) and returns ‖F‖; ``active_set()`` returns the
     local active-set indicator of the current u; ``factorize(active)`` makes the
@@ -175,29 +208,8 @@ def semismooth_newton(
     with the same factorization (iterative refinement). Raises ConvergenceError when the step cap is
     hit or the residual still fails the check.
     """
-    history = NewtonHistory()
-    current = active_set()
-    refinements = 0
-    for _ in range(options.max_iterations):
-        history.residuals.append(residual())
-        history.factorizations += bool(factorize(current))
-        linearized_at = current
-        step()
-        current = active_set()
-        history.active_sizes.append(comm.allreduce(int(np.count_nonzero(current))))
-        if same_sets(current, linearized_at):
-            final, scale = residual_check()
-            if np.isfinite(final) and final <= options.rtol * scale + options.atol:
-                history.residuals.append(residual())
-                return history
-            if not np.isfinite(final) or refinements == MAX_REFINEMENTS:
-                raise ConvergenceError(
-                    f"{name}: active set settled but the residual {final:.3e} exceeds {options.rtol:g} x the size "
-                    f"of the terms it balances ({scale:.3e}) after {refinements} refinement steps: the linear "
-                    "solve failed (ill-conditioned?)"
-                )
-            refinements += 1  # iterative refinement: one more step with the same factorization
-    raise ConvergenceError(
-        f"{name}: semismooth Newton did not converge in {options.max_iterations} steps "
-        f"(active-set sizes {history.active_sizes[-5:]}, residuals {history.residuals[-3:]})"
-    )
+    system = _PrimalSystem(residual, active_set, same_sets, factorize, step, residual_check, comm)
+    trace = semismooth_newton_loop(system, active_set(), name=name, max_steps=options.max_iterations,
+                                   line_search="never", rtol=options.rtol, atol=options.atol,
+                                   refinements=MAX_REFINEMENTS)
+    return NewtonHistory(trace.residuals, trace.active_sizes, trace.factorizations)

@@ -14,7 +14,8 @@ first step whose result has the active set it was linearized at (it then solves 
 exactly) and a residual check.  A cold start is linearized at "penalty everywhere" (traction-free Γ_C):
 its solution is compressive exactly where a free body would penetrate, a good first contact set.  The
 Jacobian depends on the iterate only through the active set, so factorizations are cached by active set
-(``mixed_linear``).
+(``mixed_linear``).  The loop is ``fem.newton.semismooth_newton_loop``; ``globalized_newton`` gives it the
+mixed subproblem's residual, solve and line search.
 
 **MPI.**  The Γ_C node data are replicated, so every rank takes the same decisions (active set, cycle
 detection, line-search step) from the same numbers; every scalar (energy, residual, step) is a global
@@ -26,10 +27,10 @@ from typing import Protocol
 
 import numpy as np
 
-from fenics_contact.errors import ConvergenceError
 from fenics_contact.fem.contact import NewtonHistory, NewtonOptions
 from fenics_contact.fem.mixed_assembly import MixedOperators, dot, norm
 from fenics_contact.fem.mixed_contact import ContactNodes
+from fenics_contact.fem.newton import Advance, Check, Direction, StepState, semismooth_newton_loop
 
 __all__ = ["MixedNewtonHistory", "MixedNewtonProblem", "exact_line_search", "globalized_newton"]
 
@@ -92,53 +93,67 @@ def exact_line_search(problem: MixedNewtonProblem, dc: np.ndarray, s: np.ndarray
     return float(t0 - v0 * (t1 - t0) / (v1 - v0))
 
 
+class _MixedSystem:
+    """A ``MixedNewtonProblem`` as a ``ContactSystem``: the set {σ_c > 0} (all of Γ_C at a cold start), Newton
+    directions (dσ, du), the exact line search on J once the equilibrium equation holds."""
+
+    def __init__(self, problem: MixedNewtonProblem, load: np.ndarray, data: np.ndarray | None) -> None:
+        self.problem, self.load, self.data = problem, load, data
+        self.energies: list[float] = []
+        self.s = problem.contact_nodes.stress(problem.c)
+
+    def start(self) -> np.ndarray:
+        """The first set: "penalty everywhere" at a cold start (traction-free Γ_C: its solution has σ_c < 0
+        exactly where a free body would penetrate, a good first contact set), else {σ_c > 0}."""
+        return np.ones_like(self.s, dtype=bool) if self.problem.cold else self.s > 0.0
+
+    def residual(self) -> float:
+        comm = self.problem.comm
+        self.F1, self.F2 = self.problem.gradient(self.load)
+        return float(np.sqrt(dot(self.F1, self.F1, comm) + dot(self.F2, self.F2, comm)))
+
+    def jacobian(self, active: np.ndarray) -> bool:
+        return self.problem.factorize_for(active)
+
+    def solve(self, active: np.ndarray) -> Direction:
+        problem, comm, nodes = self.problem, self.problem.comm, self.problem.contact_nodes
+        B, G = problem.assembly.B, problem.assembly.G
+        # dσ descends J on {div σ = −f} only once the equilibrium equation holds
+        feasible = norm(self.F2, comm) <= 1e-10 * (norm(G, comm) + norm(B @ problem.c, comm))
+        self.dc, self.du = problem.linear_solve(-self.F1, -self.F2)
+        self.d = nodes.replicate(nodes.Q @ self.dc)
+        return Direction(self.s + self.d > 0.0, searchable=feasible)
+
+    def same(self, a: np.ndarray, b: np.ndarray) -> bool:
+        return np.array_equal(a, b)  # (replicated Γ_C data)
+
+    def line_search(self) -> float:
+        return exact_line_search(self.problem, self.dc, self.s, self.d, self.load)
+
+    def advance(self, t: float, state: StepState) -> Advance:
+        problem = self.problem
+        problem.cold = False
+        problem.c += t * self.dc
+        problem.u += t * self.du
+        self.energies.append(problem.complementary_energy(self.data))
+        self.s = problem.contact_nodes.stress(problem.c)
+        return Advance(self.s > 0.0, int(np.count_nonzero(self.s <= 0.0)))
+
+    def check(self) -> Check:
+        final, scale = self.problem.residual(self.data)
+        return Check(final, scale, final)
+
+
 def globalized_newton(problem: MixedNewtonProblem, load: np.ndarray, data: np.ndarray | None
                       ) -> MixedNewtonHistory:
     """Solve the penalized contact problem with stress-side load ``load`` (Robin data ``data``), warm-started
-    from (problem.c, problem.u); raises ConvergenceError at the step cap or when the settled residual fails."""
-    history = MixedNewtonHistory()
-    comm, nodes, options = problem.comm, problem.contact_nodes, problem.newton
-    B, G = problem.assembly.B, problem.assembly.G
-    name = problem.prefix.rstrip("_")
-    visited: set[bytes] = set()
-    line_search = problem.line_search == "always"
-    for _ in range(options.max_iterations):
-        s = nodes.stress(problem.c)
-        # cold start: linearize at "penalty everywhere" (traction-free Γ_C); its solution has
-        # σ_c < 0 exactly where a free body would penetrate, a good first contact set
-        active = np.ones_like(s, dtype=bool) if problem.cold else s > 0.0
-        visited.add(np.packbits(active).tobytes())
-        F1, F2 = problem.gradient(load)
-        history.residuals.append(float(np.sqrt(dot(F1, F1, comm) + dot(F2, F2, comm))))
-        history.factorizations += problem.factorize_for(active)
-        feasible = norm(F2, comm) <= 1e-10 * (norm(G, comm) + norm(B @ problem.c, comm))
-        dc, du = problem.linear_solve(-F1, -F2)
-        d = nodes.replicate(nodes.Q @ dc)
-        predicted = s + d > 0.0
-        settled = np.array_equal(predicted, active)
-        if not settled and feasible and not line_search:
-            # with full steps the iterate depends only on the set it was linearized at, so
-            # stepping into a set already linearized at closes a cycle: from then on
-            # minimize J along every direction (J decreases monotonically: no cycle)
-            line_search = np.packbits(predicted).tobytes() in visited
-        t = exact_line_search(problem, dc, s, d, load) if line_search and feasible and not settled else 1.0
-        problem.cold = False
-        problem.c += t * dc
-        problem.u += t * du
-        history.step_lengths.append(t)
-        history.energies.append(problem.complementary_energy(data))
-        history.active_sizes.append(int(np.count_nonzero(nodes.stress(problem.c) <= 0.0)))
-        if settled:
-            final, scale = problem.residual(data)
-            history.residuals.append(final)
-            if final > options.rtol * scale + options.atol:
-                raise ConvergenceError(
-                    f"{name}: active set settled but residual {final:.3e} exceeds "
-                    f"{options.rtol:g}·(size of the terms {scale:.3e})"
-                )
-            return history
-    raise ConvergenceError(
-        f"{name}: globalized semismooth Newton did not converge in {options.max_iterations} steps "
-        f"(contact-set sizes {history.active_sizes[-5:]}, step lengths {history.step_lengths[-5:]}, "
-        f"residuals {history.residuals[-3:]})"
-    )
+    from (problem.c, problem.u) (``fem.newton.semismooth_newton_loop``); raises ConvergenceError at the step cap
+    or when the settled residual fails its check."""
+    system = _MixedSystem(problem, load, data)
+    options = problem.newton
+    trace = semismooth_newton_loop(system, system.start(), name=problem.prefix.rstrip("_"),
+                                   max_steps=options.max_iterations, line_search=problem.line_search,
+                                   rtol=options.rtol, atol=options.atol, sizes="contact-set sizes")
+    return MixedNewtonHistory(residuals=trace.residuals, active_sizes=trace.active_sizes,
+                              factorizations=trace.factorizations, step_lengths=trace.step_lengths,
+                              energies=system.energies)

@@ -9,7 +9,8 @@ active set recurs and from then on minimizes, along each Newton direction, ψ = 
 s = s_L − Mμ (exact line search on a piecewise-linear derivative, ``contact_equations.energy_line_search``):
 ψ is the convex energy of the glued problem when M is symmetric (Algorithms 1, 2), so no cycle can recur.
 A Newton method that does not converge in ``max_steps`` or meets a singular system raises
-ConvergenceError; ``contact_solve`` then starts the plain Newton afresh.
+ConvergenceError; ``contact_solve`` then starts the plain Newton afresh.  The loop is
+``fem.newton.semismooth_newton_loop``; ``contact_newton`` gives it the condensed equations.
 """
 
 import logging
@@ -18,6 +19,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from fenics_contact.errors import ConvergenceError
+from fenics_contact.fem.newton import Advance, Direction, StepState, semismooth_newton_loop
 from fenics_contact.hybrid.contact_equations import energy_line_search, solve_on
 from fenics_contact.hybrid.fronts import LocalFronts
 from fenics_contact.hybrid.options import InterfaceNewtonOptions
@@ -63,6 +65,60 @@ class ContactNewtonHistory:
         return sum(it for _, it, _ in self.local)
 
 
+class _CondensedSystem:
+    """s = s_L − M μ, μ = D s⁺ as a ``ContactSystem``: the iterate (s, μ), each step solved on its set for the
+    forces (``solve_on``, checked for a singular system), the next set that of the local front resolution
+    where it proposes one not yet solved."""
+
+    def __init__(self, s_load: np.ndarray, M: np.ndarray, D: np.ndarray, *, name: str, rtol: float,
+                 local: LocalFronts | None) -> None:
+        self.s_load, self.M, self.D, self.name, self.rtol, self.local = s_load, M, D, name, rtol, local
+        self.s, self.mu = s_load.copy(), np.zeros(s_load.size)
+        self.hist = ContactNewtonHistory()
+        self.active: np.ndarray | None = None
+
+    def residual(self) -> None:
+        return None  # (the contact-law violation is recorded after each step)
+
+    def jacobian(self, active: np.ndarray) -> bool:
+        return False  # (each solve factorizes its dense system on the set)
+
+    def solve(self, active: np.ndarray) -> Direction:
+        self.active = active
+        self.s_new, self.mu_new, residual = solve_on(self.s_load, self.M, self.D, np.flatnonzero(active))
+        if residual > self.rtol:
+            raise ConvergenceError(f"{self.name}: the condensed contact system is singular or ill-conditioned "
+                                   f"(relative residual {residual:.1e})")
+        return Direction(self.s_new > 0.0)
+
+    def same(self, a: np.ndarray, b: np.ndarray) -> bool:
+        return np.array_equal(a, b)
+
+    def line_search(self) -> float:
+        return energy_line_search(self.mu, self.mu_new - self.mu, self.s, self.s_new - self.s, self.s_load, self.D)
+
+    def advance(self, t: float, state: StepState) -> Advance:
+        active, hist = self.active, self.hist
+        self.s, self.mu = self.s + t * (self.s_new - self.s), self.mu + t * (self.mu_new - self.mu)
+        s, mu = self.s, self.mu
+        following = s > 0.0
+        resolved = np.zeros(0, dtype=np.int64)
+        local_work = (0, 0, 0)
+        if self.local is not None and not state.searching and not state.settled:
+            trial, local_work = self.local.trial(following, self.s_load, self.mu_new)
+            if not state.seen(trial):  # (a set already solved: the plain one instead)
+                resolved, following = np.flatnonzero(trial != following), trial
+        hist.local.append(local_work)
+        hist.added.append(np.flatnonzero(following & ~active))
+        hist.removed.append(np.flatnonzero(active & ~following))
+        hist.resolved.append(resolved)
+        violation = float(np.linalg.norm(mu - self.D * np.maximum(s, 0.0)))  # the contact law's
+        return Advance(following, int(np.count_nonzero(following)), violation)
+
+    def check(self) -> None:
+        return None  # (every solve was checked)
+
+
 def contact_newton(s_load: np.ndarray, M: np.ndarray, D: np.ndarray, *, max_steps: int = 50,
                    name: str = "contact Newton", rtol: float = 1e-10, active: np.ndarray | None = None,
                    line_search: bool = False, chains=None,
@@ -79,55 +135,19 @@ def contact_newton(s_load: np.ndarray, M: np.ndarray, D: np.ndarray, *, max_step
     ``chains`` (``contact_chains`` of the Γ_C unknowns' coordinates) and ``window`` > 0: the next set
     is that of the local front resolution (``LocalFronts``, ``window`` unknowns on either side of every
     front) until the line search starts; every set solved, proposed or not, is one step.  Without
-    them (``window`` = 0): the plain semismooth Newton.
+    them (``window`` = 0): the plain semismooth Newton.  The loop is ``fem.newton.semismooth_newton_loop``;
+    its ConvergenceError carries ``steps``.
     """
-    hist = ContactNewtonHistory()
-    n = s_load.size
-    s, mu = s_load.copy(), np.zeros(n)
-    active = s > 0.0 if active is None else np.asarray(active, dtype=bool).copy()
-    visited: set[bytes] = set()
     if window < 0:
         raise ValueError(f"contact_newton: window must be >= 0, got {window}")
     local = LocalFronts(chains, M, D, window) if chains and window > 0 else None
-    for _ in range(max_steps):
-        visited.add(np.packbits(active).tobytes())
-        s_new, mu_new, residual = solve_on(s_load, M, D, np.flatnonzero(active))
-        if residual > rtol:
-            error = ConvergenceError(f"{name}: the condensed contact system is singular or ill-conditioned "
-                                     f"(relative residual {residual:.1e})")
-            error.steps = hist.steps + 1
-            raise error
-        predicted = s_new > 0.0
-        settled = np.array_equal(predicted, active)
-        if not settled and not line_search:
-            line_search = np.packbits(predicted).tobytes() in visited
-        t = 1.0
-        if line_search and not settled:
-            t = energy_line_search(mu, mu_new - mu, s, s_new - s, s_load, D)
-        s, mu = s + t * (s_new - s), mu + t * (mu_new - mu)
-        following = s > 0.0
-        resolved = np.zeros(0, dtype=np.int64)
-        local_work = (0, 0, 0)
-        if local is not None and not line_search and not settled:
-            trial, local_work = local.trial(following, s_load, mu_new)
-            if np.packbits(trial).tobytes() not in visited:  # (a set already solved: the plain one instead)
-                resolved, following = np.flatnonzero(trial != following), trial
-        hist.local.append(local_work)
-        hist.step_lengths.append(t)
-        hist.active_sizes.append(int(np.count_nonzero(following)))
-        hist.added.append(np.flatnonzero(following & ~active))
-        hist.removed.append(np.flatnonzero(active & ~following))
-        hist.resolved.append(resolved)
-        hist.residuals.append(float(np.linalg.norm(mu - D * np.maximum(s, 0.0))))  # contact-law violation
-        if settled:
-            return s, mu, hist
-        active = following
-    error = ConvergenceError(
-        f"{name}: contact Newton did not converge in {max_steps} steps (active-set sizes "
-        f"{hist.active_sizes[-5:]}, step lengths {hist.step_lengths[-5:]}, residuals {hist.residuals[-3:]})"
-    )
-    error.steps = hist.steps
-    raise error
+    system = _CondensedSystem(s_load, M, D, name=name, rtol=rtol, local=local)
+    start = s_load > 0.0 if active is None else np.asarray(active, dtype=bool).copy()
+    trace = semismooth_newton_loop(system, start, name=name, max_steps=max_steps,
+                                   line_search="always" if line_search else "on-cycle")
+    hist = system.hist
+    hist.active_sizes, hist.step_lengths, hist.residuals = trace.active_sizes, trace.step_lengths, trace.residuals
+    return system.s, system.mu, hist
 
 
 def contact_solve(s_load: np.ndarray, M: np.ndarray, D: np.ndarray, options: InterfaceNewtonOptions, name: str,

@@ -178,6 +178,25 @@ def force_indentation(
     solve's ``result.step``) to reuse with everything it holds; it carries its own α or β, δ or ε and
     multiscale space, so only the iteration's options may be given with it.  ``on_step(step, solver)`` is
     called after every load step with its record and the solver in that state (e.g. to write its fields).
+
+    Args:
+        problem: a ``ContactProblem`` with an obstacle, on its mesh.
+        method: a name of ``methods.METHODS``.
+        depths: the obstacle's displacement along ``direction`` at each load step (any length unit of the mesh).
+        direction: the direction of the motion (a ``problem.dim``-vector, normalized here).
+        step: a hybrid step of this method to reuse (see above), or None.
+        on_step: called as ``on_step(record, solver)`` after every load step, or None.
+        **options: the method's options (``methods.Method.options``).
+
+    Returns:
+        The ``IndentationCurve``: ``depths``, ``forces`` (the contact resultant per unit thickness), one
+        ``IndentationStep`` record per load step (converged, iterations, certificate, time), the offline time
+        and the step object that can be reused.
+
+    Raises:
+        InputError: no obstacle, depths not finite, a zero direction, options the method does not take.
+        ConvergenceError: a Newton solve of a load step failed (a hybrid step that reaches its iteration cap is
+            recorded with ``converged`` False).
     """
     spec = get_method(method)
     if not isinstance(problem, ContactProblem) or not isinstance(problem.obstacle, Obstacle):

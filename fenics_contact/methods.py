@@ -225,5 +225,26 @@ def get_method(name: str) -> Method:
 
 
 def solve(problem: ContactProblem, method: str = "primal", /, **options):
-    """Solve ``problem`` with the method called ``method`` (``METHODS``) and its ``options``."""
+    """Solve ``problem`` with the method called ``method`` (``METHODS``) and its ``options``.
+
+    Args:
+        problem: the contact problem (``ContactProblem`` on its mesh: ``problem.on(mesh)``).
+        method: ``"primal-monolithic"``, ``"mixed-monolithic"``, ``"primal"`` (Algorithm 1), ``"mixed"``
+            (Algorithm 2), ``"primal-ms"`` (Algorithm 3) or ``"mixed-ms"`` (Algorithm 4).
+        **options: the method's options by name, flat (``tol=1e-8``, ``layers=4``, ``delta=…``) or as their
+            option objects (``options=IterationOptions(…)``, ``cem=CEMOptions(…)``), and the solve's own
+            keywords (``reference=…`` for the error against a fine solution); ``METHODS[method].defaults()``
+            lists them with their defaults.
+
+    Returns:
+        The method's result: a ``PrimalSolution`` or ``MixedSolution`` for the monolithic solves, a
+        ``HybridResult`` or ``MixedHybridResult`` for the hybrid ones (``converged``, ``history`` with the
+        certificate, ``profile`` of the contact pressure along Γ_C, the fields, ``dofs``, timings).
+
+    Raises:
+        InputError: an unknown method or option, or a problem the method cannot solve (the message says why
+            and what to do).
+        ConvergenceError: a Newton solve failed (the monolithic solve, or a subproblem of a hybrid one); a
+            hybrid iteration that reaches its iteration cap returns with ``converged`` False.
+    """
     return get_method(method).solve(problem, **options)

@@ -1,0 +1,55 @@
+"""Command line: ``fenics-contact run …`` (one simulation with fields, plots and a summary).
+
+A run goes: parse → one validated ``RunOptions`` (every option and file checked before
+any mesh is built) → inputs (E map) → output staging directory → mesh (a user mesh is
+validated against the contact problem) → solve → write into the staging directory →
+move it into place. Exit codes:
+
+  0    converged
+  2    bad input: an option, a file (--mesh, --E-map, --out, --cache-dir) or a mesh whose
+       tags contradict the problem; nothing is written
+  3    not converged: the transmission residual stayed above --tol (the iteration hit
+       --max-iterations, or the interface Newton's corrections ran out); the results are written with
+       "converged": false
+  4    numerical failure: Newton did not converge, non-finite values, a failed
+       factorization; nothing is written
+  130  interrupted by SIGINT (Ctrl-C), 143 by SIGTERM: --out is left as it was
+
+Every failure ends with one line on stderr.
+"""
+
+from fenics_contact.cli.cases import case_run_options, options_from_arguments
+from fenics_contact.cli.command import main
+from fenics_contact.cli.options import DEFAULT_H, METHODS, TABLE_METHODS, RunOptions, default_accel, default_out
+from fenics_contact.cli.parser import NOT_GIVEN, build_parser
+from fenics_contact.cli.run import check_pixel_modulus, load_pixel_map, run
+from fenics_contact.cli.signals import (
+    EXIT_BAD_INPUT,
+    EXIT_CODES,
+    EXIT_NOT_CONVERGED,
+    EXIT_NUMERICAL,
+    Interrupted,
+    _interruptible,  # (the context manager of the signal handlers, tested on its own)
+)
+
+__all__ = [
+    "DEFAULT_H",
+    "EXIT_BAD_INPUT",
+    "EXIT_CODES",
+    "EXIT_NOT_CONVERGED",
+    "EXIT_NUMERICAL",
+    "METHODS",
+    "NOT_GIVEN",
+    "TABLE_METHODS",
+    "Interrupted",
+    "RunOptions",
+    "build_parser",
+    "case_run_options",
+    "check_pixel_modulus",
+    "default_accel",
+    "default_out",
+    "load_pixel_map",
+    "main",
+    "options_from_arguments",
+    "run",
+]

@@ -1,0 +1,7 @@
+"""``python -m fenics_contact.cli``: the command line without the start-up guard of ``fenics_contact.launch``."""
+
+import sys
+
+from fenics_contact.cli.command import main
+
+sys.exit(main())

@@ -5,6 +5,7 @@ multiscale option dataclasses) is used, and an option the chosen method does not
 """
 
 import argparse
+import inspect
 import math
 import re
 from dataclasses import dataclass, fields
@@ -19,12 +20,18 @@ from fenics_contact.hybrid.mixed import transmission_coefficient
 from fenics_contact.io import check_output_target
 from fenics_contact.methods import HYBRID_METHODS, METHODS as CATALOGUE, get_method
 from fenics_contact.problem.materials import check_poisson_ratio
-from fenics_contact.problem.models import get_model
+from fenics_contact.problem.models import get_model, model_1
 
-__all__ = ["DEFAULT_H", "METHODS", "TABLE_METHODS", "RunOptions", "default_accel", "default_out"]
+__all__ = ["DEFAULT_H", "METHODS", "MODEL_DEFAULTS", "TABLE_METHODS", "RunOptions", "default_accel", "default_out",
+           "method_default"]
 
 METHODS = HYBRID_METHODS  #: the ``--method`` choices: Algorithms 1–4 (``methods.METHODS``)
 DEFAULT_H = 64  #: 1/h of the built-in mesh when --h is not given
+#: the materials of the built-in models when --E-high, --E-low, --nu are not given (the three models share them)
+MODEL_DEFAULTS = {name: p.default for name, p in inspect.signature(model_1).parameters.items()
+                  if name in ("E_high", "E_low", "nu")}
+#: the iteration's defaults (--tol, --max-iterations) and the interface Newton's (--front-window)
+_ITERATION = IterationOptions()
 
 
 #: what each option that only some methods use is (its message when another method is given it)
@@ -110,6 +117,18 @@ def default_accel(method: str) -> str:
     return get_method(method).default_accel(MPI.COMM_WORLD)
 
 
+def method_default(method: str, name: str):
+    """The default of the option ``name`` of ``method`` in the catalogue: a keyword default of its solve function,
+    else a field of its multiscale options dataclass; None when the method has neither."""
+    entry = get_method(method)
+    defaults = entry.defaults()
+    if name in defaults:
+        return defaults[name]
+    if entry.cem_type is not None and name in (f.name for f in fields(entry.cem_type)):
+        return getattr(entry.cem_type(), name)
+    return None
+
+
 @dataclass(frozen=True, slots=True)
 class RunOptions:
     """What ``fenics-contact run`` was asked to do, validated on construction (InputError).
@@ -127,15 +146,15 @@ class RunOptions:
     coarse_groups: bool = False
     alpha: str | None = None
     accel: str | None = None  #: None: "newton", or "anderson" for the mixed method on several ranks (default_accel)
-    tol: float = 1e-6
-    max_iterations: int = 2000
-    front_window: int | None = None  #: the contact Newton's local front resolution (None: the default 8; 0: off)
+    tol: float = _ITERATION.tol
+    max_iterations: int = _ITERATION.max_iterations
+    front_window: int | None = None  #: the contact Newton's local front resolution (None: InterfaceNewtonOptions' default; 0: off)
     delta: float | None = None
     beta: str | None = None
     epsilon: float | None = None
     E_high: float | None = None
     E_low: float | None = None
-    nu: float = 0.35
+    nu: float = MODEL_DEFAULTS["nu"]
     E_map: Path | None = None
     layers: int | None = None
     nbasis: int | None = None
@@ -229,14 +248,8 @@ class RunOptions:
         if given is not None:
             return given
         if name in ("E_high", "E_low"):
-            return {"E_high": 1e3, "E_low": 1.0}[name]
-        method = get_method(self.method)
-        defaults = method.defaults()
-        if name in defaults:
-            return defaults[name]
-        if method.cem_type is not None and name in (f.name for f in fields(method.cem_type)):
-            return getattr(method.cem_type(), name)
-        return None
+            return MODEL_DEFAULTS[name]
+        return method_default(self.method, name)
 
     def method_options(self) -> dict:
         """The chosen method's options given on the command line (its defaults otherwise), for the catalogue."""

@@ -1,5 +1,11 @@
 """Command line: ``fenics-contact run …`` (one simulation with fields, plots and a summary).
 
+``fenics-contact check-mesh FILE`` (or ``--case CASE.toml``) reads and checks a mesh as a run
+would, without a solve (``cli.check``); ``fenics-contact examples DIR`` copies the example files.
+The modules: ``options`` (RunOptions), ``parser`` (argparse), ``cases`` (case files),
+``run`` (the solve and load steps), ``outputs`` (summary entries, grids), ``check``
+(check-mesh), ``signals`` (SIGINT/SIGTERM, exit codes), ``command`` (``main``).
+
 A run goes: parse → one validated ``RunOptions`` (every option and file checked before
 any mesh is built) → inputs (E map) → output staging directory → mesh (a user mesh is
 validated against the contact problem) → solve → write into the staging directory →
@@ -19,6 +25,7 @@ Every failure ends with one line on stderr.
 """
 
 from fenics_contact.cli.cases import case_run_options, options_from_arguments
+from fenics_contact.cli.check import check_mesh
 from fenics_contact.cli.command import main
 from fenics_contact.cli.options import DEFAULT_H, METHODS, TABLE_METHODS, RunOptions, default_accel, default_out
 from fenics_contact.cli.parser import NOT_GIVEN, build_parser
@@ -45,6 +52,7 @@ __all__ = [
     "RunOptions",
     "build_parser",
     "case_run_options",
+    "check_mesh",
     "check_pixel_modulus",
     "default_accel",
     "default_out",

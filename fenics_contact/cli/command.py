@@ -1,10 +1,12 @@
-"""``main``: parse, run the subcommand, and turn its ending into an exit code and one line on stderr."""
+"""``main``: parse, run the subcommand (run, check-mesh, examples), and turn its ending into an exit code and one
+line on stderr."""
 
 import signal
 
 from mpi4py import MPI
 
 from fenics_contact.cli.cases import options_from_arguments
+from fenics_contact.cli.check import check_mesh
 from fenics_contact.cli.parser import build_parser
 from fenics_contact.cli.run import run
 from fenics_contact.cli.signals import (
@@ -30,11 +32,15 @@ def main(argv: list[str] | None = None) -> int:
     out = getattr(args, "out", None)
     with _interruptible() as pending:
         try:
-            options, case = options_from_arguments(args, argv)
-            out = options.out
-            code = run(options, comm, case=case)
+            if args.command == "check-mesh":
+                code = check_mesh(args, comm)
+            else:
+                options, case = options_from_arguments(args, argv)
+                out = options.out
+                code = run(options, comm, case=case)
         except Interrupted as stop:
-            where = (f"the results in {out} are complete" if getattr(stop, "output_complete", False)
+            where = ("nothing was written" if args.command == "check-mesh" else
+                     f"the results in {out} are complete" if getattr(stop, "output_complete", False)
                      else f"{out} left as it was (no partial output)")
             _fail(f"interrupted by {stop}: {where}", comm)
             return 128 + stop.signum
@@ -46,6 +52,7 @@ def main(argv: list[str] | None = None) -> int:
             return EXIT_BAD_INPUT
     if pending:  # a signal landed in the last finalizers of a run that had ended: its results are written
         signum = pending[-1]
-        _fail(f"interrupted by {signal.Signals(signum).name}: the results in {out} are complete", comm)
+        where = "nothing was written" if args.command == "check-mesh" else f"the results in {out} are complete"
+        _fail(f"interrupted by {signal.Signals(signum).name}: {where}", comm)
         return 128 + signum
     return code

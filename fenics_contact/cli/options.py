@@ -148,7 +148,8 @@ class RunOptions:
     accel: str | None = None  #: None: "newton", or "anderson" for the mixed method on several ranks (default_accel)
     tol: float = _ITERATION.tol
     max_iterations: int = _ITERATION.max_iterations
-    front_window: int | None = None  #: the contact Newton's local front resolution (None: InterfaceNewtonOptions' default; 0: off)
+    #: the contact Newton's local front resolution (None: InterfaceNewtonOptions' default; 0: off)
+    front_window: int | None = None
     delta: float | None = None
     beta: str | None = None
     epsilon: float | None = None

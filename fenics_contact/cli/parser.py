@@ -1,4 +1,4 @@
-"""The argparse command line: ``fenics-contact run``, ``fenics-contact examples``.
+"""The argparse command line: ``fenics-contact run``, ``check-mesh`` and ``examples``.
 
 ``run --help`` lists the options in groups (problem, method, iteration, multiscale, output), each
 with its default as the code decides it: the fields of ``RunOptions``, the method catalogue
@@ -75,8 +75,9 @@ def _add_problem_options(run: argparse.ArgumentParser) -> None:
                        "case file, VALUE in TOML syntax, e.g. --set mesh.refinement=0.5 --set "
                        "'obstacle.indentation=[1e-3, 2e-3]' (repeatable)" + _default("none"))
     group.add_argument("--mesh", type=Path, help="a gmsh .msh file of planar triangles with the physical groups "
-                       "Omega1, Omega2, Gamma_D, Gamma_C, gamma (checked against the contact problem); a file with "
-                       "none of Omega1/Omega2/gamma gets Omega2 = the coarse cells along Gamma_C" + _default("none: the built-in unit square"))
+                       "Omega1, Omega2, Gamma_D, Gamma_C, gamma (checked against the contact problem; "
+                       "fenics-contact check-mesh FILE checks it alone); a file with none of Omega1/Omega2/gamma "
+                       "gets Omega2 = the coarse cells along Gamma_C" + _default("none: the built-in unit square"))
     group.add_argument("--h", type=int, help="fine size of the built-in mesh as 1/h; not with --mesh, whose size "
                        "is h = sqrt(2 x largest cell area) (1/n on an n x n grid)" + _default(_shown(DEFAULT_H)))
     group.add_argument("--H", type=int, default=_RUN_DEFAULTS["H"], help="coarse size / strip width as 1/H; with "
@@ -158,6 +159,31 @@ def _add_output_options(run: argparse.ArgumentParser) -> None:
     group.add_argument("-v", "--verbose", action="store_true", help="log at debug level" + _default("off"))
 
 
+def _add_check_mesh_parser(subparsers) -> None:
+    """``check-mesh``: a mesh or case file checked without a solve (``cli.check``)."""
+    parser = subparsers.add_parser(
+        "check-mesh", help="check a gmsh mesh or a case file without solving",
+        description="Read a gmsh mesh (as run --mesh FILE reads it) or the mesh and problem of a case file (as run "
+        "--case reads them), make every check a run makes before its first solve, and print what was found: the "
+        "dimension, cells and vertices, the physical groups and the role of each, whether Omega1/Omega2/gamma "
+        "were given or built, h and the contact cell size, whether gamma is straight, and which methods can run.",
+        epilog="exit codes: 0 a run with the method could start; 2 it would be refused (the message says why)")
+    parser.add_argument("file", nargs="?", type=Path, metavar="FILE", help="a gmsh .msh file")
+    parser.add_argument("--case", type=Path, help="a case file (TOML) instead of FILE" + _default("none"))
+    parser.add_argument("--set", action="append", metavar="KEY=VALUE",
+                        help="with --case: replace one key of the case file (as run --set)" + _default("none"))
+    parser.add_argument("--method", choices=METHODS, default=None,
+                        help="the method the run would use"
+                        + _default(f"the case's [run] method, else {_RUN_DEFAULTS['method']}"))
+    parser.add_argument("--H", type=int, default=None,
+                        help="with FILE: the coarse grid of squares of side 1/H over the bounding box, and the "
+                        "strip width when the file has no Omega1/Omega2/gamma (as run)"
+                        + _default(_shown(_RUN_DEFAULTS["H"])))
+    parser.add_argument("--coarse-groups", action="store_true",
+                        help="with FILE: the surface groups of the file are the coarse cells (as run "
+                        "--coarse-groups)" + _default("off"))
+
+
 def build_parser(*, given_only: bool = False) -> argparse.ArgumentParser:
     codes = "\n".join(f"  {code:<4} {meaning}" for code, meaning in EXIT_CODES.items())
     parser = argparse.ArgumentParser(prog="fenics-contact", description=DESCRIPTION,
@@ -177,6 +203,7 @@ def build_parser(*, given_only: bool = False) -> argparse.ArgumentParser:
     _add_iteration_options(run)
     _add_multiscale_options(run)
     _add_output_options(run)
+    _add_check_mesh_parser(sub)
     add_examples_parser(sub)
     if given_only:  # only the options the command line gives (the others absent): they override a case file
         run.set_defaults(**{dest: NOT_GIVEN for dest in vars(run.parse_args([])) if dest != "set"})  # append: a list

@@ -1,4 +1,5 @@
-"""One run: inputs (E map) → output staging directory → mesh → solve (and load steps) → write → move into place."""
+"""One run: inputs (E map) → output staging directory → mesh → solve (and load steps) → write → move it into
+place."""
 
 import logging
 import time

@@ -24,9 +24,9 @@ def _help(*args: str) -> str:
     return text.getvalue()
 
 
-def _run_help() -> dict[str, str]:
-    """Each option of ``run --help`` and its help text (the lines up to the next option), spaces collapsed."""
-    body = _help("run").split("exit codes:")[0]
+def _run_help(command: str = "run") -> dict[str, str]:
+    """Each option of ``COMMAND --help`` and its help text (the lines up to the next option), spaces collapsed."""
+    body = _help(command).split("exit codes:")[0]
     entries = re.split(r"\n  (?=-)", body)[1:]
     options = {}
     for entry in entries:
@@ -95,4 +95,12 @@ def test_the_defaults_shown_are_the_ones_a_run_uses(tmp_path):
 
 def test_the_top_level_help_points_to_each_command_help():
     text = _help()
-    assert "run" in text and "examples" in text and "COMMAND --help" in text
+    assert all(command in text for command in ("run", "check-mesh", "examples")) and "COMMAND --help" in text
+
+
+def test_every_option_of_check_mesh_shows_its_default():
+    options = _run_help("check-mesh")
+    assert set(options) == {"--help", "--case", "--set", "--method", "--H", "--coarse-groups"}
+    for flag in set(options) - {"--help"}:
+        _default(options, flag)
+    assert int(_default(options, "--H")) == {f.name: f.default for f in dataclasses.fields(RunOptions)}["H"]

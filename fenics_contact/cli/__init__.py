@@ -36,8 +36,10 @@ from fenics_contact.cli.signals import (
     EXIT_NOT_CONVERGED,
     EXIT_NUMERICAL,
     Interrupted,
-    _interruptible,  # (the context manager of the signal handlers, tested on its own)
+    interruptible,
 )
+
+_interruptible = interruptible  #: the name tests/test_interrupt.py imports
 
 __all__ = [
     "DEFAULT_H",
@@ -56,6 +58,7 @@ __all__ = [
     "check_pixel_modulus",
     "default_accel",
     "default_out",
+    "interruptible",
     "load_pixel_map",
     "main",
     "options_from_arguments",

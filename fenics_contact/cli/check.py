@@ -141,7 +141,7 @@ def _describe(cm: ContactMesh, say, groups) -> None:
                                  for name, n in counts.items()))
     coarse = "none" if cm.H is None else f"{cm.H:.6g}"
     contact = contact_cell_size(msh, cm.facet_tags)
-    say(f"  h = {cm.h:.6g} (sqrt(2 x largest cell area)), contact cell size {contact:.6g} (the largest diameter of a "
+    say(f"  h = {cm.h:.6g} (the run's mesh size), contact cell size {contact:.6g} (the largest diameter of a "
         f"cell on Gamma_C), H = {coarse}")
     bends = interface_bends_of(cm)
     say("  gamma: straight" if not bends.size else

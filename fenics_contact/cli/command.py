@@ -14,7 +14,7 @@ from fenics_contact.cli.signals import (
     EXIT_NUMERICAL,
     Interrupted,
     _fail,
-    _interruptible,
+    interruptible,
     _setup_logging,
 )
 from fenics_contact.errors import ConvergenceError, FenicsContactError
@@ -30,7 +30,7 @@ def main(argv: list[str] | None = None) -> int:
     _setup_logging(getattr(args, "verbose", False))
     comm = MPI.COMM_WORLD
     out = getattr(args, "out", None)
-    with _interruptible() as pending:
+    with interruptible() as pending:
         try:
             if args.command == "check-mesh":
                 code = check_mesh(args, comm)

@@ -11,7 +11,7 @@ from contextlib import contextmanager
 
 from mpi4py import MPI
 
-__all__ = ["EXIT_BAD_INPUT", "EXIT_CODES", "EXIT_NOT_CONVERGED", "EXIT_NUMERICAL", "Interrupted"]
+__all__ = ["EXIT_BAD_INPUT", "EXIT_CODES", "EXIT_NOT_CONVERGED", "EXIT_NUMERICAL", "Interrupted", "interruptible"]
 
 #: exit code -> meaning (``--help``, README)
 EXIT_CODES = {
@@ -27,7 +27,7 @@ EXIT_BAD_INPUT, EXIT_NOT_CONVERGED, EXIT_NUMERICAL = 2, 3, 4
 
 
 class Interrupted(BaseException):
-    """SIGINT or SIGTERM arrived (raised by the handlers of ``_interruptible``)."""
+    """SIGINT or SIGTERM arrived (raised by the handlers of ``interruptible``)."""
 
     def __init__(self, signum: int) -> None:
         super().__init__(signal.Signals(signum).name)
@@ -47,7 +47,7 @@ def _in_finalizer(frame) -> bool:
 
 
 @contextmanager
-def _interruptible() -> Iterator[list[int]]:
+def interruptible() -> Iterator[list[int]]:
     """SIGINT and SIGTERM raise ``Interrupted`` (so that cleanup runs); the previous handlers come back after.
 
     Python ignores an exception raised in a ``__del__`` (it prints "Exception ignored in ...") and goes on: a

@@ -16,6 +16,7 @@ REPO = Path(__file__).resolve().parents[2]
 PAD_MESH = REPO / "cases" / "pad.msh"
 PAD_CASE = REPO / "cases" / "pad.toml"
 BAR_CASE = REPO / "cases" / "bar.toml"
+HERTZ_CASE = REPO / "cases" / "hertz.toml"
 UNIT_SQUARE = REPO / "meshes" / "unit_square_n16_H4.msh"
 
 
@@ -56,17 +57,19 @@ def test_a_case_with_its_own_mesh_file_and_material_groups(capsys):
     assert _number(r"Omega1 (\d+) cells", out) + _number(r"Omega2 (\d+) cells", out) == triangles
     assert _number(r"Gamma_C (\d+) facets", out) == _number(r"Gamma_C\s+curve\s+(\d+) segments", out)
     assert _number(r", H = ([\d.]+)", out) == case.mesh.coarse  # the case's mesh.coarse-size
-    assert _number(r"contact cell size ([\d.e+-]+)", out) < _number(r"h = ([\d.e+-]+)", out)  # refined at Γ_C
-    assert "gamma: bends at" in out
-    assert "methods: primal can run; mixed refused; primal-ms can run; mixed-ms refused" in out
+    assert _number(r"contact cell size ([\d.e+-]+)", out) < case.mesh.coarse / 10  # refined under the indenter
+    assert "gamma: bends at" in out  # the strip built along the middle of the top face
+    assert "primal can run" in out and "primal-ms can run" in out
     assert "ok: a run with --method primal can start" in out
 
 
 def test_a_method_that_refuses_the_mesh_is_refused_as_run_refuses_it(capsys, tmp_path):
-    code, out, err = _command(capsys, "check-mesh", "--case", str(PAD_CASE), "--method", "mixed")
+    """The Hertz block's graded mesh has no coarse grid: the multiscale methods refuse it."""
+    code, out, err = _command(capsys, "check-mesh", "--case", str(HERTZ_CASE), "--method", "primal-ms")
     assert code == 2 and len(err) == 1
-    assert "straight" in err[0] and "ok:" not in out
-    run = _command(capsys, "run", "--case", str(PAD_CASE), "--method", "mixed", "--no-plots", "--out",
+    assert "no coarse grid" in err[0] and "ok:" not in out
+    assert "primal can run" in out and "primal-ms refused" in out and "mixed-ms refused" in out
+    run = _command(capsys, "run", "--case", str(HERTZ_CASE), "--method", "primal-ms", "--no-plots", "--out",
                    str(tmp_path / "run"))
     assert run[0] == 2 and run[2] == err
     assert not (tmp_path / "run").exists()

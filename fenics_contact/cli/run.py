@@ -85,7 +85,7 @@ def _indentation_curve(options: RunOptions, case: Case, problem: ContactProblem,
                               **penalty)
     rows = [_curve_row(s.depth, direction, s.profile, s.iterations, s.converged, s.time_s, ends) | {
         "transmission_residual": s.transmission_residual, "complementarity": s.complementarity._asdict(),
-        "interface_newton_steps": s.interface_newton_steps}
+        "interface_newton_steps": s.interface_newton_steps, "omega1_check": s.omega1_check}
         for s in curve.steps]
     return {"direction": direction.tolist(), "steps": rows}
 
@@ -209,6 +209,8 @@ def _run_primal(options: RunOptions, problem: ContactProblem) -> _Outcome:
         "offline_cache": result.step.omega1.cache_status if ms else None,
         # Λ, the smallest local eigenvalue left out (it falls like μ/(λ+2μ) as ν → ½, and with inclusions)
         "spectral_gap": _finite_or_none(result.step.omega1.spectral_gap) if ms else None,
+        # the multiscale Ω₁ against its fine solve for the run's interface data (relative, energy norm)
+        "omega1_check": result.omega1_check if ms else None,
     }
     fields, cm = problem.fields, problem.cm
 

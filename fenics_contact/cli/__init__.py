@@ -3,7 +3,7 @@
 ``fenics-contact check-mesh FILE`` (or ``--case CASE.toml``) reads and checks a mesh as a run
 would, without a solve (``cli.check``); ``fenics-contact examples DIR`` copies the example files.
 The modules: ``options`` (RunOptions), ``parser`` (argparse), ``cases`` (case files),
-``run`` (the solve and load steps), ``outputs`` (summary entries, grids), ``check``
+``solve`` (one run: the solve and load steps), ``outputs`` (summary entries, grids), ``check``
 (check-mesh), ``signals`` (SIGINT/SIGTERM, exit codes), ``command`` (``main``).
 
 A run goes: parse → one validated ``RunOptions`` (every option and file checked before
@@ -29,7 +29,7 @@ from fenics_contact.cli.check import check_mesh
 from fenics_contact.cli.command import main
 from fenics_contact.cli.options import DEFAULT_H, METHODS, TABLE_METHODS, RunOptions, default_accel, default_out
 from fenics_contact.cli.parser import NOT_GIVEN, build_parser
-from fenics_contact.cli.run import check_pixel_modulus, load_pixel_map, run
+from fenics_contact.cli.solve import check_pixel_modulus, load_pixel_map, run
 from fenics_contact.cli.signals import (
     EXIT_BAD_INPUT,
     EXIT_CODES,

@@ -20,7 +20,7 @@ from mpi4py import MPI
 
 from fenics_contact.cli.cases import case_run_options
 from fenics_contact.cli.options import METHODS, RunOptions
-from fenics_contact.cli.run import _check_case_coarse_grid, _check_coarse_grid, _mesh, _model
+from fenics_contact.cli.solve import _check_case_coarse_grid, _check_coarse_grid, _mesh, _model
 from fenics_contact.errors import FenicsContactError, InputError
 from fenics_contact.hybrid.mixed import check_straight_interface
 from fenics_contact.methods import METHODS as CATALOGUE

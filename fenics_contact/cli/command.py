@@ -8,7 +8,7 @@ from mpi4py import MPI
 from fenics_contact.cli.cases import options_from_arguments
 from fenics_contact.cli.check import check_mesh
 from fenics_contact.cli.parser import build_parser
-from fenics_contact.cli.run import run
+from fenics_contact.cli.solve import run
 from fenics_contact.cli.signals import (
     EXIT_BAD_INPUT,
     EXIT_NUMERICAL,

@@ -21,7 +21,9 @@ can take again through ``step=``).
 Every step carries its evidence: the transmission residual of its final pair of
 subdomain solutions (``IndentationStep.transmission_residual``, hybrid methods)
 and the complementarity of its contact profile (``complementarity``: penetration,
-tensile contact stress and max |σ_c u_c|, each relative to the step's scale).
+tensile contact stress and max |σ_c u_c|, each relative to the step's scale); a
+``primal-ms`` step also the distance of its multiscale Ω₁ from the fine Ω₁ solve for its
+interface data (``IndentationStep.omega1_check``, as ``solve_primal_ms_hybrid``'s ``check``).
 """
 
 import logging
@@ -37,6 +39,7 @@ from fenics_contact.errors import InputError
 from fenics_contact.fem.contact import ContactProfile
 from fenics_contact.hybrid.iteration import HybridStep, iterate
 from fenics_contact.methods import Method, get_method
+from fenics_contact.multiscale.primal import MultiscalePrimalHybridStep
 from fenics_contact.problem.obstacles import Obstacle
 from fenics_contact.problem.problem import ContactProblem
 
@@ -94,6 +97,9 @@ class IndentationStep:
     complementarity: Complementarity | None = None  #: of the profile, relative to the depth and peak pressure
     time_offline_s: float = 0.0  #: offline work done inside this step (the interface Newton's Ω₁ response)
     interface_newton_steps: int = 0  #: steps of the interface Newton (``accel="newton"``), else 0
+    #: primal-ms: the multiscale Ω₁ against the fine Ω₁ solve for the step's interface data (relative energy norm;
+    #: ``Omega1Multiscale.fine_check``, outside ``time_s``), else None
+    omega1_check: float | None = None
 
 
 @dataclass(slots=True)
@@ -222,6 +228,7 @@ def force_indentation(
     solver_step = solver if spec.hybrid else None
     contact = solver.contact
     hybrid = WarmStart(solver) if spec.hybrid else None
+    verify = isinstance(solver, MultiscalePrimalHybridStep) and options.get("check", True)
     curve = IndentationCurve(method, direction, time_offline_s=time.perf_counter() - start, step=solver_step,
                              contact=contact)
     for depth in depths:
@@ -243,6 +250,8 @@ def force_indentation(
             float(depth), force, profile.force, profile.max_pressure, profile, iterations, converged,
             time.perf_counter() - start - offline, residual, complementarity(profile, scale), offline, newton_steps,
         ))
+        if verify and history.data is not None:  # (one factorization of the fine Ω₁ operator, outside time_s)
+            curve.steps[-1].omega1_check = solver.omega1.fine_check(history.data[: solver.interface.size])
         log.info("%s: depth %.4g force %.6g (normal %.6g), %d iterations, transmission residual %s, %.2f s", method,
                  depth, force, profile.force, iterations, residual, curve.steps[-1].time_s)
         if on_step is not None:

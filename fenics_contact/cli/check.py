@@ -1,0 +1,202 @@
+"""``fenics-contact check-mesh FILE`` and ``check-mesh --case CASE.toml``: a mesh checked without a solve.
+
+The mesh is read the way ``run`` reads it (``RunOptions`` and ``run --mesh FILE``'s reader, or the
+case file's mesh and problem, ``problem.case``), with every check a run makes before its first
+solve: the file's elements and physical groups, the tags against the contact problem
+(``problem.validation``), the strip Ω₂, γ and the coarse cells built when the file has none of
+Omega1/Omega2/gamma (``problem.strip``), the materials and loads, the coarse grid of the multiscale
+methods and the straight γ of the mixed ones. It prints what it found and which methods can run;
+exit 0 when a run with the chosen method could start, 2 (the run's code for bad input) with the
+refusal otherwise.
+"""
+
+import argparse
+from pathlib import Path
+from types import SimpleNamespace
+
+import gmsh
+import numpy as np
+from mpi4py import MPI
+
+from fenics_contact.cli.cases import case_run_options
+from fenics_contact.cli.options import METHODS, RunOptions
+from fenics_contact.cli.solve import _check_case_coarse_grid, _check_coarse_grid, _mesh, _model
+from fenics_contact.errors import FenicsContactError, InputError
+from fenics_contact.hybrid.mixed import check_straight_interface
+from fenics_contact.methods import METHODS as CATALOGUE
+from fenics_contact.problem.case import Case, MeshFile, load_case, parse_override
+from fenics_contact.problem.geometry import ContactMesh, gmsh_session
+from fenics_contact.problem.strip import contact_cell_size
+from fenics_contact.problem.tags import PHYSICAL_NAMES, Boundary, Subdomain, is_neumann_name
+from fenics_contact.problem.validation import contact_open_ends, interface_bends_of
+
+__all__ = ["check_mesh"]
+
+#: the groups the package builds when a file has none of them (Ω₁, Ω₂, γ)
+_BUILT = (PHYSICAL_NAMES[Subdomain.OMEGA1], PHYSICAL_NAMES[Subdomain.OMEGA2], PHYSICAL_NAMES[Boundary.INTERFACE])
+#: what each named group is to the contact problem
+_ROLES = {
+    PHYSICAL_NAMES[Subdomain.OMEGA1]: "Omega1: the subdomain Ω₁ (linear; fine or multiscale)",
+    PHYSICAL_NAMES[Subdomain.OMEGA2]: "Omega2: the contact strip Ω₂",
+    PHYSICAL_NAMES[Boundary.INTERFACE]: "gamma: the interface γ between Ω₁ and Ω₂",
+    PHYSICAL_NAMES[Boundary.GAMMA_C]: "Gamma_C: the contact boundary Γ_C",
+    PHYSICAL_NAMES[Boundary.GAMMA_D]: "Gamma_D: the Dirichlet boundary Γ_D (clamped, or the case's displacement)",
+}
+_KINDS = {0: ("point", "points"), 1: ("curve", "segments"), 2: ("surface", "triangles"), 3: ("volume", "cells")}
+
+
+def check_mesh(args: argparse.Namespace, comm: MPI.Comm = MPI.COMM_WORLD) -> int:
+    """``fenics-contact check-mesh``: 0 when a run could start; raises the run's refusal (InputError,
+    MeshTagError) otherwise, after printing what was found. Collective."""
+    if (args.file is None) == (args.case is None):
+        raise InputError("check-mesh takes a mesh FILE or --case CASE.toml (one of them)")
+    if args.case is None and args.set:
+        raise InputError("--set changes a key of a case file: it needs --case FILE")
+    if args.case is not None and (args.H is not None or args.coarse_groups):
+        raise InputError("--H and --coarse-groups apply to a mesh FILE; a case file gives them in its [mesh] table")
+    case, options = _options(args)
+    path = options.mesh if case is None else case.mesh.path if isinstance(case.mesh, MeshFile) else None
+    say = _printer(comm)
+    say(f"{'mesh ' + str(path) if case is None else 'case ' + str(case.path)}"
+        + (f" (mesh {path})" if case is not None and path is not None else
+           f" (built-in {case.mesh.kind} mesh)" if case is not None else ""))
+    groups = _file_groups(path, comm) if path is not None else None
+    if groups is not None:
+        materials = case.material.groups() if case is not None else set()
+        built = not any(name in _BUILT for name, _, _ in groups) and any(dim == 2 for _, dim, _ in groups)
+        say("  physical groups of the file:")
+        for name, dim, count in groups:
+            kind, unit = _KINDS.get(dim, (f"dimension {dim}", "elements"))
+            say(f"    {name:<16} {kind:<8} {count:>8} {unit:<10} {_role(name, dim, materials, built, options)}")
+    cm, problem = _build(options, case, comm)
+    _describe(cm, say, groups)
+    refusals = {m: _refusal(m, cm, options, case) for m in METHODS}
+    say("  methods: " + "; ".join(f"{m} {'can run' if why is None else 'refused'}" for m, why in refusals.items()))
+    for m, why in refusals.items():
+        if why is not None and m != options.method:  # (the chosen method's refusal ends the command)
+            say(f"    {m}: {' '.join(str(why).split())}")
+    if refusals[options.method] is not None:
+        raise refusals[options.method]
+    say(f"ok: a run with --method {options.method} can start ({problem.description})")
+    return 0
+
+
+def _options(args: argparse.Namespace) -> tuple[Case | None, RunOptions]:
+    """The case (or None) and the run options a run would have: validated as ``run`` validates them."""
+    given = {"method": args.method} if args.method is not None else {}
+    if args.case is not None:
+        case = load_case(args.case, [parse_override(text) for text in args.set or ()])
+        return case, case_run_options(case, given)
+    H = {"H": args.H} if args.H is not None else {}
+    return None, RunOptions(mesh=args.file, coarse_groups=args.coarse_groups, **given, **H)
+
+
+def _build(options: RunOptions, case: Case | None, comm: MPI.Comm):
+    """The mesh and the problem on it, as ``run`` builds them before its solve (collective)."""
+    if case is None:
+        model, _ = _model(options)
+        cm = _mesh(options, comm)
+    else:
+        case_mesh = case.build_mesh(comm)
+        cm = case_mesh.cm
+        model = case.problem(case_mesh)
+    problem = model.on(cm)
+    problem.check_loaded()
+    return cm, problem
+
+
+def _refusal(method: str, cm: ContactMesh, options: RunOptions, case: Case | None) -> FenicsContactError | None:
+    """Why ``method`` would refuse this mesh before its first solve (None: it would start)."""
+    entry = CATALOGUE[method]
+    try:
+        if entry.multiscale:
+            as_run = SimpleNamespace(method=method, mesh=options.mesh, H=options.H)
+            if case is None:
+                _check_coarse_grid(cm, as_run)
+            else:
+                _check_case_coarse_grid(cm, as_run, case)
+        if entry.family == "mixed":
+            check_straight_interface(cm)
+    except FenicsContactError as err:
+        return err
+    return None
+
+
+def _describe(cm: ContactMesh, say, groups) -> None:
+    """What the built mesh holds: sizes, the tagged cells and facets, the contact cell size, γ and Γ_C's ends."""
+    msh = cm.mesh
+    tdim = msh.topology.dim
+    msh.topology.create_entities(tdim - 1)
+    cells, facets = msh.topology.index_map(tdim), msh.topology.index_map(tdim - 1)
+    say(f"  dimension {msh.geometry.dim}, {cells.size_global} triangles, {msh.topology.index_map(0).size_global} "
+        "vertices")
+    counts = {PHYSICAL_NAMES[t]: _owned(cm.cell_tags.find(t), cells.size_local, cm.comm) for t in Subdomain}
+    counts |= {PHYSICAL_NAMES[t]: _owned(cm.facet_tags.find(t), facets.size_local, cm.comm) for t in Boundary}
+    counts |= {name: _owned(cm.facet_tags.find(tag), facets.size_local, cm.comm)
+               for tag, name in sorted((cm.neumann_names or {}).items(), key=lambda item: item[1])}
+    given = "tagged by the built-in mesh" if groups is None else "given in the file" \
+        if any(name in _BUILT for name, _, _ in groups) else "built automatically along Gamma_C (problem.strip)"
+    say(f"  Omega1, Omega2, gamma: {given}")
+    say("  tagged: " + ", ".join(f"{name} {n} {'cells' if name in _BUILT[:2] else 'facets'}"
+                                 for name, n in counts.items()))
+    coarse = "none" if cm.H is None else f"{cm.H:.6g}"
+    contact = contact_cell_size(msh, cm.facet_tags)
+    say(f"  h = {cm.h:.6g} (the run's mesh size), contact cell size {contact:.6g} (the largest diameter of a "
+        f"cell on Gamma_C), H = {coarse}")
+    bends = interface_bends_of(cm)
+    say("  gamma: straight" if not bends.size else
+        f"  gamma: bends at {len(bends)} vertices (first at ({bends[0][0]:.6g}, {bends[0][1]:.6g})): the mixed "
+        "methods need it straight")
+    ends = contact_open_ends(cm)
+    if ends.size:
+        say(f"  Gamma_C ends where the boundary goes on straight at {len(ends)} points (first at "
+            f"({ends[0][0]:.6g}, {ends[0][1]:.6g})): a contact zone reaching them is cut short by the tags")
+
+
+def _owned(found: np.ndarray, n_owned: int, comm: MPI.Comm) -> int:
+    return comm.allreduce(int(np.count_nonzero(found < n_owned)), op=MPI.SUM)
+
+
+def _role(name: str, dim: int, materials: set[str], built: bool, options: RunOptions) -> str:
+    """What the physical group ``name`` of dimension ``dim`` is to the run."""
+    if name in _ROLES:
+        return _ROLES[name]
+    if dim == 1 and is_neumann_name(name):
+        return f"{name}: a traction boundary Γ_N"
+    if dim == 2 and name in materials:
+        return "a material group of the case"
+    if dim == 2 and built and options.coarse_groups:
+        return "a coarse cell (--coarse-groups)"
+    if dim == 2:
+        return "cells (no role)"
+    return "no role (ignored)"
+
+
+def _file_groups(path: Path, comm: MPI.Comm) -> list[tuple[str, int, int]] | None:
+    """(name, dimension, elements) of every physical group of a gmsh file, read on rank 0 (None when gmsh cannot
+    read it: the run's reader says why). Collective."""
+    groups = None
+    if comm.rank == 0 and Path(path).is_file():
+        with gmsh_session():
+            gmsh.model.add("check-mesh")
+            try:
+                gmsh.merge(str(path))
+            except Exception:  # gmsh raises a bare Exception; read_mesh reports it
+                pass
+            else:
+                groups = []
+                for dim, tag in gmsh.model.getPhysicalGroups():
+                    count = sum(len(elements) for entity in gmsh.model.getEntitiesForPhysicalGroup(dim, tag)
+                                for elements in gmsh.model.mesh.getElements(dim, entity)[1])
+                    groups.append((gmsh.model.getPhysicalName(dim, tag) or f"(unnamed {tag})", dim, count))
+                groups.sort(key=lambda g: (-g[1], g[0]))
+    return comm.bcast(groups, root=0)
+
+
+def _printer(comm: MPI.Comm):
+    def say(line: str) -> None:
+        if comm.rank == 0:
+            print(line, flush=True)
+
+    return say
+

@@ -1,0 +1,58 @@
+"""``main``: parse, run the subcommand (run, check-mesh, examples), and turn its ending into an exit code and one
+line on stderr."""
+
+import signal
+
+from mpi4py import MPI
+
+from fenics_contact.cli.cases import options_from_arguments
+from fenics_contact.cli.check import check_mesh
+from fenics_contact.cli.parser import build_parser
+from fenics_contact.cli.solve import run
+from fenics_contact.cli.signals import (
+    EXIT_BAD_INPUT,
+    EXIT_NUMERICAL,
+    Interrupted,
+    _fail,
+    interruptible,
+    _setup_logging,
+)
+from fenics_contact.errors import ConvergenceError, FenicsContactError
+from fenics_contact.examples import run_examples_command
+
+__all__ = ["main"]
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)  # argparse errors exit with 2 (bad input) too
+    if args.command == "examples":
+        return run_examples_command(args)
+    _setup_logging(getattr(args, "verbose", False))
+    comm = MPI.COMM_WORLD
+    out = getattr(args, "out", None)
+    with interruptible() as pending:
+        try:
+            if args.command == "check-mesh":
+                code = check_mesh(args, comm)
+            else:
+                options, case = options_from_arguments(args, argv)
+                out = options.out
+                code = run(options, comm, case=case)
+        except Interrupted as stop:
+            where = ("nothing was written" if args.command == "check-mesh" else
+                     f"the results in {out} are complete" if getattr(stop, "output_complete", False)
+                     else f"{out} left as it was (no partial output)")
+            _fail(f"interrupted by {stop}: {where}", comm)
+            return 128 + stop.signum
+        except ConvergenceError as err:
+            _fail(f"numerical failure: {err}", comm)
+            return EXIT_NUMERICAL
+        except FenicsContactError as err:  # InputError, MeshTagError
+            _fail(f"error: {err}", comm)
+            return EXIT_BAD_INPUT
+    if pending:  # a signal landed in the last finalizers of a run that had ended: its results are written
+        signum = pending[-1]
+        where = "nothing was written" if args.command == "check-mesh" else f"the results in {out} are complete"
+        _fail(f"interrupted by {signal.Signals(signum).name}: {where}", comm)
+        return 128 + signum
+    return code

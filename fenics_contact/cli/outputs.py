@@ -1,0 +1,96 @@
+"""What a run reports and draws: the contact summary entries, the open-end warning, the ParaView grid of a
+state and the figures' titles."""
+
+import logging
+import math
+from pathlib import Path
+
+import numpy as np
+from mpi4py import MPI
+
+from fenics_contact.cli.options import RunOptions
+from fenics_contact.io import cell_function_of, cell_markers, stress_field
+from fenics_contact.paraview import field_grid
+from fenics_contact.plots import nodal_average, render_deformed
+from fenics_contact.problem.problem import ContactProblem
+
+log = logging.getLogger("fenics_contact")
+
+
+def _at_open_ends(profile, ends: np.ndarray) -> list[list[float]]:
+    """The open ends of Γ_C (``validation.open_ends``: x, y, end facet length) that ``profile``'s contact reaches:
+    a contact node within one facet of the end (the mixed method's σ_c vanishes at the end node itself next to
+    a traction-free side), whatever the order of the profile's nodes."""
+    if not ends.size or profile.points is None or not np.any(profile.active):
+        return []
+    touching = profile.points[profile.active][:, :2]
+    hits = []
+    for x, y, length in ends:
+        if np.min(np.linalg.norm(touching - [x, y], axis=1)) <= 1.01 * length:
+            hits.append([float(x), float(y)])
+    return hits
+
+
+def _contact_summary(profile, ends: np.ndarray) -> dict:
+    """Contact zone(s) of a profile for the summary: the span, each separate zone, open ends reached."""
+    zone = profile.contact_zone()
+    return {"contact_zone": [list(p) for p in zone] if zone else None,
+            "contact_zones": [[list(a), list(b)] for a, b in profile.contact_zones()],
+            "contact_at_open_end": _at_open_ends(profile, ends)}
+
+
+def _curve_row(depth: float, direction: np.ndarray, profile, iterations: int, converged: bool, time_s: float,
+               ends: np.ndarray) -> dict:
+    return {"depth": float(depth), "force": float(profile.resultant @ direction), "normal_force": profile.force,
+            "max_pressure": profile.max_pressure, **_contact_summary(profile, ends),
+            "iterations": int(iterations), "converged": bool(converged), "time_s": time_s}
+
+
+def _warn_open_ends(summary: dict, comm: MPI.Comm) -> None:
+    """Warn (rank 0) when a solve's contact zone reaches an end of Γ_C where the boundary goes on straight."""
+    hits = [("the run", summary["contact_at_open_end"])] if summary["contact_at_open_end"] else []
+    steps = (summary.get("force_indentation") or {}).get("steps", [])
+    hits += [(f"depth {s['depth']:g}", s["contact_at_open_end"]) for s in steps if s["contact_at_open_end"]]
+    if hits and comm.rank == 0:
+        where = "; ".join(f"{what} at {', '.join(f'({x:.6g}, {y:.6g})' for x, y in pts)}" for what, pts in hits)
+        log.warning("the contact zone reaches an end of Gamma_C where the boundary goes on straight (%s): the "
+                    "true zone is wider than Gamma_C, so the contact force and pressure are those of a contact "
+                    "cut short by the tags, not of the body. Extend Gamma_C along that side.", where)
+
+
+def _finite_or_none(x: float) -> float | None:
+    return float(x) if math.isfinite(x) else None
+
+
+def _field_grid(problem: ContactProblem, u, sigma=None):
+    """The ParaView grid of a state: the P1 displacement ``u`` (primal; the stress from it), or the mixed
+    stress ``sigma`` (DG P3: xx, xy, yy) and displacement ``u`` (DG P1, averaged at the vertices)."""
+    fields, cm = problem.fields, problem.cm
+    if sigma is None:
+        s = _cell_array(stress_field(u, fields.lmbda, fields.mu))
+        stress = np.column_stack([s[:, 0], s[:, 3], s[:, 1]])
+    else:
+        s = _cell_array(cell_function_of(sigma, name="sigma"))
+        stress, u = np.column_stack([s[:, 0], s[:, 2], s[:, 1]]), nodal_average(u)
+    return field_grid(u, stress, {"E": fields.E, "subdomain": cell_markers(cm.cell_tags, cm.mesh)}, fields.nu)
+
+
+def _cell_array(fn) -> np.ndarray:
+    """(local cells, components) of a DG0 function."""
+    V = fn.function_space
+    bs = V.dofmap.index_map_bs
+    n = V.mesh.topology.index_map(V.mesh.topology.dim).size_local
+    return fn.x.array.reshape(-1, bs)[V.dofmap.list[:n, 0]]
+
+
+def _title(options: RunOptions, problem: ContactProblem) -> str:
+    """The figures' name of the run: the case or mesh file, else the built-in model, and the method."""
+    name = (f"case {Path(options.case).name}" if options.case is not None else
+            f"mesh {Path(options.mesh).name}" if options.mesh is not None else f"model {options.model}")
+    return f"{name}, {options.method}"
+
+
+def _render_deformed(u, path: Path, options: RunOptions, problem: ContactProblem, profile) -> None:
+    """The deformed body with the problem's own obstacle (a wall flush with Γ_C when it has none)."""
+    wall = profile.points if problem.obstacle is None else None
+    render_deformed(u, path, title=_title(options, problem), obstacle=problem.obstacle, wall=wall)

@@ -192,7 +192,8 @@ class RunOptions:
         if self.mesh is not None:
             if self.h is not None:
                 raise InputError("--h sets the size of the built-in mesh; with --mesh the size comes from the file "
-                                 "(h = sqrt(2 x largest cell area), reported in the summary): leave --h out")
+                                 "(h = sqrt(2 x largest area of a cell on Gamma_C), reported in the summary): "
+                                 "leave --h out")
             if not Path(self.mesh).is_file():
                 raise InputError(f"--mesh {self.mesh} does not exist" if not Path(self.mesh).exists()
                                  else f"--mesh {self.mesh} is not a file")

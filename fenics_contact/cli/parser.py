@@ -79,7 +79,8 @@ def _add_problem_options(run: argparse.ArgumentParser) -> None:
                        "fenics-contact check-mesh FILE checks it alone); a file with none of Omega1/Omega2/gamma "
                        "gets Omega2 = the coarse cells along Gamma_C" + _default("none: the built-in unit square"))
     group.add_argument("--h", type=int, help="fine size of the built-in mesh as 1/h; not with --mesh, whose size "
-                       "is h = sqrt(2 x largest cell area) (1/n on an n x n grid)" + _default(_shown(DEFAULT_H)))
+                       "is h = sqrt(2 x largest area of a cell on Gamma_C) (1/n on an n x n grid)"
+                       + _default(_shown(DEFAULT_H)))
     group.add_argument("--H", type=int, default=_RUN_DEFAULTS["H"], help="coarse size / strip width as 1/H; with "
                        "--mesh the coarse grid of squares of side 1/H over the bounding box (multiscale methods)"
                        + _default(_shown(_RUN_DEFAULTS["H"])))

@@ -17,7 +17,7 @@ from mpi4py import MPI
 from fenics_contact.errors import InputError
 from fenics_contact.hybrid.iteration import InterfaceNewtonOptions, IterationOptions
 from fenics_contact.hybrid.mixed import transmission_coefficient
-from fenics_contact.io import check_output_target
+from fenics_contact.io import check_output_target, check_outside_output
 from fenics_contact.methods import HYBRID_METHODS, METHODS as CATALOGUE, get_method
 from fenics_contact.problem.materials import check_poisson_ratio
 from fenics_contact.problem.models import get_model, model_1
@@ -232,6 +232,9 @@ class RunOptions:
             _check_directory("--cache-dir", self.cache_dir)
         out = self.out if self.out is not None else default_out(self.method, self.model, self.mesh, self.case)
         object.__setattr__(self, "out", check_output_target(out))
+        for what, path in (("--cache-dir", self.cache_dir), ("--case", self.case), ("--mesh", self.mesh),
+                           ("--E-map", self.E_map)):
+            check_outside_output(self.out, path, what)
 
     @classmethod
     def from_namespace(cls, args: argparse.Namespace) -> "RunOptions":

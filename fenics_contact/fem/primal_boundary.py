@@ -146,7 +146,7 @@ class NodalContactGeometry:
         gap = self.gap.x.array[on]
         u_c = np.sum(u.x.array.reshape(-1, gdim)[on] * normal, axis=1) - gap
         sigma_c = np.sum(reaction.reshape(-1, gdim)[on] * normal, axis=1) / w[on]
-        points = self.Q.tabulate_dof_coordinates()[on, :2]
+        points = self.Q.tabulate_dof_coordinates()[on, :gdim]
         comm = self.comm
         points, u_c, sigma_c, weights, normal, gap = (
             np.concatenate(comm.allgather(a)) for a in (points, u_c, sigma_c, w[on], normal, gap)

@@ -35,10 +35,10 @@ VectorField = Callable[[np.ndarray], np.ndarray]
 
 
 def constant_vector(value: npt.ArrayLike) -> VectorField:
-    """x ↦ value (a constant 2-vector), as a vector field."""
+    """x ↦ value (a constant 2-vector, or a 3-vector for a 3D problem), as a vector field."""
     v = np.asarray(value, dtype=np.float64).ravel()
-    if v.size != 2 or not np.all(np.isfinite(v)):
-        raise InputError(f"a constant vector field needs two finite numbers, got {value!r}")
+    if v.size not in (2, 3) or not np.all(np.isfinite(v)):
+        raise InputError(f"a constant vector field needs two (three in 3D) finite numbers, got {value!r}")
     return lambda x: np.repeat(v[:, None], np.shape(x)[1], axis=1)
 
 
@@ -48,7 +48,8 @@ def _as_field(value, what: str) -> VectorField:
     try:
         return constant_vector(value)
     except (TypeError, ValueError) as err:
-        raise InputError(f"{what} must be a callable x -> (2, N) or a constant 2-vector, got {value!r}") from err
+        raise InputError(f"{what} must be a callable x -> (gdim, N) or a constant vector (2 or 3 components), "
+                         f"got {value!r}") from err
 
 
 @dataclass(frozen=True, slots=True)
@@ -124,6 +125,14 @@ def check_boundary_groups(msh, facet_tags, boundary: BoundaryConditions, *, name
             f"the mesh has traction group(s) {labels} but the model gives no traction for them; "
             "give one (BoundaryConditions(tractions={name: (tx, ty)})) or remove the group (untagged = traction free)"
         )
+    gdim = msh.geometry.dim
+    fields = [("the Gamma_D displacement", boundary.displacement)] if boundary.displacement is not None else []
+    fields += [(f"the traction on {name!r}", t) for name, t in boundary.tractions]
+    point = np.ascontiguousarray(msh.geometry.x[:1].T)
+    for what, value in fields:
+        rows = np.shape(value(point))[0] if point.shape[1] else gdim
+        if comm.allreduce(int(rows != gdim), op=MPI.SUM):
+            raise InputError(f"{what} has {rows} components; the mesh is {gdim}D: give {gdim} components")
     if boundary.displacement is not None and comm.allreduce(
         int(facet_tags.find(Boundary.GAMMA_D).size), op=MPI.SUM
     ) == 0:

@@ -291,7 +291,8 @@ def _strip_contact_mesh(data: dolfinx.io.gmsh.MeshData, *, h: float, H: float | 
 
 
 def mesh_size(msh: dmesh.Mesh, facet_tags: dmesh.MeshTags | None = None) -> float:
-    """h = max over the cells of √(2|T|): the leg of the right isosceles triangle of the largest cell's area; with
+    """h = max over the cells of √(2|T|): the leg of the right isosceles triangle of the largest cell's area (in 3D
+    (6|T|)^(1/3), the edge of the cube of which the largest tetrahedron is a sixth); with
     ``facet_tags``, over the cells with a facet on Γ_C only (the contact cell size, which sets the default
     penalties δ, ε and the Robin coefficient α, so a mesh graded towards Γ_C gets the penalties of its contact
     cells, not of its largest cell far away).
@@ -308,6 +309,10 @@ def mesh_size(msh: dmesh.Mesh, facet_tags: dmesh.MeshTags | None = None) -> floa
         touching = np.unique(np.concatenate([f2c.links(f) for f in facets] or [np.zeros(0, np.int32)]))
         cells = touching[touching < cells.size].astype(np.int32)
     geo = dmesh.entities_to_geometry(msh, tdim, cells)
+    if tdim == 3:  # (6|T|)^(1/3): the edge of the cube of which the largest tetrahedron is a sixth
+        x = msh.geometry.x[geo]
+        volume = np.abs(np.linalg.det(x[:, 1:] - x[:, :1])) / 6.0
+        return msh.comm.allreduce(float(np.cbrt(6.0 * volume.max())) if volume.size else 0.0, op=MPI.MAX)
     x = msh.geometry.x[geo][:, :, :2]
     d1, d2 = x[:, 1] - x[:, 0], x[:, 2] - x[:, 0]
     area = 0.5 * np.abs(d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0])

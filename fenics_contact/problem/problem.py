@@ -27,7 +27,7 @@ from dolfinx import mesh as dmesh
 from fenics_contact.errors import InputError
 from fenics_contact.problem.boundary import BoundaryConditions, check_boundary_groups
 from fenics_contact.problem import strip, validation
-from fenics_contact.problem.fields import FunctionField, MaterialFields, material_fields, tag_function
+from fenics_contact.problem.fields import FunctionField, MaterialFields, material_fields, tag_function, zero_load
 from fenics_contact.problem.geometry import ContactMesh, mesh_size
 from fenics_contact.problem.obstacles import Obstacle
 from fenics_contact.problem.tags import Boundary, Subdomain, neumann_tag
@@ -45,11 +45,6 @@ VectorField = Callable[[np.ndarray], np.ndarray]
 def constant_field(value: float) -> ScalarField:
     """x ↦ value, as a scalar field."""
     return lambda x: np.full(x.shape[1], float(value))
-
-
-def zero_load(x: np.ndarray) -> np.ndarray:
-    """f = 0 (two components; a body force field for the plane problems)."""
-    return np.zeros((2, x.shape[1]))
 
 
 @dataclass(frozen=True, slots=True)

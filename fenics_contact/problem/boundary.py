@@ -54,7 +54,8 @@ def _as_field(value, what: str) -> VectorField:
 
 @dataclass(frozen=True, slots=True)
 class BoundaryConditions:
-    """u = ``displacement`` on Γ_D (None: clamped), σn = ``tractions[name]`` on each Γ_N group, σn = 0 elsewhere.
+    """u = ``displacement`` on Γ_D (None: clamped), σn = ``tractions[name]`` on each Γ_N group, u_i = 0 on the
+    ``rollers`` planes x_i = c (tangential traction free), σn = 0 elsewhere.
 
     ``tractions`` maps group names (``Gamma_N``, ``Gamma_N_top``, ...) to a field or
     a constant 2-vector; it is stored as a tuple of (name, field) pairs, sorted by name.
@@ -62,8 +63,21 @@ class BoundaryConditions:
 
     displacement: VectorField | None = None
     tractions: Mapping[str, VectorField] | tuple = field(default_factory=tuple)
+    #: symmetry planes (axis i, value c): u_i = 0 on the exterior facets in the plane x_i = c (rollers;
+    #: the primal monolithic solve takes them)
+    rollers: tuple[tuple[int, float], ...] = ()
 
     def __post_init__(self) -> None:
+        rollers = []
+        for item in self.rollers:
+            try:
+                axis, value = item
+            except (TypeError, ValueError):
+                raise InputError(f"a roller is a pair (axis, value) for the plane x_axis = value, got {item!r}") from None
+            if isinstance(axis, bool) or axis not in (0, 1, 2) or not np.isfinite(value):
+                raise InputError(f"a roller plane needs an axis 0, 1 or 2 and a finite value, got {item!r}")
+            rollers.append((int(axis), float(value)))
+        object.__setattr__(self, "rollers", tuple(rollers))
         if self.displacement is not None:
             object.__setattr__(self, "displacement", _as_field(self.displacement, "the Gamma_D displacement"))
         items = self.tractions.items() if isinstance(self.tractions, Mapping) else self.tractions
@@ -87,8 +101,8 @@ class BoundaryConditions:
 
     @property
     def is_default(self) -> bool:
-        """Clamped Γ_D and no traction groups."""
-        return self.displacement is None and not self.tractions
+        """Clamped Γ_D, no traction groups and no rollers."""
+        return self.displacement is None and not self.tractions and not self.rollers
 
     def traction_tags(self) -> list[tuple[int, str, VectorField]]:
         """(facet tag, group name, traction) for every traction group."""
@@ -156,6 +170,8 @@ def boundary_data_on(msh, facet_tags, boundary: BoundaryConditions, *, traction_
     for tag, name, _ in boundary.traction_tags():
         if comm.allreduce(int(facet_tags.find(tag).size), op=MPI.SUM):
             found.append(f"a traction on {name}")
+    if boundary.rollers:
+        found.append("rollers (symmetry planes)")
     if traction_free:
         tdim = msh.topology.dim
         msh.topology.create_connectivity(tdim - 1, tdim)

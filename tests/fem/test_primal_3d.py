@@ -148,3 +148,83 @@ def test_hertz_force_converges_with_the_contact_cells():
     excess = [r["force"] / r["F_hertz"] - 1.0 for r in (coarse, fine)]
     assert 0.0 < excess[1] < 0.8 * excess[0]
     assert fine["sol"].profile.max_pressure == pytest.approx(fine["p0_F"], rel=0.05)
+
+
+def test_methods_other_than_the_primal_monolithic_refuse_3d_and_rollers():
+    cm = unit_cube(2)
+    problem = ContactProblem(youngs_modulus=1.0, poisson_ratio=0.3, mesh=cm,
+                             obstacle=Plane((1.0, 0.0), (-1.0, 0.0)).indented(0.01, (-1.0, 0.0)))
+    for method in ("primal", "mixed-monolithic", "primal-ms"):
+        with pytest.raises(InputError, match="primal-monolithic"):
+            fc.solve(problem, method)
+    assert fc.solve(problem, "primal-monolithic").profile.force > 0
+    from fenics_contact.problem.geometry import unit_square
+
+    rolled = ContactProblem(youngs_modulus=1.0, poisson_ratio=0.3, mesh=unit_square(4, 2),
+                            boundary=BoundaryConditions(rollers=((1, 0.0),)))
+    with pytest.raises(InputError, match="rollers"):
+        fc.solve(rolled, "primal")
+
+
+def _gmsh_box(path, *, split: float = 0.75, h: float = 0.3, contact_on_side: bool = False):
+    """A gmsh tetrahedral mesh of (0, 1)³: Omega1 x < ``split``, Omega2 beyond, gamma the plane between,
+    Gamma_D the face x = 0, Gamma_C the face x = 1 (``contact_on_side``: the face y = 0, across gamma)."""
+    import gmsh
+
+    from fenics_contact.problem.geometry import gmsh_session
+
+    with gmsh_session():
+        occ = gmsh.model.occ
+        gmsh.model.add("box")
+        occ.fragment([(3, occ.addBox(0, 0, 0, split, 1, 1))], [(3, occ.addBox(split, 0, 0, 1 - split, 1, 1))])
+        occ.synchronize()
+        volumes = sorted((occ.getCenterOfMass(3, t)[0], t) for _, t in gmsh.model.getEntities(3))
+        faces = {}
+        for _, t in gmsh.model.getEntities(2):
+            x = occ.getCenterOfMass(2, t)
+            contact = abs(x[1]) < 1e-9 if contact_on_side else abs(x[0] - 1) < 1e-9
+            for name, test in (("Gamma_D", abs(x[0]) < 1e-9), ("Gamma_C", contact),
+                               ("gamma", abs(x[0] - split) < 1e-9)):
+                if test:
+                    faces.setdefault(name, []).append(t)
+        gmsh.model.addPhysicalGroup(3, [volumes[0][1]], 1, name="Omega1")
+        gmsh.model.addPhysicalGroup(3, [volumes[1][1]], 2, name="Omega2")
+        for i, (name, tags) in enumerate(sorted(faces.items())):
+            gmsh.model.addPhysicalGroup(2, tags, 10 + i, name=name)
+        gmsh.option.setNumber("Mesh.MeshSizeMax", h)
+        gmsh.model.mesh.generate(3)
+        gmsh.write(str(path))
+
+
+def test_read_mesh_takes_a_gmsh_tetrahedral_mesh_and_the_patch_test_is_exact_on_it(tmp_path):
+    """The block of the patch test on an unstructured gmsh mesh: the linear solution is exact on any mesh."""
+    from fenics_contact.errors import MeshTagError
+    from fenics_contact.problem.geometry import read_mesh
+
+    path = tmp_path / "box.msh"
+    if MPI.COMM_WORLD.rank == 0:
+        _gmsh_box(path)
+    MPI.COMM_WORLD.Barrier()
+    cm = read_mesh(path)
+    assert cm.mesh.topology.dim == 3 and cm.h > 0
+    E, nu, d0, delta = 1.0, 0.25, 0.02, 1e-4
+    pressure = d0 / (delta + 1.0 / E)
+
+    def lateral(x):
+        return np.vstack([np.zeros(x.shape[1]), nu * pressure / E * x[1], nu * pressure / E * x[2]])
+
+    wall = Plane((1.0, 0.0, 0.0), (-1.0, 0.0, 0.0)).indented(d0, (-1.0, 0.0, 0.0))
+    problem = ContactProblem(youngs_modulus=E, poisson_ratio=nu, obstacle=wall, mesh=cm,
+                             boundary=BoundaryConditions(displacement=lateral))
+    sol = solve_primal_monolithic(problem, delta=delta)
+    X = sol.u.function_space.tabulate_dof_coordinates()
+    exact = lateral(X.T).T
+    exact[:, 0] = -pressure / E * X[:, 0]
+    error = cm.comm.allreduce(float(np.max(np.abs(sol.u.x.array.reshape(-1, 3) - exact))), op=MPI.MAX)
+    assert error < 1e-12
+    assert sol.profile.force == pytest.approx(pressure, rel=1e-10)
+    if MPI.COMM_WORLD.rank == 0:
+        _gmsh_box(tmp_path / "touching.msh", h=0.5, contact_on_side=True)
+    MPI.COMM_WORLD.Barrier()
+    with pytest.raises(MeshTagError, match="'Gamma_C' touches 'gamma'"):  # refused, as in 2D
+        read_mesh(tmp_path / "touching.msh")

@@ -228,3 +228,33 @@ def test_read_mesh_takes_a_gmsh_tetrahedral_mesh_and_the_patch_test_is_exact_on_
     MPI.COMM_WORLD.Barrier()
     with pytest.raises(MeshTagError, match="'Gamma_C' touches 'gamma'"):  # refused, as in 2D
         read_mesh(tmp_path / "touching.msh")
+
+
+def test_two_materials_in_series_by_cell_tag():
+    """A user's DOLFINx box (tags of its own) of two layers x < ½ (E₁) and x > ½ (E₂), ν = 0, pushed by d₀ into
+    a wall at x = 1: uniaxial stress, p = d₀/(δ + ½/E₁ + ½/E₂), u_x piecewise linear (P1-exact: the material
+    interface is a grid plane), u_y = u_z = 0."""
+    from dolfinx import mesh as dmesh
+
+    msh = dmesh.create_box(MPI.COMM_WORLD, [np.zeros(3), np.ones(3)], [4, 2, 2], dmesh.CellType.tetrahedron)
+    fdim = msh.topology.dim - 1
+    left = dmesh.locate_entities_boundary(msh, fdim, lambda x: np.isclose(x[0], 0.0))
+    right = dmesh.locate_entities_boundary(msh, fdim, lambda x: np.isclose(x[0], 1.0))
+    order = np.argsort(np.concatenate([left, right]))
+    facet_tags = dmesh.meshtags(msh, fdim, np.concatenate([left, right])[order],
+                                np.concatenate([np.full(left.size, 7), np.full(right.size, 8)]).astype(np.int32)[order])
+    imap = msh.topology.index_map(msh.topology.dim)
+    cells = np.arange(imap.size_local + imap.num_ghosts, dtype=np.int32)
+    layer = np.where(dmesh.compute_midpoints(msh, msh.topology.dim, cells)[:, 0] < 0.5, 1, 2).astype(np.int32)
+    cell_tags = dmesh.meshtags(msh, msh.topology.dim, cells, layer)
+    E1, E2, d0, delta = 1.0, 4.0, 0.01, 1e-3
+    problem = ContactProblem.from_meshtags(
+        msh, facet_tags, cell_tags, contact=8, clamped=7, youngs_modulus={1: E1, 2: E2}, poisson_ratio=0.0, strip_width=0.25,
+        obstacle=Plane((1.0, 0.0, 0.0), (-1.0, 0.0, 0.0)).indented(d0, (-1.0, 0.0, 0.0)))
+    sol = solve_primal_monolithic(problem, delta=delta)
+    p = d0 / (delta + 0.5 / E1 + 0.5 / E2)
+    X = sol.u.function_space.tabulate_dof_coordinates()
+    exact = np.zeros_like(X)
+    exact[:, 0] = -p * np.where(X[:, 0] < 0.5, X[:, 0] / E1, 0.5 / E1 + (X[:, 0] - 0.5) / E2)
+    error = MPI.COMM_WORLD.allreduce(float(np.max(np.abs(sol.u.x.array.reshape(-1, 3) - exact))), op=MPI.MAX)
+    assert error < 1e-12 and sol.profile.force == pytest.approx(p, rel=1e-11)

@@ -73,7 +73,8 @@ class BoundaryConditions:
             try:
                 axis, value = item
             except (TypeError, ValueError):
-                raise InputError(f"a roller is a pair (axis, value) for the plane x_axis = value, got {item!r}") from None
+                raise InputError(f"a roller is a pair (axis, value) for the plane x_axis = value, got {item!r}"
+                                 ) from None
             if isinstance(axis, bool) or axis not in (0, 1, 2) or not np.isfinite(value):
                 raise InputError(f"a roller plane needs an axis 0, 1 or 2 and a finite value, got {item!r}")
             rollers.append((int(axis), float(value)))

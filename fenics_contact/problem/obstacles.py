@@ -41,7 +41,8 @@ import numpy.typing as npt
 
 from fenics_contact.errors import InputError
 
-__all__ = ["Obstacle", "Plane", "Circle", "Sphere", "SignedDistance", "Translated", "evaluate_obstacle", "check_obstacle_side"]
+__all__ = ["Obstacle", "Plane", "Circle", "Sphere", "SignedDistance", "Translated", "evaluate_obstacle",
+           "check_obstacle_side"]
 
 
 def _as_vector(value: npt.ArrayLike, name: str, *, unit: bool = False, dim: int | None = None) -> np.ndarray:

@@ -10,7 +10,9 @@ The physics can be given before the mesh (``model_1()``, or ``ContactProblem(you
 and put on a mesh with ``problem.on(mesh)``; a problem on a mesh is validated once, there (the
 boundary groups against the mesh's facet groups, E > 0 and ν ∈ (−1, ½) on every cell), and its
 cellwise material fields are built once per mesh (``fields``, ``fields_on``): the subproblems,
-the CLI and the load steps share them. The dimension is the mesh's.
+the CLI and the load steps share them. The dimension is the mesh's: triangles (plane strain) or
+tetrahedra (3D; ``problem.meshes3d``, ``geometry.read_mesh``), loads and boundary data with as many
+components.
 """
 
 import math
@@ -38,7 +40,7 @@ __all__ = ["ContactProblem", "ContactLaw", "Frictionless", "ScalarField", "Vecto
 
 #: A scalar field: points x of shape (3, N) -> values of shape (N,).
 ScalarField = Callable[[np.ndarray], np.ndarray]
-#: A vector field: points x of shape (3, N) -> values of shape (gdim, N).
+#: A vector field: points x of shape (3, N) -> values of shape (gdim, N) (2 on triangles, 3 on tetrahedra).
 VectorField = Callable[[np.ndarray], np.ndarray]
 
 

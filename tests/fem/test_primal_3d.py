@@ -249,7 +249,8 @@ def test_two_materials_in_series_by_cell_tag():
     cell_tags = dmesh.meshtags(msh, msh.topology.dim, cells, layer)
     E1, E2, d0, delta = 1.0, 4.0, 0.01, 1e-3
     problem = ContactProblem.from_meshtags(
-        msh, facet_tags, cell_tags, contact=8, clamped=7, youngs_modulus={1: E1, 2: E2}, poisson_ratio=0.0, strip_width=0.25,
+        msh, facet_tags, cell_tags, contact=8, clamped=7, youngs_modulus={1: E1, 2: E2}, poisson_ratio=0.0,
+        strip_width=0.25,
         obstacle=Plane((1.0, 0.0, 0.0), (-1.0, 0.0, 0.0)).indented(d0, (-1.0, 0.0, 0.0)))
     sol = solve_primal_monolithic(problem, delta=delta)
     p = d0 / (delta + 0.5 / E1 + 0.5 / E2)

@@ -16,9 +16,6 @@ from fenics_contact.problem.obstacles import Circle, Plane, SignedDistance, Sphe
 from fenics_contact.problem.problem import ContactProblem
 from fenics_contact.problem.tags import Boundary
 
-serial = pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="compares gathered nodal data with a serial reference")
-
-
 def _points(*xyz):
     return np.array(xyz, dtype=float).T
 
@@ -122,7 +119,6 @@ def _hertz(h_over_a: float, *, growth: float, a: float = 0.1, R: float = 1.0, E:
                 p0_F=3.0 * force / (2.0 * np.pi * a_F**2))
 
 
-@serial
 def test_hertz_sphere_on_a_half_space():
     """Contact radius, peak pressure and force against Hertz, on the quarter block of ``_hertz`` with h = a/4
     (L = 40a, growth 1.4: 29478 tetrahedra, 17496 DOFs, 3 Newton steps). Measured: the outermost contact node
@@ -140,7 +136,6 @@ def test_hertz_sphere_on_a_half_space():
     assert profile.penetration == pytest.approx(sol.delta * profile.max_pressure, rel=1e-6)
 
 
-@serial
 @pytest.mark.slow
 def test_hertz_force_converges_with_the_contact_cells():
     """The excess force over Hertz falls as the contact cells shrink (h = a/4 → a/8: 8.2 % → 5.9 %, measured)."""
@@ -201,6 +196,7 @@ def test_read_mesh_takes_a_gmsh_tetrahedral_mesh_and_the_patch_test_is_exact_on_
     from fenics_contact.errors import MeshTagError
     from fenics_contact.problem.geometry import read_mesh
 
+    tmp_path = MPI.COMM_WORLD.bcast(tmp_path, root=0)  # one folder for every rank
     path = tmp_path / "box.msh"
     if MPI.COMM_WORLD.rank == 0:
         _gmsh_box(path)

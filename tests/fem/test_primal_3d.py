@@ -99,6 +99,30 @@ def test_patch_block_pressed_on_a_wall_is_exact(axis):
     assert np.all(sol.profile.active) and sol.newton.steps <= 2
 
 
+def test_confined_block_on_rollers_is_in_uniaxial_strain():
+    """The unit cube clamped at x = 0, its four sides y, z ∈ {0, 1} on rollers (u_y = 0, u_z = 0 there), pushed
+    by d₀ into a wall at x = 1: uniaxial strain, σ_xx = −p with the oedometric modulus M = λ + 2μ, so
+    p = d₀/(δ + 1/M), u = −(p/M) x e_x — the rollers hold the sides that would otherwise bulge (ν > 0)."""
+    E, nu, d0, delta = 1.0, 0.3, 0.01, 1e-3
+    M = E * (1 - nu) / ((1 + nu) * (1 - 2 * nu))
+    cm = unit_cube(3)
+    rollers = ((1, 0.0), (1, 1.0), (2, 0.0), (2, 1.0))
+    wall = Plane((1.0, 0.0, 0.0), (-1.0, 0.0, 0.0)).indented(d0, (-1.0, 0.0, 0.0))
+    problem = ContactProblem(youngs_modulus=E, poisson_ratio=nu, obstacle=wall, mesh=cm,
+                             boundary=BoundaryConditions(rollers=rollers))
+    sol = solve_primal_monolithic(problem, delta=delta)
+    p = d0 / (delta + 1.0 / M)
+    X = sol.u.function_space.tabulate_dof_coordinates()
+    exact = np.zeros_like(X)
+    exact[:, 0] = -p / M * X[:, 0]
+    error = cm.comm.allreduce(float(np.max(np.abs(sol.u.x.array.reshape(-1, 3) - exact))), op=MPI.MAX)
+    assert error < 1e-12 and sol.profile.force == pytest.approx(p, rel=1e-11)
+    with pytest.raises(InputError, match="no exterior facet"):
+        solve_primal_monolithic(problem.with_(boundary=BoundaryConditions(rollers=((1, 0.5),))))
+    with pytest.raises(InputError, match="axis"):
+        BoundaryConditions(rollers=((3, 0.0),))
+
+
 def _hertz(h_over_a: float, *, growth: float, a: float = 0.1, R: float = 1.0, E: float = 1.0, nu: float = 0.3,
            size: float = 40.0):
     """A quarter of a block (0, L)² × (−L, 0), L = ``size``·a, under a rigid sphere of radius R pushed d = a²/R

@@ -279,3 +279,6 @@ def test_two_materials_in_series_by_cell_tag():
     exact[:, 0] = -p * np.where(X[:, 0] < 0.5, X[:, 0] / E1, 0.5 / E1 + (X[:, 0] - 0.5) / E2)
     error = MPI.COMM_WORLD.allreduce(float(np.max(np.abs(sol.u.x.array.reshape(-1, 3) - exact))), op=MPI.MAX)
     assert error < 1e-12 and sol.profile.force == pytest.approx(p, rel=1e-11)
+    by_callable = problem.with_(youngs_modulus=lambda x: np.where(x[0] < 0.5, E1, E2))  # E(x) at the midpoints
+    again = solve_primal_monolithic(by_callable, delta=delta)
+    assert np.allclose(again.u.x.array, sol.u.x.array, rtol=0.0, atol=1e-14)

@@ -2,9 +2,10 @@
 
 u_D is imposed strongly (Newton works with homogeneous increments; the iterate carries u_D on the Γ_D
 DOFs), so is u_i = 0 on a roller (symmetry) plane x_i = c; the tractions t_k are P1-interpolated and
-enter the load, the other facets are traction free.  The contact direction ν and the gap g are nodal (P1) on Γ_C: the obstacle's at the Γ_C vertices, or for a wall
-flush with Γ_C (no obstacle) the body's nodal normal (facet normals averaged with the vertex weights) and
-g = 0.  One ν per node keeps the active set a set of nodes on a curved Γ_C too.
+enter the load, the other facets are traction free.  The contact direction ν and the gap g are nodal (P1)
+on Γ_C: the obstacle's at the Γ_C vertices, or for a wall flush with Γ_C (no obstacle) the body's nodal
+normal (facet normals averaged with the vertex weights) and g = 0.  One ν per node keeps the active set a
+set of nodes on a curved Γ_C too.
 """
 
 import numpy as np

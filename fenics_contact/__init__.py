@@ -24,6 +24,7 @@ _API = {
     "BoundaryConditions": "fenics_contact.problem.boundary",
     "Plane": "fenics_contact.problem.obstacles",
     "Circle": "fenics_contact.problem.obstacles",
+    "Sphere": "fenics_contact.problem.obstacles",
     "SignedDistance": "fenics_contact.problem.obstacles",
     "unit_square": "fenics_contact.problem.geometry",
     "read_mesh": "fenics_contact.problem.geometry",

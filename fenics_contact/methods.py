@@ -43,6 +43,7 @@ from fenics_contact.multiscale.mixed import MixedMultiscaleHybridStep, solve_mix
 from fenics_contact.multiscale.mixed_cem import MixedCEMOptions
 from fenics_contact.multiscale.primal import MultiscalePrimalHybridStep, solve_primal_ms_hybrid
 from fenics_contact.problem.problem import ContactProblem
+from fenics_contact.problem.validation import require_method_dimension
 
 __all__ = ["METHODS", "Method", "MonolithicSolver", "get_method", "solve"]
 
@@ -169,12 +170,14 @@ class Method:
     def solve(self, problem: ContactProblem, /, *, comm: MPI.Comm = MPI.COMM_WORLD, **values):
         """Solve ``problem`` with this method (``values``: its options, flat or nested, and the solve's own
         keyword arguments such as ``reference``)."""
+        _require_dimension(self.name, problem)
         extra = {k: values.pop(k) for k in list(values) if k in _NOT_OPTIONS}
         return self.solve_function(problem, **self.options(values, comm=comm), **extra)
 
     def build(self, problem: ContactProblem, /, *, comm: MPI.Comm = MPI.COMM_WORLD, **values):
         """The solver kept for many solves (``factory``): a prepared hybrid step, or a ``MonolithicSolver``;
         its ``contact`` is the subproblem holding Γ_C."""
+        _require_dimension(self.name, problem)
         extra = {k: values.pop(k) for k in list(values) if k in _NOT_OPTIONS}
         options = self.options(values, comm=comm) | extra
         accepted = inspect.signature(self.factory).parameters
@@ -187,6 +190,12 @@ class Method:
                   ) -> IterationOptions | None:
         """The hybrid iteration's options among ``values`` (None for a monolithic method)."""
         return self.options(values, comm=comm).get("options") if self.hybrid else None
+
+
+def _require_dimension(name: str, problem) -> None:
+    """InputError when the method ``name`` does not solve a problem of this dimension or with rollers."""
+    if isinstance(problem, ContactProblem) and problem.mesh is not None:
+        require_method_dimension(name, problem.mesh.mesh, problem.boundary)
 
 
 def _elsewhere(names: list[str]) -> str:

@@ -196,7 +196,7 @@ CASES = [
     Case("mesh missing", lambda tmp: ["--mesh", str(tmp / "none.msh")], 2, "does not exist"),
     Case("mesh not a gmsh file", _mesh_text("hello\nworld\n"), 2, "cannot read"),
     Case("empty mesh file", _mesh_text(""), 2, "cannot read"),
-    Case("3D tetrahedral mesh", _tetrahedra, 2, "is a 3D mesh"),
+    Case("second-order tetrahedral mesh", _tetrahedra, 2, "4-node tetrahedra only"),
     Case("Gamma_C as a surface group", _mesh_file(gamma_c=(), surface_groups={"Omega1": ("A", "B"), "Omega2": ("C",),
                                                                               "Gamma_C": ("C",)}),
          2, "'Gamma_C' is a surface group"),

@@ -145,6 +145,7 @@ def _solid_or_quads(path, kind):
             gmsh.model.occ.synchronize()
             gmsh.model.addPhysicalGroup(3, [1], name="Omega1")
             gmsh.option.setNumber("Mesh.MeshSizeMax", 0.5)
+            gmsh.option.setNumber("Mesh.ElementOrder", 2)
             gmsh.model.mesh.generate(3)
         else:
             gmsh.model.occ.addRectangle(0, 0, 0, 1, 1)
@@ -160,7 +161,7 @@ def _solid_or_quads(path, kind):
 
 
 @pytest.mark.parametrize("content, message", [
-    ("tetrahedra", "is a 3D mesh"),
+    ("tetrahedra", "4-node tetrahedra only"),  # (second-order ones)
     ("quadrangles", "needs 3-node triangles only"),
     ("", "cannot read"),
     ("not a mesh\n", "cannot read"),

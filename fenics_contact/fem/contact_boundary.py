@@ -30,11 +30,12 @@ def contact_boundary_present(comm: MPI.Comm, facets: np.ndarray, obstacle: Obsta
 
 def obstacle_at_nodes(obstacle: Obstacle | None, points: np.ndarray, normals: np.ndarray, *, comm=None
                       ) -> tuple[np.ndarray, np.ndarray]:
-    """(g, ν) at contact nodes ``points`` (N, 2 or 3) with outward body normals ``normals`` (N, 2): the
-    obstacle's gap and direction (side checked: ``check_obstacle_side``), or (0, ``normals``) without one.
+    """(g, ν) at contact nodes ``points`` (N, 2 or 3) with outward body normals ``normals`` (N, d), d the
+    dimension: the obstacle's gap and direction (side checked: ``check_obstacle_side``), or (0, ``normals``)
+    without one.
     With ``comm`` the checks are collective (nodes distributed); without, the nodes are replicated."""
     if obstacle is None:
         return np.zeros(np.asarray(points).shape[0]), normals
-    g, nu = evaluate_obstacle(obstacle, points, comm=comm)
+    g, nu = evaluate_obstacle(obstacle, points, dim=np.shape(normals)[1], comm=comm)
     check_obstacle_side(obstacle, nu, normals, g, comm=comm)
     return g, nu

@@ -3,7 +3,10 @@
 One class, ``PrimalSubproblem``, serves three roles: the monolithic problem on Ω
 (contact, no Robin), the linear Ω₁ problem (Robin on γ, no contact) and the
 nonlinear Ω₂ problem (contact and Robin). Forms come from ``forms_primal``, the boundary data
-(u_D, tractions) and the nodal contact geometry (ν, g) from ``primal_boundary``.
+(u_D, tractions, rollers) and the nodal contact geometry (ν, g) from ``primal_boundary``.
+
+The dimension is the mesh's: on triangles plane strain, on tetrahedra 3D elasticity (the same
+σ = 2μ ε + λ tr ε I with gdim-vector P1 elements; the monolithic solve is the method that takes 3D).
 """
 
 import logging
@@ -396,7 +399,7 @@ def solve_primal_monolithic(
     newton: NewtonOptions = NewtonOptions(),
     prefix: str = "fc_primal_mono_",
 ) -> PrimalSolution:
-    """Penalized primal contact on the whole mesh (METHOD §2) by semismooth Newton.
+    """Penalized primal contact on the whole mesh by semismooth Newton, on triangles or tetrahedra.
 
     ``delta`` defaults to ``default_penalty(h, E_c)``, E_c the largest E on Γ_C (``penalty_for``).
     """

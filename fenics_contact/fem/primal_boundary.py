@@ -1,10 +1,11 @@
 """The boundary of the primal P1 subproblem: u = u_D on Γ_D, the tractions on Γ_N and the nodal contact geometry on Γ_C.
 
 u_D is imposed strongly (Newton works with homogeneous increments; the iterate carries u_D on the Γ_D
-DOFs), the tractions t_k are P1-interpolated and enter the load, the other facets are traction free.  The
-contact direction ν and the gap g are nodal (P1) on Γ_C: the obstacle's at the Γ_C vertices, or for a wall
-flush with Γ_C (no obstacle) the body's nodal normal (facet normals averaged with the vertex weights) and
-g = 0.  One ν per node keeps the active set a set of nodes on a curved Γ_C too.
+DOFs), so is u_i = 0 on a roller (symmetry) plane x_i = c; the tractions t_k are P1-interpolated and
+enter the load, the other facets are traction free.  The contact direction ν and the gap g are nodal (P1)
+on Γ_C: the obstacle's at the Γ_C vertices, or for a wall flush with Γ_C (no obstacle) the body's nodal
+normal (facet normals averaged with the vertex weights) and g = 0.  One ν per node keeps the active set a
+set of nodes on a curved Γ_C too.
 """
 
 import numpy as np
@@ -17,16 +18,18 @@ from dolfinx import mesh as dmesh
 import dolfinx.fem.petsc
 
 from fenics_contact.fem.contact import ContactProfile, profile_order
+from fenics_contact.errors import InputError
 from fenics_contact.fem.contact_boundary import contact_boundary_present, obstacle_at_nodes
 from fenics_contact.problem.boundary import BoundaryConditions, neumann_groups
 from fenics_contact.problem.obstacles import Obstacle
 from fenics_contact.problem.tags import Boundary
 
-__all__ = ["NodalContactGeometry", "PrimalBoundaryData"]
+__all__ = ["NodalContactGeometry", "PrimalBoundaryData", "roller_conditions"]
 
 
 class PrimalBoundaryData:
-    """u = u_D on Γ_D (``bcs``: the homogeneous conditions of the Newton increments) and the tractions on Γ_N.
+    """u = u_D on Γ_D and u_i = 0 on the roller planes (``bcs``: the homogeneous conditions of the Newton
+    increments) and the tractions on Γ_N.
 
     ``traction_terms``: (t_k, ds_k) for every traction group with facets on this mesh (t_k in P1, also in
     ``tractions``); ``dirichlet_dofs`` / ``dirichlet_q``: the Γ_D DOFs of V and of the scalar P1 space Q.
@@ -40,6 +43,7 @@ class PrimalBoundaryData:
         dirichlet = facet_tags.find(Boundary.GAMMA_D)
         dofs = fem.locate_dofs_topological(V, tdim - 1, dirichlet)
         self.bcs = [fem.dirichletbc(np.zeros(gdim, dtype=PETSc.ScalarType), dofs, V)]
+        self.bcs += roller_conditions(V, boundary.rollers)
         self.dirichlet_dofs = dofs
         self.dirichlet_q = fem.locate_dofs_topological(Q, tdim - 1, dirichlet)
         self.u_D: fem.Function | None = None
@@ -66,6 +70,31 @@ class PrimalBoundaryData:
         if self.u_D is not None:
             fem.dirichletbc(self.u_D, self.dirichlet_dofs).set(u.x.array)
         u.x.scatter_forward()
+
+
+def roller_conditions(V: fem.FunctionSpace, rollers) -> list[fem.DirichletBC]:
+    """u_i = 0 on the exterior facets in each plane x_i = c of ``rollers`` ((i, c) pairs; collective).
+
+    The plane is matched to 1e-10 of the mesh's extent; InputError if no exterior facet lies in it or the
+    axis exceeds the dimension."""
+    msh = V.mesh
+    tdim, gdim = msh.topology.dim, msh.geometry.dim
+    if not rollers:
+        return []
+    x = msh.geometry.x[:, :gdim]
+    local = float(np.max(np.ptp(x, axis=0))) if x.shape[0] else 0.0
+    tol = 1e-10 * msh.comm.allreduce(local, op=MPI.MAX)
+    bcs = []
+    for axis, value in rollers:
+        if axis >= gdim:
+            raise InputError(f"a roller plane x_{axis} = {value:g} needs a {axis + 1}D mesh; this one is {gdim}D")
+        facets = dmesh.locate_entities_boundary(msh, tdim - 1, lambda p, a=axis, c=value: np.abs(p[a] - c) <= tol)
+        if msh.comm.allreduce(int(facets.size), op=MPI.SUM) == 0:
+            raise InputError(f"no exterior facet lies in the roller plane x_{axis} = {value:g}")
+        Vi = V.sub(axis)
+        dofs = fem.locate_dofs_topological(Vi, tdim - 1, facets)
+        bcs.append(fem.dirichletbc(PETSc.ScalarType(0.0), dofs, Vi))
+    return bcs
 
 
 class NodalContactGeometry:
@@ -146,7 +175,7 @@ class NodalContactGeometry:
         gap = self.gap.x.array[on]
         u_c = np.sum(u.x.array.reshape(-1, gdim)[on] * normal, axis=1) - gap
         sigma_c = np.sum(reaction.reshape(-1, gdim)[on] * normal, axis=1) / w[on]
-        points = self.Q.tabulate_dof_coordinates()[on, :2]
+        points = self.Q.tabulate_dof_coordinates()[on, :gdim]
         comm = self.comm
         points, u_c, sigma_c, weights, normal, gap = (
             np.concatenate(comm.allgather(a)) for a in (points, u_c, sigma_c, w[on], normal, gap)

@@ -35,10 +35,10 @@ VectorField = Callable[[np.ndarray], np.ndarray]
 
 
 def constant_vector(value: npt.ArrayLike) -> VectorField:
-    """x ↦ value (a constant 2-vector), as a vector field."""
+    """x ↦ value (a constant 2-vector, or a 3-vector for a 3D problem), as a vector field."""
     v = np.asarray(value, dtype=np.float64).ravel()
-    if v.size != 2 or not np.all(np.isfinite(v)):
-        raise InputError(f"a constant vector field needs two finite numbers, got {value!r}")
+    if v.size not in (2, 3) or not np.all(np.isfinite(v)):
+        raise InputError(f"a constant vector field needs two (three in 3D) finite numbers, got {value!r}")
     return lambda x: np.repeat(v[:, None], np.shape(x)[1], axis=1)
 
 
@@ -48,12 +48,14 @@ def _as_field(value, what: str) -> VectorField:
     try:
         return constant_vector(value)
     except (TypeError, ValueError) as err:
-        raise InputError(f"{what} must be a callable x -> (2, N) or a constant 2-vector, got {value!r}") from err
+        raise InputError(f"{what} must be a callable x -> (gdim, N) or a constant vector (2 or 3 components), "
+                         f"got {value!r}") from err
 
 
 @dataclass(frozen=True, slots=True)
 class BoundaryConditions:
-    """u = ``displacement`` on Γ_D (None: clamped), σn = ``tractions[name]`` on each Γ_N group, σn = 0 elsewhere.
+    """u = ``displacement`` on Γ_D (None: clamped), σn = ``tractions[name]`` on each Γ_N group, u_i = 0 on the
+    ``rollers`` planes x_i = c (tangential traction free), σn = 0 elsewhere.
 
     ``tractions`` maps group names (``Gamma_N``, ``Gamma_N_top``, ...) to a field or
     a constant 2-vector; it is stored as a tuple of (name, field) pairs, sorted by name.
@@ -61,8 +63,22 @@ class BoundaryConditions:
 
     displacement: VectorField | None = None
     tractions: Mapping[str, VectorField] | tuple = field(default_factory=tuple)
+    #: symmetry planes (axis i, value c): u_i = 0 on the exterior facets in the plane x_i = c (rollers;
+    #: the primal monolithic solve takes them)
+    rollers: tuple[tuple[int, float], ...] = ()
 
     def __post_init__(self) -> None:
+        rollers = []
+        for item in self.rollers:
+            try:
+                axis, value = item
+            except (TypeError, ValueError):
+                raise InputError(f"a roller is a pair (axis, value) for the plane x_axis = value, got {item!r}"
+                                 ) from None
+            if isinstance(axis, bool) or axis not in (0, 1, 2) or not np.isfinite(value):
+                raise InputError(f"a roller plane needs an axis 0, 1 or 2 and a finite value, got {item!r}")
+            rollers.append((int(axis), float(value)))
+        object.__setattr__(self, "rollers", tuple(rollers))
         if self.displacement is not None:
             object.__setattr__(self, "displacement", _as_field(self.displacement, "the Gamma_D displacement"))
         items = self.tractions.items() if isinstance(self.tractions, Mapping) else self.tractions
@@ -86,8 +102,8 @@ class BoundaryConditions:
 
     @property
     def is_default(self) -> bool:
-        """Clamped Γ_D and no traction groups."""
-        return self.displacement is None and not self.tractions
+        """Clamped Γ_D, no traction groups and no rollers."""
+        return self.displacement is None and not self.tractions and not self.rollers
 
     def traction_tags(self) -> list[tuple[int, str, VectorField]]:
         """(facet tag, group name, traction) for every traction group."""
@@ -124,6 +140,14 @@ def check_boundary_groups(msh, facet_tags, boundary: BoundaryConditions, *, name
             f"the mesh has traction group(s) {labels} but the model gives no traction for them; "
             "give one (BoundaryConditions(tractions={name: (tx, ty)})) or remove the group (untagged = traction free)"
         )
+    gdim = msh.geometry.dim
+    fields = [("the Gamma_D displacement", boundary.displacement)] if boundary.displacement is not None else []
+    fields += [(f"the traction on {name!r}", t) for name, t in boundary.tractions]
+    point = np.ascontiguousarray(msh.geometry.x[:1].T)
+    for what, value in fields:
+        rows = np.shape(value(point))[0] if point.shape[1] else gdim
+        if comm.allreduce(int(rows != gdim), op=MPI.SUM):
+            raise InputError(f"{what} has {rows} components; the mesh is {gdim}D: give {gdim} components")
     if boundary.displacement is not None and comm.allreduce(
         int(facet_tags.find(Boundary.GAMMA_D).size), op=MPI.SUM
     ) == 0:
@@ -147,6 +171,8 @@ def boundary_data_on(msh, facet_tags, boundary: BoundaryConditions, *, traction_
     for tag, name, _ in boundary.traction_tags():
         if comm.allreduce(int(facet_tags.find(tag).size), op=MPI.SUM):
             found.append(f"a traction on {name}")
+    if boundary.rollers:
+        found.append("rollers (symmetry planes)")
     if traction_free:
         tdim = msh.topology.dim
         msh.topology.create_connectivity(tdim - 1, tdim)

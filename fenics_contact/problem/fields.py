@@ -26,7 +26,14 @@ from fenics_contact.problem.obstacles import Obstacle
 if TYPE_CHECKING:  # (problem.problem builds its fields with material_fields)
     from fenics_contact.problem.problem import ContactProblem
 
-__all__ = ["MaterialFields", "cell_function", "material_fields", "FunctionField", "tag_function", "SubmeshTransfer"]
+__all__ = ["MaterialFields", "cell_function", "material_fields", "FunctionField", "tag_function", "SubmeshTransfer",
+           "zero_load"]
+
+
+def zero_load(x: np.ndarray) -> np.ndarray:
+    """f = 0: the default body force (two components when called; ``material_fields`` gives it the mesh's
+    dimension, so it serves the plane and the 3D problems)."""
+    return np.zeros((2, x.shape[1]))
 
 
 class MaterialFields(NamedTuple):
@@ -149,7 +156,9 @@ def material_fields(msh: dmesh.Mesh, model: "ContactProblem") -> MaterialFields:
     mu = fem.Function(E.function_space, name="mu")
     lmbda.x.array[:] = lm
     mu.x.array[:] = mu_
-    f = cell_function(msh, model.load, shape=(msh.geometry.dim,), name="f")
+    gdim = msh.geometry.dim
+    f = cell_function(msh, model.load if model.load is not zero_load else (lambda x: np.zeros((gdim, x.shape[1]))),
+                      shape=(gdim,), name="f")
     return MaterialFields(E, nu, lmbda, mu, f, model.boundary, model.obstacle)
 
 

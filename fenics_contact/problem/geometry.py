@@ -35,8 +35,10 @@ __all__ = [
 
 log = logging.getLogger(__name__)
 
-#: gmsh element type of the 3-node triangle
-_TRIANGLE = 2
+#: gmsh element types of the 3-node triangle and the 4-node tetrahedron
+_TRIANGLE, _TETRAHEDRON = 2, 4
+#: the cell types of a ContactMesh: triangles (plane problems) and tetrahedra (3D)
+_CELL_TYPES = (dmesh.CellType.triangle, dmesh.CellType.tetrahedron)
 
 
 class ContactMesh(NamedTuple):
@@ -237,7 +239,8 @@ def read_mesh(
     """Load a gmsh ``.msh`` file whose physical groups carry the names of ``tags.PHYSICAL_NAMES``.
 
     Tags are matched by physical *name*, so any integers may be used in the file. The file
-    must hold a planar (z = 0) mesh of 3-node triangles; anything else is an InputError, raised
+    must hold a planar (z = 0) mesh of 3-node triangles, or a 3D mesh of 4-node tetrahedra (then Omega1
+    and Omega2 are volume groups and the boundary groups surfaces); anything else is an InputError, raised
     before the mesh is built. With ``validate`` the tags are then checked against the contact
     problem (``validation.validate_contact_mesh`` with ``rules``: γ the common boundary of Ω₁
     and Ω₂, Γ_C on ∂Ω₂ away from γ, Γ_D and Γ_C disjoint, a conforming mesh), a MeshTagError
@@ -261,7 +264,7 @@ def read_mesh(
     if not path.is_file():
         raise InputError(f"mesh file {path} does not exist" if not path.exists() else f"mesh file {path} is not a file")
     with gmsh_session():
-        problem, auto_strip = None, False
+        problem, auto_strip, tdim = None, False, 2
         if comm.rank == 0:
             gmsh.model.add("user mesh")
             try:
@@ -269,18 +272,22 @@ def read_mesh(
             except Exception as err:  # gmsh raises a bare Exception with its parser's message
                 problem = (InputError, f"cannot read {path} as a gmsh mesh: {err}")
             else:
-                auto_strip = _needs_strip()
+                tdim = 3 if len(gmsh.model.mesh.getElementTypes(3)) else 2
+                auto_strip = _needs_strip(tdim)
                 if not auto_strip:  # overlays: read separately, not cell tags (with the automatic strip they are
-                    for dim, tag in gmsh.model.getPhysicalGroups(2):  # the cells' groups: kept)
+                    for dim, tag in gmsh.model.getPhysicalGroups(tdim):  # the cells' groups: kept)
                         if gmsh.model.getPhysicalName(dim, tag) in overlay_groups:
                             gmsh.model.removePhysicalGroups([(dim, tag)])
                 problem = _gmsh_model_problem(path, auto_strip=auto_strip)
-        problem, auto_strip = comm.bcast((problem, auto_strip), root=0)
+                if problem is None and tdim == 3 and H is not None:
+                    problem = (InputError, f"{path} is a 3D mesh: the coarse grid H (multiscale methods) is planar "
+                                           "only; read it with H=None")
+        problem, auto_strip, tdim = comm.bcast((problem, auto_strip, tdim), root=0)
         # validate before the collective mesh construction (which aborts on inconsistent tags)
         if problem is not None:
             error, message = problem
             raise error(message)
-        data = dolfinx.io.gmsh.model_to_mesh(gmsh.model, comm, 0, gdim=2)
+        data = dolfinx.io.gmsh.model_to_mesh(gmsh.model, comm, 0, gdim=tdim)
     if auto_strip:
         cm = _strip_contact_mesh(data, h=mesh_size(data.mesh), H=H, materials=overlay_groups)
     else:
@@ -299,8 +306,8 @@ def _strip_contact_mesh(data: dolfinx.io.gmsh.MeshData, *, h: float, H: float | 
     user's partition) or a band of a few cells."""
     msh = data.mesh
     tdim = msh.topology.dim
-    if msh.topology.cell_type != dmesh.CellType.triangle:
-        raise InputError(f"fenics-contact needs a triangular mesh, got {msh.topology.cell_type.name}")
+    if msh.topology.cell_type not in _CELL_TYPES:
+        raise InputError(f"fenics-contact needs a mesh of triangles or tetrahedra, got {msh.topology.cell_type.name}")
     msh.topology.create_connectivity(tdim - 1, tdim)
     facet_tags = _retag(data.facet_tags, data.physical_groups, [Boundary.GAMMA_D, Boundary.GAMMA_C], msh, tdim - 1)
     skip = {PHYSICAL_NAMES[Subdomain.OMEGA1], PHYSICAL_NAMES[Subdomain.OMEGA2], *materials}
@@ -313,7 +320,8 @@ def _strip_contact_mesh(data: dolfinx.io.gmsh.MeshData, *, h: float, H: float | 
 
 
 def mesh_size(msh: dmesh.Mesh, facet_tags: dmesh.MeshTags | None = None) -> float:
-    """h = max over the cells of √(2|T|): the leg of the right isosceles triangle of the largest cell's area; with
+    """h = max over the cells of √(2|T|): the leg of the right isosceles triangle of the largest cell's area (in 3D
+    (6|T|)^(1/3), the edge of the cube of which the largest tetrahedron is a sixth); with
     ``facet_tags``, over the cells with a facet on Γ_C only (the contact cell size, which sets the default
     penalties δ, ε and the Robin coefficient α, so a mesh graded towards Γ_C gets the penalties of its contact
     cells, not of its largest cell far away).
@@ -330,6 +338,10 @@ def mesh_size(msh: dmesh.Mesh, facet_tags: dmesh.MeshTags | None = None) -> floa
         touching = np.unique(np.concatenate([f2c.links(f) for f in facets] or [np.zeros(0, np.int32)]))
         cells = touching[touching < cells.size].astype(np.int32)
     geo = dmesh.entities_to_geometry(msh, tdim, cells)
+    if tdim == 3:  # (6|T|)^(1/3): the edge of the cube of which the largest tetrahedron is a sixth
+        x = msh.geometry.x[geo]
+        volume = np.abs(np.linalg.det(x[:, 1:] - x[:, :1])) / 6.0
+        return msh.comm.allreduce(float(np.cbrt(6.0 * volume.max())) if volume.size else 0.0, op=MPI.MAX)
     x = msh.geometry.x[geo][:, :, :2]
     d1, d2 = x[:, 1] - x[:, 0], x[:, 2] - x[:, 0]
     area = 0.5 * np.abs(d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0])
@@ -341,10 +353,13 @@ def _gmsh_model_problem(path: Path, *, auto_strip: bool = False) -> tuple[type, 
     def names_of(types) -> list[str]:
         return [gmsh.model.mesh.getElementProperties(t)[0] for t in types]
 
-    solid = gmsh.model.mesh.getElementTypes(3)
-    if len(solid):
-        return InputError, (f"{path} is a 3D mesh (it has {names_of(solid)} elements); fenics-contact needs a "
-                            "planar 2D mesh of triangles")
+    solid = list(gmsh.model.mesh.getElementTypes(3))
+    if solid:
+        if solid != [_TETRAHEDRON]:
+            other = names_of(t for t in solid if t != _TETRAHEDRON)
+            return InputError, (f"{path} has {other} elements; a 3D mesh must be of 4-node tetrahedra only "
+                                "(no hexahedra, prisms, pyramids, no second-order elements)")
+        return _groups_problem(path, 3, auto_strip)
     surface = list(gmsh.model.mesh.getElementTypes(2))
     if not surface:
         return InputError, (f"{path} holds no triangles (no 2D mesh elements): is it a mesh? A .geo model must be "
@@ -358,12 +373,18 @@ def _gmsh_model_problem(path: Path, *, auto_strip: bool = False) -> tuple[type, 
     if np.any(z > 0.0):
         return InputError, (f"{path}: {np.count_nonzero(z > 0)} nodes have z ≠ 0 (largest |z| = {z.max():.3g}); "
                             "the mesh must lie in the plane z = 0 (it is not projected)")
+    return _groups_problem(path, 2, auto_strip)
+
+
+def _groups_problem(path: Path, tdim: int, auto_strip: bool) -> tuple[type, str] | None:
+    """(error class, message) if the physical groups of the current gmsh model of cells of dimension ``tdim``
+    lack a name or have the wrong dimension, or if the cells or facets are in the wrong groups."""
     dims: dict[str, set[int]] = {}
     for dim, tag in gmsh.model.getPhysicalGroups():
         dims.setdefault(gmsh.model.getPhysicalName(dim, tag), set()).add(dim)
     wrong = []
     for tag, name in PHYSICAL_NAMES.items():
-        want = 2 if isinstance(tag, Subdomain) else 1
+        want = tdim if isinstance(tag, Subdomain) else tdim - 1
         if name in dims and want not in dims[name]:
             kinds = {0: "a point", 1: "a curve", 2: "a surface", 3: "a volume"}
             got = " and ".join(kinds[d] for d in sorted(dims[name]))
@@ -379,28 +400,30 @@ def _gmsh_model_problem(path: Path, *, auto_strip: bool = False) -> tuple[type, 
                               f"Required names: {list(PHYSICAL_NAMES.values())}"
                               + ("" if auto_strip else f" (or none of {sorted(_STRIP_NAMES)}: Omega2 is then "
                                  "built along Gamma_C from the coarse cells)"))
-    return _surface_groups_problem(path, auto_strip=auto_strip) or _curve_groups_problem(path)
+    return _surface_groups_problem(path, auto_strip=auto_strip, tdim=tdim) or _curve_groups_problem(path, tdim - 1)
 
 
 #: the groups built by the automatic strip when a file has none of them
 _STRIP_NAMES = frozenset(PHYSICAL_NAMES[t] for t in (Subdomain.OMEGA1, Subdomain.OMEGA2, Boundary.INTERFACE))
 
 
-def _needs_strip() -> bool:
-    """True if the current gmsh model tags none of Omega1/Omega2/gamma but has a surface group."""
+def _needs_strip(tdim: int = 2) -> bool:
+    """True if the current gmsh model tags none of Omega1/Omega2/gamma but has a group of cells (dimension tdim)."""
     names = {gmsh.model.getPhysicalName(d, t) for d, t in gmsh.model.getPhysicalGroups()}
-    return not (names & _STRIP_NAMES) and len(gmsh.model.getPhysicalGroups(2)) > 0
+    return not (names & _STRIP_NAMES) and len(gmsh.model.getPhysicalGroups(tdim)) > 0
 
 
-def _curve_groups_problem(path: Path) -> tuple[type, str] | None:
-    """No segment may be in two curve groups: a mesh facet carries one tag (dolfinx would keep one of them)."""
+def _curve_groups_problem(path: Path, fdim: int = 1) -> tuple[type, str] | None:
+    """No facet (segment; triangle of a 3D mesh, ``fdim`` = 2) may be in two facet groups: a mesh facet carries
+    one tag (dolfinx would keep one of them)."""
     keys, owner, names = [], [], []
-    for dim, tag in gmsh.model.getPhysicalGroups(1):
+    k = fdim + 1  # vertices of a facet; its gmsh element type is 1 (segment) or 2 (triangle), i.e. fdim
+    for dim, tag in gmsh.model.getPhysicalGroups(fdim):
         names.append(gmsh.model.getPhysicalName(dim, tag))
-        segments = [np.zeros((0, 2), dtype=np.int64)]
+        segments = [np.zeros((0, k), dtype=np.int64)]
         for entity in gmsh.model.getEntitiesForPhysicalGroup(dim, tag):
-            types, _, nodes = gmsh.model.mesh.getElements(1, entity)
-            segments += [np.asarray(n, dtype=np.int64).reshape(-1, 2) for t, n in zip(types, nodes) if t == 1]
+            types, _, nodes = gmsh.model.mesh.getElements(fdim, entity)
+            segments += [np.asarray(n, dtype=np.int64).reshape(-1, k) for t, n in zip(types, nodes) if t == fdim]
         segments = np.unique(np.sort(np.concatenate(segments), axis=1), axis=0)
         keys.append(segments)
         owner.append(np.full(segments.shape[0], len(names) - 1))
@@ -425,20 +448,20 @@ def _curve_groups_problem(path: Path) -> tuple[type, str] | None:
                           "(a mesh facet carries one tag)")
 
 
-def _surface_groups_problem(path: Path, *, auto_strip: bool = False) -> tuple[type, str] | None:
-    """Every triangle must be in exactly one surface group, and that group Omega1 or Omega2 (with
-    ``auto_strip``: any surface group, the coarse cells or the material regions of the user)."""
-    _, element_tags, _ = gmsh.model.mesh.getElements(2)
+def _surface_groups_problem(path: Path, *, auto_strip: bool = False, tdim: int = 2) -> tuple[type, str] | None:
+    """Every triangle (tetrahedron in 3D) must be in exactly one surface (volume) group, and that group Omega1
+    or Omega2 (with ``auto_strip``: any such group, the coarse cells or the material regions of the user)."""
+    _, element_tags, _ = gmsh.model.mesh.getElements(tdim)
     triangles = np.concatenate([np.asarray(t, dtype=np.int64) for t in element_tags])
     count = np.zeros(triangles.size, dtype=np.int64)
     known = np.zeros(triangles.size, dtype=bool)
     order = np.argsort(triangles)
     others = []
-    for dim, tag in gmsh.model.getPhysicalGroups(2):
+    for dim, tag in gmsh.model.getPhysicalGroups(tdim):
         name = gmsh.model.getPhysicalName(dim, tag)
         members = [np.zeros(0, dtype=np.int64)]
         for entity in gmsh.model.getEntitiesForPhysicalGroup(dim, tag):
-            members += [np.asarray(t, dtype=np.int64) for t in gmsh.model.mesh.getElements(2, entity)[1]]
+            members += [np.asarray(t, dtype=np.int64) for t in gmsh.model.mesh.getElements(tdim, entity)[1]]
         members = np.unique(np.concatenate(members))
         pos = order[np.searchsorted(triangles, members, sorter=order)]
         np.add.at(count, pos, 1)
@@ -487,8 +510,8 @@ def _retag(tags: dmesh.MeshTags | None, groups: dict, wanted: list, msh: dmesh.M
 def _contact_mesh(data: dolfinx.io.gmsh.MeshData, *, h: float, H: float | None) -> ContactMesh:
     msh = data.mesh
     tdim = msh.topology.dim
-    if msh.topology.cell_type != dmesh.CellType.triangle:
-        raise InputError(f"fenics-contact needs a triangular mesh, got {msh.topology.cell_type.name}")
+    if msh.topology.cell_type not in _CELL_TYPES:
+        raise InputError(f"fenics-contact needs a mesh of triangles or tetrahedra, got {msh.topology.cell_type.name}")
     msh.topology.create_connectivity(tdim - 1, tdim)
     cell_tags = _retag(data.cell_tags, data.physical_groups, [Subdomain.OMEGA1, Subdomain.OMEGA2], msh, tdim)
     facet_tags = _retag(

@@ -11,8 +11,10 @@ Gauss–Lobatto nodes (``fem.primal``, ``fem.mixed``).  Obstacles:
 
 * ``Plane(point, normal)``: the half-plane {(x − point)·normal ≤ 0}; ``normal``
   is the obstacle's outward unit normal (pointing towards the body).
-* ``Circle(centre, radius)``: a rigid disc / cylinder (indenter);
+* ``Circle(centre, radius)``: a rigid disc (in 3D the cylinder along z);
   d = |x − c| − R, undefined at the centre.
+* ``Sphere(centre, radius)``: a rigid ball (the 3D indenter); d = |x − c| − R,
+  undefined at the centre.
 * ``SignedDistance(distance, normal=None)``: any callable d; ``normal`` (the
   obstacle's outward normal ∇d/|∇d|) by central differences when not given.
   A callable may return NaN where its gap is undefined: a contact node there
@@ -23,7 +25,11 @@ first-order effect on the gap is g − t·ν); ``indented(depth,
 direction)`` moves it by depth·direction (unit direction).
 
 Points are numpy arrays of shape (3, N) or (2, N) (DOLFINx convention); gaps
-come back with shape (N,), directions ν with shape (2, N).
+come back with shape (N,), directions ν with shape (k, N), k the obstacle's own
+dimension: 2 for ``Circle`` and for a ``Plane`` given by 2-vectors (or 3-vectors
+with z = 0), 3 for ``Sphere`` and a ``Plane`` with a z component.  A planar
+obstacle is the same obstacle extruded along z in 3D (its ν has ν_z = 0);
+``evaluate_obstacle`` gives ν with as many components as the problem's dimension.
 """
 
 from abc import ABC, abstractmethod
@@ -35,15 +41,19 @@ import numpy.typing as npt
 
 from fenics_contact.errors import InputError
 
-__all__ = ["Obstacle", "Plane", "Circle", "SignedDistance", "Translated", "evaluate_obstacle", "check_obstacle_side"]
+__all__ = ["Obstacle", "Plane", "Circle", "Sphere", "SignedDistance", "Translated", "evaluate_obstacle",
+           "check_obstacle_side"]
 
 
-def _as_vector(value: npt.ArrayLike, name: str, *, unit: bool = False) -> np.ndarray:
+def _as_vector(value: npt.ArrayLike, name: str, *, unit: bool = False, dim: int | None = None) -> np.ndarray:
+    """A finite 2- or 3-vector (a 3-vector with z = 0 is cut to 2: the planar one); ``dim`` = 3: padded to 3."""
     v = np.asarray(value, dtype=np.float64).ravel()
-    if v.size == 3 and v[2] == 0.0:
+    if v.size == 3 and v[2] == 0.0 and dim != 3:
         v = v[:2]
-    if v.size != 2 or not np.all(np.isfinite(v)):
-        raise InputError(f"{name} must be a finite 2D vector, got {value!r}")
+    if v.size not in (2, 3) or not np.all(np.isfinite(v)):
+        raise InputError(f"{name} must be a finite 2D or 3D vector, got {value!r}")
+    if dim == 3 and v.size == 2:
+        v = np.append(v, 0.0)
     if unit:
         norm = float(np.linalg.norm(v))
         if norm == 0.0:
@@ -52,9 +62,16 @@ def _as_vector(value: npt.ArrayLike, name: str, *, unit: bool = False) -> np.nda
     return v
 
 
-def _xy(x: np.ndarray) -> np.ndarray:
+def _xy(x: np.ndarray, k: int = 2) -> np.ndarray:
+    """The first k coordinates of the points x (k, N), zero-padded when x has fewer rows."""
     x = np.asarray(x, dtype=np.float64)
-    return x[:2]
+    if x.shape[0] >= k:
+        return x[:k]
+    return np.vstack([x, np.zeros((k - x.shape[0], x.shape[1]))])
+
+
+def _padded(v: np.ndarray, k: int) -> np.ndarray:
+    return np.concatenate([v, np.zeros(k - v.size)]) if v.size < k else v
 
 
 class Obstacle(ABC):
@@ -66,14 +83,14 @@ class Obstacle(ABC):
 
     @abstractmethod
     def outward_normal(self, x: np.ndarray) -> np.ndarray:
-        """∇d/|∇d| at x, shape (2, N): the obstacle's outward unit normal (NaN where undefined)."""
+        """∇d/|∇d| at x, shape (k, N): the obstacle's outward unit normal (NaN where undefined)."""
 
     def gap(self, x: np.ndarray) -> np.ndarray:
         """g(x) = d(x): the initial gap along ν."""
         return self.distance(x)
 
     def direction(self, x: np.ndarray) -> np.ndarray:
-        """ν(x) = −∇d/|∇d|, shape (2, N): the unit direction from a body point towards the obstacle."""
+        """ν(x) = −∇d/|∇d|, shape (k, N): the unit direction from a body point towards the obstacle."""
         return -self.outward_normal(x)
 
     def translated(self, t: npt.ArrayLike) -> "Obstacle":
@@ -89,18 +106,23 @@ class Obstacle(ABC):
 
 @dataclass(frozen=True, slots=True)
 class Plane(Obstacle):
-    """The half-plane {(x − point)·normal ≤ 0}; ``normal``: its outward unit normal (towards the body)."""
+    """The half-space {(x − point)·normal ≤ 0}; ``normal``: its outward unit normal (towards the body).
 
-    point: tuple[float, float]
-    normal: tuple[float, float]
+    2-vectors (or 3-vectors with z = 0 in both) give the planar half-plane, extruded along z in 3D.
+    """
+
+    point: tuple[float, ...]
+    normal: tuple[float, ...]
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "point", tuple(map(float, _as_vector(self.point, "Plane point"))))
-        object.__setattr__(self, "normal", tuple(map(float, _as_vector(self.normal, "Plane normal", unit=True))))
+        p, n = _as_vector(self.point, "Plane point"), _as_vector(self.normal, "Plane normal", unit=True)
+        k = max(p.size, n.size)
+        object.__setattr__(self, "point", tuple(map(float, _padded(p, k))))
+        object.__setattr__(self, "normal", tuple(map(float, _padded(n, k))))
 
     def distance(self, x: np.ndarray) -> np.ndarray:
         p, n = np.asarray(self.point), np.asarray(self.normal)
-        return np.einsum("i,in->n", n, _xy(x) - p[:, None])
+        return np.einsum("i,in->n", n, _xy(x, p.size) - p[:, None])
 
     def outward_normal(self, x: np.ndarray) -> np.ndarray:
         return np.repeat(np.asarray(self.normal)[:, None], np.shape(x)[1], axis=1)
@@ -134,23 +156,55 @@ class Circle(Obstacle):
 
 
 @dataclass(frozen=True, slots=True)
+class Sphere(Obstacle):
+    """A rigid ball: d = |x − centre| − radius (x in 3D); undefined within 1e−8·radius of the centre."""
+
+    centre: tuple[float, float, float]
+    radius: float
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "centre", tuple(map(float, _as_vector(self.centre, "Sphere centre", dim=3))))
+        if not (np.isfinite(self.radius) and self.radius > 0):
+            raise InputError(f"the sphere radius must be > 0, got {self.radius!r}")
+        object.__setattr__(self, "radius", float(self.radius))
+
+    def _offset(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        r = _xy(x, 3) - np.asarray(self.centre)[:, None]
+        return r, np.linalg.norm(r, axis=0)
+
+    def distance(self, x: np.ndarray) -> np.ndarray:
+        r, rho = self._offset(x)
+        return np.where(rho > 1e-8 * self.radius, rho - self.radius, np.nan)
+
+    def outward_normal(self, x: np.ndarray) -> np.ndarray:
+        r, rho = self._offset(x)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return np.where(rho > 1e-8 * self.radius, r / rho, np.nan)
+
+
+@dataclass(frozen=True, slots=True)
 class SignedDistance(Obstacle):
     """Any signed distance callable d(x) (> 0 outside), with its outward normal or by central differences.
 
-    ``step`` is the finite-difference step (absolute length) used when ``normal`` is None.
+    ``step`` is the finite-difference step (absolute length) used when ``normal`` is None; ``dim`` the
+    dimension of d: 2 (d of x, y: a planar obstacle, extruded along z in 3D) or 3 (d of x, y, z, the
+    differences taken along all three).  ``normal`` maps x (3, N) to (dim, N).
     """
 
     function: Callable[[np.ndarray], np.ndarray]
     normal: Callable[[np.ndarray], np.ndarray] | None = None
     step: float = 1e-6
+    dim: int = 2
 
     def __post_init__(self) -> None:
         if not callable(self.function):
             raise InputError("SignedDistance needs a callable d(x)")
         if self.normal is not None and not callable(self.normal):
-            raise InputError("the normal of a SignedDistance must be a callable x -> (2, N) or None")
+            raise InputError("the normal of a SignedDistance must be a callable x -> (dim, N) or None")
         if not (np.isfinite(self.step) and self.step > 0):
             raise InputError(f"the finite-difference step must be > 0, got {self.step!r}")
+        if self.dim not in (2, 3) or isinstance(self.dim, bool):
+            raise InputError(f"the dimension of a SignedDistance must be 2 or 3, got {self.dim!r}")
 
     def _call(self, x: np.ndarray) -> np.ndarray:
         x = np.asarray(x, dtype=np.float64)
@@ -165,10 +219,11 @@ class SignedDistance(Obstacle):
         x = np.asarray(x, dtype=np.float64)
         if self.normal is not None:
             xx = x if x.shape[0] == 3 else np.vstack([x, np.zeros((1, x.shape[1]))])
-            n = np.asarray(self.normal(xx), dtype=np.float64).reshape(2, -1)
+            n = np.asarray(self.normal(xx), dtype=np.float64).reshape(self.dim, -1)
         else:
-            n = np.empty((2, x.shape[1]))
-            for i in range(2):
+            x = _xy(x, self.dim) if x.shape[0] < self.dim else x
+            n = np.empty((self.dim, x.shape[1]))
+            for i in range(self.dim):
                 e = np.zeros((x.shape[0], 1))
                 e[i] = self.step
                 n[i] = (self._call(x + e) - self._call(x - e)) / (2.0 * self.step)
@@ -181,14 +236,15 @@ class Translated(Obstacle):
     """``base`` moved rigidly by the vector ``shift``: d(x) = d_base(x − shift)."""
 
     base: Obstacle
-    shift: tuple[float, float]
+    shift: tuple[float, ...]
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "shift", tuple(map(float, _as_vector(self.shift, "the translation"))))
 
     def _back(self, x: np.ndarray) -> np.ndarray:
-        y = np.array(x, dtype=np.float64, copy=True)
-        y[:2] -= np.asarray(self.shift)[:, None]
+        shift = np.asarray(self.shift)
+        y = np.array(_xy(x, max(np.shape(x)[0], shift.size)), dtype=np.float64, copy=True)
+        y[: shift.size] -= shift[:, None]
         return y
 
     def distance(self, x: np.ndarray) -> np.ndarray:
@@ -198,15 +254,18 @@ class Translated(Obstacle):
         return self.base.outward_normal(self._back(x))
 
     def translated(self, t: npt.ArrayLike) -> Obstacle:
-        return Translated(self.base, tuple(np.asarray(self.shift) + _as_vector(t, "the translation")))
+        t = _as_vector(t, "the translation")
+        k = max(t.size, len(self.shift))
+        return Translated(self.base, tuple(_padded(np.asarray(self.shift), k) + _padded(t, k)))
 
 
 def check_obstacle_side(obstacle: Obstacle, nu: np.ndarray, normals: np.ndarray, gap: np.ndarray, *,
                         comm=None) -> None:
     """InputError if the obstacle's direction ν points into the body at most of the contact nodes nearest it.
 
-    ``nu`` (N, 2), ``gap`` (N,): ν and the gap from ``evaluate_obstacle`` at the Γ_C nodes; ``normals`` (N, 2):
-    the body's outward unit normals there.  The obstacle lies outside the body, so ν (from the body towards the
+    ``nu`` (N, d), ``gap`` (N,): ν and the gap from ``evaluate_obstacle`` at the Γ_C nodes; ``normals`` (N, d):
+    the body's outward unit normals there (d the dimension; extra columns of ``normals`` are ignored).  The
+    obstacle lies outside the body, so ν (from the body towards the
     obstacle) points out of it, ν·n > 0, where the two touch.  Among the nodes nearest the obstacle (gap within
     a tenth of the gaps' spread of the smallest: all of a flat Γ_C facing a plane, the apex of a curved Γ_C under
     a small indenter, not the parts of a curved Γ_C that face away), ν·n < 0 at more than half means the obstacle
@@ -216,8 +275,10 @@ def check_obstacle_side(obstacle: Obstacle, nu: np.ndarray, normals: np.ndarray,
     """
     from mpi4py import MPI
 
-    nu = np.asarray(nu, dtype=np.float64).reshape(-1, 2)
-    normals = np.asarray(normals, dtype=np.float64)[:, :2].reshape(-1, 2)
+    nu = np.asarray(nu, dtype=np.float64)
+    dim = nu.shape[1] if nu.ndim == 2 else 2
+    nu = nu.reshape(-1, dim)
+    normals = np.asarray(normals, dtype=np.float64)[:, :dim].reshape(-1, dim)
     gap = np.asarray(gap, dtype=np.float64).reshape(-1)
     low = float(gap.min(initial=np.inf))
     high = float(gap.max(initial=-np.inf))
@@ -238,26 +299,39 @@ def check_obstacle_side(obstacle: Obstacle, nu: np.ndarray, normals: np.ndarray,
         )
 
 
-def evaluate_obstacle(obstacle: Obstacle, points: np.ndarray, *, comm=None) -> tuple[np.ndarray, np.ndarray]:
-    """Gap g (N,) and direction ν (N, 2) at contact nodes ``points`` (N, 2 or 3); InputError if undefined.
+def evaluate_obstacle(obstacle: Obstacle, points: np.ndarray, *, dim: int = 2, comm=None
+                      ) -> tuple[np.ndarray, np.ndarray]:
+    """Gap g (N,) and direction ν (N, dim) at contact nodes ``points`` (N, ≥ dim); InputError if undefined.
 
-    The gap is undefined where d or ν is not finite or ν is not a unit vector (a
-    signed distance returning NaN, the centre of a circle, a zero gradient).
+    The first ``dim`` coordinates of the points are the obstacle's input.  A planar obstacle (ν with two
+    components) in 3D is the obstacle extruded along z: ν_z = 0.  The gap is undefined where d or ν is not
+    finite or ν is not a unit vector in ``dim`` dimensions (a signed distance returning NaN, the centre of a
+    circle, a zero gradient, a 3D obstacle whose ν leaves the plane of a 2D problem).
     With ``comm`` the check is collective: every rank raises if any rank has a bad node.
     """
+    if dim not in (2, 3):
+        raise InputError(f"the dimension of the contact nodes must be 2 or 3, got {dim!r}")
     points = np.asarray(points, dtype=np.float64).reshape(-1, points.shape[-1] if np.ndim(points) == 2 else 2)
-    x = np.zeros((3, points.shape[0]))
-    x[: points.shape[1]] = points.T
-    g = np.asarray(obstacle.gap(x), dtype=np.float64).reshape(-1) if points.shape[0] else np.zeros(0)
-    nu = np.asarray(obstacle.direction(x), dtype=np.float64).reshape(2, -1).T if points.shape[0] else np.zeros((0, 2))
-    if g.shape != (points.shape[0],) or nu.shape != (points.shape[0], 2):
+    n = points.shape[0]
+    x = np.zeros((dim, n))
+    k = min(dim, points.shape[1])
+    x[:k] = points[:, :k].T
+    g = np.asarray(obstacle.gap(x), dtype=np.float64).reshape(-1) if n else np.zeros(0)
+    nu = np.asarray(obstacle.direction(x), dtype=np.float64) if n else np.zeros((dim, 0))
+    rows = (nu.size // n if nu.size % n == 0 else 0) if n else dim
+    if g.shape != (n,) or rows not in (2, 3):
         raise InputError(
             f"the obstacle returned gaps of shape {g.shape} and normals of shape {nu.shape} "
-            f"for {points.shape[0]} points (expected ({points.shape[0]},) and (2, {points.shape[0]}))"
+            f"for {n} points (expected ({n},) and ({dim}, {n}))"
         )
+    nu = nu.reshape(rows, n).T
+    if rows < dim:
+        nu = np.hstack([nu, np.zeros((n, dim - rows))])
+    elif rows > dim:
+        nu = nu[:, :dim]
     with np.errstate(invalid="ignore"):
         bad = ~(np.isfinite(g) & np.all(np.isfinite(nu), axis=1) & (np.abs(np.linalg.norm(nu, axis=1) - 1.0) < 1e-6))
-    where = points[bad][:3, :2].tolist()
+    where = points[bad][:3, :dim].tolist()
     count = int(np.count_nonzero(bad))
     if comm is not None:
         count = comm.allreduce(count)

@@ -10,7 +10,9 @@ The physics can be given before the mesh (``model_1()``, or ``ContactProblem(you
 and put on a mesh with ``problem.on(mesh)``; a problem on a mesh is validated once, there (the
 boundary groups against the mesh's facet groups, E > 0 and ν ∈ (−1, ½) on every cell), and its
 cellwise material fields are built once per mesh (``fields``, ``fields_on``): the subproblems,
-the CLI and the load steps share them. The dimension is the mesh's.
+the CLI and the load steps share them. The dimension is the mesh's: triangles (plane strain) or
+tetrahedra (3D; ``problem.meshes3d``, ``geometry.read_mesh``), loads and boundary data with as many
+components.
 """
 
 import math
@@ -27,7 +29,7 @@ from dolfinx import mesh as dmesh
 from fenics_contact.errors import InputError
 from fenics_contact.problem.boundary import BoundaryConditions, check_boundary_groups
 from fenics_contact.problem import strip, validation
-from fenics_contact.problem.fields import FunctionField, MaterialFields, material_fields, tag_function
+from fenics_contact.problem.fields import FunctionField, MaterialFields, material_fields, tag_function, zero_load
 from fenics_contact.problem.geometry import ContactMesh, mesh_size
 from fenics_contact.problem.obstacles import Obstacle
 from fenics_contact.problem.tags import Boundary, Subdomain, neumann_tag
@@ -38,18 +40,13 @@ __all__ = ["ContactProblem", "ContactLaw", "Frictionless", "ScalarField", "Vecto
 
 #: A scalar field: points x of shape (3, N) -> values of shape (N,).
 ScalarField = Callable[[np.ndarray], np.ndarray]
-#: A vector field: points x of shape (3, N) -> values of shape (gdim, N).
+#: A vector field: points x of shape (3, N) -> values of shape (gdim, N) (2 on triangles, 3 on tetrahedra).
 VectorField = Callable[[np.ndarray], np.ndarray]
 
 
 def constant_field(value: float) -> ScalarField:
     """x ↦ value, as a scalar field."""
     return lambda x: np.full(x.shape[1], float(value))
-
-
-def zero_load(x: np.ndarray) -> np.ndarray:
-    """f = 0 (two components; a body force field for the plane problems)."""
-    return np.zeros((2, x.shape[1]))
 
 
 @dataclass(frozen=True, slots=True)

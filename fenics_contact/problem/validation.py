@@ -36,8 +36,8 @@ import scipy.spatial
 from dolfinx import mesh as dmesh
 from mpi4py import MPI
 
-from fenics_contact.errors import MeshTagError
-from fenics_contact.problem.tags import PHYSICAL_NAMES, Boundary, Subdomain
+from fenics_contact.errors import InputError, MeshTagError
+from fenics_contact.problem.tags import PHYSICAL_NAMES, Boundary, Subdomain, is_neumann_name, neumann_tag
 
 __all__ = [
     "BoundaryRule",
@@ -52,7 +52,10 @@ __all__ = [
     "mesh_problems",
     "require_facet_groups",
     "require_tag_counts",
+    "tetrahedral_mesh_problems",
     "validate_contact_mesh",
+    "METHODS_3D",
+    "require_method_dimension",
 ]
 
 OMEGA1, OMEGA2 = PHYSICAL_NAMES[Subdomain.OMEGA1], PHYSICAL_NAMES[Subdomain.OMEGA2]
@@ -424,9 +427,89 @@ def interface_bends_of(cm) -> np.ndarray:
     return cm.comm.bcast(bends, root=0)
 
 
+def tetrahedral_mesh_problems(cm, rules: Iterable[BoundaryRule] = BOUNDARY_RULES) -> list[str]:
+    """The checks of a tetrahedral ContactMesh, on the distributed mesh (collective; the same list on every rank):
+    every cell in exactly one of Omega1 and Omega2, no cell of zero volume, gamma non-empty and inside the mesh,
+    each group of ``rules`` non-empty (when required) and on the outer boundary, of its subdomain, disjoint
+    from and away from the groups its rule names."""
+    msh, comm = cm.mesh, cm.comm
+    tdim = msh.topology.dim
+    msh.topology.create_connectivity(tdim - 1, tdim)
+    msh.topology.create_connectivity(tdim - 1, 0)
+    n_cells = msh.topology.index_map(tdim).size_local
+    problems: list[str] = []
+    count = np.zeros(n_cells, dtype=np.int64)
+    for sub in Subdomain:
+        found = cm.cell_tags.find(sub)
+        np.add.at(count, found[found < n_cells], 1)
+    bad = comm.allreduce(int(np.count_nonzero(count != 1)), op=MPI.SUM)
+    if bad:
+        problems.append(f"{bad} tetrahedra are not in exactly one of {OMEGA1} and {OMEGA2}")
+    x = msh.geometry.x[dmesh.entities_to_geometry(msh, tdim, np.arange(n_cells, dtype=np.int32))]
+    volume = np.abs(np.linalg.det(x[:, 1:] - x[:, :1])) / 6.0
+    scale = comm.allreduce(float(np.max(np.ptp(msh.geometry.x, axis=0), initial=0.0)), op=MPI.MAX)
+    flat = comm.allreduce(int(np.count_nonzero(volume <= 1e-14 * scale**3)), op=MPI.SUM)
+    if flat:
+        problems.append(f"{flat} tetrahedra have zero volume")
+    exterior = dmesh.exterior_facet_indices(msh.topology)
+    by_name = {PHYSICAL_NAMES[t]: t for t in Boundary}
+    facets = {name: cm.facet_tags.find(tag) for name, tag in by_name.items()}
+    f2v = msh.topology.connectivity(tdim - 1, 0)
+    vmap = msh.topology.index_map(0)
+
+    def global_vertices(found: np.ndarray) -> set:
+        local = np.unique(np.concatenate([f2v.links(f) for f in found] or [np.zeros(0, np.int32)])).astype(np.int32)
+        return set().union(*comm.allgather(set(vmap.local_to_global(local).tolist())))
+
+    gamma_total = comm.allreduce(int(facets[GAMMA].size), op=MPI.SUM)
+    on_boundary = comm.allreduce(int(np.count_nonzero(np.isin(facets[GAMMA], exterior))), op=MPI.SUM)
+    if gamma_total == 0:
+        problems.append(f"the physical group {GAMMA!r} (the interface between Omega1 and Omega2) is missing or empty")
+    elif on_boundary:
+        problems.append(f"{on_boundary} of {gamma_total} facets of {GAMMA!r} lie on the outer boundary of the mesh")
+    f2c = msh.topology.connectivity(tdim - 1, tdim)
+    for rule in rules:
+        if rule.name not in facets:
+            facets[rule.name] = cm.facet_tags.find(neumann_tag(rule.name) if is_neumann_name(rule.name) else -1)
+        found = facets[rule.name]
+        total = comm.allreduce(int(found.size), op=MPI.SUM)
+        if total == 0:
+            if rule.required:
+                problems.append(f"the physical group {rule.name!r} is missing or empty")
+            continue
+        interior = comm.allreduce(int(np.count_nonzero(~np.isin(found, exterior))), op=MPI.SUM)
+        if interior:
+            problems.append(f"{interior} of {total} facets of {rule.name!r} are not on the outer boundary")
+        if rule.subdomain is not None:
+            cells = np.array([f2c.links(f)[0] for f in found], dtype=np.int32)
+            sub = next(t for t in Subdomain if PHYSICAL_NAMES[t] == rule.subdomain)
+            inside = np.isin(cells, cm.cell_tags.find(sub))
+            wrong = comm.allreduce(int(np.count_nonzero(~np.asarray(inside, dtype=bool))), op=MPI.SUM)
+            if wrong:
+                problems.append(f"{wrong} of {total} facets of {rule.name!r} are not on the boundary of "
+                                f"{rule.subdomain}")
+        for other in rule.disjoint_from:
+            common = comm.allreduce(int(np.intersect1d(found, facets.get(other, np.zeros(0, np.int32))).size),
+                                    op=MPI.SUM)
+            if common:
+                problems.append(f"{rule.name!r} and {other!r} share {common} facets: they must be disjoint")
+        for other in rule.away_from:
+            common = global_vertices(found) & global_vertices(facets.get(other, np.zeros(0, np.int32)))
+            if common:
+                problems.append(f"{rule.name!r} touches {other!r} at {len(common)} nodes: {rule.name} must lie "
+                                f"away from {other}")
+    return problems
+
+
 def validate_contact_mesh(cm, rules: Iterable[BoundaryRule] = BOUNDARY_RULES, *, source: str = "the mesh") -> None:
-    """Raise MeshTagError (on every rank) unless the tags of ``cm`` describe the contact problem; collective."""
+    """Raise MeshTagError (on every rank) unless the tags of ``cm`` describe the contact problem; collective.
+    A tetrahedral mesh is checked with ``tetrahedral_mesh_problems``."""
     rules = tuple(rules)
+    if cm.mesh.topology.dim == 3:
+        problems = tetrahedral_mesh_problems(cm, rules)
+        if problems:
+            raise MeshTagError(_message(source, problems))
+        return
     names = {GAMMA_D, GAMMA_C, GAMMA} | {r.name for r in rules} | {o for r in rules for o in r.disjoint_from + r.away_from}
     desc = describe_contact_mesh(cm, names)
     problems = mesh_problems(desc, rules) if cm.comm.rank == 0 else None
@@ -456,6 +539,24 @@ def require_tag_counts(cm) -> None:
                            f"(physical groups {list(PHYSICAL_NAMES.values())}) or build it with geometry.read_mesh")
     if counts[-1]:
         raise MeshTagError(f"{counts[-1]} cells are not tagged exactly once as Omega1 or Omega2")
+
+
+#: the methods that solve 3D (tetrahedral) problems and take rollers (symmetry planes)
+METHODS_3D = ("primal-monolithic",)
+
+
+def require_method_dimension(method: str, msh, boundary=None) -> None:
+    """InputError unless the method ``method`` (a name of ``methods.METHODS``) solves a problem on ``msh`` with
+    ``boundary``: the methods other than ``METHODS_3D`` solve plane (triangle) problems without rollers."""
+    if method in METHODS_3D:
+        return
+    works = " or ".join(repr(m) for m in METHODS_3D)
+    if msh.topology.dim != 2:
+        raise InputError(f"the method {method!r} solves plane problems (triangles) only; this mesh is "
+                         f"{msh.topology.dim}D: a 3D problem runs with the method {works} "
+                         "(fem.primal.solve_primal_monolithic)")
+    if boundary is not None and getattr(boundary, "rollers", ()):
+        raise InputError(f"the method {method!r} takes no rollers (symmetry planes); the method {works} does")
 
 
 def require_facet_groups(msh, facet_tags, groups: Iterable[Boundary]) -> None:

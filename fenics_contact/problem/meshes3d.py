@@ -1,0 +1,172 @@
+"""Tagged tetrahedral meshes of boxes: the 3D bodies of the primal monolithic solve.
+
+* ``box_mesh(x, y, z)``: the box over the grid planes x, y, z (increasing arrays: a graded grid
+  where they are not evenly spaced), every grid hexahedron cut into six tetrahedra. Its faces are
+  named by the coordinate and the side, ``FACES`` = xmin, xmax, ymin, ymax, zmin, zmax. Γ_C is
+  (a part of) the face ``contact``, Γ_D the faces ``clamped``, a traction group (``Gamma_N*``) on
+  each face of ``neumann``; the other faces are traction free. Ω₂ is the layer of cells within
+  ``strip`` of the contact face (snapped to a grid plane), Ω₁ the rest, γ the grid plane between.
+* ``unit_cube(n)``: the unit cube, h = 1/n, Γ_C the face x = 1 (the 3D ``unit_square``).
+* ``graded_planes(length, fine=…, h=…)``: grid planes 0 … length, of spacing h up to ``fine`` and
+  growing geometrically beyond: a mesh refined under the contact.
+
+The tags follow ``tags.PHYSICAL_NAMES``; they are set by the geometry of the grid (every rank
+tags its own and its ghost entities alike), so the meshes are correct by construction and are
+not passed through ``validation``.
+"""
+
+from collections.abc import Callable, Mapping, Sequence
+
+import numpy as np
+from mpi4py import MPI
+
+from dolfinx import mesh as dmesh
+
+from fenics_contact.errors import InputError
+from fenics_contact.problem.geometry import ContactMesh, mesh_size
+from fenics_contact.problem.tags import Boundary, Subdomain, neumann_tag
+
+__all__ = ["FACES", "box_mesh", "unit_cube", "graded_planes"]
+
+#: The faces of a box: the coordinate and the side (min or max).
+FACES = ("xmin", "xmax", "ymin", "ymax", "zmin", "zmax")
+
+
+def _planes(values, axis: str) -> np.ndarray:
+    v = np.asarray(values, dtype=np.float64).ravel()
+    if v.size < 2 or not np.all(np.isfinite(v)) or np.any(np.diff(v) <= 0):
+        raise InputError(f"the grid planes along {axis} must be at least two increasing finite numbers, got {values!r}")
+    return v
+
+
+def _face(name: str) -> tuple[int, int]:
+    """(axis, 0 for min / 1 for max) of a face name."""
+    if name not in FACES:
+        raise InputError(f"unknown face {name!r}: the faces of a box are {FACES}")
+    return "xyz".index(name[0]), int(name.endswith("max"))
+
+
+def graded_planes(length: float, *, fine: float, h: float, growth: float = 1.25) -> np.ndarray:
+    """Grid planes 0 = t₀ < … < t_m = ``length``: spacing ``h`` on [0, ``fine``], then each step ``growth``
+    times the last (the steps beyond ``fine`` scaled so that the last plane is ``length``)."""
+    if not (np.isfinite(length) and np.isfinite(fine) and np.isfinite(h) and 0 < h <= fine <= length
+            and np.isfinite(growth) and growth >= 1):
+        raise InputError(f"graded_planes needs 0 < h <= fine <= length and growth >= 1, got length {length!r}, "
+                         f"fine {fine!r}, h {h!r}, growth {growth!r}")
+    n_fine = max(1, int(round(fine / h)))
+    planes = list(np.linspace(0.0, fine, n_fine + 1))
+    steps, step, rest = [], fine / n_fine, length - fine
+    while rest > 1e-12 * length and sum(steps) < rest:
+        step *= growth
+        steps.append(step)
+    if steps:
+        steps = np.asarray(steps) * rest / sum(steps)
+        planes += list(fine + np.cumsum(steps))
+        planes[-1] = length
+    return np.asarray(planes)
+
+
+def box_mesh(
+    x: Sequence[float],
+    y: Sequence[float],
+    z: Sequence[float],
+    *,
+    contact: str = "zmax",
+    contact_region: Callable[[np.ndarray], np.ndarray] | None = None,
+    clamped: Sequence[str] = ("zmin",),
+    neumann: Mapping[str, str] | None = None,
+    strip: float | None = None,
+    comm: MPI.Comm = MPI.COMM_WORLD,
+) -> ContactMesh:
+    """The tagged tetrahedral mesh of the box over the grid planes ``x``, ``y``, ``z``.
+
+    Γ_C: the facets of the face ``contact`` whose vertices x (3, k) satisfy ``contact_region`` (default:
+    the whole face); Γ_D: the faces ``clamped``; ``neumann``: face -> traction group name (``Gamma_N*``);
+    Ω₂: the cells within ``strip`` (default: a quarter of the box across the contact face, snapped to the
+    nearest grid plane) of the contact face. ``h`` of the result is ``mesh_size`` on Γ_C.
+    """
+    planes = [_planes(v, a) for v, a in zip((x, y, z), "xyz")]
+    contact_axis, contact_side = _face(contact)
+    clamped = tuple(clamped)
+    neumann = dict(neumann or {})
+    for face in (*clamped, *neumann):
+        _face(face)
+    if contact in clamped or contact in neumann:
+        raise InputError(f"the contact face {contact!r} cannot also be clamped or carry a traction group")
+    both = sorted(set(clamped) & set(neumann))
+    if both:
+        raise InputError(f"face(s) {both} cannot be clamped (Gamma_D) and carry a traction group (Gamma_N) at once")
+    for name in neumann.values():
+        neumann_tag(name)  # validates the name
+    if not clamped:
+        raise InputError("box_mesh needs at least one clamped face (Gamma_D): the rigid motions would be free")
+
+    n = [p.size - 1 for p in planes]
+    msh = dmesh.create_box(comm, [np.zeros(3), np.asarray(n, dtype=np.float64)], n, dmesh.CellType.tetrahedron)
+    xg = msh.geometry.x
+    for axis in range(3):  # the integer grid i ↦ the grid plane planes[axis][i]
+        xg[:, axis] = np.interp(xg[:, axis], np.arange(n[axis] + 1, dtype=np.float64), planes[axis])
+
+    tdim = msh.topology.dim
+    lo, hi = np.array([p[0] for p in planes]), np.array([p[-1] for p in planes])
+    tol = 1e-10 * float(np.max(hi - lo))
+
+    def on_face(name: str) -> Callable[[np.ndarray], np.ndarray]:
+        axis, side = _face(name)
+        value = hi[axis] if side else lo[axis]
+        return lambda p: np.abs(p[axis] - value) < tol
+
+    across = planes[contact_axis]
+    depth = 0.25 * (across[-1] - across[0]) if strip is None else float(strip)
+    if not (np.isfinite(depth) and depth > 0):
+        raise InputError(f"the strip width must be > 0, got {strip!r}")
+    distance = across[-1] - across if contact_side else across - across[0]
+    inner = [i for i in range(1, across.size - 1)]
+    if not inner:
+        raise InputError(f"box_mesh needs at least two cells across the contact face {contact!r} (Omega1 and Omega2)")
+    k = min(inner, key=lambda i: abs(distance[i] - depth))
+    gamma_value = across[k]
+
+    facets, values = [], []
+
+    def add(found: np.ndarray, tag: int) -> None:
+        facets.append(found.astype(np.int32))
+        values.append(np.full(found.size, tag, dtype=np.int32))
+
+    face_c = on_face(contact)
+    region = contact_region or (lambda p: np.ones(p.shape[1], dtype=bool))
+    add(dmesh.locate_entities_boundary(msh, tdim - 1, lambda p: face_c(p) & np.asarray(region(p), dtype=bool)),
+        Boundary.GAMMA_C)
+    for face in clamped:
+        add(dmesh.locate_entities_boundary(msh, tdim - 1, on_face(face)), Boundary.GAMMA_D)
+    for face, name in sorted(neumann.items()):
+        add(dmesh.locate_entities_boundary(msh, tdim - 1, on_face(face)), neumann_tag(name))
+    add(dmesh.locate_entities(msh, tdim - 1, lambda p: np.abs(p[contact_axis] - gamma_value) < tol),
+        Boundary.INTERFACE)
+    entities, tags = np.concatenate(facets), np.concatenate(values)
+    order = np.argsort(entities, kind="stable")
+    entities, tags = entities[order], tags[order]
+    if np.any(np.diff(entities) == 0):
+        raise InputError("box_mesh: a facet lies in two groups (a clamped face, a traction face and the contact "
+                         "face must be different faces)")
+    facet_tags = dmesh.meshtags(msh, tdim - 1, entities, tags)
+
+    imap = msh.topology.index_map(tdim)
+    cells = np.arange(imap.size_local + imap.num_ghosts, dtype=np.int32)
+    mid = dmesh.compute_midpoints(msh, tdim, cells)[:, contact_axis]
+    in_strip = (mid > gamma_value) if contact_side else (mid < gamma_value)
+    cell_tags = dmesh.meshtags(msh, tdim, cells, np.where(in_strip, int(Subdomain.OMEGA2),
+                                                          int(Subdomain.OMEGA1)).astype(np.int32))
+    names = {neumann_tag(name): name for name in neumann.values()}
+    coarse = np.full(cells.size, -1, dtype=np.int32)
+    return ContactMesh(msh, cell_tags, facet_tags, mesh_size(msh, facet_tags), None, coarse, names or None)
+
+
+def unit_cube(n: int, *, clamped: Sequence[str] = ("xmin",), neumann: Mapping[str, str] | None = None,
+              strip: float | None = None, comm: MPI.Comm = MPI.COMM_WORLD) -> ContactMesh:
+    """The tagged mesh of (0, 1)³ with h = 1/n: Γ_C the face x = 1, Γ_D the faces ``clamped``, traction groups
+    on the faces of ``neumann``, the other faces traction free; Ω₂ the layer x > 1 − ``strip`` (default ¼)."""
+    if not isinstance(n, (int, np.integer)) or isinstance(n, bool) or n < 2:
+        raise InputError(f"unit_cube needs an integer n >= 2 (h = 1/n), got {n!r}")
+    planes = np.linspace(0.0, 1.0, int(n) + 1)
+    return box_mesh(planes, planes, planes, contact="xmax", clamped=clamped, neumann=neumann, strip=strip, comm=comm)

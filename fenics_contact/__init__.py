@@ -28,6 +28,8 @@ _API = {
     "SignedDistance": "fenics_contact.problem.obstacles",
     "unit_square": "fenics_contact.problem.geometry",
     "read_mesh": "fenics_contact.problem.geometry",
+    "unit_cube": "fenics_contact.problem.meshes3d",
+    "box_mesh": "fenics_contact.problem.meshes3d",
     "METHODS": "fenics_contact.methods",
     "solve": "fenics_contact.methods",
     "force_indentation": "fenics_contact.indentation",

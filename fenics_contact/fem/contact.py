@@ -68,17 +68,16 @@ class ContactProfile(NamedTuple):
     """Nodal data along Γ_C, in ``profile_order`` (by y on a vertical Γ_C): position, normal displacement, normal stress.
 
     ``u_c`` = u·ν − g, the normal displacement relative to the obstacle (> 0: penetration);
-    ``sigma_c`` the normal stress (< 0: contact pressure). The optional fields (issue 14)
-    give the node coordinates, their quadrature weights on Γ_C, the contact direction ν
+    ``sigma_c`` the normal stress (< 0: contact pressure). The optional fields give the node coordinates, their quadrature weights on Γ_C, the contact direction ν
     and the initial gap g, from which ``force``, ``resultant`` and ``contact_zone`` follow.
     """
 
     y: np.ndarray
     u_c: np.ndarray
     sigma_c: np.ndarray
-    points: np.ndarray | None = None  #: (N, 2) node coordinates
+    points: np.ndarray | None = None  #: (N, d) node coordinates (d the dimension)
     weights: np.ndarray | None = None  #: (N,) quadrature weights: ∫_ΓC w ds ≈ Σ weights·w(nodes)
-    normals: np.ndarray | None = None  #: (N, 2) contact direction ν (towards the obstacle)
+    normals: np.ndarray | None = None  #: (N, d) contact direction ν (towards the obstacle)
     gap: np.ndarray | None = None  #: (N,) initial gap g
 
     @property

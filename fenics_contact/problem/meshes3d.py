@@ -23,7 +23,7 @@ from mpi4py import MPI
 from dolfinx import mesh as dmesh
 
 from fenics_contact.errors import InputError
-from fenics_contact.problem.geometry import ContactMesh, mesh_size
+from fenics_contact.problem.geometry import ContactMesh, check_memory, mesh_size
 from fenics_contact.problem.tags import Boundary, Subdomain, neumann_tag
 
 __all__ = ["FACES", "box_mesh", "unit_cube", "graded_planes"]
@@ -86,6 +86,8 @@ def box_mesh(
     nearest grid plane) of the contact face. ``h`` of the result is ``mesh_size`` on Γ_C.
     """
     planes = [_planes(v, a) for v, a in zip((x, y, z), "xyz")]
+    check_memory(float(np.prod([p.size for p in planes])), f"the box of {' x '.join(str(p.size - 1) for p in planes)} "
+                 "grid cells")
     contact_axis, contact_side = _face(contact)
     clamped = tuple(clamped)
     neumann = dict(neumann or {})

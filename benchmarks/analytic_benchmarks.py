@@ -1,4 +1,4 @@
-"""Analytic benchmarks (METHOD §9): errors and rates per method.
+"""Analytic benchmarks: errors and rates per method.
 
 Methods: the primal P1 and mixed Arnold–Winther monolithic penalty solves, Algorithms 1 and 2, and the
 multiscale Algorithms 3 and 4 for each number of oversampling layers m in ``--layers`` (coarse grid

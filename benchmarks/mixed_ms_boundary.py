@@ -1,4 +1,4 @@
-"""Algorithm 4 with boundary conditions on Ω₁ (issue 14): errors against the fine mixed solutions per layer m.
+"""Algorithm 4 with boundary conditions on Ω₁: errors against the fine mixed solutions per layer m.
 
 Case A: model 2 (inclusions, contrast 10³) on the unit square, u_D = (0.01 sin 3y, 0.02 y²) on x = 0, a
 traction t = (0.3 + x, −½) on the top (Gamma_N_top), the bottom traction free; errors against the

@@ -1,7 +1,7 @@
 """Benchmark of Algorithm 3 (CEM-GMsFEM in Ω₁, primal FEM with contact in Ω₂), paper Table 5.3 style.
 
 Errors are relative to the fine-scale monolithic penalized solution on the same
-fine mesh (METHOD §6): e_u in L², e_a in the energy norm (Σ_i a_i(·,·) over Ω₁, Ω₂).
+fine mesh: e_u in L², e_a in the energy norm (Σ_i a_i(·,·) over Ω₁, Ω₂).
 
     (a) error vs oversampling layers m = 1..5 (H = 1/16, h = 1/64), both models (built-in loads, in Ω₂)
     (b) contrast robustness, E_high/E_low ∈ {1e2, 1e3, 1e4, 1e6}, fixed m

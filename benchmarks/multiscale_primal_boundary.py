@@ -1,4 +1,4 @@
-"""Algorithm 3 with a prescribed displacement and free sides on Ω₁ (issue 14): errors against Algorithm 1 per layer m.
+"""Algorithm 3 with a prescribed displacement and free sides on Ω₁: errors against Algorithm 1 per layer m.
 
 Model 3 (high-modulus channels running through γ up to Γ_C, γ cutting inclusions, loads in Ω₁) at each contrast of
 ``--contrasts``; u_D = (0.01, 0.002) on x = 0 (its lifting u_g, source-corrected), the top and the bottom

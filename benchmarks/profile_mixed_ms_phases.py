@@ -7,7 +7,7 @@ Runs the offline + online of ``mixed_ms_scaling.py --worker mixed-ms`` (model 2,
 ``multiscale.work.run_balanced`` / ``gather_dict`` / ``run_shared`` wrapped by timers, and prints per
 rank: each handed-out phase's wall time, the CPU of its items (``work``), how many items the rank computed and
 how long it waited at the phase's end for the other ranks; each gather's time; each ``run_shared`` call's wall
-time.  Compare the serial run's phases with the ranks' to see which phase does not scale (README, issue 11).
+time.  Compare the serial run's phases with the ranks' to see which phase does not scale.
 """
 
 import runpy

@@ -13,7 +13,7 @@ a comma list, the offline data reused between the updates).  Tables 5.3, 5.5–5
 residual < ``--tol`` (1e-6; the row also gives where the relative change first fell below it, the
 rule of the paper), give e_σ against the monolithic and against the split fine solution (Algorithm 2's
 fixed point), offline wall and CPU seconds and the peak RSS; ``--load omega1`` moves the model's load
-bands into Ω₁ (x ∈ [1/2, 15/16], ``models.LOADS_IN_OMEGA1``: the paper-like loads of issue 11) and
+bands into Ω₁ (x ∈ [1/2, 15/16], ``models.LOADS_IN_OMEGA1``: loads in Ω₁ as in the paper) and
 ``--without-source`` adds the paper's Ω₁ step (no source correctors) at the largest m:
 
     OMP_NUM_THREADS=1 python benchmarks/reproduce_mixed_ms_tables.py --tables 5.3 --load omega1 --without-source
@@ -71,7 +71,7 @@ def table_53(n: int, layers: list[int], accel: str, lines: list[str], title: str
     """One Table 5.3 / 5.5–5.7 analogue, m = ``layers``.
 
     ``load="omega1"`` moves the model's load bands into Ω₁ (``models.LOADS_IN_OMEGA1``: x ∈ [1/2, 15/16],
-    pushing and pulling), the paper-like loads of issue 11; ``without_source`` adds, at the largest m, the
+    pushing and pulling), loads in Ω₁ as in the paper; ``without_source`` adds, at the largest m, the
     paper's Ω₁ step (no source correctors).  Per row: the iterations of the stopping rule (transmission
     residual < ``tol``) and, in brackets, where the relative change of the iterates first fell below
     ``tol`` (the rule of the paper and of the runs before the certificate); offline wall and CPU
@@ -222,7 +222,7 @@ def table_source(n: int, layers: list[int], n_coarse: list[int], cases: list[str
     """Loads inside Ω₁: e_σ of Algorithm 4 with the source correctors (default) and without (the paper's).
 
     Iterated to tol 1e-9 (Anderson) so that e_σ is the multiscale error, not the stopping rule's; e_σ
-    against the monolithic AW solution (METHOD §6) and against the split one (σ_tt doubled at the γ
+    against the monolithic AW solution and against the split one (σ_tt doubled at the γ
     vertices, the exact fixed point of the fine splitting, Algorithm 2): the latter is what the
     multiscale method approximates, the former adds Algorithm 2's O(h²) γ term.
     """

@@ -152,7 +152,7 @@ def main() -> None:
         f"Set-up: unit square, structured right-diagonal triangles, H = 1/{args.coarse} (γ at x = "
         f"{1 - 1 / args.coarse:g}, in the homogeneous E = 1 region), Arnold–Winther × DG P1 in both "
         "subdomains, mixed penalty ε = 1e−3·h (default), g⁰ = 0, MUMPS LU. e_σ = ‖σ_h − σⁿ‖_A/‖σ_h‖_A, "
-        "e_u = ‖u_h − uⁿ‖/‖u_h‖ against the monolithic mixed solution of the same mesh (METHOD §6). "
+        "e_u = ‖u_h − uⁿ‖/‖u_h‖ against the monolithic mixed solution of the same mesh. "
         "Paper numbers: MATLAB, its own test models (Figure 5.1 is not available; ours are documented "
         "stand-ins), so iteration counts and errors are comparable in kind, not digit for digit.",
         "",

@@ -22,8 +22,8 @@
 # * g₁₂ ← g₂₁ − 2β σ₂n₂,  g₂₁ ← g₁₂ − 2β σ₁n₁.
 #
 # We compare β = 1 and β = √h (the paper's finding: √h is much faster), with the
-# paper's plain update, against the monolithic mixed solution (METHOD §6
-# measures e_σ in the compliance norm, e_u in L²). Serial only.
+# paper's plain update, against the monolithic mixed solution (e_σ in the
+# compliance norm, e_u in L²). Serial only.
 # `FENICS_CONTACT_DEMO_N` sets 1/h (default 64).
 
 # %%

@@ -138,7 +138,7 @@ def robin_data_form(g, t, n, ds_gamma):
 
 
 def gap_form(g, t, n, ds_contact):
-    """∫_ΓC g τ_c ds: the obstacle's gap in the natural boundary term (F_τ gets −∫ g τ_c, METHOD §9)."""
+    """∫_ΓC g τ_c ds: the obstacle's gap in the natural boundary term (F_τ gets −∫ g τ_c)."""
     return g * normal_stress(t, n) * ds_contact
 
 

@@ -7,7 +7,7 @@
 wall flush with Γ_C) and g_c the initial gap, both nodal P1 functions on Γ_C.
 
 Boundary integrals use nodal ("vertex") quadrature: ∫ w·v ds ≈ Σ_p w_p w(p)·v(p),
-which makes the contact nonlinearity and the Robin transmission nodal (METHOD §3).
+which makes the contact nonlinearity and the Robin transmission nodal (the docs' theory page).
 """
 
 import ufl

@@ -3,7 +3,7 @@
 At a fixed point of any of the four algorithms the transmission conditions hold
 on γ: the displacements agree (u₁ = u₂) and the tractions balance
 (σ₁n₁ + σ₂n₂ = 0).  Both are measured directly on the current pair, each
-relative to the size of the quantity it compares (METHOD §9):
+relative to the size of the quantity it compares:
 
     transmission residual = max( ‖u₁ − u₂‖_γ / max_i ‖u_i‖_γ ,  ‖t₁ + t₂‖_γ / max_i ‖t_i‖_γ ).
 

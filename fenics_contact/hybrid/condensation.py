@@ -1,4 +1,4 @@
-"""The interface problem of the Newton method and its condensation onto the Γ_C unknowns (METHOD §9).
+"""The interface problem of the Newton method and its condensation onto the Γ_C unknowns.
 
 Every algorithm exchanges Robin data g = (g₁₂, g₂₁) on γ through traces y_i (u_i on γ for the primal
 methods, σ_in_i for the mixed ones):

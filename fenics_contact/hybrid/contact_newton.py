@@ -1,4 +1,4 @@
-"""The contact Newton: s = s_L − M D s⁺ on the condensed Γ_C unknowns by semismooth Newton (METHOD §9).
+"""The contact Newton: s = s_L − M D s⁺ on the condensed Γ_C unknowns by semismooth Newton.
 
 M (n_c × n_c) is the contact compliance of the glued problem and s_L its load term
 (``hybrid.condensation``).  Each step solves the contact equations linearized on the current active set

@@ -1,4 +1,4 @@
-"""Interface Newton: solve the hybrid fixed point g = T(g) of any algorithm by semismooth Newton (METHOD §9).
+"""Interface Newton: solve the hybrid fixed point g = T(g) of any algorithm by semismooth Newton.
 
 The step provides its ``InterfaceProblem`` (``hybrid.condensation``: Ω₁'s affine interface response, Ω₂'s
 affine pieces, ``hybrid.response``).  Two strategies solve g = T(g) (``InterfaceNewtonOptions.strategy``):

@@ -10,7 +10,7 @@ history into the next input, or the interface Newton method
 **Stopping rule.**  The loop stops when the *transmission residual* of the
 current pair of subdomain solutions (``hybrid.certificate``: the relative
 displacement jump and traction imbalance on γ) is below ``tol``.  The relative
-change of the iterates (METHOD §6, the paper's rule) is still computed and
+change of the iterates (the paper's rule) is still computed and
 reported, but it is not evidence of a solution: a slow iteration changes little
 per step far from its fixed point (α = 10⁸ stopped after 2 iterations at
 e_u = 0.79 with it).

@@ -1,4 +1,4 @@
-"""Algorithm 1: the primal iterative contact-resolving hybrid method (METHOD §3).
+"""Algorithm 1: the primal iterative contact-resolving hybrid method (the docs' theory page).
 
     Ω₁ (linear):    a₁(u₁, v) + α∫_γ u₁·v = (f, v)_Ω₁ + ∫_γ g₁₂·v
     Ω₂ (nonlinear): a₂(u₂, v) + (1/δ)∫_ΓC (u₂c)⁺ v_c + α∫_γ u₂·v = (f, v)_Ω₂ + ∫_γ g₂₁·v
@@ -44,7 +44,7 @@ DEFAULT_ALPHA = "E*h^-1/2"
 #: Default α of Algorithm 3 (multiscale Ω₁): h^(-1/2) times the smallest E_p on γ.  The multiscale Ω₁'s
 #: interface response is a Robin map only up to its approximation error ε, and the glued problem sees
 #: that error multiplied by α: α_p = E_p h^(-1/2) (≈ 6e6 in the stiff channels of model 3 at contrast
-#: 1e6) made it indefinite (h = 1/32, m = 3) or 20–200× less accurate (m = 4); README, issue 10.
+#: 1e6) made it indefinite (h = 1/32, m = 3) or 20–200× less accurate (m = 4).
 DEFAULT_ALPHA_MS = "Emin*h^-1/2"
 
 log = logging.getLogger(__name__)

@@ -1,4 +1,4 @@
-"""Algorithm 3: CEM-GMsFEM in Ω₁, primal FEM with penalty contact in Ω₂ (METHOD §3).
+"""Algorithm 3: CEM-GMsFEM in Ω₁, primal FEM with penalty contact in Ω₂ (the docs' theory page).
 
     Ω₁ (multiscale, linear): w ∈ V_ms,
         a₁(w, v) + α∫_γ w·v = (f, v)_Ω₁ + ∫_γ g₁₂·v − [a₁(N g₁₂, v) + α∫_γ N g₁₂·v],   u₁ = w + N g₁₂
@@ -68,7 +68,7 @@ class MultiscalePrimalHybridStep:
         start = time.perf_counter()
         self.comm = cm.comm
         self.parts = split_mesh(cm)
-        # (issue 14) the Ω₁ CEM space takes clamped and traction-free sides, Γ_N tractions (a load functional,
+        # the Ω₁ CEM space takes clamped and traction-free sides, Γ_N tractions (a load functional,
         # source-corrected like f: cem.omega1_load) and a prescribed u_D (its lifting: cem.assemble_fine_operators)
         gdim = cm.mesh.geometry.dim
         self.interface = InterfaceSpace(cm, self.parts, shape=(gdim,))

@@ -1,6 +1,6 @@
 """Primal CEM-GMsFEM in Ω₁ (Algorithm 3): local spectral problems, relaxed CEM bases, Robin and source correctors.
 
-Notation (METHOD §3, Algorithm 3, and §9). K_i are the coarse cells of Ω₁
+Notation (the docs' theory page, Algorithm 3). K_i are the coarse cells of Ω₁
 (``multiscale.coarse``), K_{i,m} the patch of K_i extended by m coarse layers,
 κ̃ = c (λ + 2μ) H_i⁻² (H_i = √|K_i|),
 

@@ -66,13 +66,13 @@ class CEMOptions:
     for a Krylov subspace or most of its pairs are wanted).
 
     ``s_factor`` c scales the weight of the CEM inner product, κ̃ = c (λ + 2μ) H⁻²
-    (METHOD §3 has c = 1; the CEM literature's κ Σ_j|∇χ_j|² with a bilinear
+    (the paper has c = 1; the CEM literature's κ Σ_j|∇χ_j|² with a bilinear
     partition of unity gives c between 2 and 4). Default 3, chosen from the sweep
     c ∈ {1, 2, 3, 10, 30, 100} recorded in benchmarks/results/multiscale_primal.md:
     at h = 1/64, H = 1/16, l = 3, m = 5 the energy error of model 1 is 1.0e-2 with
     c = 1 and 1.2e-4 with c = 3.
 
-    ``source_correction`` (default on, METHOD §9) corrects the Ω₁ load on the
+    ``source_correction`` (default on) corrects the Ω₁ load on the
     patches as the Robin data are (N_f); off, the coarse problem sees the load
     directly, as in the paper, and the error stalls once the load acts in Ω₁.
     """

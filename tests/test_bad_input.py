@@ -17,7 +17,7 @@ from mpi4py import MPI
 from fenics_contact.cli import main
 from fenics_contact.fem.mixed import epsilon_hint
 
-from test_validation import GOOD, _solid_or_quads, build_columns
+from user_meshes import GOOD, build_columns, solid_or_quads as _solid_or_quads
 
 pytestmark = pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="the CLI tests run serially")
 

@@ -26,43 +26,11 @@ from fenics_contact.hybrid.mixed import solve_mixed_hybrid
 from fenics_contact.hybrid.primal import solve_primal_hybrid
 from fenics_contact.problem.boundary import BoundaryConditions, check_boundary_groups
 from fenics_contact.problem.geometry import build_unit_square_model, gmsh_session, read_mesh, unit_square
-from fenics_contact.problem.obstacles import SignedDistance
-from fenics_contact.problem.problem import ContactProblem, constant_field
 from fenics_contact.problem.tags import neumann_tag
 
+from manufactured import E, LAM, MU, manufactured_mesh as _mesh, manufactured_model, stress as _sigma
+
 serial = pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="mixed (Arnold–Winther) methods are serial")
-
-E, NU = 1.0, 0.3
-LAM, MU = E * NU / ((1 + NU) * (1 - 2 * NU)), E / (2 * (1 + NU))
-GROUPS = {"top": "Gamma_N_top", "bottom": "Gamma_N_bottom"}
-
-
-def _u(x):
-    return np.vstack([-0.1 * x[0] ** 2 + 0.05 * x[1] ** 2 - 0.2 * x[0], -0.1 * x[0] * x[1] + 0.02 * x[1] ** 2])
-
-
-def _sigma(x):
-    exx, eyy = -0.2 * x[0] - 0.2, -0.1 * x[0] + 0.04 * x[1]
-    return np.vstack([(LAM + 2 * MU) * exx + LAM * eyy, 0 * x[0], LAM * exx + (LAM + 2 * MU) * eyy])
-
-
-def manufactured_model() -> ContactProblem:
-    f = np.array([0.2 * (LAM + 2 * MU) + 0.1 * LAM, -0.04 * (LAM + 2 * MU)])  # −div σ (constant)
-    top = lambda x: np.vstack([0 * x[0], _sigma(x)[2]])  # noqa: E731  σn, n = (0, 1)
-    bottom = lambda x: np.vstack([0 * x[0], -_sigma(x)[2]])  # noqa: E731  n = (0, −1)
-    gap = SignedDistance(lambda x: 0.05 * x[1] ** 2 - 0.3 + (1.0 - x[0]),
-                         normal=lambda x: np.vstack([-np.ones(x.shape[1]), np.zeros(x.shape[1])]))
-    return ContactProblem(
-        name="manufactured", youngs_modulus=constant_field(E), poisson_ratio=constant_field(NU),
-        load=lambda x: np.repeat(f[:, None], x.shape[1], axis=1),
-        boundary=BoundaryConditions(displacement=_u, tractions={GROUPS["top"]: top, GROUPS["bottom"]: bottom}),
-        obstacle=gap,
-    )
-
-
-def _mesh(n):
-    return unit_square(n, 4, clamped=("left",), neumann=GROUPS)
-
 
 def _l2(expr, msh):
     return np.sqrt(msh.comm.allreduce(fem.assemble_scalar(fem.form(ufl.inner(expr, expr) * ufl.dx(

@@ -21,7 +21,7 @@ from fenics_contact.cli import main
 from fenics_contact.io import RUN_MARKER, OutputDirectory
 from fenics_contact.multiscale.cache import OfflineCache, remove_stale_temporaries
 
-from test_validation import build_columns
+from user_meshes import build_columns
 
 from mpi_jobs import mpiexec as _mpiexec
 

@@ -13,7 +13,7 @@ from pathlib import Path
 import fenics_contact  # noqa: F401
 from mpi4py import MPI
 
-sys.path.insert(0, str(Path(__file__).parent))
+sys.path[:0] = [str(Path(__file__).parent), str(Path(__file__).parents[1])]
 import test_boundary_conditions as bc  # noqa: E402
 
 from fenics_contact.fem.primal import default_penalty, solve_primal_monolithic  # noqa: E402

@@ -157,7 +157,7 @@ def test_case_load_steps_multiscale_reuse_the_runs_offline_phase(tmp_path, monke
 
     calls = {"primal-ms": _counting(monkeypatch, primal_ms, "Omega1Multiscale"),
              "mixed-ms": _counting(monkeypatch, mixed_ms, "MixedMultiscaleOmega1")}
-    case = Path(__file__).parents[1] / "cases" / "composite.toml"
+    case = Path(__file__).parents[2] / "cases" / "composite.toml"
     curves = {}
     for method, layers in (("primal-ms", "3"), ("mixed-ms", "2")):
         out = tmp_path / method
@@ -193,7 +193,7 @@ def test_case_load_steps_multiscale_on_two_ranks_match_serial(tmp_path, method, 
     mpiexec = str(mpiexec) if mpiexec.exists() else shutil.which("mpiexec")
     if mpiexec is None or MPI.COMM_WORLD.size > 1:
         pytest.skip("needs mpiexec, run serially")
-    case = Path(__file__).parents[1] / "cases" / "composite.toml"
+    case = Path(__file__).parents[2] / "cases" / "composite.toml"
     args = ["run", "--no-plots", "--case", str(case), "--method", method, "--layers", layers, "--tol", "1e-8"]
     assert main([*args, "--out", str(tmp_path / "serial")]) == 0
     proc = subprocess.run([mpiexec, "-n", "2", sys.executable, "-m", "fenics_contact.cli", *args, "--out",

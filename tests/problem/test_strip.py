@@ -32,7 +32,7 @@ from fenics_contact.problem.problem import ContactProblem
 from fenics_contact.problem.tags import Boundary, Subdomain
 from fenics_contact.problem.validation import interface_bends_of, validate_contact_mesh
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 PAD = ROOT / "cases" / "pad.msh"
 CLI = [sys.executable, "-m", "fenics_contact.launch"]
 

@@ -9,7 +9,7 @@ import jupytext
 import pytest
 from mpi4py import MPI
 
-DEMOS = sorted((Path(__file__).parents[1] / "demos").glob("demo_*.py"))
+DEMOS = sorted((Path(__file__).parents[2] / "demos").glob("demo_*.py"))
 pytestmark = pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="demos run serially")
 
 

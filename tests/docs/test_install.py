@@ -23,7 +23,7 @@ from mpi4py import MPI
 import fenics_contact
 from fenics_contact.examples import EXAMPLE_DIRS
 
-ROOT = Path(__file__).parents[1]
+ROOT = Path(__file__).parents[2]
 pytestmark = [pytest.mark.slow, pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="installs run serially")]
 
 #: what a copy of the source tree leaves out: environments, build and run outputs

@@ -21,7 +21,7 @@ from user_meshes import GOOD, build_columns, solid_or_quads as _solid_or_quads
 
 pytestmark = pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="the CLI tests run serially")
 
-STORED_MESH = Path(__file__).parents[1] / "meshes" / "unit_square_n16_H4.msh"
+STORED_MESH = Path(__file__).parents[2] / "meshes" / "unit_square_n16_H4.msh"
 SMALL = ["--h", "16", "--H", "4"]
 
 
@@ -97,7 +97,7 @@ def _cache(make: Callable[[Path], str], method: str = "primal-ms"):
 
 
 # case files
-CASES_DIR = Path(__file__).parents[1] / "cases"
+CASES_DIR = Path(__file__).parents[2] / "cases"
 #: a small bar on the unit square (clamped on the left), to be spoiled by each case below
 SQUARE = """[mesh]
 builtin = "unit-square"

@@ -99,7 +99,7 @@ MISUSE = {
 
 @pytest.mark.parametrize("case", list(MISUSE))
 def test_api_misuse_gives_a_package_error(cm, other_reference, case, monkeypatch):
-    monkeypatch.chdir(__import__("pathlib").Path(__file__).parents[1])
+    monkeypatch.chdir(__import__("pathlib").Path(__file__).parents[2])
     call, error, words = MISUSE[case]
     with pytest.raises(error) as info:
         call(cm, other_reference)

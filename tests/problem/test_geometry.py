@@ -130,7 +130,7 @@ def test_stored_mesh_is_the_builder_output():
     """meshes/unit_square_n16_H4.msh is what meshes/make_unit_square.py writes (see meshes/README.md)."""
     from pathlib import Path
 
-    stored = read_mesh(Path(__file__).parents[1] / "meshes" / "unit_square_n16_H4.msh", H=0.25)
+    stored = read_mesh(Path(__file__).parents[2] / "meshes" / "unit_square_n16_H4.msh", H=0.25)
     built = unit_square(16, 4)
     for t in Subdomain:
         assert _count(stored.cell_tags, t, stored.comm) == _count(built.cell_tags, t, built.comm)

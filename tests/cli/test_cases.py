@@ -30,7 +30,7 @@ from mpi_jobs import mpiexec as _mpiexec
 
 pytestmark = pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="the CLI tests run serially (MPI: launched below)")
 
-CASES = Path(__file__).parents[1] / "cases"
+CASES = Path(__file__).parents[2] / "cases"
 
 
 def _run(tmp_path: Path, *args: str, name: str = "out") -> dict:
@@ -111,7 +111,7 @@ def test_a_case_file_reads_into_validated_dataclasses(tmp_path):
 
 def test_the_readme_case_file_is_valid(tmp_path):
     """The case of the README's "Your own problem" reads, builds its strip on the user's mesh and its problem."""
-    readme = (Path(__file__).parents[1] / "README.md").read_text()
+    readme = (Path(__file__).parents[2] / "README.md").read_text()
     text = readme.split("## Your own problem")[1].split("```toml\n")[1].split("```")[0]
     path = tmp_path / "readme.toml"
     path.write_text(text.replace('file = "pad.msh"', f'file = "{CASES / "pad.msh"}"'))
@@ -209,7 +209,7 @@ def test_bar_case_with_a_prescribed_displacement(tmp_path, method):
 def test_hertz_case_small(tmp_path):
     """r = 0.5 (contact cells a/10): contact half-width within two cells of a = 2√(RF/(πE*)) and the peak
     within 2.5 % of p₀ = 2F/(πa) for the force F read off (measured −0.4 cells, +1.8 %; r = 1 meets the
-    1 % bound, tests/test_analytic.py); the curve's last point is the run's own solve, F/d grows."""
+    1 % bound, tests/problem/test_analytic.py); the curve's last point is the run's own solve, F/d grows."""
     s = _run(tmp_path, "--case", str(CASES / "hertz.toml"), "--set", "mesh.refinement=0.5",
              "--set", "obstacle.indentation=[6e-4, 1.2e-3]")
     R, E_star = 5.0, 1.0 / (1.0 - 0.3**2)

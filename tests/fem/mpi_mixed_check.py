@@ -2,7 +2,7 @@
 
 Used by test_mpi_mixed.py, once serially and under ``mpiexec -n 2`` / ``-n 3``; the numbers must agree.
 
-    python tests/mpi_mixed_check.py OUT.npz CASE [CASE ...]
+    python tests/fem/mpi_mixed_check.py OUT.npz CASE [CASE ...]
 
 Cases: ``mono-1``, ``mono-2`` (models 1, 2 on unit_square(16, 4)), ``mono-free`` (model 1 with only the
 left side clamped: traction-free top and bottom), ``mono-bc`` (u_D, two traction groups, a curved gap:
@@ -23,8 +23,8 @@ from mpi4py import MPI
 
 from dolfinx import fem
 
-sys.path.insert(0, str(Path(__file__).parent))
-import test_boundary_conditions as bc  # noqa: E402
+sys.path[:0] = [str(Path(__file__).parent), str(Path(__file__).parents[1])]
+import manufactured  # noqa: E402
 
 from fenics_contact.fem.mixed import solve_mixed_monolithic  # noqa: E402
 from fenics_contact.hybrid.iteration import IterationOptions  # noqa: E402
@@ -63,7 +63,7 @@ def mesh_and_model(name: str, n: int = 16):
     if name == "free":
         return unit_square(n, 4, clamped=("left",)), get_model(1)
     if name == "bc":
-        return bc._mesh(8), bc.manufactured_model()
+        return manufactured.manufactured_mesh(8), manufactured.manufactured_model()
     raise SystemExit(f"unknown case {name}")
 
 
@@ -126,7 +126,7 @@ def indent(fields: dict) -> dict:
 
 
 def rates(fields: dict) -> dict:
-    import test_arnold_winther as aw
+    import aw_fields as aw
 
     from fenics_contact.fem.arnold_winther import ArnoldWintherSpace, lame_parameters, solve_mixed_elasticity
 

@@ -1,6 +1,6 @@
 """Tests of the Arnold–Winther stress space (fenics_contact.fem.arnold_winther).
 
-Run from the repository root:  .venv/bin/python -m pytest tests/test_arnold_winther.py -q
+Run from the repository root:  .venv/bin/python -m pytest tests/fem/test_arnold_winther.py -q
 """
 
 from __future__ import annotations

@@ -159,7 +159,7 @@ def _cli(*args: str, ranks: int = 2) -> subprocess.CompletedProcess:
 @pytest.mark.skipif(_mpiexec() is None, reason="no mpiexec")
 def test_two_ranks_write_one_directory(tmp_path):
     out = tmp_path / "mpi"
-    stored = Path(__file__).parents[1] / "meshes" / "unit_square_n16_H4.msh"  # validated on 2 ranks
+    stored = Path(__file__).parents[2] / "meshes" / "unit_square_n16_H4.msh"  # validated on 2 ranks
     proc = _cli("--mesh", str(stored), "--H", "4", "--out", str(out))
     assert proc.returncode == 0, proc.stderr[-2000:]
     summary = json.loads((out / "summary.json").read_text())
@@ -176,7 +176,7 @@ def test_two_ranks_write_one_directory(tmp_path):
     assert len(lines) == 1 and "not on the boundary of Omega2" in lines[0], proc.stderr
     assert _snapshot(out) == before
     assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.msh", "mpi"]
-    # (the mixed method under mpiexec: tests/test_mpi_mixed.py writes the serial outputs from 2 ranks)
+    # (the mixed method under mpiexec: tests/fem/test_mpi_mixed.py writes the serial outputs from 2 ranks)
     np.testing.assert_equal(summary["dofs"]["omega1"] + summary["dofs"]["omega2"] - summary["dofs"]["interface"],
                             2 * 17 * 17)
 

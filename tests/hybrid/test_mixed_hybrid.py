@@ -1,6 +1,6 @@
 """Algorithm 2 (fenics_contact.hybrid.mixed): fixed point, tolerance 1e-6 errors, β, ν → ½, bad input.
 
-Run from the repository root:  .venv/bin/python -m pytest tests/test_mixed_hybrid.py -q
+Run from the repository root:  .venv/bin/python -m pytest tests/hybrid/test_mixed_hybrid.py -q
 """
 
 import numpy as np

@@ -18,7 +18,7 @@ from mpi4py import MPI
 
 import fenics_contact
 
-ROOT = Path(__file__).parents[1]
+ROOT = Path(__file__).parents[2]
 pytestmark = [pytest.mark.slow, pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="the docs build runs serially")]
 
 

@@ -1,4 +1,4 @@
-"""The mixed method under ``mpiexec -n 2`` and ``-n 3`` gives the serial answer (tests/mpi_mixed_check.py).
+"""The mixed method under ``mpiexec -n 2`` and ``-n 3`` gives the serial answer (tests/fem/mpi_mixed_check.py).
 
 Monolithic mixed contact (models 1 and 2, a mesh with traction-free sides, the manufactured problem with
 u_D, tractions and a curved gap) and Algorithm 2: the same Newton steps, active sets and iterations, and

@@ -145,7 +145,7 @@ def test_a_stored_mesh_runs_as_the_same_built_in_grid(tmp_path):
     --h 16 --H 4 and the same run (before, h was the largest cell diameter, √2/16, so δ and α were √2 off)."""
     from pathlib import Path
 
-    stored = Path(__file__).parents[1] / "meshes" / "unit_square_n16_H4.msh"
+    stored = Path(__file__).parents[2] / "meshes" / "unit_square_n16_H4.msh"
     same = ["--H", "4", "--accel", "anderson", "--no-plots"]  # a fixed-point iteration: many iterates to compare
     assert main(["run", "--mesh", str(stored), *same, "--out", str(tmp_path / "file")]) == 0
     assert main(["run", "--h", "16", *same, "--out", str(tmp_path / "built")]) == 0

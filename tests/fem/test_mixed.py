@@ -1,6 +1,6 @@
 """Mixed penalized contact (fenics_contact.fem.mixed, forms_mixed): forms, Newton, complementarity, bad input.
 
-Run from the repository root:  .venv/bin/python -m pytest tests/test_mixed.py -q
+Run from the repository root:  .venv/bin/python -m pytest tests/fem/test_mixed.py -q
 """
 
 import numpy as np

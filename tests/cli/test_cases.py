@@ -13,9 +13,6 @@ example cases of ``cases/`` run at a small size against what is known of their s
 
 import importlib.util
 import json
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -26,9 +23,8 @@ from fenics_contact.cli import build_parser, main, options_from_arguments
 from fenics_contact.errors import InputError
 from fenics_contact.problem.case import ByGroup, MeshFile, Pixels, PythonField, Uniform, load_case, parse_override
 
-from mpi_jobs import mpiexec as _mpiexec
 
-pytestmark = pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="the CLI tests run serially (MPI: launched below)")
+pytestmark = pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="the CLI tests run serially (MPI: test_cli_mpi.py)")
 
 CASES = Path(__file__).parents[2] / "cases"
 
@@ -321,20 +317,3 @@ def test_composite_case_mixed_agrees_with_primal(tmp_path):
     assert primal["force_indentation"] is None and mixed["force_indentation"] is None  # one depth: no curve
     assert abs(mixed["contact_force"] / primal["contact_force"] - 1.0) < 0.02
     assert abs(mixed["contact_zone"][0][1] - primal["contact_zone"][0][1]) <= primal["h"]
-
-
-@pytest.mark.mpi
-@pytest.mark.skipif(_mpiexec() is None, reason="no mpiexec")
-def test_composite_case_on_two_ranks_matches_serial(tmp_path):
-    """Materials by group under MPI (the overlay groups read on rank 0, the subdomain centroids gathered)."""
-    args = ["--case", str(CASES / "composite.toml"), "--set", "obstacle.indentation=0.008"]
-    serial = _run(tmp_path, *args, name="serial")
-    out = tmp_path / "parallel"
-    proc = subprocess.run([_mpiexec(), "-n", "2", sys.executable, "-m", "fenics_contact.cli", "run", "--no-plots",
-                           *args, "--out", str(out)], capture_output=True, text=True,
-                          env=dict(os.environ, OMP_NUM_THREADS="1"), timeout=600)
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    parallel = json.loads((out / "summary.json").read_text())
-    assert parallel["mpi_ranks"] == 2 and serial["mpi_ranks"] == 1
-    assert abs(parallel["contact_force"] - serial["contact_force"]) <= 1e-6 * serial["contact_force"]
-    assert np.allclose(parallel["contact_zone"], serial["contact_zone"], rtol=0, atol=1e-12)

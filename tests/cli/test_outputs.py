@@ -1,5 +1,5 @@
 """Outputs whole or absent: a reused --out holds exactly one run, a failed or killed run leaves it as it was,
-stale temporaries are cleaned, and ranks of an MPI run write one directory together."""
+stale temporaries are cleaned (ranks of an MPI run writing one directory together: test_cli_mpi.py)."""
 
 import json
 import os
@@ -13,8 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import pyvista
-from outcome import outcome_lines, run_files
+from outcome import run_files
 from mpi4py import MPI
 
 from fenics_contact.cli import main
@@ -23,7 +22,6 @@ from fenics_contact.multiscale.cache import OfflineCache, remove_stale_temporari
 
 from user_meshes import build_columns
 
-from mpi_jobs import mpiexec as _mpiexec
 
 pytestmark = pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="launches its own processes")
 
@@ -144,41 +142,6 @@ def test_kill_9_during_a_cache_save_leaves_a_temporary_that_the_next_use_removes
 
     assert Cache(tmp_path).load("k" * 40) == (None, "missing")
     assert not list(tmp_path.glob("*.npz.tmp"))
-
-
-# ---------------------------------------------------------------------------------------------
-# MPI: rank 0 handles the directory, every rank writes its part of the fields
-# ---------------------------------------------------------------------------------------------
-def _cli(*args: str, ranks: int = 2) -> subprocess.CompletedProcess:
-    command = [_mpiexec(), "-n", str(ranks), sys.executable, "-m", "fenics_contact.cli", "run", *args]
-    env = dict(os.environ, OMP_NUM_THREADS="1")
-    return subprocess.run(command, capture_output=True, text=True, env=env, timeout=600)
-
-
-@pytest.mark.mpi
-@pytest.mark.skipif(_mpiexec() is None, reason="no mpiexec")
-def test_two_ranks_write_one_directory(tmp_path):
-    out = tmp_path / "mpi"
-    stored = Path(__file__).parents[2] / "meshes" / "unit_square_n16_H4.msh"  # validated on 2 ranks
-    proc = _cli("--mesh", str(stored), "--H", "4", "--out", str(out))
-    assert proc.returncode == 0, proc.stderr[-2000:]
-    summary = json.loads((out / "summary.json").read_text())
-    assert summary["mpi_ranks"] == 2 and summary["converged"] is True
-    assert {"E.png", "contact.png", "displacement.png", "history.png"} <= {p.name for p in out.iterdir()}
-    fields = pyvista.read(out / "fields.pvd")[0]
-    assert fields.n_points == 289 and fields.n_cells == 2 * 16 * 16  # both ranks' parts, 17 x 17 nodes once
-    # a bad mesh: exit 2, one line on stderr (rank 0), the run before untouched (reuse: serial tests above)
-    before = _snapshot(out)
-    bad = build_columns(tmp_path / "bad.msh", gamma_c=("v0",), gamma_d=("b0", "b1", "b2", "t0", "t1", "t2", "v3"))
-    proc = _cli("--mesh", str(bad), "--no-plots", "--out", str(out))
-    assert proc.returncode == 2
-    lines = outcome_lines(proc.stderr)
-    assert len(lines) == 1 and "not on the boundary of Omega2" in lines[0], proc.stderr
-    assert _snapshot(out) == before
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.msh", "mpi"]
-    # (the mixed method under mpiexec: tests/fem/test_mpi_mixed.py writes the serial outputs from 2 ranks)
-    np.testing.assert_equal(summary["dofs"]["omega1"] + summary["dofs"]["omega2"] - summary["dofs"]["interface"],
-                            2 * 17 * 17)
 
 
 def test_peak_rss_is_in_bytes():

@@ -10,11 +10,6 @@ against the fine monolithic solution falls with the oversampling layers m.
 
 import gc
 import glob
-import json
-import os
-import subprocess
-import sys
-from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
@@ -33,7 +28,6 @@ from fenics_contact.errors import InputError
 from multiscale_layers import layer_errors
 from fenics_contact.fem.primal import PrimalSubproblem
 
-from mpi_jobs import mpiexec as _mpiexec
 
 pytestmark = pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="Algorithm 3 is serial")
 
@@ -406,39 +400,6 @@ def test_options_validated(kwargs):
 def test_operators_need_a_serial_mesh():
     with pytest.raises(InputError, match="serial"):
         cem.require_serial(SimpleNamespace(size=2))
-
-
-def _run_check(prefix: list[str], *args: str) -> dict:
-    env = dict(os.environ, OMP_NUM_THREADS="1")
-    script = Path(__file__).with_name("mpi_check_primal_ms.py")
-    proc = subprocess.run([*prefix, sys.executable, str(script), *args], capture_output=True, text=True,
-                          env=env, timeout=600)
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    line = next(l for l in proc.stdout.splitlines() if l.startswith("RESULT "))
-    return json.loads(line[len("RESULT "):])
-
-
-@pytest.mark.mpi
-@pytest.mark.skipif(_mpiexec() is None, reason="no mpiexec")
-def test_two_ranks_match_serial(tmp_path):
-    """mpiexec -n 2: the patches are shared out (each rank computes some, none twice) and the Algorithm 3
-    solution equals the serial one DOF by DOF to 1e-10 (loads in Ω₁, source correction on)."""
-    path = str(tmp_path / "serial.npz")
-    serial = _run_check([], "32", "8", path)
-    parallel = _run_check([_mpiexec(), "-n", "2"], "32", "8", path, path)
-    assert serial["ranks"] == 1 and parallel["ranks"] == 2
-    assert serial["converged"] and parallel["converged"]
-    assert parallel["iterations"] == serial["iterations"]
-    assert parallel["dim_ms"] == serial["dim_ms"]
-    shares = parallel["patches_here"]
-    assert min(shares) > 0 and sum(shares) == serial["patches_here"][0] == 56
-    assert parallel["max_diff"] < 1e-10
-    for key in ("e_u", "e_a"):
-        assert abs(parallel[key] - serial[key]) <= 1e-8 * serial[key], key
-    assert np.allclose(parallel["rel_changes"], serial["rel_changes"], rtol=1e-6, atol=1e-12)
-    for run in (serial, parallel):  # --accel newton: the same fixed point, the same steps on 1 and 2 ranks
-        assert run["newton_converged"] and run["newton_vs_robin"] < 1e-8, run
-    assert parallel["newton_steps"] == serial["newton_steps"] <= 8
 
 
 def test_threshold_limits_modes(omega1_32_8):

@@ -79,7 +79,7 @@ from fenics_contact.problem.problem import ContactProblem
 from fenics_contact.problem.tags import Subdomain
 from fenics_contact.problem.validation import contact_open_ends
 
-__all__ = ["main", "build_parser", "run", "RunOptions", "EXIT_CODES"]
+__all__ = ["main", "build_parser", "run", "RunOptions", "EXIT_CODES", "Interrupted", "interruptible"]
 
 log = logging.getLogger("fenics_contact")
 
@@ -956,7 +956,7 @@ def _solve_and_write(options: RunOptions, comm: MPI.Comm, model: ContactProblem 
 # the command
 # ---------------------------------------------------------------------------------------------
 class Interrupted(BaseException):
-    """SIGINT or SIGTERM arrived (raised by the handlers of ``_interruptible``)."""
+    """SIGINT or SIGTERM arrived (raised by the handlers of ``interruptible``)."""
 
     def __init__(self, signum: int) -> None:
         super().__init__(signal.Signals(signum).name)
@@ -976,7 +976,7 @@ def _in_finalizer(frame) -> bool:
 
 
 @contextmanager
-def _interruptible() -> Iterator[list[int]]:
+def interruptible() -> Iterator[list[int]]:
     """SIGINT and SIGTERM raise ``Interrupted`` (so that cleanup runs); the previous handlers come back after.
 
     Python ignores an exception raised in a ``__del__`` (it prints "Exception ignored in ...") and goes on: a
@@ -1051,7 +1051,7 @@ def main(argv: list[str] | None = None) -> int:
     _setup_logging(getattr(args, "verbose", False))
     comm = MPI.COMM_WORLD
     out = getattr(args, "out", None)
-    with _interruptible() as pending:
+    with interruptible() as pending:
         try:
             options, case = options_from_arguments(args, argv)
             out = options.out

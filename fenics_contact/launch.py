@@ -18,7 +18,7 @@ __all__ = ["main"]
 
 def main(argv: list[str] | None = None) -> int:
     # a Ctrl-C during the imports is recorded and acted on once they are done (see above); afterwards it
-    # raises KeyboardInterrupt, as during the run (``cli._interruptible`` installs its own handlers), also
+    # raises KeyboardInterrupt, as during the run (``cli.interruptible`` installs its own handlers), also
     # when the process inherited an ignored SIGINT (a background job of a script)
     held: list[int] = []
     signal.signal(signal.SIGINT, lambda signum, frame: held.append(signum))

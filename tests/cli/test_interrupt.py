@@ -104,7 +104,7 @@ def test_a_signal_inside_a_finalizer_is_not_lost():
     swallowed and the run went on to exit 0 (seen once in the suite).  It is sent again just after; one that
     lands in the very last finalizer of the block is handed to the caller; the caller's handlers and alarms
     are left as they were."""
-    from fenics_contact.cli import Interrupted, _interruptible
+    from fenics_contact.cli import Interrupted, interruptible
 
     class Freed:
         def __del__(self):
@@ -116,13 +116,13 @@ def test_a_signal_inside_a_finalizer_is_not_lost():
     signal.signal(signal.SIGALRM, lambda *_: rang.append(1))
     signal.setitimer(signal.ITIMER_REAL, 0.3)  # a caller's alarm, running through the block
     try:
-        with pytest.raises(Interrupted) as stop, _interruptible():
+        with pytest.raises(Interrupted) as stop, interruptible():
             Freed()  # (dropped at once)
             deadline = time.monotonic() + 5.0
             while time.monotonic() < deadline:
                 time.sleep(0.01)
         assert stop.value.signum == signal.SIGTERM
-        with _interruptible() as pending:  # the signal lands in the block's last finalizer
+        with interruptible() as pending:  # the signal lands in the block's last finalizer
             Freed()
         assert pending == [signal.SIGTERM]
         time.sleep(0.4)

@@ -47,7 +47,7 @@ def test_full_space_reproduces_the_fine_problem_with_boundary_data():
     cm = _mesh(8, 4)
     step = MixedHybridStep(models.get_model(2).with_(boundary=BOUNDARY).on(cm), beta="sqrt-h")
     part, sub = step.parts[0], step.sub[0]
-    assert sub._lifted and sub.u_D is not None
+    assert sub.spaces.lifted and sub.u_D is not None
     grid = coarse_grid(part.mesh, part.cell_map, cm.coarse_cell, cm.H)
     tf = essential_traction_facets(part.mesh, part.facet_tags)
     assert tf.size == 6 + 6  # bottom (free) and top (Γ_N) of Ω₁: 3/4 · 8 facets each

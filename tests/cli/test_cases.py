@@ -226,6 +226,7 @@ def test_hertz_case_small(tmp_path):
     assert s["contact_at_open_end"] == [] and all(st["contact_at_open_end"] == [] for st in steps)
 
 
+@pytest.mark.slow
 def test_contact_cut_short_by_the_end_of_gamma_c_is_warned(tmp_path, capsys):
     """Indented 17× deeper, the Hertz contact zone reaches both ends of Γ_C (|x| = 3a), where the top face goes
     on straight: the result is a contact cut short by the tags (force 7 % low, peak 4× high against a wider

@@ -13,6 +13,7 @@ from fenics_contact.cli import main
 pytestmark = pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="the CLI tests run serially")
 
 
+@pytest.mark.slow
 def test_run_writes_summary_fields_and_plots(tmp_path):
     out = tmp_path / "run"
     code = main(["run", "--model", "2", "--h", "16", "--H", "4", "--reference", "--out", str(out)])
@@ -91,6 +92,7 @@ def test_primal_ms_method_and_offline_cache(tmp_path):
     assert b["spectral_gap"] == a["spectral_gap"] > 0
 
 
+@pytest.mark.slow
 def test_mixed_ms_offline_cache(tmp_path):
     args = ["run", "--model", "2", "--method", "mixed-ms", "--h", "16", "--H", "4", "--layers", "1",
             "--reference", "--no-plots", "--cache-dir", str(tmp_path / "cache")]
@@ -111,6 +113,7 @@ def test_mixed_ms_offline_cache(tmp_path):
 
 
 @pytest.mark.parametrize("method", ["mixed", "mixed-ms"])
+@pytest.mark.slow
 def test_mixed_methods(tmp_path, method):
     out = tmp_path / method
     extra = ["--layers", "2"] if method == "mixed-ms" else []

@@ -44,6 +44,7 @@ def test_newton_run_reports_its_certificate(tmp_path, method):
     assert s["e_u"] < (1e-8 if method == "primal" else 1e-3)
 
 
+@pytest.mark.slow
 def test_multiscale_default_alpha_at_contrast_1e6(tmp_path, capsys):
     """`--model 3 --E-high 1e6 --method primal-ms` with the defaults (m = 4, α = Emin·h^-1/2): converged and
     close to the fine solution (α = E·h^-1/2, the former default, gave e_u = 0.33 at h = 1/32; at m = 3 a
@@ -61,6 +62,7 @@ def test_multiscale_default_alpha_at_contrast_1e6(tmp_path, capsys):
     assert "not positive definite" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_front_options_same_solution_fewer_steps(tmp_path):
     """The contact Newton's front option on the case it was built for, Algorithm 1 on model 3 at contrast 1e6,
     h = 1/128 (a near-rigid channel on Γ_C): the default local front resolution (4 steps measured) and

@@ -46,6 +46,7 @@ def test_interrupted_run_leaves_the_previous_results(tmp_path, signum, code):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["run", "stdout.txt"], "no staging directory is left"
 
 
+@pytest.mark.slow
 def test_interrupt_while_starting_up(tmp_path):
     """Ctrl-C while the console script still imports DOLFINx: exit 130, one line, no traceback, nothing written."""
     out = tmp_path / "run"
@@ -73,6 +74,7 @@ def test_interrupt_while_starting_up(tmp_path):
     assert not out.exists()
 
 
+@pytest.mark.slow
 def test_interrupt_during_the_imports_is_held_until_they_finish(tmp_path):
     """A SIGINT that arrives while the command line is being imported does not break into the import (where it
     could land in a callback of DOLFINx's C++ module initialisation and abort the process): the import runs to

@@ -39,6 +39,7 @@ def _snapshot(directory: Path) -> dict[str, bytes]:
     return run_files(directory)
 
 
+@pytest.mark.slow
 def test_a_reused_out_holds_exactly_one_run(tmp_path):
     out = tmp_path / "run"
     assert main(["run", *SMALL, "--method", "mixed", "--out", str(out)]) == 0
@@ -144,6 +145,7 @@ def test_kill_9_during_a_cache_save_leaves_a_temporary_that_the_next_use_removes
     assert not list(tmp_path.glob("*.npz.tmp"))
 
 
+@pytest.mark.slow
 def test_peak_rss_is_in_bytes():
     """``io.peak_rss_bytes`` (the benchmarks' peak memory) counts bytes: touching 300 MB more than the process
     ever held raises it by at least that much (a figure left in KiB or MiB would be 10³–10⁶ times too small)."""

@@ -25,6 +25,7 @@ def test_demo_is_a_notebook(demo):
 
 
 @pytest.mark.parametrize("demo", DEMOS, ids=lambda p: p.stem)
+@pytest.mark.slow
 def test_demo_runs(demo, tmp_path):
     env = dict(os.environ, FENICS_CONTACT_DEMO_N="16", FENICS_CONTACT_DEMO_OUT=str(tmp_path), MPLBACKEND="Agg")
     proc = subprocess.run([sys.executable, str(demo)], cwd=tmp_path, env=env, capture_output=True, text=True,

@@ -44,6 +44,7 @@ def _scipy(A):
     return sp.csr_matrix((data, indices, indptr), shape=A.getSize())
 
 
+@pytest.mark.slow
 def test_contact_term_matches_the_ufl_form():
     """Q-based penalty residual and Jacobian = the UFL forms with the Gauss–Lobatto contact measure."""
     cm = unit_square(16, 4)
@@ -126,6 +127,7 @@ def test_monolithic_contact_and_complementarity(mesh32, solutions, number):
     assert abs(lo - plo) <= 1.5 * cm.h and abs(hi - phi) <= 1.5 * cm.h, ((lo, hi), (plo, phi))
 
 
+@pytest.mark.slow
 def test_line_search_path_reaches_the_same_solution(mesh32, solutions):
     """Exact line search on J at every step: J decreases monotonically, same solution, and the
     step length minimizes J along the direction (checked against a fine grid)."""

@@ -85,6 +85,7 @@ def test_alpha_emin_is_the_smallest_nodal_modulus_on_gamma():
         robin_coefficient("E*Emin", E, space, cm.h)
 
 
+@pytest.mark.slow
 def test_multiscale_alpha_amplifying_its_error_is_a_clear_error_and_the_default_is_accurate(strip):
     cm, model, delta, ref = strip
     # α = E·h^-1/2, m = 3: the glued problem is indefinite -> ConvergenceError naming it (CLI exit 4)

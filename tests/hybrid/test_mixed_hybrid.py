@@ -67,6 +67,7 @@ def _space_gap(cm, model, aw, split):
 
 
 @pytest.mark.parametrize("number", [1, 2])
+@pytest.mark.slow
 def test_fixed_point_is_the_split_monolithic_solution(mesh, references, number):
     """At tight tolerance the iterate is the monolithic solution on X̃_h to round-off, and its distance
     to the AW monolithic solution is exactly the X̃_h/X_h space difference."""
@@ -88,6 +89,7 @@ def test_fixed_point_is_the_split_monolithic_solution(mesh, references, number):
     assert res.profile.active_interval() == split.profile.active_interval()
 
 
+@pytest.mark.slow
 def test_space_difference_shrinks_with_h(mesh, mesh64, references, references64):
     """The X̃_h/X_h difference is a discretization effect: ≥ 4× smaller at h = 1/64 (measured 6.4×)."""
     model = get_model(1)
@@ -99,6 +101,7 @@ def test_space_difference_shrinks_with_h(mesh, mesh64, references, references64)
 
 
 @pytest.mark.parametrize("number", [1, 2])
+@pytest.mark.slow
 def test_paper_tolerance_and_beta(mesh, references, number):
     """Plain update (the paper's), tolerance 1e-6, β = 1 and √h at h = 1/32: errors ≤ 1e-4 against the
     exact fixed point (X̃_h), within the measured space gap + 1e-4 of the AW solution; √h needs fewer
@@ -124,6 +127,7 @@ def test_paper_tolerance_and_beta(mesh, references, number):
 
 
 @pytest.mark.parametrize("number", [1, 2])
+@pytest.mark.slow
 def test_paper_tolerance_against_the_aw_solution(mesh64, references64, number):
     """h = 1/64, β = √h, plain update, tolerance 1e-6: e_σ, e_u ≤ 1e-3 against the monolithic AW solution."""
     res = solve_mixed_hybrid(get_model(number).on(mesh64), beta="sqrt-h", reference=references64[number],
@@ -132,6 +136,7 @@ def test_paper_tolerance_against_the_aw_solution(mesh64, references64, number):
     assert res.e_sigma <= 1e-3 and res.e_u <= 1e-3, (res.e_sigma, res.e_u)
 
 
+@pytest.mark.slow
 def test_anderson_acceleration(mesh, references):
     """Anderson on the interface data: same fixed point, fewer iterations than the plain update."""
     _, split = references[2]
@@ -144,6 +149,7 @@ def test_anderson_acceleration(mesh, references):
 
 
 @pytest.mark.parametrize("nu1, nu2, ratio", [(0.4999, 0.35, 1e4), (0.35, 0.4999, 1e-4), (0.4999, 0.4999, 1.0)])
+@pytest.mark.slow
 def test_nearly_incompressible(mesh, nu1, nu2, ratio):
     """Table 5.4 cases at ν = 0.4999, h = 1/32, plain update, β = √h: converged at 1e-6 with
     e_σ, e_u ≤ 1e-4 against the exact fixed point (X̃_h)."""
@@ -155,6 +161,7 @@ def test_nearly_incompressible(mesh, nu1, nu2, ratio):
     assert res.e_sigma <= 1e-4 and res.e_u <= 1e-4, (res.e_sigma, res.e_u)
 
 
+@pytest.mark.slow
 def test_nearly_incompressible_against_the_aw_solution(mesh64):
     """ν₁ = ν₂ = 0.4999 at h = 1/64: e_σ, e_u ≤ 1e-3 against the monolithic AW solution."""
     model = _incompressible(1.0, 0.4999, 0.4999)

@@ -208,6 +208,7 @@ def test_user_partition_from_physical_groups(partitioned):
 
 
 @pytest.mark.parametrize("case", ["l_shape", "rectangle", "partitioned"])
+@pytest.mark.slow
 def test_algorithm3_on_any_domain_matches_monolithic_with_all_modes(case, request):
     """All local modes and global patches: V_ms is the fine space, so Algorithm 3 lands on the monolithic
     solution (loads in Ω₁, traction-free sides)."""
@@ -222,6 +223,7 @@ def test_algorithm3_on_any_domain_matches_monolithic_with_all_modes(case, reques
 
 
 @pytest.mark.parametrize("case", ["l_shape", "partitioned"])
+@pytest.mark.slow
 def test_algorithm3_on_any_domain_error_falls_with_layers(case, request):
     cm = request.getfixturevalue(case)
     delta = primal.default_penalty(cm.h, 1.0)
@@ -231,6 +233,7 @@ def test_algorithm3_on_any_domain_error_falls_with_layers(case, request):
 
 
 @pytest.mark.parametrize("case", ["l_shape", "partitioned"])
+@pytest.mark.slow
 def test_algorithm4_on_any_domain_error_falls_with_layers(case, request):
     """Algorithm 4 (mixed CEM Ω₁) on a user mesh: the L-shape (Cartesian grid over its bounding box, traction-free
     sides, the re-entrant corner in Ω₁) and the user partition of an unstructured mesh, loads in Ω₁ pushing and

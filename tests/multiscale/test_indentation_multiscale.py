@@ -72,6 +72,7 @@ def _relative_error(curve, reference) -> float:
     return float(np.max(np.abs(curve.forces - reference.forces) / np.abs(reference.forces)))
 
 
+@pytest.mark.slow
 def test_primal_ms_curve_converges_with_layers_offline_once(monkeypatch):
     """Algorithm 3 load steps: error against the fine curve falls with m; Ω₁ built once per curve."""
     cm = unit_square(32, 8)
@@ -102,6 +103,7 @@ def test_primal_ms_curve_converges_with_layers_offline_once(monkeypatch):
 
 
 @serial
+@pytest.mark.slow
 def test_mixed_ms_curve_converges_with_layers_offline_once(monkeypatch):
     """Algorithm 4 load steps: error against Algorithm 2's curve falls with m; Ω₁ built once per curve."""
     cm = unit_square(16, 4)
@@ -143,6 +145,7 @@ def test_multiscale_load_steps_bad_input():
     assert "primal-ms" in methods.METHODS and "mixed-ms" in methods.METHODS
 
 
+@pytest.mark.slow
 def test_case_load_steps_multiscale_reuse_the_runs_offline_phase(tmp_path, monkeypatch):
     """``--case cases/composite.toml`` (fibres E = 10³ across γ, traction on the top, bottom free, a wall moved in by
     four steps) with ``--method primal-ms`` and ``mixed-ms``: the curve goes through ``force_indentation`` with the

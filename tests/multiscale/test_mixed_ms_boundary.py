@@ -41,6 +41,7 @@ def _mesh(n: int, n_coarse: int):
     return geometry.unit_square(n, n_coarse, clamped=("left",), neumann={"top": "Gamma_N_top"})
 
 
+@pytest.mark.slow
 def test_full_space_reproduces_the_fine_problem_with_boundary_data():
     """All Stage I modes and patches covering Ω₁: the multiscale Ω₁ solution is the fine one of the constrained
     AW space with the lifting and u_D (stress, displacement, trace σn₁ incl. the lifting's, to round-off)."""
@@ -77,6 +78,7 @@ def test_without_source_correctors_boundary_data_warn(caplog):
     assert "without source correctors" in caplog.text
 
 
+@pytest.mark.slow
 def test_algorithm4_with_boundary_data_converges_to_algorithm2():
     """Model 2 (inclusions, contrast 10³), u_D at x = 0, a traction on the top, the bottom free: the error against
     the monolithic mixed solve falls with m (≥ 10× per layer), and at m = 3 (patches covering Ω₁, H = 1/4) the
@@ -96,6 +98,7 @@ def test_algorithm4_with_boundary_data_converges_to_algorithm2():
     assert res[3].profile.force == pytest.approx(alg2.profile.force, rel=1e-9)
 
 
+@pytest.mark.slow
 def test_algorithm4_free_sides_heterogeneous_strip_against_algorithm2():
     """Hard case: model 3 (channels through γ up to Γ_C, γ cutting inclusions, loads in Ω₁; contrast 10³), clamped
     at x = 0 only, a traction on the top, the bottom traction free; h = 1/32, H = 1/4.  Algorithm 4 against
@@ -114,6 +117,7 @@ def test_algorithm4_free_sides_heterogeneous_strip_against_algorithm2():
     assert diff[3][0] < 1e-8 and diff[3][1] < 1e-9, diff
 
 
+@pytest.mark.slow
 def test_cache_keeps_and_keys_the_boundary_data(tmp_path):
     """The offline cache stores the boundary data's load (Φᵀ F) and is keyed by it: another traction is a new file;
     the loaded data give the same trace and stresses (lifting included in the trace)."""

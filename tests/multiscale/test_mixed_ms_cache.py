@@ -217,6 +217,7 @@ def test_cache_with_the_load_corrector(tmp_path):
     _assert_same_online(first, second, fields_rtol=1e-6)
 
 
+@pytest.mark.slow
 def test_cache_key_covers_options_and_beta(omega1, tmp_path):
     cm, step, grid, ops, _ = omega1
     base = _build(omega1, tmp_path)
@@ -239,6 +240,7 @@ def test_cache_key_covers_options_and_beta(omega1, tmp_path):
     assert _build(omega1, tmp_path).cache_status == "loaded"
 
 
+@pytest.mark.slow
 def test_corrupt_or_foreign_cache_file_is_rebuilt(omega1, tmp_path, caplog):
     first = _build(omega1, tmp_path)
     path = first.cache_path
@@ -371,6 +373,7 @@ def test_cell_blocks_read_off_the_csr_arrays():
         assert np.array_equal(c, c0) and np.array_equal(v, v0)
 
 
+@pytest.mark.slow
 def test_condensed_stage_two_equals_per_patch_lu(omega1):
     """The substructured Stage II (coarse cells condensed onto the skeleton) solves the same patch systems
     as one sparse LU per patch: bases, Robin and source correctors agree to rounding, also with a
@@ -421,6 +424,7 @@ def test_back_substitution_with_and_without_the_kept_factors(omega1, monkeypatch
         assert _relative_difference(loaded, dofs, ref[1], new[1]) < 1e-10
 
 
+@pytest.mark.slow
 def test_condensed_stage_two_at_contrast_1e6_nearly_incompressible():
     """The hard case of the condensed Stage II: model 3 (channels through γ, inclusions cut by γ) at contrast 10⁶
     with ν = 0.4999, the top and the bottom traction free, the default Stage I rule (more modes where Λ is
@@ -443,6 +447,7 @@ def test_condensed_stage_two_at_contrast_1e6_nearly_incompressible():
     assert _relative_difference(ops, dofs, ref[1], new[1]) < 1e-6
 
 
+@pytest.mark.slow
 def test_algorithm4_unchanged_by_the_condensed_stage_two(monkeypatch):
     """Algorithm 4 end to end (load in Ω₁ and Ω₂): coarse operators, e_σ, e_u and the solution fields equal
     those computed with one LU per patch (``stage_two_reference``) to 1e-10."""
@@ -519,6 +524,7 @@ def test_skeleton_factorizations_reuse_the_analysis_of_a_pattern():
     assert not cache.entries
 
 
+@pytest.mark.slow
 def test_stage_two_analyses_each_skeleton_pattern_once(monkeypatch):
     """Serially the patches are grouped by class (``_patch_classes``: translates), so MUMPS analyses each
     distinct skeleton sparsity pattern once (h = 1/64, H = 1/16, m = 3: 81 patterns among 240 patches against 144

@@ -107,6 +107,7 @@ def test_projection(omega1):
     assert np.allclose(om.project(p), p, atol=1e-12)
 
 
+@pytest.mark.slow
 def test_full_space_reproduces_fine_robin_solution(omega1, full_space):
     cm, step, grid, ops, topo = omega1
     om, sub = full_space, step.sub[0]
@@ -127,6 +128,7 @@ def test_full_space_reproduces_fine_robin_solution(omega1, full_space):
     assert np.allclose(om.trace(r, g), sub.N @ sub.c, atol=1e-9 * np.abs(sub.N @ sub.c).max())
 
 
+@pytest.mark.slow
 def test_algorithm4_converges_and_error_falls_with_layers():
     cm = geometry.unit_square(32, 8)
     model = models.get_model(2)
@@ -158,6 +160,7 @@ def _omega1_error(om, sub, g):
     return np.sqrt(om.a_norm2(om.fine_stress(r, g) - s_ref) / om.a_norm2(s_ref))
 
 
+@pytest.mark.slow
 def test_source_correction_removes_the_load_floor():
     """A load inside Ω₁ (model 1's channels, bands pushing and pulling in x ∈ [1/2, 7/8]): without the
     source correctors the Ω₁ error stalls at the O(H Λ^{-1/2}) floor; with them it falls ≥ 5× per layer.
@@ -180,6 +183,7 @@ def test_source_correction_removes_the_load_floor():
     assert err[3, False] > 0.05 and err[3, False] > 30 * err[3, True]
 
 
+@pytest.mark.slow
 def test_load_only_in_omega1_is_iterated_to_the_reference():
     """f = 0 in Ω₂ and g⁰ = 0: the first Ω₂ solve is zero, yet the iteration must not stop there."""
     cm = geometry.unit_square(32, 8)
@@ -191,6 +195,7 @@ def test_load_only_in_omega1_is_iterated_to_the_reference():
     assert res.e_sigma < 1e-2  # measured 3.9e-3 in 48 iterations (without the source correctors: 0.33)
 
 
+@pytest.mark.slow
 def test_stage_one_krylovschur_equals_lapack(omega1):
     """The sparse shift-and-invert Stage I (SLEPc, inertia-checked) gives LAPACK's eigenvalues, gaps and
     spaces: the fixed l (with the rigid-motion cluster of interior cells, l = 2 → 3) and the adaptive rule."""
@@ -341,6 +346,7 @@ def test_stage_one_adds_modes_until_the_gap_is_reached(omega1):
     assert np.diff(capped.offsets).max() <= 6  # 5, or the end of a cluster
 
 
+@pytest.mark.slow
 def test_adaptive_modes_restore_the_decay_for_nearly_incompressible():
     """ν = 0.499 (the paper's Table 5.7 case): with l = 3 the Ω₁ multiscale solution is far from the fine
     one at m = 2 (slow decay, Λ ≈ 0.01); keeping modes until Λ ≥ 0.1 recovers the ν = 0.3 accuracy.
@@ -366,6 +372,7 @@ def test_adaptive_modes_restore_the_decay_for_nearly_incompressible():
     assert errors[0.499, mm.DEFAULT_MIN_GAP] < 2 * errors[0.3, None]  # ... removed by the extra modes
 
 
+@pytest.mark.slow
 def test_basis_decay_rate_with_nu_and_adaptive_modes():
     """The global Stage II bases decay exponentially in the coarse distance; the rate falls for ν → ½
     with l = 3 (Λ ∝ μ/(λ+2μ)) and is restored when modes are added until Λ ≥ 0.1."""
@@ -385,6 +392,7 @@ def test_basis_decay_rate_with_nu_and_adaptive_modes():
     assert rate[0.499, mm.DEFAULT_MIN_GAP] > 0.8 * rate[0.3, None]
 
 
+@pytest.mark.slow
 def test_traction_free_side_of_omega1(omega1):
     """Essential τn = 0 on a side of Ω₁ (a traction-free boundary, issue 14): the local spaces treat it as
     inner boundary, the whole-Ω₁ local space is the constrained AW space, and with all modes and patches

@@ -221,6 +221,7 @@ def test_algorithm3_full_space_matches_monolithic():
 
 # -- verification: localization -----------------------------------------------------------------
 @pytest.mark.parametrize("number, gain", [(1, 0.15), (2, 0.5)])
+@pytest.mark.slow
 def test_algorithm3_error_decreases_with_layers(mesh_32_8, number, gain):
     cm = mesh_32_8
     model = models.get_model(number)
@@ -250,6 +251,7 @@ def _errors_with_layers(cm, model, layers, **kwargs):
 
 
 @pytest.mark.parametrize("number", [1, 2, 3])
+@pytest.mark.slow
 def test_source_correction_error_falls_with_layers_for_loads_in_omega1(mesh_32_8, number):
     """Loads inside Ω₁ (built-in bands moved to x ∈ [1/2, 15/16]; model 3 as built): with the source
     correction the energy error falls at least 5× per layer (measured 11–18× at this size)."""
@@ -261,6 +263,7 @@ def test_source_correction_error_falls_with_layers_for_loads_in_omega1(mesh_32_8
     assert e[-1] < 5e-3
 
 
+@pytest.mark.slow
 def test_without_source_correction_the_error_stalls(mesh_32_8):
     """The paper's algorithm (no N_f) on the same load: the error stops falling (0.30 → 0.29 from m = 2 to 3)."""
     model = models.get_model(1).with_(load=LOADS_IN_OMEGA1[1])
@@ -268,6 +271,7 @@ def test_without_source_correction_the_error_stalls(mesh_32_8):
     assert e[1] > 0.8 * e[0] and e[1] > 0.1
 
 
+@pytest.mark.slow
 def test_tractions_on_omega1_are_source_corrected():
     """A Γ_N traction on Ω₁'s boundary (issue 14 item 1 for Algorithm 3): left side clamped, top side
     pulled by t = (1, −½) over Ω₁ and Ω₂, no body force, bottom traction free, model 1 (channels through γ).
@@ -292,6 +296,7 @@ def test_tractions_on_omega1_are_source_corrected():
         assert np.all(e[:-1] / e[1:] > 5.0) and e[-1] < 2e-2, e
 
 
+@pytest.mark.slow
 def test_prescribed_displacement_free_sides_heterogeneous_strip():
     """Algorithm 3 on model 3 (channels through γ up to Γ_C, inclusions cut by γ, loads in Ω₁) with u_D on the
     left side only, the top and the bottom traction free (``benchmarks/multiscale_primal_boundary.py``): against
@@ -345,6 +350,7 @@ def test_interface_response_is_the_affine_map():
 
 
 # -- offline cache --------------------------------------------------------------------------------
+@pytest.mark.slow
 def test_offline_cache(tmp_path, mesh_32_8, caplog):
     cm = mesh_32_8
     model = models.get_model(2)

@@ -17,6 +17,7 @@ def free_bottom():
     return problem, fc.solve(problem, "primal-monolithic")
 
 
+@pytest.mark.slow
 def test_the_omega1_check_tracks_the_energy_error(free_bottom, caplog):
     """Measured, m = 1, 2, 3: check 0.261, 2.05e-2, 1.78e-3 against the coupled energy error 0.268, 2.14e-2, 1.85e-3;
     a warning above ``OMEGA1_CHECK_WARN`` (m = 1, 2) and none below it (m = 3)."""

@@ -111,6 +111,7 @@ def test_bar_mixed_exact_and_algorithm_2(f1):
 
 @serial
 @pytest.mark.parametrize("f1", [1.0, -1.0], ids=["push", "pull"])
+@pytest.mark.slow
 def test_bar_algorithm_4(f1):
     """Algorithm 4 on the bar (traction-free top and bottom of Ω₁ essential in the local spaces, the load
     everywhere): e_σ against the mixed monolithic solve falls ≥ 10× per layer; with m = 3 the patches cover Ω₁
@@ -206,6 +207,7 @@ def test_layered_patch_algorithm_3():
 
 
 @serial
+@pytest.mark.slow
 def test_layered_patch_algorithm_4():
     """Algorithm 4 on the layered patch: e_σ 0.10 at m = 2 (1.8 at m = 1: the long load path through the soft layer
     to the clamp, free sides); with m = 3 (patches covering Ω₁) σ_xx = −p uniform and the force d/C to round-off."""
@@ -270,6 +272,7 @@ def test_hertz_primal_monolithic_and_algorithm_1():
 
 
 @serial
+@pytest.mark.slow
 def test_hertz_mixed_monolithic_and_algorithm_2(hertz_mixed):
     """The same bounds for the mixed solutions, which are far inside them from a/10 on (measured
     0.2–0.4 % in L², 0.02–0.04 % in the peak, set by where the contact edge falls between nodes)."""
@@ -283,6 +286,7 @@ def test_hertz_mixed_monolithic_and_algorithm_2(hertz_mixed):
     _check_hertz(hertz_errors(alg2.profile, radius=R, E=E, nu=NU, h_contact=spec.h_contact), spec)
 
 
+@pytest.mark.slow
 def test_hertz_algorithm_3():
     """Algorithm 3 on the Hertz block (traction-free sides of Ω₁, 32 coarse cells with jagged boundaries): the
     error against the fine P1 solve falls with m (L²: 3.8e-2 → 2.0e-3 from m = 1 to 2); from m = 2 on the Hertz
@@ -302,6 +306,7 @@ def test_hertz_algorithm_3():
 
 
 @serial
+@pytest.mark.slow
 def test_hertz_algorithm_4(hertz_mixed):
     """Algorithm 4 on the Hertz block (traction-free sides of Ω₁ essential in the local spaces, 32 coarse cells with
     jagged boundaries): e_σ against the mixed monolithic solve falls ≥ 10× per layer (0.13, 0.012); from m = 2 on

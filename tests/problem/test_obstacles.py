@@ -169,6 +169,7 @@ def test_curved_contact_boundary_primal_and_mixed(bulged, obstacle):
 
 
 @serial
+@pytest.mark.slow
 def test_curved_contact_boundary_hybrid_fixed_points(bulged):
     """Algorithms 1 and 2 with a plane obstacle at a gap on the curved Γ_C reach their monolithic solutions."""
     model = _model(Plane((1.1, 0.5), (-1.0, 0.0)))

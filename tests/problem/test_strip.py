@@ -148,6 +148,7 @@ def _dolfinx_block(n=24):
     return msh, facet_tags, dmesh.meshtags(msh, tdim, cells, cvals)
 
 
+@pytest.mark.slow
 def test_from_meshtags_in_the_users_own_tags():
     """A DOLFINx mesh and its tags, materials by cell tag, a cylinder on the top: Algorithm 1 equals the
     monolithic solution; Algorithm 3 on the coarse cells built from H converges to it exponentially in the layers."""
@@ -186,6 +187,7 @@ def test_a_field_given_as_a_function_serves_the_parts():
 
 
 @pytest.mark.parametrize("method", ["primal", "primal-ms"])
+@pytest.mark.slow
 def test_a_users_case_file_runs_on_its_own_mesh(tmp_path, method):
     """cases/pad.toml: the user's mesh (materials by group, refined under the cylinder, no Omega tags) in mm and
     MPa, four load steps; the strip and coarse cells are built; the certificate holds at every step."""
@@ -203,6 +205,7 @@ def test_a_users_case_file_runs_on_its_own_mesh(tmp_path, method):
     assert summary["contact_at_open_end"] == []
 
 
+@pytest.mark.slow
 def test_a_users_case_file_with_a_mixed_method_is_refused_with_the_reason(tmp_path):
     run = subprocess.run([*CLI, "run", "--case", str(ROOT / "cases" / "pad.toml"), "--method", "mixed",
                           "--no-plots", "--out", str(tmp_path / "mixed")], capture_output=True, text=True,

@@ -6,7 +6,7 @@ DG P1 displacements, u = u_D natural on the whole boundary) on the unit square, 
 ψ = (x(1−x)y(1−y))², w = (sin πx sin πy, x y (1−x)(1−y)) (divergence-free up to w/λ, so the error must
 not grow as ν → ½).  For each 1/h it prints the AW and displacement DOF counts, the time of every
 phase (nodal basis and P, forms, PtAP, BP, load, block matrix, MUMPS LU) and the L² errors of u, σ and
-div σ with the rates between successive sizes (expected 2, 3, 2: ``tests/test_arnold_winther.py``).
+div σ with the rates between successive sizes (expected 2, 3, 2: ``tests/fem/test_arnold_winther.py``).
 
     OMP_NUM_THREADS=1 .venv/bin/python benchmarks/arnold_winther_rates.py --sizes 16 32 64 --nu 0.3
     OMP_NUM_THREADS=1 .venv/bin/python benchmarks/arnold_winther_rates.py --nu 0.4999 --warp 0.03

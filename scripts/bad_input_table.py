@@ -1,4 +1,4 @@
-"""Print the bad-input table of the command line (tests/test_bad_input.py) with the messages the package gives.
+"""Print the bad-input table of the command line (tests/cli/test_bad_input.py) with the messages the package gives.
 
     OMP_NUM_THREADS=1 .venv/bin/python scripts/bad_input_table.py > docs/bad_input.md
 """
@@ -13,7 +13,7 @@ from pathlib import Path
 import fenics_contact  # noqa: F401  (before dolfinx)
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "tests"))
+sys.path[:0] = [str(ROOT / "tests" / "cli"), str(ROOT / "tests")]
 
 from test_bad_input import CASES  # noqa: E402
 
@@ -41,7 +41,7 @@ def run(case) -> tuple[int, str]:
 def main_table() -> None:
     print("# The command line on bad input\n")
     print("Made by `OMP_NUM_THREADS=1 .venv/bin/python scripts/bad_input_table.py > docs/bad_input.md` from the cases of")
-    print("`tests/test_bad_input.py` (each case there asserts the exit code, the one line on stderr, and that nothing is")
+    print("`tests/cli/test_bad_input.py` (each case there asserts the exit code, the one line on stderr, and that nothing is")
     print("written). Exit codes: " + "; ".join(f"{c} {m}" for c, m in EXIT_CODES.items()) + ".\n")
     print("| case | exit | message (stderr, one line) |")
     print("|---|---|---|")

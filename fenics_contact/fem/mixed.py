@@ -35,7 +35,7 @@ data are small and replicated, so every rank takes the same Newton decisions (ac
 set, cycle detection, line-search step) from the same numbers; every scalar of the
 iteration (energy, residual, step) is a global reduction.  With N ranks the Newton
 steps, active sets and solution are those of the serial run (to round-off; tested
-for N = 2, 3 in ``tests/test_mpi_mixed.py``).
+for N = 2, 3 in ``tests/fem/test_mpi_mixed.py``).
 """
 
 import logging

@@ -44,14 +44,14 @@ corner (x = 15/16, y = ½) meets γ: measured with H = 1/16, model 1 / model 2,
     h = 1/64: e_σ 1.4e−4 / 1.9e−4,  e_u 1.5e−6 / 1.5e−6
     h = 1/128: e_σ 3.5e−5 / 4.7e−5, e_u 1.8e−7 / 1.8e−7
 
-(O(h²); ``benchmarks/reproduce_mixed_tables.py``, ``tests/test_mixed_hybrid.py``).
+(O(h²); ``benchmarks/reproduce_mixed_tables.py``, ``tests/hybrid/test_mixed_hybrid.py``).
 It is the floor of e_σ, e_u against the AW reference.
 
 **MPI.**  Under ``mpiexec`` both subproblems are distributed (``fem.mixed``); the
 Robin data g₁₂, g₂₁ are the values at the canonical γ nodes (Ω₁'s order, which Ω₂
 adopts), each rank holding one block of them (``MixedSubproblem.interface_range``),
 so the update and Anderson's inner products are global.  The iterations, Newton
-steps and solution are those of the serial run (``tests/test_mpi_mixed.py``).
+steps and solution are those of the serial run (``tests/fem/test_mpi_mixed.py``).
 """
 
 import logging

@@ -1,7 +1,7 @@
 """Hellinger–Reissner mixed elasticity with AW stresses and DG P1 displacements (no contact), by MUMPS LU.
 
 Find (σ, u) ∈ X_h × U_h: (Aσ, τ) + (div τ, u) = ⟨u_D, τn⟩_∂Ω,  (div σ, v) = −(f, v): the verification
-solve of the space (rates in ``tests/test_arnold_winther.py``, ``benchmarks/arnold_winther_rates.py``).
+solve of the space (rates in ``tests/fem/test_arnold_winther.py``, ``benchmarks/arnold_winther_rates.py``).
 """
 
 from __future__ import annotations

@@ -28,6 +28,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from fenics_contact.errors import ConvergenceError, InputError
+from fenics_contact.fem import inverse_entries
 
 __all__ = [
     "AbsoluteTerms",
@@ -114,6 +115,17 @@ class DirectSolver(_Factorization):
         reason = self._solve_reason()
         if reason < 0:
             raise ConvergenceError(f"{self.prefix}: linear solve failed, KSP reason {reason}")
+
+    def has_inverse_entries(self) -> bool:
+        """Whether ``inverse_block`` works here: a sequential MUMPS factorization (``fem.inverse_entries``)."""
+        pc = self.ksp.getPC()
+        return (self.ksp.getComm().getSize() == 1 and inverse_entries.available() and self.factorizations > 0
+                and pc.getType() in ("lu", "cholesky") and pc.getFactorSolverType() == "mumps")
+
+    def inverse_block(self, rows: np.ndarray) -> np.ndarray:
+        """(A⁻¹)[rows][:, rows] (dense, in the order of ``rows``) from the factors held: MUMPS' entries of the
+        inverse, the values of back-solves without them (``fem.inverse_entries``; ``has_inverse_entries``)."""
+        return inverse_entries.inverse_block(self.ksp.getPC().getFactorMatrix(), rows, what=self.prefix)
 
 
 class SparseFactor(_Factorization):

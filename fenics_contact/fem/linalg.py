@@ -4,7 +4,8 @@ Every factorization lives here, on one core (``_Factorization``: a KSP of type p
 the factors of its operator; the factorization and every solve are checked, a failure is a ConvergenceError):
 
 * ``DirectSolver``: a (distributed) operator configured through the PETSc options database under its own
-  prefix (the fine subproblems, the interface Newton), refactorized by ``set_operator``; PETSc vector solves.
+  prefix (the fine subproblems, the interface Newton), refactorized by ``set_operator``; PETSc vector solves;
+  on one process, blocks of A⁻¹ from its MUMPS factors (``inverse_block``, ``fem.inverse_entries``).
 * ``SparseFactor``: a sequential MUMPS LU or Cholesky (without pivoting for a matrix flagged SPD, else LDLᵀ
   with pivoting) of a matrix it owns, configured in code (the multiscale local problems, thousands of them: no options-database entries),
   with MUMPS ICNTL controls per factorization; solves of dense blocks of right-hand sides (one MatMatSolve);

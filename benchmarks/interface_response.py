@@ -16,6 +16,8 @@ only) and with the entries, and compares forces and iteration counts.  Every tim
 
     OMP_NUM_THREADS=1 .venv/bin/python benchmarks/interface_response.py --h 128 256 \\
         --out benchmarks/results/interface_response.md
+    OMP_NUM_THREADS=1 .venv/bin/python benchmarks/interface_response.py --h 256 --blocking \\
+        --out benchmarks/results/interface_response.md      # appends the block-size table
 """
 
 import argparse
@@ -133,6 +135,24 @@ def responses(args, h: int) -> list[str]:
     return rows
 
 
+def blocking(args, h: int) -> list[str]:
+    """Ω₁'s back-solves at h = 1/h in blocks of 32, 128, 1024 columns and MUMPS multi-RHS blocking ICNTL(27)."""
+    step = PrimalHybridStep(problem_on(h, args.H, args.contrast))
+    step.prepare()
+    part = PrimalPart(step.sub[0], step.interface, 0, contact=False)
+    factor = part.solver.ksp.getPC().getFactorMatrix()
+    default = factor.getMumpsIcntl(27)
+    rows = []
+    for icntl27 in (default, 128, 512):
+        factor.setMumpsIcntl(27, icntl27)
+        times = [timed(lambda: AffinePart.responses(part, contact=False, chunk=chunk), args.repeat)[0]
+                 for chunk in (32, 128, 1024)]
+        rows.append(f"| 1/{h} | {icntl27} | " + " | ".join(f"{t:.2f}" for t in times) + " |")
+        print(rows[-1], flush=True)
+    factor.setMumpsIcntl(27, default)
+    return rows
+
+
 def load_path(args, h: int) -> list[str]:
     """Part 2: the load path with the back-solves and with the entries (alternating), min over repetitions."""
     depths = np.linspace(0.002, 0.02, args.steps)
@@ -173,6 +193,8 @@ def main() -> None:
     parser.add_argument("--chunk", type=int, default=InterfaceNewtonOptions().chunk)
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--skip-load-path", action="store_true")
+    parser.add_argument("--blocking", action="store_true",
+                        help="only Ω₁'s back-solves at the largest h: block sizes against MUMPS' ICNTL(27)")
     parser.add_argument("--out", type=Path, default=None)
     args = parser.parse_args()
     lines = [f"# Algorithm 1's interface responses: back-solves, Schur complement, entries of J⁻¹ (model 3, "
@@ -183,6 +205,18 @@ def main() -> None:
              f"## Responses (back-solves in blocks of {args.chunk} right-hand sides)", "",
              "| h | response | DOFs | n_γ | n_c | back-solves [s] | Schur [s] | entries [s] | speed-up (entries) "
              "| Schur − solves | entries − solves |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+    if args.blocking:
+        h = max(args.h)
+        lines = [f"## Ω₁'s back-solves at h = 1/{h}: columns per MatMatSolve against MUMPS' ICNTL(27)", "",
+                 f"Command: `OMP_NUM_THREADS={os.environ.get('OMP_NUM_THREADS', 'unset')} .venv/bin/python "
+                 f"benchmarks/interface_response.py {' '.join(sys.argv[1:])}` (minimum of {args.repeat})", "",
+                 "| h | ICNTL(27) | 32 columns [s] | 128 columns [s] | 1024 columns [s] |", "|---|---|---|---|---|"]
+        lines += blocking(args, h)
+        print("\n".join(lines))
+        if args.out:
+            with args.out.open("a") as out:
+                out.write("\n" + "\n".join(lines) + "\n")
+        return
     for h in args.h:
         lines += responses(args, h)
     if not args.skip_load_path:

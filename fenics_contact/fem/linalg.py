@@ -4,7 +4,8 @@ Every factorization lives here, on one core (``_Factorization``: a KSP of type p
 the factors of its operator; the factorization and every solve are checked, a failure is a ConvergenceError):
 
 * ``DirectSolver``: a (distributed) operator configured through the PETSc options database under its own
-  prefix (the fine subproblems, the interface Newton), refactorized by ``set_operator``; PETSc vector solves.
+  prefix (the fine subproblems, the interface Newton), refactorized by ``set_operator``; PETSc vector solves;
+  on one process, blocks of A⁻¹ from its MUMPS factors (``inverse_block``, ``fem.inverse_entries``).
 * ``SparseFactor``: a sequential MUMPS LU or Cholesky (without pivoting for a matrix flagged SPD, else LDLᵀ
   with pivoting) of a matrix it owns, configured in code (the multiscale local problems, thousands of them: no options-database entries),
   with MUMPS ICNTL controls per factorization; solves of dense blocks of right-hand sides (one MatMatSolve);
@@ -28,6 +29,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from fenics_contact.errors import ConvergenceError, InputError
+from fenics_contact.fem import inverse_entries
 
 __all__ = [
     "AbsoluteTerms",
@@ -114,6 +116,17 @@ class DirectSolver(_Factorization):
         reason = self._solve_reason()
         if reason < 0:
             raise ConvergenceError(f"{self.prefix}: linear solve failed, KSP reason {reason}")
+
+    def has_inverse_entries(self) -> bool:
+        """Whether ``inverse_block`` works here: a sequential MUMPS factorization (``fem.inverse_entries``)."""
+        pc = self.ksp.getPC()
+        return (self.ksp.getComm().getSize() == 1 and inverse_entries.available() and self.factorizations > 0
+                and pc.getType() in ("lu", "cholesky") and pc.getFactorSolverType() == "mumps")
+
+    def inverse_block(self, rows: np.ndarray) -> np.ndarray:
+        """(A⁻¹)[rows][:, rows] (dense, in the order of ``rows``) from the factors held: MUMPS' entries of the
+        inverse, the values of back-solves without them (``fem.inverse_entries``; ``has_inverse_entries``)."""
+        return inverse_entries.inverse_block(self.ksp.getPC().getFactorMatrix(), rows, what=self.prefix)
 
 
 class SparseFactor(_Factorization):

@@ -13,6 +13,8 @@ Sc = Q J⁻¹C, Yq = N J⁻¹Qᵀ, Sq = Q J⁻¹Qᵀ.  ``PrimalPart`` is a P1 su
 by column) or ``MatrixResponse`` (given, e.g. by a multiscale Ω₁).
 """
 
+import functools
+
 import numpy as np
 import scipy.sparse as sp
 from mpi4py import MPI
@@ -193,6 +195,31 @@ class PrimalPart(AffinePart):
         free = np.zeros(self.n_g, dtype=bool)
         free[np.concatenate(self.comm.allgather(self.data_index))] = True
         return free
+
+    def responses(self, *, contact: bool, chunk: int, solver: DirectSolver | None = None
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(Yc, Sc, Yq, Sq) as ``AffinePart.responses``; on one process from the block of J⁻¹ on the γ and Γ_C
+        unknowns that MUMPS computes from its factors (``DirectSolver.inverse_block``: the values of the
+        back-solves without them; benchmarks/results/interface_response.md)."""
+        solver = solver or self.solver
+        if not solver.has_inverse_entries():
+            return super().responses(contact=contact, chunk=chunk, solver=solver)
+        contact_at = (self.bs * self.c_nodes[:, None] + np.arange(self.bs)).ravel() if self.n_c else self.trace_at[:0]
+        rows = np.unique(np.concatenate([self.trace_at, self.data_at, contact_at]))
+        at = functools.partial(np.searchsorted, rows)  # position among ``rows`` of a DOF
+        B = np.zeros((rows.size, self.n_g + (self.n_c if contact else 0)))
+        B[at(self.data_at), self.data_index] = self.data_w  # C
+        if contact:
+            for c in range(self.bs):  # Qᵀ
+                B[at(self.bs * self.c_nodes + c), self.n_g + np.arange(self.n_c)] = self.c_normals[:, c]
+        X = solver.inverse_block(rows) @ B  # the rows ``rows`` of J⁻¹ [C Qᵀ]
+        Y = np.zeros((self.n_g, B.shape[1]))
+        Y[self.trace_index] = X[at(self.trace_at)]
+        S = sum(self.c_normals[:, c, None] * X[at(self.bs * self.c_nodes + c)] for c in range(self.bs)) \
+            if self.n_c else np.zeros((0, B.shape[1]))
+        if not contact:
+            return Y, S, np.zeros((self.n_g, self.n_c)), np.zeros((self.n_c, self.n_c))
+        return Y[:, : self.n_g], S[:, : self.n_g], Y[:, self.n_g :], S[:, self.n_g :]
 
     def data_block(self, j0: int, j1: int) -> np.ndarray:
         B = np.zeros((self.nown, j1 - j0), order="F")

@@ -1,0 +1,89 @@
+"""Entries of A⁻¹ from MUMPS' factors of A (ICNTL(30)): the block of A⁻¹ on some unknowns without back-solves.
+
+The rows I of A⁻¹B, for a block B whose rows outside I are zero, are (A⁻¹)_II B_I.  MUMPS computes
+(A⁻¹)_II from the factors it holds, pruning its forward and backward substitutions to the paths of I in the
+elimination tree: the interface responses of the hybrid methods need exactly such blocks (B and the
+read-out rows on γ and Γ_C).  Algorithm 1's Ω₁ response came 17× (h = 1/128) and 34× (h = 1/256) faster
+than by back-solves in blocks of 128 columns, with their values to 1e-15 (the same factors): the command
+and table are in benchmarks/results/interface_response.md.
+
+petsc4py has no binding of ``MatMumpsGetInverseTranspose``: it is called through ctypes, in the libpetsc
+that petsc4py itself has loaded (found in the process's memory map).  Sequential factorizations only (PETSc
+wants the requested entries on one process).
+"""
+
+import ctypes
+import functools
+import os
+
+import numpy as np
+from petsc4py import PETSc
+
+from fenics_contact.errors import ConvergenceError
+
+__all__ = ["available", "inverse_block"]
+
+#: the PETSc function called through ctypes (it returns a PetscErrorCode, 0 on success)
+_FUNCTION = "MatMumpsGetInverseTranspose"
+
+
+@functools.cache
+def _library() -> ctypes.CDLL | None:
+    """The libpetsc shared library petsc4py runs on (None if it is not found or lacks the function used here)."""
+    try:
+        with open("/proc/self/maps") as maps:
+            paths = {line.split()[-1] for line in maps if os.path.basename(line.split()[-1]).startswith("libpetsc.so")}
+    except OSError:
+        return None
+    for path in sorted(paths):
+        lib = ctypes.CDLL(path)  # already loaded: the same instance, no second copy of PETSc
+        if hasattr(lib, _FUNCTION):
+            getattr(lib, _FUNCTION).restype = ctypes.c_int
+            return lib
+    return None
+
+
+def available() -> bool:
+    """Whether entries of inverses can be taken here (real double-precision PETSc, its library found)."""
+    return np.dtype(PETSc.ScalarType) == np.float64 and _library() is not None
+
+
+def inverse_block(factor: PETSc.Mat, rows: np.ndarray, *, what: str = "a matrix") -> np.ndarray:
+    """(A⁻¹)[rows][:, rows], dense, in the order of ``rows`` (distinct), from the sequential MUMPS factor ``factor``
+    of A (``pc.getFactorMatrix()`` of a factorized LU or Cholesky PC).  A failure raises ConvergenceError;
+    ``what`` names A in messages."""
+    if not available():
+        raise RuntimeError("entries of an inverse need a real double-precision PETSc whose library is found")
+    if factor.getComm().getSize() != 1:
+        raise ValueError("entries of an inverse are taken from a sequential factorization only")
+    rows = np.asarray(rows, dtype=PETSc.IntType)
+    order = np.argsort(rows)
+    kept = rows[order]  # PETSc's AIJ wants sorted columns
+    m, n = kept.size, factor.getSize()[0]
+    if m == 0:
+        return np.zeros((0, 0))
+    if np.any(kept[1:] == kept[:-1]) or kept[0] < 0 or kept[-1] >= n:
+        raise ValueError("the rows of an inverse block must be distinct unknowns of the matrix")
+    counts = np.zeros(n, dtype=PETSc.IntType)
+    counts[kept] = m
+    indptr = np.concatenate([[0], np.cumsum(counts)]).astype(PETSc.IntType)
+    indices = np.tile(kept, m).astype(PETSc.IntType)
+    values = np.zeros(indices.size, dtype=PETSc.ScalarType)
+    # the requested entries, as the pattern of Bᵀ (n × n, rows ``kept`` full on the columns ``kept``);
+    # PETSc writes (A⁻¹)ᵀ into it: Bᵀ[j, i] = A⁻¹[i, j]
+    Bt = PETSc.Mat().createAIJWithArrays((n, n), (indptr, indices, values), comm=PETSc.COMM_SELF)
+    Bt.assemble()
+    saved = {k: factor.getMumpsIcntl(k) for k in (20, 30)}  # PETSc leaves them set for the entries of A⁻¹
+    try:
+        err = getattr(_library(), _FUNCTION)(ctypes.c_void_p(factor.handle), ctypes.c_void_p(Bt.handle))
+        if err != 0:
+            raise ConvergenceError(f"MUMPS failed to compute entries of the inverse of {what} (PETSc error {err})")
+        block = Bt.getValuesCSR()[2].reshape(m, m).T  # [a, b] = A⁻¹[kept[a], kept[b]]
+    finally:
+        for k, v in saved.items():
+            factor.setMumpsIcntl(k, v)  # back to ordinary solves
+        Bt.destroy()
+    if not np.all(np.isfinite(block)):
+        raise ConvergenceError(f"entries of the inverse of {what} are not finite")
+    back = np.argsort(order)
+    return block[np.ix_(back, back)]

@@ -14,8 +14,9 @@ affine pieces, ``hybrid.response``).  Two strategies solve g = T(g) (``Interface
   generalized Jacobian from the same offline data (Woodbury on J₀, no factorization), or, when such a step
   does not reduce the residual, exactly by back-solves with Ω₂'s own factorization.
 * ``"interface"``: Newton on F(g) = g − T(g) from g⁰, each step an application of T (the Ω₂ semismooth
-  Newton) and Ω₂'s generalized Jacobian by n_γ back-solves with the factorization Ω₂ keeps; a
-  backtracking line search on ‖F‖ globalizes it.  It needs no J₀ but n_γ back-solves per step.
+  Newton) and Ω₂'s generalized Jacobian from the factorization Ω₂ keeps (the entries of its inverse on the
+  interface unknowns, or n_γ back-solves under MPI); a backtracking line search on ‖F‖ globalizes it.  It
+  needs no J₀ but that Jacobian in every step.
 
 Both land on the fixed point of the Robin iteration (the same equations).  A Newton method that fails (no
 convergence in ``max_steps``, a singular condensed system) raises ConvergenceError; a pair whose
@@ -78,7 +79,7 @@ def newton_iterate(step, options: IterationOptions, *, name: str, monitor=None,
     else:
         g = step.initial_data() if initial is None else initial
     steps_left = nopt.max_corrections if nopt.strategy == "condensed" else nopt.max_steps
-    # Jacobian of Ω₂: from the offline condensation (Woodbury, no factorization), or exact by n_γ back-solves
+    # Jacobian of Ω₂: from the offline condensation (Woodbury, no factorization), or exact from its factorization
     # with Ω₂'s own factorization (the "interface" strategy, and the fallback when a condensed step fails:
     # with a stiff penalty the Woodbury update loses digits)
     exact = nopt.strategy == "interface"

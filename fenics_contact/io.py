@@ -25,7 +25,9 @@ import dolfinx.io
 import numpy as np
 from dolfinx import fem
 from mpi4py import MPI
+from petsc4py import PETSc
 
+from fenics_contact import __version__
 from fenics_contact.errors import InputError
 from fenics_contact.problem.materials import strain, stress
 
@@ -118,11 +120,6 @@ def machine_description() -> str:
 def provenance() -> dict:
     """What made a result: the package, DOLFINx, PETSc and Python versions, the command line, the UTC time and
     the machine, and the peak memory of this process so far (rank 0's, GB = 10⁹ bytes)."""
-    import dolfinx
-    from petsc4py import PETSc
-
-    from fenics_contact import __version__
-
     return {
         "fenics_contact": __version__,
         "dolfinx": dolfinx.__version__,

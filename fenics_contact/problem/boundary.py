@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import numpy.typing as npt
+from dolfinx import mesh as dmesh
 from mpi4py import MPI
 
 from fenics_contact.errors import InputError, MeshTagError
@@ -162,8 +163,6 @@ def boundary_data_on(msh, facet_tags, boundary: BoundaryConditions, *, traction_
     Lists 'a prescribed displacement on Gamma_D', 'a traction on <group>' and, with
     ``traction_free``, 'traction-free sides' (exterior facets in no group other than γ).
     """
-    from dolfinx import mesh as dmesh
-
     comm = msh.comm
     found = []
     if boundary.displacement is not None and comm.allreduce(int(facet_tags.find(Boundary.GAMMA_D).size), op=MPI.SUM):

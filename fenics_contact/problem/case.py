@@ -73,6 +73,7 @@ from fenics_contact.errors import InputError, MeshTagError
 from fenics_contact.problem.boundary import BoundaryConditions, check_boundary_groups
 from fenics_contact.problem.cell_groups import SUBDOMAIN_NAMES, CellGroups, bounding_box, read_cell_groups
 from fenics_contact.problem.geometry import SIDES, ContactMesh, read_mesh, unit_square
+from fenics_contact.problem.meshes import bulged_square, hertz_block
 from fenics_contact.problem.models import get_model, pixel_field
 from fenics_contact.problem.problem import ContactProblem, constant_field
 from fenics_contact.problem.obstacles import Circle, Obstacle, Plane
@@ -382,8 +383,6 @@ class BulgedSquareMesh:
     kind = "bulged-square"
 
     def build(self, comm: MPI.Comm, overlays: Iterable[str] = ()) -> CaseMesh:
-        from fenics_contact.problem.meshes import bulged_square
-
         return CaseMesh(bulged_square(1.0 / self.h, 1.0 / self.H, bulge=self.bulge, clamped=self.clamped, comm=comm),
                         {})
 
@@ -408,8 +407,6 @@ class HertzBlockMesh:
     kind = "hertz-block"
 
     def build(self, comm: MPI.Comm, overlays: Iterable[str] = ()) -> CaseMesh:
-        from fenics_contact.problem.meshes import hertz_block
-
         cm, spec = hertz_block(self.a, refinement=self.refinement, width=self.width, depth=self.depth,
                                strip=self.strip, contact_width=self.contact_width, comm=comm)
         return CaseMesh(cm, {}, spec)

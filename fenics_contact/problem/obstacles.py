@@ -38,6 +38,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
+from mpi4py import MPI
 
 from fenics_contact.errors import InputError
 
@@ -273,8 +274,6 @@ def check_obstacle_side(obstacle: Obstacle, nu: np.ndarray, normals: np.ndarray,
     circle centred inside the body.  Solved, it would be a huge indentation pushing the wrong way.  With ``comm``
     the counts are summed over the ranks.
     """
-    from mpi4py import MPI
-
     nu = np.asarray(nu, dtype=np.float64)
     dim = nu.shape[1] if nu.ndim == 2 else 2
     nu = nu.reshape(-1, dim)

@@ -76,7 +76,6 @@ from fenics_contact.hybrid.iteration import (
 )
 from fenics_contact.errors import InputError
 from fenics_contact.problem.problem import ContactProblem
-from fenics_contact.problem.validation import interface_bends_of
 from fenics_contact.fem.mixed import MixedSolution, epsilon_for
 from fenics_contact.fem.mixed_contact import MixedContactProfile
 from fenics_contact.fem.mixed_newton import MixedNewtonHistory
@@ -86,7 +85,7 @@ from fenics_contact.hybrid.primal import omega2_record
 from fenics_contact.hybrid.response import FineResponse, MixedPart
 from fenics_contact.hybrid.transmission import split_mesh, sub_to_parent_dofs
 
-__all__ = ["DEFAULT_BETA", "check_straight_interface", "MixedHybridResult", "MixedHybridStep", "solve_mixed_hybrid", "solve_or_verify",
+__all__ = ["DEFAULT_BETA", "MixedHybridResult", "MixedHybridStep", "solve_mixed_hybrid", "solve_or_verify",
            "transmission_coefficient"]
 
 log = logging.getLogger(__name__)
@@ -103,21 +102,6 @@ def solve_or_verify(sub: MixedSubproblem, data: np.ndarray, warm: bool) -> Mixed
         if res <= sub.newton.rtol * scale + sub.newton.atol:
             return MixedNewtonHistory(residuals=[res])
     return sub.solve(data)
-
-
-def check_straight_interface(cm) -> None:
-    """InputError unless γ is straight between its ends: the Robin data live in the continuous P3 traces on γ,
-    and where γ bends the traction σn of an Arnold–Winther stress jumps (the normal does), so the data could not
-    hold it and the fixed point would not be the mixed solution. Collective."""
-    bends = interface_bends_of(cm)
-    if bends.size:
-        x, y = bends[0]
-        raise InputError(
-            f"the mixed methods (Algorithms 2 and 4) need an interface γ that is straight between its ends; this "
-            f"one bends at {len(bends)} vertices (first at ({x:.6g}, {y:.6g})), where the Robin data cannot hold the "
-            "jump of the traction σn. Draw Omega2 with a straight boundary to Omega1 (gamma), or build the strip from "
-            "a coarse grid that the mesh resolves along a straight Gamma_C (mesh H), or use the primal methods "
-            "(any γ)")
 
 
 def transmission_coefficient(beta: float | str, h: float) -> float:
@@ -157,7 +141,6 @@ class MixedHybridStep:
     ) -> None:
         cm = problem.cm
         check_triangles(cm.mesh)
-        check_straight_interface(cm)
         self.comm = cm.comm
         self.beta = transmission_coefficient(beta, cm.h)
         self.epsilon = epsilon_for(problem, epsilon)
@@ -179,7 +162,7 @@ class MixedHybridStep:
         g0, g1 = self.sub[0].interface_range
         #: this rank's number of interface values (x, y at the canonical γ nodes) per data vector
         self.size = g1 - g0
-        self.size_global = 2 * self.sub[0].gamma_points.shape[0]
+        self.size_global = self.sub[0].interface.num_values
         self._perm2 = np.arange(self.size)  # Ω₂ uses the canonical order (kept for subclasses)
         self._prev = [(s.c.copy(), s.u.copy()) for s in self.sub]
         self._change = np.inf

@@ -1,10 +1,11 @@
 """The interface γ of a Robin subproblem: the data space, the data load C, the trace map N and the γ mass matrix.
 
-The Robin data g live in continuous vector P3 on γ — the normal-trace space of AW, so a trace σn is
-exactly representable — as values (x, y) at the γ nodes (``points``: replicated, in one canonical order
-shared by both subdomains).  d(g; τ) = ∫_γ g·(τn) ds = C g; σn at the γ nodes = N c + n0 (exact: σn is a P3
-polynomial on each γ edge, continuous at vertices); ‖g‖²_γ = g·(M_γ g).  Each rank holds one block of the
-canonical values (``interface_range``).
+The Robin data g live in the normal-trace space of AW on γ, so a trace σn is exactly representable: vector P3 on
+each γ edge, continuous where γ is straight, one value per side where it bends (``GammaBends``: the two tractions
+of one symmetric tensor there).  They are stored as values (x, y) at the γ nodes (``points``: replicated, in one
+canonical order shared by both subdomains) and, at a bend, as 3 coefficients.  d(g; τ) = ∫_γ g·(τn) ds = C g;
+σn at the γ nodes = N c + n0 (exact: σn is a P3 polynomial on each γ edge); ‖g‖²_γ = g·(M_γ g).  Each rank holds
+one block of the canonical values (``interface_range``).
 """
 
 import basix.ufl

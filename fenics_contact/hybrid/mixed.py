@@ -13,25 +13,34 @@ paper, Anderson acceleration, or the interface Newton method of ``hybrid.interfa
 transmission residual of ``hybrid.certificate``.
 
 **Space of the Robin data and quadrature on γ.**  The normal trace σn of an AW
-stress on a straight edge is a cubic vector polynomial, and it is continuous at
-the vertices (AW has vertex degrees of freedom); on γ the traces of X_h(Ω₁) and
-X_h(Ω₂) therefore both fill Λ_h = continuous piecewise-P3 vector functions on
-γ.  The data g₁₂, g₂₁ live in Λ_h, stored as their values at the P3 Lagrange
-nodes of γ (vertices + 2 points per edge).  Then:
+stress on a straight edge is a cubic vector polynomial, and it is continuous where
+γ is straight (AW has vertex degrees of freedom).  Where γ bends at a vertex v
+the normal jumps, and so does σn; the two one-sided values are (σ(v)n_a, σ(v)n_b)
+of one symmetric tensor σ(v), a 3-dimensional space.  On γ the traces of X_h(Ω₁)
+and X_h(Ω₂) therefore both fill Λ_h = vector P3 on each γ edge, continuous at the
+straight vertices, with one value per side at a bend restricted to those tractions
+(``fem.mixed_interface.GammaBends``).  The data g₁₂, g₂₁ live in Λ_h, stored as
+their values (x, y) at the P3 Lagrange nodes of γ (vertices + 2 points per edge)
+and, at a bend, as 3 coefficients in an orthonormal basis of the two sides' values.
+Then:
 
 * the update is exact: σ_i n_i ∈ Λ_h is evaluated at the nodes from the DG P3
   representation (no projection);
 * every γ integral (β∫σn·τn and ∫g·τn, both degree 6) uses the same 4-point
-  Gauss rule per edge and is exact.
+  Gauss rule per edge and is exact;
+* Λ_h is exactly the trace space, so the fixed point below has one λ (a larger
+  space, e.g. two free values per side at a bend, leaves the data of the
+  iteration undetermined there and the interface Newton's system singular).
 
 At a fixed point, adding the two updates gives σ₁n₁ + σ₂n₂ = 0 in Λ_h, i.e.
 pointwise, and λ := g₁₂ − βσ₁n₁ = g₂₁ − βσ₂n₂ is a single displacement trace on
 γ with (Aσ_i, τ) + (div τ, u_i) − ∫_γ λ·τn_i + … = 0 on each side; summing over
 τ with continuous normal trace eliminates λ.  So the fixed point is exactly the
 monolithic mixed solution on X̃_h = {σ ∈ X_h(Ω₁) × X_h(Ω₂) : σn continuous on γ}.
-X̃_h is X_h plus one function per γ vertex: AW glues all three stress
-components at a vertex, X̃_h only the traction σn, so σ_tt (= σ_yy on γ) may
-differ on the two sides of a γ vertex.  No transmission condition can restore
+X̃_h is X_h plus one function per straight γ vertex: AW glues all three stress
+components at a vertex, X̃_h only the traction σn, so σ_tt may differ on the two
+sides of a straight γ vertex (at a bend the tractions on both edges fix all of
+σ(v), so X̃_h glues it there as X_h does).  No transmission condition can restore
 that (σ_tt is not a trace quantity), so this is the closest fixed point a
 non-overlapping Robin iteration with AW subdomain spaces can have.
 ``fem.mixed.solve_mixed_monolithic(split_interface=True)`` computes it directly; the

@@ -69,15 +69,19 @@ class GammaBends:
             raise InputError(f"the interface γ branches at ({x:.6g}, {y:.6g}) (more than two γ facets meet there): "
                              "the mixed methods need γ to be a chain of facets; change the strip Ω₂")
         self.points = points
-        bend_nodes, sides = [], []
-        for k in np.flatnonzero(degree == 2):
-            f = np.flatnonzero(np.any(ends_at == k, axis=1))  # sorted: side a first
-            other = np.where(ends_at[f, 0] == k, 1, 0)
-            far = np.where(other[:, None] == 1, b[f], a[f])
-            e = (far - points[k]) / np.linalg.norm(far - points[k], axis=1)[:, None]
-            if abs(e[0, 0] * e[1, 1] - e[0, 1] * e[1, 0]) > BEND:
-                bend_nodes.append(k)
-                sides.append((f, e))
+        # the two facets at each node of degree 2 (incidences sorted by node, then facet: side a first)
+        inc_node, inc_facet = ends_at.ravel(), np.repeat(np.arange(ends_at.shape[0]), 2)
+        inc_far = np.where(np.tile([True, False], ends_at.shape[0])[:, None], b[inc_facet], a[inc_facet])
+        order = np.lexsort((inc_facet, inc_node))
+        ks = np.flatnonzero(degree == 2)
+        first = order[np.searchsorted(inc_node[order], ks)]
+        second = order[np.searchsorted(inc_node[order], ks) + 1]
+        e = [(inc_far[i] - points[ks]) / np.linalg.norm(inc_far[i] - points[ks], axis=1)[:, None]
+             for i in (first, second)]
+        bent = np.abs(e[0][:, 0] * e[1][:, 1] - e[0][:, 1] * e[1][:, 0]) > BEND
+        bend_nodes = ks[bent]
+        sides = [(np.array([fa, fb]), np.stack([ea, eb])) for fa, fb, ea, eb in
+                 zip(inc_facet[first[bent]], inc_facet[second[bent]], e[0][bent], e[1][bent])]
         #: the γ nodes where γ bends (indices into ``points``)
         self.nodes = np.asarray(bend_nodes, dtype=np.int64)
         #: the midpoints of the two γ facets at each bend (sides a, b): (n_bends, 2, 2)

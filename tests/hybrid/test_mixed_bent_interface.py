@@ -79,7 +79,8 @@ def test_algorithm_2_on_a_bent_interface_is_the_split_monolithic_solution(algori
 
 def test_algorithm_2_on_a_bent_interface_approaches_the_standard_solution(algorithm_2):
     """Against the standard AW solution (``fc.solve(problem, "mixed-monolithic")``) the difference is the σ_tt
-    doubled at the straight vertices of γ: small and falling with h (e_σ 5.0e-5 → 2.6e-5, e_u 5.5e-7 → 1.9e-7 from h = 1/16 to 1/24)."""
+    doubled at the straight vertices of γ: small and falling with h (e_σ 5.0e-5 → 2.6e-5, e_u 5.5e-7 → 1.9e-7
+    from h = 1/16 to 1/24)."""
     (_, _, coarse, _, standard16), (_, _, fine, _, standard24) = algorithm_2[16], algorithm_2[24]
     assert coarse.e_sigma < 1e-4 and coarse.e_u < 1e-5
     assert fine.e_sigma < 0.7 * coarse.e_sigma and fine.e_u < 0.5 * coarse.e_u, (coarse.e_sigma, fine.e_sigma)

@@ -22,13 +22,12 @@ from fenics_contact.cli.cases import case_run_options
 from fenics_contact.cli.options import METHODS, RunOptions
 from fenics_contact.cli.solve import _check_case_coarse_grid, _check_coarse_grid, _mesh, _model
 from fenics_contact.errors import FenicsContactError, InputError
-from fenics_contact.hybrid.mixed import check_straight_interface
 from fenics_contact.methods import METHODS as CATALOGUE
 from fenics_contact.problem.case import Case, MeshFile, load_case, parse_override
 from fenics_contact.problem.geometry import ContactMesh, gmsh_session
 from fenics_contact.problem.strip import contact_cell_size
 from fenics_contact.problem.tags import PHYSICAL_NAMES, Boundary, Subdomain, is_neumann_name
-from fenics_contact.problem.validation import contact_open_ends, interface_bends_of
+from fenics_contact.problem.validation import contact_open_ends, interface_bends_of, require_method_dimension
 
 __all__ = ["check_mesh"]
 
@@ -115,8 +114,7 @@ def _refusal(method: str, cm: ContactMesh, options: RunOptions, case: Case | Non
                 _check_coarse_grid(cm, as_run)
             else:
                 _check_case_coarse_grid(cm, as_run, case)
-        if entry.family == "mixed":
-            check_straight_interface(cm)
+        require_method_dimension(method, cm.mesh)
     except FenicsContactError as err:
         return err
     return None

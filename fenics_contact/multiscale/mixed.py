@@ -15,13 +15,14 @@ s₀ of the fine Ω₁ subproblem (σ₁ = r + Q g₁₂ + σ_f + s₀), whose e
 −(div s₀, v) is a load, and u_D on Γ_D is the stress-side load ∫_ΓD u_D·(τn): both enter the source correctors
 (so the error still falls with m) and the coarse right-hand side.  Γ_C facets on Ω₁ are refused (InputError).
 
-The Robin data and the Ω₂ side are exactly those of ``hybrid.mixed`` (values
-of continuous P3 vector functions at the γ nodes); the step subclasses
+The Robin data and the Ω₂ side are exactly those of ``hybrid.mixed`` (the
+normal-trace space of AW on γ: values at the γ nodes, one traction per side where γ
+bends, ``fem.mixed_interface.GammaBends``); the step subclasses
 ``MixedHybridStep`` and replaces its Ω₁ solve by the coarse solve of
 ``multiscale.mixed_cem.MixedMultiscaleOmega1``.  The multiscale normal trace σ₁n₁
 can jump at the coarse nodes of γ (the local spaces leave σ_tt free on inner
 patch boundaries); the update uses the average of the two one-sided values
-there.
+there, and at a bend the two sides' values projected onto the data space there.
 
 Ω₁ is linear, so its coarse state is an affine function of g₁₂, precomputed
 offline with one coarse solve per interface value

@@ -6,7 +6,8 @@ prescribed traction σn = t on some of the σn = 0 edges is carried by a *liftin
 edge moments are those of t and whose vertex values solve the stacked constraints with right-hand side t
 (least squares where the data of two edges meeting at a corner disagree); the stress is σ = P c + σ_t.
 The split interface (σ_tt doubled at the vertices of γ) adds, at each γ vertex, the null space of
-σ ↦ σn on γ and of the vertex's own constraints.
+σ ↦ σn on the γ edges there and of the vertex's own constraints: one function where γ is straight, none where
+it bends (the tractions on two edges of different normals fix all of σ(v)).
 """
 
 from __future__ import annotations

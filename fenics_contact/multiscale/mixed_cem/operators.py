@@ -13,6 +13,7 @@ import dolfinx.la
 import numpy as np
 import scipy.sparse as sp
 import ufl
+from scipy.spatial import cKDTree
 from dolfinx import fem
 from dolfinx import mesh as dmesh
 
@@ -84,8 +85,10 @@ class CellOperators:
         return self.C.shape[1]
 
 
-def _trace_operator(msh: dmesh.Mesh, dg: fem.FunctionSpace, gamma: np.ndarray, points: np.ndarray) -> sp.csr_matrix:
-    """σn (outward normal) at ``points`` on the γ facets, cell-major columns; averaged where two facets meet."""
+def _trace_operator(msh: dmesh.Mesh, dg: fem.FunctionSpace, gamma: np.ndarray, points: np.ndarray,
+                    facet: np.ndarray | None = None) -> sp.csr_matrix:
+    """σn (outward normal) at ``points`` on the γ facets, cell-major columns; averaged where two facets meet
+    (``facet``: per point the index into ``gamma`` of the one facet to use, −1 for any)."""
     tdim = msh.topology.dim
     msh.topology.create_connectivity(tdim - 1, tdim)
     f2c = msh.topology.connectivity(tdim - 1, tdim)
@@ -103,6 +106,8 @@ def _trace_operator(msh: dmesh.Mesh, dg: fem.FunctionSpace, gamma: np.ndarray, p
     s = np.einsum("pfi,fi->pf", rel, d) / length[None] ** 2
     dist = np.linalg.norm(rel - s[..., None] * d[None], axis=-1)
     on = (dist <= 1e-10 * length[None]) & (s >= -1e-10) & (s <= 1 + 1e-10)
+    if facet is not None:
+        on &= (facet[:, None] < 0) | (facet[:, None] == np.arange(gamma.size)[None, :])
     pi, fi = np.nonzero(on)
     if np.unique(pi).size != points.shape[0]:
         raise RuntimeError("a γ node lies on no γ facet")
@@ -127,6 +132,24 @@ def _trace_operator(msh: dmesh.Mesh, dg: fem.FunctionSpace, gamma: np.ndarray, p
     )
     E.sum_duplicates()
     return E
+
+
+def _bent_trace_operator(msh: dmesh.Mesh, dg: fem.FunctionSpace, gamma: np.ndarray, bends) -> sp.csr_matrix:
+    """σn at the γ nodes as the stored data values of ``bends`` (``fem.mixed_interface.GammaBends``): averaged
+    where two facets meet at a straight vertex, each side of a bend on its own facet, the two sides' values
+    projected onto the bend's data space (the coefficients in its orthonormal basis)."""
+    x = msh.geometry.x[:, :2]
+    mid = x[dmesh.entities_to_geometry(msh, msh.topology.dim - 1, gamma)].mean(axis=1)
+    n = bends.points.shape[0]
+    plain = np.setdiff1d(np.arange(n), bends.nodes)
+    side_facets = [cKDTree(mid).query(bends.side_midpoints[:, side])[1] for side in range(2)]
+    points = np.concatenate([bends.points[plain], bends.points[bends.nodes], bends.points[bends.nodes]])
+    facet = np.concatenate([np.full(plain.size, -1), *side_facets])
+    copy_row = np.concatenate([2 * plain, 2 * bends.nodes, 2 * n + 2 * np.arange(bends.nodes.size)])
+    E = _trace_operator(msh, dg, gamma, points, facet).tocoo()
+    rows = copy_row[E.row // 2] + E.row % 2
+    copies = sp.csr_matrix((E.data, (rows, E.col)), shape=(bends.num_copy_values, E.shape[1]))
+    return (bends.basis.T @ copies).tocsr()
 
 
 def cell_operators(sub, H: float, weight: str = "lambda+2mu", s_factor: float = 1.0) -> CellOperators:
@@ -166,10 +189,14 @@ def cell_operators(sub, H: float, weight: str = "lambda+2mu", s_factor: float = 
     blocks, coords = blocks[order], coords[order]
     if coords.shape != sub.gamma_points.shape or not np.allclose(coords, sub.gamma_points, atol=1e-12):
         raise RuntimeError("the γ nodes do not match the Ω₁ subproblem's interface nodes")
-    g = ufl.TrialFunction(Lam)
-    Cfull = assemble_scipy(forms_mixed.robin_data_form(g, t, n, ds(Boundary.INTERFACE)))
-    C = Cfull[dg_rows.ravel()][:, (2 * blocks[:, None] + np.arange(2)).ravel()].tocsr()
-    E = _trace_operator(msh, dg, gamma, coords)
+    if sub.interface.bends.bent:  # the data space of the bends (``fem.mixed_interface.GammaBends``)
+        C = sub.interface.C_dg[dg_rows.ravel()].tocsr()
+        E = _bent_trace_operator(msh, dg, gamma, sub.interface.bends)
+    else:
+        g = ufl.TrialFunction(Lam)
+        Cfull = assemble_scipy(forms_mixed.robin_data_form(g, t, n, ds(Boundary.INTERFACE)))
+        C = Cfull[dg_rows.ravel()][:, (2 * blocks[:, None] + np.arange(2)).ravel()].tocsr()
+        E = _trace_operator(msh, dg, gamma, coords)
     # the local spaces start from the full (unconstrained) AW space, also where τn = 0 sides constrain sub.space
     space = sub.space
     num_full = 3 * msh.topology.index_map(0).size_local + 4 * msh.topology.index_map(1).size_local + 3 * ncell

@@ -5,7 +5,7 @@ case file's mesh and problem, ``problem.case``), with every check a run makes be
 solve: the file's elements and physical groups, the tags against the contact problem
 (``problem.validation``), the strip Ω₂, γ and the coarse cells built when the file has none of
 Omega1/Omega2/gamma (``problem.strip``), the materials and loads, the coarse grid of the multiscale
-methods and the straight γ of the mixed ones. It prints what it found and which methods can run;
+methods and the dimension each method solves in. It prints what it found and which methods can run;
 exit 0 when a run with the chosen method could start, 2 (the run's code for bad input) with the
 refusal otherwise.
 """
@@ -143,8 +143,8 @@ def _describe(cm: ContactMesh, say, groups) -> None:
         f"cell on Gamma_C), H = {coarse}")
     bends = interface_bends_of(cm)
     say("  gamma: straight" if not bends.size else
-        f"  gamma: bends at {len(bends)} vertices (first at ({bends[0][0]:.6g}, {bends[0][1]:.6g})): the mixed "
-        "methods need it straight")
+        f"  gamma: bends at {len(bends)} vertices (first at ({bends[0][0]:.6g}, {bends[0][1]:.6g})); the mixed "
+        "methods take the traction of one stress tensor there")
     ends = contact_open_ends(cm)
     if ends.size:
         say(f"  Gamma_C ends where the boundary goes on straight at {len(ends)} points (first at "

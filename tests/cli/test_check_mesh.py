@@ -59,7 +59,7 @@ def test_a_case_with_its_own_mesh_file_and_material_groups(capsys):
     assert _number(r", H = ([\d.]+)", out) == case.mesh.coarse  # the case's mesh.coarse-size
     assert _number(r"contact cell size ([\d.e+-]+)", out) < case.mesh.coarse / 10  # refined under the indenter
     assert "gamma: bends at" in out  # the strip built along the middle of the top face
-    assert "primal can run" in out and "primal-ms can run" in out
+    assert "primal can run" in out and "primal-ms can run" in out and "mixed can run" in out
     assert "ok: a run with --method primal can start" in out
 
 

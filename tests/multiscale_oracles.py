@@ -1,7 +1,7 @@
 """Test oracles of the multiscale methods: independent, slower computations that the package's fast paths match.
 
 ``stage_two_reference``: Stage II of the mixed CEM-GMsFEM (Algorithm 4) with one sparse LU of each whole patch
-system (the bases ψ_j^i and the Robin and source correctors of every coarse cell i on K_{i,m}, METHOD §3, §9),
+system (the bases ψ_j^i and the Robin and source correctors of every coarse cell i on K_{i,m}),
 against which the package's static condensation onto the coarse skeleton (``mixed_cem.stage_two``) is checked.
 """
 

@@ -1,7 +1,7 @@
 """Case files (``fenics-contact run --case``): the schema, flags over the file, materials by group, and the
 example cases of ``cases/`` run at a small size against what is known of their solutions.
 
-* bar (METHOD §9): the contact force is the closed form's, 1/(2(1 + Eδ)) (primal), 1/2 (mixed); pulling, none;
+* bar: the contact force is the closed form's, 1/(2(1 + Eδ)) (primal), 1/2 (mixed); pulling, none;
 * Hertz (r = 0.5, two load steps): half-width, peak pressure against Hertz for the force read off;
   the force–indentation curve's last point is the run's own solve;
 * layered patch from a pixel map: F = d₀/(C + δ) at every load step (primal, round-off), F/d₀
@@ -275,7 +275,7 @@ layers = 2
 
 @pytest.mark.parametrize("method", ["primal", "primal-ms"])
 def test_layered_patch_case_from_a_pixel_map(tmp_path, method):
-    """The layered patch test (METHOD §9) as a case: E from a 16-pixel map, a plane moved in by
+    """The layered patch test as a case: E from a 16-pixel map, a plane moved in by
     0.01, 0.02, 0.03 in load steps. Primal: F = d₀/(C + δ) to round-off at every step. Algorithm 3
     (one solve per step): F/d₀ the same at every step (the problem is linear in d₀ once in contact),
     within 6 % of the exact at m = 2 (measured 4.6 %: the CEM space, not the steps)."""

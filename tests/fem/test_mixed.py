@@ -25,7 +25,7 @@ from fenics_contact.fem.primal import default_penalty, solve_primal_monolithic
 from fenics_contact.problem.tags import Boundary
 from fenics_contact.hybrid.transmission import split_mesh
 
-#: the paper's contact zones (METHOD §5), per model
+#: the paper's contact zones (its test set-up), per model
 CONTACT_ZONE = {1: (0.0, 0.5), 2: (0.4, 0.6)}
 
 

@@ -1,4 +1,4 @@
-"""Interface Newton at contrast 1e6 (issue 10): the contact Newton's active-set record, its other starts,
+"""Interface Newton at contrast 1e6: the contact Newton's active-set record, its other starts,
 the multiscale default α and the clear error when the glued problem is not positive definite.
 
 * The contact Newton records the Γ_C rows each step adds / removes; the sizes add up, the last step

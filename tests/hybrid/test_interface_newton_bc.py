@@ -1,4 +1,4 @@
-"""Interface Newton and the certificate with the boundary data of issue 14.
+"""Interface Newton and the certificate with boundary data: a prescribed displacement, tractions, free sides.
 
 A heterogeneous model (model 2, contrast 1e3) clamped on the left with a prescribed displacement
 u_D ≠ 0, a traction on the top side, a traction-free bottom and a rigid plane at a gap from Γ_C

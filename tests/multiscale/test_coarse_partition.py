@@ -1,4 +1,4 @@
-"""Any domain for the multiscale methods (issue 14, item 3): coarse grids over the bounding box, user
+"""Any domain for the multiscale methods: coarse grids over the bounding box, user
 partitions, oversampling by coarse-cell adjacency, and the automatic contact strip Ω₂.
 
 Unit checks: the Cartesian grid over the bounding box of a rectangle 2×1 and of an L-shape, a refused

@@ -1,4 +1,4 @@
-"""Algorithm 4 with the boundary conditions of the fine mixed method on Ω₁ (issue 14).
+"""Algorithm 4 with the boundary conditions of the fine mixed method on Ω₁.
 
 Every untagged side traction free (σn = 0, essential in every local stress space), Γ_N groups with a
 traction (σn = t: the lifting s₀, whose effect is a load that goes through the source correctors) and

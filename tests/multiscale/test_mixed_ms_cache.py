@@ -393,7 +393,7 @@ def test_condensed_stage_two_equals_per_patch_lu(omega1):
     top = bfacets[np.isclose(dmesh.compute_midpoints(msh, 1, bfacets)[:, 1], 1.0)]
     rng = np.random.default_rng(3)
     loaded = dataclasses.replace(ops, G=rng.standard_normal(ops.G.shape),  # f, and the stress-side load F
-                                 F=rng.standard_normal((ops.num_cells, 30)))  # of boundary data (issue 14)
+                                 F=rng.standard_normal((ops.num_cells, 30)))  # of boundary data
     dofs = mm.CoarseCellDofs.of(ops, grid)
     for tp in (topo, mm.Topology(msh, ops.num_aw, top)):
         aux = mm.stage_one(loaded, tp, grid, 3)
@@ -471,7 +471,7 @@ def test_algorithm4_unchanged_by_the_condensed_stage_two(monkeypatch):
         assert np.linalg.norm(x - y) <= 1e-10 * np.linalg.norm(y), name
     # the errors are relative to the reference's norm: a change δ·‖u‖ of the solution moves them by up to δ, so
     # they must agree to 1e-10 absolutely, as the fields do (e_u_post = 3e-4 here and moves by 5e-14, i.e.
-    # 1.7e-10 of itself, with the AW bases of 2026-12-02, which differ from the older ones by rounding, 1e-14)
+    # 1.7e-10 of itself: Arnold–Winther bases that differ by rounding, 1e-14, move it that much)
     for attr in ("e_sigma", "e_u", "e_u_post"):
         assert abs(getattr(new, attr) - getattr(old, attr)) <= 1e-10, attr
     for a, b in ((new.sigma, old.sigma), (new.u, old.u)):

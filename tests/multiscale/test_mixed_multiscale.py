@@ -394,7 +394,7 @@ def test_basis_decay_rate_with_nu_and_adaptive_modes():
 
 @pytest.mark.slow
 def test_traction_free_side_of_omega1(omega1):
-    """Essential τn = 0 on a side of Ω₁ (a traction-free boundary, issue 14): the local spaces treat it as
+    """Essential τn = 0 on a side of Ω₁ (a traction-free boundary): the local spaces treat it as
     inner boundary, the whole-Ω₁ local space is the constrained AW space, and with all modes and patches
     covering Ω₁ the multiscale solution is the fine one of the constrained problem."""
     from fenics_contact.fem.arnold_winther import ArnoldWintherSpace

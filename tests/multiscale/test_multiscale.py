@@ -273,7 +273,7 @@ def test_without_source_correction_the_error_stalls(mesh_32_8):
 
 @pytest.mark.slow
 def test_tractions_on_omega1_are_source_corrected():
-    """A Γ_N traction on Ω₁'s boundary (issue 14 item 1 for Algorithm 3): left side clamped, top side
+    """A Γ_N traction on Ω₁'s boundary (Algorithm 3): left side clamped, top side
     pulled by t = (1, −½) over Ω₁ and Ω₂, no body force, bottom traction free, model 1 (channels through γ).
     Against the fine Algorithm 1 the energy error falls at least 5× per layer (measured 7.7×, 10×;
     without the correction it stalls at 0.30); the same with a prescribed displacement on the clamped side."""

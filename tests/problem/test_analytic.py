@@ -1,4 +1,4 @@
-"""Analytic benchmarks (METHOD §9) for the primal and mixed monolithic solves and Algorithms 1–4.
+"""Analytic benchmarks for the primal and mixed monolithic solves and Algorithms 1–4.
 
 (a) the bar clamped at x = 0 only: pushing (full contact) and pulling (no contact);
 (b) plane-strain Hertz: a rigid cylinder pressed into a wide, deep block;

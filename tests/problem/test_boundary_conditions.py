@@ -128,7 +128,7 @@ def test_bad_boundary_input(tmp_path):
 @serial
 @pytest.mark.slow
 def test_algorithm_3_takes_a_prescribed_displacement():
-    """Algorithm 3 with u_D on Ω₁'s Γ_D (its lifting u_g, issue 14), the tractions and the curved gap of the
+    """Algorithm 3 with u_D on Ω₁'s Γ_D (its lifting u_g), the tractions and the curved gap of the
     manufactured problem (whole Γ_C in contact): the error against Algorithm 1's fixed point falls with the
     oversampling m, and with patches covering Ω₁ (m = 3 on a 3 × 4 coarse Ω₁) it is that fixed point to the
     CEM's round-off; without the lifting (clamped instead) the answer is a different problem."""

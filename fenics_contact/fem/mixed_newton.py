@@ -7,7 +7,7 @@ descent direction of the convex, piecewise quadratic complementary energy
 
 on the affine set {div σ = −f}.  Full steps are taken while they lead to new active sets; with full steps
 the iterate depends only on the set it was linearized at, so a step into a set already visited closes a
-cycle (plain semismooth Newton cycles here, METHOD §8).  From the first such step on, the step length
+cycle (plain semismooth Newton cycles here).  From the first such step on, the step length
 minimizes J exactly along the Newton direction (J is piecewise quadratic in the step, with breakpoints
 where σ_c changes sign), so J decreases monotonically and no cycle can recur.  The iteration ends with the
 first step whose result has the active set it was linearized at (it then solves the penalized problem

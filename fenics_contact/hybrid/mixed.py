@@ -1,4 +1,4 @@
-"""Algorithm 2: the mixed iterative contact-resolving hybrid method (METHOD §3).
+"""Algorithm 2: the mixed iterative contact-resolving hybrid method (the docs' theory page).
 
     Ω₁ (linear):    (Aσ₁, τ) + (div τ, u₁) + β∫_γ (σ₁n₁)·(τn₁) = ∫_γ g₁₂·(τn₁),   (div σ₁, v) = −(f, v)
     Ω₂ (nonlinear): (Aσ₂, τ) + (div τ, u₂) + β∫_γ (σ₂n₂)·(τn₂) + (1/ε)∫_ΓC (σ₂c)⁺τ_c = ∫_γ g₂₁·(τn₂),
@@ -104,7 +104,7 @@ __all__ = ["DEFAULT_BETA", "MixedHybridResult", "MixedHybridStep", "solve_mixed_
 
 log = logging.getLogger(__name__)
 
-#: Default transmission coefficient β = √h of Algorithms 2 and 4 (the paper's faster choice, METHOD §4).
+#: Default transmission coefficient β = √h of Algorithms 2 and 4 (the paper's faster choice).
 DEFAULT_BETA = "sqrt-h"
 
 
@@ -227,7 +227,7 @@ class MixedHybridStep:
         return c, u
 
     def errors(self) -> tuple[float, float]:
-        """(e_σ, e_u) = (‖σ_h − σⁿ‖_A/‖σ_h‖_A, ‖u_h − uⁿ‖/‖u_h‖) against the reference (METHOD §6)."""
+        """(e_σ, e_u) = (‖σ_h − σⁿ‖_A/‖σ_h‖_A, ‖u_h − uⁿ‖/‖u_h‖) against the reference."""
         es = sum(s.stress_norm2(s.c - c) for s, (c, _) in zip(self.sub, self.reference))
         eu = sum(s.l2_norm2(s.u - u) for s, (_, u) in zip(self.sub, self.reference))
         return float(np.sqrt(es / self._ref_norm2[0])), float(np.sqrt(eu / self._ref_norm2[1]))
@@ -271,7 +271,7 @@ class MixedHybridStep:
 
     def interface_problem(self, options: InterfaceNewtonOptions):
         """The affine pieces for ``hybrid.interface_newton`` (built once)."""
-        if self.comm.size > 1:  # (issue 13) MixedPart holds serial SciPy operators
+        if self.comm.size > 1:  # MixedPart holds serial SciPy operators
             raise InputError(
                 f"the interface Newton method (--accel newton) of the mixed method runs serially; got {self.comm.size} "
                 "MPI ranks. Use --accel anderson (or none) under mpiexec, or run without mpiexec."

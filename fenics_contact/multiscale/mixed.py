@@ -1,14 +1,14 @@
-"""Algorithm 4: mixed CEM-GMsFEM in Ω₁, mixed FEM with penalty contact in Ω₂ (METHOD §3).
+"""Algorithm 4: mixed CEM-GMsFEM in Ω₁, mixed FEM with penalty contact in Ω₂ (the docs' theory page).
 
     Ω₁ (multiscale, linear): (r, w) ∈ X_ms × U_aux, with the Robin correctors (Q g₁₂, N g₁₂) and the
-    source correctors (σ_f, u_f) (METHOD §9; zero with ``source_correction=False``, the paper's algorithm),
+    source correctors (σ_f, u_f) (zero with ``source_correction=False``, the paper's algorithm),
         (Ar, τ) + (div τ, w) + β∫_γ (rn₁)·(τn₁) = ∫_γ g₁₂·(τn₁) − [(A(Qg₁₂ + σ_f), τ) + (div τ, Ng₁₂ + u_f)
                                                    + β∫_γ ((Qg₁₂ + σ_f)n₁)·(τn₁)]
         −(div r, v) = (f, v) + (div (Qg₁₂ + σ_f), v);     σ₁ = r + Q g₁₂ + σ_f,  u₁ = w + N g₁₂ + u_f
     Ω₂ (fine, nonlinear): as in Algorithm 2 (``fem.mixed.MixedSubproblem``, globalized semismooth Newton)
     update:  g₁₂ ← g₂₁ − 2β σ₂n₂,   g₂₁ ← g₁₂ − 2β σ₁n₁
 
-**Boundary conditions on Ω₁** (issue 14): those of the fine mixed method (``fem.mixed.boundary_stress_space``).
+**Boundary conditions on Ω₁**: those of the fine mixed method (``fem.mixed.boundary_stress_space``).
 Every exterior facet of Ω₁ that is not Γ_D or γ (untagged: traction free; Γ_N groups) carries the essential
 condition τn = 0 in every local stress space (``essential_traction_facets``); a traction σn = t is the lifting
 s₀ of the fine Ω₁ subproblem (σ₁ = r + Q g₁₂ + σ_f + s₀), whose effect −(A s₀, τ) − β∫_γ(s₀n)·(τn),
@@ -140,7 +140,7 @@ class MixedMultiscaleHybridStep(MixedHybridStep):
         grid = coarse_grid(part.mesh, part.cell_map, cm.coarse_cell, cm.H)
         self.cem = cem
         warn_if_few_layers(cem.layers, "mixed CEM (Algorithm 4)", offline_comm)
-        # (issue 14) the boundary conditions of the fine mixed method on Ω₁: σn = 0 (traction free) and σn = t
+        # the boundary conditions of the fine mixed method on Ω₁: σn = 0 (traction free) and σn = t
         # (Γ_N, homogeneous part + the lifting s₀) essential in every local space, u_D and the lifting as loads
         self.omega1 = MixedMultiscaleOmega1(self.sub[0], grid, cem, H=grid.H, cache_dir=cache_dir, comm=offline_comm,
                                             traction_free_facets=essential_traction_facets(part.mesh, part.facet_tags))
@@ -201,7 +201,7 @@ class MixedMultiscaleHybridStep(MixedHybridStep):
             self.fine_displacement_post()
 
     def errors(self) -> tuple[float, float]:
-        """(e_σ, e_u) against the fine monolithic reference over Ω₁ ∪ Ω₂ (METHOD §6)."""
+        """(e_σ, e_u) against the fine monolithic reference over Ω₁ ∪ Ω₂."""
         if self.reference is None:
             raise InputError("no reference solution was given")
         s1, u1 = self.fine_omega1()
@@ -358,7 +358,7 @@ def solve_mixed_ms_hybrid(
     (``multiscale.mixed_cem.MixedOfflineCache``; ``step.omega1.cache_status``).  ``nbasis`` is the least
     number of Stage I modes per coarse cell; ``min_gap`` adds modes where the first eigenvalue left
     out is below it (up to ``max_nbasis``; ``None`` keeps exactly ``nbasis``, the paper's fixed l).
-    ``source_correction`` (default) adds the localized source correctors of METHOD §9 (the error then
+    ``source_correction`` (default) adds the localized source correctors (the error then
     falls with m for loads inside Ω₁ too); ``False`` is the paper's Algorithm 4. These are the fields of
     ``cem`` (``multiscale.mixed_cem.MixedCEMOptions``).
 

@@ -96,8 +96,9 @@ def factorization_failure(pc: PETSc.PC, prefix: str | None = None) -> str:
             text += f": {meaning}"
     if infog1 in _WORKSPACE or (infog1 is None and reason == PETSc.PC.FailedReason.FACTOR_OUTMEMORY):
         return (f"{text}. Delayed pivots overflowed the workspace MUMPS estimated: the matrix is badly scaled (blocks "
-                f"of very different units, e.g. Young's modulus far from 1) or pivots are tiny. Give the data in "
-                f"units with E of order 1, or raise the workspace (PETSC_OPTIONS='{option} 200': per cent extra)")
+                f"in very different units, e.g. Young's modulus or lengths far from 1, where it is not equilibrated) "
+                f"or has tiny pivots. Rescale the data, or raise the workspace (PETSC_OPTIONS='{option} 200': "
+                "200 % more than estimated)")
     if infog1 in (-5, -7, -13) or infog1 == -19:
         return f"{text}. Out of memory: a coarser mesh, more memory, or more MPI ranks"
     if infog1 in (-6, -10) or reason in (PETSc.PC.FailedReason.FACTOR_STRUCT_ZEROPIVOT,

@@ -6,12 +6,14 @@ depends on the iterate only through the active set H, so a factorization is reus
 changes.  The sparsity pattern holds every Γ_C node's penalty entries (``SaddlePointMatrix``): when the
 set changes only values change, and MUMPS redoes the numeric factorization, not the analysis.
 
-**Units.**  The stress block K̃ + (1/ε) Qᵀ W H Q scales like 1/E (compliance, and ε ∝ E), the divergence block B
-not at all; with E = 2.1e11 (steel in Pa) MUMPS' threshold pivoting delays every stress pivot and its workspace
-overflows.  The matrix factorized is the equilibrated D J D, D = diag(s I_σ, I_u/s), s² ≈ E_ref (``stress_scale``:
-the power of two nearest √E_ref, so D J D and the scaled vectors round nothing): its stress block is O(1), B is
-unchanged, and J⁻¹ r = D (D J D)⁻¹ D r.  With E_ref in (1/2, 2) (every built-in model: E_ref = 1) s = 1 and the
-factorization is J's own.
+**Units.**  On a mesh of size h the stress block K̃ + (1/ε) Qᵀ W H Q scales like h²/E (compliance, and ε ∝ E),
+the divergence block B like h: a stress pivot is h/E times the divergence entries of its column, so with
+E = 2.1e11 (steel in Pa) or lengths in μm MUMPS' threshold pivoting delays every stress pivot and its workspace
+overflows.  The matrix factorized is the equilibrated D J D, D = diag(s I_σ, I_u/s), s² ≈ E_ref/L_ref
+(``stress_scale``: the power of two nearest, so D J D and the scaled vectors round nothing; E_ref a reference
+Young's modulus, L_ref a reference length): the stress pivots are h/L_ref times the divergence entries whatever
+the units, B is unchanged, and J⁻¹ r = D (D J D)⁻¹ D r.  With E_ref/L_ref in (1/2, 2) (every built-in model on
+the unit square: E_ref = L_ref = 1) s = 1 and the factorization is J's own.
 """
 
 import numpy as np
@@ -30,12 +32,12 @@ __all__ = ["MIXED_SOLVER_OPTIONS", "SaddlePointFactorization", "saddle_point_sca
 MIXED_SOLVER_OPTIONS = {**DIRECT_OPTIONS, "mat_mumps_icntl_7": "2"}
 
 
-def stress_scale(modulus: float) -> float:
-    """s = 2^k with s² nearest the reference Young's modulus E_ref (1 for E_ref in (1/2, 2)); exponents are
-    kept within ±500 (s² finite for any finite E_ref)."""
-    if not (np.isfinite(modulus) and modulus > 0):
-        raise InputError(f"the reference Young's modulus must be finite and > 0, got {modulus!r}")
-    return float(2.0 ** int(np.clip(np.round(0.5 * np.log2(modulus)), -500, 500)))
+def stress_scale(stiffness: float) -> float:
+    """s = 2^k with s² nearest ``stiffness`` = E_ref/L_ref (1 for values in (1/2, 2)); exponents are kept within
+    ±500 (s² finite for any finite value)."""
+    if not (np.isfinite(stiffness) and stiffness > 0):
+        raise InputError(f"the reference stiffness E_ref/L_ref must be finite and > 0, got {stiffness!r}")
+    return float(2.0 ** int(np.clip(np.round(0.5 * np.log2(stiffness)), -500, 500)))
 
 
 def saddle_point_scaling(scale: float, n_sigma: int, n_u: int, n_extra: int = 0) -> np.ndarray | None:

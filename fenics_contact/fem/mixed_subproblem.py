@@ -21,9 +21,9 @@ decisions from them (active sets, cycle detection, line search), with every scal
 (energies, norms) a global reduction.  The Robin data g and the trace σn on γ are distributed by blocks of
 the canonical γ values (``interface_range``).
 
-**Units.**  The saddle-point factorizations are equilibrated by the subproblem's reference modulus (``modulus``,
-by default the smallest Young's modulus of its cells; ``mixed_linear.stress_scale``), so the solves keep their
-accuracy in any units (E = 2.1e11 in Pa as E = 1).
+**Units.**  The saddle-point factorizations are equilibrated by E_ref/L_ref (``mixed_linear.stress_scale``; E_ref
+``modulus``, by default the smallest Young's modulus of the cells, L_ref the mesh's extent), so the solves keep
+their accuracy in any units (E = 2.1e11 in Pa as E = 1, lengths in mm as in m).
 """
 
 import time
@@ -59,6 +59,14 @@ def _part(part: str, name: str, doc: str) -> property:
     return property(lambda self: getattr(getattr(self, part), name), doc=doc)
 
 
+def _extent(msh: dmesh.Mesh) -> float:
+    """The largest side of the mesh's bounding box (over all ranks)."""
+    x = msh.geometry.x
+    lo = msh.comm.allreduce(np.min(x, axis=0, initial=np.inf), op=MPI.MIN)
+    hi = msh.comm.allreduce(np.max(x, axis=0, initial=-np.inf), op=MPI.MAX)
+    return float(np.max(hi - lo))
+
+
 class MixedSubproblem:
     """(Aσ, τ) + (div τ, u) [+ p_ε(σ; τ)] [+ r_β(σ, τ)] = [d(g; τ)],  (div σ, v) = −(f, v) on one mesh.
 
@@ -81,7 +89,7 @@ class MixedSubproblem:
         operators: False builds the spaces, the interface data and the load only, without
             the global matrices (no solve then; Algorithm 4's Ω₁ assembles its own cell blocks).
         modulus: the reference Young's modulus E_ref of the equilibration of the factorizations
-            (``stress_scale``; default: the smallest E of the mesh's cells).
+            (``stress_scale`` of E_ref/L_ref, L_ref the mesh's extent; default: the smallest E of its cells).
     """
 
     def __init__(
@@ -133,7 +141,7 @@ class MixedSubproblem:
         if modulus is None:
             modulus = self.comm.allreduce(float(np.min(fields.E.x.array, initial=np.inf)), op=MPI.MIN)
         #: s of the equilibration D = diag(s I_σ, I_u/s) of every saddle-point factorization of this subproblem
-        self.stress_scale = stress_scale(modulus)
+        self.stress_scale = stress_scale(modulus / _extent(msh))
         self.factorization = SaddlePointFactorization(self.comm, prefix, self.spaces.n_sigma, self.assembly,
                                                       self.contact_nodes, contact=self.contact,
                                                       has_operators=operators, scale=self.stress_scale)

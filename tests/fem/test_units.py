@@ -24,6 +24,7 @@ from fenics_contact.errors import ConvergenceError
 from fenics_contact.fem.linalg import DirectSolver, SparseFactor, scipy_to_petsc
 from fenics_contact.fem.mixed import default_epsilon
 from fenics_contact.fem.primal import default_penalty
+from fenics_contact.multiscale.mixed import MixedMultiscaleHybridStep
 from fenics_contact.problem.analytic import bar_model, bar_solution
 
 serial = pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="mixed (Arnold–Winther) methods are serial")
@@ -121,6 +122,29 @@ def test_fixed_point_iteration_in_any_units(method):
         got = _bar(method, 1.0, E, L, options=options)
         assert got["counts"] == ref["counts"], (E, L, got, ref)
         assert got["force"] == pytest.approx(ref["force"], rel=RTOL), (E, L, got, ref)
+
+
+@serial
+@pytest.mark.parametrize("eigensolver", ["lapack", "krylovschur"])
+def test_mixed_cem_offline_is_dimensionless(eigensolver):
+    """Algorithm 4's offline phase at E = 2.1e11 (Pa): the Stage I eigenvalues (dense, or SLEPc shift-and-invert
+    of the equilibrated pencil) and the coarse saddle-point matrix [[ΨᵀÃΨ, (ΠᵀBΨ)ᵀ], [ΠᵀBΨ, 0]] are those of
+    E = 1 (the S-orthonormal modes make the coarse matrix dimensionless: its dense LU needs no scaling)."""
+    def offline(E: float):
+        cm = fc.unit_square(N, N_COARSE, clamped=("left",))
+        step = MixedMultiscaleHybridStep(bar_model(E, E=E).on(cm), cem=fc.MixedCEMOptions(eigensolver=eigensolver))
+        o = step.omega1
+        co = o.co
+        ms = slice(0, co.n_ms)
+        return np.concatenate(o.aux.values), np.diff(o.aux.offsets), co.Gt[ms, ms].copy(), co.Bm[:, ms].copy()
+
+    (lam0, l0, G0, B0), (lam, l, G, B) = offline(1.0), offline(2.1e11)
+    assert np.array_equal(l, l0)
+    assert np.allclose(lam, lam0, rtol=RTOL, atol=1e-10 * lam0.max())
+    # the modes of a repeated eigenvalue are a basis of their span: compare what does not depend on the basis
+    for X, X0 in ((G, G0), (B.T @ B, B0.T @ B0)):
+        assert np.allclose(np.linalg.eigvalsh(0.5 * (X + X.T)), np.linalg.eigvalsh(0.5 * (X0 + X0.T)),
+                           rtol=RTOL, atol=RTOL * np.abs(X0).max())
 
 
 def test_equilibrated_direct_solver():

@@ -62,8 +62,9 @@ def _part(part: str, name: str, doc: str) -> property:
 def _extent(msh: dmesh.Mesh) -> float:
     """The largest side of the mesh's bounding box (over all ranks)."""
     x = msh.geometry.x
-    lo = msh.comm.allreduce(np.min(x, axis=0, initial=np.inf), op=MPI.MIN)
-    hi = msh.comm.allreduce(np.max(x, axis=0, initial=-np.inf), op=MPI.MAX)
+    lo, hi = np.min(x, axis=0, initial=np.inf), np.max(x, axis=0, initial=-np.inf)
+    msh.comm.Allreduce(MPI.IN_PLACE, lo, op=MPI.MIN)
+    msh.comm.Allreduce(MPI.IN_PLACE, hi, op=MPI.MAX)
     return float(np.max(hi - lo))
 
 

@@ -40,12 +40,12 @@ from fenics_contact.errors import ConvergenceError, InputError
 
 __all__ = [
     "AbsoluteTerms",
-    "factorization_failure",
     "DirectSolver",
     "PivotedCholesky",
     "ReusedAnalysis",
     "SparseFactor",
     "assemble_scipy",
+    "factorization_failure",
     "petsc_to_scipy",
     "quadratic_form",
     "scipy_to_petsc",
@@ -167,7 +167,8 @@ class DirectSolver(_Factorization):
             self._work = self._d.duplicate()
         self.ksp.setOperators(A)
         if self._set_up() != 0:
-            raise ConvergenceError(f"{self.prefix}: factorization failed ({factorization_failure(self.ksp.getPC(), self.prefix)})")
+            cause = factorization_failure(self.ksp.getPC(), self.prefix)
+            raise ConvergenceError(f"{self.prefix}: factorization failed ({cause})")
         self.factorizations += 1
 
     def _range_message(self, what: str) -> str:

@@ -4,17 +4,26 @@ Every factorization lives here, on one core (``_Factorization``: a KSP of type p
 the factors of its operator; the factorization and every solve are checked, a failure is a ConvergenceError):
 
 * ``DirectSolver``: a (distributed) operator configured through the PETSc options database under its own
-  prefix (the fine subproblems, the interface Newton), refactorized by ``set_operator``; PETSc vector solves;
-  on one process, blocks of A⁻¹ from its MUMPS factors (``inverse_block``, ``fem.inverse_entries``).
+  prefix (the fine subproblems, the interface Newton), refactorized by ``set_operator``; PETSc vector solves and
+  solves of dense blocks (``mat_solve``), optionally of an operator given equilibrated (``scaling``); on one
+  process, blocks of A⁻¹ from its MUMPS factors (``inverse_block``, ``fem.inverse_entries``).
 * ``SparseFactor``: a sequential MUMPS LU or Cholesky (without pivoting for a matrix flagged SPD, else LDLᵀ
   with pivoting) of a matrix it owns, configured in code (the multiscale local problems, thousands of them: no options-database entries),
   with MUMPS ICNTL controls per factorization; solves of dense blocks of right-hand sides (one MatMatSolve);
   a SciPy CSR matrix wrapped without a copy (``from_csr``), a symmetric one given by its upper triangle
   (``symmetric``: Cholesky, or LU where it is not positive definite), new values refactorized on the kept
-  symbolic analysis (``refactor``; ``ReusedAnalysis`` keeps one per sparsity pattern), the inertia of an LDLᵀ.
+  symbolic analysis (``refactor``; ``ReusedAnalysis`` keeps one per sparsity pattern), the inertia of an LDLᵀ,
+  optionally the factors of an equilibrated D A D (``scaling``).
 * ``PivotedCholesky``: a dense rank-revealing Cholesky of a small symmetric positive semi-definite matrix
   (LAPACK ``dpstrf``).  It stays outside the PETSc core: MUMPS has no pivoting by size that drops the
   numerically dependent columns, and a dense MUMPS factor would round differently.
+
+**Equilibration.**  A saddle-point matrix whose blocks have different physical units (a compliance ~1/E beside
+an O(1) divergence) makes MUMPS' threshold pivoting reject the small diagonal pivots and delay them until its
+workspace overflows (E ≥ 1e6 for the mixed systems).  A factorization given a positive diagonal ``scaling`` D
+holds the factors of D A D and solves A x = b as x = D (D A D)⁻¹ (D b); with D a power of two per block the
+scaled matrix and vectors round nothing.  A failed factorization names its cause (``factorization_failure``: the
+PETSc reason, MUMPS' INFOG(1) and INFOG(2)) and what to do.
 """
 
 import logging
@@ -38,6 +47,7 @@ __all__ = [
     "ReusedAnalysis",
     "SparseFactor",
     "assemble_scipy",
+    "factorization_failure",
     "petsc_to_scipy",
     "quadratic_form",
     "scipy_to_petsc",
@@ -50,6 +60,54 @@ SAFE_RANGE = (1e-150, 1e150)
 
 #: Default options of every direct solve (each solver gets its own prefix).
 DIRECT_OPTIONS = {"ksp_type": "preonly", "pc_type": "lu", "pc_factor_mat_solver_type": "mumps"}
+
+#: PETSc's PC failure reasons by number (``PETSc.PC.FailedReason``)
+_PC_REASONS = {v: k for k, v in vars(PETSc.PC.FailedReason).items() if not k.startswith("_") and isinstance(v, int)}
+
+#: MUMPS error codes INFOG(1) (MUMPS users' guide, section "Error diagnostics"): what they mean, what to do
+_MUMPS_ERRORS = {
+    -5: "memory allocation failed in the analysis", -7: "memory allocation failed in the analysis",
+    -6: "the matrix is structurally singular (INFOG(2): its structural rank)",
+    -8: "MUMPS' integer workspace is too small", -9: "MUMPS' real workspace is too small",
+    -10: "the matrix is numerically singular", -11: "MUMPS' real workspace is too small for the solve",
+    -12: "MUMPS' real workspace is too small", -13: "a memory allocation of INFOG(2) entries failed",
+    -14: "MUMPS' integer workspace is too small for the solve", -15: "MUMPS' integer workspace is too small",
+    -17: "MUMPS' send buffer is too small", -19: "the memory limit ICNTL(23) is too small",
+    -20: "MUMPS' reception buffer is too small",
+}
+_WORKSPACE = (-8, -9, -11, -12, -14, -15, -17, -20)
+
+
+def factorization_failure(pc: PETSc.PC, prefix: str | None = None) -> str:
+    """Why the factorization of ``pc`` failed and what to do: the PETSc reason by name and, for MUMPS, INFOG(1)
+    and INFOG(2) with their meaning.  ``prefix``: the solver's options prefix (named in the advice)."""
+    reason = pc.getFailedReason()
+    text = f"PETSc PC failed reason {_PC_REASONS.get(reason, 'UNKNOWN')} ({reason})"
+    infog1 = infog2 = None
+    try:
+        if pc.getFactorSolverType() == "mumps":
+            F = pc.getFactorMatrix()
+            infog1, infog2 = F.getMumpsInfog(1), F.getMumpsInfog(2)
+    except PETSc.Error:  # no factor matrix (the set-up failed before MUMPS ran)
+        pass
+    option = f"-{prefix or ''}mat_mumps_icntl_14"
+    if infog1 is not None:
+        text += f"; MUMPS INFOG(1) = {infog1}, INFOG(2) = {infog2}"
+        meaning = _MUMPS_ERRORS.get(infog1)
+        if meaning:
+            text += f": {meaning}"
+    if infog1 in _WORKSPACE or (infog1 is None and reason == PETSc.PC.FailedReason.FACTOR_OUTMEMORY):
+        return (f"{text}. Delayed pivots overflowed the workspace MUMPS estimated: the matrix is badly scaled (blocks "
+                f"in very different units, e.g. Young's modulus or lengths far from 1, where it is not equilibrated) "
+                f"or has tiny pivots. Rescale the data, or raise the workspace (PETSC_OPTIONS='{option} 200': "
+                "200 % more than estimated)")
+    if infog1 in (-5, -7, -13) or infog1 == -19:
+        return f"{text}. Out of memory: a coarser mesh, more memory, or more MPI ranks"
+    if infog1 in (-6, -10) or reason in (PETSc.PC.FailedReason.FACTOR_STRUCT_ZEROPIVOT,
+                                         PETSc.PC.FailedReason.FACTOR_NUMERIC_ZEROPIVOT):
+        return (f"{text}. A singular matrix: a part of the body free to move rigidly (no Γ_D, no contact or "
+                "Robin data holding it), a zero Young's modulus, or a penalty or Robin coefficient far out of range")
+    return f"{text}. Check the data (moduli, penalty and Robin coefficients) for values far out of range"
 
 
 class _Factorization:
@@ -71,9 +129,13 @@ class _Factorization:
 
 
 class DirectSolver(_Factorization):
-    """A factorized operator (MUMPS LU by default) whose every solve is checked."""
+    """A factorized operator (MUMPS LU by default) whose every solve is checked.
 
-    def __init__(self, comm, *, prefix: str, options: dict | None = None) -> None:
+    ``scaling``: the owned entries of a positive diagonal D when the operators are given equilibrated, D A D:
+    ``solve`` and ``mat_solve`` then return the solutions of A x = b, x = D (D A D)⁻¹ (D b).
+    """
+
+    def __init__(self, comm, *, prefix: str, options: dict | None = None, scaling: np.ndarray | None = None) -> None:
         self.ksp = PETSc.KSP().create(comm)
         self.ksp.setOptionsPrefix(prefix)
         opts = PETSc.Options()
@@ -82,14 +144,17 @@ class DirectSolver(_Factorization):
         self.ksp.setFromOptions()
         self.prefix = prefix
         self.factorizations = 0
+        self.scaling = None if scaling is None else np.asarray(scaling, dtype=PETSc.ScalarType)
+        self._d: PETSc.Vec | None = None  # D as a PETSc vector (made with the first operator)
+        self._work: PETSc.Vec | None = None
 
     def set_operator(self, A: PETSc.Mat) -> None:
-        """Use A from now on and factorize it.
+        """Use A from now on and factorize it (with ``scaling``: A is the equilibrated D A D).
 
         Raises InputError when A has non-finite entries (overflowing data, e.g. E = 1e308) or its
         largest entry is outside the range a double-precision factorization handles (``SAFE_RANGE``:
         squares and residual norms must stay finite); ConvergenceError when the factorization fails
-        (a singular matrix).
+        (``factorization_failure``: the cause and what to do).
         """
         _, _, values = A.getValuesCSR()
         finite = A.getComm().tompi4py().allreduce(bool(np.all(np.isfinite(values))), op=MPI.LAND)
@@ -98,11 +163,14 @@ class DirectSolver(_Factorization):
             raise InputError(self._range_message("non-finite values"))
         if not SAFE_RANGE[0] <= largest <= SAFE_RANGE[1]:
             raise InputError(self._range_message(f"entries up to {largest:.3g}"))
+        if self.scaling is not None and self._d is None:
+            self._d = A.createVecLeft()
+            self._d.array[:] = self.scaling
+            self._work = self._d.duplicate()
         self.ksp.setOperators(A)
-        reason = self._set_up()
-        if reason != 0:
-            raise ConvergenceError(f"{self.prefix}: factorization failed (PETSc PC failed reason {reason}; "
-                                   "a singular matrix?)")
+        if self._set_up() != 0:
+            cause = factorization_failure(self.ksp.getPC(), self.prefix)
+            raise ConvergenceError(f"{self.prefix}: factorization failed ({cause})")
         self.factorizations += 1
 
     def _range_message(self, what: str) -> str:
@@ -111,22 +179,46 @@ class DirectSolver(_Factorization):
                 "large or too small. Rescale the units (the displacement scales as load/E).")
 
     def solve(self, b: PETSc.Vec, x: PETSc.Vec) -> None:
-        """x = A⁻¹ b, raising ConvergenceError on any PETSc failure."""
-        self.ksp.solve(b, x)
+        """x = A⁻¹ b, raising ConvergenceError on any PETSc failure (b is left as it is)."""
+        if self._d is None:
+            self.ksp.solve(b, x)
+        else:
+            self._work.pointwiseMult(b, self._d)
+            self.ksp.solve(self._work, x)
+            x.pointwiseMult(x, self._d)
         reason = self._solve_reason()
         if reason < 0:
             raise ConvergenceError(f"{self.prefix}: linear solve failed, KSP reason {reason}")
 
     def has_inverse_entries(self) -> bool:
-        """Whether ``inverse_block`` works here: a sequential MUMPS factorization (``fem.inverse_entries``)."""
+        """Whether ``inverse_block`` works here: a sequential MUMPS factorization of the operator itself (not of an
+        equilibrated one; ``fem.inverse_entries``)."""
         pc = self.ksp.getPC()
-        return (self.ksp.getComm().getSize() == 1 and inverse_entries.available() and self.factorizations > 0
+        return (self._d is None and self.ksp.getComm().getSize() == 1 and inverse_entries.available()
+                and self.factorizations > 0
                 and pc.getType() in ("lu", "cholesky") and pc.getFactorSolverType() == "mumps")
 
     def inverse_block(self, rows: np.ndarray) -> np.ndarray:
         """(A⁻¹)[rows][:, rows] (dense, in the order of ``rows``) from the factors held: MUMPS' entries of the
         inverse, the values of back-solves without them (``fem.inverse_entries``; ``has_inverse_entries``)."""
         return inverse_entries.inverse_block(self.ksp.getPC().getFactorMatrix(), rows, what=self.prefix)
+
+    def mat_solve(self, B: PETSc.Mat, X: PETSc.Mat) -> None:
+        """X = A⁻¹ B for a dense block B (one multi-right-hand-side solve; with ``scaling`` B is overwritten)."""
+        if self._d is not None:
+            B.diagonalScale(L=self._d)
+        self.ksp.matSolve(B, X)
+        if self._d is not None:
+            X.diagonalScale(L=self._d)
+        reason = self._solve_reason()
+        if reason < 0:
+            raise ConvergenceError(f"{self.prefix}: multi-right-hand-side solve failed, KSP reason {reason}")
+
+    def destroy(self) -> None:
+        for obj in (self._d, self._work):
+            if obj is not None:
+                obj.destroy()
+        self.ksp.destroy()
 
 
 class SparseFactor(_Factorization):
@@ -144,17 +236,19 @@ class SparseFactor(_Factorization):
 
     def __init__(
         self, mat: PETSc.Mat, *, cholesky: bool = False, icntl: dict[int, int] | None = None, trial: bool = False,
-        what: str | None = None,
+        what: str | None = None, scaling: np.ndarray | None = None,
     ) -> None:
         """Factorize ``mat`` (destroyed with this factor): LU, or with ``cholesky`` MUMPS' Cholesky (no pivoting
         when ``mat`` is flagged SPD, else LDLᵀ with pivoting); ``icntl`` MUMPS controls (default: ``lu_icntl``
         for an LU, none for Cholesky).  A failed factorization raises ConvergenceError, unless ``trial``
         (a Cholesky of a matrix flagged SPD): then a failure or a non-positive pivot only sets ``positive``
         False (the caller factorizes otherwise, as ``symmetric`` does).  ``what`` overrides the class's name of
-        the matrix in messages."""
+        the matrix in messages.  ``scaling``: the diagonal D when ``mat`` is given equilibrated, D A D (``from_csr``
+        scales): ``solve`` then returns A⁻¹ rhs = D (D A D)⁻¹ (D rhs)."""
         if what is not None:
             self.what = what
         self.mat = mat
+        self.scaling = None if scaling is None else np.asarray(scaling, dtype=PETSc.ScalarType)
         self.trial = trial
         self._arrays = None  # the CSR arrays a matrix made by from_csr shares
         self.ksp = PETSc.KSP().create(PETSc.COMM_SELF)
@@ -168,22 +262,25 @@ class SparseFactor(_Factorization):
         for key, value in controls.items():
             pc.getFactorMatrix().setMumpsIcntl(key, value)
         if not self._factorize() and not trial:
-            reason = pc.getFailedReason()
+            cause = factorization_failure(pc)
             self.destroy()
-            raise ConvergenceError(f"MUMPS failed to factorize {self.what} (reason {reason})")
+            raise ConvergenceError(f"MUMPS failed to factorize {self.what} ({cause})")
 
     @classmethod
-    def from_csr(cls, A: sp.csr_matrix, **kwargs) -> "SparseFactor":
+    def from_csr(cls, A: sp.csr_matrix, *, scaling: np.ndarray | None = None, **kwargs) -> "SparseFactor":
         """Factorize a square SciPy CSR matrix (put into canonical form: sorted indices, no duplicates, no
-        explicit zeros); the PETSc matrix shares its arrays (no copy)."""
+        explicit zeros); the PETSc matrix shares its arrays (no copy).  ``scaling``: a positive diagonal D (one
+        entry per row): the factors are those of D A D, the solves those of A."""
         A = sp.csr_matrix(A)
         A.sum_duplicates()
         A.eliminate_zeros()
+        if scaling is not None:
+            A = _equilibrated(A, scaling)
         csr = (A.indptr.astype(PETSc.IntType, copy=False), A.indices.astype(PETSc.IntType, copy=False),
                A.data.astype(PETSc.ScalarType, copy=False))
         mat = PETSc.Mat().createAIJWithArrays(A.shape, csr, comm=PETSc.COMM_SELF)  # no copy: keep csr alive
         mat.assemble()
-        lu = cls(mat, **kwargs)
+        lu = cls(mat, scaling=scaling, **kwargs)
         lu._arrays = csr
         return lu
 
@@ -228,6 +325,9 @@ class SparseFactor(_Factorization):
         """New values ``data`` on the pattern this factorization was made for (a matrix from ``from_csr`` or
         ``symmetric``): the numeric factorization only, on MUMPS' kept ordering and symbolic analysis.  Returns
         whether it succeeded (for a Cholesky factorization: with positive pivots only)."""
+        if self.scaling is not None:
+            indptr, indices = self._arrays[0], self._arrays[1]
+            data = data * np.repeat(self.scaling, np.diff(indptr)) * self.scaling[indices]
         self._arrays[2][:] = data
         self.mat.assemble()
         self.ksp.setOperators(self.mat)
@@ -236,6 +336,8 @@ class SparseFactor(_Factorization):
     def solve(self, rhs: np.ndarray) -> np.ndarray:
         """A⁻¹ rhs for all columns at once (one MatMatSolve); ConvergenceError on a failure or non-finite values."""
         n, k = rhs.shape
+        if self.scaling is not None:
+            rhs = self.scaling[:, None] * rhs
         data = np.asfortranarray(rhs, dtype=PETSc.ScalarType)  # PETSc dense storage is column-major
         B = PETSc.Mat().createDense((n, k), array=data, comm=PETSc.COMM_SELF)
         X = PETSc.Mat().createDense((n, k), comm=PETSc.COMM_SELF)
@@ -251,7 +353,7 @@ class SparseFactor(_Factorization):
             X.destroy()
         if not np.all(np.isfinite(out)):
             raise ConvergenceError(f"a solve of {self.what} produced non-finite values")
-        return out
+        return out if self.scaling is None else self.scaling[:, None] * out
 
     def inertia(self) -> tuple[int, int, int]:
         """(negative, zero, positive) pivots of a Cholesky (LDLᵀ) factorization made with null-pivot detection
@@ -271,6 +373,14 @@ class SparseFactor(_Factorization):
         for obj in (self.ksp, self.mat):
             obj.destroy()
         self._arrays = None
+
+
+def _equilibrated(A: sp.csr_matrix, d: np.ndarray) -> sp.csr_matrix:
+    """D A D for a canonical CSR matrix A and the diagonal d (same pattern)."""
+    d = np.asarray(d, dtype=np.float64)
+    out = A.copy()
+    out.data = A.data * np.repeat(d, np.diff(A.indptr)) * d[A.indices]
+    return out
 
 
 class ReusedAnalysis:

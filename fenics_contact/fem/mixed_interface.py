@@ -190,7 +190,10 @@ class InterfaceData:
         if points is not None:  # use the given order (the other subdomain's γ nodes)
             points = np.asarray(points, dtype=np.float64)[:, :2]
             dist, perm = cKDTree(all_x).query(points)
-            if points.shape != all_x.shape or np.max(dist, initial=0.0) > 1e-10 or np.unique(perm).size != perm.size:
+            # matching nodes agree to the rounding of their coordinates: a tolerance relative to their size
+            # (lengths in mm or in km alike)
+            tol = 1e-10 * max(float(np.max(np.abs(all_x), initial=0.0)), float(np.max(np.abs(points), initial=0.0)))
+            if points.shape != all_x.shape or np.max(dist, initial=0.0) > tol or np.unique(perm).size != perm.size:
                 raise InputError("the interface nodes of Ω₁ and Ω₂ do not match (γ must be conforming)")
             all_g, all_x = all_g[perm], all_x[perm]
         self.gamma_points = all_x

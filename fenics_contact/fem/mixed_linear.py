@@ -5,6 +5,15 @@
 depends on the iterate only through the active set H, so a factorization is reused until the set
 changes.  The sparsity pattern holds every Γ_C node's penalty entries (``SaddlePointMatrix``): when the
 set changes only values change, and MUMPS redoes the numeric factorization, not the analysis.
+
+**Units.**  On a mesh of size h the stress block K̃ + (1/ε) Qᵀ W H Q scales like h²/E (compliance, and ε ∝ E),
+the divergence block B like h: a stress pivot is h/E times the divergence entries of its column, so with
+E = 2.1e11 (steel in Pa) or lengths in μm MUMPS' threshold pivoting delays every stress pivot and its workspace
+overflows.  The matrix factorized is the equilibrated D J D, D = diag(s I_σ, I_u/s), s² ≈ E_ref/L_ref
+(``stress_scale``: the power of two nearest, so D J D and the scaled vectors round nothing; E_ref a reference
+Young's modulus, L_ref a reference length): the stress pivots are h/L_ref times the divergence entries whatever
+the units, B is unchanged, and J⁻¹ r = D (D J D)⁻¹ D r.  With E_ref/L_ref in (1/2, 2) (every built-in model on
+the unit square: E_ref = L_ref = 1) s = 1 and the factorization is J's own.
 """
 
 import numpy as np
@@ -16,23 +25,41 @@ from fenics_contact.fem.linalg import DIRECT_OPTIONS, DirectSolver
 from fenics_contact.fem.mixed_assembly import MixedOperators
 from fenics_contact.fem.mixed_contact import ContactNodes
 
-__all__ = ["MIXED_SOLVER_OPTIONS", "SaddlePointFactorization"]
+__all__ = ["MIXED_SOLVER_OPTIONS", "SaddlePointFactorization", "saddle_point_scaling", "stress_scale"]
 
 #: MUMPS LU with the AMF ordering: half the factorization time of the default ordering on the
 #: AW saddle-point matrices (3.8 s instead of 7.5 s at h = 1/128, 0.7 s instead of 1.3 s at 1/64).
 MIXED_SOLVER_OPTIONS = {**DIRECT_OPTIONS, "mat_mumps_icntl_7": "2"}
 
 
+def stress_scale(stiffness: float) -> float:
+    """s = 2^k with s² nearest ``stiffness`` = E_ref/L_ref (1 for values in (1/2, 2)); exponents are kept within
+    ±500 (s² finite for any finite value)."""
+    if not (np.isfinite(stiffness) and stiffness > 0):
+        raise InputError(f"the reference stiffness E_ref/L_ref must be finite and > 0, got {stiffness!r}")
+    return float(2.0 ** int(np.clip(np.round(0.5 * np.log2(stiffness)), -500, 500)))
+
+
+def saddle_point_scaling(scale: float, n_sigma: int, n_u: int, n_extra: int = 0) -> np.ndarray | None:
+    """The diagonal D = (s, …, s, 1/s, …, 1/s, 1, …, 1) of n_sigma stress, n_u displacement and n_extra
+    dimensionless unknowns (None for s = 1: no equilibration)."""
+    if scale == 1.0:
+        return None
+    return np.concatenate([np.full(n_sigma, scale), np.full(n_u, 1.0 / scale), np.ones(n_extra)])
+
+
 class SaddlePointFactorization:
     """J for a given active set (None: no penalty), factorized once per set, and solves with it.
 
     ``n_sigma``: owned AW coefficients (the first block); ``contact``: whether J has a penalty block (ε
-    given); ``nodes``: the Γ_C nodes (None without Γ_C facets).
+    given); ``nodes``: the Γ_C nodes (None without Γ_C facets); ``scale``: s of the equilibration
+    D = diag(s I_σ, I_u/s) (``stress_scale`` of the reference modulus; 1: none).
     """
 
     def __init__(self, comm: MPI.Comm, prefix: str, n_sigma: int, operators: MixedOperators,
-                 nodes: ContactNodes | None, *, contact: bool, has_operators: bool) -> None:
+                 nodes: ContactNodes | None, *, contact: bool, has_operators: bool, scale: float = 1.0) -> None:
         self.comm, self.prefix, self.n_sigma = comm, prefix, n_sigma
+        self.scale = scale
         self.operators, self.nodes = operators, nodes
         self.contact, self.has_operators = contact, has_operators
         self._solver: DirectSolver | None = None
@@ -44,7 +71,9 @@ class SaddlePointFactorization:
     def solver(self) -> DirectSolver:
         """The direct solver (created at the first factorization: its PETSc options are set then)."""
         if self._solver is None:
-            self._solver = DirectSolver(self.comm, prefix=self.prefix, options=MIXED_SOLVER_OPTIONS)
+            n_u = self.operators.B.mat.getLocalSize()[0]
+            self._solver = DirectSolver(self.comm, prefix=self.prefix, options=MIXED_SOLVER_OPTIONS,
+                                        scaling=saddle_point_scaling(self.scale, self.n_sigma, n_u))
         return self._solver
 
     def factorize_for(self, active: np.ndarray | None) -> bool:
@@ -58,15 +87,28 @@ class SaddlePointFactorization:
             # one sparsity pattern for every active set (all Γ_C nodes): when the active set changes
             # only the penalty values change and MUMPS redoes the numeric factorization, not the analysis
             Q_rows = self.nodes.Q_rows_global if (self.contact and self.nodes is not None) else None
-            self._saddle = SaddlePointMatrix(self.operators.Kt.mat, self.operators.B.mat, Q_rows)
+            self._saddle = self._equilibrated_matrix(Q_rows)
             self._rhs, self._sol = self._saddle.create_vecs()
         if active is None or not self.contact:
             self._saddle.set_weights(None)
         else:
-            self._saddle.set_weights(self.nodes.penalty_weights(active))
+            weights = self.nodes.penalty_weights(active)
+            self._saddle.set_weights(weights if self.scale == 1.0 else self.scale**2 * weights)
         self.solver.set_operator(self._saddle.mat)
         self.factorized_set = key.copy()
         return True
+
+    def _equilibrated_matrix(self, Q_rows) -> SaddlePointMatrix:
+        """D J D without penalty weights: [[s² K̃, Bᵀ], [B, 0]] (the weights get s² in ``factorize_for``)."""
+        Kt = self.operators.Kt.mat
+        if self.scale == 1.0:
+            return SaddlePointMatrix(Kt, self.operators.B.mat, Q_rows)
+        Ks = Kt.duplicate(copy=True)
+        Ks.scale(self.scale**2)
+        try:
+            return SaddlePointMatrix(Ks, self.operators.B.mat, Q_rows)
+        finally:
+            Ks.destroy()
 
     def solve(self, r1: np.ndarray, r2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(x1, x2) with J [x1; x2] = [r1; r2] (owned entries) by the current factorization."""

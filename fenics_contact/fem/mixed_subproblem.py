@@ -20,6 +20,10 @@ node coordinates are replicated: every rank holds all of them in the same order 
 decisions from them (active sets, cycle detection, line search), with every scalar of the iteration
 (energies, norms) a global reduction.  The Robin data g and the trace σn on γ are distributed by blocks of
 the canonical γ values (``interface_range``).
+
+**Units.**  The saddle-point factorizations are equilibrated by E_ref/L_ref (``mixed_linear.stress_scale``; E_ref
+``modulus``, by default the smallest Young's modulus of the cells, L_ref the mesh's extent), so the solves keep
+their accuracy in any units (E = 2.1e11 in Pa as E = 1, lengths in mm as in m).
 """
 
 import time
@@ -29,6 +33,7 @@ import scipy.sparse as sp
 
 from dolfinx import fem
 from dolfinx import mesh as dmesh
+from mpi4py import MPI
 
 from fenics_contact.errors import InputError
 from fenics_contact.fem.arnold_winther import ArnoldWintherSpace
@@ -38,7 +43,7 @@ from fenics_contact.fem.distributed import DistributedMatrix
 from fenics_contact.fem.mixed_assembly import MixedOperators, dot, norm
 from fenics_contact.fem.mixed_contact import ContactNodes, MixedContactProfile
 from fenics_contact.fem.mixed_interface import InterfaceData
-from fenics_contact.fem.mixed_linear import SaddlePointFactorization
+from fenics_contact.fem.mixed_linear import SaddlePointFactorization, stress_scale
 from fenics_contact.fem.mixed_newton import MixedNewtonHistory, globalized_newton
 from fenics_contact.fem.mixed_spaces import MixedSpaces, check_triangles
 from fenics_contact.fem.mixed_residual import ufl_residual_norm
@@ -52,6 +57,15 @@ __all__ = ["MixedSubproblem"]
 def _part(part: str, name: str, doc: str) -> property:
     """A read-only attribute ``name`` of the collaborator ``part``."""
     return property(lambda self: getattr(getattr(self, part), name), doc=doc)
+
+
+def _extent(msh: dmesh.Mesh) -> float:
+    """The largest side of the mesh's bounding box (over all ranks)."""
+    x = msh.geometry.x
+    lo, hi = np.min(x, axis=0, initial=np.inf), np.max(x, axis=0, initial=-np.inf)
+    msh.comm.Allreduce(MPI.IN_PLACE, lo, op=MPI.MIN)
+    msh.comm.Allreduce(MPI.IN_PLACE, hi, op=MPI.MAX)
+    return float(np.max(hi - lo))
 
 
 class MixedSubproblem:
@@ -75,6 +89,8 @@ class MixedSubproblem:
             (replicated; default: this mesh's γ nodes sorted by (y, x)).
         operators: False builds the spaces, the interface data and the load only, without
             the global matrices (no solve then; Algorithm 4's Ω₁ assembles its own cell blocks).
+        modulus: the reference Young's modulus E_ref of the equilibration of the factorizations
+            (``stress_scale`` of E_ref/L_ref, L_ref the mesh's extent; default: the smallest E of its cells).
     """
 
     def __init__(
@@ -91,6 +107,7 @@ class MixedSubproblem:
         line_search: str = "on-cycle",
         interface_points: np.ndarray | None = None,
         operators: bool = True,
+        modulus: float | None = None,
     ) -> None:
         t0 = time.perf_counter()
         if line_search not in ("on-cycle", "always"):
@@ -122,9 +139,13 @@ class MixedSubproblem:
         if has_contact:
             self.contact_nodes = ContactNodes(msh, facet_tags, contact_facets, self.spaces, epsilon)
             self.contact_nodes.set_obstacle(fields.obstacle)
+        if modulus is None:
+            modulus = self.comm.allreduce(float(np.min(fields.E.x.array, initial=np.inf)), op=MPI.MIN)
+        #: s of the equilibration D = diag(s I_σ, I_u/s) of every saddle-point factorization of this subproblem
+        self.stress_scale = stress_scale(modulus / _extent(msh))
         self.factorization = SaddlePointFactorization(self.comm, prefix, self.spaces.n_sigma, self.assembly,
                                                       self.contact_nodes, contact=self.contact,
-                                                      has_operators=operators)
+                                                      has_operators=operators, scale=self.stress_scale)
         self.c = np.zeros(self.n_sigma)
         self.u = np.zeros(self.n_u)
         self.cold = True  #: no solution yet: the next Newton solve linearizes at "penalty everywhere"

@@ -104,7 +104,8 @@ __all__ = ["DEFAULT_BETA", "MixedHybridResult", "MixedHybridStep", "solve_mixed_
 
 log = logging.getLogger(__name__)
 
-#: Default transmission coefficient β = √h of Algorithms 2 and 4 (the paper's faster choice).
+#: Default transmission coefficient β = √h/E_c of Algorithms 2 and 4 (the paper's faster choice √h, with E = 1;
+#: E_c the smallest Young's modulus on Γ_C makes β a compliance, as the primal α = E h^-1/2 is a stiffness).
 DEFAULT_BETA = "sqrt-h"
 
 
@@ -118,12 +119,13 @@ def solve_or_verify(sub: MixedSubproblem, data: np.ndarray, warm: bool) -> Mixed
     return sub.solve(data)
 
 
-def transmission_coefficient(beta: float | str, h: float) -> float:
-    """β from a number (or its string) or ``"sqrt-h"`` (β = √h); raises InputError unless β > 0."""
+def transmission_coefficient(beta: float | str, h: float, modulus: float = 1.0) -> float:
+    """β from a number (or its string) or ``"sqrt-h"`` (β = √h/E_c, E_c = ``modulus``: a compliance in the units
+    of the data); raises InputError unless β > 0."""
     if isinstance(beta, str):
         text = beta.strip().replace(" ", "").lower()
         if text in ("sqrt-h", "sqrt(h)", "h^1/2", "h^0.5"):
-            value = float(np.sqrt(h))
+            value = float(np.sqrt(h)) / modulus
         else:
             try:
                 value = float(text)
@@ -156,7 +158,7 @@ class MixedHybridStep:
         cm = problem.cm
         check_triangles(cm.mesh)
         self.comm = cm.comm
-        self.beta = transmission_coefficient(beta, cm.h)
+        self.beta = transmission_coefficient(beta, cm.h, problem.contact_modulus(smallest=True))
         self.epsilon = epsilon_for(problem, epsilon)
         self.cm = cm
         self.parts = split_mesh(cm)

@@ -24,7 +24,7 @@ import dolfinx.fem.petsc
 
 from fenics_contact.errors import ConvergenceError
 from fenics_contact.fem.linalg import DirectSolver, scipy_to_petsc
-from fenics_contact.fem.mixed_linear import MIXED_SOLVER_OPTIONS
+from fenics_contact.fem.mixed_linear import MIXED_SOLVER_OPTIONS, saddle_point_scaling
 
 __all__ = [
     "block_solve",
@@ -37,9 +37,10 @@ __all__ = [
 ]
 
 
-def block_solve(ksp: PETSc.KSP, B: np.ndarray, comm: MPI.Comm, *projections) -> list[np.ndarray]:
-    """[P(A⁻¹ B) for P in projections] for a dense block B (local rows × columns, Fortran order) with the
-    factorization held by ``ksp`` (one multi-RHS solve; the solution block is never copied whole)."""
+def block_solve(solver: DirectSolver, B: np.ndarray, comm: MPI.Comm, *projections) -> list[np.ndarray]:
+    """[P(A⁻¹ B) for P in projections] for a dense block B (local rows × columns, Fortran order; overwritten when
+    the solver is equilibrated) with the factorization ``solver`` holds (one multi-RHS solve,
+    ``DirectSolver.mat_solve``; the solution block is never copied whole)."""
     nloc, k = B.shape
     size = ((nloc, PETSc.DECIDE), (PETSc.DECIDE, k))
     Bm = PETSc.Mat().createDense(size, array=np.asfortranarray(B), comm=comm)
@@ -48,7 +49,7 @@ def block_solve(ksp: PETSc.KSP, B: np.ndarray, comm: MPI.Comm, *projections) -> 
     Xm.setUp()
     Xm.assemble()
     try:
-        ksp.matSolve(Bm, Xm)
+        solver.mat_solve(Bm, Xm)
         X = Xm.getDenseArray(readonly=True)
         finite = bool(np.isfinite(X).all())
         out = [P(X) for P in projections] if comm.allreduce(finite, op=MPI.LAND) else None
@@ -56,7 +57,7 @@ def block_solve(ksp: PETSc.KSP, B: np.ndarray, comm: MPI.Comm, *projections) -> 
         Bm.destroy()
         Xm.destroy()
     if out is None:
-        raise ConvergenceError(f"{ksp.getOptionsPrefix()}: multi-RHS back-solve produced non-finite values")
+        raise ConvergenceError(f"{solver.prefix}: multi-RHS back-solve produced non-finite values")
     return out
 
 
@@ -90,13 +91,13 @@ class AffinePart:
     def responses(self, *, contact: bool, chunk: int, solver: DirectSolver | None = None
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(Yc, Sc, Yq, Sq): trace and contact rows of J⁻¹C and J⁻¹Qᵀ (chunked multi-RHS back-solves)."""
-        ksp = (solver or self.solver).ksp
+        solver = solver or self.solver
         rows = (self.trace_rows, self.contact_rows) if self.n_c else (self.trace_rows,)
         Yc = np.zeros((self.n_g, self.n_g))
         Sc = np.zeros((self.n_c, self.n_g))
         for j0 in range(0, self.n_g, chunk):
             j1 = min(j0 + chunk, self.n_g)
-            out = block_solve(ksp, self.data_block(j0, j1), self.comm, *rows)
+            out = block_solve(solver, self.data_block(j0, j1), self.comm, *rows)
             Yc[:, j0:j1] = out[0]
             if self.n_c:
                 Sc[:, j0:j1] = out[1]
@@ -105,7 +106,7 @@ class AffinePart:
         if contact:
             for k0 in range(0, self.n_c, chunk):
                 k1 = min(k0 + chunk, self.n_c)
-                Yq[:, k0:k1], Sq[:, k0:k1] = block_solve(ksp, self.contact_block(k0, k1), self.comm, *rows)
+                Yq[:, k0:k1], Sq[:, k0:k1] = block_solve(solver, self.contact_block(k0, k1), self.comm, *rows)
         return Yc, Sc, Yq, Sq
 
     def load_response(self) -> tuple[np.ndarray, np.ndarray]:
@@ -280,7 +281,10 @@ class PrimalPart(AffinePart):
 
 
 class MixedPart(AffinePart):
-    """A ``fem.mixed.MixedSubproblem`` (serial); ``perm``: its interface value k is canonical value perm[k]."""
+    """A ``fem.mixed.MixedSubproblem`` (serial); ``perm``: its interface value k is canonical value perm[k].
+
+    J₀ is factorized equilibrated like the subproblem's own Jacobians (D J₀ D, D = diag(s I_σ, I_u/s) with the
+    subproblem's ``stress_scale`` s), so every solver here returns solutions of the unscaled systems."""
 
     def __init__(self, sub, *, perm: np.ndarray | None, contact: bool, factorize: bool = True) -> None:
         self.sub, self.comm = sub, sub.mesh.comm
@@ -297,9 +301,11 @@ class MixedPart(AffinePart):
         if contact:
             self.QT = sub.Q.T.tocsc()
         if contact and factorize:
-            saddle = sp.bmat([[sub.Kt, sub.B.T], [sub.B, None]], format="csr")
+            s = sub.stress_scale
+            saddle = sp.bmat([[sub.Kt if s == 1.0 else s**2 * sub.Kt, sub.B.T], [sub.B, None]], format="csr")
             self._J0 = scipy_to_petsc(saddle, self.comm)
-            self.solver = DirectSolver(self.comm, prefix=f"{sub.prefix}j0_", options=MIXED_SOLVER_OPTIONS)
+            self.solver = DirectSolver(self.comm, prefix=f"{sub.prefix}j0_", options=MIXED_SOLVER_OPTIONS,
+                                       scaling=saddle_point_scaling(s, self.ns, sub.n_u))
             self.solver.set_operator(self._J0)
         elif not contact:
             sub._factorize_for(None)

@@ -14,6 +14,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from fenics_contact.fem.linalg import SparseFactor
+from fenics_contact.fem.mixed_linear import saddle_point_scaling
 from fenics_contact.multiscale.coarse import CoarseGrid
 from fenics_contact.multiscale.mixed_cem.blocks import cell_rows
 from fenics_contact.multiscale.mixed_cem.local_space import LocalSpace, Topology, local_stress_space, local_triplets
@@ -93,7 +94,8 @@ class LocalFactor(SparseFactor):
     SuperLU is 10–100× slower on these saddle-point systems).
 
     AMD ordering for LU (ICNTL(7) = 0): on the Stage II systems (5·10³–6·10⁴ unknowns) it halves the
-    factorization time of MUMPS' automatic choice (METIS); Cholesky (LDLᵀ) is 2–4× slower.
+    factorization time of MUMPS' automatic choice (METIS); Cholesky (LDLᵀ) is 2–4× slower.  The saddle-point
+    systems are factorized equilibrated (``CellOperators.scale``: ``scaling`` of ``SparseFactor.from_csr``).
     """
 
     what = "a local mixed CEM problem"
@@ -131,7 +133,7 @@ def patch_system(ops: CellOperators, topo: Topology, grid: CoarseGrid, aux: Stag
     cols = np.concatenate([ac, bc, n_loc + br, n_loc + n_u + zc, n_loc + zr, eye])
     vals = np.concatenate([av, bv, bv, -zv, -zv, np.ones(col)])
     n_tot = n_loc + n_u + col
-    lu = LocalFactor.from_coo(rows, cols, vals, n_tot)
+    lu = LocalFactor.from_coo(rows, cols, vals, n_tot, scaling=saddle_point_scaling(ops.scale, n_loc, n_u, col))
     return space, lu, Z, aux_cols, n_loc, n_u
 
 

@@ -167,7 +167,8 @@ class MixedMultiscaleOmega1:
         return float(np.min(self.aux.gaps, initial=np.inf))
 
     def _setup_online(self, data: OfflineData) -> None:
-        """Keep the offline data; factorize the coarse matrix [[ΨᵀÃΨ, (ΠᵀBΨ)ᵀ], [ΠᵀBΨ, 0]]."""
+        """Keep the offline data; factorize the coarse matrix [[ΨᵀÃΨ, (ΠᵀBΨ)ᵀ], [ΠᵀBΨ, 0]] (dense LU: with the
+        S-orthonormal modes Π it is dimensionless, the same matrix in any units of E, so it needs no scaling)."""
         self.aux, self.basis, self.corr, self.co = data
         if getattr(self, "dofs", None) is None:
             self.dofs = CoarseCellDofs.of(self.ops, self.grid)

@@ -51,6 +51,9 @@ class CellOperators:
     F: np.ndarray | None = None
     #: (n, 30) the traction lifting s₀ (σ₁ = homogeneous part + s₀, s₀n = t on Γ_N); None without tractions
     s0: np.ndarray | None = None
+    #: s of the equilibration D = diag(s I_σ, I_u/s, I_y) of the local saddle-point factorizations (the Ω₁
+    #: subproblem's ``stress_scale``: s² ≈ E_ref, so D's blocks are O(1) in any units)
+    scale: float = 1.0
 
     @property
     def has_boundary_data(self) -> bool:
@@ -212,7 +215,7 @@ def cell_operators(sub, H: float, weight: str = "lambda+2mu", s_factor: float = 
         lift[gamma_cells] -= sub.beta * np.einsum("cab,cb->ca", R, s0[gamma_cells])
         F = lift if F is None else F + lift
     return CellOperators(K, sub.beta * R, B, M, S, G, C, E, int(num_full), dg_rows, u_rows, gamma_cells,
-                         P_cols, P_blocks, F, s0)
+                         P_cols, P_blocks, F, s0, sub.stress_scale)
 
 
 def _boundary_loads(sub, dg_rows: np.ndarray, t, n, ds) -> tuple:

@@ -18,6 +18,7 @@ import scipy.sparse as sp
 from mpi4py import MPI
 
 from fenics_contact.fem.linalg import ReusedAnalysis
+from fenics_contact.fem.mixed_linear import saddle_point_scaling
 from fenics_contact.multiscale import work
 from fenics_contact.multiscale.coarse import CoarseGrid
 from fenics_contact.multiscale.mixed_cem.bases import CoarseCellDofs, LocalFactor, PatchFunctions, cell_coarse
@@ -81,6 +82,11 @@ class _CellSystem:
     @property
     def n_I(self) -> int:
         return self.M_II.shape[0]
+
+    def factor_II(self, scale: float) -> LocalFactor:
+        """The LU of M_II, equilibrated by diag(s I_σ, I_u/s, I_y) (``CellOperators.scale``)."""
+        scaling = saddle_point_scaling(scale, self.n_s, self.n_u, self.n_I - self.n_s - self.n_u)
+        return LocalFactor.from_csr(self.M_II, scaling=scaling)
 
 
 def _has_load(ops: CellOperators, cells: np.ndarray, source: bool) -> bool:
@@ -150,9 +156,9 @@ class _CellElimination:
         self.lu, self.own = lu, own
 
     @classmethod
-    def factorized(cls, system: _CellSystem) -> "_CellElimination":
-        """A new LU of M_II (a cell whose condensation was not kept)."""
-        lu = LocalFactor.from_csr(system.M_II)
+    def factorized(cls, system: _CellSystem, scale: float) -> "_CellElimination":
+        """A new LU of M_II (a cell whose condensation was not kept; ``scale``: ``CellOperators.scale``)."""
+        lu = system.factor_II(scale)
         try:
             return cls(system, lu, lu.solve(system.b[: system.n_I]))
         except Exception:
@@ -168,11 +174,11 @@ class _CellElimination:
         self.lu.destroy()
 
 
-def _condense(system: _CellSystem) -> tuple[np.ndarray, np.ndarray, np.ndarray, _CellElimination]:
+def _condense(system: _CellSystem, scale: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, _CellElimination]:
     """(skeleton DOFs, Schur complement S_K = M_ΓΓ − M_ΓI M_II⁻¹ M_IΓ, condensed own data b_Γ − M_ΓI M_II⁻¹ b_I,
-    the data of the back substitution: M_II's LU is kept, not factorized again)."""
+    the data of the back substitution: M_II's LU is kept, not factorized again; ``scale``: ``CellOperators.scale``)."""
     n_I, n_G = system.n_I, system.skel.size
-    lu = LocalFactor.from_csr(system.M_II)
+    lu = system.factor_II(scale)
     try:
         X = lu.solve(np.hstack([system.M_IG.toarray(), system.b[:n_I]]))
     except Exception:
@@ -354,7 +360,7 @@ def _stage_two_condensed(
 
     def condense(K: int) -> tuple:
         nonlocal held
-        skel, S, c, elim = _condense(_cell_system(ops, topo, dofs, aux, skeleton, skel_aw, K, source))
+        skel, S, c, elim = _condense(_cell_system(ops, topo, dofs, aux, skeleton, skel_aw, K, source), ops.scale)
         nbytes = elim.nbytes
         if held + nbytes <= KEEP_FACTORS_BYTES:
             kept[K] = elim
@@ -366,7 +372,8 @@ def _stage_two_condensed(
     def recover(K: int) -> dict:
         elim = kept.pop(K, None)
         if elim is None:  # not kept (KEEP_FACTORS_BYTES): assembled and factorized again
-            elim = _CellElimination.factorized(_cell_system(ops, topo, dofs, aux, skeleton, skel_aw, K, source))
+            system = _cell_system(ops, topo, dofs, aux, skeleton, skel_aw, K, source)
+            elim = _CellElimination.factorized(system, ops.scale)
         try:
             return _cell_values(elim, K, reach[K], values)
         finally:

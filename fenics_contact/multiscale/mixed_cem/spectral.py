@@ -148,7 +148,8 @@ def _count_below(K: sp.spmatrix, n_loc: int, t: float, M: sp.spmatrix) -> int:
 
 
 def _cell_pairs_sparse(
-    At: sp.spmatrix, Bl: sp.spmatrix, S: sp.spmatrix, nbasis: int, min_gap: float | None, max_nbasis: int
+    At: sp.spmatrix, Bl: sp.spmatrix, S: sp.spmatrix, nbasis: int, min_gap: float | None, max_nbasis: int,
+    scale: float = 1.0,
 ) -> tuple[np.ndarray, np.ndarray, float]:
     """The kept pairs (λ, p S-orthonormal) and Λ of one coarse cell: sparse shift-and-invert.
 
@@ -158,9 +159,12 @@ def _cell_pairs_sparse(
     (more when the first eigenvalue left out is not yet among them); then Sylvester's inertia just
     above the gap Λ checks that no eigenvalue below it was missed (a Krylov method can miss copies
     of a repeated one, e.g. the three rigid motions), and missing ones are searched again with the
-    found ones deflated.
+    found ones deflated.  The pencil is equilibrated by D = diag(s I, I/s) (``scale``: ``CellOperators.scale``):
+    D K D x̃ = λ D M D x̃ has the same eigenvalues and inertias, x = D x̃.
     """
     n_loc, n_u = At.shape[0], S.shape[0]
+    if scale != 1.0:
+        At, S = scale**2 * At, S / scale**2
     K = -sp.bmat([[At, Bl.T], [Bl, None]], format="csr")
     M = sp.block_diag([sp.csr_matrix((n_loc, n_loc)), S], format="csr")
     Kp, Mp = scipy_to_petsc(K), scipy_to_petsc(M)
@@ -192,6 +196,8 @@ def _cell_pairs_sparse(
         Kp.destroy()
         Mp.destroy()
     gap = float(lam[nk]) if nk < lam.size else np.inf
+    if scale != 1.0:
+        return np.maximum(lam[:nk], 0.0), X[n_loc:, :nk] / scale, gap, scale * X[:n_loc, :nk]
     return np.maximum(lam[:nk], 0.0), X[n_loc:, :nk], gap, X[:n_loc, :nk]
 
 
@@ -218,7 +224,7 @@ def stage_one_cell(
         p, _ = _s_orthonormalize(p, S)
         phi = -spla.splu(At.tocsc()).solve(np.asarray(Bl.T @ p))  # φ = −Ã⁻¹Bᵀp (sparse LU of the local Ã)
     else:  # the pencil's eigenvectors carry φ
-        lam, p, gap, phi = _cell_pairs_sparse(At, Bl, S, nbasis, min_gap, max_nbasis)
+        lam, p, gap, phi = _cell_pairs_sparse(At, Bl, S, nbasis, min_gap, max_nbasis, ops.scale)
         p, phi = _s_orthonormalize(p, S, phi)
     # the backward error of the pairs, from the equations (not the eigensolver's own estimate)
     res = _pair_residuals(At, Bl, S, lam, phi, p)

@@ -1,4 +1,4 @@
-"""Mixed (Arnold–Winther × DG P1) penalized contact: the monolithic solve and its defaults (METHOD §2).
+"""Mixed (Arnold–Winther × DG P1) penalized contact: the monolithic solve and its defaults.
 
 Find (σ_h, u_h) ∈ X_h × U_h with
 
@@ -148,7 +148,7 @@ def solve_mixed_monolithic(
     prefix: str = "fc_mixed_mono_",
     verify: bool = True,
 ) -> MixedSolution:
-    """Mixed penalized contact on the whole mesh (METHOD §2), globalized semismooth Newton (serial or MPI).
+    """Mixed penalized contact on the whole mesh, globalized semismooth Newton (serial or MPI).
 
     ``epsilon`` defaults to ``default_epsilon(h, E_c)``; ``split_interface`` solves on X̃_h
     (σ_tt doubled at the γ vertices: the exact fixed point of Algorithm 2); ``verify``

@@ -1,4 +1,4 @@
-"""The mixed (Arnold–Winther × DG P1) penalized contact subproblem on one mesh (METHOD §2).
+"""The mixed (Arnold–Winther × DG P1) penalized contact subproblem on one mesh.
 
     (Aσ_h, τ) + (div τ, u_h) + (1/ε) ∫_ΓC (σ_hc)⁺ τ_c ds [+ β∫_γ (σ_h n)·(τn) ds] = [∫_γ g·(τn) ds]
     (div σ_h, v) = −(f, v)

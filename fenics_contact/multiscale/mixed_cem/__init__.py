@@ -1,4 +1,4 @@
-"""Mixed CEM-GMsFEM in Ω₁ (METHOD §3, Algorithm 4): local spaces, Stage I, Stage II, Robin and source correctors.
+"""Mixed CEM-GMsFEM in Ω₁ (Algorithm 4): local spaces, Stage I, Stage II, Robin and source correctors.
 
 All fine quantities live in a *cell-major* discontinuous layout: a stress is an
 array (n_cells, 30) of DG P3 coefficients (10 Lagrange nodes × (σ_xx, σ_xy,
@@ -20,7 +20,7 @@ X_ms ⊄ AW(Ω₁); everything is computed on the DG P3 representation.
 
 **Stage I** (per coarse cell): Ã φ + Bᵀp = 0, −Bφ = λ S p with
 Ã = (A·,·) + β∫_{γ∩∂K}(·n)·(·n) and S the κ̃-weighted mass, κ̃ = c(λ+2μ)H⁻² (the
-weight of the primal method, METHOD §3).  Large cells: the pencil
+weight of the primal method).  Large cells: the pencil
 −[[Ã, Bᵀ], [B, 0]] x = λ [[0, 0], [0, S]] x by SLEPc Krylov–Schur with
 shift-and-invert (MUMPS) for the few pairs kept, checked by Sylvester's inertia just
 above the gap (a Krylov method can miss copies of a repeated eigenvalue, e.g. the
@@ -44,7 +44,7 @@ becomes the sparse symmetric system
 
 (C_i g = ∫_{γ∩∂K_i} g·τn₁ on the coarse cells touching γ; G|K_i = −(f χ_{K_i}, v)).
 
-**Source correction** (METHOD §9; ``MixedCEMOptions.source_correction``, default on;
+**Source correction** (``MixedCEMOptions.source_correction``, default on;
 off is the paper's algorithm).  The divergence of X_ms lies in S·U_aux, so the
 paper's Ω₁ step sees the load only through its moments against U_aux: an
 O(H Λ^{-1/2}) error that no number of layers removes (e_σ = 0.33 at m = 3 for a load

@@ -47,11 +47,11 @@ class MixedCEMOptions:
     nbasis: int | None = 3
     min_gap: float | None = DEFAULT_MIN_GAP
     max_nbasis: int = DEFAULT_MAX_NBASIS
-    weight: str = "lambda+2mu"  #: κ̃ = c(λ+2μ)H⁻² (METHOD §3 has c = 1) or "2mu": κ̃ = c·2μ H⁻²
+    weight: str = "lambda+2mu"  #: κ̃ = c(λ+2μ)H⁻² (the paper has c = 1) or "2mu": κ̃ = c·2μ H⁻²
     #: c, as for the primal CEM (multiscale.CEMOptions.s_factor). Model 2, h = 1/32, H = 1/8, m = 3:
     #: e_σ = 4.2e-3 (c = 1), 2.3e-3 (c = 3), 2.6e-3 (c = 10).
     s_factor: float = DEFAULT_S_FACTOR
-    #: Localized source correctors (METHOD §9): the Ω₁ response to f is computed on the oversampled
+    #: Localized source correctors: the Ω₁ response to f is computed on the oversampled
     #: patches and the coarse problem solves for the remainder, so that the error falls with m for any
     #: load.  False: the paper's Algorithm 4 (f seen only through U_aux: an O(H Λ^{-1/2}) floor).
     source_correction: bool = True

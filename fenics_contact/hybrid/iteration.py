@@ -28,6 +28,8 @@ from fenics_contact.hybrid.interface_newton import newton_iterate
 from fenics_contact.hybrid.options import ACCELERATIONS, InterfaceNewtonOptions, IterationOptions, default_accel
 from fenics_contact.hybrid.step import (
     COLLAPSE,
+    SHRINKING_ITERATIONS,
+    STALLED_RESIDUAL,
     HybridStep,
     IterationHistory,
     IterationRecord,
@@ -73,8 +75,9 @@ class AndersonUpdate:
 
     name = "anderson"
 
-    def __init__(self, comm: MPI.Comm, depth: int = 10, regularization: float = 1e-12,
-                 weights: np.ndarray | None = None) -> None:
+    def __init__(
+        self, comm: MPI.Comm, depth: int = 10, regularization: float = 1e-12, weights: np.ndarray | None = None
+    ) -> None:
         if depth < 1:
             raise InputError(f"Anderson depth must be >= 1, got {depth}")
         self.comm, self.depth, self.reg = comm, depth, regularization
@@ -141,26 +144,39 @@ def iterate(
     update = make_update(accel, step.comm, depth=options.depth, weights=weights)
     history = IterationHistory(accel=accel)
     start = time.perf_counter()
-    largest = data_norm(g, step.comm)
-    zero_tried = False
+    largest = previous = data_norm(g, step.comm)
+    zero_tried, shrinking = False, 0
     for k in range(1, options.max_iterations + 1):
         Tg, rec = evaluate(step, g, history, name=name, monitor=monitor)
         done = rec.residual < options.tol
         if k == 1 or k % 10 == 0 or done:
-            log.info("%s it %4d  residual %.3e  rel. change %.3e  %s", name, k, rec.residual, rec.rel_change,
-                     _format(rec.info))
+            log.info(
+                "%s it %4d  residual %.3e  rel. change %.3e  %s",
+                name,
+                k,
+                rec.residual,
+                rec.rel_change,
+                _format(rec.info),
+            )
         if done:
             history.converged = True
             break
         size = data_norm(Tg, step.comm)
-        largest = max(largest, size)
-        if not zero_tried and size <= COLLAPSE * largest and k < options.max_iterations:
+        shrinking = shrinking + 1 if size < previous and rec.residual > STALLED_RESIDUAL else 0
+        previous, largest = size, max(largest, size)
+        collapsed = size <= COLLAPSE * largest or shrinking >= SHRINKING_ITERATIONS
+        if not zero_tried and collapsed and k < options.max_iterations:
             zero_tried = True
             if zero_is_the_fixed_point(step, history, options, name=name, monitor=monitor):
                 break
         g = update(g, Tg)
     history.time_s = time.perf_counter() - start - history.time_monitor_s
     if not history.converged:
-        log.warning("%s: NOT converged after %d iterations (transmission residual %.3e, last change %.3e)", name,
-                    history.iterations, history.records[-1].residual, history.records[-1].rel_change)
+        log.warning(
+            "%s: NOT converged after %d iterations (transmission residual %.3e, last change %.3e)",
+            name,
+            history.iterations,
+            history.records[-1].residual,
+            history.records[-1].rel_change,
+        )
     return history

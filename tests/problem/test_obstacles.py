@@ -1,6 +1,5 @@
 """Rigid obstacles: shapes, gaps, bad input, a curved contact boundary in all fine methods."""
 
-
 import gmsh
 import numpy as np
 import pytest
@@ -63,7 +62,10 @@ def test_bad_obstacle_input():
         SignedDistance(3.0)
     with pytest.raises(InputError, match="finite"):
         Plane((np.nan, 0), (1, 0))
-    bad = SignedDistance(lambda x: np.where(x[1] > 0.5, np.nan, 1.0 - x[0]), normal=lambda x: np.array([[-1.0], [0.0]]) * np.ones(x.shape[1]))
+    bad = SignedDistance(
+        lambda x: np.where(x[1] > 0.5, np.nan, 1.0 - x[0]),
+        normal=lambda x: np.array([[-1.0], [0.0]]) * np.ones(x.shape[1]),
+    )
     with pytest.raises(InputError, match="undefined at 2 contact node"):
         evaluate_obstacle(bad, np.array([[1.0, 0.7], [1.0, 0.9], [1.0, 0.1]]))
 
@@ -75,8 +77,13 @@ def square():
 
 def _model(obstacle, nu=0.3):
     load = lambda x: np.vstack([np.where(x[0] > 0.5, 1.0, 0.0), np.zeros(x.shape[1])])  # noqa: E731
-    return ContactProblem(name="pushed", youngs_modulus=constant_field(1.0), poisson_ratio=constant_field(nu), load=load,
-                          obstacle=obstacle)
+    return ContactProblem(
+        name="pushed",
+        youngs_modulus=constant_field(1.0),
+        poisson_ratio=constant_field(nu),
+        load=load,
+        obstacle=obstacle,
+    )
 
 
 def test_gap_undefined_at_a_contact_node_is_refused(square):
@@ -201,21 +208,35 @@ def test_load_steps_warm_start(method):
     assert curve.forces[1] == pytest.approx(2 * curve.forces[0], rel=1e-9)  # linear: F ∝ d
 
 
-@pytest.mark.parametrize("method,accel", [("primal", "newton"), ("primal", "anderson"),
-                                          pytest.param("mixed", "anderson", marks=serial),
-                                          pytest.param("mixed", "none", marks=serial)])
+@pytest.mark.parametrize(
+    "method,accel",
+    [
+        ("primal", "newton"),
+        ("primal", "anderson"),
+        pytest.param("mixed", "anderson", marks=serial),
+        pytest.param("mixed", "none", marks=serial),
+    ],
+)
 def test_unloading_to_a_vanishing_solution_is_certified(method, accel):
     """Unloaded (depth 0) or with the obstacle withdrawn (depth < 0), the body carries no load: u = 0.  The
     warm-started iterates then shrink towards 0 and their relative transmission residual never falls (it
     stayed O(1): primal Newton not converged after 18 applications of T, Anderson after 300); the collapse is
-    detected and the pair at g = 0, computed cold, glues exactly."""
+    detected (the data below 1e-6 of their largest, or shrinking for 20 iterations at an O(1) residual) and the
+    pair at g = 0, computed cold, glues exactly. Withdrawn, the mixed solution is the small tensile-spring
+    response (σ_c = −ε u_c): the plain update reaches it at 0.7 % per iteration (2,928 iterations, β = √h/E_c
+    with E_c = 100 on Γ_C), Anderson in 15."""
     from fenics_contact.indentation import force_indentation
     from fenics_contact.problem.analytic import layered_model
 
     cm = unit_square(8, 4, clamped=("left",))
     model = layered_model([0.0, 0.5, 1.0], [1.0, 100.0], depth=0.0)
-    curve = force_indentation(model.on(cm), method, [0.01, 0.0, -0.01], direction=(-1.0, 0.0),
-                              options=IterationOptions(tol=1e-9, accel=accel, max_iterations=300))
+    curve = force_indentation(
+        model.on(cm),
+        method,
+        [0.01, 0.0, -0.01],
+        direction=(-1.0, 0.0),
+        options=IterationOptions(tol=1e-9, accel=accel, max_iterations=4000),
+    )
     pushed, unloaded, withdrawn = curve.steps
     assert pushed.converged and pushed.force > 0.0
     assert unloaded.converged and unloaded.transmission_residual == 0.0 and unloaded.force == 0.0

@@ -14,7 +14,7 @@ DEMO_N ?= 32
 # one thread per process: MUMPS/OpenBLAS threads spinning on 2 cores slow the sparse solves badly
 export OMP_NUM_THREADS ?= 1
 
-.PHONY: demo test test-quick env docs clean
+.PHONY: demo test test-quick lint env docs clean
 
 $(VENV)/.installed: pyproject.toml setup.py install/fenics_contact_import_order.py scripts/bootstrap.sh
 	VENV=$(VENV) scripts/bootstrap.sh
@@ -34,6 +34,11 @@ test: $(VENV)/.installed
 	$(VENV)/bin/python -m pytest -ra -m "not mpi"
 	$(VENV)/bin/mpiexec -n 2 $(MPI_PYTEST)
 	$(VENV)/bin/mpiexec -n 3 $(MPI_PYTEST)
+
+# ruff: import order, pyflakes, pycodestyle and the formatting (pyproject.toml [tool.ruff])
+lint: $(VENV)/.installed
+	$(VENV)/bin/ruff check fenics_contact tests demos benchmarks docs
+	$(VENV)/bin/ruff format --check fenics_contact tests demos benchmarks docs
 
 test-quick: $(VENV)/.installed
 	$(VENV)/bin/python -m pytest -ra -m "not slow and not mpi"

@@ -17,8 +17,6 @@ Runs under ``mpiexec -n N`` too (the mesh is distributed over ``COMM_WORLD``; ev
 import argparse
 import time
 
-import fenics_contact  # noqa: F401  (dolfinx_solver before dolfinx)
-
 import dolfinx
 import dolfinx.fem
 import dolfinx.mesh
@@ -26,6 +24,7 @@ import numpy as np
 import ufl
 from mpi4py import MPI
 
+import fenics_contact  # noqa: F401  (dolfinx_solver before dolfinx)
 from fenics_contact.fem.arnold_winther import ArnoldWintherSpace, lame_parameters, solve_mixed_elasticity
 
 

@@ -35,6 +35,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from common import write_report
 
 import fenics_contact  # noqa: F401  (must precede dolfinx / petsc4py)
 from fenics_contact.errors import FenicsContactError
@@ -48,8 +49,6 @@ from fenics_contact.hybrid.iteration import InterfaceNewtonOptions, IterationOpt
 from fenics_contact.hybrid.mixed import MixedHybridStep
 from fenics_contact.hybrid.primal import PrimalHybridStep
 from fenics_contact.io import machine_description
-
-from common import write_report
 from fenics_contact.multiscale.cem import CEMOptions
 from fenics_contact.multiscale.mixed import MixedMultiscaleHybridStep
 from fenics_contact.multiscale.mixed_cem import MixedCEMOptions
@@ -85,8 +84,9 @@ def build_step(method: int, cm, number: int, E_high: float, factor: float = 1.0)
             step = PrimalHybridStep(problem, alpha=alpha, delta=delta, newton=newton)
             step.prepare()
             return step
-        return MultiscalePrimalHybridStep(problem, alpha=alpha, delta=delta, newton=newton,
-                                          cem=CEMOptions(layers=LAYERS))
+        return MultiscalePrimalHybridStep(
+            problem, alpha=alpha, delta=delta, newton=newton, cem=CEMOptions(layers=LAYERS)
+        )
     fields = problem.fields
     epsilon = default_epsilon(cm.h, contact_modulus(cm.mesh, cm.facet_tags, fields.E, smallest=True))
     beta = factor * np.sqrt(cm.h)
@@ -94,8 +94,9 @@ def build_step(method: int, cm, number: int, E_high: float, factor: float = 1.0)
         step = MixedHybridStep(problem, beta=beta, epsilon=epsilon, newton=newton)
         step.prepare()
         return step
-    return MixedMultiscaleHybridStep(problem, beta=beta, epsilon=epsilon, newton=newton,
-                                     cem=MixedCEMOptions(layers=LAYERS))
+    return MixedMultiscaleHybridStep(
+        problem, beta=beta, epsilon=epsilon, newton=newton, cem=MixedCEMOptions(layers=LAYERS)
+    )
 
 
 def monolithic_steps(method: int, cm, number: int, E_high: float) -> str:
@@ -108,13 +109,13 @@ def monolithic_steps(method: int, cm, number: int, E_high: float) -> str:
     try:
         if method == 1:
             delta = default_penalty(cm.h, _strip_modulus(cm, fields.E))
-            mono = PrimalSubproblem(cm.mesh, cm.facet_tags, fields, delta=delta, alpha=None, prefix="fc_bench_mono_",
-                                    newton=newton)
+            mono = PrimalSubproblem(
+                cm.mesh, cm.facet_tags, fields, delta=delta, alpha=None, prefix="fc_bench_mono_", newton=newton
+            )
             steps = mono.solve().steps
             mono.destroy()
             return str(steps)
-        return str(solve_mixed_monolithic(model.on(cm), newton=newton, split_interface=True,
-                                          verify=False).newton.steps)
+        return str(solve_mixed_monolithic(model.on(cm), newton=newton, split_interface=True, verify=False).newton.steps)
     except FenicsContactError as err:
         return f"error: {type(err).__name__}"
 
@@ -137,15 +138,32 @@ def other_steps(step, hist) -> str:
     if DUMP is not None:  # --dump: the condensed contact problem, to study the contact Newton offline
         DUMP.mkdir(parents=True, exist_ok=True)
         name = f"{type(step).__name__}_{len(s_load)}_{abs(hash(s_load.tobytes())) % 10**6}.npz"
-        np.savez(DUMP / name, s_load=s_load, M=cond.M, D=cond.D,
-                 points=step.interface_problem(NEWTON).omega2.contact_points())
+        np.savez(
+            DUMP / name,
+            s_load=s_load,
+            M=cond.M,
+            D=cond.D,
+            points=step.interface_problem(NEWTON).omega2.contact_points(),
+        )
     kind = _main_kind()
-    s_d, _, _ = contact_newton(s_load, cond.M, cond.D, max_steps=NEWTON.max_steps,
-                               chains=None if kind == "plain" else cond.chains, window=NEWTON.front_window)
+    s_d, _, _ = contact_newton(
+        s_load,
+        cond.M,
+        cond.D,
+        max_steps=NEWTON.max_steps,
+        chains=None if kind == "plain" else cond.chains,
+        window=NEWTON.front_window,
+    )
     try:
         if kind == "plain":
-            s_o, _, h_o = contact_newton(s_load, cond.M, cond.D, max_steps=NEWTON.max_steps, chains=cond.chains,
-                                         window=InterfaceNewtonOptions().front_window)
+            s_o, _, h_o = contact_newton(
+                s_load,
+                cond.M,
+                cond.D,
+                max_steps=NEWTON.max_steps,
+                chains=cond.chains,
+                window=InterfaceNewtonOptions().front_window,
+            )
         else:
             s_o, _, h_o = contact_newton(s_load, cond.M, cond.D, max_steps=NEWTON.max_steps)
     except FenicsContactError as err:
@@ -154,8 +172,9 @@ def other_steps(step, hist) -> str:
     return f"{h_o.steps + hist.newton_steps - ch.steps}{'=' if same else ' (other solution)'}"
 
 
-def part_steps(lines, h_primal, h_mixed, factors, big_default_only, methods, h_ms_max, models=MODELS,
-               monolithic=True) -> None:
+def part_steps(
+    lines, h_primal, h_mixed, factors, big_default_only, methods, h_ms_max, models=MODELS, monolithic=True
+) -> None:
     lines += [
         "## Newton steps to a transmission residual of 1e-6 (H = 1/16)",
         "",
@@ -191,8 +210,11 @@ def part_steps(lines, h_primal, h_mixed, factors, big_default_only, methods, h_m
                         mark = "" if hist.converged else " (not conv.)"
                         other = other_steps(step, hist)
                         ch = hist.contact_newton
-                        local = "" if ch is None or not any(w for w, _, _ in ch.local) else \
-                            f" {{{ch.local_iterations}/{max(m for _, _, m in ch.local)}}}"
+                        local = (
+                            ""
+                            if ch is None or not any(w for w, _, _ in ch.local)
+                            else f" {{{ch.local_iterations}/{max(m for _, _, m in ch.local)}}}"
+                        )
                         cells.append(f"{hist.newton_steps}{local} [{other}] ({hist.transmission_residual:.0e}){mark}")
                         del step
                     except FenicsContactError as err:
@@ -202,8 +224,12 @@ def part_steps(lines, h_primal, h_mixed, factors, big_default_only, methods, h_m
                 row = f"| {method} | {label} | {n} | " + " | ".join(cells) + f" | {mono} |"
                 print(row, flush=True)
                 lines.append(row)
-    lines += ["", f"Largest Newton step count: {worst}. 'monolithic Newton': steps of the monolithic semismooth "
-              "Newton on the same mesh (Algorithms 1, 2: the same discrete problem, cold start).", ""]
+    lines += [
+        "",
+        f"Largest Newton step count: {worst}. 'monolithic Newton': steps of the monolithic semismooth "
+        "Newton on the same mesh (Algorithms 1, 2: the same discrete problem, cold start).",
+        "",
+    ]
 
 
 def part_updates(lines, n: int, cap: int, methods) -> None:
@@ -224,12 +250,17 @@ def part_updates(lines, n: int, cap: int, methods) -> None:
             for accel in ("none", "anderson", "newton"):
                 try:
                     step.reset()  # a cold start each time: the step keeps only its offline data
-                    hist = iterate(step, IterationOptions(accel=accel, max_iterations=cap),
-                                   initial=np.zeros_like(step.initial_data()))
+                    hist = iterate(
+                        step,
+                        IterationOptions(accel=accel, max_iterations=cap),
+                        initial=np.zeros_like(step.initial_data()),
+                    )
                     extra = f" + {hist.newton_steps} Newton" if accel == "newton" else ""
                     off = f" + {hist.time_offline_s:.2f} offline" if accel == "newton" else ""
-                    cells.append(f"{'yes' if hist.converged else '**no**'}, {hist.iterations}{extra}, "
-                                 f"{hist.time_s:.2f}{off} s, {hist.transmission_residual:.0e}")
+                    cells.append(
+                        f"{'yes' if hist.converged else '**no**'}, {hist.iterations}{extra}, "
+                        f"{hist.time_s:.2f}{off} s, {hist.transmission_residual:.0e}"
+                    )
                 except FenicsContactError as err:
                     cells.append(f"**{type(err).__name__}**")
                     logging.warning("Algorithm %d, model %s, %s: %s", method, label, accel, err)
@@ -276,9 +307,11 @@ def part_speed(lines, n: int, number: int) -> None:
             c0 = time.process_time()
             hist = iterate(step, IterationOptions(accel=accel), initial=np.zeros_like(step.initial_data()))
             cpu = time.process_time() - c0
-            row = (f"| {method} | {accel} | {hist.converged} | {hist.iterations} ({hist.newton_steps}) | "
-                   f"{hist.time_s:.3f} | **{hist.time_s / t_mono:.3f}** | {cpu:.3f} | **{cpu / c_mono:.3f}** | "
-                   f"{build + pre + hist.time_offline_s:.1f} ({pre + hist.time_offline_s:.2f}) |")
+            row = (
+                f"| {method} | {accel} | {hist.converged} | {hist.iterations} ({hist.newton_steps}) | "
+                f"{hist.time_s:.3f} | **{hist.time_s / t_mono:.3f}** | {cpu:.3f} | **{cpu / c_mono:.3f}** | "
+                f"{build + pre + hist.time_offline_s:.1f} ({pre + hist.time_offline_s:.2f}) |"
+            )
             print(row, flush=True)
             lines.append(row)
         del step
@@ -362,33 +395,59 @@ def part_fronts(lines, sizes, E_high: float) -> None:
         order = np.argsort(y)
         s_load, M, D, y = s_load[order], M[np.ix_(order, order)], D[order], y[order]
         s0, _, h0 = contact_newton(s_load, M, D, max_steps=200)
-        s_w, _, h_w = contact_newton(s_load, M, D, max_steps=200, chains=contact_chains(points[order]),
-                                     window=InterfaceNewtonOptions().front_window)
+        s_w, _, h_w = contact_newton(
+            s_load,
+            M,
+            D,
+            max_steps=200,
+            chains=contact_chains(points[order]),
+            window=InterfaceNewtonOptions().front_window,
+        )
         _, _, h_all = contact_newton(s_load, M, D, max_steps=200, active=np.ones(s_load.size, dtype=bool))
         nest, s_nest = _nested(s_load, M, D, y)
         path, s_path = _continuation(s_load, M, D)
         s_ls, _, h_ls = contact_newton(s_load, M, D, max_steps=200, line_search=True)
         scale = np.abs(s0).max()
-        same = all(np.array_equal(s > 0, s0 > 0) and np.abs(s - s0).max() <= 1e-10 * scale
-                   for s in (s_nest, s_path, s_ls, s_w))
-        row = (f"| {n} | {s_load.size} | **{h_w.steps}** {{{h_w.local_iterations}/{max(m for _, _, m in h_w.local)}}} | "
-               f"{h0.steps} | {h_all.steps} | {sum(nest)} ({', '.join(map(str, nest))}) | "
-               f"{sum(path)} ({', '.join(map(str, path))}) | {h_ls.steps} | {monolithic_steps(1, cm, 3, E_high)} | "
-               f"{same} |")
+        same = all(
+            np.array_equal(s > 0, s0 > 0) and np.abs(s - s0).max() <= 1e-10 * scale for s in (s_nest, s_path, s_ls, s_w)
+        )
+        row = (
+            f"| {n} | {s_load.size} | **{h_w.steps}** {{{h_w.local_iterations}/{max(m for _, _, m in h_w.local)}}} | "
+            f"{h0.steps} | {h_all.steps} | {sum(nest)} ({', '.join(map(str, nest))}) | "
+            f"{sum(path)} ({', '.join(map(str, path))}) | {h_ls.steps} | {monolithic_steps(1, cm, 3, E_high)} | "
+            f"{same} |"
+        )
         print(row, flush=True)
         lines.append(row)
         at = lambda idx: ", ".join(f"{32 * y[i]:g}" for i in idx) or "—"  # noqa: E731
-        traces.append((n, "Plain", [(k + 1, h0.active_sizes[k], at(a), at(r), "") for k, (a, r) in
-                                    enumerate(zip(h0.added, h0.removed))]))
-        traces.append((n, "Local front resolution (the default, front_window=8)",
-                       [(k + 1, h_w.active_sizes[k], at(a), at(r), at(x)) for k, (a, r, x) in
-                        enumerate(zip(h_w.added, h_w.removed, h_w.resolved))]))
+        traces.append(
+            (
+                n,
+                "Plain",
+                [(k + 1, h0.active_sizes[k], at(a), at(r), "") for k, (a, r) in enumerate(zip(h0.added, h0.removed))],
+            )
+        )
+        traces.append(
+            (
+                n,
+                "Local front resolution (the default, front_window=8)",
+                [
+                    (k + 1, h_w.active_sizes[k], at(a), at(r), at(x))
+                    for k, (a, r, x) in enumerate(zip(h_w.added, h_w.removed, h_w.resolved))
+                ],
+            )
+        )
         del step
     for n, label, rows in traces:
-        lines += ["", f"{label} contact Newton at h = 1/{n}: Γ_C nodes (y in units of 1/32; the stiff channels touch "
-                  "Γ_C on y ∈ [5, 6], [13, 14], [21, 22]) that each step adds to / removes from the active set it "
-                  "solves next (of them, set by the local front resolution):", "",
-                  "| step | active nodes after it | added | removed | of them set locally |", "|---|---|---|---|---|"]
+        lines += [
+            "",
+            f"{label} contact Newton at h = 1/{n}: Γ_C nodes (y in units of 1/32; the stiff channels touch "
+            "Γ_C on y ∈ [5, 6], [13, 14], [21, 22]) that each step adds to / removes from the active set it "
+            "solves next (of them, set by the local front resolution):",
+            "",
+            "| step | active nodes after it | added | removed | of them set locally |",
+            "|---|---|---|---|---|",
+        ]
         lines += [f"| {k} | {size} | {a} | {r} | {x or '—'} |" for k, size, a, r, x in rows]
     lines.append("")
 
@@ -400,34 +459,59 @@ def main() -> None:
     parser.add_argument("--h-primal", default="32,64,128,256")
     parser.add_argument("--h-mixed", default="32,64,128")
     parser.add_argument("--factors", default="0.01,1,1e4")
-    parser.add_argument("--big-default-only", action="store_true", default=True,
-                        help="Algorithms 3, 4 at their largest h only with the default α, β")
+    parser.add_argument(
+        "--big-default-only",
+        action="store_true",
+        default=True,
+        help="Algorithms 3, 4 at their largest h only with the default α, β",
+    )
     parser.add_argument("--h-ms-max", type=int, default=128, help="largest 1/h for Algorithms 3, 4 in the steps part")
     parser.add_argument("--updates-h", type=int, default=64)
     parser.add_argument("--cap", type=int, default=2000, help="iteration cap of the fixed-point updates")
     parser.add_argument("--speed-h", type=int, default=256)
     parser.add_argument("--speed-model", type=int, default=2)
     parser.add_argument("--models", default="1,2,3,3e6", help="models of the steps part: 1, 2, 3 (E_high 1e3), 3e6")
-    parser.add_argument("--chunk", type=int, default=InterfaceNewtonOptions().chunk,
-                        help="steps part: right-hand sides per multi-RHS back-solve of the interface responses "
-                        "(smaller: less memory for the mixed h = 1/128)")
-    parser.add_argument("--no-monolithic", action="store_true",
-                        help="steps part: skip the monolithic Newton column (the mixed one needs ~10 GB at h = 1/128)")
-    parser.add_argument("--front-window", type=int, default=InterfaceNewtonOptions().front_window,
-                        help="steps part: the local front resolution's window (0: the plain contact Newton as the "
-                        "main count, the default window in brackets)")
-    parser.add_argument("--dump", type=Path, default=None,
-                        help="steps part: save each condensed contact problem (s_L, M, D, coordinates) as .npz here")
+    parser.add_argument(
+        "--chunk",
+        type=int,
+        default=InterfaceNewtonOptions().chunk,
+        help="steps part: right-hand sides per multi-RHS back-solve of the interface responses "
+        "(smaller: less memory for the mixed h = 1/128)",
+    )
+    parser.add_argument(
+        "--no-monolithic",
+        action="store_true",
+        help="steps part: skip the monolithic Newton column (the mixed one needs ~10 GB at h = 1/128)",
+    )
+    parser.add_argument(
+        "--front-window",
+        type=int,
+        default=InterfaceNewtonOptions().front_window,
+        help="steps part: the local front resolution's window (0: the plain contact Newton as the "
+        "main count, the default window in brackets)",
+    )
+    parser.add_argument(
+        "--dump",
+        type=Path,
+        default=None,
+        help="steps part: save each condensed contact problem (s_L, M, D, coordinates) as .npz here",
+    )
     parser.add_argument("--out", type=Path, default=Path("benchmarks/results/interface_newton.md"))
     args = parser.parse_args()
     logging.basicConfig(level=logging.WARNING)
-    lines = ["# Interface Newton", "", f"Machine: {machine_description()}.", "",
-             "Command: `OMP_NUM_THREADS=1 python benchmarks/interface_newton.py "
-             f"--parts {args.parts} --methods {args.methods} --h-primal {args.h_primal} --h-mixed {args.h_mixed} "
-             f"--factors {args.factors} --h-ms-max {args.h_ms_max} --updates-h {args.updates_h} --cap {args.cap} "
-             f"--speed-h {args.speed_h} --speed-model {args.speed_model} --models {args.models}"
-             f"{' --no-monolithic' if args.no_monolithic else ''} --front-window {args.front_window} --chunk {args.chunk} "
-             f"--out {args.out}`", ""]
+    lines = [
+        "# Interface Newton",
+        "",
+        f"Machine: {machine_description()}.",
+        "",
+        "Command: `OMP_NUM_THREADS=1 python benchmarks/interface_newton.py "
+        f"--parts {args.parts} --methods {args.methods} --h-primal {args.h_primal} --h-mixed {args.h_mixed} "
+        f"--factors {args.factors} --h-ms-max {args.h_ms_max} --updates-h {args.updates_h} --cap {args.cap} "
+        f"--speed-h {args.speed_h} --speed-model {args.speed_model} --models {args.models}"
+        f"{' --no-monolithic' if args.no_monolithic else ''} --front-window {args.front_window} --chunk {args.chunk} "
+        f"--out {args.out}`",
+        "",
+    ]
     chosen = {"1": MODELS[0], "2": MODELS[1], "3": MODELS[2], "3e6": MODELS[3]}
     try:
         models = [chosen[m] for m in args.models.split(",")]
@@ -440,9 +524,17 @@ def main() -> None:
     ints = lambda text: [int(x) for x in text.split(",")]  # noqa: E731
     for part in args.parts.split(","):
         if part == "steps":
-            part_steps(lines, ints(args.h_primal), ints(args.h_mixed), [float(x) for x in args.factors.split(",")],
-                       args.big_default_only, ints(args.methods), args.h_ms_max, models,
-                       monolithic=not args.no_monolithic)
+            part_steps(
+                lines,
+                ints(args.h_primal),
+                ints(args.h_mixed),
+                [float(x) for x in args.factors.split(",")],
+                args.big_default_only,
+                ints(args.methods),
+                args.h_ms_max,
+                models,
+                monolithic=not args.no_monolithic,
+            )
         elif part == "updates":
             part_updates(lines, args.updates_h, args.cap, ints(args.methods))
         elif part == "fronts":

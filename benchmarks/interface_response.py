@@ -29,10 +29,9 @@ from pathlib import Path
 
 import numpy as np
 import scipy.linalg as sla
-
-import fenics_contact as fc  # noqa: F401  (dolfinx_solver before petsc4py)
 from petsc4py import PETSc
 
+import fenics_contact as fc  # noqa: F401  (dolfinx_solver before petsc4py)
 from fenics_contact.fem import inverse_entries
 from fenics_contact.hybrid.iteration import InterfaceNewtonOptions
 from fenics_contact.hybrid.primal import PrimalHybridStep
@@ -49,8 +48,14 @@ def problem_on(h: int, H: int, contrast: float):
 def schur_inverse(A: PETSc.Mat, rows: np.ndarray) -> np.ndarray:
     """S⁻¹ = (A⁻¹)[rows][:, rows] from MUMPS' Schur complement of A on ``rows`` (sorted), a new factorization."""
     lib = inverse_entries._library()
-    for name in ("MatFactorSetSchurIS", "MatFactorGetSchurComplement", "MatFactorRestoreSchurComplement",
-                 "MatDenseGetArrayRead", "MatDenseRestoreArrayRead", "MatDenseGetLDA"):
+    for name in (
+        "MatFactorSetSchurIS",
+        "MatFactorGetSchurComplement",
+        "MatFactorRestoreSchurComplement",
+        "MatDenseGetArrayRead",
+        "MatDenseRestoreArrayRead",
+        "MatDenseGetLDA",
+    ):
         getattr(lib, name).restype = ctypes.c_int
     ksp = PETSc.KSP().create(PETSc.COMM_SELF)
     ksp.setOperators(A)
@@ -110,8 +115,10 @@ def responses(args, h: int) -> list[str]:
     """Part 1: rows of the response table at h = 1/h."""
     step = PrimalHybridStep(problem_on(h, args.H, args.contrast))
     step.prepare()
-    parts = [(r"Ω₁: T₁", PrimalPart(step.sub[0], step.interface, 0, contact=False), False),
-             (r"Ω₂ (J₀): Yc, Sc, Yq, Sq", PrimalPart(step.sub[1], step.interface, 1, contact=True), True)]
+    parts = [
+        (r"Ω₁: T₁", PrimalPart(step.sub[0], step.interface, 0, contact=False), False),
+        (r"Ω₂ (J₀): Yc, Sc, Yq, Sq", PrimalPart(step.sub[1], step.interface, 1, contact=True), True),
+    ]
     rows = []
     for name, part, contact in parts:
         times = {}
@@ -127,9 +134,11 @@ def responses(args, h: int) -> list[str]:
         ref = times["solves"][1]
         diff = {v: max(relative(a, b) for a, b in zip(times[v][1], ref)) for v in ("schur", "entries")}
         n_dofs = part.nown
-        rows.append(f"| 1/{h} | {name} | {n_dofs} | {part.n_g} | {part.n_c if contact else 0} "
-                    f"| {times['solves'][0]:.2f} | {times['schur'][0]:.2f} | {times['entries'][0]:.3f} "
-                    f"| {times['solves'][0] / times['entries'][0]:.1f} | {diff['schur']:.1e} | {diff['entries']:.1e} |")
+        rows.append(
+            f"| 1/{h} | {name} | {n_dofs} | {part.n_g} | {part.n_c if contact else 0} "
+            f"| {times['solves'][0]:.2f} | {times['schur'][0]:.2f} | {times['entries'][0]:.3f} "
+            f"| {times['solves'][0] / times['entries'][0]:.1f} | {diff['schur']:.1e} | {diff['entries']:.1e} |"
+        )
         print(rows[-1], flush=True)
     parts[1][1].destroy()
     return rows
@@ -145,8 +154,10 @@ def blocking(args, h: int) -> list[str]:
     rows = []
     for icntl27 in (default, 128, 512):
         factor.setMumpsIcntl(27, icntl27)
-        times = [timed(lambda: AffinePart.responses(part, contact=False, chunk=chunk), args.repeat)[0]
-                 for chunk in (32, 128, 1024)]
+        times = [
+            timed(lambda: AffinePart.responses(part, contact=False, chunk=chunk), args.repeat)[0]
+            for chunk in (32, 128, 1024)
+        ]
         rows.append(f"| 1/{h} | {icntl27} | " + " | ".join(f"{t:.2f}" for t in times) + " |")
         print(rows[-1], flush=True)
     factor.setMumpsIcntl(27, default)
@@ -168,17 +179,26 @@ def load_path(args, h: int) -> list[str]:
                 total = time.perf_counter() - start
             finally:
                 PrimalPart.responses = own
-            runs[variant].append((total, curve.steps[0].time_offline_s, curve.forces,
-                                  [s.iterations for s in curve.steps], [s.interface_newton_steps for s in curve.steps],
-                                  all(s.converged for s in curve.steps)))
+            runs[variant].append(
+                (
+                    total,
+                    curve.steps[0].time_offline_s,
+                    curve.forces,
+                    [s.iterations for s in curve.steps],
+                    [s.interface_newton_steps for s in curve.steps],
+                    all(s.converged for s in curve.steps),
+                )
+            )
     ref = runs["solves"][0]
     rows = []
     for variant, out in runs.items():
         forces, its, newton = out[0][2], out[0][3], out[0][4]
         same = all(o[3] == its and o[4] == newton for o in out) and its == ref[3] and newton == ref[4]
-        rows.append(f"| 1/{h} | {variant} | {min(o[1] for o in out):.2f} | {min(o[0] for o in out):.2f} "
-                    f"| {relative(forces, ref[2]):.1e} | {sum(its)} / {sum(newton)} | {'yes' if same else 'NO'} "
-                    f"| {'yes' if all(o[5] for o in out) else 'NO'} |")
+        rows.append(
+            f"| 1/{h} | {variant} | {min(o[1] for o in out):.2f} | {min(o[0] for o in out):.2f} "
+            f"| {relative(forces, ref[2]):.1e} | {sum(its)} / {sum(newton)} | {'yes' if same else 'NO'} "
+            f"| {'yes' if all(o[5] for o in out) else 'NO'} |"
+        )
         print(rows[-1], flush=True)
     return rows
 
@@ -193,24 +213,41 @@ def main() -> None:
     parser.add_argument("--chunk", type=int, default=InterfaceNewtonOptions().chunk)
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--skip-load-path", action="store_true")
-    parser.add_argument("--blocking", action="store_true",
-                        help="only Ω₁'s back-solves at the largest h: block sizes against MUMPS' ICNTL(27)")
+    parser.add_argument(
+        "--blocking",
+        action="store_true",
+        help="only Ω₁'s back-solves at the largest h: block sizes against MUMPS' ICNTL(27)",
+    )
     parser.add_argument("--out", type=Path, default=None)
     args = parser.parse_args()
-    lines = [f"# Algorithm 1's interface responses: back-solves, Schur complement, entries of J⁻¹ (model 3, "
-             f"cylinder, contrast {args.contrast:g}, H = 1/{args.H})", "",
-             f"Command: `OMP_NUM_THREADS={os.environ.get('OMP_NUM_THREADS', 'unset')} .venv/bin/python "
-             f"benchmarks/interface_response.py {' '.join(sys.argv[1:])}`", "", f"Machine: {machine_description()}",
-             "", f"Times: minimum of {args.repeat} repetitions, the variants alternating, in one process.", "",
-             f"## Responses (back-solves in blocks of {args.chunk} right-hand sides)", "",
-             "| h | response | DOFs | n_γ | n_c | back-solves [s] | Schur [s] | entries [s] | speed-up (entries) "
-             "| Schur − solves | entries − solves |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+    lines = [
+        f"# Algorithm 1's interface responses: back-solves, Schur complement, entries of J⁻¹ (model 3, "
+        f"cylinder, contrast {args.contrast:g}, H = 1/{args.H})",
+        "",
+        f"Command: `OMP_NUM_THREADS={os.environ.get('OMP_NUM_THREADS', 'unset')} .venv/bin/python "
+        f"benchmarks/interface_response.py {' '.join(sys.argv[1:])}`",
+        "",
+        f"Machine: {machine_description()}",
+        "",
+        f"Times: minimum of {args.repeat} repetitions, the variants alternating, in one process.",
+        "",
+        f"## Responses (back-solves in blocks of {args.chunk} right-hand sides)",
+        "",
+        "| h | response | DOFs | n_γ | n_c | back-solves [s] | Schur [s] | entries [s] | speed-up (entries) "
+        "| Schur − solves | entries − solves |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
     if args.blocking:
         h = max(args.h)
-        lines = [f"## Ω₁'s back-solves at h = 1/{h}: columns per MatMatSolve against MUMPS' ICNTL(27)", "",
-                 f"Command: `OMP_NUM_THREADS={os.environ.get('OMP_NUM_THREADS', 'unset')} .venv/bin/python "
-                 f"benchmarks/interface_response.py {' '.join(sys.argv[1:])}` (minimum of {args.repeat})", "",
-                 "| h | ICNTL(27) | 32 columns [s] | 128 columns [s] | 1024 columns [s] |", "|---|---|---|---|---|"]
+        lines = [
+            f"## Ω₁'s back-solves at h = 1/{h}: columns per MatMatSolve against MUMPS' ICNTL(27)",
+            "",
+            f"Command: `OMP_NUM_THREADS={os.environ.get('OMP_NUM_THREADS', 'unset')} .venv/bin/python "
+            f"benchmarks/interface_response.py {' '.join(sys.argv[1:])}` (minimum of {args.repeat})",
+            "",
+            "| h | ICNTL(27) | 32 columns [s] | 128 columns [s] | 1024 columns [s] |",
+            "|---|---|---|---|---|",
+        ]
         lines += blocking(args, h)
         print("\n".join(lines))
         if args.out:
@@ -220,12 +257,18 @@ def main() -> None:
     for h in args.h:
         lines += responses(args, h)
     if not args.skip_load_path:
-        lines += ["", f"## Load path ({args.steps} steps, ``primal``, tol {args.tol:g})", "",
-                  "forces: largest difference to the back-solves' curve, relative to its largest force; iterations: "
-                  "applications of T / interface Newton steps over all steps; same: those counts equal in every "
-                  "repetition and to the back-solves'.", "",
-                  "| h | responses | offline in step 1 [s] | whole curve [s] | forces − back-solves "
-                  "| iterations / Newton steps | same | all certified |", "|---|---|---|---|---|---|---|---|"]
+        lines += [
+            "",
+            f"## Load path ({args.steps} steps, ``primal``, tol {args.tol:g})",
+            "",
+            "forces: largest difference to the back-solves' curve, relative to its largest force; iterations: "
+            "applications of T / interface Newton steps over all steps; same: those counts equal in every "
+            "repetition and to the back-solves'.",
+            "",
+            "| h | responses | offline in step 1 [s] | whole curve [s] | forces − back-solves "
+            "| iterations / Newton steps | same | all certified |",
+            "|---|---|---|---|---|---|---|---|",
+        ]
         for h in args.h:
             lines += load_path(args, h)
     text = "\n".join(lines) + "\n"

@@ -25,8 +25,14 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-FAMILY = {"primal-monolithic": "primal", "primal": "primal", "primal-ms": "primal",
-          "mixed-monolithic": "mixed", "mixed": "mixed", "mixed-ms": "mixed"}
+FAMILY = {
+    "primal-monolithic": "primal",
+    "primal": "primal",
+    "primal-ms": "primal",
+    "mixed-monolithic": "mixed",
+    "mixed": "mixed",
+    "mixed-ms": "mixed",
+}
 
 
 def one(args) -> dict:
@@ -47,10 +53,18 @@ def one(args) -> dict:
     curve = fc.force_indentation(problem, args.one, depths, direction=(-1.0, 0.0), **options)
     total = time.perf_counter() - start
     steps = [s.time_s for s in curve.steps]
-    return {"method": args.one, "setup_s": curve.time_offline_s, "first_step_offline_s": curve.steps[0].time_offline_s,
-            "step_median_s": float(np.median(steps)), "steps_s": float(np.sum(steps)), "total_s": total,
-            "forces": curve.forces.tolist(), "converged": all(s.converged for s in curve.steps),
-            "iterations": [s.iterations for s in curve.steps], "peak_rss_gb": peak_rss_bytes() / 1e9}
+    return {
+        "method": args.one,
+        "setup_s": curve.time_offline_s,
+        "first_step_offline_s": curve.steps[0].time_offline_s,
+        "step_median_s": float(np.median(steps)),
+        "steps_s": float(np.sum(steps)),
+        "total_s": total,
+        "forces": curve.forces.tolist(),
+        "converged": all(s.converged for s in curve.steps),
+        "iterations": [s.iterations for s in curve.steps],
+        "peak_rss_gb": peak_rss_bytes() / 1e9,
+    }
 
 
 def main() -> None:
@@ -65,8 +79,9 @@ def main() -> None:
     parser.add_argument("--layers", type=int, default=4)
     parser.add_argument("--nbasis", type=int, default=3)
     parser.add_argument("--tol", type=float, default=1e-8, help="tolerance of the certificate (hybrid methods)")
-    parser.add_argument("--methods", nargs="+", default=["primal-monolithic", "primal", "primal-ms"],
-                        choices=list(FAMILY))
+    parser.add_argument(
+        "--methods", nargs="+", default=["primal-monolithic", "primal", "primal-ms"], choices=list(FAMILY)
+    )
     parser.add_argument("--out", type=Path, default=None, help="a markdown results file (default: print)")
     parser.add_argument("--one", choices=list(FAMILY), help=argparse.SUPPRESS)
     args = parser.parse_args()
@@ -78,30 +93,51 @@ def main() -> None:
     results = {}
     for method in args.methods:
         cmd = [sys.executable, __file__, "--one", method] + [
-            f"--{k}={v}" for k, v in (("h", args.h), ("H", args.H), ("model", args.model),
-                                      ("contrast", args.contrast), ("steps", args.steps), ("first", args.first),
-                                      ("last", args.last), ("layers", args.layers), ("nbasis", args.nbasis),
-                                      ("tol", args.tol))]
+            f"--{k}={v}"
+            for k, v in (
+                ("h", args.h),
+                ("H", args.H),
+                ("model", args.model),
+                ("contrast", args.contrast),
+                ("steps", args.steps),
+                ("first", args.first),
+                ("last", args.last),
+                ("layers", args.layers),
+                ("nbasis", args.nbasis),
+                ("tol", args.tol),
+            )
+        ]
         proc = subprocess.run(cmd, capture_output=True, text=True, env=os.environ, cwd=ROOT)
         line = next((row for row in proc.stdout.splitlines() if row.startswith("RESULT ")), None)
         if line is None:
             raise SystemExit(f"{method} failed:\n{proc.stderr[-3000:]}")
         results[method] = json.loads(line[7:])
         print(f"{method}: total {results[method]['total_s']:.2f} s", flush=True)
-    lines = [f"# Load path: {args.steps} steps of a cylinder into model {args.model} (contrast {args.contrast:g}), "
-             f"h = 1/{args.h}, H = 1/{args.H}", "",
-             f"Command: `OMP_NUM_THREADS={os.environ.get('OMP_NUM_THREADS', 'unset')} .venv/bin/python "
-             f"benchmarks/load_path.py {' '.join(sys.argv[1:])}`", "", f"Machine: {machine_description()}", "",
-             "| method | set-up [s] | offline in step 1 [s] | step median [s] | steps [s] | whole curve [s] "
-             "| / monolithic | peak memory [GB] | max force difference to the monolithic curve |",
-             "|---|---|---|---|---|---|---|---|---|"]
+    lines = [
+        f"# Load path: {args.steps} steps of a cylinder into model {args.model} (contrast {args.contrast:g}), "
+        f"h = 1/{args.h}, H = 1/{args.H}",
+        "",
+        f"Command: `OMP_NUM_THREADS={os.environ.get('OMP_NUM_THREADS', 'unset')} .venv/bin/python "
+        f"benchmarks/load_path.py {' '.join(sys.argv[1:])}`",
+        "",
+        f"Machine: {machine_description()}",
+        "",
+        "| method | set-up [s] | offline in step 1 [s] | step median [s] | steps [s] | whole curve [s] "
+        "| / monolithic | peak memory [GB] | max force difference to the monolithic curve |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
     for method, r in results.items():
         mono = results.get(f"{FAMILY[method]}-monolithic")
         ratio = f"{r['total_s'] / mono['total_s']:.2f}" if mono else "—"
-        diff = (f"{np.max(np.abs(np.subtract(r['forces'], mono['forces'])) / np.abs(mono['forces'])):.1e}"
-                if mono and method != f"{FAMILY[method]}-monolithic" else "—")
-        lines.append(f"| {method} | {r['setup_s']:.2f} | {r['first_step_offline_s']:.2f} | {r['step_median_s']:.3f} "
-                     f"| {r['steps_s']:.2f} | {r['total_s']:.2f} | {ratio} | {r['peak_rss_gb']:.2f} | {diff} |")
+        diff = (
+            f"{np.max(np.abs(np.subtract(r['forces'], mono['forces'])) / np.abs(mono['forces'])):.1e}"
+            if mono and method != f"{FAMILY[method]}-monolithic"
+            else "—"
+        )
+        lines.append(
+            f"| {method} | {r['setup_s']:.2f} | {r['first_step_offline_s']:.2f} | {r['step_median_s']:.3f} "
+            f"| {r['steps_s']:.2f} | {r['total_s']:.2f} | {ratio} | {r['peak_rss_gb']:.2f} | {diff} |"
+        )
     text = "\n".join(lines) + "\n"
     if args.out:
         args.out.parent.mkdir(parents=True, exist_ok=True)

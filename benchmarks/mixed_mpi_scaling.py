@@ -48,9 +48,9 @@ METHODS = ("mono", "hybrid", "omega2")
 # one job (run under mpiexec)
 # ---------------------------------------------------------------------------------------------
 def worker(args: argparse.Namespace) -> None:
-    import fenics_contact  # noqa: F401  (dolfinx_solver first)
     from mpi4py import MPI
 
+    import fenics_contact  # noqa: F401  (dolfinx_solver first)
     from fenics_contact.fem.mixed import solve_mixed_monolithic
     from fenics_contact.hybrid.iteration import IterationOptions
     from fenics_contact.hybrid.mixed import solve_mixed_hybrid
@@ -67,12 +67,22 @@ def worker(args: argparse.Namespace) -> None:
     t0 = time.perf_counter()
     if args.method == "mono":
         sol = solve_mixed_monolithic(model.on(cm))
-        out.update(dofs=sol.dofs["total"], newton=sol.newton.steps, time_s=sol.time_s,
-                   time_online_s=sol.time_newton_s, time_setup_s=sol.time_s - sol.time_newton_s)
+        out.update(
+            dofs=sol.dofs["total"],
+            newton=sol.newton.steps,
+            time_s=sol.time_s,
+            time_online_s=sol.time_newton_s,
+            time_setup_s=sol.time_s - sol.time_newton_s,
+        )
     elif args.method == "hybrid":
         res = solve_mixed_hybrid(model.on(cm), options=IterationOptions(tol=args.tol))
-        out.update(dofs=res.dofs["omega1"] + res.dofs["omega2"], iterations=res.iterations,
-                   converged=res.converged, time_online_s=res.time_online_s, time_setup_s=res.time_offline_s)
+        out.update(
+            dofs=res.dofs["omega1"] + res.dofs["omega2"],
+            iterations=res.iterations,
+            converged=res.converged,
+            time_online_s=res.time_online_s,
+            time_setup_s=res.time_offline_s,
+        )
         out["time_s"] = out["time_online_s"] + out["time_setup_s"]
     elif args.method == "omega2":  # the Ω₂ strip alone: what Algorithm 4's online phase solves
         from fenics_contact.fem.mixed import contact_modulus, default_epsilon
@@ -83,8 +93,14 @@ def worker(args: argparse.Namespace) -> None:
         fields = material_fields(cm.mesh, model)
         eps = default_epsilon(cm.h, contact_modulus(cm.mesh, cm.facet_tags, fields.E, smallest=True))
         part = split_mesh(cm)[1]
-        sub = MixedSubproblem(part.mesh, part.facet_tags, material_fields(part.mesh, model), epsilon=eps,
-                              beta=float(np.sqrt(cm.h)), prefix="bench_omega2_")
+        sub = MixedSubproblem(
+            part.mesh,
+            part.facet_tags,
+            material_fields(part.mesh, model),
+            epsilon=eps,
+            beta=float(np.sqrt(cm.h)),
+            prefix="bench_omega2_",
+        )
         t_setup = time.perf_counter() - t0
         t1 = time.perf_counter()
         hist = sub.solve(np.zeros(sub.interface_range[1] - sub.interface_range[0]))
@@ -94,8 +110,14 @@ def worker(args: argparse.Namespace) -> None:
         for _ in range(args.repeat):  # warm solves with small data changes: one Newton step each, no refactorization
             sub.solve(1e-3 * rng.standard_normal(sub.interface_range[1] - sub.interface_range[0]))
         t_warm = (time.perf_counter() - t1) / args.repeat
-        out.update(dofs=sub.num_dofs["total"], newton=hist.steps, time_setup_s=t_setup, time_online_s=t_first,
-                   time_s=t_setup + t_first, time_warm_solve_s=t_warm)
+        out.update(
+            dofs=sub.num_dofs["total"],
+            newton=hist.steps,
+            time_setup_s=t_setup,
+            time_online_s=t_first,
+            time_s=t_setup + t_first,
+            time_warm_solve_s=t_warm,
+        )
     elif args.method != "baseline":
         raise SystemExit(f"unknown method {args.method}")
     comm.Barrier()
@@ -119,16 +141,33 @@ def _mpiexec() -> str:
 
 
 def run_job(ranks: int, n: int, method: str, args: argparse.Namespace) -> dict:
-    cmd = [_mpiexec(), "-n", str(ranks), sys.executable, __file__, "--worker", "--n", str(n), "--method", method,
-           "--model", str(args.model), "--coarse", str(args.coarse), "--tol", str(args.tol),
-           "--repeat", str(args.repeat)]
+    cmd = [
+        _mpiexec(),
+        "-n",
+        str(ranks),
+        sys.executable,
+        __file__,
+        "--worker",
+        "--n",
+        str(n),
+        "--method",
+        method,
+        "--model",
+        str(args.model),
+        "--coarse",
+        str(args.coarse),
+        "--tol",
+        str(args.tol),
+        "--repeat",
+        str(args.repeat),
+    ]
     env = dict(os.environ, OMP_NUM_THREADS="1")
     print(f"  {' '.join(cmd[:3])} ... --n {n} --method {method}", flush=True)
     proc = subprocess.run(cmd, capture_output=True, text=True, env=env)
     if proc.returncode != 0:
         raise SystemExit(f"job failed (exit {proc.returncode}):\n{(proc.stdout + proc.stderr)[-3000:]}")
     line = next(row for row in proc.stdout.splitlines() if row.startswith("RESULT "))
-    return json.loads(line[len("RESULT "):])
+    return json.loads(line[len("RESULT ") :])
 
 
 def weak_scaling(rows: list[dict], baseline: float, budget: float) -> list[str]:
@@ -165,8 +204,9 @@ def weak_scaling(rows: list[dict], baseline: float, budget: float) -> list[str]:
             ranks = 1
             while mem / ranks + baseline > budget:
                 ranks *= 2
-            lines.append(f"| {inv_h} | {dofs:,.0f} | {mem + ranks * baseline:.1f} | {ranks} | "
-                         f"{mem / ranks + baseline:.1f} |")
+            lines.append(
+                f"| {inv_h} | {dofs:,.0f} | {mem + ranks * baseline:.1f} | {ranks} | {mem / ranks + baseline:.1f} |"
+            )
         lines.append("")
     return lines
 

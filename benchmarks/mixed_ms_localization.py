@@ -17,11 +17,11 @@ from pathlib import Path
 import numpy as np
 
 import fenics_contact  # noqa: F401  (must precede dolfinx / petsc4py)
-from fenics_contact.problem import geometry, models
-from fenics_contact.multiscale.coarse import coarse_grid
-from fenics_contact.multiscale import mixed_cem as mm
-from fenics_contact.io import machine_description, write_report
 from fenics_contact.hybrid.mixed import MixedHybridStep
+from fenics_contact.io import machine_description, write_report
+from fenics_contact.multiscale import mixed_cem as mm
+from fenics_contact.multiscale.coarse import coarse_grid
+from fenics_contact.problem import geometry, models
 
 CASES = {  # the paper's cases: (model, E₁/E₂, ν₁ (pattern), ν₂ (rest))
     "5.3": (2, None, None, None),
@@ -115,14 +115,19 @@ def main() -> None:
         "|---|---|---|---|---|",
     ]
     for case, (number, ratio, nu1, nu2) in CASES.items():
-        model = (models.get_model(number) if ratio is None
-                 else models.paper_phase_model(number, E_ratio=ratio, nu_pattern=nu1, nu_rest=nu2))
+        model = (
+            models.get_model(number)
+            if ratio is None
+            else models.paper_phase_model(number, E_ratio=ratio, nu_pattern=nu1, nu_rest=nu2)
+        )
         cm, sub, grid = omega1(args.n, args.n_coarse, model)
         _, _, a3 = mm.stage_one_of(sub, grid, fixed, H=cm.H)
         _, _, aa = mm.stage_one_of(sub, grid, adaptive, H=cm.H)
         counts = np.diff(aa.offsets)
-        row = (f"| {case} | {np.min(a3.gaps):.2g} | {counts.min()}–{counts.max()} ({counts.mean():.1f}) | "
-               f"{a3.size} → {aa.size} | {np.min(aa.gaps):.2g} |")
+        row = (
+            f"| {case} | {np.min(a3.gaps):.2g} | {counts.min()}–{counts.max()} ({counts.mean():.1f}) | "
+            f"{a3.size} → {aa.size} | {np.min(aa.gaps):.2g} |"
+        )
         lines.append(row)
         print(row, flush=True)
     lines += ["", f"Total wall time {time.perf_counter() - start:.0f} s."]

@@ -74,9 +74,9 @@ def probe() -> float:
 
 def worker(args: argparse.Namespace) -> dict:
     """One measurement in this process (``--worker``)."""
-    import fenics_contact  # noqa: F401  (must precede dolfinx / petsc4py)
     from mpi4py import MPI
 
+    import fenics_contact  # noqa: F401  (must precede dolfinx / petsc4py)
     from fenics_contact.fem.mixed import solve_mixed_monolithic
     from fenics_contact.hybrid.iteration import IterationOptions
     from fenics_contact.multiscale.mixed import solve_mixed_ms_hybrid
@@ -94,25 +94,41 @@ def worker(args: argparse.Namespace) -> dict:
     if args.worker == "monolithic":
         cpu0 = _cpu_s()
         ref = solve_mixed_monolithic(model.on(cm))
-        out.update(dofs=ref.dofs["total"], time_s=ref.time_s, time_newton_s=ref.time_newton_s,
-                   newton_steps=ref.newton.steps, cpu_s=_cpu_s() - cpu0)
+        out.update(
+            dofs=ref.dofs["total"],
+            time_s=ref.time_s,
+            time_newton_s=ref.time_newton_s,
+            newton_steps=ref.newton.steps,
+            cpu_s=_cpu_s() - cpu0,
+        )
         ref.free()
     else:
-        res = solve_mixed_ms_hybrid(model.on(cm), cem=MixedCEMOptions(layers=args.layers), offline_comm=comm,
-                                    cache_dir=args.cache_dir, options=IterationOptions(max_iterations=1000))
+        res = solve_mixed_ms_hybrid(
+            model.on(cm),
+            cem=MixedCEMOptions(layers=args.layers),
+            offline_comm=comm,
+            cache_dir=args.cache_dir,
+            options=IterationOptions(max_iterations=1000),
+        )
         om = res.step.omega1
         cache = om.cache_path
-        out.update(dofs_fine=res.dofs["omega1"] + res.dofs["omega2"], dofs_ms=res.dofs["omega1_ms"],
-                   dofs_omega2=res.dofs["omega2"], iterations=res.iterations, converged=res.converged,
-                   time_offline_s=res.time_offline_s, time_online_s=res.time_online_s,
-                   offline_times={k: round(v, 2) for k, v in res.offline_times.items()},
-                   offline_cpu={k: round(v, 2) for k, v in om.cpu_times.items()},
-                   cpu_offline_omega1_s=sum(v for k, v in om.cpu_times.items() if k != "load"),
-                   cpu_total_s=_cpu_s(),
-                   cache_status=om.cache_status,
-                   cache_gb=cache.stat().st_size / 1e9 if cache is not None and cache.is_file() else None,
-                   functions_gb=sum(f.nbytes for f in om.basis + om.corr if f is not None) / 1e9,
-                   nbasis=list(om.nbasis_range))
+        out.update(
+            dofs_fine=res.dofs["omega1"] + res.dofs["omega2"],
+            dofs_ms=res.dofs["omega1_ms"],
+            dofs_omega2=res.dofs["omega2"],
+            iterations=res.iterations,
+            converged=res.converged,
+            time_offline_s=res.time_offline_s,
+            time_online_s=res.time_online_s,
+            offline_times={k: round(v, 2) for k, v in res.offline_times.items()},
+            offline_cpu={k: round(v, 2) for k, v in om.cpu_times.items()},
+            cpu_offline_omega1_s=sum(v for k, v in om.cpu_times.items() if k != "load"),
+            cpu_total_s=_cpu_s(),
+            cache_status=om.cache_status,
+            cache_gb=cache.stat().st_size / 1e9 if cache is not None and cache.is_file() else None,
+            functions_gb=sum(f.nbytes for f in om.basis + om.corr if f is not None) / 1e9,
+            nbasis=list(om.nbasis_range),
+        )
     out["peak_rss_gb"] = _peak_rss_gb(comm)
     return out
 
@@ -123,7 +139,7 @@ def _run(cmd: list[str]) -> dict:
     if proc.returncode != 0:
         raise RuntimeError(f"{' '.join(cmd)} failed:\n{proc.stderr[-4000:]}")
     line = next(l for l in proc.stdout.splitlines() if l.startswith(RESULT))
-    return json.loads(line[len(RESULT):])
+    return json.loads(line[len(RESULT) :])
 
 
 def _slope(x: list[float], y: list[float]) -> float | None:
@@ -139,8 +155,12 @@ def main() -> None:
     parser.add_argument("--layers", type=int, default=3)
     parser.add_argument("--ranks", type=int, default=2, help="MPI ranks for the shared offline phase (0: skip)")
     parser.add_argument("--mpi-sizes", default=None, help="sizes for the MPI run (default: the largest)")
-    parser.add_argument("--repeats", type=int, default=0,
-                        help="interleaved (serial without cache, R ranks) pairs per MPI size, median ratio (0: none)")
+    parser.add_argument(
+        "--repeats",
+        type=int,
+        default=0,
+        help="interleaved (serial without cache, R ranks) pairs per MPI size, median ratio (0: none)",
+    )
     parser.add_argument("--out", type=Path, default=Path("benchmarks/results/mixed_ms_scaling.md"))
     parser.add_argument("--worker", choices=("monolithic", "mixed-ms", "probe"), help=argparse.SUPPRESS)
     parser.add_argument("--n", type=int, help=argparse.SUPPRESS)
@@ -155,13 +175,17 @@ def main() -> None:
         return
 
     from common import write_report
+
     from fenics_contact.io import machine_description
 
     sizes = [int(s) for s in args.sizes.split(",")]
     mpi_sizes = [int(s) for s in args.mpi_sizes.split(",")] if args.mpi_sizes else sizes[-1:]
     me = [sys.executable, os.path.abspath(__file__), "--n-coarse", str(args.n_coarse), "--layers", str(args.layers)]
-    mpiexec = str(Path(sys.executable).with_name("mpiexec")) if Path(sys.executable).with_name("mpiexec").exists() \
+    mpiexec = (
+        str(Path(sys.executable).with_name("mpiexec"))
+        if Path(sys.executable).with_name("mpiexec").exists()
         else shutil.which("mpiexec")
+    )
     rows = []
     start = time.perf_counter()
     for n in sizes:
@@ -183,8 +207,15 @@ def main() -> None:
                 ceiling = sum(alone / t for t in together)
                 serial = _run([*me, "--worker", "mixed-ms", "--n", str(n)])
                 ranks = _run([mpiexec, "-n", str(args.ranks), *me, "--worker", "mixed-ms", "--n", str(n)])
-                pairs.append((serial["time_offline_s"], ranks["time_offline_s"], serial["offline_times"],
-                              ranks["offline_times"], ceiling))
+                pairs.append(
+                    (
+                        serial["time_offline_s"],
+                        ranks["time_offline_s"],
+                        serial["offline_times"],
+                        ranks["offline_times"],
+                        ceiling,
+                    )
+                )
                 print(json.dumps({"n": n, "pair": pairs[-1][:2], "ceiling": ceiling}), flush=True)
         row = {"n": n, "mono": mono, "built": built, "loaded": loaded, "par": par, "pairs": pairs}
         rows.append(row)
@@ -212,11 +243,16 @@ def main() -> None:
         mono, b, ld, par = r["mono"], r["built"], r["loaded"], r["par"]
         t, c = b["offline_times"], b["offline_cpu"]
         parts = f"{t.get('setup', 0):.1f}; " + ", ".join(
-            f"{t.get(k, 0):.1f} ({c.get(k, 0):.1f})" for k in ("assembly", "eigen", "basis", "coarse", "save"))
+            f"{t.get(k, 0):.1f} ({c.get(k, 0):.1f})" for k in ("assembly", "eigen", "basis", "coarse", "save")
+        )
         # the ranks run without a cache (the functions then stay where they were computed): the speed-up is
         # taken against the serial offline time without its cache write
-        par_cols = (f"{par['time_offline_s']:.1f} ({par['peak_rss_gb']:.2f} GB) | "
-                    f"{(b['time_offline_s'] - t.get('save', 0.0)) / par['time_offline_s']:.2f}" if par else "— | —")
+        par_cols = (
+            f"{par['time_offline_s']:.1f} ({par['peak_rss_gb']:.2f} GB) | "
+            f"{(b['time_offline_s'] - t.get('save', 0.0)) / par['time_offline_s']:.2f}"
+            if par
+            else "— | —"
+        )
         lines.append(
             f"| 1/{r['n']} | {mono['dofs']} | {mono['time_s']:.1f} ({mono['time_newton_s']:.1f}) "
             f"[{mono['cpu_s']:.1f}] | {mono['peak_rss_gb']:.2f} | {b['time_offline_s']:.1f} "
@@ -226,12 +262,16 @@ def main() -> None:
             f"{par_cols} |"
         )
     if any(r["pairs"] for r in rows):
-        lines += ["", f"Interleaved pairs (`--repeats {args.repeats}`): a serial process without a cache, then "
-                  f"{args.ranks} ranks; offline wall s (set-up; Stage I, Stage II, coarse); the machine's ceiling "
-                  f"just before the pair (Σ_r t_alone / t_r of a CPU-bound probe in one, then {args.ranks} processes)"
-                  " and the ratio's share of it:", "",
-                  f"| h | pair | serial s | {args.ranks} ranks s | ratio | ceiling | ratio / ceiling |",
-                  "|---|---|---|---|---|---|---|"]
+        lines += [
+            "",
+            f"Interleaved pairs (`--repeats {args.repeats}`): a serial process without a cache, then "
+            f"{args.ranks} ranks; offline wall s (set-up; Stage I, Stage II, coarse); the machine's ceiling "
+            f"just before the pair (Σ_r t_alone / t_r of a CPU-bound probe in one, then {args.ranks} processes)"
+            " and the ratio's share of it:",
+            "",
+            f"| h | pair | serial s | {args.ranks} ranks s | ratio | ceiling | ratio / ceiling |",
+            "|---|---|---|---|---|---|---|",
+        ]
 
         def parts(t: dict) -> str:
             return f"{t.get('setup', 0):.1f}; " + ", ".join(f"{t.get(k, 0):.1f}" for k in ("eigen", "basis", "coarse"))
@@ -240,13 +280,17 @@ def main() -> None:
             ratios = [s / p for s, p, *_ in r["pairs"]]
             ceilings = [c for *_, c in r["pairs"]]
             for k, (s, p, ts, tp, c) in enumerate(r["pairs"]):
-                lines.append(f"| 1/{r['n']} | {k + 1} | {s:.1f} ({parts(ts)}) | {p:.1f} ({parts(tp)}) | "
-                             f"{s / p:.2f} | {c:.2f} | {s / p / c:.2f} |")
+                lines.append(
+                    f"| 1/{r['n']} | {k + 1} | {s:.1f} ({parts(ts)}) | {p:.1f} ({parts(tp)}) | "
+                    f"{s / p:.2f} | {c:.2f} | {s / p / c:.2f} |"
+                )
             if ratios:
-                lines.append(f"| 1/{r['n']} | median | {np.median([s for s, *_ in r['pairs']]):.1f} | "
-                             f"{np.median([p for _, p, *_ in r['pairs']]):.1f} | **{np.median(ratios):.2f}** | "
-                             f"{np.median(ceilings):.2f} | "
-                             f"{np.median([a / c for a, c in zip(ratios, ceilings)]):.2f} |")
+                lines.append(
+                    f"| 1/{r['n']} | median | {np.median([s for s, *_ in r['pairs']]):.1f} | "
+                    f"{np.median([p for _, p, *_ in r['pairs']]):.1f} | **{np.median(ratios):.2f}** | "
+                    f"{np.median(ceilings):.2f} | "
+                    f"{np.median([a / c for a, c in zip(ratios, ceilings)]):.2f} |"
+                )
     dofs = [r["mono"]["dofs"] for r in rows]
     fits = {
         "monolithic solve (time)": [r["mono"]["time_s"] for r in rows],
@@ -260,8 +304,13 @@ def main() -> None:
         "Algorithm 4 peak memory": [r["built"]["peak_rss_gb"] for r in rows],
         "Algorithm 4 cache size": [r["built"]["cache_gb"] for r in rows],
     }
-    lines += ["", "Fitted cost exponents p (cost ∝ DOFs^p, least squares over the sizes above):", "",
-              "| quantity | p |", "|---|---|"]
+    lines += [
+        "",
+        "Fitted cost exponents p (cost ∝ DOFs^p, least squares over the sizes above):",
+        "",
+        "| quantity | p |",
+        "|---|---|",
+    ]
     for name, ys in fits.items():
         p = _slope(dofs, ys)
         lines.append(f"| {name} | {p:.2f} |" if p is not None else f"| {name} | — |")

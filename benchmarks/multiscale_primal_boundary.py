@@ -17,14 +17,13 @@ import sys
 import time
 from pathlib import Path
 
-import fenics_contact  # noqa: F401  (dolfinx_solver first)
+from common import write_report
 
+import fenics_contact  # noqa: F401  (dolfinx_solver first)
 from fenics_contact.fem.primal import default_penalty
 from fenics_contact.hybrid.iteration import IterationOptions
 from fenics_contact.hybrid.primal import solve_primal_hybrid
 from fenics_contact.io import machine_description
-
-from common import write_report
 from fenics_contact.multiscale.cem import CEMOptions
 from fenics_contact.multiscale.primal import solve_primal_ms_hybrid
 from fenics_contact.problem import geometry, models
@@ -43,12 +42,20 @@ def contrast_rows(n: int, n_coarse: int, contrast: float, layers: list[int], opt
     rows = []
     for m in layers:
         c = time.process_time()
-        res = solve_primal_ms_hybrid(model.on(cm), alpha="Emin", delta=delta, cem=CEMOptions(layers=m, nbasis=3),
-                                     reference=fine.u, options=options)
-        rows.append(f"| {contrast:.0e} | {m} | {res.step.error_energy():.2e} | {res.e_u:.2e} | "
-                    f"{abs(res.profile.force / fine.profile.force - 1):.1e} | {res.converged} | "
-                    f"{res.transmission_residual:.1e} | {res.time_offline_s:.1f} | "
-                    f"{time.process_time() - c:.1f} |")
+        res = solve_primal_ms_hybrid(
+            model.on(cm),
+            alpha="Emin",
+            delta=delta,
+            cem=CEMOptions(layers=m, nbasis=3),
+            reference=fine.u,
+            options=options,
+        )
+        rows.append(
+            f"| {contrast:.0e} | {m} | {res.step.error_energy():.2e} | {res.e_u:.2e} | "
+            f"{abs(res.profile.force / fine.profile.force - 1):.1e} | {res.converged} | "
+            f"{res.transmission_residual:.1e} | {res.time_offline_s:.1f} | "
+            f"{time.process_time() - c:.1f} |"
+        )
         print(rows[-1], flush=True)
     return rows
 
@@ -64,14 +71,21 @@ def main(argv=None) -> None:
     args = parser.parse_args(argv)
     options = IterationOptions(tol=args.tol, accel="newton")
     start = time.perf_counter()
-    lines = ["# Algorithm 3 with u_D and free sides on Ω₁ (model 3)", "",
-             f"{datetime.date.today()}; {machine_description()}", "",
-             "Command: `" + " ".join(["python", *sys.argv]) + "`", "",
-             f"h = 1/{args.h}, H = 1/{args.H}, l = 3, u_D = {U_D} on x = 0, top and bottom traction free; errors "
-             "of the glued solution against Algorithm 1 (interface Newton, transmission residual "
-             f"< {args.tol:g}); CPU = process time of the Algorithm 3 run.", "",
-             "| contrast | m | energy error | L² error | force difference | converged | transmission residual "
-             "| offline [s] | CPU [s] |", "|---|---|---|---|---|---|---|---|---|"]
+    lines = [
+        "# Algorithm 3 with u_D and free sides on Ω₁ (model 3)",
+        "",
+        f"{datetime.date.today()}; {machine_description()}",
+        "",
+        "Command: `" + " ".join(["python", *sys.argv]) + "`",
+        "",
+        f"h = 1/{args.h}, H = 1/{args.H}, l = 3, u_D = {U_D} on x = 0, top and bottom traction free; errors "
+        "of the glued solution against Algorithm 1 (interface Newton, transmission residual "
+        f"< {args.tol:g}); CPU = process time of the Algorithm 3 run.",
+        "",
+        "| contrast | m | energy error | L² error | force difference | converged | transmission residual "
+        "| offline [s] | CPU [s] |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
     for contrast in args.contrasts:
         lines += contrast_rows(args.h, args.H, contrast, args.layers, options)
     lines += ["", f"Total time {time.perf_counter() - start:.0f} s."]

@@ -20,14 +20,13 @@ import argparse
 import time
 
 import numpy as np
+from common import write_report
 
 import fenics_contact as fc
 from fenics_contact.io import machine_description
 from fenics_contact.multiscale.cem import CEMOptions
 from fenics_contact.multiscale.primal import OMEGA1_CHECK_WARN
 from fenics_contact.problem.models import pixel_field
-
-from common import write_report
 
 
 def log_normal_field(n: int = 64, contrast: float = 1e4, length: float = 0.1, seed: int = 1):
@@ -46,9 +45,11 @@ def problems(h: int, H: int) -> dict:
     free_bottom = fc.unit_square(h, H, clamped=("left", "top"))
     top_traction = fc.unit_square(h, H, clamped=("left",), neumann={"top": "Gamma_N_top"})
     log_normal = fc.models.model_1().with_(
-        youngs_modulus=log_normal_field(), poisson_ratio=lambda x: np.full(x.shape[1], 0.3),
+        youngs_modulus=log_normal_field(),
+        poisson_ratio=lambda x: np.full(x.shape[1], 0.3),
         boundary=fc.BoundaryConditions(tractions={"Gamma_N_top": (0.0, -0.05)}),
-        description="log-normal E, contrast 1e4, free bottom, top traction")
+        description="log-normal E, contrast 1e4, free bottom, top traction",
+    )
     return {
         "model 1, clamped sides": fc.models.model_1().on(clamped),
         "model 3, free bottom": fc.models.model_3().on(free_bottom),
@@ -63,11 +64,20 @@ def main() -> None:
     parser.add_argument("--layers", type=int, nargs="+", default=[1, 2, 3, 4])
     parser.add_argument("--out", default="benchmarks/results/omega1_indicator.md")
     args = parser.parse_args()
-    lines = ["# The multiscale Ω₁ check of Algorithm 3 against the true error", "",
-             f"`OMP_NUM_THREADS=1 .venv/bin/python benchmarks/omega1_indicator.py --h {args.h} --H {args.H}`; "
-             f"h = 1/{args.h}, H = 1/{args.H}, 3 modes per coarse cell, the interface Newton to tol 1e-8; a run warns "
-             f"when the check exceeds {OMEGA1_CHECK_WARN:g}.", "", f"Machine: {machine_description()}.", "", "## Check against the true error", "",
-             "| problem | m | e_a (true, energy) | check | check / e_a | warns | time (s) |", "|---|---|---|---|---|---|---|"]
+    lines = [
+        "# The multiscale Ω₁ check of Algorithm 3 against the true error",
+        "",
+        f"`OMP_NUM_THREADS=1 .venv/bin/python benchmarks/omega1_indicator.py --h {args.h} --H {args.H}`; "
+        f"h = 1/{args.h}, H = 1/{args.H}, 3 modes per coarse cell, the interface Newton to tol 1e-8; a run warns "
+        f"when the check exceeds {OMEGA1_CHECK_WARN:g}.",
+        "",
+        f"Machine: {machine_description()}.",
+        "",
+        "## Check against the true error",
+        "",
+        "| problem | m | e_a (true, energy) | check | check / e_a | warns | time (s) |",
+        "|---|---|---|---|---|---|---|",
+    ]
     for name, problem in problems(args.h, args.H).items():
         reference = fc.solve(problem, "primal-monolithic")
         for m in args.layers:
@@ -76,8 +86,10 @@ def main() -> None:
             elapsed = time.perf_counter() - start
             error = result.step.error_energy()
             check = result.omega1_check
-            lines.append(f"| {name} | {m} | {error:.3g} | {check:.3g} | {check / error:.3f} | "
-                         f"{'yes' if check > OMEGA1_CHECK_WARN else 'no'} | {elapsed:.1f} |")
+            lines.append(
+                f"| {name} | {m} | {error:.3g} | {check:.3g} | {check / error:.3f} | "
+                f"{'yes' if check > OMEGA1_CHECK_WARN else 'no'} | {elapsed:.1f} |"
+            )
             print(lines[-1], flush=True)
     write_report(args.out, lines)
 

@@ -16,12 +16,12 @@ import time
 from pathlib import Path
 
 import fenics_contact  # noqa: F401
-from fenics_contact.hybrid.iteration import IterationOptions
-from fenics_contact.problem.geometry import unit_square
-from fenics_contact.io import machine_description
-from fenics_contact.problem.models import get_model
 from fenics_contact.fem.primal import default_penalty, solve_primal_monolithic
+from fenics_contact.hybrid.iteration import IterationOptions
 from fenics_contact.hybrid.primal import solve_primal_hybrid
+from fenics_contact.io import machine_description
+from fenics_contact.problem.geometry import unit_square
+from fenics_contact.problem.models import get_model
 
 
 def setup(n: int, n_coarse: int, number: int):
@@ -36,8 +36,12 @@ def setup(n: int, n_coarse: int, number: int):
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--sizes", type=int, nargs="+", default=[64, 128], help="1/h values")
-    parser.add_argument("--configs", nargs="+", default=["1:16", "2:16", "1:4"],
-                        help="model:1/H pairs; 1:4 puts γ across the channels of model 1")
+    parser.add_argument(
+        "--configs",
+        nargs="+",
+        default=["1:16", "2:16", "1:4"],
+        help="model:1/H pairs; 1:4 puts γ across the channels of model 1",
+    )
     parser.add_argument("--alphas", nargs="+", default=["1", "h^-1/2", "E", "E*h^-1/2"])
     parser.add_argument("--cap", type=int, default=20000, help="iteration cap of the plain update")
     parser.add_argument("--out", type=Path, required=True)
@@ -72,8 +76,13 @@ def main() -> None:
         number, n_coarse = (int(v) for v in config.split(":"))
         for n in args.sizes:
             cm, model, delta, ref, t_ref = setup(n, n_coarse, number)
-            res = solve_primal_hybrid(model.on(cm), alpha="E*h^-1/2", delta=delta, reference=ref.u,
-                                      options=IterationOptions(tol=1e-10, accel="anderson"))
+            res = solve_primal_hybrid(
+                model.on(cm),
+                alpha="E*h^-1/2",
+                delta=delta,
+                reference=ref.u,
+                options=IterationOptions(tol=1e-10, accel="anderson"),
+            )
             d = res.dofs
             lines.append(
                 f"| {number} | {n_coarse} | {n} | {d['omega1']} / {d['omega2']} / {d['interface']} | {ref.newton.steps} | "
@@ -84,11 +93,18 @@ def main() -> None:
             for alpha in args.alphas:
                 for accel in ("none", "anderson"):
                     cap = args.cap if accel == "none" else 5000
-                    r = solve_primal_hybrid(model.on(cm), alpha=alpha, delta=delta, reference=ref.u,
-                                            options=IterationOptions(tol=1e-6, accel=accel, max_iterations=cap))
+                    r = solve_primal_hybrid(
+                        model.on(cm),
+                        alpha=alpha,
+                        delta=delta,
+                        reference=ref.u,
+                        options=IterationOptions(tol=1e-6, accel=accel, max_iterations=cap),
+                    )
                     its = f"{r.iterations}" if r.converged else f"> {r.iterations} (cap)"
-                    study.append(f"| {number} | {n_coarse} | {n} | {alpha} | {accel} | {its} | {r.converged} | "
-                                 f"{r.e_u:.1e} | {r.time_online_s:.1f} |")
+                    study.append(
+                        f"| {number} | {n_coarse} | {n} | {alpha} | {accel} | {its} | {r.converged} | "
+                        f"{r.e_u:.1e} | {r.time_online_s:.1f} |"
+                    )
                     print(study[-1], flush=True)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text("\n".join(lines + study) + "\n")

@@ -38,8 +38,10 @@ def run_balanced(cost, comm, item, **kwargs):
     out = _run_balanced(cost, comm, timed, **kwargs)
     t1 = time.perf_counter()
     comm.Barrier()
-    records.append(f"{kwargs.get('desc')}: handed out {t1 - t0:.2f} s, items' CPU {spent[0]:.2f} s, "
-                   f"{spent[1]} items, waited at the end {time.perf_counter() - t1:.2f} s")
+    records.append(
+        f"{kwargs.get('desc')}: handed out {t1 - t0:.2f} s, items' CPU {spent[0]:.2f} s, "
+        f"{spent[1]} items, waited at the end {time.perf_counter() - t1:.2f} s"
+    )
     return out
 
 

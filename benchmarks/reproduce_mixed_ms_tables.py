@@ -34,24 +34,44 @@ from pathlib import Path
 import numpy as np
 
 import fenics_contact  # noqa: F401  (must precede dolfinx / petsc4py)
-from fenics_contact.problem import geometry, models
-from fenics_contact.hybrid.iteration import IterationOptions
-from fenics_contact.io import machine_description, write_report
 from fenics_contact.fem.mixed import solve_mixed_monolithic
+from fenics_contact.hybrid.iteration import IterationOptions
 from fenics_contact.hybrid.mixed import MixedHybridStep, solve_mixed_hybrid
+from fenics_contact.io import machine_description, write_report
 from fenics_contact.multiscale.mixed import solve_mixed_ms_hybrid
 from fenics_contact.multiscale.mixed_cem.options import DEFAULT_MIN_GAP, MixedCEMOptions
+from fenics_contact.problem import geometry, models
 
 #: the paper's Tables 5.3, 5.5–5.7 (h = 1/64, H = 1/16, β = √h, 3 bases): m -> (iterations, e_σ, e_u)
 PAPER = {
-    "5.3": {1: (96, 2.16e-1, 1.81e-1), 2: (71, 1.23e-1, 6.37e-2), 3: (58, 5.14e-2, 3.09e-2),
-            4: (46, 7.26e-3, 6.29e-3), 5: (43, 8.94e-4, 6.86e-4)},
-    "5.5": {1: (68, 2.39e-1, 1.26e-1), 2: (53, 1.38e-1, 8.12e-2), 3: (44, 3.79e-2, 2.31e-2),
-            4: (37, 4.35e-3, 3.15e-3), 5: (32, 8.21e-4, 5.96e-4)},
-    "5.6": {1: (79, 5.21e-1, 3.35e-1), 2: (62, 1.96e-1, 2.81e-2), 3: (54, 3.81e-2, 1.58e-2),
-            4: (51, 4.91e-3, 3.79e-3), 5: (46, 8.84e-4, 6.02e-4)},
-    "5.7": {1: (63, 1.54e-1, 9.36e-2), 2: (50, 8.79e-2, 5.85e-2), 3: (44, 4.12e-2, 1.06e-2),
-            4: (36, 5.31e-3, 3.22e-3), 5: (24, 7.28e-4, 6.59e-4)},
+    "5.3": {
+        1: (96, 2.16e-1, 1.81e-1),
+        2: (71, 1.23e-1, 6.37e-2),
+        3: (58, 5.14e-2, 3.09e-2),
+        4: (46, 7.26e-3, 6.29e-3),
+        5: (43, 8.94e-4, 6.86e-4),
+    },
+    "5.5": {
+        1: (68, 2.39e-1, 1.26e-1),
+        2: (53, 1.38e-1, 8.12e-2),
+        3: (44, 3.79e-2, 2.31e-2),
+        4: (37, 4.35e-3, 3.15e-3),
+        5: (32, 8.21e-4, 5.96e-4),
+    },
+    "5.6": {
+        1: (79, 5.21e-1, 3.35e-1),
+        2: (62, 1.96e-1, 2.81e-2),
+        3: (54, 3.81e-2, 1.58e-2),
+        4: (51, 4.91e-3, 3.79e-3),
+        5: (46, 8.84e-4, 6.02e-4),
+    },
+    "5.7": {
+        1: (63, 1.54e-1, 9.36e-2),
+        2: (50, 8.79e-2, 5.85e-2),
+        3: (44, 4.12e-2, 1.06e-2),
+        4: (36, 5.31e-3, 3.22e-3),
+        5: (24, 7.28e-4, 6.59e-4),
+    },
 }
 PAPER_58 = {"monolithic": 15.29, "alg2": 6.48, 32: 4.94, 16: 2.13, 8: 1.69}
 #: the paper's §5.4 cases on test model 1: (E₁/E₂, ν₁ in the pattern, ν₂ elsewhere and in Ω₂)
@@ -65,9 +85,18 @@ def _peak_rss_gb() -> float:
     return peak_rss_bytes() / 1e9
 
 
-def table_53(n: int, layers: list[int], accel: str, lines: list[str], title: str = "5.3",
-             nu_high: float = 0.499, min_gap: float | None = DEFAULT_MIN_GAP, load: str = "builtin",
-             tol: float = 1.0e-6, without_source: bool = False) -> None:
+def table_53(
+    n: int,
+    layers: list[int],
+    accel: str,
+    lines: list[str],
+    title: str = "5.3",
+    nu_high: float = 0.499,
+    min_gap: float | None = DEFAULT_MIN_GAP,
+    load: str = "builtin",
+    tol: float = 1.0e-6,
+    without_source: bool = False,
+) -> None:
     """One Table 5.3 / 5.5–5.7 analogue, m = ``layers``.
 
     ``load="omega1"`` moves the model's load bands into Ω₁ (``models.LOADS_IN_OMEGA1``: x ∈ [1/2, 15/16],
@@ -91,8 +120,11 @@ def table_53(n: int, layers: list[int], accel: str, lines: list[str], title: str
     if load == "omega1":
         bands = models.LOADS_IN_OMEGA1[number]
         model = model.with_(load=models.band_load(bands))
-        desc += ", load in Ω₁ (bands x ∈ [1/2, 15/16]: " + ", ".join(
-            f"f₁ = {b[4]:+g} on y ∈ [{b[2]:g}, {b[3]:g}]" for b in bands) + ")"
+        desc += (
+            ", load in Ω₁ (bands x ∈ [1/2, 15/16]: "
+            + ", ".join(f"f₁ = {b[4]:+g} on y ∈ [{b[2]:g}, {b[3]:g}]" for b in bands)
+            + ")"
+        )
     elif load != "builtin":
         raise SystemExit(f"unknown load {load!r} (builtin or omega1)")
     ref = solve_mixed_monolithic(model.on(cm))
@@ -120,8 +152,12 @@ def table_53(n: int, layers: list[int], accel: str, lines: list[str], title: str
     ]
     prev = prev_split = None
     for m in layers:
-        res = solve_mixed_ms_hybrid(model.on(cm), cem=MixedCEMOptions(layers=m, nbasis=3, min_gap=min_gap),
-                                    reference=ref, options=IterationOptions(accel=accel, max_iterations=1000, tol=tol))
+        res = solve_mixed_ms_hybrid(
+            model.on(cm),
+            cem=MixedCEMOptions(layers=m, nbasis=3, min_gap=min_gap),
+            reference=ref,
+            options=IterationOptions(accel=accel, max_iterations=1000, tol=tol),
+        )
         om = res.step.omega1
         lo, hi = om.nbasis_range
         below = np.flatnonzero(res.history.rel_changes < tol)
@@ -132,29 +168,37 @@ def table_53(n: int, layers: list[int], accel: str, lines: list[str], title: str
         res.step.set_reference(split)
         e_split = res.step.errors()[0]
         ratio_s = f"{prev_split / e_split:.1f}" if prev_split else "—"
-        row = (f"| {m} | {res.iterations} ({its_rel}) | {res.e_sigma:.2e} | {ratio} | {e_split:.2e} | {ratio_s} | "
-               f"{res.e_sigma_l2:.2e} | "
-               f"{res.e_u:.2e} | {res.e_u_projected:.2e} | {res.e_u_post:.2e} | {res.converged} | {lo}–{hi} | "
-               f"{om.spectral_gap:.2g} | {res.dofs['omega1_ms']} | "
-               f"{res.time_offline_s:.1f} [{sum(om.cpu_times.values()):.1f}] | "
-               + ", ".join(f"{om.cpu_times.get(k, 0.0):.1f}" for k in ("assembly", "eigen", "basis", "coarse"))
-               + f" | {res.time_online_s:.2f} | {_peak_rss_gb():.2f} |" + paper)
+        row = (
+            f"| {m} | {res.iterations} ({its_rel}) | {res.e_sigma:.2e} | {ratio} | {e_split:.2e} | {ratio_s} | "
+            f"{res.e_sigma_l2:.2e} | "
+            f"{res.e_u:.2e} | {res.e_u_projected:.2e} | {res.e_u_post:.2e} | {res.converged} | {lo}–{hi} | "
+            f"{om.spectral_gap:.2g} | {res.dofs['omega1_ms']} | "
+            f"{res.time_offline_s:.1f} [{sum(om.cpu_times.values()):.1f}] | "
+            + ", ".join(f"{om.cpu_times.get(k, 0.0):.1f}" for k in ("assembly", "eigen", "basis", "coarse"))
+            + f" | {res.time_online_s:.2f} | {_peak_rss_gb():.2f} |"
+            + paper
+        )
         lines.append(row)
         print(row, flush=True)
         prev, prev_split = res.e_sigma, e_split
         del res, om  # the offline data of one m (GBs with many modes) is freed before the next is built
     if without_source:
         m = max(layers)
-        res = solve_mixed_ms_hybrid(model.on(cm),
-                                    cem=MixedCEMOptions(layers=m, nbasis=3, min_gap=min_gap, source_correction=False),
-                                    reference=ref, options=IterationOptions(accel=accel, max_iterations=1000, tol=tol))
+        res = solve_mixed_ms_hybrid(
+            model.on(cm),
+            cem=MixedCEMOptions(layers=m, nbasis=3, min_gap=min_gap, source_correction=False),
+            reference=ref,
+            options=IterationOptions(accel=accel, max_iterations=1000, tol=tol),
+        )
         res.step.set_reference(split)
         e_split = res.step.errors()[0]
-        row = (f"| {m}, without source correctors (the paper's Ω₁ step) | {res.iterations} | {res.e_sigma:.2e} | — | "
-               f"{e_split:.2e} | — | {res.e_sigma_l2:.2e} | {res.e_u:.2e} | {res.e_u_projected:.2e} | "
-               f"{res.e_u_post:.2e} | "
-               f"{res.converged} | | | {res.dofs['omega1_ms']} | {res.time_offline_s:.1f} | | "
-               f"{res.time_online_s:.2f} | {_peak_rss_gb():.2f} | — | — | — |")
+        row = (
+            f"| {m}, without source correctors (the paper's Ω₁ step) | {res.iterations} | {res.e_sigma:.2e} | — | "
+            f"{e_split:.2e} | — | {res.e_sigma_l2:.2e} | {res.e_u:.2e} | {res.e_u_projected:.2e} | "
+            f"{res.e_u_post:.2e} | "
+            f"{res.converged} | | | {res.dofs['omega1_ms']} | {res.time_offline_s:.1f} | | "
+            f"{res.time_online_s:.2f} | {_peak_rss_gb():.2f} | — | — | — |"
+        )
         lines.append(row)
         print(row, flush=True)
         del res
@@ -180,8 +224,10 @@ def table_58(n: int, layers: int, accels: list[str], lines: list[str], coarse: t
         ref = solve_mixed_monolithic(model.on(cm))
         ref.free()
         t_ref = ref.time_newton_s
-        rows = [f"| 1/{nc} | monolithic (semismooth Newton) | — | {ref.dofs['total']} | {ref.newton.steps} | "
-                f"{t_ref:.2f} | 1 | {ref.time_s - t_ref:.1f} | 0 | {PAPER_58['monolithic']} |"]
+        rows = [
+            f"| 1/{nc} | monolithic (semismooth Newton) | — | {ref.dofs['total']} | {ref.newton.steps} | "
+            f"{t_ref:.2f} | 1 | {ref.time_s - t_ref:.1f} | 0 | {PAPER_58['monolithic']} |"
+        ]
         step2 = step4 = None
         build = {}  # offline time of each step's first solve (later updates reuse the step)
         for accel in accels:
@@ -190,8 +236,9 @@ def table_58(n: int, layers: int, accels: list[str], lines: list[str], coarse: t
                     step.reset()  # cold subdomain states and factorizations; the offline data are kept
             opts = IterationOptions(accel=accel, max_iterations=1000)
             a2 = solve_mixed_hybrid(model.on(cm), reference=ref, options=opts, step=step2)
-            a4 = solve_mixed_ms_hybrid(model.on(cm), cem=MixedCEMOptions(layers=layers, nbasis=3), reference=ref,
-                                       options=opts, step=step4)
+            a4 = solve_mixed_ms_hybrid(
+                model.on(cm), cem=MixedCEMOptions(layers=layers, nbasis=3), reference=ref, options=opts, step=step4
+            )
             step2, step4 = a2.step, a4.step  # the offline data are reused by the next update
             for name, res, dofs, paper in (
                 ("Algorithm 2", a2, a2.dofs["omega1"] + a2.dofs["omega2"], PAPER_58["alg2"]),
@@ -201,8 +248,10 @@ def table_58(n: int, layers: int, accels: list[str], lines: list[str], coarse: t
                 build.setdefault(name, res.time_offline_s - res.time_interface_offline_s)
                 off = f"{build[name] + res.time_interface_offline_s:.1f}"
                 off += f" ({res.time_interface_offline_s:.2f})" if accel == "newton" else ""
-                rows.append(f"| 1/{nc} | {name} | {accel} | {dofs} | {its} | {res.time_online_s:.3f} | "
-                            f"**{res.time_online_s / t_ref:.3f}** | {off} | {res.e_sigma:.1e} | {paper} |")
+                rows.append(
+                    f"| 1/{nc} | {name} | {accel} | {dofs} | {its} | {res.time_online_s:.3f} | "
+                    f"**{res.time_online_s / t_ref:.3f}** | {off} | {res.e_sigma:.1e} | {paper} |"
+                )
         for r in rows:
             print(r, flush=True)
         lines += rows
@@ -255,17 +304,20 @@ def table_source(n: int, layers: list[int], n_coarse: list[int], cases: list[str
                 for sc in (True, False):
                     if not sc and m != max(layers):
                         continue
-                    res = solve_mixed_ms_hybrid(model.on(cm), cem=MixedCEMOptions(layers=m, source_correction=sc),
-                                                reference=ref, options=opts)
+                    res = solve_mixed_ms_hybrid(
+                        model.on(cm), cem=MixedCEMOptions(layers=m, source_correction=sc), reference=ref, options=opts
+                    )
                     res.step.set_reference(split)
                     row[sc] = (res, res.step.errors()[0])
                 res, e_split = row[True]
                 without = f"{row[False][0].e_sigma:.2e}" if False in row else "—"
                 ratio = f"{prev / res.e_sigma:.1f}" if prev else "—"
                 ratio_s = f"{prev_split / e_split:.1f}" if prev_split else "—"
-                out = (f"| {name} | 1/{nc} | {m} | {res.iterations} | {res.e_sigma:.2e} | {ratio} | {e_split:.2e} | "
-                       f"{ratio_s} | {without} | {res.e_u_post:.2e} | {res.time_offline_s:.1f} | "
-                       f"{res.time_online_s:.2f} |")
+                out = (
+                    f"| {name} | 1/{nc} | {m} | {res.iterations} | {res.e_sigma:.2e} | {ratio} | {e_split:.2e} | "
+                    f"{ratio_s} | {without} | {res.e_u_post:.2e} | {res.time_offline_s:.1f} | "
+                    f"{res.time_online_s:.2f} |"
+                )
                 lines.append(out)
                 print(out, flush=True)
                 prev, prev_split = res.e_sigma, e_split
@@ -291,23 +343,47 @@ def main() -> None:
     parser.add_argument("--layers", default="1,2,3,4,5", help="oversampling layers for Tables 5.3, 5.5-5.7")
     parser.add_argument("--layers-58", type=int, default=3, help="oversampling layers for Table 5.8")
     parser.add_argument("--coarse-58", default="32,16,8", help="Table 5.8: 1/H values (comma list)")
-    parser.add_argument("--accel", default="none",
-                        help="update: none, anderson or newton (Table 5.8: a comma list, e.g. none,anderson,newton)")
-    parser.add_argument("--nu-high", type=float, default=0.499,
-                        help="the nearly incompressible ν of Tables 5.5-5.7 (the paper's is 0.499)")
-    parser.add_argument("--min-gap", type=float, default=DEFAULT_MIN_GAP,
-                        help="Stage I: more modes where the first eigenvalue left out is below this "
-                        "(0: the paper's fixed l = 3)")
-    parser.add_argument("--load", default="builtin", choices=("builtin", "omega1"),
-                        help="Tables 5.3, 5.5-5.7: the model's own load bands (in Ω₂) or the same bands moved into "
-                        "Ω₁ (x ∈ [1/2, 15/16], models.LOADS_IN_OMEGA1)")
-    parser.add_argument("--tol", type=float, default=1.0e-6,
-                        help="Tables 5.3, 5.5-5.7: stopping rule, transmission residual < tol (the paper's 1e-6)")
-    parser.add_argument("--without-source", action="store_true",
-                        help="Tables 5.3, 5.5-5.7: also the paper's Ω₁ step (no source correctors) at the largest m")
+    parser.add_argument(
+        "--accel",
+        default="none",
+        help="update: none, anderson or newton (Table 5.8: a comma list, e.g. none,anderson,newton)",
+    )
+    parser.add_argument(
+        "--nu-high",
+        type=float,
+        default=0.499,
+        help="the nearly incompressible ν of Tables 5.5-5.7 (the paper's is 0.499)",
+    )
+    parser.add_argument(
+        "--min-gap",
+        type=float,
+        default=DEFAULT_MIN_GAP,
+        help="Stage I: more modes where the first eigenvalue left out is below this (0: the paper's fixed l = 3)",
+    )
+    parser.add_argument(
+        "--load",
+        default="builtin",
+        choices=("builtin", "omega1"),
+        help="Tables 5.3, 5.5-5.7: the model's own load bands (in Ω₂) or the same bands moved into "
+        "Ω₁ (x ∈ [1/2, 15/16], models.LOADS_IN_OMEGA1)",
+    )
+    parser.add_argument(
+        "--tol",
+        type=float,
+        default=1.0e-6,
+        help="Tables 5.3, 5.5-5.7: stopping rule, transmission residual < tol (the paper's 1e-6)",
+    )
+    parser.add_argument(
+        "--without-source",
+        action="store_true",
+        help="Tables 5.3, 5.5-5.7: also the paper's Ω₁ step (no source correctors) at the largest m",
+    )
     parser.add_argument("--n-coarse", default="16,8", help="table 'source': 1/H values")
-    parser.add_argument("--cases", default=";".join(SOURCE_CASES),
-                        help="table 'source': ';'-separated cases among " + ", ".join(SOURCE_CASES))
+    parser.add_argument(
+        "--cases",
+        default=";".join(SOURCE_CASES),
+        help="table 'source': ';'-separated cases among " + ", ".join(SOURCE_CASES),
+    )
     parser.add_argument("--out", type=Path, default=Path("benchmarks/results/mixed_ms_tables.md"))
     args = parser.parse_args()
     logging.basicConfig(level=logging.WARNING)
@@ -324,18 +400,36 @@ def main() -> None:
     for t in args.tables.split(","):
         t = t.strip()
         if t == "5.3" or t in INCOMPRESSIBLE:
-            table_53(args.n, layers, args.accel, lines, title=t, nu_high=args.nu_high, min_gap=args.min_gap or None,
-                     load=args.load, tol=args.tol, without_source=args.without_source)
+            table_53(
+                args.n,
+                layers,
+                args.accel,
+                lines,
+                title=t,
+                nu_high=args.nu_high,
+                min_gap=args.min_gap or None,
+                load=args.load,
+                tol=args.tol,
+                without_source=args.without_source,
+            )
         elif t == "5.8":
-            table_58(args.n, args.layers_58, args.accel.split(","), lines,
-                     tuple(int(c) for c in args.coarse_58.split(",")))
+            table_58(
+                args.n, args.layers_58, args.accel.split(","), lines, tuple(int(c) for c in args.coarse_58.split(","))
+            )
         elif t == "source":
-            table_source(args.n, layers, [int(c) for c in args.n_coarse.split(",")],
-                         [c.strip() for c in args.cases.split(";")], lines)
+            table_source(
+                args.n,
+                layers,
+                [int(c) for c in args.n_coarse.split(",")],
+                [c.strip() for c in args.cases.split(";")],
+                lines,
+            )
         else:
             raise SystemExit(f"unknown table {t!r}")
-    lines.append(f"Total wall time {time.perf_counter() - start:.0f} s, CPU time {time.process_time() - cpu:.0f} s, "
-                 f"peak RSS {_peak_rss_gb():.2f} GB.")
+    lines.append(
+        f"Total wall time {time.perf_counter() - start:.0f} s, CPU time {time.process_time() - cpu:.0f} s, "
+        f"peak RSS {_peak_rss_gb():.2f} GB."
+    )
     write_report(args.out, lines)
 
 

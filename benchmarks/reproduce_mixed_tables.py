@@ -26,19 +26,18 @@ from pathlib import Path
 
 import numpy as np
 import ufl
-
-import fenics_contact  # noqa: F401  (dolfinx_solver first)
 from dolfinx import fem
 
+import fenics_contact  # noqa: F401  (dolfinx_solver first)
 from fenics_contact.fem import forms_mixed
-from fenics_contact.hybrid.iteration import IterationOptions
-from fenics_contact.problem.geometry import unit_square
-from fenics_contact.io import machine_description
-from fenics_contact.problem.materials import compliance, strain, stress
 from fenics_contact.fem.mixed import solve_mixed_monolithic
-from fenics_contact.hybrid.mixed import solve_mixed_hybrid
-from fenics_contact.problem.models import get_model, paper_phase_model
 from fenics_contact.fem.primal import default_penalty, solve_primal_monolithic
+from fenics_contact.hybrid.iteration import IterationOptions
+from fenics_contact.hybrid.mixed import solve_mixed_hybrid
+from fenics_contact.io import machine_description
+from fenics_contact.problem.geometry import unit_square
+from fenics_contact.problem.materials import compliance, strain, stress
+from fenics_contact.problem.models import get_model, paper_phase_model
 
 #: Tables 5.1/5.2: (model, 1/h, β) -> (iterations, relative tolerance, e_σ, e_u)
 PAPER_5_1_2 = {
@@ -135,10 +134,16 @@ def main() -> None:
     parser.add_argument("--models", type=int, nargs="+", default=[1, 2])
     parser.add_argument("--tol", type=float, default=1e-6)
     parser.add_argument("--incompressible-size", type=int, default=64, help="1/h of Table 5.4 (0 skips)")
-    parser.add_argument("--primal-sizes", type=int, nargs="*", default=[32, 64, 128],
-                        help="1/h of the primal-vs-mixed table (none skips)")
-    parser.add_argument("--tight", type=float, nargs="+", default=[1e-4, 1e-6, 1e-8, 1e-10],
-                        help="tolerances of the fixed-point table")
+    parser.add_argument(
+        "--primal-sizes",
+        type=int,
+        nargs="*",
+        default=[32, 64, 128],
+        help="1/h of the primal-vs-mixed table (none skips)",
+    )
+    parser.add_argument(
+        "--tight", type=float, nargs="+", default=[1e-4, 1e-6, 1e-8, 1e-10], help="tolerances of the fixed-point table"
+    )
     parser.add_argument("--out", type=Path, required=True)
     args = parser.parse_args()
 
@@ -200,8 +205,12 @@ def main() -> None:
             mixed_refs[(number, n)] = (cm, aw)
             for beta in ("1", "sqrt-h"):
                 for accel in ("none", "anderson"):
-                    res = solve_mixed_hybrid(model.on(cm), beta=beta, reference=aw,
-                                             options=IterationOptions(tol=args.tol, accel=accel, max_iterations=5000))
+                    res = solve_mixed_hybrid(
+                        model.on(cm),
+                        beta=beta,
+                        reference=aw,
+                        options=IterationOptions(tol=args.tol, accel=accel, max_iterations=5000),
+                    )
                     at5 = at_tolerance(res.history, 1e-5)
                     paper = PAPER_5_1_2.get((number, n, beta)) if accel == "none" else None
                     p = [fmt(paper[0], "d"), fmt(paper[1]), fmt(paper[2]), fmt(paper[3])] if paper else ["—"] * 4
@@ -210,7 +219,9 @@ def main() -> None:
                         f"{res.iterations}{'' if res.converged else ' (cap)'} | {res.history.rel_changes[-1]:.2e} | "
                         f"{res.e_sigma:.2e} | {res.e_u:.2e} | "
                         + (f"{at5[0]} | {at5[2]:.2e} | {at5[3]:.2e}" if at5 else "— | — | —")
-                        + f" | {res.time_online_s:.2f} | " + " | ".join(p) + " |"
+                        + f" | {res.time_online_s:.2f} | "
+                        + " | ".join(p)
+                        + " |"
                     )
                     log(t51[-1])
                     if beta == "sqrt-h":
@@ -225,8 +236,12 @@ def main() -> None:
                             f"{1e3 * res.time_online_s / res.iterations:.0f} | {newton} / {lus} |"
                         )
             # the fixed point
-            res = solve_mixed_hybrid(model.on(cm), beta="sqrt-h", reference=split,
-                                     options=IterationOptions(tol=min(args.tight), accel="anderson", max_iterations=5000))
+            res = solve_mixed_hybrid(
+                model.on(cm),
+                beta="sqrt-h",
+                reference=split,
+                options=IterationOptions(tol=min(args.tight), accel="anderson", max_iterations=5000),
+            )
             res.step.set_reference(aw)
             floor = res.step.errors()  # the final iterate = the X̃ solution to ~tol: the X̃/X distance
             for tol in args.tight:
@@ -256,8 +271,12 @@ def main() -> None:
         for (ratio, nu1, nu2), paper in PAPER_5_4.items():
             model = table_model(1, ratio, nu1, nu2)
             aw = solve_mixed_monolithic(model.on(cm))
-            res = solve_mixed_hybrid(model.on(cm), beta="sqrt-h", reference=aw,
-                                     options=IterationOptions(tol=args.tol, accel="none", max_iterations=5000))
+            res = solve_mixed_hybrid(
+                model.on(cm),
+                beta="sqrt-h",
+                reference=aw,
+                options=IterationOptions(tol=args.tol, accel="none", max_iterations=5000),
+            )
             at5 = at_tolerance(res.history, 1e-5)
             t54.append(
                 f"| {ratio:g} | {nu1} | {nu2} | {res.iterations}{'' if res.converged else ' (cap)'} | "

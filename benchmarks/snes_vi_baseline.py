@@ -18,6 +18,7 @@ import time
 import dolfinx.fem.petsc
 import numpy as np
 import ufl
+from common import write_report
 from dolfinx import fem
 from petsc4py import PETSc
 
@@ -25,8 +26,6 @@ import fenics_contact as fc
 from fenics_contact.fem.forms_primal import elastic_form
 from fenics_contact.io import machine_description
 from fenics_contact.problem.tags import Boundary
-
-from common import write_report
 
 
 def snes_vi(problem) -> dict:
@@ -78,15 +77,24 @@ def snes_vi(problem) -> dict:
     force = float(-np.sum(r.array[local]))  # serial: the reaction on the Γ_C x-DOFs
     free = local[~np.isin(local, 2 * clamped)]  # the Γ_C x-DOFs that are not clamped (its end points are)
     active = int(np.count_nonzero(x.array[free] > -1e-12 * max(np.abs(x.array).max(), 1e-300)))
-    return {"time_s": elapsed, "steps": snes.getIterationNumber(), "reason": snes.getConvergedReason(),
-            "force": abs(force), "active": active}
+    return {
+        "time_s": elapsed,
+        "steps": snes.getIterationNumber(),
+        "reason": snes.getConvergedReason(),
+        "force": abs(force),
+        "active": active,
+    }
 
 
 def package(problem) -> dict:
     start = time.perf_counter()
     sol = fc.solve(problem, "primal-monolithic")
-    return {"time_s": time.perf_counter() - start, "steps": sol.newton.steps, "force": sol.profile.force,
-            "active": int(np.count_nonzero(sol.profile.active))}
+    return {
+        "time_s": time.perf_counter() - start,
+        "steps": sol.newton.steps,
+        "force": sol.profile.force,
+        "active": int(np.count_nonzero(sol.profile.active)),
+    }
 
 
 def main() -> None:
@@ -96,22 +104,32 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--out", default="benchmarks/results/snes_vi_baseline.md")
     args = parser.parse_args()
-    lines = ["# The monolithic baseline against PETSc's SNES VI Newton (Signorini, no penalty)", "",
-             f"`OMP_NUM_THREADS=1 .venv/bin/python benchmarks/snes_vi_baseline.py --h {' '.join(map(str, args.h))} "
-             f"--model {args.model}`; model {args.model} (contrast 10³, body force onto a wall flush with x = 1), "
-             f"times the minimum of {args.repeats} (assembly included), serial.", "", f"Machine: {machine_description()}.",
-             "", "## Solves", "",
-             "| h | DOFs | package: time [s] | Newton steps | SNES VI: time [s] | steps | reason | contact nodes "
-             "(package / VI) | force (package) | force (VI) | relative difference |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+    lines = [
+        "# The monolithic baseline against PETSc's SNES VI Newton (Signorini, no penalty)",
+        "",
+        f"`OMP_NUM_THREADS=1 .venv/bin/python benchmarks/snes_vi_baseline.py --h {' '.join(map(str, args.h))} "
+        f"--model {args.model}`; model {args.model} (contrast 10³, body force onto a wall flush with x = 1), "
+        f"times the minimum of {args.repeats} (assembly included), serial.",
+        "",
+        f"Machine: {machine_description()}.",
+        "",
+        "## Solves",
+        "",
+        "| h | DOFs | package: time [s] | Newton steps | SNES VI: time [s] | steps | reason | contact nodes "
+        "(package / VI) | force (package) | force (VI) | relative difference |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
     for n in args.h:
         problem = fc.models.get_model(args.model).on(fc.unit_square(n, 16))
         problem.fields
         ours = min((package(problem) for _ in range(args.repeats)), key=lambda r: r["time_s"])
         vi = min((snes_vi(problem) for _ in range(args.repeats)), key=lambda r: r["time_s"])
         dofs = 2 * (n + 1) ** 2
-        lines.append(f"| 1/{n} | {dofs} | {ours['time_s']:.3f} | {ours['steps']} | {vi['time_s']:.3f} | {vi['steps']} | "
-                     f"{vi['reason']} | {ours['active']} / {vi['active']} | {ours['force']:.6g} | {vi['force']:.6g} | "
-                     f"{abs(ours['force'] - vi['force']) / vi['force']:.2e} |")
+        lines.append(
+            f"| 1/{n} | {dofs} | {ours['time_s']:.3f} | {ours['steps']} | {vi['time_s']:.3f} | {vi['steps']} | "
+            f"{vi['reason']} | {ours['active']} / {vi['active']} | {ours['force']:.6g} | {vi['force']:.6g} | "
+            f"{abs(ours['force'] - vi['force']) / vi['force']:.2e} |"
+        )
         print(lines[-1], flush=True)
     write_report(args.out, lines)
 

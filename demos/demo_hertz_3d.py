@@ -28,9 +28,10 @@
 import os
 from pathlib import Path
 
-import fenics_contact as fc  # imports dolfinx_solver before dolfinx
 import matplotlib.pyplot as plt
 import numpy as np
+
+import fenics_contact as fc  # imports dolfinx_solver before dolfinx
 from fenics_contact.problem.meshes3d import graded_planes
 
 N = int(os.environ.get("FENICS_CONTACT_DEMO_N", "16"))
@@ -40,11 +41,22 @@ OUT.mkdir(parents=True, exist_ok=True)
 E, nu, R, a = 1.0, 0.3, 1.0, 0.1
 h = a / max(N / 4.0, 2.0)
 planes = graded_planes(40 * a, fine=1.25 * a, h=h, growth=1.4)
-cm = fc.box_mesh(planes, planes, -planes[::-1], contact="zmax", clamped=("zmin",),
-                 contact_region=lambda p: (p[0] <= 3 * a + 1e-12) & (p[1] <= 3 * a + 1e-12))
+cm = fc.box_mesh(
+    planes,
+    planes,
+    -planes[::-1],
+    contact="zmax",
+    clamped=("zmin",),
+    contact_region=lambda p: (p[0] <= 3 * a + 1e-12) & (p[1] <= 3 * a + 1e-12),
+)
 sphere = fc.Sphere((0.0, 0.0, R), R).indented(a * a / R, (0.0, 0.0, -1.0))
-problem = fc.ContactProblem(youngs_modulus=E, poisson_ratio=nu, obstacle=sphere, mesh=cm,
-                            boundary=fc.BoundaryConditions(rollers=((0, 0.0), (1, 0.0))))
+problem = fc.ContactProblem(
+    youngs_modulus=E,
+    poisson_ratio=nu,
+    obstacle=sphere,
+    mesh=cm,
+    boundary=fc.BoundaryConditions(rollers=((0, 0.0), (1, 0.0))),
+)
 solution = fc.solve(problem, "primal-monolithic")
 print(f"{cm.mesh.topology.index_map(3).size_global} tetrahedra, h = a/{a / h:g}, {solution.newton.steps} Newton steps")
 
@@ -60,8 +72,10 @@ a_F = (3 * force * R / (4 * E_star)) ** (1 / 3)
 p0 = 3 * force / (2 * np.pi * a_F**2)
 r = np.hypot(profile.points[:, 0], profile.points[:, 1])
 reach = float(r[profile.active].max())
-print(f"force {force:.5g} (Hertz at this depth {4 * E_star * a**3 / (3 * R):.5g}), contact radius {reach:.4g} "
-      f"(Hertz {a_F:.4g}, cell {h:.3g}), peak pressure {profile.max_pressure:.4g} (Hertz {p0:.4g})")
+print(
+    f"force {force:.5g} (Hertz at this depth {4 * E_star * a**3 / (3 * R):.5g}), contact radius {reach:.4g} "
+    f"(Hertz {a_F:.4g}, cell {h:.3g}), peak pressure {profile.max_pressure:.4g} (Hertz {p0:.4g})"
+)
 assert abs(reach - a_F) <= 2 * h, "the contact radius is within two contact cells of Hertz's"
 assert abs(profile.max_pressure / p0 - 1) < 0.05, "the peak pressure is within 5 % of Hertz's"
 

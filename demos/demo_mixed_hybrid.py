@@ -32,13 +32,12 @@ import sys
 from pathlib import Path
 
 import fenics_contact  # noqa: F401  (imports dolfinx_solver before dolfinx)
-
-from fenics_contact.hybrid.iteration import IterationOptions
-from fenics_contact.problem.geometry import unit_square
 from fenics_contact.fem.mixed import solve_mixed_monolithic
+from fenics_contact.hybrid.iteration import IterationOptions
 from fenics_contact.hybrid.mixed import solve_mixed_hybrid
-from fenics_contact.problem.models import model_2
 from fenics_contact.plots import plot_contact, plot_displacement, plot_history, plot_stress
+from fenics_contact.problem.geometry import unit_square
+from fenics_contact.problem.models import model_2
 
 n = int(os.environ.get("FENICS_CONTACT_DEMO_N", "64"))
 n_coarse = max(4, n // 4)
@@ -54,8 +53,10 @@ problem = model_2().on(cm)
 
 # %%
 reference = solve_mixed_monolithic(problem)
-print(f"epsilon = {reference.epsilon:.3g}, Newton steps {reference.newton.steps}, "
-      f"contact zone {reference.profile.active_interval()}, max tensile sigma_c {reference.profile.max_tensile:.2e}")
+print(
+    f"epsilon = {reference.epsilon:.3g}, Newton steps {reference.newton.steps}, "
+    f"contact zone {reference.profile.active_interval()}, max tensile sigma_c {reference.profile.max_tensile:.2e}"
+)
 
 # %% [markdown]
 # ## Algorithm 2 with β = 1 and β = √h (plain update, tolerance 1e-6)
@@ -63,11 +64,14 @@ print(f"epsilon = {reference.epsilon:.3g}, Newton steps {reference.newton.steps}
 # %%
 runs = {}
 for beta in ("1", "sqrt-h"):
-    r = solve_mixed_hybrid(problem, beta=beta, reference=reference,
-                           options=IterationOptions(tol=1e-6, accel="none", max_iterations=3000))
+    r = solve_mixed_hybrid(
+        problem, beta=beta, reference=reference, options=IterationOptions(tol=1e-6, accel="none", max_iterations=3000)
+    )
     runs[f"beta = {beta}"] = r
-    print(f"beta = {beta:>6}: converged={r.converged} after {r.iterations} iterations, "
-          f"e_sigma = {r.e_sigma:.2e}, e_u = {r.e_u:.2e}")
+    print(
+        f"beta = {beta:>6}: converged={r.converged} after {r.iterations} iterations, "
+        f"e_sigma = {r.e_sigma:.2e}, e_u = {r.e_u:.2e}"
+    )
 
 # %% [markdown]
 # ## What the iteration converges to

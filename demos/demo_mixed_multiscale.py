@@ -32,17 +32,17 @@ import os
 import sys
 from pathlib import Path
 
-import fenics_contact  # noqa: F401  (imports dolfinx_solver before dolfinx)
 import matplotlib.pyplot as plt
 import numpy as np
 
-from fenics_contact.hybrid.iteration import IterationOptions
-from fenics_contact.problem.geometry import unit_square
+import fenics_contact  # noqa: F401  (imports dolfinx_solver before dolfinx)
 from fenics_contact.fem.mixed import solve_mixed_monolithic
+from fenics_contact.hybrid.iteration import IterationOptions
 from fenics_contact.multiscale.mixed import solve_mixed_ms_hybrid
 from fenics_contact.multiscale.mixed_cem import MixedCEMOptions
-from fenics_contact.problem.models import model_2
 from fenics_contact.plots import plot_contact, plot_stress
+from fenics_contact.problem.geometry import unit_square
+from fenics_contact.problem.models import model_2
 
 n = int(os.environ.get("FENICS_CONTACT_DEMO_N", "64"))
 n_coarse = n // 4
@@ -60,12 +60,19 @@ print("fine reference: contact zone", reference.profile.active_interval())
 layers = [1, 2, 3]
 results = {}
 for m in layers:
-    r = solve_mixed_ms_hybrid(problem, beta="sqrt-h", cem=MixedCEMOptions(layers=m, nbasis=3), reference=reference,
-                              options=IterationOptions(tol=1e-8))
+    r = solve_mixed_ms_hybrid(
+        problem,
+        beta="sqrt-h",
+        cem=MixedCEMOptions(layers=m, nbasis=3),
+        reference=reference,
+        options=IterationOptions(tol=1e-8),
+    )
     results[m] = r
-    print(f"m = {m}: {r.iterations} iterations, e_sigma = {r.e_sigma:.2e}, e_u = {r.e_u:.2e} "
-          f"(post-processed fine displacement: {r.e_u_post:.2e}), "
-          f"offline {r.time_offline_s:.2f} s, online {r.time_online_s:.2f} s")
+    print(
+        f"m = {m}: {r.iterations} iterations, e_sigma = {r.e_sigma:.2e}, e_u = {r.e_u:.2e} "
+        f"(post-processed fine displacement: {r.e_u_post:.2e}), "
+        f"offline {r.time_offline_s:.2f} s, online {r.time_online_s:.2f} s"
+    )
 
 # %%
 e_sigma = np.array([results[m].e_sigma for m in layers])
@@ -82,8 +89,11 @@ ax.grid(True, which="both", alpha=0.3)
 fig.tight_layout()
 fig.savefig(out / "error_vs_layers.png", dpi=120)
 plot_stress(results[layers[-1]].sigma, out / "stress.png", title="(Algorithm 4)")
-plot_contact({"Algorithm 4": results[layers[-1]].profile, "fine monolithic": reference.profile},
-             out / "contact.png", comm=cm.comm)
+plot_contact(
+    {"Algorithm 4": results[layers[-1]].profile, "fine monolithic": reference.profile},
+    out / "contact.png",
+    comm=cm.comm,
+)
 print("figures in", out)
 
 # %% [markdown]
@@ -93,6 +103,7 @@ print("figures in", out)
 # above and below). The paper's algorithm sees the load in Ω₁ only through its moments
 # against the l modes per coarse cell: its error stops falling with m. The source
 # correctors (the Ω₁ response to f χ_{K_i} on the oversampled patches) remove that floor.
+
 
 # %%
 def band_load(x):
@@ -108,8 +119,12 @@ reference_in.free()  # only its solution is needed
 errors = {}
 for corrected in (True, False):
     errors[corrected] = [
-        solve_mixed_ms_hybrid(problem_in, cem=MixedCEMOptions(layers=m, source_correction=corrected),
-                              reference=reference_in, options=IterationOptions(tol=1e-8, accel="anderson")).e_sigma
+        solve_mixed_ms_hybrid(
+            problem_in,
+            cem=MixedCEMOptions(layers=m, source_correction=corrected),
+            reference=reference_in,
+            options=IterationOptions(tol=1e-8, accel="anderson"),
+        ).e_sigma
         for m in layers
     ]
     print("source correctors" if corrected else "paper's algorithm", ["%.2e" % e for e in errors[corrected]])

@@ -35,15 +35,15 @@ import os
 import sys
 from pathlib import Path
 
-import fenics_contact  # noqa: F401  (imports dolfinx_solver before dolfinx)
 import numpy as np
 
+import fenics_contact  # noqa: F401  (imports dolfinx_solver before dolfinx)
+from fenics_contact.fem.primal import default_penalty, solve_primal_monolithic
 from fenics_contact.hybrid.iteration import IterationOptions
+from fenics_contact.hybrid.primal import solve_primal_hybrid
+from fenics_contact.plots import plot_cell_field, plot_contact, plot_history, render_deformed
 from fenics_contact.problem.geometry import unit_square
 from fenics_contact.problem.models import model_1
-from fenics_contact.plots import plot_cell_field, plot_contact, plot_history, render_deformed
-from fenics_contact.fem.primal import default_penalty, solve_primal_monolithic
-from fenics_contact.hybrid.primal import solve_primal_hybrid
 
 n = int(os.environ.get("FENICS_CONTACT_DEMO_N", "64"))
 n_coarse = max(4, n // 4)
@@ -82,13 +82,20 @@ print("contact zone:", reference.profile.active_interval(), "penetration:", refe
 # %%
 runs = {}
 for accel in ("none", "anderson", "newton"):
-    runs[accel] = solve_primal_hybrid(problem, alpha="E", delta=delta, reference=reference.u,
-                                      options=IterationOptions(tol=1e-8, accel=accel, max_iterations=5000))
+    runs[accel] = solve_primal_hybrid(
+        problem,
+        alpha="E",
+        delta=delta,
+        reference=reference.u,
+        options=IterationOptions(tol=1e-8, accel=accel, max_iterations=5000),
+    )
     r = runs[accel]
-    print(f"{accel:>8}: converged={r.converged} after {r.iterations} applications of T "
-          f"({r.history.newton_steps} Newton steps), transmission residual {r.transmission_residual:.1e}, "
-          f"e_u = {r.e_u:.2e}, online {r.time_online_s:.3f} s (+ offline interface response "
-          f"{r.time_interface_offline_s:.2f} s)")
+    print(
+        f"{accel:>8}: converged={r.converged} after {r.iterations} applications of T "
+        f"({r.history.newton_steps} Newton steps), transmission residual {r.transmission_residual:.1e}, "
+        f"e_u = {r.e_u:.2e}, online {r.time_online_s:.3f} s (+ offline interface response "
+        f"{r.time_interface_offline_s:.2f} s)"
+    )
 
 # %% [markdown]
 # ## Checks: Theorem 3.1 and complementarity on Γ_C

@@ -29,17 +29,17 @@ import os
 import sys
 from pathlib import Path
 
-import fenics_contact  # noqa: F401  (imports dolfinx_solver before dolfinx)
 import matplotlib.pyplot as plt
 import numpy as np
 
-from fenics_contact.hybrid.iteration import IterationOptions
-from fenics_contact.problem.geometry import unit_square
-from fenics_contact.problem.models import model_2
-from fenics_contact.plots import plot_contact
+import fenics_contact  # noqa: F401  (imports dolfinx_solver before dolfinx)
 from fenics_contact.fem.primal import default_penalty, solve_primal_monolithic
+from fenics_contact.hybrid.iteration import IterationOptions
 from fenics_contact.multiscale.cem import CEMOptions
 from fenics_contact.multiscale.primal import solve_primal_ms_hybrid
+from fenics_contact.plots import plot_contact
+from fenics_contact.problem.geometry import unit_square
+from fenics_contact.problem.models import model_2
 
 n = int(os.environ.get("FENICS_CONTACT_DEMO_N", "64"))
 n_coarse = n // 4
@@ -63,13 +63,21 @@ print("contact zone:", reference.profile.active_interval())
 layers = [1, 2, 3, 4]
 errors, results = [], {}
 for m in layers:
-    r = solve_primal_ms_hybrid(problem, alpha="Emin", delta=delta, cem=CEMOptions(layers=m, nbasis=3),
-                               reference=reference.u, options=IterationOptions(tol=1e-8))
+    r = solve_primal_ms_hybrid(
+        problem,
+        alpha="Emin",
+        delta=delta,
+        cem=CEMOptions(layers=m, nbasis=3),
+        reference=reference.u,
+        options=IterationOptions(tol=1e-8),
+    )
     results[m] = r
     errors.append((r.e_u, r.step.error_energy()))
-    print(f"m = {m}: {r.iterations} iterations, dim V_ms = {r.dofs['omega1_ms']} "
-          f"(fine Ω₁: {r.dofs['omega1']}), e_u = {r.e_u:.2e}, e_energy = {errors[-1][1]:.2e}, "
-          f"offline {r.time_offline_s:.2f} s, online {r.time_online_s:.2f} s")
+    print(
+        f"m = {m}: {r.iterations} iterations, dim V_ms = {r.dofs['omega1_ms']} "
+        f"(fine Ω₁: {r.dofs['omega1']}), e_u = {r.e_u:.2e}, e_energy = {errors[-1][1]:.2e}, "
+        f"offline {r.time_offline_s:.2f} s, online {r.time_online_s:.2f} s"
+    )
 
 # %%
 errors = np.array(errors)
@@ -87,8 +95,11 @@ fig.tight_layout()
 fig.savefig(out / "error_vs_layers.png", dpi=120)
 
 # %%
-plot_contact({f"Algorithm 3, m = {layers[-1]}": results[layers[-1]].profile, "fine monolithic": reference.profile},
-             out / "contact.png", comm=cm.comm)
+plot_contact(
+    {f"Algorithm 3, m = {layers[-1]}": results[layers[-1]].profile, "fine monolithic": reference.profile},
+    out / "contact.png",
+    comm=cm.comm,
+)
 
 # %% [markdown]
 # ## Loads inside Ω₁: the source correction
@@ -115,13 +126,21 @@ table = {}
 for source in (True, False):
     table[source] = []
     for m in (1, 2, 3):
-        r = solve_primal_ms_hybrid(loaded, alpha="Emin", delta=delta,
-                                   cem=CEMOptions(layers=m, nbasis=3, source_correction=source),
-                                   reference=reference_l.u, options=IterationOptions(tol=1e-8))
+        r = solve_primal_ms_hybrid(
+            loaded,
+            alpha="Emin",
+            delta=delta,
+            cem=CEMOptions(layers=m, nbasis=3, source_correction=source),
+            reference=reference_l.u,
+            options=IterationOptions(tol=1e-8),
+        )
         assert r.converged
         table[source].append(r.step.error_energy())
-    print(("with N_f  " if source else "paper     ") + "energy error m = 1, 2, 3: "
-          + ", ".join(f"{e:.2e}" for e in table[source]))
+    print(
+        ("with N_f  " if source else "paper     ")
+        + "energy error m = 1, 2, 3: "
+        + ", ".join(f"{e:.2e}" for e in table[source])
+    )
 # with the correction the error is never larger, and it keeps falling
 assert all(a <= b * (1 + 1e-8) for a, b in zip(table[True], table[False]))
 assert table[True][2] < table[True][1] < table[True][0]

@@ -44,15 +44,14 @@ import sys
 import time
 from pathlib import Path
 
-import fenics_contact  # noqa: F401  (imports dolfinx_solver before dolfinx)
 import matplotlib.pyplot as plt
 import numpy as np
 from dolfinx import fem
 
+import fenics_contact  # noqa: F401  (imports dolfinx_solver before dolfinx)
 from fenics_contact.hybrid.iteration import IterationOptions
 from fenics_contact.indentation import force_indentation
-from fenics_contact.io import (cell_function_of, cell_markers, machine_description, stress_field, write_fields,
-                               write_vtx)
+from fenics_contact.io import cell_function_of, cell_markers, machine_description, stress_field, write_fields, write_vtx
 from fenics_contact.multiscale.cem import CEMOptions
 from fenics_contact.multiscale.mixed_cem import MixedCEMOptions
 from fenics_contact.plots import gather_cells, plot_force_indentation
@@ -76,8 +75,10 @@ TOL = 1e-8
 options = IterationOptions(tol=TOL, accel="newton")
 
 cm, block = composite_block(a, refinement=refinement)
-print(f"{cm.mesh.topology.index_map(2).size_global} triangles, contact cells h = {cm.h:.2e} = a/{a / cm.h:.0f}, "
-      f"coarse squares H = {cm.H:g} = {cm.H / a:g}a, {len(block.inclusions)} inclusions")
+print(
+    f"{cm.mesh.topology.index_map(2).size_global} triangles, contact cells h = {cm.h:.2e} = a/{a / cm.h:.0f}, "
+    f"coarse squares H = {cm.H:g} = {cm.H / a:g}a, {len(block.inclusions)} inclusions"
+)
 
 
 def zero_load(x):
@@ -85,9 +86,14 @@ def zero_load(x):
 
 
 cylinder = Circle((0.0, R), R)  # touching the top face y = 0 at x = 0
-composite = ContactProblem(name="composite", youngs_modulus=block.modulus(E_inclusion, E_matrix),
-                           poisson_ratio=constant_field(nu), load=zero_load, obstacle=cylinder,
-                           description="stiff inclusions (E = 1e3) in a soft matrix (E = 1)").on(cm)
+composite = ContactProblem(
+    name="composite",
+    youngs_modulus=block.modulus(E_inclusion, E_matrix),
+    poisson_ratio=constant_field(nu),
+    load=zero_load,
+    obstacle=cylinder,
+    description="stiff inclusions (E = 1e3) in a soft matrix (E = 1)",
+).on(cm)
 homogeneous = composite.with_(youngs_modulus=constant_field(E_matrix), description="homogeneous (E = 1)")
 fields = composite.fields
 
@@ -99,8 +105,9 @@ fields = composite.fields
 tri, E_cells = gather_cells(fields.E)
 fig, axes = plt.subplots(1, 2, figsize=(12, 3.6), gridspec_kw={"width_ratios": [2.2, 1]})
 for ax, zoom in zip(axes, (None, 6 * a)):
-    pc = ax.tripcolor(tri, facecolors=np.log10(np.ravel(E_cells)), cmap="viridis",
-                      edgecolors="w" if zoom else "none", linewidth=0.1)
+    pc = ax.tripcolor(
+        tri, facecolors=np.log10(np.ravel(E_cells)), cmap="viridis", edgecolors="w" if zoom else "none", linewidth=0.1
+    )
     ax.axhline(-block.H, color="r", ls="--", lw=0.8)
     ax.plot([-block.contact_width, block.contact_width], [0, 0], "r-", lw=2.5)
     half = zoom if zoom else block.half_width
@@ -170,7 +177,10 @@ def pressure_difference(profile, reference) -> float:
 
 
 BOUNDS = {  # relative force error against the own monolithic solve (max over the steps)
-    "primal": 1e-6, "mixed": 1e-3, "primal-ms": 2e-2, "mixed-ms": 2e-2,
+    "primal": 1e-6,
+    "mixed": 1e-3,
+    "primal-ms": 2e-2,
+    "mixed-ms": 2e-2,
 }
 rows = []
 for label, curve in curves.items():
@@ -180,8 +190,9 @@ for label, curve in curves.items():
     last = curve.steps[-1]
     if not all(s.converged for s in curve.steps):
         raise RuntimeError(f"{label}: a load step did not converge")
-    worst_cert = max((s.transmission_residual for s in curve.steps if s.transmission_residual is not None),
-                     default=None)
+    worst_cert = max(
+        (s.transmission_residual for s in curve.steps if s.transmission_residual is not None), default=None
+    )
     if worst_cert is not None and not worst_cert < TOL:
         raise RuntimeError(f"{label}: transmission residual {worst_cert:.2e} above the tolerance {TOL:g}")
     worst_comp = max(s.complementarity.value for s in curve.steps)
@@ -191,28 +202,49 @@ for label, curve in curves.items():
     if curve.method in BOUNDS and not force_error < BOUNDS[curve.method]:
         raise RuntimeError(f"{label}: force error {force_error:.2e} against the monolithic solve")
     hertz = hertz_errors(last.profile, radius=R, E=E_matrix, nu=nu, h_contact=cm.h)
-    rows.append((label, last.force, force_error, pressure_difference(last.profile, ref.steps[-1].profile),
-                 hertz.l2_error, hertz.a, [f"{s.iterations} ({s.interface_newton_steps})" if s.interface_newton_steps
-                                           else s.iterations for s in curve.steps], worst_cert, worst_comp,
-                 curve.time_offline_s + sum(s.time_offline_s for s in curve.steps),
-                 sum(s.time_s for s in curve.steps)))
+    rows.append(
+        (
+            label,
+            last.force,
+            force_error,
+            pressure_difference(last.profile, ref.steps[-1].profile),
+            hertz.l2_error,
+            hertz.a,
+            [
+                f"{s.iterations} ({s.interface_newton_steps})" if s.interface_newton_steps else s.iterations
+                for s in curve.steps
+            ],
+            worst_cert,
+            worst_comp,
+            curve.time_offline_s + sum(s.time_offline_s for s in curve.steps),
+            sum(s.time_s for s in curve.steps),
+        )
+    )
 hom = hertz_errors(homogeneous_curve.steps[-1].profile, radius=R, E=E_matrix, nu=nu, h_contact=cm.h)
-header = ("| method | force at d = {:.1e} | force error (max over steps) | pressure difference | deviation from "
-          "Hertz (L²) | Hertz a | iterations per step | transmission residual (max) | complementarity (max) "
-          "| offline s | online s |".format(depths[-1]))
+header = (
+    "| method | force at d = {:.1e} | force error (max over steps) | pressure difference | deviation from "
+    "Hertz (L²) | Hertz a | iterations per step | transmission residual (max) | complementarity (max) "
+    "| offline s | online s |".format(depths[-1])
+)
 lines = [header, "|" + "---|" * 11]
 for r in rows:
-    lines.append(f"| {r[0]} | {r[1]:.5g} | {r[2]:.1e} | {r[3]:.1e} | {r[4]:.1%} | {r[5]:.4f} | "
-                 f"{', '.join(map(str, r[6]))} | {'—' if r[7] is None else f'{r[7]:.1e}'} | {r[8]:.1e} | "
-                 f"{r[9]:.2f} | {r[10]:.2f} |")
-lines.append(f"| homogeneous block (primal monolithic) | {hom.force:.5g} | | | {hom.l2_error:.1%} | {hom.a:.4f} | "
-             f"{', '.join(str(s.iterations) for s in homogeneous_curve.steps)} | | "
-             f"{max(s.complementarity.value for s in homogeneous_curve.steps):.1e} | | |")
+    lines.append(
+        f"| {r[0]} | {r[1]:.5g} | {r[2]:.1e} | {r[3]:.1e} | {r[4]:.1%} | {r[5]:.4f} | "
+        f"{', '.join(map(str, r[6]))} | {'—' if r[7] is None else f'{r[7]:.1e}'} | {r[8]:.1e} | "
+        f"{r[9]:.2f} | {r[10]:.2f} |"
+    )
+lines.append(
+    f"| homogeneous block (primal monolithic) | {hom.force:.5g} | | | {hom.l2_error:.1%} | {hom.a:.4f} | "
+    f"{', '.join(str(s.iterations) for s in homogeneous_curve.steps)} | | "
+    f"{max(s.complementarity.value for s in homogeneous_curve.steps):.1e} | | |"
+)
 table = "\n".join(lines)
 print(table)
-(out / "showcase.md").write_text(f"# Showcase (FENICS_CONTACT_DEMO_N = {N})\n\n{machine_description()}\n\n"
-                                 "iterations per step: Newton steps (monolithic) or applications of T (hybrid; in "
-                                 f"brackets the interface Newton's steps)\n\n{table}\n")
+(out / "showcase.md").write_text(
+    f"# Showcase (FENICS_CONTACT_DEMO_N = {N})\n\n{machine_description()}\n\n"
+    "iterations per step: Newton steps (monolithic) or applications of T (hybrid; in "
+    f"brackets the interface Newton's steps)\n\n{table}\n"
+)
 if not hom.l2_error < 0.05:  # the homogeneous block: Hertz applies (sides and bottom far away)
     raise RuntimeError(f"the homogeneous block is {hom.l2_error:.1%} from Hertz")
 
@@ -230,9 +262,14 @@ for (label, curve), style in zip(curves.items(), styles):
     prof = curve.steps[-1].profile
     ax.plot(prof.points[:, 0] / a, -prof.sigma_c, linestyle=style, label=label)
 x = np.linspace(-2.0, 2.0, 401) * a
-for hz, label, colour in [(hertz_errors(curves["mixed monolithic"].steps[-1].profile, radius=R, E=E_matrix,
-                                        nu=nu, h_contact=cm.h), "Hertz, same force as the composite", "k"),
-                          (hom, "Hertz, homogeneous block's force", "grey")]:
+for hz, label, colour in [
+    (
+        hertz_errors(curves["mixed monolithic"].steps[-1].profile, radius=R, E=E_matrix, nu=nu, h_contact=cm.h),
+        "Hertz, same force as the composite",
+        "k",
+    ),
+    (hom, "Hertz, homogeneous block's force", "grey"),
+]:
     ax.plot(x / a, hz.p0 * np.sqrt(np.maximum(1 - (x / hz.a) ** 2, 0)), ":", color=colour, lw=2, label=label)
 hp = homogeneous_curve.steps[-1].profile
 ax.plot(hp.points[:, 0] / a, -hp.sigma_c, "o", ms=2.5, color="grey", label="homogeneous block (primal)")
@@ -266,9 +303,17 @@ for name, fn in output.items():
     fn.name = name
 E_out = fem.Function(fem.functionspace(cm.mesh, ("DG", 0)), name="E")
 E_out.x.array[:] = fields.E.x.array
-write_fields(out / "fields.xdmf", cm.mesh, [output["u_primal"], output["u_alg3"],
-                                            stress_field(output["u_primal"], fields.lmbda, fields.mu),
-                                            E_out, cell_markers(cm.cell_tags, cm.mesh)])
+write_fields(
+    out / "fields.xdmf",
+    cm.mesh,
+    [
+        output["u_primal"],
+        output["u_alg3"],
+        stress_field(output["u_primal"], fields.lmbda, fields.mu),
+        E_out,
+        cell_markers(cm.cell_tags, cm.mesh),
+    ],
+)
 for name in ("sigma_alg4", "u_alg4", "sigma_mixed"):
     write_vtx(out / f"{name}.bp", output[name])
 

@@ -152,8 +152,14 @@ def plain_text_docstring(app, what, name, obj, options, lines: list[str]) -> Non
     while k < len(lines):
         line = lines[k]
         after_blank = k > 0 and not lines[k - 1].strip()
-        if line.strip() and after_blank and k > 1 and _leading(line) > paragraph_indent \
-                and not out[-2].rstrip().endswith("::") and not out[-2].lstrip().startswith(".. "):
+        if (
+            line.strip()
+            and after_blank
+            and k > 1
+            and _leading(line) > paragraph_indent
+            and not out[-2].rstrip().endswith("::")
+            and not out[-2].lstrip().startswith(".. ")
+        ):
             block = []
             while k < len(lines) and (not lines[k].strip() or _leading(lines[k]) > paragraph_indent):
                 block.append(lines[k])

@@ -22,9 +22,11 @@ def row(directory: Path, E: float, nu: float, R: float) -> str:
     (x0, _), (x1, _) = s["contact_zone"]
     a_h = 0.5 * (x1 - x0)
     refinement = s["case"]["mesh"]["refinement"]
-    return (f"| {s['method']} | {refinement:g} | a/{a / s['h']:.0f} | {force:.5e} | {a:.4f} | {(a_h - a) / s['h']:+.2f} "
-            f"| {100 * (s['max_contact_pressure'] / p0 - 1):+.2f}% | {s['iterations']} | "
-            f"{s['transmission_residual']:.1e} | {s['converged']} |")
+    return (
+        f"| {s['method']} | {refinement:g} | a/{a / s['h']:.0f} | {force:.5e} | {a:.4f} | {(a_h - a) / s['h']:+.2f} "
+        f"| {100 * (s['max_contact_pressure'] / p0 - 1):+.2f}% | {s['iterations']} | "
+        f"{s['transmission_residual']:.1e} | {s['converged']} |"
+    )
 
 
 def main() -> None:
@@ -34,8 +36,10 @@ def main() -> None:
     parser.add_argument("--nu", type=float, default=0.3)
     parser.add_argument("--R", type=float, default=5.0)
     args = parser.parse_args()
-    print("| method | r | contact cells | F | a (Hertz, from F) | (a_h − a)/h | p_max/p₀ − 1 | iterations "
-          "| transmission residual | converged |")
+    print(
+        "| method | r | contact cells | F | a (Hertz, from F) | (a_h − a)/h | p_max/p₀ − 1 | iterations "
+        "| transmission residual | converged |"
+    )
     print("|---|---|---|---|---|---|---|---|---|---|")
     for directory in args.runs:
         print(row(directory, args.E, args.nu, args.R))

@@ -42,68 +42,124 @@ VARIANTS = [
 _SIDES = "a list of `left`, `bottom`, `top`"
 #: (table, key) -> (type, default or None (taken from the mesh specification), meaning)
 PROBLEM_KEYS = {
-    ("mesh", "builtin"): ("string", "—", "a built-in mesh: `unit-square` (the paper's (0,1)², Γ_C at x = 1), "
-                          "`hertz-block` (a block under a cylinder, graded towards the contact) or `bulged-square` "
-                          "(the unit square with a curved contact side); exactly one of `builtin` and `file`"),
-    ("mesh", "file"): ("file name", "—", "a gmsh `.msh` file of planar triangles (relative to the case file): physical "
-                       "groups `Gamma_C`, `Gamma_D`, optionally `Gamma_N*` and material groups, and either all of "
-                       "`Omega1`, `Omega2`, `gamma` or none (the strip Ω₂ and γ are then built along Γ_C)"),
+    ("mesh", "builtin"): (
+        "string",
+        "—",
+        "a built-in mesh: `unit-square` (the paper's (0,1)², Γ_C at x = 1), "
+        "`hertz-block` (a block under a cylinder, graded towards the contact) or `bulged-square` "
+        "(the unit square with a curved contact side); exactly one of `builtin` and `file`",
+    ),
+    ("mesh", "file"): (
+        "file name",
+        "—",
+        "a gmsh `.msh` file of planar triangles (relative to the case file): physical "
+        "groups `Gamma_C`, `Gamma_D`, optionally `Gamma_N*` and material groups, and either all of "
+        "`Omega1`, `Omega2`, `gamma` or none (the strip Ω₂ and γ are then built along Γ_C)",
+    ),
     ("mesh", "h"): ("integer ≥ 2", None, "1/h, the fine mesh size (a multiple of 1/H)"),
-    ("mesh", "H"): ("integer", None, "1/H: the coarse grid of squares of side 1/H (the width of the strip Ω₂ of "
-                    "the unit square; with `file`, the coarse grid over the bounding box that the multiscale "
-                    "methods use and, without Omega1/Omega2/gamma in the file, the strip width)"),
-    ("mesh", "coarse-size"): ("number > 0", None, "with `file`: the coarse size H itself, a length in the mesh's "
-                              "units (instead of `H` = 1/H)"),
-    ("mesh", "clamped"): (_SIDES, None, "the sides in Γ_D (u = 0, or `boundary.displacement`); the other sides "
-                          "without a traction are traction free"),
-    ("mesh", "neumann"): ('table `{side = "Gamma_N_<label>"}`', "{}", "sides that carry a traction group (its "
-                          "traction in `boundary.tractions`)"),
-    ("mesh", "a"): ("number > 0", "required", "the expected contact half-width; the block and the cell sizes are "
-                    "multiples of it"),
+    ("mesh", "H"): (
+        "integer",
+        None,
+        "1/H: the coarse grid of squares of side 1/H (the width of the strip Ω₂ of "
+        "the unit square; with `file`, the coarse grid over the bounding box that the multiscale "
+        "methods use and, without Omega1/Omega2/gamma in the file, the strip width)",
+    ),
+    ("mesh", "coarse-size"): (
+        "number > 0",
+        None,
+        "with `file`: the coarse size H itself, a length in the mesh's units (instead of `H` = 1/H)",
+    ),
+    ("mesh", "clamped"): (
+        _SIDES,
+        None,
+        "the sides in Γ_D (u = 0, or `boundary.displacement`); the other sides without a traction are traction free",
+    ),
+    ("mesh", "neumann"): (
+        'table `{side = "Gamma_N_<label>"}`',
+        "{}",
+        "sides that carry a traction group (its traction in `boundary.tractions`)",
+    ),
+    ("mesh", "a"): (
+        "number > 0",
+        "required",
+        "the expected contact half-width; the block and the cell sizes are multiples of it",
+    ),
     ("mesh", "refinement"): ("number > 0", None, "r: contact cells of size a/(20 r)"),
     ("mesh", "width"): ("number > 0", None, "the block's width, in multiples of a"),
     ("mesh", "depth"): ("number > 0", None, "the block's depth, in multiples of a"),
     ("mesh", "strip"): ("number > 0", None, "the depth of the strip Ω₂ below the top face, in multiples of a"),
     ("mesh", "contact-width"): ("number > 0", None, "Γ_C is the top segment \\|x\\| ≤ contact-width·a"),
     ("mesh", "bulge"): ("number in (0, ½)", None, "how far the circular arc of Γ_C bulges out at y = ½"),
-    ("material", "E"): ("number, table by group, pixel map or python", "required (or `model`)",
-                        "Young's modulus: a number; `{group = value, ...}` by cell group (`Omega1`, `Omega2` or the "
-                        "mesh file's surface groups); `{pixels = \"E.npy\", extent = [x0, x1, y0, y1]}` (a 2D array, "
-                        "row 0 at the bottom, `.npy` or text/`.csv`; extent default the bounding box); "
-                        "`{python = \"file.py:name\"}` (a callable x (3, N) → (N,))"),
+    ("material", "E"): (
+        "number, table by group, pixel map or python",
+        "required (or `model`)",
+        "Young's modulus: a number; `{group = value, ...}` by cell group (`Omega1`, `Omega2` or the "
+        'mesh file\'s surface groups); `{pixels = "E.npy", extent = [x0, x1, y0, y1]}` (a 2D array, '
+        "row 0 at the bottom, `.npy` or text/`.csv`; extent default the bounding box); "
+        '`{python = "file.py:name"}` (a callable x (3, N) → (N,))',
+    ),
     ("material", "nu"): ("as `E`", "required (or `model`)", "the Poisson ratio, in (−1, ½), in the same forms"),
     ("material", "model"): ("1, 2 or 3", "—", "the E, ν and body force of a built-in test model"),
     ("material", "E-high"): ("number > 0", "1e3", "with `model`: E in the high-modulus pattern"),
     ("material", "E-low"): ("number > 0", "1", "with `model`: E elsewhere"),
-    ("load", "body-force"): ("vector, table by group or python", "[0, 0]", "the body force f: `[fx, fy]`, "
-                             "`{group = [fx, fy], ...}` (0 on cells in no group given) or "
-                             "`{python = \"file.py:name\"}` (x (3, N) → (2, N))"),
-    ("boundary", "displacement"): ("vector or python", "clamped", "u on Γ_D: `[ux, uy]` or "
-                                   "`{python = \"file.py:name\"}`"),
-    ("boundary", "tractions"): ('table `{Gamma_N_<label> = [tx, ty] or {python = ...}}`', "{}",
-                                "σn on each traction group; every traction group of the mesh needs one"),
-    ("obstacle", "shape"): ('`"wall"`, `"plane"` or `"circle"`', '"wall"', "the rigid obstacle: a wall flush with "
-                            "Γ_C (zero gap), a half-plane or a disc (a cylinder in plane strain)"),
+    ("load", "body-force"): (
+        "vector, table by group or python",
+        "[0, 0]",
+        "the body force f: `[fx, fy]`, "
+        "`{group = [fx, fy], ...}` (0 on cells in no group given) or "
+        '`{python = "file.py:name"}` (x (3, N) → (2, N))',
+    ),
+    ("boundary", "displacement"): (
+        "vector or python",
+        "clamped",
+        'u on Γ_D: `[ux, uy]` or `{python = "file.py:name"}`',
+    ),
+    ("boundary", "tractions"): (
+        "table `{Gamma_N_<label> = [tx, ty] or {python = ...}}`",
+        "{}",
+        "σn on each traction group; every traction group of the mesh needs one",
+    ),
+    ("obstacle", "shape"): (
+        '`"wall"`, `"plane"` or `"circle"`',
+        '"wall"',
+        "the rigid obstacle: a wall flush with Γ_C (zero gap), a half-plane or a disc (a cylinder in plane strain)",
+    ),
     ("obstacle", "point"): ("vector", "required", "a point of the plane"),
     ("obstacle", "normal"): ("vector ≠ 0", "required", "the plane's outward normal, pointing towards the body"),
     ("obstacle", "centre"): ("vector", "required", "the centre of the circle (outside the body)"),
     ("obstacle", "radius"): ("number > 0", "required", "the radius of the circle"),
-    ("obstacle", "indentation"): ("number or list of numbers", "none", "a depth by which the obstacle is moved "
-                                  "along `direction`; a list is a sequence of load steps (a force–indentation "
-                                  "curve); the run's fields are those of the last depth; not for the wall"),
-    ("obstacle", "direction"): ("vector ≠ 0", "the plane's normal", "the direction the obstacle moves in "
-                                "(normalized); required for a circle with `indentation`"),
+    ("obstacle", "indentation"): (
+        "number or list of numbers",
+        "none",
+        "a depth by which the obstacle is moved "
+        "along `direction`; a list is a sequence of load steps (a force–indentation "
+        "curve); the run's fields are those of the last depth; not for the wall",
+    ),
+    ("obstacle", "direction"): (
+        "vector ≠ 0",
+        "the plane's normal",
+        "the direction the obstacle moves in (normalized); required for a circle with `indentation`",
+    ),
 }
 
 #: run keys whose flag's help does not say what the key does in a case file: key -> (default, meaning)
 RUN_NOTES = {
     "plots": ("true", "write the PNG figures (the flag `--no-plots` sets it false)"),
-    "max-iterations": ("2000", "the most iterations of the hybrid method; a run that reaches it unconverged "
-                       "writes its results with `\"converged\": false` (exit 3)"),
-    "coarse-groups": ("false", "not with a case file (refused): a case file's surface groups are material "
-                      "groups; its coarse grid is `mesh.H` or `mesh.coarse-size`"),
-    "out": ("`results/<case>-<method>`", "the output directory (relative to the working directory); replaced "
-            "whole by the run, so it must be new, empty or an earlier run's"),
+    "max-iterations": (
+        "2000",
+        "the most iterations of the hybrid method; a run that reaches it unconverged "
+        'writes its results with `"converged": false` (exit 3)',
+    ),
+    "coarse-groups": (
+        "false",
+        "not with a case file (refused): a case file's surface groups are material "
+        "groups; its coarse grid is `mesh.H` or `mesh.coarse-size`",
+    ),
+    "out": (
+        "`results/<case>-<method>`",
+        "the output directory (relative to the working directory); replaced "
+        "whole by the run, so it must be new, empty or an earlier run's",
+    ),
 }
 
 TABLES = {
@@ -180,8 +236,9 @@ def _run_actions() -> dict[str, object]:
 
 def _type(annotation) -> str:
     kinds = [t for t in (typing.get_args(annotation) or (annotation,)) if t is not type(None)]
-    return {bool: "boolean", int: "integer", float: "number", str: "string", Path: "directory name"}.get(kinds[0],
-                                                                                                        str(kinds[0]))
+    return {bool: "boolean", int: "integer", float: "number", str: "string", Path: "directory name"}.get(
+        kinds[0], str(kinds[0])
+    )
 
 
 def run_tables() -> str:
@@ -202,18 +259,27 @@ def run_tables() -> str:
                 if action.choices:
                     meaning += " (one of " + ", ".join(f"`{c}`" for c in action.choices) + ")"
                 default = field.default
-                default = "method's default" if default is None else str(default).lower() if isinstance(
-                    default, bool) else f"`{default}`" if isinstance(default, str) else f"{default:g}"
+                default = (
+                    "method's default"
+                    if default is None
+                    else str(default).lower()
+                    if isinstance(default, bool)
+                    else f"`{default}`"
+                    if isinstance(default, str)
+                    else f"{default:g}"
+                )
             rows.append(_row(key, _type(field.type), default, meaning))
         used = ", ".join(f"`{m}`" for m in methods)
-        blocks.append(f"### `[{table}]`\n\nRead by {used}; each key is overridden by the command line's flag of "
-                      f"its name (`--{keys[0]}`, ...).\n\n| key | type | default | meaning |\n|---|---|---|---|\n"
-                      + "\n".join(rows))
+        blocks.append(
+            f"### `[{table}]`\n\nRead by {used}; each key is overridden by the command line's flag of "
+            f"its name (`--{keys[0]}`, ...).\n\n| key | type | default | meaning |\n|---|---|---|---|\n"
+            + "\n".join(rows)
+        )
     return "\n\n".join(blocks)
 
 
 def markdown() -> str:
-    return ("## The problem tables\n\n" + problem_tables() + "\n\n## The run tables\n\n" + run_tables() + "\n")
+    return "## The problem tables\n\n" + problem_tables() + "\n\n## The run tables\n\n" + run_tables() + "\n"
 
 
 if __name__ == "__main__":

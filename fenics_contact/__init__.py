@@ -49,6 +49,7 @@ def __getattr__(name: str):
         return importlib.import_module(_MODULES[name])
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
+
 #: the DOLFINx release series this package is written for (its public API only)
 DOLFINX_SERIES = "0.11"
 
@@ -75,13 +76,17 @@ else:
     try:
         import dolfinx
     except ImportError as error:
-        raise ImportError(f"fenics-contact needs DOLFINx {DOLFINX_SERIES}, and 'import dolfinx' failed ({error}). "
-                          f"{HOW_TO_GET_DOLFINX}") from error
+        raise ImportError(
+            f"fenics-contact needs DOLFINx {DOLFINX_SERIES}, and 'import dolfinx' failed ({error}). "
+            f"{HOW_TO_GET_DOLFINX}"
+        ) from error
     dolfinx_version = dolfinx.__version__
 
 if not re.match(rf"{re.escape(DOLFINX_SERIES)}(\.|$)", dolfinx_version):
-    raise ImportError(f"fenics-contact needs DOLFINx {DOLFINX_SERIES}; this environment has DOLFINx {dolfinx_version}. "
-                      f"{HOW_TO_GET_DOLFINX}")
+    raise ImportError(
+        f"fenics-contact needs DOLFINx {DOLFINX_SERIES}; this environment has DOLFINx {dolfinx_version}. "
+        f"{HOW_TO_GET_DOLFINX}"
+    )
 
 
 def __dir__() -> list[str]:

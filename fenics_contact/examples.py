@@ -8,7 +8,6 @@ a copied case.  Case files name their mesh files relative to themselves, so a co
 """
 
 import argparse
-import shutil
 import sys
 from importlib.resources import files
 from importlib.resources.abc import Traversable
@@ -34,8 +33,10 @@ def example_files() -> Traversable:
     tree = Path(__file__).resolve().parents[1]  # a source checkout (an editable install runs from it)
     if all((tree / name).is_dir() for name in EXAMPLE_DIRS):
         return tree
-    raise FileNotFoundError(f"the example files ({', '.join(EXAMPLE_DIRS)}) are neither installed in {shipped} nor "
-                            f"in the source tree {tree}: reinstall fenics-contact")
+    raise FileNotFoundError(
+        f"the example files ({', '.join(EXAMPLE_DIRS)}) are neither installed in {shipped} nor "
+        f"in the source tree {tree}: reinstall fenics-contact"
+    )
 
 
 def _copy_tree(source: Traversable, target: Path) -> list[Path]:
@@ -71,10 +72,12 @@ def copy_examples(directory: Path) -> list[Path]:
 def add_examples_parser(subparsers: "argparse._SubParsersAction[argparse.ArgumentParser]") -> None:
     """Add the ``examples DIR`` subcommand to the command line's subparsers."""
     parser = subparsers.add_parser(
-        "examples", help="copy the example case files, meshes and demos into a new folder",
+        "examples",
+        help="copy the example case files, meshes and demos into a new folder",
         description="Copy the example case files (cases/), meshes (meshes/) and demos (demos/) into DIR, "
         "created if missing; a non-empty DIR is refused (exit 2). Then e.g. "
-        "fenics-contact run --case DIR/cases/bar.toml --out results/bar")
+        "fenics-contact run --case DIR/cases/bar.toml --out results/bar",
+    )
     parser.add_argument("directory", type=Path, metavar="DIR", help="a new or empty folder")
 
 
@@ -94,8 +97,10 @@ def run_examples_command(args: argparse.Namespace, comm: MPI.Comm = MPI.COMM_WOR
         return 2
     if comm.rank == 0:
         cases = sorted(p.name for p in (args.directory / "cases").glob("*.toml"))
-        print(f"copied {len(written)} files into {args.directory}: {', '.join(EXAMPLE_DIRS)}\n"
-              f"cases: {', '.join(cases)}\n"
-              f"run one: fenics-contact run --case {args.directory / 'cases' / 'bar.toml'} --out results/bar",
-              flush=True)
+        print(
+            f"copied {len(written)} files into {args.directory}: {', '.join(EXAMPLE_DIRS)}\n"
+            f"cases: {', '.join(cases)}\n"
+            f"run one: fenics-contact run --case {args.directory / 'cases' / 'bar.toml'} --out results/bar",
+            flush=True,
+        )
     return 0

@@ -43,8 +43,14 @@ from fenics_contact.multiscale.primal import MultiscalePrimalHybridStep
 from fenics_contact.problem.obstacles import Obstacle
 from fenics_contact.problem.problem import ContactProblem
 
-__all__ = ["Complementarity", "complementarity", "IndentationStep", "IndentationCurve", "WarmStart",
-           "force_indentation"]
+__all__ = [
+    "Complementarity",
+    "complementarity",
+    "IndentationStep",
+    "IndentationCurve",
+    "WarmStart",
+    "force_indentation",
+]
 
 log = logging.getLogger(__name__)
 
@@ -74,11 +80,14 @@ def complementarity(profile: ContactProfile, scale: float | None = None) -> Comp
     d = max(float(np.max(np.abs(u_c), initial=0.0)), 0.0 if scale is None else abs(float(scale)))
     p = profile.max_pressure
     if not (d > 0 and p > 0):  # no contact: only the sign conditions can be measured
-        return Complementarity(float(np.max(np.maximum(u_c, 0.0), initial=0.0)),
-                               float(np.max(np.maximum(s_c, 0.0), initial=0.0)), 0.0)
-    return Complementarity(float(np.max(np.maximum(u_c, 0.0), initial=0.0)) / d,
-                           float(np.max(np.maximum(s_c, 0.0), initial=0.0)) / p,
-                           float(np.max(np.abs(s_c * u_c), initial=0.0)) / (p * d))
+        return Complementarity(
+            float(np.max(np.maximum(u_c, 0.0), initial=0.0)), float(np.max(np.maximum(s_c, 0.0), initial=0.0)), 0.0
+        )
+    return Complementarity(
+        float(np.max(np.maximum(u_c, 0.0), initial=0.0)) / d,
+        float(np.max(np.maximum(s_c, 0.0), initial=0.0)) / p,
+        float(np.max(np.abs(s_c * u_c), initial=0.0)) / (p * d),
+    )
 
 
 @dataclass(slots=True)
@@ -128,8 +137,11 @@ class IndentationCurve:
 
     def table(self) -> str:
         """A markdown table of the curve."""
-        rows = ["| depth | force | normal force | max pressure | iterations | transmission residual "
-                "| complementarity | time [s] |", "|---|---|---|---|---|---|---|---|"]
+        rows = [
+            "| depth | force | normal force | max pressure | iterations | transmission residual "
+            "| complementarity | time [s] |",
+            "|---|---|---|---|---|---|---|---|",
+        ]
         rows += [
             f"| {s.depth:.4g} | {s.force:.6g} | {s.normal_force:.6g} | {s.max_pressure:.6g} | {s.iterations} "
             f"| {'—' if s.transmission_residual is None else f'{s.transmission_residual:.1e}'} "
@@ -229,8 +241,9 @@ def force_indentation(
     contact = solver.contact
     hybrid = WarmStart(solver) if spec.hybrid else None
     verify = isinstance(solver, MultiscalePrimalHybridStep) and options.get("check", True)
-    curve = IndentationCurve(method, direction, time_offline_s=time.perf_counter() - start, step=solver_step,
-                             contact=contact)
+    curve = IndentationCurve(
+        method, direction, time_offline_s=time.perf_counter() - start, step=solver_step, contact=contact
+    )
     for depth in depths:
         start = time.perf_counter()
         contact.set_obstacle(base.indented(depth, direction))
@@ -246,14 +259,34 @@ def force_indentation(
         profile = contact.contact_profile()
         force = float(profile.resultant @ direction)
         scale = abs(float(depth)) if depth != 0 else None
-        curve.steps.append(IndentationStep(
-            float(depth), force, profile.force, profile.max_pressure, profile, iterations, converged,
-            time.perf_counter() - start - offline, residual, complementarity(profile, scale), offline, newton_steps,
-        ))
+        curve.steps.append(
+            IndentationStep(
+                float(depth),
+                force,
+                profile.force,
+                profile.max_pressure,
+                profile,
+                iterations,
+                converged,
+                time.perf_counter() - start - offline,
+                residual,
+                complementarity(profile, scale),
+                offline,
+                newton_steps,
+            )
+        )
         if verify and history.data is not None:  # (one factorization of the fine Ω₁ operator, outside time_s)
             curve.steps[-1].omega1_check = solver.omega1.fine_check(history.data[: solver.interface.size])
-        log.info("%s: depth %.4g force %.6g (normal %.6g), %d iterations, transmission residual %s, %.2f s", method,
-                 depth, force, profile.force, iterations, residual, curve.steps[-1].time_s)
+        log.info(
+            "%s: depth %.4g force %.6g (normal %.6g), %d iterations, transmission residual %s, %.2f s",
+            method,
+            depth,
+            force,
+            profile.force,
+            iterations,
+            residual,
+            curve.steps[-1].time_s,
+        )
         if on_step is not None:
             on_step(curve.steps[-1], solver)
     return curve

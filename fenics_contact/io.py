@@ -155,8 +155,7 @@ def _markdown(summary: dict, title: str, level: int = 1) -> list[str]:
             lines += _markdown(value, key, level + 1)
         elif _records(value):
             columns = list(dict.fromkeys(k for row in value for k, v in row.items() if not isinstance(v, dict)))
-            lines += [f"{'#' * (level + 1)} {key}", "", "| " + " | ".join(columns) + " |",
-                      "|" + "---|" * len(columns)]
+            lines += [f"{'#' * (level + 1)} {key}", "", "| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
             lines += ["| " + " | ".join(_cell(row.get(c)) for c in columns) + " |" for row in value] + [""]
     return lines
 
@@ -220,8 +219,10 @@ def check_outside_output(target: str | Path, path: str | Path | None, what: str)
         return
     out, inner = Path(target).resolve(), Path(path).resolve()
     if inner == out or out in inner.parents:
-        raise InputError(f"{what} {path} lies inside --out {target}, which the run replaces whole: keep it outside "
-                         "the output directory (or choose another --out)")
+        raise InputError(
+            f"{what} {path} lies inside --out {target}, which the run replaces whole: keep it outside "
+            "the output directory (or choose another --out)"
+        )
 
 
 def check_output_target(target: str | Path) -> Path:
@@ -239,16 +240,20 @@ def check_output_target(target: str | Path) -> Path:
     name_max = os.pathconf(existing if existing.is_dir() else existing.parent, "PC_NAME_MAX")
     long_names = [part for part in absolute.parts if len(os.fsencode(part)) > name_max]
     if long_names:
-        raise InputError(f"--out: the name {long_names[0][:40]}… is longer than the {name_max} bytes the file "
-                         "system allows")
-    if len(os.fsencode(str(absolute))) + 64 > os.pathconf(existing if existing.is_dir() else existing.parent,
-                                                          "PC_PATH_MAX"):
+        raise InputError(
+            f"--out: the name {long_names[0][:40]}… is longer than the {name_max} bytes the file system allows"
+        )
+    if len(os.fsencode(str(absolute))) + 64 > os.pathconf(
+        existing if existing.is_dir() else existing.parent, "PC_PATH_MAX"
+    ):
         raise InputError(f"--out: the path {str(absolute)[:60]}… is too long for the file system")
     resolved = target.resolve()
     cwd = Path.cwd().resolve()
     if resolved == cwd or resolved in cwd.parents:
-        raise InputError(f"--out {target} is the current directory or contains it: the run replaces --out as a "
-                         "whole, so name a directory of its own (e.g. results/run1)")
+        raise InputError(
+            f"--out {target} is the current directory or contains it: the run replaces --out as a "
+            "whole, so name a directory of its own (e.g. results/run1)"
+        )
     existing = _nearest_existing(resolved)
     if existing != resolved and not existing.is_dir():
         raise InputError(f"--out {target} lies below {existing}, which is a file, not a directory")
@@ -258,8 +263,10 @@ def check_output_target(target: str | Path) -> Path:
         if not os.access(resolved, os.R_OK | os.X_OK):
             raise InputError(f"--out {target} cannot be read")
         if not _is_run_directory(resolved):
-            raise InputError(f"--out {target} holds files that are not the output of a fenics-contact run; the run "
-                             "would replace the directory as a whole. Choose another directory or empty it.")
+            raise InputError(
+                f"--out {target} holds files that are not the output of a fenics-contact run; the run "
+                "would replace the directory as a whole. Choose another directory or empty it."
+            )
     parent = resolved.parent if resolved.exists() else existing
     if not os.access(parent, os.W_OK | os.X_OK):
         raise InputError(f"--out {target}: {parent} is not writable")
@@ -296,8 +303,9 @@ def _remove_stale_staging(parent: Path) -> None:
         if match is None or not path.is_dir():
             continue
         try:
-            stale = (not _alive(int(match["pid"])) if match["host"] == host
-                     else now - path.stat().st_mtime > _STALE_AGE_S)
+            stale = (
+                not _alive(int(match["pid"])) if match["host"] == host else now - path.stat().st_mtime > _STALE_AGE_S
+            )
         except OSError:
             continue
         if stale:
@@ -345,8 +353,10 @@ class OutputDirectory:
             except InputError as err:
                 result = err
             except OSError as err:
-                result = InputError(f"--out {self.target}: cannot create a directory in "
-                                    f"{self.target.resolve().parent}: {err.strerror or err}")
+                result = InputError(
+                    f"--out {self.target}: cannot create a directory in "
+                    f"{self.target.resolve().parent}: {err.strerror or err}"
+                )
         result = comm.bcast(result, root=0)
         if isinstance(result, InputError):
             raise result

@@ -35,8 +35,8 @@ from fenics_contact.fem.contact import NewtonOptions
 from fenics_contact.fem.mixed import epsilon_for, solve_mixed_monolithic
 from fenics_contact.fem.mixed_subproblem import MixedSubproblem
 from fenics_contact.fem.primal import PrimalSubproblem, penalty_for, solve_primal_monolithic, warn_if_locking
-from fenics_contact.hybrid.options import InterfaceNewtonOptions, IterationOptions, default_accel
 from fenics_contact.hybrid.mixed import MixedHybridStep, solve_mixed_hybrid
+from fenics_contact.hybrid.options import InterfaceNewtonOptions, IterationOptions, default_accel
 from fenics_contact.hybrid.primal import PrimalHybridStep, solve_primal_hybrid
 from fenics_contact.multiscale.cem import CEMOptions
 from fenics_contact.multiscale.mixed import MixedMultiscaleHybridStep, solve_mixed_ms_hybrid
@@ -65,21 +65,40 @@ class MonolithicSolver:
         return self.contact.solve()
 
 
-def _primal_monolithic_solver(problem: ContactProblem, *, delta: float | None = None,
-                              newton: NewtonOptions = NewtonOptions()) -> MonolithicSolver:
+def _primal_monolithic_solver(
+    problem: ContactProblem, *, delta: float | None = None, newton: NewtonOptions = NewtonOptions()
+) -> MonolithicSolver:
     fields = problem.fields
     warn_if_locking(fields.nu, problem.comm)
     cm = problem.cm
-    return MonolithicSolver(PrimalSubproblem(cm.mesh, cm.facet_tags, fields, delta=penalty_for(problem, delta),
-                                             alpha=None, prefix="fc_steps_primal_", newton=newton))
+    return MonolithicSolver(
+        PrimalSubproblem(
+            cm.mesh,
+            cm.facet_tags,
+            fields,
+            delta=penalty_for(problem, delta),
+            alpha=None,
+            prefix="fc_steps_primal_",
+            newton=newton,
+        )
+    )
 
 
-def _mixed_monolithic_solver(problem: ContactProblem, *, epsilon: float | None = None,
-                             newton: NewtonOptions = NewtonOptions()) -> MonolithicSolver:
+def _mixed_monolithic_solver(
+    problem: ContactProblem, *, epsilon: float | None = None, newton: NewtonOptions = NewtonOptions()
+) -> MonolithicSolver:
     cm = problem.cm
-    return MonolithicSolver(MixedSubproblem(cm.mesh, cm.facet_tags, problem.fields,
-                                            epsilon=epsilon_for(problem, epsilon), beta=None,
-                                            prefix="fc_steps_mixed_", newton=newton))
+    return MonolithicSolver(
+        MixedSubproblem(
+            cm.mesh,
+            cm.facet_tags,
+            problem.fields,
+            epsilon=epsilon_for(problem, epsilon),
+            beta=None,
+            prefix="fc_steps_mixed_",
+            newton=newton,
+        )
+    )
 
 
 def _prepared(step_class: type) -> Callable:
@@ -133,8 +152,9 @@ class Method:
         Newton, Anderson for Algorithm 2 on several ranks); None for a monolithic one."""
         return default_accel(self.factory.__wrapped__, comm) if self.hybrid else None
 
-    def options(self, values: Mapping[str, Any] | None = None, /, *, comm: MPI.Comm = MPI.COMM_WORLD,
-                **more) -> dict[str, Any]:
+    def options(
+        self, values: Mapping[str, Any] | None = None, /, *, comm: MPI.Comm = MPI.COMM_WORLD, **more
+    ) -> dict[str, Any]:
         """Keyword arguments for the solve function from flat or nested options (InputError for an option
         the method does not use). Not given: the method's defaults, ``accel`` from ``default_accel``."""
         given = {**(values or {}), **more}
@@ -146,21 +166,27 @@ class Method:
         cem = {k: given.pop(k) for k in list(given) if k in cem_fields}
         unknown = sorted(k for k in given if k not in known)
         if unknown:
-            raise InputError(f"{self.name}: no option(s) {unknown}; {self.name} takes {list(self.flat_options())}"
-                             + _elsewhere(unknown))
+            raise InputError(
+                f"{self.name}: no option(s) {unknown}; {self.name} takes {list(self.flat_options())}"
+                + _elsewhere(unknown)
+            )
         if self.hybrid:
             nested = out.get("options")
             if nested is not None and (iteration or interface):
-                raise InputError(f"{self.name}: give the iteration either as options=IterationOptions(...) or as "
-                                 f"{sorted({*iteration, *interface})}, not both")
+                raise InputError(
+                    f"{self.name}: give the iteration either as options=IterationOptions(...) or as "
+                    f"{sorted({*iteration, *interface})}, not both"
+                )
             if nested is None:
                 if interface:
                     iteration["newton"] = InterfaceNewtonOptions(**interface)
                 out["options"] = IterationOptions(**iteration)
         if cem:
             if out.get("cem") is not None:
-                raise InputError(f"{self.name}: give the multiscale options either as cem={self.cem_type.__name__}"
-                                 f"(...) or as {sorted(cem)}, not both")
+                raise InputError(
+                    f"{self.name}: give the multiscale options either as cem={self.cem_type.__name__}"
+                    f"(...) or as {sorted(cem)}, not both"
+                )
             out["cem"] = self.cem_type(**cem)
         if out.get("cem") is not None and not isinstance(out["cem"], self.cem_type):
             where = self.cem_type.__module__.removeprefix("fenics_contact.")
@@ -186,8 +212,9 @@ class Method:
             raise InputError(f"{self.name}: the solver it builds takes no {refused}")
         return self.factory(problem, **{k: v for k, v in options.items() if k in accepted})
 
-    def iteration(self, values: Mapping[str, Any] | None = None, *, comm: MPI.Comm = MPI.COMM_WORLD
-                  ) -> IterationOptions | None:
+    def iteration(
+        self, values: Mapping[str, Any] | None = None, *, comm: MPI.Comm = MPI.COMM_WORLD
+    ) -> IterationOptions | None:
         """The hybrid iteration's options among ``values`` (None for a monolithic method)."""
         return self.options(values, comm=comm).get("options") if self.hybrid else None
 
@@ -208,18 +235,56 @@ def _elsewhere(names: list[str]) -> str:
 METHODS: dict[str, Method] = {
     m.name: m
     for m in (
-        Method("primal-monolithic", "primal", None, "penalized primal P1 contact on the whole mesh",
-               solve_primal_monolithic, _primal_monolithic_solver),
-        Method("mixed-monolithic", "mixed", None, "penalized mixed Arnold–Winther contact on the whole mesh",
-               solve_mixed_monolithic, _mixed_monolithic_solver),
-        Method("primal", "primal", 1, "Algorithm 1: primal P1 in Ω₁ and Ω₂", solve_primal_hybrid,
-               _prepared(PrimalHybridStep)),
-        Method("mixed", "mixed", 2, "Algorithm 2: mixed Arnold–Winther in Ω₁ and Ω₂", solve_mixed_hybrid,
-               _prepared(MixedHybridStep)),
-        Method("primal-ms", "primal", 3, "Algorithm 3: primal CEM-GMsFEM in Ω₁, primal P1 in Ω₂",
-               solve_primal_ms_hybrid, _prepared(MultiscalePrimalHybridStep), CEMOptions),
-        Method("mixed-ms", "mixed", 4, "Algorithm 4: mixed CEM-GMsFEM in Ω₁, mixed Arnold–Winther in Ω₂",
-               solve_mixed_ms_hybrid, _prepared(MixedMultiscaleHybridStep), MixedCEMOptions),
+        Method(
+            "primal-monolithic",
+            "primal",
+            None,
+            "penalized primal P1 contact on the whole mesh",
+            solve_primal_monolithic,
+            _primal_monolithic_solver,
+        ),
+        Method(
+            "mixed-monolithic",
+            "mixed",
+            None,
+            "penalized mixed Arnold–Winther contact on the whole mesh",
+            solve_mixed_monolithic,
+            _mixed_monolithic_solver,
+        ),
+        Method(
+            "primal",
+            "primal",
+            1,
+            "Algorithm 1: primal P1 in Ω₁ and Ω₂",
+            solve_primal_hybrid,
+            _prepared(PrimalHybridStep),
+        ),
+        Method(
+            "mixed",
+            "mixed",
+            2,
+            "Algorithm 2: mixed Arnold–Winther in Ω₁ and Ω₂",
+            solve_mixed_hybrid,
+            _prepared(MixedHybridStep),
+        ),
+        Method(
+            "primal-ms",
+            "primal",
+            3,
+            "Algorithm 3: primal CEM-GMsFEM in Ω₁, primal P1 in Ω₂",
+            solve_primal_ms_hybrid,
+            _prepared(MultiscalePrimalHybridStep),
+            CEMOptions,
+        ),
+        Method(
+            "mixed-ms",
+            "mixed",
+            4,
+            "Algorithm 4: mixed CEM-GMsFEM in Ω₁, mixed Arnold–Winther in Ω₂",
+            solve_mixed_ms_hybrid,
+            _prepared(MixedMultiscaleHybridStep),
+            MixedCEMOptions,
+        ),
     )
 }
 #: the hybrid methods (Algorithms 1–4), the ``fenics-contact run --method`` choices

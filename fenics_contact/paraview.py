@@ -20,9 +20,8 @@ from xml.sax.saxutils import quoteattr
 
 import numpy as np
 import pyvista
-from mpi4py import MPI
-
 from dolfinx import fem, plot
+from mpi4py import MPI
 
 __all__ = ["Series", "field_grid", "contact_grid"]
 
@@ -47,8 +46,10 @@ class Series:
         grid.save(self.directory / rel)
         self.steps.append((float(time), rel))
         rows = "\n".join(f'    <DataSet timestep="{t!r}" part="0" file={quoteattr(f)}/>' for t, f in self.steps)
-        self.path.write_text('<?xml version="1.0"?>\n<VTKFile type="Collection" version="0.1">\n  <Collection>\n'
-                             f"{rows}\n  </Collection>\n</VTKFile>\n")
+        self.path.write_text(
+            '<?xml version="1.0"?>\n<VTKFile type="Collection" version="0.1">\n  <Collection>\n'
+            f"{rows}\n  </Collection>\n</VTKFile>\n"
+        )
 
 
 def _gather_grid(V: fem.FunctionSpace, point_values: dict, cell_values: dict) -> pyvista.UnstructuredGrid | None:
@@ -62,8 +63,10 @@ def _gather_grid(V: fem.FunctionSpace, point_values: dict, cell_values: dict) ->
     imap = V.dofmap.index_map
     to_global = imap.local_to_global(np.arange(x.shape[0], dtype=np.int32))
     per_cell[:, 1:] = to_global[per_cell[:, 1:]]
-    parts = msh.comm.gather((per_cell, cell_types[:n_cells], to_global, x, point_values,
-                             {k: v[:n_cells] for k, v in cell_values.items()}), root=0)
+    parts = msh.comm.gather(
+        (per_cell, cell_types[:n_cells], to_global, x, point_values, {k: v[:n_cells] for k, v in cell_values.items()}),
+        root=0,
+    )
     if msh.comm.rank != 0:
         return None
     n_points = imap.size_global
@@ -73,8 +76,9 @@ def _gather_grid(V: fem.FunctionSpace, point_values: dict, cell_values: dict) ->
         points[glob] = pts
         for key in point_values:
             data[key][glob] = values[key]
-    grid = pyvista.UnstructuredGrid(np.concatenate([p[0].ravel() for p in parts]),
-                                    np.concatenate([p[1] for p in parts]), points)
+    grid = pyvista.UnstructuredGrid(
+        np.concatenate([p[0].ravel() for p in parts]), np.concatenate([p[1] for p in parts]), points
+    )
     for key in point_values:
         grid.point_data[key] = data[key]
     for key in cell_values:
@@ -94,8 +98,9 @@ def _cell_values(fn: fem.Function) -> np.ndarray:
     return values[:, 0] if bs == 1 else values
 
 
-def field_grid(u: fem.Function, stress: np.ndarray, cells: dict[str, fem.Function], nu: fem.Function
-               ) -> pyvista.UnstructuredGrid | None:
+def field_grid(
+    u: fem.Function, stress: np.ndarray, cells: dict[str, fem.Function], nu: fem.Function
+) -> pyvista.UnstructuredGrid | None:
     """The mesh of the P1 vector displacement ``u`` with ``u`` as point data, the cellwise plane-strain stress
     ``stress`` (cells, 3: xx, yy, xy) as ``sigma`` in ParaView's symmetric-tensor order (xx, yy, zz, xy, yz, xz;
     σ_zz = ν(σ_xx + σ_yy)) and the DG0 ``cells`` (e.g. E, subdomain) as cell data; rank 0's grid."""
@@ -105,8 +110,9 @@ def field_grid(u: fem.Function, stress: np.ndarray, cells: dict[str, fem.Functio
     values[:, :gdim] = u.x.array.reshape(-1, gdim)
     n = stress.shape[0]
     nu_c = _cell_values(nu)[:n]
-    sigma = np.column_stack([stress[:, 0], stress[:, 1], nu_c * (stress[:, 0] + stress[:, 1]), stress[:, 2],
-                             np.zeros(n), np.zeros(n)])
+    sigma = np.column_stack(
+        [stress[:, 0], stress[:, 1], nu_c * (stress[:, 0] + stress[:, 1]), stress[:, 2], np.zeros(n), np.zeros(n)]
+    )
     cell_data = {"sigma": sigma} | {name: _cell_values(fn)[:n] for name, fn in cells.items()}
     return _gather_grid(V, {"u": values}, cell_data)
 
@@ -119,8 +125,11 @@ def contact_grid(profile, comm: MPI.Comm = MPI.COMM_WORLD) -> pyvista.Unstructur
     points = np.zeros((len(profile.points), 3))
     points[:, :2] = np.asarray(profile.points)[:, :2]
     n = len(points)
-    lines = np.column_stack([np.full(n - 1, 2), np.arange(n - 1), np.arange(1, n)]).ravel() if n > 1 \
+    lines = (
+        np.column_stack([np.full(n - 1, 2), np.arange(n - 1), np.arange(1, n)]).ravel()
+        if n > 1
         else np.zeros(0, dtype=int)
+    )
     grid = pyvista.UnstructuredGrid(lines, np.full(max(n - 1, 0), pyvista.CellType.LINE, dtype=np.uint8), points)
     grid.point_data["pressure"] = -np.asarray(profile.sigma_c, dtype=float)
     grid.point_data["gap"] = -np.asarray(profile.u_c, dtype=float)

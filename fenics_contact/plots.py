@@ -8,21 +8,32 @@ from pathlib import Path
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-from matplotlib.colors import LogNorm, TwoSlopeNorm  # noqa: E402
-from matplotlib.tri import Triangulation  # noqa: E402
-from matplotlib.ticker import MaxNLocator  # noqa: E402
-
 from typing import NamedTuple  # noqa: E402
 
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
 from dolfinx import fem, la  # noqa: E402
+from matplotlib.colors import LogNorm, TwoSlopeNorm  # noqa: E402
+from matplotlib.ticker import MaxNLocator  # noqa: E402
+from matplotlib.tri import Triangulation  # noqa: E402
 
 from fenics_contact.io import cell_function_of  # noqa: E402
 from fenics_contact.problem.obstacles import Circle, Translated  # noqa: E402
 
-__all__ = ["gather_cells", "plot_cell_field", "plot_displacement", "plot_stress", "HertzCurve", "hertz_curve_for",
-           "plot_contact", "plot_history", "nodal_average", "obstacle_outline", "render_deformed", "plot_force_indentation"]
+__all__ = [
+    "gather_cells",
+    "plot_cell_field",
+    "plot_displacement",
+    "plot_stress",
+    "HertzCurve",
+    "hertz_curve_for",
+    "plot_contact",
+    "plot_history",
+    "nodal_average",
+    "obstacle_outline",
+    "render_deformed",
+    "plot_force_indentation",
+]
 
 
 def gather_cells(fn: fem.Function, component: int | None = None):
@@ -160,8 +171,13 @@ def plot_contact(profiles: dict, path: str | Path, *, comm, hertz: HertzCurve | 
             a = 2.0 * np.sqrt(hertz.radius * force / (np.pi * E_star))
             p0 = 2.0 * force / (np.pi * a)
             x = hertz.centre + np.linspace(-1.2 * a, 1.2 * a, 241)
-            axes[1].plot(x, p0 * np.sqrt(np.maximum(1.0 - ((x - hertz.centre) / a) ** 2, 0.0)), "k:", lw=1.2,
-                         label=f"Hertz (a = {a:.3g}, p₀ = {p0:.3g})")
+            axes[1].plot(
+                x,
+                p0 * np.sqrt(np.maximum(1.0 - ((x - hertz.centre) / a) ** 2, 0.0)),
+                "k:",
+                lw=1.2,
+                label=f"Hertz (a = {a:.3g}, p₀ = {p0:.3g})",
+            )
     axes[0].set_title("normal displacement $u_c$ on $\\Gamma_C$")
     axes[1].set_title("contact pressure $p = -\\sigma_c$ on $\\Gamma_C$")
     for ax in axes:
@@ -192,11 +208,15 @@ def plot_history(histories: dict, path: str | Path, *, comm, tol: float | None =
         zero = bool(hist.iterations) and hist.residuals[-1] == 0.0
         color = f"C{k}"
         dot = "." if hist.iterations < 20 else ""  # (a lone point of a line without markers is not drawn)
-        plot(its, hist.residuals, dot + "-", color=color,
-             label=f"{label}: transmission residual")
+        plot(its, hist.residuals, dot + "-", color=color, label=f"{label}: transmission residual")
         if zero:
-            ax.plot([], [], "-", color=color, label=f"{label}: transmission residual exactly 0 at iteration "
-                    f"{hist.iterations}")
+            ax.plot(
+                [],
+                [],
+                "-",
+                color=color,
+                label=f"{label}: transmission residual exactly 0 at iteration {hist.iterations}",
+            )
         plot(its, hist.rel_changes, dot + ":", color=color, label=f"{label}: rel. change")
         errs = [r.info.get("e_u") for r in hist.records]
         if all(e is not None for e in errs) and errs:
@@ -242,8 +262,9 @@ def nodal_average(u: fem.Function) -> fem.Function:
     return out
 
 
-def obstacle_outline(obstacle, box: tuple[float, float, float, float], *, scale: float = 1.0,
-                     resolution: int = 600) -> list[np.ndarray]:
+def obstacle_outline(
+    obstacle, box: tuple[float, float, float, float], *, scale: float = 1.0, resolution: int = 600
+) -> list[np.ndarray]:
     """Polylines (k, 2) of the obstacle's boundary d = 0 inside ``box`` (x0, x1, y0, y1): the zero contour of its
     signed distance, any obstacle. Its rigid motion (``Translated``) is magnified by ``scale``, as the
     displacements of a deformed plot are, so that the drawn obstacle meets the drawn body where they touch."""
@@ -264,8 +285,15 @@ def obstacle_outline(obstacle, box: tuple[float, float, float, float], *, scale:
     return lines
 
 
-def render_deformed(u: fem.Function, path: str | Path, *, scale: float | None = None, title: str = "",
-                    obstacle=None, wall: np.ndarray | None = None) -> Path | None:
+def render_deformed(
+    u: fem.Function,
+    path: str | Path,
+    *,
+    scale: float | None = None,
+    title: str = "",
+    obstacle=None,
+    wall: np.ndarray | None = None,
+) -> Path | None:
     """The mesh deformed by u (magnified), coloured by |u|, with the obstacle (its motion magnified alike), or
     with ``wall`` (the Γ_C points in order: a wall flush with Γ_C), rendered off-screen with pyvista (rank 0)."""
     import os
@@ -273,7 +301,6 @@ def render_deformed(u: fem.Function, path: str | Path, *, scale: float | None = 
     if not os.environ.get("DISPLAY"):  # off-screen OpenGL, no X server needed
         os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
     import pyvista
-
     from dolfinx import plot
 
     if u.function_space.ufl_element().discontinuous:
@@ -292,8 +319,9 @@ def render_deformed(u: fem.Function, path: str | Path, *, scale: float | None = 
         top = top.reshape(-1, 4).copy()
         top[:, 1:] += off
         cells.append(top.ravel())
-    grid = pyvista.UnstructuredGrid(np.concatenate(cells), np.concatenate([p[1] for p in parts]),
-                                   np.concatenate([p[2] for p in parts]))
+    grid = pyvista.UnstructuredGrid(
+        np.concatenate(cells), np.concatenate([p[1] for p in parts]), np.concatenate([p[2] for p in parts])
+    )
     disp = np.concatenate([p[3] for p in parts])
     grid.point_data["|u|"] = np.linalg.norm(disp, axis=1)
     if scale is None:
@@ -310,11 +338,15 @@ def render_deformed(u: fem.Function, path: str | Path, *, scale: float | None = 
         margin = 0.15 * float(np.max(hi - lo))
         box = (lo[0] - margin, hi[0] + margin, lo[1] - margin, hi[1] + margin)
         for line in obstacle_outline(obstacle, box, scale=scale):
-            plotter.add_mesh(pyvista.lines_from_points(np.column_stack([line, np.zeros(len(line))])),
-                             color="red", line_width=4)
+            plotter.add_mesh(
+                pyvista.lines_from_points(np.column_stack([line, np.zeros(len(line))])), color="red", line_width=4
+            )
     elif wall is not None and len(wall) > 1:
-        plotter.add_mesh(pyvista.lines_from_points(np.column_stack([np.asarray(wall)[:, :2], np.zeros(len(wall))])),
-                         color="red", line_width=4)
+        plotter.add_mesh(
+            pyvista.lines_from_points(np.column_stack([np.asarray(wall)[:, :2], np.zeros(len(wall))])),
+            color="red",
+            line_width=4,
+        )
     plotter.add_text(f"{title} (displacement and obstacle motion x{scale:.3g})".strip(), font_size=10)
     plotter.view_xy()
     plotter.screenshot(str(path))

@@ -73,8 +73,14 @@ class Progress:
         if now - self._last >= self.interval and self.done < self.total:
             self._last = now
             eta = self.eta()
-            self.log.info("%s: %d/%d done, %.0f s elapsed, about %.0f s left", self.desc, self.done, self.total,
-                          self.elapsed, eta if eta is not None else float("nan"))
+            self.log.info(
+                "%s: %d/%d done, %.0f s elapsed, about %.0f s left",
+                self.desc,
+                self.done,
+                self.total,
+                self.elapsed,
+                eta if eta is not None else float("nan"),
+            )
 
     def close(self) -> None:
         """Finish: close the bar, or write the final log line."""

@@ -1,22 +1,36 @@
 """Meshes and manufactured fields of the Arnold–Winther tests: warped, rotated unit squares, their sides, and
 displacements with known stresses (locking-free, sliding, traction-free on x = 1)."""
 
-import dolfinx_solver  # noqa: F401  (must precede dolfinx / petsc4py)
-
 import dolfinx
 import dolfinx.mesh
+import dolfinx_solver  # noqa: F401  (must precede dolfinx / petsc4py)
 import numpy as np
 import ufl
 from mpi4py import MPI
 
 from fenics_contact.fem.arnold_winther import lame_parameters
 
-__all__ = ["unit_square", "rotation", "side_facets", "exact_fields", "locking_displacement", "sliding_displacement",
-           "free_displacement"]
+__all__ = [
+    "unit_square",
+    "rotation",
+    "side_facets",
+    "exact_fields",
+    "locking_displacement",
+    "sliding_displacement",
+    "free_displacement",
+]
 
 
-def unit_square(n: int, *, warp: float = 0.0, angle: float = 0.0, diagonal=None, jitter: float = 0.0, seed=0,
-                comm: MPI.Comm = MPI.COMM_WORLD):
+def unit_square(
+    n: int,
+    *,
+    warp: float = 0.0,
+    angle: float = 0.0,
+    diagonal=None,
+    jitter: float = 0.0,
+    seed=0,
+    comm: MPI.Comm = MPI.COMM_WORLD,
+):
     """Unit square mesh, optionally warped (x += c sin 2πx sin 2πy), jittered, then rotated."""
     kw = {} if diagonal is None else {"diagonal": diagonal}
     mesh = dolfinx.mesh.create_unit_square(comm, n, n, **kw)
@@ -69,9 +83,7 @@ def locking_displacement(lmbda):
 
     def u(x):
         psi = (x[0] * (1 - x[0]) * x[1] * (1 - x[1])) ** 2
-        w = ufl.as_vector(
-            [ufl.sin(ufl.pi * x[0]) * ufl.sin(ufl.pi * x[1]), x[0] * x[1] * (1 - x[0]) * (1 - x[1])]
-        )
+        w = ufl.as_vector([ufl.sin(ufl.pi * x[0]) * ufl.sin(ufl.pi * x[1]), x[0] * x[1] * (1 - x[0]) * (1 - x[1])])
         return ufl.as_vector([psi.dx(1), -psi.dx(0)]) + w / lmbda
 
     return u

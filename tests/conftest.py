@@ -10,9 +10,10 @@ import gc
 import logging
 from pathlib import Path
 
-import fenics_contact  # noqa: F401  (imports dolfinx_solver first)
 import pytest
 from mpi4py import MPI
+
+import fenics_contact  # noqa: F401  (imports dolfinx_solver first)
 
 pytest_plugins = ["contact_problems"]  # its fixtures (channel_strip) for every test module
 

@@ -34,7 +34,11 @@ def channel_strip():
     """Algorithm 1 on model 3 at contrast 1e6, h = 1/128, H = 1/16 (1.6 s): the stiff channel at y ∈ [5/32, 6/32]
     has five Γ_C nodes, and the plain contact Newton frees them one per step (h ≤ 1/64: at most three)."""
     cm = unit_square(128, 16)
-    step = PrimalHybridStep(get_model(3, E_high=1e6).on(cm), alpha=DEFAULT_ALPHA, delta=default_penalty(cm.h, 1e6),
-                            newton=NewtonOptions(rtol=1e-6))
+    step = PrimalHybridStep(
+        get_model(3, E_high=1e6).on(cm),
+        alpha=DEFAULT_ALPHA,
+        delta=default_penalty(cm.h, 1e6),
+        newton=NewtonOptions(rtol=1e-6),
+    )
     step.prepare()
     return step

@@ -33,12 +33,18 @@ def manufactured_model() -> ContactProblem:
     f = np.array([0.2 * (LAM + 2 * MU) + 0.1 * LAM, -0.04 * (LAM + 2 * MU)])  # −div σ (constant)
     top = lambda x: np.vstack([0 * x[0], stress(x)[2]])  # noqa: E731  σn, n = (0, 1)
     bottom = lambda x: np.vstack([0 * x[0], -stress(x)[2]])  # noqa: E731  n = (0, −1)
-    gap = SignedDistance(lambda x: 0.05 * x[1] ** 2 - 0.3 + (1.0 - x[0]),
-                         normal=lambda x: np.vstack([-np.ones(x.shape[1]), np.zeros(x.shape[1])]))
+    gap = SignedDistance(
+        lambda x: 0.05 * x[1] ** 2 - 0.3 + (1.0 - x[0]),
+        normal=lambda x: np.vstack([-np.ones(x.shape[1]), np.zeros(x.shape[1])]),
+    )
     return ContactProblem(
-        name="manufactured", youngs_modulus=constant_field(E), poisson_ratio=constant_field(NU),
+        name="manufactured",
+        youngs_modulus=constant_field(E),
+        poisson_ratio=constant_field(NU),
         load=lambda x: np.repeat(f[:, None], x.shape[1], axis=1),
-        boundary=BoundaryConditions(displacement=displacement, tractions={GROUPS["top"]: top, GROUPS["bottom"]: bottom}),
+        boundary=BoundaryConditions(
+            displacement=displacement, tractions={GROUPS["top"]: top, GROUPS["bottom"]: bottom}
+        ),
         obstacle=gap,
     )
 

@@ -35,8 +35,13 @@ def serial_cli(*args: str, timeout: float = 900) -> tuple[int, str, dict | None]
     ``--out`` or None), the same on every rank."""
     result = None
     if MPI.COMM_WORLD.rank == 0:
-        proc = subprocess.run([sys.executable, "-m", "fenics_contact.cli", *args], capture_output=True, text=True,
-                              env=serial_env(), timeout=timeout)
+        proc = subprocess.run(
+            [sys.executable, "-m", "fenics_contact.cli", *args],
+            capture_output=True,
+            text=True,
+            env=serial_env(),
+            timeout=timeout,
+        )
         summary = None
         if "--out" in args and proc.returncode == 0:
             path = Path(args[args.index("--out") + 1]) / "summary.json"

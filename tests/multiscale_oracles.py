@@ -18,20 +18,38 @@ __all__ = ["stage_two_reference"]
 
 
 def stage_two_reference(
-    ops, topo, grid, aux, layers: int, source: bool = True,
-    *, dofs: CoarseCellDofs | None = None, comm: MPI.Comm = MPI.COMM_SELF, distributed: bool = False,
+    ops,
+    topo,
+    grid,
+    aux,
+    layers: int,
+    source: bool = True,
+    *,
+    dofs: CoarseCellDofs | None = None,
+    comm: MPI.Comm = MPI.COMM_SELF,
+    distributed: bool = False,
 ) -> tuple[list[PatchFunctions], list[PatchFunctions]]:
     """``mixed_cem.stage_two`` with one sparse LU of the whole saddle-point system per patch (every rank gets every
     function, ``distributed`` or not): the same linear systems as the static condensation of the package."""
     dofs = dofs or CoarseCellDofs.of(ops, grid)
     cost = np.array([sum(len(grid.cells[j]) for j in grid.patch(i, layers)) for i in range(grid.size)], dtype=float)
-    out = run_shared(cost ** 1.5, comm, "mixed CEM Stage II (patches)",
-                     lambda i: _patch_functions(ops, topo, grid, dofs, aux, i, layers, source))
+    out = run_shared(
+        cost**1.5,
+        comm,
+        "mixed CEM Stage II (patches)",
+        lambda i: _patch_functions(ops, topo, grid, dofs, aux, i, layers, source),
+    )
     return [b for b, _ in out], [c for _, c in out]
 
 
 def _split_by_coarse(
-    dofs: CoarseCellDofs, patch: np.ndarray, space, aw: np.ndarray, T: sp.csr_matrix, x: np.ndarray, n_loc: int,
+    dofs: CoarseCellDofs,
+    patch: np.ndarray,
+    space,
+    aw: np.ndarray,
+    T: sp.csr_matrix,
+    x: np.ndarray,
+    n_loc: int,
     n_u: int,
 ) -> tuple[list, list]:
     """Patch solutions x → per coarse cell of the patch: (AW coefficients, displacements); T = aw_map(space, aw)."""
@@ -44,8 +62,9 @@ def _split_by_coarse(
     return sig, dis
 
 
-def _patch_functions(ops, topo, grid, dofs: CoarseCellDofs, aux, i: int, layers: int, source: bool
-                     ) -> tuple[PatchFunctions, PatchFunctions | None]:
+def _patch_functions(
+    ops, topo, grid, dofs: CoarseCellDofs, aux, i: int, layers: int, source: bool
+) -> tuple[PatchFunctions, PatchFunctions | None]:
     """The Stage II basis functions ψ_j^i and the data correctors of coarse cell i on K_{i,m}."""
     n_g = ops.num_gamma_values
     patch = np.sort(np.asarray(grid.patch(i, layers), dtype=np.int64))
@@ -81,6 +100,7 @@ def _patch_functions(ops, topo, grid, dofs: CoarseCellDofs, aux, i: int, layers:
     if not nd:
         return basis, None
     index = np.concatenate([gcols, [n_g]]) if load else gcols
-    corr = PatchFunctions(patch, index, [np.ascontiguousarray(s[:, li:]) for s in sig],
-                          [np.ascontiguousarray(d[:, li:]) for d in dis])
+    corr = PatchFunctions(
+        patch, index, [np.ascontiguousarray(s[:, li:]) for s in sig], [np.ascontiguousarray(d[:, li:]) for d in dis]
+    )
     return basis, corr

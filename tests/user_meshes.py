@@ -8,14 +8,28 @@ __all__ = ["GOOD", "build_columns", "solid_or_quads"]
 
 #: the three columns A = (0, 3/8), B = (3/8, 3/4), C = (3/4, 1) of the unit square; Ω₁ = A ∪ B, Ω₂ = C
 GOOD = dict(
-    omega1=("A", "B"), omega2=("C",), gamma=("v2",), gamma_c=("v3",),
+    omega1=("A", "B"),
+    omega2=("C",),
+    gamma=("v2",),
+    gamma_c=("v3",),
     gamma_d=("v0", "b0", "b1", "b2", "t0", "t1", "t2"),
 )
 
 
-def build_columns(path, *, omega1=GOOD["omega1"], omega2=GOOD["omega2"], gamma=GOOD["gamma"],
-                  gamma_c=GOOD["gamma_c"], gamma_d=GOOD["gamma_d"], interface="shared", z=0.0,
-                  surface_groups=None, curve_groups=None, n=8):
+def build_columns(
+    path,
+    *,
+    omega1=GOOD["omega1"],
+    omega2=GOOD["omega2"],
+    gamma=GOOD["gamma"],
+    gamma_c=GOOD["gamma_c"],
+    gamma_d=GOOD["gamma_d"],
+    interface="shared",
+    z=0.0,
+    surface_groups=None,
+    curve_groups=None,
+    n=8,
+):
     """A structured triangle mesh of three columns, tagged as asked.
 
     Curves: verticals v0..v3 at x = 0, 3/8, 3/4, 1; bottom b0..b2 and top t0..t2 segments.

@@ -29,7 +29,6 @@ from fenics_contact.cli.check import check_mesh
 from fenics_contact.cli.command import main
 from fenics_contact.cli.options import DEFAULT_H, METHODS, TABLE_METHODS, RunOptions, default_accel, default_out
 from fenics_contact.cli.parser import NOT_GIVEN, build_parser
-from fenics_contact.cli.solve import check_pixel_modulus, load_pixel_map, run
 from fenics_contact.cli.signals import (
     EXIT_BAD_INPUT,
     EXIT_CODES,
@@ -38,6 +37,7 @@ from fenics_contact.cli.signals import (
     Interrupted,
     interruptible,
 )
+from fenics_contact.cli.solve import check_pixel_modulus, load_pixel_map, run
 
 _interruptible = interruptible  #: the name tests/test_interrupt.py imports
 

@@ -14,8 +14,16 @@ from fenics_contact.problem.case import Case, load_case, parse_override
 __all__ = ["case_run_options", "options_from_arguments"]
 
 #: RunOptions fields that describe the problem: with --case each one changes a key of the case
-_PROBLEM_FLAGS = {"h": "mesh.h", "H": "mesh.H", "mesh": "mesh", "nu": "material.nu", "E_map": "material.E",
-                  "model": "material.model", "E_high": "material.E-high", "E_low": "material.E-low"}
+_PROBLEM_FLAGS = {
+    "h": "mesh.h",
+    "H": "mesh.H",
+    "mesh": "mesh",
+    "nu": "material.nu",
+    "E_map": "material.E",
+    "model": "material.model",
+    "E_high": "material.E-high",
+    "E_low": "material.E-low",
+}
 
 
 def options_from_arguments(args: argparse.Namespace, argv: list[str] | None = None) -> tuple[RunOptions, Case | None]:
@@ -70,8 +78,10 @@ def case_run_options(case: Case, given: Mapping[str, object] = {}) -> RunOptions
             if name not in keys[table]:
                 home = next((t for t, k in keys.items() if name in k), None)
                 hint = f" ({key} belongs in [{home}])" if home else ""
-                raise InputError(f"case {case.path}: unknown key '{table}.{key}'{hint}; the keys of [{table}] are "
-                                 f"{sorted(k.replace('_', '-') for k in keys[table])}")
+                raise InputError(
+                    f"case {case.path}: unknown key '{table}.{key}'{hint}; the keys of [{table}] are "
+                    f"{sorted(k.replace('_', '-') for k in keys[table])}"
+                )
             values[name] = _run_value(case, f"{table}.{key}", name, value)
         probe = {"method": values.get("method", "primal") if table == "run" else methods[0]}
         if "out" in given:
@@ -99,11 +109,21 @@ def _run_value(case: Case, key: str, name: str, value):
     number = isinstance(value, (int, float)) and not isinstance(value, bool)
     if kind is str and name in ("alpha", "beta") and number:
         return repr(value)  # a coefficient may be written as a number
-    ok = {bool: isinstance(value, bool), int: number and isinstance(value, int), float: number,
-          str: isinstance(value, str), Path: isinstance(value, str)}.get(kind, True)
+    ok = {
+        bool: isinstance(value, bool),
+        int: number and isinstance(value, int),
+        float: number,
+        str: isinstance(value, str),
+        Path: isinstance(value, str),
+    }.get(kind, True)
     if not ok:
-        what = {bool: "true or false", int: "an integer", float: "a number", str: "a string",
-                Path: "a directory name (a string)"}[kind]
+        what = {
+            bool: "true or false",
+            int: "an integer",
+            float: "a number",
+            str: "a string",
+            Path: "a directory name (a string)",
+        }[kind]
         raise InputError(f"case {case.path}: {key} must be {what}, got {value!r}")
     return Path(value) if kind is Path else float(value) if kind is float else value
 

@@ -56,9 +56,16 @@ def check_mesh(args: argparse.Namespace, comm: MPI.Comm = MPI.COMM_WORLD) -> int
     case, options = _options(args)
     path = options.mesh if case is None else case.mesh.path if isinstance(case.mesh, MeshFile) else None
     say = _printer(comm)
-    say(f"{'mesh ' + str(path) if case is None else 'case ' + str(case.path)}"
-        + (f" (mesh {path})" if case is not None and path is not None else
-           f" (built-in {case.mesh.kind} mesh)" if case is not None else ""))
+    say(
+        f"{'mesh ' + str(path) if case is None else 'case ' + str(case.path)}"
+        + (
+            f" (mesh {path})"
+            if case is not None and path is not None
+            else f" (built-in {case.mesh.kind} mesh)"
+            if case is not None
+            else ""
+        )
+    )
     groups = _file_groups(path, comm) if path is not None else None
     if groups is not None:
         materials = case.material.groups() if case is not None else set()
@@ -126,29 +133,47 @@ def _describe(cm: ContactMesh, say, groups) -> None:
     tdim = msh.topology.dim
     msh.topology.create_entities(tdim - 1)
     cells, facets = msh.topology.index_map(tdim), msh.topology.index_map(tdim - 1)
-    say(f"  dimension {msh.geometry.dim}, {cells.size_global} triangles, {msh.topology.index_map(0).size_global} "
-        "vertices")
+    say(
+        f"  dimension {msh.geometry.dim}, {cells.size_global} triangles, {msh.topology.index_map(0).size_global} "
+        "vertices"
+    )
     counts = {PHYSICAL_NAMES[t]: _owned(cm.cell_tags.find(t), cells.size_local, cm.comm) for t in Subdomain}
     counts |= {PHYSICAL_NAMES[t]: _owned(cm.facet_tags.find(t), facets.size_local, cm.comm) for t in Boundary}
-    counts |= {name: _owned(cm.facet_tags.find(tag), facets.size_local, cm.comm)
-               for tag, name in sorted((cm.neumann_names or {}).items(), key=lambda item: item[1])}
-    given = "tagged by the built-in mesh" if groups is None else "given in the file" \
-        if any(name in _BUILT for name, _, _ in groups) else "built automatically along Gamma_C (problem.strip)"
+    counts |= {
+        name: _owned(cm.facet_tags.find(tag), facets.size_local, cm.comm)
+        for tag, name in sorted((cm.neumann_names or {}).items(), key=lambda item: item[1])
+    }
+    given = (
+        "tagged by the built-in mesh"
+        if groups is None
+        else "given in the file"
+        if any(name in _BUILT for name, _, _ in groups)
+        else "built automatically along Gamma_C (problem.strip)"
+    )
     say(f"  Omega1, Omega2, gamma: {given}")
-    say("  tagged: " + ", ".join(f"{name} {n} {'cells' if name in _BUILT[:2] else 'facets'}"
-                                 for name, n in counts.items()))
+    say(
+        "  tagged: "
+        + ", ".join(f"{name} {n} {'cells' if name in _BUILT[:2] else 'facets'}" for name, n in counts.items())
+    )
     coarse = "none" if cm.H is None else f"{cm.H:.6g}"
     contact = contact_cell_size(msh, cm.facet_tags)
-    say(f"  h = {cm.h:.6g} (the run's mesh size), contact cell size {contact:.6g} (the largest diameter of a "
-        f"cell on Gamma_C), H = {coarse}")
+    say(
+        f"  h = {cm.h:.6g} (the run's mesh size), contact cell size {contact:.6g} (the largest diameter of a "
+        f"cell on Gamma_C), H = {coarse}"
+    )
     bends = interface_bends_of(cm)
-    say("  gamma: straight" if not bends.size else
-        f"  gamma: bends at {len(bends)} vertices (first at ({bends[0][0]:.6g}, {bends[0][1]:.6g})); the mixed "
-        "methods take the traction of one stress tensor there")
+    say(
+        "  gamma: straight"
+        if not bends.size
+        else f"  gamma: bends at {len(bends)} vertices (first at ({bends[0][0]:.6g}, {bends[0][1]:.6g})); the mixed "
+        "methods take the traction of one stress tensor there"
+    )
     ends = contact_open_ends(cm)
     if ends.size:
-        say(f"  Gamma_C ends where the boundary goes on straight at {len(ends)} points (first at "
-            f"({ends[0][0]:.6g}, {ends[0][1]:.6g})): a contact zone reaching them is cut short by the tags")
+        say(
+            f"  Gamma_C ends where the boundary goes on straight at {len(ends)} points (first at "
+            f"({ends[0][0]:.6g}, {ends[0][1]:.6g})): a contact zone reaching them is cut short by the tags"
+        )
 
 
 def _owned(found: np.ndarray, n_owned: int, comm: MPI.Comm) -> int:
@@ -184,8 +209,11 @@ def _file_groups(path: Path, comm: MPI.Comm) -> list[tuple[str, int, int]] | Non
             else:
                 groups = []
                 for dim, tag in gmsh.model.getPhysicalGroups():
-                    count = sum(len(elements) for entity in gmsh.model.getEntitiesForPhysicalGroup(dim, tag)
-                                for elements in gmsh.model.mesh.getElements(dim, entity)[1])
+                    count = sum(
+                        len(elements)
+                        for entity in gmsh.model.getEntitiesForPhysicalGroup(dim, tag)
+                        for elements in gmsh.model.mesh.getElements(dim, entity)[1]
+                    )
                     groups.append((gmsh.model.getPhysicalName(dim, tag) or f"(unnamed {tag})", dim, count))
                 groups.sort(key=lambda g: (-g[1], g[0]))
     return comm.bcast(groups, root=0)
@@ -197,4 +225,3 @@ def _printer(comm: MPI.Comm):
             print(line, flush=True)
 
     return say
-

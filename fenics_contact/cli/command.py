@@ -8,15 +8,15 @@ from mpi4py import MPI
 from fenics_contact.cli.cases import options_from_arguments
 from fenics_contact.cli.check import check_mesh
 from fenics_contact.cli.parser import build_parser
-from fenics_contact.cli.solve import run
 from fenics_contact.cli.signals import (
     EXIT_BAD_INPUT,
     EXIT_NUMERICAL,
     Interrupted,
     _fail,
-    interruptible,
     _setup_logging,
+    interruptible,
 )
+from fenics_contact.cli.solve import run
 from fenics_contact.errors import ConvergenceError, FenicsContactError
 from fenics_contact.examples import run_examples_command
 
@@ -39,9 +39,13 @@ def main(argv: list[str] | None = None) -> int:
                 out = options.out
                 code = run(options, comm, case=case)
         except Interrupted as stop:
-            where = ("nothing was written" if args.command == "check-mesh" else
-                     f"the results in {out} are complete" if getattr(stop, "output_complete", False)
-                     else f"{out} left as it was (no partial output)")
+            where = (
+                "nothing was written"
+                if args.command == "check-mesh"
+                else f"the results in {out} are complete"
+                if getattr(stop, "output_complete", False)
+                else f"{out} left as it was (no partial output)"
+            )
             _fail(f"interrupted by {stop}: {where}", comm)
             return 128 + stop.signum
         except ConvergenceError as err:

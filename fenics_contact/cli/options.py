@@ -18,18 +18,28 @@ from fenics_contact.errors import InputError
 from fenics_contact.hybrid.iteration import InterfaceNewtonOptions, IterationOptions
 from fenics_contact.hybrid.mixed import transmission_coefficient
 from fenics_contact.io import check_output_target, check_outside_output
-from fenics_contact.methods import HYBRID_METHODS, METHODS as CATALOGUE, get_method
+from fenics_contact.methods import HYBRID_METHODS, get_method
+from fenics_contact.methods import METHODS as CATALOGUE
 from fenics_contact.problem.materials import check_poisson_ratio
 from fenics_contact.problem.models import get_model, model_1
 
-__all__ = ["DEFAULT_H", "METHODS", "MODEL_DEFAULTS", "TABLE_METHODS", "RunOptions", "default_accel", "default_out",
-           "method_default"]
+__all__ = [
+    "DEFAULT_H",
+    "METHODS",
+    "MODEL_DEFAULTS",
+    "TABLE_METHODS",
+    "RunOptions",
+    "default_accel",
+    "default_out",
+    "method_default",
+]
 
 METHODS = HYBRID_METHODS  #: the ``--method`` choices: Algorithms 1–4 (``methods.METHODS``)
 DEFAULT_H = 64  #: 1/h of the built-in mesh when --h is not given
 #: the materials of the built-in models when --E-high, --E-low, --nu are not given (the three models share them)
-MODEL_DEFAULTS = {name: p.default for name, p in inspect.signature(model_1).parameters.items()
-                  if name in ("E_high", "E_low", "nu")}
+MODEL_DEFAULTS = {
+    name: p.default for name, p in inspect.signature(model_1).parameters.items() if name in ("E_high", "E_low", "nu")
+}
 #: the iteration's defaults (--tol, --max-iterations) and the interface Newton's (--front-window)
 _ITERATION = IterationOptions()
 
@@ -62,10 +72,15 @@ TABLE_METHODS: dict[str, tuple[str, ...]] = {
 }
 #: one factor of an α spelling (hybrid.transmission.robin_coefficient): a number [E or Emin], E, Emin, sqrt-h, h^p
 _ALPHA_FACTOR = re.compile(
-    r"^((?P<number>(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?)(Emin|E)?|Emin|E|sqrt-h|h\^\(?[+-]?\d+(\.\d*)?(/\d+)?\)?)$")
+    r"^((?P<number>(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?)(Emin|E)?|Emin|E|sqrt-h|h\^\(?[+-]?\d+(\.\d*)?(/\d+)?\)?)$"
+)
 #: what a positive option is, for its message
-_MEANING = {"delta": "the primal penalty δ", "epsilon": "the mixed penalty ε", "E_high": "a Young's modulus",
-            "E_low": "a Young's modulus"}
+_MEANING = {
+    "delta": "the primal penalty δ",
+    "epsilon": "the mixed penalty ε",
+    "E_high": "a Young's modulus",
+    "E_low": "a Young's modulus",
+}
 
 
 def _flag(name: str) -> str:
@@ -87,8 +102,10 @@ def _check_alpha(alpha: str) -> None:
         match = _ALPHA_FACTOR.match(token)
         if match is not None and (match["number"] is None or 0 < float(match["number"]) < math.inf):
             continue
-        raise InputError(f"cannot read the transmission coefficient --alpha {alpha!r}: give a number > 0 or a "
-                         "product of numbers, h^p, sqrt-h and E (or Emin), e.g. 1, h^-1/2, 2E*h^-1/2, Emin*h^-1/2")
+        raise InputError(
+            f"cannot read the transmission coefficient --alpha {alpha!r}: give a number > 0 or a "
+            "product of numbers, h^p, sqrt-h and E (or Emin), e.g. 1, h^-1/2, 2E*h^-1/2, Emin*h^-1/2"
+        )
 
 
 def _check_directory(flag: str, path: Path) -> None:
@@ -174,38 +191,51 @@ class RunOptions:
         if self.accel is None:
             object.__setattr__(self, "accel", default_accel(self.method))
         if self.front_window is not None and self.accel != "newton":
-            raise InputError(f"--front-window is an option of the interface Newton (--accel newton), not of --accel "
-                             f"{self.accel}")
-        if self.front_window is not None and (isinstance(self.front_window, bool)
-                                              or not isinstance(self.front_window, (int, np.integer))
-                                              or self.front_window < 0):
+            raise InputError(
+                f"--front-window is an option of the interface Newton (--accel newton), not of --accel {self.accel}"
+            )
+        if self.front_window is not None and (
+            isinstance(self.front_window, bool)
+            or not isinstance(self.front_window, (int, np.integer))
+            or self.front_window < 0
+        ):
             raise InputError(f"--front-window must be an integer >= 0 (0: off), got {self.front_window!r}")
         for name, (methods, what) in _METHOD_OPTIONS.items():
             if getattr(self, name) is not None and self.method not in methods:
                 raise InputError(f"{_flag(name)} does not apply to --method {self.method} (it is {what})")
         if self.coarse_groups and self.case is not None:
-            raise InputError("--coarse-groups does not apply to --case: a case file's surface groups are material "
-                             "groups; its coarse grid is the Cartesian grid of side 1/H over the bounding box "
-                             "(mesh.H in the case file)")
+            raise InputError(
+                "--coarse-groups does not apply to --case: a case file's surface groups are material "
+                "groups; its coarse grid is the Cartesian grid of side 1/H over the bounding box "
+                "(mesh.H in the case file)"
+            )
         if self.coarse_groups and self.mesh is None:
             raise InputError("--coarse-groups takes the coarse cells from the surface groups of --mesh: give --mesh")
         if self.mesh is not None:
             if self.h is not None:
-                raise InputError("--h sets the size of the built-in mesh; with --mesh the size comes from the file "
-                                 "(h = sqrt(2 x largest area of a cell on Gamma_C), reported in the summary): "
-                                 "leave --h out")
+                raise InputError(
+                    "--h sets the size of the built-in mesh; with --mesh the size comes from the file "
+                    "(h = sqrt(2 x largest area of a cell on Gamma_C), reported in the summary): "
+                    "leave --h out"
+                )
             if not Path(self.mesh).is_file():
-                raise InputError(f"--mesh {self.mesh} does not exist" if not Path(self.mesh).exists()
-                                 else f"--mesh {self.mesh} is not a file")
+                raise InputError(
+                    f"--mesh {self.mesh} does not exist"
+                    if not Path(self.mesh).exists()
+                    else f"--mesh {self.mesh} is not a file"
+                )
         _integer("h", self.h, 2)
         _integer("H", self.H, 2)
         if self.mesh is None and self.n % self.H:
-            raise InputError(f"--h {self.n} is not a multiple of --H {self.H}: the coarse grid must be a union of fine "
-                             "cells")
+            raise InputError(
+                f"--h {self.n} is not a multiple of --H {self.H}: the coarse grid must be a union of fine cells"
+            )
         if self.mesh is None and self.H is not None and self.method.endswith("-ms") and self.n < 2 * self.H:
-            raise InputError(f"--H {self.H} with --h {self.n}: a coarse cell of the multiscale methods must span at "
-                             "least 2 fine cells per side (--H at most --h/2; H = h left a mixed-ms local problem "
-                             "singular)")
+            raise InputError(
+                f"--H {self.H} with --h {self.n}: a coarse cell of the multiscale methods must span at "
+                "least 2 fine cells per side (--H at most --h/2; H = h left a mixed-ms local problem "
+                "singular)"
+            )
         for name in ("delta", "epsilon", "E_high", "E_low"):
             _finite_positive(name, getattr(self, name))
         if self.E_map is not None:
@@ -232,8 +262,12 @@ class RunOptions:
             _check_directory("--cache-dir", self.cache_dir)
         out = self.out if self.out is not None else default_out(self.method, self.model, self.mesh, self.case)
         object.__setattr__(self, "out", check_output_target(out))
-        for what, path in (("--cache-dir", self.cache_dir), ("--case", self.case), ("--mesh", self.mesh),
-                           ("--E-map", self.E_map)):
+        for what, path in (
+            ("--cache-dir", self.cache_dir),
+            ("--case", self.case),
+            ("--mesh", self.mesh),
+            ("--E-map", self.E_map),
+        ):
             check_outside_output(self.out, path, what)
 
     @classmethod
@@ -264,8 +298,9 @@ class RunOptions:
         return flat | {"options": self.iteration_options()}
 
     def iteration_options(self) -> IterationOptions:
-        return IterationOptions(tol=self.tol, max_iterations=self.max_iterations, accel=self.accel,
-                                newton=self.newton_options())
+        return IterationOptions(
+            tol=self.tol, max_iterations=self.max_iterations, accel=self.accel, newton=self.newton_options()
+        )
 
     def newton_options(self) -> InterfaceNewtonOptions:
         """The interface Newton's options (the front window of --front-window, else the default)."""

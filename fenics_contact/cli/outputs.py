@@ -34,16 +34,26 @@ def _at_open_ends(profile, ends: np.ndarray) -> list[list[float]]:
 def _contact_summary(profile, ends: np.ndarray) -> dict:
     """Contact zone(s) of a profile for the summary: the span, each separate zone, open ends reached."""
     zone = profile.contact_zone()
-    return {"contact_zone": [list(p) for p in zone] if zone else None,
-            "contact_zones": [[list(a), list(b)] for a, b in profile.contact_zones()],
-            "contact_at_open_end": _at_open_ends(profile, ends)}
+    return {
+        "contact_zone": [list(p) for p in zone] if zone else None,
+        "contact_zones": [[list(a), list(b)] for a, b in profile.contact_zones()],
+        "contact_at_open_end": _at_open_ends(profile, ends),
+    }
 
 
-def _curve_row(depth: float, direction: np.ndarray, profile, iterations: int, converged: bool, time_s: float,
-               ends: np.ndarray) -> dict:
-    return {"depth": float(depth), "force": float(profile.resultant @ direction), "normal_force": profile.force,
-            "max_pressure": profile.max_pressure, **_contact_summary(profile, ends),
-            "iterations": int(iterations), "converged": bool(converged), "time_s": time_s}
+def _curve_row(
+    depth: float, direction: np.ndarray, profile, iterations: int, converged: bool, time_s: float, ends: np.ndarray
+) -> dict:
+    return {
+        "depth": float(depth),
+        "force": float(profile.resultant @ direction),
+        "normal_force": profile.force,
+        "max_pressure": profile.max_pressure,
+        **_contact_summary(profile, ends),
+        "iterations": int(iterations),
+        "converged": bool(converged),
+        "time_s": time_s,
+    }
 
 
 def _warn_open_ends(summary: dict, comm: MPI.Comm) -> None:
@@ -53,9 +63,12 @@ def _warn_open_ends(summary: dict, comm: MPI.Comm) -> None:
     hits += [(f"depth {s['depth']:g}", s["contact_at_open_end"]) for s in steps if s["contact_at_open_end"]]
     if hits and comm.rank == 0:
         where = "; ".join(f"{what} at {', '.join(f'({x:.6g}, {y:.6g})' for x, y in pts)}" for what, pts in hits)
-        log.warning("the contact zone reaches an end of Gamma_C where the boundary goes on straight (%s): the "
-                    "true zone is wider than Gamma_C, so the contact force and pressure are those of a contact "
-                    "cut short by the tags, not of the body. Extend Gamma_C along that side.", where)
+        log.warning(
+            "the contact zone reaches an end of Gamma_C where the boundary goes on straight (%s): the "
+            "true zone is wider than Gamma_C, so the contact force and pressure are those of a contact "
+            "cut short by the tags, not of the body. Extend Gamma_C along that side.",
+            where,
+        )
 
 
 def _finite_or_none(x: float) -> float | None:
@@ -85,8 +98,13 @@ def _cell_array(fn) -> np.ndarray:
 
 def _title(options: RunOptions, problem: ContactProblem) -> str:
     """The figures' name of the run: the case or mesh file, else the built-in model, and the method."""
-    name = (f"case {Path(options.case).name}" if options.case is not None else
-            f"mesh {Path(options.mesh).name}" if options.mesh is not None else f"model {options.model}")
+    name = (
+        f"case {Path(options.case).name}"
+        if options.case is not None
+        else f"mesh {Path(options.mesh).name}"
+        if options.mesh is not None
+        else f"model {options.model}"
+    )
     return f"{name}, {options.method}"
 
 

@@ -19,7 +19,8 @@ from fenics_contact.examples import add_examples_parser
 from fenics_contact.fem.mixed import default_epsilon
 from fenics_contact.fem.primal import default_penalty
 from fenics_contact.hybrid.iteration import ACCELERATIONS, InterfaceNewtonOptions
-from fenics_contact.methods import METHODS as CATALOGUE, get_method
+from fenics_contact.methods import METHODS as CATALOGUE
+from fenics_contact.methods import get_method
 
 __all__ = ["DESCRIPTION", "NOT_GIVEN", "build_parser"]
 
@@ -47,8 +48,11 @@ def _accel_default() -> str:
     several ranks (the rule reads only the communicator's size)."""
     serial = {m: get_method(m).default_accel(SimpleNamespace(size=1)) for m in METHODS}
     ranks = {m: get_method(m).default_accel(SimpleNamespace(size=2)) for m in METHODS}
-    text = _shown(serial[METHODS[0]]) if len(set(serial.values())) == 1 else \
-        "; ".join(f"{m}: {v}" for m, v in serial.items())
+    text = (
+        _shown(serial[METHODS[0]])
+        if len(set(serial.values())) == 1
+        else "; ".join(f"{m}: {v}" for m, v in serial.items())
+    )
     changed = [f"--method {m}: {v}" for m, v in ranks.items() if v != serial[m]]
     return text + (f"; under mpiexec {', '.join(changed)}" if changed else "")
 
@@ -62,100 +66,186 @@ def _default(text: str) -> str:
 
 
 def _add_problem_options(run: argparse.ArgumentParser) -> None:
-    group = run.add_argument_group("problem", "the body, its mesh, materials and loads: a built-in model, a mesh "
-                                   "file or a case file")
-    group.add_argument("--model", type=int, choices=(1, 2, 3), default=_RUN_DEFAULTS["model"],
-                       help="built-in test model: 1 channels, 2 inclusions, 3 heterogeneous strip (loads in Ω₁)"
-                       + _default(_shown(_RUN_DEFAULTS["model"])))
-    group.add_argument("--case", type=Path, help="a case file (TOML) describing the whole problem: mesh, "
-                       "materials, loads, boundary conditions, obstacle and run options (cases/*.toml, README); the "
-                       "flags override it: --h, --H, --mesh, --nu, --E-map, --model, --E-high, --E-low change its "
-                       "problem, the others its run options" + _default("none: the built-in --model"))
-    group.add_argument("--set", action="append", metavar="KEY=VALUE", help="with --case: replace one key of the "
-                       "case file, VALUE in TOML syntax, e.g. --set mesh.refinement=0.5 --set "
-                       "'obstacle.indentation=[1e-3, 2e-3]' (repeatable)" + _default("none"))
-    group.add_argument("--mesh", type=Path, help="a gmsh .msh file of planar triangles with the physical groups "
-                       "Omega1, Omega2, Gamma_D, Gamma_C, gamma (checked against the contact problem; "
-                       "fenics-contact check-mesh FILE checks it alone); a file with none of Omega1/Omega2/gamma "
-                       "gets Omega2 = the coarse cells along Gamma_C" + _default("none: the built-in unit square"))
-    group.add_argument("--h", type=int, help="fine size of the built-in mesh as 1/h; not with --mesh, whose size "
-                       "is h = sqrt(2 x largest area of a cell on Gamma_C) (1/n on an n x n grid)"
-                       + _default(_shown(DEFAULT_H)))
-    group.add_argument("--H", type=int, default=_RUN_DEFAULTS["H"], help="coarse size / strip width as 1/H; with "
-                       "--mesh the coarse grid of squares of side 1/H over the bounding box (multiscale methods)"
-                       + _default(_shown(_RUN_DEFAULTS["H"])))
-    group.add_argument("--coarse-groups", action="store_true",
-                       help="with --mesh: the surface groups of the file are the coarse cells (a coarse partition of "
-                       "your own) instead of the squares of side 1/H over the bounding box" + _default("off"))
-    group.add_argument("--E-high", type=float, help="E in the high-modulus pattern of the built-in model"
-                       + _default(_shown(MODEL_DEFAULTS["E_high"])))
+    group = run.add_argument_group(
+        "problem", "the body, its mesh, materials and loads: a built-in model, a mesh file or a case file"
+    )
+    group.add_argument(
+        "--model",
+        type=int,
+        choices=(1, 2, 3),
+        default=_RUN_DEFAULTS["model"],
+        help="built-in test model: 1 channels, 2 inclusions, 3 heterogeneous strip (loads in Ω₁)"
+        + _default(_shown(_RUN_DEFAULTS["model"])),
+    )
+    group.add_argument(
+        "--case",
+        type=Path,
+        help="a case file (TOML) describing the whole problem: mesh, "
+        "materials, loads, boundary conditions, obstacle and run options (cases/*.toml, README); the "
+        "flags override it: --h, --H, --mesh, --nu, --E-map, --model, --E-high, --E-low change its "
+        "problem, the others its run options" + _default("none: the built-in --model"),
+    )
+    group.add_argument(
+        "--set",
+        action="append",
+        metavar="KEY=VALUE",
+        help="with --case: replace one key of the "
+        "case file, VALUE in TOML syntax, e.g. --set mesh.refinement=0.5 --set "
+        "'obstacle.indentation=[1e-3, 2e-3]' (repeatable)" + _default("none"),
+    )
+    group.add_argument(
+        "--mesh",
+        type=Path,
+        help="a gmsh .msh file of planar triangles with the physical groups "
+        "Omega1, Omega2, Gamma_D, Gamma_C, gamma (checked against the contact problem; "
+        "fenics-contact check-mesh FILE checks it alone); a file with none of Omega1/Omega2/gamma "
+        "gets Omega2 = the coarse cells along Gamma_C" + _default("none: the built-in unit square"),
+    )
+    group.add_argument(
+        "--h",
+        type=int,
+        help="fine size of the built-in mesh as 1/h; not with --mesh, whose size "
+        "is h = sqrt(2 x largest area of a cell on Gamma_C) (1/n on an n x n grid)" + _default(_shown(DEFAULT_H)),
+    )
+    group.add_argument(
+        "--H",
+        type=int,
+        default=_RUN_DEFAULTS["H"],
+        help="coarse size / strip width as 1/H; with "
+        "--mesh the coarse grid of squares of side 1/H over the bounding box (multiscale methods)"
+        + _default(_shown(_RUN_DEFAULTS["H"])),
+    )
+    group.add_argument(
+        "--coarse-groups",
+        action="store_true",
+        help="with --mesh: the surface groups of the file are the coarse cells (a coarse partition of "
+        "your own) instead of the squares of side 1/H over the bounding box" + _default("off"),
+    )
+    group.add_argument(
+        "--E-high",
+        type=float,
+        help="E in the high-modulus pattern of the built-in model" + _default(_shown(MODEL_DEFAULTS["E_high"])),
+    )
     group.add_argument("--E-low", type=float, help="E elsewhere" + _default(_shown(MODEL_DEFAULTS["E_low"])))
-    group.add_argument("--nu", type=float, default=_RUN_DEFAULTS["nu"],
-                       help="Poisson ratio" + _default(_shown(_RUN_DEFAULTS["nu"])))
-    group.add_argument("--E-map", type=Path, help="Young's modulus as a pixel array over the unit square "
-                       "(.npy, or text/.csv readable by numpy.loadtxt; row 0 = bottom); replaces the model's E map; "
-                       "every pixel the domain covers must be finite and > 0" + _default("none: the model's E"))
+    group.add_argument(
+        "--nu", type=float, default=_RUN_DEFAULTS["nu"], help="Poisson ratio" + _default(_shown(_RUN_DEFAULTS["nu"]))
+    )
+    group.add_argument(
+        "--E-map",
+        type=Path,
+        help="Young's modulus as a pixel array over the unit square "
+        "(.npy, or text/.csv readable by numpy.loadtxt; row 0 = bottom); replaces the model's E map; "
+        "every pixel the domain covers must be finite and > 0" + _default("none: the model's E"),
+    )
 
 
 def _add_method_options(run: argparse.ArgumentParser) -> None:
     group = run.add_argument_group("method", "the discretization, its penalty and transmission coefficient")
-    group.add_argument("--method", choices=METHODS, default=_RUN_DEFAULTS["method"],
-                       help="discretization / algorithm: " + "; ".join(f"{m} ({CATALOGUE[m].summary})"
-                                                                       for m in METHODS)
-                       + _default(_RUN_DEFAULTS["method"]))
-    group.add_argument("--alpha", help="primal Robin coefficient: a number or a product of numbers, h^p, sqrt-h and "
-                       "E (E_p: mean E at the γ node) or Emin (the smallest E_p on γ), e.g. 1, h^-1/2, 2E*h^-1/2"
-                       + _default(_per_method("alpha")))
-    group.add_argument("--delta", type=float, help="primal penalty δ"
-                       + _default(f"{_factor(default_penalty)}·h/E, the largest E on Gamma_C"))
-    group.add_argument("--beta", help="mixed transmission coefficient β: sqrt-h or a number"
-                       + _default(_per_method("beta")))
-    group.add_argument("--epsilon", type=float, help="mixed penalty ε"
-                       + _default(f"{_factor(default_epsilon)}·h·E, the smallest E on Gamma_C"))
-    group.add_argument("--reference", action="store_true",
-                       help="also solve the monolithic problem and report e_u" + _default("off"))
+    group.add_argument(
+        "--method",
+        choices=METHODS,
+        default=_RUN_DEFAULTS["method"],
+        help="discretization / algorithm: "
+        + "; ".join(f"{m} ({CATALOGUE[m].summary})" for m in METHODS)
+        + _default(_RUN_DEFAULTS["method"]),
+    )
+    group.add_argument(
+        "--alpha",
+        help="primal Robin coefficient: a number or a product of numbers, h^p, sqrt-h and "
+        "E (E_p: mean E at the γ node) or Emin (the smallest E_p on γ), e.g. 1, h^-1/2, 2E*h^-1/2"
+        + _default(_per_method("alpha")),
+    )
+    group.add_argument(
+        "--delta",
+        type=float,
+        help="primal penalty δ" + _default(f"{_factor(default_penalty)}·h/E, the largest E on Gamma_C"),
+    )
+    group.add_argument(
+        "--beta", help="mixed transmission coefficient β: sqrt-h or a number" + _default(_per_method("beta"))
+    )
+    group.add_argument(
+        "--epsilon",
+        type=float,
+        help="mixed penalty ε" + _default(f"{_factor(default_epsilon)}·h·E, the smallest E on Gamma_C"),
+    )
+    group.add_argument(
+        "--reference", action="store_true", help="also solve the monolithic problem and report e_u" + _default("off")
+    )
 
 
 def _add_iteration_options(run: argparse.ArgumentParser) -> None:
     group = run.add_argument_group("iteration", "the interface iteration between Ω₁ and Ω₂ and when it stops")
-    group.add_argument("--accel", choices=ACCELERATIONS, default=None,
-                       help="how the interface fixed point is solved: the interface Newton method (robust on every "
-                       "tested model), Anderson acceleration, or none (the paper's plain update); the mixed "
-                       "method's interface Newton is serial" + _default(_accel_default()))
-    group.add_argument("--front-window", type=int, default=None, metavar="W",
-                       help="with --accel newton: the contact Newton solves the contact equations locally on the W "
-                       "Gamma_C unknowns on either side of every front of its next active set, the forces elsewhere "
-                       "held (0: off, the plain semismooth Newton). The same solution; 3-5 steps instead of 8-11 "
-                       "where a near-rigid body rests on Gamma_C: README, 'Interface Newton'"
-                       + _default(_shown(InterfaceNewtonOptions().front_window)))
-    group.add_argument("--tol", type=float, default=_RUN_DEFAULTS["tol"],
-                       help="tolerance of the transmission residual (relative jump and traction imbalance on γ)"
-                       + _default(_shown(_RUN_DEFAULTS["tol"])))
-    group.add_argument("--max-iterations", type=int, default=_RUN_DEFAULTS["max_iterations"],
-                       help="most iterations" + _default(_shown(_RUN_DEFAULTS["max_iterations"])))
+    group.add_argument(
+        "--accel",
+        choices=ACCELERATIONS,
+        default=None,
+        help="how the interface fixed point is solved: the interface Newton method (robust on every "
+        "tested model), Anderson acceleration, or none (the paper's plain update); the mixed "
+        "method's interface Newton is serial" + _default(_accel_default()),
+    )
+    group.add_argument(
+        "--front-window",
+        type=int,
+        default=None,
+        metavar="W",
+        help="with --accel newton: the contact Newton solves the contact equations locally on the W "
+        "Gamma_C unknowns on either side of every front of its next active set, the forces elsewhere "
+        "held (0: off, the plain semismooth Newton). The same solution; 3-5 steps instead of 8-11 "
+        "where a near-rigid body rests on Gamma_C: README, 'Interface Newton'"
+        + _default(_shown(InterfaceNewtonOptions().front_window)),
+    )
+    group.add_argument(
+        "--tol",
+        type=float,
+        default=_RUN_DEFAULTS["tol"],
+        help="tolerance of the transmission residual (relative jump and traction imbalance on γ)"
+        + _default(_shown(_RUN_DEFAULTS["tol"])),
+    )
+    group.add_argument(
+        "--max-iterations",
+        type=int,
+        default=_RUN_DEFAULTS["max_iterations"],
+        help="most iterations" + _default(_shown(_RUN_DEFAULTS["max_iterations"])),
+    )
 
 
 def _add_multiscale_options(run: argparse.ArgumentParser) -> None:
     group = run.add_argument_group("multiscale", "the CEM-GMsFEM space in Ω₁ of primal-ms and mixed-ms")
-    group.add_argument("--layers", type=int, help="*-ms: oversampling layers m of the multiscale bases"
-                       + _default(_per_method("layers")))
-    group.add_argument("--nbasis", type=int, help="*-ms: local spectral modes l per coarse cell"
-                       + _default(_per_method("nbasis")))
-    group.add_argument("--min-gap", type=float,
-                       help="mixed-ms: add Stage I modes on a coarse cell until the first one left out has "
-                       "eigenvalue >= this (needed for nu -> 1/2; 0 keeps exactly --nbasis)"
-                       + _default(_per_method("min_gap")))
-    group.add_argument("--max-nbasis", type=int, help="mixed-ms: most Stage I modes per coarse cell"
-                       + _default(_per_method("max_nbasis")))
-    group.add_argument("--cache-dir", type=Path, help="*-ms: directory for the offline data (reused when valid)"
-                       + _default("none: no cache"))
+    group.add_argument(
+        "--layers",
+        type=int,
+        help="*-ms: oversampling layers m of the multiscale bases" + _default(_per_method("layers")),
+    )
+    group.add_argument(
+        "--nbasis", type=int, help="*-ms: local spectral modes l per coarse cell" + _default(_per_method("nbasis"))
+    )
+    group.add_argument(
+        "--min-gap",
+        type=float,
+        help="mixed-ms: add Stage I modes on a coarse cell until the first one left out has "
+        "eigenvalue >= this (needed for nu -> 1/2; 0 keeps exactly --nbasis)" + _default(_per_method("min_gap")),
+    )
+    group.add_argument(
+        "--max-nbasis",
+        type=int,
+        help="mixed-ms: most Stage I modes per coarse cell" + _default(_per_method("max_nbasis")),
+    )
+    group.add_argument(
+        "--cache-dir",
+        type=Path,
+        help="*-ms: directory for the offline data (reused when valid)" + _default("none: no cache"),
+    )
 
 
 def _add_output_options(run: argparse.ArgumentParser) -> None:
     group = run.add_argument_group("output", "where the results go and what is written")
-    group.add_argument("--out", default=None, help="output directory; replaced whole by the run, so it must be new, "
-                       "empty or an earlier run's" + _default("results/<model N, mesh or case file>-<method>, e.g. "
-                                                              "results/model1-primal"))
+    group.add_argument(
+        "--out",
+        default=None,
+        help="output directory; replaced whole by the run, so it must be new, "
+        "empty or an earlier run's"
+        + _default("results/<model N, mesh or case file>-<method>, e.g. results/model1-primal"),
+    )
     group.add_argument("--no-plots", action="store_true", help="skip the PNG figures" + _default("off"))
     group.add_argument("-v", "--verbose", action="store_true", help="log at debug level" + _default("off"))
 
@@ -163,36 +253,55 @@ def _add_output_options(run: argparse.ArgumentParser) -> None:
 def _add_check_mesh_parser(subparsers) -> None:
     """``check-mesh``: a mesh or case file checked without a solve (``cli.check``)."""
     parser = subparsers.add_parser(
-        "check-mesh", help="check a gmsh mesh or a case file without solving",
+        "check-mesh",
+        help="check a gmsh mesh or a case file without solving",
         description="Read a gmsh mesh (as run --mesh FILE reads it) or the mesh and problem of a case file (as run "
         "--case reads them), make every check a run makes before its first solve, and print what was found: the "
         "dimension, cells and vertices, the physical groups and the role of each, whether Omega1/Omega2/gamma "
         "were given or built, h and the contact cell size, whether gamma is straight, and which methods can run.",
-        epilog="exit codes: 0 a run with the method could start; 2 it would be refused (the message says why)")
+        epilog="exit codes: 0 a run with the method could start; 2 it would be refused (the message says why)",
+    )
     parser.add_argument("file", nargs="?", type=Path, metavar="FILE", help="a gmsh .msh file")
     parser.add_argument("--case", type=Path, help="a case file (TOML) instead of FILE" + _default("none"))
-    parser.add_argument("--set", action="append", metavar="KEY=VALUE",
-                        help="with --case: replace one key of the case file (as run --set)" + _default("none"))
-    parser.add_argument("--method", choices=METHODS, default=None,
-                        help="the method the run would use"
-                        + _default(f"the case's [run] method, else {_RUN_DEFAULTS['method']}"))
-    parser.add_argument("--H", type=int, default=None,
-                        help="with FILE: the coarse grid of squares of side 1/H over the bounding box, and the "
-                        "strip width when the file has no Omega1/Omega2/gamma (as run)"
-                        + _default(_shown(_RUN_DEFAULTS["H"])))
-    parser.add_argument("--coarse-groups", action="store_true",
-                        help="with FILE: the surface groups of the file are the coarse cells (as run "
-                        "--coarse-groups)" + _default("off"))
+    parser.add_argument(
+        "--set",
+        action="append",
+        metavar="KEY=VALUE",
+        help="with --case: replace one key of the case file (as run --set)" + _default("none"),
+    )
+    parser.add_argument(
+        "--method",
+        choices=METHODS,
+        default=None,
+        help="the method the run would use" + _default(f"the case's [run] method, else {_RUN_DEFAULTS['method']}"),
+    )
+    parser.add_argument(
+        "--H",
+        type=int,
+        default=None,
+        help="with FILE: the coarse grid of squares of side 1/H over the bounding box, and the "
+        "strip width when the file has no Omega1/Omega2/gamma (as run)" + _default(_shown(_RUN_DEFAULTS["H"])),
+    )
+    parser.add_argument(
+        "--coarse-groups",
+        action="store_true",
+        help="with FILE: the surface groups of the file are the coarse cells (as run "
+        "--coarse-groups)" + _default("off"),
+    )
 
 
 def build_parser(*, given_only: bool = False) -> argparse.ArgumentParser:
     codes = "\n".join(f"  {code:<4} {meaning}" for code, meaning in EXIT_CODES.items())
-    parser = argparse.ArgumentParser(prog="fenics-contact", description=DESCRIPTION,
-                                     epilog="fenics-contact COMMAND --help lists the options of a command")
+    parser = argparse.ArgumentParser(
+        prog="fenics-contact",
+        description=DESCRIPTION,
+        epilog="fenics-contact COMMAND --help lists the options of a command",
+    )
     parser.add_argument("--version", action="version", version=f"fenics-contact {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
     run = sub.add_parser(
-        "run", help="run one contact simulation and write fields, plots and a summary",
+        "run",
+        help="run one contact simulation and write fields, plots and a summary",
         formatter_class=argparse.RawDescriptionHelpFormatter,
         description="Run one contact simulation. Every option and file is checked before the mesh is built; the "
         "results are written into a temporary directory beside --out that replaces --out when the run ends "

@@ -18,7 +18,7 @@ EXIT_CODES = {
     0: "converged",
     2: "bad input (an option, a file or the mesh tags; nothing written)",
     3: "not converged: the transmission residual stayed above --tol (--max-iterations hit, or the interface Newton's "
-       "corrections ran out; results written, \"converged\": false)",
+    'corrections ran out; results written, "converged": false)',
     4: "numerical failure: Newton did not converge, non-finite values, a failed factorization (nothing written)",
     130: "interrupted by SIGINT (Ctrl-C); --out left as it was",
     143: "interrupted by SIGTERM; --out left as it was",

@@ -8,9 +8,8 @@ from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
-from mpi4py import MPI
-
 from dolfinx import fem
+from mpi4py import MPI
 
 from fenics_contact.cli.cases import _options_echo
 from fenics_contact.cli.options import RunOptions
@@ -27,7 +26,8 @@ from fenics_contact.errors import InputError
 from fenics_contact.fem.mixed import solve_mixed_monolithic
 from fenics_contact.indentation import force_indentation
 from fenics_contact.io import OutputDirectory, provenance, write_summary, write_vtx
-from fenics_contact.methods import METHODS as CATALOGUE, get_method
+from fenics_contact.methods import METHODS as CATALOGUE
+from fenics_contact.methods import get_method
 from fenics_contact.paraview import Series, contact_grid
 from fenics_contact.plots import (
     hertz_curve_for,
@@ -51,8 +51,9 @@ __all__ = ["check_pixel_modulus", "load_pixel_map", "run"]
 log = logging.getLogger("fenics_contact")
 
 
-def _indentation_curve(options: RunOptions, case: Case, problem: ContactProblem, outcome, ends: np.ndarray,
-                       out: Path, writes: bool) -> dict:
+def _indentation_curve(
+    options: RunOptions, case: Case, problem: ContactProblem, outcome, ends: np.ndarray, out: Path, writes: bool
+) -> dict:
     """The force-indentation curve of the case's load steps (the last step is the run's depth), each step's
     fields and contact written into ``out`` as ParaView series (by the ranks with ``writes``).
 
@@ -81,13 +82,25 @@ def _indentation_curve(options: RunOptions, case: Case, problem: ContactProblem,
         fields.add(step.depth, _field_grid(problem, *state))
         contact.add(step.depth, contact_grid(step.profile, comm))
 
-    curve = force_indentation(problem.with_(obstacle=spec.base()), options.method, spec.depths,
-                              direction=direction, options=options.iteration_options(), on_step=write_step,
-                              **penalty)
-    rows = [_curve_row(s.depth, direction, s.profile, s.iterations, s.converged, s.time_s, ends) | {
-        "transmission_residual": s.transmission_residual, "complementarity": s.complementarity._asdict(),
-        "interface_newton_steps": s.interface_newton_steps, "omega1_check": s.omega1_check}
-        for s in curve.steps]
+    curve = force_indentation(
+        problem.with_(obstacle=spec.base()),
+        options.method,
+        spec.depths,
+        direction=direction,
+        options=options.iteration_options(),
+        on_step=write_step,
+        **penalty,
+    )
+    rows = [
+        _curve_row(s.depth, direction, s.profile, s.iterations, s.converged, s.time_s, ends)
+        | {
+            "transmission_residual": s.transmission_residual,
+            "complementarity": s.complementarity._asdict(),
+            "interface_newton_steps": s.interface_newton_steps,
+            "omega1_check": s.omega1_check,
+        }
+        for s in curve.steps
+    ]
     return {"direction": direction.tolist(), "steps": rows}
 
 
@@ -118,12 +131,14 @@ def check_pixel_modulus(values: np.ndarray, box: tuple[float, float, float, floa
     x0, x1, y0, y1 = box
     i0, i1 = (int(np.clip(np.floor(x * nx), 0, nx - 1)) for x in (x0, x1))
     j0, j1 = (int(np.clip(np.floor(y * ny), 0, ny - 1)) for y in (y0, y1))
-    covered = values[j0:j1 + 1, i0:i1 + 1]
+    covered = values[j0 : j1 + 1, i0 : i1 + 1]
     bad = ~(np.isfinite(covered) & (covered > 0))
     if np.any(bad):
         j, i = np.argwhere(bad)[0]
-        raise InputError(f"{source}: {np.count_nonzero(bad)} pixels the domain covers are not a finite Young's "
-                         f"modulus > 0 (first: row {j + j0}, column {i + i0}, value {float(covered[j, i])!r})")
+        raise InputError(
+            f"{source}: {np.count_nonzero(bad)} pixels the domain covers are not a finite Young's "
+            f"modulus > 0 (first: row {j + j0}, column {i + i0}, value {float(covered[j, i])!r})"
+        )
 
 
 def _model(options: RunOptions) -> tuple[ContactProblem, np.ndarray | None]:
@@ -133,8 +148,9 @@ def _model(options: RunOptions) -> tuple[ContactProblem, np.ndarray | None]:
     values = load_pixel_map(options.E_map)
     if options.mesh is None:  # the built-in mesh covers the unit square: check before building it
         check_pixel_modulus(values, (0.0, 1.0, 0.0, 1.0), f"--E-map {options.E_map}")
-    model = model.with_(youngs_modulus=pixel_field(values), description=f"E from {options.E_map.name}, "
-                        f"nu={options.nu:g}")
+    model = model.with_(
+        youngs_modulus=pixel_field(values), description=f"E from {options.E_map.name}, nu={options.nu:g}"
+    )
     return model, values
 
 
@@ -158,28 +174,38 @@ def _check_coarse_grid(cm: ContactMesh, options: RunOptions) -> None:
     cells = cm.cell_tags.find(Subdomain.OMEGA1)
     crossing = cm.comm.allreduce(int(np.count_nonzero(cm.coarse_cell[cells] < 0)), op=MPI.SUM)
     if crossing:
-        raise InputError(f"--method {options.method} with --mesh {options.mesh}: {crossing} Omega1 cells cross the "
-                         f"edges of the coarse grid of squares of side 1/{options.H} over the bounding box; the "
-                         "multiscale methods need a mesh that resolves it (choose --H accordingly)")
+        raise InputError(
+            f"--method {options.method} with --mesh {options.mesh}: {crossing} Omega1 cells cross the "
+            f"edges of the coarse grid of squares of side 1/{options.H} over the bounding box; the "
+            "multiscale methods need a mesh that resolves it (choose --H accordingly)"
+        )
 
 
 def _check_case_coarse_grid(cm: ContactMesh, options: RunOptions, case: Case) -> None:
     """The multiscale methods need a coarse grid that the case's mesh resolves."""
     if cm.H is None:
         builtin = case.mesh.kind in ("hertz-block", "bulged-square")
-        raise InputError(f"--method {options.method}: the mesh of case {case.path.name} ({case.mesh.kind}) has no "
-                         "coarse grid; the multiscale methods need the unit-square mesh or a mesh file with mesh.H "
-                         "(a coarse grid of squares of side 1/H that the mesh resolves)"
-                         + (f" — the built-in {case.mesh.kind} mesh takes no mesh.H (its graded cells cross any "
-                            "such grid): use --method primal or mixed on it, or a mesh file of your own that a "
-                            "coarse grid resolves (mesh.H) or that carries its own coarse partition (README, 'Any "
-                            "domain')" if builtin else ""))
+        raise InputError(
+            f"--method {options.method}: the mesh of case {case.path.name} ({case.mesh.kind}) has no "
+            "coarse grid; the multiscale methods need the unit-square mesh or a mesh file with mesh.H "
+            "(a coarse grid of squares of side 1/H that the mesh resolves)"
+            + (
+                f" — the built-in {case.mesh.kind} mesh takes no mesh.H (its graded cells cross any "
+                "such grid): use --method primal or mixed on it, or a mesh file of your own that a "
+                "coarse grid resolves (mesh.H) or that carries its own coarse partition (README, 'Any "
+                "domain')"
+                if builtin
+                else ""
+            )
+        )
     cells = cm.cell_tags.find(Subdomain.OMEGA1)
     crossing = cm.comm.allreduce(int(np.count_nonzero(cm.coarse_cell[cells] < 0)), op=MPI.SUM)
     if crossing:
-        raise InputError(f"--method {options.method} with case {case.path.name}: {crossing} Omega1 cells cross the "
-                         f"edges of the coarse grid of squares of side {cm.H:g} from the origin; the multiscale "
-                         "methods need a mesh that resolves it (choose mesh.H accordingly)")
+        raise InputError(
+            f"--method {options.method} with case {case.path.name}: {crossing} Omega1 cells cross the "
+            f"edges of the coarse grid of squares of side {cm.H:g} from the origin; the multiscale "
+            "methods need a mesh that resolves it (choose mesh.H accordingly)"
+        )
 
 
 class _Outcome(NamedTuple):
@@ -195,7 +221,7 @@ def _run_primal(options: RunOptions, problem: ContactProblem) -> _Outcome:
     """Algorithms 1 (primal) and 3 (primal-ms), with the monolithic primal reference."""
     method = get_method(options.method)
     flat = options.method_options()
-    reference = (CATALOGUE["primal-monolithic"].solve(problem, delta=options.delta) if options.reference else None)
+    reference = CATALOGUE["primal-monolithic"].solve(problem, delta=options.delta) if options.reference else None
     result = method.solve(problem, **flat, reference=reference.u if reference is not None else None)
     ms = method.multiscale
     summary = {
@@ -213,7 +239,6 @@ def _run_primal(options: RunOptions, problem: ContactProblem) -> _Outcome:
         # the multiscale Ω₁ against its fine solve for the run's interface data (relative, energy norm)
         "omega1_check": result.omega1_check if ms else None,
     }
-    fields, cm = problem.fields, problem.cm
 
     def write(out: Path) -> None:
         if not (out / "fields.pvd").exists():  # (load steps write their own series)
@@ -250,8 +275,11 @@ def _run_mixed(options: RunOptions, problem: ContactProblem, comm: MPI.Comm = MP
     method = get_method(options.method)
     ms = method.multiscale
     flat = options.method_options()
-    reference = (CATALOGUE["mixed-monolithic"].solve(problem, epsilon=options.epsilon)
-                 if options.reference and comm.rank == 0 else None)
+    reference = (
+        CATALOGUE["mixed-monolithic"].solve(problem, epsilon=options.epsilon)
+        if options.reference and comm.rank == 0
+        else None
+    )
     if reference is not None:
         reference.free()  # only its solution is used: the factors of the whole problem go now
     extra = {"offline_comm": comm} if ms else {}
@@ -276,7 +304,6 @@ def _run_mixed(options: RunOptions, problem: ContactProblem, comm: MPI.Comm = MP
         "nbasis_per_cell": list(result.step.omega1.nbasis_range) if ms else None,
         "dim_X_ms": result.step.omega1.co.n_ms if ms else None,
     }
-    fields, cm = problem.fields, problem.cm
 
     def write(out: Path) -> None:
         if not (out / "fields.pvd").exists():  # (load steps write their own series)
@@ -312,24 +339,44 @@ def run(options: RunOptions, comm: MPI.Comm = MPI.COMM_WORLD, *, case: Case | No
         raise
     if not result.converged:
         capped = result.iterations >= options.max_iterations
-        why = (f"the iteration hit --max-iterations {options.max_iterations}" if capped
-               else f"stopped after {result.iterations} iterations (the Newton corrections ran out)")
-        _fail(f"not converged: {why} (transmission residual {summary['transmission_residual']:.3e} > --tol "
-              f"{options.tol:g}); results in {options.out} with \"converged\": false", comm)
+        why = (
+            f"the iteration hit --max-iterations {options.max_iterations}"
+            if capped
+            else f"stopped after {result.iterations} iterations (the Newton corrections ran out)"
+        )
+        _fail(
+            f"not converged: {why} (transmission residual {summary['transmission_residual']:.3e} > --tol "
+            f'{options.tol:g}); results in {options.out} with "converged": false',
+            comm,
+        )
         return EXIT_NOT_CONVERGED
     if not summary["converged"]:  # a load step of the force-indentation curve
         bad = [s for s in summary["force_indentation"]["steps"] if not s["converged"]]
         steps = ", ".join(f"depth {s['depth']:g} after {s['iterations']} iterations" for s in bad)
-        _fail(f"not converged: the load step(s) at {steps} (--max-iterations {options.max_iterations}, --tol "
-              f'{options.tol:g}); results in {options.out} with "converged": false', comm)
+        _fail(
+            f"not converged: the load step(s) at {steps} (--max-iterations {options.max_iterations}, --tol "
+            f'{options.tol:g}); results in {options.out} with "converged": false',
+            comm,
+        )
         return EXIT_NOT_CONVERGED
-    log.info("converged after %d iterations; e_u = %s; active set %s; summary in %s",
-             result.iterations, result.e_u, result.profile.active_interval(), options.out / "summary.json")
+    log.info(
+        "converged after %d iterations; e_u = %s; active set %s; summary in %s",
+        result.iterations,
+        result.e_u,
+        result.profile.active_interval(),
+        options.out / "summary.json",
+    )
     return 0
 
 
-def _solve_and_write(options: RunOptions, comm: MPI.Comm, model: ContactProblem | None, pixels: np.ndarray | None,
-                     output: OutputDirectory, case: Case | None = None) -> tuple[object, dict]:
+def _solve_and_write(
+    options: RunOptions,
+    comm: MPI.Comm,
+    model: ContactProblem | None,
+    pixels: np.ndarray | None,
+    output: OutputDirectory,
+    case: Case | None = None,
+) -> tuple[object, dict]:
     """Mesh, solve, write everything into the staging directory and move it into place."""
     t0 = time.perf_counter()
     replicated = _replicated(options, comm)
@@ -351,8 +398,15 @@ def _solve_and_write(options: RunOptions, comm: MPI.Comm, model: ContactProblem 
     fields = problem.fields
     t_mesh = time.perf_counter() - t0
     name = f"model {options.model}" if case is None else f"case {case.path.name}"
-    log.info("%s (%s), h = %.4g, H = %s, method %s, accel %s",
-             name, model.description, cm.h, cm.H, options.method, options.accel)
+    log.info(
+        "%s (%s), h = %.4g, H = %s, method %s, accel %s",
+        name,
+        model.description,
+        cm.h,
+        cm.H,
+        options.method,
+        options.accel,
+    )
     if get_method(options.method).family == "primal":
         outcome = _run_primal(options, problem)
     else:
@@ -361,8 +415,11 @@ def _solve_and_write(options: RunOptions, comm: MPI.Comm, model: ContactProblem 
     profile = result.profile
     ends = contact_open_ends(cm)  # (the open ends of Γ_C, for every solve's contact summary)
     writes = not replicated or comm.rank == 0  # replicated: rank 0 holds the whole run and writes it
-    curve = (_indentation_curve(options, case, problem, outcome, ends, output.path, writes)
-             if case and case.obstacle.steps else None)
+    curve = (
+        _indentation_curve(options, case, problem, outcome, ends, output.path, writes)
+        if case and case.obstacle.steps
+        else None
+    )
     summary = {
         "method": options.method,
         "model": options.model if case is None else None,
@@ -385,8 +442,9 @@ def _solve_and_write(options: RunOptions, comm: MPI.Comm, model: ContactProblem 
         **_contact_summary(profile, ends),
         "max_contact_pressure": profile.max_pressure,
         # Ω₂'s semismooth Newton steps over the iteration (the interface Newton solves Ω₂ within its own steps)
-        "newton_steps_total": (int(sum(r.info.get("newton", 0) for r in result.history.records))
-                               if options.accel != "newton" else None),
+        "newton_steps_total": (
+            int(sum(r.info.get("newton", 0) for r in result.history.records)) if options.accel != "newton" else None
+        ),
         "dofs": result.dofs,
         "time_mesh_s": t_mesh,
         "time_offline_s": result.time_offline_s,
@@ -414,11 +472,18 @@ def _solve_and_write(options: RunOptions, comm: MPI.Comm, model: ContactProblem 
             if reference is not None:
                 profiles["monolithic"] = reference.profile
             (E_lo, E_hi), (nu_lo, nu_hi) = problem.contact_range("E"), problem.contact_range("nu")
-            hertz = hertz_curve_for(problem.obstacle, profile.points, E_hi, nu_hi) \
-                if (E_lo, nu_lo) == (E_hi, nu_hi) else None  # (Hertz: a homogeneous body at the contact)
+            hertz = (
+                hertz_curve_for(problem.obstacle, profile.points, E_hi, nu_hi)
+                if (E_lo, nu_lo) == (E_hi, nu_hi)
+                else None
+            )  # (Hertz: a homogeneous body at the contact)
             plot_contact(profiles, out / "contact.png", comm=writer, hertz=hertz)
-            plot_history({f"{options.method}, {options.accel}": result.history}, out / "history.png", comm=writer,
-                         tol=options.tol)
+            plot_history(
+                {f"{options.method}, {options.accel}": result.history},
+                out / "history.png",
+                comm=writer,
+                tol=options.tol,
+            )
         write_summary(out, summary, writer)
     output.commit()
     return result, summary

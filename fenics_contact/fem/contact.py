@@ -23,7 +23,12 @@ from fenics_contact.fem.newton import Advance, Check, Direction, StepState, semi
 MAX_REFINEMENTS = 2
 
 __all__ = [
-    "NewtonOptions", "NewtonHistory", "ContactProfile", "semismooth_newton", "active_interval", "profile_order",
+    "NewtonOptions",
+    "NewtonHistory",
+    "ContactProfile",
+    "semismooth_newton",
+    "active_interval",
+    "profile_order",
 ]
 
 
@@ -46,8 +51,9 @@ class NewtonOptions:
         if not isinstance(self.max_iterations, (int, np.integer)) or self.max_iterations < 1:
             raise InputError(f"max_iterations must be an integer >= 1, got {self.max_iterations!r}")
         if not (np.isfinite(self.rtol) and np.isfinite(self.atol) and 0 < self.rtol < 1 and self.atol >= 0):
-            raise InputError(f"Newton tolerances must be finite, 0 < rtol < 1 and atol >= 0; got {self.rtol!r}, "
-                             f"{self.atol!r}")
+            raise InputError(
+                f"Newton tolerances must be finite, 0 < rtol < 1 and atol >= 0; got {self.rtol!r}, {self.atol!r}"
+            )
 
 
 @dataclass(slots=True)
@@ -65,10 +71,12 @@ class NewtonHistory:
 
 
 class ContactProfile(NamedTuple):
-    """Nodal data along Γ_C, in ``profile_order`` (by y on a vertical Γ_C): position, normal displacement, normal stress.
+    """Nodal data along Γ_C, in ``profile_order`` (by y on a vertical Γ_C): position, normal displacement, normal
+    stress.
 
     ``u_c`` = u·ν − g, the normal displacement relative to the obstacle (> 0: penetration);
-    ``sigma_c`` the normal stress (< 0: contact pressure). The optional fields give the node coordinates, their quadrature weights on Γ_C, the contact direction ν
+    ``sigma_c`` the normal stress (< 0: contact pressure). The optional fields give the node coordinates, their
+    quadrature weights on Γ_C, the contact direction ν
     and the initial gap g, from which ``force``, ``resultant`` and ``contact_zone`` follow.
     """
 
@@ -138,7 +146,8 @@ class ContactProfile(NamedTuple):
 
 
 def profile_order(points: np.ndarray) -> np.ndarray:
-    """Order of contact nodes along Γ_C: by the coordinate with the larger spread (y for a vertical Γ_C), then the other."""
+    """Order of contact nodes along Γ_C: by the coordinate with the larger spread (y for a vertical Γ_C), then the
+    other."""
     if points.shape[0] == 0:
         return np.zeros(0, dtype=np.int64)
     spread = np.ptp(points[:, :2], axis=0)
@@ -197,7 +206,8 @@ def semismooth_newton(
 ) -> NewtonHistory:
     """The primal semismooth Newton over callbacks (``fem.newton.semismooth_newton_loop``, full steps).
 
-    ``comm`` sums the active-set sizes over ranks. ``residual()`` assembles F(u) and returns ‖F‖; ``active_set()`` returns the
+    ``comm`` sums the active-set sizes over ranks. ``residual()`` assembles F(u) and returns ‖F‖; ``active_set()``
+    returns the
     local active-set indicator of the current u; ``factorize(active)`` makes the
     factorization of J at the current u available, returning True if it had to
     refactorize (the caller caches it by active set: J depends on u only through
@@ -208,7 +218,14 @@ def semismooth_newton(
     hit or the residual still fails the check.
     """
     system = _PrimalSystem(residual, active_set, same_sets, factorize, step, residual_check, comm)
-    trace = semismooth_newton_loop(system, active_set(), name=name, max_steps=options.max_iterations,
-                                   line_search="never", rtol=options.rtol, atol=options.atol,
-                                   refinements=MAX_REFINEMENTS)
+    trace = semismooth_newton_loop(
+        system,
+        active_set(),
+        name=name,
+        max_steps=options.max_iterations,
+        line_search="never",
+        rtol=options.rtol,
+        atol=options.atol,
+        refinements=MAX_REFINEMENTS,
+    )
     return NewtonHistory(trace.residuals, trace.active_sizes, trace.factorizations)

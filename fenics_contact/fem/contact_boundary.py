@@ -28,8 +28,9 @@ def contact_boundary_present(comm: MPI.Comm, facets: np.ndarray, obstacle: Obsta
     return present
 
 
-def obstacle_at_nodes(obstacle: Obstacle | None, points: np.ndarray, normals: np.ndarray, *, comm=None
-                      ) -> tuple[np.ndarray, np.ndarray]:
+def obstacle_at_nodes(
+    obstacle: Obstacle | None, points: np.ndarray, normals: np.ndarray, *, comm=None
+) -> tuple[np.ndarray, np.ndarray]:
     """(g, ν) at contact nodes ``points`` (N, 2 or 3) with outward body normals ``normals`` (N, d), d the
     dimension: the obstacle's gap and direction (side checked: ``check_obstacle_side``), or (0, ``normals``)
     without one.

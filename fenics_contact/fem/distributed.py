@@ -14,13 +14,12 @@ PETSc operator is split with :func:`split_sizes` (PETSc's own ``DECIDE`` rule).
 
 from __future__ import annotations
 
+import dolfinx.la
 import numpy as np
 import numpy.typing as npt
 import scipy.sparse as sp
 from mpi4py import MPI
 from petsc4py import PETSc
-
-import dolfinx.la
 
 __all__ = [
     "DistributedMatrix",
@@ -113,7 +112,9 @@ def coo_matrix(
     return A
 
 
-def local_rows_to_petsc(comm: MPI.Comm, A: sp.csr_matrix, col_global: np.ndarray, col_sizes: tuple[int, int]) -> PETSc.Mat:
+def local_rows_to_petsc(
+    comm: MPI.Comm, A: sp.csr_matrix, col_global: np.ndarray, col_sizes: tuple[int, int]
+) -> PETSc.Mat:
     """AIJ matrix whose owned rows are the rows of A (local), column j of A being global column col_global[j]."""
     A = sp.csr_matrix(A)
     col_global = np.asarray(col_global)

@@ -122,9 +122,10 @@ def contact_penalty_jacobian(s, ds_, t, n, inv_epsilon, ds_contact):
 def complementary_energy(s, lmbda, mu, n, inv_epsilon, ds_contact):
     """J(σ) = ½(Aσ, σ) + (1/2ε) ∫_ΓC ((σ_c)⁺)² ds."""
     S = stress_tensor(s)
-    return 0.5 * ufl.inner(compliance(S, lmbda, mu), S) * ufl.dx + 0.5 * inv_epsilon * positive_part(
-        normal_stress(s, n)
-    ) ** 2 * ds_contact
+    return (
+        0.5 * ufl.inner(compliance(S, lmbda, mu), S) * ufl.dx
+        + 0.5 * inv_epsilon * positive_part(normal_stress(s, n)) ** 2 * ds_contact
+    )
 
 
 def robin_form(s, t, n, beta, ds_gamma):

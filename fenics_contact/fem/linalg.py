@@ -8,7 +8,8 @@ the factors of its operator; the factorization and every solve are checked, a fa
   solves of dense blocks (``mat_solve``), optionally of an operator given equilibrated (``scaling``); on one
   process, blocks of A⁻¹ from its MUMPS factors (``inverse_block``, ``fem.inverse_entries``).
 * ``SparseFactor``: a sequential MUMPS LU or Cholesky (without pivoting for a matrix flagged SPD, else LDLᵀ
-  with pivoting) of a matrix it owns, configured in code (the multiscale local problems, thousands of them: no options-database entries),
+  with pivoting) of a matrix it owns, configured in code (the multiscale local problems, thousands of them: no
+  options-database entries),
   with MUMPS ICNTL controls per factorization; solves of dense blocks of right-hand sides (one MatMatSolve);
   a SciPy CSR matrix wrapped without a copy (``from_csr``), a symmetric one given by its upper triangle
   (``symmetric``: Cholesky, or LU where it is not positive definite), new values refactorized on the kept
@@ -66,13 +67,19 @@ _PC_REASONS = {v: k for k, v in vars(PETSc.PC.FailedReason).items() if not k.sta
 
 #: MUMPS error codes INFOG(1) (MUMPS users' guide, section "Error diagnostics"): what they mean, what to do
 _MUMPS_ERRORS = {
-    -5: "memory allocation failed in the analysis", -7: "memory allocation failed in the analysis",
+    -5: "memory allocation failed in the analysis",
+    -7: "memory allocation failed in the analysis",
     -6: "the matrix is structurally singular (INFOG(2): its structural rank)",
-    -8: "MUMPS' integer workspace is too small", -9: "MUMPS' real workspace is too small",
-    -10: "the matrix is numerically singular", -11: "MUMPS' real workspace is too small for the solve",
-    -12: "MUMPS' real workspace is too small", -13: "a memory allocation of INFOG(2) entries failed",
-    -14: "MUMPS' integer workspace is too small for the solve", -15: "MUMPS' integer workspace is too small",
-    -17: "MUMPS' send buffer is too small", -19: "the memory limit ICNTL(23) is too small",
+    -8: "MUMPS' integer workspace is too small",
+    -9: "MUMPS' real workspace is too small",
+    -10: "the matrix is numerically singular",
+    -11: "MUMPS' real workspace is too small for the solve",
+    -12: "MUMPS' real workspace is too small",
+    -13: "a memory allocation of INFOG(2) entries failed",
+    -14: "MUMPS' integer workspace is too small for the solve",
+    -15: "MUMPS' integer workspace is too small",
+    -17: "MUMPS' send buffer is too small",
+    -19: "the memory limit ICNTL(23) is too small",
     -20: "MUMPS' reception buffer is too small",
 }
 _WORKSPACE = (-8, -9, -11, -12, -14, -15, -17, -20)
@@ -97,16 +104,22 @@ def factorization_failure(pc: PETSc.PC, prefix: str | None = None) -> str:
         if meaning:
             text += f": {meaning}"
     if infog1 in _WORKSPACE or (infog1 is None and reason == PETSc.PC.FailedReason.FACTOR_OUTMEMORY):
-        return (f"{text}. Delayed pivots overflowed the workspace MUMPS estimated: the matrix is badly scaled (blocks "
-                f"in very different units, e.g. Young's modulus or lengths far from 1, where it is not equilibrated) "
-                f"or has tiny pivots. Rescale the data, or raise the workspace (PETSC_OPTIONS='{option} 200': "
-                "200 % more than estimated)")
+        return (
+            f"{text}. Delayed pivots overflowed the workspace MUMPS estimated: the matrix is badly scaled (blocks "
+            f"in very different units, e.g. Young's modulus or lengths far from 1, where it is not equilibrated) "
+            f"or has tiny pivots. Rescale the data, or raise the workspace (PETSC_OPTIONS='{option} 200': "
+            "200 % more than estimated)"
+        )
     if infog1 in (-5, -7, -13) or infog1 == -19:
         return f"{text}. Out of memory: a coarser mesh, more memory, or more MPI ranks"
-    if infog1 in (-6, -10) or reason in (PETSc.PC.FailedReason.FACTOR_STRUCT_ZEROPIVOT,
-                                         PETSc.PC.FailedReason.FACTOR_NUMERIC_ZEROPIVOT):
-        return (f"{text}. A singular matrix: a part of the body free to move rigidly (no Γ_D, no contact or "
-                "Robin data holding it), a zero Young's modulus, or a penalty or Robin coefficient far out of range")
+    if infog1 in (-6, -10) or reason in (
+        PETSc.PC.FailedReason.FACTOR_STRUCT_ZEROPIVOT,
+        PETSc.PC.FailedReason.FACTOR_NUMERIC_ZEROPIVOT,
+    ):
+        return (
+            f"{text}. A singular matrix: a part of the body free to move rigidly (no Γ_D, no contact or "
+            "Robin data holding it), a zero Young's modulus, or a penalty or Robin coefficient far out of range"
+        )
     return f"{text}. Check the data (moduli, penalty and Robin coefficients) for values far out of range"
 
 
@@ -174,9 +187,11 @@ class DirectSolver(_Factorization):
         self.factorizations += 1
 
     def _range_message(self, what: str) -> str:
-        return (f"{self.prefix}: the matrix has {what}: the data overflow the range of a double-precision "
-                f"factorization (about {SAFE_RANGE[0]:g} to {SAFE_RANGE[1]:g}): Young's modulus, 1/δ, α or 1/ε too "
-                "large or too small. Rescale the units (the displacement scales as load/E).")
+        return (
+            f"{self.prefix}: the matrix has {what}: the data overflow the range of a double-precision "
+            f"factorization (about {SAFE_RANGE[0]:g} to {SAFE_RANGE[1]:g}): Young's modulus, 1/δ, α or 1/ε too "
+            "large or too small. Rescale the units (the displacement scales as load/E)."
+        )
 
     def solve(self, b: PETSc.Vec, x: PETSc.Vec) -> None:
         """x = A⁻¹ b, raising ConvergenceError on any PETSc failure (b is left as it is)."""
@@ -194,9 +209,14 @@ class DirectSolver(_Factorization):
         """Whether ``inverse_block`` works here: a sequential MUMPS factorization of the operator itself (not of an
         equilibrated one; ``fem.inverse_entries``)."""
         pc = self.ksp.getPC()
-        return (self._d is None and self.ksp.getComm().getSize() == 1 and inverse_entries.available()
-                and self.factorizations > 0
-                and pc.getType() in ("lu", "cholesky") and pc.getFactorSolverType() == "mumps")
+        return (
+            self._d is None
+            and self.ksp.getComm().getSize() == 1
+            and inverse_entries.available()
+            and self.factorizations > 0
+            and pc.getType() in ("lu", "cholesky")
+            and pc.getFactorSolverType() == "mumps"
+        )
 
     def inverse_block(self, rows: np.ndarray) -> np.ndarray:
         """(A⁻¹)[rows][:, rows] (dense, in the order of ``rows``) from the factors held: MUMPS' entries of the
@@ -235,8 +255,14 @@ class SparseFactor(_Factorization):
     lu_icntl: tuple[tuple[int, int], ...] = ()
 
     def __init__(
-        self, mat: PETSc.Mat, *, cholesky: bool = False, icntl: dict[int, int] | None = None, trial: bool = False,
-        what: str | None = None, scaling: np.ndarray | None = None,
+        self,
+        mat: PETSc.Mat,
+        *,
+        cholesky: bool = False,
+        icntl: dict[int, int] | None = None,
+        trial: bool = False,
+        what: str | None = None,
+        scaling: np.ndarray | None = None,
     ) -> None:
         """Factorize ``mat`` (destroyed with this factor): LU, or with ``cholesky`` MUMPS' Cholesky (no pivoting
         when ``mat`` is flagged SPD, else LDLᵀ with pivoting); ``icntl`` MUMPS controls (default: ``lu_icntl``
@@ -276,8 +302,11 @@ class SparseFactor(_Factorization):
         A.eliminate_zeros()
         if scaling is not None:
             A = _equilibrated(A, scaling)
-        csr = (A.indptr.astype(PETSc.IntType, copy=False), A.indices.astype(PETSc.IntType, copy=False),
-               A.data.astype(PETSc.ScalarType, copy=False))
+        csr = (
+            A.indptr.astype(PETSc.IntType, copy=False),
+            A.indices.astype(PETSc.IntType, copy=False),
+            A.data.astype(PETSc.ScalarType, copy=False),
+        )
         mat = PETSc.Mat().createAIJWithArrays(A.shape, csr, comm=PETSc.COMM_SELF)  # no copy: keep csr alive
         mat.assemble()
         lu = cls(mat, scaling=scaling, **kwargs)
@@ -295,8 +324,11 @@ class SparseFactor(_Factorization):
         """Factorize the symmetric matrix whose upper triangle (canonical CSR) is ``upper``: MUMPS Cholesky
         (positive definite, no pivoting; 1.5× faster than LU on the mixed CEM skeleton systems), or, when a
         pivot is not positive (a matrix that is not positive definite after all), the LU of the full matrix."""
-        csr = (upper.indptr.astype(PETSc.IntType, copy=False), upper.indices.astype(PETSc.IntType, copy=False),
-               upper.data.astype(PETSc.ScalarType, copy=False))
+        csr = (
+            upper.indptr.astype(PETSc.IntType, copy=False),
+            upper.indices.astype(PETSc.IntType, copy=False),
+            upper.data.astype(PETSc.ScalarType, copy=False),
+        )
         # an AIJ matrix holding the upper triangle only, on the CSR arrays (no copy): PETSc hands MUMPS' Cholesky
         # the entries from the diagonal on of every row (MatConvertToTriples_seqaij_seqsbaij), i.e. exactly
         # these (an SBAIJ matrix would be built by copying row by row: 20 ms of 0.17 s at h = 1/128)

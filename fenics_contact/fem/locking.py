@@ -7,9 +7,8 @@ bound as ν → ½ at fixed h (``benchmarks/analytic_benchmarks.py --sections 6`
 
 import numpy as np
 import ufl
-from mpi4py import MPI
-
 from dolfinx import fem, mesh
+from mpi4py import MPI
 
 from fenics_contact.fem.primal import PrimalSubproblem
 from fenics_contact.problem.fields import MaterialFields

@@ -43,10 +43,9 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
-from mpi4py import MPI
-
 from dolfinx import fem
 from dolfinx import mesh as dmesh
+from mpi4py import MPI
 
 from fenics_contact.errors import ConvergenceError, InputError
 from fenics_contact.fem.contact import NewtonOptions
@@ -54,14 +53,17 @@ from fenics_contact.fem.mixed_contact import MixedContactProfile
 from fenics_contact.fem.mixed_newton import MixedNewtonHistory
 from fenics_contact.fem.mixed_spaces import boundary_stress_space, check_triangles
 from fenics_contact.fem.mixed_subproblem import MixedSubproblem
-from fenics_contact.problem.boundary import check_boundary_groups
-from fenics_contact.problem.fields import material_fields
-from fenics_contact.problem.geometry import ContactMesh
 from fenics_contact.problem.problem import ContactProblem
 from fenics_contact.problem.tags import Boundary, Subdomain
 
-__all__ = ["MixedSolution", "contact_modulus", "default_epsilon", "epsilon_hint", "epsilon_for",
-           "solve_mixed_monolithic"]
+__all__ = [
+    "MixedSolution",
+    "contact_modulus",
+    "default_epsilon",
+    "epsilon_hint",
+    "epsilon_for",
+    "solve_mixed_monolithic",
+]
 
 log = logging.getLogger(__name__)
 
@@ -85,12 +87,13 @@ def epsilon_hint(epsilon: float, default: float) -> str:
     dwarf the stress block, so the saddle-point solves lose digits in proportion (empty otherwise)."""
     if not epsilon < 1e-3 * default:
         return ""
-    return (f"; ε = {epsilon:g} is {default / epsilon:.0e} times below the default 1e-3·h·E_min = {default:.3g} "
-            "on Gamma_C, which makes the contact block ill-conditioned: use a larger --epsilon")
+    return (
+        f"; ε = {epsilon:g} is {default / epsilon:.0e} times below the default 1e-3·h·E_min = {default:.3g} "
+        "on Gamma_C, which makes the contact block ill-conditioned: use a larger --epsilon"
+    )
 
 
-def contact_modulus(msh: dmesh.Mesh, facet_tags: dmesh.MeshTags, E: fem.Function, *, smallest: bool = False
-                    ) -> float:
+def contact_modulus(msh: dmesh.Mesh, facet_tags: dmesh.MeshTags, E: fem.Function, *, smallest: bool = False) -> float:
     """Largest (``smallest``: smallest) Young's modulus of the cells touching Γ_C (over all ranks)."""
     tdim = msh.topology.dim
     msh.topology.create_connectivity(tdim - 1, tdim)
@@ -133,8 +136,11 @@ def epsilon_for(problem: ContactProblem, epsilon: float | None = None) -> float:
     """ε, or when None the default ``default_epsilon(h, E_c)`` with E_c the smallest E on Γ_C."""
     if epsilon is None:
         return default_epsilon(problem.h, problem.contact_modulus(smallest=True))
-    if isinstance(epsilon, bool) or not isinstance(epsilon, (int, float, np.number)) \
-            or not (np.isfinite(epsilon) and epsilon > 0):
+    if (
+        isinstance(epsilon, bool)
+        or not isinstance(epsilon, (int, float, np.number))
+        or not (np.isfinite(epsilon) and epsilon > 0)
+    ):
         raise InputError(f"the mixed penalty ε must be a finite number > 0 (or None: the default), got {epsilon!r}")
     return float(epsilon)
 
@@ -165,7 +171,14 @@ def solve_mixed_monolithic(
         split = (cm.facet_tags.find(Boundary.INTERFACE), cm.cell_tags.find(Subdomain.OMEGA2))
         space = boundary_stress_space(cm.mesh, cm.facet_tags, fields.boundary, split_interface=split)
     sub = MixedSubproblem(
-        cm.mesh, cm.facet_tags, fields, epsilon=epsilon, beta=None, prefix=prefix, newton=newton, space=space,
+        cm.mesh,
+        cm.facet_tags,
+        fields,
+        epsilon=epsilon,
+        beta=None,
+        prefix=prefix,
+        newton=newton,
+        space=space,
     )
     t0 = time.perf_counter()
     try:  # every numerical failure of the solve and of its check says when ε is far below its default
@@ -174,9 +187,11 @@ def solve_mixed_monolithic(
         if verify:
             norm, scale = sub.ufl_residual_norm()
             if norm > newton.rtol * scale + newton.atol:
-                raise ConvergenceError(f"mixed monolithic: the solution misses its own equations (UFL residual "
-                                       f"{norm:.3e} > {newton.rtol:g}·{scale:.3e}, the size of their terms): the "
-                                       "linear solves lost accuracy")
+                raise ConvergenceError(
+                    f"mixed monolithic: the solution misses its own equations (UFL residual "
+                    f"{norm:.3e} > {newton.rtol:g}·{scale:.3e}, the size of their terms): the "
+                    "linear solves lost accuracy"
+                )
     except ConvergenceError as err:
         raise ConvergenceError(f"{err}{epsilon_hint(epsilon, usual)}") from err
     elapsed = time.perf_counter() - start
@@ -184,10 +199,23 @@ def solve_mixed_monolithic(
     log.info(
         "monolithic mixed (ε = %.3g%s): %d Newton steps, step lengths %s, contact points %s, "
         "max tensile σ_c %.3e, %.2f s",
-        epsilon, ", split γ" if split_interface else "", history.steps,
-        [round(t, 3) for t in history.step_lengths], history.active_sizes, profile.max_tensile, elapsed,
+        epsilon,
+        ", split γ" if split_interface else "",
+        history.steps,
+        [round(t, 3) for t in history.step_lengths],
+        history.active_sizes,
+        profile.max_tensile,
+        elapsed,
     )
     return MixedSolution(
-        sub.sigma_function(), sub.u_function(), history, profile, epsilon, sub.num_dofs,
-        elapsed, t_newton, sub, split_interface,
+        sub.sigma_function(),
+        sub.u_function(),
+        history,
+        profile,
+        epsilon,
+        sub.num_dofs,
+        elapsed,
+        t_newton,
+        sub,
+        split_interface,
     )

@@ -6,14 +6,13 @@ and the constant stress-side load F_∂ of the traction lifting σ_t and of u_D:
 F_∂ = −Pᵀ(Aσ_t, τ) + Pᵀ∫_ΓD u_D·τn − β Pᵀ R_γ σ_t.  Forms come from ``forms_mixed``.
 """
 
+import dolfinx.fem.petsc
 import numpy as np
 import ufl
-from mpi4py import MPI
-from petsc4py import PETSc
-
 from dolfinx import fem
 from dolfinx import mesh as dmesh
-import dolfinx.fem.petsc
+from mpi4py import MPI
+from petsc4py import PETSc
 
 from fenics_contact.errors import InputError
 from fenics_contact.fem import forms_mixed
@@ -64,8 +63,16 @@ class MixedOperators:
     blocks); ``beta`` None: no Robin term (K̃ = K).
     """
 
-    def __init__(self, msh: dmesh.Mesh, facet_tags: dmesh.MeshTags, fields: MaterialFields, spaces: MixedSpaces,
-                 *, beta: float | None, operators: bool) -> None:
+    def __init__(
+        self,
+        msh: dmesh.Mesh,
+        facet_tags: dmesh.MeshTags,
+        fields: MaterialFields,
+        spaces: MixedSpaces,
+        *,
+        beta: float | None,
+        operators: bool,
+    ) -> None:
         comm = msh.comm
         n_dg = spaces.n_dg
         s, t = ufl.TrialFunction(spaces.dg), ufl.TestFunction(spaces.dg)
@@ -91,8 +98,9 @@ class MixedOperators:
             s0.x.array[:n_dg] = spaces.s0
             s0.x.scatter_forward()
             self.G -= assemble_array(forms_mixed.divergence_form(s0, v))[: spaces.n_u]
-            self.F_boundary -= spaces.Pd.T @ assemble_array(
-                forms_mixed.compliance_form(s0, t, fields.lmbda, fields.mu))[:n_dg]
+            self.F_boundary -= (
+                spaces.Pd.T @ assemble_array(forms_mixed.compliance_form(s0, t, fields.lmbda, fields.mu))[:n_dg]
+            )
             self.s0_function = s0
         self.u_D: fem.Function | None = None
         has_dirichlet = comm.allreduce(int(facet_tags.find(Boundary.GAMMA_D).size), op=MPI.SUM) > 0

@@ -20,7 +20,6 @@ of them in the same (``profile_order``) order; Q has this rank's block of rows.
 
 import numpy as np
 import scipy.sparse as sp
-
 from dolfinx import mesh as dmesh
 
 from fenics_contact.fem.contact import ContactProfile, profile_order
@@ -38,7 +37,8 @@ class MixedContactProfile(ContactProfile):
     """σ_c and u_c = −(σ_c)⁺/ε along Γ_C (sorted by y) for the mixed penalty.
 
     The mixed penalty allows no penetration (u_c ≤ 0 everywhere); a point is in
-    contact where the normal stress is compressive, σ_c < 0 (there u_c = 0).  ``max_tensile`` is the penalty error: the tensile stress left
+    contact where the normal stress is compressive, σ_c < 0 (there u_c = 0).  ``max_tensile`` is the penalty error:
+    the tensile stress left
     where the body separates (= ε·max|u_c|).
     """
 
@@ -96,16 +96,23 @@ class ContactNodes:
     contact term; the nodes still serve the profile and the gap load).
     """
 
-    def __init__(self, msh: dmesh.Mesh, facet_tags: dmesh.MeshTags, facets: np.ndarray, spaces: MixedSpaces,
-                 epsilon: float | None) -> None:
+    def __init__(
+        self,
+        msh: dmesh.Mesh,
+        facet_tags: dmesh.MeshTags,
+        facets: np.ndarray,
+        spaces: MixedSpaces,
+        epsilon: float | None,
+    ) -> None:
         comm = self.comm = msh.comm
         self.epsilon = epsilon
         self.obstacle: Obstacle | None = None  #: set with the gap by ``set_obstacle``
         bf = BoundaryFacets(msh, facets)
         vertex_gid = spaces.space.global_vertex_indices
         pts, wq, cells, normals, vertex = bf.lobatto_nodes(vertex_gid)
-        (self.q_points, self.q_weights, self.q_normals, q_vertex, local_nodes,
-         rows) = merge_contact_nodes(comm, pts, wq, normals, vertex)
+        (self.q_points, self.q_weights, self.q_normals, q_vertex, local_nodes, rows) = merge_contact_nodes(
+            comm, pts, wq, normals, vertex
+        )
         nq = self.q_points.shape[0]
         self.rows = rows  #: canonical index of the contact nodes this rank evaluates
         self.range = layout(comm, nq)
@@ -116,14 +123,22 @@ class ContactNodes:
         Q_loc.eliminate_zeros()
         gi = spaces.space.global_indices
         #: this rank's rows of Q with global AW columns (the penalty pattern of the saddle-point matrix)
-        self.Q_rows_global = sp.csr_matrix((Q_loc.data, gi[Q_loc.indices], Q_loc.indptr),
-                                           shape=(Q_loc.shape[0], spaces.space.num_dofs))
+        self.Q_rows_global = sp.csr_matrix(
+            (Q_loc.data, gi[Q_loc.indices], Q_loc.indptr), shape=(Q_loc.shape[0], spaces.space.num_dofs)
+        )
         self.Q_local = Q_loc
         Qc = Q_loc.tocoo()
         #: σ_c at the contact nodes (canonical order), this rank's block of rows: Q c (+ ``q0``)
-        self.Q = DistributedMatrix(coo_matrix(comm, rows[Qc.row], gi[Qc.col], Qc.data,
-                                             (self.range[1] - self.range[0], nq),
-                                             (spaces.n_sigma, spaces.space.num_dofs)))
+        self.Q = DistributedMatrix(
+            coo_matrix(
+                comm,
+                rows[Qc.row],
+                gi[Qc.col],
+                Qc.data,
+                (self.range[1] - self.range[0], nq),
+                (spaces.n_sigma, spaces.space.num_dofs),
+            )
+        )
         #: σ_t,c at the contact nodes (the traction lifting's normal stress; zero without tractions), replicated
         self.q0 = gather_rows(comm, rows, Q_dg @ spaces.s0, nq)
         # u_h·n at the nodes from the DG P1 displacement (one adjacent cell per node)
@@ -190,8 +205,13 @@ class ContactNodes:
         keep = self.profile_nodes
         sigma_c = self.stress(c)[keep]
         return MixedContactProfile(
-            self.q_points[keep, 1], -np.maximum(sigma_c, 0.0) / self.epsilon, sigma_c, self.q_points[keep],
-            self.q_weights[keep], self.q_normals[keep], self.q_gap[keep],
+            self.q_points[keep, 1],
+            -np.maximum(sigma_c, 0.0) / self.epsilon,
+            sigma_c,
+            self.q_points[keep],
+            self.q_weights[keep],
+            self.q_normals[keep],
+            self.q_gap[keep],
         )
 
     def normal_trace(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -12,11 +12,10 @@ import basix.ufl
 import numpy as np
 import scipy.sparse as sp
 import ufl
-from mpi4py import MPI
-from scipy.spatial import cKDTree
-
 from dolfinx import fem
 from dolfinx import mesh as dmesh
+from mpi4py import MPI
+from scipy.spatial import cKDTree
 
 from fenics_contact.errors import InputError
 from fenics_contact.fem import forms_mixed
@@ -66,8 +65,10 @@ class GammaBends:
         degree = np.bincount(ends_at.ravel(), minlength=n)
         if np.any(degree > 2):
             x, y = points[np.flatnonzero(degree > 2)[0]]
-            raise InputError(f"the interface γ branches at ({x:.6g}, {y:.6g}) (more than two γ facets meet there): "
-                             "the mixed methods need γ to be a chain of facets; change the strip Ω₂")
+            raise InputError(
+                f"the interface γ branches at ({x:.6g}, {y:.6g}) (more than two γ facets meet there): "
+                "the mixed methods need γ to be a chain of facets; change the strip Ω₂"
+            )
         self.points = points
         # the two facets at each node of degree 2 (incidences sorted by node, then facet: side a first)
         inc_node, inc_facet = ends_at.ravel(), np.repeat(np.arange(ends_at.shape[0]), 2)
@@ -76,12 +77,16 @@ class GammaBends:
         ks = np.flatnonzero(degree == 2)
         first = order[np.searchsorted(inc_node[order], ks)]
         second = order[np.searchsorted(inc_node[order], ks) + 1]
-        e = [(inc_far[i] - points[ks]) / np.linalg.norm(inc_far[i] - points[ks], axis=1)[:, None]
-             for i in (first, second)]
+        e = [
+            (inc_far[i] - points[ks]) / np.linalg.norm(inc_far[i] - points[ks], axis=1)[:, None]
+            for i in (first, second)
+        ]
         bent = np.abs(e[0][:, 0] * e[1][:, 1] - e[0][:, 1] * e[1][:, 0]) > BEND
         bend_nodes = ks[bent]
-        sides = [(np.array([fa, fb]), np.stack([ea, eb])) for fa, fb, ea, eb in
-                 zip(inc_facet[first[bent]], inc_facet[second[bent]], e[0][bent], e[1][bent])]
+        sides = [
+            (np.array([fa, fb]), np.stack([ea, eb]))
+            for fa, fb, ea, eb in zip(inc_facet[first[bent]], inc_facet[second[bent]], e[0][bent], e[1][bent])
+        ]
         #: the γ nodes where γ bends (indices into ``points``)
         self.nodes = np.asarray(bend_nodes, dtype=np.int64)
         #: the midpoints of the two γ facets at each bend (sides a, b): (n_bends, 2, 2)
@@ -110,8 +115,10 @@ class GammaBends:
             cols.append(np.tile(self.offsets[k] + np.arange(3), 4))
             vals.append(self.V[j].ravel())
         #: stored values → copy values (``num_copy_values`` × ``num_values``)
-        self.basis = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
-                                   shape=(self.num_copy_values, self.num_values))
+        self.basis = sp.csr_matrix(
+            (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+            shape=(self.num_copy_values, self.num_values),
+        )
         self.colour_tags = None
         self.copy_of_colour = np.zeros((self.nodes.size, 3), dtype=np.int64)
         if self.nodes.size:
@@ -166,8 +173,14 @@ class InterfaceData:
     ``points``: the γ nodes in the order to use (the other subdomain's; default: this mesh's sorted by (y, x)).
     """
 
-    def __init__(self, msh: dmesh.Mesh, facet_tags: dmesh.MeshTags, spaces: MixedSpaces, gamma: np.ndarray,
-                 points: np.ndarray | None) -> None:
+    def __init__(
+        self,
+        msh: dmesh.Mesh,
+        facet_tags: dmesh.MeshTags,
+        spaces: MixedSpaces,
+        gamma: np.ndarray,
+        points: np.ndarray | None,
+    ) -> None:
         comm = msh.comm
         ds = forms_mixed.boundary_measure(msh, facet_tags)
         t, n = ufl.TestFunction(spaces.dg), ufl.FacetNormal(msh)
@@ -244,8 +257,11 @@ class InterfaceData:
         C_red = (P_gamma.T @ C_local).tocoo()  # local AW rows (owned, ghosts) × canonical γ values
         gi = spaces.space.global_indices
         #: d(g; τ) = C g for interface data g = values (x, y) at ``gamma_points`` (this rank's block)
-        self.C = DistributedMatrix(coo_matrix(comm, gi[C_red.row], C_red.col, C_red.data,
-                                              (spaces.n_sigma, spaces.space.num_dofs), (g1 - g0, n_g)))
+        self.C = DistributedMatrix(
+            coo_matrix(
+                comm, gi[C_red.row], C_red.col, C_red.data, (spaces.n_sigma, spaces.space.num_dofs), (g1 - g0, n_g)
+            )
+        )
         # L²(γ) mass matrix of the data, canonical values × canonical values (the γ norm of the
         # convergence certificate); the owned Lagrange rows of every rank, mapped like the columns
         w = ufl.TestFunction(Lam)
@@ -253,8 +269,7 @@ class InterfaceData:
         for measure, colour in measures:
             Mg = assemble_petsc(ufl.inner(g, w) * measure)
             mi, mj, mv = Mg.getValuesCSR()
-            m_rows = canonical_value(Mg.getOwnershipRange()[0] + np.repeat(np.arange(mi.size - 1), np.diff(mi)),
-                                     colour)
+            m_rows = canonical_value(Mg.getOwnershipRange()[0] + np.repeat(np.arange(mi.size - 1), np.diff(mi)), colour)
             Mg.destroy()
             m_cols = canonical_value(mj.astype(np.int64), colour)
             keep = (m_rows >= 0) & (m_cols >= 0)
@@ -312,8 +327,16 @@ class InterfaceData:
         else:
             rows_of = value_rows
         #: σn (outward n of this mesh) at ``gamma_points``, this rank's block: N c (+ ``n0``)
-        self.N = DistributedMatrix(coo_matrix(comm, rows_of[N_loc.row], gi[N_loc.col], N_loc.data,
-                                              (g1 - g0, n_g), (spaces.n_sigma, spaces.space.num_dofs)))
+        self.N = DistributedMatrix(
+            coo_matrix(
+                comm,
+                rows_of[N_loc.row],
+                gi[N_loc.col],
+                N_loc.data,
+                (g1 - g0, n_g),
+                (spaces.n_sigma, spaces.space.num_dofs),
+            )
+        )
         #: σ_t n on γ (the traction lifting's trace; zero without tractions), this rank's block
         self.n0 = (n0 if bends.bent else gather_rows(comm, value_rows, E @ spaces.s0, n_g))[g0:g1]
         #: outward unit normal at each γ node (at a bend: side a's)

@@ -56,8 +56,18 @@ class SaddlePointFactorization:
     D = diag(s I_σ, I_u/s) (``stress_scale`` of the reference modulus; 1: none).
     """
 
-    def __init__(self, comm: MPI.Comm, prefix: str, n_sigma: int, operators: MixedOperators,
-                 nodes: ContactNodes | None, *, contact: bool, has_operators: bool, scale: float = 1.0) -> None:
+    def __init__(
+        self,
+        comm: MPI.Comm,
+        prefix: str,
+        n_sigma: int,
+        operators: MixedOperators,
+        nodes: ContactNodes | None,
+        *,
+        contact: bool,
+        has_operators: bool,
+        scale: float = 1.0,
+    ) -> None:
         self.comm, self.prefix, self.n_sigma = comm, prefix, n_sigma
         self.scale = scale
         self.operators, self.nodes = operators, nodes
@@ -72,8 +82,12 @@ class SaddlePointFactorization:
         """The direct solver (created at the first factorization: its PETSc options are set then)."""
         if self._solver is None:
             n_u = self.operators.B.mat.getLocalSize()[0]
-            self._solver = DirectSolver(self.comm, prefix=self.prefix, options=MIXED_SOLVER_OPTIONS,
-                                        scaling=saddle_point_scaling(self.scale, self.n_sigma, n_u))
+            self._solver = DirectSolver(
+                self.comm,
+                prefix=self.prefix,
+                options=MIXED_SOLVER_OPTIONS,
+                scaling=saddle_point_scaling(self.scale, self.n_sigma, n_u),
+            )
         return self._solver
 
     def factorize_for(self, active: np.ndarray | None) -> bool:

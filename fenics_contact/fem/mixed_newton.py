@@ -70,8 +70,9 @@ class MixedNewtonProblem(Protocol):
     def residual(self, data: np.ndarray | None = None) -> tuple[float, float]: ...
 
 
-def exact_line_search(problem: MixedNewtonProblem, dc: np.ndarray, s: np.ndarray, d: np.ndarray,
-                      load: np.ndarray) -> float:
+def exact_line_search(
+    problem: MixedNewtonProblem, dc: np.ndarray, s: np.ndarray, d: np.ndarray, load: np.ndarray
+) -> float:
     """argmin_{t ∈ (0, 1]} J(σ + t dσ): root of the increasing piecewise-linear φ'(t) (s = σ_c, d = Q dσ replicated)."""
     Kt, comm = problem.assembly.Kt, problem.comm
     a = dot(dc, Kt @ dc, comm)
@@ -144,16 +145,26 @@ class _MixedSystem:
         return Check(final, scale, final)
 
 
-def globalized_newton(problem: MixedNewtonProblem, load: np.ndarray, data: np.ndarray | None
-                      ) -> MixedNewtonHistory:
+def globalized_newton(problem: MixedNewtonProblem, load: np.ndarray, data: np.ndarray | None) -> MixedNewtonHistory:
     """Solve the penalized contact problem with stress-side load ``load`` (Robin data ``data``), warm-started
     from (problem.c, problem.u) (``fem.newton.semismooth_newton_loop``); raises ConvergenceError at the step cap
     or when the settled residual fails its check."""
     system = _MixedSystem(problem, load, data)
     options = problem.newton
-    trace = semismooth_newton_loop(system, system.start(), name=problem.prefix.rstrip("_"),
-                                   max_steps=options.max_iterations, line_search=problem.line_search,
-                                   rtol=options.rtol, atol=options.atol, sizes="contact-set sizes")
-    return MixedNewtonHistory(residuals=trace.residuals, active_sizes=trace.active_sizes,
-                              factorizations=trace.factorizations, step_lengths=trace.step_lengths,
-                              energies=system.energies)
+    trace = semismooth_newton_loop(
+        system,
+        system.start(),
+        name=problem.prefix.rstrip("_"),
+        max_steps=options.max_iterations,
+        line_search=problem.line_search,
+        rtol=options.rtol,
+        atol=options.atol,
+        sizes="contact-set sizes",
+    )
+    return MixedNewtonHistory(
+        residuals=trace.residuals,
+        active_sizes=trace.active_sizes,
+        factorizations=trace.factorizations,
+        step_lengths=trace.step_lengths,
+        energies=system.energies,
+    )

@@ -7,9 +7,8 @@ passes both checks satisfies the equations as the forms state them (the monolith
 
 import numpy as np
 import ufl
-from petsc4py import PETSc
-
 from dolfinx import fem
+from petsc4py import PETSc
 
 from fenics_contact.fem import forms_mixed
 from fenics_contact.fem.mixed_assembly import assemble_array, dot
@@ -33,8 +32,9 @@ def ufl_residual_norm(sub, data: np.ndarray | None = None) -> tuple[float, float
         contact = (fem.Constant(msh, PETSc.ScalarType(1.0 / sub.epsilon)), ds_c(Boundary.GAMMA_C))
     if sub.beta is not None:  # the data term is applied below as C g
         robin = (fem.Constant(msh, PETSc.ScalarType(sub.beta)), None, ds(Boundary.INTERFACE))
-    Ft, Fv = forms_mixed.mixed_residual(sig, uh, t, v, lmbda=sub.fields.lmbda, mu=sub.fields.mu,
-                                        f=sub.fields.f, n=n, contact=contact, robin=robin)
+    Ft, Fv = forms_mixed.mixed_residual(
+        sig, uh, t, v, lmbda=sub.fields.lmbda, mu=sub.fields.mu, f=sub.fields.f, n=n, contact=contact, robin=robin
+    )
     natural = []  # ∫_ΓD u_D·τn and ∫_ΓC g τ_c (g as a P3 function with its nodes at the Gauss–Lobatto points)
     if sub.u_D is not None:
         natural.append(forms_mixed.robin_data_form(sub.u_D, t, n, ds(Boundary.GAMMA_D)))

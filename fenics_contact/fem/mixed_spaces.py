@@ -7,9 +7,9 @@ U_h: discontinuous vector P1.  u = u_D on Γ_D and the Robin condition on γ are
 
 import basix.ufl
 import numpy as np
-from mpi4py import MPI
 from dolfinx import fem
 from dolfinx import mesh as dmesh
+from mpi4py import MPI
 
 from fenics_contact.errors import InputError
 from fenics_contact.fem.arnold_winther import ArnoldWintherSpace
@@ -29,7 +29,8 @@ __all__ = [
 
 
 def check_triangles(msh: dmesh.Mesh) -> None:
-    """Raise InputError unless ``msh`` is a mesh of affine triangles (what the AW space supports; any number of ranks)."""
+    """Raise InputError unless ``msh`` is a mesh of affine triangles (what the AW space supports; any number of
+    ranks)."""
     if msh.topology.cell_type != dmesh.CellType.triangle:
         raise InputError(f"the mixed (Arnold–Winther) method needs a triangle mesh, got {msh.topology.cell_type.name}")
     if len(msh.geometry.cmaps) != 1 or msh.geometry.cmaps[0].degree != 1:
@@ -54,7 +55,11 @@ def displacement_trace_function(msh: dmesh.Mesh, field) -> fem.Function:
 
 
 def boundary_stress_space(
-    msh: dmesh.Mesh, facet_tags: dmesh.MeshTags, boundary: BoundaryConditions, *, split_interface=None,
+    msh: dmesh.Mesh,
+    facet_tags: dmesh.MeshTags,
+    boundary: BoundaryConditions,
+    *,
+    split_interface=None,
     basis_comm: MPI.Comm | None = None,
 ) -> ArnoldWintherSpace:
     """The AW space of a (sub)mesh with the essential stress conditions of its boundary.
@@ -67,9 +72,7 @@ def boundary_stress_space(
     tdim = msh.topology.dim
     msh.topology.create_connectivity(tdim - 1, tdim)
     exterior = dmesh.exterior_facet_indices(msh.topology)
-    tagged = np.concatenate(
-        [facet_tags.find(t) for t in (Boundary.GAMMA_D, Boundary.GAMMA_C, Boundary.INTERFACE)]
-    )
+    tagged = np.concatenate([facet_tags.find(t) for t in (Boundary.GAMMA_D, Boundary.GAMMA_C, Boundary.INTERFACE)])
     prescribed = []
     for tag, _, traction in boundary.traction_tags():  # every group on every rank (same list everywhere)
         prescribed.append((facet_tags.find(tag), traction))
@@ -107,8 +110,15 @@ class MixedSpaces:
     creation is collective); otherwise it is made when first used (0.34 s and 270 MB for Ω₁ at h = 1/128).
     """
 
-    def __init__(self, msh: dmesh.Mesh, facet_tags: dmesh.MeshTags, boundary: BoundaryConditions, *,
-                 space: ArnoldWintherSpace | None, distribute_P: bool) -> None:
+    def __init__(
+        self,
+        msh: dmesh.Mesh,
+        facet_tags: dmesh.MeshTags,
+        boundary: BoundaryConditions,
+        *,
+        space: ArnoldWintherSpace | None,
+        distribute_P: bool,
+    ) -> None:
         self.space = space or boundary_stress_space(msh, facet_tags, boundary)
         self._Pd: DistributedMatrix | None = None
         if distribute_P:

@@ -30,7 +30,6 @@ import time
 
 import numpy as np
 import scipy.sparse as sp
-
 from dolfinx import fem
 from dolfinx import mesh as dmesh
 from mpi4py import MPI
@@ -45,8 +44,8 @@ from fenics_contact.fem.mixed_contact import ContactNodes, MixedContactProfile
 from fenics_contact.fem.mixed_interface import InterfaceData
 from fenics_contact.fem.mixed_linear import SaddlePointFactorization, stress_scale
 from fenics_contact.fem.mixed_newton import MixedNewtonHistory, globalized_newton
-from fenics_contact.fem.mixed_spaces import MixedSpaces, check_triangles
 from fenics_contact.fem.mixed_residual import ufl_residual_norm
+from fenics_contact.fem.mixed_spaces import MixedSpaces, check_triangles
 from fenics_contact.problem.fields import MaterialFields
 from fenics_contact.problem.obstacles import Obstacle
 from fenics_contact.problem.tags import Boundary
@@ -127,8 +126,9 @@ class MixedSubproblem:
         has_contact = contact_boundary_present(self.comm, contact_facets, fields.obstacle if self.contact else None)
         if self.contact and not has_contact:
             raise InputError("a contact subproblem needs Γ_C facets")
-        self.spaces = MixedSpaces(msh, facet_tags, fields.boundary, space=space,
-                                  distribute_P=operators or self.comm.size > 1)
+        self.spaces = MixedSpaces(
+            msh, facet_tags, fields.boundary, space=space, distribute_P=operators or self.comm.size > 1
+        )
         self.has_operators = operators
         self.assembly = MixedOperators(msh, facet_tags, fields, self.spaces, beta=beta, operators=operators)
         self.interface: InterfaceData | None = None
@@ -143,9 +143,16 @@ class MixedSubproblem:
             modulus = self.comm.allreduce(float(np.min(fields.E.x.array, initial=np.inf)), op=MPI.MIN)
         #: s of the equilibration D = diag(s I_σ, I_u/s) of every saddle-point factorization of this subproblem
         self.stress_scale = stress_scale(modulus / _extent(msh))
-        self.factorization = SaddlePointFactorization(self.comm, prefix, self.spaces.n_sigma, self.assembly,
-                                                      self.contact_nodes, contact=self.contact,
-                                                      has_operators=operators, scale=self.stress_scale)
+        self.factorization = SaddlePointFactorization(
+            self.comm,
+            prefix,
+            self.spaces.n_sigma,
+            self.assembly,
+            self.contact_nodes,
+            contact=self.contact,
+            has_operators=operators,
+            scale=self.stress_scale,
+        )
         self.c = np.zeros(self.n_sigma)
         self.u = np.zeros(self.n_u)
         self.cold = True  #: no solution yet: the next Newton solve linearizes at "penalty everywhere"
@@ -198,8 +205,14 @@ class MixedSubproblem:
         if name not in self._scipy_cache:
             asm, iface, nodes = self.assembly, self.interface, self.contact_nodes
             op: DistributedMatrix | None = {
-                "K": asm.K, "Kt": asm.Kt, "B": asm.B, "M": asm.M, "R": asm.R, "Q": nodes and nodes.Q,
-                "C": iface and iface.C, "N": iface and iface.N,
+                "K": asm.K,
+                "Kt": asm.Kt,
+                "B": asm.B,
+                "M": asm.M,
+                "R": asm.R,
+                "Q": nodes and nodes.Q,
+                "C": iface and iface.C,
+                "N": iface and iface.N,
             }[name]
             if op is None:
                 raise AttributeError(f"this subproblem has no operator {name}")
@@ -211,9 +224,15 @@ class MixedSubproblem:
     B = property(lambda self: self._scipy("B"), doc="B P (divergence), SciPy CSR: owned DG P1 rows, global AW columns.")
     M = property(lambda self: self._scipy("M"), doc="DG P1 mass matrix, SciPy CSR.")
     R = property(lambda self: self._scipy("R"), doc="Pᵀ R_γ P (the Robin form with β = 1), SciPy CSR.")
-    Q = property(lambda self: self._scipy("Q"), doc="σ_c at the contact nodes, SciPy CSR: this rank's rows, global columns.")
-    C = property(lambda self: self._scipy("C"), doc="Robin data → stress load, SciPy CSR: owned rows, canonical γ columns.")
-    N = property(lambda self: self._scipy("N"), doc="σn at the γ nodes, SciPy CSR: this rank's block of rows, global columns.")
+    Q = property(
+        lambda self: self._scipy("Q"), doc="σ_c at the contact nodes, SciPy CSR: this rank's rows, global columns."
+    )
+    C = property(
+        lambda self: self._scipy("C"), doc="Robin data → stress load, SciPy CSR: owned rows, canonical γ columns."
+    )
+    N = property(
+        lambda self: self._scipy("N"), doc="σn at the γ nodes, SciPy CSR: this rank's block of rows, global columns."
+    )
 
     # -- data ---------------------------------------------------------------------------
     def set_obstacle(self, obstacle: Obstacle | None) -> None:

@@ -26,8 +26,16 @@ import numpy as np
 
 from fenics_contact.errors import ConvergenceError, InputError
 
-__all__ = ["LINE_SEARCHES", "Direction", "StepState", "Advance", "Check", "ContactSystem", "NewtonTrace",
-           "semismooth_newton_loop"]
+__all__ = [
+    "LINE_SEARCHES",
+    "Direction",
+    "StepState",
+    "Advance",
+    "Check",
+    "ContactSystem",
+    "NewtonTrace",
+    "semismooth_newton_loop",
+]
 
 #: when the exact line search runs (module docstring)
 LINE_SEARCHES = ("never", "on-cycle", "always")
@@ -113,9 +121,18 @@ def _key(active: np.ndarray) -> bytes:
     return np.packbits(active).tobytes()
 
 
-def semismooth_newton_loop(system: ContactSystem, active: np.ndarray, *, name: str, max_steps: int,
-                           line_search: str = "on-cycle", rtol: float = 0.0, atol: float = 0.0,
-                           refinements: int = 0, sizes: str = "active-set sizes") -> NewtonTrace:
+def semismooth_newton_loop(
+    system: ContactSystem,
+    active: np.ndarray,
+    *,
+    name: str,
+    max_steps: int,
+    line_search: str = "on-cycle",
+    rtol: float = 0.0,
+    atol: float = 0.0,
+    refinements: int = 0,
+    sizes: str = "active-set sizes",
+) -> NewtonTrace:
     """Semismooth Newton on ``system`` from its current iterate, linearized first at ``active``.
 
     A settled step is accepted when the system has no check or ‖F‖ ≤ rtol·(size of its terms) + atol with ‖F‖

@@ -14,26 +14,24 @@ import time
 import weakref
 from dataclasses import dataclass
 
+import basix.ufl
+import dolfinx.fem.petsc
 import numpy as np
 import ufl
+from dolfinx import fem
+from dolfinx import mesh as dmesh
 from mpi4py import MPI
 from petsc4py import PETSc
 
-import basix.ufl
-from dolfinx import fem
-from dolfinx import mesh as dmesh
-import dolfinx.fem.petsc
-
+from fenics_contact.errors import InputError
 from fenics_contact.fem import forms_primal
 from fenics_contact.fem.contact import ContactProfile, NewtonHistory, NewtonOptions, semismooth_newton
-from fenics_contact.errors import InputError
-from fenics_contact.problem.boundary import check_boundary_groups
+from fenics_contact.fem.linalg import AbsoluteTerms, DirectSolver, quadratic_form
+from fenics_contact.fem.primal_boundary import NodalContactGeometry, PrimalBoundaryData
 from fenics_contact.problem.fields import MaterialFields
+from fenics_contact.problem.materials import strain, stress
 from fenics_contact.problem.obstacles import Obstacle
 from fenics_contact.problem.problem import ContactProblem
-from fenics_contact.fem.primal_boundary import NodalContactGeometry, PrimalBoundaryData
-from fenics_contact.fem.linalg import AbsoluteTerms, DirectSolver, quadratic_form
-from fenics_contact.problem.materials import strain, stress
 from fenics_contact.problem.tags import Boundary
 from fenics_contact.problem.validation import require_facet_groups
 
@@ -97,11 +95,11 @@ class PrimalSubproblem:
         ds_c = ds(Boundary.GAMMA_C)
         self.geometry: NodalContactGeometry | None = None
         if self.contact:
-            self.geometry = NodalContactGeometry(self.V, self.Q, facet_tags, ds_c, self.boundary.dirichlet_q,
-                                                 fields.obstacle)
+            self.geometry = NodalContactGeometry(
+                self.V, self.Q, facet_tags, ds_c, self.boundary.dirichlet_q, fields.obstacle
+            )
         tractions = self.boundary.traction_terms
 
-        n = ufl.FacetNormal(msh)
         v, du = ufl.TestFunction(self.V), ufl.TrialFunction(self.V)
         q = ufl.TestFunction(self.Q)
         lm, mu = fields.lmbda, fields.mu
@@ -379,7 +377,8 @@ def warn_if_locking(nu: fem.Function | None, comm) -> None:
             "ν reaches %.6g: P1 displacement elements lock as ν → ½ (a divergence-free test solution on the "
             "clamped square, h = 1/64: L² error 3.4e-3 at ν = 0.3, 3.2e-2 at 0.49, 0.21 at 0.499, 0.68 at 0.4999), "
             "so the primal methods (monolithic, Algorithms 1 and 3) may be far from the elastic solution; "
-            "--method mixed or mixed-ms (Arnold–Winther stress) is robust in ν.", nu_max,
+            "--method mixed or mixed-ms (Arnold–Winther stress) is robust in ν.",
+            nu_max,
         )
 
 
@@ -387,7 +386,11 @@ def penalty_for(problem: ContactProblem, delta: float | None = None) -> float:
     """δ, or when None the default ``default_penalty(h, E_c)`` with E_c the largest E on Γ_C."""
     if delta is None:
         return default_penalty(problem.h, problem.contact_modulus())
-    if isinstance(delta, bool) or not isinstance(delta, (int, float, np.number)) or not (np.isfinite(delta) and delta > 0):
+    if (
+        isinstance(delta, bool)
+        or not isinstance(delta, (int, float, np.number))
+        or not (np.isfinite(delta) and delta > 0)
+    ):
         raise InputError(f"the primal penalty δ must be a finite number > 0 (or None: the default), got {delta!r}")
     return float(delta)
 
@@ -416,6 +419,9 @@ def solve_primal_monolithic(
     profile = sub.contact_profile()
     log.info(
         "monolithic primal: %d Newton steps, active-set sizes %s, penetration %.3e, %.2f s",
-        history.steps, history.active_sizes, profile.penetration, elapsed,
+        history.steps,
+        history.active_sizes,
+        profile.penetration,
+        elapsed,
     )
     return PrimalSolution(sub.u, history, profile, delta, sub.num_dofs, elapsed, sub)

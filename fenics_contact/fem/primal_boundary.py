@@ -8,17 +8,16 @@ normal (facet normals averaged with the vertex weights) and g = 0.  One ν per n
 set of nodes on a curved Γ_C too.
 """
 
+import dolfinx.fem.petsc
 import numpy as np
 import ufl
+from dolfinx import fem
+from dolfinx import mesh as dmesh
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from dolfinx import fem
-from dolfinx import mesh as dmesh
-import dolfinx.fem.petsc
-
-from fenics_contact.fem.contact import ContactProfile, profile_order
 from fenics_contact.errors import InputError
+from fenics_contact.fem.contact import ContactProfile, profile_order
 from fenics_contact.fem.contact_boundary import contact_boundary_present, obstacle_at_nodes
 from fenics_contact.problem.boundary import BoundaryConditions, neumann_groups
 from fenics_contact.problem.obstacles import Obstacle
@@ -35,8 +34,9 @@ class PrimalBoundaryData:
     ``tractions``); ``dirichlet_dofs`` / ``dirichlet_q``: the Γ_D DOFs of V and of the scalar P1 space Q.
     """
 
-    def __init__(self, V: fem.FunctionSpace, Q: fem.FunctionSpace, facet_tags: dmesh.MeshTags,
-                 boundary: BoundaryConditions) -> None:
+    def __init__(
+        self, V: fem.FunctionSpace, Q: fem.FunctionSpace, facet_tags: dmesh.MeshTags, boundary: BoundaryConditions
+    ) -> None:
         msh = V.mesh
         tdim = msh.topology.dim
         gdim = msh.geometry.dim
@@ -105,8 +105,15 @@ class NodalContactGeometry:
     obstacle is given and Γ_C has no facets.
     """
 
-    def __init__(self, V: fem.FunctionSpace, Q: fem.FunctionSpace, facet_tags: dmesh.MeshTags, ds_c,
-                 dirichlet_q: np.ndarray, obstacle: Obstacle | None) -> None:
+    def __init__(
+        self,
+        V: fem.FunctionSpace,
+        Q: fem.FunctionSpace,
+        facet_tags: dmesh.MeshTags,
+        ds_c,
+        dirichlet_q: np.ndarray,
+        obstacle: Obstacle | None,
+    ) -> None:
         msh = V.mesh
         self.V, self.Q, self.dirichlet_q = V, Q, dirichlet_q
         self.comm = msh.comm

@@ -50,7 +50,12 @@ def relative(num: float, den: float) -> float:
 
 
 def primal_certificate(
-    u1: np.ndarray, u2: np.ndarray, g12: np.ndarray, g21: np.ndarray, alpha: np.ndarray, weights: np.ndarray,
+    u1: np.ndarray,
+    u2: np.ndarray,
+    g12: np.ndarray,
+    g21: np.ndarray,
+    alpha: np.ndarray,
+    weights: np.ndarray,
     comm: MPI.Comm,
 ) -> Certificate:
     """Nodal certificate of Algorithms 1 and 3 from owned interface values (collective)."""

@@ -139,7 +139,9 @@ class CondensedInterface:
             return np.inf
         return float(np.linalg.eigvalsh(0.5 * (self.M + self.M.T))[0])
 
-    def solve(self, options: InterfaceNewtonOptions, name: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, "ContactNewtonHistory"]:
+    def solve(
+        self, options: InterfaceNewtonOptions, name: str
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, "ContactNewtonHistory"]:
         """Contact Newton, then (g₁₂, g₂₁, λ) global."""
         p = self.problem
         s_load, g21_0, y20 = self.load_terms()
@@ -154,7 +156,8 @@ class CondensedInterface:
                     f"contact compliance has the eigenvalue {lowest:.2e} < 0), so its contact problem need not "
                     "have a solution: Ω₁'s interface response is not that of an elastic body at this transmission "
                     "coefficient (a multiscale Ω₁ whose approximation error the Robin coefficient amplifies). Use a "
-                    "smaller α or β (Algorithm 3's default alpha='Emin*h^-1/2'), or more oversampling layers") from err
+                    "smaller α or β (Algorithm 3's default alpha='Emin*h^-1/2'), or more oversampling layers"
+                ) from err
             raise
         g21 = g21_0 - self.Gq @ lam
         y2 = y20 + self.Yc @ g21 - self.Yq @ lam

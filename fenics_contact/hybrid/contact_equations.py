@@ -27,8 +27,9 @@ def solve_on(s_load: np.ndarray, M: np.ndarray, D: np.ndarray, A: np.ndarray) ->
     return s, mu, float(np.linalg.norm(r) / size) if np.isfinite(r).all() else np.inf
 
 
-def energy_line_search(mu: np.ndarray, dmu: np.ndarray, s: np.ndarray, ds: np.ndarray, s_load: np.ndarray,
-                 D: np.ndarray) -> float:
+def energy_line_search(
+    mu: np.ndarray, dmu: np.ndarray, s: np.ndarray, ds: np.ndarray, s_load: np.ndarray, D: np.ndarray
+) -> float:
     """argmin over t ∈ (0, 1] of ψ(s + t ds): root of the increasing piecewise-linear φ'(t).
 
     φ'(t) = dμᵀ(s_L − s − t ds) + Σ D (s + t ds)⁺ ds  (ψ = ½μᵀMμ + ½ΣD(s⁺)², s = s_L − Mμ).

@@ -70,8 +70,9 @@ class _CondensedSystem:
     forces (``solve_on``, checked for a singular system), the next set that of the local front resolution
     where it proposes one not yet solved."""
 
-    def __init__(self, s_load: np.ndarray, M: np.ndarray, D: np.ndarray, *, name: str, rtol: float,
-                 local: LocalFronts | None) -> None:
+    def __init__(
+        self, s_load: np.ndarray, M: np.ndarray, D: np.ndarray, *, name: str, rtol: float, local: LocalFronts | None
+    ) -> None:
         self.s_load, self.M, self.D, self.name, self.rtol, self.local = s_load, M, D, name, rtol, local
         self.s, self.mu = s_load.copy(), np.zeros(s_load.size)
         self.hist = ContactNewtonHistory()
@@ -87,8 +88,10 @@ class _CondensedSystem:
         self.active = active
         self.s_new, self.mu_new, residual = solve_on(self.s_load, self.M, self.D, np.flatnonzero(active))
         if residual > self.rtol:
-            raise ConvergenceError(f"{self.name}: the condensed contact system is singular or ill-conditioned "
-                                   f"(relative residual {residual:.1e})")
+            raise ConvergenceError(
+                f"{self.name}: the condensed contact system is singular or ill-conditioned "
+                f"(relative residual {residual:.1e})"
+            )
         return Direction(self.s_new > 0.0)
 
     def same(self, a: np.ndarray, b: np.ndarray) -> bool:
@@ -119,10 +122,19 @@ class _CondensedSystem:
         return None  # (every solve was checked)
 
 
-def contact_newton(s_load: np.ndarray, M: np.ndarray, D: np.ndarray, *, max_steps: int = 50,
-                   name: str = "contact Newton", rtol: float = 1e-10, active: np.ndarray | None = None,
-                   line_search: bool = False, chains=None,
-                   window: int = 0) -> tuple[np.ndarray, np.ndarray, ContactNewtonHistory]:
+def contact_newton(
+    s_load: np.ndarray,
+    M: np.ndarray,
+    D: np.ndarray,
+    *,
+    max_steps: int = 50,
+    name: str = "contact Newton",
+    rtol: float = 1e-10,
+    active: np.ndarray | None = None,
+    line_search: bool = False,
+    chains=None,
+    window: int = 0,
+) -> tuple[np.ndarray, np.ndarray, ContactNewtonHistory]:
     """Solve s = s_L − M μ, μ = D s⁺ by semismooth Newton (finite termination, globalized): (s, μ).
 
     Starts from μ = 0 (no contact force) with the active set 𝒜 = {s_L > 0} (the contact-free
@@ -143,28 +155,35 @@ def contact_newton(s_load: np.ndarray, M: np.ndarray, D: np.ndarray, *, max_step
     local = LocalFronts(chains, M, D, window) if chains and window > 0 else None
     system = _CondensedSystem(s_load, M, D, name=name, rtol=rtol, local=local)
     start = s_load > 0.0 if active is None else np.asarray(active, dtype=bool).copy()
-    trace = semismooth_newton_loop(system, start, name=name, max_steps=max_steps,
-                                   line_search="always" if line_search else "on-cycle")
+    trace = semismooth_newton_loop(
+        system, start, name=name, max_steps=max_steps, line_search="always" if line_search else "on-cycle"
+    )
     hist = system.hist
     hist.active_sizes, hist.step_lengths, hist.residuals = trace.active_sizes, trace.step_lengths, trace.residuals
     return system.s, system.mu, hist
 
 
-def contact_solve(s_load: np.ndarray, M: np.ndarray, D: np.ndarray, options: InterfaceNewtonOptions, name: str,
-                  chains) -> tuple[np.ndarray, np.ndarray, "ContactNewtonHistory"]:
+def contact_solve(
+    s_load: np.ndarray, M: np.ndarray, D: np.ndarray, options: InterfaceNewtonOptions, name: str, chains
+) -> tuple[np.ndarray, np.ndarray, "ContactNewtonHistory"]:
     """``contact_newton`` with the options' local front resolution (``chains`` given, ``options.front_window``
     unknowns on either side of every front), and the plain contact Newton afresh should that not converge:
     with a non-symmetric M (a multiscale Ω₁) the energy line search that stops cycles is no merit function,
     and a set the local problems chose can lead into a cycle the plain Newton avoids.  The failed attempt's steps
     stay counted (``ContactNewtonHistory.discarded``)."""
     try:
-        return contact_newton(s_load, M, D, max_steps=options.max_steps, name=name, chains=chains,
-                              window=options.front_window)
+        return contact_newton(
+            s_load, M, D, max_steps=options.max_steps, name=name, chains=chains, window=options.front_window
+        )
     except ConvergenceError as first:
         if not chains:
             raise
-        log.warning("%s: the contact Newton with the local front resolution did not converge (%s); the plain "
-                    "contact Newton instead", name, first)
+        log.warning(
+            "%s: the contact Newton with the local front resolution did not converge (%s); the plain "
+            "contact Newton instead",
+            name,
+            first,
+        )
         s, mu, hist = contact_newton(s_load, M, D, max_steps=options.max_steps, name=name)
         hist.discarded = first.steps
         return s, mu, hist

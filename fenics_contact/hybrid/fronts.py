@@ -27,7 +27,8 @@ def contact_chains(points: np.ndarray, *, cut: float = 4.0) -> list[tuple[np.nda
     The pieces are the paths of the Euclidean minimum spanning tree of ``points`` once its edges longer than
     ``cut`` × the median edge are removed (separate components of Γ_C); a piece that is not a path (a
     node with three tree neighbours: points too far from a curve) is left out, and its fronts are then
-    not resolved locally (the plain step's set stands there).  Coincident points (a vertex copied at a corner) follow each other.
+    not resolved locally (the plain step's set stands there).  Coincident points (a vertex copied at a corner) follow
+    each other.
     """
     if points.shape[0] < 3:
         return []
@@ -63,8 +64,12 @@ def contact_chains(points: np.ndarray, *, cut: float = 4.0) -> list[tuple[np.nda
             order.append(int(nbrs[0]))
         order = np.array(order)
         arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points[order], axis=0), axis=1))])
-        chains.append((np.concatenate([members[k] for k in order]),
-                       np.concatenate([np.full(members[k].size, a) for k, a in zip(order, arc)])))
+        chains.append(
+            (
+                np.concatenate([members[k] for k in order]),
+                np.concatenate([np.full(members[k].size, a) for k, a in zip(order, arc)]),
+            )
+        )
     return chains
 
 

@@ -32,8 +32,12 @@ def check_solve_inputs(
     require_load: bool = True,
 ) -> None:
     """Types of the common arguments, the tags of the problem's mesh, and a load that does not vanish on it."""
-    require_instance(problem, ContactProblem, "the problem",
-                     " (problem.models.model_1/2/3(...).on(mesh), or ContactProblem(..., mesh=mesh))")
+    require_instance(
+        problem,
+        ContactProblem,
+        "the problem",
+        " (problem.models.model_1/2/3(...).on(mesh), or ContactProblem(..., mesh=mesh))",
+    )
     require_instance(problem.cm, ContactMesh, "the mesh", " (from geometry.unit_square or geometry.read_mesh)")
     require_instance(options, IterationOptions, "options", " (hybrid.iteration.IterationOptions)")
     require_instance(newton, NewtonOptions, "newton", " (fem.contact.NewtonOptions)")
@@ -44,8 +48,9 @@ def check_solve_inputs(
 
 def check_reference_displacement(reference, cm: ContactMesh) -> None:
     """A reference displacement must be a vector P1 function on the problem's own mesh."""
-    require_instance(reference, fem.Function, "the reference",
-                     " (the displacement of solve_primal_monolithic: pass its .u)")
+    require_instance(
+        reference, fem.Function, "the reference", " (the displacement of solve_primal_monolithic: pass its .u)"
+    )
     V = reference.function_space
     if V.mesh is not cm.mesh:
         raise InputError(
@@ -57,5 +62,7 @@ def check_reference_displacement(reference, cm: ContactMesh) -> None:
     element = V.ufl_element()
     gdim = cm.mesh.geometry.dim
     if tuple(V.value_shape) != (gdim,) or element.degree != 1 or element.discontinuous:
-        raise InputError(f"the reference must be a continuous P1 vector function (value shape ({gdim},)), got "
-                         f"degree {element.degree}, value shape {tuple(V.value_shape)}")
+        raise InputError(
+            f"the reference must be a continuous P1 vector function (value shape ({gdim},)), got "
+            f"degree {element.degree}, value shape {tuple(V.value_shape)}"
+        )

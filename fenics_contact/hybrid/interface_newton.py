@@ -41,8 +41,9 @@ def _norm(v: np.ndarray) -> float:
     return float(np.linalg.norm(v))
 
 
-def newton_iterate(step, options: IterationOptions, *, name: str, monitor=None,
-                   initial: np.ndarray | None = None) -> IterationHistory:
+def newton_iterate(
+    step, options: IterationOptions, *, name: str, monitor=None, initial: np.ndarray | None = None
+) -> IterationHistory:
     """Interface Newton on g = T(g) (``accel="newton"``); each record is one application of T.
 
     The step provides ``interface_problem(options.newton)`` (an ``InterfaceProblem``, built once
@@ -67,13 +68,21 @@ def newton_iterate(step, options: IterationOptions, *, name: str, monitor=None,
         om2.set_state(om2.solve(om2.rhs(g21, lam)))  # warm start of Ω₂: one J₀ back-solve
         history.newton_steps = ch.steps
         resolved = [e.size for e in ch.resolved]
-        log.info("%s: contact Newton %d steps, active-set sizes %s, step lengths %s, rows added/removed per "
-                 "step %s%s%s", name, ch.steps, ch.active_sizes, [round(t, 3) for t in ch.step_lengths],
-                 [f"+{a.size}/-{r.size}" for a, r in zip(ch.added, ch.removed)],
-                 f" (rows the local front resolution set otherwise than the plain step: {resolved})"
-                 if any(resolved) else "",
-                 f"; local front problems {sum(w for w, _, _ in ch.local)}, {ch.local_iterations} iterations, "
-                 f"largest window {max(m for _, _, m in ch.local)}" if any(w for w, _, _ in ch.local) else "")
+        log.info(
+            "%s: contact Newton %d steps, active-set sizes %s, step lengths %s, rows added/removed per step %s%s%s",
+            name,
+            ch.steps,
+            ch.active_sizes,
+            [round(t, 3) for t in ch.step_lengths],
+            [f"+{a.size}/-{r.size}" for a, r in zip(ch.added, ch.removed)],
+            f" (rows the local front resolution set otherwise than the plain step: {resolved})"
+            if any(resolved)
+            else "",
+            f"; local front problems {sum(w for w, _, _ in ch.local)}, {ch.local_iterations} iterations, "
+            f"largest window {max(m for _, _, m in ch.local)}"
+            if any(w for w, _, _ in ch.local)
+            else "",
+        )
         history.contact_newton = ch
         g = problem.data(g12, g21)
     else:
@@ -98,8 +107,11 @@ def newton_iterate(step, options: IterationOptions, *, name: str, monitor=None,
             return None, history.records[-1]
         return evaluate(step, g, history, name=name, monitor=monitor)
 
-    zero_tried = rec.residual >= options.tol and first_size <= COLLAPSE * initial_size \
+    zero_tried = (
+        rec.residual >= options.tol
+        and first_size <= COLLAPSE * initial_size
         and history.iterations < options.max_iterations
+    )
     if zero_tried:
         Tg, rec = zero_or_back(g)  # (glued: rec.residual < tol ends the corrections before they start)
 
@@ -121,25 +133,46 @@ def newton_iterate(step, options: IterationOptions, *, name: str, monitor=None,
         for _ in range(6 if exact else 1):  # backtracking (each trial is one application of T)
             g = g0 + t * problem.data(d12, d21)
             Tg, rec = evaluate(step, g, history, name=name, monitor=monitor)
-            accepted = (rec.residual < options.tol or residual_norm(g, Tg) <= (1.0 - 1e-4 * t) * fnorm
-                        or rec.residual < 0.5 * rec0.residual)
+            accepted = (
+                rec.residual < options.tol
+                or residual_norm(g, Tg) <= (1.0 - 1e-4 * t) * fnorm
+                or rec.residual < 0.5 * rec0.residual
+            )
             rec.info["newton_steps"] = history.newton_steps
             rec.info["step_length"] = t
             if accepted or history.iterations >= options.max_iterations:
                 break
             t *= 0.5
-        log.info("%s: Newton step %d (%s Jacobian), step length %g, residual %.3e", name, history.newton_steps,
-                 "exact" if exact else "condensed", t, rec.residual)
+        log.info(
+            "%s: Newton step %d (%s Jacobian), step length %g, residual %.3e",
+            name,
+            history.newton_steps,
+            "exact" if exact else "condensed",
+            t,
+            rec.residual,
+        )
         if not accepted and not exact and history.iterations < options.max_iterations:
             exact = True  # back to g0 and retry with the exact Jacobian of Ω₂
             g = g0
             Tg, rec = evaluate(step, g, history, name=name, monitor=monitor)
     history.converged = bool(rec.residual < options.tol)
-    if not history.converged and not zero_tried and history.iterations < options.max_iterations \
-            and data_norm(g, comm) <= COLLAPSE * max(initial_size, first_size):
+    if (
+        not history.converged
+        and not zero_tried
+        and history.iterations < options.max_iterations
+        and data_norm(g, comm) <= COLLAPSE * max(initial_size, first_size)
+    ):
         Tg, rec = zero_or_back(g)
     history.time_s = time.perf_counter() - start - history.time_monitor_s
-    log.info("%s: %s, %d Newton steps, %d applications of T, transmission residual %.3e, online %.3f s "
-             "(interface response offline %.3f s)", name, "converged" if history.converged else "NOT converged",
-             history.newton_steps, history.iterations, rec.residual, history.time_s, history.time_offline_s)
+    log.info(
+        "%s: %s, %d Newton steps, %d applications of T, transmission residual %.3e, online %.3f s "
+        "(interface response offline %.3f s)",
+        name,
+        "converged" if history.converged else "NOT converged",
+        history.newton_steps,
+        history.iterations,
+        rec.residual,
+        history.time_s,
+        history.time_offline_s,
+    )
     return history

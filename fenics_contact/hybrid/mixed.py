@@ -76,8 +76,14 @@ import basix.ufl
 import numpy as np
 from dolfinx import fem
 
+from fenics_contact.errors import InputError
 from fenics_contact.fem.arnold_winther import ArnoldWintherSpace
 from fenics_contact.fem.contact import NewtonOptions
+from fenics_contact.fem.mixed import MixedSolution, epsilon_for
+from fenics_contact.fem.mixed_contact import MixedContactProfile
+from fenics_contact.fem.mixed_newton import MixedNewtonHistory
+from fenics_contact.fem.mixed_spaces import check_triangles
+from fenics_contact.fem.mixed_subproblem import MixedSubproblem
 from fenics_contact.hybrid.certificate import Certificate, mixed_certificate
 from fenics_contact.hybrid.condensation import InterfaceProblem
 from fenics_contact.hybrid.inputs import check_solve_inputs, require_instance
@@ -88,19 +94,19 @@ from fenics_contact.hybrid.iteration import (
     IterationResult,
     iterate,
 )
-from fenics_contact.errors import InputError
-from fenics_contact.problem.problem import ContactProblem
-from fenics_contact.fem.mixed import MixedSolution, epsilon_for
-from fenics_contact.fem.mixed_contact import MixedContactProfile
-from fenics_contact.fem.mixed_newton import MixedNewtonHistory
-from fenics_contact.fem.mixed_spaces import check_triangles
-from fenics_contact.fem.mixed_subproblem import MixedSubproblem
 from fenics_contact.hybrid.primal import omega2_record
 from fenics_contact.hybrid.response import FineResponse, MixedPart
 from fenics_contact.hybrid.transmission import split_mesh, sub_to_parent_dofs
+from fenics_contact.problem.problem import ContactProblem
 
-__all__ = ["DEFAULT_BETA", "MixedHybridResult", "MixedHybridStep", "solve_mixed_hybrid", "solve_or_verify",
-           "transmission_coefficient"]
+__all__ = [
+    "DEFAULT_BETA",
+    "MixedHybridResult",
+    "MixedHybridStep",
+    "solve_mixed_hybrid",
+    "solve_or_verify",
+    "transmission_coefficient",
+]
 
 log = logging.getLogger(__name__)
 
@@ -166,13 +172,20 @@ class MixedHybridStep:
         self.sub = []
         for i, part in enumerate(self.parts):
             fields = problem.fields_on(part.mesh)
-            self.sub.append(MixedSubproblem(
-                part.mesh, part.facet_tags, fields,
-                epsilon=self.epsilon if i == 1 else None, beta=self.beta,
-                prefix=f"fc_mixed_omega{i + 1}_", newton=newton, operators=i == 1 or self.omega1_operators,
-                space=self._omega1_space(part, fields) if i == 0 else None,
-                interface_points=self.sub[0].gamma_points if i == 1 else None,
-            ))
+            self.sub.append(
+                MixedSubproblem(
+                    part.mesh,
+                    part.facet_tags,
+                    fields,
+                    epsilon=self.epsilon if i == 1 else None,
+                    beta=self.beta,
+                    prefix=f"fc_mixed_omega{i + 1}_",
+                    newton=newton,
+                    operators=i == 1 or self.omega1_operators,
+                    space=self._omega1_space(part, fields) if i == 0 else None,
+                    interface_points=self.sub[0].gamma_points if i == 1 else None,
+                )
+            )
         if self.sub[0].interface_range != self.sub[1].interface_range:
             raise RuntimeError("the interface data of Ω₁ and Ω₂ are not distributed alike")
         g0, g1 = self.sub[0].interface_range
@@ -281,8 +294,9 @@ class MixedHybridStep:
         if self._newton is None or self._newton.options.strategy != options.strategy:
             omega2 = MixedPart(self.sub[1], perm=self._perm2, contact=True, factorize=options.strategy == "condensed")
             same = lambda v: np.asarray(v)  # noqa: E731  (serial: local = global numbering)
-            self._newton = InterfaceProblem(self._omega1_response(options), omega2, np.full(self.size, -2.0 * self.beta),
-                                            1.0, same, same, options)
+            self._newton = InterfaceProblem(
+                self._omega1_response(options), omega2, np.full(self.size, -2.0 * self.beta), 1.0, same, same, options
+            )
         return self._newton
 
     def _measure(self) -> None:
@@ -388,7 +402,21 @@ def solve_mixed_hybrid(
     }
     e_sigma, e_u = step.errors() if step.reference is not None else (None, None)
     return MixedHybridResult(
-        sigma, u, s1.sigma_function(), s2.sigma_function(), s1.u_function(), s2.u_function(), history,
-        s2.contact_profile(), dofs, offline + history.time_offline_s, history.time_s, e_sigma, e_u, step.beta,
-        step.epsilon, step, history.time_offline_s,
+        sigma,
+        u,
+        s1.sigma_function(),
+        s2.sigma_function(),
+        s1.u_function(),
+        s2.u_function(),
+        history,
+        s2.contact_profile(),
+        dofs,
+        offline + history.time_offline_s,
+        history.time_s,
+        e_sigma,
+        e_u,
+        step.beta,
+        step.epsilon,
+        step,
+        history.time_offline_s,
     )

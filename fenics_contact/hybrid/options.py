@@ -42,10 +42,14 @@ class InterfaceNewtonOptions:
     front_window: int = 8
 
     def __post_init__(self) -> None:
-        if isinstance(self.front_window, bool) or not isinstance(self.front_window, (int, np.integer)) \
-                or self.front_window < 0:
-            raise InputError(f"interface Newton: front_window must be an integer >= 0 (0: off), got "
-                             f"{self.front_window!r}")
+        if (
+            isinstance(self.front_window, bool)
+            or not isinstance(self.front_window, (int, np.integer))
+            or self.front_window < 0
+        ):
+            raise InputError(
+                f"interface Newton: front_window must be an integer >= 0 (0: off), got {self.front_window!r}"
+            )
         if self.strategy not in ("condensed", "interface"):
             raise InputError(f"unknown interface Newton strategy {self.strategy!r}; choose 'condensed' or 'interface'")
         if self.max_steps < 1 or self.max_corrections < 0 or self.chunk < 1:

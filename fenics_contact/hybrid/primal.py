@@ -15,13 +15,14 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
+from dolfinx import fem
 from mpi4py import MPI
 
-from dolfinx import fem
-
 from fenics_contact.fem.contact import ContactProfile, NewtonHistory, NewtonOptions
+from fenics_contact.fem.primal import PrimalSubproblem, penalty_for, warn_if_locking
 from fenics_contact.hybrid.certificate import Certificate, primal_certificate
 from fenics_contact.hybrid.condensation import InterfaceProblem
+from fenics_contact.hybrid.inputs import check_reference_displacement, check_solve_inputs
 from fenics_contact.hybrid.iteration import (
     HybridStep,
     InterfaceNewtonOptions,
@@ -30,14 +31,18 @@ from fenics_contact.hybrid.iteration import (
     IterationResult,
     iterate,
 )
-from fenics_contact.hybrid.inputs import check_reference_displacement, check_solve_inputs
 from fenics_contact.hybrid.response import FineResponse, PrimalPart
-from fenics_contact.problem.problem import ContactProblem
-from fenics_contact.fem.primal import PrimalSubproblem, penalty_for, warn_if_locking
 from fenics_contact.hybrid.transmission import InterfaceSpace, robin_coefficient, split_mesh
+from fenics_contact.problem.problem import ContactProblem
 
-__all__ = ["PrimalHybridStep", "HybridResult", "solve_primal_hybrid", "solve_or_verify", "DEFAULT_ALPHA",
-           "DEFAULT_ALPHA_MS"]
+__all__ = [
+    "PrimalHybridStep",
+    "HybridResult",
+    "solve_primal_hybrid",
+    "solve_or_verify",
+    "DEFAULT_ALPHA",
+    "DEFAULT_ALPHA_MS",
+]
 
 #: Default transmission coefficient α_p = E_p h^(-1/2) (chosen from benchmarks/primal_hybrid_study.py).
 DEFAULT_ALPHA = "E*h^-1/2"
@@ -96,9 +101,14 @@ class PrimalHybridStep:
             self.interface.to_part(self.alpha, i, alpha_fn)
             self.sub.append(
                 PrimalSubproblem(
-                    part.mesh, part.facet_tags, problem.fields_on(part.mesh),
-                    delta=delta if i == 1 else None, alpha=alpha_fn,
-                    prefix=f"fc_primal_omega{i + 1}_", newton=newton, V=self.interface.spaces[i],
+                    part.mesh,
+                    part.facet_tags,
+                    problem.fields_on(part.mesh),
+                    delta=delta if i == 1 else None,
+                    alpha=alpha_fn,
+                    prefix=f"fc_primal_omega{i + 1}_",
+                    newton=newton,
+                    V=self.interface.spaces[i],
                 )
             )
         self._prev = [np.zeros_like(s.u.x.array) for s in self.sub]
@@ -161,8 +171,9 @@ class PrimalHybridStep:
             iface = self.interface
             omega1 = FineResponse(PrimalPart(self.sub[0], iface, 0, contact=False), chunk=options.chunk)
             omega2 = PrimalPart(self.sub[1], iface, 1, contact=True, factorize=options.strategy == "condensed")
-            self._newton = InterfaceProblem(omega1, omega2, iface.gather(2.0 * self.alpha), -1.0,
-                                            iface.gather, iface.local, options)
+            self._newton = InterfaceProblem(
+                omega1, omega2, iface.gather(2.0 * self.alpha), -1.0, iface.gather, iface.local, options
+            )
         return self._newton
 
     def _measure(self) -> None:
@@ -240,7 +251,8 @@ def solve_primal_hybrid(
 ) -> HybridResult:
     """Algorithm 1 until the transmission residual is below ``options.tol``.
 
-    ``delta`` defaults to ``fem.primal.default_penalty(h, E_c)``, E_c the largest E on Γ_C; ``reference`` (the monolithic solution) adds e_u per iteration, outside the online time;
+    ``delta`` defaults to ``fem.primal.default_penalty(h, E_c)``, E_c the largest E on Γ_C; ``reference`` (the
+    monolithic solution) adds e_u per iteration, outside the online time;
     ``initial_data`` warm-starts the interface data; ``step`` reuses a step (and its offline
     data) from an earlier solve on the same mesh and model.
     """
@@ -266,6 +278,15 @@ def solve_primal_hybrid(
     }
     e_u = step.error_l2() if step.reference is not None else None
     return HybridResult(
-        step.sub[0].u, step.sub[1].u, u, history, step.sub[1].contact_profile(), dofs,
-        offline + history.time_offline_s, history.time_s, e_u, step, history.time_offline_s,
+        step.sub[0].u,
+        step.sub[1].u,
+        u,
+        history,
+        step.sub[1].contact_profile(),
+        dofs,
+        offline + history.time_offline_s,
+        history.time_s,
+        e_u,
+        step,
+        history.time_offline_s,
     )

@@ -15,12 +15,11 @@ by column) or ``MatrixResponse`` (given, e.g. by a multiscale Ω₁).
 
 import functools
 
+import dolfinx.fem.petsc
 import numpy as np
 import scipy.sparse as sp
 from mpi4py import MPI
 from petsc4py import PETSc
-
-import dolfinx.fem.petsc
 
 from fenics_contact.errors import ConvergenceError
 from fenics_contact.fem.linalg import DirectSolver, scipy_to_petsc
@@ -88,8 +87,9 @@ class AffinePart:
     def solve(self, b: np.ndarray, solver: DirectSolver | None = None) -> np.ndarray: ...
 
     # -- generic -------------------------------------------------------------------------
-    def responses(self, *, contact: bool, chunk: int, solver: DirectSolver | None = None
-                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    def responses(
+        self, *, contact: bool, chunk: int, solver: DirectSolver | None = None
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(Yc, Sc, Yq, Sq): trace and contact rows of J⁻¹C and J⁻¹Qᵀ (chunked multi-RHS back-solves)."""
         solver = solver or self.solver
         rows = (self.trace_rows, self.contact_rows) if self.n_c else (self.trace_rows,)
@@ -197,8 +197,9 @@ class PrimalPart(AffinePart):
         free[np.concatenate(self.comm.allgather(self.data_index))] = True
         return free
 
-    def responses(self, *, contact: bool, chunk: int, solver: DirectSolver | None = None
-                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    def responses(
+        self, *, contact: bool, chunk: int, solver: DirectSolver | None = None
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(Yc, Sc, Yq, Sq) as ``AffinePart.responses``; on one process from the block of J⁻¹ on the γ and Γ_C
         unknowns that MUMPS computes from its factors (``DirectSolver.inverse_block``: the values of the
         back-solves without them; benchmarks/results/interface_response.md)."""
@@ -216,8 +217,11 @@ class PrimalPart(AffinePart):
         X = solver.inverse_block(rows) @ B  # the rows ``rows`` of J⁻¹ [C Qᵀ]
         Y = np.zeros((self.n_g, B.shape[1]))
         Y[self.trace_index] = X[at(self.trace_at)]
-        S = sum(self.c_normals[:, c, None] * X[at(self.bs * self.c_nodes + c)] for c in range(self.bs)) \
-            if self.n_c else np.zeros((0, B.shape[1]))
+        S = (
+            sum(self.c_normals[:, c, None] * X[at(self.bs * self.c_nodes + c)] for c in range(self.bs))
+            if self.n_c
+            else np.zeros((0, B.shape[1]))
+        )
         if not contact:
             return Y, S, np.zeros((self.n_g, self.n_c)), np.zeros((self.n_c, self.n_c))
         return Y[:, : self.n_g], S[:, : self.n_g], Y[:, self.n_g :], S[:, self.n_g :]
@@ -304,8 +308,12 @@ class MixedPart(AffinePart):
             s = sub.stress_scale
             saddle = sp.bmat([[sub.Kt if s == 1.0 else s**2 * sub.Kt, sub.B.T], [sub.B, None]], format="csr")
             self._J0 = scipy_to_petsc(saddle, self.comm)
-            self.solver = DirectSolver(self.comm, prefix=f"{sub.prefix}j0_", options=MIXED_SOLVER_OPTIONS,
-                                       scaling=saddle_point_scaling(s, self.ns, sub.n_u))
+            self.solver = DirectSolver(
+                self.comm,
+                prefix=f"{sub.prefix}j0_",
+                options=MIXED_SOLVER_OPTIONS,
+                scaling=saddle_point_scaling(s, self.ns, sub.n_u),
+            )
             self.solver.set_operator(self._J0)
         elif not contact:
             sub._factorize_for(None)

@@ -10,9 +10,9 @@ from typing import NamedTuple
 import basix.ufl
 import numpy as np
 import ufl
-from mpi4py import MPI
 from dolfinx import fem, la
 from dolfinx import mesh as dmesh
+from mpi4py import MPI
 
 from fenics_contact.errors import InputError
 from fenics_contact.problem.fields import SubmeshTransfer
@@ -150,8 +150,9 @@ def robin_coefficient(alpha: float | str, E: fem.Function, space: "InterfaceSpac
         try:
             scale = float(alpha)
         except (TypeError, ValueError):
-            raise InputError(f"the transmission coefficient must be a number or a string like 'E*h^-1/2', "
-                             f"got {alpha!r}") from None
+            raise InputError(
+                f"the transmission coefficient must be a number or a string like 'E*h^-1/2', got {alpha!r}"
+            ) from None
     if not (np.isfinite(scale) and scale > 0):
         raise InputError(f"the transmission coefficient must be > 0, got {alpha!r}")
     if with_E and with_Emin:
@@ -171,7 +172,9 @@ def robin_coefficient(alpha: float | str, E: fem.Function, space: "InterfaceSpac
     return scale * E_p
 
 
-def sub_to_parent_dofs(part: Part, V_sub: fem.FunctionSpace, V_parent: fem.FunctionSpace) -> tuple[np.ndarray, np.ndarray]:
+def sub_to_parent_dofs(
+    part: Part, V_sub: fem.FunctionSpace, V_parent: fem.FunctionSpace
+) -> tuple[np.ndarray, np.ndarray]:
     """(sub, parent) indices of the same DOFs of a discontinuous blocked space (checked by coordinates)."""
     tdim = part.mesh.topology.dim
     ncell = part.mesh.topology.index_map(tdim).size_local

@@ -75,8 +75,7 @@ def remove_stale_temporaries(directory: str | Path) -> list[Path]:
         except OSError:  # gone meanwhile, or a read-only directory
             continue
     if removed:
-        log.info("removed %d stale temporary file(s) in %s (writers that died during a save)", len(removed),
-                 directory)
+        log.info("removed %d stale temporary file(s) in %s (writers that died during a save)", len(removed), directory)
     return removed
 
 
@@ -112,8 +111,9 @@ def write_npz(fh, items, key: str) -> None:
             hasher.update(name.encode())
             hash_array(hasher, arr)
             with zf.open(f"{name}.npy", mode="w", force_zip64=True) as entry:
-                np.lib.format.write_array(entry, arr if arr.ndim == 0 else np.ascontiguousarray(arr),
-                                          allow_pickle=False)
+                np.lib.format.write_array(
+                    entry, arr if arr.ndim == 0 else np.ascontiguousarray(arr), allow_pickle=False
+                )
         for name, value in (("checksum", hasher.hexdigest()), ("key", key)):
             with zf.open(f"{name}.npy", mode="w", force_zip64=True) as entry:
                 np.lib.format.write_array(entry, np.array(value), allow_pickle=False)
@@ -122,7 +122,8 @@ def write_npz(fh, items, key: str) -> None:
 class OfflineCache:
     """npz files ``<prefix>_<key>.npz`` in a directory; each stores its full key and a checksum of its arrays.
 
-    Subclasses set ``prefix`` and the ``pack`` / ``unpack`` hooks (``cem.PrimalOfflineCache``, ``mixed_cem.MixedOfflineCache``).
+    Subclasses set ``prefix`` and the ``pack`` / ``unpack`` hooks (``cem.PrimalOfflineCache``,
+    ``mixed_cem.MixedOfflineCache``).
     """
 
     prefix = "offline"

@@ -23,8 +23,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse import csgraph
 from dolfinx import mesh as dmesh
+from scipy.sparse import csgraph
 
 from fenics_contact.errors import InputError
 
@@ -81,7 +81,7 @@ def _greedy_colouring(adjacency: sp.csr_matrix) -> np.ndarray:
     colors = np.full(n, -1, dtype=np.int64)
     A = adjacency.tocsr()
     for k in range(n):
-        used = colors[A.indices[A.indptr[k]:A.indptr[k + 1]]]
+        used = colors[A.indices[A.indptr[k] : A.indptr[k + 1]]]
         used = used[used >= 0]
         c = 0
         if used.size:
@@ -128,8 +128,9 @@ def grid_from_cells(
     adjacency = adjacency.astype(bool)
     # areas and bounding boxes of the coarse cells
     p = coords[cell_nodes][:, :, :2]
-    area = 0.5 * np.abs((p[:, 1, 0] - p[:, 0, 0]) * (p[:, 2, 1] - p[:, 0, 1])
-                        - (p[:, 2, 0] - p[:, 0, 0]) * (p[:, 1, 1] - p[:, 0, 1]))
+    area = 0.5 * np.abs(
+        (p[:, 1, 0] - p[:, 0, 0]) * (p[:, 2, 1] - p[:, 0, 1]) - (p[:, 2, 0] - p[:, 0, 0]) * (p[:, 1, 1] - p[:, 0, 1])
+    )
     cell_size = np.sqrt(np.bincount(cell_coarse, weights=area, minlength=n_k))
     lo = np.full((n_k, 2), np.inf)
     hi = np.full((n_k, 2), -np.inf)

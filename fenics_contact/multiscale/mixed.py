@@ -53,8 +53,12 @@ from dolfinx import fem
 from dolfinx import mesh as dmesh
 from mpi4py import MPI
 
+from fenics_contact.errors import InputError
 from fenics_contact.fem import forms_mixed
 from fenics_contact.fem.contact import NewtonOptions
+from fenics_contact.fem.mixed import MixedSolution
+from fenics_contact.fem.mixed_contact import MixedContactProfile
+from fenics_contact.fem.mixed_spaces import boundary_stress_space
 from fenics_contact.hybrid.certificate import mixed_certificate
 from fenics_contact.hybrid.inputs import check_solve_inputs, require_instance
 from fenics_contact.hybrid.iteration import (
@@ -64,20 +68,16 @@ from fenics_contact.hybrid.iteration import (
     IterationResult,
     iterate,
 )
-from fenics_contact.errors import InputError
-from fenics_contact.problem.tags import Boundary
-from fenics_contact.problem.geometry import ContactMesh
-from fenics_contact.fem.mixed import MixedSolution
-from fenics_contact.fem.mixed_contact import MixedContactProfile
-from fenics_contact.fem.mixed_spaces import boundary_stress_space
 from fenics_contact.hybrid.mixed import DEFAULT_BETA, MixedHybridStep, solve_or_verify
 from fenics_contact.hybrid.primal import omega2_record
 from fenics_contact.hybrid.response import MatrixResponse
-from fenics_contact.multiscale.mixed_cem.omega1 import MixedMultiscaleOmega1
-from fenics_contact.multiscale.mixed_cem.options import DEFAULT_MAX_NBASIS, DEFAULT_MIN_GAP, MixedCEMOptions
-from fenics_contact.problem.problem import ContactProblem
-from fenics_contact.multiscale.cem.options import DEFAULT_S_FACTOR, warn_if_few_layers
+from fenics_contact.multiscale.cem.options import warn_if_few_layers
 from fenics_contact.multiscale.coarse import coarse_grid
+from fenics_contact.multiscale.mixed_cem.omega1 import MixedMultiscaleOmega1
+from fenics_contact.multiscale.mixed_cem.options import MixedCEMOptions
+from fenics_contact.problem.geometry import ContactMesh
+from fenics_contact.problem.problem import ContactProblem
+from fenics_contact.problem.tags import Boundary
 
 __all__ = ["MixedMsResult", "MixedMultiscaleHybridStep", "solve_mixed_ms_hybrid"]
 
@@ -91,8 +91,10 @@ def essential_traction_facets(msh, facet_tags) -> np.ndarray:
     tdim = msh.topology.dim
     msh.topology.create_connectivity(tdim - 1, tdim)
     if facet_tags.find(Boundary.GAMMA_C).size:
-        raise InputError("Algorithm 4 needs Γ_C inside Ω₂ (the fine strip): Ω₁ has Gamma_C facets; move γ so that the "
-                         "contact boundary lies in Ω₂, or use Algorithm 2")
+        raise InputError(
+            "Algorithm 4 needs Γ_C inside Ω₂ (the fine strip): Ω₁ has Gamma_C facets; move γ so that the "
+            "contact boundary lies in Ω₂, or use Algorithm 2"
+        )
     exterior = dmesh.exterior_facet_indices(msh.topology)
     natural = np.concatenate([facet_tags.find(Boundary.GAMMA_D), facet_tags.find(Boundary.INTERFACE)])
     return np.setdiff1d(exterior, natural).astype(np.int64)
@@ -129,9 +131,11 @@ class MixedMultiscaleHybridStep(MixedHybridStep):
         cm = problem.cm
         _require_replicated_mesh(cm, offline_comm)
         if cm.H is None and not np.any(np.asarray(cm.coarse_cell) >= 0):
-            raise InputError("Algorithm 4 needs a coarse grid: build the mesh with geometry.unit_square(n, n_coarse), "
-                             "give read_mesh H or a mesh with a coarse partition, or set cm.coarse_cell (e.g. "
-                             "problem.partition.centroid_coarse_cells on an unstructured mesh)")
+            raise InputError(
+                "Algorithm 4 needs a coarse grid: build the mesh with geometry.unit_square(n, n_coarse), "
+                "give read_mesh H or a mesh with a coarse partition, or set cm.coarse_cell (e.g. "
+                "problem.partition.centroid_coarse_cells on an unstructured mesh)"
+            )
         start = time.perf_counter()
         self._offline_comm = offline_comm  # (before the base class builds Ω₁'s space: ``_omega1_space``)
         super().__init__(problem, beta=beta, epsilon=epsilon, newton=newton)
@@ -142,8 +146,15 @@ class MixedMultiscaleHybridStep(MixedHybridStep):
         warn_if_few_layers(cem.layers, "mixed CEM (Algorithm 4)", offline_comm)
         # the boundary conditions of the fine mixed method on Ω₁: σn = 0 (traction free) and σn = t
         # (Γ_N, homogeneous part + the lifting s₀) essential in every local space, u_D and the lifting as loads
-        self.omega1 = MixedMultiscaleOmega1(self.sub[0], grid, cem, H=grid.H, cache_dir=cache_dir, comm=offline_comm,
-                                            traction_free_facets=essential_traction_facets(part.mesh, part.facet_tags))
+        self.omega1 = MixedMultiscaleOmega1(
+            self.sub[0],
+            grid,
+            cem,
+            H=grid.H,
+            cache_dir=cache_dir,
+            comm=offline_comm,
+            traction_free_facets=essential_traction_facets(part.mesh, part.facet_tags),
+        )
         # the fine Ω₁ AW prolongation (1 GB at h = 1/256) is never made here (omega1.ops reads its cell blocks);
         # drop it should anything have made it
         self.sub[0].space.release_prolongation()
@@ -170,16 +181,19 @@ class MixedMultiscaleHybridStep(MixedHybridStep):
         c2, u2 = self._part_reference(1, reference)
         self.reference = [None, (c2, u2)]  # Ω₁ has no fine AW problem here (omega1_operators = False)
         s2 = self.sub[1]
-        self._ref_norm2 = (self.omega1.a_norm2(self._sref1) + s2.stress_norm2(c2),
-                           self.omega1.m_norm2(self._uref1) + s2.l2_norm2(u2))
+        self._ref_norm2 = (
+            self.omega1.a_norm2(self._sref1) + s2.stress_norm2(c2),
+            self.omega1.m_norm2(self._uref1) + s2.l2_norm2(u2),
+        )
 
     def fine_omega1(self) -> tuple[np.ndarray, np.ndarray]:
         """σ₁ (n_cells, 30) and u₁ (n_cells, 6) of the current iterate, cell-major (``multiscale.mixed_cem``).
 
         Kept for the current g₁₂ (collective when the patch functions are distributed over ranks, so that the
         errors of a rank holding a reference then need no other rank: ``fine_fields``)."""
-        return self._fine("fields", lambda r, w: (self.omega1.fine_stress(r, self.g12),
-                                                  self.omega1.fine_displacement(w, self.g12)))
+        return self._fine(
+            "fields", lambda r, w: (self.omega1.fine_stress(r, self.g12), self.omega1.fine_displacement(w, self.g12))
+        )
 
     def fine_displacement_post(self) -> np.ndarray:
         """The post-processed fine Ω₁ displacement of the current iterate (kept like ``fine_omega1``)."""
@@ -283,7 +297,8 @@ class MixedMultiscaleHybridStep(MixedHybridStep):
 
     # -- output ----------------------------------------------------------------------------
     def part_values(self) -> list[tuple[np.ndarray, np.ndarray]]:
-        """The multiscale σ₁ (with the traction lifting), u₁ = Π w + N g on Ω₁ and the fine σ₂, u₂ on Ω₂ (sub numbering)."""
+        """The multiscale σ₁ (with the traction lifting), u₁ = Π w + N g on Ω₁ and the fine σ₂, u₂ on Ω₂ (sub
+        numbering)."""
         ops = self.omega1.ops
         s1, u1 = self.fine_omega1()
         sig_sub = np.zeros(3 * self.sub[0].dg.dofmap.index_map.size_local)
@@ -375,8 +390,9 @@ def solve_mixed_ms_hybrid(
     if reference is not None and epsilon is None:
         epsilon = reference.epsilon
     if step is None:
-        step = MixedMultiscaleHybridStep(problem, beta=beta, epsilon=epsilon, cem=cem, newton=newton,
-                                         cache_dir=cache_dir, offline_comm=offline_comm)
+        step = MixedMultiscaleHybridStep(
+            problem, beta=beta, epsilon=epsilon, cem=cem, newton=newton, cache_dir=cache_dir, offline_comm=offline_comm
+        )
     layers, nbasis = step.cem.layers, step.cem.nbasis
     if reference is not None:  # not part of the method: outside the timings
         step.set_reference(reference)
@@ -400,14 +416,38 @@ def solve_mixed_ms_hybrid(
     log.info(
         "Algorithm 4 (m=%d, l=%s): %d iterations (converged %s), dim X_ms %d + U_aux %d, offline %.2f s, "
         "online %.2f s, e_σ %s, e_u %s",
-        layers, nbasis, history.iterations, history.converged, co.n_ms, co.n_aux, step.time_offline_s,
-        history.time_s, e_sigma, e_u,
+        layers,
+        nbasis,
+        history.iterations,
+        history.converged,
+        co.n_ms,
+        co.n_aux,
+        step.time_offline_s,
+        history.time_s,
+        e_sigma,
+        e_u,
     )
     offline_times = dict(step.offline_times)
     if history.time_offline_s:
         offline_times["interface_response"] = history.time_offline_s
     return MixedMsResult(
-        sigma, u, history, step.sub[1].contact_profile(), dofs, step.time_offline_s + history.time_offline_s,
-        history.time_s, offline_times, e_sigma, e_u, e_u_pi, e_u_post, e_sigma_l2, step.beta, step.epsilon, layers,
-        nbasis, step, history.time_offline_s,
+        sigma,
+        u,
+        history,
+        step.sub[1].contact_profile(),
+        dofs,
+        step.time_offline_s + history.time_offline_s,
+        history.time_s,
+        offline_times,
+        e_sigma,
+        e_u,
+        e_u_pi,
+        e_u_post,
+        e_sigma_l2,
+        step.beta,
+        step.epsilon,
+        layers,
+        nbasis,
+        step,
+        history.time_offline_s,
     )

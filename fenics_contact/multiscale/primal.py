@@ -18,23 +18,22 @@ import time
 from pathlib import Path
 
 import numpy as np
+from dolfinx import fem
 from mpi4py import MPI
 
-from dolfinx import fem
-
-from fenics_contact.multiscale.cem.omega1 import Omega1Multiscale
-from fenics_contact.multiscale.cem.options import DEFAULT_S_FACTOR, CEMOptions
+from fenics_contact.errors import InputError
 from fenics_contact.fem.contact import NewtonOptions
+from fenics_contact.fem.primal import PrimalSubproblem, penalty_for, warn_if_locking
 from fenics_contact.hybrid.certificate import Certificate, primal_certificate
 from fenics_contact.hybrid.condensation import InterfaceProblem
 from fenics_contact.hybrid.inputs import check_reference_displacement, check_solve_inputs, require_instance
 from fenics_contact.hybrid.iteration import InterfaceNewtonOptions, IterationOptions, iterate
-from fenics_contact.errors import InputError
-from fenics_contact.problem.problem import ContactProblem
-from fenics_contact.fem.primal import PrimalSubproblem, penalty_for, warn_if_locking
 from fenics_contact.hybrid.primal import DEFAULT_ALPHA_MS, HybridResult, omega2_record, solve_or_verify
 from fenics_contact.hybrid.response import MatrixResponse, PrimalPart
 from fenics_contact.hybrid.transmission import InterfaceSpace, robin_coefficient, split_mesh
+from fenics_contact.multiscale.cem.omega1 import Omega1Multiscale
+from fenics_contact.multiscale.cem.options import CEMOptions
+from fenics_contact.problem.problem import ContactProblem
 
 __all__ = ["OMEGA1_CHECK_WARN", "MultiscalePrimalHybridStep", "solve_primal_ms_hybrid"]
 
@@ -63,8 +62,10 @@ class MultiscalePrimalHybridStep:
     ) -> None:
         cm = problem.cm
         if cm.H is None and cm.comm.allreduce(int(np.any(np.asarray(cm.coarse_cell) >= 0)), op=MPI.MAX) == 0:
-            raise InputError("Algorithm 3 needs a coarse grid: build the mesh with geometry.unit_square(n, n_coarse), "
-                             "or give read_mesh H or a mesh with a coarse partition")
+            raise InputError(
+                "Algorithm 3 needs a coarse grid: build the mesh with geometry.unit_square(n, n_coarse), "
+                "or give read_mesh H or a mesh with a coarse partition"
+            )
         start = time.perf_counter()
         self.comm = cm.comm
         self.parts = split_mesh(cm)
@@ -82,8 +83,14 @@ class MultiscalePrimalHybridStep:
         self.interface.to_part(self.alpha, 1, alpha2)
         p2 = self.parts[1]
         self.omega2 = PrimalSubproblem(
-            p2.mesh, p2.facet_tags, problem.fields_on(p2.mesh), delta=delta, alpha=alpha2,
-            prefix="fc_primal_ms_omega2_", newton=newton, V=self.interface.spaces[1],
+            p2.mesh,
+            p2.facet_tags,
+            problem.fields_on(p2.mesh),
+            delta=delta,
+            alpha=alpha2,
+            prefix="fc_primal_ms_omega2_",
+            newton=newton,
+            V=self.interface.spaces[1],
         )
         self.u1 = fem.Function(self.interface.spaces[0], name="u1")  # filled by glued()
         # u₁ = Z s in the coordinates s of Omega1Multiscale (online nothing of fine-mesh size in Ω₁)
@@ -153,8 +160,9 @@ class MultiscalePrimalHybridStep:
             R, r0 = self.omega1.response()  # rows: this rank's owned values; columns: all ranks' (rank order)
             omega1 = MatrixResponse(np.vstack(self.comm.allgather(R)), iface.gather(r0))
             omega2 = PrimalPart(self.omega2, iface, 1, contact=True, factorize=options.strategy == "condensed")
-            self._newton = InterfaceProblem(omega1, omega2, iface.gather(2.0 * self.alpha), -1.0,
-                                            iface.gather, iface.local, options)
+            self._newton = InterfaceProblem(
+                omega1, omega2, iface.gather(2.0 * self.alpha), -1.0, iface.gather, iface.local, options
+            )
         return self._newton
 
     def record(self) -> dict:
@@ -239,8 +247,9 @@ def solve_primal_ms_hybrid(
         )
     layers, nbasis = step.cem.layers, step.cem.nbasis
     monitor = (lambda: {"e_u": step.error_l2()}) if step.reference is not None else None
-    history = iterate(step, options, name=f"primal CEM hybrid (m={layers}, l={nbasis})", monitor=monitor,
-                      initial=initial_data)
+    history = iterate(
+        step, options, name=f"primal CEM hybrid (m={layers}, l={nbasis})", monitor=monitor, initial=initial_data
+    )
     V = reference.function_space if reference is not None else None
     if V is None:
         V = fem.functionspace(cm.mesh, ("Lagrange", 1, (cm.mesh.geometry.dim,)))
@@ -255,14 +264,35 @@ def solve_primal_ms_hybrid(
     check = step.omega1.fine_check(history.data[: step.interface.size]) if check and history.data is not None else None
     log.info(
         "Algorithm 3: %d iterations (converged %s), dim V_ms = %d, offline %.2f s, online %.2f s, e_u %s, Ω₁ against "
-        "its fine solve %s", history.iterations, history.converged, dofs["omega1_ms"], step.time_offline_s,
-        history.time_s, e_u, check,
+        "its fine solve %s",
+        history.iterations,
+        history.converged,
+        dofs["omega1_ms"],
+        step.time_offline_s,
+        history.time_s,
+        e_u,
+        check,
     )
     if check is not None and check > OMEGA1_CHECK_WARN and step.comm.rank == 0:
-        log.warning("the multiscale Ω₁ is %.2g (relative, energy norm) from its fine P1 solve for this run's interface "
-                    "data, with m = %d oversampling layers and %s modes per coarse cell: more layers (--layers) make "
-                    "it smaller (it falls about tenfold per layer where the bases decay)", check, layers, nbasis)
+        log.warning(
+            "the multiscale Ω₁ is %.2g (relative, energy norm) from its fine P1 solve for this run's interface "
+            "data, with m = %d oversampling layers and %s modes per coarse cell: more layers (--layers) make "
+            "it smaller (it falls about tenfold per layer where the bases decay)",
+            check,
+            layers,
+            nbasis,
+        )
     return HybridResult(
-        step.u1, step.omega2.u, u, history, step.omega2.contact_profile(), dofs,
-        step.time_offline_s + history.time_offline_s, history.time_s, e_u, step, history.time_offline_s, check,
+        step.u1,
+        step.omega2.u,
+        u,
+        history,
+        step.omega2.contact_profile(),
+        dofs,
+        step.time_offline_s + history.time_offline_s,
+        history.time_s,
+        e_u,
+        step,
+        history.time_offline_s,
+        check,
     )

@@ -18,12 +18,11 @@ With one rank the copy is built the same way (a renumbered twin of Ω₁), so th
 serial and parallel runs share one code path.
 """
 
-import numpy as np
-from mpi4py import MPI
-
 import basix.ufl
+import numpy as np
 from dolfinx import fem
 from dolfinx import mesh as dmesh
+from mpi4py import MPI
 
 from fenics_contact.errors import InputError
 
@@ -107,8 +106,9 @@ class SerialReplica:
         if want.size and np.any(skey[facets] != want):
             raise RuntimeError("serial copy: a tagged facet of the subdomain was not found in its copy")
         forder = np.argsort(facets, kind="stable")
-        self.facet_tags = dmesh.meshtags(smsh, tdim - 1, facets[forder].astype(np.int32),
-                                         keyed[forder, 2].astype(np.int32))
+        self.facet_tags = dmesh.meshtags(
+            smsh, tdim - 1, facets[forder].astype(np.int32), keyed[forder, 2].astype(np.int32)
+        )
         # P1 space of the same shape, and the block ↔ global node id maps on both sides
         shape = tuple(int(d) for d in V_sub.value_shape)
         self.V = fem.functionspace(smsh, basix.ufl.element("Lagrange", smsh.basix_cell(), 1, shape=shape))

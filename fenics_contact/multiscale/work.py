@@ -107,8 +107,9 @@ def _raise_failures(comm: MPI.Comm, error: Exception | None, desc: str) -> None:
         raise ConvergenceError(f"{desc}: another rank failed ({next(f for f in failures if f)})")
 
 
-def run_balanced(cost: np.ndarray, comm: MPI.Comm, work, *, bar=None, owner: np.ndarray | None = None,
-                 desc: str = "offline items") -> dict:
+def run_balanced(
+    cost: np.ndarray, comm: MPI.Comm, work, *, bar=None, owner: np.ndarray | None = None, desc: str = "offline items"
+) -> dict:
     """This rank's results {i: work(i)}, the items handed out one at a time on request.
 
     Ranks r > 0 take items from the front of the cost order (largest first): each starts with item r − 1 and
@@ -154,8 +155,9 @@ def run_balanced(cost: np.ndarray, comm: MPI.Comm, work, *, bar=None, owner: np.
             nonlocal front, finished, failed
             # Iprobe more than once: after a long computation the first call only lets MPI take in what has
             # arrived (measured with MPICH ch4:ucx: a request sent long before is seen by the second call)
-            while finished < size and (block or any(dc.Iprobe(source=MPI.ANY_SOURCE, tag=_REQUEST)
-                                                    for _ in range(_PROBES))):
+            while finished < size and (
+                block or any(dc.Iprobe(source=MPI.ANY_SOURCE, tag=_REQUEST) for _ in range(_PROBES))
+            ):
                 report = dc.recv(source=MPI.ANY_SOURCE, tag=_REQUEST, status=status)
                 r = status.Get_source()
                 failed = failed or report is not None
@@ -192,9 +194,18 @@ def run_balanced(cost: np.ndarray, comm: MPI.Comm, work, *, bar=None, owner: np.
     return results
 
 
-def run_shared(cost: np.ndarray, comm: MPI.Comm, desc: str, work, *, gather: bool = True,
-               items: np.ndarray | None = None, balanced: bool = False, owner: np.ndarray | None = None,
-               logger: logging.Logger = log) -> list | dict:
+def run_shared(
+    cost: np.ndarray,
+    comm: MPI.Comm,
+    desc: str,
+    work,
+    *,
+    gather: bool = True,
+    items: np.ndarray | None = None,
+    balanced: bool = False,
+    owner: np.ndarray | None = None,
+    logger: logging.Logger = log,
+) -> list | dict:
     """work(i) for the items i of this rank (``share``, or ``items``), with progress; every rank gets all
     results (``gather``), or this rank's as a dict {i: result}.
 

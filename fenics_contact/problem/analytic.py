@@ -29,12 +29,20 @@ from typing import NamedTuple
 import numpy as np
 
 from fenics_contact.errors import InputError
-from fenics_contact.problem.problem import ContactProblem
 from fenics_contact.problem.obstacles import Circle, Plane
+from fenics_contact.problem.problem import ContactProblem
 
 __all__ = [
-    "BarSolution", "bar_model", "bar_solution", "layered_model", "layered_pressure", "layered_displacement",
-    "hertz_model", "hertz_force_for", "HertzErrors", "hertz_errors",
+    "BarSolution",
+    "bar_model",
+    "bar_solution",
+    "layered_model",
+    "layered_pressure",
+    "layered_displacement",
+    "hertz_model",
+    "hertz_force_for",
+    "HertzErrors",
+    "hertz_errors",
 ]
 
 
@@ -52,8 +60,9 @@ def _uniform_load(f1: float):
 
 def bar_model(f1: float, *, E: float = 1.0) -> ContactProblem:
     """The bar: ν = 0, E, body force (f₁, 0); use it on ``unit_square(n, N, clamped=("left",))``."""
-    return ContactProblem(name="bar", youngs_modulus=E, poisson_ratio=0.0, load=_uniform_load(f1),
-                          description=f"bar, E={E:g}, f1={f1:g}")
+    return ContactProblem(
+        name="bar", youngs_modulus=E, poisson_ratio=0.0, load=_uniform_load(f1), description=f"bar, E={E:g}, f1={f1:g}"
+    )
 
 
 def bar_solution(f1: float, *, E: float = 1.0, delta: float = 0.0, epsilon: float | None = None) -> BarSolution:
@@ -92,8 +101,13 @@ def layered_model(bounds, moduli, *, depth: float) -> ContactProblem:
         return moduli[i]
 
     wall = Plane((1.0, 0.0), (-1.0, 0.0)).indented(depth, (-1.0, 0.0))
-    return ContactProblem(name="layers", youngs_modulus=E, poisson_ratio=0.0, obstacle=wall,
-                          description=f"layered patch, E={moduli.tolist()}, d0={depth:g}")
+    return ContactProblem(
+        name="layers",
+        youngs_modulus=E,
+        poisson_ratio=0.0,
+        obstacle=wall,
+        description=f"layered patch, E={moduli.tolist()}, d0={depth:g}",
+    )
 
 
 def layered_pressure(bounds, moduli, depth: float, *, delta: float = 0.0) -> float:
@@ -112,8 +126,13 @@ def layered_displacement(bounds, moduli, pressure: float) -> Callable[[np.ndarra
 def hertz_model(*, radius: float = 1.0, E: float = 1.0, nu: float = 0.3, depth: float) -> ContactProblem:
     """A rigid cylinder of radius R touching the top face y = 0 at x = 0, moved down by ``depth``."""
     cylinder = Circle((0.0, radius), radius).indented(depth, (0.0, -1.0))
-    return ContactProblem(name="hertz", youngs_modulus=E, poisson_ratio=nu, obstacle=cylinder,
-                          description=f"Hertz, R={radius:g}, E={E:g}, nu={nu:g}, d={depth:g}")
+    return ContactProblem(
+        name="hertz",
+        youngs_modulus=E,
+        poisson_ratio=nu,
+        obstacle=cylinder,
+        description=f"Hertz, R={radius:g}, E={E:g}, nu={nu:g}, d={depth:g}",
+    )
 
 
 def hertz_force_for(a: float, *, radius: float = 1.0, E: float = 1.0, nu: float = 0.3) -> float:
@@ -133,8 +152,7 @@ class HertzErrors(NamedTuple):
     l2_error: float  #: ‖p_h − p‖_L²(Γ_C) / ‖p‖_L²(Γ_C)
 
 
-def hertz_errors(profile, *, radius: float, E: float, nu: float, h_contact: float,
-                 centre: float = 0.0) -> HertzErrors:
+def hertz_errors(profile, *, radius: float, E: float, nu: float, h_contact: float, centre: float = 0.0) -> HertzErrors:
     """Half-width, peak pressure and pressure-profile errors of a Hertz contact profile (``fem.contact.ContactProfile``;
     F read off it)."""
     if profile.weights is None or profile.points is None:

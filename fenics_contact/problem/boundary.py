@@ -24,10 +24,14 @@ from dolfinx import mesh as dmesh
 from mpi4py import MPI
 
 from fenics_contact.errors import InputError, MeshTagError
-from fenics_contact.problem.tags import Boundary, PHYSICAL_NAMES, is_neumann_name, neumann_tag
+from fenics_contact.problem.tags import PHYSICAL_NAMES, Boundary, is_neumann_name, neumann_tag
 
 __all__ = [
-    "VectorField", "BoundaryConditions", "constant_vector", "check_boundary_groups", "neumann_groups",
+    "VectorField",
+    "BoundaryConditions",
+    "constant_vector",
+    "check_boundary_groups",
+    "neumann_groups",
     "boundary_data_on",
 ]
 
@@ -49,8 +53,9 @@ def _as_field(value, what: str) -> VectorField:
     try:
         return constant_vector(value)
     except (TypeError, ValueError) as err:
-        raise InputError(f"{what} must be a callable x -> (gdim, N) or a constant vector (2 or 3 components), "
-                         f"got {value!r}") from err
+        raise InputError(
+            f"{what} must be a callable x -> (gdim, N) or a constant vector (2 or 3 components), got {value!r}"
+        ) from err
 
 
 @dataclass(frozen=True, slots=True)
@@ -74,8 +79,9 @@ class BoundaryConditions:
             try:
                 axis, value = item
             except (TypeError, ValueError):
-                raise InputError(f"a roller is a pair (axis, value) for the plane x_axis = value, got {item!r}"
-                                 ) from None
+                raise InputError(
+                    f"a roller is a pair (axis, value) for the plane x_axis = value, got {item!r}"
+                ) from None
             if isinstance(axis, bool) or axis not in (0, 1, 2) or not np.isfinite(value):
                 raise InputError(f"a roller plane needs an axis 0, 1 or 2 and a finite value, got {item!r}")
             rollers.append((int(axis), float(value)))
@@ -118,7 +124,9 @@ def neumann_groups(facet_tags) -> list[int]:
     return [int(v) for v in values if int(v) not in standard]
 
 
-def check_boundary_groups(msh, facet_tags, boundary: BoundaryConditions, *, names: Mapping[int, str] | None = None) -> None:
+def check_boundary_groups(
+    msh, facet_tags, boundary: BoundaryConditions, *, names: Mapping[int, str] | None = None
+) -> None:
     """Match the traction data with the mesh's Γ_N groups (collective); MeshTagError / InputError naming the group.
 
     Every traction group of ``boundary`` must exist (non-empty) on the mesh, and every
@@ -149,9 +157,10 @@ def check_boundary_groups(msh, facet_tags, boundary: BoundaryConditions, *, name
         rows = np.shape(value(point))[0] if point.shape[1] else gdim
         if comm.allreduce(int(rows != gdim), op=MPI.SUM):
             raise InputError(f"{what} has {rows} components; the mesh is {gdim}D: give {gdim} components")
-    if boundary.displacement is not None and comm.allreduce(
-        int(facet_tags.find(Boundary.GAMMA_D).size), op=MPI.SUM
-    ) == 0:
+    if (
+        boundary.displacement is not None
+        and comm.allreduce(int(facet_tags.find(Boundary.GAMMA_D).size), op=MPI.SUM) == 0
+    ):
         raise MeshTagError(
             f"a displacement is prescribed on {PHYSICAL_NAMES[Boundary.GAMMA_D]!r}, but that group has no facets"
         )

@@ -70,19 +70,32 @@ import numpy as np
 from mpi4py import MPI
 
 from fenics_contact.errors import InputError, MeshTagError
-from fenics_contact.problem.boundary import BoundaryConditions, check_boundary_groups
+from fenics_contact.problem.boundary import BoundaryConditions
 from fenics_contact.problem.cell_groups import SUBDOMAIN_NAMES, CellGroups, bounding_box, read_cell_groups
 from fenics_contact.problem.geometry import SIDES, ContactMesh, read_mesh, unit_square
 from fenics_contact.problem.meshes import bulged_square, hertz_block
 from fenics_contact.problem.models import get_model, pixel_field
-from fenics_contact.problem.problem import ContactProblem, constant_field
 from fenics_contact.problem.obstacles import Circle, Obstacle, Plane
+from fenics_contact.problem.problem import ContactProblem, constant_field
 from fenics_contact.problem.tags import is_neumann_name
 
 __all__ = [
-    "RUN_TABLES", "Case", "CaseMesh", "load_case", "parse_override",
-    "UnitSquareMesh", "HertzBlockMesh", "BulgedSquareMesh", "MeshFile",
-    "Uniform", "ByGroup", "Pixels", "PythonField", "Material", "Boundary", "ObstacleSpec",
+    "RUN_TABLES",
+    "Case",
+    "CaseMesh",
+    "load_case",
+    "parse_override",
+    "UnitSquareMesh",
+    "HertzBlockMesh",
+    "BulgedSquareMesh",
+    "MeshFile",
+    "Uniform",
+    "ByGroup",
+    "Pixels",
+    "PythonField",
+    "Material",
+    "Boundary",
+    "ObstacleSpec",
 ]
 
 #: the run-option tables (the command line says which methods read each: ``cli.TABLE_METHODS``)
@@ -112,6 +125,7 @@ def _number(*, positive: bool = False, low: float | None = None, high: float | N
         if (low is not None and not value > low) or (high is not None and not value < high):
             raise _Bad(f"must lie in ({low:g}, {high:g}), got {value!r}")
         return float(value)
+
     return convert
 
 
@@ -120,6 +134,7 @@ def _integer(minimum: int) -> Callable:
         if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
             raise _Bad(f"must be an integer >= {minimum}, got {_show(value)}")
         return int(value)
+
     return convert
 
 
@@ -143,6 +158,7 @@ def _string(choices: Sequence[str] | None = None) -> Callable:
         if choices is not None and value not in choices:
             raise _Bad(f"must be one of {list(choices)}, got {value!r}")
         return value
+
     return convert
 
 
@@ -154,6 +170,7 @@ def _strings(choices: Sequence[str]) -> Callable:
         if len(set(items)) != len(items):
             raise _Bad(f"lists a value twice: {list(items)}")
         return items
+
     return convert
 
 
@@ -209,8 +226,9 @@ class _Table:
     def finish(self, what: str = "") -> None:
         if self.data:
             unknown = sorted(self.data)
-            raise self.source.error(f"unknown key {self.key(unknown[0])!r}{what}; the keys of [{self.name}] are "
-                                    f"{self.known}")
+            raise self.source.error(
+                f"unknown key {self.key(unknown[0])!r}{what}; the keys of [{self.name}] are {self.known}"
+            )
 
 
 # ---------------------------------------------------------------------------------------------
@@ -245,8 +263,11 @@ class Pixels:
     extent: tuple[float, float, float, float] | None = None
 
     def echo(self):
-        return {"pixels": str(self.path), "shape": list(self.values.shape),
-                "extent": list(self.extent) if self.extent is not None else "bounding box"}
+        return {
+            "pixels": str(self.path),
+            "shape": list(self.values.shape),
+            "extent": list(self.extent) if self.extent is not None else "bounding box",
+        }
 
 
 @dataclass(frozen=True, slots=True)
@@ -292,11 +313,16 @@ def _pixels(source: _Source, key: str, table: dict) -> Pixels:
     extent = t.get("extent", _extent)
     t.finish()
     try:
-        values = np.load(path, allow_pickle=False) if path.suffix == ".npy" else np.loadtxt(
-            path, delimiter="," if path.suffix == ".csv" else None, ndmin=2)
+        values = (
+            np.load(path, allow_pickle=False)
+            if path.suffix == ".npy"
+            else np.loadtxt(path, delimiter="," if path.suffix == ".csv" else None, ndmin=2)
+        )
         values = np.asarray(values, dtype=np.float64)
     except (OSError, ValueError, EOFError, TypeError) as err:
-        raise source.error(f"{key}.pixels: cannot read a pixel array from {path}: {type(err).__name__}: {err}") from None
+        raise source.error(
+            f"{key}.pixels: cannot read a pixel array from {path}: {type(err).__name__}: {err}"
+        ) from None
     if values.ndim != 2 or values.size == 0:
         raise source.error(f"{key}.pixels: {path} must hold a non-empty 2D array, got shape {values.shape}")
     return Pixels(path, values, extent)
@@ -313,6 +339,7 @@ def _extent(value) -> tuple[float, float, float, float]:
 
 def _field(source: _Source, key: str, value, check: Callable, *, vector: bool, pixels: bool = True) -> FieldSpec:
     """A field from its case value; ``check`` validates one value (a number, or a vector)."""
+
     def checked(v, where):
         try:
             return check(v)
@@ -326,16 +353,18 @@ def _field(source: _Source, key: str, value, check: Callable, *, vector: bool, p
             return _python(source, key, value["python"])
         if "pixels" in value:
             if not pixels:
-                raise source.error(f"{key}: a pixel map gives a scalar field; give a vector, a table by group "
-                                   "or a python callable")
+                raise source.error(
+                    f"{key}: a pixel map gives a scalar field; give a vector, a table by group or a python callable"
+                )
             return _pixels(source, key, value)
         if not value:
             raise source.error(f"{key} is an empty table: give a value per cell group")
         return ByGroup(tuple((name, checked(v, f"{key}.{name}")) for name, v in sorted(value.items())))
     if vector and not isinstance(value, (list, tuple)) or not vector and isinstance(value, (list, tuple)):
         kind = "a vector [x, y]" if vector else "a number"
-        raise source.error(f"{key} must be {kind}, a table by cell group or {{python = 'file.py:name'}}, got "
-                           f"{_show(value)}")
+        raise source.error(
+            f"{key} must be {kind}, a table by cell group or {{python = 'file.py:name'}}, got {_show(value)}"
+        )
     return Uniform(checked(value, key))
 
 
@@ -368,8 +397,13 @@ class UnitSquareMesh:
         return {name for _, name in self.neumann}
 
     def echo(self) -> dict:
-        return {"builtin": self.kind, "h": self.h, "H": self.H, "clamped": list(self.clamped),
-                "neumann": dict(self.neumann)}
+        return {
+            "builtin": self.kind,
+            "h": self.h,
+            "H": self.H,
+            "clamped": list(self.clamped),
+            "neumann": dict(self.neumann),
+        }
 
 
 @dataclass(frozen=True, slots=True)
@@ -383,8 +417,9 @@ class BulgedSquareMesh:
     kind = "bulged-square"
 
     def build(self, comm: MPI.Comm, overlays: Iterable[str] = ()) -> CaseMesh:
-        return CaseMesh(bulged_square(1.0 / self.h, 1.0 / self.H, bulge=self.bulge, clamped=self.clamped, comm=comm),
-                        {})
+        return CaseMesh(
+            bulged_square(1.0 / self.h, 1.0 / self.H, bulge=self.bulge, clamped=self.clamped, comm=comm), {}
+        )
 
     @property
     def traction_groups(self) -> set[str] | None:
@@ -407,8 +442,15 @@ class HertzBlockMesh:
     kind = "hertz-block"
 
     def build(self, comm: MPI.Comm, overlays: Iterable[str] = ()) -> CaseMesh:
-        cm, spec = hertz_block(self.a, refinement=self.refinement, width=self.width, depth=self.depth,
-                               strip=self.strip, contact_width=self.contact_width, comm=comm)
+        cm, spec = hertz_block(
+            self.a,
+            refinement=self.refinement,
+            width=self.width,
+            depth=self.depth,
+            strip=self.strip,
+            contact_width=self.contact_width,
+            comm=comm,
+        )
         return CaseMesh(cm, {}, spec)
 
     @property
@@ -416,8 +458,15 @@ class HertzBlockMesh:
         return set()
 
     def echo(self) -> dict:
-        return {"builtin": self.kind, "a": self.a, "refinement": self.refinement, "width": self.width,
-                "depth": self.depth, "strip": self.strip, "contact-width": self.contact_width}
+        return {
+            "builtin": self.kind,
+            "a": self.a,
+            "refinement": self.refinement,
+            "width": self.width,
+            "depth": self.depth,
+            "strip": self.strip,
+            "contact-width": self.contact_width,
+        }
 
 
 @dataclass(frozen=True, slots=True)
@@ -460,42 +509,62 @@ _BUILTINS = ("unit-square", "hertz-block", "bulged-square")
 def _mesh(source: _Source, data) -> MeshSpec:
     t = _Table(source, "mesh", data)
     if t.has("builtin") == t.has("file"):
-        raise source.error("[mesh] needs exactly one of builtin = " + " | ".join(f'"{b}"' for b in _BUILTINS)
-                           + ' and file = "my.msh"')
+        raise source.error(
+            "[mesh] needs exactly one of builtin = " + " | ".join(f'"{b}"' for b in _BUILTINS) + ' and file = "my.msh"'
+        )
     if t.has("file"):
         path = t.get("file", lambda v: source.file(v, "mesh.file"))
         spec = MeshFile(path, t.get("H", _integer(1)), t.get("coarse-size", _number(positive=True)))
         if spec.H is not None and spec.coarse_size is not None:
-            raise source.error("mesh.H (1/H) and mesh.coarse-size (H itself, a length) give the same coarse size: "
-                               "give one of them")
+            raise source.error(
+                "mesh.H (1/H) and mesh.coarse-size (H itself, a length) give the same coarse size: give one of them"
+            )
         t.finish(" for a mesh file")
         return spec
     kind = t.get("builtin", _string(_BUILTINS))
     if kind == "hertz-block":
         positive = _number(positive=True)
-        spec = HertzBlockMesh(t.get("a", positive, required=True), t.get("refinement", positive, 1.0),
-                              t.get("width", positive, 80.0), t.get("depth", positive, 40.0),
-                              t.get("strip", positive, 2.0), t.get("contact-width", positive, 3.0))
+        spec = HertzBlockMesh(
+            t.get("a", positive, required=True),
+            t.get("refinement", positive, 1.0),
+            t.get("width", positive, 80.0),
+            t.get("depth", positive, 40.0),
+            t.get("strip", positive, 2.0),
+            t.get("contact-width", positive, 3.0),
+        )
     elif kind == "bulged-square":
-        spec = BulgedSquareMesh(t.get("h", _integer(4), 32), t.get("H", _integer(2), 4),
-                                t.get("bulge", _number(low=0.0, high=0.5), 0.1),
-                                t.get("clamped", _strings(SIDES), ("left",)))
+        spec = BulgedSquareMesh(
+            t.get("h", _integer(4), 32),
+            t.get("H", _integer(2), 4),
+            t.get("bulge", _number(low=0.0, high=0.5), 0.1),
+            t.get("clamped", _strings(SIDES), ("left",)),
+        )
         if spec.H >= spec.h:
             raise source.error(f"mesh.H = {spec.H} must be < mesh.h = {spec.h} (the strip is 1/H wide)")
     else:
-        spec = UnitSquareMesh(t.get("h", _integer(2), 64), t.get("H", _integer(2), 16),
-                              t.get("clamped", _strings(SIDES), SIDES), _neumann_sides(source, t))
+        spec = UnitSquareMesh(
+            t.get("h", _integer(2), 64),
+            t.get("H", _integer(2), 16),
+            t.get("clamped", _strings(SIDES), SIDES),
+            _neumann_sides(source, t),
+        )
         if spec.h % spec.H:
-            raise source.error(f"mesh.h = {spec.h} is not a multiple of mesh.H = {spec.H}: the coarse grid must be "
-                               "a union of fine cells")
+            raise source.error(
+                f"mesh.h = {spec.h} is not a multiple of mesh.H = {spec.H}: the coarse grid must be "
+                "a union of fine cells"
+            )
         both = sorted(set(spec.clamped) & {side for side, _ in spec.neumann})
         if both:
-            raise source.error(f"mesh.neumann: side {both[0]!r} is also in mesh.clamped: a side is clamped (Gamma_D) "
-                               "or carries a traction (Gamma_N), not both")
+            raise source.error(
+                f"mesh.neumann: side {both[0]!r} is also in mesh.clamped: a side is clamped (Gamma_D) "
+                "or carries a traction (Gamma_N), not both"
+            )
     if not getattr(spec, "clamped", True):
-        raise source.error("mesh.clamped = [] leaves no Gamma_D: nothing holds the body, whose rigid motions make "
-                           "the problem singular; clamp at least one side (boundary.displacement prescribes u on "
-                           "the clamped sides instead of 0)")
+        raise source.error(
+            "mesh.clamped = [] leaves no Gamma_D: nothing holds the body, whose rigid motions make "
+            "the problem singular; clamp at least one side (boundary.displacement prescribes u on "
+            "the clamped sides instead of 0)"
+        )
     t.finish(f' for builtin = "{kind}"')
     return spec
 
@@ -505,14 +574,15 @@ def _neumann_sides(source: _Source, t: _Table) -> tuple[tuple[str, str], ...]:
     if table is None:
         return ()
     if not isinstance(table, dict):
-        raise source.error(f"mesh.neumann must be a table {{side = \"Gamma_N_<label>\"}}, got {_show(table)}")
+        raise source.error(f'mesh.neumann must be a table {{side = "Gamma_N_<label>"}}, got {_show(table)}')
     pairs = []
     for side, name in sorted(table.items()):
         if side not in SIDES:
             raise source.error(f"mesh.neumann.{side}: unknown side; the sides are {list(SIDES)} (x = 1 is Gamma_C)")
         if not isinstance(name, str) or not is_neumann_name(name):
-            raise source.error(f"mesh.neumann.{side}: a traction group is named 'Gamma_N' or 'Gamma_N_<label>', "
-                               f"got {_show(name)}")
+            raise source.error(
+                f"mesh.neumann.{side}: a traction group is named 'Gamma_N' or 'Gamma_N_<label>', got {_show(name)}"
+            )
         pairs.append((side, name))
     return tuple(pairs)
 
@@ -553,7 +623,7 @@ def _material(source: _Source, data, load) -> Material:
     E = t.raw("E")
     nu = t.raw("nu")
     E = _field(source, "material.E", E, _number(positive=True), vector=False) if E is not None else None
-    nu = (_field(source, "material.nu", nu, _number(low=-1.0, high=0.5), vector=False) if nu is not None else None)
+    nu = _field(source, "material.nu", nu, _number(low=-1.0, high=0.5), vector=False) if nu is not None else None
     if model is None and (E is None or nu is None):
         raise source.error(f"material.{'E' if E is None else 'nu'} is required (or material.model = 1, 2 or 3)")
     t.finish()
@@ -574,14 +644,17 @@ class Boundary:
     def conditions(self) -> BoundaryConditions:
         def value(spec):
             return spec.value if isinstance(spec, Uniform) else spec.function
+
         return BoundaryConditions(
             displacement=value(self.displacement) if self.displacement is not None else None,
             tractions={name: value(spec) for name, spec in self.tractions},
         )
 
     def echo(self) -> dict:
-        return {"displacement": self.displacement.echo() if self.displacement else "clamped",
-                "tractions": {name: spec.echo() for name, spec in self.tractions}}
+        return {
+            "displacement": self.displacement.echo() if self.displacement else "clamped",
+            "tractions": {name: spec.echo() for name, spec in self.tractions},
+        }
 
 
 def _vector_or_python(source: _Source, key: str, value) -> Uniform | PythonField:
@@ -596,26 +669,34 @@ def _boundary(source: _Source, data, mesh: MeshSpec) -> Boundary:
     displacement = t.raw("displacement")
     tractions = t.raw("tractions")
     t.finish()
-    displacement = (_vector_or_python(source, "boundary.displacement", displacement)
-                    if displacement is not None else None)
+    displacement = (
+        _vector_or_python(source, "boundary.displacement", displacement) if displacement is not None else None
+    )
     if tractions is not None and not isinstance(tractions, dict):
         raise source.error(f"boundary.tractions must be a table {{Gamma_N_<label> = [tx, ty]}}, got {_show(tractions)}")
     pairs = []
     for name, value in sorted((tractions or {}).items()):
         if not is_neumann_name(name):
-            raise source.error(f"boundary.tractions.{name}: a traction group is named 'Gamma_N' or "
-                               "'Gamma_N_<label>' (a facet group of the mesh)")
+            raise source.error(
+                f"boundary.tractions.{name}: a traction group is named 'Gamma_N' or "
+                "'Gamma_N_<label>' (a facet group of the mesh)"
+            )
         pairs.append((name, _vector_or_python(source, f"boundary.tractions.{name}", value)))
     known = mesh.traction_groups
     if known is not None:
         for name, _ in pairs:
             if name not in known:
-                raise source.error(f"boundary.tractions.{name}: the mesh has no traction group {name!r} (its groups: "
-                                   f"{sorted(known)}; on the unit square name one with mesh.neumann)", MeshTagError)
+                raise source.error(
+                    f"boundary.tractions.{name}: the mesh has no traction group {name!r} (its groups: "
+                    f"{sorted(known)}; on the unit square name one with mesh.neumann)",
+                    MeshTagError,
+                )
         given = {name for name, _ in pairs}
         if known - given:
-            raise source.error(f"the mesh has the traction group {sorted(known - given)[0]!r} but "
-                               "boundary.tractions gives it no traction")
+            raise source.error(
+                f"the mesh has the traction group {sorted(known - given)[0]!r} but "
+                "boundary.tractions gives it no traction"
+            )
     return Boundary(displacement, tuple(pairs))
 
 
@@ -654,8 +735,10 @@ class ObstacleSpec:
         elif self.shape == "circle":
             out |= {"centre": list(self.centre), "radius": self.radius}
         if self.depths:
-            out |= {"indentation": list(self.depths) if self.steps else self.depths[0],
-                    "direction": list(self.direction)}
+            out |= {
+                "indentation": list(self.depths) if self.steps else self.depths[0],
+                "direction": list(self.direction),
+            }
         return out
 
 
@@ -684,14 +767,18 @@ def _obstacle(source: _Source, data) -> ObstacleSpec:
         except _Bad as bad:
             raise source.error(f"obstacle.indentation {bad}") from None
     if depths and shape == "wall":
-        raise source.error('obstacle.indentation moves a plane or a circle: give shape = "plane" or "circle" (the '
-                           'default wall is flush with Gamma_C)')
+        raise source.error(
+            'obstacle.indentation moves a plane or a circle: give shape = "plane" or "circle" (the '
+            "default wall is flush with Gamma_C)"
+        )
     if direction is not None and not depths:
         raise source.error("obstacle.direction is the direction of obstacle.indentation, which is not given")
     if depths and direction is None:
         if shape != "plane":
-            raise source.error("obstacle.direction is required with obstacle.indentation for a circle (the direction "
-                               "it moves in, e.g. [0, -1])")
+            raise source.error(
+                "obstacle.direction is required with obstacle.indentation for a circle (the direction "
+                "it moves in, e.g. [0, -1])"
+            )
         direction = normal  # along its outward normal: into the body
     if direction is not None:
         length = math.hypot(*direction)
@@ -741,13 +828,19 @@ class Case:
         else:
             load = lambda x: np.zeros((2, x.shape[1]))  # noqa: E731
         return ContactProblem(
-            name=self.path.stem, youngs_modulus=E, poisson_ratio=nu, load=load,
-            description=self.description or f"case {self.path.name}", boundary=self.boundary.conditions(),
-            obstacle=self.obstacle.final(), mesh=cm,
+            name=self.path.stem,
+            youngs_modulus=E,
+            poisson_ratio=nu,
+            load=load,
+            description=self.description or f"case {self.path.name}",
+            boundary=self.boundary.conditions(),
+            obstacle=self.obstacle.final(),
+            mesh=cm,
         )
 
-    def _scalar(self, spec: FieldSpec, key: str, cm: ContactMesh, groups: CellGroups | None,
-                bounds: tuple[float, float]) -> Callable:
+    def _scalar(
+        self, spec: FieldSpec, key: str, cm: ContactMesh, groups: CellGroups | None, bounds: tuple[float, float]
+    ) -> Callable:
         if isinstance(spec, Uniform):
             return constant_field(spec.value)
         if isinstance(spec, PythonField):
@@ -760,9 +853,11 @@ class Case:
         fn = groups.field(dict(spec.values))
         missing = groups.uncovered(fn)
         if missing:
-            raise MeshTagError(f"case {self.path}: {key}: {missing} cells lie in none of the groups given "
-                               f"({[n for n, _ in spec.values]}); give a value for Omega1 and Omega2 or for groups "
-                               "that cover the domain")
+            raise MeshTagError(
+                f"case {self.path}: {key}: {missing} cells lie in none of the groups given "
+                f"({[n for n, _ in spec.values]}); give a value for Omega1 and Omega2 or for groups "
+                "that cover the domain"
+            )
         return fn
 
     def _vector(self, spec: FieldSpec, groups: CellGroups | None) -> Callable:
@@ -780,8 +875,11 @@ class Case:
             "description": self.description,
             "mesh": self.mesh.echo(),
             "material": self.material.echo(),
-            "load": {"body-force": self.material.body_force.echo() if self.material.body_force else
-                     ("model" if self.material.model else [0.0, 0.0])},
+            "load": {
+                "body-force": self.material.body_force.echo()
+                if self.material.body_force
+                else ("model" if self.material.model else [0.0, 0.0])
+            },
             "boundary": self.boundary.echo(),
             "obstacle": self.obstacle.echo(),
             "overrides": {key: value for key, value in self.overrides},
@@ -795,19 +893,23 @@ def _check_pixels(spec: Pixels, extent, box, key: str, bounds: tuple[float, floa
     x0, x1, y0, y1 = extent
     tol = 1e-9 * max(x1 - x0, y1 - y0, box[1] - box[0], box[3] - box[2])
     if box[0] < x0 - tol or box[1] > x1 + tol or box[2] < y0 - tol or box[3] > y1 + tol:
-        raise InputError(f"case {path}: {key}: the pixel map {spec.path.name} covers x in [{x0:g}, {x1:g}], y in "
-                         f"[{y0:g}, {y1:g}], but the mesh spans x in [{box[0]:g}, {box[1]:g}], y in [{box[2]:g}, "
-                         f"{box[3]:g}]: give the map's extent (extent = [x0, x1, y0, y1]) so that it covers the mesh")
+        raise InputError(
+            f"case {path}: {key}: the pixel map {spec.path.name} covers x in [{x0:g}, {x1:g}], y in "
+            f"[{y0:g}, {y1:g}], but the mesh spans x in [{box[0]:g}, {box[1]:g}], y in [{box[2]:g}, "
+            f"{box[3]:g}]: give the map's extent (extent = [x0, x1, y0, y1]) so that it covers the mesh"
+        )
     i0, i1 = (int(np.clip(np.floor((x - x0) / (x1 - x0) * nx), 0, nx - 1)) for x in (box[0], box[1]))
     j0, j1 = (int(np.clip(np.floor((y - y0) / (y1 - y0) * ny), 0, ny - 1)) for y in (box[2], box[3]))
-    covered = spec.values[j0:j1 + 1, i0:i1 + 1]
+    covered = spec.values[j0 : j1 + 1, i0 : i1 + 1]
     with np.errstate(invalid="ignore"):
         bad = ~(np.isfinite(covered) & (covered > bounds[0]) & (covered < bounds[1]))
     if np.any(bad):
         j, i = np.argwhere(bad)[0]
-        raise InputError(f"case {path}: {key}: {np.count_nonzero(bad)} pixels of {spec.path.name} under the domain "
-                         f"lie outside ({bounds[0]:g}, {bounds[1]:g}) (first: row {j + j0}, column {i + i0}, value "
-                         f"{float(covered[j, i])!r})")
+        raise InputError(
+            f"case {path}: {key}: {np.count_nonzero(bad)} pixels of {spec.path.name} under the domain "
+            f"lie outside ({bounds[0]:g}, {bounds[1]:g}) (first: row {j + j0}, column {i + i0}, value "
+            f"{float(covered[j, i])!r})"
+        )
 
 
 def parse_override(text: str) -> tuple[str, Any]:
@@ -828,7 +930,7 @@ def _apply(data: dict, key: str, value, source: _Source) -> None:
     for depth, part in enumerate(parts[:-1]):
         inner = table.setdefault(part, {})
         if not isinstance(inner, dict):
-            raise source.error(f"override {key}: {'.'.join(parts[:depth + 1])} is not a table")
+            raise source.error(f"override {key}: {'.'.join(parts[: depth + 1])} is not a table")
         table = inner
     table[parts[-1]] = value
 
@@ -850,20 +952,25 @@ def load_case(path: str | Path, overrides: Sequence[tuple[str, Any]] = ()) -> Ca
         _apply(data, key, value, source)
     unknown = sorted(set(data) - {"description", *_PROBLEM_TABLES, *RUN_TABLES})
     if unknown:
-        raise source.error(f"unknown key or table {unknown[0]!r}; the tables are {[*_PROBLEM_TABLES, *RUN_TABLES]} "
-                           "(and the key description)")
+        raise source.error(
+            f"unknown key or table {unknown[0]!r}; the tables are {[*_PROBLEM_TABLES, *RUN_TABLES]} "
+            "(and the key description)"
+        )
     description = data.get("description", "")
     if not isinstance(description, str):
         raise source.error(f"description must be a string, got {_show(description)}")
     if "mesh" not in data:
-        raise source.error("[mesh] is required (builtin = \"unit-square\" | ... or file = \"my.msh\")")
+        raise source.error('[mesh] is required (builtin = "unit-square" | ... or file = "my.msh")')
     mesh = _mesh(source, data["mesh"])
     material = _material(source, data.get("material"), data.get("load"))
     if not isinstance(mesh, MeshFile):
         other = sorted(material.groups() - set(SUBDOMAIN_NAMES))
         if other:
-            raise source.error(f"the cell group {other[0]!r} is named in [material]/[load], but the built-in "
-                               f"{mesh.kind} mesh has only {list(SUBDOMAIN_NAMES)}", MeshTagError)
+            raise source.error(
+                f"the cell group {other[0]!r} is named in [material]/[load], but the built-in "
+                f"{mesh.kind} mesh has only {list(SUBDOMAIN_NAMES)}",
+                MeshTagError,
+            )
     boundary = _boundary(source, data.get("boundary"), mesh)
     obstacle = _obstacle(source, data.get("obstacle"))
     run = {}

@@ -35,8 +35,9 @@ SUBDOMAIN_NAMES = (PHYSICAL_NAMES[Subdomain.OMEGA1], PHYSICAL_NAMES[Subdomain.OM
 _TRIANGLE = 2  #: gmsh element type of the 3-node triangle
 
 
-def read_cell_groups(path: str | Path, names: Iterable[str] = (), *,
-                     comm: MPI.Comm = MPI.COMM_WORLD) -> dict[str, np.ndarray]:
+def read_cell_groups(
+    path: str | Path, names: Iterable[str] = (), *, comm: MPI.Comm = MPI.COMM_WORLD
+) -> dict[str, np.ndarray]:
     """Centroids (N, 2) of the triangles of every surface group of a gmsh file but Omega1/Omega2 (collective).
 
     ``names``: the groups the caller will use: MeshTagError if one is not a surface group of the
@@ -66,8 +67,10 @@ def _read_on_rank_zero(path: Path, names: list[str]) -> dict[str, np.ndarray]:
         groups = {gmsh.model.getPhysicalName(dim, tag): tag for dim, tag in gmsh.model.getPhysicalGroups(2)}
         missing = [name for name in names if name not in groups or name in SUBDOMAIN_NAMES]
         if missing:
-            raise MeshTagError(f"{path} has no surface group {missing[0]!r} (named in the case); its surface groups "
-                               f"are {sorted(groups)}")
+            raise MeshTagError(
+                f"{path} has no surface group {missing[0]!r} (named in the case); its surface groups "
+                f"are {sorted(groups)}"
+            )
         node_tags, coords, _ = gmsh.model.mesh.getNodes()
         coords = np.asarray(coords).reshape(-1, 3)[:, :2]
         index = np.zeros(int(np.max(node_tags, initial=0)) + 1, dtype=np.int64)
@@ -87,11 +90,13 @@ def _read_on_rank_zero(path: Path, names: list[str]) -> dict[str, np.ndarray]:
             if not triangles.size:
                 raise MeshTagError(f"the surface group {name!r} of {path} holds no triangles")
         for i, a in enumerate(names):
-            for b in names[i + 1:]:
+            for b in names[i + 1 :]:
                 shared = np.intersect1d(members[a], members[b]).size
                 if shared:
-                    raise MeshTagError(f"the surface groups {a!r} and {b!r} of {path} share {shared} triangles: a "
-                                       "cell takes its material from one group")
+                    raise MeshTagError(
+                        f"the surface groups {a!r} and {b!r} of {path} share {shared} triangles: a "
+                        "cell takes its material from one group"
+                    )
         gmsh.model.remove()
     return centroids
 
@@ -145,12 +150,15 @@ class CellGroups:
         out[found] = labels[index[found]]
         return out
 
-    def field(self, values: Mapping[str, object], *, shape: tuple[int, ...] = (),
-              default: float = np.nan) -> Callable[[np.ndarray], np.ndarray]:
+    def field(
+        self, values: Mapping[str, object], *, shape: tuple[int, ...] = (), default: float = np.nan
+    ) -> Callable[[np.ndarray], np.ndarray]:
         """x (3, N) ↦ the value of each point's group (shape ``(N,)`` or ``(*shape, N)``); ``default`` elsewhere."""
         unknown = [name for name in values if name not in self.overlay_names and name not in SUBDOMAIN_NAMES]
         if unknown:
-            raise MeshTagError(f"no cell group {unknown[0]!r}: the groups are {[*SUBDOMAIN_NAMES, *self.overlay_names]}")
+            raise MeshTagError(
+                f"no cell group {unknown[0]!r}: the groups are {[*SUBDOMAIN_NAMES, *self.overlay_names]}"
+            )
         table = {name: np.asarray(value, dtype=np.float64).reshape(shape) for name, value in values.items()}
 
         def evaluate(x: np.ndarray) -> np.ndarray:

@@ -11,12 +11,11 @@ every mesh whose cells lie in the function's (a submesh, or the mesh itself).
 from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, NamedTuple
 
-import numpy as np
-from mpi4py import MPI
-
 import basix.ufl
+import numpy as np
 from dolfinx import fem, geometry, la
 from dolfinx import mesh as dmesh
+from mpi4py import MPI
 
 from fenics_contact.errors import InputError
 from fenics_contact.problem.boundary import BoundaryConditions
@@ -26,8 +25,15 @@ from fenics_contact.problem.obstacles import Obstacle
 if TYPE_CHECKING:  # (problem.problem builds its fields with material_fields)
     from fenics_contact.problem.problem import ContactProblem
 
-__all__ = ["MaterialFields", "cell_function", "material_fields", "FunctionField", "tag_function", "SubmeshTransfer",
-           "zero_load"]
+__all__ = [
+    "MaterialFields",
+    "cell_function",
+    "material_fields",
+    "FunctionField",
+    "tag_function",
+    "SubmeshTransfer",
+    "zero_load",
+]
 
 
 def zero_load(x: np.ndarray) -> np.ndarray:
@@ -64,25 +70,34 @@ def cell_function(msh: dmesh.Mesh, field: Callable[[np.ndarray], np.ndarray], *,
 
 def _checked(field: Callable[[np.ndarray], np.ndarray], shape: tuple, name: str) -> Callable:
     """``field`` with its values checked: shape ``(*shape, N)`` for N points (``(N,)`` for a scalar), real, finite."""
+
     def evaluate(x: np.ndarray) -> np.ndarray:
         expected = (*shape, x.shape[1])
         try:
             values = field(x)
         except Exception as err:  # the user's callable: any error it raises is a bad input
-            raise InputError(f"the field {name} raised {type(err).__name__} at the cell midpoints: "
-                             f"{str(err).splitlines()[0] if str(err) else ''}") from None
+            raise InputError(
+                f"the field {name} raised {type(err).__name__} at the cell midpoints: "
+                f"{str(err).splitlines()[0] if str(err) else ''}"
+            ) from None
         values = np.asarray(values)
         if values.shape != expected:
-            raise InputError(f"the field {name} must map points x of shape (3, N) to values of shape "
-                             f"({', '.join([*map(str, shape), 'N'])}{',' if not shape else ''}), got shape "
-                             f"{values.shape} for N = {x.shape[1]}")
-        if not (np.issubdtype(values.dtype, np.floating) or np.issubdtype(values.dtype, np.integer)) \
-                or values.dtype == np.bool_:
+            raise InputError(
+                f"the field {name} must map points x of shape (3, N) to values of shape "
+                f"({', '.join([*map(str, shape), 'N'])}{',' if not shape else ''}), got shape "
+                f"{values.shape} for N = {x.shape[1]}"
+            )
+        if (
+            not (np.issubdtype(values.dtype, np.floating) or np.issubdtype(values.dtype, np.integer))
+            or values.dtype == np.bool_
+        ):
             raise InputError(f"the field {name} must give real numbers, got values of type {values.dtype}")
         if not np.all(np.isfinite(values)):
             bad = np.argmax(~np.isfinite(values.reshape(-1, x.shape[1])).all(axis=0))
-            raise InputError(f"the field {name} is not finite at {np.count_nonzero(~np.isfinite(values))} "
-                             f"value(s) (first at x = {x[:, bad].tolist()})")
+            raise InputError(
+                f"the field {name} is not finite at {np.count_nonzero(~np.isfinite(values))} "
+                f"value(s) (first at x = {x[:, bad].tolist()})"
+            )
         return values.astype(np.float64)
 
     return evaluate
@@ -112,34 +127,41 @@ class FunctionField:
         counts = np.diff(colliding.offsets)
         if np.any(counts == 0):
             where = points[np.argmax(counts == 0)]
-            raise InputError(f"the field {self.fn.name!r} is asked for at {np.count_nonzero(counts == 0)} points "
-                             f"outside its mesh (first at {where.tolist()}): give it on the problem's mesh")
+            raise InputError(
+                f"the field {self.fn.name!r} is asked for at {np.count_nonzero(counts == 0)} points "
+                f"outside its mesh (first at {where.tolist()}): give it on the problem's mesh"
+            )
         cells = colliding.array[colliding.offsets[:-1]]
         values = self.fn.eval(points, cells)
         return values[:, 0] if values.shape[1] == 1 and not self.fn.function_space.value_shape else values.T
 
 
-def tag_function(msh: dmesh.Mesh, cell_tags: dmesh.MeshTags, values: Mapping[int, float], *, name: str = ""
-                 ) -> fem.Function:
+def tag_function(
+    msh: dmesh.Mesh, cell_tags: dmesh.MeshTags, values: Mapping[int, float], *, name: str = ""
+) -> fem.Function:
     """A DG0 function with ``values[tag]`` on the cells of each tag (InputError when a cell gets no value)."""
     if not isinstance(cell_tags, dmesh.MeshTags) or cell_tags.dim != msh.topology.dim:
-        raise InputError(f"{name or 'a field'} by cell tag needs the mesh's cell tags (MeshTags of dimension "
-                         f"{msh.topology.dim})")
+        raise InputError(
+            f"{name or 'a field'} by cell tag needs the mesh's cell tags (MeshTags of dimension {msh.topology.dim})"
+        )
     V = fem.functionspace(msh, basix.ufl.element("DG", msh.basix_cell(), 0))
     fn = fem.Function(V, name=name)
     fn.x.array[:] = np.nan
     for tag, value in values.items():
         if isinstance(value, bool) or not isinstance(value, (int, float, np.number)) or not np.isfinite(value):
-            raise InputError(f"{name or 'a field'}: the value for cell tag {tag!r} must be a finite number, got "
-                             f"{value!r}")
+            raise InputError(
+                f"{name or 'a field'}: the value for cell tag {tag!r} must be a finite number, got {value!r}"
+            )
         cells = cell_tags.find(int(tag))
         fn.x.array[V.dofmap.list[cells, 0]] = float(value)
     n_owned = msh.topology.index_map(msh.topology.dim).size_local
     missing = msh.comm.allreduce(int(np.count_nonzero(np.isnan(fn.x.array[:n_owned]))), op=MPI.SUM)
     if missing:
         present = sorted({int(t) for t in np.unique(cell_tags.values)})
-        raise InputError(f"{name or 'a field'} by cell tag: {missing} cells get no value (the values are given for "
-                         f"tags {sorted(values)}; the mesh's cell tags are {present}); give a value for every tag")
+        raise InputError(
+            f"{name or 'a field'} by cell tag: {missing} cells get no value (the values are given for "
+            f"tags {sorted(values)}; the mesh's cell tags are {present}); give a value for every tag"
+        )
     fn.x.scatter_forward()
     return fn
 
@@ -157,8 +179,12 @@ def material_fields(msh: dmesh.Mesh, model: "ContactProblem") -> MaterialFields:
     lmbda.x.array[:] = lm
     mu.x.array[:] = mu_
     gdim = msh.geometry.dim
-    f = cell_function(msh, model.load if model.load is not zero_load else (lambda x: np.zeros((gdim, x.shape[1]))),
-                      shape=(gdim,), name="f")
+    f = cell_function(
+        msh,
+        model.load if model.load is not zero_load else (lambda x: np.zeros((gdim, x.shape[1]))),
+        shape=(gdim,),
+        name="f",
+    )
     return MaterialFields(E, nu, lmbda, mu, f, model.boundary, model.obstacle)
 
 

@@ -16,20 +16,25 @@ from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import NamedTuple
 
-import gmsh
-import numpy as np
-from mpi4py import MPI
-
 import dolfinx
 import dolfinx.io.gmsh
+import gmsh
+import numpy as np
 from dolfinx import mesh as dmesh
+from mpi4py import MPI
 
 from fenics_contact.errors import InputError, MeshTagError
 from fenics_contact.problem import partition, strip, validation
 from fenics_contact.problem.tags import PHYSICAL_NAMES, Boundary, Subdomain, is_neumann_name, neumann_tag
 
 __all__ = [
-    "ContactMesh", "unit_square", "read_mesh", "mesh_size", "check_memory", "gmsh_session", "build_unit_square_model",
+    "ContactMesh",
+    "unit_square",
+    "read_mesh",
+    "mesh_size",
+    "check_memory",
+    "gmsh_session",
+    "build_unit_square_model",
     "contact_mesh_from_model",
 ]
 
@@ -47,7 +52,9 @@ class ContactMesh(NamedTuple):
     mesh: dmesh.Mesh
     cell_tags: dmesh.MeshTags
     facet_tags: dmesh.MeshTags
-    h: float  #: fine mesh size at Γ_C: 1/n, or ``mesh_size(mesh, facet_tags)`` (√(2·largest area of a cell on Γ_C)) for a user mesh
+    #: fine mesh size at Γ_C: 1/n, or ``mesh_size(mesh, facet_tags)`` (√(2·largest area of a cell on Γ_C)) for a user
+    #: mesh
+    h: float
     H: float | None  #: coarse size / strip width (None when unknown)
     coarse_cell: np.ndarray  #: coarse-square index of every local cell (-1 if no coarse grid)
     neumann_names: dict | None = None  #: traction-group tag -> physical name (Gamma_N*)
@@ -190,8 +197,10 @@ def check_memory(vertices: float, what: str) -> None:
         return
     need = vertices * BYTES_PER_VERTEX
     if need > available:
-        raise InputError(f"{what} has about {vertices:.3g} vertices and would need about {need / 1e9:.3g} GB of "
-                         f"memory; this machine has {available / 1e9:.3g} GB: choose a coarser mesh")
+        raise InputError(
+            f"{what} has about {vertices:.3g} vertices and would need about {need / 1e9:.3g} GB of "
+            f"memory; this machine has {available / 1e9:.3g} GB: choose a coarser mesh"
+        )
 
 
 def unit_square(
@@ -259,8 +268,10 @@ def read_mesh(
     path = Path(path)
     overlay_groups = set(overlay_groups)
     if H is not None and not (isinstance(H, (int, float)) and np.isfinite(H) and H > 0):
-        raise InputError(f"the coarse size H must be a positive number (the side of the coarse squares over the "
-                         f"bounding box), got {H!r}")
+        raise InputError(
+            f"the coarse size H must be a positive number (the side of the coarse squares over the "
+            f"bounding box), got {H!r}"
+        )
     if not path.is_file():
         raise InputError(f"mesh file {path} does not exist" if not path.exists() else f"mesh file {path} is not a file")
     with gmsh_session():
@@ -280,8 +291,11 @@ def read_mesh(
                             gmsh.model.removePhysicalGroups([(dim, tag)])
                 problem = _gmsh_model_problem(path, auto_strip=auto_strip)
                 if problem is None and tdim == 3 and H is not None:
-                    problem = (InputError, f"{path} is a 3D mesh: the coarse grid H (multiscale methods) is planar "
-                                           "only; read it with H=None")
+                    problem = (
+                        InputError,
+                        f"{path} is a 3D mesh: the coarse grid H (multiscale methods) is planar "
+                        "only; read it with H=None",
+                    )
         problem, auto_strip, tdim = comm.bcast((problem, auto_strip, tdim), root=0)
         # validate before the collective mesh construction (which aborts on inconsistent tags)
         if problem is not None:
@@ -299,8 +313,9 @@ def read_mesh(
     return cm
 
 
-def _strip_contact_mesh(data: dolfinx.io.gmsh.MeshData, *, h: float, H: float | None,
-                        materials: Iterable[str] = ()) -> ContactMesh:
+def _strip_contact_mesh(
+    data: dolfinx.io.gmsh.MeshData, *, h: float, H: float | None, materials: Iterable[str] = ()
+) -> ContactMesh:
     """A mesh without Ω₁/Ω₂/γ gets them built (``strip.automatic_split``): with ``H``, a strip of width H
     along Γ_C; without, the surface groups that are not ``materials`` as the coarse cells (two or more: the
     user's partition) or a band of a few cells."""
@@ -312,11 +327,13 @@ def _strip_contact_mesh(data: dolfinx.io.gmsh.MeshData, *, h: float, H: float | 
     facet_tags = _retag(data.facet_tags, data.physical_groups, [Boundary.GAMMA_D, Boundary.GAMMA_C], msh, tdim - 1)
     skip = {PHYSICAL_NAMES[Subdomain.OMEGA1], PHYSICAL_NAMES[Subdomain.OMEGA2], *materials}
     groups = sorted(g.tag for name, g in data.physical_groups.items() if g.dim == tdim and name not in skip)
-    user_partition = partition.group_coarse_cells(msh, data.cell_tags, groups) if H is None and len(groups) >= 2 \
-        else None
+    user_partition = (
+        partition.group_coarse_cells(msh, data.cell_tags, groups) if H is None and len(groups) >= 2 else None
+    )
     split = strip.automatic_split(msh, facet_tags, H=H, partition=user_partition)
-    return ContactMesh(msh, split.cell_tags, split.facet_tags, float(h), split.H, split.coarse_cell,
-                       _neumann_names(data))
+    return ContactMesh(
+        msh, split.cell_tags, split.facet_tags, float(h), split.H, split.coarse_cell, _neumann_names(data)
+    )
 
 
 def mesh_size(msh: dmesh.Mesh, facet_tags: dmesh.MeshTags | None = None) -> float:
@@ -350,6 +367,7 @@ def mesh_size(msh: dmesh.Mesh, facet_tags: dmesh.MeshTags | None = None) -> floa
 
 def _gmsh_model_problem(path: Path, *, auto_strip: bool = False) -> tuple[type, str] | None:
     """(error class, message) if the current gmsh model is not a planar triangle mesh with the named groups."""
+
     def names_of(types) -> list[str]:
         return [gmsh.model.mesh.getElementProperties(t)[0] for t in types]
 
@@ -357,22 +375,30 @@ def _gmsh_model_problem(path: Path, *, auto_strip: bool = False) -> tuple[type, 
     if solid:
         if solid != [_TETRAHEDRON]:
             other = names_of(t for t in solid if t != _TETRAHEDRON)
-            return InputError, (f"{path} has {other} elements; a 3D mesh must be of 4-node tetrahedra only "
-                                "(no hexahedra, prisms, pyramids, no second-order elements)")
+            return InputError, (
+                f"{path} has {other} elements; a 3D mesh must be of 4-node tetrahedra only "
+                "(no hexahedra, prisms, pyramids, no second-order elements)"
+            )
         return _groups_problem(path, 3, auto_strip)
     surface = list(gmsh.model.mesh.getElementTypes(2))
     if not surface:
-        return InputError, (f"{path} holds no triangles (no 2D mesh elements): is it a mesh? A .geo model must be "
-                            "meshed first (gmsh -2 model.geo -o model.msh)")
+        return InputError, (
+            f"{path} holds no triangles (no 2D mesh elements): is it a mesh? A .geo model must be "
+            "meshed first (gmsh -2 model.geo -o model.msh)"
+        )
     if surface != [_TRIANGLE]:
         other = names_of(t for t in surface if t != _TRIANGLE)
-        return InputError, (f"{path} has {other} elements; fenics-contact needs 3-node triangles only "
-                            "(no quadrangles, no second-order elements)")
+        return InputError, (
+            f"{path} has {other} elements; fenics-contact needs 3-node triangles only "
+            "(no quadrangles, no second-order elements)"
+        )
     _, coords, _ = gmsh.model.mesh.getNodes()
     z = np.abs(np.asarray(coords).reshape(-1, 3)[:, 2])
     if np.any(z > 0.0):
-        return InputError, (f"{path}: {np.count_nonzero(z > 0)} nodes have z ≠ 0 (largest |z| = {z.max():.3g}); "
-                            "the mesh must lie in the plane z = 0 (it is not projected)")
+        return InputError, (
+            f"{path}: {np.count_nonzero(z > 0)} nodes have z ≠ 0 (largest |z| = {z.max():.3g}); "
+            "the mesh must lie in the plane z = 0 (it is not projected)"
+        )
     return _groups_problem(path, 2, auto_strip)
 
 
@@ -388,18 +414,25 @@ def _groups_problem(path: Path, tdim: int, auto_strip: bool) -> tuple[type, str]
         if name in dims and want not in dims[name]:
             kinds = {0: "a point", 1: "a curve", 2: "a surface", 3: "a volume"}
             got = " and ".join(kinds[d] for d in sorted(dims[name]))
-            wrong.append(f"{name!r} is {got} group (dimension {sorted(dims[name])}); it must be {kinds[want]} "
-                         f"group (dimension {want})")
+            wrong.append(
+                f"{name!r} is {got} group (dimension {sorted(dims[name])}); it must be {kinds[want]} "
+                f"group (dimension {want})"
+            )
     if wrong:
         return MeshTagError, f"{path}: " + "; ".join(wrong)
     missing = [name for name in PHYSICAL_NAMES.values() if name not in dims]
     if auto_strip:
         missing = [name for name in missing if name not in _STRIP_NAMES]
     if missing:
-        return MeshTagError, (f"{path} lacks the physical group(s) {missing}; it has {sorted(dims)}. "
-                              f"Required names: {list(PHYSICAL_NAMES.values())}"
-                              + ("" if auto_strip else f" (or none of {sorted(_STRIP_NAMES)}: Omega2 is then "
-                                 "built along Gamma_C from the coarse cells)"))
+        return MeshTagError, (
+            f"{path} lacks the physical group(s) {missing}; it has {sorted(dims)}. "
+            f"Required names: {list(PHYSICAL_NAMES.values())}"
+            + (
+                ""
+                if auto_strip
+                else f" (or none of {sorted(_STRIP_NAMES)}: Omega2 is then built along Gamma_C from the coarse cells)"
+            )
+        )
     return _surface_groups_problem(path, auto_strip=auto_strip, tdim=tdim) or _curve_groups_problem(path, tdim - 1)
 
 
@@ -444,8 +477,9 @@ def _curve_groups_problem(path: Path, fdim: int = 1) -> tuple[type, str] | None:
                 pair = tuple(sorted((names[groups[a]], names[groups[b]])))
                 pairs[pair] = pairs.get(pair, 0) + 1
     text = "; ".join(f"{a!r} and {b!r} share {n} segments" for (a, b), n in pairs.items())
-    return MeshTagError, (f"{path} does not describe the contact problem: {text}: they must be disjoint "
-                          "(a mesh facet carries one tag)")
+    return MeshTagError, (
+        f"{path} does not describe the contact problem: {text}: they must be disjoint (a mesh facet carries one tag)"
+    )
 
 
 def _surface_groups_problem(path: Path, *, auto_strip: bool = False, tdim: int = 2) -> tuple[type, str] | None:
@@ -474,8 +508,10 @@ def _surface_groups_problem(path: Path, *, auto_strip: bool = False, tdim: int =
         where = "no surface group" if auto_strip else "neither Omega1 nor Omega2"
         problems.append(f"{np.count_nonzero(~known)} of {triangles.size} triangles are in {where}")
     if np.any(count > 1):
-        problems.append(f"{np.count_nonzero(count > 1)} triangles are in more than one surface group (of Omega1, "
-                        f"Omega2 and {others}); every triangle must be in exactly one")
+        problems.append(
+            f"{np.count_nonzero(count > 1)} triangles are in more than one surface group (of Omega1, "
+            f"Omega2 and {others}); every triangle must be in exactly one"
+        )
     if problems:
         return MeshTagError, f"{path} does not describe the contact problem: " + "; ".join(problems)
     return None
@@ -531,5 +567,8 @@ def _contact_mesh(data: dolfinx.io.gmsh.MeshData, *, h: float, H: float | None) 
 def _neumann_names(data: dolfinx.io.gmsh.MeshData) -> dict[int, str]:
     """Traction-group tag -> physical name (Gamma_N*) of the mesh data."""
     tdim = data.mesh.topology.dim
-    return {neumann_tag(name): name for name, g in data.physical_groups.items()
-            if g.dim == tdim - 1 and is_neumann_name(name)}
+    return {
+        neumann_tag(name): name
+        for name, g in data.physical_groups.items()
+        if g.dim == tdim - 1 and is_neumann_name(name)
+    }

@@ -37,9 +37,7 @@ def check_poisson_ratio(nu: npt.ArrayLike) -> np.ndarray:
     nu = np.asarray(nu, dtype=np.float64)
     ok = np.isfinite(nu) & (nu > -1.0) & (nu < 0.5)
     if not np.all(ok):
-        raise InputError(
-            f"Poisson ratio must lie in the open interval (-1, 0.5); got {nu[~ok].ravel()[:5]}"
-        )
+        raise InputError(f"Poisson ratio must lie in the open interval (-1, 0.5); got {nu[~ok].ravel()[:5]}")
     return nu
 
 

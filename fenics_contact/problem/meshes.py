@@ -72,13 +72,15 @@ def bulged_square(
             s2 = geo.addPlaneSurface([geo.addCurveLoop([b2, arc, t2, -gam])])
             geo.synchronize()
             side = {"left": [left], "bottom": [b1, b2], "top": [t1, t2]}
-            _add_groups({
-                Subdomain.OMEGA1: (2, [s1]),
-                Subdomain.OMEGA2: (2, [s2]),
-                Boundary.GAMMA_D: (1, [c for name in clamped for c in side[name]]),
-                Boundary.GAMMA_C: (1, [arc]),
-                Boundary.INTERFACE: (1, [gam]),
-            })
+            _add_groups(
+                {
+                    Subdomain.OMEGA1: (2, [s1]),
+                    Subdomain.OMEGA2: (2, [s2]),
+                    Boundary.GAMMA_D: (1, [c for name in clamped for c in side[name]]),
+                    Boundary.GAMMA_C: (1, [arc]),
+                    Boundary.INTERFACE: (1, [gam]),
+                }
+            )
             gmsh.option.setNumber("Mesh.MeshSizeMax", h)
             gmsh.model.mesh.generate(2)
         return contact_mesh_from_model(comm, h=h, H=None)  # unstructured: no coarse grid
@@ -125,17 +127,33 @@ def hertz_block(
     if not (np.isfinite(refinement) and refinement > 0):
         raise InputError(f"the refinement factor must be > 0, got {refinement!r}")
     hc = a / (20.0 * refinement) if h_contact is None else float(h_contact)
-    spec = HertzBlock(a, 0.5 * width * a, depth * a, strip * a, contact_width * a, refine_width * a,
-                      refine_depth * a, hc, h_far * a / refinement, grading / refinement)
-    if not (0 < hc <= spec.refine_width and grading > 0 and spec.refine_width <= spec.contact_width < spec.half_width
-            and 0 < spec.strip < spec.depth):
+    spec = HertzBlock(
+        a,
+        0.5 * width * a,
+        depth * a,
+        strip * a,
+        contact_width * a,
+        refine_width * a,
+        refine_depth * a,
+        hc,
+        h_far * a / refinement,
+        grading / refinement,
+    )
+    if not (
+        0 < hc <= spec.refine_width
+        and grading > 0
+        and spec.refine_width <= spec.contact_width < spec.half_width
+        and 0 < spec.strip < spec.depth
+    ):
         raise InputError(f"inconsistent Hertz block sizes: {spec}")
     # vertices ≈ area / size²: the refined box (size hc, with a factor 2 to spare), the graded zone around it
     # (size hc + grading·r up to h_far: ∫ perimeter dr / size² = perimeter (1/hc − 1/h_far) / grading)
     perimeter = 4.0 * (spec.refine_width + spec.refine_depth)
-    check_memory(4.0 * spec.refine_width * spec.refine_depth / hc ** 2
-                 + perimeter * (1.0 / hc - 1.0 / max(spec.h_far, hc)) / spec.grading,
-                 f"the Hertz block with a contact cell of {hc:g}")
+    check_memory(
+        4.0 * spec.refine_width * spec.refine_depth / hc**2
+        + perimeter * (1.0 / hc - 1.0 / max(spec.h_far, hc)) / spec.grading,
+        f"the Hertz block with a contact cell of {hc:g}",
+    )
     L, D, S, W = spec.half_width, spec.depth, spec.strip, spec.contact_width
     with gmsh_session():
         if comm.rank == 0:
@@ -151,19 +169,25 @@ def hertz_block(
             s1 = geo.addPlaneSurface([geo.addCurveLoop([bottom, r1, -gam, l1])])
             s2 = geo.addPlaneSurface([geo.addCurveLoop([gam, r2, top_r, contact, top_l, l2])])
             geo.synchronize()
-            _add_groups({
-                Subdomain.OMEGA1: (2, [s1]),
-                Subdomain.OMEGA2: (2, [s2]),
-                Boundary.GAMMA_D: (1, [bottom]),
-                Boundary.GAMMA_C: (1, [contact]),
-                Boundary.INTERFACE: (1, [gam]),
-            })
+            _add_groups(
+                {
+                    Subdomain.OMEGA1: (2, [s1]),
+                    Subdomain.OMEGA2: (2, [s2]),
+                    Boundary.GAMMA_D: (1, [bottom]),
+                    Boundary.GAMMA_C: (1, [contact]),
+                    Boundary.INTERFACE: (1, [gam]),
+                }
+            )
             # size: h_contact on the refined zone, + grading·distance, capped at h_far
             zone = gmsh.model.mesh.field.add("Box")
             gmsh.model.mesh.field.setNumber(zone, "VIn", hc)
             gmsh.model.mesh.field.setNumber(zone, "VOut", spec.h_far)
-            for key, value in (("XMin", -spec.refine_width), ("XMax", spec.refine_width),
-                               ("YMin", -spec.refine_depth), ("YMax", 0.0)):
+            for key, value in (
+                ("XMin", -spec.refine_width),
+                ("XMax", spec.refine_width),
+                ("YMin", -spec.refine_depth),
+                ("YMax", 0.0),
+            ):
                 gmsh.model.mesh.field.setNumber(zone, key, value)
             gmsh.model.mesh.field.setNumber(zone, "Thickness", (spec.h_far - hc) / spec.grading)
             gmsh.model.mesh.field.setAsBackgroundMesh(zone)
@@ -242,13 +266,22 @@ def composite_block(
     if not (np.isfinite(a) and a > 0 and np.isfinite(refinement) and refinement > 0):
         raise InputError(f"composite_block needs a > 0 and refinement > 0, got {a!r}, {refinement!r}")
     nx, ny = width / coarse, depth / coarse
-    if not (abs(nx - round(nx)) < 1e-9 and abs(ny - round(ny)) < 1e-9 and round(ny) >= 2 and round(nx) >= 3
-            and round(nx) % 2 == 1):
-        raise InputError(f"composite_block: width/coarse must be an odd and depth/coarse a whole number >= 2, got "
-                         f"{width}/{coarse}, {depth}/{coarse}")
+    if not (
+        abs(nx - round(nx)) < 1e-9
+        and abs(ny - round(ny)) < 1e-9
+        and round(ny) >= 2
+        and round(nx) >= 3
+        and round(nx) % 2 == 1
+    ):
+        raise InputError(
+            f"composite_block: width/coarse must be an odd and depth/coarse a whole number >= 2, got "
+            f"{width}/{coarse}, {depth}/{coarse}"
+        )
     if not (0 < inclusion < coarse and 0 < refine_width <= contact_width < width / 2 and 0 < refine_depth < coarse):
-        raise InputError(f"composite_block: inconsistent sizes (inclusion {inclusion}, coarse {coarse}, contact width "
-                         f"{contact_width}, refine {refine_width} x {refine_depth})")
+        raise InputError(
+            f"composite_block: inconsistent sizes (inclusion {inclusion}, coarse {coarse}, contact width "
+            f"{contact_width}, refine {refine_width} x {refine_depth})"
+        )
     nx, ny = int(round(nx)), int(round(ny))
     L, D, H, W = 0.5 * width * a, depth * a, coarse * a, contact_width * a
     hc = a / (20.0 * refinement)
@@ -284,19 +317,25 @@ def composite_block(
                     groups["contact"].append(c)
                 elif abs(y0 + H) < tol and abs(y1 + H) < tol:
                     groups["gamma"].append(c)
-            _add_groups({
-                Subdomain.OMEGA1: (2, omega1),
-                Subdomain.OMEGA2: (2, omega2),
-                Boundary.GAMMA_D: (1, groups["bottom"] + groups["sides"]),
-                Boundary.GAMMA_C: (1, groups["contact"]),
-                Boundary.INTERFACE: (1, groups["gamma"]),
-            })
+            _add_groups(
+                {
+                    Subdomain.OMEGA1: (2, omega1),
+                    Subdomain.OMEGA2: (2, omega2),
+                    Boundary.GAMMA_D: (1, groups["bottom"] + groups["sides"]),
+                    Boundary.GAMMA_C: (1, groups["contact"]),
+                    Boundary.INTERFACE: (1, groups["gamma"]),
+                }
+            )
             field = gmsh.model.mesh.field
             zone = field.add("Box")
             field.setNumber(zone, "VIn", hc)
             field.setNumber(zone, "VOut", h_far)
-            for key, value in (("XMin", -refine_width * a), ("XMax", refine_width * a),
-                               ("YMin", -refine_depth * a), ("YMax", 0.0)):
+            for key, value in (
+                ("XMin", -refine_width * a),
+                ("XMax", refine_width * a),
+                ("YMin", -refine_depth * a),
+                ("YMax", 0.0),
+            ):
                 field.setNumber(zone, key, value)
             field.setNumber(zone, "Thickness", (h_far - hc) / grading)
             field.setAsBackgroundMesh(zone)

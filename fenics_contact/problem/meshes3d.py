@@ -18,9 +18,8 @@ not passed through ``validation``.
 from collections.abc import Callable, Mapping, Sequence
 
 import numpy as np
-from mpi4py import MPI
-
 from dolfinx import mesh as dmesh
+from mpi4py import MPI
 
 from fenics_contact.errors import InputError
 from fenics_contact.problem.geometry import ContactMesh, check_memory, mesh_size
@@ -49,10 +48,18 @@ def _face(name: str) -> tuple[int, int]:
 def graded_planes(length: float, *, fine: float, h: float, growth: float = 1.25) -> np.ndarray:
     """Grid planes 0 = t₀ < … < t_m = ``length``: spacing ``h`` on [0, ``fine``], then each step ``growth``
     times the last (the steps beyond ``fine`` scaled so that the last plane is ``length``)."""
-    if not (np.isfinite(length) and np.isfinite(fine) and np.isfinite(h) and 0 < h <= fine <= length
-            and np.isfinite(growth) and growth >= 1):
-        raise InputError(f"graded_planes needs 0 < h <= fine <= length and growth >= 1, got length {length!r}, "
-                         f"fine {fine!r}, h {h!r}, growth {growth!r}")
+    if not (
+        np.isfinite(length)
+        and np.isfinite(fine)
+        and np.isfinite(h)
+        and 0 < h <= fine <= length
+        and np.isfinite(growth)
+        and growth >= 1
+    ):
+        raise InputError(
+            f"graded_planes needs 0 < h <= fine <= length and growth >= 1, got length {length!r}, "
+            f"fine {fine!r}, h {h!r}, growth {growth!r}"
+        )
     n_fine = max(1, int(round(fine / h)))
     planes = list(np.linspace(0.0, fine, n_fine + 1))
     steps, step, rest = [], fine / n_fine, length - fine
@@ -86,8 +93,9 @@ def box_mesh(
     nearest grid plane) of the contact face. ``h`` of the result is ``mesh_size`` on Γ_C.
     """
     planes = [_planes(v, a) for v, a in zip((x, y, z), "xyz")]
-    check_memory(float(np.prod([p.size for p in planes])), f"the box of {' x '.join(str(p.size - 1) for p in planes)} "
-                 "grid cells")
+    check_memory(
+        float(np.prod([p.size for p in planes])), f"the box of {' x '.join(str(p.size - 1) for p in planes)} grid cells"
+    )
     contact_axis, contact_side = _face(contact)
     clamped = tuple(clamped)
     neumann = dict(neumann or {})
@@ -137,35 +145,45 @@ def box_mesh(
 
     face_c = on_face(contact)
     region = contact_region or (lambda p: np.ones(p.shape[1], dtype=bool))
-    add(dmesh.locate_entities_boundary(msh, tdim - 1, lambda p: face_c(p) & np.asarray(region(p), dtype=bool)),
-        Boundary.GAMMA_C)
+    add(
+        dmesh.locate_entities_boundary(msh, tdim - 1, lambda p: face_c(p) & np.asarray(region(p), dtype=bool)),
+        Boundary.GAMMA_C,
+    )
     for face in clamped:
         add(dmesh.locate_entities_boundary(msh, tdim - 1, on_face(face)), Boundary.GAMMA_D)
     for face, name in sorted(neumann.items()):
         add(dmesh.locate_entities_boundary(msh, tdim - 1, on_face(face)), neumann_tag(name))
-    add(dmesh.locate_entities(msh, tdim - 1, lambda p: np.abs(p[contact_axis] - gamma_value) < tol),
-        Boundary.INTERFACE)
+    add(dmesh.locate_entities(msh, tdim - 1, lambda p: np.abs(p[contact_axis] - gamma_value) < tol), Boundary.INTERFACE)
     entities, tags = np.concatenate(facets), np.concatenate(values)
     order = np.argsort(entities, kind="stable")
     entities, tags = entities[order], tags[order]
     if np.any(np.diff(entities) == 0):
-        raise InputError("box_mesh: a facet lies in two groups (a clamped face, a traction face and the contact "
-                         "face must be different faces)")
+        raise InputError(
+            "box_mesh: a facet lies in two groups (a clamped face, a traction face and the contact "
+            "face must be different faces)"
+        )
     facet_tags = dmesh.meshtags(msh, tdim - 1, entities, tags)
 
     imap = msh.topology.index_map(tdim)
     cells = np.arange(imap.size_local + imap.num_ghosts, dtype=np.int32)
     mid = dmesh.compute_midpoints(msh, tdim, cells)[:, contact_axis]
     in_strip = (mid > gamma_value) if contact_side else (mid < gamma_value)
-    cell_tags = dmesh.meshtags(msh, tdim, cells, np.where(in_strip, int(Subdomain.OMEGA2),
-                                                          int(Subdomain.OMEGA1)).astype(np.int32))
+    cell_tags = dmesh.meshtags(
+        msh, tdim, cells, np.where(in_strip, int(Subdomain.OMEGA2), int(Subdomain.OMEGA1)).astype(np.int32)
+    )
     names = {neumann_tag(name): name for name in neumann.values()}
     coarse = np.full(cells.size, -1, dtype=np.int32)
     return ContactMesh(msh, cell_tags, facet_tags, mesh_size(msh, facet_tags), None, coarse, names or None)
 
 
-def unit_cube(n: int, *, clamped: Sequence[str] = ("xmin",), neumann: Mapping[str, str] | None = None,
-              strip: float | None = None, comm: MPI.Comm = MPI.COMM_WORLD) -> ContactMesh:
+def unit_cube(
+    n: int,
+    *,
+    clamped: Sequence[str] = ("xmin",),
+    neumann: Mapping[str, str] | None = None,
+    strip: float | None = None,
+    comm: MPI.Comm = MPI.COMM_WORLD,
+) -> ContactMesh:
     """The tagged mesh of (0, 1)³ with h = 1/n: Γ_C the face x = 1, Γ_D the faces ``clamped``, traction groups
     on the faces of ``neumann``, the other faces traction free; Ω₂ the layer x > 1 − ``strip`` (default ¼)."""
     if not isinstance(n, (int, np.integer)) or isinstance(n, bool) or n < 2:

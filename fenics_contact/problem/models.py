@@ -42,14 +42,24 @@ from fenics_contact.errors import InputError
 from fenics_contact.problem.problem import ContactProblem, ScalarField, VectorField, constant_field
 
 __all__ = [
-    "constant_field", "get_model", "model_1", "model_2", "model_3", "paper_phase_model", "pixel_field",
+    "constant_field",
+    "get_model",
+    "model_1",
+    "model_2",
+    "model_3",
+    "paper_phase_model",
+    "pixel_field",
 ]
 
 
 def __getattr__(name: str):
     if name == "TestModel":
-        warnings.warn("fenics_contact.problem.models.TestModel is deprecated: it is ContactProblem "
-                      "(fenics_contact.problem.problem), whose fields it had", DeprecationWarning, stacklevel=2)
+        warnings.warn(
+            "fenics_contact.problem.models.TestModel is deprecated: it is ContactProblem "
+            "(fenics_contact.problem.problem), whose fields it had",
+            DeprecationWarning,
+            stacklevel=2,
+        )
         return ContactProblem
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
@@ -114,9 +124,7 @@ LOADS_IN_OMEGA1 = {
 _S = 1.0 / 32.0
 _X_LOAD = 15.0 / 16.0  #: loads act on x >= 15/16 (inside Ω₂ for H >= 1/16)
 _F = 0.5 / (1.0 - _X_LOAD)  #: band magnitude: the force of a unit load on x >= 1/2
-_CHANNELS = np.array(
-    [[(1 if k % 2 == 0 else 5) * _S, 27 * _S, (4 * k + 2) * _S, (4 * k + 3) * _S] for k in range(8)]
-)
+_CHANNELS = np.array([[(1 if k % 2 == 0 else 5) * _S, 27 * _S, (4 * k + 2) * _S, (4 * k + 3) * _S] for k in range(8)])
 
 
 def _inclusion_boxes() -> np.ndarray:

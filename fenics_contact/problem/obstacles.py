@@ -42,8 +42,16 @@ from mpi4py import MPI
 
 from fenics_contact.errors import InputError
 
-__all__ = ["Obstacle", "Plane", "Circle", "Sphere", "SignedDistance", "Translated", "evaluate_obstacle",
-           "check_obstacle_side"]
+__all__ = [
+    "Obstacle",
+    "Plane",
+    "Circle",
+    "Sphere",
+    "SignedDistance",
+    "Translated",
+    "evaluate_obstacle",
+    "check_obstacle_side",
+]
 
 
 def _as_vector(value: npt.ArrayLike, name: str, *, unit: bool = False, dim: int | None = None) -> np.ndarray:
@@ -131,7 +139,8 @@ class Plane(Obstacle):
 
 @dataclass(frozen=True, slots=True)
 class Circle(Obstacle):
-    """A rigid disc (a cylinder in plane strain): d = |x − centre| − radius; undefined within 1e−8·radius of the centre."""
+    """A rigid disc (a cylinder in plane strain): d = |x − centre| − radius; undefined within 1e−8·radius of the
+    centre."""
 
     centre: tuple[float, float]
     radius: float
@@ -260,8 +269,7 @@ class Translated(Obstacle):
         return Translated(self.base, tuple(_padded(np.asarray(self.shift), k) + _padded(t, k)))
 
 
-def check_obstacle_side(obstacle: Obstacle, nu: np.ndarray, normals: np.ndarray, gap: np.ndarray, *,
-                        comm=None) -> None:
+def check_obstacle_side(obstacle: Obstacle, nu: np.ndarray, normals: np.ndarray, gap: np.ndarray, *, comm=None) -> None:
     """InputError if the obstacle's direction ν points into the body at most of the contact nodes nearest it.
 
     ``nu`` (N, d), ``gap`` (N,): ν and the gap from ``evaluate_obstacle`` at the Γ_C nodes; ``normals`` (N, d):
@@ -298,8 +306,9 @@ def check_obstacle_side(obstacle: Obstacle, nu: np.ndarray, normals: np.ndarray,
         )
 
 
-def evaluate_obstacle(obstacle: Obstacle, points: np.ndarray, *, dim: int = 2, comm=None
-                      ) -> tuple[np.ndarray, np.ndarray]:
+def evaluate_obstacle(
+    obstacle: Obstacle, points: np.ndarray, *, dim: int = 2, comm=None
+) -> tuple[np.ndarray, np.ndarray]:
     """Gap g (N,) and direction ν (N, dim) at contact nodes ``points`` (N, ≥ dim); InputError if undefined.
 
     The first ``dim`` coordinates of the points are the obstacle's input.  A planar obstacle (ν with two

@@ -13,15 +13,13 @@ The multiscale methods need every fine cell of Ω₁ in one coarse cell K
 When a mesh does not tag Ω₁, Ω₂ and γ, ``problem.strip`` builds them from these partitions.
 """
 
-import numpy as np
-from mpi4py import MPI
-
 import basix.ufl
+import numpy as np
 from dolfinx import fem
 from dolfinx import mesh as dmesh
+from mpi4py import MPI
 
-from fenics_contact.errors import InputError, MeshTagError
-from fenics_contact.problem.tags import Boundary, Subdomain
+from fenics_contact.errors import InputError
 
 __all__ = ["cartesian_coarse_cells", "centroid_coarse_cells", "group_coarse_cells", "coarse_sizes", "UNRESOLVED"]
 

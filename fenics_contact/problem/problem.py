@@ -18,25 +18,24 @@ components.
 import math
 import weakref
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field, fields as dataclass_fields
+from dataclasses import dataclass, field
+from dataclasses import fields as dataclass_fields
 
 import numpy as np
-from mpi4py import MPI
-
 from dolfinx import fem
 from dolfinx import mesh as dmesh
+from mpi4py import MPI
 
 from fenics_contact.errors import InputError
-from fenics_contact.problem.boundary import BoundaryConditions, check_boundary_groups
 from fenics_contact.problem import strip, validation
+from fenics_contact.problem.boundary import BoundaryConditions, check_boundary_groups
 from fenics_contact.problem.fields import FunctionField, MaterialFields, material_fields, tag_function, zero_load
 from fenics_contact.problem.geometry import ContactMesh, mesh_size
 from fenics_contact.problem.obstacles import Obstacle
-from fenics_contact.problem.tags import Boundary, Subdomain, neumann_tag
+from fenics_contact.problem.tags import Boundary, neumann_tag
 from fenics_contact.problem.validation import require_facet_groups
 
-__all__ = ["ContactProblem", "ContactLaw", "Frictionless", "ScalarField", "VectorField", "constant_field",
-           "zero_load"]
+__all__ = ["ContactProblem", "ContactLaw", "Frictionless", "ScalarField", "VectorField", "constant_field", "zero_load"]
 
 #: A scalar field: points x of shape (3, N) -> values of shape (N,).
 ScalarField = Callable[[np.ndarray], np.ndarray]
@@ -114,20 +113,23 @@ class ContactProblem:
         set_(self, "poisson_ratio", _scalar(self.poisson_ratio, "poisson_ratio (nu)"))
         set_(self, "load", _vector(self.load, "the body force (load)"))
         if not isinstance(self.boundary, BoundaryConditions):
-            raise InputError(f"ContactProblem.boundary must be a BoundaryConditions, got "
-                             f"{type(self.boundary).__name__}")
+            raise InputError(
+                f"ContactProblem.boundary must be a BoundaryConditions, got {type(self.boundary).__name__}"
+            )
         if self.obstacle is not None and not isinstance(self.obstacle, Obstacle):
-            raise InputError(f"ContactProblem.obstacle must be an Obstacle or None, got "
-                             f"{type(self.obstacle).__name__}")
+            raise InputError(f"ContactProblem.obstacle must be an Obstacle or None, got {type(self.obstacle).__name__}")
         if not isinstance(self.law, Frictionless):
-            raise InputError(f"ContactProblem.law must be a contact law ({ContactLaw.__name__}), got "
-                             f"{type(self.law).__name__}")
+            raise InputError(
+                f"ContactProblem.law must be a contact law ({ContactLaw.__name__}), got {type(self.law).__name__}"
+            )
         if not isinstance(self.name, str) or not isinstance(self.description, str):
             raise InputError("ContactProblem.name and .description must be strings")
         if self.mesh is not None:
             if not isinstance(self.mesh, ContactMesh):
-                raise InputError(f"ContactProblem.mesh must be a ContactMesh (geometry.unit_square, read_mesh, …), "
-                                 f"got {type(self.mesh).__name__}")
+                raise InputError(
+                    f"ContactProblem.mesh must be a ContactMesh (geometry.unit_square, read_mesh, …), "
+                    f"got {type(self.mesh).__name__}"
+                )
             require_facet_groups(self.mesh.mesh, self.mesh.facet_tags, ())  # facet tags (not e.g. the cell tags)
             check_boundary_groups(self.mesh.mesh, self.mesh.facet_tags, self.boundary, names=self.mesh.neumann_names)
             self.fields_on(self.mesh.mesh)  # E > 0 and ν ∈ (−1, ½) on every cell, checked once, here
@@ -165,10 +167,12 @@ class ContactProblem:
         cells of the tag(s) ``strip_cells`` (γ is then its boundary with the rest).
         """
         if not isinstance(facet_tags, dmesh.MeshTags) or facet_tags.dim != mesh.topology.dim - 1:
-            raise InputError("facet_tags must be the facet MeshTags of the mesh (dimension "
-                             f"{mesh.topology.dim - 1})")
+            raise InputError(f"facet_tags must be the facet MeshTags of the mesh (dimension {mesh.topology.dim - 1})")
         tractions = dict(tractions or {})
-        groups = [(_tags(contact, "contact"), int(Boundary.GAMMA_C)), (_tags(clamped, "clamped"), int(Boundary.GAMMA_D))]
+        groups = [
+            (_tags(contact, "contact"), int(Boundary.GAMMA_C)),
+            (_tags(clamped, "clamped"), int(Boundary.GAMMA_D)),
+        ]
         names = {neumann_tag(f"Gamma_N_{int(t)}"): f"Gamma_N_{int(t)}" for t in tractions}
         groups += [((int(t),), tag) for t, tag in zip(tractions, names)]
         tags = _retagged(mesh, facet_tags, groups)
@@ -179,13 +183,23 @@ class ContactProblem:
             mask = np.zeros(_num_cells(mesh), dtype=bool)
             mask[cell_tags.indices[in_strip]] = True
             cell_omega, tags = strip.strip_tags(mesh, tags, mask)
-            coarse = (strip.coarse_partition(mesh, ~mask, H) if H is not None
-                      else np.full(_num_cells(mesh), -1, dtype=np.int32))
+            coarse = (
+                strip.coarse_partition(mesh, ~mask, H)
+                if H is not None
+                else np.full(_num_cells(mesh), -1, dtype=np.int32)
+            )
             split = strip.Split(cell_omega, tags, coarse, H)
         else:
             split = strip.automatic_split(mesh, tags, H=H, width=strip_width)
-        cm = ContactMesh(mesh, split.cell_tags, split.facet_tags, mesh_size(mesh, split.facet_tags), split.H,
-                         split.coarse_cell, names)
+        cm = ContactMesh(
+            mesh,
+            split.cell_tags,
+            split.facet_tags,
+            mesh_size(mesh, split.facet_tags),
+            split.H,
+            split.coarse_cell,
+            names,
+        )
         validation.validate_contact_mesh(cm, source="the mesh given to ContactProblem.from_meshtags")
         fields = {}
         for key, value in (("youngs_modulus", youngs_modulus), ("poisson_ratio", poisson_ratio)):
@@ -194,10 +208,12 @@ class ContactProblem:
                     raise InputError(f"{key} by cell tag needs cell_tags")
                 value = tag_function(mesh, cell_tags, value, name=key)
             fields[key] = value
-        boundary = BoundaryConditions(displacement=displacement,
-                                      tractions={names[tag]: tractions[t] for t, tag in zip(tractions, names)})
-        return cls(**fields, load=load, boundary=boundary, obstacle=obstacle, mesh=cm, name=name,
-                   description=description)
+        boundary = BoundaryConditions(
+            displacement=displacement, tractions={names[tag]: tractions[t] for t, tag in zip(tractions, names)}
+        )
+        return cls(
+            **fields, load=load, boundary=boundary, obstacle=obstacle, mesh=cm, name=name, description=description
+        )
 
     # -- building new problems ----------------------------------------------------------------
     def on(self, mesh: ContactMesh) -> "ContactProblem":
@@ -213,7 +229,8 @@ class ContactProblem:
             raise InputError(f"ContactProblem has no field(s) {unknown}; its fields are {sorted(names)}")
         values = {name: changes.get(name, getattr(self, name)) for name in names}
         keep = changes.get("mesh", self.mesh) is self.mesh and not any(
-            name in changes and changes[name] is not getattr(self, name) for name in _MATERIAL_FIELDS)
+            name in changes and changes[name] is not getattr(self, name) for name in _MATERIAL_FIELDS
+        )
         if not keep:
             return ContactProblem(**values)
         copy = object.__new__(ContactProblem)
@@ -228,8 +245,10 @@ class ContactProblem:
     def cm(self) -> ContactMesh:
         """The tagged mesh (InputError when the problem has none: give it one with ``on(mesh)``)."""
         if self.mesh is None:
-            raise InputError(f"the problem {self.name!r} has no mesh: put it on one with problem.on(mesh) "
-                             "(e.g. geometry.unit_square(64, 16) or geometry.read_mesh('my.msh'))")
+            raise InputError(
+                f"the problem {self.name!r} has no mesh: put it on one with problem.on(mesh) "
+                "(e.g. geometry.unit_square(64, 16) or geometry.read_mesh('my.msh'))"
+            )
         return self.mesh
 
     @property
@@ -304,8 +323,7 @@ def _num_cells(msh: dmesh.Mesh) -> int:
     return imap.size_local + imap.num_ghosts
 
 
-def _retagged(msh: dmesh.Mesh, facet_tags: dmesh.MeshTags, groups: list[tuple[tuple[int, ...], int]]
-              ) -> dmesh.MeshTags:
+def _retagged(msh: dmesh.Mesh, facet_tags: dmesh.MeshTags, groups: list[tuple[tuple[int, ...], int]]) -> dmesh.MeshTags:
     """The facets of each group of user tags, tagged with the package's tag (``tags.Boundary``, Γ_N groups)."""
     entities, values, used = [], [], {}
     for user, tag in groups:

@@ -21,20 +21,28 @@ so that is exact enough. Everything is collective and rank-independent: every ra
 sampled Γ_C points and decides its own and its ghost cells the same way.
 """
 
-import numpy as np
-from mpi4py import MPI
-from scipy.spatial import cKDTree
-
 from typing import NamedTuple
 
+import numpy as np
 from dolfinx import mesh as dmesh
+from mpi4py import MPI
+from scipy.spatial import cKDTree
 
 from fenics_contact.errors import InputError, MeshTagError
 from fenics_contact.problem.partition import UNRESOLVED, cartesian_coarse_cells, centroid_coarse_cells, coarse_sizes
 from fenics_contact.problem.tags import Boundary, Subdomain
 
-__all__ = ["Split", "automatic_split", "SLIVER", "DEFAULT_WIDTH_CELLS", "band_cells", "coarse_strip", "strip_tags", "coarse_partition",
-           "contact_cell_size"]
+__all__ = [
+    "Split",
+    "automatic_split",
+    "SLIVER",
+    "DEFAULT_WIDTH_CELLS",
+    "band_cells",
+    "coarse_strip",
+    "strip_tags",
+    "coarse_partition",
+    "contact_cell_size",
+]
 
 #: a coarse piece of Ω₁ with fewer cells than this fraction of the median coarse cell is merged into a neighbour
 SLIVER = 0.3
@@ -106,8 +114,9 @@ def band_cells(msh: dmesh.Mesh, facet_tags: dmesh.MeshTags, width: float) -> np.
     return inside
 
 
-def strip_tags(msh: dmesh.Mesh, facet_tags: dmesh.MeshTags, in_strip: np.ndarray
-               ) -> tuple[dmesh.MeshTags, dmesh.MeshTags]:
+def strip_tags(
+    msh: dmesh.Mesh, facet_tags: dmesh.MeshTags, in_strip: np.ndarray
+) -> tuple[dmesh.MeshTags, dmesh.MeshTags]:
     """(cell tags Ω₁/Ω₂, the facet tags plus γ) from the strip mask over the local cells. Collective."""
     comm = msh.comm
     tdim = msh.topology.dim
@@ -117,8 +126,9 @@ def strip_tags(msh: dmesh.Mesh, facet_tags: dmesh.MeshTags, in_strip: np.ndarray
     n_total = comm.allreduce(n_owned, op=MPI.SUM)
     n_strip = comm.allreduce(int(np.count_nonzero(in_strip[:n_owned])), op=MPI.SUM)
     if n_strip == n_total:
-        raise InputError("the contact strip Ω₂ is the whole domain: make it narrower (a smaller strip width or "
-                         "coarse size H)")
+        raise InputError(
+            "the contact strip Ω₂ is the whole domain: make it narrower (a smaller strip width or coarse size H)"
+        )
     cells = _local_cells(msh)
     values = np.where(in_strip, int(Subdomain.OMEGA2), int(Subdomain.OMEGA1)).astype(np.int32)
     cell_tags = dmesh.meshtags(msh, tdim, cells, values)
@@ -134,8 +144,9 @@ def strip_tags(msh: dmesh.Mesh, facet_tags: dmesh.MeshTags, in_strip: np.ndarray
     entities = np.concatenate([facet_tags.indices[keep], gamma])
     tag_values = np.concatenate([facet_tags.values[keep], np.full(gamma.size, int(Boundary.INTERFACE), np.int32)])
     order = np.argsort(entities, kind="stable")
-    return cell_tags, dmesh.meshtags(msh, tdim - 1, entities[order].astype(np.int32),
-                                     tag_values[order].astype(np.int32))
+    return cell_tags, dmesh.meshtags(
+        msh, tdim - 1, entities[order].astype(np.int32), tag_values[order].astype(np.int32)
+    )
 
 
 def coarse_strip(msh: dmesh.Mesh, facet_tags: dmesh.MeshTags, coarse_cell: np.ndarray) -> np.ndarray:
@@ -192,8 +203,14 @@ def coarse_partition(msh: dmesh.Mesh, omega1: np.ndarray, H: float) -> np.ndarra
         adjacency = _coarse_adjacency(msh, coarse)
         merge = {}
         for k in small[np.argsort(counts[small], kind="stable")]:
-            best = max(((n, j if i == k else i) for (i, j), n in adjacency.items() if k in (i, j)
-                        and (j if i == k else i) not in merge), default=None)
+            best = max(
+                (
+                    (n, j if i == k else i)
+                    for (i, j), n in adjacency.items()
+                    if k in (i, j) and (j if i == k else i) not in merge
+                ),
+                default=None,
+            )
             if best is not None and best[1] not in small:
                 merge[int(k)] = int(best[1])
         if not merge:
@@ -216,8 +233,14 @@ class Split(NamedTuple):
     H: float | None
 
 
-def automatic_split(msh: dmesh.Mesh, facet_tags: dmesh.MeshTags, *, H: float | None = None,
-                    width: float | None = None, partition: np.ndarray | None = None) -> Split:
+def automatic_split(
+    msh: dmesh.Mesh,
+    facet_tags: dmesh.MeshTags,
+    *,
+    H: float | None = None,
+    width: float | None = None,
+    partition: np.ndarray | None = None,
+) -> Split:
     """Ω₂, γ and the coarse cells of a mesh that tags only Γ_C (and Γ_D, Γ_N): collective.
 
     * ``partition`` (a coarse index per local cell: the user's coarse cells): Ω₂ = the coarse cells along Γ_C;

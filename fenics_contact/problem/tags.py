@@ -59,7 +59,6 @@ def neumann_tag(name: str) -> int:
     """The facet-tag integer of the traction group ``name`` (1000 + CRC-32 of the name mod 10⁶)."""
     if not is_neumann_name(name):
         raise InputError(
-            f"{name!r} is not a traction group name: use 'Gamma_N' or 'Gamma_N_<label>' "
-            "(letters, digits, underscores)"
+            f"{name!r} is not a traction group name: use 'Gamma_N' or 'Gamma_N_<label>' (letters, digits, underscores)"
         )
     return _NEUMANN_BASE + zlib.crc32(name.encode()) % _NEUMANN_RANGE

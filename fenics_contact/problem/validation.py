@@ -118,7 +118,9 @@ class _Edges:
         self.nodes = np.stack([self.unique // self.n_points, self.unique % self.n_points], axis=1)
         label = np.asarray(desc.label)
         self.label1 = label[self.tri1] if self.tri1.size else np.zeros(0, dtype=label.dtype)
-        self.label2 = np.where(self.tri2 >= 0, label[np.maximum(self.tri2, 0)], UNTAGGED) if self.tri2.size else self.label1
+        self.label2 = (
+            np.where(self.tri2 >= 0, label[np.maximum(self.tri2, 0)], UNTAGGED) if self.tri2.size else self.label1
+        )
 
     def keys(self, segments: np.ndarray) -> np.ndarray:
         s = np.sort(np.asarray(segments, dtype=np.int64).reshape(-1, 2), axis=1)
@@ -185,14 +187,21 @@ def mesh_problems(desc: MeshDescription, rules: Iterable[BoundaryRule] = BOUNDAR
     for code, name in ((1, OMEGA1), (2, OMEGA2)):
         if not np.any(label == code):
             problems.append(f"the physical group {name!r} has no triangles")
-    for code, what in ((UNTAGGED, "belong to neither Omega1 nor Omega2"), (MULTIPLY_TAGGED, "are in both Omega1 and Omega2")):
+    for code, what in (
+        (UNTAGGED, "belong to neither Omega1 nor Omega2"),
+        (MULTIPLY_TAGGED, "are in both Omega1 and Omega2"),
+    ):
         bad = np.flatnonzero(label == code)
         if bad.size:
             x, y = pts[tri[bad[0]]].mean(axis=0)
-            problems.append(f"{bad.size} of {tri.shape[0]} triangles {what} (first at ({x:.6g}, {y:.6g})): "
-                            "every triangle must lie in exactly one of them")
+            problems.append(
+                f"{bad.size} of {tri.shape[0]} triangles {what} (first at ({x:.6g}, {y:.6g})): "
+                "every triangle must lie in exactly one of them"
+            )
     p = pts[tri]
-    area2 = (p[:, 1, 0] - p[:, 0, 0]) * (p[:, 2, 1] - p[:, 0, 1]) - (p[:, 2, 0] - p[:, 0, 0]) * (p[:, 1, 1] - p[:, 0, 1])
+    area2 = (p[:, 1, 0] - p[:, 0, 0]) * (p[:, 2, 1] - p[:, 0, 1]) - (p[:, 2, 0] - p[:, 0, 0]) * (
+        p[:, 1, 1] - p[:, 0, 1]
+    )
     scale = max(float(np.ptp(pts[:, 0])), float(np.ptp(pts[:, 1])), 1e-300)
     flat = np.flatnonzero(np.abs(area2) <= 1e-14 * scale**2)
     if flat.size:
@@ -202,8 +211,10 @@ def mesh_problems(desc: MeshDescription, rules: Iterable[BoundaryRule] = BOUNDAR
     edges = _Edges(desc)
     if np.any(edges.count > 2):
         bad = np.flatnonzero(edges.count > 2)
-        problems.append(f"{bad.size} edges are shared by more than two triangles (overlapping triangles)"
-                        + _where(pts, edges.nodes[bad]))
+        problems.append(
+            f"{bad.size} edges are shared by more than two triangles (overlapping triangles)"
+            + _where(pts, edges.nodes[bad])
+        )
     cracks = _cracks(desc, edges)
     if cracks.size:
         problems.append(
@@ -217,8 +228,10 @@ def mesh_problems(desc: MeshDescription, rules: Iterable[BoundaryRule] = BOUNDAR
     for name, seg in groups.items():
         idx, found = edges.find(seg)
         if not np.all(found):
-            problems.append(f"{np.count_nonzero(~found)} of {seg.shape[0]} segments of {name!r} are not edges of "
-                            f"the triangles{_where(pts, seg[~found])}: the curve must be meshed as part of the surfaces")
+            problems.append(
+                f"{np.count_nonzero(~found)} of {seg.shape[0]} segments of {name!r} are not edges of "
+                f"the triangles{_where(pts, seg[~found])}: the curve must be meshed as part of the surfaces"
+            )
         located[name] = np.unique(idx[found])
 
     # the interface gamma: exactly the common boundary of Omega1 and Omega2
@@ -237,12 +250,16 @@ def mesh_problems(desc: MeshDescription, rules: Iterable[BoundaryRule] = BOUNDAR
         for code, name in ((1, OMEGA1), (2, OMEGA2)):
             inner = gamma[(edges.count[gamma] == 2) & (edges.label1[gamma] == code) & (edges.label2[gamma] == code)]
             if inner.size:
-                problems.append(f"{inner.size} segments of {GAMMA!r} lie inside {name} (both neighbours are {name} "
-                                f"triangles){_where(pts, edges.nodes[inner])}: gamma must separate Omega1 from Omega2")
+                problems.append(
+                    f"{inner.size} segments of {GAMMA!r} lie inside {name} (both neighbours are {name} "
+                    f"triangles){_where(pts, edges.nodes[inner])}: gamma must separate Omega1 from Omega2"
+                )
         untagged = np.setdiff1d(interface, gamma)
         if untagged.size:
-            problems.append(f"{untagged.size} edges between Omega1 and Omega2 are not tagged {GAMMA!r}"
-                            f"{_where(pts, edges.nodes[untagged])}: gamma must be the whole common boundary")
+            problems.append(
+                f"{untagged.size} edges between Omega1 and Omega2 are not tagged {GAMMA!r}"
+                f"{_where(pts, edges.nodes[untagged])}: gamma must be the whole common boundary"
+            )
     if interface.size == 0 and np.any(label == 1) and np.any(label == 2):
         problems.append("Omega1 and Omega2 share no edge: they are not joined (a non-conforming interface?)")
 
@@ -258,33 +275,45 @@ def mesh_problems(desc: MeshDescription, rules: Iterable[BoundaryRule] = BOUNDAR
             continue
         interior = idx[~edges.exterior[idx]]
         if interior.size:
-            problems.append(f"{interior.size} of {idx.size} segments of {rule.name!r} are not on the outer boundary "
-                            f"(shared by two triangles){_where(pts, edges.nodes[interior])}")
+            problems.append(
+                f"{interior.size} of {idx.size} segments of {rule.name!r} are not on the outer boundary "
+                f"(shared by two triangles){_where(pts, edges.nodes[interior])}"
+            )
         if rule.subdomain is not None:
             code = 1 if rule.subdomain == OMEGA1 else 2
             wrong = idx[(edges.label1[idx] != code) & (edges.label2[idx] != code)]
             if wrong.size:
-                problems.append(f"{wrong.size} of {idx.size} segments of {rule.name!r} are not on the boundary of "
-                                f"{rule.subdomain}{_where(pts, edges.nodes[wrong])}")
+                problems.append(
+                    f"{wrong.size} of {idx.size} segments of {rule.name!r} are not on the boundary of "
+                    f"{rule.subdomain}{_where(pts, edges.nodes[wrong])}"
+                )
         for other in rule.disjoint_from:
             common = np.intersect1d(idx, located.get(other, np.zeros(0, dtype=np.int64)))
             if common.size:
-                problems.append(f"{rule.name!r} and {other!r} share {common.size} segments"
-                                f"{_where(pts, edges.nodes[common])}: they must be disjoint")
+                problems.append(
+                    f"{rule.name!r} and {other!r} share {common.size} segments"
+                    f"{_where(pts, edges.nodes[common])}: they must be disjoint"
+                )
         for other in rule.away_from:
             common = np.intersect1d(node_sets[rule.name], node_sets.get(other, np.zeros(0, dtype=np.int64)))
             if common.size:
                 x, y = pts[common[0]]
-                hint = ("; the contact must lie inside the strip Omega2: extend Omega2 past the ends of Gamma_C, or "
-                        "leave out Omega1, Omega2 and gamma and the strip is built along Gamma_C"
-                        if (rule.name, other) == (GAMMA_C, GAMMA) else "")
-                problems.append(f"{rule.name!r} touches {other!r} at {common.size} nodes (first at ({x:.6g}, {y:.6g})): "
-                                f"{rule.name} must lie away from {other}{hint}")
+                hint = (
+                    "; the contact must lie inside the strip Omega2: extend Omega2 past the ends of Gamma_C, or "
+                    "leave out Omega1, Omega2 and gamma and the strip is built along Gamma_C"
+                    if (rule.name, other) == (GAMMA_C, GAMMA)
+                    else ""
+                )
+                problems.append(
+                    f"{rule.name!r} touches {other!r} at {common.size} nodes (first at ({x:.6g}, {y:.6g})): "
+                    f"{rule.name} must lie away from {other}{hint}"
+                )
 
     # every connected part is held by Gamma_D
     inner = np.flatnonzero(edges.count == 2)
-    graph = scipy.sparse.coo_matrix((np.ones(inner.size), (edges.tri1[inner], edges.tri2[inner])),
-                                    shape=(tri.shape[0], tri.shape[0]))
+    graph = scipy.sparse.coo_matrix(
+        (np.ones(inner.size), (edges.tri1[inner], edges.tri2[inner])), shape=(tri.shape[0], tri.shape[0])
+    )
     n_parts, part = scipy.sparse.csgraph.connected_components(graph, directed=False)
     clamped = located.get(GAMMA_D)
     if n_parts > 1 and clamped is not None and clamped.size:
@@ -294,13 +323,16 @@ def mesh_problems(desc: MeshDescription, rules: Iterable[BoundaryRule] = BOUNDAR
         if free.size:
             cells = np.flatnonzero(np.isin(part, free))
             x, y = p[cells[0]].mean(axis=0)
-            problems.append(f"{free.size} of {n_parts} connected parts of the mesh ({cells.size} triangles, first at "
-                            f"({x:.6g}, {y:.6g})) do not touch {GAMMA_D!r}: their rigid motions would be free")
+            problems.append(
+                f"{free.size} of {n_parts} connected parts of the mesh ({cells.size} triangles, first at "
+                f"({x:.6g}, {y:.6g})) do not touch {GAMMA_D!r}: their rigid motions would be free"
+            )
     return problems
 
 
-def check_mesh_description(desc: MeshDescription, rules: Iterable[BoundaryRule] = BOUNDARY_RULES, *,
-                           source: str = "the mesh") -> None:
+def check_mesh_description(
+    desc: MeshDescription, rules: Iterable[BoundaryRule] = BOUNDARY_RULES, *, source: str = "the mesh"
+) -> None:
     """Raise MeshTagError listing every problem of ``mesh_problems``."""
     problems = mesh_problems(desc, rules)
     if problems:
@@ -354,8 +386,10 @@ def describe_contact_mesh(cm, names: Iterable[str] | None = None) -> MeshDescrip
         points[index] = coords
     triangles = np.concatenate([g[0] for g in gathered]).reshape(-1, 3)
     labels = np.concatenate([g[1] for g in gathered])
-    groups = {name: np.unique(np.sort(np.concatenate([g[4][name] for g in gathered]).reshape(-1, 2), axis=1), axis=0)
-              for name in wanted}
+    groups = {
+        name: np.unique(np.sort(np.concatenate([g[4][name] for g in gathered]).reshape(-1, 2), axis=1), axis=0)
+        for name in wanted
+    }
     return MeshDescription(points, triangles, labels, groups)
 
 
@@ -486,18 +520,21 @@ def tetrahedral_mesh_problems(cm, rules: Iterable[BoundaryRule] = BOUNDARY_RULES
             inside = np.isin(cells, cm.cell_tags.find(sub))
             wrong = comm.allreduce(int(np.count_nonzero(~np.asarray(inside, dtype=bool))), op=MPI.SUM)
             if wrong:
-                problems.append(f"{wrong} of {total} facets of {rule.name!r} are not on the boundary of "
-                                f"{rule.subdomain}")
+                problems.append(
+                    f"{wrong} of {total} facets of {rule.name!r} are not on the boundary of {rule.subdomain}"
+                )
         for other in rule.disjoint_from:
-            common = comm.allreduce(int(np.intersect1d(found, facets.get(other, np.zeros(0, np.int32))).size),
-                                    op=MPI.SUM)
+            common = comm.allreduce(
+                int(np.intersect1d(found, facets.get(other, np.zeros(0, np.int32))).size), op=MPI.SUM
+            )
             if common:
                 problems.append(f"{rule.name!r} and {other!r} share {common} facets: they must be disjoint")
         for other in rule.away_from:
             common = global_vertices(found) & global_vertices(facets.get(other, np.zeros(0, np.int32)))
             if common:
-                problems.append(f"{rule.name!r} touches {other!r} at {len(common)} nodes: {rule.name} must lie "
-                                f"away from {other}")
+                problems.append(
+                    f"{rule.name!r} touches {other!r} at {len(common)} nodes: {rule.name} must lie away from {other}"
+                )
     return problems
 
 
@@ -510,7 +547,9 @@ def validate_contact_mesh(cm, rules: Iterable[BoundaryRule] = BOUNDARY_RULES, *,
         if problems:
             raise MeshTagError(_message(source, problems))
         return
-    names = {GAMMA_D, GAMMA_C, GAMMA} | {r.name for r in rules} | {o for r in rules for o in r.disjoint_from + r.away_from}
+    names = (
+        {GAMMA_D, GAMMA_C, GAMMA} | {r.name for r in rules} | {o for r in rules for o in r.disjoint_from + r.away_from}
+    )
     desc = describe_contact_mesh(cm, names)
     problems = mesh_problems(desc, rules) if cm.comm.rank == 0 else None
     problems = cm.comm.bcast(problems, root=0)
@@ -535,8 +574,10 @@ def require_tag_counts(cm) -> None:
     names = [PHYSICAL_NAMES[t] for t in (*Subdomain, *Boundary)]
     empty = [name for name, c in zip(names, counts[:-1]) if c == 0]
     if empty:
-        raise MeshTagError(f"the mesh has no cells/facets tagged {empty}: tag them "
-                           f"(physical groups {list(PHYSICAL_NAMES.values())}) or build it with geometry.read_mesh")
+        raise MeshTagError(
+            f"the mesh has no cells/facets tagged {empty}: tag them "
+            f"(physical groups {list(PHYSICAL_NAMES.values())}) or build it with geometry.read_mesh"
+        )
     if counts[-1]:
         raise MeshTagError(f"{counts[-1]} cells are not tagged exactly once as Omega1 or Omega2")
 
@@ -552,9 +593,11 @@ def require_method_dimension(method: str, msh, boundary=None) -> None:
         return
     works = " or ".join(repr(m) for m in METHODS_3D)
     if msh.topology.dim != 2:
-        raise InputError(f"the method {method!r} solves plane problems (triangles) only; this mesh is "
-                         f"{msh.topology.dim}D: a 3D problem runs with the method {works} "
-                         "(fem.primal.solve_primal_monolithic)")
+        raise InputError(
+            f"the method {method!r} solves plane problems (triangles) only; this mesh is "
+            f"{msh.topology.dim}D: a 3D problem runs with the method {works} "
+            "(fem.primal.solve_primal_monolithic)"
+        )
     if boundary is not None and getattr(boundary, "rollers", ()):
         raise InputError(f"the method {method!r} takes no rollers (symmetry planes); the method {works} does")
 
@@ -565,11 +608,14 @@ def require_facet_groups(msh, facet_tags, groups: Iterable[Boundary]) -> None:
         got = type(facet_tags).__name__
         if isinstance(facet_tags, dmesh.MeshTags):
             got += f" of dimension {facet_tags.dim}"
-        raise MeshTagError(f"facet_tags must be the facet MeshTags of the mesh (dimension {msh.topology.dim - 1}), "
-                           f"got {got}")
+        raise MeshTagError(
+            f"facet_tags must be the facet MeshTags of the mesh (dimension {msh.topology.dim - 1}), got {got}"
+        )
     groups = list(groups)
     counts = msh.comm.allreduce(np.array([facet_tags.find(g).size for g in groups], dtype=np.int64), op=MPI.SUM)
     empty = [PHYSICAL_NAMES[g] for g, c in zip(groups, counts) if c == 0]
     if empty:
-        raise MeshTagError(f"the mesh has no facets tagged {empty} (tag values {[int(g) for g in groups]}): "
-                           "a solve without them would be another problem")
+        raise MeshTagError(
+            f"the mesh has no facets tagged {empty} (tag values {[int(g) for g in groups]}): "
+            "a solve without them would be another problem"
+        )

@@ -1,7 +1,8 @@
 """The command line on bad input: a table of cases, each with the exit code and the one-line message it gets.
 
 Every case is refused — most before the mesh is built, the numerical failures (exit 4) by the solve's
-own checks — and prints exactly one line on stderr, no traceback, and writes nothing. ``scripts/bad_input_table.py`` prints this
+own checks — and prints exactly one line on stderr, no traceback, and writes nothing. ``scripts/bad_input_table.py``
+prints this
 table with the messages as the package gives them (docs/bad_input.md).
 """
 
@@ -11,13 +12,13 @@ from typing import Callable, NamedTuple
 
 import numpy as np
 import pytest
-from outcome import outcome_lines
 from mpi4py import MPI
+from outcome import outcome_lines
+from user_meshes import GOOD, build_columns
+from user_meshes import solid_or_quads as _solid_or_quads
 
 from fenics_contact.cli import main
 from fenics_contact.fem.mixed import epsilon_hint
-
-from user_meshes import GOOD, build_columns, solid_or_quads as _solid_or_quads
 
 pytestmark = pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="the CLI tests run serially")
 
@@ -48,6 +49,7 @@ def _e_map(values, name="E.npy", *, raw: bytes | None = None, text: str | None =
         else:
             np.save(path, values)
         return [*SMALL, "--E-map", str(path)]
+
     return prepare
 
 
@@ -61,6 +63,7 @@ def _nan_pixel_between_cell_centres() -> np.ndarray:
 def _mesh_file(**kwargs):
     def prepare(tmp: Path) -> list[str]:
         return ["--mesh", str(build_columns(tmp / "user.msh", **kwargs)), "--H", "4"]
+
     return prepare
 
 
@@ -68,6 +71,7 @@ def _mesh_text(text: str):
     def prepare(tmp: Path) -> list[str]:
         (tmp / "user.msh").write_text(text)
         return ["--mesh", str(tmp / "user.msh")]
+
     return prepare
 
 
@@ -112,7 +116,7 @@ body-force = [1.0, 0.0]
 """
 #: the composite of cases/ (materials by group, a traction group on the top)
 COMPOSITE = f"""[mesh]
-file = "{CASES_DIR / 'composite.msh'}"
+file = "{CASES_DIR / "composite.msh"}"
 [material]
 E = {{matrix = 1.0, fibres = 1e3}}
 nu = 0.3
@@ -128,6 +132,7 @@ normal = [-1.0, 0.0]
 
 def _case(text: str, *args: str, files: dict | None = None):
     """A case file with ``text`` (and ``files`` beside it: name -> text, or an array for .npy)."""
+
     def prepare(tmp: Path) -> list[str]:
         for name, content in (files or {}).items():
             if isinstance(content, np.ndarray):
@@ -136,15 +141,18 @@ def _case(text: str, *args: str, files: dict | None = None):
                 (tmp / name).write_text(content)
         (tmp / "case.toml").write_text(text)
         return ["--case", str(tmp / "case.toml"), *args]
+
     return prepare
 
 
 def _case_mesh(text: str, **kwargs):
     """A case on a mesh file of three columns (test_validation.build_columns) tagged as asked."""
+
     def prepare(tmp: Path) -> list[str]:
         mesh = build_columns(tmp / "user.msh", **kwargs)
         (tmp / "case.toml").write_text(f'[mesh]\nfile = "{mesh}"\n' + text)
         return ["--case", str(tmp / "case.toml")]
+
     return prepare
 
 
@@ -162,7 +170,9 @@ CASES = [
     Case("h = 1", lambda tmp: ["--h", "1", "--H", "2"], 2, "--h must be an integer >= 2"),
     Case("negative α", _args("--alpha", "-3"), 2, "transmission coefficient --alpha '-3'"),
     Case("unreadable α", _args("--alpha", "h^x"), 2, "transmission coefficient --alpha 'h^x'"),
-    Case("δ = inf (contact switched off)", _args("--delta", "inf"), 2, "--delta (the primal penalty δ) must be a finite"),
+    Case(
+        "δ = inf (contact switched off)", _args("--delta", "inf"), 2, "--delta (the primal penalty δ) must be a finite"
+    ),
     Case("δ = 0", _args("--delta", "0"), 2, "--delta (the primal penalty δ) must be a finite number > 0"),
     Case("ε = inf", _args("--method", "mixed", "--epsilon", "inf"), 2, "--epsilon (the mixed penalty ε)"),
     Case("β = 0", _args("--method", "mixed", "--beta", "0"), 2, "transmission coefficient β must be > 0"),
@@ -172,21 +182,43 @@ CASES = [
     Case("negative layers", _args("--method", "primal-ms", "--layers", "-1"), 2, "--layers must be an integer >= 0"),
     Case("no modes", _args("--method", "primal-ms", "--nbasis", "0"), 2, "--nbasis must be an integer >= 1"),
     Case("negative min-gap", _args("--method", "mixed-ms", "--min-gap", "-1"), 2, "--min-gap must be"),
-    Case("H = h for a multiscale method", lambda tmp: ["--h", "8", "--H", "8", "--method", "mixed-ms"], 2,
-         "must span at least 2 fine cells per side"),
-    Case("δ for a mixed method", _args("--method", "mixed", "--delta", "1e-4"), 2,
-         "--delta does not apply to --method mixed"),
+    Case(
+        "H = h for a multiscale method",
+        lambda tmp: ["--h", "8", "--H", "8", "--method", "mixed-ms"],
+        2,
+        "must span at least 2 fine cells per side",
+    ),
+    Case(
+        "δ for a mixed method",
+        _args("--method", "mixed", "--delta", "1e-4"),
+        2,
+        "--delta does not apply to --method mixed",
+    ),
     Case("layers for Algorithm 1", _args("--layers", "3"), 2, "--layers does not apply to --method primal"),
-    Case("--E-map with --E-high", lambda tmp: [*_e_map(np.ones((4, 4)))(tmp), "--E-high", "5"], 2,
-         "give one or the other"),
-    Case("--h with --mesh", lambda tmp: ["--mesh", str(STORED_MESH), "--h", "16"], 2, "--h sets the size of the built-in"),
+    Case(
+        "--E-map with --E-high",
+        lambda tmp: [*_e_map(np.ones((4, 4)))(tmp), "--E-high", "5"],
+        2,
+        "give one or the other",
+    ),
+    Case(
+        "--h with --mesh", lambda tmp: ["--mesh", str(STORED_MESH), "--h", "16"], 2, "--h sets the size of the built-in"
+    ),
     Case("mesh too coarse for the load", lambda tmp: ["--h", "4", "--H", "2"], 2, "zero on every cell"),
     # the E map
     Case("E map missing", lambda tmp: [*SMALL, "--E-map", str(tmp / "none.npy")], 2, "does not exist"),
-    Case("E map with a NaN pixel no cell centre samples", _e_map(_nan_pixel_between_cell_centres()), 2,
-         "pixels the domain covers are not a finite Young's modulus > 0 (first: row 0, column 0, value nan)"),
-    Case("E map with a negative pixel", _e_map(np.where(np.eye(32) > 0, -1.0, 1.0)), 2,
-         "pixels the domain covers are not a finite Young's modulus > 0"),
+    Case(
+        "E map with a NaN pixel no cell centre samples",
+        _e_map(_nan_pixel_between_cell_centres()),
+        2,
+        "pixels the domain covers are not a finite Young's modulus > 0 (first: row 0, column 0, value nan)",
+    ),
+    Case(
+        "E map with a negative pixel",
+        _e_map(np.where(np.eye(32) > 0, -1.0, 1.0)),
+        2,
+        "pixels the domain covers are not a finite Young's modulus > 0",
+    ),
     Case("empty .npy file", _e_map(None, raw=b""), 2, "cannot read a pixel array"),
     Case(".npy with no pixels", _e_map(np.zeros((0, 3))), 2, "must hold a non-empty 2D array"),
     Case("1D .npy", _e_map(np.ones(5)), 2, "must hold a non-empty 2D array, got shape (5,)"),
@@ -197,19 +229,38 @@ CASES = [
     Case("mesh not a gmsh file", _mesh_text("hello\nworld\n"), 2, "cannot read"),
     Case("empty mesh file", _mesh_text(""), 2, "cannot read"),
     Case("second-order tetrahedral mesh", _tetrahedra, 2, "4-node tetrahedra only"),
-    Case("Gamma_C as a surface group", _mesh_file(gamma_c=(), surface_groups={"Omega1": ("A", "B"), "Omega2": ("C",),
-                                                                              "Gamma_C": ("C",)}),
-         2, "'Gamma_C' is a surface group"),
+    Case(
+        "Gamma_C as a surface group",
+        _mesh_file(gamma_c=(), surface_groups={"Omega1": ("A", "B"), "Omega2": ("C",), "Gamma_C": ("C",)}),
+        2,
+        "'Gamma_C' is a surface group",
+    ),
     Case("mesh off the plane z = 0", _mesh_file(z=1.0), 2, "z ≠ 0"),
-    Case("gamma on the wrong curve", _mesh_file(gamma=("v0",), gamma_d=("b0", "b1", "b2", "t0", "t1", "t2")), 2,
-         "segments of 'gamma' lie on the outer boundary"),
+    Case(
+        "gamma on the wrong curve",
+        _mesh_file(gamma=("v0",), gamma_d=("b0", "b1", "b2", "t0", "t1", "t2")),
+        2,
+        "segments of 'gamma' lie on the outer boundary",
+    ),
     Case("non-conforming gamma", _mesh_file(interface="hanging"), 2, "the mesh is not conforming"),
-    Case("Gamma_C on Omega1", _mesh_file(gamma_c=("v0",), gamma_d=("b0", "b1", "b2", "t0", "t1", "t2", "v3")), 2,
-         "segments of 'Gamma_C' are not on the boundary of Omega2"),
-    Case("Gamma_D and Gamma_C overlap", _mesh_file(gamma_d=(*GOOD["gamma_d"], "v3")), 2,
-         "'Gamma_C' and 'Gamma_D' share 8 segments"),
-    Case("coarse grid not resolved (multiscale)", lambda tmp: ["--mesh", str(STORED_MESH), "--H", "3", "--method",
-                                                               "primal-ms"], 2, "cross the edges of the coarse grid"),
+    Case(
+        "Gamma_C on Omega1",
+        _mesh_file(gamma_c=("v0",), gamma_d=("b0", "b1", "b2", "t0", "t1", "t2", "v3")),
+        2,
+        "segments of 'Gamma_C' are not on the boundary of Omega2",
+    ),
+    Case(
+        "Gamma_D and Gamma_C overlap",
+        _mesh_file(gamma_d=(*GOOD["gamma_d"], "v3")),
+        2,
+        "'Gamma_C' and 'Gamma_D' share 8 segments",
+    ),
+    Case(
+        "coarse grid not resolved (multiscale)",
+        lambda tmp: ["--mesh", str(STORED_MESH), "--H", "3", "--method", "primal-ms"],
+        2,
+        "cross the edges of the coarse grid",
+    ),
     # the output directory
     Case("--out an existing file", _out(lambda tmp: str(_file(tmp))), 2, "exists and is a file"),
     Case("--out below a file", _out(lambda tmp: str(_file(tmp) / "run")), 2, "which is a file, not a directory"),
@@ -221,90 +272,199 @@ CASES = [
     # the offline cache directory
     Case("--cache-dir an existing file", _cache(lambda tmp: str(_file(tmp))), 2, "exists and is a file"),
     Case("--cache-dir below a file", _cache(lambda tmp: str(_file(tmp) / "cache")), 2, "which is a file"),
-    Case("--cache-dir not writable (before the offline phase)", _cache(lambda tmp: "/proc/fenics-contact-cache"), 2,
-         "offline cache directory /proc/fenics-contact-cache is not writable"),
-    Case("--cache-dir for Algorithm 1", lambda tmp: [*SMALL, "--cache-dir", str(tmp)], 2,
-         "--cache-dir does not apply to --method primal"),
+    Case(
+        "--cache-dir not writable (before the offline phase)",
+        _cache(lambda tmp: "/proc/fenics-contact-cache"),
+        2,
+        "offline cache directory /proc/fenics-contact-cache is not writable",
+    ),
+    Case(
+        "--cache-dir for Algorithm 1",
+        lambda tmp: [*SMALL, "--cache-dir", str(tmp)],
+        2,
+        "--cache-dir does not apply to --method primal",
+    ),
     # case files (--case): schema, groups, boundary conditions, obstacle, run tables
     Case("case file missing", lambda tmp: ["--case", str(tmp / "none.toml")], 2, "none.toml does not exist"),
-    Case("case with --coarse-groups", _case(SQUARE, "--method", "primal-ms", "--coarse-groups"), 2,
-         "--coarse-groups does not apply to --case"),
+    Case(
+        "case with --coarse-groups",
+        _case(SQUARE, "--method", "primal-ms", "--coarse-groups"),
+        2,
+        "--coarse-groups does not apply to --case",
+    ),
     Case("case file not TOML", _case("[mesh\nh = 8\n"), 2, "not a valid TOML file"),
     Case("case: unknown table", _case(SQUARE + "[solver]\ntol = 1e-6\n"), 2, "unknown key or table 'solver'"),
     Case("case: unknown key", _case(SQUARE.replace("h = 8", "hh = 8")), 2, "unknown key 'mesh.hh'"),
-    Case("case: wrong type", _case(SQUARE.replace("h = 8", 'h = "eight"')), 2,
-         "mesh.h must be an integer >= 2, got 'eight'"),
-    Case("case: h not a multiple of H", _case(SQUARE.replace("H = 2", "H = 3")), 2,
-         "mesh.h = 8 is not a multiple of mesh.H = 3"),
+    Case(
+        "case: wrong type",
+        _case(SQUARE.replace("h = 8", 'h = "eight"')),
+        2,
+        "mesh.h must be an integer >= 2, got 'eight'",
+    ),
+    Case(
+        "case: h not a multiple of H",
+        _case(SQUARE.replace("H = 2", "H = 3")),
+        2,
+        "mesh.h = 8 is not a multiple of mesh.H = 3",
+    ),
     Case("case: ν = 0.5", _case(SQUARE.replace("nu = 0.0", "nu = 0.5")), 2, "material.nu must lie in (-1, 0.5)"),
     Case("case: negative E", _case(SQUARE.replace("E = 1.0", "E = -1.0")), 2, "material.E must be > 0, got -1.0"),
-    Case("case: E pixel map with a negative pixel under the domain",
-         _case(SQUARE.replace("E = 1.0", 'E = {pixels = "E.npy"}'), files={"E.npy": np.array([[1.0, -1.0]])}), 2,
-         "material.E: 1 pixels of E.npy under the domain lie outside (0, inf)"),
-    Case("case: python field without that function",
-         _case(SQUARE.replace("body-force = [1.0, 0.0]", 'body-force = {python = "f.py:force"}'),
-               files={"f.py": "def other(x):\n    return x\n"}), 2, "has no callable 'force'"),
-    Case("case: a material group on a built-in mesh", _case(SQUARE.replace("E = 1.0", "E = {Omega1 = 1.0, fibres = 5.0}")),
-         2, "the cell group 'fibres' is named in [material]/[load], but the built-in unit-square mesh has only"),
-    Case("case: a material group the mesh file lacks", _case(COMPOSITE.replace("fibres = 1e3", "fibers = 1e3")), 2,
-         "has no surface group 'fibers' (named in the case)"),
-    Case("case: cells without a material", _case(COMPOSITE.replace("matrix = 1.0, ", "")), 2,
-         "material.E: 1113 cells lie in none of the groups given (['fibres'])"),
-    Case("case: a traction on a group the unit square lacks",
-         _case(SQUARE + "[boundary]\ntractions = {Gamma_N_side = [0.0, 1.0]}\n"), 2,
-         "boundary.tractions.Gamma_N_side: the mesh has no traction group 'Gamma_N_side'"),
-    Case("case: a traction on a group the mesh file lacks",
-         _case(COMPOSITE.replace("tractions = {", "tractions = {Gamma_N_bottom = [0.0, 1.0], ")), 2,
-         "a traction is given on the group 'Gamma_N_bottom', but the mesh has no facets"),
-    Case("case: a traction group of the mesh without a traction", _case(COMPOSITE.replace(
-        "[boundary]\ntractions = {Gamma_N_top = [0.0, -0.01]}\n", "")), 2,
-         "the mesh has traction group(s) ['Gamma_N_top'] but the model gives no traction"),
-    Case("case: Gamma_N overlapping Gamma_D (unit square)", _case(SQUARE.replace(
-        'clamped = ["left"]', 'clamped = ["left", "top"]\nneumann = {top = "Gamma_N_top"}')), 2,
-         "mesh.neumann: side 'top' is also in mesh.clamped"),
-    Case("case: Gamma_N overlapping Gamma_D (mesh file)", _case_mesh(
-        _MATERIAL + "[boundary]\ntractions = {Gamma_N_load = [0.0, -1.0]}\n", curve_groups={"Gamma_N_load": ("t0",)}),
-         2, "'Gamma_D' and 'Gamma_N_load' share 3 segments"),
-    Case("case: an obstacle and no Gamma_C", _case_mesh(_MATERIAL + PLANE, gamma_c=()), 2,
-         "lacks the physical group(s) ['Gamma_C']"),
-    Case("case: the gap undefined at a contact node",
-         _case(SQUARE + '[obstacle]\nshape = "circle"\ncentre = [1.0, 0.5]\nradius = 0.2\n'), 2,
-         "the obstacle's gap is undefined at 1 contact node(s) of Gamma_C"),
-    Case("case: a plane obstacle with its normal flipped (the body inside it)",
-         _case(SQUARE + PLANE.replace("normal = [-1.0, 0.0]", "normal = [1.0, 0.0]")), 2,
-         "the obstacle is on the wrong side of Gamma_C"),
-    Case("case: no side clamped", _case(SQUARE.replace('clamped = ["left"]', "clamped = []")), 2,
-         "mesh.clamped = [] leaves no Gamma_D: nothing holds the body"),
-    Case("case: indentation of the flush wall", _case(SQUARE + "[obstacle]\nindentation = 0.01\n"), 2,
-         "obstacle.indentation moves a plane or a circle"),
-    Case("case: a circle's indentation with no direction",
-         _case(SQUARE + '[obstacle]\nshape = "circle"\ncentre = [1.5, 0.5]\nradius = 0.5\nindentation = 0.01\n'), 2,
-         "obstacle.direction is required with obstacle.indentation for a circle"),
-    Case("case: a bad run option", _case(SQUARE + "[run]\ntol = 0\n"), 2,
-         "[run] the relative tolerance must lie in (0, 1)"),
-    Case("case: a run option of the wrong type", _case(SQUARE + '[run]\ntol = "small"\n'), 2,
-         "run.tol must be a number, got 'small'"),
-    Case("case: a method option in [run]", _case(SQUARE + "[run]\ndelta = 1e-6\n"), 2,
-         "unknown key 'run.delta' (delta belongs in [primal])"),
-    Case("case: a bad option in the table of a method not run", _case(SQUARE + "[mixed]\nepsilon = -1\n"), 2,
-         "[mixed] --epsilon (the mixed penalty ε) must be a finite number > 0"),
-    Case("case: --h on the Hertz block", lambda tmp: ["--case", str(CASES_DIR / "hertz.toml"), "--h", "16"], 2,
-         "unknown key 'mesh.h' for builtin = \"hertz-block\""),
-    Case("case: a multiscale method on a mesh without a coarse grid",
-         lambda tmp: ["--case", str(CASES_DIR / "hertz.toml"), "--set", "mesh.refinement=0.25", "--method",
-                      "primal-ms"], 2, "has no coarse grid"),
+    Case(
+        "case: E pixel map with a negative pixel under the domain",
+        _case(SQUARE.replace("E = 1.0", 'E = {pixels = "E.npy"}'), files={"E.npy": np.array([[1.0, -1.0]])}),
+        2,
+        "material.E: 1 pixels of E.npy under the domain lie outside (0, inf)",
+    ),
+    Case(
+        "case: python field without that function",
+        _case(
+            SQUARE.replace("body-force = [1.0, 0.0]", 'body-force = {python = "f.py:force"}'),
+            files={"f.py": "def other(x):\n    return x\n"},
+        ),
+        2,
+        "has no callable 'force'",
+    ),
+    Case(
+        "case: a material group on a built-in mesh",
+        _case(SQUARE.replace("E = 1.0", "E = {Omega1 = 1.0, fibres = 5.0}")),
+        2,
+        "the cell group 'fibres' is named in [material]/[load], but the built-in unit-square mesh has only",
+    ),
+    Case(
+        "case: a material group the mesh file lacks",
+        _case(COMPOSITE.replace("fibres = 1e3", "fibers = 1e3")),
+        2,
+        "has no surface group 'fibers' (named in the case)",
+    ),
+    Case(
+        "case: cells without a material",
+        _case(COMPOSITE.replace("matrix = 1.0, ", "")),
+        2,
+        "material.E: 1113 cells lie in none of the groups given (['fibres'])",
+    ),
+    Case(
+        "case: a traction on a group the unit square lacks",
+        _case(SQUARE + "[boundary]\ntractions = {Gamma_N_side = [0.0, 1.0]}\n"),
+        2,
+        "boundary.tractions.Gamma_N_side: the mesh has no traction group 'Gamma_N_side'",
+    ),
+    Case(
+        "case: a traction on a group the mesh file lacks",
+        _case(COMPOSITE.replace("tractions = {", "tractions = {Gamma_N_bottom = [0.0, 1.0], ")),
+        2,
+        "a traction is given on the group 'Gamma_N_bottom', but the mesh has no facets",
+    ),
+    Case(
+        "case: a traction group of the mesh without a traction",
+        _case(COMPOSITE.replace("[boundary]\ntractions = {Gamma_N_top = [0.0, -0.01]}\n", "")),
+        2,
+        "the mesh has traction group(s) ['Gamma_N_top'] but the model gives no traction",
+    ),
+    Case(
+        "case: Gamma_N overlapping Gamma_D (unit square)",
+        _case(SQUARE.replace('clamped = ["left"]', 'clamped = ["left", "top"]\nneumann = {top = "Gamma_N_top"}')),
+        2,
+        "mesh.neumann: side 'top' is also in mesh.clamped",
+    ),
+    Case(
+        "case: Gamma_N overlapping Gamma_D (mesh file)",
+        _case_mesh(
+            _MATERIAL + "[boundary]\ntractions = {Gamma_N_load = [0.0, -1.0]}\n", curve_groups={"Gamma_N_load": ("t0",)}
+        ),
+        2,
+        "'Gamma_D' and 'Gamma_N_load' share 3 segments",
+    ),
+    Case(
+        "case: an obstacle and no Gamma_C",
+        _case_mesh(_MATERIAL + PLANE, gamma_c=()),
+        2,
+        "lacks the physical group(s) ['Gamma_C']",
+    ),
+    Case(
+        "case: the gap undefined at a contact node",
+        _case(SQUARE + '[obstacle]\nshape = "circle"\ncentre = [1.0, 0.5]\nradius = 0.2\n'),
+        2,
+        "the obstacle's gap is undefined at 1 contact node(s) of Gamma_C",
+    ),
+    Case(
+        "case: a plane obstacle with its normal flipped (the body inside it)",
+        _case(SQUARE + PLANE.replace("normal = [-1.0, 0.0]", "normal = [1.0, 0.0]")),
+        2,
+        "the obstacle is on the wrong side of Gamma_C",
+    ),
+    Case(
+        "case: no side clamped",
+        _case(SQUARE.replace('clamped = ["left"]', "clamped = []")),
+        2,
+        "mesh.clamped = [] leaves no Gamma_D: nothing holds the body",
+    ),
+    Case(
+        "case: indentation of the flush wall",
+        _case(SQUARE + "[obstacle]\nindentation = 0.01\n"),
+        2,
+        "obstacle.indentation moves a plane or a circle",
+    ),
+    Case(
+        "case: a circle's indentation with no direction",
+        _case(SQUARE + '[obstacle]\nshape = "circle"\ncentre = [1.5, 0.5]\nradius = 0.5\nindentation = 0.01\n'),
+        2,
+        "obstacle.direction is required with obstacle.indentation for a circle",
+    ),
+    Case(
+        "case: a bad run option",
+        _case(SQUARE + "[run]\ntol = 0\n"),
+        2,
+        "[run] the relative tolerance must lie in (0, 1)",
+    ),
+    Case(
+        "case: a run option of the wrong type",
+        _case(SQUARE + '[run]\ntol = "small"\n'),
+        2,
+        "run.tol must be a number, got 'small'",
+    ),
+    Case(
+        "case: a method option in [run]",
+        _case(SQUARE + "[run]\ndelta = 1e-6\n"),
+        2,
+        "unknown key 'run.delta' (delta belongs in [primal])",
+    ),
+    Case(
+        "case: a bad option in the table of a method not run",
+        _case(SQUARE + "[mixed]\nepsilon = -1\n"),
+        2,
+        "[mixed] --epsilon (the mixed penalty ε) must be a finite number > 0",
+    ),
+    Case(
+        "case: --h on the Hertz block",
+        lambda tmp: ["--case", str(CASES_DIR / "hertz.toml"), "--h", "16"],
+        2,
+        "unknown key 'mesh.h' for builtin = \"hertz-block\"",
+    ),
+    Case(
+        "case: a multiscale method on a mesh without a coarse grid",
+        lambda tmp: ["--case", str(CASES_DIR / "hertz.toml"), "--set", "mesh.refinement=0.25", "--method", "primal-ms"],
+        2,
+        "has no coarse grid",
+    ),
     Case("--set without --case", _args("--set", "mesh.h=8"), 2, "--set changes a key of a case file"),
     # numbers out of range and numerical failure
     Case("E = 1e308 (overflow)", _args("--E-high", "1e308"), 2, "Rescale the units"),
     # δ = 1e-3·h/E_high given: the default takes E_c on Gamma_C, which the channels of model 1 do not reach at H = 1/4
-    Case("contrast 1e100 (beyond double precision)", _args("--E-high", "1e100", "--delta", "6.25e-105"), 4,
-         "numerical failure: fc_primal_omega2: semismooth Newton did not converge"),
+    Case(
+        "contrast 1e100 (beyond double precision)",
+        _args("--E-high", "1e100", "--delta", "6.25e-105"),
+        4,
+        "numerical failure: fc_primal_omega2: semismooth Newton did not converge",
+    ),
     # ε 6e6 times below the default: the saddle-point solves lose digits in proportion to 1/ε, and the Newton
     # and UFL residual checks miss their tolerance by ~10³ (serial, 2 ranks, models 1 and 2); near ε = 1e-8
     # (6e3 times below) the same checks pass or fail by round-off (0.86 to 1.8 times the tolerance)
-    Case("mixed with ε millions of times below its default (ill-conditioned reference)",
-         _args("--method", "mixed", "--epsilon", "1e-11", "--reference"), 4,
-         "times below the default 1e-3·h·E_min"),
+    Case(
+        "mixed with ε millions of times below its default (ill-conditioned reference)",
+        _args("--method", "mixed", "--epsilon", "1e-11", "--reference"),
+        4,
+        "times below the default 1e-3·h·E_min",
+    ),
 ]
 
 

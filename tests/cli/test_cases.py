@@ -23,7 +23,6 @@ from fenics_contact.cli import build_parser, main, options_from_arguments
 from fenics_contact.errors import InputError
 from fenics_contact.problem.case import ByGroup, MeshFile, Pixels, PythonField, Uniform, load_case, parse_override
 
-
 pytestmark = pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="the CLI tests run serially (MPI: test_cli_mpi.py)")
 
 CASES = Path(__file__).parents[2] / "cases"
@@ -119,18 +118,40 @@ def test_the_readme_case_file_is_valid(tmp_path):
     problem = case.problem(case.build_mesh())
     assert set(np.unique(problem.fields.E.x.array)) == {10.0, 2.1e5}
 
+
 def test_the_flags_override_the_case_and_only_the_methods_tables_apply(tmp_path):
     path = _write_full(tmp_path)
     options, case = _options(["run", "--case", str(path)])
     assert (options.method, options.tol, options.max_iterations) == ("mixed", 1e-7, 300)
     assert (options.epsilon, options.beta, options.delta) == (1e-5, "0.5", None)  # [primal] is not used
     options, case = _options(["run", "--case", str(path), "--method", "primal", "--tol", "1e-9", "--no-plots"])
-    assert (options.method, options.tol, options.delta, options.epsilon, options.plots) == ("primal", 1e-9, 1e-7,
-                                                                                          None, False)
+    assert (options.method, options.tol, options.delta, options.epsilon, options.plots) == (
+        "primal",
+        1e-9,
+        1e-7,
+        None,
+        False,
+    )
     # problem flags change the case: --h/--H of a built-in mesh, --nu, --set on any key
-    options, case = _options(["run", "--case", str(CASES / "bar.toml"), "--h", "8", "--H", "2", "--nu", "0.25",
-                              "--set", "obstacle.shape=plane", "--set", "obstacle.point=[1.0, 0.0]",
-                              "--set", "obstacle.normal=[-1, 0]"])
+    options, case = _options(
+        [
+            "run",
+            "--case",
+            str(CASES / "bar.toml"),
+            "--h",
+            "8",
+            "--H",
+            "2",
+            "--nu",
+            "0.25",
+            "--set",
+            "obstacle.shape=plane",
+            "--set",
+            "obstacle.point=[1.0, 0.0]",
+            "--set",
+            "obstacle.normal=[-1, 0]",
+        ]
+    )
     assert (case.mesh.h, case.mesh.H, case.material.nu, case.obstacle.shape) == (8, 2, Uniform(0.25), "plane")
     assert dict(case.overrides)["mesh.h"] == 8
     assert parse_override("obstacle.indentation=[1e-3, 2e-3]") == ("obstacle.indentation", [1e-3, 2e-3])
@@ -191,11 +212,24 @@ def test_bar_case_pushing_and_pulling(tmp_path, method):
 def test_bar_case_with_a_prescribed_displacement(tmp_path, method):
     """No load, Γ_D moved by u_D = (d, 0) from a Python file: the bar is pressed uniformly into the wall,
     σ_xx = −Ed/(1 + Eδ) (primal penalty; mixed: −Ed), so the contact force is Ed/(1 + Eδ) resp. Ed."""
-    (tmp_path / "u_D.py").write_text("import numpy as np\n\ndef shift(x):\n"
-                                     "    return np.vstack([np.full(x.shape[1], 0.01), np.zeros(x.shape[1])])\n")
-    s = _run(tmp_path, "--case", str(CASES / "bar.toml"), "--set", "mesh.h=8", "--set", "mesh.H=2",
-             "--set", "load.body-force=[0.0, 0.0]", "--set", f"boundary.displacement={{python = '{tmp_path}/u_D.py:shift'}}",
-             "--method", method)
+    (tmp_path / "u_D.py").write_text(
+        "import numpy as np\n\ndef shift(x):\n    return np.vstack([np.full(x.shape[1], 0.01), np.zeros(x.shape[1])])\n"
+    )
+    s = _run(
+        tmp_path,
+        "--case",
+        str(CASES / "bar.toml"),
+        "--set",
+        "mesh.h=8",
+        "--set",
+        "mesh.H=2",
+        "--set",
+        "load.body-force=[0.0, 0.0]",
+        "--set",
+        f"boundary.displacement={{python = '{tmp_path}/u_D.py:shift'}}",
+        "--method",
+        method,
+    )
     exact = 0.01 / (1.0 + s["delta"]) if method == "primal" else 0.01
     assert abs(s["contact_force"] - exact) < 1e-9 * exact
     assert abs(s["max_contact_pressure"] - exact) < 1e-9 * exact  # uniform
@@ -206,8 +240,15 @@ def test_hertz_case_small(tmp_path):
     """r = 0.5 (contact cells a/10): contact half-width within two cells of a = 2√(RF/(πE*)) and the peak
     within 2.5 % of p₀ = 2F/(πa) for the force F read off (measured −0.4 cells, +1.8 %; r = 1 meets the
     1 % bound, tests/problem/test_analytic.py); the curve's last point is the run's own solve, F/d grows."""
-    s = _run(tmp_path, "--case", str(CASES / "hertz.toml"), "--set", "mesh.refinement=0.5",
-             "--set", "obstacle.indentation=[6e-4, 1.2e-3]")
+    s = _run(
+        tmp_path,
+        "--case",
+        str(CASES / "hertz.toml"),
+        "--set",
+        "mesh.refinement=0.5",
+        "--set",
+        "obstacle.indentation=[6e-4, 1.2e-3]",
+    )
     R, E_star = 5.0, 1.0 / (1.0 - 0.3**2)
     F = s["contact_force"]
     a = 2.0 * np.sqrt(R * F / (np.pi * E_star))
@@ -232,16 +273,33 @@ def test_contact_cut_short_by_the_end_of_gamma_c_is_warned(tmp_path, capsys):
     on straight: the result is a contact cut short by the tags (force 7 % low, peak 4× high against a wider
     Γ_C, measured by the probe that found it), reported with a warning and in the summary; the bar's full
     contact reaches the ends of its Γ_C at the body's corners and is not warned about."""
-    s = _run(tmp_path, "--case", str(CASES / "hertz.toml"), "--set", "mesh.refinement=0.5",
-             "--set", "obstacle.indentation=[0.02]")
+    s = _run(
+        tmp_path,
+        "--case",
+        str(CASES / "hertz.toml"),
+        "--set",
+        "mesh.refinement=0.5",
+        "--set",
+        "obstacle.indentation=[0.02]",
+    )
     ends = sorted(p[0] for p in s["contact_at_open_end"])
     assert ends == pytest.approx([-0.15, 0.15]) and s["force_indentation"]["steps"][-1]["contact_at_open_end"]
     printed = capsys.readouterr()
     assert "reaches an end of Gamma_C where the boundary goes on straight" in printed.out + printed.err
     # the mixed method too (its σ_c vanishes at the end node itself next to the free side: a contact node
     # within one facet of the end counts; a first version looked at the end node only and missed it)
-    mixed = _run(tmp_path, "--case", str(CASES / "hertz.toml"), "--set", "mesh.refinement=0.5",
-                 "--set", "obstacle.indentation=[0.02]", "--method", "mixed", name="mixed")
+    mixed = _run(
+        tmp_path,
+        "--case",
+        str(CASES / "hertz.toml"),
+        "--set",
+        "mesh.refinement=0.5",
+        "--set",
+        "obstacle.indentation=[0.02]",
+        "--method",
+        "mixed",
+        name="mixed",
+    )
     assert sorted(p[0] for p in mixed["contact_at_open_end"]) == pytest.approx([-0.15, 0.15])
     printed = capsys.readouterr()
     assert "reaches an end of Gamma_C where the boundary goes on straight" in printed.out + printed.err
@@ -311,10 +369,28 @@ def test_composite_case_primal(tmp_path):
 def test_composite_case_mixed_agrees_with_primal(tmp_path):
     """The mixed solution of the same case (last depth only) gives the primal contact force within 2 %
     (measured 0.7 % at h ≈ 0.05) and the same contact zone within a cell."""
-    primal = _run(tmp_path, "--case", str(CASES / "composite.toml"), "--set", "obstacle.indentation=0.008",
-                  "--tol", "1e-7", name="primal")
-    mixed = _run(tmp_path, "--case", str(CASES / "composite.toml"), "--set", "obstacle.indentation=0.008",
-                 "--method", "mixed", "--tol", "1e-7", name="mixed")
+    primal = _run(
+        tmp_path,
+        "--case",
+        str(CASES / "composite.toml"),
+        "--set",
+        "obstacle.indentation=0.008",
+        "--tol",
+        "1e-7",
+        name="primal",
+    )
+    mixed = _run(
+        tmp_path,
+        "--case",
+        str(CASES / "composite.toml"),
+        "--set",
+        "obstacle.indentation=0.008",
+        "--method",
+        "mixed",
+        "--tol",
+        "1e-7",
+        name="mixed",
+    )
     assert primal["force_indentation"] is None and mixed["force_indentation"] is None  # one depth: no curve
     assert abs(mixed["contact_force"] / primal["contact_force"] - 1.0) < 0.02
     assert abs(mixed["contact_zone"][0][1] - primal["contact_zone"][0][1]) <= primal["h"]

@@ -69,8 +69,9 @@ def test_a_method_that_refuses_the_mesh_is_refused_as_run_refuses_it(capsys, tmp
     assert code == 2 and len(err) == 1
     assert "no coarse grid" in err[0] and "ok:" not in out
     assert "primal can run" in out and "primal-ms refused" in out and "mixed-ms refused" in out
-    run = _command(capsys, "run", "--case", str(HERTZ_CASE), "--method", "primal-ms", "--no-plots", "--out",
-                   str(tmp_path / "run"))
+    run = _command(
+        capsys, "run", "--case", str(HERTZ_CASE), "--method", "primal-ms", "--no-plots", "--out", str(tmp_path / "run")
+    )
     assert run[0] == 2 and run[2] == err
     assert not (tmp_path / "run").exists()
 
@@ -123,8 +124,9 @@ def test_a_mesh_without_gamma_c_is_refused_with_its_hint(capsys, tmp_path):
     assert run[0] == 2 and run[2] == err
 
 
-@pytest.mark.parametrize("args", [[], [str(UNIT_SQUARE), "--case", str(BAR_CASE)], [str(UNIT_SQUARE), "--set",
-                                                                                         "mesh.h=8"]])
+@pytest.mark.parametrize(
+    "args", [[], [str(UNIT_SQUARE), "--case", str(BAR_CASE)], [str(UNIT_SQUARE), "--set", "mesh.h=8"]]
+)
 def test_one_mesh_or_case_is_asked_for(capsys, args):
     code, out, err = _command(capsys, "check-mesh", *args)
     assert code == 2 and len(err) == 1 and err[0].startswith("error: ")

@@ -3,7 +3,6 @@
 import json
 
 import numpy as np
-
 import pytest
 import pyvista
 from mpi4py import MPI
@@ -19,15 +18,32 @@ def test_run_writes_summary_fields_and_plots(tmp_path):
     code = main(["run", "--model", "2", "--h", "16", "--H", "4", "--reference", "--out", str(out)])
     assert code == 0
     summary = json.loads((out / "summary.json").read_text())
-    for key in ("iterations", "converged", "rel_tolerance", "e_u", "active_set", "dofs",
-                "time_offline_s", "time_online_s", "time_reference_s"):
+    for key in (
+        "iterations",
+        "converged",
+        "rel_tolerance",
+        "e_u",
+        "active_set",
+        "dofs",
+        "time_offline_s",
+        "time_online_s",
+        "time_reference_s",
+    ):
         assert key in summary, key
     assert summary["converged"] is True and summary["e_u"] < 1e-4
     lo, hi = summary["active_set"]
     assert 0.3 <= lo < hi <= 0.7
     assert summary["dofs"]["omega1"] + summary["dofs"]["omega2"] - summary["dofs"]["interface"] == 2 * 17 * 17
-    for name in ("fields.pvd", "contact.pvd", "E.png", "displacement.png", "deformed.png", "contact.png",
-                 "history.png", "summary.md"):
+    for name in (
+        "fields.pvd",
+        "contact.pvd",
+        "E.png",
+        "displacement.png",
+        "deformed.png",
+        "contact.png",
+        "history.png",
+        "summary.md",
+    ):
         assert (out / name).stat().st_size > 0, name
     # the ParaView fields read back: the mesh with u and the stress, Γ_C with the contact pressure and gap
     fields, contact = pyvista.read(out / "fields.pvd")[0], pyvista.read(out / "contact.pvd")[0]
@@ -41,18 +57,22 @@ def test_run_writes_summary_fields_and_plots(tmp_path):
 
 def test_not_converged_exits_nonzero(tmp_path):
     out = tmp_path / "capped"
-    code = main(["run", "--h", "16", "--H", "4", "--accel", "none", "--max-iterations", "3",
-                 "--no-plots", "--out", str(out)])
+    code = main(
+        ["run", "--h", "16", "--H", "4", "--accel", "none", "--max-iterations", "3", "--no-plots", "--out", str(out)]
+    )
     assert code == 3
     assert json.loads((out / "summary.json").read_text())["converged"] is False
 
 
-@pytest.mark.parametrize("args, message", [
-    (["--nu", "0.5"], "Poisson"),
-    (["--E-low", "-1"], "Young"),
-    (["--H", "5"], "multiple"),
-    (["--alpha", "-3"], "transmission"),
-])
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--nu", "0.5"], "Poisson"),
+        (["--E-low", "-1"], "Young"),
+        (["--H", "5"], "multiple"),
+        (["--alpha", "-3"], "transmission"),
+    ],
+)
 def test_bad_input_is_a_clear_error(tmp_path, caplog, capsys, args, message):
     out = tmp_path / "bad"
     code = main(["run", "--h", "16", "--H", "4", "--no-plots", "--out", str(out), *args])
@@ -76,8 +96,23 @@ def test_user_pixel_map_of_E(tmp_path):
 
 
 def test_primal_ms_method_and_offline_cache(tmp_path):
-    args = ["run", "--model", "2", "--method", "primal-ms", "--h", "32", "--H", "8", "--layers", "3",
-            "--reference", "--no-plots", "--cache-dir", str(tmp_path / "cache")]
+    args = [
+        "run",
+        "--model",
+        "2",
+        "--method",
+        "primal-ms",
+        "--h",
+        "32",
+        "--H",
+        "8",
+        "--layers",
+        "3",
+        "--reference",
+        "--no-plots",
+        "--cache-dir",
+        str(tmp_path / "cache"),
+    ]
     assert main([*args, "--out", str(tmp_path / "a")]) == 0
     assert main([*args, "--out", str(tmp_path / "b")]) == 0
     a, b = (json.loads((tmp_path / d / "summary.json").read_text()) for d in "ab")
@@ -94,8 +129,23 @@ def test_primal_ms_method_and_offline_cache(tmp_path):
 
 @pytest.mark.slow
 def test_mixed_ms_offline_cache(tmp_path):
-    args = ["run", "--model", "2", "--method", "mixed-ms", "--h", "16", "--H", "4", "--layers", "1",
-            "--reference", "--no-plots", "--cache-dir", str(tmp_path / "cache")]
+    args = [
+        "run",
+        "--model",
+        "2",
+        "--method",
+        "mixed-ms",
+        "--h",
+        "16",
+        "--H",
+        "4",
+        "--layers",
+        "1",
+        "--reference",
+        "--no-plots",
+        "--cache-dir",
+        str(tmp_path / "cache"),
+    ]
     assert main([*args, "--out", str(tmp_path / "a")]) == 0
     assert main([*args, "--out", str(tmp_path / "b")]) == 0
     a, b = (json.loads((tmp_path / d / "summary.json").read_text()) for d in "ab")
@@ -117,8 +167,25 @@ def test_mixed_ms_offline_cache(tmp_path):
 def test_mixed_methods(tmp_path, method):
     out = tmp_path / method
     extra = ["--layers", "2"] if method == "mixed-ms" else []
-    code = main(["run", "--model", "2", "--method", method, "--h", "16", "--H", "4", "--beta", "sqrt-h",
-                 "--reference", "--out", str(out), *extra])
+    code = main(
+        [
+            "run",
+            "--model",
+            "2",
+            "--method",
+            method,
+            "--h",
+            "16",
+            "--H",
+            "4",
+            "--beta",
+            "sqrt-h",
+            "--reference",
+            "--out",
+            str(out),
+            *extra,
+        ]
+    )
     assert code == 0
     summary = json.loads((out / "summary.json").read_text())
     assert summary["converged"] is True
@@ -128,14 +195,40 @@ def test_mixed_methods(tmp_path, method):
     else:
         assert summary["e_u_post"] is None
     assert summary["max_tensile_sigma_c"] >= 0.0
-    for name in ("sigma.bp", "u.bp", "fields.pvd", "contact.pvd", "stress.png", "displacement.png", "deformed.png",
-                 "contact.png", "history.png"):
+    for name in (
+        "sigma.bp",
+        "u.bp",
+        "fields.pvd",
+        "contact.pvd",
+        "stress.png",
+        "displacement.png",
+        "deformed.png",
+        "contact.png",
+        "history.png",
+    ):
         assert (out / name).exists(), name
 
 
 def test_mixed_rejects_bad_beta(tmp_path):
-    assert main(["run", "--method", "mixed", "--h", "16", "--H", "4", "--beta", "0", "--no-plots",
-                 "--out", str(tmp_path / "x")]) == 2
+    assert (
+        main(
+            [
+                "run",
+                "--method",
+                "mixed",
+                "--h",
+                "16",
+                "--H",
+                "4",
+                "--beta",
+                "0",
+                "--no-plots",
+                "--out",
+                str(tmp_path / "x"),
+            ]
+        )
+        == 2
+    )
 
 
 def test_mesh_too_coarse_for_the_load(tmp_path):

@@ -7,13 +7,12 @@ import numpy as np
 import pytest
 import pyvista
 from mpi4py import MPI
-
-import fenics_contact  # noqa: F401  (imports dolfinx_solver first)
-from fenics_contact.cli import main
-
 from mpi_jobs import on_every_rank, run_summary, serial_cli
 from outcome import outcome_lines, run_files
 from user_meshes import build_columns
+
+import fenics_contact  # noqa: F401  (imports dolfinx_solver first)
+from fenics_contact.cli import main
 
 pytestmark = pytest.mark.mpi
 
@@ -42,8 +41,9 @@ def test_two_ranks_write_one_directory(shared_tmp_path, capsys):
     assert {"E.png", "contact.png", "displacement.png", "history.png"} <= {p.name for p in out.iterdir()}
     fields = pyvista.read(out / "fields.pvd")[0]
     assert fields.n_points == 289 and fields.n_cells == 2 * 16 * 16  # both ranks' parts, 17 x 17 nodes once
-    np.testing.assert_equal(summary["dofs"]["omega1"] + summary["dofs"]["omega2"] - summary["dofs"]["interface"],
-                            2 * 17 * 17)
+    np.testing.assert_equal(
+        summary["dofs"]["omega1"] + summary["dofs"]["omega2"] - summary["dofs"]["interface"], 2 * 17 * 17
+    )
     # a bad mesh: exit 2, one line on stderr (rank 0), the run before untouched
     before = run_files(out)
     bad = shared_tmp_path / "bad.msh"
@@ -64,8 +64,18 @@ def test_two_ranks_write_one_directory(shared_tmp_path, capsys):
 def test_case_load_steps_multiscale_on_two_ranks_match_serial(shared_tmp_path, method, layers):
     """The same case's Algorithm 3 and 4 load steps on two ranks (offline phase shared out): the forces of the
     serial run (measured 6e-12 for Algorithm 3), the same iterations, every step certified."""
-    args = ["run", "--no-plots", "--case", str(CASES / "composite.toml"), "--method", method, "--layers", layers,
-            "--tol", "1e-8"]
+    args = [
+        "run",
+        "--no-plots",
+        "--case",
+        str(CASES / "composite.toml"),
+        "--method",
+        method,
+        "--layers",
+        layers,
+        "--tol",
+        "1e-8",
+    ]
     code, err, serial = serial_cli(*args, "--out", str(shared_tmp_path / "serial"))
     assert code == 0, err[-3000:]
     assert main([*args, "--out", str(shared_tmp_path / "parallel")]) == 0

@@ -17,8 +17,25 @@ def _summary(out):
 def test_huge_alpha_ends_not_converged(tmp_path):
     """`--h 32 --H 8 --alpha 1e8 --reference` exited 0 after 2 iterations with e_u = 0.79: now exit 3."""
     out = tmp_path / "alpha"
-    code = main(["run", "--h", "32", "--H", "8", "--alpha", "1e8", "--accel", "anderson", "--max-iterations", "40",
-                 "--reference", "--no-plots", "--out", str(out)])
+    code = main(
+        [
+            "run",
+            "--h",
+            "32",
+            "--H",
+            "8",
+            "--alpha",
+            "1e8",
+            "--accel",
+            "anderson",
+            "--max-iterations",
+            "40",
+            "--reference",
+            "--no-plots",
+            "--out",
+            str(out),
+        ]
+    )
     s = _summary(out)
     assert code == 3 and s["converged"] is False
     assert s["transmission_residual"] > 1e-6 and s["e_u"] > 1e-3
@@ -26,16 +43,51 @@ def test_huge_alpha_ends_not_converged(tmp_path):
 
 def test_huge_beta_ends_not_converged(tmp_path):
     out = tmp_path / "beta"
-    code = main(["run", "--method", "mixed", "--h", "16", "--H", "4", "--beta", "1e12", "--accel", "anderson",
-                 "--max-iterations", "30", "--no-plots", "--out", str(out)])
+    code = main(
+        [
+            "run",
+            "--method",
+            "mixed",
+            "--h",
+            "16",
+            "--H",
+            "4",
+            "--beta",
+            "1e12",
+            "--accel",
+            "anderson",
+            "--max-iterations",
+            "30",
+            "--no-plots",
+            "--out",
+            str(out),
+        ]
+    )
     assert code == 3 and _summary(out)["transmission_residual"] > 1e-6
 
 
 @pytest.mark.parametrize("method", ["primal", "mixed"])
 def test_newton_run_reports_its_certificate(tmp_path, method):
     out = tmp_path / method
-    code = main(["run", "--method", method, "--model", "3", "--h", "16", "--H", "4", "--accel", "newton",
-                 "--reference", "--no-plots", "--out", str(out)])
+    code = main(
+        [
+            "run",
+            "--method",
+            method,
+            "--model",
+            "3",
+            "--h",
+            "16",
+            "--H",
+            "4",
+            "--accel",
+            "newton",
+            "--reference",
+            "--no-plots",
+            "--out",
+            str(out),
+        ]
+    )
     s = _summary(out)
     assert code == 0 and s["converged"] is True and s["accel"] == "newton"
     assert s["transmission_residual"] < 1e-6 and 1 <= s["interface_newton_steps"] <= 8
@@ -50,14 +102,47 @@ def test_multiscale_default_alpha_at_contrast_1e6(tmp_path, capsys):
     close to the fine solution (α = E·h^-1/2, the former default, gave e_u = 0.33 at h = 1/32; at m = 3 a
     ConvergenceError, exit 4); --alpha with E·h^-1/2 and m = 3 ends with exit 4 and the message naming it."""
     out = tmp_path / "ms"
-    code = main(["run", "--method", "primal-ms", "--model", "3", "--E-high", "1e6", "--h", "32", "--reference",
-                 "--no-plots", "--out", str(out)])
+    code = main(
+        [
+            "run",
+            "--method",
+            "primal-ms",
+            "--model",
+            "3",
+            "--E-high",
+            "1e6",
+            "--h",
+            "32",
+            "--reference",
+            "--no-plots",
+            "--out",
+            str(out),
+        ]
+    )
     s = _summary(out)
     assert code == 0 and s["converged"] is True and s["alpha"] == "Emin*h^-1/2" and s["layers"] == 4
     assert s["transmission_residual"] < 1e-6 and s["e_u"] < 0.03
     bad = tmp_path / "bad"
-    code = main(["run", "--method", "primal-ms", "--model", "3", "--E-high", "1e6", "--h", "32", "--layers", "3",
-                 "--alpha", "E*h^-1/2", "--no-plots", "--out", str(bad)])
+    code = main(
+        [
+            "run",
+            "--method",
+            "primal-ms",
+            "--model",
+            "3",
+            "--E-high",
+            "1e6",
+            "--h",
+            "32",
+            "--layers",
+            "3",
+            "--alpha",
+            "E*h^-1/2",
+            "--no-plots",
+            "--out",
+            str(bad),
+        ]
+    )
     assert code == 4 and not bad.exists()
     assert "not positive definite" in capsys.readouterr().err
 
@@ -72,8 +157,24 @@ def test_front_options_same_solution_fewer_steps(tmp_path):
     runs = {}
     for name, flag in (("default", []), ("plain", ["--front-window", "0"])):
         out = tmp_path / name
-        code = main(["run", "--model", "3", "--E-high", "1e6", "--h", "128", "--H", "16", "--reference", "--no-plots",
-                     "--out", str(out), *flag])
+        code = main(
+            [
+                "run",
+                "--model",
+                "3",
+                "--E-high",
+                "1e6",
+                "--h",
+                "128",
+                "--H",
+                "16",
+                "--reference",
+                "--no-plots",
+                "--out",
+                str(out),
+                *flag,
+            ]
+        )
         assert code == 0
         runs[name] = _summary(out)
     default, plain = runs["default"], runs["plain"]
@@ -82,8 +183,22 @@ def test_front_options_same_solution_fewer_steps(tmp_path):
     assert abs(default["e_u"] - plain["e_u"]) < 1e-10 and default["e_u"] < 1e-8
     assert default["interface_newton_steps"] < plain["interface_newton_steps"]
     assert default["interface_newton_steps"] <= 5
-    code = main(["run", "--h", "16", "--H", "4", "--accel", "anderson", "--front-window", "4", "--no-plots",
-                 "--out", str(tmp_path / "refused")])
+    code = main(
+        [
+            "run",
+            "--h",
+            "16",
+            "--H",
+            "4",
+            "--accel",
+            "anderson",
+            "--front-window",
+            "4",
+            "--no-plots",
+            "--out",
+            str(tmp_path / "refused"),
+        ]
+    )
     assert code == 2 and not (tmp_path / "refused").exists()
     code = main(["run", "--h", "16", "--H", "4", "--front-window", "-1", "--no-plots", "--out", str(tmp_path / "bad")])
     assert code == 2 and not (tmp_path / "bad").exists()

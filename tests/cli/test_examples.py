@@ -36,4 +36,6 @@ def test_nothing_is_overwritten(tmp_path, existing, capsys):
     assert main(["examples", str(target)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith(f"error: {target} is ")
-    assert sorted(p.name for p in tmp_path.rglob("*")) == (["target"] if existing == "a file" else ["notes.txt", "target"])
+    assert sorted(p.name for p in tmp_path.rglob("*")) == (
+        ["target"] if existing == "a file" else ["notes.txt", "target"]
+    )

@@ -7,8 +7,8 @@ import sys
 import time
 
 import pytest
-from outcome import outcome_lines, run_files
 from mpi4py import MPI
+from outcome import outcome_lines, run_files
 
 from fenics_contact.cli import main
 
@@ -26,8 +26,13 @@ def test_interrupted_run_leaves_the_previous_results(tmp_path, signum, code):
     log = tmp_path / "stdout.txt"
     env = dict(os.environ, OMP_NUM_THREADS="1")
     with open(log, "w") as stdout:
-        proc = subprocess.Popen([sys.executable, "-m", "fenics_contact.cli", "run", *LONG_RUN, "--out", str(out)],
-                                stdout=stdout, stderr=subprocess.PIPE, text=True, env=env)
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "fenics_contact.cli", "run", *LONG_RUN, "--out", str(out)],
+            stdout=stdout,
+            stderr=subprocess.PIPE,
+            text=True,
+            env=env,
+        )
         try:
             deadline = time.monotonic() + 300
             while " it " not in log.read_text():  # the iteration is under way (the staging directory exists)
@@ -54,10 +59,17 @@ def test_interrupt_while_starting_up(tmp_path):
     # the console script's own code path (pyproject: fenics-contact = fenics_contact.launch:main); the SIGINT
     # arrives once the package itself is imported (the marker file), while the command line's imports run
     marker = tmp_path / "imported"
-    code = ("import sys, pathlib, fenics_contact; pathlib.Path(sys.argv[1]).touch(); "
-            "from fenics_contact.launch import main; sys.exit(main(sys.argv[2:]))")
-    proc = subprocess.Popen([sys.executable, "-c", code, str(marker), "run", "--h", "16", "--H", "4", "--out",
-                             str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    code = (
+        "import sys, pathlib, fenics_contact; pathlib.Path(sys.argv[1]).touch(); "
+        "from fenics_contact.launch import main; sys.exit(main(sys.argv[2:]))"
+    )
+    proc = subprocess.Popen(
+        [sys.executable, "-c", code, str(marker), "run", "--h", "16", "--H", "4", "--out", str(out)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+    )
     try:
         deadline = time.monotonic() + 120
         while not marker.exists():
@@ -93,8 +105,13 @@ def test_interrupt_during_the_imports_is_held_until_they_finish(tmp_path):
         "print('imported', 'fenics_contact.cli' in sys.modules, 'dolfinx.fem' in sys.modules)\n"
         "sys.exit(code)\n"
     )
-    proc = subprocess.run([sys.executable, "-c", code, "run", "--h", "16", "--H", "4", "--out", str(out)],
-                          capture_output=True, text=True, env=dict(os.environ, OMP_NUM_THREADS="1"), timeout=300)
+    proc = subprocess.run(
+        [sys.executable, "-c", code, "run", "--h", "16", "--H", "4", "--out", str(out)],
+        capture_output=True,
+        text=True,
+        env=dict(os.environ, OMP_NUM_THREADS="1"),
+        timeout=300,
+    )
     assert proc.returncode == 130, proc.stderr
     assert proc.stderr.strip().splitlines() == ["interrupted by SIGINT while starting up: nothing was written"]
     assert proc.stdout.split() == ["imported", "True", "True"]  # the import was not cut short
@@ -132,5 +149,6 @@ def test_a_signal_inside_a_finalizer_is_not_lost():
     finally:
         signal.setitimer(signal.ITIMER_REAL, 0.0)
         signal.signal(signal.SIGALRM, before[signal.SIGALRM])
-    assert {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)} == \
-        {s: before[s] for s in (signal.SIGINT, signal.SIGTERM)}
+    assert {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)} == {
+        s: before[s] for s in (signal.SIGINT, signal.SIGTERM)
+    }

@@ -44,8 +44,12 @@ def _summary(out) -> dict:
 def test_the_run_reports_the_check_of_its_solve(tmp_path):
     """The summary's value is the one the API's Algorithm 3 computes on the same problem and options."""
     out = tmp_path / "run"
-    assert main(["run", "--method", "primal-ms", "--h", "16", "--H", "4", "--layers", "2", "--no-plots",
-                 "--out", str(out)]) == 0
+    assert (
+        main(
+            ["run", "--method", "primal-ms", "--h", "16", "--H", "4", "--layers", "2", "--no-plots", "--out", str(out)]
+        )
+        == 0
+    )
     summary = _summary(out)
     problem = fc.models.model_1().on(fc.unit_square(16, 4))
     result = fc.solve(problem, "primal-ms", cem=CEMOptions(layers=2))

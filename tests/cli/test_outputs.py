@@ -13,15 +13,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from outcome import run_files
 from mpi4py import MPI
+from outcome import run_files
+from user_meshes import build_columns
 
 from fenics_contact.cli import main
 from fenics_contact.io import RUN_MARKER, OutputDirectory
 from fenics_contact.multiscale.cache import OfflineCache, remove_stale_temporaries
-
-from user_meshes import build_columns
-
 
 pytestmark = pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="launches its own processes")
 

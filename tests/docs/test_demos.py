@@ -28,8 +28,9 @@ def test_demo_is_a_notebook(demo):
 @pytest.mark.slow
 def test_demo_runs(demo, tmp_path):
     env = dict(os.environ, FENICS_CONTACT_DEMO_N="16", FENICS_CONTACT_DEMO_OUT=str(tmp_path), MPLBACKEND="Agg")
-    proc = subprocess.run([sys.executable, str(demo)], cwd=tmp_path, env=env, capture_output=True, text=True,
-                          timeout=900)
+    proc = subprocess.run(
+        [sys.executable, str(demo)], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=900
+    )
     assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-4000:]
     assert any(tmp_path.glob("*.png")), "a demo writes its figures"
     if demo.stem == "demo_showcase":  # the fields for ParaView and the table of all methods

@@ -13,8 +13,12 @@ pytestmark = pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="runs the page s
 
 
 def test_the_problem_page_examples_run():
-    run = subprocess.run([sys.executable, str(ROOT / "docs" / "run_page_examples.py"),
-                          str(ROOT / "docs" / "user_guide" / "problem.md")], capture_output=True, text=True,
-                         timeout=900, cwd=ROOT)
+    run = subprocess.run(
+        [sys.executable, str(ROOT / "docs" / "run_page_examples.py"), str(ROOT / "docs" / "user_guide" / "problem.md")],
+        capture_output=True,
+        text=True,
+        timeout=900,
+        cwd=ROOT,
+    )
     assert run.returncode == 0, run.stderr[-3000:]
     assert "# block 1" in run.stdout and "cells in Ω₂" in run.stdout

@@ -5,25 +5,15 @@ Run from the repository root:  .venv/bin/python -m pytest tests/fem/test_arnold_
 
 from __future__ import annotations
 
-import dolfinx_solver  # noqa: F401  (must precede dolfinx / petsc4py)
-
 import basix
 import basix.ufl
 import dolfinx
 import dolfinx.fem
 import dolfinx.mesh
+import dolfinx_solver  # noqa: F401  (must precede dolfinx / petsc4py)
 import numpy as np
 import pytest
 import ufl
-from mpi4py import MPI
-
-from fenics_contact.fem.arnold_winther import (
-    ArnoldWintherSpace,
-    lame_parameters,
-    local_nodal_basis,
-    solve_mixed_elasticity,
-)
-
 from aw_fields import (
     exact_fields,
     free_displacement,
@@ -31,6 +21,14 @@ from aw_fields import (
     side_facets,
     sliding_displacement,
     unit_square,
+)
+from mpi4py import MPI
+
+from fenics_contact.fem.arnold_winther import (
+    ArnoldWintherSpace,
+    lame_parameters,
+    local_nodal_basis,
+    solve_mixed_elasticity,
 )
 
 RATES = np.array([2.0, 3.0, 2.0])  # ‖u-u_h‖, ‖σ-σ_h‖, ‖div(σ-σ_h)‖
@@ -185,6 +183,7 @@ def test_interpolation_reproduces_aw_polynomials():
     exact.interpolate(sigma)
     err = np.abs(space.to_dg(space.interpolate(sigma)).x.array - exact.x.array).max()
     assert err < 1e-10 * np.abs(exact.x.array).max(), err
+
     # a symmetric P3 field with div ∉ P1 is not in the space, so it is not reproduced
     def cubic(x):
         return np.stack([x[0] ** 3, 0 * x[0], 0 * x[0]])
@@ -265,9 +264,7 @@ def convergence(u_fn_of_lmbda, *, nu, warp=0.0, angle=0.0, sizes=(4, 8, 16), tan
     return np.array(errs), rates(errs)
 
 
-@pytest.mark.parametrize(
-    ("nu", "warp"), [(0.3, 0.0), (0.4999, 0.0), (0.3, 0.03), (0.4999, 0.03), (0.49999999, 0.03)]
-)
+@pytest.mark.parametrize(("nu", "warp"), [(0.3, 0.0), (0.4999, 0.0), (0.3, 0.03), (0.4999, 0.03), (0.49999999, 0.03)])
 def test_convergence_dirichlet(nu, warp):
     """Homogeneous Dirichlet, locking-prone u = curl ψ + w/λ: rates (2, 3, 2) uniformly in λ."""
     errs, r = convergence(locking_displacement, nu=nu, warp=warp)
@@ -340,8 +337,9 @@ def test_prolongation_built_from_cell_blocks_equals_coo():
     cols[:, 1] = (cols[:, 0] + 1) % 9
     cols[:, 2] = (cols[:, 0] + 4) % 9  # distinct columns per cell, in any order
     blocks = rng.standard_normal((n, a, b))
-    coo = sp.csr_matrix((blocks.ravel(), (np.repeat(rows, b, axis=1).ravel(), np.tile(cols, (1, a)).ravel())),
-                        shape=(n * a, 9))
+    coo = sp.csr_matrix(
+        (blocks.ravel(), (np.repeat(rows, b, axis=1).ravel(), np.tile(cols, (1, a)).ravel())), shape=(n * a, 9)
+    )
     order = np.argsort(cols, axis=1)  # each cell's columns increasing, as the space keeps them
     scols, sblocks = np.take_along_axis(cols, order, axis=1), np.take_along_axis(blocks, order[:, None, :], axis=2)
     assert np.all(np.diff(scols, axis=1) > 0)
@@ -353,6 +351,9 @@ def test_prolongation_built_from_cell_blocks_equals_coo():
     inorder = np.arange(n * a).reshape(n, a)
     P = cell_rows_csr(sblocks, inorder, scols, (n * a, 9))
     assert np.shares_memory(P.data, sblocks) and P.has_sorted_indices
-    assert np.array_equal(P.toarray(), sp.csr_matrix(
-        (blocks.ravel(), (np.repeat(inorder, b, axis=1).ravel(), np.tile(cols, (1, a)).ravel())), shape=(n * a, 9)
-    ).toarray())
+    assert np.array_equal(
+        P.toarray(),
+        sp.csr_matrix(
+            (blocks.ravel(), (np.repeat(inorder, b, axis=1).ravel(), np.tile(cols, (1, a)).ravel())), shape=(n * a, 9)
+        ).toarray(),
+    )

@@ -3,11 +3,11 @@
 import numpy as np
 import pytest
 
-from fenics_contact.fem.contact import NewtonOptions
 from fenics_contact.errors import ConvergenceError, InputError
+from fenics_contact.fem.contact import NewtonOptions
+from fenics_contact.fem.primal import default_penalty, solve_primal_monolithic
 from fenics_contact.problem.geometry import unit_square
 from fenics_contact.problem.models import get_model
-from fenics_contact.fem.primal import default_penalty, solve_primal_monolithic
 
 N = 32
 
@@ -41,8 +41,7 @@ def test_complementarity_and_active_set(mesh32, number, expected):
 def test_penetration_vanishes_with_the_penalty(mesh32):
     cm = mesh32
     problem = get_model(1).on(cm)
-    pen = [solve_primal_monolithic(problem, delta=f * cm.h).profile.penetration
-           for f in (1e-1, 1e-3, 1e-5)]
+    pen = [solve_primal_monolithic(problem, delta=f * cm.h).profile.penetration for f in (1e-1, 1e-3, 1e-5)]
     ratios = np.array(pen[:-1]) / np.array(pen[1:])
     assert np.all((ratios > 50) & (ratios < 200)), pen  # penetration = O(δ)
 
@@ -53,5 +52,6 @@ def test_bad_penalty_and_newton_cap(mesh32):
     with pytest.raises(InputError, match="δ"):
         solve_primal_monolithic(problem, delta=0.0)
     with pytest.raises(ConvergenceError, match="did not converge"):
-        solve_primal_monolithic(problem, delta=default_penalty(cm.h, 1.0),
-                                newton=NewtonOptions(max_iterations=1), prefix="capped_")
+        solve_primal_monolithic(
+            problem, delta=default_penalty(cm.h, 1.0), newton=NewtonOptions(max_iterations=1), prefix="capped_"
+        )

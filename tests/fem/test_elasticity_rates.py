@@ -2,20 +2,21 @@
 
 import numpy as np
 import ufl
+from dolfinx import fem
 from mpi4py import MPI
 
-from dolfinx import fem
-
+from fenics_contact.fem.locking import clamped_square, p1_locking_error
+from fenics_contact.fem.primal import PrimalSubproblem
 from fenics_contact.problem.fields import MaterialFields
 from fenics_contact.problem.materials import lame, strain, stress
-from fenics_contact.fem.primal import PrimalSubproblem
-from fenics_contact.fem.locking import clamped_square, p1_locking_error
 
 
 def _errors(n: int) -> tuple[float, float]:
     msh, tags = clamped_square(n)
     x = ufl.SpatialCoordinate(msh)
-    u_exact = ufl.as_vector([ufl.sin(ufl.pi * x[0]) * ufl.sin(ufl.pi * x[1]), 4 * x[0] * (1 - x[0]) * x[1] * (1 - x[1])])
+    u_exact = ufl.as_vector(
+        [ufl.sin(ufl.pi * x[0]) * ufl.sin(ufl.pi * x[1]), 4 * x[0] * (1 - x[0]) * x[1] * (1 - x[1])]
+    )
     lm, mu = (float(v) for v in lame(1.0, 0.3))
     f = -ufl.div(stress(strain(u_exact), lm, mu))
     fields = MaterialFields(None, None, fem.Constant(msh, lm), fem.Constant(msh, mu), f)
@@ -65,11 +66,13 @@ def test_primal_methods_warn_when_p1_locks(caplog):
         solve_primal_monolithic(problem, delta=default_penalty(cm.h, 1.0)).problem.destroy()
         assert caplog.text.count("P1 displacement elements lock") == int(warned), nu
         # Algorithm 1 on the same mesh: not warned twice; on a new mesh it warns itself
-        solve_primal_hybrid(problem, delta=default_penalty(cm.h, 1.0),
-                            options=IterationOptions(tol=1e-3))
+        solve_primal_hybrid(problem, delta=default_penalty(cm.h, 1.0), options=IterationOptions(tol=1e-3))
         assert caplog.text.count("P1 displacement elements lock") == int(warned), nu
         caplog.clear()
         other = geometry.unit_square(16, 4)
-        solve_primal_hybrid(models.get_model(1, nu=nu).on(other), delta=default_penalty(other.h, 1.0),
-                            options=IterationOptions(tol=1e-3))
+        solve_primal_hybrid(
+            models.get_model(1, nu=nu).on(other),
+            delta=default_penalty(other.h, 1.0),
+            options=IterationOptions(tol=1e-3),
+        )
         assert caplog.text.count("P1 displacement elements lock") == int(warned), nu

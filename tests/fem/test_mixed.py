@@ -3,27 +3,26 @@
 Run from the repository root:  .venv/bin/python -m pytest tests/fem/test_mixed.py -q
 """
 
+import dolfinx
 import numpy as np
 import pytest
 import scipy.sparse as sp
 import ufl
+from dolfinx import fem
 from mpi4py import MPI
 from petsc4py import PETSc
 
-import dolfinx
-from dolfinx import fem
-
-from fenics_contact.fem import forms_mixed
 from fenics_contact.errors import InputError
-from fenics_contact.problem.fields import material_fields
-from fenics_contact.problem.geometry import ContactMesh, unit_square
+from fenics_contact.fem import forms_mixed
 from fenics_contact.fem.mixed import default_epsilon, solve_mixed_monolithic
 from fenics_contact.fem.mixed_newton import exact_line_search
 from fenics_contact.fem.mixed_subproblem import MixedSubproblem
-from fenics_contact.problem.models import get_model
 from fenics_contact.fem.primal import default_penalty, solve_primal_monolithic
-from fenics_contact.problem.tags import Boundary
 from fenics_contact.hybrid.transmission import split_mesh
+from fenics_contact.problem.fields import material_fields
+from fenics_contact.problem.geometry import ContactMesh, unit_square
+from fenics_contact.problem.models import get_model
+from fenics_contact.problem.tags import Boundary
 
 #: the paper's contact zones (its test set-up), per model
 CONTACT_ZONE = {1: (0.0, 0.5), 2: (0.4, 0.6)}
@@ -90,8 +89,12 @@ def test_robin_data_space_holds_the_traces_exactly():
     parts = split_mesh(cm)
     for i, part in enumerate(parts):
         prob = MixedSubproblem(
-            part.mesh, part.facet_tags, material_fields(part.mesh, get_model(1)),
-            epsilon=1e-3 if i == 1 else None, beta=1.0, prefix=f"t_cn{i}_",
+            part.mesh,
+            part.facet_tags,
+            material_fields(part.mesh, get_model(1)),
+            epsilon=1e-3 if i == 1 else None,
+            beta=1.0,
+            prefix=f"t_cn{i}_",
         )
         CN = (prob.C @ prob.N).toarray()
         R = prob.R.toarray()

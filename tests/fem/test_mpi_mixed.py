@@ -12,13 +12,16 @@ the default one by 4e-11 (σ at the DG nodes, relative to max |σ|) and 9e-11 (�
 model 1 (ε = 1e-3·h, h = 1/16); the distributed runs differ from the serial one by the same amounts.
 """
 
+import aw_fields as aw
 import numpy as np
 import pytest
 import pyvista
 import ufl
 from dolfinx import fem
+from manufactured import manufactured_mesh, manufactured_model
 from matplotlib.image import imread
 from mpi4py import MPI
+from mpi_jobs import on_every_rank, run_summary, serial_cli
 
 import fenics_contact  # noqa: F401  (imports dolfinx_solver first)
 from fenics_contact.cli import main
@@ -31,10 +34,6 @@ from fenics_contact.problem.analytic import hertz_model
 from fenics_contact.problem.geometry import unit_square
 from fenics_contact.problem.meshes import hertz_block
 from fenics_contact.problem.models import get_model
-
-import aw_fields as aw
-from manufactured import manufactured_mesh, manufactured_model
-from mpi_jobs import on_every_rank, run_summary, serial_cli
 
 MONO = ["1", "2", "free", "bc"]
 HYBRID = ["1", "2", "free"]
@@ -65,8 +64,7 @@ def mesh_and_model(name: str, comm: MPI.Comm, n: int = 16):
 
 
 def profile_data(profile) -> dict:
-    return {"sigma_c": profile.sigma_c.tolist(), "active": profile.active.astype(int).tolist(),
-            "y": profile.y.tolist()}
+    return {"sigma_c": profile.sigma_c.tolist(), "active": profile.active.astype(int).tolist(), "y": profile.y.tolist()}
 
 
 def mono(name: str, comm: MPI.Comm) -> dict:
@@ -74,11 +72,16 @@ def mono(name: str, comm: MPI.Comm) -> dict:
     sol = solve_mixed_monolithic(model.on(cm))
     prob = sol.problem
     return {
-        "newton_steps": sol.newton.steps, "active_sizes": sol.newton.active_sizes,
-        "step_lengths": sol.newton.step_lengths, "energies": sol.newton.energies,
-        "stress_norm2": prob.stress_norm2(prob.c), "l2_norm2": prob.l2_norm2(prob.u),
-        "dofs": sol.dofs, **profile_data(sol.profile),
-        "sigma": sorted_values(sol.sigma), "u": sorted_values(sol.u),
+        "newton_steps": sol.newton.steps,
+        "active_sizes": sol.newton.active_sizes,
+        "step_lengths": sol.newton.step_lengths,
+        "energies": sol.newton.energies,
+        "stress_norm2": prob.stress_norm2(prob.c),
+        "l2_norm2": prob.l2_norm2(prob.u),
+        "dofs": sol.dofs,
+        **profile_data(sol.profile),
+        "sigma": sorted_values(sol.sigma),
+        "u": sorted_values(sol.u),
     }
 
 
@@ -93,27 +96,39 @@ def hybrid(name: str, comm: MPI.Comm) -> dict:
     f = np.stack([y**3, 1.0 + y], axis=1).ravel()[g0:g1]
     return {
         "gamma_f2": comm.allreduce(float(f @ (s1.gamma_mass_matrix() @ f)), op=MPI.SUM),
-        "iterations": res.iterations, "converged": res.converged,
+        "iterations": res.iterations,
+        "converged": res.converged,
         "newton": [r.info["newton"] for r in res.history.records],
         "newton_active": [r.info["active"] for r in res.history.records],
-        "rel_changes": res.history.rel_changes.tolist(), "e_sigma": res.e_sigma, "e_u": res.e_u,
-        "dofs": res.dofs, **profile_data(res.profile),
-        "sigma": sorted_values(res.sigma), "u": sorted_values(res.u), "ref-sigma": sorted_values(ref.sigma),
+        "rel_changes": res.history.rel_changes.tolist(),
+        "e_sigma": res.e_sigma,
+        "e_u": res.e_u,
+        "dofs": res.dofs,
+        **profile_data(res.profile),
+        "sigma": sorted_values(res.sigma),
+        "u": sorted_values(res.u),
+        "ref-sigma": sorted_values(ref.sigma),
     }
 
 
 def indent(comm: MPI.Comm) -> dict:
     """The Hertz cylinder pressed into a block in two load steps (a moving obstacle), mixed monolithic."""
     block, _ = hertz_block(0.05, refinement=0.5, comm=comm)
-    curve = force_indentation(hertz_model(radius=5.0, depth=0.0).on(block), "mixed-monolithic", [6e-4, 1.2e-3],
-                              direction=(0.0, -1.0))
+    curve = force_indentation(
+        hertz_model(radius=5.0, depth=0.0).on(block), "mixed-monolithic", [6e-4, 1.2e-3], direction=(0.0, -1.0)
+    )
     last = curve.steps[-1].profile
-    return {"forces": curve.forces.tolist(), "newton": [s.iterations for s in curve.steps],
-            "zone": last.contact_zone(), **profile_data(last)}
+    return {
+        "forces": curve.forces.tolist(),
+        "newton": [s.iterations for s in curve.steps],
+        "zone": last.contact_zone(),
+        **profile_data(last),
+    }
 
 
 def rates(comm: MPI.Comm) -> dict:
     """Arnold–Winther errors and rates on warped unit squares 4, 8, 16 (Dirichlet, traction-free, sliding side)."""
+
     def l2(expr, dx):
         return float(np.sqrt(comm.allreduce(fem.assemble_scalar(fem.form(ufl.inner(expr, expr) * dx)), op=MPI.SUM)))
 
@@ -141,13 +156,19 @@ def rates(comm: MPI.Comm) -> dict:
 @pytest.fixture(scope="module")
 def runs():
     """``runs(kind, case)``: (serial, parallel) numbers of one case, rank 0's on every rank, each computed once."""
-    kinds = {"mono": mono, "hybrid": hybrid, "indent": lambda _, comm: indent(comm),
-             "rates": lambda _, comm: rates(comm)}
+    kinds = {
+        "mono": mono,
+        "hybrid": hybrid,
+        "indent": lambda _, comm: indent(comm),
+        "rates": lambda _, comm: rates(comm),
+    }
     cache = {}
 
     def get(kind: str, case: str = "") -> tuple[dict, dict]:
         if (kind, case) not in cache:
-            cache[kind, case] = tuple(on_every_rank(kinds[kind](case, comm)) for comm in (MPI.COMM_SELF, MPI.COMM_WORLD))
+            cache[kind, case] = tuple(
+                on_every_rank(kinds[kind](case, comm)) for comm in (MPI.COMM_SELF, MPI.COMM_WORLD)
+            )
         return cache[kind, case]
 
     return get
@@ -229,21 +250,40 @@ def test_cli_mixed_outputs_from_two_ranks(shared_tmp_path):
     s2 = run_summary(out2)
     assert s1["mpi_ranks"] == 1 and s2["mpi_ranks"] == 2 and s2["converged"]
     assert s1["accel"] == s2["accel"] == "anderson"
-    for key in ("iterations", "newton_steps_total", "reference_newton_steps", "dofs", "active_set",
-                "reference_active_set"):
+    for key in (
+        "iterations",
+        "newton_steps_total",
+        "reference_newton_steps",
+        "dofs",
+        "active_set",
+        "reference_active_set",
+    ):
         assert s2[key] == s1[key], key
     for key in ("e_sigma", "e_u", "final_rel_change"):
         assert s2[key] == pytest.approx(s1[key], rel=1e-6), key
     assert s2["max_tensile_sigma_c"] == pytest.approx(s1["max_tensile_sigma_c"], rel=1e-6, abs=1e-12)
     names = {p.name for p in out2.iterdir()}
-    assert {"fields.pvd", "contact.pvd", "sigma.bp", "u.bp", "stress.png", "displacement.png", "contact.png",
-            "history.png", "summary.json"} <= names
+    assert {
+        "fields.pvd",
+        "contact.pvd",
+        "sigma.bp",
+        "u.bp",
+        "stress.png",
+        "displacement.png",
+        "contact.png",
+        "history.png",
+        "summary.json",
+    } <= names
     fields1, fields2 = (pyvista.read(out / "fields.pvd")[0] for out in (out1, out2))
     assert fields2.n_points == 81 and fields2.n_cells == fields1.n_cells  # both ranks' parts, 9 x 9 nodes once
     order1, order2 = (np.lexsort(f.points[:, :2].T) for f in (fields1, fields2))
-    np.testing.assert_allclose(fields2.point_data["u"][order2], fields1.point_data["u"][order1], rtol=1e-6,
-                               atol=1e-12 * np.abs(fields1.point_data["u"]).max())
+    np.testing.assert_allclose(
+        fields2.point_data["u"][order2],
+        fields1.point_data["u"][order1],
+        rtol=1e-6,
+        atol=1e-12 * np.abs(fields1.point_data["u"]).max(),
+    )
     for png in ("stress.png", "displacement.png", "contact.png"):  # gathered fields: the serial pictures
         a, b = imread(out1 / png), imread(out2 / png)  # (the triangles come in another order: a few edge pixels
-        assert a.shape == b.shape, png                 # of the shaded DG P1 plot differ by a shade, 1e-5 of them)
+        assert a.shape == b.shape, png  # of the shaded DG P1 plot differ by a shade, 1e-5 of them)
         assert np.mean(np.abs(a - b).max(axis=-1) > 0.02) < 1e-4, png

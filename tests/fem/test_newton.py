@@ -58,8 +58,9 @@ class Obstacle:
 
 def test_the_obstacle_node_ends_on_the_closed_form_solution():
     system = Obstacle()
-    trace = semismooth_newton_loop(system, np.array([False]), name="node", max_steps=10, line_search="never",
-                                   rtol=1e-12)
+    trace = semismooth_newton_loop(
+        system, np.array([False]), name="node", max_steps=10, line_search="never", rtol=1e-12
+    )
     assert system.u == pytest.approx(system.exact, rel=1e-14) and system.u > system.g
     assert trace.steps == 2 and trace.active_sizes == [1, 1] and trace.step_lengths == [1.0, 1.0]
     assert len(trace.residuals) == trace.steps + 1 and trace.residuals[-1] <= 1e-12 * system.g / system.delta
@@ -125,20 +126,23 @@ def _at_the_solution() -> Obstacle:
 def test_a_settled_step_that_misses_the_check_is_refined_then_refused():
     system = _at_the_solution()
     system.checks = [(1.0, 1.0), (1e-20, 1.0)]  # the first check fails, the refinement step passes
-    trace = semismooth_newton_loop(system, np.array([True]), name="node", max_steps=10, line_search="never",
-                                   rtol=1e-12, refinements=2)
+    trace = semismooth_newton_loop(
+        system, np.array([True]), name="node", max_steps=10, line_search="never", rtol=1e-12, refinements=2
+    )
     assert trace.steps == 2 and trace.residuals[-1] == 1e-20
     system = _at_the_solution()
     system.checks = [(1.0, 1.0)] * 3
     with pytest.raises(ConvergenceError, match="after 2 refinement steps") as failed:
-        semismooth_newton_loop(system, np.array([True]), name="node", max_steps=10, line_search="never",
-                               rtol=1e-12, refinements=2)
+        semismooth_newton_loop(
+            system, np.array([True]), name="node", max_steps=10, line_search="never", rtol=1e-12, refinements=2
+        )
     assert failed.value.steps == 3
     system = _at_the_solution()
     system.checks = [(np.nan, 1.0)]
     with pytest.raises(ConvergenceError, match="after 0 refinement steps"):
-        semismooth_newton_loop(system, np.array([True]), name="node", max_steps=10, line_search="never",
-                               rtol=1e-12, refinements=2)
+        semismooth_newton_loop(
+            system, np.array([True]), name="node", max_steps=10, line_search="never", rtol=1e-12, refinements=2
+        )
 
 
 def test_a_failure_inside_a_step_counts_that_step():

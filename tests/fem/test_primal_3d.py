@@ -16,6 +16,7 @@ from fenics_contact.problem.obstacles import Circle, Plane, SignedDistance, Sphe
 from fenics_contact.problem.problem import ContactProblem
 from fenics_contact.problem.tags import Boundary
 
+
 def _points(*xyz):
     return np.array(xyz, dtype=float).T
 
@@ -54,8 +55,10 @@ def test_box_meshes_are_tagged_and_sized():
     cm = unit_cube(4)
     assert cm.mesh.topology.dim == 3 and np.isclose(cm.h, 0.25) and np.isclose(mesh_size(cm.mesh), 0.25)
     ds = ufl.Measure("ds", domain=cm.mesh, subdomain_data=cm.facet_tags)
-    area = {tag: cm.comm.allreduce(fem.assemble_scalar(fem.form(1.0 * ds(tag))), op=MPI.SUM)
-            for tag in (Boundary.GAMMA_C, Boundary.GAMMA_D)}
+    area = {
+        tag: cm.comm.allreduce(fem.assemble_scalar(fem.form(1.0 * ds(tag))), op=MPI.SUM)
+        for tag in (Boundary.GAMMA_C, Boundary.GAMMA_D)
+    }
     assert np.isclose(area[Boundary.GAMMA_C], 1.0) and np.isclose(area[Boundary.GAMMA_D], 1.0)
     planes = graded_planes(10.0, fine=1.0, h=0.25, growth=1.5)
     assert planes[0] == 0.0 and planes[-1] == 10.0 and np.allclose(np.diff(planes[:5]), 0.25)
@@ -86,8 +89,9 @@ def test_patch_block_pressed_on_a_wall_is_exact(axis):
         return u * pressure
 
     pressure = d0 / (delta + 1.0 / E)
-    problem = ContactProblem(youngs_modulus=E, poisson_ratio=nu, obstacle=wall, mesh=cm,
-                             boundary=BoundaryConditions(displacement=lateral))
+    problem = ContactProblem(
+        youngs_modulus=E, poisson_ratio=nu, obstacle=wall, mesh=cm, boundary=BoundaryConditions(displacement=lateral)
+    )
     sol = solve_primal_monolithic(problem, delta=delta)
     X = sol.u.function_space.tabulate_dof_coordinates()
     exact = lateral(X.T).T
@@ -108,8 +112,9 @@ def test_confined_block_on_rollers_is_in_uniaxial_strain():
     cm = unit_cube(3)
     rollers = ((1, 0.0), (1, 1.0), (2, 0.0), (2, 1.0))
     wall = Plane((1.0, 0.0, 0.0), (-1.0, 0.0, 0.0)).indented(d0, (-1.0, 0.0, 0.0))
-    problem = ContactProblem(youngs_modulus=E, poisson_ratio=nu, obstacle=wall, mesh=cm,
-                             boundary=BoundaryConditions(rollers=rollers))
+    problem = ContactProblem(
+        youngs_modulus=E, poisson_ratio=nu, obstacle=wall, mesh=cm, boundary=BoundaryConditions(rollers=rollers)
+    )
     sol = solve_primal_monolithic(problem, delta=delta)
     p = d0 / (delta + 1.0 / M)
     X = sol.u.function_space.tabulate_dof_coordinates()
@@ -123,24 +128,43 @@ def test_confined_block_on_rollers_is_in_uniaxial_strain():
         BoundaryConditions(rollers=((3, 0.0),))
 
 
-def _hertz(h_over_a: float, *, growth: float, a: float = 0.1, R: float = 1.0, E: float = 1.0, nu: float = 0.3,
-           size: float = 40.0):
+def _hertz(
+    h_over_a: float,
+    *,
+    growth: float,
+    a: float = 0.1,
+    R: float = 1.0,
+    E: float = 1.0,
+    nu: float = 0.3,
+    size: float = 40.0,
+):
     """A quarter of a block (0, L)² × (−L, 0), L = ``size``·a, under a rigid sphere of radius R pushed d = a²/R
     into its top (Hertz's contact radius a at that depth), symmetry planes x = 0 and y = 0 on rollers, the
     bottom clamped; the grid is h = ``h_over_a``·a on 1.25a around the contact and grows by ``growth``."""
     planes = graded_planes(size * a, fine=1.25 * a, h=h_over_a * a, growth=growth)
     region = lambda p: (p[0] <= 3 * a + 1e-12) & (p[1] <= 3 * a + 1e-12)  # noqa: E731
-    cm = box_mesh(planes, planes, -planes[::-1], contact="zmax", clamped=("zmin",), contact_region=region,
-                  strip=2 * a)
+    cm = box_mesh(planes, planes, -planes[::-1], contact="zmax", clamped=("zmin",), contact_region=region, strip=2 * a)
     sphere = Sphere((0.0, 0.0, R), R).indented(a * a / R, (0.0, 0.0, -1.0))
-    problem = ContactProblem(youngs_modulus=E, poisson_ratio=nu, obstacle=sphere, mesh=cm,
-                             boundary=BoundaryConditions(rollers=((0, 0.0), (1, 0.0))))
+    problem = ContactProblem(
+        youngs_modulus=E,
+        poisson_ratio=nu,
+        obstacle=sphere,
+        mesh=cm,
+        boundary=BoundaryConditions(rollers=((0, 0.0), (1, 0.0))),
+    )
     sol = solve_primal_monolithic(problem)
     E_star = E / (1.0 - nu**2)
     force = 4.0 * sol.profile.force  # the quarter's
     a_F = (3.0 * force * R / (4.0 * E_star)) ** (1.0 / 3.0)
-    return dict(sol=sol, h=h_over_a * a, a=a, force=force, F_hertz=4.0 * E_star * a**3 / (3.0 * R), a_F=a_F,
-                p0_F=3.0 * force / (2.0 * np.pi * a_F**2))
+    return dict(
+        sol=sol,
+        h=h_over_a * a,
+        a=a,
+        force=force,
+        F_hertz=4.0 * E_star * a**3 / (3.0 * R),
+        a_F=a_F,
+        p0_F=3.0 * force / (2.0 * np.pi * a_F**2),
+    )
 
 
 def test_hertz_sphere_on_a_half_space():
@@ -171,16 +195,21 @@ def test_hertz_force_converges_with_the_contact_cells():
 
 def test_methods_other_than_the_primal_monolithic_refuse_3d_and_rollers():
     cm = unit_cube(2)
-    problem = ContactProblem(youngs_modulus=1.0, poisson_ratio=0.3, mesh=cm,
-                             obstacle=Plane((1.0, 0.0), (-1.0, 0.0)).indented(0.01, (-1.0, 0.0)))
+    problem = ContactProblem(
+        youngs_modulus=1.0,
+        poisson_ratio=0.3,
+        mesh=cm,
+        obstacle=Plane((1.0, 0.0), (-1.0, 0.0)).indented(0.01, (-1.0, 0.0)),
+    )
     for method in ("primal", "mixed-monolithic", "primal-ms"):
         with pytest.raises(InputError, match="primal-monolithic"):
             fc.solve(problem, method)
     assert fc.solve(problem, "primal-monolithic").profile.force > 0
     from fenics_contact.problem.geometry import unit_square
 
-    rolled = ContactProblem(youngs_modulus=1.0, poisson_ratio=0.3, mesh=unit_square(4, 2),
-                            boundary=BoundaryConditions(rollers=((1, 0.0),)))
+    rolled = ContactProblem(
+        youngs_modulus=1.0, poisson_ratio=0.3, mesh=unit_square(4, 2), boundary=BoundaryConditions(rollers=((1, 0.0),))
+    )
     with pytest.raises(InputError, match="rollers"):
         fc.solve(rolled, "primal")
 
@@ -202,8 +231,11 @@ def _gmsh_box(path, *, split: float = 0.75, h: float = 0.3, contact_on_side: boo
         for _, t in gmsh.model.getEntities(2):
             x = occ.getCenterOfMass(2, t)
             contact = abs(x[1]) < 1e-9 if contact_on_side else abs(x[0] - 1) < 1e-9
-            for name, test in (("Gamma_D", abs(x[0]) < 1e-9), ("Gamma_C", contact),
-                               ("gamma", abs(x[0] - split) < 1e-9)):
+            for name, test in (
+                ("Gamma_D", abs(x[0]) < 1e-9),
+                ("Gamma_C", contact),
+                ("gamma", abs(x[0] - split) < 1e-9),
+            ):
                 if test:
                     faces.setdefault(name, []).append(t)
         gmsh.model.addPhysicalGroup(3, [volumes[0][1]], 1, name="Omega1")
@@ -234,8 +266,9 @@ def test_read_mesh_takes_a_gmsh_tetrahedral_mesh_and_the_patch_test_is_exact_on_
         return np.vstack([np.zeros(x.shape[1]), nu * pressure / E * x[1], nu * pressure / E * x[2]])
 
     wall = Plane((1.0, 0.0, 0.0), (-1.0, 0.0, 0.0)).indented(d0, (-1.0, 0.0, 0.0))
-    problem = ContactProblem(youngs_modulus=E, poisson_ratio=nu, obstacle=wall, mesh=cm,
-                             boundary=BoundaryConditions(displacement=lateral))
+    problem = ContactProblem(
+        youngs_modulus=E, poisson_ratio=nu, obstacle=wall, mesh=cm, boundary=BoundaryConditions(displacement=lateral)
+    )
     sol = solve_primal_monolithic(problem, delta=delta)
     X = sol.u.function_space.tabulate_dof_coordinates()
     exact = lateral(X.T).T
@@ -261,17 +294,28 @@ def test_two_materials_in_series_by_cell_tag():
     left = dmesh.locate_entities_boundary(msh, fdim, lambda x: np.isclose(x[0], 0.0))
     right = dmesh.locate_entities_boundary(msh, fdim, lambda x: np.isclose(x[0], 1.0))
     order = np.argsort(np.concatenate([left, right]))
-    facet_tags = dmesh.meshtags(msh, fdim, np.concatenate([left, right])[order],
-                                np.concatenate([np.full(left.size, 7), np.full(right.size, 8)]).astype(np.int32)[order])
+    facet_tags = dmesh.meshtags(
+        msh,
+        fdim,
+        np.concatenate([left, right])[order],
+        np.concatenate([np.full(left.size, 7), np.full(right.size, 8)]).astype(np.int32)[order],
+    )
     imap = msh.topology.index_map(msh.topology.dim)
     cells = np.arange(imap.size_local + imap.num_ghosts, dtype=np.int32)
     layer = np.where(dmesh.compute_midpoints(msh, msh.topology.dim, cells)[:, 0] < 0.5, 1, 2).astype(np.int32)
     cell_tags = dmesh.meshtags(msh, msh.topology.dim, cells, layer)
     E1, E2, d0, delta = 1.0, 4.0, 0.01, 1e-3
     problem = ContactProblem.from_meshtags(
-        msh, facet_tags, cell_tags, contact=8, clamped=7, youngs_modulus={1: E1, 2: E2}, poisson_ratio=0.0,
+        msh,
+        facet_tags,
+        cell_tags,
+        contact=8,
+        clamped=7,
+        youngs_modulus={1: E1, 2: E2},
+        poisson_ratio=0.0,
         strip_width=0.25,
-        obstacle=Plane((1.0, 0.0, 0.0), (-1.0, 0.0, 0.0)).indented(d0, (-1.0, 0.0, 0.0)))
+        obstacle=Plane((1.0, 0.0, 0.0), (-1.0, 0.0, 0.0)).indented(d0, (-1.0, 0.0, 0.0)),
+    )
     sol = solve_primal_monolithic(problem, delta=delta)
     p = d0 / (delta + 0.5 / E1 + 0.5 / E2)
     X = sol.u.function_space.tabulate_dof_coordinates()

@@ -32,9 +32,14 @@ serial = pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="mixed (Arnold–Win
 N, N_COARSE = 16, 4  # h = 1/16, H = 1/4
 #: (E, L): stress in MPa and Pa, lengths in mm-, km- and 1000-km-sized units, steel in Pa on a 1 mm part
 UNITS = [(2.1e5, 1.0), (2.1e11, 1.0), (1.0, 1e-3), (1.0, 1e3), (1.0, 1e6), (2.1e11, 1e-3)]
-METHODS = ["primal-monolithic", "primal", "primal-ms",
-           "mixed-monolithic", pytest.param("mixed", marks=serial),
-           pytest.param("mixed-ms", marks=serial)]
+METHODS = [
+    "primal-monolithic",
+    "primal",
+    "primal-ms",
+    "mixed-monolithic",
+    pytest.param("mixed", marks=serial),
+    pytest.param("mixed-ms", marks=serial),
+]
 RTOL = 1e-8
 
 
@@ -130,6 +135,7 @@ def test_mixed_cem_offline_is_dimensionless(eigensolver):
     """Algorithm 4's offline phase at E = 2.1e11 (Pa): the Stage I eigenvalues (dense, or SLEPc shift-and-invert
     of the equilibrated pencil) and the coarse saddle-point matrix [[ΨᵀÃΨ, (ΠᵀBΨ)ᵀ], [ΠᵀBΨ, 0]] are those of
     E = 1 (the S-orthonormal modes make the coarse matrix dimensionless: its dense LU needs no scaling)."""
+
     def offline(E: float):
         cm = fc.unit_square(N, N_COARSE, clamped=("left",))
         step = MixedMultiscaleHybridStep(bar_model(E, E=E).on(cm), cem=fc.MixedCEMOptions(eigensolver=eigensolver))
@@ -143,8 +149,12 @@ def test_mixed_cem_offline_is_dimensionless(eigensolver):
     assert np.allclose(lam, lam0, rtol=RTOL, atol=1e-10 * lam0.max())
     # the modes of a repeated eigenvalue are a basis of their span: compare what does not depend on the basis
     for X, X0 in ((G, G0), (B.T @ B, B0.T @ B0)):
-        assert np.allclose(np.linalg.eigvalsh(0.5 * (X + X.T)), np.linalg.eigvalsh(0.5 * (X0 + X0.T)),
-                           rtol=RTOL, atol=RTOL * np.abs(X0).max())
+        assert np.allclose(
+            np.linalg.eigvalsh(0.5 * (X + X.T)),
+            np.linalg.eigvalsh(0.5 * (X0 + X0.T)),
+            rtol=RTOL,
+            atol=RTOL * np.abs(X0).max(),
+        )
 
 
 def test_equilibrated_direct_solver():
@@ -186,9 +196,12 @@ def test_factorization_failure_names_its_cause():
     A = scipy_to_petsc(singular)
     solver = DirectSolver(MPI.COMM_SELF, prefix="test_units_singular_")
     try:
-        with pytest.raises(ConvergenceError, match=r"test_units_singular_: factorization failed \(PETSc PC failed "
-                           r"reason FACTOR_\w+ \(\d\); MUMPS INFOG\(1\) = -10, INFOG\(2\) = \d+: the matrix is "
-                           r"numerically singular\. A singular matrix"):
+        with pytest.raises(
+            ConvergenceError,
+            match=r"test_units_singular_: factorization failed \(PETSc PC failed "
+            r"reason FACTOR_\w+ \(\d\); MUMPS INFOG\(1\) = -10, INFOG\(2\) = \d+: the matrix is "
+            r"numerically singular\. A singular matrix",
+        ):
             solver.set_operator(A)
     finally:
         solver.destroy()

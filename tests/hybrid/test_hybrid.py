@@ -3,13 +3,13 @@
 import numpy as np
 import pytest
 
-from fenics_contact.hybrid.iteration import IterationOptions
 from fenics_contact.errors import InputError
+from fenics_contact.fem.primal import default_penalty, solve_primal_monolithic
+from fenics_contact.hybrid.iteration import IterationOptions
+from fenics_contact.hybrid.primal import solve_primal_hybrid
 from fenics_contact.problem.fields import material_fields
 from fenics_contact.problem.geometry import unit_square
 from fenics_contact.problem.models import get_model
-from fenics_contact.fem.primal import default_penalty, solve_primal_monolithic
-from fenics_contact.hybrid.primal import solve_primal_hybrid
 
 
 def _setup(n, n_coarse, number):
@@ -24,8 +24,9 @@ def _setup(n, n_coarse, number):
 def test_fixed_point_is_the_monolithic_solution(number):
     """Theorem 3.1: with vertex quadrature on γ the converged iterate equals the monolithic solve."""
     cm, problem, delta, ref = _setup(32, 8, number)
-    res = solve_primal_hybrid(problem, alpha="E", delta=delta, reference=ref.u,
-                              options=IterationOptions(tol=1e-10, accel="anderson"))
+    res = solve_primal_hybrid(
+        problem, alpha="E", delta=delta, reference=ref.u, options=IterationOptions(tol=1e-10, accel="anderson")
+    )
     assert res.converged
     assert res.e_u <= 1e-8, res.e_u
     assert res.profile.active_interval() == ref.profile.active_interval()
@@ -39,9 +40,12 @@ def test_fixed_point_is_the_monolithic_solution(number):
 
 def test_plain_and_anderson_updates_reach_the_same_solution():
     cm, problem, delta, ref = _setup(16, 4, 1)
-    runs = {accel: solve_primal_hybrid(problem, alpha="E", delta=delta, reference=ref.u,
-                                       options=IterationOptions(tol=1e-6, accel=accel))
-            for accel in ("none", "anderson")}
+    runs = {
+        accel: solve_primal_hybrid(
+            problem, alpha="E", delta=delta, reference=ref.u, options=IterationOptions(tol=1e-6, accel=accel)
+        )
+        for accel in ("none", "anderson")
+    }
     for res in runs.values():
         assert res.converged and res.e_u < 1e-4
     assert runs["anderson"].iterations < runs["none"].iterations
@@ -70,8 +74,10 @@ def test_bad_iteration_options(kwargs):
         IterationOptions(**kwargs)
 
 
-@pytest.mark.parametrize("alpha, expected", [(2.5, 2.5), ("h^-1/2", 4.0), ("sqrt-h", 0.25), ("2*h^-1/2", 8.0),
-                                             ("E*h^-1/2", 4.0), ("0.5E*h^(1/2)", 0.125)])
+@pytest.mark.parametrize(
+    "alpha, expected",
+    [(2.5, 2.5), ("h^-1/2", 4.0), ("sqrt-h", 0.25), ("2*h^-1/2", 8.0), ("E*h^-1/2", 4.0), ("0.5E*h^(1/2)", 0.125)],
+)
 def test_alpha_spellings(alpha, expected):
     from fenics_contact.hybrid.transmission import InterfaceSpace, robin_coefficient, split_mesh
 

@@ -69,8 +69,9 @@ def _primal_step(method, number, E_high):
         step = PrimalHybridStep(model.on(cm), alpha=DEFAULT_ALPHA, delta=delta, newton=newton)
         step.prepare()
     else:
-        step = MultiscalePrimalHybridStep(model.on(cm), alpha=DEFAULT_ALPHA, delta=delta, newton=newton,
-                                          cem=CEMOptions(layers=2))
+        step = MultiscalePrimalHybridStep(
+            model.on(cm), alpha=DEFAULT_ALPHA, delta=delta, newton=newton, cem=CEMOptions(layers=2)
+        )
     return cm, model, delta, step
 
 
@@ -113,15 +114,15 @@ def test_primal_newton_is_the_robin_fixed_point(method, number, E_high):
     """
     cm, model, delta, step = _primal_step(method, number, E_high)
     stiff = E_high > 1e3
-    robin, robin_fields, newton, newton_fields = _robin_then_newton(step, robin=not stiff,
-                                                                    floor=1e-8 if stiff else TIGHT)
+    robin, robin_fields, newton, newton_fields = _robin_then_newton(
+        step, robin=not stiff, floor=1e-8 if stiff else TIGHT
+    )
     if not stiff:
         assert robin.converged and robin.iterations > 10
         assert _distance(robin_fields, newton_fields) <= 1e-8
     if method == 1:  # Theorem 3.1: the fixed point is the monolithic solution
         newton_opts = NewtonOptions(rtol=1e-6) if stiff else NewtonOptions()
-        ref = solve_primal_monolithic(model.on(cm), delta=delta,
-                                      newton=newton_opts)
+        ref = solve_primal_monolithic(model.on(cm), delta=delta, newton=newton_opts)
         assert _distance([ref.u], newton_fields) <= (1e-8 if stiff else 1e-10)
 
 
@@ -146,8 +147,12 @@ def test_strategies_agree_and_newton_matches_monolithic():
     delta = default_penalty(cm.h, 1e3)
     ref = solve_primal_monolithic(model.on(cm), delta=delta)
     for strategy in ("interface", "condensed"):
-        res = solve_primal_hybrid(model.on(cm), delta=delta, reference=ref.u, options=IterationOptions(
-            tol=TIGHT, accel="newton", newton=InterfaceNewtonOptions(strategy=strategy)))
+        res = solve_primal_hybrid(
+            model.on(cm),
+            delta=delta,
+            reference=ref.u,
+            options=IterationOptions(tol=TIGHT, accel="newton", newton=InterfaceNewtonOptions(strategy=strategy)),
+        )
         assert res.converged and res.e_u <= 1e-10 and res.history.newton_steps <= 8, (strategy, res.e_u)
         assert res.time_interface_offline_s > 0 and res.time_offline_s >= res.time_interface_offline_s
 
@@ -161,8 +166,13 @@ def test_extreme_alpha_is_never_a_wrong_converged(alpha, accel):
     model = get_model(1)
     delta = default_penalty(cm.h, 1.0)
     ref = solve_primal_monolithic(model.on(cm), delta=delta)
-    res = solve_primal_hybrid(model.on(cm), alpha=alpha, delta=delta, reference=ref.u,
-                              options=IterationOptions(accel=accel, max_iterations=60))
+    res = solve_primal_hybrid(
+        model.on(cm),
+        alpha=alpha,
+        delta=delta,
+        reference=ref.u,
+        options=IterationOptions(accel=accel, max_iterations=60),
+    )
     assert res.e_u <= 1e-5 if res.converged else res.transmission_residual >= 1e-6, (res.converged, res.e_u)
     if accel == "anderson":
         assert not res.converged  # 60 iterations are far too few at either extreme
@@ -173,8 +183,9 @@ def test_extreme_beta_is_never_a_wrong_converged(accel):
     cm = unit_square(16, 4)
     model = get_model(2)
     split = solve_mixed_monolithic(model.on(cm), split_interface=True)
-    res = solve_mixed_hybrid(model.on(cm), beta=1e12, reference=split,
-                             options=IterationOptions(accel=accel, max_iterations=60))
+    res = solve_mixed_hybrid(
+        model.on(cm), beta=1e12, reference=split, options=IterationOptions(accel=accel, max_iterations=60)
+    )
     assert max(res.e_sigma, res.e_u) <= 1e-5 if res.converged else res.transmission_residual >= 1e-6
 
 
@@ -204,8 +215,13 @@ def test_warm_start_reuses_the_step_and_its_offline_data():
     delta = default_penalty(cm.h, 1.0)
     step = PrimalHybridStep(model.on(cm), alpha=DEFAULT_ALPHA, delta=delta)
     first = solve_primal_hybrid(model.on(cm), delta=delta, step=step, options=IterationOptions(accel="anderson"))
-    again = solve_primal_hybrid(model.on(cm), delta=delta, step=step, initial_data=first.history.data,
-                                options=IterationOptions(accel="anderson"))
+    again = solve_primal_hybrid(
+        model.on(cm),
+        delta=delta,
+        step=step,
+        initial_data=first.history.data,
+        options=IterationOptions(accel="anderson"),
+    )
     assert first.iterations > 5 and again.iterations == 1 and again.converged
     n1 = solve_primal_hybrid(model.on(cm), delta=delta, step=step, options=IterationOptions(accel="newton"))
     n2 = solve_primal_hybrid(model.on(cm), delta=delta, step=step, options=IterationOptions(accel="newton"))
@@ -220,8 +236,9 @@ def test_online_time_excludes_the_monitor():
     step = PrimalHybridStep(get_model(1).on(cm), alpha=DEFAULT_ALPHA, delta=default_penalty(cm.h, 1.0))
     step.prepare()
     start = time.perf_counter()
-    history = iterate(step, IterationOptions(accel="anderson", max_iterations=5),
-                      monitor=lambda: (time.sleep(0.05), {"slept": 1})[1])
+    history = iterate(
+        step, IterationOptions(accel="anderson", max_iterations=5), monitor=lambda: (time.sleep(0.05), {"slept": 1})[1]
+    )
     wall = time.perf_counter() - start
     assert history.records[-1].info["slept"] == 1
     assert history.time_monitor_s >= 0.05 * history.iterations

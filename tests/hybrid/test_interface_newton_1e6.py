@@ -19,9 +19,9 @@ import pytest
 from fenics_contact.errors import ConvergenceError, InputError
 from fenics_contact.fem.contact import NewtonOptions
 from fenics_contact.fem.primal import default_penalty, solve_primal_monolithic
-from fenics_contact.hybrid.iteration import InterfaceNewtonOptions, IterationOptions, iterate
 from fenics_contact.hybrid.condensation import CondensedInterface
 from fenics_contact.hybrid.contact_newton import contact_newton
+from fenics_contact.hybrid.iteration import InterfaceNewtonOptions, IterationOptions, iterate
 from fenics_contact.hybrid.primal import DEFAULT_ALPHA, DEFAULT_ALPHA_MS, PrimalHybridStep
 from fenics_contact.hybrid.transmission import InterfaceSpace, robin_coefficient, split_mesh
 from fenics_contact.multiscale.cem import CEMOptions
@@ -89,16 +89,24 @@ def test_alpha_emin_is_the_smallest_nodal_modulus_on_gamma():
 def test_multiscale_alpha_amplifying_its_error_is_a_clear_error_and_the_default_is_accurate(strip):
     cm, model, delta, ref = strip
     # α = E·h^-1/2, m = 3: the glued problem is indefinite -> ConvergenceError naming it (CLI exit 4)
-    step = MultiscalePrimalHybridStep(model.on(cm), alpha=DEFAULT_ALPHA, delta=delta, newton=STIFF,
-                                      cem=CEMOptions(layers=3))
+    step = MultiscalePrimalHybridStep(
+        model.on(cm), alpha=DEFAULT_ALPHA, delta=delta, newton=STIFF, cem=CEMOptions(layers=3)
+    )
     assert CondensedInterface(step.interface_problem(InterfaceNewtonOptions())).lowest_eigenvalue() < 0
     with pytest.raises(ConvergenceError, match="not positive definite"):
         iterate(step, IterationOptions(accel="newton"))
     # m = 4 (the CLI default): both converge, E·h^-1/2 to a solution 0.33 off the fine one, the default to 0.015
     errors = {}
     for alpha in (DEFAULT_ALPHA, DEFAULT_ALPHA_MS):
-        res = solve_primal_ms_hybrid(model.on(cm), alpha=alpha, delta=delta, cem=CEMOptions(layers=4), newton=STIFF,
-                                     reference=ref.u, options=IterationOptions(accel="newton"))
+        res = solve_primal_ms_hybrid(
+            model.on(cm),
+            alpha=alpha,
+            delta=delta,
+            cem=CEMOptions(layers=4),
+            newton=STIFF,
+            reference=ref.u,
+            options=IterationOptions(accel="newton"),
+        )
         assert res.converged and res.transmission_residual < 1e-6
         errors[alpha] = res.e_u
     assert res.step.interface_problem(InterfaceNewtonOptions()).condensed.lowest_eigenvalue() > 0

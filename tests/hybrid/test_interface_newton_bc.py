@@ -37,8 +37,9 @@ def _mesh():
 
 
 def _model(gap: float = 0.5):
-    boundary = BoundaryConditions(displacement=lambda x: np.vstack([0.02 * x[1], -0.01 + 0.0 * x[0]]),
-                                  tractions={TOP: (0.5, -1.0)})
+    boundary = BoundaryConditions(
+        displacement=lambda x: np.vstack([0.02 * x[1], -0.01 + 0.0 * x[0]]), tractions={TOP: (0.5, -1.0)}
+    )
     return get_model(2, E_high=1e3).with_(boundary=boundary, obstacle=Plane((1.0 + gap, 0.5), (-1.0, 0.0)))
 
 
@@ -57,10 +58,12 @@ def test_primal_newton_with_displacement_traction_and_gap():
     active = ref.profile.active
     assert 0 < active.sum() < active.size  # the gap matters: partial contact
     step = PrimalHybridStep(model.on(cm), alpha=DEFAULT_ALPHA, delta=delta)
-    robin = solve_primal_hybrid(model.on(cm), delta=delta, step=step,
-                                options=IterationOptions(tol=TIGHT, max_iterations=3000))
-    newton = solve_primal_hybrid(model.on(cm), delta=delta, step=step,
-                                 options=IterationOptions(tol=TIGHT, accel="newton"))
+    robin = solve_primal_hybrid(
+        model.on(cm), delta=delta, step=step, options=IterationOptions(tol=TIGHT, max_iterations=3000)
+    )
+    newton = solve_primal_hybrid(
+        model.on(cm), delta=delta, step=step, options=IterationOptions(tol=TIGHT, accel="newton")
+    )
     assert robin.converged and newton.converged and newton.history.newton_steps <= 8
     assert _relative_l2(robin.u, newton.u) < 1e-8
     assert _relative_l2(ref.u, newton.u) < 1e-10  # Theorem 3.1: the monolithic solution
@@ -75,8 +78,13 @@ def test_certificate_with_boundary_data_refuses_a_wrong_answer(accel):
     cm, model = _mesh(), _model()
     delta = default_penalty(cm.h, 1.0)
     ref = solve_primal_monolithic(model.on(cm), delta=delta)
-    result = solve_primal_hybrid(model.on(cm), alpha=1e8, delta=delta, reference=ref.u,
-                                 options=IterationOptions(tol=1e-6, accel=accel, max_iterations=200))
+    result = solve_primal_hybrid(
+        model.on(cm),
+        alpha=1e8,
+        delta=delta,
+        reference=ref.u,
+        options=IterationOptions(tol=1e-6, accel=accel, max_iterations=200),
+    )
     assert not result.converged or result.e_u < 1e-5, (result.converged, result.e_u)
     if accel == "anderson":  # stalls far from the solution, and says so
         assert not result.converged and result.history.transmission_residual > 1e-2 and result.e_u > 0.1
@@ -94,8 +102,9 @@ def test_mixed_newton_with_displacement_traction_and_gap():
     step.prepare()
     robin = solve_mixed_hybrid(model.on(cm), step=step, reference=split, options=IterationOptions(tol=TIGHT))
     robin_fields = [f.copy() for f in step.glued()]
-    newton = solve_mixed_hybrid(model.on(cm), step=step, reference=split,
-                                options=IterationOptions(tol=TIGHT, accel="newton"))
+    newton = solve_mixed_hybrid(
+        model.on(cm), step=step, reference=split, options=IterationOptions(tol=TIGHT, accel="newton")
+    )
     assert robin.converged and newton.converged and newton.history.newton_steps <= 8
     assert newton.e_sigma < 1e-10 and newton.e_u < 1e-10  # the monolithic solution on X̃_h
     assert max(_relative_l2(a, b) for a, b in zip(robin_fields, step.glued())) < 1e-8
@@ -107,8 +116,9 @@ def test_load_steps_with_newton_and_a_moving_circle():
     cm = unit_square(16, 4, clamped=("left",))
     model = get_model(2, E_high=1e3).with_(obstacle=Circle((3.0, 0.5), 2.0))
     depths = [0.5, 1.0, 1.0]
-    newton = force_indentation(model.on(cm), "primal", depths, direction=(-1.0, 0.0),
-                               options=IterationOptions(tol=TIGHT, accel="newton"))
+    newton = force_indentation(
+        model.on(cm), "primal", depths, direction=(-1.0, 0.0), options=IterationOptions(tol=TIGHT, accel="newton")
+    )
     mono = force_indentation(model.on(cm), "primal-monolithic", depths, direction=(-1.0, 0.0))
     assert all(s.converged and s.iterations == 1 for s in newton.steps)
     assert np.allclose(newton.forces, mono.forces, rtol=1e-8, atol=0.0), (newton.forces, mono.forces)

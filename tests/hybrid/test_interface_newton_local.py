@@ -18,13 +18,12 @@
 
 import numpy as np
 import pytest
+from contact_problems import random_contact_problem
 
 from fenics_contact.errors import ConvergenceError, InputError
-from fenics_contact.hybrid.iteration import InterfaceNewtonOptions, IterationOptions, iterate
 from fenics_contact.hybrid.contact_newton import contact_newton, contact_solve
 from fenics_contact.hybrid.fronts import LocalFronts, contact_chains
-
-from contact_problems import random_contact_problem
+from fenics_contact.hybrid.iteration import InterfaceNewtonOptions, IterationOptions, iterate
 
 
 def test_local_problem_solves_the_window_equations_with_the_rest_held():
@@ -47,8 +46,11 @@ def test_local_problem_solves_the_window_equations_with_the_rest_held():
         outside[R] = False
     assert np.array_equal(trial[outside], active[outside])  # only the windows change
     for R in wins:  # on each window: μ_R = D_R s_R⁺ with s_R = r_R − M_RR μ_R, the rest's forces held
-        r = s_load[R] - M[np.ix_(R, np.flatnonzero(~np.isin(np.arange(s_load.size), R)))] @ mu[~np.isin(
-            np.arange(s_load.size), R)]
+        r = (
+            s_load[R]
+            - M[np.ix_(R, np.flatnonzero(~np.isin(np.arange(s_load.size), R)))]
+            @ mu[~np.isin(np.arange(s_load.size), R)]
+        )
         on = np.flatnonzero(trial[R])
         muR = np.zeros(R.size)
         muR[on] = np.linalg.solve(M[np.ix_(R[on], R[on])] + np.diag(1.0 / D[R[on]]), r[on])

@@ -2,9 +2,8 @@
 
 import numpy as np
 import pytest
-from mpi4py import MPI
-
 from dolfinx import mesh as dmesh
+from mpi4py import MPI
 
 from fenics_contact.errors import ConvergenceError, InputError, MeshTagError
 from fenics_contact.fem.contact import NewtonOptions
@@ -43,57 +42,114 @@ def _empty_tags(cm, dim):
 
 MISUSE = {
     # (call, error class, words of the message)
-    "zero load, Algorithm 1": (lambda cm, ref: solve_primal_hybrid(_zero_load(model_1()).on(cm), delta=1e-4),
-                               InputError, "body force"),
-    "zero load, Algorithm 3": (lambda cm, ref: solve_primal_ms_hybrid(_zero_load(model_1()).on(cm), delta=1e-4,
-                                                                      cem=CEMOptions(layers=1)),
-                               InputError, "body force"),
-    "zero load, Algorithm 2": (lambda cm, ref: solve_mixed_hybrid(_zero_load(model_1()).on(cm)), InputError,
-                               "body force"),
-    "reference on another mesh, Algorithm 1": (lambda cm, ref: solve_primal_hybrid(model_1().on(cm), delta=1e-4,
-                                                                                   reference=ref.u),
-                                               InputError, "another mesh"),
-    "reference on another mesh, Algorithm 3": (lambda cm, ref: solve_primal_ms_hybrid(model_1().on(cm), delta=1e-4,
-                                                                                      cem=CEMOptions(layers=1),
-                                                                                      reference=ref.u),
-                                               InputError, "another mesh"),
-    "reference not a Function": (lambda cm, ref: solve_primal_hybrid(model_1().on(cm), delta=1e-4, reference=ref),
-                                 InputError, "pass its .u"),
-    "mixed reference of the wrong kind": (lambda cm, ref: solve_mixed_hybrid(model_1().on(cm), reference=ref.u),
-                                          InputError, "solve_mixed_monolithic"),
-    "no cell tags": (lambda cm, ref: solve_primal_hybrid(model_1().on(cm._replace(cell_tags=_empty_tags(cm, 2))),
-                                                         delta=1e-4), MeshTagError, "Omega1"),
-    "no facet tags": (lambda cm, ref: solve_primal_hybrid(model_1().on(cm._replace(facet_tags=_empty_tags(cm, 1))),
-                                                          delta=1e-4), MeshTagError, "Gamma_D"),
-    "no facet tags, monolithic": (lambda cm, ref: solve_primal_monolithic(
-        model_1().on(cm._replace(facet_tags=_empty_tags(cm, 1))), delta=1e-4), MeshTagError, "Gamma_D"),
-    "cell tags as facet tags": (lambda cm, ref: solve_primal_monolithic(
-        model_1().on(cm._replace(facet_tags=cm.cell_tags)), delta=1e-4), MeshTagError, "dimension 1"),
-    "a dolfinx Mesh for a ContactMesh": (lambda cm, ref: solve_primal_hybrid(model_1().on(cm.mesh), delta=1e-4),
-                                         InputError, "ContactMesh"),
+    "zero load, Algorithm 1": (
+        lambda cm, ref: solve_primal_hybrid(_zero_load(model_1()).on(cm), delta=1e-4),
+        InputError,
+        "body force",
+    ),
+    "zero load, Algorithm 3": (
+        lambda cm, ref: solve_primal_ms_hybrid(_zero_load(model_1()).on(cm), delta=1e-4, cem=CEMOptions(layers=1)),
+        InputError,
+        "body force",
+    ),
+    "zero load, Algorithm 2": (
+        lambda cm, ref: solve_mixed_hybrid(_zero_load(model_1()).on(cm)),
+        InputError,
+        "body force",
+    ),
+    "reference on another mesh, Algorithm 1": (
+        lambda cm, ref: solve_primal_hybrid(model_1().on(cm), delta=1e-4, reference=ref.u),
+        InputError,
+        "another mesh",
+    ),
+    "reference on another mesh, Algorithm 3": (
+        lambda cm, ref: solve_primal_ms_hybrid(model_1().on(cm), delta=1e-4, cem=CEMOptions(layers=1), reference=ref.u),
+        InputError,
+        "another mesh",
+    ),
+    "reference not a Function": (
+        lambda cm, ref: solve_primal_hybrid(model_1().on(cm), delta=1e-4, reference=ref),
+        InputError,
+        "pass its .u",
+    ),
+    "mixed reference of the wrong kind": (
+        lambda cm, ref: solve_mixed_hybrid(model_1().on(cm), reference=ref.u),
+        InputError,
+        "solve_mixed_monolithic",
+    ),
+    "no cell tags": (
+        lambda cm, ref: solve_primal_hybrid(model_1().on(cm._replace(cell_tags=_empty_tags(cm, 2))), delta=1e-4),
+        MeshTagError,
+        "Omega1",
+    ),
+    "no facet tags": (
+        lambda cm, ref: solve_primal_hybrid(model_1().on(cm._replace(facet_tags=_empty_tags(cm, 1))), delta=1e-4),
+        MeshTagError,
+        "Gamma_D",
+    ),
+    "no facet tags, monolithic": (
+        lambda cm, ref: solve_primal_monolithic(model_1().on(cm._replace(facet_tags=_empty_tags(cm, 1))), delta=1e-4),
+        MeshTagError,
+        "Gamma_D",
+    ),
+    "cell tags as facet tags": (
+        lambda cm, ref: solve_primal_monolithic(model_1().on(cm._replace(facet_tags=cm.cell_tags)), delta=1e-4),
+        MeshTagError,
+        "dimension 1",
+    ),
+    "a dolfinx Mesh for a ContactMesh": (
+        lambda cm, ref: solve_primal_hybrid(model_1().on(cm.mesh), delta=1e-4),
+        InputError,
+        "ContactMesh",
+    ),
     "a model number for a model": (lambda cm, ref: solve_primal_hybrid(1, delta=1e-4), InputError, "ContactProblem"),
-    "options as a dict": (lambda cm, ref: solve_primal_hybrid(model_1().on(cm), delta=1e-4, options={"tol": 1e-3}),
-                          InputError, "IterationOptions"),
-    "Newton options as a dict": (lambda cm, ref: solve_mixed_hybrid(model_1().on(cm), newton={"rtol": 1e-3}),
-                                 InputError, "NewtonOptions"),
-    "delta = inf (contact switched off)": (lambda cm, ref: solve_primal_hybrid(model_1().on(cm), delta=float("inf")),
-                                           InputError, "primal penalty δ must be a finite number > 0"),
+    "options as a dict": (
+        lambda cm, ref: solve_primal_hybrid(model_1().on(cm), delta=1e-4, options={"tol": 1e-3}),
+        InputError,
+        "IterationOptions",
+    ),
+    "Newton options as a dict": (
+        lambda cm, ref: solve_mixed_hybrid(model_1().on(cm), newton={"rtol": 1e-3}),
+        InputError,
+        "NewtonOptions",
+    ),
+    "delta = inf (contact switched off)": (
+        lambda cm, ref: solve_primal_hybrid(model_1().on(cm), delta=float("inf")),
+        InputError,
+        "primal penalty δ must be a finite number > 0",
+    ),
     "delta as a string": (lambda cm, ref: solve_primal_hybrid(model_1().on(cm), delta="1e-4"), InputError, "penalty"),
-    "alpha as a list": (lambda cm, ref: solve_primal_hybrid(model_1().on(cm), delta=1e-4, alpha=[1, 2]),
-                        InputError, "transmission coefficient"),
+    "alpha as a list": (
+        lambda cm, ref: solve_primal_hybrid(model_1().on(cm), delta=1e-4, alpha=[1, 2]),
+        InputError,
+        "transmission coefficient",
+    ),
     "default_penalty with E = 0": (lambda cm, ref: default_penalty(0.1, 0.0), InputError, "default_penalty"),
-    "read_mesh with H = 0": (lambda cm, ref: read_mesh("meshes/unit_square_n16_H4.msh", H=0), InputError, "coarse size"),
+    "read_mesh with H = 0": (
+        lambda cm, ref: read_mesh("meshes/unit_square_n16_H4.msh", H=0),
+        InputError,
+        "coarse size",
+    ),
     "unit_square with a string": (lambda cm, ref: unit_square("16", 4), InputError, "1/h"),
     "max_iterations 2.5": (lambda cm, ref: IterationOptions(max_iterations=2.5), InputError, "integer"),
     "Newton max_iterations 0": (lambda cm, ref: NewtonOptions(max_iterations=0), InputError, "integer"),
     "pixel field of strings": (lambda cm, ref: pixel_field("abc"), InputError, "2D array"),
-    "E field of the wrong shape": (lambda cm, ref: material_fields(cm.mesh, model_1().with_(youngs_modulus=lambda x: 1.0)),
-                                   InputError, "must map points"),
-    "load of the wrong shape": (lambda cm, ref: material_fields(cm.mesh, model_1().with_(
-        load=lambda x: np.zeros(x.shape[1]))), InputError, "values of shape (2, N)"),
+    "E field of the wrong shape": (
+        lambda cm, ref: material_fields(cm.mesh, model_1().with_(youngs_modulus=lambda x: 1.0)),
+        InputError,
+        "must map points",
+    ),
+    "load of the wrong shape": (
+        lambda cm, ref: material_fields(cm.mesh, model_1().with_(load=lambda x: np.zeros(x.shape[1]))),
+        InputError,
+        "values of shape (2, N)",
+    ),
     "unknown model": (lambda cm, ref: get_model(4), InputError, "built-in models"),
-    "E = 1e308 (overflow)": (lambda cm, ref: solve_primal_hybrid(model_1(E_high=1e308).on(cm), delta=1e-4),
-                             InputError, "Rescale the units"),
+    "E = 1e308 (overflow)": (
+        lambda cm, ref: solve_primal_hybrid(model_1(E_high=1e308).on(cm), delta=1e-4),
+        InputError,
+        "Rescale the units",
+    ),
 }
 
 
@@ -114,8 +170,9 @@ def _backward_error(problem) -> float:
     return final / size
 
 
-@pytest.mark.parametrize("E_high, factor", [(1e3, 1e-3), (1e3, 1e-6), (1e3, 1e-9), (1e3, 1e-12), (1e8, 1e-3),
-                                            (1e12, 1e-3)])
+@pytest.mark.parametrize(
+    "E_high, factor", [(1e3, 1e-3), (1e3, 1e-6), (1e3, 1e-9), (1e3, 1e-12), (1e8, 1e-3), (1e12, 1e-3)]
+)
 def test_primal_newton_accepts_converged_solves_for_any_penalty_and_contrast(E_high, factor):
     """Model 3 (stiff channels through the strip up to Γ_C): δ = factor·h/E_C down to 1e-12, contrast up to 1e12.
 

@@ -10,7 +10,7 @@ distance to the standard Arnold–Winther solution falls with h.
 
 import numpy as np
 import pytest
-from dolfinx import mesh as dmesh
+from bent_interfaces import box_problem, zigzag_problem
 
 import fenics_contact as fc
 from fenics_contact.fem.mixed import solve_mixed_monolithic
@@ -20,7 +20,6 @@ from fenics_contact.multiscale.mixed import solve_mixed_ms_hybrid
 from fenics_contact.multiscale.mixed_cem.options import MixedCEMOptions
 from fenics_contact.problem.validation import interface_bends_of
 
-from bent_interfaces import box_problem, zigzag_problem
 
 @pytest.fixture(scope="module")
 def algorithm_2():
@@ -76,8 +75,9 @@ def test_algorithm_4_on_a_bent_interface_falls_with_the_layers():
     split = solve_mixed_monolithic(problem, split_interface=True)
     errors = []
     for m in (1, 2, 3):
-        result = solve_mixed_ms_hybrid(problem, cem=MixedCEMOptions(layers=m), reference=split,
-                                       options=IterationOptions(accel="newton", tol=1e-10))
+        result = solve_mixed_ms_hybrid(
+            problem, cem=MixedCEMOptions(layers=m), reference=split, options=IterationOptions(accel="newton", tol=1e-10)
+        )
         assert result.converged and result.history.residuals[-1] < 1e-10
         errors.append(result.e_sigma)
     assert errors[1] < 0.1 * errors[0], errors

@@ -6,11 +6,11 @@ Run from the repository root:  .venv/bin/python -m pytest tests/hybrid/test_mixe
 import numpy as np
 import pytest
 
-from fenics_contact.hybrid.iteration import IterationOptions
 from fenics_contact.errors import InputError
-from fenics_contact.problem.geometry import unit_square
 from fenics_contact.fem.mixed import solve_mixed_monolithic
+from fenics_contact.hybrid.iteration import IterationOptions
 from fenics_contact.hybrid.mixed import MixedHybridStep, solve_mixed_hybrid, transmission_coefficient
+from fenics_contact.problem.geometry import unit_square
 from fenics_contact.problem.models import get_model
 
 #: H = 1/16 (γ at x = 15/16, three cells of h = 1/32 from the heterogeneity; the loads act on x ≥ 15/16)
@@ -20,9 +20,7 @@ N_COARSE = 16
 def _incompressible(ratio, nu1, nu2):
     """Model 1 with E = ratio in the channels (E₂ = 1 elsewhere), ν₁ in the channels, ν₂ elsewhere."""
     pattern = get_model(1, E_high=2.0, E_low=1.0).youngs_modulus
-    return get_model(1, E_high=ratio, E_low=1.0).with_(
-        poisson_ratio=lambda x: np.where(pattern(x) > 1.5, nu1, nu2)
-    )
+    return get_model(1, E_high=ratio, E_low=1.0).with_(poisson_ratio=lambda x: np.where(pattern(x) > 1.5, nu1, nu2))
 
 
 @pytest.fixture(scope="module")
@@ -39,8 +37,10 @@ def mesh64():
 def references(mesh):
     """Per model at h = 1/32: the AW monolithic solution and the one on X̃_h (σ_tt split at the γ vertices)."""
     return {
-        m: (solve_mixed_monolithic(get_model(m).on(mesh)),
-            solve_mixed_monolithic(get_model(m).on(mesh), split_interface=True))
+        m: (
+            solve_mixed_monolithic(get_model(m).on(mesh)),
+            solve_mixed_monolithic(get_model(m).on(mesh), split_interface=True),
+        )
         for m in (1, 2)
     }
 
@@ -72,8 +72,12 @@ def test_fixed_point_is_the_split_monolithic_solution(mesh, references, number):
     """At tight tolerance the iterate is the monolithic solution on X̃_h to round-off, and its distance
     to the AW monolithic solution is exactly the X̃_h/X_h space difference."""
     aw, split = references[number]
-    res = solve_mixed_hybrid(get_model(number).on(mesh), beta="sqrt-h", reference=split,
-                             options=IterationOptions(tol=1e-11, accel="anderson"))
+    res = solve_mixed_hybrid(
+        get_model(number).on(mesh),
+        beta="sqrt-h",
+        reference=split,
+        options=IterationOptions(tol=1e-11, accel="anderson"),
+    )
     assert res.converged
     assert res.e_sigma < 1e-8 and res.e_u < 1e-8, (res.e_sigma, res.e_u)
     gap = _space_gap(mesh, get_model(number), aw, split)
@@ -109,8 +113,9 @@ def test_paper_tolerance_and_beta(mesh, references, number):
     aw, split = references[number]
     gap = _space_gap(mesh, get_model(number), aw, split)
     runs = {
-        beta: solve_mixed_hybrid(get_model(number).on(mesh), beta=beta, reference=split,
-                                 options=IterationOptions(tol=1e-6, accel="none"))
+        beta: solve_mixed_hybrid(
+            get_model(number).on(mesh), beta=beta, reference=split, options=IterationOptions(tol=1e-6, accel="none")
+        )
         for beta in (1.0, "sqrt-h")
     }
     for res in runs.values():
@@ -130,8 +135,12 @@ def test_paper_tolerance_and_beta(mesh, references, number):
 @pytest.mark.slow
 def test_paper_tolerance_against_the_aw_solution(mesh64, references64, number):
     """h = 1/64, β = √h, plain update, tolerance 1e-6: e_σ, e_u ≤ 1e-3 against the monolithic AW solution."""
-    res = solve_mixed_hybrid(get_model(number).on(mesh64), beta="sqrt-h", reference=references64[number],
-                             options=IterationOptions(tol=1e-6, accel="none"))
+    res = solve_mixed_hybrid(
+        get_model(number).on(mesh64),
+        beta="sqrt-h",
+        reference=references64[number],
+        options=IterationOptions(tol=1e-6, accel="none"),
+    )
     assert res.converged
     assert res.e_sigma <= 1e-3 and res.e_u <= 1e-3, (res.e_sigma, res.e_u)
 
@@ -140,10 +149,12 @@ def test_paper_tolerance_against_the_aw_solution(mesh64, references64, number):
 def test_anderson_acceleration(mesh, references):
     """Anderson on the interface data: same fixed point, fewer iterations than the plain update."""
     _, split = references[2]
-    plain = solve_mixed_hybrid(get_model(2).on(mesh), beta="sqrt-h", reference=split,
-                               options=IterationOptions(tol=1e-6, accel="none"))
-    anderson = solve_mixed_hybrid(get_model(2).on(mesh), beta="sqrt-h", reference=split,
-                                  options=IterationOptions(tol=1e-6, accel="anderson"))
+    plain = solve_mixed_hybrid(
+        get_model(2).on(mesh), beta="sqrt-h", reference=split, options=IterationOptions(tol=1e-6, accel="none")
+    )
+    anderson = solve_mixed_hybrid(
+        get_model(2).on(mesh), beta="sqrt-h", reference=split, options=IterationOptions(tol=1e-6, accel="anderson")
+    )
     assert anderson.converged and anderson.iterations < plain.iterations
     assert anderson.e_sigma < 1e-4 and anderson.e_u < 1e-4
 
@@ -155,8 +166,9 @@ def test_nearly_incompressible(mesh, nu1, nu2, ratio):
     e_σ, e_u ≤ 1e-4 against the exact fixed point (X̃_h)."""
     model = _incompressible(ratio, nu1, nu2)
     split = solve_mixed_monolithic(model.on(mesh), split_interface=True)
-    res = solve_mixed_hybrid(model.on(mesh), beta="sqrt-h", reference=split,
-                             options=IterationOptions(tol=1e-6, accel="none"))
+    res = solve_mixed_hybrid(
+        model.on(mesh), beta="sqrt-h", reference=split, options=IterationOptions(tol=1e-6, accel="none")
+    )
     assert res.converged
     assert res.e_sigma <= 1e-4 and res.e_u <= 1e-4, (res.e_sigma, res.e_u)
 
@@ -166,8 +178,9 @@ def test_nearly_incompressible_against_the_aw_solution(mesh64):
     """ν₁ = ν₂ = 0.4999 at h = 1/64: e_σ, e_u ≤ 1e-3 against the monolithic AW solution."""
     model = _incompressible(1.0, 0.4999, 0.4999)
     aw = solve_mixed_monolithic(model.on(mesh64))
-    res = solve_mixed_hybrid(model.on(mesh64), beta="sqrt-h", reference=aw,
-                             options=IterationOptions(tol=1e-6, accel="none"))
+    res = solve_mixed_hybrid(
+        model.on(mesh64), beta="sqrt-h", reference=aw, options=IterationOptions(tol=1e-6, accel="none")
+    )
     assert res.converged
     assert res.e_sigma <= 1e-3 and res.e_u <= 1e-3, (res.e_sigma, res.e_u)
 

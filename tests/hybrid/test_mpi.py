@@ -5,6 +5,7 @@ import pytest
 import ufl
 from dolfinx import fem
 from mpi4py import MPI
+from mpi_jobs import on_every_rank
 
 import fenics_contact  # noqa: F401  (imports dolfinx_solver first)
 from fenics_contact.fem.primal import default_penalty, solve_primal_monolithic
@@ -12,8 +13,6 @@ from fenics_contact.hybrid.iteration import IterationOptions
 from fenics_contact.hybrid.primal import solve_primal_hybrid
 from fenics_contact.problem.geometry import unit_square
 from fenics_contact.problem.models import get_model
-
-from mpi_jobs import on_every_rank
 
 pytestmark = pytest.mark.mpi
 
@@ -24,29 +23,36 @@ def _numbers(comm: MPI.Comm, n: int, n_coarse: int, model_number: int, accel: st
     problem = get_model(model_number).on(cm)
     delta = default_penalty(cm.h, 1e3 if model_number == 3 else 1.0)  # model 3: stiff channels reach Γ_C
     ref = solve_primal_monolithic(problem, delta=delta)
-    res = solve_primal_hybrid(problem, alpha="E", delta=delta, reference=ref.u,
-                              options=IterationOptions(tol=1e-8 if accel == "anderson" else 1e-10, accel=accel))
+    res = solve_primal_hybrid(
+        problem,
+        alpha="E",
+        delta=delta,
+        reference=ref.u,
+        options=IterationOptions(tol=1e-8 if accel == "anderson" else 1e-10, accel=accel),
+    )
 
     def norm(u):
         local = fem.assemble_scalar(fem.form(ufl.inner(u, u) * ufl.dx))
         return float(np.sqrt(comm.allreduce(local, op=MPI.SUM)))
 
-    return on_every_rank({
-        "ranks": comm.size,
-        "newton_steps": ref.newton.steps,
-        "active_sizes": ref.newton.active_sizes,
-        "ref_norm": norm(ref.u),
-        "hybrid_norm": norm(res.u),
-        "iterations": res.iterations,
-        "rel_changes": res.history.rel_changes.tolist(),
-        "residuals": res.history.residuals.tolist(),
-        "converged": res.converged,
-        "interface_newton_steps": res.history.newton_steps,
-        "e_u": res.e_u,
-        "active_set": res.profile.active_interval(),
-        "ref_active_set": ref.profile.active_interval(),
-        "sigma_c": ref.profile.sigma_c.tolist(),
-    })
+    return on_every_rank(
+        {
+            "ranks": comm.size,
+            "newton_steps": ref.newton.steps,
+            "active_sizes": ref.newton.active_sizes,
+            "ref_norm": norm(ref.u),
+            "hybrid_norm": norm(res.u),
+            "iterations": res.iterations,
+            "rel_changes": res.history.rel_changes.tolist(),
+            "residuals": res.history.residuals.tolist(),
+            "converged": res.converged,
+            "interface_newton_steps": res.history.newton_steps,
+            "e_u": res.e_u,
+            "active_set": res.profile.active_interval(),
+            "ref_active_set": ref.profile.active_interval(),
+            "sigma_c": ref.profile.sigma_c.tolist(),
+        }
+    )
 
 
 @pytest.mark.parametrize("model", [1, 2])

@@ -2,14 +2,13 @@
 across ranks) is the serial run: the same iterations, fixed point and force (the serial run on COMM_SELF)."""
 
 import pytest
+from bent_interfaces import zigzag_problem
 from mpi4py import MPI
+from mpi_jobs import on_every_rank
 
 from fenics_contact.fem.mixed import solve_mixed_monolithic
 from fenics_contact.hybrid.iteration import IterationOptions
 from fenics_contact.hybrid.mixed import solve_mixed_hybrid
-
-from bent_interfaces import zigzag_problem
-from mpi_jobs import on_every_rank
 
 pytestmark = pytest.mark.mpi
 
@@ -19,11 +18,18 @@ def _numbers(comm: MPI.Comm) -> dict:
     problem = zigzag_problem(16, comm=comm)
     split = solve_mixed_monolithic(problem, split_interface=True)
     result = solve_mixed_hybrid(problem, reference=split, options=IterationOptions(accel="anderson", tol=1e-10))
-    return on_every_rank({
-        "ranks": comm.size, "converged": bool(result.converged), "iterations": result.history.iterations,
-        "e_sigma": result.e_sigma, "e_u": result.e_u, "residual": float(result.history.residuals[-1]),
-        "force": float(result.profile.force), "force_split": float(split.profile.force),
-    })
+    return on_every_rank(
+        {
+            "ranks": comm.size,
+            "converged": bool(result.converged),
+            "iterations": result.history.iterations,
+            "e_sigma": result.e_sigma,
+            "e_u": result.e_u,
+            "residual": float(result.history.residuals[-1]),
+            "force": float(result.profile.force),
+            "force_split": float(split.profile.force),
+        }
+    )
 
 
 def test_algorithm_2_on_a_bent_interface_on_two_ranks_is_the_serial_run():

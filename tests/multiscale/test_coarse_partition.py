@@ -13,6 +13,7 @@ import gmsh
 import numpy as np
 import pytest
 from mpi4py import MPI
+from multiscale_layers import layer_errors
 
 import fenics_contact  # noqa: F401
 from fenics_contact.errors import InputError
@@ -22,7 +23,6 @@ from fenics_contact.multiscale import cem
 from fenics_contact.multiscale import primal as primal_ms
 from fenics_contact.problem import geometry, models
 from fenics_contact.problem.tags import Boundary, Subdomain
-from multiscale_layers import layer_errors
 
 pytestmark = pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="serial test (its MPI twin is in test_multiscale)")
 
@@ -75,17 +75,29 @@ def _write(tmp_path, fname, build) -> str:
 @pytest.fixture(scope="module")
 def l_shape(tmp_path_factory):
     """L-shape (0,1)² minus [1/2,1]×[1/2,1], h = 1/16; clamped on x = 0, contact on x = 1 (y < 1/2)."""
-    path = _write(tmp_path_factory.mktemp("lshape"), "l.msh", lambda: _structured_model(
-        [(0, 0.5, 0, 0.5), (0.5, 1, 0, 0.5), (0, 0.5, 0.5, 1)], 16,
-        contact=lambda m: abs(m[0] - 1) < 1e-9, dirichlet=lambda m: abs(m[0]) < 1e-9))
+    path = _write(
+        tmp_path_factory.mktemp("lshape"),
+        "l.msh",
+        lambda: _structured_model(
+            [(0, 0.5, 0, 0.5), (0.5, 1, 0, 0.5), (0, 0.5, 0.5, 1)],
+            16,
+            contact=lambda m: abs(m[0] - 1) < 1e-9,
+            dirichlet=lambda m: abs(m[0]) < 1e-9,
+        ),
+    )
     return geometry.read_mesh(path, H=1 / 8)
 
 
 @pytest.fixture(scope="module")
 def rectangle(tmp_path_factory):
     """Rectangle (0,2)×(0,1), h = 1/16; clamped on x = 0, contact on x = 2."""
-    path = _write(tmp_path_factory.mktemp("rect"), "r.msh", lambda: _structured_model(
-        [(0, 2, 0, 1)], 16, contact=lambda m: abs(m[0] - 2) < 1e-9, dirichlet=lambda m: abs(m[0]) < 1e-9))
+    path = _write(
+        tmp_path_factory.mktemp("rect"),
+        "r.msh",
+        lambda: _structured_model(
+            [(0, 2, 0, 1)], 16, contact=lambda m: abs(m[0] - 2) < 1e-9, dirichlet=lambda m: abs(m[0]) < 1e-9
+        ),
+    )
     return geometry.read_mesh(path, H=1 / 4)
 
 
@@ -101,6 +113,7 @@ MODEL = models.get_model(2).with_(load=_load)
 
 def _cell_area(cm, cells):
     from dolfinx import mesh as dmesh
+
     geo = dmesh.entities_to_geometry(cm.mesh, 2, cells.astype(np.int32))
     p = cm.mesh.geometry.x[geo][:, :, :2]
     d1, d2 = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]
@@ -115,6 +128,7 @@ def test_strip_built_along_contact_boundary(l_shape, rectangle):
     assert _cell_area(cm, cm.cell_tags.find(Subdomain.OMEGA1)) == pytest.approx(0.75 - 0.5 / 8)
     x = cm.mesh.geometry.x
     from dolfinx import mesh as dmesh
+
     gamma = dmesh.entities_to_geometry(cm.mesh, 1, cm.facet_tags.find(Boundary.INTERFACE))
     xg = x[gamma]
     # γ: the segment x = 7/8, 0 ≤ y ≤ 1/2 (the strip ends at the L-shape's boundary y = 1/2)
@@ -157,6 +171,7 @@ def test_unresolved_grid_is_refused(l_shape):
     """H = 1/6 does not fit the 1/16 fine grid: the multiscale Ω₁ refuses it with a clear InputError."""
     cm = l_shape
     from fenics_contact.problem.partition import cartesian_coarse_cells
+
     coarse, _ = cartesian_coarse_cells(cm.mesh, 1 / 6)
     assert np.any(coarse < 0)
     bad = cm._replace(H=1 / 6, coarse_cell=coarse.astype(np.int32))
@@ -215,9 +230,14 @@ def test_algorithm3_on_any_domain_matches_monolithic_with_all_modes(case, reques
     cm = request.getfixturevalue(case)
     delta = primal.default_penalty(cm.h, 1.0)
     ref = primal.solve_primal_monolithic(MODEL.on(cm), delta=delta)
-    res = primal_ms.solve_primal_ms_hybrid(MODEL.on(cm), alpha="Emin", delta=delta,
-                                           cem=cem.CEMOptions(layers=50, nbasis=None), reference=ref.u,
-                                           options=IterationOptions(tol=1e-11))
+    res = primal_ms.solve_primal_ms_hybrid(
+        MODEL.on(cm),
+        alpha="Emin",
+        delta=delta,
+        cem=cem.CEMOptions(layers=50, nbasis=None),
+        reference=ref.u,
+        options=IterationOptions(tol=1e-11),
+    )
     assert res.converged
     assert res.e_u < 1e-9 and res.step.error_energy() < 1e-8
 
@@ -237,7 +257,8 @@ def test_algorithm3_on_any_domain_error_falls_with_layers(case, request):
 def test_algorithm4_on_any_domain_error_falls_with_layers(case, request):
     """Algorithm 4 (mixed CEM Ω₁) on a user mesh: the L-shape (Cartesian grid over its bounding box, traction-free
     sides, the re-entrant corner in Ω₁) and the user partition of an unstructured mesh, loads in Ω₁ pushing and
-    pulling: converged, and e_σ against the fine monolithic mixed solution falls with the layers (measured at m = 1, 2, 3:
+    pulling: converged, and e_σ against the fine monolithic mixed solution falls with the layers (measured at m = 1,
+    2, 3:
     L-shape 0.25, 2.6e-2, 2.6e-3; user partition 0.51, 2.7e-2, 1.3e-3)."""
     from fenics_contact.fem.mixed import solve_mixed_monolithic
     from fenics_contact.multiscale.mixed import solve_mixed_ms_hybrid
@@ -247,8 +268,12 @@ def test_algorithm4_on_any_domain_error_falls_with_layers(case, request):
     ref = solve_mixed_monolithic(MODEL.on(cm))
     errors = []
     for layers in (1, 2, 3):
-        res = solve_mixed_ms_hybrid(MODEL.on(cm), cem=MixedCEMOptions(layers=layers), reference=ref,
-                                    options=IterationOptions(tol=1e-10, accel="newton"))
+        res = solve_mixed_ms_hybrid(
+            MODEL.on(cm),
+            cem=MixedCEMOptions(layers=layers),
+            reference=ref,
+            options=IterationOptions(tol=1e-10, accel="newton"),
+        )
         assert res.converged and res.history.transmission_residual < 1e-10
         errors.append(res.e_sigma)
     e = np.array(errors)

@@ -45,6 +45,7 @@ def test_composite_block_tags_coarse_grid_and_inclusions():
     fx = cm.mesh.geometry.x
     cm.mesh.topology.create_connectivity(1, 0)
     f2v = cm.mesh.topology.connectivity(1, 0)
+
     def on_contact(p):
         return np.all(np.abs(p[:, 1]) < 1e-12) and np.all(np.abs(p[:, 0]) <= 3 * a + 1e-12)
 

@@ -81,25 +81,33 @@ def test_primal_ms_curve_converges_with_layers_offline_once(monkeypatch):
     calls = _counting(monkeypatch, primal_ms, "Omega1Multiscale")
     errors = []
     for m in (1, 2, 3):
-        curve = force_indentation(model.on(cm), "primal-ms", DEPTHS, direction=DIRECTION, options=NEWTON,
-                                  cem=CEMOptions(layers=m))
+        curve = force_indentation(
+            model.on(cm), "primal-ms", DEPTHS, direction=DIRECTION, options=NEWTON, cem=CEMOptions(layers=m)
+        )
         assert len(calls) == m, "the Ω₁ offline phase runs once per curve, not once per step"
         _check_evidence(curve, penetration=1e-4, tension=1e-10)
         assert all(s.iterations == 1 and s.interface_newton_steps >= 1 for s in curve.steps)  # Newton, then T once
         errors.append(_relative_error(curve, fine))
-        print(f"m = {m}: force error {errors[-1]:.2e}, offline {curve.time_offline_s:.2f} s, steps "
-              + ", ".join(f"{s.time_s:.3f} s" for s in curve.steps))
+        print(
+            f"m = {m}: force error {errors[-1]:.2e}, offline {curve.time_offline_s:.2f} s, steps "
+            + ", ".join(f"{s.time_s:.3f} s" for s in curve.steps)
+        )
     # measured (h = 1/32, H = 1/8): 1.1, 7.3e-3, 2.0e-4
     assert errors[0] > 10 * errors[1] > 100 * errors[2] and errors[2] < 1e-3, errors
     # (b) the same step again: no offline work, warm Anderson starts from the previous data
-    again = force_indentation(model.on(cm), "primal-ms", [DEPTHS[-1], DEPTHS[-1]], direction=DIRECTION,
-                              options=IterationOptions(tol=TOL, accel="anderson"), step=curve.step)
+    again = force_indentation(
+        model.on(cm),
+        "primal-ms",
+        [DEPTHS[-1], DEPTHS[-1]],
+        direction=DIRECTION,
+        options=IterationOptions(tol=TOL, accel="anderson"),
+        step=curve.step,
+    )
     assert len(calls) == 3
     assert again.steps[0].force == pytest.approx(curve.steps[-1].force, rel=1e-6)
     assert again.steps[1].iterations <= 2 < again.steps[0].iterations  # warm start at the same depth
     assert all(s.interface_newton_steps == 0 for s in again.steps)  # Anderson
-    _check_evidence(again.__class__(again.method, again.direction, again.steps[:1]), penetration=1e-4,
-                    tension=1e-10)
+    _check_evidence(again.__class__(again.method, again.direction, again.steps[:1]), penetration=1e-4, tension=1e-10)
 
 
 @serial
@@ -113,21 +121,31 @@ def test_mixed_ms_curve_converges_with_layers_offline_once(monkeypatch):
     calls = _counting(monkeypatch, mixed_ms, "MixedMultiscaleOmega1")
     errors = []
     for m in (1, 2, 3):
-        curve = force_indentation(model.on(cm), "mixed-ms", DEPTHS, direction=DIRECTION, options=NEWTON,
-                                  cem=MixedCEMOptions(layers=m))
+        curve = force_indentation(
+            model.on(cm), "mixed-ms", DEPTHS, direction=DIRECTION, options=NEWTON, cem=MixedCEMOptions(layers=m)
+        )
         assert len(calls) == m, "the Ω₁ offline phase runs once per curve, not once per step"
         _check_evidence(curve, penetration=0.0, tension=1e-2)
         errors.append(_relative_error(curve, fine))
-        print(f"m = {m}: force error {errors[-1]:.2e}, offline {curve.time_offline_s:.2f} s, steps "
-              + ", ".join(f"{s.time_s:.3f} s" for s in curve.steps))
+        print(
+            f"m = {m}: force error {errors[-1]:.2e}, offline {curve.time_offline_s:.2f} s, steps "
+            + ", ".join(f"{s.time_s:.3f} s" for s in curve.steps)
+        )
     assert errors[0] > errors[1] > errors[2] and errors[2] < 0.1 * errors[0], errors
-    again = force_indentation(model.on(cm), "mixed-ms", DEPTHS[-1:], direction=DIRECTION, options=NEWTON,
-                              step=curve.step)
+    again = force_indentation(
+        model.on(cm), "mixed-ms", DEPTHS[-1:], direction=DIRECTION, options=NEWTON, step=curve.step
+    )
     assert len(calls) == 3
     assert again.forces[0] == pytest.approx(curve.forces[-1], rel=1e-8)
     # Anderson on the same step: the Newton forces up to the tolerance; a repeated depth restarts converged
-    anderson = force_indentation(model.on(cm), "mixed-ms", [DEPTHS[-1], DEPTHS[-1]], direction=DIRECTION,
-                                 options=IterationOptions(tol=TOL, accel="anderson"), step=curve.step)
+    anderson = force_indentation(
+        model.on(cm),
+        "mixed-ms",
+        [DEPTHS[-1], DEPTHS[-1]],
+        direction=DIRECTION,
+        options=IterationOptions(tol=TOL, accel="anderson"),
+        step=curve.step,
+    )
     assert len(calls) == 3
     assert anderson.steps[0].force == pytest.approx(curve.forces[-1], rel=1e-6)
     assert anderson.steps[1].iterations <= 2 < anderson.steps[0].iterations
@@ -158,14 +176,33 @@ def test_case_load_steps_multiscale_reuse_the_runs_offline_phase(tmp_path, monke
 
     from fenics_contact.cli import main
 
-    calls = {"primal-ms": _counting(monkeypatch, primal_ms, "Omega1Multiscale"),
-             "mixed-ms": _counting(monkeypatch, mixed_ms, "MixedMultiscaleOmega1")}
+    calls = {
+        "primal-ms": _counting(monkeypatch, primal_ms, "Omega1Multiscale"),
+        "mixed-ms": _counting(monkeypatch, mixed_ms, "MixedMultiscaleOmega1"),
+    }
     case = Path(__file__).parents[2] / "cases" / "composite.toml"
     curves = {}
     for method, layers in (("primal-ms", "3"), ("mixed-ms", "2")):
         out = tmp_path / method
-        assert main(["run", "--no-plots", "--case", str(case), "--method", method, "--layers", layers,
-                     "--tol", "1e-8", "--out", str(out)]) == 0
+        assert (
+            main(
+                [
+                    "run",
+                    "--no-plots",
+                    "--case",
+                    str(case),
+                    "--method",
+                    method,
+                    "--layers",
+                    layers,
+                    "--tol",
+                    "1e-8",
+                    "--out",
+                    str(out),
+                ]
+            )
+            == 0
+        )
         assert len(calls[method]) == 1
         s = json.loads((out / "summary.json").read_text())
         steps = curves[method] = s["force_indentation"]["steps"]

@@ -15,8 +15,8 @@ import fenics_contact  # noqa: F401  (must precede dolfinx)
 from fenics_contact.fem.mixed import solve_mixed_monolithic
 from fenics_contact.hybrid.iteration import IterationOptions
 from fenics_contact.hybrid.mixed import MixedHybridStep, solve_mixed_hybrid
-from fenics_contact.multiscale.coarse import coarse_grid
 from fenics_contact.multiscale import mixed_cem as mm
+from fenics_contact.multiscale.coarse import coarse_grid
 from fenics_contact.multiscale.mixed import essential_traction_facets, l2_stress_error, solve_mixed_ms_hybrid
 from fenics_contact.problem import geometry, models
 from fenics_contact.problem.boundary import BoundaryConditions
@@ -52,8 +52,7 @@ def test_full_space_reproduces_the_fine_problem_with_boundary_data():
     grid = coarse_grid(part.mesh, part.cell_map, cm.coarse_cell, cm.H)
     tf = essential_traction_facets(part.mesh, part.facet_tags)
     assert tf.size == 6 + 6  # bottom (free) and top (Γ_N) of Ω₁: 3/4 · 8 facets each
-    om = mm.MixedMultiscaleOmega1(sub, grid, mm.MixedCEMOptions(layers=3, nbasis=None), H=cm.H,
-                                  traction_free_facets=tf)
+    om = mm.MixedMultiscaleOmega1(sub, grid, mm.MixedCEMOptions(layers=3, nbasis=None), H=cm.H, traction_free_facets=tf)
     assert om.ops.has_boundary_data and om.lifting is not None
     g = np.random.default_rng(0).standard_normal(om.co.n_g)
     r, w = om.solve(g)
@@ -73,8 +72,13 @@ def test_without_source_correctors_boundary_data_warn(caplog):
     part = step.parts[0]
     grid = coarse_grid(part.mesh, part.cell_map, cm.coarse_cell, cm.H)
     with caplog.at_level(logging.WARNING, logger="fenics_contact.multiscale.mixed_cem"):
-        mm.MixedMultiscaleOmega1(step.sub[0], grid, mm.MixedCEMOptions(layers=1, source_correction=False), H=cm.H,
-                                 traction_free_facets=essential_traction_facets(part.mesh, part.facet_tags))
+        mm.MixedMultiscaleOmega1(
+            step.sub[0],
+            grid,
+            mm.MixedCEMOptions(layers=1, source_correction=False),
+            H=cm.H,
+            traction_free_facets=essential_traction_facets(part.mesh, part.facet_tags),
+        )
     assert "without source correctors" in caplog.text
 
 
@@ -88,8 +92,10 @@ def test_algorithm4_with_boundary_data_converges_to_algorithm2():
     ref = solve_mixed_monolithic(model.on(cm))
     alg2 = solve_mixed_hybrid(model.on(cm), reference=ref, options=NEWTON)
     assert alg2.converged and alg2.e_sigma < 1e-2  # the split-interface floor, O(h²): measured 3.2e-3
-    res = {m: solve_mixed_ms_hybrid(model.on(cm), cem=mm.MixedCEMOptions(layers=m), reference=ref,
-                                    options=NEWTON) for m in (1, 2, 3)}
+    res = {
+        m: solve_mixed_ms_hybrid(model.on(cm), cem=mm.MixedCEMOptions(layers=m), reference=ref, options=NEWTON)
+        for m in (1, 2, 3)
+    }
     assert all(r.converged for r in res.values())
     e = [res[m].e_sigma for m in (1, 2, 3)]
     assert e[1] < e[0] / 10, e
@@ -124,14 +130,17 @@ def test_cache_keeps_and_keys_the_boundary_data(tmp_path):
     cm = _mesh(8, 4)
     built = {}
     for name, t in (("a", (0.2, -0.5)), ("b", (0.2, -0.6))):
-        model = models.get_model(2).with_(boundary=BoundaryConditions(displacement=_data,
-                                                                      tractions={"Gamma_N_top": t}))
+        model = models.get_model(2).with_(boundary=BoundaryConditions(displacement=_data, tractions={"Gamma_N_top": t}))
         step = MixedHybridStep(model.on(cm), beta="sqrt-h")
         part = step.parts[0]
         grid = coarse_grid(part.mesh, part.cell_map, cm.coarse_cell, cm.H)
         tf = essential_traction_facets(part.mesh, part.facet_tags)
-        oms = [mm.MixedMultiscaleOmega1(step.sub[0], grid, mm.MixedCEMOptions(layers=1), H=cm.H, cache_dir=tmp_path,
-                                        traction_free_facets=tf) for _ in range(2)]
+        oms = [
+            mm.MixedMultiscaleOmega1(
+                step.sub[0], grid, mm.MixedCEMOptions(layers=1), H=cm.H, cache_dir=tmp_path, traction_free_facets=tf
+            )
+            for _ in range(2)
+        ]
         assert [om.cache_status for om in oms] == ["built", "loaded"]
         g = np.random.default_rng(3).standard_normal(oms[0].co.n_g)
         (r0, _), (r1, _) = oms[0].solve(g), oms[1].solve(g)

@@ -17,18 +17,18 @@ import pytest
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from mpi4py import MPI
+from multiscale_oracles import stage_two_reference
 
 import fenics_contact  # noqa: F401  (must precede dolfinx)
+from fenics_contact.errors import InputError
 from fenics_contact.fem import linalg
-from fenics_contact.problem import geometry, models
+from fenics_contact.hybrid.mixed import MixedHybridStep
+from fenics_contact.multiscale import mixed_cem as mm
 from fenics_contact.multiscale.cem.options import DEFAULT_S_FACTOR
 from fenics_contact.multiscale.coarse import coarse_grid
-from fenics_contact.multiscale import mixed_cem as mm
 from fenics_contact.multiscale.mixed_cem import omega1 as mixed_omega1
 from fenics_contact.multiscale.mixed_cem import skeleton
-from fenics_contact.errors import InputError
-from fenics_contact.hybrid.mixed import MixedHybridStep
-from multiscale_oracles import stage_two_reference
+from fenics_contact.problem import geometry, models
 
 pytestmark = pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="the mixed CEM offline phase is serial")
 
@@ -84,11 +84,13 @@ def _reference_basis(ops, topo, cells, space):
     v_bnd = np.flatnonzero((v_in > 0) & (v_in < topo.v_deg))
     e_int = np.flatnonzero((e_in > 0) & (e_in == topo.e_deg))
     e_bnd = np.flatnonzero((e_in == 1) & (topo.e_deg == 2))
-    inner = np.concatenate([
-        (3 * v_int[:, None] + np.arange(3)).ravel(),
-        (3 * topo.nv + 4 * e_int[:, None] + np.arange(4)).ravel(),
-        (3 * topo.nv + 4 * topo.ne + 3 * cells[:, None] + np.arange(3)).ravel(),
-    ])
+    inner = np.concatenate(
+        [
+            (3 * v_int[:, None] + np.arange(3)).ravel(),
+            (3 * topo.nv + 4 * e_int[:, None] + np.arange(4)).ravel(),
+            (3 * topo.nv + 4 * topo.ne + 3 * cells[:, None] + np.arange(3)).ravel(),
+        ]
+    )
     Pp = ops.P[mm.cell_rows(cells, 30)].tocsc()
     parts = [Pp[:, inner]]
     for v in v_bnd:
@@ -149,8 +151,12 @@ def test_omega1_unchanged_against_recorded_values(omega1):
     om = _build(omega1)
     g = np.random.default_rng(0).standard_normal(om.co.n_g)
     r, w = om.solve(g)
-    values = (om.stress_norm2(r, g), om.l2_norm2(w, g), om.m_norm2(om.fine_displacement_post(r, g)),
-              float(np.linalg.norm(om.trace(r, g))))
+    values = (
+        om.stress_norm2(r, g),
+        om.l2_norm2(w, g),
+        om.m_norm2(om.fine_displacement_post(r, g)),
+        float(np.linalg.norm(om.trace(r, g))),
+    )
     assert np.allclose(values, RECORDED_M1_L3, rtol=1e-10, atol=0)
     assert np.isclose(om.a_norm2(om.fine_stress(r, g)), values[0], rtol=1e-12)
 
@@ -225,11 +231,21 @@ def test_cache_key_covers_options_and_beta(omega1, tmp_path):
     assert other.cache_status == "built" and other.cache_path != base.cache_path
     sub = step.sub[0]
     key = mm.mixed_offline_key(sub, ops, grid, base.options, H=cm.H)
-    variants = [{"layers": 2}, {"nbasis": 2}, {"nbasis": None}, {"weight": "2mu"}, {"s_factor": 1.0},
-                {"min_gap": 0.5}, {"max_nbasis": 8}]
-    keys = {mm.mixed_offline_key(sub, ops, grid, mm.MixedCEMOptions(**{"layers": 1, "nbasis": 3, "min_gap": None, **v}),
-                                 H=cm.H)
-            for v in variants}
+    variants = [
+        {"layers": 2},
+        {"nbasis": 2},
+        {"nbasis": None},
+        {"weight": "2mu"},
+        {"s_factor": 1.0},
+        {"min_gap": 0.5},
+        {"max_nbasis": 8},
+    ]
+    keys = {
+        mm.mixed_offline_key(
+            sub, ops, grid, mm.MixedCEMOptions(**{"layers": 1, "nbasis": 3, "min_gap": None, **v}), H=cm.H
+        )
+        for v in variants
+    }
     assert len(keys) == len(variants) and key not in keys
     assert mm.mixed_offline_key(sub, ops, grid, base.options, H=0.5 * cm.H) != key
     # another β: another Ω₁ problem (Robin term), never the cached one
@@ -296,8 +312,9 @@ def _relative_difference(ops, dofs, a, b):
         if fa is None:
             continue
         assert np.array_equal(fa.coarse, fb.coarse) and np.array_equal(fa.index, fb.index)
-        diff = mm.PatchFunctions(fa.coarse, fa.index, [x - y for x, y in zip(fa.sigma, fb.sigma)],
-                                 [x - y for x, y in zip(fa.u, fb.u)])
+        diff = mm.PatchFunctions(
+            fa.coarse, fa.index, [x - y for x, y in zip(fa.sigma, fb.sigma)], [x - y for x, y in zip(fa.u, fb.u)]
+        )
         num = sum(np.array(_energy(ops, dofs, diff, j)) for j in range(fa.coarse.size))
         den = sum(np.array(_energy(ops, dofs, fa, j)) for j in range(fa.coarse.size))
         worst = max(worst, float(np.sqrt(num / den).max()))
@@ -349,12 +366,17 @@ def test_cell_blocks_read_off_the_csr_arrays():
     rng = np.random.default_rng(7)
     n, a, b = 6, 3, 4
     perm = rng.permutation(n * b)
-    layouts = [rng.permutation(n * a).reshape(n, a), a * rng.permutation(n)[:, None] + np.arange(a),
-               np.arange(n * a).reshape(n, a)]
+    layouts = [
+        rng.permutation(n * a).reshape(n, a),
+        a * rng.permutation(n)[:, None] + np.arange(a),
+        np.arange(n * a).reshape(n, a),
+    ]
     for cols, rows in ((c, r) for c in (np.arange(n * b).reshape(n, b), perm.reshape(n, b)) for r in layouts):
         blocks = rng.standard_normal((n, a, b))
-        A = sp.csr_matrix((blocks.ravel(), (np.repeat(rows, b, axis=1).ravel(), np.tile(cols, (1, a)).ravel())),
-                          shape=(n * a, n * b + 1))
+        A = sp.csr_matrix(
+            (blocks.ravel(), (np.repeat(rows, b, axis=1).ravel(), np.tile(cols, (1, a)).ravel())),
+            shape=(n * a, n * b + 1),
+        )
         got = mm.cell_blocks(A, rows, cols)
         assert np.array_equal(got, blocks)
         if rows is layouts[2] and np.all(np.diff(cols, axis=1) > 0):
@@ -392,8 +414,11 @@ def test_condensed_stage_two_equals_per_patch_lu(omega1):
     bfacets = dmesh.exterior_facet_indices(msh.topology)
     top = bfacets[np.isclose(dmesh.compute_midpoints(msh, 1, bfacets)[:, 1], 1.0)]
     rng = np.random.default_rng(3)
-    loaded = dataclasses.replace(ops, G=rng.standard_normal(ops.G.shape),  # f, and the stress-side load F
-                                 F=rng.standard_normal((ops.num_cells, 30)))  # of boundary data
+    loaded = dataclasses.replace(
+        ops,
+        G=rng.standard_normal(ops.G.shape),  # f, and the stress-side load F
+        F=rng.standard_normal((ops.num_cells, 30)),
+    )  # of boundary data
     dofs = mm.CoarseCellDofs.of(ops, grid)
     for tp in (topo, mm.Topology(msh, ops.num_aw, top)):
         aux = mm.stage_one(loaded, tp, grid, 3)
@@ -409,7 +434,8 @@ def test_back_substitution_with_and_without_the_kept_factors(omega1, monkeypatch
     """The back substitution of the condensed Stage II uses each coarse cell's LU kept from the condensation, up to
     ``KEEP_FACTORS_BYTES`` per rank, and assembles and factorizes the others again: the same bases and correctors
     (to the rounding of these saddle-point systems, 1e-10 as against one LU per patch above; measured 2.4e-13: a new
-    LU solves for M_II⁻¹ b_I as the condensation did) whether all, some or none are kept, with loads on every cell (the own right-hand sides)."""
+    LU solves for M_II⁻¹ b_I as the condensation did) whether all, some or none are kept, with loads on every cell
+    (the own right-hand sides)."""
     import dataclasses
 
     _, _, grid, ops, topo = omega1
@@ -456,13 +482,21 @@ def test_algorithm4_unchanged_by_the_condensed_stage_two(monkeypatch):
     from fenics_contact.multiscale.mixed import solve_mixed_ms_hybrid
 
     cm = geometry.unit_square(16, 4)
-    model = models.get_model(2).with_(load=models.band_load([(0.25, 0.875, 0.3, 0.7, 2.0), (0.5, 0.875, 0.7, 1.0, -1.0)]))
+    model = models.get_model(2).with_(
+        load=models.band_load([(0.25, 0.875, 0.3, 0.7, 2.0), (0.5, 0.875, 0.7, 1.0, -1.0)])
+    )
     ref = solve_mixed_monolithic(model.on(cm))
     runs = []
     for stage_two in (mm.stage_two, stage_two_reference):
         monkeypatch.setattr(mixed_omega1, "stage_two", stage_two)
-        runs.append(solve_mixed_ms_hybrid(model.on(cm), cem=mm.MixedCEMOptions(layers=2), reference=ref,
-                                          options=IterationOptions(tol=1e-10, max_iterations=400)))
+        runs.append(
+            solve_mixed_ms_hybrid(
+                model.on(cm),
+                cem=mm.MixedCEMOptions(layers=2),
+                reference=ref,
+                options=IterationOptions(tol=1e-10, max_iterations=400),
+            )
+        )
     new, old = runs
     assert new.converged and old.converged
     co_new, co_old = new.step.omega1.co, old.step.omega1.co

@@ -11,6 +11,7 @@ import time
 import numpy as np
 import pytest
 from mpi4py import MPI
+from mpi_jobs import on_every_rank, run_summary, serial_cli
 
 import fenics_contact  # noqa: F401  (imports dolfinx_solver first)
 from fenics_contact.cli import main
@@ -21,8 +22,6 @@ from fenics_contact.multiscale.mixed_cem import MixedCEMOptions
 from fenics_contact.multiscale.work import run_shared
 from fenics_contact.problem.geometry import unit_square
 from fenics_contact.problem.models import get_model
-
-from mpi_jobs import on_every_rank, run_summary, serial_cli
 
 pytestmark = pytest.mark.mpi
 
@@ -39,32 +38,43 @@ def _numbers(comm: MPI.Comm, n: int = 32, n_coarse: int = 8, layers: int = 2, ca
     cm = unit_square(n, n_coarse, comm=MPI.COMM_SELF)
     model = get_model(1).with_(load=band_load)
     ref = solve_mixed_monolithic(model.on(cm))
-    res = solve_mixed_ms_hybrid(model.on(cm), cem=MixedCEMOptions(layers=layers), reference=ref, offline_comm=comm,
-                                cache_dir=cache_dir, options=IterationOptions(tol=1e-8, accel="anderson"))
+    res = solve_mixed_ms_hybrid(
+        model.on(cm),
+        cem=MixedCEMOptions(layers=layers),
+        reference=ref,
+        offline_comm=comm,
+        cache_dir=cache_dir,
+        options=IterationOptions(tol=1e-8, accel="anderson"),
+    )
     om = res.step.omega1
     r, _ = om.solve(res.step.g12)
     P = res.step.sub[0].space.prolongation  # Ω₁'s AW space (its cells' nodal bases shared out over the ranks)
     same = comm.allgather(res.step.g12.copy())
-    return on_every_rank({
-        "ranks": comm.size,
-        "iterations": res.iterations,
-        "e_sigma": res.e_sigma,
-        "e_u_post": res.e_u_post,
-        "cache": om.cache_status,
-        "nbasis": list(om.nbasis_range),
-        "gap": om.spectral_gap,
-        "Gt_norm": float(np.linalg.norm(om.co.Gt)),
-        "stress_norm2": om.a_norm2(om.fine_stress(r, res.step.g12)),
-        "trace": om.response.trace(res.step.g12).tolist(),
-        "rel_changes": [float(x) for x in res.history.rel_changes],
-        "distributed": om.distributed,
-        "function_bytes": int(comm.allreduce(sum(f.nbytes for f in om.basis + om.corr if f is not None),
-                                             op=MPI.MAX)),
-        # the same on every rank, bit for bit
-        "P_sha1": comm.allgather(hashlib.sha1(P.data.tobytes() + P.indices.tobytes() + P.indptr.tobytes()).hexdigest()),
-        # every rank iterated to the same state
-        "ranks_agree": bool(all(np.array_equal(same[0], g) for g in same)),
-    })
+    return on_every_rank(
+        {
+            "ranks": comm.size,
+            "iterations": res.iterations,
+            "e_sigma": res.e_sigma,
+            "e_u_post": res.e_u_post,
+            "cache": om.cache_status,
+            "nbasis": list(om.nbasis_range),
+            "gap": om.spectral_gap,
+            "Gt_norm": float(np.linalg.norm(om.co.Gt)),
+            "stress_norm2": om.a_norm2(om.fine_stress(r, res.step.g12)),
+            "trace": om.response.trace(res.step.g12).tolist(),
+            "rel_changes": [float(x) for x in res.history.rel_changes],
+            "distributed": om.distributed,
+            "function_bytes": int(
+                comm.allreduce(sum(f.nbytes for f in om.basis + om.corr if f is not None), op=MPI.MAX)
+            ),
+            # the same on every rank, bit for bit
+            "P_sha1": comm.allgather(
+                hashlib.sha1(P.data.tobytes() + P.indices.tobytes() + P.indptr.tobytes()).hexdigest()
+            ),
+            # every rank iterated to the same state
+            "ranks_agree": bool(all(np.array_equal(same[0], g) for g in same)),
+        }
+    )
 
 
 @pytest.fixture(scope="module")
@@ -124,8 +134,9 @@ def test_balanced_sharing_gives_a_slower_rank_less():
     results = run_shared(cost, comm, "balance check", work, balanced=True, owner=owner)
     counts, everything = comm.allgather(len(done)), comm.allgather(sorted(done))
     equal = []
-    run_shared(np.ones(100), comm, "equal items", lambda i: equal.append(i) or time.sleep(0.01), balanced=True,
-               gather=False)
+    run_shared(
+        np.ones(100), comm, "equal items", lambda i: equal.append(i) or time.sleep(0.01), balanced=True, gather=False
+    )
     equal_counts = comm.allgather(len(equal))
     owned = on_every_rank(all(np.array_equal(np.flatnonzero(owner == r), everything[r]) for r in range(comm.size)))
     assert sorted(i for d in everything for i in d) == list(range(n))  # each item once

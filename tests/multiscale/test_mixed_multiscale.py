@@ -1,21 +1,21 @@
 """Mixed CEM-GMsFEM (Algorithm 4): local spaces, Stage I, π, reproduction of fine solutions, convergence."""
 
+import basix.ufl
 import numpy as np
 import pytest
 import scipy.sparse.linalg as spla
-
-import fenics_contact  # noqa: F401  (must precede dolfinx)
-import basix.ufl
 from dolfinx import fem
 from dolfinx import mesh as dmesh
-from fenics_contact.problem import geometry, models
-from fenics_contact.multiscale.coarse import coarse_grid
-from fenics_contact.multiscale import mixed_cem as mm
-from fenics_contact.hybrid.iteration import IterationOptions
+
+import fenics_contact  # noqa: F401  (must precede dolfinx)
 from fenics_contact.errors import InputError
 from fenics_contact.fem.mixed import solve_mixed_monolithic
+from fenics_contact.hybrid.iteration import IterationOptions
 from fenics_contact.hybrid.mixed import MixedHybridStep
+from fenics_contact.multiscale import mixed_cem as mm
+from fenics_contact.multiscale.coarse import coarse_grid
 from fenics_contact.multiscale.mixed import l2_stress_error, solve_mixed_ms_hybrid
+from fenics_contact.problem import geometry, models
 
 
 def _step_and_grid(cm, model):
@@ -135,8 +135,12 @@ def test_algorithm4_converges_and_error_falls_with_layers():
     ref = solve_mixed_monolithic(model.on(cm))
     errors = []
     for m in (1, 2):
-        res = solve_mixed_ms_hybrid(model.on(cm), cem=mm.MixedCEMOptions(layers=m, nbasis=3, min_gap=None),
-                                    reference=ref, options=IterationOptions(accel="none", max_iterations=400))
+        res = solve_mixed_ms_hybrid(
+            model.on(cm),
+            cem=mm.MixedCEMOptions(layers=m, nbasis=3, min_gap=None),
+            reference=ref,
+            options=IterationOptions(accel="none", max_iterations=400),
+        )
         assert res.converged
         assert res.dofs["X_ms"] == res.dofs["U_aux"] == 3 * 7 * 8
         assert res.time_online_s < res.time_offline_s
@@ -148,8 +152,6 @@ def test_algorithm4_converges_and_error_falls_with_layers():
     # measured (c = 3): e_σ = 0.18, 0.019 at m = 1, 2; the bounds leave room for round-off, not for a regression
     assert errors[0][0] < 0.25
     assert errors[1][0] < 0.03
-
-
 
 
 def _omega1_error(om, sub, g):
@@ -168,7 +170,9 @@ def test_source_correction_removes_the_load_floor():
     Ω₁ alone, h = 1/32, H = 1/8, l = 3, fine Robin solution with the same data g as reference.
     """
     cm = geometry.unit_square(32, 8)
-    model = models.get_model(1).with_(load=models.band_load([(0.5, 0.875, 0.0, 0.5, 1.0), (0.5, 0.875, 0.5, 1.0, -1.0)]))
+    model = models.get_model(1).with_(
+        load=models.band_load([(0.5, 0.875, 0.0, 0.5, 1.0), (0.5, 0.875, 0.5, 1.0, -1.0)])
+    )
     step, grid = _step_and_grid(cm, model)
     sub = step.sub[0]
     pts = sub.gamma_points
@@ -187,10 +191,16 @@ def test_source_correction_removes_the_load_floor():
 def test_load_only_in_omega1_is_iterated_to_the_reference():
     """f = 0 in Ω₂ and g⁰ = 0: the first Ω₂ solve is zero, yet the iteration must not stop there."""
     cm = geometry.unit_square(32, 8)
-    model = models.get_model(2).with_(load=models.band_load([(0.5, 0.875, 0.3, 0.7, 2.0), (0.5, 0.875, 0.7, 1.0, -1.0)]))
+    model = models.get_model(2).with_(
+        load=models.band_load([(0.5, 0.875, 0.3, 0.7, 2.0), (0.5, 0.875, 0.7, 1.0, -1.0)])
+    )
     ref = solve_mixed_monolithic(model.on(cm), split_interface=True)  # the fixed point of the fine splitting
-    res = solve_mixed_ms_hybrid(model.on(cm), cem=mm.MixedCEMOptions(layers=3), reference=ref,
-                                options=IterationOptions(tol=1e-9, accel="anderson", max_iterations=400))
+    res = solve_mixed_ms_hybrid(
+        model.on(cm),
+        cem=mm.MixedCEMOptions(layers=3),
+        reference=ref,
+        options=IterationOptions(tol=1e-9, accel="anderson", max_iterations=400),
+    )
     assert res.converged and res.iterations > 5
     assert res.e_sigma < 1e-2  # measured 3.9e-3 in 48 iterations (without the source correctors: 0.33)
 
@@ -304,8 +314,12 @@ def test_stage_one_keeps_whole_eigenvalue_clusters(omega1):
 
 @pytest.mark.parametrize(
     "nu, min_gap, warning",
-    [(0.3, None, None), (0.499, None, "decay slowly"), (0.499, mm.DEFAULT_MIN_GAP, None),
-     (0.4999, mm.DEFAULT_MIN_GAP, "was not reached")],
+    [
+        (0.3, None, None),
+        (0.499, None, "decay slowly"),
+        (0.499, mm.DEFAULT_MIN_GAP, None),
+        (0.4999, mm.DEFAULT_MIN_GAP, "was not reached"),
+    ],
 )
 def test_small_spectral_gap_is_reported(caplog, nu, min_gap, warning):
     """ν → ½ in Ω₁ makes Λ small: with a fixed l the user is warned that the layers converge slowly;
@@ -419,10 +433,12 @@ def test_traction_free_side_of_omega1(omega1):
     coef = spla.splu((P_tf.T @ P_tf).tocsc()).solve((P_tf.T @ L).toarray())
     assert np.abs(P_tf @ coef - L.toarray()).max() < 1e-10 * abs(L).max()
     # the constrained fine Robin problem, reproduced by the multiscale method with everything kept
-    fine = MixedSubproblem(msh, sub.facet_tags, sub.fields, epsilon=None, beta=sub.beta, prefix="tf_omega1_",
-                           space=space_tf)
-    om = mm.MixedMultiscaleOmega1(fine, grid, mm.MixedCEMOptions(layers=3, nbasis=None), H=cm.H,
-                                  traction_free_facets=top)
+    fine = MixedSubproblem(
+        msh, sub.facet_tags, sub.fields, epsilon=None, beta=sub.beta, prefix="tf_omega1_", space=space_tf
+    )
+    om = mm.MixedMultiscaleOmega1(
+        fine, grid, mm.MixedCEMOptions(layers=3, nbasis=None), H=cm.H, traction_free_facets=top
+    )
     g = np.random.default_rng(5).standard_normal(om.co.n_g)
     fine.solve(g)
     r, _ = om.solve(g)

@@ -15,19 +15,17 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 import scipy.linalg
+from mpi4py import MPI
+from multiscale_layers import layer_errors
 
 import fenics_contact  # noqa: F401  (imports dolfinx_solver first)
-from mpi4py import MPI
-
+from fenics_contact.errors import InputError
 from fenics_contact.fem import primal
+from fenics_contact.fem.primal import PrimalSubproblem
+from fenics_contact.hybrid.iteration import IterationOptions
 from fenics_contact.multiscale import cem
 from fenics_contact.multiscale import primal as primal_ms
 from fenics_contact.problem import geometry, models
-from fenics_contact.hybrid.iteration import IterationOptions
-from fenics_contact.errors import InputError
-from multiscale_layers import layer_errors
-from fenics_contact.fem.primal import PrimalSubproblem
-
 
 pytestmark = pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="Algorithm 3 is serial")
 
@@ -49,8 +47,7 @@ def mesh_32_8():
 @pytest.fixture(scope="module")
 def omega1_32_8(mesh_32_8):
     """Ω₁ of model 1 at h = 1/32, H = 1/8 with m = 2, l = 3."""
-    om, _, _ = cem.build_omega1_multiscale(models.get_model(1).on(mesh_32_8), cem=cem.CEMOptions(layers=2, nbasis=3)
-    )
+    om, _, _ = cem.build_omega1_multiscale(models.get_model(1).on(mesh_32_8), cem=cem.CEMOptions(layers=2, nbasis=3))
     return om
 
 
@@ -151,8 +148,9 @@ def test_basis_supported_in_patch(omega1_32_8):
 
 def _fine_robin_error(om: cem.Omega1Multiscale, g: np.ndarray) -> float:
     """Relative energy error of the multiscale Ω₁ Robin solution against an independent fine solve."""
-    fine = PrimalSubproblem(om.ops.V.mesh, om.facet_tags, om.fields, delta=None, alpha=om.alpha_fn,
-                            prefix="test_ms_fine_gap_", V=om.V)
+    fine = PrimalSubproblem(
+        om.ops.V.mesh, om.facet_tags, om.fields, delta=None, alpha=om.alpha_fn, prefix="test_ms_fine_gap_", V=om.V
+    )
     try:
         fine.g.x.array[:] = 0.0
         fine.g.x.array[om.ops.gamma] = g
@@ -170,8 +168,9 @@ def test_nearly_incompressible_omega1_is_reported(mesh_32_8, caplog):
     errors, gaps = {}, {}
     for nu in (0.35, 0.49):
         caplog.clear()
-        om, _, _ = cem.build_omega1_multiscale(models.get_model(1, nu=nu).on(mesh_32_8),
-                                               cem=cem.CEMOptions(layers=2, nbasis=3))
+        om, _, _ = cem.build_omega1_multiscale(
+            models.get_model(1, nu=nu).on(mesh_32_8), cem=cem.CEMOptions(layers=2, nbasis=3)
+        )
         assert om.nu_max == pytest.approx(nu)
         assert ("localize slowly" in caplog.text) == (nu > cem.NEARLY_INCOMPRESSIBLE)
         gaps[nu] = om.spectral_gap
@@ -185,15 +184,15 @@ def test_all_modes_reproduce_fine_robin_solution():
     """Patches = Ω₁ and every local mode kept: V_ms = V_h(Ω₁), so u₁ = w + Ng is the fine solution."""
     cm = geometry.unit_square(16, 4)
     model = models.get_model(1)
-    om, _, _ = cem.build_omega1_multiscale(model.on(cm), cem=cem.CEMOptions(layers=4, nbasis=cem.ALL_MODES)
-    )
+    om, _, _ = cem.build_omega1_multiscale(model.on(cm), cem=cem.CEMOptions(layers=4, nbasis=cem.ALL_MODES))
     assert om.solver.factor.rank == int(np.count_nonzero(om.ops.free))
     g = _robin_data(om)
     u_ms = om.solver.solve(g)
     # independent fine solve with DOLFINx/PETSc (PrimalSubproblem, MUMPS)
     part = om.ops.V.mesh
-    fine = PrimalSubproblem(part, om.facet_tags, om.fields, delta=None, alpha=om.alpha_fn,
-                            prefix="test_ms_fine_", V=om.V)
+    fine = PrimalSubproblem(
+        part, om.facet_tags, om.fields, delta=None, alpha=om.alpha_fn, prefix="test_ms_fine_", V=om.V
+    )
     fine.g.x.array[:] = 0.0
     fine.g.x.array[om.ops.gamma] = g
     fine.solve()
@@ -210,8 +209,12 @@ def test_algorithm3_full_space_matches_monolithic():
     delta = primal.default_penalty(cm.h, 1.0)
     ref = primal.solve_primal_monolithic(model.on(cm), delta=delta)
     res = primal_ms.solve_primal_ms_hybrid(
-        model.on(cm), alpha="Emin", delta=delta, cem=cem.CEMOptions(layers=4, nbasis=None), reference=ref.u,
-        options=IterationOptions(tol=1e-11)
+        model.on(cm),
+        alpha="Emin",
+        delta=delta,
+        cem=cem.CEMOptions(layers=4, nbasis=None),
+        reference=ref.u,
+        options=IterationOptions(tol=1e-11),
     )
     assert res.converged
     assert res.e_u < 1e-9
@@ -229,8 +232,9 @@ def test_algorithm3_error_decreases_with_layers(mesh_32_8, number, gain):
     ref = primal.solve_primal_monolithic(model.on(cm), delta=delta)
     errors = []
     for m in (1, 2, 3, 4):
-        res = primal_ms.solve_primal_ms_hybrid(model.on(cm), alpha="Emin", delta=delta,
-                                               cem=cem.CEMOptions(layers=m, nbasis=3), reference=ref.u)
+        res = primal_ms.solve_primal_ms_hybrid(
+            model.on(cm), alpha="Emin", delta=delta, cem=cem.CEMOptions(layers=m, nbasis=3), reference=ref.u
+        )
         assert res.converged and res.iterations < 200
         assert res.dofs["omega1_ms"] == 3 * 56
         assert res.time_offline_s > 0 and res.time_online_s > 0
@@ -281,12 +285,14 @@ def test_tractions_on_omega1_are_source_corrected():
     from fenics_contact.problem.boundary import BoundaryConditions
 
     cm = geometry.unit_square(32, 8, clamped=("left",), neumann={"top": "Gamma_N_top"})
-    model = models.get_model(1).with_(load=lambda x: np.zeros((2, x.shape[1])),
-                                      boundary=BoundaryConditions(tractions={"Gamma_N_top": (1.0, -0.5)}))
+    model = models.get_model(1).with_(
+        load=lambda x: np.zeros((2, x.shape[1])), boundary=BoundaryConditions(tractions={"Gamma_N_top": (1.0, -0.5)})
+    )
     delta = primal.default_penalty(cm.h, 1.0)
     # then a prescribed u_D on the left side too (its lifting, source-corrected with the traction): the same fall
-    clamped_to = model.with_(boundary=BoundaryConditions(displacement=(0.01, 0.0),
-                                                         tractions={"Gamma_N_top": (1.0, -0.5)}))
+    clamped_to = model.with_(
+        boundary=BoundaryConditions(displacement=(0.01, 0.0), tractions={"Gamma_N_top": (1.0, -0.5)})
+    )
     for case in (model, clamped_to):
         fine = solve_primal_hybrid(case.on(cm), delta=delta, options=IterationOptions(tol=1e-10))
         assert fine.converged
@@ -420,8 +426,9 @@ def test_threshold_limits_modes(omega1_32_8):
 def test_nbasis_as_float_and_a_cut_through_the_rigid_motions():
     """nbasis = 2.0 is 2 modes; cutting the triple zero of an interior cell (rigid motions) leaves Λ = 0, not
     a negative rounding value."""
-    om, _, _ = cem.build_omega1_multiscale(models.get_model(1).on(geometry.unit_square(16, 4)),
-                                           cem=cem.CEMOptions(layers=1, nbasis=2.0))
+    om, _, _ = cem.build_omega1_multiscale(
+        models.get_model(1).on(geometry.unit_square(16, 4)), cem=cem.CEMOptions(layers=1, nbasis=2.0)
+    )
     assert om.nbasis_range == (2, 2)
     assert np.all(om.space.aux.gaps >= 0.0) and om.spectral_gap == 0.0
 
@@ -449,7 +456,24 @@ def test_both_multiscale_methods_warn_about_few_layers(tmp_path, capsys, method)
 
     for m, expected in ((1, True), (2, False)):
         out = tmp_path / f"m{m}"
-        assert main(["run", "--h", "16", "--H", "4", "--method", method, "--layers", str(m), "--no-plots",
-                     "--out", str(out)]) == 0
+        assert (
+            main(
+                [
+                    "run",
+                    "--h",
+                    "16",
+                    "--H",
+                    "4",
+                    "--method",
+                    method,
+                    "--layers",
+                    str(m),
+                    "--no-plots",
+                    "--out",
+                    str(out),
+                ]
+            )
+            == 0
+        )
         printed = capsys.readouterr()
         assert (f"with m = {m} oversampling layer" in printed.out + printed.err) is expected, (method, m)

@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 from mpi4py import MPI
+from mpi_jobs import on_every_rank
 
 import fenics_contact  # noqa: F401  (imports dolfinx_solver first)
 from fenics_contact.fem.primal import default_penalty, solve_primal_monolithic
@@ -11,8 +12,6 @@ from fenics_contact.multiscale.cem import CEMOptions
 from fenics_contact.multiscale.primal import solve_primal_ms_hybrid
 from fenics_contact.problem.geometry import unit_square
 from fenics_contact.problem.models import get_model
-
-from mpi_jobs import on_every_rank
 
 pytestmark = pytest.mark.mpi
 
@@ -34,11 +33,18 @@ def _numbers(comm: MPI.Comm, n: int = 32, n_coarse: int = 8) -> dict:
     delta = default_penalty(cm.h, 1.0)
     ref = solve_primal_monolithic(problem, delta=delta)
     cem = CEMOptions(layers=2, nbasis=3)
-    res = solve_primal_ms_hybrid(problem, alpha="Emin", delta=delta, cem=cem, reference=ref.u,
-                                 options=IterationOptions(tol=1e-10, accel="anderson"))
+    res = solve_primal_ms_hybrid(
+        problem,
+        alpha="Emin",
+        delta=delta,
+        cem=cem,
+        reference=ref.u,
+        options=IterationOptions(tol=1e-10, accel="anderson"),
+    )
     # the interface Newton on the same step (Ω₁'s response from the coarse solver, gathered over the ranks)
-    newton = solve_primal_ms_hybrid(problem, alpha="Emin", delta=delta, cem=cem, step=res.step,
-                                    options=IterationOptions(tol=1e-10, accel="newton"))
+    newton = solve_primal_ms_hybrid(
+        problem, alpha="Emin", delta=delta, cem=cem, step=res.step, options=IterationOptions(tol=1e-10, accel="newton")
+    )
     scale = comm.allreduce(float(np.abs(res.u.x.array).max()), op=MPI.MAX)
     newton_vs_robin = comm.allreduce(float(np.abs(newton.u.x.array - res.u.x.array).max()), op=MPI.MAX) / scale
     V = res.u.function_space
@@ -47,20 +53,23 @@ def _numbers(comm: MPI.Comm, n: int = 32, n_coarse: int = 8) -> dict:
     us = np.concatenate(comm.allgather(res.u.x.array[: n_owned * bs].reshape(n_owned, bs)))
     key = np.round(xs * n).astype(np.int64)  # vertices of the uniform grid (h = 1/n)
     order = np.lexsort((key[:, 1], key[:, 0]))
-    return on_every_rank({
-        "ranks": comm.size,
-        "iterations": res.iterations,
-        "converged": bool(res.converged),
-        "e_u": res.e_u,
-        "e_a": res.step.error_energy(),
-        "rel_changes": res.history.rel_changes.tolist(),
-        "dim_ms": res.dofs["omega1_ms"],
-        "newton_converged": bool(newton.converged),
-        "newton_steps": newton.history.newton_steps,
-        "newton_vs_robin": newton_vs_robin,
-        "patches_here": comm.allgather(res.step.omega1.space.times["patches_here"]),
-        "x": xs[order], "u": us[order],
-    })
+    return on_every_rank(
+        {
+            "ranks": comm.size,
+            "iterations": res.iterations,
+            "converged": bool(res.converged),
+            "e_u": res.e_u,
+            "e_a": res.step.error_energy(),
+            "rel_changes": res.history.rel_changes.tolist(),
+            "dim_ms": res.dofs["omega1_ms"],
+            "newton_converged": bool(newton.converged),
+            "newton_steps": newton.history.newton_steps,
+            "newton_vs_robin": newton_vs_robin,
+            "patches_here": comm.allgather(res.step.omega1.space.times["patches_here"]),
+            "x": xs[order],
+            "u": us[order],
+        }
+    )
 
 
 def test_two_ranks_match_serial():

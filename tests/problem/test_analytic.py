@@ -30,7 +30,13 @@ from fenics_contact.multiscale.mixed import l2_stress_error, solve_mixed_ms_hybr
 from fenics_contact.multiscale.mixed_cem import MixedCEMOptions
 from fenics_contact.multiscale.primal import solve_primal_ms_hybrid
 from fenics_contact.problem.analytic import (
-    bar_model, bar_solution, hertz_errors, hertz_model, layered_displacement, layered_model, layered_pressure,
+    bar_model,
+    bar_solution,
+    hertz_errors,
+    hertz_model,
+    layered_displacement,
+    layered_model,
+    layered_pressure,
 )
 from fenics_contact.problem.geometry import unit_square
 from fenics_contact.problem.meshes import hertz_block
@@ -82,9 +88,12 @@ def test_bar_algorithm_3(f1):
     cm = unit_square(16, 4, clamped=("left",))
     delta = default_penalty(cm.h, 1.0)
     sol = solve_primal_monolithic(bar_model(f1).on(cm), delta=delta)
-    errors = [solve_primal_ms_hybrid(bar_model(f1).on(cm), alpha="Emin", delta=delta, cem=CEMOptions(layers=m),
-                                     reference=sol.u, options=TIGHT)
-              for m in (1, 2, 3)]
+    errors = [
+        solve_primal_ms_hybrid(
+            bar_model(f1).on(cm), alpha="Emin", delta=delta, cem=CEMOptions(layers=m), reference=sol.u, options=TIGHT
+        )
+        for m in (1, 2, 3)
+    ]
     assert all(r.converged for r in errors)
     e = [r.e_u for r in errors]
     assert e[0] < 5e-2 and e[0] / e[1] > 20 and e[2] < 1e-8, e
@@ -120,8 +129,10 @@ def test_bar_algorithm_4(f1):
     sol = solve_mixed_monolithic(bar_model(f1).on(cm))
     exact = bar_solution(f1, epsilon=sol.epsilon)
     s_ex, _ = _bar_exact(cm.mesh, exact)
-    res = [solve_mixed_ms_hybrid(bar_model(f1).on(cm), cem=MixedCEMOptions(layers=m), reference=sol,
-                                 options=NEWTON) for m in (1, 2, 3)]
+    res = [
+        solve_mixed_ms_hybrid(bar_model(f1).on(cm), cem=MixedCEMOptions(layers=m), reference=sol, options=NEWTON)
+        for m in (1, 2, 3)
+    ]
     assert all(r.converged for r in res)
     e = [r.e_sigma for r in res]
     # measured: 3.8e-2, 1.1e-3, 1e-13 (push); 4.0e-2, 1.7e-3, 2e-13 (pull)
@@ -136,9 +147,15 @@ def test_bar_algorithm_4(f1):
 BOUNDS, MODULI = [0.0, 6 / 16, 13 / 16, 1.0], [1.0, 1e3, 10.0]  # layers across γ (x = 3/4)
 
 
-@pytest.mark.parametrize("method", [
-    "primal-monolithic", "primal", pytest.param("mixed-monolithic", marks=serial), pytest.param("mixed", marks=serial),
-])
+@pytest.mark.parametrize(
+    "method",
+    [
+        "primal-monolithic",
+        "primal",
+        pytest.param("mixed-monolithic", marks=serial),
+        pytest.param("mixed", marks=serial),
+    ],
+)
 def test_layered_patch_force_indentation(method):
     """Exact to round-off up to the penalty: F(d) = d/(C + δ) (primal) or d/C (mixed) at every load step,
     σ_xx uniform, u_x piecewise linear; the steps reuse the factorizations and warm-start."""
@@ -178,8 +195,19 @@ def test_layered_patch_mixed_fields_exact():
     assert np.max(np.abs(s - [-p, 0.0, 0.0])) < 1e-9 * p  # contrast 10³: round-off ~1e-10
     u_ex = layered_displacement(BOUNDS, MODULI, p)
     X = ufl.SpatialCoordinate(cm.mesh)
-    u_ufl = ufl.as_vector([-p * ufl.conditional(ufl.lt(X[0], 6 / 16), X[0], ufl.conditional(
-        ufl.lt(X[0], 13 / 16), 6 / 16 + (X[0] - 6 / 16) / 1e3, 6 / 16 + 7 / 16e3 + (X[0] - 13 / 16) / 10.0)), 0.0])
+    u_ufl = ufl.as_vector(
+        [
+            -p
+            * ufl.conditional(
+                ufl.lt(X[0], 6 / 16),
+                X[0],
+                ufl.conditional(
+                    ufl.lt(X[0], 13 / 16), 6 / 16 + (X[0] - 6 / 16) / 1e3, 6 / 16 + 7 / 16e3 + (X[0] - 13 / 16) / 10.0
+                ),
+            ),
+            0.0,
+        ]
+    )
     assert abs(u_ex(np.array([[0.9], [0.0]]))[0] - (-p * (6 / 16 + 7 / 16e3 + 0.0875 / 10))) < 1e-15
     assert _l2(sol.u - u_ufl, cm.mesh) < 1e-9 * _l2(u_ufl, cm.mesh)  # DG P1 holds the piecewise-linear u
 
@@ -194,9 +222,12 @@ def test_layered_patch_algorithm_3():
     delta = default_penalty(cm.h, MODULI[-1])
     p = layered_pressure(BOUNDS, MODULI, d0, delta=delta)
     sol = solve_primal_monolithic(model.on(cm), delta=delta)
-    res = {m: solve_primal_ms_hybrid(model.on(cm), alpha="Emin", delta=delta, cem=CEMOptions(layers=m),
-                                     reference=sol.u, options=NEWTON)
-           for m in (2, 3)}
+    res = {
+        m: solve_primal_ms_hybrid(
+            model.on(cm), alpha="Emin", delta=delta, cem=CEMOptions(layers=m), reference=sol.u, options=NEWTON
+        )
+        for m in (2, 3)
+    }
     assert all(r.converged for r in res.values())
     force = {m: abs(r.profile.force / p - 1) for m, r in res.items()}
     assert force[2] < 0.05 and force[3] < 1e-10, force  # measured 2.0e-2, 2e-14
@@ -216,8 +247,10 @@ def test_layered_patch_algorithm_4():
     model = layered_model(BOUNDS, MODULI, depth=d0)
     p = layered_pressure(BOUNDS, MODULI, d0)
     sol = solve_mixed_monolithic(model.on(cm))
-    res = {m: solve_mixed_ms_hybrid(model.on(cm), cem=MixedCEMOptions(layers=m), reference=sol,
-                                    options=NEWTON) for m in (2, 3)}
+    res = {
+        m: solve_mixed_ms_hybrid(model.on(cm), cem=MixedCEMOptions(layers=m), reference=sol, options=NEWTON)
+        for m in (2, 3)
+    }
     assert all(r.converged for r in res.values())
     assert res[3].e_sigma < 1e-8 < res[2].e_sigma < 0.2  # measured 3e-10, 0.10
     assert abs(res[3].profile.force / p - 1) < 1e-10
@@ -295,9 +328,12 @@ def test_hertz_algorithm_3():
     delta = default_penalty(cm.h, E)
     sol = solve_primal_monolithic(model.on(cm), delta=delta)
     fine = hertz_errors(sol.profile, radius=R, E=E, nu=NU, h_contact=spec.h_contact)
-    res = {m: solve_primal_ms_hybrid(model.on(cm), alpha="Emin", delta=delta, cem=CEMOptions(layers=m),
-                                     reference=sol.u, options=NEWTON)
-           for m in (1, 2)}
+    res = {
+        m: solve_primal_ms_hybrid(
+            model.on(cm), alpha="Emin", delta=delta, cem=CEMOptions(layers=m), reference=sol.u, options=NEWTON
+        )
+        for m in (1, 2)
+    }
     assert all(r.converged for r in res.values())
     assert res[2].e_u < res[1].e_u / 10 and res[2].e_u < 1e-2, (res[1].e_u, res[2].e_u)
     errors = hertz_errors(res[2].profile, radius=R, E=E, nu=NU, h_contact=spec.h_contact)
@@ -312,8 +348,10 @@ def test_hertz_algorithm_4(hertz_mixed):
     jagged boundaries): e_σ against the mixed monolithic solve falls ≥ 10× per layer (0.13, 0.012); from m = 2 on
     the Hertz bounds hold (measured peak 0.04 %, L² 0.20 %; the fine solve 0.04 %, 0.38 %)."""
     cm, spec, model, sol = hertz_mixed
-    res = {m: solve_mixed_ms_hybrid(model.on(cm), cem=MixedCEMOptions(layers=m), reference=sol,
-                                    options=NEWTON) for m in (1, 2)}
+    res = {
+        m: solve_mixed_ms_hybrid(model.on(cm), cem=MixedCEMOptions(layers=m), reference=sol, options=NEWTON)
+        for m in (1, 2)
+    }
     assert all(r.converged for r in res.values())
     assert res[2].e_sigma < res[1].e_sigma / 10 and res[2].e_sigma < 0.05, (res[1].e_sigma, res[2].e_sigma)
     errors = hertz_errors(res[2].profile, radius=R, E=E, nu=NU, h_contact=spec.h_contact)

@@ -13,6 +13,9 @@ import numpy as np
 import pytest
 import ufl
 from dolfinx import fem
+from manufactured import LAM, MU, E, manufactured_model
+from manufactured import manufactured_mesh as _mesh
+from manufactured import stress as _sigma
 from mpi4py import MPI
 
 import fenics_contact  # noqa: F401
@@ -28,13 +31,18 @@ from fenics_contact.problem.boundary import BoundaryConditions, check_boundary_g
 from fenics_contact.problem.geometry import build_unit_square_model, gmsh_session, read_mesh, unit_square
 from fenics_contact.problem.tags import neumann_tag
 
-from manufactured import E, LAM, MU, manufactured_mesh as _mesh, manufactured_model, stress as _sigma
-
 serial = pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="mixed (Arnold–Winther) methods are serial")
 
+
 def _l2(expr, msh):
-    return np.sqrt(msh.comm.allreduce(fem.assemble_scalar(fem.form(ufl.inner(expr, expr) * ufl.dx(
-        domain=msh, metadata={"quadrature_degree": 8}))), op=MPI.SUM))
+    return np.sqrt(
+        msh.comm.allreduce(
+            fem.assemble_scalar(
+                fem.form(ufl.inner(expr, expr) * ufl.dx(domain=msh, metadata={"quadrature_degree": 8}))
+            ),
+            op=MPI.SUM,
+        )
+    )
 
 
 def _exact_u(msh):
@@ -57,8 +65,9 @@ def test_primal_manufactured_rate_and_algorithm_1():
         assert np.all(sol.profile.active)  # the whole of Γ_C is in contact
         errors.append(_l2(sol.u - _exact_u(cm.mesh), cm.mesh) / _l2(_exact_u(cm.mesh), cm.mesh))
     assert errors[1] < 2e-3 and np.log2(errors[0] / errors[1]) > 1.8, errors
-    hybrid = solve_primal_hybrid(manufactured_model().on(cm), delta=delta, reference=sol.u,
-                                 options=IterationOptions(tol=1e-10))
+    hybrid = solve_primal_hybrid(
+        manufactured_model().on(cm), delta=delta, reference=sol.u, options=IterationOptions(tol=1e-10)
+    )
     assert hybrid.converged and hybrid.e_u < 1e-8
 
 
@@ -108,8 +117,9 @@ def test_bad_boundary_input(tmp_path):
     cm = unit_square(4, 2, clamped=("left",), neumann={"top": "Gamma_N_top"})
     assert cm.neumann_names == {neumann_tag("Gamma_N_top"): "Gamma_N_top"}
     with pytest.raises(MeshTagError, match="'Gamma_N_side'"):
-        check_boundary_groups(cm.mesh, cm.facet_tags, BoundaryConditions(
-            tractions={"Gamma_N_top": (0, 1), "Gamma_N_side": (1, 0)}))
+        check_boundary_groups(
+            cm.mesh, cm.facet_tags, BoundaryConditions(tractions={"Gamma_N_top": (0, 1), "Gamma_N_side": (1, 0)})
+        )
     with pytest.raises(InputError, match="Gamma_N_top.*no traction"):
         check_boundary_groups(cm.mesh, cm.facet_tags, BoundaryConditions(), names=cm.neumann_names)
     # a Gamma_N group overlapping Gamma_D in a user's file
@@ -144,15 +154,26 @@ def test_algorithm_3_takes_a_prescribed_displacement():
     assert alg1.converged and alg1.e_u < 1e-8
     errors = []
     for m in (1, 2, 3):
-        res = solve_primal_ms_hybrid(model.on(cm), alpha="Emin", delta=delta, cem=CEMOptions(layers=m, nbasis=3),
-                                     reference=mono.u, options=options)
+        res = solve_primal_ms_hybrid(
+            model.on(cm),
+            alpha="Emin",
+            delta=delta,
+            cem=CEMOptions(layers=m, nbasis=3),
+            reference=mono.u,
+            options=options,
+        )
         assert res.converged
         errors.append(res.e_u)
     print("Algorithm 3 with u_D, e_u for m = 1, 2, 3:", errors)
     assert errors[2] < 1e-6 and errors[1] < errors[0] / 5 and errors[2] < errors[1] / 5, errors
     exact = _l2(_exact_u(cm.mesh), cm.mesh)
     assert _l2(mono.u - _exact_u(cm.mesh), cm.mesh) / exact < 2e-3
-    clamped = solve_primal_ms_hybrid(model.with_(boundary=BoundaryConditions(tractions=dict(
-        model.boundary.tractions))).on(cm), alpha="Emin", delta=delta, cem=CEMOptions(layers=3, nbasis=3),
-        reference=mono.u, options=options)
+    clamped = solve_primal_ms_hybrid(
+        model.with_(boundary=BoundaryConditions(tractions=dict(model.boundary.tractions))).on(cm),
+        alpha="Emin",
+        delta=delta,
+        cem=CEMOptions(layers=3, nbasis=3),
+        reference=mono.u,
+        options=options,
+    )
     assert clamped.e_u > 1e-2  # u_D matters: dropping it is not a small error

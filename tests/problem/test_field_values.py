@@ -8,13 +8,16 @@ import fenics_contact as fc
 from fenics_contact.errors import InputError
 
 
-@pytest.mark.parametrize("load, message", [
-    (lambda x: np.ones((2, x.shape[1] - 100)), "values of shape (2, N), got shape (2, 28) for N = 128"),
-    (lambda x: np.ones(x.shape[1]), "values of shape (2, N), got shape (128,)"),
-    (lambda x: np.full((2, x.shape[1]), np.inf), "is not finite at 256 value(s)"),
-    (lambda x: 1 / 0, "raised ZeroDivisionError"),
-    (lambda x: np.ones((2, x.shape[1])) * (1 + 1j), "must give real numbers"),
-])
+@pytest.mark.parametrize(
+    "load, message",
+    [
+        (lambda x: np.ones((2, x.shape[1] - 100)), "values of shape (2, N), got shape (2, 28) for N = 128"),
+        (lambda x: np.ones(x.shape[1]), "values of shape (2, N), got shape (128,)"),
+        (lambda x: np.full((2, x.shape[1]), np.inf), "is not finite at 256 value(s)"),
+        (lambda x: 1 / 0, "raised ZeroDivisionError"),
+        (lambda x: np.ones((2, x.shape[1])) * (1 + 1j), "must give real numbers"),
+    ],
+)
 def test_a_bad_body_force_is_refused(load, message):
     cm = fc.unit_square(8, 2)
     with pytest.raises(InputError, match="the field f") as error:
@@ -37,9 +40,11 @@ def test_a_pixel_map_that_does_not_cover_the_mesh_is_refused(tmp_path, capsys):
 
     np.save(tmp_path / "E.npy", np.ones((4, 4)))
     case = tmp_path / "half.toml"
-    case.write_text('[mesh]\nbuiltin = "unit-square"\nh = 8\nH = 2\nclamped = ["left"]\n'
-                    '[material]\nE = {pixels = "E.npy", extent = [0.0, 0.5, 0.0, 1.0]}\nnu = 0.3\n'
-                    '[load]\nbody-force = [1.0, 0.0]\n')
+    case.write_text(
+        '[mesh]\nbuiltin = "unit-square"\nh = 8\nH = 2\nclamped = ["left"]\n'
+        '[material]\nE = {pixels = "E.npy", extent = [0.0, 0.5, 0.0, 1.0]}\nnu = 0.3\n'
+        "[load]\nbody-force = [1.0, 0.0]\n"
+    )
     assert main(["run", "--case", str(case), "--no-plots", "--out", str(tmp_path / "out")]) == 2
     assert "covers x in [0, 0.5], y in [0, 1], but the mesh spans x in [0, 1]" in capsys.readouterr().err
     assert not (tmp_path / "out").exists()
@@ -50,8 +55,10 @@ def test_a_case_file_with_a_byte_order_mark_reads_and_a_subnormal_modulus_is_ref
     as > 0 and end in NaN: a Young's modulus of 1e-320 is refused with the smallest normal number named."""
     from fenics_contact.problem.case import load_case
 
-    text = ('[mesh]\nbuiltin = "unit-square"\nh = 8\nH = 2\nclamped = ["left"]\n[material]\nE = 1.0\nnu = 0.3\n'
-            '[load]\nbody-force = [1.0, 0.0]\n')
+    text = (
+        '[mesh]\nbuiltin = "unit-square"\nh = 8\nH = 2\nclamped = ["left"]\n[material]\nE = 1.0\nnu = 0.3\n'
+        "[load]\nbody-force = [1.0, 0.0]\n"
+    )
     (tmp_path / "bom.toml").write_bytes(b"\xef\xbb\xbf" + text.encode())
     (tmp_path / "plain.toml").write_text(text)
     assert load_case(tmp_path / "bom.toml").to_dict()["mesh"] == load_case(tmp_path / "plain.toml").to_dict()["mesh"]

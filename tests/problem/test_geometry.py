@@ -3,17 +3,16 @@
 import gmsh
 import numpy as np
 import pytest
+from dolfinx import fem
 from mpi4py import MPI
 
-from dolfinx import fem
-
 from fenics_contact.errors import InputError, MeshTagError
+from fenics_contact.fem.primal import default_penalty, solve_primal_monolithic
+from fenics_contact.hybrid.transmission import split_mesh
 from fenics_contact.problem.fields import material_fields
 from fenics_contact.problem.geometry import build_unit_square_model, gmsh_session, read_mesh, unit_square
 from fenics_contact.problem.models import model_2
-from fenics_contact.fem.primal import default_penalty, solve_primal_monolithic
 from fenics_contact.problem.tags import PHYSICAL_NAMES, Boundary, Subdomain
-from fenics_contact.hybrid.transmission import split_mesh
 
 
 def _count(tags, value, comm):
@@ -52,7 +51,9 @@ def test_submesh_transfer_maps_matching_points():
     assert np.allclose(space.coordinates[:, 0], 0.75)
 
 
-@pytest.mark.parametrize("n, N, message", [(16, 3, "multiple"), (16, 1, "room"), (3.5, 2, "integer"), (1, 1, "integer")])
+@pytest.mark.parametrize(
+    "n, N, message", [(16, 3, "multiple"), (16, 1, "room"), (3.5, 2, "integer"), (1, 1, "integer")]
+)
 def test_bad_sizes(n, N, message):
     with pytest.raises(InputError, match=message):
         unit_square(n, N)
@@ -62,8 +63,10 @@ def _write_msh(path, *, drop=None, offset=100):
     """The built-in model written as a .msh with other tag integers (and optionally a group dropped)."""
     with gmsh_session():
         build_unit_square_model(8, 4)
-        groups = [(d, t, gmsh.model.getPhysicalName(d, t), gmsh.model.getEntitiesForPhysicalGroup(d, t))
-                  for d, t in gmsh.model.getPhysicalGroups()]
+        groups = [
+            (d, t, gmsh.model.getPhysicalName(d, t), gmsh.model.getEntitiesForPhysicalGroup(d, t))
+            for d, t in gmsh.model.getPhysicalGroups()
+        ]
         gmsh.model.removePhysicalGroups()
         for _, _, name, _ in groups:
             gmsh.model.removePhysicalName(name)

@@ -27,7 +27,23 @@ def test_a_hertz_block_refined_beyond_memory_is_refused_and_the_default_estimate
 
 
 def test_the_command_line_refuses_it_with_exit_2():
-    run = subprocess.run([sys.executable, "-m", "fenics_contact.launch", "run", "--case", "cases/bar.toml", "--set",
-                          "mesh.h=20000", "--no-plots", "--out", "unused"], capture_output=True, text=True,
-                         timeout=120, cwd=fc.__path__[0] + "/..")
+    run = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "fenics_contact.launch",
+            "run",
+            "--case",
+            "cases/bar.toml",
+            "--set",
+            "mesh.h=20000",
+            "--no-plots",
+            "--out",
+            "unused",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        cwd=fc.__path__[0] + "/..",
+    )
     assert run.returncode == 2 and "choose a coarser mesh" in run.stderr, run.stderr

@@ -4,7 +4,9 @@ cylinder with a moving obstacle (load steps); the serial answer is the same comp
 
 import numpy as np
 import pytest
+from manufactured import manufactured_mesh, manufactured_model
 from mpi4py import MPI
+from mpi_jobs import on_every_rank
 
 import fenics_contact  # noqa: F401  (imports dolfinx_solver first)
 from fenics_contact.fem.primal import default_penalty, solve_primal_monolithic
@@ -15,9 +17,6 @@ from fenics_contact.problem.analytic import hertz_model, layered_model
 from fenics_contact.problem.geometry import unit_square
 from fenics_contact.problem.meshes import hertz_block
 
-from manufactured import manufactured_mesh, manufactured_model
-from mpi_jobs import on_every_rank
-
 pytestmark = pytest.mark.mpi
 
 
@@ -26,25 +25,30 @@ def _numbers(comm: MPI.Comm) -> dict:
     model = manufactured_model()
     delta = default_penalty(cm.h, 1.0)
     ref = solve_primal_monolithic(model.on(cm), delta=delta)
-    alg1 = solve_primal_hybrid(model.on(cm), delta=delta, reference=ref.u,
-                               options=IterationOptions(tol=1e-10, accel="anderson"))
-    newton = solve_primal_hybrid(model.on(cm), delta=delta, reference=ref.u,
-                                 options=IterationOptions(tol=1e-10, accel="newton"))
+    alg1 = solve_primal_hybrid(
+        model.on(cm), delta=delta, reference=ref.u, options=IterationOptions(tol=1e-10, accel="anderson")
+    )
+    newton = solve_primal_hybrid(
+        model.on(cm), delta=delta, reference=ref.u, options=IterationOptions(tol=1e-10, accel="newton")
+    )
     block, _ = hertz_block(0.05, refinement=0.5, comm=comm)
-    curve = force_indentation(hertz_model(radius=5.0, depth=0.0).on(block), "primal-monolithic", [6e-4, 1.2e-3],
-                              direction=(0.0, -1.0))
-    return on_every_rank({
-        "ranks": comm.size,
-        "force": ref.profile.force,
-        "l2": ref.problem.l2_norm2(ref.u),
-        "alg1_iterations": alg1.iterations,
-        "alg1_e_u": alg1.e_u,
-        "newton_converged": newton.converged,
-        "newton_steps": newton.history.newton_steps,
-        "newton_e_u": newton.e_u,
-        "hertz_forces": curve.forces.tolist(),
-        "hertz_zone": curve.steps[-1].profile.contact_zone(),
-    })
+    curve = force_indentation(
+        hertz_model(radius=5.0, depth=0.0).on(block), "primal-monolithic", [6e-4, 1.2e-3], direction=(0.0, -1.0)
+    )
+    return on_every_rank(
+        {
+            "ranks": comm.size,
+            "force": ref.profile.force,
+            "l2": ref.problem.l2_norm2(ref.u),
+            "alg1_iterations": alg1.iterations,
+            "alg1_e_u": alg1.e_u,
+            "newton_converged": newton.converged,
+            "newton_steps": newton.history.newton_steps,
+            "newton_e_u": newton.e_u,
+            "hertz_forces": curve.forces.tolist(),
+            "hertz_zone": curve.steps[-1].profile.contact_zone(),
+        }
+    )
 
 
 def test_two_ranks_match_serial_with_boundary_conditions_and_obstacles():
@@ -67,10 +71,16 @@ def test_unloading_to_a_vanishing_solution_on_two_ranks(accel):
     every step converges, the unloaded and withdrawn steps with zero force and the unloaded one exactly."""
     cm = unit_square(8, 4, clamped=("left",))
     model = layered_model([0.0, 0.5, 1.0], [1.0, 100.0], depth=0.0)
-    curve = force_indentation(model.on(cm), "primal", [0.01, 0.0, -0.01], direction=(-1.0, 0.0),
-                              options=IterationOptions(tol=1e-9, accel=accel, max_iterations=300))
-    steps = on_every_rank([dict(converged=s.converged, force=s.force, residual=s.transmission_residual)
-                           for s in curve.steps])
+    curve = force_indentation(
+        model.on(cm),
+        "primal",
+        [0.01, 0.0, -0.01],
+        direction=(-1.0, 0.0),
+        options=IterationOptions(tol=1e-9, accel=accel, max_iterations=300),
+    )
+    steps = on_every_rank(
+        [dict(converged=s.converged, force=s.force, residual=s.transmission_residual) for s in curve.steps]
+    )
     pushed, unloaded, withdrawn = steps
     assert MPI.COMM_WORLD.size == 2 and all(s["converged"] for s in steps)
     assert pushed["force"] > 0.0 and unloaded["force"] == 0.0 and withdrawn["force"] == 0.0

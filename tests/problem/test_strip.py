@@ -7,13 +7,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from dolfinx import mesh as dmesh
 from mpi4py import MPI
 from scipy.spatial import cKDTree
 
 import fenics_contact  # noqa: F401  (imports dolfinx_solver first)
-from dolfinx import fem
-from dolfinx import mesh as dmesh
-
 from fenics_contact.errors import InputError
 from fenics_contact.fem.mixed import solve_mixed_monolithic
 from fenics_contact.fem.primal import solve_primal_monolithic
@@ -88,17 +86,21 @@ def test_automatic_split_of_a_resolved_grid_is_the_papers_strip():
     split = strip.automatic_split(cm.mesh, _physics_only_tags(cm), H=0.25)
     for tag in Subdomain:
         assert np.array_equal(np.sort(split.cell_tags.find(tag)), np.sort(cm.cell_tags.find(tag)))
-    assert np.array_equal(np.sort(split.facet_tags.find(Boundary.INTERFACE)),
-                          np.sort(cm.facet_tags.find(Boundary.INTERFACE)))
+    assert np.array_equal(
+        np.sort(split.facet_tags.find(Boundary.INTERFACE)), np.sort(cm.facet_tags.find(Boundary.INTERFACE))
+    )
     assert np.array_equal(split.coarse_cell, cm.coarse_cell)
 
 
 def _pad_problem(H=None):
     cm = read_mesh(PAD, H=H, overlay_groups=["rubber", "steel"])
     groups = CellGroups(cm, read_cell_groups(PAD, ["rubber", "steel"]))
-    return ContactProblem(youngs_modulus=groups.field({"rubber": 10.0, "steel": 2.1e5}),
-                          poisson_ratio=groups.field({"rubber": 0.45, "steel": 0.3}),
-                          obstacle=Circle((0.0, 30.0), 30.0).indented(0.2, (0.0, -1.0)), mesh=cm)
+    return ContactProblem(
+        youngs_modulus=groups.field({"rubber": 10.0, "steel": 2.1e5}),
+        poisson_ratio=groups.field({"rubber": 0.45, "steel": 0.3}),
+        obstacle=Circle((0.0, 30.0), 30.0).indented(0.2, (0.0, -1.0)),
+        mesh=cm,
+    )
 
 
 def test_algorithm_1_on_the_automatic_strip_is_the_monolithic_solution():
@@ -123,8 +125,9 @@ def test_mixed_methods_on_a_bent_and_a_straight_interface():
     result = solve_mixed_hybrid(bent, reference=ref, options=IterationOptions(accel="newton", tol=1e-10))
     assert result.e_sigma < 1e-9
     straight = strip.automatic_split(cm.mesh, _physics_only_tags(cm), width=0.125)
-    problem = model_2().on(ContactMesh(cm.mesh, straight.cell_tags, straight.facet_tags, cm.h, None,
-                                       straight.coarse_cell))
+    problem = model_2().on(
+        ContactMesh(cm.mesh, straight.cell_tags, straight.facet_tags, cm.h, None, straight.coarse_cell)
+    )
     assert interface_bends_of(problem.cm).shape[0] == 0
     ref = solve_mixed_monolithic(problem, split_interface=True)
     result = solve_mixed_hybrid(problem, reference=ref, options=IterationOptions(accel="newton", tol=1e-10))
@@ -153,8 +156,16 @@ def test_from_meshtags_in_the_users_own_tags():
     monolithic solution; Algorithm 3 on the coarse cells built from H converges to it exponentially in the layers."""
     msh, facet_tags, cell_tags = _dolfinx_block()
     problem = ContactProblem.from_meshtags(
-        msh, facet_tags, cell_tags, contact=2, clamped=1, youngs_modulus={10: 1e3, 11: 1.0},
-        poisson_ratio={10: 0.3, 11: 0.45}, obstacle=Circle((1.0, 6.0), 5.0).indented(0.01, (0.0, -1.0)), H=0.25)
+        msh,
+        facet_tags,
+        cell_tags,
+        contact=2,
+        clamped=1,
+        youngs_modulus={10: 1e3, 11: 1.0},
+        poisson_ratio={10: 0.3, 11: 0.45},
+        obstacle=Circle((1.0, 6.0), 5.0).indented(0.01, (0.0, -1.0)),
+        H=0.25,
+    )
     E = problem.fields.E.x.array
     assert set(np.unique(E)) == {1.0, 1e3}
     ref = solve(problem, "primal-monolithic")
@@ -163,19 +174,28 @@ def test_from_meshtags_in_the_users_own_tags():
     errors = [solve(problem, "primal-ms", cem=CEMOptions(layers=m), reference=ref.u).e_u for m in (2, 3)]
     assert errors[1] < 2e-4 and errors[1] < errors[0] / 5  # measured 5.9e-4, 3.9e-5: ×15 per layer
     with pytest.raises(InputError, match="no facet has the tag 7"):
-        ContactProblem.from_meshtags(msh, facet_tags, cell_tags, contact=7, clamped=1, youngs_modulus=1.0,
-                                     poisson_ratio=0.3)
+        ContactProblem.from_meshtags(
+            msh, facet_tags, cell_tags, contact=7, clamped=1, youngs_modulus=1.0, poisson_ratio=0.3
+        )
     with pytest.raises(InputError, match="cells get no value"):
-        ContactProblem.from_meshtags(msh, facet_tags, cell_tags, contact=2, clamped=1, youngs_modulus={10: 1.0},
-                                     poisson_ratio=0.3)
+        ContactProblem.from_meshtags(
+            msh, facet_tags, cell_tags, contact=2, clamped=1, youngs_modulus={10: 1.0}, poisson_ratio=0.3
+        )
 
 
 def test_a_field_given_as_a_function_serves_the_parts():
     """E given as a dolfinx Function on the mesh: the fields of Ω₁ and Ω₂ (submeshes) take its values."""
     msh, facet_tags, cell_tags = _dolfinx_block(8)
     E = tag_function(msh, cell_tags, {10: 5.0, 11: 2.0}, name="E")
-    problem = ContactProblem.from_meshtags(msh, facet_tags, contact=2, clamped=1, youngs_modulus=E,
-                                           poisson_ratio=0.3, obstacle=Plane((0.0, 1.0), (0.0, -1.0)))
+    problem = ContactProblem.from_meshtags(
+        msh,
+        facet_tags,
+        contact=2,
+        clamped=1,
+        youngs_modulus=E,
+        poisson_ratio=0.3,
+        obstacle=Plane((0.0, 1.0), (0.0, -1.0)),
+    )
     assert np.array_equal(problem.fields.E.x.array, E.x.array)
     sub, entity_map, _, _ = dmesh.create_submesh(msh, 2, problem.cm.cell_tags.find(Subdomain.OMEGA2))
     values = problem.fields_on(sub).E.x.array
@@ -191,8 +211,12 @@ def test_a_users_case_file_runs_on_its_own_mesh(tmp_path, method):
     """cases/pad.toml: the user's mesh (materials by group, refined under the cylinder, no Omega tags) in mm and
     MPa, four load steps; the strip and coarse cells are built; the certificate holds at every step."""
     out = tmp_path / method
-    run = subprocess.run([*CLI, "run", "--case", str(ROOT / "cases" / "pad.toml"), "--method", method,
-                          "--no-plots", "--out", str(out)], capture_output=True, text=True, timeout=900)
+    run = subprocess.run(
+        [*CLI, "run", "--case", str(ROOT / "cases" / "pad.toml"), "--method", method, "--no-plots", "--out", str(out)],
+        capture_output=True,
+        text=True,
+        timeout=900,
+    )
     assert run.returncode == 0, run.stderr
     import json
 
@@ -215,8 +239,22 @@ def test_a_users_case_file_runs_with_the_mixed_methods(tmp_path):
     forces = {}
     for method in ("primal", "mixed", "mixed-ms"):
         out = tmp_path / method
-        run = subprocess.run([*CLI, "run", "--case", str(ROOT / "cases" / "pad.toml"), "--method", method,
-                              "--no-plots", "--out", str(out)], capture_output=True, text=True, timeout=1800)
+        run = subprocess.run(
+            [
+                *CLI,
+                "run",
+                "--case",
+                str(ROOT / "cases" / "pad.toml"),
+                "--method",
+                method,
+                "--no-plots",
+                "--out",
+                str(out),
+            ],
+            capture_output=True,
+            text=True,
+            timeout=1800,
+        )
         assert run.returncode == 0, run.stderr
         steps = json.loads((out / "summary.json").read_text())["force_indentation"]["steps"]
         assert all(s["transmission_residual"] < 1e-8 for s in steps)

@@ -62,7 +62,8 @@ class EssentialConstraints:
                 raise ValueError("prescribed-traction facets must be among the zero_traction_facets")
             group_of[facets] = k
         self._tractions = [value for _, value in (prescribed or [])]
-        # records: kind (0 tangential, 1 traction), facet gid, vertex gids, rows (2, 3), nrows, rhs (2 vertices, 2), group
+        # records: kind (0 tangential, 1 traction), facet gid, vertex gids, rows (2, 3), nrows, rhs (2 vertices, 2),
+        # group
         recs = []
         for kind, facets in enumerate(sets):
             if facets.size == 0:
@@ -86,13 +87,25 @@ class EssentialConstraints:
                     x[:2] = ent.vx[ent.e2v[e]].T
                     val = np.asarray(self._tractions[group_of[e]](x), dtype=np.float64).reshape(2, 2)
                     rhs[i] = outward[i] * val.T  # σ n_e = ±t(v), n_e = ±(outward normal)
-            recs.append({
-                "kind": np.full(F, kind, dtype=np.int64), "gid": ent.edge_gid[facets],
-                "v": ent.vertex_gid[ent.e2v[facets]], "rows": rows, "rhs": rhs, "group": group_of[facets],
-            })
+            recs.append(
+                {
+                    "kind": np.full(F, kind, dtype=np.int64),
+                    "gid": ent.edge_gid[facets],
+                    "v": ent.vertex_gid[ent.e2v[facets]],
+                    "rows": rows,
+                    "rhs": rhs,
+                    "group": group_of[facets],
+                }
+            )
         keys = ("kind", "gid", "v", "rows", "rhs", "group")
-        empty = {"kind": np.zeros(0, np.int64), "gid": np.zeros(0, np.int64), "v": np.zeros((0, 2), np.int64),
-                 "rows": np.zeros((0, 2, 3)), "rhs": np.zeros((0, 2, 2)), "group": np.zeros(0, np.int64)}
+        empty = {
+            "kind": np.zeros(0, np.int64),
+            "gid": np.zeros(0, np.int64),
+            "v": np.zeros((0, 2), np.int64),
+            "rows": np.zeros((0, 2, 3)),
+            "rhs": np.zeros((0, 2, 2)),
+            "group": np.zeros(0, np.int64),
+        }
         local = {k: np.concatenate([r[k] for r in recs]) if recs else empty[k] for k in keys}
         if self.comm.size > 1:
             parts = self.comm.allgather(local)

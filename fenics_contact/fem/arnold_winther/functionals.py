@@ -76,9 +76,7 @@ def edge_moments(values: np.ndarray, wn: np.ndarray, wt: np.ndarray) -> np.ndarr
     q = MOMENT_WEIGHTS
     snn = np.einsum("...j,...qjk->...qk", wn, values)
     snt = np.einsum("...j,...qjk->...qk", wt, values)
-    return np.concatenate(
-        [np.einsum("lq,...qk->...lk", q, snn), np.einsum("lq,...qk->...lk", q, snt)], axis=-2
-    )
+    return np.concatenate([np.einsum("lq,...qk->...lk", q, snn), np.einsum("lq,...qk->...lk", q, snt)], axis=-2)
 
 
 def edge_points(start: np.ndarray, end: np.ndarray) -> np.ndarray:
@@ -94,7 +92,10 @@ def map_to_cells(vertices: np.ndarray, ref: np.ndarray) -> np.ndarray:
 
 
 def dof_values(
-    sigma: Callable[[np.ndarray], np.ndarray], vertices: np.ndarray, edge_start: np.ndarray, edge_end: np.ndarray,
+    sigma: Callable[[np.ndarray], np.ndarray],
+    vertices: np.ndarray,
+    edge_start: np.ndarray,
+    edge_end: np.ndarray,
     cells: np.ndarray,
 ) -> np.ndarray:
     """ℓ_i(σ) for every DOF of the full local numbering: 3v + j, then 3n_v + 4e + k, then 3n_v + 4n_e + 3c + j.

@@ -72,7 +72,8 @@ def _monomials(xi: np.ndarray) -> np.ndarray:
 def _span_of(mono: np.ndarray) -> np.ndarray:
     """Monomial coefficients (..., 10) -> values (..., 3, 24) of the spanning functions (one 2-D product)."""
     return (mono.reshape(-1, len(_MONOMIALS)) @ _SPAN.reshape(len(_MONOMIALS), -1)).reshape(
-        mono.shape[:-1] + (3, NUM_LOCAL))
+        mono.shape[:-1] + (3, NUM_LOCAL)
+    )
 
 
 def _eval_span(xi: np.ndarray) -> np.ndarray:

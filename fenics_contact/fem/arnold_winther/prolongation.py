@@ -30,8 +30,9 @@ def cell_rows_csr(sblocks: np.ndarray, rows: np.ndarray, scols: np.ndarray, shap
     nc, a, b = sblocks.shape
     flat = rows.ravel()
     if flat.size != shape[0] or not np.array_equal(np.bincount(flat, minlength=shape[0]), np.ones(shape[0], np.int64)):
-        P = sp.csr_matrix((sblocks.ravel(), (np.repeat(rows, b, axis=1).ravel(), np.tile(scols, (1, a)).ravel())),
-                          shape=shape)
+        P = sp.csr_matrix(
+            (sblocks.ravel(), (np.repeat(rows, b, axis=1).ravel(), np.tile(scols, (1, a)).ravel())), shape=shape
+        )
         P.sort_indices()
         return P
     if np.array_equal(flat, np.arange(shape[0])):
@@ -54,8 +55,15 @@ class Prolongation:
     """
 
     def __init__(
-        self, comm: MPI.Comm, cell_blocks: np.ndarray, cell_cols: np.ndarray, dg_rows: np.ndarray, n_dg: int,
-        num_dofs_full: int, numbering: DofNumbering, split_cells: np.ndarray | None,
+        self,
+        comm: MPI.Comm,
+        cell_blocks: np.ndarray,
+        cell_cols: np.ndarray,
+        dg_rows: np.ndarray,
+        n_dg: int,
+        num_dofs_full: int,
+        numbering: DofNumbering,
+        split_cells: np.ndarray | None,
     ) -> None:
         self.comm = comm
         self.cell_blocks, self.cell_cols, self.dg_rows = cell_blocks, cell_cols, dg_rows
@@ -70,8 +78,9 @@ class Prolongation:
     def full(self) -> sp.csr_matrix:
         """P_full (SciPy CSR), made once."""
         if self.full_csr is None:
-            self.full_csr = cell_rows_csr(self.cell_blocks, self.dg_rows, self.cell_cols,
-                                          (self.n_dg, self.num_dofs_full))
+            self.full_csr = cell_rows_csr(
+                self.cell_blocks, self.dg_rows, self.cell_cols, (self.n_dg, self.num_dofs_full)
+            )
         return self.full_csr
 
     def _constrain_rows(self, P_full: sp.csr_matrix, split_cells: np.ndarray | None) -> sp.csr_matrix:
@@ -100,8 +109,9 @@ class Prolongation:
         cell_of = np.empty(self.n_dg, dtype=np.int64)
         cell_of[self.dg_rows.ravel()] = np.repeat(np.arange(num_cells), self.dg_rows.shape[1])
         cells = np.unique(cell_of[np.asarray(rows, dtype=np.int64)])
-        P_full = cell_rows_csr(self.cell_blocks[cells], self.dg_rows[cells], self.cell_cols[cells],
-                               (self.n_dg, self.num_dofs_full))
+        P_full = cell_rows_csr(
+            self.cell_blocks[cells], self.dg_rows[cells], self.cell_cols[cells], (self.n_dg, self.num_dofs_full)
+        )
         split = None if self.split_cells is None else np.intersect1d(self.split_cells, cells)
         return self._constrain_rows(P_full, split)
 
@@ -109,8 +119,9 @@ class Prolongation:
         """P as a distributed PETSc AIJ matrix (global AW numbering; created once)."""
         if self.petsc is None:
             num = self.numbering
-            self.petsc = local_rows_to_petsc(self.comm, self.matrix, num.global_indices,
-                                             (num.num_owned, int(num.offsets[-1])))
+            self.petsc = local_rows_to_petsc(
+                self.comm, self.matrix, num.global_indices, (num.num_owned, int(num.offsets[-1]))
+            )
         return self.petsc
 
     def release(self) -> None:

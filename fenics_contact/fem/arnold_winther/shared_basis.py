@@ -18,8 +18,11 @@ __all__ = ["shared_nodal_basis"]
 
 
 def shared_nodal_basis(
-    vertices: npt.NDArray[np.floating], edge_flip: npt.NDArray[np.bool_], points: npt.NDArray[np.floating],
-    comm: MPI.Comm, column_order: np.ndarray | None = None,
+    vertices: npt.NDArray[np.floating],
+    edge_flip: npt.NDArray[np.bool_],
+    points: npt.NDArray[np.floating],
+    comm: MPI.Comm,
+    column_order: np.ndarray | None = None,
 ) -> np.ndarray:
     """``local_nodal_basis`` of all cells on every rank of ``comm``, each rank computing a contiguous share
     (the ranks hold the same cells: a replicated serial mesh) and one ``Allgatherv`` joining them."""
@@ -27,8 +30,13 @@ def shared_nodal_basis(
     bounds = np.linspace(0, n, comm.size + 1).astype(np.int64)
     lo, hi = bounds[comm.rank], bounds[comm.rank + 1]
     out = np.empty((n, np.asarray(points).shape[0], 3, NUM_LOCAL))
-    local_nodal_basis(vertices[lo:hi], edge_flip[lo:hi], points, out=out[lo:hi],
-                      column_order=None if column_order is None else column_order[lo:hi])
+    local_nodal_basis(
+        vertices[lo:hi],
+        edge_flip[lo:hi],
+        points,
+        out=out[lo:hi],
+        column_order=None if column_order is None else column_order[lo:hi],
+    )
     width = int(np.prod(out.shape[1:], dtype=np.int64))
     comm.Allgatherv(MPI.IN_PLACE, [out, (np.diff(bounds) * width, bounds[:-1] * width), MPI.DOUBLE])
     return out

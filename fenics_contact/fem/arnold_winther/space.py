@@ -125,8 +125,9 @@ class ArnoldWintherSpace:
         dg_dofs = self.dg.dofmap.list[:nc].astype(np.int64)  # (nc, 10) blocks (owned: DG)
         rows = (3 * dg_dofs[:, :, None] + np.arange(3)).reshape(nc, 30)
         self._n_dg = 3 * self.dg.dofmap.index_map.size_local
-        self.constraints = EssentialConstraints(ent, self.comm, zero_tangential_facets, zero_traction_facets,
-                                                prescribed_tractions)
+        self.constraints = EssentialConstraints(
+            ent, self.comm, zero_tangential_facets, zero_traction_facets, prescribed_tractions
+        )
         #: stacked essential constraint rows (k, 3) acting on the vertex value σ(v), per constrained local vertex
         self.vertex_constraints: dict[int, np.ndarray] = self.constraints.vertex_constraints
         if split_interface is not None:
@@ -138,8 +139,9 @@ class ArnoldWintherSpace:
         if split_interface is not None and num.X_local is not None:
             cells = np.asarray(split_interface[1], dtype=np.int64)
             split_cells = cells[cells < nc]
-        self.prolongator = Prolongation(self.comm, cell_blocks, cell_cols, rows, self._n_dg, self.num_dofs_full,
-                                        num, split_cells)
+        self.prolongator = Prolongation(
+            self.comm, cell_blocks, cell_cols, rows, self._n_dg, self.num_dofs_full, num, split_cells
+        )
         #: DG coefficients of the traction lifting σ_t (None without prescribed tractions)
         self.lifting_dg: np.ndarray | None = None
         #: local vertices where the prescribed tractions of two edges are incompatible (least-squares value used)

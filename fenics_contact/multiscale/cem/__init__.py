@@ -80,15 +80,17 @@ forms), ``spectral`` (the local spectral problems, V_aux), ``bases`` (the patch 
 ``omega1`` (``Omega1Multiscale``, the Ω₁ side of Algorithm 3).  The names below are re-exported here.
 """
 
-from fenics_contact.multiscale.cem.options import (
-    ALL_MODES,
-    DEFAULT_S_FACTOR,
-    EIGENSOLVERS,
-    FEW_LAYERS,
-    NEARLY_INCOMPRESSIBLE,
-    CEMOptions,
-    warn_if_few_layers,
+from fenics_contact.multiscale.cem.bases import (
+    PATCH_ICNTL,
+    Incidence,
+    MultiscaleSpace,
+    PatchFunctions,
+    build_multiscale_space,
+    global_saddle_matrix,
 )
+from fenics_contact.multiscale.cem.cache import CACHE_FORMAT, PrimalOfflineCache, offline_key, offline_stage
+from fenics_contact.multiscale.cem.coarse import MultiscaleRobinSolver, gram_matrices, trace_matrix
+from fenics_contact.multiscale.cem.omega1 import Omega1Multiscale, build_omega1_multiscale
 from fenics_contact.multiscale.cem.operators import (
     FineOperators,
     assemble_fine_operators,
@@ -98,6 +100,15 @@ from fenics_contact.multiscale.cem.operators import (
     omega1_load,
     require_serial,
 )
+from fenics_contact.multiscale.cem.options import (
+    ALL_MODES,
+    DEFAULT_S_FACTOR,
+    EIGENSOLVERS,
+    FEW_LAYERS,
+    NEARLY_INCOMPRESSIBLE,
+    CEMOptions,
+    warn_if_few_layers,
+)
 from fenics_contact.multiscale.cem.spectral import (
     DENSE_FALLBACK,
     AuxiliarySpace,
@@ -105,17 +116,6 @@ from fenics_contact.multiscale.cem.spectral import (
     local_matrices,
     local_spectral_problem,
 )
-from fenics_contact.multiscale.cem.bases import (
-    PATCH_ICNTL,
-    Incidence,
-    MultiscaleSpace,
-    PatchFunctions,
-    build_multiscale_space,
-    global_saddle_matrix,
-)
-from fenics_contact.multiscale.cem.coarse import MultiscaleRobinSolver, gram_matrices, trace_matrix
-from fenics_contact.multiscale.cem.cache import CACHE_FORMAT, PrimalOfflineCache, offline_key, offline_stage
-from fenics_contact.multiscale.cem.omega1 import Omega1Multiscale, build_omega1_multiscale
 
 __all__ = [
     "ALL_MODES",

@@ -30,7 +30,11 @@ from fenics_contact.multiscale.coarse import CoarseGrid
 from fenics_contact.multiscale.work import run_shared
 
 __all__ = [
-    "PATCH_ICNTL", "Incidence", "MultiscaleSpace", "PatchFunctions", "build_multiscale_space",
+    "PATCH_ICNTL",
+    "Incidence",
+    "MultiscaleSpace",
+    "PatchFunctions",
+    "build_multiscale_space",
     "global_saddle_matrix",
 ]
 
@@ -61,7 +65,7 @@ class Incidence:
 
     def nodes(self, k: int) -> np.ndarray:
         """Vertices of K_k (sorted)."""
-        return self.cell_nodes.indices[self.cell_nodes.indptr[k]:self.cell_nodes.indptr[k + 1]]
+        return self.cell_nodes.indices[self.cell_nodes.indptr[k] : self.cell_nodes.indptr[k + 1]]
 
     def dofs(self, k: int, *, free_only: bool = True) -> np.ndarray:
         """Scalar DOFs of the vertices of K_k (sorted)."""
@@ -160,8 +164,16 @@ def global_saddle_matrix(ops: FineOperators, aux: AuxiliarySpace) -> PETSc.Mat:
 
 
 def _patch_problem(
-    ops: FineOperators, grid: CoarseGrid, aux: AuxiliarySpace, inc: Incidence, saddle: PETSc.Mat, i: int,
-    patch: np.ndarray, inner: np.ndarray, *, source: bool,
+    ops: FineOperators,
+    grid: CoarseGrid,
+    aux: AuxiliarySpace,
+    inc: Incidence,
+    saddle: PETSc.Mat,
+    i: int,
+    patch: np.ndarray,
+    inner: np.ndarray,
+    *,
+    source: bool,
 ) -> tuple:
     """Bases, Robin correction and source correction of coarse cell i on its patch (one LDLᵀ)."""
     J = np.concatenate([aux.columns(k) for k in patch])
@@ -191,7 +203,7 @@ def _patch_problem(
     rhs = np.zeros((nI + nJ, ncols))
     rhs[nI + np.searchsorted(J, aux.columns(i)), np.arange(li)] = 1.0  # s(φ_j^i, πv): the μ-row unit vectors
     if ng:
-        rhs[:nI, li:li + ng] = G_I[:, used].toarray()
+        rhs[:nI, li : li + ng] = G_I[:, used].toarray()
     if F_i is not None:
         rhs[:nI, -1] = F_i
     M.setOption(PETSc.Mat.Option.SYMMETRIC, True)
@@ -207,13 +219,17 @@ def _patch_problem(
     dofs = inner.astype(np.int32)
     basis = PatchFunctions(dofs, np.ascontiguousarray(x[:, :li]), aux.columns(i))
     gamma_pos = np.searchsorted(ops.gamma, on_gamma[used])
-    corr = PatchFunctions(dofs, np.ascontiguousarray(x[:, li:li + ng]), gamma_pos) if ng else None
+    corr = PatchFunctions(dofs, np.ascontiguousarray(x[:, li : li + ng]), gamma_pos) if ng else None
     nf = x[:, -1].copy() if F_i is not None else None
     return basis, corr, nf
 
 
 def build_multiscale_space(
-    ops: FineOperators, grid: CoarseGrid, options: CEMOptions, *, aux: AuxiliarySpace | None = None,
+    ops: FineOperators,
+    grid: CoarseGrid,
+    options: CEMOptions,
+    *,
+    aux: AuxiliarySpace | None = None,
     comm: MPI.Comm = MPI.COMM_SELF,
 ) -> MultiscaleSpace:
     """Offline stage: aux space, relaxed CEM bases on K_{i,m}, the corrections N and N_f (shared out over comm)."""
@@ -229,10 +245,17 @@ def build_multiscale_space(
     saddle = global_saddle_matrix(ops, aux)
     try:
         owner = np.empty(grid.size, dtype=np.int64)
-        results = run_shared(np.array([d.size for d in inner], dtype=np.float64) ** 1.5, comm, "CEM patch problems",
-                             lambda i: _patch_problem(ops, grid, aux, inc, saddle, i, patches[i], inner[i],
-                                                      source=options.source_correction),
-                             balanced=True, owner=owner, logger=log)
+        results = run_shared(
+            np.array([d.size for d in inner], dtype=np.float64) ** 1.5,
+            comm,
+            "CEM patch problems",
+            lambda i: _patch_problem(
+                ops, grid, aux, inc, saddle, i, patches[i], inner[i], source=options.source_correction
+            ),
+            balanced=True,
+            owner=owner,
+            logger=log,
+        )
     finally:
         saddle.destroy()
     basis = [r[0] for r in results]
@@ -249,10 +272,16 @@ def build_multiscale_space(
     times["patches"] = time.perf_counter() - t0
     times["total"] = times["eigen"] + times["patches"]
     times["patches_here"] = int(np.count_nonzero(owner == comm.rank))  # this rank's share
-    space = MultiscaleSpace(aux, basis, correction, Nf, int(options.layers), ops.size, ops.gamma.size,
-                            correction_cells, times)
+    space = MultiscaleSpace(
+        aux, basis, correction, Nf, int(options.layers), ops.size, ops.gamma.size, correction_cells, times
+    )
     log.info(
         "CEM offline: %d coarse cells, m = %d, dim V_ms = %d, %.1f MB of bases; eigen %.2f s, patches %.2f s",
-        grid.size, options.layers, aux.size, space.nbytes / 1e6, times["eigen"], times["patches"],
+        grid.size,
+        options.layers,
+        aux.size,
+        space.nbytes / 1e6,
+        times["eigen"],
+        times["patches"],
     )
     return space

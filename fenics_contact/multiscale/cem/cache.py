@@ -89,13 +89,13 @@ def _unpack(arrays: dict, ops: FineOperators, grid: CoarseGrid) -> MultiscaleSpa
     dofs, values, vectors, blocks = [], [], [], []
     pos = 0
     for k in range(grid.size):
-        D = arrays["aux_dofs"][doffs[k]:doffs[k + 1]]
+        D = arrays["aux_dofs"][doffs[k] : doffs[k + 1]]
         lk = int(offs[k + 1] - offs[k])
-        Phi = arrays["aux_vectors"][pos:pos + D.size * lk].reshape(D.size, lk)
+        Phi = arrays["aux_vectors"][pos : pos + D.size * lk].reshape(D.size, lk)
         pos += D.size * lk
         S = ops.Sc[int(grid.colors[k])][D][:, D]
         dofs.append(D)
-        values.append(arrays["aux_values"][offs[k]:offs[k + 1]])
+        values.append(arrays["aux_values"][offs[k] : offs[k + 1]])
         vectors.append(Phi)
         blocks.append(S @ Phi)
     aux = AuxiliarySpace.from_parts(ops.size, dofs, values, vectors, blocks, arrays["aux_gaps"])
@@ -109,8 +109,9 @@ def _unpack(arrays: dict, ops: FineOperators, grid: CoarseGrid) -> MultiscaleSpa
             for k in range(count)
         ]
     times = {"eigen": 0.0, "patches": 0.0, "total": 0.0}
-    return MultiscaleSpace(aux, parts["basis"], parts["corr"], arrays.get("Nf"), layers, n, ng,
-                           arrays["correction_cells"], times)
+    return MultiscaleSpace(
+        aux, parts["basis"], parts["corr"], arrays.get("Nf"), layers, n, ng, arrays["correction_cells"], times
+    )
 
 
 class PrimalOfflineCache(OfflineCache):
@@ -128,7 +129,12 @@ class PrimalOfflineCache(OfflineCache):
 
 
 def offline_stage(
-    ops: FineOperators, grid: CoarseGrid, options: CEMOptions, *, h: float, cache_dir: str | Path | None = None,
+    ops: FineOperators,
+    grid: CoarseGrid,
+    options: CEMOptions,
+    *,
+    h: float,
+    cache_dir: str | Path | None = None,
     comm: MPI.Comm = MPI.COMM_SELF,
 ) -> tuple[MultiscaleSpace, str]:
     """Build (or load from the cache) the multiscale space; returns (space, cache status).

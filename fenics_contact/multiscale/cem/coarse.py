@@ -35,8 +35,8 @@ def _rows_on(parts: list, D: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         pos = np.searchsorted(p.dofs, D)
         np.minimum(pos, p.dofs.size - 1, out=pos)
         hit = p.dofs[pos] == D
-        Z[hit, at:at + k] = p.values[pos[hit]]
-        cols[at:at + k] = p.columns
+        Z[hit, at : at + k] = p.values[pos[hit]]
+        cols[at : at + k] = p.columns
         at += k
     return Z, cols
 
@@ -114,8 +114,9 @@ class MultiscaleRobinSolver:
     the norms a₁(u₁, u₁) = sᵀ(ZᵀKZ)s, ‖u₁‖² = sᵀ(ZᵀMZ)s; the fine field Z s only when asked.
     """
 
-    def __init__(self, ops: FineOperators, space: MultiscaleSpace, grid: CoarseGrid, *,
-                 comm: MPI.Comm = MPI.COMM_SELF) -> None:
+    def __init__(
+        self, ops: FineOperators, space: MultiscaleSpace, grid: CoarseGrid, *, comm: MPI.Comm = MPI.COMM_SELF
+    ) -> None:
         t0 = time.perf_counter()
         self.ops = ops
         self.space = space
@@ -138,7 +139,7 @@ class MultiscaleRobinSolver:
                 PsiG[p.columns] += (Gp.T @ p.values).T
         self.b_f = PsiF - ZAZ[:n_ms, -1]
         # Ψᵀ (G[:, γ] − A N): the action of the interface data on the coarse right-hand side
-        self.C = PsiG - ZAZ[:n_ms, n_ms:n_ms + ng]
+        self.C = PsiG - ZAZ[:n_ms, n_ms : n_ms + ng]
         self.time_s = time.perf_counter() - t0
 
     @property
@@ -157,7 +158,7 @@ class MultiscaleRobinSolver:
     def field(self, s: np.ndarray) -> np.ndarray:
         """u₁ = Z s = Ψ w + N g + s_last N_f on every Ω₁ DOF."""
         n_ms, ng = self.space.size, self.space.n_gamma
-        u = self.space.apply(s[:n_ms], s[n_ms:n_ms + ng], with_source=False)
+        u = self.space.apply(s[:n_ms], s[n_ms : n_ms + ng], with_source=False)
         if self.space.Nf is not None and s[-1] != 0.0:
             u += s[-1] * self.space.Nf
         return u
@@ -174,6 +175,6 @@ class MultiscaleRobinSolver:
         """The affine interface map u₁|γ = R g + r₀ (``ops.gamma`` ordering, dense R)."""
         n_ms, ng = self.space.size, self.space.n_gamma
         X = self.factor.solve(np.column_stack([self.C, self.b_f]))
-        R = self.Zg[:, :n_ms] @ X[:, :ng] + self.Zg[:, n_ms:n_ms + ng]
+        R = self.Zg[:, :n_ms] @ X[:, :ng] + self.Zg[:, n_ms : n_ms + ng]
         r0 = self.Zg[:, :n_ms] @ X[:, ng] + self.Zg[:, -1]
         return R, r0

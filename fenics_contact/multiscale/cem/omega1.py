@@ -23,7 +23,6 @@ from fenics_contact.multiscale.cem.operators import assemble_fine_operators, ome
 from fenics_contact.multiscale.cem.options import NEARLY_INCOMPRESSIBLE, CEMOptions, warn_if_few_layers
 from fenics_contact.multiscale.coarse import grid_from_cells
 from fenics_contact.multiscale.replica import SerialReplica
-from fenics_contact.problem.geometry import ContactMesh
 from fenics_contact.problem.problem import ContactProblem
 
 __all__ = ["Omega1Multiscale", "build_omega1_multiscale"]
@@ -83,8 +82,9 @@ class Omega1Multiscale:
         self.facet_tags = self.replica.facet_tags
         self.V = self.replica.V
         self.fields = problem.fields_on(self.mesh)
-        self.grid = grid_from_cells(self.mesh.geometry.dofmaps[0], self.mesh.geometry.x,
-                                    self.replica.cell_data["coarse"], cm.H)
+        self.grid = grid_from_cells(
+            self.mesh.geometry.dofmaps[0], self.mesh.geometry.x, self.replica.cell_data["coarse"], cm.H
+        )
         # global interface value index (rank order) of every γ DOF of the copy
         self._n_local = interface.size
         self._offset = comm.exscan(self._n_local) or 0
@@ -97,21 +97,28 @@ class Omega1Multiscale:
         self.alpha_fn.x.array[on] = _allgather_values(comm, alpha)[index[on]]
         self._fine_factor = None  # the fine Ω₁ operator's factorization, made by the first fine_check
         self.ops = assemble_fine_operators(
-            self.V, self.facet_tags, self.fields, self.alpha_fn, self.grid, s_factor=cem.s_factor,
-            load=omega1_load(self.V, self.facet_tags, self.fields), displacement=self.fields.boundary.displacement,
+            self.V,
+            self.facet_tags,
+            self.fields,
+            self.alpha_fn,
+            self.grid,
+            s_factor=cem.s_factor,
+            load=omega1_load(self.V, self.facet_tags, self.fields),
+            displacement=self.fields.boundary.displacement,
         )
         value_of_dof = index[self.ops.gamma]
-        if np.any(value_of_dof < 0) or np.unique(value_of_dof).size != self._n_total or \
-                self.ops.gamma.size != self._n_total:
+        if (
+            np.any(value_of_dof < 0)
+            or np.unique(value_of_dof).size != self._n_total
+            or self.ops.gamma.size != self._n_total
+        ):
             raise InputError("the Ω₁ γ DOFs do not match the interface DOFs one to one")
         self.value_of_dof = value_of_dof  #: global interface index of each ops.gamma DOF
         self.gamma_of_value = np.empty(self._n_total, dtype=np.int64)  #: position in ops.gamma of each value
         self.gamma_of_value[value_of_dof] = np.arange(self.ops.gamma.size)
-        self._mine = self.gamma_of_value[self._offset:self._offset + self._n_local]
+        self._mine = self.gamma_of_value[self._offset : self._offset + self._n_local]
         t_assembly = time.perf_counter() - t0
-        self.space, self.cache_status = offline_stage(
-            self.ops, self.grid, cem, h=cm.h, cache_dir=cache_dir, comm=comm
-        )
+        self.space, self.cache_status = offline_stage(self.ops, self.grid, cem, h=cm.h, cache_dir=cache_dir, comm=comm)
         self.solver = MultiscaleRobinSolver(self.ops, self.space, self.grid, comm=comm)
         self.nu_max = float(np.max(self.fields.nu.x.array, initial=0.0))  #: largest ν in Ω₁
         warn_if_few_layers(cem.layers, "primal CEM (Algorithm 3)", comm)
@@ -123,7 +130,9 @@ class Omega1Multiscale:
                 "0.49; P1 itself locks as ν → ½). Check against the fine solution (CLI: --reference); more layers "
                 "help up to ν ≈ 0.48 (8.9e-2 "
                 "at m = 5, 1.7e-2 at m = 6), not at ν = 0.499 (0.79 at m = 6); --method mixed-ms is robust in ν.",
-                self.nu_max, self.spectral_gap * cem.s_factor, cem.layers,
+                self.nu_max,
+                self.spectral_gap * cem.s_factor,
+                cem.layers,
             )
         self.times = {
             "assembly": t_assembly,

@@ -26,8 +26,13 @@ from fenics_contact.problem.fields import MaterialFields
 from fenics_contact.problem.tags import Boundary
 
 __all__ = [
-    "FineOperators", "assemble_fine_operators", "cem_mass_form", "interface_mass_form", "kappa_tilde",
-    "omega1_load", "require_serial",
+    "FineOperators",
+    "assemble_fine_operators",
+    "cem_mass_form",
+    "interface_mass_form",
+    "kappa_tilde",
+    "omega1_load",
+    "require_serial",
 ]
 
 
@@ -191,8 +196,11 @@ def assemble_fine_operators(
     lifting = F_lifted = None
     if displacement is not None and dir_blocks.size:
         u_D = fem.Function(V)
-        u_D.interpolate(displacement if callable(displacement) else
-                        (lambda x, c=np.asarray(displacement, dtype=np.float64): np.tile(c[:, None], (1, x.shape[1]))))
+        u_D.interpolate(
+            displacement
+            if callable(displacement)
+            else (lambda x, c=np.asarray(displacement, dtype=np.float64): np.tile(c[:, None], (1, x.shape[1])))
+        )
         lifting = np.zeros(n)
         lifting[~free] = u_D.x.array[~free]
         if np.any(lifting):
@@ -200,8 +208,9 @@ def assemble_fine_operators(
             key_data["lifting"] = lifting
         else:
             lifting = None
-    return FineOperators(V, K, R, A, M, G, Kc, Mc, Sc, Gc, F, free, gamma, a, node_dofs, cell_nodes, key_data,
-                         lifting, F_lifted)
+    return FineOperators(
+        V, K, R, A, M, G, Kc, Mc, Sc, Gc, F, free, gamma, a, node_dofs, cell_nodes, key_data, lifting, F_lifted
+    )
 
 
 def omega1_load(V: fem.FunctionSpace, facet_tags, fields: MaterialFields) -> np.ndarray | None:

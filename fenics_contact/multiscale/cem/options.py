@@ -13,7 +13,12 @@ from fenics_contact.errors import InputError
 from fenics_contact.fem.eigen import EIGEN_METHODS
 
 __all__ = [
-    "ALL_MODES", "DEFAULT_S_FACTOR", "EIGENSOLVERS", "FEW_LAYERS", "NEARLY_INCOMPRESSIBLE", "CEMOptions",
+    "ALL_MODES",
+    "DEFAULT_S_FACTOR",
+    "EIGENSOLVERS",
+    "FEW_LAYERS",
+    "NEARLY_INCOMPRESSIBLE",
+    "CEMOptions",
     "warn_if_few_layers",
 ]
 
@@ -51,7 +56,11 @@ def warn_if_few_layers(layers: int, method: str, comm) -> None:
             "%s with m = %d oversampling layer(s): the multiscale bases are cut off where they have not decayed, "
             "and the Ω₁ error stays large (model 1, h = 1/32, H = 1/8: primal-ms e_u 0.72, 0.36, 5.1e-3, 3.9e-4 "
             "and mixed-ms e_σ 3.1, 0.44, 2.0e-2, 2.5e-3 for m = 0, 1, 2, 3). Use m >= 2 (default %d); check against "
-            "the fine solution with --reference.", method, layers, CEMOptions().layers)
+            "the fine solution with --reference.",
+            method,
+            layers,
+            CEMOptions().layers,
+        )
 
 
 @dataclass(frozen=True, slots=True)

@@ -62,8 +62,9 @@ def local_spectral_problem(
     Ap, Sp = scipy_to_petsc(A), scipy_to_petsc(S)
 
     def pairs(count: int, method: str, deflation: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-        return generalized_eigenpairs(Ap, Sp, count, method, target=target, tol=tol, deflation=deflation,
-                                      label="local spectral problem")
+        return generalized_eigenpairs(
+            Ap, Sp, count, method, target=target, tol=tol, deflation=deflation, label="local spectral problem"
+        )
 
     try:
         if kind == "lapack":
@@ -80,8 +81,9 @@ def local_spectral_problem(
                 have = int(np.count_nonzero(values < sigma))
                 if below <= have:
                     break
-                log.debug("Krylov–Schur missed %d eigenpair(s) below %.3e; deflating and searching again",
-                          below - have, sigma)
+                log.debug(
+                    "Krylov–Schur missed %d eigenpair(s) below %.3e; deflating and searching again", below - have, sigma
+                )
                 more_v, more_x = pairs(min(below - have + _EXTRA_PAIRS, n - have), kind, vectors[:, values < sigma])
                 keep = values < sigma
                 values = np.concatenate([values[keep], more_v])
@@ -91,8 +93,7 @@ def local_spectral_problem(
                 # stiff inclusion in a soft matrix: λ₄ ≈ 5e-3) and Krylov–Schur can keep missing a copy of the
                 # triple zero; a problem small enough is then solved densely.
                 if n > DENSE_FALLBACK:
-                    raise ConvergenceError(f"local spectral problem (n = {n}): could not find all {nev} smallest "
-                                           "pairs")
+                    raise ConvergenceError(f"local spectral problem (n = {n}): could not find all {nev} smallest pairs")
                 log.info("local spectral problem (n = %d): Krylov–Schur missed pairs; dense LAPACK instead", n)
                 values, vectors = pairs(nev, "lapack")
     finally:
@@ -147,7 +148,7 @@ class AuxiliarySpace:
     def project(self, u: np.ndarray) -> list:
         """πu as broken local vectors (one per K_k, on D_k): Φ_k Φ_kᵀ S_k u."""
         c = self.coefficients(u)
-        return [Phi @ c[self.offsets[k]:self.offsets[k + 1]] for k, Phi in enumerate(self.vectors)]
+        return [Phi @ c[self.offsets[k] : self.offsets[k + 1]] for k, Phi in enumerate(self.vectors)]
 
     def project_local(self, local: list, S_local: list) -> list:
         """π applied to a broken function given by local vectors (with the local s_k matrices)."""
@@ -159,9 +160,7 @@ class AuxiliarySpace:
         n Ω₁ DOFs."""
         offsets = np.concatenate([[0], np.cumsum([Phi.shape[1] for Phi in vectors])]).astype(np.int64)
         rows = np.concatenate([np.repeat(D, b.shape[1]) for D, b in zip(dofs, blocks)])
-        cols = np.concatenate(
-            [np.tile(np.arange(offsets[k], offsets[k + 1]), len(D)) for k, D in enumerate(dofs)]
-        )
+        cols = np.concatenate([np.tile(np.arange(offsets[k], offsets[k + 1]), len(D)) for k, D in enumerate(dofs)])
         data = np.concatenate([b.ravel() for b in blocks])
         B = sp.csr_matrix((data, (rows, cols)), shape=(n, int(offsets[-1])))
         return cls(list(dofs), list(values), list(vectors), B, offsets, np.asarray(gaps, dtype=np.float64))
@@ -192,8 +191,12 @@ def build_auxiliary_space(
         # one pair more than kept: Λ_k, the first eigenvalue left out (reported as ``spectral_gap``)
         l = options.nbasis  # an int (CEMOptions) or None
         lam, Phi = local_spectral_problem(
-            A, S, l if l is None or l >= D.size else l + 1, eigensolver=options.eigensolver,
-            target=options.target, tol=options.eig_tol,
+            A,
+            S,
+            l if l is None or l >= D.size else l + 1,
+            eigensolver=options.eigensolver,
+            target=options.target,
+            tol=options.eig_tol,
         )
         gap = np.inf
         if l is not None and lam.size > l:

@@ -66,7 +66,8 @@ of the data: d = [g; 1] (n_g γ values, then the load).
 right-hand side as G ← G − (div s₀, v) and the stress-side load F = −(A s₀, τ) − β∫_γ(s₀n)·(τn); a
 prescribed u_D on Γ_D adds ∫_ΓD u_D·(τn) to F (``CellOperators.F``, ``.s0``).  F|K_i enters the τ rows of
 the source corrector's system above (the load column), Ψᵀ F the coarse right-hand side (``CoarseOperators.Fphi``),
-and the trace σ₁n₁ gets s₀'s (``MixedMultiscaleOmega1.trace``).  Without source correctors F is seen only through Ψᵀ F (a warning).
+and the trace σ₁n₁ gets s₀'s (``MixedMultiscaleOmega1.trace``).  Without source correctors F is seen only through Ψᵀ
+F (a warning).
 
 **Coarse operators.**  With Φ = [Ψ | Q | σ_f] the online problem needs only small dense
 matrices, accumulated coarse cell by coarse cell from the patch functions that
@@ -115,9 +116,29 @@ condensation, ``stage_two``), ``coarse`` (``CoarseOperators``), ``cache`` (``Off
 here.
 """
 
-from fenics_contact.multiscale.mixed_cem.options import DEFAULT_MAX_NBASIS, DEFAULT_MIN_GAP, SMALL_GAP, MixedCEMOptions
+from fenics_contact.multiscale.mixed_cem.bases import (
+    CoarseCellDofs,
+    LocalFactor,
+    PatchFunctions,
+    basis_decay_profile,
+    cell_coarse,
+    patch_system,
+)
 from fenics_contact.multiscale.mixed_cem.blocks import block_diag, cell_blocks, cell_rows, column_blocks, row_blocks
-from fenics_contact.multiscale.mixed_cem.operators import CellOperators, cell_operators, scale_to_cell_sizes
+from fenics_contact.multiscale.mixed_cem.cache import (
+    MIXED_CACHE_FORMAT,
+    MixedOfflineCache,
+    OfflineData,
+    mixed_offline_key,
+)
+from fenics_contact.multiscale.mixed_cem.coarse import (
+    COARSE_ARRAYS,
+    SYMMETRIC_ARRAYS,
+    CoarseOperators,
+    coarse_operators,
+    gram,
+    reaching,
+)
 from fenics_contact.multiscale.mixed_cem.local_space import (
     LocalSpace,
     Topology,
@@ -127,32 +148,12 @@ from fenics_contact.multiscale.mixed_cem.local_space import (
     local_stress_space,
     local_triplets,
 )
-from fenics_contact.multiscale.mixed_cem.spectral import StageI, stage_one, stage_one_cell, stage_one_of
-from fenics_contact.multiscale.mixed_cem.bases import (
-    CoarseCellDofs,
-    LocalFactor,
-    PatchFunctions,
-    basis_decay_profile,
-    cell_coarse,
-    patch_system,
-)
-from fenics_contact.multiscale.mixed_cem.skeleton import KEEP_FACTORS_BYTES, held_cells, stage_two
-from fenics_contact.multiscale.mixed_cem.coarse import (
-    COARSE_ARRAYS,
-    SYMMETRIC_ARRAYS,
-    CoarseOperators,
-    coarse_operators,
-    gram,
-    reaching,
-)
-from fenics_contact.multiscale.mixed_cem.cache import (
-    MIXED_CACHE_FORMAT,
-    MixedOfflineCache,
-    OfflineData,
-    mixed_offline_key,
-)
-from fenics_contact.multiscale.mixed_cem.response import InterfaceResponse
 from fenics_contact.multiscale.mixed_cem.omega1 import MixedMultiscaleOmega1
+from fenics_contact.multiscale.mixed_cem.operators import CellOperators, cell_operators, scale_to_cell_sizes
+from fenics_contact.multiscale.mixed_cem.options import DEFAULT_MAX_NBASIS, DEFAULT_MIN_GAP, SMALL_GAP, MixedCEMOptions
+from fenics_contact.multiscale.mixed_cem.response import InterfaceResponse
+from fenics_contact.multiscale.mixed_cem.skeleton import KEEP_FACTORS_BYTES, held_cells, stage_two
+from fenics_contact.multiscale.mixed_cem.spectral import StageI, stage_one, stage_one_cell, stage_one_of
 
 __all__ = [
     "DEFAULT_MAX_NBASIS",

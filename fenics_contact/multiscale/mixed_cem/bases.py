@@ -66,7 +66,9 @@ class CoarseCellDofs:
     def dg(self, ops: CellOperators, k: int, c: np.ndarray) -> np.ndarray:
         """The cell-major DG P3 values (|K|, 30, ...) of AW coefficients c (|aw_K|, ...) on K."""
         cc = self.per_cell(k, c)
-        return ops.P_blocks[self.cells[k]] @ cc if c.ndim > 1 else np.einsum("cab,cb->ca", ops.P_blocks[self.cells[k]], cc)
+        return (
+            ops.P_blocks[self.cells[k]] @ cc if c.ndim > 1 else np.einsum("cab,cb->ca", ops.P_blocks[self.cells[k]], cc)
+        )
 
 
 @dataclass(slots=True)

@@ -20,8 +20,12 @@ def _csr_cell_blocks(A: sp.csr_matrix, rows: np.ndarray, b: int) -> tuple[np.nda
     cells come in row order, one gather of blocks otherwise; else one (n, a, b) index gather."""
     n, a = rows.shape
     first = rows[:, 0]
-    if (A.shape[0] % a == 0 and np.all(np.diff(A.indptr) == b) and np.all(first % a == 0)
-            and np.array_equal(rows - first[:, None], np.broadcast_to(np.arange(a), rows.shape))):
+    if (
+        A.shape[0] % a == 0
+        and np.all(np.diff(A.indptr) == b)
+        and np.all(first % a == 0)
+        and np.array_equal(rows - first[:, None], np.broadcast_to(np.arange(a), rows.shape))
+    ):
         data, ind = A.data.reshape(-1, a, b), A.indices.reshape(-1, a, b)
         k = first // a
         if not (k.size == data.shape[0] and np.array_equal(k, np.arange(k.size))):

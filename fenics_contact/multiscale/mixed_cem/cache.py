@@ -44,7 +44,12 @@ _FUNCTION_DTYPE = np.float32
 
 
 def mixed_offline_key(
-    sub, ops: CellOperators, grid: CoarseGrid, options: MixedCEMOptions, *, H: float,
+    sub,
+    ops: CellOperators,
+    grid: CoarseGrid,
+    options: MixedCEMOptions,
+    *,
+    H: float,
     traction_free: np.ndarray | None = None,
 ) -> str:
     """sha256 of everything the mixed offline data depend on.
@@ -138,8 +143,12 @@ def _unpack_functions(arrays: dict, prefix: str, dofs: CoarseCellDofs, n_index: 
     nu = np.array([6 * dofs.cells[K].size for K in coarse])
     sig = _split(arrays.pop(f"{prefix}_sigma"), na * k, f"{prefix} stresses")
     dis = _split(arrays.pop(f"{prefix}_u"), nu * k, f"{prefix} displacements")
-    return PatchFunctions(coarse, index, [s.astype(np.float64).reshape(-1, k) for s in sig],
-                          [d.astype(np.float64).reshape(-1, k) for d in dis])
+    return PatchFunctions(
+        coarse,
+        index,
+        [s.astype(np.float64).reshape(-1, k) for s in sig],
+        [d.astype(np.float64).reshape(-1, k) for d in dis],
+    )
 
 
 def _unpack_offline(arrays: dict, ops: CellOperators, grid: CoarseGrid) -> OfflineData:
@@ -156,8 +165,10 @@ def _unpack_offline(arrays: dict, ops: CellOperators, grid: CoarseGrid) -> Offli
         raise ValueError("cached coarse operators do not match U_aux or the interface")
     dofs = CoarseCellDofs.of(ops, grid)
     basis = [_unpack_functions(arrays, f"fn_b_{i:07d}", dofs, n_ms) for i in range(grid.size)]
-    corr = [_unpack_functions(arrays, f"fn_c_{i:07d}", dofs, n_g + 1) if f"fn_c_{i:07d}_index" in arrays else None
-            for i in range(grid.size)]
+    corr = [
+        _unpack_functions(arrays, f"fn_c_{i:07d}", dofs, n_g + 1) if f"fn_c_{i:07d}_index" in arrays else None
+        for i in range(grid.size)
+    ]
     n_d = n_g + 1
     n = n_ms + n_d
     mats = {name: arrays[f"co_{name}"] for name in COARSE_ARRAYS}
@@ -168,8 +179,17 @@ def _unpack_offline(arrays: dict, ops: CellOperators, grid: CoarseGrid) -> Offli
         X = np.zeros((size, size))
         X[np.triu_indices(size)] = tri
         mats[name] = X + np.triu(X, 1).T
-    shapes = {"Gt": (n, n), "Gk": (n, n), "Bm": (n_aux, n), "BN": (n, n_d), "Cphi": (n, n_g), "Ephi": (n_g, n),
-              "Mu": (n_aux + n_d, n_aux + n_d), "PiG": (n_aux,), "Fphi": (n,)}
+    shapes = {
+        "Gt": (n, n),
+        "Gk": (n, n),
+        "Bm": (n_aux, n),
+        "BN": (n, n_d),
+        "Cphi": (n, n_g),
+        "Ephi": (n_g, n),
+        "Mu": (n_aux + n_d, n_aux + n_d),
+        "PiG": (n_aux,),
+        "Fphi": (n,),
+    }
     for name, shape in shapes.items():
         if mats[name].shape != shape:
             raise ValueError(f"cached coarse matrix {name} has shape {mats[name].shape}, expected {shape}")

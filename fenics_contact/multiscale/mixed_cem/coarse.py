@@ -53,10 +53,14 @@ class CoarseOperators:
 
     def __add__(self, other: "CoarseOperators") -> "CoarseOperators":
         names = ("Gt", "Gk", "Bm", "BN", "Cphi", "Ephi", "Mu", "PiG")
-        fphi = None if self.Fphi is None and other.Fphi is None else (
-            (0.0 if self.Fphi is None else self.Fphi) + (0.0 if other.Fphi is None else other.Fphi))
-        return CoarseOperators(self.n_ms, self.n_aux, self.n_g, *(getattr(self, n) + getattr(other, n) for n in names),
-                               fphi)
+        fphi = (
+            None
+            if self.Fphi is None and other.Fphi is None
+            else ((0.0 if self.Fphi is None else self.Fphi) + (0.0 if other.Fphi is None else other.Fphi))
+        )
+        return CoarseOperators(
+            self.n_ms, self.n_aux, self.n_g, *(getattr(self, n) + getattr(other, n) for n in names), fphi
+        )
 
 
 #: The matrices of ``CoarseOperators`` (summed over the ranks, stored in the cache)
@@ -100,8 +104,15 @@ def reaching(funcs: list, n: int) -> list:
 
 
 def coarse_operators(
-    ops: CellOperators, grid: CoarseGrid, aux: StageI, basis: list, corr: list, *,
-    dofs: CoarseCellDofs | None = None, comm: MPI.Comm = MPI.COMM_SELF, cells: np.ndarray | None = None,
+    ops: CellOperators,
+    grid: CoarseGrid,
+    aux: StageI,
+    basis: list,
+    corr: list,
+    *,
+    dofs: CoarseCellDofs | None = None,
+    comm: MPI.Comm = MPI.COMM_SELF,
+    cells: np.ndarray | None = None,
 ) -> CoarseOperators:
     """Accumulate the coarse matrices coarse cell by coarse cell from the patch functions reaching it.
 
@@ -152,8 +163,10 @@ def coarse_operators(
         if ops.F is not None:
             Fphi[uniq] += Fcf.T @ (PBt @ ops.F[cK][:, :, None]).ravel()
         if reach_c[K]:
-            gu, Nu = _merge_columns(np.concatenate([q.u[p] for q, p in reach_c[K]], axis=1),
-                                    np.concatenate([q.index for q, _ in reach_c[K]]))
+            gu, Nu = _merge_columns(
+                np.concatenate([q.u[p] for q, p in reach_c[K]], axis=1),
+                np.concatenate([q.index for q, _ in reach_c[K]]),
+            )
             MNu = (ops.M[cK] @ Nu.reshape(cK.size, 6, -1)).reshape(6 * cK.size, -1)
             BN[np.ix_(uniq, gu)] += BP.T @ Nu
             PMN = MPi.T @ Nu
@@ -168,7 +181,7 @@ def coarse_operators(
             Ephi[:, uniq] += ops.E[:, rows] @ PFf
 
     cost = np.array([sum(f.index.size for f, _ in reach_b[K] + reach_c[K]) for K in range(grid.size)], dtype=float)
-    work.run_shared(cost ** 2, comm, "mixed CEM coarse operators", accumulate, gather=False, items=cells, logger=log)
+    work.run_shared(cost**2, comm, "mixed CEM coarse operators", accumulate, gather=False, items=cells, logger=log)
     co = CoarseOperators(n_ms, aux.size, n_g, Gt, Gk, Bm, BN, Cphi, Ephi, Mu, PiG, Fphi)
     if comm.size > 1:
         for name in COARSE_ARRAYS:

@@ -17,7 +17,12 @@ from fenics_contact.errors import InputError
 from fenics_contact.multiscale.mixed_cem.operators import CellOperators
 
 __all__ = [
-    "LocalSpace", "Topology", "aw_map", "boundary_vertex_null_spaces", "local_operators", "local_stress_space",
+    "LocalSpace",
+    "Topology",
+    "aw_map",
+    "boundary_vertex_null_spaces",
+    "local_operators",
+    "local_stress_space",
     "local_triplets",
 ]
 
@@ -37,8 +42,10 @@ class Topology:
         self.nv = top.index_map(0).size_local
         self.ne = top.index_map(1).size_local
         if num_aw != 3 * self.nv + 4 * self.ne + 3 * self.nc:
-            raise RuntimeError("the local spaces are built on the unconstrained AW numbering of Ω₁ (cell_operators "
-                               "takes care of that); essential τn = 0 sides enter through traction_free_facets")
+            raise RuntimeError(
+                "the local spaces are built on the unconstrained AW numbering of Ω₁ (cell_operators "
+                "takes care of that); essential τn = 0 sides enter through traction_free_facets"
+            )
         self.c2v = top.connectivity(2, 0).array.reshape(-1, 3)[: self.nc].astype(np.int64)
         self.c2e = top.connectivity(2, 1).array.reshape(-1, 3)[: self.nc].astype(np.int64)
         self.e2v = top.connectivity(1, 0).array.reshape(-1, 2).astype(np.int64)
@@ -134,7 +141,10 @@ def boundary_vertex_null_spaces(
 
 
 def local_stress_space(
-    ops: CellOperators, topo: Topology, cells: np.ndarray, raw: tuple[np.ndarray, np.ndarray] | None = None,
+    ops: CellOperators,
+    topo: Topology,
+    cells: np.ndarray,
+    raw: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> LocalSpace:
     """Basis of {τ ∈ AW(ω) : τn = 0 on ∂ω ∩ Ω₁° and on the traction-free sides} in the cell-major layout of ω.
 
@@ -150,11 +160,13 @@ def local_stress_space(
     e_int = np.flatnonzero((e_in > 0) & (((e_in == topo.e_deg) & ~topo.tf_edge) | raw_e))
     e_bnd = np.flatnonzero((((e_in == 1) & (topo.e_deg == 2)) | ((e_in > 0) & topo.tf_edge)) & ~raw_e)
     nv, ne = topo.nv, topo.ne
-    inner = np.concatenate([
-        (3 * v_int[:, None] + np.arange(3)).ravel(),
-        (3 * nv + 4 * e_int[:, None] + np.arange(4)).ravel(),
-        (3 * nv + 4 * ne + 3 * cells[:, None] + np.arange(3)).ravel(),
-    ])
+    inner = np.concatenate(
+        [
+            (3 * v_int[:, None] + np.arange(3)).ravel(),
+            (3 * nv + 4 * e_int[:, None] + np.arange(4)).ravel(),
+            (3 * nv + 4 * ne + 3 * cells[:, None] + np.arange(3)).ravel(),
+        ]
+    )
     # AW functions supported in ω: columns of P, by cell
     local = np.full(ops.num_aw, -1, dtype=np.int64)
     local[inner] = np.arange(inner.size)

@@ -43,8 +43,15 @@ class MixedMultiscaleOmega1:
     """
 
     def __init__(
-        self, sub, grid: CoarseGrid, options: MixedCEMOptions, *, H: float, cache_dir: str | Path | None = None,
-        comm: MPI.Comm = MPI.COMM_SELF, traction_free_facets: np.ndarray | None = None,
+        self,
+        sub,
+        grid: CoarseGrid,
+        options: MixedCEMOptions,
+        *,
+        H: float,
+        cache_dir: str | Path | None = None,
+        comm: MPI.Comm = MPI.COMM_SELF,
+        traction_free_facets: np.ndarray | None = None,
     ) -> None:
         require_serial(sub.mesh.comm)
         self.options = options
@@ -95,22 +102,43 @@ class MixedMultiscaleOmega1:
                 self.cache_status = "built" if self.cache_status == "missing" else f"rebuilt ({self.cache_status})"
         if data is None:
             t, c = time.perf_counter(), time.process_time()
-            aux = stage_one(self.ops, self.topo, grid, options.nbasis, options.min_gap, options.max_nbasis,
-                            options.eigensolver, comm=comm)
+            aux = stage_one(
+                self.ops,
+                self.topo,
+                grid,
+                options.nbasis,
+                options.min_gap,
+                options.max_nbasis,
+                options.eigensolver,
+                comm=comm,
+            )
             self.times["eigen"] = time.perf_counter() - t
             self.cpu_times["eigen"] = time.process_time() - c
             t, c = time.perf_counter(), time.process_time()
             self.dofs = CoarseCellDofs.of(self.ops, grid)
             distributed = comm.size > 1 and cache_dir is None  # (the cache file needs every function on rank 0)
-            basis, corr = stage_two(self.ops, self.topo, grid, aux, options.layers, options.source_correction,
-                                    dofs=self.dofs, comm=comm, distributed=distributed)
+            basis, corr = stage_two(
+                self.ops,
+                self.topo,
+                grid,
+                aux,
+                options.layers,
+                options.source_correction,
+                dofs=self.dofs,
+                comm=comm,
+                distributed=distributed,
+            )
             if distributed and comm.allreduce(any(a is None for f in basis for a in f.sigma), op=MPI.LOR):
                 self._held = held_cells(basis)
             self.times["basis"] = time.perf_counter() - t
             self.cpu_times["basis"] = time.process_time() - c
             t, c = time.perf_counter(), time.process_time()
-            data = OfflineData(aux, basis, corr, coarse_operators(self.ops, grid, aux, basis, corr, dofs=self.dofs,
-                                                                  comm=comm, cells=self._held))
+            data = OfflineData(
+                aux,
+                basis,
+                corr,
+                coarse_operators(self.ops, grid, aux, basis, corr, dofs=self.dofs, comm=comm, cells=self._held),
+            )
             self._setup_online(data)
             self.times["coarse"] = time.perf_counter() - t
             self.cpu_times["coarse"] = time.process_time() - c
@@ -129,8 +157,16 @@ class MixedMultiscaleOmega1:
         lo, hi = self.nbasis_range
         log.info(
             "mixed CEM Ω₁ (m=%d, l=%d..%d per cell): dim X_ms %d, dim U_aux %d, max Stage I residual %.1e, Λ %.2e, "
-            "cache %s, times %s", options.layers, lo, hi, co.n_ms, co.n_aux, float(self.aux.residuals.max()),
-            self.spectral_gap, self.cache_status, {k: round(v, 2) for k, v in self.times.items()},
+            "cache %s, times %s",
+            options.layers,
+            lo,
+            hi,
+            co.n_ms,
+            co.n_aux,
+            float(self.aux.residuals.max()),
+            self.spectral_gap,
+            self.cache_status,
+            {k: round(v, 2) for k, v in self.times.items()},
         )
         if not options.source_correction and self.ops.F is not None:
             log.warning(
@@ -144,7 +180,9 @@ class MixedMultiscaleOmega1:
                 "mixed CEM: the Stage I target Λ ≥ %g was not reached with at most max_nbasis = %d modes per cell "
                 "(Λ = %.2e, ν → ½ in Ω₁): the basis functions may decay more slowly with the oversampling layers "
                 "(for ν = 0.4999, h = 1/64, H = 1/16, 32 modes still gave the decay of ν = 0.3). Check the error "
-                "with one layer more, raise max_nbasis, or use Algorithm 2.", options.min_gap, options.max_nbasis,
+                "with one layer more, raise max_nbasis, or use Algorithm 2.",
+                options.min_gap,
+                options.max_nbasis,
                 self.spectral_gap,
             )
         elif options.min_gap is None and self.spectral_gap * options.s_factor < SMALL_GAP:
@@ -152,7 +190,10 @@ class MixedMultiscaleOmega1:
                 "mixed CEM: the smallest left-out Stage I eigenvalue is Λ = %.2e (Λ·c < %g): the basis functions "
                 "decay slowly with the oversampling layers (expected for ν → ½ in Ω₁ with a fixed l); at m = 5 "
                 "errors of 1e-2 and more were measured in such cases. Set min_gap (e.g. %g) to add modes where "
-                "Λ is small, add layers, or use Algorithm 2.", self.spectral_gap, SMALL_GAP, DEFAULT_MIN_GAP,
+                "Λ is small, add layers, or use Algorithm 2.",
+                self.spectral_gap,
+                SMALL_GAP,
+                DEFAULT_MIN_GAP,
             )
 
     @property
@@ -227,7 +268,9 @@ class MixedMultiscaleOmega1:
     def _combine(self, K: int, r: np.ndarray | None, d: np.ndarray, part: str) -> np.ndarray:
         """Σ over the functions reaching K of their ``part`` ('sigma' or 'u') on K times their coefficient."""
         out = None
-        terms = ([] if r is None else [(f, p, r) for f, p in self._reach_b[K]]) + [(q, p, d) for q, p in self._reach_c[K]]
+        terms = ([] if r is None else [(f, p, r) for f, p in self._reach_b[K]]) + [
+            (q, p, d) for q, p in self._reach_c[K]
+        ]
         for f, p, coef in terms:
             x = getattr(f, part)[p] @ coef[f.index]
             out = x if out is None else out + x
@@ -285,7 +328,8 @@ class MixedMultiscaleOmega1:
 
     @property
     def lifting(self) -> np.ndarray | None:
-        """The traction lifting s₀ (n_cells, 30), cell-major: the stress is ``fine_stress`` + s₀ (None: no tractions)."""
+        """The traction lifting s₀ (n_cells, 30), cell-major: the stress is ``fine_stress`` + s₀ (None: no
+        tractions)."""
         return self.ops.s0
 
     def a_norm2(self, sigma: np.ndarray) -> float:

@@ -13,9 +13,9 @@ import dolfinx.la
 import numpy as np
 import scipy.sparse as sp
 import ufl
-from scipy.spatial import cKDTree
 from dolfinx import fem
 from dolfinx import mesh as dmesh
+from scipy.spatial import cKDTree
 
 from fenics_contact.errors import InputError
 from fenics_contact.fem import forms_mixed
@@ -88,8 +88,9 @@ class CellOperators:
         return self.C.shape[1]
 
 
-def _trace_operator(msh: dmesh.Mesh, dg: fem.FunctionSpace, gamma: np.ndarray, points: np.ndarray,
-                    facet: np.ndarray | None = None) -> sp.csr_matrix:
+def _trace_operator(
+    msh: dmesh.Mesh, dg: fem.FunctionSpace, gamma: np.ndarray, points: np.ndarray, facet: np.ndarray | None = None
+) -> sp.csr_matrix:
     """σn (outward normal) at ``points`` on the γ facets, cell-major columns; averaged where two facets meet
     (``facet``: per point the index into ``gamma`` of the one facet to use, −1 for any)."""
     tdim = msh.topology.dim
@@ -174,11 +175,18 @@ def cell_operators(sub, H: float, weight: str = "lambda+2mu", s_factor: float = 
     f2c = msh.topology.connectivity(tdim - 1, tdim)
     gamma_cells = np.unique(f2c.array[f2c.offsets[gamma]]).astype(np.int64)  # a γ facet is on ∂Ω₁: one cell
     K = cell_blocks(assemble_scipy(forms_mixed.compliance_form(s, t, fields.lmbda, fields.mu)), dg_rows, dg_rows)
-    R = cell_blocks(assemble_scipy(forms_mixed.robin_form(s, t, n, 1.0, ds(Boundary.INTERFACE))),
-                     dg_rows[gamma_cells], dg_rows[gamma_cells])
+    R = cell_blocks(
+        assemble_scipy(forms_mixed.robin_form(s, t, n, 1.0, ds(Boundary.INTERFACE))),
+        dg_rows[gamma_cells],
+        dg_rows[gamma_cells],
+    )
     B = cell_blocks(assemble_scipy(forms_mixed.divergence_form(s, v)), u_rows, dg_rows)
     M = cell_blocks(assemble_scipy(forms_mixed.mass_form(w, v)), u_rows, u_rows)
-    kt = kappa_tilde(fields.lmbda, fields.mu, H, s_factor) if weight == "lambda+2mu" else s_factor * 2.0 * fields.mu / H**2
+    kt = (
+        kappa_tilde(fields.lmbda, fields.mu, H, s_factor)
+        if weight == "lambda+2mu"
+        else s_factor * 2.0 * fields.mu / H**2
+    )
     S = cell_blocks(assemble_scipy(kt * ufl.inner(w, v) * ufl.dx), u_rows, u_rows)
     Gv = fem.assemble_vector(fem.form(forms_mixed.load_form(fields.f, v)))
     Gv.scatter_reverse(dolfinx.la.InsertMode.add)
@@ -214,8 +222,25 @@ def cell_operators(sub, H: float, weight: str = "lambda+2mu", s_factor: float = 
         lift = -np.einsum("cab,cb->ca", K, s0)
         lift[gamma_cells] -= sub.beta * np.einsum("cab,cb->ca", R, s0[gamma_cells])
         F = lift if F is None else F + lift
-    return CellOperators(K, sub.beta * R, B, M, S, G, C, E, int(num_full), dg_rows, u_rows, gamma_cells,
-                         P_cols, P_blocks, F, s0, sub.stress_scale)
+    return CellOperators(
+        K,
+        sub.beta * R,
+        B,
+        M,
+        S,
+        G,
+        C,
+        E,
+        int(num_full),
+        dg_rows,
+        u_rows,
+        gamma_cells,
+        P_cols,
+        P_blocks,
+        F,
+        s0,
+        sub.stress_scale,
+    )
 
 
 def _boundary_loads(sub, dg_rows: np.ndarray, t, n, ds) -> tuple:

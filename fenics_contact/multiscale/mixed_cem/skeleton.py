@@ -95,8 +95,14 @@ def _has_load(ops: CellOperators, cells: np.ndarray, source: bool) -> bool:
 
 
 def _cell_system(
-    ops: CellOperators, topo: Topology, dofs: CoarseCellDofs, aux: StageI, skeleton: tuple, skel_aw: np.ndarray,
-    K: int, source: bool,
+    ops: CellOperators,
+    topo: Topology,
+    dofs: CoarseCellDofs,
+    aux: StageI,
+    skeleton: tuple,
+    skel_aw: np.ndarray,
+    K: int,
+    source: bool,
 ) -> _CellSystem:
     """The coarse cell K's block of every Stage II patch system (``_CellSystem``), assembled from cell blocks."""
     cK, awK = dofs.cells[K], dofs.aw[K]
@@ -134,8 +140,17 @@ def _cell_system(
         if ops.F is not None:  # the boundary data's stress-side load F|K in the τ rows
             b[new, -1] = T.T @ (dofs.P(ops, K).T @ ops.F[cK].ravel())
     skel = space.aw_inner[skel_cols]
-    return _CellSystem(skel, T[:, own_cols].tocsr(), np.searchsorted(awK, skel), n_s, 6 * nK,
-                       M[:n_I, :n_I], M[:n_I, n_I:], M[n_I:, n_I:].toarray(), b)
+    return _CellSystem(
+        skel,
+        T[:, own_cols].tocsr(),
+        np.searchsorted(awK, skel),
+        n_s,
+        6 * nK,
+        M[:n_I, :n_I],
+        M[:n_I, n_I:],
+        M[n_I:, n_I:].toarray(),
+        b,
+    )
 
 
 #: Bytes of coarse-cell LUs (and what goes with them) a rank keeps from the condensation for the back substitution;
@@ -190,8 +205,9 @@ def _condense(system: _CellSystem, scale: float) -> tuple[np.ndarray, np.ndarray
     return system.skel, S, c, _CellElimination(system, lu, np.ascontiguousarray(X[:, n_G:]))
 
 
-def _skeleton_columns(topo: Topology, skeleton: tuple, cells: np.ndarray, G: np.ndarray
-                      ) -> tuple[sp.csr_matrix, np.ndarray]:
+def _skeleton_columns(
+    topo: Topology, skeleton: tuple, cells: np.ndarray, G: np.ndarray
+) -> tuple[sp.csr_matrix, np.ndarray]:
     """T_Γ (|G| × n): the functions of X_h(ω) (``local_stress_space`` of the fine cells ω) on the skeleton DOFs G
     of ω: the AW functions of the skeleton vertices and edges inside ω, the inner-boundary vertex functions
     (null-space values z) of the skeleton vertices on ∂ω or on a traction-free side; edges there are dropped.
@@ -203,8 +219,9 @@ def _skeleton_columns(topo: Topology, skeleton: tuple, cells: np.ndarray, G: np.
     v_bnd = np.flatnonzero(skel_v & (v_in > 0) & ((v_in < topo.v_deg) | topo.tf_vertex))
     e_int = np.flatnonzero(skel_e & (e_in > 0) & (e_in == topo.e_deg) & ~topo.tf_edge)
     e_bnd = np.flatnonzero(((e_in == 1) & (topo.e_deg == 2)) | ((e_in > 0) & topo.tf_edge))
-    inner = np.concatenate([(3 * v_int[:, None] + np.arange(3)).ravel(),
-                            (3 * topo.nv + 4 * e_int[:, None] + np.arange(4)).ravel()])
+    inner = np.concatenate(
+        [(3 * v_int[:, None] + np.arange(3)).ravel(), (3 * topo.nv + 4 * e_int[:, None] + np.arange(4)).ravel()]
+    )
     null, extra, ncol = boundary_vertex_null_spaces(topo, v_bnd, e_bnd, inner.size)
     kk, qq = np.nonzero(extra >= 0)
     rows = [np.searchsorted(G, inner)] + [np.searchsorted(G, 3 * v_bnd[kk] + i) for i in range(3)]
@@ -216,8 +233,15 @@ def _skeleton_columns(topo: Topology, skeleton: tuple, cells: np.ndarray, G: np.
 
 
 def _skeleton_solve(
-    ops: CellOperators, topo: Topology, grid: CoarseGrid, dofs: CoarseCellDofs, skeleton: tuple, condensed: list,
-    i: int, layers: int, glob: "_GlobalSkeleton",
+    ops: CellOperators,
+    topo: Topology,
+    grid: CoarseGrid,
+    dofs: CoarseCellDofs,
+    skeleton: tuple,
+    condensed: list,
+    i: int,
+    layers: int,
+    glob: "_GlobalSkeleton",
 ) -> tuple[np.ndarray, np.ndarray]:
     """The patch K_{i,m} condensed onto its skeleton: (skeleton AW DOFs G, their values (|G|, k) for coarse
     cell i's right-hand sides).  On the skeleton the patch space X_h(K_{i,m}) is T_Γ: the AW functions of
@@ -302,14 +326,19 @@ class _GlobalSkeleton:
             if b.any():
                 Nk = NB[rows[b]]
                 cols = np.unique(Nk.indices)
-                Nk = sp.csr_matrix((Nk.data, np.searchsorted(cols, Nk.indices), Nk.indptr), shape=(Nk.shape[0], cols.size))
+                Nk = sp.csr_matrix(
+                    (Nk.data, np.searchsorted(cols, Nk.indices), Nk.indptr), shape=(Nk.shape[0], cols.size)
+                )
                 rows_x.append(np.repeat(rows, cols.size))
                 cols_x.append(np.tile(cols, rows.size))
                 vals_x.append(np.asarray(Nk.T @ S[b]).T.ravel())  # S[:, b] N_k (S symmetric)
-        X = sp.csr_matrix((np.concatenate(vals_x), (np.concatenate(rows_x), np.concatenate(cols_x))),
-                          shape=(G.size, n_B))
+        X = sp.csr_matrix(
+            (np.concatenate(vals_x), (np.concatenate(rows_x), np.concatenate(cols_x))), shape=(G.size, n_B)
+        )
         BB = (NB.T @ X).toarray()
-        A = sp.bmat([[A, X[np.searchsorted(G, inner)]], [None, sp.csr_matrix(np.triu(0.5 * (BB + BB.T)))]], format="csr")
+        A = sp.bmat(
+            [[A, X[np.searchsorted(G, inner)]], [None, sp.csr_matrix(np.triu(0.5 * (BB + BB.T)))]], format="csr"
+        )
         A.sum_duplicates()  # sorts the indices too: canonical for PETSc
         return A
 
@@ -339,8 +368,15 @@ def _columns(x: np.ndarray | None, cols: slice) -> np.ndarray | None:
 
 
 def _stage_two_condensed(
-    ops: CellOperators, topo: Topology, grid: CoarseGrid, dofs: CoarseCellDofs, aux: StageI, layers: int,
-    source: bool, comm: MPI.Comm, distributed: bool = False,
+    ops: CellOperators,
+    topo: Topology,
+    grid: CoarseGrid,
+    dofs: CoarseCellDofs,
+    aux: StageI,
+    layers: int,
+    source: bool,
+    comm: MPI.Comm,
+    distributed: bool = False,
 ) -> tuple[list[PatchFunctions], list[PatchFunctions]]:
     """Stage II by static condensation (a substructuring of every patch along the coarse skeleton).
 
@@ -375,26 +411,30 @@ def _stage_two_condensed(
             system = _cell_system(ops, topo, dofs, aux, skeleton, skel_aw, K, source)
             elim = _CellElimination.factorized(system, ops.scale)
         try:
-            return _cell_values(elim, K, reach[K], values)
+            return _cell_values(elim, K, reach[K], values)  # noqa: F821 (bound before recover runs; deleted after)
         finally:
             elim.destroy()
 
     try:
         cell_owner = np.empty(grid.size, dtype=np.int64)  # who condensed K keeps its LU: it back-substitutes K
-        condensed = work.run_shared(size, comm, "mixed CEM Stage II (coarse cells)", condense, balanced=True,
-                                    owner=cell_owner, logger=log)
+        condensed = work.run_shared(
+            size, comm, "mixed CEM Stage II (coarse cells)", condense, balanced=True, owner=cell_owner, logger=log
+        )
         cost = np.array([sum(condensed[j][0].size for j in p) for p in patches], dtype=float)
         # patches of one class one after the other (MUMPS' analysis reused: ``ReusedAnalysis``); a class's
         # patches have one cost, so a relative 1e-9 per class label groups them in the cost order of MPI too
         label = _patch_classes(grid, patches, condensed)
         glob = _GlobalSkeleton(condensed)
         try:
-            values = work.run_shared(cost ** 1.5 * (1.0 + 1e-9 * label / max(len(patches), 1)), comm,
-                                     "mixed CEM Stage II (patch skeletons)",
-                                     lambda i: _skeleton_solve(ops, topo, grid, dofs, skeleton, condensed, i, layers,
-                                                               glob),
-                                     balanced=True, items=np.lexsort((np.arange(label.size), label))
-                                     if comm.size == 1 else None, logger=log)
+            values = work.run_shared(
+                cost**1.5 * (1.0 + 1e-9 * label / max(len(patches), 1)),
+                comm,
+                "mixed CEM Stage II (patch skeletons)",
+                lambda i: _skeleton_solve(ops, topo, grid, dofs, skeleton, condensed, i, layers, glob),  # noqa: F821
+                balanced=True,
+                items=np.lexsort((np.arange(label.size), label)) if comm.size == 1 else None,
+                logger=log,
+            )
         finally:
             glob.factors.release()
         del glob, condensed
@@ -402,8 +442,15 @@ def _stage_two_condensed(
         for i, p in enumerate(patches):
             for K in p:
                 reach[int(K)].append(i)
-        parts = work.run_shared(size, comm, "mixed CEM Stage II (back substitution)", recover, gather=not distributed,
-                                items=np.flatnonzero(cell_owner == comm.rank), logger=log)
+        parts = work.run_shared(
+            size,
+            comm,
+            "mixed CEM Stage II (back substitution)",
+            recover,
+            gather=not distributed,
+            items=np.flatnonzero(cell_owner == comm.rank),
+            logger=log,
+        )
         if distributed and comm.size > 1:  # pieces for the coarse cells this rank recovered (``held_cells``) only
             parts = [parts.get(K) for K in range(grid.size)]
     finally:
@@ -418,8 +465,14 @@ def _stage_two_condensed(
         held_here = next((a for a, _ in pieces if a is not None), None)  # (distributed: some pieces are elsewhere)
         width = None if held_here is None else held_here.shape[1]
         first, rest = slice(0, li), slice(li, None)
-        basis.append(PatchFunctions(p, aux.offsets[i] + np.arange(li), [_columns(a, first) for a, _ in pieces],
-                                    [_columns(u, first) for _, u in pieces]))
+        basis.append(
+            PatchFunctions(
+                p,
+                aux.offsets[i] + np.arange(li),
+                [_columns(a, first) for a, _ in pieces],
+                [_columns(u, first) for _, u in pieces],
+            )
+        )
         cK = dofs.cells[i]
         gcols = np.unique(ops.C[cell_rows(cK, 30)].indices)
         load = _has_load(ops, cK, source)
@@ -429,14 +482,28 @@ def _stage_two_condensed(
         if n_corr == 0:
             corr.append(None)
             continue
-        corr.append(PatchFunctions(p, np.concatenate([gcols, [n_g]]) if load else gcols,
-                                   [_columns(a, rest) for a, _ in pieces], [_columns(u, rest) for _, u in pieces]))
+        corr.append(
+            PatchFunctions(
+                p,
+                np.concatenate([gcols, [n_g]]) if load else gcols,
+                [_columns(a, rest) for a, _ in pieces],
+                [_columns(u, rest) for _, u in pieces],
+            )
+        )
     return basis, corr
 
 
 def stage_two(
-    ops: CellOperators, topo: Topology, grid: CoarseGrid, aux: StageI, layers: int, source: bool = True,
-    *, dofs: CoarseCellDofs | None = None, comm: MPI.Comm = MPI.COMM_SELF, distributed: bool = False,
+    ops: CellOperators,
+    topo: Topology,
+    grid: CoarseGrid,
+    aux: StageI,
+    layers: int,
+    source: bool = True,
+    *,
+    dofs: CoarseCellDofs | None = None,
+    comm: MPI.Comm = MPI.COMM_SELF,
+    distributed: bool = False,
 ) -> tuple[list[PatchFunctions], list[PatchFunctions]]:
     """Basis functions ψ_j^i (index = aux index) and data correctors (index = data index), per coarse cell.
 
@@ -458,5 +525,6 @@ def _cell_cost(dofs: CoarseCellDofs) -> np.ndarray:
 def held_cells(basis: list[PatchFunctions]) -> np.ndarray:
     """The coarse cells K whose pieces this rank holds (all, unless ``stage_two(distributed=True)`` under MPI):
     those where the basis of K's own patch has its piece on K."""
-    return np.array([i for i, f in enumerate(basis) if f.sigma[int(np.searchsorted(f.coarse, i))] is not None],
-                    dtype=np.int64)
+    return np.array(
+        [i for i, f in enumerate(basis) if f.sigma[int(np.searchsorted(f.coarse, i))] is not None], dtype=np.int64
+    )

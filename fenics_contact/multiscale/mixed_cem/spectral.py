@@ -133,10 +133,21 @@ def _cell_pairs_dense(At: sp.spmatrix, Bl: sp.spmatrix, S: sp.spmatrix) -> tuple
     return np.maximum(lam, 0.0), vec
 
 
-def _eps_smallest(Af: PETSc.Mat, Bf: PETSc.Mat, nev: int, deflation: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+def _eps_smallest(
+    Af: PETSc.Mat, Bf: PETSc.Mat, nev: int, deflation: np.ndarray | None
+) -> tuple[np.ndarray, np.ndarray]:
     """Converged pairs nearest ``_SHIFT`` of Af x = λ Bf x (Bf ⪰ 0; Krylov–Schur, shift-and-invert by MUMPS)."""
-    return generalized_eigenpairs(Af, Bf, nev, "krylovschur", target=_SHIFT, tol=_EPS_TOL, factor_solver="mumps",
-                                  deflation=deflation, label="Stage I eigenproblem")
+    return generalized_eigenpairs(
+        Af,
+        Bf,
+        nev,
+        "krylovschur",
+        target=_SHIFT,
+        tol=_EPS_TOL,
+        factor_solver="mumps",
+        deflation=deflation,
+        label="Stage I eigenproblem",
+    )
 
 
 def _count_below(K: sp.spmatrix, n_loc: int, t: float, M: sp.spmatrix) -> int:
@@ -148,7 +159,12 @@ def _count_below(K: sp.spmatrix, n_loc: int, t: float, M: sp.spmatrix) -> int:
 
 
 def _cell_pairs_sparse(
-    At: sp.spmatrix, Bl: sp.spmatrix, S: sp.spmatrix, nbasis: int, min_gap: float | None, max_nbasis: int,
+    At: sp.spmatrix,
+    Bl: sp.spmatrix,
+    S: sp.spmatrix,
+    nbasis: int,
+    min_gap: float | None,
+    max_nbasis: int,
     scale: float = 1.0,
 ) -> tuple[np.ndarray, np.ndarray, float]:
     """The kept pairs (λ, p S-orthonormal) and Λ of one coarse cell: sparse shift-and-invert.
@@ -185,8 +201,9 @@ def _cell_pairs_sparse(
             below, have = _count_below(K, n_loc, t, M), int(np.count_nonzero(lam < t))
             if below <= have:
                 break
-            log.debug("Stage I: Krylov–Schur missed %d pair(s) below %.3e; deflating and searching again",
-                      below - have, t)
+            log.debug(
+                "Stage I: Krylov–Schur missed %d pair(s) below %.3e; deflating and searching again", below - have, t
+            )
             keep = lam < t
             more_v, more_x = _eps_smallest(Kp, Mp, min(below - have + _EXTRA_PAIRS, n_u - have), X[:, keep])
             lam, X = np.concatenate([lam[keep], more_v]), np.concatenate([X[:, keep], more_x], axis=1)
@@ -202,8 +219,13 @@ def _cell_pairs_sparse(
 
 
 def stage_one_cell(
-    ops: CellOperators, topo: Topology, cells: np.ndarray, nbasis: int | None,
-    min_gap: float | None = None, max_nbasis: int = DEFAULT_MAX_NBASIS, eigensolver: str = "auto",
+    ops: CellOperators,
+    topo: Topology,
+    cells: np.ndarray,
+    nbasis: int | None,
+    min_gap: float | None = None,
+    max_nbasis: int = DEFAULT_MAX_NBASIS,
+    eigensolver: str = "auto",
 ) -> tuple[np.ndarray, np.ndarray, float, float]:
     """Stage I on one coarse cell (fine ``cells``): (λ kept, p (|K|, 6, l) S-orthonormal, Λ, residual).
 
@@ -232,9 +254,15 @@ def stage_one_cell(
 
 
 def stage_one(
-    ops: CellOperators, topo: Topology, grid: CoarseGrid, nbasis: int | None,
-    min_gap: float | None = None, max_nbasis: int = DEFAULT_MAX_NBASIS, eigensolver: str = "auto",
-    *, comm: MPI.Comm = MPI.COMM_SELF,
+    ops: CellOperators,
+    topo: Topology,
+    grid: CoarseGrid,
+    nbasis: int | None,
+    min_gap: float | None = None,
+    max_nbasis: int = DEFAULT_MAX_NBASIS,
+    eigensolver: str = "auto",
+    *,
+    comm: MPI.Comm = MPI.COMM_SELF,
 ) -> StageI:
     """Mixed local spectral problems Ã φ + Bᵀp = 0, −Bφ = λ S p on every coarse cell (``stage_one_cell``).
 
@@ -242,9 +270,14 @@ def stage_one(
     eigenvalue left out is below ``min_gap`` (at most ``max_nbasis``) and to whole clusters.
     Under ``comm`` the coarse cells are shared out and every rank gets all results.
     """
-    out = work.run_shared(np.array([len(c) for c in grid.cells], dtype=float), comm, "mixed CEM Stage I (coarse cells)",
-                          lambda k: stage_one_cell(ops, topo, grid.cells[k], nbasis, min_gap, max_nbasis, eigensolver),
-                          balanced=True, logger=log)
+    out = work.run_shared(
+        np.array([len(c) for c in grid.cells], dtype=float),
+        comm,
+        "mixed CEM Stage I (coarse cells)",
+        lambda k: stage_one_cell(ops, topo, grid.cells[k], nbasis, min_gap, max_nbasis, eigensolver),
+        balanced=True,
+        logger=log,
+    )
     return _stage_one_from(out)
 
 
@@ -256,11 +289,19 @@ def _stage_one_from(out: list) -> StageI:
 
 
 def stage_one_of(
-    sub, grid: CoarseGrid, options: MixedCEMOptions, *, H: float, traction_free_facets: np.ndarray | None = None,
+    sub,
+    grid: CoarseGrid,
+    options: MixedCEMOptions,
+    *,
+    H: float,
+    traction_free_facets: np.ndarray | None = None,
 ) -> tuple[CellOperators, "Topology", StageI]:
     """Stage I alone for an Ω₁ ``MixedSubproblem``: (cell operators, local-space topology, U_aux)."""
     ops = cell_operators(sub, H, options.weight, options.s_factor)
     scale_to_cell_sizes(ops, grid, H)
     topo = Topology(sub.mesh, ops.num_aw, traction_free_facets)
-    return ops, topo, stage_one(ops, topo, grid, options.nbasis, options.min_gap, options.max_nbasis,
-                                options.eigensolver)
+    return (
+        ops,
+        topo,
+        stage_one(ops, topo, grid, options.nbasis, options.min_gap, options.max_nbasis, options.eigensolver),
+    )

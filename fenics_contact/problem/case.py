@@ -57,12 +57,10 @@ A ``python`` reference runs that file's code: use it only with case files you tr
 """
 
 import codecs
-import importlib.util
 import math
-import sys
 import tomllib
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, NamedTuple
 
@@ -71,6 +69,24 @@ from mpi4py import MPI
 
 from fenics_contact.errors import InputError, MeshTagError
 from fenics_contact.problem.boundary import BoundaryConditions
+from fenics_contact.problem.case_values import (
+    Bad,
+    ByGroup,
+    FieldSpec,
+    Pixels,
+    PythonField,
+    Source,
+    Table,
+    Uniform,
+    read_field,
+    read_integer,
+    read_number,
+    read_string,
+    read_strings,
+    read_unit,
+    read_vector,
+    show_value,
+)
 from fenics_contact.problem.cell_groups import SUBDOMAIN_NAMES, CellGroups, bounding_box, read_cell_groups
 from fenics_contact.problem.geometry import SIDES, ContactMesh, read_mesh, unit_square
 from fenics_contact.problem.meshes import bulged_square, hertz_block
@@ -101,271 +117,6 @@ __all__ = [
 #: the run-option tables (the command line says which methods read each: ``cli.TABLE_METHODS``)
 RUN_TABLES = ("run", "primal", "mixed", "multiscale", "mixed-ms")
 _PROBLEM_TABLES = ("mesh", "material", "load", "boundary", "obstacle")
-
-
-class _Bad(Exception):
-    """A value of the wrong type or range (the message completes "KEY ...")."""
-
-
-# ---------------------------------------------------------------------------------------------
-# reading typed values
-# ---------------------------------------------------------------------------------------------
-def _show(value) -> str:
-    return repr(value) if not isinstance(value, dict) else "a table"
-
-
-def _number(*, positive: bool = False, low: float | None = None, high: float | None = None) -> Callable:
-    def convert(value) -> float:
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-            raise _Bad(f"must be a finite number, got {_show(value)}")
-        if positive and not value > 0:
-            raise _Bad(f"must be > 0, got {value!r}")
-        if positive and value < sys.float_info.min:  # subnormal: 1/value overflows, products lose all digits
-            raise _Bad(f"must be at least {sys.float_info.min:.3g} (a normal floating-point number), got {value!r}")
-        if (low is not None and not value > low) or (high is not None and not value < high):
-            raise _Bad(f"must lie in ({low:g}, {high:g}), got {value!r}")
-        return float(value)
-
-    return convert
-
-
-def _integer(minimum: int) -> Callable:
-    def convert(value) -> int:
-        if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
-            raise _Bad(f"must be an integer >= {minimum}, got {_show(value)}")
-        return int(value)
-
-    return convert
-
-
-def _vector(value) -> tuple[float, float]:
-    if not isinstance(value, (list, tuple)) or len(value) != 2:
-        raise _Bad(f"must be a vector [x, y] of two numbers, got {_show(value)}")
-    return tuple(_number()(v) for v in value)
-
-
-def _unit(value) -> tuple[float, float]:
-    v = _vector(value)
-    if math.hypot(*v) == 0.0:
-        raise _Bad("must be a non-zero vector")
-    return v
-
-
-def _string(choices: Sequence[str] | None = None) -> Callable:
-    def convert(value) -> str:
-        if not isinstance(value, str):
-            raise _Bad(f"must be a string, got {_show(value)}")
-        if choices is not None and value not in choices:
-            raise _Bad(f"must be one of {list(choices)}, got {value!r}")
-        return value
-
-    return convert
-
-
-def _strings(choices: Sequence[str]) -> Callable:
-    def convert(value) -> tuple[str, ...]:
-        if not isinstance(value, (list, tuple)):
-            raise _Bad(f"must be a list of strings, got {_show(value)}")
-        items = tuple(_string(choices)(v) for v in value)
-        if len(set(items)) != len(items):
-            raise _Bad(f"lists a value twice: {list(items)}")
-        return items
-
-    return convert
-
-
-class _Source:
-    """The case file being read: its path and directory (for relative file names) and error messages."""
-
-    def __init__(self, path: Path) -> None:
-        self.path = path
-        self.directory = path.parent
-
-    def error(self, message: str, kind: type = InputError) -> Exception:
-        return kind(f"case {self.path}: {message}")
-
-    def file(self, value, key: str) -> Path:
-        if not isinstance(value, str) or not value.strip():
-            raise self.error(f"{key} must name a file, got {_show(value)}")
-        path = (self.directory / value).resolve()
-        if not path.is_file():
-            raise self.error(f"{key}: {path} does not exist" if not path.exists() else f"{key}: {path} is not a file")
-        return path
-
-
-class _Table:
-    """One table of the case: typed reads by key; ``finish`` refuses the keys nobody read."""
-
-    def __init__(self, source: _Source, name: str, data) -> None:
-        if not isinstance(data, dict):
-            raise source.error(f"{name} must be a table ([{name}]), got {_show(data)}")
-        self.source, self.name, self.data, self.known = source, name, dict(data), []
-
-    def key(self, key: str) -> str:
-        return f"{self.name}.{key}"
-
-    def has(self, key: str) -> bool:
-        return key in self.data
-
-    def get(self, key: str, convert: Callable, default=None, *, required: bool = False):
-        self.known.append(key)
-        if key not in self.data:
-            if required:
-                raise self.source.error(f"{self.key(key)} is required")
-            return default
-        value = self.data.pop(key)
-        try:
-            return convert(value)
-        except _Bad as bad:
-            raise self.source.error(f"{self.key(key)} {bad}") from None
-
-    def raw(self, key: str):
-        self.known.append(key)
-        return self.data.pop(key, None)
-
-    def finish(self, what: str = "") -> None:
-        if self.data:
-            unknown = sorted(self.data)
-            raise self.source.error(
-                f"unknown key {self.key(unknown[0])!r}{what}; the keys of [{self.name}] are {self.known}"
-            )
-
-
-# ---------------------------------------------------------------------------------------------
-# fields: a number or vector, by cell group, a pixel map, a Python callable
-# ---------------------------------------------------------------------------------------------
-@dataclass(frozen=True, slots=True)
-class Uniform:
-    """One value everywhere."""
-
-    value: float | tuple[float, float]
-
-    def echo(self):
-        return list(self.value) if isinstance(self.value, tuple) else self.value
-
-
-@dataclass(frozen=True, slots=True)
-class ByGroup:
-    """A value per cell group (Omega1, Omega2, or a surface group of the mesh file)."""
-
-    values: tuple[tuple[str, Any], ...]
-
-    def echo(self):
-        return {name: list(v) if isinstance(v, tuple) else v for name, v in self.values}
-
-
-@dataclass(frozen=True, slots=True)
-class Pixels:
-    """A pixel map ``values[row, col]`` (row 0 at the bottom) over ``extent`` (default: the mesh's bounding box)."""
-
-    path: Path
-    values: np.ndarray = field(compare=False, repr=False)
-    extent: tuple[float, float, float, float] | None = None
-
-    def echo(self):
-        return {
-            "pixels": str(self.path),
-            "shape": list(self.values.shape),
-            "extent": list(self.extent) if self.extent is not None else "bounding box",
-        }
-
-
-@dataclass(frozen=True, slots=True)
-class PythonField:
-    """A callable ``file.py:name`` (points x (3, N) -> values)."""
-
-    reference: str
-    function: Callable = field(compare=False, repr=False)
-
-    def echo(self):
-        return {"python": self.reference}
-
-
-FieldSpec = Uniform | ByGroup | Pixels | PythonField
-
-
-def _python(source: _Source, key: str, reference) -> PythonField:
-    if not isinstance(reference, str) or reference.count(":") != 1:
-        raise source.error(f"{key}: a python reference is 'file.py:name', got {_show(reference)}")
-    filename, name = reference.split(":")
-    path = source.file(filename, key)
-    module_name = f"fenics_contact_case_{abs(hash(str(path)))}"
-    module = sys.modules.get(module_name)
-    if module is None:
-        spec = importlib.util.spec_from_file_location(module_name, path)
-        if spec is None or spec.loader is None:
-            raise source.error(f"{key}: cannot import {path} as Python")
-        module = importlib.util.module_from_spec(spec)
-        try:
-            spec.loader.exec_module(module)
-        except Exception as err:  # the user's code: any failure is bad input
-            raise source.error(f"{key}: importing {path} failed: {type(err).__name__}: {err}") from None
-        sys.modules[module_name] = module
-    function = getattr(module, name, None)
-    if not callable(function):
-        raise source.error(f"{key}: {path} has no callable {name!r}")
-    return PythonField(f"{path}:{name}", function)
-
-
-def _pixels(source: _Source, key: str, table: dict) -> Pixels:
-    t = _Table(source, key, table)
-    path = t.get("pixels", lambda v: source.file(v, f"{key}.pixels"))
-    extent = t.get("extent", _extent)
-    t.finish()
-    try:
-        values = (
-            np.load(path, allow_pickle=False)
-            if path.suffix == ".npy"
-            else np.loadtxt(path, delimiter="," if path.suffix == ".csv" else None, ndmin=2)
-        )
-        values = np.asarray(values, dtype=np.float64)
-    except (OSError, ValueError, EOFError, TypeError) as err:
-        raise source.error(
-            f"{key}.pixels: cannot read a pixel array from {path}: {type(err).__name__}: {err}"
-        ) from None
-    if values.ndim != 2 or values.size == 0:
-        raise source.error(f"{key}.pixels: {path} must hold a non-empty 2D array, got shape {values.shape}")
-    return Pixels(path, values, extent)
-
-
-def _extent(value) -> tuple[float, float, float, float]:
-    if not isinstance(value, (list, tuple)) or len(value) != 4:
-        raise _Bad(f"must be [x0, x1, y0, y1], got {_show(value)}")
-    x0, x1, y0, y1 = (_number()(v) for v in value)
-    if not (x1 > x0 and y1 > y0):
-        raise _Bad(f"must have x1 > x0 and y1 > y0, got {list(value)}")
-    return x0, x1, y0, y1
-
-
-def _field(source: _Source, key: str, value, check: Callable, *, vector: bool, pixels: bool = True) -> FieldSpec:
-    """A field from its case value; ``check`` validates one value (a number, or a vector)."""
-
-    def checked(v, where):
-        try:
-            return check(v)
-        except _Bad as bad:
-            raise source.error(f"{where} {bad}") from None
-
-    if isinstance(value, dict):
-        if "python" in value:
-            if len(value) != 1:
-                raise source.error(f"{key}: a python field takes no other keys, got {sorted(value)}")
-            return _python(source, key, value["python"])
-        if "pixels" in value:
-            if not pixels:
-                raise source.error(
-                    f"{key}: a pixel map gives a scalar field; give a vector, a table by group or a python callable"
-                )
-            return _pixels(source, key, value)
-        if not value:
-            raise source.error(f"{key} is an empty table: give a value per cell group")
-        return ByGroup(tuple((name, checked(v, f"{key}.{name}")) for name, v in sorted(value.items())))
-    if vector and not isinstance(value, (list, tuple)) or not vector and isinstance(value, (list, tuple)):
-        kind = "a vector [x, y]" if vector else "a number"
-        raise source.error(
-            f"{key} must be {kind}, a table by cell group or {{python = 'file.py:name'}}, got {_show(value)}"
-        )
-    return Uniform(checked(value, key))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -506,24 +257,24 @@ MeshSpec = UnitSquareMesh | BulgedSquareMesh | HertzBlockMesh | MeshFile
 _BUILTINS = ("unit-square", "hertz-block", "bulged-square")
 
 
-def _mesh(source: _Source, data) -> MeshSpec:
-    t = _Table(source, "mesh", data)
+def _mesh(source: Source, data) -> MeshSpec:
+    t = Table(source, "mesh", data)
     if t.has("builtin") == t.has("file"):
         raise source.error(
             "[mesh] needs exactly one of builtin = " + " | ".join(f'"{b}"' for b in _BUILTINS) + ' and file = "my.msh"'
         )
     if t.has("file"):
         path = t.get("file", lambda v: source.file(v, "mesh.file"))
-        spec = MeshFile(path, t.get("H", _integer(1)), t.get("coarse-size", _number(positive=True)))
+        spec = MeshFile(path, t.get("H", read_integer(1)), t.get("coarse-size", read_number(positive=True)))
         if spec.H is not None and spec.coarse_size is not None:
             raise source.error(
                 "mesh.H (1/H) and mesh.coarse-size (H itself, a length) give the same coarse size: give one of them"
             )
         t.finish(" for a mesh file")
         return spec
-    kind = t.get("builtin", _string(_BUILTINS))
+    kind = t.get("builtin", read_string(_BUILTINS))
     if kind == "hertz-block":
-        positive = _number(positive=True)
+        positive = read_number(positive=True)
         spec = HertzBlockMesh(
             t.get("a", positive, required=True),
             t.get("refinement", positive, 1.0),
@@ -534,18 +285,18 @@ def _mesh(source: _Source, data) -> MeshSpec:
         )
     elif kind == "bulged-square":
         spec = BulgedSquareMesh(
-            t.get("h", _integer(4), 32),
-            t.get("H", _integer(2), 4),
-            t.get("bulge", _number(low=0.0, high=0.5), 0.1),
-            t.get("clamped", _strings(SIDES), ("left",)),
+            t.get("h", read_integer(4), 32),
+            t.get("H", read_integer(2), 4),
+            t.get("bulge", read_number(low=0.0, high=0.5), 0.1),
+            t.get("clamped", read_strings(SIDES), ("left",)),
         )
         if spec.H >= spec.h:
             raise source.error(f"mesh.H = {spec.H} must be < mesh.h = {spec.h} (the strip is 1/H wide)")
     else:
         spec = UnitSquareMesh(
-            t.get("h", _integer(2), 64),
-            t.get("H", _integer(2), 16),
-            t.get("clamped", _strings(SIDES), SIDES),
+            t.get("h", read_integer(2), 64),
+            t.get("H", read_integer(2), 16),
+            t.get("clamped", read_strings(SIDES), SIDES),
             _neumann_sides(source, t),
         )
         if spec.h % spec.H:
@@ -569,19 +320,19 @@ def _mesh(source: _Source, data) -> MeshSpec:
     return spec
 
 
-def _neumann_sides(source: _Source, t: _Table) -> tuple[tuple[str, str], ...]:
+def _neumann_sides(source: Source, t: Table) -> tuple[tuple[str, str], ...]:
     table = t.raw("neumann")
     if table is None:
         return ()
     if not isinstance(table, dict):
-        raise source.error(f'mesh.neumann must be a table {{side = "Gamma_N_<label>"}}, got {_show(table)}')
+        raise source.error(f'mesh.neumann must be a table {{side = "Gamma_N_<label>"}}, got {show_value(table)}')
     pairs = []
     for side, name in sorted(table.items()):
         if side not in SIDES:
             raise source.error(f"mesh.neumann.{side}: unknown side; the sides are {list(SIDES)} (x = 1 is Gamma_C)")
         if not isinstance(name, str) or not is_neumann_name(name):
             raise source.error(
-                f"mesh.neumann.{side}: a traction group is named 'Gamma_N' or 'Gamma_N_<label>', got {_show(name)}"
+                f"mesh.neumann.{side}: a traction group is named 'Gamma_N' or 'Gamma_N_<label>', got {show_value(name)}"
             )
         pairs.append((side, name))
     return tuple(pairs)
@@ -611,26 +362,32 @@ class Material:
         return out
 
 
-def _material(source: _Source, data, load) -> Material:
-    t = _Table(source, "material", data or {})
-    model = t.get("model", _integer(1))
+def _material(source: Source, data, load) -> Material:
+    t = Table(source, "material", data or {})
+    model = t.get("model", read_integer(1))
     if model is not None and model not in (1, 2, 3):
         raise source.error(f"material.model must be 1, 2 or 3 (the built-in models), got {model}")
-    E_high = t.get("E-high", _number(positive=True))
-    E_low = t.get("E-low", _number(positive=True))
+    E_high = t.get("E-high", read_number(positive=True))
+    E_low = t.get("E-low", read_number(positive=True))
     if model is None and (E_high is not None or E_low is not None):
         raise source.error("material.E-high and material.E-low set a built-in model's moduli: they need material.model")
     E = t.raw("E")
     nu = t.raw("nu")
-    E = _field(source, "material.E", E, _number(positive=True), vector=False) if E is not None else None
-    nu = _field(source, "material.nu", nu, _number(low=-1.0, high=0.5), vector=False) if nu is not None else None
+    E = read_field(source, "material.E", E, read_number(positive=True), vector=False) if E is not None else None
+    nu = (
+        read_field(source, "material.nu", nu, read_number(low=-1.0, high=0.5), vector=False) if nu is not None else None
+    )
     if model is None and (E is None or nu is None):
         raise source.error(f"material.{'E' if E is None else 'nu'} is required (or material.model = 1, 2 or 3)")
     t.finish()
-    lt = _Table(source, "load", load or {})
+    lt = Table(source, "load", load or {})
     force = lt.raw("body-force")
     lt.finish()
-    force = _field(source, "load.body-force", force, _vector, vector=True, pixels=False) if force is not None else None
+    force = (
+        read_field(source, "load.body-force", force, read_vector, vector=True, pixels=False)
+        if force is not None
+        else None
+    )
     return Material(E, nu, model, E_high if model else None, E_low if model else None, force)
 
 
@@ -657,15 +414,15 @@ class Boundary:
         }
 
 
-def _vector_or_python(source: _Source, key: str, value) -> Uniform | PythonField:
-    spec = _field(source, key, value, _vector, vector=True, pixels=False)
+def _vector_or_python(source: Source, key: str, value) -> Uniform | PythonField:
+    spec = read_field(source, key, value, read_vector, vector=True, pixels=False)
     if isinstance(spec, ByGroup):
         raise source.error(f"{key} must be a vector [x, y] or {{python = 'file.py:name'}}, got a table")
     return spec
 
 
-def _boundary(source: _Source, data, mesh: MeshSpec) -> Boundary:
-    t = _Table(source, "boundary", data or {})
+def _boundary(source: Source, data, mesh: MeshSpec) -> Boundary:
+    t = Table(source, "boundary", data or {})
     displacement = t.raw("displacement")
     tractions = t.raw("tractions")
     t.finish()
@@ -673,7 +430,9 @@ def _boundary(source: _Source, data, mesh: MeshSpec) -> Boundary:
         _vector_or_python(source, "boundary.displacement", displacement) if displacement is not None else None
     )
     if tractions is not None and not isinstance(tractions, dict):
-        raise source.error(f"boundary.tractions must be a table {{Gamma_N_<label> = [tx, ty]}}, got {_show(tractions)}")
+        raise source.error(
+            f"boundary.tractions must be a table {{Gamma_N_<label> = [tx, ty]}}, got {show_value(tractions)}"
+        )
     pairs = []
     for name, value in sorted((tractions or {}).items()):
         if not is_neumann_name(name):
@@ -742,18 +501,18 @@ class ObstacleSpec:
         return out
 
 
-def _obstacle(source: _Source, data) -> ObstacleSpec:
-    t = _Table(source, "obstacle", data or {})
-    shape = t.get("shape", _string(("wall", "plane", "circle")), "wall")
+def _obstacle(source: Source, data) -> ObstacleSpec:
+    t = Table(source, "obstacle", data or {})
+    shape = t.get("shape", read_string(("wall", "plane", "circle")), "wall")
     point = normal = centre = radius = None
     if shape == "plane":
-        point = t.get("point", _vector, required=True)
-        normal = t.get("normal", _unit, required=True)
+        point = t.get("point", read_vector, required=True)
+        normal = t.get("normal", read_unit, required=True)
     elif shape == "circle":
-        centre = t.get("centre", _vector, required=True)
-        radius = t.get("radius", _number(positive=True), required=True)
+        centre = t.get("centre", read_vector, required=True)
+        radius = t.get("radius", read_number(positive=True), required=True)
     indentation = t.raw("indentation")
-    direction = t.get("direction", _unit)
+    direction = t.get("direction", read_unit)
     t.finish(f' for shape = "{shape}"')
     steps = isinstance(indentation, list)
     if indentation is None:
@@ -763,8 +522,8 @@ def _obstacle(source: _Source, data) -> ObstacleSpec:
         if steps and not values:
             raise source.error("obstacle.indentation is an empty list: give the depths of the load steps")
         try:
-            depths = tuple(_number()(v) for v in values)
-        except _Bad as bad:
+            depths = tuple(read_number()(v) for v in values)
+        except Bad as bad:
             raise source.error(f"obstacle.indentation {bad}") from None
     if depths and shape == "wall":
         raise source.error(
@@ -924,7 +683,7 @@ def parse_override(text: str) -> tuple[str, Any]:
         return key, value.strip()
 
 
-def _apply(data: dict, key: str, value, source: _Source) -> None:
+def _apply(data: dict, key: str, value, source: Source) -> None:
     parts = key.split(".")
     table = data
     for depth, part in enumerate(parts[:-1]):
@@ -938,7 +697,7 @@ def _apply(data: dict, key: str, value, source: _Source) -> None:
 def load_case(path: str | Path, overrides: Sequence[tuple[str, Any]] = ()) -> Case:
     """Read and validate a case file; ``overrides`` ((dotted key, value), ...) replace keys first."""
     path = Path(path).resolve()
-    source = _Source(path)
+    source = Source(path)
     if not path.is_file():
         raise InputError(f"--case {path} does not exist" if not path.exists() else f"--case {path} is not a file")
     try:
@@ -958,7 +717,7 @@ def load_case(path: str | Path, overrides: Sequence[tuple[str, Any]] = ()) -> Ca
         )
     description = data.get("description", "")
     if not isinstance(description, str):
-        raise source.error(f"description must be a string, got {_show(description)}")
+        raise source.error(f"description must be a string, got {show_value(description)}")
     if "mesh" not in data:
         raise source.error('[mesh] is required (builtin = "unit-square" | ... or file = "my.msh")')
     mesh = _mesh(source, data["mesh"])
@@ -977,6 +736,6 @@ def load_case(path: str | Path, overrides: Sequence[tuple[str, Any]] = ()) -> Ca
     for table in RUN_TABLES:
         values = data.get(table, {})
         if not isinstance(values, dict):
-            raise source.error(f"{table} must be a table ([{table}]), got {_show(values)}")
+            raise source.error(f"{table} must be a table ([{table}]), got {show_value(values)}")
         run[table] = dict(values)
     return Case(path, description, mesh, material, boundary, obstacle, run, tuple(overrides))

@@ -24,7 +24,7 @@ env: $(VENV)/.installed
 demo: $(VENV)/.installed
 	$(VENV)/bin/fenics-contact run --model 1 --method primal --h 64 --H 16 --reference --out $(OUT)/model1-primal
 	$(VENV)/bin/fenics-contact run --model 2 --method primal --h 64 --H 16 --reference --out $(OUT)/model2-primal
-	@echo "Fields for ParaView: $(OUT)/*/fields.xdmf   plots: $(OUT)/*/*.png   summaries: $(OUT)/*/summary.md"
+	@echo "Fields for ParaView: $(OUT)/*/fields.pvd and contact.pvd   plots: $(OUT)/*/*.png   summaries: $(OUT)/*/summary.md"
 
 # python -m mpi4py: an exception on one rank aborts the job instead of leaving the others waiting; no cache
 # (the ranks would write it at once)

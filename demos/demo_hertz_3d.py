@@ -26,12 +26,14 @@
 
 # %%
 import os
+import sys
 from pathlib import Path
 
 import matplotlib.pyplot as plt
 import numpy as np
 
 import fenics_contact as fc  # imports dolfinx_solver before dolfinx
+from fenics_contact.io import write_vtx
 from fenics_contact.problem.meshes3d import graded_planes
 
 N = int(os.environ.get("FENICS_CONTACT_DEMO_N", "16"))
@@ -89,3 +91,33 @@ ax.set(xlim=(0, 2), xlabel="r / a", ylabel="p / p₀", title=f"Sphere on a block
 ax.legend()
 fig.tight_layout()
 fig.savefig(OUT / "hertz_3d_pressure.png", dpi=120)
+
+# %% [markdown]
+# The pressure over the contact surface (the quarter, seen from above) and the displacement for ParaView
+# (`u.bp`, ADIOS2/VTX).
+
+# %%
+pressure = -profile.sigma_c
+near = (profile.points[:, 0] <= 2 * a) & (profile.points[:, 1] <= 2 * a)
+fig, ax = plt.subplots(figsize=(4.5, 4))
+dots = ax.scatter(profile.points[near, 0] / a, profile.points[near, 1] / a, c=pressure[near] / p0, s=12, cmap="viridis")
+ax.add_patch(plt.Circle((0, 0), a_F / a, fill=False, color="k", ls="--", label="Hertz contact radius"))
+ax.set(
+    xlabel="x / a", ylabel="y / a", xlim=(-0.05, 2), ylim=(-0.05, 2), aspect="equal", title="contact pressure p / p₀"
+)
+fig.colorbar(dots, ax=ax)
+ax.legend(loc="upper right")
+fig.tight_layout()
+fig.savefig(OUT / "hertz_3d_pressure_map.png", dpi=120)
+write_vtx(OUT / "u.bp", solution.u)
+
+# %% [markdown]
+# ## The figures
+# Inline when this file runs as a notebook; run as a script, it leaves them as the PNG files above.
+
+# %%
+if "ipykernel" in sys.modules:  # a notebook kernel: show the figures written above
+    from IPython.display import Image, display
+
+    for png in ("hertz_3d_pressure.png", "hertz_3d_pressure_map.png"):
+        display(Image(filename=str(OUT / png)))

@@ -137,8 +137,28 @@ class Plane(Obstacle):
         return np.repeat(np.asarray(self.normal)[:, None], np.shape(x)[1], axis=1)
 
 
+class _Round(Obstacle):
+    """d = |x − centre| − radius in the dimension of ``centre`` (a disc or a ball); undefined within 1e−8·radius
+    of the centre. Subclasses are frozen dataclasses with the fields ``centre`` and ``radius``."""
+
+    __slots__ = ()
+
+    def _offset(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        r = _xy(x, len(self.centre)) - np.asarray(self.centre)[:, None]
+        return r, np.linalg.norm(r, axis=0)
+
+    def distance(self, x: np.ndarray) -> np.ndarray:
+        r, rho = self._offset(x)
+        return np.where(rho > 1e-8 * self.radius, rho - self.radius, np.nan)
+
+    def outward_normal(self, x: np.ndarray) -> np.ndarray:
+        r, rho = self._offset(x)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return np.where(rho > 1e-8 * self.radius, r / rho, np.nan)
+
+
 @dataclass(frozen=True, slots=True)
-class Circle(Obstacle):
+class Circle(_Round):
     """A rigid disc (a cylinder in plane strain): d = |x − centre| − radius; undefined within 1e−8·radius of the
     centre."""
 
@@ -151,22 +171,9 @@ class Circle(Obstacle):
             raise InputError(f"the circle radius must be > 0, got {self.radius!r}")
         object.__setattr__(self, "radius", float(self.radius))
 
-    def _offset(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        r = _xy(x) - np.asarray(self.centre)[:, None]
-        return r, np.linalg.norm(r, axis=0)
-
-    def distance(self, x: np.ndarray) -> np.ndarray:
-        r, rho = self._offset(x)
-        return np.where(rho > 1e-8 * self.radius, rho - self.radius, np.nan)
-
-    def outward_normal(self, x: np.ndarray) -> np.ndarray:
-        r, rho = self._offset(x)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            return np.where(rho > 1e-8 * self.radius, r / rho, np.nan)
-
 
 @dataclass(frozen=True, slots=True)
-class Sphere(Obstacle):
+class Sphere(_Round):
     """A rigid ball: d = |x − centre| − radius (x in 3D); undefined within 1e−8·radius of the centre."""
 
     centre: tuple[float, float, float]
@@ -177,19 +184,6 @@ class Sphere(Obstacle):
         if not (np.isfinite(self.radius) and self.radius > 0):
             raise InputError(f"the sphere radius must be > 0, got {self.radius!r}")
         object.__setattr__(self, "radius", float(self.radius))
-
-    def _offset(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        r = _xy(x, 3) - np.asarray(self.centre)[:, None]
-        return r, np.linalg.norm(r, axis=0)
-
-    def distance(self, x: np.ndarray) -> np.ndarray:
-        r, rho = self._offset(x)
-        return np.where(rho > 1e-8 * self.radius, rho - self.radius, np.nan)
-
-    def outward_normal(self, x: np.ndarray) -> np.ndarray:
-        r, rho = self._offset(x)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            return np.where(rho > 1e-8 * self.radius, r / rho, np.nan)
 
 
 @dataclass(frozen=True, slots=True)

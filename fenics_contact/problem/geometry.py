@@ -349,11 +349,8 @@ def mesh_size(msh: dmesh.Mesh, facet_tags: dmesh.MeshTags | None = None) -> floa
     tdim = msh.topology.dim
     cells = np.arange(msh.topology.index_map(tdim).size_local, dtype=np.int32)
     if facet_tags is not None:
-        msh.topology.create_connectivity(tdim - 1, tdim)
-        f2c = msh.topology.connectivity(tdim - 1, tdim)
-        facets = facet_tags.indices[facet_tags.values == Boundary.GAMMA_C]
-        touching = np.unique(np.concatenate([f2c.links(f) for f in facets] or [np.zeros(0, np.int32)]))
-        cells = touching[touching < cells.size].astype(np.int32)
+        touching = strip.contact_cells(msh, facet_tags)
+        cells = touching[touching < cells.size]
     geo = dmesh.entities_to_geometry(msh, tdim, cells)
     if tdim == 3:  # (6|T|)^(1/3): the edge of the cube of which the largest tetrahedron is a sixth
         x = msh.geometry.x[geo]

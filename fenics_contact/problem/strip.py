@@ -42,6 +42,7 @@ __all__ = [
     "strip_tags",
     "coarse_partition",
     "contact_cell_size",
+    "contact_cells",
 ]
 
 #: a coarse piece of Ω₁ with fewer cells than this fraction of the median coarse cell is merged into a neighbour
@@ -83,13 +84,19 @@ def _facet_samples(msh: dmesh.Mesh, facets: np.ndarray) -> np.ndarray:
     return np.concatenate(msh.comm.allgather(points))
 
 
-def contact_cell_size(msh: dmesh.Mesh, facet_tags: dmesh.MeshTags) -> float:
-    """The largest diameter of a cell with a facet on Γ_C (over all ranks)."""
+def contact_cells(msh: dmesh.Mesh, facet_tags: dmesh.MeshTags) -> np.ndarray:
+    """The local cells (owned and ghost) with a facet on Γ_C, sorted; MeshTagError when no rank has Γ_C."""
     tdim = msh.topology.dim
     msh.topology.create_connectivity(tdim - 1, tdim)
     f2c = msh.topology.connectivity(tdim - 1, tdim)
     facets = _contact_facets(msh, facet_tags)
-    cells = np.unique(f2c.array[f2c.offsets[facets]]).astype(np.int32)
+    return np.unique(f2c.array[f2c.offsets[facets]]).astype(np.int32)  # a boundary facet has one cell
+
+
+def contact_cell_size(msh: dmesh.Mesh, facet_tags: dmesh.MeshTags) -> float:
+    """The largest diameter of a cell with a facet on Γ_C (over all ranks)."""
+    tdim = msh.topology.dim
+    cells = contact_cells(msh, facet_tags)
     size = 0.0
     if cells.size:
         x = _entity_points(msh, tdim, cells)

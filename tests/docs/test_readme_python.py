@@ -16,8 +16,13 @@ pytestmark = [pytest.mark.slow, pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reas
 
 
 def test_the_readme_python_example_solves_with_every_method():
-    run = subprocess.run([sys.executable, str(ROOT / "docs" / "run_page_examples.py"), str(ROOT / "README.md")],
-                         capture_output=True, text=True, timeout=1800, cwd=ROOT)
+    run = subprocess.run(
+        [sys.executable, str(ROOT / "docs" / "run_page_examples.py"), str(ROOT / "README.md")],
+        capture_output=True,
+        text=True,
+        timeout=1800,
+        cwd=ROOT,
+    )
     assert run.returncode == 0, run.stderr[-3000:]
     forces = next(ast.literal_eval(line) for line in run.stdout.splitlines() if line.startswith("["))
     reference, primal, multiscale, mixed, mixed_ms = forces

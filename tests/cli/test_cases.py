@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from layered_case import LAYERS, write_layered_case
 from mpi4py import MPI
 
 from fenics_contact.cli import build_parser, main, options_from_arguments
@@ -309,37 +310,13 @@ def test_contact_cut_short_by_the_end_of_gamma_c_is_warned(tmp_path, capsys):
     assert "Gamma_C where the boundary" not in printed.out + printed.err
 
 
-LAYERS = np.array([1.0] * 6 + [1e3] * 7 + [10.0] * 3)  #: E on the 16 columns of [0, 1]: 1 | 10³ | 10
-LAYERED = """
-[mesh]
-builtin = "unit-square"
-h = 16
-H = 4
-clamped = ["left"]
-[material]
-E = {pixels = "layers.csv"}
-nu = 0.0
-[obstacle]
-shape = "plane"
-point = [1.0, 0.0]
-normal = [-1.0, 0.0]
-indentation = [0.01, 0.02, 0.03]
-[run]
-tol = 1e-10
-[multiscale]
-layers = 2
-"""
-
-
 @pytest.mark.parametrize("method", ["primal", "primal-ms"])
 def test_layered_patch_case_from_a_pixel_map(tmp_path, method):
     """The layered patch test as a case: E from a 16-pixel map, a plane moved in by
     0.01, 0.02, 0.03 in load steps. Primal: F = d₀/(C + δ) to round-off at every step. Algorithm 3
     (one solve per step): F/d₀ the same at every step (the problem is linear in d₀ once in contact),
     within 6 % of the exact at m = 2 (measured 4.6 %: the CEM space, not the steps)."""
-    np.savetxt(tmp_path / "layers.csv", LAYERS[None, :], delimiter=",")
-    (tmp_path / "layered.toml").write_text(LAYERED)
-    s = _run(tmp_path, "--case", str(tmp_path / "layered.toml"), "--method", method)
+    s = _run(tmp_path, "--case", str(write_layered_case(tmp_path)), "--method", method)
     compliance = float(np.sum(1.0 / LAYERS) / LAYERS.size)  # C = ∫ dx/E
     steps = s["force_indentation"]["steps"]
     exact = [st["depth"] / (compliance + s["delta"]) for st in steps]

@@ -5,6 +5,7 @@ import json
 
 import numpy as np
 import pytest
+from layered_case import write_layered_case
 from mpi4py import MPI
 
 import fenics_contact as fc
@@ -12,29 +13,6 @@ from fenics_contact.cli import main
 from fenics_contact.multiscale.cem import CEMOptions
 
 pytestmark = pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="compares with a serial solve")
-
-#: E on the 16 columns of [0, 1]: 1 | 10³ | 10, a plane moved in by three depths (the layered patch test)
-LAYERS = np.array([1.0] * 6 + [1e3] * 7 + [10.0] * 3)
-LAYERED = """
-[mesh]
-builtin = "unit-square"
-h = 16
-H = 4
-clamped = ["left"]
-[material]
-E = {pixels = "layers.csv"}
-nu = 0.0
-[obstacle]
-shape = "plane"
-point = [1.0, 0.0]
-normal = [-1.0, 0.0]
-indentation = [0.01, 0.02, 0.03]
-[run]
-method = "primal-ms"
-tol = 1e-10
-[multiscale]
-layers = 2
-"""
 
 
 def _summary(out) -> dict:
@@ -60,10 +38,9 @@ def test_the_run_reports_the_check_of_its_solve(tmp_path):
 def test_every_load_step_reports_its_check(tmp_path):
     """Once in contact the layered problem is linear in the depth, so the interface data scale with it and the
     relative check is the same at every step; the last step is the run's own solve."""
-    np.savetxt(tmp_path / "layers.csv", LAYERS[None, :], delimiter=",")
-    (tmp_path / "layered.toml").write_text(LAYERED)
     out = tmp_path / "run"
-    assert main(["run", "--case", str(tmp_path / "layered.toml"), "--no-plots", "--out", str(out)]) == 0
+    case = write_layered_case(tmp_path)
+    assert main(["run", "--case", str(case), "--method", "primal-ms", "--no-plots", "--out", str(out)]) == 0
     summary = _summary(out)
     checks = np.array([step["omega1_check"] for step in summary["force_indentation"]["steps"]])
     assert checks.shape == (3,) and np.all(checks > 0)

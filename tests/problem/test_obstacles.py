@@ -222,7 +222,9 @@ def test_unloading_to_a_vanishing_solution_is_certified(method, accel):
     warm-started iterates then shrink towards 0 and their relative transmission residual never falls (it
     stayed O(1): primal Newton not converged after 18 applications of T, Anderson after 300); the collapse is
     detected (the data below 1e-6 of their largest, or shrinking for 20 iterations at an O(1) residual) and the
-    pair at g = 0, computed cold, glues exactly. Withdrawn, the mixed solution is the small tensile-spring
+    pair at g = 0, computed cold, glues exactly. Where the rounding of the machine's BLAS lets the iteration
+    reach u ≈ 0 directly, the certificate holds at round-off instead: either way the unloaded step is certified
+    and carries no force beyond round-off of the loaded one. Withdrawn, the mixed solution is the small tensile-spring
     response (σ_c = −ε u_c): the plain update reaches it at 0.7 % per iteration (2,928 iterations, β = √h/E_c
     with E_c = 100 on Γ_C), Anderson in 15."""
     from fenics_contact.indentation import force_indentation
@@ -239,8 +241,10 @@ def test_unloading_to_a_vanishing_solution_is_certified(method, accel):
     )
     pushed, unloaded, withdrawn = curve.steps
     assert pushed.converged and pushed.force > 0.0
-    assert unloaded.converged and unloaded.transmission_residual == 0.0 and unloaded.force == 0.0
-    assert unloaded.iterations < 60
+    assert unloaded.converged and unloaded.transmission_residual < 1e-9
+    assert abs(unloaded.force) <= 1e-12 * pushed.force
+    # detected collapse: < 60 iterations; reached directly at round-off (Anderson): about 100; undetected: the cap
+    assert unloaded.iterations < 200
     assert withdrawn.converged and withdrawn.transmission_residual < 1e-9
     if method == "primal":
         assert withdrawn.force == 0.0

@@ -1,0 +1,311 @@
+"""The monolithic penalized contact of two deformable bodies (P1, one mesh, non-matching contact surfaces).
+
+    a(u, v) + (1/δ) Σ_q w_q (s_q(u))⁺ s_q(v)₀ = (f, v) + Σ_k ∫_ΓN,k t_k·v ds,   u = u_D on the supports,
+
+with s(u) = B u − g the penetration at the points of the contact quadrature (``fem.mortar``: slave points,
+their closest points on the master surface, on the reference configuration) and s(v)₀ = B v.  The energy
+½ a(u, u) − (f, v)(u) + (1/2δ) Σ_q w_q (s_q⁺)² is convex; its semismooth Newton (``fem.newton``, active
+set: the quadrature points with s_q > 0) runs through ``TwoBodySystem``, a ``ContactSystem`` with the
+exact line search on that energy after a cycle.
+
+The coupling entries Bᵀ W B join DOF blocks of the two bodies that share no cell, outside the pattern of the
+finite-element matrix: the system is assembled in SciPy and factorized by ``fem.linalg.SparseFactor``
+(sequential MUMPS).  Two-body contact runs on one process: under MPI the solve refuses (InputError).
+"""
+
+import logging
+import time
+from dataclasses import dataclass
+
+import basix.ufl
+import dolfinx.la
+import numpy as np
+import scipy.sparse as sp
+import ufl
+from dolfinx import fem
+
+from fenics_contact.errors import InputError
+from fenics_contact.fem import forms_primal
+from fenics_contact.fem.contact import ContactProfile, NewtonHistory, NewtonOptions, profile_order
+from fenics_contact.fem.linalg import SparseFactor, assemble_scipy
+from fenics_contact.fem.mortar import ContactQuadrature, Surface, contact_quadrature, project, surface
+from fenics_contact.fem.newton import Advance, Check, Direction, StepState, semismooth_newton_loop
+from fenics_contact.fem.primal import default_penalty
+from fenics_contact.problem.pair import TwoBodyProblem
+
+__all__ = ["TwoBodySystem", "TwoBodySolution", "solve_two_body", "two_body_penalty"]
+
+log = logging.getLogger(__name__)
+
+#: iterative-refinement steps with a settled active set (as the one-body primal solve)
+MAX_REFINEMENTS = 2
+
+
+def two_body_penalty(problem: TwoBodyProblem, slave: Surface, master: Surface, delta: float | None) -> float:
+    """δ, or when None ``default_penalty(h, E_c)``: h the smaller median facet size of the two surfaces, E_c the
+    largest E of the cells touching them."""
+    if delta is None:
+        h = min(float(np.median(slave.measures)), float(np.median(master.measures)))
+        if problem.dim == 3:
+            h = float(np.sqrt(h))
+        return default_penalty(h, max(problem.contact_moduli()))
+    if (
+        isinstance(delta, bool)
+        or not isinstance(delta, (int, float, np.number))
+        or not (np.isfinite(delta) and delta > 0)
+    ):
+        raise InputError(f"the penalty δ must be a finite number > 0 (or None: the default), got {delta!r}")
+    return float(delta)
+
+
+class TwoBodySystem:
+    """The two-body penalized equations as a ``fem.newton.ContactSystem`` on the scalar DOF vector u (SciPy).
+
+    K the stiffness (no boundary conditions), b the load, ``fixed`` the supported DOFs with their values,
+    Q the contact quadrature (B, w, g), δ the penalty.  F(u) = K u − b + Bᵀ(w/δ (B u − g)⁺) on the free
+    rows, 0 on the fixed ones; J = K + Bᵀ diag(w H(s)/δ) B on the free rows and columns, identity on the fixed.
+    """
+
+    def __init__(
+        self, K: sp.csr_matrix, b: np.ndarray, fixed: np.ndarray, values: np.ndarray, Q: ContactQuadrature, delta: float
+    ) -> None:
+        n = K.shape[0]
+        self.K, self.b, self.Q, self.delta = K.tocsr(), b, Q, delta
+        self.free = np.ones(n, dtype=bool)
+        self.free[fixed] = False
+        keep = sp.diags(self.free.astype(np.float64))
+        self._K_free = (keep @ self.K @ keep + sp.diags((~self.free).astype(np.float64))).tocsr()
+        self._B_free = (Q.B @ keep).tocsr()
+        self.u = np.zeros(n)
+        self.u[fixed] = values
+        self.F = np.zeros(n)
+        self.d = np.zeros(n)
+        self._factor: SparseFactor | None = None
+        self._factor_set: np.ndarray | None = None
+        self._J: sp.csr_matrix | None = None
+
+    # -- the pieces ------------------------------------------------------------------------------
+    def penetration(self, u: np.ndarray | None = None) -> np.ndarray:
+        """s = B u − g at the quadrature points."""
+        return self.Q.B @ (self.u if u is None else u) - self.Q.gap
+
+    def contact_force(self, u: np.ndarray | None = None) -> np.ndarray:
+        """Bᵀ(w/δ (B u − g)⁺) on the free DOFs: the contact term of F."""
+        return self._B_free.T @ (self.Q.weights / self.delta * np.maximum(self.penetration(u), 0.0))
+
+    def _assemble_residual(self) -> np.ndarray:
+        self.F = (self.K @ self.u - self.b) * self.free + self.contact_force()
+        return self.F
+
+    # -- ContactSystem ---------------------------------------------------------------------------
+    def residual(self) -> float:
+        return float(np.linalg.norm(self._assemble_residual()))
+
+    def jacobian(self, active: np.ndarray) -> bool:
+        if self._factor_set is not None and np.array_equal(active, self._factor_set):
+            return False
+        D = sp.diags(self.Q.weights * active / self.delta)
+        self._J = (self._K_free + self._B_free.T @ D @ self._B_free).tocsr()
+        if self._factor is not None:
+            self._factor.destroy()
+        self._factor = SparseFactor.from_csr(self._J, what="the two-body contact Jacobian")
+        self._factor_set = active.copy()
+        return True
+
+    def solve(self, active: np.ndarray) -> Direction:
+        self.d = self._factor.solve(-self.F[:, None])[:, 0]
+        return Direction(self.penetration(self.u + self.d) > 0.0)
+
+    def same(self, a: np.ndarray, b: np.ndarray) -> bool:
+        return bool(np.array_equal(a, b))
+
+    def line_search(self) -> float:
+        """The minimizer of the convex energy along d in (0, 1]: the root of its monotone derivative
+        φ'(t) = dᵀ(K(u + t d) − b) + Σ_q (w_q/δ)(B d)_q (s_q + t (B d)_q)⁺ (bisection)."""
+        d = self.d * self.free
+        Kd, r = self.K @ d, self.K @ self.u - self.b
+        Bd, s, w = self.Q.B @ d, self.penetration(), self.Q.weights / self.delta
+
+        def slope(t: float) -> float:
+            return float(d @ (r + t * Kd) + np.sum(w * Bd * np.maximum(s + t * Bd, 0.0)))
+
+        if slope(1.0) <= 0.0:
+            return 1.0
+        lo, hi = 0.0, 1.0
+        for _ in range(60):
+            mid = 0.5 * (lo + hi)
+            lo, hi = (mid, hi) if slope(mid) < 0.0 else (lo, mid)
+        return hi
+
+    def advance(self, t: float, state: StepState) -> Advance:
+        self.u += t * self.d
+        active = self.penetration() > 0.0
+        return Advance(active, int(np.count_nonzero(active)))
+
+    def check(self) -> Check:
+        """‖F‖∞ against ‖ |J||u| + |b| + |Bᵀ W g| ‖∞ (the size of the terms F balances, row by row)."""
+        F = self._assemble_residual()
+        active = self.penetration() > 0.0
+        gap_terms = np.abs(self._B_free.T @ (self.Q.weights / self.delta * active * self.Q.gap))
+        J = self._J if self._J is not None else self._K_free
+        scale = float(np.max(abs(J) @ np.abs(self.u) + np.abs(self.b) * self.free + gap_terms, initial=0.0))
+        return Check(float(np.max(np.abs(F), initial=0.0)), scale, float(np.linalg.norm(F)))
+
+    def destroy(self) -> None:
+        if self._factor is not None:
+            self._factor.destroy()
+            self._factor = None
+
+
+@dataclass(slots=True)
+class TwoBodySolution:
+    """The two-body penalized solution: u, the Newton history, the contact profiles of both surfaces (nodal
+    normal stress σ_c < 0 in compression, along each surface's outward normal) and the contact quadrature."""
+
+    u: fem.Function
+    newton: NewtonHistory
+    slave: ContactProfile
+    master: ContactProfile
+    delta: float
+    dofs: int
+    time_s: float
+    quadrature: ContactQuadrature
+    problem: TwoBodyProblem
+
+    @property
+    def profile(self) -> ContactProfile:
+        """The slave side's profile (the surface the contact integral lives on)."""
+        return self.slave
+
+    def force_balance(self) -> float:
+        """|F_slave + F_master| / max |F|: the relative imbalance of the resultant contact forces (round-off)."""
+        fs, fm = self.slave.resultant, self.master.resultant
+        return float(np.linalg.norm(fs + fm) / max(np.linalg.norm(fs), np.linalg.norm(fm), np.finfo(float).tiny))
+
+
+def _supports(problem: TwoBodyProblem, V: fem.FunctionSpace) -> tuple[np.ndarray, np.ndarray]:
+    """The supported scalar DOFs and their values u_D."""
+    msh = V.mesh
+    bs, fdim = V.dofmap.index_map_bs, msh.topology.dim - 1
+    x = V.tabulate_dof_coordinates()
+    dofs, values = [], []
+    for s in problem.supports:
+        blocks = fem.locate_dofs_topological(V, fdim, problem.facet_tags.find(s.facets))
+        comps = range(bs) if s.components is None else s.components
+        if max(comps) >= bs:
+            raise InputError(f"Support on tag {s.facets}: component {max(comps)} of a {bs}D displacement")
+        u_D = np.zeros((bs, blocks.size)) if s.displacement is None else np.asarray(s.displacement(x[blocks].T))
+        if u_D.shape != (bs, blocks.size):
+            raise InputError(f"the displacement on tag {s.facets} must give {bs} components, got shape {u_D.shape}")
+        for c in comps:
+            dofs.append(bs * blocks + c)
+            values.append(u_D[c])
+    dofs, values = np.concatenate(dofs), np.concatenate(values)
+    dofs, first = np.unique(dofs, return_index=True)
+    return dofs, values[first]
+
+
+def _load(problem: TwoBodyProblem, V: fem.FunctionSpace) -> np.ndarray:
+    msh, v = V.mesh, ufl.TestFunction(V)
+    L = ufl.inner(problem.fields.f, v) * ufl.dx
+    if problem.tractions:
+        ds = ufl.Measure("ds", domain=msh, subdomain_data=problem.facet_tags)
+        for tag, traction in problem.tractions.items():
+            t = fem.Function(V)
+            t.interpolate(traction)
+            L += ufl.inner(t, v) * ds(tag)
+    b = fem.assemble_vector(fem.form(L))
+    b.scatter_reverse(dolfinx.la.InsertMode.add)
+    return b.array.copy()
+
+
+def _profile(u: np.ndarray, reaction: np.ndarray, own: Surface, other: Surface, bs: int) -> ContactProfile:
+    """Nodal profile of one surface: σ_c = (R_p·n_p)/w_p, u_c the penetration at the nodes (projected onto the
+    other surface; −∞ where a node does not face it)."""
+    nodes, weights, normals = own.lumped()
+    points = own.node_coordinates()
+    R = reaction.reshape(-1, bs)[nodes]
+    U = u.reshape(-1, bs)
+    sigma = np.sum(R * normals, axis=1) / weights
+    proj = project(points, other)
+    u_other = np.einsum("nk,nkd->nd", proj.bary, U[other.blocks[proj.facet]])
+    u_c = np.where(proj.found, np.sum((U[nodes] - u_other) * proj.nu, axis=1) - proj.gap, -np.inf)
+    order = profile_order(points)
+    gap = proj.gap
+    return ContactProfile(
+        points[order, 1], u_c[order], sigma[order], points[order], weights[order], normals[order], gap[order]
+    )
+
+
+def solve_two_body(
+    problem: TwoBodyProblem,
+    *,
+    delta: float | None = None,
+    newton: NewtonOptions = NewtonOptions(),
+    line_search: str = "on-cycle",
+) -> TwoBodySolution:
+    """Penalized frictionless contact of the two bodies of ``problem`` by semismooth Newton (serial).
+
+    ``delta`` defaults to ``two_body_penalty``; ``line_search`` as in ``fem.newton`` (exact, on the energy).
+    """
+    if not isinstance(problem, TwoBodyProblem):
+        raise InputError(f"solve_two_body takes a TwoBodyProblem, got {type(problem).__name__}")
+    if problem.comm.size > 1:
+        raise InputError(
+            "two-body contact runs on one process: the contact coupling joins DOFs of the two bodies that a "
+            "distributed mesh spreads over ranks (the contact surfaces are not gathered); run it without mpiexec"
+        )
+    start = time.perf_counter()
+    msh = problem.mesh
+    gdim = msh.geometry.dim
+    V = fem.functionspace(msh, basix.ufl.element("Lagrange", msh.basix_cell(), 1, shape=(gdim,)))
+    bs = V.dofmap.index_map_bs
+    n = V.dofmap.index_map.size_local * bs
+    fields = problem.fields
+    u_, v = ufl.TrialFunction(V), ufl.TestFunction(V)
+    K = assemble_scipy(forms_primal.elastic_form(u_, v, fields.lmbda, fields.mu))
+    b = _load(problem, V)
+    fixed, values = _supports(problem, V)
+    slave = surface(V, problem.facet_tags, problem.pair.slave)
+    master = surface(V, problem.facet_tags, problem.pair.master)
+    delta = two_body_penalty(problem, slave, master, delta)
+    Q = contact_quadrature(slave, master, n, bs, problem.pair.quadrature_degree)
+    system = TwoBodySystem(K, b, fixed, values, Q, delta)
+    try:
+        trace = semismooth_newton_loop(
+            system,
+            system.penetration() > 0.0,
+            name="two-body contact",
+            max_steps=newton.max_iterations,
+            line_search=line_search,
+            rtol=newton.rtol,
+            atol=newton.atol,
+            refinements=MAX_REFINEMENTS,
+            sizes="active quadrature points",
+        )
+    finally:
+        system.destroy()
+    u = fem.Function(V, name="u")
+    u.x.array[:n] = system.u
+    reaction = system.K @ system.u - system.b
+    history = NewtonHistory(trace.residuals, trace.active_sizes, trace.factorizations)
+    elapsed = time.perf_counter() - start
+    solution = TwoBodySolution(
+        u,
+        history,
+        _profile(system.u, reaction, slave, master, bs),
+        _profile(system.u, reaction, master, slave, bs),
+        delta,
+        n,
+        elapsed,
+        Q,
+        problem,
+    )
+    log.info(
+        "two bodies: %d Newton steps, active quadrature points %s, force balance %.1e, %.2f s",
+        history.steps,
+        history.active_sizes,
+        solution.force_balance(),
+        elapsed,
+    )
+    return solution

@@ -35,6 +35,7 @@ from fenics_contact.fem.contact import NewtonOptions
 from fenics_contact.fem.mixed import epsilon_for, solve_mixed_monolithic
 from fenics_contact.fem.mixed_subproblem import MixedSubproblem
 from fenics_contact.fem.primal import PrimalSubproblem, penalty_for, solve_primal_monolithic, warn_if_locking
+from fenics_contact.fem.two_body import solve_two_body
 from fenics_contact.hybrid.mixed import MixedHybridStep, solve_mixed_hybrid
 from fenics_contact.hybrid.options import InterfaceNewtonOptions, IterationOptions, default_accel
 from fenics_contact.hybrid.primal import PrimalHybridStep, solve_primal_hybrid
@@ -42,6 +43,7 @@ from fenics_contact.multiscale.cem import CEMOptions
 from fenics_contact.multiscale.mixed import MixedMultiscaleHybridStep, solve_mixed_ms_hybrid
 from fenics_contact.multiscale.mixed_cem import MixedCEMOptions
 from fenics_contact.multiscale.primal import MultiscalePrimalHybridStep, solve_primal_ms_hybrid
+from fenics_contact.problem.pair import TwoBodyProblem
 from fenics_contact.problem.problem import ContactProblem
 from fenics_contact.problem.validation import require_method_dimension
 
@@ -196,6 +198,8 @@ class Method:
     def solve(self, problem: ContactProblem, /, *, comm: MPI.Comm = MPI.COMM_WORLD, **values):
         """Solve ``problem`` with this method (``values``: its options, flat or nested, and the solve's own
         keyword arguments such as ``reference``)."""
+        if isinstance(problem, TwoBodyProblem):
+            return _solve_two_bodies(self.name, problem, values)
         _require_dimension(self.name, problem)
         extra = {k: values.pop(k) for k in list(values) if k in _NOT_OPTIONS}
         return self.solve_function(problem, **self.options(values, comm=comm), **extra)
@@ -203,6 +207,8 @@ class Method:
     def build(self, problem: ContactProblem, /, *, comm: MPI.Comm = MPI.COMM_WORLD, **values):
         """The solver kept for many solves (``factory``): a prepared hybrid step, or a ``MonolithicSolver``;
         its ``contact`` is the subproblem holding Γ_C."""
+        if isinstance(problem, TwoBodyProblem):
+            raise InputError(f"{self.name}: two-body problems are solved once, by solve(problem, 'primal-monolithic')")
         _require_dimension(self.name, problem)
         extra = {k: values.pop(k) for k in list(values) if k in _NOT_OPTIONS}
         options = self.options(values, comm=comm) | extra
@@ -217,6 +223,24 @@ class Method:
     ) -> IterationOptions | None:
         """The hybrid iteration's options among ``values`` (None for a monolithic method)."""
         return self.options(values, comm=comm).get("options") if self.hybrid else None
+
+
+#: the options of the two-body solve (``fem.two_body.solve_two_body``)
+_TWO_BODY_OPTIONS = ("delta", "newton", "line_search")
+
+
+def _solve_two_bodies(name: str, problem: TwoBodyProblem, values: Mapping[str, Any]):
+    """The two-body solve, which only ``primal-monolithic`` does (InputError for the others and other options)."""
+    if name != "primal-monolithic":
+        raise InputError(
+            f"{name} cannot solve two deformable bodies: the hybrid methods split one body into Ω₁ and the strip "
+            "Ω₂ along its contact boundary, the mixed ones need an Arnold–Winther contact pair; solve a "
+            "TwoBodyProblem with 'primal-monolithic'"
+        )
+    refused = sorted(set(values) - set(_TWO_BODY_OPTIONS))
+    if refused:
+        raise InputError(f"the two-body solve takes the options {', '.join(_TWO_BODY_OPTIONS)}; got {refused}")
+    return solve_two_body(problem, **values)
 
 
 def _require_dimension(name: str, problem) -> None:
@@ -302,7 +326,9 @@ def solve(problem: ContactProblem, method: str = "primal", /, **options):
     """Solve ``problem`` with the method called ``method`` (``METHODS``) and its ``options``.
 
     Args:
-        problem: the contact problem (``ContactProblem`` on its mesh: ``problem.on(mesh)``).
+        problem: the contact problem (``ContactProblem`` on its mesh: ``problem.on(mesh)``), or two bodies in
+            contact (``TwoBodyProblem``: ``"primal-monolithic"`` only, options ``delta``, ``newton``,
+            ``line_search``; a ``TwoBodySolution``).
         method: ``"primal-monolithic"``, ``"mixed-monolithic"``, ``"primal"`` (Algorithm 1), ``"mixed"``
             (Algorithm 2), ``"primal-ms"`` (Algorithm 3) or ``"mixed-ms"`` (Algorithm 4).
         **options: the method's options by name, flat (``tol=1e-8``, ``layers=4``, ``delta=…``) or as their

@@ -30,7 +30,7 @@ from dolfinx import mesh as dmesh
 
 from fenics_contact.errors import InputError
 
-__all__ = ["Surface", "Projection", "ContactQuadrature", "surface", "project", "contact_quadrature"]
+__all__ = ["Surface", "Projection", "ContactQuadrature", "surface", "project", "contact_quadrature", "nodal_gaps"]
 
 #: barycentric tolerance of "the orthogonal projection lies in the facet"
 _INSIDE = 1e-10
@@ -93,12 +93,12 @@ def surface(V: fem.FunctionSpace, facet_tags: dmesh.MeshTags, tag: int) -> Surfa
     coords = np.zeros((facets.size, tdim, gdim))
     blocks = np.zeros((facets.size, tdim), dtype=np.int64)
     inward = np.zeros((facets.size, gdim))
-    x = msh.geometry.x[:, :gdim]
+    x, gdofs = msh.geometry.x[:, :gdim], msh.geometry.dofmaps[0]
     for i, f in enumerate(facets):
         c = f2c.links(f)[0]
         local = int(np.flatnonzero(c2f.links(c) == f)[0])
         verts = np.asarray(ref_facets[local])
-        nodes = msh.geometry.dofmap[c]
+        nodes = gdofs[c]
         coords[i] = x[nodes[verts]]
         blocks[i] = V.dofmap.cell_dofs(c)[verts]
         inward[i] = x[nodes].mean(axis=0) - coords[i, 0]
@@ -212,9 +212,15 @@ def _cuts(slave: Surface, master: Surface) -> list[np.ndarray]:
     return out
 
 
-def _slave_points(slave: Surface, master: Surface, degree: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Quadrature points on the slave facets: (facet index, barycentric coordinates, weights)."""
+def _slave_points(
+    slave: Surface, master: Surface, degree: int, vertices: bool = False
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Quadrature points on the slave facets: (facet index, barycentric coordinates, weights); ``vertices``:
+    the facets' vertices with the lumped weights |F|/k instead."""
     tdim = slave.coords.shape[1]
+    if vertices:
+        nf = slave.coords.shape[0]
+        return np.repeat(np.arange(nf), tdim), np.tile(np.eye(tdim), (nf, 1)), np.repeat(slave.measures / tdim, tdim)
     cell = basix.CellType.interval if tdim == 2 else basix.CellType.triangle
     ref, ref_w = basix.make_quadrature(cell, degree)
     if tdim == 2:  # segment-to-segment: each slave segment cut at the master vertices
@@ -233,12 +239,20 @@ def _slave_points(slave: Surface, master: Surface, degree: int) -> tuple[np.ndar
     return np.repeat(np.arange(nf), nq), bary, weights
 
 
-def contact_quadrature(slave: Surface, master: Surface, num_dofs: int, bs: int, degree: int) -> ContactQuadrature:
+def contact_quadrature(
+    slave: Surface, master: Surface, num_dofs: int, bs: int, degree: int, *, nodal: bool = True, rule: str = "segments"
+) -> ContactQuadrature:
     """The contact quadrature of a slave and a master surface (module docstring); points that do not face
-    the master surface are left out.  ``num_dofs``: the scalar DOFs of the vector P1 space of block size ``bs``."""
+    the master surface are left out.  ``num_dofs``: the scalar DOFs of the vector P1 space of block size ``bs``.
+
+    ``nodal``: the mortar-weighted nodal gaps (``nodal_gaps``) instead of the Gauss points themselves.
+    ``rule``: ``"segments"`` (the module docstring) or ``"vertices"``: the one-pass node-to-segment rule (the
+    slave vertices with lumped weights), which fails the patch test on non-matching meshes (kept to show it)."""
+    if rule not in ("segments", "vertices"):
+        raise InputError(f"the contact quadrature rule must be 'segments' or 'vertices', got {rule!r}")
     if slave.coords.shape[0] == 0:
         raise InputError("the slave contact surface has no facets")
-    facet, bary, weights = _slave_points(slave, master, degree)
+    facet, bary, weights = _slave_points(slave, master, degree, vertices=rule == "vertices")
     points = np.einsum("nk,nkd->nd", bary, slave.coords[facet])
     proj = project(points, master)
     keep = proj.found
@@ -253,4 +267,28 @@ def contact_quadrature(slave: Surface, master: Surface, num_dofs: int, bs: int, 
                 cols.append(bs * blocks[:, j] + c)
                 vals.append(sign * basis[:, j] * nu[:, c])
     B = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n, num_dofs))
-    return ContactQuadrature(points, weights, gap, nu, B)
+    Q = ContactQuadrature(points, weights, gap, nu, B)
+    if not nodal:
+        return Q
+    P = sp.csr_matrix(
+        (bary.ravel(), (slave.blocks[facet].ravel(), np.repeat(np.arange(n), k))), shape=(num_dofs // bs, n)
+    )
+    return nodal_gaps(Q, P)
+
+
+def nodal_gaps(Q: ContactQuadrature, P: sp.csr_matrix) -> ContactQuadrature:
+    """The mortar-weighted nodal gaps of the quadrature Q: one row per slave node p (P[p, q] = N_p(x_q)),
+
+        w_p = Σ_q w_q N_p(x_q),   s̃_p(u) = (1/w_p) Σ_q w_q N_p(x_q) s_q(u),
+
+    with the penalty (1/δ) Σ_p w_p (s̃_p)⁺ s̃_p(v): as many constraints as slave nodes (a Gauss-point penalty
+    over-constrains the contact and its pressure oscillates), the same s̃ = s for a uniform s (patch test),
+    and the active set a set of slave nodes.  Nodes whose points all miss the master surface are left out."""
+    PW = P @ sp.diags(Q.weights)
+    weights = np.asarray(PW.sum(axis=1)).ravel()
+    nodes = np.flatnonzero(weights > 0.0)
+    scale = sp.diags(1.0 / weights[nodes])
+    rows = scale @ PW[nodes]
+    nu = rows @ Q.nu
+    nu /= np.linalg.norm(nu, axis=1)[:, None]
+    return ContactQuadrature(rows @ Q.points, weights[nodes], rows @ Q.gap, nu, (rows @ Q.B).tocsr())

@@ -171,6 +171,8 @@ class TwoBodySolution:
     time_s: float
     quadrature: ContactQuadrature
     problem: TwoBodyProblem
+    #: the resultant contact force on the slave and on the master body (Σ of the nodal contact forces)
+    forces: tuple[np.ndarray, np.ndarray]
 
     @property
     def profile(self) -> ContactProfile:
@@ -179,7 +181,7 @@ class TwoBodySolution:
 
     def force_balance(self) -> float:
         """|F_slave + F_master| / max |F|: the relative imbalance of the resultant contact forces (round-off)."""
-        fs, fm = self.slave.resultant, self.master.resultant
+        fs, fm = self.forces
         return float(np.linalg.norm(fs + fm) / max(np.linalg.norm(fs), np.linalg.norm(fm), np.finfo(float).tiny))
 
 
@@ -219,21 +221,20 @@ def _load(problem: TwoBodyProblem, V: fem.FunctionSpace) -> np.ndarray:
     return b.array.copy()
 
 
-def _profile(u: np.ndarray, reaction: np.ndarray, own: Surface, other: Surface, bs: int) -> ContactProfile:
-    """Nodal profile of one surface: σ_c = (R_p·n_p)/w_p, u_c the penetration at the nodes (projected onto the
-    other surface; −∞ where a node does not face it)."""
+def _profile(u: np.ndarray, force: np.ndarray, own: Surface, other: Surface, bs: int) -> ContactProfile:
+    """Nodal profile of one surface: σ_c = (f_p·n_p)/w_p with f the contact force on the node (−Bᵀ(w/δ s⁺), not
+    polluted by support reactions), n_p its outward normal and w_p = ∫ N_p ds; u_c the penetration at the nodes
+    (projected onto the other surface; −∞ where a node does not face it)."""
     nodes, weights, normals = own.lumped()
     points = own.node_coordinates()
-    R = reaction.reshape(-1, bs)[nodes]
     U = u.reshape(-1, bs)
-    sigma = np.sum(R * normals, axis=1) / weights
+    sigma = np.sum(force.reshape(-1, bs)[nodes] * normals, axis=1) / weights
     proj = project(points, other)
     u_other = np.einsum("nk,nkd->nd", proj.bary, U[other.blocks[proj.facet]])
     u_c = np.where(proj.found, np.sum((U[nodes] - u_other) * proj.nu, axis=1) - proj.gap, -np.inf)
     order = profile_order(points)
-    gap = proj.gap
     return ContactProfile(
-        points[order, 1], u_c[order], sigma[order], points[order], weights[order], normals[order], gap[order]
+        points[order, 1], u_c[order], sigma[order], points[order], weights[order], normals[order], proj.gap[order]
     )
 
 
@@ -269,7 +270,7 @@ def solve_two_body(
     slave = surface(V, problem.facet_tags, problem.pair.slave)
     master = surface(V, problem.facet_tags, problem.pair.master)
     delta = two_body_penalty(problem, slave, master, delta)
-    Q = contact_quadrature(slave, master, n, bs, problem.pair.quadrature_degree)
+    Q = contact_quadrature(slave, master, n, bs, problem.pair.quadrature_degree, rule=problem.pair.rule)
     system = TwoBodySystem(K, b, fixed, values, Q, delta)
     try:
         trace = semismooth_newton_loop(
@@ -287,19 +288,21 @@ def solve_two_body(
         system.destroy()
     u = fem.Function(V, name="u")
     u.x.array[:n] = system.u
-    reaction = system.K @ system.u - system.b
+    force = -(system.Q.B.T @ (system.Q.weights / delta * np.maximum(system.penetration(), 0.0)))
     history = NewtonHistory(trace.residuals, trace.active_sizes, trace.factorizations)
+    log.debug("two bodies: step lengths %s", trace.step_lengths)
     elapsed = time.perf_counter() - start
     solution = TwoBodySolution(
         u,
         history,
-        _profile(system.u, reaction, slave, master, bs),
-        _profile(system.u, reaction, master, slave, bs),
+        _profile(system.u, force, slave, master, bs),
+        _profile(system.u, force, master, slave, bs),
         delta,
         n,
         elapsed,
         Q,
         problem,
+        tuple(force.reshape(-1, bs)[surf.nodes].sum(axis=0) for surf in (slave, master)),
     )
     log.info(
         "two bodies: %d Newton steps, active quadrature points %s, force balance %.1e, %.2f s",

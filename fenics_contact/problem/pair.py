@@ -95,11 +95,14 @@ class Support:
 @dataclass(frozen=True, slots=True)
 class ContactPair:
     """The potential contact surfaces: ``slave`` (Γ_C, integrated) and ``master`` (Γ_C_other, projected onto)
-    facet tags, on different bodies; ``quadrature_degree`` of the Gauss rule on each slave segment."""
+    facet tags, on different bodies; ``quadrature_degree`` of the Gauss rule on each slave segment; ``rule``:
+    ``"segments"`` (segment-to-segment, ``fem.mortar``) or ``"vertices"`` (one-pass node-to-segment, which fails
+    the contact patch test on non-matching meshes: for comparison only)."""
 
     slave: int
     master: int
     quadrature_degree: int = 3
+    rule: str = "segments"
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "slave", _tag(self.slave, "ContactPair.slave"))
@@ -109,6 +112,8 @@ class ContactPair:
         degree = self.quadrature_degree
         if isinstance(degree, bool) or not isinstance(degree, (int, np.integer)) or not 1 <= degree <= 10:
             raise InputError(f"ContactPair.quadrature_degree must be an integer in [1, 10], got {degree!r}")
+        if self.rule not in ("segments", "vertices"):
+            raise InputError(f"ContactPair.rule must be 'segments' or 'vertices', got {self.rule!r}")
 
 
 def _count(comm: MPI.Comm, local: int) -> int:

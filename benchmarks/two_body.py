@@ -13,8 +13,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).parent))
 
-import fenics_contact as fc  # noqa: E402
 from common import write_report  # noqa: E402
+
+import fenics_contact as fc  # noqa: E402
 from fenics_contact.problem.analytic import hertz_errors, hertz_pair  # noqa: E402
 
 T = fc.PairTag
@@ -116,8 +117,7 @@ def main() -> None:
         "a/(20 r) on both bodies, non-matching; R* = R, 1/E* = (1 − ν₁²)/E₁ + (1 − ν₂²)/E₂; F read off each "
         "surface, a and p₀ from F. Half-width error in contact cells.",
         "",
-        "| r | cells | surface | F | a | (a_h − a)/h | p_max/p₀ − 1 | L² error | Newton steps | balance | "
-        "time [s] |",
+        "| r | cells | surface | F | a | (a_h − a)/h | p_max/p₀ − 1 | L² error | Newton steps | balance | time [s] |",
         "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in args.refinements:

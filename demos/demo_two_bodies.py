@@ -84,8 +84,10 @@ plot_cell_field(problem.fields.E, out / "E.png", title="Young's modulus of the t
 
 # %%
 result = fc.solve(problem, "primal-monolithic")
-print(f"{result.dofs} DOFs, δ = {result.delta:.3g}, Newton steps {result.newton.steps}, "
-      f"active-set sizes {result.newton.active_sizes}")
+print(
+    f"{result.dofs} DOFs, δ = {result.delta:.3g}, Newton steps {result.newton.steps}, "
+    f"active-set sizes {result.newton.active_sizes}"
+)
 upper_force, lower_force = result.forces
 print("contact force on the upper body:", upper_force, " on the lower body:", lower_force)
 print(f"relative force imbalance: {result.force_balance():.1e}; largest penetration {result.slave.penetration:.2e}")
@@ -103,7 +105,8 @@ plot_displacement(result.u, out / "displacement.png", title="(two bodies)")
 
 # %%
 fig, ax = plt.subplots(figsize=(7, 3.5))
-for profile, label, style in ((result.slave, "upper body (slave)", "-o"), (result.master, "lower body (master)", "--s")):
+faces = ((result.slave, "upper body (slave)", "-o"), (result.master, "lower body (master)", "--s"))
+for profile, label, style in faces:
     ax.plot(profile.points[:, 0], -profile.sigma_c, style, ms=3, label=label)
 ax.set_xlabel("x")
 ax.set_ylabel("contact pressure p")

@@ -23,17 +23,26 @@ import numpy as np
 import scipy.sparse as sp
 import ufl
 from dolfinx import fem
+from dolfinx import mesh as dmesh
 
 from fenics_contact.errors import InputError
-from fenics_contact.fem import forms_primal
 from fenics_contact.fem.contact import ContactProfile, NewtonHistory, NewtonOptions, profile_order
 from fenics_contact.fem.linalg import SparseFactor, assemble_scipy
 from fenics_contact.fem.mortar import ContactQuadrature, Surface, contact_quadrature, project, surface
 from fenics_contact.fem.newton import Advance, Check, Direction, StepState, semismooth_newton_loop
 from fenics_contact.fem.primal import default_penalty
+from fenics_contact.problem.materials import strain, stress
 from fenics_contact.problem.pair import TwoBodyProblem
 
-__all__ = ["TwoBodySystem", "TwoBodySolution", "solve_two_body", "two_body_penalty"]
+__all__ = [
+    "TwoBodySystem",
+    "TwoBodySolution",
+    "solve_two_body",
+    "two_body_penalty",
+    "supported_dofs",
+    "stiffness",
+    "load_vector",
+]
 
 log = logging.getLogger(__name__)
 
@@ -185,7 +194,7 @@ class TwoBodySolution:
         return float(np.linalg.norm(fs + fm) / max(np.linalg.norm(fs), np.linalg.norm(fm), np.finfo(float).tiny))
 
 
-def _supports(problem: TwoBodyProblem, V: fem.FunctionSpace) -> tuple[np.ndarray, np.ndarray]:
+def supported_dofs(problem: TwoBodyProblem, V: fem.FunctionSpace) -> tuple[np.ndarray, np.ndarray]:
     """The supported scalar DOFs and their values u_D."""
     msh = V.mesh
     bs, fdim = V.dofmap.index_map_bs, msh.topology.dim - 1
@@ -207,15 +216,44 @@ def _supports(problem: TwoBodyProblem, V: fem.FunctionSpace) -> tuple[np.ndarray
     return dofs, values[first]
 
 
-def _load(problem: TwoBodyProblem, V: fem.FunctionSpace) -> np.ndarray:
+def _cell_measure(problem: TwoBodyProblem, cells: np.ndarray | None):
+    """dx over the mesh, or over ``cells`` only (marked 1)."""
+    msh = problem.mesh
+    if cells is None:
+        return ufl.dx(domain=msh)
+    tags = dmesh.meshtags(msh, msh.topology.dim, np.sort(cells).astype(np.int32), np.ones(cells.size, np.int32))
+    return ufl.Measure("dx", domain=msh, subdomain_data=tags)(1)
+
+
+def stiffness(problem: TwoBodyProblem, V: fem.FunctionSpace, cells: np.ndarray | None = None) -> sp.csr_matrix:
+    """K: a(u, v) over the mesh, or over ``cells`` only (no boundary conditions; SciPy CSR)."""
+    u, v, fields = ufl.TrialFunction(V), ufl.TestFunction(V), problem.fields
+    dx = _cell_measure(problem, cells)
+    return assemble_scipy(ufl.inner(stress(strain(u), fields.lmbda, fields.mu), strain(v)) * dx)
+
+
+def load_vector(problem: TwoBodyProblem, V: fem.FunctionSpace, cells: np.ndarray | None = None) -> np.ndarray:
+    """b: (f, v) + Σ_k ∫_ΓN,k t_k·v ds over the mesh, or over ``cells`` and the traction facets of those cells."""
     msh, v = V.mesh, ufl.TestFunction(V)
-    L = ufl.inner(problem.fields.f, v) * ufl.dx
+    L = ufl.inner(problem.fields.f, v) * _cell_measure(problem, cells)
     if problem.tractions:
-        ds = ufl.Measure("ds", domain=msh, subdomain_data=problem.facet_tags)
-        for tag, traction in problem.tractions.items():
+        tdim = msh.topology.dim
+        f2c = msh.topology.connectivity(tdim - 1, tdim)
+        entities, values = [], []
+        for k, tag in enumerate(problem.tractions):
+            facets = problem.facet_tags.find(tag)
+            if cells is not None:
+                facets = facets[np.isin([f2c.links(f)[0] for f in facets], cells)]
+            entities.append(facets)
+            values.append(np.full(facets.size, k + 1, dtype=np.int32))
+        entities, values = np.concatenate(entities), np.concatenate(values)
+        order = np.argsort(entities)
+        tags = dmesh.meshtags(msh, tdim - 1, entities[order].astype(np.int32), values[order])
+        ds = ufl.Measure("ds", domain=msh, subdomain_data=tags)
+        for k, traction in enumerate(problem.tractions.values()):
             t = fem.Function(V)
             t.interpolate(traction)
-            L += ufl.inner(t, v) * ds(tag)
+            L += ufl.inner(t, v) * ds(k + 1)
     b = fem.assemble_vector(fem.form(L))
     b.scatter_reverse(dolfinx.la.InsertMode.add)
     return b.array.copy()
@@ -265,11 +303,9 @@ def solve_two_body(
     V = fem.functionspace(msh, basix.ufl.element("Lagrange", msh.basix_cell(), 1, shape=(gdim,)))
     bs = V.dofmap.index_map_bs
     n = V.dofmap.index_map.size_local * bs
-    fields = problem.fields
-    u_, v = ufl.TrialFunction(V), ufl.TestFunction(V)
-    K = assemble_scipy(forms_primal.elastic_form(u_, v, fields.lmbda, fields.mu))
-    b = _load(problem, V)
-    fixed, values = _supports(problem, V)
+    K = stiffness(problem, V)
+    b = load_vector(problem, V)
+    fixed, values = supported_dofs(problem, V)
     slave = surface(V, problem.facet_tags, problem.pair.slave)
     master = surface(V, problem.facet_tags, problem.pair.master)
     delta = two_body_penalty(problem, slave, master, delta)

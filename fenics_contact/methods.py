@@ -39,6 +39,7 @@ from fenics_contact.fem.two_body import solve_two_body
 from fenics_contact.hybrid.mixed import MixedHybridStep, solve_mixed_hybrid
 from fenics_contact.hybrid.options import InterfaceNewtonOptions, IterationOptions, default_accel
 from fenics_contact.hybrid.primal import PrimalHybridStep, solve_primal_hybrid
+from fenics_contact.hybrid.two_body import TwoBodyHybridOptions, solve_two_body_hybrid
 from fenics_contact.multiscale.cem import CEMOptions
 from fenics_contact.multiscale.mixed import MixedMultiscaleHybridStep, solve_mixed_ms_hybrid
 from fenics_contact.multiscale.mixed_cem import MixedCEMOptions
@@ -225,22 +226,34 @@ class Method:
         return self.options(values, comm=comm).get("options") if self.hybrid else None
 
 
-#: the options of the two-body solve (``fem.two_body.solve_two_body``)
-_TWO_BODY_OPTIONS = ("delta", "newton", "line_search")
+#: the options of the two-body solves: monolithic (``fem.two_body``) and Algorithm 1 (``hybrid.two_body``)
+_TWO_BODY_OPTIONS = {
+    "primal-monolithic": ("delta", "newton", "line_search"),
+    "primal": ("delta", "newton", *(f.name for f in dataclasses.fields(TwoBodyHybridOptions))),
+}
 
 
 def _solve_two_bodies(name: str, problem: TwoBodyProblem, values: Mapping[str, Any]):
-    """The two-body solve, which only ``primal-monolithic`` does (InputError for the others and other options)."""
-    if name != "primal-monolithic":
+    """The two-body solves: ``primal-monolithic`` and ``primal`` (Algorithm 1; its options flat or as
+    ``options=TwoBodyHybridOptions(…)``); InputError for the other methods and for other options."""
+    if name not in _TWO_BODY_OPTIONS:
         raise InputError(
-            f"{name} cannot solve two deformable bodies: the hybrid methods split one body into Ω₁ and the strip "
-            "Ω₂ along its contact boundary, the mixed ones need an Arnold–Winther contact pair; solve a "
-            "TwoBodyProblem with 'primal-monolithic'"
+            f"{name} cannot solve two deformable bodies: the mixed methods need an Arnold–Winther contact pair and "
+            "the multiscale ones a coarse grid in each body; solve a TwoBodyProblem with 'primal-monolithic' or "
+            "'primal' (Algorithm 1)"
         )
-    refused = sorted(set(values) - set(_TWO_BODY_OPTIONS))
+    accepted = _TWO_BODY_OPTIONS[name] + (("options",) if name == "primal" else ())
+    refused = sorted(set(values) - set(accepted))
     if refused:
-        raise InputError(f"the two-body solve takes the options {', '.join(_TWO_BODY_OPTIONS)}; got {refused}")
-    return solve_two_body(problem, **values)
+        raise InputError(f"the two-body solve {name} takes the options {', '.join(accepted)}; got {refused}")
+    if name == "primal-monolithic":
+        return solve_two_body(problem, **values)
+    kwargs = {k: values[k] for k in ("delta", "newton") if k in values}
+    flat = {k: v for k, v in values.items() if k not in ("delta", "newton", "options")}
+    options = values.get("options") or TwoBodyHybridOptions()
+    if flat:
+        options = dataclasses.replace(options, **flat)
+    return solve_two_body_hybrid(problem, options=options, **kwargs)
 
 
 def _require_dimension(name: str, problem) -> None:
@@ -327,8 +340,9 @@ def solve(problem: ContactProblem, method: str = "primal", /, **options):
 
     Args:
         problem: the contact problem (``ContactProblem`` on its mesh: ``problem.on(mesh)``), or two bodies in
-            contact (``TwoBodyProblem``: ``"primal-monolithic"`` only, options ``delta``, ``newton``,
-            ``line_search``; a ``TwoBodySolution``).
+            contact (``TwoBodyProblem``: ``"primal-monolithic"``, options ``delta``, ``newton``, ``line_search``,
+            a ``TwoBodySolution``; or ``"primal"``, Algorithm 1 with a strip on each side, options those of
+            ``hybrid.two_body.TwoBodyHybridOptions``, a ``TwoBodyHybridResult``).
         method: ``"primal-monolithic"``, ``"mixed-monolithic"``, ``"primal"`` (Algorithm 1), ``"mixed"``
             (Algorithm 2), ``"primal-ms"`` (Algorithm 3) or ``"mixed-ms"`` (Algorithm 4).
         **options: the method's options by name, flat (``tol=1e-8``, ``layers=4``, ``delta=…``) or as their

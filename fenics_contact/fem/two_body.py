@@ -160,6 +160,14 @@ class TwoBodySystem:
         scale = float(np.max(abs(J) @ np.abs(self.u) + np.abs(self.b) * self.free + gap_terms, initial=0.0))
         return Check(float(np.max(np.abs(F), initial=0.0)), scale, float(np.linalg.norm(F)))
 
+    def contact_force_vector(self) -> np.ndarray:
+        """−Bᵀ(w/δ (B u − g)⁺): the contact forces on every DOF (supported ones too)."""
+        return -(self.Q.B.T @ (self.Q.weights / self.delta * np.maximum(self.penetration(), 0.0)))
+
+    def solve_block(self, rhs: np.ndarray) -> np.ndarray:
+        """J⁻¹ rhs for a block of right-hand sides (zero on the supported rows), with the current factorization."""
+        return self._factor.solve(rhs)
+
     def destroy(self) -> None:
         if self._factor is not None:
             self._factor.destroy()
@@ -259,7 +267,7 @@ def load_vector(problem: TwoBodyProblem, V: fem.FunctionSpace, cells: np.ndarray
     return b.array.copy()
 
 
-def _profile(u: np.ndarray, force: np.ndarray, own: Surface, other: Surface, bs: int) -> ContactProfile:
+def surface_profile(u: np.ndarray, force: np.ndarray, own: Surface, other: Surface, bs: int) -> ContactProfile:
     """Nodal profile of one surface: σ_c = (f_p·n_p)/w_p with f the contact force on the node (−Bᵀ(w/δ s⁺), not
     polluted by support reactions), n_p its outward normal and w_p = ∫ N_p ds; u_c the penetration at the nodes
     (projected onto the other surface; −∞ where a node does not face it)."""
@@ -327,15 +335,15 @@ def solve_two_body(
         system.destroy()
     u = fem.Function(V, name="u")
     u.x.array[:n] = system.u
-    force = -(system.Q.B.T @ (system.Q.weights / delta * np.maximum(system.penetration(), 0.0)))
+    force = system.contact_force_vector()
     history = NewtonHistory(trace.residuals, trace.active_sizes, trace.factorizations)
     log.debug("two bodies: step lengths %s", trace.step_lengths)
     elapsed = time.perf_counter() - start
     solution = TwoBodySolution(
         u,
         history,
-        _profile(system.u, force, slave, master, bs),
-        _profile(system.u, force, master, slave, bs),
+        surface_profile(system.u, force, slave, master, bs),
+        surface_profile(system.u, force, master, slave, bs),
         delta,
         n,
         elapsed,

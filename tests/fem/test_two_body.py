@@ -135,6 +135,33 @@ def test_two_body_hertz_on_non_matching_meshes():
         assert errors.l2_error < 0.015
 
 
+@pytest.mark.parametrize("accel", ["newton", "anderson"])
+def test_algorithm_1_for_two_bodies_reaches_the_monolithic_solution(accel):
+    """A strip on each side, each bulk coupled to it by Robin data on its γ: the fixed point is the monolithic
+    two-body solution (vertex quadrature on γ), reached by the interface Newton method in a few evaluations of
+    T and by Anderson acceleration to its tolerance; layered lower block (contrast 1e3), overhanging upper one."""
+    m = two_blocks(10, 14, heights=(H1, H2), offset=0.2)
+    layers = lambda x: np.where(np.floor(-x[1] / 0.1) % 2 == 0, 1e3, 1.0)  # noqa: E731
+    problem = TwoBodyProblem(
+        m.mesh,
+        m.cell_tags,
+        m.facet_tags,
+        bodies=(Body(T.LOWER, layers, 0.3), Body(T.UPPER, 2.0, 0.25)),
+        pair=ContactPair(T.UPPER_BOTTOM, T.LOWER_TOP),
+        supports=(Support(T.LOWER_BOTTOM), Support(T.UPPER_TOP, (0.0, -0.005))),
+    )
+    reference = fc.solve(problem, "primal-monolithic")
+    tol = 1e-10 if accel == "newton" else 1e-8
+    result = fc.solve(problem, "primal", accel=accel, tol=tol)
+    assert result.converged and result.transmission_residual < tol
+    error = np.linalg.norm(result.u.x.array - reference.u.x.array) / np.linalg.norm(reference.u.x.array)
+    assert error < 10 * tol
+    assert np.allclose(result.forces[0], reference.forces[0], rtol=10 * tol, atol=0.0)
+    assert result.force_balance() < 1e-12
+    assert result.iterations <= (8 if accel == "newton" else 400)
+    assert 0 < result.strip.size < m.mesh.topology.index_map(2).size_local
+
+
 def test_hertz_pair():
     assert hertz_pair((1.0, 1.0), (1.0, 1.0), (0.0, 0.0)) == pytest.approx((0.5, 0.5))
     with pytest.raises(InputError, match="not both flat"):
@@ -143,11 +170,15 @@ def test_hertz_pair():
 
 def test_methods_that_cannot_do_two_bodies_refuse():
     problem = _stacked(2, 3)
-    for method in ("primal", "mixed", "mixed-monolithic", "primal-ms"):
+    for method in ("mixed", "mixed-monolithic", "primal-ms", "mixed-ms"):
         with pytest.raises(InputError, match="cannot solve two deformable bodies"):
             fc.solve(problem, method)
     with pytest.raises(InputError, match="takes the options"):
         fc.solve(problem, "primal-monolithic", tol=1e-8)
+    with pytest.raises(InputError, match="takes the options"):
+        fc.solve(problem, "primal", cem=None)
+    with pytest.raises(InputError, match="unknown update"):
+        fc.solve(problem, "primal", accel="multigrid")
     with pytest.raises(InputError, match="solved once"):
         fc.METHODS["primal-monolithic"].build(problem)
 

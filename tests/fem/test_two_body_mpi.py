@@ -22,5 +22,6 @@ def test_two_body_solve_refuses_on_several_ranks():
         supports=(fc.Support(T.LOWER_BOTTOM), fc.Support(T.UPPER_TOP, (0.0, -0.01))),
     )
     assert problem.contact_moduli() == (2.0, 1.0)
-    with pytest.raises(InputError, match="runs on one process"):
-        fc.solve(problem, "primal-monolithic")
+    for method in ("primal-monolithic", "primal"):
+        with pytest.raises(InputError, match="runs on one process"):
+            fc.solve(problem, method)

@@ -188,14 +188,16 @@ def project(points: np.ndarray, target: Surface, *, candidates: int = 12) -> Pro
 
 
 class ContactQuadrature(NamedTuple):
-    """The contact quadrature: per point q its weight w_q, gap g_q and the row of B (``B``: rows q, columns
-    the scalar DOFs of the vector P1 space), with the slave points themselves."""
+    """The contact quadrature: per point q its weight w_q, gap g_q, direction ν_q and the row of B (``B``: rows
+    q, columns the scalar DOFs of the vector P1 space), with the slave points themselves; for nodal gaps the
+    rows are slave nodes (``nodes``)."""
 
     points: np.ndarray
     weights: np.ndarray
     gap: np.ndarray
     nu: np.ndarray
     B: sp.csr_matrix
+    nodes: np.ndarray | None = None  #: the slave node (DOF block) of each row (``nodal_gaps``), None for points
 
 
 def _cuts(slave: Surface, master: Surface) -> list[np.ndarray]:
@@ -291,4 +293,4 @@ def nodal_gaps(Q: ContactQuadrature, P: sp.csr_matrix) -> ContactQuadrature:
     rows = scale @ PW[nodes]
     nu = rows @ Q.nu
     nu /= np.linalg.norm(nu, axis=1)[:, None]
-    return ContactQuadrature(rows @ Q.points, weights[nodes], rows @ Q.gap, nu, (rows @ Q.B).tocsr())
+    return ContactQuadrature(rows @ Q.points, weights[nodes], rows @ Q.gap, nu, (rows @ Q.B).tocsr(), nodes)

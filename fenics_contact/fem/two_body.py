@@ -28,7 +28,7 @@ from dolfinx import mesh as dmesh
 from fenics_contact.errors import InputError
 from fenics_contact.fem.contact import ContactProfile, NewtonHistory, NewtonOptions, profile_order
 from fenics_contact.fem.linalg import SparseFactor, assemble_scipy
-from fenics_contact.fem.mortar import ContactQuadrature, Surface, contact_quadrature, project, surface
+from fenics_contact.fem.mortar import ContactQuadrature, Surface, contact_quadrature, surface
 from fenics_contact.fem.newton import Advance, Check, Direction, StepState, semismooth_newton_loop
 from fenics_contact.fem.primal import default_penalty
 from fenics_contact.problem.materials import strain, stress
@@ -267,20 +267,37 @@ def load_vector(problem: TwoBodyProblem, V: fem.FunctionSpace, cells: np.ndarray
     return b.array.copy()
 
 
-def surface_profile(u: np.ndarray, force: np.ndarray, own: Surface, other: Surface, bs: int) -> ContactProfile:
+def surface_profile(
+    u: np.ndarray, force: np.ndarray, own: Surface, Q: ContactQuadrature, *, slave: bool
+) -> ContactProfile:
     """Nodal profile of one surface: σ_c = (f_p·n_p)/w_p with f the contact force on the node (−Bᵀ(w/δ s⁺), not
-    polluted by support reactions), n_p its outward normal and w_p = ∫ N_p ds; u_c the penetration at the nodes
-    (projected onto the other surface; −∞ where a node does not face it)."""
+    polluted by support reactions), n_p its outward normal and w_p = ∫ N_p ds; u_c the penetration the penalty
+    acts on: the slave nodes' weighted gaps s̃_p (``mortar.nodal_gaps``), on a master node the largest s̃_p of
+    the slave nodes coupled with it (∫ N_p M_j ds > 0), so that ``active`` marks the master nodes that carry
+    contact forces; −∞ on a node that faces no part of the other surface.  Needs Q with nodal rows."""
+    if Q.nodes is None:
+        raise InputError("surface_profile needs the nodal gaps of mortar.nodal_gaps")
     nodes, weights, normals = own.lumped()
     points = own.node_coordinates()
-    U = u.reshape(-1, bs)
+    bs = Q.nu.shape[1]
     sigma = np.sum(force.reshape(-1, bs)[nodes] * normals, axis=1) / weights
-    proj = project(points, other)
-    u_other = np.einsum("nk,nkd->nd", proj.bary, U[other.blocks[proj.facet]])
-    u_c = np.where(proj.found, np.sum((U[nodes] - u_other) * proj.nu, axis=1) - proj.gap, -np.inf)
+    s = Q.B @ u - Q.gap
+    u_c, gap = np.full(nodes.size, -np.inf), np.full(nodes.size, np.nan)
+    if slave:
+        at = np.searchsorted(nodes, Q.nodes)
+        u_c[at], gap[at] = s, Q.gap
+    else:  # master node j: the largest s̃_p of the slave rows p coupled with it (∫ N_p M_j ds > 0)
+        cols = (bs * nodes[:, None] + np.arange(bs)).ravel()
+        Bm = Q.B[:, cols].tocoo()
+        coupled = Bm.data != 0.0
+        rows, js = Bm.row[coupled], Bm.col[coupled] // bs
+        np.maximum.at(u_c, js, s[rows])
+        gap_min = np.full(nodes.size, np.inf)
+        np.minimum.at(gap_min, js, Q.gap[rows])
+        gap = np.where(np.isfinite(gap_min), gap_min, np.nan)
     order = profile_order(points)
     return ContactProfile(
-        points[order, 1], u_c[order], sigma[order], points[order], weights[order], normals[order], proj.gap[order]
+        points[order, 1], u_c[order], sigma[order], points[order], weights[order], normals[order], gap[order]
     )
 
 
@@ -342,8 +359,8 @@ def solve_two_body(
     solution = TwoBodySolution(
         u,
         history,
-        surface_profile(system.u, force, slave, master, bs),
-        surface_profile(system.u, force, master, slave, bs),
+        surface_profile(system.u, force, slave, Q, slave=True),
+        surface_profile(system.u, force, master, Q, slave=False),
         delta,
         n,
         elapsed,

@@ -327,7 +327,7 @@ def solve_two_body_hybrid(
     if not converged:
         log.warning("two bodies, Algorithm 1: NOT converged (transmission residual %.3e)", residuals[-1])
     profiles = (
-        surface_profile(u.x.array[:n], force, slave, master, bs),
-        surface_profile(u.x.array[:n], force, master, slave, bs),
+        surface_profile(u.x.array[:n], force, slave, Q, slave=True),
+        surface_profile(u.x.array[:n], force, master, Q, slave=False),
     )
     return TwoBodyHybridResult(u, converged, residuals, histories, strip, delta, elapsed, *profiles, forces)

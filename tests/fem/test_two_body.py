@@ -88,7 +88,7 @@ def test_the_initial_gap_is_closed_first():
 
 def test_three_dimensions_with_the_same_code():
     """Two boxes, 3 against 4 cells across: force balance to round-off; the uniform pressure to the error of the
-    Gauss rule on unclipped slave triangles (smaller with a higher degree)."""
+    Gauss rule on unclipped slave triangles (smaller with a higher degree); Algorithm 1 at the monolithic solution."""
     errors = []
     for degree in (3, 8):
         problem = _stacked(3, 4, dim=3, nus=(0.0, 0.0))
@@ -105,6 +105,10 @@ def test_three_dimensions_with_the_same_code():
         p = _pressure(0.01, 0.0, result.delta, nus=(0.0, 0.0), dim=3)
         assert result.slave.force == pytest.approx(p, rel=1e-3)
         errors.append(max(np.max(np.abs(prof.sigma_c + p)) / p for prof in (result.slave, result.master)))
+        if degree == 3:  # Algorithm 1 with the same code: its fixed point is this solution
+            hybrid = fc.solve(problem, "primal", layers=1, tol=1e-10)
+            assert hybrid.converged
+            assert np.linalg.norm(hybrid.u.x.array - result.u.x.array) < 1e-9 * np.linalg.norm(result.u.x.array)
     assert errors[1] < errors[0] < 0.1 and errors[1] < 0.01
 
 

@@ -13,8 +13,11 @@ Robin data on γ (the facets between a strip and its bulk, in both bodies):
 the monolithic two-body solution (``fem.two_body``), as Theorem 3.1 states for one body.  The interface
 problem F(g) = g − T(g) is solved by Newton's method (``accel="newton"``): Ω₁'s response to g₁₂ is affine,
 u₁|γ = R₁ g₁₂ + r₁ (R₁ by back-solves, once), and on a fixed active set so is Ω₂'s, with R₂ from the
-factorized Jacobian of its last contact Newton; one step per active set, then exact.  ``"anderson"`` and
-``"none"`` (the paper's update) are the alternatives.  The stopping rule is the transmission residual
+factorized Jacobian of its last contact Newton; one step per active set, then exact (after ``NEWTON_STEPS``
+steps without convergence, a cycle of active sets, the iteration goes on with Anderson acceleration).
+``"anderson"`` and ``"none"`` (the paper's update) are the alternatives.  The responses cost one back-solve
+per γ unknown and dense matrices of the size of γ: affordable for the strips of a contact zone, not for a γ
+of many thousand nodes.  The stopping rule is the transmission residual
 (``hybrid.certificate``).  Serial, as the two-body solve.
 """
 
@@ -53,6 +56,8 @@ log = logging.getLogger(__name__)
 
 #: the updates of the interface data
 UPDATES = ("newton", "anderson", "none")
+#: interface Newton steps before the iteration goes on with Anderson acceleration (a cycle of active sets)
+NEWTON_STEPS = 30
 
 
 @dataclass(frozen=True, slots=True)
@@ -169,6 +174,22 @@ class _Split:
         self.alpha = np.repeat(alpha, bs)[keep]
 
 
+#: right-hand sides per multi-RHS back-solve of the interface responses
+CHUNK = 128
+
+
+def _responses(solve, size: int, positions: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """X[positions] for A X = E, E[positions[j], j] = weights[j], by blocks of ``CHUNK`` columns (``solve``: A⁻¹
+    of a dense block)."""
+    out = np.zeros((positions.size, positions.size))
+    for first in range(0, positions.size, CHUNK):
+        cols = np.arange(first, min(first + CHUNK, positions.size))
+        rhs = np.zeros((size, cols.size))
+        rhs[positions[cols], np.arange(cols.size)] = weights[cols]
+        out[:, cols] = solve(rhs)[positions]
+    return out
+
+
 def _local(dofs: np.ndarray, n: int) -> np.ndarray:
     """Global DOF -> position in ``dofs`` (−1 outside)."""
     out = np.full(n, -1, dtype=np.int64)
@@ -195,11 +216,9 @@ class _Bulk:
         self.factor = SparseFactor.from_csr(self.A_ff, what="the two-body bulk (Omega_1) matrix")
 
     def response(self, positions: np.ndarray, weights: np.ndarray) -> np.ndarray:
-        """R₁[i, j] = ∂u₁(positions[i])/∂g_j for data weights[j] at positions[j] (one multi-RHS solve)."""
+        """R₁[i, j] = ∂u₁(positions[i])/∂g_j for data weights[j] at positions[j] (multi-RHS solves)."""
         rows = np.cumsum(self.free) - 1  # bulk position -> position among the free DOFs
-        rhs = np.zeros((int(self.free.sum()), positions.size))
-        rhs[rows[positions], np.arange(positions.size)] = weights
-        return self.factor.solve(rhs)[rows[positions]]
+        return _responses(self.factor.solve, int(self.free.sum()), rows[positions], weights)
 
     def solve(self, data: np.ndarray) -> np.ndarray:
         """u₁ on the bulk DOFs for the data vector ``data`` (on the bulk DOFs)."""
@@ -281,23 +300,24 @@ def solve_two_body_hybrid(
     g = np.zeros(2 * m)
     converged = False
     try:
+        steps = 0
         if options.accel == "newton":
-            # R₁ = ∂u₁|γ/∂g₁₂ (one multi-RHS solve, once); R₂ = ∂u₂|γ/∂g₂₁ from Ω₂'s factorized Jacobian
+            # R₁ = ∂u₁|γ/∂g₁₂ (once); R₂ = ∂u₂|γ/∂g₂₁ from Ω₂'s factorized Jacobian at the current active set
             R1 = bulk.response(g1_pos, w)
-            for _ in range(options.max_iterations):
+            zero, one = np.zeros((m, m)), np.eye(m)
+            for steps in range(1, min(NEWTON_STEPS, options.max_iterations) + 1):
                 Tg, res = T(g)
                 if res < options.tol:
                     converged = True
                     break
-                E2 = np.zeros((d2.size, m))
-                E2[g2_pos, np.arange(m)] = w
-                R2 = system.solve_block(E2)[g2_pos]
-                zero, one = np.zeros((m, m)), np.eye(m)
+                R2 = _responses(system.solve_block, d2.size, g2_pos, w)
                 dT = np.block([[zero, 2 * alpha[:, None] * R2 - one], [2 * alpha[:, None] * R1 - one, zero]])
                 g = g + np.linalg.solve(np.eye(2 * m) - dT, Tg - g)
-        else:
-            update = AndersonUpdate(MPI.COMM_SELF, options.depth) if options.accel == "anderson" else None
-            for _ in range(options.max_iterations):
+            if not converged and steps < options.max_iterations:
+                log.warning("two bodies, Algorithm 1: no interface Newton convergence in %d steps; Anderson", steps)
+        if not converged and steps < options.max_iterations:
+            update = AndersonUpdate(MPI.COMM_SELF, options.depth) if options.accel != "none" else None
+            for _ in range(options.max_iterations - steps):
                 Tg, res = T(g)
                 if res < options.tol:
                     converged = True

@@ -313,7 +313,8 @@ def solve_two_body(
     ``delta`` defaults to ``two_body_penalty``; ``line_search`` as in ``fem.newton`` (exact, on the energy):
     ``"always"`` by default, as a full first step from no contact drives the bodies through each other and the
     active set then shrinks back a few nodes per step (Hertz at contact cells a/20: 5 steps searching at every
-    step, 18 with full steps until a cycle).
+    step, 18 with full steps until a cycle).  The first step is linearized at the touching nodes (s̃ ≥ 0): a body
+    held only by the contact (pushed by a traction) is not free to move in it.
     """
     if not isinstance(problem, TwoBodyProblem):
         raise InputError(f"solve_two_body takes a TwoBodyProblem, got {type(problem).__name__}")
@@ -339,7 +340,7 @@ def solve_two_body(
     try:
         trace = semismooth_newton_loop(
             system,
-            system.penetration() > 0.0,
+            system.penetration() >= 0.0,  # touching counts: a body held only by contact
             name="two-body contact",
             max_steps=newton.max_iterations,
             line_search=line_search,

@@ -275,7 +275,7 @@ def solve_two_body_hybrid(
         system.b[g2_pos] += w * g[m:]
         trace = semismooth_newton_loop(
             system,
-            system.penetration() > 0.0,
+            system.penetration() >= 0.0,
             name="two-body strips",
             max_steps=newton.max_iterations,
             line_search="always",

@@ -61,7 +61,31 @@ def test_patch_test_non_matching_meshes_transmits_a_uniform_pressure(slave):
     slave_force, master_force = result.forces
     assert np.abs(slave_force + master_force).max() < 1e-13 * p
     assert result.force_balance() < 1e-12
-    assert result.newton.steps == 2  # the contact set is settled after the first step
+    assert result.newton.steps == 1  # linearized at the touching points, the first step is the solution
+
+
+def test_a_body_held_by_contact_alone_under_a_traction():
+    """The upper block held only sideways (a roller on its left side) and pushed down by a traction p on its top:
+    the contact carries exactly p whatever δ (the first Newton step starts from the touching points)."""
+    m = two_blocks(7, 10, heights=(H1, H2))
+    pressure = 0.02
+    problem = TwoBodyProblem(
+        m.mesh,
+        m.cell_tags,
+        m.facet_tags,
+        bodies=(Body(T.LOWER, E1, NU1), Body(T.UPPER, E2, NU2)),
+        pair=ContactPair(T.UPPER_BOTTOM, T.LOWER_TOP),
+        supports=(
+            Support(T.LOWER_BOTTOM, components=(1,)),
+            Support(T.LOWER_LEFT, components=(0,)),
+            Support(T.UPPER_LEFT, components=(0,)),
+        ),
+        tractions={T.UPPER_TOP: (0.0, -pressure)},
+    )
+    result = fc.solve(problem, "primal-monolithic")
+    for profile in (result.slave, result.master):
+        assert np.max(np.abs(profile.sigma_c + pressure)) < 1e-9 * pressure
+    assert result.slave.penetration == pytest.approx(result.delta * pressure, rel=1e-8)
 
 
 def test_node_to_segment_fails_the_patch_test():

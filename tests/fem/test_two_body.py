@@ -6,7 +6,7 @@ import pytest
 from mpi4py import MPI
 
 import fenics_contact as fc
-from fenics_contact.errors import InputError, MeshTagError
+from fenics_contact.errors import InputError
 from fenics_contact.problem.analytic import hertz_errors, hertz_pair
 from fenics_contact.problem.pair import Body, ContactPair, Support, TwoBodyProblem
 from fenics_contact.problem.pair_meshes import PairTag as T
@@ -163,39 +163,6 @@ def test_two_body_hertz_on_non_matching_meshes():
         assert errors.l2_error < 0.015
 
 
-@pytest.mark.parametrize("accel", ["newton", "anderson"])
-def test_algorithm_1_for_two_bodies_reaches_the_monolithic_solution(accel):
-    """A strip on each side, each bulk coupled to it by Robin data on its γ: the fixed point is the monolithic
-    two-body solution (vertex quadrature on γ), reached by the interface Newton method in a few evaluations of
-    T and by Anderson acceleration to its tolerance; layered lower block (contrast 1e3), overhanging upper one."""
-    m = two_blocks(10, 14, heights=(H1, H2), offset=0.2)
-    layers = lambda x: np.where(np.floor(-x[1] / 0.1) % 2 == 0, 1e3, 1.0)  # noqa: E731
-    problem = TwoBodyProblem(
-        m.mesh,
-        m.cell_tags,
-        m.facet_tags,
-        bodies=(Body(T.LOWER, layers, 0.3), Body(T.UPPER, 2.0, 0.25)),
-        pair=ContactPair(T.UPPER_BOTTOM, T.LOWER_TOP),
-        supports=(Support(T.LOWER_BOTTOM), Support(T.UPPER_TOP, (0.0, -0.005))),
-    )
-    reference = fc.solve(problem, "primal-monolithic")
-    tol = 1e-10 if accel == "newton" else 1e-8
-    result = fc.solve(problem, "primal", accel=accel, tol=tol)
-    assert result.converged and result.transmission_residual < tol
-    error = np.linalg.norm(result.u.x.array - reference.u.x.array) / np.linalg.norm(reference.u.x.array)
-    assert error < 10 * tol
-    assert np.allclose(result.forces[0], reference.forces[0], rtol=10 * tol, atol=0.0)
-    assert result.force_balance() < 1e-12
-    assert result.iterations <= (8 if accel == "newton" else 400)
-    assert 0 < result.strip.size < m.mesh.topology.index_map(2).size_local
-
-
-def test_hertz_pair():
-    assert hertz_pair((1.0, 1.0), (1.0, 1.0), (0.0, 0.0)) == pytest.approx((0.5, 0.5))
-    with pytest.raises(InputError, match="not both flat"):
-        hertz_pair((np.inf, np.inf), (1.0, 1.0), (0.0, 0.0))
-
-
 def test_methods_that_cannot_do_two_bodies_refuse():
     problem = _stacked(2, 3)
     for method in ("mixed", "mixed-monolithic", "primal-ms", "mixed-ms"):
@@ -209,29 +176,3 @@ def test_methods_that_cannot_do_two_bodies_refuse():
         fc.solve(problem, "primal", accel="multigrid")
     with pytest.raises(InputError, match="solved once"):
         fc.METHODS["primal-monolithic"].build(problem)
-
-
-def test_bad_two_body_input_is_refused():
-    m = two_blocks(2, 3)
-    bodies = (Body(T.LOWER, 1.0, 0.3), Body(T.UPPER, 1.0, 0.3))
-    held = (Support(T.LOWER_BOTTOM), Support(T.UPPER_TOP))
-    args = (m.mesh, m.cell_tags, m.facet_tags)
-    with pytest.raises(InputError, match="on different ones"):
-        TwoBodyProblem(*args, bodies=bodies, pair=ContactPair(T.LOWER_TOP, T.LOWER_BOTTOM), supports=held)
-    with pytest.raises(InputError, match="no Support"):
-        TwoBodyProblem(*args, bodies=bodies, pair=ContactPair(T.LOWER_TOP, T.UPPER_BOTTOM), supports=held[:1])
-    with pytest.raises(MeshTagError, match="no facet has the tag 99"):
-        TwoBodyProblem(*args, bodies=bodies, pair=ContactPair(99, T.UPPER_BOTTOM), supports=held)
-    with pytest.raises(InputError, match="different cell tags"):
-        TwoBodyProblem(*args, bodies=(bodies[0], bodies[0]), pair=ContactPair(T.LOWER_TOP, 31), supports=held)
-    with pytest.raises(InputError, match="different tags"):
-        ContactPair(3, 3)
-    with pytest.raises(InputError, match="components"):
-        Support(1, components=(5,))
-    with pytest.raises(InputError, match="Poisson ratio"):
-        TwoBodyProblem(
-            *args,
-            bodies=(Body(T.LOWER, 1.0, 0.5), bodies[1]),
-            pair=ContactPair(T.LOWER_TOP, T.UPPER_BOTTOM),
-            supports=held,
-        )

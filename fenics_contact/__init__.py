@@ -37,6 +37,7 @@ _API = {
     "PairTag": "fenics_contact.problem.pair_meshes",
     "two_blocks": "fenics_contact.problem.pair_meshes",
     "cylinder_on_block": "fenics_contact.problem.pair_meshes",
+    "join_bodies": "fenics_contact.problem.pair_meshes",
     "METHODS": "fenics_contact.methods",
     "solve": "fenics_contact.methods",
     "force_indentation": "fenics_contact.indentation",

@@ -8,7 +8,9 @@ facets of each side a tag of its own (``PairTag.LOWER_TOP`` …).
 from enum import IntEnum
 from typing import NamedTuple
 
+import dolfinx.graph
 import dolfinx.io.gmsh
+import dolfinx.io.utils
 import gmsh
 import numpy as np
 from dolfinx import mesh as dmesh
@@ -17,7 +19,7 @@ from mpi4py import MPI
 from fenics_contact.errors import InputError
 from fenics_contact.problem.geometry import gmsh_session
 
-__all__ = ["PairTag", "TwoBodyMesh", "two_blocks", "cylinder_on_block"]
+__all__ = ["PairTag", "TwoBodyMesh", "two_blocks", "cylinder_on_block", "join_bodies"]
 
 
 class PairTag(IntEnum):
@@ -201,3 +203,55 @@ def cylinder_on_block(
             gmsh.model.mesh.generate(2)
         out = _to_mesh(comm, 2)
     return out
+
+
+def join_bodies(
+    first: tuple[dmesh.Mesh, dmesh.MeshTags],
+    second: tuple[dmesh.Mesh, dmesh.MeshTags],
+    *,
+    comm: MPI.Comm | None = None,
+) -> TwoBodyMesh:
+    """One mesh of two bodies given as two meshes with their facet tags (each on one process, e.g. built or
+    read on ``MPI.COMM_SELF``): the cells of ``first`` tagged ``PairTag.LOWER`` (1), those of ``second``
+    ``PairTag.UPPER`` (2), every facet keeping its tag (the two meshes' facet tags must differ).  Straight
+    simplices of the same kind; the result lives on ``comm`` (default: the first mesh's)."""
+    meshes = (first[0], second[0])
+    if any(m.comm.size > 1 for m in meshes):
+        raise InputError("join_bodies takes meshes held by one process each (build or read them on MPI.COMM_SELF)")
+    if meshes[0].topology.cell_type != meshes[1].topology.cell_type or meshes[0].geometry.dim != meshes[1].geometry.dim:
+        raise InputError("join_bodies: the two meshes must have the same cell type and dimension")
+    if any(m.geometry.cmaps[0].degree != 1 for m in meshes):
+        raise InputError("join_bodies: the meshes must have straight (degree-1) cells")
+    shared = set(np.unique(first[1].values)) & set(np.unique(second[1].values))
+    if shared:
+        raise InputError(f"join_bodies: the facet tags {sorted(map(int, shared))} appear in both meshes; renumber them")
+    comm = comm or meshes[0].comm
+    gdim, tdim = meshes[0].geometry.dim, meshes[0].topology.dim
+    xs, cells, entities, values, offset = [], [], [], [], 0
+    for msh, tags in (first, second):
+        msh.topology.create_connectivity(tdim - 1, tdim)
+        xs.append(msh.geometry.x[:, :gdim])
+        cells.append(msh.geometry.dofmaps[0].astype(np.int64) + offset)
+        entities.append(dmesh.entities_to_geometry(msh, tdim - 1, tags.indices).astype(np.int64) + offset)
+        values.append(tags.values.astype(np.int32))
+        offset += msh.geometry.x.shape[0]
+    rank0 = comm.rank == 0
+    x = np.vstack(xs) if rank0 else np.zeros((0, gdim))
+    all_cells = np.vstack(cells) if rank0 else np.zeros((0, tdim + 1), dtype=np.int64)
+    joined = dmesh.create_mesh(comm, all_cells, meshes[0].ufl_domain(), x)
+    num_first = cells[0].shape[0]
+    imap = joined.topology.index_map(tdim)
+    original = np.asarray(joined.topology.original_cell_index)[: imap.size_local + imap.num_ghosts]
+    cell_values = np.where(original < num_first, int(PairTag.LOWER), int(PairTag.UPPER)).astype(np.int32)
+    cell_tags = dmesh.meshtags(joined, tdim, np.arange(original.size, dtype=np.int32), cell_values)
+    joined.topology.create_connectivity(tdim - 1, tdim)
+    local, local_values = dolfinx.io.utils.distribute_entity_data(
+        joined,
+        tdim - 1,
+        np.vstack(entities) if rank0 else np.zeros((0, tdim), dtype=np.int64),
+        np.concatenate(values) if rank0 else np.zeros(0, dtype=np.int32),
+    )
+    facet_tags = dmesh.meshtags_from_entities(
+        joined, tdim - 1, dolfinx.graph.adjacencylist(local.astype(np.int32)), local_values.astype(np.int32)
+    )
+    return TwoBodyMesh(joined, cell_tags, facet_tags)

@@ -3,8 +3,10 @@
 
 import numpy as np
 import pytest
+from dolfinx import mesh as dmesh
 from mpi4py import MPI
 
+import fenics_contact as fc
 from fenics_contact.errors import InputError, MeshTagError
 from fenics_contact.problem.analytic import hertz_pair
 from fenics_contact.problem.pair import Body, ContactPair, Support, TwoBodyProblem
@@ -60,3 +62,41 @@ def test_the_two_blocks_are_disjoint_and_tagged():
         facets = m.facet_tags.find(tag)
         assert facets.size == (3 if tag == T.LOWER_TOP else 4)
         assert np.allclose(x[np.concatenate([f2v.links(f) for f in facets]), 1], y)
+
+
+def _rectangle(n: int, y0: float, height: float, tags: dict):
+    """A DOLFINx rectangle (0, 1) × (y0, y0 + height) on COMM_SELF with facet tags at y = value."""
+    msh = dmesh.create_rectangle(
+        MPI.COMM_SELF, [[0.0, y0], [1.0, y0 + height]], [n, max(2, int(n * height))], dmesh.CellType.triangle
+    )
+    msh.topology.create_connectivity(1, 2)
+    entities, values = [], []
+    for tag, y in tags.items():
+        facets = dmesh.locate_entities_boundary(msh, 1, lambda x, y=y: np.isclose(x[1], y))
+        entities.append(facets)
+        values.append(np.full(facets.size, tag, dtype=np.int32))
+    entities, values = np.concatenate(entities), np.concatenate(values)
+    order = np.argsort(entities)
+    return msh, dmesh.meshtags(msh, 1, entities[order], values[order])
+
+
+def test_two_meshes_joined_into_one_keep_their_tags_and_pass_the_patch_test():
+    lower = _rectangle(7, -0.5, 0.5, {11: -0.5, 12: 0.0})
+    upper = _rectangle(10, 0.0, 0.4, {21: 0.0, 22: 0.4})
+    joined = fc.join_bodies(lower, upper)
+    cells = [lower[0].topology.index_map(2).size_local, upper[0].topology.index_map(2).size_local]
+    assert [joined.cell_tags.find(t).size for t in (T.LOWER, T.UPPER)] == cells
+    assert [joined.facet_tags.find(t).size for t in (11, 12, 21, 22)] == [7, 7, 10, 10]
+    problem = TwoBodyProblem(
+        joined.mesh,
+        joined.cell_tags,
+        joined.facet_tags,
+        bodies=(Body(T.LOWER, 1.0, 0.0), Body(T.UPPER, 5.0, 0.0)),
+        pair=ContactPair(21, 12),
+        supports=(Support(11), Support(22, (0.0, -0.01))),
+    )
+    result = fc.solve(problem, "primal-monolithic")
+    p = 0.01 / (0.5 / 1.0 + 0.4 / 5.0 + result.delta)
+    assert max(np.max(np.abs(prof.sigma_c + p)) for prof in (result.slave, result.master)) < 1e-9 * p
+    with pytest.raises(InputError, match="appear in both meshes"):
+        fc.join_bodies(lower, _rectangle(4, 0.0, 0.4, {12: 0.0}))

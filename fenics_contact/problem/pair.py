@@ -24,6 +24,7 @@ from mpi4py import MPI
 from fenics_contact.errors import InputError, MeshTagError
 from fenics_contact.problem.boundary import constant_vector
 from fenics_contact.problem.fields import MaterialFields, cell_function
+from fenics_contact.problem.fields import _checked as checked_values
 from fenics_contact.problem.materials import check_poisson_ratio, check_youngs_modulus, lame
 
 __all__ = ["Body", "Support", "ContactPair", "TwoBodyProblem"]
@@ -228,22 +229,24 @@ class TwoBodyProblem:
         object.__setattr__(self, "_slave_body", slave.pop())
 
     def _material_fields(self) -> MaterialFields:
+        """DG0 E, ν, λ, μ and f, each body's laws evaluated at the midpoints of its own cells only."""
         msh = self.mesh
-        gdim = msh.geometry.dim
-
+        tdim, gdim = msh.topology.dim, msh.geometry.dim
         E = cell_function(msh, lambda x: np.ones(x.shape[1]), name="E")
         nu = cell_function(msh, lambda x: np.zeros(x.shape[1]), name="nu")
         f = cell_function(msh, lambda x: np.zeros((gdim, x.shape[1])), shape=(gdim,), name="f")
         for body in self.bodies:
             cells = self.cell_tags.find(body.cells)
-            for fn, law in ((E, body.youngs_modulus), (nu, body.poisson_ratio), (f, body.load)):
-                if law is None:
+            x = dmesh.compute_midpoints(msh, tdim, cells).T
+            for fn, law, shape in ((E, body.youngs_modulus, ()), (nu, body.poisson_ratio, ()), (f, body.load, (gdim,))):
+                if law is None or cells.size == 0:
                     continue
-                shape = fn.function_space.value_shape
-                piece = cell_function(msh, law, shape=shape, name=fn.name)
-                bs = fn.function_space.dofmap.index_map_bs
-                dofs = (bs * fn.function_space.dofmap.list[cells, 0][:, None] + np.arange(bs)).ravel()
-                fn.x.array[dofs] = piece.x.array[dofs]
+                values = checked_values(law, shape, f"{fn.name} of the body of cell tag {body.cells}")(x)
+                dofs = fn.function_space.dofmap.list[cells, 0]
+                if shape:
+                    fn.x.array.reshape(-1, gdim)[dofs] = values.T
+                else:
+                    fn.x.array[dofs] = values
         for fn in (E, nu, f):
             fn.x.scatter_forward()
         check_youngs_modulus(E.x.array)

@@ -100,3 +100,26 @@ def test_two_meshes_joined_into_one_keep_their_tags_and_pass_the_patch_test():
     assert max(np.max(np.abs(prof.sigma_c + p)) for prof in (result.slave, result.master)) < 1e-9 * p
     with pytest.raises(InputError, match="appear in both meshes"):
         fc.join_bodies(lower, _rectangle(4, 0.0, 0.4, {12: 0.0}))
+
+
+def test_each_body_law_is_evaluated_on_its_own_cells_only():
+    """A modulus defined on the lower block only (NaN elsewhere) and a body force on it alone are accepted:
+    each body's fields are read at its own cells' midpoints."""
+    m = two_blocks(4, 5, heights=(0.5, 0.4))
+    problem = TwoBodyProblem(
+        m.mesh,
+        m.cell_tags,
+        m.facet_tags,
+        bodies=(
+            Body(T.LOWER, lambda x: np.where(x[1] < 0.0, 3.0, np.nan), 0.2, load=(0.0, -1.0)),
+            Body(T.UPPER, 5.0, 0.3),
+        ),
+        pair=ContactPair(T.UPPER_BOTTOM, T.LOWER_TOP),
+        supports=(Support(T.LOWER_BOTTOM), Support(T.UPPER_TOP)),
+    )
+    lower, upper = m.cell_tags.find(T.LOWER), m.cell_tags.find(T.UPPER)
+    E, nu, f = (fn.x.array for fn in (problem.fields.E, problem.fields.nu, problem.fields.f))
+    assert np.all(E[lower] == 3.0) and np.all(E[upper] == 5.0)
+    assert np.all(nu[lower] == 0.2) and np.all(nu[upper] == 0.3)
+    assert np.all(f.reshape(-1, 2)[lower] == (0.0, -1.0)) and np.all(f.reshape(-1, 2)[upper] == 0.0)
+    assert problem.contact_moduli() == (5.0, 3.0)

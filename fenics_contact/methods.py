@@ -35,13 +35,16 @@ from fenics_contact.fem.contact import NewtonOptions
 from fenics_contact.fem.mixed import epsilon_for, solve_mixed_monolithic
 from fenics_contact.fem.mixed_subproblem import MixedSubproblem
 from fenics_contact.fem.primal import PrimalSubproblem, penalty_for, solve_primal_monolithic, warn_if_locking
+from fenics_contact.fem.two_body import solve_two_body
 from fenics_contact.hybrid.mixed import MixedHybridStep, solve_mixed_hybrid
 from fenics_contact.hybrid.options import InterfaceNewtonOptions, IterationOptions, default_accel
 from fenics_contact.hybrid.primal import PrimalHybridStep, solve_primal_hybrid
+from fenics_contact.hybrid.two_body import TwoBodyHybridOptions, solve_two_body_hybrid
 from fenics_contact.multiscale.cem import CEMOptions
 from fenics_contact.multiscale.mixed import MixedMultiscaleHybridStep, solve_mixed_ms_hybrid
 from fenics_contact.multiscale.mixed_cem import MixedCEMOptions
 from fenics_contact.multiscale.primal import MultiscalePrimalHybridStep, solve_primal_ms_hybrid
+from fenics_contact.problem.pair import TwoBodyProblem
 from fenics_contact.problem.problem import ContactProblem
 from fenics_contact.problem.validation import require_method_dimension
 
@@ -196,6 +199,8 @@ class Method:
     def solve(self, problem: ContactProblem, /, *, comm: MPI.Comm = MPI.COMM_WORLD, **values):
         """Solve ``problem`` with this method (``values``: its options, flat or nested, and the solve's own
         keyword arguments such as ``reference``)."""
+        if isinstance(problem, TwoBodyProblem):
+            return _solve_two_bodies(self.name, problem, values)
         _require_dimension(self.name, problem)
         extra = {k: values.pop(k) for k in list(values) if k in _NOT_OPTIONS}
         return self.solve_function(problem, **self.options(values, comm=comm), **extra)
@@ -203,6 +208,8 @@ class Method:
     def build(self, problem: ContactProblem, /, *, comm: MPI.Comm = MPI.COMM_WORLD, **values):
         """The solver kept for many solves (``factory``): a prepared hybrid step, or a ``MonolithicSolver``;
         its ``contact`` is the subproblem holding Γ_C."""
+        if isinstance(problem, TwoBodyProblem):
+            raise InputError(f"{self.name}: two-body problems are solved once, by solve(problem, 'primal-monolithic')")
         _require_dimension(self.name, problem)
         extra = {k: values.pop(k) for k in list(values) if k in _NOT_OPTIONS}
         options = self.options(values, comm=comm) | extra
@@ -217,6 +224,36 @@ class Method:
     ) -> IterationOptions | None:
         """The hybrid iteration's options among ``values`` (None for a monolithic method)."""
         return self.options(values, comm=comm).get("options") if self.hybrid else None
+
+
+#: the options of the two-body solves: monolithic (``fem.two_body``) and Algorithm 1 (``hybrid.two_body``)
+_TWO_BODY_OPTIONS = {
+    "primal-monolithic": ("delta", "newton", "line_search"),
+    "primal": ("delta", "newton", *(f.name for f in dataclasses.fields(TwoBodyHybridOptions))),
+}
+
+
+def _solve_two_bodies(name: str, problem: TwoBodyProblem, values: Mapping[str, Any]):
+    """The two-body solves: ``primal-monolithic`` and ``primal`` (Algorithm 1; its options flat or as
+    ``options=TwoBodyHybridOptions(…)``); InputError for the other methods and for other options."""
+    if name not in _TWO_BODY_OPTIONS:
+        raise InputError(
+            f"{name} cannot solve two deformable bodies: the mixed methods need an Arnold–Winther contact pair and "
+            "the multiscale ones a coarse grid in each body; solve a TwoBodyProblem with 'primal-monolithic' or "
+            "'primal' (Algorithm 1)"
+        )
+    accepted = _TWO_BODY_OPTIONS[name] + (("options",) if name == "primal" else ())
+    refused = sorted(set(values) - set(accepted))
+    if refused:
+        raise InputError(f"the two-body solve {name} takes the options {', '.join(accepted)}; got {refused}")
+    if name == "primal-monolithic":
+        return solve_two_body(problem, **values)
+    kwargs = {k: values[k] for k in ("delta", "newton") if k in values}
+    flat = {k: v for k, v in values.items() if k not in ("delta", "newton", "options")}
+    options = values.get("options") or TwoBodyHybridOptions()
+    if flat:
+        options = dataclasses.replace(options, **flat)
+    return solve_two_body_hybrid(problem, options=options, **kwargs)
 
 
 def _require_dimension(name: str, problem) -> None:
@@ -302,7 +339,10 @@ def solve(problem: ContactProblem, method: str = "primal", /, **options):
     """Solve ``problem`` with the method called ``method`` (``METHODS``) and its ``options``.
 
     Args:
-        problem: the contact problem (``ContactProblem`` on its mesh: ``problem.on(mesh)``).
+        problem: the contact problem (``ContactProblem`` on its mesh: ``problem.on(mesh)``), or two bodies in
+            contact (``TwoBodyProblem``: ``"primal-monolithic"``, options ``delta``, ``newton``, ``line_search``,
+            a ``TwoBodySolution``; or ``"primal"``, Algorithm 1 with a strip on each side, options those of
+            ``hybrid.two_body.TwoBodyHybridOptions``, a ``TwoBodyHybridResult``).
         method: ``"primal-monolithic"``, ``"mixed-monolithic"``, ``"primal"`` (Algorithm 1), ``"mixed"``
             (Algorithm 2), ``"primal-ms"`` (Algorithm 3) or ``"mixed-ms"`` (Algorithm 4).
         **options: the method's options by name, flat (``tol=1e-8``, ``layers=4``, ``delta=…``) or as their

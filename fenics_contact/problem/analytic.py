@@ -19,6 +19,9 @@
   force F per unit thickness: E* = E/(1 − ν²), a = 2√(RF/(πE*)),
   p(x) = p₀√(1 − x²/a²), p₀ = 2F/(πa).  ``hertz_errors`` compares a computed
   contact profile with it, F read off the profile.
+* **Two-body Hertz** (plane strain, frictionless): two cylinders of radii R₁, R₂ (R = ∞: a flat block) and
+  moduli (E₁, ν₁), (E₂, ν₂) are the one-body case with 1/R* = 1/R₁ + 1/R₂ and
+  1/E* = (1 − ν₁²)/E₁ + (1 − ν₂²)/E₂ (``hertz_pair``): ``hertz_errors(profile, radius=R*, E=E*, nu=0)``.
 
 The P1 locking measurement (u = curl ψ on the clamped square) is ``fem.locking``.
 """
@@ -43,6 +46,7 @@ __all__ = [
     "hertz_force_for",
     "HertzErrors",
     "hertz_errors",
+    "hertz_pair",
 ]
 
 
@@ -171,3 +175,18 @@ def hertz_errors(profile, *, radius: float, E: float, nu: float, h_contact: floa
     w = profile.weights
     l2 = float(np.sqrt(np.sum(w * (p - exact) ** 2) / np.sum(w * exact**2)))
     return HertzErrors(F, a, p0, half, (half - a) / h_contact, float(p.max() / p0 - 1.0), l2)
+
+
+def hertz_pair(
+    radii: tuple[float, float], moduli: tuple[float, float], poisson: tuple[float, float]
+) -> tuple[float, float]:
+    """(R*, E*) of two bodies in plane-strain Hertz contact: 1/R* = 1/R₁ + 1/R₂ (R = inf: flat),
+    1/E* = (1 − ν₁²)/E₁ + (1 − ν₂²)/E₂."""
+    radii, moduli, poisson = (np.asarray(v, dtype=np.float64) for v in (radii, moduli, poisson))
+    if radii.shape != (2,) or moduli.shape != (2,) or poisson.shape != (2,):
+        raise InputError("hertz_pair takes two radii, two moduli and two Poisson ratios")
+    if np.any(radii <= 0) or np.all(np.isinf(radii)) or np.any(moduli <= 0) or np.any(np.abs(poisson) >= 1):
+        raise InputError(
+            f"hertz_pair needs radii > 0 (not both flat), E > 0, |nu| < 1; got {radii}, {moduli}, {poisson}"
+        )
+    return float(1.0 / np.sum(1.0 / radii)), float(1.0 / np.sum((1.0 - poisson**2) / moduli))

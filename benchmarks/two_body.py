@@ -1,0 +1,179 @@
+"""Two deformable bodies in contact: the contact patch test (segment-to-segment against node-to-segment, 2D and
+3D), two-body Hertz (an elastic cylinder on a block) under refinement, and Algorithm 1 against the monolithic
+solve.
+
+    python benchmarks/two_body.py --refinements 0.5 1 2 --sizes 32 64 --out benchmarks/results/two_body.md
+"""
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).parent))
+
+from common import write_report  # noqa: E402
+
+import fenics_contact as fc  # noqa: E402
+from fenics_contact.problem.analytic import hertz_errors, hertz_pair  # noqa: E402
+
+T = fc.PairTag
+H1, H2, D = 0.5, 0.4, 0.01
+
+
+def patch(n_lower: int, n_upper: int, slave: str, rule: str, *, dim: int = 2, degree: int = 3) -> tuple[float, float]:
+    """The largest relative error of the nodal pressure on either surface, and the force imbalance."""
+    materials = ((1.0, 0.3), (5.0, 0.2)) if dim == 2 else ((1.0, 0.0), (5.0, 0.0))
+    m = fc.two_blocks(n_lower, n_upper, heights=(H1, H2), dim=dim)
+    up = dim - 1
+    push = np.zeros(dim)
+    push[up] = -D
+    pair = (T.UPPER_BOTTOM, T.LOWER_TOP) if slave == "upper" else (T.LOWER_TOP, T.UPPER_BOTTOM)
+    sides = (fc.Support(T.LOWER_SIDES, components=(1,)), fc.Support(T.UPPER_SIDES, components=(1,)))
+    problem = fc.TwoBodyProblem(
+        m.mesh,
+        m.cell_tags,
+        m.facet_tags,
+        bodies=(fc.Body(T.LOWER, *materials[0]), fc.Body(T.UPPER, *materials[1])),
+        pair=fc.ContactPair(*pair, quadrature_degree=degree, rule=rule),
+        supports=(
+            fc.Support(T.LOWER_BOTTOM, components=(up,)),
+            fc.Support(T.LOWER_LEFT, components=(0,)),
+            fc.Support(T.UPPER_LEFT, components=(0,)),
+            fc.Support(T.UPPER_TOP, push, components=(up,)),
+        )
+        + (sides if dim == 3 else ()),
+    )
+    result = fc.solve(problem, "primal-monolithic")
+    if dim == 2:
+        soft = [E / (1 - nu**2) for E, nu in materials]
+    else:
+        soft = [E * (1 - nu) / ((1 + nu) * (1 - 2 * nu)) for E, nu in materials]
+    p = D / (H1 / soft[0] + H2 / soft[1] + result.delta)
+    error = max(np.max(np.abs(prof.sigma_c + p)) / p for prof in (result.slave, result.master))
+    return float(error), result.force_balance()
+
+
+def hertz(refinement: float, slave: str, *, radius: float = 5.0, a: float = 0.05, depth: float = 1.1e-3) -> list[str]:
+    """An elastic cylinder (E = 2, ν = 0.25) pressed by ``depth`` onto a block (E = 1, ν = 0.3); ``slave``:
+    "cylinder" or "block"."""
+    start = time.perf_counter()
+    surfaces = (T.UPPER_BOTTOM, T.LOWER_TOP) if slave == "cylinder" else (T.LOWER_TOP, T.UPPER_BOTTOM)
+    m = fc.cylinder_on_block(radius, a, refinement=refinement)
+    problem = fc.TwoBodyProblem(
+        m.mesh,
+        m.cell_tags,
+        m.facet_tags,
+        bodies=(fc.Body(T.LOWER, 1.0, 0.3), fc.Body(T.UPPER, 2.0, 0.25)),
+        pair=fc.ContactPair(*surfaces),
+        supports=(fc.Support(T.LOWER_BOTTOM), fc.Support(T.UPPER_TOP, (0.0, -depth))),
+    )
+    result = fc.solve(problem, "primal-monolithic")
+    elapsed = time.perf_counter() - start
+    r_star, e_star = hertz_pair((radius, np.inf), (2.0, 1.0), (0.25, 0.3))
+    h = a / (20 * refinement)
+    rows = []
+    sides = (("cylinder", result.slave), ("block", result.master))
+    if slave == "block":
+        sides = (("block", result.slave), ("cylinder", result.master))
+    for side, profile in sides:
+        e = hertz_errors(profile, radius=r_star, E=e_star, nu=0.0, h_contact=h)
+        rows.append(
+            f"| {refinement:g} | {m.mesh.topology.index_map(2).size_local} | {slave} | {side} | {e.force:.5e} | "
+            f"{e.a:.4f} | "
+            f"{e.half_width_cells:+.2f} | {100 * e.peak_error:+.2f}% | {100 * e.l2_error:.2f}% | "
+            f"{result.newton.steps} | {result.force_balance():.1e} | {elapsed:.1f} |"
+        )
+    return rows
+
+
+def algorithm_1(n: int, accel: str) -> str:
+    """Algorithm 1 on two blocks (the lower layered, contrast 1e3; the upper overhanging) against the monolithic
+    solve: evaluations of T, transmission residual, distance to the monolithic solution, time."""
+    m = fc.two_blocks(n, int(0.7 * n) + 1, heights=(H1, H2), offset=0.2)
+    problem = fc.TwoBodyProblem(
+        m.mesh,
+        m.cell_tags,
+        m.facet_tags,
+        bodies=(
+            fc.Body(T.LOWER, lambda x: np.where(np.floor(-x[1] / 0.1) % 2 == 0, 1e3, 1.0), 0.3),
+            fc.Body(T.UPPER, 2.0, 0.25),
+        ),
+        pair=fc.ContactPair(T.UPPER_BOTTOM, T.LOWER_TOP),
+        supports=(fc.Support(T.LOWER_BOTTOM), fc.Support(T.UPPER_TOP, (0.0, -0.005))),
+    )
+    reference = fc.solve(problem, "primal-monolithic")
+    result = fc.solve(problem, "primal", accel=accel, tol=1e-8, max_iterations=5000)
+    error = np.linalg.norm(result.u.x.array - reference.u.x.array) / np.linalg.norm(reference.u.x.array)
+    return (
+        f"| {n} | {accel} | {result.converged} | {result.iterations} | {result.transmission_residual:.1e} | "
+        f"{error:.1e} | {result.time_s:.2f} | {reference.time_s:.2f} |"
+    )
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--refinements", type=float, nargs="+", default=[0.5, 1.0, 2.0])
+    parser.add_argument("--sizes", type=int, nargs="+", default=[32, 64])
+    parser.add_argument("--out", default="benchmarks/results/two_body.md")
+    args = parser.parse_args()
+    lines = [
+        "# Two deformable bodies in contact",
+        "",
+        f"Command: `python benchmarks/two_body.py --refinements {' '.join(f'{r:g}' for r in args.refinements)} "
+        f"--sizes {' '.join(map(str, args.sizes))} --out {args.out}`",
+        "",
+        "## 1. Contact patch test: two blocks pressed together, non-matching meshes",
+        "",
+        "Lower block 1 × 0.5 (E = 1, ν = 0.3), upper 1 × 0.4 (E = 5, ν = 0.2), rollers on the bottom and left "
+        "sides, the upper top pushed down by 0.01; the exact pressure is uniform (the blocks slide along each "
+        "other). Error: the largest relative error of the nodal pressure on either surface; balance: "
+        "|F_slave + F_master|/|F|. 3D: two boxes, ν = 0.",
+        "",
+        "| dim | cells across (lower/upper) | slave | quadrature | pressure error | force balance |",
+        "|---|---|---|---|---|---|",
+    ]
+    cases = [(2, 7, 10, s, r, 3) for r in ("segments", "vertices") for s in ("upper", "lower")]
+    cases += [(3, 3, 4, "upper", "segments", k) for k in (3, 8)]
+    for dim, nl, nu, slave, rule, degree in cases:
+        error, balance = patch(nl, nu, slave, rule, dim=dim, degree=degree)
+        label = "node-to-segment (vertices)" if rule == "vertices" else f"segment-to-segment, degree {degree}"
+        lines.append(f"| {dim} | {nl}/{nu} | {slave} | {label} | {error:.1e} | {balance:.1e} |")
+    lines += [
+        "",
+        "## 2. Two-body Hertz: an elastic cylinder on a block",
+        "",
+        "Cylinder R = 5 (E = 2, ν = 0.25) pressed by 1.1e-3 onto a block 4 × 2 (E = 1, ν = 0.3); contact cells "
+        "a/(20 r) on both bodies, non-matching; R* = R, 1/E* = (1 − ν₁²)/E₁ + (1 − ν₂²)/E₂; F read off each "
+        "surface, a and p₀ from F. Half-width: half the extent of the nodes carrying contact forces, its error in "
+        "contact cells.",
+        "",
+        "| r | cells | slave | surface | F | a | (a_h − a)/h | p_max/p₀ − 1 | L² error | Newton steps | balance | "
+        "time [s] |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in args.refinements:
+        for slave in ("cylinder", "block"):
+            lines += hertz(r, slave)
+    lines += [
+        "",
+        "## 3. Algorithm 1 for two bodies",
+        "",
+        "Two blocks, the lower (n cells across) layered (E alternating 1e3 and 1 every 0.1), the upper (E = 2, "
+        "0.7n + 1 cells across) shifted by 0.2 and pushed down by 0.005; strips of 2 cell layers, α_p = E_p/√h; "
+        "stop at the transmission residual 1e-8 (at most 5000 evaluations of T).",
+        "",
+        "| n | update | converged | evaluations of T | transmission residual | ‖u − u_mono‖/‖u_mono‖ | time [s] | "
+        "monolithic [s] |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for n in args.sizes:
+        for accel in ("newton", "anderson", "none"):
+            lines.append(algorithm_1(n, accel))
+    write_report(args.out, lines)
+
+
+if __name__ == "__main__":
+    main()

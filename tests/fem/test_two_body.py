@@ -1,0 +1,178 @@
+"""Two deformable bodies in contact (``problem.pair``, ``fem.mortar``, ``fem.two_body``): the contact patch test on
+non-matching meshes, the initial gap, force balance, two-body Hertz, 3D, and what is refused."""
+
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+import fenics_contact as fc
+from fenics_contact.errors import InputError
+from fenics_contact.problem.analytic import hertz_errors, hertz_pair
+from fenics_contact.problem.pair import Body, ContactPair, Support, TwoBodyProblem
+from fenics_contact.problem.pair_meshes import PairTag as T
+from fenics_contact.problem.pair_meshes import cylinder_on_block, two_blocks
+
+pytestmark = pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="two-body contact runs on one process")
+
+#: lower block (0, 1) × (−½, 0) and upper block (0, 1) × (g, g + 0.4): moduli and Poisson ratios
+E1, NU1, E2, NU2 = 1.0, 0.3, 5.0, 0.2
+H1, H2 = 0.5, 0.4
+
+
+def _stacked(n_lower=7, n_upper=10, *, slave="upper", d=0.01, gap=0.0, rule="segments", dim=2, nus=(NU1, NU2)):
+    """The two blocks pressed together by u_y = −d on the upper top: rollers on the bottom and the left sides
+    (the blocks expand sideways freely: they slide along each other where ν₁ ≠ ν₂)."""
+    m = two_blocks(n_lower, n_upper, heights=(H1, H2), gap=gap, dim=dim)
+    up = dim - 1
+    pair = (T.UPPER_BOTTOM, T.LOWER_TOP) if slave == "upper" else (T.LOWER_TOP, T.UPPER_BOTTOM)
+    push = np.zeros(dim)
+    push[up] = -d
+    return TwoBodyProblem(
+        m.mesh,
+        m.cell_tags,
+        m.facet_tags,
+        bodies=(Body(T.LOWER, E1, nus[0]), Body(T.UPPER, E2, nus[1])),
+        pair=ContactPair(*pair, rule=rule),
+        supports=(
+            Support(T.LOWER_BOTTOM, components=(up,)),
+            Support(T.LOWER_LEFT, components=(0,)),
+            Support(T.UPPER_LEFT, components=(0,)),
+            Support(T.UPPER_TOP, push, components=(up,)),
+        )
+        + ((Support(T.LOWER_SIDES, components=(1,)), Support(T.UPPER_SIDES, components=(1,))) if dim == 3 else ()),
+    )
+
+
+def _pressure(d, gap, delta, nus=(NU1, NU2), dim=2):
+    """The exact uniform pressure: d − g = p (H₁/E₁' + H₂/E₂') + δ p (E' = E/(1 − ν²) in plane strain)."""
+    soft = (lambda E, nu: E / (1 - nu**2)) if dim == 2 else (lambda E, nu: E * (1 - nu) / ((1 + nu) * (1 - 2 * nu)))
+    return max(d - gap, 0.0) / (H1 / soft(E1, nus[0]) + H2 / soft(E2, nus[1]) + delta)
+
+
+@pytest.mark.parametrize("slave", ["upper", "lower"])
+def test_patch_test_non_matching_meshes_transmits_a_uniform_pressure(slave):
+    """7 against 10 cells across, either side the slave: the pressure is the exact constant to round-off on both
+    surfaces, and the forces on the two bodies are equal and opposite to round-off."""
+    result = fc.solve(_stacked(slave=slave), "primal-monolithic")
+    p = _pressure(0.01, 0.0, result.delta)
+    for profile in (result.slave, result.master):
+        assert np.max(np.abs(profile.sigma_c + p)) < 1e-9 * p
+        assert profile.force == pytest.approx(p * 1.0, rel=1e-10)  # width 1
+    slave_force, master_force = result.forces
+    assert np.abs(slave_force + master_force).max() < 1e-13 * p
+    assert result.force_balance() < 1e-12
+    assert result.newton.steps == 1  # linearized at the touching points, the first step is the solution
+
+
+def test_a_body_held_by_contact_alone_under_a_traction():
+    """The upper block held only sideways (a roller on its left side) and pushed down by a traction p on its top:
+    the contact carries exactly p whatever δ (the first Newton step starts from the touching points)."""
+    m = two_blocks(7, 10, heights=(H1, H2))
+    pressure = 0.02
+    problem = TwoBodyProblem(
+        m.mesh,
+        m.cell_tags,
+        m.facet_tags,
+        bodies=(Body(T.LOWER, E1, NU1), Body(T.UPPER, E2, NU2)),
+        pair=ContactPair(T.UPPER_BOTTOM, T.LOWER_TOP),
+        supports=(
+            Support(T.LOWER_BOTTOM, components=(1,)),
+            Support(T.LOWER_LEFT, components=(0,)),
+            Support(T.UPPER_LEFT, components=(0,)),
+        ),
+        tractions={T.UPPER_TOP: (0.0, -pressure)},
+    )
+    result = fc.solve(problem, "primal-monolithic")
+    for profile in (result.slave, result.master):
+        assert np.max(np.abs(profile.sigma_c + pressure)) < 1e-9 * pressure
+    assert result.slave.penetration == pytest.approx(result.delta * pressure, rel=1e-8)
+
+
+def test_node_to_segment_fails_the_patch_test():
+    """The one-pass node-to-segment rule (slave vertices, lumped weights) does not transmit a uniform pressure
+    across these non-matching meshes, with either side the slave: why the package integrates segment to segment."""
+    for slave in ("upper", "lower"):
+        result = fc.solve(_stacked(slave=slave, rule="vertices"), "primal-monolithic")
+        p = _pressure(0.01, 0.0, result.delta)
+        worst = max(np.max(np.abs(prof.sigma_c + p)) for prof in (result.slave, result.master))
+        assert worst > 1e-2 * p
+
+
+def test_the_initial_gap_is_closed_first():
+    """A gap g between the blocks: a push d < g leaves them apart (no force), d > g transmits p(d − g)."""
+    gap = 0.004
+    apart = fc.solve(_stacked(gap=gap, d=0.5 * gap), "primal-monolithic")
+    assert np.all(apart.slave.sigma_c == 0.0) and apart.slave.force == 0.0
+    assert np.allclose(apart.slave.u_c[np.isfinite(apart.slave.u_c)], -0.5 * gap, rtol=1e-9)
+    closed = fc.solve(_stacked(gap=gap, d=0.01), "primal-monolithic")
+    p = _pressure(0.01, gap, closed.delta)
+    assert np.max(np.abs(closed.master.sigma_c + p)) < 1e-9 * p
+    assert closed.slave.penetration == pytest.approx(closed.delta * p, rel=1e-8)  # the penalty law s = δ p
+
+
+def test_three_dimensions_with_the_same_code():
+    """Two boxes, 3 against 4 cells across: force balance to round-off; the uniform pressure to the error of the
+    Gauss rule on unclipped slave triangles (smaller with a higher degree); Algorithm 1 at the monolithic solution."""
+    errors = []
+    for degree in (3, 8):
+        problem = _stacked(3, 4, dim=3, nus=(0.0, 0.0))
+        problem = TwoBodyProblem(
+            problem.mesh,
+            problem.cell_tags,
+            problem.facet_tags,
+            problem.bodies,
+            ContactPair(T.UPPER_BOTTOM, T.LOWER_TOP, quadrature_degree=degree),
+            problem.supports,
+        )
+        result = fc.solve(problem, "primal-monolithic")
+        assert result.force_balance() < 1e-12
+        p = _pressure(0.01, 0.0, result.delta, nus=(0.0, 0.0), dim=3)
+        assert result.slave.force == pytest.approx(p, rel=1e-3)
+        errors.append(max(np.max(np.abs(prof.sigma_c + p)) / p for prof in (result.slave, result.master)))
+        if degree == 3:  # Algorithm 1 with the same code: its fixed point is this solution
+            hybrid = fc.solve(problem, "primal", layers=1, tol=1e-10)
+            assert hybrid.converged
+            assert np.linalg.norm(hybrid.u.x.array - result.u.x.array) < 1e-9 * np.linalg.norm(result.u.x.array)
+    assert errors[1] < errors[0] < 0.1 and errors[1] < 0.01
+
+
+@pytest.mark.slow
+def test_two_body_hertz_on_non_matching_meshes():
+    """An elastic cylinder (R = 5, E = 2, ν = 0.25) on a block (E = 1, ν = 0.3), contact cells a/40: Hertz with
+    R* = R and E* from both bodies, on both surfaces: the half-width within 2 contact cells, the peak within
+    1 %, the L² profile within 1.5 % (measured: -0.6/+1.2 cells, +0.08 %, 0.92/0.99 %)."""
+    radius, a, refinement = 5.0, 0.05, 2.0
+    m = cylinder_on_block(radius, a, refinement=refinement)
+    problem = TwoBodyProblem(
+        m.mesh,
+        m.cell_tags,
+        m.facet_tags,
+        bodies=(Body(T.LOWER, 1.0, 0.3), Body(T.UPPER, 2.0, 0.25)),
+        pair=ContactPair(T.UPPER_BOTTOM, T.LOWER_TOP),
+        supports=(Support(T.LOWER_BOTTOM), Support(T.UPPER_TOP, (0.0, -1.1e-3))),
+    )
+    result = fc.solve(problem, "primal-monolithic")
+    assert result.force_balance() < 1e-12
+    r_star, e_star = hertz_pair((radius, np.inf), (2.0, 1.0), (0.25, 0.3))
+    assert r_star == radius
+    for profile in (result.slave, result.master):
+        errors = hertz_errors(profile, radius=r_star, E=e_star, nu=0.0, h_contact=a / (20 * refinement))
+        assert 0.8 * a < errors.a < 1.2 * a
+        assert abs(errors.half_width_cells) < 2.0
+        assert abs(errors.peak_error) < 0.01
+        assert errors.l2_error < 0.015
+
+
+def test_methods_that_cannot_do_two_bodies_refuse():
+    problem = _stacked(2, 3)
+    for method in ("mixed", "mixed-monolithic", "primal-ms", "mixed-ms"):
+        with pytest.raises(InputError, match="cannot solve two deformable bodies"):
+            fc.solve(problem, method)
+    with pytest.raises(InputError, match="takes the options"):
+        fc.solve(problem, "primal-monolithic", tol=1e-8)
+    with pytest.raises(InputError, match="takes the options"):
+        fc.solve(problem, "primal", cem=None)
+    with pytest.raises(InputError, match="unknown update"):
+        fc.solve(problem, "primal", accel="multigrid")
+    with pytest.raises(InputError, match="solved once"):
+        fc.METHODS["primal-monolithic"].build(problem)

@@ -209,7 +209,10 @@ class Method:
         """The solver kept for many solves (``factory``): a prepared hybrid step, or a ``MonolithicSolver``;
         its ``contact`` is the subproblem holding Γ_C."""
         if isinstance(problem, TwoBodyProblem):
-            raise InputError(f"{self.name}: two-body problems are solved once, by solve(problem, 'primal-monolithic')")
+            raise InputError(
+                f"{self.name}: two-body problems are solved once, by solve(problem, 'primal-monolithic') or "
+                "solve(problem, 'primal') (Algorithm 1); build() keeps a one-body problem for many solves"
+            )
         _require_dimension(self.name, problem)
         extra = {k: values.pop(k) for k in list(values) if k in _NOT_OPTIONS}
         options = self.options(values, comm=comm) | extra

@@ -582,8 +582,9 @@ def require_tag_counts(cm) -> None:
         raise MeshTagError(f"{counts[-1]} cells are not tagged exactly once as Omega1 or Omega2")
 
 
-#: the methods that solve 3D (tetrahedral) problems and take rollers (symmetry planes)
-METHODS_3D = ("primal-monolithic",)
+#: the methods that solve 3D (tetrahedral) problems and take rollers (symmetry planes): the primal monolithic
+#: solve and Algorithm 1 (its strip Ω₂ and interface γ are built or read in 3D as in 2D)
+METHODS_3D = ("primal-monolithic", "primal")
 
 
 def require_method_dimension(method: str, msh, boundary=None) -> None:
@@ -596,10 +597,10 @@ def require_method_dimension(method: str, msh, boundary=None) -> None:
         raise InputError(
             f"the method {method!r} solves plane problems (triangles) only; this mesh is "
             f"{msh.topology.dim}D: a 3D problem runs with the method {works} "
-            "(fem.primal.solve_primal_monolithic)"
+            "(fem.primal.solve_primal_monolithic, hybrid.primal.solve_primal_hybrid)"
         )
     if boundary is not None and getattr(boundary, "rollers", ()):
-        raise InputError(f"the method {method!r} takes no rollers (symmetry planes); the method {works} does")
+        raise InputError(f"the method {method!r} takes no rollers (symmetry planes); the methods {works} do")
 
 
 def require_facet_groups(msh, facet_tags, groups: Iterable[Boundary]) -> None:

@@ -465,7 +465,7 @@ def tetrahedral_mesh_problems(cm, rules: Iterable[BoundaryRule] = BOUNDARY_RULES
     """The checks of a tetrahedral ContactMesh, on the distributed mesh (collective; the same list on every rank):
     every cell in exactly one of Omega1 and Omega2, no cell of zero volume, gamma non-empty and inside the mesh,
     each group of ``rules`` non-empty (when required) and on the outer boundary, of its subdomain, disjoint
-    from and away from the groups its rule names."""
+    from and away from the groups its rule names; gamma the common boundary of Omega1 and Omega2."""
     msh, comm = cm.mesh, cm.comm
     tdim = msh.topology.dim
     msh.topology.create_connectivity(tdim - 1, tdim)
@@ -502,6 +502,7 @@ def tetrahedral_mesh_problems(cm, rules: Iterable[BoundaryRule] = BOUNDARY_RULES
     elif on_boundary:
         problems.append(f"{on_boundary} of {gamma_total} facets of {GAMMA!r} lie on the outer boundary of the mesh")
     f2c = msh.topology.connectivity(tdim - 1, tdim)
+    problems += _tetrahedral_interface_problems(cm, facets[GAMMA])
     for rule in rules:
         if rule.name not in facets:
             facets[rule.name] = cm.facet_tags.find(neumann_tag(rule.name) if is_neumann_name(rule.name) else -1)
@@ -535,6 +536,37 @@ def tetrahedral_mesh_problems(cm, rules: Iterable[BoundaryRule] = BOUNDARY_RULES
                 problems.append(
                     f"{rule.name!r} touches {other!r} at {len(common)} nodes: {rule.name} must lie away from {other}"
                 )
+    return problems
+
+
+def _tetrahedral_interface_problems(cm, gamma: np.ndarray) -> list[str]:
+    """gamma is the common boundary of Omega1 and Omega2: every gamma facet lies between an Omega1 and an Omega2
+    cell, and every facet between an Omega1 and an Omega2 cell is tagged gamma (owned facets whose two cells
+    this rank holds; collective)."""
+    msh, comm = cm.mesh, cm.comm
+    tdim = msh.topology.dim
+    f2c = msh.topology.connectivity(tdim - 1, tdim)
+    imap = msh.topology.index_map(tdim)
+    label = np.zeros(imap.size_local + imap.num_ghosts, dtype=np.int64)
+    for sub in Subdomain:
+        label[cm.cell_tags.find(sub)] = int(sub)
+    owned = np.arange(msh.topology.index_map(tdim - 1).size_local, dtype=np.int32)
+    two = owned[np.diff(f2c.offsets)[owned] == 2]
+    first, second = label[f2c.array[f2c.offsets[two]]], label[f2c.array[f2c.offsets[two] + 1]]
+    across = two[np.minimum(first, second) * np.maximum(first, second) == int(Subdomain.OMEGA1) * int(Subdomain.OMEGA2)]
+    tagged = np.isin(two, gamma)
+    inside = np.isin(across, gamma, invert=True)
+    counts = comm.allreduce(
+        np.array([np.count_nonzero(tagged & ~np.isin(two, across)), np.count_nonzero(inside)]), op=MPI.SUM
+    )
+    problems = []
+    if counts[0]:
+        problems.append(f"{counts[0]} facets of {GAMMA!r} do not lie between an {OMEGA1} and an {OMEGA2} cell")
+    if counts[1]:
+        problems.append(
+            f"{counts[1]} facets between an {OMEGA1} and an {OMEGA2} cell are not tagged {GAMMA!r} (gamma must be "
+            "the whole common boundary of Omega1 and Omega2)"
+        )
     return problems
 
 

@@ -72,9 +72,10 @@ def _add_problem_options(run: argparse.ArgumentParser) -> None:
     group.add_argument(
         "--model",
         type=int,
-        choices=(1, 2, 3),
+        choices=(1, 2, 3, 4),
         default=_RUN_DEFAULTS["model"],
-        help="built-in test model: 1 channels, 2 inclusions, 3 heterogeneous strip (loads in Ω₁)"
+        help="built-in test model: 1 channels, 2 inclusions, 3 heterogeneous strip (loads in Ω₁), 4 the 3D "
+        "channel model (the unit cube, its strip Ω₂ of width 1/H; --method primal)"
         + _default(_shown(_RUN_DEFAULTS["model"])),
     )
     group.add_argument(

@@ -42,6 +42,7 @@ from fenics_contact.problem.case import Case
 from fenics_contact.problem.cell_groups import bounding_box
 from fenics_contact.problem.geometry import ContactMesh, read_mesh, unit_square
 from fenics_contact.problem.models import get_model, pixel_field
+from fenics_contact.problem.models3d import MODEL_3D, channels_3d_mesh
 from fenics_contact.problem.problem import ContactProblem
 from fenics_contact.problem.tags import Subdomain
 from fenics_contact.problem.validation import contact_open_ends
@@ -157,6 +158,8 @@ def _model(options: RunOptions) -> tuple[ContactProblem, np.ndarray | None]:
 def _mesh(options: RunOptions, comm: MPI.Comm = MPI.COMM_WORLD) -> ContactMesh:
     if options.mesh is not None:
         return read_mesh(options.mesh, H=None if options.coarse_groups else 1.0 / options.H, comm=comm)
+    if options.model == MODEL_3D:
+        return channels_3d_mesh(options.n, strip=1.0 / options.H, comm=comm)
     return unit_square(options.n, options.H, comm=comm)
 
 
@@ -244,7 +247,7 @@ def _run_primal(options: RunOptions, problem: ContactProblem) -> _Outcome:
         if not (out / "fields.pvd").exists():  # (load steps write their own series)
             Series(out, "fields", problem.comm).add(0.0, _field_grid(problem, result.u))
             Series(out, "contact", problem.comm).add(0.0, contact_grid(result.profile, problem.comm))
-        if options.plots:
+        if options.plots and problem.dim == 2:  # (figures of the plane; a 3D run has its ParaView series)
             plot_displacement(result.u, out / "displacement.png", title=f"({options.method} hybrid)")
             _render_deformed(result.u, out / "deformed.png", options, problem, result.profile)
 
@@ -464,7 +467,14 @@ def _solve_and_write(
     writer = MPI.COMM_SELF if replicated else comm  # replicated: rank 0 holds the whole run and writes it
     if not replicated or comm.rank == 0:
         outcome.write(out)
-        if options.plots:
+        if options.plots and problem.dim == 3:  # (the plane figures do not apply: the ParaView series do)
+            plot_history(
+                {f"{options.method}, {options.accel}": result.history},
+                out / "history.png",
+                comm=writer,
+                tol=options.tol,
+            )
+        elif options.plots:
             plot_cell_field(fields.E, out / "E.png", title=f"Young's modulus, {name}", log=True)
             if curve is not None:
                 plot_force_indentation({options.method: curve}, out / "force_indentation.png", comm=writer)

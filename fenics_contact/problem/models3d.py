@@ -20,7 +20,10 @@ from fenics_contact.problem.geometry import ContactMesh
 from fenics_contact.problem.meshes3d import unit_cube
 from fenics_contact.problem.problem import ContactProblem, ScalarField, VectorField, constant_field
 
-__all__ = ["CHANNELS_3D", "CLAMPED_3D", "ROLLERS_3D", "channels_3d", "channels_3d_mesh"]
+__all__ = ["CHANNELS_3D", "CLAMPED_3D", "MODEL_3D", "ROLLERS_3D", "channels_3d", "channels_3d_mesh"]
+
+#: the number of the 3D channel model among the built-in models (``models.get_model``, ``--model``)
+MODEL_3D = 4
 
 #: the sections (y0, y1, z0, z1) of the stiff channels, each running along x from ``_X_CHANNEL`` to Γ_C (x = 1)
 CHANNELS_3D = ((0.25, 0.5, 0.0, 0.25), (0.5, 0.75, 0.5, 0.75), (0.0, 0.25, 0.75, 1.0))

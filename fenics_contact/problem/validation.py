@@ -427,7 +427,10 @@ def open_ends(desc: MeshDescription, group: str = GAMMA_C, angle: float = OPEN_E
 
 
 def contact_open_ends(cm) -> np.ndarray:
-    """``open_ends`` of Γ_C on every rank (collective: the mesh is described on rank 0)."""
+    """``open_ends`` of Γ_C on every rank (collective: the mesh is described on rank 0); none on a tetrahedral
+    mesh (the ends of a contact curve: a contact surface is not checked)."""
+    if cm.mesh.topology.dim == 3:
+        return np.zeros((0, 3))
     desc = describe_contact_mesh(cm, [GAMMA_C])
     ends = open_ends(desc) if cm.comm.rank == 0 else None
     return cm.comm.bcast(ends, root=0)

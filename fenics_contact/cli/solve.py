@@ -63,7 +63,8 @@ def _indentation_curve(
     step, so the Ω₁ offline phase of the run serves every step.
     """
     spec = case.obstacle
-    direction = np.asarray(spec.direction)
+    direction = np.asarray(spec.direction, dtype=np.float64)
+    direction = np.pad(direction, (0, max(problem.dim - direction.size, 0)))  # (a planar direction, z = 0 in 3D)
     if options.method in ("primal", "mixed"):
         if options.method == "primal":
             penalty = {"delta": outcome.summary["delta"], "alpha": options.value("alpha")}

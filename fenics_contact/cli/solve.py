@@ -7,6 +7,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import NamedTuple
 
+import gmsh
 import numpy as np
 from dolfinx import fem
 from mpi4py import MPI
@@ -40,7 +41,7 @@ from fenics_contact.plots import (
 )
 from fenics_contact.problem.case import Case
 from fenics_contact.problem.cell_groups import bounding_box
-from fenics_contact.problem.geometry import ContactMesh, read_mesh, unit_square
+from fenics_contact.problem.geometry import ContactMesh, gmsh_session, read_mesh, unit_square
 from fenics_contact.problem.models import get_model, pixel_field
 from fenics_contact.problem.models3d import MODEL_3D, channels_3d_mesh
 from fenics_contact.problem.problem import ContactProblem
@@ -156,9 +157,26 @@ def _model(options: RunOptions) -> tuple[ContactProblem, np.ndarray | None]:
     return model, values
 
 
+def _solid(path: Path, comm: MPI.Comm) -> bool:
+    """Whether the gmsh file holds 3D cells (read on rank 0; False when gmsh cannot read it: read_mesh says why)."""
+    solid = False
+    if comm.rank == 0 and Path(path).is_file():
+        with gmsh_session():
+            gmsh.model.add("dimension")
+            try:
+                gmsh.merge(str(path))
+            except Exception:  # gmsh raises a bare Exception; read_mesh reports it
+                pass
+            else:
+                solid = len(gmsh.model.mesh.getElementTypes(3)) > 0
+    return comm.bcast(solid, root=0)
+
+
 def _mesh(options: RunOptions, comm: MPI.Comm = MPI.COMM_WORLD) -> ContactMesh:
     if options.mesh is not None:
-        return read_mesh(options.mesh, H=None if options.coarse_groups else 1.0 / options.H, comm=comm)
+        # (a 3D mesh has no coarse grid: its strip, when the file has none, is the band of ``problem.strip``)
+        planar_grid = not options.coarse_groups and not _solid(options.mesh, comm)
+        return read_mesh(options.mesh, H=1.0 / options.H if planar_grid else None, comm=comm)
     if options.model == MODEL_3D:
         return channels_3d_mesh(options.n, strip=1.0 / options.H, comm=comm)
     return unit_square(options.n, options.H, comm=comm)

@@ -80,3 +80,13 @@ def test_a_case_file_on_a_tetrahedral_mesh_runs_algorithm_1(tmp_path):
     assert step["converged"] and summary["contact_force"] > 0
     contact = pyvista.read(out / "contact.pvd")[0]
     assert np.all(contact.point_data["active"] > 0) and np.allclose(contact.points[:, 0], 1.0)
+
+
+def test_a_tetrahedral_mesh_file_runs_with_the_3d_model(tmp_path):
+    """``--mesh`` of a gmsh tetrahedral file (no coarse grid in 3D: --H is not used) with the 3D model's physics."""
+    _gmsh_box(tmp_path / "box.msh")
+    out = tmp_path / "run"
+    args = ["run", "--mesh", str(tmp_path / "box.msh"), "--model", "4", "--method", "primal", "--reference"]
+    assert main([*args, "--out", str(out)]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["converged"] is True and summary["e_u"] < 1e-8 and summary["H"] is None

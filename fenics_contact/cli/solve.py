@@ -487,6 +487,8 @@ def _solve_and_write(
     if not replicated or comm.rank == 0:
         outcome.write(out)
         if options.plots and problem.dim == 3:  # (the plane figures do not apply: the ParaView series do)
+            if curve is not None:
+                plot_force_indentation({options.method: curve}, out / "force_indentation.png", comm=writer)
             plot_history(
                 {f"{options.method}, {options.accel}": result.history},
                 out / "history.png",

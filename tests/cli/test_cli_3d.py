@@ -78,6 +78,7 @@ def test_a_case_file_on_a_tetrahedral_mesh_runs_algorithm_1(tmp_path):
     assert summary["converged"] is True and summary["e_u"] < 1e-8
     step = summary["force_indentation"]["steps"][-1]
     assert step["converged"] and summary["contact_force"] > 0
+    assert (out / "force_indentation.png").stat().st_size > 0
     contact = pyvista.read(out / "contact.pvd")[0]
     assert np.all(contact.point_data["active"] > 0) and np.allclose(contact.points[:, 0], 1.0)
 

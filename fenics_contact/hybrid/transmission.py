@@ -157,7 +157,7 @@ def robin_coefficient(alpha: float | str, E: fem.Function, space: "InterfaceSpac
 
     ``alpha`` is a number, or a product of factors joined by ``*``: numbers,
     ``h^p`` (e.g. ``h^-1/2``), ``sqrt-h`` (= h^½), ``E``, where E stands for
-    E_p, the area-weighted mean of Young's modulus over the cells touching node p,
+    E_p, the area- (in 3D volume-) weighted mean of Young's modulus over the cells touching node p,
     and ``Emin``, the smallest E_p on γ (one number for all nodes).
     Examples: ``"1"``, ``"h^-1/2"``, ``"E"``, ``"2E"``, ``"E*h^-1/2"``, ``"Emin*h^-1/2"``.
     """

@@ -139,3 +139,24 @@ def test_the_other_methods_refuse_3d_and_name_the_3d_methods():
         with pytest.raises(InputError, match="'primal'"):
             fc.solve(problem, method)
     assert get_model(4).description == channels_3d().description
+
+
+def test_contact_patches_and_the_fronts_on_a_surface():
+    """The Γ_C unknowns of a 3D contact surface: one patch per connected piece with the grid neighbours (edges
+    and diagonals); the windows of the local front resolution are the nodes within w − 1 rings of a front."""
+    from fenics_contact.hybrid.fronts import LocalFronts, contact_chains, contact_patches
+
+    y, z = np.meshgrid(np.arange(6.0), np.arange(5.0), indexing="ij")
+    face = np.column_stack([np.ones(y.size), y.ravel(), z.ravel()]) * 0.1
+    far = face + np.array([0.0, 2.0, 0.0])  # a second piece, far away
+    points = np.vstack([face, far])
+    patches = contact_patches(points)
+    assert [p[0].size for p in patches] == [30, 30] and contact_chains(points)[0][0].size == 30
+    degree = np.diff(patches[0][1].indptr)
+    assert degree.min() == 3 and degree.max() == 8  # a corner; an inner node with its 8 neighbours
+    active = np.zeros(60, dtype=bool)
+    active[:30][y.ravel() <= 1] = True  # the columns y = 0, 1 of the first piece in contact
+    M = np.eye(60)
+    windows = LocalFronts(patches, M, np.ones(60), width=2).windows(active)
+    assert len(windows) == 1  # the front between y = 1 and y = 2, one ring on either side: y = 0 … 3
+    assert np.array_equal(np.sort(windows[0]), np.flatnonzero(y.ravel() <= 3))

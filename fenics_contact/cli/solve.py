@@ -415,6 +415,11 @@ def _solve_and_write(
         model = case.problem(case_mesh)
         if options.method.endswith("-ms"):
             _check_case_coarse_grid(cm, options, case)
+    if case is None and cm.mesh.topology.dim == 3 and options.model != MODEL_3D:
+        raise InputError(
+            f"--mesh {options.mesh} is a tetrahedral (3D) mesh and the built-in model {options.model} is planar: "
+            f"run it with --model {MODEL_3D} (the 3D channel model's materials and load) or a case file"
+        )
     problem = model.on(cm)
     problem.check_loaded()
     fields = problem.fields

@@ -458,7 +458,10 @@ def interface_bends(desc: MeshDescription) -> np.ndarray:
 
 
 def interface_bends_of(cm) -> np.ndarray:
-    """``interface_bends`` of γ on every rank (collective: the mesh is described on rank 0)."""
+    """``interface_bends`` of γ on every rank (collective: the mesh is described on rank 0); none on a tetrahedral
+    mesh (the bends of an interface curve, which the mixed methods need to know: they are planar)."""
+    if cm.mesh.topology.dim == 3:
+        return np.zeros((0, 2))
     desc = describe_contact_mesh(cm, [GAMMA])
     bends = interface_bends(desc) if cm.comm.rank == 0 else None
     return cm.comm.bcast(bends, root=0)

@@ -83,11 +83,17 @@ def test_a_case_file_on_a_tetrahedral_mesh_runs_algorithm_1(tmp_path):
     assert np.all(contact.point_data["active"] > 0) and np.allclose(contact.points[:, 0], 1.0)
 
 
-def test_a_tetrahedral_mesh_file_runs_with_the_3d_model(tmp_path):
-    """``--mesh`` of a gmsh tetrahedral file (no coarse grid in 3D: --H is not used) with the 3D model's physics."""
-    _gmsh_box(tmp_path / "box.msh")
+def test_a_tetrahedral_mesh_file_runs_with_the_3d_model(tmp_path, capsys):
+    """``--mesh`` of a gmsh tetrahedral file (no coarse grid in 3D: --H is not used) with the 3D model's physics;
+    check-mesh finds that Algorithm 1 can run on it and the 2D methods cannot; a planar model is refused."""
+    path = tmp_path / "box.msh"
+    _gmsh_box(path)
+    assert main(["check-mesh", str(path), "--method", "primal"]) == 0
+    said = capsys.readouterr().out
+    assert "primal can run" in said and "mixed refused" in said and "tetrahedra" in said
     out = tmp_path / "run"
-    args = ["run", "--mesh", str(tmp_path / "box.msh"), "--model", "4", "--method", "primal", "--reference"]
-    assert main([*args, "--out", str(out)]) == 0
+    args = ["run", "--mesh", str(path), "--method", "primal", "--reference", "--out", str(out)]
+    assert main(args) == 2 and "--model 4" in capsys.readouterr().err
+    assert main([*args, "--model", "4"]) == 0
     summary = json.loads((out / "summary.json").read_text())
     assert summary["converged"] is True and summary["e_u"] < 1e-8 and summary["H"] is None

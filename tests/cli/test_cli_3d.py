@@ -97,3 +97,10 @@ def test_a_tetrahedral_mesh_file_runs_with_the_3d_model(tmp_path, capsys):
     assert main([*args, "--model", "4"]) == 0
     summary = json.loads((out / "summary.json").read_text())
     assert summary["converged"] is True and summary["e_u"] < 1e-8 and summary["H"] is None
+
+
+def test_the_3d_model_has_its_own_default_mesh_size():
+    from fenics_contact.cli.options import DEFAULT_H, DEFAULT_H_3D, RunOptions
+
+    assert RunOptions(model=4).n == DEFAULT_H_3D < DEFAULT_H == RunOptions(model=1).n
+    assert RunOptions(model=4, h=8).n == 8

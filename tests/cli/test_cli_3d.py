@@ -103,4 +103,4 @@ def test_the_3d_model_has_its_own_default_mesh_size():
     from fenics_contact.cli.options import DEFAULT_H, DEFAULT_H_3D, RunOptions
 
     assert RunOptions(model=4).n == DEFAULT_H_3D < DEFAULT_H == RunOptions(model=1).n
-    assert RunOptions(model=4, h=8).n == 8
+    assert RunOptions(model=4, h=32).n == 32

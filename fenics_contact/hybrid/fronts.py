@@ -21,7 +21,7 @@ from scipy.spatial.distance import cdist
 
 from fenics_contact.hybrid.contact_equations import solve_on
 
-__all__ = ["contact_chains", "LocalFronts"]
+__all__ = ["contact_chains", "contact_patches", "LocalFronts"]
 
 
 #: surface neighbours: unknowns closer than this many times the larger of their nearest-neighbour distances

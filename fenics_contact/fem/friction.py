@@ -20,6 +20,7 @@ varies within a state, and the Newton continues until its residual check.  The d
 Σ_p w_p t_p·(a_p − a_p^new) ≥ 0 (δ_t τ (|t_trial| − τ) per slipping node, 0 where it sticks).
 """
 
+import logging
 from typing import NamedTuple
 
 import dolfinx.fem.petsc
@@ -27,11 +28,17 @@ import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
+from fenics_contact.errors import ConvergenceError
 from fenics_contact.fem.contact import NewtonHistory, profile_order
 from fenics_contact.fem.newton import Advance, Check, Direction, StepState, semismooth_newton_loop
 from fenics_contact.problem.friction import Friction
 
-__all__ = ["NodalFriction", "FrictionProfile", "frictional_newton"]
+__all__ = ["NodalFriction", "FrictionProfile", "frictional_newton", "STATE_WEIGHT"]
+
+log = logging.getLogger(__name__)
+
+#: β of the Newton's state rule (``NodalFriction.next_state``): c = β/δ_t, 1e-3 of the stick stiffness
+STATE_WEIGHT = 1.0e-3
 
 
 class FrictionProfile(NamedTuple):
@@ -109,9 +116,15 @@ class NodalFriction:
         self.anchor = np.zeros((nodes.size, self.d))
         self.motion = np.zeros(self.d)
         self.dissipation = 0.0  #: accumulated over the committed load steps (all ranks)
+        diagonal = sub._K.getDiagonal()
+        #: the elastic stiffness at each node (the mean diagonal entry of its block of K)
+        self.stiffness = diagonal.getArray(readonly=True).reshape(-1, self.d)[nodes].mean(axis=1)
+        diagonal.destroy()
         #: the Newton's linearization state: codes per node (0 no traction, 1 stick, 2 slip) and the slip
         #: directions, or None (the state of the current u)
         self.forced: tuple[np.ndarray, np.ndarray] | None = None
+        #: thresholds τ held fixed (the fixed-point iteration of ``frictional_newton``), or None: the law's
+        self.frozen: np.ndarray | None = None
 
     # -- the law at the current iterate ------------------------------------------------------------------
     def _geometry(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -128,7 +141,12 @@ class NodalFriction:
         r_t = r - np.einsum("ij,ij->i", r, nu)[:, None] * nu
         t_trial = -self.k_t * r_t
         norm = np.linalg.norm(t_trial, axis=1)
-        tau = self.law.mu * p if self.law.law == "coulomb" else np.where(gn > 0.0, self.law.threshold, 0.0)
+        if self.frozen is not None:
+            tau = self.frozen
+        elif self.law.law == "coulomb":
+            tau = self.law.mu * p
+        else:
+            tau = np.where(gn > 0.0, self.law.threshold, 0.0)
         raw = t_trial / np.where(norm > 0.0, norm, 1.0)[:, None]
         if self.forced is None:
             stick = (tau > 0.0) & (norm <= tau)
@@ -143,23 +161,22 @@ class NodalFriction:
         return dict(nu=nu, w=w, p=p, tau=tau, active=gn > 0.0, t_trial=t_trial, norm=norm, t=t, stick=stick,
                     slip=slip, direction=direction)  # fmt: skip
 
-    def state(self, previous: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """The state at the current u: (codes, slip directions).  Given the ``previous`` state, a node that
-        slipped there and whose trial traction now points against its slip direction sticks instead: its stick
-        band |r_t| ≤ τδ_t is too narrow for a Newton iterate to land in, and between the two slip directions
-        lies a stick solution."""
-        keep, self.forced = self.forced, None
-        try:
-            e = self.evaluate()
-        finally:
-            self.forced = keep
-        codes = np.where(e["stick"], 1, np.where(e["slip"], 2, 0)).astype(np.int8)
-        direction = e["t_trial"] / np.where(e["norm"] > 0.0, e["norm"], 1.0)[:, None]
-        if previous is not None:
-            old_codes, old_direction = previous
-            flipped = (old_codes == 2) & (codes == 2) & (np.einsum("ij,ij->i", direction, old_direction) < 0.0)
-            codes[flipped] = 1
-        return codes, direction
+    def next_state(self) -> tuple[np.ndarray, np.ndarray]:
+        """The state the Newton linearizes at next: (codes, slip directions) from z = (1 − β) t + β t_trial.
+
+        t is the traction of the state linearized at (``forced``; the law's own without one) and t_trial the
+        trial traction at the current u: a node sticks where |z| ≤ τ and slips along z/|z| otherwise.  The
+        primal–dual active-set rule with the constant c = β/δ_t: β = 1 would be the trial state alone, whose
+        stick band |u_t − …| ≤ τδ_t is too narrow for a Newton iterate to land in; β = ``STATE_WEIGHT`` makes c
+        the element stiffness E_c/h at the default penalty.  A state that reproduces itself satisfies the law.
+        """
+        e = self.evaluate()
+        beta = np.minimum(1.0, self.stiffness / e["w"] / self.k_t)[:, None]
+        z = (1.0 - beta) * e["t"] + beta * e["t_trial"]
+        size = np.linalg.norm(z, axis=1)
+        tau = e["tau"]
+        codes = np.where(tau > 0.0, np.where(size <= tau, 1, 2), 0).astype(np.int8)
+        return codes, z / np.where(size > 0.0, size, 1.0)[:, None]
 
     @staticmethod
     def key(state: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
@@ -205,7 +222,7 @@ class NodalFriction:
             ratio = e["tau"][slip] / e["norm"][slip]
             nn = n_hat[slip][:, :, None] * n_hat[slip][:, None, :]
             blocks[slip] = (w[slip] * self.k_t * ratio)[:, None, None] * (P[slip] - nn)
-            if self.law.law == "coulomb":
+            if self.law.law == "coulomb" and self.frozen is None:
                 on = e["active"][slip]
                 coupling = n_hat[slip][:, :, None] * nu[slip][:, None, :]
                 blocks[slip] -= (w[slip] * self.law.mu / self.delta * on)[:, None, None] * coupling
@@ -249,10 +266,11 @@ class _FrictionalSystem:
     state (``NodalFriction.state``), on which the friction term is linearized (``NodalFriction.forced``); once
     full steps cycle, the step length comes from a backtracking line search on ‖F‖ (Armijo)."""
 
-    def __init__(self, sub) -> None:
-        self.sub, self.friction = sub, sub.friction
+    def __init__(self, sub, *, energy: bool = False) -> None:
+        self.sub, self.friction, self.energy = sub, sub.friction, energy
         self._norm = np.inf
-        self.friction.forced = self.friction.state()
+        self.friction.forced = None
+        self.friction.forced = self.friction.next_state()
 
     def key(self, state) -> np.ndarray:
         return np.concatenate([self.sub._active_set(), self.friction.key(state)])
@@ -276,14 +294,43 @@ class _FrictionalSystem:
         sub.b.scale(-1.0)
         sub.solver.solve(sub.b, sub.du)
         self._move(1.0)
-        self._next = self.friction.state(self.friction.forced)
+        self._next = self.friction.next_state()
         predicted = self.key(self._next)
         self._move(-1.0)
         return Direction(predicted)
 
+    def _slope(self, t: float) -> float:
+        """d·F(u + t d): the derivative of the energy along the direction (F its gradient with frozen τ)."""
+        self._move(t)
+        self.sub._residual()
+        self._move(-t)
+        return self.sub.b.dot(self.sub.du)
+
+    def _energy_search(self) -> float:
+        """The root in (0, 1] of the increasing t ↦ d·F(u + t d) (exact line search on the convex energy, by
+        regula falsi with the Illinois modification)."""
+        t0, t1 = 0.0, 1.0
+        f0, f1 = self._slope(0.0), self._slope(1.0)
+        if f0 >= 0.0 or f1 <= 0.0:
+            return 1.0
+        for _ in range(60):
+            t = t1 - f1 * (t1 - t0) / (f1 - f0)
+            f = self._slope(t)
+            if abs(f) <= 1e-12 * abs(f0) or t1 - t0 <= 1e-12:
+                return t
+            if f > 0.0:
+                t1, f1 = t, f
+                f0 *= 0.5
+            else:
+                t0, f0 = t, f
+                f1 *= 0.5
+        return t
+
     def line_search(self) -> float:
         keep, self.friction.forced = self.friction.forced, None  # the merit: the residual of the law itself
         try:
+            if self.energy:
+                return self._energy_search()
             norm0 = self.sub._residual()
             t = 1.0
             for _ in range(30):
@@ -299,8 +346,7 @@ class _FrictionalSystem:
 
     def advance(self, t: float, state: StepState) -> Advance:
         self._move(t)
-        previous = self.friction.forced
-        self.friction.forced = self._next if t == 1.0 else self.friction.state(previous)
+        self.friction.forced = self._next if t == 1.0 else self.friction.next_state()
         active = self.key(self.friction.forced)
         return Advance(active, self.sub.mesh.comm.allreduce(int(np.count_nonzero(active))))
 
@@ -309,23 +355,72 @@ class _FrictionalSystem:
         return Check(final, scale, self.sub._residual())
 
 
+#: thresholds' fixed-point iterations of ``frictional_newton`` at most, and their relative tolerance
+FIXED_POINT_STEPS = 200
+FIXED_POINT_TOL = 1.0e-11
+
+
+def _newton(sub, *, refinements: int, energy: bool = False):
+    system = _FrictionalSystem(sub, energy=energy)
+    return semismooth_newton_loop(
+        system,
+        system.key(sub.friction.forced),
+        name=sub.prefix.rstrip("_"),
+        max_steps=sub.newton.max_iterations,
+        line_search="on-cycle",
+        rtol=sub.newton.rtol,
+        atol=sub.newton.atol,
+        refinements=refinements,
+        sizes="contact and friction state sizes",
+    )
+
+
+def _fixed_point(sub, *, refinements: int) -> NewtonHistory:
+    """The thresholds by fixed point: τ frozen at the law's value for the current u, the problem with frozen τ
+    (a convex energy: the semismooth Newton with its exact line search) solved, until τ stops changing; then
+    the residual check of the law itself."""
+    friction, history = sub.friction, NewtonHistory()
+    for _ in range(FIXED_POINT_STEPS):
+        tau = friction.evaluate()["tau"]
+        friction.frozen = tau
+        try:
+            trace = _newton(sub, refinements=refinements, energy=True)
+        finally:
+            friction.frozen = None
+        history.residuals += trace.residuals
+        history.active_sizes += trace.active_sizes
+        history.factorizations += trace.factorizations
+        change = np.max(np.abs(friction.evaluate()["tau"] - tau), initial=0.0)
+        size = np.max(tau, initial=0.0)
+        change, size = (sub.mesh.comm.allreduce(v, op=MPI.MAX) for v in (change, size))
+        if change <= FIXED_POINT_TOL * size:
+            break
+    sub._factorized_set = None  # (the last factorization had frozen thresholds)
+    final, scale = sub.residual_check()
+    if not (np.isfinite(final) and final <= sub.newton.rtol * scale + sub.newton.atol):
+        history_tail = _newton(sub, refinements=refinements)
+        history.residuals += history_tail.residuals
+        history.active_sizes += history_tail.active_sizes
+        history.factorizations += history_tail.factorizations
+    else:
+        history.residuals.append(final)
+    return history
+
+
 def frictional_newton(sub, *, refinements: int) -> NewtonHistory:
-    """The semismooth Newton of a frictional ``PrimalSubproblem`` (``fem.newton.semismooth_newton_loop``): full
-    steps until a state recurs, then a backtracking line search on ‖F‖; ``refinements`` steps after a settled
-    state whose residual misses the check (iterative refinement, or the Newton steps of a 3D slip)."""
-    system = _FrictionalSystem(sub)
+    """Solve a frictional ``PrimalSubproblem``: the semismooth Newton on the law itself
+    (``fem.newton.semismooth_newton_loop``; full steps until a state recurs, then a backtracking line search on
+    ‖F‖; ``refinements`` steps after a settled state whose residual misses the check: iterative refinement, or
+    the Newton steps of a 3D slip), and should it not converge (slip fronts cycling at high contrast), the
+    fixed point on the thresholds from the same start (``_fixed_point``: each step a convex problem)."""
+    start = sub.u.x.array.copy()
     try:
-        trace = semismooth_newton_loop(
-            system,
-            system.key(sub.friction.forced),
-            name=sub.prefix.rstrip("_"),
-            max_steps=sub.newton.max_iterations,
-            line_search="on-cycle",
-            rtol=sub.newton.rtol,
-            atol=sub.newton.atol,
-            refinements=refinements,
-            sizes="contact and friction state sizes",
-        )
+        trace = _newton(sub, refinements=refinements)
+        return NewtonHistory(trace.residuals, trace.active_sizes, trace.factorizations)
+    except ConvergenceError as error:
+        log.info("%s: %s; the fixed point on the friction thresholds instead", sub.prefix.rstrip("_"), error)
+        sub.u.x.array[:] = start
+        sub._factorized_set = None
+        return _fixed_point(sub, refinements=refinements)
     finally:
         sub.friction.forced = None
-    return NewtonHistory(trace.residuals, trace.active_sizes, trace.factorizations)

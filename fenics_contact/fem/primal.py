@@ -30,7 +30,7 @@ from fenics_contact.fem.friction import NodalFriction, frictional_newton
 from fenics_contact.fem.linalg import AbsoluteTerms, DirectSolver, quadratic_form
 from fenics_contact.fem.primal_boundary import NodalContactGeometry, PrimalBoundaryData
 from fenics_contact.problem.fields import MaterialFields
-from fenics_contact.problem.friction import Friction
+from fenics_contact.problem.friction import Friction, friction_of
 from fenics_contact.problem.materials import strain, stress
 from fenics_contact.problem.obstacles import Obstacle
 from fenics_contact.problem.problem import ContactProblem
@@ -157,6 +157,11 @@ class PrimalSubproblem:
             raise InputError("this subproblem has no contact boundary")
         if self.geometry.set_obstacle(obstacle):
             self._factorized_set = None  # ν enters the Jacobian
+
+    @property
+    def symmetric(self) -> bool:
+        """Whether the Jacobian is symmetric (not with Coulomb friction)."""
+        return self.friction is None or self.friction.law.symmetric
 
     # -- sizes ---------------------------------------------------------------------------
     @property
@@ -425,7 +430,9 @@ def solve_primal_monolithic(
 ) -> PrimalSolution:
     """Penalized primal contact on the whole mesh by semismooth Newton, on triangles or tetrahedra.
 
-    ``delta`` defaults to ``default_penalty(h, E_c)``, E_c the largest E on Γ_C (``penalty_for``).
+    ``delta`` defaults to ``default_penalty(h, E_c)``, E_c the largest E on Γ_C (``penalty_for``).  With a
+    friction law (``problem.law``) it is one load step from the unloaded state (``fenics_contact.sliding`` for
+    load paths).
     """
     cm = problem.cm
     msh, facet_tags = cm.mesh, cm.facet_tags
@@ -434,7 +441,16 @@ def solve_primal_monolithic(
     fields = problem.fields
     delta = penalty_for(problem, delta)
     warn_if_locking(fields.nu, msh.comm)
-    sub = PrimalSubproblem(msh, facet_tags, fields, delta=delta, alpha=None, prefix=prefix, newton=newton)
+    sub = PrimalSubproblem(
+        msh,
+        facet_tags,
+        fields,
+        delta=delta,
+        alpha=None,
+        prefix=prefix,
+        newton=newton,
+        friction=friction_of(problem.law),
+    )
     history = sub.solve()
     elapsed = time.perf_counter() - start
     profile = sub.contact_profile()

@@ -53,6 +53,7 @@ def newton_iterate(
     history = IterationHistory()
     t_off = time.perf_counter()
     problem = step.interface_problem(nopt)
+    nopt = problem.options  # (the step's: with friction the "interface" strategy, ``options.interface_options``)
     if problem.omega2.refresh():
         problem.condensed = None
     if nopt.strategy == "condensed" and problem.condensed is None:

@@ -31,8 +31,10 @@ from fenics_contact.hybrid.iteration import (
     IterationResult,
     iterate,
 )
+from fenics_contact.hybrid.options import interface_options
 from fenics_contact.hybrid.response import FineResponse, PrimalPart
 from fenics_contact.hybrid.transmission import InterfaceSpace, robin_coefficient, split_mesh
+from fenics_contact.problem.friction import friction_of
 from fenics_contact.problem.problem import ContactProblem
 
 __all__ = [
@@ -109,6 +111,7 @@ class PrimalHybridStep:
                     prefix=f"fc_primal_omega{i + 1}_",
                     newton=newton,
                     V=self.interface.spaces[i],
+                    friction=friction_of(problem.law) if i == 1 else None,
                 )
             )
         self._prev = [np.zeros_like(s.u.x.array) for s in self.sub]
@@ -166,6 +169,7 @@ class PrimalHybridStep:
 
     def interface_problem(self, options: InterfaceNewtonOptions):
         """The affine pieces for ``hybrid.interface_newton`` (built once: fine Ω₁ response, Ω₂ with J₀)."""
+        options = interface_options(options, self.sub[1].friction)
         if self._newton is None or self._newton.options.strategy != options.strategy:
             self.prepare()
             iface = self.interface

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 from fenics_contact.errors import InputError
 
-__all__ = ["Friction", "FRICTION_LAWS", "require_frictionless"]
+__all__ = ["Friction", "FRICTION_LAWS", "friction_of", "require_frictionless"]
 
 #: the friction laws by name
 FRICTION_LAWS = ("coulomb", "tresca")
@@ -86,6 +86,11 @@ class Friction:
         value = f"mu = {self.mu:g}" if self.law == "coulomb" else f"threshold = {self.threshold:g}"
         ratio = "" if self.stiffness_ratio == 1.0 else f", stick stiffness {self.stiffness_ratio:g}/δ"
         return f"{self.law} friction, {value}{ratio}"
+
+
+def friction_of(law) -> Friction | None:
+    """The friction law of a contact law (None when frictionless)."""
+    return law if isinstance(law, Friction) else None
 
 
 def require_frictionless(law, method: str) -> None:

@@ -3,7 +3,7 @@
 With vertex quadrature the friction term of the residual is nodal, F_p += −w_p t_p, w_p the vertex weight and
 t_p the tangential traction of the return mapping (``problem.friction``):
 
-    r_p = u_p − m − a_p,   t_trial = −(1/δ_t) P_p r_p,   τ_p = μ p_p (Coulomb) or s·[p_p > 0] (Tresca),
+    r_p = u_p − m − a_p,   t_trial = −(1/δ_t) P_p r_p,   τ_p = μ p_p (Coulomb) or s (Tresca),
     stick |t_trial| ≤ τ_p: t_p = t_trial,   slip: t_p = τ_p n̂_p,   n̂_p = t_trial/|t_trial|,
 
 P_p = I − ν_p⊗ν_p, m the obstacle's rigid motion, a_p the node's anchor: the relative displacement at which
@@ -146,7 +146,7 @@ class NodalFriction:
         elif self.law.law == "coulomb":
             tau = self.law.mu * p
         else:
-            tau = np.where(gn > 0.0, self.law.threshold, 0.0)
+            tau = np.full(gn.size, self.law.threshold)
         raw = t_trial / np.where(norm > 0.0, norm, 1.0)[:, None]
         if self.forced is None:
             stick = (tau > 0.0) & (norm <= tau)
@@ -161,7 +161,7 @@ class NodalFriction:
         return dict(nu=nu, w=w, p=p, tau=tau, active=gn > 0.0, t_trial=t_trial, norm=norm, t=t, stick=stick,
                     slip=slip, direction=direction)  # fmt: skip
 
-    def next_state(self) -> tuple[np.ndarray, np.ndarray]:
+    def next_state(self, *, plain: bool = False) -> tuple[np.ndarray, np.ndarray]:
         """The state the Newton linearizes at next: (codes, slip directions) from z = (1 − β) t + β t_trial.
 
         t is the traction of the state linearized at (``forced``; the law's own without one) and t_trial the
@@ -170,8 +170,16 @@ class NodalFriction:
         stick band |u_t − …| ≤ τδ_t is too narrow for a Newton iterate to land in; β = ``STATE_WEIGHT`` makes c
         the element stiffness E_c/h at the default penalty.  A state that reproduces itself satisfies the law.
         """
-        e = self.evaluate()
-        beta = np.minimum(1.0, self.stiffness / e["w"] / self.k_t)[:, None]
+        if plain:  # the state of u itself (β = 1): the generalized Hessian of a frozen-threshold energy
+            keep, self.forced = self.forced, None
+            try:
+                e = self.evaluate()
+            finally:
+                self.forced = keep
+            beta = np.ones((e["w"].size, 1))
+        else:
+            e = self.evaluate()
+            beta = np.minimum(1.0, self.stiffness / e["w"] / self.k_t)[:, None]
         z = (1.0 - beta) * e["t"] + beta * e["t_trial"]
         size = np.linalg.norm(z, axis=1)
         tau = e["tau"]
@@ -270,7 +278,7 @@ class _FrictionalSystem:
         self.sub, self.friction, self.energy = sub, sub.friction, energy
         self._norm = np.inf
         self.friction.forced = None
-        self.friction.forced = self.friction.next_state()
+        self.friction.forced = self.friction.next_state(plain=self.energy)
 
     def key(self, state) -> np.ndarray:
         return np.concatenate([self.sub._active_set(), self.friction.key(state)])
@@ -294,7 +302,7 @@ class _FrictionalSystem:
         sub.b.scale(-1.0)
         sub.solver.solve(sub.b, sub.du)
         self._move(1.0)
-        self._next = self.friction.next_state()
+        self._next = self.friction.next_state(plain=self.energy)
         predicted = self.key(self._next)
         self._move(-1.0)
         return Direction(predicted)
@@ -346,7 +354,7 @@ class _FrictionalSystem:
 
     def advance(self, t: float, state: StepState) -> Advance:
         self._move(t)
-        self.friction.forced = self._next if t == 1.0 else self.friction.next_state()
+        self.friction.forced = self._next if t == 1.0 else self.friction.next_state(plain=self.energy)
         active = self.key(self.friction.forced)
         return Advance(active, self.sub.mesh.comm.allreduce(int(np.count_nonzero(active))))
 
@@ -428,7 +436,8 @@ def frictional_newton(sub, *, refinements: int) -> NewtonHistory:
     fixed point on the thresholds from the same start (``_fixed_point``: each step a convex problem)."""
     start = sub.u.x.array.copy()
     try:
-        trace = _newton(sub, refinements=refinements)
+        # Tresca: the gradient of a convex energy (the exact line search globalizes); Coulomb: the law's Newton
+        trace = _newton(sub, refinements=refinements, energy=sub.friction.law.law == "tresca")
         return NewtonHistory(trace.residuals, trace.active_sizes, trace.factorizations)
     except ConvergenceError as error:
         log.info("%s: %s; the fixed point on the friction thresholds instead", sub.prefix.rstrip("_"), error)

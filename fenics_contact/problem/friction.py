@@ -10,8 +10,8 @@ quasi-static and incremental (the docs' theory page, 'Friction'):
 u_old and t_old the node's displacement and traction at the previous converged load step, Δm the obstacle's
 rigid motion since then, τ the threshold: Tresca τ = s on all of Γ_C (the given-friction law of the classical
 Tresca problem: a convex energy), Coulomb τ = μ p with p = (1/δ)(u·ν − g)⁺ the normal penalty pressure.  The
-stick stiffness 1/δ_t is ``stiffness_ratio`` times the normal penalty 1/δ (default 1: δ_t = δ = 1e-3·h/E_c, a factor 1e3 above the
-element stiffness; the elastic stick slip it leaves is t/(1/δ_t), like the penetration p·δ).
+stick stiffness 1/δ_t is ``stiffness_ratio`` times the normal penalty 1/δ (default 1: δ_t = δ = 1e-3·h/E_c,
+a factor 1e3 above the element stiffness; the elastic stick slip it leaves is τ·δ_t, like the penetration p·δ).
 """
 
 import math

@@ -365,7 +365,7 @@ class _FrictionalSystem:
 
 #: thresholds' fixed-point iterations of ``frictional_newton`` at most, and their relative tolerance
 FIXED_POINT_STEPS = 200
-FIXED_POINT_TOL = 1.0e-11
+FIXED_POINT_TOL = 1.0e-12
 
 
 def _newton(sub, *, refinements: int, energy: bool = False):
@@ -403,7 +403,7 @@ def _fixed_point(sub, *, refinements: int) -> NewtonHistory:
         change, size = (sub.mesh.comm.allreduce(v, op=MPI.MAX) for v in (change, size))
         if change <= FIXED_POINT_TOL * size:
             break
-    # the Newton on the law itself from there: it settles the state exactly (the fixed point ends at 1e-11)
+    # the Newton on the law itself from there: it settles the state exactly (the fixed point ends at 1e-12)
     reached = sub.u.x.array.copy()
     sub._factorized_set = None
     try:

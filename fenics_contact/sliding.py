@@ -55,7 +55,8 @@ class SlidingStep:
     converged: bool
     time_s: float
     transmission_residual: float | None = None
-    interface_newton_steps: int = 0
+    interface_newton_steps: int = 0  #: the interface Newton's steps (with the condensed strategy: contact Newton's too)
+    contact_newton_steps: int = 0  #: of those, the steps of the contact Newton on the condensed Γ_C system
 
 
 @dataclass(slots=True)
@@ -147,7 +148,7 @@ def slide(
         contact.set_obstacle(base.translated(motion))
         if friction is not None:
             friction.set_motion(motion)
-        residual, newton_steps = None, 0
+        residual, newton_steps, contact_steps = None, 0, 0
         if hybrid is None:
             history = solver.solve()
             iterations, converged = history.steps, True
@@ -155,6 +156,7 @@ def slide(
             history = iterate(hybrid, iteration, name=f"{method} sliding")
             iterations, converged = history.iterations, history.converged
             residual, newton_steps = history.transmission_residual, history.newton_steps
+            contact_steps = history.contact_newton.steps if history.contact_newton is not None else 0
         profile = contact.contact_profile()
         tangential = friction.profile() if friction is not None else None
         dissipated = friction.commit() if friction is not None else 0.0
@@ -174,6 +176,7 @@ def slide(
             time.perf_counter() - start,
             residual,
             newton_steps,
+            contact_steps,
         )
         path.steps.append(record)
         log.info(

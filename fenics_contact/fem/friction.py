@@ -125,6 +125,8 @@ class NodalFriction:
         self.forced: tuple[np.ndarray, np.ndarray] | None = None
         #: thresholds τ held fixed (the fixed-point iteration of ``frictional_newton``), or None: the law's
         self.frozen: np.ndarray | None = None
+        #: nodal displacements (N, d) to evaluate the law at instead of u's (the condensed system's unknowns)
+        self.nodal: np.ndarray | None = None
 
     # -- the law at the current iterate ------------------------------------------------------------------
     def _geometry(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -134,7 +136,7 @@ class NodalFriction:
     def evaluate(self) -> dict:
         """The return mapping at the current u: ν, w, p, τ, t_trial, t, stick, slip (owned nodes)."""
         nu, w, gap = self._geometry()
-        u = self.sub.u.x.array.reshape(-1, self.d)[self.nodes]
+        u = self.sub.u.x.array.reshape(-1, self.d)[self.nodes] if self.nodal is None else self.nodal
         gn = np.einsum("ij,ij->i", u, nu) - gap
         p = np.maximum(gn, 0.0) / self.delta
         r = u - self.motion[None, :] - self.anchor
@@ -220,6 +222,14 @@ class NodalFriction:
     def add_jacobian(self, A: PETSc.Mat) -> None:
         """A ← A + the friction blocks (assembled A; it is assembled again)."""
         e = self.evaluate()
+        blocks = self.blocks(e)
+        rows = self._dofs().reshape(-1, self.d).astype(PETSc.IntType)
+        for k in np.flatnonzero(e["stick"] | e["slip"]):
+            A.setValuesLocal(rows[k], rows[k], blocks[k], addv=PETSc.InsertMode.ADD_VALUES)
+        A.assemble()
+
+    def blocks(self, e: dict) -> np.ndarray:
+        """The generalized Jacobian blocks ∂(−w t_p)/∂u_p (N, d, d) of the evaluated law ``e`` (free components)."""
         nu, w, n_hat = e["nu"], e["w"], e["direction"]
         eye = np.eye(self.d)
         P = eye[None] - nu[:, :, None] * nu[:, None, :]
@@ -234,11 +244,7 @@ class NodalFriction:
                 on = e["active"][slip]
                 coupling = n_hat[slip][:, :, None] * nu[slip][:, None, :]
                 blocks[slip] -= (w[slip] * self.law.mu / self.delta * on)[:, None, None] * coupling
-        blocks *= self.free[:, :, None] * self.free[:, None, :]
-        rows = self._dofs().reshape(-1, self.d).astype(PETSc.IntType)
-        for k in np.flatnonzero(stick | slip):
-            A.setValuesLocal(rows[k], rows[k], blocks[k], addv=PETSc.InsertMode.ADD_VALUES)
-        A.assemble()
+        return blocks * self.free[:, :, None] * self.free[:, None, :]
 
     # -- load steps ----------------------------------------------------------------------------------------
     def set_motion(self, motion) -> None:

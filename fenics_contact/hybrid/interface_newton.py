@@ -92,7 +92,7 @@ def newton_iterate(
     # Jacobian of Ω₂: from the offline condensation (Woodbury, no factorization), or exact from its factorization
     # with Ω₂'s own factorization (the "interface" strategy, and the fallback when a condensed step fails:
     # with a stiff penalty the Woodbury update loses digits)
-    exact = nopt.strategy == "interface"
+    exact = nopt.strategy == "interface" or getattr(problem.condensed, "exact_corrections", False)
     # certify: Ω₁ is solved, Ω₂'s warm state is checked against its own equations (solved only if that fails)
     Tg, rec = evaluate(step, g, history, name=name, monitor=monitor, omega2_warm=nopt.strategy == "condensed")
     rec.info["newton_steps"] = history.newton_steps

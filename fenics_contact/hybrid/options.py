@@ -89,10 +89,12 @@ def default_accel(step, comm) -> str:
     return "anderson" if getattr(step, "serial_interface_newton", False) and comm.size > 1 else "newton"
 
 
-def interface_options(options: InterfaceNewtonOptions, friction) -> InterfaceNewtonOptions:
-    """The interface Newton options a step runs: with friction on Γ_C (``friction`` not None) the ``"interface"``
-    strategy (Newton on F(g) = g − T(g) with Ω₂'s frictional Jacobian), as the condensed system holds the normal
-    contact unknowns only."""
-    return (
-        replace(options, strategy="interface") if friction is not None and options.strategy == "condensed" else options
-    )
+def interface_options(
+    options: InterfaceNewtonOptions, friction, *, frictional_condensation: bool
+) -> InterfaceNewtonOptions:
+    """The interface Newton options a step runs: with friction on Γ_C (``friction`` not None) and no frictional
+    condensation (``hybrid.friction``: Algorithm 1, serial) the ``"interface"`` strategy (Newton on
+    F(g) = g − T(g) with Ω₂'s frictional Jacobian) instead of the normal-only condensation."""
+    if friction is not None and options.strategy == "condensed" and not frictional_condensation:
+        return replace(options, strategy="interface")
+    return options

@@ -158,7 +158,7 @@ class MultiscalePrimalHybridStep:
         """The affine pieces for ``hybrid.interface_newton``: Ω₁'s interface response u₁|γ = R g₁₂ + r₀ from the
         coarse solver (``Omega1Multiscale.response``: one dense coarse solve with n_γ + 1 right-hand sides,
         nothing of fine-mesh size), Ω₂ with J₀ (built once)."""
-        options = interface_options(options, self.omega2.friction)
+        options = interface_options(options, self.omega2.friction, frictional_condensation=False)
         if self._newton is None or self._newton.options.strategy != options.strategy:
             iface = self.interface
             R, r0 = self.omega1.response()  # rows: this rank's owned values; columns: all ranks' (rank order)

@@ -33,6 +33,7 @@
 
 # %%
 import os
+import sys
 from pathlib import Path
 
 import matplotlib.pyplot as plt
@@ -120,6 +121,7 @@ for ax, title in zip(axes, ("normal pressure p", "tangential traction t·τ (o s
 axes[0].legend()
 fig.tight_layout()
 fig.savefig(out / "friction_tractions.png", dpi=120)
+plt.close(fig)
 
 # %% [markdown]
 # ## Force–displacement and dissipation
@@ -134,4 +136,16 @@ ax.set_xlabel("drag of the cylinder")
 ax.legend()
 fig.tight_layout()
 fig.savefig(out / "friction_forces.png", dpi=120)
+plt.close(fig)
 print(f"dissipated along the path: {mono.dissipation:.4e}")
+
+# %% [markdown]
+# ## The figures
+# Inline when this file runs as a notebook; run as a script, it leaves them as the PNG files above.
+
+# %%
+if "ipykernel" in sys.modules:  # a notebook kernel: show the figures written above
+    from IPython.display import Image, display
+
+    for png in ("friction_tractions.png", "friction_forces.png"):
+        display(Image(filename=str(out / png)))

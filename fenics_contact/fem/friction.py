@@ -283,6 +283,7 @@ class _FrictionalSystem:
     def __init__(self, sub, *, energy: bool = False) -> None:
         self.sub, self.friction, self.energy = sub, sub.friction, energy
         self._norm = np.inf
+        self._negligible = False
         self.friction.forced = None
         self.friction.forced = self.friction.next_state(plain=self.energy)
 
@@ -297,7 +298,8 @@ class _FrictionalSystem:
         return self.sub._factorize_for(active)
 
     def same(self, a: np.ndarray, b: np.ndarray) -> bool:
-        return self.sub._same_sets(a, b)
+        """The sets are equal and, where the Jacobian varies within a set (3D slip), the step is negligible."""
+        return self.sub._same_sets(a, b) and (self.friction.d == 2 or self._negligible)
 
     def _move(self, t: float) -> None:
         self.sub.u.x.petsc_vec.axpy(t, self.sub.du)
@@ -307,6 +309,8 @@ class _FrictionalSystem:
         sub = self.sub
         sub.b.scale(-1.0)
         sub.solver.solve(sub.b, sub.du)
+        size = sub.u.x.petsc_vec.norm(PETSc.NormType.NORM_INFINITY)
+        self._negligible = sub.du.norm(PETSc.NormType.NORM_INFINITY) <= 1e-12 * size
         self._move(1.0)
         self._next = self.friction.next_state(plain=self.energy)
         predicted = self.key(self._next)

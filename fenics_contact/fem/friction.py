@@ -288,7 +288,9 @@ class _FrictionalSystem:
         self.friction.forced = self.friction.next_state(plain=self.energy)
 
     def key(self, state) -> np.ndarray:
-        return np.concatenate([self.sub._active_set(), self.friction.key(state)])
+        """The set of all ranks (so that every rank sees the same sets recur)."""
+        local = np.concatenate([self.sub._active_set(), self.friction.key(state)])
+        return np.concatenate(self.sub.mesh.comm.allgather(local))
 
     def residual(self) -> float:
         self._norm = self.sub._residual()

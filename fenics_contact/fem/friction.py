@@ -33,12 +33,9 @@ from fenics_contact.fem.contact import NewtonHistory, profile_order
 from fenics_contact.fem.newton import Advance, Check, Direction, StepState, semismooth_newton_loop
 from fenics_contact.problem.friction import Friction
 
-__all__ = ["NodalFriction", "FrictionProfile", "frictional_newton", "STATE_WEIGHT"]
+__all__ = ["NodalFriction", "FrictionProfile", "frictional_newton"]
 
 log = logging.getLogger(__name__)
-
-#: β of the Newton's state rule (``NodalFriction.next_state``): c = β/δ_t, 1e-3 of the stick stiffness
-STATE_WEIGHT = 1.0e-3
 
 
 class FrictionProfile(NamedTuple):
@@ -168,11 +165,12 @@ class NodalFriction:
 
         t is the traction of the state linearized at (``forced``; the law's own without one) and t_trial the
         trial traction at the current u: a node sticks where |z| ≤ τ and slips along z/|z| otherwise.  The
-        primal–dual active-set rule with the constant c = β/δ_t: β = 1 would be the trial state alone, whose
-        stick band |u_t − …| ≤ τδ_t is too narrow for a Newton iterate to land in; β = ``STATE_WEIGHT`` makes c
-        the element stiffness E_c/h at the default penalty.  A state that reproduces itself satisfies the law.
+        primal–dual active-set rule with the constant c = β/δ_t, β = min(1, δ_t K_pp/w_p) (K_pp the node's
+        elastic stiffness): β = 1 would be the trial state alone, whose stick band |P r| ≤ τδ_t is too narrow for
+        a Newton iterate to land in.  A state that reproduces itself satisfies the law.  ``plain``: the state of
+        u itself (β = 1), the generalized Hessian of a frozen-threshold energy.
         """
-        if plain:  # the state of u itself (β = 1): the generalized Hessian of a frozen-threshold energy
+        if plain:
             keep, self.forced = self.forced, None
             try:
                 e = self.evaluate()
@@ -277,8 +275,9 @@ class NodalFriction:
 
 class _FrictionalSystem:
     """A frictional ``PrimalSubproblem`` as a ``ContactSystem``: its set is the contact set with the friction
-    state (``NodalFriction.state``), on which the friction term is linearized (``NodalFriction.forced``); once
-    full steps cycle, the step length comes from a backtracking line search on ‖F‖ (Armijo)."""
+    state (``NodalFriction.next_state``), on which the friction term is linearized (``NodalFriction.forced``);
+    once full steps cycle, the step length comes from a backtracking line search on ‖F‖ (Armijo), or with
+    ``energy`` (frozen thresholds, Tresca) from the exact line search on the convex energy F is the gradient of."""
 
     def __init__(self, sub, *, energy: bool = False) -> None:
         self.sub, self.friction, self.energy = sub, sub.friction, energy

@@ -85,7 +85,9 @@ from fenics_contact.problem.case_values import (
     Table,
     Uniform,
     read_field,
+    read_friction,
     read_integer,
+    read_motions,
     read_number,
     read_string,
     read_strings,
@@ -94,7 +96,7 @@ from fenics_contact.problem.case_values import (
     show_value,
 )
 from fenics_contact.problem.cell_groups import SUBDOMAIN_NAMES, CellGroups, bounding_box, read_cell_groups
-from fenics_contact.problem.friction import FRICTION_LAWS, Friction
+from fenics_contact.problem.friction import Friction
 from fenics_contact.problem.geometry import SIDES, ContactMesh, read_mesh, unit_square
 from fenics_contact.problem.meshes import bulged_square, hertz_block
 from fenics_contact.problem.models import get_model, pixel_field
@@ -525,7 +527,7 @@ def _obstacle(source: Source, data) -> ObstacleSpec:
         radius = t.get("radius", read_number(positive=True), required=True)
     indentation = t.raw("indentation")
     direction = t.get("direction", read_unit)
-    motions = t.get("motion", _read_motions, ())
+    motions = t.get("motion", read_motions, ())
     t.finish(f' for shape = "{shape}"')
     if motions and (indentation is not None or shape == "wall"):
         raise source.error(
@@ -561,28 +563,6 @@ def _obstacle(source: Source, data) -> ObstacleSpec:
         length = math.hypot(*direction)
         direction = (direction[0] / length, direction[1] / length)
     return ObstacleSpec(shape, point, normal, centre, radius, depths, direction, steps, motions)
-
-
-def _read_motions(value) -> tuple[tuple[float, float], ...]:
-    if not isinstance(value, list) or not value:
-        raise Bad(f"must be a non-empty list of vectors [[dx, dy], ...], got {show_value(value)}")
-    return tuple(read_vector(v) for v in value)
-
-
-def _friction(source: Source, data) -> Friction | None:
-    """The ``[friction]`` table: None (frictionless) without it."""
-    if data is None:
-        return None
-    t = Table(source, "friction", data)
-    law = t.get("law", read_string(FRICTION_LAWS), required=True)
-    key = "mu" if law == "coulomb" else "threshold"
-    value = t.get(key, read_number(), required=True)
-    ratio = t.get("stiffness-ratio", read_number(positive=True), 1.0)
-    t.finish(f' for law = "{law}"')
-    try:
-        return Friction(law, **{key: value}, stiffness_ratio=ratio)
-    except InputError as error:
-        raise source.error(str(error)) from None
 
 
 # ---------------------------------------------------------------------------------------------
@@ -783,7 +763,7 @@ def load_case(path: str | Path, overrides: Sequence[tuple[str, Any]] = ()) -> Ca
             )
     boundary = _boundary(source, data.get("boundary"), mesh)
     obstacle = _obstacle(source, data.get("obstacle"))
-    friction = _friction(source, data.get("friction"))
+    friction = read_friction(source, data.get("friction"))
     run = {}
     for table in RUN_TABLES:
         values = data.get(table, {})

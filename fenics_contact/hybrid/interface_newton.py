@@ -25,6 +25,7 @@ transmission residual stays above the tolerance ends with ``converged = False``.
 
 import logging
 import time
+from dataclasses import replace
 
 import numpy as np
 
@@ -53,7 +54,8 @@ def newton_iterate(
     history = IterationHistory()
     t_off = time.perf_counter()
     problem = step.interface_problem(nopt)
-    nopt = problem.options  # (the step's: with friction the "interface" strategy, ``options.interface_options``)
+    if problem.options.strategy != nopt.strategy:  # (the step's: ``options.interface_options`` with friction)
+        nopt = replace(nopt, strategy=problem.options.strategy)
     if problem.omega2.refresh():
         problem.condensed = None
     if nopt.strategy == "condensed" and problem.condensed is None:

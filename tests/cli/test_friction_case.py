@@ -89,3 +89,9 @@ def test_mixed_method_refuses_a_friction_case(tmp_path):
         ["run", "--no-plots", "--case", str(_case(tmp_path)), "--method", "mixed", "--out", str(tmp_path / "o")]
     )
     assert code != 0
+
+
+def test_check_mesh_says_the_mixed_methods_refuse_friction(tmp_path, capsys):
+    assert main(["check-mesh", "--case", str(_case(tmp_path))]) == 0
+    out = capsys.readouterr().out
+    assert "primal can run" in out and "mixed refused" in out and "mixed-ms refused" in out

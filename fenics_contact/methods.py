@@ -44,6 +44,7 @@ from fenics_contact.multiscale.cem import CEMOptions
 from fenics_contact.multiscale.mixed import MixedMultiscaleHybridStep, solve_mixed_ms_hybrid
 from fenics_contact.multiscale.mixed_cem import MixedCEMOptions
 from fenics_contact.multiscale.primal import MultiscalePrimalHybridStep, solve_primal_ms_hybrid
+from fenics_contact.problem.friction import friction_of, require_frictionless
 from fenics_contact.problem.pair import TwoBodyProblem
 from fenics_contact.problem.problem import ContactProblem
 from fenics_contact.problem.validation import require_method_dimension
@@ -83,6 +84,7 @@ def _primal_monolithic_solver(
             alpha=None,
             prefix="fc_steps_primal_",
             newton=newton,
+            friction=friction_of(problem.law),
         )
     )
 
@@ -263,6 +265,8 @@ def _require_dimension(name: str, problem) -> None:
     """InputError when the method ``name`` does not solve a problem of this dimension or with rollers."""
     if isinstance(problem, ContactProblem) and problem.mesh is not None:
         require_method_dimension(name, problem.mesh.mesh, problem.boundary)
+    if isinstance(problem, ContactProblem) and METHODS[name].family == "mixed":
+        require_frictionless(problem.law, f"the method {name!r}")
 
 
 def _elsewhere(names: list[str]) -> str:

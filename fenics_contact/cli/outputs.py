@@ -56,6 +56,20 @@ def _curve_row(
     }
 
 
+def _friction_summary(profile, dissipation: float | None) -> dict:
+    """The tangential side of a frictional solve (``fem.friction.FrictionProfile``) for the summary; the
+    dissipation of a load step (None for a solve from the unloaded body)."""
+    return {
+        "normal_force": profile.normal_force,
+        "tangential_force": profile.tangential_force.tolist(),
+        "stick_nodes": int(np.count_nonzero(profile.stick)),
+        "slip_nodes": int(np.count_nonzero(profile.slip)),
+        "stick_zone": profile.extent("stick"),
+        "slip_zone": profile.extent("slip"),
+        "dissipation": None if dissipation is None else float(dissipation),
+    }
+
+
 def _warn_open_ends(summary: dict, comm: MPI.Comm) -> None:
     """Warn (rank 0) when a solve's contact zone reaches an end of Γ_C where the boundary goes on straight."""
     hits = [("the run", summary["contact_at_open_end"])] if summary["contact_at_open_end"] else []

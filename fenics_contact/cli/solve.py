@@ -19,6 +19,7 @@ from fenics_contact.cli.outputs import (
     _curve_row,
     _field_grid,
     _finite_or_none,
+    _friction_summary,
     _render_deformed,
     _warn_open_ends,
 )
@@ -47,6 +48,7 @@ from fenics_contact.problem.models3d import MODEL_3D, channels_3d_mesh
 from fenics_contact.problem.problem import ContactProblem
 from fenics_contact.problem.tags import Subdomain
 from fenics_contact.problem.validation import contact_open_ends
+from fenics_contact.sliding import slide
 
 __all__ = ["check_pixel_modulus", "load_pixel_map", "run"]
 
@@ -105,6 +107,46 @@ def _indentation_curve(
         for s in curve.steps
     ]
     return {"direction": direction.tolist(), "steps": rows}
+
+
+def _sliding_path(options: RunOptions, case: Case, problem: ContactProblem, out: Path, writes: bool) -> dict:
+    """The case's sliding path (``[obstacle] motion``, ``sliding.slide``): per step the forces, the stick and
+    slip zones and the dissipation; each step's fields and contact written into ``out`` as ParaView series
+    (time: the step's number) by the ranks with ``writes``."""
+    comm = problem.comm if writes else MPI.COMM_SELF
+    fields, contact = Series(out, "fields", comm), Series(out, "contact", comm)
+    V = fem.functionspace(problem.cm.mesh, ("Lagrange", 1, (problem.dim,)))
+    written = []
+
+    def write_step(step, solver) -> None:
+        u = solver.glued(V) if hasattr(solver, "glued") else solver.contact.u  # (collective)
+        written.append(step)
+        if writes:
+            fields.add(float(len(written)), _field_grid(problem, u))
+            contact.add(float(len(written)), contact_grid(step.profile, comm))
+
+    flat = options.method_options()
+    path = slide(
+        problem.with_(obstacle=case.obstacle.base()),
+        options.method,
+        case.obstacle.motions,
+        on_step=write_step,
+        **flat,
+    )
+    rows = [
+        {"motion": list(map(float, s.motion))}
+        | (_friction_summary(s.friction, s.dissipation) if s.friction is not None else {})
+        | {
+            "contact_force": s.profile.force,
+            "iterations": s.iterations,
+            "converged": bool(s.converged),
+            "transmission_residual": s.transmission_residual,
+            "interface_newton_steps": s.interface_newton_steps,
+            "time_s": s.time_s,
+        }
+        for s in path.steps
+    ]
+    return {"steps": rows, "dissipation": path.dissipation}
 
 
 # ---------------------------------------------------------------------------------------------
@@ -447,6 +489,9 @@ def _solve_and_write(
         if case and case.obstacle.steps
         else None
     )
+    sliding = _sliding_path(options, case, problem, output.path, writes) if case and case.obstacle.motions else None
+    contact_sub = getattr(getattr(result, "step", None), "contact", None)
+    friction = getattr(contact_sub, "friction", None)
     summary = {
         "method": options.method,
         "model": options.model if case is None else None,
@@ -456,7 +501,9 @@ def _solve_and_write(
         "accel": options.accel,
         "front_window": options.newton_options().front_window if options.accel == "newton" else None,
         "iterations": result.iterations,
-        "converged": result.converged and (curve is None or all(s["converged"] for s in curve["steps"])),
+        "converged": result.converged
+        and (curve is None or all(s["converged"] for s in curve["steps"]))
+        and (sliding is None or all(s["converged"] for s in sliding["steps"])),
         "rel_tolerance": options.tol,
         # the relative change of the last two iterates (the paper's rule): not defined for the interface Newton,
         # which applies T once, to certify its solution
@@ -484,6 +531,13 @@ def _solve_and_write(
         "mpi_ranks": comm.size,
         "provenance": provenance(),
         "force_indentation": curve,
+        # with a friction law: the run's own solve (one load step from the unloaded body) and the sliding path
+        # (with a sliding path: its last step)
+        "friction": (sliding["steps"][-1] if sliding else _friction_summary(friction.profile(), None))
+        | {"law": friction.law.describe()}
+        if friction is not None
+        else None,
+        "sliding": sliding,
         "case": case.to_dict() | {"run": _options_echo(options)} if case is not None else None,
     }
     _warn_open_ends(summary, comm)

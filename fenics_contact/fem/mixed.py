@@ -53,6 +53,7 @@ from fenics_contact.fem.mixed_contact import MixedContactProfile
 from fenics_contact.fem.mixed_newton import MixedNewtonHistory
 from fenics_contact.fem.mixed_spaces import boundary_stress_space, check_triangles
 from fenics_contact.fem.mixed_subproblem import MixedSubproblem
+from fenics_contact.problem.friction import require_frictionless
 from fenics_contact.problem.problem import ContactProblem
 from fenics_contact.problem.tags import Boundary, Subdomain
 
@@ -161,6 +162,7 @@ def solve_mixed_monolithic(
     re-checks the final residual with the UFL forms.
     """
     start = time.perf_counter()
+    require_frictionless(problem.law, "the mixed monolithic solve")
     cm = problem.cm
     check_triangles(cm.mesh)
     fields = problem.fields

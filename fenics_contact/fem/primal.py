@@ -25,10 +25,12 @@ from petsc4py import PETSc
 
 from fenics_contact.errors import InputError
 from fenics_contact.fem import forms_primal
-from fenics_contact.fem.contact import ContactProfile, NewtonHistory, NewtonOptions, semismooth_newton
+from fenics_contact.fem.contact import MAX_REFINEMENTS, ContactProfile, NewtonHistory, NewtonOptions, semismooth_newton
+from fenics_contact.fem.friction import NodalFriction, frictional_newton
 from fenics_contact.fem.linalg import AbsoluteTerms, DirectSolver, quadratic_form
 from fenics_contact.fem.primal_boundary import NodalContactGeometry, PrimalBoundaryData
 from fenics_contact.problem.fields import MaterialFields
+from fenics_contact.problem.friction import Friction, friction_of
 from fenics_contact.problem.materials import strain, stress
 from fenics_contact.problem.obstacles import Obstacle
 from fenics_contact.problem.problem import ContactProblem
@@ -56,7 +58,8 @@ class PrimalSubproblem:
     contact direction ν and the gap g are nodal (P1) on Γ_C: the obstacle's at
     the Γ_C vertices, or for a wall flush with Γ_C (``obstacle=None``) the body's
     nodal normal (facet normals averaged with the vertex weights) and g = 0.  One
-    ν per node keeps the active set a set of nodes on a curved Γ_C too.
+    ν per node keeps the active set a set of nodes on a curved Γ_C too.  ``friction`` (a
+    ``problem.friction.Friction``, with contact only) adds the nodal friction term of ``fem.friction``.
     """
 
     def __init__(
@@ -70,6 +73,7 @@ class PrimalSubproblem:
         prefix: str,
         newton: NewtonOptions = NewtonOptions(),
         V: fem.FunctionSpace | None = None,
+        friction: Friction | None = None,
     ) -> None:
         if delta is not None and not (isinstance(delta, (int, float, np.number)) and np.isfinite(delta) and delta > 0):
             raise InputError(f"the penalty parameter δ must be a finite number > 0, got {delta!r}")
@@ -139,6 +143,7 @@ class PrimalSubproblem:
         self._linear_ready = False
         self._factorized_set: np.ndarray | None = None
         self._terms = AbsoluteTerms()
+        self.friction = NodalFriction(self, friction, delta) if friction is not None and self.contact else None
 
     # -- contact geometry ------------------------------------------------------------------
     @property
@@ -152,6 +157,11 @@ class PrimalSubproblem:
             raise InputError("this subproblem has no contact boundary")
         if self.geometry.set_obstacle(obstacle):
             self._factorized_set = None  # ν enters the Jacobian
+
+    @property
+    def symmetric(self) -> bool:
+        """Whether the Jacobian is symmetric (not with Coulomb friction)."""
+        return self.friction is None or self.friction.law.symmetric
 
     # -- sizes ---------------------------------------------------------------------------
     @property
@@ -169,12 +179,20 @@ class PrimalSubproblem:
         return out
 
     def _residual(self) -> float:
-        self._assemble_vector(self._F, self.b)
+        self._assemble_F()
         return self.b.norm()
+
+    def _assemble_F(self) -> PETSc.Vec:
+        """b ← F(u), with the friction term when there is one."""
+        self._assemble_vector(self._F, self.b)
+        if self.friction is not None:
+            self.friction.add_residual(self.b)
+        return self.b
 
     def _factorize_for(self, active: np.ndarray) -> bool:
         """Factorize J unless the cached factorization has the same active set."""
-        if self._factorized_set is not None and self._same_sets(active, self._factorized_set):
+        varies = self.friction is not None and self.friction.varies()  # 3D slip: J changes within a state
+        if not varies and self._factorized_set is not None and self._same_sets(active, self._factorized_set):
             return False
         self._factorize()
         self._factorized_set = active.copy()
@@ -184,6 +202,8 @@ class PrimalSubproblem:
         self.A.zeroEntries()
         dolfinx.fem.petsc.assemble_matrix(self.A, self._J, bcs=self.bcs)
         self.A.assemble()
+        if self.friction is not None:
+            self.friction.add_jacobian(self.A)
         self.solver.set_operator(self.A)
 
     def _step(self) -> None:
@@ -212,13 +232,15 @@ class PrimalSubproblem:
         Robin data, p_g = (1/δ)∫ H(u·ν − g) g v·ν the gap's share of the penalty; a backward-stable
         solve leaves a residual of about 1e-16 of their size row by row, whatever δ, α or the contrast.
         """
-        final = self._assemble_vector(self._F, self.b).norm(PETSc.NormType.NORM_INFINITY)
+        final = self._assemble_F().norm(PETSc.NormType.NORM_INFINITY)
         load = self._assemble_vector(self._load, self.du)
         if self.contact:
             load.abs()
             gap = self._assemble_vector(self._gap_terms, self._gap_vec)
             gap.abs()
             load.axpy(1.0, gap)
+            if self.friction is not None:
+                self.friction.add_sizes(load)
         return final, self._terms(self.A, self.u.x.petsc_vec, load)
 
     # -- solve ---------------------------------------------------------------------------
@@ -237,6 +259,10 @@ class PrimalSubproblem:
             h = NewtonHistory()
             h.active_sizes.append(0)
             return h
+        if self.friction is not None:
+            return frictional_newton(
+                self, refinements=self.newton.max_iterations if self.mesh.geometry.dim == 3 else MAX_REFINEMENTS
+            )
         return semismooth_newton(
             residual=self._residual,
             active_set=self._active_set,
@@ -404,7 +430,9 @@ def solve_primal_monolithic(
 ) -> PrimalSolution:
     """Penalized primal contact on the whole mesh by semismooth Newton, on triangles or tetrahedra.
 
-    ``delta`` defaults to ``default_penalty(h, E_c)``, E_c the largest E on Γ_C (``penalty_for``).
+    ``delta`` defaults to ``default_penalty(h, E_c)``, E_c the largest E on Γ_C (``penalty_for``).  With a
+    friction law (``problem.law``) it is one load step from the unloaded state (``fenics_contact.sliding`` for
+    load paths).
     """
     cm = problem.cm
     msh, facet_tags = cm.mesh, cm.facet_tags
@@ -413,7 +441,16 @@ def solve_primal_monolithic(
     fields = problem.fields
     delta = penalty_for(problem, delta)
     warn_if_locking(fields.nu, msh.comm)
-    sub = PrimalSubproblem(msh, facet_tags, fields, delta=delta, alpha=None, prefix=prefix, newton=newton)
+    sub = PrimalSubproblem(
+        msh,
+        facet_tags,
+        fields,
+        delta=delta,
+        alpha=None,
+        prefix=prefix,
+        newton=newton,
+        friction=friction_of(problem.law),
+    )
     history = sub.solve()
     elapsed = time.perf_counter() - start
     profile = sub.contact_profile()

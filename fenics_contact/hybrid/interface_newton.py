@@ -25,6 +25,7 @@ transmission residual stays above the tolerance ends with ``converged = False``.
 
 import logging
 import time
+from dataclasses import replace
 
 import numpy as np
 
@@ -53,6 +54,8 @@ def newton_iterate(
     history = IterationHistory()
     t_off = time.perf_counter()
     problem = step.interface_problem(nopt)
+    if problem.options.strategy != nopt.strategy:  # (the step's: ``options.interface_options`` with friction)
+        nopt = replace(nopt, strategy=problem.options.strategy)
     if problem.omega2.refresh():
         problem.condensed = None
     if nopt.strategy == "condensed" and problem.condensed is None:
@@ -91,7 +94,7 @@ def newton_iterate(
     # Jacobian of Ω₂: from the offline condensation (Woodbury, no factorization), or exact from its factorization
     # with Ω₂'s own factorization (the "interface" strategy, and the fallback when a condensed step fails:
     # with a stiff penalty the Woodbury update loses digits)
-    exact = nopt.strategy == "interface"
+    exact = nopt.strategy == "interface" or getattr(problem.condensed, "exact_corrections", False)
     # certify: Ω₁ is solved, Ω₂'s warm state is checked against its own equations (solved only if that fails)
     Tg, rec = evaluate(step, g, history, name=name, monitor=monitor, omega2_warm=nopt.strategy == "condensed")
     rec.info["newton_steps"] = history.newton_steps

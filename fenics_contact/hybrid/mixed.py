@@ -97,6 +97,7 @@ from fenics_contact.hybrid.iteration import (
 from fenics_contact.hybrid.primal import omega2_record
 from fenics_contact.hybrid.response import FineResponse, MixedPart
 from fenics_contact.hybrid.transmission import split_mesh, sub_to_parent_dofs
+from fenics_contact.problem.friction import require_frictionless
 from fenics_contact.problem.problem import ContactProblem
 
 __all__ = [
@@ -161,6 +162,7 @@ class MixedHybridStep:
         newton: NewtonOptions = NewtonOptions(),
         reference: MixedSolution | None = None,
     ) -> None:
+        require_frictionless(problem.law, "Algorithm 2 (mixed)")
         cm = problem.cm
         check_triangles(cm.mesh)
         self.comm = cm.comm

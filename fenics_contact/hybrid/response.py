@@ -204,7 +204,7 @@ class PrimalPart(AffinePart):
         unknowns that MUMPS computes from its factors (``DirectSolver.inverse_block``: the values of the
         back-solves without them; benchmarks/results/interface_response.md)."""
         solver = solver or self.solver
-        if not solver.has_inverse_entries():
+        if not solver.has_inverse_entries() or not self.sub.symmetric:  # (MUMPS gives entries of A⁻ᵀ)
             return super().responses(contact=contact, chunk=chunk, solver=solver)
         contact_at = (self.bs * self.c_nodes[:, None] + np.arange(self.bs)).ravel() if self.n_c else self.trace_at[:0]
         rows = np.unique(np.concatenate([self.trace_at, self.data_at, contact_at]))

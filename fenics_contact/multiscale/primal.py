@@ -28,11 +28,13 @@ from fenics_contact.hybrid.certificate import Certificate, primal_certificate
 from fenics_contact.hybrid.condensation import InterfaceProblem
 from fenics_contact.hybrid.inputs import check_reference_displacement, check_solve_inputs, require_instance
 from fenics_contact.hybrid.iteration import InterfaceNewtonOptions, IterationOptions, iterate
+from fenics_contact.hybrid.options import interface_options
 from fenics_contact.hybrid.primal import DEFAULT_ALPHA_MS, HybridResult, omega2_record, solve_or_verify
 from fenics_contact.hybrid.response import MatrixResponse, PrimalPart
 from fenics_contact.hybrid.transmission import InterfaceSpace, robin_coefficient, split_mesh
 from fenics_contact.multiscale.cem.omega1 import Omega1Multiscale
 from fenics_contact.multiscale.cem.options import CEMOptions
+from fenics_contact.problem.friction import friction_of
 from fenics_contact.problem.problem import ContactProblem
 
 __all__ = ["OMEGA1_CHECK_WARN", "MultiscalePrimalHybridStep", "solve_primal_ms_hybrid"]
@@ -91,6 +93,7 @@ class MultiscalePrimalHybridStep:
             prefix="fc_primal_ms_omega2_",
             newton=newton,
             V=self.interface.spaces[1],
+            friction=friction_of(problem.law),
         )
         self.u1 = fem.Function(self.interface.spaces[0], name="u1")  # filled by glued()
         # u₁ = Z s in the coordinates s of Omega1Multiscale (online nothing of fine-mesh size in Ω₁)
@@ -155,6 +158,7 @@ class MultiscalePrimalHybridStep:
         """The affine pieces for ``hybrid.interface_newton``: Ω₁'s interface response u₁|γ = R g₁₂ + r₀ from the
         coarse solver (``Omega1Multiscale.response``: one dense coarse solve with n_γ + 1 right-hand sides,
         nothing of fine-mesh size), Ω₂ with J₀ (built once)."""
+        options = interface_options(options, self.omega2.friction, frictional_condensation=False)
         if self._newton is None or self._newton.options.strategy != options.strategy:
             iface = self.interface
             R, r0 = self.omega1.response()  # rows: this rank's owned values; columns: all ranks' (rank order)

@@ -3,8 +3,8 @@
 A problem is a body — its tagged mesh (``geometry.ContactMesh``), Young's modulus E(x) and
 Poisson ratio ν(x), body force f(x), boundary conditions (Γ_D displacement, Γ_N tractions) —
 and what it touches on Γ_C: a rigid obstacle (``problem.obstacles``; None: a wall flush with
-Γ_C) through a contact law (``Frictionless``). Every solver takes a problem, and only a
-problem: the monolithic solves, Algorithms 1–4 and the load steps alike.
+Γ_C) through a contact law (``Frictionless``, or ``problem.friction.Friction``: Tresca or Coulomb).
+Every solver takes a problem, and only a problem: the monolithic solves, Algorithms 1–4 and the load steps alike.
 
 The physics can be given before the mesh (``model_1()``, or ``ContactProblem(youngs_modulus=…)``)
 and put on a mesh with ``problem.on(mesh)``; a problem on a mesh is validated once, there (the
@@ -30,12 +30,22 @@ from fenics_contact.errors import InputError
 from fenics_contact.problem import strip, validation
 from fenics_contact.problem.boundary import BoundaryConditions, check_boundary_groups
 from fenics_contact.problem.fields import FunctionField, MaterialFields, material_fields, tag_function, zero_load
+from fenics_contact.problem.friction import Friction
 from fenics_contact.problem.geometry import ContactMesh, mesh_size
 from fenics_contact.problem.obstacles import Obstacle
 from fenics_contact.problem.tags import Boundary, neumann_tag
 from fenics_contact.problem.validation import require_facet_groups
 
-__all__ = ["ContactProblem", "ContactLaw", "Frictionless", "ScalarField", "VectorField", "constant_field", "zero_load"]
+__all__ = [
+    "ContactProblem",
+    "ContactLaw",
+    "Friction",
+    "Frictionless",
+    "ScalarField",
+    "VectorField",
+    "constant_field",
+    "zero_load",
+]
 
 #: A scalar field: points x of shape (3, N) -> values of shape (N,).
 ScalarField = Callable[[np.ndarray], np.ndarray]
@@ -55,8 +65,8 @@ class Frictionless:
     name = "frictionless"
 
 
-#: The contact laws a problem can carry (friction laws join this union).
-ContactLaw = Frictionless
+#: The contact laws a problem can carry: frictionless, or a penalized friction law (``problem.friction``).
+ContactLaw = Frictionless | Friction
 
 
 def _scalar(value, what: str) -> ScalarField:
@@ -118,9 +128,9 @@ class ContactProblem:
             )
         if self.obstacle is not None and not isinstance(self.obstacle, Obstacle):
             raise InputError(f"ContactProblem.obstacle must be an Obstacle or None, got {type(self.obstacle).__name__}")
-        if not isinstance(self.law, Frictionless):
+        if not isinstance(self.law, (Frictionless, Friction)):
             raise InputError(
-                f"ContactProblem.law must be a contact law ({ContactLaw.__name__}), got {type(self.law).__name__}"
+                f"ContactProblem.law must be a contact law (Frictionless or Friction), got {type(self.law).__name__}"
             )
         if not isinstance(self.name, str) or not isinstance(self.description, str):
             raise InputError("ContactProblem.name and .description must be strings")

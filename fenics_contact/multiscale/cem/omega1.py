@@ -189,8 +189,12 @@ class Omega1Multiscale:
         """u₁ = Z s at this rank's owned interface DOFs (InterfaceSpace ordering)."""
         return self.solver.Zg[self._mine] @ s
 
-    def coordinate_norms2(self, s: np.ndarray) -> tuple[float, float]:
-        """(a₁(Zs, Zs), ‖Zs‖²_L²) from the Gram matrices (s may be a difference of coordinates)."""
+    def coordinate_norms2(self, s: np.ndarray) -> tuple:
+        """(a₁(Zs, Zs), ‖Zs‖²_L²) from the Gram matrices (s may be a difference of coordinates); for the columns
+        of a 2-D s, two arrays (one pass over each Gram matrix for all columns)."""
+        if s.ndim == 2:
+            GK, GM = self.solver.GK, self.solver.GM
+            return np.einsum("ij,ij->j", s, GK @ s), np.einsum("ij,ij->j", s, GM @ s)
         return float(s @ (self.solver.GK @ s)), float(s @ (self.solver.GM @ s))
 
     def reference_terms(self, r1: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, float]:

@@ -139,7 +139,7 @@ class Omega1Multiscale:
             "eigen": self.space.times.get("eigen", 0.0),
             "patches": self.space.times.get("patches", 0.0),
             "cache_load": self.space.times.get("load", 0.0),
-            "coarse": self.solver.time_s,
+            "coarse": self.solver.time_s + self.space.times.get("gram", 0.0),
         }
 
     @property

@@ -13,6 +13,8 @@ run stored (``cache_dir``): the set-up of a later curve on the same Ω₁ (anoth
     OMP_NUM_THREADS=1 .venv/bin/python benchmarks/load_path.py --h 128 --H 16 --steps 20 --cached \\
         --methods primal-monolithic primal primal-ms mixed-monolithic mixed mixed-ms \\
         --out benchmarks/results/load_path.md
+    OMP_NUM_THREADS=1 .venv/bin/python benchmarks/load_path.py --h 256 --H 16 --steps 20 --cached \\
+        --methods primal-monolithic primal primal-ms --out benchmarks/results/load_path.md --append
 
 Only the work itself is timed: the mesh and the problem are built before the clock starts.  Algorithm 3's
 per-step check of its multiscale Ω₁ against the fine Ω₁ solve (``IndentationStep.omega1_check``: one fine
@@ -193,6 +195,7 @@ def main() -> None:
         "--methods", nargs="+", default=["primal-monolithic", "primal", "primal-ms"], choices=list(FAMILY)
     )
     parser.add_argument("--out", type=Path, default=None, help="a markdown results file (default: print)")
+    parser.add_argument("--append", action="store_true", help="add the table to --out instead of replacing it")
     parser.add_argument("--one", choices=list(FAMILY), help=argparse.SUPPRESS)
     parser.add_argument("--cache-dir", default=None, help=argparse.SUPPRESS)
     args = parser.parse_args()
@@ -212,6 +215,8 @@ def main() -> None:
     text = table(args, results)
     if args.out:
         args.out.parent.mkdir(parents=True, exist_ok=True)
+        if args.append and args.out.is_file():
+            text = args.out.read_text() + "\n" + text.replace("# Load path", "## Load path", 1)
         args.out.write_text(text)
     print(text)
 

@@ -191,7 +191,13 @@ def machine() -> str:
     from fenics_contact.io import machine_description
 
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
-    return f"{machine_description()}; load average {load:.1f} at the end of the run"
+    text = f"{machine_description()}; load average {load:.1f} at the end of the run"
+    if load > 1.5:  # more than the one process of the run
+        text += (
+            ". The machine was shared with other jobs: the wall times are contended, compare the CPU times (and "
+            "ratios within this table only)"
+        )
+    return text
 
 
 def main() -> None:

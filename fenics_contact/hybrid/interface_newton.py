@@ -56,10 +56,11 @@ def newton_iterate(
     problem = step.interface_problem(nopt)
     if problem.options.strategy != nopt.strategy:  # (the step's: ``options.interface_options`` with friction)
         nopt = replace(nopt, strategy=problem.options.strategy)
-    if problem.omega2.refresh():
+    stale = problem.condensed
+    if problem.omega2.refresh():  # the normals moved: condense again (keeping what does not depend on them)
         problem.condensed = None
     if nopt.strategy == "condensed" and problem.condensed is None:
-        problem.condensed = CondensedInterface(problem)
+        problem.condensed = CondensedInterface(problem, previous=stale)
     history.time_offline_s = time.perf_counter() - t_off
     start = time.perf_counter()
     comm = step.comm

@@ -177,6 +177,7 @@ class PrimalPart(AffinePart):
             self.solver = sub.solver
         self._b = sub.b.duplicate()
         self._x = sub.b.duplicate()
+        self._kept_inverse = None  # (J₀'s factorization count, rows, the block of J₀⁻¹ there, transposed)
 
     def refresh(self) -> bool:
         if not self.n_c:
@@ -209,12 +210,16 @@ class PrimalPart(AffinePart):
         contact_at = (self.bs * self.c_nodes[:, None] + np.arange(self.bs)).ravel() if self.n_c else self.trace_at[:0]
         rows = np.unique(np.concatenate([self.trace_at, self.data_at, contact_at]))
         at = functools.partial(np.searchsorted, rows)  # position among ``rows`` of a DOF
-        B = np.zeros((rows.size, self.n_g + (self.n_c if contact else 0)))
-        B[at(self.data_at), self.data_index] = self.data_w  # C
+        r_idx, c_idx, v = [at(self.data_at)], [self.data_index], [self.data_w]  # C
         if contact:
             for c in range(self.bs):  # Qᵀ
-                B[at(self.bs * self.c_nodes + c), self.n_g + np.arange(self.n_c)] = self.c_normals[:, c]
-        X = solver.inverse_block(rows) @ B  # the rows ``rows`` of J⁻¹ [C Qᵀ]
+                r_idx.append(at(self.bs * self.c_nodes + c))
+                c_idx.append(self.n_g + np.arange(self.n_c))
+                v.append(self.c_normals[:, c])
+        shape = (rows.size, self.n_g + (self.n_c if contact else 0))
+        B = sp.csr_matrix((np.concatenate(v), (np.concatenate(r_idx), np.concatenate(c_idx))), shape=shape)
+        # the rows ``rows`` of J⁻¹ [C Qᵀ] = ((J⁻¹)ᵀ[rows, rows]ᵀ B)ᵀ; B has one or ``bs`` entries per column
+        X = np.asarray((B.T @ self._inverse_block_transposed(solver, rows)).T)
         Y = np.zeros((self.n_g, B.shape[1]))
         Y[self.trace_index] = X[at(self.trace_at)]
         S = (
@@ -225,6 +230,18 @@ class PrimalPart(AffinePart):
         if not contact:
             return Y, S, np.zeros((self.n_g, self.n_c)), np.zeros((self.n_c, self.n_c))
         return Y[:, : self.n_g], S[:, : self.n_g], Y[:, self.n_g :], S[:, self.n_g :]
+
+    def _inverse_block_transposed(self, solver: DirectSolver, rows: np.ndarray) -> np.ndarray:
+        """((J⁻¹)[rows][:, rows])ᵀ, C-contiguous; J₀'s is kept (it is factorized once, and the rows stay when the
+        obstacle moves: only the normals in Qᵀ change, so a refreshed condensation costs products, no MUMPS
+        call)."""
+        if solver is not getattr(self, "solver", None):  # (no J₀ without ``factorize``)
+            return np.ascontiguousarray(solver.inverse_block(rows).T)
+        kept = self._kept_inverse
+        if kept is None or kept[0] != solver.factorizations or not np.array_equal(kept[1], rows):
+            block = np.ascontiguousarray(solver.inverse_block(rows).T)
+            self._kept_inverse = kept = (solver.factorizations, rows, block)
+        return kept[2]
 
     def data_block(self, j0: int, j1: int) -> np.ndarray:
         B = np.zeros((self.nown, j1 - j0), order="F")

@@ -175,8 +175,7 @@ class MultiscalePrimalHybridStep:
     # -- measures -------------------------------------------------------------------------
     def _measure(self) -> None:
         om1 = self.omega1
-        de1, dl1 = om1.coordinate_norms2(self._s - self._prev[0])
-        ne1, nl1 = om1.coordinate_norms2(self._s)
+        (de1, ne1), (dl1, nl1) = om1.coordinate_norms2(np.column_stack([self._s - self._prev[0], self._s]))
         self._diff2.x.array[:] = self.omega2.u.x.array - self._prev[1]
         de = de1 + self.omega2.energy_norm2(self._diff2)
         dl = dl1 + self.omega2.l2_norm2(self._diff2)

@@ -151,7 +151,7 @@ def _obstacle_run(method: str, case: str, L: float) -> dict:
     return out
 
 
-@pytest.mark.parametrize("case", ["layers", "cylinder"])
+@pytest.mark.parametrize("case", ["layers", pytest.param("cylinder", marks=pytest.mark.slow)])
 @pytest.mark.parametrize("method", METHODS)
 def test_obstacles_in_any_units(method, case):
     """The layered patch and a cylinder pressed into the side, lengths in units 10³ times smaller and larger: the

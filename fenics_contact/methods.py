@@ -154,7 +154,7 @@ class Method:
 
     def default_accel(self, comm: MPI.Comm = MPI.COMM_WORLD) -> str | None:
         """The update of a hybrid method when none is given (``hybrid.options.default_accel``: the interface
-        Newton, Anderson for Algorithm 2 on several ranks); None for a monolithic one."""
+        Newton, serially and under MPI); None for a monolithic one."""
         return default_accel(self.factory.__wrapped__, comm) if self.hybrid else None
 
     def options(

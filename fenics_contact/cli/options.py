@@ -165,7 +165,7 @@ class RunOptions:
     mesh: Path | None = None
     coarse_groups: bool = False
     alpha: str | None = None
-    accel: str | None = None  #: None: "newton", or "anderson" for the mixed method on several ranks (default_accel)
+    accel: str | None = None  #: None: the method's default_accel ("newton")
     tol: float = _ITERATION.tol
     max_iterations: int = _ITERATION.max_iterations
     #: the contact Newton's local front resolution (None: InterfaceNewtonOptions' default; 0: off)

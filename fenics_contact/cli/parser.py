@@ -154,8 +154,9 @@ def _add_method_options(run: argparse.ArgumentParser) -> None:
     group.add_argument(
         "--alpha",
         help="primal Robin coefficient: a number or a product of numbers, h^p, sqrt-h and "
-        "E (E_p: mean E at the γ node) or Emin (the smallest E_p on γ), e.g. 1, h^-1/2, 2E*h^-1/2"
-        + _default(_per_method("alpha")),
+        "E (E_p: mean E at the γ node) or Emin (the smallest E_p on γ), e.g. 1, h^-1/2, 2E*h^-1/2; in a "
+        "product h is h/L (L the body's size, the largest side of its bounding box) and the product is divided "
+        "by L" + _default(_per_method("alpha")),
     )
     group.add_argument(
         "--delta",
@@ -163,12 +164,15 @@ def _add_method_options(run: argparse.ArgumentParser) -> None:
         help="primal penalty δ" + _default(f"{_factor(default_penalty)}·h/E, the largest E on Gamma_C"),
     )
     group.add_argument(
-        "--beta", help="mixed transmission coefficient β: sqrt-h or a number" + _default(_per_method("beta"))
+        "--beta",
+        help="mixed transmission coefficient β: sqrt-h (sqrt(h L)/E, the smallest E on Gamma_C, L the body's size) "
+        "or a number" + _default(_per_method("beta")),
     )
     group.add_argument(
         "--epsilon",
         type=float,
-        help="mixed penalty ε" + _default(f"{_factor(default_epsilon)}·h·E, the smallest E on Gamma_C"),
+        help="mixed penalty ε"
+        + _default(f"{_factor(default_epsilon)}·(h/L)·E/L, the smallest E on Gamma_C, L the body's size"),
     )
     group.add_argument(
         "--reference", action="store_true", help="also solve the monolithic problem and report e_u" + _default("off")
@@ -182,8 +186,7 @@ def _add_iteration_options(run: argparse.ArgumentParser) -> None:
         choices=ACCELERATIONS,
         default=None,
         help="how the interface fixed point is solved: the interface Newton method (robust on every "
-        "tested model), Anderson acceleration, or none (the paper's plain update); the mixed "
-        "method's interface Newton is serial" + _default(_accel_default()),
+        "tested model), Anderson acceleration, or none (the paper's plain update)" + _default(_accel_default()),
     )
     group.add_argument(
         "--front-window",

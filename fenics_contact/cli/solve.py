@@ -101,7 +101,7 @@ def _indentation_curve(
         | {
             "transmission_residual": s.transmission_residual,
             "complementarity": s.complementarity._asdict(),
-            "interface_newton_steps": s.interface_newton_steps,
+            "interface_newton_steps": s.interface_newton_steps if options.accel == "newton" else None,
             "omega1_check": s.omega1_check,
         }
         for s in curve.steps

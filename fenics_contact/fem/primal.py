@@ -43,7 +43,10 @@ log = logging.getLogger(__name__)
 
 
 def default_penalty(h: float, E_contact: float, factor: float = 1.0e-3) -> float:
-    """δ = factor · h / E_c: penalty stiffness 1/δ a factor 1/factor above the element stiffness E_c/h."""
+    """δ = factor · h / E_c: penalty stiffness 1/δ a factor 1/factor above the element stiffness E_c/h.
+
+    Units: δ is a length per stress (1/δ multiplies a displacement into a traction), and so is h/E_c: a mesh in
+    mm instead of m gets δ in mm/Pa, the same problem (no reference length needed)."""
     if not all(isinstance(v, (int, float, np.number)) and np.isfinite(v) and v > 0 for v in (h, E_contact, factor)):
         raise InputError(f"default_penalty needs finite h, E_c, factor > 0; got {h!r}, {E_contact!r}, {factor!r}")
     return factor * h / E_contact

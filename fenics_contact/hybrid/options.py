@@ -63,8 +63,7 @@ class IterationOptions:
 
     ``accel`` is the update: ``"none"`` (the paper's), ``"anderson"`` (depth ``depth``) or
     ``"newton"`` (``hybrid.interface_newton``, options ``newton``); None: ``default_accel`` of the step (the
-    interface Newton, measured the fastest on every tested model; Anderson where a step's interface Newton is
-    serial and the run has several ranks).
+    interface Newton, measured the fastest on every tested model, serially and under MPI).
     """
 
     tol: float = 1.0e-6
@@ -85,9 +84,9 @@ class IterationOptions:
 
 
 def default_accel(step, comm) -> str:
-    """The update when none is given: the interface Newton, or Anderson when the step (a hybrid step or its class)
-    has ``serial_interface_newton`` and ``comm`` several ranks."""
-    return "anderson" if getattr(step, "serial_interface_newton", False) and comm.size > 1 else "newton"
+    """The update when none is given: the interface Newton, for every step (a hybrid step or its class) on any
+    number of ranks ``comm``."""
+    return "newton"
 
 
 def interface_options(

@@ -48,7 +48,8 @@ __all__ = [
     "DEFAULT_ALPHA_MS",
 ]
 
-#: Default transmission coefficient α_p = E_p h^(-1/2) (chosen from benchmarks/primal_hybrid_study.py).
+#: Default transmission coefficient α_p = E_p (h/L_ref)^(-1/2)/L_ref = E_p/√(h L_ref), a stiffness per length
+#: (L_ref the body's size, 1 on the unit square; chosen from benchmarks/primal_hybrid_study.py).
 DEFAULT_ALPHA = "E*h^-1/2"
 #: Default α of Algorithm 3 (multiscale Ω₁): h^(-1/2) times the smallest E_p on γ.  The multiscale Ω₁'s
 #: interface response is a Robin map only up to its approximation error ε, and the glued problem sees
@@ -99,7 +100,7 @@ class PrimalHybridStep:
         self.interface = InterfaceSpace(cm, self.parts, shape=(gdim,))
         parent_fields = problem.fields
         warn_if_locking(parent_fields.nu, cm.comm)
-        self.alpha = robin_coefficient(alpha, parent_fields.E, self.interface, cm.h)
+        self.alpha = robin_coefficient(alpha, parent_fields.E, self.interface, cm.h, problem.length)
         self.delta = delta = penalty_for(problem, delta)
         self.sub = []
         for i, part in enumerate(self.parts):

@@ -116,7 +116,6 @@ class MixedMultiscaleHybridStep(MixedHybridStep):
     """The transmission map T of Algorithm 4 (``hybrid.iteration.HybridStep`` protocol)."""
 
     omega1_operators = False  # Ω₁ is solved in the multiscale space: no fine Ω₁ matrices
-    serial_interface_newton = False  # every rank holds the whole problem (replicated)
 
     def __init__(
         self,

@@ -77,7 +77,7 @@ class MultiscalePrimalHybridStep:
         self.interface = InterfaceSpace(cm, self.parts, shape=(gdim,))
         parent_fields = problem.fields
         warn_if_locking(parent_fields.nu, cm.comm)
-        self.alpha = robin_coefficient(alpha, parent_fields.E, self.interface, cm.h)
+        self.alpha = robin_coefficient(alpha, parent_fields.E, self.interface, cm.h, problem.length)
         self.delta = delta = penalty_for(problem, delta)
         self.cem = cem
         self.omega1 = Omega1Multiscale(problem, self.parts, self.interface, self.alpha, cem=cem, cache_dir=cache_dir)

@@ -32,6 +32,7 @@ __all__ = [
     "unit_square",
     "read_mesh",
     "mesh_size",
+    "mesh_extent",
     "check_memory",
     "gmsh_session",
     "build_unit_square_model",
@@ -360,6 +361,20 @@ def mesh_size(msh: dmesh.Mesh, facet_tags: dmesh.MeshTags | None = None) -> floa
     d1, d2 = x[:, 1] - x[:, 0], x[:, 2] - x[:, 0]
     area = 0.5 * np.abs(d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0])
     return msh.comm.allreduce(float(np.sqrt(2.0 * area.max())) if area.size else 0.0, op=MPI.MAX)
+
+
+def mesh_extent(msh: dmesh.Mesh) -> float:
+    """L_ref = the largest side of the mesh's bounding box (over all ranks; collective): the body's size.
+
+    The reference length of the length-dependent defaults (ε, α, β, the equilibration of the mixed solves):
+    1 on the unit square, and a mesh scaled by s has s·L_ref, so the defaults give the same relative answers
+    whatever the unit of length.
+    """
+    x = msh.geometry.x
+    lo, hi = np.min(x, axis=0, initial=np.inf), np.max(x, axis=0, initial=-np.inf)
+    msh.comm.Allreduce(MPI.IN_PLACE, lo, op=MPI.MIN)
+    msh.comm.Allreduce(MPI.IN_PLACE, hi, op=MPI.MAX)
+    return float(np.max(hi - lo))
 
 
 def _gmsh_model_problem(path: Path, *, auto_strip: bool = False) -> tuple[type, str] | None:

@@ -31,7 +31,7 @@ from fenics_contact.problem import strip, validation
 from fenics_contact.problem.boundary import BoundaryConditions, check_boundary_groups
 from fenics_contact.problem.fields import FunctionField, MaterialFields, material_fields, tag_function, zero_load
 from fenics_contact.problem.friction import Friction
-from fenics_contact.problem.geometry import ContactMesh, mesh_size
+from fenics_contact.problem.geometry import ContactMesh, mesh_extent, mesh_size
 from fenics_contact.problem.obstacles import Obstacle
 from fenics_contact.problem.tags import Boundary, neumann_tag
 from fenics_contact.problem.validation import require_facet_groups
@@ -274,6 +274,12 @@ class ContactProblem:
     def h(self) -> float:
         """The fine mesh size (``ContactMesh.h``)."""
         return self.cm.h
+
+    @property
+    def length(self) -> float:
+        """L_ref, the body's size: the largest side of the mesh's bounding box (``geometry.mesh_extent``; 1 on the
+        unit square; collective). The length-dependent defaults (ε, α, β) take h relative to it."""
+        return mesh_extent(self.cm.mesh)
 
     def contact_range(self, name: str = "E") -> tuple[float, float]:
         """(smallest, largest) of the cellwise field ``name`` ("E", "nu", "lmbda", "mu") over the cells touching

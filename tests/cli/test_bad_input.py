@@ -463,7 +463,7 @@ CASES = [
         "mixed with ε millions of times below its default (ill-conditioned reference)",
         _args("--method", "mixed", "--epsilon", "1e-11", "--reference"),
         4,
-        "times below the default 1e-3·h·E_min",
+        "times below the default 1e-3·(h/L)·E_min/L",
     ),
 ]
 
@@ -494,7 +494,7 @@ def test_bad_input_table(case, tmp_path, capsys, monkeypatch):
 def test_epsilon_hint_only_far_below_the_default():
     """The hint every numerical failure of the mixed monolithic solve carries: only for ε < 1e-3 × the default."""
     assert epsilon_hint(1e-7, 6.25e-5) == ""  # 625 times below: no hint
-    assert "; ε = 1e-11 is 6e+06 times below the default 1e-3·h·E_min = 6.25e-05" in epsilon_hint(1e-11, 6.25e-5)
+    assert "; ε = 1e-11 is 6e+06 times below the default 1e-3·(h/L)·E_min/L = 6.25e-05" in epsilon_hint(1e-11, 6.25e-5)
 
 
 def test_argparse_errors_exit_2(capsys):

@@ -283,6 +283,6 @@ def build_omega1_multiscale(
     cm = problem.cm
     parts = split_mesh(cm)
     interface = InterfaceSpace(cm, parts, shape=(cm.mesh.geometry.dim,))
-    alpha_values = robin_coefficient(alpha, problem.fields.E, interface, cm.h)
+    alpha_values = robin_coefficient(alpha, problem.fields.E, interface, cm.h, problem.length)
     omega1 = Omega1Multiscale(problem, parts, interface, alpha_values, cem=cem, cache_dir=cache_dir)
     return omega1, interface, alpha_values

@@ -22,6 +22,7 @@ from pathlib import Path
 
 import basix.ufl
 import dolfinx.io
+import dolfinx.jit
 import numpy as np
 from dolfinx import fem
 from mpi4py import MPI
@@ -38,6 +39,7 @@ __all__ = [
     "cell_function_of",
     "cell_markers",
     "check_output_target",
+    "check_jit_cache",
     "check_outside_output",
     "machine_description",
     "stress_field",
@@ -164,6 +166,17 @@ def _records(value) -> bool:
     return isinstance(value, list) and bool(value) and all(isinstance(v, dict) for v in value)
 
 
+def _finite(value):
+    """``value`` with every float that is inf or NaN (nested in dicts, lists and tuples) replaced by None."""
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_finite(v) for v in value]
+    if isinstance(value, (float, np.floating)) and not np.isfinite(value):
+        return None
+    return value
+
+
 def write_summary(directory: str | Path, summary: dict, comm: MPI.Comm = MPI.COMM_WORLD) -> None:
     """DIR/summary.json and DIR/summary.md (tables: the run's quantities, then one per nested result), rank 0."""
     if comm.rank != 0:
@@ -178,7 +191,8 @@ def write_summary(directory: str | Path, summary: dict, comm: MPI.Comm = MPI.COM
             return value.tolist()
         raise TypeError(f"cannot serialize {type(value)}")
 
-    (directory / "summary.json").write_text(json.dumps(summary, indent=2, default=plain) + "\n")
+    summary = _finite(summary)  # (JSON has no inf or NaN: a relative error of a vanishing reference is null)
+    (directory / "summary.json").write_text(json.dumps(summary, indent=2, default=plain, allow_nan=False) + "\n")
     title = f"fenics-contact run: {summary.get('method', '')}".strip()
     (directory / "summary.md").write_text("\n".join(_markdown(summary, title)) + "\n")
 
@@ -210,6 +224,25 @@ def _is_run_directory(path: Path) -> bool:
     if not lines or lines[0] != RUN_MARKER_HEADER:
         return False
     return entries <= {RUN_MARKER, *lines[1:]}
+
+
+def check_jit_cache() -> Path:
+    """The directory where DOLFINx keeps the compiled forms (``$XDG_CACHE_HOME/fenics``, or the ``cache_dir`` of
+    its JIT options), created if need be; InputError when it cannot be created or written, before a form is
+    compiled (FFCx would fail with a traceback there)."""
+    cache = Path(dolfinx.jit.get_options()["cache_dir"])
+    try:
+        cache.mkdir(parents=True, exist_ok=True)
+        ok = os.access(cache, os.W_OK | os.X_OK)
+        reason = "it is not writable"
+    except OSError as err:
+        ok, reason = False, err.strerror or str(err)
+    if not ok:
+        raise InputError(
+            f"the cache of compiled forms {cache} cannot be used: {reason}; point XDG_CACHE_HOME (or cache_dir "
+            "in a dolfinx_jit_options.json) to a writable directory"
+        )
+    return cache
 
 
 def check_outside_output(target: str | Path, path: str | Path | None, what: str) -> None:

@@ -19,6 +19,7 @@ from fenics_contact.cli.signals import (
 from fenics_contact.cli.solve import run
 from fenics_contact.errors import ConvergenceError, FenicsContactError
 from fenics_contact.examples import run_examples_command
+from fenics_contact.io import check_jit_cache
 
 __all__ = ["main"]
 
@@ -36,6 +37,7 @@ def main(argv: list[str] | None = None) -> int:
                 code = check_mesh(args, comm)
             else:
                 options, case = options_from_arguments(args, argv)
+                check_jit_cache()
                 out = options.out
                 code = run(options, comm, case=case)
         except Interrupted as stop:
@@ -53,6 +55,13 @@ def main(argv: list[str] | None = None) -> int:
             return EXIT_NUMERICAL
         except FenicsContactError as err:  # InputError, MeshTagError
             _fail(f"error: {err}", comm)
+            return EXIT_BAD_INPUT
+        except SystemExit as stop:  # user code run by the case (a python field) called sys.exit
+            _fail(
+                f"error: code run by the case called sys.exit({stop.code!r}) and would have ended the run "
+                f"unfinished: {out} left as it was",
+                comm,
+            )
             return EXIT_BAD_INPUT
     if pending:  # a signal landed in the last finalizers of a run that had ended: its results are written
         signum = pending[-1]

@@ -11,7 +11,16 @@ from contextlib import contextmanager
 
 from mpi4py import MPI
 
-__all__ = ["EXIT_BAD_INPUT", "EXIT_CODES", "EXIT_NOT_CONVERGED", "EXIT_NUMERICAL", "Interrupted", "interruptible"]
+__all__ = [
+    "EXIT_BAD_INPUT",
+    "EXIT_CODES",
+    "EXIT_NOT_CONVERGED",
+    "EXIT_NUMERICAL",
+    "EXIT_WRITE",
+    "Interrupted",
+    "interruptible",
+    "raise_interrupted",
+]
 
 #: exit code -> meaning (``--help``, README)
 EXIT_CODES = {
@@ -20,10 +29,11 @@ EXIT_CODES = {
     3: "not converged: the transmission residual stayed above --tol (--max-iterations hit, or the interface Newton's "
     'corrections ran out; results written, "converged": false)',
     4: "numerical failure: Newton did not converge, non-finite values, a failed factorization (nothing written)",
+    5: "the results could not be written (a full disk, an unwritable or removed directory); --out left as it was",
     130: "interrupted by SIGINT (Ctrl-C); --out left as it was",
     143: "interrupted by SIGTERM; --out left as it was",
 }
-EXIT_BAD_INPUT, EXIT_NOT_CONVERGED, EXIT_NUMERICAL = 2, 3, 4
+EXIT_BAD_INPUT, EXIT_NOT_CONVERGED, EXIT_NUMERICAL, EXIT_WRITE = 2, 3, 4, 5
 
 
 class Interrupted(BaseException):
@@ -32,6 +42,11 @@ class Interrupted(BaseException):
     def __init__(self, signum: int) -> None:
         super().__init__(signal.Signals(signum).name)
         self.signum = signum
+
+
+def raise_interrupted(signum: int, frame) -> None:
+    """A signal handler: raise ``Interrupted``."""
+    raise Interrupted(signum)
 
 
 #: a signal that arrives inside a ``__del__`` is raised again this much later (s)
@@ -92,10 +107,42 @@ class _BelowWarning(logging.Filter):
         return record.levelno < logging.WARNING
 
 
+def stdout_lost(error: OSError) -> None:
+    """stdout cannot be written (a closed pipe, ``| head``; a full device): what is left for it goes to the null
+    device, so that the run goes on (and Python's last flush at exit does not fail), with one warning on stderr."""
+    try:
+        fd = sys.stdout.fileno()
+    except (AttributeError, OSError, ValueError):  # not a file (a test's capture)
+        return
+    null = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(null, fd)
+    finally:
+        os.close(null)
+    if MPI.COMM_WORLD.rank == 0:
+        print(
+            f"warning: stdout cannot be written ({error.strerror or error}): the progress log stops here; the run "
+            "goes on",
+            file=sys.stderr,
+            flush=True,
+        )
+
+
+class _ProgressHandler(logging.StreamHandler):
+    """The progress log on stdout; a write that fails (``stdout_lost``) stops it, not the run."""
+
+    def handleError(self, record: logging.LogRecord) -> None:
+        error = sys.exc_info()[1]
+        if isinstance(error, OSError):
+            stdout_lost(error)
+        else:
+            super().handleError(record)
+
+
 def _setup_logging(verbose: bool) -> None:
     """The progress log on stdout, warnings on stderr prefixed ``warning:``, rank 0 only; a failure ends with one
     line on stderr (``_fail``), the last."""
-    out = logging.StreamHandler(sys.stdout)
+    out = _ProgressHandler(sys.stdout)
     out.addFilter(_RankZero())
     out.addFilter(_BelowWarning())
     out.setFormatter(logging.Formatter("%(message)s"))

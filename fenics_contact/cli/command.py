@@ -11,13 +11,14 @@ from fenics_contact.cli.parser import build_parser
 from fenics_contact.cli.signals import (
     EXIT_BAD_INPUT,
     EXIT_NUMERICAL,
+    EXIT_WRITE,
     Interrupted,
     _fail,
     _setup_logging,
     interruptible,
 )
 from fenics_contact.cli.solve import run
-from fenics_contact.errors import ConvergenceError, FenicsContactError
+from fenics_contact.errors import ConvergenceError, FenicsContactError, OutputError
 from fenics_contact.examples import run_examples_command
 from fenics_contact.io import check_jit_cache
 
@@ -53,6 +54,9 @@ def main(argv: list[str] | None = None) -> int:
         except ConvergenceError as err:
             _fail(f"numerical failure: {err}", comm)
             return EXIT_NUMERICAL
+        except OutputError as err:
+            _fail(f"error: {err}; {out} left as it was", comm)
+            return EXIT_WRITE
         except FenicsContactError as err:  # InputError, MeshTagError
             _fail(f"error: {err}", comm)
             return EXIT_BAD_INPUT

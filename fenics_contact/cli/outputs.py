@@ -112,3 +112,20 @@ def _render_deformed(u, path: Path, options: RunOptions, problem: ContactProblem
     """The deformed body with the problem's own obstacle (a wall flush with Γ_C when it has none)."""
     wall = profile.points if problem.obstacle is None else None
     render_deformed(u, path, title=_title(options, problem), obstacle=problem.obstacle, wall=wall)
+
+
+#: bytes of the results per cell of the mesh and per state written (ParaView fields and contact, the mixed
+#: methods' VTX files), of the figures and of the rest (summaries, file-system blocks), each twice what a run
+#: writes (66, 950 bytes per cell; 0.32 to 0.48 MB of figures: ``fenics-contact run --h 32 --H 4 --method M``,
+#: ``du -sb`` of --out and of its .png files, h = 1/16 and 1/32, each method)
+BYTES_PER_CELL = {"primal": 150.0, "mixed": 2000.0}
+BYTES_OF_PLOTS = 1.0e6
+BYTES_FIXED = 1.0e5
+
+
+def output_bytes(cm, options: RunOptions, case=None) -> float:
+    """About how many bytes a run writes into ``--out`` (``OutputDirectory.check_space`` before the solve)."""
+    cells = cm.mesh.topology.index_map(cm.mesh.topology.dim).size_global
+    family = "primal" if options.method.startswith("primal") else "mixed"
+    states = 1 + (len(case.obstacle.depths) if case is not None and case.obstacle.steps else 0)
+    return BYTES_PER_CELL[family] * cells * states + (BYTES_OF_PLOTS if options.plots else 0.0) + BYTES_FIXED

@@ -20,6 +20,7 @@ from fenics_contact.cli.outputs import (
     _finite_or_none,
     _render_deformed,
     _warn_open_ends,
+    output_bytes,
 )
 from fenics_contact.cli.signals import EXIT_NOT_CONVERGED, Interrupted, _fail
 from fenics_contact.errors import InputError
@@ -332,7 +333,7 @@ def run(options: RunOptions, comm: MPI.Comm = MPI.COMM_WORLD, *, case: Case | No
     model, pixels = _model(options) if case is None else (None, None)
     output = OutputDirectory(options.out, comm)
     try:
-        with output:
+        with output, output.writing():  # (a failed write: OutputError)
             result, summary = _solve_and_write(options, comm, model, pixels, output, case)
     except Interrupted as stop:
         stop.output_complete = output.committed
@@ -395,6 +396,7 @@ def _solve_and_write(
             _check_case_coarse_grid(cm, options, case)
     problem = model.on(cm)
     problem.check_loaded()
+    output.check_space(output_bytes(cm, options, case))
     fields = problem.fields
     t_mesh = time.perf_counter() - t0
     name = f"model {options.model}" if case is None else f"case {case.path.name}"

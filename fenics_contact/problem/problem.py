@@ -323,7 +323,7 @@ class ContactProblem:
         if isinstance(self.load, FunctionField):
             return False  # (a function: its values are the DG0 field's own)
         msh = self.cm.mesh
-        nodes = msh.geometry.x[msh.geometry.dofmap]  # (cells, vertices, 3): affine cells
+        nodes = msh.geometry.x[msh.geometry.dofmaps[0]]  # (cells, vertices, 3): affine cells
         n = nodes.shape[1]
         eye = np.eye(n)
         weights = [*eye, *((eye[i] + eye[j]) / 2 for i in range(n) for j in range(i + 1, n))]

@@ -38,7 +38,7 @@ def test_interrupted_run_leaves_the_previous_results(tmp_path, signum, code):
             while " it " not in log.read_text():  # the iteration is under way (the staging directory exists)
                 assert proc.poll() is None and time.monotonic() < deadline, log.read_text()
                 time.sleep(0.2)
-            assert list(tmp_path.glob(".fenics-contact-*.partial"))
+            assert list(out.glob(".fenics-contact-*.partial")), "the staging directory is inside the existing --out"
             proc.send_signal(signum)
             _, err = proc.communicate(timeout=120)
         finally:

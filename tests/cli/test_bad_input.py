@@ -495,7 +495,6 @@ CASES = [
         2,
         "the unit square with h = 1/100000 has about 1e+10 vertices and would need about",
     ),
-
     # numbers out of range and numerical failure
     Case("E = 1e308 (overflow)", _args("--E-high", "1e308"), 2, "Rescale the units"),
     # δ = 1e-3·h/E_high given: the default takes E_c on Gamma_C, which the channels of model 1 do not reach at H = 1/4

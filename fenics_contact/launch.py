@@ -50,10 +50,8 @@ def main(argv: list[str] | None = None) -> int:
         signal.signal(signal.SIGINT, signal.default_int_handler)
         signal.signal(signal.SIGTERM, signal.SIG_DFL)
     if held:
-        print(
-            f"interrupted by {signal.Signals(held[0]).name} while starting up: nothing was written",
-            file=sys.stderr,
-        )
+        message = f"interrupted by {signal.Signals(held[0]).name} while starting up: nothing was written"
+        _end(message, held[0])
         return 128 + held[0]
     # (a PETSc initialised before the guard, e.g. by a DOLFINx that imports petsc4py, took these signals)
     signal.signal(signal.SIGTERM, raise_interrupted)
@@ -61,8 +59,19 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return cli_main(argv)
     except Interrupted as stop:  # before the run's own handlers (parsing the arguments)
-        print(f"interrupted by {stop} while starting up: nothing was written", file=sys.stderr)
+        _end(f"interrupted by {stop} while starting up: nothing was written", stop.signum)
         return 128 + stop.signum
+
+
+def _end(message: str, signum: int) -> None:
+    """Print ``message``; under MPI end every rank (``cli.signals.end_every_rank``: others wait for this one)."""
+    from mpi4py import MPI
+
+    if MPI.Is_initialized() and MPI.COMM_WORLD.size > 1:
+        from fenics_contact.cli.signals import end_every_rank
+
+        end_every_rank(message, signum)
+    print(message, file=sys.stderr)
 
 
 if __name__ == "__main__":

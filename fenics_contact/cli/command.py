@@ -15,7 +15,9 @@ from fenics_contact.cli.signals import (
     Interrupted,
     _fail,
     _setup_logging,
+    end_every_rank,
     interruptible,
+    share_rank_zero,
 )
 from fenics_contact.cli.solve import run
 from fenics_contact.errors import ConvergenceError, FenicsContactError, OutputError
@@ -32,6 +34,8 @@ def main(argv: list[str] | None = None) -> int:
     _setup_logging(getattr(args, "verbose", False))
     comm = MPI.COMM_WORLD
     out = getattr(args, "out", None)
+    if comm.size > 1:
+        share_rank_zero(comm)
     with interruptible() as pending:
         try:
             if args.command == "check-mesh":
@@ -49,6 +53,8 @@ def main(argv: list[str] | None = None) -> int:
                 if getattr(stop, "output_complete", False)
                 else f"{out} left as it was (no partial output)"
             )
+            if comm.size > 1:  # the other ranks may wait for this one in a collective operation
+                end_every_rank(f"interrupted by {stop}: {where}", stop.signum, comm)
             _fail(f"interrupted by {stop}: {where}", comm)
             return 128 + stop.signum
         except ConvergenceError as err:

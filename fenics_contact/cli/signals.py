@@ -1,11 +1,14 @@
 """How the command ends: the exit codes, SIGINT/SIGTERM raised as ``Interrupted`` (so that cleanup runs), the
 progress log on stdout and the one line on stderr that ends every failure."""
 
+import contextlib
 import logging
 import os
 import signal
+import socket
 import sys
 import threading
+import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 
@@ -18,6 +21,8 @@ __all__ = [
     "EXIT_NUMERICAL",
     "EXIT_WRITE",
     "Interrupted",
+    "end_every_rank",
+    "share_rank_zero",
     "interruptible",
     "raise_interrupted",
 ]
@@ -154,6 +159,52 @@ def _setup_logging(verbose: bool) -> None:
     root.handlers[:] = [out, warn]
     root.setLevel(logging.DEBUG if verbose else logging.INFO)
     root.propagate = False
+
+
+#: a rank other than 0 that was interrupted gives rank 0 this long to end the run (s) before it does so itself
+ABORT_GRACE_S = 2.0
+#: (host name, process id) of rank 0 (``share_rank_zero``)
+_rank_zero: list[tuple[str, int]] = []
+
+
+def share_rank_zero(comm: MPI.Comm = MPI.COMM_WORLD) -> None:
+    """Tell every rank the host and process of rank 0 (collective), for ``end_every_rank``."""
+    _rank_zero[:] = [comm.bcast((socket.gethostname(), os.getpid()), root=0)]
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def end_every_rank(message: str, signum: int, comm: MPI.Comm = MPI.COMM_WORLD) -> None:
+    """End every rank of the run with exit code 128 + ``signum`` (MPI_Abort; MPICH adds a line of its own), with
+    ``message`` as the one line on stderr.
+
+    Under MPI a signal reaches one rank only (``kill PID``), or the ranks at different points of the run: a
+    rank that returned alone would leave the others waiting in a collective operation for ever, at 100 % CPU.
+    Rank 0 prints and aborts at once.  Another rank passes the signal on to rank 0 (on the same host), which
+    ends the run with its one line; if rank 0 has not done so within ``ABORT_GRACE_S`` (it waits in a
+    collective operation for this rank, or runs on another host) this rank prints and aborts.
+    """
+    for s in (signal.SIGINT, signal.SIGTERM):  # (the run is ending: a second signal must not cut this short)
+        signal.signal(s, signal.SIG_IGN)
+    if comm.rank != 0:
+        local = bool(_rank_zero) and _rank_zero[0][0] == socket.gethostname()
+        if local:
+            with contextlib.suppress(OSError):
+                os.kill(_rank_zero[0][1], signum)
+        time.sleep(ABORT_GRACE_S)
+        if local and not _alive(_rank_zero[0][1]):  # rank 0 has ended the run, with its line
+            os._exit(128 + signum)
+    print(" ".join(str(message).split()), file=sys.stderr, flush=True)
+    comm.Abort(128 + signum)
+    os._exit(128 + signum)  # (MPI_Abort may return before the launcher has ended the processes)
 
 
 def _fail(message: str, comm: MPI.Comm = MPI.COMM_WORLD) -> None:

@@ -489,9 +489,9 @@ class OutputDirectory:
         shutil.rmtree(old, ignore_errors=True)
 
     def discard(self) -> None:
-        """Remove the staging directory (rank 0); ``target`` is untouched."""
-        if self.comm.rank == 0:
-            shutil.rmtree(self.path, ignore_errors=True)
+        """Remove the staging directory (every rank: under MPI an interrupted rank may end the run while rank 0
+        waits in a collective operation); ``target`` is untouched."""
+        shutil.rmtree(self.path, ignore_errors=True)
 
 
 def _megabytes(n: float) -> str:

@@ -86,7 +86,7 @@ from fenics_contact.fem.mixed_spaces import check_triangles
 from fenics_contact.fem.mixed_subproblem import MixedSubproblem
 from fenics_contact.hybrid.certificate import Certificate, mixed_certificate, relative
 from fenics_contact.hybrid.condensation import InterfaceProblem
-from fenics_contact.hybrid.inputs import check_solve_inputs, require_instance
+from fenics_contact.hybrid.inputs import check_reference_mixed, check_solve_inputs
 from fenics_contact.hybrid.iteration import (
     InterfaceNewtonOptions,
     IterationHistory,
@@ -379,7 +379,7 @@ def solve_mixed_hybrid(
     """
     check_solve_inputs(problem, options=options, newton=newton)
     if reference is not None:
-        require_instance(reference, MixedSolution, "the reference", " (from fem.mixed.solve_mixed_monolithic)")
+        check_reference_mixed(reference, problem.cm)
     start = time.perf_counter()
     if reference is not None and epsilon is None:
         epsilon = reference.epsilon

@@ -60,7 +60,7 @@ from fenics_contact.fem.mixed import MixedSolution
 from fenics_contact.fem.mixed_contact import MixedContactProfile
 from fenics_contact.fem.mixed_spaces import boundary_stress_space
 from fenics_contact.hybrid.certificate import mixed_certificate, relative
-from fenics_contact.hybrid.inputs import check_solve_inputs, require_instance
+from fenics_contact.hybrid.inputs import check_reference_mixed, check_solve_inputs, require_instance
 from fenics_contact.hybrid.iteration import (
     InterfaceNewtonOptions,
     IterationHistory,
@@ -386,7 +386,7 @@ def solve_mixed_ms_hybrid(
     check_solve_inputs(problem, options=options, newton=newton)
     require_instance(cem, MixedCEMOptions, "cem", " (multiscale.mixed_cem.MixedCEMOptions)")
     if reference is not None:
-        require_instance(reference, MixedSolution, "the reference", " (from fem.mixed.solve_mixed_monolithic)")
+        check_reference_mixed(reference, problem.cm)
     if reference is not None and epsilon is None:
         epsilon = reference.epsilon
     if step is None:

@@ -168,6 +168,9 @@ class ContactProblem:
         """
         if not isinstance(facet_tags, dmesh.MeshTags) or facet_tags.dim != mesh.topology.dim - 1:
             raise InputError(f"facet_tags must be the facet MeshTags of the mesh (dimension {mesh.topology.dim - 1})")
+        _require_entities_of(mesh, facet_tags, "facet_tags")
+        if cell_tags is not None:
+            _require_entities_of(mesh, cell_tags, "cell_tags")
         tractions = dict(tractions or {})
         groups = [
             (_tags(contact, "contact"), int(Boundary.GAMMA_C)),
@@ -336,8 +339,27 @@ class ContactProblem:
         return bool(np.all(values == 0.0))
 
 
+def _require_entities_of(msh: dmesh.Mesh, tags, what: str) -> None:
+    """InputError when the MeshTags ``tags`` name entities this rank's part of ``msh`` does not have (tags of
+    another mesh)."""
+    if not isinstance(tags, dmesh.MeshTags):
+        raise InputError(f"{what} must be a dolfinx.mesh.MeshTags, got {type(tags).__name__}")
+    msh.topology.create_entities(tags.dim)
+    imap = msh.topology.index_map(tags.dim)
+    count = imap.size_local + imap.num_ghosts
+    beyond = msh.comm.allreduce(int(np.count_nonzero(tags.indices >= count)), op=MPI.SUM)
+    if beyond:
+        raise InputError(
+            f"{what} tag {beyond} entities of dimension {tags.dim} that the mesh does not have (it has "
+            f"{imap.size_global}): the tags belong to another mesh"
+        )
+
+
 def _tags(value, what: str) -> tuple[int, ...]:
-    values = (value,) if isinstance(value, (int, np.integer)) else tuple(value)
+    try:
+        values = (value,) if isinstance(value, (int, np.integer)) else tuple(value)
+    except TypeError:  # (neither a tag nor a sequence: a float, None)
+        values = ()
     if not values or not all(isinstance(v, (int, np.integer)) and not isinstance(v, bool) for v in values):
         raise InputError(f"{what} must be a tag (an integer) or a list of tags, got {value!r}")
     return tuple(int(v) for v in values)

@@ -490,6 +490,12 @@ CASES = [
     ),
     Case("--set without --case", _args("--set", "mesh.h=8"), 2, "--set changes a key of a case file"),
     Case(
+        "case: bulged square finer than the memory",
+        _case('[mesh]\nbuiltin = "bulged-square"\nh = 1000000\nH = 4\n' + _MATERIAL),
+        2,
+        "the bulged square with h = 1e-06 has about 1.32e+12 vertices and would need about",
+    ),
+    Case(
         "--h far beyond the memory",
         lambda tmp: ["--h", "100000", "--H", "4"],
         2,

@@ -20,6 +20,7 @@ from fenics_contact.cli.outputs import (
     _finite_or_none,
     _render_deformed,
     _warn_open_ends,
+    check_run_memory,
     output_bytes,
 )
 from fenics_contact.cli.signals import EXIT_NOT_CONVERGED, Interrupted, _fail
@@ -331,6 +332,8 @@ def run(options: RunOptions, comm: MPI.Comm = MPI.COMM_WORLD, *, case: Case | No
     already holds the run.
     """
     model, pixels = _model(options) if case is None else (None, None)
+    if case is None and options.mesh is None:
+        check_run_memory(options)  # (before the unit square is made)
     output = OutputDirectory(options.out, comm)
     try:
         with output, output.writing():  # (a failed write: OutputError)
@@ -396,6 +399,7 @@ def _solve_and_write(
             _check_case_coarse_grid(cm, options, case)
     problem = model.on(cm)
     problem.check_loaded()
+    check_run_memory(options, cm)
     output.check_space(output_bytes(cm, options, case))
     fields = problem.fields
     t_mesh = time.perf_counter() - t0

@@ -496,10 +496,16 @@ CASES = [
         "the bulged square with h = 1e-06 has about 1.32e+12 vertices and would need about",
     ),
     Case(
+        "--method mixed on a mesh beyond the memory",
+        lambda tmp: ["--h", "2048", "--H", "8", "--method", "mixed"],
+        2,
+        "the mesh of --method mixed has about 4.2e+06 vertices and would need about",
+    ),
+    Case(
         "--h far beyond the memory",
         lambda tmp: ["--h", "100000", "--H", "4"],
         2,
-        "the unit square with h = 1/100000 has about 1e+10 vertices and would need about",
+        "the mesh of --method primal has about 1e+10 vertices and would need about",
     ),
     # numbers out of range and numerical failure
     Case("E = 1e308 (overflow)", _args("--E-high", "1e308"), 2, "Rescale the units"),

@@ -34,6 +34,7 @@ from fenics_contact.problem.materials import strain, stress
 
 __all__ = [
     "peak_rss_bytes",
+    "process_alive",
     "provenance",
     "OutputDirectory",
     "cell_function_of",
@@ -318,7 +319,8 @@ def _nearest_existing(path: Path) -> Path:
         path = path.parent
 
 
-def _alive(pid: int) -> bool:
+def process_alive(pid: int) -> bool:
+    """True if the process ``pid`` exists (on this host)."""
     try:
         os.kill(pid, 0)
     except ProcessLookupError:
@@ -338,7 +340,9 @@ def _remove_stale_staging(parent: Path) -> None:
             continue
         try:
             stale = (
-                not _alive(int(match["pid"])) if match["host"] == host else now - path.stat().st_mtime > _STALE_AGE_S
+                not process_alive(int(match["pid"]))
+                if match["host"] == host
+                else now - path.stat().st_mtime > _STALE_AGE_S
             )
         except OSError:
             continue

@@ -14,6 +14,8 @@ from contextlib import contextmanager
 
 from mpi4py import MPI
 
+from fenics_contact.io import process_alive
+
 __all__ = [
     "EXIT_BAD_INPUT",
     "EXIT_CODES",
@@ -172,16 +174,6 @@ def share_rank_zero(comm: MPI.Comm = MPI.COMM_WORLD) -> None:
     _rank_zero[:] = [comm.bcast((socket.gethostname(), os.getpid()), root=0)]
 
 
-def _alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
-
-
 def end_every_rank(message: str, signum: int, comm: MPI.Comm = MPI.COMM_WORLD) -> None:
     """End every rank of the run with exit code 128 + ``signum`` (MPI_Abort; MPICH adds a line of its own), with
     ``message`` as the one line on stderr.
@@ -200,7 +192,7 @@ def end_every_rank(message: str, signum: int, comm: MPI.Comm = MPI.COMM_WORLD) -
             with contextlib.suppress(OSError):
                 os.kill(_rank_zero[0][1], signum)
         time.sleep(ABORT_GRACE_S)
-        if local and not _alive(_rank_zero[0][1]):  # rank 0 has ended the run, with its line
+        if local and not process_alive(_rank_zero[0][1]):  # rank 0 has ended the run, with its line
             os._exit(128 + signum)
     print(" ".join(str(message).split()), file=sys.stderr, flush=True)
     comm.Abort(128 + signum)

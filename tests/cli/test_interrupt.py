@@ -213,7 +213,7 @@ def test_sigterm_under_mpi_never_hangs(tmp_path, target):
     for trial in range(8):
         out = tmp_path / f"run{trial}"
         proc = subprocess.Popen(
-            [mpiexec, "-n", "2", script, "run", "--h", "32", *LONG_RUN[2:], "--out", str(out)],
+            [mpiexec, "-n", "2", script, "run", "--h", "32", "--H", "4", *LONG_RUN[4:], "--out", str(out)],
             stdout=subprocess.DEVNULL,
             stderr=subprocess.PIPE,
             text=True,

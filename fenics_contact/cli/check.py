@@ -21,6 +21,7 @@ from mpi4py import MPI
 
 from fenics_contact.cli.cases import case_run_options
 from fenics_contact.cli.options import METHODS, RunOptions
+from fenics_contact.cli.signals import stdout_lost
 from fenics_contact.cli.solve import _check_case_coarse_grid, _check_coarse_grid, _mesh, _model
 from fenics_contact.errors import FenicsContactError, InputError
 from fenics_contact.methods import METHODS as CATALOGUE
@@ -228,8 +229,14 @@ def _file_groups(path: Path, comm: MPI.Comm) -> list[tuple[str, int, int]] | Non
 
 
 def _printer(comm: MPI.Comm):
+    lost = []
+
     def say(line: str) -> None:
-        if comm.rank == 0:
-            print(line, flush=True)
+        if comm.rank == 0 and not lost:
+            try:
+                print(line, flush=True)
+            except OSError as error:  # a closed pipe (| head), a full device: the report stops there
+                lost.append(error)
+                stdout_lost(error)
 
     return say

@@ -22,6 +22,8 @@ from fenics_contact.cli.outputs import (
     _friction_summary,
     _render_deformed,
     _warn_open_ends,
+    check_run_memory,
+    output_bytes,
 )
 from fenics_contact.cli.signals import EXIT_NOT_CONVERGED, Interrupted, _fail
 from fenics_contact.errors import InputError
@@ -394,9 +396,11 @@ def run(options: RunOptions, comm: MPI.Comm = MPI.COMM_WORLD, *, case: Case | No
     already holds the run.
     """
     model, pixels = _model(options) if case is None else (None, None)
+    if case is None and options.mesh is None:
+        check_run_memory(options)  # (before the unit square is made)
     output = OutputDirectory(options.out, comm)
     try:
-        with output:
+        with output, output.writing():  # (a failed write: OutputError)
             result, summary = _solve_and_write(options, comm, model, pixels, output, case)
     except Interrupted as stop:
         stop.output_complete = output.committed
@@ -464,6 +468,8 @@ def _solve_and_write(
         )
     problem = model.on(cm)
     problem.check_loaded()
+    check_run_memory(options, cm)
+    output.check_space(output_bytes(cm, options, case))
     fields = problem.fields
     t_mesh = time.perf_counter() - t0
     name = f"model {options.model}" if case is None else f"case {case.path.name}"

@@ -87,9 +87,9 @@ from fenics_contact.fem.mixed_contact import MixedContactProfile
 from fenics_contact.fem.mixed_newton import MixedNewtonHistory
 from fenics_contact.fem.mixed_spaces import check_triangles
 from fenics_contact.fem.mixed_subproblem import MixedSubproblem
-from fenics_contact.hybrid.certificate import Certificate, mixed_certificate
+from fenics_contact.hybrid.certificate import Certificate, mixed_certificate, relative
 from fenics_contact.hybrid.condensation import InterfaceProblem
-from fenics_contact.hybrid.inputs import check_solve_inputs, require_instance
+from fenics_contact.hybrid.inputs import check_reference_mixed, check_solve_inputs
 from fenics_contact.hybrid.iteration import (
     InterfaceNewtonOptions,
     IterationHistory,
@@ -253,7 +253,7 @@ class MixedHybridStep:
         """(e_σ, e_u) = (‖σ_h − σⁿ‖_A/‖σ_h‖_A, ‖u_h − uⁿ‖/‖u_h‖) against the reference."""
         es = sum(s.stress_norm2(s.c - c) for s, (c, _) in zip(self.sub, self.reference))
         eu = sum(s.l2_norm2(s.u - u) for s, (_, u) in zip(self.sub, self.reference))
-        return float(np.sqrt(es / self._ref_norm2[0])), float(np.sqrt(eu / self._ref_norm2[1]))
+        return float(np.sqrt(relative(es, self._ref_norm2[0]))), float(np.sqrt(relative(eu, self._ref_norm2[1])))
 
     # -- HybridStep protocol -------------------------------------------------------------
     def initial_data(self) -> np.ndarray:
@@ -393,7 +393,7 @@ def solve_mixed_hybrid(
     """
     check_solve_inputs(problem, options=options, newton=newton)
     if reference is not None:
-        require_instance(reference, MixedSolution, "the reference", " (from fem.mixed.solve_mixed_monolithic)")
+        check_reference_mixed(reference, problem.cm)
     start = time.perf_counter()
     if reference is not None and epsilon is None:
         epsilon = reference.epsilon

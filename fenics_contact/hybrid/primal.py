@@ -21,7 +21,7 @@ from mpi4py import MPI
 
 from fenics_contact.fem.contact import ContactProfile, NewtonHistory, NewtonOptions
 from fenics_contact.fem.primal import PrimalSubproblem, penalty_for, warn_if_locking
-from fenics_contact.hybrid.certificate import Certificate, primal_certificate
+from fenics_contact.hybrid.certificate import Certificate, primal_certificate, relative
 from fenics_contact.hybrid.condensation import InterfaceProblem
 from fenics_contact.hybrid.friction import ComponentPart, FrictionalCondensation
 from fenics_contact.hybrid.inputs import check_reference_displacement, check_solve_inputs
@@ -219,7 +219,7 @@ class PrimalHybridStep:
         for s, ref, diff in zip(self.sub, self.reference, self._diff):
             diff.x.array[:] = s.u.x.array - ref.x.array
             err += s.l2_norm2(diff)
-        return float(np.sqrt(err / self._ref_norm2))
+        return float(np.sqrt(relative(err, self._ref_norm2)))
 
     def error_energy(self) -> float:
         """‖u_h − uⁿ‖_a / ‖u_h‖_a over both subdomains (needs the reference)."""
@@ -228,7 +228,7 @@ class PrimalHybridStep:
             diff.x.array[:] = s.u.x.array - r.x.array
             err += s.energy_norm2(diff)
             ref += s.energy_norm2(r)
-        return float(np.sqrt(err / ref))
+        return float(np.sqrt(relative(err, ref)))
 
     def glued(self, V: fem.FunctionSpace) -> fem.Function:
         """u on the parent mesh: u₁ on Ω₁, u₂ on Ω₂ (u₂ on γ)."""

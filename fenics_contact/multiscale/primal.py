@@ -24,7 +24,7 @@ from mpi4py import MPI
 from fenics_contact.errors import InputError
 from fenics_contact.fem.contact import NewtonOptions
 from fenics_contact.fem.primal import PrimalSubproblem, penalty_for, warn_if_locking
-from fenics_contact.hybrid.certificate import Certificate, primal_certificate
+from fenics_contact.hybrid.certificate import Certificate, primal_certificate, relative
 from fenics_contact.hybrid.condensation import InterfaceProblem
 from fenics_contact.hybrid.inputs import check_reference_displacement, check_solve_inputs, require_instance
 from fenics_contact.hybrid.iteration import InterfaceNewtonOptions, IterationOptions, iterate
@@ -193,7 +193,7 @@ class MultiscalePrimalHybridStep:
         self._diff2.x.array[:] = self.omega2.u.x.array - r2.x.array
         l2 = self.omega1.l2_norm2(d1) + self.omega2.l2_norm2(self._diff2)
         en = self.omega1.energy_norm2(d1) + self.omega2.energy_norm2(self._diff2)
-        return float(np.sqrt(l2 / self._ref_l2)), float(np.sqrt(en / self._ref_energy))
+        return float(np.sqrt(relative(l2, self._ref_l2))), float(np.sqrt(relative(en, self._ref_energy)))
 
     def error_l2(self) -> float:
         """‖u_h − uⁿ‖_L² / ‖u_h‖_L² over Ω₁ ∪ Ω₂ against the fine monolithic reference."""

@@ -263,6 +263,8 @@ def read_python(source: Source, key: str, reference) -> PythonField:
         module = importlib.util.module_from_spec(spec)
         try:
             spec.loader.exec_module(module)
+        except SystemExit as err:  # the user's code ended the process on import: bad input, not the run's end
+            raise source.error(f"{key}: importing {path} called sys.exit({err.code!r})") from None
         except Exception as err:  # the user's code: any failure is bad input
             raise source.error(f"{key}: importing {path} failed: {type(err).__name__}: {err}") from None
         sys.modules[module_name] = module

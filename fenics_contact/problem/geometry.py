@@ -189,14 +189,14 @@ def build_unit_square_model(
 BYTES_PER_VERTEX = 8.0e3
 
 
-def check_memory(vertices: float, what: str) -> None:
+def check_memory(vertices: float, what: str, bytes_per_vertex: float = BYTES_PER_VERTEX) -> None:
     """InputError when a mesh of about ``vertices`` vertices would need more memory than this machine has (by
-    ``BYTES_PER_VERTEX``), before gmsh runs out of memory making it."""
+    ``bytes_per_vertex``, a primal run's by default), before gmsh runs out of memory making it."""
     try:
         available = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
     except (ValueError, OSError, AttributeError):
         return
-    need = vertices * BYTES_PER_VERTEX
+    need = vertices * bytes_per_vertex
     if need > available:
         raise InputError(
             f"{what} has about {vertices:.3g} vertices and would need about {need / 1e9:.3g} GB of "

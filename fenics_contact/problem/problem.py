@@ -178,6 +178,9 @@ class ContactProblem:
         """
         if not isinstance(facet_tags, dmesh.MeshTags) or facet_tags.dim != mesh.topology.dim - 1:
             raise InputError(f"facet_tags must be the facet MeshTags of the mesh (dimension {mesh.topology.dim - 1})")
+        _require_entities_of(mesh, facet_tags, "facet_tags")
+        if cell_tags is not None:
+            _require_entities_of(mesh, cell_tags, "cell_tags")
         tractions = dict(tractions or {})
         groups = [
             (_tags(contact, "contact"), int(Boundary.GAMMA_C)),
@@ -320,15 +323,59 @@ class ContactProblem:
         f = self.fields.f
         if loaded_otherwise:
             return
-        if self.comm.allreduce(float(np.max(np.abs(f.x.array), initial=0.0)), op=MPI.MAX) == 0.0:
+        if self.comm.allreduce(float(np.max(np.abs(f.x.array), initial=0.0)), op=MPI.MAX) != 0.0:
+            return
+        if self.comm.allreduce(self._load_vanishes_in_cells(), op=MPI.LAND):
             raise InputError(
-                f"the body force of {self.name!r} is zero on every cell of this mesh (too coarse to resolve the "
-                "load bands?): the solution would be u = 0. Refine the mesh (the built-in loads act on x >= 15/16)."
+                f"nothing loads the body of {self.name!r}: its body force is zero everywhere in it, Gamma_D holds "
+                "it at u = 0, and it has no traction and no obstacle: the solution is u = 0. Give a load (a body "
+                "force, a traction, a displacement on Gamma_D or an obstacle pressed into the body)."
             )
+        raise InputError(
+            f"the body force of {self.name!r} is zero on every cell of this mesh (too coarse to resolve the "
+            "load bands?): the solution would be u = 0. Refine the mesh (the built-in loads act on x >= 15/16)."
+        )
+
+    def _load_vanishes_in_cells(self) -> bool:
+        """True when the body force is zero at the vertices, edge midpoints and inner points of every local cell
+        (the load itself vanishes, not only at the cell midpoints that the DG0 body force samples)."""
+        if isinstance(self.load, FunctionField):
+            return False  # (a function: its values are the DG0 field's own)
+        msh = self.cm.mesh
+        nodes = msh.geometry.x[msh.geometry.dofmaps[0]]  # (cells, vertices, 3): affine cells
+        n = nodes.shape[1]
+        eye = np.eye(n)
+        weights = [*eye, *((eye[i] + eye[j]) / 2 for i in range(n) for j in range(i + 1, n))]
+        weights += [0.7 * eye[i] + 0.3 / n for i in range(n)] + [np.full(n, 1.0 / n)]
+        points = np.concatenate([np.einsum("v,cvd->cd", w, nodes) for w in weights]).T
+        try:
+            values = np.asarray(self.load(points), dtype=np.float64)
+        except Exception:  # noqa: BLE001 -- the user's callable off the midpoints: no verdict, the mesh is blamed
+            return False
+        return bool(np.all(values == 0.0))
+
+
+def _require_entities_of(msh: dmesh.Mesh, tags, what: str) -> None:
+    """InputError when the MeshTags ``tags`` name entities this rank's part of ``msh`` does not have (tags of
+    another mesh)."""
+    if not isinstance(tags, dmesh.MeshTags):
+        raise InputError(f"{what} must be a dolfinx.mesh.MeshTags, got {type(tags).__name__}")
+    msh.topology.create_entities(tags.dim)
+    imap = msh.topology.index_map(tags.dim)
+    count = imap.size_local + imap.num_ghosts
+    beyond = msh.comm.allreduce(int(np.count_nonzero(tags.indices >= count)), op=MPI.SUM)
+    if beyond:
+        raise InputError(
+            f"{what} tag {beyond} entities of dimension {tags.dim} that the mesh does not have (it has "
+            f"{imap.size_global}): the tags belong to another mesh"
+        )
 
 
 def _tags(value, what: str) -> tuple[int, ...]:
-    values = (value,) if isinstance(value, (int, np.integer)) else tuple(value)
+    try:
+        values = (value,) if isinstance(value, (int, np.integer)) else tuple(value)
+    except TypeError:  # (neither a tag nor a sequence: a float, None)
+        values = ()
     if not values or not all(isinstance(v, (int, np.integer)) and not isinstance(v, bool) for v in values):
         raise InputError(f"{what} must be a tag (an integer) or a list of tags, got {value!r}")
     return tuple(int(v) for v in values)

@@ -26,7 +26,7 @@ from petsc4py import PETSc
 from fenics_contact.errors import InputError
 from fenics_contact.fem import forms_primal
 from fenics_contact.fem.contact import ContactProfile, NewtonHistory, NewtonOptions, semismooth_newton
-from fenics_contact.fem.linalg import AbsoluteTerms, DirectSolver, quadratic_form
+from fenics_contact.fem.linalg import AbsoluteTerms, AMGSolver, LinearSolverOptions, linear_solver, quadratic_form
 from fenics_contact.fem.primal_boundary import NodalContactGeometry, PrimalBoundaryData
 from fenics_contact.problem.fields import MaterialFields
 from fenics_contact.problem.materials import strain, stress
@@ -57,6 +57,9 @@ class PrimalSubproblem:
     the Γ_C vertices, or for a wall flush with Γ_C (``obstacle=None``) the body's
     nodal normal (facet normals averaged with the vertex weights) and g = 0.  One
     ν per node keeps the active set a set of nodes on a curved Γ_C too.
+
+    ``solver``: the linear solver of every solve (``fem.linalg.LinearSolverOptions`` or its kind: ``"direct"``,
+    MUMPS LU; ``"amg"``, CG + smoothed-aggregation AMG, its set-up kept across Newton steps; ``"auto"``).
     """
 
     def __init__(
@@ -70,6 +73,7 @@ class PrimalSubproblem:
         prefix: str,
         newton: NewtonOptions = NewtonOptions(),
         V: fem.FunctionSpace | None = None,
+        solver: LinearSolverOptions | str = "direct",
     ) -> None:
         if delta is not None and not (isinstance(delta, (int, float, np.number)) and np.isfinite(delta) and delta > 0):
             raise InputError(f"the penalty parameter δ must be a finite number > 0, got {delta!r}")
@@ -130,7 +134,7 @@ class PrimalSubproblem:
         self.b = dolfinx.fem.petsc.create_vector(self.V)
         self.du = dolfinx.fem.petsc.create_vector(self.V)
         self._gap_vec = dolfinx.fem.petsc.create_vector(self.V)  # ghosted, like b (assembly target)
-        self.solver = DirectSolver(msh.comm, prefix=prefix)
+        self.solver = linear_solver(msh.comm, prefix=prefix, space=self.V, options=solver)
         self._K = dolfinx.fem.petsc.assemble_matrix(self._a)
         self._K.assemble()
         self._M = dolfinx.fem.petsc.assemble_matrix(self._m)
@@ -352,6 +356,16 @@ class PrimalSolution:
     time_s: float
     problem: PrimalSubproblem
 
+    @property
+    def linear_solver(self) -> str:
+        """The linear solver the Newton steps used: ``"direct"`` (MUMPS LU) or ``"amg"``."""
+        return "amg" if isinstance(self.problem.solver, AMGSolver) else "direct"
+
+    @property
+    def krylov_iterations(self) -> list[int]:
+        """The Krylov iterations of each linear solve (empty for the direct solver)."""
+        return list(getattr(self.problem.solver, "iterations", []))
+
 
 #: The primal (P1) methods warn when ν reaches this.  P1 locks as ν → ½: on u = curl ψ, the clamped unit
 #: square (``problem.analytic.p1_locking_error``; ``benchmarks/analytic_benchmarks.py --sections 6``), the
@@ -400,11 +414,15 @@ def solve_primal_monolithic(
     *,
     delta: float | None = None,
     newton: NewtonOptions = NewtonOptions(),
+    solver: LinearSolverOptions | str = "auto",
     prefix: str = "fc_primal_mono_",
 ) -> PrimalSolution:
     """Penalized primal contact on the whole mesh by semismooth Newton, on triangles or tetrahedra.
 
-    ``delta`` defaults to ``default_penalty(h, E_c)``, E_c the largest E on Γ_C (``penalty_for``).
+    ``delta`` defaults to ``default_penalty(h, E_c)``, E_c the largest E on Γ_C (``penalty_for``). ``solver``:
+    the linear solver of the Newton steps (``fem.linalg.LinearSolverOptions`` or its kind): ``"direct"``
+    (MUMPS LU), ``"amg"`` (CG + smoothed-aggregation AMG with the rigid-body near-nullspace) or ``"auto"``
+    (AMG on a 3D mesh of ``fem.linalg.AUTO_AMG_DOFS`` unknowns or more, else direct).
     """
     cm = problem.cm
     msh, facet_tags = cm.mesh, cm.facet_tags
@@ -413,15 +431,20 @@ def solve_primal_monolithic(
     fields = problem.fields
     delta = penalty_for(problem, delta)
     warn_if_locking(fields.nu, msh.comm)
-    sub = PrimalSubproblem(msh, facet_tags, fields, delta=delta, alpha=None, prefix=prefix, newton=newton)
+    sub = PrimalSubproblem(
+        msh, facet_tags, fields, delta=delta, alpha=None, prefix=prefix, newton=newton, solver=solver
+    )
     history = sub.solve()
     elapsed = time.perf_counter() - start
     profile = sub.contact_profile()
+    solution = PrimalSolution(sub.u, history, profile, delta, sub.num_dofs, elapsed, sub)
     log.info(
-        "monolithic primal: %d Newton steps, active-set sizes %s, penetration %.3e, %.2f s",
+        "monolithic primal: %d Newton steps (%s%s), active-set sizes %s, penetration %.3e, %.2f s",
         history.steps,
+        solution.linear_solver,
+        f", Krylov iterations {solution.krylov_iterations}" if solution.krylov_iterations else "",
         history.active_sizes,
         profile.penetration,
         elapsed,
     )
-    return PrimalSolution(sub.u, history, profile, delta, sub.num_dofs, elapsed, sub)
+    return solution

@@ -134,7 +134,10 @@ class PrimalSubproblem:
         self.b = dolfinx.fem.petsc.create_vector(self.V)
         self.du = dolfinx.fem.petsc.create_vector(self.V)
         self._gap_vec = dolfinx.fem.petsc.create_vector(self.V)  # ghosted, like b (assembly target)
-        self.solver = linear_solver(msh.comm, prefix=prefix, space=self.V, options=solver)
+        E = fields.E.x.array
+        low = msh.comm.allreduce(float(np.min(E, initial=np.inf)), op=MPI.MIN)
+        high = msh.comm.allreduce(float(np.max(E, initial=0.0)), op=MPI.MAX)
+        self.solver = linear_solver(msh.comm, prefix=prefix, space=self.V, options=solver, contrast=high / low)
         self._K = dolfinx.fem.petsc.assemble_matrix(self._a)
         self._K.assemble()
         self._M = dolfinx.fem.petsc.assemble_matrix(self._m)

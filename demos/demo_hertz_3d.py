@@ -19,7 +19,7 @@
 #
 # The block is a quarter, (0, L)² × (−L, 0) with L = 20a, on rollers (u·n = 0) on the symmetry planes
 # x = 0 and y = 0 and clamped at the bottom (`fc.analytic.hertz_sphere_model`); its tetrahedra
-# (`meshes3d.hertz_block`, gmsh) are of size h_c within 1.25a of the first contact point and grow with the
+# (`meshes3d.hertz_quarter_block`, gmsh) are of size h_c within 1.25a of the first contact point and grow with the
 # distance beyond. R = 10a (a/R = 0.1), the penalty δ = 10⁻³·h_c/E*. The primal penalty contact is
 # solved by semismooth Newton on the whole block (the monolithic solve), each Newton step by conjugate
 # gradients preconditioned with smoothed-aggregation AMG (the rigid-body modes as its near-nullspace).

@@ -21,7 +21,7 @@
   contact profile with it, F read off the profile.
 * **Hertz** (3D): a rigid sphere of radius R on a half-space, total force F: a = (3FR/(4E*))^(1/3),
   p(r) = p₀√(1 − r²/a²), p₀ = 3F/(2πa²), at the depth d = a²/R.  ``hertz_sphere_model`` is the
-  quarter block of ``meshes3d.hertz_block`` under it (symmetry planes on rollers), ``hertz_sphere_errors``
+  quarter block of ``meshes3d.hertz_quarter_block`` under it (symmetry planes on rollers), ``hertz_sphere_errors``
   compares a computed contact profile with it, F read off the profile: the area-equivalent contact radius
   √(A/π) (A the contact area of the whole block), the centre pressure and the L² error of the profile.
 
@@ -36,7 +36,7 @@ from mpi4py import MPI
 
 from fenics_contact.errors import InputError
 from fenics_contact.problem.boundary import BoundaryConditions
-from fenics_contact.problem.meshes3d import hertz_block
+from fenics_contact.problem.meshes3d import hertz_quarter_block
 from fenics_contact.problem.obstacles import Circle, Plane, Sphere
 from fenics_contact.problem.problem import ContactProblem
 
@@ -196,7 +196,7 @@ def hertz_sphere_model(
     comm: MPI.Comm = MPI.COMM_WORLD,
 ) -> ContactProblem:
     """A rigid sphere of radius R (default 10a: a/R = 0.1) pressed d = a²/R into the quarter block of
-    ``meshes3d.hertz_block(a, h_contact, size=size)``, symmetry planes x = 0 and y = 0 on rollers, the bottom
+    ``meshes3d.hertz_quarter_block(a, h_contact, size=size)``, symmetry planes x = 0 and y = 0 on rollers, the bottom
     clamped: Hertz's contact radius a at that depth."""
     R = 10.0 * a if radius is None else float(radius)
     if not (np.isfinite(R) and R > a):
@@ -207,7 +207,7 @@ def hertz_sphere_model(
         youngs_modulus=E,
         poisson_ratio=nu,
         obstacle=sphere,
-        mesh=hertz_block(a, h_contact, size=size, comm=comm),
+        mesh=hertz_quarter_block(a, h_contact, size=size, comm=comm),
         boundary=BoundaryConditions(rollers=((0, 0.0), (1, 0.0))),
         description=f"Hertz sphere, a={a:g}, R={R:g}, h={h_contact:g}, E={E:g}, nu={nu:g}",
     )

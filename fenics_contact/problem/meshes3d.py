@@ -9,7 +9,7 @@
 * ``unit_cube(n)``: the unit cube, h = 1/n, Γ_C the face x = 1 (the 3D ``unit_square``).
 * ``graded_planes(length, fine=…, h=…)``: grid planes 0 … length, of spacing h up to ``fine`` and
   growing geometrically beyond: a mesh refined under the contact.
-* ``hertz_block(a, h_contact)``: the quarter block (0, L)² × (−L, 0) under a sphere pressed at the origin,
+* ``hertz_quarter_block(a, h_contact)``: the quarter block (0, L)² × (−L, 0) under a sphere pressed at the origin,
   unstructured gmsh tetrahedra of size h_contact within ``fine`` of the origin and growing linearly with the
   distance beyond (cells of every size close to equilateral, which algebraic multigrid needs; a graded grid
   of planes stretches its cells up to L/h_contact : 1 where a fine plane crosses a coarse one).
@@ -36,7 +36,7 @@ from fenics_contact.problem.geometry import (
 )
 from fenics_contact.problem.tags import PHYSICAL_NAMES, Boundary, Subdomain, neumann_tag
 
-__all__ = ["FACES", "box_mesh", "unit_cube", "graded_planes", "hertz_block"]
+__all__ = ["FACES", "box_mesh", "unit_cube", "graded_planes", "hertz_quarter_block"]
 
 #: The faces of a box: the coordinate and the side (min or max).
 FACES = ("xmin", "xmax", "ymin", "ymax", "zmin", "zmax")
@@ -84,7 +84,7 @@ def graded_planes(length: float, *, fine: float, h: float, growth: float = 1.25)
     return np.asarray(planes)
 
 
-def hertz_block(
+def hertz_quarter_block(
     a: float,
     h_contact: float,
     *,
@@ -104,11 +104,11 @@ def hertz_block(
     """
     values = (a, h_contact, size, fine, growth, strip)
     if not all(isinstance(v, (int, float, np.number)) and np.isfinite(v) and v > 0 for v in values):
-        raise InputError(f"hertz_block needs finite a, h_contact, size, fine, growth, strip > 0, got {values}")
+        raise InputError(f"hertz_quarter_block needs finite a, h_contact, size, fine, growth, strip > 0, got {values}")
     if not (h_contact < fine * a and strip < size and fine < size):
         raise InputError(
-            f"hertz_block needs h_contact < fine·a and fine, strip < size (got h_contact {h_contact:g}, a {a:g}, "
-            f"fine {fine:g}, strip {strip:g}, size {size:g})"
+            f"hertz_quarter_block needs h_contact < fine·a and fine, strip < size (got h_contact {h_contact:g}, "
+            f"a {a:g}, fine {fine:g}, strip {strip:g}, size {size:g})"
         )
     L = size * a
     check_memory((fine * a / h_contact) ** 3, f"the Hertz block with contact cells a/{a / h_contact:g}")
@@ -120,7 +120,7 @@ def hertz_block(
 
 
 def _hertz_block_model(L: float, depth: float, r_fine: float, h: float, growth: float) -> None:
-    """The gmsh model of ``hertz_block`` (rank 0, in a gmsh session): two boxes, their faces grouped."""
+    """The gmsh model of ``hertz_quarter_block`` (rank 0, in a gmsh session): two boxes, their faces grouped."""
     occ = gmsh.model.occ
     gmsh.model.add("hertz block")
     occ.fragment([(3, occ.addBox(0, 0, -depth, L, L, depth))], [(3, occ.addBox(0, 0, -L, L, L, L - depth))])

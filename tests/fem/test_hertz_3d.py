@@ -1,4 +1,4 @@
-"""3D Hertz at contact cells of a/20: a rigid sphere on the quarter block of ``meshes3d.hertz_block``."""
+"""3D Hertz at contact cells of a/20: a rigid sphere on the quarter block of ``meshes3d.hertz_quarter_block``."""
 
 import numpy as np
 import pytest
@@ -9,7 +9,7 @@ from fenics_contact.fem.linalg import LinearSolverOptions
 from fenics_contact.fem.primal import solve_primal_monolithic
 from fenics_contact.problem.analytic import hertz_sphere_errors, hertz_sphere_model, hertz_sphere_penalty
 from fenics_contact.problem.geometry import mesh_size
-from fenics_contact.problem.meshes3d import hertz_block
+from fenics_contact.problem.meshes3d import hertz_quarter_block
 from fenics_contact.problem.tags import Boundary
 
 A, R, E, NU = 0.1, 1.0, 1.0, 0.3  # a/R = 0.1; the block 20a
@@ -42,11 +42,11 @@ def test_hertz_sphere_at_a_over_20():
 
 def test_hertz_block_is_tagged_and_refined_under_the_contact():
     """The quarter block at a/4: Γ_C the top, the contact cells of size h_c at the origin, coarse far away."""
-    cm = hertz_block(A, A / 4)
+    cm = hertz_quarter_block(A, A / 4)
     assert cm.mesh.topology.dim == 3 and cm.h == A / 4
     assert cm.comm.allreduce(cm.facet_tags.find(Boundary.GAMMA_C).size, op=MPI.SUM) > 0
     x = cm.mesh.geometry.x
     assert np.isclose(cm.comm.allreduce(x[:, 0].max(), op=MPI.MAX), 20 * A)
     assert mesh_size(cm.mesh, cm.facet_tags) > 4 * cm.h  # the top face far from the contact is coarse
     with pytest.raises(InputError, match="h_contact < fine"):
-        hertz_block(A, 2 * A)
+        hertz_quarter_block(A, 2 * A)

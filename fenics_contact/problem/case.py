@@ -40,7 +40,7 @@ unless said; unknown keys are refused.  Relative file names are relative to the 
     direction = [dx, dy]                     # default: the plane's normal (into the body); required for a circle
 
     [run]          method, accel, front-window, tol, max-iterations, reference, out, plots
-    [primal]       alpha, delta            (primal, primal-ms)
+    [primal]       alpha, delta, solver    (primal, primal-ms; solver: the monolithic reference's)
     [mixed]        beta, epsilon           (mixed, mixed-ms)
     [multiscale]   layers, nbasis, cache-dir   (primal-ms, mixed-ms)
     [mixed-ms]     min-gap, max-nbasis

@@ -100,7 +100,7 @@ def main() -> None:
         "",
         "The sphere on the quarter block (`hertz_sphere_model`: a = 0.1, R = 10a, block 20a, δ = 10⁻³ h_c/E*),",
         'contact cells h_c = a/n; `primal-monolithic` with `solver="direct"` (MUMPS LU per Newton step) and',
-        '`solver="amg"` (CG + smoothed-aggregation AMG with the rigid-body near-nullspace, rtol 10⁻¹⁰). Solve:',
+        '`solver="amg"` (CG + smoothed-aggregation AMG with the rigid-body near-nullspace, rtol 10⁻⁸). Solve:',
         "the wall time of the Newton solve (mesh not included); peak memory: the process's ru_maxrss (one",
         "process per run); force difference: |F_AMG/F_MUMPS − 1| at the size.",
         "",

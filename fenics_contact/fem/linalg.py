@@ -285,7 +285,7 @@ class LinearSolverOptions:
 
     kind: str = "auto"
     krylov: str = "cg"
-    rtol: float = 1e-10
+    rtol: float = 1e-8
     max_iterations: int = 1000
     auto_dofs: int = AUTO_AMG_DOFS
     threshold: float | None = None

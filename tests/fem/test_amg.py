@@ -38,7 +38,7 @@ def _model_1_2d():
     return get_model(1, E_high=1e3).on(unit_square(32, 8))
 
 
-def _layered_cube():
+def _layered_cube(comm: MPI.Comm = MPI.COMM_WORLD):
     """The unit cube (h = 1/8) clamped at x = 0, a stiff slab 1/4 < x < 1/2 and a stiff bar 1/2 < x < 7/8,
     y < 1/2 under the contact (E = 1e3 beside E = 1), a sphere pressed into its face x = 1 off-centre."""
     ball = Sphere((1.5, 0.45, 0.55), 0.5).indented(0.06, (-1.0, 0.0, 0.0))
@@ -51,7 +51,7 @@ def _layered_cube():
         youngs_modulus=modulus,
         poisson_ratio=0.3,
         obstacle=ball,
-        mesh=unit_cube(8),
+        mesh=unit_cube(8, comm=comm),
         boundary=BoundaryConditions(),
     )
 
@@ -127,3 +127,14 @@ def test_linear_solver_options_are_checked_and_auto_chooses_by_size_and_dimensio
     assert METHODS["primal-monolithic"].defaults()["solver"] == "auto"
     with pytest.raises(InputError, match="linear solver must be one of"):
         METHODS["primal-monolithic"].solve(_layered_cube(), solver="cholesky")
+
+
+@pytest.mark.mpi
+def test_amg_on_two_ranks_is_the_serial_direct_solve():
+    """The heterogeneous cube by CG + AMG distributed over the ranks against MUMPS on one rank: the same contact
+    nodes and force to the Krylov tolerance, the iterations bounded."""
+    amg = solve_primal_monolithic(_layered_cube(MPI.COMM_WORLD), solver=LinearSolverOptions(kind="amg", rtol=RTOL))
+    serial = solve_primal_monolithic(_layered_cube(MPI.COMM_SELF), solver="direct")
+    assert amg.newton.active_sizes == serial.newton.active_sizes
+    assert amg.profile.force == pytest.approx(serial.profile.force, rel=1e3 * RTOL)
+    assert max(amg.krylov_iterations) <= MAX_ITERATIONS

@@ -444,7 +444,8 @@ class AMGSolver:
     def solve(self, b: PETSc.Vec, x: PETSc.Vec) -> None:
         """x = A⁻¹ b to ‖b − A x‖ ≤ rtol‖b‖, raising ConvergenceError when the Krylov solve fails."""
         self.ksp.solve(b, x)
-        x.array[self._identity] = b.array[self._identity]  # exact on the Dirichlet rows, as a factorization
+        if self._identity.size:  # exact on the Dirichlet rows, as a factorization
+            x.array[self._identity] = b.getArray(readonly=True)[self._identity]
         its = self.ksp.getIterationNumber()
         self.iterations.append(int(its))
         reason = self.ksp.getConvergedReason()

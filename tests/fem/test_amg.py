@@ -2,11 +2,13 @@
 
 import basix.ufl
 import dolfinx.fem.petsc
+import dolfinx.mesh
 import numpy as np
 import pytest
 import ufl
 from dolfinx import fem
 from mpi4py import MPI
+from petsc4py import PETSc
 
 from fenics_contact.errors import ConvergenceError, InputError
 from fenics_contact.fem import forms_primal
@@ -138,3 +140,40 @@ def test_amg_on_two_ranks_is_the_serial_direct_solve():
     assert amg.newton.active_sizes == serial.newton.active_sizes
     assert amg.profile.force == pytest.approx(serial.profile.force, rel=1e3 * RTOL)
     assert max(amg.krylov_iterations) <= MAX_ITERATIONS
+
+
+def test_mat_solve_of_a_dense_block_is_the_direct_one():
+    """``AMGSolver.mat_solve`` (one checked CG solve per column, as the interface responses call it) against
+    MUMPS on the clamped stiffness of a small cube, its Dirichlet rows exact."""
+    msh = unit_cube(4).mesh
+    V = fem.functionspace(msh, basix.ufl.element("Lagrange", msh.basix_cell(), 1, shape=(3,)))
+    msh.topology.create_connectivity(2, 3)
+    facets = dolfinx.mesh.locate_entities_boundary(msh, 2, lambda x: np.isclose(x[0], 0.0))
+    bc = fem.dirichletbc(np.zeros(3), fem.locate_dofs_topological(V, 2, facets), V)
+    form = fem.form(forms_primal.elastic_form(ufl.TrialFunction(V), ufl.TestFunction(V), 1.0, 1.0))
+    K = dolfinx.fem.petsc.assemble_matrix(form, bcs=[bc])
+    K.assemble()
+    n, k = K.getLocalSize()[0], 3
+    rng = np.random.default_rng(0)
+    B = PETSc.Mat().createDense(
+        ((n, PETSc.DECIDE), (PETSc.DECIDE, k)), array=rng.standard_normal((n, k)), comm=msh.comm
+    )
+    B.assemble()
+    solutions = []
+    for solver in (
+        DirectSolver(msh.comm, prefix="test_block_direct_"),
+        AMGSolver(msh.comm, prefix="test_block_amg_", space=V, options=LinearSolverOptions(kind="amg", rtol=RTOL)),
+    ):
+        X = PETSc.Mat().createDense(((n, PETSc.DECIDE), (PETSc.DECIDE, k)), comm=msh.comm)
+        X.setUp()
+        X.assemble()
+        solver.set_operator(K)
+        solver.mat_solve(B, X)
+        solutions.append(X.getDenseArray().copy())
+        for obj in (solver, X):
+            obj.destroy()
+    assert np.allclose(solutions[1], solutions[0], rtol=0.0, atol=1e4 * RTOL * np.abs(solutions[0]).max())
+    dofs, owned = bc.dof_indices()
+    assert np.array_equal(solutions[1][dofs[:owned]], solutions[0][dofs[:owned]])
+    for obj in (K, B):
+        obj.destroy()

@@ -27,7 +27,7 @@ def _errors(cells: int):
 
 @pytest.mark.slow
 def test_hertz_sphere_at_a_over_20():
-    """Measured (28k DOFs at a/20, 7 Newton steps of 34–39 CG iterations): the area-equivalent contact radius
+    """Measured (26,901 DOFs at a/20, 7 Newton steps of 25–33 CG iterations): the area-equivalent contact radius
     −0.00 h_c from a, the centre pressure −0.6 % from p₀, the L² profile error 3.1 % (4.9 % at a/10: 1.6×)."""
     coarse_solution, coarse = _errors(10)
     solution, fine = _errors(20)

@@ -413,11 +413,13 @@ class AMGSolver:
             "ksp_rtol": options.rtol,
             "ksp_atol": 0.0,
             "ksp_max_it": options.max_iterations,
+            # GMRES preconditioned from the right: its residual norm is the unpreconditioned one (the side is set for
+            # CG too: a GMRES solver earlier under this prefix leaves its side in the options database)
+            "ksp_pc_side": "right" if options.krylov == "gmres" else "left",
         }.items():
             opts[f"{prefix}{key}"] = value
         if options.krylov == "gmres":
             opts[f"{prefix}ksp_gmres_restart"] = 100
-            opts[f"{prefix}ksp_pc_side"] = "right"  # the unpreconditioned residual norm
         self.ksp.setFromOptions()
         self.prefix = prefix
         self.options = options

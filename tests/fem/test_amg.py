@@ -78,6 +78,17 @@ def test_amg_and_mumps_find_the_same_contact(build):
     assert amg.problem.solver.factorizations == direct.problem.solver.factorizations  # one set-up per active set
 
 
+def test_gmres_with_amg_is_the_same_solve():
+    """GMRES (for an unsymmetric Jacobian; right-preconditioned, the true residual) on the symmetric one: the
+    solve of CG and of MUMPS."""
+    problem = _layered_cube()
+    direct = solve_primal_monolithic(problem, solver="direct")
+    gmres = solve_primal_monolithic(problem, solver=LinearSolverOptions(kind="amg", krylov="gmres", rtol=RTOL))
+    assert gmres.newton.active_sizes == direct.newton.active_sizes
+    assert gmres.profile.force == pytest.approx(direct.profile.force, rel=1e3 * RTOL)
+    assert gmres.problem.solver.ksp.getType() == "gmres" and max(gmres.krylov_iterations) <= MAX_ITERATIONS
+
+
 @pytest.mark.parametrize("n, dim", [(4, 2), (3, 3)])
 def test_rigid_body_modes_span_the_kernel_of_the_free_stiffness(n, dim):
     """3 modes in 2D, 6 in 3D, orthonormal, and K m = 0 for the stiffness K of the unconstrained body."""

@@ -280,7 +280,7 @@ class LinearSolverOptions:
     preconditioned by smoothed-aggregation AMG) or ``"auto"`` (AMG on a 3D mesh of ``auto_dofs`` unknowns or
     more, else direct).  A Krylov solve stops at ‖b − A x‖₂ ≤ ``rtol``·‖b‖₂.  ``threshold``: the AMG's drop
     tolerance of weak connections when it aggregates (PETSc's ``pc_gamg_threshold``); None: ``HETEROGENEOUS_THRESHOLD``
-    where Young's modulus varies by more than ``HETEROGENEOUS_CONTRAST`` over the mesh, else 0 (test model 1 in
+    where the shear modulus μ varies by more than ``HETEROGENEOUS_CONTRAST`` over the mesh, else 0 (test model 1 in
     2D at contrast 1e3: 184 CG iterations per step at 0, 43 at 0.02; a homogeneous 3D block: 0.02 doubles them).
     """
 
@@ -399,7 +399,7 @@ class AMGSolver:
     def __init__(
         self, comm, *, prefix: str, space: fem.FunctionSpace, options: LinearSolverOptions, contrast: float = 1.0
     ) -> None:
-        """``contrast``: max E / min E of the operator's material (the AMG threshold when ``options`` has none)."""
+        """``contrast``: max μ / min μ of the operator's material (the AMG threshold when ``options`` has none)."""
         self.ksp = PETSc.KSP().create(comm)
         self.ksp.setOptionsPrefix(prefix)
         opts = PETSc.Options()
@@ -492,7 +492,7 @@ def linear_solver(
     comm, *, prefix: str, space: fem.FunctionSpace, options: "LinearSolverOptions | str", contrast: float = 1.0
 ) -> DirectSolver | AMGSolver:
     """The solver ``options`` choose for operators on ``space`` (``LinearSolverOptions.chosen``); ``contrast``:
-    max E / min E (``AMGSolver``)."""
+    max μ / min μ (``AMGSolver``)."""
     options = LinearSolverOptions.of(options)
     dofs = space.dofmap.index_map.size_global * space.dofmap.index_map_bs
     if options.chosen(dofs, space.mesh.topology.dim) == "amg":

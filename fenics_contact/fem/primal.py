@@ -134,10 +134,9 @@ class PrimalSubproblem:
         self.b = dolfinx.fem.petsc.create_vector(self.V)
         self.du = dolfinx.fem.petsc.create_vector(self.V)
         self._gap_vec = dolfinx.fem.petsc.create_vector(self.V)  # ghosted, like b (assembly target)
-        E = fields.E.x.array
-        low = msh.comm.allreduce(float(np.min(E, initial=np.inf)), op=MPI.MIN)
-        high = msh.comm.allreduce(float(np.max(E, initial=0.0)), op=MPI.MAX)
-        self.solver = linear_solver(msh.comm, prefix=prefix, space=self.V, options=solver, contrast=high / low)
+        self.solver = linear_solver(
+            msh.comm, prefix=prefix, space=self.V, options=solver, contrast=_contrast(fields.mu, msh.comm)
+        )
         self._K = dolfinx.fem.petsc.assemble_matrix(self._a)
         self._K.assemble()
         self._M = dolfinx.fem.petsc.assemble_matrix(self._m)
@@ -345,6 +344,16 @@ class PrimalSubproblem:
             obj.destroy()
         self.solver.destroy()
         self._terms.destroy()
+
+
+def _contrast(mu: fem.Function, comm: MPI.Comm) -> float:
+    """max μ / min μ over the mesh (μ = E/(2(1 + ν)): the contrast of the moduli; 1 for a constant μ)."""
+    values = getattr(getattr(mu, "x", None), "array", None)
+    if values is None:
+        return 1.0
+    low = comm.allreduce(float(np.min(values, initial=np.inf)), op=MPI.MIN)
+    high = comm.allreduce(float(np.max(values, initial=0.0)), op=MPI.MAX)
+    return high / low if low > 0 else np.inf
 
 
 @dataclass(slots=True)

@@ -12,7 +12,7 @@
 * ``hertz_quarter_block(a, h_contact)``: the quarter block (0, L)² × (−L, 0) under a sphere pressed at the origin,
   unstructured gmsh tetrahedra of size h_contact within ``fine`` of the origin and growing linearly with the
   distance beyond (cells of every size close to equilateral, which algebraic multigrid needs; a graded grid
-  of planes stretches its cells up to L/h_contact : 1 where a fine plane crosses a coarse one).
+  of planes stretches its cells where a fine plane crosses a coarse one).
 
 The tags follow ``tags.PHYSICAL_NAMES``; they are set by the geometry of the grid (every rank
 tags its own and its ghost entities alike), so the meshes are correct by construction and are

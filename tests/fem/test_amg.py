@@ -188,3 +188,25 @@ def test_mat_solve_of_a_dense_block_is_the_direct_one():
     assert np.array_equal(solutions[1][dofs[:owned]], solutions[0][dofs[:owned]])
     for obj in (K, B):
         obj.destroy()
+
+
+def test_a_linear_subproblem_sets_amg_up_once_for_all_its_solves():
+    """A subproblem without contact (the fine Ω₁ of Algorithm 1 is one, with Robin data) keeps one AMG set-up
+    for every solve, as it keeps one factorization; its solution is MUMPS' to the Krylov tolerance."""
+    from fenics_contact.fem.primal import PrimalSubproblem
+
+    problem = _model_1_2d()
+    cm, fields = problem.cm, problem.fields
+    solutions = {}
+    for kind in ("direct", "amg"):
+        options = LinearSolverOptions(kind=kind, rtol=RTOL)
+        sub = PrimalSubproblem(
+            cm.mesh, cm.facet_tags, fields, delta=None, alpha=None, prefix=f"t_{kind}_", solver=options
+        )
+        for _ in range(3):
+            sub.solve()
+        assert sub.solver.factorizations == 1
+        solutions[kind] = sub.u.x.array.copy()
+        sub.destroy()
+    size = np.max(np.abs(solutions["direct"]))
+    assert size > 0 and np.max(np.abs(solutions["amg"] - solutions["direct"])) <= 1e3 * RTOL * size

@@ -32,6 +32,7 @@ from mpi4py import MPI
 
 from fenics_contact.errors import InputError
 from fenics_contact.fem.contact import NewtonOptions
+from fenics_contact.fem.linalg import LinearSolverOptions
 from fenics_contact.fem.mixed import epsilon_for, solve_mixed_monolithic
 from fenics_contact.fem.mixed_subproblem import MixedSubproblem
 from fenics_contact.fem.primal import PrimalSubproblem, penalty_for, solve_primal_monolithic, warn_if_locking
@@ -70,7 +71,11 @@ class MonolithicSolver:
 
 
 def _primal_monolithic_solver(
-    problem: ContactProblem, *, delta: float | None = None, newton: NewtonOptions = NewtonOptions()
+    problem: ContactProblem,
+    *,
+    delta: float | None = None,
+    newton: NewtonOptions = NewtonOptions(),
+    solver: LinearSolverOptions | str = "auto",
 ) -> MonolithicSolver:
     fields = problem.fields
     warn_if_locking(fields.nu, problem.comm)
@@ -85,6 +90,7 @@ def _primal_monolithic_solver(
             prefix="fc_steps_primal_",
             newton=newton,
             friction=friction_of(problem.law),
+            solver=solver,
         )
     )
 

@@ -16,6 +16,7 @@ from fenics_contact import __version__
 from fenics_contact.cli.options import DEFAULT_H, DEFAULT_H_3D, METHODS, MODEL_DEFAULTS, RunOptions, method_default
 from fenics_contact.cli.signals import EXIT_CODES
 from fenics_contact.examples import add_examples_parser
+from fenics_contact.fem.linalg import AUTO_AMG_DOFS, LINEAR_SOLVERS
 from fenics_contact.fem.mixed import default_epsilon
 from fenics_contact.fem.primal import default_penalty
 from fenics_contact.hybrid.iteration import ACCELERATIONS, InterfaceNewtonOptions
@@ -176,6 +177,12 @@ def _add_method_options(run: argparse.ArgumentParser) -> None:
     )
     group.add_argument(
         "--reference", action="store_true", help="also solve the monolithic problem and report e_u" + _default("off")
+    )
+    group.add_argument(
+        "--solver",
+        choices=LINEAR_SOLVERS,
+        help="linear solver of the primal monolithic reference: direct (MUMPS LU), amg (CG + smoothed-aggregation "
+        f"AMG), auto (amg on a 3D mesh of {AUTO_AMG_DOFS:,} DOFs or more)" + _default("auto"),
     )
 
 

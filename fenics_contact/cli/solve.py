@@ -287,7 +287,11 @@ def _run_primal(options: RunOptions, problem: ContactProblem) -> _Outcome:
     """Algorithms 1 (primal) and 3 (primal-ms), with the monolithic primal reference."""
     method = get_method(options.method)
     flat = options.method_options()
-    reference = CATALOGUE["primal-monolithic"].solve(problem, delta=options.delta) if options.reference else None
+    reference = (
+        CATALOGUE["primal-monolithic"].solve(problem, delta=options.delta, **options.reference_options())
+        if options.reference
+        else None
+    )
     result = method.solve(problem, **flat, reference=reference.u if reference is not None else None)
     ms = method.multiscale
     summary = {
@@ -533,6 +537,9 @@ def _solve_and_write(
         "time_error_evaluation_s": result.history.time_monitor_s,
         "time_reference_s": reference.time_s if reference is not None else None,
         "reference_newton_steps": reference.newton.steps if reference is not None else None,
+        # the primal reference's linear solver ("direct" or "amg") and its Krylov iterations per Newton step
+        "reference_linear_solver": getattr(reference, "linear_solver", "direct") if reference is not None else None,
+        "reference_krylov_iterations": getattr(reference, "krylov_iterations", None) or None,
         "reference_active_set": reference.profile.active_interval() if reference is not None else None,
         "mpi_ranks": comm.size,
         "provenance": provenance(),

@@ -9,6 +9,7 @@ The dimension is the mesh's: on triangles plane strain, on tetrahedra 3D elastic
 σ = 2μ ε + λ tr ε I with gdim-vector P1 elements; the monolithic solve is the method that takes 3D).
 """
 
+import dataclasses
 import logging
 import time
 import weakref
@@ -27,7 +28,7 @@ from fenics_contact.errors import InputError
 from fenics_contact.fem import forms_primal
 from fenics_contact.fem.contact import MAX_REFINEMENTS, ContactProfile, NewtonHistory, NewtonOptions, semismooth_newton
 from fenics_contact.fem.friction import NodalFriction, frictional_newton
-from fenics_contact.fem.linalg import AbsoluteTerms, DirectSolver, quadratic_form
+from fenics_contact.fem.linalg import AbsoluteTerms, AMGSolver, LinearSolverOptions, linear_solver, quadratic_form
 from fenics_contact.fem.primal_boundary import NodalContactGeometry, PrimalBoundaryData
 from fenics_contact.problem.fields import MaterialFields
 from fenics_contact.problem.friction import Friction, friction_of
@@ -63,6 +64,9 @@ class PrimalSubproblem:
     nodal normal (facet normals averaged with the vertex weights) and g = 0.  One
     ν per node keeps the active set a set of nodes on a curved Γ_C too.  ``friction`` (a
     ``problem.friction.Friction``, with contact only) adds the nodal friction term of ``fem.friction``.
+
+    ``solver``: the linear solver of every solve (``fem.linalg.LinearSolverOptions`` or its kind: ``"direct"``,
+    MUMPS LU; ``"amg"``, CG + smoothed-aggregation AMG, its set-up kept across Newton steps; ``"auto"``).
     """
 
     def __init__(
@@ -77,6 +81,7 @@ class PrimalSubproblem:
         newton: NewtonOptions = NewtonOptions(),
         V: fem.FunctionSpace | None = None,
         friction: Friction | None = None,
+        solver: LinearSolverOptions | str = "direct",
     ) -> None:
         if delta is not None and not (isinstance(delta, (int, float, np.number)) and np.isfinite(delta) and delta > 0):
             raise InputError(f"the penalty parameter δ must be a finite number > 0, got {delta!r}")
@@ -137,7 +142,12 @@ class PrimalSubproblem:
         self.b = dolfinx.fem.petsc.create_vector(self.V)
         self.du = dolfinx.fem.petsc.create_vector(self.V)
         self._gap_vec = dolfinx.fem.petsc.create_vector(self.V)  # ghosted, like b (assembly target)
-        self.solver = DirectSolver(msh.comm, prefix=prefix)
+        solver = LinearSolverOptions.of(solver)
+        if friction is not None and solver.krylov == "cg":  # Coulomb's Jacobian is not symmetric: GMRES
+            solver = dataclasses.replace(solver, krylov="gmres")
+        self.solver = linear_solver(
+            msh.comm, prefix=prefix, space=self.V, options=solver, contrast=_contrast(fields.mu, msh.comm)
+        )
         self._K = dolfinx.fem.petsc.assemble_matrix(self._a)
         self._K.assemble()
         self._M = dolfinx.fem.petsc.assemble_matrix(self._m)
@@ -369,6 +379,16 @@ class PrimalSubproblem:
         self._terms.destroy()
 
 
+def _contrast(mu: fem.Function, comm: MPI.Comm) -> float:
+    """max μ / min μ over the mesh (μ = E/(2(1 + ν)): the contrast of the moduli; 1 for a constant μ)."""
+    values = getattr(getattr(mu, "x", None), "array", None)
+    if values is None:
+        return 1.0
+    low = comm.allreduce(float(np.min(values, initial=np.inf)), op=MPI.MIN)
+    high = comm.allreduce(float(np.max(values, initial=0.0)), op=MPI.MAX)
+    return high / low if low > 0 else np.inf
+
+
 @dataclass(slots=True)
 class PrimalSolution:
     """The monolithic penalized solution with its Newton history and contact profile."""
@@ -380,6 +400,16 @@ class PrimalSolution:
     dofs: int
     time_s: float
     problem: PrimalSubproblem
+
+    @property
+    def linear_solver(self) -> str:
+        """The linear solver the Newton steps used: ``"direct"`` (MUMPS LU) or ``"amg"``."""
+        return "amg" if isinstance(self.problem.solver, AMGSolver) else "direct"
+
+    @property
+    def krylov_iterations(self) -> list[int]:
+        """The Krylov iterations of each linear solve (empty for the direct solver)."""
+        return list(getattr(self.problem.solver, "iterations", []))
 
 
 #: The primal (P1) methods warn when ν reaches this.  P1 locks as ν → ½: on u = curl ψ, the clamped unit
@@ -429,13 +459,17 @@ def solve_primal_monolithic(
     *,
     delta: float | None = None,
     newton: NewtonOptions = NewtonOptions(),
+    solver: LinearSolverOptions | str = "auto",
     prefix: str = "fc_primal_mono_",
 ) -> PrimalSolution:
     """Penalized primal contact on the whole mesh by semismooth Newton, on triangles or tetrahedra.
 
     ``delta`` defaults to ``default_penalty(h, E_c)``, E_c the largest E on Γ_C (``penalty_for``).  With a
     friction law (``problem.law``) it is one load step from the unloaded state (``fenics_contact.sliding`` for
-    load paths).
+    load paths). ``solver``:
+    the linear solver of the Newton steps (``fem.linalg.LinearSolverOptions`` or its kind): ``"direct"``
+    (MUMPS LU), ``"amg"`` (CG + smoothed-aggregation AMG with the rigid-body near-nullspace) or ``"auto"``
+    (AMG on a 3D mesh of ``fem.linalg.AUTO_AMG_DOFS`` unknowns or more, else direct).
     """
     cm = problem.cm
     msh, facet_tags = cm.mesh, cm.facet_tags
@@ -453,15 +487,19 @@ def solve_primal_monolithic(
         prefix=prefix,
         newton=newton,
         friction=friction_of(problem.law),
+        solver=solver,
     )
     history = sub.solve()
     elapsed = time.perf_counter() - start
     profile = sub.contact_profile()
+    solution = PrimalSolution(sub.u, history, profile, delta, sub.num_dofs, elapsed, sub)
     log.info(
-        "monolithic primal: %d Newton steps, active-set sizes %s, penetration %.3e, %.2f s",
+        "monolithic primal: %d Newton steps (%s%s), active-set sizes %s, penetration %.3e, %.2f s",
         history.steps,
+        solution.linear_solver,
+        f", Krylov iterations {solution.krylov_iterations}" if solution.krylov_iterations else "",
         history.active_sizes,
         profile.penetration,
         elapsed,
     )
-    return PrimalSolution(sub.u, history, profile, delta, sub.num_dofs, elapsed, sub)
+    return solution

@@ -46,7 +46,7 @@ unless said; unknown keys are refused.  Relative file names are relative to the 
     stiffness-ratio = 1.0                    # the stick stiffness 1/delta_t over the normal penalty 1/delta
 
     [run]          method, accel, front-window, tol, max-iterations, reference, out, plots
-    [primal]       alpha, delta            (primal, primal-ms)
+    [primal]       alpha, delta, solver    (primal, primal-ms; solver: the monolithic reference's)
     [mixed]        beta, epsilon           (mixed, mixed-ms)
     [multiscale]   layers, nbasis, cache-dir   (primal-ms, mixed-ms)
     [mixed-ms]     min-gap, max-nbasis

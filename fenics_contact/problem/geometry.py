@@ -231,9 +231,10 @@ def unit_square(
     return cm
 
 
-def contact_mesh_from_model(comm: MPI.Comm, *, h: float, H: float | None = None) -> ContactMesh:
-    """The ContactMesh of the gmsh model built (on rank 0) in the current gmsh session (collective)."""
-    data = dolfinx.io.gmsh.model_to_mesh(gmsh.model, comm, 0, gdim=2)
+def contact_mesh_from_model(comm: MPI.Comm, *, h: float, H: float | None = None, gdim: int = 2) -> ContactMesh:
+    """The ContactMesh of the gmsh model built (on rank 0) in the current gmsh session (collective); ``gdim`` 3
+    for a model of tetrahedra."""
+    data = dolfinx.io.gmsh.model_to_mesh(gmsh.model, comm, 0, gdim=gdim)
     return _contact_mesh(data, h=h, H=H)
 
 

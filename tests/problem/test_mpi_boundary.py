@@ -67,11 +67,11 @@ def test_two_ranks_match_serial_with_boundary_conditions_and_obstacles():
 
 @pytest.mark.parametrize("accel", ["newton", "anderson"])
 def test_unloading_to_a_vanishing_solution_on_two_ranks(accel):
-    """Load steps down to a vanishing solution on two ranks (Algorithm 1): the Ω₂ solve at nearly collapsed data
-    sees the collapse before its own residual check (on two ranks that check can fail where one rank passes), so
-    every step converges, the withdrawn step with zero force and the unloaded one with no force beyond round-off
-    of the loaded one (exactly zero where the collapse is detected; the machine's BLAS rounding decides whether
-    the iteration reaches u ≈ 0 directly instead)."""
+    """Load steps down to a vanishing solution on two ranks (Algorithm 1): at depth 0 the nodal gaps are of
+    rounding size and so are the iterates, and the Ω₂ Newton passes its residual check as on one rank (the ghost
+    Γ_C nodes carry their owners' ν and g: one active set per node), so every step converges, the withdrawn step
+    with zero force and the unloaded one with no force beyond round-off of the loaded one (exactly zero where the
+    collapse is detected; the machine's BLAS rounding decides whether the iteration reaches u ≈ 0 directly)."""
     cm = unit_square(8, 4, clamped=("left",))
     model = layered_model([0.0, 0.5, 1.0], [1.0, 100.0], depth=0.0)
     curve = force_indentation(

@@ -145,13 +145,17 @@ class NodalContactGeometry:
         gdim = self.V.mesh.geometry.dim
         points = self.Q.tabulate_dof_coordinates()[nodes]
         g, nu = obstacle_at_nodes(obstacle, points, self.surface_normal, comm=self.comm)
-        same_direction = self.comm.allreduce(
-            bool(np.array_equal(self.nu.x.array.reshape(-1, gdim)[nodes], nu)), op=MPI.LAND
-        )
+        previous = self.nu.x.array.copy()
         self.nu.x.array[:] = 0.0
         self.nu.x.array.reshape(-1, gdim)[nodes] = nu
         self.gap.x.array[:] = 0.0
         self.gap.x.array[nodes] = g
+        # ghosts take their owner's ν and g: each rank evaluates the obstacle at its own copy of a node's
+        # coordinates (pushed forward through a different cell, they can differ in the last bit), and the
+        # facets at a node must see one u·ν − g, or near u·ν = g the node is active on one facet only
+        self.nu.x.scatter_forward()
+        self.gap.x.scatter_forward()
+        same_direction = self.comm.allreduce(bool(np.array_equal(previous, self.nu.x.array)), op=MPI.LAND)
         self.obstacle = obstacle
         return not same_direction
 

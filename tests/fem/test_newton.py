@@ -4,8 +4,8 @@
   keeps its set, on the closed-form solution, and records one residual before each step and one at the end.
 * A system whose full steps alternate between two sets: ``"never"`` runs into the step cap (the error counts
   the steps), ``"on-cycle"`` starts the line search with the first step into a set already linearized at.
-* The settled residual check: iterative refinement steps up to ``refinements``, then ConvergenceError;
-  a failure inside a step carries the steps taken with it.
+* The settled residual check: iterative refinement steps up to ``refinements``, then ConvergenceError (a warm
+  start far above a collapsing solution needs one); a failure inside a step carries the steps taken with it.
 """
 
 import numpy as np
@@ -143,6 +143,33 @@ def test_a_settled_step_that_misses_the_check_is_refined_then_refused():
         semismooth_newton_loop(
             system, np.array([True]), name="node", max_steps=10, line_search="never", rtol=1e-12, refinements=2
         )
+
+
+def test_a_warm_start_far_above_a_collapsing_solution_is_refined_to_the_check():
+    """From u = 1 to the solution u* ≈ 1e-12 (depth 0, load 1e-6): the step Δu ≈ −1 is exact to rounding of 1,
+    so the settled iterate misses the check measured at u* by far (‖F‖/scale ≈ 1e-5), and one step of
+    iterative refinement (the correction is of the size of u*) meets it; without refinement it is refused."""
+    for refinements in (2, 0):
+        system = Obstacle(k=1.0, delta=1e-6, g=0.0, f=1e-6)
+        system.u = 1.0
+        checks, measure = [], system.check
+
+        def check(measure=measure, checks=checks):
+            checks.append(measure())
+            return checks[-1]
+
+        system.check = check
+        if refinements == 0:
+            with pytest.raises(ConvergenceError, match="after 0 refinement steps"):
+                semismooth_newton_loop(
+                    system, np.array([True]), name="node", max_steps=10, line_search="never", rtol=1e-8
+                )
+            continue
+        trace = semismooth_newton_loop(
+            system, np.array([True]), name="node", max_steps=10, line_search="never", rtol=1e-8, refinements=2
+        )
+        assert trace.steps == 2 and checks[0].residual > 1e-8 * checks[0].scale
+        assert checks[1].residual <= 1e-15 * checks[1].scale and system.u == pytest.approx(system.exact, rel=1e-14)
 
 
 def test_a_failure_inside_a_step_counts_that_step():

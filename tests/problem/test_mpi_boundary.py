@@ -9,13 +9,14 @@ from mpi4py import MPI
 from mpi_jobs import on_every_rank
 
 import fenics_contact  # noqa: F401  (imports dolfinx_solver first)
-from fenics_contact.fem.primal import default_penalty, solve_primal_monolithic
+from fenics_contact.fem.primal import PrimalSubproblem, default_penalty, solve_primal_monolithic
 from fenics_contact.hybrid.iteration import IterationOptions
 from fenics_contact.hybrid.primal import solve_primal_hybrid
 from fenics_contact.indentation import force_indentation
 from fenics_contact.problem.analytic import hertz_model, layered_model
 from fenics_contact.problem.geometry import unit_square
 from fenics_contact.problem.meshes import hertz_block
+from fenics_contact.problem.obstacles import Plane
 
 pytestmark = pytest.mark.mpi
 
@@ -66,11 +67,11 @@ def test_two_ranks_match_serial_with_boundary_conditions_and_obstacles():
 
 @pytest.mark.parametrize("accel", ["newton", "anderson"])
 def test_unloading_to_a_vanishing_solution_on_two_ranks(accel):
-    """Load steps down to a vanishing solution on two ranks (Algorithm 1): the Ω₂ solve at nearly collapsed data
-    sees the collapse before its own residual check (on two ranks that check can fail where one rank passes), so
-    every step converges, the withdrawn step with zero force and the unloaded one with no force beyond round-off
-    of the loaded one (exactly zero where the collapse is detected; the machine's BLAS rounding decides whether
-    the iteration reaches u ≈ 0 directly instead)."""
+    """Load steps down to a vanishing solution on two ranks (Algorithm 1): at depth 0 the nodal gaps are of
+    rounding size and so are the iterates, and the Ω₂ Newton passes its residual check as on one rank (the ghost
+    Γ_C nodes carry their owners' ν and g: one active set per node), so every step converges, the withdrawn step
+    with zero force and the unloaded one with no force beyond round-off of the loaded one (exactly zero where the
+    collapse is detected; the machine's BLAS rounding decides whether the iteration reaches u ≈ 0 directly)."""
     cm = unit_square(8, 4, clamped=("left",))
     model = layered_model([0.0, 0.5, 1.0], [1.0, 100.0], depth=0.0)
     curve = force_indentation(
@@ -87,3 +88,20 @@ def test_unloading_to_a_vanishing_solution_on_two_ranks(accel):
     assert MPI.COMM_WORLD.size == 2 and all(s["converged"] for s in steps)
     assert pushed["force"] > 0.0 and abs(unloaded["force"]) <= 1e-12 * pushed["force"] and withdrawn["force"] == 0.0
     assert unloaded["residual"] < 1e-9
+
+
+def test_ghost_contact_nodes_carry_their_owners_direction_and_gap():
+    """Each rank evaluates the obstacle at its own copy of a Γ_C node's coordinates, which can differ in the last
+    bit between the owner and a ghost (pushed forward through different cells: on the layered Ω₂, gaps 1.1e-16 and
+    −2.2e-16 at (1, 0.5) for a plane at x = 1); the ghosts carry the owner's ν and g, so the facets at a node see
+    one u·ν − g and agree on whether it is active (else Newton's refinement halves the residual per step only)."""
+    cm = unit_square(8, 4, clamped=("left",))
+    fields = layered_model([0.0, 0.5, 1.0], [1.0, 100.0], depth=0.0).on(cm).fields
+    sub = PrimalSubproblem(cm.mesh, cm.facet_tags, fields, delta=1e-3, alpha=None, prefix="ghost_nodes_")
+    for depth in (0.0, 0.01, 1e-3 / 3.0):
+        sub.set_obstacle(Plane((1.0, 0.0), (-1.0, 0.0)).indented(depth, (-1.0, 0.0)))
+        for f in (sub.geometry.nu, sub.geometry.gap):
+            local = f.x.array.copy()
+            f.x.scatter_forward()  # the owners' values onto the ghosts
+            assert MPI.COMM_WORLD.allreduce(bool(np.array_equal(local, f.x.array)), op=MPI.LAND)
+    sub.destroy()

@@ -13,15 +13,17 @@ solves the nodal law on U by the semismooth Newton loop of the monolithic fricti
 state recurs, then a line search; in 3D a state is settled once the step is negligible, the slip direction varying
 within it), dense, with the fixed point on the Coulomb thresholds should it not converge, then returns the
 interface data as ``CondensedInterface.solve`` does.  With Algorithm 1 the condensation is exact and the dense
-Newton takes the monolithic Newton's steps; the corrections that follow use Ω₂'s exact Jacobian.  Serial only
-(the condensation gathers the Γ_C unknowns in the order of one rank's nodes).
+Newton takes the monolithic Newton's steps; the corrections that follow use Ω₂'s exact Jacobian.  Under MPI the
+unknowns are the ranks' Γ_C nodes in turn, the law's data are gathered to every rank (``_Gathered``), every rank
+solves the same dense system, and the interface Newton continues from rank 0's result.
 """
 
 import numpy as np
 import scipy.linalg as sla
+from mpi4py import MPI
 
 from fenics_contact.errors import ConvergenceError
-from fenics_contact.fem.friction import FIXED_POINT_STEPS, FIXED_POINT_TOL
+from fenics_contact.fem.friction import FIXED_POINT_STEPS, FIXED_POINT_TOL, NodalFriction
 from fenics_contact.fem.newton import Advance, Direction, StepState, semismooth_newton_loop
 from fenics_contact.hybrid.condensation import CondensedInterface
 from fenics_contact.hybrid.contact_newton import ContactNewtonHistory
@@ -40,7 +42,8 @@ class ComponentPart(PrimalPart):
         self.nodes = nodes
         self.c_nodes = np.repeat(nodes, d)
         self.c_normals = np.tile(np.eye(d), (nodes.size, 1))
-        self.n_c = nodes.size * d
+        self.c_offset = self.comm.exscan(self.c_nodes.size) or 0  # (global order: the ranks' nodes in turn)
+        self.n_c = self.comm.allreduce(self.c_nodes.size, op=MPI.SUM)
         self.D = np.zeros(self.n_c)
         self.gap = np.zeros(self.n_c)
 
@@ -55,7 +58,8 @@ class FrictionalCondensation(CondensedInterface):
 
     def __init__(self, problem) -> None:
         super().__init__(problem)
-        self.friction = problem.omega2.sub.friction
+        self.law = problem.omega2.sub.friction  #: Ω₂'s ``NodalFriction`` (its rank's nodes)
+        self.friction = _Gathered(self.law)  #: the law at the Γ_C nodes of all ranks (gathered for each solve)
         self._lu = None
         self._warm: np.ndarray | None = None  #: the last solve's U (the next one starts there)
 
@@ -109,7 +113,8 @@ class FrictionalCondensation(CondensedInterface):
         """U = U_L − M λ(U): the Newton on the law (Tresca: with the exact line search on its convex energy), and
         for Coulomb, should it not converge, the fixed point on the thresholds (each a convex problem) and the
         Newton on the law from there: (λ, history)."""
-        friction, hist = self.friction, ContactNewtonHistory()
+        self.friction = friction = _Gathered(self.law)  # (this step's geometry, anchors and motion)
+        hist = ContactNewtonHistory()
         tresca = friction.law.law == "tresca"
         start = np.zeros_like(U_L) if self._warm is None else self._warm.copy()  # (the previous step's U)
         try:
@@ -149,6 +154,31 @@ class FrictionalCondensation(CondensedInterface):
         y2 = y20 + self.Yc @ g21 - self.Yq @ lam
         g12 = np.where(p.free, p.a * y2 + p.b * g21, 0.0)
         return g12, g21, lam, hist
+
+
+class _Gathered(NodalFriction):
+    """A ``NodalFriction``'s law at the Γ_C nodes of all ranks (in rank order, the order of the condensed
+    unknowns): its geometry, anchors, motion and stiffness gathered, evaluated at given nodal displacements only
+    (``nodal``).  Every rank holds the same data, so the dense solve is the same on every rank."""
+
+    def __init__(self, friction: NodalFriction) -> None:  # (no NodalFriction.__init__: no subproblem of its own)
+        comm, d = friction.comm, friction.d
+
+        def gather(a: np.ndarray, width: int = 0) -> np.ndarray:
+            parts = comm.allgather(np.asarray(a))
+            return np.concatenate(parts).reshape((-1, width) if width else -1)
+
+        nu, w, gap = friction._geometry()
+        self._nodal_geometry = (gather(nu, d), gather(w), gather(gap))
+        self.sub, self.law, self.delta, self.k_t, self.d = None, friction.law, friction.delta, friction.k_t, d
+        self.comm = MPI.COMM_SELF
+        self.anchor, self.free = gather(friction.anchor, d), gather(friction.free, d)
+        self.stiffness, self.motion = gather(friction.stiffness), friction.motion.copy()
+        self.nodes = np.arange(self.anchor.shape[0])
+        self.dissipation, self.forced, self.frozen, self.nodal = 0.0, None, None, None
+
+    def _geometry(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        return self._nodal_geometry
 
 
 class _CondensedSystem:

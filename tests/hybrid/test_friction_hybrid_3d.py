@@ -34,7 +34,7 @@ def test_algorithm_1_is_the_monolithic_frictional_solution_in_3d(contrast):
     monolithic one to 1e-8 relative, with the same forces (normal and the tangential vector), stick/slip sets and
     dissipation.  The interface Newton runs the condensed frictional system and applies T at most 3 times per load
     step, with at most 2 Newton steps on the interface data after it (measured 1–2 and 0–1; the dense contact
-    Newton on the 126 Γ_C displacement components took 46–155 steps, a first Newton on the law that does not
+    Newton on the 126 Γ_C displacement components took 46–154 steps, a first Newton on the law that does not
     converge in 50 and the thresholds' fixed point included)."""
     wall = Plane(point=(1.0, 0.5, 0.5), normal=(-1.0, 0.0, 0.0))
     model = channels_3d(E_high=contrast).on(channels_3d_mesh(6))

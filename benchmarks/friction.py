@@ -4,13 +4,16 @@
 2e-3 in two steps and dragged by 0.002, 0.008, 0.03: per load step and contrast, Algorithm 1's applications of
 T, its Newton steps on the interface data after the condensed solve, the steps of the condensed contact Newton
 (the thresholds' fixed point included), and the largest displacement difference to the monolithic path.
-``--strategy interface`` runs the interface Newton's "interface" strategy instead.
+``--strategy interface`` runs the interface Newton's "interface" strategy instead.  ``--dim 3``: the same on the
+3D channel cube (h = 1/``--h``), the wall on x = 1 pressed in by 0.01 and dragged along y by 0.005, 0.01, 0.02
+(this table only).
 
 (2) A cylinder (R = 5) pressed into the Hertz block (contact cells a/(20 r)) with P, then moved sideways: per
 drag step Q/(μP), the stick zone's half-width and centre against c = a√(1 − Q/(μP)) (in contact cells), and the
 L² distance of |t| to μp₀[√(1 − x²/a²) − (c/a)√(1 − x²/c²)] over the contact zone.
 
     OMP_NUM_THREADS=1 .venv/bin/python benchmarks/friction.py --h 32 --H 8 --nu 0.45 0.49 --refinement 0.5
+    OMP_NUM_THREADS=1 .venv/bin/python benchmarks/friction.py --dim 3 --h 6
 """
 
 import argparse
@@ -24,26 +27,33 @@ from fenics_contact.problem.friction import Friction
 from fenics_contact.problem.geometry import unit_square
 from fenics_contact.problem.meshes import hertz_block
 from fenics_contact.problem.models import get_model
+from fenics_contact.problem.models3d import channels_3d, channels_3d_mesh
 from fenics_contact.problem.obstacles import Plane
 from fenics_contact.sliding import slide
 
 MU = 0.3
 
 
-def theorem_table(n: int, n_coarse: int, strategy: str) -> str:
-    depth = 2e-3
-    path = [(-depth / 2, 0.0), (-depth, 0.0), (-depth, 0.002), (-depth, 0.008), (-depth, 0.03)]
+def theorem_table(n: int, n_coarse: int, strategy: str, dim: int = 2) -> str:
+    if dim == 2:
+        depth = 2e-3
+        path = [(-depth / 2, 0.0), (-depth, 0.0), (-depth, 0.002), (-depth, 0.008), (-depth, 0.03)]
+    else:
+        path = [(-0.01, 0.0, 0.0), (-0.01, 0.005, 0.0), (-0.01, 0.01, 0.0), (-0.01, 0.02, 0.0)]
     rows = [
         "| contrast | motion | applications of T | interface steps after the condensed solve | condensed contact "
         "Newton steps | max rel. displacement difference |",
         "|---|---|---|---|---|---|",
     ]
     for contrast in (1e3, 1e6):
-        model = get_model(3, E_high=contrast).with_(
-            obstacle=Plane((1.0, 0.0), (-1.0, 0.0)), law=Friction("coulomb", mu=MU)
-        )
-        problem = model.on(unit_square(n, n_coarse))
-        V = fem.functionspace(problem.cm.mesh, ("Lagrange", 1, (2,)))
+        law = Friction("coulomb", mu=MU)
+        if dim == 2:
+            model = get_model(3, E_high=contrast).with_(obstacle=Plane((1.0, 0.0), (-1.0, 0.0)), law=law)
+            problem = model.on(unit_square(n, n_coarse))
+        else:
+            wall = Plane((1.0, 0.5, 0.5), (-1.0, 0.0, 0.0))
+            problem = channels_3d(E_high=contrast).on(channels_3d_mesh(n)).with_(obstacle=wall, law=law)
+        V = fem.functionspace(problem.cm.mesh, ("Lagrange", 1, (dim,)))
         fields = {"mono": [], "alg1": []}
 
         def keep(name):
@@ -101,11 +111,14 @@ def main() -> None:
     parser.add_argument("--h", type=int, default=32, help="1/h of the unit square (Theorem 3.1 table)")
     parser.add_argument("--H", type=int, default=8, help="1/H")
     parser.add_argument("--strategy", default="condensed", choices=("condensed", "interface"))
+    parser.add_argument("--dim", type=int, default=2, choices=(2, 3), help="3: the 3D channel cube, h = 1/--h")
     parser.add_argument("--nu", type=float, nargs="+", default=[0.45, 0.49], help="Poisson ratios (Cattaneo–Mindlin)")
     parser.add_argument("--refinement", type=float, default=0.5, help="Hertz block refinement r: contact cells a/(20r)")
     args = parser.parse_args()
     print("## Algorithm 1 and the monolithic solve along a frictional path\n")
-    print(theorem_table(args.h, args.H, args.strategy))
+    print(theorem_table(args.h, args.H, args.strategy, args.dim))
+    if args.dim == 3:
+        return
     print("\n## Cattaneo–Mindlin\n")
     print(cattaneo_table(args.nu, args.refinement))
 

@@ -9,9 +9,10 @@ displacement and traction, so a path's answer depends on the path and the slip d
 Each step reports the normal force Σ w_p p_p, the tangential force Σ w_p t_p (a vector: the force the obstacle
 exerts on the body along Γ_C), the stick and slip nodes (counts and extents along Γ_C), the step's dissipation
 Σ w_p t_p·(a_p − a_p^new) ≥ 0, the solver's effort and, for the hybrid methods, the transmission residual of
-the final pair.  Methods: ``primal-monolithic``, ``primal`` (Algorithm 1) and ``primal-ms`` (Algorithm 3); the
-hybrid methods run the interface Newton with the ``"interface"`` strategy (``hybrid.options.interface_options``)
-or the iteration asked for.
+the final pair.  Methods: ``primal-monolithic``, ``primal`` (Algorithm 1) and ``primal-ms`` (Algorithm 3); by
+default Algorithm 1 runs the interface Newton on the condensed frictional system (``hybrid.friction``, on one or
+several ranks), Algorithm 3 with the ``"interface"`` strategy (``hybrid.options.interface_options``); or the
+iteration asked for.
 """
 
 import logging

@@ -93,7 +93,7 @@ def interface_options(
     options: InterfaceNewtonOptions, friction, *, frictional_condensation: bool
 ) -> InterfaceNewtonOptions:
     """The interface Newton options a step runs: with friction on Γ_C (``friction`` not None) and no frictional
-    condensation (``hybrid.friction``: Algorithm 1, serial) the ``"interface"`` strategy (Newton on
+    condensation (``hybrid.friction``: Algorithm 1) the ``"interface"`` strategy (Newton on
     F(g) = g − T(g) with Ω₂'s frictional Jacobian) instead of the normal-only condensation."""
     if friction is not None and options.strategy == "condensed" and not frictional_condensation:
         return replace(options, strategy="interface")

@@ -179,7 +179,7 @@ class PrimalHybridStep:
     def interface_problem(self, options: InterfaceNewtonOptions):
         """The affine pieces for ``hybrid.interface_newton`` (built once: fine Ω₁ response, Ω₂ with J₀)."""
         friction = self.sub[1].friction
-        options = interface_options(options, friction, frictional_condensation=self.comm.size == 1)
+        options = interface_options(options, friction, frictional_condensation=True)
         if self._newton is None or self._newton.options.strategy != options.strategy:
             self.prepare()
             iface = self.interface

@@ -54,7 +54,7 @@ def test_algorithm_1_is_the_monolithic_frictional_solution(model3):
     relative, with the same forces, stick/slip sets and dissipation.  The interface Newton (the default condensed
     strategy: the frictional contact solved on all Γ_C displacement components, ``hybrid.friction``) applies T at
     most 3 times per load step and takes at most 2 Newton steps on the interface data after the condensed solve
-    (measured; its dense contact Newton on the Γ_C unknowns took 3–130 steps, the thresholds' fixed point
+    (measured; its dense contact Newton on the Γ_C unknowns took 1–83 steps, the thresholds' fixed point
     included)."""
     problem, mono, u_mono = model3
     alg1, u_alg1 = _snapshots("primal", problem, tol=1e-11)

@@ -1,5 +1,5 @@
-"""Friction on two ranks: the monolithic solve and Algorithm 1 (the "interface" strategy under MPI) along a
-press-and-drag path give the serial answer."""
+"""Friction on two ranks: the monolithic solve and Algorithm 1 (the condensed frictional system, its law gathered
+to every rank) along a press-and-drag path give the serial answer."""
 
 import numpy as np
 import pytest
@@ -7,8 +7,11 @@ from mpi4py import MPI
 from mpi_jobs import on_every_rank
 
 import fenics_contact  # noqa: F401  (imports dolfinx_solver first)
+from fenics_contact.hybrid.friction import FrictionalCondensation
 from fenics_contact.problem.friction import Friction
 from fenics_contact.problem.geometry import unit_square
+from fenics_contact.problem.models import get_model
+from fenics_contact.problem.models3d import channels_3d, channels_3d_mesh
 from fenics_contact.problem.obstacles import Plane
 from fenics_contact.problem.problem import ContactProblem
 from fenics_contact.sliding import slide
@@ -41,3 +44,40 @@ def test_two_ranks_match_serial_with_friction():
         assert np.array_equal(s[:, 3:5], p[:, 3:5])  # stick and slip node counts
         assert np.allclose(p, s, rtol=1e-8, atol=1e-14)
     assert np.allclose(serial["primal"], serial["primal-monolithic"], rtol=1e-8, atol=1e-14)
+
+
+def _channels(comm: MPI.Comm, dim: int) -> dict:
+    """Algorithm 1 along press-and-drag on the channel models at contrast 1e6 (2D model 3, h = 1/16; the 3D channel
+    cube, h = 1/4), Coulomb μ = 0.3: per step the forces, stick/slip counts, dissipation and convergence."""
+    law = Friction("coulomb", mu=0.3)
+    if dim == 2:
+        problem = get_model(3, E_high=1e6).on(unit_square(16, 4, comm=comm))
+        problem = problem.with_(obstacle=Plane((1.0, 0.0), (-1.0, 0.0)), law=law)
+        path = [(-2e-3, 0.0), (-2e-3, 0.004), (-2e-3, 0.03)]
+    else:
+        problem = channels_3d(E_high=1e6).on(channels_3d_mesh(4, comm=comm))
+        problem = problem.with_(obstacle=Plane((1.0, 0.5, 0.5), (-1.0, 0.0, 0.0)), law=law)
+        path = [(-0.01, 0.0, 0.0), (-0.01, 0.005, 0.0), (-0.01, 0.02, 0.0)]
+    result = slide(problem, "primal", path, tol=1e-11)
+    steps = [
+        (s.normal_force, *map(float, s.tangential_force), s.stick_nodes, s.slip_nodes, s.dissipation, s.converged)
+        for s in result.steps
+    ]
+    condensed = isinstance(result.solver._newton.condensed, FrictionalCondensation)
+    return on_every_rank({"ranks": comm.size, "steps": steps, "condensed": condensed}, comm)
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_two_ranks_run_the_condensed_frictional_system_as_serial(dim):
+    """At contrast 1e6 the frictional condensed system runs on two ranks (not the "interface" strategy) and gives
+    the serial path to 1e-10: forces, stick/slip counts, dissipation, every step converged."""
+    serial = _channels(MPI.COMM_SELF, dim)
+    parallel = _channels(MPI.COMM_WORLD, dim)
+    assert parallel["ranks"] == MPI.COMM_WORLD.size and serial["condensed"] and parallel["condensed"]
+    s, p = np.array(serial["steps"], dtype=float), np.array(parallel["steps"], dtype=float)
+    assert np.all(s[:, -1] == 1.0) and np.all(p[:, -1] == 1.0)  # converged
+    assert np.array_equal(s[:, dim + 1 : dim + 3], p[:, dim + 1 : dim + 3])  # stick and slip node counts
+    normal = s[:, :1]
+    assert np.all(np.abs(p[:, : dim + 1] - s[:, : dim + 1]) <= 1e-10 * normal)  # normal and tangential forces
+    assert np.allclose(p[:, dim + 3], s[:, dim + 3], rtol=1e-10, atol=1e-10 * np.max(np.abs(s[:, dim + 3])))
+    assert np.any(s[:, dim + 2] > 0)  # the drag makes nodes slip

@@ -307,8 +307,12 @@ def solve_two_body(
     delta: float | None = None,
     newton: NewtonOptions = NewtonOptions(),
     line_search: str = "always",
+    initial: np.ndarray | None = None,
 ) -> TwoBodySolution:
     """Penalized frictionless contact of the two bodies of ``problem`` by semismooth Newton (serial).
+
+    ``initial``: the displacement DOF vector to start from (a warm start, e.g. the previous load step's
+    ``u.x.array``); its supported DOFs take the problem's values.
 
     ``delta`` defaults to ``two_body_penalty``; ``line_search`` as in ``fem.newton`` (exact, on the energy):
     ``"always"`` by default, as a full first step from no contact drives the bodies through each other and the
@@ -337,6 +341,11 @@ def solve_two_body(
     delta = two_body_penalty(problem, slave, master, delta)
     Q = contact_quadrature(slave, master, n, bs, problem.pair.quadrature_degree, rule=problem.pair.rule)
     system = TwoBodySystem(K, b, fixed, values, Q, delta)
+    if initial is not None:
+        start_u = np.asarray(initial, dtype=np.float64).ravel()
+        if start_u.size < n or not np.all(np.isfinite(start_u[:n])):
+            raise InputError(f"solve_two_body: initial must hold {n} finite displacement DOFs, got {start_u.size}")
+        system.u[system.free] = start_u[:n][system.free]
     try:
         trace = semismooth_newton_loop(
             system,

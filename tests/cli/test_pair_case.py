@@ -120,3 +120,23 @@ def test_bad_input_is_refused(tmp_path, capsys, args, message):
     assert main(["run", "--case", str(CASE), "--no-plots", "--out", str(out), *args]) == 2
     assert message in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_a_body_held_by_contact_alone_carries_its_traction(tmp_path):
+    """The upper block on rollers at its sides (x held, y free) under a traction t on its top: the contact
+    alone holds it up, so the contact force on it is −t times the top's width (30 mm), whatever δ."""
+    text = CASE.read_text().replace('file = "two_blocks.msh"', f'file = "{CASE.parent / "two_blocks.msh"}"')
+    text = text.replace(
+        'supports = [{facets = "upper_top", displacement = [0.0, -0.02]}]',
+        'supports = [{facets = "upper_left", components = [0]}, {facets = "upper_right", components = [0]}]\n'
+        "tractions = {upper_top = [0.0, -5.0]}",
+    )
+    text = text[: text.index("[load]")]
+    (tmp_path / "pushed.toml").write_text(text)
+    out = tmp_path / "out"
+    assert main(["run", "--case", str(tmp_path / "pushed.toml"), "--no-plots", "--out", str(out)]) == 0
+    summary = _summary(out)
+    assert summary["load_steps"] is None
+    assert summary["force_slave"][1] == pytest.approx(5.0 * 30.0, rel=1e-10)
+    assert summary["force_master"][1] == pytest.approx(-5.0 * 30.0, rel=1e-10)
+    assert summary["case"]["bodies"]["upper"]["tractions"] == {"upper_top": [0.0, -5.0]}

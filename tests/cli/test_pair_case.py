@@ -140,3 +140,13 @@ def test_a_body_held_by_contact_alone_carries_its_traction(tmp_path):
     assert summary["force_slave"][1] == pytest.approx(5.0 * 30.0, rel=1e-10)
     assert summary["force_master"][1] == pytest.approx(-5.0 * 30.0, rel=1e-10)
     assert summary["case"]["bodies"]["upper"]["tractions"] == {"upper_top": [0.0, -5.0]}
+
+
+def test_algorithm_1_stopped_early_writes_its_results_unconverged(tmp_path, capsys):
+    out = tmp_path / "stopped"
+    args = ["run", "--case", str(CASE), "--method", "primal", "--accel", "none", "--max-iterations", "2"]
+    assert main([*args, "--no-plots", "--out", str(out), "--set", "load.steps=[[0.0, -0.02]]"]) == 3
+    assert "not converged" in capsys.readouterr().err
+    summary = _summary(out)
+    assert summary["converged"] is False and summary["iterations"] == 2
+    assert summary["transmission_residual"] > 1e-8

@@ -300,6 +300,7 @@ def read_pair_mesh(path: Path, comm: MPI.Comm = MPI.COMM_WORLD) -> tuple[TwoBody
                 problem = f"cannot read {path} as a gmsh mesh: {err}"
             else:
                 problem = _mesh_problem(path)
+                gmsh.model.mesh.renumberNodes()  # (the DOLFINx reader needs node tags 1..N; a file may skip some)
         problem = comm.bcast(problem, root=0)
         if problem is not None:
             raise InputError(problem)
@@ -317,10 +318,22 @@ def _mesh_problem(path: Path) -> str | None:
     _, coords, _ = gmsh.model.mesh.getNodes()
     if np.any(np.abs(np.asarray(coords).reshape(-1, 3)[:, 2]) > 0.0):
         return f"{path} is not planar: its nodes must have z = 0"
-    grouped = set()
+    members, used = [], []
     for dim, tag in gmsh.model.getPhysicalGroups(2):
         for entity in gmsh.model.getEntitiesForPhysicalGroup(dim, tag):
-            grouped.update(np.concatenate(gmsh.model.mesh.getElements(2, entity)[1] or [np.zeros(0)]).tolist())
+            _, elements, nodes = gmsh.model.mesh.getElements(2, entity)
+            members.extend(np.concatenate(elements or [np.zeros(0)]).tolist())
+            used.append(np.concatenate(nodes or [np.zeros(0)]))
+    node_tags = gmsh.model.mesh.getNodes()[0]
+    stray = np.setdiff1d(node_tags, np.concatenate(used or [np.zeros(0)]))
+    if stray.size:
+        return (
+            f"{path}: {stray.size} of its nodes belong to no triangle of a surface group (cells left out of every "
+            "group, or written without their elements); every triangle must belong to the cell group of a body"
+        )
+    grouped = set(members)
+    if len(grouped) < len(members):
+        return f"{path}: {len(members) - len(grouped)} triangles lie in two surface groups; give each to one group"
     total = np.concatenate(gmsh.model.mesh.getElements(2)[1] or [np.zeros(0)]).size
     if len(grouped) < total:
         return (

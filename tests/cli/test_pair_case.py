@@ -150,3 +150,26 @@ def test_algorithm_1_stopped_early_writes_its_results_unconverged(tmp_path, caps
     summary = _summary(out)
     assert summary["converged"] is False and summary["iterations"] == 2
     assert summary["transmission_residual"] > 1e-8
+
+
+@pytest.mark.parametrize(
+    ("edit", "message"),
+    [("two groups", "triangles lie in two surface groups"), ("no group", "belong to no triangle of a surface group")],
+)
+def test_a_mesh_with_cells_outside_one_group_each_is_refused(tmp_path, capsys, edit, message):
+    import gmsh
+
+    from fenics_contact.problem.geometry import gmsh_session
+
+    mesh = tmp_path / "edited.msh"
+    with gmsh_session():
+        gmsh.merge(str(CASE.parent / "two_blocks.msh"))
+        shale = next(t for d, t in gmsh.model.getPhysicalGroups(2) if gmsh.model.getPhysicalName(d, t) == "lower_shale")
+        if edit == "two groups":
+            gmsh.model.addPhysicalGroup(2, list(gmsh.model.getEntitiesForPhysicalGroup(2, shale)), name="extra")
+        else:
+            gmsh.model.removePhysicalGroups([(2, shale)])
+            gmsh.option.setNumber("Mesh.SaveAll", 1)
+        gmsh.write(str(mesh))
+    assert main(["check-mesh", "--case", str(CASE), "--set", f'mesh.file="{mesh}"']) == 2
+    assert message in capsys.readouterr().err

@@ -103,39 +103,51 @@ def field_grid(
 ) -> pyvista.UnstructuredGrid | None:
     """The mesh of the P1 vector displacement ``u`` with ``u`` as point data, the cellwise plane-strain stress
     ``stress`` (cells, 3: xx, yy, xy) as ``sigma`` in ParaView's symmetric-tensor order (xx, yy, zz, xy, yz, xz;
-    σ_zz = ν(σ_xx + σ_yy)) and the DG0 ``cells`` (e.g. E, subdomain) as cell data; rank 0's grid."""
+    σ_zz = ν(σ_xx + σ_yy)), or a 3D stress given in that order (cells, 6), and the DG0 ``cells`` (e.g. E,
+    subdomain) as cell data; rank 0's grid."""
     V = u.function_space
     gdim = V.mesh.geometry.dim
     values = np.zeros((u.x.array.size // gdim, 3))
     values[:, :gdim] = u.x.array.reshape(-1, gdim)
     n = stress.shape[0]
     nu_c = _cell_values(nu)[:n]
-    sigma = np.column_stack(
-        [stress[:, 0], stress[:, 1], nu_c * (stress[:, 0] + stress[:, 1]), stress[:, 2], np.zeros(n), np.zeros(n)]
+    sigma = (
+        stress
+        if stress.shape[1] == 6
+        else np.column_stack(
+            [stress[:, 0], stress[:, 1], nu_c * (stress[:, 0] + stress[:, 1]), stress[:, 2], np.zeros(n), np.zeros(n)]
+        )
     )
     cell_data = {"sigma": sigma} | {name: _cell_values(fn)[:n] for name, fn in cells.items()}
     return _gather_grid(V, {"u": values}, cell_data)
 
 
 def contact_grid(profile, comm: MPI.Comm = MPI.COMM_WORLD) -> pyvista.UnstructuredGrid | None:
-    """The Γ_C nodes of a contact profile (replicated on every rank) joined in its order, with pressure, gap,
-    active and normal as point data; rank 0's grid (None elsewhere, and when the profile has no points)."""
+    """The Γ_C nodes of a contact profile (replicated on every rank) joined in its order (on a contact surface,
+    3D: the nodes as vertices), with pressure, gap, active and normal as point data; rank 0's grid (None
+    elsewhere, and when the profile has no points)."""
     if comm.rank != 0 or profile.points is None:
         return None
-    points = np.zeros((len(profile.points), 3))
-    points[:, :2] = np.asarray(profile.points)[:, :2]
+    given = np.asarray(profile.points)
+    dim = min(given.shape[1], 3)
+    points = np.zeros((len(given), 3))
+    points[:, :dim] = given[:, :dim]
     n = len(points)
-    lines = (
-        np.column_stack([np.full(n - 1, 2), np.arange(n - 1), np.arange(1, n)]).ravel()
-        if n > 1
-        else np.zeros(0, dtype=int)
-    )
-    grid = pyvista.UnstructuredGrid(lines, np.full(max(n - 1, 0), pyvista.CellType.LINE, dtype=np.uint8), points)
+    if dim == 3:
+        cells = np.column_stack([np.ones(n, dtype=int), np.arange(n)]).ravel()
+        grid = pyvista.UnstructuredGrid(cells, np.full(n, pyvista.CellType.VERTEX, dtype=np.uint8), points)
+    else:
+        lines = (
+            np.column_stack([np.full(n - 1, 2), np.arange(n - 1), np.arange(1, n)]).ravel()
+            if n > 1
+            else np.zeros(0, dtype=int)
+        )
+        grid = pyvista.UnstructuredGrid(lines, np.full(max(n - 1, 0), pyvista.CellType.LINE, dtype=np.uint8), points)
     grid.point_data["pressure"] = -np.asarray(profile.sigma_c, dtype=float)
     grid.point_data["gap"] = -np.asarray(profile.u_c, dtype=float)
     grid.point_data["active"] = np.asarray(profile.active, dtype=float)
     if profile.normals is not None:
         normal = np.zeros((n, 3))
-        normal[:, :2] = np.asarray(profile.normals)[:, :2]
+        normal[:, :dim] = np.asarray(profile.normals)[:, :dim]
         grid.point_data["normal"] = normal
     return grid

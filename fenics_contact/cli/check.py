@@ -11,6 +11,7 @@ refusal otherwise.
 """
 
 import argparse
+import dataclasses
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -26,6 +27,7 @@ from fenics_contact.errors import FenicsContactError, InputError
 from fenics_contact.methods import METHODS as CATALOGUE
 from fenics_contact.problem.case import Case, MeshFile, load_case, parse_override
 from fenics_contact.problem.geometry import ContactMesh, gmsh_session
+from fenics_contact.problem.models3d import MODEL_3D
 from fenics_contact.problem.pair_case import PairCase
 from fenics_contact.problem.strip import contact_cell_size
 from fenics_contact.problem.tags import PHYSICAL_NAMES, Boundary, Subdomain, is_neumann_name
@@ -106,8 +108,10 @@ def _options(args: argparse.Namespace) -> tuple[Case | None, RunOptions]:
 def _build(options: RunOptions, case: Case | None, comm: MPI.Comm):
     """The mesh and the problem on it, as ``run`` builds them before its solve (collective)."""
     if case is None:
-        model, _ = _model(options)
         cm = _mesh(options, comm)
+        if cm.mesh.topology.dim == 3:  # (the planar models' loads are 2-vectors: the 3D model's physics)
+            options = dataclasses.replace(options, model=MODEL_3D)
+        model, _ = _model(options)
     else:
         case_mesh = case.build_mesh(comm)
         cm = case_mesh.cm
@@ -121,13 +125,13 @@ def _refusal(method: str, cm: ContactMesh, options: RunOptions, case: Case | Non
     """Why ``method`` would refuse this mesh before its first solve (None: it would start)."""
     entry = CATALOGUE[method]
     try:
+        require_method_dimension(method, cm.mesh)
         if entry.multiscale:
             as_run = SimpleNamespace(method=method, mesh=options.mesh, H=options.H)
             if case is None:
                 _check_coarse_grid(cm, as_run)
             else:
                 _check_case_coarse_grid(cm, as_run, case)
-        require_method_dimension(method, cm.mesh)
     except FenicsContactError as err:
         return err
     return None
@@ -140,7 +144,8 @@ def _describe(cm: ContactMesh, say, groups) -> None:
     msh.topology.create_entities(tdim - 1)
     cells, facets = msh.topology.index_map(tdim), msh.topology.index_map(tdim - 1)
     say(
-        f"  dimension {msh.geometry.dim}, {cells.size_global} triangles, {msh.topology.index_map(0).size_global} "
+        f"  dimension {msh.geometry.dim}, {cells.size_global} {'tetrahedra' if tdim == 3 else 'triangles'}, "
+        f"{msh.topology.index_map(0).size_global} "
         "vertices"
     )
     counts = {PHYSICAL_NAMES[t]: _owned(cm.cell_tags.find(t), cells.size_local, cm.comm) for t in Subdomain}

@@ -22,9 +22,11 @@ from fenics_contact.methods import HYBRID_METHODS, get_method
 from fenics_contact.methods import METHODS as CATALOGUE
 from fenics_contact.problem.materials import check_poisson_ratio
 from fenics_contact.problem.models import get_model, model_1
+from fenics_contact.problem.models3d import MODEL_3D
 
 __all__ = [
     "DEFAULT_H",
+    "DEFAULT_H_3D",
     "METHODS",
     "MODEL_DEFAULTS",
     "TABLE_METHODS",
@@ -36,6 +38,7 @@ __all__ = [
 
 METHODS = HYBRID_METHODS  #: the ``--method`` choices: Algorithms 1–4 (``methods.METHODS``)
 DEFAULT_H = 64  #: 1/h of the built-in mesh when --h is not given
+DEFAULT_H_3D = 16  #: 1/h of the built-in cube of the 3D model (--model 4) when --h is not given
 #: the materials of the built-in models when --E-high, --E-low, --nu are not given (the three models share them)
 MODEL_DEFAULTS = {
     name: p.default for name, p in inspect.signature(model_1).parameters.items() if name in ("E_high", "E_low", "nu")
@@ -284,7 +287,9 @@ class RunOptions:
     @property
     def n(self) -> int:
         """1/h of the built-in mesh."""
-        return self.h if self.h is not None else DEFAULT_H
+        if self.h is not None:
+            return self.h
+        return DEFAULT_H_3D if self.model == MODEL_3D else DEFAULT_H
 
     def value(self, name: str):
         """The option, or the method's default when it was not given."""

@@ -79,7 +79,10 @@ def _field_grid(problem: ContactProblem, u, sigma=None):
     """The ParaView grid of a state: the P1 displacement ``u`` (primal; the stress from it), or the mixed
     stress ``sigma`` (DG P3: xx, xy, yy) and displacement ``u`` (DG P1, averaged at the vertices)."""
     fields, cm = problem.fields, problem.cm
-    if sigma is None:
+    if sigma is None and problem.dim == 3:  # (xx, yy, zz, xy, yz, xz) of the 3 × 3 stress, row by row
+        s = _cell_array(stress_field(u, fields.lmbda, fields.mu))
+        stress = s[:, [0, 4, 8, 1, 5, 2]]
+    elif sigma is None:
         s = _cell_array(stress_field(u, fields.lmbda, fields.mu))
         stress = np.column_stack([s[:, 0], s[:, 3], s[:, 1]])
     else:

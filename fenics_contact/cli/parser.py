@@ -13,7 +13,7 @@ from pathlib import Path
 from types import SimpleNamespace
 
 from fenics_contact import __version__
-from fenics_contact.cli.options import DEFAULT_H, METHODS, MODEL_DEFAULTS, RunOptions, method_default
+from fenics_contact.cli.options import DEFAULT_H, DEFAULT_H_3D, METHODS, MODEL_DEFAULTS, RunOptions, method_default
 from fenics_contact.cli.signals import EXIT_CODES
 from fenics_contact.examples import add_examples_parser
 from fenics_contact.fem.mixed import default_epsilon
@@ -72,9 +72,10 @@ def _add_problem_options(run: argparse.ArgumentParser) -> None:
     group.add_argument(
         "--model",
         type=int,
-        choices=(1, 2, 3),
+        choices=(1, 2, 3, 4),
         default=_RUN_DEFAULTS["model"],
-        help="built-in test model: 1 channels, 2 inclusions, 3 heterogeneous strip (loads in Ω₁)"
+        help="built-in test model: 1 channels, 2 inclusions, 3 heterogeneous strip (loads in Ω₁), 4 the 3D "
+        "channel model (the unit cube, its strip Ω₂ of width 1/H; --method primal)"
         + _default(_shown(_RUN_DEFAULTS["model"])),
     )
     group.add_argument(
@@ -104,8 +105,9 @@ def _add_problem_options(run: argparse.ArgumentParser) -> None:
     group.add_argument(
         "--h",
         type=int,
-        help="fine size of the built-in mesh as 1/h; not with --mesh, whose size "
-        "is h = sqrt(2 x largest area of a cell on Gamma_C) (1/n on an n x n grid)" + _default(_shown(DEFAULT_H)),
+        help=f"fine size of the built-in mesh as 1/h ({DEFAULT_H_3D} for the cube of --model 4 when not given); not "
+        "with --mesh, whose size is h = sqrt(2 x largest area of a cell on Gamma_C) (1/n on an n x n grid)"
+        + _default(_shown(DEFAULT_H)),
     )
     group.add_argument(
         "--H",

@@ -7,6 +7,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import NamedTuple
 
+import gmsh
 import numpy as np
 from dolfinx import fem
 from mpi4py import MPI
@@ -41,8 +42,9 @@ from fenics_contact.plots import (
 )
 from fenics_contact.problem.case import Case
 from fenics_contact.problem.cell_groups import bounding_box
-from fenics_contact.problem.geometry import ContactMesh, read_mesh, unit_square
+from fenics_contact.problem.geometry import ContactMesh, gmsh_session, read_mesh, unit_square
 from fenics_contact.problem.models import get_model, pixel_field
+from fenics_contact.problem.models3d import MODEL_3D, channels_3d_mesh
 from fenics_contact.problem.pair_case import PairCase
 from fenics_contact.problem.problem import ContactProblem
 from fenics_contact.problem.tags import Subdomain
@@ -64,7 +66,8 @@ def _indentation_curve(
     step, so the Ω₁ offline phase of the run serves every step.
     """
     spec = case.obstacle
-    direction = np.asarray(spec.direction)
+    direction = np.asarray(spec.direction, dtype=np.float64)
+    direction = np.pad(direction, (0, max(problem.dim - direction.size, 0)))  # (a planar direction, z = 0 in 3D)
     if options.method in ("primal", "mixed"):
         if options.method == "primal":
             penalty = {"delta": outcome.summary["delta"], "alpha": options.value("alpha")}
@@ -156,9 +159,28 @@ def _model(options: RunOptions) -> tuple[ContactProblem, np.ndarray | None]:
     return model, values
 
 
+def _solid(path: Path, comm: MPI.Comm) -> bool:
+    """Whether the gmsh file holds 3D cells (read on rank 0; False when gmsh cannot read it: read_mesh says why)."""
+    solid = False
+    if comm.rank == 0 and Path(path).is_file():
+        with gmsh_session():
+            gmsh.model.add("dimension")
+            try:
+                gmsh.merge(str(path))
+            except Exception:  # gmsh raises a bare Exception; read_mesh reports it
+                pass
+            else:
+                solid = len(gmsh.model.mesh.getElementTypes(3)) > 0
+    return comm.bcast(solid, root=0)
+
+
 def _mesh(options: RunOptions, comm: MPI.Comm = MPI.COMM_WORLD) -> ContactMesh:
     if options.mesh is not None:
-        return read_mesh(options.mesh, H=None if options.coarse_groups else 1.0 / options.H, comm=comm)
+        # (a 3D mesh has no coarse grid: its strip, when the file has none, is the band of ``problem.strip``)
+        planar_grid = not options.coarse_groups and not _solid(options.mesh, comm)
+        return read_mesh(options.mesh, H=1.0 / options.H if planar_grid else None, comm=comm)
+    if options.model == MODEL_3D:
+        return channels_3d_mesh(options.n, strip=1.0 / options.H, comm=comm)
     return unit_square(options.n, options.H, comm=comm)
 
 
@@ -246,7 +268,7 @@ def _run_primal(options: RunOptions, problem: ContactProblem) -> _Outcome:
         if not (out / "fields.pvd").exists():  # (load steps write their own series)
             Series(out, "fields", problem.comm).add(0.0, _field_grid(problem, result.u))
             Series(out, "contact", problem.comm).add(0.0, contact_grid(result.profile, problem.comm))
-        if options.plots:
+        if options.plots and problem.dim == 2:  # (figures of the plane; a 3D run has its ParaView series)
             plot_displacement(result.u, out / "displacement.png", title=f"({options.method} hybrid)")
             _render_deformed(result.u, out / "deformed.png", options, problem, result.profile)
 
@@ -397,6 +419,11 @@ def _solve_and_write(
         model = case.problem(case_mesh)
         if options.method.endswith("-ms"):
             _check_case_coarse_grid(cm, options, case)
+    if case is None and cm.mesh.topology.dim == 3 and options.model != MODEL_3D:
+        raise InputError(
+            f"--mesh {options.mesh} is a tetrahedral (3D) mesh and the built-in model {options.model} is planar: "
+            f"run it with --model {MODEL_3D} (the 3D channel model's materials and load) or a case file"
+        )
     problem = model.on(cm)
     problem.check_loaded()
     fields = problem.fields
@@ -468,7 +495,16 @@ def _solve_and_write(
     writer = MPI.COMM_SELF if replicated else comm  # replicated: rank 0 holds the whole run and writes it
     if not replicated or comm.rank == 0:
         outcome.write(out)
-        if options.plots:
+        if options.plots and problem.dim == 3:  # (the plane figures do not apply: the ParaView series do)
+            if curve is not None:
+                plot_force_indentation({options.method: curve}, out / "force_indentation.png", comm=writer)
+            plot_history(
+                {f"{options.method}, {options.accel}": result.history},
+                out / "history.png",
+                comm=writer,
+                tol=options.tol,
+            )
+        elif options.plots:
             plot_cell_field(fields.E, out / "E.png", title=f"Young's modulus, {name}", log=True)
             if curve is not None:
                 plot_force_indentation({options.method: curve}, out / "force_indentation.png", comm=writer)

@@ -2,7 +2,9 @@
 resolved locally.
 
 A front is the end of a contiguous active segment of a chain of Γ_C unknowns (``contact_chains``: the
-unknowns ordered along each piece of Γ_C from their coordinates alone).  Where a near-rigid body rests on
+unknowns ordered along each piece of Γ_C from their coordinates alone); on a contact surface (3D) it is the
+edge between active and inactive unknowns of their neighbour graph (``contact_chains`` then returns patches:
+the unknowns of each piece with that graph).  Where a near-rigid body rests on
 Γ_C (a channel 10⁶ times stiffer than its surroundings) the plain semismooth Newton frees one node per
 step, and in the mixed method fronts in the bulk creep one Gauss–Lobatto point per step.  ``LocalFronts``
 (``InterfaceNewtonOptions.front_window``, default 8) solves the contact equations exactly on a window
@@ -12,17 +14,48 @@ solve on it reproduces it.
 """
 
 import numpy as np
-from scipy.sparse import coo_matrix
+from scipy.sparse import coo_matrix, csr_matrix, issparse
 from scipy.sparse.csgraph import connected_components, minimum_spanning_tree
+from scipy.spatial import cKDTree
 from scipy.spatial.distance import cdist
 
 from fenics_contact.hybrid.contact_equations import solve_on
 
-__all__ = ["contact_chains", "LocalFronts"]
+__all__ = ["contact_chains", "contact_patches", "LocalFronts"]
+
+
+#: surface neighbours: unknowns closer than this many times the larger of their nearest-neighbour distances
+SURFACE_NEIGHBOURS = 1.5
+
+
+def contact_patches(points: np.ndarray) -> list[tuple[np.ndarray, csr_matrix]]:
+    """The contact unknowns of a contact surface (3D): one (indices, neighbour graph) pair per connected piece.
+
+    Two unknowns are neighbours when they are closer than ``SURFACE_NEIGHBOURS`` times the larger of their
+    nearest-neighbour distances (on a grid face: the grid edges and the diagonals of its squares).
+    """
+    n = points.shape[0]
+    if n < 3:
+        return []
+    tree = cKDTree(points)
+    nearest = tree.query(points, k=2)[0][:, 1]
+    pairs = tree.query_pairs(SURFACE_NEIGHBOURS * float(nearest.max()), output_type="ndarray")
+    d = np.linalg.norm(points[pairs[:, 0]] - points[pairs[:, 1]], axis=1)
+    pairs = pairs[d <= SURFACE_NEIGHBOURS * np.maximum(nearest[pairs[:, 0]], nearest[pairs[:, 1]])]
+    adj = coo_matrix((np.ones(pairs.shape[0]), (pairs[:, 0], pairs[:, 1])), shape=(n, n)).tocsr()
+    adj = (adj + adj.T).tocsr()
+    count, label = connected_components(adj, directed=False)
+    patches = []
+    for c in range(count):
+        nodes = np.flatnonzero(label == c)
+        if nodes.size >= 3:
+            patches.append((nodes, adj[nodes][:, nodes].tocsr()))
+    return patches
 
 
 def contact_chains(points: np.ndarray, *, cut: float = 4.0) -> list[tuple[np.ndarray, np.ndarray]]:
-    """The contact unknowns ordered along Γ_C: one (indices, arc-length positions) pair per piece of Γ_C.
+    """The contact unknowns ordered along Γ_C: one (indices, arc-length positions) pair per piece of Γ_C; for
+    points in 3D (a contact surface) the ``contact_patches`` instead.
 
     The pieces are the paths of the Euclidean minimum spanning tree of ``points`` once its edges longer than
     ``cut`` × the median edge are removed (separate components of Γ_C); a piece that is not a path (a
@@ -30,6 +63,8 @@ def contact_chains(points: np.ndarray, *, cut: float = 4.0) -> list[tuple[np.nda
     not resolved locally (the plain step's set stands there).  Coincident points (a vertex copied at a corner) follow
     each other.
     """
+    if points.ndim == 2 and points.shape[1] == 3:
+        return contact_patches(points)
     if points.shape[0] < 3:
         return []
     dist = cdist(points, points)
@@ -96,12 +131,32 @@ class LocalFronts:
     """
 
     def __init__(self, chains, M: np.ndarray, D: np.ndarray, width: int) -> None:
-        self.chains = [np.asarray(idx) for idx, _ in chains]
+        self.chains = [np.asarray(idx) for idx, second in chains if not issparse(second)]
+        self.patches = [(np.asarray(idx), graph) for idx, graph in chains if issparse(graph)]
         self.M, self.D, self.width = M, D, int(width)
+
+    def _patch_windows(self, active: np.ndarray) -> list[np.ndarray]:
+        """On a surface patch: the unknowns within ``width`` − 1 graph steps of a front (an unknown with a
+        neighbour of the other state), split into connected windows."""
+        out = []
+        for idx, graph in self.patches:
+            a = active[idx].astype(np.int8)
+            coo = graph.tocoo()
+            front = np.unique(coo.row[a[coo.row] != a[coo.col]])
+            if front.size == 0:
+                continue
+            mark = np.zeros(idx.size, dtype=bool)
+            mark[front] = True
+            for _ in range(self.width - 1):  # grow by one ring of neighbours
+                mark |= (graph @ mark.astype(np.float64)) > 0
+            sub = np.flatnonzero(mark)
+            count, label = connected_components(graph[sub][:, sub], directed=False)
+            out += [idx[sub[label == c]] for c in range(count)]
+        return out
 
     def windows(self, active: np.ndarray) -> list[np.ndarray]:
         """The merged windows (rows of the contact unknowns) around the fronts of ``active``."""
-        out, w = [], self.width
+        out, w = self._patch_windows(active), self.width
         for idx in self.chains:
             a = active[idx]
             mark = np.zeros(idx.size, dtype=bool)

@@ -30,7 +30,8 @@ class InterfaceNewtonOptions:
     ``max_steps`` caps the contact Newton, ``max_corrections`` the Newton steps on F(g) that
     follow it (or, for ``"interface"``, all steps).  ``front_window`` (default 8; 0: off): the condensed
     contact Newton resolves every front of its next active set locally, on the ``front_window`` Γ_C
-    unknowns on either side of it with the forces elsewhere held (``hybrid.fronts.LocalFronts``; the same
+    unknowns on either side of it (on a 3D contact surface: within ``front_window`` − 1 rings of neighbours)
+    with the forces elsewhere held (``hybrid.fronts.LocalFronts``; the same
     fixed point; 3–5 steps instead of 8–11 where a near-rigid body rests on Γ_C at contrast 1e6: README,
     "Interface Newton").
     """

@@ -10,6 +10,7 @@ the pair (``hybrid.certificate``); ``accel="newton"`` solves the fixed point by
 the interface Newton method (``hybrid.interface_newton``) instead of iterating.
 """
 
+import dataclasses
 import logging
 import time
 from dataclasses import dataclass
@@ -32,7 +33,7 @@ from fenics_contact.hybrid.iteration import (
     iterate,
 )
 from fenics_contact.hybrid.response import FineResponse, PrimalPart
-from fenics_contact.hybrid.transmission import InterfaceSpace, robin_coefficient, split_mesh
+from fenics_contact.hybrid.transmission import InterfaceSpace, part_rollers, robin_coefficient, split_mesh
 from fenics_contact.problem.problem import ContactProblem
 
 __all__ = [
@@ -99,11 +100,15 @@ class PrimalHybridStep:
         for i, part in enumerate(self.parts):
             alpha_fn = fem.Function(self.interface.spaces[i], name="alpha")
             self.interface.to_part(self.alpha, i, alpha_fn)
+            fields = problem.fields_on(part.mesh)
+            if problem.boundary.rollers:  # each part takes the roller planes on its own outer boundary
+                own = part_rollers(part, problem.boundary.rollers)
+                fields = fields._replace(boundary=dataclasses.replace(problem.boundary, rollers=own))
             self.sub.append(
                 PrimalSubproblem(
                     part.mesh,
                     part.facet_tags,
-                    problem.fields_on(part.mesh),
+                    fields,
                     delta=delta if i == 1 else None,
                     alpha=alpha_fn,
                     prefix=f"fc_primal_omega{i + 1}_",

@@ -19,7 +19,7 @@ from fenics_contact.problem.fields import SubmeshTransfer
 from fenics_contact.problem.geometry import ContactMesh
 from fenics_contact.problem.tags import Boundary, Subdomain
 
-__all__ = ["InterfaceSpace", "Part", "robin_coefficient", "split_mesh", "sub_to_parent_dofs"]
+__all__ = ["InterfaceSpace", "Part", "part_rollers", "robin_coefficient", "split_mesh", "sub_to_parent_dofs"]
 
 
 class Part(NamedTuple):
@@ -41,6 +41,33 @@ def split_mesh(cm: ContactMesh) -> tuple[Part, Part]:
         ft = dmesh.transfer_meshtags_to_submesh(cm.facet_tags, msh, vmap, cmap)
         parts.append(Part(msh, ft, cmap, vmap))
     return parts[0], parts[1]
+
+
+def part_rollers(part: Part, rollers) -> tuple[tuple[int, float], ...]:
+    """The roller planes x_i = c of ``rollers`` that hold exterior facets of the part (collective): the part's
+    own rollers. InputError when a plane holds a facet of γ (a roller on γ would constrain one side of the
+    interface only)."""
+    msh = part.mesh
+    tdim = msh.topology.dim
+    x = msh.geometry.x[:, : msh.geometry.dim]
+    tol = 1e-10 * msh.comm.allreduce(float(np.max(np.ptp(x, axis=0))) if x.shape[0] else 0.0, op=MPI.MAX)
+    gamma = part.facet_tags.find(Boundary.INTERFACE)
+    own = []
+    for axis, value in rollers:
+        if axis >= msh.geometry.dim:
+            own.append((axis, value))  # (refused with its message by the subproblem's roller conditions)
+            continue
+        facets = dmesh.locate_entities_boundary(msh, tdim - 1, lambda p, a=axis, c=value: np.abs(p[a] - c) <= tol)
+        on_gamma = np.isin(facets, gamma)
+        counts = msh.comm.allreduce(np.array([np.count_nonzero(on_gamma), np.count_nonzero(~on_gamma)]), op=MPI.SUM)
+        if counts[0]:
+            raise InputError(
+                f"the roller plane x_{axis} = {value:g} holds {counts[0]} facets of the interface γ between Omega1 "
+                "and Omega2: a roller must lie on the outer boundary (move γ or the plane)"
+            )
+        if counts[1]:
+            own.append((axis, value))
+    return tuple(own)
 
 
 class InterfaceSpace:
@@ -130,7 +157,7 @@ def robin_coefficient(alpha: float | str, E: fem.Function, space: "InterfaceSpac
 
     ``alpha`` is a number, or a product of factors joined by ``*``: numbers,
     ``h^p`` (e.g. ``h^-1/2``), ``sqrt-h`` (= h^½), ``E``, where E stands for
-    E_p, the area-weighted mean of Young's modulus over the cells touching node p,
+    E_p, the area- (in 3D volume-) weighted mean of Young's modulus over the cells touching node p,
     and ``Emin``, the smallest E_p on γ (one number for all nodes).
     Examples: ``"1"``, ``"h^-1/2"``, ``"E"``, ``"2E"``, ``"E*h^-1/2"``, ``"Emin*h^-1/2"``.
     """

@@ -93,7 +93,7 @@ from fenics_contact.problem.meshes import bulged_square, hertz_block
 from fenics_contact.problem.models import get_model, pixel_field
 from fenics_contact.problem.obstacles import Circle, Obstacle, Plane
 from fenics_contact.problem.pair_case import PairCase, read_pair_case
-from fenics_contact.problem.problem import ContactProblem, constant_field
+from fenics_contact.problem.problem import ContactProblem, constant_field, zero_load
 from fenics_contact.problem.tags import is_neumann_name
 
 __all__ = [
@@ -586,7 +586,7 @@ class Case:
         elif base is not None:
             load = base.load
         else:
-            load = lambda x: np.zeros((2, x.shape[1]))  # noqa: E731
+            load = zero_load  # (of the mesh's dimension: a 3D mesh file takes it too)
         return ContactProblem(
             name=self.path.stem,
             youngs_modulus=E,

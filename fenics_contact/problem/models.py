@@ -13,6 +13,7 @@ that the contact strip Ω₂ = (1−H, 1)×(0,1) is homogeneous for every H ≤ 
   1/16) on a staggered lattice, positions listed in ``_INCLUSIONS``.
 
 E = ``E_high`` (10³) inside the pattern and ``E_low`` (1) elsewhere; ν = 0.35.
+Model 4 is the 3D one (``problem.models3d``: the unit cube with stiff channels through γ to Γ_C).
 
 Models 1 and 2 follow the paper's set-up (homogeneous strip, loads next to Γ_C).
 A user's problem generally has neither, so a third model is built to be hard:
@@ -39,6 +40,7 @@ import numpy as np
 import numpy.typing as npt
 
 from fenics_contact.errors import InputError
+from fenics_contact.problem.models3d import channels_3d
 from fenics_contact.problem.problem import ContactProblem, ScalarField, VectorField, constant_field
 
 __all__ = [
@@ -205,8 +207,8 @@ def paper_phase_model(number: int, *, E_ratio: float, nu_pattern: float, nu_rest
 
 
 def get_model(number: int, **kwargs) -> ContactProblem:
-    """The built-in test model 1, 2 or 3."""
-    builders = {1: model_1, 2: model_2, 3: model_3}
+    """The built-in test model 1, 2 or 3 (the unit square), or 4 (``models3d.channels_3d``: the unit cube)."""
+    builders = {1: model_1, 2: model_2, 3: model_3, 4: channels_3d}
     if number not in builders:
-        raise InputError(f"unknown test model {number!r}; the built-in models are 1, 2 and 3")
+        raise InputError(f"unknown test model {number!r}; the built-in models are 1, 2, 3 and 4 (3D)")
     return builders[number](**kwargs)

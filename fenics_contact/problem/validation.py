@@ -427,7 +427,10 @@ def open_ends(desc: MeshDescription, group: str = GAMMA_C, angle: float = OPEN_E
 
 
 def contact_open_ends(cm) -> np.ndarray:
-    """``open_ends`` of Γ_C on every rank (collective: the mesh is described on rank 0)."""
+    """``open_ends`` of Γ_C on every rank (collective: the mesh is described on rank 0); none on a tetrahedral
+    mesh (the ends of a contact curve: a contact surface is not checked)."""
+    if cm.mesh.topology.dim == 3:
+        return np.zeros((0, 3))
     desc = describe_contact_mesh(cm, [GAMMA_C])
     ends = open_ends(desc) if cm.comm.rank == 0 else None
     return cm.comm.bcast(ends, root=0)
@@ -455,7 +458,10 @@ def interface_bends(desc: MeshDescription) -> np.ndarray:
 
 
 def interface_bends_of(cm) -> np.ndarray:
-    """``interface_bends`` of γ on every rank (collective: the mesh is described on rank 0)."""
+    """``interface_bends`` of γ on every rank (collective: the mesh is described on rank 0); none on a tetrahedral
+    mesh (the bends of an interface curve, which the mixed methods need to know: they are planar)."""
+    if cm.mesh.topology.dim == 3:
+        return np.zeros((0, 2))
     desc = describe_contact_mesh(cm, [GAMMA])
     bends = interface_bends(desc) if cm.comm.rank == 0 else None
     return cm.comm.bcast(bends, root=0)
@@ -465,7 +471,7 @@ def tetrahedral_mesh_problems(cm, rules: Iterable[BoundaryRule] = BOUNDARY_RULES
     """The checks of a tetrahedral ContactMesh, on the distributed mesh (collective; the same list on every rank):
     every cell in exactly one of Omega1 and Omega2, no cell of zero volume, gamma non-empty and inside the mesh,
     each group of ``rules`` non-empty (when required) and on the outer boundary, of its subdomain, disjoint
-    from and away from the groups its rule names."""
+    from and away from the groups its rule names; gamma the common boundary of Omega1 and Omega2."""
     msh, comm = cm.mesh, cm.comm
     tdim = msh.topology.dim
     msh.topology.create_connectivity(tdim - 1, tdim)
@@ -502,6 +508,7 @@ def tetrahedral_mesh_problems(cm, rules: Iterable[BoundaryRule] = BOUNDARY_RULES
     elif on_boundary:
         problems.append(f"{on_boundary} of {gamma_total} facets of {GAMMA!r} lie on the outer boundary of the mesh")
     f2c = msh.topology.connectivity(tdim - 1, tdim)
+    problems += _tetrahedral_interface_problems(cm, facets[GAMMA])
     for rule in rules:
         if rule.name not in facets:
             facets[rule.name] = cm.facet_tags.find(neumann_tag(rule.name) if is_neumann_name(rule.name) else -1)
@@ -535,6 +542,37 @@ def tetrahedral_mesh_problems(cm, rules: Iterable[BoundaryRule] = BOUNDARY_RULES
                 problems.append(
                     f"{rule.name!r} touches {other!r} at {len(common)} nodes: {rule.name} must lie away from {other}"
                 )
+    return problems
+
+
+def _tetrahedral_interface_problems(cm, gamma: np.ndarray) -> list[str]:
+    """gamma is the common boundary of Omega1 and Omega2: every gamma facet lies between an Omega1 and an Omega2
+    cell, and every facet between an Omega1 and an Omega2 cell is tagged gamma (owned facets whose two cells
+    this rank holds; collective)."""
+    msh, comm = cm.mesh, cm.comm
+    tdim = msh.topology.dim
+    f2c = msh.topology.connectivity(tdim - 1, tdim)
+    imap = msh.topology.index_map(tdim)
+    label = np.zeros(imap.size_local + imap.num_ghosts, dtype=np.int64)
+    for sub in Subdomain:
+        label[cm.cell_tags.find(sub)] = int(sub)
+    owned = np.arange(msh.topology.index_map(tdim - 1).size_local, dtype=np.int32)
+    two = owned[np.diff(f2c.offsets)[owned] == 2]
+    first, second = label[f2c.array[f2c.offsets[two]]], label[f2c.array[f2c.offsets[two] + 1]]
+    across = two[np.minimum(first, second) * np.maximum(first, second) == int(Subdomain.OMEGA1) * int(Subdomain.OMEGA2)]
+    tagged = np.isin(two, gamma)
+    inside = np.isin(across, gamma, invert=True)
+    counts = comm.allreduce(
+        np.array([np.count_nonzero(tagged & ~np.isin(two, across)), np.count_nonzero(inside)]), op=MPI.SUM
+    )
+    problems = []
+    if counts[0]:
+        problems.append(f"{counts[0]} facets of {GAMMA!r} do not lie between an {OMEGA1} and an {OMEGA2} cell")
+    if counts[1]:
+        problems.append(
+            f"{counts[1]} facets between an {OMEGA1} and an {OMEGA2} cell are not tagged {GAMMA!r} (gamma must be "
+            "the whole common boundary of Omega1 and Omega2)"
+        )
     return problems
 
 
@@ -582,8 +620,9 @@ def require_tag_counts(cm) -> None:
         raise MeshTagError(f"{counts[-1]} cells are not tagged exactly once as Omega1 or Omega2")
 
 
-#: the methods that solve 3D (tetrahedral) problems and take rollers (symmetry planes)
-METHODS_3D = ("primal-monolithic",)
+#: the methods that solve 3D (tetrahedral) problems and take rollers (symmetry planes): the primal monolithic
+#: solve and Algorithm 1 (its strip Ω₂ and interface γ are built or read in 3D as in 2D)
+METHODS_3D = ("primal-monolithic", "primal")
 
 
 def require_method_dimension(method: str, msh, boundary=None) -> None:
@@ -596,10 +635,10 @@ def require_method_dimension(method: str, msh, boundary=None) -> None:
         raise InputError(
             f"the method {method!r} solves plane problems (triangles) only; this mesh is "
             f"{msh.topology.dim}D: a 3D problem runs with the method {works} "
-            "(fem.primal.solve_primal_monolithic)"
+            "(fem.primal.solve_primal_monolithic, hybrid.primal.solve_primal_hybrid)"
         )
     if boundary is not None and getattr(boundary, "rollers", ()):
-        raise InputError(f"the method {method!r} takes no rollers (symmetry planes); the method {works} does")
+        raise InputError(f"the method {method!r} takes no rollers (symmetry planes); the methods {works} do")
 
 
 def require_facet_groups(msh, facet_tags, groups: Iterable[Boundary]) -> None:

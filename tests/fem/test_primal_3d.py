@@ -193,7 +193,7 @@ def test_hertz_force_converges_with_the_contact_cells():
     assert fine["sol"].profile.max_pressure == pytest.approx(fine["p0_F"], rel=0.05)
 
 
-def test_methods_other_than_the_primal_monolithic_refuse_3d_and_rollers():
+def test_methods_other_than_the_primal_ones_refuse_3d_and_rollers():
     cm = unit_cube(2)
     problem = ContactProblem(
         youngs_modulus=1.0,
@@ -201,7 +201,7 @@ def test_methods_other_than_the_primal_monolithic_refuse_3d_and_rollers():
         mesh=cm,
         obstacle=Plane((1.0, 0.0), (-1.0, 0.0)).indented(0.01, (-1.0, 0.0)),
     )
-    for method in ("primal", "mixed-monolithic", "primal-ms"):
+    for method in ("mixed", "mixed-monolithic", "primal-ms"):
         with pytest.raises(InputError, match="primal-monolithic"):
             fc.solve(problem, method)
     assert fc.solve(problem, "primal-monolithic").profile.force > 0
@@ -211,7 +211,7 @@ def test_methods_other_than_the_primal_monolithic_refuse_3d_and_rollers():
         youngs_modulus=1.0, poisson_ratio=0.3, mesh=unit_square(4, 2), boundary=BoundaryConditions(rollers=((1, 0.0),))
     )
     with pytest.raises(InputError, match="rollers"):
-        fc.solve(rolled, "primal")
+        fc.solve(rolled, "mixed")
 
 
 def _gmsh_box(path, *, split: float = 0.75, h: float = 0.3, contact_on_side: bool = False):

@@ -1,0 +1,194 @@
+"""Algorithm 1 in 3D: which update reaches the fixed point fastest on the 3D channel model (one process).
+
+The model is ``problem.models3d.channels_3d`` on ``channels_3d_mesh(n)`` (the unit cube, Γ_C the face x = 1,
+Ω₂ the layer x > ¾, stiff channels through γ to Γ_C, the load in Ω₁, rollers on z = 0 and z = 1). For each
+h and contrast it solves
+
+* ``monolithic``: the primal monolithic penalized problem (the reference u_h);
+* ``newton``: the interface Newton (condensed), its interface responses from the entries of J⁻¹ that MUMPS
+  computes from the factors (``PrimalPart.responses`` on one process, the default);
+* ``newton, back-solves``: the same with the responses by blocked multi-RHS back-solves
+  (``AffinePart.responses``, this script only);
+* ``anderson``: Anderson acceleration (depth 10) of the Robin iteration;
+
+each to the transmission residual ``--tol``, and reports the times (offline: the subdomain factorizations
+and the interface responses; online: the rest), the interface Newton's steps (and the local front
+problems' iterations), the applications of T, the transmission residual and e_u against the monolithic
+solution.  n_γ is the number of interface values, n_c of Γ_C unknowns: the dense interface matrices hold
+O((n_γ + n_c)²) numbers.
+
+    OMP_NUM_THREADS=1 .venv/bin/python benchmarks/primal_hybrid_3d.py --h 8 16 24 --contrast 1e3 1e6 \\
+        --out benchmarks/results/primal_hybrid_3d.md
+
+``--windows W …`` instead compares the contact Newton's local front resolution on the contact surface
+(``InterfaceNewtonOptions.front_window`` = W; 0: the plain semismooth Newton) at every h and contrast:
+
+    OMP_NUM_THREADS=1 .venv/bin/python benchmarks/primal_hybrid_3d.py --h 8 12 16 24 --contrast 1e6 \\
+        --windows 0 3 8 --out benchmarks/results/primal_hybrid_3d_fronts.md
+"""
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import fenics_contact as fc  # noqa: F401  (dolfinx_solver before petsc4py)
+from fenics_contact.hybrid.response import AffinePart, PrimalPart
+from fenics_contact.io import machine_description
+from fenics_contact.methods import solve
+from fenics_contact.problem.models3d import channels_3d, channels_3d_mesh
+
+VARIANTS = ("newton", "newton, back-solves", "anderson")
+
+
+def run(n: int, contrast: float, variants, tol: float, max_iterations: int):
+    """The rows of one mesh and contrast, one by one."""
+    problem = channels_3d(E_high=contrast).on(channels_3d_mesh(n))
+    start = time.perf_counter()
+    ref = solve(problem, "primal-monolithic")
+    yield {
+        "h": f"1/{n}",
+        "contrast": f"{contrast:.0e}",
+        "variant": "monolithic",
+        "dofs": ref.dofs,
+        "offline": None,
+        "online": time.perf_counter() - start,
+        "steps": f"{ref.newton.steps} (Newton)",
+        "T": None,
+        "residual": None,
+        "e_u": None,
+    }
+    entries = PrimalPart.responses
+    for variant in variants:
+        accel = variant.split(",")[0]
+        if variant.endswith("back-solves"):
+            PrimalPart.responses = AffinePart.responses
+        try:
+            result = solve(problem, "primal", accel=accel, tol=tol, reference=ref.u, max_iterations=max_iterations)
+        finally:
+            PrimalPart.responses = entries
+        history = result.history
+        ch = history.contact_newton
+        steps = (
+            f"{history.newton_steps} ({ch.local_iterations} local)" if accel == "newton" else f"{history.iterations}"
+        )
+        yield (
+            {
+                "h": f"1/{n}",
+                "contrast": f"{contrast:.0e}",
+                "variant": variant,
+                "dofs": f"{result.dofs['omega1']} + {result.dofs['omega2']}, n_γ {result.dofs['interface']}, "
+                f"n_c {result.profile.points.shape[0]}",
+                "offline": result.time_offline_s,
+                "online": result.time_online_s,
+                "steps": steps,
+                "T": history.iterations,
+                "residual": history.transmission_residual,
+                "e_u": result.e_u,
+                "converged": result.converged,
+            }
+        )
+        result.step.reset()
+
+
+def windows(n: int, contrast: float, widths, tol: float):
+    """The interface Newton with each front window on one mesh and contrast: its rows, one by one."""
+    problem = channels_3d(E_high=contrast).on(channels_3d_mesh(n))
+    ref = solve(problem, "primal-monolithic")
+    step = None
+    for width in widths:
+        result = solve(problem, "primal", accel="newton", front_window=width, tol=tol, reference=ref.u, step=step)
+        step = result.step
+        ch = result.history.contact_newton
+        yield {
+            "h": f"1/{n}",
+            "contrast": f"{contrast:.0e}",
+            "window": width,
+            "n_c": result.profile.points.shape[0],
+            "monolithic": ref.newton.steps,
+            "steps": result.history.newton_steps,
+            "sizes": " ".join(str(k) for k in ch.active_sizes),
+            "local": f"{sum(w for w, _, _ in ch.local)} / {ch.local_iterations} / "
+            f"{max([m for _, _, m in ch.local] or [0])}",
+            "online": result.time_online_s,
+            "e_u": result.e_u,
+        }
+        step.reset()
+
+
+def _cell(value) -> str:
+    if value is None:
+        return "—"
+    if isinstance(value, float):
+        return f"{value:.2f}" if value >= 0.01 else f"{value:.1e}"
+    return str(value)
+
+
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--h", type=int, nargs="+", default=[8, 16, 24], help="1/h of the cube meshes")
+    parser.add_argument("--contrast", type=float, nargs="+", default=[1e3, 1e6])
+    parser.add_argument("--variants", nargs="+", default=list(VARIANTS), choices=VARIANTS)
+    parser.add_argument("--tol", type=float, default=1e-8, help="transmission residual to reach")
+    parser.add_argument("--max-iterations", type=int, default=1000, help="Anderson's cap")
+    parser.add_argument("--windows", type=int, nargs="+", default=None, help="compare these front windows")
+    parser.add_argument("--out", type=Path, default=None)
+    args = parser.parse_args(argv)
+    if args.windows is not None:
+        return _windows_table(args)
+    head = ["h", "contrast", "variant", "DOFs", "offline [s]", "online [s]", "steps", "applications of T",
+            "transmission residual", "e_u", "converged"]  # fmt: skip
+    keys = ["h", "contrast", "variant", "dofs", "offline", "online", "steps", "T", "residual", "e_u", "converged"]
+    lines = [
+        "# Algorithm 1 in 3D: interface Newton and Anderson on the 3D channel model",
+        "",
+        f"Command: `OMP_NUM_THREADS=1 .venv/bin/python benchmarks/primal_hybrid_3d.py {' '.join(sys.argv[1:])}`",
+        "",
+        f"Machine: {machine_description()}",
+        "",
+        f"Every hybrid solve stops at the transmission residual {args.tol:g} (Anderson at most "
+        f"{args.max_iterations} iterations); steps: the interface Newton's (contact Newton steps and "
+        "corrections; in brackets the iterations of its local front problems) or Anderson's iterations; "
+        "e_u: relative L² distance to the monolithic solution; times on a machine shared with other jobs.",
+        "",
+        "| " + " | ".join(head) + " |",
+        "|" + "---|" * len(head),
+    ]
+    for n in args.h:
+        for contrast in args.contrast:
+            for row in run(n, contrast, args.variants, args.tol, args.max_iterations):
+                lines.append("| " + " | ".join(_cell(row.get(k)) for k in keys) + " |")
+                print(lines[-1], flush=True)
+                if args.out is not None:
+                    args.out.write_text("\n".join(lines) + "\n")
+
+
+def _windows_table(args) -> None:
+    head = ["h", "contrast", "front window", "n_c", "monolithic Newton steps", "interface Newton steps",
+            "active-set sizes", "local problems / iterations / largest window", "online [s]", "e_u"]  # fmt: skip
+    keys = ["h", "contrast", "window", "n_c", "monolithic", "steps", "sizes", "local", "online", "e_u"]
+    lines = [
+        "# Algorithm 1 in 3D: the contact Newton's local front resolution on the contact surface",
+        "",
+        f"Command: `OMP_NUM_THREADS=1 .venv/bin/python benchmarks/primal_hybrid_3d.py {' '.join(sys.argv[1:])}`",
+        "",
+        f"Machine: {machine_description()}",
+        "",
+        "The 3D channel model; the interface Newton (condensed) with the front window W (0: the plain "
+        "semismooth Newton on the Γ_C unknowns), the same step reused; local: the front problems solved, "
+        "their semismooth iterations and the largest window (unknowns).",
+        "",
+        "| " + " | ".join(head) + " |",
+        "|" + "---|" * len(head),
+    ]
+    for n in args.h:
+        for contrast in args.contrast:
+            for row in windows(n, contrast, args.windows, args.tol):
+                lines.append("| " + " | ".join(_cell(row.get(k)) for k in keys) + " |")
+                print(lines[-1], flush=True)
+                if args.out is not None:
+                    args.out.write_text("\n".join(lines) + "\n")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,56 @@
+"""Algorithm 1 in 3D on 2 and 3 ranks gives the serial answer (the same solves on COMM_SELF)."""
+
+import numpy as np
+import pytest
+import ufl
+from dolfinx import fem
+from mpi4py import MPI
+from mpi_jobs import on_every_rank
+
+import fenics_contact as fc
+from fenics_contact.problem.models3d import channels_3d, channels_3d_mesh
+
+
+def _numbers(comm: MPI.Comm, accel: str) -> dict:
+    problem = channels_3d(E_high=1e3).on(channels_3d_mesh(8, comm=comm))
+    ref = fc.solve(problem, "primal-monolithic")
+    result = fc.solve(problem, "primal", accel=accel, tol=1e-9, reference=ref.u)
+
+    def norm(u):
+        local = fem.assemble_scalar(fem.form(ufl.inner(u, u) * ufl.dx))
+        return float(np.sqrt(comm.allreduce(local, op=MPI.SUM)))
+
+    V = result.u.function_space
+    owned = V.dofmap.index_map.size_local
+    x = np.concatenate(comm.allgather(V.tabulate_dof_coordinates()[:owned]))
+    u = np.concatenate(comm.allgather(result.u.x.array.reshape(-1, 3)[:owned]))
+    order = np.lexsort(np.round(x, 12).T)
+    return on_every_rank(
+        {
+            "u": u[order],
+            "ranks": comm.size,
+            "norm": norm(result.u),
+            "ref_norm": norm(ref.u),
+            "e_u": result.e_u,
+            "converged": result.converged,
+            "residual": result.history.transmission_residual,
+            "newton_steps": result.history.newton_steps,
+            "active": int(np.count_nonzero(result.profile.active)),
+            "force": result.profile.force,
+        },
+        comm=MPI.COMM_WORLD,
+    )
+
+
+@pytest.mark.mpi(sizes=(2, 3))
+def test_algorithm_1_in_3d_on_several_ranks_is_the_serial_answer():
+    serial = _numbers(MPI.COMM_SELF, "newton")
+    parallel = _numbers(MPI.COMM_WORLD, "newton")
+    assert serial["ranks"] == 1 and parallel["ranks"] == MPI.COMM_WORLD.size
+    for run in (serial, parallel):
+        assert run["converged"] and run["residual"] < 1e-9 and run["e_u"] <= 1e-8
+    assert np.abs(parallel["u"] - serial["u"]).max() <= 1e-10 * np.abs(serial["u"]).max()  # node by node
+    assert abs(parallel["norm"] - serial["norm"]) <= 1e-10 * serial["norm"]
+    assert abs(parallel["ref_norm"] - serial["ref_norm"]) <= 1e-10 * serial["ref_norm"]
+    assert parallel["active"] == serial["active"] and parallel["newton_steps"] == serial["newton_steps"]
+    assert parallel["force"] == pytest.approx(serial["force"], rel=1e-10)

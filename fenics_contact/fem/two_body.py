@@ -31,6 +31,7 @@ from fenics_contact.fem.linalg import SparseFactor, assemble_scipy
 from fenics_contact.fem.mortar import ContactQuadrature, Surface, contact_quadrature, surface
 from fenics_contact.fem.newton import Advance, Check, Direction, StepState, semismooth_newton_loop
 from fenics_contact.fem.primal import default_penalty
+from fenics_contact.fem.two_body_mpi import solve_two_body_distributed
 from fenics_contact.problem.materials import strain, stress
 from fenics_contact.problem.pair import TwoBodyProblem
 
@@ -322,11 +323,10 @@ def solve_two_body(
     """
     if not isinstance(problem, TwoBodyProblem):
         raise InputError(f"solve_two_body takes a TwoBodyProblem, got {type(problem).__name__}")
-    if problem.comm.size > 1:
-        raise InputError(
-            "two-body contact runs on one process: the contact coupling joins DOFs of the two bodies that a "
-            "distributed mesh spreads over ranks (the contact surfaces are not gathered); run it without mpiexec"
-        )
+    if problem.comm.size > 1:  # the contact surfaces gathered, the bulk solved in parallel
+        if initial is not None:
+            raise InputError("solve_two_body: a warm start (initial) is serial only")
+        return solve_two_body_distributed(problem, delta=delta, newton=newton, line_search=line_search)
     start = time.perf_counter()
     msh = problem.mesh
     gdim = msh.geometry.dim

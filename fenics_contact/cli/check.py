@@ -234,14 +234,10 @@ def _check_pair(case: PairCase, args: argparse.Namespace, comm: MPI.Comm) -> int
         f"({_owned(problem.facet_tags.find(problem.pair.master), n_facets, comm)} facets), "
         f"{case.pair.rule} rule of degree {case.pair.quadrature_degree}"
     )
-    refusal = (
-        None
-        if comm.size == 1
-        else InputError("two-body contact runs on one process (the contact surfaces are not gathered across ranks)")
-    )
-    say("  methods: " + "; ".join(f"{m} {'can run' if refusal is None else 'refused'}" for m in PAIR_METHODS))
-    if refusal is not None:
-        raise refusal
+    serial = comm.size == 1
+    say("  methods: " + "; ".join(f"{m} {'can run' if serial or m != 'primal' else 'refused'}" for m in PAIR_METHODS))
+    if not serial and options.method == "primal":
+        raise InputError("two-body contact with Algorithm 1 (--method primal) runs on one process")
     say(f"ok: a run with --method {options.method} can start ({case.description_or_name})")
     return 0
 

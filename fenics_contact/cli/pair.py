@@ -5,7 +5,8 @@ penalized Newton on the whole mesh, or ``primal``, Algorithm 1 with a strip on e
 Algorithm 1's stopping rule and strips, the output directory and the figures; the flags ``--method``,
 ``--out``, ``--no-plots``, ``--delta``, ``--tol``, ``--max-iterations``, ``--accel`` override the case's
 ``[run]`` and ``[primal]`` tables, any other flag is refused.  A run solves each load step (warm-started from
-the last with ``primal-monolithic``) and writes ``outputs.pair``'s files.
+the last with ``primal-monolithic`` on one process) and writes ``cli.pair_outputs``' files; under ``mpiexec``
+``primal-monolithic`` runs in parallel (``fem.two_body_mpi``), ``primal`` is refused.
 """
 
 import logging
@@ -173,10 +174,10 @@ def _converged(result) -> bool:
 
 def run_pair(options: PairRunOptions, comm: MPI.Comm, case: PairCase) -> int:
     """Solve the case (each load step), write into ``options.out``; 0 converged, 3 not converged."""
-    if comm.size > 1:
+    if comm.size > 1 and options.method != "primal-monolithic":
         raise InputError(
-            "two-body contact runs on one process (the contact surfaces are not gathered across ranks): run "
-            "this case without mpiexec"
+            "two-body contact with Algorithm 1 (--method primal) runs on one process: run it without mpiexec, or "
+            "run --method primal-monolithic under mpiexec"
         )
     output = OutputDirectory(options.out, comm)
     with output:
@@ -190,7 +191,7 @@ def run_pair(options: PairRunOptions, comm: MPI.Comm, case: PairCase) -> int:
         for k, displacement in enumerate(steps):
             problem = case.problem(built, step=None if displacement is None else k)
             result = _solve(options, problem, u)
-            u = result.u.x.array.copy()
+            u = result.u.x.array.copy() if comm.size == 1 else None  # (a warm start is serial)
             row = step_row(result, options.method)
             if displacement is not None:
                 row = {"step": k + 1, "displacement": list(displacement)} | row

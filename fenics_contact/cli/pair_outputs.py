@@ -95,8 +95,8 @@ class PairWriter:
         if not self.plots:
             return
         plot_cell_field(problem.fields.E, self.directory / "E.png", title=f"Young's modulus, {self.title}", log=True)
-        plot_pair(result, self.directory / "pair.png", title=self.title)
-        if summary.get("load_steps"):
+        plot_pair(result, problem, self.directory / "pair.png", title=self.title)
+        if summary.get("load_steps") and self.comm.rank == 0:
             plot_force_displacement(summary["load_steps"], self.directory / "force_displacement.png", self.title)
 
 
@@ -106,15 +106,34 @@ def _along(points: np.ndarray) -> tuple[np.ndarray, str]:
     return points[:, k], "xy"[k]
 
 
-def plot_pair(result, path: str | Path, *, title: str = "", scale: float | None = None) -> Path | None:
+def plot_pair(result, problem, path: str | Path, *, title: str = "", scale: float | None = None) -> Path | None:
     """The deformed bodies (displacements magnified by ``scale``, default 10 % of the extent over max |u|),
     coloured by |u| with both contact surfaces drawn, beside the contact pressure −σ_c along each surface.
-    Serial (the two-body solves are)."""
+    Collective: the mesh is gathered to rank 0, which draws (None elsewhere)."""
     u = result.u
     V = u.function_space
     topology, _, x = plot.vtk_mesh(V)
-    triangles = topology.reshape(-1, 4)[:, 1:]
-    disp = u.x.array.reshape(-1, V.dofmap.index_map_bs)[: x.shape[0], :2]
+    n_cells = V.mesh.topology.index_map(V.mesh.topology.dim).size_local
+    body = np.zeros(n_cells)
+    for k, b in enumerate(problem.bodies):
+        cells = problem.cell_tags.find(b.cells)
+        body[cells[cells < n_cells]] = k
+    parts = V.mesh.comm.gather(
+        (
+            topology.reshape(-1, 4)[:n_cells, 1:],
+            x,
+            u.x.array.reshape(-1, V.dofmap.index_map_bs)[: x.shape[0], :2],
+            body,
+        ),
+        root=0,
+    )
+    if parts is None:
+        return None
+    offsets = np.cumsum([0] + [p[1].shape[0] for p in parts[:-1]])
+    triangles = np.vstack([p[0] + off for p, off in zip(parts, offsets, strict=True)])
+    x, disp = np.vstack([p[1] for p in parts]), np.vstack([p[2] for p in parts])
+    vertex_body = np.full(x.shape[0], -1.0)
+    vertex_body[triangles.ravel()] = np.repeat(np.concatenate([p[3] for p in parts]), 3)
     extent = float(np.max(np.ptp(x[:, :2], axis=0)))
     umax = float(np.max(np.linalg.norm(disp, axis=1), initial=0.0))
     if scale is None:
@@ -126,9 +145,14 @@ def plot_pair(result, path: str | Path, *, title: str = "", scale: float | None 
     )
     ax.triplot(deformed[:, 0], deformed[:, 1], triangles, color="k", lw=0.15, alpha=0.4)
     fig.colorbar(pc, ax=ax, label="|u|")
-    for profile, colour, label in ((result.slave, "tab:red", "slave"), (result.master, "tab:blue", "master")):
+    slave_body = problem._slave_body  # (the body the slave surface lies on, found by TwoBodyProblem)
+    for profile, colour, label, k in (
+        (result.slave, "tab:red", "slave", slave_body),
+        (result.master, "tab:blue", "master", 1 - slave_body),
+    ):
         pts = np.asarray(profile.points)[:, :2]
-        nodes = np.argmin(np.linalg.norm(x[:, None, :2] - pts[None], axis=2), axis=0)  # the surface's P1 dofs
+        own = np.flatnonzero(vertex_body == k)  # (the other body may have a vertex at the same point)
+        nodes = own[np.argmin(np.linalg.norm(x[own, None, :2] - pts[None], axis=2), axis=0)]
         moved = pts + scale * disp[nodes]
         ax.plot(moved[:, 0], moved[:, 1], color=colour, lw=1.5, label=label)
         along, axis = _along(pts)

@@ -332,7 +332,7 @@ PAIR_KEYS = {
         "list of vectors",
         "required",
         "its displacement at each step; the last is the run's; each step starts from the last's solution "
-        "(`primal-monolithic`)",
+        "(`primal-monolithic` on one process)",
     ),
     ("run", "method"): (
         "string",

@@ -10,7 +10,8 @@ on that energy (at every step by default: ``solve_two_body``).
 
 The coupling entries Bᵀ W B join DOF blocks of the two bodies that share no cell, outside the pattern of the
 finite-element matrix: the system is assembled in SciPy and factorized by ``fem.linalg.SparseFactor``
-(sequential MUMPS).  Two-body contact runs on one process: under MPI the solve refuses (InputError).
+(sequential MUMPS).  Under MPI ``solve_two_body`` hands over to ``fem.two_body_mpi`` (the contact surfaces gathered
+to every rank, the bulk solved in parallel; the same solution).
 """
 
 import logging
@@ -310,10 +311,11 @@ def solve_two_body(
     line_search: str = "always",
     initial: np.ndarray | None = None,
 ) -> TwoBodySolution:
-    """Penalized frictionless contact of the two bodies of ``problem`` by semismooth Newton (serial).
+    """Penalized frictionless contact of the two bodies of ``problem`` by semismooth Newton (under MPI:
+    ``fem.two_body_mpi.solve_two_body_distributed``).
 
     ``initial``: the displacement DOF vector to start from (a warm start, e.g. the previous load step's
-    ``u.x.array``); its supported DOFs take the problem's values.
+    ``u.x.array``); its supported DOFs take the problem's values.  Serial only.
 
     ``delta`` defaults to ``two_body_penalty``; ``line_search`` as in ``fem.newton`` (exact, on the energy):
     ``"always"`` by default, as a full first step from no contact drives the bodies through each other and the

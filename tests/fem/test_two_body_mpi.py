@@ -72,3 +72,29 @@ def test_algorithm_1_refuses_on_several_ranks():
     assert problem.contact_moduli() == (5.0, 1.0)  # (built and validated collectively)
     with pytest.raises(InputError, match="runs on one process"):
         fc.solve(problem, "primal")
+
+
+def _tilted_3d(comm: MPI.Comm) -> TwoBodyProblem:
+    m = two_blocks(3, 4, heights=(0.5, 0.4), dim=3, comm=comm)
+    return TwoBodyProblem(
+        m.mesh,
+        m.cell_tags,
+        m.facet_tags,
+        bodies=(Body(T.LOWER, 1.0, 0.3), Body(T.UPPER, 5.0, 0.2)),
+        pair=ContactPair(T.UPPER_BOTTOM, T.LOWER_TOP),
+        supports=(
+            Support(T.LOWER_BOTTOM),
+            Support(T.UPPER_TOP, lambda x: np.vstack([0.0 * x[0], 0.0 * x[0], 0.005 - 0.02 * x[0]])),
+        ),
+    )
+
+
+def test_two_ranks_give_the_serial_solution_in_three_dimensions():
+    parallel = fc.solve(_tilted_3d(MPI.COMM_WORLD), "primal-monolithic")
+    serial = fc.solve(_tilted_3d(MPI.COMM_SELF), "primal-monolithic")
+    assert 0 < np.count_nonzero(serial.slave.active) < serial.slave.active.size
+    for a, b in ((parallel.slave, serial.slave), (parallel.master, serial.master)):
+        assert np.array_equal(a.points, b.points)
+        assert np.max(np.abs(a.sigma_c - b.sigma_c)) <= 1e-10 * np.max(np.abs(b.sigma_c))
+    for fp, fs in zip(parallel.forces, serial.forces, strict=True):
+        assert np.linalg.norm(fp - fs) <= 1e-10 * np.linalg.norm(fs)

@@ -1,17 +1,26 @@
 """The whole force–indentation curve, offline phase included, for every method against the monolithic solve.
 
-A cylinder (``Circle((3.0, 0.5), 2.0)``) indents the contact side x = 1 of a built-in test model in
-load steps (``force_indentation``: each method built once, warm starts, every step certified); each
-method runs in a fresh process (its own peak memory), and the table gives its set-up (offline) time,
-the offline work done inside the first step (the interface Newton's Ω₁ response), the median and the
-total of the steps, the whole curve against the monolithic Newton's, the peak resident memory and the
-largest force difference to the monolithic curve of the same discretization (primal or mixed).
+A cylinder (``Circle(centre, radius)``, by default ``Circle((3.0, 0.5), 2.0)``) indents the contact side x = 1
+of a built-in test model in load steps (``force_indentation``: each method built once, warm starts, every step
+certified).  Each method runs in a fresh process (its own peak memory); the table gives its set-up (offline)
+time, the offline work done inside the steps (the interface Newton's condensation: Ω₁'s response in the
+first step, Ω₂'s contact columns again whenever the obstacle's normals move), the median and the sum of the
+steps, the whole curve (wall and CPU time of the process; CPU also to the end of step 1 and per step)
+against the monolithic Newton's of the same discretization (primal or mixed), the peak resident memory and the
+largest relative force difference to the monolithic curve.  With ``--cached`` the multiscale methods run a
+second time on the offline data the first run stored (``cache_dir``): the set-up of a later curve on the same
+Ω₁ (another obstacle, other depths).
 
-    OMP_NUM_THREADS=1 .venv/bin/python benchmarks/load_path.py --h 256 --H 16 --steps 20 \\
-        --methods primal-monolithic primal primal-ms --out benchmarks/results/load_path.md
+    OMP_NUM_THREADS=1 .venv/bin/python benchmarks/load_path.py --h 128 --H 16 --steps 20 --cached \\
+        --methods primal-monolithic primal primal-ms mixed-monolithic mixed mixed-ms \\
+        --out benchmarks/results/load_path.md
+    OMP_NUM_THREADS=1 .venv/bin/python benchmarks/load_path.py --h 256 --H 16 --steps 20 --cached \\
+        --methods primal-monolithic primal primal-ms --out benchmarks/results/load_path_256.md
 
-Time only the work itself: the mesh and the problem are built before the clock starts. Ratios are
-within one run; run it on a quiet machine (the machine line of the results file says which).
+Only the work itself is timed: the mesh and the problem are built before the clock starts.  Algorithm 3's
+per-step check of its multiscale Ω₁ against the fine Ω₁ solve (``IndentationStep.omega1_check``: one fine
+solve per step, verification rather than the method) is off unless ``--check``.  Ratios are within one run;
+on a machine shared with other jobs the CPU-time ratio is the steadier one (the machine line says which).
 """
 
 import argparse
@@ -19,6 +28,7 @@ import json
 import os
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -33,6 +43,24 @@ FAMILY = {
     "mixed": "mixed",
     "mixed-ms": "mixed",
 }
+#: the options passed on to the child process (``--one``)
+FORWARD = (
+    "h",
+    "H",
+    "model",
+    "contrast",
+    "steps",
+    "first",
+    "last",
+    "centre",
+    "radius",
+    "direction",
+    "layers",
+    "nbasis",
+    "tol",
+    "accel",
+    "check",
+)
 
 
 def one(args) -> dict:
@@ -42,77 +70,71 @@ def one(args) -> dict:
     from fenics_contact.problem.models import get_model
 
     cm = fc.unit_square(args.h, args.H)
-    problem = get_model(args.model, E_high=args.contrast).with_(obstacle=fc.Circle((3.0, 0.5), 2.0)).on(cm)
+    obstacle = fc.Circle(tuple(args.centre), args.radius)
+    problem = get_model(args.model, E_high=args.contrast).with_(obstacle=obstacle).on(cm)
     depths = np.linspace(args.first, args.last, args.steps)
     options = {}
     if args.one.endswith("-ms"):
         options["layers"], options["nbasis"] = args.layers, args.nbasis
-    if args.one in ("primal", "mixed", "primal-ms", "mixed-ms"):
+        if args.cache_dir:
+            options["cache_dir"] = args.cache_dir
+    if args.one == "primal-ms":
+        options["check"] = args.check
+    if not args.one.endswith("monolithic"):
         options["tol"] = args.tol
-    start = time.perf_counter()
-    curve = fc.force_indentation(problem, args.one, depths, direction=(-1.0, 0.0), **options)
-    total = time.perf_counter() - start
+        if args.accel:
+            options["accel"] = args.accel
+    marks = []  # the process's CPU time at the end of every step
+    wall, cpu = time.perf_counter(), time.process_time()
+    curve = fc.force_indentation(
+        problem,
+        args.one,
+        depths,
+        direction=tuple(args.direction),
+        on_step=lambda record, solver: marks.append(time.process_time()),
+        **options,
+    )
+    wall, cpu_end = time.perf_counter() - wall, time.process_time()
+    step_cpu = np.diff(marks)  # steps 2…N, their offline work included
     steps = [s.time_s for s in curve.steps]
     return {
         "method": args.one,
         "setup_s": curve.time_offline_s,
-        "first_step_offline_s": curve.steps[0].time_offline_s,
+        "offline_in_steps_s": float(sum(s.time_offline_s for s in curve.steps)),
         "step_median_s": float(np.median(steps)),
         "steps_s": float(np.sum(steps)),
-        "total_s": total,
+        "total_s": wall,
+        "cpu_s": cpu_end - cpu,
+        "cpu_to_first_step_s": marks[0] - cpu,
+        "cpu_step_median_s": float(np.median(step_cpu)) if step_cpu.size else float("nan"),
         "forces": curve.forces.tolist(),
         "converged": all(s.converged for s in curve.steps),
         "iterations": [s.iterations for s in curve.steps],
         "peak_rss_gb": peak_rss_bytes() / 1e9,
+        "offline_parts": dict(getattr(curve.step, "offline_times", {})),  # Algorithm 3's set-up by phase
     }
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--h", type=int, default=256, help="1/h of the unit-square mesh")
-    parser.add_argument("--H", type=int, default=16, help="1/H: the strip width and coarse size")
-    parser.add_argument("--model", type=int, default=3)
-    parser.add_argument("--contrast", type=float, default=1e3, help="E in the model's pattern (E = 1 elsewhere)")
-    parser.add_argument("--steps", type=int, default=20)
-    parser.add_argument("--first", type=float, default=0.002, help="first indentation depth")
-    parser.add_argument("--last", type=float, default=0.02, help="last indentation depth")
-    parser.add_argument("--layers", type=int, default=4)
-    parser.add_argument("--nbasis", type=int, default=3)
-    parser.add_argument("--tol", type=float, default=1e-8, help="tolerance of the certificate (hybrid methods)")
-    parser.add_argument(
-        "--methods", nargs="+", default=["primal-monolithic", "primal", "primal-ms"], choices=list(FAMILY)
-    )
-    parser.add_argument("--out", type=Path, default=None, help="a markdown results file (default: print)")
-    parser.add_argument("--one", choices=list(FAMILY), help=argparse.SUPPRESS)
-    args = parser.parse_args()
-    if args.one:
-        print("RESULT " + json.dumps(one(args)))
-        return
-    from fenics_contact.io import machine_description
+def run_child(method: str, args, cache_dir: str | None) -> dict:
+    cmd = [sys.executable, __file__, "--one", method]
+    for name in FORWARD:
+        value = getattr(args, name)
+        if isinstance(value, bool):
+            cmd += [f"--{name}"] if value else []
+        elif isinstance(value, list | tuple):
+            cmd += [f"--{name}", *map(str, value)]
+        elif value is not None:
+            cmd += [f"--{name}={value}"]
+    if cache_dir:
+        cmd += [f"--cache-dir={cache_dir}"]
+    proc = subprocess.run(cmd, capture_output=True, text=True, env=os.environ, cwd=ROOT)
+    line = next((row for row in proc.stdout.splitlines() if row.startswith("RESULT ")), None)
+    if line is None:
+        raise SystemExit(f"{method} failed:\n{proc.stderr[-3000:]}")
+    return json.loads(line[7:])
 
-    results = {}
-    for method in args.methods:
-        cmd = [sys.executable, __file__, "--one", method] + [
-            f"--{k}={v}"
-            for k, v in (
-                ("h", args.h),
-                ("H", args.H),
-                ("model", args.model),
-                ("contrast", args.contrast),
-                ("steps", args.steps),
-                ("first", args.first),
-                ("last", args.last),
-                ("layers", args.layers),
-                ("nbasis", args.nbasis),
-                ("tol", args.tol),
-            )
-        ]
-        proc = subprocess.run(cmd, capture_output=True, text=True, env=os.environ, cwd=ROOT)
-        line = next((row for row in proc.stdout.splitlines() if row.startswith("RESULT ")), None)
-        if line is None:
-            raise SystemExit(f"{method} failed:\n{proc.stderr[-3000:]}")
-        results[method] = json.loads(line[7:])
-        print(f"{method}: total {results[method]['total_s']:.2f} s", flush=True)
+
+def table(args, results: dict) -> str:
     lines = [
         f"# Load path: {args.steps} steps of a cylinder into model {args.model} (contrast {args.contrast:g}), "
         f"h = 1/{args.h}, H = 1/{args.H}",
@@ -120,27 +142,108 @@ def main() -> None:
         f"Command: `OMP_NUM_THREADS={os.environ.get('OMP_NUM_THREADS', 'unset')} .venv/bin/python "
         f"benchmarks/load_path.py {' '.join(sys.argv[1:])}`",
         "",
-        f"Machine: {machine_description()}",
+        f"Obstacle `Circle({tuple(args.centre)}, {args.radius})` moved along {tuple(args.direction)} from depth "
+        f"{args.first:g} to {args.last:g}; hybrid methods: tol {args.tol:g}, accel {args.accel or 'the default'}; "
+        f"multiscale: m = {args.layers}, l = {args.nbasis}; Algorithm 3's fine Ω₁ check "
+        f"{'on' if args.check else 'off'}.",
         "",
-        "| method | set-up [s] | offline in step 1 [s] | step median [s] | steps [s] | whole curve [s] "
-        "| / monolithic | peak memory [GB] | max force difference to the monolithic curve |",
-        "|---|---|---|---|---|---|---|---|---|",
+        f"Machine: {machine()}",
+        "",
+        "| method | set-up [s] | offline in steps [s] | step median [s] | steps [s] | whole curve [s] "
+        "| / monolithic | CPU [s] | CPU / monolithic | CPU to step 1 [s] | CPU step median [s] | peak memory [GB] "
+        "| max force difference |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
-    for method, r in results.items():
+    for label, r in results.items():
+        method = r["method"]
         mono = results.get(f"{FAMILY[method]}-monolithic")
-        ratio = f"{r['total_s'] / mono['total_s']:.2f}" if mono else "—"
+        ratio = f"{r['total_s'] / mono['total_s']:.3f}" if mono else "—"
+        cpu_ratio = f"{r['cpu_s'] / mono['cpu_s']:.3f}" if mono else "—"
         diff = (
             f"{np.max(np.abs(np.subtract(r['forces'], mono['forces'])) / np.abs(mono['forces'])):.1e}"
             if mono and method != f"{FAMILY[method]}-monolithic"
             else "—"
         )
+        converged = "" if r["converged"] else " (not all steps converged)"
         lines.append(
-            f"| {method} | {r['setup_s']:.2f} | {r['first_step_offline_s']:.2f} | {r['step_median_s']:.3f} "
-            f"| {r['steps_s']:.2f} | {r['total_s']:.2f} | {ratio} | {r['peak_rss_gb']:.2f} | {diff} |"
+            f"| {label}{converged} | {r['setup_s']:.2f} | {r['offline_in_steps_s']:.2f} | {r['step_median_s']:.4f} "
+            f"| {r['steps_s']:.2f} | {r['total_s']:.2f} | {ratio} | {r['cpu_s']:.2f} | {cpu_ratio} "
+            f"| {r['cpu_to_first_step_s']:.2f} | {r['cpu_step_median_s']:.4f} | {r['peak_rss_gb']:.2f} | {diff} |"
         )
-    text = "\n".join(lines) + "\n"
+    for label, r in results.items():
+        parts = r.get("offline_parts") or {}
+        if parts:
+            text = ", ".join(f"{k} {v:.2f}" for k, v in parts.items() if isinstance(v, int | float))
+            lines += ["", f"Set-up of {label} by phase [s]: {text}"]
+    lines += [
+        "",
+        "Set-up: building the solver before the first step (the multiscale Ω₁'s offline phase, factorizations); "
+        "offline in steps: the interface Newton's condensation done inside the steps (Ω₁'s response in the first, "
+        "Ω₂'s contact columns again when the obstacle's normals move); steps: the online work (wall times).  CPU: "
+        "the process's CPU time, for the whole curve, to the end of step 1 (set-up and first step) and per step "
+        "(steps 2…N, offline work included).  The force difference is relative to the monolithic force of each "
+        "step.",
+    ]
+    return "\n".join(lines) + "\n"
+
+
+def machine() -> str:
+    from fenics_contact.io import machine_description
+
+    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
+    text = f"{machine_description()}; load average {load:.1f} at the end of the run"
+    if load > 1.5:  # more than the one process of the run
+        text += (
+            ". The machine was shared with other jobs: the wall times are contended, compare the CPU times (and "
+            "ratios within this table only)"
+        )
+    return text
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--h", type=int, default=128, help="1/h of the unit-square mesh")
+    parser.add_argument("--H", type=int, default=16, help="1/H: the strip width and coarse size")
+    parser.add_argument("--model", type=int, default=3)
+    parser.add_argument("--contrast", type=float, default=1e3, help="E in the model's pattern (E = 1 elsewhere)")
+    parser.add_argument("--steps", type=int, default=20)
+    parser.add_argument("--first", type=float, default=0.002, help="first indentation depth")
+    parser.add_argument("--last", type=float, default=0.02, help="last indentation depth")
+    parser.add_argument("--centre", type=float, nargs=2, default=[3.0, 0.5], help="the cylinder's centre")
+    parser.add_argument("--radius", type=float, default=2.0, help="the cylinder's radius")
+    parser.add_argument("--direction", type=float, nargs=2, default=[-1.0, 0.0], help="the obstacle's motion")
+    parser.add_argument("--layers", type=int, default=4)
+    parser.add_argument("--nbasis", type=int, default=3)
+    parser.add_argument("--tol", type=float, default=1e-8, help="tolerance of the certificate (hybrid methods)")
+    parser.add_argument("--accel", default="newton", help="the hybrid methods' update (IterationOptions.accel)")
+    parser.add_argument("--check", action="store_true", help="Algorithm 3's fine Ω₁ check at every step")
+    parser.add_argument("--cached", action="store_true", help="run the multiscale methods again on cached data")
+    parser.add_argument(
+        "--methods", nargs="+", default=["primal-monolithic", "primal", "primal-ms"], choices=list(FAMILY)
+    )
+    parser.add_argument("--out", type=Path, default=None, help="a markdown results file (default: print)")
+    parser.add_argument("--append", action="store_true", help="add the table to --out instead of replacing it")
+    parser.add_argument("--one", choices=list(FAMILY), help=argparse.SUPPRESS)
+    parser.add_argument("--cache-dir", default=None, help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.one:
+        print("RESULT " + json.dumps(one(args)))
+        return
+    results = {}
+    with tempfile.TemporaryDirectory(prefix="load_path_cache_") as cache:
+        for method in args.methods:
+            multiscale = method.endswith("-ms")
+            results[method] = run_child(method, args, cache if multiscale else None)
+            print(f"{method}: whole curve {results[method]['total_s']:.2f} s", flush=True)
+            if multiscale and args.cached:
+                label = f"{method}, offline data from the cache"
+                results[label] = run_child(method, args, cache)
+                print(f"{label}: whole curve {results[label]['total_s']:.2f} s", flush=True)
+    text = table(args, results)
     if args.out:
         args.out.parent.mkdir(parents=True, exist_ok=True)
+        if args.append and args.out.is_file():
+            text = args.out.read_text() + "\n" + text.replace("# Load path", "## Load path", 1)
         args.out.write_text(text)
     print(text)
 

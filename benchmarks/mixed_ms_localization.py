@@ -15,10 +15,11 @@ import time
 from pathlib import Path
 
 import numpy as np
+from common import write_report
 
 import fenics_contact  # noqa: F401  (must precede dolfinx / petsc4py)
 from fenics_contact.hybrid.mixed import MixedHybridStep
-from fenics_contact.io import machine_description, write_report
+from fenics_contact.io import machine_description
 from fenics_contact.multiscale import mixed_cem as mm
 from fenics_contact.multiscale.coarse import coarse_grid
 from fenics_contact.problem import geometry, models

@@ -17,12 +17,14 @@
 # solution for a half-space: the contact is a disc of radius a = √(R d), the force F = 4E*a³/(3R) with
 # E* = E/(1 − ν²), and the pressure p(r) = p₀√(1 − r²/a²) with p₀ = 3F/(2πa²).
 #
-# The block is a quarter, (0, L)² × (−L, 0) with L = 40a, on rollers (u·n = 0) on the symmetry planes
-# x = 0 and y = 0 and clamped at the bottom; its tetrahedra are of size h near the contact and grow away
-# from it. The primal penalty contact is solved by semismooth Newton on the whole block (the monolithic
-# solve: the hybrid methods are two-dimensional so far).
+# The block is a quarter, (0, L)² × (−L, 0) with L = 20a, on rollers (u·n = 0) on the symmetry planes
+# x = 0 and y = 0 and clamped at the bottom (`fc.analytic.hertz_sphere_model`); its tetrahedra
+# (`meshes3d.hertz_quarter_block`, gmsh) are of size h_c within 1.25a of the first contact point and grow with the
+# distance beyond. R = 10a (a/R = 0.1), the penalty δ = 10⁻³·h_c/E*. The primal penalty contact is
+# solved by semismooth Newton on the whole block (the monolithic solve), each Newton step by conjugate
+# gradients preconditioned with smoothed-aggregation AMG (the rigid-body modes as its near-nullspace).
 #
-# `FENICS_CONTACT_DEMO_N` sets the contact cells: h = a/(N/4) (default N = 16: h = a/4).
+# `FENICS_CONTACT_DEMO_N` sets the contact cells: h_c = a/(N/4) (default N = 80: h_c = a/20).
 
 # %%
 import os
@@ -34,52 +36,45 @@ import numpy as np
 
 import fenics_contact as fc  # imports dolfinx_solver before dolfinx
 from fenics_contact.io import write_vtx
-from fenics_contact.problem.meshes3d import graded_planes
+from fenics_contact.problem.analytic import hertz_sphere_errors, hertz_sphere_model, hertz_sphere_penalty
 
-N = int(os.environ.get("FENICS_CONTACT_DEMO_N", "16"))
+N = int(os.environ.get("FENICS_CONTACT_DEMO_N", "80"))
 OUT = Path(os.environ.get("FENICS_CONTACT_DEMO_OUT", "results/demo_hertz_3d"))
 OUT.mkdir(parents=True, exist_ok=True)
 
-E, nu, R, a = 1.0, 0.3, 1.0, 0.1
+E, nu, a = 1.0, 0.3, 0.1
+R = 10 * a
 h = a / max(N / 4.0, 2.0)
-planes = graded_planes(40 * a, fine=1.25 * a, h=h, growth=1.4)
-cm = fc.box_mesh(
-    planes,
-    planes,
-    -planes[::-1],
-    contact="zmax",
-    clamped=("zmin",),
-    contact_region=lambda p: (p[0] <= 3 * a + 1e-12) & (p[1] <= 3 * a + 1e-12),
+problem = hertz_sphere_model(a, h, radius=R, E=E, nu=nu)
+solution = fc.solve(problem, "primal-monolithic", delta=hertz_sphere_penalty(h, E=E, nu=nu), solver="amg")
+print(
+    f"{problem.cm.mesh.topology.index_map(3).size_global} tetrahedra, {solution.dofs} DOFs, h_c = a/{a / h:g}, "
+    f"{solution.newton.steps} Newton steps, CG iterations {solution.krylov_iterations}"
 )
-sphere = fc.Sphere((0.0, 0.0, R), R).indented(a * a / R, (0.0, 0.0, -1.0))
-problem = fc.ContactProblem(
-    youngs_modulus=E,
-    poisson_ratio=nu,
-    obstacle=sphere,
-    mesh=cm,
-    boundary=fc.BoundaryConditions(rollers=((0, 0.0), (1, 0.0))),
-)
-solution = fc.solve(problem, "primal-monolithic")
-print(f"{cm.mesh.topology.index_map(3).size_global} tetrahedra, h = a/{a / h:g}, {solution.newton.steps} Newton steps")
 
 # %% [markdown]
-# The computed contact against Hertz's: the force of the whole block is four times the quarter's; the
-# contact radius and peak pressure are compared with Hertz's for the computed force.
+# The computed contact against Hertz's for the computed force F (four times the quarter's): the
+# area-equivalent contact radius √(A/π) (A the contact area, four times the quarter's) against a, the
+# pressure at the centre against p₀, and the L² error of the pressure over Γ_C. The largest nodal pressure
+# overshoots p₀ by a few per cent (P1 near the centre) and the force at the depth d depends on the size of
+# the block: they are printed, not checked.
 
 # %%
+errors = hertz_sphere_errors(solution.profile, radius=R, E=E, nu=nu, h_contact=h)
 E_star = E / (1 - nu**2)
-profile = solution.profile
-force = 4 * profile.force
-a_F = (3 * force * R / (4 * E_star)) ** (1 / 3)
-p0 = 3 * force / (2 * np.pi * a_F**2)
-r = np.hypot(profile.points[:, 0], profile.points[:, 1])
-reach = float(r[profile.active].max())
 print(
-    f"force {force:.5g} (Hertz at this depth {4 * E_star * a**3 / (3 * R):.5g}), contact radius {reach:.4g} "
-    f"(Hertz {a_F:.4g}, cell {h:.3g}), peak pressure {profile.max_pressure:.4g} (Hertz {p0:.4g})"
+    f"force {errors.force:.5g} (Hertz at this depth {4 * E_star * a**3 / (3 * R):.5g}); contact radius "
+    f"{errors.radius:.4g} (Hertz {errors.a:.4g}: {errors.radius_cells:+.2f} h_c); centre pressure "
+    f"{errors.centre_error:+.2%} of p0; L2 pressure error {errors.l2_error:.2%}; largest pressure "
+    f"{errors.peak_error:+.2%} of p0"
 )
-assert abs(reach - a_F) <= 2 * h, "the contact radius is within two contact cells of Hertz's"
-assert abs(profile.max_pressure / p0 - 1) < 0.05, "the peak pressure is within 5 % of Hertz's"
+assert abs(errors.radius_cells) <= 1.0, "the contact radius is within a contact cell of Hertz's"
+if h <= a / 20:  # (at a/4, N = 16: the centre pressure −3.0 %, the L2 error 9.3 %)
+    assert abs(errors.centre_error) <= 0.03, "the centre pressure is within 3 % of Hertz's at h_c = a/20"
+    assert errors.l2_error <= 0.04, "the pressure profile is within 4 % of Hertz's (L2) at h_c = a/20"
+profile = solution.profile
+a_F, p0 = errors.a, errors.p0
+r = np.hypot(profile.points[:, 0], profile.points[:, 1])
 
 # %%
 order = np.argsort(r)
@@ -87,7 +82,7 @@ fig, ax = plt.subplots(figsize=(6, 3.5))
 ax.plot(r[order] / a, -profile.sigma_c[order] / p0, ".", ms=3, label="computed (nodes of Γ_C)")
 s = np.linspace(0, 1, 200)
 ax.plot(s * a_F / a, np.sqrt(1 - s**2), "k-", label="Hertz, p₀√(1 − r²/a²)")
-ax.set(xlim=(0, 2), xlabel="r / a", ylabel="p / p₀", title=f"Sphere on a block, h = a/{a / h:g}")
+ax.set(xlim=(0, 2), xlabel="r / a", ylabel="p / p₀", title=f"Sphere on a block, h_c = a/{a / h:g}")
 ax.legend()
 fig.tight_layout()
 fig.savefig(OUT / "hertz_3d_pressure.png", dpi=120)

@@ -38,6 +38,8 @@ VARIANTS = [
     ("obstacle", 'shape = "wall"', "[obstacle]\n", None),
     ("obstacle", 'shape = "plane"', '[obstacle]\nshape = "plane"\npoint = [1.0, 0.0]\nnormal = [-1.0, 0.0]\n', None),
     ("obstacle", 'shape = "circle"', '[obstacle]\nshape = "circle"\ncentre = [2.0, 0.5]\nradius = 1.0\n', None),
+    ("friction", 'law = "coulomb"', '[friction]\nlaw = "coulomb"\nmu = 0.3\n', None),
+    ("friction", 'law = "tresca"', '[friction]\nlaw = "tresca"\nthreshold = 0.01\n', None),
 ]
 
 _SIDES = "a list of `left`, `bottom`, `top`"
@@ -141,6 +143,25 @@ PROBLEM_KEYS = {
         "the plane's normal",
         "the direction the obstacle moves in (normalized); required for a circle with `indentation`",
     ),
+    ("obstacle", "motion"): (
+        "list of vectors",
+        "none",
+        "rigid displacements of the obstacle from where the case places it, one per load step (press, then "
+        "drag: a sliding path, the summary's `sliding`); the run's fields are those of the steps; instead of "
+        "`indentation`; not for the wall",
+    ),
+    ("friction", "law"): (
+        '`"coulomb"` or `"tresca"`',
+        "required",
+        "the friction law on Γ_C (without `[friction]`: frictionless); primal methods only",
+    ),
+    ("friction", "mu"): ("number ≥ 0", "required", "the Coulomb coefficient: slip threshold μ times the pressure"),
+    ("friction", "threshold"): ("number ≥ 0", "required", "the Tresca slip threshold s (a traction) on all of Γ_C"),
+    ("friction", "stiffness-ratio"): (
+        "number > 0",
+        "1",
+        "the stick stiffness 1/δ_t over the normal penalty 1/δ (the elastic stick slip it leaves is τ·δ_t)",
+    ),
 }
 
 #: run keys whose flag's help does not say what the key does in a case file: key -> (default, meaning)
@@ -169,6 +190,7 @@ TABLES = {
     "load": "the body force",
     "boundary": "the boundary conditions on Γ_D and Γ_N",
     "obstacle": "the rigid obstacle and its load steps",
+    "friction": "the friction law on Γ_C",
 }
 
 

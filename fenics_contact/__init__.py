@@ -41,6 +41,8 @@ _API = {
     "METHODS": "fenics_contact.methods",
     "solve": "fenics_contact.methods",
     "force_indentation": "fenics_contact.indentation",
+    "Friction": "fenics_contact.problem.friction",
+    "slide": "fenics_contact.sliding",
     "IterationOptions": "fenics_contact.hybrid.iteration",
     "CEMOptions": "fenics_contact.multiscale.cem",
     "MixedCEMOptions": "fenics_contact.multiscale.mixed_cem",

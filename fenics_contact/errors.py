@@ -1,6 +1,6 @@
 """Exception classes: every failure of the package is one of these."""
 
-__all__ = ["FenicsContactError", "InputError", "MeshTagError", "ConvergenceError"]
+__all__ = ["FenicsContactError", "InputError", "MeshTagError", "ConvergenceError", "OutputError"]
 
 
 class FenicsContactError(Exception):
@@ -17,3 +17,7 @@ class MeshTagError(FenicsContactError, ValueError):
 
 class ConvergenceError(FenicsContactError, RuntimeError):
     """A nonlinear or linear solver did not converge."""
+
+
+class OutputError(FenicsContactError, OSError):
+    """The results cannot be written: too little space for them, a write that failed (a full disk)."""

@@ -22,22 +22,25 @@ from pathlib import Path
 
 import basix.ufl
 import dolfinx.io
+import dolfinx.jit
 import numpy as np
 from dolfinx import fem
 from mpi4py import MPI
 from petsc4py import PETSc
 
 from fenics_contact import __version__
-from fenics_contact.errors import InputError
+from fenics_contact.errors import InputError, OutputError
 from fenics_contact.problem.materials import strain, stress
 
 __all__ = [
     "peak_rss_bytes",
+    "process_alive",
     "provenance",
     "OutputDirectory",
     "cell_function_of",
     "cell_markers",
     "check_output_target",
+    "check_jit_cache",
     "check_outside_output",
     "machine_description",
     "stress_field",
@@ -164,6 +167,17 @@ def _records(value) -> bool:
     return isinstance(value, list) and bool(value) and all(isinstance(v, dict) for v in value)
 
 
+def _finite(value):
+    """``value`` with every float that is inf or NaN (nested in dicts, lists and tuples) replaced by None."""
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_finite(v) for v in value]
+    if isinstance(value, (float, np.floating)) and not np.isfinite(value):
+        return None
+    return value
+
+
 def write_summary(directory: str | Path, summary: dict, comm: MPI.Comm = MPI.COMM_WORLD) -> None:
     """DIR/summary.json and DIR/summary.md (tables: the run's quantities, then one per nested result), rank 0."""
     if comm.rank != 0:
@@ -178,7 +192,8 @@ def write_summary(directory: str | Path, summary: dict, comm: MPI.Comm = MPI.COM
             return value.tolist()
         raise TypeError(f"cannot serialize {type(value)}")
 
-    (directory / "summary.json").write_text(json.dumps(summary, indent=2, default=plain) + "\n")
+    summary = _finite(summary)  # (JSON has no inf or NaN: a relative error of a vanishing reference is null)
+    (directory / "summary.json").write_text(json.dumps(summary, indent=2, default=plain, allow_nan=False) + "\n")
     title = f"fenics-contact run: {summary.get('method', '')}".strip()
     (directory / "summary.md").write_text("\n".join(_markdown(summary, title)) + "\n")
 
@@ -199,8 +214,9 @@ _STALE_AGE_S = 24 * 3600.0
 def _is_run_directory(path: Path) -> bool:
     """True if ``path`` is empty or holds exactly what a fenics-contact run wrote there (so it may be replaced):
     its marker lists the entries the run wrote, and nothing else is there (a file the user added, a copied
-    summary, a case file or a cache directory kept inside it make it the user's)."""
-    entries = {entry.name for entry in path.iterdir()}
+    summary, a case file or a cache directory kept inside it make it the user's; the staging directories of
+    runs into it are not counted)."""
+    entries = {entry.name for entry in path.iterdir() if not _STAGING.match(entry.name)}
     if not entries:
         return True
     try:
@@ -210,6 +226,25 @@ def _is_run_directory(path: Path) -> bool:
     if not lines or lines[0] != RUN_MARKER_HEADER:
         return False
     return entries <= {RUN_MARKER, *lines[1:]}
+
+
+def check_jit_cache() -> Path:
+    """The directory where DOLFINx keeps the compiled forms (``$XDG_CACHE_HOME/fenics``, or the ``cache_dir`` of
+    its JIT options), created if need be; InputError when it cannot be created or written, before a form is
+    compiled (FFCx would fail with a traceback there)."""
+    cache = Path(dolfinx.jit.get_options()["cache_dir"])
+    try:
+        cache.mkdir(parents=True, exist_ok=True)
+        ok = os.access(cache, os.W_OK | os.X_OK)
+        reason = "it is not writable"
+    except OSError as err:
+        ok, reason = False, err.strerror or str(err)
+    if not ok:
+        raise InputError(
+            f"the cache of compiled forms {cache} cannot be used: {reason}; point XDG_CACHE_HOME (or cache_dir "
+            "in a dolfinx_jit_options.json) to a writable directory"
+        )
+    return cache
 
 
 def check_outside_output(target: str | Path, path: str | Path | None, what: str) -> None:
@@ -267,9 +302,9 @@ def check_output_target(target: str | Path) -> Path:
                 f"--out {target} holds files that are not the output of a fenics-contact run; the run "
                 "would replace the directory as a whole. Choose another directory or empty it."
             )
-    parent = resolved.parent if resolved.exists() else existing
-    if not os.access(parent, os.W_OK | os.X_OK):
-        raise InputError(f"--out {target}: {parent} is not writable")
+    home = resolved if resolved.exists() else existing  # (an existing --out is filled in place)
+    if not os.access(home, os.W_OK | os.X_OK):
+        raise InputError(f"--out {target}: {home} is not writable")
     return target
 
 
@@ -284,7 +319,8 @@ def _nearest_existing(path: Path) -> Path:
         path = path.parent
 
 
-def _alive(pid: int) -> bool:
+def process_alive(pid: int) -> bool:
+    """True if the process ``pid`` exists (on this host)."""
     try:
         os.kill(pid, 0)
     except ProcessLookupError:
@@ -304,7 +340,9 @@ def _remove_stale_staging(parent: Path) -> None:
             continue
         try:
             stale = (
-                not _alive(int(match["pid"])) if match["host"] == host else now - path.stat().st_mtime > _STALE_AGE_S
+                not process_alive(int(match["pid"]))
+                if match["host"] == host
+                else now - path.stat().st_mtime > _STALE_AGE_S
             )
         except OSError:
             continue
@@ -326,13 +364,17 @@ def _signals_blocked() -> Iterator[None]:
 class OutputDirectory:
     """A run directory written whole or not at all (collective over ``comm``).
 
-    ``path`` is a hidden staging directory beside ``target`` (created on rank 0, the same
-    path on every rank); write every file there. ``commit()`` puts it in the place of
-    ``target`` (whose previous contents are removed only then: a reused ``--out`` ends
-    holding exactly one run); leaving the ``with`` block without ``commit()`` (an error, an
-    interrupt) removes it and leaves ``target`` as it was. Staging directories of runs that
-    were killed are removed when the next run starts beside them.
+    ``path`` is a hidden staging directory (created on rank 0, the same path on every rank): inside
+    ``target`` when that is an existing directory (empty or an earlier run's: it is filled in place, never
+    removed or renamed, so that a mount point or a directory owned by someone else serves), beside it
+    otherwise. Write every file there. ``commit()`` puts its entries in the place of ``target``'s (whose
+    previous contents are removed only then: a reused ``--out`` ends holding exactly one run); leaving the
+    ``with`` block without ``commit()`` (an error, an interrupt) removes it and leaves ``target`` as it was.
+    Staging directories of runs that were killed are removed when the next run starts beside or in them.
     """
+
+    #: the exit code of a run whose ranks a failed write ends (MPI_Abort; the command line's EXIT_WRITE)
+    ABORT_CODE = 5
 
     def __init__(self, target: str | Path, comm: MPI.Comm = MPI.COMM_WORLD) -> None:
         self.target = Path(target)
@@ -342,11 +384,12 @@ class OutputDirectory:
         if comm.rank == 0:
             try:
                 check_output_target(self.target)
-                parent = self.target.resolve().parent
-                parent.mkdir(parents=True, exist_ok=True)
-                _remove_stale_staging(parent)
+                resolved = self.target.resolve()
+                home = resolved if resolved.is_dir() else resolved.parent
+                home.mkdir(parents=True, exist_ok=True)
+                _remove_stale_staging(home)
                 prefix = f".fenics-contact-{os.getpid()}@{socket.gethostname()}-"
-                result = Path(tempfile.mkdtemp(prefix=prefix, suffix=".partial", dir=parent))
+                result = Path(tempfile.mkdtemp(prefix=prefix, suffix=".partial", dir=home))
                 umask = os.umask(0o022)
                 os.umask(umask)
                 result.chmod(0o777 & ~umask)  # mkdtemp makes it private; the results are an ordinary directory
@@ -361,6 +404,7 @@ class OutputDirectory:
         if isinstance(result, InputError):
             raise result
         self.path: Path = result
+        self.in_place = self.path.parent == self.target.resolve()
 
     def __enter__(self) -> "OutputDirectory":
         return self
@@ -369,8 +413,39 @@ class OutputDirectory:
         if not self.committed:
             self.discard()
 
+    def check_space(self, need: float, what: str = "the results") -> None:
+        """OutputError (on every rank) when the file system of ``path`` has less than ``need`` bytes free."""
+        free = None
+        if self.comm.rank == 0:
+            try:
+                stat = os.statvfs(self.path)
+                free = stat.f_bavail * stat.f_frsize
+            except OSError:
+                pass
+        free = self.comm.bcast(free, root=0)
+        if free is not None and free < need:
+            raise OutputError(
+                f"--out {self.target}: {what} need about {_megabytes(need)} and its file system has "
+                f"{_megabytes(free)} free: free some space or choose another --out"
+            )
+
+    @contextlib.contextmanager
+    def writing(self) -> Iterator[None]:
+        """Write the results: a failed write (a full disk, a removed directory) is an OutputError."""
+        try:
+            yield
+        except OSError as err:
+            if isinstance(err, OutputError):
+                raise
+            where = f" ({Path(err.filename).name})" if err.filename else ""
+            error = OutputError(f"--out {self.target}: could not write the results{where}: {err.strerror or err}")
+            if self.comm.size > 1:  # the other ranks may wait in a collective write: only ending them all is sure
+                print(f"error: {error}", file=sys.stderr, flush=True)
+                self.comm.Abort(self.ABORT_CODE)
+            raise error from None
+
     def commit(self) -> None:
-        """Replace ``target`` by the staging directory (collective; SIGINT/SIGTERM held back until it is done)."""
+        """Put the staging directory's entries in ``target`` (collective; SIGINT/SIGTERM held back until done)."""
         error = None
         with _signals_blocked():
             self.comm.Barrier()  # every rank has closed its files
@@ -378,31 +453,50 @@ class OutputDirectory:
                 try:
                     names = sorted(entry.name for entry in self.path.iterdir())
                     (self.path / RUN_MARKER).write_text("\n".join([RUN_MARKER_HEADER, *names]) + "\n")
-                    self._swap()
+                    self._fill() if self.in_place else self._swap()
                 except OSError as err:
                     error = f"--out {self.target}: could not move the results into place: {err}"
             error = self.comm.bcast(error, root=0)
             self.committed = self.comm.bcast(self.committed, root=0)
         if error is not None:
-            raise InputError(error)
+            raise OutputError(error)
 
     def _swap(self) -> None:
+        """``target`` does not exist: the staging directory becomes it."""
+        os.rename(self.path, self.target.resolve())
+        self.committed = True
+
+    def _fill(self) -> None:
+        """``target`` exists (the staging directory is inside it): its entries move to a directory of the previous
+        contents, the staging directory's into ``target``; on a failure everything moves back."""
         target = self.target.resolve()
-        old = None
-        if target.exists():
-            old = self.path.with_suffix(".old")
-            os.rename(target, old)
+        old = self.path.with_suffix(".old")
+        old.mkdir()
+        moved_out, moved_in = [], []
         try:
-            os.rename(self.path, target)
+            for entry in sorted(target.iterdir()):
+                if not _STAGING.match(entry.name):
+                    os.rename(entry, old / entry.name)
+                    moved_out.append(entry.name)
+            for entry in sorted(self.path.iterdir()):
+                os.rename(entry, target / entry.name)
+                moved_in.append(entry.name)
         except OSError:
-            if old is not None:
-                os.rename(old, target)  # put the previous run back
+            for name in moved_in:
+                os.rename(target / name, self.path / name)
+            for name in moved_out:
+                os.rename(old / name, target / name)
+            old.rmdir()
             raise
         self.committed = True
-        if old is not None:
-            shutil.rmtree(old, ignore_errors=True)
+        self.path.rmdir()
+        shutil.rmtree(old, ignore_errors=True)
 
     def discard(self) -> None:
-        """Remove the staging directory (rank 0); ``target`` is untouched."""
-        if self.comm.rank == 0:
-            shutil.rmtree(self.path, ignore_errors=True)
+        """Remove the staging directory (every rank: under MPI an interrupted rank may end the run while rank 0
+        waits in a collective operation); ``target`` is untouched."""
+        shutil.rmtree(self.path, ignore_errors=True)
+
+
+def _megabytes(n: float) -> str:
+    return f"{n / 1e6:.3g} MB"

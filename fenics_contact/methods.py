@@ -32,6 +32,7 @@ from mpi4py import MPI
 
 from fenics_contact.errors import InputError
 from fenics_contact.fem.contact import NewtonOptions
+from fenics_contact.fem.linalg import LinearSolverOptions
 from fenics_contact.fem.mixed import epsilon_for, solve_mixed_monolithic
 from fenics_contact.fem.mixed_subproblem import MixedSubproblem
 from fenics_contact.fem.primal import PrimalSubproblem, penalty_for, solve_primal_monolithic, warn_if_locking
@@ -44,6 +45,7 @@ from fenics_contact.multiscale.cem import CEMOptions
 from fenics_contact.multiscale.mixed import MixedMultiscaleHybridStep, solve_mixed_ms_hybrid
 from fenics_contact.multiscale.mixed_cem import MixedCEMOptions
 from fenics_contact.multiscale.primal import MultiscalePrimalHybridStep, solve_primal_ms_hybrid
+from fenics_contact.problem.friction import friction_of, require_frictionless
 from fenics_contact.problem.pair import TwoBodyProblem
 from fenics_contact.problem.problem import ContactProblem
 from fenics_contact.problem.validation import require_method_dimension
@@ -69,7 +71,11 @@ class MonolithicSolver:
 
 
 def _primal_monolithic_solver(
-    problem: ContactProblem, *, delta: float | None = None, newton: NewtonOptions = NewtonOptions()
+    problem: ContactProblem,
+    *,
+    delta: float | None = None,
+    newton: NewtonOptions = NewtonOptions(),
+    solver: LinearSolverOptions | str = "auto",
 ) -> MonolithicSolver:
     fields = problem.fields
     warn_if_locking(fields.nu, problem.comm)
@@ -83,6 +89,8 @@ def _primal_monolithic_solver(
             alpha=None,
             prefix="fc_steps_primal_",
             newton=newton,
+            friction=friction_of(problem.law),
+            solver=solver,
         )
     )
 
@@ -152,7 +160,7 @@ class Method:
 
     def default_accel(self, comm: MPI.Comm = MPI.COMM_WORLD) -> str | None:
         """The update of a hybrid method when none is given (``hybrid.options.default_accel``: the interface
-        Newton, Anderson for Algorithm 2 on several ranks); None for a monolithic one."""
+        Newton, serially and under MPI); None for a monolithic one."""
         return default_accel(self.factory.__wrapped__, comm) if self.hybrid else None
 
     def options(
@@ -263,6 +271,8 @@ def _require_dimension(name: str, problem) -> None:
     """InputError when the method ``name`` does not solve a problem of this dimension or with rollers."""
     if isinstance(problem, ContactProblem) and problem.mesh is not None:
         require_method_dimension(name, problem.mesh.mesh, problem.boundary)
+    if isinstance(problem, ContactProblem) and METHODS[name].family == "mixed":
+        require_frictionless(problem.law, f"the method {name!r}")
 
 
 def _elsewhere(names: list[str]) -> str:

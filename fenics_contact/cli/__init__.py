@@ -20,6 +20,8 @@ move it into place. Exit codes:
        "converged": false
   4    numerical failure: Newton did not converge, non-finite values, a failed
        factorization; nothing is written
+  5    the results could not be written (too little space for them, a failed write): --out is
+       left as it was
   130  interrupted by SIGINT (Ctrl-C), 143 by SIGTERM: --out is left as it was
 
 Every failure ends with one line on stderr.
@@ -35,6 +37,7 @@ from fenics_contact.cli.signals import (
     EXIT_CODES,
     EXIT_NOT_CONVERGED,
     EXIT_NUMERICAL,
+    EXIT_WRITE,
     Interrupted,
     interruptible,
 )
@@ -48,6 +51,7 @@ __all__ = [
     "EXIT_CODES",
     "EXIT_NOT_CONVERGED",
     "EXIT_NUMERICAL",
+    "EXIT_WRITE",
     "METHODS",
     "NOT_GIVEN",
     "TABLE_METHODS",

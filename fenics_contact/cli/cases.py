@@ -38,7 +38,24 @@ def options_from_arguments(args: argparse.Namespace, argv: list[str] | None = No
     case = load_case(args.case, _case_overrides(given))
     if isinstance(case, PairCase):  # two deformable bodies: their own few run options (cli.pair)
         return pair_run_options(case, given), case
+    _check_model_flags(case, given)
     return case_run_options(case, given), case
+
+
+def _check_model_flags(case: Case, given: dict) -> None:
+    """InputError when --model, --E-high or --E-low would change nothing: the case gives what they set."""
+    material = case.material
+    if {"E_high", "E_low"} & set(given) and material.E is not None:
+        flag = "--E-high" if "E_high" in given else "--E-low"
+        raise InputError(
+            f"{flag} sets a built-in model's E, but case {case.path.name} gives material.E, which replaces it: "
+            f"leave {flag} out (or change material.E with --set)"
+        )
+    if "model" in given and None not in (material.E, material.nu, material.body_force):
+        raise InputError(
+            f"--model {given['model']} would change nothing: case {case.path.name} gives material.E, material.nu "
+            "and load.body-force, which replace the model's; leave --model out (or change the case with --set)"
+        )
 
 
 def _case_overrides(given: dict) -> list[tuple[str, object]]:

@@ -22,10 +22,12 @@ from mpi4py import MPI
 from fenics_contact.cli.cases import case_run_options
 from fenics_contact.cli.options import METHODS, RunOptions
 from fenics_contact.cli.pair import PAIR_METHODS, pair_run_options
+from fenics_contact.cli.signals import stdout_lost
 from fenics_contact.cli.solve import _check_case_coarse_grid, _check_coarse_grid, _mesh, _model
 from fenics_contact.errors import FenicsContactError, InputError
 from fenics_contact.methods import METHODS as CATALOGUE
 from fenics_contact.problem.case import Case, MeshFile, load_case, parse_override
+from fenics_contact.problem.friction import require_frictionless
 from fenics_contact.problem.geometry import ContactMesh, gmsh_session
 from fenics_contact.problem.models3d import MODEL_3D
 from fenics_contact.problem.pair_case import PairCase
@@ -132,6 +134,8 @@ def _refusal(method: str, cm: ContactMesh, options: RunOptions, case: Case | Non
                 _check_coarse_grid(cm, as_run)
             else:
                 _check_case_coarse_grid(cm, as_run, case)
+        if entry.family == "mixed" and case is not None:
+            require_frictionless(case.friction, f"the method {method!r}")
     except FenicsContactError as err:
         return err
     return None
@@ -286,8 +290,14 @@ def _file_groups(path: Path, comm: MPI.Comm) -> list[tuple[str, int, int]] | Non
 
 
 def _printer(comm: MPI.Comm):
+    lost = []
+
     def say(line: str) -> None:
-        if comm.rank == 0:
-            print(line, flush=True)
+        if comm.rank == 0 and not lost:
+            try:
+                print(line, flush=True)
+            except OSError as error:  # a closed pipe (| head), a full device: the report stops there
+                lost.append(error)
+                stdout_lost(error)
 
     return say

@@ -15,6 +15,7 @@ import numpy as np
 from mpi4py import MPI
 
 from fenics_contact.errors import InputError
+from fenics_contact.fem.linalg import LINEAR_SOLVERS
 from fenics_contact.hybrid.iteration import InterfaceNewtonOptions, IterationOptions
 from fenics_contact.hybrid.mixed import transmission_coefficient
 from fenics_contact.io import check_output_target, check_outside_output
@@ -58,12 +59,24 @@ _METHOD_OPTION_HINTS = {
     "cache_dir": "the multiscale offline cache",
     "min_gap": "a mixed-ms option",
     "max_nbasis": "a mixed-ms option",
+    "solver": "the linear solver of the primal monolithic reference",
 }
+#: options of the monolithic reference solve (--reference) rather than of the hybrid method: a method takes one
+#: when the monolithic solve of its family does
+_REFERENCE_OPTIONS = ("solver",)
+
+
+def _takes(method: str, name: str) -> bool:
+    """Whether ``method`` (a hybrid method) uses the option ``name``, itself or in its monolithic reference."""
+    entry = CATALOGUE[method]
+    reference = CATALOGUE[f"{entry.family}-monolithic"]
+    return name in entry.flat_options() or (name in _REFERENCE_OPTIONS and name in reference.flat_options())
+
+
 #: the options that only some methods use, and those methods (from the catalogue): giving one to another
 #: method is refused, not ignored
 _METHOD_OPTIONS: dict[str, tuple[tuple[str, ...], str]] = {
-    name: (tuple(m for m in METHODS if name in CATALOGUE[m].flat_options()), hint)
-    for name, hint in _METHOD_OPTION_HINTS.items()
+    name: (tuple(m for m in METHODS if _takes(m, name)), hint) for name, hint in _METHOD_OPTION_HINTS.items()
 }
 #: the run tables of a case file and the methods that read each (``problem.case.RUN_TABLES``)
 TABLE_METHODS: dict[str, tuple[str, ...]] = {
@@ -165,7 +178,7 @@ class RunOptions:
     mesh: Path | None = None
     coarse_groups: bool = False
     alpha: str | None = None
-    accel: str | None = None  #: None: "newton", or "anderson" for the mixed method on several ranks (default_accel)
+    accel: str | None = None  #: None: the method's default_accel ("newton")
     tol: float = _ITERATION.tol
     max_iterations: int = _ITERATION.max_iterations
     #: the contact Newton's local front resolution (None: InterfaceNewtonOptions' default; 0: off)
@@ -183,6 +196,8 @@ class RunOptions:
     max_nbasis: int | None = None
     cache_dir: Path | None = None
     reference: bool = False
+    #: the linear solver of the primal monolithic reference (None: its default, ``"auto"``)
+    solver: str | None = None
     out: Path | None = None  #: None: results/<model N | mesh or case file stem>-<method> (default_out)
     plots: bool = True
     case: Path | None = None  #: the case file the problem came from (``--case``; see ``problem.case``)
@@ -262,6 +277,8 @@ class RunOptions:
             raise InputError(f"--max-nbasis {self.max_nbasis} must be >= --nbasis {self.value('nbasis')}")
         if self.min_gap is not None and not (math.isfinite(self.min_gap) and self.min_gap >= 0):
             raise InputError(f"--min-gap must be a finite number >= 0, got {self.min_gap!r}")
+        if self.solver is not None and self.solver not in LINEAR_SOLVERS:
+            raise InputError(f"--solver must be one of {', '.join(LINEAR_SOLVERS)}, got {self.solver!r}")
         if self.alpha is not None:
             _check_alpha(self.alpha)
         if self.beta is not None:
@@ -298,14 +315,24 @@ class RunOptions:
             return given
         if name in ("E_high", "E_low"):
             return MODEL_DEFAULTS[name]
+        if name in _REFERENCE_OPTIONS:
+            return method_default(f"{get_method(self.method).family}-monolithic", name)
         return method_default(self.method, name)
 
     def method_options(self) -> dict:
         """The chosen method's options given on the command line (its defaults otherwise), for the catalogue."""
-        flat = {name: getattr(self, name) for name in _METHOD_OPTIONS if getattr(self, name) is not None}
+        flat = {
+            name: getattr(self, name)
+            for name in _METHOD_OPTIONS
+            if getattr(self, name) is not None and name not in _REFERENCE_OPTIONS
+        }
         if "min_gap" in flat:  # --min-gap 0: exactly --nbasis modes (the option's None)
             flat["min_gap"] = flat["min_gap"] or None
         return flat | {"options": self.iteration_options()}
+
+    def reference_options(self) -> dict:
+        """The options of the monolithic reference solve given on the command line (``--solver``)."""
+        return {name: getattr(self, name) for name in _REFERENCE_OPTIONS if getattr(self, name) is not None}
 
     def iteration_options(self) -> IterationOptions:
         return IterationOptions(

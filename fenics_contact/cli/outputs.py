@@ -1,5 +1,5 @@
 """What a run reports and draws: the contact summary entries, the open-end warning, the ParaView grid of a
-state and the figures' titles."""
+state and the figures' titles; and what it needs: the space of its results, its memory."""
 
 import logging
 import math
@@ -12,6 +12,7 @@ from fenics_contact.cli.options import RunOptions
 from fenics_contact.io import cell_function_of, cell_markers, stress_field
 from fenics_contact.paraview import field_grid
 from fenics_contact.plots import nodal_average, render_deformed
+from fenics_contact.problem.geometry import check_memory
 from fenics_contact.problem.problem import ContactProblem
 
 log = logging.getLogger("fenics_contact")
@@ -53,6 +54,20 @@ def _curve_row(
         "iterations": int(iterations),
         "converged": bool(converged),
         "time_s": time_s,
+    }
+
+
+def _friction_summary(profile, dissipation: float | None) -> dict:
+    """The tangential side of a frictional solve (``fem.friction.FrictionProfile``) for the summary; the
+    dissipation of a load step (None for a solve from the unloaded body)."""
+    return {
+        "normal_force": profile.normal_force,
+        "tangential_force": profile.tangential_force.tolist(),
+        "stick_nodes": int(np.count_nonzero(profile.stick)),
+        "slip_nodes": int(np.count_nonzero(profile.slip)),
+        "stick_zone": profile.extent("stick"),
+        "slip_zone": profile.extent("slip"),
+        "dissipation": None if dissipation is None else float(dissipation),
     }
 
 
@@ -115,3 +130,34 @@ def _render_deformed(u, path: Path, options: RunOptions, problem: ContactProblem
     """The deformed body with the problem's own obstacle (a wall flush with Γ_C when it has none)."""
     wall = profile.points if problem.obstacle is None else None
     render_deformed(u, path, title=_title(options, problem), obstacle=problem.obstacle, wall=wall)
+
+
+#: bytes of the results per cell of the mesh and per state written (ParaView fields and contact, the mixed
+#: methods' VTX files), of the figures and of the rest (summaries, file-system blocks), each twice what a run
+#: writes (66, 950 bytes per cell; 0.32 to 0.48 MB of figures: ``fenics-contact run --h 32 --H 4 --method M``,
+#: ``du -sb`` of --out and of its .png files, h = 1/16 and 1/32, each method)
+BYTES_PER_CELL = {"primal": 150.0, "mixed": 2000.0}
+BYTES_OF_PLOTS = 1.0e6
+BYTES_FIXED = 1.0e5
+
+
+def output_bytes(cm, options: RunOptions, case=None) -> float:
+    """About how many bytes a run writes into ``--out`` (``OutputDirectory.check_space`` before the solve)."""
+    cells = cm.mesh.topology.index_map(cm.mesh.topology.dim).size_global
+    family = "primal" if options.method.startswith("primal") else "mixed"
+    states = 1 + (len(case.obstacle.depths) if case is not None and case.obstacle.steps else 0)
+    return BYTES_PER_CELL[family] * cells * states + (BYTES_OF_PLOTS if options.plots else 0.0) + BYTES_FIXED
+
+
+#: peak memory of a run per mesh vertex, by method family (bytes): 6.9 kB (primal) and 235 kB (mixed: the
+#: Arnold–Winther spaces and their factorizations) from h = 1/64 to 1/128 (``/usr/bin/time -f %M fenics-contact
+#: run --h 128 --H 8 --method M --no-plots``), with a margin
+RUN_BYTES_PER_VERTEX = {"primal": 1.0e4, "mixed": 2.5e5}
+
+
+def check_run_memory(options: RunOptions, cm=None) -> None:
+    """InputError before the solve when the run would need more memory than this machine has: on the mesh ``cm``,
+    or without it on the built-in unit square of ``options`` (before it is made)."""
+    vertices = (options.n + 1.0) ** 2 if cm is None else cm.mesh.topology.index_map(0).size_global
+    family = "primal" if options.method.startswith("primal") else "mixed"
+    check_memory(vertices, f"the mesh of --method {options.method}", RUN_BYTES_PER_VERTEX[family])

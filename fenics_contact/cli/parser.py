@@ -16,6 +16,7 @@ from fenics_contact import __version__
 from fenics_contact.cli.options import DEFAULT_H, DEFAULT_H_3D, METHODS, MODEL_DEFAULTS, RunOptions, method_default
 from fenics_contact.cli.signals import EXIT_CODES
 from fenics_contact.examples import add_examples_parser
+from fenics_contact.fem.linalg import AUTO_AMG_DOFS, LINEAR_SOLVERS
 from fenics_contact.fem.mixed import default_epsilon
 from fenics_contact.fem.primal import default_penalty
 from fenics_contact.hybrid.iteration import ACCELERATIONS, InterfaceNewtonOptions
@@ -155,8 +156,9 @@ def _add_method_options(run: argparse.ArgumentParser) -> None:
     group.add_argument(
         "--alpha",
         help="primal Robin coefficient: a number or a product of numbers, h^p, sqrt-h and "
-        "E (E_p: mean E at the γ node) or Emin (the smallest E_p on γ), e.g. 1, h^-1/2, 2E*h^-1/2"
-        + _default(_per_method("alpha")),
+        "E (E_p: mean E at the γ node) or Emin (the smallest E_p on γ), e.g. 1, h^-1/2, 2E*h^-1/2; in a "
+        "product h is h/L (L the body's size, the largest side of its bounding box) and the product is divided "
+        "by L" + _default(_per_method("alpha")),
     )
     group.add_argument(
         "--delta",
@@ -164,15 +166,24 @@ def _add_method_options(run: argparse.ArgumentParser) -> None:
         help="primal penalty δ" + _default(f"{_factor(default_penalty)}·h/E, the largest E on Gamma_C"),
     )
     group.add_argument(
-        "--beta", help="mixed transmission coefficient β: sqrt-h or a number" + _default(_per_method("beta"))
+        "--beta",
+        help="mixed transmission coefficient β: sqrt-h (sqrt(h L)/E, the smallest E on Gamma_C, L the body's size) "
+        "or a number" + _default(_per_method("beta")),
     )
     group.add_argument(
         "--epsilon",
         type=float,
-        help="mixed penalty ε" + _default(f"{_factor(default_epsilon)}·h·E, the smallest E on Gamma_C"),
+        help="mixed penalty ε"
+        + _default(f"{_factor(default_epsilon)}·(h/L)·E/L, the smallest E on Gamma_C, L the body's size"),
     )
     group.add_argument(
         "--reference", action="store_true", help="also solve the monolithic problem and report e_u" + _default("off")
+    )
+    group.add_argument(
+        "--solver",
+        choices=LINEAR_SOLVERS,
+        help="linear solver of the primal monolithic reference: direct (MUMPS LU), amg (CG + smoothed-aggregation "
+        f"AMG), auto (amg on a 3D mesh of {AUTO_AMG_DOFS:,} DOFs or more)" + _default("auto"),
     )
 
 
@@ -183,8 +194,7 @@ def _add_iteration_options(run: argparse.ArgumentParser) -> None:
         choices=ACCELERATIONS,
         default=None,
         help="how the interface fixed point is solved: the interface Newton method (robust on every "
-        "tested model), Anderson acceleration, or none (the paper's plain update); the mixed "
-        "method's interface Newton is serial" + _default(_accel_default()),
+        "tested model), Anderson acceleration, or none (the paper's plain update)" + _default(_accel_default()),
     )
     group.add_argument(
         "--front-window",

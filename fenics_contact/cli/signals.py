@@ -1,17 +1,33 @@
 """How the command ends: the exit codes, SIGINT/SIGTERM raised as ``Interrupted`` (so that cleanup runs), the
 progress log on stdout and the one line on stderr that ends every failure."""
 
+import contextlib
 import logging
 import os
 import signal
+import socket
 import sys
 import threading
+import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 
 from mpi4py import MPI
 
-__all__ = ["EXIT_BAD_INPUT", "EXIT_CODES", "EXIT_NOT_CONVERGED", "EXIT_NUMERICAL", "Interrupted", "interruptible"]
+from fenics_contact.io import process_alive
+
+__all__ = [
+    "EXIT_BAD_INPUT",
+    "EXIT_CODES",
+    "EXIT_NOT_CONVERGED",
+    "EXIT_NUMERICAL",
+    "EXIT_WRITE",
+    "Interrupted",
+    "end_every_rank",
+    "share_rank_zero",
+    "interruptible",
+    "raise_interrupted",
+]
 
 #: exit code -> meaning (``--help``, README)
 EXIT_CODES = {
@@ -20,10 +36,11 @@ EXIT_CODES = {
     3: "not converged: the transmission residual stayed above --tol (--max-iterations hit, or the interface Newton's "
     'corrections ran out; results written, "converged": false)',
     4: "numerical failure: Newton did not converge, non-finite values, a failed factorization (nothing written)",
+    5: "the results could not be written (a full disk, an unwritable or removed directory); --out left as it was",
     130: "interrupted by SIGINT (Ctrl-C); --out left as it was",
     143: "interrupted by SIGTERM; --out left as it was",
 }
-EXIT_BAD_INPUT, EXIT_NOT_CONVERGED, EXIT_NUMERICAL = 2, 3, 4
+EXIT_BAD_INPUT, EXIT_NOT_CONVERGED, EXIT_NUMERICAL, EXIT_WRITE = 2, 3, 4, 5
 
 
 class Interrupted(BaseException):
@@ -32,6 +49,11 @@ class Interrupted(BaseException):
     def __init__(self, signum: int) -> None:
         super().__init__(signal.Signals(signum).name)
         self.signum = signum
+
+
+def raise_interrupted(signum: int, frame) -> None:
+    """A signal handler: raise ``Interrupted``."""
+    raise Interrupted(signum)
 
 
 #: a signal that arrives inside a ``__del__`` is raised again this much later (s)
@@ -92,10 +114,42 @@ class _BelowWarning(logging.Filter):
         return record.levelno < logging.WARNING
 
 
+def stdout_lost(error: OSError) -> None:
+    """stdout cannot be written (a closed pipe, ``| head``; a full device): what is left for it goes to the null
+    device, so that the run goes on (and Python's last flush at exit does not fail), with one warning on stderr."""
+    try:
+        fd = sys.stdout.fileno()
+    except (AttributeError, OSError, ValueError):  # not a file (a test's capture)
+        return
+    null = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(null, fd)
+    finally:
+        os.close(null)
+    if MPI.COMM_WORLD.rank == 0:
+        print(
+            f"warning: stdout cannot be written ({error.strerror or error}): the progress log stops here; the run "
+            "goes on",
+            file=sys.stderr,
+            flush=True,
+        )
+
+
+class _ProgressHandler(logging.StreamHandler):
+    """The progress log on stdout; a write that fails (``stdout_lost``) stops it, not the run."""
+
+    def handleError(self, record: logging.LogRecord) -> None:
+        error = sys.exc_info()[1]
+        if isinstance(error, OSError):
+            stdout_lost(error)
+        else:
+            super().handleError(record)
+
+
 def _setup_logging(verbose: bool) -> None:
     """The progress log on stdout, warnings on stderr prefixed ``warning:``, rank 0 only; a failure ends with one
     line on stderr (``_fail``), the last."""
-    out = logging.StreamHandler(sys.stdout)
+    out = _ProgressHandler(sys.stdout)
     out.addFilter(_RankZero())
     out.addFilter(_BelowWarning())
     out.setFormatter(logging.Formatter("%(message)s"))
@@ -107,6 +161,42 @@ def _setup_logging(verbose: bool) -> None:
     root.handlers[:] = [out, warn]
     root.setLevel(logging.DEBUG if verbose else logging.INFO)
     root.propagate = False
+
+
+#: a rank other than 0 that was interrupted gives rank 0 this long to end the run (s) before it does so itself
+ABORT_GRACE_S = 2.0
+#: (host name, process id) of rank 0 (``share_rank_zero``)
+_rank_zero: list[tuple[str, int]] = []
+
+
+def share_rank_zero(comm: MPI.Comm = MPI.COMM_WORLD) -> None:
+    """Tell every rank the host and process of rank 0 (collective), for ``end_every_rank``."""
+    _rank_zero[:] = [comm.bcast((socket.gethostname(), os.getpid()), root=0)]
+
+
+def end_every_rank(message: str, signum: int, comm: MPI.Comm = MPI.COMM_WORLD) -> None:
+    """End every rank of the run with exit code 128 + ``signum`` (MPI_Abort; MPICH adds a line of its own), with
+    ``message`` as the one line on stderr.
+
+    Under MPI a signal reaches one rank only (``kill PID``), or the ranks at different points of the run: a
+    rank that returned alone would leave the others waiting in a collective operation for ever, at 100 % CPU.
+    Rank 0 prints and aborts at once.  Another rank passes the signal on to rank 0 (on the same host), which
+    ends the run with its one line; if rank 0 has not done so within ``ABORT_GRACE_S`` (it waits in a
+    collective operation for this rank, or runs on another host) this rank prints and aborts.
+    """
+    for s in (signal.SIGINT, signal.SIGTERM):  # (the run is ending: a second signal must not cut this short)
+        signal.signal(s, signal.SIG_IGN)
+    if comm.rank != 0:
+        local = bool(_rank_zero) and _rank_zero[0][0] == socket.gethostname()
+        if local:
+            with contextlib.suppress(OSError):
+                os.kill(_rank_zero[0][1], signum)
+        time.sleep(ABORT_GRACE_S)
+        if local and not process_alive(_rank_zero[0][1]):  # rank 0 has ended the run, with its line
+            os._exit(128 + signum)
+    print(" ".join(str(message).split()), file=sys.stderr, flush=True)
+    comm.Abort(128 + signum)
+    os._exit(128 + signum)  # (MPI_Abort may return before the launcher has ended the processes)
 
 
 def _fail(message: str, comm: MPI.Comm = MPI.COMM_WORLD) -> None:

@@ -19,8 +19,11 @@ from fenics_contact.cli.outputs import (
     _curve_row,
     _field_grid,
     _finite_or_none,
+    _friction_summary,
     _render_deformed,
     _warn_open_ends,
+    check_run_memory,
+    output_bytes,
 )
 from fenics_contact.cli.pair import run_pair
 from fenics_contact.cli.signals import EXIT_NOT_CONVERGED, Interrupted, _fail
@@ -49,6 +52,7 @@ from fenics_contact.problem.pair_case import PairCase
 from fenics_contact.problem.problem import ContactProblem
 from fenics_contact.problem.tags import Subdomain
 from fenics_contact.problem.validation import contact_open_ends
+from fenics_contact.sliding import slide
 
 __all__ = ["check_pixel_modulus", "load_pixel_map", "run"]
 
@@ -101,12 +105,52 @@ def _indentation_curve(
         | {
             "transmission_residual": s.transmission_residual,
             "complementarity": s.complementarity._asdict(),
-            "interface_newton_steps": s.interface_newton_steps,
+            "interface_newton_steps": s.interface_newton_steps if options.accel == "newton" else None,
             "omega1_check": s.omega1_check,
         }
         for s in curve.steps
     ]
     return {"direction": direction.tolist(), "steps": rows}
+
+
+def _sliding_path(options: RunOptions, case: Case, problem: ContactProblem, out: Path, writes: bool) -> dict:
+    """The case's sliding path (``[obstacle] motion``, ``sliding.slide``): per step the forces, the stick and
+    slip zones and the dissipation; each step's fields and contact written into ``out`` as ParaView series
+    (time: the step's number) by the ranks with ``writes``."""
+    comm = problem.comm if writes else MPI.COMM_SELF
+    fields, contact = Series(out, "fields", comm), Series(out, "contact", comm)
+    V = fem.functionspace(problem.cm.mesh, ("Lagrange", 1, (problem.dim,)))
+    written = []
+
+    def write_step(step, solver) -> None:
+        u = solver.glued(V) if hasattr(solver, "glued") else solver.contact.u  # (collective)
+        written.append(step)
+        if writes:
+            fields.add(float(len(written)), _field_grid(problem, u))
+            contact.add(float(len(written)), contact_grid(step.profile, comm))
+
+    flat = options.method_options()
+    path = slide(
+        problem.with_(obstacle=case.obstacle.base()),
+        options.method,
+        case.obstacle.motions,
+        on_step=write_step,
+        **flat,
+    )
+    rows = [
+        {"motion": list(map(float, s.motion))}
+        | (_friction_summary(s.friction, s.dissipation) if s.friction is not None else {})
+        | {
+            "contact_force": s.profile.force,
+            "iterations": s.iterations,
+            "converged": bool(s.converged),
+            "transmission_residual": s.transmission_residual,
+            "interface_newton_steps": s.interface_newton_steps,
+            "time_s": s.time_s,
+        }
+        for s in path.steps
+    ]
+    return {"steps": rows, "dissipation": path.dissipation}
 
 
 # ---------------------------------------------------------------------------------------------
@@ -245,7 +289,11 @@ def _run_primal(options: RunOptions, problem: ContactProblem) -> _Outcome:
     """Algorithms 1 (primal) and 3 (primal-ms), with the monolithic primal reference."""
     method = get_method(options.method)
     flat = options.method_options()
-    reference = CATALOGUE["primal-monolithic"].solve(problem, delta=options.delta) if options.reference else None
+    reference = (
+        CATALOGUE["primal-monolithic"].solve(problem, delta=options.delta, **options.reference_options())
+        if options.reference
+        else None
+    )
     result = method.solve(problem, **flat, reference=reference.u if reference is not None else None)
     ms = method.multiscale
     summary = {
@@ -356,9 +404,11 @@ def run(options: RunOptions, comm: MPI.Comm = MPI.COMM_WORLD, *, case: Case | No
     if isinstance(case, PairCase):  # two deformable bodies (cli.pair)
         return run_pair(options, comm, case)
     model, pixels = _model(options) if case is None else (None, None)
+    if case is None and options.mesh is None:
+        check_run_memory(options)  # (before the unit square is made)
     output = OutputDirectory(options.out, comm)
     try:
-        with output:
+        with output, output.writing():  # (a failed write: OutputError)
             result, summary = _solve_and_write(options, comm, model, pixels, output, case)
     except Interrupted as stop:
         stop.output_complete = output.committed
@@ -426,6 +476,8 @@ def _solve_and_write(
         )
     problem = model.on(cm)
     problem.check_loaded()
+    check_run_memory(options, cm)
+    output.check_space(output_bytes(cm, options, case))
     fields = problem.fields
     t_mesh = time.perf_counter() - t0
     name = f"model {options.model}" if case is None else f"case {case.path.name}"
@@ -451,6 +503,9 @@ def _solve_and_write(
         if case and case.obstacle.steps
         else None
     )
+    sliding = _sliding_path(options, case, problem, output.path, writes) if case and case.obstacle.motions else None
+    contact_sub = getattr(getattr(result, "step", None), "contact", None)
+    friction = getattr(contact_sub, "friction", None)
     summary = {
         "method": options.method,
         "model": options.model if case is None else None,
@@ -460,7 +515,9 @@ def _solve_and_write(
         "accel": options.accel,
         "front_window": options.newton_options().front_window if options.accel == "newton" else None,
         "iterations": result.iterations,
-        "converged": result.converged and (curve is None or all(s["converged"] for s in curve["steps"])),
+        "converged": result.converged
+        and (curve is None or all(s["converged"] for s in curve["steps"]))
+        and (sliding is None or all(s["converged"] for s in sliding["steps"])),
         "rel_tolerance": options.tol,
         # the relative change of the last two iterates (the paper's rule): not defined for the interface Newton,
         # which applies T once, to certify its solution
@@ -484,10 +541,20 @@ def _solve_and_write(
         "time_error_evaluation_s": result.history.time_monitor_s,
         "time_reference_s": reference.time_s if reference is not None else None,
         "reference_newton_steps": reference.newton.steps if reference is not None else None,
+        # the primal reference's linear solver ("direct" or "amg") and its Krylov iterations per Newton step
+        "reference_linear_solver": getattr(reference, "linear_solver", "direct") if reference is not None else None,
+        "reference_krylov_iterations": getattr(reference, "krylov_iterations", None) or None,
         "reference_active_set": reference.profile.active_interval() if reference is not None else None,
         "mpi_ranks": comm.size,
         "provenance": provenance(),
         "force_indentation": curve,
+        # with a friction law: the run's own solve (one load step from the unloaded body) and the sliding path
+        # (with a sliding path: its last step)
+        "friction": (sliding["steps"][-1] if sliding else _friction_summary(friction.profile(), None))
+        | {"law": friction.law.describe()}
+        if friction is not None
+        else None,
+        "sliding": sliding,
         "case": case.to_dict() | {"run": _options_echo(options)} if case is not None else None,
     }
     _warn_open_ends(summary, comm)

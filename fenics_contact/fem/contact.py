@@ -40,7 +40,9 @@ class NewtonOptions:
     the size being ‖J‖‖u‖ + ‖b‖ (stiffness, penalty and Robin terms, load and data) for the primal
     solve and the sum of the norms of the terms for the mixed one. A backward-stable direct solve
     meets it with rtol ~ 1e-16·growth whatever δ, ε or the contrast, so rtol = 1e-8 only rejects a
-    solve whose linear algebra failed.
+    solve whose linear algebra failed. ``atol`` is a residual (a force) in the units of the data: the floor of
+    a problem whose terms all vanish (u = 0, nothing loaded), where ‖F‖ is round-off of nothing; with terms of
+    any size above 1e-5 in those units the relative part decides.
     """
 
     max_iterations: int = 50

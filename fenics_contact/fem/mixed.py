@@ -53,6 +53,7 @@ from fenics_contact.fem.mixed_contact import MixedContactProfile
 from fenics_contact.fem.mixed_newton import MixedNewtonHistory
 from fenics_contact.fem.mixed_spaces import boundary_stress_space, check_triangles
 from fenics_contact.fem.mixed_subproblem import MixedSubproblem
+from fenics_contact.problem.friction import require_frictionless
 from fenics_contact.problem.problem import ContactProblem
 from fenics_contact.problem.tags import Boundary, Subdomain
 
@@ -68,18 +69,20 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 
-def default_epsilon(h: float, E_contact: float, factor: float = 1.0e-3) -> float:
-    """ε = factor·h·E_c with E_c the *smallest* E on Γ_C (``contact_modulus(..., smallest=True)``).
+def default_epsilon(h: float, E_contact: float, factor: float = 1.0e-3, length: float = 1.0) -> float:
+    """ε = factor·(h/L_ref)·E_c/L_ref (a stress per length, as 1/ε multiplies σ_c in a traction–displacement law),
+    with E_c the *smallest* E on Γ_C (``contact_modulus(..., smallest=True)``) and L_ref = ``length`` the body's
+    size (``ContactProblem.length``; 1 on the unit square, where ε = factor·h·E_c).
 
     Where the body separates, the wall holds it with a tensile spring of stiffness ε (σ_c = −ε u_c):
-    against a material of modulus E the tensile stress left is ≈ ε/E relative, factor·h for the softest
-    material on Γ_C.  With the largest E instead, a soft part of a heterogeneous Γ_C stayed glued to the
+    against a material of modulus E the tensile stress left is ≈ ε L_ref/E relative, factor·h/L_ref for the
+    softest material on Γ_C.  With the largest E instead, a soft part of a heterogeneous Γ_C stayed glued to the
     wall: model 3 at contrast 10⁶ (stiff channels reaching Γ_C), h = 1/32, gave a contact force 20 % below
     the primal one and a tensile σ_c of 0.22; a bar pulled off the wall with one stiff stripe kept 27 % of
     its load on the wall."""
-    if not (h > 0 and E_contact > 0 and factor > 0):
-        raise InputError(f"default_epsilon needs h, E_c, factor > 0; got {h}, {E_contact}, {factor}")
-    return factor * h * E_contact
+    if not (h > 0 and E_contact > 0 and factor > 0 and length > 0):
+        raise InputError(f"default_epsilon needs h, E_c, factor, L_ref > 0; got {h}, {E_contact}, {factor}, {length}")
+    return factor * (h / length) * E_contact / length
 
 
 def epsilon_hint(epsilon: float, default: float) -> str:
@@ -88,7 +91,7 @@ def epsilon_hint(epsilon: float, default: float) -> str:
     if not epsilon < 1e-3 * default:
         return ""
     return (
-        f"; ε = {epsilon:g} is {default / epsilon:.0e} times below the default 1e-3·h·E_min = {default:.3g} "
+        f"; ε = {epsilon:g} is {default / epsilon:.0e} times below the default 1e-3·(h/L)·E_min/L = {default:.3g} "
         "on Gamma_C, which makes the contact block ill-conditioned: use a larger --epsilon"
     )
 
@@ -133,9 +136,10 @@ class MixedSolution:
 
 
 def epsilon_for(problem: ContactProblem, epsilon: float | None = None) -> float:
-    """ε, or when None the default ``default_epsilon(h, E_c)`` with E_c the smallest E on Γ_C."""
+    """ε, or when None the default ``default_epsilon(h, E_c, length=L_ref)`` with E_c the smallest E on Γ_C and
+    L_ref the body's size (``ContactProblem.length``)."""
     if epsilon is None:
-        return default_epsilon(problem.h, problem.contact_modulus(smallest=True))
+        return default_epsilon(problem.h, problem.contact_modulus(smallest=True), length=problem.length)
     if (
         isinstance(epsilon, bool)
         or not isinstance(epsilon, (int, float, np.number))
@@ -161,6 +165,7 @@ def solve_mixed_monolithic(
     re-checks the final residual with the UFL forms.
     """
     start = time.perf_counter()
+    require_frictionless(problem.law, "the mixed monolithic solve")
     cm = problem.cm
     check_triangles(cm.mesh)
     fields = problem.fields

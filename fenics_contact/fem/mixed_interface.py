@@ -147,7 +147,7 @@ class GammaBends:
         facets = np.unique(np.asarray(gamma, dtype=np.int32))
         local_mid = msh.geometry.x[dmesh.entities_to_geometry(msh, tdim - 1, facets)][:, :, :2].mean(axis=1)
         dist, which = cKDTree(mid).query(local_mid) if facets.size else (np.zeros(0), np.zeros(0, dtype=np.int64))
-        if np.max(dist, initial=0.0) > 1e-10 * max(float(np.max(np.abs(mid), initial=1.0)), 1.0):
+        if np.max(dist, initial=0.0) > 1e-10 * max(float(np.max(np.abs(mid), initial=0.0)), 1e-300):  # (relative)
             raise RuntimeError("a γ facet of this rank is not among the gathered γ facets")
         #: the colour class of each local γ facet (values 0, 1, 2)
         self.colour_tags = dmesh.meshtags(msh, tdim - 1, facets, colour[which].astype(np.int32))

@@ -47,6 +47,7 @@ from fenics_contact.fem.mixed_newton import MixedNewtonHistory, globalized_newto
 from fenics_contact.fem.mixed_residual import ufl_residual_norm
 from fenics_contact.fem.mixed_spaces import MixedSpaces, check_triangles
 from fenics_contact.problem.fields import MaterialFields
+from fenics_contact.problem.geometry import mesh_extent
 from fenics_contact.problem.obstacles import Obstacle
 from fenics_contact.problem.tags import Boundary
 
@@ -56,15 +57,6 @@ __all__ = ["MixedSubproblem"]
 def _part(part: str, name: str, doc: str) -> property:
     """A read-only attribute ``name`` of the collaborator ``part``."""
     return property(lambda self: getattr(getattr(self, part), name), doc=doc)
-
-
-def _extent(msh: dmesh.Mesh) -> float:
-    """The largest side of the mesh's bounding box (over all ranks)."""
-    x = msh.geometry.x
-    lo, hi = np.min(x, axis=0, initial=np.inf), np.max(x, axis=0, initial=-np.inf)
-    msh.comm.Allreduce(MPI.IN_PLACE, lo, op=MPI.MIN)
-    msh.comm.Allreduce(MPI.IN_PLACE, hi, op=MPI.MAX)
-    return float(np.max(hi - lo))
 
 
 class MixedSubproblem:
@@ -142,7 +134,7 @@ class MixedSubproblem:
         if modulus is None:
             modulus = self.comm.allreduce(float(np.min(fields.E.x.array, initial=np.inf)), op=MPI.MIN)
         #: s of the equilibration D = diag(s I_σ, I_u/s) of every saddle-point factorization of this subproblem
-        self.stress_scale = stress_scale(modulus / _extent(msh))
+        self.stress_scale = stress_scale(modulus / mesh_extent(msh))
         self.factorization = SaddlePointFactorization(
             self.comm,
             prefix,

@@ -9,6 +9,7 @@ The dimension is the mesh's: on triangles plane strain, on tetrahedra 3D elastic
 σ = 2μ ε + λ tr ε I with gdim-vector P1 elements; the monolithic solve is the method that takes 3D).
 """
 
+import dataclasses
 import logging
 import time
 import weakref
@@ -25,10 +26,12 @@ from petsc4py import PETSc
 
 from fenics_contact.errors import InputError
 from fenics_contact.fem import forms_primal
-from fenics_contact.fem.contact import ContactProfile, NewtonHistory, NewtonOptions, semismooth_newton
-from fenics_contact.fem.linalg import AbsoluteTerms, DirectSolver, quadratic_form
+from fenics_contact.fem.contact import MAX_REFINEMENTS, ContactProfile, NewtonHistory, NewtonOptions, semismooth_newton
+from fenics_contact.fem.friction import NodalFriction, frictional_newton
+from fenics_contact.fem.linalg import AbsoluteTerms, AMGSolver, LinearSolverOptions, linear_solver, quadratic_form
 from fenics_contact.fem.primal_boundary import NodalContactGeometry, PrimalBoundaryData
 from fenics_contact.problem.fields import MaterialFields
+from fenics_contact.problem.friction import Friction, friction_of
 from fenics_contact.problem.materials import strain, stress
 from fenics_contact.problem.obstacles import Obstacle
 from fenics_contact.problem.problem import ContactProblem
@@ -41,7 +44,10 @@ log = logging.getLogger(__name__)
 
 
 def default_penalty(h: float, E_contact: float, factor: float = 1.0e-3) -> float:
-    """δ = factor · h / E_c: penalty stiffness 1/δ a factor 1/factor above the element stiffness E_c/h."""
+    """δ = factor · h / E_c: penalty stiffness 1/δ a factor 1/factor above the element stiffness E_c/h.
+
+    Units: δ is a length per stress (1/δ multiplies a displacement into a traction), and so is h/E_c: a mesh in
+    mm instead of m gets δ in mm/Pa, the same problem (no reference length needed)."""
     if not all(isinstance(v, (int, float, np.number)) and np.isfinite(v) and v > 0 for v in (h, E_contact, factor)):
         raise InputError(f"default_penalty needs finite h, E_c, factor > 0; got {h!r}, {E_contact!r}, {factor!r}")
     return factor * h / E_contact
@@ -56,7 +62,11 @@ class PrimalSubproblem:
     contact direction ν and the gap g are nodal (P1) on Γ_C: the obstacle's at
     the Γ_C vertices, or for a wall flush with Γ_C (``obstacle=None``) the body's
     nodal normal (facet normals averaged with the vertex weights) and g = 0.  One
-    ν per node keeps the active set a set of nodes on a curved Γ_C too.
+    ν per node keeps the active set a set of nodes on a curved Γ_C too.  ``friction`` (a
+    ``problem.friction.Friction``, with contact only) adds the nodal friction term of ``fem.friction``.
+
+    ``solver``: the linear solver of every solve (``fem.linalg.LinearSolverOptions`` or its kind: ``"direct"``,
+    MUMPS LU; ``"amg"``, CG + smoothed-aggregation AMG, its set-up kept across Newton steps; ``"auto"``).
     """
 
     def __init__(
@@ -70,6 +80,8 @@ class PrimalSubproblem:
         prefix: str,
         newton: NewtonOptions = NewtonOptions(),
         V: fem.FunctionSpace | None = None,
+        friction: Friction | None = None,
+        solver: LinearSolverOptions | str = "direct",
     ) -> None:
         if delta is not None and not (isinstance(delta, (int, float, np.number)) and np.isfinite(delta) and delta > 0):
             raise InputError(f"the penalty parameter δ must be a finite number > 0, got {delta!r}")
@@ -130,7 +142,12 @@ class PrimalSubproblem:
         self.b = dolfinx.fem.petsc.create_vector(self.V)
         self.du = dolfinx.fem.petsc.create_vector(self.V)
         self._gap_vec = dolfinx.fem.petsc.create_vector(self.V)  # ghosted, like b (assembly target)
-        self.solver = DirectSolver(msh.comm, prefix=prefix)
+        solver = LinearSolverOptions.of(solver)
+        if friction is not None and solver.krylov == "cg":  # Coulomb's Jacobian is not symmetric: GMRES
+            solver = dataclasses.replace(solver, krylov="gmres")
+        self.solver = linear_solver(
+            msh.comm, prefix=prefix, space=self.V, options=solver, contrast=_contrast(fields.mu, msh.comm)
+        )
         self._K = dolfinx.fem.petsc.assemble_matrix(self._a)
         self._K.assemble()
         self._M = dolfinx.fem.petsc.assemble_matrix(self._m)
@@ -139,6 +156,7 @@ class PrimalSubproblem:
         self._linear_ready = False
         self._factorized_set: np.ndarray | None = None
         self._terms = AbsoluteTerms()
+        self.friction = NodalFriction(self, friction, delta) if friction is not None and self.contact else None
 
     # -- contact geometry ------------------------------------------------------------------
     @property
@@ -152,6 +170,11 @@ class PrimalSubproblem:
             raise InputError("this subproblem has no contact boundary")
         if self.geometry.set_obstacle(obstacle):
             self._factorized_set = None  # ν enters the Jacobian
+
+    @property
+    def symmetric(self) -> bool:
+        """Whether the Jacobian is symmetric (not with Coulomb friction)."""
+        return self.friction is None or self.friction.law.symmetric
 
     # -- sizes ---------------------------------------------------------------------------
     @property
@@ -169,12 +192,20 @@ class PrimalSubproblem:
         return out
 
     def _residual(self) -> float:
-        self._assemble_vector(self._F, self.b)
+        self._assemble_F()
         return self.b.norm()
+
+    def _assemble_F(self) -> PETSc.Vec:
+        """b ← F(u), with the friction term when there is one."""
+        self._assemble_vector(self._F, self.b)
+        if self.friction is not None:
+            self.friction.add_residual(self.b)
+        return self.b
 
     def _factorize_for(self, active: np.ndarray) -> bool:
         """Factorize J unless the cached factorization has the same active set."""
-        if self._factorized_set is not None and self._same_sets(active, self._factorized_set):
+        varies = self.friction is not None and self.friction.varies()  # 3D slip: J changes within a state
+        if not varies and self._factorized_set is not None and self._same_sets(active, self._factorized_set):
             return False
         self._factorize()
         self._factorized_set = active.copy()
@@ -184,6 +215,8 @@ class PrimalSubproblem:
         self.A.zeroEntries()
         dolfinx.fem.petsc.assemble_matrix(self.A, self._J, bcs=self.bcs)
         self.A.assemble()
+        if self.friction is not None:
+            self.friction.add_jacobian(self.A)
         self.solver.set_operator(self.A)
 
     def _step(self) -> None:
@@ -212,13 +245,15 @@ class PrimalSubproblem:
         Robin data, p_g = (1/δ)∫ H(u·ν − g) g v·ν the gap's share of the penalty; a backward-stable
         solve leaves a residual of about 1e-16 of their size row by row, whatever δ, α or the contrast.
         """
-        final = self._assemble_vector(self._F, self.b).norm(PETSc.NormType.NORM_INFINITY)
+        final = self._assemble_F().norm(PETSc.NormType.NORM_INFINITY)
         load = self._assemble_vector(self._load, self.du)
         if self.contact:
             load.abs()
             gap = self._assemble_vector(self._gap_terms, self._gap_vec)
             gap.abs()
             load.axpy(1.0, gap)
+            if self.friction is not None:
+                self.friction.add_sizes(load)
         return final, self._terms(self.A, self.u.x.petsc_vec, load)
 
     # -- solve ---------------------------------------------------------------------------
@@ -237,6 +272,10 @@ class PrimalSubproblem:
             h = NewtonHistory()
             h.active_sizes.append(0)
             return h
+        if self.friction is not None:
+            return frictional_newton(
+                self, refinements=self.newton.max_iterations if self.mesh.geometry.dim == 3 else MAX_REFINEMENTS
+            )
         return semismooth_newton(
             residual=self._residual,
             active_set=self._active_set,
@@ -340,6 +379,16 @@ class PrimalSubproblem:
         self._terms.destroy()
 
 
+def _contrast(mu: fem.Function, comm: MPI.Comm) -> float:
+    """max μ / min μ over the mesh (μ = E/(2(1 + ν)): the contrast of the moduli; 1 for a constant μ)."""
+    values = getattr(getattr(mu, "x", None), "array", None)
+    if values is None:
+        return 1.0
+    low = comm.allreduce(float(np.min(values, initial=np.inf)), op=MPI.MIN)
+    high = comm.allreduce(float(np.max(values, initial=0.0)), op=MPI.MAX)
+    return high / low if low > 0 else np.inf
+
+
 @dataclass(slots=True)
 class PrimalSolution:
     """The monolithic penalized solution with its Newton history and contact profile."""
@@ -351,6 +400,16 @@ class PrimalSolution:
     dofs: int
     time_s: float
     problem: PrimalSubproblem
+
+    @property
+    def linear_solver(self) -> str:
+        """The linear solver the Newton steps used: ``"direct"`` (MUMPS LU) or ``"amg"``."""
+        return "amg" if isinstance(self.problem.solver, AMGSolver) else "direct"
+
+    @property
+    def krylov_iterations(self) -> list[int]:
+        """The Krylov iterations of each linear solve (empty for the direct solver)."""
+        return list(getattr(self.problem.solver, "iterations", []))
 
 
 #: The primal (P1) methods warn when ν reaches this.  P1 locks as ν → ½: on u = curl ψ, the clamped unit
@@ -400,11 +459,17 @@ def solve_primal_monolithic(
     *,
     delta: float | None = None,
     newton: NewtonOptions = NewtonOptions(),
+    solver: LinearSolverOptions | str = "auto",
     prefix: str = "fc_primal_mono_",
 ) -> PrimalSolution:
     """Penalized primal contact on the whole mesh by semismooth Newton, on triangles or tetrahedra.
 
-    ``delta`` defaults to ``default_penalty(h, E_c)``, E_c the largest E on Γ_C (``penalty_for``).
+    ``delta`` defaults to ``default_penalty(h, E_c)``, E_c the largest E on Γ_C (``penalty_for``).  With a
+    friction law (``problem.law``) it is one load step from the unloaded state (``fenics_contact.sliding`` for
+    load paths). ``solver``:
+    the linear solver of the Newton steps (``fem.linalg.LinearSolverOptions`` or its kind): ``"direct"``
+    (MUMPS LU), ``"amg"`` (CG + smoothed-aggregation AMG with the rigid-body near-nullspace) or ``"auto"``
+    (AMG on a 3D mesh of ``fem.linalg.AUTO_AMG_DOFS`` unknowns or more, else direct).
     """
     cm = problem.cm
     msh, facet_tags = cm.mesh, cm.facet_tags
@@ -413,15 +478,28 @@ def solve_primal_monolithic(
     fields = problem.fields
     delta = penalty_for(problem, delta)
     warn_if_locking(fields.nu, msh.comm)
-    sub = PrimalSubproblem(msh, facet_tags, fields, delta=delta, alpha=None, prefix=prefix, newton=newton)
+    sub = PrimalSubproblem(
+        msh,
+        facet_tags,
+        fields,
+        delta=delta,
+        alpha=None,
+        prefix=prefix,
+        newton=newton,
+        friction=friction_of(problem.law),
+        solver=solver,
+    )
     history = sub.solve()
     elapsed = time.perf_counter() - start
     profile = sub.contact_profile()
+    solution = PrimalSolution(sub.u, history, profile, delta, sub.num_dofs, elapsed, sub)
     log.info(
-        "monolithic primal: %d Newton steps, active-set sizes %s, penetration %.3e, %.2f s",
+        "monolithic primal: %d Newton steps (%s%s), active-set sizes %s, penetration %.3e, %.2f s",
         history.steps,
+        solution.linear_solver,
+        f", Krylov iterations {solution.krylov_iterations}" if solution.krylov_iterations else "",
         history.active_sizes,
         profile.penetration,
         elapsed,
     )
-    return PrimalSolution(sub.u, history, profile, delta, sub.num_dofs, elapsed, sub)
+    return solution

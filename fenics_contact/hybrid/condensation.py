@@ -83,19 +83,25 @@ class InterfaceProblem:
 class CondensedInterface:
     """Offline condensation of the glued linear problem onto the Γ_C unknowns: s = s_L − M λ."""
 
-    def __init__(self, problem: InterfaceProblem) -> None:
+    def __init__(self, problem: InterfaceProblem, previous: "CondensedInterface | None" = None) -> None:
+        """``previous``: the condensation of the same problem before its contact normals moved (an obstacle
+        step): its interface matrix K and the Γ_C chains are kept when the data response Yc is unchanged."""
         om2 = problem.omega2
         self.problem = problem
         self.Yc, self.Sc, self.Yq, self.Sq = om2.responses(contact=True, chunk=problem.options.chunk)
         f = self.f = np.flatnonzero(problem.free)  # the data at the other values stay zero
         a, b, eye = problem.a[f], problem.b, np.eye(f.size)
-        self.P1 = a[:, None] * problem.omega1.T[np.ix_(f, f)] + b * eye
-        P2 = a[:, None] * self.Yc[np.ix_(f, f)] + b * eye
-        self.lu = sla.lu_factor(eye - self.P1 @ P2)
+        same = previous is not None and np.array_equal(previous.f, f) and np.array_equal(previous.Yc, self.Yc)
+        if same:  # K = I − P₁P₂ depends on Ω₁ and Yc only (not on the normals)
+            self.P1, self.lu = previous.P1, previous.lu
+        else:
+            self.P1 = a[:, None] * problem.omega1.T[np.ix_(f, f)] + b * eye
+            P2 = a[:, None] * self.Yc[np.ix_(f, f)] + b * eye
+            self.lu = sla.lu_factor(eye - self.P1 @ P2)
         self.Gq = np.zeros((problem.a.size, self.Sq.shape[0]))  # ∂g₂₁/∂λ = −Gq
         self.Gq[f] = sla.lu_solve(self.lu, self.P1 @ (a[:, None] * self.Yq[f]))
         self.M = self.Sq + self.Sc @ self.Gq
-        self._chains = None
+        self._chains = previous._chains if same else None  # the contact points stay
         if problem.options.front_window:
             self.chains  # noqa: B018 -- formed offline (collective: all ranks' points), not in the timed solve
 

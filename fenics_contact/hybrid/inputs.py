@@ -10,6 +10,7 @@ from dolfinx import fem
 
 from fenics_contact.errors import InputError
 from fenics_contact.fem.contact import NewtonOptions
+from fenics_contact.fem.mixed import MixedSolution
 from fenics_contact.hybrid.iteration import IterationOptions
 from fenics_contact.problem.geometry import ContactMesh
 from fenics_contact.problem.problem import ContactProblem
@@ -46,12 +47,7 @@ def check_solve_inputs(
         problem.check_loaded()
 
 
-def check_reference_displacement(reference, cm: ContactMesh) -> None:
-    """A reference displacement must be a vector P1 function on the problem's own mesh."""
-    require_instance(
-        reference, fem.Function, "the reference", " (the displacement of solve_primal_monolithic: pass its .u)"
-    )
-    V = reference.function_space
+def _require_problem_mesh(V: fem.FunctionSpace, cm: ContactMesh) -> None:
     if V.mesh is not cm.mesh:
         raise InputError(
             "the reference solution lives on another mesh "
@@ -59,6 +55,21 @@ def check_reference_displacement(reference, cm: ContactMesh) -> None:
             f"({cm.mesh.topology.index_map(cm.mesh.topology.dim).size_global} cells): solve the monolithic "
             "problem on cm.mesh"
         )
+
+
+def check_reference_mixed(reference, cm: ContactMesh) -> None:
+    """A mixed reference must be a MixedSolution on the problem's own mesh."""
+    require_instance(reference, MixedSolution, "the reference", " (from fem.mixed.solve_mixed_monolithic)")
+    _require_problem_mesh(reference.u.function_space, cm)
+
+
+def check_reference_displacement(reference, cm: ContactMesh) -> None:
+    """A reference displacement must be a vector P1 function on the problem's own mesh."""
+    require_instance(
+        reference, fem.Function, "the reference", " (the displacement of solve_primal_monolithic: pass its .u)"
+    )
+    V = reference.function_space
+    _require_problem_mesh(V, cm)
     element = V.ufl_element()
     gdim = cm.mesh.geometry.dim
     if tuple(V.value_shape) != (gdim,) or element.degree != 1 or element.discontinuous:

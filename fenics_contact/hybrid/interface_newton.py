@@ -25,6 +25,7 @@ transmission residual stays above the tolerance ends with ``converged = False``.
 
 import logging
 import time
+from dataclasses import replace
 
 import numpy as np
 
@@ -53,10 +54,13 @@ def newton_iterate(
     history = IterationHistory()
     t_off = time.perf_counter()
     problem = step.interface_problem(nopt)
-    if problem.omega2.refresh():
+    if problem.options.strategy != nopt.strategy:  # (the step's: ``options.interface_options`` with friction)
+        nopt = replace(nopt, strategy=problem.options.strategy)
+    stale = problem.condensed
+    if problem.omega2.refresh():  # the normals moved: condense again (keeping what does not depend on them)
         problem.condensed = None
     if nopt.strategy == "condensed" and problem.condensed is None:
-        problem.condensed = CondensedInterface(problem)
+        problem.condensed = CondensedInterface(problem, previous=stale)
     history.time_offline_s = time.perf_counter() - t_off
     start = time.perf_counter()
     comm = step.comm
@@ -91,7 +95,7 @@ def newton_iterate(
     # Jacobian of Ω₂: from the offline condensation (Woodbury, no factorization), or exact from its factorization
     # with Ω₂'s own factorization (the "interface" strategy, and the fallback when a condensed step fails:
     # with a stiff penalty the Woodbury update loses digits)
-    exact = nopt.strategy == "interface"
+    exact = nopt.strategy == "interface" or getattr(problem.condensed, "exact_corrections", False)
     # certify: Ω₁ is solved, Ω₂'s warm state is checked against its own equations (solved only if that fails)
     Tg, rec = evaluate(step, g, history, name=name, monitor=monitor, omega2_warm=nopt.strategy == "condensed")
     rec.info["newton_steps"] = history.newton_steps

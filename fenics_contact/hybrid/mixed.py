@@ -64,8 +64,11 @@ its vertices (the zigzag of a band of width 0.15 along Γ_C, model 2,
 **MPI.**  Under ``mpiexec`` both subproblems are distributed (``fem.mixed``); the
 Robin data g₁₂, g₂₁ are the values at the canonical γ nodes (Ω₁'s order, which Ω₂
 adopts), each rank holding one block of them (``MixedSubproblem.interface_range``),
-so the update and Anderson's inner products are global.  The iterations, Newton
-steps and solution are those of the serial run (``tests/fem/test_mpi_mixed.py``).
+so the update and Anderson's inner products are global.  The interface Newton takes
+its affine pieces from the distributed subproblems (``hybrid.response.MixedPart``: block back-solves with
+their factorizations, the trace and contact rows gathered) and solves its dense interface problem on every
+rank.  The iterations, Newton steps and solution are those of the serial run
+(``tests/fem/test_mpi_mixed.py``).
 """
 
 import logging
@@ -84,9 +87,9 @@ from fenics_contact.fem.mixed_contact import MixedContactProfile
 from fenics_contact.fem.mixed_newton import MixedNewtonHistory
 from fenics_contact.fem.mixed_spaces import check_triangles
 from fenics_contact.fem.mixed_subproblem import MixedSubproblem
-from fenics_contact.hybrid.certificate import Certificate, mixed_certificate
+from fenics_contact.hybrid.certificate import Certificate, mixed_certificate, relative
 from fenics_contact.hybrid.condensation import InterfaceProblem
-from fenics_contact.hybrid.inputs import check_solve_inputs, require_instance
+from fenics_contact.hybrid.inputs import check_reference_mixed, check_solve_inputs
 from fenics_contact.hybrid.iteration import (
     InterfaceNewtonOptions,
     IterationHistory,
@@ -97,6 +100,7 @@ from fenics_contact.hybrid.iteration import (
 from fenics_contact.hybrid.primal import omega2_record
 from fenics_contact.hybrid.response import FineResponse, MixedPart
 from fenics_contact.hybrid.transmission import split_mesh, sub_to_parent_dofs
+from fenics_contact.problem.friction import require_frictionless
 from fenics_contact.problem.problem import ContactProblem
 
 __all__ = [
@@ -110,8 +114,9 @@ __all__ = [
 
 log = logging.getLogger(__name__)
 
-#: Default transmission coefficient β = √h/E_c of Algorithms 2 and 4 (the paper's faster choice √h, with E = 1;
-#: E_c the smallest Young's modulus on Γ_C makes β a compliance, as the primal α = E h^-1/2 is a stiffness).
+#: Default transmission coefficient β = √(h L_ref)/E_c of Algorithms 2 and 4 (the paper's faster choice √h, with
+#: E = L_ref = 1; E_c the smallest Young's modulus on Γ_C and L_ref the body's size make β a compliance, a length
+#: per stress, as the primal α = E/√(h L_ref) is a stiffness per length).
 DEFAULT_BETA = "sqrt-h"
 
 
@@ -125,13 +130,17 @@ def solve_or_verify(sub: MixedSubproblem, data: np.ndarray, warm: bool) -> Mixed
     return sub.solve(data)
 
 
-def transmission_coefficient(beta: float | str, h: float, modulus: float = 1.0) -> float:
-    """β from a number (or its string) or ``"sqrt-h"`` (β = √h/E_c, E_c = ``modulus``: a compliance in the units
-    of the data); raises InputError unless β > 0."""
+def transmission_coefficient(beta: float | str, h: float, modulus: float = 1.0, length: float = 1.0) -> float:
+    """β from a number (or its string: a length per stress in the data's units) or ``"sqrt-h"``: β =
+    √(h/L_ref)·L_ref/E_c = √(h L_ref)/E_c, E_c = ``modulus``, L_ref = ``length`` (the body's size; 1 on the unit
+    square, where β = √h/E_c): a compliance in the units of the data, the same relative answers in any unit of
+    length. Raises InputError unless β > 0."""
+    if not (np.isfinite(length) and length > 0):
+        raise InputError(f"the reference length L_ref must be a finite number > 0, got {length!r}")
     if isinstance(beta, str):
         text = beta.strip().replace(" ", "").lower()
         if text in ("sqrt-h", "sqrt(h)", "h^1/2", "h^0.5"):
-            value = float(np.sqrt(h)) / modulus
+            value = float(np.sqrt(h / length)) * length / modulus
         else:
             try:
                 value = float(text)
@@ -149,8 +158,6 @@ class MixedHybridStep:
 
     #: whether the Ω₁ subproblem assembles its global matrices (Algorithm 4's Ω₁ does not need them)
     omega1_operators = True
-    #: the interface Newton holds serial SciPy operators: on several ranks the default update is Anderson
-    serial_interface_newton = True
 
     def __init__(
         self,
@@ -161,10 +168,11 @@ class MixedHybridStep:
         newton: NewtonOptions = NewtonOptions(),
         reference: MixedSolution | None = None,
     ) -> None:
+        require_frictionless(problem.law, "Algorithm 2 (mixed)")
         cm = problem.cm
         check_triangles(cm.mesh)
         self.comm = cm.comm
-        self.beta = transmission_coefficient(beta, cm.h, problem.contact_modulus(smallest=True))
+        self.beta = transmission_coefficient(beta, cm.h, problem.contact_modulus(smallest=True), problem.length)
         self.epsilon = epsilon_for(problem, epsilon)
         self.cm = cm
         self.parts = split_mesh(cm)
@@ -245,7 +253,7 @@ class MixedHybridStep:
         """(e_σ, e_u) = (‖σ_h − σⁿ‖_A/‖σ_h‖_A, ‖u_h − uⁿ‖/‖u_h‖) against the reference."""
         es = sum(s.stress_norm2(s.c - c) for s, (c, _) in zip(self.sub, self.reference))
         eu = sum(s.l2_norm2(s.u - u) for s, (_, u) in zip(self.sub, self.reference))
-        return float(np.sqrt(es / self._ref_norm2[0])), float(np.sqrt(eu / self._ref_norm2[1]))
+        return float(np.sqrt(relative(es, self._ref_norm2[0]))), float(np.sqrt(relative(eu, self._ref_norm2[1])))
 
     # -- HybridStep protocol -------------------------------------------------------------
     def initial_data(self) -> np.ndarray:
@@ -286,18 +294,24 @@ class MixedHybridStep:
 
     def interface_problem(self, options: InterfaceNewtonOptions):
         """The affine pieces for ``hybrid.interface_newton`` (built once)."""
-        if self.comm.size > 1:  # MixedPart holds serial SciPy operators
-            raise InputError(
-                f"the interface Newton method (--accel newton) of the mixed method runs serially; got {self.comm.size} "
-                "MPI ranks. Use --accel anderson (or none) under mpiexec, or run without mpiexec."
-            )
         if self._newton is None or self._newton.options.strategy != options.strategy:
-            omega2 = MixedPart(self.sub[1], perm=self._perm2, contact=True, factorize=options.strategy == "condensed")
-            same = lambda v: np.asarray(v)  # noqa: E731  (serial: local = global numbering)
+            perm = self._perm2 if self.comm.size == 1 else None  # (distributed: the canonical order)
+            omega2 = MixedPart(self.sub[1], perm=perm, contact=True, factorize=options.strategy == "condensed")
+            g0, g1 = self.sub[0].interface_range
             self._newton = InterfaceProblem(
-                self._omega1_response(options), omega2, np.full(self.size, -2.0 * self.beta), 1.0, same, same, options
+                self._omega1_response(options),
+                omega2,
+                np.full(self.size_global, -2.0 * self.beta),
+                1.0,
+                self._gather,
+                lambda v: np.asarray(v)[g0:g1],
+                options,
             )
         return self._newton
+
+    def _gather(self, block: np.ndarray) -> np.ndarray:
+        """The interface values of all ranks (canonical order) from this rank's block (collective)."""
+        return np.asarray(block) if self.comm.size == 1 else np.concatenate(self.comm.allgather(np.asarray(block)))
 
     def _measure(self) -> None:
         ds = du = ns = nu = 0.0
@@ -379,7 +393,7 @@ def solve_mixed_hybrid(
     """
     check_solve_inputs(problem, options=options, newton=newton)
     if reference is not None:
-        require_instance(reference, MixedSolution, "the reference", " (from fem.mixed.solve_mixed_monolithic)")
+        check_reference_mixed(reference, problem.cm)
     start = time.perf_counter()
     if reference is not None and epsilon is None:
         epsilon = reference.epsilon

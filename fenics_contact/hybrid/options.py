@@ -6,13 +6,13 @@
 so that the loop and the Newton method read the same options without importing each other.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from fenics_contact.errors import InputError
 
-__all__ = ["default_accel", "ACCELERATIONS", "InterfaceNewtonOptions", "IterationOptions"]
+__all__ = ["default_accel", "interface_options", "ACCELERATIONS", "InterfaceNewtonOptions", "IterationOptions"]
 
 
 #: The updates of the interface data: the paper's plain update, Anderson acceleration, interface Newton.
@@ -63,8 +63,7 @@ class IterationOptions:
 
     ``accel`` is the update: ``"none"`` (the paper's), ``"anderson"`` (depth ``depth``) or
     ``"newton"`` (``hybrid.interface_newton``, options ``newton``); None: ``default_accel`` of the step (the
-    interface Newton, measured the fastest on every tested model; Anderson where a step's interface Newton is
-    serial and the run has several ranks).
+    interface Newton, measured the fastest on every tested model, serially and under MPI).
     """
 
     tol: float = 1.0e-6
@@ -85,6 +84,17 @@ class IterationOptions:
 
 
 def default_accel(step, comm) -> str:
-    """The update when none is given: the interface Newton, or Anderson when the step (a hybrid step or its class)
-    has ``serial_interface_newton`` and ``comm`` several ranks."""
-    return "anderson" if getattr(step, "serial_interface_newton", False) and comm.size > 1 else "newton"
+    """The update when none is given: the interface Newton, for every step (a hybrid step or its class) on any
+    number of ranks ``comm``."""
+    return "newton"
+
+
+def interface_options(
+    options: InterfaceNewtonOptions, friction, *, frictional_condensation: bool
+) -> InterfaceNewtonOptions:
+    """The interface Newton options a step runs: with friction on Γ_C (``friction`` not None) and no frictional
+    condensation (``hybrid.friction``: Algorithm 1, serial) the ``"interface"`` strategy (Newton on
+    F(g) = g − T(g) with Ω₂'s frictional Jacobian) instead of the normal-only condensation."""
+    if friction is not None and options.strategy == "condensed" and not frictional_condensation:
+        return replace(options, strategy="interface")
+    return options

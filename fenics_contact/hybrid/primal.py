@@ -21,8 +21,9 @@ from mpi4py import MPI
 
 from fenics_contact.fem.contact import ContactProfile, NewtonHistory, NewtonOptions
 from fenics_contact.fem.primal import PrimalSubproblem, penalty_for, warn_if_locking
-from fenics_contact.hybrid.certificate import Certificate, primal_certificate
+from fenics_contact.hybrid.certificate import Certificate, primal_certificate, relative
 from fenics_contact.hybrid.condensation import InterfaceProblem
+from fenics_contact.hybrid.friction import ComponentPart, FrictionalCondensation
 from fenics_contact.hybrid.inputs import check_reference_displacement, check_solve_inputs
 from fenics_contact.hybrid.iteration import (
     HybridStep,
@@ -32,8 +33,10 @@ from fenics_contact.hybrid.iteration import (
     IterationResult,
     iterate,
 )
+from fenics_contact.hybrid.options import interface_options
 from fenics_contact.hybrid.response import FineResponse, PrimalPart
 from fenics_contact.hybrid.transmission import InterfaceSpace, part_rollers, robin_coefficient, split_mesh
+from fenics_contact.problem.friction import friction_of
 from fenics_contact.problem.problem import ContactProblem
 
 __all__ = [
@@ -45,7 +48,8 @@ __all__ = [
     "DEFAULT_ALPHA_MS",
 ]
 
-#: Default transmission coefficient α_p = E_p h^(-1/2) (chosen from benchmarks/primal_hybrid_study.py).
+#: Default transmission coefficient α_p = E_p (h/L_ref)^(-1/2)/L_ref = E_p/√(h L_ref), a stiffness per length
+#: (L_ref the body's size, 1 on the unit square; chosen from benchmarks/primal_hybrid_study.py).
 DEFAULT_ALPHA = "E*h^-1/2"
 #: Default α of Algorithm 3 (multiscale Ω₁): h^(-1/2) times the smallest E_p on γ.  The multiscale Ω₁'s
 #: interface response is a Robin map only up to its approximation error ε, and the glued problem sees
@@ -62,6 +66,8 @@ def solve_or_verify(sub: PrimalSubproblem, warm: bool) -> NewtonHistory:
     if warm:
         res, load = sub.residual_norm()
         if res <= sub.newton.rtol * load + sub.newton.atol:
+            if sub.friction is not None:
+                sub._factorize()  # (its Jacobian at this state: the interface Newton's corrections read it)
             return NewtonHistory(residuals=[res])
     return sub.solve()
 
@@ -94,7 +100,7 @@ class PrimalHybridStep:
         self.interface = InterfaceSpace(cm, self.parts, shape=(gdim,))
         parent_fields = problem.fields
         warn_if_locking(parent_fields.nu, cm.comm)
-        self.alpha = robin_coefficient(alpha, parent_fields.E, self.interface, cm.h)
+        self.alpha = robin_coefficient(alpha, parent_fields.E, self.interface, cm.h, problem.length)
         self.delta = delta = penalty_for(problem, delta)
         self.sub = []
         for i, part in enumerate(self.parts):
@@ -114,6 +120,7 @@ class PrimalHybridStep:
                     prefix=f"fc_primal_omega{i + 1}_",
                     newton=newton,
                     V=self.interface.spaces[i],
+                    friction=friction_of(problem.law) if i == 1 else None,
                 )
             )
         self._prev = [np.zeros_like(s.u.x.array) for s in self.sub]
@@ -171,14 +178,22 @@ class PrimalHybridStep:
 
     def interface_problem(self, options: InterfaceNewtonOptions):
         """The affine pieces for ``hybrid.interface_newton`` (built once: fine Ω₁ response, Ω₂ with J₀)."""
+        friction = self.sub[1].friction
+        options = interface_options(options, friction, frictional_condensation=self.comm.size == 1)
         if self._newton is None or self._newton.options.strategy != options.strategy:
             self.prepare()
             iface = self.interface
             omega1 = FineResponse(PrimalPart(self.sub[0], iface, 0, contact=False), chunk=options.chunk)
-            omega2 = PrimalPart(self.sub[1], iface, 1, contact=True, factorize=options.strategy == "condensed")
+            condensed = options.strategy == "condensed"
+            if friction is not None and condensed:  # all components of the Γ_C displacements (hybrid.friction)
+                omega2 = ComponentPart(self.sub[1], iface, 1)
+            else:
+                omega2 = PrimalPart(self.sub[1], iface, 1, contact=True, factorize=condensed)
             self._newton = InterfaceProblem(
                 omega1, omega2, iface.gather(2.0 * self.alpha), -1.0, iface.gather, iface.local, options
             )
+            if isinstance(omega2, ComponentPart):
+                self._newton.condensed = FrictionalCondensation(self._newton)
         return self._newton
 
     def _measure(self) -> None:
@@ -204,7 +219,7 @@ class PrimalHybridStep:
         for s, ref, diff in zip(self.sub, self.reference, self._diff):
             diff.x.array[:] = s.u.x.array - ref.x.array
             err += s.l2_norm2(diff)
-        return float(np.sqrt(err / self._ref_norm2))
+        return float(np.sqrt(relative(err, self._ref_norm2)))
 
     def error_energy(self) -> float:
         """‖u_h − uⁿ‖_a / ‖u_h‖_a over both subdomains (needs the reference)."""
@@ -213,7 +228,7 @@ class PrimalHybridStep:
             diff.x.array[:] = s.u.x.array - r.x.array
             err += s.energy_norm2(diff)
             ref += s.energy_norm2(r)
-        return float(np.sqrt(err / ref))
+        return float(np.sqrt(relative(err, ref)))
 
     def glued(self, V: fem.FunctionSpace) -> fem.Function:
         """u on the parent mesh: u₁ on Ω₁, u₂ on Ω₂ (u₂ on γ)."""

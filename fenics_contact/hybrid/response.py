@@ -7,8 +7,8 @@ A subdomain problem seen through its interface (``AffinePart``) is
 with J the operator the responses are taken with (Ω₂: J₀, no contact node active; Ω₁: its only operator).
 ``AffinePart.responses`` back-solves J for the columns of C and Qᵀ (chunked multi-right-hand-side solves
 with the factorization it holds, ``block_solve``) and keeps their trace and contact rows: Yc = N J⁻¹C,
-Sc = Q J⁻¹C, Yq = N J⁻¹Qᵀ, Sq = Q J⁻¹Qᵀ.  ``PrimalPart`` is a P1 subproblem (MPI-parallel),
-``MixedPart`` an Arnold–Winther one (serial).  Ω₁'s affine trace response y₁ = T₁ g₁₂ + t₁ is
+Sc = Q J⁻¹C, Yq = N J⁻¹Qᵀ, Sq = Q J⁻¹Qᵀ.  ``PrimalPart`` is a P1 subproblem, ``MixedPart`` an Arnold–Winther one (both
+MPI-parallel).  Ω₁'s affine trace response y₁ = T₁ g₁₂ + t₁ is
 ``FineResponse`` (a fine Ω₁: T₁ by back-solves), ``ProbedResponse`` (a public affine solve, probed column
 by column) or ``MatrixResponse`` (given, e.g. by a multiscale Ω₁).
 """
@@ -22,8 +22,8 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from fenics_contact.errors import ConvergenceError
-from fenics_contact.fem.linalg import DirectSolver, scipy_to_petsc
-from fenics_contact.fem.mixed_linear import MIXED_SOLVER_OPTIONS, saddle_point_scaling
+from fenics_contact.fem.linalg import DirectSolver
+from fenics_contact.fem.mixed_linear import SaddlePointFactorization
 
 __all__ = [
     "block_solve",
@@ -177,6 +177,7 @@ class PrimalPart(AffinePart):
             self.solver = sub.solver
         self._b = sub.b.duplicate()
         self._x = sub.b.duplicate()
+        self._kept_inverse = None  # (J₀'s factorization count, rows, the block of J₀⁻¹ there, transposed)
 
     def refresh(self) -> bool:
         if not self.n_c:
@@ -204,17 +205,21 @@ class PrimalPart(AffinePart):
         unknowns that MUMPS computes from its factors (``DirectSolver.inverse_block``: the values of the
         back-solves without them; benchmarks/results/interface_response.md)."""
         solver = solver or self.solver
-        if not solver.has_inverse_entries():
+        if not solver.has_inverse_entries() or not self.sub.symmetric:  # (MUMPS gives entries of A⁻ᵀ)
             return super().responses(contact=contact, chunk=chunk, solver=solver)
         contact_at = (self.bs * self.c_nodes[:, None] + np.arange(self.bs)).ravel() if self.n_c else self.trace_at[:0]
         rows = np.unique(np.concatenate([self.trace_at, self.data_at, contact_at]))
         at = functools.partial(np.searchsorted, rows)  # position among ``rows`` of a DOF
-        B = np.zeros((rows.size, self.n_g + (self.n_c if contact else 0)))
-        B[at(self.data_at), self.data_index] = self.data_w  # C
+        r_idx, c_idx, v = [at(self.data_at)], [self.data_index], [self.data_w]  # C
         if contact:
             for c in range(self.bs):  # Qᵀ
-                B[at(self.bs * self.c_nodes + c), self.n_g + np.arange(self.n_c)] = self.c_normals[:, c]
-        X = solver.inverse_block(rows) @ B  # the rows ``rows`` of J⁻¹ [C Qᵀ]
+                r_idx.append(at(self.bs * self.c_nodes + c))
+                c_idx.append(self.n_g + np.arange(self.n_c))
+                v.append(self.c_normals[:, c])
+        shape = (rows.size, self.n_g + (self.n_c if contact else 0))
+        B = sp.csr_matrix((np.concatenate(v), (np.concatenate(r_idx), np.concatenate(c_idx))), shape=shape)
+        # the rows ``rows`` of J⁻¹ [C Qᵀ] = ((J⁻¹)ᵀ[rows, rows]ᵀ B)ᵀ; B has one or ``bs`` entries per column
+        X = np.asarray((B.T @ self._inverse_block_transposed(solver, rows)).T)
         Y = np.zeros((self.n_g, B.shape[1]))
         Y[self.trace_index] = X[at(self.trace_at)]
         S = (
@@ -225,6 +230,18 @@ class PrimalPart(AffinePart):
         if not contact:
             return Y, S, np.zeros((self.n_g, self.n_c)), np.zeros((self.n_c, self.n_c))
         return Y[:, : self.n_g], S[:, : self.n_g], Y[:, self.n_g :], S[:, self.n_g :]
+
+    def _inverse_block_transposed(self, solver: DirectSolver, rows: np.ndarray) -> np.ndarray:
+        """((J⁻¹)[rows][:, rows])ᵀ, C-contiguous; J₀'s is kept (it is factorized once, and the rows stay when the
+        obstacle moves: only the normals in Qᵀ change, so a refreshed condensation costs products, no MUMPS
+        call)."""
+        if solver is not getattr(self, "solver", None):  # (no J₀ without ``factorize``)
+            return np.ascontiguousarray(solver.inverse_block(rows).T)
+        kept = self._kept_inverse
+        if kept is None or kept[0] != solver.factorizations or not np.array_equal(kept[1], rows):
+            block = np.ascontiguousarray(solver.inverse_block(rows).T)
+            self._kept_inverse = kept = (solver.factorizations, rows, block)
+        return kept[2]
 
     def data_block(self, j0: int, j1: int) -> np.ndarray:
         B = np.zeros((self.nown, j1 - j0), order="F")
@@ -285,44 +302,59 @@ class PrimalPart(AffinePart):
 
 
 class MixedPart(AffinePart):
-    """A ``fem.mixed.MixedSubproblem`` (serial); ``perm``: its interface value k is canonical value perm[k].
+    """A ``fem.mixed.MixedSubproblem`` (serial or distributed); ``perm``: its interface value k is canonical value
+    perm[k] (serial only).
 
+    Under MPI the state, the data and contact blocks and the solves are this rank's owned entries (the layout
+    of the subproblem's saddle-point factorization: owned stresses, then owned displacements), the trace and
+    contact rows global (gathered from the blocks of N and Q, ``fem.distributed.DistributedMatrix``).
     J₀ is factorized equilibrated like the subproblem's own Jacobians (D J₀ D, D = diag(s I_σ, I_u/s) with the
     subproblem's ``stress_scale`` s), so every solver here returns solutions of the unscaled systems."""
 
     def __init__(self, sub, *, perm: np.ndarray | None, contact: bool, factorize: bool = True) -> None:
         self.sub, self.comm = sub, sub.mesh.comm
-        inv = np.arange(sub.C.shape[1]) if perm is None else np.argsort(perm)
-        self.C = sub.C[:, inv].tocsc()  # data (canonical order) → stress rows
-        self.N = sub.N[inv].tocsr()  # stress → trace (canonical order)
+        self.serial = self.comm.size == 1
+        if not (self.serial or perm is None or np.array_equal(perm, np.arange(perm.size))):
+            raise ValueError("a distributed MixedPart takes its data in the canonical order (perm=None)")
+        self.inv = np.arange(sub.C.shape[1]) if perm is None else np.argsort(perm)
+        self.C = sub.C[:, self.inv].tocsc()  # data (canonical order) → stress rows (owned rows)
         self.n_g = self.C.shape[1]
         self.ns, self.nown = sub.n_sigma, sub.n_sigma + sub.n_u
-        self.n_c = sub.Q.shape[0] if contact else 0
+        self.n_c = sub.q_points.shape[0] if contact else 0
         self.D = sub.q_weights / sub.epsilon if contact else np.zeros(0)
         self.gap = -sub.q0 if contact else np.zeros(0)  # σ_c = Q c + q0 (q0: the traction lifting's)
-        self.trace_offset = sub.n0[inv] if sub.beta is not None else 0.0  # σn = N c + n0
+        self.trace_offset = self._gathered(sub.n0)[self.inv] if sub.beta is not None else 0.0  # σn = N c + n0
         self._J0 = None
-        if contact:
-            self.QT = sub.Q.T.tocsc()
+        if self.serial:
+            self.N = sub.N[self.inv].tocsr()  # stress → trace (canonical order)
+            if contact:
+                self.QT = sub.Q.T.tocsc()
         if contact and factorize:
-            s = sub.stress_scale
-            saddle = sp.bmat([[sub.Kt if s == 1.0 else s**2 * sub.Kt, sub.B.T], [sub.B, None]], format="csr")
-            self._J0 = scipy_to_petsc(saddle, self.comm)
-            self.solver = DirectSolver(
+            self._J0 = SaddlePointFactorization(
                 self.comm,
-                prefix=f"{sub.prefix}j0_",
-                options=MIXED_SOLVER_OPTIONS,
-                scaling=saddle_point_scaling(s, self.ns, sub.n_u),
+                f"{sub.prefix}j0_",
+                self.ns,
+                sub.assembly,
+                None,
+                contact=False,
+                has_operators=True,
+                scale=sub.stress_scale,
             )
-            self.solver.set_operator(self._J0)
+            self._J0.factorize_for(None)
+            self.solver = self._J0.solver
         elif not contact:
             sub._factorize_for(None)
             self.solver = sub.solver
-        self._b = PETSc.Vec().createSeq(self.nown, comm=self.comm)
+        self._b = PETSc.Vec().createMPI((self.nown, PETSc.DECIDE), comm=self.comm)
         self._x = self._b.duplicate()
 
+    def _gathered(self, block: np.ndarray) -> np.ndarray:
+        """The global array from every rank's block (rank order)."""
+        return block if self.serial else np.concatenate(self.comm.allgather(np.asarray(block)))
+
     def data_free(self) -> np.ndarray:
-        return np.diff(self.C.indptr) > 0
+        free = np.diff(self.C.indptr) > 0
+        return free if self.serial else np.any(self.comm.allgather(free), axis=0)
 
     def contact_points(self) -> np.ndarray:
         return np.asarray(self.sub.q_points)[:, : self.sub.mesh.geometry.dim]
@@ -334,14 +366,33 @@ class MixedPart(AffinePart):
 
     def contact_block(self, k0: int, k1: int) -> np.ndarray:
         B = np.zeros((self.nown, k1 - k0), order="F")
-        B[: self.ns] = self.QT[:, k0:k1].toarray()
+        if self.serial:
+            B[: self.ns] = self.QT[:, k0:k1].toarray()
+            return B
+        nodes, e = self.sub.contact_nodes, np.zeros(self.n_c)
+        for j, k in enumerate(range(k0, k1)):  # Qᵀ e_k, column by column (collective)
+            e[k] = 1.0
+            B[: self.ns, j] = nodes.Q.T @ nodes.block(e)
+            e[k] = 0.0
         return B
 
     def trace_rows(self, X: np.ndarray) -> np.ndarray:
-        return self.N @ X[: self.ns]
+        if self.serial:
+            return self.N @ X[: self.ns]
+        return self._gathered_rows(self.sub.interface.N, X)[self.inv]
 
     def contact_rows(self, X: np.ndarray) -> np.ndarray:
-        return self.sub.Q @ X[: self.ns]
+        if self.serial:
+            return self.sub.Q @ X[: self.ns]
+        return self._gathered_rows(self.sub.contact_nodes.Q, X)
+
+    def _gathered_rows(self, op, X: np.ndarray) -> np.ndarray:
+        """op X[:ns] with all ranks' row blocks of the distributed ``op``, column by column (collective)."""
+        k = X.shape[1]
+        block = np.zeros((op.local_shape[0], k))
+        for j in range(k):
+            block[:, j] = op @ X[: self.ns, j]
+        return np.concatenate(self.comm.allgather(block), axis=0)
 
     def body_load(self) -> np.ndarray:
         b = np.zeros(self.nown)
@@ -364,7 +415,11 @@ class MixedPart(AffinePart):
         r = self.body_load()
         r[: self.ns] += self.C @ g
         if self.n_c:
-            r[: self.ns] -= self.QT @ lam
+            if self.serial:
+                r[: self.ns] -= self.QT @ lam
+            else:
+                nodes = self.sub.contact_nodes
+                r[: self.ns] -= nodes.Q.T @ nodes.block(lam)
         return r
 
     def destroy(self) -> None:
@@ -372,7 +427,6 @@ class MixedPart(AffinePart):
             obj.destroy()
         if self._J0 is not None:
             self._J0.destroy()
-            self.solver.destroy()
 
 
 class FineResponse:

@@ -135,44 +135,57 @@ class InterfaceSpace:
         return u.x.array[self.dofs].copy()
 
 
-def _parse_factor(token: str, h: float) -> tuple[float, bool | str]:
-    """One factor of an α spelling: a number, 'E', 'Emin', 'sqrt-h' or 'h^p' → (value, 'E' / 'Emin' / False)."""
+def _parse_factor(token: str, h: float) -> tuple[float, bool | str, bool]:
+    """One factor of an α spelling: a number, 'E', 'Emin', 'sqrt-h' or 'h^p' → (value, 'E' / 'Emin' / False,
+    whether it is a symbol rather than a number)."""
     if token == "E":
-        return 1.0, True
+        return 1.0, True, True
     if token.endswith("Emin"):
-        return float(token[:-4] or 1.0), "Emin"
+        return float(token[:-4] or 1.0), "Emin", True
     if token == "sqrt-h":
-        return h**0.5, False
+        return h**0.5, False, True
     if token.startswith("h^"):
         power = token[2:].strip("()")
         num, _, den = power.partition("/")
-        return h ** (float(num) / float(den or 1)), False
+        return h ** (float(num) / float(den or 1)), False, True
     if token.endswith("E"):
-        return float(token[:-1]), True
-    return float(token), False
+        return float(token[:-1]), True, True
+    return float(token), False, False
 
 
-def robin_coefficient(alpha: float | str, E: fem.Function, space: "InterfaceSpace", h: float) -> np.ndarray:
+def robin_coefficient(
+    alpha: float | str, E: fem.Function, space: "InterfaceSpace", h: float, length: float = 1.0
+) -> np.ndarray:
     """Nodal α on the owned interface DOFs from a number or a product spelling.
 
-    ``alpha`` is a number, or a product of factors joined by ``*``: numbers,
-    ``h^p`` (e.g. ``h^-1/2``), ``sqrt-h`` (= h^½), ``E``, where E stands for
+    ``alpha`` is a number (a stiffness per length in the data's units, used as given), or a product of factors
+    joined by ``*``: numbers, ``h^p`` (e.g. ``h^-1/2``), ``sqrt-h`` (= h^½), ``E``, where E stands for
     E_p, the area- (in 3D volume-) weighted mean of Young's modulus over the cells touching node p,
     and ``Emin``, the smallest E_p on γ (one number for all nodes).
     Examples: ``"1"``, ``"h^-1/2"``, ``"E"``, ``"2E"``, ``"E*h^-1/2"``, ``"Emin*h^-1/2"``.
+
+    Units: in a spelling with a symbol (h, E, Emin), h is the relative mesh size h/L_ref and the product is
+    divided by L_ref (``length``, the body's size), so α = E (h/L_ref)^-½ / L_ref = E/√(h L_ref) is a stress per
+    length and the same spelling gives the same relative answers in any unit of length (L_ref = 1 on the unit
+    square: α = E h^-½ there).  A spelling of numbers only is a number.
     """
-    scale, with_E, with_Emin = 1.0, False, False
+    if not (np.isfinite(length) and length > 0):
+        raise InputError(f"the reference length L_ref must be a finite number > 0, got {length!r}")
+    scale, with_E, with_Emin, symbolic = 1.0, False, False, False
     if isinstance(alpha, str):
         try:
             for token in alpha.replace(" ", "").split("*"):
-                value, kind = _parse_factor(token, h)
+                value, kind, symbol = _parse_factor(token, h / length)
                 scale *= value
                 with_E |= kind is True
                 with_Emin |= kind == "Emin"
+                symbolic |= symbol
         except (ValueError, ZeroDivisionError):
             raise InputError(
                 f"cannot read alpha={alpha!r}: give a number or a product like 'h^-1/2', 'sqrt-h', 'E', '2E*h^-1/2'"
             ) from None
+        if symbolic:
+            scale /= length
     else:
         try:
             scale = float(alpha)
@@ -210,7 +223,7 @@ def sub_to_parent_dofs(
     bs = V_sub.dofmap.index_map_bs
     ds, dp = V_sub.dofmap.list[cells].ravel(), V_parent.dofmap.list[pcells].ravel()
     xs, xp = V_sub.tabulate_dof_coordinates()[ds], V_parent.tabulate_dof_coordinates()[dp]
-    if not np.allclose(xs, xp, atol=1e-12):
+    if not np.allclose(xs, xp, atol=1e-12 * float(np.max(np.abs(xp), initial=0.0))):  # (relative: any length unit)
         raise RuntimeError("submesh and parent cells do not share their local DOF layout")
     sub = (bs * ds.astype(np.int64)[:, None] + np.arange(bs)).ravel()
     par = (bs * dp.astype(np.int64)[:, None] + np.arange(bs)).ravel()

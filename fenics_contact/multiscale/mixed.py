@@ -59,8 +59,8 @@ from fenics_contact.fem.contact import NewtonOptions
 from fenics_contact.fem.mixed import MixedSolution
 from fenics_contact.fem.mixed_contact import MixedContactProfile
 from fenics_contact.fem.mixed_spaces import boundary_stress_space
-from fenics_contact.hybrid.certificate import mixed_certificate
-from fenics_contact.hybrid.inputs import check_solve_inputs, require_instance
+from fenics_contact.hybrid.certificate import mixed_certificate, relative
+from fenics_contact.hybrid.inputs import check_reference_mixed, check_solve_inputs, require_instance
 from fenics_contact.hybrid.iteration import (
     InterfaceNewtonOptions,
     IterationHistory,
@@ -75,6 +75,7 @@ from fenics_contact.multiscale.cem.options import warn_if_few_layers
 from fenics_contact.multiscale.coarse import coarse_grid
 from fenics_contact.multiscale.mixed_cem.omega1 import MixedMultiscaleOmega1
 from fenics_contact.multiscale.mixed_cem.options import MixedCEMOptions
+from fenics_contact.problem.friction import require_frictionless
 from fenics_contact.problem.geometry import ContactMesh
 from fenics_contact.problem.problem import ContactProblem
 from fenics_contact.problem.tags import Boundary
@@ -115,7 +116,6 @@ class MixedMultiscaleHybridStep(MixedHybridStep):
     """The transmission map T of Algorithm 4 (``hybrid.iteration.HybridStep`` protocol)."""
 
     omega1_operators = False  # Ω₁ is solved in the multiscale space: no fine Ω₁ matrices
-    serial_interface_newton = False  # every rank holds the whole problem (replicated)
 
     def __init__(
         self,
@@ -128,6 +128,7 @@ class MixedMultiscaleHybridStep(MixedHybridStep):
         cache_dir: str | Path | None = None,
         offline_comm: MPI.Comm = MPI.COMM_SELF,
     ) -> None:
+        require_frictionless(problem.law, "Algorithm 4 (mixed-ms)")
         cm = problem.cm
         _require_replicated_mesh(cm, offline_comm)
         if cm.H is None and not np.any(np.asarray(cm.coarse_cell) >= 0):
@@ -223,7 +224,7 @@ class MixedMultiscaleHybridStep(MixedHybridStep):
         c2, v2 = self.reference[1]
         es = self.omega1.a_norm2(s1 - self._sref1) + s2.stress_norm2(s2.c - c2)
         eu = self.omega1.m_norm2(u1 - self._uref1) + s2.l2_norm2(s2.u - v2)
-        return float(np.sqrt(es / self._ref_norm2[0])), float(np.sqrt(eu / self._ref_norm2[1]))
+        return float(np.sqrt(relative(es, self._ref_norm2[0]))), float(np.sqrt(relative(eu, self._ref_norm2[1])))
 
     def projected_displacement_error(self) -> float:
         """‖π(u_h − u₁)‖_Ω₁ ⊕ ‖u_h − u₂‖_Ω₂ relative to ‖u_h‖: e_u with the Ω₁ part seen through π.
@@ -237,7 +238,7 @@ class MixedMultiscaleHybridStep(MixedHybridStep):
         _, u1 = self.fine_omega1()
         s2 = self.sub[1]
         eu = self.omega1.m_norm2(self.omega1.project(u1 - self._uref1)) + s2.l2_norm2(s2.u - self.reference[1][1])
-        return float(np.sqrt(eu / self._ref_norm2[1]))
+        return float(np.sqrt(relative(eu, self._ref_norm2[1])))
 
     def postprocessed_displacement_error(self) -> float:
         """e_u with the post-processed fine Ω₁ displacement Σ r_j q_j + N g (``fine_displacement_post``)."""
@@ -246,7 +247,7 @@ class MixedMultiscaleHybridStep(MixedHybridStep):
         u1 = self.fine_displacement_post()
         s2 = self.sub[1]
         eu = self.omega1.m_norm2(u1 - self._uref1) + s2.l2_norm2(s2.u - self.reference[1][1])
-        return float(np.sqrt(eu / self._ref_norm2[1]))
+        return float(np.sqrt(relative(eu, self._ref_norm2[1])))
 
     # -- HybridStep protocol -------------------------------------------------------------
     def prepare(self) -> None:
@@ -319,7 +320,7 @@ def l2_stress_error(sigma: fem.Function, reference: fem.Function) -> float:
     comm = reference.function_space.mesh.comm
     num = comm.allreduce(fem.assemble_scalar(fem.form(ufl.inner(d, d) * ufl.dx)))
     den = comm.allreduce(fem.assemble_scalar(fem.form(ufl.inner(r, r) * ufl.dx)))
-    return float(np.sqrt(num / den))
+    return float(np.sqrt(relative(num, den)))
 
 
 @dataclass(slots=True)
@@ -386,7 +387,7 @@ def solve_mixed_ms_hybrid(
     check_solve_inputs(problem, options=options, newton=newton)
     require_instance(cem, MixedCEMOptions, "cem", " (multiscale.mixed_cem.MixedCEMOptions)")
     if reference is not None:
-        require_instance(reference, MixedSolution, "the reference", " (from fem.mixed.solve_mixed_monolithic)")
+        check_reference_mixed(reference, problem.cm)
     if reference is not None and epsilon is None:
         epsilon = reference.epsilon
     if step is None:

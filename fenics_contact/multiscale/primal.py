@@ -24,15 +24,17 @@ from mpi4py import MPI
 from fenics_contact.errors import InputError
 from fenics_contact.fem.contact import NewtonOptions
 from fenics_contact.fem.primal import PrimalSubproblem, penalty_for, warn_if_locking
-from fenics_contact.hybrid.certificate import Certificate, primal_certificate
+from fenics_contact.hybrid.certificate import Certificate, primal_certificate, relative
 from fenics_contact.hybrid.condensation import InterfaceProblem
 from fenics_contact.hybrid.inputs import check_reference_displacement, check_solve_inputs, require_instance
 from fenics_contact.hybrid.iteration import InterfaceNewtonOptions, IterationOptions, iterate
+from fenics_contact.hybrid.options import interface_options
 from fenics_contact.hybrid.primal import DEFAULT_ALPHA_MS, HybridResult, omega2_record, solve_or_verify
 from fenics_contact.hybrid.response import MatrixResponse, PrimalPart
 from fenics_contact.hybrid.transmission import InterfaceSpace, robin_coefficient, split_mesh
 from fenics_contact.multiscale.cem.omega1 import Omega1Multiscale
 from fenics_contact.multiscale.cem.options import CEMOptions
+from fenics_contact.problem.friction import friction_of
 from fenics_contact.problem.problem import ContactProblem
 
 __all__ = ["OMEGA1_CHECK_WARN", "MultiscalePrimalHybridStep", "solve_primal_ms_hybrid"]
@@ -75,7 +77,7 @@ class MultiscalePrimalHybridStep:
         self.interface = InterfaceSpace(cm, self.parts, shape=(gdim,))
         parent_fields = problem.fields
         warn_if_locking(parent_fields.nu, cm.comm)
-        self.alpha = robin_coefficient(alpha, parent_fields.E, self.interface, cm.h)
+        self.alpha = robin_coefficient(alpha, parent_fields.E, self.interface, cm.h, problem.length)
         self.delta = delta = penalty_for(problem, delta)
         self.cem = cem
         self.omega1 = Omega1Multiscale(problem, self.parts, self.interface, self.alpha, cem=cem, cache_dir=cache_dir)
@@ -91,6 +93,7 @@ class MultiscalePrimalHybridStep:
             prefix="fc_primal_ms_omega2_",
             newton=newton,
             V=self.interface.spaces[1],
+            friction=friction_of(problem.law),
         )
         self.u1 = fem.Function(self.interface.spaces[0], name="u1")  # filled by glued()
         # u₁ = Z s in the coordinates s of Omega1Multiscale (online nothing of fine-mesh size in Ω₁)
@@ -155,6 +158,7 @@ class MultiscalePrimalHybridStep:
         """The affine pieces for ``hybrid.interface_newton``: Ω₁'s interface response u₁|γ = R g₁₂ + r₀ from the
         coarse solver (``Omega1Multiscale.response``: one dense coarse solve with n_γ + 1 right-hand sides,
         nothing of fine-mesh size), Ω₂ with J₀ (built once)."""
+        options = interface_options(options, self.omega2.friction, frictional_condensation=False)
         if self._newton is None or self._newton.options.strategy != options.strategy:
             iface = self.interface
             R, r0 = self.omega1.response()  # rows: this rank's owned values; columns: all ranks' (rank order)
@@ -171,8 +175,7 @@ class MultiscalePrimalHybridStep:
     # -- measures -------------------------------------------------------------------------
     def _measure(self) -> None:
         om1 = self.omega1
-        de1, dl1 = om1.coordinate_norms2(self._s - self._prev[0])
-        ne1, nl1 = om1.coordinate_norms2(self._s)
+        (de1, ne1), (dl1, nl1) = om1.coordinate_norms2(np.column_stack([self._s - self._prev[0], self._s]))
         self._diff2.x.array[:] = self.omega2.u.x.array - self._prev[1]
         de = de1 + self.omega2.energy_norm2(self._diff2)
         dl = dl1 + self.omega2.l2_norm2(self._diff2)
@@ -190,7 +193,7 @@ class MultiscalePrimalHybridStep:
         self._diff2.x.array[:] = self.omega2.u.x.array - r2.x.array
         l2 = self.omega1.l2_norm2(d1) + self.omega2.l2_norm2(self._diff2)
         en = self.omega1.energy_norm2(d1) + self.omega2.energy_norm2(self._diff2)
-        return float(np.sqrt(l2 / self._ref_l2)), float(np.sqrt(en / self._ref_energy))
+        return float(np.sqrt(relative(l2, self._ref_l2))), float(np.sqrt(relative(en, self._ref_energy)))
 
     def error_l2(self) -> float:
         """‖u_h − uⁿ‖_L² / ‖u_h‖_L² over Ω₁ ∪ Ω₂ against the fine monolithic reference."""

@@ -22,6 +22,11 @@
 * **Two-body Hertz** (plane strain, frictionless): two cylinders of radii R₁, R₂ (R = ∞: a flat block) and
   moduli (E₁, ν₁), (E₂, ν₂) are the one-body case with 1/R* = 1/R₁ + 1/R₂ and
   1/E* = (1 − ν₁²)/E₁ + (1 − ν₂²)/E₂ (``hertz_pair``): ``hertz_errors(profile, radius=R*, E=E*, nu=0)``.
+* **Hertz** (3D): a rigid sphere of radius R on a half-space, total force F: a = (3FR/(4E*))^(1/3),
+  p(r) = p₀√(1 − r²/a²), p₀ = 3F/(2πa²), at the depth d = a²/R.  ``hertz_sphere_model`` is the
+  quarter block of ``meshes3d.hertz_quarter_block`` under it (symmetry planes on rollers), ``hertz_sphere_errors``
+  compares a computed contact profile with it, F read off the profile: the area-equivalent contact radius
+  √(A/π) (A the contact area of the whole block), the centre pressure and the L² error of the profile.
 
 The P1 locking measurement (u = curl ψ on the clamped square) is ``fem.locking``.
 """
@@ -30,9 +35,12 @@ from collections.abc import Callable
 from typing import NamedTuple
 
 import numpy as np
+from mpi4py import MPI
 
 from fenics_contact.errors import InputError
-from fenics_contact.problem.obstacles import Circle, Plane
+from fenics_contact.problem.boundary import BoundaryConditions
+from fenics_contact.problem.meshes3d import hertz_quarter_block
+from fenics_contact.problem.obstacles import Circle, Plane, Sphere
 from fenics_contact.problem.problem import ContactProblem
 
 __all__ = [
@@ -47,6 +55,10 @@ __all__ = [
     "HertzErrors",
     "hertz_errors",
     "hertz_pair",
+    "hertz_sphere_model",
+    "hertz_sphere_penalty",
+    "HertzSphereErrors",
+    "hertz_sphere_errors",
 ]
 
 
@@ -190,3 +202,89 @@ def hertz_pair(
             f"hertz_pair needs radii > 0 (not both flat), E > 0, |nu| < 1; got {radii}, {moduli}, {poisson}"
         )
     return float(1.0 / np.sum(1.0 / radii)), float(1.0 / np.sum((1.0 - poisson**2) / moduli))
+
+
+def hertz_sphere_model(
+    a: float,
+    h_contact: float,
+    *,
+    radius: float | None = None,
+    E: float = 1.0,
+    nu: float = 0.3,
+    size: float = 20.0,
+    comm: MPI.Comm = MPI.COMM_WORLD,
+) -> ContactProblem:
+    """A rigid sphere of radius R (default 10a: a/R = 0.1) pressed d = a²/R into the quarter block of
+    ``meshes3d.hertz_quarter_block(a, h_contact, size=size)``, symmetry planes x = 0 and y = 0 on rollers, the bottom
+    clamped: Hertz's contact radius a at that depth."""
+    R = 10.0 * a if radius is None else float(radius)
+    if not (np.isfinite(R) and R > a):
+        raise InputError(f"the sphere's radius must be finite and larger than the contact radius a, got {radius!r}")
+    sphere = Sphere((0.0, 0.0, R), R).indented(a * a / R, (0.0, 0.0, -1.0))
+    return ContactProblem(
+        name="hertz-sphere",
+        youngs_modulus=E,
+        poisson_ratio=nu,
+        obstacle=sphere,
+        mesh=hertz_quarter_block(a, h_contact, size=size, comm=comm),
+        boundary=BoundaryConditions(rollers=((0, 0.0), (1, 0.0))),
+        description=f"Hertz sphere, a={a:g}, R={R:g}, h={h_contact:g}, E={E:g}, nu={nu:g}",
+    )
+
+
+def hertz_sphere_penalty(h_contact: float, *, E: float = 1.0, nu: float = 0.3, factor: float = 1e-3) -> float:
+    """δ = factor · h_c / E*, E* = E/(1 − ν²): the penalty's compliance δ·p small beside the contact cells'."""
+    return factor * h_contact * (1.0 - nu**2) / E
+
+
+class HertzSphereErrors(NamedTuple):
+    """A computed 3D Hertz contact against the analytic one for its own force F."""
+
+    force: float  #: F = −symmetry·∫ σ_c ds
+    a: float  #: (3FR/(4E*))^(1/3)
+    p0: float  #: 3F/(2πa²)
+    radius: float  #: the area-equivalent contact radius √(A/π), A = symmetry·(contact area of the model)
+    radius_cells: float  #: (radius − a)/h_contact
+    centre_error: float  #: p_h(centre)/p₀ − 1, p_h at the contact node nearest the centre
+    l2_error: float  #: ‖p_h − p‖_L²(Γ_C) / ‖p‖_L²(Γ_C) (nodal quadrature)
+    peak_error: float  #: max p_h / p₀ − 1 (P1 overshoots by a few per cent near the centre)
+
+
+def hertz_sphere_errors(
+    profile,
+    *,
+    radius: float,
+    E: float,
+    nu: float,
+    h_contact: float,
+    symmetry: int = 4,
+    centre: tuple[float, float] = (0.0, 0.0),
+) -> HertzSphereErrors:
+    """Contact radius, centre pressure and pressure-profile errors of a 3D Hertz contact profile
+    (``fem.contact.ContactProfile`` on a horizontal Γ_C; F read off it).  ``symmetry``: the copies of the model
+    that make the whole block (4 for a quarter); ``centre``: (x, y) of the first contact point."""
+    if profile.weights is None or profile.points is None:
+        raise InputError("hertz_sphere_errors needs a contact profile with points and weights")
+    F = symmetry * profile.force
+    if not F > 0:
+        raise InputError(f"no compressive contact force (F = {F:.3e}): the sphere does not touch")
+    E_star = E / (1.0 - nu**2)
+    a = (3.0 * F * radius / (4.0 * E_star)) ** (1.0 / 3.0)
+    p0 = 3.0 * F / (2.0 * np.pi * a**2)
+    r = np.hypot(profile.points[:, 0] - centre[0], profile.points[:, 1] - centre[1])
+    p = -profile.sigma_c
+    exact = p0 * np.sqrt(np.maximum(1.0 - (r / a) ** 2, 0.0))
+    w = profile.weights
+    area = symmetry * float(np.sum(w[profile.active]))
+    equivalent = float(np.sqrt(area / np.pi))
+    l2 = float(np.sqrt(np.sum(w * (p - exact) ** 2) / np.sum(w * exact**2)))
+    return HertzSphereErrors(
+        F,
+        a,
+        p0,
+        equivalent,
+        (equivalent - a) / h_contact,
+        float(p[np.argmin(r)] / p0 - 1.0),
+        l2,
+        float(p.max() / p0 - 1.0),
+    )

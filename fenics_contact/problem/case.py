@@ -38,9 +38,15 @@ unless said; unknown keys are refused.  Relative file names are relative to the 
     shape = "circle"                         # centre = [x, y], radius = R
     indentation = 1e-3 | [2e-4, 4e-4, ...]   # rigid motion by depth x direction; a list = load steps
     direction = [dx, dy]                     # default: the plane's normal (into the body); required for a circle
+    motion = [[dx, dy], ...]                 # or: rigid displacements, one per load step (a sliding path)
+
+    [friction]                               # default: frictionless
+    law = "coulomb"                          # mu = 0.3 (the Coulomb coefficient)
+    law = "tresca"                           # threshold = s (the slip threshold, a traction)
+    stiffness-ratio = 1.0                    # the stick stiffness 1/delta_t over the normal penalty 1/delta
 
     [run]          method, accel, front-window, tol, max-iterations, reference, out, plots
-    [primal]       alpha, delta            (primal, primal-ms)
+    [primal]       alpha, delta, solver    (primal, primal-ms; solver: the monolithic reference's)
     [mixed]        beta, epsilon           (mixed, mixed-ms)
     [multiscale]   layers, nbasis, cache-dir   (primal-ms, mixed-ms)
     [mixed-ms]     min-gap, max-nbasis
@@ -79,7 +85,9 @@ from fenics_contact.problem.case_values import (
     Table,
     Uniform,
     read_field,
+    read_friction,
     read_integer,
+    read_motions,
     read_number,
     read_string,
     read_strings,
@@ -88,12 +96,13 @@ from fenics_contact.problem.case_values import (
     show_value,
 )
 from fenics_contact.problem.cell_groups import SUBDOMAIN_NAMES, CellGroups, bounding_box, read_cell_groups
+from fenics_contact.problem.friction import Friction
 from fenics_contact.problem.geometry import SIDES, ContactMesh, read_mesh, unit_square
 from fenics_contact.problem.meshes import bulged_square, hertz_block
 from fenics_contact.problem.models import get_model, pixel_field
 from fenics_contact.problem.obstacles import Circle, Obstacle, Plane
 from fenics_contact.problem.pair_case import PairCase, read_pair_case
-from fenics_contact.problem.problem import ContactProblem, constant_field, zero_load
+from fenics_contact.problem.problem import ContactProblem, Frictionless, constant_field, zero_load
 from fenics_contact.problem.tags import is_neumann_name
 
 __all__ = [
@@ -117,7 +126,7 @@ __all__ = [
 
 #: the run-option tables (the command line says which methods read each: ``cli.TABLE_METHODS``)
 RUN_TABLES = ("run", "primal", "mixed", "multiscale", "mixed-ms")
-_PROBLEM_TABLES = ("mesh", "material", "load", "boundary", "obstacle")
+_PROBLEM_TABLES = ("mesh", "material", "load", "boundary", "obstacle", "friction")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -472,6 +481,7 @@ class ObstacleSpec:
     depths: tuple[float, ...] = ()
     direction: tuple[float, float] | None = None
     steps: bool = False  #: ``indentation`` was a list: load steps, a force–indentation curve
+    motions: tuple[tuple[float, float], ...] = ()  #: rigid displacements, one per load step (a sliding path)
 
     def base(self) -> Obstacle | None:
         """The obstacle where the case places it (None: the wall flush with Gamma_C)."""
@@ -485,7 +495,9 @@ class ObstacleSpec:
         return self.base().indented(depth, self.direction)
 
     def final(self) -> Obstacle | None:
-        """The obstacle at the last indentation depth (the one the run solves for)."""
+        """The obstacle at the last indentation depth or motion (the one the run solves for)."""
+        if self.motions:
+            return self.base().translated(self.motions[-1])
         return self.at(self.depths[-1]) if self.depths else self.base()
 
     def echo(self) -> dict:
@@ -499,6 +511,8 @@ class ObstacleSpec:
                 "indentation": list(self.depths) if self.steps else self.depths[0],
                 "direction": list(self.direction),
             }
+        if self.motions:
+            out["motion"] = [list(m) for m in self.motions]
         return out
 
 
@@ -514,7 +528,13 @@ def _obstacle(source: Source, data) -> ObstacleSpec:
         radius = t.get("radius", read_number(positive=True), required=True)
     indentation = t.raw("indentation")
     direction = t.get("direction", read_unit)
+    motions = t.get("motion", read_motions, ())
     t.finish(f' for shape = "{shape}"')
+    if motions and (indentation is not None or shape == "wall"):
+        raise source.error(
+            "obstacle.motion moves a plane or a circle (not the default wall) and replaces obstacle.indentation: "
+            "give one of the two"
+        )
     steps = isinstance(indentation, list)
     if indentation is None:
         depths = ()
@@ -543,7 +563,7 @@ def _obstacle(source: Source, data) -> ObstacleSpec:
     if direction is not None:
         length = math.hypot(*direction)
         direction = (direction[0] / length, direction[1] / length)
-    return ObstacleSpec(shape, point, normal, centre, radius, depths, direction, steps)
+    return ObstacleSpec(shape, point, normal, centre, radius, depths, direction, steps, motions)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -561,6 +581,7 @@ class Case:
     obstacle: ObstacleSpec
     run: Mapping[str, Mapping[str, Any]]  #: {table: {option: value}} (validated by the command line)
     overrides: tuple[tuple[str, Any], ...] = ()
+    friction: Friction | None = None  #: the friction law of ``[friction]`` (None: frictionless)
 
     def build_mesh(self, comm: MPI.Comm = MPI.COMM_WORLD) -> CaseMesh:
         """The mesh (collective); a mesh file's material groups are read on rank 0."""
@@ -595,6 +616,7 @@ class Case:
             description=self.description or f"case {self.path.name}",
             boundary=self.boundary.conditions(),
             obstacle=self.obstacle.final(),
+            law=self.friction or Frictionless(),
             mesh=cm,
         )
 
@@ -642,6 +664,15 @@ class Case:
             },
             "boundary": self.boundary.echo(),
             "obstacle": self.obstacle.echo(),
+            "friction": None
+            if self.friction is None
+            else {
+                "law": self.friction.law,
+                ("mu" if self.friction.law == "coulomb" else "threshold"): self.friction.mu
+                if self.friction.law == "coulomb"
+                else self.friction.threshold,
+                "stiffness-ratio": self.friction.stiffness_ratio,
+            },
             "overrides": {key: value for key, value in self.overrides},
         }
 
@@ -736,10 +767,11 @@ def load_case(path: str | Path, overrides: Sequence[tuple[str, Any]] = ()) -> "C
             )
     boundary = _boundary(source, data.get("boundary"), mesh)
     obstacle = _obstacle(source, data.get("obstacle"))
+    friction = read_friction(source, data.get("friction"))
     run = {}
     for table in RUN_TABLES:
         values = data.get(table, {})
         if not isinstance(values, dict):
             raise source.error(f"{table} must be a table ([{table}]), got {show_value(values)}")
         run[table] = dict(values)
-    return Case(path, description, mesh, material, boundary, obstacle, run, tuple(overrides))
+    return Case(path, description, mesh, material, boundary, obstacle, run, tuple(overrides), friction)

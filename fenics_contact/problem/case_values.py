@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from fenics_contact.errors import InputError
+from fenics_contact.problem.friction import FRICTION_LAWS, Friction
 
 __all__ = [
     "Bad",
@@ -37,6 +38,8 @@ __all__ = [
     "read_pixels",
     "read_extent",
     "read_field",
+    "read_motions",
+    "read_friction",
 ]
 
 
@@ -169,6 +172,31 @@ class Table:
 
 
 # ---------------------------------------------------------------------------------------------
+# the obstacle's motion and the friction law
+# ---------------------------------------------------------------------------------------------
+def read_motions(value) -> tuple[tuple[float, float], ...]:
+    if not isinstance(value, list) or not value:
+        raise Bad(f"must be a non-empty list of vectors [[dx, dy], ...], got {show_value(value)}")
+    return tuple(read_vector(v) for v in value)
+
+
+def read_friction(source: Source, data) -> Friction | None:
+    """The ``[friction]`` table: None (frictionless) without it."""
+    if data is None:
+        return None
+    t = Table(source, "friction", data)
+    law = t.get("law", read_string(FRICTION_LAWS), required=True)
+    key = "mu" if law == "coulomb" else "threshold"
+    value = t.get(key, read_number(), required=True)
+    ratio = t.get("stiffness-ratio", read_number(positive=True), 1.0)
+    t.finish(f' for law = "{law}"')
+    try:
+        return Friction(law, **{key: value}, stiffness_ratio=ratio)
+    except InputError as error:
+        raise source.error(str(error)) from None
+
+
+# ---------------------------------------------------------------------------------------------
 # fields: a number or vector, by cell group, a pixel map, a Python callable
 # ---------------------------------------------------------------------------------------------
 @dataclass(frozen=True, slots=True)
@@ -235,6 +263,8 @@ def read_python(source: Source, key: str, reference) -> PythonField:
         module = importlib.util.module_from_spec(spec)
         try:
             spec.loader.exec_module(module)
+        except SystemExit as err:  # the user's code ended the process on import: bad input, not the run's end
+            raise source.error(f"{key}: importing {path} called sys.exit({err.code!r})") from None
         except Exception as err:  # the user's code: any failure is bad input
             raise source.error(f"{key}: importing {path} failed: {type(err).__name__}: {err}") from None
         sys.modules[module_name] = module

@@ -75,6 +75,8 @@ def _checked(field: Callable[[np.ndarray], np.ndarray], shape: tuple, name: str)
         expected = (*shape, x.shape[1])
         try:
             values = field(x)
+        except SystemExit as err:  # the user's callable ended the process: a bad input too, not the run's end
+            raise InputError(f"the field {name} called sys.exit({err.code!r}) at the cell midpoints") from None
         except Exception as err:  # the user's callable: any error it raises is a bad input
             raise InputError(
                 f"the field {name} raised {type(err).__name__} at the cell midpoints: "

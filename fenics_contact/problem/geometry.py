@@ -32,6 +32,7 @@ __all__ = [
     "unit_square",
     "read_mesh",
     "mesh_size",
+    "mesh_extent",
     "check_memory",
     "gmsh_session",
     "build_unit_square_model",
@@ -188,14 +189,14 @@ def build_unit_square_model(
 BYTES_PER_VERTEX = 8.0e3
 
 
-def check_memory(vertices: float, what: str) -> None:
+def check_memory(vertices: float, what: str, bytes_per_vertex: float = BYTES_PER_VERTEX) -> None:
     """InputError when a mesh of about ``vertices`` vertices would need more memory than this machine has (by
-    ``BYTES_PER_VERTEX``), before gmsh runs out of memory making it."""
+    ``bytes_per_vertex``, a primal run's by default), before gmsh runs out of memory making it."""
     try:
         available = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
     except (ValueError, OSError, AttributeError):
         return
-    need = vertices * BYTES_PER_VERTEX
+    need = vertices * bytes_per_vertex
     if need > available:
         raise InputError(
             f"{what} has about {vertices:.3g} vertices and would need about {need / 1e9:.3g} GB of "
@@ -230,9 +231,10 @@ def unit_square(
     return cm
 
 
-def contact_mesh_from_model(comm: MPI.Comm, *, h: float, H: float | None = None) -> ContactMesh:
-    """The ContactMesh of the gmsh model built (on rank 0) in the current gmsh session (collective)."""
-    data = dolfinx.io.gmsh.model_to_mesh(gmsh.model, comm, 0, gdim=2)
+def contact_mesh_from_model(comm: MPI.Comm, *, h: float, H: float | None = None, gdim: int = 2) -> ContactMesh:
+    """The ContactMesh of the gmsh model built (on rank 0) in the current gmsh session (collective); ``gdim`` 3
+    for a model of tetrahedra."""
+    data = dolfinx.io.gmsh.model_to_mesh(gmsh.model, comm, 0, gdim=gdim)
     return _contact_mesh(data, h=h, H=H)
 
 
@@ -360,6 +362,20 @@ def mesh_size(msh: dmesh.Mesh, facet_tags: dmesh.MeshTags | None = None) -> floa
     d1, d2 = x[:, 1] - x[:, 0], x[:, 2] - x[:, 0]
     area = 0.5 * np.abs(d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0])
     return msh.comm.allreduce(float(np.sqrt(2.0 * area.max())) if area.size else 0.0, op=MPI.MAX)
+
+
+def mesh_extent(msh: dmesh.Mesh) -> float:
+    """L_ref = the largest side of the mesh's bounding box (over all ranks; collective): the body's size.
+
+    The reference length of the length-dependent defaults (ε, α, β, the equilibration of the mixed solves):
+    1 on the unit square, and a mesh scaled by s has s·L_ref, so the defaults give the same relative answers
+    whatever the unit of length.
+    """
+    x = msh.geometry.x
+    lo, hi = np.min(x, axis=0, initial=np.inf), np.max(x, axis=0, initial=-np.inf)
+    msh.comm.Allreduce(MPI.IN_PLACE, lo, op=MPI.MIN)
+    msh.comm.Allreduce(MPI.IN_PLACE, hi, op=MPI.MAX)
+    return float(np.max(hi - lo))
 
 
 def _gmsh_model_problem(path: Path, *, auto_strip: bool = False) -> tuple[type, str] | None:

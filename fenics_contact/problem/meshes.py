@@ -56,6 +56,8 @@ def bulged_square(
     if any(side not in sides for side in clamped):
         raise InputError(f"clamped sides must be among {sides}, got {clamped}")
     s = (0.25 - bulge**2) / (2.0 * bulge)  # arc centre at (1 − s, ½)
+    # vertices ≈ 2/√3 per h² of area (equilateral triangles), the area at most 1 + bulge
+    check_memory(1.2 * (1.0 + bulge) / h**2, f"the bulged square with h = {h:g}")
     with gmsh_session():
         if comm.rank == 0:
             geo = gmsh.model.geo
@@ -288,6 +290,11 @@ def composite_block(
     h_far = min(0.5 * H, 2.0 * a / refinement)
     grading = 0.5 / refinement
     boxes = _lattice(L, D, H, inclusion * a)
+    # vertices ≈ area / size²: the refined box (size hc, a factor 2 to spare), the rest at most at the far size
+    check_memory(
+        4.0 * refine_width * refine_depth * a**2 / hc**2 + 2.0 * L * D / h_far**2,
+        f"the composite block with a contact cell of {hc:g}",
+    )
     spec = CompositeBlock(a, L, D, H, W, tuple(boxes), hc, h_far, grading)
     tol = 1e-4 * a  # (OCC bounding boxes are padded by ~1e-7)
     with gmsh_session():

@@ -9,6 +9,10 @@
 * ``unit_cube(n)``: the unit cube, h = 1/n, Γ_C the face x = 1 (the 3D ``unit_square``).
 * ``graded_planes(length, fine=…, h=…)``: grid planes 0 … length, of spacing h up to ``fine`` and
   growing geometrically beyond: a mesh refined under the contact.
+* ``hertz_quarter_block(a, h_contact)``: the quarter block (0, L)² × (−L, 0) under a sphere pressed at the origin,
+  unstructured gmsh tetrahedra of size h_contact within ``fine`` of the origin and growing linearly with the
+  distance beyond (cells of every size close to equilateral, which algebraic multigrid needs; a graded grid
+  of planes stretches its cells where a fine plane crosses a coarse one).
 
 The tags follow ``tags.PHYSICAL_NAMES``; they are set by the geometry of the grid (every rank
 tags its own and its ghost entities alike), so the meshes are correct by construction and are
@@ -17,15 +21,22 @@ not passed through ``validation``.
 
 from collections.abc import Callable, Mapping, Sequence
 
+import gmsh
 import numpy as np
 from dolfinx import mesh as dmesh
 from mpi4py import MPI
 
 from fenics_contact.errors import InputError
-from fenics_contact.problem.geometry import ContactMesh, check_memory, mesh_size
-from fenics_contact.problem.tags import Boundary, Subdomain, neumann_tag
+from fenics_contact.problem.geometry import (
+    ContactMesh,
+    check_memory,
+    contact_mesh_from_model,
+    gmsh_session,
+    mesh_size,
+)
+from fenics_contact.problem.tags import PHYSICAL_NAMES, Boundary, Subdomain, neumann_tag
 
-__all__ = ["FACES", "box_mesh", "unit_cube", "graded_planes"]
+__all__ = ["FACES", "box_mesh", "unit_cube", "graded_planes", "hertz_quarter_block"]
 
 #: The faces of a box: the coordinate and the side (min or max).
 FACES = ("xmin", "xmax", "ymin", "ymax", "zmin", "zmax")
@@ -71,6 +82,79 @@ def graded_planes(length: float, *, fine: float, h: float, growth: float = 1.25)
         planes += list(fine + np.cumsum(steps))
         planes[-1] = length
     return np.asarray(planes)
+
+
+def hertz_quarter_block(
+    a: float,
+    h_contact: float,
+    *,
+    size: float = 20.0,
+    fine: float = 1.25,
+    growth: float = 0.3,
+    strip: float = 2.0,
+    comm: MPI.Comm = MPI.COMM_WORLD,
+) -> ContactMesh:
+    """The quarter block (0, L)² × (−L, 0), L = ``size``·a, of a sphere pressed into its top at the origin
+    (contact radius about a): gmsh tetrahedra of size ``h_contact`` within ``fine``·a of the origin, of size
+    h_contact + ``growth``·(r − ``fine``·a) at a distance r beyond, at most L/4.
+
+    Γ_C the top face z = 0, Γ_D the bottom z = −L, the symmetry planes x = 0 and y = 0 and the sides traction
+    free (symmetry: rollers, ``BoundaryConditions(rollers=((0, 0.0), (1, 0.0)))``); Ω₂ the layer
+    z > −``strip``·a, γ the plane between.  ``h`` of the result is ``h_contact``.
+    """
+    values = (a, h_contact, size, fine, growth, strip)
+    if not all(isinstance(v, (int, float, np.number)) and np.isfinite(v) and v > 0 for v in values):
+        raise InputError(f"hertz_quarter_block needs finite a, h_contact, size, fine, growth, strip > 0, got {values}")
+    if not (h_contact < fine * a and strip < size and fine < size):
+        raise InputError(
+            f"hertz_quarter_block needs h_contact < fine·a and fine, strip < size (got h_contact {h_contact:g}, "
+            f"a {a:g}, fine {fine:g}, strip {strip:g}, size {size:g})"
+        )
+    L = size * a
+    check_memory((fine * a / h_contact) ** 3, f"the Hertz block with contact cells a/{a / h_contact:g}")
+    with gmsh_session():
+        if comm.rank == 0:
+            _hertz_block_model(L, strip * a, fine * a, h_contact, growth)
+        cm = contact_mesh_from_model(comm, h=h_contact, H=strip * a, gdim=3)
+    return cm
+
+
+def _hertz_block_model(L: float, depth: float, r_fine: float, h: float, growth: float) -> None:
+    """The gmsh model of ``hertz_quarter_block`` (rank 0, in a gmsh session): two boxes, their faces grouped."""
+    occ = gmsh.model.occ
+    gmsh.model.add("hertz block")
+    occ.fragment([(3, occ.addBox(0, 0, -depth, L, L, depth))], [(3, occ.addBox(0, 0, -L, L, L, L - depth))])
+    occ.synchronize()
+    volumes = sorted((occ.getCenterOfMass(3, t)[2], t) for _, t in gmsh.model.getEntities(3))
+    tol = 1e-6 * L  # (gmsh pads bounding boxes by its geometry tolerance)
+    faces = {Boundary.GAMMA_C: [], Boundary.GAMMA_D: [], Boundary.INTERFACE: []}
+    for _, t in gmsh.model.getEntities(2):
+        z = occ.getCenterOfMass(2, t)[2]
+        zmin, zmax = gmsh.model.getBoundingBox(2, t)[2::3]
+        if zmax - zmin < tol:  # a horizontal face: the top, the bottom, or γ
+            key = Boundary.GAMMA_C if abs(z) < tol else Boundary.GAMMA_D if abs(z + L) < tol else Boundary.INTERFACE
+            faces[key].append(t)
+    gmsh.model.addPhysicalGroup(3, [volumes[0][1]], int(Subdomain.OMEGA1), name=PHYSICAL_NAMES[Subdomain.OMEGA1])
+    gmsh.model.addPhysicalGroup(3, [volumes[1][1]], int(Subdomain.OMEGA2), name=PHYSICAL_NAMES[Subdomain.OMEGA2])
+    for tag, surfaces in faces.items():
+        gmsh.model.addPhysicalGroup(2, surfaces, int(tag), name=PHYSICAL_NAMES[tag])
+    centre = [t for _, t in gmsh.model.getEntitiesInBoundingBox(-tol, -tol, -tol, tol, tol, tol, 0)]
+    field = gmsh.model.mesh.field
+    distance = field.add("Distance")
+    field.setNumbers(distance, "PointsList", centre)
+    coarse = L / 4
+    threshold = field.add("Threshold")
+    field.setNumber(threshold, "InField", distance)
+    field.setNumber(threshold, "SizeMin", h)
+    field.setNumber(threshold, "SizeMax", coarse)
+    field.setNumber(threshold, "DistMin", r_fine)
+    field.setNumber(threshold, "DistMax", r_fine + (coarse - h) / growth)
+    field.setAsBackgroundMesh(threshold)
+    for option in ("Mesh.MeshSizeExtendFromBoundary", "Mesh.MeshSizeFromPoints", "Mesh.MeshSizeFromCurvature"):
+        gmsh.option.setNumber(option, 0)
+    # Netgen's optimization: better shaped tetrahedra (a/20: the L² pressure error 3.1 % instead of 4.0 %)
+    gmsh.option.setNumber("Mesh.OptimizeNetgen", 1)
+    gmsh.model.mesh.generate(3)
 
 
 def box_mesh(

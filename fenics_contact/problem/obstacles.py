@@ -190,14 +190,16 @@ class Sphere(_Round):
 class SignedDistance(Obstacle):
     """Any signed distance callable d(x) (> 0 outside), with its outward normal or by central differences.
 
-    ``step`` is the finite-difference step (absolute length) used when ``normal`` is None; ``dim`` the
+    ``step`` is the finite-difference step (a length) used when ``normal`` is None; None (the default): at each
+    point x, 10⁻⁶·max(‖x‖∞, |d(x)|), relative to the coordinates so the same in any unit of length (10⁻⁶ where
+    both vanish); ``dim`` the
     dimension of d: 2 (d of x, y: a planar obstacle, extruded along z in 3D) or 3 (d of x, y, z, the
     differences taken along all three).  ``normal`` maps x (3, N) to (dim, N).
     """
 
     function: Callable[[np.ndarray], np.ndarray]
     normal: Callable[[np.ndarray], np.ndarray] | None = None
-    step: float = 1e-6
+    step: float | None = None
     dim: int = 2
 
     def __post_init__(self) -> None:
@@ -205,7 +207,7 @@ class SignedDistance(Obstacle):
             raise InputError("SignedDistance needs a callable d(x)")
         if self.normal is not None and not callable(self.normal):
             raise InputError("the normal of a SignedDistance must be a callable x -> (dim, N) or None")
-        if not (np.isfinite(self.step) and self.step > 0):
+        if self.step is not None and not (np.isfinite(self.step) and self.step > 0):
             raise InputError(f"the finite-difference step must be > 0, got {self.step!r}")
         if self.dim not in (2, 3) or isinstance(self.dim, bool):
             raise InputError(f"the dimension of a SignedDistance must be 2 or 3, got {self.dim!r}")
@@ -227,10 +229,15 @@ class SignedDistance(Obstacle):
         else:
             x = _xy(x, self.dim) if x.shape[0] < self.dim else x
             n = np.empty((self.dim, x.shape[1]))
+            step = self.step
+            if step is None:  # relative to the point's coordinates and distance: any unit of length
+                with np.errstate(invalid="ignore"):
+                    size = np.fmax(np.max(np.abs(x), axis=0, initial=0.0), np.abs(self._call(x)))
+                step = 1e-6 * np.where(np.isfinite(size) & (size > 0), size, 1.0)
             for i in range(self.dim):
-                e = np.zeros((x.shape[0], 1))
-                e[i] = self.step
-                n[i] = (self._call(x + e) - self._call(x - e)) / (2.0 * self.step)
+                e = np.zeros((x.shape[0], np.size(step)))
+                e[i] = step
+                n[i] = (self._call(x + e) - self._call(x - e)) / (2.0 * step)
         with np.errstate(invalid="ignore", divide="ignore"):
             return n / np.linalg.norm(n, axis=0)
 

@@ -3,8 +3,8 @@
 A problem is a body — its tagged mesh (``geometry.ContactMesh``), Young's modulus E(x) and
 Poisson ratio ν(x), body force f(x), boundary conditions (Γ_D displacement, Γ_N tractions) —
 and what it touches on Γ_C: a rigid obstacle (``problem.obstacles``; None: a wall flush with
-Γ_C) through a contact law (``Frictionless``). Every solver takes a problem, and only a
-problem: the monolithic solves, Algorithms 1–4 and the load steps alike.
+Γ_C) through a contact law (``Frictionless``, or ``problem.friction.Friction``: Tresca or Coulomb).
+Every solver takes a problem, and only a problem: the monolithic solves, Algorithms 1–4 and the load steps alike.
 
 The physics can be given before the mesh (``model_1()``, or ``ContactProblem(youngs_modulus=…)``)
 and put on a mesh with ``problem.on(mesh)``; a problem on a mesh is validated once, there (the
@@ -30,12 +30,22 @@ from fenics_contact.errors import InputError
 from fenics_contact.problem import strip, validation
 from fenics_contact.problem.boundary import BoundaryConditions, check_boundary_groups
 from fenics_contact.problem.fields import FunctionField, MaterialFields, material_fields, tag_function, zero_load
-from fenics_contact.problem.geometry import ContactMesh, mesh_size
+from fenics_contact.problem.friction import Friction
+from fenics_contact.problem.geometry import ContactMesh, mesh_extent, mesh_size
 from fenics_contact.problem.obstacles import Obstacle
 from fenics_contact.problem.tags import Boundary, neumann_tag
 from fenics_contact.problem.validation import require_facet_groups
 
-__all__ = ["ContactProblem", "ContactLaw", "Frictionless", "ScalarField", "VectorField", "constant_field", "zero_load"]
+__all__ = [
+    "ContactProblem",
+    "ContactLaw",
+    "Friction",
+    "Frictionless",
+    "ScalarField",
+    "VectorField",
+    "constant_field",
+    "zero_load",
+]
 
 #: A scalar field: points x of shape (3, N) -> values of shape (N,).
 ScalarField = Callable[[np.ndarray], np.ndarray]
@@ -55,8 +65,8 @@ class Frictionless:
     name = "frictionless"
 
 
-#: The contact laws a problem can carry (friction laws join this union).
-ContactLaw = Frictionless
+#: The contact laws a problem can carry: frictionless, or a penalized friction law (``problem.friction``).
+ContactLaw = Frictionless | Friction
 
 
 def _scalar(value, what: str) -> ScalarField:
@@ -118,9 +128,9 @@ class ContactProblem:
             )
         if self.obstacle is not None and not isinstance(self.obstacle, Obstacle):
             raise InputError(f"ContactProblem.obstacle must be an Obstacle or None, got {type(self.obstacle).__name__}")
-        if not isinstance(self.law, Frictionless):
+        if not isinstance(self.law, (Frictionless, Friction)):
             raise InputError(
-                f"ContactProblem.law must be a contact law ({ContactLaw.__name__}), got {type(self.law).__name__}"
+                f"ContactProblem.law must be a contact law (Frictionless or Friction), got {type(self.law).__name__}"
             )
         if not isinstance(self.name, str) or not isinstance(self.description, str):
             raise InputError("ContactProblem.name and .description must be strings")
@@ -168,6 +178,9 @@ class ContactProblem:
         """
         if not isinstance(facet_tags, dmesh.MeshTags) or facet_tags.dim != mesh.topology.dim - 1:
             raise InputError(f"facet_tags must be the facet MeshTags of the mesh (dimension {mesh.topology.dim - 1})")
+        _require_entities_of(mesh, facet_tags, "facet_tags")
+        if cell_tags is not None:
+            _require_entities_of(mesh, cell_tags, "cell_tags")
         tractions = dict(tractions or {})
         groups = [
             (_tags(contact, "contact"), int(Boundary.GAMMA_C)),
@@ -265,6 +278,12 @@ class ContactProblem:
         """The fine mesh size (``ContactMesh.h``)."""
         return self.cm.h
 
+    @property
+    def length(self) -> float:
+        """L_ref, the body's size: the largest side of the mesh's bounding box (``geometry.mesh_extent``; 1 on the
+        unit square; collective). The length-dependent defaults (ε, α, β) take h relative to it."""
+        return mesh_extent(self.cm.mesh)
+
     def contact_range(self, name: str = "E") -> tuple[float, float]:
         """(smallest, largest) of the cellwise field ``name`` ("E", "nu", "lmbda", "mu") over the cells touching
         Γ_C, over all ranks."""
@@ -304,15 +323,59 @@ class ContactProblem:
         f = self.fields.f
         if loaded_otherwise:
             return
-        if self.comm.allreduce(float(np.max(np.abs(f.x.array), initial=0.0)), op=MPI.MAX) == 0.0:
+        if self.comm.allreduce(float(np.max(np.abs(f.x.array), initial=0.0)), op=MPI.MAX) != 0.0:
+            return
+        if self.comm.allreduce(self._load_vanishes_in_cells(), op=MPI.LAND):
             raise InputError(
-                f"the body force of {self.name!r} is zero on every cell of this mesh (too coarse to resolve the "
-                "load bands?): the solution would be u = 0. Refine the mesh (the built-in loads act on x >= 15/16)."
+                f"nothing loads the body of {self.name!r}: its body force is zero everywhere in it, Gamma_D holds "
+                "it at u = 0, and it has no traction and no obstacle: the solution is u = 0. Give a load (a body "
+                "force, a traction, a displacement on Gamma_D or an obstacle pressed into the body)."
             )
+        raise InputError(
+            f"the body force of {self.name!r} is zero on every cell of this mesh (too coarse to resolve the "
+            "load bands?): the solution would be u = 0. Refine the mesh (the built-in loads act on x >= 15/16)."
+        )
+
+    def _load_vanishes_in_cells(self) -> bool:
+        """True when the body force is zero at the vertices, edge midpoints and inner points of every local cell
+        (the load itself vanishes, not only at the cell midpoints that the DG0 body force samples)."""
+        if isinstance(self.load, FunctionField):
+            return False  # (a function: its values are the DG0 field's own)
+        msh = self.cm.mesh
+        nodes = msh.geometry.x[msh.geometry.dofmaps[0]]  # (cells, vertices, 3): affine cells
+        n = nodes.shape[1]
+        eye = np.eye(n)
+        weights = [*eye, *((eye[i] + eye[j]) / 2 for i in range(n) for j in range(i + 1, n))]
+        weights += [0.7 * eye[i] + 0.3 / n for i in range(n)] + [np.full(n, 1.0 / n)]
+        points = np.concatenate([np.einsum("v,cvd->cd", w, nodes) for w in weights]).T
+        try:
+            values = np.asarray(self.load(points), dtype=np.float64)
+        except Exception:  # noqa: BLE001 -- the user's callable off the midpoints: no verdict, the mesh is blamed
+            return False
+        return bool(np.all(values == 0.0))
+
+
+def _require_entities_of(msh: dmesh.Mesh, tags, what: str) -> None:
+    """InputError when the MeshTags ``tags`` name entities this rank's part of ``msh`` does not have (tags of
+    another mesh)."""
+    if not isinstance(tags, dmesh.MeshTags):
+        raise InputError(f"{what} must be a dolfinx.mesh.MeshTags, got {type(tags).__name__}")
+    msh.topology.create_entities(tags.dim)
+    imap = msh.topology.index_map(tags.dim)
+    count = imap.size_local + imap.num_ghosts
+    beyond = msh.comm.allreduce(int(np.count_nonzero(tags.indices >= count)), op=MPI.SUM)
+    if beyond:
+        raise InputError(
+            f"{what} tag {beyond} entities of dimension {tags.dim} that the mesh does not have (it has "
+            f"{imap.size_global}): the tags belong to another mesh"
+        )
 
 
 def _tags(value, what: str) -> tuple[int, ...]:
-    values = (value,) if isinstance(value, (int, np.integer)) else tuple(value)
+    try:
+        values = (value,) if isinstance(value, (int, np.integer)) else tuple(value)
+    except TypeError:  # (neither a tag nor a sequence: a float, None)
+        values = ()
     if not values or not all(isinstance(v, (int, np.integer)) and not isinstance(v, bool) for v in values):
         raise InputError(f"{what} must be a tag (an integer) or a list of tags, got {value!r}")
     return tuple(int(v) for v in values)

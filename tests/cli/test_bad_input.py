@@ -325,6 +325,48 @@ CASES = [
         "has no callable 'force'",
     ),
     Case(
+        "case: python field calling sys.exit(0)",
+        _case(
+            SQUARE.replace("body-force = [1.0, 0.0]", 'body-force = {python = "f.py:force"}'),
+            files={"f.py": "import sys\n\ndef force(x):\n    sys.exit(0)\n"},
+        ),
+        2,
+        "called sys.exit(0) at the cell midpoints",
+    ),
+    Case(
+        "case: python module calling sys.exit on import",
+        _case(
+            SQUARE.replace("body-force = [1.0, 0.0]", 'body-force = {python = "f.py:force"}'),
+            files={"f.py": "import sys\n\nsys.exit(0)\n"},
+        ),
+        2,
+        "f.py called sys.exit(0)",
+    ),
+    Case(
+        "case: an explicit zero load (nothing loads the body)",
+        _case(SQUARE.replace("body-force = [1.0, 0.0]", "body-force = [0.0, 0.0]")),
+        2,
+        "nothing loads the body of 'case': its body force is zero everywhere in it",
+    ),
+    Case(
+        "case: --model where the case gives E, nu and the body force",
+        _case(SQUARE, "--model", "2"),
+        2,
+        "--model 2 would change nothing: case case.toml gives material.E, material.nu and load.body-force",
+    ),
+    Case(
+        "case: --E-high where the case gives E",
+        _case(SQUARE.replace("[material]\n", "[material]\nmodel = 1\n"), "--E-high", "5"),
+        2,
+        "--E-high sets a built-in model's E, but case case.toml gives material.E",
+    ),
+    Case(
+        "case: Hertz block refined beyond the memory",
+        lambda tmp: ["--case", str(CASES_DIR / "hertz.toml"), "--set", "mesh.refinement=1000"],
+        2,
+        "would need about",
+    ),
+    Case(
         "case: a material group on a built-in mesh",
         _case(SQUARE.replace("E = 1.0", "E = {Omega1 = 1.0, fibres = 5.0}")),
         2,
@@ -447,6 +489,24 @@ CASES = [
         "has no coarse grid",
     ),
     Case("--set without --case", _args("--set", "mesh.h=8"), 2, "--set changes a key of a case file"),
+    Case(
+        "case: bulged square finer than the memory",
+        _case('[mesh]\nbuiltin = "bulged-square"\nh = 1000000\nH = 4\n' + _MATERIAL),
+        2,
+        "the bulged square with h = 1e-06 has about 1.32e+12 vertices and would need about",
+    ),
+    Case(
+        "--method mixed on a mesh beyond the memory",
+        lambda tmp: ["--h", "2048", "--H", "8", "--method", "mixed"],
+        2,
+        "the mesh of --method mixed has about 4.2e+06 vertices and would need about",
+    ),
+    Case(
+        "--h far beyond the memory",
+        lambda tmp: ["--h", "100000", "--H", "4"],
+        2,
+        "the mesh of --method primal has about 1e+10 vertices and would need about",
+    ),
     # numbers out of range and numerical failure
     Case("E = 1e308 (overflow)", _args("--E-high", "1e308"), 2, "Rescale the units"),
     # δ = 1e-3·h/E_high given: the default takes E_c on Gamma_C, which the channels of model 1 do not reach at H = 1/4
@@ -463,7 +523,7 @@ CASES = [
         "mixed with ε millions of times below its default (ill-conditioned reference)",
         _args("--method", "mixed", "--epsilon", "1e-11", "--reference"),
         4,
-        "times below the default 1e-3·h·E_min",
+        "times below the default 1e-3·(h/L)·E_min/L",
     ),
 ]
 
@@ -494,7 +554,7 @@ def test_bad_input_table(case, tmp_path, capsys, monkeypatch):
 def test_epsilon_hint_only_far_below_the_default():
     """The hint every numerical failure of the mixed monolithic solve carries: only for ε < 1e-3 × the default."""
     assert epsilon_hint(1e-7, 6.25e-5) == ""  # 625 times below: no hint
-    assert "; ε = 1e-11 is 6e+06 times below the default 1e-3·h·E_min = 6.25e-05" in epsilon_hint(1e-11, 6.25e-5)
+    assert "; ε = 1e-11 is 6e+06 times below the default 1e-3·(h/L)·E_min/L = 6.25e-05" in epsilon_hint(1e-11, 6.25e-5)
 
 
 def test_argparse_errors_exit_2(capsys):

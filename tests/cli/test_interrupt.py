@@ -1,16 +1,21 @@
 """Ctrl-C (SIGINT) or SIGTERM during a run: exit 130 / 143, one line on stderr, --out left as it was."""
 
+import contextlib
 import os
+import random
+import shutil
 import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import pytest
 from mpi4py import MPI
 from outcome import outcome_lines, run_files
 
 from fenics_contact.cli import main
+from fenics_contact.io import _STAGING
 
 pytestmark = pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="launches its own process")
 
@@ -38,7 +43,7 @@ def test_interrupted_run_leaves_the_previous_results(tmp_path, signum, code):
             while " it " not in log.read_text():  # the iteration is under way (the staging directory exists)
                 assert proc.poll() is None and time.monotonic() < deadline, log.read_text()
                 time.sleep(0.2)
-            assert list(tmp_path.glob(".fenics-contact-*.partial"))
+            assert list(out.glob(".fenics-contact-*.partial")), "the staging directory is inside the existing --out"
             proc.send_signal(signum)
             _, err = proc.communicate(timeout=120)
         finally:
@@ -152,3 +157,87 @@ def test_a_signal_inside_a_finalizer_is_not_lost():
     assert {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)} == {
         s: before[s] for s in (signal.SIGINT, signal.SIGTERM)
     }
+
+
+def _descendants(pid: int) -> list[int]:
+    """The processes below ``pid`` (from /proc), nearest first."""
+    children: dict[int, list[int]] = {}
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        with contextlib.suppress(OSError, ValueError, IndexError):
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+            children.setdefault(int(fields[1]), []).append(int(stat.parent.name))
+    found, todo = [], [pid]
+    while todo:
+        kids = children.get(todo.pop(0), [])
+        found += kids
+        todo += kids
+    return found
+
+
+def _rank_processes(pid: int) -> list[int]:
+    """The ranks started by the mpiexec ``pid``: its Python descendants."""
+    ranks = []
+    for p in _descendants(pid):
+        with contextlib.suppress(OSError):
+            if "python" in Path(f"/proc/{p}/exe").resolve().name:
+                ranks.append(p)
+    return ranks
+
+
+def _ends(pid: int, timeout: float = 30.0) -> bool:
+    """True once the process ``pid`` is gone (or a zombie) within ``timeout`` s: no rank is left running."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        try:
+            if Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] == "Z":
+                return True
+        except (OSError, IndexError):
+            return True
+        time.sleep(0.1)
+    return False
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("target", ["every rank", "one rank"])
+def test_sigterm_under_mpi_never_hangs(tmp_path, target):
+    """SIGTERM to the ranks of `mpiexec -n 2 fenics-contact run` (the process group, as a batch system sends it, or
+    one rank, as `kill PID` does) at random times from start-up into the solve: every run ends with exit 143 and
+    the one line (and MPICH's line on MPI_Abort), nothing written.  A rank that stopped alone left the other
+    waiting in a collective operation for ever (about one run in five when every rank was signalled, every run
+    when one was).  Eight runs of each, about 10 s each."""
+    mpiexec = shutil.which("mpiexec", path=str(Path(sys.executable).parent)) or shutil.which("mpiexec")
+    script = shutil.which("fenics-contact", path=str(Path(sys.executable).parent))
+    if mpiexec is None or script is None:
+        pytest.skip("needs mpiexec and the fenics-contact console script beside the Python")
+    draw = random.Random(f"sigterm {target}")
+    for trial in range(8):
+        out = tmp_path / f"run{trial}"
+        proc = subprocess.Popen(
+            [mpiexec, "-n", "2", script, "run", "--h", "32", "--H", "4", *LONG_RUN[4:], "--out", str(out)],
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.PIPE,
+            text=True,
+            env=dict(os.environ, OMP_NUM_THREADS="1"),
+            start_new_session=True,
+        )
+        try:
+            time.sleep(draw.uniform(1.0, 8.0))  # start-up (the imports), the mesh, the iteration
+            ranks = _rank_processes(proc.pid)
+            if target == "every rank" or not ranks:
+                os.killpg(proc.pid, signal.SIGTERM)
+            else:
+                os.kill(draw.choice(ranks), signal.SIGTERM)
+            _, err = proc.communicate(timeout=60)  # (a hang: TimeoutExpired)
+        finally:
+            if proc.poll() is None:
+                os.killpg(proc.pid, signal.SIGKILL)
+                proc.wait()
+        assert proc.returncode == 143, err
+        lines = [line for line in outcome_lines(err) if "application called MPI_Abort" not in line]
+        assert len(lines) == 1 and lines[0].startswith("interrupted by SIGTERM"), err
+        assert not out.exists(), "nothing written"
+        # a rank that ended the run while rank 0 waited in a collective operation leaves the staging directory (as
+        # kill -9 does): of a process that is gone, so the next run beside it removes it
+        for left in tmp_path.iterdir():
+            match = _STAGING.match(left.name)
+            assert match and _ends(int(match["pid"])), left

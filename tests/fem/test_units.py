@@ -7,9 +7,9 @@ m on a mm-sized part, and must give the contact force/(E L), ‖u‖/L², the er
 the iteration and Newton counts of E = L = 1 (to 1e-8: each solve is backward stable in its own units; the
 mixed saddle-point factorizations are equilibrated, ``fem.mixed_linear``).
 
-Under a change of E the default penalty and transmission coefficients scale with it (ε, α ∝ E; δ, β ∝ 1/E).
-Under a change of length they do not all (ε = 1e-3·h·E, β = √h/E, α = E h^-1/2 take h as a number), so the
-runs at L ≠ 1 get the coefficients of E = L = 1 in their units (ε/L, βL, α/L, δL): the same problem.
+The default penalty and transmission coefficients carry their units: ε = 1e-3·(h/L_ref)·E/L_ref and
+α = E/√(h L_ref) (stress per length), δ = 1e-3·h/E and β = √(h L_ref)/E (length per stress), L_ref the body's
+size (``ContactProblem.length``), so every run here uses the defaults.
 """
 
 import numpy as np
@@ -48,22 +48,6 @@ def _l2(expr, msh) -> float:
     return float(np.sqrt(msh.comm.allreduce(fem.assemble_scalar(form), op=MPI.SUM)))
 
 
-def _coefficients(method: str, E: float, L: float) -> dict:
-    """The penalty and transmission coefficients of E = L = 1 in the units (E, L); {} (the defaults) for L = 1."""
-    if L == 1.0:
-        return {}
-    h = 1.0 / N
-    if method.startswith("mixed"):
-        out = {"epsilon": default_epsilon(h, E) / L}  # a stress per length
-        if method != "mixed-monolithic":
-            out["beta"] = L * np.sqrt(h) / E  # a length per stress
-        return out
-    out = {"delta": default_penalty(h, E) * L}  # a length per stress
-    if method != "primal-monolithic":
-        out["alpha"] = E / np.sqrt(h) / L  # a stress per length
-    return out
-
-
 def _counts(result) -> tuple:
     """Iterations and Newton steps: (Newton steps, factorizations) of a monolithic solve; (iterations, interface
     Newton steps) of a hybrid one."""
@@ -77,7 +61,7 @@ def _bar(method: str, f1: float, E: float, L: float, **options) -> dict:
     cm = fc.unit_square(N, N_COARSE, clamped=("left",))
     cm.mesh.geometry.x[:, :2] *= L
     cm = cm._replace(h=cm.h * L, H=cm.H * L)
-    result = fc.solve(bar_model(f1 * E / L, E=E).on(cm), method, **_coefficients(method, E, L), **options)
+    result = fc.solve(bar_model(f1 * E / L, E=E).on(cm), method, **options)
     msh = cm.mesh
     X = ufl.SpatialCoordinate(msh)
     if method.startswith("mixed"):  # the penalized closed form of E = L = 1 (exact for the pushed mixed bar)
@@ -114,6 +98,76 @@ def test_bar_in_any_units(method, f1):
         assert got["e_u"] == pytest.approx(ref["e_u"], rel=RTOL, abs=RTOL), where
         if method.startswith("mixed"):
             assert got["e_sigma"] < 1e-9 and abs(got["force"] + got["sigma_end"]) < 1e-9, where
+
+
+#: the obstacle cases' mesh (h = 1/8, H = 1/4) and layered patch: E = 1 | 10³ | 10 across γ (x = 3/4), on the grid
+N_OBSTACLE = 8
+LAYERS, MODULI = np.array([0.0, 3 / 8, 7 / 8, 1.0]), np.array([1.0, 1e3, 10.0])
+
+
+def _obstacle_case(case: str, L: float) -> fc.ContactProblem:
+    """The layered patch (a plane moved in by 10⁻³, ν = 0) or a cylinder (R = 2, moved 0.02 into the side x = 1
+    around y = ½, E = 1, ν = 0.3), every length of it scaled by L."""
+    if case == "layers":
+
+        def E(x: np.ndarray) -> np.ndarray:
+            return MODULI[np.clip(np.searchsorted(LAYERS, x[0] / L, side="right") - 1, 0, MODULI.size - 1)]
+
+        wall = fc.Plane((L, 0.0), (-1.0, 0.0)).indented(1e-3 * L, (-1.0, 0.0))
+        return fc.ContactProblem(youngs_modulus=E, poisson_ratio=0.0, obstacle=wall, name="layers")
+    cylinder = fc.Circle((3.0 * L, 0.5 * L), 2.0 * L).indented(0.02 * L, (-1.0, 0.0))
+    return fc.ContactProblem(youngs_modulus=1.0, poisson_ratio=0.3, obstacle=cylinder, name="cylinder")
+
+
+def _obstacle_run(method: str, case: str, L: float) -> dict:
+    """The dimensionless results of ``_obstacle_case`` in the length unit L, with every default."""
+    cm = fc.unit_square(N_OBSTACLE, N_COARSE, clamped=("left",))
+    cm.mesh.geometry.x[:, :2] *= L
+    cm = cm._replace(h=cm.h * L, H=cm.H * L)
+    result = fc.solve(_obstacle_case(case, L).on(cm), method)
+    out = {
+        "force": result.profile.force / L,  # (E = 1 on Γ_C: a force per unit thickness is a stress times L)
+        "u": _l2(result.u, cm.mesh) / L**2,
+        "counts": _counts(result),
+    }
+    if case == "layers":  # the piecewise linear u_x of the exact (unpenalized) solution
+        X = ufl.SpatialCoordinate(cm.mesh)
+        p = 1e-3 / float(np.sum(np.diff(LAYERS) / MODULI))
+        u_x = (
+            -p
+            * L
+            * ufl.conditional(
+                ufl.lt(X[0], LAYERS[1] * L),
+                X[0] / L,
+                ufl.conditional(
+                    ufl.lt(X[0], LAYERS[2] * L),
+                    LAYERS[1] + (X[0] / L - LAYERS[1]) / MODULI[1],
+                    LAYERS[1] + (LAYERS[2] - LAYERS[1]) / MODULI[1] + (X[0] / L - LAYERS[2]) / MODULI[2],
+                ),
+            )
+        )
+        exact = ufl.as_vector([u_x, 0.0])
+        out["e_u"] = _l2(result.u - exact, cm.mesh) / _l2(exact, cm.mesh)
+    return out
+
+
+@pytest.mark.parametrize("case", ["layers", pytest.param("cylinder", marks=pytest.mark.slow)])
+@pytest.mark.parametrize("method", METHODS)
+def test_obstacles_in_any_units(method, case):
+    """The layered patch and a cylinder pressed into the side, lengths in units 10³ times smaller and larger: the
+    contact force/L, ‖u‖/L², the error against the closed form (layers) and the iteration and Newton counts of
+    L = 1, with every default (ε, α, β from h/L_ref, δ = 10⁻³h/E)."""
+    ref = _obstacle_run(method, case, 1.0)
+    assert ref["force"] > 0
+    if case == "layers" and method != "mixed-ms":  # the patch test: exact up to the penalty (primal: δ/C, 1e-5);
+        assert ref["e_u"] < 1e-4, ref  # (Algorithm 4's u₁ is the coarse U_aux displacement)
+    for L in (1e-3, 1e3):
+        got = _obstacle_run(method, case, L)
+        where = f"L = {L:g}: {got} against {ref}"
+        assert got["counts"] == ref["counts"], where
+        for key in ("force", "u", "e_u"):
+            if key in ref:
+                assert got[key] == pytest.approx(ref[key], rel=RTOL, abs=RTOL * 1e-3), where
 
 
 @pytest.mark.parametrize("method", ["primal", pytest.param("mixed", marks=serial)])

@@ -87,6 +87,11 @@ def test_alpha_spellings(alpha, expected):
     assert np.allclose(robin_coefficient(alpha, E, space, cm.h), expected)
     # γ at x = 7/8 lies in the homogeneous E = 1 region: α_p = 3·1
     assert np.allclose(robin_coefficient("3E", E, space, cm.h), 3.0)
+    # lengths in a unit L times smaller (h·L, L_ref = L): a spelling with a symbol is a stiffness per length
+    # (α/L: h read as h/L_ref), a number is taken as given
+    L = 1e-3
+    scaled = robin_coefficient(alpha, E, space, cm.h * L, L)
+    assert np.allclose(scaled, expected if isinstance(alpha, float) else expected / L, rtol=1e-14)
 
 
 def test_alpha_scaled_by_the_local_modulus():

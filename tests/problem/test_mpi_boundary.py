@@ -68,7 +68,9 @@ def test_two_ranks_match_serial_with_boundary_conditions_and_obstacles():
 def test_unloading_to_a_vanishing_solution_on_two_ranks(accel):
     """Load steps down to a vanishing solution on two ranks (Algorithm 1): the Ω₂ solve at nearly collapsed data
     sees the collapse before its own residual check (on two ranks that check can fail where one rank passes), so
-    every step converges, the unloaded and withdrawn steps with zero force and the unloaded one exactly."""
+    every step converges, the withdrawn step with zero force and the unloaded one with no force beyond round-off
+    of the loaded one (exactly zero where the collapse is detected; the machine's BLAS rounding decides whether
+    the iteration reaches u ≈ 0 directly instead)."""
     cm = unit_square(8, 4, clamped=("left",))
     model = layered_model([0.0, 0.5, 1.0], [1.0, 100.0], depth=0.0)
     curve = force_indentation(
@@ -83,5 +85,5 @@ def test_unloading_to_a_vanishing_solution_on_two_ranks(accel):
     )
     pushed, unloaded, withdrawn = steps
     assert MPI.COMM_WORLD.size == 2 and all(s["converged"] for s in steps)
-    assert pushed["force"] > 0.0 and unloaded["force"] == 0.0 and withdrawn["force"] == 0.0
-    assert unloaded["residual"] == 0.0
+    assert pushed["force"] > 0.0 and abs(unloaded["force"]) <= 1e-12 * pushed["force"] and withdrawn["force"] == 0.0
+    assert unloaded["residual"] < 1e-9

@@ -69,10 +69,10 @@ matrix at the interior DOFs of a patch only see cells of that patch.
 of the coarse operators are summed over the ranks (Allreduce). The fine Ω₁
 operators live on a serial (COMM_SELF) copy of Ω₁ on every rank.
 
-Offline data (the aux functions, the bases, N and N_f) can be cached on disk
-(npz, one entry per patch: written without a second copy) under a key hashing
-everything they depend on; a cache file whose stored key or checksum does not
-match is rebuilt, never used.
+Offline data (the aux functions, the bases, N, N_f and the Gram matrices ZᵀKZ,
+ZᵀMZ) can be cached on disk (npz, one entry per patch: written without a second
+copy) under a key hashing everything they depend on; a cache file whose stored
+key or checksum does not match is rebuilt, never used.
 
 **Modules.** ``options`` (``CEMOptions``, the warning thresholds), ``operators`` (the fine Ω₁ operators and
 forms), ``spectral`` (the local spectral problems, V_aux), ``bases`` (the patch problems, V_ms), ``coarse``

@@ -109,6 +109,9 @@ class MultiscaleSpace:
     n_gamma: int  #: γ DOFs
     correction_cells: np.ndarray  #: coarse cell of each ``correction`` entry
     times: dict = field(default_factory=dict)
+    #: (ZᵀKZ, ZᵀMZ) for Z = [Ψ, N, N_f] (``coarse.gram_matrices``) when stored with the space (the offline
+    #: cache), else None (``coarse.MultiscaleRobinSolver`` forms them)
+    grams: tuple | None = None
 
     @property
     def size(self) -> int:

@@ -1,8 +1,9 @@
 """The offline data of the primal CEM (Algorithm 3) on disk: the cache key, the npz layout, the offline stage.
 
-The aux functions, the bases, N and N_f are cached (npz, one entry per patch: written without a second copy)
-under a key hashing everything they depend on (``offline_key``); a file whose stored key or checksum does not
-match is rebuilt, never used (``multiscale.cache.OfflineCache``).  ``offline_stage`` builds or loads them.
+The aux functions, the bases, N, N_f and the Gram matrices ZᵀKZ, ZᵀMZ of Z = [Ψ, N, N_f] are cached (npz, one
+entry per patch: written without a second copy) under a key hashing everything they depend on (``offline_key``);
+a file whose stored key or checksum does not match is rebuilt, never used (``multiscale.cache.OfflineCache``).
+``offline_stage`` builds or loads them.
 """
 
 import hashlib
@@ -18,6 +19,7 @@ from fenics_contact import __version__
 from fenics_contact.errors import InputError
 from fenics_contact.multiscale.cache import OfflineCache, hash_array
 from fenics_contact.multiscale.cem.bases import MultiscaleSpace, PatchFunctions, build_multiscale_space
+from fenics_contact.multiscale.cem.coarse import gram_matrices
 from fenics_contact.multiscale.cem.operators import FineOperators
 from fenics_contact.multiscale.cem.options import CEMOptions
 from fenics_contact.multiscale.cem.spectral import AuxiliarySpace
@@ -27,8 +29,8 @@ __all__ = ["CACHE_FORMAT", "PrimalOfflineCache", "offline_key", "offline_stage"]
 
 log = logging.getLogger(__name__)
 
-#: Format of the cached arrays: bumped whenever their layout or meaning changes.
-CACHE_FORMAT = 3
+#: Format of the cached arrays: bumped whenever their layout or meaning changes (4: the Gram matrices stored).
+CACHE_FORMAT = 4
 
 
 def offline_key(ops: FineOperators, grid: CoarseGrid, options: CEMOptions, *, h: float) -> str:
@@ -79,6 +81,8 @@ def _pack(space: MultiscaleSpace) -> dict:
             out[f"{name}{k}_columns"] = p.columns
     if space.Nf is not None:
         out["Nf"] = space.Nf
+    if space.grams is not None:
+        out["gram_K"], out["gram_M"] = space.grams
     return out
 
 
@@ -109,8 +113,12 @@ def _unpack(arrays: dict, ops: FineOperators, grid: CoarseGrid) -> MultiscaleSpa
             for k in range(count)
         ]
     times = {"eigen": 0.0, "patches": 0.0, "total": 0.0}
+    nz = aux.size + ng + 1
+    grams = (arrays["gram_K"], arrays["gram_M"])
+    if any(G.shape != (nz, nz) for G in grams):
+        raise ValueError("cached Gram matrices do not match the multiscale space")
     return MultiscaleSpace(
-        aux, parts["basis"], parts["corr"], arrays.get("Nf"), layers, n, ng, arrays["correction_cells"], times
+        aux, parts["basis"], parts["corr"], arrays.get("Nf"), layers, n, ng, arrays["correction_cells"], times, grams
     )
 
 
@@ -166,6 +174,9 @@ def offline_stage(
     if error is not None:
         raise InputError(error)
     space = build_multiscale_space(ops, grid, options, comm=comm)
+    t0 = time.perf_counter()
+    space.grams = gram_matrices(ops, grid, space, comm=comm)  # stored too: a later run needs no pass over the bases
+    space.times["gram"] = time.perf_counter() - t0
     if comm.rank == 0:
         try:
             cache.save(key, space)

@@ -121,7 +121,7 @@ class MultiscaleRobinSolver:
         self.ops = ops
         self.space = space
         n_ms, ng = space.size, space.n_gamma
-        self.GK, self.GM = gram_matrices(ops, grid, space, comm=comm)
+        self.GK, self.GM = space.grams if space.grams is not None else gram_matrices(ops, grid, space, comm=comm)
         self.Zg = trace_matrix(ops, space)
         # ZᵀAZ = ZᵀKZ + Z_γᵀ R_γγ Z_γ (R is α times the γ vertex mass: diagonal on γ)
         Rg = ops.R[ops.gamma][:, ops.gamma]

@@ -120,6 +120,7 @@ class Omega1Multiscale:
         t_assembly = time.perf_counter() - t0
         self.space, self.cache_status = offline_stage(self.ops, self.grid, cem, h=cm.h, cache_dir=cache_dir, comm=comm)
         self.solver = MultiscaleRobinSolver(self.ops, self.space, self.grid, comm=comm)
+        self._Zg_mine = self.solver.Zg[self._mine]  # the trace rows of this rank's values (one copy, not per step)
         self.nu_max = float(np.max(self.fields.nu.x.array, initial=0.0))  #: largest ν in Ω₁
         warn_if_few_layers(cem.layers, "primal CEM (Algorithm 3)", comm)
         if self.nu_max > NEARLY_INCOMPRESSIBLE and comm.rank == 0:
@@ -139,7 +140,7 @@ class Omega1Multiscale:
             "eigen": self.space.times.get("eigen", 0.0),
             "patches": self.space.times.get("patches", 0.0),
             "cache_load": self.space.times.get("load", 0.0),
-            "coarse": self.solver.time_s,
+            "coarse": self.solver.time_s + self.space.times.get("gram", 0.0),
         }
 
     @property
@@ -187,10 +188,14 @@ class Omega1Multiscale:
 
     def trace(self, s: np.ndarray) -> np.ndarray:
         """u₁ = Z s at this rank's owned interface DOFs (InterfaceSpace ordering)."""
-        return self.solver.Zg[self._mine] @ s
+        return self._Zg_mine @ s
 
-    def coordinate_norms2(self, s: np.ndarray) -> tuple[float, float]:
-        """(a₁(Zs, Zs), ‖Zs‖²_L²) from the Gram matrices (s may be a difference of coordinates)."""
+    def coordinate_norms2(self, s: np.ndarray) -> tuple:
+        """(a₁(Zs, Zs), ‖Zs‖²_L²) from the Gram matrices (s may be a difference of coordinates); for the columns
+        of a 2-D s, two arrays (one pass over each Gram matrix for all columns)."""
+        if s.ndim == 2:
+            GK, GM = self.solver.GK, self.solver.GM
+            return np.einsum("ij,ij->j", s, GK @ s), np.einsum("ij,ij->j", s, GM @ s)
         return float(s @ (self.solver.GK @ s)), float(s @ (self.solver.GM @ s))
 
     def reference_terms(self, r1: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, float]:
@@ -278,6 +283,6 @@ def build_omega1_multiscale(
     cm = problem.cm
     parts = split_mesh(cm)
     interface = InterfaceSpace(cm, parts, shape=(cm.mesh.geometry.dim,))
-    alpha_values = robin_coefficient(alpha, problem.fields.E, interface, cm.h)
+    alpha_values = robin_coefficient(alpha, problem.fields.E, interface, cm.h, problem.length)
     omega1 = Omega1Multiscale(problem, parts, interface, alpha_values, cem=cem, cache_dir=cache_dir)
     return omega1, interface, alpha_values

@@ -198,7 +198,8 @@ def cell_operators(sub, H: float, weight: str = "lambda+2mu", s_factor: float = 
     coords = Lam.tabulate_dof_coordinates()[blocks, :2]
     order = np.lexsort((coords[:, 0], coords[:, 1]))
     blocks, coords = blocks[order], coords[order]
-    if coords.shape != sub.gamma_points.shape or not np.allclose(coords, sub.gamma_points, atol=1e-12):
+    size = float(np.max(np.abs(sub.gamma_points), initial=0.0))  # (the match is relative: any length unit)
+    if coords.shape != sub.gamma_points.shape or not np.allclose(coords, sub.gamma_points, atol=1e-12 * size):
         raise RuntimeError("the γ nodes do not match the Ω₁ subproblem's interface nodes")
     if sub.interface.bends.bent:  # the data space of the bends (``fem.mixed_interface.GammaBends``)
         C = sub.interface.C_dg[dg_rows.ravel()].tocsr()

@@ -1,0 +1,459 @@
+"""The penalized friction law at the Γ_C vertices of a primal subproblem: residual, generalized Jacobian, state.
+
+With vertex quadrature the friction term of the residual is nodal, F_p += −w_p t_p, w_p the vertex weight and
+t_p the tangential traction of the return mapping (``problem.friction``):
+
+    r_p = u_p − m − a_p,   t_trial = −(1/δ_t) P_p r_p,   τ_p = μ p_p (Coulomb) or s (Tresca),
+    stick |t_trial| ≤ τ_p: t_p = t_trial,   slip: t_p = τ_p n̂_p,   n̂_p = t_trial/|t_trial|,
+
+P_p = I − ν_p⊗ν_p, m the obstacle's rigid motion, a_p the node's anchor: the relative displacement at which
+its tangential spring is unstretched (a_p = u_old − m_old + δ_t t_old after each converged load step, so
+t_trial = t_old − (1/δ_t) P (u − u_old − Δm)).  A node with τ_p = 0 (out of contact) carries no traction.
+Its generalized Jacobian block ∂(−w t_p)/∂u_p (d × d, d the dimension; the tangential plane is a line in 2D
+and a plane in 3D):
+
+    stick:  (w/δ_t) P,     slip:  (w/δ_t)(τ/|t_trial|)(P − n̂⊗n̂) − [Coulomb, p > 0] (w μ/δ) n̂⊗ν,
+
+non-symmetric for a slipping Coulomb node (LU factorization).  In 2D P − n̂⊗n̂ = 0: on a fixed state (contact,
+stick, slip and its sign) the equations are affine and the semismooth Newton terminates finitely; in 3D n̂
+varies within a state, and the Newton continues until its residual check.  The dissipation of a load step is
+Σ_p w_p t_p·(a_p − a_p^new) ≥ 0 (δ_t τ (|t_trial| − τ) per slipping node, 0 where it sticks).
+"""
+
+import logging
+from typing import NamedTuple
+
+import dolfinx.fem.petsc
+import numpy as np
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from fenics_contact.errors import ConvergenceError
+from fenics_contact.fem.contact import NewtonHistory, profile_order
+from fenics_contact.fem.newton import Advance, Check, Direction, StepState, semismooth_newton_loop
+from fenics_contact.problem.friction import Friction
+
+__all__ = ["NodalFriction", "FrictionProfile", "frictional_newton"]
+
+log = logging.getLogger(__name__)
+
+
+class FrictionProfile(NamedTuple):
+    """The tangential side of a frictional contact profile, at the Γ_C nodes of all ranks (``profile_order``).
+
+    ``traction``: t (N, d) on the body; ``pressure``: the normal penalty pressure p; ``stick`` / ``slip``:
+    the nodes' state (neither: out of contact, no traction); ``tangent``: in 2D the unit tangent (−ν_y, ν_x)
+    the signed ``shear`` t·tangent refers to (zero rows in 3D).
+    """
+
+    points: np.ndarray
+    weights: np.ndarray
+    traction: np.ndarray
+    pressure: np.ndarray
+    stick: np.ndarray
+    slip: np.ndarray
+    tangent: np.ndarray
+
+    @property
+    def shear(self) -> np.ndarray:
+        """t·tangent (2D: the signed tangential traction; 3D: zero, use ``traction``)."""
+        return np.einsum("ij,ij->i", self.traction, self.tangent)
+
+    @property
+    def tangential_force(self) -> np.ndarray:
+        """Σ w_p t_p: the tangential force (vector, per unit thickness in 2D) the obstacle exerts on the body."""
+        return np.sum(self.weights[:, None] * self.traction, axis=0)
+
+    @property
+    def normal_force(self) -> float:
+        """Σ w_p p_p: the normal penalty force."""
+        return float(np.sum(self.weights * self.pressure))
+
+    @property
+    def along(self) -> np.ndarray:
+        """Each node's coordinate along Γ_C (the coordinate of larger spread)."""
+        if self.points.shape[0] == 0:
+            return np.zeros(0)
+        return self.points[:, int(np.argmax(np.ptp(self.points[:, :2], axis=0)))]
+
+    def extent(self, which: str) -> tuple[float, float] | None:
+        """[min, max] along Γ_C of the ``"stick"`` or ``"slip"`` nodes, or None when there are none."""
+        mask = self.stick if which == "stick" else self.slip
+        if not np.any(mask):
+            return None
+        return float(np.min(self.along[mask])), float(np.max(self.along[mask]))
+
+
+def _tangent_2d(nu: np.ndarray) -> np.ndarray:
+    """(−ν_y, ν_x) per row in 2D; zero rows in 3D (no preferred tangent)."""
+    if nu.shape[1] != 2:
+        return np.zeros_like(nu)
+    return np.column_stack([-nu[:, 1], nu[:, 0]])
+
+
+class NodalFriction:
+    """The friction law of a ``PrimalSubproblem`` at its owned Γ_C nodes off Γ_D, with its load-step state.
+
+    ``delta``: the normal penalty δ (p = (u·ν − g)⁺/δ); the stick stiffness is ``law.stiffness_ratio``/δ.
+    The state is the anchor a_p per node and the obstacle motion m; ``commit`` ends a load step.
+    """
+
+    def __init__(self, sub, law: Friction, delta: float) -> None:
+        self.sub, self.law, self.delta = sub, law, float(delta)
+        self.k_t = law.stiffness_ratio / self.delta
+        self.d = sub.mesh.geometry.dim
+        self.comm = sub.mesh.comm
+        nodes = sub.geometry.owned_nodes()
+        mask = dolfinx.fem.petsc.create_vector(sub.V)
+        mask.set(1.0)
+        dolfinx.fem.petsc.set_bc(mask, sub.bcs)
+        free = mask.getArray(readonly=True).reshape(-1, self.d)[nodes].copy()
+        mask.destroy()
+        self.nodes, self.free = nodes, free != 0.0  #: (N,), (N, d): components not held by Γ_D / rollers
+        self.anchor = np.zeros((nodes.size, self.d))
+        self.motion = np.zeros(self.d)
+        self.dissipation = 0.0  #: accumulated over the committed load steps (all ranks)
+        diagonal = sub._K.getDiagonal()
+        #: the elastic stiffness at each node (the mean diagonal entry of its block of K)
+        self.stiffness = diagonal.getArray(readonly=True).reshape(-1, self.d)[nodes].mean(axis=1)
+        diagonal.destroy()
+        #: the Newton's linearization state: codes per node (0 no traction, 1 stick, 2 slip) and the slip
+        #: directions, or None (the state of the current u)
+        self.forced: tuple[np.ndarray, np.ndarray] | None = None
+        #: thresholds τ held fixed (the fixed-point iteration of ``frictional_newton``), or None: the law's
+        self.frozen: np.ndarray | None = None
+        #: nodal displacements (N, d) to evaluate the law at instead of u's (the condensed system's unknowns)
+        self.nodal: np.ndarray | None = None
+
+    # -- the law at the current iterate ------------------------------------------------------------------
+    def _geometry(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        _, nu, w, gap = self.sub.geometry.nodes()
+        return nu, w, gap
+
+    def evaluate(self) -> dict:
+        """The return mapping at the current u: ν, w, p, τ, t_trial, t, stick, slip (owned nodes)."""
+        nu, w, gap = self._geometry()
+        u = self.sub.u.x.array.reshape(-1, self.d)[self.nodes] if self.nodal is None else self.nodal
+        gn = np.einsum("ij,ij->i", u, nu) - gap
+        p = np.maximum(gn, 0.0) / self.delta
+        r = u - self.motion[None, :] - self.anchor
+        r_t = r - np.einsum("ij,ij->i", r, nu)[:, None] * nu
+        t_trial = -self.k_t * r_t
+        norm = np.linalg.norm(t_trial, axis=1)
+        if self.frozen is not None:
+            tau = self.frozen
+        elif self.law.law == "coulomb":
+            tau = self.law.mu * p
+        else:
+            tau = np.full(gn.size, self.law.threshold)
+        raw = t_trial / np.where(norm > 0.0, norm, 1.0)[:, None]
+        if self.forced is None:
+            stick = (tau > 0.0) & (norm <= tau)
+            slip = (tau > 0.0) & ~stick
+            direction = np.where(slip[:, None], raw, 0.0)
+        else:
+            codes, forced_direction = self.forced
+            stick, slip = (tau > 0.0) & (codes == 1), (tau > 0.0) & (codes == 2)
+            keep = (self.d == 2) | (norm == 0.0)  # 2D: the slip direction of the state (affine on it)
+            direction = np.where(slip[:, None], np.where(keep[:, None], forced_direction, raw), 0.0)
+        t = np.where(stick[:, None], t_trial, tau[:, None] * direction)
+        return dict(nu=nu, w=w, p=p, tau=tau, active=gn > 0.0, t_trial=t_trial, norm=norm, t=t, stick=stick,
+                    slip=slip, direction=direction)  # fmt: skip
+
+    def next_state(self, *, plain: bool = False) -> tuple[np.ndarray, np.ndarray]:
+        """The state the Newton linearizes at next: (codes, slip directions) from z = (1 − β) t + β t_trial.
+
+        t is the traction of the state linearized at (``forced``; the law's own without one) and t_trial the
+        trial traction at the current u: a node sticks where |z| ≤ τ and slips along z/|z| otherwise.  The
+        primal–dual active-set rule with the constant c = β/δ_t, β = min(1, δ_t K_pp/w_p) (K_pp the node's
+        elastic stiffness): β = 1 would be the trial state alone, whose stick band |P r| ≤ τδ_t is too narrow for
+        a Newton iterate to land in.  A state that reproduces itself satisfies the law.  ``plain``: the state of
+        u itself (β = 1), the generalized Hessian of a frozen-threshold energy.
+        """
+        if plain:
+            keep, self.forced = self.forced, None
+            try:
+                e = self.evaluate()
+            finally:
+                self.forced = keep
+            beta = np.ones((e["w"].size, 1))
+        else:
+            e = self.evaluate()
+            beta = np.minimum(1.0, self.stiffness / e["w"] / self.k_t)[:, None]
+        z = (1.0 - beta) * e["t"] + beta * e["t_trial"]
+        size = np.linalg.norm(z, axis=1)
+        tau = e["tau"]
+        codes = np.where(tau > 0.0, np.where(size <= tau, 1, 2), 0).astype(np.int8)
+        return codes, z / np.where(size > 0.0, size, 1.0)[:, None]
+
+    @staticmethod
+    def key(state: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
+        """The state as a boolean array (the Newton's active set): stick, slip, and the 2D slip's sign."""
+        codes, direction = state
+        parts = [codes == 1, codes == 2]
+        if direction.shape[1] == 2:
+            parts.append((codes == 2) & (direction[:, 0] + 1e-3 * direction[:, 1] > 0.0))
+        return np.concatenate(parts)
+
+    def varies(self) -> bool:
+        """Whether the Jacobian varies within a state: a slipping node in 3D (collective)."""
+        local = self.d == 3 and bool(np.any(self.evaluate()["slip"]))
+        return self.comm.allreduce(local, op=MPI.LOR)
+
+    # -- assembly hooks ------------------------------------------------------------------------------------
+    def _dofs(self) -> np.ndarray:
+        return (self.d * self.nodes[:, None] + np.arange(self.d)).ravel()
+
+    def add_residual(self, b: PETSc.Vec) -> None:
+        """b ← b − Σ_p w_p t_p·v_p on the free components (b: the assembled residual, owned entries)."""
+        e = self.evaluate()
+        force = -(e["w"][:, None] * e["t"]) * self.free
+        arr = b.getArray()
+        arr[self._dofs()] += force.ravel()
+
+    def add_sizes(self, sizes: PETSc.Vec) -> None:
+        """sizes ← sizes + |w_p t_p| (the friction forces' share of the terms the residual balances)."""
+        e = self.evaluate()
+        arr = sizes.getArray()
+        arr[self._dofs()] += (np.abs(e["w"][:, None] * e["t"]) * self.free).ravel()
+
+    def add_jacobian(self, A: PETSc.Mat) -> None:
+        """A ← A + the friction blocks (assembled A; it is assembled again)."""
+        e = self.evaluate()
+        blocks = self.blocks(e)
+        rows = self._dofs().reshape(-1, self.d).astype(PETSc.IntType)
+        for k in np.flatnonzero(e["stick"] | e["slip"]):
+            A.setValuesLocal(rows[k], rows[k], blocks[k], addv=PETSc.InsertMode.ADD_VALUES)
+        A.assemble()
+
+    def blocks(self, e: dict) -> np.ndarray:
+        """The generalized Jacobian blocks ∂(−w t_p)/∂u_p (N, d, d) of the evaluated law ``e`` (free components)."""
+        nu, w, n_hat = e["nu"], e["w"], e["direction"]
+        eye = np.eye(self.d)
+        P = eye[None] - nu[:, :, None] * nu[:, None, :]
+        blocks = np.zeros((self.nodes.size, self.d, self.d))
+        stick, slip = e["stick"], e["slip"]
+        blocks[stick] = (w[stick] * self.k_t)[:, None, None] * P[stick]
+        if np.any(slip):
+            ratio = e["tau"][slip] / e["norm"][slip]
+            nn = n_hat[slip][:, :, None] * n_hat[slip][:, None, :]
+            blocks[slip] = (w[slip] * self.k_t * ratio)[:, None, None] * (P[slip] - nn)
+            if self.law.law == "coulomb" and self.frozen is None:
+                on = e["active"][slip]
+                coupling = n_hat[slip][:, :, None] * nu[slip][:, None, :]
+                blocks[slip] -= (w[slip] * self.law.mu / self.delta * on)[:, None, None] * coupling
+        return blocks * self.free[:, :, None] * self.free[:, None, :]
+
+    # -- load steps ----------------------------------------------------------------------------------------
+    def set_motion(self, motion) -> None:
+        """The obstacle's rigid motion m (a d-vector) from the reference position of the anchors."""
+        m = np.zeros(self.d)
+        v = np.asarray(motion, dtype=np.float64).ravel()
+        m[: min(v.size, self.d)] = v[: self.d]
+        self.motion = m
+
+    def commit(self) -> float:
+        """End the load step at the current (converged) u: move the anchors by the slip, add its dissipation
+        Σ w_p t_p·(a_p − a_p^new) to ``dissipation``; returns the step's (collective)."""
+        e = self.evaluate()
+        change = (e["t"] - e["t_trial"]) / self.k_t  # a_new − a: zero where the node sticks
+        local = float(np.sum(e["w"] * np.einsum("ij,ij->i", e["t"], -change)))
+        self.anchor += change
+        step = self.comm.allreduce(local, op=MPI.SUM)
+        self.dissipation += step
+        return step
+
+    def profile(self) -> FrictionProfile:
+        """The tangential traction, pressure and stick/slip state at the Γ_C nodes of all ranks (profile order)."""
+        e = self.evaluate()
+        points = self.sub.Q.tabulate_dof_coordinates()[self.nodes, : self.d]
+        arrays = (points, e["w"], e["t"], e["p"], e["stick"], e["slip"], _tangent_2d(e["nu"]))
+        gathered = [np.concatenate(self.comm.allgather(a)) for a in arrays]
+        order = profile_order(gathered[0])
+        return FrictionProfile(*(a[order] for a in gathered))
+
+
+class _FrictionalSystem:
+    """A frictional ``PrimalSubproblem`` as a ``ContactSystem``: its set is the contact set with the friction
+    state (``NodalFriction.next_state``), on which the friction term is linearized (``NodalFriction.forced``);
+    once full steps cycle, the step length comes from a backtracking line search on ‖F‖ (Armijo), or with
+    ``energy`` (frozen thresholds, Tresca) from the exact line search on the convex energy F is the gradient of."""
+
+    def __init__(self, sub, *, energy: bool = False) -> None:
+        self.sub, self.friction, self.energy = sub, sub.friction, energy
+        self._norm = np.inf
+        self._negligible = False
+        self.friction.forced = None
+        self.friction.forced = self.friction.next_state(plain=self.energy)
+
+    def key(self, state) -> np.ndarray:
+        """The set of all ranks (so that every rank sees the same sets recur)."""
+        local = np.concatenate([self.sub._active_set(), self.friction.key(state)])
+        return np.concatenate(self.sub.mesh.comm.allgather(local))
+
+    def residual(self) -> float:
+        self._norm = self.sub._residual()
+        return self._norm
+
+    def jacobian(self, active: np.ndarray) -> bool:
+        return self.sub._factorize_for(active)
+
+    def same(self, a: np.ndarray, b: np.ndarray) -> bool:
+        """The sets are equal and, where the Jacobian varies within a set (3D slip), the step is negligible."""
+        return self.sub._same_sets(a, b) and (self.friction.d == 2 or self._negligible)
+
+    def _move(self, t: float) -> None:
+        self.sub.u.x.petsc_vec.axpy(t, self.sub.du)
+        self.sub.u.x.scatter_forward()
+
+    def solve(self, active: np.ndarray) -> Direction:
+        sub = self.sub
+        sub.b.scale(-1.0)
+        sub.solver.solve(sub.b, sub.du)
+        size = sub.u.x.petsc_vec.norm(PETSc.NormType.NORM_INFINITY)
+        self._negligible = sub.du.norm(PETSc.NormType.NORM_INFINITY) <= 1e-12 * size
+        self._move(1.0)
+        self._next = self.friction.next_state(plain=self.energy)
+        predicted = self.key(self._next)
+        self._move(-1.0)
+        return Direction(predicted)
+
+    def _slope(self, t: float) -> float:
+        """d·F(u + t d): the derivative of the energy along the direction (F its gradient with frozen τ)."""
+        self._move(t)
+        self.sub._residual()
+        self._move(-t)
+        return self.sub.b.dot(self.sub.du)
+
+    def _energy_search(self) -> float:
+        """The root in (0, 1] of the increasing t ↦ d·F(u + t d) (exact line search on the convex energy, by
+        regula falsi with the Illinois modification)."""
+        t0, t1 = 0.0, 1.0
+        f0, f1 = self._slope(0.0), self._slope(1.0)
+        if f0 >= 0.0 or f1 <= 0.0:
+            return 1.0
+        for _ in range(60):
+            t = t1 - f1 * (t1 - t0) / (f1 - f0)
+            f = self._slope(t)
+            if abs(f) <= 1e-12 * abs(f0) or t1 - t0 <= 1e-12:
+                return t
+            if f > 0.0:
+                t1, f1 = t, f
+                f0 *= 0.5
+            else:
+                t0, f0 = t, f
+                f1 *= 0.5
+        return t
+
+    def line_search(self) -> float:
+        keep, self.friction.forced = self.friction.forced, None  # the merit: the residual of the law itself
+        try:
+            if self.energy:
+                return self._energy_search()
+            norm0 = self.sub._residual()
+            t = 1.0
+            for _ in range(30):
+                self._move(t)
+                trial = self.sub._residual()
+                self._move(-t)
+                if trial <= (1.0 - 1e-4 * t) * norm0:
+                    break
+                t *= 0.5
+        finally:
+            self.friction.forced = keep
+        return t
+
+    def advance(self, t: float, state: StepState) -> Advance:
+        self._move(t)
+        self.friction.forced = self._next if t == 1.0 else self.friction.next_state(plain=self.energy)
+        active = self.key(self.friction.forced)
+        return Advance(active, self.sub.mesh.comm.allreduce(int(np.count_nonzero(active))))
+
+    def check(self) -> Check:
+        final, scale = self.sub.residual_check()
+        return Check(final, scale, self.sub._residual())
+
+
+#: thresholds' fixed-point iterations of ``frictional_newton`` at most, and their relative tolerance
+FIXED_POINT_STEPS = 200
+FIXED_POINT_TOL = 1.0e-12
+
+
+def _newton(sub, *, refinements: int, energy: bool = False):
+    system = _FrictionalSystem(sub, energy=energy)
+    return semismooth_newton_loop(
+        system,
+        system.key(sub.friction.forced),
+        name=sub.prefix.rstrip("_"),
+        max_steps=sub.newton.max_iterations,
+        line_search="on-cycle",
+        rtol=sub.newton.rtol,
+        atol=sub.newton.atol,
+        refinements=refinements,
+        sizes="contact and friction state sizes",
+    )
+
+
+def _fixed_point(sub, *, refinements: int) -> NewtonHistory:
+    """The thresholds by fixed point: τ frozen at the law's value for the current u, the problem with frozen τ
+    (a convex energy: the semismooth Newton with its exact line search) solved, until τ stops changing; then
+    the residual check of the law itself."""
+    friction, history = sub.friction, NewtonHistory()
+    for _ in range(FIXED_POINT_STEPS):
+        tau = friction.evaluate()["tau"]
+        friction.frozen = tau
+        try:
+            trace = _newton(sub, refinements=refinements, energy=True)
+        finally:
+            friction.frozen = None
+        history.residuals += trace.residuals
+        history.active_sizes += trace.active_sizes
+        history.factorizations += trace.factorizations
+        change = np.max(np.abs(friction.evaluate()["tau"] - tau), initial=0.0)
+        size = np.max(tau, initial=0.0)
+        change, size = (sub.mesh.comm.allreduce(v, op=MPI.MAX) for v in (change, size))
+        if change <= FIXED_POINT_TOL * size:
+            break
+    # the Newton on the law itself from there: it settles the state exactly (the fixed point ends at 1e-12)
+    reached = sub.u.x.array.copy()
+    sub._factorized_set = None
+    try:
+        tail = _newton(sub, refinements=refinements)
+        history.residuals += tail.residuals
+        history.active_sizes += tail.active_sizes
+        history.factorizations += tail.factorizations
+        return history
+    except ConvergenceError:
+        sub.u.x.array[:] = reached
+    finally:
+        sub.friction.forced = None
+    sub._factorize()  # the law's own Jacobian at the solution (the interface Newton's Ω₂ response reads it)
+    sub._factorized_set = None
+    final, scale = sub.residual_check()
+    if not (np.isfinite(final) and final <= sub.newton.rtol * scale + sub.newton.atol):
+        raise ConvergenceError(
+            f"{sub.prefix.rstrip('_')}: the friction thresholds' fixed point ended with the residual {final:.3e} "
+            f"above {sub.newton.rtol:g} x the size of its terms ({scale:.3e})"
+        )
+    history.residuals.append(final)
+    return history
+
+
+def frictional_newton(sub, *, refinements: int) -> NewtonHistory:
+    """Solve a frictional ``PrimalSubproblem``: the semismooth Newton on the law itself
+    (``fem.newton.semismooth_newton_loop``; full steps until a state recurs, then a backtracking line search on
+    ‖F‖; ``refinements`` steps after a settled state whose residual misses the check: iterative refinement, or
+    the Newton steps of a 3D slip), and should it not converge (slip fronts cycling at high contrast), the
+    fixed point on the thresholds from the same start (``_fixed_point``: each step a convex problem)."""
+    start = sub.u.x.array.copy()
+    try:
+        # Tresca: the gradient of a convex energy (the exact line search globalizes); Coulomb: the law's Newton
+        trace = _newton(sub, refinements=refinements, energy=sub.friction.law.law == "tresca")
+        return NewtonHistory(trace.residuals, trace.active_sizes, trace.factorizations)
+    except ConvergenceError as error:
+        log.info("%s: %s; the fixed point on the friction thresholds instead", sub.prefix.rstrip("_"), error)
+        sub.u.x.array[:] = start
+        sub._factorized_set = None
+        return _fixed_point(sub, refinements=refinements)
+    finally:
+        sub.friction.forced = None

@@ -308,7 +308,7 @@ PAIR_TABLES = [
     ("bodies.<name>", "bodies.lower.zz", "one body (two such tables, any names)"),
     ("supports entry", "bodies.lower.supports", "one entry of a body's `supports` list"),
     ("pair", "pair.zz", "the contact surfaces (required: it makes the case a two-body one)"),
-    ("load", "load.zz", "load steps: the displacement of one support step by step"),
+    ("load", "load.zz", "load steps: the displacement of one support, or one traction, step by step"),
     ("run", "run.zz", "the run (both methods)"),
     ("primal", "primal.zz", 'Algorithm 1\'s options (`method = "primal"` only)'),
 ]
@@ -349,11 +349,20 @@ PAIR_KEYS = {
         '"segments"',
         "segment-to-segment mortar gaps, or one-pass node-to-segment (fails the patch test: for comparison)",
     ),
-    ("load", "support"): ("group name", "required", "the facet group of the support whose displacement steps"),
+    ("load", "support"): (
+        "group name",
+        "—",
+        "the facet group of the support whose displacement steps (one of `support` and `traction`)",
+    ),
+    ("load", "traction"): (
+        "group name",
+        "—",
+        "a group of a body's `tractions` whose value steps (one of `support` and `traction`)",
+    ),
     ("load", "steps"): (
         "list of vectors",
         "required",
-        "its displacement at each step; the last is the run's; each step starts from the last's solution "
+        "its displacement (or traction) at each step; the last is the run's; each step starts from the last's solution "
         "(`primal-monolithic` on one process)",
     ),
     ("run", "method"): (

@@ -206,7 +206,7 @@ def _check_pair(case: PairCase, args: argparse.Namespace, comm: MPI.Comm) -> int
             roles[s.facets] = f"a support of the body {body.name} ({what}{comps})"
         roles |= {name: f"a traction on the body {body.name}" for name, _ in body.tractions}
     if case.load is not None:
-        roles[case.load.support] += f", moved in {len(case.load.steps)} load steps"
+        roles[case.load.group] += f", stepped in {len(case.load.steps)} load steps"
     roles[case.pair.slave] = "the slave contact surface (the contact integral lives on it)"
     roles[case.pair.master] = "the master contact surface (the slave points are projected onto it)"
     groups = _file_groups(case.mesh_file, comm) or []

@@ -188,16 +188,18 @@ def run_pair(options: PairRunOptions, comm: MPI.Comm, case: PairCase) -> int:
         log.info("case %s (%s), method %s", case.path.name, case.description_or_name, options.method)
         writer = PairWriter(output.path, comm, options.plots, f"case {case.path.name}, {options.method}")
         rows, result, u = [], None, None
+        quantity = case.load.quantity if case.load else None
         for k, displacement in enumerate(steps):
             problem = case.problem(built, step=None if displacement is None else k)
             result = _solve(options, problem, u)
             u = result.u.x.array.copy() if comm.size == 1 else None  # (a warm start is serial)
             row = step_row(result, options.method)
             if displacement is not None:
-                row = {"step": k + 1, "displacement": list(displacement)} | row
+                row = {"step": k + 1, quantity: list(displacement)} | row
                 log.info(
-                    "step %d, displacement %s: contact force %.6g on the slave side, balance %.2e",
+                    "step %d, %s %s: contact force %.6g on the slave side, balance %.2e",
                     k + 1,
+                    quantity,
                     list(displacement),
                     result.slave.force,
                     result.force_balance(),
@@ -213,11 +215,11 @@ def run_pair(options: PairRunOptions, comm: MPI.Comm, case: PairCase) -> int:
             "time_mesh_s": t_mesh,
             "mpi_ranks": comm.size,
             "provenance": provenance(),
-            "load_steps": {"support": case.load.support, "steps": rows} if case.load else None,
+            "load_steps": {case.load.kind: case.load.group, "steps": rows} if case.load else None,
             "case": case.to_dict() | {"run": options.echo()},
         }
         summary.pop("step", None)
-        summary.pop("displacement", None)
+        summary.pop(quantity, None)
         writer.finish(problem, result, summary)
         write_summary(output.path, summary, comm)
         output.commit()

@@ -7,7 +7,7 @@
   and ``side`` (1 slave, 2 master);
 * ``pair.png``: the deformed bodies (magnified, coloured by |u|, the contact surfaces drawn) beside the contact
   pressure along each surface; ``E.png``; ``force_displacement.png`` with load steps: the normal contact force
-  on each side against the displacement of the stepped support.
+  on each side against the stepped support's displacement or traction.
 """
 
 from pathlib import Path
@@ -171,16 +171,17 @@ def plot_pair(result, problem, path: str | Path, *, title: str = "", scale: floa
 
 
 def plot_force_displacement(load_steps: dict, path: str | Path, title: str = "") -> Path:
-    """The normal contact force on each side against the prescribed displacement of the stepped support
-    (its component along the last step's displacement)."""
+    """The normal contact force on each side against the stepped support's displacement or traction (its
+    component along the last step's)."""
     steps = load_steps["steps"]
-    last = np.asarray(steps[-1]["displacement"], dtype=float)
+    kind, quantity = ("support", "displacement") if "support" in load_steps else ("traction", "traction")
+    last = np.asarray(steps[-1][quantity], dtype=float)
     direction = last / max(float(np.linalg.norm(last)), np.finfo(float).tiny)
-    d = [float(np.asarray(s["displacement"]) @ direction) for s in steps]
+    d = [float(np.asarray(s[quantity]) @ direction) for s in steps]
     fig, ax = plt.subplots(figsize=(6, 4))
     ax.plot(d, [s["normal_force_slave"] for s in steps], "o-", label="slave side")
     ax.plot(d, [s["normal_force_master"] for s in steps], "x--", label="master side")
-    ax.set_xlabel(f"displacement of {load_steps['support']} along ({direction[0]:.3g}, {direction[1]:.3g})")
+    ax.set_xlabel(f"{quantity} of {load_steps[kind]} along ({direction[0]:.3g}, {direction[1]:.3g})")
     ax.set_ylabel("normal contact force")
     ax.set_title(title)
     ax.legend()

@@ -26,9 +26,10 @@ MeshTagError naming a group the mesh lacks), unknown keys are refused.
     quadrature-degree = 3
     rule = "segments"                        # or "vertices" (node-to-segment, for comparison)
 
-    [load]                                   # load steps: the displacement of one support, step by step
-    support = "upper_top"                    # the facets of a support of either body
-    steps = [[0.0, -0.01], [0.0, -0.02]]     # its displacement at each step; the last is the run's
+    [load]                                   # load steps: one support's displacement or one traction, by step
+    support = "upper_top"                    # the facets of a support of either body (or traction = "group":
+    steps = [[0.0, -0.01], [0.0, -0.02]]     #   a group of a body's tractions); its value at each step, the
+                                             #   last the run's
 
 The run tables ``[run]`` (method ``primal-monolithic`` or ``primal``, out, plots, tol, max-iterations, accel)
 and ``[primal]`` (delta, layers, alpha-scale) are read by ``cli.pair``.
@@ -141,13 +142,20 @@ class PairSpec:
 
 @dataclass(frozen=True, slots=True)
 class LoadSteps:
-    """The displacement of the support on the facet group ``support`` at each load step."""
+    """At each load step, the displacement of the support (``kind`` "support") or the traction (``kind``
+    "traction") on the facet group ``group``."""
 
-    support: str
+    group: str
     steps: tuple[tuple[float, float], ...]
+    kind: str = "support"
+
+    @property
+    def quantity(self) -> str:
+        """What each step gives: "displacement" or "traction"."""
+        return "displacement" if self.kind == "support" else "traction"
 
     def echo(self) -> dict:
-        return {"support": self.support, "steps": [list(s) for s in self.steps]}
+        return {self.kind: self.group, "steps": [list(s) for s in self.steps]}
 
 
 @dataclass(frozen=True, slots=True)
@@ -196,7 +204,9 @@ class PairCase:
         order = np.argsort(n_cells)
         cell_tags = dmesh.meshtags(msh, tdim, n_cells[order].astype(np.int32), values[order])
         fdim = tdim - 1
-        moved = {self.load.support: self.load.steps[-1 if step is None else step]} if self.load else {}
+        stepped = self.load.steps[-1 if step is None else step] if self.load else None
+        moved = {self.load.group: stepped} if self.load and self.load.kind == "support" else {}
+        loaded = {self.load.group: stepped} if self.load and self.load.kind == "traction" else {}
         supports, tractions = [], {}
         for body in self.bodies:
             for s in body.supports:
@@ -206,7 +216,8 @@ class PairCase:
                     u_D = moved[s.facets]
                 supports.append(Support(tag, u_D, s.components))
             for name, spec in body.tractions:
-                tractions[self._group(groups, name, fdim, f"bodies.{body.name}.tractions")] = _vector_law(spec)
+                law = loaded.get(name, _vector_law(spec))
+                tractions[self._group(groups, name, fdim, f"bodies.{body.name}.tractions")] = law
         pair = ContactPair(
             self._group(groups, self.pair.slave, fdim, "pair.slave"),
             self._group(groups, self.pair.master, fdim, "pair.master"),
@@ -445,22 +456,35 @@ def _load(source: Source, data, bodies: Sequence[BodySpec]) -> LoadSteps | None:
     if data is None:
         return None
     t = Table(source, "load", data)
-    support = t.get("support", read_string(), required=True)
+    support = t.get("support", read_string())
+    traction = t.get("traction", read_string())
     steps = t.raw("steps")
     t.finish(" for a two-body case (body forces are given per body)")
+    if (support is None) == (traction is None):
+        raise source.error(
+            "[load] steps one boundary: give exactly one of load.support (a support's displacement) and "
+            "load.traction (a traction's value)"
+        )
     if not isinstance(steps, list) or not steps:
-        raise source.error("load.steps must be a non-empty list of displacements [[ux, uy], ...]")
+        raise source.error("load.steps must be a non-empty list of vectors [[x, y], ...] (one per step)")
     try:
         values = tuple(read_vector(v) for v in steps)
     except Bad as bad:
         raise source.error(f"load.steps: each step {bad}") from None
-    named = [s for b in bodies for s in b.supports if s.facets == support]
-    if not named:
+    if support is not None:
+        known = sorted(s.facets for b in bodies for s in b.supports)
+        if support not in known:
+            raise source.error(
+                f"load.support = {support!r} is not the facet group of a support (the supports: {known})"
+            )
+        return LoadSteps(support, values, "support")
+    known = sorted(name for b in bodies for name, _ in b.tractions)
+    if traction not in known:
         raise source.error(
-            f"load.support = {support!r} is not the facet group of a support (the supports: "
-            f"{sorted(s.facets for b in bodies for s in b.supports)})"
+            f"load.traction = {traction!r} is not a group of a body's tractions (the tractions: {known}); give the "
+            "group a traction in [bodies.<name>] tractions (its value is replaced step by step)"
         )
-    return LoadSteps(support, values)
+    return LoadSteps(traction, values, "traction")
 
 
 def read_pair_case(source: Source, data: dict, overrides: Sequence[tuple[str, Any]] = ()) -> PairCase:

@@ -97,7 +97,7 @@ def test_check_mesh_reports_the_bodies_and_the_pair(capsys):
     assert "body lower: 468 cells, E in [8000, 20000]" in text
     assert "body upper: 210 cells" in text
     assert "pair: slave upper_bottom (22 facets, body upper), master lower_top (40 facets)" in text
-    assert "moved in 4 load steps" in text
+    assert "stepped in 4 load steps" in text
 
 
 BAD = [
@@ -110,6 +110,8 @@ BAD = [
     (["--set", "bodies.upper.E={upper_shale=1.0}"], "gives no value for the body's cell group 'upper_sandstone'"),
     (["--set", "run.tol=1e-9"], "tol belongs in [primal]"),
     (["--set", "primal.tol=1e-9"], "options of Algorithm 1 (--method primal)"),
+    (["--set", 'load.traction="upper_top"'], "give exactly one of load.support"),
+    (["--set", 'load={traction="upper_top", steps=[[0.0, 1.0]]}'], "load.traction = 'upper_top' is not a group"),
     (["--set", "bodies.lower.supports=[]"], "has no Support"),
 ]
 
@@ -123,20 +125,23 @@ def test_bad_input_is_refused(tmp_path, capsys, args, message):
 
 
 def test_a_body_held_by_contact_alone_carries_its_traction(tmp_path):
-    """The upper block on rollers at its sides (x held, y free) under a traction t on its top: the contact
-    alone holds it up, so the contact force on it is −t times the top's width (30 mm), whatever δ."""
+    """The upper block on rollers at its sides (x held, y free) under a traction t on its top, stepped: the
+    contact alone holds it up, so the contact force on it is −t times the top's width (30 mm) at every step,
+    whatever δ."""
     text = CASE.read_text().replace('file = "two_blocks.msh"', f'file = "{CASE.parent / "two_blocks.msh"}"')
     text = text.replace(
         'supports = [{facets = "upper_top", displacement = [0.0, -0.02]}]',
         'supports = [{facets = "upper_left", components = [0]}, {facets = "upper_right", components = [0]}]\n'
         "tractions = {upper_top = [0.0, -5.0]}",
     )
-    text = text[: text.index("[load]")]
+    text = text[: text.index("[load]")] + '[load]\ntraction = "upper_top"\nsteps = [[0.0, -2.5], [0.0, -5.0]]\n'
     (tmp_path / "pushed.toml").write_text(text)
     out = tmp_path / "out"
     assert main(["run", "--case", str(tmp_path / "pushed.toml"), "--no-plots", "--out", str(out)]) == 0
     summary = _summary(out)
-    assert summary["load_steps"] is None
+    steps = summary["load_steps"]["steps"]
+    assert summary["load_steps"]["traction"] == "upper_top" and [s["traction"] for s in steps] == [[0, -2.5], [0, -5]]
+    assert steps[0]["force_slave"][1] == pytest.approx(2.5 * 30.0, rel=1e-10)
     assert summary["force_slave"][1] == pytest.approx(5.0 * 30.0, rel=1e-10)
     assert summary["force_master"][1] == pytest.approx(-5.0 * 30.0, rel=1e-10)
     assert summary["case"]["bodies"]["upper"]["tractions"] == {"upper_top": [0.0, -5.0]}

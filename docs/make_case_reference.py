@@ -20,6 +20,7 @@ from pathlib import Path
 
 from fenics_contact import cli
 from fenics_contact.errors import InputError
+from fenics_contact.hybrid.two_body import TwoBodyHybridOptions
 from fenics_contact.problem import case as case_module
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -300,8 +301,138 @@ def run_tables() -> str:
     return "\n\n".join(blocks)
 
 
+#: the tables of a two-body case (one with ``[pair]``), each probed by an unknown key set with ``--set``:
+#: (table as written in the case, the key the probe sets, what the table is)
+PAIR_TABLES = [
+    ("mesh", "mesh.zz", "the mesh file of both bodies (required)"),
+    ("bodies.<name>", "bodies.lower.zz", "one body (two such tables, any names)"),
+    ("supports entry", "bodies.lower.supports", "one entry of a body's `supports` list"),
+    ("pair", "pair.zz", "the contact surfaces (required: it makes the case a two-body one)"),
+    ("load", "load.zz", "load steps: the displacement of one support, or one traction, step by step"),
+    ("run", "run.zz", "the run (both methods)"),
+    ("primal", "primal.zz", 'Algorithm 1\'s options (`method = "primal"` only)'),
+]
+#: (table, key) -> (type, default, meaning) of the two-body case keys
+PAIR_KEYS = {
+    ("mesh", "file"): (
+        "file name",
+        "required",
+        "a gmsh `.msh` file of planar triangles holding both bodies, meshed apart (no shared node); every "
+        "triangle in a surface group",
+    ),
+    ("bodies.<name>", "cells"): ("group name or list", "required", "the body's surface groups (e.g. its layers)"),
+    ("bodies.<name>", "E"): (
+        "number, `{group = value}`, `{python = ...}`",
+        "required",
+        "Young's modulus: one value, a value per cell group of the body, or a callable",
+    ),
+    ("bodies.<name>", "nu"): ("number in (−1, ½), by group, python", "required", "Poisson's ratio, the same forms"),
+    ("bodies.<name>", "body-force"): ("vector `[fx, fy]` or python", "[0, 0]", "the body force"),
+    ("bodies.<name>", "supports"): (
+        "list of tables",
+        "[]",
+        "Dirichlet boundaries (each body needs one: frictionless contact does not hold it tangentially)",
+    ),
+    ("bodies.<name>", "tractions"): ("table `{group = [tx, ty]}`", "{}", "tractions σn = t on facet groups"),
+    ("supports entry", "facets"): ("group name", "required", "the facet group held"),
+    ("supports entry", "displacement"): ("vector or python", "[0, 0]", "the prescribed displacement u_D"),
+    ("supports entry", "components"): (
+        "list of 0, 1",
+        "[0, 1]",
+        "the components held (`[0]`: a roller holding x only)",
+    ),
+    ("pair", "slave"): ("group name", "required", "the slave surface Γ_C: the contact integral lives on it"),
+    ("pair", "master"): ("group name", "required", "the master surface, onto which the slave points are projected"),
+    ("pair", "quadrature-degree"): ("integer in [1, 10]", "3", "the Gauss rule on each slave segment"),
+    ("pair", "rule"): (
+        "`segments` or `vertices`",
+        '"segments"',
+        "segment-to-segment mortar gaps, or one-pass node-to-segment (fails the patch test: for comparison)",
+    ),
+    ("load", "support"): (
+        "group name",
+        "—",
+        "the facet group of the support whose displacement steps (one of `support` and `traction`)",
+    ),
+    ("load", "traction"): (
+        "group name",
+        "—",
+        "a group of a body's `tractions` whose value steps (one of `support` and `traction`)",
+    ),
+    ("load", "steps"): (
+        "list of vectors",
+        "required",
+        "its displacement (or traction) at each step; the last is the run's; each step starts from the last's solution "
+        "(`primal-monolithic` on one process)",
+    ),
+    ("run", "method"): (
+        "string",
+        '"primal-monolithic"',
+        "`primal-monolithic` or `primal` (Algorithm 1, a strip per side)",
+    ),
+    ("run", "out"): ("directory name", "`results/<case>-<method>`", "the output directory"),
+    ("run", "plots"): ("boolean", "true", "write the PNG figures"),
+    ("run", "delta"): (
+        "number > 0",
+        "10⁻³ h/E_c",
+        "the contact penalty δ (h the median facet size of the surfaces, E_c the largest E at them)",
+    ),
+    ("primal", "tol"): ("number", None, "the transmission residual to reach"),
+    ("primal", "max-iterations"): ("integer", None, "the most evaluations of the transmission map"),
+    ("primal", "accel"): ("string", None, "the interface update: `newton`, `anderson` or `none`"),
+    ("primal", "layers"): ("integer", None, "cell layers of each strip from its contact surface"),
+    ("primal", "alpha-scale"): ("number > 0", None, "α_p = alpha-scale · E_p / √h_γ"),
+}
+
+
+def _pair_keys(probe: str) -> list[str]:
+    """The keys the package accepts in a two-body table, from its refusal of ``probe`` = 1 (or ``[{zz = 1}]``)."""
+    from fenics_contact.cli.pair import pair_run_options
+
+    case_file = ROOT / "cases" / "two_blocks.toml"
+    value = [{"facets": "lower_bottom", "zz": 1}] if probe.endswith("supports") else 1
+    try:
+        pair_run_options(case_module.load_case(case_file, [(probe, value)]))
+    except InputError as error:
+        found = re.search(r"the keys of \[[^\]]*\]* are \[(.*?)\]", str(error))
+        if found:
+            return re.findall(r"'([\w-]+)'", found.group(1))
+        raise
+    raise RuntimeError(f"the package accepted the unknown key {probe}")
+
+
+def pair_tables() -> str:
+    seen, blocks = set(), []
+    for table, probe, what in PAIR_TABLES:
+        rows = []
+        for key in _pair_keys(probe):
+            if (table, key) not in PAIR_KEYS:
+                raise KeyError(f"[{table}] of a two-body case accepts {key!r}, which PAIR_KEYS does not describe")
+            seen.add((table, key))
+            kind, default, meaning = PAIR_KEYS[table, key]
+            if default is None:  # Algorithm 1's options: the defaults of its options dataclass
+                default = _default(TwoBodyHybridOptions, key)
+            rows.append(_row(key, kind, default, meaning))
+        title = f"`[{table}]`" if table != "supports entry" else "an entry of `supports`"
+        blocks.append(
+            f"### {title}: {what}\n\n| key | type | default | meaning |\n|---|---|---|---|\n" + "\n".join(rows)
+        )
+    unused = sorted(set(PAIR_KEYS) - seen)
+    if unused:
+        raise KeyError(f"PAIR_KEYS describes keys the package does not accept: {unused}")
+    return "\n\n".join(blocks)
+
+
 def markdown() -> str:
-    return "## The problem tables\n\n" + problem_tables() + "\n\n## The run tables\n\n" + run_tables() + "\n"
+    return (
+        "## The problem tables\n\n"
+        + problem_tables()
+        + "\n\n## The run tables\n\n"
+        + run_tables()
+        + "\n\n## Two-body cases\n\n"
+        + pair_tables()
+        + "\n"
+    )
 
 
 if __name__ == "__main__":

@@ -4,7 +4,8 @@
 would, without a solve (``cli.check``); ``fenics-contact examples DIR`` copies the example files.
 The modules: ``options`` (RunOptions), ``parser`` (argparse), ``cases`` (case files),
 ``solve`` (one run: the solve and load steps), ``outputs`` (summary entries, grids), ``check``
-(check-mesh), ``signals`` (SIGINT/SIGTERM, exit codes), ``command`` (``main``).
+(check-mesh), ``signals`` (SIGINT/SIGTERM, exit codes), ``command`` (``main``); ``pair`` and
+``pair_outputs``: the run and the outputs of a case of two deformable bodies (a case with ``[pair]``).
 
 A run goes: parse → one validated ``RunOptions`` (every option and file checked before
 any mesh is built) → inputs (E map) → output staging directory → mesh (a user mesh is

@@ -7,9 +7,11 @@ from dataclasses import fields
 from pathlib import Path
 
 from fenics_contact.cli.options import _METHOD_OPTIONS, TABLE_METHODS, RunOptions
+from fenics_contact.cli.pair import pair_run_options
 from fenics_contact.cli.parser import NOT_GIVEN, build_parser
 from fenics_contact.errors import InputError
 from fenics_contact.problem.case import Case, load_case, parse_override
+from fenics_contact.problem.pair_case import PairCase
 
 __all__ = ["case_run_options", "options_from_arguments"]
 
@@ -34,6 +36,8 @@ def options_from_arguments(args: argparse.Namespace, argv: list[str] | None = No
         return RunOptions.from_namespace(args), None
     given = {k: v for k, v in vars(build_parser(given_only=True).parse_args(argv)).items() if v is not NOT_GIVEN}
     case = load_case(args.case, _case_overrides(given))
+    if isinstance(case, PairCase):  # two deformable bodies: their own few run options (cli.pair)
+        return pair_run_options(case, given), case
     _check_model_flags(case, given)
     return case_run_options(case, given), case
 

@@ -21,6 +21,7 @@ from mpi4py import MPI
 
 from fenics_contact.cli.cases import case_run_options
 from fenics_contact.cli.options import METHODS, RunOptions
+from fenics_contact.cli.pair import PAIR_METHODS, pair_run_options
 from fenics_contact.cli.signals import stdout_lost
 from fenics_contact.cli.solve import _check_case_coarse_grid, _check_coarse_grid, _mesh, _model
 from fenics_contact.errors import FenicsContactError, InputError
@@ -29,6 +30,7 @@ from fenics_contact.problem.case import Case, MeshFile, load_case, parse_overrid
 from fenics_contact.problem.friction import require_frictionless
 from fenics_contact.problem.geometry import ContactMesh, gmsh_session
 from fenics_contact.problem.models3d import MODEL_3D
+from fenics_contact.problem.pair_case import PairCase
 from fenics_contact.problem.strip import contact_cell_size
 from fenics_contact.problem.tags import PHYSICAL_NAMES, Boundary, Subdomain, is_neumann_name
 from fenics_contact.problem.validation import contact_open_ends, interface_bends_of, require_method_dimension
@@ -57,6 +59,10 @@ def check_mesh(args: argparse.Namespace, comm: MPI.Comm = MPI.COMM_WORLD) -> int
         raise InputError("--set changes a key of a case file: it needs --case FILE")
     if args.case is not None and (args.H is not None or args.coarse_groups):
         raise InputError("--H and --coarse-groups apply to a mesh FILE; a case file gives them in its [mesh] table")
+    if args.case is not None:
+        found = load_case(args.case, [parse_override(text) for text in args.set or ()])
+        if isinstance(found, PairCase):
+            return _check_pair(found, args, comm)
     case, options = _options(args)
     path = options.mesh if case is None else case.mesh.path if isinstance(case.mesh, MeshFile) else None
     say = _printer(comm)
@@ -183,6 +189,61 @@ def _describe(cm: ContactMesh, say, groups) -> None:
             f"  Gamma_C ends where the boundary goes on straight at {len(ends)} points (first at "
             f"({ends[0][0]:.6g}, {ends[0][1]:.6g})): a contact zone reaching them is cut short by the tags"
         )
+
+
+def _check_pair(case: PairCase, args: argparse.Namespace, comm: MPI.Comm) -> int:
+    """check-mesh of a two-body case: the file's groups and their roles, the bodies and the pair as the run
+    builds them (``PairCase.problem``: every group, support and the pair validated), the methods."""
+    options = pair_run_options(case, {"method": args.method} if args.method is not None else {})
+    say = _printer(comm)
+    say(f"case {case.path} (mesh {case.mesh_file}): two deformable bodies")
+    roles = {}
+    for body in case.bodies:
+        roles |= {name: f"cells of the body {body.name}" for name in body.cells}
+        for s in body.supports:
+            what = "u = 0" if s.displacement is None else f"u = {s.displacement.echo()}"
+            comps = "" if s.components is None else f" on components {list(s.components)}"
+            roles[s.facets] = f"a support of the body {body.name} ({what}{comps})"
+        roles |= {name: f"a traction on the body {body.name}" for name, _ in body.tractions}
+    if case.load is not None:
+        roles[case.load.group] += f", stepped in {len(case.load.steps)} load steps"
+    roles[case.pair.slave] = "the slave contact surface (the contact integral lives on it)"
+    roles[case.pair.master] = "the master contact surface (the slave points are projected onto it)"
+    groups = _file_groups(case.mesh_file, comm) or []
+    say("  physical groups of the file:")
+    for name, dim, count in groups:
+        kind, unit = _KINDS.get(dim, (f"dimension {dim}", "elements"))
+        role = roles.get(name, "no role (traction free)" if dim == 1 else "no role")
+        say(f"    {name:<16} {kind:<8} {count:>8} {unit:<10} {role}")
+    built = case.build_mesh(comm)
+    problem = case.problem(built)
+    msh = problem.mesh
+    tdim = msh.topology.dim
+    say(
+        f"  dimension {msh.geometry.dim}, {msh.topology.index_map(tdim).size_global} triangles, "
+        f"{msh.topology.index_map(0).size_global} vertices"
+    )
+    n_cells = msh.topology.index_map(tdim).size_local
+    n_facets = msh.topology.index_map(tdim - 1).size_local
+    for k, body in enumerate(case.bodies):
+        cells = problem.body_cells(k)
+        E = problem.fields.E.x.array[cells[cells < n_cells]]
+        lo = comm.allreduce(float(np.min(E, initial=np.inf)), op=MPI.MIN)
+        hi = comm.allreduce(float(np.max(E, initial=-np.inf)), op=MPI.MAX)
+        say(f"  body {body.name}: {_owned(cells, n_cells, comm)} cells, E in [{lo:.6g}, {hi:.6g}]")
+    slave_body = case.bodies[problem._slave_body].name
+    say(
+        f"  pair: slave {case.pair.slave} ({_owned(problem.facet_tags.find(problem.pair.slave), n_facets, comm)} "
+        f"facets, body {slave_body}), master {case.pair.master} "
+        f"({_owned(problem.facet_tags.find(problem.pair.master), n_facets, comm)} facets), "
+        f"{case.pair.rule} rule of degree {case.pair.quadrature_degree}"
+    )
+    serial = comm.size == 1
+    say("  methods: " + "; ".join(f"{m} {'can run' if serial or m != 'primal' else 'refused'}" for m in PAIR_METHODS))
+    if not serial and options.method == "primal":
+        raise InputError("two-body contact with Algorithm 1 (--method primal) runs on one process")
+    say(f"ok: a run with --method {options.method} can start ({case.description_or_name})")
+    return 0
 
 
 def _owned(found: np.ndarray, n_owned: int, comm: MPI.Comm) -> int:

@@ -203,6 +203,11 @@ class RunOptions:
     case: Path | None = None  #: the case file the problem came from (``--case``; see ``problem.case``)
 
     def __post_init__(self) -> None:
+        if self.method == "primal-monolithic":
+            raise InputError(
+                "--method primal-monolithic runs two-body case files only (a case with [pair]); for one body "
+                f"choose one of {METHODS}"
+            )
         if self.method not in METHODS:
             raise InputError(f"unknown --method {self.method!r}; choose one of {METHODS}")
         get_model(self.model)  # InputError for an unknown model

@@ -146,10 +146,11 @@ def _add_method_options(run: argparse.ArgumentParser) -> None:
     group = run.add_argument_group("method", "the discretization, its penalty and transmission coefficient")
     group.add_argument(
         "--method",
-        choices=METHODS,
+        choices=(*METHODS, "primal-monolithic"),
         default=_RUN_DEFAULTS["method"],
         help="discretization / algorithm: "
         + "; ".join(f"{m} ({CATALOGUE[m].summary})" for m in METHODS)
+        + "; primal-monolithic (two-body case files only: the penalized Newton on both bodies)"
         + _default(_RUN_DEFAULTS["method"]),
     )
     group.add_argument(

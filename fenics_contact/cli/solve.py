@@ -25,6 +25,7 @@ from fenics_contact.cli.outputs import (
     check_run_memory,
     output_bytes,
 )
+from fenics_contact.cli.pair import run_pair
 from fenics_contact.cli.signals import EXIT_NOT_CONVERGED, Interrupted, _fail
 from fenics_contact.errors import InputError
 from fenics_contact.fem.mixed import solve_mixed_monolithic
@@ -47,6 +48,7 @@ from fenics_contact.problem.cell_groups import bounding_box
 from fenics_contact.problem.geometry import ContactMesh, gmsh_session, read_mesh, unit_square
 from fenics_contact.problem.models import get_model, pixel_field
 from fenics_contact.problem.models3d import MODEL_3D, channels_3d_mesh
+from fenics_contact.problem.pair_case import PairCase
 from fenics_contact.problem.problem import ContactProblem
 from fenics_contact.problem.tags import Subdomain
 from fenics_contact.problem.validation import contact_open_ends
@@ -399,6 +401,8 @@ def run(options: RunOptions, comm: MPI.Comm = MPI.COMM_WORLD, *, case: Case | No
     the options. An ``Interrupted`` raised meanwhile carries ``output_complete``: whether ``--out``
     already holds the run.
     """
+    if isinstance(case, PairCase):  # two deformable bodies (cli.pair)
+        return run_pair(options, comm, case)
     model, pixels = _model(options) if case is None else (None, None)
     if case is None and options.mesh is None:
         check_run_memory(options)  # (before the unit square is made)

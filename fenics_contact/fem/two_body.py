@@ -10,7 +10,8 @@ on that energy (at every step by default: ``solve_two_body``).
 
 The coupling entries Bᵀ W B join DOF blocks of the two bodies that share no cell, outside the pattern of the
 finite-element matrix: the system is assembled in SciPy and factorized by ``fem.linalg.SparseFactor``
-(sequential MUMPS).  Two-body contact runs on one process: under MPI the solve refuses (InputError).
+(sequential MUMPS).  Under MPI ``solve_two_body`` hands over to ``fem.two_body_mpi`` (the contact surfaces gathered
+to every rank, the bulk solved in parallel; the same solution).
 """
 
 import logging
@@ -31,6 +32,7 @@ from fenics_contact.fem.linalg import SparseFactor, assemble_scipy
 from fenics_contact.fem.mortar import ContactQuadrature, Surface, contact_quadrature, surface
 from fenics_contact.fem.newton import Advance, Check, Direction, StepState, semismooth_newton_loop
 from fenics_contact.fem.primal import default_penalty
+from fenics_contact.fem.two_body_mpi import solve_two_body_distributed
 from fenics_contact.problem.materials import strain, stress
 from fenics_contact.problem.pair import TwoBodyProblem
 
@@ -307,8 +309,13 @@ def solve_two_body(
     delta: float | None = None,
     newton: NewtonOptions = NewtonOptions(),
     line_search: str = "always",
+    initial: np.ndarray | None = None,
 ) -> TwoBodySolution:
-    """Penalized frictionless contact of the two bodies of ``problem`` by semismooth Newton (serial).
+    """Penalized frictionless contact of the two bodies of ``problem`` by semismooth Newton (under MPI:
+    ``fem.two_body_mpi.solve_two_body_distributed``).
+
+    ``initial``: the displacement DOF vector to start from (a warm start, e.g. the previous load step's
+    ``u.x.array``); its supported DOFs take the problem's values.  Serial only.
 
     ``delta`` defaults to ``two_body_penalty``; ``line_search`` as in ``fem.newton`` (exact, on the energy):
     ``"always"`` by default, as a full first step from no contact drives the bodies through each other and the
@@ -318,11 +325,10 @@ def solve_two_body(
     """
     if not isinstance(problem, TwoBodyProblem):
         raise InputError(f"solve_two_body takes a TwoBodyProblem, got {type(problem).__name__}")
-    if problem.comm.size > 1:
-        raise InputError(
-            "two-body contact runs on one process: the contact coupling joins DOFs of the two bodies that a "
-            "distributed mesh spreads over ranks (the contact surfaces are not gathered); run it without mpiexec"
-        )
+    if problem.comm.size > 1:  # the contact surfaces gathered, the bulk solved in parallel
+        if initial is not None:
+            raise InputError("solve_two_body: a warm start (initial) is serial only")
+        return solve_two_body_distributed(problem, delta=delta, newton=newton, line_search=line_search)
     start = time.perf_counter()
     msh = problem.mesh
     gdim = msh.geometry.dim
@@ -337,6 +343,11 @@ def solve_two_body(
     delta = two_body_penalty(problem, slave, master, delta)
     Q = contact_quadrature(slave, master, n, bs, problem.pair.quadrature_degree, rule=problem.pair.rule)
     system = TwoBodySystem(K, b, fixed, values, Q, delta)
+    if initial is not None:
+        start_u = np.asarray(initial, dtype=np.float64).ravel()
+        if start_u.size < n or not np.all(np.isfinite(start_u[:n])):
+            raise InputError(f"solve_two_body: initial must hold {n} finite displacement DOFs, got {start_u.size}")
+        system.u[system.free] = start_u[:n][system.free]
     try:
         trace = semismooth_newton_loop(
             system,

@@ -101,6 +101,7 @@ from fenics_contact.problem.geometry import SIDES, ContactMesh, read_mesh, unit_
 from fenics_contact.problem.meshes import bulged_square, hertz_block
 from fenics_contact.problem.models import get_model, pixel_field
 from fenics_contact.problem.obstacles import Circle, Obstacle, Plane
+from fenics_contact.problem.pair_case import PairCase, read_pair_case
 from fenics_contact.problem.problem import ContactProblem, Frictionless, constant_field, zero_load
 from fenics_contact.problem.tags import is_neumann_name
 
@@ -725,8 +726,9 @@ def _apply(data: dict, key: str, value, source: Source) -> None:
     table[parts[-1]] = value
 
 
-def load_case(path: str | Path, overrides: Sequence[tuple[str, Any]] = ()) -> Case:
-    """Read and validate a case file; ``overrides`` ((dotted key, value), ...) replace keys first."""
+def load_case(path: str | Path, overrides: Sequence[tuple[str, Any]] = ()) -> "Case | PairCase":
+    """Read and validate a case file; ``overrides`` ((dotted key, value), ...) replace keys first.  A case with a
+    ``[pair]`` table is one of two deformable bodies: a ``problem.pair_case.PairCase``."""
     path = Path(path).resolve()
     source = Source(path)
     if not path.is_file():
@@ -740,6 +742,8 @@ def load_case(path: str | Path, overrides: Sequence[tuple[str, Any]] = ()) -> Ca
         raise InputError(f"cannot read the case file {path}: {err}") from None
     for key, value in overrides:
         _apply(data, key, value, source)
+    if "pair" in data:  # two deformable bodies (problem.pair_case)
+        return read_pair_case(source, data, tuple(overrides))
     unknown = sorted(set(data) - {"description", *_PROBLEM_TABLES, *RUN_TABLES})
     if unknown:
         raise source.error(

@@ -1,0 +1,241 @@
+"""Two-body case files on the command line: ``fenics-contact run --case TWO_BODIES.toml`` (a case with ``[pair]``).
+
+The run options of a two-body case are few (``PairRunOptions``): the method (``primal-monolithic``, the
+penalized Newton on the whole mesh, or ``primal``, Algorithm 1 with a strip on each side), the penalty δ,
+Algorithm 1's stopping rule and strips, the output directory and the figures; the flags ``--method``,
+``--out``, ``--no-plots``, ``--delta``, ``--tol``, ``--max-iterations``, ``--accel`` override the case's
+``[run]`` and ``[primal]`` tables, any other flag is refused.  A run solves each load step (warm-started from
+the last with ``primal-monolithic`` on one process) and writes ``cli.pair_outputs``' files; under ``mpiexec``
+``primal-monolithic`` runs in parallel (``fem.two_body_mpi``), ``primal`` is refused.
+"""
+
+import logging
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from mpi4py import MPI
+
+from fenics_contact.cli.pair_outputs import PairWriter, step_row
+from fenics_contact.cli.signals import EXIT_NOT_CONVERGED, _fail
+from fenics_contact.errors import InputError
+from fenics_contact.fem.contact import NewtonOptions
+from fenics_contact.fem.two_body import solve_two_body
+from fenics_contact.hybrid.iteration import ACCELERATIONS
+from fenics_contact.hybrid.two_body import TwoBodyHybridOptions, solve_two_body_hybrid
+from fenics_contact.io import OutputDirectory, provenance, write_summary
+from fenics_contact.problem.pair_case import PairCase
+
+__all__ = ["PAIR_METHODS", "RUN_KEYS", "PairRunOptions", "pair_run_options", "run_pair"]
+
+log = logging.getLogger("fenics_contact")
+
+#: the methods that solve two deformable bodies
+PAIR_METHODS = ("primal-monolithic", "primal")
+#: the keys of a two-body case's run tables (``[primal]`` is read by Algorithm 1 only)
+RUN_KEYS = {
+    "run": ("method", "out", "plots", "delta"),
+    "primal": ("tol", "max-iterations", "accel", "layers", "alpha-scale"),
+}
+#: the flags a two-body case takes (argparse dest -> its key)
+_FLAGS = {
+    "method": "method",
+    "out": "out",
+    "no_plots": "plots",
+    "delta": "delta",
+    "tol": "tol",
+    "max_iterations": "max-iterations",
+    "accel": "accel",
+}
+_FRAME = {"command", "case", "set", "verbose"}  #: parser entries that are not run options
+
+
+@dataclass(frozen=True, slots=True)
+class PairRunOptions:
+    """The run of a two-body case: ``method``, penalty ``delta`` (None: ``fem.two_body.two_body_penalty``),
+    Algorithm 1's ``hybrid`` options, the output directory and whether to draw the figures."""
+
+    case: Path
+    method: str = "primal-monolithic"
+    delta: float | None = None
+    hybrid: TwoBodyHybridOptions = TwoBodyHybridOptions()
+    out: Path | None = None
+    plots: bool = True
+
+    def __post_init__(self) -> None:
+        if self.method not in PAIR_METHODS:
+            raise InputError(
+                f"--method {self.method} cannot solve two deformable bodies (a case with [pair]): the mixed methods "
+                "need an Arnold–Winther contact pair and the multiscale ones a coarse grid in each body; choose one "
+                f"of {PAIR_METHODS}"
+            )
+        if self.delta is not None and not (np.isfinite(self.delta) and self.delta > 0):
+            raise InputError(f"--delta must be a finite number > 0, got {self.delta!r}")
+        out = Path("results") / f"{Path(self.case).stem}-{self.method}" if self.out is None else Path(self.out)
+        object.__setattr__(self, "out", out)
+
+    def echo(self) -> dict:
+        out = {"method": self.method, "delta": self.delta, "out": str(self.out), "plots": self.plots}
+        if self.method == "primal":
+            h = self.hybrid
+            out |= {
+                "tol": h.tol,
+                "max-iterations": h.max_iterations,
+                "accel": h.accel,
+                "layers": h.layers,
+                "alpha-scale": h.alpha_scale,
+            }
+        return out
+
+
+def _typed(case: PairCase, key: str, value, kind: type):
+    ok = (
+        isinstance(value, bool)
+        if kind is bool
+        else isinstance(value, str)
+        if kind in (str, Path)
+        else not isinstance(value, bool) and isinstance(value, int if kind is int else (int, float))
+    )
+    if not ok:
+        what = {bool: "true or false", str: "a string", Path: "a directory name", int: "an integer"}.get(
+            kind, "a number"
+        )
+        raise InputError(f"case {case.path}: {key} must be {what}, got {value!r}")
+    return Path(value) if kind is Path else float(value) if kind is float else value
+
+
+_KINDS = {
+    "method": str,
+    "out": Path,
+    "plots": bool,
+    "delta": float,
+    "tol": float,
+    "max-iterations": int,
+    "accel": str,
+    "layers": int,
+    "alpha-scale": float,
+}
+
+
+def pair_run_options(case: PairCase, given: Mapping[str, object] = {}) -> PairRunOptions:
+    """The run options from the case's ``[run]`` and ``[primal]`` tables, then the flags ``given`` (dest -> value)."""
+    values = {}
+    for table, keys in RUN_KEYS.items():
+        for key, value in case.run[table].items():
+            if key not in keys:
+                home = next((t for t, k in RUN_KEYS.items() if key in k), None)
+                hint = f" ({key} belongs in [{home}])" if home else ""
+                raise InputError(
+                    f"case {case.path}: unknown key '{table}.{key}' in a two-body case{hint}; the keys of [{table}] "
+                    f"are {list(keys)}"
+                )
+            values[key] = _typed(case, f"{table}.{key}", value, _KINDS[key])
+    refused = sorted(f"--{d.replace('_', '-')}" for d in given if d not in _FLAGS and d not in _FRAME)
+    if refused:
+        raise InputError(
+            f"{refused[0]} does not apply to a two-body case; its flags are "
+            + ", ".join(f"--{d.replace('_', '-')}" for d in _FLAGS)
+        )
+    for dest, key in _FLAGS.items():
+        if dest in given:
+            values[key] = (not given[dest]) if dest == "no_plots" else given[dest]
+    method = values.get("method", "primal-monolithic")
+    hybrid = {k: values[k] for k in RUN_KEYS["primal"] if k in values}
+    if hybrid and method != "primal":
+        raise InputError(
+            f"{', '.join(sorted(hybrid))}: options of Algorithm 1 (--method primal), not of --method {method} "
+            "(in a case file they belong in [primal], read only by primal)"
+        )
+    if hybrid.get("accel") is not None and hybrid["accel"] not in ACCELERATIONS:
+        raise InputError(f"--accel must be one of {list(ACCELERATIONS)}, got {hybrid['accel']!r}")
+    options = TwoBodyHybridOptions(**{k.replace("-", "_"): v for k, v in hybrid.items()})
+    return PairRunOptions(
+        case.path,
+        method,
+        values.get("delta"),
+        options,
+        values.get("out"),
+        values.get("plots", True),
+    )
+
+
+def _solve(options: PairRunOptions, problem, initial: np.ndarray | None):
+    """One solve of the run's method; ``initial`` warm-starts the monolithic Newton."""
+    if options.method == "primal-monolithic":
+        return solve_two_body(problem, delta=options.delta, newton=NewtonOptions(), initial=initial)
+    return solve_two_body_hybrid(problem, delta=options.delta, options=options.hybrid)
+
+
+def _converged(result) -> bool:
+    return bool(getattr(result, "converged", True))
+
+
+def run_pair(options: PairRunOptions, comm: MPI.Comm, case: PairCase) -> int:
+    """Solve the case (each load step), write into ``options.out``; 0 converged, 3 not converged."""
+    if comm.size > 1 and options.method != "primal-monolithic":
+        raise InputError(
+            "two-body contact with Algorithm 1 (--method primal) runs on one process: run it without mpiexec, or "
+            "run --method primal-monolithic under mpiexec"
+        )
+    output = OutputDirectory(options.out, comm)
+    with output:
+        t0 = time.perf_counter()
+        built = case.build_mesh(comm)
+        steps = case.load.steps if case.load else (None,)
+        t_mesh = time.perf_counter() - t0
+        log.info("case %s (%s), method %s", case.path.name, case.description_or_name, options.method)
+        writer = PairWriter(output.path, comm, options.plots, f"case {case.path.name}, {options.method}")
+        rows, result, u = [], None, None
+        quantity = case.load.quantity if case.load else None
+        for k, displacement in enumerate(steps):
+            problem = case.problem(built, step=None if displacement is None else k)
+            result = _solve(options, problem, u)
+            u = result.u.x.array.copy() if comm.size == 1 else None  # (a warm start is serial)
+            row = step_row(result, options.method)
+            if displacement is not None:
+                row = {"step": k + 1, quantity: list(displacement)} | row
+                log.info(
+                    "step %d, %s %s: contact force %.6g on the slave side, balance %.2e",
+                    k + 1,
+                    quantity,
+                    list(displacement),
+                    result.slave.force,
+                    result.force_balance(),
+                )
+            rows.append(row)
+            writer.add_step(k + 1 if displacement is not None else 0.0, problem, result)
+        converged = all(r["converged"] for r in rows)
+        summary = {
+            "method": options.method,
+            "mesh": str(case.mesh_file),
+            "converged": converged,
+            **rows[-1],
+            "time_mesh_s": t_mesh,
+            "mpi_ranks": comm.size,
+            "provenance": provenance(),
+            "load_steps": {case.load.kind: case.load.group, "steps": rows} if case.load else None,
+            "case": case.to_dict() | {"run": options.echo()},
+        }
+        summary.pop("step", None)
+        summary.pop(quantity, None)
+        writer.finish(problem, result, summary)
+        write_summary(output.path, summary, comm)
+        output.commit()
+    if not converged:
+        bad = [str(r.get("step", "")) for r in rows if not r["converged"]]
+        _fail(
+            f"not converged: Algorithm 1 stopped above --tol {options.hybrid.tol:g} (step(s) {', '.join(bad)}); "
+            f'results in {options.out} with "converged": false',
+            comm,
+        )
+        return EXIT_NOT_CONVERGED
+    log.info(
+        "converged; contact force %.6g (slave), %.6g (master), balance %.2e; summary in %s",
+        result.slave.force,
+        result.master.force,
+        result.force_balance(),
+        options.out / "summary.json",
+    )
+    return 0

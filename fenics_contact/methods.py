@@ -31,8 +31,8 @@ from typing import Any
 from mpi4py import MPI
 
 from fenics_contact.errors import InputError
+from fenics_contact.fem.amg import LinearSolverOptions
 from fenics_contact.fem.contact import NewtonOptions
-from fenics_contact.fem.linalg import LinearSolverOptions
 from fenics_contact.fem.mixed import epsilon_for, solve_mixed_monolithic
 from fenics_contact.fem.mixed_subproblem import MixedSubproblem
 from fenics_contact.fem.primal import PrimalSubproblem, penalty_for, solve_primal_monolithic, warn_if_locking

@@ -15,7 +15,7 @@ import numpy as np
 from mpi4py import MPI
 
 from fenics_contact.errors import InputError
-from fenics_contact.fem.linalg import LINEAR_SOLVERS
+from fenics_contact.fem.amg import LINEAR_SOLVERS
 from fenics_contact.hybrid.iteration import InterfaceNewtonOptions, IterationOptions
 from fenics_contact.hybrid.mixed import transmission_coefficient
 from fenics_contact.io import check_output_target, check_outside_output

@@ -16,7 +16,7 @@ from fenics_contact import __version__
 from fenics_contact.cli.options import DEFAULT_H, DEFAULT_H_3D, METHODS, MODEL_DEFAULTS, RunOptions, method_default
 from fenics_contact.cli.signals import EXIT_CODES
 from fenics_contact.examples import add_examples_parser
-from fenics_contact.fem.linalg import AUTO_AMG_DOFS, LINEAR_SOLVERS
+from fenics_contact.fem.amg import AUTO_AMG_DOFS, LINEAR_SOLVERS
 from fenics_contact.fem.mixed import default_epsilon
 from fenics_contact.fem.primal import default_penalty
 from fenics_contact.hybrid.iteration import ACCELERATIONS, InterfaceNewtonOptions

@@ -15,12 +15,6 @@ the factors of its operator; the factorization and every solve are checked, a fa
   (``symmetric``: Cholesky, or LU where it is not positive definite), new values refactorized on the kept
   symbolic analysis (``refactor``; ``ReusedAnalysis`` keeps one per sparsity pattern), the inertia of an LDLᵀ,
   optionally the factors of an equilibrated D A D (``scaling``).
-* ``AMGSolver``: beside ``DirectSolver``, with its interface (``set_operator``, ``solve``): conjugate gradients
-  (GMRES for a Jacobian that is not symmetric) preconditioned by PETSc's smoothed-aggregation algebraic
-  multigrid (GAMG) with the rigid-body modes as its near-nullspace; every solve checked (the KSP reason, a
-  failure a ConvergenceError saying what to do), its iterations recorded.  ``LinearSolverOptions`` chooses
-  between the two (``"direct"``, ``"amg"``, ``"auto"``: AMG for a 3D operator of ``auto_dofs`` unknowns or
-  more), ``linear_solver`` builds the one chosen.
 * ``PivotedCholesky``: a dense rank-revealing Cholesky of a small symmetric positive semi-definite matrix
   (LAPACK ``dpstrf``).  It stays outside the PETSc core: MUMPS has no pivoting by size that drops the
   numerically dependent columns, and a dense MUMPS factor would round differently.
@@ -34,7 +28,6 @@ PETSc reason, MUMPS' INFOG(1) and INFOG(2)) and what to do.
 """
 
 import logging
-from dataclasses import dataclass
 
 import dolfinx.fem.petsc
 import dolfinx.la
@@ -49,19 +42,14 @@ from fenics_contact.errors import ConvergenceError, InputError
 from fenics_contact.fem import inverse_entries
 
 __all__ = [
-    "AUTO_AMG_DOFS",
-    "LINEAR_SOLVERS",
-    "AMGSolver",
     "AbsoluteTerms",
     "DirectSolver",
-    "LinearSolverOptions",
-    "linear_solver",
-    "rigid_body_modes",
     "PivotedCholesky",
     "ReusedAnalysis",
     "SparseFactor",
     "assemble_scipy",
     "factorization_failure",
+    "PC_FAILED_REASONS",
     "petsc_to_scipy",
     "quadratic_form",
     "scipy_to_petsc",
@@ -76,7 +64,9 @@ SAFE_RANGE = (1e-150, 1e150)
 DIRECT_OPTIONS = {"ksp_type": "preonly", "pc_type": "lu", "pc_factor_mat_solver_type": "mumps"}
 
 #: PETSc's PC failure reasons by number (``PETSc.PC.FailedReason``)
-_PC_REASONS = {v: k for k, v in vars(PETSc.PC.FailedReason).items() if not k.startswith("_") and isinstance(v, int)}
+PC_FAILED_REASONS = {
+    v: k for k, v in vars(PETSc.PC.FailedReason).items() if not k.startswith("_") and isinstance(v, int)
+}
 
 #: MUMPS error codes INFOG(1) (MUMPS users' guide, section "Error diagnostics"): what they mean, what to do
 _MUMPS_ERRORS = {
@@ -102,7 +92,7 @@ def factorization_failure(pc: PETSc.PC, prefix: str | None = None) -> str:
     """Why the factorization of ``pc`` failed and what to do: the PETSc reason by name and, for MUMPS, INFOG(1)
     and INFOG(2) with their meaning.  ``prefix``: the solver's options prefix (named in the advice)."""
     reason = pc.getFailedReason()
-    text = f"PETSc PC failed reason {_PC_REASONS.get(reason, 'UNKNOWN')} ({reason})"
+    text = f"PETSc PC failed reason {PC_FAILED_REASONS.get(reason, 'UNKNOWN')} ({reason})"
     infog1 = infog2 = None
     try:
         if pc.getFactorSolverType() == "mumps":
@@ -258,248 +248,6 @@ class DirectSolver(_Factorization):
             if obj is not None:
                 obj.destroy()
         self.ksp.destroy()
-
-
-#: the linear solvers of a Newton step: MUMPS LU, CG or GMRES + smoothed-aggregation AMG, or chosen by size
-LINEAR_SOLVERS = ("direct", "amg", "auto")
-#: unknowns from which ``"auto"`` takes AMG on a 3D mesh: on the well-shaped cells of ``benchmarks/solvers_3d.py``
-#: the two cross between 14,000 and 27,000 unknowns and AMG is 1.3× (46,263) to 6× (159,030) faster with 2–3.6×
-#: less memory; in 2D the LU's fill grows like n log n only (``"auto"``: direct)
-AUTO_AMG_DOFS = 40_000
-#: the AMG drop tolerance (``pc_gamg_threshold``) for heterogeneous moduli, and the contrast from which it applies
-HETEROGENEOUS_THRESHOLD, HETEROGENEOUS_CONTRAST = 0.02, 10.0
-_KRYLOV = ("cg", "gmres")
-
-
-@dataclass(frozen=True, slots=True)
-class LinearSolverOptions:
-    """Which linear solver a Newton step uses, and the Krylov solver's tolerance and iteration cap.
-
-    ``kind``: ``"direct"`` (MUMPS LU, ``DirectSolver``), ``"amg"`` (``AMGSolver``: ``krylov`` = ``"cg"`` for a
-    symmetric positive definite Jacobian such as the frictionless penalty's, ``"gmres"`` otherwise,
-    preconditioned by smoothed-aggregation AMG) or ``"auto"`` (AMG on a 3D mesh of ``auto_dofs`` unknowns or
-    more, else direct).  A Krylov solve stops at ‖b − A x‖₂ ≤ ``rtol``·‖b‖₂.  ``threshold``: the AMG's drop
-    tolerance of weak connections when it aggregates (PETSc's ``pc_gamg_threshold``); None: ``HETEROGENEOUS_THRESHOLD``
-    where the shear modulus μ varies by more than ``HETEROGENEOUS_CONTRAST`` over the mesh, else 0 (test model 1 in
-    2D, h = 1/32, contrast 1e3, rtol 1e-10: 158–192 CG iterations per step at 0, 40–48 at 0.02; the homogeneous
-    Hertz block at a/20: 0.02 doubles them).
-    """
-
-    kind: str = "auto"
-    krylov: str = "cg"
-    rtol: float = 1e-8
-    max_iterations: int = 1000
-    auto_dofs: int = AUTO_AMG_DOFS
-    threshold: float | None = None
-
-    def __post_init__(self) -> None:
-        if self.kind not in LINEAR_SOLVERS:
-            raise InputError(f"the linear solver must be one of {', '.join(LINEAR_SOLVERS)}, got {self.kind!r}")
-        if self.krylov not in _KRYLOV:
-            raise InputError(f"the Krylov method must be one of {', '.join(_KRYLOV)}, got {self.krylov!r}")
-        if not (isinstance(self.rtol, (int, float)) and 0 < self.rtol < 1):
-            raise InputError(f"the Krylov rtol must be a number in (0, 1), got {self.rtol!r}")
-        if self.threshold is not None and not (isinstance(self.threshold, (int, float)) and 0 <= self.threshold < 1):
-            raise InputError(f"the AMG threshold must be a number in [0, 1) or None, got {self.threshold!r}")
-        for name in ("max_iterations", "auto_dofs"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
-                raise InputError(f"the linear solver's {name} must be an integer >= 1, got {value!r}")
-
-    @classmethod
-    def of(cls, value: "LinearSolverOptions | str") -> "LinearSolverOptions":
-        """The options themselves, or the defaults with ``kind`` = ``value`` (``"direct"``, ``"amg"``, ``"auto"``)."""
-        if isinstance(value, cls):
-            return value
-        if isinstance(value, str):
-            return cls(kind=value)
-        raise InputError(
-            f"solver must be one of {', '.join(LINEAR_SOLVERS)} or LinearSolverOptions, got {type(value).__name__}"
-        )
-
-    def chosen(self, dofs: int, tdim: int) -> str:
-        """``"direct"`` or ``"amg"`` for an operator of ``dofs`` unknowns on a mesh of dimension ``tdim``."""
-        if self.kind != "auto":
-            return self.kind
-        return "amg" if tdim == 3 and dofs >= self.auto_dofs else "direct"
-
-
-def rigid_body_modes(V: fem.FunctionSpace) -> list[PETSc.Vec]:
-    """The rigid motions on V (vector P1/Pk): gdim translations and the rotations x ↦ e_k × x (1 in 2D, 3 in
-    3D), as owned PETSc vectors in V's layout, orthonormalized (the near-nullspace of elasticity for AMG)."""
-    gdim = V.mesh.geometry.dim
-    bs = V.dofmap.index_map_bs
-    if bs != gdim:
-        raise InputError(f"rigid_body_modes needs a vector space with {gdim} components, got block size {bs}")
-    n = V.dofmap.index_map.size_local
-    x = V.tabulate_dof_coordinates()[:n, :gdim]
-    x = x - V.mesh.comm.allreduce(x.sum(axis=0), op=MPI.SUM) / max(V.mesh.comm.allreduce(n, op=MPI.SUM), 1)
-    modes = []
-    for k in range(gdim):  # translations
-        m = np.zeros((n, gdim))
-        m[:, k] = 1.0
-        modes.append(m)
-    rotations = [(0, 1)] if gdim == 2 else [(0, 1), (1, 2), (2, 0)]
-    for i, j in rotations:  # the rotation in the (i, j) plane: u_i = −x_j, u_j = x_i
-        m = np.zeros((n, gdim))
-        m[:, i], m[:, j] = -x[:, j], x[:, i]
-        modes.append(m)
-    vecs = []
-    for m in modes:  # Gram–Schmidt, twice (collective dot products)
-        v = PETSc.Vec().createWithArray(m.ravel().copy(), size=(n * bs, PETSc.DECIDE), bsize=bs, comm=V.mesh.comm)
-        for _ in range(2):
-            for w in vecs:
-                v.axpy(-v.dot(w), w)
-        v.scale(1.0 / v.norm())
-        vecs.append(v)
-    return vecs
-
-
-def identity_rows(A: PETSc.Mat) -> np.ndarray:
-    """The owned rows of A (local indices) that are rows of the identity: a unit diagonal and no other nonzero
-    (the Dirichlet rows of an assembled operator, whose solution is the right-hand side)."""
-    indptr, indices, values = A.getValuesCSR()
-    n = indptr.size - 1
-    rows = np.repeat(np.arange(n), np.diff(indptr))
-    on_diagonal = indices == rows + A.getOwnershipRange()[0]
-    off = np.bincount(rows[~on_diagonal], np.abs(values[~on_diagonal]), minlength=n)
-    diagonal = np.zeros(n)
-    diagonal[rows[on_diagonal]] = values[on_diagonal]
-    return np.flatnonzero((off == 0.0) & (diagonal == 1.0))
-
-
-#: the options of ``AMGSolver`` (each solver under its own prefix): smoothed aggregation (GAMG, one smoothing
-#: step of the prolongator), Chebyshev–Jacobi smoothing, the interpolation kept when the operator changes
-#: values on its pattern (a Newton step moving the active set: only the coarse operators are recomputed)
-AMG_OPTIONS = {
-    "ksp_norm_type": "unpreconditioned",
-    "pc_type": "gamg",
-    "pc_gamg_type": "agg",
-    "pc_gamg_agg_nsmooths": 1,
-    "pc_gamg_reuse_interpolation": True,
-    "mg_levels_ksp_type": "chebyshev",
-    "mg_levels_pc_type": "jacobi",
-    "mg_levels_ksp_chebyshev_esteig_steps": 20,
-}
-
-#: KSP reasons by number (``PETSc.KSP.ConvergedReason``)
-_REASON = PETSc.KSP.ConvergedReason
-_KSP_REASONS = {v: k for k, v in vars(_REASON).items() if not k.startswith("_") and isinstance(v, int)}
-
-
-class AMGSolver:
-    """A Krylov solver (CG or GMRES) preconditioned by smoothed-aggregation AMG with the rigid-body
-    near-nullspace of V; ``DirectSolver``'s interface (``set_operator``, ``solve``, ``mat_solve``).
-
-    The AMG hierarchy is built at the first ``set_operator``; later operators on the same pattern (the Newton
-    Jacobians of other active sets) keep its interpolation and recompute the coarse operators.  Every solve is
-    checked (the KSP reason; ConvergenceError naming it and what to do); ``iterations`` holds the Krylov
-    iterations of each solve.
-    """
-
-    def __init__(
-        self, comm, *, prefix: str, space: fem.FunctionSpace, options: LinearSolverOptions, contrast: float = 1.0
-    ) -> None:
-        """``contrast``: max μ / min μ of the operator's material (the AMG threshold when ``options`` has none)."""
-        self.ksp = PETSc.KSP().create(comm)
-        self.ksp.setOptionsPrefix(prefix)
-        opts = PETSc.Options()
-        threshold = options.threshold
-        if threshold is None:
-            threshold = HETEROGENEOUS_THRESHOLD if contrast > HETEROGENEOUS_CONTRAST else 0.0
-        for key, value in {
-            **AMG_OPTIONS,
-            "pc_gamg_threshold": threshold,
-            "ksp_type": options.krylov,
-            "ksp_rtol": options.rtol,
-            "ksp_atol": 0.0,
-            "ksp_max_it": options.max_iterations,
-            # GMRES preconditioned from the right: its residual norm is the unpreconditioned one (the side is set for
-            # CG too: a GMRES solver earlier under this prefix leaves its side in the options database)
-            "ksp_pc_side": "right" if options.krylov == "gmres" else "left",
-        }.items():
-            opts[f"{prefix}{key}"] = value
-        if options.krylov == "gmres":
-            opts[f"{prefix}ksp_gmres_restart"] = 100
-        self.ksp.setFromOptions()
-        self.prefix = prefix
-        self.options = options
-        self.factorizations = 0  #: operators set (AMG set-ups, the first in full)
-        self.iterations: list[int] = []  #: Krylov iterations of each solve
-        self._identity = np.zeros(0, dtype=np.int64)  #: the owned rows of the operator that are the identity's
-        self._modes = rigid_body_modes(space)
-        self._nullspace = PETSc.NullSpace().create(vectors=self._modes, comm=comm)
-
-    def set_operator(self, A: PETSc.Mat) -> None:
-        """Use A from now on (symmetric positive definite for CG); the AMG set-up happens here, checked."""
-        check_entries(A, self.prefix)
-        self._identity = identity_rows(A)
-        A.setNearNullSpace(self._nullspace)
-        self.ksp.setOperators(A)
-        self.ksp.setUp()
-        reason = self.ksp.getPC().getFailedReason()
-        if reason != 0:
-            raise ConvergenceError(
-                f"{self.prefix}: the AMG set-up failed (PETSc PC failed reason {_PC_REASONS.get(reason, reason)}): "
-                "check the data for values far out of range, or use the direct solver (solver='direct')"
-            )
-        self.factorizations += 1
-
-    def solve(self, b: PETSc.Vec, x: PETSc.Vec) -> None:
-        """x = A⁻¹ b to ‖b − A x‖ ≤ rtol‖b‖, raising ConvergenceError when the Krylov solve fails."""
-        self.ksp.solve(b, x)
-        if self._identity.size:  # exact on the Dirichlet rows, as a factorization
-            x.array[self._identity] = b.getArray(readonly=True)[self._identity]
-        its = self.ksp.getIterationNumber()
-        self.iterations.append(int(its))
-        reason = self.ksp.getConvergedReason()
-        if reason < 0:
-            name = _KSP_REASONS.get(reason, str(reason))
-            advice = (
-                "the operator is not symmetric positive definite (a frictional or otherwise unsymmetric "
-                "Jacobian): use krylov='gmres' or the direct solver (solver='direct')"
-                if reason in (_REASON.DIVERGED_INDEFINITE_PC, _REASON.DIVERGED_INDEFINITE_MAT)
-                else "raise the iteration cap (LinearSolverOptions(max_iterations=...)) or the tolerance, or use the "
-                "direct solver (solver='direct'): a body held only by contact or springs, or a very large contrast "
-                "in the moduli, slows AMG down"
-            )
-            raise ConvergenceError(
-                f"{self.prefix}: {self.options.krylov.upper()} with AMG did not converge: KSP reason {name} after "
-                f"{its} iterations (residual {self.ksp.getResidualNorm():.3e}, ‖b‖ {b.norm():.3e}, rtol "
-                f"{self.options.rtol:g}); {advice}"
-            )
-
-    def mat_solve(self, B: PETSc.Mat, X: PETSc.Mat) -> None:
-        """X = A⁻¹ B for a dense block B, one checked Krylov solve per column."""
-        for j in range(B.getSize()[1]):
-            b = B.getDenseColumnVec(j, "r")
-            x = X.getDenseColumnVec(j, "w")
-            try:
-                self.solve(b, x)
-            finally:
-                B.restoreDenseColumnVec(j, "r")
-                X.restoreDenseColumnVec(j, "w")
-
-    def has_inverse_entries(self) -> bool:
-        """False: no factors to take entries of A⁻¹ from (``DirectSolver.has_inverse_entries``)."""
-        return False
-
-    def destroy(self) -> None:
-        for obj in (self.ksp, self._nullspace, *self._modes):
-            obj.destroy()
-
-
-def linear_solver(
-    comm, *, prefix: str, space: fem.FunctionSpace, options: "LinearSolverOptions | str", contrast: float = 1.0
-) -> DirectSolver | AMGSolver:
-    """The solver ``options`` choose for operators on ``space`` (``LinearSolverOptions.chosen``); ``contrast``:
-    max μ / min μ (``AMGSolver``)."""
-    options = LinearSolverOptions.of(options)
-    dofs = space.dofmap.index_map.size_global * space.dofmap.index_map_bs
-    if options.chosen(dofs, space.mesh.topology.dim) == "amg":
-        log.info("%s: %s + AMG for %d unknowns", prefix, options.krylov.upper(), dofs)
-        return AMGSolver(comm, prefix=prefix, space=space, options=options, contrast=contrast)
-    return DirectSolver(comm, prefix=prefix)
 
 
 class SparseFactor(_Factorization):

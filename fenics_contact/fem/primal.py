@@ -26,9 +26,10 @@ from petsc4py import PETSc
 
 from fenics_contact.errors import InputError
 from fenics_contact.fem import forms_primal
+from fenics_contact.fem.amg import AMGSolver, LinearSolverOptions, linear_solver
 from fenics_contact.fem.contact import MAX_REFINEMENTS, ContactProfile, NewtonHistory, NewtonOptions, semismooth_newton
 from fenics_contact.fem.friction import NodalFriction, frictional_newton
-from fenics_contact.fem.linalg import AbsoluteTerms, AMGSolver, LinearSolverOptions, linear_solver, quadratic_form
+from fenics_contact.fem.linalg import AbsoluteTerms, quadratic_form
 from fenics_contact.fem.primal_boundary import NodalContactGeometry, PrimalBoundaryData
 from fenics_contact.problem.fields import MaterialFields
 from fenics_contact.problem.friction import Friction, friction_of
@@ -65,7 +66,7 @@ class PrimalSubproblem:
     ν per node keeps the active set a set of nodes on a curved Γ_C too.  ``friction`` (a
     ``problem.friction.Friction``, with contact only) adds the nodal friction term of ``fem.friction``.
 
-    ``solver``: the linear solver of every solve (``fem.linalg.LinearSolverOptions`` or its kind: ``"direct"``,
+    ``solver``: the linear solver of every solve (``fem.amg.LinearSolverOptions`` or its kind: ``"direct"``,
     MUMPS LU; ``"amg"``, CG + smoothed-aggregation AMG, its set-up kept across Newton steps; ``"auto"``).
     """
 
@@ -467,9 +468,9 @@ def solve_primal_monolithic(
     ``delta`` defaults to ``default_penalty(h, E_c)``, E_c the largest E on Γ_C (``penalty_for``).  With a
     friction law (``problem.law``) it is one load step from the unloaded state (``fenics_contact.sliding`` for
     load paths). ``solver``:
-    the linear solver of the Newton steps (``fem.linalg.LinearSolverOptions`` or its kind): ``"direct"``
+    the linear solver of the Newton steps (``fem.amg.LinearSolverOptions`` or its kind): ``"direct"``
     (MUMPS LU), ``"amg"`` (CG + smoothed-aggregation AMG with the rigid-body near-nullspace) or ``"auto"``
-    (AMG on a 3D mesh of ``fem.linalg.AUTO_AMG_DOFS`` unknowns or more, else direct).
+    (AMG on a 3D mesh of ``fem.amg.AUTO_AMG_DOFS`` unknowns or more, else direct).
     """
     cm = problem.cm
     msh, facet_tags = cm.mesh, cm.facet_tags

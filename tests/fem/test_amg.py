@@ -1,4 +1,4 @@
-"""The AMG-preconditioned Krylov solver of the primal Newton (``fem.linalg.AMGSolver``) against MUMPS."""
+"""The AMG-preconditioned Krylov solver of the primal Newton (``fem.amg.AMGSolver``) against MUMPS."""
 
 import basix.ufl
 import dolfinx.fem.petsc
@@ -12,14 +12,8 @@ from petsc4py import PETSc
 
 from fenics_contact.errors import ConvergenceError, InputError
 from fenics_contact.fem import forms_primal
-from fenics_contact.fem.linalg import (
-    AUTO_AMG_DOFS,
-    AMGSolver,
-    DirectSolver,
-    LinearSolverOptions,
-    linear_solver,
-    rigid_body_modes,
-)
+from fenics_contact.fem.amg import AUTO_AMG_DOFS, AMGSolver, LinearSolverOptions, linear_solver, rigid_body_modes
+from fenics_contact.fem.linalg import DirectSolver
 from fenics_contact.fem.primal import solve_primal_monolithic
 from fenics_contact.methods import METHODS
 from fenics_contact.problem.boundary import BoundaryConditions

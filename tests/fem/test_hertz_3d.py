@@ -5,7 +5,7 @@ import pytest
 from mpi4py import MPI
 
 from fenics_contact.errors import InputError
-from fenics_contact.fem.linalg import LinearSolverOptions
+from fenics_contact.fem.amg import LinearSolverOptions
 from fenics_contact.fem.primal import solve_primal_monolithic
 from fenics_contact.problem.analytic import hertz_sphere_errors, hertz_sphere_model, hertz_sphere_penalty
 from fenics_contact.problem.geometry import mesh_size

@@ -31,6 +31,7 @@
 
 # %%
 import os
+import sys
 from pathlib import Path
 
 import matplotlib
@@ -133,3 +134,14 @@ fig.tight_layout()
 fig.savefig(out / "pressure.png", dpi=120)
 plt.close(fig)
 print("resultants (normal part) on the two faces:", result.slave.force, result.master.force)
+
+# %% [markdown]
+# ## The figures
+# Inline when this file runs as a notebook; run as a script, it leaves them as the PNG files above.
+
+# %%
+if "ipykernel" in sys.modules:  # a notebook kernel: show the figures written above
+    from IPython.display import Image, display
+
+    for png in ("displacement.png", "pressure.png"):
+        display(Image(filename=str(out / png)))

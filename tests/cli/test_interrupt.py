@@ -202,7 +202,8 @@ def _ends(pid: int, timeout: float = 30.0) -> bool:
 def test_sigterm_under_mpi_never_hangs(tmp_path, target):
     """SIGTERM to the ranks of `mpiexec -n 2 fenics-contact run` (the process group, as a batch system sends it, or
     one rank, as `kill PID` does) at random times from start-up into the solve: every run ends with exit 143 and
-    the one line (and MPICH's line on MPI_Abort), nothing written.  A rank that stopped alone left the other
+    the one line (and MPICH's line on MPI_Abort), nothing written; signalled as a group, mpiexec, signalled too,
+    may end the ranks before rank 0 prints its line.  A rank that stopped alone left the other
     waiting in a collective operation for ever (about one run in five when every rank was signalled, every run
     when one was).  Eight runs of each, about 10 s each."""
     mpiexec = shutil.which("mpiexec", path=str(Path(sys.executable).parent)) or shutil.which("mpiexec")
@@ -234,7 +235,9 @@ def test_sigterm_under_mpi_never_hangs(tmp_path, target):
                 proc.wait()
         assert proc.returncode == 143, err
         lines = [line for line in outcome_lines(err) if "application called MPI_Abort" not in line]
-        assert len(lines) == 1 and lines[0].startswith("interrupted by SIGTERM"), err
+        # signalled as a group, mpiexec itself tears the ranks down too and may do so before rank 0 has printed
+        assert len(lines) == (1 if target == "one rank" else len(lines[:1])), err
+        assert all(line.startswith("interrupted by SIGTERM") for line in lines), err
         assert not out.exists(), "nothing written"
         # a rank that ended the run while rank 0 waited in a collective operation leaves the staging directory (as
         # kill -9 does): of a process that is gone, so the next run beside it removes it

@@ -236,7 +236,7 @@ def test_sigterm_under_mpi_never_hangs(tmp_path, target):
         assert proc.returncode == 143, err
         lines = [line for line in outcome_lines(err) if "application called MPI_Abort" not in line]
         # signalled as a group, mpiexec itself tears the ranks down too and may do so before rank 0 has printed
-        assert len(lines) == (1 if target == "one rank" else len(lines[:1])), err
+        assert len(lines) == 1 if target == "one rank" else len(lines) <= 1, err
         assert all(line.startswith("interrupted by SIGTERM") for line in lines), err
         assert not out.exists(), "nothing written"
         # a rank that ended the run while rank 0 waited in a collective operation leaves the staging directory (as

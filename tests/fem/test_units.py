@@ -286,7 +286,15 @@ def _hertz_run(method: str, E: float, L: float) -> dict:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("method", ["primal-monolithic", "primal", pytest.param("mixed-monolithic", marks=serial)])
+@pytest.mark.parametrize(
+    "method",
+    [
+        "primal-monolithic",
+        "primal",
+        pytest.param("mixed-monolithic", marks=serial),
+        pytest.param("mixed", marks=serial),
+    ],
+)
 def test_hertz_block_in_any_units(method):
     """The Hertz block with lengths 10³ times larger in MPa, in Pa, and 10³ times smaller in Pa: the force/(E L)
     and the contact half-width/L of E = L = 1 to 1e-8, the pressure errors against Hertz (relative to p₀) to

@@ -14,6 +14,12 @@ overflows.  The matrix factorized is the equilibrated D J D, D = diag(s I_σ, I_
 Young's modulus, L_ref a reference length): the stress pivots are h/L_ref times the divergence entries whatever
 the units, B is unchanged, and J⁻¹ r = D (D J D)⁻¹ D r.  With E_ref/L_ref in (1/2, 2) (every built-in model on
 the unit square: E_ref = L_ref = 1) s = 1 and the factorization is J's own.
+
+The residual F = (F_σ, F_u) has the same two units: F_σ (compliance × stress × area) a length², F_u (stress ×
+length) E/L_ref times that, so ‖F‖ and the sums of the norms of its terms are measured equilibrated,
+‖D F‖ = (s²‖F_σ‖² + ‖F_u‖²/s²)^½ (``equilibrated_norm``): both blocks in one unit, the same relative numbers in
+any units (without it, the round-off of the divergence block, E times that of E = 1, swamps a yardstick made of
+the stress block's terms at E = 2.1e11).
 """
 
 import numpy as np
@@ -22,10 +28,17 @@ from mpi4py import MPI
 from fenics_contact.errors import InputError
 from fenics_contact.fem.distributed import SaddlePointMatrix
 from fenics_contact.fem.linalg import DIRECT_OPTIONS, DirectSolver
-from fenics_contact.fem.mixed_assembly import MixedOperators
+from fenics_contact.fem.mixed_assembly import MixedOperators, dot
 from fenics_contact.fem.mixed_contact import ContactNodes
 
-__all__ = ["MIXED_SOLVER_OPTIONS", "SaddlePointFactorization", "saddle_point_scaling", "stress_scale"]
+__all__ = [
+    "MIXED_SOLVER_OPTIONS",
+    "SaddlePointFactorization",
+    "equilibrated_norm",
+    "equilibrated_size",
+    "saddle_point_scaling",
+    "stress_scale",
+]
 
 #: MUMPS LU with the AMF ordering: half the factorization time of the default ordering on the
 #: AW saddle-point matrices (3.8 s instead of 7.5 s at h = 1/128, 0.7 s instead of 1.3 s at 1/64).
@@ -46,6 +59,19 @@ def saddle_point_scaling(scale: float, n_sigma: int, n_u: int, n_extra: int = 0)
     if scale == 1.0:
         return None
     return np.concatenate([np.full(n_sigma, scale), np.full(n_u, 1.0 / scale), np.ones(n_extra)])
+
+
+def equilibrated_norm(scale: float, r1: np.ndarray, r2: np.ndarray, comm: MPI.Comm) -> float:
+    """‖D r‖ = (s²‖r1‖² + ‖r2‖²/s²)^½ of the stress part r1 and displacement part r2 (owned entries) of a residual,
+    s = ``scale`` (a power of two: the scaling rounds nothing; s = 1: the plain norm)."""
+    s2 = scale * scale
+    return float(np.sqrt(s2 * dot(r1, r1, comm) + dot(r2, r2, comm) / s2))
+
+
+def equilibrated_size(scale: float, sizes1: float, sizes2: float) -> float:
+    """The yardstick s·Σ₁ + Σ₂/s of ``equilibrated_norm``: Σ₁, Σ₂ the sums of the norms of the terms of the stress
+    and displacement parts."""
+    return scale * sizes1 + sizes2 / scale
 
 
 class SaddlePointFactorization:

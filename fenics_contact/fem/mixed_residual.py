@@ -11,7 +11,7 @@ from dolfinx import fem
 from petsc4py import PETSc
 
 from fenics_contact.fem import forms_mixed
-from fenics_contact.fem.mixed_assembly import assemble_array, dot
+from fenics_contact.fem.mixed_assembly import assemble_array
 from fenics_contact.fem.mixed_traces import gll_function
 from fenics_contact.problem.tags import Boundary
 
@@ -19,8 +19,9 @@ __all__ = ["ufl_residual_norm"]
 
 
 def ufl_residual_norm(sub, data: np.ndarray | None = None) -> tuple[float, float]:
-    """‖F‖ of the residual of the ``MixedSubproblem`` ``sub`` at its current (σ, u) with Robin data g, assembled
-    from ``forms_mixed.mixed_residual`` (independent of Q), and the scale of ``sub.residual``."""
+    """‖D F‖ of the residual of the ``MixedSubproblem`` ``sub`` at its current (σ, u) with Robin data g, assembled
+    from ``forms_mixed.mixed_residual`` (independent of Q) and equilibrated like ``sub.residual``
+    (``sub.residual_norm``), and the scale of ``sub.residual``."""
     msh = sub.mesh
     sig, uh = sub.sigma_function(), sub.u_function()
     t, v = ufl.TestFunction(sub.dg), ufl.TestFunction(sub.U)
@@ -48,4 +49,4 @@ def ufl_residual_norm(sub, data: np.ndarray | None = None) -> tuple[float, float
         r1 -= sub.interface.C @ data
     r2 = assemble_array(Fv)[: sub.n_u]
     _, scale = sub.residual(data)
-    return float(np.sqrt(dot(r1, r1, sub.comm) + dot(r2, r2, sub.comm))), scale
+    return sub.residual_norm(r1, r2), scale

@@ -23,7 +23,8 @@ the canonical γ values (``interface_range``).
 
 **Units.**  The saddle-point factorizations are equilibrated by E_ref/L_ref (``mixed_linear.stress_scale``; E_ref
 ``modulus``, by default the smallest Young's modulus of the cells, L_ref the mesh's extent), so the solves keep
-their accuracy in any units (E = 2.1e11 in Pa as E = 1, lengths in mm as in m).
+their accuracy in any units (E = 2.1e11 in Pa as E = 1, lengths in mm as in m), and the residual checks measure
+the residual with the same equilibration (``residual_norm``), both blocks in one unit.
 """
 
 import time
@@ -42,7 +43,12 @@ from fenics_contact.fem.distributed import DistributedMatrix
 from fenics_contact.fem.mixed_assembly import MixedOperators, dot, norm
 from fenics_contact.fem.mixed_contact import ContactNodes, MixedContactProfile
 from fenics_contact.fem.mixed_interface import InterfaceData
-from fenics_contact.fem.mixed_linear import SaddlePointFactorization, stress_scale
+from fenics_contact.fem.mixed_linear import (
+    SaddlePointFactorization,
+    equilibrated_norm,
+    equilibrated_size,
+    stress_scale,
+)
 from fenics_contact.fem.mixed_newton import MixedNewtonHistory, globalized_newton
 from fenics_contact.fem.mixed_residual import ufl_residual_norm
 from fenics_contact.fem.mixed_spaces import MixedSpaces, check_triangles
@@ -284,19 +290,25 @@ class MixedSubproblem:
         return F1, asm.B @ self.c - asm.G
 
     def _scale(self, load: np.ndarray) -> float:
-        """Sum of the norms of the terms of the residual (the yardstick of the residual check)."""
+        """Sum of the norms of the terms of the residual, equilibrated like the residual (the yardstick of the
+        residual check: ``mixed_linear.equilibrated_size``)."""
         comm, asm = self.comm, self.assembly
-        scale = norm(asm.Kt @ self.c, comm) + norm(asm.B.T @ self.u, comm) + norm(load, comm)
-        scale += norm(asm.B @ self.c, comm) + norm(asm.G, comm)
+        sizes1 = norm(asm.Kt @ self.c, comm) + norm(asm.B.T @ self.u, comm) + norm(load, comm)
         if self.contact:
-            scale += norm(self.contact_nodes.penalty_force(self.contact_nodes.stress(self.c)), comm)
-        return scale
+            sizes1 += norm(self.contact_nodes.penalty_force(self.contact_nodes.stress(self.c)), comm)
+        return equilibrated_size(self.stress_scale, sizes1, norm(asm.B @ self.c, comm) + norm(asm.G, comm))
+
+    def residual_norm(self, F1: np.ndarray, F2: np.ndarray) -> float:
+        """‖D F‖ of a residual (F_σ, F_u), D the equilibration of the factorizations (``equilibrated_norm``):
+        both blocks in one unit."""
+        return equilibrated_norm(self.stress_scale, F1, F2, self.comm)
 
     def residual(self, data: np.ndarray | None = None) -> tuple[float, float]:
-        """(‖F‖, scale) at the current (σ, u) with Robin data g; scale = sum of the norms of the terms."""
+        """(‖D F‖, scale) at the current (σ, u) with Robin data g; scale = sum of the norms of the terms, both
+        equilibrated by D = diag(s I_σ, I_u/s) (``residual_norm``)."""
         load = self.stress_load(data)
         F1, F2 = self.gradient(load)
-        return float(np.sqrt(dot(F1, F1, self.comm) + dot(F2, F2, self.comm))), self._scale(load)
+        return self.residual_norm(F1, F2), self._scale(load)
 
     def complementary_energy(self, data: np.ndarray | None = None) -> float:
         """J(σ) = ½(Aσ,σ) [+ ½β‖σn‖²_γ − ∫_γ g·σn] + (1/2ε)∫_ΓC ((σ_c)⁺)² at the current σ."""

@@ -262,8 +262,9 @@ def test_mixed_indentation_steps_on_two_ranks(runs):
     assert np.allclose(b["zone"], a["zone"], rtol=0, atol=1e-12)
     # the round-off floor of this problem (a 0.1-wide contact zone on a 0.1 × 0.05 block, ε = 1e-3·h·E) is
     # higher: serial runs with the MUMPS orderings METIS / AMD instead of AMF differ in σ_c by 1.8e-9 / 3.3e-9
-    # of max |σ_c|, the 2-rank run by 3.8e-9
-    assert np.abs(np.array(b["sigma_c"]) - a["sigma_c"]).max() <= 2e-8 * np.abs(a["sigma_c"]).max()
+    # of max |σ_c|, the serial run without the equilibration (s = 1 instead of 1/2) by 3.3e-8, and 2-rank runs
+    # (MUMPS' parallel factorization is not reproducible bit for bit) by 1.5e-8 … 4.7e-8
+    assert np.abs(np.array(b["sigma_c"]) - a["sigma_c"]).max() <= 1e-7 * np.abs(a["sigma_c"]).max()
 
 
 @pytest.mark.mpi

@@ -262,3 +262,50 @@ def test_factorization_failure_names_its_cause():
         A.destroy()
     with pytest.raises(ConvergenceError, match=r"INFOG\(1\) = -10.*numerically singular"):
         SparseFactor.from_csr(singular)
+
+
+def _hertz_run(method: str, E: float, L: float) -> dict:
+    """The Hertz block (a cylinder of radius 5a·20 on the graded block of ``hertz_block``) with Young's modulus E
+    and every length times L, with every default: the dimensionless force, contact half-width and counts."""
+    from fenics_contact.problem.analytic import hertz_errors, hertz_model
+    from fenics_contact.problem.meshes import hertz_block
+
+    a, radius, nu, depth = 0.05, 5.0, 0.3, 1.2e-3
+    cm, spec = hertz_block(a, refinement=0.5)
+    cm.mesh.geometry.x[:, :2] *= L
+    cm = cm._replace(h=cm.h * L)
+    result = fc.solve(hertz_model(radius=radius * L, E=E, nu=nu, depth=depth * L).on(cm), method)
+    errors = hertz_errors(result.profile, radius=radius * L, E=E, nu=nu, h_contact=spec.h_contact * L)
+    return {
+        "force": result.profile.force / (E * L),
+        "half_width": errors.half_width / L,
+        "peak_error": errors.peak_error,
+        "l2_error": errors.l2_error,
+        "counts": _counts(result),
+    }
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    "method",
+    [
+        "primal-monolithic",
+        "primal",
+        pytest.param("mixed-monolithic", marks=serial),
+        pytest.param("mixed", marks=serial),
+    ],
+)
+def test_hertz_block_in_any_units(method):
+    """The Hertz block with lengths 10³ times larger in MPa, in Pa, and 10³ times smaller in Pa: the force/(E L)
+    and the contact half-width/L of E = L = 1 to 1e-8, the pressure errors against Hertz (relative to p₀) to
+    1e-9 and the same Newton counts."""
+    ref = _hertz_run(method, 1.0, 1.0)
+    assert ref["force"] > 0 and ref["l2_error"] < 0.05, ref
+    for E, L in [(2.1e5, 1e3), (2.1e11, 1.0), (2.1e11, 1e-3)]:
+        got = _hertz_run(method, E, L)
+        where = f"E = {E:g}, L = {L:g}: {got} against {ref}"
+        assert got["counts"] == ref["counts"], where
+        for key in ("force", "half_width"):
+            assert got[key] == pytest.approx(ref[key], rel=RTOL), where
+        for key in ("peak_error", "l2_error"):  # differences from the exact pressure, relative to p₀: absolute
+            assert got[key] == pytest.approx(ref[key], abs=0.1 * RTOL), where

@@ -28,7 +28,7 @@ from fenics_contact.errors import FenicsContactError, InputError
 from fenics_contact.methods import METHODS as CATALOGUE
 from fenics_contact.problem.case import Case, MeshFile, load_case, parse_override
 from fenics_contact.problem.friction import require_frictionless
-from fenics_contact.problem.geometry import ContactMesh, gmsh_session
+from fenics_contact.problem.geometry import ContactMesh, query_gmsh_file
 from fenics_contact.problem.models3d import MODEL_3D
 from fenics_contact.problem.pair_case import PairCase
 from fenics_contact.problem.strip import contact_cell_size
@@ -266,27 +266,21 @@ def _role(name: str, dim: int, materials: set[str], built: bool, options: RunOpt
 
 
 def _file_groups(path: Path, comm: MPI.Comm) -> list[tuple[str, int, int]] | None:
-    """(name, dimension, elements) of every physical group of a gmsh file, read on rank 0 (None when gmsh cannot
-    read it: the run's reader says why). Collective."""
-    groups = None
-    if comm.rank == 0 and Path(path).is_file():
-        with gmsh_session():
-            gmsh.model.add("check-mesh")
-            try:
-                gmsh.merge(str(path))
-            except Exception:  # gmsh raises a bare Exception; read_mesh reports it
-                pass
-            else:
-                groups = []
-                for dim, tag in gmsh.model.getPhysicalGroups():
-                    count = sum(
-                        len(elements)
-                        for entity in gmsh.model.getEntitiesForPhysicalGroup(dim, tag)
-                        for elements in gmsh.model.mesh.getElements(dim, entity)[1]
-                    )
-                    groups.append((gmsh.model.getPhysicalName(dim, tag) or f"(unnamed {tag})", dim, count))
-                groups.sort(key=lambda g: (-g[1], g[0]))
-    return comm.bcast(groups, root=0)
+    """(name, dimension, elements) of every physical group of a gmsh file (None when gmsh cannot read it: the
+    run's reader says why). Collective."""
+
+    def groups() -> list[tuple[str, int, int]]:
+        found = []
+        for dim, tag in gmsh.model.getPhysicalGroups():
+            count = sum(
+                len(elements)
+                for entity in gmsh.model.getEntitiesForPhysicalGroup(dim, tag)
+                for elements in gmsh.model.mesh.getElements(dim, entity)[1]
+            )
+            found.append((gmsh.model.getPhysicalName(dim, tag) or f"(unnamed {tag})", dim, count))
+        return sorted(found, key=lambda g: (-g[1], g[0]))
+
+    return query_gmsh_file(path, comm, groups, None)
 
 
 def _printer(comm: MPI.Comm):

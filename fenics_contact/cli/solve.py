@@ -45,7 +45,7 @@ from fenics_contact.plots import (
 )
 from fenics_contact.problem.case import Case
 from fenics_contact.problem.cell_groups import bounding_box
-from fenics_contact.problem.geometry import ContactMesh, gmsh_session, read_mesh, unit_square
+from fenics_contact.problem.geometry import ContactMesh, query_gmsh_file, read_mesh, unit_square
 from fenics_contact.problem.models import get_model, pixel_field
 from fenics_contact.problem.models3d import MODEL_3D, channels_3d_mesh
 from fenics_contact.problem.pair_case import PairCase
@@ -204,18 +204,8 @@ def _model(options: RunOptions) -> tuple[ContactProblem, np.ndarray | None]:
 
 
 def _solid(path: Path, comm: MPI.Comm) -> bool:
-    """Whether the gmsh file holds 3D cells (read on rank 0; False when gmsh cannot read it: read_mesh says why)."""
-    solid = False
-    if comm.rank == 0 and Path(path).is_file():
-        with gmsh_session():
-            gmsh.model.add("dimension")
-            try:
-                gmsh.merge(str(path))
-            except Exception:  # gmsh raises a bare Exception; read_mesh reports it
-                pass
-            else:
-                solid = len(gmsh.model.mesh.getElementTypes(3)) > 0
-    return comm.bcast(solid, root=0)
+    """Whether the gmsh file holds 3D cells (False when gmsh cannot read it: read_mesh says why). Collective."""
+    return query_gmsh_file(path, comm, lambda: len(gmsh.model.mesh.getElementTypes(3)) > 0, False)
 
 
 def _mesh(options: RunOptions, comm: MPI.Comm = MPI.COMM_WORLD) -> ContactMesh:

@@ -12,9 +12,9 @@ import logging
 import os
 import signal
 import threading
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
-from typing import NamedTuple
+from typing import NamedTuple, TypeVar
 
 import dolfinx
 import dolfinx.io.gmsh
@@ -35,11 +35,13 @@ __all__ = [
     "mesh_extent",
     "check_memory",
     "gmsh_session",
+    "query_gmsh_file",
     "build_unit_square_model",
     "contact_mesh_from_model",
 ]
 
 log = logging.getLogger(__name__)
+T = TypeVar("T")
 
 #: gmsh element types of the 3-node triangle and the 4-node tetrahedron
 _TRIANGLE, _TETRAHEDRON = 2, 4
@@ -85,6 +87,22 @@ def gmsh_session(*, verbosity: int = 0) -> Iterator[None]:
         if started:
             gmsh.finalize()
             _restore_signal_handlers(handlers)
+
+
+def query_gmsh_file(path: Path, comm: MPI.Comm, query: Callable[[], T], default: T) -> T:
+    """Collective: ``query()`` on rank 0 with the gmsh file ``path`` merged into a fresh model, broadcast to every
+    rank; ``default`` when the file is missing or gmsh cannot read it (the mesh reader then says why)."""
+    result = default
+    if comm.rank == 0 and Path(path).is_file():
+        with gmsh_session():
+            gmsh.model.add("query")
+            try:
+                gmsh.merge(str(path))
+            except Exception:  # gmsh raises a bare Exception; read_mesh reports it
+                pass
+            else:
+                result = query()
+    return comm.bcast(result, root=0)
 
 
 def _signal_handlers() -> dict:

@@ -3,13 +3,12 @@ Algorithm 3 within its multiscale error of it."""
 
 import numpy as np
 import pytest
-from dolfinx import fem
+from friction_paths import snapshots
 
 from fenics_contact.problem.friction import Friction
 from fenics_contact.problem.geometry import unit_square
 from fenics_contact.problem.models import get_model
 from fenics_contact.problem.obstacles import Plane
-from fenics_contact.sliding import slide
 
 DEPTH = 2e-3
 #: press the wall into Γ_C = {x = 1} in two steps, then drag it along in three
@@ -17,15 +16,7 @@ PATH = [(-DEPTH / 2, 0.0), (-DEPTH, 0.0), (-DEPTH, 0.002), (-DEPTH, 0.008), (-DE
 
 
 def _snapshots(method, problem, **options):
-    """The path and the displacement on the whole mesh after each step."""
-    V = fem.functionspace(problem.cm.mesh, ("Lagrange", 1, (2,)))
-    fields = []
-
-    def keep(step, solver):
-        u = solver.glued(V) if hasattr(solver, "glued") else solver.contact.u
-        fields.append(u.x.array.copy())
-
-    return slide(problem, method, PATH, on_step=keep, **options), fields
+    return snapshots(method, problem, PATH, **options)
 
 
 @pytest.fixture(scope="module", params=[1e3, 1e6], ids=["contrast1e3", "contrast1e6"])

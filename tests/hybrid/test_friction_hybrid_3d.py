@@ -4,28 +4,19 @@ all three displacement components of the Γ_C nodes (``hybrid.friction``)."""
 
 import numpy as np
 import pytest
-from dolfinx import fem
+from friction_paths import snapshots
 
 from fenics_contact.hybrid.friction import FrictionalCondensation
 from fenics_contact.problem.friction import Friction
 from fenics_contact.problem.models3d import channels_3d, channels_3d_mesh
 from fenics_contact.problem.obstacles import Plane
-from fenics_contact.sliding import slide
 
 #: press the wall into Γ_C = {x = 1}, then drag it along y in three steps
 PATH = [(-0.01, 0.0, 0.0), (-0.01, 0.005, 0.0), (-0.01, 0.01, 0.0), (-0.01, 0.02, 0.0)]
 
 
 def _snapshots(method, problem, **options):
-    """The path and the displacement on the whole mesh after each step."""
-    V = fem.functionspace(problem.cm.mesh, ("Lagrange", 1, (3,)))
-    fields = []
-
-    def keep(step, solver):
-        u = solver.glued(V) if hasattr(solver, "glued") else solver.contact.u
-        fields.append(u.x.array.copy())
-
-    return slide(problem, method, PATH, on_step=keep, **options), fields
+    return snapshots(method, problem, PATH, **options)
 
 
 @pytest.mark.parametrize("contrast", [1e3, 1e6])

@@ -22,8 +22,7 @@ from fenics_contact.io import check_output_target, check_outside_output
 from fenics_contact.methods import HYBRID_METHODS, get_method
 from fenics_contact.methods import METHODS as CATALOGUE
 from fenics_contact.problem.materials import check_poisson_ratio
-from fenics_contact.problem.models import get_model, model_1
-from fenics_contact.problem.models3d import MODEL_3D
+from fenics_contact.problem.models import MODELS_3D, get_model, model_1
 
 __all__ = [
     "DEFAULT_H",
@@ -39,7 +38,7 @@ __all__ = [
 
 METHODS = HYBRID_METHODS  #: the ``--method`` choices: Algorithms 1–4 (``methods.METHODS``)
 DEFAULT_H = 64  #: 1/h of the built-in mesh when --h is not given
-DEFAULT_H_3D = 16  #: 1/h of the built-in cube of the 3D model (--model 4) when --h is not given
+DEFAULT_H_3D = 16  #: 1/h of the built-in cube of the 3D models (--model 4, 5) when --h is not given
 #: the materials of the built-in models when --E-high, --E-low, --nu are not given (the three models share them)
 MODEL_DEFAULTS = {
     name: p.default for name, p in inspect.signature(model_1).parameters.items() if name in ("E_high", "E_low", "nu")
@@ -306,7 +305,7 @@ class RunOptions:
         """1/h of the built-in mesh."""
         if self.h is not None:
             return self.h
-        return DEFAULT_H_3D if self.model == MODEL_3D else DEFAULT_H
+        return DEFAULT_H_3D if self.model in MODELS_3D else DEFAULT_H
 
     def value(self, name: str):
         """The option, or the method's default when it was not given."""

@@ -73,10 +73,11 @@ def _add_problem_options(run: argparse.ArgumentParser) -> None:
     group.add_argument(
         "--model",
         type=int,
-        choices=(1, 2, 3, 4),
+        choices=(1, 2, 3, 4, 5),
         default=_RUN_DEFAULTS["model"],
         help="built-in test model: 1 channels, 2 inclusions, 3 heterogeneous strip (loads in Ω₁), 4 the 3D "
-        "channel model (the unit cube, its strip Ω₂ of width 1/H; --method primal)"
+        "channel model (the unit cube, its strip Ω₂ of width 1/H; --method primal), 5 the 3D fibre composite "
+        "(a block with stiff fibres along y, two crossing γ; --method primal)"
         + _default(_shown(_RUN_DEFAULTS["model"])),
     )
     group.add_argument(

@@ -46,7 +46,8 @@ from fenics_contact.plots import (
 from fenics_contact.problem.case import Case
 from fenics_contact.problem.cell_groups import bounding_box
 from fenics_contact.problem.geometry import ContactMesh, query_gmsh_file, read_mesh, unit_square
-from fenics_contact.problem.models import get_model, pixel_field
+from fenics_contact.problem.composite3d import MODEL_COMPOSITE_3D, fibre_block_3d_mesh
+from fenics_contact.problem.models import MODELS_3D, get_model, pixel_field
 from fenics_contact.problem.models3d import MODEL_3D, channels_3d_mesh
 from fenics_contact.problem.pair_case import PairCase
 from fenics_contact.problem.problem import ContactProblem
@@ -215,6 +216,8 @@ def _mesh(options: RunOptions, comm: MPI.Comm = MPI.COMM_WORLD) -> ContactMesh:
         return read_mesh(options.mesh, H=1.0 / options.H if planar_grid else None, comm=comm)
     if options.model == MODEL_3D:
         return channels_3d_mesh(options.n, strip=1.0 / options.H, comm=comm)
+    if options.model == MODEL_COMPOSITE_3D:
+        return fibre_block_3d_mesh(options.n, strip=1.0 / options.H, comm=comm)
     return unit_square(options.n, options.H, comm=comm)
 
 
@@ -459,10 +462,11 @@ def _solve_and_write(
         model = case.problem(case_mesh)
         if options.method.endswith("-ms"):
             _check_case_coarse_grid(cm, options, case)
-    if case is None and cm.mesh.topology.dim == 3 and options.model != MODEL_3D:
+    if case is None and cm.mesh.topology.dim == 3 and options.model not in MODELS_3D:
         raise InputError(
             f"--mesh {options.mesh} is a tetrahedral (3D) mesh and the built-in model {options.model} is planar: "
-            f"run it with --model {MODEL_3D} (the 3D channel model's materials and load) or a case file"
+            f"run it with --model {MODEL_3D} (the 3D channel model's materials and load), --model "
+            f"{MODEL_COMPOSITE_3D} (the fibre composite's) or a case file"
         )
     problem = model.on(cm)
     problem.check_loaded()

@@ -32,6 +32,9 @@ __all__ = [
     "read_integer",
     "read_vector",
     "read_unit",
+    "read_point",
+    "read_direction",
+    "read_points",
     "read_string",
     "read_strings",
     "read_python",
@@ -89,6 +92,30 @@ def read_unit(value) -> tuple[float, float]:
     if math.hypot(*v) == 0.0:
         raise Bad("must be a non-zero vector")
     return v
+
+
+def read_point(value) -> tuple[float, ...]:
+    """A vector of two (2D) or three (3D) numbers: its length is checked against the mesh's dimension later."""
+    if not isinstance(value, (list, tuple)) or len(value) not in (2, 3):
+        raise Bad(f"must be a vector [x, y] (2D) or [x, y, z] (3D) of numbers, got {show_value(value)}")
+    return tuple(read_number()(v) for v in value)
+
+
+def read_direction(value) -> tuple[float, ...]:
+    """A non-zero vector of two or three numbers."""
+    v = read_point(value)
+    if math.hypot(*v) == 0.0:
+        raise Bad("must be a non-zero vector")
+    return v
+
+
+def read_points(value) -> tuple[tuple[float, ...], ...]:
+    """A non-empty list of vectors of two or three numbers (each; the lengths are checked together later)."""
+    if not isinstance(value, list) or not value:
+        raise Bad(
+            f"must be a non-empty list of vectors [[dx, dy], ...] or [[dx, dy, dz], ...], got {show_value(value)}"
+        )
+    return tuple(read_point(v) for v in value)
 
 
 def read_string(choices: Sequence[str] | None = None) -> Callable:

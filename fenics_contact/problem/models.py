@@ -13,7 +13,8 @@ that the contact strip Ω₂ = (1−H, 1)×(0,1) is homogeneous for every H ≤ 
   1/16) on a staggered lattice, positions listed in ``_INCLUSIONS``.
 
 E = ``E_high`` (10³) inside the pattern and ``E_low`` (1) elsewhere; ν = 0.35.
-Model 4 is the 3D one (``problem.models3d``: the unit cube with stiff channels through γ to Γ_C).
+Models 4 and 5 are the 3D ones: ``problem.models3d`` (the unit cube with stiff channels through γ to Γ_C) and
+``problem.composite3d`` (a block with stiff fibres, two crossing γ into the strip).
 
 Models 1 and 2 follow the paper's set-up (homogeneous strip, loads next to Γ_C).
 A user's problem generally has neither, so a third model is built to be hard:
@@ -40,10 +41,12 @@ import numpy as np
 import numpy.typing as npt
 
 from fenics_contact.errors import InputError
+from fenics_contact.problem.composite3d import fibre_block_3d
 from fenics_contact.problem.models3d import channels_3d
 from fenics_contact.problem.problem import ContactProblem, ScalarField, VectorField, constant_field
 
 __all__ = [
+    "MODELS_3D",
     "constant_field",
     "get_model",
     "model_1",
@@ -52,6 +55,10 @@ __all__ = [
     "paper_phase_model",
     "pixel_field",
 ]
+
+
+#: the built-in models of the unit cube (tetrahedra); 1, 2 and 3 are of the unit square
+MODELS_3D = (4, 5)
 
 
 def __getattr__(name: str):
@@ -207,8 +214,9 @@ def paper_phase_model(number: int, *, E_ratio: float, nu_pattern: float, nu_rest
 
 
 def get_model(number: int, **kwargs) -> ContactProblem:
-    """The built-in test model 1, 2 or 3 (the unit square), or 4 (``models3d.channels_3d``: the unit cube)."""
-    builders = {1: model_1, 2: model_2, 3: model_3, 4: channels_3d}
+    """The built-in test model 1, 2 or 3 (the unit square), 4 (``models3d.channels_3d``: the unit cube) or 5
+    (``composite3d.fibre_block_3d``: the fibre block)."""
+    builders = {1: model_1, 2: model_2, 3: model_3, 4: channels_3d, 5: fibre_block_3d}
     if number not in builders:
-        raise InputError(f"unknown test model {number!r}; the built-in models are 1, 2, 3 and 4 (3D)")
+        raise InputError(f"unknown test model {number!r}; the built-in models are 1, 2, 3, and 4 and 5 (3D)")
     return builders[number](**kwargs)

@@ -45,8 +45,8 @@ from fenics_contact.plots import (
 )
 from fenics_contact.problem.case import Case
 from fenics_contact.problem.cell_groups import bounding_box
-from fenics_contact.problem.geometry import ContactMesh, query_gmsh_file, read_mesh, unit_square
 from fenics_contact.problem.composite3d import MODEL_COMPOSITE_3D, fibre_block_3d_mesh
+from fenics_contact.problem.geometry import ContactMesh, query_gmsh_file, read_mesh, unit_square
 from fenics_contact.problem.models import MODELS_3D, get_model, pixel_field
 from fenics_contact.problem.models3d import MODEL_3D, channels_3d_mesh
 from fenics_contact.problem.pair_case import PairCase

@@ -549,7 +549,7 @@ def _solve_and_write(
         if friction is not None
         else None,
         "sliding": sliding,
-        "case": case.to_dict() | {"run": _options_echo(options)} if case is not None else None,
+        "case": case.to_dict(problem.dim) | {"run": _options_echo(options)} if case is not None else None,
     }
     _warn_open_ends(summary, comm)
     out = output.path

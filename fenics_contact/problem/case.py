@@ -68,13 +68,14 @@ import tomllib
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import Any
 
 import numpy as np
 from mpi4py import MPI
 
 from fenics_contact.errors import InputError, MeshTagError
 from fenics_contact.problem.boundary import BoundaryConditions
+from fenics_contact.problem.case_meshes3d import BUILTINS_3D, CaseMesh, MeshSpec3D, read_mesh_3d
 from fenics_contact.problem.case_values import (
     Bad,
     ByGroup,
@@ -84,23 +85,23 @@ from fenics_contact.problem.case_values import (
     Source,
     Table,
     Uniform,
+    read_direction,
     read_field,
     read_friction,
     read_integer,
-    read_motions,
     read_number,
+    read_point,
+    read_points,
     read_string,
     read_strings,
-    read_unit,
-    read_vector,
     show_value,
 )
 from fenics_contact.problem.cell_groups import SUBDOMAIN_NAMES, CellGroups, bounding_box, read_cell_groups
 from fenics_contact.problem.friction import Friction
 from fenics_contact.problem.geometry import SIDES, ContactMesh, read_mesh, unit_square
 from fenics_contact.problem.meshes import bulged_square, hertz_block
-from fenics_contact.problem.models import get_model, pixel_field
-from fenics_contact.problem.obstacles import Circle, Obstacle, Plane
+from fenics_contact.problem.models import MODELS_3D, get_model, pixel_field
+from fenics_contact.problem.obstacles import Circle, Obstacle, Plane, Sphere
 from fenics_contact.problem.pair_case import PairCase, read_pair_case
 from fenics_contact.problem.problem import ContactProblem, Frictionless, constant_field, zero_load
 from fenics_contact.problem.tags import is_neumann_name
@@ -132,14 +133,6 @@ _PROBLEM_TABLES = ("mesh", "material", "load", "boundary", "obstacle", "friction
 # ---------------------------------------------------------------------------------------------
 # meshes
 # ---------------------------------------------------------------------------------------------
-class CaseMesh(NamedTuple):
-    """A built mesh with the case's cell groups (overlay centroids) and, for the Hertz block, its sizes."""
-
-    cm: ContactMesh
-    overlays: dict
-    hertz: object | None = None
-
-
 @dataclass(frozen=True, slots=True)
 class UnitSquareMesh:
     """The structured unit square: 1/h, 1/H, the clamped sides and the traction groups by side (x = 1 is Gamma_C)."""
@@ -149,6 +142,8 @@ class UnitSquareMesh:
     clamped: tuple[str, ...] = SIDES
     neumann: tuple[tuple[str, str], ...] = ()
     kind = "unit-square"
+    dim = 2
+    groups = ()
 
     def build(self, comm: MPI.Comm, overlays: Iterable[str] = ()) -> CaseMesh:
         return CaseMesh(unit_square(self.h, self.H, comm=comm, clamped=self.clamped, neumann=dict(self.neumann)), {})
@@ -176,6 +171,8 @@ class BulgedSquareMesh:
     bulge: float = 0.1
     clamped: tuple[str, ...] = ("left",)
     kind = "bulged-square"
+    dim = 2
+    groups = ()
 
     def build(self, comm: MPI.Comm, overlays: Iterable[str] = ()) -> CaseMesh:
         return CaseMesh(
@@ -201,6 +198,8 @@ class HertzBlockMesh:
     strip: float = 2.0
     contact_width: float = 3.0
     kind = "hertz-block"
+    dim = 2
+    groups = ()
 
     def build(self, comm: MPI.Comm, overlays: Iterable[str] = ()) -> CaseMesh:
         cm, spec = hertz_block(
@@ -243,6 +242,7 @@ class MeshFile:
     H: int | None = None
     coarse_size: float | None = None
     kind = "file"
+    dim = None  #: known once the file is read
 
     @property
     def coarse(self) -> float | None:
@@ -263,8 +263,8 @@ class MeshFile:
         return {"file": str(self.path), "H": self.H, "coarse-size": self.coarse_size}
 
 
-MeshSpec = UnitSquareMesh | BulgedSquareMesh | HertzBlockMesh | MeshFile
-_BUILTINS = ("unit-square", "hertz-block", "bulged-square")
+MeshSpec = UnitSquareMesh | BulgedSquareMesh | HertzBlockMesh | MeshFile | MeshSpec3D
+_BUILTINS = ("unit-square", "hertz-block", "bulged-square", *BUILTINS_3D)
 
 
 def _mesh(source: Source, data) -> MeshSpec:
@@ -283,6 +283,10 @@ def _mesh(source: Source, data) -> MeshSpec:
         t.finish(" for a mesh file")
         return spec
     kind = t.get("builtin", read_string(_BUILTINS))
+    if kind in BUILTINS_3D:
+        spec = read_mesh_3d(source, t, kind)
+        t.finish(f' for builtin = "{kind}"')
+        return spec
     if kind == "hertz-block":
         positive = read_number(positive=True)
         spec = HertzBlockMesh(
@@ -372,11 +376,14 @@ class Material:
         return out
 
 
+_MODELS = (1, 2, 3, *MODELS_3D)
+
+
 def _material(source: Source, data, load) -> Material:
     t = Table(source, "material", data or {})
     model = t.get("model", read_integer(1))
-    if model is not None and model not in (1, 2, 3):
-        raise source.error(f"material.model must be 1, 2 or 3 (the built-in models), got {model}")
+    if model is not None and model not in _MODELS:
+        raise source.error(f"material.model must be 1, 2 or 3 (2D) or 4 or 5 (3D) (the built-in models), got {model}")
     E_high = t.get("E-high", read_number(positive=True))
     E_low = t.get("E-low", read_number(positive=True))
     if model is None and (E_high is not None or E_low is not None):
@@ -388,13 +395,13 @@ def _material(source: Source, data, load) -> Material:
         read_field(source, "material.nu", nu, read_number(low=-1.0, high=0.5), vector=False) if nu is not None else None
     )
     if model is None and (E is None or nu is None):
-        raise source.error(f"material.{'E' if E is None else 'nu'} is required (or material.model = 1, 2 or 3)")
+        raise source.error(f"material.{'E' if E is None else 'nu'} is required (or material.model = 1, ..., 5)")
     t.finish()
     lt = Table(source, "load", load or {})
     force = lt.raw("body-force")
     lt.finish()
     force = (
-        read_field(source, "load.body-force", force, read_vector, vector=True, pixels=False)
+        read_field(source, "load.body-force", force, read_point, vector=True, pixels=False)
         if force is not None
         else None
     )
@@ -407,27 +414,34 @@ class Boundary:
 
     displacement: Uniform | PythonField | None = None
     tractions: tuple[tuple[str, Uniform | PythonField], ...] = ()
+    rollers: tuple[tuple[int, float], ...] = ()  #: symmetry planes (axis, value): u_axis = 0 there
 
-    def conditions(self) -> BoundaryConditions:
+    def conditions(self, rollers: tuple[tuple[int, float], ...] = ()) -> BoundaryConditions:
+        """The conditions, with the mesh's own symmetry planes ``rollers`` added to the case's."""
+
         def value(spec):
             return spec.value if isinstance(spec, Uniform) else spec.function
 
         return BoundaryConditions(
             displacement=value(self.displacement) if self.displacement is not None else None,
             tractions={name: value(spec) for name, spec in self.tractions},
+            rollers=tuple(dict.fromkeys((*self.rollers, *rollers))),
         )
 
     def echo(self) -> dict:
-        return {
+        out = {
             "displacement": self.displacement.echo() if self.displacement else "clamped",
             "tractions": {name: spec.echo() for name, spec in self.tractions},
         }
+        if self.rollers:
+            out["rollers"] = {"xyz"[axis]: [v for a, v in self.rollers if a == axis] for axis, _ in self.rollers}
+        return out
 
 
 def _vector_or_python(source: Source, key: str, value) -> Uniform | PythonField:
-    spec = read_field(source, key, value, read_vector, vector=True, pixels=False)
+    spec = read_field(source, key, value, read_point, vector=True, pixels=False)
     if isinstance(spec, ByGroup):
-        raise source.error(f"{key} must be a vector [x, y] or {{python = 'file.py:name'}}, got a table")
+        raise source.error(f"{key} must be a vector [x, y] or [x, y, z] or {{python = 'file.py:name'}}, got a table")
     return spec
 
 
@@ -435,6 +449,7 @@ def _boundary(source: Source, data, mesh: MeshSpec) -> Boundary:
     t = Table(source, "boundary", data or {})
     displacement = t.raw("displacement")
     tractions = t.raw("tractions")
+    rollers = _rollers(source, t.raw("rollers"))
     t.finish()
     displacement = (
         _vector_or_python(source, "boundary.displacement", displacement) if displacement is not None else None
@@ -466,7 +481,28 @@ def _boundary(source: Source, data, mesh: MeshSpec) -> Boundary:
                 f"the mesh has the traction group {sorted(known - given)[0]!r} but "
                 "boundary.tractions gives it no traction"
             )
-    return Boundary(displacement, tuple(pairs))
+    return Boundary(displacement, tuple(pairs), rollers)
+
+
+def _rollers(source: Source, table) -> tuple[tuple[int, float], ...]:
+    """``boundary.rollers = {z = [0.0, 1.0]}``: the planes x_i = c on rollers (u_i = 0, tangentially free)."""
+    if table is None:
+        return ()
+    if not isinstance(table, dict) or not table:
+        raise source.error(
+            "boundary.rollers must be a table {axis = [values]} of symmetry planes, e.g. {z = [0.0, 1.0]} (u_z = 0 "
+            f"on the planes z = 0 and z = 1), got {show_value(table)}"
+        )
+    planes = []
+    for axis, values in sorted(table.items()):
+        if axis not in ("x", "y", "z"):
+            raise source.error(f"boundary.rollers.{axis}: the axes are x, y and z")
+        values = values if isinstance(values, list) else [values]
+        try:
+            planes += [("xyz".index(axis), read_number()(v)) for v in values]
+        except Bad as bad:
+            raise source.error(f"boundary.rollers.{axis} {bad}") from None
+    return tuple(planes)
 
 
 @dataclass(frozen=True, slots=True)
@@ -474,14 +510,14 @@ class ObstacleSpec:
     """The rigid obstacle and its indentation steps (depths along ``direction``)."""
 
     shape: str = "wall"
-    point: tuple[float, float] | None = None
-    normal: tuple[float, float] | None = None
-    centre: tuple[float, float] | None = None
+    point: tuple[float, ...] | None = None
+    normal: tuple[float, ...] | None = None
+    centre: tuple[float, ...] | None = None
     radius: float | None = None
     depths: tuple[float, ...] = ()
-    direction: tuple[float, float] | None = None
+    direction: tuple[float, ...] | None = None
     steps: bool = False  #: ``indentation`` was a list: load steps, a force–indentation curve
-    motions: tuple[tuple[float, float], ...] = ()  #: rigid displacements, one per load step (a sliding path)
+    motions: tuple[tuple[float, ...], ...] = ()  #: rigid displacements, one per load step (a sliding path)
 
     def base(self) -> Obstacle | None:
         """The obstacle where the case places it (None: the wall flush with Gamma_C)."""
@@ -489,6 +525,8 @@ class ObstacleSpec:
             return Plane(self.point, self.normal)
         if self.shape == "circle":
             return Circle(self.centre, self.radius)
+        if self.shape == "sphere":
+            return Sphere(self.centre, self.radius)
         return None
 
     def at(self, depth: float) -> Obstacle:
@@ -504,7 +542,7 @@ class ObstacleSpec:
         out = {"shape": self.shape}
         if self.shape == "plane":
             out |= {"point": list(self.point), "normal": list(self.normal)}
-        elif self.shape == "circle":
+        elif self.shape in ("circle", "sphere"):
             out |= {"centre": list(self.centre), "radius": self.radius}
         if self.depths:
             out |= {
@@ -518,21 +556,22 @@ class ObstacleSpec:
 
 def _obstacle(source: Source, data) -> ObstacleSpec:
     t = Table(source, "obstacle", data or {})
-    shape = t.get("shape", read_string(("wall", "plane", "circle")), "wall")
+    shape = t.get("shape", read_string(("wall", "plane", "circle", "sphere")), "wall")
     point = normal = centre = radius = None
     if shape == "plane":
-        point = t.get("point", read_vector, required=True)
-        normal = t.get("normal", read_unit, required=True)
-    elif shape == "circle":
-        centre = t.get("centre", read_vector, required=True)
+        point = t.get("point", read_point, required=True)
+        normal = t.get("normal", read_direction, required=True)
+    elif shape in ("circle", "sphere"):
+        centre = t.get("centre", read_point, required=True)
         radius = t.get("radius", read_number(positive=True), required=True)
     indentation = t.raw("indentation")
-    direction = t.get("direction", read_unit)
-    motions = t.get("motion", read_motions, ())
+    direction = t.get("direction", read_direction)
+    motions = t.get("motion", read_points, ())
     t.finish(f' for shape = "{shape}"')
     if motions and (indentation is not None or shape == "wall"):
         raise source.error(
-            "obstacle.motion moves a plane or a circle (not the default wall) and replaces obstacle.indentation: "
+            "obstacle.motion moves a plane, a circle or a sphere (not the default wall) and replaces "
+            "obstacle.indentation: "
             "give one of the two"
         )
     steps = isinstance(indentation, list)
@@ -548,21 +587,21 @@ def _obstacle(source: Source, data) -> ObstacleSpec:
             raise source.error(f"obstacle.indentation {bad}") from None
     if depths and shape == "wall":
         raise source.error(
-            'obstacle.indentation moves a plane or a circle: give shape = "plane" or "circle" (the '
-            "default wall is flush with Gamma_C)"
+            'obstacle.indentation moves a plane, a circle or a sphere: give shape = "plane", "circle" or "sphere" '
+            "(the default wall is flush with Gamma_C)"
         )
     if direction is not None and not depths:
         raise source.error("obstacle.direction is the direction of obstacle.indentation, which is not given")
     if depths and direction is None:
         if shape != "plane":
             raise source.error(
-                "obstacle.direction is required with obstacle.indentation for a circle (the direction "
-                "it moves in, e.g. [0, -1])"
+                f"obstacle.direction is required with obstacle.indentation for a {shape} (the direction "
+                f"it moves in, e.g. {'[0, -1]' if shape == 'circle' else '[0, 0, -1]'})"
             )
         direction = normal  # along its outward normal: into the body
     if direction is not None:
         length = math.hypot(*direction)
-        direction = (direction[0] / length, direction[1] / length)
+        direction = tuple(v / length for v in direction)
     return ObstacleSpec(shape, point, normal, centre, radius, depths, direction, steps, motions)
 
 
@@ -583,6 +622,41 @@ class Case:
     overrides: tuple[tuple[str, Any], ...] = ()
     friction: Friction | None = None  #: the friction law of ``[friction]`` (None: frictionless)
 
+    def check_dimension(self, dim: int | None, where: str) -> None:
+        """InputError naming the key when a vector, the obstacle's shape or the model is not of the mesh's
+        dimension ``dim`` (None: unknown until the mesh file is read; the vectors then agree among themselves)."""
+        vectors = _given_vectors(self)
+        if dim is None:
+            if len({n for _, n in vectors}) > 1:
+                (k1, n1), (k2, n2) = vectors[0], next(v for v in vectors if v[1] != vectors[0][1])
+                raise InputError(
+                    f"case {self.path}: {k1} has {n1} components but {k2} has {n2}: the vectors of a case all have "
+                    "the mesh's dimension ([x, y] in 2D, [x, y, z] in 3D)"
+                )
+            return
+        cells = "tetrahedra" if dim == 3 else "triangles"
+        shape_dim = {"circle": 2, "sphere": 3}.get(self.obstacle.shape, dim)
+        if shape_dim != dim:
+            other = "sphere" if dim == 3 else "circle"
+            raise InputError(
+                f'case {self.path}: obstacle.shape = "{self.obstacle.shape}" is a {shape_dim}D obstacle but {where} '
+                f'is {dim}D ({cells}): give shape = "{other}" (or "plane")'
+            )
+        model = self.material.model
+        if model is not None and (model in MODELS_3D) != (dim == 3):
+            models = "4 or 5" if dim == 3 else "1, 2 or 3"
+            raise InputError(
+                f"case {self.path}: material.model = {model} is a {5 - dim}D model but {where} is {dim}D ({cells}): "
+                f"give material.model = {models} or the materials themselves"
+            )
+        for key, n in vectors:
+            if n != dim:
+                form = "[x, y, z]" if dim == 3 else "[x, y]"
+                raise InputError(
+                    f"case {self.path}: {key} has {n} components but {where} is {dim}D ({cells}): give {dim} "
+                    f"components, {form}"
+                )
+
     def build_mesh(self, comm: MPI.Comm = MPI.COMM_WORLD) -> CaseMesh:
         """The mesh (collective); a mesh file's material groups are read on rank 0."""
         overlays = [name for name in self.material.groups() if name not in SUBDOMAIN_NAMES]
@@ -594,6 +668,9 @@ class Case:
         Checked here: every cell has a material (groups, pixel maps), the traction groups match the mesh's.
         """
         cm = mesh.cm
+        dim = cm.mesh.topology.dim
+        if self.mesh.dim is None:
+            self.check_dimension(dim, f"the mesh file {self.mesh.path.name}")
         material = self.material
         groups = CellGroups(cm, mesh.overlays) if material.groups() else None
         base = None
@@ -603,7 +680,7 @@ class Case:
         E = self._scalar(material.E, "material.E", cm, groups, (0.0, math.inf)) if material.E else base.youngs_modulus
         nu = self._scalar(material.nu, "material.nu", cm, groups, (-1.0, 0.5)) if material.nu else base.poisson_ratio
         if material.body_force is not None:
-            load = self._vector(material.body_force, groups)
+            load = self._vector(material.body_force, groups, dim)
         elif base is not None:
             load = base.load
         else:
@@ -614,7 +691,7 @@ class Case:
             poisson_ratio=nu,
             load=load,
             description=self.description or f"case {self.path.name}",
-            boundary=self.boundary.conditions(),
+            boundary=self.boundary.conditions(mesh.rollers),
             obstacle=self.obstacle.final(),
             law=self.friction or Frictionless(),
             mesh=cm,
@@ -642,16 +719,16 @@ class Case:
             )
         return fn
 
-    def _vector(self, spec: FieldSpec, groups: CellGroups | None) -> Callable:
+    def _vector(self, spec: FieldSpec, groups: CellGroups | None, dim: int) -> Callable:
         if isinstance(spec, Uniform):
             value = np.asarray(spec.value)
             return lambda x: np.repeat(value[:, None], x.shape[1], axis=1)
         if isinstance(spec, PythonField):
             return spec.function
-        return groups.field(dict(spec.values), shape=(2,), default=0.0)
+        return groups.field(dict(spec.values), shape=(dim,), default=0.0)
 
-    def to_dict(self) -> dict:
-        """The resolved case (defaults filled in, file names absolute), for the summary."""
+    def to_dict(self, dim: int = 2) -> dict:
+        """The resolved case (defaults filled in, file names absolute), for the summary; ``dim`` the mesh's."""
         return {
             "file": str(self.path),
             "description": self.description,
@@ -660,7 +737,7 @@ class Case:
             "load": {
                 "body-force": self.material.body_force.echo()
                 if self.material.body_force
-                else ("model" if self.material.model else [0.0, 0.0])
+                else ("model" if self.material.model else [0.0] * dim)
             },
             "boundary": self.boundary.echo(),
             "obstacle": self.obstacle.echo(),
@@ -675,6 +752,30 @@ class Case:
             },
             "overrides": {key: value for key, value in self.overrides},
         }
+
+
+def _given_vectors(case: Case) -> list[tuple[str, int]]:
+    """(key, number of components) of every vector the case gives (a python field's are its own), and of the
+    rollers' axes beyond y (z: three)."""
+    found = []
+
+    def field(key: str, spec) -> None:
+        if isinstance(spec, Uniform):
+            found.append((key, len(spec.value)))
+        elif isinstance(spec, ByGroup):
+            found.extend((f"{key}.{name}", len(value)) for name, value in spec.values)
+
+    field("load.body-force", case.material.body_force)
+    field("boundary.displacement", case.boundary.displacement)
+    for name, spec in case.boundary.tractions:
+        field(f"boundary.tractions.{name}", spec)
+    obstacle = case.obstacle
+    for key in ("point", "normal", "centre", "direction"):
+        if getattr(obstacle, key) is not None:
+            found.append((f"obstacle.{key}", len(getattr(obstacle, key))))
+    found.extend((f"obstacle.motion[{k}]", len(m)) for k, m in enumerate(obstacle.motions))
+    found.extend(("boundary.rollers.z (an axis)", 3) for axis, _ in case.boundary.rollers if axis == 2)
+    return found
 
 
 def _check_pixels(spec: Pixels, extent, box, key: str, bounds: tuple[float, float], path: Path) -> None:
@@ -758,11 +859,11 @@ def load_case(path: str | Path, overrides: Sequence[tuple[str, Any]] = ()) -> "C
     mesh = _mesh(source, data["mesh"])
     material = _material(source, data.get("material"), data.get("load"))
     if not isinstance(mesh, MeshFile):
-        other = sorted(material.groups() - set(SUBDOMAIN_NAMES))
+        other = sorted(material.groups() - {*SUBDOMAIN_NAMES, *mesh.groups})
         if other:
             raise source.error(
                 f"the cell group {other[0]!r} is named in [material]/[load], but the built-in "
-                f"{mesh.kind} mesh has only {list(SUBDOMAIN_NAMES)}",
+                f"{mesh.kind} mesh has only {[*SUBDOMAIN_NAMES, *mesh.groups]}",
                 MeshTagError,
             )
     boundary = _boundary(source, data.get("boundary"), mesh)
@@ -774,4 +875,6 @@ def load_case(path: str | Path, overrides: Sequence[tuple[str, Any]] = ()) -> "C
         if not isinstance(values, dict):
             raise source.error(f"{table} must be a table ([{table}]), got {show_value(values)}")
         run[table] = dict(values)
-    return Case(path, description, mesh, material, boundary, obstacle, run, tuple(overrides), friction)
+    case = Case(path, description, mesh, material, boundary, obstacle, run, tuple(overrides), friction)
+    case.check_dimension(mesh.dim, f'the mesh (builtin = "{mesh.kind}")')
+    return case

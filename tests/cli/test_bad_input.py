@@ -123,6 +123,14 @@ nu = 0.3
 [boundary]
 tractions = {{Gamma_N_top = [0.0, -0.01]}}
 """
+CUBE = """[mesh]
+builtin = "unit-cube"
+h = 4
+H = 2
+[material]
+E = 1.0
+nu = 0.3
+"""
 PLANE = """[obstacle]
 shape = "plane"
 point = [1.0, 0.0]
@@ -444,13 +452,56 @@ CASES = [
         "case: indentation of the flush wall",
         _case(SQUARE + "[obstacle]\nindentation = 0.01\n"),
         2,
-        "obstacle.indentation moves a plane or a circle",
+        "obstacle.indentation moves a plane, a circle or a sphere",
     ),
     Case(
         "case: a circle's indentation with no direction",
         _case(SQUARE + '[obstacle]\nshape = "circle"\ncentre = [1.5, 0.5]\nradius = 0.5\nindentation = 0.01\n'),
         2,
         "obstacle.direction is required with obstacle.indentation for a circle",
+    ),
+    Case(
+        "case: a 2-vector body force on the unit cube",
+        _case(CUBE + "[load]\nbody-force = [1.0, 0.0]\n"),
+        2,
+        'load.body-force has 2 components but the mesh (builtin = "unit-cube") is 3D (tetrahedra): give 3',
+    ),
+    Case(
+        "case: a 3-vector plane on the unit square",
+        _case(SQUARE + PLANE.replace("point = [1.0, 0.0]", "point = [1.0, 0.0, 0.0]")),
+        2,
+        'obstacle.point has 3 components but the mesh (builtin = "unit-square") is 2D (triangles): give 2',
+    ),
+    Case(
+        "case: a circle on the unit cube",
+        _case(CUBE + '[obstacle]\nshape = "circle"\ncentre = [1.5, 0.5]\nradius = 0.5\n'),
+        2,
+        'obstacle.shape = "circle" is a 2D obstacle but the mesh (builtin = "unit-cube") is 3D (tetrahedra): '
+        'give shape = "sphere"',
+    ),
+    Case(
+        "case: a sphere on the unit square",
+        _case(SQUARE + '[obstacle]\nshape = "sphere"\ncentre = [1.5, 0.5, 0.0]\nradius = 0.5\n'),
+        2,
+        'obstacle.shape = "sphere" is a 3D obstacle but the mesh (builtin = "unit-square") is 2D',
+    ),
+    Case(
+        "case: a 3D model on the unit square",
+        _case(SQUARE.replace("nu = 0.0", "nu = 0.0\nmodel = 5")),
+        2,
+        'material.model = 5 is a 3D model but the mesh (builtin = "unit-square") is 2D (triangles)',
+    ),
+    Case(
+        "case: vectors of two dimensions with a mesh file",
+        _case(COMPOSITE.replace("[boundary]", "[load]\nbody-force = [0.0, 0.0, 1.0]\n[boundary]")),
+        2,
+        "load.body-force has 3 components but boundary.tractions.Gamma_N_top has 2",
+    ),
+    Case(
+        "case: a 3-vector traction on a planar mesh file",
+        _case(COMPOSITE.replace("[0.0, -0.01]", "[0.0, -0.01, 0.0]")),
+        2,
+        "boundary.tractions.Gamma_N_top has 3 components but the mesh file composite.msh is 2D (triangles)",
     ),
     Case(
         "case: a bad run option",

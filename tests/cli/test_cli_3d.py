@@ -63,13 +63,13 @@ def _gmsh_box(path, split: float = 0.75, h: float = 0.25) -> None:
 
 
 def test_a_case_file_on_a_tetrahedral_mesh_runs_algorithm_1(tmp_path):
-    """A gmsh box pressed by a plane (planar obstacle, extruded along z) in one load step: the same contact
+    """A gmsh box pressed by a plane (its point and normal 3-vectors) in one load step: the same contact
     force as the monolithic solve, every Γ_C node in contact."""
     _gmsh_box(tmp_path / "box.msh")
     case = tmp_path / "box.toml"
     case.write_text(
         'description = "a box pressed by a plane"\n[mesh]\nfile = "box.msh"\n[material]\nE = 1.0\nnu = 0.3\n'
-        '[obstacle]\nshape = "plane"\npoint = [1.0, 0.0]\nnormal = [-1.0, 0.0]\nindentation = [0.01]\n'
+        '[obstacle]\nshape = "plane"\npoint = [1.0, 0.0, 0.0]\nnormal = [-1.0, 0.0, 0.0]\nindentation = [0.01]\n'
         '[run]\nmethod = "primal"\ntol = 1e-8\n'
     )
     out = tmp_path / "run"

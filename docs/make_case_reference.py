@@ -22,6 +22,7 @@ from fenics_contact import cli
 from fenics_contact.errors import InputError
 from fenics_contact.hybrid.two_body import TwoBodyHybridOptions
 from fenics_contact.problem import case as case_module
+from fenics_contact.problem import case_meshes3d
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -31,6 +32,14 @@ VARIANTS = [
     ("mesh", 'builtin = "unit-square"', '[mesh]\nbuiltin = "unit-square"\n', case_module.UnitSquareMesh),
     ("mesh", 'builtin = "hertz-block"', '[mesh]\nbuiltin = "hertz-block"\na = 1.0\n', case_module.HertzBlockMesh),
     ("mesh", 'builtin = "bulged-square"', '[mesh]\nbuiltin = "bulged-square"\n', case_module.BulgedSquareMesh),
+    ("mesh", 'builtin = "unit-cube"', '[mesh]\nbuiltin = "unit-cube"\n', case_meshes3d.UnitCubeMesh),
+    (
+        "mesh",
+        'builtin = "hertz-quarter-block"',
+        '[mesh]\nbuiltin = "hertz-quarter-block"\na = 1.0\n',
+        case_meshes3d.HertzQuarterBlockMesh,
+    ),
+    ("mesh", 'builtin = "fibre-block"', '[mesh]\nbuiltin = "fibre-block"\n', case_meshes3d.FibreBlockMesh),
     ("mesh", 'file = "..."', f'[mesh]\nfile = "{ROOT / "cases" / "pad.msh"}"\n', case_module.MeshFile),
     ("material", "", "[material]\nE = 1.0\nnu = 0.3\n", None),
     ("load", "", "[load]\n", None),
@@ -38,34 +47,48 @@ VARIANTS = [
     ("obstacle", 'shape = "wall"', "[obstacle]\n", None),
     ("obstacle", 'shape = "plane"', '[obstacle]\nshape = "plane"\npoint = [1.0, 0.0]\nnormal = [-1.0, 0.0]\n', None),
     ("obstacle", 'shape = "circle"', '[obstacle]\nshape = "circle"\ncentre = [2.0, 0.5]\nradius = 1.0\n', None),
+    (
+        "obstacle",
+        'shape = "sphere"',
+        '[obstacle]\nshape = "sphere"\ncentre = [1.5, 0.5, 0.5]\nradius = 0.5\n',
+        None,
+    ),
     ("friction", 'law = "coulomb"', '[friction]\nlaw = "coulomb"\nmu = 0.3\n', None),
     ("friction", 'law = "tresca"', '[friction]\nlaw = "tresca"\nthreshold = 0.01\n', None),
 ]
 
-_SIDES = "a list of `left`, `bottom`, `top`"
+_SIDES = "a list of `left`, `bottom`, `top` (2D); of `xmin`, `ymin`, `ymax`, `zmin`, `zmax` (unit cube)"
 #: (table, key) -> (type, default or None (taken from the mesh specification), meaning)
 PROBLEM_KEYS = {
     ("mesh", "builtin"): (
         "string",
         "—",
         "a built-in mesh: `unit-square` (the paper's (0,1)², Γ_C at x = 1), "
-        "`hertz-block` (a block under a cylinder, graded towards the contact) or `bulged-square` "
-        "(the unit square with a curved contact side); exactly one of `builtin` and `file`",
+        "`hertz-block` (a block under a cylinder, graded towards the contact), `bulged-square` "
+        "(the unit square with a curved contact side); in 3D (tetrahedra) `unit-cube` ((0,1)³, Γ_C at x = 1), "
+        "`hertz-quarter-block` (the quarter block under a sphere, its symmetry planes x = 0, y = 0 on rollers) "
+        "or `fibre-block` (the block of model 5 with its cell groups `fibres` and `matrix`, Γ_C at x = 1, "
+        "clamped at x = 0); exactly one of `builtin` and `file`",
     ),
     ("mesh", "file"): (
         "file name",
         "—",
-        "a gmsh `.msh` file of planar triangles (relative to the case file): physical "
-        "groups `Gamma_C`, `Gamma_D`, optionally `Gamma_N*` and material groups, and either all of "
-        "`Omega1`, `Omega2`, `gamma` or none (the strip Ω₂ and γ are then built along Γ_C)",
+        "a gmsh `.msh` file of planar triangles or of tetrahedra (relative to the case file): physical "
+        "groups `Gamma_C`, `Gamma_D`, optionally `Gamma_N*` and material groups (surface groups in 2D, "
+        "volume groups in 3D), and either all of `Omega1`, `Omega2`, `gamma` or none (the strip Ω₂ and γ "
+        "are then built along Γ_C)",
     ),
-    ("mesh", "h"): ("integer ≥ 2", None, "1/h, the fine mesh size (a multiple of 1/H)"),
+    ("mesh", "h"): (
+        "integer ≥ 2",
+        None,
+        "1/h, the fine mesh size (a multiple of 1/H; on the fibre block the size away from the contact)",
+    ),
     ("mesh", "H"): (
         "integer",
         None,
         "1/H: the coarse grid of squares of side 1/H (the width of the strip Ω₂ of "
-        "the unit square; with `file`, the coarse grid over the bounding box that the multiscale "
-        "methods use and, without Omega1/Omega2/gamma in the file, the strip width)",
+        "the unit square, cube and fibre block; with `file`, the coarse grid over the bounding box that the "
+        "multiscale methods use and, without Omega1/Omega2/gamma in the file, the strip width; planar only)",
     ),
     ("mesh", "coarse-size"): (
         "number > 0",
@@ -80,57 +103,76 @@ PROBLEM_KEYS = {
     ("mesh", "neumann"): (
         'table `{side = "Gamma_N_<label>"}`',
         "{}",
-        "sides that carry a traction group (its traction in `boundary.tractions`)",
+        "sides (faces of the cube) that carry a traction group (its traction in `boundary.tractions`)",
     ),
     ("mesh", "a"): (
         "number > 0",
         "required",
-        "the expected contact half-width; the block and the cell sizes are multiples of it",
+        "the expected contact half-width (radius under a sphere); the block and the cell sizes are multiples of it",
     ),
     ("mesh", "refinement"): ("number > 0", None, "r: contact cells of size a/(20 r)"),
     ("mesh", "width"): ("number > 0", None, "the block's width, in multiples of a"),
     ("mesh", "depth"): ("number > 0", None, "the block's depth, in multiples of a"),
     ("mesh", "strip"): ("number > 0", None, "the depth of the strip Ω₂ below the top face, in multiples of a"),
+    ("mesh", "size"): ("number > 2", None, "the side of the quarter block, in multiples of a"),
+    ("mesh", "contact-size"): (
+        "number > 0",
+        "1/h",
+        "the cell size within `contact-radius` of the middle of Γ_C (at most 1/h; it grows to 1/h over as far again)",
+    ),
+    ("mesh", "contact-radius"): ("number in (0, 1)", None, "the radius of the refined ball about the middle of Γ_C"),
     ("mesh", "contact-width"): ("number > 0", None, "Γ_C is the top segment \\|x\\| ≤ contact-width·a"),
     ("mesh", "bulge"): ("number in (0, ½)", None, "how far the circular arc of Γ_C bulges out at y = ½"),
     ("material", "E"): (
         "number, table by group, pixel map or python",
         "required (or `model`)",
-        "Young's modulus: a number; `{group = value, ...}` by cell group (`Omega1`, `Omega2` or the "
-        'mesh file\'s surface groups); `{pixels = "E.npy", extent = [x0, x1, y0, y1]}` (a 2D array, '
+        "Young's modulus: a number; `{group = value, ...}` by cell group (`Omega1`, `Omega2`, the "
+        "fibre block's `fibres` and `matrix`, or the mesh file's surface groups, volume groups in 3D); "
+        '`{pixels = "E.npy", extent = [x0, x1, y0, y1]}` (2D: a 2D array, '
         "row 0 at the bottom, `.npy` or text/`.csv`; extent default the bounding box); "
         '`{python = "file.py:name"}` (a callable x (3, N) → (N,))',
     ),
     ("material", "nu"): ("as `E`", "required (or `model`)", "the Poisson ratio, in (−1, ½), in the same forms"),
-    ("material", "model"): ("1, 2 or 3", "—", "the E, ν and body force of a built-in test model"),
+    ("material", "model"): (
+        "1, 2 or 3; 4 or 5 (3D)",
+        "—",
+        "the E, ν and body force of a built-in test model (4, 5: of a 3D mesh; not their boundary conditions)",
+    ),
     ("material", "E-high"): ("number > 0", "1e3", "with `model`: E in the high-modulus pattern"),
     ("material", "E-low"): ("number > 0", "1", "with `model`: E elsewhere"),
     ("load", "body-force"): (
         "vector, table by group or python",
-        "[0, 0]",
-        "the body force f: `[fx, fy]`, "
+        "0",
+        "the body force f: `[fx, fy]` (`[fx, fy, fz]` in 3D), "
         "`{group = [fx, fy], ...}` (0 on cells in no group given) or "
-        '`{python = "file.py:name"}` (x (3, N) → (2, N))',
+        '`{python = "file.py:name"}` (x (3, N) → (d, N))',
     ),
     ("boundary", "displacement"): (
         "vector or python",
         "clamped",
-        'u on Γ_D: `[ux, uy]` or `{python = "file.py:name"}`',
+        'u on Γ_D: `[ux, uy]` (`[ux, uy, uz]` in 3D) or `{python = "file.py:name"}`',
     ),
     ("boundary", "tractions"): (
         "table `{Gamma_N_<label> = [tx, ty] or {python = ...}}`",
         "{}",
-        "σn on each traction group; every traction group of the mesh needs one",
+        "σn on each traction group (3-vectors in 3D); every traction group of the mesh needs one",
+    ),
+    ("boundary", "rollers"): (
+        "table `{axis = [values]}`",
+        "{}",
+        "symmetry planes on rollers: `{z = [0.0, 1.0]}` holds u_z = 0 on the boundary facets in the planes z = 0 "
+        "and z = 1 (the primal methods in 3D); the hertz-quarter-block's own planes x = 0, y = 0 are added",
     ),
     ("obstacle", "shape"): (
-        '`"wall"`, `"plane"` or `"circle"`',
+        '`"wall"`, `"plane"`, `"circle"` or `"sphere"`',
         '"wall"',
-        "the rigid obstacle: a wall flush with Γ_C (zero gap), a half-plane or a disc (a cylinder in plane strain)",
+        "the rigid obstacle: a wall flush with Γ_C (zero gap), a half-plane (half-space in 3D), a disc (a "
+        "cylinder in plane strain; 2D) or a ball (3D)",
     ),
-    ("obstacle", "point"): ("vector", "required", "a point of the plane"),
+    ("obstacle", "point"): ("vector", "required", "a point of the plane (every vector of a case has the mesh's d)"),
     ("obstacle", "normal"): ("vector ≠ 0", "required", "the plane's outward normal, pointing towards the body"),
-    ("obstacle", "centre"): ("vector", "required", "the centre of the circle (outside the body)"),
-    ("obstacle", "radius"): ("number > 0", "required", "the radius of the circle"),
+    ("obstacle", "centre"): ("vector", "required", "the centre of the circle or sphere (outside the body)"),
+    ("obstacle", "radius"): ("number > 0", "required", "the radius of the circle or sphere"),
     ("obstacle", "indentation"): (
         "number or list of numbers",
         "none",
@@ -141,7 +183,7 @@ PROBLEM_KEYS = {
     ("obstacle", "direction"): (
         "vector ≠ 0",
         "the plane's normal",
-        "the direction the obstacle moves in (normalized); required for a circle with `indentation`",
+        "the direction the obstacle moves in (normalized); required for a circle or sphere with `indentation`",
     ),
     ("obstacle", "motion"): (
         "list of vectors",

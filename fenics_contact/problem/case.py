@@ -14,14 +14,16 @@ unless said; unknown keys are refused.  Relative file names are relative to the 
     builtin = "hertz-block"                  # a (contact half-width, required), refinement = 1,
                                              #   width = 80, depth = 40, strip = 2, contact-width = 3 (x a)
     builtin = "bulged-square"                # h = 32, H = 4, bulge = 0.1, clamped = ["left"]
+    builtin = "unit-cube" | "hertz-quarter-block" | "fibre-block"   # 3D (problem.case_meshes3d)
     file = "my.msh"                          # coarse-size = H (a length) or H = 1/H: the coarse grid (multiscale
-                                             #   methods) and, without Omega1/Omega2/gamma in the file, the strip
+                                             #   methods) and, without Omega1/Omega2/gamma in the file, the strip;
+                                             #   triangles, or tetrahedra (3D: volume groups)
 
     [material]                               # E and nu: required unless model is given
     E  = 1.0 | {Omega1 = 1.0, fibres = 1e3} | {pixels = "E.npy", extent = [x0, x1, y0, y1]}
          | {python = "fields.py:E"}          # a number, by cell group, a pixel map, a callable x -> (N,)
     nu = 0.3                                 # the same forms
-    model = 1                                # E, nu and body force of built-in model 1, 2, 3
+    model = 1                                # E, nu and body force of built-in model 1, 2, 3 (2D) or 4, 5 (3D)
     E-high = 1e3                             # with model: its E in / outside the pattern
     E-low = 1.0
 
@@ -31,13 +33,16 @@ unless said; unknown keys are refused.  Relative file names are relative to the 
     [boundary]
     displacement = [ux, uy] | {python = "fields.py:u_D"}      # on Gamma_D; default clamped
     tractions = {Gamma_N_top = [tx, ty] | {python = ...}, ...} # one per Gamma_N group of the mesh
+    rollers = {z = [0.0, 1.0]}                                 # symmetry planes: u_z = 0 on z = 0 and z = 1
 
     [obstacle]
     shape = "wall"                           # flush with Gamma_C, zero gap (the default)
     shape = "plane"                          # point = [x, y], normal = [nx, ny] (outward, towards the body)
     shape = "circle"                         # centre = [x, y], radius = R
+    shape = "sphere"                         # centre = [x, y, z], radius = R (3D)
     indentation = 1e-3 | [2e-4, 4e-4, ...]   # rigid motion by depth x direction; a list = load steps
     direction = [dx, dy]                     # default: the plane's normal (into the body); required for a circle
+                                             #   or a sphere
     motion = [[dx, dy], ...]                 # or: rigid displacements, one per load step (a sliding path)
 
     [friction]                               # default: frictionless
@@ -50,6 +55,9 @@ unless said; unknown keys are refused.  Relative file names are relative to the 
     [mixed]        beta, epsilon           (mixed, mixed-ms)
     [multiscale]   layers, nbasis, cache-dir   (primal-ms, mixed-ms)
     [mixed-ms]     min-gap, max-nbasis
+
+On a 3D mesh every vector has three components ([fx, fy, fz], ...): a vector, an obstacle shape or a model of
+the other dimension is refused naming its key (``Case.check_dimension``; for a mesh file once it is read).
 
 The run tables use the command line's option names; the command line validates them
 (``cli.RunOptions``) and its flags override them.  A method's table is used only when

@@ -62,7 +62,7 @@ def test_model_3_is_hard_where_models_1_and_2_are_easy():
 
 def test_unknown_model_and_pixel_field():
     with pytest.raises(InputError):
-        get_model(5)
+        get_model(6)
     field = pixel_field([[1.0, 2.0], [3.0, 4.0]])
     pts = np.array([[0.25, 0.75, 0.25, 0.75], [0.25, 0.25, 0.75, 0.75], [0, 0, 0, 0]])
     assert np.array_equal(field(pts), [1.0, 2.0, 3.0, 4.0])

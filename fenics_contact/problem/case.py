@@ -83,6 +83,7 @@ from mpi4py import MPI
 
 from fenics_contact.errors import InputError, MeshTagError
 from fenics_contact.problem.boundary import BoundaryConditions
+from fenics_contact.problem.case_dimension import check_dimension
 from fenics_contact.problem.case_meshes3d import BUILTINS_3D, CaseMesh, MeshSpec3D, read_mesh_3d
 from fenics_contact.problem.case_values import (
     Bad,
@@ -100,6 +101,7 @@ from fenics_contact.problem.case_values import (
     read_number,
     read_point,
     read_points,
+    read_rollers,
     read_string,
     read_strings,
     show_value,
@@ -457,7 +459,7 @@ def _boundary(source: Source, data, mesh: MeshSpec) -> Boundary:
     t = Table(source, "boundary", data or {})
     displacement = t.raw("displacement")
     tractions = t.raw("tractions")
-    rollers = _rollers(source, t.raw("rollers"))
+    rollers = read_rollers(source, t.raw("rollers"))
     t.finish()
     displacement = (
         _vector_or_python(source, "boundary.displacement", displacement) if displacement is not None else None
@@ -490,27 +492,6 @@ def _boundary(source: Source, data, mesh: MeshSpec) -> Boundary:
                 "boundary.tractions gives it no traction"
             )
     return Boundary(displacement, tuple(pairs), rollers)
-
-
-def _rollers(source: Source, table) -> tuple[tuple[int, float], ...]:
-    """``boundary.rollers = {z = [0.0, 1.0]}``: the planes x_i = c on rollers (u_i = 0, tangentially free)."""
-    if table is None:
-        return ()
-    if not isinstance(table, dict) or not table:
-        raise source.error(
-            "boundary.rollers must be a table {axis = [values]} of symmetry planes, e.g. {z = [0.0, 1.0]} (u_z = 0 "
-            f"on the planes z = 0 and z = 1), got {show_value(table)}"
-        )
-    planes = []
-    for axis, values in sorted(table.items()):
-        if axis not in ("x", "y", "z"):
-            raise source.error(f"boundary.rollers.{axis}: the axes are x, y and z")
-        values = values if isinstance(values, list) else [values]
-        try:
-            planes += [("xyz".index(axis), read_number()(v)) for v in values]
-        except Bad as bad:
-            raise source.error(f"boundary.rollers.{axis} {bad}") from None
-    return tuple(planes)
 
 
 @dataclass(frozen=True, slots=True)
@@ -632,38 +613,8 @@ class Case:
 
     def check_dimension(self, dim: int | None, where: str) -> None:
         """InputError naming the key when a vector, the obstacle's shape or the model is not of the mesh's
-        dimension ``dim`` (None: unknown until the mesh file is read; the vectors then agree among themselves)."""
-        vectors = _given_vectors(self)
-        if dim is None:
-            if len({n for _, n in vectors}) > 1:
-                (k1, n1), (k2, n2) = vectors[0], next(v for v in vectors if v[1] != vectors[0][1])
-                raise InputError(
-                    f"case {self.path}: {k1} has {n1} components but {k2} has {n2}: the vectors of a case all have "
-                    "the mesh's dimension ([x, y] in 2D, [x, y, z] in 3D)"
-                )
-            return
-        cells = "tetrahedra" if dim == 3 else "triangles"
-        shape_dim = {"circle": 2, "sphere": 3}.get(self.obstacle.shape, dim)
-        if shape_dim != dim:
-            other = "sphere" if dim == 3 else "circle"
-            raise InputError(
-                f'case {self.path}: obstacle.shape = "{self.obstacle.shape}" is a {shape_dim}D obstacle but {where} '
-                f'is {dim}D ({cells}): give shape = "{other}" (or "plane")'
-            )
-        model = self.material.model
-        if model is not None and (model in MODELS_3D) != (dim == 3):
-            models = "4 or 5" if dim == 3 else "1, 2 or 3"
-            raise InputError(
-                f"case {self.path}: material.model = {model} is a {5 - dim}D model but {where} is {dim}D ({cells}): "
-                f"give material.model = {models} or the materials themselves"
-            )
-        for key, n in vectors:
-            if n != dim:
-                form = "[x, y, z]" if dim == 3 else "[x, y]"
-                raise InputError(
-                    f"case {self.path}: {key} has {n} components but {where} is {dim}D ({cells}): give {dim} "
-                    f"components, {form}"
-                )
+        dimension ``dim`` (``case_dimension.check_dimension``; ``where`` names the mesh)."""
+        check_dimension(self, dim, where)
 
     def build_mesh(self, comm: MPI.Comm = MPI.COMM_WORLD) -> CaseMesh:
         """The mesh (collective); a mesh file's material groups are read on rank 0."""
@@ -760,30 +711,6 @@ class Case:
             },
             "overrides": {key: value for key, value in self.overrides},
         }
-
-
-def _given_vectors(case: Case) -> list[tuple[str, int]]:
-    """(key, number of components) of every vector the case gives (a python field's are its own), and of the
-    rollers' axes beyond y (z: three)."""
-    found = []
-
-    def field(key: str, spec) -> None:
-        if isinstance(spec, Uniform):
-            found.append((key, len(spec.value)))
-        elif isinstance(spec, ByGroup):
-            found.extend((f"{key}.{name}", len(value)) for name, value in spec.values)
-
-    field("load.body-force", case.material.body_force)
-    field("boundary.displacement", case.boundary.displacement)
-    for name, spec in case.boundary.tractions:
-        field(f"boundary.tractions.{name}", spec)
-    obstacle = case.obstacle
-    for key in ("point", "normal", "centre", "direction"):
-        if getattr(obstacle, key) is not None:
-            found.append((f"obstacle.{key}", len(getattr(obstacle, key))))
-    found.extend((f"obstacle.motion[{k}]", len(m)) for k, m in enumerate(obstacle.motions))
-    found.extend(("boundary.rollers.z (an axis)", 3) for axis, _ in case.boundary.rollers if axis == 2)
-    return found
 
 
 def _check_pixels(spec: Pixels, extent, box, key: str, bounds: tuple[float, float], path: Path) -> None:

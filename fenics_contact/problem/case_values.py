@@ -42,6 +42,7 @@ __all__ = [
     "read_extent",
     "read_field",
     "read_motions",
+    "read_rollers",
     "read_friction",
 ]
 
@@ -205,6 +206,27 @@ def read_motions(value) -> tuple[tuple[float, float], ...]:
     if not isinstance(value, list) or not value:
         raise Bad(f"must be a non-empty list of vectors [[dx, dy], ...], got {show_value(value)}")
     return tuple(read_vector(v) for v in value)
+
+
+def read_rollers(source: Source, table) -> tuple[tuple[int, float], ...]:
+    """``boundary.rollers = {z = [0.0, 1.0]}``: the planes x_i = c on rollers (u_i = 0, tangentially free)."""
+    if table is None:
+        return ()
+    if not isinstance(table, dict) or not table:
+        raise source.error(
+            "boundary.rollers must be a table {axis = [values]} of symmetry planes, e.g. {z = [0.0, 1.0]} (u_z = 0 "
+            f"on the planes z = 0 and z = 1), got {show_value(table)}"
+        )
+    planes = []
+    for axis, values in sorted(table.items()):
+        if axis not in ("x", "y", "z"):
+            raise source.error(f"boundary.rollers.{axis}: the axes are x, y and z")
+        values = values if isinstance(values, list) else [values]
+        try:
+            planes += [("xyz".index(axis), read_number()(v)) for v in values]
+        except Bad as bad:
+            raise source.error(f"boundary.rollers.{axis} {bad}") from None
+    return tuple(planes)
 
 
 def read_friction(source: Source, data) -> Friction | None:

@@ -192,3 +192,20 @@ def test_fibre_case_small(tmp_path):
 def test_model_5_on_the_command_line(tmp_path):
     s = _run(tmp_path, "--model", "5", "--h", "4", "--H", "4", "--method", "primal", "--reference", "--E-high", "1e6")
     assert s["converged"] and s["e_u"] < 1e-8 and s["contact_force"] > 0
+
+
+def test_a_sphere_dragged_over_the_fibre_block_with_coulomb_friction(tmp_path):
+    """A 3D motion (press, then drag along y) with Coulomb friction from a case: every contact node slips at the
+    end, so the tangential force is μ times the normal force (up to the stick regularization), along the drag."""
+    (tmp_path / "drag.toml").write_text(
+        '[mesh]\nbuiltin = "fibre-block"\nh = 4\ncontact-size = 0.1\n[material]\nE = {fibres = 1e3, matrix = 1.0}\n'
+        'nu = 0.3\n[obstacle]\nshape = "sphere"\ncentre = [1.5, 0.5, 0.5]\nradius = 0.5\n'
+        "motion = [[-0.006, 0.0, 0.0], [-0.006, 0.02, 0.0]]\n"
+        '[friction]\nlaw = "coulomb"\nmu = 0.3\n[run]\nmethod = "primal"\n'
+    )
+    s = _run(tmp_path, "--case", str(tmp_path / "drag.toml"))
+    last = s["sliding"]["steps"][-1]
+    assert last["converged"] and last["stick_nodes"] == 0 and last["slip_nodes"] > 0
+    tangential, normal = np.asarray(last["tangential_force"]), last["normal_force"]
+    assert 0.95 * 0.3 * normal <= np.linalg.norm(tangential) <= 0.3 * normal * (1 + 1e-9)
+    assert tangential[1] > 0.95 * np.linalg.norm(tangential) and s["sliding"]["dissipation"] > 0

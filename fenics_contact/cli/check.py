@@ -79,11 +79,13 @@ def check_mesh(args: argparse.Namespace, comm: MPI.Comm = MPI.COMM_WORLD) -> int
     groups = _file_groups(path, comm) if path is not None else None
     if groups is not None:
         materials = case.material.groups() if case is not None else set()
-        built = not any(name in _BUILT for name, _, _ in groups) and any(dim == 2 for _, dim, _ in groups)
+        tdim = 3 if any(dim == 3 for _, dim, _ in groups) else 2  # (the cells' dimension: 3 for tetrahedra)
+        built = not any(name in _BUILT for name, _, _ in groups) and any(dim == tdim for _, dim, _ in groups)
         say("  physical groups of the file:")
         for name, dim, count in groups:
             kind, unit = _KINDS.get(dim, (f"dimension {dim}", "elements"))
-            say(f"    {name:<16} {kind:<8} {count:>8} {unit:<10} {_role(name, dim, materials, built, options)}")
+            role = _role(name, dim, materials, built, options, tdim)
+            say(f"    {name:<16} {kind:<8} {count:>8} {unit:<10} {role}")
     cm, problem = _build(options, case, comm)
     _describe(cm, say, groups)
     refusals = {m: _refusal(m, cm, options, case) for m in METHODS}
@@ -250,17 +252,17 @@ def _owned(found: np.ndarray, n_owned: int, comm: MPI.Comm) -> int:
     return comm.allreduce(int(np.count_nonzero(found < n_owned)), op=MPI.SUM)
 
 
-def _role(name: str, dim: int, materials: set[str], built: bool, options: RunOptions) -> str:
-    """What the physical group ``name`` of dimension ``dim`` is to the run."""
+def _role(name: str, dim: int, materials: set[str], built: bool, options: RunOptions, tdim: int = 2) -> str:
+    """What the physical group ``name`` of dimension ``dim`` is to the run on cells of dimension ``tdim``."""
     if name in _ROLES:
         return _ROLES[name]
-    if dim == 1 and is_neumann_name(name):
+    if dim == tdim - 1 and is_neumann_name(name):
         return f"{name}: a traction boundary Γ_N"
-    if dim == 2 and name in materials:
+    if dim == tdim and name in materials:
         return "a material group of the case"
-    if dim == 2 and built and options.coarse_groups:
+    if dim == tdim and built and options.coarse_groups:
         return "a coarse cell (--coarse-groups)"
-    if dim == 2:
+    if dim == tdim:
         return "cells (no role)"
     return "no role (ignored)"
 

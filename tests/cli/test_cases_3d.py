@@ -133,15 +133,19 @@ def _layered_box(path: Path) -> None:
         gmsh.write(str(path))
 
 
-def test_volume_material_groups_and_3d_loads_of_a_mesh_file(tmp_path):
-    """E and the body force by volume group, a plane given by 3-vectors: the cells take their group's values, and
-    Algorithm 1 runs on it to the monolithic solution."""
+def test_volume_material_groups_and_3d_loads_of_a_mesh_file(tmp_path, capsys):
+    """E and the body force by volume group, a plane given by 3-vectors: check-mesh names the groups' roles, the
+    cells take their group's values, and Algorithm 1 runs on it to the monolithic solution."""
     _layered_box(tmp_path / "box.msh")
     (tmp_path / "box.toml").write_text(
         '[mesh]\nfile = "box.msh"\n[material]\nE = {soft = 1.0, hard = 100.0}\nnu = 0.3\n'
         "[load]\nbody-force = {soft = [1.0, 0.0, 0.5]}\n"
         '[obstacle]\nshape = "plane"\npoint = [1.001, 0.0, 0.0]\nnormal = [-1.0, 0.0, 0.0]\n'
     )
+    assert main(["check-mesh", "--case", str(tmp_path / "box.toml")]) == 0
+    said = capsys.readouterr().out
+    assert all(f"{name:<16} volume" in said for name in ("soft", "hard"))
+    assert said.count("a material group of the case") == 2 and "primal can run" in said
     case = load_case(tmp_path / "box.toml")
     problem = case.problem(case.build_mesh())
     x, E = _cell_values(problem, "E")

@@ -78,6 +78,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import gmsh
 import numpy as np
 from mpi4py import MPI
 
@@ -108,7 +109,7 @@ from fenics_contact.problem.case_values import (
 )
 from fenics_contact.problem.cell_groups import SUBDOMAIN_NAMES, CellGroups, bounding_box, read_cell_groups
 from fenics_contact.problem.friction import Friction
-from fenics_contact.problem.geometry import SIDES, ContactMesh, read_mesh, unit_square
+from fenics_contact.problem.geometry import SIDES, ContactMesh, query_gmsh_file, read_mesh, unit_square
 from fenics_contact.problem.meshes import bulged_square, hertz_block
 from fenics_contact.problem.models import MODELS_3D, get_model, pixel_field
 from fenics_contact.problem.obstacles import Circle, Obstacle, Plane, Sphere
@@ -261,6 +262,13 @@ class MeshFile:
 
     def build(self, comm: MPI.Comm, overlays: Iterable[str] = ()) -> CaseMesh:
         """The mesh; every surface group but Omega1/Omega2 is an overlay (materials), ``overlays`` must exist."""
+        if self.coarse is not None and query_gmsh_file(self.path, comm, _holds_tetrahedra, False):
+            key = "mesh.H" if self.H is not None else "mesh.coarse-size"
+            raise InputError(
+                f"{key}: {self.path.name} is a mesh of tetrahedra, which takes no coarse grid (the multiscale "
+                "methods are planar): leave it out (without Omega1/Omega2/gamma in the file, the strip is then the "
+                "band of cells along Gamma_C)"
+            )
         centroids = read_cell_groups(self.path, overlays, comm=comm)
         cm = read_mesh(self.path, comm=comm, H=self.coarse, overlay_groups=list(centroids))
         return CaseMesh(cm, centroids)
@@ -271,6 +279,11 @@ class MeshFile:
 
     def echo(self) -> dict:
         return {"file": str(self.path), "H": self.H, "coarse-size": self.coarse_size}
+
+
+def _holds_tetrahedra() -> bool:
+    """Whether the gmsh model (a file merged by ``geometry.query_gmsh_file``) holds 3D cells."""
+    return len(gmsh.model.mesh.getElementTypes(3)) > 0
 
 
 MeshSpec = UnitSquareMesh | BulgedSquareMesh | HertzBlockMesh | MeshFile | MeshSpec3D

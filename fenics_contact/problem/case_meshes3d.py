@@ -106,6 +106,7 @@ class HertzQuarterBlockMesh:
             "refinement": self.refinement,
             "size": self.size,
             "strip": self.strip,
+            "rollers": {"x": [0.0], "y": [0.0]},  # (the symmetry planes the mesh holds)
         }
 
 

@@ -154,6 +154,8 @@ def test_volume_material_groups_and_3d_loads_of_a_mesh_file(tmp_path, capsys):
     assert np.all(f[x[0] < 0.5] == [1.0, 0.0, 0.5]) and np.all(f[x[0] > 0.5] == 0.0)
     s = _run(tmp_path, "--case", str(tmp_path / "box.toml"), "--reference", "--tol", "1e-9")
     assert s["converged"] and s["e_u"] < 1e-8 and s["contact_force"] > 0
+    with pytest.raises(InputError, match="mesh.H: box.msh is a mesh of tetrahedra, which takes no coarse grid"):
+        load_case(tmp_path / "box.toml", [("mesh.H", 4)]).build_mesh()
 
 
 # -- the example cases, small ---------------------------------------------------------------------------------------
@@ -177,6 +179,7 @@ def test_sphere_case_small(tmp_path):
     assert abs(radius - 0.1) <= s["h"]
     forces = [step["force"] for step in s["force_indentation"]["steps"]]
     assert forces[1] / forces[0] == pytest.approx(2**1.5, rel=0.1)
+    assert s["case"]["mesh"]["rollers"] == {"x": [0.0], "y": [0.0]}
 
 
 def test_fibre_case_small(tmp_path):

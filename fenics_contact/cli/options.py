@@ -21,6 +21,7 @@ from fenics_contact.hybrid.mixed import transmission_coefficient
 from fenics_contact.io import check_output_target, check_outside_output
 from fenics_contact.methods import HYBRID_METHODS, get_method
 from fenics_contact.methods import METHODS as CATALOGUE
+from fenics_contact.problem.composite3d import MODEL_COMPOSITE_3D
 from fenics_contact.problem.materials import check_poisson_ratio
 from fenics_contact.problem.models import MODELS_3D, get_model, model_1
 
@@ -248,7 +249,7 @@ class RunOptions:
                 )
         _integer("h", self.h, 2)
         _integer("H", self.H, 2)
-        if self.mesh is None and self.n % self.H:
+        if self.mesh is None and self.model != MODEL_COMPOSITE_3D and self.n % self.H:  # (a grid of cells)
             raise InputError(
                 f"--h {self.n} is not a multiple of --H {self.H}: the coarse grid must be a union of fine cells"
             )

@@ -159,7 +159,7 @@ def _fibre_block_model(gamma: float, h: float, fine: float, radius: float) -> No
     faces = {Boundary.GAMMA_C: [], Boundary.GAMMA_D: [], Boundary.INTERFACE: []}
     for _, t in gmsh.model.getEntities(2):
         xmin, xmax = gmsh.model.getBoundingBox(2, t)[0::3]
-        if xmax - xmin < 1e-6:  # a face in a plane x = const (gmsh pads bounding boxes by its tolerance)
+        if xmax - xmin < 1e-4:  # a face in a plane x = const (gmsh pads bounding boxes, by up to about 1e-6)
             x = occ.getCenterOfMass(2, t)[0]
             for key, at in ((Boundary.GAMMA_C, 1.0), (Boundary.GAMMA_D, 0.0), (Boundary.INTERFACE, gamma)):
                 if abs(x - at) < tol:

@@ -610,7 +610,7 @@ def test_epsilon_hint_only_far_below_the_default():
 
 def test_argparse_errors_exit_2(capsys):
     with pytest.raises(SystemExit) as info:
-        main(["run", "--model", "5"])
+        main(["run", "--model", "6"])
     assert info.value.code == 2 and "invalid choice" in capsys.readouterr().err
 
 

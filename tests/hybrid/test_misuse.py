@@ -144,7 +144,7 @@ MISUSE = {
         InputError,
         "values of shape (2, N)",
     ),
-    "unknown model": (lambda cm, ref: get_model(5), InputError, "built-in models"),
+    "unknown model": (lambda cm, ref: get_model(6), InputError, "built-in models"),
     "E = 1e308 (overflow)": (
         lambda cm, ref: solve_primal_hybrid(model_1(E_high=1e308).on(cm), delta=1e-4),
         InputError,

@@ -17,7 +17,7 @@ from fenics_contact.problem.composite3d import (
 )
 from fenics_contact.problem.models import MODELS_3D, get_model
 from fenics_contact.problem.obstacles import Sphere
-from fenics_contact.problem.tags import Subdomain
+from fenics_contact.problem.tags import Boundary, Subdomain
 
 
 @pytest.fixture(scope="module")
@@ -68,3 +68,14 @@ def test_algorithm_1_is_the_monolithic_solution_at_contrast_1e6(block, obstacle)
     np.testing.assert_array_equal(result.profile.active, reference.profile.active)
     assert result.profile.force == pytest.approx(reference.profile.force, rel=1e-8)
     assert 0 < np.count_nonzero(result.profile.active) < result.profile.active.size
+
+
+def test_gamma_through_the_fibre_in_the_strip():
+    """A strip of 1/16 puts γ at x = 15/16 through the fibre under Γ_C (a sliver of it beyond): γ is tagged and
+    that fibre has cells on both sides of it (the default strip of ``--model 5 --H 16``)."""
+    cm = fibre_block_3d_mesh(4, strip=1.0 / 16.0)
+    assert cm.facet_tags.find(Boundary.INTERFACE).size > 0
+    cells, x, _ = _cells(cm)
+    fibre = in_fibres(x) & (np.hypot(x[0] - 0.88, x[2] - 0.5) < FIBRE_RADIUS)
+    strip = np.isin(cells, cm.cell_tags.find(Subdomain.OMEGA2))
+    assert np.any(fibre & strip) and np.any(fibre & ~strip)

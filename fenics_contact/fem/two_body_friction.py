@@ -164,8 +164,10 @@ class FrictionalTwoBodySystem(TwoBodySystem):
             self.u = keep
 
     def same(self, a: np.ndarray, b: np.ndarray) -> bool:
-        """Equal sets and, where the Jacobian varies within a set (3D slip), a negligible step."""
-        return bool(np.array_equal(a, b)) and (self.friction.d == 2 or self._negligible)
+        """Equal sets and, where the Jacobian varies within a set (3D slip), a negligible step; or a negligible
+        step alone (a node on the stick/slip threshold to round-off predicts the other state; ``check`` then
+        measures the law's own residual)."""
+        return (bool(np.array_equal(a, b)) and self.friction.d == 2) or self._negligible
 
     def _gradient(self, u: np.ndarray) -> np.ndarray:
         return (self.K @ u - self.b) * self.free + self.G.T @ self.forces(u)[0]

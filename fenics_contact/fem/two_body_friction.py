@@ -142,7 +142,9 @@ class FrictionalTwoBodySystem(TwoBodySystem):
         unless the set is the factorized one in 2D (there the blocks depend on the set only)."""
         if self.friction.d == 2 and self._key_factorized is not None and np.array_equal(active, self._key_factorized):
             return False
-        self._J = (self._K_free + self.G.T @ sp.block_diag(self._blocks, format="csr") @ self.G).tocsr()
+        N, d = self._blocks.shape[:2]
+        blocks = sp.bsr_matrix((self._blocks, np.arange(N), np.arange(N + 1)), shape=(N * d, N * d)).tocsr()
+        self._J = (self._K_free + self.G.T @ blocks @ self.G).tocsr()
         if self._factor is not None:
             self._factor.destroy()
         self._factor = SparseFactor.from_csr(self._J, what="the frictional two-body contact Jacobian")

@@ -7,8 +7,7 @@ Algorithm 1's stopping rule and strips, the output directory and the figures; th
 ``[run]`` and ``[primal]`` tables, any other flag is refused.  A run solves each load step (warm-started from
 the last with ``primal-monolithic`` on one process) and writes ``cli.pair_outputs``' files; under ``mpiexec``
 ``primal-monolithic`` runs in parallel (``fem.two_body_mpi``), ``primal`` is refused.  With ``[friction]`` each step
-starts from the friction state the last one committed (the slip of a step is measured from it); such a run is
-serial.
+starts from the friction state the last one committed (the slip of a step is measured from it).
 """
 
 import logging
@@ -179,8 +178,6 @@ def _converged(result) -> bool:
 
 def run_pair(options: PairRunOptions, comm: MPI.Comm, case: PairCase) -> int:
     """Solve the case (each load step), write into ``options.out``; 0 converged, 3 not converged."""
-    if comm.size > 1 and case.friction is not None:
-        raise InputError("two-body contact with friction ([friction]) runs on one process: run it without mpiexec")
     if comm.size > 1 and options.method != "primal-monolithic":
         raise InputError(
             "two-body contact with Algorithm 1 (--method primal) runs on one process: run it without mpiexec, or "
@@ -199,7 +196,7 @@ def run_pair(options: PairRunOptions, comm: MPI.Comm, case: PairCase) -> int:
         for k, displacement in enumerate(steps):
             problem = case.problem(built, step=None if displacement is None else k)
             result = _solve(options, problem, state)
-            state = result.state if comm.size == 1 else None  # (a warm start is serial)
+            state = result.state  # (under MPI only its friction anchors are used: a warm start is serial)
             row = step_row(result, options.method)
             if displacement is not None:
                 row = {"step": k + 1, quantity: list(displacement)} | row

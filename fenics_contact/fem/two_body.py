@@ -351,9 +351,7 @@ def solve_two_body(
     if problem.comm.size > 1:  # the contact surfaces gathered, the bulk solved in parallel
         if initial is not None:
             raise InputError("solve_two_body: a warm start (initial) is serial only")
-        if problem.friction is not None:
-            raise InputError("two-body contact with friction runs on one process (run it without mpiexec)")
-        return solve_two_body_distributed(problem, delta=delta, newton=newton, line_search=line_search)
+        return solve_two_body_distributed(problem, delta=delta, newton=newton, line_search=line_search, state=state)
     start = time.perf_counter()
     msh = problem.mesh
     gdim = msh.geometry.dim
@@ -444,7 +442,7 @@ def _solve_frictional(problem, V, operators, surfaces, delta, newton, initial, s
     u = fem.Function(V, name="u")
     u.x.array[:n] = system.u
     force = system.contact_force_vector()
-    tangential = system.friction.profile()
+    tangential = system.profile()
     dissipation = system.commit()
     elapsed = time.perf_counter() - start
     solution = TwoBodySolution(

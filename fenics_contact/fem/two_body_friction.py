@@ -26,6 +26,7 @@ import scipy.sparse as sp
 from mpi4py import MPI
 
 from fenics_contact.errors import ConvergenceError
+from fenics_contact.fem.condensed_friction import nodal_forces
 from fenics_contact.fem.contact import NewtonHistory, NewtonOptions, profile_order
 from fenics_contact.fem.friction import FIXED_POINT_STEPS, FIXED_POINT_TOL, FrictionProfile, NodalFriction, _tangent_2d
 from fenics_contact.fem.linalg import SparseFactor
@@ -95,15 +96,14 @@ class FrictionalTwoBodySystem(TwoBodySystem):
         self.friction.nodal = (self.Q.relative @ u).reshape(-1, self.friction.d)
 
     def forces(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray, dict]:
-        """λ(G u) (dN), its blocks ∂λ_p/∂r_p (N, d, d) and the evaluated law, in the law's current state."""
-        friction = self.friction
-        self.at(u)
-        e = friction.evaluate()
-        blocks = friction.blocks(e)
-        nu, w, on = e["nu"], e["w"], e["active"]
-        blocks[on] += (w[on] / friction.delta)[:, None, None] * nu[on][:, :, None] * nu[on][:, None, :]
-        lam = (w * e["p"])[:, None] * nu - w[:, None] * e["t"]
-        return lam.ravel(), blocks, e
+        """λ(G u) (dN), its blocks ∂λ_p/∂r_p (N, d, d) and the evaluated law, in the law's current state
+        (``fem.condensed_friction.nodal_forces``)."""
+        return nodal_forces(self.friction, self.Q.relative @ u)
+
+    def profile(self) -> FrictionProfile:
+        """The slave side's ``FrictionProfile`` at the current u."""
+        self.at(self.u)
+        return self.friction.profile()
 
     def contact_force(self, u: np.ndarray | None = None) -> np.ndarray:
         """Gᵀ λ on the free DOFs: the contact term of F."""

@@ -355,7 +355,7 @@ def solve_two_body_hybrid(
                 g = update(g, Tg) if update is not None else Tg
         force = np.zeros(n)
         force[d2] = system.contact_force_vector()
-        tangential = system.friction.profile() if frictional else None
+        tangential = system.profile() if frictional else None
         dissipation = system.commit() if frictional else 0.0
     finally:
         system.destroy()

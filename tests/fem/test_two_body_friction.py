@@ -116,3 +116,35 @@ def test_bad_friction_input_is_refused(blocks):
         ContactPair(T.UPPER_BOTTOM, T.LOWER_TOP, friction="coulomb")
     with pytest.raises(InputError, match="PairState"):
         solve_two_body(_problem(blocks, fc.Friction("coulomb", mu=MU), PATH[0]), state=np.zeros(3))
+
+
+@pytest.mark.parametrize(
+    ("law", "bound"),
+    [(fc.Friction("coulomb", mu=MU), "mu"), (fc.Friction("tresca", threshold=S), "threshold")],
+    ids=["coulomb", "tresca"],
+)
+def test_sliding_cubes_in_3d(law, bound):
+    """Two cubes (3 against 4 cells across) pressed, then sheared along (2, 1) past sliding: the tangential
+    plane of the law is a plane; every slave node slips, Σ w_p|t_p| is μ Σ w_p p_p (Coulomb) or s |Γ_C| (Tresca),
+    the tangential force opposes the motion, the forces balance to round-off."""
+    m = two_blocks(3, 4, heights=(0.5, 0.4), dim=3)
+    state = None
+    for top in ((0.0, 0.0, -0.01), (0.01, 0.005, -0.01), (0.04, 0.02, -0.01)):
+        problem = TwoBodyProblem(
+            m.mesh,
+            m.cell_tags,
+            m.facet_tags,
+            bodies=(Body(T.LOWER, 1.0, 0.3), Body(T.UPPER, 5.0, 0.2)),
+            pair=ContactPair(T.UPPER_BOTTOM, T.LOWER_TOP, friction=law),
+            supports=(Support(T.LOWER_BOTTOM), Support(T.UPPER_TOP, top)),
+        )
+        solution = solve_two_body(problem, state=state)
+        state = solution.state
+        assert solution.force_balance() < 1e-13 and solution.dissipation >= 0.0
+    f = solution.friction
+    assert np.all(f.slip)
+    carried = np.sum(f.weights * np.linalg.norm(f.traction, axis=1))
+    expected = MU * f.normal_force if bound == "mu" else S * 1.0  # the face is 1 × 1
+    assert carried == pytest.approx(expected, rel=1e-10)
+    direction = f.tangential_force / np.linalg.norm(f.tangential_force)
+    assert direction @ np.array([2.0, 1.0, 0.0]) / np.sqrt(5.0) < -0.999

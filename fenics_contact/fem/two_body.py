@@ -11,7 +11,9 @@ on that energy (at every step by default: ``solve_two_body``).
 The coupling entries Bᵀ W B join DOF blocks of the two bodies that share no cell, outside the pattern of the
 finite-element matrix: the system is assembled in SciPy and factorized by ``fem.linalg.SparseFactor``
 (sequential MUMPS).  Under MPI ``solve_two_body`` hands over to ``fem.two_body_mpi`` (the contact surfaces gathered
-to every rank, the bulk solved in parallel; the same solution).
+to every rank, the bulk solved in parallel; the same solution).  With the pair's friction law the contact term
+is the nodal law on the slave nodes' relative displacements (``fem.two_body_friction``); a load step then takes
+the previous one's ``PairState``.
 """
 
 import logging

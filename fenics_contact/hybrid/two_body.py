@@ -18,7 +18,9 @@ steps without convergence, a cycle of active sets, the iteration goes on with An
 ``"anderson"`` and ``"none"`` (the paper's update) are the alternatives.  The responses cost one back-solve
 per γ unknown and dense matrices of the size of γ: affordable for the strips of a contact zone, not for a γ
 of many thousand nodes.  The stopping rule is the transmission residual
-(``hybrid.certificate``).  Serial, as the two-body solve.
+(``hybrid.certificate``).  With the pair's friction law Ω₂ is the frictional strips (``fem.two_body_friction``):
+R₂ comes from their frictional Jacobian, one interface Newton step per friction state, and the state is
+committed once the pair has converged (``state`` carries it to the next load step).  Serial.
 """
 
 import logging
@@ -110,7 +112,7 @@ class TwoBodyHybridResult:
     dissipation: float = 0.0
     #: the state the next load step starts from (``solve_two_body_hybrid(..., state=)``)
     state: PairState | None = None
-    #: the interface Newton's steps (0 with another update)
+    #: the evaluations of T the interface Newton made (0 with another update)
     interface_newton_steps: int = 0
 
     @property

@@ -81,3 +81,8 @@ def test_a_bad_friction_table_is_refused(tmp_path, capsys, args, message):
     assert main(["run", "--case", str(CASE), "--no-plots", "--out", str(out), *args]) == 2
     assert message in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_check_mesh_reports_the_friction_law(capsys):
+    assert main(["check-mesh", "--case", str(CASE)]) == 0
+    assert "coulomb friction, mu = 0.6 on the relative slip" in capsys.readouterr().out

@@ -64,3 +64,27 @@ def test_algorithm_1_is_the_monolithic_frictional_path(blocks, law):
         assert hybrid.dissipation == pytest.approx(mono.dissipation, rel=1e-6, abs=1e-14)
         slipped |= bool(np.any(mono.friction.slip))
     assert np.all(mono.friction.slip) and slipped
+
+
+def test_a_state_warm_starts_the_frictionless_interface_newton(blocks):
+    """Without friction a state carries the displacement and the interface data only: the next step starts
+    from them, in no more evaluations of T than from zero, and reaches the monolithic solution."""
+    m = blocks
+    state = None
+    for top in ((0.0, -0.005), (0.0, -0.01)):
+        problem = TwoBodyProblem(
+            m.mesh,
+            m.cell_tags,
+            m.facet_tags,
+            bodies=(Body(T.LOWER, _lower, 0.3), Body(T.UPPER, _upper, 0.2)),
+            pair=ContactPair(T.UPPER_BOTTOM, T.LOWER_TOP),
+            supports=(Support(T.LOWER_BOTTOM), Support(T.UPPER_TOP, top)),
+        )
+        warm = fc.solve(problem, "primal", state=state)
+        state = warm.state
+        assert state.anchor is None and warm.friction is None and warm.dissipation == 0.0
+    cold = fc.solve(problem, "primal")
+    mono = fc.solve(problem, "primal-monolithic")
+    assert warm.converged and warm.iterations <= cold.iterations
+    u0 = mono.u.x.array
+    assert np.linalg.norm(warm.u.x.array - u0) <= 1e-8 * np.linalg.norm(u0)

@@ -230,8 +230,8 @@ class TwoBodyProblem:
         if loose:
             raise InputError(
                 f"the bod{'ies' if len(loose) > 1 else 'y'} of cell tag {loose} ha{'ve' if len(loose) > 1 else 's'} no "
-                "Support: frictionless contact does not hold a body tangentially, and with friction the first Newton step, "
-                "before any contact, has no stiffness there; so each needs a Dirichlet boundary"
+                "Support: frictionless contact does not hold a body tangentially, and with friction the first "
+                "Newton step, before any contact, has no stiffness there; so each needs a Dirichlet boundary"
             )
         object.__setattr__(self, "_slave_body", slave.pop())
 

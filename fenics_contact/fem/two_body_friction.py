@@ -25,7 +25,7 @@ import numpy as np
 import scipy.sparse as sp
 from mpi4py import MPI
 
-from fenics_contact.errors import ConvergenceError
+from fenics_contact.errors import ConvergenceError, InputError
 from fenics_contact.fem.condensed_friction import nodal_forces
 from fenics_contact.fem.contact import NewtonHistory, NewtonOptions, profile_order
 from fenics_contact.fem.friction import FIXED_POINT_STEPS, FIXED_POINT_TOL, FrictionProfile, NodalFriction, _tangent_2d
@@ -55,7 +55,10 @@ class PairFriction(NodalFriction):
         self.free = np.ones((self.nodes.size, d), dtype=bool)  # (the supports act on u, not on r)
         self.anchor = np.zeros((self.nodes.size, d)) if anchor is None else np.array(anchor, dtype=np.float64)
         if self.anchor.shape != (self.nodes.size, d):
-            raise ValueError(f"friction anchors of shape {self.anchor.shape} for {self.nodes.size} slave nodes")
+            raise InputError(
+                f"the state's friction anchors have the shape {self.anchor.shape}, this pair has {self.nodes.size} "
+                f"slave nodes in {d}D: a state belongs to the load path of the same mesh and pair"
+            )
         self.stiffness, self.motion = np.asarray(stiffness, dtype=np.float64), np.zeros(d)
         self.dissipation, self.forced, self.frozen, self.nodal = 0.0, None, None, None
 

@@ -116,6 +116,10 @@ def test_bad_friction_input_is_refused(blocks):
         ContactPair(T.UPPER_BOTTOM, T.LOWER_TOP, friction="coulomb")
     with pytest.raises(InputError, match="PairState"):
         solve_two_body(_problem(blocks, fc.Friction("coulomb", mu=MU), PATH[0]), state=np.zeros(3))
+    other = two_blocks(5, 6, heights=(0.5, 0.4))
+    foreign = solve_two_body(_problem(other, fc.Friction("coulomb", mu=MU), PATH[0])).state
+    with pytest.raises(InputError, match="the same mesh and pair"):
+        solve_two_body(_problem(blocks, fc.Friction("coulomb", mu=MU), PATH[0]), state=foreign._replace(u=None))
 
 
 @pytest.mark.parametrize(

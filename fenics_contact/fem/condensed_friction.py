@@ -21,7 +21,7 @@ import scipy.linalg as sla
 
 from fenics_contact.errors import ConvergenceError
 from fenics_contact.fem.friction import FIXED_POINT_STEPS, FIXED_POINT_TOL, NodalFriction
-from fenics_contact.fem.newton import Advance, Direction, NewtonTrace, StepState, semismooth_newton_loop
+from fenics_contact.fem.newton import Advance, Direction, NewtonTrace, StepState, exact_step, semismooth_newton_loop
 
 __all__ = ["nodal_forces", "CondensedLaw", "CondensedFrictionalSystem", "solve_condensed"]
 
@@ -135,20 +135,7 @@ class CondensedFrictionalSystem:
         def slope(t: float) -> float:
             return float(dU @ (base + t * step + law.forces(U + t * dU)[0]))
 
-        t0, t1, f0, f1 = 0.0, 1.0, slope(0.0), slope(1.0)
-        if f0 >= 0.0 or f1 <= 0.0:
-            return 1.0
-        t = 1.0
-        for _ in range(60):  # the root of the increasing slope (regula falsi, Illinois)
-            t = t1 - f1 * (t1 - t0) / (f1 - f0)
-            f = slope(t)
-            if abs(f) <= 1e-12 * abs(f0) or t1 - t0 <= 1e-12:
-                break
-            if f > 0.0:
-                t1, f1, f0 = t, f, 0.5 * f0
-            else:
-                t0, f0, f1 = t, f, 0.5 * f1
-        return t
+        return exact_step(slope)
 
     def advance(self, t: float, state: StepState) -> Advance:
         self.U += t * self.dU

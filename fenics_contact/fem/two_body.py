@@ -224,6 +224,30 @@ class TwoBodySolution:
         return float(np.linalg.norm(fs + fm) / max(np.linalg.norm(fs), np.linalg.norm(fm), np.finfo(float).tiny))
 
 
+def pair_solution(
+    problem: TwoBodyProblem, u: fem.Function, u_contact: np.ndarray, force: np.ndarray, surfaces, delta: float,
+    dofs: int, elapsed: float, history: NewtonHistory, **extra,
+) -> TwoBodySolution:  # fmt: skip
+    """The ``TwoBodySolution`` of u, ``u_contact`` (a DOF vector holding u at least at the contact columns), the
+    nodal contact forces ``force`` and ``surfaces`` = (slave, master, Q): both profiles and both resultants;
+    ``extra``: the friction fields and the state."""
+    slave, master, Q = surfaces
+    bs = u.function_space.dofmap.index_map_bs
+    return TwoBodySolution(
+        u,
+        history,
+        surface_profile(u_contact, force, slave, Q, slave=True),
+        surface_profile(u_contact, force, master, Q, slave=False),
+        delta,
+        dofs,
+        elapsed,
+        Q,
+        problem,
+        tuple(force.reshape(-1, bs)[surf.nodes].sum(axis=0) for surf in (slave, master)),
+        **extra,
+    )
+
+
 def supported_dofs(problem: TwoBodyProblem, V: fem.FunctionSpace) -> tuple[np.ndarray, np.ndarray]:
     """The supported scalar DOFs and their values u_D."""
     msh = V.mesh
@@ -389,23 +413,13 @@ def solve_two_body(
         system.destroy()
     u = fem.Function(V, name="u")
     u.x.array[:n] = system.u
-    force = system.contact_force_vector()
     history = NewtonHistory(trace.residuals, trace.active_sizes, trace.factorizations)
     log.debug("two bodies: step lengths %s", trace.step_lengths)
     elapsed = time.perf_counter() - start
-    solution = TwoBodySolution(
-        u,
-        history,
-        surface_profile(system.u, force, slave, Q, slave=True),
-        surface_profile(system.u, force, master, Q, slave=False),
-        delta,
-        n,
-        elapsed,
-        Q,
-        problem,
-        tuple(force.reshape(-1, bs)[surf.nodes].sum(axis=0) for surf in (slave, master)),
+    solution = pair_solution(
+        problem, u, system.u, system.contact_force_vector(), (slave, master, Q), delta, n, elapsed, history,
         state=PairState(system.u.copy()),
-    )
+    )  # fmt: skip
     log.info(
         "two bodies: %d Newton steps, active quadrature points %s, force balance %.1e, %.2f s",
         history.steps,
@@ -431,11 +445,9 @@ def _solve_frictional(problem, V, operators, surfaces, delta, newton, initial, s
     from fenics_contact.fem.two_body_friction import FrictionalTwoBodySystem, solve_frictional_pair  # (imports this)
 
     start = time.perf_counter()
-    slave, master, Q = surfaces
-    bs = V.dofmap.index_map_bs
-    n = V.dofmap.index_map.size_local * bs
+    n = V.dofmap.index_map.size_local * V.dofmap.index_map_bs
     anchor = None if state is None else state.anchor
-    system = FrictionalTwoBodySystem(*operators, Q, delta, problem.friction, anchor)
+    system = FrictionalTwoBodySystem(*operators, surfaces[2], delta, problem.friction, anchor)
     _warm_start(system, initial, n)
     try:
         history = solve_frictional_pair(system, newton, MAX_REFINEMENTS)
@@ -447,21 +459,10 @@ def _solve_frictional(problem, V, operators, surfaces, delta, newton, initial, s
     tangential = system.profile()
     dissipation = system.commit()
     elapsed = time.perf_counter() - start
-    solution = TwoBodySolution(
-        u,
-        history,
-        surface_profile(system.u, force, slave, Q, slave=True),
-        surface_profile(system.u, force, master, Q, slave=False),
-        delta,
-        n,
-        elapsed,
-        Q,
-        problem,
-        tuple(force.reshape(-1, bs)[surf.nodes].sum(axis=0) for surf in (slave, master)),
-        tangential,
-        dissipation,
-        PairState(system.u.copy(), system.friction.anchor.copy()),
-    )
+    solution = pair_solution(
+        problem, u, system.u, force, surfaces, delta, n, elapsed, history, friction=tangential,
+        dissipation=dissipation, state=PairState(system.u.copy(), system.friction.anchor.copy()),
+    )  # fmt: skip
     log.info(
         "two bodies, %s: %d Newton steps, stick %d, slip %d nodes, dissipation %.3e, force balance %.1e, %.2f s",
         problem.friction.describe(),

@@ -31,7 +31,7 @@ from fenics_contact.fem.contact import NewtonHistory, NewtonOptions, profile_ord
 from fenics_contact.fem.friction import FIXED_POINT_STEPS, FIXED_POINT_TOL, FrictionProfile, NodalFriction, _tangent_2d
 from fenics_contact.fem.linalg import SparseFactor
 from fenics_contact.fem.mortar import ContactQuadrature
-from fenics_contact.fem.newton import Advance, Check, Direction, StepState, semismooth_newton_loop
+from fenics_contact.fem.newton import Advance, Check, Direction, StepState, exact_step, semismooth_newton_loop
 from fenics_contact.fem.two_body import TwoBodySystem
 from fenics_contact.problem.friction import Friction
 
@@ -193,20 +193,7 @@ class FrictionalTwoBodySystem(TwoBodySystem):
             def slope(t: float) -> float:
                 return float(d @ self._gradient(u + t * d))
 
-            t0, t1, f0, f1 = 0.0, 1.0, slope(0.0), slope(1.0)
-            if f0 >= 0.0 or f1 <= 0.0:
-                return 1.0
-            t = 1.0
-            for _ in range(60):
-                t = t1 - f1 * (t1 - t0) / (f1 - f0)
-                f = slope(t)
-                if abs(f) <= 1e-12 * abs(f0) or t1 - t0 <= 1e-12:
-                    break
-                if f > 0.0:
-                    t1, f1, f0 = t, f, 0.5 * f0
-                else:
-                    t0, f0, f1 = t, f, 0.5 * f1
-            return t
+            return exact_step(slope)
         finally:
             self.friction.forced = keep
 

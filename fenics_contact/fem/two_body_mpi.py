@@ -83,10 +83,9 @@ def solve_two_body_distributed(
     """``fem.two_body.solve_two_body`` on several processes (module docstring); the same ``TwoBodySolution``.
     ``state``: the previous load step's (its friction anchors; its u is not used)."""
     from fenics_contact.fem.two_body import (  # (the serial module calls this one)
-        TwoBodySolution,
         load_vector,
+        pair_solution,
         supported_dofs,
-        surface_profile,
         two_body_penalty,
     )
 
@@ -180,18 +179,8 @@ def solve_two_body_distributed(
     # the profiles on every rank: u at the contact columns gathered, the contact forces −Bᵀ W s⁺
     u_full = _gathered_u(u_h, np.unique(Q.B.indices), N, lo, n_owned, comm)
     force = -(Q.B.T @ (W * np.maximum(s, 0.0)))
-    return TwoBodySolution(
-        u_h,
-        history,
-        surface_profile(u_full, force, slave, Q, slave=True),
-        surface_profile(u_full, force, master, Q, slave=False),
-        delta,
-        N,
-        time.perf_counter() - start,
-        Q,
-        problem,
-        tuple(force.reshape(-1, bs)[surf.nodes].sum(axis=0) for surf in (slave, master)),
-    )
+    elapsed = time.perf_counter() - start
+    return pair_solution(problem, u_h, u_full, force, (slave, master, Q), delta, N, elapsed, history)
 
 
 def _gathered_u(u_h: fem.Function, columns: np.ndarray, N: int, lo: int, n_owned: int, comm: MPI.Comm) -> np.ndarray:
@@ -206,7 +195,7 @@ def _gathered_u(u_h: fem.Function, columns: np.ndarray, N: int, lo: int, n_owned
 def _frictional(problem: TwoBodyProblem, parts, newton: NewtonOptions, state, elapsed: float):
     """The frictional contact reduced to the slave nodes' relative displacements (module docstring):
     U = U₀ − S λ(U) (``fem.condensed_friction``), the same on every rank, then u = u₀ − Z λ and the state committed."""
-    from fenics_contact.fem.two_body import PairState, TwoBodySolution, surface_profile  # (imports this module)
+    from fenics_contact.fem.two_body import PairState, pair_solution  # (imports this module)
     from fenics_contact.fem.two_body_friction import PairFriction
 
     start = time.perf_counter()
@@ -237,18 +226,9 @@ def _frictional(problem: TwoBodyProblem, parts, newton: NewtonOptions, state, el
     friction.nodal = U.reshape(-1, bs)
     tangential = friction.profile()
     dissipation = friction.commit()
-    return TwoBodySolution(
-        u_h,
-        history,
-        surface_profile(u_full, force, slave, Q, slave=True),
-        surface_profile(u_full, force, master, Q, slave=False),
-        delta,
-        N,
-        elapsed + time.perf_counter() - start,
-        Q,
-        problem,
-        tuple(force.reshape(-1, bs)[surf.nodes].sum(axis=0) for surf in (slave, master)),
-        tangential,
-        dissipation,
-        PairState(u_h.x.array[:n_owned].copy(), friction.anchor.copy()),
-    )
+    state = PairState(u_h.x.array[:n_owned].copy(), friction.anchor.copy())
+    elapsed += time.perf_counter() - start
+    return pair_solution(
+        problem, u_h, u_full, force, (slave, master, Q), delta, N, elapsed, history, friction=tangential,
+        dissipation=dissipation, state=state,
+    )  # fmt: skip

@@ -350,6 +350,7 @@ PAIR_TABLES = [
     ("bodies.<name>", "bodies.lower.zz", "one body (two such tables, any names)"),
     ("supports entry", "bodies.lower.supports", "one entry of a body's `supports` list"),
     ("pair", "pair.zz", "the contact surfaces (required: it makes the case a two-body one)"),
+    ("friction", "friction.zz", "friction on the relative slip of the two faces (default frictionless)"),
     ("load", "load.zz", "load steps: the displacement of one support, or one traction, step by step"),
     ("run", "run.zz", "the run (both methods)"),
     ("primal", "primal.zz", 'Algorithm 1\'s options (`method = "primal"` only)'),
@@ -373,7 +374,7 @@ PAIR_KEYS = {
     ("bodies.<name>", "supports"): (
         "list of tables",
         "[]",
-        "Dirichlet boundaries (each body needs one: frictionless contact does not hold it tangentially)",
+        "Dirichlet boundaries (each body needs one: contact does not hold it tangentially before it touches)",
     ),
     ("bodies.<name>", "tractions"): ("table `{group = [tx, ty]}`", "{}", "tractions σn = t on facet groups"),
     ("supports entry", "facets"): ("group name", "required", "the facet group held"),
@@ -390,6 +391,17 @@ PAIR_KEYS = {
         "`segments` or `vertices`",
         '"segments"',
         "segment-to-segment mortar gaps, or one-pass node-to-segment (fails the patch test: for comparison)",
+    ),
+    ("friction", "law"): (
+        "`coulomb` or `tresca`",
+        "required",
+        "the law, as for one body; `tresca` takes `threshold` (a traction, ≥ 0) in place of `mu`",
+    ),
+    ("friction", "mu"): ("number ≥ 0", "required", "the Coulomb coefficient: slip threshold μ times the pressure"),
+    ("friction", "stiffness-ratio"): (
+        "number > 0",
+        "1",
+        "the stick stiffness over the normal penalty 1/δ",
     ),
     ("load", "support"): (
         "group name",
@@ -431,7 +443,7 @@ def _pair_keys(probe: str) -> list[str]:
     """The keys the package accepts in a two-body table, from its refusal of ``probe`` = 1 (or ``[{zz = 1}]``)."""
     from fenics_contact.cli.pair import pair_run_options
 
-    case_file = ROOT / "cases" / "two_blocks.toml"
+    case_file = ROOT / "cases" / ("fault_sliding.toml" if probe.startswith("friction") else "two_blocks.toml")
     value = [{"facets": "lower_bottom", "zz": 1}] if probe.endswith("supports") else 1
     try:
         pair_run_options(case_module.load_case(case_file, [(probe, value)]))

@@ -239,8 +239,8 @@ class Method:
 
 #: the options of the two-body solves: monolithic (``fem.two_body``) and Algorithm 1 (``hybrid.two_body``)
 _TWO_BODY_OPTIONS = {
-    "primal-monolithic": ("delta", "newton", "line_search"),
-    "primal": ("delta", "newton", *(f.name for f in dataclasses.fields(TwoBodyHybridOptions))),
+    "primal-monolithic": ("delta", "newton", "line_search", "state"),
+    "primal": ("delta", "newton", "state", *(f.name for f in dataclasses.fields(TwoBodyHybridOptions))),
 }
 
 
@@ -259,8 +259,8 @@ def _solve_two_bodies(name: str, problem: TwoBodyProblem, values: Mapping[str, A
         raise InputError(f"the two-body solve {name} takes the options {', '.join(accepted)}; got {refused}")
     if name == "primal-monolithic":
         return solve_two_body(problem, **values)
-    kwargs = {k: values[k] for k in ("delta", "newton") if k in values}
-    flat = {k: v for k, v in values.items() if k not in ("delta", "newton", "options")}
+    kwargs = {k: values[k] for k in ("delta", "newton", "state") if k in values}
+    flat = {k: v for k, v in values.items() if k not in ("delta", "newton", "state", "options")}
     options = values.get("options") or TwoBodyHybridOptions()
     if flat:
         options = dataclasses.replace(options, **flat)
@@ -355,7 +355,8 @@ def solve(problem: ContactProblem, method: str = "primal", /, **options):
         problem: the contact problem (``ContactProblem`` on its mesh: ``problem.on(mesh)``), or two bodies in
             contact (``TwoBodyProblem``: ``"primal-monolithic"``, options ``delta``, ``newton``, ``line_search``,
             a ``TwoBodySolution``; or ``"primal"``, Algorithm 1 with a strip on each side, options those of
-            ``hybrid.two_body.TwoBodyHybridOptions``, a ``TwoBodyHybridResult``).
+            ``hybrid.two_body.TwoBodyHybridOptions``, a ``TwoBodyHybridResult``; both take ``state``, the previous
+            load step's ``.state``: its friction anchors and warm start).
         method: ``"primal-monolithic"``, ``"mixed-monolithic"``, ``"primal"`` (Algorithm 1), ``"mixed"``
             (Algorithm 2), ``"primal-ms"`` (Algorithm 3) or ``"mixed-ms"`` (Algorithm 4).
         **options: the method's options by name, flat (``tol=1e-8``, ``layers=4``, ``delta=…``) or as their

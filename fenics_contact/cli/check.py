@@ -239,6 +239,7 @@ def _check_pair(case: PairCase, args: argparse.Namespace, comm: MPI.Comm) -> int
         f"facets, body {slave_body}), master {case.pair.master} "
         f"({_owned(problem.facet_tags.find(problem.pair.master), n_facets, comm)} facets), "
         f"{case.pair.rule} rule of degree {case.pair.quadrature_degree}"
+        + (f", {case.friction.describe()} on the relative slip" if case.friction is not None else ", frictionless")
     )
     serial = comm.size == 1
     say("  methods: " + "; ".join(f"{m} {'can run' if serial or m != 'primal' else 'refused'}" for m in PAIR_METHODS))

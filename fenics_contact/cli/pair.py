@@ -6,7 +6,8 @@ Algorithm 1's stopping rule and strips, the output directory and the figures; th
 ``--out``, ``--no-plots``, ``--delta``, ``--tol``, ``--max-iterations``, ``--accel`` override the case's
 ``[run]`` and ``[primal]`` tables, any other flag is refused.  A run solves each load step (warm-started from
 the last with ``primal-monolithic`` on one process) and writes ``cli.pair_outputs``' files; under ``mpiexec``
-``primal-monolithic`` runs in parallel (``fem.two_body_mpi``), ``primal`` is refused.
+``primal-monolithic`` runs in parallel (``fem.two_body_mpi``), ``primal`` is refused.  With ``[friction]`` each step
+starts from the friction state the last one committed (the slip of a step is measured from it).
 """
 
 import logging
@@ -22,7 +23,7 @@ from fenics_contact.cli.pair_outputs import PairWriter, step_row
 from fenics_contact.cli.signals import EXIT_NOT_CONVERGED, _fail
 from fenics_contact.errors import InputError
 from fenics_contact.fem.contact import NewtonOptions
-from fenics_contact.fem.two_body import solve_two_body
+from fenics_contact.fem.two_body import PairState, solve_two_body
 from fenics_contact.hybrid.iteration import ACCELERATIONS
 from fenics_contact.hybrid.two_body import TwoBodyHybridOptions, solve_two_body_hybrid
 from fenics_contact.io import OutputDirectory, provenance, write_summary
@@ -161,11 +162,14 @@ def pair_run_options(case: PairCase, given: Mapping[str, object] = {}) -> PairRu
     )
 
 
-def _solve(options: PairRunOptions, problem, initial: np.ndarray | None):
-    """One solve of the run's method; ``initial`` warm-starts the monolithic Newton."""
+def _solve(options: PairRunOptions, problem, state: PairState | None):
+    """One solve of the run's method from the previous load step's ``state``: the monolithic Newton's warm start
+    and, with friction, the anchors the step's slip is measured from (Algorithm 1: also its interface data)."""
     if options.method == "primal-monolithic":
-        return solve_two_body(problem, delta=options.delta, newton=NewtonOptions(), initial=initial)
-    return solve_two_body_hybrid(problem, delta=options.delta, options=options.hybrid)
+        return solve_two_body(problem, delta=options.delta, newton=NewtonOptions(), state=state)
+    if problem.friction is None:
+        state = None  # (frictionless: each step from the unloaded pair, as the paper's iteration)
+    return solve_two_body_hybrid(problem, delta=options.delta, options=options.hybrid, state=state)
 
 
 def _converged(result) -> bool:
@@ -187,12 +191,12 @@ def run_pair(options: PairRunOptions, comm: MPI.Comm, case: PairCase) -> int:
         t_mesh = time.perf_counter() - t0
         log.info("case %s (%s), method %s", case.path.name, case.description_or_name, options.method)
         writer = PairWriter(output.path, comm, options.plots, f"case {case.path.name}, {options.method}")
-        rows, result, u = [], None, None
+        rows, result, state = [], None, None
         quantity = case.load.quantity if case.load else None
         for k, displacement in enumerate(steps):
             problem = case.problem(built, step=None if displacement is None else k)
-            result = _solve(options, problem, u)
-            u = result.u.x.array.copy() if comm.size == 1 else None  # (a warm start is serial)
+            result = _solve(options, problem, state)
+            state = result.state  # (under MPI only its friction anchors are used: a warm start is serial)
             row = step_row(result, options.method)
             if displacement is not None:
                 row = {"step": k + 1, quantity: list(displacement)} | row
@@ -216,6 +220,7 @@ def run_pair(options: PairRunOptions, comm: MPI.Comm, case: PairCase) -> int:
             "mpi_ranks": comm.size,
             "provenance": provenance(),
             "load_steps": {case.load.kind: case.load.group, "steps": rows} if case.load else None,
+            "dissipation": float(sum(r["friction"]["dissipation"] for r in rows)) if case.friction else None,
             "case": case.to_dict() | {"run": options.echo()},
         }
         summary.pop("step", None)

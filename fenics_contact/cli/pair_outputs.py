@@ -7,7 +7,8 @@
   and ``side`` (1 slave, 2 master);
 * ``pair.png``: the deformed bodies (magnified, coloured by |u|, the contact surfaces drawn) beside the contact
   pressure along each surface; ``E.png``; ``force_displacement.png`` with load steps: the normal contact force
-  on each side against the stepped support's displacement or traction.
+  on each side (with friction also the tangential force on the slave side) against the stepped support's
+  displacement or traction.
 """
 
 from pathlib import Path
@@ -17,7 +18,7 @@ import pyvista
 from dolfinx import plot
 from mpi4py import MPI
 
-from fenics_contact.cli.outputs import _cell_array
+from fenics_contact.cli.outputs import _cell_array, _friction_summary
 from fenics_contact.io import cell_markers, stress_field
 from fenics_contact.paraview import Series, contact_grid, field_grid
 from fenics_contact.plots import _save, plot_cell_field, plt
@@ -32,7 +33,8 @@ def _interval(profile) -> list[float] | None:
 
 def step_row(result, method: str) -> dict:
     """The summary entries of one two-body solve: the forces on each side and their balance, the pressures, the
-    contact zones (along each surface's major coordinate), the solver's counts."""
+    contact zones (along each surface's major coordinate), the solver's counts; with friction ``friction``: the
+    slave side's normal and tangential force, stick and slip nodes and zones, the step's dissipation."""
     slave, master = result.slave, result.master
     row = {
         "converged": bool(getattr(result, "converged", True)),
@@ -50,6 +52,8 @@ def step_row(result, method: str) -> dict:
         "penetration": slave.penetration,
         "time_s": float(result.time_s),
     }
+    if result.friction is not None:  # the slave side's tangential summary (the master's is its opposite)
+        row["friction"] = _friction_summary(result.friction, result.dissipation)
     if method == "primal-monolithic":
         row |= {"newton_steps": result.newton.steps, "dofs": int(result.dofs)}
     else:
@@ -172,17 +176,28 @@ def plot_pair(result, problem, path: str | Path, *, title: str = "", scale: floa
 
 def plot_force_displacement(load_steps: dict, path: str | Path, title: str = "") -> Path:
     """The normal contact force on each side against the stepped support's displacement or traction (its
-    component along the last step's)."""
+    component along the last step's; against the step number when the steps do not all lie along the last)."""
     steps = load_steps["steps"]
     kind, quantity = ("support", "displacement") if "support" in load_steps else ("traction", "traction")
     last = np.asarray(steps[-1][quantity], dtype=float)
     direction = last / max(float(np.linalg.norm(last)), np.finfo(float).tiny)
-    d = [float(np.asarray(s[quantity]) @ direction) for s in steps]
+    values = np.asarray([s[quantity] for s in steps], dtype=float)
+    along = np.all(np.abs(values @ np.array([-direction[1], direction[0]])) <= 1e-12 * np.abs(values).max())
+    d = list(values @ direction) if along else list(range(1, len(steps) + 1))  # (a path that turns: by step)
     fig, ax = plt.subplots(figsize=(6, 4))
     ax.plot(d, [s["normal_force_slave"] for s in steps], "o-", label="slave side")
     ax.plot(d, [s["normal_force_master"] for s in steps], "x--", label="master side")
-    ax.set_xlabel(f"{quantity} of {load_steps[kind]} along ({direction[0]:.3g}, {direction[1]:.3g})")
-    ax.set_ylabel("normal contact force")
+    frictional = all("friction" in s for s in steps)
+    if frictional:  # the tangential force on the slave side, |Σ w_p t_p|
+        tangential = [float(np.linalg.norm(s["friction"]["tangential_force"])) for s in steps]
+        ax.plot(d, tangential, "s-", ms=4, label="tangential (slave side)")
+    label = f"{quantity} of {load_steps[kind]} along ({direction[0]:.3g}, {direction[1]:.3g})"
+    ax.set_xlabel(
+        label
+        if along
+        else f"load step ({quantity} of {load_steps[kind]}: {values[0].tolist()} … {values[-1].tolist()})"
+    )
+    ax.set_ylabel("normal and tangential contact force" if frictional else "normal contact force")
     ax.set_title(title)
     ax.legend()
     ax.grid(True, alpha=0.3)

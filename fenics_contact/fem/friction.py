@@ -30,7 +30,7 @@ from petsc4py import PETSc
 
 from fenics_contact.errors import ConvergenceError
 from fenics_contact.fem.contact import NewtonHistory, profile_order
-from fenics_contact.fem.newton import Advance, Check, Direction, StepState, semismooth_newton_loop
+from fenics_contact.fem.newton import Advance, Check, Direction, StepState, exact_step, semismooth_newton_loop
 from fenics_contact.problem.friction import Friction
 
 __all__ = ["NodalFriction", "FrictionProfile", "frictional_newton"]
@@ -326,24 +326,8 @@ class _FrictionalSystem:
         return self.sub.b.dot(self.sub.du)
 
     def _energy_search(self) -> float:
-        """The root in (0, 1] of the increasing t ↦ d·F(u + t d) (exact line search on the convex energy, by
-        regula falsi with the Illinois modification)."""
-        t0, t1 = 0.0, 1.0
-        f0, f1 = self._slope(0.0), self._slope(1.0)
-        if f0 >= 0.0 or f1 <= 0.0:
-            return 1.0
-        for _ in range(60):
-            t = t1 - f1 * (t1 - t0) / (f1 - f0)
-            f = self._slope(t)
-            if abs(f) <= 1e-12 * abs(f0) or t1 - t0 <= 1e-12:
-                return t
-            if f > 0.0:
-                t1, f1 = t, f
-                f0 *= 0.5
-            else:
-                t0, f0 = t, f
-                f1 *= 0.5
-        return t
+        """The exact line search on the convex energy (``fem.newton.exact_step``)."""
+        return exact_step(self._slope)
 
     def line_search(self) -> float:
         keep, self.friction.forced = self.friction.forced, None  # the merit: the residual of the law itself

@@ -198,6 +198,9 @@ class ContactQuadrature(NamedTuple):
     nu: np.ndarray
     B: sp.csr_matrix
     nodes: np.ndarray | None = None  #: the slave node (DOF block) of each row (``nodal_gaps``), None for points
+    #: the relative displacement u_s(x_q) − u_m(π(x_q)) at each row, one row per component (row d q + c):
+    #: B = diag(ν_q)ᵀ of it; the tangential slip of friction is its part orthogonal to ν
+    relative: sp.csr_matrix | None = None
 
 
 def _cuts(slave: Surface, master: Surface) -> list[np.ndarray]:
@@ -261,15 +264,18 @@ def contact_quadrature(
     facet, bary, weights, points = facet[keep], bary[keep], weights[keep], points[keep]
     nu, gap, mfacet, mbary = proj.nu[keep], proj.gap[keep], proj.facet[keep], proj.bary[keep]
     n, k = points.shape[0], bary.shape[1]
-    rows, cols, vals = [], [], []
+    rows, cols, vals, comps = [], [], [], []
     for blocks, basis, sign in ((slave.blocks[facet], bary, 1.0), (master.blocks[mfacet], mbary, -1.0)):
         for j in range(k):
             for c in range(bs):
                 rows.append(np.arange(n))
                 cols.append(bs * blocks[:, j] + c)
-                vals.append(sign * basis[:, j] * nu[:, c])
-    B = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n, num_dofs))
-    Q = ContactQuadrature(points, weights, gap, nu, B)
+                vals.append(sign * basis[:, j])
+                comps.append(np.full(n, c))
+    rows, cols, vals, comps = (np.concatenate(a) for a in (rows, cols, vals, comps))
+    B = sp.csr_matrix((vals * nu[rows, comps], (rows, cols)), shape=(n, num_dofs))
+    relative = sp.csr_matrix((vals, (bs * rows + comps, cols)), shape=(bs * n, num_dofs))
+    Q = ContactQuadrature(points, weights, gap, nu, B, relative=relative)
     if not nodal:
         return Q
     P = sp.csr_matrix(
@@ -293,4 +299,6 @@ def nodal_gaps(Q: ContactQuadrature, P: sp.csr_matrix) -> ContactQuadrature:
     rows = scale @ PW[nodes]
     nu = rows @ Q.nu
     nu /= np.linalg.norm(nu, axis=1)[:, None]
-    return ContactQuadrature(rows @ Q.points, weights[nodes], rows @ Q.gap, nu, (rows @ Q.B).tocsr(), nodes)
+    bs = Q.nu.shape[1]
+    relative = None if Q.relative is None else (sp.kron(rows, sp.identity(bs)) @ Q.relative).tocsr()
+    return ContactQuadrature(rows @ Q.points, weights[nodes], rows @ Q.gap, nu, (rows @ Q.B).tocsr(), nodes, relative)

@@ -35,6 +35,7 @@ __all__ = [
     "ContactSystem",
     "NewtonTrace",
     "semismooth_newton_loop",
+    "exact_step",
 ]
 
 #: when the exact line search runs (module docstring)
@@ -194,3 +195,25 @@ def semismooth_newton_loop(
     )
     error.steps = max_steps
     raise error
+
+
+def exact_step(slope: Callable[[float], float]) -> float:
+    """The root in (0, 1] of the increasing slope t ↦ d·∇ψ(u + t d) of a convex energy ψ along d: the exact line
+    search, by regula falsi with the Illinois modification (1 when the slope does not change sign on [0, 1])."""
+    t0, t1 = 0.0, 1.0
+    f0, f1 = slope(0.0), slope(1.0)
+    if f0 >= 0.0 or f1 <= 0.0:
+        return 1.0
+    t = 1.0
+    for _ in range(60):
+        t = t1 - f1 * (t1 - t0) / (f1 - f0)
+        f = slope(t)
+        if abs(f) <= 1e-12 * abs(f0) or t1 - t0 <= 1e-12:
+            return t
+        if f > 0.0:
+            t1, f1 = t, f
+            f0 *= 0.5
+        else:
+            t0, f0 = t, f
+            f1 *= 0.5
+    return t

@@ -11,12 +11,15 @@ on that energy (at every step by default: ``solve_two_body``).
 The coupling entries Bᵀ W B join DOF blocks of the two bodies that share no cell, outside the pattern of the
 finite-element matrix: the system is assembled in SciPy and factorized by ``fem.linalg.SparseFactor``
 (sequential MUMPS).  Under MPI ``solve_two_body`` hands over to ``fem.two_body_mpi`` (the contact surfaces gathered
-to every rank, the bulk solved in parallel; the same solution).
+to every rank, the bulk solved in parallel; the same solution).  With the pair's friction law the contact term
+is the nodal law on the slave nodes' relative displacements (``fem.two_body_friction``); a load step then takes
+the previous one's ``PairState``.
 """
 
 import logging
 import time
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import basix.ufl
 import dolfinx.la
@@ -28,6 +31,7 @@ from dolfinx import mesh as dmesh
 
 from fenics_contact.errors import InputError
 from fenics_contact.fem.contact import ContactProfile, NewtonHistory, NewtonOptions, profile_order
+from fenics_contact.fem.friction import FrictionProfile
 from fenics_contact.fem.linalg import SparseFactor, assemble_scipy
 from fenics_contact.fem.mortar import ContactQuadrature, Surface, contact_quadrature, surface
 from fenics_contact.fem.newton import Advance, Check, Direction, StepState, semismooth_newton_loop
@@ -37,6 +41,7 @@ from fenics_contact.problem.materials import strain, stress
 from fenics_contact.problem.pair import TwoBodyProblem
 
 __all__ = [
+    "PairState",
     "TwoBodySystem",
     "TwoBodySolution",
     "solve_two_body",
@@ -176,6 +181,15 @@ class TwoBodySystem:
             self._factor = None
 
 
+class PairState(NamedTuple):
+    """What a converged load step hands the next one: the displacement DOFs ``u`` (the warm start), the friction
+    anchors it committed (``fem.friction``: None when frictionless), and Algorithm 1's interface data g."""
+
+    u: np.ndarray
+    anchor: np.ndarray | None = None
+    interface: np.ndarray | None = None
+
+
 @dataclass(slots=True)
 class TwoBodySolution:
     """The two-body penalized solution: u, the Newton history, the contact profiles of both surfaces (nodal
@@ -192,6 +206,12 @@ class TwoBodySolution:
     problem: TwoBodyProblem
     #: the resultant contact force on the slave and on the master body (Σ of the nodal contact forces)
     forces: tuple[np.ndarray, np.ndarray]
+    #: with friction: the tangential traction, pressure and stick/slip state at the slave nodes
+    friction: FrictionProfile | None = None
+    #: with friction: the energy the step's slip dissipated (≥ 0)
+    dissipation: float = 0.0
+    #: the state the next load step starts from (``solve_two_body(..., state=)``)
+    state: PairState | None = None
 
     @property
     def profile(self) -> ContactProfile:
@@ -202,6 +222,30 @@ class TwoBodySolution:
         """|F_slave + F_master| / max |F|: the relative imbalance of the resultant contact forces (round-off)."""
         fs, fm = self.forces
         return float(np.linalg.norm(fs + fm) / max(np.linalg.norm(fs), np.linalg.norm(fm), np.finfo(float).tiny))
+
+
+def pair_solution(
+    problem: TwoBodyProblem, u: fem.Function, u_contact: np.ndarray, force: np.ndarray, surfaces, delta: float,
+    dofs: int, elapsed: float, history: NewtonHistory, **extra,
+) -> TwoBodySolution:  # fmt: skip
+    """The ``TwoBodySolution`` of u, ``u_contact`` (a DOF vector holding u at least at the contact columns), the
+    nodal contact forces ``force`` and ``surfaces`` = (slave, master, Q): both profiles and both resultants;
+    ``extra``: the friction fields and the state."""
+    slave, master, Q = surfaces
+    bs = u.function_space.dofmap.index_map_bs
+    return TwoBodySolution(
+        u,
+        history,
+        surface_profile(u_contact, force, slave, Q, slave=True),
+        surface_profile(u_contact, force, master, Q, slave=False),
+        delta,
+        dofs,
+        elapsed,
+        Q,
+        problem,
+        tuple(force.reshape(-1, bs)[surf.nodes].sum(axis=0) for surf in (slave, master)),
+        **extra,
+    )
 
 
 def supported_dofs(problem: TwoBodyProblem, V: fem.FunctionSpace) -> tuple[np.ndarray, np.ndarray]:
@@ -310,12 +354,15 @@ def solve_two_body(
     newton: NewtonOptions = NewtonOptions(),
     line_search: str = "always",
     initial: np.ndarray | None = None,
+    state: PairState | None = None,
 ) -> TwoBodySolution:
-    """Penalized frictionless contact of the two bodies of ``problem`` by semismooth Newton (under MPI:
-    ``fem.two_body_mpi.solve_two_body_distributed``).
+    """Penalized contact of the two bodies of ``problem`` by semismooth Newton (under MPI:
+    ``fem.two_body_mpi.solve_two_body_distributed``); with the pair's friction law, ``fem.two_body_friction``.
 
     ``initial``: the displacement DOF vector to start from (a warm start, e.g. the previous load step's
-    ``u.x.array``); its supported DOFs take the problem's values.  Serial only.
+    ``u.x.array``); its supported DOFs take the problem's values.  Serial only.  ``state``: the previous load
+    step's ``TwoBodySolution.state`` (its u the warm start unless ``initial`` is given; with friction its anchors,
+    from which this step's slip is measured; without one, the step starts from the unstretched state).
 
     ``delta`` defaults to ``two_body_penalty``; ``line_search`` as in ``fem.newton`` (exact, on the energy):
     ``"always"`` by default, as a full first step from no contact drives the bodies through each other and the
@@ -325,10 +372,12 @@ def solve_two_body(
     """
     if not isinstance(problem, TwoBodyProblem):
         raise InputError(f"solve_two_body takes a TwoBodyProblem, got {type(problem).__name__}")
+    if state is not None and not isinstance(state, PairState):
+        raise InputError(f"solve_two_body: state must be a PairState (a solution's .state), got {type(state).__name__}")
     if problem.comm.size > 1:  # the contact surfaces gathered, the bulk solved in parallel
         if initial is not None:
             raise InputError("solve_two_body: a warm start (initial) is serial only")
-        return solve_two_body_distributed(problem, delta=delta, newton=newton, line_search=line_search)
+        return solve_two_body_distributed(problem, delta=delta, newton=newton, line_search=line_search, state=state)
     start = time.perf_counter()
     msh = problem.mesh
     gdim = msh.geometry.dim
@@ -342,12 +391,12 @@ def solve_two_body(
     master = surface(V, problem.facet_tags, problem.pair.master)
     delta = two_body_penalty(problem, slave, master, delta)
     Q = contact_quadrature(slave, master, n, bs, problem.pair.quadrature_degree, rule=problem.pair.rule)
+    if initial is None and state is not None:
+        initial = state.u
+    if problem.friction is not None:
+        return _solve_frictional(problem, V, (K, b, fixed, values), (slave, master, Q), delta, newton, initial, state)
     system = TwoBodySystem(K, b, fixed, values, Q, delta)
-    if initial is not None:
-        start_u = np.asarray(initial, dtype=np.float64).ravel()
-        if start_u.size < n or not np.all(np.isfinite(start_u[:n])):
-            raise InputError(f"solve_two_body: initial must hold {n} finite displacement DOFs, got {start_u.size}")
-        system.u[system.free] = start_u[:n][system.free]
+    _warm_start(system, initial, n)
     try:
         trace = semismooth_newton_loop(
             system,
@@ -364,26 +413,63 @@ def solve_two_body(
         system.destroy()
     u = fem.Function(V, name="u")
     u.x.array[:n] = system.u
-    force = system.contact_force_vector()
     history = NewtonHistory(trace.residuals, trace.active_sizes, trace.factorizations)
     log.debug("two bodies: step lengths %s", trace.step_lengths)
     elapsed = time.perf_counter() - start
-    solution = TwoBodySolution(
-        u,
-        history,
-        surface_profile(system.u, force, slave, Q, slave=True),
-        surface_profile(system.u, force, master, Q, slave=False),
-        delta,
-        n,
-        elapsed,
-        Q,
-        problem,
-        tuple(force.reshape(-1, bs)[surf.nodes].sum(axis=0) for surf in (slave, master)),
-    )
+    solution = pair_solution(
+        problem, u, system.u, system.contact_force_vector(), (slave, master, Q), delta, n, elapsed, history,
+        state=PairState(system.u.copy()),
+    )  # fmt: skip
     log.info(
         "two bodies: %d Newton steps, active quadrature points %s, force balance %.1e, %.2f s",
         history.steps,
         history.active_sizes,
+        solution.force_balance(),
+        elapsed,
+    )
+    return solution
+
+
+def _warm_start(system: TwoBodySystem, initial: np.ndarray | None, n: int) -> None:
+    """u ← ``initial`` on the free DOFs (the supported ones keep the problem's values)."""
+    if initial is None:
+        return
+    start_u = np.asarray(initial, dtype=np.float64).ravel()
+    if start_u.size < n or not np.all(np.isfinite(start_u[:n])):
+        raise InputError(f"solve_two_body: initial must hold {n} finite displacement DOFs, got {start_u.size}")
+    system.u[system.free] = start_u[:n][system.free]
+
+
+def _solve_frictional(problem, V, operators, surfaces, delta, newton, initial, state) -> TwoBodySolution:
+    """The frictional solve of ``solve_two_body`` (``fem.two_body_friction``), the friction state committed."""
+    from fenics_contact.fem.two_body_friction import FrictionalTwoBodySystem, solve_frictional_pair  # (imports this)
+
+    start = time.perf_counter()
+    n = V.dofmap.index_map.size_local * V.dofmap.index_map_bs
+    anchor = None if state is None else state.anchor
+    system = FrictionalTwoBodySystem(*operators, surfaces[2], delta, problem.friction, anchor)
+    _warm_start(system, initial, n)
+    try:
+        history = solve_frictional_pair(system, newton, MAX_REFINEMENTS)
+    finally:
+        system.destroy()
+    u = fem.Function(V, name="u")
+    u.x.array[:n] = system.u
+    force = system.contact_force_vector()
+    tangential = system.profile()
+    dissipation = system.commit()
+    elapsed = time.perf_counter() - start
+    solution = pair_solution(
+        problem, u, system.u, force, surfaces, delta, n, elapsed, history, friction=tangential,
+        dissipation=dissipation, state=PairState(system.u.copy(), system.friction.anchor.copy()),
+    )  # fmt: skip
+    log.info(
+        "two bodies, %s: %d Newton steps, stick %d, slip %d nodes, dissipation %.3e, force balance %.1e, %.2f s",
+        problem.friction.describe(),
+        history.steps,
+        int(np.count_nonzero(tangential.stick)),
+        int(np.count_nonzero(tangential.slip)),
+        dissipation,
         solution.force_balance(),
         elapsed,
     )

@@ -15,6 +15,11 @@ whose semismooth Newton steps on an active set A, (I + W A S) μ = W A s₀, are
 energy restricted to u₀ − Z μ: ½ μᵀ S μ + ½ Σ W (s⁺)².  It stops when a full step keeps the active set or ‖μ − W s⁺‖
 reaches round-off (``RTOL``).  The
 solution is the serial one (the unique minimizer of the energy).
+
+With the pair's friction law the contact rows are the slave nodes' relative displacements G (d rows per node,
+``fem.two_body_friction``): u = u₀ − Z λ, Z = K⁻¹ G_fᵀ, and the nodal law reduces to U = U₀ − S λ(U), S = G Z,
+U₀ = G u₀, solved on every rank by ``fem.condensed_friction.solve_condensed`` (the loop of the frictional Newton);
+the state (the anchors) is committed on every rank alike.
 """
 
 import time
@@ -29,6 +34,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from fenics_contact.errors import ConvergenceError
+from fenics_contact.fem.condensed_friction import CondensedLaw, solve_condensed
 from fenics_contact.fem.contact import NewtonHistory, NewtonOptions
 from fenics_contact.fem.linalg import DirectSolver
 from fenics_contact.fem.mortar import Surface, contact_quadrature, surface
@@ -72,14 +78,14 @@ def _line_search(S: np.ndarray, W: np.ndarray, s0: np.ndarray, mu: np.ndarray, d
 
 
 def solve_two_body_distributed(
-    problem: TwoBodyProblem, *, delta: float | None, newton: NewtonOptions, line_search: str
+    problem: TwoBodyProblem, *, delta: float | None, newton: NewtonOptions, line_search: str, state=None
 ):
-    """``fem.two_body.solve_two_body`` on several processes (module docstring); the same ``TwoBodySolution``."""
+    """``fem.two_body.solve_two_body`` on several processes (module docstring); the same ``TwoBodySolution``.
+    ``state``: the previous load step's (its friction anchors; its u is not used)."""
     from fenics_contact.fem.two_body import (  # (the serial module calls this one)
-        TwoBodySolution,
         load_vector,
+        pair_solution,
         supported_dofs,
-        surface_profile,
         two_body_penalty,
     )
 
@@ -114,7 +120,9 @@ def solve_two_body_distributed(
         Q = contact_quadrature(slave, master, N, bs, problem.pair.quadrature_degree, rule=problem.pair.rule)
         free = np.ones(N, dtype=bool)
         free[np.concatenate(comm.allgather(lo + fixed[mine]))] = False
-        B_f = (Q.B @ sp.diags(free.astype(np.float64))).tocsr()
+        # the contact rows: B (frictionless), or with friction the relative displacements G (d rows per node)
+        rows = Q.B if problem.friction is None else Q.relative
+        B_f = (rows @ sp.diags(free.astype(np.float64))).tocsr()
         m = B_f.shape[0]
         B_own = B_f[:, lo : lo + n_owned].tocsc()
         Z = np.zeros((n_owned, m))
@@ -125,12 +133,20 @@ def solve_two_body_distributed(
             Z[:, j] = z.array
         S = comm.allreduce(B_own @ Z, op=MPI.SUM)
         S = 0.5 * (S + S.T)
-        s0 = comm.allreduce(Q.B[:, lo : lo + n_owned] @ u0.array, op=MPI.SUM) - Q.gap
+        s0 = comm.allreduce(rows[:, lo : lo + n_owned] @ u0.array, op=MPI.SUM)
+        if problem.friction is not None:  # the stiffness against r_p (as the serial solve: 1 / Σ_j G_pj² / K_jj)
+            G0, diagonal = B_own[0::bs], K.getDiagonal()
+            stiffness = 1.0 / comm.allreduce(G0.multiply(G0) @ (1.0 / diagonal.array), op=MPI.SUM)
+            diagonal.destroy()
         for vec in (rhs, z, x_D, b):
             vec.destroy()
     finally:
         solver.destroy()
         K.destroy()
+    if problem.friction is not None:
+        parts = (V, Q, (slave, master), u0, Z, S, s0, delta, stiffness)
+        return _frictional(problem, parts, newton, state, time.perf_counter() - start)
+    s0 -= Q.gap
     W = Q.weights / delta
     mu = np.zeros(m)
     s = s0.copy()
@@ -161,21 +177,58 @@ def solve_two_body_distributed(
     u_h.x.scatter_forward()
     u0.destroy()
     # the profiles on every rank: u at the contact columns gathered, the contact forces −Bᵀ W s⁺
-    cols = np.unique(Q.B.indices)
-    own = cols[(cols >= lo) & (cols < lo + n_owned)]
+    u_full = _gathered_u(u_h, np.unique(Q.B.indices), N, lo, n_owned, comm)
+    force = -(Q.B.T @ (W * np.maximum(s, 0.0)))
+    elapsed = time.perf_counter() - start
+    return pair_solution(problem, u_h, u_full, force, (slave, master, Q), delta, N, elapsed, history)
+
+
+def _gathered_u(u_h: fem.Function, columns: np.ndarray, N: int, lo: int, n_owned: int, comm: MPI.Comm) -> np.ndarray:
+    """A global DOF vector holding u at ``columns`` (the contact columns) on every rank, zero elsewhere."""
+    own = columns[(columns >= lo) & (columns < lo + n_owned)]
     u_full = np.zeros(N)
     for idx, val in comm.allgather((own, u_h.x.array[own - lo])):
         u_full[idx] = val
-    force = -(Q.B.T @ (W * np.maximum(s, 0.0)))
-    return TwoBodySolution(
-        u_h,
-        history,
-        surface_profile(u_full, force, slave, Q, slave=True),
-        surface_profile(u_full, force, master, Q, slave=False),
-        delta,
-        N,
-        time.perf_counter() - start,
-        Q,
-        problem,
-        tuple(force.reshape(-1, bs)[surf.nodes].sum(axis=0) for surf in (slave, master)),
-    )
+    return u_full
+
+
+def _frictional(problem: TwoBodyProblem, parts, newton: NewtonOptions, state, elapsed: float):
+    """The frictional contact reduced to the slave nodes' relative displacements (module docstring):
+    U = U₀ − S λ(U) (``fem.condensed_friction``), the same on every rank, then u = u₀ − Z λ and the state committed."""
+    from fenics_contact.fem.two_body import PairState, pair_solution  # (imports this module)
+    from fenics_contact.fem.two_body_friction import PairFriction
+
+    start = time.perf_counter()
+    V, Q, (slave, master), u0, Z, S, U0, delta, stiffness = parts
+    comm, imap, bs = problem.comm, V.dofmap.index_map, V.dofmap.index_map_bs
+    n_owned, N, lo = imap.size_local * bs, imap.size_global * bs, imap.local_range[0] * bs
+    friction = PairFriction(problem.friction, Q, delta, stiffness, None if state is None else state.anchor)
+    law = CondensedLaw(friction, S)
+    history = NewtonHistory(factorizations=1)
+
+    def record(trace) -> None:
+        history.residuals.extend(trace.residuals)
+        history.active_sizes.extend(trace.active_sizes)
+
+    U = solve_condensed(law, U0, U0.copy(), newton.max_iterations, record=record)
+    lam = law.forces(U)[0]
+    residual = float(np.linalg.norm(U - U0 + S @ lam))
+    size = float(np.linalg.norm(U)) + float(np.linalg.norm(S @ lam))
+    if not residual <= RTOL * size + 100.0 * np.finfo(float).eps * float(np.linalg.norm(U0)):
+        raise ConvergenceError(f"frictional two-body contact (distributed): the reduced residual {residual:.3e}")
+    history.residuals.append(residual)
+    u_h = fem.Function(V, name="u")
+    u_h.x.array[:n_owned] = u0.array - Z @ lam
+    u_h.x.scatter_forward()
+    u0.destroy()
+    u_full = _gathered_u(u_h, np.unique(Q.B.indices), N, lo, n_owned, comm)
+    force = -(Q.relative.T @ lam)
+    friction.nodal = U.reshape(-1, bs)
+    tangential = friction.profile()
+    dissipation = friction.commit()
+    state = PairState(u_h.x.array[:n_owned].copy(), friction.anchor.copy())
+    elapsed += time.perf_counter() - start
+    return pair_solution(
+        problem, u_h, u_full, force, (slave, master, Q), delta, N, elapsed, history, friction=tangential,
+        dissipation=dissipation, state=state,
+    )  # fmt: skip

@@ -18,7 +18,9 @@ steps without convergence, a cycle of active sets, the iteration goes on with An
 ``"anderson"`` and ``"none"`` (the paper's update) are the alternatives.  The responses cost one back-solve
 per γ unknown and dense matrices of the size of γ: affordable for the strips of a contact zone, not for a γ
 of many thousand nodes.  The stopping rule is the transmission residual
-(``hybrid.certificate``).  Serial, as the two-body solve.
+(``hybrid.certificate``).  With the pair's friction law Ω₂ is the frictional strips (``fem.two_body_friction``):
+R₂ comes from their frictional Jacobian, one interface Newton step per friction state, and the state is
+committed once the pair has converged (``state`` carries it to the next load step).  Serial.
 """
 
 import logging
@@ -34,11 +36,13 @@ from mpi4py import MPI
 
 from fenics_contact.errors import InputError
 from fenics_contact.fem.contact import ContactProfile, NewtonHistory, NewtonOptions
+from fenics_contact.fem.friction import FrictionProfile
 from fenics_contact.fem.linalg import SparseFactor
 from fenics_contact.fem.mortar import ContactQuadrature, contact_quadrature, surface
 from fenics_contact.fem.newton import semismooth_newton_loop
 from fenics_contact.fem.two_body import (
     MAX_REFINEMENTS,
+    PairState,
     TwoBodySystem,
     load_vector,
     stiffness,
@@ -46,6 +50,7 @@ from fenics_contact.fem.two_body import (
     surface_profile,
     two_body_penalty,
 )
+from fenics_contact.fem.two_body_friction import FrictionalTwoBodySystem, solve_frictional_pair
 from fenics_contact.hybrid.certificate import primal_certificate
 from fenics_contact.hybrid.iteration import AndersonUpdate
 from fenics_contact.problem.pair import TwoBodyProblem
@@ -101,6 +106,14 @@ class TwoBodyHybridResult:
     master: ContactProfile
     #: the resultant contact force on the slave and on the master body (from Ω₂'s contact forces)
     forces: tuple[np.ndarray, np.ndarray]
+    #: with friction: the tangential traction, pressure and stick/slip state at the slave nodes (Ω₂'s)
+    friction: FrictionProfile | None = None
+    #: with friction: the energy the step's slip dissipated (≥ 0)
+    dissipation: float = 0.0
+    #: the state the next load step starts from (``solve_two_body_hybrid(..., state=)``)
+    state: PairState | None = None
+    #: the evaluations of T the interface Newton made (0 with another update)
+    interface_newton_steps: int = 0
 
     @property
     def iterations(self) -> int:
@@ -233,8 +246,13 @@ def solve_two_body_hybrid(
     delta: float | None = None,
     options: TwoBodyHybridOptions = TwoBodyHybridOptions(),
     newton: NewtonOptions = NewtonOptions(),
+    state: PairState | None = None,
 ) -> TwoBodyHybridResult:
-    """Algorithm 1 for two bodies (module docstring); the same δ default as the monolithic solve."""
+    """Algorithm 1 for two bodies (module docstring); the same δ default as the monolithic solve.  ``state``: the
+    previous load step's ``.state`` (either solve's): Ω₂ starts from its u, the interface data from its g (when
+    Algorithm 1 made it), and with friction the slip is measured from its anchors."""
+    if state is not None and not isinstance(state, PairState):
+        raise InputError(f"two-body Algorithm 1: state must be a PairState (a solution's .state), got {state!r}")
     if problem.comm.size > 1:
         raise InputError("two-body contact runs on one process (run it without mpiexec)")
     start = time.perf_counter()
@@ -256,11 +274,20 @@ def solve_two_body_hybrid(
     Q = contact_quadrature(slave, master, n, bs, problem.pair.quadrature_degree, rule=problem.pair.rule)
     d2 = split.dofs[1]
     loc2 = _local(d2, n)
-    Q2 = ContactQuadrature(Q.points, Q.weights, Q.gap, Q.nu, Q.B[:, d2].tocsr())
+    Q2 = ContactQuadrature(Q.points, Q.weights, Q.gap, Q.nu, Q.B[:, d2].tocsr(), Q.nodes, Q.relative[:, d2].tocsr())
     K2 = (stiffness(problem, V, strip) + robin)[d2][:, d2].tocsr()
     b2 = load_vector(problem, V, strip)[d2]
     mine = loc2[fixed] >= 0
-    system = TwoBodySystem(K2, b2.copy(), loc2[fixed[mine]], values[mine], Q2, delta)
+    frictional = problem.friction is not None
+    if frictional:
+        anchor = None if state is None else state.anchor
+        system = FrictionalTwoBodySystem(
+            K2, b2.copy(), loc2[fixed[mine]], values[mine], Q2, delta, problem.friction, anchor
+        )
+    else:
+        system = TwoBodySystem(K2, b2.copy(), loc2[fixed[mine]], values[mine], Q2, delta)
+    if state is not None:
+        system.u[system.free] = np.asarray(state.u, dtype=np.float64)[d2][system.free]
     g1_pos, g2_pos = _local(split.dofs[0], n)[split.gamma], loc2[split.gamma]
     m = split.gamma.size
     w, alpha = split.weights, split.alpha
@@ -273,6 +300,9 @@ def solve_two_body_hybrid(
         u1 = bulk.solve(data1)
         system.b = b2.copy()
         system.b[g2_pos] += w * g[m:]
+        if frictional:
+            histories.append(solve_frictional_pair(system, newton, MAX_REFINEMENTS))
+            return u1, system.u.copy()
         trace = semismooth_newton_loop(
             system,
             system.penetration() >= 0.0,
@@ -298,6 +328,8 @@ def solve_two_body_hybrid(
         return np.concatenate([2 * alpha * u2g - g[m:], 2 * alpha * u1g - g[:m]]), cert.value
 
     g = np.zeros(2 * m)
+    if state is not None and state.interface is not None and state.interface.size == 2 * m:
+        g = state.interface.copy()
     converged = False
     try:
         steps = 0
@@ -323,6 +355,10 @@ def solve_two_body_hybrid(
                     converged = True
                     break
                 g = update(g, Tg) if update is not None else Tg
+        force = np.zeros(n)
+        force[d2] = system.contact_force_vector()
+        tangential = system.profile() if frictional else None
+        dissipation = system.commit() if frictional else 0.0
     finally:
         system.destroy()
         bulk.factor.destroy()
@@ -333,8 +369,6 @@ def solve_two_body_hybrid(
         count[dofs] += 1.0
     u = fem.Function(V, name="u")
     u.x.array[:n] = merged / np.maximum(count, 1.0)
-    force = np.zeros(n)
-    force[d2] = system.contact_force_vector()
     forces = tuple(force.reshape(-1, bs)[surf.nodes].sum(axis=0) for surf in (slave, master))
     elapsed = time.perf_counter() - start
     log.info(
@@ -350,4 +384,9 @@ def solve_two_body_hybrid(
         surface_profile(u.x.array[:n], force, slave, Q, slave=True),
         surface_profile(u.x.array[:n], force, master, Q, slave=False),
     )
-    return TwoBodyHybridResult(u, converged, residuals, histories, strip, delta, elapsed, *profiles, forces)
+    next_state = PairState(u.x.array[:n].copy(), system.friction.anchor.copy() if frictional else None, g.copy())
+    newton_steps = steps if options.accel == "newton" else 0
+    return TwoBodyHybridResult(
+        u, converged, residuals, histories, strip, delta, elapsed, *profiles, forces, tangential, dissipation,
+        next_state, newton_steps,
+    )  # fmt: skip

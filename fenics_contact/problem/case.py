@@ -95,6 +95,7 @@ from fenics_contact.problem.case_values import (
     Source,
     Table,
     Uniform,
+    echo_friction,
     read_direction,
     read_field,
     read_friction,
@@ -713,15 +714,7 @@ class Case:
             },
             "boundary": self.boundary.echo(),
             "obstacle": self.obstacle.echo(),
-            "friction": None
-            if self.friction is None
-            else {
-                "law": self.friction.law,
-                ("mu" if self.friction.law == "coulomb" else "threshold"): self.friction.mu
-                if self.friction.law == "coulomb"
-                else self.friction.threshold,
-                "stiffness-ratio": self.friction.stiffness_ratio,
-            },
+            "friction": echo_friction(self.friction),
             "overrides": {key: value for key, value in self.overrides},
         }
 

@@ -44,6 +44,7 @@ __all__ = [
     "read_motions",
     "read_rollers",
     "read_friction",
+    "echo_friction",
 ]
 
 
@@ -243,6 +244,15 @@ def read_friction(source: Source, data) -> Friction | None:
         return Friction(law, **{key: value}, stiffness_ratio=ratio)
     except InputError as error:
         raise source.error(str(error)) from None
+
+
+def echo_friction(law: Friction | None) -> dict | None:
+    """The ``[friction]`` table of a law, for a summary (None: frictionless)."""
+    if law is None:
+        return None
+    value = law.mu if law.law == "coulomb" else law.threshold
+    key = "mu" if law.law == "coulomb" else "threshold"
+    return {"law": law.law, key: value, "stiffness-ratio": law.stiffness_ratio}
 
 
 # ---------------------------------------------------------------------------------------------

@@ -25,6 +25,7 @@ from fenics_contact.errors import InputError, MeshTagError
 from fenics_contact.problem.boundary import constant_vector
 from fenics_contact.problem.fields import MaterialFields, cell_function
 from fenics_contact.problem.fields import _checked as checked_values
+from fenics_contact.problem.friction import Friction
 from fenics_contact.problem.materials import check_poisson_ratio, check_youngs_modulus, lame
 
 __all__ = ["Body", "Support", "ContactPair", "TwoBodyProblem"]
@@ -98,12 +99,14 @@ class ContactPair:
     """The potential contact surfaces: ``slave`` (Γ_C, integrated) and ``master`` (Γ_C_other, projected onto)
     facet tags, on different bodies; ``quadrature_degree`` of the Gauss rule on each slave segment; ``rule``:
     ``"segments"`` (segment-to-segment, ``fem.mortar``) or ``"vertices"`` (one-pass node-to-segment, which fails
-    the contact patch test on non-matching meshes: for comparison only)."""
+    the contact patch test on non-matching meshes: for comparison only); ``friction``: a ``Friction`` law on the
+    relative slip of the two surfaces (``fem.two_body_friction``), None: frictionless."""
 
     slave: int
     master: int
     quadrature_degree: int = 3
     rule: str = "segments"
+    friction: Friction | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "slave", _tag(self.slave, "ContactPair.slave"))
@@ -115,6 +118,8 @@ class ContactPair:
             raise InputError(f"ContactPair.quadrature_degree must be an integer in [1, 10], got {degree!r}")
         if self.rule not in ("segments", "vertices"):
             raise InputError(f"ContactPair.rule must be 'segments' or 'vertices', got {self.rule!r}")
+        if self.friction is not None and not isinstance(self.friction, Friction):
+            raise InputError(f"ContactPair.friction must be a Friction law or None, got {self.friction!r}")
 
 
 def _count(comm: MPI.Comm, local: int) -> int:
@@ -133,8 +138,9 @@ class TwoBodyProblem:
 
     ``bodies``: two ``Body``; ``pair``: the ``ContactPair``; ``supports``: the Dirichlet boundaries
     (``Support``), at least one on each body (frictionless contact does not hold a body tangentially);
-    ``tractions``: facet tag -> traction t (σn = t).  Frictionless penalty contact on the pair
-    (``fem.two_body``).  Validated on construction (InputError / MeshTagError).
+    ``tractions``: facet tag -> traction t (σn = t).  Penalty contact on the pair (``fem.two_body``), with
+    the pair's friction law if it has one (``fem.two_body_friction``).  Validated on construction
+    (InputError / MeshTagError).
     """
 
     mesh: dmesh.Mesh
@@ -224,7 +230,8 @@ class TwoBodyProblem:
         if loose:
             raise InputError(
                 f"the bod{'ies' if len(loose) > 1 else 'y'} of cell tag {loose} ha{'ve' if len(loose) > 1 else 's'} no "
-                "Support: frictionless contact does not hold a body tangentially, so each needs a Dirichlet boundary"
+                "Support: frictionless contact does not hold a body tangentially, and with friction the first "
+                "Newton step, before any contact, has no stiffness there; so each needs a Dirichlet boundary"
             )
         object.__setattr__(self, "_slave_body", slave.pop())
 
@@ -282,6 +289,11 @@ class TwoBodyProblem:
             local = float(np.max(self._fields.E.x.array[cells], initial=0.0))
             out.append(self.comm.allreduce(local, op=MPI.MAX))
         return out[0], out[1]
+
+    @property
+    def friction(self) -> Friction | None:
+        """The pair's friction law (None: frictionless)."""
+        return self.pair.friction
 
     def body_cells(self, k: int) -> np.ndarray:
         """The local cells of body k (0 or 1)."""

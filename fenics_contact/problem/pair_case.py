@@ -26,6 +26,11 @@ MeshTagError naming a group the mesh lacks), unknown keys are refused.
     quadrature-degree = 3
     rule = "segments"                        # or "vertices" (node-to-segment, for comparison)
 
+    [friction]                               # default: frictionless; on the relative slip of the two faces
+    law = "coulomb"                          # mu = 0.6, or law = "tresca" with threshold = s (a stress)
+    mu = 0.6
+    stiffness-ratio = 1.0                    # the stick stiffness over the normal penalty
+
     [load]                                   # load steps: one support's displacement or one traction, by step
     support = "upper_top"                    # the facets of a support of either body (or traction = "group":
     steps = [[0.0, -0.01], [0.0, -0.02]]     #   a group of a body's tractions); its value at each step, the
@@ -56,13 +61,16 @@ from fenics_contact.problem.case_values import (
     Source,
     Table,
     Uniform,
+    echo_friction,
     read_field,
+    read_friction,
     read_integer,
     read_number,
     read_string,
     read_vector,
     show_value,
 )
+from fenics_contact.problem.friction import Friction
 from fenics_contact.problem.geometry import gmsh_session
 from fenics_contact.problem.pair import Body, ContactPair, Support, TwoBodyProblem
 from fenics_contact.problem.pair_meshes import TwoBodyMesh
@@ -80,7 +88,7 @@ __all__ = [
 
 #: the run tables of a two-body case (their keys: ``cli.pair.RUN_KEYS``)
 PAIR_RUN_TABLES = ("run", "primal")
-_TABLES = ("mesh", "bodies", "pair", "load")
+_TABLES = ("mesh", "bodies", "pair", "load", "friction")
 
 
 @dataclass(frozen=True, slots=True)
@@ -170,6 +178,7 @@ class PairCase:
     load: LoadSteps | None
     run: Mapping[str, Mapping[str, Any]]
     overrides: tuple[tuple[str, Any], ...] = ()
+    friction: Friction | None = None  #: the pair's friction law (``[friction]``; None: frictionless)
 
     def build_mesh(self, comm: MPI.Comm = MPI.COMM_WORLD) -> tuple[TwoBodyMesh, dict[str, tuple[int, int]]]:
         """The mesh with the file's cell and facet tags and the physical groups by name: (dim, tag). Collective."""
@@ -223,6 +232,7 @@ class PairCase:
             self._group(groups, self.pair.master, fdim, "pair.master"),
             self.pair.quadrature_degree,
             self.pair.rule,
+            self.friction,
         )
         return TwoBodyProblem(
             msh, cell_tags, tbm.facet_tags, tuple(laws), pair, tuple(supports), tractions, name=self.path.stem
@@ -263,6 +273,7 @@ class PairCase:
             "bodies": {b.name: b.echo() for b in self.bodies},
             "pair": self.pair.echo(),
             "load": self.load.echo() if self.load else None,
+            "friction": echo_friction(self.friction),
             "overrides": {key: value for key, value in self.overrides},
         }
 
@@ -514,4 +525,5 @@ def read_pair_case(source: Source, data: dict, overrides: Sequence[tuple[str, An
         if not isinstance(values, dict):
             raise source.error(f"{table} must be a table ([{table}]), got {show_value(values)}")
         run[table] = dict(values)
-    return PairCase(source.path, description, path, specs, pair, load, run, tuple(overrides))
+    friction = read_friction(source, data.get("friction"))
+    return PairCase(source.path, description, path, specs, pair, load, run, tuple(overrides), friction)

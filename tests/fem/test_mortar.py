@@ -74,3 +74,24 @@ def test_coupling_rows_sum_to_the_normal_on_each_side(nodal):
         assert Q.nodes.tolist() == list(range(8))
     else:  # 7 + 10 − 1 segments after the cuts at the master vertices, 2 Gauss points each
         assert Q.B.shape[0] == 2 * 16
+
+
+@pytest.mark.parametrize("nodal", [True, False])
+def test_relative_rows_are_the_jump_whose_normal_part_is_the_penetration(nodal):
+    """The rows of ``relative`` (one per point and component) hold N_i on the slave's and −M_j on the master's
+    DOFs of their own component: per side they sum to ±1 (a rigid translation has no jump, the friction forces
+    on the two bodies are equal and opposite), and on a flat, inclined pair ν·(relative u) = B u for any u."""
+    angle = 0.3
+    rot = np.array([[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]])
+    xs = np.column_stack([np.linspace(0, 1, 8), np.full(8, 0.01)]) @ rot.T
+    xm = np.column_stack([np.linspace(-0.1, 1.1, 11), np.zeros(11)]) @ rot.T
+    slave = _surface(xs[np.c_[0:7, 1:8]], np.c_[0:7, 1:8], rot @ np.array([0.0, -1.0]))
+    master = _surface(xm[np.c_[0:10, 1:11]], 8 + np.c_[0:10, 1:11], rot @ np.array([0.0, 1.0]))
+    Q = contact_quadrature(slave, master, 2 * 19, 2, 3, nodal=nodal)
+    R = Q.relative.toarray().reshape(-1, 2, 19, 2)  # (point, component, node, component)
+    eye = np.eye(2)[None]
+    assert np.allclose(R[:, :, :8].sum(axis=2), eye) and np.allclose(R[:, :, 8:].sum(axis=2), -eye)
+    u = np.random.default_rng(3).standard_normal(2 * 19)
+    jump = (Q.relative @ u).reshape(-1, 2)
+    assert np.allclose(np.sum(jump * Q.nu, axis=1), Q.B @ u, rtol=0.0, atol=1e-13)
+    assert np.allclose(Q.relative @ np.tile([0.7, -0.2], 19), 0.0, atol=1e-14)  # a rigid translation

@@ -1,0 +1,209 @@
+"""The frictional contact law condensed onto nodal unknowns: U = U_L − M λ(U), dense, by semismooth Newton.
+
+With a linear bulk, the contact displacements U (d components at each of N contact nodes: the Γ_C
+displacements of one body, or the relative displacements of a contact pair's slave nodes) are those of the load
+U_L minus a compliance M (dN × dN, symmetric positive definite) times the nodal contact forces,
+
+    U = U_L − M λ(U),      λ_p = w_p p_p ν_p − w_p t_p      (``fem.friction``: normal penalty and friction),
+
+λ the nodal law of a ``NodalFriction`` evaluated at given nodal values (``nodal``).  ``solve_condensed`` solves it
+by the loop of the monolithic frictional Newton (``fem.newton.semismooth_newton_loop`` on
+``CondensedFrictionalSystem``: the state rule ``NodalFriction.next_state``, full steps until a state recurs,
+then a line search; in 3D a state is settled once the step is negligible, the slip direction varying within
+it), with, for Coulomb, the fixed point on the thresholds should it not converge.  Used by Algorithm 1's
+condensed Γ_C system (``hybrid.friction``) and by the two-body solve under MPI (``fem.two_body_mpi``).
+"""
+
+from collections.abc import Callable
+
+import numpy as np
+import scipy.linalg as sla
+
+from fenics_contact.errors import ConvergenceError
+from fenics_contact.fem.friction import FIXED_POINT_STEPS, FIXED_POINT_TOL, NodalFriction
+from fenics_contact.fem.newton import Advance, Direction, NewtonTrace, StepState, exact_step, semismooth_newton_loop
+
+__all__ = ["nodal_forces", "CondensedLaw", "CondensedFrictionalSystem", "solve_condensed"]
+
+
+def nodal_forces(friction: NodalFriction, U: np.ndarray) -> tuple[np.ndarray, np.ndarray, dict]:
+    """λ(U) (dN) and its block-diagonal Jacobian ∂λ_p/∂U_p (N, d, d) at the nodal values U, in the law's state,
+    with the evaluated law (free components only; ``friction.nodal`` is left unset)."""
+    d = friction.d
+    friction.nodal = U.reshape(-1, d)
+    try:
+        e = friction.evaluate()
+        blocks = friction.blocks(e)
+    finally:
+        friction.nodal = None
+    nu, w = e["nu"], e["w"]
+    normal = (w * e["p"])[:, None] * nu
+    on = e["active"]
+    blocks[on] += (w[on] / friction.delta)[:, None, None] * nu[on][:, :, None] * nu[on][:, None, :]
+    lam = (normal - w[:, None] * e["t"]) * friction.free
+    blocks *= friction.free[:, :, None] * friction.free[:, None, :]
+    return lam.ravel(), blocks, e
+
+
+class CondensedLaw:
+    """The nodal law ``friction`` with the compliance ``M``: λ(U), the residual U − U_L + M λ(U), and M's LU
+    (for the exact line search; ``lu`` a factorization to reuse, e.g. of an earlier load step's M)."""
+
+    def __init__(self, friction: NodalFriction, M: np.ndarray, lu=None) -> None:
+        self.friction, self.M, self.lu = friction, M, lu
+
+    def forces(self, U: np.ndarray) -> tuple[np.ndarray, np.ndarray, dict]:
+        return nodal_forces(self.friction, U)
+
+    def residual(self, U: np.ndarray, U_L: np.ndarray) -> np.ndarray:
+        return U - U_L + self.M @ self.forces(U)[0]
+
+    def factor(self):
+        """M's LU (made once)."""
+        if self.lu is None:
+            self.lu = sla.lu_factor(self.M)
+        return self.lu
+
+
+class CondensedFrictionalSystem:
+    """U = U_L − M λ(U) as a ``fem.newton.ContactSystem`` (dense): its set is the contact set with the friction
+    state (``NodalFriction.next_state``) the law is linearized on, as in ``fem.friction``'s Newton; in 3D a set
+    is settled once the step is negligible too (the slip direction varies within it).  The line search: the exact
+    one on ψ = ½(U − U_L)ᵀM⁻¹(U − U_L) + Φ(U) (``energy``: frozen thresholds, Tresca), whose gradient
+    M⁻¹(U − U_L) + λ(U) the residual is, else backtracking on ‖R‖ (Armijo)."""
+
+    def __init__(self, law: CondensedLaw, U: np.ndarray, U_L: np.ndarray, *, energy: bool) -> None:
+        self.law, self.friction, self.energy = law, law.friction, energy
+        self.U, self.U_L = U.copy(), U_L
+        self.friction.forced = None
+        self.friction.forced = self._next_state(self.U)
+
+    def _next_state(self, U: np.ndarray):
+        self.friction.nodal = U.reshape(-1, self.friction.d)
+        try:
+            return self.friction.next_state(plain=self.energy)
+        finally:
+            self.friction.nodal = None
+
+    def key(self, state) -> np.ndarray:
+        friction = self.friction
+        friction.nodal = self.U.reshape(-1, friction.d)
+        try:
+            active = friction.evaluate()["active"]
+        finally:
+            friction.nodal = None
+        return np.concatenate([active, friction.key(state)])
+
+    def residual(self) -> float:
+        lam, self._blocks, _ = self.law.forces(self.U)
+        self._R = self.U - self.U_L + self.law.M @ lam
+        return float(np.linalg.norm(self._R))
+
+    def jacobian(self, active: np.ndarray) -> bool:
+        self._J = np.eye(self.U.size) + self.law.M @ sla.block_diag(*self._blocks)
+        return True
+
+    def same(self, a: np.ndarray, b: np.ndarray) -> bool:
+        return bool(np.array_equal(a, b)) and (self.friction.d == 2 or self._negligible)
+
+    def solve(self, active: np.ndarray) -> Direction:
+        self.dU = sla.solve(self._J, -self._R)
+        self._negligible = np.max(np.abs(self.dU), initial=0.0) <= 1e-12 * np.max(np.abs(self.U), initial=0.0)
+        self.U += self.dU
+        self._next = self._next_state(self.U)
+        predicted = self.key(self._next)
+        self.U -= self.dU
+        return Direction(predicted)
+
+    def line_search(self) -> float:
+        keep, self.friction.forced = self.friction.forced, None  # the merit: the residual of the law itself
+        try:
+            return self._search()
+        finally:
+            self.friction.forced = keep
+
+    def _search(self) -> float:
+        law, U, dU, U_L = self.law, self.U, self.dU, self.U_L
+        if not self.energy:
+            norm0, t = np.linalg.norm(law.residual(U, U_L)), 1.0
+            while t > 1e-9 and np.linalg.norm(law.residual(U + t * dU, U_L)) > (1.0 - 1e-4 * t) * norm0:
+                t *= 0.5
+            return t
+        lu = law.factor()
+        base, step = sla.lu_solve(lu, U - U_L), sla.lu_solve(lu, dU)
+
+        def slope(t: float) -> float:
+            return float(dU @ (base + t * step + law.forces(U + t * dU)[0]))
+
+        return exact_step(slope)
+
+    def advance(self, t: float, state: StepState) -> Advance:
+        self.U += t * self.dU
+        self.friction.forced = self._next if t == 1.0 else self._next_state(self.U)
+        active = self.key(self.friction.forced)
+        return Advance(active, int(np.count_nonzero(active)))
+
+    def check(self) -> None:
+        """None: a settled iterate is accepted (in 2D the equations are affine on a settled state, solved
+        exactly; the caller measures the residual of what it uses)."""
+        return None
+
+
+def _newton(law: CondensedLaw, U, U_L, max_steps: int, energy: bool, record, discard) -> np.ndarray:
+    system = CondensedFrictionalSystem(law, U, U_L, energy=energy)
+    try:
+        trace = semismooth_newton_loop(
+            system,
+            system.key(law.friction.forced),
+            name="condensed frictional contact Newton",
+            max_steps=max_steps,
+            line_search="on-cycle",
+            sizes="contact and friction state sizes",
+        )
+    except ConvergenceError as error:
+        discard(getattr(error, "steps", 0))
+        raise
+    finally:
+        law.friction.forced = None
+    record(trace)
+    return system.U
+
+
+def solve_condensed(
+    law: CondensedLaw,
+    U_L: np.ndarray,
+    start: np.ndarray,
+    max_steps: int,
+    *,
+    record: Callable[[NewtonTrace], None] = lambda trace: None,
+    discard: Callable[[int], None] = lambda steps: None,
+) -> np.ndarray:
+    """U = U_L − M λ(U) from ``start``: the Newton on the law (Tresca: with the exact line search on its convex
+    energy; a failure raises ConvergenceError), and for Coulomb, should it not converge, the fixed point on the
+    thresholds (each a convex problem) and the Newton on the law from there.  ``record`` gets each converged
+    Newton's trace, ``discard`` the steps of each that did not converge."""
+    friction = law.friction
+    try:
+        return _newton(law, start, U_L, max_steps, friction.law.law == "tresca", record, discard)
+    except ConvergenceError:
+        if friction.law.law == "tresca":
+            raise
+    U = start
+    for _ in range(FIXED_POINT_STEPS):
+        friction.nodal = U.reshape(-1, friction.d)
+        tau = friction.evaluate()["tau"]
+        friction.nodal, friction.frozen = None, tau
+        try:
+            U = _newton(law, U, U_L, max_steps, True, record, discard)
+        finally:
+            friction.frozen = None
+        friction.nodal = U.reshape(-1, friction.d)
+        change = np.max(np.abs(friction.evaluate()["tau"] - tau), initial=0.0)
+        friction.nodal = None
+        if change <= FIXED_POINT_TOL * np.max(tau, initial=0.0):
+            break
+    try:  # the law's own Newton settles the state exactly
+        U = _newton(law, U, U_L, max_steps, False, record, discard)
+    except ConvergenceError:
+        pass
+    return U

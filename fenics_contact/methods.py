@@ -108,6 +108,7 @@ def _mixed_monolithic_solver(
             beta=None,
             prefix="fc_steps_mixed_",
             newton=newton,
+            friction=friction_of(problem.law),
         )
     )
 
@@ -271,8 +272,12 @@ def _require_dimension(name: str, problem) -> None:
     """InputError when the method ``name`` does not solve a problem of this dimension or with rollers."""
     if isinstance(problem, ContactProblem) and problem.mesh is not None:
         require_method_dimension(name, problem.mesh.mesh, problem.boundary)
-    if isinstance(problem, ContactProblem) and METHODS[name].family == "mixed":
+    if isinstance(problem, ContactProblem) and name in FRICTIONLESS_METHODS:
         require_frictionless(problem.law, f"the method {name!r}")
+
+
+#: the methods that solve frictionless contact only (every other takes ``problem.law`` = ``Friction(...)``)
+FRICTIONLESS_METHODS = ("mixed-ms",)
 
 
 def _elsewhere(names: list[str]) -> str:

@@ -28,7 +28,7 @@ from fenics_contact.fem.contact import ContactProfile
 from fenics_contact.fem.friction import FrictionProfile
 from fenics_contact.hybrid.iteration import iterate
 from fenics_contact.indentation import WarmStart
-from fenics_contact.methods import get_method
+from fenics_contact.methods import FRICTIONLESS_METHODS, get_method
 from fenics_contact.problem.friction import require_frictionless
 from fenics_contact.problem.obstacles import Obstacle
 from fenics_contact.problem.problem import ContactProblem
@@ -133,7 +133,7 @@ def slide(
     spec = get_method(method)
     if not isinstance(problem, ContactProblem) or not isinstance(problem.obstacle, Obstacle):
         raise InputError("slide needs a ContactProblem with an obstacle (problem.with_(obstacle=...))")
-    if spec.family == "mixed":
+    if method in FRICTIONLESS_METHODS:
         require_frictionless(problem.law, f"the method {method!r}")
     motions = check_motions(motions, problem.dim)
     base = problem.obstacle

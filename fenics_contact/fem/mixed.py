@@ -53,7 +53,7 @@ from fenics_contact.fem.mixed_contact import MixedContactProfile
 from fenics_contact.fem.mixed_newton import MixedNewtonHistory
 from fenics_contact.fem.mixed_spaces import boundary_stress_space, check_triangles
 from fenics_contact.fem.mixed_subproblem import MixedSubproblem
-from fenics_contact.problem.friction import require_frictionless
+from fenics_contact.problem.friction import friction_of
 from fenics_contact.problem.problem import ContactProblem
 from fenics_contact.problem.tags import Boundary, Subdomain
 
@@ -162,10 +162,12 @@ def solve_mixed_monolithic(
 
     ``epsilon`` defaults to ``default_epsilon(h, E_c)``; ``split_interface`` solves on X̃_h
     (σ_tt doubled at the γ vertices: the exact fixed point of Algorithm 2); ``verify``
-    re-checks the final residual with the UFL forms.
+    re-checks the final residual with the UFL forms.  A friction law (``problem.law``) makes σn·t on Γ_C an unknown
+    of the law on the traction (``fem.mixed_friction``); the solve is one load step from the unloaded state
+    (``fenics_contact.sliding`` for load paths).
     """
     start = time.perf_counter()
-    require_frictionless(problem.law, "the mixed monolithic solve")
+    friction = friction_of(problem.law)
     cm = problem.cm
     check_triangles(cm.mesh)
     fields = problem.fields
@@ -174,7 +176,9 @@ def solve_mixed_monolithic(
     space = None
     if split_interface:
         split = (cm.facet_tags.find(Boundary.INTERFACE), cm.cell_tags.find(Subdomain.OMEGA2))
-        space = boundary_stress_space(cm.mesh, cm.facet_tags, fields.boundary, split_interface=split)
+        space = boundary_stress_space(
+            cm.mesh, cm.facet_tags, fields.boundary, split_interface=split, friction=friction is not None
+        )
     sub = MixedSubproblem(
         cm.mesh,
         cm.facet_tags,
@@ -184,6 +188,7 @@ def solve_mixed_monolithic(
         prefix=prefix,
         newton=newton,
         space=space,
+        friction=friction,
     )
     t0 = time.perf_counter()
     try:  # every numerical failure of the solve and of its check says when ε is far below its default

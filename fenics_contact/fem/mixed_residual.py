@@ -45,6 +45,8 @@ def ufl_residual_norm(sub, data: np.ndarray | None = None) -> tuple[float, float
     for form in natural:
         Ft -= form
     r1 = sub.spaces.Pd.T @ assemble_array(Ft)[: sub.spaces.n_dg]
+    if sub.friction is not None:  # the friction law's term, nodal at the same Gauss–Lobatto points
+        r1 += sub.friction.force(sub.c) - sub.friction.load()
     if data is not None:
         r1 -= sub.interface.C @ data
     r2 = assemble_array(Fv)[: sub.n_u]

@@ -97,10 +97,11 @@ from fenics_contact.hybrid.iteration import (
     IterationResult,
     iterate,
 )
+from fenics_contact.hybrid.options import interface_options
 from fenics_contact.hybrid.primal import omega2_record
 from fenics_contact.hybrid.response import FineResponse, MixedPart
 from fenics_contact.hybrid.transmission import split_mesh, sub_to_parent_dofs
-from fenics_contact.problem.friction import require_frictionless
+from fenics_contact.problem.friction import friction_of
 from fenics_contact.problem.problem import ContactProblem
 
 __all__ = [
@@ -168,7 +169,6 @@ class MixedHybridStep:
         newton: NewtonOptions = NewtonOptions(),
         reference: MixedSolution | None = None,
     ) -> None:
-        require_frictionless(problem.law, "Algorithm 2 (mixed)")
         cm = problem.cm
         check_triangles(cm.mesh)
         self.comm = cm.comm
@@ -192,6 +192,7 @@ class MixedHybridStep:
                     operators=i == 1 or self.omega1_operators,
                     space=self._omega1_space(part, fields) if i == 0 else None,
                     interface_points=self.sub[0].gamma_points if i == 1 else None,
+                    friction=friction_of(problem.law) if i == 1 else None,
                 )
             )
         if self.sub[0].interface_range != self.sub[1].interface_range:
@@ -293,7 +294,10 @@ class MixedHybridStep:
         return FineResponse(MixedPart(self.sub[0], perm=None, contact=False), chunk=options.chunk)
 
     def interface_problem(self, options: InterfaceNewtonOptions):
-        """The affine pieces for ``hybrid.interface_newton`` (built once)."""
+        """The affine pieces for ``hybrid.interface_newton`` (built once); with friction on Γ_C the
+        ``"interface"`` strategy (Newton on F(g) = g − T(g) with Ω₂'s frictional Jacobian:
+        ``options.interface_options``)."""
+        options = interface_options(options, self.sub[1].friction, frictional_condensation=False)
         if self._newton is None or self._newton.options.strategy != options.strategy:
             perm = self._perm2 if self.comm.size == 1 else None  # (distributed: the canonical order)
             omega2 = MixedPart(self.sub[1], perm=perm, contact=True, factorize=options.strategy == "condensed")

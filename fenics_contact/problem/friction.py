@@ -97,6 +97,7 @@ def require_frictionless(law, method: str) -> None:
     """InputError when ``law`` is a friction law: ``method`` solves frictionless contact only."""
     if isinstance(law, Friction):
         raise InputError(
-            f"{method} solves frictionless contact only; a friction law ({law.describe()}) needs a primal method: "
-            "primal-monolithic, primal (Algorithm 1) or primal-ms (Algorithm 3)"
+            f"{method} solves frictionless contact only; a friction law ({law.describe()}) needs another method: "
+            "primal-monolithic, mixed-monolithic, primal (Algorithm 1), mixed (Algorithm 2) or primal-ms "
+            "(Algorithm 3)"
         )

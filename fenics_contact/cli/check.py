@@ -25,6 +25,7 @@ from fenics_contact.cli.pair import PAIR_METHODS, pair_run_options
 from fenics_contact.cli.signals import stdout_lost
 from fenics_contact.cli.solve import _check_case_coarse_grid, _check_coarse_grid, _mesh, _model
 from fenics_contact.errors import FenicsContactError, InputError
+from fenics_contact.methods import FRICTIONLESS_METHODS
 from fenics_contact.methods import METHODS as CATALOGUE
 from fenics_contact.problem.case import Case, MeshFile, load_case, parse_override
 from fenics_contact.problem.friction import require_frictionless
@@ -134,7 +135,7 @@ def _refusal(method: str, cm: ContactMesh, options: RunOptions, case: Case | Non
                 _check_coarse_grid(cm, as_run)
             else:
                 _check_case_coarse_grid(cm, as_run, case)
-        if entry.family == "mixed" and case is not None:
+        if method in FRICTIONLESS_METHODS and case is not None:
             require_frictionless(case.friction, f"the method {method!r}")
     except FenicsContactError as err:
         return err

@@ -33,7 +33,7 @@ from mpi4py import MPI
 from fenics_contact.errors import InputError
 from fenics_contact.fem.amg import LinearSolverOptions
 from fenics_contact.fem.contact import NewtonOptions
-from fenics_contact.fem.mixed import epsilon_for, solve_mixed_monolithic
+from fenics_contact.fem.mixed import monolithic_subproblem, solve_mixed_monolithic
 from fenics_contact.fem.mixed_subproblem import MixedSubproblem
 from fenics_contact.fem.primal import PrimalSubproblem, penalty_for, solve_primal_monolithic, warn_if_locking
 from fenics_contact.fem.two_body import solve_two_body
@@ -96,19 +96,16 @@ def _primal_monolithic_solver(
 
 
 def _mixed_monolithic_solver(
-    problem: ContactProblem, *, epsilon: float | None = None, newton: NewtonOptions = NewtonOptions()
+    problem: ContactProblem,
+    *,
+    epsilon: float | None = None,
+    newton: NewtonOptions = NewtonOptions(),
+    split_interface: bool = False,
 ) -> MonolithicSolver:
-    cm = problem.cm
+    """``split_interface``: on X̃_h (σ_tt split at the γ vertices), the exact fixed point of Algorithm 2."""
     return MonolithicSolver(
-        MixedSubproblem(
-            cm.mesh,
-            cm.facet_tags,
-            problem.fields,
-            epsilon=epsilon_for(problem, epsilon),
-            beta=None,
-            prefix="fc_steps_mixed_",
-            newton=newton,
-            friction=friction_of(problem.law),
+        monolithic_subproblem(
+            problem, epsilon=epsilon, newton=newton, split_interface=split_interface, prefix="fc_steps_mixed_"
         )
     )
 

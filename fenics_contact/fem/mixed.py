@@ -63,6 +63,7 @@ __all__ = [
     "default_epsilon",
     "epsilon_hint",
     "epsilon_for",
+    "monolithic_subproblem",
     "solve_mixed_monolithic",
 ]
 
@@ -149,6 +150,38 @@ def epsilon_for(problem: ContactProblem, epsilon: float | None = None) -> float:
     return float(epsilon)
 
 
+def monolithic_subproblem(
+    problem: ContactProblem,
+    *,
+    epsilon: float | None = None,
+    newton: NewtonOptions = NewtonOptions(),
+    split_interface: bool = False,
+    prefix: str = "fc_mixed_mono_",
+) -> MixedSubproblem:
+    """The mixed subproblem of the whole mesh (contact, no Robin term) with the problem's friction law; on X̃_h with
+    ``split_interface`` (``solve_mixed_monolithic``)."""
+    friction = friction_of(problem.law)
+    cm = problem.cm
+    check_triangles(cm.mesh)
+    space = None
+    if split_interface:
+        split = (cm.facet_tags.find(Boundary.INTERFACE), cm.cell_tags.find(Subdomain.OMEGA2))
+        space = boundary_stress_space(
+            cm.mesh, cm.facet_tags, problem.fields.boundary, split_interface=split, friction=friction is not None
+        )
+    return MixedSubproblem(
+        cm.mesh,
+        cm.facet_tags,
+        problem.fields,
+        epsilon=epsilon_for(problem, epsilon),
+        beta=None,
+        prefix=prefix,
+        newton=newton,
+        space=space,
+        friction=friction,
+    )
+
+
 def solve_mixed_monolithic(
     problem: ContactProblem,
     *,
@@ -167,29 +200,9 @@ def solve_mixed_monolithic(
     (``fenics_contact.sliding`` for load paths).
     """
     start = time.perf_counter()
-    friction = friction_of(problem.law)
-    cm = problem.cm
-    check_triangles(cm.mesh)
-    fields = problem.fields
     usual = epsilon_for(problem)
-    epsilon = epsilon_for(problem, epsilon)
-    space = None
-    if split_interface:
-        split = (cm.facet_tags.find(Boundary.INTERFACE), cm.cell_tags.find(Subdomain.OMEGA2))
-        space = boundary_stress_space(
-            cm.mesh, cm.facet_tags, fields.boundary, split_interface=split, friction=friction is not None
-        )
-    sub = MixedSubproblem(
-        cm.mesh,
-        cm.facet_tags,
-        fields,
-        epsilon=epsilon,
-        beta=None,
-        prefix=prefix,
-        newton=newton,
-        space=space,
-        friction=friction,
-    )
+    sub = monolithic_subproblem(problem, epsilon=epsilon, newton=newton, split_interface=split_interface, prefix=prefix)
+    epsilon = sub.epsilon
     t0 = time.perf_counter()
     try:  # every numerical failure of the solve and of its check says when ε is far below its default
         history = sub.solve()

@@ -5,9 +5,7 @@ import numpy as np
 import pytest
 
 from fenics_contact.errors import InputError
-from fenics_contact.fem.mixed import MixedSolution, epsilon_for
-from fenics_contact.fem.mixed_spaces import boundary_stress_space
-from fenics_contact.fem.mixed_subproblem import MixedSubproblem
+from fenics_contact.fem.mixed import MixedSolution
 from fenics_contact.methods import get_method
 from fenics_contact.problem.analytic import hertz_model
 from fenics_contact.problem.friction import Friction
@@ -16,7 +14,6 @@ from fenics_contact.problem.meshes import hertz_block
 from fenics_contact.problem.models import get_model
 from fenics_contact.problem.obstacles import Plane
 from fenics_contact.problem.problem import ContactProblem
-from fenics_contact.problem.tags import Boundary, Subdomain
 from fenics_contact.sliding import slide
 
 MU, THRESHOLD = 0.3, 3e-3
@@ -88,30 +85,17 @@ def test_sliding_block_tresca(method):
 
 
 def _split_monolithic_path(problem, path):
-    """The monolithic frictional solution on X̃_h (σ_tt split at the γ vertices: Algorithm 2's fixed point) along
-    ``path``, as a MixedSolution per step."""
-    cm = problem.cm
-    split = (cm.facet_tags.find(Boundary.INTERFACE), cm.cell_tags.find(Subdomain.OMEGA2))
-    law = problem.law
-    space = boundary_stress_space(cm.mesh, cm.facet_tags, problem.fields.boundary, split_interface=split, friction=True)
-    eps = epsilon_for(problem)
-    sub = MixedSubproblem(
-        cm.mesh, cm.facet_tags, problem.fields, epsilon=eps, beta=None, prefix="t_split_", space=space, friction=law
-    )
-    out = []
-    for motion in path:
-        sub.set_obstacle(problem.obstacle.translated(motion))
-        sub.friction.set_motion(motion)
-        sub.solve()
-        out.append(
-            (
-                MixedSolution(sub.sigma_function(), sub.u_function(), None, None, eps, {}, 0.0, 0.0, None, True),
-                sub.friction.profile(),
-                sub.friction.commit(),
-            )
+    """The monolithic frictional path on X̃_h (σ_tt split at the γ vertices: Algorithm 2's fixed point), with a
+    MixedSolution of each step."""
+    solutions = []
+
+    def keep(step, solver):
+        sub = solver.contact
+        solutions.append(
+            MixedSolution(sub.sigma_function(), sub.u_function(), None, None, sub.epsilon, {}, 0.0, 0.0, None, True)
         )
-    sub.destroy()
-    return out
+
+    return slide(problem, "mixed-monolithic", path, split_interface=True, on_step=keep), solutions
 
 
 def test_algorithm_2_is_the_monolithic_frictional_path():
@@ -122,20 +106,20 @@ def test_algorithm_2_is_the_monolithic_frictional_path():
     path = [(-depth / 2, 0.0), (-depth, 0.0), (-depth, 0.002), (-depth, 0.008), (-depth, 0.03)]
     model = get_model(3, E_high=1e3).with_(obstacle=WALL, law=Friction("coulomb", mu=MU))
     problem = model.on(unit_square(16, 4))
-    mono = _split_monolithic_path(problem, path)
+    mono, solutions = _split_monolithic_path(problem, path)
     errors = []
 
     def compare(step, solver):
-        solver.set_reference(mono[len(errors)][0])
+        solver.set_reference(solutions[len(errors)])
         errors.append(solver.errors())
 
     hybrid = slide(problem, "mixed", path, on_step=compare, **HYBRID)
-    for (_, fp, dissipation), step, (e_s, e_u) in zip(mono, hybrid.steps, errors):
-        assert step.converged and e_s < 1e-8 and e_u < 1e-8, (e_s, e_u)
-        assert np.array_equal(fp.stick, step.friction.stick) and np.array_equal(fp.slip, step.friction.slip)
-        scale = np.max(np.abs(fp.traction))
-        assert np.max(np.abs(fp.traction - step.friction.traction)) <= 1e-8 * scale
-        assert abs(dissipation - step.dissipation) <= 1e-8 * hybrid.dissipation
+    for a, b, (e_s, e_u) in zip(mono.steps, hybrid.steps, errors):
+        assert b.converged and e_s < 1e-8 and e_u < 1e-8, (e_s, e_u)
+        assert np.array_equal(a.friction.stick, b.friction.stick) and np.array_equal(a.friction.slip, b.friction.slip)
+        scale = np.max(np.abs(a.friction.traction))
+        assert np.max(np.abs(a.friction.traction - b.friction.traction)) <= 1e-8 * scale
+        assert abs(a.dissipation - b.dissipation) <= 1e-8 * hybrid.dissipation
     assert hybrid.steps[-1].slip_nodes > hybrid.steps[2].slip_nodes > 0
 
 

@@ -137,16 +137,16 @@ def test_cattaneo_mindlin_incompressible(refinement):
     over the contact zone 18.4 %, 10.9 % (a/10) and 18.6 %, 10.3 % (a/20): independent of h, a tilt of q in the
     stick zone from the finite block (80a × 40a; on a 40a × 10a block 61 %, 33 %); the pressure p within 1.6 %
     of Hertz.  Asserted: half-width within 1 cell, centre within 2 cells, q within 25 %, p within 3 %, the slip zone
-    at μp plus the slip penalty's excess, dissipation ≥ 0.
+    at μp plus the slip penalty's excess, dissipation ≥ 0.  Then moved back (Mindlin–Deresiewicz, below).
     """
     nu, mu, depth = 0.4999, 0.3, 1.2e-3
     cm, spec = hertz_block(A, refinement=refinement)
     model = hertz_model(radius=R, E=1.0, nu=nu, depth=0.0).with_(law=Friction("coulomb", mu=mu))
-    motions = [(0.0, -depth / 2), (0.0, -depth), (2e-4, -depth), (4e-4, -depth)]
+    motions = [(0.0, -depth / 2), (0.0, -depth), (2e-4, -depth), (4e-4, -depth), (2e-4, -depth)]
     path = slide(model.on(cm), "mixed-monolithic", motions)
     hc = spec.h_contact
     ratios = []
-    for step in path.steps[2:]:
+    for step in path.steps[2:4]:
         fp = step.friction
         P, Q = step.normal_force, abs(step.tangential_force[0])
         a = 2.0 * np.sqrt(R * P / (np.pi / (1.0 - nu**2)))
@@ -170,3 +170,25 @@ def test_cattaneo_mindlin_incompressible(refinement):
         assert np.all(excess >= 0.0) and np.max(excess) < 1e-3 * mu * p0
         assert step.dissipation >= 0.0
     assert 0.2 < ratios[0] < 0.45 < ratios[1] < 0.8  # measured 0.32, 0.63
+    # Mindlin–Deresiewicz: moved back from Q* to Q, reverse slip in c' < |x| < a, c' = a√(1 − (Q* − Q)/(2μP)),
+    # q = μp₀[−√(1 − x²/a²) + 2(c'/a)√(1 − x²/c'²) − (c/a)√(1 − x²/c²)] (measured at Q/μP = 0.31: the stick zone
+    # 0.12 cells from c', its centre 0.2 cells from the axis; q within 17.6 % in L², also the finite block's)
+    step, loaded = path.steps[4], path.steps[3]
+    fp, P = step.friction, step.normal_force
+    Q_star, Q = loaded.tangential_force[0], step.tangential_force[0]
+    a = 2.0 * np.sqrt(R * P / (np.pi / (1.0 - nu**2)))
+    p0 = 2.0 * P / (np.pi * a)
+    c, c_back = a * np.sqrt(1.0 - Q_star / (mu * P)), a * np.sqrt(1.0 - (Q_star - Q) / (2.0 * mu * P))
+    assert 0.2 < Q / (mu * P) < 0.45
+    lo, hi = fp.extent("stick")
+    assert abs(0.5 * (hi - lo) - c_back) <= 1.0 * hc and abs(0.5 * (hi + lo)) <= 2.0 * hc
+    x, w = fp.points[:, 0], fp.weights
+
+    def term(r):
+        return (r / a) * np.sqrt(np.maximum(1.0 - (x / r) ** 2, 0.0))
+
+    exact = mu * p0 * (-term(a) + 2.0 * term(c_back) - term(c))
+    inside = np.abs(x) < a
+    q = fp.traction[:, 0]
+    assert np.sqrt(np.sum((w * (q - exact) ** 2)[inside]) / np.sum((w * exact**2)[inside])) < 0.25
+    assert np.all(q[fp.slip] <= 1e-12 * mu * p0) and step.dissipation >= 0.0  # the reverse slip

@@ -45,7 +45,7 @@ from fenics_contact.multiscale.cem import CEMOptions
 from fenics_contact.multiscale.mixed import MixedMultiscaleHybridStep, solve_mixed_ms_hybrid
 from fenics_contact.multiscale.mixed_cem import MixedCEMOptions
 from fenics_contact.multiscale.primal import MultiscalePrimalHybridStep, solve_primal_ms_hybrid
-from fenics_contact.problem.friction import friction_of, require_frictionless
+from fenics_contact.problem.friction import friction_of
 from fenics_contact.problem.pair import TwoBodyProblem
 from fenics_contact.problem.problem import ContactProblem
 from fenics_contact.problem.validation import require_method_dimension
@@ -269,12 +269,6 @@ def _require_dimension(name: str, problem) -> None:
     """InputError when the method ``name`` does not solve a problem of this dimension or with rollers."""
     if isinstance(problem, ContactProblem) and problem.mesh is not None:
         require_method_dimension(name, problem.mesh.mesh, problem.boundary)
-    if isinstance(problem, ContactProblem) and name in FRICTIONLESS_METHODS:
-        require_frictionless(problem.law, f"the method {name!r}")
-
-
-#: the methods that solve frictionless contact only (every other takes ``problem.law`` = ``Friction(...)``)
-FRICTIONLESS_METHODS = ("mixed-ms",)
 
 
 def _elsewhere(names: list[str]) -> str:

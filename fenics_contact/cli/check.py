@@ -25,10 +25,8 @@ from fenics_contact.cli.pair import PAIR_METHODS, pair_run_options
 from fenics_contact.cli.signals import stdout_lost
 from fenics_contact.cli.solve import _check_case_coarse_grid, _check_coarse_grid, _mesh, _model
 from fenics_contact.errors import FenicsContactError, InputError
-from fenics_contact.methods import FRICTIONLESS_METHODS
 from fenics_contact.methods import METHODS as CATALOGUE
 from fenics_contact.problem.case import Case, MeshFile, load_case, parse_override
-from fenics_contact.problem.friction import require_frictionless
 from fenics_contact.problem.geometry import ContactMesh, query_gmsh_file
 from fenics_contact.problem.models3d import MODEL_3D
 from fenics_contact.problem.pair_case import PairCase
@@ -135,8 +133,6 @@ def _refusal(method: str, cm: ContactMesh, options: RunOptions, case: Case | Non
                 _check_coarse_grid(cm, as_run)
             else:
                 _check_case_coarse_grid(cm, as_run, case)
-        if method in FRICTIONLESS_METHODS and case is not None:
-            require_frictionless(case.friction, f"the method {method!r}")
     except FenicsContactError as err:
         return err
     return None

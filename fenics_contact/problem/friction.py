@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 from fenics_contact.errors import InputError
 
-__all__ = ["Friction", "FRICTION_LAWS", "friction_of", "require_frictionless"]
+__all__ = ["Friction", "FRICTION_LAWS", "friction_of"]
 
 #: the friction laws by name
 FRICTION_LAWS = ("coulomb", "tresca")
@@ -91,13 +91,3 @@ class Friction:
 def friction_of(law) -> Friction | None:
     """The friction law of a contact law (None when frictionless)."""
     return law if isinstance(law, Friction) else None
-
-
-def require_frictionless(law, method: str) -> None:
-    """InputError when ``law`` is a friction law: ``method`` solves frictionless contact only."""
-    if isinstance(law, Friction):
-        raise InputError(
-            f"{method} solves frictionless contact only; a friction law ({law.describe()}) needs another method: "
-            "primal-monolithic, mixed-monolithic, primal (Algorithm 1), mixed (Algorithm 2) or primal-ms "
-            "(Algorithm 3)"
-        )

@@ -1,12 +1,11 @@
 """Friction in the mixed methods: the sliding block (mixed monolithic and Algorithm 2), Algorithm 2 = the monolithic
-frictional solution on X̃_h along a load path, Cattaneo–Mindlin at ν = 0.4999."""
+frictional solution on X̃_h along a load path and Algorithm 4 within its multiscale error of it, Cattaneo–Mindlin
+and Mindlin–Deresiewicz at ν = 0.4999."""
 
 import numpy as np
 import pytest
 
-from fenics_contact.errors import InputError
 from fenics_contact.fem.mixed import MixedSolution
-from fenics_contact.methods import get_method
 from fenics_contact.problem.analytic import hertz_model
 from fenics_contact.problem.friction import Friction
 from fenics_contact.problem.geometry import unit_square
@@ -35,14 +34,6 @@ def _corners_and_slip(step, carrying):
     assert np.all(np.abs(fp.shear[fp.stick]) <= 1e-12 * np.max(np.abs(fp.shear)))
     assert step.slip_nodes == np.count_nonzero(carrying) - step.stick_nodes > 40
     return fp
-
-
-def test_only_algorithm_4_refuses_friction():
-    problem = _block(Friction("coulomb", mu=MU))
-    with pytest.raises(InputError, match="frictionless contact only"):
-        get_method("mixed-ms").build(problem)
-    with pytest.raises(InputError, match="frictionless contact only"):
-        slide(problem, "mixed-ms", BLOCK_PATH)
 
 
 @pytest.mark.parametrize("method", ["mixed-monolithic", "mixed"])
@@ -98,14 +89,17 @@ def _split_monolithic_path(problem, path):
     return slide(problem, "mixed-monolithic", path, split_interface=True, on_step=keep), solutions
 
 
-def test_algorithm_2_is_the_monolithic_frictional_path():
-    """Model 3 (stiff channels through γ up to Γ_C, contrast 1e3, h = 1/16, H = 1/4), Coulomb μ = 0.3, pressed then
-    dragged: at every step Algorithm 2 (tolerance 1e-11) is the monolithic frictional solution on X̃_h with
-    e_σ, e_u < 1e-8 (its frictionless tolerance), the same stick/slip nodes, tractions and dissipation."""
+def _model3_path(n: int, n_coarse: int):
+    """Model 3 (stiff channels through γ up to Γ_C, contrast 1e3), Coulomb μ = 0.3, the wall pressed in by 2e-3 in
+    two steps and dragged by 0.002, 0.008, 0.03."""
     depth = 2e-3
     path = [(-depth / 2, 0.0), (-depth, 0.0), (-depth, 0.002), (-depth, 0.008), (-depth, 0.03)]
     model = get_model(3, E_high=1e3).with_(obstacle=WALL, law=Friction("coulomb", mu=MU))
-    problem = model.on(unit_square(16, 4))
+    return model.on(unit_square(n, n_coarse)), path
+
+
+def _against(problem, path, method, **options):
+    """``method``'s path and its (e_σ, e_u) per step against the monolithic frictional path on X̃_h."""
     mono, solutions = _split_monolithic_path(problem, path)
     errors = []
 
@@ -113,7 +107,14 @@ def test_algorithm_2_is_the_monolithic_frictional_path():
         solver.set_reference(solutions[len(errors)])
         errors.append(solver.errors())
 
-    hybrid = slide(problem, "mixed", path, on_step=compare, **HYBRID)
+    return mono, slide(problem, method, path, on_step=compare, **options), errors
+
+
+def test_algorithm_2_is_the_monolithic_frictional_path():
+    """Model 3 (stiff channels through γ up to Γ_C, contrast 1e3, h = 1/16, H = 1/4), Coulomb μ = 0.3, pressed then
+    dragged: at every step Algorithm 2 (tolerance 1e-11) is the monolithic frictional solution on X̃_h with
+    e_σ, e_u < 1e-8 (its frictionless tolerance), the same stick/slip nodes, tractions and dissipation."""
+    mono, hybrid, errors = _against(*_model3_path(16, 4), "mixed", **HYBRID)
     for a, b, (e_s, e_u) in zip(mono.steps, hybrid.steps, errors):
         assert b.converged and e_s < 1e-8 and e_u < 1e-8, (e_s, e_u)
         assert np.array_equal(a.friction.stick, b.friction.stick) and np.array_equal(a.friction.slip, b.friction.slip)
@@ -121,6 +122,21 @@ def test_algorithm_2_is_the_monolithic_frictional_path():
         assert np.max(np.abs(a.friction.traction - b.friction.traction)) <= 1e-8 * scale
         assert abs(a.dissipation - b.dissipation) <= 1e-8 * hybrid.dissipation
     assert hybrid.steps[-1].slip_nodes > hybrid.steps[2].slip_nodes > 0
+
+
+def test_algorithm_4_along_a_frictional_path():
+    """Algorithm 4 on the same path (h = 1/16, H = 1/4): with m = 2 layers e_σ = 2.5e-4 at every step (measured; the
+    frictionless solve has the same), with m = 3 (every patch all of Ω₁) e_σ ≤ 1.2e-11: the multiscale stress
+    space is then the fine one; the stick and slip nodes those of the monolithic path; e_u = 0.12–0.14 for both,
+    the displacement's floor in the multiscale space (U_aux; model 3 loads Ω₁), as frictionless."""
+    problem, path = _model3_path(16, 4)
+    for layers, bound in ((2, 5e-4), (3, 1e-9)):
+        mono, ms, errors = _against(problem, path, "mixed-ms", layers=layers, tol=1e-10)
+        for a, b, (e_s, e_u) in zip(mono.steps, ms.steps, errors):
+            assert b.converged and e_s < bound and e_u < 0.2, (layers, e_s, e_u)
+            assert np.array_equal(a.friction.stick, b.friction.stick) and np.array_equal(
+                a.friction.slip, b.friction.slip
+            )
 
 
 A, R = 0.05, 5.0

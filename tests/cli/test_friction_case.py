@@ -84,10 +84,12 @@ def test_a_sliding_case_runs(tmp_path):
     assert (out / "fields.pvd").exists()
 
 
-def test_algorithm_2_runs_a_sliding_case(tmp_path):
-    """Algorithm 2 through the command line: every step converges and dissipates ≥ 0, the last one slides along y."""
+@pytest.mark.parametrize("method", ["mixed", "mixed-ms"])
+def test_the_mixed_algorithms_run_a_sliding_case(tmp_path, method):
+    """Algorithms 2 and 4 through the command line: every step converges and dissipates ≥ 0, the last one slides
+    along y."""
     out = tmp_path / "out"
-    args = ["run", "--no-plots", "--case", str(_case(tmp_path)), "--method", "mixed", "--out", str(out)]
+    args = ["run", "--no-plots", "--case", str(_case(tmp_path)), "--method", method, "--out", str(out)]
     assert main(args) == 0
     steps = json.loads((out / "summary.json").read_text())["sliding"]["steps"]
     assert all(s["converged"] for s in steps) and all(s["dissipation"] >= 0.0 for s in steps)

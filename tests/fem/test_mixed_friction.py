@@ -5,7 +5,7 @@ and Mindlin–Deresiewicz at ν = 0.4999."""
 import numpy as np
 import pytest
 
-from fenics_contact.fem.mixed import MixedSolution
+from fenics_contact.fem.mixed import MixedSolution, solve_mixed_monolithic
 from fenics_contact.problem.analytic import hertz_model
 from fenics_contact.problem.friction import Friction
 from fenics_contact.problem.geometry import unit_square
@@ -34,6 +34,23 @@ def _corners_and_slip(step, carrying):
     assert np.all(np.abs(fp.shear[fp.stick]) <= 1e-12 * np.max(np.abs(fp.shear)))
     assert step.slip_nodes == np.count_nonzero(carrying) - step.stick_nodes > 40
     return fp
+
+
+@pytest.mark.parametrize("law", [Friction("coulomb", mu=MU), Friction("tresca", threshold=THRESHOLD)])
+def test_the_forms_state_the_friction_law(law):
+    """The residual assembled from the UFL forms (``forms_mixed.friction_term``: the law written on σ_t, the sticking
+    target a DG P3 function at the Gauss–Lobatto points) vanishes at the Newton solution (measured 5e-15 of the
+    size of its terms, with stick and slip nodes), and moving every anchor by 1e-3 changes it as it changes the
+    nodal residual the Newton solves (both ‖D F‖ 2.5e-4)."""
+    problem = ContactProblem(1.0, 0.3, obstacle=WALL.translated((-0.01, 0.0)), law=law)
+    sub = solve_mixed_monolithic(problem.on(unit_square(16, 4, clamped=("left",)))).problem  # (verify=True)
+    fp = sub.friction.profile()
+    assert np.any(fp.stick) and np.any(fp.slip)
+    norm, scale = sub.ufl_residual_norm()
+    assert norm < 1e-12 * scale
+    sub.friction.anchor += 1e-3
+    moved, nodal = sub.ufl_residual_norm()[0], sub.residual()[0]
+    assert moved > 1e-3 * scale and abs(moved - nodal) < 1e-10 * nodal
 
 
 @pytest.mark.parametrize("method", ["mixed-monolithic", "mixed"])

@@ -243,7 +243,8 @@ class ContactNodes:
         return self.q_points[keep, 1], un[keep]
 
     def tangential_stress(self, c: np.ndarray) -> np.ndarray:
-        """σ_t = t·σn at the contact nodes of the stress P c + σ_t (replicated; ``tangential`` nodes only)."""
+        """t·σn at the contact nodes of the stress P c + s₀ (s₀ the traction lifting; replicated; ``tangential``
+        nodes only)."""
         return self.replicate(self.T @ c) + self.t0
 
     def destroy(self) -> None:

@@ -28,6 +28,9 @@ stress there; the normal traction σn stays continuous).  That space X̃_h is
 exactly the space of the converged iterate of Algorithm 2 (see
 ``hybrid.mixed``), so this monolithic solve is its exact fixed point.
 
+**Friction.**  With a friction law (``problem.law``) σn·t is free on Γ_C and the law acts on the tangential
+traction (``fem.mixed_friction``); ``fenics_contact.slide`` runs load paths.
+
 **MPI.**  Everything runs on a distributed mesh (``mpiexec -n N``): the AW space
 numbers its DOFs globally (``fem.arnold_winther``), the operators are distributed
 PETSc matrices, MUMPS factorizes the saddle-point matrix in parallel.  The Γ_C node

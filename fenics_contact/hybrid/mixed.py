@@ -61,6 +61,12 @@ its vertices (the zigzag of a band of width 0.15 along Γ_C, model 2,
 
     h = 1/16: e_σ 5.0e−5, e_u 5.5e−7;   h = 1/24: e_σ 2.6e−5, e_u 1.9e−7.
 
+**Friction.**  A friction law (``problem.law``) acts on Γ_C ⊂ Ω₂ only (``fem.mixed_friction``: the law on the
+tangential traction), so Ω₁ and the update are unchanged and the fixed point above carries over: at every load
+step of a path (``fenics_contact.slide``) it is the monolithic frictional solution on X̃_h (measured 2e−11 at
+contrast 1e6, ``benchmarks/results/friction_mixed.md``).  The interface Newton then runs its ``"interface"``
+strategy, Newton on g = T(g) with Ω₂'s frictional Jacobian (``hybrid.options.interface_options``).
+
 **MPI.**  Under ``mpiexec`` both subproblems are distributed (``fem.mixed``); the
 Robin data g₁₂, g₂₁ are the values at the canonical γ nodes (Ω₁'s order, which Ω₂
 adopts), each rank holding one block of them (``MixedSubproblem.interface_range``),

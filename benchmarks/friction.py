@@ -14,6 +14,12 @@ L² distance of |t| to μp₀[√(1 − x²/a²) − (c/a)√(1 − x²/c²)] ov
 
     OMP_NUM_THREADS=1 .venv/bin/python benchmarks/friction.py --h 32 --H 8 --nu 0.45 0.49 --refinement 0.5
     OMP_NUM_THREADS=1 .venv/bin/python benchmarks/friction.py --dim 3 --h 6
+
+``--mixed``: (1) with Algorithm 2 against the monolithic frictional path on X̃_h (its exact fixed point: e_σ, e_u
+per step), (2) with ``mixed-monolithic`` and a step back to 2e-4 (Mindlin–Deresiewicz); ``--width``, ``--depth``:
+the Hertz block's size in units of a.
+
+    OMP_NUM_THREADS=1 .venv/bin/python benchmarks/friction.py --mixed --h 32 --H 8 --nu 0.4999 --refinement 0.5
 """
 
 import argparse
@@ -22,6 +28,7 @@ import numpy as np
 from dolfinx import fem
 
 import fenics_contact  # noqa: F401  (imports dolfinx_solver first)
+from fenics_contact.fem.mixed import MixedSolution
 from fenics_contact.problem.analytic import hertz_model
 from fenics_contact.problem.friction import Friction
 from fenics_contact.problem.geometry import unit_square
@@ -74,20 +81,91 @@ def theorem_table(n: int, n_coarse: int, strategy: str, dim: int = 2) -> str:
     return "\n".join(rows)
 
 
-def cattaneo_table(nus, refinement: float) -> str:
+def mixed_theorem_table(n: int, n_coarse: int) -> str:
+    """Algorithm 2 against the monolithic frictional path on X̃_h (its exact fixed point), model 3, per load step."""
+    depth = 2e-3
+    path = [(-depth / 2, 0.0), (-depth, 0.0), (-depth, 0.002), (-depth, 0.008), (-depth, 0.03)]
+    rows = [
+        "| contrast | motion | applications of T | interface Newton steps | stick / slip nodes | e_σ | e_u |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for contrast in (1e3, 1e6):
+        law = Friction("coulomb", mu=MU)
+        model = get_model(3, E_high=contrast).with_(obstacle=Plane((1.0, 0.0), (-1.0, 0.0)), law=law)
+        problem = model.on(unit_square(n, n_coarse))
+        solutions, errors = [], []
+
+        def keep(step, solver):
+            sub = solver.contact
+            solutions.append(
+                MixedSolution(sub.sigma_function(), sub.u_function(), None, None, sub.epsilon, {}, 0.0, 0.0, None, True)
+            )
+
+        def compare(step, solver):
+            solver.set_reference(solutions[len(errors)])
+            errors.append(solver.errors())
+
+        slide(problem, "mixed-monolithic", path, split_interface=True, on_step=keep)
+        alg2 = slide(problem, "mixed", path, tol=1e-11, on_step=compare)
+        for step, (e_s, e_u) in zip(alg2.steps, errors):
+            rows.append(
+                f"| {contrast:g} | {step.motion.tolist()} | {step.iterations} | {step.interface_newton_steps} | "
+                f"{step.stick_nodes} / {step.slip_nodes} | {e_s:.1e} | {e_u:.1e} |"
+            )
+    return "\n".join(rows)
+
+
+def _unloading_row(nu: float, radius: float, hc: float, loaded, step) -> str:
+    """Mindlin–Deresiewicz: moved back from Q* to Q, against c' = a√(1 − (Q* − Q)/(2μP)) and
+    q = μp₀[−√(1 − x²/a²) + 2(c'/a)√(1 − x²/c'²) − (c/a)√(1 − x²/c²)]."""
+    fp, P = step.friction, step.normal_force
+    Q_star, Q = loaded.tangential_force[0], step.tangential_force[0]
+    a = 2.0 * np.sqrt(radius * P / (np.pi / (1.0 - nu**2)))
+    p0 = 2.0 * P / (np.pi * a)
+    c, c_back = a * np.sqrt(1.0 - Q_star / (MU * P)), a * np.sqrt(1.0 - (Q_star - Q) / (2.0 * MU * P))
+    x, w = fp.points[:, 0], fp.weights
+    terms = [(r / a) * np.sqrt(np.maximum(1.0 - (x / r) ** 2, 0.0)) for r in (a, c_back, c)]
+    exact = MU * p0 * (-terms[0] + 2.0 * terms[1] - terms[2])
+    inside = np.abs(x) < a
+    l2 = np.sqrt(np.sum((w * (fp.traction[:, 0] - exact) ** 2)[inside]) / np.sum((w * exact**2)[inside]))
+    lo, hi = fp.extent("stick")
+    return (
+        f"| {nu:g} | {Q_star / (MU * P):.3f} → {Q / (MU * P):.3f} | {(0.5 * (hi - lo) - c_back) / hc:+.2f} "
+        f"| {0.5 * (hi + lo) / hc:+.2f} | {l2:.3f} |"
+    )
+
+
+def cattaneo_table(
+    nus,
+    refinement: float,
+    method: str = "primal-monolithic",
+    width: float = 80.0,
+    depth_a: float = 40.0,
+    unload: bool = False,
+) -> str:
     a_target, radius, depth = 0.05, 5.0, 1.2e-3
-    cm, spec = hertz_block(a_target, refinement=refinement)
+    cm, spec = hertz_block(a_target, refinement=refinement, width=width, depth=depth_a)
     hc = spec.h_contact
     rows = [
         f"contact cells h_c = {hc:.4g} (a/{a_target / hc:.0f})",
         "",
-        "| ν | Q/(μP) | stick half-width − c [cells] | stick centre [cells] | L² error of q |",
+        "| ν | Q/(μP) | stick half-width − c [cells] | stick centre [cells] | L² error of q | L² error of p |",
+        "|---|---|---|---|---|---|",
+    ]
+    unloading = [
+        "",
+        "Moved back to 2e-4 (Mindlin–Deresiewicz):",
+        "",
+        "| ν | Q*/(μP) → Q/(μP) | stick half-width − c' [cells] | stick centre [cells] | L² error of q |",
         "|---|---|---|---|---|",
     ]
     for nu in nus:
         model = hertz_model(radius=radius, E=1.0, nu=nu, depth=0.0).with_(law=Friction("coulomb", mu=MU))
         motions = [(0.0, -depth / 2), (0.0, -depth), (2e-4, -depth), (4e-4, -depth)]
-        for step in slide(model.on(cm), "primal-monolithic", motions).steps[2:]:
+        path = slide(model.on(cm), method, motions + [(2e-4, -depth)] if unload else motions)
+        if unload:
+            unloading.append(_unloading_row(nu, radius, hc, path.steps[3], path.steps[4]))
+        for step in path.steps[2:4]:
             fp = step.friction
             P, Q = step.normal_force, abs(step.tangential_force[0])
             a = 2.0 * np.sqrt(radius * P / (np.pi / (1.0 - nu**2)))
@@ -100,10 +178,13 @@ def cattaneo_table(nus, refinement: float) -> str:
             inside, w = np.abs(x) < a, fp.weights
             q = np.abs(fp.traction[:, 0])
             l2 = np.sqrt(np.sum((w * (q - exact) ** 2)[inside]) / np.sum((w * exact**2)[inside]))
+            hertz = p0 * np.sqrt(np.maximum(1.0 - (x / a) ** 2, 0.0))
+            l2p = np.sqrt(np.sum(w * (fp.pressure - hertz) ** 2) / np.sum(w * hertz**2))
             rows.append(
-                f"| {nu:g} | {ratio:.3f} | {(0.5 * (hi - lo) - c) / hc:+.2f} | {0.5 * (hi + lo) / hc:+.2f} | {l2:.3f} |"
+                f"| {nu:g} | {ratio:.3f} | {(0.5 * (hi - lo) - c) / hc:+.2f} | {0.5 * (hi + lo) / hc:+.2f} | {l2:.3f} "
+                f"| {l2p:.3f} |"
             )
-    return "\n".join(rows)
+    return "\n".join(rows + (unloading if unload else []))
 
 
 def main() -> None:
@@ -114,7 +195,18 @@ def main() -> None:
     parser.add_argument("--dim", type=int, default=2, choices=(2, 3), help="3: the 3D channel cube, h = 1/--h")
     parser.add_argument("--nu", type=float, nargs="+", default=[0.45, 0.49], help="Poisson ratios (Cattaneo–Mindlin)")
     parser.add_argument("--refinement", type=float, default=0.5, help="Hertz block refinement r: contact cells a/(20r)")
+    parser.add_argument(
+        "--mixed", action="store_true", help="the mixed methods: Algorithm 2 and mixed-monolithic (Cattaneo–Mindlin)"
+    )
+    parser.add_argument("--width", type=float, default=80.0, help="Hertz block width / a (Cattaneo–Mindlin)")
+    parser.add_argument("--depth", type=float, default=40.0, help="Hertz block depth / a (Cattaneo–Mindlin)")
     args = parser.parse_args()
+    if args.mixed:
+        print("## Algorithm 2 and the monolithic solve on X̃_h along a frictional path\n")
+        print(mixed_theorem_table(args.h, args.H))
+        print("\n## Cattaneo–Mindlin (mixed-monolithic)\n")
+        print(cattaneo_table(args.nu, args.refinement, "mixed-monolithic", args.width, args.depth, unload=True))
+        return
     print("## Algorithm 1 and the monolithic solve along a frictional path\n")
     print(theorem_table(args.h, args.H, args.strategy, args.dim))
     if args.dim == 3:

@@ -195,14 +195,15 @@ PROBLEM_KEYS = {
     ("friction", "law"): (
         '`"coulomb"` or `"tresca"`',
         "required",
-        "the friction law on Γ_C (without `[friction]`: frictionless); primal methods only",
+        "the friction law on Γ_C (without `[friction]`: frictionless); every method (the mixed ones in 2D)",
     ),
     ("friction", "mu"): ("number ≥ 0", "required", "the Coulomb coefficient: slip threshold μ times the pressure"),
     ("friction", "threshold"): ("number ≥ 0", "required", "the Tresca slip threshold s (a traction) on all of Γ_C"),
     ("friction", "stiffness-ratio"): (
         "number > 0",
         "1",
-        "the stick stiffness 1/δ_t over the normal penalty 1/δ (the elastic stick slip it leaves is τ·δ_t)",
+        "the stick stiffness 1/δ_t over the normal penalty 1/δ (the elastic stick slip it leaves is τ·δ_t); "
+        "the mixed methods' slip penalty is ε_t = ε/ratio",
     ),
 }
 

@@ -33,7 +33,7 @@ from mpi4py import MPI
 from fenics_contact.errors import InputError
 from fenics_contact.fem.amg import LinearSolverOptions
 from fenics_contact.fem.contact import NewtonOptions
-from fenics_contact.fem.mixed import epsilon_for, solve_mixed_monolithic
+from fenics_contact.fem.mixed import monolithic_subproblem, solve_mixed_monolithic
 from fenics_contact.fem.mixed_subproblem import MixedSubproblem
 from fenics_contact.fem.primal import PrimalSubproblem, penalty_for, solve_primal_monolithic, warn_if_locking
 from fenics_contact.fem.two_body import solve_two_body
@@ -45,7 +45,7 @@ from fenics_contact.multiscale.cem import CEMOptions
 from fenics_contact.multiscale.mixed import MixedMultiscaleHybridStep, solve_mixed_ms_hybrid
 from fenics_contact.multiscale.mixed_cem import MixedCEMOptions
 from fenics_contact.multiscale.primal import MultiscalePrimalHybridStep, solve_primal_ms_hybrid
-from fenics_contact.problem.friction import friction_of, require_frictionless
+from fenics_contact.problem.friction import friction_of
 from fenics_contact.problem.pair import TwoBodyProblem
 from fenics_contact.problem.problem import ContactProblem
 from fenics_contact.problem.validation import require_method_dimension
@@ -96,18 +96,16 @@ def _primal_monolithic_solver(
 
 
 def _mixed_monolithic_solver(
-    problem: ContactProblem, *, epsilon: float | None = None, newton: NewtonOptions = NewtonOptions()
+    problem: ContactProblem,
+    *,
+    epsilon: float | None = None,
+    newton: NewtonOptions = NewtonOptions(),
+    split_interface: bool = False,
 ) -> MonolithicSolver:
-    cm = problem.cm
+    """``split_interface``: on X̃_h (σ_tt split at the γ vertices), the exact fixed point of Algorithm 2."""
     return MonolithicSolver(
-        MixedSubproblem(
-            cm.mesh,
-            cm.facet_tags,
-            problem.fields,
-            epsilon=epsilon_for(problem, epsilon),
-            beta=None,
-            prefix="fc_steps_mixed_",
-            newton=newton,
+        monolithic_subproblem(
+            problem, epsilon=epsilon, newton=newton, split_interface=split_interface, prefix="fc_steps_mixed_"
         )
     )
 
@@ -271,8 +269,6 @@ def _require_dimension(name: str, problem) -> None:
     """InputError when the method ``name`` does not solve a problem of this dimension or with rollers."""
     if isinstance(problem, ContactProblem) and problem.mesh is not None:
         require_method_dimension(name, problem.mesh.mesh, problem.boundary)
-    if isinstance(problem, ContactProblem) and METHODS[name].family == "mixed":
-        require_frictionless(problem.law, f"the method {name!r}")
 
 
 def _elsewhere(names: list[str]) -> str:

@@ -2,17 +2,18 @@
 
 At every step the obstacle ``problem.obstacle`` is translated by that step's motion m_k (a rigid displacement
 from its position in the problem: pressing it in, dragging it along), the contact subproblem (the whole body,
-or Ω₂ of Algorithms 1 and 3) is solved from the previous step's solution, and the friction state is committed
-(``fem.friction.NodalFriction.commit``): the slip of the next step is measured from this one's converged
-displacement and traction, so a path's answer depends on the path and the slip dissipates energy.
+or Ω₂ of Algorithms 1–4) is solved from the previous step's solution, and the friction state is committed
+(``fem.friction.NodalFriction.commit``; the mixed methods' ``fem.mixed_friction.MixedFriction.commit``): the
+slip of the next step is measured from this one's converged state, so a path's answer depends on the path and the
+slip dissipates energy.
 
 Each step reports the normal force Σ w_p p_p, the tangential force Σ w_p t_p (a vector: the force the obstacle
 exerts on the body along Γ_C), the stick and slip nodes (counts and extents along Γ_C), the step's dissipation
 Σ w_p t_p·(a_p − a_p^new) ≥ 0, the solver's effort and, for the hybrid methods, the transmission residual of
-the final pair.  Methods: ``primal-monolithic``, ``primal`` (Algorithm 1) and ``primal-ms`` (Algorithm 3); by
-default Algorithm 1 runs the interface Newton on the condensed frictional system (``hybrid.friction``, on one or
-several ranks), Algorithm 3 with the ``"interface"`` strategy (``hybrid.options.interface_options``); or the
-iteration asked for.
+the final pair.  Methods: all six (the mixed ones in 2D; ``mixed-monolithic`` with ``split_interface=True``: on
+X̃_h, Algorithm 2's fixed point); by default Algorithm 1 runs the interface Newton on the condensed frictional
+system (``hybrid.friction``, on one or several ranks), Algorithms 2–4 with the ``"interface"`` strategy
+(``hybrid.options.interface_options``); or the iteration asked for.
 """
 
 import logging
@@ -29,7 +30,6 @@ from fenics_contact.fem.friction import FrictionProfile
 from fenics_contact.hybrid.iteration import iterate
 from fenics_contact.indentation import WarmStart
 from fenics_contact.methods import get_method
-from fenics_contact.problem.friction import require_frictionless
 from fenics_contact.problem.obstacles import Obstacle
 from fenics_contact.problem.problem import ContactProblem
 
@@ -121,20 +121,19 @@ def slide(
     """Move ``problem.obstacle`` by each motion in turn (rigid displacements from its position in the problem),
     solve each load step from the previous one and carry the friction state (``problem.law``).
 
-    ``method``: ``primal-monolithic``, ``primal`` or ``primal-ms``; ``options``: its options
+    ``method``: any of ``methods.METHODS`` (``primal-monolithic``, ``primal``, ``primal-ms``, ``mixed-monolithic``,
+    ``mixed``, ``mixed-ms``); ``options``: its options
     (``methods.Method.options``); ``on_step(step, solver)`` after every load step.  A frictionless problem runs
     the same path (no tangential force, no dissipation).
 
     Raises:
-        InputError: no obstacle, motions that are not finite d-vectors, a mixed method with friction.
+        InputError: no obstacle, motions that are not finite d-vectors, a mixed method in 3D.
         ConvergenceError: a Newton solve of a load step failed (a hybrid step that reaches its iteration cap is
             recorded with ``converged`` False).
     """
     spec = get_method(method)
     if not isinstance(problem, ContactProblem) or not isinstance(problem.obstacle, Obstacle):
         raise InputError("slide needs a ContactProblem with an obstacle (problem.with_(obstacle=...))")
-    if spec.family == "mixed":
-        require_frictionless(problem.law, f"the method {method!r}")
     motions = check_motions(motions, problem.dim)
     base = problem.obstacle
     start = time.perf_counter()

@@ -27,7 +27,6 @@ from fenics_contact.cli.solve import _check_case_coarse_grid, _check_coarse_grid
 from fenics_contact.errors import FenicsContactError, InputError
 from fenics_contact.methods import METHODS as CATALOGUE
 from fenics_contact.problem.case import Case, MeshFile, load_case, parse_override
-from fenics_contact.problem.friction import require_frictionless
 from fenics_contact.problem.geometry import ContactMesh, query_gmsh_file
 from fenics_contact.problem.models3d import MODEL_3D
 from fenics_contact.problem.pair_case import PairCase
@@ -136,8 +135,6 @@ def _refusal(method: str, cm: ContactMesh, options: RunOptions, case: Case | Non
                 _check_coarse_grid(cm, as_run)
             else:
                 _check_case_coarse_grid(cm, as_run, case)
-        if entry.family == "mixed" and case is not None:
-            require_frictionless(case.friction, f"the method {method!r}")
     except FenicsContactError as err:
         return err
     return None

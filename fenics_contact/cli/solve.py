@@ -123,11 +123,21 @@ def _sliding_path(options: RunOptions, case: Case, problem: ContactProblem, out:
     V = fem.functionspace(problem.cm.mesh, ("Lagrange", 1, (problem.dim,)))
     written = []
 
+    mixed = get_method(options.method).family == "mixed"
+
     def write_step(step, solver) -> None:
-        u = solver.glued(V) if hasattr(solver, "glued") else solver.contact.u  # (collective)
+        sigma = None  # (collective:)
+        if mixed:  # σ (DG P3) and u (DG P1), the parts glued
+            sigma, u = (
+                solver.glued()
+                if hasattr(solver, "glued")
+                else (solver.contact.sigma_function(), solver.contact.u_function())
+            )
+        else:
+            u = solver.glued(V) if hasattr(solver, "glued") else solver.contact.u
         written.append(step)
         if writes:
-            fields.add(float(len(written)), _field_grid(problem, u))
+            fields.add(float(len(written)), _field_grid(problem, u, sigma))
             contact.add(float(len(written)), contact_grid(step.profile, comm))
 
     flat = options.method_options()

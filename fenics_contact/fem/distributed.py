@@ -184,6 +184,27 @@ class DistributedMatrix:
             obj.destroy()
 
 
+def _pair_pattern(Q: sp.csr_matrix, T: sp.csr_matrix):
+    """Per node q with rows R_0 = Q_q, R_1 = T_q on the union of their columns: the node of each entry, the values
+    of the 4 products R_a ⊗ R_b (4, entries; ab = 00, 01, 10, 11) and the entries' rows and columns."""
+    nodes, values, rows, cols = [], [], [], []
+    for q in range(Q.shape[0]):
+        iq, it = Q.indices[Q.indptr[q] : Q.indptr[q + 1]], T.indices[T.indptr[q] : T.indptr[q + 1]]
+        idx = np.union1d(iq, it).astype(np.int64)
+        if idx.size == 0:
+            continue
+        R = np.zeros((2, idx.size))
+        R[0, np.searchsorted(idx, iq)] = Q.data[Q.indptr[q] : Q.indptr[q + 1]]
+        R[1, np.searchsorted(idx, it)] = T.data[T.indptr[q] : T.indptr[q + 1]]
+        values.append(np.stack([np.outer(R[a], R[b]).ravel() for a in (0, 1) for b in (0, 1)]))
+        rows.append(np.repeat(idx, idx.size))
+        cols.append(np.tile(idx, idx.size))
+        nodes.append(np.full(idx.size**2, q, dtype=np.int64))
+    if not nodes:
+        return np.zeros(0, np.int64), np.zeros((4, 0)), np.zeros(0, np.int64), np.zeros(0, np.int64)
+    return np.concatenate(nodes), np.concatenate(values, axis=1), np.concatenate(rows), np.concatenate(cols)
+
+
 class SaddlePointMatrix:
     """[[K + D, Bᵀ], [B, 0]] as one AIJ matrix with a fixed pattern, D = Σ_q d_q (Q_q)ᵀQ_q changing with the weights d.
 
@@ -194,7 +215,9 @@ class SaddlePointMatrix:
     analysis.  ``Q_rows``: the penalty rows this rank holds, with global columns of K.
     """
 
-    def __init__(self, K: PETSc.Mat, B: PETSc.Mat, Q_rows: sp.csr_matrix | None = None) -> None:
+    def __init__(
+        self, K: PETSc.Mat, B: PETSc.Mat, Q_rows: sp.csr_matrix | None = None, T_rows: sp.csr_matrix | None = None
+    ) -> None:
         comm = K.getComm().tompi4py()
         self.comm = comm
         nx, ny = K.getLocalSize()[0], B.getLocalSize()[0]
@@ -204,9 +227,11 @@ class SaddlePointMatrix:
 
         self._pen_entry_node = np.zeros(0, dtype=np.int64)
         self._pen_values = np.zeros(0)
+        self._pairs = T_rows is not None  #: 2 × 2 weights per node (normal and tangential rows)
         self._base = np.zeros(0)
         #: no penalty on any rank: the values are fixed (the same on every rank: set_weights is collective)
-        self._fixed = not comm.allreduce(Q_rows is not None and Q_rows.nnz > 0, op=MPI.LOR)
+        penalized = any(R is not None and R.nnz > 0 for R in (Q_rows, T_rows))
+        self._fixed = not comm.allreduce(penalized, op=MPI.LOR)
         if self._fixed:
             # no penalty on any rank: the values never change; MatNest -> AIJ (same layout) holds no COO
             # maps and no copy of the values (about 3x less memory than the COO assembly below)
@@ -232,7 +257,11 @@ class SaddlePointMatrix:
         rows = [xmap(krows), ymap(brows), xmap(bj)]
         cols = [xmap(kj), xmap(bj), ymap(brows)]
         self._base = np.concatenate([kv, bv, bv])
-        if Q_rows is not None and Q_rows.nnz:
+        if self._pairs:
+            self._pen_entry_node, self._pen_values, r, c = _pair_pattern(sp.csr_matrix(Q_rows), sp.csr_matrix(T_rows))
+            rows.append(xmap(r))
+            cols.append(xmap(c))
+        elif Q_rows is not None and Q_rows.nnz:
             Q = sp.csr_matrix(Q_rows)
             counts = np.diff(Q.indptr)
             node_parts, r_parts, c_parts, v_parts = [], [], [], []
@@ -255,10 +284,18 @@ class SaddlePointMatrix:
         self.set_weights(None)
 
     def set_weights(self, weights: np.ndarray | None) -> None:
-        """Values for penalty weights d (one per local row of ``Q_rows``; None: D = 0)."""
+        """Values for penalty weights d (one per local row of ``Q_rows``; with ``T_rows`` a 2 × 2 matrix W_q per
+        node, D = Σ_q [Q_q; T_q]ᵀ W_q [Q_q; T_q]; None: D = 0)."""
         if self._fixed:  # no penalty anywhere (MatNest conversion): the values are fixed
             return
-        if self._pen_values.size:
+        if self._pairs and self._pen_entry_node.size:
+            values = self._base.copy()
+            if weights is not None:  # Σ_ab W[q, a, b] R_a ⊗ R_b over each node's 4 products of rows
+                w = np.asarray(weights, dtype=np.float64).reshape(-1, 4)[self._pen_entry_node]
+                values = np.concatenate([self._base, np.einsum("ek,ke->e", w, self._pen_values)])
+            else:
+                values = np.concatenate([self._base, np.zeros(self._pen_entry_node.size)])
+        elif self._pen_values.size:
             w = np.zeros(0) if weights is None else np.asarray(weights, dtype=np.float64)
             pen = self._pen_values * w[self._pen_entry_node] if w.size else np.zeros_like(self._pen_values)
             values = np.concatenate([self._base, pen])

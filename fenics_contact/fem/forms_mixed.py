@@ -11,6 +11,7 @@ Displacements are discontinuous vector P1.  With n the outward unit normal,
     p_ε(σ; τ)      = (1/ε) ∫_ΓC (σ_c)⁺ τ_c ds                 mixed contact penalty
     r_β(σ, τ)      = β ∫_γ (σn)·(τn) ds                        Robin term on γ
     d(g; τ)        = ∫_γ g·(τn) ds                             Robin data on γ
+    f_t(σ; τ)      = ∫_ΓC [(σ_t − Π_τ σ_t)/ε_t − (m_t + a)] τ_t ds   friction (σ_t = t·σn, t = (−n_y, n_x))
     J(σ)           = ½(Aσ, σ) + (1/2ε) ∫_ΓC ((σ_c)⁺)² ds       complementary energy
 
 Quadrature on boundaries (the normal trace of an Arnold–Winther stress is a
@@ -50,6 +51,8 @@ __all__ = [
     "robin_form",
     "robin_data_form",
     "gap_form",
+    "tangential_stress",
+    "friction_term",
     "mixed_residual",
 ]
 
@@ -141,6 +144,21 @@ def robin_data_form(g, t, n, ds_gamma):
 def gap_form(g, t, n, ds_contact):
     """∫_ΓC g τ_c ds: the obstacle's gap in the natural boundary term (F_τ gets −∫ g τ_c)."""
     return g * normal_stress(t, n) * ds_contact
+
+
+def tangential_stress(s, n):
+    """σ_t = t·σn, t = (−n_y, n_x)."""
+    return ufl.dot(ufl.as_vector((-n[1], n[0])), ufl.dot(stress_tensor(s), n))
+
+
+def friction_term(s, t, n, target, law, inv_epsilon_t, ds_contact):
+    """The friction law's natural term ∫_ΓC [(σ_t − Π_τ σ_t)/ε_t − (m_t + a)] τ_t ds (``fem.mixed_friction``):
+    ``target`` = m_t + a, ``law`` = ("coulomb", μ) (τ = μ(−σ_c)⁺) or ("tresca", s) (τ = s)."""
+    name, value = law
+    tau = value * positive_part(-normal_stress(s, n)) if name == "coulomb" else value
+    s_t = tangential_stress(s, n)
+    excess = s_t - ufl.max_value(-tau, ufl.min_value(tau, s_t))
+    return (inv_epsilon_t * excess - target) * tangential_stress(t, n) * ds_contact
 
 
 def mixed_residual(s, u, t, v, *, lmbda, mu, f, n, contact=None, robin=None):

@@ -28,6 +28,9 @@ stress there; the normal traction σn stays continuous).  That space X̃_h is
 exactly the space of the converged iterate of Algorithm 2 (see
 ``hybrid.mixed``), so this monolithic solve is its exact fixed point.
 
+**Friction.**  With a friction law (``problem.law``) σn·t is free on Γ_C and the law acts on the tangential
+traction (``fem.mixed_friction``); ``fenics_contact.slide`` runs load paths.
+
 **MPI.**  Everything runs on a distributed mesh (``mpiexec -n N``): the AW space
 numbers its DOFs globally (``fem.arnold_winther``), the operators are distributed
 PETSc matrices, MUMPS factorizes the saddle-point matrix in parallel.  The Γ_C node
@@ -53,7 +56,7 @@ from fenics_contact.fem.mixed_contact import MixedContactProfile
 from fenics_contact.fem.mixed_newton import MixedNewtonHistory
 from fenics_contact.fem.mixed_spaces import boundary_stress_space, check_triangles
 from fenics_contact.fem.mixed_subproblem import MixedSubproblem
-from fenics_contact.problem.friction import require_frictionless
+from fenics_contact.problem.friction import friction_of
 from fenics_contact.problem.problem import ContactProblem
 from fenics_contact.problem.tags import Boundary, Subdomain
 
@@ -63,6 +66,7 @@ __all__ = [
     "default_epsilon",
     "epsilon_hint",
     "epsilon_for",
+    "monolithic_subproblem",
     "solve_mixed_monolithic",
 ]
 
@@ -149,6 +153,38 @@ def epsilon_for(problem: ContactProblem, epsilon: float | None = None) -> float:
     return float(epsilon)
 
 
+def monolithic_subproblem(
+    problem: ContactProblem,
+    *,
+    epsilon: float | None = None,
+    newton: NewtonOptions = NewtonOptions(),
+    split_interface: bool = False,
+    prefix: str = "fc_mixed_mono_",
+) -> MixedSubproblem:
+    """The mixed subproblem of the whole mesh (contact, no Robin term) with the problem's friction law; on X̃_h with
+    ``split_interface`` (``solve_mixed_monolithic``)."""
+    friction = friction_of(problem.law)
+    cm = problem.cm
+    check_triangles(cm.mesh)
+    space = None
+    if split_interface:
+        split = (cm.facet_tags.find(Boundary.INTERFACE), cm.cell_tags.find(Subdomain.OMEGA2))
+        space = boundary_stress_space(
+            cm.mesh, cm.facet_tags, problem.fields.boundary, split_interface=split, friction=friction is not None
+        )
+    return MixedSubproblem(
+        cm.mesh,
+        cm.facet_tags,
+        problem.fields,
+        epsilon=epsilon_for(problem, epsilon),
+        beta=None,
+        prefix=prefix,
+        newton=newton,
+        space=space,
+        friction=friction,
+    )
+
+
 def solve_mixed_monolithic(
     problem: ContactProblem,
     *,
@@ -162,29 +198,14 @@ def solve_mixed_monolithic(
 
     ``epsilon`` defaults to ``default_epsilon(h, E_c)``; ``split_interface`` solves on X̃_h
     (σ_tt doubled at the γ vertices: the exact fixed point of Algorithm 2); ``verify``
-    re-checks the final residual with the UFL forms.
+    re-checks the final residual with the UFL forms.  A friction law (``problem.law``) makes σn·t on Γ_C an unknown
+    of the law on the traction (``fem.mixed_friction``); the solve is one load step from the unloaded state
+    (``fenics_contact.sliding`` for load paths).
     """
     start = time.perf_counter()
-    require_frictionless(problem.law, "the mixed monolithic solve")
-    cm = problem.cm
-    check_triangles(cm.mesh)
-    fields = problem.fields
     usual = epsilon_for(problem)
-    epsilon = epsilon_for(problem, epsilon)
-    space = None
-    if split_interface:
-        split = (cm.facet_tags.find(Boundary.INTERFACE), cm.cell_tags.find(Subdomain.OMEGA2))
-        space = boundary_stress_space(cm.mesh, cm.facet_tags, fields.boundary, split_interface=split)
-    sub = MixedSubproblem(
-        cm.mesh,
-        cm.facet_tags,
-        fields,
-        epsilon=epsilon,
-        beta=None,
-        prefix=prefix,
-        newton=newton,
-        space=space,
-    )
+    sub = monolithic_subproblem(problem, epsilon=epsilon, newton=newton, split_interface=split_interface, prefix=prefix)
+    epsilon = sub.epsilon
     t0 = time.perf_counter()
     try:  # every numerical failure of the solve and of its check says when ε is far below its default
         history = sub.solve()

@@ -26,7 +26,13 @@ from fenics_contact.fem.contact import ContactProfile, profile_order
 from fenics_contact.fem.contact_boundary import obstacle_at_nodes
 from fenics_contact.fem.distributed import DistributedMatrix, coo_matrix, gather_rows, layout
 from fenics_contact.fem.mixed_spaces import MixedSpaces
-from fenics_contact.fem.mixed_traces import BoundaryFacets, normal_weights, reference_coordinates, stress_evaluation
+from fenics_contact.fem.mixed_traces import (
+    BoundaryFacets,
+    normal_weights,
+    reference_coordinates,
+    stress_evaluation,
+    tangential_weights,
+)
 from fenics_contact.problem.obstacles import Obstacle
 from fenics_contact.problem.tags import Boundary
 
@@ -88,6 +94,31 @@ def merge_contact_nodes(comm, pts, wts, normals, vertex):
     return (pts[first], merged_w[order], normals[first], vertex[first], first[mine] - start, mine_rows)
 
 
+def _evaluation(comm, spaces: MixedSpaces, cells, X, weights, rows, block, nq: int):
+    """A stress value at the contact nodes (component ``weights`` of (σ_xx, σ_xy, σ_yy)): the distributed matrix
+    (canonical node rows, this rank's ``block``), this rank's rows with local and with global AW columns, and the
+    traction lifting's value (replicated)."""
+    E_dg = stress_evaluation(spaces.dg, cells, X, weights)
+    E_loc = (E_dg @ spaces.space.prolongation_for_rows(np.unique(E_dg.tocsr().indices))).tocsr()
+    E_loc.eliminate_zeros()
+    gi = spaces.space.global_indices
+    rows_global = sp.csr_matrix(
+        (E_loc.data, gi[E_loc.indices], E_loc.indptr), shape=(E_loc.shape[0], spaces.space.num_dofs)
+    )
+    Ec = E_loc.tocoo()
+    E = DistributedMatrix(
+        coo_matrix(
+            comm,
+            rows[Ec.row],
+            gi[Ec.col],
+            Ec.data,
+            (block[1] - block[0], nq),
+            (spaces.n_sigma, spaces.space.num_dofs),
+        )
+    )
+    return E, E_loc, rows_global, gather_rows(comm, rows, E_dg @ spaces.s0, nq)
+
+
 class ContactNodes:
     """The Γ_C contact nodes (replicated ``q_points``, ``q_weights``, ``q_normals``, gap ``q_gap``), Q and the penalty.
 
@@ -103,6 +134,8 @@ class ContactNodes:
         facets: np.ndarray,
         spaces: MixedSpaces,
         epsilon: float | None,
+        *,
+        tangential: bool = False,
     ) -> None:
         comm = self.comm = msh.comm
         self.epsilon = epsilon
@@ -118,29 +151,18 @@ class ContactNodes:
         self.range = layout(comm, nq)
         cells, normals = cells[local_nodes], normals[local_nodes]
         X = reference_coordinates(msh, cells, pts[local_nodes])
-        Q_dg = stress_evaluation(spaces.dg, cells, X, normal_weights(normals))
-        Q_loc = (Q_dg @ spaces.space.prolongation_for_rows(np.unique(Q_dg.tocsr().indices))).tocsr()
-        Q_loc.eliminate_zeros()
-        gi = spaces.space.global_indices
-        #: this rank's rows of Q with global AW columns (the penalty pattern of the saddle-point matrix)
-        self.Q_rows_global = sp.csr_matrix(
-            (Q_loc.data, gi[Q_loc.indices], Q_loc.indptr), shape=(Q_loc.shape[0], spaces.space.num_dofs)
+        #: σ_c at the contact nodes (canonical order), this rank's block of rows: Q c (+ ``q0``); its rows here
+        #: with local (``Q_local``) and global (``Q_rows_global``: the penalty pattern of the saddle-point matrix)
+        #: AW columns; ``q0``: σ_t,c of the traction lifting (zero without tractions), replicated
+        self.Q, self.Q_local, self.Q_rows_global, self.q0 = _evaluation(
+            comm, spaces, cells, X, normal_weights(normals), rows, self.range, nq
         )
-        self.Q_local = Q_loc
-        Qc = Q_loc.tocoo()
-        #: σ_c at the contact nodes (canonical order), this rank's block of rows: Q c (+ ``q0``)
-        self.Q = DistributedMatrix(
-            coo_matrix(
-                comm,
-                rows[Qc.row],
-                gi[Qc.col],
-                Qc.data,
-                (self.range[1] - self.range[0], nq),
-                (spaces.n_sigma, spaces.space.num_dofs),
+        #: with ``tangential``: σ_t = t·σn at the nodes (t = (−n_y, n_x)) alike (the friction law's rows), else None
+        self.T = self.T_local = self.T_rows_global = self.t0 = None
+        if tangential:
+            self.T, self.T_local, self.T_rows_global, self.t0 = _evaluation(
+                comm, spaces, cells, X, tangential_weights(normals), rows, self.range, nq
             )
-        )
-        #: σ_t,c at the contact nodes (the traction lifting's normal stress; zero without tractions), replicated
-        self.q0 = gather_rows(comm, rows, Q_dg @ spaces.s0, nq)
         # u_h·n at the nodes from the DG P1 displacement (one adjacent cell per node)
         el = spaces.U.ufl_element().sub_elements[0].basix_element
         if cells.size:
@@ -220,6 +242,13 @@ class ContactNodes:
         un = gather_rows(self.comm, self.rows, self.Un @ u, self.q_points.shape[0])
         return self.q_points[keep, 1], un[keep]
 
+    def tangential_stress(self, c: np.ndarray) -> np.ndarray:
+        """t·σn at the contact nodes of the stress P c + s₀ (s₀ the traction lifting; replicated; ``tangential``
+        nodes only)."""
+        return self.replicate(self.T @ c) + self.t0
+
     def destroy(self) -> None:
-        """Free the PETSc matrix Q (collective)."""
+        """Free the PETSc matrices Q (and T) (collective)."""
         self.Q.destroy()
+        if self.T is not None:
+            self.T.destroy()

@@ -116,8 +116,9 @@ class SaddlePointFactorization:
             )
         return self._solver
 
-    def factorize_for(self, active: np.ndarray | None) -> bool:
-        """Factorize the saddle-point Jacobian unless the cached one has the same active set."""
+    def factorize_for(self, active: np.ndarray | None, weights: np.ndarray | None = None) -> bool:
+        """Factorize the saddle-point Jacobian unless the cached one has the same active set (with friction: the
+        key of the friction state, and ``weights`` the 2 × 2 weights per node, ``fem.mixed_friction``)."""
         if not self.has_operators:
             raise InputError("this subproblem was built without its matrices (operators=False): it cannot be solved")
         key = np.zeros(0, dtype=bool) if active is None else active
@@ -127,26 +128,27 @@ class SaddlePointFactorization:
             # one sparsity pattern for every active set (all Γ_C nodes): when the active set changes
             # only the penalty values change and MUMPS redoes the numeric factorization, not the analysis
             Q_rows = self.nodes.Q_rows_global if (self.contact and self.nodes is not None) else None
-            self._saddle = self._equilibrated_matrix(Q_rows)
+            T_rows = self.nodes.T_rows_global if Q_rows is not None else None
+            self._saddle = self._equilibrated_matrix(Q_rows, T_rows)
             self._rhs, self._sol = self._saddle.create_vecs()
         if active is None or not self.contact:
             self._saddle.set_weights(None)
         else:
-            weights = self.nodes.penalty_weights(active)
+            weights = self.nodes.penalty_weights(active) if weights is None else weights
             self._saddle.set_weights(weights if self.scale == 1.0 else self.scale**2 * weights)
         self.solver.set_operator(self._saddle.mat)
         self.factorized_set = key.copy()
         return True
 
-    def _equilibrated_matrix(self, Q_rows) -> SaddlePointMatrix:
+    def _equilibrated_matrix(self, Q_rows, T_rows=None) -> SaddlePointMatrix:
         """D J D without penalty weights: [[s² K̃, Bᵀ], [B, 0]] (the weights get s² in ``factorize_for``)."""
         Kt = self.operators.Kt.mat
         if self.scale == 1.0:
-            return SaddlePointMatrix(Kt, self.operators.B.mat, Q_rows)
+            return SaddlePointMatrix(Kt, self.operators.B.mat, Q_rows, T_rows)
         Ks = Kt.duplicate(copy=True)
         Ks.scale(self.scale**2)
         try:
-            return SaddlePointMatrix(Ks, self.operators.B.mat, Q_rows)
+            return SaddlePointMatrix(Ks, self.operators.B.mat, Q_rows, T_rows)
         finally:
             Ks.destroy()
 

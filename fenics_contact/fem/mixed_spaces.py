@@ -61,10 +61,12 @@ def boundary_stress_space(
     *,
     split_interface=None,
     basis_comm: MPI.Comm | None = None,
+    friction: bool = False,
 ) -> ArnoldWintherSpace:
     """The AW space of a (sub)mesh with the essential stress conditions of its boundary.
 
-    σn·t = 0 on Γ_C; σn = t on the Γ_N groups (a lifting); σn = 0 on every other
+    σn·t = 0 on Γ_C (``friction``: none there, the tangential traction is an unknown of the friction law);
+    σn = t on the Γ_N groups (a lifting); σn = 0 on every other
     exterior facet that is not Γ_D or γ (traction free).  Γ_D (u = u_D) and γ (Robin)
     are natural.  ``split_interface`` = (γ facets, cells of one side), ``basis_comm`` (ranks holding this same
     serial mesh, which share out its cells' nodal bases): see ``ArnoldWintherSpace``.
@@ -81,7 +83,7 @@ def boundary_stress_space(
     free = np.setdiff1d(exterior, np.concatenate([tagged, neumann]))
     return ArnoldWintherSpace(
         msh,
-        zero_tangential_facets=facet_tags.find(Boundary.GAMMA_C),
+        zero_tangential_facets=None if friction else facet_tags.find(Boundary.GAMMA_C),
         zero_traction_facets=np.union1d(free, neumann),
         prescribed_tractions=prescribed,
         split_interface=split_interface,
@@ -105,7 +107,8 @@ def interpolate_stress(sigma: fem.Function, degree: int = 1, name: str = "sigma"
 class MixedSpaces:
     """X_h × U_h of one (sub)mesh, the traction lifting σ_t (σ = P c + σ_t) and P as a distributed matrix.
 
-    ``space``: a prebuilt AW space on ``msh`` (with σ_t = 0 on Γ_C), else ``boundary_stress_space``.
+    ``space``: a prebuilt AW space on ``msh`` (with σ_t = 0 on Γ_C unless ``friction``), else
+    ``boundary_stress_space`` (with ``friction``: σn·t free on Γ_C).
     ``distribute_P``: make the distributed P now (the operators need it, or the mesh is distributed: its
     creation is collective); otherwise it is made when first used (0.34 s and 270 MB for Ω₁ at h = 1/128).
     """
@@ -118,8 +121,9 @@ class MixedSpaces:
         *,
         space: ArnoldWintherSpace | None,
         distribute_P: bool,
+        friction: bool = False,
     ) -> None:
-        self.space = space or boundary_stress_space(msh, facet_tags, boundary)
+        self.space = space or boundary_stress_space(msh, facet_tags, boundary, friction=friction)
         self._Pd: DistributedMatrix | None = None
         if distribute_P:
             self._Pd = DistributedMatrix(self.space.prolongation_petsc)

@@ -42,6 +42,7 @@ from fenics_contact.fem.contact_boundary import contact_boundary_present
 from fenics_contact.fem.distributed import DistributedMatrix
 from fenics_contact.fem.mixed_assembly import MixedOperators, dot, norm
 from fenics_contact.fem.mixed_contact import ContactNodes, MixedContactProfile
+from fenics_contact.fem.mixed_friction import MixedFriction, frictional_mixed_newton
 from fenics_contact.fem.mixed_interface import InterfaceData
 from fenics_contact.fem.mixed_linear import (
     SaddlePointFactorization,
@@ -53,6 +54,7 @@ from fenics_contact.fem.mixed_newton import MixedNewtonHistory, globalized_newto
 from fenics_contact.fem.mixed_residual import ufl_residual_norm
 from fenics_contact.fem.mixed_spaces import MixedSpaces, check_triangles
 from fenics_contact.problem.fields import MaterialFields
+from fenics_contact.problem.friction import Friction
 from fenics_contact.problem.geometry import mesh_extent
 from fenics_contact.problem.obstacles import Obstacle
 from fenics_contact.problem.tags import Boundary
@@ -86,6 +88,8 @@ class MixedSubproblem:
             (replicated; default: this mesh's γ nodes sorted by (y, x)).
         operators: False builds the spaces, the interface data and the load only, without
             the global matrices (no solve then; Algorithm 4's Ω₁ assembles its own cell blocks).
+        friction: a friction law on Γ_C (``problem.friction.Friction``; with ε only): σn·t is free there and
+            governed by the law on the traction (``fem.mixed_friction``).
         modulus: the reference Young's modulus E_ref of the equilibration of the factorizations
             (``stress_scale`` of E_ref/L_ref, L_ref the mesh's extent; default: the smallest E of its cells).
     """
@@ -105,6 +109,7 @@ class MixedSubproblem:
         interface_points: np.ndarray | None = None,
         operators: bool = True,
         modulus: float | None = None,
+        friction: Friction | None = None,
     ) -> None:
         t0 = time.perf_counter()
         if line_search not in ("on-cycle", "always"):
@@ -124,8 +129,14 @@ class MixedSubproblem:
         has_contact = contact_boundary_present(self.comm, contact_facets, fields.obstacle if self.contact else None)
         if self.contact and not has_contact:
             raise InputError("a contact subproblem needs Γ_C facets")
+        frictional = friction is not None and self.contact
         self.spaces = MixedSpaces(
-            msh, facet_tags, fields.boundary, space=space, distribute_P=operators or self.comm.size > 1
+            msh,
+            facet_tags,
+            fields.boundary,
+            space=space,
+            distribute_P=operators or self.comm.size > 1,
+            friction=frictional,
         )
         self.has_operators = operators
         self.assembly = MixedOperators(msh, facet_tags, fields, self.spaces, beta=beta, operators=operators)
@@ -135,8 +146,12 @@ class MixedSubproblem:
             self.interface = InterfaceData(msh, facet_tags, self.spaces, gamma, interface_points)
         self.contact_nodes: ContactNodes | None = None
         if has_contact:
-            self.contact_nodes = ContactNodes(msh, facet_tags, contact_facets, self.spaces, epsilon)
+            self.contact_nodes = ContactNodes(
+                msh, facet_tags, contact_facets, self.spaces, epsilon, tangential=frictional
+            )
             self.contact_nodes.set_obstacle(fields.obstacle)
+        #: the friction law on Γ_C and its state (``fem.mixed_friction``), or None: frictionless (σn·t = 0 there)
+        self.friction = MixedFriction(self, friction, epsilon) if frictional else None
         if modulus is None:
             modulus = self.comm.allreduce(float(np.min(fields.E.x.array, initial=np.inf)), op=MPI.MIN)
         #: s of the equilibration D = diag(s I_σ, I_u/s) of every saddle-point factorization of this subproblem
@@ -247,6 +262,8 @@ class MixedSubproblem:
         """The σ-row right-hand side: Robin data C g, traction lifting, ∫_ΓD u_D·τn and ∫_ΓC g τ_c."""
         F_gap = np.zeros(self.n_sigma) if self.contact_nodes is None else self.contact_nodes.F_gap
         load = self.assembly.F_boundary + F_gap
+        if self.friction is not None:
+            load = load + self.friction.load()
         return load if data is None else load + self.interface.C @ data
 
     _stress_load = stress_load  # the name hybrid.newton calls
@@ -272,8 +289,12 @@ class MixedSubproblem:
 
     # -- residual, energy, solve ----------------------------------------------------------
     def factorize_for(self, active: np.ndarray | None) -> bool:
-        """Factorize the saddle-point Jacobian for the active set (None: no penalty) unless cached."""
-        return self.factorization.factorize_for(active)
+        """Factorize the saddle-point Jacobian for the active set (None: no penalty; with friction the friction
+        state, ``MixedFriction.key``) unless cached."""
+        if self.friction is None or active is None:
+            return self.factorization.factorize_for(active)
+        friction = self.friction
+        return self.factorization.factorize_for(friction.cache_key(active), friction.weights(active))
 
     _factorize_for = factorize_for  # the name hybrid.mixed and hybrid.newton call
 
@@ -287,6 +308,8 @@ class MixedSubproblem:
         F1 = asm.Kt @ self.c + asm.B.T @ self.u - load
         if self.contact:
             F1 += self.contact_nodes.penalty_force(self.contact_nodes.stress(self.c))
+        if self.friction is not None:
+            F1 += self.friction.force(self.c)
         return F1, asm.B @ self.c - asm.G
 
     def _scale(self, load: np.ndarray) -> float:
@@ -296,6 +319,8 @@ class MixedSubproblem:
         sizes1 = norm(asm.Kt @ self.c, comm) + norm(asm.B.T @ self.u, comm) + norm(load, comm)
         if self.contact:
             sizes1 += norm(self.contact_nodes.penalty_force(self.contact_nodes.stress(self.c)), comm)
+        if self.friction is not None:
+            sizes1 += norm(self.friction.force(self.c), comm)
         return equilibrated_size(self.stress_scale, sizes1, norm(asm.B @ self.c, comm) + norm(asm.G, comm))
 
     def residual_norm(self, F1: np.ndarray, F2: np.ndarray) -> float:
@@ -315,6 +340,8 @@ class MixedSubproblem:
         J = 0.5 * dot(self.c, self.assembly.Kt @ self.c, self.comm) - dot(self.stress_load(data), self.c, self.comm)
         if self.contact:
             J += self.contact_nodes.penalty_energy(self.contact_nodes.stress(self.c))
+        if self.friction is not None:
+            J += self.friction.energy(self.c)
         return float(J)
 
     def solve(self, data: np.ndarray | None = None) -> MixedNewtonHistory:
@@ -327,6 +354,8 @@ class MixedSubproblem:
             history.active_sizes.append(0)
             history.step_lengths.append(1.0)
             return history
+        if self.friction is not None:
+            return frictional_mixed_newton(self, load, data)
         return globalized_newton(self, load, data)
 
     # -- output -------------------------------------------------------------------------

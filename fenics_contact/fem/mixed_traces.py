@@ -25,6 +25,8 @@ __all__ = [
     "owned_cell_facets",
     "reference_coordinates",
     "stress_evaluation",
+    "tangent_of",
+    "tangential_weights",
     "traction_weights",
 ]
 
@@ -64,6 +66,17 @@ def stress_evaluation(dg: fem.FunctionSpace, cells: np.ndarray, X: np.ndarray, w
 def normal_weights(n: np.ndarray) -> np.ndarray:
     """Weights (N, 3) giving n·σn from (σ_xx, σ_xy, σ_yy)."""
     return np.stack([n[:, 0] ** 2, 2.0 * n[:, 0] * n[:, 1], n[:, 1] ** 2], axis=1)
+
+
+def tangent_of(n: np.ndarray) -> np.ndarray:
+    """The unit tangent t = (−n_y, n_x) of outward unit normals n (N, 2): the direction of σ_t = t·σn."""
+    return np.stack([-n[:, 1], n[:, 0]], axis=1)
+
+
+def tangential_weights(n: np.ndarray) -> np.ndarray:
+    """Weights (N, 3) giving t·σn from (σ_xx, σ_xy, σ_yy), t = ``tangent_of(n)``."""
+    t = tangent_of(n)
+    return np.stack([t[:, 0] * n[:, 0], t[:, 0] * n[:, 1] + t[:, 1] * n[:, 0], t[:, 1] * n[:, 1]], axis=1)
 
 
 def traction_weights(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

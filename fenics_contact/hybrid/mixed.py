@@ -61,6 +61,12 @@ its vertices (the zigzag of a band of width 0.15 along Γ_C, model 2,
 
     h = 1/16: e_σ 5.0e−5, e_u 5.5e−7;   h = 1/24: e_σ 2.6e−5, e_u 1.9e−7.
 
+**Friction.**  A friction law (``problem.law``) acts on Γ_C ⊂ Ω₂ only (``fem.mixed_friction``: the law on the
+tangential traction), so Ω₁ and the update are unchanged and the fixed point above carries over: at every load
+step of a path (``fenics_contact.slide``) it is the monolithic frictional solution on X̃_h (measured 2e−11 at
+contrast 1e6, ``benchmarks/results/friction_mixed.md``).  The interface Newton then runs its ``"interface"``
+strategy, Newton on g = T(g) with Ω₂'s frictional Jacobian (``hybrid.options.interface_options``).
+
 **MPI.**  Under ``mpiexec`` both subproblems are distributed (``fem.mixed``); the
 Robin data g₁₂, g₂₁ are the values at the canonical γ nodes (Ω₁'s order, which Ω₂
 adopts), each rank holding one block of them (``MixedSubproblem.interface_range``),
@@ -97,10 +103,11 @@ from fenics_contact.hybrid.iteration import (
     IterationResult,
     iterate,
 )
+from fenics_contact.hybrid.options import interface_options
 from fenics_contact.hybrid.primal import omega2_record
 from fenics_contact.hybrid.response import FineResponse, MixedPart
 from fenics_contact.hybrid.transmission import split_mesh, sub_to_parent_dofs
-from fenics_contact.problem.friction import require_frictionless
+from fenics_contact.problem.friction import friction_of
 from fenics_contact.problem.problem import ContactProblem
 
 __all__ = [
@@ -168,7 +175,6 @@ class MixedHybridStep:
         newton: NewtonOptions = NewtonOptions(),
         reference: MixedSolution | None = None,
     ) -> None:
-        require_frictionless(problem.law, "Algorithm 2 (mixed)")
         cm = problem.cm
         check_triangles(cm.mesh)
         self.comm = cm.comm
@@ -192,6 +198,7 @@ class MixedHybridStep:
                     operators=i == 1 or self.omega1_operators,
                     space=self._omega1_space(part, fields) if i == 0 else None,
                     interface_points=self.sub[0].gamma_points if i == 1 else None,
+                    friction=friction_of(problem.law) if i == 1 else None,
                 )
             )
         if self.sub[0].interface_range != self.sub[1].interface_range:
@@ -293,7 +300,10 @@ class MixedHybridStep:
         return FineResponse(MixedPart(self.sub[0], perm=None, contact=False), chunk=options.chunk)
 
     def interface_problem(self, options: InterfaceNewtonOptions):
-        """The affine pieces for ``hybrid.interface_newton`` (built once)."""
+        """The affine pieces for ``hybrid.interface_newton`` (built once); with friction on Γ_C the
+        ``"interface"`` strategy (Newton on F(g) = g − T(g) with Ω₂'s frictional Jacobian:
+        ``options.interface_options``)."""
+        options = interface_options(options, self.sub[1].friction, frictional_condensation=False)
         if self._newton is None or self._newton.options.strategy != options.strategy:
             perm = self._perm2 if self.comm.size == 1 else None  # (distributed: the canonical order)
             omega2 = MixedPart(self.sub[1], perm=perm, contact=True, factorize=options.strategy == "condensed")

@@ -75,7 +75,6 @@ from fenics_contact.multiscale.cem.options import warn_if_few_layers
 from fenics_contact.multiscale.coarse import coarse_grid
 from fenics_contact.multiscale.mixed_cem.omega1 import MixedMultiscaleOmega1
 from fenics_contact.multiscale.mixed_cem.options import MixedCEMOptions
-from fenics_contact.problem.friction import require_frictionless
 from fenics_contact.problem.geometry import ContactMesh
 from fenics_contact.problem.problem import ContactProblem
 from fenics_contact.problem.tags import Boundary
@@ -128,7 +127,6 @@ class MixedMultiscaleHybridStep(MixedHybridStep):
         cache_dir: str | Path | None = None,
         offline_comm: MPI.Comm = MPI.COMM_SELF,
     ) -> None:
-        require_frictionless(problem.law, "Algorithm 4 (mixed-ms)")
         cm = problem.cm
         _require_replicated_mesh(cm, offline_comm)
         if cm.H is None and not np.any(np.asarray(cm.coarse_cell) >= 0):

@@ -12,6 +12,8 @@ rigid motion since then, τ the threshold: Tresca τ = s on all of Γ_C (the giv
 Tresca problem: a convex energy), Coulomb τ = μ p with p = (1/δ)(u·ν − g)⁺ the normal penalty pressure.  The
 stick stiffness 1/δ_t is ``stiffness_ratio`` times the normal penalty 1/δ (default 1: δ_t = δ = 1e-3·h/E_c,
 a factor 1e3 above the element stiffness; the elastic stick slip it leaves is τ·δ_t, like the penetration p·δ).
+The mixed methods write the same law on the traction (``fem.mixed_friction``): exact stick, and a slip penalty
+ε_t = ε/``stiffness_ratio`` on the excess |t| − τ; both laws become the exact one as δ_t, ε_t → 0.
 """
 
 import math
@@ -19,7 +21,7 @@ from dataclasses import dataclass
 
 from fenics_contact.errors import InputError
 
-__all__ = ["Friction", "FRICTION_LAWS", "friction_of", "require_frictionless"]
+__all__ = ["Friction", "FRICTION_LAWS", "friction_of"]
 
 #: the friction laws by name
 FRICTION_LAWS = ("coulomb", "tresca")
@@ -45,7 +47,8 @@ class Friction:
     threshold=s)``.
 
     ``mu``: the Coulomb coefficient (≥ 0); ``threshold``: the Tresca slip threshold s (a traction, ≥ 0);
-    ``stiffness_ratio``: the stick stiffness 1/δ_t over the normal penalty 1/δ (default 1).
+    ``stiffness_ratio``: the stick stiffness 1/δ_t over the normal penalty 1/δ (default 1); the mixed methods' slip
+    penalty is ε_t = ε/``stiffness_ratio``.
     """
 
     law: str
@@ -91,12 +94,3 @@ class Friction:
 def friction_of(law) -> Friction | None:
     """The friction law of a contact law (None when frictionless)."""
     return law if isinstance(law, Friction) else None
-
-
-def require_frictionless(law, method: str) -> None:
-    """InputError when ``law`` is a friction law: ``method`` solves frictionless contact only."""
-    if isinstance(law, Friction):
-        raise InputError(
-            f"{method} solves frictionless contact only; a friction law ({law.describe()}) needs a primal method: "
-            "primal-monolithic, primal (Algorithm 1) or primal-ms (Algorithm 3)"
-        )

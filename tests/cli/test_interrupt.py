@@ -5,6 +5,7 @@ import os
 import random
 import shutil
 import signal
+import socket
 import subprocess
 import sys
 import time
@@ -157,6 +158,63 @@ def test_a_signal_inside_a_finalizer_is_not_lost():
     assert {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)} == {
         s: before[s] for s in (signal.SIGINT, signal.SIGTERM)
     }
+
+
+def test_only_the_first_signal_of_a_run_is_raised():
+    """A second SIGTERM or SIGINT while the first is handled (mpiexec passes a SIGTERM to every rank, and a rank
+    passes its own on to rank 0) is ignored: it cannot cut the cleanup or the last line short."""
+    from fenics_contact.cli import Interrupted, interruptible
+
+    before = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    handled = []
+    with interruptible():
+        try:
+            os.kill(os.getpid(), signal.SIGTERM)
+            time.sleep(5.0)
+        except Interrupted as stop:
+            for again in (signal.SIGTERM, signal.SIGINT):
+                os.kill(os.getpid(), again)
+            time.sleep(0.1)
+            handled.append(stop.signum)
+    assert handled == [signal.SIGTERM]
+    assert {s: signal.getsignal(s) for s in before} == before
+
+
+def test_the_last_line_waits_for_its_reader():
+    """What a pipe holds that its reader (mpiexec's proxy) has not read yet: the rank that ends the run aborts once
+    its line is read; 0 for what is not a pipe."""
+    from fenics_contact.cli.signals import _unread_bytes
+
+    read, write = os.pipe()
+    try:
+        os.write(write, b"interrupted by SIGTERM\n")
+        assert _unread_bytes(write) == 23
+        os.read(read, 100)
+        assert _unread_bytes(write) == 0
+    finally:
+        os.close(read)
+        os.close(write)
+    with open(os.devnull, "w") as null:
+        assert _unread_bytes(null.fileno()) == 0
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="abstract Unix sockets are Linux's")
+def test_one_rank_of_a_host_claims_the_line(monkeypatch):
+    """The ranks of one host ending a run: the first to claim the line prints it, the others do not; the claim
+    ends with the process that holds it."""
+    from fenics_contact.cli import signals
+
+    monkeypatch.setattr(signals, "_rank_zero", [(socket.gethostname(), os.getpid())])
+    monkeypatch.setattr(signals, "_claim", [])
+    try:
+        assert signals._claim_the_line() is True
+        assert signals._claim_the_line() is False
+    finally:
+        for sock in signals._claim:
+            sock.close()
+    signals._claim.clear()
+    assert signals._claim_the_line() is True  # (the holder is gone)
+    signals._claim.pop().close()
 
 
 def _descendants(pid: int) -> list[int]:

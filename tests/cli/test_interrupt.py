@@ -263,7 +263,7 @@ def test_sigterm_under_mpi_never_hangs(tmp_path, target):
     into the solve: every run ends with exit 143 and the one line, exactly once (besides MPICH's lines on
     MPI_Abort), nothing written.  What each part holds off: a rank that stopped alone would leave the other
     waiting in a collective operation for ever; a line still in the pipe to mpiexec when its rank aborts would be
-    lost (mpiexec exits on the abort: about one abort in 30 without the wait); two ranks signalled together could
+    lost (mpiexec exits on the abort: a few aborts in a hundred without the wait); two ranks signalled together could
     both print it.  Eight runs of each, about 10 s each."""
     mpiexec = shutil.which("mpiexec", path=str(Path(sys.executable).parent)) or shutil.which("mpiexec")
     script = shutil.which("fenics-contact", path=str(Path(sys.executable).parent))

@@ -219,9 +219,11 @@ def _write_last_line(message: str) -> None:
     """``message`` as one line on stderr (fd 2 directly, after what Python holds for it), then a wait of at most
     ``STDERR_DRAIN_S`` until the launcher has read it.
 
-    MPICH's ``mpiexec`` ends on ``MPI_Abort`` as soon as the abort reaches it, and its proxy forwards the ranks'
-    PMI messages before their output when both are waiting: a line still in the pipe when the rank aborts is
-    lost.  Once the proxy has read it, it has sent it to ``mpiexec`` ahead of the abort.
+    Once an abort reaches MPICH's ``mpiexec`` (hydra), it kills its proxies at its next whole second and exits,
+    dropping output that has not reached it yet; a proxy serves a rank's PMI socket before its stderr pipe when
+    both wait.  A line still in the pipe when the rank aborts is therefore lost now and then (a few aborts in a
+    hundred).  The proxy sends what it reads from the pipe on to ``mpiexec`` at once, on the stream that later
+    carries the abort: once the pipe is empty, the line reaches ``mpiexec`` ahead of the abort.
     """
     with contextlib.suppress(OSError, ValueError):
         sys.stderr.flush()

@@ -85,7 +85,7 @@ def _add_problem_options(run: argparse.ArgumentParser) -> None:
         choices=(1, 2, 3, 4),
         default=_RUN_DEFAULTS["model"],
         help="built-in test model: 1 channels, 2 inclusions, 3 heterogeneous strip (loads in Ω₁), 4 the 3D "
-        "channel model (the unit cube, its strip Ω₂ of width 1/H; --method primal)"
+        "channel model (the unit cube, its strip Ω₂ of width 1/H; --method primal, or primal-ms on cubes of side 1/H)"
         + _default(_shown(_RUN_DEFAULTS["model"])),
     )
     group.add_argument(

@@ -81,14 +81,18 @@ class MultiscalePrimalHybridStep:
         self.alpha = robin_coefficient(alpha, parent_fields.E, self.interface, cm.h, problem.length)
         self.delta = delta = penalty_for(problem, delta)
         self.cem = cem = cem.for_dimension(gdim)  # l resolved (RIGID_MOTIONS: 3 in 2D, 6 in 3D)
+        p2 = self.parts[1]
+        fields2 = problem.fields_on(p2.mesh)
+        rollers = problem.boundary.rollers
+        if rollers:  # each part takes the roller planes on its own outer boundary (Ω₁: cem.roller_dofs)
+            own = [part_rollers(part, rollers) for part in self.parts]  # (refuses a plane through γ)
+            lost = [plane for plane in rollers if plane not in own[0] + own[1]]
+            if lost:
+                raise InputError(f"no exterior facet lies in the roller plane(s) x_axis = value {lost}")
+            fields2 = fields2._replace(boundary=dataclasses.replace(problem.boundary, rollers=own[1]))
         self.omega1 = Omega1Multiscale(problem, self.parts, self.interface, self.alpha, cem=cem, cache_dir=cache_dir)
         alpha2 = fem.Function(self.interface.spaces[1], name="alpha")
         self.interface.to_part(self.alpha, 1, alpha2)
-        p2 = self.parts[1]
-        fields2 = problem.fields_on(p2.mesh)
-        if problem.boundary.rollers:  # Ω₂ takes the roller planes on its own outer boundary (Ω₁: its operators)
-            own = part_rollers(p2, problem.boundary.rollers)
-            fields2 = fields2._replace(boundary=dataclasses.replace(problem.boundary, rollers=own))
         self.omega2 = PrimalSubproblem(
             p2.mesh,
             p2.facet_tags,

@@ -19,6 +19,7 @@ import fenics_contact as fc
 from fenics_contact.errors import InputError
 from fenics_contact.multiscale import cem
 from fenics_contact.multiscale.coarse import grid_from_cells
+from fenics_contact.problem.boundary import BoundaryConditions
 from fenics_contact.problem.models3d import channels_3d, channels_3d_mesh
 from fenics_contact.problem.partition import cartesian_coarse_cells, coarse_sizes
 
@@ -139,3 +140,12 @@ def test_mixed_ms_is_refused_in_3d_and_names_the_3d_methods(cube):
     problem, _ = cube
     with pytest.raises(InputError, match="plane problems.*'primal-ms'"):
         fc.solve(problem, "mixed-ms")
+
+
+@pytest.mark.parametrize(("plane", "match"), [((0, 0.75), "interface γ"), ((2, 0.5), "no exterior facet")])
+def test_a_roller_plane_through_gamma_or_inside_the_body_is_refused(cube, plane, match):
+    """Before the offline phase: a roller plane must lie on the outer boundary of Ω₁ or Ω₂, not on γ."""
+    problem, _ = cube
+    moved = problem.with_(boundary=BoundaryConditions(rollers=(plane,)))
+    with pytest.raises(InputError, match=match):
+        fc.solve(moved, "primal-ms", layers=1)

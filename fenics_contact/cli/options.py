@@ -28,6 +28,8 @@ from fenics_contact.problem.models import MODELS_3D, get_model, model_1
 __all__ = [
     "DEFAULT_H",
     "DEFAULT_H_3D",
+    "DEFAULT_COARSE",
+    "DEFAULT_COARSE_3D_MS",
     "METHODS",
     "MODEL_DEFAULTS",
     "TABLE_METHODS",
@@ -40,6 +42,10 @@ __all__ = [
 METHODS = HYBRID_METHODS  #: the ``--method`` choices: Algorithms 1–4 (``methods.METHODS``)
 DEFAULT_H = 64  #: 1/h of the built-in mesh when --h is not given
 DEFAULT_H_3D = 16  #: 1/h of the built-in cube of the 3D models (--model 4, 5) when --h is not given
+DEFAULT_COARSE = 16  #: 1/H (coarse size / strip width) when --H is not given
+#: 1/H of primal-ms on the cube of the 3D model when --H is not given: cubes of side ¼ (48 of them in Ω₁, each
+#: 4 fine cells wide at the default h = 1/16; a 1/16 strip would leave a coarse cell one fine cell wide)
+DEFAULT_COARSE_3D_MS = 4
 #: the materials of the built-in models when --E-high, --E-low, --nu are not given (the three models share them)
 MODEL_DEFAULTS = {
     name: p.default for name, p in inspect.signature(model_1).parameters.items() if name in ("E_high", "E_low", "nu")
@@ -174,7 +180,7 @@ class RunOptions:
     model: int = 1
     method: str = "primal"
     h: int | None = None
-    H: int = 16
+    H: int | None = None  #: None: ``DEFAULT_COARSE`` (``DEFAULT_COARSE_3D_MS`` for primal-ms on --model 4)
     mesh: Path | None = None
     coarse_groups: bool = False
     alpha: str | None = None
@@ -248,6 +254,9 @@ class RunOptions:
                     else f"--mesh {self.mesh} is not a file"
                 )
         _integer("h", self.h, 2)
+        if self.H is None:
+            cube_ms = self.mesh is None and self.case is None and self.model == MODEL_3D and self.method.endswith("-ms")
+            object.__setattr__(self, "H", DEFAULT_COARSE_3D_MS if cube_ms else DEFAULT_COARSE)
         _integer("H", self.H, 2)
         if self.mesh is None and self.model != MODEL_COMPOSITE_3D and self.n % self.H:  # (a grid of cells)
             raise InputError(

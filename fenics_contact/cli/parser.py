@@ -13,7 +13,16 @@ from pathlib import Path
 from types import SimpleNamespace
 
 from fenics_contact import __version__
-from fenics_contact.cli.options import DEFAULT_H, DEFAULT_H_3D, METHODS, MODEL_DEFAULTS, RunOptions, method_default
+from fenics_contact.cli.options import (
+    DEFAULT_COARSE,
+    DEFAULT_COARSE_3D_MS,
+    DEFAULT_H,
+    DEFAULT_H_3D,
+    METHODS,
+    MODEL_DEFAULTS,
+    RunOptions,
+    method_default,
+)
 from fenics_contact.cli.signals import EXIT_CODES
 from fenics_contact.examples import add_examples_parser
 from fenics_contact.fem.amg import AUTO_AMG_DOFS, LINEAR_SOLVERS
@@ -76,8 +85,9 @@ def _add_problem_options(run: argparse.ArgumentParser) -> None:
         choices=(1, 2, 3, 4, 5),
         default=_RUN_DEFAULTS["model"],
         help="built-in test model: 1 channels, 2 inclusions, 3 heterogeneous strip (loads in Ω₁), 4 the 3D "
-        "channel model (the unit cube, its strip Ω₂ of width 1/H; --method primal), 5 the 3D fibre composite "
-        "(a gmsh block with stiff fibres along y, γ at x = 1 − 1/H cutting some of them; --method primal)"
+        "channel model (the unit cube, its strip Ω₂ of width 1/H; --method primal, or primal-ms on cubes of side 1/H), "
+        "5 the 3D fibre composite (a gmsh block with stiff fibres along y, γ at x = 1 − 1/H cutting some of them; "
+        "--method primal)"
         + _default(_shown(_RUN_DEFAULTS["model"])),
     )
     group.add_argument(
@@ -114,10 +124,10 @@ def _add_problem_options(run: argparse.ArgumentParser) -> None:
     group.add_argument(
         "--H",
         type=int,
-        default=_RUN_DEFAULTS["H"],
-        help="coarse size / strip width as 1/H; with "
+        help="coarse size / strip width as 1/H (the cube of --model 4: the coarse cubes of side 1/H of primal-ms "
+        f"and the strip, {DEFAULT_COARSE_3D_MS} for primal-ms when not given); with "
         "--mesh the coarse grid of squares of side 1/H over the bounding box (multiscale methods)"
-        + _default(_shown(_RUN_DEFAULTS["H"])),
+        + _default(_shown(DEFAULT_COARSE)),
     )
     group.add_argument(
         "--coarse-groups",
@@ -231,7 +241,10 @@ def _add_multiscale_options(run: argparse.ArgumentParser) -> None:
         help="*-ms: oversampling layers m of the multiscale bases" + _default(_per_method("layers")),
     )
     group.add_argument(
-        "--nbasis", type=int, help="*-ms: local spectral modes l per coarse cell" + _default(_per_method("nbasis"))
+        "--nbasis",
+        type=int,
+        help="*-ms: local spectral modes l per coarse cell (rigid: as many as a coarse cell has rigid motions, "
+        "3 in 2D and 6 in 3D)" + _default(_per_method("nbasis")),
     )
     group.add_argument(
         "--min-gap",
@@ -294,7 +307,7 @@ def _add_check_mesh_parser(subparsers) -> None:
         type=int,
         default=None,
         help="with FILE: the coarse grid of squares of side 1/H over the bounding box, and the "
-        "strip width when the file has no Omega1/Omega2/gamma (as run)" + _default(_shown(_RUN_DEFAULTS["H"])),
+        "strip width when the file has no Omega1/Omega2/gamma (as run)" + _default(_shown(DEFAULT_COARSE)),
     )
     parser.add_argument(
         "--coarse-groups",

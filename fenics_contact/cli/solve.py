@@ -224,8 +224,9 @@ def _mesh(options: RunOptions, comm: MPI.Comm = MPI.COMM_WORLD) -> ContactMesh:
         # (a 3D mesh has no coarse grid: its strip, when the file has none, is the band of ``problem.strip``)
         planar_grid = not options.coarse_groups and not _solid(options.mesh, comm)
         return read_mesh(options.mesh, H=1.0 / options.H if planar_grid else None, comm=comm)
-    if options.model == MODEL_3D:
-        return channels_3d_mesh(options.n, strip=1.0 / options.H, comm=comm)
+    if options.model == MODEL_3D:  # the multiscale methods' coarse cubes: side 1/H, as the strip
+        coarse = 1.0 / options.H if CATALOGUE[options.method].multiscale else None
+        return channels_3d_mesh(options.n, strip=1.0 / options.H, H=coarse, comm=comm)
     if options.model == MODEL_COMPOSITE_3D:
         return fibre_block_3d_mesh(options.n, strip=1.0 / options.H, comm=comm)
     return unit_square(options.n, options.H, comm=comm)
@@ -242,6 +243,12 @@ def _bounding_box(cm: ContactMesh) -> tuple[float, float, float, float]:
 
 def _check_coarse_grid(cm: ContactMesh, options: RunOptions) -> None:
     """The multiscale methods need the coarse grid of squares of side H to be a union of fine cells."""
+    if cm.mesh.topology.dim == 3 and cm.H is None:
+        raise InputError(
+            f"--method {options.method} with --mesh {options.mesh}: a 3D mesh file has no coarse grid (--H sets "
+            "only the strip there); primal-ms runs in 3D on the cube of --model 4 (its coarse cubes of side 1/H) or "
+            "through the Python API on a mesh with a coarse partition (ContactMesh.coarse_cell)"
+        )
     cells = cm.cell_tags.find(Subdomain.OMEGA1)
     crossing = cm.comm.allreduce(int(np.count_nonzero(cm.coarse_cell[cells] < 0)), op=MPI.SUM)
     if crossing:

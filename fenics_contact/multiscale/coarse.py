@@ -2,21 +2,22 @@
 
 A coarse cell K_k is a set of fine Ω₁ cells (the fine mesh refines the coarse
 partition). Where the partition comes from is the mesh's business
-(``ContactMesh.coarse_cell``: the squares of a Cartesian grid over the bounding
-box, or a partition given by the user, ``problem.partition``); this module only
+(``ContactMesh.coarse_cell``: the squares (cubes on a tetrahedral mesh) of a
+Cartesian grid over the bounding box, or a partition given by the user,
+``problem.partition``); this module only
 needs the coarse index of every fine cell, so any domain and any partition work.
 
 * **Adjacency.** Two coarse cells are neighbours when they share a fine vertex
-  (for a Cartesian grid: the eight surrounding squares).
+  (for a Cartesian grid: the eight surrounding squares, the 26 surrounding cubes).
 * **Oversampling.** K_{k,m} is K_k and every coarse cell at most m adjacency
   steps away (breadth-first search); on a Cartesian grid over a convex Ω₁ this
-  is |i′ − i| ≤ m and |j′ − j| ≤ m.
+  is |i′ − i| ≤ m and |j′ − j| ≤ m (and |k′ − k| ≤ m).
 * **Colours.** A greedy colouring of the adjacency graph: two coarse cells of
   one colour share no fine vertex, so the restriction of a matrix assembled over
   the cells of one colour to the vertices of K_k is the matrix of K_k alone
-  (four colours on a Cartesian grid).
-* **Size.** ``cell_size[k]`` = √|K_k| (H for a square of side H) scales the CEM
-  inner product, κ̃ = c κ H_k⁻².
+  (four colours on a Cartesian grid of squares, eight of cubes).
+* **Size.** ``cell_size[k]`` = |K_k|^(1/d) (H for a square or cube of side H) scales
+  the CEM inner product, κ̃ = c κ H_k⁻².
 """
 
 from dataclasses import dataclass, field
@@ -27,6 +28,7 @@ from dolfinx import mesh as dmesh
 from scipy.sparse import csgraph
 
 from fenics_contact.errors import InputError
+from fenics_contact.problem.partition import simplex_volumes
 
 __all__ = ["CoarseGrid", "coarse_grid", "grid_from_cells"]
 
@@ -35,14 +37,14 @@ __all__ = ["CoarseGrid", "coarse_grid", "grid_from_cells"]
 class CoarseGrid:
     """The coarse cells K_k of Ω₁ (local numbering k = 0..size−1) and their adjacency."""
 
-    H: float  #: coarse size: the Cartesian H, or the largest √|K_k| of a user partition
+    H: float  #: coarse size: the Cartesian H, or the largest |K_k|^(1/d) of a user partition
     global_index: np.ndarray  #: (n_K,) index of each K_k in ContactMesh.coarse_cell
     cell_coarse: np.ndarray  #: (num fine cells,) local coarse number k of each fine Ω₁ cell
     cells: tuple  #: fine cells of each K_k (Ω₁ submesh numbering, sorted)
     adjacency: sp.csr_matrix  #: (n_K, n_K) boolean, K_k and K_l share a fine vertex (diagonal included)
-    cell_size: np.ndarray  #: (n_K,) √|K_k|
-    ij: np.ndarray | None  #: (n_K, 2) Cartesian position of each K_k, None for a general partition
-    n_coarse: int | None  #: 1/H for a Cartesian grid over the unit square, else None
+    cell_size: np.ndarray  #: (n_K,) |K_k|^(1/d): √|K_k| in the plane, ∛|K_k| in 3D
+    ij: np.ndarray | None  #: (n_K, d) Cartesian position of each K_k, None for a general partition
+    n_coarse: int | None  #: 1/H for a Cartesian grid over the unit square (cube), else None
     _patches: dict = field(default_factory=dict, repr=False)
 
     @property
@@ -94,22 +96,25 @@ def _greedy_colouring(adjacency: sp.csr_matrix) -> np.ndarray:
 def grid_from_cells(
     cell_nodes: np.ndarray, coords: np.ndarray, coarse_index: np.ndarray, H: float | None
 ) -> CoarseGrid:
-    """The coarse grid from the coarse index of every fine cell (``cell_nodes``: (cells, 3) vertex numbers).
+    """The coarse grid from the coarse index of every fine cell (``cell_nodes``: (cells, d + 1) vertex numbers of
+    triangles, d = 2, or tetrahedra, d = 3).
 
-    ``coords`` are the vertex coordinates (x, y in the first two columns). A grid is
-    recognised as Cartesian (``ij`` set) when every coarse cell lies in one square of
-    side H of the grid anchored at the smallest vertex coordinates.
+    ``coords`` are the vertex coordinates (x, y (, z) in the first d columns). A grid is recognised as Cartesian
+    (``ij`` set) when every coarse cell lies in one square (cube) of side H of the grid anchored at the smallest
+    vertex coordinates.
     """
     coarse_index = np.asarray(coarse_index, dtype=np.int64)
+    d = cell_nodes.shape[1] - 1
+    shape = "squares" if d == 2 else "cubes"
     if coarse_index.size == 0:
         raise InputError("Ω₁ has no cells")
     if np.any(coarse_index < 0):
         bad = int(np.count_nonzero(coarse_index < 0))
         raise InputError(
             f"{bad} of the {coarse_index.size} fine cells of Ω₁ lie in no coarse cell: the fine mesh does not "
-            f"resolve the coarse grid (squares of side H = {H} over the bounding box; every fine cell must lie "
-            "inside one square). Use a mesh whose edges follow the grid lines, another H, or give the coarse "
-            "partition as 2D physical groups (one per coarse cell)"
+            f"resolve the coarse grid ({shape} of side H = {H} over the bounding box; every fine cell must lie "
+            f"inside one of them). Use a mesh whose edges follow the grid lines, another H, or give the coarse "
+            f"partition as {d}D physical groups (one per coarse cell)"
         )
     global_index, cell_coarse = np.unique(coarse_index, return_inverse=True)
     n_k = global_index.size
@@ -126,19 +131,17 @@ def grid_from_cells(
     adjacency = (inc.T @ inc).tocsr()
     adjacency.data[:] = 1
     adjacency = adjacency.astype(bool)
-    # areas and bounding boxes of the coarse cells
-    p = coords[cell_nodes][:, :, :2]
-    area = 0.5 * np.abs(
-        (p[:, 1, 0] - p[:, 0, 0]) * (p[:, 2, 1] - p[:, 0, 1]) - (p[:, 2, 0] - p[:, 0, 0]) * (p[:, 1, 1] - p[:, 0, 1])
-    )
-    cell_size = np.sqrt(np.bincount(cell_coarse, weights=area, minlength=n_k))
-    lo = np.full((n_k, 2), np.inf)
-    hi = np.full((n_k, 2), -np.inf)
+    # measures (areas, volumes) and bounding boxes of the coarse cells
+    p = coords[cell_nodes][:, :, :d]
+    measure = np.bincount(cell_coarse, weights=simplex_volumes(p), minlength=n_k)
+    cell_size = np.sqrt(measure) if d == 2 else np.cbrt(measure)
+    lo = np.full((n_k, d), np.inf)
+    hi = np.full((n_k, d), -np.inf)
     np.minimum.at(lo, cell_coarse, p.min(axis=1))
     np.maximum.at(hi, cell_coarse, p.max(axis=1))
     ij, n_coarse = None, None
     if H is not None:
-        origin = coords[:, :2].min(axis=0)
+        origin = coords[:, :d].min(axis=0)
         tol = 1e-8 * H
         ij_lo = np.floor((lo - origin + tol) / H).astype(np.int64)
         ij_hi = np.floor((hi - origin - tol) / H).astype(np.int64)
@@ -146,8 +149,8 @@ def grid_from_cells(
             ij = ij_lo
             if np.unique(ij, axis=0).shape[0] != n_k:
                 ij = None
-        in_unit_square = np.allclose(coords[:, :2].min(axis=0), 0.0) and np.all(coords[:, :2].max(axis=0) <= 1 + 1e-12)
-        if ij is not None and in_unit_square and abs(1.0 / H - round(1.0 / H)) < 1e-9:
+        in_unit_box = np.allclose(coords[:, :d].min(axis=0), 0.0) and np.all(coords[:, :d].max(axis=0) <= 1 + 1e-12)
+        if ij is not None and in_unit_box and abs(1.0 / H - round(1.0 / H)) < 1e-9:
             n_coarse = int(round(1.0 / H))
     H_out = float(H) if H is not None else float(cell_size.max())
     return CoarseGrid(H_out, global_index, cell_coarse.astype(np.int32), cells, adjacency, cell_size, ij, n_coarse)

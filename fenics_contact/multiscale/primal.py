@@ -13,6 +13,7 @@ difference to the fine monolithic solution is the multiscale error (it falls
 with the oversampling layers m and the number of local modes).
 """
 
+import dataclasses
 import logging
 import time
 from pathlib import Path
@@ -31,7 +32,7 @@ from fenics_contact.hybrid.iteration import InterfaceNewtonOptions, IterationOpt
 from fenics_contact.hybrid.options import interface_options
 from fenics_contact.hybrid.primal import DEFAULT_ALPHA_MS, HybridResult, omega2_record, solve_or_verify
 from fenics_contact.hybrid.response import MatrixResponse, PrimalPart
-from fenics_contact.hybrid.transmission import InterfaceSpace, robin_coefficient, split_mesh
+from fenics_contact.hybrid.transmission import InterfaceSpace, part_rollers, robin_coefficient, split_mesh
 from fenics_contact.multiscale.cem.omega1 import Omega1Multiscale
 from fenics_contact.multiscale.cem.options import CEMOptions
 from fenics_contact.problem.friction import friction_of
@@ -65,8 +66,8 @@ class MultiscalePrimalHybridStep:
         cm = problem.cm
         if cm.H is None and cm.comm.allreduce(int(np.any(np.asarray(cm.coarse_cell) >= 0)), op=MPI.MAX) == 0:
             raise InputError(
-                "Algorithm 3 needs a coarse grid: build the mesh with geometry.unit_square(n, n_coarse), "
-                "or give read_mesh H or a mesh with a coarse partition"
+                "Algorithm 3 needs a coarse grid: build the mesh with geometry.unit_square(n, n_coarse) or "
+                "meshes3d.unit_cube(n, H=…), or give read_mesh H or a mesh with a coarse partition"
             )
         start = time.perf_counter()
         self.comm = cm.comm
@@ -79,15 +80,23 @@ class MultiscalePrimalHybridStep:
         warn_if_locking(parent_fields.nu, cm.comm)
         self.alpha = robin_coefficient(alpha, parent_fields.E, self.interface, cm.h, problem.length)
         self.delta = delta = penalty_for(problem, delta)
-        self.cem = cem
+        self.cem = cem = cem.for_dimension(gdim)  # l resolved (RIGID_MOTIONS: 3 in 2D, 6 in 3D)
+        p2 = self.parts[1]
+        fields2 = problem.fields_on(p2.mesh)
+        rollers = problem.boundary.rollers
+        if rollers:  # each part takes the roller planes on its own outer boundary (Ω₁: cem.roller_dofs)
+            own = [part_rollers(part, rollers) for part in self.parts]  # (refuses a plane through γ)
+            lost = [plane for plane in rollers if plane not in own[0] + own[1]]
+            if lost:
+                raise InputError(f"no exterior facet lies in the roller plane(s) x_axis = value {lost}")
+            fields2 = fields2._replace(boundary=dataclasses.replace(problem.boundary, rollers=own[1]))
         self.omega1 = Omega1Multiscale(problem, self.parts, self.interface, self.alpha, cem=cem, cache_dir=cache_dir)
         alpha2 = fem.Function(self.interface.spaces[1], name="alpha")
         self.interface.to_part(self.alpha, 1, alpha2)
-        p2 = self.parts[1]
         self.omega2 = PrimalSubproblem(
             p2.mesh,
             p2.facet_tags,
-            problem.fields_on(p2.mesh),
+            fields2,
             delta=delta,
             alpha=alpha2,
             prefix="fc_primal_ms_omega2_",

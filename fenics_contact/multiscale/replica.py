@@ -64,7 +64,7 @@ class SerialReplica:
         geo_map = msh.geometry.index_map()
         gdofs = msh.geometry.dofmaps[0]
         if gdofs.shape[1] != tdim + 1:
-            raise InputError("the serial copy of a subdomain needs an affine (P1) triangle geometry")
+            raise InputError("the serial copy of a subdomain needs an affine (P1) triangle or tetrahedron geometry")
         node_gid = np.asarray(geo_map.local_to_global(np.arange(gdofs.max() + 1, dtype=np.int32)), dtype=np.int64)
         cells_gid = node_gid[gdofs[:n_owned]]
         all_cells = _allgather_rows(comm, cells_gid)
@@ -84,11 +84,14 @@ class SerialReplica:
         original = np.asarray(self.mesh.topology.original_cell_index, dtype=np.int64)
         for name, values in cell_data.items():
             self.cell_data[name] = _allgather_rows(comm, np.asarray(values)[:n_owned])[original]
-        # facet tags: (sorted pair of global node ids, value) of every tagged local facet
+        # facet tags: (sorted global node ids of its vertices, value) of every tagged local facet
         msh.topology.create_connectivity(tdim - 1, tdim)
         ftags = self._facet_keys(msh, node_gid, facet_tags.indices)
         vals = facet_tags.values.astype(np.int64)
-        keyed = _allgather_rows(comm, np.column_stack([ftags, vals]) if ftags.size else np.zeros((0, 3), np.int64))
+        width = tdim  # vertices of a facet: 2 (edges of triangles), 3 (faces of tetrahedra)
+        keyed = _allgather_rows(
+            comm, np.column_stack([ftags, vals]) if ftags.size else np.zeros((0, width + 1), np.int64)
+        )
         keyed = np.unique(keyed, axis=0)
         serial_gid = self.node_gids[np.asarray(self.mesh.geometry.input_global_indices, dtype=np.int64)]
         smsh = self.mesh
@@ -96,18 +99,17 @@ class SerialReplica:
         smsh.topology.create_connectivity(tdim - 1, 0)
         nf = smsh.topology.index_map(tdim - 1).size_local
         skeys = self._facet_keys(smsh, serial_gid, np.arange(nf, dtype=np.int32))
-        # match the gathered keys among the copy's facets (key = a·M + b, a < b global node ids)
-        M = int(self.node_gids.max()) + 1
-        skey = skeys[:, 0] * M + skeys[:, 1]
-        sorder = np.argsort(skey)
-        want = keyed[:, 0] * M + keyed[:, 1]
-        pos = np.minimum(np.searchsorted(skey[sorder], want), max(skey.size - 1, 0))
-        facets = sorder[pos] if want.size else np.zeros(0, dtype=np.int64)
-        if want.size and np.any(skey[facets] != want):
+        # match the gathered keys among the copy's facets (the rows of sorted vertex ids, compared whole)
+        rows, inverse = np.unique(np.vstack([skeys, keyed[:, :width]]), axis=0, return_inverse=True)
+        inverse = inverse.ravel()
+        facet_of_row = np.full(rows.shape[0], -1, dtype=np.int64)
+        facet_of_row[inverse[: skeys.shape[0]]] = np.arange(skeys.shape[0])
+        facets = facet_of_row[inverse[skeys.shape[0] :]]
+        if np.any(facets < 0):
             raise RuntimeError("serial copy: a tagged facet of the subdomain was not found in its copy")
         forder = np.argsort(facets, kind="stable")
         self.facet_tags = dmesh.meshtags(
-            smsh, tdim - 1, facets[forder].astype(np.int32), keyed[forder, 2].astype(np.int32)
+            smsh, tdim - 1, facets[forder].astype(np.int32), keyed[forder, width].astype(np.int32)
         )
         # P1 space of the same shape, and the block ↔ global node id maps on both sides
         shape = tuple(int(d) for d in V_sub.value_shape)
@@ -125,10 +127,10 @@ class SerialReplica:
 
     @staticmethod
     def _facet_keys(msh: dmesh.Mesh, node_gid: np.ndarray, facets: np.ndarray) -> np.ndarray:
-        """(min, max) global node ids of the two vertices of each facet."""
+        """The sorted global node ids of the vertices of each facet (two in the plane, three in 3D)."""
         tdim = msh.topology.dim
         if facets.size == 0:
-            return np.zeros((0, 2), dtype=np.int64)
+            return np.zeros((0, tdim), dtype=np.int64)
         nodes = dmesh.entities_to_geometry(msh, tdim - 1, np.asarray(facets, dtype=np.int32))
         g = node_gid[nodes]
         return np.sort(g, axis=1)

@@ -313,8 +313,9 @@ def read_mesh(
                 if problem is None and tdim == 3 and H is not None:
                     problem = (
                         InputError,
-                        f"{path} is a 3D mesh: the coarse grid H (multiscale methods) is planar "
-                        "only; read it with H=None",
+                        f"{path} is a 3D mesh: read_mesh builds the coarse grid H (multiscale methods) of "
+                        "planar meshes only; read it with H=None (a 3D coarse grid: meshes3d.box_mesh(..., H=...), "
+                        "or a ContactMesh whose coarse_cell partitions Omega1)",
                     )
         problem, auto_strip, tdim = comm.bcast((problem, auto_strip, tdim), root=0)
         # validate before the collective mesh construction (which aborts on inconsistent tags)

@@ -34,6 +34,7 @@ from fenics_contact.problem.geometry import (
     gmsh_session,
     mesh_size,
 )
+from fenics_contact.problem.partition import UNRESOLVED, cartesian_coarse_cells
 from fenics_contact.problem.tags import PHYSICAL_NAMES, Boundary, Subdomain, neumann_tag
 
 __all__ = ["FACES", "box_mesh", "unit_cube", "graded_planes", "hertz_quarter_block"]
@@ -167,6 +168,7 @@ def box_mesh(
     clamped: Sequence[str] = ("zmin",),
     neumann: Mapping[str, str] | None = None,
     strip: float | None = None,
+    H: float | None = None,
     comm: MPI.Comm = MPI.COMM_WORLD,
 ) -> ContactMesh:
     """The tagged tetrahedral mesh of the box over the grid planes ``x``, ``y``, ``z``.
@@ -174,7 +176,8 @@ def box_mesh(
     Γ_C: the facets of the face ``contact`` whose vertices x (3, k) satisfy ``contact_region`` (default:
     the whole face); Γ_D: the faces ``clamped``; ``neumann``: face -> traction group name (``Gamma_N*``);
     Ω₂: the cells within ``strip`` (default: a quarter of the box across the contact face, snapped to the
-    nearest grid plane) of the contact face. ``h`` of the result is ``mesh_size`` on Γ_C.
+    nearest grid plane) of the contact face. ``h`` of the result is ``mesh_size`` on Γ_C; ``H`` (optional) the
+    coarse grid of the multiscale methods: cubes of side H over the box (``partition.cartesian_coarse_cells``).
     """
     planes = [_planes(v, a) for v, a in zip((x, y, z), "xyz")]
     check_memory(
@@ -256,8 +259,11 @@ def box_mesh(
         msh, tdim, cells, np.where(in_strip, int(Subdomain.OMEGA2), int(Subdomain.OMEGA1)).astype(np.int32)
     )
     names = {neumann_tag(name): name for name in neumann.values()}
-    coarse = np.full(cells.size, -1, dtype=np.int32)
-    return ContactMesh(msh, cell_tags, facet_tags, mesh_size(msh, facet_tags), None, coarse, names or None)
+    coarse = np.full(cells.size, UNRESOLVED, dtype=np.int32)
+    if H is not None:
+        coarse = cartesian_coarse_cells(msh, H)[0].astype(np.int32)
+        H = float(H)
+    return ContactMesh(msh, cell_tags, facet_tags, mesh_size(msh, facet_tags), H, coarse, names or None)
 
 
 def unit_cube(
@@ -266,11 +272,15 @@ def unit_cube(
     clamped: Sequence[str] = ("xmin",),
     neumann: Mapping[str, str] | None = None,
     strip: float | None = None,
+    H: float | None = None,
     comm: MPI.Comm = MPI.COMM_WORLD,
 ) -> ContactMesh:
     """The tagged mesh of (0, 1)³ with h = 1/n: Γ_C the face x = 1, Γ_D the faces ``clamped``, traction groups
-    on the faces of ``neumann``, the other faces traction free; Ω₂ the layer x > 1 − ``strip`` (default ¼)."""
+    on the faces of ``neumann``, the other faces traction free; Ω₂ the layer x > 1 − ``strip`` (default ¼);
+    ``H`` the coarse grid of cubes of side H (multiscale methods; None: no coarse grid)."""
     if not isinstance(n, (int, np.integer)) or isinstance(n, bool) or n < 2:
         raise InputError(f"unit_cube needs an integer n >= 2 (h = 1/n), got {n!r}")
     planes = np.linspace(0.0, 1.0, int(n) + 1)
-    return box_mesh(planes, planes, planes, contact="xmax", clamped=clamped, neumann=neumann, strip=strip, comm=comm)
+    return box_mesh(
+        planes, planes, planes, contact="xmax", clamped=clamped, neumann=neumann, strip=strip, H=H, comm=comm
+    )

@@ -71,7 +71,10 @@ def channels_3d(
     )
 
 
-def channels_3d_mesh(n: int, *, strip: float | None = None, comm: MPI.Comm = MPI.COMM_WORLD) -> ContactMesh:
+def channels_3d_mesh(
+    n: int, *, strip: float | None = None, H: float | None = None, comm: MPI.Comm = MPI.COMM_WORLD
+) -> ContactMesh:
     """The unit cube of the 3D channel model, h = 1/n: Γ_C the face x = 1, Γ_D the faces ``CLAMPED_3D``, Ω₂ the
-    layer x > 1 − ``strip`` (default ¼, snapped to the grid)."""
-    return unit_cube(n, clamped=CLAMPED_3D, strip=strip, comm=comm)
+    layer x > 1 − ``strip`` (default ¼, snapped to the grid); ``H`` the coarse grid of cubes of side H
+    (``primal-ms``; None: no coarse grid)."""
+    return unit_cube(n, clamped=CLAMPED_3D, strip=strip, H=H, comm=comm)

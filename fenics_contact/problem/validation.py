@@ -621,8 +621,9 @@ def require_tag_counts(cm) -> None:
 
 
 #: the methods that solve 3D (tetrahedral) problems and take rollers (symmetry planes): the primal monolithic
-#: solve and Algorithm 1 (its strip Ω₂ and interface γ are built or read in 3D as in 2D)
-METHODS_3D = ("primal-monolithic", "primal")
+#: solve, Algorithm 1 (its strip Ω₂ and interface γ are built or read in 3D as in 2D) and Algorithm 3 (its
+#: coarse grid of cubes, ``ContactMesh.coarse_cell``)
+METHODS_3D = ("primal-monolithic", "primal", "primal-ms")
 
 
 def require_method_dimension(method: str, msh, boundary=None) -> None:
@@ -635,7 +636,8 @@ def require_method_dimension(method: str, msh, boundary=None) -> None:
         raise InputError(
             f"the method {method!r} solves plane problems (triangles) only; this mesh is "
             f"{msh.topology.dim}D: a 3D problem runs with the method {works} "
-            "(fem.primal.solve_primal_monolithic, hybrid.primal.solve_primal_hybrid)"
+            "(fem.primal.solve_primal_monolithic, hybrid.primal.solve_primal_hybrid, "
+            "multiscale.primal.solve_primal_ms_hybrid)"
         )
     if boundary is not None and getattr(boundary, "rollers", ()):
         raise InputError(f"the method {method!r} takes no rollers (symmetry planes); the methods {works} do")

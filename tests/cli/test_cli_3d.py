@@ -1,4 +1,5 @@
-"""The command line on the 3D channel model (``--model 4``): Algorithm 1 runs on tetrahedra and writes its outputs."""
+"""The command line on the 3D channel model (``--model 4``): Algorithms 1 and 3 run on tetrahedra and write their
+outputs."""
 
 import json
 
@@ -32,6 +33,27 @@ def test_run_the_3d_model_with_algorithm_1_writes_its_outputs(tmp_path):
 def test_the_other_methods_refuse_the_3d_model(tmp_path, capsys):
     code = main(["run", "--model", "4", "--method", "mixed", "--h", "4", "--H", "4", "--out", str(tmp_path / "m")])
     assert code != 0 and "'primal'" in capsys.readouterr().err
+    code = main(["run", "--model", "4", "--method", "mixed-ms", "--h", "8", "--out", str(tmp_path / "mm")])
+    err = capsys.readouterr().err
+    assert code == 2 and "plane problems" in err and "'primal-ms'" in err and not (tmp_path / "mm").exists()
+
+
+def test_run_the_3d_model_with_algorithm_3_writes_its_outputs(tmp_path):
+    """--method primal-ms on the cube: coarse cubes of side 1/4 (the default --H of primal-ms on --model 4), six
+    modes per cube (the rigid motions), m = 2; close to the monolithic solution and its outputs written."""
+    out = tmp_path / "cube-ms"
+    code = main(["run", "--model", "4", "--method", "primal-ms", "--h", "8", "--layers", "2", "--reference",
+                 "--no-plots", "--out", str(out)])  # fmt: skip
+    assert code == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["converged"] is True and summary["transmission_residual"] < 1e-6
+    assert summary["H"] == 0.25 and summary["layers"] == 2 and summary["nbasis"] == 6
+    assert summary["dofs"]["omega1_ms"] == 6 * 3 * 4 * 4 and summary["spectral_gap"] > 0
+    assert summary["e_energy"] < 1e-2 and summary["e_u"] < 1e-2  # (2.2e-3 and 2.9e-4 measured)
+    for name in ("fields.pvd", "contact.pvd", "summary.md"):
+        assert (out / name).stat().st_size > 0, name
+    fields = pyvista.read(out / "fields.pvd")[0]
+    assert fields.n_points == 9**3 and fields.point_data["u"].shape == (9**3, 3)
 
 
 def _gmsh_box(path, split: float = 0.75, h: float = 0.25) -> None:
@@ -91,6 +113,7 @@ def test_a_tetrahedral_mesh_file_runs_with_the_3d_model(tmp_path, capsys):
     assert main(["check-mesh", str(path), "--method", "primal"]) == 0
     said = capsys.readouterr().out
     assert "primal can run" in said and "mixed refused" in said and "tetrahedra" in said
+    assert "primal-ms refused" in said
     out = tmp_path / "run"
     args = ["run", "--mesh", str(path), "--method", "primal", "--reference", "--out", str(out)]
     assert main(args) == 2 and "--model 4" in capsys.readouterr().err

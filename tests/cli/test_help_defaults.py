@@ -8,6 +8,7 @@ import re
 import pytest
 
 from fenics_contact.cli import DEFAULT_H, RunOptions, build_parser
+from fenics_contact.cli.options import DEFAULT_COARSE, DEFAULT_COARSE_3D_MS
 from fenics_contact.hybrid.options import InterfaceNewtonOptions, IterationOptions
 from fenics_contact.methods import METHODS
 from fenics_contact.multiscale.cem import CEMOptions
@@ -60,12 +61,14 @@ def test_the_defaults_shown_are_those_of_the_catalogue_and_the_option_dataclasse
     assert float(_default(options, "--tol")) == iteration.tol == run["tol"]
     assert int(_default(options, "--max-iterations")) == iteration.max_iterations == run["max_iterations"]
     assert int(_default(options, "--front-window")) == InterfaceNewtonOptions().front_window
-    assert int(_default(options, "--H")) == run["H"]
+    assert int(_default(options, "--H")) == DEFAULT_COARSE and run["H"] is None  # (None: resolved by RunOptions)
+    assert f"{DEFAULT_COARSE_3D_MS} for primal-ms" in options["--H"]
     assert int(_default(options, "--h")) == DEFAULT_H
     assert float(_default(options, "--nu")) == run["nu"]
     assert _default(options, "--method") == run["method"]
     assert int(_default(options, "--layers")) == CEMOptions().layers == MixedCEMOptions().layers
-    assert int(_default(options, "--nbasis")) == CEMOptions().nbasis == MixedCEMOptions().nbasis
+    nbasis = dict(item.split(": ") for item in _default(options, "--nbasis").split("; "))
+    assert nbasis == {"primal-ms": CEMOptions().nbasis, "mixed-ms": str(MixedCEMOptions().nbasis)}
     assert float(_default(options, "--min-gap")) == MixedCEMOptions().min_gap
     assert int(_default(options, "--max-nbasis")) == MixedCEMOptions().max_nbasis
     alphas = dict(item.split(": ") for item in _default(options, "--alpha").split("; "))
@@ -80,10 +83,10 @@ def test_the_defaults_shown_are_the_ones_a_run_uses(tmp_path):
     for method in ("primal", "primal-ms", "mixed", "mixed-ms"):
         run = RunOptions(method=method, out=tmp_path / method)
         assert run.accel == "newton" and _default(options, "--accel").startswith("newton")
-        assert run.n == int(_default(options, "--h"))
+        assert run.n == int(_default(options, "--h")) and run.H == int(_default(options, "--H"))
         if method.endswith("-ms"):
             assert run.value("layers") == int(_default(options, "--layers"))
-            assert run.value("nbasis") == int(_default(options, "--nbasis"))
+            assert f"{method}: {run.value('nbasis')}" in _default(options, "--nbasis")
         if method == "mixed-ms":
             assert run.value("min_gap") == float(_default(options, "--min-gap"))
             assert run.value("max_nbasis") == int(_default(options, "--max-nbasis"))
@@ -103,4 +106,4 @@ def test_every_option_of_check_mesh_shows_its_default():
     assert set(options) == {"--help", "--case", "--set", "--method", "--H", "--coarse-groups"}
     for flag in set(options) - {"--help"}:
         _default(options, flag)
-    assert int(_default(options, "--H")) == {f.name: f.default for f in dataclasses.fields(RunOptions)}["H"]
+    assert int(_default(options, "--H")) == DEFAULT_COARSE

@@ -194,6 +194,7 @@ def test_hertz_force_converges_with_the_contact_cells():
 
 
 def test_methods_other_than_the_primal_ones_refuse_3d_and_rollers():
+    """The mixed methods refuse 3D and rollers; primal-ms refuses a cube without coarse cubes."""
     cm = unit_cube(2)
     problem = ContactProblem(
         youngs_modulus=1.0,
@@ -201,9 +202,11 @@ def test_methods_other_than_the_primal_ones_refuse_3d_and_rollers():
         mesh=cm,
         obstacle=Plane((1.0, 0.0), (-1.0, 0.0)).indented(0.01, (-1.0, 0.0)),
     )
-    for method in ("mixed", "mixed-monolithic", "primal-ms"):
+    for method in ("mixed", "mixed-monolithic"):
         with pytest.raises(InputError, match="primal-monolithic"):
             fc.solve(problem, method)
+    with pytest.raises(InputError, match="needs a coarse grid.*unit_cube"):  # (the cube has none: unit_cube(n, H=…))
+        fc.solve(problem, "primal-ms")
     assert fc.solve(problem, "primal-monolithic").profile.force > 0
     from fenics_contact.problem.geometry import unit_square
 

@@ -135,7 +135,7 @@ def test_3d_validation_finds_a_gamma_that_is_not_the_interface():
 
 def test_the_other_methods_refuse_3d_and_name_the_3d_methods():
     problem = channels_3d().on(channels_3d_mesh(2))
-    for method in ("mixed", "primal-ms", "mixed-ms", "mixed-monolithic"):
+    for method in ("mixed", "mixed-ms", "mixed-monolithic"):
         with pytest.raises(InputError, match="'primal'"):
             fc.solve(problem, method)
     assert get_model(4).description == channels_3d().description

@@ -106,6 +106,7 @@ from fenics_contact.multiscale.cem.options import (
     EIGENSOLVERS,
     FEW_LAYERS,
     NEARLY_INCOMPRESSIBLE,
+    RIGID_MOTIONS,
     CEMOptions,
     warn_if_few_layers,
 )
@@ -123,6 +124,7 @@ __all__ = [
     "EIGENSOLVERS",
     "FEW_LAYERS",
     "NEARLY_INCOMPRESSIBLE",
+    "RIGID_MOTIONS",
     "CEMOptions",
     "warn_if_few_layers",
     "FineOperators",

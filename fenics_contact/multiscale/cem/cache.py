@@ -43,7 +43,7 @@ def offline_key(ops: FineOperators, grid: CoarseGrid, options: CEMOptions, *, h:
         "H": repr(float(grid.H)),
         "options": {
             "layers": options.layers,
-            "nbasis": options.nbasis,
+            "nbasis": options.modes(ops.bs),
             "threshold": options.threshold,
             "eigensolver": options.eigensolver,
             "eig_tol": options.eig_tol,
@@ -52,6 +52,8 @@ def offline_key(ops: FineOperators, grid: CoarseGrid, options: CEMOptions, *, h:
             "source_correction": options.source_correction,
         },
     }
+    if ops.bs != 2:  # the dimension (the cell_nodes shape holds it too; 2D keys unchanged)
+        meta["dim"] = int(ops.bs)
     hasher.update(json.dumps(meta, sort_keys=True).encode())
     for name in sorted(ops.key_data):
         if name == "load" and not options.source_correction:

@@ -33,6 +33,7 @@ __all__ = [
     "kappa_tilde",
     "omega1_load",
     "require_serial",
+    "roller_dofs",
 ]
 
 
@@ -64,6 +65,7 @@ class FineOperators:
     """SciPy matrices of the Ω₁ P1 space (no boundary conditions applied; ``free`` marks non-Γ_D DOFs).
 
     K: a(u, v); R: α∫_γ u·v; A = K + R; M: (u, v); G: ∫_γ u·v (vertex quadrature); F: the load ℓ(v);
+    ``free`` is false on Γ_D and on the components held by roller planes (u_i = 0 on x_i = c);
     Kc/Mc/Sc/Gc: a, the mass, s and the γ-mass restricted to the cells of one colour (index = colour).
     """
 
@@ -78,7 +80,7 @@ class FineOperators:
     Sc: list
     Gc: list
     F: np.ndarray
-    free: np.ndarray  #: bool, scalar DOF not on Γ_D
+    free: np.ndarray  #: bool, scalar DOF not on Γ_D nor held by a roller plane
     gamma: np.ndarray  #: scalar DOFs on γ (sorted), the columns of N
     alpha: np.ndarray  #: nodal α at every scalar DOF (zero off γ)
     node_dofs: np.ndarray  #: (num nodes, bs) scalar DOFs of each node
@@ -102,6 +104,34 @@ class FineOperators:
     @property
     def bs(self) -> int:
         return self.node_dofs.shape[1]
+
+
+def roller_dofs(V: fem.FunctionSpace, facet_tags, rollers) -> np.ndarray:
+    """The scalar DOFs u_i held by the roller planes x_i = c of ``rollers`` ((i, c) pairs) on a serial mesh: the
+    component i at the vertices of the exterior facets in the plane (γ excepted; a plane with no facet of this
+    mesh holds none: it lies on another part of the body)."""
+    msh = V.mesh
+    require_serial(msh.comm)
+    if not rollers:
+        return np.zeros(0, dtype=np.int64)
+    tdim, gdim = msh.topology.dim, msh.geometry.dim
+    bs = V.dofmap.index_map_bs
+    x = msh.geometry.x[:, :gdim]
+    tol = 1e-10 * float(np.max(np.ptp(x, axis=0)))
+    gamma = facet_tags.find(Boundary.INTERFACE)
+    held = []
+    for axis, value in rollers:
+        if axis >= gdim:
+            raise InputError(f"a roller plane x_{axis} = {value:g} needs a {axis + 1}D mesh; this one is {gdim}D")
+
+        def in_plane(p: np.ndarray, a: int = axis, c: float = value) -> np.ndarray:
+            return np.abs(p[a] - c) <= tol
+
+        facets = dolfinx.mesh.locate_entities_boundary(msh, tdim - 1, in_plane)
+        facets = np.setdiff1d(facets, gamma)
+        blocks = fem.locate_dofs_topological(V, tdim - 1, facets)
+        held.append(bs * np.asarray(blocks, dtype=np.int64) + axis)
+    return np.unique(np.concatenate(held))
 
 
 def _over(form: ufl.Form, measure: ufl.Measure) -> ufl.Form:
@@ -174,7 +204,9 @@ def assemble_fine_operators(
     dir_blocks = fem.locate_dofs_topological(V, tdim - 1, facet_tags.find(Boundary.GAMMA_D))
     gam_blocks = fem.locate_dofs_topological(V, tdim - 1, facet_tags.find(Boundary.INTERFACE))
     free = np.ones(n, dtype=bool)
-    free[(bs * dir_blocks[:, None] + np.arange(bs)).ravel()] = False
+    dirichlet = (bs * dir_blocks[:, None] + np.arange(bs)).ravel()
+    free[dirichlet] = False
+    free[roller_dofs(V, facet_tags, fields.boundary.rollers)] = False
     gamma = np.sort((bs * gam_blocks[:, None] + np.arange(bs)).ravel())
     num_nodes = n // bs
     node_dofs = bs * np.arange(num_nodes)[:, None] + np.arange(bs)
@@ -202,7 +234,7 @@ def assemble_fine_operators(
             else (lambda x, c=np.asarray(displacement, dtype=np.float64): np.tile(c[:, None], (1, x.shape[1])))
         )
         lifting = np.zeros(n)
-        lifting[~free] = u_D.x.array[~free]
+        lifting[dirichlet] = u_D.x.array[dirichlet]
         if np.any(lifting):
             F_lifted = F - A @ lifting
             key_data["lifting"] = lifting

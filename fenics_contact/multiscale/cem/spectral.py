@@ -189,7 +189,7 @@ def build_auxiliary_space(
     def eigenproblem(k: int) -> tuple:
         D, A, S = local_matrices(ops, grid, k)
         # one pair more than kept: Λ_k, the first eigenvalue left out (reported as ``spectral_gap``)
-        l = options.nbasis  # an int (CEMOptions) or None
+        l = options.modes(ops.bs)  # an int or None (the rigid motions resolved by the dimension)
         lam, Phi = local_spectral_problem(
             A,
             S,

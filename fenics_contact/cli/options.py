@@ -24,6 +24,7 @@ from fenics_contact.methods import METHODS as CATALOGUE
 from fenics_contact.problem.composite3d import MODEL_COMPOSITE_3D
 from fenics_contact.problem.materials import check_poisson_ratio
 from fenics_contact.problem.models import MODELS_3D, get_model, model_1
+from fenics_contact.problem.models3d import MODEL_3D
 
 __all__ = [
     "DEFAULT_H",
@@ -258,6 +259,11 @@ class RunOptions:
             cube_ms = self.mesh is None and self.case is None and self.model == MODEL_3D and self.method.endswith("-ms")
             object.__setattr__(self, "H", DEFAULT_COARSE_3D_MS if cube_ms else DEFAULT_COARSE)
         _integer("H", self.H, 2)
+        if self.mesh is None and self.case is None and self.model == MODEL_COMPOSITE_3D and self.method.endswith("-ms"):
+            raise InputError(
+                f"--method {self.method} needs a coarse grid of Ω₁ and --model 5 has none (its gmsh mesh follows the "
+                "fibres, not a grid of cubes): use --method primal, or --model 4 for Algorithm 3 in 3D"
+            )
         if self.mesh is None and self.model != MODEL_COMPOSITE_3D and self.n % self.H:  # (a grid of cells)
             raise InputError(
                 f"--h {self.n} is not a multiple of --H {self.H}: the coarse grid must be a union of fine cells"

@@ -87,8 +87,7 @@ def _add_problem_options(run: argparse.ArgumentParser) -> None:
         help="built-in test model: 1 channels, 2 inclusions, 3 heterogeneous strip (loads in Ω₁), 4 the 3D "
         "channel model (the unit cube, its strip Ω₂ of width 1/H; --method primal, or primal-ms on cubes of side 1/H), "
         "5 the 3D fibre composite (a gmsh block with stiff fibres along y, γ at x = 1 − 1/H cutting some of them; "
-        "--method primal)"
-        + _default(_shown(_RUN_DEFAULTS["model"])),
+        "--method primal)" + _default(_shown(_RUN_DEFAULTS["model"])),
     )
     group.add_argument(
         "--case",

@@ -261,6 +261,12 @@ def _check_coarse_grid(cm: ContactMesh, options: RunOptions) -> None:
 
 def _check_case_coarse_grid(cm: ContactMesh, options: RunOptions, case: Case) -> None:
     """The multiscale methods need a coarse grid that the case's mesh resolves."""
+    if cm.mesh.topology.dim == 3:
+        raise InputError(
+            f"--method {options.method}: case {case.path.name} is 3D and a 3D case has no coarse grid of cubes "
+            "(its H is the strip width); Algorithm 3 in 3D runs on --model 4 or from Python on a mesh with cubes "
+            "(fc.unit_cube(n, H=...), fc.box_mesh(..., H=...)): use --method primal for the case"
+        )
     if cm.H is None:
         builtin = case.mesh.kind in ("hertz-block", "bulged-square")
         raise InputError(

@@ -539,6 +539,18 @@ CASES = [
         2,
         "has no coarse grid",
     ),
+    Case(
+        "case: Algorithm 3 on a 3D case (no coarse grid of cubes)",
+        lambda tmp: ["--case", str(CASES_DIR / "sphere_3d.toml"), "--method", "primal-ms"],
+        2,
+        "a 3D case has no coarse grid of cubes",
+    ),
+    Case(
+        "Algorithm 3 on the fibre composite (no coarse grid)",
+        lambda tmp: ["--model", "5", "--h", "8", "--method", "primal-ms"],
+        2,
+        "--model 5 has none",
+    ),
     Case("--set without --case", _args("--set", "mesh.h=8"), 2, "--set changes a key of a case file"),
     Case(
         "case: bulged square finer than the memory",

@@ -85,25 +85,63 @@ class CondensedInterface:
 
     def __init__(self, problem: InterfaceProblem, previous: "CondensedInterface | None" = None) -> None:
         """``previous``: the condensation of the same problem before its contact normals moved (an obstacle
-        step): its interface matrix K and the Γ_C chains are kept when the data response Yc is unchanged."""
+        step): its interface matrix K and the Γ_C chains are kept when the data response Yc is unchanged, and
+        so are its per-component pieces when Ω₂ gives its responses per displacement component
+        (``PrimalPart.component_responses``): the normals then enter by sums only, no solve."""
         om2 = problem.omega2
         self.problem = problem
-        self.Yc, self.Sc, self.Yq, self.Sq = om2.responses(contact=True, chunk=problem.options.chunk)
+        components = om2.component_responses() if hasattr(om2, "component_responses") else None
+        self.components = components
+        if components is None:
+            self.Yc, self.Sc, self.Yq, self.Sq = om2.responses(contact=True, chunk=problem.options.chunk)
+        else:
+            self.Yc = components[0]
         f = self.f = np.flatnonzero(problem.free)  # the data at the other values stay zero
         a, b, eye = problem.a[f], problem.b, np.eye(f.size)
-        same = previous is not None and np.array_equal(previous.f, f) and np.array_equal(previous.Yc, self.Yc)
+        same = (
+            previous is not None
+            and np.array_equal(previous.f, f)
+            and (previous.Yc is self.Yc or np.array_equal(previous.Yc, self.Yc))
+        )
         if same:  # K = I − P₁P₂ depends on Ω₁ and Yc only (not on the normals)
             self.P1, self.lu = previous.P1, previous.lu
         else:
             self.P1 = a[:, None] * problem.omega1.T[np.ix_(f, f)] + b * eye
             P2 = a[:, None] * self.Yc[np.ix_(f, f)] + b * eye
             self.lu = sla.lu_factor(eye - self.P1 @ P2)
-        self.Gq = np.zeros((problem.a.size, self.Sq.shape[0]))  # ∂g₂₁/∂λ = −Gq
-        self.Gq[f] = sla.lu_solve(self.lu, self.P1 @ (a[:, None] * self.Yq[f]))
-        self.M = self.Sq + self.Sc @ self.Gq
+        if components is None:
+            self.Gq = self._data_response(self.Yq)  # ∂g₂₁/∂λ = −Gq
+            self.M = self.Sq + self.Sc @ self.Gq
+        else:
+            self._combine(components, previous if same and previous.components is components else None)
         self._chains = previous._chains if same else None  # the contact points stay
         if problem.options.front_window:
             self.chains  # noqa: B018 -- formed offline (collective: all ranks' points), not in the timed solve
+
+    def _data_response(self, Yq: np.ndarray) -> np.ndarray:
+        """K⁻¹ P₁ (a ⊙ Yq) on the free data values (zero elsewhere)."""
+        p, f = self.problem, self.f
+        G = np.zeros((p.a.size, Yq.shape[1]))
+        G[f] = sla.lu_solve(self.lu, self.P1 @ (p.a[f][:, None] * Yq[f]))
+        return G
+
+    def _combine(self, components: tuple, previous: "CondensedInterface | None") -> None:
+        """Sc, Yq, Sq, Gq and M for the current normals ν from the per-component pieces: with Yq = Σ_k Yq_k diag(ν_k),
+        Gq = Σ_k G_k diag(ν_k) (G_k = K⁻¹P₁(a ⊙ Yq_k)) and M = Σ_kl diag(ν_k) (Sq_kl + Sc_k G_l) diag(ν_l); G_k and
+        M_kl are formed once per J₀ (kept from ``previous``)."""
+        _, Sc, Yq, Sq = components
+        if previous is not None:
+            self._G, self._M = previous._G, previous._M
+        else:
+            self._G = [self._data_response(y) for y in Yq]
+            self._M = [[Sq[k][l] + Sc[k] @ self._G[l] for l in range(len(Yq))] for k in range(len(Yq))]
+        nu = self.problem.omega2.contact_normals()
+        bs = nu.shape[1]
+        self.Sc = sum(nu[:, k, None] * Sc[k] for k in range(bs))
+        self.Yq = sum(Yq[k] * nu[None, :, k] for k in range(bs))
+        self.Gq = sum(self._G[k] * nu[None, :, k] for k in range(bs))
+        self.Sq = sum(nu[:, k, None] * Sq[k][l] * nu[None, :, l] for k in range(bs) for l in range(bs))
+        self.M = sum(nu[:, k, None] * self._M[k][l] * nu[None, :, l] for k in range(bs) for l in range(bs))
 
     def load_terms(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Online: (s_L, g₂₁ at λ = 0, y₂₀) from one Ω₂ back-solve and the Ω₁ load response."""

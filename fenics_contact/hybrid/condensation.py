@@ -21,6 +21,12 @@ with M (n_c × n_c, the contact compliance of the glued problem) and the load te
 back-solved for the n_γ data and n_c contact columns (Yc, Sc, Yq, Sq) and the interface matrix
 K = I − P₁P₂ (P₁ = a⊙T₁ + b, P₂ = a⊙Yc + b) factorized; online: one J₀ back-solve and one Ω₁ load solve
 give s_L.  With Algorithm 1 the condensation is exact.
+
+The contact rows are Q = Σ_k diag(ν_k) E_kᵀ (ν the normals, E_k the unit vectors of displacement component
+k at the Γ_C nodes).  Where Ω₂ gives its responses per component (``PrimalPart.component_responses``), the
+condensation is formed per component once (G_k = K⁻¹P₁(a ⊙ N J₀⁻¹E_k), M_kl = E_kᵀJ₀⁻¹E_l + E_kᵀJ₀⁻¹C G_l)
+and a load step whose obstacle moved the normals recombines M = Σ_kl diag(ν_k) M_kl diag(ν_l) by sums: the
+step then costs s_L and the contact Newton.
 """
 
 from dataclasses import dataclass

@@ -38,8 +38,9 @@ __all__ = [
 
 
 #: ``MixedPart.responses`` takes the block of J⁻¹ from MUMPS' factors when it spans at most this fraction of the
-#: unknowns, else it back-solves: model 3 with the cylinder at h = 1/128 (load_path.py's case), Ω₁'s T₁ on 0.5 % of
-#: its unknowns came 6.9× faster than by the back-solves, Ω₂'s J₀ responses on 14.5 % of the strip's 2.9× slower
+#: unknowns, else it back-solves: model 3 with the cylinder at h = 1/128 (benchmarks/mixed_interface_response.py),
+#: Ω₁'s T₁ on 0.5 % of its unknowns came 6.2× faster than by the back-solves, Ω₂'s J₀ responses on 14.5 % of the
+#: strip's 1.9× slower
 ENTRIES_FRACTION = 0.05
 
 

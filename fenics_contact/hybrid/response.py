@@ -123,7 +123,8 @@ class AffinePart:
         b = self.body_load()
         kept = getattr(self, "_kept_load", None)
         key = (id(self.solver), getattr(self.solver, "factorizations", None))
-        if kept is None or kept[0] != key or not np.array_equal(kept[1], b):
+        changed = kept is None or kept[0] != key or not np.array_equal(kept[1], b)
+        if self.comm.allreduce(changed, op=MPI.LOR):  # (collective: the solve is)
             kept = self._kept_load = (key, b, self.solve(b))
         x0 = kept[2][:, None]
         y0 = self.trace_rows(x0)[:, 0] + self.trace_offset

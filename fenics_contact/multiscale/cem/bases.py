@@ -154,13 +154,10 @@ class MultiscaleSpace:
         return total + (self.Nf.nbytes if self.Nf is not None else 0)
 
 
-#: MUMPS controls of the patch LDLᵀ: the AMF ordering (ICNTL(7) = 2), no preliminary matching or scaling
-#: (ICNTL(6) = ICNTL(8) = 0).  Measured on a 7×7-cell patch at h = 1/256 (24.6k DOFs): LDLᵀ with QAMD 0.13 s,
-#: LDLᵀ with AMD 0.21 s, LU with AMD 0.39 s, SuperLU 1.8 s; over every third patch of model 3 (H = 1/16,
-#: m = 4, CPU time in one process) AMF without matching and scaling took 0.89× QAMD's time at h = 1/256 and
-#: 0.87× at h = 1/128, the bases the same to 1e-14 (both cope with the μ rows, one per aux function, dense
-#: over its coarse cell).
-PATCH_ICNTL = {7: 2, 6: 0, 8: 0}
+#: MUMPS controls of the patch LDLᵀ: the QAMD ordering (ICNTL(7) = 6).  Measured on a 7×7-cell patch at
+#: h = 1/256 (24.6k DOFs): LDLᵀ with QAMD 0.13 s, LDLᵀ with AMD 0.21 s, LU with AMD 0.39 s, SuperLU 1.8 s;
+#: QAMD copes with the μ rows (one per aux function, dense over its coarse cell).
+PATCH_ICNTL = {7: 6}
 
 
 def global_saddle_matrix(ops: FineOperators, aux: AuxiliarySpace) -> PETSc.Mat:

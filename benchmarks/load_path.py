@@ -12,8 +12,11 @@ second time on the offline data the first run stored (``cache_dir``): the set-up
 Ω₁ (another obstacle, other depths).
 
     OMP_NUM_THREADS=1 .venv/bin/python benchmarks/load_path.py --h 128 --H 16 --steps 20 --cached \\
-        --methods primal-monolithic primal primal-ms mixed-monolithic mixed mixed-ms \\
-        --out benchmarks/results/load_path.md
+        --methods primal-monolithic primal primal-ms --out benchmarks/results/load_path.md
+    OMP_NUM_THREADS=1 .venv/bin/python benchmarks/load_path.py --h 128 --H 16 --steps 20 --cached \\
+        --methods mixed-monolithic mixed mixed-ms --out benchmarks/results/load_path.md --append
+    OMP_NUM_THREADS=1 .venv/bin/python benchmarks/load_path.py --h 128 --H 16 --steps 100 \\
+        --methods primal-monolithic primal-ms --out benchmarks/results/load_path.md --append
     OMP_NUM_THREADS=1 .venv/bin/python benchmarks/load_path.py --h 256 --H 16 --steps 20 --cached \\
         --methods primal-monolithic primal primal-ms --out benchmarks/results/load_path_256.md
 

@@ -215,12 +215,10 @@ class DirectSolver(_Factorization):
             raise ConvergenceError(f"{self.prefix}: linear solve failed, KSP reason {reason}")
 
     def has_inverse_entries(self) -> bool:
-        """Whether ``inverse_block`` works here: a sequential MUMPS factorization of the operator itself (not of an
-        equilibrated one; ``fem.inverse_entries``)."""
+        """Whether ``inverse_block`` works here: a sequential MUMPS factorization (``fem.inverse_entries``)."""
         pc = self.ksp.getPC()
         return (
-            self._d is None
-            and self.ksp.getComm().getSize() == 1
+            self.ksp.getComm().getSize() == 1
             and inverse_entries.available()
             and self.factorizations > 0
             and pc.getType() in ("lu", "cholesky")
@@ -229,8 +227,13 @@ class DirectSolver(_Factorization):
 
     def inverse_block(self, rows: np.ndarray) -> np.ndarray:
         """(A⁻¹)[rows][:, rows] (dense, in the order of ``rows``) from the factors held: MUMPS' entries of the
-        inverse, the values of back-solves without them (``fem.inverse_entries``; ``has_inverse_entries``)."""
-        return inverse_entries.inverse_block(self.ksp.getPC().getFactorMatrix(), rows, what=self.prefix)
+        inverse, the values of back-solves without them (``fem.inverse_entries``; ``has_inverse_entries``).  With
+        ``scaling`` the factors are those of D A D and A⁻¹ = D (D A D)⁻¹ D (exact for powers of two)."""
+        block = inverse_entries.inverse_block(self.ksp.getPC().getFactorMatrix(), rows, what=self.prefix)
+        if self.scaling is None:
+            return block
+        d = self.scaling[np.asarray(rows, dtype=np.int64)]
+        return d[:, None] * block * d[None, :]
 
     def mat_solve(self, B: PETSc.Mat, X: PETSc.Mat) -> None:
         """X = A⁻¹ B for a dense block B (one multi-right-hand-side solve; with ``scaling`` B is overwritten)."""

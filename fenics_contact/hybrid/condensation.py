@@ -21,6 +21,12 @@ with M (n_c × n_c, the contact compliance of the glued problem) and the load te
 back-solved for the n_γ data and n_c contact columns (Yc, Sc, Yq, Sq) and the interface matrix
 K = I − P₁P₂ (P₁ = a⊙T₁ + b, P₂ = a⊙Yc + b) factorized; online: one J₀ back-solve and one Ω₁ load solve
 give s_L.  With Algorithm 1 the condensation is exact.
+
+The contact rows are Q = Σ_k diag(ν_k) E_kᵀ (ν the normals, E_k the unit vectors of displacement component
+k at the Γ_C nodes).  Where Ω₂ gives its responses per component (``PrimalPart.component_responses``), the
+condensation is formed per component once (G_k = K⁻¹P₁(a ⊙ N J₀⁻¹E_k), M_kl = E_kᵀJ₀⁻¹E_l + E_kᵀJ₀⁻¹C G_l)
+and a load step whose obstacle moved the normals recombines M = Σ_kl diag(ν_k) M_kl diag(ν_l) by sums: the
+step then costs s_L and the contact Newton.
 """
 
 from dataclasses import dataclass
@@ -85,25 +91,101 @@ class CondensedInterface:
 
     def __init__(self, problem: InterfaceProblem, previous: "CondensedInterface | None" = None) -> None:
         """``previous``: the condensation of the same problem before its contact normals moved (an obstacle
-        step): its interface matrix K and the Γ_C chains are kept when the data response Yc is unchanged."""
+        step): its interface matrix K and the Γ_C chains are kept when the data response Yc is unchanged, and
+        so are its per-component pieces when Ω₂ gives its responses per displacement component
+        (``PrimalPart.component_responses``): the normals then enter by sums only, no solve."""
         om2 = problem.omega2
         self.problem = problem
-        self.Yc, self.Sc, self.Yq, self.Sq = om2.responses(contact=True, chunk=problem.options.chunk)
+        components = om2.component_responses() if hasattr(om2, "component_responses") else None
+        self.components = components
+        self._nu = None  # the normals the per-component pieces are combined with
+        if components is None:
+            self.Yc, self.Sc, self._Yq, self._Sq = om2.responses(contact=True, chunk=problem.options.chunk)
+        else:
+            self.Yc = components[0]
         f = self.f = np.flatnonzero(problem.free)  # the data at the other values stay zero
         a, b, eye = problem.a[f], problem.b, np.eye(f.size)
-        same = previous is not None and np.array_equal(previous.f, f) and np.array_equal(previous.Yc, self.Yc)
+        same = (
+            previous is not None
+            and np.array_equal(previous.f, f)
+            and (previous.Yc is self.Yc or np.array_equal(previous.Yc, self.Yc))
+        )
         if same:  # K = I − P₁P₂ depends on Ω₁ and Yc only (not on the normals)
             self.P1, self.lu = previous.P1, previous.lu
         else:
             self.P1 = a[:, None] * problem.omega1.T[np.ix_(f, f)] + b * eye
             P2 = a[:, None] * self.Yc[np.ix_(f, f)] + b * eye
             self.lu = sla.lu_factor(eye - self.P1 @ P2)
-        self.Gq = np.zeros((problem.a.size, self.Sq.shape[0]))  # ∂g₂₁/∂λ = −Gq
-        self.Gq[f] = sla.lu_solve(self.lu, self.P1 @ (a[:, None] * self.Yq[f]))
-        self.M = self.Sq + self.Sc @ self.Gq
+        if components is None:
+            self._Gq = self._data_response(self.Yq)  # ∂g₂₁/∂λ = −Gq
+            self.M = self.Sq + self.Sc @ self.Gq
+        else:
+            self._combine(components, previous if same and previous.components is components else None)
         self._chains = previous._chains if same else None  # the contact points stay
         if problem.options.front_window:
             self.chains  # noqa: B018 -- formed offline (collective: all ranks' points), not in the timed solve
+
+    def _data_response(self, Yq: np.ndarray) -> np.ndarray:
+        """K⁻¹ P₁ (a ⊙ Yq) on the free data values (zero elsewhere)."""
+        p, f = self.problem, self.f
+        G = np.zeros((p.a.size, Yq.shape[1]))
+        G[f] = sla.lu_solve(self.lu, self.P1 @ (p.a[f][:, None] * Yq[f]))
+        return G
+
+    def _combine(self, components: tuple, previous: "CondensedInterface | None") -> None:
+        """Sc and M for the current normals ν from the per-component pieces: with Yq = Σ_k Yq_k diag(ν_k),
+        Gq = Σ_k G_k diag(ν_k) (G_k = K⁻¹P₁(a ⊙ Yq_k)) and M = Σ_kl diag(ν_k) (Sq_kl + Sc_k G_l) diag(ν_l); G_k and
+        M_kl are formed once per J₀ (kept from ``previous``); Yq, Sq and Gq only when asked (``times``: their
+        products with λ from the pieces)."""
+        _, Sc, Yq, Sq = components
+        if previous is not None:
+            self._G, self._M = previous._G, previous._M
+        else:
+            self._G = [self._data_response(y) for y in Yq]
+            self._M = [[Sq[k][l] + Sc[k] @ self._G[l] for l in range(len(Yq))] for k in range(len(Yq))]
+        nu = self._nu = self.problem.omega2.contact_normals()
+        bs = nu.shape[1]
+        self._Yq = self._Sq = self._Gq = None
+        self.Sc = sum(nu[:, k, None] * Sc[k] for k in range(bs))
+        self.M = sum(nu[:, k, None] * self._M[k][l] * nu[None, :, l] for k in range(bs) for l in range(bs))
+
+    def _by_normals(self, pieces: list) -> np.ndarray:
+        """Σ_k pieces[k] diag(ν_k)."""
+        return sum(pieces[k] * self._nu[None, :, k] for k in range(self._nu.shape[1]))
+
+    @property
+    def Yq(self) -> np.ndarray:
+        """N J₀⁻¹Qᵀ: the traces on γ of the contact columns."""
+        if self._Yq is None:
+            self._Yq = self._by_normals(self.components[2])
+        return self._Yq
+
+    @property
+    def Gq(self) -> np.ndarray:
+        """K⁻¹P₁(a ⊙ Yq): ∂g₂₁/∂λ = −Gq."""
+        if self._Gq is None:
+            self._Gq = self._by_normals(self._G)
+        return self._Gq
+
+    @property
+    def Sq(self) -> np.ndarray:
+        """Q J₀⁻¹Qᵀ: the contact values of the contact columns."""
+        if self._Sq is None:
+            nu = self._nu
+            self._Sq = sum(
+                nu[:, k, None] * self.components[3][k][l] * nu[None, :, l]
+                for k in range(nu.shape[1])
+                for l in range(nu.shape[1])
+            )
+        return self._Sq
+
+    def times(self, name: str, lam: np.ndarray) -> np.ndarray:
+        """``name`` ("Yq" or "Gq") times λ: by the per-component pieces, Σ_k X_k (ν_k ⊙ λ), when they are held and
+        the product was not formed."""
+        if self._nu is None or getattr(self, f"_{name}") is not None:
+            return getattr(self, name) @ lam
+        pieces = self.components[2] if name == "Yq" else self._G
+        return sum(pieces[k] @ (self._nu[:, k] * lam) for k in range(self._nu.shape[1]))
 
     def load_terms(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Online: (s_L, g₂₁ at λ = 0, y₂₀) from one Ω₂ back-solve and the Ω₁ load response."""
@@ -165,7 +247,7 @@ class CondensedInterface:
                     "smaller α or β (Algorithm 3's default alpha='Emin*h^-1/2'), or more oversampling layers"
                 ) from err
             raise
-        g21 = g21_0 - self.Gq @ lam
-        y2 = y20 + self.Yc @ g21 - self.Yq @ lam
+        g21 = g21_0 - self.times("Gq", lam)
+        y2 = y20 + self.Yc @ g21 - self.times("Yq", lam)
         g12 = np.where(p.free, p.a * y2 + p.b * g21, 0.0)
         return g12, g21, lam, hist

@@ -44,6 +44,7 @@ class ComponentPart(PrimalPart):
         self.n_c = self.comm.allreduce(self.c_nodes.size, op=MPI.SUM)
         self.D = np.zeros(self.n_c)
         self.gap = np.zeros(self.n_c)
+        self.by_components = False  # its contact rows are the components already (and never move)
 
     def refresh(self) -> bool:
         return False  # (the rows are the coordinate directions: no obstacle motion changes them)
@@ -93,8 +94,8 @@ class FrictionalCondensation(CondensedInterface):
         p = self.problem
         U_L, g21_0, y20 = self.load_terms()
         lam, hist = self.contact_solve(U_L, name, options.max_steps)
-        g21 = g21_0 - self.Gq @ lam
-        y2 = y20 + self.Yc @ g21 - self.Yq @ lam
+        g21 = g21_0 - self.times("Gq", lam)
+        y2 = y20 + self.Yc @ g21 - self.times("Yq", lam)
         g12 = np.where(p.free, p.a * y2 + p.b * g21, 0.0)
         return g12, g21, lam, hist
 

@@ -154,3 +154,22 @@ def test_clipped_quadrature_integrates_p1_traces_exactly_in_3d(sizes):
         assert np.sum(Q.weights * (Q.B @ u)) == pytest.approx(exact, abs=1e-13)
         B = Q.B.toarray().reshape(Q.B.shape[0], ns + nm, 3)
         assert np.allclose(B[:, :ns].sum(axis=1), Q.nu) and np.allclose(B[:, ns:].sum(axis=1), -Q.nu)
+
+
+def test_a_hinted_facet_gives_the_closest_point_on_a_convex_master():
+    """Points above a convex roof of four triangles, each with a random facet as hint: where the orthogonal
+    projection lies in the hinted facet it is the closest point (its plane supports the roof), elsewhere the
+    search runs: the distances and gaps are those of the search without hints."""
+    rng = np.random.default_rng(2)
+    x = np.array([[0, 0, 0], [1, 0, 0.3], [2, 0, 0], [0, 1, 0], [1, 1, 0.3], [2, 1, 0]], dtype=float)
+    tris = np.array([[0, 1, 4], [0, 4, 3], [1, 2, 5], [1, 5, 4]])
+    surf = _surface(x[tris], tris, np.array([0.0, 0.0, 1.0]))
+    points = np.column_stack([rng.uniform(-0.3, 2.3, 200), rng.uniform(-0.3, 1.3, 200), rng.uniform(0.35, 0.8, 200)])
+    plain = project(points, surf)
+    hinted = project(points, surf, hint=rng.integers(-1, 4, 200))
+    d_plain = np.linalg.norm(points - np.einsum("nk,nkd->nd", plain.bary, surf.coords[plain.facet]), axis=1)
+    d_hint = np.linalg.norm(points - np.einsum("nk,nkd->nd", hinted.bary, surf.coords[hinted.facet]), axis=1)
+    assert np.allclose(d_hint, d_plain, rtol=0.0, atol=1e-12)
+    inside = plain.found & hinted.found
+    assert np.allclose(hinted.gap[inside], plain.gap[inside], rtol=0.0, atol=1e-12)
+    assert np.array_equal(hinted.found, plain.found)

@@ -100,11 +100,11 @@ class SupportSpec:
     displacement: Uniform | PythonField | None = None
     components: tuple[int, ...] | None = None
 
-    def echo(self) -> dict:
+    def echo(self, dim: int = 2) -> dict:
         return {
             "facets": self.facets,
-            "displacement": self.displacement.echo() if self.displacement else [0.0, 0.0],
-            "components": list(self.components) if self.components is not None else [0, 1],
+            "displacement": self.displacement.echo() if self.displacement else [0.0] * dim,
+            "components": list(self.components) if self.components is not None else list(range(dim)),
         }
 
 
@@ -120,13 +120,13 @@ class BodySpec:
     supports: tuple[SupportSpec, ...]
     tractions: tuple[tuple[str, FieldSpec], ...] = ()
 
-    def echo(self) -> dict:
+    def echo(self, dim: int = 2) -> dict:
         return {
             "cells": list(self.cells),
             "E": self.E.echo(),
             "nu": self.nu.echo(),
-            "body-force": self.body_force.echo() if self.body_force else [0.0, 0.0],
-            "supports": [s.echo() for s in self.supports],
+            "body-force": self.body_force.echo() if self.body_force else [0.0] * dim,
+            "supports": [s.echo(dim) for s in self.supports],
             "tractions": {name: spec.echo() for name, spec in self.tractions},
         }
 
@@ -240,6 +240,11 @@ class PairCase:
             msh, cell_tags, tbm.facet_tags, tuple(laws), pair, tuple(supports), tractions, name=self.path.stem
         )
 
+    @property
+    def dimension(self) -> int:
+        """The number of components of the case's vectors (2 when it gives none)."""
+        return next((n for _, n in self.vectors()), 2)
+
     def vectors(self) -> list[tuple[str, int]]:
         """(key, number of components) of every vector the case gives, and (key, axis + 1) of every support
         component listed."""
@@ -316,7 +321,7 @@ class PairCase:
             "file": str(self.path),
             "description": self.description,
             "mesh": {"file": str(self.mesh_file)},
-            "bodies": {b.name: b.echo() for b in self.bodies},
+            "bodies": {b.name: b.echo(self.dimension) for b in self.bodies},
             "pair": self.pair.echo(),
             "load": self.load.echo() if self.load else None,
             "friction": echo_friction(self.friction),

@@ -144,3 +144,9 @@ def test_check_mesh_reports_the_volumes_and_the_faces(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "dimension 3" in out and "tetrahedra" in out
     assert "the slave contact surface" in out and "lower_right      surface" in out
+
+
+def test_the_summary_echoes_three_components(run):
+    _, summary = run
+    lower = summary["case"]["bodies"]["lower"]
+    assert lower["body-force"] == [0.0, 0.0, 0.0] and lower["supports"][0]["displacement"] == [0.0, 0.0, 0.0]

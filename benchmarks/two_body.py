@@ -1,6 +1,6 @@
 """Two deformable bodies in contact: the contact patch test (segment-to-segment against node-to-segment, 2D and
-3D), two-body Hertz (an elastic cylinder on a block) under refinement, and Algorithm 1 against the monolithic
-solve.
+3D), the cost of the 3D clipped quadrature, two-body Hertz (an elastic cylinder on a block) under refinement, and
+Algorithm 1 against the monolithic solve.
 
     python benchmarks/two_body.py --refinements 0.5 1 2 --sizes 32 64 --out benchmarks/results/two_body.md
 """
@@ -25,7 +25,7 @@ H1, H2, D = 0.5, 0.4, 0.01
 
 def patch(n_lower: int, n_upper: int, slave: str, rule: str, *, dim: int = 2, degree: int = 3) -> tuple[float, float]:
     """The largest relative error of the nodal pressure on either surface, and the force imbalance."""
-    materials = ((1.0, 0.3), (5.0, 0.2)) if dim == 2 else ((1.0, 0.0), (5.0, 0.0))
+    materials = ((1.0, 0.3), (5.0, 0.2))
     m = fc.two_blocks(n_lower, n_upper, heights=(H1, H2), dim=dim)
     up = dim - 1
     push = np.zeros(dim)
@@ -47,13 +47,50 @@ def patch(n_lower: int, n_upper: int, slave: str, rule: str, *, dim: int = 2, de
         + (sides if dim == 3 else ()),
     )
     result = fc.solve(problem, "primal-monolithic")
-    if dim == 2:
-        soft = [E / (1 - nu**2) for E, nu in materials]
-    else:
-        soft = [E * (1 - nu) / ((1 + nu) * (1 - 2 * nu)) for E, nu in materials]
+    soft = [E / (1 - nu**2) for E, nu in materials]  # plane strain; in 3D rollers on y = 0, W and x free
     p = D / (H1 / soft[0] + H2 / soft[1] + result.delta)
     error = max(np.max(np.abs(prof.sigma_c + p)) / p for prof in (result.slave, result.master))
     return float(error), result.force_balance()
+
+
+def quadrature_cost(n: int) -> str:
+    """The 3D segment-to-segment quadrature on two boxes of n and n + 3 cells across (the upper slave): facets,
+    points, the time of ``contact_quadrature`` and of the whole monolithic solve."""
+    from dolfinx import fem
+
+    from fenics_contact.fem.mortar import contact_quadrature, surface
+
+    m = fc.two_blocks(n, n + 3, heights=(H1, H2), dim=3)
+    V = fem.functionspace(m.mesh, ("Lagrange", 1, (3,)))
+    slave = surface(V, m.facet_tags, T.UPPER_BOTTOM)
+    master = surface(V, m.facet_tags, T.LOWER_TOP)
+    num = V.dofmap.index_map.size_local * 3
+    start = time.perf_counter()
+    Q = contact_quadrature(slave, master, num, 3, 3, nodal=False)
+    gauss = time.perf_counter() - start
+    start = time.perf_counter()
+    contact_quadrature(slave, master, num, 3, 3)
+    nodal = time.perf_counter() - start
+    problem = fc.TwoBodyProblem(
+        m.mesh,
+        m.cell_tags,
+        m.facet_tags,
+        bodies=(fc.Body(T.LOWER, 1.0, 0.3), fc.Body(T.UPPER, 5.0, 0.2)),
+        pair=fc.ContactPair(T.UPPER_BOTTOM, T.LOWER_TOP),
+        supports=(
+            fc.Support(T.LOWER_BOTTOM, components=(2,)),
+            fc.Support(T.LOWER_LEFT, components=(0,)),
+            fc.Support(T.UPPER_LEFT, components=(0,)),
+            fc.Support(T.LOWER_SIDES, components=(1,)),
+            fc.Support(T.UPPER_SIDES, components=(1,)),
+            fc.Support(T.UPPER_TOP, (0.0, 0.0, -D), components=(2,)),
+        ),
+    )
+    result = fc.solve(problem, "primal-monolithic")
+    return (
+        f"| {n}/{n + 3} | {slave.coords.shape[0]} | {master.coords.shape[0]} | {Q.B.shape[0]} | "
+        f"{Q.B.shape[0] / slave.coords.shape[0]:.0f} | {gauss:.2f} | {nodal:.2f} | {result.time_s:.2f} |"
+    )
 
 
 def hertz(refinement: float, slave: str, *, radius: float = 5.0, a: float = 0.05, depth: float = 1.1e-3) -> list[str]:
@@ -89,6 +126,56 @@ def hertz(refinement: float, slave: str, *, radius: float = 5.0, a: float = 0.05
     return rows
 
 
+def _interpolant_error(x: np.ndarray, a: float) -> float:
+    """Relative L² error of the P1 interpolant, on the nodes x, of the Hertz profile √(1 − x²/a²)."""
+    xs = np.sort(x)
+    t = np.linspace(-1.5 * a, 1.5 * a, 200001)
+    exact = np.sqrt(np.maximum(1.0 - (t / a) ** 2, 0.0))
+    exact_nodes = np.sqrt(np.maximum(1.0 - (xs / a) ** 2, 0.0))
+    return float(np.sqrt(np.trapezoid((np.interp(t, xs, exact_nodes) - exact) ** 2, t) / np.trapezoid(exact**2, t)))
+
+
+def hertz_edge(
+    refinement: float, depth: float, slave: str, *, delta_scale: float = 1.0, size: float = 1.0
+) -> list[str]:
+    """Two-body Hertz as in ``hertz`` at one depth, the block ``size`` times wider and deeper, δ times
+    ``delta_scale``: per surface the L² error of the nodal pressure, its part from the nodes farther than two
+    contact cells from the edges x = ±a, and the L² error of the exact profile's own P1 interpolant on the same
+    nodes (what a nodal pressure can reach at that spacing)."""
+    radius, a = 5.0, 0.05
+    surfaces = (T.UPPER_BOTTOM, T.LOWER_TOP) if slave == "cylinder" else (T.LOWER_TOP, T.UPPER_BOTTOM)
+    m = fc.cylinder_on_block(radius, a, refinement=refinement, width=80.0 * size, depth=40.0 * size)
+    problem = fc.TwoBodyProblem(
+        m.mesh,
+        m.cell_tags,
+        m.facet_tags,
+        bodies=(fc.Body(T.LOWER, 1.0, 0.3), fc.Body(T.UPPER, 2.0, 0.25)),
+        pair=fc.ContactPair(*surfaces),
+        supports=(fc.Support(T.LOWER_BOTTOM), fc.Support(T.UPPER_TOP, (0.0, -depth))),
+    )
+    delta = None
+    if delta_scale != 1.0:
+        delta = delta_scale * fc.solve(problem, "primal-monolithic").delta
+    result = fc.solve(problem, "primal-monolithic", delta=delta)
+    r_star, e_star = hertz_pair((radius, np.inf), (2.0, 1.0), (0.25, 0.3))
+    h = a / (20 * refinement)
+    rows = []
+    sides = {"cylinder": result.slave if slave == "cylinder" else result.master}
+    sides["block"] = result.master if slave == "cylinder" else result.slave
+    for side, profile in sides.items():
+        e = hertz_errors(profile, radius=r_star, E=e_star, nu=0.0, h_contact=h)
+        x, p, w = profile.points[:, 0], -profile.sigma_c, profile.weights
+        exact = e.p0 * np.sqrt(np.maximum(1.0 - (x / e.a) ** 2, 0.0))
+        far = np.abs(np.abs(x) - e.a) > 2.0 * h
+        interior = np.sqrt(np.sum((w * (p - exact) ** 2)[far]) / np.sum(w * exact**2))
+        rows.append(
+            f"| {refinement:g} | {depth:.3g} | {size:g} | {delta_scale:g} | {slave} | {side} | {e.a / h:.1f} | "
+            f"{e.half_width_cells:+.2f} | {100 * e.peak_error:+.2f}% | {100 * e.l2_error:.2f}% | "
+            f"{100 * interior:.2f}% | {100 * _interpolant_error(x, e.a):.2f}% |"
+        )
+    return rows
+
+
 def algorithm_1(n: int, accel: str) -> str:
     """Algorithm 1 on two blocks (the lower layered, contrast 1e3; the upper overhanging) against the monolithic
     solve: evaluations of T, transmission residual, distance to the monolithic solution, time."""
@@ -117,33 +204,53 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--refinements", type=float, nargs="+", default=[0.5, 1.0, 2.0])
     parser.add_argument("--sizes", type=int, nargs="+", default=[32, 64])
+    parser.add_argument("--cost-sizes", type=int, nargs="+", default=[4, 8, 16])
+    parser.add_argument("--edge-refinements", type=float, nargs="*", default=[1.0, 1.5])
     parser.add_argument("--out", default="benchmarks/results/two_body.md")
     args = parser.parse_args()
     lines = [
         "# Two deformable bodies in contact",
         "",
         f"Command: `python benchmarks/two_body.py --refinements {' '.join(f'{r:g}' for r in args.refinements)} "
-        f"--sizes {' '.join(map(str, args.sizes))} --out {args.out}`",
+        f"--sizes {' '.join(map(str, args.sizes))} --cost-sizes {' '.join(map(str, args.cost_sizes))} "
+        f"--edge-refinements {' '.join(f'{r:g}' for r in args.edge_refinements)} --out {args.out}`",
         "",
         "## 1. Contact patch test: two blocks pressed together, non-matching meshes",
         "",
         "Lower block 1 × 0.5 (E = 1, ν = 0.3), upper 1 × 0.4 (E = 5, ν = 0.2), rollers on the bottom and left "
         "sides, the upper top pushed down by 0.01; the exact pressure is uniform (the blocks slide along each "
         "other). Error: the largest relative error of the nodal pressure on either surface; balance: "
-        "|F_slave + F_master|/|F|. 3D: two boxes, ν = 0.",
+        "|F_slave + F_master|/|F|. 3D: two boxes 1 × 1, rollers on the faces y = 0 and 1 as well, the slave "
+        "triangles clipped against the master's.",
         "",
         "| dim | cells across (lower/upper) | slave | quadrature | pressure error | force balance |",
         "|---|---|---|---|---|---|",
     ]
     cases = [(2, 7, 10, s, r, 3) for r in ("segments", "vertices") for s in ("upper", "lower")]
-    cases += [(3, 3, 4, "upper", "segments", k) for k in (3, 8)]
+    cases += [(3, 3, 4, s, "segments", 3) for s in ("upper", "lower")]
+    cases += [(3, 5, 7, "upper", "segments", k) for k in (2, 3)] + [(3, 3, 4, "upper", "vertices", 3)]
     for dim, nl, nu, slave, rule, degree in cases:
         error, balance = patch(nl, nu, slave, rule, dim=dim, degree=degree)
         label = "node-to-segment (vertices)" if rule == "vertices" else f"segment-to-segment, degree {degree}"
         lines.append(f"| {dim} | {nl}/{nu} | {slave} | {label} | {error:.1e} | {balance:.1e} |")
     lines += [
         "",
-        "## 2. Two-body Hertz: an elastic cylinder on a block",
+        "## 2. Cost of the 3D segment-to-segment quadrature",
+        "",
+        "Two boxes as above, n and n + 3 cells across, the upper the slave, degree 3 (6 points per triangle): "
+        "every slave triangle cut by the master triangles projected onto its plane, the pieces fan-triangulated. "
+        "Times in seconds, one process: the quadrature at the Gauss points, with the mortar-weighted nodal rows "
+        "(what the solve uses), and the whole monolithic solve (mesh excluded, quadrature included).",
+        "",
+        "| cells across | slave triangles | master triangles | points | points per slave triangle | "
+        "quadrature | nodal rows | monolithic solve |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for n in args.cost_sizes:
+        lines.append(quadrature_cost(n))
+    lines += [
+        "",
+        "## 3. Two-body Hertz: an elastic cylinder on a block",
         "",
         "Cylinder R = 5 (E = 2, ν = 0.25) pressed by 1.1e-3 onto a block 4 × 2 (E = 1, ν = 0.3); contact cells "
         "a/(20 r) on both bodies, non-matching; R* = R, 1/E* = (1 − ν₁²)/E₁ + (1 − ν₂²)/E₂; F read off each "
@@ -159,7 +266,27 @@ def main() -> None:
             lines += hertz(r, slave)
     lines += [
         "",
-        "## 3. Algorithm 1 for two bodies",
+        "### Where the L² error at a/20 comes from",
+        "",
+        "The same pair at five depths (the contact edge crosses a contact cell), then at one depth with the block "
+        "twice as wide and deep (size 2) and with δ/100. L² error: all nodes; interior: without the nodes within "
+        "two contact cells of x = ±a; P1 interpolant: the L² error of the exact profile's own P1 interpolant on "
+        "the surface's nodes (what a nodal pressure can reach at that spacing).",
+        "",
+        "| r | depth | size | δ factor | slave | surface | a/h | (a_h − a)/h | p_max/p₀ − 1 | L² error | interior | "
+        "P1 interpolant |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in args.edge_refinements:
+        for depth in np.linspace(1.0e-3, 1.2e-3, 5):
+            for slave in ("cylinder", "block"):
+                lines += hertz_edge(r, float(depth), slave)
+    if args.edge_refinements:
+        lines += hertz_edge(args.edge_refinements[0], 1.1e-3, "cylinder", size=2.0)
+        lines += hertz_edge(args.edge_refinements[0], 1.1e-3, "cylinder", delta_scale=0.01)
+    lines += [
+        "",
+        "## 4. Algorithm 1 for two bodies",
         "",
         "Two blocks, the lower (n cells across) layered (E alternating 1e3 and 1 every 0.1), the upper (E = 2, "
         "0.7n + 1 cells across) shifted by 0.2 and pushed down by 0.005; strips of 2 cell layers, α_p = E_p/√h; "

@@ -210,16 +210,18 @@ def _check_pair(case: PairCase, args: argparse.Namespace, comm: MPI.Comm) -> int
     roles[case.pair.master] = "the master contact surface (the slave points are projected onto it)"
     groups = _file_groups(case.mesh_file, comm) or []
     say("  physical groups of the file:")
+    facet_dim = 2 if any(dim == 3 for _, dim, _ in groups) else 1
     for name, dim, count in groups:
         kind, unit = _KINDS.get(dim, (f"dimension {dim}", "elements"))
-        role = roles.get(name, "no role (traction free)" if dim == 1 else "no role")
+        role = roles.get(name, "no role (traction free)" if dim == facet_dim else "no role")
         say(f"    {name:<16} {kind:<8} {count:>8} {unit:<10} {role}")
     built = case.build_mesh(comm)
     problem = case.problem(built)
     msh = problem.mesh
     tdim = msh.topology.dim
     say(
-        f"  dimension {msh.geometry.dim}, {msh.topology.index_map(tdim).size_global} triangles, "
+        f"  dimension {msh.geometry.dim}, {msh.topology.index_map(tdim).size_global} "
+        f"{'tetrahedra' if tdim == 3 else 'triangles'}, "
         f"{msh.topology.index_map(0).size_global} vertices"
     )
     n_cells = msh.topology.index_map(tdim).size_local

@@ -5,8 +5,8 @@
   load steps);
 * ``contact.pvd``: the nodes of both contact surfaces with ``pressure`` (−σ_c), ``gap``, ``active``, ``normal``
   and ``side`` (1 slave, 2 master);
-* ``pair.png``: the deformed bodies (magnified, coloured by |u|, the contact surfaces drawn) beside the contact
-  pressure along each surface; ``E.png``; ``force_displacement.png`` with load steps: the normal contact force
+* ``pair.png`` (2D): the deformed bodies (magnified, coloured by |u|, the contact surfaces drawn) beside the contact
+  pressure along each surface; ``E.png`` (2D); ``force_displacement.png`` with load steps: the normal contact force
   on each side (with friction also the tangential force on the slave side) against the stepped support's
   displacement or traction.
 """
@@ -89,7 +89,10 @@ class PairWriter:
     def add_step(self, time: float, problem, result) -> None:
         fields = problem.fields
         s = _cell_array(stress_field(result.u, fields.lmbda, fields.mu))
-        stress = np.column_stack([s[:, 0], s[:, 3], s[:, 1]])
+        if problem.dim == 3:  # (xx, yy, zz, xy, yz, xz) of the 3 × 3 stress, row by row
+            stress = s[:, [0, 4, 8, 1, 5, 2]]
+        else:
+            stress = np.column_stack([s[:, 0], s[:, 3], s[:, 1]])
         markers = cell_markers(problem.cell_tags, problem.mesh)
         markers.name = "body"
         self.fields.add(time, field_grid(result.u, stress, {"E": fields.E, "body": markers}, fields.nu))
@@ -98,8 +101,11 @@ class PairWriter:
     def finish(self, problem, result, summary: dict) -> None:
         if not self.plots:
             return
-        plot_cell_field(problem.fields.E, self.directory / "E.png", title=f"Young's modulus, {self.title}", log=True)
-        plot_pair(result, problem, self.directory / "pair.png", title=self.title)
+        if problem.dim == 2:  # (in 3D the fields and the contact pressure are for ParaView)
+            plot_cell_field(
+                problem.fields.E, self.directory / "E.png", title=f"Young's modulus, {self.title}", log=True
+            )
+            plot_pair(result, problem, self.directory / "pair.png", title=self.title)
         if summary.get("load_steps") and self.comm.rank == 0:
             plot_force_displacement(summary["load_steps"], self.directory / "force_displacement.png", self.title)
 
@@ -182,7 +188,8 @@ def plot_force_displacement(load_steps: dict, path: str | Path, title: str = "")
     last = np.asarray(steps[-1][quantity], dtype=float)
     direction = last / max(float(np.linalg.norm(last)), np.finfo(float).tiny)
     values = np.asarray([s[quantity] for s in steps], dtype=float)
-    along = np.all(np.abs(values @ np.array([-direction[1], direction[0]])) <= 1e-12 * np.abs(values).max())
+    across = values - np.outer(values @ direction, direction)  # the part of each step off the last one's line
+    along = np.all(np.linalg.norm(across, axis=1) <= 1e-12 * np.abs(values).max())
     d = list(values @ direction) if along else list(range(1, len(steps) + 1))  # (a path that turns: by step)
     fig, ax = plt.subplots(figsize=(6, 4))
     ax.plot(d, [s["normal_force_slave"] for s in steps], "o-", label="slave side")

@@ -14,9 +14,12 @@ Quadrature (``ContactQuadrature``): in 2D each slave segment is cut at the proje
 vertices, and each piece gets a Gauss rule: the slave and master P1 traces are then both linear on each piece,
 so the integrals of a piecewise linear (s)⁺ against both bodies' test functions are exact where (s)⁺ is
 linear, and the contact patch test (a uniform pressure across a flat, non-matching interface) holds to
-round-off.  In 3D the slave triangles get a Gauss rule without clipping (a mortar-type quadrature whose
-patch-test error is that of the quadrature).  The forces on the two sides are equal and opposite to
-round-off in any dimension: the rows of B sum to ν − ν = 0 over the components (partitions of unity).
+round-off.  In 3D the same holds with each slave triangle cut by the master triangles projected onto its plane
+(``fem.clipping``: polygon clipping, the pieces fan-triangulated, a Gauss rule on each triangle); a point of
+a piece takes its master triangle's orthogonal projection when it lies in it (the closest point where the
+master is flat or convex), the closest-point search otherwise.  The forces on the two sides are equal and
+opposite to round-off in any dimension: the rows of B sum to ν − ν = 0 over the components (partitions of
+unity).
 """
 
 from typing import NamedTuple
@@ -29,6 +32,7 @@ from dolfinx import fem
 from dolfinx import mesh as dmesh
 
 from fenics_contact.errors import InputError
+from fenics_contact.fem import clipping
 
 __all__ = ["Surface", "Projection", "ContactQuadrature", "surface", "project", "contact_quadrature", "nodal_gaps"]
 
@@ -152,9 +156,25 @@ class Projection(NamedTuple):
     found: np.ndarray
 
 
-def project(points: np.ndarray, target: Surface, *, candidates: int = 12) -> Projection:
+def project(points: np.ndarray, target: Surface, *, candidates: int = 12, hint: np.ndarray | None = None) -> Projection:
     """Closest-point projection of ``points`` (n, gdim) onto the surface ``target``, over the ``candidates``
-    facets with the nearest midpoints."""
+    facets with the nearest midpoints.  ``hint``: a facet per point (−1: none) whose orthogonal projection is
+    taken where it lies in the facet (the closest point when the surface is flat or convex there), the
+    others searched as without it."""
+    if hint is not None:
+        near = np.flatnonzero(hint >= 0)
+        bary, inside = _closest_on_simplex(points[near], target.coords[hint[near]])
+        take, rest = near[inside], np.setdiff1d(np.arange(points.shape[0]), near[inside])
+        first = project(points[rest], target, candidates=candidates) if rest.size else None
+        facet = np.zeros(points.shape[0], dtype=np.int64)
+        out_bary = np.zeros((points.shape[0], target.coords.shape[1]))
+        found = np.ones(points.shape[0], dtype=bool)
+        facet[take], out_bary[take] = hint[take], bary[inside]
+        if first is not None:
+            facet[rest], out_bary[rest], found[rest] = first.facet, first.bary, first.found
+        nu = -target.normals[facet]
+        closest = np.einsum("nk,nkd->nd", out_bary, target.coords[facet])
+        return Projection(facet, out_bary, nu, np.sum((closest - points) * nu, axis=1), found)
     n = points.shape[0]
     num = target.coords.shape[0]
     if num == 0:
@@ -217,15 +237,48 @@ def _cuts(slave: Surface, master: Surface) -> list[np.ndarray]:
     return out
 
 
+def _pieces(slave: Surface, master: Surface) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The slave triangles cut by the master triangles projected onto their planes (``fem.clipping``): the
+    convex pieces in the slave's affine coordinates (P, M, 2), the slave facet of each (P,) and the master facet
+    it lies in (−1: none).  A slave triangle
+    meets the master triangles whose midpoints lie within the sum of the two circumscribing radii (about the
+    midpoints) of its midpoint's closest point on the master surface."""
+    mid_s, mid_m = slave.coords.mean(axis=1), master.coords.mean(axis=1)
+    r_s = np.linalg.norm(slave.coords - mid_s[:, None], axis=2).max(axis=1)
+    r_m = float(np.linalg.norm(master.coords - mid_m[:, None], axis=2).max())
+    proj = project(mid_s, master)
+    foot = np.einsum("nk,nkd->nd", proj.bary, master.coords[proj.facet])
+    near = scipy.spatial.cKDTree(mid_m).query_ball_point(foot, r=(r_s + r_m) * (1.0 + 1e-9))
+    k = max(1, max(len(c) for c in near))
+    cand = np.full((len(near), k), -1)
+    for i, c in enumerate(near):
+        cand[i, : len(c)] = c
+    x0 = slave.coords[:, 0]
+    edges = slave.coords[:, 1:] - x0[:, None]  # (S, 2, 3)
+    gram = np.einsum("sid,sjd->sij", edges, edges)
+    rel = master.coords[np.maximum(cand, 0)] - x0[:, None, None]  # (S, K, 3, 3)
+    rhs = np.einsum("sid,skvd->skvi", edges, rel)
+    xi = np.einsum("sij,skvj->skvi", np.linalg.inv(gram), rhs)  # the orthogonal projection onto the slave plane
+    xi[cand < 0] = np.nan
+    poly, _, owner, slot = clipping.intersections(xi)
+    return poly, owner, np.where(slot >= 0, cand[owner, np.maximum(slot, 0)], -1)
+
+
 def _slave_points(
     slave: Surface, master: Surface, degree: int, vertices: bool = False
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Quadrature points on the slave facets: (facet index, barycentric coordinates, weights); ``vertices``:
-    the facets' vertices with the lumped weights |F|/k instead."""
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
+    """Quadrature points on the slave facets: (facet index, barycentric coordinates, weights, the master facet
+    each point was clipped against (3D; −1: none) or None); ``vertices``: the facets' vertices with the lumped
+    weights |F|/k instead."""
     tdim = slave.coords.shape[1]
     if vertices:
         nf = slave.coords.shape[0]
-        return np.repeat(np.arange(nf), tdim), np.tile(np.eye(tdim), (nf, 1)), np.repeat(slave.measures / tdim, tdim)
+        return (
+            np.repeat(np.arange(nf), tdim),
+            np.tile(np.eye(tdim), (nf, 1)),
+            np.repeat(slave.measures / tdim, tdim),
+            None,
+        )
     cell = basix.CellType.interval if tdim == 2 else basix.CellType.triangle
     ref, ref_w = basix.make_quadrature(cell, degree)
     if tdim == 2:  # segment-to-segment: each slave segment cut at the master vertices
@@ -237,11 +290,12 @@ def _slave_points(
                 facets.append(np.full(t.size, i))
                 bary.append(np.stack([1.0 - t, t], axis=1))
                 weights.append((t1 - t0) * ref_w * slave.measures[i])
-        return np.concatenate(facets), np.concatenate(bary), np.concatenate(weights)
-    nf, nq = slave.coords.shape[0], ref.shape[0]
-    bary = np.tile(np.concatenate([1.0 - ref.sum(axis=1, keepdims=True), ref], axis=1), (nf, 1))
-    weights = (2.0 * ref_w[None, :] * slave.measures[:, None]).ravel()  # reference triangle area ½
-    return np.repeat(np.arange(nf), nq), bary, weights
+        return np.concatenate(facets), np.concatenate(bary), np.concatenate(weights), None
+    pieces, owner, target = _pieces(slave, master)
+    piece, xi, weights = clipping.fan_rule(pieces, degree)
+    facets = owner[piece]
+    bary = np.concatenate([1.0 - xi.sum(axis=1, keepdims=True), xi], axis=1)
+    return facets, bary, 2.0 * weights * slave.measures[facets], target[piece]  # reference triangle area ½
 
 
 def contact_quadrature(
@@ -257,9 +311,9 @@ def contact_quadrature(
         raise InputError(f"the contact quadrature rule must be 'segments' or 'vertices', got {rule!r}")
     if slave.coords.shape[0] == 0:
         raise InputError("the slave contact surface has no facets")
-    facet, bary, weights = _slave_points(slave, master, degree, vertices=rule == "vertices")
+    facet, bary, weights, hint = _slave_points(slave, master, degree, vertices=rule == "vertices")
     points = np.einsum("nk,nkd->nd", bary, slave.coords[facet])
-    proj = project(points, master)
+    proj = project(points, master, hint=hint)
     keep = proj.found
     facet, bary, weights, points = facet[keep], bary[keep], weights[keep], points[keep]
     nu, gap, mfacet, mbary = proj.nu[keep], proj.gap[keep], proj.facet[keep], proj.bary[keep]

@@ -97,10 +97,10 @@ class Support:
 @dataclass(frozen=True, slots=True)
 class ContactPair:
     """The potential contact surfaces: ``slave`` (Γ_C, integrated) and ``master`` (Γ_C_other, projected onto)
-    facet tags, on different bodies; ``quadrature_degree`` of the Gauss rule on each slave segment; ``rule``:
-    ``"segments"`` (segment-to-segment, ``fem.mortar``) or ``"vertices"`` (one-pass node-to-segment, which fails
-    the contact patch test on non-matching meshes: for comparison only); ``friction``: a ``Friction`` law on the
-    relative slip of the two surfaces (``fem.two_body_friction``), None: frictionless."""
+    facet tags, on different bodies; ``quadrature_degree`` of the Gauss rule on each piece of a slave facet;
+    ``rule``: ``"segments"`` (segment-to-segment, ``fem.mortar``) or ``"vertices"`` (one-pass node-to-segment,
+    which fails the contact patch test on non-matching meshes: for comparison only); ``friction``: a
+    ``Friction`` law on the relative slip of the two surfaces (``fem.two_body_friction``), None: frictionless."""
 
     slave: int
     master: int

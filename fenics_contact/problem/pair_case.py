@@ -3,21 +3,22 @@
 A case with a ``[pair]`` table describes two bodies on one gmsh mesh (``problem.pair.TwoBodyProblem``): the
 file's surface groups are the cells of the bodies (a body may span several groups, e.g. layers of different
 materials), its curve groups carry the supports, the tractions and the two contact surfaces, all by physical
-name.  ``load_pair_case`` reads it into a ``PairCase``; every key is validated (InputError naming the key,
-MeshTagError naming a group the mesh lacks), unknown keys are refused.
+name; in a 3D file (tetrahedra) the volume groups are the cells and the surface groups the facets, and every
+vector has three components.  ``load_pair_case`` reads it into a ``PairCase``; every key is validated
+(InputError naming the key, MeshTagError naming a group the mesh lacks), unknown keys are refused.
 
     description = "..."
 
     [mesh]
-    file = "two_blocks.msh"                  # planar triangles; the two bodies meshed apart (no shared node)
+    file = "two_blocks.msh"                  # planar triangles, or tetrahedra (3D); the two bodies meshed apart
 
     [bodies.lower]                           # two bodies, each its own table (any names)
     cells = ["lower_sandstone", "lower_shale"]   # its surface groups (a string for one)
     E = 2.0e4 | {lower_sandstone = 2e4, lower_shale = 8e3} | {python = "fields.py:E"}
     nu = 0.25                                # the same forms
-    body-force = [fx, fy] | {python = ...}   # default zero
+    body-force = [fx, fy] | {python = ...}   # default zero; every vector [x, y, z] on a 3D mesh
     supports = [{facets = "lower_bottom"},   # u = 0 on the group, or u = displacement, on the
-                {facets = "lower_left", components = [0]}]  # components listed (0: x, 1: y; default both)
+                {facets = "lower_left", components = [0]}]  # components listed (0: x, 1: y, 2: z; default all)
     tractions = {lower_right = [tx, ty]}     # σn = t on the group
 
     [pair]
@@ -66,8 +67,8 @@ from fenics_contact.problem.case_values import (
     read_friction,
     read_integer,
     read_number,
+    read_point,
     read_string,
-    read_vector,
     show_value,
 )
 from fenics_contact.problem.friction import Friction
@@ -99,11 +100,11 @@ class SupportSpec:
     displacement: Uniform | PythonField | None = None
     components: tuple[int, ...] | None = None
 
-    def echo(self) -> dict:
+    def echo(self, dim: int = 2) -> dict:
         return {
             "facets": self.facets,
-            "displacement": self.displacement.echo() if self.displacement else [0.0, 0.0],
-            "components": list(self.components) if self.components is not None else [0, 1],
+            "displacement": self.displacement.echo() if self.displacement else [0.0] * dim,
+            "components": list(self.components) if self.components is not None else list(range(dim)),
         }
 
 
@@ -119,13 +120,13 @@ class BodySpec:
     supports: tuple[SupportSpec, ...]
     tractions: tuple[tuple[str, FieldSpec], ...] = ()
 
-    def echo(self) -> dict:
+    def echo(self, dim: int = 2) -> dict:
         return {
             "cells": list(self.cells),
             "E": self.E.echo(),
             "nu": self.nu.echo(),
-            "body-force": self.body_force.echo() if self.body_force else [0.0, 0.0],
-            "supports": [s.echo() for s in self.supports],
+            "body-force": self.body_force.echo() if self.body_force else [0.0] * dim,
+            "supports": [s.echo(dim) for s in self.supports],
             "tractions": {name: spec.echo() for name, spec in self.tractions},
         }
 
@@ -193,6 +194,7 @@ class PairCase:
         tbm, groups = built
         msh, file_cells = tbm.mesh, tbm.cell_tags
         tdim = msh.topology.dim
+        self.check_dimension(msh.geometry.dim)
         body_cells, laws = [], []
         for k, body in enumerate(self.bodies):
             tags = [self._group(groups, name, tdim, f"bodies.{body.name}.cells") for name in body.cells]
@@ -238,12 +240,61 @@ class PairCase:
             msh, cell_tags, tbm.facet_tags, tuple(laws), pair, tuple(supports), tractions, name=self.path.stem
         )
 
+    @property
+    def dimension(self) -> int:
+        """The number of components of the case's vectors (2 when it gives none)."""
+        return next((n for _, n in self.vectors()), 2)
+
+    def vectors(self) -> list[tuple[str, int]]:
+        """(key, number of components) of every vector the case gives, and (key, axis + 1) of every support
+        component listed."""
+        found = []
+        for body in self.bodies:
+            key = f"bodies.{body.name}"
+            if isinstance(body.body_force, Uniform):
+                found.append((f"{key}.body-force", len(body.body_force.value)))
+            for i, s in enumerate(body.supports):
+                if isinstance(s.displacement, Uniform):
+                    found.append((f"{key}.supports[{i}].displacement", len(s.displacement.value)))
+            found.extend((f"{key}.tractions.{n}", len(v.value)) for n, v in body.tractions if isinstance(v, Uniform))
+        if self.load is not None:
+            found.extend((f"load.steps[{k}]", len(v)) for k, v in enumerate(self.load.steps))
+        return found
+
+    def check_dimension(self, dim: int | None) -> None:
+        """InputError naming the key when a vector does not have ``dim`` components or a support lists an axis
+        beyond it (None: the vectors agree among themselves)."""
+        vectors = self.vectors()
+        if dim is None:
+            if len({n for _, n in vectors}) > 1:
+                (k1, n1), (k2, n2) = vectors[0], next(v for v in vectors if v[1] != vectors[0][1])
+                raise self._error(
+                    f"{k1} has {n1} components but {k2} has {n2}: the vectors of a case all have the mesh's "
+                    "dimension ([x, y] in 2D, [x, y, z] in 3D)"
+                )
+            return
+        cells = "tetrahedra" if dim == 3 else "triangles"
+        for key, n in vectors:
+            if n != dim:
+                raise self._error(
+                    f"{key} has {n} components but the mesh {self.mesh_file.name} is {dim}D ({cells}): give "
+                    f"{'[x, y, z]' if dim == 3 else '[x, y]'}"
+                )
+        for body in self.bodies:
+            for i, s in enumerate(body.supports):
+                if s.components is not None and max(s.components) >= dim:
+                    raise self._error(
+                        f"bodies.{body.name}.supports[{i}].components lists the axis {max(s.components)} but the "
+                        f"mesh {self.mesh_file.name} is {dim}D"
+                    )
+
     def _error(self, message: str, kind: type = InputError) -> Exception:
         return kind(f"case {self.path}: {message}")
 
     def _group(self, groups: dict, name: str, dim: int, key: str) -> int:
         if name not in groups or groups[name][0] != dim:
-            kind = "surface (cell)" if dim == 2 else "curve (facet)"
+            tdim = max((d for d, _ in groups.values()), default=2)
+            kind = {3: "volume", 2: "surface", 1: "curve"}[dim] + (" (cell)" if dim == max(tdim, 2) else " (facet)")
             known = sorted(n for n, (d, _) in groups.items() if d == dim)
             raise self._error(
                 f"{key}: the mesh {self.mesh_file.name} has no {kind} group {name!r}; its {kind} groups are {known}",
@@ -270,7 +321,7 @@ class PairCase:
             "file": str(self.path),
             "description": self.description,
             "mesh": {"file": str(self.mesh_file)},
-            "bodies": {b.name: b.echo() for b in self.bodies},
+            "bodies": {b.name: b.echo(self.dimension) for b in self.bodies},
             "pair": self.pair.echo(),
             "load": self.load.echo() if self.load else None,
             "friction": echo_friction(self.friction),
@@ -308,12 +359,13 @@ def group_field(msh: dmesh.Mesh, cell_tags: dmesh.MeshTags, values: Mapping[int,
 
 
 def read_pair_mesh(path: Path, comm: MPI.Comm = MPI.COMM_WORLD) -> tuple[TwoBodyMesh, dict[str, tuple[int, int]]]:
-    """A planar triangle mesh from a gmsh file, with its cell and facet tags and its physical groups by name.
+    """A planar triangle or a tetrahedral mesh from a gmsh file, with its cell and facet tags and its physical
+    groups by name.
 
-    InputError when gmsh cannot read it, it is not planar triangles, or a triangle lies in no surface group
-    (it would be left out of the mesh). Collective; the file is read on rank 0."""
+    InputError when gmsh cannot read it, it is neither planar triangles nor tetrahedra, or a cell lies in no
+    cell group (it would be left out of the mesh). Collective; the file is read on rank 0."""
     with gmsh_session():
-        problem = None
+        problem, dim = None, 2
         if comm.rank == 0:
             gmsh.model.add("two bodies")
             try:
@@ -321,45 +373,48 @@ def read_pair_mesh(path: Path, comm: MPI.Comm = MPI.COMM_WORLD) -> tuple[TwoBody
             except Exception as err:  # gmsh raises a bare Exception with its parser's message
                 problem = f"cannot read {path} as a gmsh mesh: {err}"
             else:
-                problem = _mesh_problem(path)
+                dim = 3 if len(gmsh.model.mesh.getElementTypes(3)) else 2
+                problem = _mesh_problem(path, dim)
                 gmsh.model.mesh.renumberNodes()  # (the DOLFINx reader needs node tags 1..N; a file may skip some)
-        problem = comm.bcast(problem, root=0)
+        problem, dim = comm.bcast((problem, dim), root=0)
         if problem is not None:
             raise InputError(problem)
-        data = dolfinx.io.gmsh.model_to_mesh(gmsh.model, comm, 0, gdim=2)
+        data = dolfinx.io.gmsh.model_to_mesh(gmsh.model, comm, 0, gdim=dim)
     groups = {name: (int(g.dim), int(g.tag)) for name, g in data.physical_groups.items()}
     return TwoBodyMesh(data.mesh, data.cell_tags, data.facet_tags), groups
 
 
-def _mesh_problem(path: Path) -> str | None:
-    if len(gmsh.model.mesh.getElementTypes(3)):
-        return f"{path} is a 3D mesh: two-body case files take planar triangle meshes"
-    types = set(gmsh.model.mesh.getElementTypes(2))
-    if types != {2}:
-        return f"{path} must hold 3-node triangles only (gmsh element type 2), got types {sorted(types)}"
+def _mesh_problem(path: Path, tdim: int) -> str | None:
+    """What is wrong with the gmsh model of ``path`` as a mesh of two bodies of dimension ``tdim``, or None."""
+    types = set(gmsh.model.mesh.getElementTypes(tdim))
+    one, cell, gmsh_type, group = (
+        ("triangle", "triangles", 2, "surface") if tdim == 2 else ("tetrahedron", "tetrahedra", 4, "volume")
+    )
+    if types != {gmsh_type}:
+        return f"{path} must hold 4-node tetrahedra or 3-node triangles only (gmsh type 4 or 2), got {sorted(types)}"
     _, coords, _ = gmsh.model.mesh.getNodes()
-    if np.any(np.abs(np.asarray(coords).reshape(-1, 3)[:, 2]) > 0.0):
+    if tdim == 2 and np.any(np.abs(np.asarray(coords).reshape(-1, 3)[:, 2]) > 0.0):
         return f"{path} is not planar: its nodes must have z = 0"
     members, used = [], []
-    for dim, tag in gmsh.model.getPhysicalGroups(2):
+    for dim, tag in gmsh.model.getPhysicalGroups(tdim):
         for entity in gmsh.model.getEntitiesForPhysicalGroup(dim, tag):
-            _, elements, nodes = gmsh.model.mesh.getElements(2, entity)
+            _, elements, nodes = gmsh.model.mesh.getElements(tdim, entity)
             members.extend(np.concatenate(elements or [np.zeros(0)]).tolist())
             used.append(np.concatenate(nodes or [np.zeros(0)]))
     node_tags = gmsh.model.mesh.getNodes()[0]
     stray = np.setdiff1d(node_tags, np.concatenate(used or [np.zeros(0)]))
     if stray.size:
         return (
-            f"{path}: {stray.size} of its nodes belong to no triangle of a surface group (cells left out of every "
-            "group, or written without their elements); every triangle must belong to the cell group of a body"
+            f"{path}: {stray.size} of its nodes belong to no {one} of a {group} group (cells left out of every "
+            f"group, or written without their elements); every {one} must belong to the cell group of a body"
         )
     grouped = set(members)
     if len(grouped) < len(members):
-        return f"{path}: {len(members) - len(grouped)} triangles lie in two surface groups; give each to one group"
-    total = np.concatenate(gmsh.model.mesh.getElements(2)[1] or [np.zeros(0)]).size
+        return f"{path}: {len(members) - len(grouped)} {cell} lie in two {group} groups; give each to one group"
+    total = np.concatenate(gmsh.model.mesh.getElements(tdim)[1] or [np.zeros(0)]).size
     if len(grouped) < total:
         return (
-            f"{path}: {total - len(grouped)} of its {total} triangles lie in no surface group; every triangle must "
+            f"{path}: {total - len(grouped)} of its {total} {cell} lie in no {group} group; every {one} must "
             "belong to the cell group of a body"
         )
     return None
@@ -378,9 +433,9 @@ def _names(source: Source, key: str, value) -> tuple[str, ...]:
 
 
 def _vector_or_python(source: Source, key: str, value) -> Uniform | PythonField:
-    spec = read_field(source, key, value, read_vector, vector=True, pixels=False)
+    spec = read_field(source, key, value, read_point, vector=True, pixels=False)
     if isinstance(spec, ByGroup):
-        raise source.error(f"{key} must be a vector [x, y] or {{python = 'file.py:name'}}, got a table")
+        raise source.error(f"{key} must be a vector [x, y] or [x, y, z] or {{python = 'file.py:name'}}, got a table")
     return spec
 
 
@@ -394,10 +449,10 @@ def _support(source: Source, key: str, value) -> SupportSpec:
         if (
             not isinstance(components, list)
             or not components
-            or any(isinstance(c, bool) or c not in (0, 1) for c in components)
+            or any(isinstance(c, bool) or c not in (0, 1, 2) for c in components)
             or len(set(components)) < len(components)
         ):
-            raise source.error(f"{key}.components must list distinct axes 0 (x) and/or 1 (y), got {components!r}")
+            raise source.error(f"{key}.components must list distinct axes 0 (x), 1 (y), 2 (z), got {components!r}")
         components = tuple(int(c) for c in components)
     u_D = _vector_or_python(source, f"{key}.displacement", displacement) if displacement is not None else None
     return SupportSpec(facets, u_D, components)
@@ -479,7 +534,7 @@ def _load(source: Source, data, bodies: Sequence[BodySpec]) -> LoadSteps | None:
     if not isinstance(steps, list) or not steps:
         raise source.error("load.steps must be a non-empty list of vectors [[x, y], ...] (one per step)")
     try:
-        values = tuple(read_vector(v) for v in steps)
+        values = tuple(read_point(v) for v in steps)
     except Bad as bad:
         raise source.error(f"load.steps: each step {bad}") from None
     if support is not None:
@@ -526,4 +581,6 @@ def read_pair_case(source: Source, data: dict, overrides: Sequence[tuple[str, An
             raise source.error(f"{table} must be a table ([{table}]), got {show_value(values)}")
         run[table] = dict(values)
     friction = read_friction(source, data.get("friction"))
-    return PairCase(source.path, description, path, specs, pair, load, run, tuple(overrides), friction)
+    case = PairCase(source.path, description, path, specs, pair, load, run, tuple(overrides), friction)
+    case.check_dimension(None)
+    return case

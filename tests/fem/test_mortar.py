@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
+from fenics_contact.fem import clipping
 from fenics_contact.fem.mortar import Surface, contact_quadrature, project
 
 pytestmark = pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="serial geometry")
@@ -95,3 +96,80 @@ def test_relative_rows_are_the_jump_whose_normal_part_is_the_penetration(nodal):
     jump = (Q.relative @ u).reshape(-1, 2)
     assert np.allclose(np.sum(jump * Q.nu, axis=1), Q.B @ u, rtol=0.0, atol=1e-13)
     assert np.allclose(Q.relative @ np.tile([0.7, -0.2], 19), 0.0, atol=1e-14)  # a rigid translation
+
+
+def _grid(n: int, z: float, rng: np.random.Generator, box=((0.0, 1.0), (0.0, 1.0))) -> tuple[np.ndarray, np.ndarray]:
+    """An n × n grid of the box at height z, its inner vertices jittered by 0.3 cells, two triangles per square."""
+    (x0, x1), (y0, y1) = box
+    X, Y = np.meshgrid(np.linspace(x0, x1, n + 1), np.linspace(y0, y1, n + 1))
+    x = np.column_stack([X.ravel(), Y.ravel(), np.full(X.size, z)])
+    inner = (X.ravel() > x0) & (X.ravel() < x1) & (Y.ravel() > y0) & (Y.ravel() < y1)
+    x[inner, :2] += 0.3 * rng.uniform(-1.0, 1.0, (inner.sum(), 2)) * [(x1 - x0) / n, (y1 - y0) / n]
+    a = (np.arange(n)[:, None] * (n + 1) + np.arange(n)[None, :]).ravel()
+    tris = np.concatenate([np.c_[a, a + 1, a + n + 2], np.c_[a, a + n + 2, a + n + 1]])
+    return x, tris
+
+
+def test_clipping_cuts_a_triangle_into_pieces_of_one_master_each_or_of_none():
+    """The reference triangle cut by a jittered triangulation of (−1, 0.4) × (−1, 2) (either orientation): the
+    pieces tile it (areas sum to ½), each lies in its master triangle, and those of no master fill ξ₁ > 0.4
+    (area 0.18); ``intersections`` gives the same pieces."""
+    rng = np.random.default_rng(11)
+    x, tris = _grid(6, 0.0, rng, box=((-1.0, 0.4), (-1.0, 2.0)))
+    masters = x[tris][:, :, :2]
+    masters[::2] = masters[::2, ::-1]  # half of them clockwise
+    for pieces in (clipping.partition(masters[None]), clipping.intersections(masters[None])):
+        poly, count, owner, slot = pieces
+        area = np.abs(clipping.areas(poly))
+        assert np.all(owner == 0) and np.all(count >= 3)
+        assert area.sum() == pytest.approx(0.5, abs=1e-14)
+        assert area[slot < 0].sum() == pytest.approx(0.5 * 0.6**2, abs=1e-14)
+        assert np.all(poly[slot < 0][..., 0] >= 0.4 - 1e-14)
+        for piece, j in zip(poly[slot >= 0], slot[slot >= 0]):
+            tri = masters[j]
+            for e in range(3):  # every vertex on the inner side of every edge of its master
+                t, n = tri[(e + 1) % 3] - tri[e], piece - tri[e]
+                side = (t[0] * n[:, 1] - t[1] * n[:, 0]) * np.sign(clipping.areas(tri[None]))[0]
+                assert np.all(side >= -1e-14)
+
+
+@pytest.mark.parametrize("sizes", [(3, 4), (7, 5)])
+def test_clipped_quadrature_integrates_p1_traces_exactly_in_3d(sizes):
+    """Two jittered non-matching triangulations of the unit square 0.01 apart, random P1 values on both: the
+    3D segment-to-segment rule integrates the penetration of any P1 field exactly, ∫ s = Σ_T |T| mean(s) per side
+    (the traces are affine on each piece), and the rows of B sum to ±ν per side."""
+    rng = np.random.default_rng(5)
+    xs, ts = _grid(sizes[0], 0.01, rng)
+    xm, tm = _grid(sizes[1], 0.0, rng)
+    ns, nm = xs.shape[0], xm.shape[0]
+    slave = _surface(xs[ts], ts, np.array([0.0, 0.0, -1.0]))
+    master = _surface(xm[tm], ns + tm, np.array([0.0, 0.0, 1.0]))
+    u = rng.standard_normal(3 * (ns + nm))
+    uz = u[2::3]
+    exact = -np.sum(slave.measures * uz[ts].mean(axis=1)) + np.sum(master.measures * uz[ns + tm].mean(axis=1))
+    for nodal in (False, True):
+        Q = contact_quadrature(slave, master, 3 * (ns + nm), 3, 2, nodal=nodal)
+        assert Q.weights.sum() == pytest.approx(1.0, abs=1e-14)
+        assert np.allclose(Q.nu, [0.0, 0.0, -1.0]) and np.allclose(Q.gap, 0.01)
+        assert np.sum(Q.weights * (Q.B @ u)) == pytest.approx(exact, abs=1e-13)
+        B = Q.B.toarray().reshape(Q.B.shape[0], ns + nm, 3)
+        assert np.allclose(B[:, :ns].sum(axis=1), Q.nu) and np.allclose(B[:, ns:].sum(axis=1), -Q.nu)
+
+
+def test_a_hinted_facet_gives_the_closest_point_on_a_convex_master():
+    """Points above a convex roof of four triangles, each with a random facet as hint: where the orthogonal
+    projection lies in the hinted facet it is the closest point (its plane supports the roof), elsewhere the
+    search runs: the distances and gaps are those of the search without hints."""
+    rng = np.random.default_rng(2)
+    x = np.array([[0, 0, 0], [1, 0, 0.3], [2, 0, 0], [0, 1, 0], [1, 1, 0.3], [2, 1, 0]], dtype=float)
+    tris = np.array([[0, 1, 4], [0, 4, 3], [1, 2, 5], [1, 5, 4]])
+    surf = _surface(x[tris], tris, np.array([0.0, 0.0, 1.0]))
+    points = np.column_stack([rng.uniform(-0.3, 2.3, 200), rng.uniform(-0.3, 1.3, 200), rng.uniform(0.35, 0.8, 200)])
+    plain = project(points, surf)
+    hinted = project(points, surf, hint=rng.integers(-1, 4, 200))
+    d_plain = np.linalg.norm(points - np.einsum("nk,nkd->nd", plain.bary, surf.coords[plain.facet]), axis=1)
+    d_hint = np.linalg.norm(points - np.einsum("nk,nkd->nd", hinted.bary, surf.coords[hinted.facet]), axis=1)
+    assert np.allclose(d_hint, d_plain, rtol=0.0, atol=1e-12)
+    inside = plain.found & hinted.found
+    assert np.allclose(hinted.gap[inside], plain.gap[inside], rtol=0.0, atol=1e-12)
+    assert np.array_equal(hinted.found, plain.found)

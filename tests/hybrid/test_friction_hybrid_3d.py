@@ -6,8 +6,8 @@ layer."""
 
 import numpy as np
 import pytest
-from mpi4py import MPI
 from friction_paths import snapshots
+from mpi4py import MPI
 
 from fenics_contact.hybrid.friction import FrictionalCondensation
 from fenics_contact.problem.friction import Friction

@@ -205,7 +205,8 @@ class PrimalHybridStep:
             ne += s.energy_norm2(s.u)
             nu += s.l2_norm2(s.u)
             prev[:] = s.u.x.array
-        self._change = max(np.sqrt(de / ne), np.sqrt(du / nu)) if ne > 0 and nu > 0 else np.inf
+        # (a quadratic form of a round-off-sized difference can come out a little below zero)
+        self._change = max(np.sqrt(max(de, 0.0) / ne), np.sqrt(max(du, 0.0) / nu)) if ne > 0 and nu > 0 else np.inf
 
     def relative_change(self) -> float:
         return self._change

@@ -75,13 +75,16 @@ class CondensedFrictionalSystem:
     def __init__(self, law: CondensedLaw, U: np.ndarray, U_L: np.ndarray, *, energy: bool) -> None:
         self.law, self.friction, self.energy = law, law.friction, energy
         self.U, self.U_L = U.copy(), U_L
+        self.searching = False  #: the line search is on (``energy``: the states are then the plain ones)
         self.friction.forced = None
         self.friction.forced = self._next_state(self.U)
 
     def _next_state(self, U: np.ndarray):
+        """The state rule ``NodalFriction.next_state``; with ``energy``, once the line search is on, the plain
+        state of U (the generalized Hessian of the convex energy: a descent direction for its exact line search)."""
         self.friction.nodal = U.reshape(-1, self.friction.d)
         try:
-            return self.friction.next_state(plain=self.energy)
+            return self.friction.next_state(plain=self.energy and self.searching)
         finally:
             self.friction.nodal = None
 
@@ -95,7 +98,8 @@ class CondensedFrictionalSystem:
         return np.concatenate([active, friction.key(state)])
 
     def residual(self) -> float:
-        lam, self._blocks, _ = self.law.forces(self.U)
+        lam, self._blocks, e = self.law.forces(self.U)
+        self.friction.linearize(e)
         self._R = self.U - self.U_L + self.law.M @ lam
         return float(np.linalg.norm(self._R))
 
@@ -139,7 +143,9 @@ class CondensedFrictionalSystem:
 
     def advance(self, t: float, state: StepState) -> Advance:
         self.U += t * self.dU
-        self.friction.forced = self._next if t == 1.0 else self._next_state(self.U)
+        fresh = self.energy and state.searching and not self.searching  # (the plain states from here on)
+        self.searching = state.searching
+        self.friction.forced = self._next if t == 1.0 and not fresh else self._next_state(self.U)
         active = self.key(self.friction.forced)
         return Advance(active, int(np.count_nonzero(active)))
 
@@ -169,6 +175,22 @@ def _newton(law: CondensedLaw, U, U_L, max_steps: int, energy: bool, record, dis
     return system.U
 
 
+#: the steps of the first Newton on the Coulomb law, and of each one tried from the thresholds' fixed point, before
+#: the fixed point takes over (measured on the tests' paths: the Newton on the law converges in at most 4 steps or
+#: cycles between slip states; a cycle is left after a few steps instead of being line-searched to ``max_steps``)
+LAW_STEPS = 10
+
+
+def _plain_state(friction: NodalFriction, U: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The contact and stick/slip sets of U itself (the law's, with the thresholds of U)."""
+    friction.nodal = U.reshape(-1, friction.d)
+    try:
+        e = friction.evaluate()
+    finally:
+        friction.nodal = None
+    return e["active"], friction.key((np.where(e["stick"], 1, np.where(e["slip"], 2, 0)), e["direction"]))
+
+
 def solve_condensed(
     law: CondensedLaw,
     U_L: np.ndarray,
@@ -179,16 +201,20 @@ def solve_condensed(
     discard: Callable[[int], None] = lambda steps: None,
 ) -> np.ndarray:
     """U = U_L − M λ(U) from ``start``: the Newton on the law (Tresca: with the exact line search on its convex
-    energy; a failure raises ConvergenceError), and for Coulomb, should it not converge, the fixed point on the
-    thresholds (each a convex problem) and the Newton on the law from there.  ``record`` gets each converged
-    Newton's trace, ``discard`` the steps of each that did not converge."""
+    energy; a failure raises ConvergenceError), and for Coulomb, should it not converge in ``LAW_STEPS``, the fixed
+    point on the thresholds (each a convex problem): as soon as two successive iterates of it have the same contact
+    and stick/slip sets, the Newton on the law from there (``LAW_STEPS``; the fixed point goes on should it fail),
+    else until the thresholds settle, and the Newton on the law from there.  ``record`` gets each converged Newton's
+    trace, ``discard`` the steps of each that did not converge."""
     friction = law.friction
+    coulomb = friction.law.law == "coulomb"
     try:
-        return _newton(law, start, U_L, max_steps, friction.law.law == "tresca", record, discard)
+        return _newton(law, start, U_L, min(max_steps, LAW_STEPS) if coulomb else max_steps, not coulomb, record,
+                       discard)  # fmt: skip
     except ConvergenceError:
-        if friction.law.law == "tresca":
+        if not coulomb:
             raise
-    U = start
+    U, previous = start, None
     for _ in range(FIXED_POINT_STEPS):
         friction.nodal = U.reshape(-1, friction.d)
         tau = friction.evaluate()["tau"]
@@ -202,6 +228,13 @@ def solve_condensed(
         friction.nodal = None
         if change <= FIXED_POINT_TOL * np.max(tau, initial=0.0):
             break
+        state = _plain_state(friction, U)
+        if previous is not None and all(np.array_equal(a, b) for a, b in zip(state, previous)):
+            try:  # the sets have settled: the law's own Newton finds the thresholds with them
+                return _newton(law, U, U_L, min(max_steps, LAW_STEPS), False, record, discard)
+            except ConvergenceError:
+                pass
+        previous = state
     try:  # the law's own Newton settles the state exactly
         U = _newton(law, U, U_L, max_steps, False, record, discard)
     except ConvergenceError:

@@ -124,6 +124,8 @@ class NodalFriction:
         self.frozen: np.ndarray | None = None
         #: nodal displacements (N, d) to evaluate the law at instead of u's (the condensed system's unknowns)
         self.nodal: np.ndarray | None = None
+        #: the law evaluated where the Newton last linearized (``linearize``), or None
+        self.linearized: dict | None = None
 
     # -- the law at the current iterate ------------------------------------------------------------------
     def _geometry(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -180,11 +182,39 @@ class NodalFriction:
         else:
             e = self.evaluate()
             beta = np.minimum(1.0, self.stiffness / e["w"] / self.k_t)[:, None]
-        z = (1.0 - beta) * e["t"] + beta * e["t_trial"]
+        z = (1.0 - beta) * self._linearized_traction(e) + beta * e["t_trial"]
         size = np.linalg.norm(z, axis=1)
         tau = e["tau"]
         codes = np.where(tau > 0.0, np.where(size <= tau, 1, 2), 0).astype(np.int8)
         return codes, z / np.where(size > 0.0, size, 1.0)[:, None]
+
+    def linearize(self, e: dict) -> None:
+        """Keep the law ``e`` evaluated at the point the Newton linearizes at (its Jacobian's): in 3D the next
+        state rule takes a slipping node's traction from that linearization (``_linearized_traction``)."""
+        self.linearized = {k: e[k] for k in ("t", "t_trial", "norm", "tau", "direction", "slip")}
+
+    def _linearized_traction(self, e: dict) -> np.ndarray:
+        """The traction of the state linearized at: the law's own (``e["t"]``), except, in 3D, at the nodes that
+        slipped at the linearization point: there its first-order expansion t_k + (τ/|t_trial|)(P − n̂⊗n̂)Δt_trial
+        (with the threshold τ of the current iterate), whose component along the old slip direction n̂ is τ: a
+        node whose trial traction turns back is then told to stick, as the 2D state rule does with the sign kept.
+        The traction τ·t_trial/|t_trial| of the current direction would always be τ in size, and the state rule
+        would reduce to the trial state alone."""
+        if self.d == 2 or self.forced is None or self.linearized is None:
+            return e["t"]
+        lin = self.linearized
+        if lin["t"].shape != e["t"].shape:
+            return e["t"]
+        slip = e["slip"] & lin["slip"]
+        if not np.any(slip):
+            return e["t"]
+        n_hat, nu = lin["direction"][slip], e["nu"][slip]
+        change = e["t_trial"][slip] - lin["t_trial"][slip]
+        change -= np.einsum("ij,ij->i", change, n_hat)[:, None] * n_hat  # (P − n̂⊗n̂): t_trial is tangential
+        change -= np.einsum("ij,ij->i", change, nu)[:, None] * nu
+        t = e["t"].copy()
+        t[slip] = e["tau"][slip, None] * n_hat + (lin["tau"][slip] / lin["norm"][slip])[:, None] * change
+        return t
 
     @staticmethod
     def key(state: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
@@ -220,6 +250,7 @@ class NodalFriction:
     def add_jacobian(self, A: PETSc.Mat) -> None:
         """A ← A + the friction blocks (assembled A; it is assembled again)."""
         e = self.evaluate()
+        self.linearize(e)
         blocks = self.blocks(e)
         rows = self._dofs().reshape(-1, self.d).astype(PETSc.IntType)
         for k in np.flatnonzero(e["stick"] | e["slip"]):

@@ -118,7 +118,7 @@ class _Gathered(NodalFriction):
         self.anchor, self.free = gather(friction.anchor, d), gather(friction.free, d)
         self.stiffness, self.motion = gather(friction.stiffness), friction.motion.copy()
         self.nodes = np.arange(self.anchor.shape[0])
-        self.dissipation, self.forced, self.frozen, self.nodal = 0.0, None, None, None
+        self.dissipation, self.forced, self.frozen, self.nodal, self.linearized = 0.0, None, None, None, None
 
     def _geometry(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         return self._nodal_geometry

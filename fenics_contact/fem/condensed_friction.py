@@ -10,8 +10,13 @@ U_L minus a compliance M (dN × dN, symmetric positive definite) times the nodal
 by the loop of the monolithic frictional Newton (``fem.newton.semismooth_newton_loop`` on
 ``CondensedFrictionalSystem``: the state rule ``NodalFriction.next_state``, full steps until a state recurs,
 then a line search; in 3D a state is settled once the step is negligible, the slip direction varying within
-it), with, for Coulomb, the fixed point on the thresholds should it not converge.  Used by Algorithm 1's
-condensed Γ_C system (``hybrid.friction``) and by the two-body solve under MPI (``fem.two_body_mpi``).
+it), with, for Coulomb, the fixed point on the thresholds should it not converge in ``LAW_STEPS``: once two of its
+iterates have the same contact and stick/slip sets, the Newton on the law from there (it then converges in one or
+two steps), the fixed point going on should it fail.  The energy solves (Tresca, frozen thresholds) take the
+primal–dual state rule with full steps and, once a state recurs, the plain states of the iterates with the exact
+line search on the convex energy (whose generalized Hessians make every direction a descent direction).  Used by
+Algorithm 1's condensed Γ_C system (``hybrid.friction``) and by the two-body solve under MPI
+(``fem.two_body_mpi``).
 """
 
 from collections.abc import Callable

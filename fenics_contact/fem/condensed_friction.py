@@ -181,8 +181,8 @@ def _newton(law: CondensedLaw, U, U_L, max_steps: int, energy: bool, record, dis
 
 
 #: the steps of the first Newton on the Coulomb law, and of each one tried from the thresholds' fixed point, before
-#: the fixed point takes over (measured on the tests' paths: the Newton on the law converges in at most 4 steps or
-#: cycles between slip states; a cycle is left after a few steps instead of being line-searched to ``max_steps``)
+#: the fixed point takes over (on the 2D tests' paths the Newton on the law converges in at most 4 steps or cycles
+#: between slip states: a cycle is left after a few steps instead of being line-searched to ``max_steps``)
 LAW_STEPS = 10
 
 

@@ -14,7 +14,7 @@ it), with, for Coulomb, the fixed point on the thresholds should it not converge
 iterates have the same contact and stick/slip sets, the Newton on the law from there (it then converges in one or
 two steps), the fixed point going on should it fail.  The energy solves (Tresca, frozen thresholds) take the
 primal–dual state rule with full steps and, once a state recurs, the plain states of the iterates with the exact
-line search on the convex energy (whose generalized Hessians make every direction a descent direction).  Used by
+line search on the convex energy (the Newton direction of a generalized Hessian of it descends).  Used by
 Algorithm 1's condensed Γ_C system (``hybrid.friction``) and by the two-body solve under MPI
 (``fem.two_body_mpi``).
 """
@@ -213,9 +213,9 @@ def solve_condensed(
     trace, ``discard`` the steps of each that did not converge."""
     friction = law.friction
     coulomb = friction.law.law == "coulomb"
+    steps = min(max_steps, LAW_STEPS) if coulomb else max_steps
     try:
-        return _newton(law, start, U_L, min(max_steps, LAW_STEPS) if coulomb else max_steps, not coulomb, record,
-                       discard)  # fmt: skip
+        return _newton(law, start, U_L, steps, not coulomb, record, discard)
     except ConvergenceError:
         if not coulomb:
             raise

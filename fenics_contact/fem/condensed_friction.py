@@ -13,8 +13,8 @@ then a line search; in 3D a state is settled once the step is negligible, the sl
 it), with, for Coulomb, the fixed point on the thresholds should it not converge in ``LAW_STEPS``: once two of its
 iterates have the same contact and stick/slip sets, the Newton on the law from there (it then converges in one or
 two steps), the fixed point going on should it fail.  The energy solves (Tresca, frozen thresholds) take the
-primal–dual state rule with full steps and, once a state recurs, the plain states of the iterates with the exact
-line search on the convex energy (the Newton direction of a generalized Hessian of it descends).  Used by
+full steps of the primal–dual state rule while they lower the convex energy, else its exact line search
+(``CondensedFrictionalSystem``).  Used by
 Algorithm 1's condensed Γ_C system (``hybrid.friction``) and by the two-body solve under MPI
 (``fem.two_body_mpi``).
 """
@@ -70,26 +70,34 @@ class CondensedLaw:
         return self.lu
 
 
+#: the energy's change along a direction: composite 3-point Gauss–Legendre on this many pieces of [0, 1]
+ENERGY_PIECES = 8
+_NODES, _WEIGHTS = np.polynomial.legendre.leggauss(3)
+
+
 class CondensedFrictionalSystem:
     """U = U_L − M λ(U) as a ``fem.newton.ContactSystem`` (dense): its set is the contact set with the friction
     state (``NodalFriction.next_state``) the law is linearized on, as in ``fem.friction``'s Newton; in 3D a set
-    is settled once the step is negligible too (the slip direction varies within it).  The line search: the exact
-    one on ψ = ½(U − U_L)ᵀM⁻¹(U − U_L) + Φ(U) (``energy``: frozen thresholds, Tresca), whose gradient
-    M⁻¹(U − U_L) + λ(U) the residual is, else backtracking on ‖R‖ (Armijo)."""
+    is settled once the step is negligible too (the slip direction varies within it).
+
+    With ``energy`` (frozen thresholds, Tresca) the residual is the gradient M⁻¹(U − U_L) + λ(U) (times M) of the
+    convex ψ = ½(U − U_L)ᵀM⁻¹(U − U_L) + Φ(U), and every step is checked on it: the full step of the primal–dual
+    state rule is taken when it lowers ψ (its change integrated along the step from the slope), else the exact line
+    search along it when it descends, else along the Newton direction of the plain state of U (a generalized
+    Hessian of ψ: it descends).  ψ falls at every step, so no state recurs.  Without it (Coulomb) full steps until a
+    state recurs, then backtracking on ‖R‖ (Armijo)."""
 
     def __init__(self, law: CondensedLaw, U: np.ndarray, U_L: np.ndarray, *, energy: bool) -> None:
         self.law, self.friction, self.energy = law, law.friction, energy
         self.U, self.U_L = U.copy(), U_L
-        self.searching = False  #: the line search is on (``energy``: the states are then the plain ones)
+        self._full = True  #: the last step was the full step of the state rule (its next state is ``_next``)
         self.friction.forced = None
         self.friction.forced = self._next_state(self.U)
 
-    def _next_state(self, U: np.ndarray):
-        """The state rule ``NodalFriction.next_state``; with ``energy``, once the line search is on, the plain
-        state of U (the generalized Hessian of the convex energy: a descent direction for its exact line search)."""
+    def _next_state(self, U: np.ndarray, *, plain: bool = False):
         self.friction.nodal = U.reshape(-1, self.friction.d)
         try:
-            return self.friction.next_state(plain=self.energy and self.searching)
+            return self.friction.next_state(plain=plain)
         finally:
             self.friction.nodal = None
 
@@ -127,30 +135,49 @@ class CondensedFrictionalSystem:
     def line_search(self) -> float:
         keep, self.friction.forced = self.friction.forced, None  # the merit: the residual of the law itself
         try:
-            return self._search()
+            return self._search() if self.energy else self._backtrack()
         finally:
             self.friction.forced = keep
 
-    def _search(self) -> float:
+    def _backtrack(self) -> float:
         law, U, dU, U_L = self.law, self.U, self.dU, self.U_L
-        if not self.energy:
-            norm0, t = np.linalg.norm(law.residual(U, U_L)), 1.0
-            while t > 1e-9 and np.linalg.norm(law.residual(U + t * dU, U_L)) > (1.0 - 1e-4 * t) * norm0:
-                t *= 0.5
-            return t
+        norm0, t = np.linalg.norm(law.residual(U, U_L)), 1.0
+        while t > 1e-9 and np.linalg.norm(law.residual(U + t * dU, U_L)) > (1.0 - 1e-4 * t) * norm0:
+            t *= 0.5
+        return t
+
+    def _slope(self, dU: np.ndarray):
+        """t ↦ dU·∇ψ(U + t dU)."""
+        law, U = self.law, self.U
         lu = law.factor()
-        base, step = sla.lu_solve(lu, U - U_L), sla.lu_solve(lu, dU)
+        base, step = sla.lu_solve(lu, U - self.U_L), sla.lu_solve(lu, dU)
+        return lambda t: float(dU @ (base + t * step + law.forces(U + t * dU)[0]))
 
-        def slope(t: float) -> float:
-            return float(dU @ (base + t * step + law.forces(U + t * dU)[0]))
-
-        return exact_step(slope)
+    def _search(self) -> float:
+        slope = self._slope(self.dU)
+        start = slope(0.0)
+        if start < 0.0:
+            edges = np.linspace(0.0, 1.0, ENERGY_PIECES + 1)
+            change = sum(
+                0.5 * (b - a) * w * slope(a + 0.5 * (b - a) * (x + 1.0))
+                for a, b in zip(edges[:-1], edges[1:])
+                for x, w in zip(_NODES, _WEIGHTS)
+            )
+            if change <= 1e-4 * start:  # the full step lowers ψ
+                return 1.0
+            self._full = False
+            return exact_step(slope)
+        self._full = False  # no descent: the Newton direction of the plain state of U
+        self.friction.forced = self._next_state(self.U, plain=True)
+        self.residual()
+        self.jacobian(None)
+        self.dU = sla.solve(self._J, -self._R)
+        return exact_step(self._slope(self.dU))
 
     def advance(self, t: float, state: StepState) -> Advance:
         self.U += t * self.dU
-        fresh = self.energy and state.searching and not self.searching  # (the plain states from here on)
-        self.searching = state.searching
-        self.friction.forced = self._next if t == 1.0 and not fresh else self._next_state(self.U)
+        self.friction.forced = self._next if t == 1.0 and self._full else self._next_state(self.U)
+        self._full = True
         active = self.key(self.friction.forced)
         return Advance(active, int(np.count_nonzero(active)))
 
@@ -168,7 +195,7 @@ def _newton(law: CondensedLaw, U, U_L, max_steps: int, energy: bool, record, dis
             system.key(law.friction.forced),
             name="condensed frictional contact Newton",
             max_steps=max_steps,
-            line_search="on-cycle",
+            line_search="always" if energy else "on-cycle",
             sizes="contact and friction state sizes",
         )
     except ConvergenceError as error:

@@ -25,8 +25,16 @@ import numpy as np
 import scipy.linalg as sla
 
 from fenics_contact.errors import ConvergenceError
-from fenics_contact.fem.friction import FIXED_POINT_STEPS, FIXED_POINT_TOL, NodalFriction
-from fenics_contact.fem.newton import Advance, Direction, NewtonTrace, StepState, exact_step, semismooth_newton_loop
+from fenics_contact.fem.friction import ENERGY_STEPS, FIXED_POINT_STEPS, FIXED_POINT_TOL, NodalFriction
+from fenics_contact.fem.newton import (
+    Advance,
+    Direction,
+    NewtonTrace,
+    StepState,
+    exact_step,
+    lowers_energy,
+    semismooth_newton_loop,
+)
 
 __all__ = ["nodal_forces", "CondensedLaw", "CondensedFrictionalSystem", "solve_condensed"]
 
@@ -68,11 +76,6 @@ class CondensedLaw:
         if self.lu is None:
             self.lu = sla.lu_factor(self.M)
         return self.lu
-
-
-#: the energy's change along a direction: composite 3-point Gauss–Legendre on this many pieces of [0, 1]
-ENERGY_PIECES = 8
-_NODES, _WEIGHTS = np.polynomial.legendre.leggauss(3)
 
 
 class CondensedFrictionalSystem:
@@ -157,13 +160,7 @@ class CondensedFrictionalSystem:
         slope = self._slope(self.dU)
         start = slope(0.0)
         if start < 0.0:
-            edges = np.linspace(0.0, 1.0, ENERGY_PIECES + 1)
-            change = sum(
-                0.5 * (b - a) * w * slope(a + 0.5 * (b - a) * (x + 1.0))
-                for a, b in zip(edges[:-1], edges[1:])
-                for x, w in zip(_NODES, _WEIGHTS)
-            )
-            if change <= 1e-4 * start:  # the full step lowers ψ
+            if lowers_energy(slope, start):
                 return 1.0
             self._full = False
             return exact_step(slope)
@@ -188,6 +185,8 @@ class CondensedFrictionalSystem:
 
 
 def _newton(law: CondensedLaw, U, U_L, max_steps: int, energy: bool, record, discard) -> np.ndarray:
+    """The Newton loop on ``CondensedFrictionalSystem`` (an energy's with ``ENERGY_STEPS`` steps at least)."""
+    max_steps = max(max_steps, ENERGY_STEPS) if energy else max_steps
     system = CondensedFrictionalSystem(law, U, U_L, energy=energy)
     try:
         trace = semismooth_newton_loop(

@@ -25,7 +25,7 @@ def test_algorithm_1_is_the_monolithic_frictional_solution_in_3d(contrast):
     monolithic one to 1e-8 relative, with the same forces (normal and the tangential vector), stick/slip sets and
     dissipation.  The interface Newton runs the condensed frictional system and applies T at most 3 times per load
     step, with at most 2 Newton steps on the interface data after it (measured 1–2 and 0–1; the dense contact
-    Newton on the 126 Γ_C displacement components took 28–64 steps, a first Newton on the law cut at
+    Newton on the 126 Γ_C displacement components took 22–53 steps, a first Newton on the law cut at
     ``LAW_STEPS`` and the thresholds' fixed point included)."""
     wall = Plane(point=(1.0, 0.5, 0.5), normal=(-1.0, 0.0, 0.0))
     model = channels_3d(E_high=contrast).on(channels_3d_mesh(6))
@@ -41,7 +41,7 @@ def test_algorithm_1_is_the_monolithic_frictional_solution_in_3d(contrast):
         assert np.array_equal(a.friction.stick, b.friction.stick) and np.array_equal(a.friction.slip, b.friction.slip)
         assert abs(a.dissipation - b.dissipation) <= 1e-8 * mono.dissipation
         assert b.iterations <= 3 and b.interface_newton_steps - b.contact_newton_steps <= 2
-        assert b.contact_newton_steps <= 70
+        assert b.contact_newton_steps <= 60
     assert np.linalg.norm(mono.steps[-1].tangential_force) > 0.1 * mono.steps[-1].normal_force  # a real drag
     assert mono.steps[-1].slip_nodes > mono.steps[1].slip_nodes  # the drag spreads the slip
     assert mono.dissipation > 0.0

@@ -10,8 +10,13 @@ U_L minus a compliance M (dN × dN, symmetric positive definite) times the nodal
 by the loop of the monolithic frictional Newton (``fem.newton.semismooth_newton_loop`` on
 ``CondensedFrictionalSystem``: the state rule ``NodalFriction.next_state``, full steps until a state recurs,
 then a line search; in 3D a state is settled once the step is negligible, the slip direction varying within
-it), with, for Coulomb, the fixed point on the thresholds should it not converge.  Used by Algorithm 1's
-condensed Γ_C system (``hybrid.friction``) and by the two-body solve under MPI (``fem.two_body_mpi``).
+it), with, for Coulomb, the fixed point on the thresholds should it not converge in ``LAW_STEPS``: once two of its
+iterates have the same contact and stick/slip sets, the Newton on the law from there (it then converges in one or
+two steps), the fixed point going on should it fail.  The energy solves (Tresca, frozen thresholds) take the
+full steps of the primal–dual state rule while they lower the convex energy, else its exact line search
+(``CondensedFrictionalSystem``).  Used by
+Algorithm 1's condensed Γ_C system (``hybrid.friction``) and by the two-body solve under MPI
+(``fem.two_body_mpi``).
 """
 
 from collections.abc import Callable
@@ -20,8 +25,16 @@ import numpy as np
 import scipy.linalg as sla
 
 from fenics_contact.errors import ConvergenceError
-from fenics_contact.fem.friction import FIXED_POINT_STEPS, FIXED_POINT_TOL, NodalFriction
-from fenics_contact.fem.newton import Advance, Direction, NewtonTrace, StepState, exact_step, semismooth_newton_loop
+from fenics_contact.fem.friction import ENERGY_STEPS, FIXED_POINT_STEPS, FIXED_POINT_TOL, NodalFriction
+from fenics_contact.fem.newton import (
+    Advance,
+    Direction,
+    NewtonTrace,
+    StepState,
+    exact_step,
+    lowers_energy,
+    semismooth_newton_loop,
+)
 
 __all__ = ["nodal_forces", "CondensedLaw", "CondensedFrictionalSystem", "solve_condensed"]
 
@@ -68,20 +81,26 @@ class CondensedLaw:
 class CondensedFrictionalSystem:
     """U = U_L − M λ(U) as a ``fem.newton.ContactSystem`` (dense): its set is the contact set with the friction
     state (``NodalFriction.next_state``) the law is linearized on, as in ``fem.friction``'s Newton; in 3D a set
-    is settled once the step is negligible too (the slip direction varies within it).  The line search: the exact
-    one on ψ = ½(U − U_L)ᵀM⁻¹(U − U_L) + Φ(U) (``energy``: frozen thresholds, Tresca), whose gradient
-    M⁻¹(U − U_L) + λ(U) the residual is, else backtracking on ‖R‖ (Armijo)."""
+    is settled once the step is negligible too (the slip direction varies within it).
+
+    With ``energy`` (frozen thresholds, Tresca) the residual is the gradient M⁻¹(U − U_L) + λ(U) (times M) of the
+    convex ψ = ½(U − U_L)ᵀM⁻¹(U − U_L) + Φ(U), and every step is checked on it: the full step of the primal–dual
+    state rule is taken when it lowers ψ (its change integrated along the step from the slope), else the exact line
+    search along it when it descends, else along the Newton direction of the plain state of U (a generalized
+    Hessian of ψ: it descends).  ψ falls at every step, so no state recurs.  Without it (Coulomb) full steps until a
+    state recurs, then backtracking on ‖R‖ (Armijo)."""
 
     def __init__(self, law: CondensedLaw, U: np.ndarray, U_L: np.ndarray, *, energy: bool) -> None:
         self.law, self.friction, self.energy = law, law.friction, energy
         self.U, self.U_L = U.copy(), U_L
+        self._full = True  #: the last step was the full step of the state rule (its next state is ``_next``)
         self.friction.forced = None
         self.friction.forced = self._next_state(self.U)
 
-    def _next_state(self, U: np.ndarray):
+    def _next_state(self, U: np.ndarray, *, plain: bool = False):
         self.friction.nodal = U.reshape(-1, self.friction.d)
         try:
-            return self.friction.next_state(plain=self.energy)
+            return self.friction.next_state(plain=plain)
         finally:
             self.friction.nodal = None
 
@@ -95,7 +114,8 @@ class CondensedFrictionalSystem:
         return np.concatenate([active, friction.key(state)])
 
     def residual(self) -> float:
-        lam, self._blocks, _ = self.law.forces(self.U)
+        lam, self._blocks, e = self.law.forces(self.U)
+        self.friction.linearize(e)
         self._R = self.U - self.U_L + self.law.M @ lam
         return float(np.linalg.norm(self._R))
 
@@ -118,28 +138,43 @@ class CondensedFrictionalSystem:
     def line_search(self) -> float:
         keep, self.friction.forced = self.friction.forced, None  # the merit: the residual of the law itself
         try:
-            return self._search()
+            return self._search() if self.energy else self._backtrack()
         finally:
             self.friction.forced = keep
 
-    def _search(self) -> float:
+    def _backtrack(self) -> float:
         law, U, dU, U_L = self.law, self.U, self.dU, self.U_L
-        if not self.energy:
-            norm0, t = np.linalg.norm(law.residual(U, U_L)), 1.0
-            while t > 1e-9 and np.linalg.norm(law.residual(U + t * dU, U_L)) > (1.0 - 1e-4 * t) * norm0:
-                t *= 0.5
-            return t
+        norm0, t = np.linalg.norm(law.residual(U, U_L)), 1.0
+        while t > 1e-9 and np.linalg.norm(law.residual(U + t * dU, U_L)) > (1.0 - 1e-4 * t) * norm0:
+            t *= 0.5
+        return t
+
+    def _slope(self, dU: np.ndarray):
+        """t ↦ dU·∇ψ(U + t dU)."""
+        law, U = self.law, self.U
         lu = law.factor()
-        base, step = sla.lu_solve(lu, U - U_L), sla.lu_solve(lu, dU)
+        base, step = sla.lu_solve(lu, U - self.U_L), sla.lu_solve(lu, dU)
+        return lambda t: float(dU @ (base + t * step + law.forces(U + t * dU)[0]))
 
-        def slope(t: float) -> float:
-            return float(dU @ (base + t * step + law.forces(U + t * dU)[0]))
-
-        return exact_step(slope)
+    def _search(self) -> float:
+        slope = self._slope(self.dU)
+        start = slope(0.0)
+        if start < 0.0:
+            if lowers_energy(slope, start):
+                return 1.0
+            self._full = False
+            return exact_step(slope)
+        self._full = False  # no descent: the Newton direction of the plain state of U
+        self.friction.forced = self._next_state(self.U, plain=True)
+        self.residual()
+        self.jacobian(None)
+        self.dU = sla.solve(self._J, -self._R)
+        return exact_step(self._slope(self.dU))
 
     def advance(self, t: float, state: StepState) -> Advance:
         self.U += t * self.dU
-        self.friction.forced = self._next if t == 1.0 else self._next_state(self.U)
+        self.friction.forced = self._next if t == 1.0 and self._full else self._next_state(self.U)
+        self._full = True
         active = self.key(self.friction.forced)
         return Advance(active, int(np.count_nonzero(active)))
 
@@ -150,6 +185,8 @@ class CondensedFrictionalSystem:
 
 
 def _newton(law: CondensedLaw, U, U_L, max_steps: int, energy: bool, record, discard) -> np.ndarray:
+    """The Newton loop on ``CondensedFrictionalSystem`` (an energy's with ``ENERGY_STEPS`` steps at least)."""
+    max_steps = max(max_steps, ENERGY_STEPS) if energy else max_steps
     system = CondensedFrictionalSystem(law, U, U_L, energy=energy)
     try:
         trace = semismooth_newton_loop(
@@ -157,7 +194,7 @@ def _newton(law: CondensedLaw, U, U_L, max_steps: int, energy: bool, record, dis
             system.key(law.friction.forced),
             name="condensed frictional contact Newton",
             max_steps=max_steps,
-            line_search="on-cycle",
+            line_search="always" if energy else "on-cycle",
             sizes="contact and friction state sizes",
         )
     except ConvergenceError as error:
@@ -167,6 +204,22 @@ def _newton(law: CondensedLaw, U, U_L, max_steps: int, energy: bool, record, dis
         law.friction.forced = None
     record(trace)
     return system.U
+
+
+#: the steps of the first Newton on the Coulomb law, and of each one tried from the thresholds' fixed point, before
+#: the fixed point takes over (on the 2D tests' paths the Newton on the law converges in at most 4 steps or cycles
+#: between slip states: a cycle is left after a few steps instead of being line-searched to ``max_steps``)
+LAW_STEPS = 10
+
+
+def _plain_state(friction: NodalFriction, U: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The contact and stick/slip sets of U itself (the law's, with the thresholds of U)."""
+    friction.nodal = U.reshape(-1, friction.d)
+    try:
+        e = friction.evaluate()
+    finally:
+        friction.nodal = None
+    return e["active"], friction.key((np.where(e["stick"], 1, np.where(e["slip"], 2, 0)), e["direction"]))
 
 
 def solve_condensed(
@@ -179,16 +232,20 @@ def solve_condensed(
     discard: Callable[[int], None] = lambda steps: None,
 ) -> np.ndarray:
     """U = U_L − M λ(U) from ``start``: the Newton on the law (Tresca: with the exact line search on its convex
-    energy; a failure raises ConvergenceError), and for Coulomb, should it not converge, the fixed point on the
-    thresholds (each a convex problem) and the Newton on the law from there.  ``record`` gets each converged
-    Newton's trace, ``discard`` the steps of each that did not converge."""
+    energy; a failure raises ConvergenceError), and for Coulomb, should it not converge in ``LAW_STEPS``, the fixed
+    point on the thresholds (each a convex problem): as soon as two successive iterates of it have the same contact
+    and stick/slip sets, the Newton on the law from there (``LAW_STEPS``; the fixed point goes on should it fail),
+    else until the thresholds settle, and the Newton on the law from there.  ``record`` gets each converged Newton's
+    trace, ``discard`` the steps of each that did not converge."""
     friction = law.friction
+    coulomb = friction.law.law == "coulomb"
+    steps = min(max_steps, LAW_STEPS) if coulomb else max_steps
     try:
-        return _newton(law, start, U_L, max_steps, friction.law.law == "tresca", record, discard)
+        return _newton(law, start, U_L, steps, not coulomb, record, discard)
     except ConvergenceError:
-        if friction.law.law == "tresca":
+        if not coulomb:
             raise
-    U = start
+    U, previous = start, None
     for _ in range(FIXED_POINT_STEPS):
         friction.nodal = U.reshape(-1, friction.d)
         tau = friction.evaluate()["tau"]
@@ -202,6 +259,13 @@ def solve_condensed(
         friction.nodal = None
         if change <= FIXED_POINT_TOL * np.max(tau, initial=0.0):
             break
+        state = _plain_state(friction, U)
+        if previous is not None and all(np.array_equal(a, b) for a, b in zip(state, previous)):
+            try:  # the sets have settled: the law's own Newton finds the thresholds with them
+                return _newton(law, U, U_L, min(max_steps, LAW_STEPS), False, record, discard)
+            except ConvergenceError:
+                pass
+        previous = state
     try:  # the law's own Newton settles the state exactly
         U = _newton(law, U, U_L, max_steps, False, record, discard)
     except ConvergenceError:

@@ -36,6 +36,7 @@ __all__ = [
     "NewtonTrace",
     "semismooth_newton_loop",
     "exact_step",
+    "lowers_energy",
 ]
 
 #: when the exact line search runs (module docstring)
@@ -217,3 +218,21 @@ def exact_step(slope: Callable[[float], float]) -> float:
             t0, f0 = t, f
             f1 *= 0.5
     return t
+
+
+#: ``lowers_energy``: the energy's change along [0, 1] by composite 3-point Gauss–Legendre on this many pieces
+ENERGY_PIECES = 8
+_NODES, _WEIGHTS = np.polynomial.legendre.leggauss(3)
+
+
+def lowers_energy(slope: Callable[[float], float], start: float) -> bool:
+    """Whether the full step lowers the convex energy ψ whose slope along the direction is t ↦ d·∇ψ(u + t d)
+    (``start`` = slope(0) < 0): ψ(u + d) − ψ(u) = ∫₀¹ slope ≤ 10⁻⁴ slope(0), the integral by composite Gauss–Legendre
+    (the slope is piecewise smooth: exact on its smooth pieces up to the quadrature error of the kinks)."""
+    edges = np.linspace(0.0, 1.0, ENERGY_PIECES + 1)
+    change = sum(
+        0.5 * (b - a) * w * slope(a + 0.5 * (b - a) * (x + 1.0))
+        for a, b in zip(edges[:-1], edges[1:])
+        for x, w in zip(_NODES, _WEIGHTS)
+    )
+    return change <= 1e-4 * start

@@ -60,7 +60,7 @@ class PairFriction(NodalFriction):
                 f"slave nodes in {d}D: a state belongs to the load path of the same mesh and pair"
             )
         self.stiffness, self.motion = np.asarray(stiffness, dtype=np.float64), np.zeros(d)
-        self.dissipation, self.forced, self.frozen, self.nodal = 0.0, None, None, None
+        self.dissipation, self.forced, self.frozen, self.nodal, self.linearized = 0.0, None, None, None, None
 
     def _geometry(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         return self._nodal_geometry

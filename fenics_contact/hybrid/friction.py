@@ -13,7 +13,9 @@ solves the nodal law on U by the semismooth Newton loop of the monolithic fricti
 a line search; in 3D a state is settled once the step is negligible, the slip direction varying within it),
 dense, with the fixed point on the Coulomb thresholds should it not converge, then returns the
 interface data as ``CondensedInterface.solve`` does.  With Algorithm 1 the condensation is exact and the dense
-Newton takes the monolithic Newton's steps; the corrections that follow use Ω₂'s exact Jacobian.  Under MPI the
+Newton solves the monolithic frictional equations (the monolithic Newton runs its fixed point on the thresholds
+to the end, the dense one hands over to the Newton on the law once the sets repeat); the corrections that follow
+use Ω₂'s exact Jacobian.  Under MPI the
 unknowns are the ranks' Γ_C nodes in turn, the law's data are gathered to every rank (``_Gathered``), every rank
 solves the same dense system, and the interface Newton continues from rank 0's result.
 """
@@ -119,7 +121,7 @@ class _Gathered(NodalFriction):
         self.anchor, self.free = gather(friction.anchor, d), gather(friction.free, d)
         self.stiffness, self.motion = gather(friction.stiffness), friction.motion.copy()
         self.nodes = np.arange(self.anchor.shape[0])
-        self.dissipation, self.forced, self.frozen, self.nodal = 0.0, None, None, None
+        self.dissipation, self.forced, self.frozen, self.nodal, self.linearized = 0.0, None, None, None, None
 
     def _geometry(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         return self._nodal_geometry

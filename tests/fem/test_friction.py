@@ -5,6 +5,7 @@ import pytest
 
 import fenics_contact
 from fenics_contact.errors import InputError
+from fenics_contact.fem.friction import NodalFriction
 from fenics_contact.problem.analytic import hertz_model
 from fenics_contact.problem.friction import Friction
 from fenics_contact.problem.geometry import unit_square
@@ -151,3 +152,37 @@ def test_sliding_block_3d():
     assert abs(T[0]) < 1e-12 * last.normal_force
     assert np.arccos(T @ drag / np.linalg.norm(T) / np.linalg.norm(drag)) < 1e-2
     assert all(s.dissipation >= 0.0 for s in path.steps) and path.steps[1].stick_nodes > 0
+
+
+class _OneNode(NodalFriction):
+    """The nodal law at one 3D node in contact with the wall x = 0 (ν = e_x, weight 1, δ = 1), evaluated at given
+    nodal displacements (no subproblem, as ``hybrid.friction``'s gathered law)."""
+
+    def __init__(self, stiffness: float) -> None:  # (no NodalFriction.__init__)
+        self.sub, self.law, self.delta, self.k_t, self.d = None, Friction("tresca", threshold=1.0), 1.0, 1.0, 3
+        self.nodes, self.free, self.anchor = np.arange(1), np.ones((1, 3), bool), np.zeros((1, 3))
+        self.motion, self.stiffness = np.zeros(3), np.array([stiffness])
+        self.dissipation, self.forced, self.frozen, self.nodal, self.linearized = 0.0, None, None, None, None
+
+    def _geometry(self):
+        return np.array([[1.0, 0.0, 0.0]]), np.ones(1), np.zeros(1)
+
+    def state_at(self, y: float) -> int:
+        """The state code ``next_state`` predicts at u = (0.1, y, 0) after linearizing at u = (0.1, −2, 0)."""
+        self.nodal = np.array([[0.1, -2.0, 0.0]])  # t_trial = (0, 2, 0): slips along +y
+        self.forced = None
+        self.forced = self.next_state()
+        self.linearize(self.evaluate())
+        self.nodal = np.array([[0.1, y, 0.0]])
+        return int(self.next_state()[0][0])
+
+
+def test_3d_state_rule_tells_a_node_turning_back_to_stick():
+    """A 3D node that slipped along +y at the linearization point and whose trial traction turns back to −3τ ŷ is
+    told to stick (z = (1 − β) t_lin + β t_trial with t_lin the linearized slip traction τ ŷ: |z| = τ|1 − 4β| ≤ τ
+    at β = 1/4), as the 2D rule with its kept sign does; the traction τ t_trial/|t_trial| of the current direction
+    would give |z| = τ(1 + 2β) > τ (slip).  A node whose trial keeps its direction keeps slipping, and β = 1 is the
+    trial state alone (|t_trial| = 3τ > τ: slip)."""
+    assert _OneNode(stiffness=0.25).state_at(3.0) == 1  # t_trial = (0, −3, 0): turned back: stick
+    assert _OneNode(stiffness=0.25).state_at(-3.0) == 2  # t_trial = (0, 3, 0): slips on
+    assert _OneNode(stiffness=1.0).state_at(3.0) == 2

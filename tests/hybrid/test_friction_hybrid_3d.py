@@ -94,6 +94,8 @@ def test_algorithm_3_with_one_layer_along_the_frictional_path_in_3d(channel_cube
         assert np.max(np.abs(a.tangential_force - b.tangential_force)) <= error * a.normal_force
         assert np.array_equal(a.friction.stick, b.friction.stick) and np.array_equal(a.friction.slip, b.friction.slip)
         assert b.dissipation >= 0.0
+
+
 def test_tresca_in_3d():
     """Tresca (s = 0.05) on the channel cube at contrast 1e3, pressed and dragged: the convex energy's Newton
     (``fem.friction``: the primal–dual full step while it lowers the energy, else the exact line search) converges
@@ -114,3 +116,21 @@ def test_tresca_in_3d():
         assert np.allclose(size[a.friction.slip], 0.05, rtol=1e-10)
         assert a.dissipation > 0.0
     assert mono.steps[1].slip_nodes > 0 and mono.steps[1].stick_nodes > 0
+
+
+@pytest.mark.parametrize("drag", [0.001, 0.005])
+def test_coulomb_drag_on_the_channel_cube_at_h_one_eighth(drag):
+    """Coulomb μ = 0.3 on the 8 × 8 × 8 channel mesh at contrast 1e3, pressed 0.01 and dragged along y: the
+    monolithic frictional Newton converges (the energy-checked steps of ``fem.friction``), no node carries more
+    than μp, the slipping ones μp, and the drag dissipates (measured 1 and 15 slipping nodes)."""
+    wall = Plane(point=(1.0, 0.5, 0.5), normal=(-1.0, 0.0, 0.0))
+    problem = channels_3d(E_high=1e3).on(channels_3d_mesh(8)).with_(obstacle=wall, law=Friction("coulomb", mu=0.3))
+    path = [(-0.01, 0.0, 0.0), (-0.01, drag, 0.0)]
+    mono, _ = snapshots("primal-monolithic", problem, path)
+    step = mono.steps[-1]
+    assert step.converged and step.slip_nodes > 0
+    size = np.linalg.norm(step.friction.traction, axis=1)
+    bound = 0.3 * step.friction.pressure
+    assert np.all(size <= bound + 1e-12 * bound.max())
+    assert np.allclose(size[step.friction.slip], bound[step.friction.slip], rtol=1e-10)
+    assert step.dissipation > 0.0

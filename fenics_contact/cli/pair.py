@@ -6,8 +6,9 @@ Algorithm 1's stopping rule and strips, the output directory and the figures; th
 ``--out``, ``--no-plots``, ``--delta``, ``--tol``, ``--max-iterations``, ``--accel`` override the case's
 ``[run]`` and ``[primal]`` tables, any other flag is refused.  A run solves each load step (warm-started from
 the last with ``primal-monolithic`` on one process) and writes ``cli.pair_outputs``' files; under ``mpiexec``
-``primal-monolithic`` runs in parallel (``fem.two_body_mpi``), ``primal`` is refused.  With ``[friction]`` each step
-starts from the friction state the last one committed (the slip of a step is measured from it).
+``primal-monolithic`` runs in parallel (``fem.two_body_mpi``), and so does ``primal`` (``hybrid.two_body_mpi``).
+With ``[friction]`` each step starts from the friction state the last one committed (the slip of a step is
+measured from it).
 """
 
 import logging
@@ -178,11 +179,6 @@ def _converged(result) -> bool:
 
 def run_pair(options: PairRunOptions, comm: MPI.Comm, case: PairCase) -> int:
     """Solve the case (each load step), write into ``options.out``; 0 converged, 3 not converged."""
-    if comm.size > 1 and options.method != "primal-monolithic":
-        raise InputError(
-            "two-body contact with Algorithm 1 (--method primal) runs on one process: run it without mpiexec, or "
-            "run --method primal-monolithic under mpiexec"
-        )
     output = OutputDirectory(options.out, comm)
     with output:
         t0 = time.perf_counter()

@@ -20,7 +20,8 @@ per γ unknown and dense matrices of the size of γ: affordable for the strips o
 of many thousand nodes.  The stopping rule is the transmission residual
 (``hybrid.certificate``).  With the pair's friction law Ω₂ is the frictional strips (``fem.two_body_friction``):
 R₂ comes from their frictional Jacobian, one interface Newton step per friction state, and the state is
-committed once the pair has converged (``state`` carries it to the next load step).  Serial.
+committed once the pair has converged (``state`` carries it to the next load step).  Under MPI
+``hybrid.two_body_mpi`` solves both subdomains in parallel and the reduced pair on every rank (the same fixed point).
 """
 
 import logging
@@ -53,6 +54,7 @@ from fenics_contact.fem.two_body import (
 from fenics_contact.fem.two_body_friction import FrictionalTwoBodySystem, solve_frictional_pair
 from fenics_contact.hybrid.certificate import primal_certificate
 from fenics_contact.hybrid.iteration import AndersonUpdate
+from fenics_contact.hybrid.two_body_mpi import solve_two_body_hybrid_distributed
 from fenics_contact.problem.pair import TwoBodyProblem
 
 __all__ = ["TwoBodyHybridOptions", "TwoBodyHybridResult", "strip_cells", "solve_two_body_hybrid"]
@@ -253,8 +255,8 @@ def solve_two_body_hybrid(
     Algorithm 1 made it), and with friction the slip is measured from its anchors."""
     if state is not None and not isinstance(state, PairState):
         raise InputError(f"two-body Algorithm 1: state must be a PairState (a solution's .state), got {state!r}")
-    if problem.comm.size > 1:
-        raise InputError("two-body contact runs on one process (run it without mpiexec)")
+    if problem.comm.size > 1:  # both subdomains in parallel, the pair reduced to γ and the contact rows
+        return solve_two_body_hybrid_distributed(problem, delta=delta, options=options, newton=newton, state=state)
     start = time.perf_counter()
     msh = problem.mesh
     gdim = msh.geometry.dim

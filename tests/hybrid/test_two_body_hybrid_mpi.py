@@ -2,7 +2,8 @@
 reduced to the interface data and the contact rows on every rank.  On a layered pair (strata of contrast 1e3
 with inclusions, non-matching meshes, an overhanging upper block) the result is the serial one (``mpiexec -n 2``,
 against the same problem on ``COMM_SELF``; also on 3 ranks) to 1e-10, frictionless and along a Coulomb
-press-then-shear path, in at most 8 interface Newton steps; and a case file run with ``--method primal`` is the serial run."""
+press-then-shear path, in at most 8 interface Newton steps; and a case file run with ``--method primal`` is the
+serial run."""
 
 from pathlib import Path
 

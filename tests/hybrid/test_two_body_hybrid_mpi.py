@@ -2,8 +2,8 @@
 reduced to the interface data and the contact rows on every rank.  On a layered pair (strata of contrast 1e3
 with inclusions, non-matching meshes, an overhanging upper block) the result is the serial one (``mpiexec -n 2``,
 against the same problem on ``COMM_SELF``; also on 3 ranks) to 1e-10, frictionless and along a Coulomb
-press-then-shear path, in at most 8 interface Newton steps; and a case file run with ``--method primal`` is the
-serial run."""
+press-then-shear path, in at most 8 interface Newton steps; in 3D alike; and a case file run with
+``--method primal`` is the serial run."""
 
 from pathlib import Path
 
@@ -116,3 +116,31 @@ def test_a_two_body_case_with_algorithm_1_on_two_ranks_is_the_serial_run(shared_
         assert p["force_balance"] < 1e-12
         if "friction" in s:
             assert p["friction"]["slip_nodes"] == s["friction"]["slip_nodes"]
+
+
+def _tilted_3d(comm: MPI.Comm) -> TwoBodyProblem:
+    m = two_blocks(5, 6, heights=(0.5, 0.4), dim=3, comm=comm)
+    return TwoBodyProblem(
+        m.mesh,
+        m.cell_tags,
+        m.facet_tags,
+        bodies=(Body(T.LOWER, 1.0, 0.3), Body(T.UPPER, 5.0, 0.2)),
+        pair=ContactPair(T.UPPER_BOTTOM, T.LOWER_TOP),
+        supports=(
+            Support(T.LOWER_BOTTOM),
+            Support(T.UPPER_TOP, lambda x: np.vstack([0.0 * x[0], 0.0 * x[0], 0.005 - 0.02 * x[0]])),
+        ),
+    )
+
+
+def test_two_ranks_give_the_serial_algorithm_1_in_three_dimensions():
+    """A partial contact of two blocks in 3D, one-layer strips: the serial forces and the monolithic ones."""
+    parallel = fc.solve(_tilted_3d(MPI.COMM_WORLD), "primal", tol=1e-11, layers=1)
+    serial = fc.solve(_tilted_3d(MPI.COMM_SELF), "primal", tol=1e-11, layers=1)
+    mono = fc.solve(_tilted_3d(MPI.COMM_WORLD), "primal-monolithic")
+    assert parallel.converged and parallel.iterations <= 8
+    assert 0 < np.count_nonzero(serial.slave.active) < serial.slave.active.size
+    for fp, fs, fm in zip(parallel.forces, serial.forces, mono.forces, strict=True):
+        assert np.linalg.norm(fp - fs) <= 1e-10 * np.linalg.norm(fs)
+        assert np.linalg.norm(fp - fm) <= 1e-9 * np.linalg.norm(fm)
+    assert parallel.force_balance() < 1e-12

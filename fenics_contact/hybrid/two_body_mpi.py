@@ -18,6 +18,7 @@ one (``hybrid.two_body``) with ∂u₂|γ/∂g₂₁ = P − Cz ∂λ/∂g₂₁
 the serial one.
 """
 
+import logging
 import time
 
 import dolfinx.fem.petsc
@@ -43,6 +44,8 @@ from fenics_contact.problem.materials import strain, stress
 from fenics_contact.problem.pair import TwoBodyProblem
 
 __all__ = ["distributed_strip", "solve_two_body_hybrid_distributed"]
+
+log = logging.getLogger(__name__)
 
 
 def _summed(imap, entries: np.ndarray, values, bs: int = 1) -> np.ndarray:
@@ -173,6 +176,12 @@ class _Part:
             obj.destroy()
 
 
+def _replicated(comm: MPI.Comm, part: np.ndarray) -> np.ndarray:
+    """Σ over the ranks of ``part``, bitwise the same on every rank (summed on rank 0, broadcast): the reduced
+    problem each rank solves alone then takes the same steps everywhere."""
+    return comm.bcast(comm.reduce(part, op=MPI.SUM, root=0), root=0)
+
+
 class _Reduced:
     """The pair on every rank (module docstring): Ω₁'s r₁, R₁; Ω₂'s a₂, P, Cz, and its contact rows c₀, Y, S; the
     contact of the strips solved for given data g₂₁, with ∂λ/∂g₂₁ at the solution."""
@@ -184,16 +193,16 @@ class _Reduced:
         G = iface.rows
         data = G.T.toarray() * iface.weights  # unit data w_j at the γ DOF j (owned rows)
         self.X1 = bulk.solve_columns(data)
-        self.r1 = comm.allreduce(G @ bulk.u0, op=MPI.SUM)
-        self.R1 = comm.allreduce(G @ self.X1, op=MPI.SUM)
+        self.r1 = _replicated(comm, G @ bulk.u0)
+        self.R1 = _replicated(comm, G @ self.X1)
         self.X2 = strips.solve_columns(data)
         self.Z = strips.solve_columns(free_rows.T.toarray())
-        self.a2 = comm.allreduce(G @ strips.u0, op=MPI.SUM)
-        self.P = comm.allreduce(G @ self.X2, op=MPI.SUM)
-        self.Cz = comm.allreduce(G @ self.Z, op=MPI.SUM)
-        self.c0 = comm.allreduce(rows @ strips.u0, op=MPI.SUM) - gap
-        self.Y = comm.allreduce(free_rows @ self.X2, op=MPI.SUM)
-        S = comm.allreduce(free_rows @ self.Z, op=MPI.SUM)
+        self.a2 = _replicated(comm, G @ strips.u0)
+        self.P = _replicated(comm, G @ self.X2)
+        self.Cz = _replicated(comm, G @ self.Z)
+        self.c0 = _replicated(comm, rows @ strips.u0) - gap
+        self.Y = _replicated(comm, free_rows @ self.X2)
+        S = _replicated(comm, free_rows @ self.Z)
         self.S = 0.5 * (S + S.T)
         self.newton, self.friction = newton, friction
         self.law = None if friction is None else CondensedLaw(friction, self.S)
@@ -266,7 +275,7 @@ def solve_two_body_hybrid_distributed(problem: TwoBodyProblem, *, delta, options
         if frictional:  # the stiffness against r_p (as the serial strips: 1 / Σ_j G_pj² / K_jj)
             diagonal = strips.K.getDiagonal()
             G0 = free_rows[0::bs]
-            stiffness = 1.0 / comm.allreduce(G0.multiply(G0) @ (1.0 / diagonal.array), op=MPI.SUM)
+            stiffness = 1.0 / _replicated(comm, G0.multiply(G0) @ (1.0 / diagonal.array))
             diagonal.destroy()
             friction = PairFriction(problem.friction, Q, delta, stiffness, None if state is None else state.anchor)
         red = _Reduced(problem, iface, (bulk, strips), (rows, free_rows, gap, Q.weights / delta), newton, friction)
@@ -299,6 +308,8 @@ def solve_two_body_hybrid_distributed(problem: TwoBodyProblem, *, delta, options
             R2 = red.P - red.Cz @ red.dlam()
             dT = np.block([[zero, 2 * alpha[:, None] * R2 - one], [2 * alpha[:, None] * red.R1 - one, zero]])
             g = g + np.linalg.solve(np.eye(2 * m) - dT, Tg - g)
+        if not converged and steps < options.max_iterations and comm.rank == 0:
+            log.warning("two bodies, Algorithm 1 (MPI): no interface Newton convergence in %d steps; Anderson", steps)
     if not converged and steps < options.max_iterations:
         update = AndersonUpdate(MPI.COMM_SELF, options.depth) if options.accel != "none" else None
         for _ in range(options.max_iterations - steps):
@@ -328,6 +339,17 @@ def solve_two_body_hybrid_distributed(problem: TwoBodyProblem, *, delta, options
     forces = tuple(force.reshape(-1, bs)[surf.nodes].sum(axis=0) for surf in (slave, master))
     next_state = PairState(u.x.array[:n_owned].copy(), friction.anchor.copy() if frictional else None, g.copy())
     elapsed = time.perf_counter() - start
+    if comm.rank == 0:
+        log.info(
+            "two bodies, Algorithm 1 on %d ranks (%s): %d evaluations of T, transmission residual %.3e, %.2f s",
+            comm.size,
+            options.accel,
+            len(residuals),
+            residuals[-1],
+            elapsed,
+        )
+        if not converged:
+            log.warning("two bodies, Algorithm 1 (MPI): NOT converged (transmission residual %.3e)", residuals[-1])
     return TwoBodyHybridResult(
         u, converged, residuals, red.histories, strip, delta, elapsed, *profiles, forces, tangential, dissipation,
         next_state, steps if options.accel == "newton" else 0,

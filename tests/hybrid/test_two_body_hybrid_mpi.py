@@ -103,6 +103,7 @@ def test_two_ranks_give_the_serial_algorithm_1(law, path):
 
 @pytest.mark.parametrize("case", ["two_blocks.toml", "fault_sliding.toml"])
 def test_a_two_body_case_with_algorithm_1_on_two_ranks_is_the_serial_run(shared_tmp_path, case):
+    assert main(["check-mesh", "--case", str(CASES / case), "--method", "primal"]) == 0
     args = ["run", "--case", str(CASES / case), "--method", "primal", "--no-plots"]
     code, err, serial = serial_cli(*args, "--out", str(shared_tmp_path / "serial"))
     assert code == 0, err[-3000:]

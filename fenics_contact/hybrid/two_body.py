@@ -94,7 +94,8 @@ class TwoBodyHybridOptions:
 @dataclass(slots=True)
 class TwoBodyHybridResult:
     """The converged (or last) pair: u (Ω₁ values in the bulks, Ω₂'s in the strips, their mean on γ), the
-    transmission residual per evaluation of T, the contact Newton histories, the strip cells."""
+    transmission residual per evaluation of T, the contact Newton histories, the strip cells (local; under MPI the
+    owned ones)."""
 
     u: fem.Function
     converged: bool

@@ -115,6 +115,7 @@ def test_a_two_body_case_with_algorithm_1_on_two_ranks_is_the_serial_run(shared_
         for key in ("force_slave", "force_master"):
             assert np.linalg.norm(np.subtract(p[key], s[key])) <= 1e-10 * np.linalg.norm(s[key])
         assert p["force_balance"] < 1e-12
+        assert p["strip_cells"] == s["strip_cells"]
         if "friction" in s:
             assert p["friction"]["slip_nodes"] == s["friction"]["slip_nodes"]
 

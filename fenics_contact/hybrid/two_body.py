@@ -242,6 +242,9 @@ class _Bulk:
         u[self.free] = self.factor.solve((self.rhs0 + data[self.free])[:, None])[:, 0]
         return u
 
+    def destroy(self) -> None:
+        self.factor.destroy()
+
 
 def solve_two_body_hybrid(
     problem: TwoBodyProblem,
@@ -250,12 +253,17 @@ def solve_two_body_hybrid(
     options: TwoBodyHybridOptions = TwoBodyHybridOptions(),
     newton: NewtonOptions = NewtonOptions(),
     state: PairState | None = None,
+    omega1=None,
 ) -> TwoBodyHybridResult:
     """Algorithm 1 for two bodies (module docstring); the same δ default as the monolithic solve.  ``state``: the
     previous load step's ``.state`` (either solve's): Ω₂ starts from its u, the interface data from its g (when
-    Algorithm 1 made it), and with friction the slip is measured from its anchors."""
+    Algorithm 1 made it), and with friction the slip is measured from its anchors.  ``omega1``: None (the fine
+    bulks), or ``omega1(problem, V, split, strip)`` building another Ω₁ with ``response``, ``solve`` and
+    ``destroy`` (``multiscale.pair``: a CEM-GMsFEM space in each bulk; serial)."""
     if state is not None and not isinstance(state, PairState):
         raise InputError(f"two-body Algorithm 1: state must be a PairState (a solution's .state), got {state!r}")
+    if omega1 is not None and problem.comm.size > 1:
+        raise InputError("two-body Algorithm 1 with another Omega_1 runs on one process (run it without mpiexec)")
     if problem.comm.size > 1:  # both subdomains in parallel, the pair reduced to γ and the contact rows
         return solve_two_body_hybrid_distributed(problem, delta=delta, options=options, newton=newton, state=state)
     start = time.perf_counter()
@@ -269,8 +277,11 @@ def solve_two_body_hybrid(
     bulk_cells = np.setdiff1d(np.arange(msh.topology.index_map(msh.topology.dim).size_local), strip)
     split = _Split(problem, V, strip, fixed, options.alpha_scale)
     robin = sp.csr_matrix((split.alpha * split.weights, (split.gamma, split.gamma)), shape=(n, n))
-    K1, b1 = stiffness(problem, V, bulk_cells), load_vector(problem, V, bulk_cells)
-    bulk = _Bulk(K1, b1, split.dofs[0], fixed, values, robin)
+    if omega1 is None:
+        K1, b1 = stiffness(problem, V, bulk_cells), load_vector(problem, V, bulk_cells)
+        bulk = _Bulk(K1, b1, split.dofs[0], fixed, values, robin)
+    else:
+        bulk = omega1(problem, V, split, strip)
     slave = surface(V, problem.facet_tags, problem.pair.slave)
     master = surface(V, problem.facet_tags, problem.pair.master)
     delta = two_body_penalty(problem, slave, master, delta)
@@ -364,7 +375,7 @@ def solve_two_body_hybrid(
         dissipation = system.commit() if frictional else 0.0
     finally:
         system.destroy()
-        bulk.factor.destroy()
+        bulk.destroy()
     u1, u2 = last
     merged, count = np.zeros(n), np.zeros(n)
     for dofs, values_ in ((split.dofs[0], u1), (d2, u2)):

@@ -70,8 +70,8 @@ class PairRunOptions:
         if self.method not in PAIR_METHODS:
             raise InputError(
                 f"--method {self.method} cannot solve two deformable bodies (a case with [pair]): the mixed methods "
-                "need an Arnold–Winther contact pair and the multiscale ones a coarse grid in each body; choose one "
-                f"of {PAIR_METHODS}"
+                "need an Arnold–Winther contact pair, and Algorithm 3 on a pair runs from Python only "
+                f"(fc.solve(pair, 'primal-ms', H=...)); choose one of {PAIR_METHODS}"
             )
         if self.delta is not None and not (np.isfinite(self.delta) and self.delta > 0):
             raise InputError(f"--delta must be a finite number > 0, got {self.delta!r}")

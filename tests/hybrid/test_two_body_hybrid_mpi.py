@@ -15,6 +15,7 @@ from mpi_jobs import on_every_rank, run_summary, serial_cli
 
 import fenics_contact as fc
 from fenics_contact.cli import main
+from fenics_contact.errors import InputError
 from fenics_contact.problem.pair import Body, ContactPair, Support, TwoBodyProblem
 from fenics_contact.problem.pair_meshes import PairTag as T
 from fenics_contact.problem.pair_meshes import two_blocks
@@ -146,3 +147,8 @@ def test_two_ranks_give_the_serial_algorithm_1_in_three_dimensions():
         assert np.linalg.norm(fp - fs) <= 1e-10 * np.linalg.norm(fs)
         assert np.linalg.norm(fp - fm) <= 1e-9 * np.linalg.norm(fm)
     assert parallel.force_balance() < 1e-12
+
+
+def test_two_body_algorithm_3_refuses_on_two_ranks():
+    with pytest.raises(InputError, match="runs on one process"):
+        fc.solve(_tilted_3d(MPI.COMM_WORLD), "primal-ms", H=0.25)

@@ -96,10 +96,16 @@ class _BodyBulk:
         for f in range(sub.topology.index_map(tdim - 1).size_local):
             pf = parent[tuple(sorted(vertices[sf2v.links(f)]))]
             sides = in_strip[f2c.links(pf)]
-            if sides.size == 2 and sides[0] != sides[1]:
-                entities.append(f), values.append(int(Boundary.INTERFACE))
-            elif pf in held:
-                entities.append(f), values.append(int(Boundary.GAMMA_D))
+            tag = (
+                Boundary.INTERFACE
+                if sides.size == 2 and sides[0] != sides[1]
+                else Boundary.GAMMA_D
+                if pf in held
+                else None
+            )
+            if tag is not None:
+                entities.append(f)
+                values.append(int(tag))
         facet_tags = dmesh.meshtags(sub, tdim - 1, np.asarray(entities, np.int32), np.asarray(values, np.int32))
         Q0 = fem.functionspace(sub, ("DG", 0))
         fields = problem.fields

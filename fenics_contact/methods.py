@@ -44,6 +44,7 @@ from fenics_contact.hybrid.two_body import TwoBodyHybridOptions, solve_two_body_
 from fenics_contact.multiscale.cem import CEMOptions
 from fenics_contact.multiscale.mixed import MixedMultiscaleHybridStep, solve_mixed_ms_hybrid
 from fenics_contact.multiscale.mixed_cem import MixedCEMOptions
+from fenics_contact.multiscale.pair import PairMultiscaleOptions, solve_two_body_ms_hybrid
 from fenics_contact.multiscale.primal import MultiscalePrimalHybridStep, solve_primal_ms_hybrid
 from fenics_contact.problem.friction import friction_of
 from fenics_contact.problem.pair import TwoBodyProblem
@@ -239,29 +240,36 @@ class Method:
 _TWO_BODY_OPTIONS = {
     "primal-monolithic": ("delta", "newton", "line_search", "state"),
     "primal": ("delta", "newton", "state", *(f.name for f in dataclasses.fields(TwoBodyHybridOptions))),
+    "primal-ms": ("delta", "newton", "H", "cem", *(f.name for f in dataclasses.fields(TwoBodyHybridOptions))),
 }
 
 
 def _solve_two_bodies(name: str, problem: TwoBodyProblem, values: Mapping[str, Any]):
-    """The two-body solves: ``primal-monolithic`` and ``primal`` (Algorithm 1; its options flat or as
-    ``options=TwoBodyHybridOptions(…)``); InputError for the other methods and for other options."""
+    """The two-body solves: ``primal-monolithic``, ``primal`` (Algorithm 1; its options flat or as
+    ``options=TwoBodyHybridOptions(…)``) and ``primal-ms`` (Algorithm 3: ``H`` and ``cem=CEMOptions(…)`` besides);
+    InputError for the other methods and for other options."""
     if name not in _TWO_BODY_OPTIONS:
         raise InputError(
-            f"{name} cannot solve two deformable bodies: the mixed methods need an Arnold–Winther contact pair and "
-            "the multiscale ones a coarse grid in each body; solve a TwoBodyProblem with 'primal-monolithic' or "
-            "'primal' (Algorithm 1)"
+            f"{name} cannot solve two deformable bodies: the mixed methods need an Arnold–Winther contact pair; "
+            "solve a TwoBodyProblem with 'primal-monolithic', 'primal' (Algorithm 1) or 'primal-ms' (Algorithm 3)"
         )
-    accepted = _TWO_BODY_OPTIONS[name] + (("options",) if name == "primal" else ())
+    accepted = _TWO_BODY_OPTIONS[name] + (("options",) if name != "primal-monolithic" else ())
     refused = sorted(set(values) - set(accepted))
     if refused:
         raise InputError(f"the two-body solve {name} takes the options {', '.join(accepted)}; got {refused}")
     if name == "primal-monolithic":
         return solve_two_body(problem, **values)
     kwargs = {k: values[k] for k in ("delta", "newton", "state") if k in values}
-    flat = {k: v for k, v in values.items() if k not in ("delta", "newton", "state", "options")}
+    own = ("delta", "newton", "state", "options", "H", "cem")
+    flat = {k: v for k, v in values.items() if k not in own}
     options = values.get("options") or TwoBodyHybridOptions()
     if flat:
         options = dataclasses.replace(options, **flat)
+    if name == "primal-ms":
+        if "H" not in values:
+            raise InputError("primal-ms for two bodies needs H, the coarse cell size of both bulks")
+        multiscale = PairMultiscaleOptions(values["H"], values.get("cem") or CEMOptions())
+        return solve_two_body_ms_hybrid(problem, multiscale, options=options, **kwargs)
     return solve_two_body_hybrid(problem, options=options, **kwargs)
 
 
@@ -352,7 +360,8 @@ def solve(problem: ContactProblem, method: str = "primal", /, **options):
             contact (``TwoBodyProblem``: ``"primal-monolithic"``, options ``delta``, ``newton``, ``line_search``,
             a ``TwoBodySolution``; or ``"primal"``, Algorithm 1 with a strip on each side, options those of
             ``hybrid.two_body.TwoBodyHybridOptions``, a ``TwoBodyHybridResult``; both take ``state``, the previous
-            load step's ``.state``: its friction anchors and warm start).
+            load step's ``.state``: its friction anchors and warm start; or ``"primal-ms"``, Algorithm 3 with a
+            CEM-GMsFEM space in each bulk, options ``H`` and ``cem`` besides Algorithm 1's, serial, frictionless).
         method: ``"primal-monolithic"``, ``"mixed-monolithic"``, ``"primal"`` (Algorithm 1), ``"mixed"``
             (Algorithm 2), ``"primal-ms"`` (Algorithm 3) or ``"mixed-ms"`` (Algorithm 4).
         **options: the method's options by name, flat (``tol=1e-8``, ``layers=4``, ``delta=…``) or as their

@@ -6,8 +6,9 @@ Algorithm 1's stopping rule and strips, the output directory and the figures; th
 ``--out``, ``--no-plots``, ``--delta``, ``--tol``, ``--max-iterations``, ``--accel`` override the case's
 ``[run]`` and ``[primal]`` tables, any other flag is refused.  A run solves each load step (warm-started from
 the last with ``primal-monolithic`` on one process) and writes ``cli.pair_outputs``' files; under ``mpiexec``
-``primal-monolithic`` runs in parallel (``fem.two_body_mpi``), ``primal`` is refused.  With ``[friction]`` each step
-starts from the friction state the last one committed (the slip of a step is measured from it).
+``primal-monolithic`` runs in parallel (``fem.two_body_mpi``), and so does ``primal`` (``hybrid.two_body_mpi``).
+With ``[friction]`` each step starts from the friction state the last one committed (the slip of a step is
+measured from it).
 """
 
 import logging
@@ -69,8 +70,8 @@ class PairRunOptions:
         if self.method not in PAIR_METHODS:
             raise InputError(
                 f"--method {self.method} cannot solve two deformable bodies (a case with [pair]): the mixed methods "
-                "need an Arnold–Winther contact pair and the multiscale ones a coarse grid in each body; choose one "
-                f"of {PAIR_METHODS}"
+                "need an Arnold–Winther contact pair, and Algorithm 3 on a pair runs from Python only "
+                f"(fc.solve(pair, 'primal-ms', H=...)); choose one of {PAIR_METHODS}"
             )
         if self.delta is not None and not (np.isfinite(self.delta) and self.delta > 0):
             raise InputError(f"--delta must be a finite number > 0, got {self.delta!r}")
@@ -178,11 +179,6 @@ def _converged(result) -> bool:
 
 def run_pair(options: PairRunOptions, comm: MPI.Comm, case: PairCase) -> int:
     """Solve the case (each load step), write into ``options.out``; 0 converged, 3 not converged."""
-    if comm.size > 1 and options.method != "primal-monolithic":
-        raise InputError(
-            "two-body contact with Algorithm 1 (--method primal) runs on one process: run it without mpiexec, or "
-            "run --method primal-monolithic under mpiexec"
-        )
     output = OutputDirectory(options.out, comm)
     with output:
         t0 = time.perf_counter()

@@ -61,7 +61,8 @@ def step_row(result, method: str) -> dict:
             "iterations": result.iterations,
             "transmission_residual": result.transmission_residual,
             "newton_steps_total": int(sum(h.steps for h in result.newton)),
-            "strip_cells": int(result.strip.size),
+            # (the owned strip cells of each rank, summed)
+            "strip_cells": int(result.u.function_space.mesh.comm.allreduce(int(result.strip.size))),
         }
     return row
 

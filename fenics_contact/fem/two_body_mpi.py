@@ -41,7 +41,7 @@ from fenics_contact.fem.mortar import Surface, contact_quadrature, surface
 from fenics_contact.problem.materials import strain, stress
 from fenics_contact.problem.pair import TwoBodyProblem
 
-__all__ = ["gathered_surface", "solve_two_body_distributed"]
+__all__ = ["gathered_surface", "gathered_u", "reduced_penalty_newton", "solve_two_body_distributed"]
 
 #: the stopping rule: a full step that keeps the active set (the equations are then linear, solved exactly), or
 #: ‖μ − W s(μ)⁺‖ ≤ RTOL ‖μ‖ + 100 ε max W ‖s₀‖ (round-off)
@@ -148,8 +148,31 @@ def solve_two_body_distributed(
         return _frictional(problem, parts, newton, state, time.perf_counter() - start)
     s0 -= Q.gap
     W = Q.weights / delta
-    mu = np.zeros(m)
-    s = s0.copy()
+    mu, s, history = reduced_penalty_newton(S, W, s0, newton, line_search)
+    u_h = fem.Function(V, name="u")
+    u_h.x.array[:n_owned] = u0.array - Z @ mu
+    u_h.x.scatter_forward()
+    u0.destroy()
+    # the profiles on every rank: u at the contact columns gathered, the contact forces −Bᵀ W s⁺
+    u_full = gathered_u(u_h, np.unique(Q.B.indices), N, lo, n_owned, comm)
+    force = -(Q.B.T @ (W * np.maximum(s, 0.0)))
+    elapsed = time.perf_counter() - start
+    return pair_solution(problem, u_h, u_full, force, (slave, master, Q), delta, N, elapsed, history)
+
+
+def reduced_penalty_newton(
+    S: np.ndarray,
+    W: np.ndarray,
+    s0: np.ndarray,
+    newton: NewtonOptions,
+    line_search: str,
+    start: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray, NewtonHistory]:
+    """μ = W s(μ)⁺, s(μ) = s₀ − S μ by semismooth Newton with the exact line search (module docstring), from
+    ``start`` (default 0): (μ, s(μ), the history); the same on every rank."""
+    m = s0.size
+    mu = np.zeros(m) if start is None else start.copy()
+    s = s0 - S @ mu
     active = s >= 0.0  # touching counts: a body held only by contact (as the serial solve)
     history = NewtonHistory(factorizations=1)
     converged = False
@@ -172,18 +195,10 @@ def solve_two_body_distributed(
         raise ConvergenceError(
             f"two-body contact (distributed): no converged active set in {newton.max_iterations} Newton steps"
         )
-    u_h = fem.Function(V, name="u")
-    u_h.x.array[:n_owned] = u0.array - Z @ mu
-    u_h.x.scatter_forward()
-    u0.destroy()
-    # the profiles on every rank: u at the contact columns gathered, the contact forces −Bᵀ W s⁺
-    u_full = _gathered_u(u_h, np.unique(Q.B.indices), N, lo, n_owned, comm)
-    force = -(Q.B.T @ (W * np.maximum(s, 0.0)))
-    elapsed = time.perf_counter() - start
-    return pair_solution(problem, u_h, u_full, force, (slave, master, Q), delta, N, elapsed, history)
+    return mu, s, history
 
 
-def _gathered_u(u_h: fem.Function, columns: np.ndarray, N: int, lo: int, n_owned: int, comm: MPI.Comm) -> np.ndarray:
+def gathered_u(u_h: fem.Function, columns: np.ndarray, N: int, lo: int, n_owned: int, comm: MPI.Comm) -> np.ndarray:
     """A global DOF vector holding u at ``columns`` (the contact columns) on every rank, zero elsewhere."""
     own = columns[(columns >= lo) & (columns < lo + n_owned)]
     u_full = np.zeros(N)
@@ -221,7 +236,7 @@ def _frictional(problem: TwoBodyProblem, parts, newton: NewtonOptions, state, el
     u_h.x.array[:n_owned] = u0.array - Z @ lam
     u_h.x.scatter_forward()
     u0.destroy()
-    u_full = _gathered_u(u_h, np.unique(Q.B.indices), N, lo, n_owned, comm)
+    u_full = gathered_u(u_h, np.unique(Q.B.indices), N, lo, n_owned, comm)
     force = -(Q.relative.T @ lam)
     friction.nodal = U.reshape(-1, bs)
     tangential = friction.profile()

@@ -20,7 +20,8 @@ per γ unknown and dense matrices of the size of γ: affordable for the strips o
 of many thousand nodes.  The stopping rule is the transmission residual
 (``hybrid.certificate``).  With the pair's friction law Ω₂ is the frictional strips (``fem.two_body_friction``):
 R₂ comes from their frictional Jacobian, one interface Newton step per friction state, and the state is
-committed once the pair has converged (``state`` carries it to the next load step).  Serial.
+committed once the pair has converged (``state`` carries it to the next load step).  Under MPI
+``hybrid.two_body_mpi`` solves both subdomains in parallel and the reduced pair on every rank (the same fixed point).
 """
 
 import logging
@@ -53,6 +54,7 @@ from fenics_contact.fem.two_body import (
 from fenics_contact.fem.two_body_friction import FrictionalTwoBodySystem, solve_frictional_pair
 from fenics_contact.hybrid.certificate import primal_certificate
 from fenics_contact.hybrid.iteration import AndersonUpdate
+from fenics_contact.hybrid.two_body_mpi import solve_two_body_hybrid_distributed
 from fenics_contact.problem.pair import TwoBodyProblem
 
 __all__ = ["TwoBodyHybridOptions", "TwoBodyHybridResult", "strip_cells", "solve_two_body_hybrid"]
@@ -92,7 +94,8 @@ class TwoBodyHybridOptions:
 @dataclass(slots=True)
 class TwoBodyHybridResult:
     """The converged (or last) pair: u (Ω₁ values in the bulks, Ω₂'s in the strips, their mean on γ), the
-    transmission residual per evaluation of T, the contact Newton histories, the strip cells."""
+    transmission residual per evaluation of T, the contact Newton histories, the strip cells (local; under MPI the
+    owned ones)."""
 
     u: fem.Function
     converged: bool
@@ -239,6 +242,9 @@ class _Bulk:
         u[self.free] = self.factor.solve((self.rhs0 + data[self.free])[:, None])[:, 0]
         return u
 
+    def destroy(self) -> None:
+        self.factor.destroy()
+
 
 def solve_two_body_hybrid(
     problem: TwoBodyProblem,
@@ -247,14 +253,19 @@ def solve_two_body_hybrid(
     options: TwoBodyHybridOptions = TwoBodyHybridOptions(),
     newton: NewtonOptions = NewtonOptions(),
     state: PairState | None = None,
+    omega1=None,
 ) -> TwoBodyHybridResult:
     """Algorithm 1 for two bodies (module docstring); the same δ default as the monolithic solve.  ``state``: the
     previous load step's ``.state`` (either solve's): Ω₂ starts from its u, the interface data from its g (when
-    Algorithm 1 made it), and with friction the slip is measured from its anchors."""
+    Algorithm 1 made it), and with friction the slip is measured from its anchors.  ``omega1``: None (the fine
+    bulks), or ``omega1(problem, V, split, strip)`` building another Ω₁ with ``response``, ``solve`` and
+    ``destroy`` (``multiscale.pair``: a CEM-GMsFEM space in each bulk; serial)."""
     if state is not None and not isinstance(state, PairState):
         raise InputError(f"two-body Algorithm 1: state must be a PairState (a solution's .state), got {state!r}")
-    if problem.comm.size > 1:
-        raise InputError("two-body contact runs on one process (run it without mpiexec)")
+    if omega1 is not None and problem.comm.size > 1:
+        raise InputError("two-body Algorithm 1 with another Omega_1 runs on one process (run it without mpiexec)")
+    if problem.comm.size > 1:  # both subdomains in parallel, the pair reduced to γ and the contact rows
+        return solve_two_body_hybrid_distributed(problem, delta=delta, options=options, newton=newton, state=state)
     start = time.perf_counter()
     msh = problem.mesh
     gdim = msh.geometry.dim
@@ -266,8 +277,11 @@ def solve_two_body_hybrid(
     bulk_cells = np.setdiff1d(np.arange(msh.topology.index_map(msh.topology.dim).size_local), strip)
     split = _Split(problem, V, strip, fixed, options.alpha_scale)
     robin = sp.csr_matrix((split.alpha * split.weights, (split.gamma, split.gamma)), shape=(n, n))
-    K1, b1 = stiffness(problem, V, bulk_cells), load_vector(problem, V, bulk_cells)
-    bulk = _Bulk(K1, b1, split.dofs[0], fixed, values, robin)
+    if omega1 is None:
+        K1, b1 = stiffness(problem, V, bulk_cells), load_vector(problem, V, bulk_cells)
+        bulk = _Bulk(K1, b1, split.dofs[0], fixed, values, robin)
+    else:
+        bulk = omega1(problem, V, split, strip)
     slave = surface(V, problem.facet_tags, problem.pair.slave)
     master = surface(V, problem.facet_tags, problem.pair.master)
     delta = two_body_penalty(problem, slave, master, delta)
@@ -361,7 +375,7 @@ def solve_two_body_hybrid(
         dissipation = system.commit() if frictional else 0.0
     finally:
         system.destroy()
-        bulk.factor.destroy()
+        bulk.destroy()
     u1, u2 = last
     merged, count = np.zeros(n), np.zeros(n)
     for dofs, values_ in ((split.dofs[0], u1), (d2, u2)):

@@ -1,6 +1,6 @@
 """A two-body case under ``mpiexec -n 2``: ``primal-monolithic`` runs in parallel (the contact surfaces gathered,
-``fem.two_body_mpi``) and its summary is the serial command's to 1e-10 at every load step, with the same files;
-Algorithm 1 (``primal``) is refused with exit 2 before anything is written, by run and check-mesh alike."""
+``fem.two_body_mpi``) and its summary is the serial command's to 1e-10 at every load step, with the same files
+(Algorithm 1 on two ranks: ``tests/hybrid/test_two_body_hybrid_mpi.py``)."""
 
 from pathlib import Path
 
@@ -31,12 +31,3 @@ def test_a_two_body_case_on_two_ranks_is_the_serial_run(shared_tmp_path):
         assert p["force_balance"] < 1e-12
     files = on_every_rank(sorted(f.name for f in out.iterdir()))
     assert {"fields.pvd", "contact.pvd", "pair.png", "E.png", "force_displacement.png", "summary.json"} <= set(files)
-
-
-def test_algorithm_1_on_a_two_body_case_is_refused_on_two_ranks(shared_tmp_path, capsys):
-    out = shared_tmp_path / "pair"
-    assert main(["run", "--case", str(CASE), "--method", "primal", "--no-plots", "--out", str(out)]) == 2
-    assert on_every_rank(not out.exists())
-    assert main(["check-mesh", "--case", str(CASE), "--method", "primal"]) == 2
-    err = on_every_rank(capsys.readouterr().err)
-    assert err.count("Algorithm 1 (--method primal) runs on one process") == 2

@@ -162,9 +162,11 @@ def test_two_body_hertz_on_non_matching_meshes():
 
 def test_methods_that_cannot_do_two_bodies_refuse():
     problem = _stacked(2, 3)
-    for method in ("mixed", "mixed-monolithic", "primal-ms", "mixed-ms"):
+    for method in ("mixed", "mixed-monolithic", "mixed-ms"):
         with pytest.raises(InputError, match="cannot solve two deformable bodies"):
             fc.solve(problem, method)
+    with pytest.raises(InputError, match="needs H"):
+        fc.solve(problem, "primal-ms")
     with pytest.raises(InputError, match="takes the options"):
         fc.solve(problem, "primal-monolithic", tol=1e-8)
     with pytest.raises(InputError, match="takes the options"):

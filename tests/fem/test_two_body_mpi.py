@@ -1,7 +1,7 @@
 """The monolithic two-body solve on two ranks (``fem.two_body_mpi``): the contact surfaces gathered to every rank,
 the bulk solved in parallel; the solution is the serial one (``mpiexec -n 2``, against the same problem on
 ``COMM_SELF``) to 1e-10: the displacement at every vertex, both contact profiles and the forces on both sides,
-with a partial contact whose active set changes during the iteration.  Algorithm 1 (``primal``) refuses."""
+with a partial contact whose active set changes during the iteration."""
 
 import numpy as np
 import pytest
@@ -10,7 +10,6 @@ from mpi4py import MPI
 from mpi_jobs import on_every_rank
 
 import fenics_contact as fc
-from fenics_contact.errors import InputError
 from fenics_contact.problem.pair import Body, ContactPair, Support, TwoBodyProblem
 from fenics_contact.problem.pair_meshes import PairTag as T
 from fenics_contact.problem.pair_meshes import two_blocks
@@ -65,13 +64,6 @@ def test_two_ranks_give_the_serial_solution():
         assert rows.shape[0] == serial_u.shape[0] and np.max(distance) < 1e-12
         error = float(np.max(np.abs(rows[:, 2:] - serial_u[match])) / np.max(np.abs(serial_u)))
     assert on_every_rank(error) < 1e-10
-
-
-def test_algorithm_1_refuses_on_several_ranks():
-    problem = _tilted(MPI.COMM_WORLD)
-    assert problem.contact_moduli() == (5.0, 1.0)  # (built and validated collectively)
-    with pytest.raises(InputError, match="runs on one process"):
-        fc.solve(problem, "primal")
 
 
 def _tilted_3d(comm: MPI.Comm) -> TwoBodyProblem:

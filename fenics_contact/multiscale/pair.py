@@ -1,0 +1,207 @@
+"""Algorithm 3 for two bodies: each body's bulk a CEM-GMsFEM space, each strip fine, the contact between the strips.
+
+Algorithm 1 for a pair (``hybrid.two_body``) with Ω₁ replaced, body by body, by the multiscale Robin solve of the
+one-body Algorithm 3 (``multiscale.cem``): each body's bulk is a serial submesh with γ (its facets against its
+strip) and Γ_D (its supports) tagged, its coarse grid the centroid squares of side ``H`` (``problem.strip.
+coarse_partition``), its fine operators, relaxed CEM bases with ``cem.layers`` oversampling layers and the
+factorized coarse matrix built once; its γ response u₁|γ = R g + r₀ (``MultiscaleRobinSolver.response``) is
+exact in the coarse space, so the interface Newton method on the condensed contact unknowns of both strips is
+Algorithm 1's.  The two bodies' spaces are independent (no coarse cell holds cells of both).  The fixed point
+differs from the monolithic solution by the multiscale error, which falls with the oversampling layers.
+Serial; a body's supports hold every component (no rollers), one prescribed displacement per body, no
+tractions on the bulks.
+"""
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from dolfinx import fem
+from dolfinx import mesh as dmesh
+
+from fenics_contact.errors import InputError
+from fenics_contact.fem.contact import NewtonOptions
+from fenics_contact.hybrid.two_body import TwoBodyHybridOptions, TwoBodyHybridResult, solve_two_body_hybrid
+from fenics_contact.multiscale.cem.cache import offline_stage
+from fenics_contact.multiscale.cem.coarse import MultiscaleRobinSolver
+from fenics_contact.multiscale.cem.operators import assemble_fine_operators
+from fenics_contact.multiscale.cem.options import CEMOptions
+from fenics_contact.multiscale.coarse import grid_from_cells
+from fenics_contact.problem.boundary import BoundaryConditions
+from fenics_contact.problem.fields import MaterialFields
+from fenics_contact.problem.pair import TwoBodyProblem
+from fenics_contact.problem.strip import coarse_partition
+from fenics_contact.problem.tags import Boundary
+
+__all__ = ["PairMultiscaleOptions", "solve_two_body_ms_hybrid"]
+
+
+@dataclass(frozen=True, slots=True)
+class PairMultiscaleOptions:
+    """``H``: the coarse cell size of both bulks (mesh units, > 0); ``cem``: the CEM-GMsFEM parameters."""
+
+    H: float
+    cem: CEMOptions = field(default_factory=CEMOptions)
+
+    def __post_init__(self) -> None:
+        if isinstance(self.H, bool) or not isinstance(self.H, (int, float, np.number)) or not self.H > 0:
+            raise InputError(f"two-body Algorithm 3: H must be a coarse cell size > 0, got {self.H!r}")
+        if not isinstance(self.cem, CEMOptions):
+            raise InputError(f"two-body Algorithm 3: cem must be a CEMOptions, got {type(self.cem).__name__}")
+
+
+def _dg0(source: fem.Function, Q0: fem.FunctionSpace, parent_cells: np.ndarray) -> fem.Function:
+    """A DG0 field of the parent mesh on a submesh (``parent_cells``: the parent cell of each submesh cell)."""
+    out = fem.Function(Q0)
+    bs = Q0.dofmap.index_map_bs
+    src = source.x.array.reshape(-1, bs)[source.function_space.dofmap.list[parent_cells, 0]]
+    out.x.array.reshape(-1, bs)[Q0.dofmap.list[:, 0]] = src
+    return out
+
+
+def _supports_of(problem: TwoBodyProblem, k: int) -> list:
+    """The supports on body k (the body of the cell at each support's facets)."""
+    msh = problem.mesh
+    tdim = msh.topology.dim
+    msh.topology.create_connectivity(tdim - 1, tdim)
+    f2c = msh.topology.connectivity(tdim - 1, tdim)
+    cells = set(problem.body_cells(k).tolist())
+    return [s for s in problem.supports if any(f2c.links(f)[0] in cells for f in problem.facet_tags.find(s.facets))]
+
+
+class _BodyBulk:
+    """One body's bulk: the submesh, its γ / Γ_D tags, the multiscale Robin solver, its DOFs in the parent."""
+
+    def __init__(self, problem: TwoBodyProblem, V, cells, in_strip, supports, alpha, options, h) -> None:
+        msh = problem.mesh
+        tdim, gdim = msh.topology.dim, msh.geometry.dim
+        sub, cell_map, vertex_map, _ = dmesh.create_submesh(msh, tdim, cells)
+        parent_cells = np.asarray(cell_map.sub_topology_to_topology(np.arange(cells.size, dtype=np.int32), False))
+        Vs = fem.functionspace(sub, ("Lagrange", 1, (gdim,)))
+        blocks = np.zeros(Vs.dofmap.index_map.size_local, dtype=np.int64)
+        blocks[Vs.dofmap.list.ravel()] = V.dofmap.list[parent_cells].ravel()  # P1 DOFs follow the geometry nodes
+        self.dofs = (gdim * blocks[:, None] + np.arange(gdim)).ravel()  #: the parent DOF of every submesh DOF
+        # the submesh facets: γ (a parent facet between a strip and a bulk cell) and Γ_D (the body's supports)
+        msh.topology.create_connectivity(tdim - 1, 0)
+        msh.topology.create_connectivity(tdim - 1, tdim)
+        f2v, f2c = msh.topology.connectivity(tdim - 1, 0), msh.topology.connectivity(tdim - 1, tdim)
+        fmap = msh.topology.index_map(tdim - 1)
+        parent = {tuple(sorted(f2v.links(f))): f for f in range(fmap.size_local + fmap.num_ghosts)}
+        sub.topology.create_connectivity(tdim - 1, 0)
+        sub.topology.create_connectivity(tdim - 1, tdim)
+        sf2v = sub.topology.connectivity(tdim - 1, 0)
+        n_vertices = sub.topology.index_map(0).size_local
+        vertices = np.asarray(vertex_map.sub_topology_to_topology(np.arange(n_vertices, dtype=np.int32), False))
+        held = set(np.concatenate([problem.facet_tags.find(s.facets) for s in supports]).tolist())
+        entities, values = [], []
+        for f in range(sub.topology.index_map(tdim - 1).size_local):
+            pf = parent[tuple(sorted(vertices[sf2v.links(f)]))]
+            sides = in_strip[f2c.links(pf)]
+            tag = (
+                Boundary.INTERFACE
+                if sides.size == 2 and sides[0] != sides[1]
+                else Boundary.GAMMA_D
+                if pf in held
+                else None
+            )
+            if tag is not None:
+                entities.append(f)
+                values.append(int(tag))
+        facet_tags = dmesh.meshtags(sub, tdim - 1, np.asarray(entities, np.int32), np.asarray(values, np.int32))
+        Q0 = fem.functionspace(sub, ("DG", 0))
+        fields = problem.fields
+        f_space = fem.functionspace(sub, ("DG", 0, (gdim,)))
+        sub_fields = MaterialFields(
+            *(_dg0(fn, Q0, parent_cells) for fn in (fields.E, fields.nu, fields.lmbda, fields.mu)),
+            _dg0(fields.f, f_space, parent_cells),
+            BoundaryConditions(),
+        )
+        alpha_fn = fem.Function(Vs, name="alpha")
+        alpha_fn.x.array[:] = alpha[self.dofs]
+        grid = grid_from_cells(
+            sub.geometry.dofmaps[0],
+            sub.geometry.x,
+            coarse_partition(sub, np.ones(cells.size, bool), options.H),
+            options.H,
+        )
+        moved = [s.displacement for s in supports if s.displacement is not None]
+        ops = assemble_fine_operators(
+            Vs, facet_tags, sub_fields, alpha_fn, grid, s_factor=options.cem.s_factor, displacement=(moved or [None])[0]
+        )
+        space, _ = offline_stage(ops, grid, options.cem, h=h)
+        self.solver = MultiscaleRobinSolver(ops, space, grid)
+        self.gamma = self.dofs[ops.gamma]  #: the parent DOFs of the solver's γ values (its order)
+
+
+class _MultiscaleBulks:
+    """Ω₁ of the pair with a CEM-GMsFEM space in each body (``hybrid.two_body``'s Ω₁ interface: ``response``,
+    ``solve``, ``destroy``)."""
+
+    def __init__(self, problem: TwoBodyProblem, V, split, strip: np.ndarray, options: PairMultiscaleOptions) -> None:
+        msh = problem.mesh
+        tdim, n = msh.topology.dim, V.dofmap.index_map.size_local * V.dofmap.index_map_bs
+        n_cells = msh.topology.index_map(tdim).size_local
+        in_strip = np.zeros(n_cells, dtype=bool)
+        in_strip[strip] = True
+        alpha = np.zeros(n)
+        alpha[split.gamma] = split.alpha
+        self.weight = np.zeros(n)
+        self.weight[split.gamma] = split.weights
+        self.position = np.full(n, -1, dtype=np.int64)
+        self.position[split.dofs[0]] = np.arange(split.dofs[0].size)
+        h = float(np.median(np.abs(msh.h(tdim, np.arange(n_cells, dtype=np.int32)))))
+        self.bodies = []
+        for k in (0, 1):
+            cells = np.setdiff1d(problem.body_cells(k), strip).astype(np.int32)
+            self.bodies.append(_BodyBulk(problem, V, cells, in_strip, _supports_of(problem, k), alpha, options, h))
+
+    def response(self, positions: np.ndarray, weights: np.ndarray) -> np.ndarray:
+        """R₁[i, j] = ∂u₁(positions[i])/∂g_j for data weights[j] g_j at positions[j] (block diagonal by body)."""
+        at = np.full(self.position.size, -1, dtype=np.int64)
+        at[np.flatnonzero(self.position >= 0)[positions]] = np.arange(positions.size)
+        R = np.zeros((positions.size, positions.size))
+        for bulk in self.bodies:
+            index = at[bulk.gamma]
+            R[np.ix_(index, index)] = bulk.solver.response()[0]
+        return R
+
+    def solve(self, data: np.ndarray) -> np.ndarray:
+        """u₁ on the bulk DOFs for the data vector ``data`` (w_p g_p at the γ DOFs)."""
+        u = np.zeros(data.size)
+        for bulk in self.bodies:
+            g = data[self.position[bulk.gamma]] / self.weight[bulk.gamma]
+            u[self.position[bulk.dofs]] = bulk.solver.solve(g)
+        return u
+
+    def destroy(self) -> None:
+        """(Nothing to free: the coarse factorizations are dense.)"""
+
+
+def solve_two_body_ms_hybrid(
+    problem: TwoBodyProblem,
+    multiscale: PairMultiscaleOptions,
+    *,
+    delta: float | None = None,
+    options: TwoBodyHybridOptions = TwoBodyHybridOptions(),
+    newton: NewtonOptions = NewtonOptions(),
+) -> TwoBodyHybridResult:
+    """Algorithm 3 for two bodies (module docstring): ``hybrid.two_body.solve_two_body_hybrid`` with each bulk a
+    CEM-GMsFEM space; serial, frictionless."""
+    if not isinstance(multiscale, PairMultiscaleOptions):
+        raise InputError(f"two-body Algorithm 3 takes PairMultiscaleOptions, got {type(multiscale).__name__}")
+    if problem.comm.size > 1:
+        raise InputError("two-body Algorithm 3 (primal-ms) runs on one process (run it without mpiexec)")
+    if problem.friction is not None:
+        raise InputError("two-body Algorithm 3 (primal-ms) is frictionless: solve a pair with friction by 'primal'")
+    if problem.tractions:
+        raise InputError("two-body Algorithm 3 (primal-ms) takes no tractions (the bulks' load is the body force)")
+    for s in problem.supports:
+        if s.components is not None:
+            raise InputError("two-body Algorithm 3 (primal-ms): a support holds every component (no rollers)")
+    for k in (0, 1):
+        if sum(s.displacement is not None for s in _supports_of(problem, k)) > 1:
+            raise InputError("two-body Algorithm 3 (primal-ms): one prescribed displacement per body")
+
+    def omega1(problem_, V, split, strip):
+        return _MultiscaleBulks(problem_, V, split, strip, multiscale)
+
+    return solve_two_body_hybrid(problem, delta=delta, options=options, newton=newton, omega1=omega1)

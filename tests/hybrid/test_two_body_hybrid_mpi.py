@@ -1,0 +1,154 @@
+"""Algorithm 1 for two bodies on two ranks (``hybrid.two_body_mpi``): both subdomains solved in parallel, the pair
+reduced to the interface data and the contact rows on every rank.  On a layered pair (strata of contrast 1e3
+with inclusions, non-matching meshes, an overhanging upper block) the result is the serial one (``mpiexec -n 2``,
+against the same problem on ``COMM_SELF``; also on 3 ranks) to 1e-10, frictionless and along a Coulomb
+press-then-shear path, in at most 8 interface Newton steps; in 3D alike; and a case file run with
+``--method primal`` is the serial run."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import scipy.spatial
+from mpi4py import MPI
+from mpi_jobs import on_every_rank, run_summary, serial_cli
+
+import fenics_contact as fc
+from fenics_contact.cli import main
+from fenics_contact.errors import InputError
+from fenics_contact.problem.pair import Body, ContactPair, Support, TwoBodyProblem
+from fenics_contact.problem.pair_meshes import PairTag as T
+from fenics_contact.problem.pair_meshes import two_blocks
+
+pytestmark = pytest.mark.mpi
+
+CONTRAST = 1e3
+CASES = Path(__file__).parents[2] / "cases"
+
+
+def _lower(x):
+    """Strata of E = 1 and 1e3 across the lower block, a stiff inclusion in a soft one."""
+    E = np.where(np.sin(12.0 * x[1]) > 0.0, CONTRAST, 1.0)
+    return np.where((x[0] - 0.3) ** 2 + (x[1] + 0.25) ** 2 < 0.08**2, CONTRAST, E)
+
+
+def _upper(x):
+    """Strata the other way round in the upper block, a soft inclusion."""
+    E = np.where(np.sin(10.0 * x[1] + 1.0) > 0.0, 1.0, CONTRAST)
+    return np.where((x[0] - 0.6) ** 2 + (x[1] - 0.2) ** 2 < 0.07**2, 1.0, E)
+
+
+def _path(comm: MPI.Comm, law, path) -> list:
+    m = two_blocks(10, 14, heights=(0.5, 0.4), offset=0.2, comm=comm)
+    state, out = None, []
+    for top in path:
+        problem = TwoBodyProblem(
+            m.mesh,
+            m.cell_tags,
+            m.facet_tags,
+            bodies=(Body(T.LOWER, _lower, 0.3), Body(T.UPPER, _upper, 0.2)),
+            pair=ContactPair(T.UPPER_BOTTOM, T.LOWER_TOP, friction=law),
+            supports=(Support(T.LOWER_BOTTOM), Support(T.UPPER_TOP, top)),
+        )
+        out.append(fc.solve(problem, "primal", tol=1e-11, state=state))
+        state = out[-1].state
+    return out
+
+
+def _vertex_error(parallel, serial) -> float:
+    """max |u_parallel − u_serial| / max |u_serial| over the vertices (matched by position and body), every rank."""
+    V = parallel.function_space
+    n = V.dofmap.index_map.size_local
+    rows = np.column_stack([V.tabulate_dof_coordinates()[:n, :2], parallel.x.array.reshape(-1, 2)[:n]])
+    parts = V.mesh.comm.gather(rows, root=0)
+    error = None
+    if parts is not None:
+        rows = np.vstack(parts)
+        xs = serial.function_space.tabulate_dof_coordinates()[:, :2]
+        us = serial.x.array.reshape(-1, 2)
+        tree = scipy.spatial.cKDTree(xs)
+        # a position on the contact faces holds a node of each body: the serial value nearest in u
+        error = 0.0
+        for x, u in zip(rows[:, :2], rows[:, 2:], strict=True):
+            near = tree.query_ball_point(x, 1e-12)
+            error = max(error, min(np.max(np.abs(u - us[j])) for j in near))
+        error /= np.max(np.abs(us))
+        assert rows.shape[0] == xs.shape[0]
+    return on_every_rank(error)
+
+
+@pytest.mark.mpi(sizes=(2, 3))
+@pytest.mark.parametrize(
+    ("law", "path"),
+    [(None, ((0.002, -0.005),)), (fc.Friction("coulomb", mu=0.3), ((0.0, -0.005), (0.002, -0.005), (0.02, -0.005)))],
+    ids=["frictionless", "coulomb"],
+)
+def test_two_ranks_give_the_serial_algorithm_1(law, path):
+    parallel, serial = _path(MPI.COMM_WORLD, law, path), _path(MPI.COMM_SELF, law, path)
+    assert MPI.COMM_WORLD.size > 1
+    for p, s in zip(parallel, serial, strict=True):
+        assert p.converged and p.interface_newton_steps <= 8 and p.iterations <= 8
+        for fp, fs in zip(p.forces, s.forces, strict=True):
+            assert np.linalg.norm(fp - fs) <= 1e-10 * np.linalg.norm(fs)
+        assert p.force_balance() < 1e-12
+        for a, b in ((p.slave, s.slave), (p.master, s.master)):
+            assert np.array_equal(a.points, b.points)
+            assert np.max(np.abs(a.sigma_c - b.sigma_c)) <= 1e-10 * np.max(np.abs(b.sigma_c))
+        assert _vertex_error(p.u, s.u) < 1e-10
+        if law is not None:
+            assert np.array_equal(p.friction.slip, s.friction.slip)
+            assert p.dissipation == pytest.approx(s.dissipation, rel=1e-8, abs=1e-15)
+    if law is not None:
+        assert np.any(parallel[-1].friction.slip)
+
+
+@pytest.mark.parametrize("case", ["two_blocks.toml", "fault_sliding.toml"])
+def test_a_two_body_case_with_algorithm_1_on_two_ranks_is_the_serial_run(shared_tmp_path, case):
+    assert main(["check-mesh", "--case", str(CASES / case), "--method", "primal"]) == 0
+    args = ["run", "--case", str(CASES / case), "--method", "primal", "--no-plots"]
+    code, err, serial = serial_cli(*args, "--out", str(shared_tmp_path / "serial"))
+    assert code == 0, err[-3000:]
+    out = shared_tmp_path / "parallel"
+    assert main([*args, "--out", str(out)]) == 0
+    parallel = run_summary(out)
+    assert parallel["mpi_ranks"] == 2 and serial["mpi_ranks"] == 1
+    for p, s in zip(parallel["load_steps"]["steps"], serial["load_steps"]["steps"], strict=True):
+        for key in ("force_slave", "force_master"):
+            assert np.linalg.norm(np.subtract(p[key], s[key])) <= 1e-10 * np.linalg.norm(s[key])
+        assert p["force_balance"] < 1e-12
+        assert p["strip_cells"] == s["strip_cells"]
+        if "friction" in s:
+            assert p["friction"]["slip_nodes"] == s["friction"]["slip_nodes"]
+
+
+def _tilted_3d(comm: MPI.Comm) -> TwoBodyProblem:
+    m = two_blocks(5, 6, heights=(0.5, 0.4), dim=3, comm=comm)
+    return TwoBodyProblem(
+        m.mesh,
+        m.cell_tags,
+        m.facet_tags,
+        bodies=(Body(T.LOWER, 1.0, 0.3), Body(T.UPPER, 5.0, 0.2)),
+        pair=ContactPair(T.UPPER_BOTTOM, T.LOWER_TOP),
+        supports=(
+            Support(T.LOWER_BOTTOM),
+            Support(T.UPPER_TOP, lambda x: np.vstack([0.0 * x[0], 0.0 * x[0], 0.005 - 0.02 * x[0]])),
+        ),
+    )
+
+
+def test_two_ranks_give_the_serial_algorithm_1_in_three_dimensions():
+    """A partial contact of two blocks in 3D, one-layer strips: the serial forces and the monolithic ones."""
+    parallel = fc.solve(_tilted_3d(MPI.COMM_WORLD), "primal", tol=1e-11, layers=1)
+    serial = fc.solve(_tilted_3d(MPI.COMM_SELF), "primal", tol=1e-11, layers=1)
+    mono = fc.solve(_tilted_3d(MPI.COMM_WORLD), "primal-monolithic")
+    assert parallel.converged and parallel.iterations <= 8
+    assert 0 < np.count_nonzero(serial.slave.active) < serial.slave.active.size
+    for fp, fs, fm in zip(parallel.forces, serial.forces, mono.forces, strict=True):
+        assert np.linalg.norm(fp - fs) <= 1e-10 * np.linalg.norm(fs)
+        assert np.linalg.norm(fp - fm) <= 1e-9 * np.linalg.norm(fm)
+    assert parallel.force_balance() < 1e-12
+
+
+def test_two_body_algorithm_3_refuses_on_two_ranks():
+    with pytest.raises(InputError, match="runs on one process"):
+        fc.solve(_tilted_3d(MPI.COMM_WORLD), "primal-ms", H=0.25)

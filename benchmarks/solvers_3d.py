@@ -9,6 +9,7 @@ process of its own) and the contact force.  A run whose memory, extrapolated fro
 
     OMP_NUM_THREADS=1 python benchmarks/solvers_3d.py --cells 10 15 20 25 30 40 --out benchmarks/results/solvers_3d.md
     OMP_NUM_THREADS=1 python benchmarks/solvers_3d.py --mesh graded --cells 8 --out benchmarks/results/solvers_3d_graded.md
+    OMP_NUM_THREADS=1 python benchmarks/solvers_3d.py --cells 50 60 --solvers amg --out benchmarks/results/solvers_3d_large.md
 """
 
 import argparse
@@ -88,6 +89,7 @@ def main() -> None:
         default="block",
         help="block: hertz_quarter_block (gmsh, well-shaped cells); graded: a graded grid of planes (stretched cells)",
     )
+    parser.add_argument("--solvers", nargs="+", choices=SOLVERS, default=list(SOLVERS), help="the solvers to run")
     parser.add_argument("--single", nargs=2, metavar=("CELLS", "SOLVER"), help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.single:
@@ -96,7 +98,7 @@ def main() -> None:
     rows, last = [], {}
     for cells in args.cells:
         forces = {}
-        for solver in SOLVERS:
+        for solver in args.solvers:
             if solver in last:  # extrapolate the memory from the last size (DOFs ∝ cells³)
                 prev = last[solver]
                 ratio = (cells / prev["cells"]) ** 3

@@ -4,6 +4,8 @@ fails says so."""
 
 import numpy as np
 import pytest
+from mpi4py import MPI
+from mpi_jobs import on_every_rank
 
 import fenics_contact as fc
 from fenics_contact.errors import ConvergenceError
@@ -56,3 +58,26 @@ def test_an_amg_omega1_that_does_not_converge_raises_a_clear_error():
     capped = LinearSolverOptions(kind="amg", rtol=1e-12, max_iterations=2)
     with pytest.raises(ConvergenceError, match="fc_primal_omega1_.*did not converge.*solver='direct'"):
         fc.solve(problem, "primal", solver=capped)
+
+
+def _amg_numbers(comm) -> dict:
+    """Algorithm 1 with an AMG Ω₁ on ``comm``: u ordered by its node coordinates, and the run's numbers."""
+    problem = channels_3d(E_high=1e2).on(channels_3d_mesh(6, comm=comm))
+    ref = fc.solve(problem, "primal-monolithic", solver="direct")
+    result = fc.solve(problem, "primal", reference=ref.u, tol=1e-9, solver=AMG)
+    V = result.u.function_space
+    owned = V.dofmap.index_map.size_local
+    x = np.concatenate(comm.allgather(V.tabulate_dof_coordinates()[:owned]))
+    u = np.concatenate(comm.allgather(result.u.x.array.reshape(-1, 3)[:owned]))
+    numbers = {"u": u[np.lexsort(np.round(x, 12).T)], "converged": result.converged, "e_u": result.e_u}
+    return on_every_rank(numbers, comm=MPI.COMM_WORLD)
+
+
+@pytest.mark.mpi(sizes=(2,))
+def test_algorithm_1_with_an_amg_omega1_on_two_ranks_is_the_serial_answer():
+    """The same solve on COMM_SELF and on two ranks (the AMG aggregates differ with the partition): both glued and
+    on the monolithic solution, node by node equal to the Krylov tolerance's AGREEMENT."""
+    serial, parallel = _amg_numbers(MPI.COMM_SELF), _amg_numbers(MPI.COMM_WORLD)
+    for run in (serial, parallel):
+        assert run["converged"] and run["e_u"] <= AGREEMENT
+    assert np.abs(parallel["u"] - serial["u"]).max() <= AGREEMENT * np.abs(serial["u"]).max()

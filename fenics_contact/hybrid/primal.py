@@ -53,6 +53,8 @@ __all__ = [
     "solve_or_verify",
     "DEFAULT_ALPHA",
     "DEFAULT_ALPHA_MS",
+    "OMEGA1_AUTO_AMG_DOFS",
+    "omega1_solver",
 ]
 
 #: Default transmission coefficient α_p = E_p (h/L_ref)^(-1/2)/L_ref = E_p/√(h L_ref), a stiffness per length
@@ -63,8 +65,21 @@ DEFAULT_ALPHA = "E*h^-1/2"
 #: that error multiplied by α: α_p = E_p h^(-1/2) (≈ 6e6 in the stiff channels of model 3 at contrast
 #: 1e6) made it indefinite (h = 1/32, m = 3) or 20–200× less accurate (m = 4).
 DEFAULT_ALPHA_MS = "Emin*h^-1/2"
+#: Ω₁ unknowns from which ``solver="auto"`` takes AMG in Ω₁ (3D).  Higher than the monolithic solve's
+#: ``fem.amg.AUTO_AMG_DOFS``: with MUMPS, Algorithm 1 pays one factorization and the dense interface responses
+#: once and one application of T per load step, with AMG some hundred Ω₁ solves per load step
+#: (benchmarks/primal_hybrid_3d.py; docs/performance.md), so AMG pays only where MUMPS' memory runs out (its
+#: fitted memory passes 10 GB near 330,000 DOFs, benchmarks/solvers_3d.py --fit)
+OMEGA1_AUTO_AMG_DOFS = 300_000
 
 log = logging.getLogger(__name__)
+
+
+def omega1_solver(solver: LinearSolverOptions | str) -> LinearSolverOptions:
+    """Ω₁'s linear solver options: a kind given by name (``"auto"``) takes AMG from ``OMEGA1_AUTO_AMG_DOFS``."""
+    if isinstance(solver, str):
+        return LinearSolverOptions(kind=solver, auto_dofs=OMEGA1_AUTO_AMG_DOFS)
+    return LinearSolverOptions.of(solver)
 
 
 def solve_or_verify(sub: PrimalSubproblem, warm: bool) -> NewtonHistory:
@@ -131,7 +146,7 @@ class PrimalHybridStep:
                     newton=newton,
                     V=self.interface.spaces[i],
                     friction=friction_of(problem.law) if i == 1 else None,
-                    solver=LinearSolverOptions.of(solver) if i == 0 else "direct",
+                    solver=omega1_solver(solver) if i == 0 else "direct",
                 )
             )
         self._prev = [np.zeros_like(s.u.x.array) for s in self.sub]
@@ -304,7 +319,7 @@ def solve_primal_hybrid(
     ``initial_data`` warm-starts the interface data; ``step`` reuses a step (and its offline
     data) from an earlier solve on the same mesh and model.  ``solver``: Ω₁'s linear solver
     (``fem.amg.LinearSolverOptions`` or its kind: ``"direct"``, ``"amg"``, ``"auto"``: AMG for a 3D Ω₁ of
-    ``fem.amg.AUTO_AMG_DOFS`` unknowns or more).
+    ``OMEGA1_AUTO_AMG_DOFS`` unknowns or more).
     """
     check_solve_inputs(problem, options=options, newton=newton)
     cm = problem.cm

@@ -9,8 +9,9 @@ from mpi_jobs import on_every_rank
 
 import fenics_contact as fc
 from fenics_contact.errors import ConvergenceError
-from fenics_contact.fem.amg import AMGSolver, LinearSolverOptions
+from fenics_contact.fem.amg import AUTO_AMG_DOFS, AMGSolver, LinearSolverOptions
 from fenics_contact.fem.linalg import DirectSolver
+from fenics_contact.hybrid.primal import OMEGA1_AUTO_AMG_DOFS, omega1_solver
 from fenics_contact.problem.models3d import channels_3d, channels_3d_mesh
 
 #: the CG tolerance of the AMG Ω₁ here, and the distance to the monolithic solution it allows (measured 2e-11)
@@ -81,3 +82,15 @@ def test_algorithm_1_with_an_amg_omega1_on_two_ranks_is_the_serial_answer():
     for run in (serial, parallel):
         assert run["converged"] and run["e_u"] <= AGREEMENT
     assert np.abs(parallel["u"] - serial["u"]).max() <= AGREEMENT * np.abs(serial["u"]).max()
+
+
+def test_auto_takes_amg_in_omega1_only_where_mumps_runs_out_of_memory():
+    """``solver="auto"`` in Algorithm 1: MUMPS up to ``OMEGA1_AUTO_AMG_DOFS`` Ω₁ unknowns in 3D (above the
+    monolithic threshold), AMG from there; given options keep their own threshold; the plane stays direct."""
+    auto = omega1_solver("auto")
+    assert OMEGA1_AUTO_AMG_DOFS > AUTO_AMG_DOFS
+    assert auto.chosen(OMEGA1_AUTO_AMG_DOFS - 1, 3) == "direct" and auto.chosen(OMEGA1_AUTO_AMG_DOFS, 3) == "amg"
+    assert auto.chosen(10 * OMEGA1_AUTO_AMG_DOFS, 2) == "direct"
+    assert omega1_solver(LinearSolverOptions(kind="auto")).chosen(AUTO_AMG_DOFS, 3) == "amg"
+    step = fc.solve(channels_3d().on(channels_3d_mesh(4)), "primal").step  # default: auto, a small Ω₁
+    assert not step.omega1_iterative and isinstance(step.sub[0].solver, DirectSolver)

@@ -9,6 +9,11 @@ process of its own) and the contact force.  A run whose memory, extrapolated fro
 
     OMP_NUM_THREADS=1 python benchmarks/solvers_3d.py --cells 10 15 20 25 30 40 --out benchmarks/results/solvers_3d.md
     OMP_NUM_THREADS=1 python benchmarks/solvers_3d.py --mesh graded --cells 8 --out benchmarks/results/solvers_3d_graded.md
+    OMP_NUM_THREADS=1 python benchmarks/solvers_3d.py --cells 50 60 --solvers amg --out benchmarks/results/solvers_3d_large.md
+    python benchmarks/solvers_3d.py --fit benchmarks/results/solvers_3d.md benchmarks/results/solvers_3d_large.md
+
+``--fit`` reads result tables and fits, per solver over its two largest sizes, peak memory − ``BASE_GB`` (the
+process before any solve) and the solve time as c·DOFs^p, and prints the DOFs that reach 10 GB and 24 GB.
 """
 
 import argparse
@@ -25,6 +30,8 @@ from fenics_contact.io import machine_description, peak_rss_bytes
 
 A, R, E, NU = 0.1, 1.0, 1.0, 0.3
 SOLVERS = ("direct", "amg")
+#: the peak memory of the process before the solve (Python, DOLFINx, PETSc, a small mesh), subtracted in the fits
+BASE_GB = 0.2
 
 
 def _graded(h: float):
@@ -77,6 +84,31 @@ def _subprocess(cells: int, solver: str, mesh: str) -> dict:
     return json.loads(line.removeprefix("RESULT "))
 
 
+def fit(paths: list[str]) -> list[str]:
+    """Per solver: the growth exponents of memory and time over its two largest sizes in the tables at ``paths``,
+    and the DOFs at which the fitted memory reaches 10 GB and 24 GB."""
+    rows = {}
+    for path in paths:
+        for line in Path(path).read_text().splitlines():
+            cells = [c.strip() for c in line.strip("|").split("|")]
+            if len(cells) >= 7 and cells[0].startswith("a/") and cells[2] in SOLVERS:
+                dofs = int(cells[1].replace(",", ""))
+                rows.setdefault(cells[2], {})[dofs] = (float(cells[3]), float(cells[6]))
+    lines = []
+    for solver, by_dofs in rows.items():
+        if len(by_dofs) < 2:
+            continue
+        (n0, (t0, m0)), (n1, (t1, m1)) = sorted(by_dofs.items())[-2:]
+        p_mem = np.log((m1 - BASE_GB) / (m0 - BASE_GB)) / np.log(n1 / n0)
+        p_time = np.log(t1 / t0) / np.log(n1 / n0)
+        at = {gb: n1 * ((gb - BASE_GB) / (m1 - BASE_GB)) ** (1.0 / p_mem) for gb in (10.0, 24.0)}
+        lines.append(
+            f"{solver}: from {n0:,} to {n1:,} DOFs memory ∝ DOFs^{p_mem:.2f}, time ∝ DOFs^{p_time:.2f}; "
+            f"10 GB at {at[10.0]:,.0f} DOFs, 24 GB at {at[24.0]:,.0f} DOFs"
+        )
+    return lines
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--cells", type=int, nargs="+", default=[10, 20, 30, 40], help="contact cells h_c = a/n")
@@ -88,15 +120,20 @@ def main() -> None:
         default="block",
         help="block: hertz_quarter_block (gmsh, well-shaped cells); graded: a graded grid of planes (stretched cells)",
     )
+    parser.add_argument("--solvers", nargs="+", choices=SOLVERS, default=list(SOLVERS), help="the solvers to run")
+    parser.add_argument("--fit", nargs="+", metavar="TABLE", help="fit the growth in these result tables")
     parser.add_argument("--single", nargs=2, metavar=("CELLS", "SOLVER"), help=argparse.SUPPRESS)
     args = parser.parse_args()
+    if args.fit:
+        print("\n".join(fit(args.fit)))
+        return
     if args.single:
         print("RESULT " + json.dumps(run_one(int(args.single[0]), args.single[1], args.mesh)))
         return
     rows, last = [], {}
     for cells in args.cells:
         forces = {}
-        for solver in SOLVERS:
+        for solver in args.solvers:
             if solver in last:  # extrapolate the memory from the last size (DOFs ∝ cells³)
                 prev = last[solver]
                 ratio = (cells / prev["cells"]) ** 3

@@ -25,6 +25,7 @@ from mpi4py import MPI
 
 from fenics_contact.errors import InputError
 from fenics_contact.hybrid.interface_newton import newton_iterate
+from fenics_contact.hybrid.krylov_newton import krylov_newton_iterate
 from fenics_contact.hybrid.options import ACCELERATIONS, InterfaceNewtonOptions, IterationOptions, default_accel
 from fenics_contact.hybrid.step import (
     COLLAPSE,
@@ -137,7 +138,9 @@ def iterate(
         raise InputError(f"initial interface data have shape {g.shape}, expected {step.initial_data().shape}")
     accel = options.accel if options.accel is not None else default_accel(step, step.comm)
     if accel == "newton":
-        history = newton_iterate(step, options, name=name, monitor=monitor, initial=g)
+        # an Ω₁ solved iteratively (AMG) has no interface response to condense: Newton–GMRES, matrix-free
+        solve = krylov_newton_iterate if getattr(step, "omega1_iterative", False) else newton_iterate
+        history = solve(step, options, name=name, monitor=monitor, initial=g)
         history.accel = accel
         return history
     weights = step.data_weights() if hasattr(step, "data_weights") else None

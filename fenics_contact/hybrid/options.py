@@ -85,7 +85,8 @@ class IterationOptions:
 
 def default_accel(step, comm) -> str:
     """The update when none is given: the interface Newton, for every step (a hybrid step or its class) on any
-    number of ranks ``comm``."""
+    number of ranks ``comm`` (with an Ω₁ solved by AMG its matrix-free Newton–GMRES, ``hybrid.krylov_newton``:
+    measured faster than Anderson with the same Ω₁, and converging at contrast 1e6 where Anderson does not)."""
     return "newton"
 
 

@@ -8,6 +8,11 @@ With vertex quadrature on γ its fixed point is the monolithic penalized
 solution (Theorem 3.1).  The iteration stops on the transmission residual of
 the pair (``hybrid.certificate``); ``accel="newton"`` solves the fixed point by
 the interface Newton method (``hybrid.interface_newton``) instead of iterating.
+
+Ω₁'s linear solver is chosen by ``fem.amg.LinearSolverOptions`` (``solver``): MUMPS LU, factorized once, or
+for a large 3D Ω₁ CG + smoothed-aggregation AMG with the rigid-body near-nullspace, set up once and reused by
+every iteration and load step.  With AMG the interface Newton is Newton–GMRES, matrix-free
+(``hybrid.krylov_newton``): the dense interface response of the condensed strategy would cost n_γ Ω₁ solves.
 """
 
 import dataclasses
@@ -19,6 +24,7 @@ import numpy as np
 from dolfinx import fem
 from mpi4py import MPI
 
+from fenics_contact.fem.amg import AMGSolver, LinearSolverOptions
 from fenics_contact.fem.contact import ContactProfile, NewtonHistory, NewtonOptions
 from fenics_contact.fem.primal import PrimalSubproblem, penalty_for, warn_if_locking
 from fenics_contact.hybrid.certificate import Certificate, primal_certificate, relative
@@ -33,6 +39,7 @@ from fenics_contact.hybrid.iteration import (
     IterationResult,
     iterate,
 )
+from fenics_contact.hybrid.krylov_newton import KrylovInterface
 from fenics_contact.hybrid.options import interface_options
 from fenics_contact.hybrid.response import FineResponse, PrimalPart
 from fenics_contact.hybrid.transmission import InterfaceSpace, part_rollers, robin_coefficient, split_mesh
@@ -46,6 +53,8 @@ __all__ = [
     "solve_or_verify",
     "DEFAULT_ALPHA",
     "DEFAULT_ALPHA_MS",
+    "OMEGA1_AUTO_AMG_DOFS",
+    "omega1_solver",
 ]
 
 #: Default transmission coefficient α_p = E_p (h/L_ref)^(-1/2)/L_ref = E_p/√(h L_ref), a stiffness per length
@@ -56,8 +65,21 @@ DEFAULT_ALPHA = "E*h^-1/2"
 #: that error multiplied by α: α_p = E_p h^(-1/2) (≈ 6e6 in the stiff channels of model 3 at contrast
 #: 1e6) made it indefinite (h = 1/32, m = 3) or 20–200× less accurate (m = 4).
 DEFAULT_ALPHA_MS = "Emin*h^-1/2"
+#: Ω₁ unknowns from which ``solver="auto"`` takes AMG in Ω₁ (3D).  Higher than the monolithic solve's
+#: ``fem.amg.AUTO_AMG_DOFS``: with MUMPS, Algorithm 1 pays one factorization and the dense interface responses
+#: once and one application of T per load step, with AMG some hundred Ω₁ solves per load step
+#: (benchmarks/primal_hybrid_3d.py; docs/performance.md), so AMG pays only where MUMPS' memory runs out (its
+#: fitted memory passes 10 GB near 330,000 DOFs, benchmarks/solvers_3d.py --fit)
+OMEGA1_AUTO_AMG_DOFS = 300_000
 
 log = logging.getLogger(__name__)
+
+
+def omega1_solver(solver: LinearSolverOptions | str) -> LinearSolverOptions:
+    """Ω₁'s linear solver options: a kind given by name (``"auto"``) takes AMG from ``OMEGA1_AUTO_AMG_DOFS``."""
+    if isinstance(solver, str):
+        return LinearSolverOptions(kind=solver, auto_dofs=OMEGA1_AUTO_AMG_DOFS)
+    return LinearSolverOptions.of(solver)
 
 
 def solve_or_verify(sub: PrimalSubproblem, warm: bool) -> NewtonHistory:
@@ -92,7 +114,10 @@ class PrimalHybridStep:
         delta: float | None = None,
         newton: NewtonOptions = NewtonOptions(),
         reference: fem.Function | None = None,
+        solver: LinearSolverOptions | str = "auto",
     ) -> None:
+        """``solver``: Ω₁'s linear solver (``fem.amg.LinearSolverOptions`` or its kind; Ω₂, the contact strip,
+        keeps MUMPS for its Newton Jacobians)."""
         cm = problem.cm
         self.comm = cm.comm
         self.parts = split_mesh(cm)
@@ -121,6 +146,7 @@ class PrimalHybridStep:
                     newton=newton,
                     V=self.interface.spaces[i],
                     friction=friction_of(problem.law) if i == 1 else None,
+                    solver=omega1_solver(solver) if i == 0 else "direct",
                 )
             )
         self._prev = [np.zeros_like(s.u.x.array) for s in self.sub]
@@ -129,6 +155,7 @@ class PrimalHybridStep:
         self._certificate = Certificate(np.inf, np.inf)
         self._record: dict = {}
         self._newton = None
+        self._krylov: KrylovInterface | None = None
         self.reference = None
         if reference is not None:
             self.reference = [fem.Function(s.V) for s in self.sub]
@@ -141,11 +168,16 @@ class PrimalHybridStep:
         """The subproblem holding Γ_C (Ω₂)."""
         return self.sub[1]
 
+    @property
+    def omega1_iterative(self) -> bool:
+        """Ω₁ is solved by CG + AMG (the interface Newton is then Newton–GMRES, ``hybrid.krylov_newton``)."""
+        return isinstance(self.sub[0].solver, AMGSolver)
+
     def initial_data(self) -> np.ndarray:
         return np.zeros(2 * self.interface.size)
 
     def prepare(self) -> None:
-        """Offline work: factorize the linear Ω₁ operator once."""
+        """Offline work: factorize the linear Ω₁ operator once (with AMG: its set-up, once)."""
         self.sub[0].factorize()
 
     def apply(self, g: np.ndarray, *, omega2_warm: bool = False) -> np.ndarray:
@@ -175,6 +207,16 @@ class PrimalHybridStep:
         """w_p/α_p per data value: Robin data g ~ α u + t, so this balances stiff and soft γ nodes in Anderson."""
         w = self.interface.weights / self.alpha
         return np.concatenate([w, w])
+
+    def krylov_interface(self) -> KrylovInterface:
+        """The matrix-free interface equation of Newton–GMRES (built once: Ω₁'s set-up, the γ and Γ_C maps)."""
+        if self._krylov is None:
+            self.prepare()
+            iface = self.interface
+            omega1 = PrimalPart(self.sub[0], iface, 0, contact=False)
+            omega2 = PrimalPart(self.sub[1], iface, 1, contact=True, factorize=False)
+            self._krylov = KrylovInterface(omega1, omega2, iface.gather(2.0 * self.alpha), -1.0)
+        return self._krylov
 
     def interface_problem(self, options: InterfaceNewtonOptions):
         """The affine pieces for ``hybrid.interface_newton`` (built once: fine Ω₁ response, Ω₂ with J₀)."""
@@ -269,13 +311,16 @@ def solve_primal_hybrid(
     reference: fem.Function | None = None,
     initial_data: np.ndarray | None = None,
     step: PrimalHybridStep | None = None,
+    solver: LinearSolverOptions | str = "auto",
 ) -> HybridResult:
     """Algorithm 1 until the transmission residual is below ``options.tol``.
 
     ``delta`` defaults to ``fem.primal.default_penalty(h, E_c)``, E_c the largest E on Γ_C; ``reference`` (the
     monolithic solution) adds e_u per iteration, outside the online time;
     ``initial_data`` warm-starts the interface data; ``step`` reuses a step (and its offline
-    data) from an earlier solve on the same mesh and model.
+    data) from an earlier solve on the same mesh and model.  ``solver``: Ω₁'s linear solver
+    (``fem.amg.LinearSolverOptions`` or its kind: ``"direct"``, ``"amg"``, ``"auto"``: AMG for a 3D Ω₁ of
+    ``OMEGA1_AUTO_AMG_DOFS`` unknowns or more).
     """
     check_solve_inputs(problem, options=options, newton=newton)
     cm = problem.cm
@@ -283,7 +328,7 @@ def solve_primal_hybrid(
         check_reference_displacement(reference, cm)
     start = time.perf_counter()
     if step is None:
-        step = PrimalHybridStep(problem, alpha=alpha, delta=delta, newton=newton, reference=reference)
+        step = PrimalHybridStep(problem, alpha=alpha, delta=delta, newton=newton, reference=reference, solver=solver)
     step.prepare()
     offline = time.perf_counter() - start
     monitor = (lambda: {"e_u": step.error_l2()}) if step.reference is not None else None

@@ -60,7 +60,8 @@ class HybridStep(Protocol):
 
     # Optional: ``interface_problem(options)`` (the affine pieces for ``accel="newton"``, see
     # ``hybrid.condensation.InterfaceProblem``), ``data_weights()`` (weights of Anderson's least squares),
-    # ``reset()`` (cold subdomain states for the next solve, offline data kept).
+    # ``reset()`` (cold subdomain states for the next solve, offline data kept), ``omega1_iterative`` and
+    # ``krylov_interface()`` (an Ω₁ solved by AMG: the matrix-free Newton–GMRES of ``hybrid.krylov_newton``).
 
 
 @dataclass(slots=True)

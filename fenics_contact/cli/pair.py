@@ -225,8 +225,8 @@ def check_coarse_size(problem, H: float) -> None:
     h = float(np.median(msh.h(tdim, np.arange(n_cells, dtype=np.int32))))
     if H < h:
         raise InputError(
-            f"mesh.coarse-size {H:g} is smaller than the fine cells (median diameter {h:.3g}): a coarse cell of "
-            "primal-ms spans fine cells; give a coarse size of several fine cells"
+            f"the coarse size H = {H:g} (mesh.coarse-size, or 1/--H) is smaller than the fine cells (median "
+            f"diameter {h:.3g}): a coarse cell of primal-ms spans fine cells; give a coarse size of several of them"
         )
     x = msh.geometry.x
     for k in (0, 1):
@@ -234,8 +234,8 @@ def check_coarse_size(problem, H: float) -> None:
         side = float(np.ptp(x[nodes, :tdim], axis=0).max())
         if H >= side / 2:
             raise InputError(
-                f"mesh.coarse-size {H:g} does not divide body {k + 1} (its longer side {side:.3g}): primal-ms needs "
-                "at least two coarse cells along it; give a coarse size below half of it"
+                f"the coarse size H = {H:g} (mesh.coarse-size, or 1/--H) does not divide body {k + 1} (its longer "
+                f"side {side:.3g}): primal-ms needs at least two coarse cells along it; give H below half of it"
             )
 
 

@@ -22,13 +22,13 @@ from fenics_contact.problem.case import load_case
 pytestmark = pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="two-body Algorithm 3 runs on one process")
 
 CASE = Path(__file__).parents[2] / "cases" / "two_blocks.toml"
-H = 5.0  #: the coarse size in mm: squares of 5 mm over blocks 30 and 40 mm wide
+H = 5.0  #: the case's coarse size in mm: squares of 5 mm over blocks 30 and 40 mm wide
 LAST = "load.steps=[[0.0, -0.02]]"
 
 
 def _run(out: Path, *args: str) -> dict:
     base = ["run", "--case", str(CASE), "--method", "primal-ms", "--no-plots", "--out", str(out)]
-    assert main([*base, "--set", f"mesh.coarse-size={H}", *args]) == 0
+    assert main([*base, *args]) == 0  # (the case's mesh.coarse-size: H)
     return json.loads((out / "summary.json").read_text())
 
 
@@ -68,18 +68,18 @@ def test_patches_covering_each_bulk_give_algorithm_1(tmp_path):
 
 
 BAD = [
-    ([], "needs the coarse size of both bulks"),
+    (["--set", f"mesh={{file='{CASE.parent / 'two_blocks.msh'}'}}"], "needs the coarse size of both bulks"),
     (["--set", "mesh.coarse-size=0.1"], "smaller than the fine cells"),
     (["--set", "mesh.coarse-size=16.0"], "does not divide body 2"),
-    (["--set", "mesh.coarse-size=5.0", "--H", "2"], "the coarse size H = 0.5 (mesh.coarse-size, or 1/--H)"),
-    (["--set", "mesh.coarse-size=5.0", "--set", 'friction={law="coulomb", mu=0.3}'], "frictionless pairs only"),
-    (["--set", "mesh.coarse-size=5.0", "--set", 'multiscale.nbasis="many"'], '"rigid" or "all"'),
-    (["--set", "mesh.coarse-size=5.0", "--set", "multiscale.cache-dir=1"], "the keys of [multiscale]"),
-    (["--set", "mesh.coarse-size=5.0", "--layers", "-1"], "oversampling layers must be an integer >= 0"),
+    (["--H", "2"], "the coarse size H = 0.5 (mesh.coarse-size, or 1/--H)"),
+    (["--set", 'friction={law="coulomb", mu=0.3}'], "frictionless pairs only"),
+    (["--set", 'multiscale.nbasis="many"'], '"rigid" or "all"'),
+    (["--set", "multiscale.cache-dir=1"], "the keys of [multiscale]"),
+    (["--layers", "-1"], "oversampling layers must be an integer >= 0"),
 ]
 
 
-@pytest.mark.parametrize(("args", "message"), BAD, ids=[" ".join(a[-1:]) or "no H" for a, _ in BAD])
+@pytest.mark.parametrize(("args", "message"), BAD, ids=[a[-1].split("=")[0] for a, _ in BAD])
 def test_what_primal_ms_cannot_run_is_refused(tmp_path, capsys, args, message):
     out = tmp_path / "out"
     base = ["run", "--case", str(CASE), "--method", "primal-ms", "--no-plots", "--out", str(out)]

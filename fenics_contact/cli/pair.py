@@ -85,6 +85,8 @@ class PairRunOptions:
                 f"--method {self.method} cannot solve two deformable bodies (a case with [pair]): the mixed methods "
                 f"need an Arnold–Winther contact pair; choose one of {PAIR_METHODS}"
             )
+        if (self.method == "primal-ms") != (self.multiscale is not None):
+            raise InputError("PairRunOptions: multiscale options (PairMultiscaleOptions) go with primal-ms, and only")
         if self.delta is not None and not (np.isfinite(self.delta) and self.delta > 0):
             raise InputError(f"--delta must be a finite number > 0, got {self.delta!r}")
         out = Path("results") / f"{Path(self.case).stem}-{self.method}" if self.out is None else Path(self.out)

@@ -3,8 +3,8 @@
 * the run's forces, load step by load step, are the API's ``fc.solve(pair, "primal-ms", H=..., cem=...)``;
 * with patches covering each bulk and every local mode the multiscale space is the fine one: Algorithm 1's forces;
 * the summary and the outputs carry both bodies, both faces and the coarse space's options;
-* what it cannot run is refused before any solve (no coarse size, friction, an H that does not divide the bodies,
-  bad [multiscale] keys).
+* what it cannot run is refused, nothing written (no coarse size or two of them, friction, tractions, an H that does
+  not divide the bodies, bad [multiscale] keys).
 """
 
 import json
@@ -22,6 +22,7 @@ from fenics_contact.problem.case import load_case
 pytestmark = pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="two-body Algorithm 3 runs on one process")
 
 CASE = Path(__file__).parents[2] / "cases" / "two_blocks.toml"
+MESH = CASE.parent / "two_blocks.msh"
 H = 5.0  #: the case's coarse size in mm: squares of 5 mm over blocks 30 and 40 mm wide
 LAST = "load.steps=[[0.0, -0.02]]"
 
@@ -65,12 +66,16 @@ def test_patches_covering_each_bulk_give_algorithm_1(tmp_path):
     fine = json.loads((tmp_path / "a1" / "summary.json").read_text())
     assert _relative(multiscale["force_slave"], fine["force_slave"]) <= 1e-8
     assert _relative(multiscale["force_master"], fine["force_master"]) <= 1e-8
+    local = _run(tmp_path / "m2", "--layers", "2", "--set", LAST)  # (short patches: the multiscale error shows)
+    assert _relative(local["force_slave"], fine["force_slave"]) > 1e-5  # (measured 1.5e-3)
 
 
 BAD = [
-    (["--set", f"mesh={{file='{CASE.parent / 'two_blocks.msh'}'}}"], "needs the coarse size of both bulks"),
+    (["--set", f"mesh={{file='{MESH}'}}"], "needs the coarse size of both bulks"),
     (["--set", "mesh.coarse-size=0.1"], "smaller than the fine cells"),
     (["--set", "mesh.coarse-size=16.0"], "does not divide body 2"),
+    (["--set", f"mesh={{file='{MESH}', coarse-size=5.0, H=2}}"], "give one of them"),
+    (["--set", "bodies.upper.tractions={upper_left=[0.0, -1.0]}"], "takes no tractions"),
     (["--H", "2"], "the coarse size H = 0.5 (mesh.coarse-size, or 1/--H)"),
     (["--set", 'friction={law="coulomb", mu=0.3}'], "frictionless pairs only"),
     (["--set", 'multiscale.nbasis="many"'], '"rigid" or "all"'),

@@ -21,6 +21,7 @@ from pathlib import Path
 from fenics_contact import cli
 from fenics_contact.errors import InputError
 from fenics_contact.hybrid.two_body import TwoBodyHybridOptions
+from fenics_contact.multiscale.cem import CEMOptions
 from fenics_contact.problem import case as case_module
 from fenics_contact.problem import case_meshes3d
 
@@ -347,14 +348,15 @@ def run_tables() -> str:
 #: the tables of a two-body case (one with ``[pair]``), each probed by an unknown key set with ``--set``:
 #: (table as written in the case, the key the probe sets, what the table is)
 PAIR_TABLES = [
-    ("mesh", "mesh.zz", "the mesh file of both bodies (required)"),
+    ("mesh", "mesh.zz", "the mesh file of both bodies (required) and the coarse size of `primal-ms`"),
     ("bodies.<name>", "bodies.lower.zz", "one body (two such tables, any names)"),
     ("supports entry", "bodies.lower.supports", "one entry of a body's `supports` list"),
     ("pair", "pair.zz", "the contact surfaces (required: it makes the case a two-body one)"),
     ("friction", "friction.zz", "friction on the relative slip of the two faces (default frictionless)"),
     ("load", "load.zz", "load steps: the displacement of one support, or one traction, step by step"),
-    ("run", "run.zz", "the run (both methods)"),
-    ("primal", "primal.zz", 'Algorithm 1\'s options (`method = "primal"` only)'),
+    ("run", "run.zz", "the run (every method)"),
+    ("primal", "primal.zz", 'the options of Algorithms 1 and 3 (`method = "primal"` and `"primal-ms"` only)'),
+    ("multiscale", "multiscale.zz", 'the CEM-GMsFEM space of each bulk (`method = "primal-ms"` only)'),
 ]
 #: (table, key) -> (type, default, meaning) of the two-body case keys
 PAIR_KEYS = {
@@ -364,6 +366,13 @@ PAIR_KEYS = {
         "a gmsh `.msh` file of planar triangles holding both bodies, meshed apart (no shared node); every "
         "triangle in a surface group",
     ),
+    ("mesh", "coarse-size"): (
+        "number > 0",
+        "required by `primal-ms`",
+        "H, the side of the coarse squares of both bulks (mesh units): at least a fine cell, below half of each "
+        "body's longer side",
+    ),
+    ("mesh", "H"): ("integer ≥ 1", "—", "1/H instead of `coarse-size` (the flag `--H`)"),
     ("bodies.<name>", "cells"): ("group name or list", "required", "the body's surface groups (e.g. its layers)"),
     ("bodies.<name>", "E"): (
         "number, `{group = value}`, `{python = ...}`",
@@ -423,7 +432,8 @@ PAIR_KEYS = {
     ("run", "method"): (
         "string",
         '"primal-monolithic"',
-        "`primal-monolithic` or `primal` (Algorithm 1, a strip per side)",
+        "`primal-monolithic`, `primal` (Algorithm 1, a strip per side) or `primal-ms` (Algorithm 3: each bulk a "
+        "CEM-GMsFEM space; one process, frictionless)",
     ),
     ("run", "out"): ("directory name", "`results/<case>-<method>`", "the output directory"),
     ("run", "plots"): ("boolean", "true", "write the PNG figures"),
@@ -436,6 +446,17 @@ PAIR_KEYS = {
     ("primal", "max-iterations"): ("integer", None, "the most evaluations of the transmission map"),
     ("primal", "accel"): ("string", None, "the interface update: `newton`, `anderson` or `none`"),
     ("primal", "layers"): ("integer", None, "cell layers of each strip from its contact surface"),
+    ("multiscale", "layers"): (
+        "integer ≥ 0",
+        str(CEMOptions().layers),
+        "oversampling layers m of the bases (the flag `--layers`); enough to cover each bulk gives its global bases",
+    ),
+    ("multiscale", "nbasis"): (
+        'integer ≥ 1, `"rigid"`, `"all"`',
+        '"rigid"',
+        "local modes per coarse cell (the flag `--nbasis`): the rigid motions (3), or every mode (with patches "
+        "covering each bulk, Algorithm 1's solution)",
+    ),
     ("primal", "alpha-scale"): ("number > 0", None, "α_p = alpha-scale · E_p / √h_γ"),
 }
 

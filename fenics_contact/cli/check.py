@@ -21,7 +21,7 @@ from mpi4py import MPI
 
 from fenics_contact.cli.cases import case_run_options
 from fenics_contact.cli.options import METHODS, RunOptions
-from fenics_contact.cli.pair import PAIR_METHODS, pair_run_options
+from fenics_contact.cli.pair import PAIR_METHODS, check_coarse_size, pair_run_options
 from fenics_contact.cli.signals import stdout_lost
 from fenics_contact.cli.solve import _check_case_coarse_grid, _check_coarse_grid, _mesh, _model
 from fenics_contact.errors import FenicsContactError, InputError
@@ -240,9 +240,30 @@ def _check_pair(case: PairCase, args: argparse.Namespace, comm: MPI.Comm) -> int
         f"{case.pair.rule} rule of degree {case.pair.quadrature_degree}"
         + (f", {case.friction.describe()} on the relative slip" if case.friction is not None else ", frictionless")
     )
-    say("  methods: " + "; ".join(f"{m} can run" for m in PAIR_METHODS))
+    refusal = _pair_ms_refusal(case, problem, comm)
+    if options.method == "primal-ms" and refusal is not None:
+        raise refusal
+    notes = [f"{m} can run" if m != "primal-ms" or refusal is None else f"{m} cannot ({refusal})" for m in PAIR_METHODS]
+    say("  methods: " + "; ".join(notes))
+    if case.coarse_size is not None and refusal is None:
+        say(f"  primal-ms: coarse squares of side {case.coarse_size:g} in each bulk")
     say(f"ok: a run with --method {options.method} can start ({case.description_or_name})")
     return 0
+
+
+def _pair_ms_refusal(case: PairCase, problem, comm: MPI.Comm) -> InputError | None:
+    """Why ``primal-ms`` cannot run the two-body case (as ``cli.pair`` would say), or None."""
+    if comm.size > 1:
+        return InputError("--method primal-ms on a two-body case runs on one process")
+    if case.friction is not None:
+        return InputError("--method primal-ms solves frictionless pairs only, and the case has [friction]")
+    if case.coarse_size is None:
+        return InputError("--method primal-ms needs the coarse size: give mesh.coarse-size or mesh.H")
+    try:
+        check_coarse_size(problem, case.coarse_size)
+    except InputError as error:
+        return error
+    return None
 
 
 def _owned(found: np.ndarray, n_owned: int, comm: MPI.Comm) -> int:

@@ -11,6 +11,8 @@ vector has three components.  ``load_pair_case`` reads it into a ``PairCase``; e
 
     [mesh]
     file = "two_blocks.msh"                  # planar triangles, or tetrahedra (3D); the two bodies meshed apart
+    coarse-size = 5.0                        # primal-ms: H, the side of the coarse squares of both bulks (a length
+                                             #   in mesh units), or H = 1/H (an integer, as --H)
 
     [bodies.lower]                           # two bodies, each its own table (any names)
     cells = ["lower_sandstone", "lower_shale"]   # its surface groups (a string for one)
@@ -37,8 +39,9 @@ vector has three components.  ``load_pair_case`` reads it into a ``PairCase``; e
     steps = [[0.0, -0.01], [0.0, -0.02]]     #   a group of a body's tractions); its value at each step, the
                                              #   last the run's
 
-The run tables ``[run]`` (method ``primal-monolithic`` or ``primal``, out, plots, tol, max-iterations, accel)
-and ``[primal]`` (delta, layers, alpha-scale) are read by ``cli.pair``.
+The run tables ``[run]`` (method ``primal-monolithic``, ``primal`` or ``primal-ms``, out, plots, delta),
+``[primal]`` (tol, max-iterations, accel, layers: the strip layers, alpha-scale; primal and primal-ms) and
+``[multiscale]`` (layers: the oversampling layers, nbasis; primal-ms) are read by ``cli.pair``.
 """
 
 from collections.abc import Callable, Mapping, Sequence
@@ -88,7 +91,7 @@ __all__ = [
 ]
 
 #: the run tables of a two-body case (their keys: ``cli.pair.RUN_KEYS``)
-PAIR_RUN_TABLES = ("run", "primal")
+PAIR_RUN_TABLES = ("run", "primal", "multiscale")
 _TABLES = ("mesh", "bodies", "pair", "load", "friction")
 
 
@@ -180,6 +183,8 @@ class PairCase:
     run: Mapping[str, Mapping[str, Any]]
     overrides: tuple[tuple[str, Any], ...] = ()
     friction: Friction | None = None  #: the pair's friction law (``[friction]``; None: frictionless)
+    #: primal-ms: the side of the coarse squares of both bulks, in mesh units (``mesh.coarse-size`` or 1/``mesh.H``)
+    coarse_size: float | None = None
 
     def build_mesh(self, comm: MPI.Comm = MPI.COMM_WORLD) -> tuple[TwoBodyMesh, dict[str, tuple[int, int]]]:
         """The mesh with the file's cell and facet tags and the physical groups by name: (dim, tag). Collective."""
@@ -320,7 +325,7 @@ class PairCase:
         return {
             "file": str(self.path),
             "description": self.description,
-            "mesh": {"file": str(self.mesh_file)},
+            "mesh": {"file": str(self.mesh_file), "coarse-size": self.coarse_size},
             "bodies": {b.name: b.echo(self.dimension) for b in self.bodies},
             "pair": self.pair.echo(),
             "load": self.load.echo() if self.load else None,
@@ -566,7 +571,15 @@ def read_pair_case(source: Source, data: dict, overrides: Sequence[tuple[str, An
         raise source.error(f"description must be a string, got {show_value(description)}")
     mesh = Table(source, "mesh", data.get("mesh", {}))
     path = mesh.get("file", lambda v: source.file(v, "mesh.file"), required=True)
+    inverse = mesh.get("H", read_integer(1))
+    coarse_size = mesh.get("coarse-size", read_number(positive=True))
     mesh.finish(" for a two-body case")
+    if inverse is not None and coarse_size is not None and all(key != "mesh.H" for key, _ in overrides):
+        raise source.error(
+            "mesh.H (1/H) and mesh.coarse-size (H itself, a length) give the same coarse size: give one of them"
+        )
+    if inverse is not None:
+        coarse_size = 1.0 / inverse
     bodies = data.get("bodies")
     if not isinstance(bodies, dict) or len(bodies) != 2:
         count = len(bodies) if isinstance(bodies, dict) else 0
@@ -581,6 +594,6 @@ def read_pair_case(source: Source, data: dict, overrides: Sequence[tuple[str, An
             raise source.error(f"{table} must be a table ([{table}]), got {show_value(values)}")
         run[table] = dict(values)
     friction = read_friction(source, data.get("friction"))
-    case = PairCase(source.path, description, path, specs, pair, load, run, tuple(overrides), friction)
+    case = PairCase(source.path, description, path, specs, pair, load, run, tuple(overrides), friction, coarse_size)
     case.check_dimension(None)
     return case

@@ -109,7 +109,7 @@ BAD = [
     (["--set", 'load.support="lower_left"'], "load.support = 'lower_left' is not the facet group of a support"),
     (["--set", "bodies.upper.E={upper_shale=1.0}"], "gives no value for the body's cell group 'upper_sandstone'"),
     (["--set", "run.tol=1e-9"], "tol belongs in [primal]"),
-    (["--set", "primal.tol=1e-9"], "options of Algorithm 1 (--method primal)"),
+    (["--set", "primal.tol=1e-9"], "options of --method primal and primal-ms"),
     (["--set", 'load.traction="upper_top"'], "give exactly one of load.support"),
     (["--set", 'load={traction="upper_top", steps=[[0.0, 1.0]]}'], "load.traction = 'upper_top' is not a group"),
     (["--set", "bodies.lower.supports=[]"], "has no Support"),

@@ -33,9 +33,9 @@ import numpy as np
 from fenics_contact.errors import ConvergenceError
 from fenics_contact.fem.friction import FIXED_POINT_STEPS, FIXED_POINT_TOL, FrictionProfile
 from fenics_contact.fem.mixed_assembly import dot, norm
-from fenics_contact.fem.mixed_newton import MixedNewtonHistory
+from fenics_contact.fem.mixed_newton import MixedNewtonHistory, run_mixed_newton
 from fenics_contact.fem.mixed_traces import tangent_of
-from fenics_contact.fem.newton import Advance, Check, Direction, StepState, semismooth_newton_loop
+from fenics_contact.fem.newton import Advance, Check, Direction, StepState
 from fenics_contact.problem.friction import Friction
 
 __all__ = ["MixedFriction", "frictional_mixed_newton"]
@@ -271,25 +271,7 @@ class _FrictionalMixedSystem:
 
 
 def _newton(problem, load: np.ndarray, data: np.ndarray | None) -> MixedNewtonHistory:
-    system = _FrictionalMixedSystem(problem, load, data)
-    options = problem.newton
-    trace = semismooth_newton_loop(
-        system,
-        system.start(),
-        name=problem.prefix.rstrip("_"),
-        max_steps=options.max_iterations,
-        line_search=problem.line_search,
-        rtol=options.rtol,
-        atol=options.atol,
-        sizes="contact-set sizes",
-    )
-    return MixedNewtonHistory(
-        residuals=trace.residuals,
-        active_sizes=trace.active_sizes,
-        factorizations=trace.factorizations,
-        step_lengths=trace.step_lengths,
-        energies=system.energies,
-    )
+    return run_mixed_newton(_FrictionalMixedSystem(problem, load, data), problem)
 
 
 def _append(history: MixedNewtonHistory, more: MixedNewtonHistory) -> None:

@@ -32,7 +32,7 @@ from fenics_contact.fem.mixed_assembly import MixedOperators, dot, norm
 from fenics_contact.fem.mixed_contact import ContactNodes
 from fenics_contact.fem.newton import Advance, Check, Direction, StepState, semismooth_newton_loop
 
-__all__ = ["MixedNewtonHistory", "MixedNewtonProblem", "exact_line_search", "globalized_newton"]
+__all__ = ["MixedNewtonHistory", "MixedNewtonProblem", "exact_line_search", "globalized_newton", "run_mixed_newton"]
 
 
 @dataclass(slots=True)
@@ -150,7 +150,12 @@ def globalized_newton(problem: MixedNewtonProblem, load: np.ndarray, data: np.nd
     """Solve the penalized contact problem with stress-side load ``load`` (Robin data ``data``), warm-started
     from (problem.c, problem.u) (``fem.newton.semismooth_newton_loop``); raises ConvergenceError at the step cap
     or when the settled residual fails its check."""
-    system = _MixedSystem(problem, load, data)
+    return run_mixed_newton(_MixedSystem(problem, load, data), problem)
+
+
+def run_mixed_newton(system, problem: MixedNewtonProblem) -> MixedNewtonHistory:
+    """``fem.newton.semismooth_newton_loop`` on a mixed contact ``system`` (frictionless or frictional) with the
+    Newton options, line search and prefix of ``problem``, its trace as a ``MixedNewtonHistory``."""
     options = problem.newton
     trace = semismooth_newton_loop(
         system,

@@ -25,7 +25,8 @@ from mpi4py import MPI
 from fenics_contact.errors import InputError
 from fenics_contact.problem.boundary import BoundaryConditions
 from fenics_contact.problem.geometry import ContactMesh, check_memory, contact_mesh_from_model, gmsh_session
-from fenics_contact.problem.problem import ContactProblem, ScalarField, VectorField, constant_field
+from fenics_contact.problem.models3d import slab_load
+from fenics_contact.problem.problem import ContactProblem, ScalarField, constant_field
 from fenics_contact.problem.tags import PHYSICAL_NAMES, Boundary, Subdomain
 
 __all__ = [
@@ -77,17 +78,6 @@ def _fibre_modulus(E_high: float, E_low: float) -> ScalarField:
     return field
 
 
-def _slab_load(scale: float) -> VectorField:
-    def load(x: np.ndarray) -> np.ndarray:
-        f = np.zeros((3, x.shape[1]))
-        slab = (x[0] > _LOAD_SLAB[0]) & (x[0] < _LOAD_SLAB[1])
-        f[0, slab & (x[1] < 0.5)] = scale
-        f[0, slab & (x[1] > 0.75)] = -scale
-        return f
-
-    return load
-
-
 def fibre_block_3d(
     *, E_high: float = 1.0e3, E_low: float = 1.0, nu: float = 0.35, load_scale: float = 1.0
 ) -> ContactProblem:
@@ -97,7 +87,7 @@ def fibre_block_3d(
         name="model5",
         youngs_modulus=_fibre_modulus(float(E_high), float(E_low)),
         poisson_ratio=constant_field(nu),
-        load=_slab_load(float(load_scale)),
+        load=slab_load(float(load_scale), _LOAD_SLAB),
         boundary=BoundaryConditions(),
         description=f"3D fibre composite, E={E_high:g}/{E_low:g}, nu={nu:g}",
     )

@@ -20,7 +20,7 @@ from fenics_contact.problem.geometry import ContactMesh
 from fenics_contact.problem.meshes3d import unit_cube
 from fenics_contact.problem.problem import ContactProblem, ScalarField, VectorField, constant_field
 
-__all__ = ["CHANNELS_3D", "CLAMPED_3D", "MODEL_3D", "ROLLERS_3D", "channels_3d", "channels_3d_mesh"]
+__all__ = ["CHANNELS_3D", "CLAMPED_3D", "MODEL_3D", "ROLLERS_3D", "channels_3d", "channels_3d_mesh", "slab_load"]
 
 #: the number of the 3D channel model among the built-in models (``models.get_model``, ``--model``)
 MODEL_3D = 4
@@ -45,12 +45,15 @@ def _channels(E_high: float, E_low: float) -> ScalarField:
     return field
 
 
-def _slab_load(scale: float) -> VectorField:
+def slab_load(scale: float, slab: tuple[float, float] = _LOAD_SLAB) -> VectorField:
+    """The 3D models' body force: ±``scale`` along x on the slab ``slab[0] < x < slab[1]``, +x where y < ½ and −x
+    where y > ¾ (a load in Ω₁ that bends the block without a net force on Γ_C)."""
+
     def load(x: np.ndarray) -> np.ndarray:
         f = np.zeros((3, x.shape[1]))
-        slab = (x[0] > _LOAD_SLAB[0]) & (x[0] < _LOAD_SLAB[1])
-        f[0, slab & (x[1] < 0.5)] = scale
-        f[0, slab & (x[1] > 0.75)] = -scale
+        inside = (x[0] > slab[0]) & (x[0] < slab[1])
+        f[0, inside & (x[1] < 0.5)] = scale
+        f[0, inside & (x[1] > 0.75)] = -scale
         return f
 
     return load
@@ -65,7 +68,7 @@ def channels_3d(
         name="model4",
         youngs_modulus=_channels(float(E_high), float(E_low)),
         poisson_ratio=constant_field(nu),
-        load=_slab_load(float(load_scale)),
+        load=slab_load(float(load_scale)),
         boundary=BoundaryConditions(rollers=ROLLERS_3D),
         description=f"3D channels to the contact face, E={E_high:g}/{E_low:g}, nu={nu:g}",
     )

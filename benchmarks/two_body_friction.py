@@ -19,6 +19,7 @@ sys.path.insert(0, str(Path(__file__).parent))
 from common import write_report  # noqa: E402
 
 import fenics_contact as fc  # noqa: E402
+from fenics_contact.problem.pair_meshes import fault_strata
 
 T = fc.PairTag
 PRESS = [(0.0, -0.005), (0.0, -0.01)]
@@ -26,17 +27,8 @@ SHEAR = [(s, -0.01) for s in (0.004, 0.008, 0.01, 0.011, 0.012, 0.014, 0.02)]
 
 
 def strata(contrast: float):
-    """E of the lower block (strata with a stiff disc) and of the upper (strata the other way, a soft disc)."""
-
-    def lower(x):
-        E = np.where(np.sin(12.0 * x[1]) > 0.0, contrast, 1.0)
-        return np.where(np.hypot(x[0] - 0.3, x[1] + 0.25) < 0.08, contrast, E)
-
-    def upper(x):
-        E = np.where(np.sin(10.0 * x[1] + 1.0) > 0.0, 1.0, contrast)
-        return np.where(np.hypot(x[0] - 0.6, x[1] - 0.2) < 0.07, 1.0, E)
-
-    return lower, upper
+    """E of the lower and the upper block (``pair_meshes.fault_strata``)."""
+    return fault_strata(contrast)
 
 
 def path(n: int, contrast: float, law: fc.Friction) -> list[str]:

@@ -20,19 +20,13 @@ from common import write_report  # noqa: E402
 import fenics_contact as fc  # noqa: E402
 from fenics_contact.fem.two_body import stiffness  # noqa: E402
 from fenics_contact.multiscale.cem import CEMOptions  # noqa: E402
+from fenics_contact.problem.pair_meshes import fault_strata
 
 T = fc.PairTag
 CONTRAST = 1e3
 
 
-def _lower(x):
-    E = np.where(np.sin(12.0 * x[1]) > 0.0, CONTRAST, 1.0)
-    return np.where((x[0] - 0.3) ** 2 + (x[1] + 0.25) ** 2 < 0.08**2, CONTRAST, E)
-
-
-def _upper(x):
-    E = np.where(np.sin(10.0 * x[1] + 1.0) > 0.0, 1.0, CONTRAST)
-    return np.where((x[0] - 0.6) ** 2 + (x[1] - 0.2) ** 2 < 0.07**2, 1.0, E)
+_lower, _upper = fault_strata(CONTRAST)
 
 
 def main() -> None:

@@ -42,6 +42,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 import fenics_contact as fc  # noqa: E402
+from fenics_contact.problem.pair_meshes import fault_strata
 
 n = int(os.environ.get("FENICS_CONTACT_DEMO_N", "48"))
 out = Path(os.environ.get("FENICS_CONTACT_DEMO_OUT", "results/demo_fault_sliding"))
@@ -56,16 +57,9 @@ mesh = fc.two_blocks(n, int(1.3 * n) + 1, heights=(0.5, 0.4))  # non-matching al
 MU, CONTRAST = 0.4, 1e3
 
 
-def lower_strata(x):
-    """Strata about 0.13 thick alternating E = 10³ and 1, a stiff disc in a soft one."""
-    E = np.where(np.sin(12.0 * x[1]) > 0.0, CONTRAST, 1.0)
-    return np.where(np.hypot(x[0] - 0.3, x[1] + 0.25) < 0.08, CONTRAST, E)
-
-
-def upper_strata(x):
-    """Strata the other way round, a soft disc in a stiff one."""
-    E = np.where(np.sin(10.0 * x[1] + 1.0) > 0.0, 1.0, CONTRAST)
-    return np.where(np.hypot(x[0] - 0.6, x[1] - 0.2) < 0.07, 1.0, E)
+# strata about 0.13 thick alternating E = 10³ and 1 with a stiff disc below the fault, the other way round with a
+# soft disc above it (`fault_strata`)
+lower_strata, upper_strata = fault_strata(CONTRAST)
 
 
 def pair_at(top):

@@ -19,7 +19,7 @@ from mpi4py import MPI
 from fenics_contact.errors import InputError
 from fenics_contact.problem.geometry import gmsh_session
 
-__all__ = ["PairTag", "TwoBodyMesh", "two_blocks", "cylinder_on_block", "join_bodies"]
+__all__ = ["PairTag", "TwoBodyMesh", "two_blocks", "cylinder_on_block", "join_bodies", "fault_strata"]
 
 
 class PairTag(IntEnum):
@@ -255,3 +255,19 @@ def join_bodies(
         joined, tdim - 1, dolfinx.graph.adjacencylist(local.astype(np.int32)), local_values.astype(np.int32)
     )
     return TwoBodyMesh(joined, cell_tags, facet_tags)
+
+
+def fault_strata(contrast: float):
+    """Young's moduli of a fault-like pair on ``two_blocks(…, heights=(0.5, 0.4))`` (the fault at y = 0): the lower
+    block in strata about 0.13 thick alternating E = ``contrast`` and 1 with a stiff disc in a soft stratum, the
+    upper block in strata the other way round with a soft disc; returns the callables (lower, upper) of x."""
+
+    def lower(x: np.ndarray) -> np.ndarray:
+        E = np.where(np.sin(12.0 * x[1]) > 0.0, contrast, 1.0)
+        return np.where((x[0] - 0.3) ** 2 + (x[1] + 0.25) ** 2 < 0.08**2, contrast, E)
+
+    def upper(x: np.ndarray) -> np.ndarray:
+        E = np.where(np.sin(10.0 * x[1] + 1.0) > 0.0, 1.0, contrast)
+        return np.where((x[0] - 0.6) ** 2 + (x[1] - 0.2) ** 2 < 0.07**2, 1.0, E)
+
+    return lower, upper

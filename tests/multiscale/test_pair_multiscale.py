@@ -14,7 +14,7 @@ from fenics_contact.multiscale.cem import CEMOptions
 from fenics_contact.multiscale.pair import PairMultiscaleOptions
 from fenics_contact.problem.pair import Body, ContactPair, Support, TwoBodyProblem
 from fenics_contact.problem.pair_meshes import PairTag as T
-from fenics_contact.problem.pair_meshes import two_blocks
+from fenics_contact.problem.pair_meshes import fault_strata, two_blocks
 
 pytestmark = pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="two-body Algorithm 3 runs on one process")
 
@@ -24,16 +24,7 @@ CONTRAST = 1e3
 FACTOR = 10.0
 
 
-def _lower(x):
-    """Strata of E = 1 and 1e3 across the lower block, a stiff inclusion in a soft one."""
-    E = np.where(np.sin(12.0 * x[1]) > 0.0, CONTRAST, 1.0)
-    return np.where((x[0] - 0.3) ** 2 + (x[1] + 0.25) ** 2 < 0.08**2, CONTRAST, E)
-
-
-def _upper(x):
-    """Strata the other way round in the upper block, a soft inclusion."""
-    E = np.where(np.sin(10.0 * x[1] + 1.0) > 0.0, 1.0, CONTRAST)
-    return np.where((x[0] - 0.6) ** 2 + (x[1] - 0.2) ** 2 < 0.07**2, 1.0, E)
+_lower, _upper = fault_strata(CONTRAST)
 
 
 def _pair(friction=None, top=(0.0, -0.005)) -> TwoBodyProblem:

@@ -13,8 +13,9 @@ Robin data on γ (the facets between a strip and its bulk, in both bodies):
 the monolithic two-body solution (``fem.two_body``), as Theorem 3.1 states for one body.  The interface
 problem F(g) = g − T(g) is solved by Newton's method (``accel="newton"``): Ω₁'s response to g₁₂ is affine,
 u₁|γ = R₁ g₁₂ + r₁ (R₁ by back-solves, once), and on a fixed active set so is Ω₂'s, with R₂ from the
-factorized Jacobian of its last contact Newton; one step per active set, then exact (after ``NEWTON_STEPS``
-steps without convergence, a cycle of active sets, the iteration goes on with Anderson acceleration).
+factorized Jacobian of its last contact Newton; one step per active set, then exact (after
+``pair_iteration.NEWTON_STEPS`` steps without convergence, a cycle of active sets, the iteration goes on with
+Anderson acceleration).
 ``"anderson"`` and ``"none"`` (the paper's update) are the alternatives.  The responses cost one back-solve
 per γ unknown and dense matrices of the size of γ: affordable for the strips of a contact zone, not for a γ
 of many thousand nodes.  The stopping rule is the transmission residual
@@ -53,7 +54,7 @@ from fenics_contact.fem.two_body import (
 )
 from fenics_contact.fem.two_body_friction import FrictionalTwoBodySystem, solve_frictional_pair
 from fenics_contact.hybrid.certificate import primal_certificate
-from fenics_contact.hybrid.iteration import AndersonUpdate
+from fenics_contact.hybrid.pair_iteration import iterate_pair_interface
 from fenics_contact.hybrid.two_body_mpi import solve_two_body_hybrid_distributed
 from fenics_contact.problem.pair import TwoBodyProblem
 
@@ -63,8 +64,6 @@ log = logging.getLogger(__name__)
 
 #: the updates of the interface data
 UPDATES = ("newton", "anderson", "none")
-#: interface Newton steps before the iteration goes on with Anderson acceleration (a cycle of active sets)
-NEWTON_STEPS = 30
 
 
 @dataclass(frozen=True, slots=True)
@@ -344,31 +343,17 @@ def solve_two_body_hybrid(
     g = np.zeros(2 * m)
     if state is not None and state.interface is not None and state.interface.size == 2 * m:
         g = state.interface.copy()
-    converged = False
     try:
-        steps = 0
-        if options.accel == "newton":
-            # R₁ = ∂u₁|γ/∂g₁₂ (once); R₂ = ∂u₂|γ/∂g₂₁ from Ω₂'s factorized Jacobian at the current active set
-            R1 = bulk.response(g1_pos, w)
-            zero, one = np.zeros((m, m)), np.eye(m)
-            for steps in range(1, min(NEWTON_STEPS, options.max_iterations) + 1):
-                Tg, res = T(g)
-                if res < options.tol:
-                    converged = True
-                    break
-                R2 = _responses(system.solve_block, d2.size, g2_pos, w)
-                dT = np.block([[zero, 2 * alpha[:, None] * R2 - one], [2 * alpha[:, None] * R1 - one, zero]])
-                g = g + np.linalg.solve(np.eye(2 * m) - dT, Tg - g)
-            if not converged and steps < options.max_iterations:
-                log.warning("two bodies, Algorithm 1: no interface Newton convergence in %d steps; Anderson", steps)
-        if not converged and steps < options.max_iterations:
-            update = AndersonUpdate(MPI.COMM_SELF, options.depth) if options.accel != "none" else None
-            for _ in range(options.max_iterations - steps):
-                Tg, res = T(g)
-                if res < options.tol:
-                    converged = True
-                    break
-                g = update(g, Tg) if update is not None else Tg
+        # R₁ = ∂u₁|γ/∂g₁₂ (once); R₂ = ∂u₂|γ/∂g₂₁ from Ω₂'s factorized Jacobian at the current active set
+        g, converged, newton_steps = iterate_pair_interface(
+            T,
+            g,
+            alpha,
+            lambda: bulk.response(g1_pos, w),
+            lambda: _responses(system.solve_block, d2.size, g2_pos, w),
+            options,
+            name="two bodies, Algorithm 1",
+        )
         force = np.zeros(n)
         force[d2] = system.contact_force_vector()
         tangential = system.profile() if frictional else None
@@ -399,7 +384,6 @@ def solve_two_body_hybrid(
         surface_profile(u.x.array[:n], force, master, Q, slave=False),
     )
     next_state = PairState(u.x.array[:n].copy(), system.friction.anchor.copy() if frictional else None, g.copy())
-    newton_steps = steps if options.accel == "newton" else 0
     return TwoBodyHybridResult(
         u, converged, residuals, histories, strip, delta, elapsed, *profiles, forces, tangential, dissipation,
         next_state, newton_steps,

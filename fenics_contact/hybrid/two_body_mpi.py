@@ -39,7 +39,7 @@ from fenics_contact.fem.linalg import DirectSolver
 from fenics_contact.fem.mortar import contact_quadrature, surface
 from fenics_contact.fem.two_body_mpi import gathered_surface, gathered_u, reduced_penalty_newton
 from fenics_contact.hybrid.certificate import primal_certificate
-from fenics_contact.hybrid.iteration import AndersonUpdate
+from fenics_contact.hybrid.pair_iteration import iterate_pair_interface
 from fenics_contact.problem.materials import strain, stress
 from fenics_contact.problem.pair import TwoBodyProblem
 
@@ -243,7 +243,7 @@ def solve_two_body_hybrid_distributed(problem: TwoBodyProblem, *, delta, options
     its fields on the owned DOFs, the profiles and forces on every rank."""
     from fenics_contact.fem.two_body import PairState, supported_dofs, surface_profile, two_body_penalty
     from fenics_contact.fem.two_body_friction import PairFriction
-    from fenics_contact.hybrid.two_body import NEWTON_STEPS, TwoBodyHybridResult  # (imports this module)
+    from fenics_contact.hybrid.two_body import TwoBodyHybridResult  # (imports this module)
 
     start = time.perf_counter()
     msh, comm = problem.mesh, problem.comm
@@ -297,27 +297,16 @@ def solve_two_body_hybrid_distributed(problem: TwoBodyProblem, *, delta, options
     g = np.zeros(2 * m)
     if state is not None and state.interface is not None and state.interface.size == 2 * m:
         g = state.interface.copy()
-    converged, steps = False, 0
-    if options.accel == "newton":
-        zero, one = np.zeros((m, m)), np.eye(m)
-        for steps in range(1, min(NEWTON_STEPS, options.max_iterations) + 1):
-            Tg, res = T(g)
-            if res < options.tol:
-                converged = True
-                break
-            R2 = red.P - red.Cz @ red.dlam()
-            dT = np.block([[zero, 2 * alpha[:, None] * R2 - one], [2 * alpha[:, None] * red.R1 - one, zero]])
-            g = g + np.linalg.solve(np.eye(2 * m) - dT, Tg - g)
-        if not converged and steps < options.max_iterations and comm.rank == 0:
-            log.warning("two bodies, Algorithm 1 (MPI): no interface Newton convergence in %d steps; Anderson", steps)
-    if not converged and steps < options.max_iterations:
-        update = AndersonUpdate(MPI.COMM_SELF, options.depth) if options.accel != "none" else None
-        for _ in range(options.max_iterations - steps):
-            Tg, res = T(g)
-            if res < options.tol:
-                converged = True
-                break
-            g = update(g, Tg) if update is not None else Tg
+    g, converged, newton_steps = iterate_pair_interface(
+        T,
+        g,
+        alpha,
+        lambda: red.R1,
+        lambda: red.P - red.Cz @ red.dlam(),
+        options,
+        name="two bodies, Algorithm 1 (MPI)",
+        warn=comm.rank == 0,
+    )
     lam = red.lam
     u1 = u10 + red.X1 @ g[:m]
     u2 = u20 + red.X2 @ g[m:] - red.Z @ lam
@@ -352,5 +341,5 @@ def solve_two_body_hybrid_distributed(problem: TwoBodyProblem, *, delta, options
             log.warning("two bodies, Algorithm 1 (MPI): NOT converged (transmission residual %.3e)", residuals[-1])
     return TwoBodyHybridResult(
         u, converged, residuals, red.histories, strip, delta, elapsed, *profiles, forces, tangential, dissipation,
-        next_state, steps if options.accel == "newton" else 0,
+        next_state, newton_steps,
     )  # fmt: skip

@@ -29,7 +29,7 @@ from dolfinx import fem
 
 import fenics_contact  # noqa: F401  (imports dolfinx_solver first)
 from fenics_contact.fem.mixed import MixedSolution
-from fenics_contact.problem.analytic import hertz_model
+from fenics_contact.problem.analytic import cattaneo_mindlin, hertz_model
 from fenics_contact.problem.friction import Friction
 from fenics_contact.problem.geometry import unit_square
 from fenics_contact.problem.meshes import hertz_block
@@ -120,12 +120,9 @@ def _unloading_row(nu: float, radius: float, hc: float, loaded, step) -> str:
     q = μp₀[−√(1 − x²/a²) + 2(c'/a)√(1 − x²/c'²) − (c/a)√(1 − x²/c²)]."""
     fp, P = step.friction, step.normal_force
     Q_star, Q = loaded.tangential_force[0], step.tangential_force[0]
-    a = 2.0 * np.sqrt(radius * P / (np.pi / (1.0 - nu**2)))
-    p0 = 2.0 * P / (np.pi * a)
-    c, c_back = a * np.sqrt(1.0 - Q_star / (MU * P)), a * np.sqrt(1.0 - (Q_star - Q) / (2.0 * MU * P))
     x, w = fp.points[:, 0], fp.weights
-    terms = [(r / a) * np.sqrt(np.maximum(1.0 - (x / r) ** 2, 0.0)) for r in (a, c_back, c)]
-    exact = MU * p0 * (-terms[0] + 2.0 * terms[1] - terms[2])
+    md = cattaneo_mindlin(x, normal=P, tangential=Q, mu=MU, radius=radius, nu=nu, peak=Q_star)
+    a, c_back, exact = md.a, md.c_back, md.shear
     inside = np.abs(x) < a
     l2 = np.sqrt(np.sum((w * (fp.traction[:, 0] - exact) ** 2)[inside]) / np.sum((w * exact**2)[inside]))
     lo, hi = fp.extent("stick")
@@ -168,13 +165,11 @@ def cattaneo_table(
         for step in path.steps[2:4]:
             fp = step.friction
             P, Q = step.normal_force, abs(step.tangential_force[0])
-            a = 2.0 * np.sqrt(radius * P / (np.pi / (1.0 - nu**2)))
-            p0, ratio = 2.0 * P / (np.pi * a), Q / (MU * P)
-            c = a * np.sqrt(max(1.0 - ratio, 0.0))
+            ratio = Q / (MU * P)
             lo, hi = fp.extent("stick")
             x = fp.points[:, 0]
-            exact = MU * p0 * np.sqrt(np.maximum(1.0 - (x / a) ** 2, 0.0))
-            exact -= np.where(np.abs(x) < c, MU * p0 * (c / a) * np.sqrt(np.maximum(1.0 - (x / c) ** 2, 0.0)), 0.0)
+            cat = cattaneo_mindlin(x, normal=P, tangential=Q, mu=MU, radius=radius, nu=nu)
+            a, p0, c, exact = cat.a, cat.p0, cat.c, cat.shear
             inside, w = np.abs(x) < a, fp.weights
             q = np.abs(fp.traction[:, 0])
             l2 = np.sqrt(np.sum((w * (q - exact) ** 2)[inside]) / np.sum((w * exact**2)[inside]))
@@ -208,17 +203,15 @@ def primal_mixed_table(nus, refinement: float) -> str:
         paths = [slide(model.on(cm), method, motions) for method in ("primal-monolithic", "mixed-monolithic")]
         for primal, mixed in zip(paths[0].steps[2:], paths[1].steps[2:]):
             P, Q = mixed.normal_force, abs(mixed.tangential_force[0])
-            a = 2.0 * np.sqrt(radius * P / (np.pi / (1.0 - nu**2)))
-            p0, ratio = 2.0 * P / (np.pi * a), Q / (MU * P)
-            c = a * np.sqrt(max(1.0 - ratio, 0.0))
+            ratio = Q / (MU * P)
             widths, errors = [], []
             for step in (primal, mixed):
                 fp = step.friction
-                lo, hi = fp.extent("stick")
-                widths.append((0.5 * (hi - lo) - c) / hc)
                 x, w = fp.points[:, 0], fp.weights
-                exact = MU * p0 * np.sqrt(np.maximum(1.0 - (x / a) ** 2, 0.0))
-                exact -= np.where(np.abs(x) < c, MU * p0 * (c / a) * np.sqrt(np.maximum(1.0 - (x / c) ** 2, 0.0)), 0.0)
+                exact = cattaneo_mindlin(x, normal=P, tangential=Q, mu=MU, radius=radius, nu=nu)
+                lo, hi = fp.extent("stick")
+                widths.append((0.5 * (hi - lo) - exact.c) / hc)
+                a, exact = exact.a, exact.shear
                 inside = np.abs(x) < a
                 q = np.abs(fp.traction[:, 0])
                 errors.append(np.sqrt(np.sum((w * (q - exact) ** 2)[inside]) / np.sum((w * exact**2)[inside])))

@@ -22,6 +22,11 @@
 * **Two-body Hertz** (plane strain, frictionless): two cylinders of radii R₁, R₂ (R = ∞: a flat block) and
   moduli (E₁, ν₁), (E₂, ν₂) are the one-body case with 1/R* = 1/R₁ + 1/R₂ and
   1/E* = (1 − ν₁²)/E₁ + (1 − ν₂²)/E₂ (``hertz_pair``): ``hertz_errors(profile, radius=R*, E=E*, nu=0)``.
+* **Cattaneo–Mindlin** (plane strain, Coulomb μ, no normal–tangential coupling: an incompressible body on a
+  rigid base): the Hertz contact of the normal force P then a tangential force Q < μP sticks on |x| < c,
+  c = a√(1 − Q/(μP)), with the shear q(x) = μp₀[√(1 − x²/a²) − (c/a)√(1 − x²/c²)]; moved back from Q* to Q
+  (Mindlin–Deresiewicz) it slips back on c′ < |x| < a, c′ = a√(1 − (Q* − Q)/(2μP)), with
+  q = μp₀[−√(1 − x²/a²) + 2(c′/a)√(1 − x²/c′²) − (c/a)√(1 − x²/c²)], c of Q* (``cattaneo_mindlin``).
 * **Hertz** (3D): a rigid sphere of radius R on a half-space, total force F: a = (3FR/(4E*))^(1/3),
   p(r) = p₀√(1 − r²/a²), p₀ = 3F/(2πa²), at the depth d = a²/R.  ``hertz_sphere_model`` is the
   quarter block of ``meshes3d.hertz_quarter_block`` under it (symmetry planes on rollers), ``hertz_sphere_errors``
@@ -44,6 +49,8 @@ from fenics_contact.problem.obstacles import Circle, Plane, Sphere
 from fenics_contact.problem.problem import ContactProblem
 
 __all__ = [
+    "CattaneoMindlin",
+    "cattaneo_mindlin",
     "BarSolution",
     "bar_model",
     "bar_solution",
@@ -187,6 +194,44 @@ def hertz_errors(profile, *, radius: float, E: float, nu: float, h_contact: floa
     w = profile.weights
     l2 = float(np.sqrt(np.sum(w * (p - exact) ** 2) / np.sum(w * exact**2)))
     return HertzErrors(F, a, p0, half, (half - a) / h_contact, float(p.max() / p0 - 1.0), l2)
+
+
+class CattaneoMindlin(NamedTuple):
+    """The Cattaneo–Mindlin shear traction of a cylinder (module docstring) at the points x."""
+
+    a: float  #: the Hertz half-width 2√(RP/(πE*))
+    p0: float  #: the Hertz peak pressure 2P/(πa)
+    c: float  #: the stick half-width of the loading to Q (of Q* when unloaded): a√(1 − Q/(μP)), 0 when sliding
+    c_back: float | None  #: where the reverse slip ends after unloading to Q, a√(1 − (Q* − Q)/(2μP)); None loading
+    shear: np.ndarray  #: q(x), the shear traction in the direction of Q
+
+
+def cattaneo_mindlin(
+    x: np.ndarray,
+    *,
+    normal: float,
+    tangential: float,
+    mu: float,
+    radius: float,
+    E: float = 1.0,
+    nu: float,
+    peak: float | None = None,
+) -> CattaneoMindlin:
+    """The shear traction at the points x of a cylinder of ``radius`` pressed with ``normal`` force P, then
+    loaded to ``tangential`` force Q, or (``peak`` = Q*) loaded to Q* and moved back to Q (Mindlin–Deresiewicz)."""
+
+    a = 2.0 * np.sqrt(radius * normal / (np.pi * E / (1.0 - nu**2)))
+    p0 = 2.0 * normal / (np.pi * a)
+
+    def term(r: float) -> np.ndarray:
+        return (r / a) * np.sqrt(np.maximum(1.0 - (x / r) ** 2, 0.0)) if r > 0.0 else np.zeros_like(x)
+
+    if peak is None:
+        c = a * np.sqrt(max(1.0 - tangential / (mu * normal), 0.0))
+        return CattaneoMindlin(a, p0, c, None, mu * p0 * (term(a) - term(c)))
+    c = a * np.sqrt(max(1.0 - peak / (mu * normal), 0.0))
+    c_back = a * np.sqrt(max(1.0 - (peak - tangential) / (2.0 * mu * normal), 0.0))
+    return CattaneoMindlin(a, p0, c, c_back, mu * p0 * (-term(a) + 2.0 * term(c_back) - term(c)))
 
 
 def hertz_pair(

@@ -6,7 +6,7 @@ import pytest
 import fenics_contact
 from fenics_contact.errors import InputError
 from fenics_contact.fem.friction import NodalFriction
-from fenics_contact.problem.analytic import hertz_model
+from fenics_contact.problem.analytic import cattaneo_mindlin, hertz_model
 from fenics_contact.problem.friction import Friction
 from fenics_contact.problem.geometry import unit_square
 from fenics_contact.problem.meshes import hertz_block
@@ -113,18 +113,15 @@ def test_cattaneo_mindlin():
     for step in path.steps[2:]:
         fp = step.friction
         P, Q = step.normal_force, abs(step.tangential_force[0])
-        a = 2.0 * np.sqrt(R * P / (np.pi / (1.0 - nu**2)))
-        p0 = 2.0 * P / (np.pi * a)
-        ratio = Q / (mu * P)
-        ratios.append(ratio)
-        c = a * np.sqrt(1.0 - ratio)
+        x = fp.points[:, 0]
+        exact = cattaneo_mindlin(x, normal=P, tangential=Q, mu=mu, radius=R, nu=nu)
+        c = exact.c
+        ratios.append(Q / (mu * P))
         lo, hi = fp.extent("stick")
         assert abs(0.5 * (hi - lo) - c) <= 1.5 * hc
         assert abs(0.5 * (hi + lo)) <= 2.0 * hc
-        x = fp.points[:, 0]
         q = np.abs(fp.traction[:, 0])
-        exact = mu * p0 * np.sqrt(np.maximum(1.0 - (x / a) ** 2, 0.0))
-        exact -= np.where(np.abs(x) < c, mu * p0 * (c / a) * np.sqrt(np.maximum(1.0 - (x / c) ** 2, 0.0)), 0.0)
+        a, exact = exact.a, exact.shear
         inside = np.abs(x) < a
         w = fp.weights[inside]
         assert np.sqrt(np.sum(w * (q - exact)[inside] ** 2) / np.sum(w * exact[inside] ** 2)) < 0.6

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from fenics_contact.fem.mixed import MixedSolution, solve_mixed_monolithic
-from fenics_contact.problem.analytic import hertz_model
+from fenics_contact.problem.analytic import cattaneo_mindlin, hertz_model
 from fenics_contact.problem.friction import Friction
 from fenics_contact.problem.geometry import unit_square
 from fenics_contact.problem.meshes import hertz_block
@@ -182,18 +182,15 @@ def test_cattaneo_mindlin_incompressible(refinement):
     for step in path.steps[2:4]:
         fp = step.friction
         P, Q = step.normal_force, abs(step.tangential_force[0])
-        a = 2.0 * np.sqrt(R * P / (np.pi / (1.0 - nu**2)))
-        p0 = 2.0 * P / (np.pi * a)
-        ratio = Q / (mu * P)
-        ratios.append(ratio)
-        c = a * np.sqrt(1.0 - ratio)
+        x, w = fp.points[:, 0], fp.weights
+        cat = cattaneo_mindlin(x, normal=P, tangential=Q, mu=mu, radius=R, nu=nu)
+        a, p0, c = cat.a, cat.p0, cat.c
+        ratios.append(Q / (mu * P))
         lo, hi = fp.extent("stick")
         assert abs(0.5 * (hi - lo) - c) <= 1.0 * hc
         assert abs(0.5 * (hi + lo)) <= 2.0 * hc
-        x, w = fp.points[:, 0], fp.weights
         q = np.abs(fp.traction[:, 0])
-        exact = mu * p0 * np.sqrt(np.maximum(1.0 - (x / a) ** 2, 0.0))
-        exact -= np.where(np.abs(x) < c, mu * p0 * (c / a) * np.sqrt(np.maximum(1.0 - (x / c) ** 2, 0.0)), 0.0)
+        exact = cat.shear
         inside = np.abs(x) < a
         assert np.sqrt(np.sum((w * (q - exact) ** 2)[inside]) / np.sum((w * exact**2)[inside])) < 0.25
         hertz = p0 * np.sqrt(np.maximum(1.0 - (x / a) ** 2, 0.0))
@@ -209,18 +206,12 @@ def test_cattaneo_mindlin_incompressible(refinement):
     step, loaded = path.steps[4], path.steps[3]
     fp, P = step.friction, step.normal_force
     Q_star, Q = loaded.tangential_force[0], step.tangential_force[0]
-    a = 2.0 * np.sqrt(R * P / (np.pi / (1.0 - nu**2)))
-    p0 = 2.0 * P / (np.pi * a)
-    c, c_back = a * np.sqrt(1.0 - Q_star / (mu * P)), a * np.sqrt(1.0 - (Q_star - Q) / (2.0 * mu * P))
+    x, w = fp.points[:, 0], fp.weights
+    md = cattaneo_mindlin(x, normal=P, tangential=Q, mu=mu, radius=R, nu=nu, peak=Q_star)
+    a, p0, exact = md.a, md.p0, md.shear
     assert 0.2 < Q / (mu * P) < 0.45
     lo, hi = fp.extent("stick")
-    assert abs(0.5 * (hi - lo) - c_back) <= 1.0 * hc and abs(0.5 * (hi + lo)) <= 2.0 * hc
-    x, w = fp.points[:, 0], fp.weights
-
-    def term(r):
-        return (r / a) * np.sqrt(np.maximum(1.0 - (x / r) ** 2, 0.0))
-
-    exact = mu * p0 * (-term(a) + 2.0 * term(c_back) - term(c))
+    assert abs(0.5 * (hi - lo) - md.c_back) <= 1.0 * hc and abs(0.5 * (hi + lo)) <= 2.0 * hc
     inside = np.abs(x) < a
     q = fp.traction[:, 0]
     assert np.sqrt(np.sum((w * (q - exact) ** 2)[inside]) / np.sum((w * exact**2)[inside])) < 0.25

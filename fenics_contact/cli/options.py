@@ -25,6 +25,7 @@ from fenics_contact.problem.composite3d import MODEL_COMPOSITE_3D
 from fenics_contact.problem.materials import check_poisson_ratio
 from fenics_contact.problem.models import MODELS_3D, get_model, model_1
 from fenics_contact.problem.models3d import MODEL_3D
+from fenics_contact.problem.validation import METHODS_3D
 
 __all__ = [
     "DEFAULT_H",
@@ -255,6 +256,11 @@ class RunOptions:
                     else f"--mesh {self.mesh} is not a file"
                 )
         _integer("h", self.h, 2)
+        if self.mesh is None and self.case is None and self.model in MODELS_3D and self.method not in METHODS_3D:
+            raise InputError(
+                f"--method {self.method} solves plane problems (triangles) only and --model {self.model} is 3D: "
+                f"a 3D problem runs with the method {' or '.join(repr(m) for m in METHODS_3D if m in METHODS)}"
+            )
         if self.H is None:
             cube_ms = self.mesh is None and self.case is None and self.model == MODEL_3D and self.method.endswith("-ms")
             object.__setattr__(self, "H", DEFAULT_COARSE_3D_MS if cube_ms else DEFAULT_COARSE)

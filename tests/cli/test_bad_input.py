@@ -546,6 +546,12 @@ CASES = [
         "a 3D case has no coarse grid of cubes",
     ),
     Case(
+        "a mixed method on the 3D model",
+        lambda tmp: ["--model", "4", "--h", "8", "--method", "mixed"],
+        2,
+        "--method mixed solves plane problems (triangles) only and --model 4 is 3D",
+    ),
+    Case(
         "Algorithm 3 on the fibre composite (no coarse grid)",
         lambda tmp: ["--model", "5", "--h", "8", "--method", "primal-ms"],
         2,

@@ -8,29 +8,11 @@ import pytest
 import scipy.spatial
 from mpi4py import MPI
 from mpi_jobs import on_every_rank
+from pair_problems import tilted_pair
 
 import fenics_contact as fc
-from fenics_contact.problem.pair import Body, ContactPair, Support, TwoBodyProblem
-from fenics_contact.problem.pair_meshes import PairTag as T
-from fenics_contact.problem.pair_meshes import two_blocks
 
 pytestmark = pytest.mark.mpi
-
-
-def _tilted(comm: MPI.Comm) -> TwoBodyProblem:
-    """The upper block pushed down on the left and lifted on the right across a gap: a partial contact."""
-    m = two_blocks(7, 10, heights=(0.5, 0.4), gap=0.004, comm=comm)
-    return TwoBodyProblem(
-        m.mesh,
-        m.cell_tags,
-        m.facet_tags,
-        bodies=(Body(T.LOWER, 1.0, 0.3), Body(T.UPPER, 5.0, 0.2)),
-        pair=ContactPair(T.UPPER_BOTTOM, T.LOWER_TOP),
-        supports=(
-            Support(T.LOWER_BOTTOM),
-            Support(T.UPPER_TOP, lambda x: np.vstack([0.0 * x[0], 0.01 - 0.03 * x[0]])),
-        ),
-    )
 
 
 def _vertex_values(u) -> np.ndarray:
@@ -45,8 +27,8 @@ def _vertex_values(u) -> np.ndarray:
 
 
 def test_two_ranks_give_the_serial_solution():
-    parallel = fc.solve(_tilted(MPI.COMM_WORLD), "primal-monolithic")
-    serial = fc.solve(_tilted(MPI.COMM_SELF), "primal-monolithic")
+    parallel = fc.solve(tilted_pair(MPI.COMM_WORLD, (7, 10)), "primal-monolithic")
+    serial = fc.solve(tilted_pair(MPI.COMM_SELF, (7, 10)), "primal-monolithic")
     assert MPI.COMM_WORLD.size > 1 and parallel.dofs == serial.dofs
     assert 0 < np.count_nonzero(serial.slave.active) < serial.slave.active.size  # a partial contact
     for a, b in ((parallel.slave, serial.slave), (parallel.master, serial.master)):
@@ -66,24 +48,9 @@ def test_two_ranks_give_the_serial_solution():
     assert on_every_rank(error) < 1e-10
 
 
-def _tilted_3d(comm: MPI.Comm) -> TwoBodyProblem:
-    m = two_blocks(3, 4, heights=(0.5, 0.4), dim=3, comm=comm)
-    return TwoBodyProblem(
-        m.mesh,
-        m.cell_tags,
-        m.facet_tags,
-        bodies=(Body(T.LOWER, 1.0, 0.3), Body(T.UPPER, 5.0, 0.2)),
-        pair=ContactPair(T.UPPER_BOTTOM, T.LOWER_TOP),
-        supports=(
-            Support(T.LOWER_BOTTOM),
-            Support(T.UPPER_TOP, lambda x: np.vstack([0.0 * x[0], 0.0 * x[0], 0.005 - 0.02 * x[0]])),
-        ),
-    )
-
-
 def test_two_ranks_give_the_serial_solution_in_three_dimensions():
-    parallel = fc.solve(_tilted_3d(MPI.COMM_WORLD), "primal-monolithic")
-    serial = fc.solve(_tilted_3d(MPI.COMM_SELF), "primal-monolithic")
+    parallel = fc.solve(tilted_pair(MPI.COMM_WORLD, (3, 4), dim=3), "primal-monolithic")
+    serial = fc.solve(tilted_pair(MPI.COMM_SELF, (3, 4), dim=3), "primal-monolithic")
     assert 0 < np.count_nonzero(serial.slave.active) < serial.slave.active.size
     for a, b in ((parallel.slave, serial.slave), (parallel.master, serial.master)):
         assert np.array_equal(a.points, b.points)

@@ -12,6 +12,7 @@ import pytest
 import scipy.spatial
 from mpi4py import MPI
 from mpi_jobs import on_every_rank, run_summary, serial_cli
+from pair_problems import tilted_pair
 
 import fenics_contact as fc
 from fenics_contact.cli import main
@@ -112,26 +113,11 @@ def test_a_two_body_case_with_algorithm_1_on_two_ranks_is_the_serial_run(shared_
             assert p["friction"]["slip_nodes"] == s["friction"]["slip_nodes"]
 
 
-def _tilted_3d(comm: MPI.Comm) -> TwoBodyProblem:
-    m = two_blocks(5, 6, heights=(0.5, 0.4), dim=3, comm=comm)
-    return TwoBodyProblem(
-        m.mesh,
-        m.cell_tags,
-        m.facet_tags,
-        bodies=(Body(T.LOWER, 1.0, 0.3), Body(T.UPPER, 5.0, 0.2)),
-        pair=ContactPair(T.UPPER_BOTTOM, T.LOWER_TOP),
-        supports=(
-            Support(T.LOWER_BOTTOM),
-            Support(T.UPPER_TOP, lambda x: np.vstack([0.0 * x[0], 0.0 * x[0], 0.005 - 0.02 * x[0]])),
-        ),
-    )
-
-
 def test_two_ranks_give_the_serial_algorithm_1_in_three_dimensions():
     """A partial contact of two blocks in 3D, one-layer strips: the serial forces and the monolithic ones."""
-    parallel = fc.solve(_tilted_3d(MPI.COMM_WORLD), "primal", tol=1e-11, layers=1)
-    serial = fc.solve(_tilted_3d(MPI.COMM_SELF), "primal", tol=1e-11, layers=1)
-    mono = fc.solve(_tilted_3d(MPI.COMM_WORLD), "primal-monolithic")
+    parallel = fc.solve(tilted_pair(MPI.COMM_WORLD, (5, 6), dim=3), "primal", tol=1e-11, layers=1)
+    serial = fc.solve(tilted_pair(MPI.COMM_SELF, (5, 6), dim=3), "primal", tol=1e-11, layers=1)
+    mono = fc.solve(tilted_pair(MPI.COMM_WORLD, (5, 6), dim=3), "primal-monolithic")
     assert parallel.converged and parallel.iterations <= 8
     assert 0 < np.count_nonzero(serial.slave.active) < serial.slave.active.size
     for fp, fs, fm in zip(parallel.forces, serial.forces, mono.forces, strict=True):
@@ -142,4 +128,4 @@ def test_two_ranks_give_the_serial_algorithm_1_in_three_dimensions():
 
 def test_two_body_algorithm_3_refuses_on_two_ranks():
     with pytest.raises(InputError, match="runs on one process"):
-        fc.solve(_tilted_3d(MPI.COMM_WORLD), "primal-ms", H=0.25)
+        fc.solve(tilted_pair(MPI.COMM_WORLD, (5, 6), dim=3), "primal-ms", H=0.25)

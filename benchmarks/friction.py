@@ -8,18 +8,22 @@ T, its Newton steps on the interface data after the condensed solve, the steps o
 3D channel cube (h = 1/``--h``), the wall on x = 1 pressed in by 0.01 and dragged along y by 0.005, 0.01, 0.02
 (this table only).
 
-(2) A cylinder (R = 5) pressed into the Hertz block (contact cells a/(20 r)) with P, then moved sideways: per
-drag step Q/(μP), the stick zone's half-width and centre against c = a√(1 − Q/(μP)) (in contact cells), and the
-L² distance of |t| to μp₀[√(1 − x²/a²) − (c/a)√(1 − x²/c²)] over the contact zone.
+(2) A cylinder (R = 100a) pressed into the Hertz block (80a × 40a, contact cells a/(20 r), a = 0.05) with P, then
+moved sideways: the pressed state against Hertz (a, p₀ from the computed normal force P: the contact half-width,
+the peak and the L² error of p), and per drag step Q/(μP), the stick zone's half-width and centre against
+c = a√(1 − Q/(μP)) (in contact cells), and the L² distance of |t| to μp₀[√(1 − x²/a²) − (c/a)√(1 − x²/c²)] over the
+contact zone.
 
     OMP_NUM_THREADS=1 .venv/bin/python benchmarks/friction.py --h 32 --H 8 --nu 0.45 0.49 --refinement 0.5
     OMP_NUM_THREADS=1 .venv/bin/python benchmarks/friction.py --dim 3 --h 6
 
 ``--mixed``: (1) with Algorithm 2 against the monolithic frictional path on X̃_h (its exact fixed point: e_σ, e_u
-per step), (2) with ``mixed-monolithic`` and a step back to 2e-4 (Mindlin–Deresiewicz); ``--width``, ``--depth``:
-the Hertz block's size in units of a.
+per step), (2) with ``mixed-monolithic`` and a step back (Mindlin–Deresiewicz), at each ``--refinement`` and the L²
+errors' observed rates.  ``--half-space``: the block 1000a × 500a graded to 64a cells and R = 1000a
+(``HALF_SPACE``), where the half-space formulas hold; ``--width``, ``--depth``, ``--radius`` (in units of a) change
+the block and the cylinder; ``--cattaneo``: the tables of (2) only.
 
-    OMP_NUM_THREADS=1 .venv/bin/python benchmarks/friction.py --mixed --h 32 --H 8 --nu 0.4999 --refinement 0.5
+    OMP_NUM_THREADS=1 .venv/bin/python benchmarks/friction.py --mixed --half-space --nu 0.4999 --refinement 0.5 1 2
 """
 
 import argparse
@@ -323,7 +327,10 @@ def main() -> None:
     )
     parser.add_argument("--width", type=float, help="Hertz block width / a (Cattaneo–Mindlin; default 80)")
     parser.add_argument("--depth", type=float, help="Hertz block depth / a (Cattaneo–Mindlin; default 40)")
-    parser.add_argument("--radius", type=float, help="the cylinder's radius / a (Cattaneo–Mindlin; default 100)")
+    parser.add_argument(
+        "--radius", type=float, help="the cylinder's radius / a (Cattaneo–Mindlin; default 100; the motions ∝ 1/R)"
+    )
+    parser.add_argument("--cattaneo", action="store_true", help="with --mixed: only the Cattaneo–Mindlin tables")
     parser.add_argument(
         "--primal-mixed", action="store_true", help="Cattaneo–Mindlin: primal-monolithic against mixed-monolithic"
     )
@@ -331,13 +338,17 @@ def main() -> None:
     setup = HALF_SPACE if args.half_space else CattaneoSetup()
     given = {"width": args.width, "depth": args.depth, "radius": args.radius}
     setup = replace(setup, **{key: value for key, value in given.items() if value is not None})
+    if args.radius is not None:  # the same a: P and the motions scale with 1/R
+        scale = (HALF_SPACE if args.half_space else CattaneoSetup()).radius / args.radius
+        setup = replace(setup, press=setup.press * scale, drag=setup.drag * scale)
     if args.primal_mixed:
         print("## Cattaneo–Mindlin: primal-monolithic against mixed-monolithic\n")
         print(primal_mixed_table(args.nu, args.refinement[0]))
         return
     if args.mixed:
-        print("## Algorithm 2 and the monolithic solve on X̃_h along a frictional path\n")
-        print(mixed_theorem_table(args.h, args.H))
+        if not args.cattaneo:
+            print("## Algorithm 2 and the monolithic solve on X̃_h along a frictional path\n")
+            print(mixed_theorem_table(args.h, args.H))
         print("\n## Cattaneo–Mindlin (mixed-monolithic)\n")
         print(cattaneo_rates(args.nu, args.refinement, "mixed-monolithic", setup))
         return

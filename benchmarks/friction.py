@@ -238,7 +238,7 @@ def cattaneo_rates(nus, refinements, method: str, setup: CattaneoSetup) -> str:
         out += [f"### h_c = a/{0.05 / hc:.0f}", ""] + rows + [""]
         table.append((hc, errors))
     out += [
-        "### L² errors against h_c (observed rate log₂ of the ratio between successive h_c)",
+        "### L² errors against h_c (the first ν; observed rate: log₂ of the ratio between successive h_c)",
         "",
         "| h_c | p (pressed) | q at the first drag | q at the second drag | q moved back |",
         "|---|---|---|---|---|",

@@ -156,63 +156,91 @@ def test_algorithm_4_along_a_frictional_path():
             )
 
 
-A, R = 0.05, 5.0
+A = 0.05
+#: a half-space to the contact: the block 1000a × 500a, graded from the contact cells to 64a cells far away; the
+#: cylinder's radius 1000a (the law's tangent, normal to the cylinder, turns by |x|/R ≤ 10⁻³ across the contact)
+HALF_SPACE = {"width": 1000.0, "depth": 500.0, "h_far": 64.0}
+R, PRESS, DRAG = 1000.0 * A, 1.7e-4, 2.4e-5
+#: measured at h_c = a/10, a/20 (``benchmarks/results/friction_mixed.md``): the L² errors of p (pressed), of q at
+#: the two drag steps and moved back, and the bounds asserted
+CATTANEO_BOUNDS = {0.5: (0.012, 0.05, 0.05), 1.0: (0.005, 0.025, 0.03)}
+
+
+def _l2(values, exact, weights, inside):
+    return np.sqrt(np.sum((weights * (values - exact) ** 2)[inside]) / np.sum((weights * exact**2)[inside]))
+
+
+def _contact_half_width(x, p):
+    """Half the extent of the run of nodes in contact (p > 0) around the axis (an end of Γ_C next to the free top
+    may carry a round-off p > 0 of its own)."""
+    order = np.argsort(x)
+    x, touching = x[order], p[order] > 0.0
+    lo = hi = int(np.argmin(np.abs(x)))
+    while lo > 0 and touching[lo - 1]:
+        lo -= 1
+    while hi < x.size - 1 and touching[hi + 1]:
+        hi += 1
+    return 0.5 * (x[hi] - x[lo])
 
 
 @pytest.mark.parametrize("refinement", [0.5, pytest.param(1.0, marks=pytest.mark.slow)], ids=["a/10", "a/20"])
 def test_cattaneo_mindlin_incompressible(refinement):
-    """A cylinder pressed into the Hertz block with P, then moved sideways until Q < μP, ν = 0.4999 (no
+    """A cylinder pressed into a half-space-like block with P, then moved sideways until Q < μP, ν = 0.4999 (no
     normal–tangential coupling: Cattaneo–Mindlin is the exact half-space answer): stick zone |x| ≤ c,
-    c = a√(1 − Q/(μP)), q(x) = μp₀[√(1 − x²/a²) − (c/a)√(1 − x²/c²)].  The mixed method does not lock.
+    c = a√(1 − Q/(μP)), q(x) = μp₀[√(1 − x²/a²) − (c/a)√(1 − x²/c²)], a and p₀ Hertz's for the computed P.
+    The mixed method does not lock.
 
-    Measured at Q/μP = 0.32 and 0.63, h_c = a/10 and a/20: the stick zone's half-width 0.03, 0.02 and 0.02, 0.19
-    cells from c, its centre 0.4, 0.5 and 0.5, 1.0 cells from the axis (≈ a/20 in length at both h); q's L² error
-    over the contact zone 18.4 %, 10.9 % (a/10) and 18.6 %, 10.3 % (a/20): independent of h, a tilt of q in the
-    stick zone from the finite block (80a × 40a; on a 40a × 10a block 61 %, 33 %); the pressure p within 1.6 %
-    of Hertz.  Asserted: half-width within 1 cell, centre within 2 cells, q within 25 %, p within 3 %, the slip zone
-    at μp plus the slip penalty's excess, dissipation ≥ 0.  Then moved back (Mindlin–Deresiewicz, below).
+    Measured (``benchmarks/friction.py --mixed --half-space``) at Q/μP = 0.33 and 0.64: the pressed state's p
+    within 0.8 % (a/10) and 0.2 % (a/20) of Hertz in L² and so under Q, its contact half-width within 0.3 cells
+    of a; the stick zone within 0.15 cells of c, its centre within 0.22 cells of the axis; q's L² error over the
+    contact zone 3.6 %, 1.5 % (a/10) and 1.7 %, 1.1 % (a/20).  Asserted: p and q within ``CATTANEO_BOUNDS``, the
+    half-width within 1 cell, the centre within 1 cell, the slip zone at μp plus the slip penalty's excess,
+    dissipation ≥ 0.  Then moved back (Mindlin–Deresiewicz, below).
     """
-    nu, mu, depth = 0.4999, 0.3, 1.2e-3
-    cm, spec = hertz_block(A, refinement=refinement)
+    nu, mu = 0.4999, 0.3
+    bound_p, bound_q, bound_md = CATTANEO_BOUNDS[refinement]
+    cm, spec = hertz_block(A, refinement=refinement, **HALF_SPACE)
     model = hertz_model(radius=R, E=1.0, nu=nu, depth=0.0).with_(law=Friction("coulomb", mu=mu))
-    motions = [(0.0, -depth / 2), (0.0, -depth), (2e-4, -depth), (4e-4, -depth), (2e-4, -depth)]
+    motions = [(0.0, -PRESS / 2), (0.0, -PRESS), (DRAG, -PRESS), (2 * DRAG, -PRESS), (DRAG, -PRESS)]
     path = slide(model.on(cm), "mixed-monolithic", motions)
     hc = spec.h_contact
+    pressed = path.steps[1].friction
+    x, w = pressed.points[:, 0], pressed.weights
+    hertz = cattaneo_mindlin(x, normal=path.steps[1].normal_force, tangential=0.0, mu=mu, radius=R, nu=nu)
+    assert 0.9 < hertz.a / A < 1.1  # measured 1.014
+    assert (
+        _l2(pressed.pressure, hertz.p0 * np.sqrt(np.maximum(1.0 - (x / hertz.a) ** 2, 0.0)), w, slice(None)) < bound_p
+    )
+    assert abs(_contact_half_width(x, pressed.pressure) - hertz.a) <= 1.0 * hc
     ratios = []
     for step in path.steps[2:4]:
         fp = step.friction
         P, Q = step.normal_force, abs(step.tangential_force[0])
         x, w = fp.points[:, 0], fp.weights
         cat = cattaneo_mindlin(x, normal=P, tangential=Q, mu=mu, radius=R, nu=nu)
-        a, p0, c = cat.a, cat.p0, cat.c
         ratios.append(Q / (mu * P))
         lo, hi = fp.extent("stick")
-        assert abs(0.5 * (hi - lo) - c) <= 1.0 * hc
-        assert abs(0.5 * (hi + lo)) <= 2.0 * hc
-        q = np.abs(fp.traction[:, 0])
-        exact = cat.shear
-        inside = np.abs(x) < a
-        assert np.sqrt(np.sum((w * (q - exact) ** 2)[inside]) / np.sum((w * exact**2)[inside])) < 0.25
-        hertz = p0 * np.sqrt(np.maximum(1.0 - (x / a) ** 2, 0.0))
-        assert np.sqrt(np.sum(w * (fp.pressure - hertz) ** 2) / np.sum(w * hertz**2)) < 0.03
+        assert abs(0.5 * (hi - lo) - cat.c) <= 1.0 * hc
+        assert abs(0.5 * (hi + lo)) <= 1.0 * hc
+        assert _l2(np.abs(fp.traction[:, 0]), cat.shear, w, np.abs(x) < cat.a) < bound_q
+        hertz = cat.p0 * np.sqrt(np.maximum(1.0 - (x / cat.a) ** 2, 0.0))
+        assert _l2(fp.pressure, hertz, w, slice(None)) < bound_p  # Q leaves p alone: no coupling
         slip = fp.slip
         excess = np.abs(fp.traction[slip, 0]) - mu * fp.pressure[slip]
-        assert np.all(excess >= 0.0) and np.max(excess) < 1e-3 * mu * p0
+        assert np.all(excess >= 0.0) and np.max(excess) < 1e-3 * mu * cat.p0
         assert step.dissipation >= 0.0
-    assert 0.2 < ratios[0] < 0.45 < ratios[1] < 0.8  # measured 0.32, 0.63
+    assert 0.2 < ratios[0] < 0.45 < ratios[1] < 0.8  # measured 0.33, 0.64
     # Mindlin–Deresiewicz: moved back from Q* to Q, reverse slip in c' < |x| < a, c' = a√(1 − (Q* − Q)/(2μP)),
-    # q = μp₀[−√(1 − x²/a²) + 2(c'/a)√(1 − x²/c'²) − (c/a)√(1 − x²/c²)] (measured at Q/μP = 0.31: the stick zone
-    # 0.12 cells from c', its centre 0.2 cells from the axis; q within 17.6 % in L², also the finite block's)
+    # q = μp₀[−√(1 − x²/a²) + 2(c'/a)√(1 − x²/c'²) − (c/a)√(1 − x²/c²)] (measured at Q/μP = 0.32: the stick zone
+    # within 0.14 cells of c', its centre on the axis; q within 3.6 % (a/10), 2.1 % (a/20) in L²)
     step, loaded = path.steps[4], path.steps[3]
     fp, P = step.friction, step.normal_force
     Q_star, Q = loaded.tangential_force[0], step.tangential_force[0]
     x, w = fp.points[:, 0], fp.weights
     md = cattaneo_mindlin(x, normal=P, tangential=Q, mu=mu, radius=R, nu=nu, peak=Q_star)
-    a, p0, exact = md.a, md.p0, md.shear
     assert 0.2 < Q / (mu * P) < 0.45
     lo, hi = fp.extent("stick")
-    assert abs(0.5 * (hi - lo) - md.c_back) <= 1.0 * hc and abs(0.5 * (hi + lo)) <= 2.0 * hc
-    inside = np.abs(x) < a
+    assert abs(0.5 * (hi - lo) - md.c_back) <= 1.0 * hc and abs(0.5 * (hi + lo)) <= 1.0 * hc
     q = fp.traction[:, 0]
-    assert np.sqrt(np.sum((w * (q - exact) ** 2)[inside]) / np.sum((w * exact**2)[inside])) < 0.25
-    assert np.all(q[fp.slip] <= 1e-12 * mu * p0) and step.dissipation >= 0.0  # the reverse slip
+    assert _l2(q, md.shear, w, np.abs(x) < md.a) < bound_md
+    assert np.all(q[fp.slip] <= 1e-12 * mu * md.p0) and step.dissipation >= 0.0  # the reverse slip

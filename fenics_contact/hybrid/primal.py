@@ -185,13 +185,24 @@ class PrimalHybridStep:
         g12, g21 = g[:n], g[n:]
         for i, data in enumerate((g12, g21)):
             self.interface.to_part(data, i, self.sub[i].g)
-        newton = [self.sub[0].solve(), solve_or_verify(self.sub[1], omega2_warm)]
+        newton = [self._solve_omega1(g12, omega2_warm), solve_or_verify(self.sub[1], omega2_warm)]
         u1 = self.interface.from_part(self.sub[0].u, 0)
         u2 = self.interface.from_part(self.sub[1].u, 1)
         self._measure()
         self._certificate = primal_certificate(u1, u2, g12, g21, self.alpha, self.interface.weights, self.comm)
         self._record = omega2_record(newton[1])
         return np.concatenate([2.0 * self.alpha * u2 - g21, 2.0 * self.alpha * u1 - g12])
+
+    def _solve_omega1(self, g12: np.ndarray, condensed: bool) -> NewtonHistory | None:
+        """Solve Ω₁ for the data g₁₂ (its Robin data set).  In the condensed interface Newton's application of T
+        (``condensed``, the Ω₁ response held) the residual of the linear Ω₁ is a product with its factorized
+        operator and the kept body load (``PrimalPart.correct``: the assembly of the residual spared), otherwise
+        its own solve."""
+        omega1 = getattr(self._newton, "omega1", None)
+        if condensed and isinstance(omega1, FineResponse) and omega1.part.sub is self.sub[0]:
+            omega1.part.correct(self.interface.gather(g12))
+            return None
+        return self.sub[0].solve()
 
     def certificate(self) -> Certificate:
         return self._certificate

@@ -305,6 +305,12 @@ class PrimalSubproblem:
         """(w, w) on this (sub)mesh."""
         return quadratic_form(self._M, w.x.petsc_vec, self._work)
 
+    def norm_products(self, w: fem.Function, Kw: PETSc.Vec, Mw: PETSc.Vec) -> None:
+        """Kw ← K w, Mw ← M w: a(w, w) = wᵀK w and (w, w) = wᵀM w (K, M the matrices of ``energy_norm2``,
+        ``l2_norm2``)."""
+        self._K.mult(w.x.petsc_vec, Kw)
+        self._M.mult(w.x.petsc_vec, Mw)
+
     def contact_profile(self) -> ContactProfile:
         """u_c = u·ν − g and the consistent nodal normal stress σ_c = (R·ν_p)/w_p along Γ_C, on every rank.
 

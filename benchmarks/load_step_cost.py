@@ -39,7 +39,7 @@ PARTS = (
     ("load term s_L (kept J⁻¹b, one dense solve)", CondensedInterface, "load_terms"),
     ("contact Newton on Γ_C", condensation, "contact_solve"),
     ("Ω₂ warm state (one J₀ back-solve)", PrimalPart, "solve"),
-    ("Ω₁ solve (one back-solve, residual by a product)", PrimalHybridStep, "_solve_omega1"),
+    ("Ω₁ solve (one back-solve)", PrimalHybridStep, "_solve_omega1"),
     ("Ω₂ check (its residual at the warm state)", primal, "solve_or_verify"),
     ("γ traces and data (transfers)", InterfaceSpace, "from_part"),
     ("γ traces and data (transfers)", InterfaceSpace, "to_part"),

@@ -196,12 +196,11 @@ class PrimalHybridStep:
 
     def _solve_omega1(self, g12: np.ndarray, condensed: bool) -> NewtonHistory | None:
         """Solve Ω₁ for the data g₁₂ (its Robin data set).  In the condensed interface Newton's application of T
-        (``condensed``, the Ω₁ response held) the residual of the linear Ω₁ is a product with its factorized
-        operator and the kept body load (``PrimalPart.correct``: the assembly of the residual spared), otherwise
-        its own solve."""
+        (``condensed``, the Ω₁ response held) the linear Ω₁ is one back-solve of the kept body load plus the data
+        (``PrimalPart.solve_for``: no assembly of its residual), otherwise its own solve."""
         omega1 = getattr(self._newton, "omega1", None)
         if condensed and isinstance(omega1, FineResponse) and omega1.part.sub is self.sub[0]:
-            omega1.part.correct(self.interface.gather(g12))
+            omega1.part.solve_for(self.interface.gather(g12))
             return None
         return self.sub[0].solve()
 

@@ -357,19 +357,13 @@ class PrimalPart(AffinePart):
                 r[self.bs * self.c_nodes + c] -= self.c_normals[:, c] * mine
         return r
 
-    def correct(self, g: np.ndarray) -> None:
-        """The subproblem's state solved for global data g without contact forces, from the state it holds:
-        x ← x + J⁻¹(b + C g − J x), one back-solve, the residual by a product with the factorized J and the kept
-        body load (no assembly).  For the linear Ω₁, whose J is its only operator (``FineResponse``)."""
+    def solve_for(self, g: np.ndarray) -> None:
+        """Set the subproblem's state to its solution for global data g without contact forces, x = J⁻¹(b + C g):
+        one back-solve, its right-hand side from the kept body load (no assembly).  For the linear Ω₁, whose J is
+        its only operator (``FineResponse``)."""
         if self.n_c:
-            raise ValueError("correct solves the subproblem without contact (its linear operator J)")
-        x = self.sub.u.x.petsc_vec
-        self._b.getArray()[:] = self.rhs(g, np.zeros(0))
-        self.sub.A.mult(x, self._x)  # (the operator ``solver`` factorized: the subproblem's Jacobian)
-        self._b.axpy(-1.0, self._x)
-        self.solver.solve(self._b, self._x)
-        x.axpy(1.0, self._x)
-        self.sub.u.x.scatter_forward()
+            raise ValueError("solve_for solves the subproblem without contact (its linear operator J)")
+        self.set_state(self.solve(self.rhs(g, np.zeros(0))))
 
     def destroy(self) -> None:
         for obj in (self._b, self._x):

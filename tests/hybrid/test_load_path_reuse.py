@@ -3,8 +3,8 @@
 * ``PrimalPart.body_load`` is assembled again only when the values it is assembled from change
   (``PrimalSubproblem.body_load_inputs``): a moved obstacle keeps it, a new body force or u_D does not, and the
   kept vector equals a fresh assembly bit for bit.
-* ``PrimalPart.correct`` (Ω₁ solved by a residual correction with its factorized operator) gives Ω₁'s own solve
-  to 1e-12.
+* ``PrimalPart.solve_for`` (Ω₁ by one back-solve of the kept body load plus the data) gives Ω₁'s own solve to
+  1e-12.
 * A force–indentation curve through the condensed Newton with these gives the forces of the plain path (the body
   load assembled at every call, Ω₁ by its own solve, four quadratic forms per subdomain for the relative change)
   to 1e-12, the same relative changes to 1e-6, certified steps, and the monolithic forces to 1e-10.
@@ -54,7 +54,7 @@ def test_body_load_is_kept_while_its_inputs_are(which):
     assert np.array_equal(loaded, _fresh(assemble, part))
 
 
-def test_correct_equals_the_subproblem_solve():
+def test_solve_for_equals_the_subproblem_solve():
     step = PrimalHybridStep(_model().on(unit_square(16, 4)))
     step.prepare()
     part = step.interface_problem(InterfaceNewtonOptions()).omega1.part
@@ -63,12 +63,12 @@ def test_correct_equals_the_subproblem_solve():
     step.interface.to_part(g, 0, part.sub.g)
     part.sub.solve()  # from zero: Ω₁'s own solve
     own = part.sub.u.x.array.copy()
-    part.sub.u.x.array[:] = rng.standard_normal(own.size) * 1e-3  # any state: one correction solves
-    part.correct(step.interface.gather(g))
+    part.sub.u.x.array[:] = rng.standard_normal(own.size)  # (overwritten)
+    part.solve_for(step.interface.gather(g))
     scale = np.abs(own).max()
     assert scale > 0 and np.abs(part.sub.u.x.array - own).max() <= 1e-12 * scale
     with pytest.raises(ValueError, match="without contact"):
-        step.interface_problem(InterfaceNewtonOptions()).omega2.correct(np.zeros(part.n_g))
+        step.interface_problem(InterfaceNewtonOptions()).omega2.solve_for(np.zeros(part.n_g))
 
 
 def _curve(cm, method="primal"):
@@ -82,11 +82,11 @@ def _curve(cm, method="primal"):
 
 def test_load_path_equals_the_plain_path(monkeypatch):
     cm = unit_square(32, 8)
-    corrections = []
-    correct = PrimalPart.correct
-    monkeypatch.setattr(PrimalPart, "correct", lambda self, g: corrections.append(1) or correct(self, g))
+    solves = []
+    solve_for = PrimalPart.solve_for
+    monkeypatch.setattr(PrimalPart, "solve_for", lambda self, g: solves.append(1) or solve_for(self, g))
     fast, fast_changes = _curve(cm)
-    assert len(corrections) == DEPTHS.size  # Ω₁ by the residual correction at every step
+    assert len(solves) == DEPTHS.size  # Ω₁ from the kept body load at every step
     mono, _ = _curve(cm, "primal-monolithic")
 
     def assembled(self):  # the body load assembled at every call

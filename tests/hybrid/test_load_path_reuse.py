@@ -5,6 +5,8 @@
   kept vector equals a fresh assembly bit for bit.
 * ``PrimalPart.solve_for`` (Ω₁ by one back-solve of the kept body load plus the data) gives Ω₁'s own solve to
   1e-12.
+* On one process ``InterfaceSpace``'s transfers are copies of the interface entries: the values of the general
+  transfers through the parent space, bit for bit.
 * A force–indentation curve through the condensed Newton with these gives the forces of the plain path (the body
   load assembled at every call, Ω₁ by its own solve, four quadratic forms per subdomain for the relative change)
   to 1e-12, the same relative changes to 1e-6, certified steps, and the monolithic forces to 1e-10.
@@ -12,6 +14,8 @@
 
 import numpy as np
 import pytest
+from dolfinx import fem
+from mpi4py import MPI
 
 from fenics_contact.hybrid.iteration import InterfaceNewtonOptions, IterationOptions
 from fenics_contact.hybrid.primal import PrimalHybridStep
@@ -20,6 +24,8 @@ from fenics_contact.indentation import force_indentation
 from fenics_contact.problem.geometry import unit_square
 from fenics_contact.problem.models import get_model
 from fenics_contact.problem.obstacles import Circle
+
+serial = pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="the copies are the serial transfers")
 
 CYLINDER = Circle((3.0, 0.5), 2.0)
 LEFT = (-1.0, 0.0)
@@ -69,6 +75,28 @@ def test_solve_for_equals_the_subproblem_solve():
     assert scale > 0 and np.abs(part.sub.u.x.array - own).max() <= 1e-12 * scale
     with pytest.raises(ValueError, match="without contact"):
         step.interface_problem(InterfaceNewtonOptions()).omega2.solve_for(np.zeros(part.n_g))
+
+
+@serial
+def test_serial_transfers_are_the_general_ones():
+    step = PrimalHybridStep(_model().on(unit_square(16, 4)))
+    iface = step.interface
+    assert iface._at is not None
+    rng = np.random.default_rng(5)
+    values = rng.standard_normal(iface.size)
+    for i, space in enumerate(iface.spaces):
+        u = fem.Function(space)
+        u.x.array[:] = rng.standard_normal(u.x.array.size)
+        out = [fem.Function(space) for _ in range(2)]
+        copies = iface.from_part(u, i)
+        iface.to_part(values, i, out[0])
+        at, iface._at = iface._at, None  # the transfers through the parent space
+        try:
+            assert np.array_equal(copies, iface.from_part(u, i))
+            iface.to_part(values, i, out[1])
+        finally:
+            iface._at = at
+        assert np.array_equal(out[0].x.array, out[1].x.array)
 
 
 def _curve(cm, method="primal"):

@@ -120,7 +120,14 @@ class PrimalSubproblem:
         penalty = (fem.Constant(msh, PETSc.ScalarType(1.0 / delta)), geo.nu, geo.gap) if self.contact else None
         robin = (alpha, self.g, ds(Boundary.INTERFACE)) if alpha is not None else None
         kw = dict(lmbda=lm, mu=mu, penalty=penalty, ds_contact=ds_c, robin=robin)
-        self._F = fem.form(forms_primal.contact_residual(self.u, v, f=fields.f, tractions=tractions, **kw))
+        residual = forms_primal.contact_residual(self.u, v, f=fields.f, tractions=tractions, **kw)
+        self._F = fem.form(residual)
+        # what ``body_load`` depends on: the residual's coefficients and constants but the state u, the Robin data
+        # g and the contact geometry (ν, gap: the contact term vanishes there), and u_D
+        state = {id(c) for c in (self.u, self.g, *((geo.nu, geo.gap) if self.contact else ()))}
+        inputs = [c for c in residual.coefficients() if id(c) not in state]
+        inputs += [] if self.u_D is None else [self.u_D]
+        self._load_inputs = inputs, ufl.algorithms.analysis.extract_constants(residual)
         self._J = fem.form(forms_primal.contact_jacobian(self.u, du, v, **kw))
         load = ufl.inner(fields.f, v) * ufl.dx
         if tractions:
@@ -298,6 +305,12 @@ class PrimalSubproblem:
         """(w, w) on this (sub)mesh."""
         return quadratic_form(self._M, w.x.petsc_vec, self._work)
 
+    def norm_products(self, w: fem.Function, Kw: PETSc.Vec, Mw: PETSc.Vec) -> None:
+        """Kw ← K w, Mw ← M w: a(w, w) = wᵀK w and (w, w) = wᵀM w (K, M the matrices of ``energy_norm2``,
+        ``l2_norm2``)."""
+        self._K.mult(w.x.petsc_vec, Kw)
+        self._M.mult(w.x.petsc_vec, Mw)
+
     def contact_profile(self) -> ContactProfile:
         """u_c = u·ν − g and the consistent nodal normal stress σ_c = (R·ν_p)/w_p along Γ_C, on every rank.
 
@@ -364,6 +377,13 @@ class PrimalSubproblem:
             return out
 
         return self._with_lifting_no_contact(assemble)
+
+    def body_load_inputs(self) -> list[np.ndarray]:
+        """The values ``body_load`` is a function of (local arrays, views): the coefficients and constants of the
+        residual but the state, the Robin data and the contact geometry, and u_D.  Equal inputs assemble the
+        same body load."""
+        functions, constants = self._load_inputs
+        return [c.x.array for c in functions] + [np.asarray(k.value) for k in constants]
 
     def contact_nodes(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Owned Γ_C nodes off Γ_D: (node = block index of u, contact direction ν_p (k, gdim), vertex weight w_p,

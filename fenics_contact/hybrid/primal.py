@@ -150,6 +150,7 @@ class PrimalHybridStep:
                 )
             )
         self._prev = [np.zeros_like(s.u.x.array) for s in self.sub]
+        self._products: list | None = None  #: per subdomain [K u, M u, work, work] of the last state (``_measure``)
         self._diff = [fem.Function(s.V) for s in self.sub]
         self._change = np.inf
         self._certificate = Certificate(np.inf, np.inf)
@@ -185,13 +186,23 @@ class PrimalHybridStep:
         g12, g21 = g[:n], g[n:]
         for i, data in enumerate((g12, g21)):
             self.interface.to_part(data, i, self.sub[i].g)
-        newton = [self.sub[0].solve(), solve_or_verify(self.sub[1], omega2_warm)]
+        newton = [self._solve_omega1(g12, omega2_warm), solve_or_verify(self.sub[1], omega2_warm)]
         u1 = self.interface.from_part(self.sub[0].u, 0)
         u2 = self.interface.from_part(self.sub[1].u, 1)
-        self._measure()
+        self._measure(kept=omega2_warm)
         self._certificate = primal_certificate(u1, u2, g12, g21, self.alpha, self.interface.weights, self.comm)
         self._record = omega2_record(newton[1])
         return np.concatenate([2.0 * self.alpha * u2 - g21, 2.0 * self.alpha * u1 - g12])
+
+    def _solve_omega1(self, g12: np.ndarray, condensed: bool) -> NewtonHistory | None:
+        """Solve Ω₁ for the data g₁₂ (its Robin data set).  In the condensed interface Newton's application of T
+        (``condensed``, the Ω₁ response held) the linear Ω₁ is one back-solve of the kept body load plus the data
+        (``PrimalPart.solve_for``: no assembly of its residual), otherwise its own solve."""
+        omega1 = getattr(self._newton, "omega1", None)
+        if condensed and isinstance(omega1, FineResponse) and omega1.part.sub is self.sub[0]:
+            omega1.part.solve_for(self.interface.gather(g12))
+            return None
+        return self.sub[0].solve()
 
     def certificate(self) -> Certificate:
         return self._certificate
@@ -202,6 +213,7 @@ class PrimalHybridStep:
         self.sub[0].u.x.array[:] = 0.0
         for prev in self._prev:
             prev[:] = 0.0
+        self._drop_products()
 
     def data_weights(self) -> np.ndarray:
         """w_p/α_p per data value: Robin data g ~ α u + t, so this balances stiff and soft γ nodes in Anderson."""
@@ -238,17 +250,44 @@ class PrimalHybridStep:
                 self._newton.condensed = FrictionalCondensation(self._newton)
         return self._newton
 
-    def _measure(self) -> None:
+    def _measure(self, *, kept: bool = False) -> None:
+        """The relative change of the pair since the last application of T.  ``kept`` (the condensed Newton's
+        load steps): the products with the stiffness and mass matrices of the last state are kept, and those of
+        the change are their differences, K(u − u_prev) = K u − K u_prev: two products per subdomain instead of
+        four (the same numbers to round-off relative to the state's, the change's relative accuracy ε/change)."""
         de = du = ne = nu = 0.0
-        for s, prev, diff in zip(self.sub, self._prev, self._diff):
+        fast = kept and self._products is not None
+        if kept and not fast:
+            self._products = [[s.u.x.petsc_vec.duplicate() for _ in range(4)] for s in self.sub]
+        for i, (s, prev, diff) in enumerate(zip(self.sub, self._prev, self._diff)):
             diff.x.array[:] = s.u.x.array - prev
-            de += s.energy_norm2(diff)
-            du += s.l2_norm2(diff)
-            ne += s.energy_norm2(s.u)
-            nu += s.l2_norm2(s.u)
+            if fast:
+                Ku, Mu, Kprev, Mprev = self._products[i]
+                s.norm_products(s.u, Ku, Mu)
+                x, d = s.u.x.petsc_vec, diff.x.petsc_vec
+                ne, nu = ne + Ku.dot(x), nu + Mu.dot(x)
+                Kprev.aypx(-1.0, Ku)  # K u − K u_prev
+                Mprev.aypx(-1.0, Mu)
+                de, du = de + Kprev.dot(d), du + Mprev.dot(d)
+                self._products[i] = [Kprev, Mprev, Ku, Mu]  # (the next call's work and kept products)
+            else:
+                de += s.energy_norm2(diff)
+                du += s.l2_norm2(diff)
+                ne += s.energy_norm2(s.u)
+                nu += s.l2_norm2(s.u)
+                if kept:
+                    s.norm_products(s.u, *self._products[i][2:])
             prev[:] = s.u.x.array
+        if not kept:
+            self._drop_products()
         # (a quadratic form of a round-off-sized difference can come out a little below zero)
         self._change = max(np.sqrt(max(de, 0.0) / ne), np.sqrt(max(du, 0.0) / nu)) if ne > 0 and nu > 0 else np.inf
+
+    def _drop_products(self) -> None:
+        """Forget the products kept by ``_measure`` (the state changed otherwise)."""
+        for vec in [v for vecs in self._products or () for v in vecs]:
+            vec.destroy()
+        self._products = None
 
     def relative_change(self) -> float:
         return self._change

@@ -193,6 +193,7 @@ class PrimalPart(AffinePart):
         self._b = sub.b.duplicate()
         self._x = sub.b.duplicate()
         self._kept_inverse = None  # (J₀'s factorization count, rows, the block of J₀⁻¹ there, transposed)
+        self._kept_body = None  # (the values ``body_load`` was assembled from, b)
         self._kept_components = None  # (J₀'s factorization count, ``component_responses``)
         #: condense per displacement component (``component_responses``) where the entries of J₀⁻¹ are taken
         self.by_components = True
@@ -324,7 +325,15 @@ class PrimalPart(AffinePart):
         return np.concatenate(self.comm.allgather(np.asarray(s).reshape(-1, X.shape[1])), axis=0)
 
     def body_load(self) -> np.ndarray:
-        return self.sub.body_load(self._b).getArray(readonly=True).copy()
+        """b (local), assembled again only when the values it depends on changed (``body_load_inputs``: a load
+        path moves the obstacle, which b does not see)."""
+        inputs = self.sub.body_load_inputs()
+        kept = self._kept_body
+        same = kept is not None and len(kept[0]) == len(inputs) and all(map(np.array_equal, kept[0], inputs))
+        if self.comm.allreduce(not same, op=MPI.LOR):  # (collective: the assembly is)
+            b = self.sub.body_load(self._b).getArray(readonly=True).copy()
+            self._kept_body = kept = ([np.array(a, copy=True) for a in inputs], b)
+        return kept[1].copy()
 
     def state(self) -> np.ndarray:
         return self.sub.u.x.petsc_vec.getArray(readonly=True).copy()
@@ -347,6 +356,14 @@ class PrimalPart(AffinePart):
             for c in range(self.bs):
                 r[self.bs * self.c_nodes + c] -= self.c_normals[:, c] * mine
         return r
+
+    def solve_for(self, g: np.ndarray) -> None:
+        """Set the subproblem's state to its solution for global data g without contact forces, x = J⁻¹(b + C g):
+        one back-solve, its right-hand side from the kept body load (no assembly).  For the linear Ω₁, whose J is
+        its only operator (``FineResponse``)."""
+        if self.n_c:
+            raise ValueError("solve_for solves the subproblem without contact (its linear operator J)")
+        self.set_state(self.solve(self.rhs(g, np.zeros(0))))
 
     def destroy(self) -> None:
         for obj in (self._b, self._x):

@@ -86,9 +86,22 @@ class InterfaceSpace:
         self.spaces = [fem.functionspace(p.mesh, el) for p in parts]
         self.transfers = [SubmeshTransfer(self.V, Vs, p.cell_map) for Vs, p in zip(self.spaces, parts)]
         self._scratch = fem.Function(self.V)
+        self._at = self._serial_positions()
         self.coordinates = self.V.tabulate_dof_coordinates()[blocks]
         #: vertex-quadrature weight w_p of the node of every owned interface value: ∫_γ w·v ds = Σ_p w_p w(p)·v(p)
         self.weights = self._vertex_weights(parts[0])
+
+    def _serial_positions(self) -> list[np.ndarray] | None:
+        """On one process, the position in each part's space of every interface value (the transfers are then
+        copies of those entries, ``to_part`` and ``from_part``); None under MPI."""
+        if self.comm.size > 1:
+            return None
+        at = []
+        for transfer in self.transfers:
+            lookup = np.full(self._scratch.x.array.size, -1, dtype=np.int64)
+            lookup[transfer.parent] = transfer.sub
+            at.append(lookup[self.dofs])
+        return at if all(np.all(a >= 0) for a in at) else None
 
     def _vertex_weights(self, part: Part) -> np.ndarray:
         """w_p = ∫_γ φ_p ds for the P1 hat functions, assembled on Ω₁ (where γ is a boundary)."""
@@ -119,6 +132,10 @@ class InterfaceSpace:
 
     def to_part(self, values: np.ndarray, i: int, out: fem.Function) -> None:
         """out (on part i) ← nodal interface values, zero off γ (collective)."""
+        if self._at is not None:
+            out.x.array[:] = 0.0
+            out.x.array[self._at[i]] = values
+            return
         self._scratch.x.array[:] = 0.0
         self._scratch.x.array[self.dofs] = values
         self._scratch.x.scatter_forward()
@@ -126,6 +143,8 @@ class InterfaceSpace:
 
     def from_part(self, u: fem.Function, i: int) -> np.ndarray:
         """Owned interface values of a function on part i (collective)."""
+        if self._at is not None:
+            return u.x.array[self._at[i]].copy()
         self._scratch.x.array[:] = 0.0
         self.transfers[i].to_parent(u, self._scratch)
         return self._scratch.x.array[self.dofs].copy()

@@ -1,0 +1,132 @@
+"""Algorithm 1's load steps reuse what the obstacle's motion leaves unchanged, with the answers of the plain path.
+
+* ``PrimalPart.body_load`` is assembled again only when the values it is assembled from change
+  (``PrimalSubproblem.body_load_inputs``): a moved obstacle keeps it, a new body force or u_D does not, and the
+  kept vector equals a fresh assembly bit for bit.
+* ``PrimalPart.solve_for`` (Ω₁ by one back-solve of the kept body load plus the data) gives Ω₁'s own solve to
+  1e-12.
+* On one process ``InterfaceSpace``'s transfers are copies of the interface entries: the values of the general
+  transfers through the parent space, bit for bit.
+* A force–indentation curve through the condensed Newton with these gives the forces of the plain path (the body
+  load assembled at every call, Ω₁ by its own solve, four quadratic forms per subdomain for the relative change)
+  to 1e-12, the same relative changes to 1e-6, certified steps, and the monolithic forces to 1e-10.
+"""
+
+import numpy as np
+import pytest
+from dolfinx import fem
+from mpi4py import MPI
+
+from fenics_contact.hybrid.iteration import InterfaceNewtonOptions, IterationOptions
+from fenics_contact.hybrid.primal import PrimalHybridStep
+from fenics_contact.hybrid.response import PrimalPart
+from fenics_contact.indentation import force_indentation
+from fenics_contact.problem.geometry import unit_square
+from fenics_contact.problem.models import get_model
+from fenics_contact.problem.obstacles import Circle
+
+serial = pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="the copies are the serial transfers")
+
+CYLINDER = Circle((3.0, 0.5), 2.0)
+LEFT = (-1.0, 0.0)
+DEPTHS = np.linspace(0.002, 0.02, 4)
+
+
+def _model():
+    return get_model(3, E_high=1e3).with_(obstacle=CYLINDER.indented(DEPTHS[0], LEFT))
+
+
+def _fresh(assemble, part: PrimalPart) -> np.ndarray:
+    """The body load assembled now."""
+    return assemble(part.sub.b.duplicate()).getArray(readonly=True).copy()
+
+
+@pytest.mark.parametrize("which", [0, 1])
+def test_body_load_is_kept_while_its_inputs_are(which):
+    step = PrimalHybridStep(_model().on(unit_square(16, 4)))
+    step.prepare()
+    problem = step.interface_problem(InterfaceNewtonOptions())
+    part = problem.omega1.part if which == 0 else problem.omega2
+    assemblies = []
+    assemble = part.sub.body_load
+    part.sub.body_load = lambda out: assemblies.append(1) or assemble(out)
+    first = part.body_load()
+    step.contact.set_obstacle(CYLINDER.indented(DEPTHS[-1], LEFT))  # the obstacle moves: b stays
+    again = part.body_load()
+    assert len(assemblies) == 1 and np.array_equal(first, again) and np.array_equal(first, _fresh(assemble, part))
+    part.sub.fields.f.x.array[:] = 1.0  # a body force: assembled again
+    loaded = part.body_load()
+    assert len(assemblies) == 2 and not np.array_equal(loaded, first)
+    assert np.array_equal(loaded, _fresh(assemble, part))
+
+
+def test_solve_for_equals_the_subproblem_solve():
+    step = PrimalHybridStep(_model().on(unit_square(16, 4)))
+    step.prepare()
+    part = step.interface_problem(InterfaceNewtonOptions()).omega1.part
+    rng = np.random.default_rng(3)
+    g = rng.standard_normal(part.n_g) * step.alpha * 1e-3
+    step.interface.to_part(g, 0, part.sub.g)
+    part.sub.solve()  # from zero: Ω₁'s own solve
+    own = part.sub.u.x.array.copy()
+    part.sub.u.x.array[:] = rng.standard_normal(own.size)  # (overwritten)
+    part.solve_for(step.interface.gather(g))
+    scale = np.abs(own).max()
+    assert scale > 0 and np.abs(part.sub.u.x.array - own).max() <= 1e-12 * scale
+    with pytest.raises(ValueError, match="without contact"):
+        step.interface_problem(InterfaceNewtonOptions()).omega2.solve_for(np.zeros(part.n_g))
+
+
+@serial
+def test_serial_transfers_are_the_general_ones():
+    step = PrimalHybridStep(_model().on(unit_square(16, 4)))
+    iface = step.interface
+    assert iface._at is not None
+    rng = np.random.default_rng(5)
+    values = rng.standard_normal(iface.size)
+    for i, space in enumerate(iface.spaces):
+        u = fem.Function(space)
+        u.x.array[:] = rng.standard_normal(u.x.array.size)
+        out = [fem.Function(space) for _ in range(2)]
+        copies = iface.from_part(u, i)
+        iface.to_part(values, i, out[0])
+        at, iface._at = iface._at, None  # the transfers through the parent space
+        try:
+            assert np.array_equal(copies, iface.from_part(u, i))
+            iface.to_part(values, i, out[1])
+        finally:
+            iface._at = at
+        assert np.array_equal(out[0].x.array, out[1].x.array)
+
+
+def _curve(cm, method="primal"):
+    """The curve and the relative change of every step's pair (hybrid)."""
+    options = {} if method.endswith("monolithic") else {"options": IterationOptions(accel="newton", tol=1e-10)}
+    changes = []
+    record = None if method.endswith("monolithic") else lambda _, solver: changes.append(solver.relative_change())
+    curve = force_indentation(_model().on(cm), method, DEPTHS, direction=LEFT, on_step=record, **options)
+    return curve, np.array(changes)
+
+
+def test_load_path_equals_the_plain_path(monkeypatch):
+    cm = unit_square(32, 8)
+    solves = []
+    solve_for = PrimalPart.solve_for
+    monkeypatch.setattr(PrimalPart, "solve_for", lambda self, g: solves.append(1) or solve_for(self, g))
+    fast, fast_changes = _curve(cm)
+    assert len(solves) == DEPTHS.size  # Ω₁ from the kept body load at every step
+    mono, _ = _curve(cm, "primal-monolithic")
+
+    def assembled(self):  # the body load assembled at every call
+        return self.sub.body_load(self._b).getArray(readonly=True).copy()
+
+    monkeypatch.setattr(PrimalPart, "body_load", assembled)
+    monkeypatch.setattr(PrimalHybridStep, "_solve_omega1", lambda self, g12, condensed: self.sub[0].solve())
+    measure = PrimalHybridStep._measure
+    monkeypatch.setattr(PrimalHybridStep, "_measure", lambda self, kept=False: measure(self))
+    plain, plain_changes = _curve(cm)
+    assert all(s.converged and s.iterations == 1 for s in fast.steps + plain.steps)
+    assert np.max(np.abs(fast.forces - plain.forces) / np.abs(plain.forces)) <= 1e-12
+    assert np.max(np.abs(fast.forces - mono.forces) / np.abs(mono.forces)) <= 1e-10
+    assert fast_changes.size == DEPTHS.size and np.allclose(fast_changes, plain_changes, rtol=1e-6, atol=0.0)
+    assert np.all(fast.transmission_residuals < 1e-10)

@@ -13,6 +13,7 @@ import gc
 
 import numpy as np
 import pytest
+from dolfinx import mesh as dmesh
 from mpi4py import MPI
 
 import fenics_contact as fc
@@ -57,6 +58,9 @@ def test_graded_boxes_of_a_constant_size_are_the_cartesian_cubes():
     assert _same_partition(index, cartesian_coarse_cells(msh, 0.25)[0])
     assert _same_partition(index, centroid_coarse_cells(msh, 0.25)[0])
     assert np.array_equal(np.unique(index), np.arange(64))  # numbered 0, 1, … over the boxes
+    square = dmesh.create_unit_square(MPI.COMM_SELF, 8, 8)  # (any dimension: squares in the plane)
+    flat = graded_coarse_cells(square, lambda x: np.full(x.shape[1], 0.5))
+    assert _same_partition(flat, cartesian_coarse_cells(square, 0.5)[0]) and flat.max() == 3
 
 
 def test_graded_boxes_grow_with_the_size_function():

@@ -65,7 +65,8 @@ class SerialReplica:
         gdofs = msh.geometry.dofmaps[0]
         if gdofs.shape[1] != tdim + 1:
             raise InputError("the serial copy of a subdomain needs an affine (P1) triangle or tetrahedron geometry")
-        node_gid = np.asarray(geo_map.local_to_global(np.arange(gdofs.max() + 1, dtype=np.int32)), dtype=np.int64)
+        n_nodes = geo_map.size_local + geo_map.num_ghosts  # (none on a rank that holds no cell of the submesh)
+        node_gid = np.asarray(geo_map.local_to_global(np.arange(n_nodes, dtype=np.int32)), dtype=np.int64)
         cells_gid = node_gid[gdofs[:n_owned]]
         all_cells = _allgather_rows(comm, cells_gid)
         # node coordinates (owned nodes only, each once)

@@ -12,7 +12,9 @@
 * ``hertz_quarter_block(a, h_contact)``: the quarter block (0, L)² × (−L, 0) under a sphere pressed at the origin,
   unstructured gmsh tetrahedra of size h_contact within ``fine`` of the origin and growing linearly with the
   distance beyond (cells of every size close to equilateral, which algebraic multigrid needs; a graded grid
-  of planes stretches its cells where a fine plane crosses a coarse one).
+  of planes stretches its cells where a fine plane crosses a coarse one).  Its coarse partition of Ω₁
+  (Algorithm 3) follows the grading: boxes about ``coarse`` local cell sizes across
+  (``partition.graded_coarse_cells``).
 
 The tags follow ``tags.PHYSICAL_NAMES``; they are set by the geometry of the grid (every rank
 tags its own and its ghost entities alike), so the meshes are correct by construction and are
@@ -34,10 +36,10 @@ from fenics_contact.problem.geometry import (
     gmsh_session,
     mesh_size,
 )
-from fenics_contact.problem.partition import UNRESOLVED, cartesian_coarse_cells
+from fenics_contact.problem.partition import UNRESOLVED, cartesian_coarse_cells, graded_coarse_cells
 from fenics_contact.problem.tags import PHYSICAL_NAMES, Boundary, Subdomain, neumann_tag
 
-__all__ = ["FACES", "box_mesh", "unit_cube", "graded_planes", "hertz_quarter_block"]
+__all__ = ["FACES", "box_mesh", "unit_cube", "graded_planes", "hertz_quarter_block", "hertz_coarse_size"]
 
 #: The faces of a box: the coordinate and the side (min or max).
 FACES = ("xmin", "xmax", "ymin", "ymax", "zmin", "zmax")
@@ -93,19 +95,25 @@ def hertz_quarter_block(
     fine: float = 1.25,
     growth: float = 0.3,
     strip: float = 2.0,
+    coarse: float = 4.0,
     comm: MPI.Comm = MPI.COMM_WORLD,
 ) -> ContactMesh:
     """The quarter block (0, L)² × (−L, 0), L = ``size``·a, of a sphere pressed into its top at the origin
     (contact radius about a): gmsh tetrahedra of size ``h_contact`` within ``fine``·a of the origin, of size
-    h_contact + ``growth``·(r − ``fine``·a) at a distance r beyond, at most L/4.
+    h(r) = h_contact + ``growth``·(r − ``fine``·a) at a distance r beyond, at most L/4.
 
     Γ_C the top face z = 0, Γ_D the bottom z = −L, the symmetry planes x = 0 and y = 0 and the sides traction
     free (symmetry: rollers, ``BoundaryConditions(rollers=((0, 0.0), (1, 0.0)))``); Ω₂ the layer
-    z > −``strip``·a, γ the plane between.  ``h`` of the result is ``h_contact``.
+    z > −``strip``·a, γ the plane between.  ``h`` of the result is ``h_contact``.  The coarse cells of Ω₁
+    (Algorithm 3, ``coarse_cell``) are boxes of side at most ``coarse``·h(r) at their centre's distance r
+    (``hertz_coarse_size``, ``partition.graded_coarse_cells``): about ``coarse`` fine cells across, the
+    smallest at the top of Ω₁ under the contact, the largest far from it.
     """
-    values = (a, h_contact, size, fine, growth, strip)
+    values = (a, h_contact, size, fine, growth, strip, coarse)
     if not all(isinstance(v, (int, float, np.number)) and np.isfinite(v) and v > 0 for v in values):
-        raise InputError(f"hertz_quarter_block needs finite a, h_contact, size, fine, growth, strip > 0, got {values}")
+        raise InputError(
+            f"hertz_quarter_block needs finite a, h_contact, size, fine, growth, strip, coarse > 0, got {values}"
+        )
     if not (h_contact < fine * a and strip < size and fine < size):
         raise InputError(
             f"hertz_quarter_block needs h_contact < fine·a and fine, strip < size (got h_contact {h_contact:g}, "
@@ -117,7 +125,24 @@ def hertz_quarter_block(
         if comm.rank == 0:
             _hertz_block_model(L, strip * a, fine * a, h_contact, growth)
         cm = contact_mesh_from_model(comm, h=h_contact, H=strip * a, gdim=3)
-    return cm
+    coarse_size = hertz_coarse_size(a, h_contact, size=size, fine=fine, growth=growth, cells=coarse)
+    omega1 = cm.cell_tags.find(Subdomain.OMEGA1)
+    return cm._replace(coarse_cell=graded_coarse_cells(cm.mesh, coarse_size, cells=omega1).astype(np.int32))
+
+
+def hertz_coarse_size(
+    a: float, h_contact: float, *, size: float = 20.0, fine: float = 1.25, growth: float = 0.3, cells: float = 4.0
+) -> Callable[[np.ndarray], np.ndarray]:
+    """x (3, k) ↦ ``cells``·h(r), r = |x|: the coarse size of ``hertz_quarter_block`` (h(r) its cell size at the
+    distance r from the first contact point, h_contact + ``growth``·(r − ``fine``·a) beyond ``fine``·a, at most
+    ``size``·a/4)."""
+
+    def coarse_size(x: np.ndarray) -> np.ndarray:
+        r = np.linalg.norm(x, axis=0)
+        h = np.minimum(h_contact + growth * np.maximum(r - fine * a, 0.0), size * a / 4)
+        return cells * h
+
+    return coarse_size
 
 
 def _hertz_block_model(L: float, depth: float, r_fine: float, h: float, growth: float) -> None:

@@ -7,23 +7,32 @@ The multiscale methods need every fine cell of Ω₁ in one coarse cell K
   tetrahedral mesh) of side H anchored at the smallest vertex coordinates; a fine cell gets the
   square that contains it, or −1 when it straddles a grid line (the fine mesh does not resolve the
   grid there). The multiscale methods refuse −1 cells in Ω₁ with an InputError.
+* **Graded boxes** (``graded_coarse_cells``): the bounding box of the chosen cells halved along every axis
+  longer than a size function at the box's centre, again and again (a k-d tree of boxes whose side follows
+  the size function); a fine cell gets the box that holds its centroid.  Coarse cells of any size on any
+  mesh, e.g. small near a contact and growing with the distance from it, where a graded mesh grows too.
 * **A partition given by the user**: in a gmsh file, every 2D physical group other than
   ``Omega1``/``Omega2`` is one coarse cell (``read_mesh`` reads them, ``group_coarse_cells``).
 
 When a mesh does not tag Ω₁, Ω₂ and γ, ``problem.strip`` builds them from these partitions.
 """
 
+from collections.abc import Callable
+
 import basix.ufl
 import numpy as np
+import scipy.sparse as sp
 from dolfinx import fem
 from dolfinx import mesh as dmesh
 from mpi4py import MPI
+from scipy.sparse import csgraph
 
 from fenics_contact.errors import InputError
 
 __all__ = [
     "cartesian_coarse_cells",
     "centroid_coarse_cells",
+    "graded_coarse_cells",
     "group_coarse_cells",
     "coarse_sizes",
     "simplex_volumes",
@@ -108,6 +117,162 @@ def centroid_coarse_cells(msh: dmesh.Mesh, H: float) -> tuple[np.ndarray, int]:
     ij = np.floor((_cell_vertices(msh, cells).mean(axis=1) - lo) / H).astype(np.int64)
     ij = np.minimum(np.maximum(ij, 0), counts - 1)
     return _flat_index(ij, counts), nx
+
+
+#: ``graded_coarse_cells`` refuses a size function that asks for more boxes than this
+MAX_BOXES = 200_000
+
+
+def graded_coarse_cells(
+    msh: dmesh.Mesh, size: Callable[[np.ndarray], np.ndarray], *, cells: np.ndarray | None = None
+) -> np.ndarray:
+    """Coarse index of every local cell (owned and ghost): boxes no longer than ``size`` at centre and corners.
+
+    The bounding box of ``cells`` (local cell numbers, owned and ghost; default all) is halved along every
+    axis longer than the smallest ``size`` at its centre and its corners (x of shape (3, k) -> (k,) positive
+    sizes, as a DOLFINx expression takes points), and so are its halves, until no box is longer than that.  A fine cell
+    of ``cells`` gets the box holding its centroid, numbered 0, 1, … over the boxes that hold a cell on some
+    rank; the other cells get ``UNRESOLVED``.  The coarse cells are unions of fine cells with jagged
+    boundaries where the mesh does not follow the box faces, which the multiscale methods accept as any
+    partition; a piece of a box's cells joined to the rest at a vertex or an edge only (a hinge: a zero-energy
+    mode more in its local spectral problem) joins the neighbouring coarse cell it shares the most faces with,
+    so that every coarse cell is face-connected.  The boxes depend only on the global bounding box and
+    ``size``, and the repair is made on the chosen cells of all ranks (gathered on every rank) in the order of
+    their centroids: the same partition on any number of ranks (collective).  InputError for a size that is
+    not positive and finite or asks for over ``MAX_BOXES`` boxes.
+    """
+    d = msh.topology.dim
+    local = _local_cells(msh)
+    chosen = local if cells is None else np.asarray(cells, dtype=np.int32)
+    p = _cell_vertices(msh, chosen) if chosen.size else np.zeros((0, d + 1, d))
+    comm = msh.comm
+    lo, hi = np.empty(d), np.empty(d)
+    flat = p.reshape(-1, d)
+    comm.Allreduce(flat.min(axis=0) if flat.size else np.full(d, np.inf), lo, op=MPI.MIN)
+    comm.Allreduce(flat.max(axis=0) if flat.size else np.full(d, -np.inf), hi, op=MPI.MAX)
+    if not np.all(hi > lo):
+        raise InputError("graded_coarse_cells: the chosen cells span no box (no cells, or a flat set)")
+    centroids = p.mean(axis=1)
+    leaf, _ = _box_tree_leaves(lo, hi, size, centroids)
+    # every rank gathers the chosen owned cells (global numbers, global vertices, box, centroid) and repairs them
+    # alike, in the order of their centroids (the same partition on any number of ranks)
+    n_owned = msh.topology.index_map(d).size_local
+    owned = chosen < n_owned
+    cell_map, vertex_map = msh.topology.index_map(d), msh.topology.index_map(0)
+    c2v = msh.topology.connectivity(d, 0)
+    vertices = c2v.array.reshape(-1, d + 1)[chosen[owned]] if chosen.size else np.zeros((0, d + 1), np.int32)
+    gathered = comm.allgather(
+        (
+            cell_map.local_to_global(chosen[owned].astype(np.int32)),
+            vertex_map.local_to_global(vertices.ravel().astype(np.int32)).reshape(-1, d + 1),
+            leaf[owned],
+            centroids[owned],
+        )
+    )
+    global_cells, global_vertices, boxes, points = (np.concatenate([g[i] for g in gathered]) for i in range(4))
+    along = np.lexsort(np.round((points - lo) / np.max(hi - lo), 9).T[::-1])
+    repaired = np.empty(global_cells.size, dtype=np.int64)
+    repaired[along] = _face_connected(global_vertices[along], boxes[along])
+    order = np.argsort(global_cells)
+    mine = cell_map.local_to_global(chosen.astype(np.int32))
+    at = np.minimum(np.searchsorted(global_cells, mine, sorter=order), max(order.size - 1, 0))
+    found = order.size > 0 and global_cells[order[at]] == mine
+    index = np.full(local.size, UNRESOLVED, dtype=np.int64)
+    index[chosen[found]] = repaired[order[at[found]]]
+    return index
+
+
+def _face_connected(vertices: np.ndarray, index: np.ndarray, *, rounds: int = 50) -> np.ndarray:
+    """Coarse cells joined through faces, numbered 0, 1, …: the cells (rows of global ``vertices``) of a coarse
+    ``index`` that are not in its largest face-connected piece (pieces joined to it only at a vertex or an edge,
+    which would add hinge modes to its local spectral problem) join the neighbouring coarse cell with which
+    they share the most faces; a piece with no other neighbour becomes a coarse cell of its own."""
+    index = np.unique(index, return_inverse=True)[1].astype(np.int64)
+    n, d1 = vertices.shape
+    if n == 0:
+        return index
+    # the pairs of cells that share a face (the d vertices left when one is dropped)
+    faces = np.sort(np.concatenate([np.delete(vertices, k, axis=1) for k in range(d1)]), axis=1)
+    owner = np.tile(np.arange(n), d1)
+    order = np.lexsort(faces.T[::-1])
+    same = np.all(faces[order[1:]] == faces[order[:-1]], axis=1)
+    first, second = owner[order[:-1][same]], owner[order[1:][same]]
+    for _ in range(rounds):
+        inside = index[first] == index[second]
+        graph = sp.coo_matrix((np.ones(int(inside.sum())), (first[inside], second[inside])), shape=(n, n))
+        _, piece = csgraph.connected_components(graph, directed=False)
+        cells_of_piece = np.bincount(piece)
+        largest = np.zeros(index.max() + 1, dtype=np.int64)  # the largest piece of each coarse cell (the first)
+        by_size = np.lexsort((-cells_of_piece[piece], index))
+        heads = np.concatenate([[True], index[by_size[1:]] != index[by_size[:-1]]])
+        largest[index[by_size[heads]]] = piece[by_size[heads]]
+        stray = piece != largest[index]
+        if not stray.any():
+            break
+        # votes of the stray pieces for the coarse index across their faces
+        a, b = np.concatenate([first, second]), np.concatenate([second, first])
+        vote = stray[a] & (piece[a] != piece[b])
+        pairs, counts = np.unique(np.stack([piece[a[vote]], index[b[vote]]]), axis=1, return_counts=True)
+        best = np.lexsort((pairs[1], -counts, pairs[0]))
+        keep = np.concatenate([[True], pairs[0, best[1:]] != pairs[0, best[:-1]]]) if best.size else best
+        target = dict(zip(pairs[0, best[keep]].tolist(), pairs[1, best[keep]].tolist()))
+        moved = np.array([target.get(int(q), -1) for q in piece[stray]], dtype=np.int64)
+        alone = moved < 0
+        moved[alone] = index.max() + 1 + np.unique(piece[stray][alone], return_inverse=True)[1]
+        index[stray] = moved
+    return np.unique(index, return_inverse=True)[1].astype(np.int64)
+
+
+def _box_tree_leaves(
+    lo: np.ndarray, hi: np.ndarray, size: Callable[[np.ndarray], np.ndarray], points: np.ndarray
+) -> tuple[np.ndarray, int]:
+    """(the leaf box of every point (k, d), the number of leaves) of the k-d tree of ``graded_coarse_cells``:
+    level by level, every box longer than ``size`` at its centre or a corner along some axes is halved along
+    those axes."""
+    d = lo.size
+    box_lo, box_hi = lo[None, :].copy(), hi[None, :].copy()
+    where = np.zeros(points.shape[0], dtype=np.int64)  # the box of every point at the current level
+    leaf_of = np.full(points.shape[0], -1, dtype=np.int64)
+    n_leaves, total = 0, 1
+    codes = np.arange(2**d)
+    bits = (codes[:, None] >> np.arange(d)[None, :]) & 1  # (2^d, d): the upper half along each axis?
+    while box_lo.shape[0]:
+        centre = 0.5 * (box_lo + box_hi)
+        n = centre.shape[0]
+        corners = np.where(bits[None, :, :].astype(bool), box_hi[:, None, :], box_lo[:, None, :])  # (n, 2^d, d)
+        x = np.zeros((3, n * (2**d + 1)))
+        x[:d] = np.concatenate([centre[:, None, :], corners], axis=1).reshape(-1, d).T
+        values = np.broadcast_to(np.asarray(size(x), dtype=np.float64), (x.shape[1],))
+        if not np.all(np.isfinite(values) & (values > 0)):
+            raise InputError("graded_coarse_cells: the size function must be positive and finite everywhere")
+        s = values.reshape(n, 2**d + 1).min(axis=1)
+        split = (box_hi - box_lo) > s[:, None] * (1.0 + 1e-12)
+        is_leaf = ~split.any(axis=1)
+        leaf_id = np.full(box_lo.shape[0], -1, dtype=np.int64)
+        leaf_id[is_leaf] = n_leaves + np.arange(np.count_nonzero(is_leaf))
+        n_leaves += int(np.count_nonzero(is_leaf))
+        done = is_leaf[where]
+        leaf_of[np.flatnonzero(leaf_of < 0)[done]] = leaf_id[where[done]]
+        points, where = points[~done], where[~done]
+        # the children: the codes whose upper-half bits lie on split axes only, in (box, code) order
+        valid = ~np.any(bits[None, :, :] & ~split[:, None, :], axis=2)  # (boxes, 2^d)
+        valid[is_leaf] = False
+        child = np.full(valid.shape, -1, dtype=np.int64)
+        child[valid] = np.arange(np.count_nonzero(valid))
+        total += int(np.count_nonzero(valid))
+        if total > MAX_BOXES:
+            raise InputError(
+                f"graded_coarse_cells: the size function asks for more than {MAX_BOXES} boxes (too small a size)"
+            )
+        parent, code = np.nonzero(valid)
+        mid = centre[parent]
+        upper = bits[code].astype(bool)
+        new_lo = np.where(upper, mid, box_lo[parent])
+        new_hi = np.where(upper, box_hi[parent], mid)
+        point_code = np.sum(((points >= centre[where]) & split[where]) << np.arange(d), axis=1)
+        where = child[where, point_code]
+        box_lo, box_hi = new_lo, new_hi
+    return leaf_of, n_leaves
 
 
 def group_coarse_cells(msh: dmesh.Mesh, cell_tags: dmesh.MeshTags, tags: list[int]) -> np.ndarray:

@@ -240,7 +240,7 @@ class Method:
 _TWO_BODY_OPTIONS = {
     "primal-monolithic": ("delta", "newton", "line_search", "state"),
     "primal": ("delta", "newton", "state", *(f.name for f in dataclasses.fields(TwoBodyHybridOptions))),
-    "primal-ms": ("delta", "newton", "H", "cem", *(f.name for f in dataclasses.fields(TwoBodyHybridOptions))),
+    "primal-ms": ("delta", "newton", "state", "H", "cem", *(f.name for f in dataclasses.fields(TwoBodyHybridOptions))),
 }
 
 

@@ -62,7 +62,5 @@ def test_what_two_body_algorithm_3_cannot_take_is_refused():
     for bad in (0.0, -1.0, True):
         with pytest.raises(InputError, match="H must be"):
             PairMultiscaleOptions(bad)
-    with pytest.raises(InputError, match="frictionless"):
-        fc.solve(_pair(fc.Friction("coulomb", mu=0.3)), "primal-ms", H=0.125)
     with pytest.raises(InputError, match="takes the options"):
         fc.solve(problem, "primal-ms", H=0.125, line_search="always")

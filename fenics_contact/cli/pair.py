@@ -8,10 +8,10 @@ flags ``--method``, ``--out``, ``--no-plots``, ``--delta``, ``--tol``, ``--max-i
 ``--H`` (1/H), ``--layers`` and ``--nbasis`` (the ``[multiscale]`` oversampling layers and modes) override the
 case's ``[mesh]``, ``[run]``, ``[primal]`` and ``[multiscale]`` tables, any other flag is refused.  The strip
 layers of Algorithms 1 and 3 are the case's ``primal.layers``.  ``primal-ms`` runs on one process.  A run
-solves each load step (warm-started from the last with ``primal-monolithic`` on one process) and writes ``cli.pair_outputs``' files; under ``mpiexec`` ``primal-monolithic`` runs in parallel
-(``fem.two_body_mpi``), and so does ``primal`` (``hybrid.two_body_mpi``).
-With ``[friction]`` each step starts from the friction state the last one committed (the slip of a step is
-measured from it).
+solves each load step (warm-started from the last with ``primal-monolithic`` on one process) and writes
+``cli.pair_outputs``' files; under ``mpiexec`` ``primal-monolithic`` runs in parallel (``fem.two_body_mpi``),
+and so does ``primal`` (``hybrid.two_body_mpi``).  With ``[friction]`` each step starts from the friction state
+the last one committed (the slip of a step is measured from it), with every method.
 """
 
 import logging

@@ -78,7 +78,7 @@ def test_the_energy_error_falls_with_the_oversampling_layers_along_the_path():
     law = fc.Friction("coulomb", mu=MU)
     layers = (1, 2, 3)
     states = [None] * (1 + len(layers))
-    for top in PATH[1::2]:  # pressed, shear starting, sliding
+    for top in (PATH[1], PATH[3], PATH[4]):  # pressed, slip spreading, sliding
         problem = _problem(m, law, top)
         fine = fc.solve(problem, "primal", state=states[0], tol=1e-11)
         u0 = fine.u.x.array

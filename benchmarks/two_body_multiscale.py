@@ -136,7 +136,7 @@ def main() -> None:
     m = fc.two_blocks(args.n, args.n + 4, heights=(0.5, 0.4), comm=MPI.COMM_SELF)
     lines = frictionless(m, args) if args.friction is None else frictional(m, args)
     if args.append and Path(args.out).is_file():
-        lines = Path(args.out).read_text().splitlines() + lines
+        lines = [*Path(args.out).read_text().splitlines(), "", *lines]
     write_report(args.out, lines, MPI.COMM_SELF)
 
 

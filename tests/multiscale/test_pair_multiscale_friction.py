@@ -72,7 +72,6 @@ def test_with_all_modes_on_global_patches_the_path_is_algorithm_1s(law):
         assert np.linalg.norm(f.tangential_force) == pytest.approx(MU * f.normal_force, rel=1e-8)
 
 
-@pytest.mark.slow
 def test_the_energy_error_falls_with_the_oversampling_layers_along_the_path():
     m = two_blocks(16, 20, heights=(0.5, 0.4), comm=MPI.COMM_SELF)
     law = fc.Friction("coulomb", mu=MU)

@@ -240,7 +240,7 @@ class Method:
 _TWO_BODY_OPTIONS = {
     "primal-monolithic": ("delta", "newton", "line_search", "state"),
     "primal": ("delta", "newton", "state", *(f.name for f in dataclasses.fields(TwoBodyHybridOptions))),
-    "primal-ms": ("delta", "newton", "H", "cem", *(f.name for f in dataclasses.fields(TwoBodyHybridOptions))),
+    "primal-ms": ("delta", "newton", "state", "H", "cem", *(f.name for f in dataclasses.fields(TwoBodyHybridOptions))),
 }
 
 
@@ -359,9 +359,9 @@ def solve(problem: ContactProblem, method: str = "primal", /, **options):
         problem: the contact problem (``ContactProblem`` on its mesh: ``problem.on(mesh)``), or two bodies in
             contact (``TwoBodyProblem``: ``"primal-monolithic"``, options ``delta``, ``newton``, ``line_search``,
             a ``TwoBodySolution``; or ``"primal"``, Algorithm 1 with a strip on each side, options those of
-            ``hybrid.two_body.TwoBodyHybridOptions``, a ``TwoBodyHybridResult``; both take ``state``, the previous
-            load step's ``.state``: its friction anchors and warm start; or ``"primal-ms"``, Algorithm 3 with a
-            CEM-GMsFEM space in each bulk, options ``H`` and ``cem`` besides Algorithm 1's, serial, frictionless).
+            ``hybrid.two_body.TwoBodyHybridOptions``, a ``TwoBodyHybridResult``; or ``"primal-ms"``, Algorithm 3
+            with a CEM-GMsFEM space in each bulk, options ``H`` and ``cem`` besides Algorithm 1's, serial; all take
+            ``state``, the previous load step's ``.state``: its friction anchors and warm start).
         method: ``"primal-monolithic"``, ``"mixed-monolithic"``, ``"primal"`` (Algorithm 1), ``"mixed"``
             (Algorithm 2), ``"primal-ms"`` (Algorithm 3) or ``"mixed-ms"`` (Algorithm 4).
         **options: the method's options by name, flat (``tol=1e-8``, ``layers=4``, ``delta=…``) or as their

@@ -255,8 +255,6 @@ def _pair_ms_refusal(case: PairCase, problem, comm: MPI.Comm) -> InputError | No
     """Why ``primal-ms`` cannot run the two-body case (as ``cli.pair`` would say), or None."""
     if comm.size > 1:
         return InputError("--method primal-ms on a two-body case runs on one process")
-    if case.friction is not None:
-        return InputError("--method primal-ms solves frictionless pairs only, and the case has [friction]")
     if case.coarse_size is None:
         return InputError("--method primal-ms needs the coarse size: give mesh.coarse-size or mesh.H")
     try:

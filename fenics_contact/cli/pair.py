@@ -7,12 +7,11 @@ of Algorithms 1 and 3, Algorithm 3's coarse size and CEM options, the output dir
 flags ``--method``, ``--out``, ``--no-plots``, ``--delta``, ``--tol``, ``--max-iterations``, ``--accel``,
 ``--H`` (1/H), ``--layers`` and ``--nbasis`` (the ``[multiscale]`` oversampling layers and modes) override the
 case's ``[mesh]``, ``[run]``, ``[primal]`` and ``[multiscale]`` tables, any other flag is refused.  The strip
-layers of Algorithms 1 and 3 are the case's ``primal.layers``.  ``primal-ms`` runs on one process,
-frictionless.  A run solves each load step (warm-started from the last with ``primal-monolithic`` on one
-process) and writes ``cli.pair_outputs``' files; under ``mpiexec`` ``primal-monolithic`` runs in parallel
-(``fem.two_body_mpi``), and so does ``primal`` (``hybrid.two_body_mpi``).
-With ``[friction]`` each step starts from the friction state the last one committed (the slip of a step is
-measured from it).
+layers of Algorithms 1 and 3 are the case's ``primal.layers``.  ``primal-ms`` runs on one process.  A run
+solves each load step (warm-started from the last with ``primal-monolithic`` on one process) and writes
+``cli.pair_outputs``' files; under ``mpiexec`` ``primal-monolithic`` runs in parallel (``fem.two_body_mpi``),
+and so does ``primal`` (``hybrid.two_body_mpi``).  With ``[friction]`` each step starts from the friction state
+the last one committed (the slip of a step is measured from it), with every method.
 """
 
 import logging
@@ -203,13 +202,7 @@ def pair_run_options(case: PairCase, given: Mapping[str, object] = {}) -> PairRu
 
 
 def _multiscale_options(case: PairCase, cem: Mapping[str, int]) -> PairMultiscaleOptions:
-    """Algorithm 3's options of a two-body case: InputError when it cannot run the case (no coarse size, friction)."""
-    if case.friction is not None:
-        raise InputError(
-            f"case {case.path}: --method primal-ms solves frictionless pairs only (its multiscale bulks are coupled "
-            "to the frictionless interface iteration, which carries no slip state from step to step), and the case "
-            "has [friction]; run it with --method primal or primal-monolithic"
-        )
+    """Algorithm 3's options of a two-body case: InputError when it cannot run the case (no coarse size)."""
     if case.coarse_size is None:
         raise InputError(
             f"case {case.path}: --method primal-ms needs the coarse size of both bulks: give mesh.coarse-size "
@@ -246,10 +239,12 @@ def _solve(options: PairRunOptions, problem, state: PairState | None):
     and, with friction, the anchors the step's slip is measured from (Algorithm 1: also its interface data)."""
     if options.method == "primal-monolithic":
         return solve_two_body(problem, delta=options.delta, newton=NewtonOptions(), state=state)
-    if options.method == "primal-ms":  # (frictionless: each step from the unloaded pair)
-        return solve_two_body_ms_hybrid(problem, options.multiscale, delta=options.delta, options=options.hybrid)
     if problem.friction is None:
         state = None  # (frictionless: each step from the unloaded pair, as the paper's iteration)
+    if options.method == "primal-ms":
+        return solve_two_body_ms_hybrid(
+            problem, options.multiscale, delta=options.delta, options=options.hybrid, state=state
+        )
     return solve_two_body_hybrid(problem, delta=options.delta, options=options.hybrid, state=state)
 
 

@@ -7,9 +7,14 @@ coarse_partition``), its fine operators, relaxed CEM bases with ``cem.layers`` o
 factorized coarse matrix built once; its γ response u₁|γ = R g + r₀ (``MultiscaleRobinSolver.response``) is
 exact in the coarse space, so the interface Newton method on the condensed contact unknowns of both strips is
 Algorithm 1's.  The two bodies' spaces are independent (no coarse cell holds cells of both).  The fixed point
-differs from the monolithic solution by the multiscale error, which falls with the oversampling layers.
-Serial; a body's supports hold every component (no rollers), one prescribed displacement per body, no
-tractions on the bulks.
+differs from the monolithic solution by the multiscale error, which falls with the oversampling layers; with
+patches covering each bulk and every local mode (``nbasis=None``) the coarse space is the fine one and the fixed
+point is Algorithm 1's.  With the pair's friction law the strips are Algorithm 1's frictional strips
+(``fem.two_body_friction``): friction lives in Ω₂ only, so the multiscale bulks are unchanged, and ``state``
+carries the slip anchors, the displacement and the interface data from one load step to the next.  Tractions
+on a bulk's facets enter its load vector (the parent's load over the bulk's cells and their traction facets),
+which the source correctors localize as they do the body force.  Serial; a body's supports hold every
+component (no rollers), one prescribed displacement per body.
 """
 
 from dataclasses import dataclass, field
@@ -20,6 +25,7 @@ from dolfinx import mesh as dmesh
 
 from fenics_contact.errors import InputError
 from fenics_contact.fem.contact import NewtonOptions
+from fenics_contact.fem.two_body import PairState, load_vector
 from fenics_contact.hybrid.two_body import TwoBodyHybridOptions, TwoBodyHybridResult, solve_two_body_hybrid
 from fenics_contact.multiscale.cem.cache import offline_stage
 from fenics_contact.multiscale.cem.coarse import MultiscaleRobinSolver
@@ -124,8 +130,17 @@ class _BodyBulk:
             options.H,
         )
         moved = [s.displacement for s in supports if s.displacement is not None]
+        # with tractions the bulk's load is the parent's over its cells and their traction facets (else its body force)
+        load = load_vector(problem, V, cells)[self.dofs] if problem.tractions else None
         ops = assemble_fine_operators(
-            Vs, facet_tags, sub_fields, alpha_fn, grid, s_factor=options.cem.s_factor, displacement=(moved or [None])[0]
+            Vs,
+            facet_tags,
+            sub_fields,
+            alpha_fn,
+            grid,
+            s_factor=options.cem.s_factor,
+            load=load,
+            displacement=(moved or [None])[0],
         )
         space, _ = offline_stage(ops, grid, options.cem, h=h)
         self.solver = MultiscaleRobinSolver(ops, space, grid)
@@ -183,17 +198,15 @@ def solve_two_body_ms_hybrid(
     delta: float | None = None,
     options: TwoBodyHybridOptions = TwoBodyHybridOptions(),
     newton: NewtonOptions = NewtonOptions(),
+    state: PairState | None = None,
 ) -> TwoBodyHybridResult:
     """Algorithm 3 for two bodies (module docstring): ``hybrid.two_body.solve_two_body_hybrid`` with each bulk a
-    CEM-GMsFEM space; serial, frictionless."""
+    CEM-GMsFEM space; serial.  ``state``: the previous load step's ``.state`` (with friction: the anchors its
+    slip is measured from)."""
     if not isinstance(multiscale, PairMultiscaleOptions):
         raise InputError(f"two-body Algorithm 3 takes PairMultiscaleOptions, got {type(multiscale).__name__}")
     if problem.comm.size > 1:
         raise InputError("two-body Algorithm 3 (primal-ms) runs on one process (run it without mpiexec)")
-    if problem.friction is not None:
-        raise InputError("two-body Algorithm 3 (primal-ms) is frictionless: solve a pair with friction by 'primal'")
-    if problem.tractions:
-        raise InputError("two-body Algorithm 3 (primal-ms) takes no tractions (the bulks' load is the body force)")
     for s in problem.supports:
         if s.components is not None:
             raise InputError("two-body Algorithm 3 (primal-ms): a support holds every component (no rollers)")
@@ -204,4 +217,4 @@ def solve_two_body_ms_hybrid(
     def omega1(problem_, V, split, strip):
         return _MultiscaleBulks(problem_, V, split, strip, multiscale)
 
-    return solve_two_body_hybrid(problem, delta=delta, options=options, newton=newton, omega1=omega1)
+    return solve_two_body_hybrid(problem, delta=delta, options=options, newton=newton, state=state, omega1=omega1)

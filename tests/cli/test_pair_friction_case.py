@@ -85,4 +85,6 @@ def test_a_bad_friction_table_is_refused(tmp_path, capsys, args, message):
 
 def test_check_mesh_reports_the_friction_law(capsys):
     assert main(["check-mesh", "--case", str(CASE)]) == 0
-    assert "coulomb friction, mu = 0.6 on the relative slip" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "coulomb friction, mu = 0.6 on the relative slip" in out
+    assert "primal-ms can run" in out and "primal-ms: coarse squares of side 5 in each bulk" in out

@@ -3,8 +3,11 @@
 * the run's forces, load step by load step, are the API's ``fc.solve(pair, "primal-ms", H=..., cem=...)``;
 * with patches covering each bulk and every local mode the multiscale space is the fine one: Algorithm 1's forces;
 * the summary and the outputs carry both bodies, both faces and the coarse space's options;
-* what it cannot run is refused, nothing written (no coarse size or two of them, friction, tractions, an H that does
-  not divide the bodies, bad [multiscale] keys).
+* a traction on a bulk's side enters its multiscale load: with every mode Algorithm 1's forces;
+* with ``[friction]`` (``cases/fault_sliding.toml``) each step starts from the last one's state: with patches
+  covering each bulk and every local mode Algorithm 1's frictional path, the last step sliding (Q = μN);
+* what it cannot run is refused, nothing written (no coarse size or two of them, an H that does not divide the
+  bodies, bad [multiscale] keys).
 """
 
 import json
@@ -25,6 +28,8 @@ CASE = Path(__file__).parents[2] / "cases" / "two_blocks.toml"
 MESH = CASE.parent / "two_blocks.msh"
 H = 5.0  #: the case's coarse size in mm: squares of 5 mm over blocks 30 and 40 mm wide
 LAST = "load.steps=[[0.0, -0.02]]"
+FAULT = CASE.parent / "fault_sliding.toml"
+MU = 0.6  #: the fault's Coulomb coefficient
 
 
 def _run(out: Path, *args: str) -> dict:
@@ -70,14 +75,43 @@ def test_patches_covering_each_bulk_give_algorithm_1(tmp_path):
     assert _relative(local["force_slave"], fine["force_slave"]) > 1e-5  # (measured 1.5e-3)
 
 
+def test_a_traction_on_a_bulk_gives_algorithm_1s_forces_with_all_modes(tmp_path):
+    traction = "bodies.upper.tractions={upper_left=[5.0, 0.0]}"
+    multiscale = _run(
+        tmp_path / "ms", "--layers", "50", "--set", 'multiscale.nbasis="all"', "--set", LAST, "--set", traction
+    )
+    args = ["run", "--case", str(CASE), "--method", "primal", "--no-plots", "--out", str(tmp_path / "a1")]
+    assert main([*args, "--set", LAST, "--set", traction]) == 0
+    fine = json.loads((tmp_path / "a1" / "summary.json").read_text())
+    assert _relative(multiscale["force_slave"], fine["force_slave"]) <= 1e-8
+    assert multiscale["force_balance"] <= 1e-12
+
+
+def test_the_fault_slides_as_with_algorithm_1(tmp_path):
+    steps = "load.steps=[[0.0, -0.02], [0.02, -0.02], [0.06, -0.02]]"
+    runs = {}
+    for method, extra in (("primal", []), ("primal-ms", ["--layers", "50", "--set", 'multiscale.nbasis="all"'])):
+        out = tmp_path / method
+        args = ["run", "--case", str(FAULT), "--method", method, "--no-plots", "--out", str(out), "--set", steps]
+        assert main([*args, *extra]) == 0  # (the case's mesh.coarse-size: H)
+        runs[method] = json.loads((out / "summary.json").read_text())
+    fine, multiscale = (runs[m]["load_steps"]["steps"] for m in ("primal", "primal-ms"))
+    for row, ref in zip(multiscale, fine, strict=True):
+        assert row["converged"] and row["force_balance"] <= 1e-12
+        assert _relative(row["force_slave"], ref["force_slave"]) <= 1e-8
+        assert row["friction"]["slip_nodes"] == ref["friction"]["slip_nodes"]
+        assert row["friction"]["dissipation"] == pytest.approx(ref["friction"]["dissipation"], rel=1e-6, abs=1e-14)
+    last = multiscale[-1]["friction"]
+    assert last["stick_nodes"] == 0 and last["slip_nodes"] > 0
+    assert abs(last["tangential_force"][0]) == pytest.approx(MU * last["normal_force"], rel=1e-8)
+
+
 BAD = [
     (["--set", f"mesh={{file='{MESH}'}}"], "needs the coarse size of both bulks"),
     (["--set", "mesh.coarse-size=0.1"], "smaller than the fine cells"),
     (["--set", "mesh.coarse-size=16.0"], "does not divide body 2"),
     (["--set", f"mesh={{file='{MESH}', coarse-size=5.0, H=2}}"], "give one of them"),
-    (["--set", "bodies.upper.tractions={upper_left=[0.0, -1.0]}"], "takes no tractions"),
     (["--H", "2"], "the coarse size H = 0.5 (mesh.coarse-size, or 1/--H)"),
-    (["--set", 'friction={law="coulomb", mu=0.3}'], "frictionless pairs only"),
     (["--set", 'multiscale.nbasis="many"'], '"rigid" or "all"'),
     (["--set", "multiscale.cache-dir=1"], "the keys of [multiscale]"),
     (["--layers", "-1"], "oversampling layers must be an integer >= 0"),

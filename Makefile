@@ -37,8 +37,8 @@ test: $(VENV)/.installed
 
 # ruff: import order, pyflakes, pycodestyle and the formatting (pyproject.toml [tool.ruff])
 lint: $(VENV)/.installed
-	$(VENV)/bin/ruff check fenics_contact tests demos benchmarks docs
-	$(VENV)/bin/ruff format --check fenics_contact tests demos benchmarks docs
+	$(VENV)/bin/ruff check fenics_contact tests demos benchmarks docs scripts
+	$(VENV)/bin/ruff format --check fenics_contact tests demos benchmarks docs scripts
 
 test-quick: $(VENV)/.installed
 	$(VENV)/bin/python -m pytest -ra -m "not slow and not mpi"

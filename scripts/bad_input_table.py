@@ -1,6 +1,6 @@
 """Print the bad-input table of the command line (tests/cli/test_bad_input.py) with the messages the package gives.
 
-    OMP_NUM_THREADS=1 .venv/bin/python scripts/bad_input_table.py > docs/bad_input.md
+OMP_NUM_THREADS=1 .venv/bin/python scripts/bad_input_table.py > docs/bad_input.md
 """
 
 import contextlib
@@ -40,8 +40,13 @@ def run(case) -> tuple[int, str]:
 
 def main_table() -> None:
     print("# The command line on bad input\n")
-    print("Made by `OMP_NUM_THREADS=1 .venv/bin/python scripts/bad_input_table.py > docs/bad_input.md` from the cases of")
-    print("`tests/cli/test_bad_input.py` (each case there asserts the exit code, the one line on stderr, and that nothing is")
+    print(
+        "Made by `OMP_NUM_THREADS=1 .venv/bin/python scripts/bad_input_table.py > docs/bad_input.md` from the cases of"
+    )
+    print(
+        "`tests/cli/test_bad_input.py` (each case there asserts the exit code, the one line on stderr, and that nothing"
+        " is"
+    )
     print("written). Exit codes: " + "; ".join(f"{c} {m}" for c, m in EXIT_CODES.items()) + ".\n")
     print("| case | exit | message (stderr, one line) |")
     print("|---|---|---|")

@@ -107,6 +107,7 @@ from fenics_contact.multiscale.cem.options import (
     FEW_LAYERS,
     NEARLY_INCOMPRESSIBLE,
     RIGID_MOTIONS,
+    WHOLE_DOMAIN,
     CEMOptions,
     warn_if_few_layers,
 )
@@ -125,6 +126,7 @@ __all__ = [
     "FEW_LAYERS",
     "NEARLY_INCOMPRESSIBLE",
     "RIGID_MOTIONS",
+    "WHOLE_DOMAIN",
     "CEMOptions",
     "warn_if_few_layers",
     "FineOperators",

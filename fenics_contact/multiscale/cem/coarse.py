@@ -14,7 +14,7 @@ import scipy.sparse as sp
 from mpi4py import MPI
 
 from fenics_contact.fem.linalg import PivotedCholesky
-from fenics_contact.multiscale.cem.bases import Incidence, MultiscaleSpace
+from fenics_contact.multiscale.cem.bases import Incidence, MultiscaleSpace, covering
 from fenics_contact.multiscale.cem.operators import FineOperators
 from fenics_contact.multiscale.coarse import CoarseGrid
 from fenics_contact.multiscale.work import run_shared
@@ -57,11 +57,12 @@ def gram_matrices(
     GK = np.zeros((nz, nz))
     GM = np.zeros((nz, nz))
     sizes = np.array([c.size for c in grid.cells], dtype=np.float64)
+    covers = covering(grid, space.layers, space.patch_group, ops.bs)
 
     def add_cell(K: int) -> None:
         c = int(grid.colors[K])
         D = inc.dofs(K, free_only=False)
-        cover = grid.patch(K, space.layers)
+        cover = covers[K]
         Zb, cols = _rows_on([space.basis[i] for i in cover], D)
         blocks = [Zb]
         cn = [corr_at[int(i)] for i in cover if int(i) in corr_at]

@@ -86,6 +86,8 @@ from fenics_contact.multiscale.cem.bases import (
     MultiscaleSpace,
     PatchFunctions,
     build_multiscale_space,
+    cell_groups,
+    covering,
     global_saddle_matrix,
 )
 from fenics_contact.multiscale.cem.cache import CACHE_FORMAT, PrimalOfflineCache, offline_key, offline_stage
@@ -146,6 +148,8 @@ __all__ = [
     "MultiscaleSpace",
     "PatchFunctions",
     "build_multiscale_space",
+    "cell_groups",
+    "covering",
     "global_saddle_matrix",
     "MultiscaleRobinSolver",
     "gram_matrices",

@@ -141,6 +141,8 @@ class MultiscaleRobinSolver:
         self.b_f = PsiF - ZAZ[:n_ms, -1]
         # Ψᵀ (G[:, γ] − A N): the action of the interface data on the coarse right-hand side
         self.C = PsiG - ZAZ[:n_ms, n_ms : n_ms + ng]
+        self._response = None
+        self._reduced = None
         self.time_s = time.perf_counter() - t0
 
     @property
@@ -172,10 +174,39 @@ class MultiscaleRobinSolver:
         """u₁ at ``ops.gamma`` for coordinates s."""
         return self.Zg @ s
 
+    def _solution_map(self) -> np.ndarray:
+        """X with w = X t for t = (g, 1): the coarse solution as an affine map of the Robin data (one dense
+        coarse solve with n_γ + 1 right-hand sides, made once)."""
+        if self._response is None:
+            self._response = self.factor.solve(np.column_stack([self.C, self.b_f]))
+        return self._response
+
     def response(self) -> tuple[np.ndarray, np.ndarray]:
         """The affine interface map u₁|γ = R g + r₀ (``ops.gamma`` ordering, dense R)."""
         n_ms, ng = self.space.size, self.space.n_gamma
-        X = self.factor.solve(np.column_stack([self.C, self.b_f]))
+        X = self._solution_map()
         R = self.Zg[:, :n_ms] @ X[:, :ng] + self.Zg[:, n_ms : n_ms + ng]
         r0 = self.Zg[:, :n_ms] @ X[:, ng] + self.Zg[:, -1]
         return R, r0
+
+    def reduced(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(T, Ĝ_K, Ĝ_M) in the interface coordinates t = (g, 1): u₁|γ = T t and the Gram matrices QᵀGQ of
+        s = Q t (Q = [X; I]), so a₁(Zs, Zs) = tᵀĜ_K t and ‖Zs‖² = tᵀĜ_M t.  Order n_γ + 1 instead of
+        dim V_ms + n_γ + 1: a step reads these instead of the coarse factor, Z_γ and the Gram matrices (made
+        once, with the response)."""
+        if self._reduced is None:
+            n_ms = self.space.size
+            X = self._solution_map()
+            R, r0 = self.response()
+
+            def reduce(G: np.ndarray) -> np.ndarray:
+                GQ = G[:, :n_ms] @ X + G[:, n_ms:]
+                out = X.T @ GQ[:n_ms] + GQ[n_ms:]
+                return 0.5 * (out + out.T)
+
+            self._reduced = (np.column_stack([R, r0]), reduce(self.GK), reduce(self.GM))
+        return self._reduced
+
+    def expand(self, t: np.ndarray) -> np.ndarray:
+        """s = (X t, t): the coordinates of u₁ = Z s from the interface coordinates t = (g, 1)."""
+        return np.concatenate([self._solution_map() @ t, t])

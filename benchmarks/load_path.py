@@ -121,6 +121,8 @@ def one(args) -> dict:
         "iterations": [s.iterations for s in curve.steps],
         "peak_rss_gb": peak_rss_bytes() / 1e9,
         "offline_parts": dict(getattr(curve.step, "offline_times", {})),  # Algorithm 3's set-up by phase
+        # --check: the largest energy distance of the multiscale Ω₁ to the fine Ω₁ solve over the steps
+        "omega1_check": max((s.omega1_check for s in curve.steps if s.omega1_check is not None), default=None),
     }
 
 
@@ -185,6 +187,8 @@ def table(args, results: dict) -> str:
         if parts:
             text = ", ".join(f"{k} {v:.2f}" for k, v in parts.items() if isinstance(v, int | float))
             lines += ["", f"Set-up of {label} by phase [s]: {text}"]
+        if r.get("omega1_check") is not None:
+            lines += ["", f"{label}: Ω₁ against the fine Ω₁ solve (energy, largest over the steps): {r['omega1_check']:.2e}"]
     lines += [
         "",
         "Set-up: building the solver before the first step (the multiscale Ω₁'s offline phase, factorizations); "

@@ -188,7 +188,10 @@ def table(args, results: dict) -> str:
             text = ", ".join(f"{k} {v:.2f}" for k, v in parts.items() if isinstance(v, int | float))
             lines += ["", f"Set-up of {label} by phase [s]: {text}"]
         if r.get("omega1_check") is not None:
-            lines += ["", f"{label}: Ω₁ against the fine Ω₁ solve (energy, largest over the steps): {r['omega1_check']:.2e}"]
+            lines += [
+                "",
+                f"{label}: Ω₁ against the fine Ω₁ solve (energy, largest over the steps): {r['omega1_check']:.2e}",
+            ]
     lines += [
         "",
         "Set-up: building the solver before the first step (the multiscale Ω₁'s offline phase, factorizations); "

@@ -30,12 +30,16 @@ def _rows_on(parts: list, D: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     Z = np.zeros((D.size, ncols))
     cols = np.empty(ncols, dtype=np.int64)
     at = 0
+    found = {}  # the functions of one patch problem share their DOF array: look D up in it once
     for p in parts:
         k = p.columns.size
-        pos = np.searchsorted(p.dofs, D)
-        np.minimum(pos, p.dofs.size - 1, out=pos)
-        hit = p.dofs[pos] == D
-        Z[hit, at : at + k] = p.values[pos[hit]]
+        if id(p.dofs) not in found:
+            pos = np.searchsorted(p.dofs, D)
+            np.minimum(pos, p.dofs.size - 1, out=pos)
+            hit = p.dofs[pos] == D
+            found[id(p.dofs)] = (hit, pos[hit])
+        hit, rows = found[id(p.dofs)]
+        Z[hit, at : at + k] = p.values[rows]
         cols[at : at + k] = p.columns
         at += k
     return Z, cols

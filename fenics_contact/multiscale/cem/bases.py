@@ -209,7 +209,7 @@ def _patch_problem(
         F = ops.corrector_load[inner] * np.isin(inc.load_owner[inner // ops.bs], group)
         if not np.any(F):
             F = None
-    rhs = np.zeros((nI + nJ, ncols + (F is not None)))
+    rhs = np.zeros((nI + nJ, ncols + (F is not None)), order="F")  # MUMPS takes column-major: no copy
     for (at, li, G_I, _, used), i in zip(blocks, group):
         rhs[nI + np.searchsorted(J, aux.columns(i)), at + np.arange(li)] = 1.0  # s(φ_j^i, πv): μ-row unit vectors
         if used.size:

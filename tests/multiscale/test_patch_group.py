@@ -113,3 +113,25 @@ def test_groups_keep_the_localization_and_the_whole_domain_is_exact(mesh_32_8, t
     assert again.cache_status == "loaded" and again.space.patch_group == 2
     g = _robin_data(om)
     assert np.array_equal(again.solver.solve(g), om.solver.solve(g))
+
+
+@pytest.mark.parametrize("g", [2, cem.WHOLE_DOMAIN])
+def test_gram_matrices_of_grouped_bases(g):
+    """The Gram matrices summed over the coarse cells the grouped supports cover (``covering``) are ZᵀKZ and
+    ZᵀMZ of the assembled Z = [Ψ, N, N_f]: no cell a function reaches is left out.  The interface coordinates
+    of a step give the same trace and norms."""
+    om, _, _ = cem.build_omega1_multiscale(
+        models.get_model(3).on(geometry.unit_square(32, 8)), cem=cem.CEMOptions(layers=1, patch_group=g)
+    )
+    covers = cem.covering(om.grid, 1, g, 2)
+    assert g == cem.WHOLE_DOMAIN or max(c.size for c in covers) < om.grid.size  # supports are local
+    space, ops = om.space, om.ops
+    Z = np.hstack([space.Psi.toarray(), space.N.toarray(), space.Nf[:, None]])
+    scale = np.abs(om.solver.GK).max()
+    assert np.allclose(om.solver.GK, Z.T @ (ops.K @ Z), rtol=0, atol=1e-12 * scale)
+    assert np.allclose(om.solver.GM, Z.T @ (ops.M @ Z), rtol=0, atol=1e-12 * np.abs(om.solver.GM).max())
+    gdata = _robin_data(om)
+    u1 = om.solver.solve(gdata)
+    t = om.interface_coordinates(gdata)
+    assert np.allclose(om.interface_trace(t), om.interface_values(u1), rtol=0, atol=1e-12 * np.abs(u1).max())
+    assert om.interface_norms2(t)[0] == pytest.approx(float(u1 @ (ops.K @ u1)), rel=1e-10)

@@ -16,6 +16,10 @@ needs the coarse index of every fine cell, so any domain and any partition work.
   one colour share no fine vertex, so the restriction of a matrix assembled over
   the cells of one colour to the vertices of K_k is the matrix of K_k alone
   (four colours on a Cartesian grid of squares, eight of cubes).
+* **Groups.** ``groups(g)`` partitions the coarse cells into blocks that share one patch problem
+  (``CEMOptions.patch_group``): the g × g (× g) blocks of a Cartesian grid; on a general partition greedy
+  groups (the first ungrouped cell and the ungrouped cells at most g − 1 steps from it, nearest first, at
+  most g^d of them); g = None: one group of all cells.
 * **Size.** ``cell_size[k]`` = |K_k|^(1/d) (H for a square or cube of side H) scales
   the CEM inner product, κ̃ = c κ H_k⁻².
 """
@@ -75,6 +79,38 @@ class CoarseGrid:
         """Coarse cells of K_{k,m}: at most m = ``layers`` adjacency steps from K_k (sorted)."""
         dist = self.distance(k)
         return np.flatnonzero((dist >= 0) & (dist <= layers))
+
+    def groups(self, g: int | None, dim: int) -> list[np.ndarray]:
+        """The coarse cells in groups of about g per direction (each sorted; groups by their first cell) in
+        dimension ``dim``; g = None: one group of all cells."""
+        if g is None:
+            return [np.arange(self.size)]
+        if g == 1:
+            return [np.array([k]) for k in range(self.size)]
+        if self.ij is not None:
+            _, label = np.unique(self.ij // g, axis=0, return_inverse=True)
+        else:
+            label = np.full(self.size, -1, dtype=np.int64)
+            for seed in range(self.size):
+                if label[seed] >= 0:
+                    continue
+                dist = self.distance(seed)
+                near = np.flatnonzero((dist >= 0) & (dist <= g - 1) & (label < 0))
+                near = near[np.argsort(dist[near], kind="stable")][: g**dim]
+                label[near] = seed
+        label = np.asarray(label).ravel()
+        groups = [np.flatnonzero(label == v) for v in np.unique(label)]
+        return sorted(groups, key=lambda c: int(c[0]))
+
+    def group_patch(self, cells: np.ndarray, layers: int) -> np.ndarray:
+        """The union of the K_{k,m} of ``cells`` (sorted): the patch a group's problems are solved on."""
+        if cells.size == 1:
+            return self.patch(int(cells[0]), layers)
+        reach = np.zeros(self.size, dtype=bool)
+        reach[cells] = True
+        for _ in range(layers):
+            reach = reach | (self.adjacency @ reach.astype(np.int64) > 0)
+        return np.flatnonzero(reach)
 
 
 def _greedy_colouring(adjacency: sp.csr_matrix) -> np.ndarray:

@@ -105,9 +105,10 @@ class MultiscalePrimalHybridStep:
             friction=friction_of(problem.law),
         )
         self.u1 = fem.Function(self.interface.spaces[0], name="u1")  # filled by glued()
-        # u₁ = Z s in the coordinates s of Omega1Multiscale (online nothing of fine-mesh size in Ω₁)
-        self._s = np.zeros(self.omega1.solver.GK.shape[0])
-        self._prev = [self._s.copy(), np.zeros_like(self.omega2.u.x.array)]
+        # u₁ in the interface coordinates t = (g₁₂, 1) of Omega1Multiscale: its trace and norms are small dense
+        # products (online nothing of fine-mesh size in Ω₁, no coarse solve: the coarse field only on request)
+        self._t = np.zeros(self.omega1.solver.space.n_gamma + 1)
+        self._prev = [self._t.copy(), np.zeros_like(self.omega2.u.x.array)]
         self._diff2 = fem.Function(self.omega2.V)
         self._change = np.inf
         self._certificate = Certificate(np.inf, np.inf)
@@ -140,10 +141,10 @@ class MultiscalePrimalHybridStep:
     def apply(self, g: np.ndarray, *, omega2_warm: bool = False) -> np.ndarray:
         n = self.interface.size
         g12, g21 = g[:n], g[n:]
-        self._s = self.omega1.coordinates(g12)
+        self._t = self.omega1.interface_coordinates(g12)
         self.interface.to_part(g21, 1, self.omega2.g)
         newton = solve_or_verify(self.omega2, omega2_warm)
-        u1g = self.omega1.trace(self._s)
+        u1g = self.omega1.interface_trace(self._t)
         u2g = self.interface.from_part(self.omega2.u, 1)
         self._measure()
         self._certificate = primal_certificate(u1g, u2g, g12, g21, self.alpha, self.interface.weights, self.comm)
@@ -159,7 +160,7 @@ class MultiscalePrimalHybridStep:
     def reset(self) -> None:
         """Start the next solve cold: zero subdomain states, Ω₂ factorization dropped (offline data kept)."""
         self.omega2.reset()
-        self._s[:] = 0.0
+        self._t[:] = 0.0
         for prev in self._prev:
             prev[:] = 0.0
 
@@ -184,13 +185,13 @@ class MultiscalePrimalHybridStep:
     # -- measures -------------------------------------------------------------------------
     def _measure(self) -> None:
         om1 = self.omega1
-        (de1, ne1), (dl1, nl1) = om1.coordinate_norms2(np.column_stack([self._s - self._prev[0], self._s]))
+        (de1, ne1), (dl1, nl1) = om1.interface_norms2(np.column_stack([self._t - self._prev[0], self._t]))
         self._diff2.x.array[:] = self.omega2.u.x.array - self._prev[1]
         de = de1 + self.omega2.energy_norm2(self._diff2)
         dl = dl1 + self.omega2.l2_norm2(self._diff2)
         ne = ne1 + self.omega2.energy_norm2(self.omega2.u)
         nl = nl1 + self.omega2.l2_norm2(self.omega2.u)
-        self._prev[0][:] = self._s
+        self._prev[0][:] = self._t
         self._prev[1][:] = self.omega2.u.x.array
         self._change = max(np.sqrt(de / ne), np.sqrt(dl / nl)) if ne > 0 and nl > 0 else np.inf
 
@@ -198,7 +199,7 @@ class MultiscalePrimalHybridStep:
         if self.reference is None:
             raise InputError("no reference solution was given")
         r1, r2 = self.reference
-        d1 = self.omega1.field(self._s) - r1  # the fine field (no cancellation in the error norms)
+        d1 = self.omega1.field(self.omega1.expand(self._t)) - r1  # the fine field (no cancellation in the error norms)
         self._diff2.x.array[:] = self.omega2.u.x.array - r2.x.array
         l2 = self.omega1.l2_norm2(d1) + self.omega2.l2_norm2(self._diff2)
         en = self.omega1.energy_norm2(d1) + self.omega2.energy_norm2(self._diff2)
@@ -215,7 +216,7 @@ class MultiscalePrimalHybridStep:
     def glued(self, V: fem.FunctionSpace) -> fem.Function:
         """u on the parent mesh: u₁ on Ω₁, u₂ on Ω₂ (u₂ on γ)."""
         u = fem.Function(V, name="u")
-        self.omega1.to_part(self.omega1.field(self._s), self.u1)
+        self.omega1.to_part(self.omega1.field(self.omega1.expand(self._t)), self.u1)
         self.interface.transfers[0].to_parent(self.u1, u)
         self.interface.transfers[1].to_parent(self.omega2.u, u)
         return u

@@ -353,6 +353,14 @@ def test_interface_response_is_the_affine_map():
             assert ek == pytest.approx(om.energy_norm2(d), rel=1e-10)
             assert em == pytest.approx(om.l2_norm2(d), rel=1e-10)
         prev = s
+        # the interface coordinates t = (g, 1) of a step: s = Q t, trace and norms from the reduced matrices
+        t = om.interface_coordinates(g)
+        assert np.allclose(om.expand(t), s, rtol=0, atol=1e-10 * np.abs(s).max())
+        assert np.allclose(om.interface_trace(t), om.interface_values(u1), rtol=0, atol=1e-12 * np.abs(u1).max())
+        for a, b in zip(om.interface_norms2(t), (om.energy_norm2(u1), om.l2_norm2(u1))):
+            assert a == pytest.approx(b, rel=1e-10)
+        both = om.interface_norms2(np.column_stack([t, 2.0 * t]))
+        assert np.allclose(both[0], np.array([1.0, 4.0]) * om.energy_norm2(u1), rtol=1e-10, atol=0)
 
 
 # -- offline cache --------------------------------------------------------------------------------

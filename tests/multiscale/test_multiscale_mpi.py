@@ -25,14 +25,14 @@ def load(x):
     return f
 
 
-def _numbers(comm: MPI.Comm, n: int = 32, n_coarse: int = 8) -> dict:
+def _numbers(comm: MPI.Comm, n: int = 32, n_coarse: int = 8, patch_group: int = 1) -> dict:
     """Algorithm 3 (Anderson), then the interface Newton on the same step; the solution's values at every vertex
     of the uniform grid (h = 1/n) in coordinate order, from all ranks."""
     cm = unit_square(n, n_coarse, comm=comm)
     problem = get_model(1).with_(load=load).on(cm)
     delta = default_penalty(cm.h, 1.0)
     ref = solve_primal_monolithic(problem, delta=delta)
-    cem = CEMOptions(layers=2, nbasis=3)
+    cem = CEMOptions(layers=2, nbasis=3, patch_group=patch_group)
     res = solve_primal_ms_hybrid(
         problem,
         alpha="Emin",
@@ -91,3 +91,15 @@ def test_two_ranks_match_serial():
     for run in (serial, parallel):  # --accel newton: the same fixed point, the same steps on 1 and 2 ranks
         assert run["newton_converged"] and run["newton_vs_robin"] < 1e-8, run
     assert parallel["newton_steps"] == serial["newton_steps"] <= 8
+
+
+def test_two_ranks_share_out_patch_groups():
+    """mpiexec -n 2 with 2 × 2 cells per patch problem: the 16 group problems are shared out (each rank some,
+    none twice) and the solution equals the serial one with the same groups."""
+    serial = _numbers(MPI.COMM_SELF, patch_group=2)
+    parallel = _numbers(MPI.COMM_WORLD, patch_group=2)
+    assert serial["converged"] and parallel["converged"]
+    shares = parallel["patches_here"]
+    assert min(shares) > 0 and sum(shares) == serial["patches_here"][0] == 16
+    assert np.abs(parallel["u"] - serial["u"]).max() / np.abs(serial["u"]).max() < 1e-10
+    assert parallel["iterations"] == serial["iterations"]

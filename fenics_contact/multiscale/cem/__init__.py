@@ -52,7 +52,9 @@ solved in its sparse saddle-point form
 (A_II + B_IJ B_IJᵀ has a dense block per coarse cell: 45× the nonzeros of A_II
 at h = 1/256). One MUMPS LDLᵀ per patch serves the l_i bases, the Robin
 correction of the γ vertices of K_i and the source correction (one solve with
-many right-hand sides). The bases are stored per patch (the DOFs I and an
+many right-hand sides); with ``CEMOptions.patch_group`` the cells of a block share one patch, the union of
+their K_{i,m}, and one factorization (a superset of each K_{i,m}: the decay estimate holds with at least m
+layers). The bases are stored per patch (the DOFs I and an
 |I| × l_i block), never as fine-mesh-sized arrays. The coarse operators
 ΨᵀAΨ, ΨᵀA[N N_f] are summed over coarse cells K from dense blocks of the
 functions that cover K (one BLAS product per K with the cellwise matrix A_K).
@@ -86,6 +88,8 @@ from fenics_contact.multiscale.cem.bases import (
     MultiscaleSpace,
     PatchFunctions,
     build_multiscale_space,
+    cell_groups,
+    covering,
     global_saddle_matrix,
 )
 from fenics_contact.multiscale.cem.cache import CACHE_FORMAT, PrimalOfflineCache, offline_key, offline_stage
@@ -107,6 +111,7 @@ from fenics_contact.multiscale.cem.options import (
     FEW_LAYERS,
     NEARLY_INCOMPRESSIBLE,
     RIGID_MOTIONS,
+    WHOLE_DOMAIN,
     CEMOptions,
     warn_if_few_layers,
 )
@@ -125,6 +130,7 @@ __all__ = [
     "FEW_LAYERS",
     "NEARLY_INCOMPRESSIBLE",
     "RIGID_MOTIONS",
+    "WHOLE_DOMAIN",
     "CEMOptions",
     "warn_if_few_layers",
     "FineOperators",
@@ -144,6 +150,8 @@ __all__ = [
     "MultiscaleSpace",
     "PatchFunctions",
     "build_multiscale_space",
+    "cell_groups",
+    "covering",
     "global_saddle_matrix",
     "MultiscaleRobinSolver",
     "gram_matrices",

@@ -9,7 +9,9 @@ On the patch K_{i,m} (K_i extended by m coarse layers), for all v ∈ V_h⁰(K_{
 solved in the sparse saddle-point form [[A_II, B_IJ], [B_IJᵀ, −I]] (μ = B_IJᵀ x; B = the columns S_k Φ_k of
 the aux functions of the patch's cells): A_II + B_IJ B_IJᵀ has a dense block per coarse cell, 45× the nonzeros
 of A_II at h = 1/256.  One MUMPS LDLᵀ per patch serves the l_i bases, the Robin corrector of the γ vertices of
-K_i and the source corrector (one solve with many right-hand sides).  The functions are stored per patch
+K_i and the source corrector (one solve with many right-hand sides).  With ``CEMOptions.patch_group`` the
+cells of a group share one patch, the union of their K_{i,m} (``cell_groups``), and one LDLᵀ serves all their
+problems; ``covering`` gives the cells whose functions reach a coarse cell.  The functions are stored per patch
 (``PatchFunctions``: the DOFs and a dense block), never as fine-mesh-sized arrays.
 """
 
@@ -24,7 +26,7 @@ from petsc4py import PETSc
 
 from fenics_contact.fem.linalg import SparseFactor, scipy_to_petsc
 from fenics_contact.multiscale.cem.operators import FineOperators
-from fenics_contact.multiscale.cem.options import CEMOptions
+from fenics_contact.multiscale.cem.options import WHOLE_DOMAIN, CEMOptions
 from fenics_contact.multiscale.cem.spectral import AuxiliarySpace, build_auxiliary_space
 from fenics_contact.multiscale.coarse import CoarseGrid
 from fenics_contact.multiscale.work import run_shared
@@ -35,6 +37,8 @@ __all__ = [
     "MultiscaleSpace",
     "PatchFunctions",
     "build_multiscale_space",
+    "cell_groups",
+    "covering",
     "global_saddle_matrix",
 ]
 
@@ -112,6 +116,8 @@ class MultiscaleSpace:
     #: (ZᵀKZ, ZᵀMZ) for Z = [Ψ, N, N_f] (``coarse.gram_matrices``) when stored with the space (the offline
     #: cache), else None (``coarse.MultiscaleRobinSolver`` forms them)
     grams: tuple | None = None
+    #: ``CEMOptions.patch_group`` the bases were built with (their supports: ``covering``)
+    patch_group: int | str = 1
 
     @property
     def size(self) -> int:
@@ -172,13 +178,14 @@ def _patch_problem(
     aux: AuxiliarySpace,
     inc: Incidence,
     saddle: PETSc.Mat,
-    i: int,
+    group: np.ndarray,
     patch: np.ndarray,
     inner: np.ndarray,
     *,
     source: bool,
 ) -> tuple:
-    """Bases, Robin correction and source correction of coarse cell i on its patch (one LDLᵀ)."""
+    """Bases and Robin corrections of the coarse cells ``group`` and their source correction, all on ``patch``
+    (one LDLᵀ); returns ([(basis, correction or None) per cell], summed source correction or None)."""
     J = np.concatenate([aux.columns(k) for k in patch])
     nI, nJ = inner.size, J.size
     index = PETSc.IS().createGeneral(np.concatenate([inner, ops.size + J]).astype(PETSc.IntType), comm=PETSc.COMM_SELF)
@@ -186,29 +193,31 @@ def _patch_problem(
         M = saddle.createSubMatrix(index, index)
     finally:
         index.destroy()
-    li = int(aux.offsets[i + 1] - aux.offsets[i])
-    # Robin data on the γ vertices of K_i (γ-mass of the cells of K_i)
-    c = int(grid.colors[i])
-    D_all = inc.dofs(i, free_only=False)
-    on_gamma = np.intersect1d(D_all, ops.gamma, assume_unique=True)
-    if on_gamma.size:
-        G_I = ops.Gc[c][on_gamma][:, inner].T.tocsc()  # (|I| × γ vertices of K_i), symmetric γ-mass
-        used = np.flatnonzero(np.diff(G_I.indptr) > 0)
-    else:
-        used = np.zeros(0, dtype=np.int64)
-    ng = used.size
-    F_i = None
+    blocks = []  # per cell: (first column, l_i, Robin data columns G_I, their γ vertices)
+    ncols = 0
+    for i in group:
+        li = int(aux.offsets[i + 1] - aux.offsets[i])
+        # Robin data on the γ vertices of K_i (γ-mass of the cells of K_i)
+        D_all = inc.dofs(int(i), free_only=False)
+        on_gamma = np.intersect1d(D_all, ops.gamma, assume_unique=True)
+        G_I, used = None, np.zeros(0, dtype=np.int64)
+        if on_gamma.size:
+            G_I = ops.Gc[int(grid.colors[i])][on_gamma][:, inner].T.tocsc()  # (|I| × γ vertices of K_i)
+            used = np.flatnonzero(np.diff(G_I.indptr) > 0)
+        blocks.append((ncols, li, G_I, on_gamma, used))
+        ncols += li + used.size
+    F = None
     if source:
-        F_i = ops.corrector_load[inner] * (inc.load_owner[inner // ops.bs] == i)
-        if not np.any(F_i):
-            F_i = None
-    ncols = li + ng + (F_i is not None)
-    rhs = np.zeros((nI + nJ, ncols))
-    rhs[nI + np.searchsorted(J, aux.columns(i)), np.arange(li)] = 1.0  # s(φ_j^i, πv): the μ-row unit vectors
-    if ng:
-        rhs[:nI, li : li + ng] = G_I[:, used].toarray()
-    if F_i is not None:
-        rhs[:nI, -1] = F_i
+        F = ops.corrector_load[inner] * np.isin(inc.load_owner[inner // ops.bs], group)
+        if not np.any(F):
+            F = None
+    rhs = np.zeros((nI + nJ, ncols + (F is not None)), order="F")  # MUMPS takes column-major: no copy
+    for (at, li, G_I, _, used), i in zip(blocks, group):
+        rhs[nI + np.searchsorted(J, aux.columns(i)), at + np.arange(li)] = 1.0  # s(φ_j^i, πv): μ-row unit vectors
+        if used.size:
+            rhs[:nI, at + li : at + li + used.size] = G_I[:, used].toarray()
+    if F is not None:
+        rhs[:nI, -1] = F
     M.setOption(PETSc.Mat.Option.SYMMETRIC, True)
     try:  # symmetric indefinite: MUMPS LDLᵀ
         lu = SparseFactor(M, cholesky=True, icntl=PATCH_ICNTL, what="a CEM patch problem")
@@ -220,11 +229,35 @@ def _patch_problem(
     finally:
         lu.destroy()
     dofs = inner.astype(np.int32)
-    basis = PatchFunctions(dofs, np.ascontiguousarray(x[:, :li]), aux.columns(i))
-    gamma_pos = np.searchsorted(ops.gamma, on_gamma[used])
-    corr = PatchFunctions(dofs, np.ascontiguousarray(x[:, li : li + ng]), gamma_pos) if ng else None
-    nf = x[:, -1].copy() if F_i is not None else None
-    return basis, corr, nf
+    cells = []
+    for (at, li, _, on_gamma, used), i in zip(blocks, group):
+        basis = PatchFunctions(dofs, np.ascontiguousarray(x[:, at : at + li]), aux.columns(i))
+        corr = None
+        if used.size:
+            gamma_pos = np.searchsorted(ops.gamma, on_gamma[used])
+            corr = PatchFunctions(dofs, np.ascontiguousarray(x[:, at + li : at + li + used.size]), gamma_pos)
+        cells.append((basis, corr))
+    return cells, (x[:, -1].copy() if F is not None else None)
+
+
+def cell_groups(grid: CoarseGrid, options: CEMOptions, dim: int) -> tuple[list, list]:
+    """(groups, patches): the coarse cells that share a patch problem (``CEMOptions.patch_group``) and the
+    coarse cells of each group's patch, the union of its cells' K_{k,m}."""
+    g = None if options.patch_group == WHOLE_DOMAIN else int(options.patch_group)
+    groups = grid.groups(g, dim)
+    return groups, [grid.group_patch(c, options.layers) for c in groups]
+
+
+def covering(grid: CoarseGrid, layers: int, patch_group: int | str, dim: int) -> list:
+    """For every coarse cell K the (sorted) cells whose bases may be nonzero on K: those whose patch holds K."""
+    if patch_group == 1:
+        return [grid.patch(K, layers) for K in range(grid.size)]
+    groups, patches = cell_groups(grid, CEMOptions(layers=layers, patch_group=patch_group), dim)
+    rows = np.concatenate([np.repeat(c, p.size) for c, p in zip(groups, patches)])
+    cols = np.concatenate([np.tile(p, c.size) for c, p in zip(groups, patches)])
+    held = sp.csc_matrix((np.ones(rows.size), (rows, cols)), shape=(grid.size, grid.size))
+    held.sort_indices()
+    return [held.indices[held.indptr[K] : held.indptr[K + 1]] for K in range(grid.size)]
 
 
 def build_multiscale_space(
@@ -243,17 +276,17 @@ def build_multiscale_space(
     times["eigen"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     inc = Incidence(ops, grid)
-    patches = [grid.patch(i, options.layers) for i in range(grid.size)]
+    groups, patches = cell_groups(grid, options, ops.bs)
     inner = [inc.interior_dofs(p) for p in patches]
     saddle = global_saddle_matrix(ops, aux)
     try:
-        owner = np.empty(grid.size, dtype=np.int64)
+        owner = np.empty(len(groups), dtype=np.int64)
         results = run_shared(
             np.array([d.size for d in inner], dtype=np.float64) ** 1.5,
             comm,
             "CEM patch problems",
-            lambda i: _patch_problem(
-                ops, grid, aux, inc, saddle, i, patches[i], inner[i], source=options.source_correction
+            lambda q: _patch_problem(
+                ops, grid, aux, inc, saddle, groups[q], patches[q], inner[q], source=options.source_correction
             ),
             balanced=True,
             owner=owner,
@@ -261,22 +294,36 @@ def build_multiscale_space(
         )
     finally:
         saddle.destroy()
-    basis = [r[0] for r in results]
-    correction = [r[1] for r in results if r[1] is not None]
-    correction_cells = np.array([i for i, r in enumerate(results) if r[1] is not None], dtype=np.int64)
+    per_cell = [None] * grid.size
+    for cells, r in zip(groups, results):
+        for i, pair in zip(cells, r[0]):
+            per_cell[i] = pair
+    basis = [r[0] for r in per_cell]
+    correction = [r[1] for r in per_cell if r[1] is not None]
+    correction_cells = np.array([i for i, r in enumerate(per_cell) if r[1] is not None], dtype=np.int64)
     Nf = None
     if options.source_correction:
         Nf = np.zeros(ops.size)
-        for r in results:
-            if r[2] is not None:
-                Nf[r[0].dofs] += r[2]
+        for q, r in enumerate(results):
+            if r[1] is not None:
+                Nf[inner[q]] += r[1]
     if ops.lifting is not None:  # u₁ = Ψ w + N g + (N_f + u_g): the lifting rides in the last column of Z
         Nf = ops.lifting.copy() if Nf is None else Nf + ops.lifting
     times["patches"] = time.perf_counter() - t0
     times["total"] = times["eigen"] + times["patches"]
     times["patches_here"] = int(np.count_nonzero(owner == comm.rank))  # this rank's share
+    times["patch_problems"] = len(groups)
     space = MultiscaleSpace(
-        aux, basis, correction, Nf, int(options.layers), ops.size, ops.gamma.size, correction_cells, times
+        aux,
+        basis,
+        correction,
+        Nf,
+        int(options.layers),
+        ops.size,
+        ops.gamma.size,
+        correction_cells,
+        times,
+        patch_group=options.patch_group,
     )
     log.info(
         "CEM offline: %d coarse cells, m = %d, dim V_ms = %d, %.1f MB of bases; eigen %.2f s, patches %.2f s",

@@ -21,7 +21,7 @@ from fenics_contact.multiscale.cache import OfflineCache, hash_array
 from fenics_contact.multiscale.cem.bases import MultiscaleSpace, PatchFunctions, build_multiscale_space
 from fenics_contact.multiscale.cem.coarse import gram_matrices
 from fenics_contact.multiscale.cem.operators import FineOperators
-from fenics_contact.multiscale.cem.options import CEMOptions
+from fenics_contact.multiscale.cem.options import WHOLE_DOMAIN, CEMOptions
 from fenics_contact.multiscale.cem.spectral import AuxiliarySpace
 from fenics_contact.multiscale.coarse import CoarseGrid
 
@@ -52,6 +52,8 @@ def offline_key(ops: FineOperators, grid: CoarseGrid, options: CEMOptions, *, h:
             "source_correction": options.source_correction,
         },
     }
+    if options.patch_group != 1:  # one patch per cell: the keys of the default unchanged
+        meta["options"]["patch_group"] = options.patch_group
     if ops.bs != 2:  # the dimension (the cell_nodes shape holds it too; 2D keys unchanged)
         meta["dim"] = int(ops.bs)
     hasher.update(json.dumps(meta, sort_keys=True).encode())
@@ -83,6 +85,8 @@ def _pack(space: MultiscaleSpace) -> dict:
             out[f"{name}{k}_columns"] = p.columns
     if space.Nf is not None:
         out["Nf"] = space.Nf
+    if space.patch_group != 1:  # 0: WHOLE_DOMAIN
+        out["patch_group"] = np.array([0 if space.patch_group == WHOLE_DOMAIN else space.patch_group])
     if space.grams is not None:
         out["gram_K"], out["gram_M"] = space.grams
     return out
@@ -119,8 +123,19 @@ def _unpack(arrays: dict, ops: FineOperators, grid: CoarseGrid) -> MultiscaleSpa
     grams = (arrays["gram_K"], arrays["gram_M"])
     if any(G.shape != (nz, nz) for G in grams):
         raise ValueError("cached Gram matrices do not match the multiscale space")
+    group = int(arrays["patch_group"][0]) if "patch_group" in arrays else 1
     return MultiscaleSpace(
-        aux, parts["basis"], parts["corr"], arrays.get("Nf"), layers, n, ng, arrays["correction_cells"], times, grams
+        aux,
+        parts["basis"],
+        parts["corr"],
+        arrays.get("Nf"),
+        layers,
+        n,
+        ng,
+        arrays["correction_cells"],
+        times,
+        grams,
+        patch_group=WHOLE_DOMAIN if group == 0 else group,
     )
 
 

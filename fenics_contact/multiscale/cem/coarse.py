@@ -14,7 +14,7 @@ import scipy.sparse as sp
 from mpi4py import MPI
 
 from fenics_contact.fem.linalg import PivotedCholesky
-from fenics_contact.multiscale.cem.bases import Incidence, MultiscaleSpace
+from fenics_contact.multiscale.cem.bases import Incidence, MultiscaleSpace, covering
 from fenics_contact.multiscale.cem.operators import FineOperators
 from fenics_contact.multiscale.coarse import CoarseGrid
 from fenics_contact.multiscale.work import run_shared
@@ -30,12 +30,16 @@ def _rows_on(parts: list, D: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     Z = np.zeros((D.size, ncols))
     cols = np.empty(ncols, dtype=np.int64)
     at = 0
+    found = {}  # the functions of one patch problem share their DOF array: look D up in it once
     for p in parts:
         k = p.columns.size
-        pos = np.searchsorted(p.dofs, D)
-        np.minimum(pos, p.dofs.size - 1, out=pos)
-        hit = p.dofs[pos] == D
-        Z[hit, at : at + k] = p.values[pos[hit]]
+        if id(p.dofs) not in found:
+            pos = np.searchsorted(p.dofs, D)
+            np.minimum(pos, p.dofs.size - 1, out=pos)
+            hit = p.dofs[pos] == D
+            found[id(p.dofs)] = (hit, pos[hit])
+        hit, rows = found[id(p.dofs)]
+        Z[hit, at : at + k] = p.values[rows]
         cols[at : at + k] = p.columns
         at += k
     return Z, cols
@@ -57,11 +61,12 @@ def gram_matrices(
     GK = np.zeros((nz, nz))
     GM = np.zeros((nz, nz))
     sizes = np.array([c.size for c in grid.cells], dtype=np.float64)
+    covers = covering(grid, space.layers, space.patch_group, ops.bs)
 
     def add_cell(K: int) -> None:
         c = int(grid.colors[K])
         D = inc.dofs(K, free_only=False)
-        cover = grid.patch(K, space.layers)
+        cover = covers[K]
         Zb, cols = _rows_on([space.basis[i] for i in cover], D)
         blocks = [Zb]
         cn = [corr_at[int(i)] for i in cover if int(i) in corr_at]
@@ -140,6 +145,8 @@ class MultiscaleRobinSolver:
         self.b_f = PsiF - ZAZ[:n_ms, -1]
         # Ψᵀ (G[:, γ] − A N): the action of the interface data on the coarse right-hand side
         self.C = PsiG - ZAZ[:n_ms, n_ms : n_ms + ng]
+        self._response = None
+        self._reduced = None
         self.time_s = time.perf_counter() - t0
 
     @property
@@ -171,10 +178,39 @@ class MultiscaleRobinSolver:
         """u₁ at ``ops.gamma`` for coordinates s."""
         return self.Zg @ s
 
+    def _solution_map(self) -> np.ndarray:
+        """X with w = X t for t = (g, 1): the coarse solution as an affine map of the Robin data (one dense
+        coarse solve with n_γ + 1 right-hand sides, made once)."""
+        if self._response is None:
+            self._response = self.factor.solve(np.column_stack([self.C, self.b_f]))
+        return self._response
+
     def response(self) -> tuple[np.ndarray, np.ndarray]:
         """The affine interface map u₁|γ = R g + r₀ (``ops.gamma`` ordering, dense R)."""
         n_ms, ng = self.space.size, self.space.n_gamma
-        X = self.factor.solve(np.column_stack([self.C, self.b_f]))
+        X = self._solution_map()
         R = self.Zg[:, :n_ms] @ X[:, :ng] + self.Zg[:, n_ms : n_ms + ng]
         r0 = self.Zg[:, :n_ms] @ X[:, ng] + self.Zg[:, -1]
         return R, r0
+
+    def reduced(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(T, Ĝ_K, Ĝ_M) in the interface coordinates t = (g, 1): u₁|γ = T t and the Gram matrices QᵀGQ of
+        s = Q t (Q = [X; I]), so a₁(Zs, Zs) = tᵀĜ_K t and ‖Zs‖² = tᵀĜ_M t.  Order n_γ + 1 instead of
+        dim V_ms + n_γ + 1: a step reads these instead of the coarse factor, Z_γ and the Gram matrices (made
+        once, with the response)."""
+        if self._reduced is None:
+            n_ms = self.space.size
+            X = self._solution_map()
+            R, r0 = self.response()
+
+            def reduce(G: np.ndarray) -> np.ndarray:
+                GQ = G[:, :n_ms] @ X + G[:, n_ms:]
+                out = X.T @ GQ[:n_ms] + GQ[n_ms:]
+                return 0.5 * (out + out.T)
+
+            self._reduced = (np.column_stack([R, r0]), reduce(self.GK), reduce(self.GM))
+        return self._reduced
+
+    def expand(self, t: np.ndarray) -> np.ndarray:
+        """s = (X t, t): the coordinates of u₁ = Z s from the interface coordinates t = (g, 1)."""
+        return np.concatenate([self._solution_map() @ t, t])

@@ -121,6 +121,10 @@ class Omega1Multiscale:
         self.space, self.cache_status = offline_stage(self.ops, self.grid, cem, h=cm.h, cache_dir=cache_dir, comm=comm)
         self.solver = MultiscaleRobinSolver(self.ops, self.space, self.grid, comm=comm)
         self._Zg_mine = self.solver.Zg[self._mine]  # the trace rows of this rank's values (one copy, not per step)
+        t_reduce = time.perf_counter()
+        T, self._GK_t, self._GM_t = self.solver.reduced()  # a step in the interface coordinates t = (g, 1)
+        self._T_mine = np.ascontiguousarray(T[self._mine])
+        t_reduce = time.perf_counter() - t_reduce
         self.nu_max = float(np.max(self.fields.nu.x.array, initial=0.0))  #: largest ν in Ω₁
         warn_if_few_layers(cem.layers, "primal CEM (Algorithm 3)", comm)
         if self.nu_max > NEARLY_INCOMPRESSIBLE and comm.rank == 0:
@@ -140,7 +144,7 @@ class Omega1Multiscale:
             "eigen": self.space.times.get("eigen", 0.0),
             "patches": self.space.times.get("patches", 0.0),
             "cache_load": self.space.times.get("load", 0.0),
-            "coarse": self.solver.time_s + self.space.times.get("gram", 0.0),
+            "coarse": self.solver.time_s + self.space.times.get("gram", 0.0) + t_reduce,
         }
 
     @property
@@ -181,6 +185,27 @@ class Omega1Multiscale:
         """
         g = _allgather_values(self.comm, g12)[self.value_of_dof]
         return self.solver.coordinates(g)
+
+    def interface_coordinates(self, g12: np.ndarray) -> np.ndarray:
+        """t = (g, 1), the Robin data of all ranks (``ops.gamma`` ordering) and the load's 1: u₁ = Z Q t
+        (``MultiscaleRobinSolver.reduced``; collective: one Allgather of the γ values).  No solve: the coarse
+        solution is an affine map of the data, applied only when a field is wanted (``expand``)."""
+        return np.concatenate([_allgather_values(self.comm, g12)[self.value_of_dof], [1.0]])
+
+    def expand(self, t: np.ndarray) -> np.ndarray:
+        """s = Q t, the coordinates of u₁ = Z s, for interface coordinates t."""
+        return self.solver.expand(t)
+
+    def interface_trace(self, t: np.ndarray) -> np.ndarray:
+        """u₁ at this rank's owned interface DOFs (InterfaceSpace ordering) for interface coordinates t."""
+        return self._T_mine @ t
+
+    def interface_norms2(self, t: np.ndarray) -> tuple:
+        """(a₁(u₁, u₁), ‖u₁‖²_L²) of u₁ = Z Q t, t interface coordinates (or their differences); for the
+        columns of a 2-D t, two arrays (one pass over each reduced Gram matrix)."""
+        if t.ndim == 2:
+            return np.einsum("ij,ij->j", t, self._GK_t @ t), np.einsum("ij,ij->j", t, self._GM_t @ t)
+        return float(t @ (self._GK_t @ t)), float(t @ (self._GM_t @ t))
 
     def field(self, s: np.ndarray) -> np.ndarray:
         """u₁ = Z s on every DOF of the Ω₁ copy."""

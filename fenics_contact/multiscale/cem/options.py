@@ -17,6 +17,7 @@ __all__ = [
     "ALL_MODES",
     "RIGID_MOTIONS",
     "DEFAULT_S_FACTOR",
+    "WHOLE_DOMAIN",
     "EIGENSOLVERS",
     "FEW_LAYERS",
     "NEARLY_INCOMPRESSIBLE",
@@ -36,6 +37,10 @@ ALL_MODES = None
 RIGID_MOTIONS = "rigid"
 #: the rigid motions of a coarse cell by dimension (translations and rotations)
 _RIGID_MODES = {2: 3, 3: 6}
+
+#: ``CEMOptions.patch_group`` value that solves every patch problem on all of Ω₁ (one factorization: the bases
+#: are then the global ones, no localization error, dense over Ω₁)
+WHOLE_DOMAIN = "all"
 
 #: default c in κ̃ = c (λ + 2μ) H⁻² (see CEMOptions)
 DEFAULT_S_FACTOR = 3.0
@@ -95,6 +100,17 @@ class CEMOptions:
     ``source_correction`` (default on) corrects the Ω₁ load on the
     patches as the Robin data are (N_f); off, the coarse problem sees the load
     directly, as in the paper, and the error stalls once the load acts in Ω₁.
+
+    ``patch_group`` g shares one patch factorization among a group of coarse cells: the cells are grouped
+    (g × g blocks of a Cartesian coarse grid, g × g × g in 3D; on a general partition greedy groups of at most
+    g^d cells within g − 1 adjacency steps of the group's first cell; ``WHOLE_DOMAIN`` one group of all
+    of Ω₁) and the bases and correctors of a group's cells are all solved on ONE patch, the union of their
+    m-layer oversamplings K_{k,m}.  The patch operator does not depend on the target cell, so one LDLᵀ serves
+    the group.  Each group patch contains every K_{k,m} of its cells, so each basis is localized at least as
+    well as with its own patch (the CEM decay estimate), at the price of wider supports: the patch grows from
+    (2m+1)^d to (g+2m)^d coarse cells, the stored bases and the coarse matrix's bandwidth grow with it, and
+    a factorization costs more while g^d fewer are made.  g = 1 (the default) is one patch per cell;
+    ``WHOLE_DOMAIN`` gives the fine Robin solution of Ω₁ (no localization) with bases dense over Ω₁.
     """
 
     layers: int = 4
@@ -105,6 +121,7 @@ class CEMOptions:
     target: float = -1.0
     s_factor: float = DEFAULT_S_FACTOR
     source_correction: bool = True
+    patch_group: int | str = 1
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.s_factor) and self.s_factor > 0):
@@ -128,6 +145,15 @@ class CEMOptions:
             raise InputError(f"the shift-and-invert target must be < 0 (A is only semi-definite), got {self.target}")
         if not isinstance(self.source_correction, bool):
             raise InputError(f"source_correction must be True or False, got {self.source_correction!r}")
+        if self.patch_group != WHOLE_DOMAIN:
+            g = self.patch_group
+            whole = isinstance(g, (int, np.integer)) or (isinstance(g, float) and g.is_integer())
+            if isinstance(g, bool) or not whole or g < 1:
+                raise InputError(
+                    f"patch_group must be an integer >= 1 (coarse cells per group and direction) or "
+                    f"{WHOLE_DOMAIN!r} (one patch, all of Ω₁), got {g!r}"
+                )
+            object.__setattr__(self, "patch_group", int(g))
 
     def modes(self, dim: int) -> int | None:
         """l, the modes kept per coarse cell in dimension ``dim`` (``RIGID_MOTIONS``: 3 in 2D, 6 in 3D)."""

@@ -20,6 +20,7 @@ from fenics_contact.problem.boundary import BoundaryConditions
 from fenics_contact.problem.geometry import unit_square
 from fenics_contact.problem.meshes3d import unit_cube
 from fenics_contact.problem.models import get_model
+from fenics_contact.problem.models3d import channels_3d, channels_3d_mesh
 from fenics_contact.problem.obstacles import Sphere
 from fenics_contact.problem.problem import ContactProblem
 
@@ -204,3 +205,18 @@ def test_a_linear_subproblem_sets_amg_up_once_for_all_its_solves():
         sub.destroy()
     size = np.max(np.abs(solutions["direct"]))
     assert size > 0 and np.max(np.abs(solutions["amg"] - solutions["direct"])) <= 1e3 * RTOL * size
+
+
+def test_amg_newton_at_contrast_1e6_takes_the_steps_of_mumps():
+    """The 3D channel cube (h = 1/12) at contrast 10⁶ with the default Krylov tolerance: the step that moves the active
+    set leaves F full of penalty forces 10⁹× the load, and a solve stopped at rtol‖F‖ leaves the next iterate wrong by
+    more than its penetrations (the active sets then cycle); stopped at rtol times the next iterate's right-hand side
+    (``AMGSolver.newton_tolerance``), CG + AMG takes the active sets of MUMPS step by step and lands on its answer."""
+    problem = channels_3d(E_high=1e6).on(channels_3d_mesh(12))
+    direct = solve_primal_monolithic(problem, solver="direct")
+    amg = solve_primal_monolithic(problem, solver="amg")
+    assert amg.linear_solver == "amg" and len(amg.krylov_iterations) == amg.newton.steps
+    assert amg.newton.active_sizes == direct.newton.active_sizes
+    np.testing.assert_array_equal(amg.profile.active, direct.profile.active)
+    gap = np.linalg.norm(amg.u.x.array - direct.u.x.array)
+    assert gap <= 1e-7 * np.linalg.norm(direct.u.x.array)

@@ -19,7 +19,15 @@ from petsc4py import PETSc
 from fenics_contact.errors import ConvergenceError, InputError
 from fenics_contact.fem.linalg import PC_FAILED_REASONS, DirectSolver, check_entries
 
-__all__ = ["AUTO_AMG_DOFS", "LINEAR_SOLVERS", "AMGSolver", "LinearSolverOptions", "linear_solver", "rigid_body_modes"]
+__all__ = [
+    "AUTO_AMG_DOFS",
+    "HETEROGENEOUS_OPTIONS",
+    "LINEAR_SOLVERS",
+    "AMGSolver",
+    "LinearSolverOptions",
+    "linear_solver",
+    "rigid_body_modes",
+]
 
 log = logging.getLogger(__name__)
 
@@ -145,6 +153,19 @@ AMG_OPTIONS = {
     "mg_levels_ksp_chebyshev_esteig_steps": 20,
 }
 
+#: what replaces ``AMG_OPTIONS`` for an operator whose moduli vary by more than ``HETEROGENEOUS_CONTRAST``: plain
+#: (unsmoothed) aggregation, and symmetric Gauss–Seidel (SSOR) sweeps as the smoother, which need no estimate of the
+#: largest eigenvalue.  Chebyshev's bound, taken from 10 Krylov steps on a spectrum spread by the contrast and the
+#: penalty rows, can fall below the largest eigenvalue and make the preconditioner indefinite (the 3D channel cube,
+#: contrast 10⁶, h = 1/8: CG stopped with DIVERGED_INDEFINITE_PC).  At h = 1/24 there, 30–55 CG iterations per
+#: Newton step and 12 s of CPU for the solve against 200–232 and 57 s with ``AMG_OPTIONS`` (MUMPS: 21 s); test
+#: model 1 in 2D, h = 1/32, contrast 10³: 49–58 against 40–48
+HETEROGENEOUS_OPTIONS = {
+    "pc_gamg_agg_nsmooths": 0,
+    "mg_levels_ksp_type": "richardson",
+    "mg_levels_pc_type": "sor",
+}
+
 #: KSP reasons by number (``PETSc.KSP.ConvergedReason``)
 _REASON = PETSc.KSP.ConvergedReason
 _KSP_REASONS = {v: k for k, v in vars(_REASON).items() if not k.startswith("_") and isinstance(v, int)}
@@ -167,11 +188,16 @@ class AMGSolver:
         self.ksp = PETSc.KSP().create(comm)
         self.ksp.setOptionsPrefix(prefix)
         opts = PETSc.Options()
+        heterogeneous = contrast > HETEROGENEOUS_CONTRAST
         threshold = options.threshold
         if threshold is None:
-            threshold = HETEROGENEOUS_THRESHOLD if contrast > HETEROGENEOUS_CONTRAST else 0.0
+            threshold = HETEROGENEOUS_THRESHOLD if heterogeneous else 0.0
+        amg = {**AMG_OPTIONS, **HETEROGENEOUS_OPTIONS} if heterogeneous else AMG_OPTIONS
+        if heterogeneous:  # no Chebyshev smoother: its options would stay unused
+            amg = {k: v for k, v in amg.items() if "chebyshev" not in k}
+            opts.delValue(f"{prefix}mg_levels_ksp_chebyshev_esteig_steps")
         for key, value in {
-            **AMG_OPTIONS,
+            **amg,
             "pc_gamg_threshold": threshold,
             "ksp_type": options.krylov,
             "ksp_rtol": options.rtol,

@@ -2,7 +2,9 @@
 
 ``AMGSolver`` stands beside ``fem.linalg.DirectSolver``, with its interface (``set_operator``, ``solve``):
 conjugate gradients (GMRES for a Jacobian that is not symmetric) preconditioned by PETSc's smoothed-aggregation
-algebraic multigrid (GAMG) with the rigid-body modes as its near-nullspace; every solve checked (the KSP reason, a
+algebraic multigrid (GAMG) with the rigid-body modes as its near-nullspace (``AMG_OPTIONS``; for heterogeneous
+moduli plain aggregation with SSOR smoothing, ``HETEROGENEOUS_OPTIONS``); a Newton step's solve stopped relative to
+the new iterate's right-hand side (``AMGSolver.newton_tolerance``); every solve checked (the KSP reason, a
 failure a ConvergenceError saying what to do), its iterations recorded.  ``LinearSolverOptions`` chooses
 between the two (``"direct"``, ``"amg"``, ``"auto"``: AMG for a 3D operator of ``auto_dofs`` unknowns or
 more), ``linear_solver`` builds the one chosen.
@@ -49,11 +51,12 @@ class LinearSolverOptions:
     ``kind``: ``"direct"`` (MUMPS LU, ``DirectSolver``), ``"amg"`` (``AMGSolver``: ``krylov`` = ``"cg"`` for a
     symmetric positive definite Jacobian such as the frictionless penalty's, ``"gmres"`` otherwise,
     preconditioned by smoothed-aggregation AMG) or ``"auto"`` (AMG on a 3D mesh of ``auto_dofs`` unknowns or
-    more, else direct).  A Krylov solve stops at ‖b − A x‖₂ ≤ ``rtol``·‖b‖₂.  ``threshold``: the AMG's drop
-    tolerance of weak connections when it aggregates (PETSc's ``pc_gamg_threshold``); None: ``HETEROGENEOUS_THRESHOLD``
-    where the shear modulus μ varies by more than ``HETEROGENEOUS_CONTRAST`` over the mesh, else 0 (test model 1 in
-    2D, h = 1/32, contrast 1e3, rtol 1e-10: 158–192 CG iterations per step at 0, 40–48 at 0.02; the homogeneous
-    Hertz block at a/20: 0.02 doubles them).
+    more, else direct).  A Krylov solve stops at ‖b − A x‖₂ ≤ ``rtol``·‖b‖₂ (a Newton step's at
+    ``rtol``·min(‖b‖₂, ‖A u + b‖₂): ``AMGSolver.newton_tolerance``).  ``threshold``: the AMG's drop tolerance of weak
+    connections when it aggregates (PETSc's ``pc_gamg_threshold``); None: ``HETEROGENEOUS_THRESHOLD`` where the shear
+    modulus μ varies by more than ``HETEROGENEOUS_CONTRAST`` over the mesh, else 0 (test model 1 in 2D, h = 1/32,
+    contrast 1e3, rtol 1e-10, smoothed aggregation: 158–192 CG iterations per step at 0, 40–48 at 0.02; the
+    homogeneous Hertz block at a/20: 0.02 doubles them).
     """
 
     kind: str = "auto"

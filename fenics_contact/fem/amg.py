@@ -2,7 +2,9 @@
 
 ``AMGSolver`` stands beside ``fem.linalg.DirectSolver``, with its interface (``set_operator``, ``solve``):
 conjugate gradients (GMRES for a Jacobian that is not symmetric) preconditioned by PETSc's smoothed-aggregation
-algebraic multigrid (GAMG) with the rigid-body modes as its near-nullspace; every solve checked (the KSP reason, a
+algebraic multigrid (GAMG) with the rigid-body modes as its near-nullspace (``AMG_OPTIONS``; for heterogeneous
+moduli plain aggregation with SSOR smoothing, ``HETEROGENEOUS_OPTIONS``); a Newton step's solve stopped relative to
+the new iterate's right-hand side (``AMGSolver.newton_tolerance``); every solve checked (the KSP reason, a
 failure a ConvergenceError saying what to do), its iterations recorded.  ``LinearSolverOptions`` chooses
 between the two (``"direct"``, ``"amg"``, ``"auto"``: AMG for a 3D operator of ``auto_dofs`` unknowns or
 more), ``linear_solver`` builds the one chosen.
@@ -19,7 +21,15 @@ from petsc4py import PETSc
 from fenics_contact.errors import ConvergenceError, InputError
 from fenics_contact.fem.linalg import PC_FAILED_REASONS, DirectSolver, check_entries
 
-__all__ = ["AUTO_AMG_DOFS", "LINEAR_SOLVERS", "AMGSolver", "LinearSolverOptions", "linear_solver", "rigid_body_modes"]
+__all__ = [
+    "AUTO_AMG_DOFS",
+    "HETEROGENEOUS_OPTIONS",
+    "LINEAR_SOLVERS",
+    "AMGSolver",
+    "LinearSolverOptions",
+    "linear_solver",
+    "rigid_body_modes",
+]
 
 log = logging.getLogger(__name__)
 
@@ -41,11 +51,12 @@ class LinearSolverOptions:
     ``kind``: ``"direct"`` (MUMPS LU, ``DirectSolver``), ``"amg"`` (``AMGSolver``: ``krylov`` = ``"cg"`` for a
     symmetric positive definite Jacobian such as the frictionless penalty's, ``"gmres"`` otherwise,
     preconditioned by smoothed-aggregation AMG) or ``"auto"`` (AMG on a 3D mesh of ``auto_dofs`` unknowns or
-    more, else direct).  A Krylov solve stops at ‖b − A x‖₂ ≤ ``rtol``·‖b‖₂.  ``threshold``: the AMG's drop
-    tolerance of weak connections when it aggregates (PETSc's ``pc_gamg_threshold``); None: ``HETEROGENEOUS_THRESHOLD``
-    where the shear modulus μ varies by more than ``HETEROGENEOUS_CONTRAST`` over the mesh, else 0 (test model 1 in
-    2D, h = 1/32, contrast 1e3, rtol 1e-10: 158–192 CG iterations per step at 0, 40–48 at 0.02; the homogeneous
-    Hertz block at a/20: 0.02 doubles them).
+    more, else direct).  A Krylov solve stops at ‖b − A x‖₂ ≤ ``rtol``·‖b‖₂ (a Newton step's at
+    ``rtol``·min(‖b‖₂, ‖A u + b‖₂): ``AMGSolver.newton_tolerance``).  ``threshold``: the AMG's drop tolerance of weak
+    connections when it aggregates (PETSc's ``pc_gamg_threshold``); None: ``HETEROGENEOUS_THRESHOLD`` where the shear
+    modulus μ varies by more than ``HETEROGENEOUS_CONTRAST`` over the mesh, else 0 (test model 1 in 2D, h = 1/32,
+    contrast 1e3, rtol 1e-10, smoothed aggregation: 158–192 CG iterations per step at 0, 40–48 at 0.02; the
+    homogeneous Hertz block at a/20: 0.02 doubles them).
     """
 
     kind: str = "auto"
@@ -145,6 +156,19 @@ AMG_OPTIONS = {
     "mg_levels_ksp_chebyshev_esteig_steps": 20,
 }
 
+#: what replaces ``AMG_OPTIONS`` for an operator whose moduli vary by more than ``HETEROGENEOUS_CONTRAST``: plain
+#: (unsmoothed) aggregation, and symmetric Gauss–Seidel (SSOR) sweeps as the smoother, which need no estimate of the
+#: largest eigenvalue.  Chebyshev's bound, taken from 10 Krylov steps on a spectrum spread by the contrast and the
+#: penalty rows, can fall below the largest eigenvalue and make the preconditioner indefinite (the 3D channel cube,
+#: contrast 10⁶, h = 1/8: CG stopped with DIVERGED_INDEFINITE_PC).  At h = 1/24 there, 30–55 CG iterations per
+#: Newton step and 12 s of CPU for the solve against 200–232 and 57 s with ``AMG_OPTIONS`` (MUMPS: 21 s); test
+#: model 1 in 2D, h = 1/32, contrast 10³: 49–58 against 40–48
+HETEROGENEOUS_OPTIONS = {
+    "pc_gamg_agg_nsmooths": 0,
+    "mg_levels_ksp_type": "richardson",
+    "mg_levels_pc_type": "sor",
+}
+
 #: KSP reasons by number (``PETSc.KSP.ConvergedReason``)
 _REASON = PETSc.KSP.ConvergedReason
 _KSP_REASONS = {v: k for k, v in vars(_REASON).items() if not k.startswith("_") and isinstance(v, int)}
@@ -167,11 +191,16 @@ class AMGSolver:
         self.ksp = PETSc.KSP().create(comm)
         self.ksp.setOptionsPrefix(prefix)
         opts = PETSc.Options()
+        heterogeneous = contrast > HETEROGENEOUS_CONTRAST
         threshold = options.threshold
         if threshold is None:
-            threshold = HETEROGENEOUS_THRESHOLD if contrast > HETEROGENEOUS_CONTRAST else 0.0
+            threshold = HETEROGENEOUS_THRESHOLD if heterogeneous else 0.0
+        amg = {**AMG_OPTIONS, **HETEROGENEOUS_OPTIONS} if heterogeneous else AMG_OPTIONS
+        if heterogeneous:  # no Chebyshev smoother: its options would stay unused
+            amg = {k: v for k, v in amg.items() if "chebyshev" not in k}
+            opts.delValue(f"{prefix}mg_levels_ksp_chebyshev_esteig_steps")
         for key, value in {
-            **AMG_OPTIONS,
+            **amg,
             "pc_gamg_threshold": threshold,
             "ksp_type": options.krylov,
             "ksp_rtol": options.rtol,
@@ -209,8 +238,15 @@ class AMGSolver:
             )
         self.factorizations += 1
 
-    def solve(self, b: PETSc.Vec, x: PETSc.Vec) -> None:
-        """x = A⁻¹ b to ‖b − A x‖ ≤ rtol‖b‖, raising ConvergenceError when the Krylov solve fails."""
+    def solve(self, b: PETSc.Vec, x: PETSc.Vec, *, iterate: PETSc.Vec | None = None) -> None:
+        """x = A⁻¹ b to ‖b − A x‖ ≤ rtol‖b‖, raising ConvergenceError when the Krylov solve fails.
+
+        ``iterate``: the Newton iterate u when b = −F(u) (x the Newton step): the solve then stops at
+        ‖b − A x‖ ≤ rtol·min(‖b‖, ‖A u + b‖), ‖A u + b‖ the norm of the right-hand side A u − F(u) of the new
+        iterate's equation A (u + x) = A u − F(u) (its free rows; ``newton_tolerance``).
+        """
+        rtol = self.options.rtol if iterate is None else self.newton_tolerance(b, iterate)
+        self.ksp.setTolerances(rtol=rtol)
         self.ksp.solve(b, x)
         if self._identity.size:  # exact on the Dirichlet rows, as a factorization
             x.array[self._identity] = b.getArray(readonly=True)[self._identity]
@@ -230,8 +266,32 @@ class AMGSolver:
             raise ConvergenceError(
                 f"{self.prefix}: {self.options.krylov.upper()} with AMG did not converge: KSP reason {name} after "
                 f"{its} iterations (residual {self.ksp.getResidualNorm():.3e}, ‖b‖ {b.norm():.3e}, rtol "
-                f"{self.options.rtol:g}); {advice}"
+                f"{rtol:g}); {advice}"
             )
+
+    def newton_tolerance(self, b: PETSc.Vec, iterate: PETSc.Vec) -> float:
+        """The relative tolerance on ‖b‖ of a Newton step's solve A x = b = −F(u) at the iterate u that stops it at
+        rtol·min(‖b‖, ‖A u + b‖) (collective).
+
+        Krylov solves of Newton steps usually stop at rtol‖F(u)‖.  In penalized contact a step that moves the
+        active set leaves F(u) full of penalty forces (1/δ)(u·ν − g)⁺ far above the load (10⁹× it on the 3D
+        channel cube at contrast 10⁶): rtol‖F(u)‖ then allows a residual above the load itself, the next iterate
+        is wrong by more than its penetrations and the active sets cycle.  A u + b = A (u + x) is the right-hand
+        side of the next iterate's own equation (the load and the gap's penalty forces, the Dirichlet columns'
+        lifting); the Dirichlet rows, set exactly after the solve, are left out of its norm.
+        """
+        w = b.duplicate()
+        try:
+            self._operator().mult(iterate, w)
+            w.axpy(1.0, b)
+            w.array[self._identity] = 0.0
+            target, norm = w.norm(), b.norm()
+        finally:
+            w.destroy()
+        return self.options.rtol if norm == 0.0 else self.options.rtol * min(1.0, target / norm)
+
+    def _operator(self) -> PETSc.Mat:
+        return self.ksp.getOperators()[0]
 
     def mat_solve(self, B: PETSc.Mat, X: PETSc.Mat) -> None:
         """X = A⁻¹ B for a dense block B, one checked Krylov solve per column."""

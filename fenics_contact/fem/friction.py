@@ -351,9 +351,7 @@ class _FrictionalSystem:
         self.sub.u.x.scatter_forward()
 
     def _direction(self) -> None:
-        sub = self.sub
-        sub.b.scale(-1.0)
-        sub.solver.solve(sub.b, sub.du)
+        self.sub._direction()
 
     def solve(self, active: np.ndarray) -> Direction:
         sub = self.sub

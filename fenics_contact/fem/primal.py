@@ -227,9 +227,17 @@ class PrimalSubproblem:
             self.friction.add_jacobian(self.A)
         self.solver.set_operator(self.A)
 
-    def _step(self) -> None:
+    def _direction(self) -> None:
+        """du ← −J⁻¹F(u), b holding F(u) (left holding −F(u)); an AMG solve to its Newton tolerance
+        (``AMGSolver.newton_tolerance``: relative to the right-hand side of the new iterate's equation)."""
         self.b.scale(-1.0)
-        self.solver.solve(self.b, self.du)
+        if isinstance(self.solver, AMGSolver):
+            self.solver.solve(self.b, self.du, iterate=self.u.x.petsc_vec)
+        else:
+            self.solver.solve(self.b, self.du)
+
+    def _step(self) -> None:
+        self._direction()
         self.u.x.petsc_vec.axpy(1.0, self.du)
         self.u.x.scatter_forward()
 

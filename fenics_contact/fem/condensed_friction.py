@@ -25,7 +25,7 @@ import numpy as np
 import scipy.linalg as sla
 
 from fenics_contact.errors import ConvergenceError
-from fenics_contact.fem.friction import ENERGY_STEPS, FIXED_POINT_STEPS, FIXED_POINT_TOL, NodalFriction
+from fenics_contact.fem.friction import ENERGY_STEPS, FIXED_POINT_STEPS, FIXED_POINT_TOL, LAW_STEPS, NodalFriction
 from fenics_contact.fem.newton import (
     Advance,
     Direction,
@@ -90,12 +90,12 @@ class CondensedFrictionalSystem:
     Hessian of ψ: it descends).  ψ falls at every step, so no state recurs.  Without it (Coulomb) full steps until a
     state recurs, then backtracking on ‖R‖ (Armijo)."""
 
-    def __init__(self, law: CondensedLaw, U: np.ndarray, U_L: np.ndarray, *, energy: bool) -> None:
+    def __init__(self, law: CondensedLaw, U: np.ndarray, U_L: np.ndarray, *, energy: bool, state=None) -> None:
         self.law, self.friction, self.energy = law, law.friction, energy
         self.U, self.U_L = U.copy(), U_L
         self._full = True  #: the last step was the full step of the state rule (its next state is ``_next``)
         self.friction.forced = None
-        self.friction.forced = self._next_state(self.U)
+        self.friction.forced = self._next_state(self.U) if state is None else state
 
     def _next_state(self, U: np.ndarray, *, plain: bool = False):
         self.friction.nodal = U.reshape(-1, self.friction.d)
@@ -184,10 +184,11 @@ class CondensedFrictionalSystem:
         return None
 
 
-def _newton(law: CondensedLaw, U, U_L, max_steps: int, energy: bool, record, discard) -> np.ndarray:
-    """The Newton loop on ``CondensedFrictionalSystem`` (an energy's with ``ENERGY_STEPS`` steps at least)."""
+def _newton(law: CondensedLaw, U, U_L, max_steps: int, energy: bool, record, discard, state=None) -> np.ndarray:
+    """The Newton loop on ``CondensedFrictionalSystem`` (an energy's with ``ENERGY_STEPS`` steps at least), linearized
+    first at ``state`` (None: the state rule's at U)."""
     max_steps = max(max_steps, ENERGY_STEPS) if energy else max_steps
-    system = CondensedFrictionalSystem(law, U, U_L, energy=energy)
+    system = CondensedFrictionalSystem(law, U, U_L, energy=energy, state=state)
     try:
         trace = semismooth_newton_loop(
             system,
@@ -204,12 +205,6 @@ def _newton(law: CondensedLaw, U, U_L, max_steps: int, energy: bool, record, dis
         law.friction.forced = None
     record(trace)
     return system.U
-
-
-#: the steps of the first Newton on the Coulomb law, and of each one tried from the thresholds' fixed point, before
-#: the fixed point takes over (on the 2D tests' paths the Newton on the law converges in at most 4 steps or cycles
-#: between slip states: a cycle is left after a few steps instead of being line-searched to ``max_steps``)
-LAW_STEPS = 10
 
 
 def _plain_state(friction: NodalFriction, U: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -240,11 +235,13 @@ def solve_condensed(
     friction = law.friction
     coulomb = friction.law.law == "coulomb"
     steps = min(max_steps, LAW_STEPS) if coulomb else max_steps
-    try:
-        return _newton(law, start, U_L, steps, not coulomb, record, discard)
-    except ConvergenceError:
-        if not coulomb:
-            raise
+    predicted = friction.predicted_state()
+    for state in ([predicted] if predicted is not None else []) + [None]:
+        try:
+            return _newton(law, start, U_L, steps, not coulomb, record, discard, state=state)
+        except ConvergenceError:
+            if not coulomb and state is None:
+                raise
     U, previous = start, None
     for _ in range(FIXED_POINT_STEPS):
         friction.nodal = U.reshape(-1, friction.d)

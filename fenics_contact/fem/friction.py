@@ -134,6 +134,9 @@ class NodalFriction:
         self.nodal: np.ndarray | None = None
         #: the law evaluated where the Newton last linearized (``linearize``), or None
         self.linearized: dict | None = None
+        #: the state (codes, slip directions) at the last committed load step, or None (``commit``): the state the
+        #: Newton of the next load step linearizes at first (``predicted_state``)
+        self.committed: tuple[np.ndarray, np.ndarray] | None = None
 
     # -- the law at the current iterate ------------------------------------------------------------------
     def _geometry(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -177,8 +180,12 @@ class NodalFriction:
         trial traction at the current u: a node sticks where |z| ≤ τ and slips along z/|z| otherwise.  The
         primal–dual active-set rule with the constant c = β/δ_t, β = min(1, δ_t K_pp/w_p) (K_pp the node's
         elastic stiffness): β = 1 would be the trial state alone, whose stick band |P r| ≤ τδ_t is too narrow for
-        a Newton iterate to land in.  A state that reproduces itself satisfies the law.  ``plain``: the state of
-        u itself (β = 1), the generalized Hessian of a frozen-threshold energy.
+        a Newton iterate to land in.  A node that slipped in the state linearized at and whose z turns against
+        that slip direction (z·n̂ < 0) sticks instead: its traction passes through the stick disc on the way, and
+        the slip state, whose tangential stiffness is zero in 2D, would carry it across to the other side in one
+        full step (the Coulomb Newton then cycles between slip directions).  A state that reproduces itself
+        satisfies the law, with the reversal rule as without it (it only changes a node that slipped into one that
+        sticks).  ``plain``: the state of u itself (β = 1), the generalized Hessian of a frozen-threshold energy.
         """
         if plain:
             keep, self.forced = self.forced, None
@@ -194,7 +201,24 @@ class NodalFriction:
         size = np.linalg.norm(z, axis=1)
         tau = e["tau"]
         codes = np.where(tau > 0.0, np.where(size <= tau, 1, 2), 0).astype(np.int8)
-        return codes, z / np.where(size > 0.0, size, 1.0)[:, None]
+        direction = z / np.where(size > 0.0, size, 1.0)[:, None]
+        if not plain and self.forced is not None and self.forced[0].shape == codes.shape:
+            was, along = self.forced
+            codes[(codes == 2) & (was == 2) & (np.einsum("ij,ij->i", direction, along) < 0.0)] = 1
+        return codes, direction
+
+    @staticmethod
+    def state_of(e: dict) -> tuple[np.ndarray, np.ndarray]:
+        """The state (codes: 0 no traction, 1 stick, 2 slip; slip directions) of the evaluated law ``e``."""
+        return np.where(e["stick"], 1, np.where(e["slip"], 2, 0)).astype(np.int8), e["direction"].copy()
+
+    def predicted_state(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """The state the Newton of a load step linearizes at first: the last committed step's, or None (none
+        committed yet).  Dragged on, most nodes keep their state; the trial state of the new motion would have them
+        all slip along it, and the Newton from there wanders through the slip states of the heterogeneous Γ_C."""
+        if self.committed is None or self.committed[0].shape != (self.nodes.size,):
+            return None
+        return self.committed[0].copy(), self.committed[1].copy()
 
     def linearize(self, e: dict) -> None:
         """Keep the law ``e`` evaluated at the point the Newton linearizes at (its Jacobian's): in 3D the next
@@ -295,6 +319,7 @@ class NodalFriction:
         """End the load step at the current (converged) u: move the anchors by the slip, add its dissipation
         Σ w_p t_p·(a_p − a_p^new) to ``dissipation``; returns the step's (collective)."""
         e = self.evaluate()
+        self.committed = self.state_of(e)
         change = (e["t"] - e["t_trial"]) / self.k_t  # a_new − a: zero where the node sticks
         local = float(np.sum(e["w"] * np.einsum("ij,ij->i", e["t"], -change)))
         self.anchor += change
@@ -322,13 +347,13 @@ class _FrictionalSystem:
     Hessian of ψ: it descends); ψ falls at every step, so no state recurs.  Without it (Coulomb) full steps until a
     state recurs, then a backtracking line search on ‖F‖ (Armijo)."""
 
-    def __init__(self, sub, *, energy: bool = False) -> None:
+    def __init__(self, sub, *, energy: bool = False, state=None) -> None:
         self.sub, self.friction, self.energy = sub, sub.friction, energy
         self._norm = np.inf
         self._negligible = False
         self._full = True  #: the last step was the full step of the state rule (its next state is ``_next``)
         self.friction.forced = None
-        self.friction.forced = self.friction.next_state()
+        self.friction.forced = self.friction.next_state() if state is None else state
 
     def key(self, state) -> np.ndarray:
         """The set of all ranks (so that every rank sees the same sets recur)."""
@@ -431,13 +456,20 @@ FIXED_POINT_TOL = 1.0e-12
 ENERGY_STEPS = 200
 
 
-def _newton(sub, *, refinements: int, energy: bool = False):
-    system = _FrictionalSystem(sub, energy=energy)
+#: the steps of a Newton on the Coulomb law from the committed state, and of the condensed solve's Newtons on the
+#: law (``fem.condensed_friction``), before the next strategy takes over: on the tests' paths the Newton on the law
+#: converges in at most 8 steps or cycles between slip states
+LAW_STEPS = 10
+
+
+def _newton(sub, *, refinements: int, energy: bool = False, state=None, max_steps: int | None = None):
+    system = _FrictionalSystem(sub, energy=energy, state=state)
+    steps = sub.newton.max_iterations if max_steps is None else max_steps
     return semismooth_newton_loop(
         system,
         system.key(sub.friction.forced),
         name=sub.prefix.rstrip("_"),
-        max_steps=max(sub.newton.max_iterations, ENERGY_STEPS) if energy else sub.newton.max_iterations,
+        max_steps=max(steps, ENERGY_STEPS) if energy else steps,
         line_search="always" if energy else "on-cycle",
         rtol=sub.newton.rtol,
         atol=sub.newton.atol,
@@ -498,9 +530,22 @@ def frictional_newton(sub, *, refinements: int) -> NewtonHistory:
     the Newton steps of a 3D slip), and should it not converge (slip fronts cycling at high contrast), the
     fixed point on the thresholds from the same start (``_fixed_point``: each step a convex problem)."""
     start = sub.u.x.array.copy()
+    tresca = sub.friction.law.law == "tresca"
+    predicted = sub.friction.predicted_state()
+    if predicted is not None:
+        try:  # from the state of the last committed load step
+            steps = None if tresca else min(sub.newton.max_iterations, LAW_STEPS)
+            trace = _newton(sub, refinements=refinements, energy=tresca, state=predicted, max_steps=steps)
+            return NewtonHistory(trace.residuals, trace.active_sizes, trace.factorizations)
+        except ConvergenceError as error:
+            log.info("%s: %s; from the trial state instead", sub.prefix.rstrip("_"), error)
+            sub.u.x.array[:] = start
+            sub._factorized_set = None
+        finally:
+            sub.friction.forced = None
     try:
         # Tresca: the gradient of a convex energy (the exact line search globalizes); Coulomb: the law's Newton
-        trace = _newton(sub, refinements=refinements, energy=sub.friction.law.law == "tresca")
+        trace = _newton(sub, refinements=refinements, energy=tresca)
         return NewtonHistory(trace.residuals, trace.active_sizes, trace.factorizations)
     except ConvergenceError as error:
         log.info("%s: %s; the fixed point on the friction thresholds instead", sub.prefix.rstrip("_"), error)

@@ -61,6 +61,7 @@ class PairFriction(NodalFriction):
             )
         self.stiffness, self.motion = np.asarray(stiffness, dtype=np.float64), np.zeros(d)
         self.dissipation, self.forced, self.frozen, self.nodal, self.linearized = 0.0, None, None, None, None
+        self.committed = None
 
     def _geometry(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         return self._nodal_geometry

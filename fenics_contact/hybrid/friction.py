@@ -122,6 +122,10 @@ class _Gathered(NodalFriction):
         self.stiffness, self.motion = gather(friction.stiffness), friction.motion.copy()
         self.nodes = np.arange(self.anchor.shape[0])
         self.dissipation, self.forced, self.frozen, self.nodal, self.linearized = 0.0, None, None, None, None
+        committed = comm.allreduce(friction.committed is not None, op=MPI.LAND)
+        self.committed = (
+            (gather(friction.committed[0]).astype(np.int8), gather(friction.committed[1], d)) if committed else None
+        )
 
     def _geometry(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         return self._nodal_geometry

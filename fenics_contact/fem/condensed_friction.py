@@ -10,13 +10,13 @@ U_L minus a compliance M (dN × dN, symmetric positive definite) times the nodal
 by the loop of the monolithic frictional Newton (``fem.newton.semismooth_newton_loop`` on
 ``CondensedFrictionalSystem``: the state rule ``NodalFriction.next_state``, full steps until a state recurs,
 then a line search; in 3D a state is settled once the step is negligible, the slip direction varying within
-it), with, for Coulomb, the fixed point on the thresholds should it not converge in ``LAW_STEPS``: once two of its
-iterates have the same contact and stick/slip sets, the Newton on the law from there (it then converges in one or
-two steps), the fixed point going on should it fail.  The energy solves (Tresca, frozen thresholds) take the
-full steps of the primal–dual state rule while they lower the convex energy, else its exact line search
-(``CondensedFrictionalSystem``).  Used by
-Algorithm 1's condensed Γ_C system (``hybrid.friction``) and by the two-body solve under MPI
-(``fem.two_body_mpi``).
+it), linearized first at the state of the last committed load step (``NodalFriction.predicted_state``), then at
+the trial state, with, for Coulomb, the fixed point on the thresholds should neither converge in ``LAW_STEPS``:
+once two of its iterates have the same contact and stick/slip sets, the Newton on the law from there (it then
+converges in one or two steps), the fixed point going on should it fail.  The energy solves (Tresca, frozen
+thresholds) take the full steps of the primal–dual state rule while they lower the convex energy, else its exact
+line search (``CondensedFrictionalSystem``).  Used by Algorithm 1's condensed Γ_C system (``hybrid.friction``) and by
+the two-body solve under MPI (``fem.two_body_mpi``).
 """
 
 from collections.abc import Callable
@@ -227,11 +227,13 @@ def solve_condensed(
     discard: Callable[[int], None] = lambda steps: None,
 ) -> np.ndarray:
     """U = U_L − M λ(U) from ``start``: the Newton on the law (Tresca: with the exact line search on its convex
-    energy; a failure raises ConvergenceError), and for Coulomb, should it not converge in ``LAW_STEPS``, the fixed
-    point on the thresholds (each a convex problem): as soon as two successive iterates of it have the same contact
-    and stick/slip sets, the Newton on the law from there (``LAW_STEPS``; the fixed point goes on should it fail),
-    else until the thresholds settle, and the Newton on the law from there.  ``record`` gets each converged Newton's
-    trace, ``discard`` the steps of each that did not converge."""
+    energy; a failure raises ConvergenceError) linearized first at the committed state
+    (``NodalFriction.predicted_state``, when there is one) and, should that not converge, at the trial state; for
+    Coulomb, should neither converge in ``LAW_STEPS``, the fixed point on the thresholds (each a convex problem):
+    as soon as two successive iterates of it have the same contact and stick/slip sets, the Newton on the law from
+    there (``LAW_STEPS``; the fixed point goes on should it fail), else until the thresholds settle, and the Newton
+    on the law from there.  ``record`` gets each converged Newton's trace, ``discard`` the steps of each that did
+    not converge."""
     friction = law.friction
     coulomb = friction.law.law == "coulomb"
     steps = min(max_steps, LAW_STEPS) if coulomb else max_steps

@@ -527,8 +527,10 @@ def frictional_newton(sub, *, refinements: int) -> NewtonHistory:
     """Solve a frictional ``PrimalSubproblem``: the semismooth Newton on the law itself
     (``fem.newton.semismooth_newton_loop``; full steps until a state recurs, then a backtracking line search on
     ‖F‖; ``refinements`` steps after a settled state whose residual misses the check: iterative refinement, or
-    the Newton steps of a 3D slip), and should it not converge (slip fronts cycling at high contrast), the
-    fixed point on the thresholds from the same start (``_fixed_point``: each step a convex problem)."""
+    the Newton steps of a 3D slip), linearized first at the committed state (``NodalFriction.predicted_state``;
+    Coulomb: ``LAW_STEPS`` steps) and, should that not converge, at the trial state, and should that not converge
+    (slip fronts cycling at high contrast), the fixed point on the thresholds from the same start
+    (``_fixed_point``: each step a convex problem)."""
     start = sub.u.x.array.copy()
     tresca = sub.friction.law.law == "tresca"
     predicted = sub.friction.predicted_state()

@@ -452,7 +452,7 @@ FIXED_POINT_TOL = 1.0e-12
 
 
 #: steps of a convex energy's Newton (Tresca, frozen thresholds) at least: the energy falls at every step, so it
-#: converges, but in 3D slowly (71 steps on the channel cube dragged with Tresca, ``docs/limits.md``)
+#: converges, but in 3D slowly (65 steps on the channel cube dragged with Tresca, ``docs/limits.md``)
 ENERGY_STEPS = 200
 
 

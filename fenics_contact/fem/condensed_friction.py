@@ -23,9 +23,11 @@ from collections.abc import Callable
 
 import numpy as np
 import scipy.linalg as sla
+from mpi4py import MPI
 
 from fenics_contact.errors import ConvergenceError
-from fenics_contact.fem.friction import ENERGY_STEPS, FIXED_POINT_STEPS, FIXED_POINT_TOL, LAW_STEPS, NodalFriction
+from fenics_contact.fem.friction import ENERGY_STEPS, NodalFriction
+from fenics_contact.fem.friction_strategy import LAW_STEPS, solve_frictional
 from fenics_contact.fem.newton import (
     Advance,
     Direction,
@@ -214,7 +216,41 @@ def _plain_state(friction: NodalFriction, U: np.ndarray) -> tuple[np.ndarray, np
         e = friction.evaluate()
     finally:
         friction.nodal = None
-    return e["active"], friction.key((np.where(e["stick"], 1, np.where(e["slip"], 2, 0)), e["direction"]))
+    return e["active"], friction.key(friction.state_of(e))
+
+
+class _CondensedSolve:
+    """U = U_L − M λ(U) as a ``fem.friction_strategy.FrictionalSolve`` (every rank holds the same data); the fixed
+    point's iterate is accepted as it is (the caller measures the residual of what it uses)."""
+
+    comm = MPI.COMM_SELF
+
+    def __init__(self, law: CondensedLaw, U_L: np.ndarray, start: np.ndarray, max_steps: int, record, discard):
+        self.law, self.friction = law, law.friction
+        self.U_L, self.U, self.max_steps, self.record, self.discard = U_L, start, max_steps, record, discard
+
+    def newton(self, *, energy: bool, state, max_steps: int | None) -> None:
+        steps = self.max_steps if max_steps is None else min(self.max_steps, max_steps)
+        self.U = _newton(self.law, self.U, self.U_L, steps, energy, self.record, self.discard, state=state)
+
+    def save(self) -> np.ndarray:
+        return self.U
+
+    def restore(self, saved: np.ndarray) -> None:
+        self.U = saved
+
+    def thresholds(self) -> np.ndarray:
+        self.friction.nodal = self.U.reshape(-1, self.friction.d)
+        try:
+            return self.friction.evaluate()["tau"]
+        finally:
+            self.friction.nodal = None
+
+    def sets(self) -> tuple[np.ndarray, ...]:
+        return _plain_state(self.friction, self.U)
+
+    def settle(self) -> None:
+        return None
 
 
 def solve_condensed(
@@ -226,47 +262,14 @@ def solve_condensed(
     record: Callable[[NewtonTrace], None] = lambda trace: None,
     discard: Callable[[int], None] = lambda steps: None,
 ) -> np.ndarray:
-    """U = U_L − M λ(U) from ``start``: the Newton on the law (Tresca: with the exact line search on its convex
-    energy; a failure raises ConvergenceError) linearized first at the committed state
-    (``NodalFriction.predicted_state``, when there is one) and, should that not converge, at the trial state; for
-    Coulomb, should neither converge in ``LAW_STEPS``, the fixed point on the thresholds (each a convex problem):
-    as soon as two successive iterates of it have the same contact and stick/slip sets, the Newton on the law from
-    there (``LAW_STEPS``; the fixed point goes on should it fail), else until the thresholds settle, and the Newton
-    on the law from there.  ``record`` gets each converged Newton's trace, ``discard`` the steps of each that did
-    not converge."""
-    friction = law.friction
-    coulomb = friction.law.law == "coulomb"
-    steps = min(max_steps, LAW_STEPS) if coulomb else max_steps
-    predicted = friction.predicted_state()
-    for state in ([predicted] if predicted is not None else []) + [None]:
-        try:
-            return _newton(law, start, U_L, steps, not coulomb, record, discard, state=state)
-        except ConvergenceError:
-            if not coulomb and state is None:
-                raise
-    U, previous = start, None
-    for _ in range(FIXED_POINT_STEPS):
-        friction.nodal = U.reshape(-1, friction.d)
-        tau = friction.evaluate()["tau"]
-        friction.nodal, friction.frozen = None, tau
-        try:
-            U = _newton(law, U, U_L, max_steps, True, record, discard)
-        finally:
-            friction.frozen = None
-        friction.nodal = U.reshape(-1, friction.d)
-        change = np.max(np.abs(friction.evaluate()["tau"] - tau), initial=0.0)
-        friction.nodal = None
-        if change <= FIXED_POINT_TOL * np.max(tau, initial=0.0):
-            break
-        state = _plain_state(friction, U)
-        if previous is not None and all(np.array_equal(a, b) for a, b in zip(state, previous)):
-            try:  # the sets have settled: the law's own Newton finds the thresholds with them
-                return _newton(law, U, U_L, min(max_steps, LAW_STEPS), False, record, discard)
-            except ConvergenceError:
-                pass
-        previous = state
-    try:  # the law's own Newton settles the state exactly
-        U = _newton(law, U, U_L, max_steps, False, record, discard)
-    except ConvergenceError:
-        pass
-    return U
+    """U = U_L − M λ(U) from ``start`` (``fem.friction_strategy.solve_frictional``): the Newton on the law (Tresca:
+    with the exact line search on its convex energy; a failure raises ConvergenceError) linearized first at the
+    committed state (``NodalFriction.predicted_state``, when there is one) and, should that not converge, at the
+    trial state; for Coulomb, should neither converge in ``LAW_STEPS``, the fixed point on the thresholds (each a
+    convex problem): as soon as two successive iterates of it have the same contact and stick/slip sets, the Newton
+    on the law from there (``LAW_STEPS``; the fixed point goes on should it fail), else until the thresholds
+    settle, and the Newton on the law from there.  ``record`` gets each converged Newton's trace, ``discard`` the
+    steps of each that did not converge."""
+    solve = _CondensedSolve(law, U_L, start, max_steps, record, discard)
+    solve_frictional(solve, predict=True, trial_steps=LAW_STEPS, handover=True)
+    return solve.U

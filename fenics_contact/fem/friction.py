@@ -30,6 +30,7 @@ from petsc4py import PETSc
 
 from fenics_contact.errors import ConvergenceError
 from fenics_contact.fem.contact import NewtonHistory, profile_order
+from fenics_contact.fem.friction_strategy import solve_frictional
 from fenics_contact.fem.newton import (
     Advance,
     Check,
@@ -446,20 +447,9 @@ class _FrictionalSystem:
         return Check(final, scale, self.sub._residual())
 
 
-#: thresholds' fixed-point iterations of ``frictional_newton`` at most, and their relative tolerance
-FIXED_POINT_STEPS = 200
-FIXED_POINT_TOL = 1.0e-12
-
-
 #: steps of a convex energy's Newton (Tresca, frozen thresholds) at least: the energy falls at every step, so it
 #: converges, but in 3D slowly (65 steps on the channel cube dragged with Tresca, ``docs/limits.md``)
 ENERGY_STEPS = 200
-
-
-#: the steps of a Newton on the Coulomb law from the committed state, and of the condensed solve's Newtons on the
-#: law (``fem.condensed_friction``), before the next strategy takes over: on the tests' paths the Newton on the law
-#: converges in at most 8 steps or cycles between slip states
-LAW_STEPS = 10
 
 
 def _newton(sub, *, refinements: int, energy: bool = False, state=None, max_steps: int | None = None):
@@ -478,81 +468,64 @@ def _newton(sub, *, refinements: int, energy: bool = False, state=None, max_step
     )
 
 
-def _fixed_point(sub, *, refinements: int) -> NewtonHistory:
-    """The thresholds by fixed point: τ frozen at the law's value for the current u, the problem with frozen τ
-    (a convex energy: the semismooth Newton with its exact line search) solved, until τ stops changing; then
-    the residual check of the law itself."""
-    friction, history = sub.friction, NewtonHistory()
-    for _ in range(FIXED_POINT_STEPS):
-        tau = friction.evaluate()["tau"]
-        friction.frozen = tau
+class _SubproblemSolve:
+    """A frictional ``PrimalSubproblem`` as a ``fem.friction_strategy.FrictionalSolve``: the converged Newtons'
+    traces in ``history``; the fixed point's iterate is accepted when it passes the subproblem's residual check."""
+
+    def __init__(self, sub, refinements: int) -> None:
+        self.sub, self.refinements = sub, refinements
+        self.friction, self.comm = sub.friction, sub.mesh.comm
+        self.history = NewtonHistory()
+
+    def newton(self, *, energy: bool, state, max_steps: int | None) -> None:
+        sub = self.sub
+        steps = sub.newton.max_iterations if max_steps is None else min(sub.newton.max_iterations, max_steps)
+        sub._factorized_set = None  # (a factorization of the same sets with other thresholds is not this one's)
         try:
-            trace = _newton(sub, refinements=refinements, energy=True)
+            trace = _newton(sub, refinements=self.refinements, energy=energy, state=state, max_steps=steps)
+        except ConvergenceError as error:
+            log.info("%s: %s", sub.prefix.rstrip("_"), error)
+            raise
         finally:
-            friction.frozen = None
-        history.residuals += trace.residuals
-        history.active_sizes += trace.active_sizes
-        history.factorizations += trace.factorizations
-        change = np.max(np.abs(friction.evaluate()["tau"] - tau), initial=0.0)
-        size = np.max(tau, initial=0.0)
-        change, size = (sub.mesh.comm.allreduce(v, op=MPI.MAX) for v in (change, size))
-        if change <= FIXED_POINT_TOL * size:
-            break
-    # the Newton on the law itself from there: it settles the state exactly (the fixed point ends at 1e-12)
-    reached = sub.u.x.array.copy()
-    sub._factorized_set = None
-    try:
-        tail = _newton(sub, refinements=refinements)
-        history.residuals += tail.residuals
-        history.active_sizes += tail.active_sizes
-        history.factorizations += tail.factorizations
-        return history
-    except ConvergenceError:
-        sub.u.x.array[:] = reached
-    finally:
-        sub.friction.forced = None
-    sub._factorize()  # the law's own Jacobian at the solution (the interface Newton's Ω₂ response reads it)
-    sub._factorized_set = None
-    final, scale = sub.residual_check()
-    if not (np.isfinite(final) and final <= sub.newton.rtol * scale + sub.newton.atol):
-        raise ConvergenceError(
-            f"{sub.prefix.rstrip('_')}: the friction thresholds' fixed point ended with the residual {final:.3e} "
-            f"above {sub.newton.rtol:g} x the size of its terms ({scale:.3e})"
-        )
-    history.residuals.append(final)
-    return history
+            sub.friction.forced = None
+        self.history.residuals += trace.residuals
+        self.history.active_sizes += trace.active_sizes
+        self.history.factorizations += trace.factorizations
+
+    def save(self) -> np.ndarray:
+        return self.sub.u.x.array.copy()
+
+    def restore(self, saved: np.ndarray) -> None:
+        self.sub.u.x.array[:] = saved
+        self.sub._factorized_set = None
+
+    def thresholds(self) -> np.ndarray:
+        return self.friction.evaluate()["tau"]
+
+    def sets(self) -> tuple[np.ndarray, ...]:
+        e = self.friction.evaluate()
+        return self.sub._active_set(), self.friction.key(self.friction.state_of(e))
+
+    def settle(self) -> None:
+        sub = self.sub
+        sub._factorize()  # the law's own Jacobian at the solution (the interface Newton's Ω₂ response reads it)
+        sub._factorized_set = None
+        final, scale = sub.residual_check()
+        if not (np.isfinite(final) and final <= sub.newton.rtol * scale + sub.newton.atol):
+            raise ConvergenceError(
+                f"{sub.prefix.rstrip('_')}: the friction thresholds' fixed point ended with the residual {final:.3e} "
+                f"above {sub.newton.rtol:g} x the size of its terms ({scale:.3e})"
+            )
+        self.history.residuals.append(final)
 
 
 def frictional_newton(sub, *, refinements: int) -> NewtonHistory:
-    """Solve a frictional ``PrimalSubproblem``: the semismooth Newton on the law itself
-    (``fem.newton.semismooth_newton_loop``; full steps until a state recurs, then a backtracking line search on
-    ‖F‖; ``refinements`` steps after a settled state whose residual misses the check: iterative refinement, or
-    the Newton steps of a 3D slip), linearized first at the committed state (``NodalFriction.predicted_state``;
-    Coulomb: ``LAW_STEPS`` steps) and, should that not converge, at the trial state, and should that not converge
-    (slip fronts cycling at high contrast), the fixed point on the thresholds from the same start
-    (``_fixed_point``: each step a convex problem)."""
-    start = sub.u.x.array.copy()
-    tresca = sub.friction.law.law == "tresca"
-    predicted = sub.friction.predicted_state()
-    if predicted is not None:
-        try:  # from the state of the last committed load step
-            steps = None if tresca else min(sub.newton.max_iterations, LAW_STEPS)
-            trace = _newton(sub, refinements=refinements, energy=tresca, state=predicted, max_steps=steps)
-            return NewtonHistory(trace.residuals, trace.active_sizes, trace.factorizations)
-        except ConvergenceError as error:
-            log.info("%s: %s; from the trial state instead", sub.prefix.rstrip("_"), error)
-            sub.u.x.array[:] = start
-            sub._factorized_set = None
-        finally:
-            sub.friction.forced = None
-    try:
-        # Tresca: the gradient of a convex energy (the exact line search globalizes); Coulomb: the law's Newton
-        trace = _newton(sub, refinements=refinements, energy=tresca)
-        return NewtonHistory(trace.residuals, trace.active_sizes, trace.factorizations)
-    except ConvergenceError as error:
-        log.info("%s: %s; the fixed point on the friction thresholds instead", sub.prefix.rstrip("_"), error)
-        sub.u.x.array[:] = start
-        sub._factorized_set = None
-        return _fixed_point(sub, refinements=refinements)
-    finally:
-        sub.friction.forced = None
+    """Solve a frictional ``PrimalSubproblem`` (``fem.friction_strategy.solve_frictional``): the semismooth Newton
+    on the law itself (``fem.newton.semismooth_newton_loop``; full steps until a state recurs, then a backtracking
+    line search on ‖F‖; ``refinements`` steps after a settled state whose residual misses the check: iterative
+    refinement, or the Newton steps of a 3D slip) from the trial state, and should it not converge (slip fronts
+    cycling at high contrast), the fixed point on the thresholds (each step a convex problem) until they settle,
+    then the Newton on the law from there."""
+    solve = _SubproblemSolve(sub, refinements)
+    solve_frictional(solve, predict=False, trial_steps=None, handover=False)
+    return solve.history

@@ -448,7 +448,7 @@ class _FrictionalSystem:
 
 
 #: steps of a convex energy's Newton (Tresca, frozen thresholds) at least: the energy falls at every step, so it
-#: converges, but in 3D slowly (65 steps on the channel cube dragged with Tresca, ``docs/limits.md``)
+#: converges, but in 3D slowly (73 steps on the channel cube dragged with Tresca, ``docs/limits.md``)
 ENERGY_STEPS = 200
 
 

@@ -136,7 +136,7 @@ class NodalFriction:
         #: the law evaluated where the Newton last linearized (``linearize``), or None
         self.linearized: dict | None = None
         #: the state (codes, slip directions) at the last committed load step, or None (``commit``): the state the
-        #: Newton of the next load step linearizes at first (``predicted_state``)
+        #: condensed Newton of the next load step linearizes at first (``predicted_state``)
         self.committed: tuple[np.ndarray, np.ndarray] | None = None
 
     # -- the law at the current iterate ------------------------------------------------------------------
@@ -214,9 +214,10 @@ class NodalFriction:
         return np.where(e["stick"], 1, np.where(e["slip"], 2, 0)).astype(np.int8), e["direction"].copy()
 
     def predicted_state(self) -> tuple[np.ndarray, np.ndarray] | None:
-        """The state the Newton of a load step linearizes at first: the last committed step's, or None (none
-        committed yet).  Dragged on, most nodes keep their state; the trial state of the new motion would have them
-        all slip along it, and the Newton from there wanders through the slip states of the heterogeneous Γ_C."""
+        """The state the condensed Newton of a load step linearizes at first (``fem.condensed_friction``): the last
+        committed step's, or None (none committed yet).  Dragged on, most nodes keep their state; the trial state of
+        the new motion would have them all slip along it, and the Newton from there wanders through the slip states
+        of the heterogeneous Γ_C."""
         if self.committed is None or self.committed[0].shape != (self.nodes.size,):
             return None
         return self.committed[0].copy(), self.committed[1].copy()

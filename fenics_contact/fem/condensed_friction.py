@@ -10,22 +10,24 @@ U_L minus a compliance M (dN × dN, symmetric positive definite) times the nodal
 by the loop of the monolithic frictional Newton (``fem.newton.semismooth_newton_loop`` on
 ``CondensedFrictionalSystem``: the state rule ``NodalFriction.next_state``, full steps until a state recurs,
 then a line search; in 3D a state is settled once the step is negligible, the slip direction varying within
-it), with, for Coulomb, the fixed point on the thresholds should it not converge in ``LAW_STEPS``: once two of its
-iterates have the same contact and stick/slip sets, the Newton on the law from there (it then converges in one or
-two steps), the fixed point going on should it fail.  The energy solves (Tresca, frozen thresholds) take the
-full steps of the primal–dual state rule while they lower the convex energy, else its exact line search
-(``CondensedFrictionalSystem``).  Used by
-Algorithm 1's condensed Γ_C system (``hybrid.friction``) and by the two-body solve under MPI
-(``fem.two_body_mpi``).
+it), linearized first at the state of the last committed load step (``NodalFriction.predicted_state``), then at
+the trial state, with, for Coulomb, the fixed point on the thresholds should neither converge in ``LAW_STEPS``:
+once two of its iterates have the same contact and stick/slip sets, the Newton on the law from there (it then
+converges in one or two steps), the fixed point going on should it fail.  The energy solves (Tresca, frozen
+thresholds) take the full steps of the primal–dual state rule while they lower the convex energy, else its exact
+line search (``CondensedFrictionalSystem``).  Used by Algorithm 1's condensed Γ_C system (``hybrid.friction``) and by
+the two-body solve under MPI (``fem.two_body_mpi``).
 """
 
 from collections.abc import Callable
 
 import numpy as np
 import scipy.linalg as sla
+from mpi4py import MPI
 
 from fenics_contact.errors import ConvergenceError
-from fenics_contact.fem.friction import ENERGY_STEPS, FIXED_POINT_STEPS, FIXED_POINT_TOL, NodalFriction
+from fenics_contact.fem.friction import ENERGY_STEPS, NodalFriction
+from fenics_contact.fem.friction_strategy import LAW_STEPS, solve_frictional
 from fenics_contact.fem.newton import (
     Advance,
     Direction,
@@ -90,12 +92,12 @@ class CondensedFrictionalSystem:
     Hessian of ψ: it descends).  ψ falls at every step, so no state recurs.  Without it (Coulomb) full steps until a
     state recurs, then backtracking on ‖R‖ (Armijo)."""
 
-    def __init__(self, law: CondensedLaw, U: np.ndarray, U_L: np.ndarray, *, energy: bool) -> None:
+    def __init__(self, law: CondensedLaw, U: np.ndarray, U_L: np.ndarray, *, energy: bool, state=None) -> None:
         self.law, self.friction, self.energy = law, law.friction, energy
         self.U, self.U_L = U.copy(), U_L
         self._full = True  #: the last step was the full step of the state rule (its next state is ``_next``)
         self.friction.forced = None
-        self.friction.forced = self._next_state(self.U)
+        self.friction.forced = self._next_state(self.U) if state is None else state
 
     def _next_state(self, U: np.ndarray, *, plain: bool = False):
         self.friction.nodal = U.reshape(-1, self.friction.d)
@@ -184,10 +186,11 @@ class CondensedFrictionalSystem:
         return None
 
 
-def _newton(law: CondensedLaw, U, U_L, max_steps: int, energy: bool, record, discard) -> np.ndarray:
-    """The Newton loop on ``CondensedFrictionalSystem`` (an energy's with ``ENERGY_STEPS`` steps at least)."""
+def _newton(law: CondensedLaw, U, U_L, max_steps: int, energy: bool, record, discard, state=None) -> np.ndarray:
+    """The Newton loop on ``CondensedFrictionalSystem`` (an energy's with ``ENERGY_STEPS`` steps at least), linearized
+    first at ``state`` (None: the state rule's at U)."""
     max_steps = max(max_steps, ENERGY_STEPS) if energy else max_steps
-    system = CondensedFrictionalSystem(law, U, U_L, energy=energy)
+    system = CondensedFrictionalSystem(law, U, U_L, energy=energy, state=state)
     try:
         trace = semismooth_newton_loop(
             system,
@@ -206,12 +209,6 @@ def _newton(law: CondensedLaw, U, U_L, max_steps: int, energy: bool, record, dis
     return system.U
 
 
-#: the steps of the first Newton on the Coulomb law, and of each one tried from the thresholds' fixed point, before
-#: the fixed point takes over (on the 2D tests' paths the Newton on the law converges in at most 4 steps or cycles
-#: between slip states: a cycle is left after a few steps instead of being line-searched to ``max_steps``)
-LAW_STEPS = 10
-
-
 def _plain_state(friction: NodalFriction, U: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The contact and stick/slip sets of U itself (the law's, with the thresholds of U)."""
     friction.nodal = U.reshape(-1, friction.d)
@@ -219,7 +216,41 @@ def _plain_state(friction: NodalFriction, U: np.ndarray) -> tuple[np.ndarray, np
         e = friction.evaluate()
     finally:
         friction.nodal = None
-    return e["active"], friction.key((np.where(e["stick"], 1, np.where(e["slip"], 2, 0)), e["direction"]))
+    return e["active"], friction.key(friction.state_of(e))
+
+
+class _CondensedSolve:
+    """U = U_L − M λ(U) as a ``fem.friction_strategy.FrictionalSolve`` (every rank holds the same data); the fixed
+    point's iterate is accepted as it is (the caller measures the residual of what it uses)."""
+
+    comm = MPI.COMM_SELF
+
+    def __init__(self, law: CondensedLaw, U_L: np.ndarray, start: np.ndarray, max_steps: int, record, discard):
+        self.law, self.friction = law, law.friction
+        self.U_L, self.U, self.max_steps, self.record, self.discard = U_L, start, max_steps, record, discard
+
+    def newton(self, *, energy: bool, state, max_steps: int | None) -> None:
+        steps = self.max_steps if max_steps is None else min(self.max_steps, max_steps)
+        self.U = _newton(self.law, self.U, self.U_L, steps, energy, self.record, self.discard, state=state)
+
+    def save(self) -> np.ndarray:
+        return self.U
+
+    def restore(self, saved: np.ndarray) -> None:
+        self.U = saved
+
+    def thresholds(self) -> np.ndarray:
+        self.friction.nodal = self.U.reshape(-1, self.friction.d)
+        try:
+            return self.friction.evaluate()["tau"]
+        finally:
+            self.friction.nodal = None
+
+    def sets(self) -> tuple[np.ndarray, ...]:
+        return _plain_state(self.friction, self.U)
+
+    def settle(self) -> None:
+        return None
 
 
 def solve_condensed(
@@ -231,43 +262,14 @@ def solve_condensed(
     record: Callable[[NewtonTrace], None] = lambda trace: None,
     discard: Callable[[int], None] = lambda steps: None,
 ) -> np.ndarray:
-    """U = U_L − M λ(U) from ``start``: the Newton on the law (Tresca: with the exact line search on its convex
-    energy; a failure raises ConvergenceError), and for Coulomb, should it not converge in ``LAW_STEPS``, the fixed
-    point on the thresholds (each a convex problem): as soon as two successive iterates of it have the same contact
-    and stick/slip sets, the Newton on the law from there (``LAW_STEPS``; the fixed point goes on should it fail),
-    else until the thresholds settle, and the Newton on the law from there.  ``record`` gets each converged Newton's
-    trace, ``discard`` the steps of each that did not converge."""
-    friction = law.friction
-    coulomb = friction.law.law == "coulomb"
-    steps = min(max_steps, LAW_STEPS) if coulomb else max_steps
-    try:
-        return _newton(law, start, U_L, steps, not coulomb, record, discard)
-    except ConvergenceError:
-        if not coulomb:
-            raise
-    U, previous = start, None
-    for _ in range(FIXED_POINT_STEPS):
-        friction.nodal = U.reshape(-1, friction.d)
-        tau = friction.evaluate()["tau"]
-        friction.nodal, friction.frozen = None, tau
-        try:
-            U = _newton(law, U, U_L, max_steps, True, record, discard)
-        finally:
-            friction.frozen = None
-        friction.nodal = U.reshape(-1, friction.d)
-        change = np.max(np.abs(friction.evaluate()["tau"] - tau), initial=0.0)
-        friction.nodal = None
-        if change <= FIXED_POINT_TOL * np.max(tau, initial=0.0):
-            break
-        state = _plain_state(friction, U)
-        if previous is not None and all(np.array_equal(a, b) for a, b in zip(state, previous)):
-            try:  # the sets have settled: the law's own Newton finds the thresholds with them
-                return _newton(law, U, U_L, min(max_steps, LAW_STEPS), False, record, discard)
-            except ConvergenceError:
-                pass
-        previous = state
-    try:  # the law's own Newton settles the state exactly
-        U = _newton(law, U, U_L, max_steps, False, record, discard)
-    except ConvergenceError:
-        pass
-    return U
+    """U = U_L − M λ(U) from ``start`` (``fem.friction_strategy.solve_frictional``): the Newton on the law (Tresca:
+    with the exact line search on its convex energy; a failure raises ConvergenceError) linearized first at the
+    committed state (``NodalFriction.predicted_state``, when there is one) and, should that not converge, at the
+    trial state; for Coulomb, should neither converge in ``LAW_STEPS``, the fixed point on the thresholds (each a
+    convex problem): as soon as two successive iterates of it have the same contact and stick/slip sets, the Newton
+    on the law from there (``LAW_STEPS``; the fixed point goes on should it fail), else until the thresholds
+    settle, and the Newton on the law from there.  ``record`` gets each converged Newton's trace, ``discard`` the
+    steps of each that did not converge."""
+    solve = _CondensedSolve(law, U_L, start, max_steps, record, discard)
+    solve_frictional(solve, predict=True, trial_steps=LAW_STEPS, handover=True)
+    return solve.U

@@ -30,6 +30,7 @@ from petsc4py import PETSc
 
 from fenics_contact.errors import ConvergenceError
 from fenics_contact.fem.contact import NewtonHistory, profile_order
+from fenics_contact.fem.friction_strategy import solve_frictional
 from fenics_contact.fem.newton import (
     Advance,
     Check,
@@ -134,6 +135,9 @@ class NodalFriction:
         self.nodal: np.ndarray | None = None
         #: the law evaluated where the Newton last linearized (``linearize``), or None
         self.linearized: dict | None = None
+        #: the state (codes, slip directions) at the last committed load step, or None (``commit``): the state the
+        #: condensed Newton of the next load step linearizes at first (``predicted_state``)
+        self.committed: tuple[np.ndarray, np.ndarray] | None = None
 
     # -- the law at the current iterate ------------------------------------------------------------------
     def _geometry(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -177,8 +181,12 @@ class NodalFriction:
         trial traction at the current u: a node sticks where |z| ≤ τ and slips along z/|z| otherwise.  The
         primal–dual active-set rule with the constant c = β/δ_t, β = min(1, δ_t K_pp/w_p) (K_pp the node's
         elastic stiffness): β = 1 would be the trial state alone, whose stick band |P r| ≤ τδ_t is too narrow for
-        a Newton iterate to land in.  A state that reproduces itself satisfies the law.  ``plain``: the state of
-        u itself (β = 1), the generalized Hessian of a frozen-threshold energy.
+        a Newton iterate to land in.  A node that slipped in the state linearized at and whose z turns against
+        that slip direction (z·n̂ < 0) sticks instead: its traction passes through the stick disc on the way, and
+        the slip state, whose tangential stiffness is zero in 2D, would carry it across to the other side in one
+        full step (the Coulomb Newton then cycles between slip directions).  A state that reproduces itself
+        satisfies the law, with the reversal rule as without it (it only changes a node that slipped into one that
+        sticks).  ``plain``: the state of u itself (β = 1), the generalized Hessian of a frozen-threshold energy.
         """
         if plain:
             keep, self.forced = self.forced, None
@@ -194,7 +202,25 @@ class NodalFriction:
         size = np.linalg.norm(z, axis=1)
         tau = e["tau"]
         codes = np.where(tau > 0.0, np.where(size <= tau, 1, 2), 0).astype(np.int8)
-        return codes, z / np.where(size > 0.0, size, 1.0)[:, None]
+        direction = z / np.where(size > 0.0, size, 1.0)[:, None]
+        if not plain and self.forced is not None and self.forced[0].shape == codes.shape:
+            was, along = self.forced
+            codes[(codes == 2) & (was == 2) & (np.einsum("ij,ij->i", direction, along) < 0.0)] = 1
+        return codes, direction
+
+    @staticmethod
+    def state_of(e: dict) -> tuple[np.ndarray, np.ndarray]:
+        """The state (codes: 0 no traction, 1 stick, 2 slip; slip directions) of the evaluated law ``e``."""
+        return np.where(e["stick"], 1, np.where(e["slip"], 2, 0)).astype(np.int8), e["direction"].copy()
+
+    def predicted_state(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """The state the condensed Newton of a load step linearizes at first (``fem.condensed_friction``): the last
+        committed step's, or None (none committed yet).  Dragged on, most nodes keep their state; the trial state of
+        the new motion would have them all slip along it, and the Newton from there wanders through the slip states
+        of the heterogeneous Γ_C."""
+        if self.committed is None or self.committed[0].shape != (self.nodes.size,):
+            return None
+        return self.committed[0].copy(), self.committed[1].copy()
 
     def linearize(self, e: dict) -> None:
         """Keep the law ``e`` evaluated at the point the Newton linearizes at (its Jacobian's): in 3D the next
@@ -295,6 +321,7 @@ class NodalFriction:
         """End the load step at the current (converged) u: move the anchors by the slip, add its dissipation
         Σ w_p t_p·(a_p − a_p^new) to ``dissipation``; returns the step's (collective)."""
         e = self.evaluate()
+        self.committed = self.state_of(e)
         change = (e["t"] - e["t_trial"]) / self.k_t  # a_new − a: zero where the node sticks
         local = float(np.sum(e["w"] * np.einsum("ij,ij->i", e["t"], -change)))
         self.anchor += change
@@ -322,13 +349,13 @@ class _FrictionalSystem:
     Hessian of ψ: it descends); ψ falls at every step, so no state recurs.  Without it (Coulomb) full steps until a
     state recurs, then a backtracking line search on ‖F‖ (Armijo)."""
 
-    def __init__(self, sub, *, energy: bool = False) -> None:
+    def __init__(self, sub, *, energy: bool = False, state=None) -> None:
         self.sub, self.friction, self.energy = sub, sub.friction, energy
         self._norm = np.inf
         self._negligible = False
         self._full = True  #: the last step was the full step of the state rule (its next state is ``_next``)
         self.friction.forced = None
-        self.friction.forced = self.friction.next_state()
+        self.friction.forced = self.friction.next_state() if state is None else state
 
     def key(self, state) -> np.ndarray:
         """The set of all ranks (so that every rank sees the same sets recur)."""
@@ -419,23 +446,19 @@ class _FrictionalSystem:
         return Check(final, scale, self.sub._residual())
 
 
-#: thresholds' fixed-point iterations of ``frictional_newton`` at most, and their relative tolerance
-FIXED_POINT_STEPS = 200
-FIXED_POINT_TOL = 1.0e-12
-
-
 #: steps of a convex energy's Newton (Tresca, frozen thresholds) at least: the energy falls at every step, so it
-#: converges, but in 3D slowly (71 steps on the channel cube dragged with Tresca, ``docs/limits.md``)
+#: converges, but in 3D slowly (73 steps on the channel cube dragged with Tresca, ``docs/limits.md``)
 ENERGY_STEPS = 200
 
 
-def _newton(sub, *, refinements: int, energy: bool = False):
-    system = _FrictionalSystem(sub, energy=energy)
+def _newton(sub, *, refinements: int, energy: bool = False, state=None, max_steps: int | None = None):
+    system = _FrictionalSystem(sub, energy=energy, state=state)
+    steps = sub.newton.max_iterations if max_steps is None else max_steps
     return semismooth_newton_loop(
         system,
         system.key(sub.friction.forced),
         name=sub.prefix.rstrip("_"),
-        max_steps=max(sub.newton.max_iterations, ENERGY_STEPS) if energy else sub.newton.max_iterations,
+        max_steps=max(steps, ENERGY_STEPS) if energy else steps,
         line_search="always" if energy else "on-cycle",
         rtol=sub.newton.rtol,
         atol=sub.newton.atol,
@@ -444,66 +467,64 @@ def _newton(sub, *, refinements: int, energy: bool = False):
     )
 
 
-def _fixed_point(sub, *, refinements: int) -> NewtonHistory:
-    """The thresholds by fixed point: τ frozen at the law's value for the current u, the problem with frozen τ
-    (a convex energy: the semismooth Newton with its exact line search) solved, until τ stops changing; then
-    the residual check of the law itself."""
-    friction, history = sub.friction, NewtonHistory()
-    for _ in range(FIXED_POINT_STEPS):
-        tau = friction.evaluate()["tau"]
-        friction.frozen = tau
+class _SubproblemSolve:
+    """A frictional ``PrimalSubproblem`` as a ``fem.friction_strategy.FrictionalSolve``: the converged Newtons'
+    traces in ``history``; the fixed point's iterate is accepted when it passes the subproblem's residual check."""
+
+    def __init__(self, sub, refinements: int) -> None:
+        self.sub, self.refinements = sub, refinements
+        self.friction, self.comm = sub.friction, sub.mesh.comm
+        self.history = NewtonHistory()
+
+    def newton(self, *, energy: bool, state, max_steps: int | None) -> None:
+        sub = self.sub
+        steps = sub.newton.max_iterations if max_steps is None else min(sub.newton.max_iterations, max_steps)
+        sub._factorized_set = None  # (a factorization of the same sets with other thresholds is not this one's)
         try:
-            trace = _newton(sub, refinements=refinements, energy=True)
+            trace = _newton(sub, refinements=self.refinements, energy=energy, state=state, max_steps=steps)
+        except ConvergenceError as error:
+            log.info("%s: %s", sub.prefix.rstrip("_"), error)
+            raise
         finally:
-            friction.frozen = None
-        history.residuals += trace.residuals
-        history.active_sizes += trace.active_sizes
-        history.factorizations += trace.factorizations
-        change = np.max(np.abs(friction.evaluate()["tau"] - tau), initial=0.0)
-        size = np.max(tau, initial=0.0)
-        change, size = (sub.mesh.comm.allreduce(v, op=MPI.MAX) for v in (change, size))
-        if change <= FIXED_POINT_TOL * size:
-            break
-    # the Newton on the law itself from there: it settles the state exactly (the fixed point ends at 1e-12)
-    reached = sub.u.x.array.copy()
-    sub._factorized_set = None
-    try:
-        tail = _newton(sub, refinements=refinements)
-        history.residuals += tail.residuals
-        history.active_sizes += tail.active_sizes
-        history.factorizations += tail.factorizations
-        return history
-    except ConvergenceError:
-        sub.u.x.array[:] = reached
-    finally:
-        sub.friction.forced = None
-    sub._factorize()  # the law's own Jacobian at the solution (the interface Newton's Ω₂ response reads it)
-    sub._factorized_set = None
-    final, scale = sub.residual_check()
-    if not (np.isfinite(final) and final <= sub.newton.rtol * scale + sub.newton.atol):
-        raise ConvergenceError(
-            f"{sub.prefix.rstrip('_')}: the friction thresholds' fixed point ended with the residual {final:.3e} "
-            f"above {sub.newton.rtol:g} x the size of its terms ({scale:.3e})"
-        )
-    history.residuals.append(final)
-    return history
+            sub.friction.forced = None
+        self.history.residuals += trace.residuals
+        self.history.active_sizes += trace.active_sizes
+        self.history.factorizations += trace.factorizations
+
+    def save(self) -> np.ndarray:
+        return self.sub.u.x.array.copy()
+
+    def restore(self, saved: np.ndarray) -> None:
+        self.sub.u.x.array[:] = saved
+        self.sub._factorized_set = None
+
+    def thresholds(self) -> np.ndarray:
+        return self.friction.evaluate()["tau"]
+
+    def sets(self) -> tuple[np.ndarray, ...]:
+        e = self.friction.evaluate()
+        return self.sub._active_set(), self.friction.key(self.friction.state_of(e))
+
+    def settle(self) -> None:
+        sub = self.sub
+        sub._factorize()  # the law's own Jacobian at the solution (the interface Newton's Ω₂ response reads it)
+        sub._factorized_set = None
+        final, scale = sub.residual_check()
+        if not (np.isfinite(final) and final <= sub.newton.rtol * scale + sub.newton.atol):
+            raise ConvergenceError(
+                f"{sub.prefix.rstrip('_')}: the friction thresholds' fixed point ended with the residual {final:.3e} "
+                f"above {sub.newton.rtol:g} x the size of its terms ({scale:.3e})"
+            )
+        self.history.residuals.append(final)
 
 
 def frictional_newton(sub, *, refinements: int) -> NewtonHistory:
-    """Solve a frictional ``PrimalSubproblem``: the semismooth Newton on the law itself
-    (``fem.newton.semismooth_newton_loop``; full steps until a state recurs, then a backtracking line search on
-    ‖F‖; ``refinements`` steps after a settled state whose residual misses the check: iterative refinement, or
-    the Newton steps of a 3D slip), and should it not converge (slip fronts cycling at high contrast), the
-    fixed point on the thresholds from the same start (``_fixed_point``: each step a convex problem)."""
-    start = sub.u.x.array.copy()
-    try:
-        # Tresca: the gradient of a convex energy (the exact line search globalizes); Coulomb: the law's Newton
-        trace = _newton(sub, refinements=refinements, energy=sub.friction.law.law == "tresca")
-        return NewtonHistory(trace.residuals, trace.active_sizes, trace.factorizations)
-    except ConvergenceError as error:
-        log.info("%s: %s; the fixed point on the friction thresholds instead", sub.prefix.rstrip("_"), error)
-        sub.u.x.array[:] = start
-        sub._factorized_set = None
-        return _fixed_point(sub, refinements=refinements)
-    finally:
-        sub.friction.forced = None
+    """Solve a frictional ``PrimalSubproblem`` (``fem.friction_strategy.solve_frictional``): the semismooth Newton
+    on the law itself (``fem.newton.semismooth_newton_loop``; full steps until a state recurs, then a backtracking
+    line search on ‖F‖; ``refinements`` steps after a settled state whose residual misses the check: iterative
+    refinement, or the Newton steps of a 3D slip) from the trial state, and should it not converge (slip fronts
+    cycling at high contrast), the fixed point on the thresholds (each step a convex problem) until they settle,
+    then the Newton on the law from there."""
+    solve = _SubproblemSolve(sub, refinements)
+    solve_frictional(solve, predict=False, trial_steps=None, handover=False)
+    return solve.history

@@ -31,7 +31,8 @@ import logging
 import numpy as np
 
 from fenics_contact.errors import ConvergenceError
-from fenics_contact.fem.friction import FIXED_POINT_STEPS, FIXED_POINT_TOL, FrictionProfile
+from fenics_contact.fem.friction import FrictionProfile
+from fenics_contact.fem.friction_strategy import FIXED_POINT_STEPS, FIXED_POINT_TOL
 from fenics_contact.fem.mixed_assembly import dot, norm
 from fenics_contact.fem.mixed_newton import MixedNewtonHistory, run_mixed_newton
 from fenics_contact.fem.mixed_traces import tangent_of

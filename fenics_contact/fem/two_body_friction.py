@@ -28,7 +28,8 @@ from mpi4py import MPI
 from fenics_contact.errors import ConvergenceError, InputError
 from fenics_contact.fem.condensed_friction import nodal_forces
 from fenics_contact.fem.contact import NewtonHistory, NewtonOptions, profile_order
-from fenics_contact.fem.friction import FIXED_POINT_STEPS, FIXED_POINT_TOL, FrictionProfile, NodalFriction, _tangent_2d
+from fenics_contact.fem.friction import FrictionProfile, NodalFriction, _tangent_2d
+from fenics_contact.fem.friction_strategy import solve_frictional
 from fenics_contact.fem.linalg import SparseFactor
 from fenics_contact.fem.mortar import ContactQuadrature
 from fenics_contact.fem.newton import Advance, Check, Direction, StepState, exact_step, semismooth_newton_loop
@@ -61,6 +62,7 @@ class PairFriction(NodalFriction):
             )
         self.stiffness, self.motion = np.asarray(stiffness, dtype=np.float64), np.zeros(d)
         self.dissipation, self.forced, self.frozen, self.nodal, self.linearized = 0.0, None, None, None, None
+        self.committed = None
 
     def _geometry(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         return self._nodal_geometry
@@ -127,10 +129,10 @@ class FrictionalTwoBodySystem(TwoBodySystem):
         self.at(u)
         return self.friction.next_state(plain=self.energy)
 
-    def start(self) -> np.ndarray:
-        """Linearize at the state of the current u; the set to start the Newton loop with."""
+    def start(self, state=None) -> np.ndarray:
+        """Linearize at ``state`` (None: the state rule's at the current u); the set to start the Newton loop with."""
         self.friction.forced = None
-        self.friction.forced = self.state(self.u)
+        self.friction.forced = self.state(self.u) if state is None else state
         self._key_factorized = None
         return self.key(self.friction.forced)
 
@@ -221,14 +223,14 @@ class FrictionalTwoBodySystem(TwoBodySystem):
         return self.friction.commit()
 
 
-def _newton(system: FrictionalTwoBodySystem, newton: NewtonOptions, refinements: int, *, energy: bool):
+def _newton(system: FrictionalTwoBodySystem, newton: NewtonOptions, refinements: int, *, energy: bool, state, steps):
     system.energy = energy
     try:
         return semismooth_newton_loop(
             system,
-            system.start(),
+            system.start(state),
             name="frictional two-body contact",
-            max_steps=newton.max_iterations,
+            max_steps=steps,
             line_search="on-cycle",
             rtol=newton.rtol,
             atol=newton.atol,
@@ -239,48 +241,56 @@ def _newton(system: FrictionalTwoBodySystem, newton: NewtonOptions, refinements:
         system.friction.forced = None
 
 
-def _record(history: NewtonHistory, trace) -> None:
-    history.residuals += trace.residuals
-    history.active_sizes += trace.active_sizes
-    history.factorizations += trace.factorizations
+class _PairSolve:
+    """A ``FrictionalTwoBodySystem`` as a ``fem.friction_strategy.FrictionalSolve``: the converged Newtons' traces
+    in ``history``; the fixed point's iterate is accepted when it passes the system's residual check."""
+
+    comm = MPI.COMM_SELF
+
+    def __init__(self, system: FrictionalTwoBodySystem, newton: NewtonOptions, refinements: int) -> None:
+        self.system, self.options, self.refinements = system, newton, refinements
+        self.friction, self.history = system.friction, NewtonHistory()
+
+    def newton(self, *, energy: bool, state, max_steps: int | None) -> None:
+        limit = self.options.max_iterations
+        steps = limit if max_steps is None else min(limit, max_steps)
+        trace = _newton(self.system, self.options, self.refinements, energy=energy, state=state, steps=steps)
+        self.history.residuals += trace.residuals
+        self.history.active_sizes += trace.active_sizes
+        self.history.factorizations += trace.factorizations
+
+    def save(self) -> np.ndarray:
+        return self.system.u.copy()
+
+    def restore(self, saved: np.ndarray) -> None:
+        self.system.u[:] = saved
+
+    def thresholds(self) -> np.ndarray:
+        self.system.at(self.system.u)
+        return self.friction.evaluate()["tau"]
+
+    def sets(self) -> tuple[np.ndarray, ...]:
+        self.system.at(self.system.u)
+        e = self.friction.evaluate()
+        return e["active"], self.friction.key(self.friction.state_of(e))
+
+    def settle(self) -> None:
+        check = self.system.check()
+        newton = self.options
+        if not (np.isfinite(check.residual) and check.residual <= newton.rtol * check.scale + newton.atol):
+            raise ConvergenceError(
+                f"frictional two-body contact: the thresholds' fixed point ended with the residual "
+                f"{check.residual:.3e} above {newton.rtol:g} x the size of its terms ({check.scale:.3e})"
+            )
+        self.history.residuals.append(check.recorded)
 
 
 def solve_frictional_pair(system: FrictionalTwoBodySystem, newton: NewtonOptions, refinements: int) -> NewtonHistory:
-    """Solve the frictional two-body system from its current u (``fem.friction.frictional_newton``'s strategy):
-    the Newton on the law (Tresca: with the exact line search on its convex energy); should it not converge, the
-    fixed point on the thresholds (each step a convex problem, τ frozen) from the same start, then the Newton on
-    the law from there (or the fixed point's result when its residual passes the check)."""
-    history = NewtonHistory()
-    start = system.u.copy()
-    friction = system.friction
-    try:
-        _record(history, _newton(system, newton, refinements, energy=friction.law.law == "tresca"))
-        return history
-    except ConvergenceError:
-        system.u[:] = start
-    for _ in range(FIXED_POINT_STEPS):
-        system.at(system.u)
-        tau = friction.evaluate()["tau"]
-        friction.frozen = tau
-        try:
-            _record(history, _newton(system, newton, refinements, energy=True))
-        finally:
-            friction.frozen = None
-        system.at(system.u)
-        change = np.max(np.abs(friction.evaluate()["tau"] - tau), initial=0.0)
-        if change <= FIXED_POINT_TOL * np.max(tau, initial=0.0):
-            break
-    reached = system.u.copy()
-    try:
-        _record(history, _newton(system, newton, refinements, energy=False))
-        return history
-    except ConvergenceError:
-        system.u[:] = reached
-    check = system.check()
-    if not (np.isfinite(check.residual) and check.residual <= newton.rtol * check.scale + newton.atol):
-        raise ConvergenceError(
-            f"frictional two-body contact: the thresholds' fixed point ended with the residual {check.residual:.3e} "
-            f"above {newton.rtol:g} x the size of its terms ({check.scale:.3e})"
-        )
-    history.residuals.append(check.recorded)
-    return history
+    """Solve the frictional two-body system from its current u (``fem.friction_strategy.solve_frictional``, as
+    ``fem.friction.frictional_newton``): the Newton on the law (Tresca: with the exact line search on its convex
+    energy) from the trial state; should it not converge, the fixed point on the
+    thresholds (each step a convex problem, τ frozen) until they settle, then the Newton on the law from there (or
+    the fixed point's result when its residual passes the check)."""
+    solve = _PairSolve(system, newton, refinements)
+    solve_frictional(solve, predict=False, trial_steps=None, handover=False)
+    return solve.history

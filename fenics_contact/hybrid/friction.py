@@ -9,8 +9,9 @@ no contact node active, ``hybrid.condensation``) is condensed onto all d compone
 M (dN × dN) the compliance of the glued problem at the N Γ_C nodes, U_L their displacement under the load with
 no contact force.  ``ComponentPart`` is Ω₂ with one contact column per node and component; ``FrictionalCondensation``
 solves the nodal law on U by the semismooth Newton loop of the monolithic frictional solve
-(``fem.condensed_friction.solve_condensed``: ``fem.friction``'s state rule, full steps until a state recurs, then
-a line search; in 3D a state is settled once the step is negligible, the slip direction varying within it),
+(``fem.condensed_friction.solve_condensed``: ``fem.friction``'s state rule from the committed state, full steps
+until a state recurs, then a line search; in 3D a state is settled once the step is negligible, the slip direction
+varying within it),
 dense, with the fixed point on the Coulomb thresholds should it not converge, then returns the
 interface data as ``CondensedInterface.solve`` does.  With Algorithm 1 the condensation is exact and the dense
 Newton solves the monolithic frictional equations (the monolithic Newton runs its fixed point on the thresholds
@@ -122,6 +123,10 @@ class _Gathered(NodalFriction):
         self.stiffness, self.motion = gather(friction.stiffness), friction.motion.copy()
         self.nodes = np.arange(self.anchor.shape[0])
         self.dissipation, self.forced, self.frozen, self.nodal, self.linearized = 0.0, None, None, None, None
+        committed = comm.allreduce(friction.committed is not None, op=MPI.LAND)
+        self.committed = (
+            (gather(friction.committed[0]).astype(np.int8), gather(friction.committed[1], d)) if committed else None
+        )
 
     def _geometry(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         return self._nodal_geometry

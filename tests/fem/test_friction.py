@@ -178,8 +178,10 @@ def test_3d_state_rule_tells_a_node_turning_back_to_stick():
     """A 3D node that slipped along +y at the linearization point and whose trial traction turns back to −3τ ŷ is
     told to stick (z = (1 − β) t_lin + β t_trial with t_lin the linearized slip traction τ ŷ: |z| = τ|1 − 4β| ≤ τ
     at β = 1/4), as the 2D rule with its kept sign does; the traction τ t_trial/|t_trial| of the current direction
-    would give |z| = τ(1 + 2β) > τ (slip).  A node whose trial keeps its direction keeps slipping, and β = 1 is the
-    trial state alone (|t_trial| = 3τ > τ: slip)."""
+    would give |z| = τ(1 + 2β) > τ (slip).  A node whose trial keeps its direction keeps slipping.  At β = 1 (the
+    trial state alone) z = t_trial = −3τ ŷ lies outside the disc but against the slip linearized at: the node sticks
+    (a slip one way does not turn into a slip the other way in one step), and slips on where the trial keeps on."""
     assert _OneNode(stiffness=0.25).state_at(3.0) == 1  # t_trial = (0, −3, 0): turned back: stick
     assert _OneNode(stiffness=0.25).state_at(-3.0) == 2  # t_trial = (0, 3, 0): slips on
-    assert _OneNode(stiffness=1.0).state_at(3.0) == 2
+    assert _OneNode(stiffness=1.0).state_at(3.0) == 1
+    assert _OneNode(stiffness=1.0).state_at(-3.0) == 2

@@ -27,8 +27,9 @@ def test_algorithm_1_is_the_monolithic_frictional_solution_in_3d(contrast):
     """Coulomb μ = 0.3 on the 6 × 6 × 6 channel mesh: at every step Algorithm 1's glued displacement equals the
     monolithic one to 1e-8 relative, with the same forces (normal and the tangential vector), stick/slip sets and
     dissipation.  The interface Newton runs the condensed frictional system and applies T at most 3 times per load
-    step, with at most 2 Newton steps on the interface data after it (measured 1–2 and 0–1; the dense contact
-    Newton on the 126 Γ_C displacement components took 22–53 steps, a first Newton on the law cut at
+    step, with at most 2 Newton steps on the interface data after it (measured 1–2 and 0–1).  The dense contact
+    Newton on the 126 Γ_C displacement components takes at most 8 steps per drag step, starting from the committed
+    state (measured 7–8), and 31–32 for the first press (no state to start from: a first Newton on the law cut at
     ``LAW_STEPS`` and the thresholds' fixed point included)."""
     wall = Plane(point=(1.0, 0.5, 0.5), normal=(-1.0, 0.0, 0.0))
     model = channels_3d(E_high=contrast).on(channels_3d_mesh(6))
@@ -44,7 +45,8 @@ def test_algorithm_1_is_the_monolithic_frictional_solution_in_3d(contrast):
         assert np.array_equal(a.friction.stick, b.friction.stick) and np.array_equal(a.friction.slip, b.friction.slip)
         assert abs(a.dissipation - b.dissipation) <= 1e-8 * mono.dissipation
         assert b.iterations <= 3 and b.interface_newton_steps - b.contact_newton_steps <= 2
-        assert b.contact_newton_steps <= 60
+    assert alg1.steps[0].contact_newton_steps <= 40
+    assert all(step.contact_newton_steps <= 8 for step in alg1.steps[1:])
     assert np.linalg.norm(mono.steps[-1].tangential_force) > 0.1 * mono.steps[-1].normal_force  # a real drag
     assert mono.steps[-1].slip_nodes > mono.steps[1].slip_nodes  # the drag spreads the slip
     assert mono.dissipation > 0.0
@@ -99,7 +101,8 @@ def test_algorithm_3_with_one_layer_along_the_frictional_path_in_3d(channel_cube
 def test_tresca_in_3d():
     """Tresca (s = 0.05) on the channel cube at contrast 1e3, pressed and dragged: the convex energy's Newton
     (``fem.friction``: the primal–dual full step while it lowers the energy, else the exact line search) converges
-    with ``primal-monolithic`` (measured 10, 71, 70, 35 steps) and Algorithm 1 equals it to 1e-8 with the same
+    with ``primal-monolithic`` (measured 12, 64, 73, 29 steps; Algorithm 1's dense solve from the committed state
+    12, 8, 8, 65) and Algorithm 1 equals it to 1e-8 with the same
     stick/slip sets; no node carries more than s, the slipping ones s, and every step dissipates."""
     wall = Plane(point=(1.0, 0.5, 0.5), normal=(-1.0, 0.0, 0.0))
     problem = (

@@ -107,7 +107,6 @@ def test_sliding_block_tresca(method):
     assert 0.0 < ratio - 1.0 < 1e-3, ratio
 
 
-@pytest.mark.slow
 def test_the_corner_share_of_the_normal_force():
     """The pressure at the corner where σ_t is fixed to 0 grows like a corner singularity, p ~ h^(λ−1), so its share
     w p/N (w = h/12) of the normal force, the sliding block's tangential deficit 1 − T/(μN), falls like h^λ:

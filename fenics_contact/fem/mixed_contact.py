@@ -21,6 +21,7 @@ of them in the same (``profile_order``) order; Q has this rank's block of rows.
 import numpy as np
 import scipy.sparse as sp
 from dolfinx import mesh as dmesh
+from mpi4py import MPI
 
 from fenics_contact.fem.contact import ContactProfile, profile_order
 from fenics_contact.fem.contact_boundary import obstacle_at_nodes
@@ -54,8 +55,9 @@ class MixedContactProfile(ContactProfile):
     def active(self) -> np.ndarray:
         """Points in contact: σ_c < 0 (compressive: the penalty is inactive and u_c = g).
 
-        (σ_c = 0 up to round-off, 1e−12 of max |σ_c|, only where an essential condition
-        forces it, e.g. a Γ_C end next to a traction-free side: not contact.)
+        (σ_c = 0 exactly where an essential condition fixes it, e.g. at a Γ_C end next to a traction-free
+        side in line with Γ_C (``_drop_fixed_rows``): not contact; values within 1e−12 of max |σ_c| of 0
+        count as 0.)
         """
         scale = float(np.max(np.abs(self.sigma_c), initial=0.0))
         return self.sigma_c < -1e-12 * scale
@@ -94,13 +96,38 @@ def merge_contact_nodes(comm, pts, wts, normals, vertex):
     return (pts[first], merged_w[order], normals[first], vertex[first], first[mine] - start, mine_rows)
 
 
+#: a row of an evaluation matrix whose entries are all below this share of the largest entry is round-off
+FIXED_ROW_TOL = 1e-12
+
+
+def _drop_fixed_rows(comm, E: sp.csr_matrix) -> tuple[sp.csr_matrix, np.ndarray]:
+    """E with its round-off rows emptied, and which rows they are: the nodes whose value the essential conditions fix.
+
+    At a vertex where Γ_C meets a traction-free side of normal n_N, the AW vertex value σ(v) (one tensor) lies
+    in the null space of σ(v)n_N = 0.  If the side is in line with Γ_C (n_N = n), σ_c = n·σ(v)n and
+    σ_t = t·σ(v)n vanish identically; at a right-angled corner (t = ±n_N) σ_t does.  Such a row is zero up
+    to the round-off of the DG P3 tabulation and the prolongation; emptying it makes the value exactly the
+    traction lifting's (0 on a traction-free side), so no round-off pressure or shear is reported at a node
+    the contact condition cannot act on.  Every other row has entries of order one.
+    """
+    largest = comm.allreduce(float(np.max(np.abs(E.data), initial=0.0)), op=MPI.MAX)
+    row_max = np.zeros(E.shape[0])
+    rows = np.repeat(np.arange(E.shape[0]), np.diff(E.indptr))
+    np.maximum.at(row_max, rows, np.abs(E.data))
+    fixed = row_max <= FIXED_ROW_TOL * largest
+    if np.any(fixed):
+        E = (sp.diags((~fixed).astype(np.float64)) @ E).tocsr()
+    E.eliminate_zeros()
+    return E, fixed
+
+
 def _evaluation(comm, spaces: MixedSpaces, cells, X, weights, rows, block, nq: int):
     """A stress value at the contact nodes (component ``weights`` of (σ_xx, σ_xy, σ_yy)): the distributed matrix
     (canonical node rows, this rank's ``block``), this rank's rows with local and with global AW columns, and the
-    traction lifting's value (replicated)."""
+    traction lifting's value and the nodes whose value the essential conditions fix (both replicated)."""
     E_dg = stress_evaluation(spaces.dg, cells, X, weights)
     E_loc = (E_dg @ spaces.space.prolongation_for_rows(np.unique(E_dg.tocsr().indices))).tocsr()
-    E_loc.eliminate_zeros()
+    E_loc, fixed = _drop_fixed_rows(comm, E_loc)
     gi = spaces.space.global_indices
     rows_global = sp.csr_matrix(
         (E_loc.data, gi[E_loc.indices], E_loc.indptr), shape=(E_loc.shape[0], spaces.space.num_dofs)
@@ -116,7 +143,8 @@ def _evaluation(comm, spaces: MixedSpaces, cells, X, weights, rows, block, nq: i
             (spaces.n_sigma, spaces.space.num_dofs),
         )
     )
-    return E, E_loc, rows_global, gather_rows(comm, rows, E_dg @ spaces.s0, nq)
+    lifting = gather_rows(comm, rows, E_dg @ spaces.s0, nq)
+    return E, E_loc, rows_global, lifting, gather_rows(comm, rows, fixed, nq)
 
 
 class ContactNodes:
@@ -154,13 +182,16 @@ class ContactNodes:
         #: σ_c at the contact nodes (canonical order), this rank's block of rows: Q c (+ ``q0``); its rows here
         #: with local (``Q_local``) and global (``Q_rows_global``: the penalty pattern of the saddle-point matrix)
         #: AW columns; ``q0``: σ_t,c of the traction lifting (zero without tractions), replicated
-        self.Q, self.Q_local, self.Q_rows_global, self.q0 = _evaluation(
+        #: ``normal_fixed``: the nodes where the essential conditions fix σ_c (its Q row is empty), replicated
+        self.Q, self.Q_local, self.Q_rows_global, self.q0, self.normal_fixed = _evaluation(
             comm, spaces, cells, X, normal_weights(normals), rows, self.range, nq
         )
         #: with ``tangential``: σ_t = t·σn at the nodes (t = (−n_y, n_x)) alike (the friction law's rows), else None
-        self.T = self.T_local = self.T_rows_global = self.t0 = None
+        #: (``shear_fixed``: the nodes where the essential conditions fix σ_t, e.g. the right-angled corners of Γ_C
+        #: with a traction-free side, where σ_t = 0 whatever the pressure)
+        self.T = self.T_local = self.T_rows_global = self.t0 = self.shear_fixed = None
         if tangential:
-            self.T, self.T_local, self.T_rows_global, self.t0 = _evaluation(
+            self.T, self.T_local, self.T_rows_global, self.t0, self.shear_fixed = _evaluation(
                 comm, spaces, cells, X, tangential_weights(normals), rows, self.range, nq
             )
         # u_h·n at the nodes from the DG P1 displacement (one adjacent cell per node)

@@ -123,7 +123,8 @@ def slide(
 
     ``method``: any of ``methods.METHODS`` (``primal-monolithic``, ``primal``, ``primal-ms``, ``mixed-monolithic``,
     ``mixed``, ``mixed-ms``); ``options``: its options
-    (``methods.Method.options``); ``on_step(step, solver)`` after every load step.  A frictionless problem runs
+    (``methods.Method.options``) and the build's own keywords (``offline_comm=MPI.COMM_WORLD`` shares ``mixed-ms``'s
+    offline phase over the ranks, each holding the whole mesh); ``on_step(step, solver)`` after every load step.  A frictionless problem runs
     the same path (no tangential force, no dissipation).
 
     Raises:

@@ -83,9 +83,9 @@ def _same_path(a: np.ndarray, b: np.ndarray, dim: int, rtol: float) -> None:
 @pytest.mark.parametrize("method", ["primal-ms", "mixed-ms"])
 def test_multiscale_friction_path_matches_serial_and_monolithic(method):
     """On 2 and 3 ranks Algorithm 3 (its patches shared out, each rank some) and Algorithm 4 (its offline phase
-    shared out) give the serial path per step to 1e-10 of the normal force (measured ≤ 3e-11 for Algorithm 3, bit
-    for bit for Algorithm 4), the same stick/slip counts and dissipation; with patches covering Ω₁ both equal
-    their fixed point with a fine Ω₁ to 1e-8: the primal monolithic path, the mixed one on X̃_h (at contrast 1e6
+    shared out) give the serial path per step to 1e-10 of the normal force (measured 7e-11 for Algorithm 3 on 2
+    ranks, bit for bit for Algorithm 4), the same stick/slip counts and dissipation; with patches covering Ω₁ both
+    equal their fixed point with a fine Ω₁ to 1e-8: the primal monolithic path, the mixed one on X̃_h (at contrast 1e6
     Algorithm 2's split σ_tt at γ moves the forces by 1e-5 from the mixed monolithic path on X_h)."""
     serial = _serial(_path, method)
     parallel = _path(MPI.COMM_WORLD, method)

@@ -232,8 +232,10 @@ class Method:
     def iteration(
         self, values: Mapping[str, Any] | None = None, *, comm: MPI.Comm = MPI.COMM_WORLD
     ) -> IterationOptions | None:
-        """The hybrid iteration's options among ``values`` (None for a monolithic method)."""
-        return self.options(values, comm=comm).get("options") if self.hybrid else None
+        """The hybrid iteration's options among ``values`` (None for a monolithic method; the build's own keywords
+        such as ``offline_comm`` are left to ``build``)."""
+        options = {k: v for k, v in (values or {}).items() if k not in _NOT_OPTIONS}
+        return self.options(options, comm=comm).get("options") if self.hybrid else None
 
 
 #: the options of the two-body solves: monolithic (``fem.two_body``) and Algorithm 1 (``hybrid.two_body``)

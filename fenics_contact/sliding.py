@@ -122,9 +122,11 @@ def slide(
     solve each load step from the previous one and carry the friction state (``problem.law``).
 
     ``method``: any of ``methods.METHODS`` (``primal-monolithic``, ``primal``, ``primal-ms``, ``mixed-monolithic``,
-    ``mixed``, ``mixed-ms``); ``options``: its options
-    (``methods.Method.options``); ``on_step(step, solver)`` after every load step.  A frictionless problem runs
-    the same path (no tangential force, no dissipation).
+    ``mixed``, ``mixed-ms``); ``options``: its options (``methods.Method.options``) and the build's own keywords
+    (``offline_comm=MPI.COMM_WORLD`` shares ``mixed-ms``'s offline phase over the ranks, each holding the whole
+    mesh; ``split_interface=True`` for ``mixed-monolithic`` on X̃_h, Algorithm 2's fixed point);
+    ``on_step(step, solver)`` after every load step.  A frictionless problem runs the same path (no tangential force,
+    no dissipation).
 
     Raises:
         InputError: no obstacle, motions that are not finite d-vectors, a mixed method in 3D.

@@ -114,10 +114,13 @@ def _indentation_curve(
     return {"direction": direction.tolist(), "steps": rows}
 
 
-def _sliding_path(options: RunOptions, case: Case, problem: ContactProblem, out: Path, writes: bool) -> dict:
+def _sliding_path(
+    options: RunOptions, case: Case, problem: ContactProblem, out: Path, writes: bool, comm: MPI.Comm = MPI.COMM_SELF
+) -> dict:
     """The case's sliding path (``[obstacle] motion``, ``sliding.slide``): per step the forces, the stick and
     slip zones and the dissipation; each step's fields and contact written into ``out`` as ParaView series
-    (time: the step's number) by the ranks with ``writes``."""
+    (time: the step's number) by the ranks with ``writes``; ``comm``: the ranks sharing mixed-ms's offline phase
+    (each holding the whole mesh)."""
     comm = problem.comm if writes else MPI.COMM_SELF
     fields, contact = Series(out, "fields", comm), Series(out, "contact", comm)
     V = fem.functionspace(problem.cm.mesh, ("Lagrange", 1, (problem.dim,)))
@@ -141,12 +144,14 @@ def _sliding_path(options: RunOptions, case: Case, problem: ContactProblem, out:
             contact.add(float(len(written)), contact_grid(step.profile, comm))
 
     flat = options.method_options()
+    extra = {"offline_comm": comm} if mixed and get_method(options.method).multiscale else {}
     path = slide(
         problem.with_(obstacle=case.obstacle.base()),
         options.method,
         case.obstacle.motions,
         on_step=write_step,
         **flat,
+        **extra,
     )
     rows = [
         {"motion": list(map(float, s.motion))}
@@ -520,7 +525,11 @@ def _solve_and_write(
         if case and case.obstacle.steps
         else None
     )
-    sliding = _sliding_path(options, case, problem, output.path, writes) if case and case.obstacle.motions else None
+    sliding = (
+        _sliding_path(options, case, problem, output.path, writes, comm if replicated else MPI.COMM_SELF)
+        if case and case.obstacle.motions
+        else None
+    )
     contact_sub = getattr(getattr(result, "step", None), "contact", None)
     friction = getattr(contact_sub, "friction", None)
     summary = {

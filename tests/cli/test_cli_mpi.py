@@ -83,3 +83,29 @@ def test_case_load_steps_multiscale_on_two_ranks_match_serial(shared_tmp_path, m
     for s, p in zip(serial["force_indentation"]["steps"], parallel["force_indentation"]["steps"], strict=True):
         assert abs(p["force"] - s["force"]) <= 1e-9 * abs(s["force"])
         assert p["converged"] and p["transmission_residual"] < 1e-8 and p["iterations"] == s["iterations"]
+
+
+def test_mixed_ms_sliding_case_on_two_ranks_matches_serial(shared_tmp_path):
+    """A press-and-drag Coulomb case with Algorithm 4 on two ranks (each holding the whole mesh, the offline phase
+    of every load step's solver shared out): per step the serial forces, stick/slip counts and dissipation."""
+    case = shared_tmp_path / "slide.toml"
+    if MPI.COMM_WORLD.rank == 0:
+        case.write_text(
+            "[mesh]\nbuiltin = 'unit-square'\nh = 8\nH = 4\nclamped = ['left']\n[material]\nE = 1.0\nnu = 0.3\n"
+            "[obstacle]\nshape = 'plane'\npoint = [1.0, 0.0]\nnormal = [-1.0, 0.0]\n"
+            "motion = [[-0.01, 0.0], [-0.01, 0.01], [-0.01, 0.05]]\n[friction]\nlaw = 'coulomb'\nmu = 0.3\n"
+            "[run]\ntol = 1e-10\n"
+        )
+    MPI.COMM_WORLD.Barrier()
+    args = ["run", "--no-plots", "--case", str(case), "--method", "mixed-ms"]
+    code, err, serial = serial_cli(*args, "--out", str(shared_tmp_path / "serial"))
+    assert code == 0, err[-3000:]
+    assert main([*args, "--out", str(shared_tmp_path / "parallel")]) == 0
+    parallel = run_summary(shared_tmp_path / "parallel")
+    steps = zip(serial["sliding"]["steps"], parallel["sliding"]["steps"], strict=True)
+    for s, p in steps:
+        assert p["converged"] and (p["stick_nodes"], p["slip_nodes"]) == (s["stick_nodes"], s["slip_nodes"])
+        assert abs(p["normal_force"] - s["normal_force"]) <= 1e-10 * s["normal_force"]
+        assert np.allclose(p["tangential_force"], s["tangential_force"], rtol=0, atol=1e-10 * s["normal_force"])
+        assert abs(p["dissipation"] - s["dissipation"]) <= 1e-10 * max(abs(s["dissipation"]), 1e-300)
+    assert parallel["sliding"]["steps"][-1]["slip_nodes"] > 0

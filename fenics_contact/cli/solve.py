@@ -13,6 +13,7 @@ from dolfinx import fem
 from mpi4py import MPI
 
 from fenics_contact.cli.cases import _options_echo
+from fenics_contact.cli.coarse import check_case_coarse_grid, check_coarse_grid
 from fenics_contact.cli.options import RunOptions
 from fenics_contact.cli.outputs import (
     _contact_summary,
@@ -51,7 +52,6 @@ from fenics_contact.problem.models import MODELS_3D, get_model, pixel_field
 from fenics_contact.problem.models3d import MODEL_3D, channels_3d_mesh
 from fenics_contact.problem.pair_case import PairCase
 from fenics_contact.problem.problem import ContactProblem
-from fenics_contact.problem.tags import Subdomain
 from fenics_contact.problem.validation import contact_open_ends
 from fenics_contact.sliding import slide
 
@@ -241,57 +241,6 @@ def _bounding_box(cm: ContactMesh) -> tuple[float, float, float, float]:
     return bounding_box(cm.mesh)  # (an elementwise allreduce of arrays failed under MPI)
 
 
-def _check_coarse_grid(cm: ContactMesh, options: RunOptions) -> None:
-    """The multiscale methods need the coarse grid of squares of side H to be a union of fine cells."""
-    if cm.mesh.topology.dim == 3 and cm.H is None:
-        raise InputError(
-            f"--method {options.method} with --mesh {options.mesh}: a 3D mesh file has no coarse grid (--H sets "
-            "only the strip there); primal-ms runs in 3D on the cube of --model 4 (its coarse cubes of side 1/H) or "
-            "through the Python API on a mesh with a coarse partition (ContactMesh.coarse_cell)"
-        )
-    cells = cm.cell_tags.find(Subdomain.OMEGA1)
-    crossing = cm.comm.allreduce(int(np.count_nonzero(cm.coarse_cell[cells] < 0)), op=MPI.SUM)
-    if crossing:
-        raise InputError(
-            f"--method {options.method} with --mesh {options.mesh}: {crossing} Omega1 cells cross the "
-            f"edges of the coarse grid of squares of side 1/{options.H} over the bounding box; the "
-            "multiscale methods need a mesh that resolves it (choose --H accordingly)"
-        )
-
-
-def _check_case_coarse_grid(cm: ContactMesh, options: RunOptions, case: Case) -> None:
-    """The multiscale methods need a coarse grid that the case's mesh resolves."""
-    if cm.mesh.topology.dim == 3:
-        raise InputError(
-            f"--method {options.method}: case {case.path.name} is 3D and a 3D case has no coarse grid of cubes "
-            "(its H is the strip width); Algorithm 3 in 3D runs on --model 4 or from Python on a mesh with cubes "
-            "(fc.unit_cube(n, H=...), fc.box_mesh(..., H=...)): use --method primal for the case"
-        )
-    if cm.H is None:
-        builtin = case.mesh.kind in ("hertz-block", "bulged-square")
-        raise InputError(
-            f"--method {options.method}: the mesh of case {case.path.name} ({case.mesh.kind}) has no "
-            "coarse grid; the multiscale methods need the unit-square mesh or a mesh file with mesh.H "
-            "(a coarse grid of squares of side 1/H that the mesh resolves)"
-            + (
-                f" — the built-in {case.mesh.kind} mesh takes no mesh.H (its graded cells cross any "
-                "such grid): use --method primal or mixed on it, or a mesh file of your own that a "
-                "coarse grid resolves (mesh.H) or that carries its own coarse partition (README, 'Any "
-                "domain')"
-                if builtin
-                else ""
-            )
-        )
-    cells = cm.cell_tags.find(Subdomain.OMEGA1)
-    crossing = cm.comm.allreduce(int(np.count_nonzero(cm.coarse_cell[cells] < 0)), op=MPI.SUM)
-    if crossing:
-        raise InputError(
-            f"--method {options.method} with case {case.path.name}: {crossing} Omega1 cells cross the "
-            f"edges of the coarse grid of squares of side {cm.H:g} from the origin; the multiscale "
-            "methods need a mesh that resolves it (choose mesh.H accordingly)"
-        )
-
-
 class _Outcome(NamedTuple):
     """What a method family hands back to ``run``: its result, summary entries and output writer."""
 
@@ -478,13 +427,13 @@ def _solve_and_write(
         if pixels is not None and options.mesh is not None:
             check_pixel_modulus(pixels, _bounding_box(cm), f"--E-map {options.E_map}")
         if options.mesh is not None and options.method.endswith("-ms"):
-            _check_coarse_grid(cm, options)
+            check_coarse_grid(cm, options)
     else:
         case_mesh = case.build_mesh(mesh_comm)
         cm = case_mesh.cm
         model = case.problem(case_mesh)
         if options.method.endswith("-ms"):
-            _check_case_coarse_grid(cm, options, case)
+            check_case_coarse_grid(cm, options, case)
     if case is None and cm.mesh.topology.dim == 3 and options.model not in MODELS_3D:
         raise InputError(
             f"--mesh {options.mesh} is a tetrahedral (3D) mesh and the built-in model {options.model} is planar: "

@@ -52,6 +52,7 @@ from fenics_contact.problem.models import MODELS_3D, get_model, pixel_field
 from fenics_contact.problem.models3d import MODEL_3D, channels_3d_mesh
 from fenics_contact.problem.pair_case import PairCase
 from fenics_contact.problem.problem import ContactProblem
+from fenics_contact.problem.strip import omega1_coarse_cells
 from fenics_contact.problem.validation import contact_open_ends
 from fenics_contact.sliding import slide
 
@@ -220,15 +221,19 @@ def _solid(path: Path, comm: MPI.Comm) -> bool:
 
 
 def _mesh(options: RunOptions, comm: MPI.Comm = MPI.COMM_WORLD) -> ContactMesh:
+    multiscale = CATALOGUE[options.method].multiscale
     if options.mesh is not None:
-        # (a 3D mesh has no coarse grid: its strip, when the file has none, is the band of ``problem.strip``)
-        planar_grid = not options.coarse_groups and not _solid(options.mesh, comm)
-        return read_mesh(options.mesh, H=1.0 / options.H if planar_grid else None, comm=comm)
+        # (a 3D mesh takes 1/H for the multiscale methods only, the side of its coarse cubes: the strip of a file
+        # without one is otherwise the band of ``problem.strip``)
+        grid = not options.coarse_groups and (multiscale or not _solid(options.mesh, comm))
+        return read_mesh(options.mesh, H=1.0 / options.H if grid else None, comm=comm)
     if options.model == MODEL_3D:  # the multiscale methods' coarse cubes: side 1/H, as the strip
-        coarse = 1.0 / options.H if CATALOGUE[options.method].multiscale else None
-        return channels_3d_mesh(options.n, strip=1.0 / options.H, H=coarse, comm=comm)
+        return channels_3d_mesh(options.n, strip=1.0 / options.H, H=1.0 / options.H if multiscale else None, comm=comm)
     if options.model == MODEL_COMPOSITE_3D:
-        return fibre_block_3d_mesh(options.n, strip=1.0 / options.H, comm=comm)
+        cm = fibre_block_3d_mesh(options.n, strip=1.0 / options.H, comm=comm)
+        if multiscale:  # the cubes of side 1/H that hold the Ω₁ cells' centroids (the mesh follows the fibres)
+            cm = cm._replace(coarse_cell=omega1_coarse_cells(cm.mesh, cm.cell_tags, 1.0 / options.H))
+        return cm
     return unit_square(options.n, options.H, comm=comm)
 
 
@@ -239,6 +244,12 @@ def _replicated(options: RunOptions, comm: MPI.Comm) -> bool:
 
 def _bounding_box(cm: ContactMesh) -> tuple[float, float, float, float]:
     return bounding_box(cm.mesh)  # (an elementwise allreduce of arrays failed under MPI)
+
+
+def _series_written(out: Path, comm: MPI.Comm) -> bool:
+    """Whether ``out`` holds the fields series of load steps, as rank 0 (which writes it) sees it: the ranks decide
+    alike whether to write the run's single state (a collective write)."""
+    return comm.bcast((out / "fields.pvd").exists() if comm.rank == 0 else None, root=0)
 
 
 class _Outcome(NamedTuple):
@@ -269,7 +280,7 @@ def _run_primal(options: RunOptions, problem: ContactProblem) -> _Outcome:
         "penetration": result.profile.penetration,
         "max_tensile_sigma_c": float(np.max(result.profile.sigma_c, initial=0.0)),
         "layers": result.step.cem.layers if ms else None,
-        "nbasis": result.step.cem.nbasis if ms else None,
+        "nbasis": ("all" if result.step.cem.nbasis is None else result.step.cem.nbasis) if ms else None,
         "offline_cache": result.step.omega1.cache_status if ms else None,
         # Λ, the smallest local eigenvalue left out (it falls like μ/(λ+2μ) as ν → ½, and with inclusions)
         "spectral_gap": _finite_or_none(result.step.omega1.spectral_gap) if ms else None,
@@ -278,7 +289,7 @@ def _run_primal(options: RunOptions, problem: ContactProblem) -> _Outcome:
     }
 
     def write(out: Path) -> None:
-        if not (out / "fields.pvd").exists():  # (load steps write their own series)
+        if not _series_written(out, problem.comm):  # (load steps write their own series)
             Series(out, "fields", problem.comm).add(0.0, _field_grid(problem, result.u))
             Series(out, "contact", problem.comm).add(0.0, contact_grid(result.profile, problem.comm))
         if options.plots and problem.dim == 2:  # (figures of the plane; a 3D run has its ParaView series)
@@ -343,7 +354,7 @@ def _run_mixed(options: RunOptions, problem: ContactProblem, comm: MPI.Comm = MP
     }
 
     def write(out: Path) -> None:
-        if not (out / "fields.pvd").exists():  # (load steps write their own series)
+        if not _series_written(out, problem.comm):  # (load steps write their own series)
             Series(out, "fields", problem.comm).add(0.0, _field_grid(problem, result.u, result.sigma))
             Series(out, "contact", problem.comm).add(0.0, contact_grid(result.profile, problem.comm))
         write_vtx(out / "sigma.bp", result.sigma)
@@ -426,7 +437,7 @@ def _solve_and_write(
         cm = _mesh(options, mesh_comm)
         if pixels is not None and options.mesh is not None:
             check_pixel_modulus(pixels, _bounding_box(cm), f"--E-map {options.E_map}")
-        if options.mesh is not None and options.method.endswith("-ms"):
+        if (options.mesh is not None or options.model == MODEL_COMPOSITE_3D) and options.method.endswith("-ms"):
             check_coarse_grid(cm, options)
     else:
         case_mesh = case.build_mesh(mesh_comm)

@@ -322,6 +322,8 @@ def read_mesh(
         cm = _strip_contact_mesh(data, h=mesh_size(data.mesh), H=H, materials=overlay_groups)
     else:
         cm = _contact_mesh(data, h=mesh_size(data.mesh), H=H)
+        if H is not None and tdim == 3:  # the cubes of side H that hold the Ω₁ cells' centroids (any tetrahedra)
+            cm = cm._replace(coarse_cell=strip.omega1_coarse_cells(cm.mesh, cm.cell_tags, H))
     if cm.comm.allreduce(int(np.count_nonzero(cm.facet_tags.values == Boundary.GAMMA_C)), op=MPI.SUM):
         cm = cm._replace(h=mesh_size(cm.mesh, cm.facet_tags))
     if validate:
@@ -586,9 +588,7 @@ def _contact_mesh(data: dolfinx.io.gmsh.MeshData, *, h: float, H: float | None) 
                 raise MeshTagError(f"the physical group {PHYSICAL_NAMES[t]!r} is empty")
     num_cells = msh.topology.index_map(tdim).size_local + msh.topology.index_map(tdim).num_ghosts
     coarse = np.full(num_cells, -1, dtype=np.int32)
-    if H is not None and tdim == 3:  # the cubes of side H that hold the Ω₁ cells' centroids (any tetrahedra)
-        coarse = strip.omega1_coarse_cells(msh, cell_tags, H)
-    elif H is not None:  # squares of side H over the bounding box; -1 where a cell straddles a grid line
+    if H is not None:  # squares of side H over the bounding box; -1 where a cell straddles a grid line
         coarse = partition.cartesian_coarse_cells(msh, H)[0].astype(np.int32)
     return ContactMesh(msh, cell_tags, facet_tags, float(h), H, coarse, _neumann_names(data))
 

@@ -593,6 +593,12 @@ CASES = [
         2,
         "the mesh of --method primal has about 1e+10 vertices and would need about",
     ),
+    Case(
+        "the cube of the 3D model beyond the memory",
+        lambda tmp: ["--model", "4", "--h", "400", "--H", "4"],
+        2,
+        "the mesh of --method primal has about 6.45e+07 vertices and would need about",
+    ),
     # numbers out of range and numerical failure
     Case("E = 1e308 (overflow)", _args("--E-high", "1e308"), 2, "Rescale the units"),
     # δ = 1e-3·h/E_high given: the default takes E_c on Gamma_C, which the channels of model 1 do not reach at H = 1/4

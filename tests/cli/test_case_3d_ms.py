@@ -152,3 +152,18 @@ def test_coarse_cubes_longer_than_half_the_body_are_refused(tmp_path, capsys):
     assert main(["run", "--case", str(path), "--set", "mesh.coarse-size=0.6", "--out", str(tmp_path / "o")]) == 2
     assert "more than half of the body's longest side" in capsys.readouterr().err
     assert not (tmp_path / "o").exists()
+
+
+def test_the_shipped_sphere_case_runs_algorithm_3(tmp_path):
+    """cases/sphere_3d.toml with its coarse cubes (5a) and m = 2, contact cells a/4, two load steps: close to the
+    fine monolithic solution (energy error 5.0e-3 measured at one step), the force growing with the depth."""
+    summary = _run(
+        tmp_path,
+        "sphere",
+        *("--case", str(CASES / "sphere_3d.toml"), "--method", "primal-ms", "--reference"),
+        *("--set", "mesh.refinement=0.2", "--set", "obstacle.indentation=[0.005, 0.01]"),
+    )
+    assert summary["converged"] and summary["H"] == pytest.approx(0.5) and summary["layers"] == 2
+    assert summary["e_energy"] < 2e-2 and summary["e_u"] < 1e-2
+    forces = [step["force"] for step in summary["force_indentation"]["steps"]]
+    assert 0 < forces[0] < forces[1]

@@ -19,9 +19,9 @@ __all__ = ["check_case_coarse_grid", "check_coarse_grid", "check_cubes"]
 
 #: the key of a 3D case's coarse size, by built-in mesh (a mesh file: mesh.coarse-size or mesh.H)
 _CASE_KEYS = {
-    "unit-cube": "mesh.H (1/H: the strip and the coarse cubes)",
-    "fibre-block": "mesh.H (1/H: the strip and the coarse cubes)",
-    "hertz-quarter-block": "mesh.coarse-size (in multiples of a)",
+    "unit-cube": "mesh.H, 1/H: the strip and the coarse cubes",
+    "fibre-block": "mesh.H, 1/H: the strip and the coarse cubes",
+    "hertz-quarter-block": "mesh.coarse-size, in multiples of a",
 }
 
 
@@ -49,7 +49,7 @@ def check_coarse_grid(cm: ContactMesh, options: RunOptions) -> None:
 def check_case_coarse_grid(cm: ContactMesh, options: RunOptions, case: Case) -> None:
     """The multiscale methods need a coarse grid that the case's mesh resolves."""
     if cm.mesh.topology.dim == 3:
-        key = _CASE_KEYS.get(case.mesh.kind, "mesh.coarse-size (H, a length) or mesh.H (1/H)")
+        key = _CASE_KEYS.get(case.mesh.kind, "mesh.coarse-size, a length, or mesh.H, 1/H")
         missing = f"give {key}: the side of the coarse cubes"
         check_cubes(cm, f"--method {options.method} with case {case.path.name}", key, missing)
         return

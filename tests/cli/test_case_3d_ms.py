@@ -124,9 +124,14 @@ def test_patches_covering_omega1_with_every_mode_give_algorithm_1(tmp_path):
 
 BAD = [
     (
-        ["--case", str(CASES / "sphere_3d.toml"), "--set", "mesh.refinement=0.2"],
+        [
+            "--case",
+            str(CASES / "sphere_3d.toml"),
+            "--set",
+            'mesh={builtin="hertz-quarter-block", a=0.1, refinement=0.2}',
+        ],
         "Omega1 cells lie in no coarse cell of the mesh's partition; give every Omega1 cell a coarse cell, or a "
-        "coarse size (mesh.coarse-size (in multiples of a))",
+        "coarse size (mesh.coarse-size, in multiples of a)",
     ),
     (
         ["--case", str(CASES / "sphere_3d.toml"), "--set", "mesh.refinement=0.2", "--set", "mesh.coarse-size=0.2"],

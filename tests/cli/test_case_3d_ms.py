@@ -172,3 +172,18 @@ def test_the_shipped_sphere_case_runs_algorithm_3(tmp_path):
     assert summary["e_energy"] < 2e-2 and summary["e_u"] < 1e-2
     forces = [step["force"] for step in summary["force_indentation"]["steps"]]
     assert 0 < forces[0] < forces[1]
+
+
+def test_a_tetrahedral_mesh_file_and_model_5_on_the_command_line(tmp_path, capsys):
+    """--mesh of a gmsh box of tetrahedra with --H: check-mesh finds that primal-ms can run on its cubes of side
+    1/H (it cannot without them), and the run converges; --model 5 runs primal-ms on its fibre block's cubes."""
+    mesh = str(_box(tmp_path / "slabs.msh"))
+    assert main(["check-mesh", mesh]) == 0
+    assert "primal-ms refused" in capsys.readouterr().out
+    assert main(["check-mesh", mesh, "--method", "primal-ms", "--H", "3"]) == 0
+    assert "primal-ms can run" in capsys.readouterr().out
+    args = ["--mesh", mesh, "--model", "4", "--method", "primal-ms", "--H", "3", "--layers", "1"]
+    summary = _run(tmp_path, "file", *args)
+    assert summary["converged"] and summary["H"] == pytest.approx(COARSE) and summary["dofs"]["omega1_ms"] > 0
+    model = _run(tmp_path, "m5", "--model", "5", "--h", "8", "--method", "primal-ms", "--layers", "1")
+    assert model["converged"] and model["H"] == 0.25 and model["dofs"]["omega1_ms"] % 6 == 0

@@ -88,13 +88,18 @@ PROBLEM_KEYS = {
         "integer",
         None,
         "1/H: the coarse grid of squares of side 1/H (the width of the strip Ω₂ of "
-        "the unit square, cube and fibre block; with `file`, the coarse grid over the bounding box that the "
-        "multiscale methods use and, without Omega1/Omega2/gamma in the file, the strip width; planar only)",
+        "the unit square, cube and fibre block, and the side of their coarse squares or cubes; with `file`, the "
+        "coarse grid over the bounding box that the multiscale methods use and, without Omega1/Omega2/gamma in the "
+        "file, the strip width; on tetrahedra the coarse cells of `primal-ms` are the cubes that hold the Ω₁ "
+        "cells' centroids)",
     ),
     ("mesh", "coarse-size"): (
         "number > 0",
         None,
-        "with `file`: the coarse size H itself, a length in the mesh's units (instead of `H` = 1/H)",
+        "with `file`: the coarse size H itself, a length in the mesh's units (instead of `H` = 1/H); with "
+        "`hertz-quarter-block`: the side of the coarse cubes of `primal-ms`, in multiples of a (at most `size`/2; "
+        "none: no coarse grid). Algorithm 3 in 3D refuses cubes smaller than the median Ω₁ cell or longer than "
+        "half the body",
     ),
     ("mesh", "clamped"): (
         _SIDES,
@@ -303,9 +308,8 @@ def _run_actions() -> dict[str, object]:
 
 def _type(annotation) -> str:
     kinds = [t for t in (typing.get_args(annotation) or (annotation,)) if t is not type(None)]
-    return {bool: "boolean", int: "integer", float: "number", str: "string", Path: "directory name"}.get(
-        kinds[0], str(kinds[0])
-    )
+    names = {bool: "boolean", int: "integer", float: "number", str: "string", Path: "directory name"}
+    return " or ".join(names.get(kind, str(kind)) for kind in kinds)
 
 
 def run_tables() -> str:
@@ -363,8 +367,8 @@ PAIR_KEYS = {
     ("mesh", "file"): (
         "file name",
         "required",
-        "a gmsh `.msh` file of planar triangles holding both bodies, meshed apart (no shared node); every "
-        "triangle in a surface group",
+        "a gmsh `.msh` file of planar triangles (or tetrahedra) holding both bodies, meshed apart (no shared "
+        "node); every cell in a surface (volume) group",
     ),
     ("mesh", "coarse-size"): (
         "number > 0",

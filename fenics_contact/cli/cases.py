@@ -130,6 +130,8 @@ def _run_value(case: Case, key: str, name: str, value):
     number = isinstance(value, (int, float)) and not isinstance(value, bool)
     if kind is str and name in ("alpha", "beta") and number:
         return repr(value)  # a coefficient may be written as a number
+    if name == "nbasis" and isinstance(value, str):
+        return value  # "rigid" or "all" (RunOptions checks the word and the method)
     ok = {
         bool: isinstance(value, bool),
         int: number and isinstance(value, int),

@@ -20,10 +20,11 @@ import numpy as np
 from mpi4py import MPI
 
 from fenics_contact.cli.cases import case_run_options
+from fenics_contact.cli.coarse import check_case_coarse_grid, check_coarse_grid
 from fenics_contact.cli.options import METHODS, RunOptions
 from fenics_contact.cli.pair import PAIR_METHODS, check_coarse_size, pair_run_options
 from fenics_contact.cli.signals import stdout_lost
-from fenics_contact.cli.solve import _check_case_coarse_grid, _check_coarse_grid, _mesh, _model
+from fenics_contact.cli.solve import _mesh, _model
 from fenics_contact.errors import FenicsContactError, InputError
 from fenics_contact.methods import METHODS as CATALOGUE
 from fenics_contact.problem.case import Case, MeshFile, load_case, parse_override
@@ -132,9 +133,9 @@ def _refusal(method: str, cm: ContactMesh, options: RunOptions, case: Case | Non
         if entry.multiscale:
             as_run = SimpleNamespace(method=method, mesh=options.mesh, H=options.H)
             if case is None:
-                _check_coarse_grid(cm, as_run)
+                check_coarse_grid(cm, as_run)
             else:
-                _check_case_coarse_grid(cm, as_run, case)
+                check_case_coarse_grid(cm, as_run, case)
     except FenicsContactError as err:
         return err
     return None

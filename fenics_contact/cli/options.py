@@ -21,10 +21,10 @@ from fenics_contact.hybrid.mixed import transmission_coefficient
 from fenics_contact.io import check_output_target, check_outside_output
 from fenics_contact.methods import HYBRID_METHODS, get_method
 from fenics_contact.methods import METHODS as CATALOGUE
+from fenics_contact.multiscale.cem.options import ALL_MODES, RIGID_MOTIONS
 from fenics_contact.problem.composite3d import MODEL_COMPOSITE_3D
 from fenics_contact.problem.materials import check_poisson_ratio
 from fenics_contact.problem.models import MODELS_3D, get_model, model_1
-from fenics_contact.problem.models3d import MODEL_3D
 from fenics_contact.problem.validation import METHODS_3D
 
 __all__ = [
@@ -33,6 +33,7 @@ __all__ = [
     "DEFAULT_COARSE",
     "DEFAULT_COARSE_3D_MS",
     "METHODS",
+    "NBASIS_WORDS",
     "MODEL_DEFAULTS",
     "TABLE_METHODS",
     "RunOptions",
@@ -45,13 +46,16 @@ METHODS = HYBRID_METHODS  #: the ``--method`` choices: Algorithms 1–4 (``metho
 DEFAULT_H = 64  #: 1/h of the built-in mesh when --h is not given
 DEFAULT_H_3D = 16  #: 1/h of the built-in cube of the 3D models (--model 4, 5) when --h is not given
 DEFAULT_COARSE = 16  #: 1/H (coarse size / strip width) when --H is not given
-#: 1/H of primal-ms on the cube of the 3D model when --H is not given: cubes of side ¼ (48 of them in Ω₁, each
-#: 4 fine cells wide at the default h = 1/16; a 1/16 strip would leave a coarse cell one fine cell wide)
+#: 1/H of primal-ms on the 3D models when --H is not given: cubes of side ¼ (on the cube of model 4, 48 of them in
+#: Ω₁, each 4 fine cells wide at the default h = 1/16; a 1/16 strip would leave a coarse cell one fine cell wide)
 DEFAULT_COARSE_3D_MS = 4
 #: the materials of the built-in models when --E-high, --E-low, --nu are not given (the three models share them)
 MODEL_DEFAULTS = {
     name: p.default for name, p in inspect.signature(model_1).parameters.items() if name in ("E_high", "E_low", "nu")
 }
+#: the words --nbasis (and ``[multiscale] nbasis``) takes for primal-ms besides a number: the rigid motions of a
+#: coarse cell (its default: 3 in 2D, 6 in 3D) and every local mode (with patches covering Ω₁, the fine space)
+NBASIS_WORDS = {"rigid": RIGID_MOTIONS, "all": ALL_MODES}
 #: the iteration's defaults (--tol, --max-iterations) and the interface Newton's (--front-window)
 _ITERATION = IterationOptions()
 
@@ -119,6 +123,19 @@ def _finite_positive(name: str, value) -> None:
 def _integer(name: str, value, minimum: int) -> None:
     if value is not None and not (isinstance(value, int) and value >= minimum):
         raise InputError(f"{_flag(name)} must be an integer >= {minimum}, got {value!r}")
+
+
+def _check_nbasis(method: str, nbasis) -> None:
+    """An integer >= 1, or for primal-ms one of ``NBASIS_WORDS``."""
+    if nbasis is None or (isinstance(nbasis, int) and not isinstance(nbasis, bool) and nbasis >= 1):
+        return
+    if method == "primal-ms" and nbasis in NBASIS_WORDS:
+        return
+    words = " or ".join(f'"{w}"' for w in NBASIS_WORDS)
+    raise InputError(
+        f"--nbasis must be an integer >= 1{f', {words}' if method == 'primal-ms' else ''}, got {nbasis!r}"
+        + (f" ({words} apply to primal-ms; mixed-ms takes a number of modes)" if nbasis in NBASIS_WORDS else "")
+    )
 
 
 def _check_alpha(alpha: str) -> None:
@@ -199,7 +216,8 @@ class RunOptions:
     nu: float = MODEL_DEFAULTS["nu"]
     E_map: Path | None = None
     layers: int | None = None
-    nbasis: int | None = None
+    #: local modes per coarse cell: a number, or (primal-ms) "rigid" (the rigid motions) or "all" (every mode)
+    nbasis: int | str | None = None
     min_gap: float | None = None
     max_nbasis: int | None = None
     cache_dir: Path | None = None
@@ -262,14 +280,11 @@ class RunOptions:
                 f"a 3D problem runs with the method {' or '.join(repr(m) for m in METHODS_3D if m in METHODS)}"
             )
         if self.H is None:
-            cube_ms = self.mesh is None and self.case is None and self.model == MODEL_3D and self.method.endswith("-ms")
-            object.__setattr__(self, "H", DEFAULT_COARSE_3D_MS if cube_ms else DEFAULT_COARSE)
-        _integer("H", self.H, 2)
-        if self.mesh is None and self.case is None and self.model == MODEL_COMPOSITE_3D and self.method.endswith("-ms"):
-            raise InputError(
-                f"--method {self.method} needs a coarse grid of Ω₁ and --model 5 has none (its gmsh mesh follows the "
-                "fibres, not a grid of cubes): use --method primal, or --model 4 for Algorithm 3 in 3D"
+            solid_ms = (
+                self.mesh is None and self.case is None and self.model in MODELS_3D and self.method.endswith("-ms")
             )
+            object.__setattr__(self, "H", DEFAULT_COARSE_3D_MS if solid_ms else DEFAULT_COARSE)
+        _integer("H", self.H, 2)
         if self.mesh is None and self.model != MODEL_COMPOSITE_3D and self.n % self.H:  # (a grid of cells)
             raise InputError(
                 f"--h {self.n} is not a multiple of --H {self.H}: the coarse grid must be a union of fine cells"
@@ -292,7 +307,7 @@ class RunOptions:
         check_poisson_ratio(self.nu)
         self.iteration_options()
         _integer("layers", self.layers, 0)
-        _integer("nbasis", self.nbasis, 1)
+        _check_nbasis(self.method, self.nbasis)
         _integer("max_nbasis", self.max_nbasis, 1)
         if self.max_nbasis is not None and self.max_nbasis < self.value("nbasis"):
             raise InputError(f"--max-nbasis {self.max_nbasis} must be >= --nbasis {self.value('nbasis')}")
@@ -349,6 +364,8 @@ class RunOptions:
         }
         if "min_gap" in flat:  # --min-gap 0: exactly --nbasis modes (the option's None)
             flat["min_gap"] = flat["min_gap"] or None
+        if flat.get("nbasis") in NBASIS_WORDS:  # "rigid", "all": CEMOptions' RIGID_MOTIONS, ALL_MODES
+            flat["nbasis"] = NBASIS_WORDS[flat["nbasis"]]
         return flat | {"options": self.iteration_options()}
 
     def reference_options(self) -> dict:

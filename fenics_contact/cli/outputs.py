@@ -13,6 +13,7 @@ from fenics_contact.io import cell_function_of, cell_markers, stress_field
 from fenics_contact.paraview import field_grid
 from fenics_contact.plots import nodal_average, render_deformed
 from fenics_contact.problem.geometry import check_memory
+from fenics_contact.problem.models import MODELS_3D
 from fenics_contact.problem.problem import ContactProblem
 
 log = logging.getLogger("fenics_contact")
@@ -153,11 +154,26 @@ def output_bytes(cm, options: RunOptions, case=None) -> float:
 #: Arnold–Winther spaces and their factorizations) from h = 1/64 to 1/128 (``/usr/bin/time -f %M fenics-contact
 #: run --h 128 --H 8 --method M --no-plots``), with a margin
 RUN_BYTES_PER_VERTEX = {"primal": 1.0e4, "mixed": 2.5e5}
+#: the same on a mesh of tetrahedra (the primal methods: three unknowns and about 15 neighbours a vertex, and the
+#: fill of a direct factorization growing faster in 3D): 109 kB at h = 1/16 (4,913 vertices, 0.54 GB) and 88 kB at
+#: h = 1/24 (15,625 vertices, 1.38 GB) of the cube of model 4 (``/usr/bin/time -f %M fenics-contact run --model 4
+#: --h 24 --H 4 --method primal --no-plots``), with a margin
+RUN_BYTES_PER_VERTEX_3D = 1.2e5
+
+
+def run_vertices(options: RunOptions, cm=None) -> float:
+    """The vertices of the run's mesh: of ``cm``, or without it of the built-in mesh of ``options`` before it is
+    made, (n + 1)² on the unit square and (n + 1)³ on the cube of the 3D models (their gmsh block: about as many)."""
+    if cm is not None:
+        return float(cm.mesh.topology.index_map(0).size_global)
+    return (options.n + 1.0) ** (3 if options.model in MODELS_3D else 2)
 
 
 def check_run_memory(options: RunOptions, cm=None) -> None:
     """InputError before the solve when the run would need more memory than this machine has: on the mesh ``cm``,
-    or without it on the built-in unit square of ``options`` (before it is made)."""
-    vertices = (options.n + 1.0) ** 2 if cm is None else cm.mesh.topology.index_map(0).size_global
+    or without it on the built-in mesh of ``options`` (before it is made), by the bytes per vertex of the method's
+    family and the mesh's dimension."""
+    solid = options.model in MODELS_3D if cm is None else cm.mesh.topology.dim == 3
     family = "primal" if options.method.startswith("primal") else "mixed"
-    check_memory(vertices, f"the mesh of --method {options.method}", RUN_BYTES_PER_VERTEX[family])
+    per_vertex = RUN_BYTES_PER_VERTEX_3D if solid else RUN_BYTES_PER_VERTEX[family]
+    check_memory(run_vertices(options, cm), f"the mesh of --method {options.method}", per_vertex)

@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 from mpi4py import MPI
 
+from fenics_contact.cli.options import NBASIS_WORDS
 from fenics_contact.cli.pair_outputs import PairWriter, step_row
 from fenics_contact.cli.signals import EXIT_NOT_CONVERGED, _fail
 from fenics_contact.errors import InputError
@@ -31,7 +32,7 @@ from fenics_contact.fem.two_body import PairState, solve_two_body
 from fenics_contact.hybrid.iteration import ACCELERATIONS
 from fenics_contact.hybrid.two_body import TwoBodyHybridOptions, solve_two_body_hybrid
 from fenics_contact.io import OutputDirectory, provenance, write_summary
-from fenics_contact.multiscale.cem import ALL_MODES, RIGID_MOTIONS, CEMOptions
+from fenics_contact.multiscale.cem import ALL_MODES, CEMOptions
 from fenics_contact.multiscale.pair import PairMultiscaleOptions, solve_two_body_ms_hybrid
 from fenics_contact.problem.pair_case import PairCase
 
@@ -140,11 +141,6 @@ _KINDS = {
 }
 
 
-#: the words ``multiscale.nbasis`` takes besides a number: every local mode (the fine space with patches covering
-#: each bulk), the rigid motions of a coarse cell (the default)
-_NBASIS_WORDS = {"all": ALL_MODES, "rigid": RIGID_MOTIONS}
-
-
 def pair_run_options(case: PairCase, given: Mapping[str, object] = {}) -> PairRunOptions:
     """The run options from the case's ``[run]``, ``[primal]`` and ``[multiscale]`` tables, then the flags ``given``
     (dest -> value)."""
@@ -160,11 +156,11 @@ def pair_run_options(case: PairCase, given: Mapping[str, object] = {}) -> PairRu
                 )
             name = f"multiscale.{key}" if table == "multiscale" else key
             if name == "multiscale.nbasis" and isinstance(value, str):
-                if value not in _NBASIS_WORDS:
+                if value not in NBASIS_WORDS:
                     raise InputError(
                         f'case {case.path}: multiscale.nbasis must be an integer >= 1, "rigid" or "all", got {value!r}'
                     )
-                values[name] = _NBASIS_WORDS[value]
+                values[name] = NBASIS_WORDS[value]
                 continue
             values[name] = _typed(case, f"{table}.{key}", value, _KINDS[name])
     refused = sorted(f"--{d.replace('_', '-')}" for d in given if d not in _FLAGS and d not in _FRAME)
@@ -176,6 +172,8 @@ def pair_run_options(case: PairCase, given: Mapping[str, object] = {}) -> PairRu
     for dest, key in _FLAGS.items():
         if dest in given:
             values[key] = (not given[dest]) if dest == "no_plots" else given[dest]
+    if values.get("multiscale.nbasis") in NBASIS_WORDS:  # (--nbasis rigid | all)
+        values["multiscale.nbasis"] = NBASIS_WORDS[values["multiscale.nbasis"]]
     method = values.get("method", "primal-monolithic")
     hybrid = {k: values[k] for k in RUN_KEYS["primal"] if k in values}
     cem = {k: values[f"multiscale.{k}"] for k in RUN_KEYS["multiscale"] if f"multiscale.{k}" in values}

@@ -20,6 +20,7 @@ from fenics_contact.cli.options import (
     DEFAULT_H_3D,
     METHODS,
     MODEL_DEFAULTS,
+    NBASIS_WORDS,
     RunOptions,
     method_default,
 )
@@ -43,6 +44,18 @@ _RUN_DEFAULTS = {f.name: f.default for f in fields(RunOptions) if f.default is n
 
 def _shown(value) -> str:
     return "off" if value is None or value is False else f"{value:g}" if isinstance(value, float) else str(value)
+
+
+def _nbasis(text: str) -> int | str:
+    """--nbasis: a number, or one of ``NBASIS_WORDS`` (RunOptions says which methods take them)."""
+    if text in NBASIS_WORDS:
+        return text
+    try:
+        return int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"an integer or one of {', '.join(NBASIS_WORDS)} expected, got {text!r}"
+        ) from None
 
 
 def _per_method(name: str) -> str:
@@ -108,7 +121,7 @@ def _add_problem_options(run: argparse.ArgumentParser) -> None:
     group.add_argument(
         "--mesh",
         type=Path,
-        help="a gmsh .msh file of planar triangles with the physical groups "
+        help="a gmsh .msh file of planar triangles (or of tetrahedra: volume groups) with the physical groups "
         "Omega1, Omega2, Gamma_D, Gamma_C, gamma (checked against the contact problem; "
         "fenics-contact check-mesh FILE checks it alone); a file with none of Omega1/Omega2/gamma "
         "gets Omega2 = the coarse cells along Gamma_C" + _default("none: the built-in unit square"),
@@ -123,9 +136,10 @@ def _add_problem_options(run: argparse.ArgumentParser) -> None:
     group.add_argument(
         "--H",
         type=int,
-        help="coarse size / strip width as 1/H (the cube of --model 4: the coarse cubes of side 1/H of primal-ms "
+        help="coarse size / strip width as 1/H (the 3D models 4 and 5: the coarse cubes of side 1/H of primal-ms "
         f"and the strip, {DEFAULT_COARSE_3D_MS} for primal-ms when not given); with "
-        "--mesh the coarse grid of squares of side 1/H over the bounding box (multiscale methods)"
+        "--mesh the coarse grid of squares of side 1/H over the bounding box (multiscale methods; a mesh of "
+        "tetrahedra: the cubes of side 1/H that hold the Omega1 cells' centroids, for primal-ms only)"
         + _default(_shown(DEFAULT_COARSE)),
     )
     group.add_argument(
@@ -241,9 +255,10 @@ def _add_multiscale_options(run: argparse.ArgumentParser) -> None:
     )
     group.add_argument(
         "--nbasis",
-        type=int,
-        help="*-ms: local spectral modes l per coarse cell (rigid: as many as a coarse cell has rigid motions, "
-        "3 in 2D and 6 in 3D)" + _default(_per_method("nbasis")),
+        type=_nbasis,
+        help="*-ms: local spectral modes l per coarse cell, a number; primal-ms also takes rigid (as many as a "
+        "coarse cell has rigid motions, 3 in 2D and 6 in 3D) and all (every local mode: with --layers covering "
+        "Omega1, the fine space of Algorithm 1)" + _default(_per_method("nbasis")),
     )
     group.add_argument(
         "--min-gap",

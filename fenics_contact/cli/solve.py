@@ -13,6 +13,7 @@ from dolfinx import fem
 from mpi4py import MPI
 
 from fenics_contact.cli.cases import _options_echo
+from fenics_contact.cli.coarse import check_case_coarse_grid, check_coarse_grid
 from fenics_contact.cli.options import RunOptions
 from fenics_contact.cli.outputs import (
     _contact_summary,
@@ -51,7 +52,7 @@ from fenics_contact.problem.models import MODELS_3D, get_model, pixel_field
 from fenics_contact.problem.models3d import MODEL_3D, channels_3d_mesh
 from fenics_contact.problem.pair_case import PairCase
 from fenics_contact.problem.problem import ContactProblem
-from fenics_contact.problem.tags import Subdomain
+from fenics_contact.problem.strip import omega1_coarse_cells
 from fenics_contact.problem.validation import contact_open_ends
 from fenics_contact.sliding import slide
 
@@ -225,15 +226,19 @@ def _solid(path: Path, comm: MPI.Comm) -> bool:
 
 
 def _mesh(options: RunOptions, comm: MPI.Comm = MPI.COMM_WORLD) -> ContactMesh:
+    multiscale = CATALOGUE[options.method].multiscale
     if options.mesh is not None:
-        # (a 3D mesh has no coarse grid: its strip, when the file has none, is the band of ``problem.strip``)
-        planar_grid = not options.coarse_groups and not _solid(options.mesh, comm)
-        return read_mesh(options.mesh, H=1.0 / options.H if planar_grid else None, comm=comm)
+        # (a 3D mesh takes 1/H for the multiscale methods only, the side of its coarse cubes: the strip of a file
+        # without one is otherwise the band of ``problem.strip``)
+        grid = not options.coarse_groups and (multiscale or not _solid(options.mesh, comm))
+        return read_mesh(options.mesh, H=1.0 / options.H if grid else None, comm=comm)
     if options.model == MODEL_3D:  # the multiscale methods' coarse cubes: side 1/H, as the strip
-        coarse = 1.0 / options.H if CATALOGUE[options.method].multiscale else None
-        return channels_3d_mesh(options.n, strip=1.0 / options.H, H=coarse, comm=comm)
+        return channels_3d_mesh(options.n, strip=1.0 / options.H, H=1.0 / options.H if multiscale else None, comm=comm)
     if options.model == MODEL_COMPOSITE_3D:
-        return fibre_block_3d_mesh(options.n, strip=1.0 / options.H, comm=comm)
+        cm = fibre_block_3d_mesh(options.n, strip=1.0 / options.H, comm=comm)
+        if multiscale:  # the cubes of side 1/H that hold the Ω₁ cells' centroids (the mesh follows the fibres)
+            cm = cm._replace(coarse_cell=omega1_coarse_cells(cm.mesh, cm.cell_tags, 1.0 / options.H))
+        return cm
     return unit_square(options.n, options.H, comm=comm)
 
 
@@ -246,55 +251,10 @@ def _bounding_box(cm: ContactMesh) -> tuple[float, float, float, float]:
     return bounding_box(cm.mesh)  # (an elementwise allreduce of arrays failed under MPI)
 
 
-def _check_coarse_grid(cm: ContactMesh, options: RunOptions) -> None:
-    """The multiscale methods need the coarse grid of squares of side H to be a union of fine cells."""
-    if cm.mesh.topology.dim == 3 and cm.H is None:
-        raise InputError(
-            f"--method {options.method} with --mesh {options.mesh}: a 3D mesh file has no coarse grid (--H sets "
-            "only the strip there); primal-ms runs in 3D on the cube of --model 4 (its coarse cubes of side 1/H) or "
-            "through the Python API on a mesh with a coarse partition (ContactMesh.coarse_cell)"
-        )
-    cells = cm.cell_tags.find(Subdomain.OMEGA1)
-    crossing = cm.comm.allreduce(int(np.count_nonzero(cm.coarse_cell[cells] < 0)), op=MPI.SUM)
-    if crossing:
-        raise InputError(
-            f"--method {options.method} with --mesh {options.mesh}: {crossing} Omega1 cells cross the "
-            f"edges of the coarse grid of squares of side 1/{options.H} over the bounding box; the "
-            "multiscale methods need a mesh that resolves it (choose --H accordingly)"
-        )
-
-
-def _check_case_coarse_grid(cm: ContactMesh, options: RunOptions, case: Case) -> None:
-    """The multiscale methods need a coarse grid that the case's mesh resolves."""
-    if cm.mesh.topology.dim == 3:
-        raise InputError(
-            f"--method {options.method}: case {case.path.name} is 3D and a 3D case has no coarse grid of cubes "
-            "(its H is the strip width); Algorithm 3 in 3D runs on --model 4 or from Python on a mesh with cubes "
-            "(fc.unit_cube(n, H=...), fc.box_mesh(..., H=...)): use --method primal for the case"
-        )
-    if cm.H is None:
-        builtin = case.mesh.kind in ("hertz-block", "bulged-square")
-        raise InputError(
-            f"--method {options.method}: the mesh of case {case.path.name} ({case.mesh.kind}) has no "
-            "coarse grid; the multiscale methods need the unit-square mesh or a mesh file with mesh.H "
-            "(a coarse grid of squares of side 1/H that the mesh resolves)"
-            + (
-                f" — the built-in {case.mesh.kind} mesh takes no mesh.H (its graded cells cross any "
-                "such grid): use --method primal or mixed on it, or a mesh file of your own that a "
-                "coarse grid resolves (mesh.H) or that carries its own coarse partition (README, 'Any "
-                "domain')"
-                if builtin
-                else ""
-            )
-        )
-    cells = cm.cell_tags.find(Subdomain.OMEGA1)
-    crossing = cm.comm.allreduce(int(np.count_nonzero(cm.coarse_cell[cells] < 0)), op=MPI.SUM)
-    if crossing:
-        raise InputError(
-            f"--method {options.method} with case {case.path.name}: {crossing} Omega1 cells cross the "
-            f"edges of the coarse grid of squares of side {cm.H:g} from the origin; the multiscale "
-            "methods need a mesh that resolves it (choose mesh.H accordingly)"
-        )
+def _series_written(out: Path, comm: MPI.Comm) -> bool:
+    """Whether ``out`` holds the fields series of load steps, as rank 0 (which writes it) sees it: the ranks decide
+    alike whether to write the run's single state (a collective write)."""
+    return comm.bcast((out / "fields.pvd").exists() if comm.rank == 0 else None, root=0)
 
 
 class _Outcome(NamedTuple):
@@ -325,7 +285,7 @@ def _run_primal(options: RunOptions, problem: ContactProblem) -> _Outcome:
         "penetration": result.profile.penetration,
         "max_tensile_sigma_c": float(np.max(result.profile.sigma_c, initial=0.0)),
         "layers": result.step.cem.layers if ms else None,
-        "nbasis": result.step.cem.nbasis if ms else None,
+        "nbasis": ("all" if result.step.cem.nbasis is None else result.step.cem.nbasis) if ms else None,
         "offline_cache": result.step.omega1.cache_status if ms else None,
         # Λ, the smallest local eigenvalue left out (it falls like μ/(λ+2μ) as ν → ½, and with inclusions)
         "spectral_gap": _finite_or_none(result.step.omega1.spectral_gap) if ms else None,
@@ -334,7 +294,7 @@ def _run_primal(options: RunOptions, problem: ContactProblem) -> _Outcome:
     }
 
     def write(out: Path) -> None:
-        if not (out / "fields.pvd").exists():  # (load steps write their own series)
+        if not _series_written(out, problem.comm):  # (load steps write their own series)
             Series(out, "fields", problem.comm).add(0.0, _field_grid(problem, result.u))
             Series(out, "contact", problem.comm).add(0.0, contact_grid(result.profile, problem.comm))
         if options.plots and problem.dim == 2:  # (figures of the plane; a 3D run has its ParaView series)
@@ -399,7 +359,7 @@ def _run_mixed(options: RunOptions, problem: ContactProblem, comm: MPI.Comm = MP
     }
 
     def write(out: Path) -> None:
-        if not (out / "fields.pvd").exists():  # (load steps write their own series)
+        if not _series_written(out, problem.comm):  # (load steps write their own series)
             Series(out, "fields", problem.comm).add(0.0, _field_grid(problem, result.u, result.sigma))
             Series(out, "contact", problem.comm).add(0.0, contact_grid(result.profile, problem.comm))
         write_vtx(out / "sigma.bp", result.sigma)
@@ -482,14 +442,14 @@ def _solve_and_write(
         cm = _mesh(options, mesh_comm)
         if pixels is not None and options.mesh is not None:
             check_pixel_modulus(pixels, _bounding_box(cm), f"--E-map {options.E_map}")
-        if options.mesh is not None and options.method.endswith("-ms"):
-            _check_coarse_grid(cm, options)
+        if (options.mesh is not None or options.model == MODEL_COMPOSITE_3D) and options.method.endswith("-ms"):
+            check_coarse_grid(cm, options)
     else:
         case_mesh = case.build_mesh(mesh_comm)
         cm = case_mesh.cm
         model = case.problem(case_mesh)
         if options.method.endswith("-ms"):
-            _check_case_coarse_grid(cm, options, case)
+            check_case_coarse_grid(cm, options, case)
     if case is None and cm.mesh.topology.dim == 3 and options.model not in MODELS_3D:
         raise InputError(
             f"--mesh {options.mesh} is a tetrahedral (3D) mesh and the built-in model {options.model} is planar: "

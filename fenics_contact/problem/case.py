@@ -16,7 +16,8 @@ unless said; unknown keys are refused.  Relative file names are relative to the 
     builtin = "bulged-square"                # h = 32, H = 4, bulge = 0.1, clamped = ["left"]
     builtin = "unit-cube" | "hertz-quarter-block" | "fibre-block"   # 3D (problem.case_meshes3d)
     file = "my.msh"                          # coarse-size = H (a length) or H = 1/H: the coarse grid (multiscale
-                                             #   methods) and, without Omega1/Omega2/gamma in the file, the strip;
+                                             #   methods; on tetrahedra the cubes holding the Omega1 cells'
+                                             #   centroids) and, without Omega1/Omega2/gamma in the file, the strip;
                                              #   triangles, or tetrahedra (3D: volume groups)
 
     [material]                               # E and nu: required unless model is given
@@ -53,7 +54,8 @@ unless said; unknown keys are refused.  Relative file names are relative to the 
     [run]          method, accel, front-window, tol, max-iterations, reference, out, plots
     [primal]       alpha, delta, solver    (primal, primal-ms; solver: the monolithic reference's)
     [mixed]        beta, epsilon           (mixed, mixed-ms)
-    [multiscale]   layers, nbasis, cache-dir   (primal-ms, mixed-ms)
+    [multiscale]   layers, nbasis, cache-dir   (primal-ms, mixed-ms; nbasis a number, or "rigid" | "all" for
+                                                primal-ms)
     [mixed-ms]     min-gap, max-nbasis
 
 On a 3D mesh every vector has three components ([fx, fy, fz], ...): a vector, an obstacle shape or a model of

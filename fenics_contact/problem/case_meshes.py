@@ -9,10 +9,8 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
-import gmsh
 from mpi4py import MPI
 
-from fenics_contact.errors import InputError
 from fenics_contact.problem.case_meshes3d import BUILTINS_3D, CaseMesh, MeshSpec3D, read_mesh_3d
 from fenics_contact.problem.case_values import (
     Source,
@@ -24,7 +22,7 @@ from fenics_contact.problem.case_values import (
     show_value,
 )
 from fenics_contact.problem.cell_groups import read_cell_groups
-from fenics_contact.problem.geometry import SIDES, query_gmsh_file, read_mesh, unit_square
+from fenics_contact.problem.geometry import SIDES, read_mesh, unit_square
 from fenics_contact.problem.meshes import bulged_square, hertz_block
 from fenics_contact.problem.tags import is_neumann_name
 
@@ -133,7 +131,9 @@ class MeshFile:
     or none of them (the strip is then built along Gamma_C).
 
     ``H`` is 1/H of the coarse grid (a unit-square mesh), ``coarse_size`` the coarse size itself (a length,
-    in the mesh's units); at most one of them.
+    in the mesh's units); at most one of them.  The coarse cells are the squares of that side over the bounding box
+    (the mesh must resolve them), on a mesh of tetrahedra the cubes that hold the Ω₁ cells' centroids
+    (``geometry.read_mesh``).
     """
 
     path: Path
@@ -149,13 +149,6 @@ class MeshFile:
 
     def build(self, comm: MPI.Comm, overlays: Iterable[str] = ()) -> CaseMesh:
         """The mesh; every surface group but Omega1/Omega2 is an overlay (materials), ``overlays`` must exist."""
-        if self.coarse is not None and query_gmsh_file(self.path, comm, _holds_tetrahedra, False):
-            key = "mesh.H" if self.H is not None else "mesh.coarse-size"
-            raise InputError(
-                f"{key}: {self.path.name} is a mesh of tetrahedra, which takes no coarse grid (the multiscale "
-                "methods are planar): leave it out (without Omega1/Omega2/gamma in the file, the strip is then the "
-                "band of cells along Gamma_C)"
-            )
         centroids = read_cell_groups(self.path, overlays, comm=comm)
         cm = read_mesh(self.path, comm=comm, H=self.coarse, overlay_groups=list(centroids))
         return CaseMesh(cm, centroids)
@@ -166,11 +159,6 @@ class MeshFile:
 
     def echo(self) -> dict:
         return {"file": str(self.path), "H": self.H, "coarse-size": self.coarse_size}
-
-
-def _holds_tetrahedra() -> bool:
-    """Whether the gmsh model (a file merged by ``geometry.query_gmsh_file``) holds 3D cells."""
-    return len(gmsh.model.mesh.getElementTypes(3)) > 0
 
 
 MeshSpec = UnitSquareMesh | BulgedSquareMesh | HertzBlockMesh | MeshFile | MeshSpec3D

@@ -1,15 +1,20 @@
 """The built-in 3D meshes of a case file (tetrahedra): ``[mesh] builtin = "unit-cube" | "hertz-quarter-block" |
 "fibre-block"``.
 
-    builtin = "unit-cube"             # h = 8 (1/h), H = 4 (1/H: the strip x > 1 - 1/H), clamped = ["xmin"] (faces),
-                                      #   neumann = {face = "Gamma_N_<label>"}; Gamma_C the face x = 1
+    builtin = "unit-cube"             # h = 8 (1/h), H = 4 (1/H: the strip x > 1 - 1/H and the coarse cubes),
+                                      #   clamped = ["xmin"] (faces), neumann = {face = "Gamma_N_<label>"}; Gamma_C
+                                      #   the face x = 1
     builtin = "hertz-quarter-block"   # a (contact radius, required), refinement = 1 (contact cells a/(20 r)),
-                                      #   size = 20, strip = 2 (x a); the symmetry planes x = 0, y = 0 on rollers
-    builtin = "fibre-block"           # model 5's block: h = 8, H = 4, contact-size = 1/h, contact-radius = 0.25;
-                                      #   cell groups fibres and matrix (materials by group)
+                                      #   size = 20, strip = 2, coarse-size (x a; primal-ms: the coarse cubes);
+                                      #   the symmetry planes x = 0, y = 0 on rollers
+    builtin = "fibre-block"           # model 5's block: h = 8, H = 4 (the strip and the coarse cubes),
+                                      #   contact-size = 1/h, contact-radius = 0.25; cell groups fibres and matrix
 
 The faces of a box are ``meshes3d.FACES`` (xmin, xmax, ymin, ymax, zmin, zmax).  Each spec builds a
-``case.CaseMesh`` (through ``build``) and echoes its resolved keys for the summary.
+``case.CaseMesh`` (through ``build``) and echoes its resolved keys for the summary.  The coarse grid of Algorithm 3
+(``ContactMesh.coarse_cell``) is the cubes of side 1/H over the unit cube (which the unit cube's cells resolve), and
+on the gmsh meshes of the fibre block and the Hertz block the cubes that hold the Ω₁ cells' centroids
+(``strip.omega1_coarse_cells``: unions of whole tetrahedra, which Algorithm 3 takes as any coarse partition).
 """
 
 from collections.abc import Iterable
@@ -24,6 +29,7 @@ from fenics_contact.problem.case_values import Source, Table, read_integer, read
 from fenics_contact.problem.composite3d import fibre_block_3d_mesh, in_fibres
 from fenics_contact.problem.geometry import ContactMesh
 from fenics_contact.problem.meshes3d import FACES, hertz_quarter_block, unit_cube
+from fenics_contact.problem.strip import omega1_coarse_cells
 from fenics_contact.problem.tags import is_neumann_name
 
 __all__ = ["BUILTINS_3D", "CaseMesh", "FibreBlockMesh", "HertzQuarterBlockMesh", "UnitCubeMesh", "read_mesh_3d"]
@@ -60,7 +66,8 @@ class UnitCubeMesh:
     groups = ()
 
     def build(self, comm: MPI.Comm, overlays: Iterable[str] = ()) -> CaseMesh:
-        cm = unit_cube(self.h, clamped=self.clamped, neumann=dict(self.neumann), strip=1.0 / self.H, comm=comm)
+        H = 1.0 / self.H
+        cm = unit_cube(self.h, clamped=self.clamped, neumann=dict(self.neumann), strip=H, H=H, comm=comm)
         return CaseMesh(cm, {})
 
     @property
@@ -80,12 +87,14 @@ class UnitCubeMesh:
 @dataclass(frozen=True, slots=True)
 class HertzQuarterBlockMesh:
     """The quarter block under a sphere (``meshes3d.hertz_quarter_block``): sizes in multiples of the contact
-    radius a, contact cells a/(20·refinement), the symmetry planes x = 0 and y = 0 on rollers."""
+    radius a, contact cells a/(20·refinement), the symmetry planes x = 0 and y = 0 on rollers; with
+    ``coarse_size`` the coarse cubes of side ``coarse_size``·a over the block (Algorithm 3)."""
 
     a: float
     refinement: float = 1.0
     size: float = 20.0
     strip: float = 2.0
+    coarse_size: float | None = None
     kind = "hertz-quarter-block"
     dim = 3
     groups = ()
@@ -93,6 +102,9 @@ class HertzQuarterBlockMesh:
     def build(self, comm: MPI.Comm, overlays: Iterable[str] = ()) -> CaseMesh:
         h = self.a / (20.0 * self.refinement)
         cm = hertz_quarter_block(self.a, h, size=self.size, strip=self.strip, comm=comm)
+        if self.coarse_size is not None:
+            H = self.coarse_size * self.a
+            cm = cm._replace(H=H, coarse_cell=omega1_coarse_cells(cm.mesh, cm.cell_tags, H))
         return CaseMesh(cm, {}, None, ((0, 0.0), (1, 0.0)))
 
     @property
@@ -106,14 +118,15 @@ class HertzQuarterBlockMesh:
             "refinement": self.refinement,
             "size": self.size,
             "strip": self.strip,
+            "coarse-size": self.coarse_size,
             "rollers": {"x": [0.0], "y": [0.0]},  # (the symmetry planes the mesh holds)
         }
 
 
 @dataclass(frozen=True, slots=True)
 class FibreBlockMesh:
-    """The block of the fibre composite (``composite3d.fibre_block_3d_mesh``): 1/h, 1/H (the strip), the cells
-    near the middle of Gamma_C; its cell groups ``fibres`` and ``matrix``."""
+    """The block of the fibre composite (``composite3d.fibre_block_3d_mesh``): 1/h, 1/H (the strip and the coarse
+    cubes), the cells near the middle of Gamma_C; its cell groups ``fibres`` and ``matrix``."""
 
     h: int = 8
     H: int = 4
@@ -131,6 +144,7 @@ class FibreBlockMesh:
             contact_radius=self.contact_radius,
             comm=comm,
         )
+        cm = cm._replace(coarse_cell=omega1_coarse_cells(cm.mesh, cm.cell_tags, 1.0 / self.H))
         msh = cm.mesh
         owned = np.arange(msh.topology.index_map(3).size_local, dtype=np.int32)
         midpoints = np.concatenate(comm.allgather(dmesh.compute_midpoints(msh, 3, owned)))
@@ -163,9 +177,15 @@ def read_mesh_3d(source: Source, t: Table, kind: str) -> MeshSpec3D:
             t.get("refinement", read_number(low=0.05, high=np.inf), 1.0),
             t.get("size", read_number(low=2.0, high=np.inf), 20.0),
             t.get("strip", positive, 2.0),
+            t.get("coarse-size", positive),
         )
         if spec.strip >= spec.size:
             raise source.error(f"mesh.strip = {spec.strip:g} must be < mesh.size = {spec.size:g} (both times a)")
+        if spec.coarse_size is not None and spec.coarse_size > spec.size / 2:
+            raise source.error(
+                f"mesh.coarse-size = {spec.coarse_size:g} must be at most half of mesh.size = {spec.size:g} (both "
+                "times a): Algorithm 3 needs at least two coarse cubes along the block"
+            )
         return spec
     if kind == "fibre-block":
         spec = FibreBlockMesh(

@@ -275,7 +275,9 @@ def read_mesh(
     and Ω₂, Γ_C on ∂Ω₂ away from γ, Γ_D and Γ_C disjoint, a conforming mesh), a MeshTagError
     naming the group otherwise. ``h`` of the result is the mesh size ``mesh_size`` (1/n on the
     built-in meshes), ``H`` the side of the coarse grid of squares over the bounding box (multiscale
-    methods; a fine cell that straddles a grid line lies in no coarse cell).
+    methods; a fine cell that straddles a grid line lies in no coarse cell); on a mesh of tetrahedra the coarse
+    cells are the cubes of side H that hold the Ω₁ cells' centroids (``strip.omega1_coarse_cells``: the cubes
+    themselves where the mesh resolves them, unions of whole tetrahedra with jagged faces elsewhere).
     ``overlay_groups``: surface groups that overlay Omega1/Omega2 (materials by group, read with
     ``problem.cell_groups.read_cell_groups``); they are left out of the mesh and its checks.
 
@@ -310,13 +312,6 @@ def read_mesh(
                         if gmsh.model.getPhysicalName(dim, tag) in overlay_groups:
                             gmsh.model.removePhysicalGroups([(dim, tag)])
                 problem = _gmsh_model_problem(path, auto_strip=auto_strip)
-                if problem is None and tdim == 3 and H is not None:
-                    problem = (
-                        InputError,
-                        f"{path} is a 3D mesh: read_mesh builds the coarse grid H (multiscale methods) of "
-                        "planar meshes only; read it with H=None (a 3D coarse grid: meshes3d.box_mesh(..., H=...), "
-                        "or a ContactMesh whose coarse_cell partitions Omega1)",
-                    )
         problem, auto_strip, tdim = comm.bcast((problem, auto_strip, tdim), root=0)
         # validate before the collective mesh construction (which aborts on inconsistent tags)
         if problem is not None:
@@ -327,6 +322,8 @@ def read_mesh(
         cm = _strip_contact_mesh(data, h=mesh_size(data.mesh), H=H, materials=overlay_groups)
     else:
         cm = _contact_mesh(data, h=mesh_size(data.mesh), H=H)
+        if H is not None and tdim == 3:  # the cubes of side H that hold the Ω₁ cells' centroids (any tetrahedra)
+            cm = cm._replace(coarse_cell=strip.omega1_coarse_cells(cm.mesh, cm.cell_tags, H))
     if cm.comm.allreduce(int(np.count_nonzero(cm.facet_tags.values == Boundary.GAMMA_C)), op=MPI.SUM):
         cm = cm._replace(h=mesh_size(cm.mesh, cm.facet_tags))
     if validate:

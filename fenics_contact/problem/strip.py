@@ -41,6 +41,7 @@ __all__ = [
     "coarse_strip",
     "strip_tags",
     "coarse_partition",
+    "omega1_coarse_cells",
     "contact_cell_size",
     "contact_cells",
 ]
@@ -229,6 +230,13 @@ def coarse_partition(msh: dmesh.Mesh, omega1: np.ndarray, H: float) -> np.ndarra
     ok = coarse >= 0
     renumbered[ok] = np.searchsorted(numbers, coarse[ok])
     return renumbered.astype(np.int32)
+
+
+def omega1_coarse_cells(msh: dmesh.Mesh, cell_tags: dmesh.MeshTags, H: float) -> np.ndarray:
+    """Coarse index of every local cell of a mesh whose Ω₁ is tagged: the squares (cubes) of side H over the
+    bounding box that hold the centroids of the Ω₁ cells, slivers merged (``coarse_partition``; on a mesh that
+    resolves the grid, the grid itself), ``UNRESOLVED`` outside Ω₁ (collective)."""
+    return coarse_partition(msh, np.isin(_local_cells(msh), cell_tags.find(Subdomain.OMEGA1)), H)
 
 
 class Split(NamedTuple):

@@ -154,8 +154,6 @@ def test_volume_material_groups_and_3d_loads_of_a_mesh_file(tmp_path, capsys):
     assert np.all(f[x[0] < 0.5] == [1.0, 0.0, 0.5]) and np.all(f[x[0] > 0.5] == 0.0)
     s = _run(tmp_path, "--case", str(tmp_path / "box.toml"), "--reference", "--tol", "1e-9")
     assert s["converged"] and s["e_u"] < 1e-8 and s["contact_force"] > 0
-    with pytest.raises(InputError, match="mesh.H: box.msh is a mesh of tetrahedra, which takes no coarse grid"):
-        load_case(tmp_path / "box.toml", [("mesh.H", 4)]).build_mesh()
 
 
 # -- the example cases, small ---------------------------------------------------------------------------------------

@@ -106,8 +106,9 @@ def test_a_case_file_on_a_tetrahedral_mesh_runs_algorithm_1(tmp_path):
 
 
 def test_a_tetrahedral_mesh_file_runs_with_the_3d_model(tmp_path, capsys):
-    """``--mesh`` of a gmsh tetrahedral file (no coarse grid in 3D: --H is not used) with the 3D model's physics;
-    check-mesh finds that Algorithm 1 can run on it and the 2D methods cannot; a planar model is refused."""
+    """``--mesh`` of a gmsh tetrahedral file (--H not given: no coarse grid, which primal-ms alone builds) with the 3D
+    model's physics; check-mesh finds that Algorithm 1 can run on it and the 2D methods cannot; a planar model is
+    refused."""
     path = tmp_path / "box.msh"
     _gmsh_box(path)
     assert main(["check-mesh", str(path), "--method", "primal"]) == 0

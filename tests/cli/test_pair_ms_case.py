@@ -131,3 +131,14 @@ def test_multiscale_options_belong_to_primal_ms(tmp_path, capsys):
     args = ["run", "--case", str(CASE), "--method", "primal", "--no-plots", "--out", str(tmp_path / "out")]
     assert main([*args, "--nbasis", "4"]) == 2
     assert "options of --method primal-ms, not of --method primal" in capsys.readouterr().err
+
+
+def test_the_nbasis_words_on_the_command_line():
+    """--nbasis all and --nbasis rigid (the words of [multiscale] nbasis) reach the pair's CEM options."""
+    from fenics_contact.cli.pair import pair_run_options
+    from fenics_contact.multiscale.cem import ALL_MODES, RIGID_MOTIONS
+
+    case = load_case(CASE)
+    for word, value in (("all", ALL_MODES), ("rigid", RIGID_MOTIONS), (4, 4)):
+        options = pair_run_options(case, {"method": "primal-ms", "nbasis": word})
+        assert options.multiscale.cem.nbasis == value

@@ -57,3 +57,23 @@ def test_the_command_line_refuses_it_with_exit_2():
         cwd=fc.__path__[0] + "/..",
     )
     assert run.returncode == 2 and "choose a coarser mesh" in run.stderr, run.stderr
+
+
+def test_a_3d_model_counts_its_vertices_in_three_dimensions():
+    """The run's estimate before the mesh is made: (n + 1)³ vertices on the cube of model 4, exactly those of the
+    mesh made, and within a factor 2 those of model 5's gmsh block (h = 1/12); --model 4 --h 400 (6.4e7
+    vertices) is refused, which a planar count, (n + 1)² = 1.6e5 vertices, would have let through."""
+    import os
+
+    from fenics_contact.cli import RunOptions
+    from fenics_contact.cli.outputs import RUN_BYTES_PER_VERTEX, check_run_memory, run_vertices
+    from fenics_contact.problem.composite3d import fibre_block_3d_mesh
+    from fenics_contact.problem.models3d import channels_3d_mesh
+
+    cube = channels_3d_mesh(4, strip=0.25)
+    assert run_vertices(RunOptions(model=4, h=4, H=2)) == cube.mesh.topology.index_map(0).size_global == 5**3
+    block = fibre_block_3d_mesh(12).mesh.topology.index_map(0).size_global  # (the fibres add vertices at small n)
+    assert 0.5 < run_vertices(RunOptions(model=5, h=12, H=4)) / block < 2.0
+    assert 401**2 * RUN_BYTES_PER_VERTEX["primal"] < os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    with pytest.raises(InputError, match=r"about 6.45e\+07 vertices"):
+        check_run_memory(RunOptions(model=4, h=400, H=4))

@@ -1,0 +1,113 @@
+"""The coarse grid of the multiscale methods checked before a run: every Ω₁ cell in a coarse cell of the mesh.
+
+In the plane the coarse grid is the squares of side H that the mesh resolves.  On a mesh of tetrahedra it is the
+cubes of side H that hold the Ω₁ cells' centroids (``strip.omega1_coarse_cells``), or the user's partition; a run
+of Algorithm 3 there is refused when a coarse cell would hold less than a fine cell (H below the median diameter of
+the Ω₁ cells) or Ω₁ would be less than two coarse cells long (H above half the body's longest side).
+"""
+
+import numpy as np
+from mpi4py import MPI
+
+from fenics_contact.cli.options import RunOptions
+from fenics_contact.errors import InputError
+from fenics_contact.problem.case import Case
+from fenics_contact.problem.geometry import ContactMesh
+from fenics_contact.problem.tags import Subdomain
+
+__all__ = ["check_case_coarse_grid", "check_coarse_grid", "check_cubes"]
+
+#: the key of a 3D case's coarse size, by built-in mesh (a mesh file: mesh.coarse-size or mesh.H)
+_CASE_KEYS = {
+    "unit-cube": "mesh.H, 1/H: the strip and the coarse cubes",
+    "fibre-block": "mesh.H, 1/H: the strip and the coarse cubes",
+    "hertz-quarter-block": "mesh.coarse-size, in multiples of a",
+}
+
+
+def check_coarse_grid(cm: ContactMesh, options: RunOptions) -> None:
+    """The multiscale methods need the coarse grid of squares of side H to be a union of fine cells (in 3D:
+    ``check_cubes``)."""
+    if cm.mesh.topology.dim == 3:
+        source = f"--mesh {options.mesh}" if options.mesh is not None else f"--model {options.model}"
+        missing = (
+            f"a 3D mesh file gets its coarse grid (cubes of side 1/--H) when it runs with a multiscale method: "
+            f"check it with check-mesh {options.mesh} --method primal-ms --H N"
+        )
+        check_cubes(cm, f"--method {options.method} with {source}", "--H (1/H)", missing)
+        return
+    cells = cm.cell_tags.find(Subdomain.OMEGA1)
+    crossing = cm.comm.allreduce(int(np.count_nonzero(cm.coarse_cell[cells] < 0)), op=MPI.SUM)
+    if crossing:
+        raise InputError(
+            f"--method {options.method} with --mesh {options.mesh}: {crossing} Omega1 cells cross the "
+            f"edges of the coarse grid of squares of side 1/{options.H} over the bounding box; the "
+            "multiscale methods need a mesh that resolves it (choose --H accordingly)"
+        )
+
+
+def check_case_coarse_grid(cm: ContactMesh, options: RunOptions, case: Case) -> None:
+    """The multiscale methods need a coarse grid that the case's mesh resolves."""
+    if cm.mesh.topology.dim == 3:
+        key = _CASE_KEYS.get(case.mesh.kind, "mesh.coarse-size, a length, or mesh.H, 1/H")
+        missing = f"give {key}: the side of the coarse cubes"
+        check_cubes(cm, f"--method {options.method} with case {case.path.name}", key, missing)
+        return
+    if cm.H is None:
+        builtin = case.mesh.kind in ("hertz-block", "bulged-square")
+        raise InputError(
+            f"--method {options.method}: the mesh of case {case.path.name} ({case.mesh.kind}) has no "
+            "coarse grid; the multiscale methods need the unit-square mesh or a mesh file with mesh.H "
+            "(a coarse grid of squares of side 1/H that the mesh resolves)"
+            + (
+                f" — the built-in {case.mesh.kind} mesh takes no mesh.H (its graded cells cross any "
+                "such grid): use --method primal or mixed on it, or a mesh file of your own that a "
+                "coarse grid resolves (mesh.H) or that carries its own coarse partition (README, 'Any "
+                "domain')"
+                if builtin
+                else ""
+            )
+        )
+    cells = cm.cell_tags.find(Subdomain.OMEGA1)
+    crossing = cm.comm.allreduce(int(np.count_nonzero(cm.coarse_cell[cells] < 0)), op=MPI.SUM)
+    if crossing:
+        raise InputError(
+            f"--method {options.method} with case {case.path.name}: {crossing} Omega1 cells cross the "
+            f"edges of the coarse grid of squares of side {cm.H:g} from the origin; the multiscale "
+            "methods need a mesh that resolves it (choose mesh.H accordingly)"
+        )
+
+
+def check_cubes(cm: ContactMesh, where: str, key: str, missing: str) -> None:
+    """InputError (starting with ``where``) unless every Ω₁ cell of the 3D mesh ``cm`` lies in a coarse cell, the
+    coarse size is at least the median diameter of the Ω₁ cells and at most half of the body's longest side
+    (``key``: the option that sets it; ``missing``: what to do when the mesh has no coarse grid). Collective."""
+    comm = cm.comm
+    cells = cm.cell_tags.find(Subdomain.OMEGA1)
+    cells = cells[cells < cm.mesh.topology.index_map(3).size_local]
+    coarse = np.asarray(cm.coarse_cell)[cells]
+    if comm.allreduce(int(np.count_nonzero(coarse >= 0)), op=MPI.SUM) == 0:
+        raise InputError(f"{where}: the mesh has no coarse grid of Omega1 for Algorithm 3; {missing}")
+    outside = comm.allreduce(int(np.count_nonzero(coarse < 0)), op=MPI.SUM)
+    if outside:
+        raise InputError(
+            f"{where}: {outside} Omega1 cells lie in no coarse cell of the mesh's partition; give every Omega1 cell "
+            f"a coarse cell, or a coarse size ({key})"
+        )
+    diameters = np.concatenate(comm.allgather(cm.mesh.h(3, cells)))
+    h = float(np.median(diameters))
+    if cm.H is not None and cm.H < h:
+        raise InputError(
+            f"{where}: the coarse cubes of side H = {cm.H:.4g} are smaller than the Omega1 cells (median diameter "
+            f"{h:.4g}): a coarse cell must hold several fine cells; give a larger coarse size ({key})"
+        )
+    x = cm.mesh.geometry.x
+    side = max(
+        comm.allreduce(float(top), op=MPI.MAX) - comm.allreduce(float(bottom), op=MPI.MIN)
+        for bottom, top in zip(np.min(x, axis=0, initial=np.inf), np.max(x, axis=0, initial=-np.inf), strict=True)
+    )
+    if cm.H is not None and cm.H > side / 2 * (1 + 1e-12):
+        raise InputError(
+            f"{where}: the coarse size H = {cm.H:.4g} is more than half of the body's longest side ({side:.4g}): "
+            f"Algorithm 3 needs at least two coarse cells along it; give a smaller coarse size ({key})"
+        )

@@ -3,7 +3,8 @@
 In the plane the coarse grid is the squares of side H that the mesh resolves.  On a mesh of tetrahedra it is the
 cubes of side H that hold the Ω₁ cells' centroids (``strip.omega1_coarse_cells``), or the user's partition; a run
 of Algorithm 3 there is refused when a coarse cell would hold less than a fine cell (H below the median diameter of
-the Ω₁ cells) or Ω₁ would be less than two coarse cells long (H above half the body's longest side).
+the Ω₁ cells) or Ω₁ would be less than two coarse cells long (H above half the body's longest side).  The Hertz
+block's graded boxes (``partition.graded_coarse_cells``) are checked to be larger than the fine cells they hold.
 """
 
 import numpy as np
@@ -13,6 +14,7 @@ from fenics_contact.cli.options import RunOptions
 from fenics_contact.errors import InputError
 from fenics_contact.problem.case import Case
 from fenics_contact.problem.geometry import ContactMesh
+from fenics_contact.problem.partition import simplex_volumes
 from fenics_contact.problem.tags import Subdomain
 
 __all__ = ["check_case_coarse_grid", "check_coarse_grid", "check_cubes"]
@@ -51,7 +53,8 @@ def check_case_coarse_grid(cm: ContactMesh, options: RunOptions, case: Case) -> 
     if cm.mesh.topology.dim == 3:
         key = _CASE_KEYS.get(case.mesh.kind, "mesh.coarse-size, a length, or mesh.H, 1/H")
         missing = f"give {key}: the side of the coarse cubes"
-        check_cubes(cm, f"--method {options.method} with case {case.path.name}", key, missing)
+        graded = case.mesh.kind == "hertz-quarter-block" and case.mesh.coarse_size is None
+        check_cubes(cm, f"--method {options.method} with case {case.path.name}", key, missing, graded=graded)
         return
     if cm.H is None:
         builtin = case.mesh.kind in ("hertz-block", "bulged-square")
@@ -78,10 +81,12 @@ def check_case_coarse_grid(cm: ContactMesh, options: RunOptions, case: Case) -> 
         )
 
 
-def check_cubes(cm: ContactMesh, where: str, key: str, missing: str) -> None:
+def check_cubes(cm: ContactMesh, where: str, key: str, missing: str, graded: bool = False) -> None:
     """InputError (starting with ``where``) unless every Ω₁ cell of the 3D mesh ``cm`` lies in a coarse cell, the
     coarse size is at least the median diameter of the Ω₁ cells and at most half of the body's longest side
-    (``key``: the option that sets it; ``missing``: what to do when the mesh has no coarse grid). Collective."""
+    (``key``: the option that sets it; ``missing``: what to do when the mesh has no coarse grid).  ``graded``: the
+    coarse cells are a graded partition (the Hertz block's boxes, ``partition.graded_coarse_cells``), not cubes of
+    side ``cm.H``: they are checked to be larger than the fine cells they hold instead.  Collective."""
     comm = cm.comm
     cells = cm.cell_tags.find(Subdomain.OMEGA1)
     cells = cells[cells < cm.mesh.topology.index_map(3).size_local]
@@ -94,6 +99,15 @@ def check_cubes(cm: ContactMesh, where: str, key: str, missing: str) -> None:
             f"{where}: {outside} Omega1 cells lie in no coarse cell of the mesh's partition; give every Omega1 cell "
             f"a coarse cell, or a coarse size ({key})"
         )
+    if graded:
+        ratio = _size_ratio(cm, cells, coarse)
+        if ratio < 1.0:
+            raise InputError(
+                f"{where}: the coarse cells are smaller than the Omega1 cells they hold (the median over the "
+                f"coarse cells of |K|^(1/3) over their cells' (6|T|)^(1/3) is {ratio:.3g}): a coarse cell must "
+                f"hold several fine cells; give a coarse size ({key})"
+            )
+        return
     diameters = np.concatenate(comm.allgather(cm.mesh.h(3, cells)))
     h = float(np.median(diameters))
     if cm.H is not None and cm.H < h:
@@ -111,3 +125,17 @@ def check_cubes(cm: ContactMesh, where: str, key: str, missing: str) -> None:
             f"{where}: the coarse size H = {cm.H:.4g} is more than half of the body's longest side ({side:.4g}): "
             f"Algorithm 3 needs at least two coarse cells along it; give a smaller coarse size ({key})"
         )
+
+
+def _size_ratio(cm: ContactMesh, cells: np.ndarray, coarse: np.ndarray) -> float:
+    """The median over the coarse cells K of |K|^(1/3) / mean (6|T|)^(1/3) of the fine cells T it holds (the owned
+    ``cells`` of the 3D mesh and their ``coarse`` indices, summed over the ranks).  (6|T|)^(1/3) is the side of the
+    cube a tetrahedron of volume |T| is one sixth of: a cube of side H over a mesh of cubes of side h, each cut into
+    six tetrahedra, has the ratio H/h."""
+    volumes = simplex_volumes(cm.mesh.geometry.x[cm.mesh.geometry.dofmap[cells]])
+    n = cm.comm.allreduce(int(np.max(coarse, initial=-1)) + 1, op=MPI.MAX)
+    total = cm.comm.allreduce(np.bincount(coarse, weights=volumes, minlength=n), op=MPI.SUM)
+    fine = cm.comm.allreduce(np.bincount(coarse, weights=np.cbrt(6.0 * volumes), minlength=n), op=MPI.SUM)
+    count = cm.comm.allreduce(np.bincount(coarse, minlength=n).astype(float), op=MPI.SUM)
+    held = count > 0
+    return float(np.median(np.cbrt(total[held]) / (fine[held] / count[held])))

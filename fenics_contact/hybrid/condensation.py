@@ -124,7 +124,7 @@ class CondensedInterface:
             self.Yc, self.Sc, self._Yq, self._Sq = om2.responses(contact=True, chunk=problem.options.chunk)
         else:
             self.Yc = components[0]
-        f = self.f = np.flatnonzero(problem.free)  # the data at the other values stay zero
+        f = self.f = problem.unknowns(self.Yc)  # the data at the other values stay zero
         a, b, eye = problem.a[f], problem.b, np.eye(f.size)
         same = (
             previous is not None

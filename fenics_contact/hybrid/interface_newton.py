@@ -18,6 +18,12 @@ affine pieces, ``hybrid.response``).  Two strategies solve g = T(g) (``Interface
   interface unknowns, or n_γ back-solves under MPI); a backtracking line search on ‖F‖ globalizes it.  It
   needs no J₀ but that Jacobian in every step.
 
+A line search that rejects all its trials leaves the iterate where it was (a rejected trial never becomes the next
+one): a step with the condensed Jacobian is retried with the exact one, a step with the exact one once more with
+Ω₂'s Jacobian at the shortest trial's state (the other side of a contact or stick/slip front next to the iterate),
+and should that fail too, Anderson acceleration goes on from the iterate for the remaining steps, its least
+squares seeded with the trials (their applications of T are secant information).
+
 Both land on the fixed point of the Robin iteration (the same equations).  A Newton method that fails (no
 convergence in ``max_steps``, a singular condensed system) raises ConvergenceError; a pair whose
 transmission residual stays above the tolerance ends with ``converged = False``.

@@ -4,7 +4,9 @@
 2e-3 in two steps and dragged by 0.002, 0.008, 0.03: per load step and contrast, Algorithm 1's applications of
 T, its Newton steps on the interface data after the condensed solve, the steps of the condensed contact Newton
 (the thresholds' fixed point included), and the largest displacement difference to the monolithic path.
-``--strategy interface`` runs the interface Newton's "interface" strategy instead.  ``--dim 3``: the same on the
+``--strategy interface`` runs the interface Newton's "interface" strategy instead, ``--method primal-ms``
+Algorithm 3 instead of Algorithm 1 (the difference is then its multiscale error), ``--frictionless`` the same path
+with no friction (these print table (1) only).  ``--dim 3``: the same on the
 3D channel cube (h = 1/``--h``), the wall on x = 1 pressed in by 0.01 and dragged along y by 0.005, 0.01, 0.02
 (this table only).
 
@@ -41,12 +43,15 @@ from fenics_contact.problem.meshes import hertz_block
 from fenics_contact.problem.models import get_model
 from fenics_contact.problem.models3d import channels_3d, channels_3d_mesh
 from fenics_contact.problem.obstacles import Plane
+from fenics_contact.problem.problem import Frictionless
 from fenics_contact.sliding import slide
 
 MU = 0.3
 
 
-def theorem_table(n: int, n_coarse: int, strategy: str, dim: int = 2) -> str:
+def theorem_table(
+    n: int, n_coarse: int, strategy: str, dim: int = 2, method: str = "primal", frictionless: bool = False
+) -> str:
     if dim == 2:
         depth = 2e-3
         path = [(-depth / 2, 0.0), (-depth, 0.0), (-depth, 0.002), (-depth, 0.008), (-depth, 0.03)]
@@ -58,7 +63,7 @@ def theorem_table(n: int, n_coarse: int, strategy: str, dim: int = 2) -> str:
         "|---|---|---|---|---|---|",
     ]
     for contrast in (1e3, 1e6):
-        law = Friction("coulomb", mu=MU)
+        law = Frictionless() if frictionless else Friction("coulomb", mu=MU)
         if dim == 2:
             model = get_model(3, E_high=contrast).with_(obstacle=Plane((1.0, 0.0), (-1.0, 0.0)), law=law)
             problem = model.on(unit_square(n, n_coarse))
@@ -76,7 +81,7 @@ def theorem_table(n: int, n_coarse: int, strategy: str, dim: int = 2) -> str:
             return record
 
         slide(problem, "primal-monolithic", path, on_step=keep("mono"))
-        alg1 = slide(problem, "primal", path, tol=1e-11, strategy=strategy, on_step=keep("alg1"))
+        alg1 = slide(problem, method, path, tol=1e-11, strategy=strategy, on_step=keep("alg1"))
         for step, ua, ub in zip(alg1.steps, fields["mono"], fields["alg1"]):
             gap = np.max(np.abs(ua - ub)) / np.max(np.abs(ua))
             rows.append(
@@ -308,6 +313,10 @@ def main() -> None:
     parser.add_argument("--h", type=int, default=32, help="1/h of the unit square (Theorem 3.1 table)")
     parser.add_argument("--H", type=int, default=8, help="1/H")
     parser.add_argument("--strategy", default="condensed", choices=("condensed", "interface"))
+    parser.add_argument(
+        "--method", default="primal", choices=("primal", "primal-ms"), help="the hybrid method of table (1)"
+    )
+    parser.add_argument("--frictionless", action="store_true", help="table (1) without friction")
     parser.add_argument("--dim", type=int, default=2, choices=(2, 3), help="3: the 3D channel cube, h = 1/--h")
     parser.add_argument("--nu", type=float, nargs="+", default=[0.45, 0.49], help="Poisson ratios (Cattaneo–Mindlin)")
     parser.add_argument(
@@ -353,7 +362,9 @@ def main() -> None:
         print(cattaneo_rates(args.nu, args.refinement, "mixed-monolithic", setup))
         return
     print("## Algorithm 1 and the monolithic solve along a frictional path\n")
-    print(theorem_table(args.h, args.H, args.strategy, args.dim))
+    print(theorem_table(args.h, args.H, args.strategy, args.dim, args.method, args.frictionless))
+    if args.method != "primal" or args.frictionless:
+        return
     if args.dim == 3:
         return
     print("\n## Cattaneo–Mindlin\n")

@@ -42,6 +42,9 @@ from fenics_contact.hybrid.response import AffinePart
 
 __all__ = ["InterfaceProblem", "CondensedInterface"]
 
+#: a trace row whose entries are all below this fraction of the largest entry is zero (round-off)
+ROUND_OFF = 1.0e4 * np.finfo(np.float64).eps
+
 
 @dataclass(slots=True)
 class InterfaceProblem:
@@ -74,9 +77,27 @@ class InterfaceProblem:
         """The step's local data from global halves."""
         return np.concatenate([self.local(g12), self.local(g21)])
 
-    def step_direction(self, F12: np.ndarray, F21: np.ndarray, D2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Newton direction of F(g) = g − T(g) with ∂y₂/∂g₂₁ = D2: (I − P₁P₂) d₂₁ = −F₂₁ − P₁F₁₂, d₁₂ = P₂d₂₁ − F₁₂."""
+    def unknowns(self, D2: np.ndarray) -> np.ndarray:
+        """The data values the Newton system solves for: the free ones, less those whose trace no data moves on
+        either side (rows of T₁ and of ∂y₂/∂g₂₁ = D2 zero to round-off).
+
+        At such a value p (a mixed method's γ ending on a traction-free side: the AW vertex stress there has
+        σn·t = 0, so the tangential trace σ_xy vanishes in both subdomains) the update only swaps the data,
+        g₁₂(p) ← g₂₁(p) and back, and the rows of both halves of the Jacobian, e_p − e_p and −e_p + e_p, are
+        dependent: I − P₁P₂ is singular.  The subdomains see the data only through ∫_γ g·τn over the traces
+        τn, which lack that value, so the data with g(p) held are already the whole trace space: solving for the
+        others loses nothing (the pair, and the fixed point, are the same), and the system on them is regular.
+        """
         f = np.flatnonzero(self.free)
+        T1, tiny = self.omega1.T, ROUND_OFF
+        still = np.linalg.norm(T1[f], axis=1) <= tiny * max(np.abs(T1).max(), 1e-300)
+        still &= np.linalg.norm(D2[f], axis=1) <= tiny * max(np.abs(D2).max(), 1e-300)
+        return f[~still]
+
+    def step_direction(self, F12: np.ndarray, F21: np.ndarray, D2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Newton direction of F(g) = g − T(g) with ∂y₂/∂g₂₁ = D2: (I − P₁P₂) d₂₁ = −F₂₁ − P₁F₁₂, d₁₂ = P₂d₂₁ − F₁₂,
+        on the ``unknowns`` (the other components of d zero)."""
+        f = self.unknowns(D2)
         a, eye = self.a[f], np.eye(f.size)
         P1 = a[:, None] * self.omega1.T[np.ix_(f, f)] + self.b * eye
         P2 = a[:, None] * D2[np.ix_(f, f)] + self.b * eye
@@ -103,7 +124,7 @@ class CondensedInterface:
             self.Yc, self.Sc, self._Yq, self._Sq = om2.responses(contact=True, chunk=problem.options.chunk)
         else:
             self.Yc = components[0]
-        f = self.f = np.flatnonzero(problem.free)  # the data at the other values stay zero
+        f = self.f = problem.unknowns(self.Yc)  # the data at the other values stay zero
         a, b, eye = problem.a[f], problem.b, np.eye(f.size)
         same = (
             previous is not None

@@ -14,7 +14,7 @@ from collections.abc import Callable
 import numpy as np
 from mpi4py import MPI
 
-from fenics_contact.hybrid.iteration import AndersonUpdate
+from fenics_contact.hybrid.anderson import AndersonUpdate
 
 __all__ = ["NEWTON_STEPS", "iterate_pair_interface"]
 

@@ -540,19 +540,6 @@ CASES = [
         "has no coarse grid",
     ),
     Case(
-        "case: Algorithm 3 on the Hertz quarter block without coarse cubes",
-        lambda tmp: [
-            "--case",
-            str(CASES_DIR / "sphere_3d.toml"),
-            "--set",
-            'mesh={builtin="hertz-quarter-block", a=0.1, refinement=0.2}',
-            "--method",
-            "primal-ms",
-        ],
-        2,
-        "give every Omega1 cell a coarse cell, or a coarse size (mesh.coarse-size, in multiples of a)",
-    ),
-    Case(
         "case: Algorithm 3 on coarse cubes smaller than the cells",
         lambda tmp: [
             "--case",

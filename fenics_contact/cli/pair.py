@@ -227,8 +227,9 @@ def check_coarse_size(problem, H: float) -> None:
     x = msh.geometry.x
     for k in (0, 1):
         nodes = np.unique(msh.geometry.dofmaps[0][problem.body_cells(k)])
-        low = comm.allreduce(np.min(x[nodes, :tdim], axis=0, initial=np.inf), op=MPI.MIN)
-        high = comm.allreduce(np.max(x[nodes, :tdim], axis=0, initial=-np.inf), op=MPI.MAX)
+        low, high = np.min(x[nodes, :tdim], axis=0, initial=np.inf), np.max(x[nodes, :tdim], axis=0, initial=-np.inf)
+        comm.Allreduce(MPI.IN_PLACE, low, op=MPI.MIN)
+        comm.Allreduce(MPI.IN_PLACE, high, op=MPI.MAX)
         side = float(np.max(high - low))
         if H >= side / 2:
             raise InputError(

@@ -241,7 +241,7 @@ def _check_pair(case: PairCase, args: argparse.Namespace, comm: MPI.Comm) -> int
         f"{case.pair.rule} rule of degree {case.pair.quadrature_degree}"
         + (f", {case.friction.describe()} on the relative slip" if case.friction is not None else ", frictionless")
     )
-    refusal = _pair_ms_refusal(case, problem, comm)
+    refusal = _pair_ms_refusal(case, problem)
     if options.method == "primal-ms" and refusal is not None:
         raise refusal
     notes = [f"{m} can run" if m != "primal-ms" or refusal is None else f"{m} cannot ({refusal})" for m in PAIR_METHODS]
@@ -252,10 +252,8 @@ def _check_pair(case: PairCase, args: argparse.Namespace, comm: MPI.Comm) -> int
     return 0
 
 
-def _pair_ms_refusal(case: PairCase, problem, comm: MPI.Comm) -> InputError | None:
+def _pair_ms_refusal(case: PairCase, problem) -> InputError | None:
     """Why ``primal-ms`` cannot run the two-body case (as ``cli.pair`` would say), or None."""
-    if comm.size > 1:
-        return InputError("--method primal-ms on a two-body case runs on one process")
     if case.coarse_size is None:
         return InputError("--method primal-ms needs the coarse size: give mesh.coarse-size or mesh.H")
     try:

@@ -7,11 +7,12 @@ of Algorithms 1 and 3, Algorithm 3's coarse size and CEM options, the output dir
 flags ``--method``, ``--out``, ``--no-plots``, ``--delta``, ``--tol``, ``--max-iterations``, ``--accel``,
 ``--H`` (1/H), ``--layers`` and ``--nbasis`` (the ``[multiscale]`` oversampling layers and modes) override the
 case's ``[mesh]``, ``[run]``, ``[primal]`` and ``[multiscale]`` tables, any other flag is refused.  The strip
-layers of Algorithms 1 and 3 are the case's ``primal.layers``.  ``primal-ms`` runs on one process.  A run
-solves each load step (warm-started from the last with ``primal-monolithic`` on one process) and writes
-``cli.pair_outputs``' files; under ``mpiexec`` ``primal-monolithic`` runs in parallel (``fem.two_body_mpi``),
-and so does ``primal`` (``hybrid.two_body_mpi``).  With ``[friction]`` each step starts from the friction state
-the last one committed (the slip of a step is measured from it), with every method.
+layers of Algorithms 1 and 3 are the case's ``primal.layers``.  A run solves each load step (warm-started from
+the last with ``primal-monolithic`` on one process) and writes ``cli.pair_outputs``' files; under ``mpiexec``
+``primal-monolithic`` runs in parallel (``fem.two_body_mpi``), and so does ``primal`` (``hybrid.two_body_mpi``);
+``primal-ms`` solves the same serial pair on every rank (``multiscale.pair_replica``: the serial answer, no
+speed-up).  With ``[friction]`` each step starts from the friction state the last one committed (the slip of a
+step is measured from it), with every method.
 """
 
 import logging
@@ -212,10 +213,10 @@ def _multiscale_options(case: PairCase, cem: Mapping[str, int]) -> PairMultiscal
 def check_coarse_size(problem, H: float) -> None:
     """InputError unless the coarse squares of side ``H`` divide each body: at least one fine cell across and at
     least two coarse cells along a body's longer side (collective)."""
-    msh = problem.mesh
+    msh, comm = problem.mesh, problem.mesh.comm
     tdim = msh.topology.dim
     n_cells = msh.topology.index_map(tdim).size_local
-    h = float(np.median(msh.h(tdim, np.arange(n_cells, dtype=np.int32))))
+    h = float(np.median(np.concatenate(comm.allgather(msh.h(tdim, np.arange(n_cells, dtype=np.int32))))))
     if H < h:
         raise InputError(
             f"the coarse size H = {H:g} (mesh.coarse-size, or 1/--H) is smaller than the fine cells (median "
@@ -224,7 +225,10 @@ def check_coarse_size(problem, H: float) -> None:
     x = msh.geometry.x
     for k in (0, 1):
         nodes = np.unique(msh.geometry.dofmaps[0][problem.body_cells(k)])
-        side = float(np.ptp(x[nodes, :tdim], axis=0).max())
+        low, high = np.min(x[nodes, :tdim], axis=0, initial=np.inf), np.max(x[nodes, :tdim], axis=0, initial=-np.inf)
+        comm.Allreduce(MPI.IN_PLACE, low, op=MPI.MIN)
+        comm.Allreduce(MPI.IN_PLACE, high, op=MPI.MAX)
+        side = float(np.max(high - low))
         if H >= side / 2:
             raise InputError(
                 f"the coarse size H = {H:g} (mesh.coarse-size, or 1/--H) does not divide body {k + 1} (its longer "
@@ -252,11 +256,6 @@ def _converged(result) -> bool:
 
 def run_pair(options: PairRunOptions, comm: MPI.Comm, case: PairCase) -> int:
     """Solve the case (each load step), write into ``options.out``; 0 converged, 3 not converged."""
-    if options.method == "primal-ms" and comm.size > 1:
-        raise InputError(
-            "--method primal-ms on a two-body case runs on one process (its multiscale bulks are serial): run it "
-            "without mpiexec, or use --method primal or primal-monolithic under MPI"
-        )
     output = OutputDirectory(options.out, comm)
     with output:
         t0 = time.perf_counter()

@@ -13,7 +13,8 @@ point is Algorithm 1's.  With the pair's friction law the strips are Algorithm 1
 (``fem.two_body_friction``): friction lives in Ω₂ only, so the multiscale bulks are unchanged, and ``state``
 carries the slip anchors, the displacement and the interface data from one load step to the next.  Tractions
 on a bulk's facets enter its load vector (the parent's load over the bulk's cells and their traction facets),
-which the source correctors localize as they do the body force.  Serial; a body's supports hold every
+which the source correctors localize as they do the body force.  Under MPI every rank solves the same serial
+copy of the pair (``multiscale.pair_replica``: no speed-up, the answer of one process).  A body's supports hold every
 component (no rollers), one prescribed displacement per body.
 """
 
@@ -32,6 +33,7 @@ from fenics_contact.multiscale.cem.coarse import MultiscaleRobinSolver
 from fenics_contact.multiscale.cem.operators import assemble_fine_operators
 from fenics_contact.multiscale.cem.options import CEMOptions
 from fenics_contact.multiscale.coarse import grid_from_cells
+from fenics_contact.multiscale.pair_replica import PairReplica
 from fenics_contact.problem.boundary import BoundaryConditions
 from fenics_contact.problem.fields import MaterialFields
 from fenics_contact.problem.pair import TwoBodyProblem
@@ -201,12 +203,16 @@ def solve_two_body_ms_hybrid(
     state: PairState | None = None,
 ) -> TwoBodyHybridResult:
     """Algorithm 3 for two bodies (module docstring): ``hybrid.two_body.solve_two_body_hybrid`` with each bulk a
-    CEM-GMsFEM space; serial.  ``state``: the previous load step's ``.state`` (with friction: the anchors its
-    slip is measured from)."""
+    CEM-GMsFEM space; under MPI the same serial pair on every rank (``multiscale.pair_replica``).  ``state``:
+    the previous load step's ``.state`` (with friction: the anchors its slip is measured from)."""
     if not isinstance(multiscale, PairMultiscaleOptions):
         raise InputError(f"two-body Algorithm 3 takes PairMultiscaleOptions, got {type(multiscale).__name__}")
-    if problem.comm.size > 1:
-        raise InputError("two-body Algorithm 3 (primal-ms) runs on one process (run it without mpiexec)")
+    if problem.comm.size > 1:  # the same serial pair on every rank (``multiscale.pair_replica``)
+        copy = PairReplica(problem)
+        serial = solve_two_body_ms_hybrid(
+            copy.problem, multiscale, delta=delta, options=options, newton=newton, state=copy.serial_state(state)
+        )
+        return copy.distributed(serial)
     for s in problem.supports:
         if s.components is not None:
             raise InputError("two-body Algorithm 3 (primal-ms): a support holds every component (no rollers)")

@@ -20,6 +20,7 @@ serial and parallel runs share one code path.
 
 import basix.ufl
 import numpy as np
+import ufl
 from dolfinx import fem
 from dolfinx import mesh as dmesh
 from mpi4py import MPI
@@ -80,7 +81,10 @@ class SerialReplica:
         cells = np.searchsorted(self.node_gids, all_cells)
         if np.any(self.node_gids[cells] != all_cells):
             raise RuntimeError("serial copy: a cell vertex is owned by no rank")
-        self.mesh = dmesh.create_mesh(MPI.COMM_SELF, cells.astype(np.int64), msh.ufl_domain(), x)
+        # a UFL domain of its own: sharing the subdomain's would point that domain at the copy (forms on the
+        # distributed mesh would then be built on the copy)
+        domain = ufl.Mesh(basix.ufl.element("Lagrange", msh.basix_cell(), 1, shape=(gdim,)))
+        self.mesh = dmesh.create_mesh(MPI.COMM_SELF, cells.astype(np.int64), domain, x)
         self.cell_data = {}
         original = np.asarray(self.mesh.topology.original_cell_index, dtype=np.int64)
         for name, values in cell_data.items():

@@ -22,7 +22,7 @@ import fenics_contact as fc
 from fenics_contact.cli import main
 from fenics_contact.problem.case import load_case
 
-pytestmark = pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="two-body Algorithm 3 runs on one process")
+pytestmark = pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="serial (the MPI runs: test_pair_multiscale_mpi.py)")
 
 CASE = Path(__file__).parents[2] / "cases" / "two_blocks.toml"
 MESH = CASE.parent / "two_blocks.msh"

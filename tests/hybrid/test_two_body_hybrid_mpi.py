@@ -3,7 +3,7 @@ reduced to the interface data and the contact rows on every rank.  On a layered 
 with inclusions, non-matching meshes, an overhanging upper block) the result is the serial one (``mpiexec -n 2``,
 against the same problem on ``COMM_SELF``; also on 3 ranks) to 1e-10, frictionless and along a Coulomb
 press-then-shear path, in at most 8 interface Newton steps; in 3D alike; and a case file run with
-``--method primal`` is the serial run."""
+``--method primal`` is the serial run, as is the fault sliding case with ``--method primal-ms``."""
 
 from pathlib import Path
 
@@ -16,7 +16,6 @@ from pair_problems import tilted_pair
 
 import fenics_contact as fc
 from fenics_contact.cli import main
-from fenics_contact.errors import InputError
 from fenics_contact.problem.pair import Body, ContactPair, Support, TwoBodyProblem
 from fenics_contact.problem.pair_meshes import PairTag as T
 from fenics_contact.problem.pair_meshes import fault_strata, two_blocks
@@ -126,6 +125,22 @@ def test_two_ranks_give_the_serial_algorithm_1_in_three_dimensions():
     assert parallel.force_balance() < 1e-12
 
 
-def test_two_body_algorithm_3_refuses_on_two_ranks():
-    with pytest.raises(InputError, match="runs on one process"):
-        fc.solve(tilted_pair(MPI.COMM_WORLD, (5, 6), dim=3), "primal-ms", H=0.25)
+def test_the_fault_sliding_case_with_algorithm_3_on_two_ranks_is_the_serial_run(shared_tmp_path):
+    """``--method primal-ms`` (each rank solves the serial pair, ``multiscale.pair_replica``) along the case's
+    Coulomb press-then-shear path: the serial forces and stick/slip at every step."""
+    case = str(CASES / "fault_sliding.toml")
+    assert main(["check-mesh", "--case", case, "--method", "primal-ms"]) == 0
+    args = ["run", "--case", case, "--method", "primal-ms", "--no-plots"]
+    code, err, serial = serial_cli(*args, "--out", str(shared_tmp_path / "serial"))
+    assert code == 0, err[-3000:]
+    out = shared_tmp_path / "parallel"
+    assert main([*args, "--out", str(out)]) == 0
+    parallel = run_summary(out)
+    assert parallel["mpi_ranks"] == 2 and serial["mpi_ranks"] == 1
+    for p, s in zip(parallel["load_steps"]["steps"], serial["load_steps"]["steps"], strict=True):
+        for key in ("force_slave", "force_master"):
+            assert np.linalg.norm(np.subtract(p[key], s[key])) <= 1e-10 * np.linalg.norm(s[key])
+        assert p["force_balance"] < 1e-12
+        assert p["strip_cells"] == s["strip_cells"]
+        assert p["friction"]["slip_nodes"] == s["friction"]["slip_nodes"]
+    assert parallel["load_steps"]["steps"][-1]["friction"]["slip_nodes"] > 0

@@ -17,7 +17,7 @@ from fenics_contact.problem.pair import Body, ContactPair, Support, TwoBodyProbl
 from fenics_contact.problem.pair_meshes import PairTag as T
 from fenics_contact.problem.pair_meshes import fault_strata, two_blocks
 
-pytestmark = pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="two-body Algorithm 3 runs on one process")
+pytestmark = pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="serial (the MPI runs: test_pair_multiscale_mpi.py)")
 
 CONTRAST = 1e3
 #: the energy error falls by at least this factor per oversampling layer from m = 2 (measured 28 and 23: the

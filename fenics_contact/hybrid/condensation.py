@@ -122,6 +122,11 @@ class CondensedInterface:
         else:
             self._combine(components, previous if same and previous.components is components else None)
         self._chains = previous._chains if same else None  # the contact points stay
+        #: the contact Newton's first set: the active set of the last solve of ``previous`` (a load path's last
+        #: step, the obstacle moved), else None ({s_L > 0}); ``last``: this condensation's last active set
+        start = getattr(previous, "last", None)
+        self.start = start if start is not None and start.size == self.D.size else None
+        self.last = None
         if problem.options.front_window:
             self.chains  # noqa: B018 -- formed offline (collective: all ranks' points), not in the timed solve
 
@@ -257,7 +262,7 @@ class CondensedInterface:
         s_load, g21_0, y20 = self.load_terms()
         try:
             chains = self.chains if options.front_window else None
-            _, lam, hist = contact_solve(s_load, self.M, self.D, options, name, chains)
+            _, lam, hist = contact_solve(s_load, self.M, self.D, options, name, chains, self.start)
         except ConvergenceError as err:
             lowest = self.lowest_eigenvalue()
             if lowest < 0.0:
@@ -269,6 +274,7 @@ class CondensedInterface:
                     "smaller α or β (Algorithm 3's default alpha='Emin*h^-1/2'), or more oversampling layers"
                 ) from err
             raise
+        self.last = lam > 0.0
         g21 = g21_0 - self.times("Gq", lam)
         y2 = y20 + self.Yc @ g21 - self.times("Yq", lam)
         g12 = np.where(p.free, p.a * y2 + p.b * g21, 0.0)

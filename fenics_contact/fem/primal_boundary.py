@@ -136,6 +136,7 @@ class NodalContactGeometry:
         Nn = N.array.reshape(-1, gdim)[nodes]
         self.surface_normal = Nn / np.linalg.norm(Nn, axis=1)[:, None] if nodes.size else Nn
         self.weights = w.array
+        self.points = Q.tabulate_dof_coordinates()  #: the coordinates of Q's DOFs (the mesh does not move)
         self.obstacle: Obstacle | None = None
         self.set_obstacle(obstacle)
 
@@ -143,7 +144,7 @@ class NodalContactGeometry:
         """ν and g at the Γ_C vertices for ``obstacle`` (collective); True when ν changed (ν enters the Jacobian)."""
         nodes = self.contact_q
         gdim = self.V.mesh.geometry.dim
-        points = self.Q.tabulate_dof_coordinates()[nodes]
+        points = self.points[nodes]
         g, nu = obstacle_at_nodes(obstacle, points, self.surface_normal, comm=self.comm)
         previous = self.nu.x.array.copy()
         self.nu.x.array[:] = 0.0
@@ -186,7 +187,7 @@ class NodalContactGeometry:
         gap = self.gap.x.array[on]
         u_c = np.sum(u.x.array.reshape(-1, gdim)[on] * normal, axis=1) - gap
         sigma_c = np.sum(reaction.reshape(-1, gdim)[on] * normal, axis=1) / w[on]
-        points = self.Q.tabulate_dof_coordinates()[on, :gdim]
+        points = self.points[on, :gdim]
         comm = self.comm
         points, u_c, sigma_c, weights, normal, gap = (
             np.concatenate(comm.allgather(a)) for a in (points, u_c, sigma_c, w[on], normal, gap)

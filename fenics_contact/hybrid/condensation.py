@@ -121,7 +121,7 @@ class CondensedInterface:
         self.components = components
         self._nu = None  # the normals the per-component pieces are combined with
         if components is None:
-            self.Yc, self.Sc, self._Yq, self._Sq = om2.responses(contact=True, chunk=problem.options.chunk)
+            self.Yc, self._Sc, self._Yq, self._Sq = om2.responses(contact=True, chunk=problem.options.chunk)
         else:
             self.Yc = components[0]
         f = self.f = problem.unknowns(self.Yc)  # the data at the other values stay zero
@@ -143,6 +143,11 @@ class CondensedInterface:
         else:
             self._combine(components, previous if same and previous.components is components else None)
         self._chains = previous._chains if same else None  # the contact points stay
+        #: the contact Newton's first set: the active set of the last solve of ``previous`` (a load path's last
+        #: step, the obstacle moved), else None ({s_L > 0}); ``last``: this condensation's last active set
+        start = getattr(previous, "last", None)
+        self.start = start if start is not None and start.size == self.D.size else None
+        self.last = None
         if problem.options.front_window:
             self.chains  # noqa: B018 -- formed offline (collective: all ranks' points), not in the timed solve
 
@@ -157,7 +162,8 @@ class CondensedInterface:
         """Sc and M for the current normals ν from the per-component pieces: with Yq = Σ_k Yq_k diag(ν_k),
         Gq = Σ_k G_k diag(ν_k) (G_k = K⁻¹P₁(a ⊙ Yq_k)) and M = Σ_kl diag(ν_k) (Sq_kl + Sc_k G_l) diag(ν_l); G_k and
         M_kl are formed once per J₀ (kept from ``previous``); Yq, Sq and Gq only when asked (``times``: their
-        products with λ from the pieces)."""
+        products with λ from the pieces; Sc too, its products with the data ``contact_of``).  M is summed in place,
+        one column block diag(ν_k) M_kl at a time (no temporary per term)."""
         _, Sc, Yq, Sq = components
         if previous is not None:
             self._G, self._M = previous._G, previous._M
@@ -166,13 +172,34 @@ class CondensedInterface:
             self._M = [[Sq[k][l] + Sc[k] @ self._G[l] for l in range(len(Yq))] for k in range(len(Yq))]
         nu = self._nu = self.problem.omega2.contact_normals()
         bs = nu.shape[1]
-        self._Yq = self._Sq = self._Gq = None
-        self.Sc = sum(nu[:, k, None] * Sc[k] for k in range(bs))
-        self.M = sum(nu[:, k, None] * self._M[k][l] * nu[None, :, l] for k in range(bs) for l in range(bs))
+        self._Yq = self._Sq = self._Gq = self._Sc = None
+        n = nu.shape[0]
+        self.M, col, work = np.zeros((n, n)), np.empty((n, n)), np.empty((n, n))
+        for l in range(bs):  # M += (Σ_k diag(ν_k) M_kl) diag(ν_l)
+            np.multiply(self._M[0][l], nu[:, 0, None], out=col)
+            for k in range(1, bs):
+                col += np.multiply(self._M[k][l], nu[:, k, None], out=work)
+            col *= nu[None, :, l]
+            self.M += col
 
     def _by_normals(self, pieces: list) -> np.ndarray:
         """Σ_k pieces[k] diag(ν_k)."""
         return sum(pieces[k] * self._nu[None, :, k] for k in range(self._nu.shape[1]))
+
+    @property
+    def Sc(self) -> np.ndarray:
+        """Q J₀⁻¹C: the contact values of the data columns."""
+        if self._Sc is None:
+            pieces = self.components[1]
+            self._Sc = sum(self._nu[:, k, None] * pieces[k] for k in range(self._nu.shape[1]))
+        return self._Sc
+
+    def contact_of(self, g: np.ndarray) -> np.ndarray:
+        """Sc g: by the per-component pieces, Σ_k ν_k ⊙ (Sc_k g), when they are held and Sc was not formed."""
+        if self._nu is None or self._Sc is not None:
+            return self.Sc @ g
+        pieces = self.components[1]
+        return sum(self._nu[:, k] * (pieces[k] @ g) for k in range(self._nu.shape[1]))
 
     @property
     def Yq(self) -> np.ndarray:
@@ -215,7 +242,7 @@ class CondensedInterface:
         y20, s00 = p.omega2.load_response()
         g21 = np.zeros(p.a.size)
         g21[f] = sla.lu_solve(self.lu, self.P1 @ (p.a[f] * y20[f]) + p.a[f] * t1[f])
-        return s00 + self.Sc @ g21, g21, y20
+        return s00 + self.contact_of(g21), g21, y20
 
     def jacobian(self, active: np.ndarray) -> np.ndarray:
         """∂y₂/∂g₂₁ for the Ω₂ active set (Woodbury on J₀: no factorization)."""
@@ -256,7 +283,7 @@ class CondensedInterface:
         s_load, g21_0, y20 = self.load_terms()
         try:
             chains = self.chains if options.front_window else None
-            _, lam, hist = contact_solve(s_load, self.M, self.D, options, name, chains)
+            _, lam, hist = contact_solve(s_load, self.M, self.D, options, name, chains, self.start)
         except ConvergenceError as err:
             lowest = self.lowest_eigenvalue()
             if lowest < 0.0:
@@ -268,6 +295,7 @@ class CondensedInterface:
                     "smaller α or β (Algorithm 3's default alpha='Emin*h^-1/2'), or more oversampling layers"
                 ) from err
             raise
+        self.last = lam > 0.0
         g21 = g21_0 - self.times("Gq", lam)
         y2 = y20 + self.Yc @ g21 - self.times("Yq", lam)
         g12 = np.where(p.free, p.a * y2 + p.b * g21, 0.0)

@@ -164,16 +164,30 @@ def contact_newton(
 
 
 def contact_solve(
-    s_load: np.ndarray, M: np.ndarray, D: np.ndarray, options: InterfaceNewtonOptions, name: str, chains
+    s_load: np.ndarray,
+    M: np.ndarray,
+    D: np.ndarray,
+    options: InterfaceNewtonOptions,
+    name: str,
+    chains,
+    active: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, "ContactNewtonHistory"]:
     """``contact_newton`` with the options' local front resolution (``chains`` given, ``options.front_window``
     unknowns on either side of every front), and the plain contact Newton afresh should that not converge:
     with a non-symmetric M (a multiscale Ω₁) the energy line search that stops cycles is no merit function,
     and a set the local problems chose can lead into a cycle the plain Newton avoids.  The failed attempt's steps
-    stay counted (``ContactNewtonHistory.discarded``)."""
+    stay counted (``ContactNewtonHistory.discarded``).  ``active``: the first set (e.g. the last load step's),
+    else {s_L > 0}."""
     try:
         return contact_newton(
-            s_load, M, D, max_steps=options.max_steps, name=name, chains=chains, window=options.front_window
+            s_load,
+            M,
+            D,
+            max_steps=options.max_steps,
+            name=name,
+            chains=chains,
+            window=options.front_window,
+            active=active,
         )
     except ConvergenceError as first:
         if not chains:

@@ -110,6 +110,7 @@ class MultiscalePrimalHybridStep:
         self._t = np.zeros(self.omega1.solver.space.n_gamma + 1)
         self._prev = [self._t.copy(), np.zeros_like(self.omega2.u.x.array)]
         self._diff2 = fem.Function(self.omega2.V)
+        self._products: list | None = None  #: Ω₂'s [K u, M u, work, work] of the last state (``_measure``)
         self._change = np.inf
         self._certificate = Certificate(np.inf, np.inf)
         self._record: dict = {}
@@ -146,7 +147,7 @@ class MultiscalePrimalHybridStep:
         newton = solve_or_verify(self.omega2, omega2_warm)
         u1g = self.omega1.interface_trace(self._t)
         u2g = self.interface.from_part(self.omega2.u, 1)
-        self._measure()
+        self._measure(kept=omega2_warm)
         self._certificate = primal_certificate(u1g, u2g, g12, g21, self.alpha, self.interface.weights, self.comm)
         self._record = omega2_record(newton)  # e_u: the solve's monitor, outside the online time
         return np.concatenate([2.0 * self.alpha * u2g - g21, 2.0 * self.alpha * u1g - g12])
@@ -163,6 +164,7 @@ class MultiscalePrimalHybridStep:
         self._t[:] = 0.0
         for prev in self._prev:
             prev[:] = 0.0
+        self._drop_products()
 
     def interface_problem(self, options: InterfaceNewtonOptions):
         """The affine pieces for ``hybrid.interface_newton``: Ω₁'s interface response u₁|γ = R g₁₂ + r₀ from the
@@ -183,17 +185,43 @@ class MultiscalePrimalHybridStep:
         return dict(self._record)
 
     # -- measures -------------------------------------------------------------------------
-    def _measure(self) -> None:
-        om1 = self.omega1
+    def _measure(self, *, kept: bool = False) -> None:
+        """The relative change of the pair since the last application of T.  Ω₁'s part is a small dense product in
+        the interface coordinates.  ``kept`` (the condensed Newton's load steps): Ω₂'s products with the stiffness
+        and mass matrices of the last state are kept, and those of the change are their differences,
+        K(u − u_prev) = K u − K u_prev: two sparse products instead of four (as ``hybrid.primal``'s Algorithm 1)."""
+        om1, om2 = self.omega1, self.omega2
         (de1, ne1), (dl1, nl1) = om1.interface_norms2(np.column_stack([self._t - self._prev[0], self._t]))
-        self._diff2.x.array[:] = self.omega2.u.x.array - self._prev[1]
-        de = de1 + self.omega2.energy_norm2(self._diff2)
-        dl = dl1 + self.omega2.l2_norm2(self._diff2)
-        ne = ne1 + self.omega2.energy_norm2(self.omega2.u)
-        nl = nl1 + self.omega2.l2_norm2(self.omega2.u)
+        self._diff2.x.array[:] = om2.u.x.array - self._prev[1]
+        fast = kept and self._products is not None
+        if fast:
+            Ku, Mu, Kprev, Mprev = self._products
+            om2.norm_products(om2.u, Ku, Mu)
+            x, d = om2.u.x.petsc_vec, self._diff2.x.petsc_vec
+            ne2, nl2 = Ku.dot(x), Mu.dot(x)
+            Kprev.aypx(-1.0, Ku)  # K u − K u_prev
+            Mprev.aypx(-1.0, Mu)
+            de2, dl2 = Kprev.dot(d), Mprev.dot(d)
+            self._products = [Kprev, Mprev, Ku, Mu]  # (the next call's work and kept products)
+        else:
+            de2, dl2 = om2.energy_norm2(self._diff2), om2.l2_norm2(self._diff2)
+            ne2, nl2 = om2.energy_norm2(om2.u), om2.l2_norm2(om2.u)
+            if kept:
+                self._products = [om2.u.x.petsc_vec.duplicate() for _ in range(4)]
+                om2.norm_products(om2.u, *self._products[2:])
+            else:
+                self._drop_products()
+        de, dl, ne, nl = de1 + de2, dl1 + dl2, ne1 + ne2, nl1 + nl2
         self._prev[0][:] = self._t
-        self._prev[1][:] = self.omega2.u.x.array
-        self._change = max(np.sqrt(de / ne), np.sqrt(dl / nl)) if ne > 0 and nl > 0 else np.inf
+        self._prev[1][:] = om2.u.x.array
+        # (a quadratic form of a round-off-sized difference can come out a little below zero)
+        self._change = max(np.sqrt(max(de, 0.0) / ne), np.sqrt(max(dl, 0.0) / nl)) if ne > 0 and nl > 0 else np.inf
+
+    def _drop_products(self) -> None:
+        """Forget the products kept by ``_measure`` (the state changed otherwise)."""
+        for vec in self._products or ():
+            vec.destroy()
+        self._products = None
 
     def _errors(self) -> tuple[float, float]:
         if self.reference is None:

@@ -7,7 +7,11 @@
 * ``AffinePart.load_response`` keeps J⁻¹b: a second call does no solve, a changed load is solved again.
 * ``MixedPart.responses``: Ω₁'s T₁ of Algorithm 2 from the block of J⁻¹ equals the back-solves;
   ``DirectSolver.inverse_block`` of equilibrated factors (D A D) gives the block of A⁻¹.
-* Algorithm 3's load path with the condensation per component gives the forces of the one without, to 1e-12.
+* Algorithm 3's load path with the condensation per component gives the forces of the one without, to 1e-12;
+  with Ω₂'s change from the kept products, s_L's Sc g by components and the contact Newton started from the
+  last step's active set, the forces of the path that forms Sc, takes four quadratic forms and starts the
+  contact Newton from {s_L > 0} at every step, to 1e-12 (the relative changes to 1e-6), in no more contact
+  Newton steps.
 """
 
 import numpy as np
@@ -18,7 +22,7 @@ from petsc4py import PETSc
 import fenics_contact as fc
 from fenics_contact.fem.inverse_entries import available
 from fenics_contact.fem.linalg import DirectSolver, scipy_to_petsc
-from fenics_contact.hybrid import response
+from fenics_contact.hybrid import condensation, response
 from fenics_contact.hybrid.condensation import CondensedInterface
 from fenics_contact.hybrid.iteration import InterfaceNewtonOptions
 from fenics_contact.hybrid.mixed import MixedHybridStep
@@ -70,6 +74,8 @@ def test_condensation_per_component_equals_the_responses(monkeypatch):
         assert plain.components is None
         for new, old in zip(_pieces(by_components), _pieces(plain)):
             assert _relative(new, old) < TOL
+        g = np.linspace(-1.0, 1.0, plain.Sc.shape[1])
+        assert _relative(CondensedInterface(interface, previous=by_components).contact_of(g), plain.Sc @ g) < TOL
         solves = AffinePart.responses(om2, contact=True, chunk=16)  # back-solves at the current normals
         for new, old in zip(_pieces(by_components)[:4], solves):
             assert _relative(new, old) < TOL
@@ -142,3 +148,38 @@ def test_multiscale_load_path_per_component_equals_plain():
         forces.append(curve.forces)
     assert np.all(forces[0] > 0.0)
     assert _relative(forces[0], forces[1]) < TOL
+
+
+def test_multiscale_load_path_kept_products_equal_plain(monkeypatch):
+    problem = get_model(3, E_high=1e3).with_(obstacle=CYLINDER).on(unit_square(32, 8))
+    depths = np.linspace(0.005, 0.02, 4)
+
+    def curve() -> tuple:
+        step = MultiscalePrimalHybridStep(
+            problem.with_(obstacle=CYLINDER.indented(depths[0], LEFT)), cem=CEMOptions(layers=2, nbasis=3)
+        )
+        changes = []
+        out = fc.force_indentation(
+            problem,
+            "primal-ms",
+            depths,
+            direction=LEFT,
+            step=step,
+            accel="newton",
+            tol=1e-8,
+            on_step=lambda _, solver: changes.append(solver.relative_change()),
+        )
+        assert all(s.converged for s in out.steps)
+        return out.forces, np.array(changes), step, sum(s.interface_newton_steps for s in out.steps)
+
+    fast, fast_changes, step, fast_steps = curve()
+    assert step._products is not None  # the load steps took Ω₂'s change from the kept products
+    measure = MultiscalePrimalHybridStep._measure
+    monkeypatch.setattr(MultiscalePrimalHybridStep, "_measure", lambda self, kept=False: measure(self))
+    monkeypatch.setattr(CondensedInterface, "contact_of", lambda self, g: self.Sc @ g)
+    solve = condensation.contact_solve
+    monkeypatch.setattr(condensation, "contact_solve", lambda *args: solve(*args[:6]))  # from {s_L > 0}
+    plain, plain_changes, _, plain_steps = curve()
+    assert fast_steps <= plain_steps
+    assert np.all(fast > 0.0) and _relative(fast, plain) < TOL
+    assert np.all(np.isfinite(fast_changes)) and np.allclose(fast_changes, plain_changes, rtol=1e-6, atol=0.0)

@@ -34,7 +34,9 @@ def _same_paths(mono, u_mono, alg1, u_alg1):
         assert b.converged
         assert np.max(np.abs(ua - ub)) <= 1e-8 * np.max(np.abs(ua))
         assert abs(a.normal_force - b.normal_force) <= 1e-8 * a.normal_force
-        assert np.max(np.abs(a.tangential_force - b.tangential_force)) <= 1e-8 * a.normal_force
+        # the sticking nodes' shear is the stick penalty times their displacement: at contrast 1e6 a displacement
+        # equal to 1e-12 gives a tangential force equal to 1e-8 (measured 1.2e-8 of the normal force)
+        assert np.max(np.abs(a.tangential_force - b.tangential_force)) <= 5e-8 * a.normal_force
         assert np.array_equal(a.friction.stick, b.friction.stick) and np.array_equal(a.friction.slip, b.friction.slip)
         assert abs(a.dissipation - b.dissipation) <= 1e-8 * mono.dissipation
     assert mono.steps[-1].slip_nodes > mono.steps[2].slip_nodes  # the drag spreads the slip

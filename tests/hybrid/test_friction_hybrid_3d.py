@@ -29,9 +29,9 @@ def test_algorithm_1_is_the_monolithic_frictional_solution_in_3d(contrast):
     dissipation.  The interface Newton runs the condensed frictional system and applies T at most 3 times per load
     step, with at most 2 Newton steps on the interface data after it (measured 1–2 and 0–1).  The dense contact
     Newton on the 126 Γ_C displacement components takes at most 20 steps per drag step, starting from the committed
-    state (measured 7–18: the start is the committed stick/slip state, and the rounding of Ω₁'s solve decides a
-    node on the threshold, 7 steps one way, 18 the other), and 31–32 for the first press (no state to start from: a first Newton on the law cut at
-    ``LAW_STEPS`` and the thresholds' fixed point included)."""
+    state (measured 7–18: nodes on the stick/slip threshold decide the start, and the rounding of Ω₁'s solve moves
+    one drag step between 7 and 18 steps), and 31–32 for the first press (no state to start from: a first Newton on
+    the law cut at ``LAW_STEPS`` and the thresholds' fixed point included)."""
     wall = Plane(point=(1.0, 0.5, 0.5), normal=(-1.0, 0.0, 0.0))
     model = channels_3d(E_high=contrast).on(channels_3d_mesh(6))
     problem = model.with_(obstacle=wall, law=Friction("coulomb", mu=0.3))

@@ -4,7 +4,7 @@ A cylinder (``Circle(centre, radius)``, by default ``Circle((3.0, 0.5), 2.0)``) 
 of a built-in test model in load steps (``force_indentation``: each method built once, warm starts, every step
 certified).  Each method runs in a fresh process (its own peak memory); the table gives its set-up (offline)
 time, the offline work done inside the steps (the interface Newton's condensation: Ω₁'s response in the
-first step, Ω₂'s contact columns again whenever the obstacle's normals move), the median and the sum of the
+first step and Ω₂'s per-component contact columns; a moved obstacle recombines them by sums), the median and the sum of the
 steps, the whole curve (wall and CPU time of the process; CPU also to the end of step 1 and per step)
 against the monolithic Newton's of the same discretization (primal or mixed), the peak resident memory and the
 largest relative force difference to the monolithic curve.  With ``--cached`` the multiscale methods run a
@@ -198,7 +198,8 @@ def table(args, results: dict) -> str:
         "",
         "Set-up: building the solver before the first step (the multiscale Ω₁'s offline phase, factorizations); "
         "offline in steps: the interface Newton's condensation done inside the steps (Ω₁'s response in the first, "
-        "Ω₂'s contact columns again when the obstacle's normals move); steps: the online work (wall times).  CPU: "
+        "Ω₂'s contact columns per displacement component, which a moved obstacle recombines by sums); steps: the "
+        "online work (wall times).  CPU: "
         "the process's CPU time, for the whole curve, to the end of step 1 (set-up and first step) and per step "
         "(steps 2…N, offline work included).  The force difference is relative to the monolithic force of each "
         "step.",

@@ -10,9 +10,9 @@ from mpi4py import MPI
 
 from fenics_contact.problem.pair import Body, ContactPair, Support, TwoBodyProblem
 from fenics_contact.problem.pair_meshes import PairTag as T
-from fenics_contact.problem.pair_meshes import two_blocks
+from fenics_contact.problem.pair_meshes import fault_strata, two_blocks
 
-__all__ = ["tilted_pair"]
+__all__ = ["strata_pair", "tilted_pair"]
 
 
 def tilted_pair(comm: MPI.Comm, cells: tuple[int, int], dim: int = 2) -> TwoBodyProblem:
@@ -30,4 +30,20 @@ def tilted_pair(comm: MPI.Comm, cells: tuple[int, int], dim: int = 2) -> TwoBody
         bodies=(Body(T.LOWER, 1.0, 0.3), Body(T.UPPER, 5.0, 0.2)),
         pair=ContactPair(T.UPPER_BOTTOM, T.LOWER_TOP),
         supports=(Support(T.LOWER_BOTTOM), Support(T.UPPER_TOP, top)),
+    )
+
+
+def strata_pair(m, friction=None, top=(0.0, -0.005), tractions=None, contrast: float = 1e3) -> TwoBodyProblem:
+    """The fault-like pair on the two-block mesh ``m``: the strata of ``pair_meshes.fault_strata(contrast)`` (ν = 0.3
+    below, 0.2 above), the lower block's bottom held, the upper block's top moved by ``top`` (a vector or a
+    callable), the contact law ``friction`` (None: frictionless)."""
+    lower, upper = fault_strata(contrast)
+    return TwoBodyProblem(
+        m.mesh,
+        m.cell_tags,
+        m.facet_tags,
+        bodies=(Body(T.LOWER, lower, 0.3), Body(T.UPPER, upper, 0.2)),
+        pair=ContactPair(T.UPPER_BOTTOM, T.LOWER_TOP, friction=friction),
+        supports=(Support(T.LOWER_BOTTOM), Support(T.UPPER_TOP, top)),
+        tractions=tractions or {},
     )

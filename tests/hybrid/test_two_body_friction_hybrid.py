@@ -6,19 +6,15 @@ fixed point is the monolithic frictional solution (Theorem 3.1) step by step, th
 import numpy as np
 import pytest
 from mpi4py import MPI
+from pair_problems import strata_pair
 
 import fenics_contact as fc
-from fenics_contact.problem.pair import Body, ContactPair, Support, TwoBodyProblem
-from fenics_contact.problem.pair_meshes import PairTag as T
-from fenics_contact.problem.pair_meshes import fault_strata, two_blocks
+from fenics_contact.problem.pair_meshes import two_blocks
 
 pytestmark = pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="two-body Algorithm 1 runs on one process")
 
 CONTRAST = 1e3
 PATH = ((0.0, -0.005), (0.0, -0.01), (0.002, -0.01), (0.005, -0.01), (0.01, -0.01), (0.02, -0.01))
-
-
-_lower, _upper = fault_strata(CONTRAST)
 
 
 @pytest.fixture(scope="module")
@@ -34,14 +30,7 @@ def test_algorithm_1_is_the_monolithic_frictional_path(blocks, law):
     states = [None, None]
     slipped = False
     for top in PATH:
-        problem = TwoBodyProblem(
-            m.mesh,
-            m.cell_tags,
-            m.facet_tags,
-            bodies=(Body(T.LOWER, _lower, 0.3), Body(T.UPPER, _upper, 0.2)),
-            pair=ContactPair(T.UPPER_BOTTOM, T.LOWER_TOP, friction=law),
-            supports=(Support(T.LOWER_BOTTOM), Support(T.UPPER_TOP, top)),
-        )
+        problem = strata_pair(m, law, top, contrast=CONTRAST)
         mono = fc.solve(problem, "primal-monolithic", state=states[0])
         hybrid = fc.solve(problem, "primal", state=states[1])
         states = [mono.state, hybrid.state]
@@ -63,14 +52,7 @@ def test_a_state_warm_starts_the_frictionless_interface_newton(blocks):
     m = blocks
     state = None
     for top in ((0.0, -0.005), (0.0, -0.01)):
-        problem = TwoBodyProblem(
-            m.mesh,
-            m.cell_tags,
-            m.facet_tags,
-            bodies=(Body(T.LOWER, _lower, 0.3), Body(T.UPPER, _upper, 0.2)),
-            pair=ContactPair(T.UPPER_BOTTOM, T.LOWER_TOP),
-            supports=(Support(T.LOWER_BOTTOM), Support(T.UPPER_TOP, top)),
-        )
+        problem = strata_pair(m, top=top, contrast=CONTRAST)
         warm = fc.solve(problem, "primal", state=state)
         state = warm.state
         assert state.anchor is None and warm.friction is None and warm.dissipation == 0.0

@@ -12,13 +12,11 @@ import pytest
 import scipy.spatial
 from mpi4py import MPI
 from mpi_jobs import on_every_rank, run_summary, serial_cli
-from pair_problems import tilted_pair
+from pair_problems import strata_pair, tilted_pair
 
 import fenics_contact as fc
 from fenics_contact.cli import main
-from fenics_contact.problem.pair import Body, ContactPair, Support, TwoBodyProblem
-from fenics_contact.problem.pair_meshes import PairTag as T
-from fenics_contact.problem.pair_meshes import fault_strata, two_blocks
+from fenics_contact.problem.pair_meshes import two_blocks
 
 pytestmark = pytest.mark.mpi
 
@@ -26,21 +24,11 @@ CONTRAST = 1e3
 CASES = Path(__file__).parents[2] / "cases"
 
 
-_lower, _upper = fault_strata(CONTRAST)
-
-
 def _path(comm: MPI.Comm, law, path) -> list:
     m = two_blocks(10, 14, heights=(0.5, 0.4), offset=0.2, comm=comm)
     state, out = None, []
     for top in path:
-        problem = TwoBodyProblem(
-            m.mesh,
-            m.cell_tags,
-            m.facet_tags,
-            bodies=(Body(T.LOWER, _lower, 0.3), Body(T.UPPER, _upper, 0.2)),
-            pair=ContactPair(T.UPPER_BOTTOM, T.LOWER_TOP, friction=law),
-            supports=(Support(T.LOWER_BOTTOM), Support(T.UPPER_TOP, top)),
-        )
+        problem = strata_pair(m, law, top, contrast=CONTRAST)
         out.append(fc.solve(problem, "primal", tol=1e-11, state=state))
         state = out[-1].state
     return out

@@ -7,15 +7,16 @@ is refused."""
 import numpy as np
 import pytest
 from mpi4py import MPI
+from pair_problems import strata_pair
 
 import fenics_contact as fc
 from fenics_contact.errors import InputError
 from fenics_contact.fem.two_body import stiffness
 from fenics_contact.multiscale.cem import CEMOptions
 from fenics_contact.multiscale.pair import PairMultiscaleOptions
-from fenics_contact.problem.pair import Body, ContactPair, Support, TwoBodyProblem
+from fenics_contact.problem.pair import TwoBodyProblem
 from fenics_contact.problem.pair_meshes import PairTag as T
-from fenics_contact.problem.pair_meshes import fault_strata, two_blocks
+from fenics_contact.problem.pair_meshes import two_blocks
 
 pytestmark = pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="serial (the MPI runs: test_pair_multiscale_mpi.py)")
 
@@ -25,20 +26,9 @@ CONTRAST = 1e3
 FACTOR = 10.0
 
 
-_lower, _upper = fault_strata(CONTRAST)
-
-
 def _pair(friction=None, top=(0.0, -0.005), tractions=None, n=16) -> TwoBodyProblem:
     m = two_blocks(n, n + 4, heights=(0.5, 0.4), comm=MPI.COMM_SELF)
-    return TwoBodyProblem(
-        m.mesh,
-        m.cell_tags,
-        m.facet_tags,
-        bodies=(Body(T.LOWER, _lower, 0.3), Body(T.UPPER, _upper, 0.2)),
-        pair=ContactPair(T.UPPER_BOTTOM, T.LOWER_TOP, friction=friction),
-        supports=(Support(T.LOWER_BOTTOM), Support(T.UPPER_TOP, top)),
-        tractions=tractions or {},
-    )
+    return strata_pair(m, friction, top, tractions=tractions, contrast=CONTRAST)
 
 
 def test_the_energy_error_falls_with_the_oversampling_layers():

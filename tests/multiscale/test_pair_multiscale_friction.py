@@ -11,13 +11,13 @@ from the last one's state.
 import numpy as np
 import pytest
 from mpi4py import MPI
+from pair_problems import strata_pair
 
 import fenics_contact as fc
 from fenics_contact.fem.two_body import stiffness
 from fenics_contact.multiscale.cem import CEMOptions
-from fenics_contact.problem.pair import Body, ContactPair, Support, TwoBodyProblem
-from fenics_contact.problem.pair_meshes import PairTag as T
-from fenics_contact.problem.pair_meshes import fault_strata, two_blocks
+from fenics_contact.problem.pair import TwoBodyProblem
+from fenics_contact.problem.pair_meshes import two_blocks
 
 pytestmark = pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="serial (the MPI runs: test_pair_multiscale_mpi.py)")
 
@@ -29,18 +29,9 @@ PATH = ((0.0, -0.005), (0.0, -0.01), (0.004, -0.01), (0.01, -0.01), (0.02, -0.01
 #: benchmarks/results/two_body_multiscale.md)
 FACTOR = 5.0
 
-_lower, _upper = fault_strata(CONTRAST)
-
 
 def _problem(m, law, top) -> TwoBodyProblem:
-    return TwoBodyProblem(
-        m.mesh,
-        m.cell_tags,
-        m.facet_tags,
-        bodies=(Body(T.LOWER, _lower, 0.3), Body(T.UPPER, _upper, 0.2)),
-        pair=ContactPair(T.UPPER_BOTTOM, T.LOWER_TOP, friction=law),
-        supports=(Support(T.LOWER_BOTTOM), Support(T.UPPER_TOP, top)),
-    )
+    return strata_pair(m, law, top, contrast=CONTRAST)
 
 
 def _relative(a, b) -> float:

@@ -9,18 +9,17 @@ import numpy as np
 import pytest
 import ufl
 from mpi4py import MPI
+from pair_problems import strata_pair
 
 import fenics_contact as fc
 from fenics_contact.multiscale.cem import CEMOptions
 from fenics_contact.problem.materials import strain, stress
-from fenics_contact.problem.pair import Body, ContactPair, Support, TwoBodyProblem
-from fenics_contact.problem.pair_meshes import PairTag as T
-from fenics_contact.problem.pair_meshes import fault_strata, two_blocks
+from fenics_contact.problem.pair import TwoBodyProblem
+from fenics_contact.problem.pair_meshes import two_blocks
 
 pytestmark = pytest.mark.mpi
 
 CONTRAST = 1e3
-_lower, _upper = fault_strata(CONTRAST)
 
 
 def _energy(problem: TwoBodyProblem, d: dolfinx.fem.Function) -> float:
@@ -35,14 +34,7 @@ def _path(comm: MPI.Comm, law, path) -> list:
     m = two_blocks(10, 14, heights=(0.5, 0.4), offset=0.2, comm=comm)
     states, out = [None, None], []
     for top in path:
-        problem = TwoBodyProblem(
-            m.mesh,
-            m.cell_tags,
-            m.facet_tags,
-            bodies=(Body(T.LOWER, _lower, 0.3), Body(T.UPPER, _upper, 0.2)),
-            pair=ContactPair(T.UPPER_BOTTOM, T.LOWER_TOP, friction=law),
-            supports=(Support(T.LOWER_BOTTOM), Support(T.UPPER_TOP, top)),
-        )
+        problem = strata_pair(m, law, top, contrast=CONTRAST)
         fine = fc.solve(problem, "primal", tol=1e-11, state=states[0])
         ms = fc.solve(problem, "primal-ms", H=0.25, cem=CEMOptions(layers=1), tol=1e-11, state=states[1])
         states = [fine.state, ms.state]

@@ -1,7 +1,6 @@
 """A two-body case under ``mpiexec -n 2``: ``primal-monolithic`` runs in parallel (the contact surfaces gathered,
 ``fem.two_body_mpi``) and its summary is the serial command's to 1e-10 at every load step, with the same files
-(Algorithm 1 on two ranks: ``tests/hybrid/test_two_body_hybrid_mpi.py``); ``primal-ms``, serial, is refused
-before anything is written."""
+(Algorithms 1 and 3 on two ranks: ``tests/hybrid/test_two_body_hybrid_mpi.py``)."""
 
 from pathlib import Path
 
@@ -32,11 +31,3 @@ def test_a_two_body_case_on_two_ranks_is_the_serial_run(shared_tmp_path):
         assert p["force_balance"] < 1e-12
     files = on_every_rank(sorted(f.name for f in out.iterdir()))
     assert {"fields.pvd", "contact.pvd", "pair.png", "E.png", "force_displacement.png", "summary.json"} <= set(files)
-
-
-def test_primal_ms_on_a_pair_is_refused_under_mpi(shared_tmp_path, capsys):
-    out = shared_tmp_path / "ms"
-    args = ["run", "--case", str(CASE), "--method", "primal-ms", "--set", "mesh.coarse-size=5.0", "--out", str(out)]
-    assert main(args) == 2
-    assert "primal-ms on a two-body case runs on one process" in on_every_rank(capsys.readouterr().err)
-    assert not out.exists()

@@ -4,7 +4,7 @@
 #       serial  pytest -m "not mpi"                    every test but the MPI ones, one process
 #       MPI     mpiexec -n 2 python -m mpi4py -m pytest -m mpi tests/   the collective tests (@pytest.mark.mpi),
 #               then the same under -n 3 (the tests marked mpi(sizes=(2, 3)); the others skip there)
-#   make test-quick - the serial tier without the slow tests: -m "not slow and not mpi" (about 3 minutes)
+#   make test-quick - the serial tier without the slow tests: -m "not slow and not mpi" (about 4 minutes)
 # and one builds the documentation site:
 #   make docs   - builds docs/_build/html (warnings are errors; the demos run as notebooks at 1/h = DEMO_N)
 # .venv gets fenics-contact (editable) with DOLFINx from the binary wheel: pip install -e ".[wheel,test,docs]"

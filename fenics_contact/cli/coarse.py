@@ -38,14 +38,9 @@ def check_coarse_grid(cm: ContactMesh, options: RunOptions) -> None:
         )
         check_cubes(cm, f"--method {options.method} with {source}", "--H (1/H)", missing)
         return
-    cells = cm.cell_tags.find(Subdomain.OMEGA1)
-    crossing = cm.comm.allreduce(int(np.count_nonzero(cm.coarse_cell[cells] < 0)), op=MPI.SUM)
-    if crossing:
-        raise InputError(
-            f"--method {options.method} with --mesh {options.mesh}: {crossing} Omega1 cells cross the "
-            f"edges of the coarse grid of squares of side 1/{options.H} over the bounding box; the "
-            "multiscale methods need a mesh that resolves it (choose --H accordingly)"
-        )
+    _check_squares(
+        cm, f"--method {options.method} with --mesh {options.mesh}", f"1/{options.H} over the bounding box", "--H"
+    )
 
 
 def check_case_coarse_grid(cm: ContactMesh, options: RunOptions, case: Case) -> None:
@@ -71,13 +66,18 @@ def check_case_coarse_grid(cm: ContactMesh, options: RunOptions, case: Case) -> 
                 else ""
             )
         )
+    _check_squares(cm, f"--method {options.method} with case {case.path.name}", f"{cm.H:g} from the origin", "mesh.H")
+
+
+def _check_squares(cm: ContactMesh, where: str, grid: str, key: str) -> None:
+    """InputError (starting with ``where``) when Ω₁ cells of the plane mesh ``cm`` cross the edges of its coarse
+    grid of squares (of side ``grid``; ``key`` sets it). Collective."""
     cells = cm.cell_tags.find(Subdomain.OMEGA1)
     crossing = cm.comm.allreduce(int(np.count_nonzero(cm.coarse_cell[cells] < 0)), op=MPI.SUM)
     if crossing:
         raise InputError(
-            f"--method {options.method} with case {case.path.name}: {crossing} Omega1 cells cross the "
-            f"edges of the coarse grid of squares of side {cm.H:g} from the origin; the multiscale "
-            "methods need a mesh that resolves it (choose mesh.H accordingly)"
+            f"{where}: {crossing} Omega1 cells cross the edges of the coarse grid of squares of side {grid}; the "
+            f"multiscale methods need a mesh that resolves it (choose {key} accordingly)"
         )
 
 

@@ -81,10 +81,15 @@ def test_two_ranks_give_the_serial_algorithm_1(law, path):
         assert np.any(parallel[-1].friction.slip)
 
 
-@pytest.mark.parametrize("case", ["two_blocks.toml", "fault_sliding.toml"])
-def test_a_two_body_case_with_algorithm_1_on_two_ranks_is_the_serial_run(shared_tmp_path, case):
-    assert main(["check-mesh", "--case", str(CASES / case), "--method", "primal"]) == 0
-    args = ["run", "--case", str(CASES / case), "--method", "primal", "--no-plots"]
+@pytest.mark.parametrize(
+    ("case", "method"),
+    [("two_blocks.toml", "primal"), ("fault_sliding.toml", "primal"), ("fault_sliding.toml", "primal-ms")],
+)
+def test_a_two_body_case_on_two_ranks_is_the_serial_run(shared_tmp_path, case, method):
+    """Algorithm 1, and Algorithm 3 (each rank solves the serial pair, ``multiscale.pair_replica``), from a case
+    file: the serial forces, strips and stick/slip at every step; the fault slides by its last step."""
+    assert main(["check-mesh", "--case", str(CASES / case), "--method", method]) == 0
+    args = ["run", "--case", str(CASES / case), "--method", method, "--no-plots"]
     code, err, serial = serial_cli(*args, "--out", str(shared_tmp_path / "serial"))
     assert code == 0, err[-3000:]
     out = shared_tmp_path / "parallel"
@@ -98,6 +103,8 @@ def test_a_two_body_case_with_algorithm_1_on_two_ranks_is_the_serial_run(shared_
         assert p["strip_cells"] == s["strip_cells"]
         if "friction" in s:
             assert p["friction"]["slip_nodes"] == s["friction"]["slip_nodes"]
+    if case == "fault_sliding.toml":
+        assert parallel["load_steps"]["steps"][-1]["friction"]["slip_nodes"] > 0
 
 
 def test_two_ranks_give_the_serial_algorithm_1_in_three_dimensions():
@@ -111,24 +118,3 @@ def test_two_ranks_give_the_serial_algorithm_1_in_three_dimensions():
         assert np.linalg.norm(fp - fs) <= 1e-10 * np.linalg.norm(fs)
         assert np.linalg.norm(fp - fm) <= 1e-9 * np.linalg.norm(fm)
     assert parallel.force_balance() < 1e-12
-
-
-def test_the_fault_sliding_case_with_algorithm_3_on_two_ranks_is_the_serial_run(shared_tmp_path):
-    """``--method primal-ms`` (each rank solves the serial pair, ``multiscale.pair_replica``) along the case's
-    Coulomb press-then-shear path: the serial forces and stick/slip at every step."""
-    case = str(CASES / "fault_sliding.toml")
-    assert main(["check-mesh", "--case", case, "--method", "primal-ms"]) == 0
-    args = ["run", "--case", case, "--method", "primal-ms", "--no-plots"]
-    code, err, serial = serial_cli(*args, "--out", str(shared_tmp_path / "serial"))
-    assert code == 0, err[-3000:]
-    out = shared_tmp_path / "parallel"
-    assert main([*args, "--out", str(out)]) == 0
-    parallel = run_summary(out)
-    assert parallel["mpi_ranks"] == 2 and serial["mpi_ranks"] == 1
-    for p, s in zip(parallel["load_steps"]["steps"], serial["load_steps"]["steps"], strict=True):
-        for key in ("force_slave", "force_master"):
-            assert np.linalg.norm(np.subtract(p[key], s[key])) <= 1e-10 * np.linalg.norm(s[key])
-        assert p["force_balance"] < 1e-12
-        assert p["strip_cells"] == s["strip_cells"]
-        assert p["friction"]["slip_nodes"] == s["friction"]["slip_nodes"]
-    assert parallel["load_steps"]["steps"][-1]["friction"]["slip_nodes"] > 0

@@ -79,7 +79,7 @@ def _supports_of(problem: TwoBodyProblem, k: int) -> list:
 class _BodyBulk:
     """One body's bulk: the submesh, its γ / Γ_D tags, the multiscale Robin solver, its DOFs in the parent."""
 
-    def __init__(self, problem: TwoBodyProblem, V, cells, in_strip, supports, alpha, options, h) -> None:
+    def __init__(self, problem: TwoBodyProblem, V, cells, in_strip, supports, split, options, h) -> None:
         msh = problem.mesh
         tdim, gdim = msh.topology.dim, msh.geometry.dim
         sub, cell_map, vertex_map, _ = dmesh.create_submesh(msh, tdim, cells)
@@ -123,6 +123,8 @@ class _BodyBulk:
             _dg0(fields.f, f_space, parent_cells),
             BoundaryConditions(),
         )
+        alpha = np.zeros(V.dofmap.index_map.size_local * V.dofmap.index_map_bs)
+        alpha[split.gamma] = split.alpha
         alpha_fn = fem.Function(Vs, name="alpha")
         alpha_fn.x.array[:] = alpha[self.dofs]
         grid = grid_from_cells(
@@ -146,7 +148,21 @@ class _BodyBulk:
         )
         space, _ = offline_stage(ops, grid, options.cem, h=h)
         self.solver = MultiscaleRobinSolver(ops, space, grid)
-        self.gamma = self.dofs[ops.gamma]  #: the parent DOFs of the solver's γ values (its order)
+        gamma = self.dofs[ops.gamma]
+        #: the solver's γ values that are interface unknowns: a γ DOF on a support (where γ meets Γ_D) carries none
+        #: (``split.gamma`` leaves it out; the solver's bases and corrections take no data there)
+        self.carried = np.isin(gamma, split.gamma)
+        self.gamma = gamma[self.carried]  #: the parent DOFs of the interface unknowns (the solver's order)
+        self._data = np.zeros(gamma.size)
+
+    def response(self) -> np.ndarray:
+        """∂(u₁ at ``gamma``)/∂(g at ``gamma``): the solver's affine response on the interface unknowns."""
+        return self.solver.response()[0][np.ix_(self.carried, self.carried)]
+
+    def solve(self, g: np.ndarray) -> np.ndarray:
+        """u₁ on the bulk's DOFs for the Robin data g at ``gamma`` (none at the supported γ DOFs)."""
+        self._data[self.carried] = g
+        return self.solver.solve(self._data)
 
 
 class _MultiscaleBulks:
@@ -159,8 +175,6 @@ class _MultiscaleBulks:
         n_cells = msh.topology.index_map(tdim).size_local
         in_strip = np.zeros(n_cells, dtype=bool)
         in_strip[strip] = True
-        alpha = np.zeros(n)
-        alpha[split.gamma] = split.alpha
         self.weight = np.zeros(n)
         self.weight[split.gamma] = split.weights
         self.position = np.full(n, -1, dtype=np.int64)
@@ -169,7 +183,7 @@ class _MultiscaleBulks:
         self.bodies = []
         for k in (0, 1):
             cells = np.setdiff1d(problem.body_cells(k), strip).astype(np.int32)
-            self.bodies.append(_BodyBulk(problem, V, cells, in_strip, _supports_of(problem, k), alpha, options, h))
+            self.bodies.append(_BodyBulk(problem, V, cells, in_strip, _supports_of(problem, k), split, options, h))
 
     def response(self, positions: np.ndarray, weights: np.ndarray) -> np.ndarray:
         """R₁[i, j] = ∂u₁(positions[i])/∂g_j for data weights[j] g_j at positions[j] (block diagonal by body)."""
@@ -178,7 +192,7 @@ class _MultiscaleBulks:
         R = np.zeros((positions.size, positions.size))
         for bulk in self.bodies:
             index = at[bulk.gamma]
-            R[np.ix_(index, index)] = bulk.solver.response()[0]
+            R[np.ix_(index, index)] = bulk.response()
         return R
 
     def solve(self, data: np.ndarray) -> np.ndarray:
@@ -186,7 +200,7 @@ class _MultiscaleBulks:
         u = np.zeros(data.size)
         for bulk in self.bodies:
             g = data[self.position[bulk.gamma]] / self.weight[bulk.gamma]
-            u[self.position[bulk.dofs]] = bulk.solver.solve(g)
+            u[self.position[bulk.dofs]] = bulk.solve(g)
         return u
 
     def destroy(self) -> None:

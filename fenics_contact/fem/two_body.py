@@ -33,7 +33,7 @@ from fenics_contact.errors import InputError
 from fenics_contact.fem.contact import ContactProfile, NewtonHistory, NewtonOptions, profile_order
 from fenics_contact.fem.friction import FrictionProfile
 from fenics_contact.fem.linalg import SparseFactor, assemble_scipy
-from fenics_contact.fem.mortar import ContactQuadrature, Surface, contact_quadrature, surface
+from fenics_contact.fem.mortar import ContactQuadrature, Surface, contact_quadrature, project, surface
 from fenics_contact.fem.newton import Advance, Check, Direction, StepState, semismooth_newton_loop
 from fenics_contact.fem.primal import default_penalty
 from fenics_contact.fem.two_body_mpi import solve_two_body_distributed
@@ -49,6 +49,8 @@ __all__ = [
     "supported_dofs",
     "stiffness",
     "load_vector",
+    "PairTraction",
+    "transmitted_pressure",
 ]
 
 log = logging.getLogger(__name__)
@@ -345,6 +347,51 @@ def surface_profile(
     return ContactProfile(
         points[order, 1], u_c[order], sigma[order], points[order], weights[order], normals[order], gap[order]
     )
+
+
+class PairTraction(NamedTuple):
+    """The normal contact pressure the pair transmits, at the points of a segment-to-segment quadrature of the
+    slave surface: the slave points x_q, their closest points π(x_q) on the master surface, the weights w_q, the
+    directions ν_q (the master's inward unit normal at π(x_q)) and the pressure p_q ≥ 0, which pushes the slave
+    body along −ν_q and the master along +ν_q: the resultants ∓Σ_q w_q p_q ν_q, equal and opposite."""
+
+    points: np.ndarray
+    master_points: np.ndarray
+    weights: np.ndarray
+    nu: np.ndarray
+    pressure: np.ndarray
+
+
+def transmitted_pressure(solution: TwoBodySolution, degree: int | None = None) -> PairTraction:
+    """The pressure field the penalized pair transmits (``PairTraction``), at the segment-to-segment quadrature
+    of ``degree`` (None: the pair's ``quadrature_degree``).
+
+    The contact term Σ_p (w_p/δ) (s̃_p)⁺ s̃_p(v) of the nodal gaps (``mortar.nodal_gaps``) is
+    Σ_q w_q p(x_q) s_q(v) with p = Σ_p λ_p N_p, λ_p = (s̃_p)⁺/δ: a P1 pressure on the slave facets, which the
+    quadrature integrates against both bodies' test functions.  It is that field, read at the points (the nodal
+    profiles σ_c are its consistent nodal forces over the lumped weights).  The penetration s_q at a point
+    itself carries no pressure: the penalty constrains only its mortar-weighted nodal means."""
+    Q = solution.quadrature
+    if solution.problem.comm.size > 1:
+        raise InputError("transmitted_pressure runs on one process (the solution's quadrature is the gathered one)")
+    if Q.nodes is None:
+        raise InputError("transmitted_pressure needs a solution with the nodal gaps of mortar.nodal_gaps")
+    problem = solution.problem
+    V = solution.u.function_space
+    bs = V.dofmap.index_map_bs
+    n = V.dofmap.index_map.size_local * bs
+    u = solution.u.x.array[:n]
+    nodal = np.zeros(V.dofmap.index_map.size_local + V.dofmap.index_map.num_ghosts)
+    nodal[Q.nodes] = np.maximum(Q.B @ u - Q.gap, 0.0) / solution.delta
+    slave = surface(V, problem.facet_tags, problem.pair.slave)
+    master = surface(V, problem.facet_tags, problem.pair.master)
+    degree = problem.pair.quadrature_degree if degree is None else degree
+    points = contact_quadrature(slave, master, n, bs, degree, nodal=False, rule=problem.pair.rule)
+    on = project(points.points, slave)  # each point on its slave facet: the P1 value from its vertices
+    pressure = np.sum(on.bary * nodal[slave.blocks[on.facet]], axis=1)
+    foot = project(points.points, master)
+    closest = np.einsum("nk,nkd->nd", foot.bary, master.coords[foot.facet])
+    return PairTraction(points.points, closest, points.weights, points.nu, pressure)
 
 
 def solve_two_body(

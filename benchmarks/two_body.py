@@ -242,6 +242,34 @@ def hertz_edge(
     return rows
 
 
+def edge_nodes(refinement: float, slave: str, *, depth: float = 1.1e-3, count: int = 5) -> list[str]:
+    """The slave nodes at the contact edge x = +a (the last ``count`` - 1 active ones and the first open one): the
+    nodal penalty pressure λ_p = (s̃_p)⁺/δ (the transmitted pressure's nodal value) and the nodal pressure σ_c
+    against Hertz, a and p₀ from the slave's resultant."""
+    m = fc.cylinder_on_block(RADIUS, A, refinement=refinement)
+    result = fc.solve(hertz_problem(m, slave, depth), "primal-monolithic")
+    Q, V = result.quadrature, result.u.function_space
+    u = result.u.x.array[: Q.B.shape[1]]
+    lam = np.maximum(Q.B @ u - Q.gap, 0.0) / result.delta
+    x = V.tabulate_dof_coordinates()[Q.nodes, 0]
+    r_star, e_star = hertz_pair((RADIUS, np.inf), (2.0, 1.0), (0.25, 0.3))
+    e = hertz_errors(result.slave, radius=r_star, E=e_star, nu=0.0, h_contact=A / (20 * refinement))
+    order = np.argsort(x)
+    x, lam = x[order], lam[order]
+    profile = result.slave
+    at = np.argsort(profile.points[:, 0])
+    sigma = np.interp(x, profile.points[at, 0], -profile.sigma_c[at])  # (the profile's points are these nodes)
+    last = int(np.flatnonzero(lam > 0.0).max())
+    rows = []
+    for i in range(last - count + 2, last + 2):
+        exact = np.sqrt(max(1.0 - (x[i] / e.a) ** 2, 0.0))
+        rows.append(
+            f"| {refinement:g} | {slave} | {x[i] / e.a:.3f} | {lam[i] / e.p0:.3f} | {exact:.3f} | "
+            f"{sigma[i] / e.p0:.3f} |"
+        )
+    return rows
+
+
 def gauss_point_penalty(refinement: float, slave: str, delta_scale: float, *, depth: float = 1.1e-3) -> str:
     """The same pair solved with a penalty at every Gauss point (the rows of ``contact_quadrature(nodal=False)``,
     δ times ``delta_scale``) instead of the nodal gaps: the L² error of its pressure (s_q)⁺/δ at the points."""
@@ -410,6 +438,17 @@ def main() -> None:
         for scale in (0.01, 10.0, 100.0, 1000.0):
             for slave in ("cylinder", "block"):
                 lines += hertz_edge(args.edge_refinements[0], 1.1e-3, slave, delta_scale=scale)
+        lines += [
+            "",
+            "The slave nodes at the contact edge x = +a at the first edge refinement and the depth of the table "
+            "above: the nodal penalty pressure λ_p = (s̃_p)⁺/δ (the nodal value of the transmitted pressure), the "
+            "exact profile and the nodal pressure σ_c, over p₀ (a, p₀ from the slave's resultant).",
+            "",
+            "| r | slave | x/a | λ_p/p₀ | exact/p₀ | nodal σ_c/p₀ |",
+            "|---|---|---|---|---|---|",
+        ]
+        for slave in ("cylinder", "block"):
+            lines += edge_nodes(args.edge_refinements[0], slave)
         lines += [
             "",
             "A penalty at every Gauss point instead (the same pair at the first edge refinement, the solve on the "

@@ -84,7 +84,7 @@ def test_a_strip_that_reaches_the_supports():
     fine = fc.solve(problem, "primal", tol=1e-11)
     u0 = fine.u.x.array
     every = fc.solve(problem, "primal-ms", H=0.25, cem=CEMOptions(layers=20, nbasis=None), tol=1e-11)
-    assert every.converged and np.linalg.norm(every.u.x.array - u0) <= 1e-8 * np.linalg.norm(u0)
+    assert every.converged and np.linalg.norm(every.u.x.array - u0) <= 1e-12 * np.linalg.norm(u0)  # (measured 1.3e-15)
     K = stiffness(problem, fine.u.function_space)
     errors = []
     for layers in (2, 3):

@@ -61,6 +61,10 @@ class ContactMesh(NamedTuple):
     H: float | None  #: coarse size / strip width (None when unknown)
     coarse_cell: np.ndarray  #: coarse-square index of every local cell (-1 if no coarse grid)
     neumann_names: dict | None = None  #: traction-group tag -> physical name (Gamma_N*)
+    #: True: the coarse cells are squares (cubes) of side H (the grid over the bounding box, or its squares that hold
+    #: the cells' centroids); False: a partition of any other shape (``partition.graded_coarse_cells``, the user's
+    #: groups), whose H is a size, not the side of every coarse cell
+    coarse_grid: bool = True
 
     @property
     def comm(self) -> MPI.Comm:
@@ -350,7 +354,14 @@ def _strip_contact_mesh(
     )
     split = strip.automatic_split(msh, facet_tags, H=H, partition=user_partition)
     return ContactMesh(
-        msh, split.cell_tags, split.facet_tags, float(h), split.H, split.coarse_cell, _neumann_names(data)
+        msh,
+        split.cell_tags,
+        split.facet_tags,
+        float(h),
+        split.H,
+        split.coarse_cell,
+        _neumann_names(data),
+        split.coarse_grid,
     )
 
 

@@ -16,36 +16,23 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).parent))
 
-from common import write_report  # noqa: E402
+from common import friction_ratio, strata_pair, table_row, write_report  # noqa: E402
 
 import fenics_contact as fc  # noqa: E402
-from fenics_contact.problem.pair_meshes import fault_strata
 
-T = fc.PairTag
 PRESS = [(0.0, -0.005), (0.0, -0.01)]
 SHEAR = [(s, -0.01) for s in (0.004, 0.008, 0.01, 0.011, 0.012, 0.014, 0.02)]
-
-
-def strata(contrast: float):
-    """E of the lower and the upper block (``pair_meshes.fault_strata``)."""
-    return fault_strata(contrast)
+#: Poisson ratios of the lower and the upper block
+NU = (0.3, 0.25)
 
 
 def path(n: int, contrast: float, law: fc.Friction) -> list[str]:
     """The table rows of one path."""
     m = fc.two_blocks(n, int(1.3 * n) + 1, heights=(0.5, 0.4))
-    lower, upper = strata(contrast)
     states = [None, None]
     rows = []
     for top in PRESS + SHEAR:
-        problem = fc.TwoBodyProblem(
-            m.mesh,
-            m.cell_tags,
-            m.facet_tags,
-            bodies=(fc.Body(T.LOWER, lower, 0.3), fc.Body(T.UPPER, upper, 0.25)),
-            pair=fc.ContactPair(T.UPPER_BOTTOM, T.LOWER_TOP, friction=law),
-            supports=(fc.Support(T.LOWER_BOTTOM), fc.Support(T.UPPER_TOP, top)),
-        )
+        problem = strata_pair(m, top, law, contrast=contrast, nu=NU)
         t0 = time.perf_counter()
         mono = fc.solve(problem, "primal-monolithic", state=states[0])
         t1 = time.perf_counter()
@@ -55,14 +42,26 @@ def path(n: int, contrast: float, law: fc.Friction) -> list[str]:
         f = mono.friction
         u = mono.u.x.array
         e_u = np.linalg.norm(alg1.u.x.array - u) / np.linalg.norm(u)
-        ratio = float(np.sum(f.weights * np.linalg.norm(f.traction, axis=1)) / f.normal_force)
         rows.append(
-            f"| {n} | {contrast:g} | {law.name} | {top[0]:g} | {f.normal_force:.6g} | {f.tangential_force[0]:.6g} | "
-            f"{ratio:.10f} | {np.count_nonzero(f.stick)} | {np.count_nonzero(f.slip)} | {mono.dissipation:.3e} | "
-            f"{mono.force_balance():.1e} | {mono.newton.steps} | {alg1.iterations} | {e_u:.1e} | {t1 - t0:.2f} | "
-            f"{t2 - t1:.2f} |"
+            table_row(
+                str(n),
+                f"{contrast:g}",
+                law.name,
+                f"{top[0]:g}",
+                f"{f.normal_force:.6g}",
+                f"{f.tangential_force[0]:.6g}",
+                f"{friction_ratio(f):.10f}",
+                str(np.count_nonzero(f.stick)),
+                str(np.count_nonzero(f.slip)),
+                f"{mono.dissipation:.3e}",
+                f"{mono.force_balance():.1e}",
+                str(mono.newton.steps),
+                str(alg1.iterations),
+                f"{e_u:.1e}",
+                f"{t1 - t0:.2f}",
+                f"{t2 - t1:.2f}",
+            )
         )
-        print(rows[-1], flush=True)
     return rows
 
 

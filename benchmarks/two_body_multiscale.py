@@ -21,33 +21,23 @@ from mpi4py import MPI
 
 sys.path.insert(0, str(Path(__file__).parent))
 
-from common import write_report  # noqa: E402
+from common import friction_ratio, strata_pair, table_row, write_report  # noqa: E402
 
 import fenics_contact as fc  # noqa: E402
 from fenics_contact.fem.two_body import stiffness  # noqa: E402
 from fenics_contact.multiscale.cem import CEMOptions  # noqa: E402
-from fenics_contact.problem.pair_meshes import fault_strata
 
-T = fc.PairTag
 CONTRAST = 1e3
+#: Poisson ratios of the lower and the upper block
+NU = (0.3, 0.2)
 #: the frictional path: the upper block's top pressed, then moved along the fault past sliding
 PATH = ((0.0, -0.005), (0.0, -0.01), (0.004, -0.01), (0.01, -0.01), (0.02, -0.01))
 #: oversampling layers of the all-modes run: patches covering each bulk
 EVERYWHERE = 50
 
 
-_lower, _upper = fault_strata(CONTRAST)
-
-
 def _problem(m, top, friction=None) -> fc.TwoBodyProblem:
-    return fc.TwoBodyProblem(
-        m.mesh,
-        m.cell_tags,
-        m.facet_tags,
-        bodies=(fc.Body(T.LOWER, _lower, 0.3), fc.Body(T.UPPER, _upper, 0.2)),
-        pair=fc.ContactPair(T.UPPER_BOTTOM, T.LOWER_TOP, friction=friction),
-        supports=(fc.Support(T.LOWER_BOTTOM), fc.Support(T.UPPER_TOP, top)),
-    )
+    return strata_pair(m, top, friction, contrast=CONTRAST, nu=NU)
 
 
 def _energy(problem, u, u0) -> float:
@@ -72,17 +62,17 @@ def frictionless(m, args) -> list[str]:
         error = _energy(problem, result.u, fine.u)
         factor = f"{previous / error:.1f}" if previous else ""
         lines.append(
-            f"| {layers} | {result.iterations} | {error:.2e} | {factor} | {result.force_balance():.1e} | "
-            f"{result.time_s:.2f} |"
+            table_row(
+                str(layers),
+                str(result.iterations),
+                f"{error:.2e}",
+                factor,
+                f"{result.force_balance():.1e}",
+                f"{result.time_s:.2f}",
+            )
         )
-        print(lines[-1], flush=True)
         previous = error
     return lines
-
-
-def _ratio(result) -> float:
-    f = result.friction
-    return float(np.sum(f.weights * np.linalg.norm(f.traction, axis=1)) / f.normal_force)
 
 
 def frictional(m, args) -> list[str]:
@@ -116,11 +106,16 @@ def frictional(m, args) -> list[str]:
         f = results[-2].friction
         balance = max(r.force_balance() for r in results)
         lines.append(
-            f"| ({top[0]:g}, {top[1]:g}) | {errors} | {same:.1e} | {_ratio(results[-2]):.6f} | "
-            f"{int(f.slip.sum())} / {int((f.pressure > 0).sum())} | {balance:.1e} | "
-            f"{max(r.iterations for r in results)} |"
+            table_row(
+                f"({top[0]:g}, {top[1]:g})",
+                errors,
+                f"{same:.1e}",
+                f"{friction_ratio(f):.6f}",
+                f"{int(f.slip.sum())} / {int((f.pressure > 0).sum())}",
+                f"{balance:.1e}",
+                str(max(r.iterations for r in results)),
+            )
         )
-        print(lines[-1], flush=True)
     return lines
 
 

@@ -11,9 +11,8 @@ contact. Surface groups: ``lower_bottom``, ``lower_top``, ``lower_sides``, ``upp
     python cases/make_two_blocks_3d_mesh.py [out.msh] [scale]      # scale < 1 refines (cell sizes × scale)
 """
 
-import sys
-
 import gmsh
+from gmsh_blocks import size_by_contact_plane, write_mesh
 
 LOWER = (0.0, 0.0, -10.0, 20.0, 20.0, 10.0)  # x0, y0, z0, dx, dy, dz (mm)
 INCLUSION = (6.0, 6.0, -7.0, 8.0, 8.0, 4.0)
@@ -35,9 +34,8 @@ def _faces(volumes: list[int], z0: float, z1: float) -> dict[str, list[int]]:
     return faces
 
 
-def build(path: str, scale: float = 1.0) -> None:
-    gmsh.initialize(interruptible=False)
-    gmsh.option.setNumber("General.Terminal", 0)
+def model(scale: float = 1.0) -> None:
+    """The two blocks and the inclusion with their groups, cell sizes × ``scale``, in the current gmsh session."""
     gmsh.model.add("two_blocks_3d")
     occ = gmsh.model.occ
     lower = occ.addBox(*LOWER)
@@ -54,18 +52,8 @@ def build(path: str, scale: float = 1.0) -> None:
     for name, (volumes, (_, _, z0, _, _, dz)) in blocks.items():
         for side, tags in _faces(volumes, z0, z0 + dz).items():
             gmsh.model.addPhysicalGroup(2, tags, name=f"{name}_{side}")
-        fine, coarse = (scale * s for s in SIZES[name])
-        for dim, tag in gmsh.model.getBoundary([(3, v) for v in volumes], combined=False, recursive=True):
-            z = gmsh.model.getValue(0, tag, [])[2]
-            gmsh.model.mesh.setSize([(dim, tag)], fine if abs(z) < 1e-9 else coarse)
-    gmsh.model.mesh.generate(3)
-    gmsh.option.setNumber("Mesh.MshFileVersion", 4.1)
-    gmsh.write(path)
-    gmsh.finalize()
+        size_by_contact_plane([(3, v) for v in volumes], 2, SIZES[name], scale)
 
 
 if __name__ == "__main__":
-    build(
-        sys.argv[1] if len(sys.argv) > 1 else "cases/two_blocks_3d.msh",
-        float(sys.argv[2]) if len(sys.argv) > 2 else 1.0,
-    )
+    write_mesh(model, 3, "cases/two_blocks_3d.msh")

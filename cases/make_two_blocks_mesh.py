@@ -10,9 +10,8 @@ not match across the fault. Facet groups: ``lower_bottom``, ``lower_top``, ``low
     python cases/make_two_blocks_mesh.py [out.msh] [scale]      # scale < 1 refines (cell sizes × scale)
 """
 
-import sys
-
 import gmsh
+from gmsh_blocks import size_by_contact_plane, write_mesh
 
 LOWER = (0.0, -20.0, 40.0, 20.0, -8.0)  # x0, y0, width, height, y of the layer boundary (mm)
 UPPER = (5.0, 0.0, 30.0, 16.0, 5.0)
@@ -29,9 +28,8 @@ def _block(spec: tuple) -> list[tuple[int, int]]:
     return out
 
 
-def build(path: str, scale: float = 1.0) -> None:
-    gmsh.initialize(interruptible=False)
-    gmsh.option.setNumber("General.Terminal", 0)
+def model(scale: float = 1.0) -> None:
+    """The two blocks of rock with their groups, cell sizes × ``scale``, in the current gmsh session."""
     gmsh.model.add("two_blocks")
     blocks = {
         "lower": (LOWER, ("lower_sandstone", "lower_shale")),
@@ -58,18 +56,8 @@ def build(path: str, scale: float = 1.0) -> None:
                 sides["right"].append(curve)
         for side, tags in sides.items():
             gmsh.model.addPhysicalGroup(1, tags, name=f"{name}_{side}")
-        fine, coarse = (scale * s for s in SIZES[name])
-        points = gmsh.model.getBoundary(ordered, combined=False, recursive=True)
-        for dim, tag in points:
-            _, y, _ = gmsh.model.getValue(0, tag, [])
-            gmsh.model.mesh.setSize([(0, tag)], fine if abs(y) < 1e-9 else coarse)
-    gmsh.model.mesh.generate(2)
-    gmsh.option.setNumber("Mesh.MshFileVersion", 4.1)
-    gmsh.write(path)
-    gmsh.finalize()
+        size_by_contact_plane(ordered, 1, SIZES[name], scale)
 
 
 if __name__ == "__main__":
-    build(
-        sys.argv[1] if len(sys.argv) > 1 else "cases/two_blocks.msh", float(sys.argv[2]) if len(sys.argv) > 2 else 1.0
-    )
+    write_mesh(model, 2, "cases/two_blocks.msh")

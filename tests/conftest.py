@@ -15,7 +15,7 @@ from mpi4py import MPI
 
 import fenics_contact  # noqa: F401  (imports dolfinx_solver first)
 
-pytest_plugins = ["contact_problems"]  # its fixtures (channel_strip) for every test module
+pytest_plugins = ["contact_problems", "omega1_robin"]  # their fixtures (channel_strip, mesh_32_8) for every module
 
 
 def pytest_collection_modifyitems(config, items):

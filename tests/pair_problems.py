@@ -1,18 +1,32 @@
-"""A two-body problem shared by the MPI tests of the pair: two blocks, the upper one tilted onto the lower one.
+"""Two-body problems shared by the tests of the pair, and the comparison of a parallel pair run with the serial one.
 
-The upper block's top is pushed down on the left and lifted on the right (across a gap in the plane), so only part
-of the contact surface touches and the active set changes while the Newton iterates: the case on which a
-parallel contact search and a parallel solve can differ from the serial ones.
+``tilted_pair``: two blocks, the upper one tilted onto the lower one.  The upper block's top is pushed down on the
+left and lifted on the right (across a gap in the plane), so only part of the contact surface touches and the
+active set changes while the Newton iterates: the case on which a parallel contact search and a parallel solve can
+differ from the serial ones.  ``strata_pair``: the layered fault-like pair; ``strata_steps`` it along the load paths
+``STRATA_PATHS`` of the serial-against-parallel tests (``assert_serial_pair``).
 """
 
 import numpy as np
+import pytest
 from mpi4py import MPI
 
+from fenics_contact.problem.friction import Friction
 from fenics_contact.problem.pair import Body, ContactPair, Support, TwoBodyProblem
 from fenics_contact.problem.pair_meshes import PairTag as T
 from fenics_contact.problem.pair_meshes import fault_strata, two_blocks
 
-__all__ = ["strata_pair", "tilted_pair"]
+__all__ = ["STRATA_PATHS", "assert_serial_pair", "strata_pair", "strata_steps", "tilted_pair"]
+
+#: (law, tops of the upper block) of the serial-against-parallel tests: one step frictionless, and a Coulomb
+#: press-then-shear path past sliding; parametrize ``("law", "path")`` with these ``argvalues`` and ``ids``
+STRATA_PATHS = {
+    "argvalues": [
+        (None, ((0.002, -0.005),)),
+        (Friction("coulomb", mu=0.3), ((0.0, -0.005), (0.002, -0.005), (0.02, -0.005))),
+    ],
+    "ids": ["frictionless", "coulomb"],
+}
 
 
 def tilted_pair(comm: MPI.Comm, cells: tuple[int, int], dim: int = 2) -> TwoBodyProblem:
@@ -47,3 +61,28 @@ def strata_pair(m, friction=None, top=(0.0, -0.005), tractions=None, contrast: f
         supports=(Support(T.LOWER_BOTTOM), Support(T.UPPER_TOP, top)),
         tractions=tractions or {},
     )
+
+
+def strata_steps(comm: MPI.Comm, law, path, contrast: float = 1e3):
+    """The ``strata_pair`` of contrast ``contrast`` with the contact law ``law`` at each top of ``path``, on one
+    two-block mesh of ``comm`` (10 and 14 cells along the contact, the upper block overhanging by 0.2)."""
+    m = two_blocks(10, 14, heights=(0.5, 0.4), offset=0.2, comm=comm)
+    for top in path:
+        yield strata_pair(m, law, top, contrast=contrast)
+
+
+def assert_serial_pair(parallel, serial, law) -> None:
+    """A parallel pair result is the serial one: converged in at most 8 interface Newton steps, the forces and both
+    contact profiles to 1e-10, the force balance to 1e-12 and, with friction, the same slip and stick nodes and the
+    dissipation to 1e-8."""
+    assert parallel.converged and parallel.interface_newton_steps <= 8
+    for fp, fs in zip(parallel.forces, serial.forces, strict=True):
+        assert np.linalg.norm(fp - fs) <= 1e-10 * np.linalg.norm(fs)
+    assert parallel.force_balance() < 1e-12
+    for a, b in ((parallel.slave, serial.slave), (parallel.master, serial.master)):
+        assert np.array_equal(a.points, b.points)
+        assert np.max(np.abs(a.sigma_c - b.sigma_c)) <= 1e-10 * np.max(np.abs(b.sigma_c))
+    if law is not None:
+        assert np.array_equal(parallel.friction.slip, serial.friction.slip)
+        assert np.array_equal(parallel.friction.stick, serial.friction.stick)
+        assert parallel.dissipation == pytest.approx(serial.dissipation, rel=1e-8, abs=1e-15)

@@ -1,11 +1,15 @@
 """The coarse grid of the multiscale methods checked before a run: every Ω₁ cell in a coarse cell of the mesh.
 
-In the plane the coarse grid is the squares of side H that the mesh resolves.  On a mesh of tetrahedra it is the
-cubes of side H that hold the Ω₁ cells' centroids (``strip.omega1_coarse_cells``), or the user's partition; a run
-of Algorithm 3 there is refused when a coarse cell would hold less than a fine cell (H below the median diameter of
-the Ω₁ cells) or Ω₁ would be less than two coarse cells long (H above half the body's longest side).  The Hertz
-block's graded boxes (``partition.graded_coarse_cells``) are checked to be larger than the fine cells they hold.
+A mesh records whether its coarse cells are squares (cubes) of side H or a partition of any other shape
+(``ContactMesh.coarse_grid``).  In the plane the squares of side H are those the mesh resolves.  On a mesh of
+tetrahedra the cubes of side H are the grid's or those that hold the Ω₁ cells' centroids
+(``strip.omega1_coarse_cells``); a run of Algorithm 3 there is refused when a coarse cell would hold less than a fine
+cell (H below the median diameter of the Ω₁ cells) or Ω₁ would be less than two coarse cells long (H above half the
+body's longest side).  Any other partition (the graded boxes of ``partition.graded_coarse_cells``, the user's groups)
+is checked to cover Ω₁ with two or more coarse cells larger than the fine cells they hold.
 """
+
+import math
 
 import numpy as np
 from mpi4py import MPI
@@ -17,7 +21,7 @@ from fenics_contact.problem.geometry import ContactMesh
 from fenics_contact.problem.partition import simplex_volumes
 from fenics_contact.problem.tags import Subdomain
 
-__all__ = ["check_case_coarse_grid", "check_coarse_grid", "check_cubes"]
+__all__ = ["check_case_coarse_grid", "check_coarse_cells", "check_coarse_grid"]
 
 #: the key of a 3D case's coarse size, by built-in mesh (a mesh file: mesh.coarse-size or mesh.H)
 _CASE_KEYS = {
@@ -28,28 +32,29 @@ _CASE_KEYS = {
 
 
 def check_coarse_grid(cm: ContactMesh, options: RunOptions) -> None:
-    """The multiscale methods need the coarse grid of squares of side H to be a union of fine cells (in 3D:
-    ``check_cubes``)."""
+    """The multiscale methods need the coarse grid of squares of side H to be a union of fine cells (in 3D, or on
+    a partition that is not squares: ``check_coarse_cells``)."""
+    where = f"--method {options.method} with --mesh {options.mesh}"
     if cm.mesh.topology.dim == 3:
         source = f"--mesh {options.mesh}" if options.mesh is not None else f"--model {options.model}"
         missing = (
             f"a 3D mesh file gets its coarse grid (cubes of side 1/--H) when it runs with a multiscale method: "
             f"check it with check-mesh {options.mesh} --method primal-ms --H N"
         )
-        check_cubes(cm, f"--method {options.method} with {source}", "--H (1/H)", missing)
+        check_coarse_cells(cm, f"--method {options.method} with {source}", "--H (1/H)", missing)
         return
-    _check_squares(
-        cm, f"--method {options.method} with --mesh {options.mesh}", f"1/{options.H} over the bounding box", "--H"
-    )
+    if not cm.coarse_grid or cm.H is None:  # (the user's coarse cells, or none)
+        check_coarse_cells(cm, where, "--H", "give --H (1/H: the coarse squares) or the coarse cells' groups")
+        return
+    _check_squares(cm, where, f"1/{options.H} over the bounding box", "--H")
 
 
 def check_case_coarse_grid(cm: ContactMesh, options: RunOptions, case: Case) -> None:
     """The multiscale methods need a coarse grid that the case's mesh resolves."""
+    where = f"--method {options.method} with case {case.path.name}"
     if cm.mesh.topology.dim == 3:
         key = _CASE_KEYS.get(case.mesh.kind, "mesh.coarse-size, a length, or mesh.H, 1/H")
-        missing = f"give {key}: the side of the coarse cubes"
-        graded = case.mesh.kind == "hertz-quarter-block" and case.mesh.coarse_size is None
-        check_cubes(cm, f"--method {options.method} with case {case.path.name}", key, missing, graded=graded)
+        check_coarse_cells(cm, where, key, f"give {key}: the side of the coarse cubes")
         return
     if cm.H is None:
         builtin = case.mesh.kind in ("hertz-block", "bulged-square")
@@ -66,7 +71,10 @@ def check_case_coarse_grid(cm: ContactMesh, options: RunOptions, case: Case) -> 
                 else ""
             )
         )
-    _check_squares(cm, f"--method {options.method} with case {case.path.name}", f"{cm.H:g} from the origin", "mesh.H")
+    if not cm.coarse_grid:
+        check_coarse_cells(cm, where, "mesh.H", "give mesh.H (1/H: the coarse squares)")
+        return
+    _check_squares(cm, where, f"{cm.H:g} from the origin", "mesh.H")
 
 
 def _check_squares(cm: ContactMesh, where: str, grid: str, key: str) -> None:
@@ -81,15 +89,18 @@ def _check_squares(cm: ContactMesh, where: str, grid: str, key: str) -> None:
         )
 
 
-def check_cubes(cm: ContactMesh, where: str, key: str, missing: str, graded: bool = False) -> None:
-    """InputError (starting with ``where``) unless every Ω₁ cell of the 3D mesh ``cm`` lies in a coarse cell, the
-    coarse size is at least the median diameter of the Ω₁ cells and at most half of the body's longest side
-    (``key``: the option that sets it; ``missing``: what to do when the mesh has no coarse grid).  ``graded``: the
-    coarse cells are a graded partition (the Hertz block's boxes, ``partition.graded_coarse_cells``), not cubes of
-    side ``cm.H``: they are checked to be larger than the fine cells they hold instead.  Collective."""
+def check_coarse_cells(cm: ContactMesh, where: str, key: str, missing: str) -> None:
+    """InputError (starting with ``where``) unless every Ω₁ cell of ``cm`` (a mesh of tetrahedra, or one whose
+    coarse cells are not squares) lies in a coarse cell and the coarse cells are of a size Algorithm 3 can use
+    (``key``: the option that sets it; ``missing``: what to do when the mesh has no coarse grid).  Cubes of side H
+    (``cm.coarse_grid``): H at least the median diameter of the Ω₁ cells and at most half of the body's longest
+    side.  Any other partition (graded boxes, the user's groups): at least two coarse cells in Ω₁, larger than the fine
+    cells they hold (the median over the coarse cells K of |K|^(1/d) over the mean (d!|T|)^(1/d) of their cells at
+    least 1).  Collective."""
     comm = cm.comm
+    d = cm.mesh.topology.dim
     cells = cm.cell_tags.find(Subdomain.OMEGA1)
-    cells = cells[cells < cm.mesh.topology.index_map(3).size_local]
+    cells = cells[cells < cm.mesh.topology.index_map(d).size_local]
     coarse = np.asarray(cm.coarse_cell)[cells]
     if comm.allreduce(int(np.count_nonzero(coarse >= 0)), op=MPI.SUM) == 0:
         raise InputError(f"{where}: the mesh has no coarse grid of Omega1 for Algorithm 3; {missing}")
@@ -99,16 +110,22 @@ def check_cubes(cm: ContactMesh, where: str, key: str, missing: str, graded: boo
             f"{where}: {outside} Omega1 cells lie in no coarse cell of the mesh's partition; give every Omega1 cell "
             f"a coarse cell, or a coarse size ({key})"
         )
-    if graded:
+    if not cm.coarse_grid:
+        held = np.unique(np.concatenate(comm.allgather(np.unique(coarse)))).size
+        if held < 2:
+            raise InputError(
+                f"{where}: Omega1 is one coarse cell of the mesh's partition; Algorithm 3 needs at least two coarse "
+                f"cells in it; give a coarse size ({key})"
+            )
         ratio = _size_ratio(cm, cells, coarse)
         if ratio < 1.0:
             raise InputError(
                 f"{where}: the coarse cells are smaller than the Omega1 cells they hold (the median over the "
-                f"coarse cells of |K|^(1/3) over their cells' (6|T|)^(1/3) is {ratio:.3g}): a coarse cell must "
-                f"hold several fine cells; give a coarse size ({key})"
+                f"coarse cells of |K|^(1/{d}) over their cells' ({math.factorial(d)}|T|)^(1/{d}) is {ratio:.3g}): a "
+                f"coarse cell must hold several fine cells; give a coarse size ({key})"
             )
         return
-    diameters = np.concatenate(comm.allgather(cm.mesh.h(3, cells)))
+    diameters = np.concatenate(comm.allgather(cm.mesh.h(d, cells)))
     h = float(np.median(diameters))
     if cm.H is not None and cm.H < h:
         raise InputError(
@@ -128,14 +145,17 @@ def check_cubes(cm: ContactMesh, where: str, key: str, missing: str, graded: boo
 
 
 def _size_ratio(cm: ContactMesh, cells: np.ndarray, coarse: np.ndarray) -> float:
-    """The median over the coarse cells K of |K|^(1/3) / mean (6|T|)^(1/3) of the fine cells T it holds (the owned
-    ``cells`` of the 3D mesh and their ``coarse`` indices, summed over the ranks).  (6|T|)^(1/3) is the side of the
-    cube a tetrahedron of volume |T| is one sixth of: a cube of side H over a mesh of cubes of side h, each cut into
-    six tetrahedra, has the ratio H/h."""
-    volumes = simplex_volumes(cm.mesh.geometry.x[cm.mesh.geometry.dofmap[cells]])
+    """The median over the coarse cells K of |K|^(1/d) / mean (d!|T|)^(1/d) of the fine cells T it holds (the owned
+    ``cells`` of the mesh of simplices of dimension d and their ``coarse`` indices, summed over the ranks).
+    (d!|T|)^(1/d) is the side of the square (cube) a triangle (tetrahedron) of area (volume) |T| is one d!-th of: a
+    square (cube) of side H over a mesh of squares (cubes) of side h, each cut into d! simplices, has the ratio
+    H/h."""
+    d = cm.mesh.topology.dim
+    root = np.sqrt if d == 2 else np.cbrt
+    volumes = simplex_volumes(cm.mesh.geometry.x[cm.mesh.geometry.dofmaps[0][cells]][:, :, :d])
     n = cm.comm.allreduce(int(np.max(coarse, initial=-1)) + 1, op=MPI.MAX)
     total = cm.comm.allreduce(np.bincount(coarse, weights=volumes, minlength=n), op=MPI.SUM)
-    fine = cm.comm.allreduce(np.bincount(coarse, weights=np.cbrt(6.0 * volumes), minlength=n), op=MPI.SUM)
+    fine = cm.comm.allreduce(np.bincount(coarse, weights=root(math.factorial(d) * volumes), minlength=n), op=MPI.SUM)
     count = cm.comm.allreduce(np.bincount(coarse, minlength=n).astype(float), op=MPI.SUM)
     held = count > 0
-    return float(np.median(np.cbrt(total[held]) / (fine[held] / count[held])))
+    return float(np.median(root(total[held]) / (fine[held] / count[held])))

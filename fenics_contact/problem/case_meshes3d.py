@@ -104,7 +104,7 @@ class HertzQuarterBlockMesh:
         cm = hertz_quarter_block(self.a, h, size=self.size, strip=self.strip, comm=comm)
         if self.coarse_size is not None:
             H = self.coarse_size * self.a
-            cm = cm._replace(H=H, coarse_cell=omega1_coarse_cells(cm.mesh, cm.cell_tags, H))
+            cm = cm._replace(H=H, coarse_cell=omega1_coarse_cells(cm.mesh, cm.cell_tags, H), coarse_grid=True)
         return CaseMesh(cm, {}, None, ((0, 0.0), (1, 0.0)))
 
     @property

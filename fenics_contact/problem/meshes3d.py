@@ -127,7 +127,8 @@ def hertz_quarter_block(
         cm = contact_mesh_from_model(comm, h=h_contact, H=strip * a, gdim=3)
     coarse_size = hertz_coarse_size(a, h_contact, size=size, fine=fine, growth=growth, cells=coarse)
     omega1 = cm.cell_tags.find(Subdomain.OMEGA1)
-    return cm._replace(coarse_cell=graded_coarse_cells(cm.mesh, coarse_size, cells=omega1).astype(np.int32))
+    graded = graded_coarse_cells(cm.mesh, coarse_size, cells=omega1).astype(np.int32)
+    return cm._replace(coarse_cell=graded, coarse_grid=False)
 
 
 def hertz_coarse_size(

@@ -212,6 +212,7 @@ class ContactProblem:
             split.H,
             split.coarse_cell,
             names,
+            split.coarse_grid,
         )
         validation.validate_contact_mesh(cm, source="the mesh given to ContactProblem.from_meshtags")
         fields = {}

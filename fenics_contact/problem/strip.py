@@ -240,12 +240,14 @@ def omega1_coarse_cells(msh: dmesh.Mesh, cell_tags: dmesh.MeshTags, H: float) ->
 
 
 class Split(NamedTuple):
-    """Ω₁/Ω₂ cell tags, the facet tags with γ, the coarse cell of every local cell, the coarse size."""
+    """Ω₁/Ω₂ cell tags, the facet tags with γ, the coarse cell of every local cell, the coarse size, and whether the
+    coarse cells are squares (cubes) of side H (False: the user's partition, H its largest |K|^(1/d))."""
 
     cell_tags: dmesh.MeshTags
     facet_tags: dmesh.MeshTags
     coarse_cell: np.ndarray
     H: float | None
+    coarse_grid: bool = True
 
 
 def automatic_split(
@@ -270,7 +272,7 @@ def automatic_split(
     if partition is not None:
         coarse = np.asarray(partition)
         cell_tags, tags = strip_tags(msh, facet_tags, coarse_strip(msh, facet_tags, coarse))
-        return Split(cell_tags, tags, coarse.astype(np.int32), float(coarse_sizes(msh, coarse).max()))
+        return Split(cell_tags, tags, coarse.astype(np.int32), float(coarse_sizes(msh, coarse).max()), False)
     if H is not None:
         coarse, _ = cartesian_coarse_cells(msh, H)
         if width is None and msh.comm.allreduce(int(np.all(coarse >= 0)), op=MPI.MIN):

@@ -17,6 +17,7 @@ import pytest
 import scipy.linalg
 from mpi4py import MPI
 from multiscale_layers import layer_errors
+from omega1_robin import fine_robin_error, robin_data
 
 import fenics_contact  # noqa: F401  (imports dolfinx_solver first)
 from fenics_contact.errors import InputError
@@ -40,20 +41,10 @@ def _teardown():
 
 
 @pytest.fixture(scope="module")
-def mesh_32_8():
-    return geometry.unit_square(32, 8)
-
-
-@pytest.fixture(scope="module")
 def omega1_32_8(mesh_32_8):
     """Ω₁ of model 1 at h = 1/32, H = 1/8 with m = 2, l = 3."""
     om, _, _ = cem.build_omega1_multiscale(models.get_model(1).on(mesh_32_8), cem=cem.CEMOptions(layers=2, nbasis=3))
     return om
-
-
-def _robin_data(om: cem.Omega1Multiscale) -> np.ndarray:
-    y = om.V.tabulate_dof_coordinates()[om.ops.gamma // 2, 1]
-    return np.where(om.ops.gamma % 2 == 0, np.sin(3.0 * y) + 0.3, 0.5 * np.cos(2.0 * y))
 
 
 # -- coarse grid ------------------------------------------------------------------------------
@@ -146,22 +137,6 @@ def test_basis_supported_in_patch(omega1_32_8):
     assert x[:, 1].min() > 2 * H and x[:, 1].max() < 7 * H
 
 
-def _fine_robin_error(om: cem.Omega1Multiscale, g: np.ndarray) -> float:
-    """Relative energy error of the multiscale Ω₁ Robin solution against an independent fine solve."""
-    fine = PrimalSubproblem(
-        om.ops.V.mesh, om.facet_tags, om.fields, delta=None, alpha=om.alpha_fn, prefix="test_ms_fine_gap_", V=om.V
-    )
-    try:
-        fine.g.x.array[:] = 0.0
-        fine.g.x.array[om.ops.gamma] = g
-        fine.solve()
-        ref = fine.u.x.array.copy()
-    finally:
-        fine.destroy()
-    d = om.solver.solve(g) - ref
-    return float(np.sqrt(d @ om.ops.K @ d / (ref @ om.ops.K @ ref)))
-
-
 def test_nearly_incompressible_omega1_is_reported(mesh_32_8, caplog):
     """ν → ½: Λ (the first local eigenvalue left out) falls like μ/(λ+2μ), the bases localize slowly and the
     Ω₁ error at a fixed m grows many times; Algorithm 3 says so (no silent loss of accuracy)."""
@@ -174,7 +149,7 @@ def test_nearly_incompressible_omega1_is_reported(mesh_32_8, caplog):
         assert om.nu_max == pytest.approx(nu)
         assert ("localize slowly" in caplog.text) == (nu > cem.NEARLY_INCOMPRESSIBLE)
         gaps[nu] = om.spectral_gap
-        errors[nu] = _fine_robin_error(om, _robin_data(om))
+        errors[nu] = fine_robin_error(om, robin_data(om))
     assert gaps[0.49] < 0.2 * gaps[0.35]  # Λ falls like μ/(λ+2μ) (0.54 → 0.055 here)
     assert errors[0.49] > 5 * errors[0.35], errors  # the loss the warning is about (0.43 against 0.045)
 
@@ -186,7 +161,7 @@ def test_all_modes_reproduce_fine_robin_solution():
     model = models.get_model(1)
     om, _, _ = cem.build_omega1_multiscale(model.on(cm), cem=cem.CEMOptions(layers=4, nbasis=cem.ALL_MODES))
     assert om.solver.factor.rank == int(np.count_nonzero(om.ops.free))
-    g = _robin_data(om)
+    g = robin_data(om)
     u_ms = om.solver.solve(g)
     # independent fine solve with DOLFINx/PETSc (PrimalSubproblem, MUMPS)
     part = om.ops.V.mesh
@@ -379,7 +354,7 @@ def test_offline_cache(tmp_path, mesh_32_8, caplog):
     assert len(files) == 1
     second = build()
     assert second.cache_status == "loaded"
-    g = _robin_data(first)
+    g = robin_data(first)
     assert np.array_equal(first.solver.solve(g), second.solver.solve(g))
     # corrupt one stored value: detected by the checksum, rebuilt, never used
     with np.load(files[0]) as data:

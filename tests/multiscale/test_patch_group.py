@@ -12,7 +12,7 @@ import gc
 import numpy as np
 import pytest
 from mpi4py import MPI
-from test_multiscale import _fine_robin_error, _robin_data
+from omega1_robin import fine_robin_error, robin_data
 
 import fenics_contact  # noqa: F401  (imports dolfinx_solver first)
 from fenics_contact.errors import InputError
@@ -28,11 +28,6 @@ def _teardown():
     yield
     gc.collect()
     MPI.COMM_WORLD.Barrier()
-
-
-@pytest.fixture(scope="module")
-def mesh_32_8():
-    return geometry.unit_square(32, 8)
 
 
 def _grid(cm, *, cartesian: bool):
@@ -94,7 +89,7 @@ def test_groups_keep_the_localization_and_the_whole_domain_is_exact(mesh_32_8, t
             model, cem=cem.CEMOptions(layers=2, nbasis=3, patch_group=g), cache_dir=tmp_path
         )
         assert om.cache_status == "built"
-        errors[g] = _fine_robin_error(om, _robin_data(om))
+        errors[g] = fine_robin_error(om, robin_data(om))
         omegas[g] = om
     assert errors[2] <= 1.2 * errors[1], errors
     assert errors[cem.WHOLE_DOMAIN] < 1e-10, errors
@@ -111,7 +106,7 @@ def test_groups_keep_the_localization_and_the_whole_domain_is_exact(mesh_32_8, t
         model, cem=cem.CEMOptions(layers=2, nbasis=3, patch_group=2), cache_dir=tmp_path
     )
     assert again.cache_status == "loaded" and again.space.patch_group == 2
-    g = _robin_data(om)
+    g = robin_data(om)
     assert np.array_equal(again.solver.solve(g), om.solver.solve(g))
 
 
@@ -130,7 +125,7 @@ def test_gram_matrices_of_grouped_bases(g):
     scale = np.abs(om.solver.GK).max()
     assert np.allclose(om.solver.GK, Z.T @ (ops.K @ Z), rtol=0, atol=1e-12 * scale)
     assert np.allclose(om.solver.GM, Z.T @ (ops.M @ Z), rtol=0, atol=1e-12 * np.abs(om.solver.GM).max())
-    gdata = _robin_data(om)
+    gdata = robin_data(om)
     u1 = om.solver.solve(gdata)
     t = om.interface_coordinates(gdata)
     assert np.allclose(om.interface_trace(t), om.interface_values(u1), rtol=0, atol=1e-12 * np.abs(u1).max())

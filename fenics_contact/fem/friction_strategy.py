@@ -11,6 +11,15 @@ pair (``fem.two_body_friction``) solve the penalized friction law the same way (
    have the same contact and stick/slip sets, where the Newton on the law takes over; then the Newton on the law
    from the fixed point's iterate, and should it fail the iterate itself (``FrictionalSolve.settle``).
 
+The first press of a path with ``predict`` (Coulomb, no load step committed) goes to the fixed point at once, and
+hands over as soon as two successive iterates have the same contact set.  Pressed from the unloaded state, the
+Newton on the law cycles there: on 2D model 3 at contrast 10³ its contact set alternates between 14 and 16 nodes
+and 12 nodes change stick/slip at every step, for ten steps.  The fixed point's first problem has the thresholds of
+the starting iterate, which penetrates everywhere: every node sticks (a bonded press, the normal contact set in
+3–4 steps); the next has the bonded press's thresholds, and the Newton on the law finishes from there (8 steps in
+all on 2D model 3 at 10³ and 10⁶, where the Newton from the trial state takes 19 and 6, and 22 on the 3D
+channel cube at 10³, where it takes 32; ``benchmarks/results/friction.md``).
+
 What a solve provides is a ``FrictionalSolve``: its Newton, its iterate to save and restore, the thresholds and sets
 of the iterate, and what to do with the fixed point's iterate.  The condensed system predicts (on 2D model 3 and the
 3D channel cube its Newton then takes 2–8 steps per drag step, 15–53 without); the one-body and the pair solves do
@@ -80,12 +89,14 @@ def solve_frictional(solve: FrictionalSolve, *, predict: bool, trial_steps: int 
             return solve.newton(energy=not coulomb, state=predicted, max_steps=LAW_STEPS if coulomb else None)
         except ConvergenceError:
             solve.restore(start)
-    try:
-        return solve.newton(energy=not coulomb, state=None, max_steps=trial_steps if coulomb else None)
-    except ConvergenceError:
-        if not coulomb:
-            raise
-        solve.restore(start)
+    first = predict and predicted is None and coulomb  # nothing committed: the first press of a path
+    if not first:
+        try:
+            return solve.newton(energy=not coulomb, state=None, max_steps=trial_steps if coulomb else None)
+        except ConvergenceError:
+            if not coulomb:
+                raise
+            solve.restore(start)
     previous = None
     for _ in range(FIXED_POINT_STEPS):
         tau = solve.thresholds()
@@ -100,7 +111,7 @@ def solve_frictional(solve: FrictionalSolve, *, predict: bool, trial_steps: int 
         if change <= FIXED_POINT_TOL * size:
             break
         if handover:
-            sets = solve.sets()
+            sets = solve.sets()[:1] if first else solve.sets()
             if _same(sets, previous):
                 reached = solve.save()
                 try:  # the sets have settled: the Newton on the law finds the thresholds with them

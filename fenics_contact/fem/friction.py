@@ -107,6 +107,10 @@ class NodalFriction:
     The state is the anchor a_p per node and the obstacle motion m; ``commit`` ends a load step.
     """
 
+    #: a dense Newton with frozen thresholds ends once its sets settle, in 3D too (``fem.friction_strategy``: the
+    #: thresholds' fixed point before the hand-over, whose iterates need only their sets)
+    settle_on_sets = False
+
     def __init__(self, sub, law: Friction, delta: float) -> None:
         self.sub, self.law, self.delta = sub, law, float(delta)
         self.k_t = law.stiffness_ratio / self.delta

@@ -100,11 +100,11 @@ def solve_frictional(solve: FrictionalSolve, *, predict: bool, trial_steps: int 
     previous = None
     for _ in range(FIXED_POINT_STEPS):
         tau = solve.thresholds()
-        friction.frozen = tau
+        friction.frozen, friction.settle_on_sets = tau, handover
         try:
             solve.newton(energy=True, state=None, max_steps=None)
         finally:
-            friction.frozen = None
+            friction.frozen, friction.settle_on_sets = None, False
         change = np.max(np.abs(solve.thresholds() - tau), initial=0.0)
         size = np.max(tau, initial=0.0)
         change, size = (solve.comm.allreduce(v, op=MPI.MAX) for v in (change, size))

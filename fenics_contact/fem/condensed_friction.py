@@ -26,7 +26,7 @@ import scipy.linalg as sla
 from mpi4py import MPI
 
 from fenics_contact.errors import ConvergenceError
-from fenics_contact.fem.friction import ENERGY_STEPS, NodalFriction
+from fenics_contact.fem.friction import ENERGY_STEPS, NEGLIGIBLE, NodalFriction
 from fenics_contact.fem.friction_strategy import LAW_STEPS, solve_frictional
 from fenics_contact.fem.newton import (
     Advance,
@@ -38,12 +38,7 @@ from fenics_contact.fem.newton import (
     semismooth_newton_loop,
 )
 
-__all__ = ["nodal_forces", "CondensedLaw", "CondensedFrictionalSystem", "solve_condensed", "NEGLIGIBLE"]
-
-#: a 3D step (max norm) at most this times U's ends the Newton on a settled set: the Newton converges quadratically
-#: there, so the iterate after it is within a few times its square of the solution (at contrast 10⁶ on the 3D
-#: channel cube the round-off level of U is 10⁻¹⁰ of it, above 10⁻¹²: a step there never becomes smaller)
-NEGLIGIBLE = 1.0e-8
+__all__ = ["nodal_forces", "CondensedLaw", "CondensedFrictionalSystem", "solve_condensed"]
 
 
 def nodal_forces(friction: NodalFriction, U: np.ndarray) -> tuple[np.ndarray, np.ndarray, dict]:
@@ -281,5 +276,5 @@ def solve_condensed(
     settle, and the Newton on the law from there.  ``record`` gets each converged Newton's trace, ``discard`` the
     steps of each that did not converge."""
     solve = _CondensedSolve(law, U_L, start, max_steps, record, discard)
-    solve_frictional(solve, predict=True, trial_steps=LAW_STEPS, handover=True)
+    solve_frictional(solve, predict=True, trial_steps=LAW_STEPS, handover=True, press=law.friction.committed is None)
     return solve.U

@@ -42,7 +42,12 @@ from fenics_contact.fem.newton import (
 )
 from fenics_contact.problem.friction import Friction
 
-__all__ = ["NodalFriction", "FrictionProfile", "frictional_newton"]
+__all__ = ["NodalFriction", "FrictionProfile", "frictional_newton", "NEGLIGIBLE"]
+
+#: a 3D step (max norm) at most this times u's ends the Newton on a settled set: the Newton converges quadratically
+#: there, so the iterate after it is within a few times its square of the solution (at contrast 10⁶ on the 3D
+#: channel cube the round-off level of u is 10⁻¹⁰ of it: a step never becomes smaller there)
+NEGLIGIBLE = 1.0e-8
 
 log = logging.getLogger(__name__)
 
@@ -201,7 +206,8 @@ class NodalFriction:
             beta = np.ones((e["w"].size, 1))
         else:
             e = self.evaluate()
-            beta = np.minimum(1.0, self.stiffness / e["w"] / self.k_t)[:, None]
+            beta = np.minimum(1.0, self.stiffness / e["w"] / self.k_t)
+            beta = np.where(e["stick"] | e["slip"], beta, 1.0)[:, None]  # (no traction linearized: the trial state)
         z = (1.0 - beta) * self._linearized_traction(e) + beta * e["t_trial"]
         size = np.linalg.norm(z, axis=1)
         tau = e["tau"]
@@ -388,7 +394,7 @@ class _FrictionalSystem:
         sub = self.sub
         self._direction()
         size = sub.u.x.petsc_vec.norm(PETSc.NormType.NORM_INFINITY)
-        self._negligible = sub.du.norm(PETSc.NormType.NORM_INFINITY) <= 1e-12 * size
+        self._negligible = sub.du.norm(PETSc.NormType.NORM_INFINITY) <= NEGLIGIBLE * size
         self._move(1.0)
         self._next = self.friction.next_state()
         predicted = self.key(self._next)
@@ -530,5 +536,5 @@ def frictional_newton(sub, *, refinements: int) -> NewtonHistory:
     cycling at high contrast), the fixed point on the thresholds (each step a convex problem) until they settle,
     then the Newton on the law from there."""
     solve = _SubproblemSolve(sub, refinements)
-    solve_frictional(solve, predict=False, trial_steps=None, handover=False)
+    solve_frictional(solve, predict=False, trial_steps=None, handover=False, press=sub.friction.committed is None)
     return solve.history

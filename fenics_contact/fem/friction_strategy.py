@@ -11,14 +11,14 @@ pair (``fem.two_body_friction``) solve the penalized friction law the same way (
    have the same contact and stick/slip sets, where the Newton on the law takes over; then the Newton on the law
    from the fixed point's iterate, and should it fail the iterate itself (``FrictionalSolve.settle``).
 
-The first press of a path with ``predict`` (Coulomb, no load step committed) goes to the fixed point at once, and
-hands over as soon as two successive iterates have the same contact set.  Pressed from the unloaded state, the
-Newton on the law cycles there: on 2D model 3 at contrast 10³ its contact set alternates between 14 and 16 nodes
-and 12 nodes change stick/slip at every step, for ten steps.  The fixed point's first problem has the thresholds of
-the starting iterate, which penetrates everywhere: every node sticks (a bonded press, the normal contact set in
-3–4 steps); the next has the bonded press's thresholds, and the Newton on the law finishes from there (8 steps in
-all on 2D model 3 at 10³ and 10⁶, where the Newton from the trial state takes 19 and 6, and 22 on the 3D
-channel cube at 10³, where it takes 32; ``benchmarks/results/friction.md``).
+The first press of a path (``press``: Coulomb, no load step committed; the one-body and condensed solves) goes to
+the fixed point at once, and hands over as soon as two successive iterates have the same contact set.  Pressed
+from the unloaded state, the Newton on the law cycles: on 2D model 3 at contrast 10³ a slipping node's step carries
+its trial traction far across to the other side (in 2D a slipping node has no tangential stiffness), the reversal
+rule makes it stick, the stick sends it back, and 12 nodes change stick/slip at every step for ten steps.  The fixed
+point's first problem has the thresholds of the starting iterate, which the obstacle penetrates everywhere: every
+node sticks (a bonded press: the normal contact set in 3–4 steps); the next has the bonded press's thresholds, and
+the Newton on the law finishes from there (``benchmarks/results/friction.md``).
 
 What a solve provides is a ``FrictionalSolve``: its Newton, its iterate to save and restore, the thresholds and sets
 of the iterate, and what to do with the fixed point's iterate.  The condensed system predicts (on 2D model 3 and the
@@ -77,9 +77,12 @@ def _same(a: tuple[np.ndarray, ...], b: tuple[np.ndarray, ...] | None) -> bool:
     return b is not None and all(np.array_equal(x, y) for x, y in zip(a, b))
 
 
-def solve_frictional(solve: FrictionalSolve, *, predict: bool, trial_steps: int | None, handover: bool) -> None:
+def solve_frictional(
+    solve: FrictionalSolve, *, predict: bool, trial_steps: int | None, handover: bool, press: bool = False
+) -> None:
     """Solve ``solve`` by the strategy of the module docstring (``predict``: with its first step, from the committed
-    state); ``trial_steps``: the Coulomb Newton's steps from the trial state (None: the solve's own number)."""
+    state; ``press``: the first press of a path, nothing committed); ``trial_steps``: the Coulomb Newton's steps from
+    the trial state (None: the solve's own number)."""
     friction = solve.friction
     coulomb = friction.law.law == "coulomb"
     start = solve.save()
@@ -89,7 +92,7 @@ def solve_frictional(solve: FrictionalSolve, *, predict: bool, trial_steps: int 
             return solve.newton(energy=not coulomb, state=predicted, max_steps=LAW_STEPS if coulomb else None)
         except ConvergenceError:
             solve.restore(start)
-    first = predict and predicted is None and coulomb  # nothing committed: the first press of a path
+    first = press and coulomb
     if not first:
         try:
             return solve.newton(energy=not coulomb, state=None, max_steps=trial_steps if coulomb else None)
@@ -110,7 +113,7 @@ def solve_frictional(solve: FrictionalSolve, *, predict: bool, trial_steps: int 
         change, size = (solve.comm.allreduce(v, op=MPI.MAX) for v in (change, size))
         if change <= FIXED_POINT_TOL * size:
             break
-        if handover:
+        if handover or first:
             sets = solve.sets()[:1] if first else solve.sets()
             if _same(sets, previous):
                 reached = solve.save()

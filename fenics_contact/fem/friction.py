@@ -380,8 +380,11 @@ class _FrictionalSystem:
         return self.sub._factorize_for(active)
 
     def same(self, a: np.ndarray, b: np.ndarray) -> bool:
-        """The sets are equal and, where the Jacobian varies within a set (3D slip), the step is negligible."""
-        return self.sub._same_sets(a, b) and (self.friction.d == 2 or self._negligible)
+        """The sets are equal and, where the Jacobian varies within a set (3D slip), the step is negligible or the
+        thresholds are frozen inside the fixed point before its hand-over (``NodalFriction.settle_on_sets``)."""
+        friction = self.friction
+        rough = friction.frozen is not None and friction.settle_on_sets
+        return self.sub._same_sets(a, b) and (friction.d == 2 or self._negligible or rough)
 
     def _move(self, t: float) -> None:
         self.sub.u.x.petsc_vec.axpy(t, self.sub.du)

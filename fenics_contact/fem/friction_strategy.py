@@ -103,7 +103,7 @@ def solve_frictional(
     previous = None
     for _ in range(FIXED_POINT_STEPS):
         tau = solve.thresholds()
-        friction.frozen, friction.settle_on_sets = tau, handover
+        friction.frozen, friction.settle_on_sets = tau, handover or first
         try:
             solve.newton(energy=True, state=None, max_steps=None)
         finally:
@@ -115,7 +115,7 @@ def solve_frictional(
             break
         if handover or first:
             sets = solve.sets()[:1] if first else solve.sets()
-            if _same(sets, previous):
+            if solve.comm.allreduce(_same(sets, previous), op=MPI.LAND):
                 reached = solve.save()
                 try:  # the sets have settled: the Newton on the law finds the thresholds with them
                     return solve.newton(energy=False, state=None, max_steps=LAW_STEPS)

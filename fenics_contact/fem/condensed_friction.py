@@ -9,11 +9,13 @@ U_L minus a compliance M (dN × dN, symmetric positive definite) times the nodal
 λ the nodal law of a ``NodalFriction`` evaluated at given nodal values (``nodal``).  ``solve_condensed`` solves it
 by the loop of the monolithic frictional Newton (``fem.newton.semismooth_newton_loop`` on
 ``CondensedFrictionalSystem``: the state rule ``NodalFriction.next_state``, full steps until a state recurs,
-then a line search; in 3D a state is settled once the step is negligible, the slip direction varying within
-it), linearized first at the state of the last committed load step (``NodalFriction.predicted_state``), then at
-the trial state, with, for Coulomb, the fixed point on the thresholds should neither converge in ``LAW_STEPS``:
-once two of its iterates have the same contact and stick/slip sets, the Newton on the law from there (it then
-converges in one or two steps), the fixed point going on should it fail.  The energy solves (Tresca, frozen
+then a line search; in 3D a state is settled once the step is at most ``NEGLIGIBLE`` of U as well, the slip
+direction varying within it), linearized first at the state of the last committed load step
+(``NodalFriction.predicted_state``), then at the trial state, with, for Coulomb, the fixed point on the thresholds
+should neither converge in ``LAW_STEPS``: once two of its iterates have the same contact and stick/slip sets, the
+Newton on the law from there (it then converges in one or two steps), the fixed point going on should it fail.  The
+first press of a path (nothing committed) goes to the fixed point at once (``fem.friction_strategy``), its
+frozen-threshold solves ended once their sets settle.  The energy solves (Tresca, frozen
 thresholds) take the full steps of the primal–dual state rule while they lower the convex energy, else its exact
 line search (``CondensedFrictionalSystem``).  Used by Algorithm 1's condensed Γ_C system (``hybrid.friction``) and by
 the two-body solve under MPI (``fem.two_body_mpi``).

@@ -268,6 +268,7 @@ def solve_condensed(
     *,
     record: Callable[[NewtonTrace], None] = lambda trace: None,
     discard: Callable[[int], None] = lambda steps: None,
+    press: bool = False,
 ) -> np.ndarray:
     """U = U_L − M λ(U) from ``start`` (``fem.friction_strategy.solve_frictional``): the Newton on the law (Tresca:
     with the exact line search on its convex energy; a failure raises ConvergenceError) linearized first at the
@@ -275,8 +276,9 @@ def solve_condensed(
     trial state; for Coulomb, should neither converge in ``LAW_STEPS``, the fixed point on the thresholds (each a
     convex problem): as soon as two successive iterates of it have the same contact and stick/slip sets, the Newton
     on the law from there (``LAW_STEPS``; the fixed point goes on should it fail), else until the thresholds
-    settle, and the Newton on the law from there.  ``record`` gets each converged Newton's trace, ``discard`` the
-    steps of each that did not converge."""
+    settle, and the Newton on the law from there.  ``press``: the first press of a path (nothing committed), to the
+    fixed point at once.  ``record`` gets each converged Newton's trace, ``discard`` the steps of each that did not
+    converge."""
     solve = _CondensedSolve(law, U_L, start, max_steps, record, discard)
-    solve_frictional(solve, predict=True, trial_steps=LAW_STEPS, handover=True, press=law.friction.committed is None)
+    solve_frictional(solve, predict=True, trial_steps=LAW_STEPS, handover=True, press=press)
     return solve.U

@@ -3,7 +3,8 @@
 (1) Model 3 (stiff channels through γ up to Γ_C, loads in Ω₁), Coulomb μ = 0.3, the wall on x = 1 pressed in by
 2e-3 in two steps and dragged by 0.002, 0.008, 0.03: per load step and contrast, Algorithm 1's applications of
 T, its Newton steps on the interface data after the condensed solve, the steps of the condensed contact Newton
-(the thresholds' fixed point included), and the largest displacement difference to the monolithic path.
+(the thresholds' fixed point and every Newton that did not converge included), the monolithic frictional Newton's
+steps (counted alike), and the largest displacement difference to the monolithic path.
 ``--strategy interface`` runs the interface Newton's "interface" strategy instead, ``--method primal-ms``
 Algorithm 3 instead of Algorithm 1 (the difference is then its multiscale error), ``--frictionless`` the same path
 with no friction (these print table (1) only).  ``--dim 3``: the same on the
@@ -59,8 +60,8 @@ def theorem_table(
         path = [(-0.01, 0.0, 0.0), (-0.01, 0.005, 0.0), (-0.01, 0.01, 0.0), (-0.01, 0.02, 0.0)]
     rows = [
         "| contrast | motion | applications of T | interface steps after the condensed solve | condensed contact "
-        "Newton steps | max rel. displacement difference |",
-        "|---|---|---|---|---|---|",
+        "Newton steps | monolithic Newton steps | max rel. displacement difference |",
+        "|---|---|---|---|---|---|---|",
     ]
     for contrast in (1e3, 1e6):
         law = Frictionless() if frictionless else Friction("coulomb", mu=MU)
@@ -80,13 +81,14 @@ def theorem_table(
 
             return record
 
-        slide(problem, "primal-monolithic", path, on_step=keep("mono"))
+        mono = slide(problem, "primal-monolithic", path, on_step=keep("mono"))
         alg1 = slide(problem, method, path, tol=1e-11, strategy=strategy, on_step=keep("alg1"))
-        for step, ua, ub in zip(alg1.steps, fields["mono"], fields["alg1"]):
+        for step, reference, ua, ub in zip(alg1.steps, mono.steps, fields["mono"], fields["alg1"]):
             gap = np.max(np.abs(ua - ub)) / np.max(np.abs(ua))
             rows.append(
                 f"| {contrast:g} | {step.motion.tolist()} | {step.iterations} | "
-                f"{step.interface_newton_steps - step.contact_newton_steps} | {step.contact_newton_steps} | {gap:.1e} |"
+                f"{step.interface_newton_steps - step.contact_newton_steps} | {step.contact_newton_steps} | "
+                f"{reference.iterations} | {gap:.1e} |"
             )
     return "\n".join(rows)
 

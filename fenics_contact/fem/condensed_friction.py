@@ -9,11 +9,13 @@ U_L minus a compliance M (dN × dN, symmetric positive definite) times the nodal
 λ the nodal law of a ``NodalFriction`` evaluated at given nodal values (``nodal``).  ``solve_condensed`` solves it
 by the loop of the monolithic frictional Newton (``fem.newton.semismooth_newton_loop`` on
 ``CondensedFrictionalSystem``: the state rule ``NodalFriction.next_state``, full steps until a state recurs,
-then a line search; in 3D a state is settled once the step is negligible, the slip direction varying within
-it), linearized first at the state of the last committed load step (``NodalFriction.predicted_state``), then at
-the trial state, with, for Coulomb, the fixed point on the thresholds should neither converge in ``LAW_STEPS``:
-once two of its iterates have the same contact and stick/slip sets, the Newton on the law from there (it then
-converges in one or two steps), the fixed point going on should it fail.  The energy solves (Tresca, frozen
+then a line search; in 3D a state is settled once the step is at most ``NEGLIGIBLE`` of U as well, the slip
+direction varying within it), linearized first at the state of the last committed load step
+(``NodalFriction.predicted_state``), then at the trial state, with, for Coulomb, the fixed point on the thresholds
+should neither converge in ``LAW_STEPS``: once two of its iterates have the same contact and stick/slip sets, the
+Newton on the law from there (it then converges in one or two steps), the fixed point going on should it fail.  The
+first press of a path (nothing committed) goes to the fixed point at once (``fem.friction_strategy``), its
+frozen-threshold solves ended once their sets settle.  The energy solves (Tresca, frozen
 thresholds) take the full steps of the primal–dual state rule while they lower the convex energy, else its exact
 line search (``CondensedFrictionalSystem``).  Used by Algorithm 1's condensed Γ_C system (``hybrid.friction``) and by
 the two-body solve under MPI (``fem.two_body_mpi``).
@@ -26,7 +28,7 @@ import scipy.linalg as sla
 from mpi4py import MPI
 
 from fenics_contact.errors import ConvergenceError
-from fenics_contact.fem.friction import ENERGY_STEPS, NodalFriction
+from fenics_contact.fem.friction import ENERGY_STEPS, NEGLIGIBLE, NodalFriction
 from fenics_contact.fem.friction_strategy import LAW_STEPS, solve_frictional
 from fenics_contact.fem.newton import (
     Advance,
@@ -126,11 +128,16 @@ class CondensedFrictionalSystem:
         return True
 
     def same(self, a: np.ndarray, b: np.ndarray) -> bool:
-        return bool(np.array_equal(a, b)) and (self.friction.d == 2 or self._negligible)
+        """The sets are equal and, in 3D, the step is negligible (``NEGLIGIBLE``) or the thresholds are frozen
+        inside the fixed point before its hand-over (``NodalFriction.settle_on_sets``)."""
+        if not np.array_equal(a, b):
+            return False
+        friction = self.friction
+        return friction.d == 2 or self._negligible or (friction.frozen is not None and friction.settle_on_sets)
 
     def solve(self, active: np.ndarray) -> Direction:
         self.dU = sla.solve(self._J, -self._R)
-        self._negligible = np.max(np.abs(self.dU), initial=0.0) <= 1e-12 * np.max(np.abs(self.U), initial=0.0)
+        self._negligible = np.max(np.abs(self.dU), initial=0.0) <= NEGLIGIBLE * np.max(np.abs(self.U), initial=0.0)
         self.U += self.dU
         self._next = self._next_state(self.U)
         predicted = self.key(self._next)
@@ -261,6 +268,7 @@ def solve_condensed(
     *,
     record: Callable[[NewtonTrace], None] = lambda trace: None,
     discard: Callable[[int], None] = lambda steps: None,
+    press: bool = False,
 ) -> np.ndarray:
     """U = U_L − M λ(U) from ``start`` (``fem.friction_strategy.solve_frictional``): the Newton on the law (Tresca:
     with the exact line search on its convex energy; a failure raises ConvergenceError) linearized first at the
@@ -268,8 +276,9 @@ def solve_condensed(
     trial state; for Coulomb, should neither converge in ``LAW_STEPS``, the fixed point on the thresholds (each a
     convex problem): as soon as two successive iterates of it have the same contact and stick/slip sets, the Newton
     on the law from there (``LAW_STEPS``; the fixed point goes on should it fail), else until the thresholds
-    settle, and the Newton on the law from there.  ``record`` gets each converged Newton's trace, ``discard`` the
-    steps of each that did not converge."""
+    settle, and the Newton on the law from there.  ``press``: the first press of a path (nothing committed), to the
+    fixed point at once.  ``record`` gets each converged Newton's trace, ``discard`` the steps of each that did not
+    converge."""
     solve = _CondensedSolve(law, U_L, start, max_steps, record, discard)
-    solve_frictional(solve, predict=True, trial_steps=LAW_STEPS, handover=True)
+    solve_frictional(solve, predict=True, trial_steps=LAW_STEPS, handover=True, press=press)
     return solve.U

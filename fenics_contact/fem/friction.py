@@ -42,7 +42,12 @@ from fenics_contact.fem.newton import (
 )
 from fenics_contact.problem.friction import Friction
 
-__all__ = ["NodalFriction", "FrictionProfile", "frictional_newton"]
+__all__ = ["NodalFriction", "FrictionProfile", "frictional_newton", "NEGLIGIBLE"]
+
+#: a 3D step (max norm) at most this times u's ends the Newton on a settled set: the Newton converges quadratically
+#: there, so the iterate after it is within a few times its square of the solution (at contrast 10⁶ on the 3D
+#: channel cube the round-off level of u is 10⁻¹⁰ of it: a step never becomes smaller there)
+NEGLIGIBLE = 1.0e-8
 
 log = logging.getLogger(__name__)
 
@@ -106,6 +111,10 @@ class NodalFriction:
     ``delta``: the normal penalty δ (p = (u·ν − g)⁺/δ); the stick stiffness is ``law.stiffness_ratio``/δ.
     The state is the anchor a_p per node and the obstacle motion m; ``commit`` ends a load step.
     """
+
+    #: a dense Newton with frozen thresholds ends once its sets settle, in 3D too (``fem.friction_strategy``: the
+    #: thresholds' fixed point before the hand-over, whose iterates need only their sets)
+    settle_on_sets = False
 
     def __init__(self, sub, law: Friction, delta: float) -> None:
         self.sub, self.law, self.delta = sub, law, float(delta)
@@ -181,10 +190,13 @@ class NodalFriction:
         trial traction at the current u: a node sticks where |z| ≤ τ and slips along z/|z| otherwise.  The
         primal–dual active-set rule with the constant c = β/δ_t, β = min(1, δ_t K_pp/w_p) (K_pp the node's
         elastic stiffness): β = 1 would be the trial state alone, whose stick band |P r| ≤ τδ_t is too narrow for
-        a Newton iterate to land in.  A node that slipped in the state linearized at and whose z turns against
-        that slip direction (z·n̂ < 0) sticks instead: its traction passes through the stick disc on the way, and
-        the slip state, whose tangential stiffness is zero in 2D, would carry it across to the other side in one
-        full step (the Coulomb Newton then cycles between slip directions).  A state that reproduces itself
+        a Newton iterate to land in.  A node that carried no traction in the state linearized at (out of contact
+        there) takes β = 1, its trial state: with t = 0 a node entering contact would stick whatever its trial
+        traction (on model 3 at contrast 10⁶ nodes re-entered contact sticking at 25–76 times their threshold, and
+        the Newton cycled them in and out of contact).  A node that slipped in the state linearized at and whose z
+        turns against that slip direction (z·n̂ < 0) sticks instead: its traction passes through the stick disc on
+        the way, and the slip state, whose tangential stiffness is zero in 2D, would carry it across to the other
+        side in one full step (the Coulomb Newton then cycles between slip directions).  A state that reproduces itself
         satisfies the law, with the reversal rule as without it (it only changes a node that slipped into one that
         sticks).  ``plain``: the state of u itself (β = 1), the generalized Hessian of a frozen-threshold energy.
         """
@@ -197,7 +209,8 @@ class NodalFriction:
             beta = np.ones((e["w"].size, 1))
         else:
             e = self.evaluate()
-            beta = np.minimum(1.0, self.stiffness / e["w"] / self.k_t)[:, None]
+            beta = np.minimum(1.0, self.stiffness / e["w"] / self.k_t)
+            beta = np.where(e["stick"] | e["slip"], beta, 1.0)[:, None]  # (no traction linearized: the trial state)
         z = (1.0 - beta) * self._linearized_traction(e) + beta * e["t_trial"]
         size = np.linalg.norm(z, axis=1)
         tau = e["tau"]
@@ -370,8 +383,11 @@ class _FrictionalSystem:
         return self.sub._factorize_for(active)
 
     def same(self, a: np.ndarray, b: np.ndarray) -> bool:
-        """The sets are equal and, where the Jacobian varies within a set (3D slip), the step is negligible."""
-        return self.sub._same_sets(a, b) and (self.friction.d == 2 or self._negligible)
+        """The sets are equal and, where the Jacobian varies within a set (3D slip), the step is negligible or the
+        thresholds are frozen inside the fixed point before its hand-over (``NodalFriction.settle_on_sets``)."""
+        friction = self.friction
+        rough = friction.frozen is not None and friction.settle_on_sets
+        return self.sub._same_sets(a, b) and (friction.d == 2 or self._negligible or rough)
 
     def _move(self, t: float) -> None:
         self.sub.u.x.petsc_vec.axpy(t, self.sub.du)
@@ -384,7 +400,7 @@ class _FrictionalSystem:
         sub = self.sub
         self._direction()
         size = sub.u.x.petsc_vec.norm(PETSc.NormType.NORM_INFINITY)
-        self._negligible = sub.du.norm(PETSc.NormType.NORM_INFINITY) <= 1e-12 * size
+        self._negligible = sub.du.norm(PETSc.NormType.NORM_INFINITY) <= NEGLIGIBLE * size
         self._move(1.0)
         self._next = self.friction.next_state()
         predicted = self.key(self._next)
@@ -526,5 +542,5 @@ def frictional_newton(sub, *, refinements: int) -> NewtonHistory:
     cycling at high contrast), the fixed point on the thresholds (each step a convex problem) until they settle,
     then the Newton on the law from there."""
     solve = _SubproblemSolve(sub, refinements)
-    solve_frictional(solve, predict=False, trial_steps=None, handover=False)
+    solve_frictional(solve, predict=False, trial_steps=None, handover=False, press=sub.friction.committed is None)
     return solve.history

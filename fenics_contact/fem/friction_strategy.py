@@ -11,6 +11,15 @@ pair (``fem.two_body_friction``) solve the penalized friction law the same way (
    have the same contact and stick/slip sets, where the Newton on the law takes over; then the Newton on the law
    from the fixed point's iterate, and should it fail the iterate itself (``FrictionalSolve.settle``).
 
+The first press of a path (``press``: Coulomb, no load step committed; the one-body and condensed solves) goes to
+the fixed point at once, and hands over as soon as two successive iterates have the same contact set.  Pressed
+from the unloaded state, the Newton on the law cycles: on 2D model 3 at contrast 10³ a slipping node's step carries
+its trial traction far across to the other side (in 2D a slipping node has no tangential stiffness), the reversal
+rule makes it stick, the stick sends it back, and 12 nodes change stick/slip at every step for ten steps.  The fixed
+point's first problem has the thresholds of the starting iterate, which the obstacle penetrates everywhere: every
+node sticks (a bonded press: the normal contact set in 3–4 steps); the next has the bonded press's thresholds, and
+the Newton on the law finishes from there (``benchmarks/results/friction.md``).
+
 What a solve provides is a ``FrictionalSolve``: its Newton, its iterate to save and restore, the thresholds and sets
 of the iterate, and what to do with the fixed point's iterate.  The condensed system predicts (on 2D model 3 and the
 3D channel cube its Newton then takes 2–8 steps per drag step, 15–53 without); the one-body and the pair solves do
@@ -68,9 +77,12 @@ def _same(a: tuple[np.ndarray, ...], b: tuple[np.ndarray, ...] | None) -> bool:
     return b is not None and all(np.array_equal(x, y) for x, y in zip(a, b))
 
 
-def solve_frictional(solve: FrictionalSolve, *, predict: bool, trial_steps: int | None, handover: bool) -> None:
+def solve_frictional(
+    solve: FrictionalSolve, *, predict: bool, trial_steps: int | None, handover: bool, press: bool = False
+) -> None:
     """Solve ``solve`` by the strategy of the module docstring (``predict``: with its first step, from the committed
-    state); ``trial_steps``: the Coulomb Newton's steps from the trial state (None: the solve's own number)."""
+    state; ``press``: the first press of a path, nothing committed); ``trial_steps``: the Coulomb Newton's steps from
+    the trial state (None: the solve's own number)."""
     friction = solve.friction
     coulomb = friction.law.law == "coulomb"
     start = solve.save()
@@ -80,28 +92,30 @@ def solve_frictional(solve: FrictionalSolve, *, predict: bool, trial_steps: int 
             return solve.newton(energy=not coulomb, state=predicted, max_steps=LAW_STEPS if coulomb else None)
         except ConvergenceError:
             solve.restore(start)
-    try:
-        return solve.newton(energy=not coulomb, state=None, max_steps=trial_steps if coulomb else None)
-    except ConvergenceError:
-        if not coulomb:
-            raise
-        solve.restore(start)
+    first = press and coulomb
+    if not first:
+        try:
+            return solve.newton(energy=not coulomb, state=None, max_steps=trial_steps if coulomb else None)
+        except ConvergenceError:
+            if not coulomb:
+                raise
+            solve.restore(start)
     previous = None
     for _ in range(FIXED_POINT_STEPS):
         tau = solve.thresholds()
-        friction.frozen = tau
+        friction.frozen, friction.settle_on_sets = tau, handover or first
         try:
             solve.newton(energy=True, state=None, max_steps=None)
         finally:
-            friction.frozen = None
+            friction.frozen, friction.settle_on_sets = None, False
         change = np.max(np.abs(solve.thresholds() - tau), initial=0.0)
         size = np.max(tau, initial=0.0)
         change, size = (solve.comm.allreduce(v, op=MPI.MAX) for v in (change, size))
         if change <= FIXED_POINT_TOL * size:
             break
-        if handover:
-            sets = solve.sets()
-            if _same(sets, previous):
+        if handover or first:
+            sets = solve.sets()[:1] if first else solve.sets()
+            if solve.comm.allreduce(_same(sets, previous), op=MPI.LAND):
                 reached = solve.save()
                 try:  # the sets have settled: the Newton on the law finds the thresholds with them
                     return solve.newton(energy=False, state=None, max_steps=LAW_STEPS)

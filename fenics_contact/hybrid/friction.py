@@ -84,7 +84,8 @@ class FrictionalCondensation(CondensedInterface):
             hist.discarded += steps  # (counted in the steps)
 
         try:
-            U = solve_condensed(law, U_L, start, max_steps, record=record, discard=discard)
+            press = friction.committed is None  # (the first press of the path)
+            U = solve_condensed(law, U_L, start, max_steps, record=record, discard=discard, press=press)
         finally:
             self._lu = law.lu
         self._warm = U

@@ -2,10 +2,13 @@
 
 import numpy as np
 import pytest
+import scipy.sparse as sp
 
 import fenics_contact
 from fenics_contact.errors import InputError
 from fenics_contact.fem.friction import NodalFriction
+from fenics_contact.fem.mortar import ContactQuadrature
+from fenics_contact.fem.two_body_friction import PairFriction
 from fenics_contact.problem.analytic import cattaneo_mindlin, hertz_model
 from fenics_contact.problem.friction import Friction
 from fenics_contact.problem.geometry import unit_square
@@ -185,3 +188,27 @@ def test_3d_state_rule_tells_a_node_turning_back_to_stick():
     assert _OneNode(stiffness=0.25).state_at(-3.0) == 2  # t_trial = (0, 3, 0): slips on
     assert _OneNode(stiffness=1.0).state_at(3.0) == 1
     assert _OneNode(stiffness=1.0).state_at(-3.0) == 2
+
+
+def test_state_rule_gives_a_node_without_traction_its_trial_state():
+    """``NodalFriction.next_state`` on three penetrating nodes of small elastic stiffness (β = 10⁻³): two carried no
+    traction where the Newton linearized (out of contact there) and take their trial state, slipping along a trial
+    traction 10τ and sticking under 0.1τ (the blend z = (1 − β)·0 + β t_trial alone would have both stick); the
+    third slipped along the trial traction there, and its blend keeps it slipping."""
+    n, delta = 3, 1.0
+    Q = ContactQuadrature(
+        points=np.zeros((n, 2)),
+        weights=np.ones(n),
+        gap=np.zeros(n),
+        nu=np.tile([1.0, 0.0], (n, 1)),
+        B=sp.csr_matrix((n, 2 * n)),
+    )
+    law = Friction("coulomb", mu=MU)
+    friction = PairFriction(law, Q, delta, stiffness=np.full(n, 1e-3 * law.stiffness_ratio / delta))
+    tau = MU * 0.01 / delta  # p = 0.01/δ at every node
+    slide_by = np.array([10.0, 0.1, 10.0]) * tau / friction.k_t  # |t_trial| = 10τ, 0.1τ, 10τ
+    friction.nodal = np.column_stack([np.full(n, 0.01), -slide_by])
+    friction.forced = (np.array([0, 0, 2], dtype=np.int8), np.array([[0.0, 0.0], [0.0, 0.0], [0.0, 1.0]]))
+    codes, direction = friction.next_state()
+    assert codes.tolist() == [2, 1, 2]
+    assert np.allclose(direction[[0, 2]], [[0.0, 1.0], [0.0, 1.0]])

@@ -46,20 +46,17 @@ def test_algorithm_1_is_the_monolithic_frictional_solution(model3):
     """At every step of the press-and-drag path Algorithm 1's glued displacement equals the monolithic one to 1e-8
     relative, with the same forces, stick/slip sets and dissipation.  The interface Newton (the default condensed
     strategy: the frictional contact solved on all Γ_C displacement components, ``hybrid.friction``) applies T at
-    most 3 times per load step and takes at most 2 Newton steps on the interface data after the condensed solve
-    (measured).  Its dense contact Newton on the Γ_C unknowns (``fem.condensed_friction.solve_condensed``) starts
-    each load step after the first from the committed state and takes 2–6 steps there (measured), 11 at the drag
-    to 0.03 at contrast 1e6 (the whole contact zone slips: 10 from the committed state, 1 from the trial state);
-    the first press, with no state to start from, 19 at 1e3 (a Newton on the Coulomb law cut at ``LAW_STEPS``, the
-    thresholds' fixed point, the Newton on the law from there) and 6 at 1e6."""
+    most 4 times per load step and takes at most 3 Newton steps on the interface data after the condensed solve
+    (measured).  Its dense contact Newton on the Γ_C unknowns (``fem.condensed_friction.solve_condensed``) and the
+    monolithic frictional Newton take at most 8 steps at every load step, the first press from the unloaded state
+    included (measured 8 there at both contrasts: the thresholds' fixed point from a bonded press, then the Newton
+    on the law; 2–5 on the later steps from the committed state), every Newton that did not converge counted."""
     problem, mono, u_mono = model3
     alg1, u_alg1 = _snapshots("primal", problem, tol=1e-11)
     _same_paths(mono, u_mono, alg1, u_alg1)
-    for step in alg1.steps:
-        assert step.iterations <= 8 and step.interface_newton_steps - step.contact_newton_steps <= 8
-    assert alg1.steps[0].contact_newton_steps <= 20
-    assert all(step.contact_newton_steps <= 11 for step in alg1.steps[1:])
-    assert sum(step.contact_newton_steps <= 6 for step in alg1.steps[1:]) >= 3
+    for a, b in zip(mono.steps, alg1.steps, strict=True):
+        assert b.iterations <= 8 and b.interface_newton_steps - b.contact_newton_steps <= 8
+        assert b.contact_newton_steps <= 8 and a.iterations <= 8
 
 
 @pytest.mark.slow

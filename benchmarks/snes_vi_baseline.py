@@ -15,7 +15,8 @@ MUMPS on the reduced (inactive) block, as in dolfinx_contact's reference, here i
 (the blocks are symmetric positive definite).
 
 Reported per model and h: the set-up and the time per step (median) and the whole curve for both solvers (the
-SNES VI's set-up: the stiffness and load assembled; the package's: its solver built), the Newton steps, the
+SNES VI's set-up: the package's contact subproblem built for its nodal ν and g, the stiffness and load
+assembled; the package's: its solver built), the Newton steps, the
 contact nodes of the last step (package / VI, and how many differ over the path), and the largest relative
 difference of the forces (the obstacle's resultant along ``direction``: Σ_p (r_p·ν_p)(ν_p·d) with r = K u − f
 the reaction at the Γ_C nodes, for both solvers) over the steps: the penalty's O(δ).  ``--delta-factors``

@@ -29,7 +29,7 @@ from fenics_contact.fem import forms_primal
 from fenics_contact.fem.amg import AMGSolver, LinearSolverOptions, linear_solver
 from fenics_contact.fem.contact import MAX_REFINEMENTS, ContactProfile, NewtonHistory, NewtonOptions, semismooth_newton
 from fenics_contact.fem.friction import NodalFriction, frictional_newton
-from fenics_contact.fem.linalg import SPD_OPTIONS, AbsoluteTerms, DirectSolver, quadratic_form
+from fenics_contact.fem.linalg import AbsoluteTerms, DirectSolver, quadratic_form
 from fenics_contact.fem.primal_boundary import NodalContactGeometry, PrimalBoundaryData
 from fenics_contact.problem.fields import MaterialFields
 from fenics_contact.problem.friction import Friction, friction_of
@@ -42,14 +42,6 @@ from fenics_contact.problem.validation import require_facet_groups
 __all__ = ["PrimalSubproblem", "PrimalSolution", "solve_primal_monolithic", "default_penalty", "penalty_for"]
 
 log = logging.getLogger(__name__)
-
-
-#: MUMPS' fill-reducing ordering (ICNTL(7)) of a linear 2D subproblem, factorized once (Algorithm 1's Ω₁):
-#: the approximate minimum fill (2).  On the unit square's Ω₁ its factors are as large as METIS' (the automatic
-#: choice) within 5 % and its numeric factorization some 10 % slower, but its analysis takes a fifth of the time
-#: (0.05 s against 0.25 s at h = 1/256), which a single factorization does not amortize.  The contact problems,
-#: refactorized at every Newton step, and 3D, where nested dissection fills far less, keep MUMPS' choice.
-ONCE_2D_ORDERING = 2
 
 
 def default_penalty(h: float, E_contact: float, factor: float = 1.0e-3) -> float:
@@ -165,9 +157,7 @@ class PrimalSubproblem:
         if friction is None and solver.chosen(self.num_dofs, tdim) == "direct":
             # frictionless, J (stiffness + penalty on the active set + Robin, identity on Γ_D) is symmetric
             # positive definite: MUMPS' Cholesky, half an LU's factors
-            once = not self.contact and tdim == 2  # (factorized once: ``ONCE_2D_ORDERING``)
-            options = {**SPD_OPTIONS, "mat_mumps_icntl_7": ONCE_2D_ORDERING} if once else None
-            self.solver = DirectSolver(msh.comm, prefix=prefix, spd=True, options=options)
+            self.solver = DirectSolver(msh.comm, prefix=prefix, spd=True)
         else:
             self.solver = linear_solver(
                 msh.comm, prefix=prefix, space=self.V, options=solver, contrast=_contrast(fields.mu, msh.comm)

@@ -162,10 +162,12 @@ class PrimalSubproblem:
             self.solver = linear_solver(
                 msh.comm, prefix=prefix, space=self.V, options=solver, contrast=_contrast(fields.mu, msh.comm)
             )
-        self._K = dolfinx.fem.petsc.assemble_matrix(self._a)
-        self._K.assemble()
-        self._M = dolfinx.fem.petsc.assemble_matrix(self._m)
-        self._M.assemble()
+        # K and M on J's sparsity (its cell couplings are theirs; its facet terms couple no other unknowns): the
+        # pattern is computed once, not three times
+        self._K, self._M = self.A.duplicate(), self.A.duplicate()
+        for mat, form in ((self._K, self._a), (self._M, self._m)):
+            dolfinx.fem.petsc.assemble_matrix(mat, form)
+            mat.assemble()
         self._work = self._K.createVecLeft()
         self._linear_ready = False
         self._factorized_set: np.ndarray | None = None

@@ -172,7 +172,8 @@ class DirectSolver(_Factorization):
     ``scaling``: the owned entries of a positive diagonal D when the operators are given equilibrated, D A D:
     ``solve`` and ``mat_solve`` then return the solutions of A x = b, x = D (D A D)⁻¹ (D b).  ``spd``: the
     operators are symmetric positive definite (the caller's guarantee): each is flagged so and factorized by
-    MUMPS' Cholesky without pivoting (``SPD_OPTIONS``, unless ``options`` are given).
+    MUMPS' Cholesky without pivoting (``SPD_OPTIONS``, unless ``options`` are given); should that fail (a
+    matrix positive definite in exact arithmetic only), by its LU from then on.
     """
 
     def __init__(
@@ -213,7 +214,16 @@ class DirectSolver(_Factorization):
             self._d.array[:] = self.scaling
             self._work = self._d.duplicate()
         self.ksp.setOperators(A)
-        if self._set_up() != 0:
+        failed = self._set_up() != 0
+        if failed and self.spd:  # not positive definite in floating point (a contrast beyond double precision)
+            log.debug("%s: Cholesky failed, LU from now on", self.prefix)
+            self.spd = False
+            A.setOption(PETSc.Mat.Option.SPD, False)
+            self.ksp.getPC().setType("lu")
+            self.ksp.getPC().setFactorSolverType("mumps")
+            self.ksp.setOperators(A)
+            failed = self._set_up() != 0
+        if failed:
             cause = factorization_failure(self.ksp.getPC(), self.prefix)
             raise ConvergenceError(f"{self.prefix}: factorization failed ({cause})")
         self.factorizations += 1

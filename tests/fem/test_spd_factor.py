@@ -43,6 +43,24 @@ def test_spd_solver_is_a_cholesky_with_the_lu_solution():
     assert entries[True] < entries[False]  # one triangle of factors against two
 
 
+@pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="a sequential matrix")
+def test_spd_solver_falls_back_to_lu_where_the_cholesky_fails():
+    """A zero pivot (a matrix not positive definite in floating point): the LU takes over, with its solution."""
+    J = sp.csr_matrix(np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 2.0]]))
+    solver = DirectSolver(MPI.COMM_SELF, prefix="test_spd_fallback_", spd=True)
+    A = scipy_to_petsc(J)
+    rhs, x = A.createVecs()
+    try:
+        solver.set_operator(A)
+        assert not solver.spd and solver.ksp.getPC().getType() == "lu"
+        rhs.array[:] = [1.0, 2.0, 4.0]
+        solver.solve(rhs, x)
+        assert np.allclose(x.array, [2.0, 1.0, 2.0], rtol=1e-14)
+    finally:
+        for obj in (solver, A, rhs, x):
+            obj.destroy()
+
+
 def test_frictionless_monolithic_newton_factorizes_by_cholesky_with_the_lu_answer():
     """The monolithic Newton's Jacobian (stiffness + penalty on the active set, identity on Γ_D) is SPD: its
     Cholesky gives the LU's solution, active set and Newton steps."""

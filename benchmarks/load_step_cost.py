@@ -20,6 +20,7 @@ from collections import defaultdict
 from pathlib import Path
 
 import numpy as np
+from common import write_report
 
 import fenics_contact as fc
 from fenics_contact.fem.primal import PrimalSubproblem
@@ -164,11 +165,9 @@ def main() -> None:
         + " |"
     )
     lines.append("| **the step** | " + " | ".join(f"**{1e3 * r[1] / r[2]:.1f}**" for r in results) + " |")
-    text = "\n".join(lines) + "\n"
     if args.out:
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(text)
-    print(text)
+        write_report(args.out, lines)
+    print("\n".join(lines))
 
 
 if __name__ == "__main__":

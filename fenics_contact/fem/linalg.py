@@ -62,6 +62,9 @@ SAFE_RANGE = (1e-150, 1e150)
 
 #: Default options of every direct solve (each solver gets its own prefix).
 DIRECT_OPTIONS = {"ksp_type": "preonly", "pc_type": "lu", "pc_factor_mat_solver_type": "mumps"}
+#: ``DirectSolver(spd=True)``: MUMPS Cholesky without pivoting (its SYM = 1: the operator is flagged SPD), half
+#: the factors of an LU: a faster numeric factorization and back-solve (benchmarks/results/snes_vi_baseline.md)
+SPD_OPTIONS = {"ksp_type": "preonly", "pc_type": "cholesky", "pc_factor_mat_solver_type": "mumps"}
 
 #: PETSc's PC failure reasons by number (``PETSc.PC.FailedReason``)
 PC_FAILED_REASONS = {
@@ -167,14 +170,26 @@ class DirectSolver(_Factorization):
     """A factorized operator (MUMPS LU by default) whose every solve is checked.
 
     ``scaling``: the owned entries of a positive diagonal D when the operators are given equilibrated, D A D:
-    ``solve`` and ``mat_solve`` then return the solutions of A x = b, x = D (D A D)⁻¹ (D b).
+    ``solve`` and ``mat_solve`` then return the solutions of A x = b, x = D (D A D)⁻¹ (D b).  ``spd``: the
+    operators are symmetric positive definite (the caller's guarantee): each is flagged so and factorized by
+    MUMPS' Cholesky without pivoting (``SPD_OPTIONS``, unless ``options`` are given); should that fail (a
+    matrix positive definite in exact arithmetic only), by its LU from then on.
     """
 
-    def __init__(self, comm, *, prefix: str, options: dict | None = None, scaling: np.ndarray | None = None) -> None:
+    def __init__(
+        self,
+        comm,
+        *,
+        prefix: str,
+        options: dict | None = None,
+        scaling: np.ndarray | None = None,
+        spd: bool = False,
+    ) -> None:
         self.ksp = PETSc.KSP().create(comm)
         self.ksp.setOptionsPrefix(prefix)
+        self.spd = spd
         opts = PETSc.Options()
-        for key, value in (options or DIRECT_OPTIONS).items():
+        for key, value in (options or (SPD_OPTIONS if spd else DIRECT_OPTIONS)).items():
             opts[f"{prefix}{key}"] = value
         self.ksp.setFromOptions()
         self.prefix = prefix
@@ -192,12 +207,23 @@ class DirectSolver(_Factorization):
         (``factorization_failure``: the cause and what to do).
         """
         check_entries(A, self.prefix)
+        if self.spd:
+            A.setOption(PETSc.Mat.Option.SPD, True)
         if self.scaling is not None and self._d is None:
             self._d = A.createVecLeft()
             self._d.array[:] = self.scaling
             self._work = self._d.duplicate()
         self.ksp.setOperators(A)
-        if self._set_up() != 0:
+        failed = self._set_up() != 0
+        if failed and self.spd:  # not positive definite in floating point (a contrast beyond double precision)
+            log.debug("%s: Cholesky failed, LU from now on", self.prefix)
+            self.spd = False
+            A.setOption(PETSc.Mat.Option.SPD, False)
+            self.ksp.getPC().setType("lu")
+            self.ksp.getPC().setFactorSolverType("mumps")
+            self.ksp.setOperators(A)
+            failed = self._set_up() != 0
+        if failed:
             cause = factorization_failure(self.ksp.getPC(), self.prefix)
             raise ConvergenceError(f"{self.prefix}: factorization failed ({cause})")
         self.factorizations += 1

@@ -29,7 +29,7 @@ from fenics_contact.fem import forms_primal
 from fenics_contact.fem.amg import AMGSolver, LinearSolverOptions, linear_solver
 from fenics_contact.fem.contact import MAX_REFINEMENTS, ContactProfile, NewtonHistory, NewtonOptions, semismooth_newton
 from fenics_contact.fem.friction import NodalFriction, frictional_newton
-from fenics_contact.fem.linalg import AbsoluteTerms, quadratic_form
+from fenics_contact.fem.linalg import AbsoluteTerms, DirectSolver, quadratic_form
 from fenics_contact.fem.primal_boundary import NodalContactGeometry, PrimalBoundaryData
 from fenics_contact.problem.fields import MaterialFields
 from fenics_contact.problem.friction import Friction, friction_of
@@ -67,7 +67,8 @@ class PrimalSubproblem:
     ``problem.friction.Friction``, with contact only) adds the nodal friction term of ``fem.friction``.
 
     ``solver``: the linear solver of every solve (``fem.amg.LinearSolverOptions`` or its kind: ``"direct"``,
-    MUMPS LU; ``"amg"``, CG + smoothed-aggregation AMG, its set-up kept across Newton steps; ``"auto"``).
+    MUMPS: Cholesky when frictionless, J being symmetric positive definite, else LU; ``"amg"``, CG +
+    smoothed-aggregation AMG, its set-up kept across Newton steps; ``"auto"``).
     """
 
     def __init__(
@@ -153,13 +154,20 @@ class PrimalSubproblem:
         solver = LinearSolverOptions.of(solver)
         if friction is not None and solver.krylov == "cg":  # Coulomb's Jacobian is not symmetric: GMRES
             solver = dataclasses.replace(solver, krylov="gmres")
-        self.solver = linear_solver(
-            msh.comm, prefix=prefix, space=self.V, options=solver, contrast=_contrast(fields.mu, msh.comm)
-        )
-        self._K = dolfinx.fem.petsc.assemble_matrix(self._a)
-        self._K.assemble()
-        self._M = dolfinx.fem.petsc.assemble_matrix(self._m)
-        self._M.assemble()
+        if friction is None and solver.chosen(self.num_dofs, tdim) == "direct":
+            # frictionless, J (stiffness + penalty on the active set + Robin, identity on Γ_D) is symmetric
+            # positive definite: MUMPS' Cholesky, half an LU's factors
+            self.solver = DirectSolver(msh.comm, prefix=prefix, spd=True)
+        else:
+            self.solver = linear_solver(
+                msh.comm, prefix=prefix, space=self.V, options=solver, contrast=_contrast(fields.mu, msh.comm)
+            )
+        # K and M on J's sparsity (its cell couplings are theirs; its facet terms couple no other unknowns): the
+        # pattern is computed once, not three times
+        self._K, self._M = self.A.duplicate(), self.A.duplicate()
+        for mat, form in ((self._K, self._a), (self._M, self._m)):
+            dolfinx.fem.petsc.assemble_matrix(mat, form)
+            mat.assemble()
         self._work = self._K.createVecLeft()
         self._linear_ready = False
         self._factorized_set: np.ndarray | None = None
@@ -432,7 +440,7 @@ class PrimalSolution:
 
     @property
     def linear_solver(self) -> str:
-        """The linear solver the Newton steps used: ``"direct"`` (MUMPS LU) or ``"amg"``."""
+        """The linear solver the Newton steps used: ``"direct"`` (MUMPS Cholesky or LU) or ``"amg"``."""
         return "amg" if isinstance(self.problem.solver, AMGSolver) else "direct"
 
     @property
@@ -495,10 +503,10 @@ def solve_primal_monolithic(
 
     ``delta`` defaults to ``default_penalty(h, E_c)``, E_c the largest E on Γ_C (``penalty_for``).  With a
     friction law (``problem.law``) it is one load step from the unloaded state (``fenics_contact.sliding`` for
-    load paths). ``solver``:
-    the linear solver of the Newton steps (``fem.amg.LinearSolverOptions`` or its kind): ``"direct"``
-    (MUMPS LU), ``"amg"`` (CG + smoothed-aggregation AMG with the rigid-body near-nullspace) or ``"auto"``
-    (AMG on a 3D mesh of ``fem.amg.AUTO_AMG_DOFS`` unknowns or more, else direct).
+    load paths). ``solver``: the linear solver of the Newton steps (``fem.amg.LinearSolverOptions`` or its
+    kind): ``"direct"`` (MUMPS: Cholesky frictionless, else LU), ``"amg"`` (CG + smoothed-aggregation AMG with
+    the rigid-body near-nullspace) or ``"auto"`` (AMG on a 3D mesh of ``fem.amg.AUTO_AMG_DOFS`` unknowns or
+    more, else direct).
     """
     cm = problem.cm
     msh, facet_tags = cm.mesh, cm.facet_tags

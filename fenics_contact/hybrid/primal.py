@@ -9,7 +9,7 @@ solution (Theorem 3.1).  The iteration stops on the transmission residual of
 the pair (``hybrid.certificate``); ``accel="newton"`` solves the fixed point by
 the interface Newton method (``hybrid.interface_newton``) instead of iterating.
 
-Ω₁'s linear solver is chosen by ``fem.amg.LinearSolverOptions`` (``solver``): MUMPS LU, factorized once, or
+Ω₁'s linear solver is chosen by ``fem.amg.LinearSolverOptions`` (``solver``): MUMPS Cholesky, factorized once, or
 for a large 3D Ω₁ CG + smoothed-aggregation AMG with the rigid-body near-nullspace, set up once and reused by
 every iteration and load step.  With AMG the interface Newton is Newton–GMRES, matrix-free
 (``hybrid.krylov_newton``): the dense interface response of the condensed strategy would cost n_γ Ω₁ solves.

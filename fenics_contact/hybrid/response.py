@@ -184,7 +184,7 @@ class PrimalPart(AffinePart):
             self.gap = np.concatenate(comm.allgather(gap))
             self._J0 = None
             if factorize:  # J₀ (only the condensed strategy needs it)
-                self.solver = DirectSolver(comm, prefix=f"{sub.prefix}j0_")
+                self.solver = DirectSolver(comm, prefix=f"{sub.prefix}j0_", spd=sub.friction is None)
                 self._J0 = sub.contact_free_matrix()
                 self.solver.set_operator(self._J0)
         else:

@@ -24,6 +24,7 @@ import scipy.sparse as sp
 from mpi4py import MPI
 from petsc4py import PETSc
 
+from fenics_contact.errors import ConvergenceError
 from fenics_contact.fem.linalg import SparseFactor, scipy_to_petsc
 from fenics_contact.multiscale.cem.operators import FineOperators
 from fenics_contact.multiscale.cem.options import WHOLE_DOMAIN, CEMOptions
@@ -172,6 +173,34 @@ def global_saddle_matrix(ops: FineOperators, aux: AuxiliarySpace) -> PETSc.Mat:
     return scipy_to_petsc(M)
 
 
+def sparse_solve(lu: SparseFactor, rhs_t: sp.csr_matrix) -> np.ndarray:
+    """A⁻¹ B for the sparse right-hand sides B given by their transpose ``rhs_t`` (one row per right-hand side):
+    one MUMPS solve with sparse right-hand sides (ICNTL(20) = 1), a dense (n × k) column-major result."""
+    k, n = rhs_t.shape
+    csr = (
+        rhs_t.indptr.astype(PETSc.IntType, copy=False),
+        rhs_t.indices.astype(PETSc.IntType, copy=False),
+        rhs_t.data.astype(PETSc.ScalarType, copy=False),
+    )
+    Bt = PETSc.Mat().createAIJWithArrays((k, n), csr, comm=PETSc.COMM_SELF)
+    Bt.assemble()
+    B = PETSc.Mat().createTranspose(Bt)
+    X = PETSc.Mat().createDense((n, k), comm=PETSc.COMM_SELF)
+    X.setUp()
+    try:
+        try:
+            lu.ksp.getPC().getFactorMatrix().matSolve(B, X)
+        except PETSc.Error as err:
+            raise ConvergenceError(f"MUMPS failed on {lu.what} ({err})") from None
+        out = X.getDenseArray().copy(order="F")
+    finally:
+        for obj in (B, Bt, X):
+            obj.destroy()
+    if not np.all(np.isfinite(out)):
+        raise ConvergenceError(f"a solve of {lu.what} produced non-finite values")
+    return out
+
+
 def _patch_problem(
     ops: FineOperators,
     grid: CoarseGrid,
@@ -193,31 +222,44 @@ def _patch_problem(
         M = saddle.createSubMatrix(index, index)
     finally:
         index.destroy()
-    blocks = []  # per cell: (first column, l_i, Robin data columns G_I, their γ vertices)
+    blocks = []  # per cell: (first column, l_i, their γ vertices, the used Robin data columns)
+    rows, cols, vals = [], [], []  # the right-hand sides' nonzeros (column, row, value: the transpose)
     ncols = 0
     for i in group:
         li = int(aux.offsets[i + 1] - aux.offsets[i])
+        # s(φ_j^i, πv): unit vectors in the μ rows
+        rows.append(ncols + np.arange(li))
+        cols.append(nI + np.searchsorted(J, aux.columns(i)))
+        vals.append(np.ones(li))
         # Robin data on the γ vertices of K_i (γ-mass of the cells of K_i)
         D_all = inc.dofs(int(i), free_only=False)
         on_gamma = np.intersect1d(D_all, ops.gamma, assume_unique=True)
-        G_I, used = None, np.zeros(0, dtype=np.int64)
+        used = np.zeros(0, dtype=np.int64)
         if on_gamma.size:
-            G_I = ops.Gc[int(grid.colors[i])][on_gamma][:, inner].T.tocsc()  # (|I| × γ vertices of K_i)
+            G_I = ops.Gc[int(grid.colors[i])][on_gamma][:, inner].tocsr()  # (γ vertices of K_i × |I|)
             used = np.flatnonzero(np.diff(G_I.indptr) > 0)
-        blocks.append((ncols, li, G_I, on_gamma, used))
+            G_I = G_I[used].tocoo()
+            rows.append(ncols + li + G_I.row)
+            cols.append(G_I.col)
+            vals.append(G_I.data)
+        blocks.append((ncols, li, on_gamma, used))
         ncols += li + used.size
     F = None
     if source:
         F = ops.corrector_load[inner] * np.isin(inc.load_owner[inner // ops.bs], group)
         if not np.any(F):
             F = None
-    rhs = np.zeros((nI + nJ, ncols + (F is not None)), order="F")  # MUMPS takes column-major: no copy
-    for (at, li, G_I, _, used), i in zip(blocks, group):
-        rhs[nI + np.searchsorted(J, aux.columns(i)), at + np.arange(li)] = 1.0  # s(φ_j^i, πv): μ-row unit vectors
-        if used.size:
-            rhs[:nI, at + li : at + li + used.size] = G_I[:, used].toarray()
-    if F is not None:
-        rhs[:nI, -1] = F
+        else:
+            at = np.flatnonzero(F)
+            rows.append(np.full(at.size, ncols))
+            cols.append(at)
+            vals.append(F[at])
+    # the right-hand sides are sparse (one nonzero per basis, a few γ rows per Robin datum): MUMPS' sparse
+    # right-hand sides (ICNTL(20)) skip the forward elimination where they vanish (2.5× faster solves)
+    rhs_t = sp.csr_matrix(
+        (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(ncols + (F is not None), nI + nJ)
+    )
+    rhs_t.sum_duplicates()  # (canonical: sorted indices)
     M.setOption(PETSc.Mat.Option.SYMMETRIC, True)
     try:  # symmetric indefinite: MUMPS LDLᵀ
         lu = SparseFactor(M, cholesky=True, icntl=PATCH_ICNTL, what="a CEM patch problem")
@@ -225,12 +267,12 @@ def _patch_problem(
         M.destroy()
         raise
     try:
-        x = lu.solve(rhs)[:nI]
+        x = sparse_solve(lu, rhs_t)[:nI]
     finally:
         lu.destroy()
     dofs = inner.astype(np.int32)
     cells = []
-    for (at, li, _, on_gamma, used), i in zip(blocks, group):
+    for (at, li, on_gamma, used), i in zip(blocks, group):
         basis = PatchFunctions(dofs, np.ascontiguousarray(x[:, at : at + li]), aux.columns(i))
         corr = None
         if used.size:

@@ -45,6 +45,35 @@ def _rows_on(parts: list, D: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return Z, cols
 
 
+#: column pieces of the symmetric products ZᵀW of ``gram_matrices``: the blocks above the diagonal are formed,
+#: those below mirrored ((pieces + 1) / (2 pieces) of the work of the full product)
+GRAM_PIECES = 4
+
+
+def _cell_matrix(Kc: sp.csr_matrix, Mc: sp.csr_matrix, D: np.ndarray) -> sp.csr_matrix:
+    """[K_K; M_K] (2|D| × |D|): the rows at the DOFs D of a coarse cell K of the colour matrices of K's colour.
+    Cells of one colour share no vertex, so these rows reach no DOF outside D: their columns are renumbered
+    (no column extraction)."""
+    rows = sp.vstack([Kc[D], Mc[D]], format="csr")
+    pos = np.minimum(np.searchsorted(D, rows.indices), D.size - 1)
+    if not np.array_equal(D[pos], rows.indices):  # entries of the pattern outside D (zero): dropped
+        rows = rows[:, D]
+        return rows
+    return sp.csr_matrix((rows.data, pos, rows.indptr), shape=(2 * D.size, D.size))
+
+
+def _symmetric_products(Z: np.ndarray, W: np.ndarray) -> np.ndarray:
+    """ZᵀW for a symmetric result (W = S Z, S symmetric): the column blocks on and above the diagonal formed
+    (``GRAM_PIECES`` of them), the rest mirrored."""
+    k = Z.shape[1]
+    cuts = np.linspace(0, k, min(GRAM_PIECES, k) + 1).astype(np.int64)
+    G = np.empty((k, k))
+    for a, b in zip(cuts[:-1], cuts[1:]):
+        G[a:b, a:] = Z[:, a:b].T @ W[:, a:]
+        G[b:, a:b] = G[a:b, b:].T
+    return G
+
+
 def gram_matrices(
     ops: FineOperators, grid: CoarseGrid, space: MultiscaleSpace, *, comm: MPI.Comm = MPI.COMM_SELF
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -81,9 +110,16 @@ def gram_matrices(
             blocks.append(space.Nf[D][:, None])
             cols = np.concatenate([cols, [nz - 1]])
         Z = np.hstack(blocks) if len(blocks) > 1 else Zb
-        idx = np.ix_(cols, cols)
-        GK[idx] += Z.T @ (ops.Kc[c][D][:, D] @ Z)
-        GM[idx] += Z.T @ (ops.Mc[c][D][:, D] @ Z)
+        W = _cell_matrix(ops.Kc[c], ops.Mc[c], D) @ Z  # [K_K Z; M_K Z]
+        gk, gm = _symmetric_products(Z, W[: D.size]), _symmetric_products(Z, W[D.size :])
+        # cols runs through few contiguous ranges (the modes of consecutive cells): added range by range
+        cut = np.concatenate([[0], np.flatnonzero(np.diff(cols) != 1) + 1, [cols.size]])
+        for a0, a1 in zip(cut[:-1], cut[1:]):
+            ra = slice(cols[a0], cols[a0] + a1 - a0)
+            for b0, b1 in zip(cut[:-1], cut[1:]):
+                rb = slice(cols[b0], cols[b0] + b1 - b0)
+                GK[ra, rb] += gk[a0:a1, b0:b1]
+                GM[ra, rb] += gm[a0:a1, b0:b1]
 
     # a static share (not handed out on request): the same cells on the same rank in every run, so the sums
     # and the Allreduce below round the same way every time

@@ -214,7 +214,8 @@ def _patch_problem(
     source: bool,
 ) -> tuple:
     """Bases and Robin corrections of the coarse cells ``group`` and their source correction, all on ``patch``
-    (one LDLᵀ); returns ([(basis, correction or None) per cell], summed source correction or None)."""
+    (one LDLᵀ); returns ([(basis, correction or None) per cell], summed source correction or None, (factorization
+    time, solve time))."""
     J = np.concatenate([aux.columns(k) for k in patch])
     nI, nJ = inner.size, J.size
     index = PETSc.IS().createGeneral(np.concatenate([inner, ops.size + J]).astype(PETSc.IntType), comm=PETSc.COMM_SELF)
@@ -261,15 +262,18 @@ def _patch_problem(
     )
     rhs_t.sum_duplicates()  # (canonical: sorted indices)
     M.setOption(PETSc.Mat.Option.SYMMETRIC, True)
+    t0 = time.perf_counter()
     try:  # symmetric indefinite: MUMPS LDLᵀ
         lu = SparseFactor(M, cholesky=True, icntl=PATCH_ICNTL, what="a CEM patch problem")
     except BaseException:
         M.destroy()
         raise
+    t1 = time.perf_counter()
     try:
         x = sparse_solve(lu, rhs_t)[:nI]
     finally:
         lu.destroy()
+    timing = (t1 - t0, time.perf_counter() - t1)
     dofs = inner.astype(np.int32)
     cells = []
     for (at, li, on_gamma, used), i in zip(blocks, group):
@@ -279,7 +283,7 @@ def _patch_problem(
             gamma_pos = np.searchsorted(ops.gamma, on_gamma[used])
             corr = PatchFunctions(dofs, np.ascontiguousarray(x[:, at + li : at + li + used.size]), gamma_pos)
         cells.append((basis, corr))
-    return cells, (x[:, -1].copy() if F is not None else None)
+    return cells, (x[:, -1].copy() if F is not None else None), timing
 
 
 def cell_groups(grid: CoarseGrid, options: CEMOptions, dim: int) -> tuple[list, list]:
@@ -352,6 +356,9 @@ def build_multiscale_space(
     if ops.lifting is not None:  # u₁ = Ψ w + N g + (N_f + u_g): the lifting rides in the last column of Z
         Nf = ops.lifting.copy() if Nf is None else Nf + ops.lifting
     times["patches"] = time.perf_counter() - t0
+    # of which (summed over the ranks): the LDLᵀ factorizations and the solves with their right-hand sides
+    times["patch_factor"] = float(sum(r[2][0] for r in results))
+    times["patch_solve"] = float(sum(r[2][1] for r in results))
     times["total"] = times["eigen"] + times["patches"]
     times["patches_here"] = int(np.count_nonzero(owner == comm.rank))  # this rank's share
     times["patch_problems"] = len(groups)

@@ -37,9 +37,9 @@ def _rows_on(parts: list, D: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
             pos = np.searchsorted(p.dofs, D)
             np.minimum(pos, p.dofs.size - 1, out=pos)
             hit = p.dofs[pos] == D
-            found[id(p.dofs)] = (hit, pos[hit])
+            found[id(p.dofs)] = (slice(None) if hit.all() else np.flatnonzero(hit), pos[hit])
         hit, rows = found[id(p.dofs)]
-        Z[hit, at : at + k] = p.values[rows]
+        Z[hit, at : at + k] = p.values[rows]  # (a cell inside the patch: all of D, no row index)
         cols[at : at + k] = p.columns
         at += k
     return Z, cols
@@ -163,6 +163,7 @@ class MultiscaleRobinSolver:
         self.space = space
         n_ms, ng = space.size, space.n_gamma
         self.GK, self.GM = space.grams if space.grams is not None else gram_matrices(ops, grid, space, comm=comm)
+        self.time_gram = time.perf_counter() - t0  #: forming the Gram matrices (0 when the space holds them)
         self.Zg = trace_matrix(ops, space)
         # ZᵀAZ = ZᵀKZ + Z_γᵀ R_γγ Z_γ (R is α times the γ vertex mass: diagonal on γ)
         Rg = ops.R[ops.gamma][:, ops.gamma]

@@ -9,7 +9,8 @@ On the patch K_{i,m} (K_i extended by m coarse layers), for all v ∈ V_h⁰(K_{
 solved in the sparse saddle-point form [[A_II, B_IJ], [B_IJᵀ, −I]] (μ = B_IJᵀ x; B = the columns S_k Φ_k of
 the aux functions of the patch's cells): A_II + B_IJ B_IJᵀ has a dense block per coarse cell, 45× the nonzeros
 of A_II at h = 1/256.  One MUMPS LDLᵀ per patch serves the l_i bases, the Robin corrector of the γ vertices of
-K_i and the source corrector (one solve with many right-hand sides).  With ``CEMOptions.patch_group`` the
+K_i and the source corrector (one solve with many right-hand sides, given to MUMPS as sparse: a unit vector in
+the μ rows per basis, a few γ rows per Robin datum; ``sparse_solve``).  With ``CEMOptions.patch_group`` the
 cells of a group share one patch, the union of their K_{i,m} (``cell_groups``), and one LDLᵀ serves all their
 problems; ``covering`` gives the cells whose functions reach a coarse cell.  The functions are stored per patch
 (``PatchFunctions``: the DOFs and a dense block), never as fine-mesh-sized arrays.
@@ -41,6 +42,7 @@ __all__ = [
     "cell_groups",
     "covering",
     "global_saddle_matrix",
+    "sparse_solve",
 ]
 
 log = logging.getLogger(__name__)

@@ -2,8 +2,9 @@
 
 Online everything is done in the coordinates s = (w, g, 1) of u₁ = Z s, Z = [Ψ, N, N_f]: the coarse solve
 (ΨᵀAΨ factorized once, ``fem.linalg.PivotedCholesky``), the trace Z_γ s, the norms sᵀ(ZᵀKZ)s and sᵀ(ZᵀMZ)s.
-The Gram matrices are summed over the coarse cells K from dense blocks of the functions that cover K (one
-BLAS product per K with the cellwise matrix), the cells shared out over the ranks and the sums Allreduced.
+The Gram matrices are summed over the coarse cells K from dense blocks of the functions that cover K (BLAS
+products with the cellwise matrices [K_K; M_K], the column blocks on and above the diagonal formed and the rest
+mirrored), the cells shared out over the ranks and the sums Allreduced.
 """
 
 import logging
@@ -80,8 +81,8 @@ def gram_matrices(
     """(ZᵀKZ, ZᵀMZ) for Z = [Ψ, N, N_f] (columns: the dim V_ms bases, the γ DOFs, the source correction).
 
     Summed over coarse cells K of Z_Kᵀ K_K Z_K (K_K the cellwise matrix, Z_K the dense block of the
-    functions covering K); cells shared out over ``comm`` (a static share: a fixed summation order) and the
-    sums Allreduced.
+    functions covering K; ``_symmetric_products``: (GRAM_PIECES + 1) / (2 GRAM_PIECES) of a full product);
+    cells shared out over ``comm`` (a static share: a fixed summation order) and the sums Allreduced.
     """
     inc = Incidence(ops, grid)
     n_ms, ng = space.size, space.n_gamma

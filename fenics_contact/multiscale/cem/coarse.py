@@ -17,6 +17,7 @@ from mpi4py import MPI
 from fenics_contact.fem.linalg import PivotedCholesky
 from fenics_contact.multiscale.cem.bases import Incidence, MultiscaleSpace, covering
 from fenics_contact.multiscale.cem.operators import FineOperators
+from fenics_contact.multiscale.cem.spectral import restrict
 from fenics_contact.multiscale.coarse import CoarseGrid
 from fenics_contact.multiscale.work import run_shared
 
@@ -52,15 +53,8 @@ GRAM_PIECES = 4
 
 
 def _cell_matrix(Kc: sp.csr_matrix, Mc: sp.csr_matrix, D: np.ndarray) -> sp.csr_matrix:
-    """[K_K; M_K] (2|D| × |D|): the rows at the DOFs D of a coarse cell K of the colour matrices of K's colour.
-    Cells of one colour share no vertex, so these rows reach no DOF outside D: their columns are renumbered
-    (no column extraction)."""
-    rows = sp.vstack([Kc[D], Mc[D]], format="csr")
-    pos = np.minimum(np.searchsorted(D, rows.indices), D.size - 1)
-    if not np.array_equal(D[pos], rows.indices):  # entries of the pattern outside D (zero): dropped
-        rows = rows[:, D]
-        return rows
-    return sp.csr_matrix((rows.data, pos, rows.indptr), shape=(2 * D.size, D.size))
+    """[K_K; M_K] (2|D| × |D|): the colour matrices of K's colour restricted to the DOFs D of the coarse cell K."""
+    return sp.vstack([restrict(Kc, D), restrict(Mc, D)], format="csr")
 
 
 def _symmetric_products(Z: np.ndarray, W: np.ndarray) -> np.ndarray:

@@ -147,6 +147,21 @@ def test_basis_supported_in_patch(omega1_32_8):
     assert x[:, 1].min() > 2 * H and x[:, 1].max() < 7 * H
 
 
+def test_restrict_is_scipy_indexing():
+    """``spectral.restrict`` (a coarse cell's block of a colour matrix) gives SciPy's M[D][:, D], entry for entry,
+    empty rows and an empty D included."""
+    rng = np.random.default_rng(1)
+    M = scipy.sparse.random(60, 60, density=0.1, rng=rng, format="csr")
+    M = (M + M.T).tocsr()
+    for D in (np.sort(rng.choice(60, 17, replace=False)), np.arange(5), np.zeros(0, dtype=np.int64)):
+        want = M[D][:, D].tocsr()
+        want.sort_indices()
+        got = cem.restrict(M, D)
+        assert got.shape == want.shape
+        assert np.array_equal(got.indptr, want.indptr) and np.array_equal(got.indices, want.indices)
+        assert np.array_equal(got.data, want.data)
+
+
 def test_patch_problem_sparse_right_hand_sides(omega1_32_8):
     """The patch problems are solved with MUMPS' sparse right-hand sides (``bases.sparse_solve``): the result
     equals the dense solve of the same right-hand sides to round-off and satisfies the saddle-point equations,

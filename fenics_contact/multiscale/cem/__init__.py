@@ -123,6 +123,7 @@ from fenics_contact.multiscale.cem.spectral import (
     build_auxiliary_space,
     local_matrices,
     local_spectral_problem,
+    restrict,
 )
 
 __all__ = [
@@ -147,6 +148,7 @@ __all__ = [
     "build_auxiliary_space",
     "local_matrices",
     "local_spectral_problem",
+    "restrict",
     "PATCH_ICNTL",
     "Incidence",
     "MultiscaleSpace",

@@ -26,25 +26,21 @@ __all__ = ["MultiscaleRobinSolver", "gram_matrices", "trace_matrix"]
 log = logging.getLogger(__name__)
 
 
-def _rows_on(parts: list, D: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Dense block (|D| × Σ k) of the patch functions ``parts`` at the DOFs D, and their global columns."""
-    ncols = sum(p.columns.size for p in parts)
-    Z = np.zeros((D.size, ncols))
-    cols = np.empty(ncols, dtype=np.int64)
-    at = 0
+def _fill_rows(Z: np.ndarray, parts: list, targets: list, D: np.ndarray) -> None:
+    """Z[:, targets[j]] += the values of the patch functions parts[j] at the DOFs D (zero where D is outside
+    their DOFs; each target list without repeats)."""
     found = {}  # the functions of one patch problem share their DOF array: look D up in it once
-    for p in parts:
-        k = p.columns.size
+    for p, target in zip(parts, targets):
         if id(p.dofs) not in found:
             pos = np.searchsorted(p.dofs, D)
             np.minimum(pos, p.dofs.size - 1, out=pos)
             hit = p.dofs[pos] == D
-            found[id(p.dofs)] = (slice(None) if hit.all() else np.flatnonzero(hit), pos[hit])
-        hit, rows = found[id(p.dofs)]
-        Z[hit, at : at + k] = p.values[rows]  # (a cell inside the patch: all of D, no row index)
-        cols[at : at + k] = p.columns
-        at += k
-    return Z, cols
+            index = np.flatnonzero(hit)
+            # (a cell inside the patch: all of D, no row index; an index array paired with column indices as a
+            # column vector)
+            found[id(p.dofs)] = (slice(None), slice(None), pos) if hit.all() else (index, index[:, None], pos[hit])
+        hit, hit_column, rows = found[id(p.dofs)]
+        Z[hit if isinstance(target, slice) else hit_column, target] += p.values[rows]
 
 
 #: column pieces of the symmetric products ZᵀW of ``gram_matrices``: the blocks above the diagonal are formed,
@@ -91,20 +87,24 @@ def gram_matrices(
         c = int(grid.colors[K])
         D = inc.dofs(K, free_only=False)
         cover = covers[K]
-        Zb, cols = _rows_on([space.basis[i] for i in cover], D)
-        blocks = [Zb]
-        cn = [corr_at[int(i)] for i in cover if int(i) in corr_at]
-        if cn:
-            Zn, cols_n = _rows_on(cn, D)
-            # a γ vertex shared by two coarse cells has a column in both corrections: sum them first
-            uniq, inv = np.unique(cols_n, return_inverse=True)
-            merge = sp.csr_matrix((np.ones(inv.size), (np.arange(inv.size), inv)), shape=(inv.size, uniq.size))
-            blocks.append((merge.T @ Zn.T).T)
-            cols = np.concatenate([cols, n_ms + uniq])
+        bases = [space.basis[i] for i in cover]
+        corrections = [corr_at[int(i)] for i in cover if int(i) in corr_at]
+        # columns: the covering bases, the γ vertices of their Robin corrections (a γ vertex shared by two coarse
+        # cells has a column in both corrections: summed into one), N_f
+        cols = [p.columns for p in bases]
+        at = np.cumsum([0] + [c.size for c in cols])
+        targets = [slice(a, z) for a, z in zip(at[:-1], at[1:])]
+        if corrections:
+            uniq = np.unique(np.concatenate([p.columns for p in corrections]))
+            targets += [at[-1] + np.searchsorted(uniq, p.columns) for p in corrections]
+            cols.append(n_ms + uniq)
         if space.Nf is not None:
-            blocks.append(space.Nf[D][:, None])
-            cols = np.concatenate([cols, [nz - 1]])
-        Z = np.hstack(blocks) if len(blocks) > 1 else Zb
+            cols.append(np.array([nz - 1]))
+        cols = np.concatenate(cols)
+        Z = np.zeros((D.size, cols.size))
+        _fill_rows(Z, bases + corrections, targets, D)
+        if space.Nf is not None:
+            Z[:, -1] = space.Nf[D]
         W = _cell_matrix(ops.Kc[c], ops.Mc[c], D) @ Z  # [K_K Z; M_K Z]
         gk, gm = _symmetric_products(Z, W[: D.size]), _symmetric_products(Z, W[D.size :])
         # cols runs through few contiguous ranges (the modes of consecutive cells): added range by range

@@ -15,6 +15,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 import scipy.linalg
+import scipy.sparse
 from mpi4py import MPI
 from multiscale_layers import layer_errors
 from omega1_robin import fine_robin_error, robin_data
@@ -135,6 +136,59 @@ def test_basis_supported_in_patch(omega1_32_8):
     # strictly inside K_{k,2} = [1, 6]H × [2, 7]H
     assert x[:, 0].min() > 1 * H and x[:, 0].max() < 6 * H
     assert x[:, 1].min() > 2 * H and x[:, 1].max() < 7 * H
+
+
+def test_restrict_is_scipy_indexing():
+    """``spectral.restrict`` (a coarse cell's block of a colour matrix) gives SciPy's M[D][:, D], entry for entry,
+    empty rows and an empty D included."""
+    rng = np.random.default_rng(1)
+    M = scipy.sparse.random(60, 60, density=0.1, rng=rng, format="csr")
+    M = (M + M.T).tocsr()
+    for D in (np.sort(rng.choice(60, 17, replace=False)), np.arange(5), np.zeros(0, dtype=np.int64)):
+        want = M[D][:, D].tocsr()
+        want.sort_indices()
+        got = cem.restrict(M, D)
+        assert got.shape == want.shape
+        assert np.array_equal(got.indptr, want.indptr) and np.array_equal(got.indices, want.indices)
+        assert np.array_equal(got.data, want.data)
+
+
+def test_patch_problem_sparse_right_hand_sides(omega1_32_8):
+    """The patch problems are solved with MUMPS' sparse right-hand sides (``bases.sparse_solve``): the result
+    equals the dense solve of the same right-hand sides to round-off and satisfies the saddle-point equations,
+    and a basis so computed solves (A + BBᵀ) ψ = B e_j on the interior DOFs of its patch."""
+    from petsc4py import PETSc
+
+    from fenics_contact.fem.linalg import SparseFactor, petsc_to_scipy
+    from fenics_contact.multiscale.cem.bases import Incidence, cell_groups, sparse_solve
+
+    om = omega1_32_8
+    ops, aux = om.ops, om.space.aux
+    groups, patches = cell_groups(om.grid, cem.CEMOptions(layers=2), ops.bs)
+    k = np.flatnonzero((om.grid.ij[:, 0] == 3) & (om.grid.ij[:, 1] == 4))[0]
+    inner = Incidence(ops, om.grid).interior_dofs(patches[k])
+    J = np.concatenate([aux.columns(c) for c in patches[k]])
+    index = PETSc.IS().createGeneral(np.concatenate([inner, ops.size + J]).astype(PETSc.IntType))
+    saddle = cem.global_saddle_matrix(ops, aux)
+    M = saddle.createSubMatrix(index, index)
+    dense_M = petsc_to_scipy(M)
+    M.setOption(PETSc.Mat.Option.SYMMETRIC, True)
+    lu = SparseFactor(M, cholesky=True, icntl=cem.PATCH_ICNTL)
+    try:
+        n = inner.size + J.size
+        rng = np.random.default_rng(0)  # (row 0: the first basis of K_k; the others random)
+        unit = scipy.sparse.csr_matrix(([1.0], ([0], [inner.size + np.searchsorted(J, aux.columns(k)[0])])), (1, n))
+        rhs_t = scipy.sparse.vstack([unit, scipy.sparse.random(6, n, density=0.002, rng=rng)], format="csr")
+        x = sparse_solve(lu, rhs_t)
+        dense = lu.solve(rhs_t.T.toarray())
+    finally:
+        lu.destroy()
+        saddle.destroy()
+        index.destroy()
+    assert np.abs(x - dense).max() <= 1e3 * EPS * np.abs(dense).max()
+    assert np.abs(dense_M @ x - rhs_t.T.toarray()).max() <= 1e3 * EPS * np.abs(dense_M).max() * np.abs(x).max()
+    psi = om.space.Psi[:, aux.columns(k)[0]].toarray()[:, 0]
+    assert np.abs(psi[inner] - x[: inner.size, 0]).max() <= 1e3 * EPS * np.abs(psi).max()
 
 
 def test_nearly_incompressible_omega1_is_reported(mesh_32_8, caplog):

@@ -110,7 +110,7 @@ def test_groups_keep_the_localization_and_the_whole_domain_is_exact(mesh_32_8, t
     assert np.array_equal(again.solver.solve(g), om.solver.solve(g))
 
 
-@pytest.mark.parametrize("g", [2, cem.WHOLE_DOMAIN])
+@pytest.mark.parametrize("g", [1, 2, cem.WHOLE_DOMAIN])
 def test_gram_matrices_of_grouped_bases(g):
     """The Gram matrices summed over the coarse cells the grouped supports cover (``covering``) are ZᵀKZ and
     ZᵀMZ of the assembled Z = [Ψ, N, N_f]: no cell a function reaches is left out.  The interface coordinates

@@ -52,12 +52,13 @@ solved in its sparse saddle-point form
 (A_II + B_IJ B_IJᵀ has a dense block per coarse cell: 45× the nonzeros of A_II
 at h = 1/256). One MUMPS LDLᵀ per patch serves the l_i bases, the Robin
 correction of the γ vertices of K_i and the source correction (one solve with
-many right-hand sides); with ``CEMOptions.patch_group`` the cells of a block share one patch, the union of
-their K_{i,m}, and one factorization (a superset of each K_{i,m}: the decay estimate holds with at least m
-layers). The bases are stored per patch (the DOFs I and an
-|I| × l_i block), never as fine-mesh-sized arrays. The coarse operators
+many right-hand sides, sparse: MUMPS skips the forward elimination where they vanish); with
+``CEMOptions.patch_group`` the cells of a block share one patch, the union of their K_{i,m}, and one
+factorization (a superset of each K_{i,m}: the decay estimate holds with at least m layers). The bases are
+stored per patch (the DOFs I and an |I| × l_i block), never as fine-mesh-sized arrays. The coarse operators
 ΨᵀAΨ, ΨᵀA[N N_f] are summed over coarse cells K from dense blocks of the
-functions that cover K (one BLAS product per K with the cellwise matrix A_K).
+functions that cover K (BLAS products per K with the cellwise matrix A_K: the blocks on and above the diagonal,
+the rest mirrored).
 
 **Cellwise matrices.** a_i, s_i and the γ-mass of K_i come from a colouring of
 the coarse cells (``CoarseGrid.colors``): cells of one colour share no fine
@@ -91,6 +92,7 @@ from fenics_contact.multiscale.cem.bases import (
     cell_groups,
     covering,
     global_saddle_matrix,
+    sparse_solve,
 )
 from fenics_contact.multiscale.cem.cache import CACHE_FORMAT, PrimalOfflineCache, offline_key, offline_stage
 from fenics_contact.multiscale.cem.coarse import MultiscaleRobinSolver, gram_matrices, trace_matrix
@@ -121,6 +123,7 @@ from fenics_contact.multiscale.cem.spectral import (
     build_auxiliary_space,
     local_matrices,
     local_spectral_problem,
+    restrict,
 )
 
 __all__ = [
@@ -145,6 +148,7 @@ __all__ = [
     "build_auxiliary_space",
     "local_matrices",
     "local_spectral_problem",
+    "restrict",
     "PATCH_ICNTL",
     "Incidence",
     "MultiscaleSpace",
@@ -153,6 +157,7 @@ __all__ = [
     "cell_groups",
     "covering",
     "global_saddle_matrix",
+    "sparse_solve",
     "MultiscaleRobinSolver",
     "gram_matrices",
     "trace_matrix",

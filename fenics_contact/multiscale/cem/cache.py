@@ -22,7 +22,7 @@ from fenics_contact.multiscale.cem.bases import MultiscaleSpace, PatchFunctions,
 from fenics_contact.multiscale.cem.coarse import gram_matrices
 from fenics_contact.multiscale.cem.operators import FineOperators
 from fenics_contact.multiscale.cem.options import WHOLE_DOMAIN, CEMOptions
-from fenics_contact.multiscale.cem.spectral import AuxiliarySpace
+from fenics_contact.multiscale.cem.spectral import AuxiliarySpace, restrict
 from fenics_contact.multiscale.coarse import CoarseGrid
 
 __all__ = ["CACHE_FORMAT", "PrimalOfflineCache", "offline_key", "offline_stage"]
@@ -103,7 +103,7 @@ def _unpack(arrays: dict, ops: FineOperators, grid: CoarseGrid) -> MultiscaleSpa
         lk = int(offs[k + 1] - offs[k])
         Phi = arrays["aux_vectors"][pos : pos + D.size * lk].reshape(D.size, lk)
         pos += D.size * lk
-        S = ops.Sc[int(grid.colors[k])][D][:, D]
+        S = restrict(ops.Sc[int(grid.colors[k])], D)
         dofs.append(D)
         values.append(arrays["aux_values"][offs[k] : offs[k + 1]])
         vectors.append(Phi)

@@ -146,6 +146,13 @@ class Omega1Multiscale:
             "cache_load": self.space.times.get("load", 0.0),
             "coarse": self.solver.time_s + self.space.times.get("gram", 0.0) + t_reduce,
         }
+        #: parts of the above (not added again): the patch factorizations and solves (summed over the ranks), the
+        #: Gram matrices
+        self.time_parts = {
+            "patch_factor": self.space.times.get("patch_factor", 0.0),
+            "patch_solve": self.space.times.get("patch_solve", 0.0),
+            "gram": self.space.times.get("gram", 0.0) + self.solver.time_gram,
+        }
 
     @property
     def spectral_gap(self) -> float:

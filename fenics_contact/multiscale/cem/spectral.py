@@ -21,7 +21,14 @@ from fenics_contact.multiscale.cem.options import CEMOptions
 from fenics_contact.multiscale.coarse import CoarseGrid
 from fenics_contact.multiscale.work import run_shared
 
-__all__ = ["DENSE_FALLBACK", "AuxiliarySpace", "build_auxiliary_space", "local_matrices", "local_spectral_problem"]
+__all__ = [
+    "DENSE_FALLBACK",
+    "AuxiliarySpace",
+    "build_auxiliary_space",
+    "local_matrices",
+    "local_spectral_problem",
+    "restrict",
+]
 
 log = logging.getLogger(__name__)
 
@@ -172,12 +179,22 @@ def _cell_dofs(ops: FineOperators, grid: CoarseGrid, k: int) -> np.ndarray:
     return dofs[ops.free[dofs]]
 
 
+def restrict(M: sp.csr_matrix, D: np.ndarray) -> sp.csr_matrix:
+    """M[D][:, D] for sorted D: the rows at D, their entries in the columns D kept and renumbered (the same
+    entries in the same order as SciPy's column indexing, without its pass over the columns)."""
+    rows = M[D]
+    pos = np.minimum(np.searchsorted(D, rows.indices), max(D.size - 1, 0))
+    keep = D[pos] == rows.indices if D.size else np.zeros(rows.indices.size, dtype=bool)
+    indptr = np.concatenate([[0], np.cumsum(keep)])[rows.indptr]
+    return sp.csr_matrix((rows.data[keep], pos[keep], indptr), shape=(D.size, D.size))
+
+
 def local_matrices(ops: FineOperators, grid: CoarseGrid, k: int) -> tuple[np.ndarray, sp.csr_matrix, sp.csr_matrix]:
     """D_k and the matrices of a_k(·,·) + α∫_{γ∩∂K_k} and s_k on it (colour restriction)."""
     c = int(grid.colors[k])
     D = _cell_dofs(ops, grid, k)
-    Gk = ops.Gc[c][D][:, D]
-    return D, (ops.Kc[c][D][:, D] + sp.diags(ops.alpha[D]) @ Gk).tocsr(), ops.Sc[c][D][:, D].tocsr()
+    Gk = restrict(ops.Gc[c], D)
+    return D, (restrict(ops.Kc[c], D) + sp.diags(ops.alpha[D]) @ Gk).tocsr(), restrict(ops.Sc[c], D)
 
 
 def build_auxiliary_space(
@@ -213,5 +230,5 @@ def build_auxiliary_space(
     dofs = [p[0] for p in parts]
     values = [p[1] for p in parts]
     vectors = [p[2] for p in parts]
-    blocks = [ops.Sc[int(grid.colors[k])][D][:, D] @ Phi for k, (D, Phi) in enumerate(zip(dofs, vectors))]
+    blocks = [restrict(ops.Sc[int(grid.colors[k])], D) @ Phi for k, (D, Phi) in enumerate(zip(dofs, vectors))]
     return AuxiliarySpace.from_parts(ops.size, dofs, values, vectors, blocks, np.array([p[3] for p in parts]))

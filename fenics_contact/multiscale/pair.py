@@ -115,7 +115,6 @@ class _BodyBulk:
     """One body's bulk: the submesh, its γ / Γ_D tags, the multiscale Robin solver, its DOFs in the parent."""
 
     def __init__(self, problem: TwoBodyProblem, k, V, cells, in_strip, supports, split, options, h, layers) -> None:
-        check_bulk(k, cells.size, None, options.H, layers)
         msh = problem.mesh
         tdim, gdim = msh.topology.dim, msh.geometry.dim
         sub, cell_map, vertex_map, _ = dmesh.create_submesh(msh, tdim, cells)
@@ -220,8 +219,10 @@ class _MultiscaleBulks:
         self.position[split.dofs[0]] = np.arange(split.dofs[0].size)
         h = float(np.median(np.abs(msh.h(tdim, np.arange(n_cells, dtype=np.int32)))))
         self.bodies = []
-        for k in (0, 1):
-            cells = np.setdiff1d(problem.body_cells(k), strip).astype(np.int32)
+        bulks = [np.setdiff1d(problem.body_cells(k), strip).astype(np.int32) for k in (0, 1)]
+        for k, cells in enumerate(bulks):
+            check_bulk(k, cells.size, None, options.H, layers)
+        for k, cells in enumerate(bulks):
             supports = _supports_of(problem, k)
             self.bodies.append(_BodyBulk(problem, k, V, cells, in_strip, supports, split, options, h, layers))
 

@@ -100,11 +100,12 @@ def check_bulk(k: int, n_cells: int, ratio: float | None, H: float, layers: int)
     if n_cells == 0:
         raise InputError(
             f"{where}: the strips ({layers} cell layers from the contact surfaces) take the whole body, no bulk is "
-            "left for its multiscale space; give fewer strip layers (layers, [primal] layers) or a finer mesh"
+            "left for its multiscale space; give fewer strip layers ([primal] layers of a case, layers= of a solve) "
+            "or a finer mesh"
         )
     if ratio is not None and ratio < 1.0:
         raise InputError(
-            f"{where}: the coarse squares of side H = {H:g} are not larger than the {n_cells} fine cells of its bulk "
+            f"{where}: the coarse cells of side H = {H:g} are not larger than the {n_cells} fine cells of its bulk "
             f"outside the strips (the median over the coarse cells of |K|^(1/d) over their cells' (d!|T|)^(1/d) is "
             f"{ratio:.3g}): a coarse cell must hold several fine cells; give a finer mesh, fewer strip layers "
             "or a larger H"

@@ -122,7 +122,7 @@ def test_a_bulk_too_coarse_for_H_is_refused_before_the_solve():
     one per coarse square of side 1/4 (no interior DOFs for their bases) and is refused, as is the bulk that the
     strips take whole at 3 cells across; with a strip of one layer the same mesh and H run."""
     problem = _pair(n=4)
-    with pytest.raises(InputError, match="body 1: the coarse squares of side H = 0.25 are not larger than"):
+    with pytest.raises(InputError, match="body 1: the coarse cells of side H = 0.25 are not larger than"):
         fc.solve(problem, "primal-ms", H=0.25, cem=CEMOptions(layers=1))
     with pytest.raises(InputError, match="body 1: the strips .2 cell layers .* take the whole body"):
         fc.solve(_pair(n=3), "primal-ms", H=0.25, cem=CEMOptions(layers=1))

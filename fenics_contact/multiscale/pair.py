@@ -17,7 +17,7 @@ which the source correctors localize as they do the body force.  Under MPI every
 copy of the pair (``multiscale.pair_replica``: no speed-up, the answer of one process).  A body's supports hold every
 component (no rollers), one prescribed displacement per body.
 
-A body's bulk is refused before its offline phase when it has no cells (the strips take the whole body) or when
+A bulk is refused before either offline phase when it has no cells (the strips take the whole body) or when
 its coarse cells are no larger than the fine cells they hold (``check_bulk``: the one-body criterion of
 ``cli.coarse.check_coarse_cells`` for a partition that is not the mesh's squares).
 """
@@ -112,13 +112,24 @@ def check_bulk(k: int, n_cells: int, ratio: float | None, H: float, layers: int)
         )
 
 
+def _bulk_mesh(msh: dmesh.Mesh, cells: np.ndarray, H: float) -> tuple:
+    """A bulk's serial submesh (with its cell and vertex maps) and its coarse grid: the centroid squares (cubes) of
+    side ``H``, slivers merged (``problem.strip.coarse_partition``)."""
+    tdim = msh.topology.dim
+    sub, cell_map, vertex_map, _ = dmesh.create_submesh(msh, tdim, cells)
+    sub.topology.create_connectivity(tdim - 1, 0)
+    sub.topology.create_connectivity(tdim - 1, tdim)
+    coarse = coarse_partition(sub, np.ones(cells.size, bool), H)
+    return sub, cell_map, vertex_map, grid_from_cells(sub.geometry.dofmaps[0], sub.geometry.x, coarse, H)
+
+
 class _BodyBulk:
     """One body's bulk: the submesh, its γ / Γ_D tags, the multiscale Robin solver, its DOFs in the parent."""
 
-    def __init__(self, problem: TwoBodyProblem, k, V, cells, in_strip, supports, split, options, h, layers) -> None:
+    def __init__(self, problem: TwoBodyProblem, V, cells, bulk, in_strip, supports, split, options, h) -> None:
         msh = problem.mesh
         tdim, gdim = msh.topology.dim, msh.geometry.dim
-        sub, cell_map, vertex_map, _ = dmesh.create_submesh(msh, tdim, cells)
+        sub, cell_map, vertex_map, grid = bulk
         parent_cells = np.asarray(cell_map.sub_topology_to_topology(np.arange(cells.size, dtype=np.int32), False))
         Vs = fem.functionspace(sub, ("Lagrange", 1, (gdim,)))
         blocks = np.zeros(Vs.dofmap.index_map.size_local, dtype=np.int64)
@@ -163,13 +174,6 @@ class _BodyBulk:
         alpha[split.gamma] = split.alpha
         alpha_fn = fem.Function(Vs, name="alpha")
         alpha_fn.x.array[:] = alpha[self.dofs]
-        grid = grid_from_cells(
-            sub.geometry.dofmaps[0],
-            sub.geometry.x,
-            coarse_partition(sub, np.ones(cells.size, bool), options.H),
-            options.H,
-        )
-        check_bulk(k, cells.size, coarse_to_fine(grid, sub.geometry.dofmaps[0], sub.geometry.x), options.H, layers)
         moved = [s.displacement for s in supports if s.displacement is not None]
         # with tractions the bulk's load is the parent's over its cells and their traction facets (else its body force)
         load = load_vector(problem, V, cells)[self.dofs] if problem.tractions else None
@@ -223,9 +227,13 @@ class _MultiscaleBulks:
         bulks = [np.setdiff1d(problem.body_cells(k), strip).astype(np.int32) for k in (0, 1)]
         for k, cells in enumerate(bulks):
             check_bulk(k, cells.size, None, options.H, layers)
-        for k, cells in enumerate(bulks):
+        meshes = [_bulk_mesh(msh, cells, options.H) for cells in bulks]
+        for k, (cells, (sub, *_, grid)) in enumerate(zip(bulks, meshes, strict=True)):
+            ratio = coarse_to_fine(grid, sub.geometry.dofmaps[0], sub.geometry.x)
+            check_bulk(k, cells.size, ratio, options.H, layers)
+        for k, (cells, bulk) in enumerate(zip(bulks, meshes, strict=True)):
             supports = _supports_of(problem, k)
-            self.bodies.append(_BodyBulk(problem, k, V, cells, in_strip, supports, split, options, h, layers))
+            self.bodies.append(_BodyBulk(problem, V, cells, bulk, in_strip, supports, split, options, h))
 
     def response(self, positions: np.ndarray, weights: np.ndarray) -> np.ndarray:
         """R₁[i, j] = ∂u₁(positions[i])/∂g_j for data weights[j] g_j at positions[j] (block diagonal by body)."""

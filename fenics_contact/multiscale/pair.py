@@ -16,8 +16,13 @@ on a bulk's facets enter its load vector (the parent's load over the bulk's cell
 which the source correctors localize as they do the body force.  Under MPI every rank solves the same serial
 copy of the pair (``multiscale.pair_replica``: no speed-up, the answer of one process).  A body's supports hold every
 component (no rollers), one prescribed displacement per body.
+
+A bulk is refused before either offline phase when it has no cells (the strips take the whole body) or when
+its coarse cells are no larger than the fine cells they hold (``check_bulk``: the one-body criterion of
+``cli.coarse.check_coarse_cells`` for a partition that is not the mesh's squares).
 """
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -37,10 +42,11 @@ from fenics_contact.multiscale.pair_replica import PairReplica
 from fenics_contact.problem.boundary import BoundaryConditions
 from fenics_contact.problem.fields import MaterialFields
 from fenics_contact.problem.pair import TwoBodyProblem
+from fenics_contact.problem.partition import simplex_volumes
 from fenics_contact.problem.strip import coarse_partition
 from fenics_contact.problem.tags import Boundary
 
-__all__ = ["PairMultiscaleOptions", "solve_two_body_ms_hybrid"]
+__all__ = ["PairMultiscaleOptions", "check_bulk", "coarse_to_fine", "solve_two_body_ms_hybrid"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -76,13 +82,54 @@ def _supports_of(problem: TwoBodyProblem, k: int) -> list:
     return [s for s in problem.supports if any(f2c.links(f)[0] in cells for f in problem.facet_tags.find(s.facets))]
 
 
+def coarse_to_fine(grid, cell_nodes: np.ndarray, coords: np.ndarray) -> float:
+    """The median over the coarse cells K of ``grid`` of |K|^(1/d) over the mean (d!|T|)^(1/d) of the fine cells T
+    it holds (``cell_nodes``: the vertices of the simplices, ``coords`` their coordinates): H/h for squares
+    (cubes) of side H over a mesh of squares (cubes) of side h cut into d! simplices."""
+    d = cell_nodes.shape[1] - 1
+    fine = (math.factorial(d) * simplex_volumes(coords[cell_nodes][:, :, :d])) ** (1.0 / d)
+    return float(np.median([size / fine[cells].mean() for size, cells in zip(grid.cell_size, grid.cells)]))
+
+
+def check_bulk(k: int, n_cells: int, ratio: float | None, H: float, layers: int) -> None:
+    """InputError unless body k's bulk (``n_cells`` cells outside the strips of ``layers`` cell layers) has cells
+    and coarse cells of side ``H`` larger than its fine cells (``ratio``: ``coarse_to_fine``; None: not yet
+    known).  A coarse cell of one fine cell or less has no interior DOFs for its bases: the coarse matrix and the
+    interface response are then those of a degenerate space (a wrong answer or non-finite values)."""
+    where = f"two-body Algorithm 3 (primal-ms): body {k + 1}"
+    if n_cells == 0:
+        raise InputError(
+            f"{where}: the strips ({layers} cell layers from the contact surfaces) take the whole body, no bulk is "
+            "left for its multiscale space; give fewer strip layers ([primal] layers of a case, layers= of a solve) "
+            "or a finer mesh"
+        )
+    if ratio is not None and ratio < 1.0:
+        raise InputError(
+            f"{where}: the coarse cells of side H = {H:g} are not larger than the {n_cells} fine cells of its bulk "
+            f"outside the strips (the median over the coarse cells of |K|^(1/d) over their cells' (d!|T|)^(1/d) is "
+            f"{ratio:.3g}): a coarse cell must hold several fine cells; give a finer mesh, fewer strip layers "
+            "or a larger H"
+        )
+
+
+def _bulk_mesh(msh: dmesh.Mesh, cells: np.ndarray, H: float) -> tuple:
+    """A bulk's serial submesh (with its cell and vertex maps) and its coarse grid: the centroid squares (cubes) of
+    side ``H``, slivers merged (``problem.strip.coarse_partition``)."""
+    tdim = msh.topology.dim
+    sub, cell_map, vertex_map, _ = dmesh.create_submesh(msh, tdim, cells)
+    sub.topology.create_connectivity(tdim - 1, 0)
+    sub.topology.create_connectivity(tdim - 1, tdim)
+    coarse = coarse_partition(sub, np.ones(cells.size, bool), H)
+    return sub, cell_map, vertex_map, grid_from_cells(sub.geometry.dofmaps[0], sub.geometry.x, coarse, H)
+
+
 class _BodyBulk:
     """One body's bulk: the submesh, its γ / Γ_D tags, the multiscale Robin solver, its DOFs in the parent."""
 
-    def __init__(self, problem: TwoBodyProblem, V, cells, in_strip, supports, split, options, h) -> None:
+    def __init__(self, problem: TwoBodyProblem, V, cells, bulk, in_strip, supports, split, options, h) -> None:
         msh = problem.mesh
         tdim, gdim = msh.topology.dim, msh.geometry.dim
-        sub, cell_map, vertex_map, _ = dmesh.create_submesh(msh, tdim, cells)
+        sub, cell_map, vertex_map, grid = bulk
         parent_cells = np.asarray(cell_map.sub_topology_to_topology(np.arange(cells.size, dtype=np.int32), False))
         Vs = fem.functionspace(sub, ("Lagrange", 1, (gdim,)))
         blocks = np.zeros(Vs.dofmap.index_map.size_local, dtype=np.int64)
@@ -127,12 +174,6 @@ class _BodyBulk:
         alpha[split.gamma] = split.alpha
         alpha_fn = fem.Function(Vs, name="alpha")
         alpha_fn.x.array[:] = alpha[self.dofs]
-        grid = grid_from_cells(
-            sub.geometry.dofmaps[0],
-            sub.geometry.x,
-            coarse_partition(sub, np.ones(cells.size, bool), options.H),
-            options.H,
-        )
         moved = [s.displacement for s in supports if s.displacement is not None]
         # with tractions the bulk's load is the parent's over its cells and their traction facets (else its body force)
         load = load_vector(problem, V, cells)[self.dofs] if problem.tractions else None
@@ -169,7 +210,9 @@ class _MultiscaleBulks:
     """Ω₁ of the pair with a CEM-GMsFEM space in each body (``hybrid.two_body``'s Ω₁ interface: ``response``,
     ``solve``, ``destroy``)."""
 
-    def __init__(self, problem: TwoBodyProblem, V, split, strip: np.ndarray, options: PairMultiscaleOptions) -> None:
+    def __init__(
+        self, problem: TwoBodyProblem, V, split, strip: np.ndarray, options: PairMultiscaleOptions, layers: int
+    ) -> None:
         msh = problem.mesh
         tdim, n = msh.topology.dim, V.dofmap.index_map.size_local * V.dofmap.index_map_bs
         n_cells = msh.topology.index_map(tdim).size_local
@@ -181,9 +224,16 @@ class _MultiscaleBulks:
         self.position[split.dofs[0]] = np.arange(split.dofs[0].size)
         h = float(np.median(np.abs(msh.h(tdim, np.arange(n_cells, dtype=np.int32)))))
         self.bodies = []
-        for k in (0, 1):
-            cells = np.setdiff1d(problem.body_cells(k), strip).astype(np.int32)
-            self.bodies.append(_BodyBulk(problem, V, cells, in_strip, _supports_of(problem, k), split, options, h))
+        bulks = [np.setdiff1d(problem.body_cells(k), strip).astype(np.int32) for k in (0, 1)]
+        for k, cells in enumerate(bulks):
+            check_bulk(k, cells.size, None, options.H, layers)
+        meshes = [_bulk_mesh(msh, cells, options.H) for cells in bulks]
+        for k, (cells, (sub, *_, grid)) in enumerate(zip(bulks, meshes, strict=True)):
+            ratio = coarse_to_fine(grid, sub.geometry.dofmaps[0], sub.geometry.x)
+            check_bulk(k, cells.size, ratio, options.H, layers)
+        for k, (cells, bulk) in enumerate(zip(bulks, meshes, strict=True)):
+            supports = _supports_of(problem, k)
+            self.bodies.append(_BodyBulk(problem, V, cells, bulk, in_strip, supports, split, options, h))
 
     def response(self, positions: np.ndarray, weights: np.ndarray) -> np.ndarray:
         """R₁[i, j] = ∂u₁(positions[i])/∂g_j for data weights[j] g_j at positions[j] (block diagonal by body)."""
@@ -235,6 +285,6 @@ def solve_two_body_ms_hybrid(
             raise InputError("two-body Algorithm 3 (primal-ms): one prescribed displacement per body")
 
     def omega1(problem_, V, split, strip):
-        return _MultiscaleBulks(problem_, V, split, strip, multiscale)
+        return _MultiscaleBulks(problem_, V, split, strip, multiscale, options.layers)
 
     return solve_two_body_hybrid(problem, delta=delta, options=options, newton=newton, state=state, omega1=omega1)

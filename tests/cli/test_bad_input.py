@@ -554,6 +554,12 @@ CASES = [
         2,
         "are smaller than the Omega1 cells",
     ),
+    Case(
+        "case: Algorithm 3 with strips that take a whole body",
+        lambda tmp: ["--case", str(CASES_DIR / "two_blocks.toml"), "--set", "primal.layers=8", "--method", "primal-ms"],
+        2,
+        "take the whole body, no bulk is left",
+    ),
     Case("all modes for mixed-ms", _args("--method", "mixed-ms", "--nbasis", "all"), 2, "apply to primal-ms"),
     Case(
         "a mixed method on the 3D model",

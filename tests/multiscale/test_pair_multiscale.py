@@ -8,6 +8,7 @@ import dataclasses
 
 import numpy as np
 import pytest
+from dolfinx import mesh as dmesh
 from mpi4py import MPI
 from pair_problems import strata_pair
 
@@ -15,7 +16,8 @@ import fenics_contact as fc
 from fenics_contact.errors import InputError
 from fenics_contact.fem.two_body import stiffness
 from fenics_contact.multiscale.cem import CEMOptions
-from fenics_contact.multiscale.pair import PairMultiscaleOptions
+from fenics_contact.multiscale.coarse import grid_from_cells
+from fenics_contact.multiscale.pair import PairMultiscaleOptions, coarse_to_fine
 from fenics_contact.problem.pair import Support, TwoBodyProblem
 from fenics_contact.problem.pair_meshes import PairTag as T
 from fenics_contact.problem.pair_meshes import two_blocks
@@ -103,3 +105,26 @@ def test_what_two_body_algorithm_3_cannot_take_is_refused():
             PairMultiscaleOptions(bad)
     with pytest.raises(InputError, match="takes the options"):
         fc.solve(problem, "primal-ms", H=0.125, line_search="always")
+
+
+def test_coarse_to_fine_is_H_over_h_on_a_grid_of_squares():
+    """Squares of side H = 1/4 over the unit square meshed by squares of side h = 1/16, each cut into two
+    triangles: the ratio of ``check_bulk`` is H/h = 4."""
+    msh = dmesh.create_unit_square(MPI.COMM_SELF, 16, 16)
+    nodes, x = msh.geometry.dofmaps[0], msh.geometry.x
+    index = np.floor(x[nodes].mean(axis=1)[:, :2] * 4).astype(np.int64) @ np.array([1, 4])
+    grid = grid_from_cells(nodes, x, index, 0.25)
+    assert abs(coarse_to_fine(grid, nodes, x) - 4.0) < 1e-12
+
+
+def test_a_bulk_too_coarse_for_H_is_refused_before_the_solve():
+    """The lower block at 4 cells across (h = 1/4, height 1/2): its strip of 2 layers leaves a bulk of two cells,
+    one per coarse square of side 1/4 (no interior DOFs for their bases) and is refused, as is the bulk that the
+    strips take whole at 3 cells across; with a strip of one layer the same mesh and H run."""
+    problem = _pair(n=4)
+    with pytest.raises(InputError, match="body 1: the coarse cells of side H = 0.25 are not larger than"):
+        fc.solve(problem, "primal-ms", H=0.25, cem=CEMOptions(layers=1))
+    with pytest.raises(InputError, match="body 1: the strips .2 cell layers .* take the whole body"):
+        fc.solve(_pair(n=3), "primal-ms", H=0.25, cem=CEMOptions(layers=1))
+    result = fc.solve(problem, "primal-ms", H=0.25, cem=CEMOptions(layers=1), layers=1, tol=1e-10)
+    assert result.converged and result.force_balance() < 1e-12

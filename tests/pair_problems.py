@@ -4,7 +4,8 @@
 left and lifted on the right (across a gap in the plane), so only part of the contact surface touches and the
 active set changes while the Newton iterates: the case on which a parallel contact search and a parallel solve can
 differ from the serial ones.  ``strata_pair``: the layered fault-like pair; ``strata_steps`` it along the load paths
-``STRATA_PATHS`` of the serial-against-parallel tests (``assert_serial_pair``).
+``STRATA_PATHS`` of the serial-against-parallel tests (``assert_serial_pair``).  ``hertz_cylinder_pair``: the
+two-body Hertz pair, an elastic cylinder pressed onto a block.
 """
 
 import numpy as np
@@ -14,9 +15,9 @@ from mpi4py import MPI
 from fenics_contact.problem.friction import Friction
 from fenics_contact.problem.pair import Body, ContactPair, Support, TwoBodyProblem
 from fenics_contact.problem.pair_meshes import PairTag as T
-from fenics_contact.problem.pair_meshes import fault_strata, two_blocks
+from fenics_contact.problem.pair_meshes import cylinder_on_block, fault_strata, two_blocks
 
-__all__ = ["STRATA_PATHS", "assert_serial_pair", "strata_pair", "strata_steps", "tilted_pair"]
+__all__ = ["STRATA_PATHS", "assert_serial_pair", "hertz_cylinder_pair", "strata_pair", "strata_steps", "tilted_pair"]
 
 #: (law, tops of the upper block) of the serial-against-parallel tests: one step frictionless, and a Coulomb
 #: press-then-shear path past sliding; parametrize ``("law", "path")`` with these ``argvalues`` and ``ids``
@@ -27,6 +28,21 @@ STRATA_PATHS = {
     ],
     "ids": ["frictionless", "coulomb"],
 }
+
+
+def hertz_cylinder_pair(slave: str, refinement: float) -> TwoBodyProblem:
+    """A cylinder (R = 5, E = 2, ν = 0.25) pressed by 1.1e-3 onto a block (E = 1, ν = 0.3), contact cells
+    a/(20·``refinement``) with a = 0.05, on one process; ``slave``: "cylinder" or "block", the slave surface."""
+    m = cylinder_on_block(5.0, 0.05, refinement=refinement, comm=MPI.COMM_SELF)
+    pair = (T.UPPER_BOTTOM, T.LOWER_TOP) if slave == "cylinder" else (T.LOWER_TOP, T.UPPER_BOTTOM)
+    return TwoBodyProblem(
+        m.mesh,
+        m.cell_tags,
+        m.facet_tags,
+        bodies=(Body(T.LOWER, 1.0, 0.3), Body(T.UPPER, 2.0, 0.25)),
+        pair=ContactPair(*pair),
+        supports=(Support(T.LOWER_BOTTOM), Support(T.UPPER_TOP, (0.0, -1.1e-3))),
+    )
 
 
 def tilted_pair(comm: MPI.Comm, cells: tuple[int, int], dim: int = 2) -> TwoBodyProblem:

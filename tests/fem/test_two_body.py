@@ -4,6 +4,7 @@ non-matching meshes, the initial gap, force balance, two-body Hertz, 3D, and wha
 import numpy as np
 import pytest
 from mpi4py import MPI
+from pair_problems import hertz_cylinder_pair
 
 import fenics_contact as fc
 from fenics_contact.errors import InputError
@@ -179,16 +180,7 @@ def test_the_pressure_the_pair_transmits_at_a_20(slave):
     (``benchmarks/results/two_body.md``)."""
     radius, a, refinement = 5.0, 0.05, 1.0
     h = a / (20 * refinement)
-    m = cylinder_on_block(radius, a, refinement=refinement, comm=MPI.COMM_SELF)
-    pair = (T.UPPER_BOTTOM, T.LOWER_TOP) if slave == "cylinder" else (T.LOWER_TOP, T.UPPER_BOTTOM)
-    problem = TwoBodyProblem(
-        m.mesh,
-        m.cell_tags,
-        m.facet_tags,
-        bodies=(Body(T.LOWER, 1.0, 0.3), Body(T.UPPER, 2.0, 0.25)),
-        pair=ContactPair(*pair),
-        supports=(Support(T.LOWER_BOTTOM), Support(T.UPPER_TOP, (0.0, -1.1e-3))),
-    )
+    problem = hertz_cylinder_pair(slave, refinement)
     result = fc.solve(problem, "primal-monolithic")
     traction = transmitted_pressure(result, degree=8)
     x, w, p = traction.points[:, 0], traction.weights, traction.pressure

@@ -4,13 +4,14 @@ it by Robin data; the fixed point is the monolithic two-body solution."""
 import numpy as np
 import pytest
 from mpi4py import MPI
+from pair_problems import hertz_cylinder_pair
 
 import fenics_contact as fc
 from fenics_contact.errors import InputError
 from fenics_contact.hybrid.two_body import TwoBodyHybridOptions, strip_cells
 from fenics_contact.problem.pair import Body, ContactPair, Support, TwoBodyProblem
 from fenics_contact.problem.pair_meshes import PairTag as T
-from fenics_contact.problem.pair_meshes import cylinder_on_block, two_blocks
+from fenics_contact.problem.pair_meshes import two_blocks
 
 pytestmark = pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="two-body contact runs on one process")
 
@@ -49,16 +50,7 @@ def test_algorithm_1_on_the_two_body_hertz_pair(slave):
     """An elastic cylinder (R = 5, E = 2, ν = 0.25) on a block (E = 1, ν = 0.3), contact cells a/10, either body
     the slave: Algorithm 1 reaches the monolithic solution to 1e-8 in at most 8 interface Newton steps (measured:
     5 steps, 1e-13; 5 to 7 steps at a/20 and a/40, ``benchmarks/results/two_body.md``)."""
-    m = cylinder_on_block(5.0, 0.05, refinement=0.5, comm=MPI.COMM_SELF)
-    pair = (T.UPPER_BOTTOM, T.LOWER_TOP) if slave == "cylinder" else (T.LOWER_TOP, T.UPPER_BOTTOM)
-    problem = TwoBodyProblem(
-        m.mesh,
-        m.cell_tags,
-        m.facet_tags,
-        bodies=(Body(T.LOWER, 1.0, 0.3), Body(T.UPPER, 2.0, 0.25)),
-        pair=ContactPair(*pair),
-        supports=(Support(T.LOWER_BOTTOM), Support(T.UPPER_TOP, (0.0, -1.1e-3))),
-    )
+    problem = hertz_cylinder_pair(slave, refinement=0.5)
     reference = fc.solve(problem, "primal-monolithic")
     result = fc.solve(problem, "primal", tol=1e-8)
     assert result.converged and result.interface_newton_steps <= 8

@@ -17,7 +17,15 @@ from fenics_contact.problem.pair import Body, ContactPair, Support, TwoBodyProbl
 from fenics_contact.problem.pair_meshes import PairTag as T
 from fenics_contact.problem.pair_meshes import cylinder_on_block, fault_strata, two_blocks
 
-__all__ = ["STRATA_PATHS", "assert_serial_pair", "hertz_cylinder_pair", "strata_pair", "strata_steps", "tilted_pair"]
+__all__ = [
+    "STRATA_PATHS",
+    "assert_serial_pair",
+    "hertz_cylinder_pair",
+    "pressed_pair",
+    "strata_pair",
+    "strata_steps",
+    "tilted_pair",
+]
 
 #: (law, tops of the upper block) of the serial-against-parallel tests: one step frictionless, and a Coulomb
 #: press-then-shear path past sliding; parametrize ``("law", "path")`` with these ``argvalues`` and ``ids``
@@ -30,19 +38,27 @@ STRATA_PATHS = {
 }
 
 
-def hertz_cylinder_pair(slave: str, refinement: float) -> TwoBodyProblem:
-    """A cylinder (R = 5, E = 2, ν = 0.25) pressed by 1.1e-3 onto a block (E = 1, ν = 0.3), contact cells
-    a/(20·``refinement``) with a = 0.05, on one process; ``slave``: "cylinder" or "block", the slave surface."""
-    m = cylinder_on_block(5.0, 0.05, refinement=refinement, comm=MPI.COMM_SELF)
-    pair = (T.UPPER_BOTTOM, T.LOWER_TOP) if slave == "cylinder" else (T.LOWER_TOP, T.UPPER_BOTTOM)
+def pressed_pair(m, lower: Body, upper: Body, top, *, upper_slave: bool = True, friction=None) -> TwoBodyProblem:
+    """The upper body of the pair mesh ``m`` pressed onto the lower one: the lower clamped at its bottom, the
+    upper's top moved by ``top`` (a vector or a callable of x); the slave surface the upper's (``upper_slave``) or
+    the lower's."""
+    pair = (T.UPPER_BOTTOM, T.LOWER_TOP) if upper_slave else (T.LOWER_TOP, T.UPPER_BOTTOM)
     return TwoBodyProblem(
         m.mesh,
         m.cell_tags,
         m.facet_tags,
-        bodies=(Body(T.LOWER, 1.0, 0.3), Body(T.UPPER, 2.0, 0.25)),
-        pair=ContactPair(*pair),
-        supports=(Support(T.LOWER_BOTTOM), Support(T.UPPER_TOP, (0.0, -1.1e-3))),
+        bodies=(lower, upper),
+        pair=ContactPair(*pair, friction=friction),
+        supports=(Support(T.LOWER_BOTTOM), Support(T.UPPER_TOP, top)),
     )
+
+
+def hertz_cylinder_pair(slave: str, refinement: float) -> TwoBodyProblem:
+    """A cylinder (R = 5, E = 2, ν = 0.25) pressed by 1.1e-3 onto a block (E = 1, ν = 0.3), contact cells
+    a/(20·``refinement``) with a = 0.05, on one process; ``slave``: "cylinder" or "block", the slave surface."""
+    m = cylinder_on_block(5.0, 0.05, refinement=refinement, comm=MPI.COMM_SELF)
+    lower, upper = Body(T.LOWER, 1.0, 0.3), Body(T.UPPER, 2.0, 0.25)
+    return pressed_pair(m, lower, upper, (0.0, -1.1e-3), upper_slave=slave == "cylinder")
 
 
 def tilted_pair(comm: MPI.Comm, cells: tuple[int, int], dim: int = 2) -> TwoBodyProblem:

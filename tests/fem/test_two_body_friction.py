@@ -6,6 +6,7 @@ length (Tresca), equal and opposite forces on the two bodies, the stick-to-slip 
 import numpy as np
 import pytest
 from mpi4py import MPI
+from pair_problems import pressed_pair
 
 import fenics_contact as fc
 from fenics_contact.errors import InputError
@@ -29,15 +30,8 @@ def blocks():
 def _problem(m, law, top, *, slave="upper"):
     """The lower block (E = 1, ν = 0.3) clamped at its bottom, the upper (E = 5, ν = 0.2) with its top moved by
     ``top``; the contact face 1 wide."""
-    pair = (T.UPPER_BOTTOM, T.LOWER_TOP) if slave == "upper" else (T.LOWER_TOP, T.UPPER_BOTTOM)
-    return TwoBodyProblem(
-        m.mesh,
-        m.cell_tags,
-        m.facet_tags,
-        bodies=(Body(T.LOWER, 1.0, 0.3), Body(T.UPPER, 5.0, 0.2)),
-        pair=ContactPair(*pair, friction=law),
-        supports=(Support(T.LOWER_BOTTOM), Support(T.UPPER_TOP, top)),
-    )
+    lower, upper = Body(T.LOWER, 1.0, 0.3), Body(T.UPPER, 5.0, 0.2)
+    return pressed_pair(m, lower, upper, top, upper_slave=slave == "upper", friction=law)
 
 
 def _path(m, law, **kw):

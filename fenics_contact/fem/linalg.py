@@ -279,6 +279,16 @@ class DirectSolver(_Factorization):
         self.ksp.destroy()
 
 
+def _petsc_csr(A: sp.csr_matrix) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A's CSR arrays in PETSc's integer and scalar types (the same arrays where they already are: a matrix made
+    on them shares them, so the caller keeps them alive)."""
+    return (
+        A.indptr.astype(PETSc.IntType, copy=False),
+        A.indices.astype(PETSc.IntType, copy=False),
+        A.data.astype(PETSc.ScalarType, copy=False),
+    )
+
+
 class SparseFactor(_Factorization):
     """MUMPS LU or Cholesky of a sequential sparse matrix it owns; solves of dense blocks of right-hand sides.
 
@@ -340,11 +350,7 @@ class SparseFactor(_Factorization):
         A.eliminate_zeros()
         if scaling is not None:
             A = _equilibrated(A, scaling)
-        csr = (
-            A.indptr.astype(PETSc.IntType, copy=False),
-            A.indices.astype(PETSc.IntType, copy=False),
-            A.data.astype(PETSc.ScalarType, copy=False),
-        )
+        csr = _petsc_csr(A)
         mat = PETSc.Mat().createAIJWithArrays(A.shape, csr, comm=PETSc.COMM_SELF)  # no copy: keep csr alive
         mat.assemble()
         lu = cls(mat, scaling=scaling, **kwargs)
@@ -362,11 +368,7 @@ class SparseFactor(_Factorization):
         """Factorize the symmetric matrix whose upper triangle (canonical CSR) is ``upper``: MUMPS Cholesky
         (positive definite, no pivoting; 1.5× faster than LU on the mixed CEM skeleton systems), or, when a
         pivot is not positive (a matrix that is not positive definite after all), the LU of the full matrix."""
-        csr = (
-            upper.indptr.astype(PETSc.IntType, copy=False),
-            upper.indices.astype(PETSc.IntType, copy=False),
-            upper.data.astype(PETSc.ScalarType, copy=False),
-        )
+        csr = _petsc_csr(upper)
         # an AIJ matrix holding the upper triangle only, on the CSR arrays (no copy): PETSc hands MUMPS' Cholesky
         # the entries from the diagonal on of every row (MatConvertToTriples_seqaij_seqsbaij), i.e. exactly
         # these (an SBAIJ matrix would be built by copying row by row: 20 ms of 0.17 s at h = 1/128)
@@ -421,6 +423,33 @@ class SparseFactor(_Factorization):
         finally:
             B.destroy()
             X.destroy()
+        if not np.all(np.isfinite(out)):
+            raise ConvergenceError(f"a solve of {self.what} produced non-finite values")
+        return out if self.scaling is None else self.scaling[:, None] * out
+
+    def solve_sparse(self, rhs_t: sp.csr_matrix) -> np.ndarray:
+        """A⁻¹ B for sparse right-hand sides B given by their transpose ``rhs_t`` (one row per right-hand side,
+        canonical CSR): MUMPS' sparse right-hand sides (ICNTL(20), which PETSc selects for the transpose of an AIJ
+        matrix) skip the forward elimination where they vanish; a dense (n × k) column-major result;
+        ConvergenceError on a failure or non-finite values."""
+        if self.scaling is not None:
+            rhs_t = (rhs_t @ sp.diags(self.scaling)).tocsr()  # (D B, by its transpose's columns)
+        k, n = rhs_t.shape
+        csr = _petsc_csr(rhs_t)
+        Bt = PETSc.Mat().createAIJWithArrays((k, n), csr, comm=PETSc.COMM_SELF)
+        Bt.assemble()
+        B = PETSc.Mat().createTranspose(Bt)
+        X = PETSc.Mat().createDense((n, k), comm=PETSc.COMM_SELF)
+        X.setUp()
+        try:
+            try:
+                self.ksp.getPC().getFactorMatrix().matSolve(B, X)
+            except PETSc.Error as err:
+                raise ConvergenceError(f"MUMPS failed on {self.what} ({err})") from None
+            out = X.getDenseArray().copy(order="F")
+        finally:
+            for obj in (B, Bt, X):
+                obj.destroy()
         if not np.all(np.isfinite(out)):
             raise ConvergenceError(f"a solve of {self.what} produced non-finite values")
         return out if self.scaling is None else self.scaling[:, None] * out

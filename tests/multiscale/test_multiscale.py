@@ -154,13 +154,13 @@ def test_restrict_is_scipy_indexing():
 
 
 def test_patch_problem_sparse_right_hand_sides(omega1_32_8):
-    """The patch problems are solved with MUMPS' sparse right-hand sides (``bases.sparse_solve``): the result
+    """The patch problems are solved with MUMPS' sparse right-hand sides (``SparseFactor.solve_sparse``): the result
     equals the dense solve of the same right-hand sides to round-off and satisfies the saddle-point equations,
     and a basis so computed solves (A + BBᵀ) ψ = B e_j on the interior DOFs of its patch."""
     from petsc4py import PETSc
 
     from fenics_contact.fem.linalg import SparseFactor, petsc_to_scipy
-    from fenics_contact.multiscale.cem.bases import Incidence, cell_groups, sparse_solve
+    from fenics_contact.multiscale.cem.bases import Incidence, cell_groups
 
     om = omega1_32_8
     ops, aux = om.ops, om.space.aux
@@ -179,7 +179,7 @@ def test_patch_problem_sparse_right_hand_sides(omega1_32_8):
         rng = np.random.default_rng(0)  # (row 0: the first basis of K_k; the others random)
         unit = scipy.sparse.csr_matrix(([1.0], ([0], [inner.size + np.searchsorted(J, aux.columns(k)[0])])), (1, n))
         rhs_t = scipy.sparse.vstack([unit, scipy.sparse.random(6, n, density=0.002, rng=rng)], format="csr")
-        x = sparse_solve(lu, rhs_t)
+        x = lu.solve_sparse(rhs_t)
         dense = lu.solve(rhs_t.T.toarray())
     finally:
         lu.destroy()

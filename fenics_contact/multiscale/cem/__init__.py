@@ -92,7 +92,6 @@ from fenics_contact.multiscale.cem.bases import (
     cell_groups,
     covering,
     global_saddle_matrix,
-    sparse_solve,
 )
 from fenics_contact.multiscale.cem.cache import CACHE_FORMAT, PrimalOfflineCache, offline_key, offline_stage
 from fenics_contact.multiscale.cem.coarse import MultiscaleRobinSolver, gram_matrices, trace_matrix
@@ -157,7 +156,6 @@ __all__ = [
     "cell_groups",
     "covering",
     "global_saddle_matrix",
-    "sparse_solve",
     "MultiscaleRobinSolver",
     "gram_matrices",
     "trace_matrix",

@@ -10,7 +10,7 @@ solved in the sparse saddle-point form [[A_II, B_IJ], [B_IJᵀ, −I]] (μ = B_I
 the aux functions of the patch's cells): A_II + B_IJ B_IJᵀ has a dense block per coarse cell, 45× the nonzeros
 of A_II at h = 1/256.  One MUMPS LDLᵀ per patch serves the l_i bases, the Robin corrector of the γ vertices of
 K_i and the source corrector (one solve with many right-hand sides, given to MUMPS as sparse: a unit vector in
-the μ rows per basis, a few γ rows per Robin datum; ``sparse_solve``).  With ``CEMOptions.patch_group`` the
+the μ rows per basis, a few γ rows per Robin datum; ``SparseFactor.solve_sparse``).  With ``CEMOptions.patch_group`` the
 cells of a group share one patch, the union of their K_{i,m} (``cell_groups``), and one LDLᵀ serves all their
 problems; ``covering`` gives the cells whose functions reach a coarse cell.  The functions are stored per patch
 (``PatchFunctions``: the DOFs and a dense block), never as fine-mesh-sized arrays.
@@ -25,7 +25,6 @@ import scipy.sparse as sp
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from fenics_contact.errors import ConvergenceError
 from fenics_contact.fem.linalg import SparseFactor, scipy_to_petsc
 from fenics_contact.multiscale.cem.operators import FineOperators
 from fenics_contact.multiscale.cem.options import WHOLE_DOMAIN, CEMOptions
@@ -42,7 +41,6 @@ __all__ = [
     "cell_groups",
     "covering",
     "global_saddle_matrix",
-    "sparse_solve",
 ]
 
 log = logging.getLogger(__name__)
@@ -175,34 +173,6 @@ def global_saddle_matrix(ops: FineOperators, aux: AuxiliarySpace) -> PETSc.Mat:
     return scipy_to_petsc(M)
 
 
-def sparse_solve(lu: SparseFactor, rhs_t: sp.csr_matrix) -> np.ndarray:
-    """A⁻¹ B for the sparse right-hand sides B given by their transpose ``rhs_t`` (one row per right-hand side):
-    one MUMPS solve with sparse right-hand sides (ICNTL(20) = 1), a dense (n × k) column-major result."""
-    k, n = rhs_t.shape
-    csr = (
-        rhs_t.indptr.astype(PETSc.IntType, copy=False),
-        rhs_t.indices.astype(PETSc.IntType, copy=False),
-        rhs_t.data.astype(PETSc.ScalarType, copy=False),
-    )
-    Bt = PETSc.Mat().createAIJWithArrays((k, n), csr, comm=PETSc.COMM_SELF)
-    Bt.assemble()
-    B = PETSc.Mat().createTranspose(Bt)
-    X = PETSc.Mat().createDense((n, k), comm=PETSc.COMM_SELF)
-    X.setUp()
-    try:
-        try:
-            lu.ksp.getPC().getFactorMatrix().matSolve(B, X)
-        except PETSc.Error as err:
-            raise ConvergenceError(f"MUMPS failed on {lu.what} ({err})") from None
-        out = X.getDenseArray().copy(order="F")
-    finally:
-        for obj in (B, Bt, X):
-            obj.destroy()
-    if not np.all(np.isfinite(out)):
-        raise ConvergenceError(f"a solve of {lu.what} produced non-finite values")
-    return out
-
-
 def _patch_problem(
     ops: FineOperators,
     grid: CoarseGrid,
@@ -272,7 +242,7 @@ def _patch_problem(
         raise
     t1 = time.perf_counter()
     try:
-        x = sparse_solve(lu, rhs_t)[:nI]
+        x = lu.solve_sparse(rhs_t)[:nI]
     finally:
         lu.destroy()
     timing = (t1 - t0, time.perf_counter() - t1)

@@ -18,7 +18,7 @@ from fenics_contact.cli.options import RunOptions
 from fenics_contact.errors import InputError
 from fenics_contact.problem.case import Case
 from fenics_contact.problem.geometry import ContactMesh
-from fenics_contact.problem.partition import simplex_volumes
+from fenics_contact.problem.partition import coarse_to_fine, simplex_volumes
 from fenics_contact.problem.tags import Subdomain
 
 __all__ = ["check_case_coarse_grid", "check_coarse_cells", "check_coarse_grid"]
@@ -145,17 +145,7 @@ def check_coarse_cells(cm: ContactMesh, where: str, key: str, missing: str) -> N
 
 
 def _size_ratio(cm: ContactMesh, cells: np.ndarray, coarse: np.ndarray) -> float:
-    """The median over the coarse cells K of |K|^(1/d) / mean (d!|T|)^(1/d) of the fine cells T it holds (the owned
-    ``cells`` of the mesh of simplices of dimension d and their ``coarse`` indices, summed over the ranks).
-    (d!|T|)^(1/d) is the side of the square (cube) a triangle (tetrahedron) of area (volume) |T| is one d!-th of: a
-    square (cube) of side H over a mesh of squares (cubes) of side h, each cut into d! simplices, has the ratio
-    H/h."""
+    """``partition.coarse_to_fine`` of the owned ``cells`` of the mesh and their ``coarse`` indices (over the ranks)."""
     d = cm.mesh.topology.dim
-    root = np.sqrt if d == 2 else np.cbrt
     volumes = simplex_volumes(cm.mesh.geometry.x[cm.mesh.geometry.dofmaps[0][cells]][:, :, :d])
-    n = cm.comm.allreduce(int(np.max(coarse, initial=-1)) + 1, op=MPI.MAX)
-    total = cm.comm.allreduce(np.bincount(coarse, weights=volumes, minlength=n), op=MPI.SUM)
-    fine = cm.comm.allreduce(np.bincount(coarse, weights=root(math.factorial(d) * volumes), minlength=n), op=MPI.SUM)
-    count = cm.comm.allreduce(np.bincount(coarse, minlength=n).astype(float), op=MPI.SUM)
-    held = count > 0
-    return float(np.median(root(total[held]) / (fine[held] / count[held])))
+    return coarse_to_fine(volumes, coarse, d, cm.comm)

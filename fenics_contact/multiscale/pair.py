@@ -22,7 +22,6 @@ its coarse cells are no larger than the fine cells they hold (``check_bulk``: th
 ``cli.coarse.check_coarse_cells`` for a partition that is not the mesh's squares).
 """
 
-import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -42,6 +41,7 @@ from fenics_contact.multiscale.pair_replica import PairReplica
 from fenics_contact.problem.boundary import BoundaryConditions
 from fenics_contact.problem.fields import MaterialFields
 from fenics_contact.problem.pair import TwoBodyProblem
+from fenics_contact.problem.partition import coarse_to_fine as _coarse_to_fine
 from fenics_contact.problem.partition import simplex_volumes
 from fenics_contact.problem.strip import coarse_partition
 from fenics_contact.problem.tags import Boundary
@@ -83,12 +83,11 @@ def _supports_of(problem: TwoBodyProblem, k: int) -> list:
 
 
 def coarse_to_fine(grid, cell_nodes: np.ndarray, coords: np.ndarray) -> float:
-    """The median over the coarse cells K of ``grid`` of |K|^(1/d) over the mean (d!|T|)^(1/d) of the fine cells T
-    it holds (``cell_nodes``: the vertices of the simplices, ``coords`` their coordinates): H/h for squares
-    (cubes) of side H over a mesh of squares (cubes) of side h cut into d! simplices."""
+    """``partition.coarse_to_fine`` of the coarse cells of ``grid`` over the simplices ``cell_nodes`` (vertex
+    indices into ``coords``): H/h for squares (cubes) of side H over a mesh of squares (cubes) of side h cut into
+    d! simplices."""
     d = cell_nodes.shape[1] - 1
-    fine = (math.factorial(d) * simplex_volumes(coords[cell_nodes][:, :, :d])) ** (1.0 / d)
-    return float(np.median([size / fine[cells].mean() for size, cells in zip(grid.cell_size, grid.cells)]))
+    return _coarse_to_fine(simplex_volumes(coords[cell_nodes][:, :, :d]), grid.cell_coarse, d)
 
 
 def check_bulk(k: int, n_cells: int, ratio: float | None, H: float, layers: int) -> None:

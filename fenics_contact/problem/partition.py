@@ -17,6 +17,7 @@ The multiscale methods need every fine cell of Ω₁ in one coarse cell K
 When a mesh does not tag Ω₁, Ω₂ and γ, ``problem.strip`` builds them from these partitions.
 """
 
+import math
 from collections.abc import Callable
 
 import basix.ufl
@@ -31,6 +32,7 @@ from fenics_contact.errors import InputError
 
 __all__ = [
     "cartesian_coarse_cells",
+    "coarse_to_fine",
     "centroid_coarse_cells",
     "graded_coarse_cells",
     "group_coarse_cells",
@@ -61,6 +63,21 @@ def simplex_volumes(p: np.ndarray) -> np.ndarray:
     if p.shape[2] == 2:
         return 0.5 * np.abs(d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0])
     return np.abs(np.einsum("ij,ij->i", np.cross(d1, d2), p[:, 3] - p[:, 0])) / 6.0
+
+
+def coarse_to_fine(volumes: np.ndarray, coarse: np.ndarray, d: int, comm: MPI.Comm = MPI.COMM_SELF) -> float:
+    """The median over the coarse cells K of |K|^(1/d) / mean (d!|T|)^(1/d) of the fine cells T it holds
+    (``volumes``: |T| of the fine simplices of dimension d, ``coarse``: their coarse cells' indices; summed over
+    the ranks of ``comm`` when each holds some of the cells).  (d!|T|)^(1/d) is the side of the square (cube) a
+    triangle (tetrahedron) of area (volume) |T| is one d!-th of: a square (cube) of side H over a mesh of squares
+    (cubes) of side h, each cut into d! simplices, has the ratio H/h."""
+    root = np.sqrt if d == 2 else np.cbrt
+    n = comm.allreduce(int(np.max(coarse, initial=-1)) + 1, op=MPI.MAX)
+    total = comm.allreduce(np.bincount(coarse, weights=volumes, minlength=n), op=MPI.SUM)
+    fine = comm.allreduce(np.bincount(coarse, weights=root(math.factorial(d) * volumes), minlength=n), op=MPI.SUM)
+    count = comm.allreduce(np.bincount(coarse, minlength=n).astype(float), op=MPI.SUM)
+    held = count > 0
+    return float(np.median(root(total[held]) / (fine[held] / count[held])))
 
 
 def _bounding_grid(msh: dmesh.Mesh, H: float) -> tuple[np.ndarray, np.ndarray]:

@@ -8,8 +8,8 @@ steps (counted alike), and the largest displacement difference to the monolithic
 ``--strategy interface`` runs the interface Newton's "interface" strategy instead, ``--method primal-ms``
 Algorithm 3 instead of Algorithm 1 (the difference is then its multiscale error), ``--frictionless`` the same path
 with no friction (these print table (1) only).  ``--dim 3``: the same on the
-3D channel cube (h = 1/``--h``), the wall on x = 1 pressed in by 0.01 and dragged along y by 0.005, 0.01, 0.02
-(this table only).
+3D channel cube (h = 1/``--h``, Poisson ratio ``--cube-nu``), the wall on x = 1 pressed in by 0.01 and dragged along
+y by 0.005, 0.01, 0.02 (this table only); ``--contrast`` the contrasts (default 10³ and 10⁶).
 
 (2) A cylinder (R = 100a) pressed into the Hertz block (80a × 40a, contact cells a/(20 r), a = 0.05) with P, then
 moved sideways: the pressed state against Hertz (a, p₀ from the computed normal force P: the contact half-width,
@@ -51,7 +51,14 @@ MU = 0.3
 
 
 def theorem_table(
-    n: int, n_coarse: int, strategy: str, dim: int = 2, method: str = "primal", frictionless: bool = False
+    n: int,
+    n_coarse: int,
+    strategy: str,
+    dim: int = 2,
+    method: str = "primal",
+    frictionless: bool = False,
+    contrasts=(1e3, 1e6),
+    cube_nu: float | None = None,
 ) -> str:
     if dim == 2:
         depth = 2e-3
@@ -63,14 +70,15 @@ def theorem_table(
         "Newton steps | monolithic Newton steps | max rel. displacement difference |",
         "|---|---|---|---|---|---|---|",
     ]
-    for contrast in (1e3, 1e6):
+    for contrast in contrasts:
         law = Frictionless() if frictionless else Friction("coulomb", mu=MU)
         if dim == 2:
             model = get_model(3, E_high=contrast).with_(obstacle=Plane((1.0, 0.0), (-1.0, 0.0)), law=law)
             problem = model.on(unit_square(n, n_coarse))
         else:
             wall = Plane((1.0, 0.5, 0.5), (-1.0, 0.0, 0.0))
-            problem = channels_3d(E_high=contrast).on(channels_3d_mesh(n)).with_(obstacle=wall, law=law)
+            model = channels_3d(E_high=contrast, **({} if cube_nu is None else {"nu": cube_nu}))
+            problem = model.on(channels_3d_mesh(n)).with_(obstacle=wall, law=law)
         V = fem.functionspace(problem.cm.mesh, ("Lagrange", 1, (dim,)))
         fields = {"mono": [], "alg1": []}
 
@@ -321,6 +329,10 @@ def main() -> None:
     parser.add_argument("--frictionless", action="store_true", help="table (1) without friction")
     parser.add_argument("--dim", type=int, default=2, choices=(2, 3), help="3: the 3D channel cube, h = 1/--h")
     parser.add_argument("--nu", type=float, nargs="+", default=[0.45, 0.49], help="Poisson ratios (Cattaneo–Mindlin)")
+    parser.add_argument("--cube-nu", type=float, help="the channel cube's Poisson ratio (--dim 3; default 0.35)")
+    parser.add_argument(
+        "--contrast", type=float, nargs="+", default=[1e3, 1e6], help="the contrasts of table (1) (E_high/E_low)"
+    )
     parser.add_argument(
         "--refinement",
         type=float,
@@ -364,7 +376,11 @@ def main() -> None:
         print(cattaneo_rates(args.nu, args.refinement, "mixed-monolithic", setup))
         return
     print("## Algorithm 1 and the monolithic solve along a frictional path\n")
-    print(theorem_table(args.h, args.H, args.strategy, args.dim, args.method, args.frictionless))
+    print(
+        theorem_table(
+            args.h, args.H, args.strategy, args.dim, args.method, args.frictionless, args.contrast, args.cube_nu
+        )
+    )
     if args.method != "primal" or args.frictionless:
         return
     if args.dim == 3:

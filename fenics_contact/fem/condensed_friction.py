@@ -16,12 +16,15 @@ should neither converge in ``LAW_STEPS``: once two of its iterates have the same
 Newton on the law from there (it then converges in one or two steps), the fixed point going on should it fail.  The
 first press of a path (nothing committed) in 3D is the Newton on the law from U_L, the displacement of the load alone
 (in ``LAW_STEPS``; in 3D a slipping node keeps a tangential stiffness across its slip, and this Newton converges
-where the 2D one cycles: 9 steps on the 3D channel cube at contrast 10³ and 10⁶, from U = 0 9 and 12); in 2D, or
-should it not converge, the press goes to the fixed point at once (``fem.friction_strategy``), its frozen-threshold
-solves ended once their sets settle.  The energy solves (Tresca, frozen
-thresholds) take the full steps of the primal–dual state rule while they lower the convex energy, else its exact
-line search (``CondensedFrictionalSystem``).  Used by Algorithm 1's condensed Γ_C system (``hybrid.friction``) and by
-the two-body solve under MPI (``fem.two_body_mpi``).
+where the 2D one cycles).  Its first state, the law's at U_L, holds no slip of the path (U_L is a displacement no
+contact force acts on), so the state rule's reversal (a slip turning back sticks) applies from the first iterate on
+(``loaded``): 8 and 7 steps on the 3D channel cube at contrast 10³ and 10⁶, against 9 and 9 with the reversal
+from U_L's slip directions, where the nodes whose load-alone tangential displacement the first step turns round are
+told to stick and slip again the step after.  In 2D, or should it not converge, the press goes to the fixed point
+at once (``fem.friction_strategy``), its frozen-threshold solves ended once their sets settle.  The energy solves
+(Tresca, frozen thresholds) take the full steps of the primal–dual state rule while they lower the convex energy,
+else its exact line search (``CondensedFrictionalSystem``).  Used by Algorithm 1's condensed Γ_C system
+(``hybrid.friction``) and by the two-body solve under MPI (``fem.two_body_mpi``).
 """
 
 from collections.abc import Callable
@@ -95,19 +98,24 @@ class CondensedFrictionalSystem:
     state rule is taken when it lowers ψ (its change integrated along the step from the slope), else the exact line
     search along it when it descends, else along the Newton direction of the plain state of U (a generalized
     Hessian of ψ: it descends).  ψ falls at every step, so no state recurs.  Without it (Coulomb) full steps until a
-    state recurs, then backtracking on ‖R‖ (Armijo)."""
+    state recurs, then backtracking on ‖R‖ (Armijo).  ``loaded``: U is the load's displacement U_L, whose state holds
+    no slip of the path: the next state after the first step is the state rule's without the reversal."""
 
-    def __init__(self, law: CondensedLaw, U: np.ndarray, U_L: np.ndarray, *, energy: bool, state=None) -> None:
+    def __init__(
+        self, law: CondensedLaw, U: np.ndarray, U_L: np.ndarray, *, energy: bool, state=None, loaded: bool = False
+    ) -> None:
         self.law, self.friction, self.energy = law, law.friction, energy
         self.U, self.U_L = U.copy(), U_L
         self._full = True  #: the last step was the full step of the state rule (its next state is ``_next``)
+        #: the state rule's reversal applies (not to the first state of a start at the load's displacement: ``loaded``)
+        self._reverse = not loaded
         self.friction.forced = None
         self.friction.forced = self._next_state(self.U) if state is None else state
 
     def _next_state(self, U: np.ndarray, *, plain: bool = False):
         self.friction.nodal = U.reshape(-1, self.friction.d)
         try:
-            return self.friction.next_state(plain=plain)
+            return self.friction.next_state(plain=plain, reverse=self._reverse)
         finally:
             self.friction.nodal = None
 
@@ -186,7 +194,7 @@ class CondensedFrictionalSystem:
     def advance(self, t: float, state: StepState) -> Advance:
         self.U += t * self.dU
         self.friction.forced = self._next if t == 1.0 and self._full else self._next_state(self.U)
-        self._full = True
+        self._full = self._reverse = True
         active = self.key(self.friction.forced)
         return Advance(active, int(np.count_nonzero(active)))
 
@@ -196,11 +204,14 @@ class CondensedFrictionalSystem:
         return None
 
 
-def _newton(law: CondensedLaw, U, U_L, max_steps: int, energy: bool, record, discard, state=None) -> np.ndarray:
+def _newton(
+    law: CondensedLaw, U, U_L, max_steps: int, energy: bool, record, discard, state=None, loaded: bool = False
+) -> np.ndarray:
     """The Newton loop on ``CondensedFrictionalSystem`` (an energy's with ``ENERGY_STEPS`` steps at least), linearized
-    first at ``state`` (None: the state rule's at U)."""
+    first at ``state`` (None: the state rule's at U; ``loaded``: U is the load's displacement U_L, whose state holds
+    no slip to reverse)."""
     max_steps = max(max_steps, ENERGY_STEPS) if energy else max_steps
-    system = CondensedFrictionalSystem(law, U, U_L, energy=energy, state=state)
+    system = CondensedFrictionalSystem(law, U, U_L, energy=energy, state=state, loaded=loaded)
     try:
         trace = semismooth_newton_loop(
             system,
@@ -280,15 +291,14 @@ def solve_condensed(
     convex problem): as soon as two successive iterates of it have the same contact and stick/slip sets, the Newton
     on the law from there (``LAW_STEPS``; the fixed point goes on should it fail), else until the thresholds
     settle, and the Newton on the law from there.  ``press``: the first press of a path (nothing committed): in 3D
-    the Newton on the law from U_L first (``LAW_STEPS``), then (and in 2D at once) the fixed point.  ``record``
-    gets each converged Newton's trace, ``discard`` the steps of each that did not converge."""
-    solve = _CondensedSolve(law, U_L, start, max_steps, record, discard)
+    the Newton on the law from U_L first (``LAW_STEPS``; the state rule's reversal from its first iterate on), then
+    (and in 2D at once) the fixed point.  ``record`` gets each converged Newton's trace, ``discard`` the steps of
+    each that did not converge."""
     if press and law.friction.d == 3 and law.friction.law.law == "coulomb":
-        solve.U = U_L.copy()  # (the load's displacement: the contact set of the load alone)
-        try:
-            solve.newton(energy=False, state=None, max_steps=LAW_STEPS)
-            return solve.U
+        try:  # (from the load's displacement: the contact set of the load alone)
+            return _newton(law, U_L, U_L, min(max_steps, LAW_STEPS), False, record, discard, loaded=True)
         except ConvergenceError:
-            solve.U = start
+            pass  # (the fixed point)
+    solve = _CondensedSolve(law, U_L, start, max_steps, record, discard)
     solve_frictional(solve, predict=True, trial_steps=LAW_STEPS, handover=True, press=press)
     return solve.U

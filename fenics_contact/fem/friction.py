@@ -183,7 +183,7 @@ class NodalFriction:
         return dict(nu=nu, w=w, p=p, tau=tau, active=gn > 0.0, t_trial=t_trial, norm=norm, t=t, stick=stick,
                     slip=slip, direction=direction)  # fmt: skip
 
-    def next_state(self, *, plain: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    def next_state(self, *, plain: bool = False, reverse: bool = True) -> tuple[np.ndarray, np.ndarray]:
         """The state the Newton linearizes at next: (codes, slip directions) from z = (1 − β) t + β t_trial.
 
         t is the traction of the state linearized at (``forced``; the law's own without one) and t_trial the
@@ -199,6 +199,9 @@ class NodalFriction:
         side in one full step (the Coulomb Newton then cycles between slip directions).  A state that reproduces itself
         satisfies the law, with the reversal rule as without it (it only changes a node that slipped into one that
         sticks).  ``plain``: the state of u itself (β = 1), the generalized Hessian of a frozen-threshold energy.
+        ``reverse``: with the reversal rule; without it where the state linearized at holds no slip of the path (the
+        law's at the displacement of the load alone, ``fem.condensed_friction``: its slip directions are those of a
+        displacement no contact force acts on, and its tractions pass through no stick disc).
         """
         if plain:
             keep, self.forced = self.forced, None
@@ -216,7 +219,7 @@ class NodalFriction:
         tau = e["tau"]
         codes = np.where(tau > 0.0, np.where(size <= tau, 1, 2), 0).astype(np.int8)
         direction = z / np.where(size > 0.0, size, 1.0)[:, None]
-        if not plain and self.forced is not None and self.forced[0].shape == codes.shape:
+        if not plain and reverse and self.forced is not None and self.forced[0].shape == codes.shape:
             was, along = self.forced
             codes[(codes == 2) & (was == 2) & (np.einsum("ij,ij->i", direction, along) < 0.0)] = 1
         return codes, direction

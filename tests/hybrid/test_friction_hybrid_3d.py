@@ -29,8 +29,9 @@ def test_algorithm_1_is_the_monolithic_frictional_solution_in_3d(contrast):
     dissipation.  The interface Newton runs the condensed frictional system and applies T at most 3 times per load
     step, with at most 2 Newton steps on the interface data after it (measured 1–2 and 0–1).  The dense contact
     Newton on the 126 Γ_C displacement components takes at most 8 steps per drag step from the committed state
-    (measured 6–8), and at most 9 for the first press, the Newton on the law from the displacement of the load alone
-    (measured 9 at both contrasts); the monolithic Newton at most 15 per step (measured 5–13)."""
+    (measured 6–8), and at most 8 for the first press, the Newton on the law from the displacement of the load alone
+    (measured 8 and 7): the interface Newton's steps, the dense ones with those after them, are at most 8 per load
+    step (measured 6–8); the monolithic Newton at most 15 per step (measured 5–13)."""
     wall = Plane(point=(1.0, 0.5, 0.5), normal=(-1.0, 0.0, 0.0))
     model = channels_3d(E_high=contrast).on(channels_3d_mesh(6))
     problem = model.with_(obstacle=wall, law=Friction("coulomb", mu=0.3))
@@ -45,8 +46,8 @@ def test_algorithm_1_is_the_monolithic_frictional_solution_in_3d(contrast):
         assert np.array_equal(a.friction.stick, b.friction.stick) and np.array_equal(a.friction.slip, b.friction.slip)
         assert abs(a.dissipation - b.dissipation) <= 1e-8 * mono.dissipation
         assert b.iterations <= 3 and b.interface_newton_steps - b.contact_newton_steps <= 2
-    assert alg1.steps[0].contact_newton_steps <= 9
-    assert all(step.contact_newton_steps <= 8 for step in alg1.steps[1:])
+        assert b.interface_newton_steps <= 8
+    assert all(step.contact_newton_steps <= 8 for step in alg1.steps)
     assert all(step.iterations <= 15 for step in mono.steps)
     assert np.linalg.norm(mono.steps[-1].tangential_force) > 0.1 * mono.steps[-1].normal_force  # a real drag
     assert mono.steps[-1].slip_nodes > mono.steps[1].slip_nodes  # the drag spreads the slip

@@ -18,9 +18,10 @@ its trial traction far across to the other side (in 2D a slipping node has no ta
 rule makes it stick, the stick sends it back, and 12 nodes change stick/slip at every step for ten steps.  The fixed
 point's first problem has the thresholds of the starting iterate, which the obstacle penetrates everywhere: every
 node sticks (a bonded press: the normal contact set in 3–4 steps); the next has the bonded press's thresholds, and
-the Newton on the law finishes from there (``benchmarks/results/friction.md``).  The condensed solve in 3D, where a
-slipping node keeps a tangential stiffness across its slip, first runs the Newton on the law from the displacement
-of the load alone (``fem.condensed_friction.solve_condensed``) and comes here should it not converge.
+the Newton on the law finishes from there (``benchmarks/results/friction.md``).  The one-body and condensed solves
+in 3D, where a slipping node keeps a tangential stiffness across its slip, first run the Newton on the law from the
+displacement of the load alone (``fem.friction.frictional_newton``, ``fem.condensed_friction.solve_condensed``) and
+come here should it not converge.
 
 What a solve provides is a ``FrictionalSolve``: its Newton, its iterate to save and restore, the thresholds and sets
 of the iterate, and what to do with the fixed point's iterate.  The condensed system predicts (on 2D model 3 and the

@@ -31,7 +31,8 @@ def test_algorithm_1_is_the_monolithic_frictional_solution_in_3d(contrast):
     Newton on the 126 Γ_C displacement components takes at most 8 steps per drag step from the committed state
     (measured 6–8), and at most 8 for the first press, the Newton on the law from the displacement of the load alone
     (measured 8 and 7): the interface Newton's steps, the dense ones with those after them, are at most 8 per load
-    step (measured 6–8); the monolithic Newton at most 15 per step (measured 5–13)."""
+    step (measured 6–8); the monolithic Newton at most 11 per step (measured 5–11), and at most 9 on the first
+    press, the load alone's solve and the Newton on the law from it (measured 9 and 8)."""
     wall = Plane(point=(1.0, 0.5, 0.5), normal=(-1.0, 0.0, 0.0))
     model = channels_3d(E_high=contrast).on(channels_3d_mesh(6))
     problem = model.with_(obstacle=wall, law=Friction("coulomb", mu=0.3))
@@ -48,7 +49,7 @@ def test_algorithm_1_is_the_monolithic_frictional_solution_in_3d(contrast):
         assert b.iterations <= 3 and b.interface_newton_steps - b.contact_newton_steps <= 2
         assert b.interface_newton_steps <= 8
     assert all(step.contact_newton_steps <= 8 for step in alg1.steps)
-    assert all(step.iterations <= 15 for step in mono.steps)
+    assert mono.steps[0].iterations <= 9 and all(step.iterations <= 11 for step in mono.steps)
     assert np.linalg.norm(mono.steps[-1].tangential_force) > 0.1 * mono.steps[-1].normal_force  # a real drag
     assert mono.steps[-1].slip_nodes > mono.steps[1].slip_nodes  # the drag spreads the slip
     assert mono.dissipation > 0.0

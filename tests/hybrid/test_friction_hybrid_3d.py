@@ -140,3 +140,22 @@ def test_coulomb_drag_on_the_channel_cube_at_h_one_eighth(drag):
     assert np.all(size <= bound + 1e-12 * bound.max())
     assert np.allclose(size[step.friction.slip], bound[step.friction.slip], rtol=1e-10)
     assert step.dissipation > 0.0
+
+
+def test_the_first_press_at_h_one_eighth_and_contrast_1e6():
+    """Coulomb μ = 0.3 on the 8 × 8 × 8 channel mesh at contrast 1e6, pressed 0.01: Ω₂'s frictional solve inside
+    Algorithm 1 presses from the displacement of the load alone by the Newton on the law (``fem.friction``; by the
+    thresholds' fixed point it fails its residual check here), and Algorithm 1 is the monolithic solution to 1e-8
+    relative with the same stick/slip sets; the dense press takes at most 8 steps (measured 8), the monolithic one at
+    most 9 (the load alone's solve and 8)."""
+    wall = Plane(point=(1.0, 0.5, 0.5), normal=(-1.0, 0.0, 0.0))
+    problem = channels_3d(E_high=1e6).on(channels_3d_mesh(8)).with_(obstacle=wall, law=Friction("coulomb", mu=0.3))
+    path = [(-0.01, 0.0, 0.0)]
+    mono, u_mono = snapshots("primal-monolithic", problem, path)
+    alg1, u_alg1 = snapshots("primal", problem, path, tol=1e-11)
+    a, b = mono.steps[0], alg1.steps[0]
+    assert a.converged and b.converged
+    assert np.max(np.abs(u_mono[0] - u_alg1[0])) <= 1e-8 * np.max(np.abs(u_mono[0]))
+    assert np.array_equal(a.friction.stick, b.friction.stick) and np.array_equal(a.friction.slip, b.friction.slip)
+    assert a.slip_nodes > 0 and a.stick_nodes > 0
+    assert b.contact_newton_steps <= 8 and a.iterations <= 9

@@ -582,7 +582,8 @@ def frictional_newton(sub, *, refinements: int) -> NewtonHistory:
         try:  # (from the load's displacement, as the condensed press: ``fem.condensed_friction``)
             solve.newton(energy=False, state=None, max_steps=LAW_STEPS, loaded=True)
             return solve.history
-        except ConvergenceError:
+        except ConvergenceError as error:
+            solve.history.active_sizes += [0] * getattr(error, "steps", 0)  # (its steps counted)
             solve.restore(start)
     solve_frictional(solve, predict=False, trial_steps=None, handover=False, press=press)
     return solve.history

@@ -98,7 +98,8 @@ class CondensedFrictionalSystem:
     state rule is taken when it lowers ψ (its change integrated along the step from the slope), else the exact line
     search along it when it descends, else along the Newton direction of the plain state of U (a generalized
     Hessian of ψ: it descends).  ψ falls at every step, so no state recurs.  Without it (Coulomb) full steps until a
-    state recurs, then backtracking on ‖R‖ (Armijo).  ``loaded``: U is the load's displacement U_L, whose state holds
+    state recurs, then backtracking on ‖R‖ (Armijo); in 3D from a given ``state`` (the committed one) full steps
+    throughout (no line search: see ``_searchable``).  ``loaded``: U is the load's displacement U_L, whose state holds
     no slip of the path: the next state after the first step is the state rule's without the reversal."""
 
     def __init__(
@@ -109,6 +110,12 @@ class CondensedFrictionalSystem:
         self._full = True  #: the last step was the full step of the state rule (its next state is ``_next``)
         #: the state rule's reversal applies (not to the first state of a start at the load's displacement: ``loaded``)
         self._reverse = not loaded
+        #: the line search on a recurring set; in 3D from a given state (the committed one) full steps throughout: a
+        #: slipping node's direction varies within a set, so a set recurs without a cycle, and a node on the contact
+        #: boundary leaves and re-enters contact on the way to the solution; the backtracking on ‖R‖ there accepts
+        #: only steps of 10⁻⁵–10⁻⁷ (the normal penalty's kink lies within them) and stalls to the end of its steps
+        #: (``LAW_STEPS``: the strategy goes on should it not converge)
+        self._searchable = energy or state is None or self.friction.d == 2
         self.friction.forced = None
         self.friction.forced = self._next_state(self.U) if state is None else state
 
@@ -153,7 +160,7 @@ class CondensedFrictionalSystem:
         self._next = self._next_state(self.U)
         predicted = self.key(self._next)
         self.U -= self.dU
-        return Direction(predicted)
+        return Direction(predicted, searchable=self._searchable)
 
     def line_search(self) -> float:
         keep, self.friction.forced = self.friction.forced, None  # the merit: the residual of the law itself

@@ -10,9 +10,9 @@ U_L minus a compliance M (dN × dN, symmetric positive definite) times the nodal
 by the loop of the monolithic frictional Newton (``fem.newton.semismooth_newton_loop`` on
 ``CondensedFrictionalSystem``: the state rule ``NodalFriction.next_state``, full steps until a state recurs,
 then a line search, in 3D from the committed state full steps throughout; in 3D a state is settled once the
-step is at most ``NEGLIGIBLE`` of U as well, the slip direction varying within it), linearized first at the state of the last committed load step
-(``NodalFriction.predicted_state``), then at the trial state, with, for Coulomb, the fixed point on the thresholds
-should neither converge in ``LAW_STEPS``: once two of its iterates have the same contact and stick/slip sets, the
+step is at most ``NEGLIGIBLE`` of U as well, the slip direction varying within it), linearized first at the state
+of the last committed load step (``NodalFriction.predicted_state``), then at the trial state, with, for Coulomb,
+the fixed point on the thresholds should neither converge in ``LAW_STEPS``: once two of its iterates have the same contact and stick/slip sets, the
 Newton on the law from there (it then converges in one or two steps), the fixed point going on should it fail.  The
 first press of a path (nothing committed) in 3D is the Newton on the law from U_L, the displacement of the load alone
 (in ``LAW_STEPS``; in 3D a slipping node keeps a tangential stiffness across its slip, and this Newton converges

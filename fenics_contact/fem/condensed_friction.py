@@ -6,25 +6,25 @@ U_L minus a compliance M (dN × dN, symmetric positive definite) times the nodal
 
     U = U_L − M λ(U),      λ_p = w_p p_p ν_p − w_p t_p      (``fem.friction``: normal penalty and friction),
 
-λ the nodal law of a ``NodalFriction`` evaluated at given nodal values (``nodal``).  ``solve_condensed`` solves it
-by the loop of the monolithic frictional Newton (``fem.newton.semismooth_newton_loop`` on
-``CondensedFrictionalSystem``: the state rule ``NodalFriction.next_state``, full steps until a state recurs,
-then a line search, in 3D from the committed state full steps throughout; in 3D a state is settled once the
-step is at most ``NEGLIGIBLE`` of U as well, the slip direction varying within it), linearized first at the state
-of the last committed load step (``NodalFriction.predicted_state``), then at the trial state, with, for Coulomb,
-the fixed point on the thresholds should neither converge in ``LAW_STEPS``: once two of its iterates have the same contact and stick/slip sets, the
-Newton on the law from there (it then converges in one or two steps), the fixed point going on should it fail.  The
-first press of a path (nothing committed) in 3D is the Newton on the law from U_L, the displacement of the load alone
-(in ``LAW_STEPS``; in 3D a slipping node keeps a tangential stiffness across its slip, and this Newton converges
-where the 2D one cycles).  Its first state, the law's at U_L, holds no slip of the path (U_L is a displacement no
-contact force acts on), so the state rule's reversal (a slip turning back sticks) applies from the first iterate on
-(``loaded``): 8 and 7 steps on the 3D channel cube at contrast 10³ and 10⁶, against 9 and 9 with the reversal
-from U_L's slip directions, where the nodes whose load-alone tangential displacement the first step turns round are
-told to stick and slip again the step after.  In 2D, or should it not converge, the press goes to the fixed point
-at once (``fem.friction_strategy``), its frozen-threshold solves ended once their sets settle.  The energy solves
-(Tresca, frozen thresholds) take the full steps of the primal–dual state rule while they lower the convex energy,
-else its exact line search (``CondensedFrictionalSystem``).  Used by Algorithm 1's condensed Γ_C system
-(``hybrid.friction``) and by the two-body solve under MPI (``fem.two_body_mpi``).
+λ the nodal law of a ``NodalFriction`` evaluated at given nodal values (``nodal``). ``solve_condensed`` solves it by
+the loop of the monolithic frictional Newton (``fem.newton.semismooth_newton_loop`` on
+``CondensedFrictionalSystem``: the state rule ``NodalFriction.next_state``, full steps until a state recurs, then a
+line search, in 3D from the committed state full steps throughout; in 3D a state is settled once the step is at most
+``NEGLIGIBLE`` of U as well, the slip direction varying within it), linearized first at the state of the last
+committed load step (``NodalFriction.predicted_state``), then at the trial state, with, for Coulomb, the fixed point
+on the thresholds should neither converge in ``LAW_STEPS``: once two of its iterates have the same contact and
+stick/slip sets, the Newton on the law from there (it then converges in one or two steps), the fixed point going on
+should it fail. The first press of a path (nothing committed) in 3D is the Newton on the law from U_L, the
+displacement of the load alone (in ``LAW_STEPS``; in 3D a slipping node keeps a tangential stiffness across its
+slip, and this Newton converges where the 2D one cycles). Its first state, the law's at U_L, holds no slip of the
+path (U_L is a displacement no contact force acts on), so the state rule's reversal (a slip turning back sticks)
+applies from the first iterate on (``loaded``): 8 and 7 steps on the 3D channel cube at contrast 10³ and 10⁶,
+against 9 and 9 with the reversal from U_L's slip directions, where the nodes whose load-alone tangential
+displacement the first step turns round are told to stick and slip again the step after. In 2D, or should it not
+converge, the press goes to the fixed point at once (``fem.friction_strategy``), its frozen-threshold solves ended
+once their sets settle. The energy solves (Tresca, frozen thresholds) take the full steps of the primal–dual state
+rule while they lower the convex energy, else its exact line search (``CondensedFrictionalSystem``). Used by
+Algorithm 1's condensed Γ_C system (``hybrid.friction``) and by the two-body solve under MPI (``fem.two_body_mpi``).
 """
 
 from collections.abc import Callable

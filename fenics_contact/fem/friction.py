@@ -494,7 +494,8 @@ def _newton(
 
 class _SubproblemSolve:
     """A frictional ``PrimalSubproblem`` as a ``fem.friction_strategy.FrictionalSolve``: the converged Newtons'
-    traces in ``history``; the fixed point's iterate is accepted when it passes the subproblem's residual check."""
+    traces in ``history``, and the steps of every Newton that did not converge (a step each); the fixed point's
+    iterate is accepted when it passes the subproblem's residual check."""
 
     def __init__(self, sub, refinements: int) -> None:
         self.sub, self.refinements = sub, refinements
@@ -511,6 +512,9 @@ class _SubproblemSolve:
             )
         except ConvergenceError as error:
             log.info("%s: %s", sub.prefix.rstrip("_"), error)
+            steps = getattr(error, "steps", 0)  # (its linear solves counted)
+            self.history.active_sizes += [0] * steps
+            self.history.factorizations += steps
             raise
         finally:
             sub.friction.forced = None
@@ -582,8 +586,7 @@ def frictional_newton(sub, *, refinements: int) -> NewtonHistory:
         try:  # (from the load's displacement, as the condensed press: ``fem.condensed_friction``)
             solve.newton(energy=False, state=None, max_steps=LAW_STEPS, loaded=True)
             return solve.history
-        except ConvergenceError as error:
-            solve.history.active_sizes += [0] * getattr(error, "steps", 0)  # (its steps counted)
-            solve.restore(start)
+        except ConvergenceError:
+            solve.restore(start)  # (its steps counted by ``newton``)
     solve_frictional(solve, predict=False, trial_steps=None, handover=False, press=press)
     return solve.history

@@ -20,6 +20,8 @@ import time
 import numpy as np
 import scipy.sparse.linalg as spla
 
+from fenics_contact.fem.amg import AMGSolver, amg_coarse_space
+from fenics_contact.hybrid.krylov_band import BandPreconditioner
 from fenics_contact.hybrid.options import IterationOptions
 from fenics_contact.hybrid.response import PrimalPart
 from fenics_contact.hybrid.step import IterationHistory, evaluate
@@ -41,12 +43,37 @@ ETA_MIN = 1e-13
 
 class KrylovInterface:
     """The interface equation of the Newton step, matrix-free: P₁ v by one Ω₁ solve, P₂ v by one Ω₂
-    back-solve with the factorization Ω₂ holds; vectors are global interface values (identical on all ranks)."""
+    back-solve with the factorization Ω₂ holds; vectors are global interface values (identical on all ranks).
 
-    def __init__(self, omega1: PrimalPart, omega2: PrimalPart, a: np.ndarray, b: float) -> None:
+    ``layers`` (None: no preconditioner) and ``coarse``: GMRES preconditioned from the right by the Robin response
+    of a cheap Ω₁ model, the band of Ω₁ within ``layers`` couplings of γ and the coarse functions ``coarse`` levels
+    below the finest of Ω₁'s AMG (0: none) beyond it (``hybrid.krylov_band``; on one process, else none)."""
+
+    def __init__(
+        self, omega1: PrimalPart, omega2: PrimalPart, a: np.ndarray, b: float, *, layers: int | None = None,
+        coarse: int = 0,
+    ) -> None:  # fmt: skip
         self.omega1, self.omega2, self.a, self.b = omega1, omega2, a, b
         self.free = np.flatnonzero(omega1.data_free() | omega2.data_free())  #: values whose data act (not γ ∩ Γ_D)
         self.products = 0  #: interface products (each one Ω₁ solve and one Ω₂ back-solve), GMRES's and the step's
+        self.layers, self.coarse = layers, coarse
+        self._band: BandPreconditioner | None = None
+        self._band_for: tuple | None = None  # (layers, coarse) of ``_band``
+
+    @property
+    def preconditioner(self) -> BandPreconditioner | None:
+        """The preconditioner of ``layers`` and ``coarse`` (built at its first use, kept while they stay; None:
+        unpreconditioned GMRES)."""
+        if self.layers is None or self.omega1.comm.size > 1:
+            return None
+        if self._band is None or self._band_for != (self.layers, self.coarse):
+            if self._band is not None:
+                self._band.destroy()
+            solver = self.omega1.sub.solver
+            P = amg_coarse_space(solver, self.coarse) if self.coarse and isinstance(solver, AMGSolver) else None
+            self._band = BandPreconditioner(self.omega1, self.omega2, self.a, self.b, layers=self.layers, coarse=P)
+            self._band_for = (self.layers, self.coarse)
+        return self._band
 
     @staticmethod
     def _response(part: PrimalPart, d: np.ndarray, solver=None) -> np.ndarray:
@@ -72,18 +99,20 @@ class KrylovInterface:
             return out
 
         count = [0]
+        band = self.preconditioner
+        right = (lambda y: y) if band is None else band.solve  # M⁻¹ (GMRES on (I − P₁P₂) M⁻¹)
 
-        def matvec(x: np.ndarray) -> np.ndarray:
+        def matvec(y: np.ndarray) -> np.ndarray:
             count[0] += 1
-            x = np.asarray(x).ravel()
+            x = right(np.asarray(y).ravel())
             return x - self.P1(self.P2(full(x)))[f]
 
         rhs = (-F21 - self.P1(F12))[f]
         A = spla.LinearOperator((f.size, f.size), matvec=matvec, dtype=float)
-        x, info = spla.gmres(
+        y, info = spla.gmres(
             A, rhs, rtol=eta, atol=0.0, restart=GMRES_RESTART, maxiter=max(GMRES_PRODUCTS // GMRES_RESTART, 1)
         )
-        d21 = full(x)
+        d21 = full(right(y))
         d12 = self.P2(d21) - F12
         self.products += count[0] + 1
         return d12, d21, count[0], info == 0
@@ -98,6 +127,7 @@ def krylov_newton_iterate(
     history = IterationHistory()
     t_off = time.perf_counter()
     kry = step.krylov_interface()
+    kry.layers, kry.coarse = nopt.krylov_layers, nopt.krylov_coarse
     history.time_offline_s = time.perf_counter() - t_off
     start = time.perf_counter()
     comm = step.comm

@@ -14,7 +14,8 @@ h and contrast it solves
   one AMG set-up for the whole solve): the matrix-free Newton–GMRES interface Newton (``hybrid.krylov_newton``;
   steps: Newton steps and in brackets the GMRES products, each one Ω₁ solve and one Ω₂ back-solve; its GMRES
   preconditioned by the band and AMG coarse model of Ω₁, ``hybrid.krylov_band``, the default) and Anderson
-  (depth 10); ``newton, AMG Ω₁, unpreconditioned``: the Newton–GMRES without the preconditioner;
+  (depth 10); ``newton, AMG Ω₁, unpreconditioned``: the Newton–GMRES without the preconditioner; ``--models L:C …``
+  adds one Newton–GMRES row per preconditioner model (band of L layers, AMG coarse functions C levels down);
 
 each to the transmission residual ``--tol``, and reports the times (offline: the subdomain factorizations
 and the interface responses; online: the rest), the interface Newton's steps (and the local front
@@ -29,6 +30,8 @@ O((n_γ + n_c)²) numbers.
     OMP_NUM_THREADS=1 .venv/bin/python benchmarks/primal_hybrid_3d.py --h 16 24 --contrast 1e3 1e6 --monolithic amg \
         --variants "newton, AMG Ω₁" "newton, AMG Ω₁, unpreconditioned" \
         --out benchmarks/results/primal_hybrid_3d_amg_preconditioned.md
+    OMP_NUM_THREADS=1 .venv/bin/python benchmarks/primal_hybrid_3d.py --h 16 --contrast 1e3 1e6 --variants \
+        --models 3:0 6:0 0:1 2:1 3:1 2:2 --out benchmarks/results/primal_hybrid_3d_amg_models.md
 
 ``--windows W …`` instead compares the contact Newton's local front resolution on the contact surface
 (``InterfaceNewtonOptions.front_window`` = W; 0: the plain semismooth Newton) at every h and contrast:
@@ -69,8 +72,10 @@ def run(
     max_iterations: int,
     amg_rtol: float = 1e-10,
     monolithic: str = "auto",
+    models=(),
 ):
-    """The rows of one mesh and contrast, one by one."""
+    """The rows of one mesh and contrast, one by one; ``models``: (layers, coarse) pairs of the Newton–GMRES
+    preconditioner's Ω₁ model, each run as a variant ``newton, AMG Ω₁ [layers:coarse]``."""
     problem = channels_3d(E_high=contrast).on(channels_3d_mesh(n))
     start, cpu = time.perf_counter(), time.process_time()
     ref = solve(problem, "primal-monolithic", solver=monolithic)
@@ -90,10 +95,11 @@ def run(
         "e_u": None,
     }
     entries = PrimalPart.responses
-    for variant in variants:
+    runs = [(v, {"krylov_layers": None} if v.endswith("unpreconditioned") else {}) for v in variants]
+    runs += [(f"newton, AMG Ω₁ [{m[0]}:{m[1]}]", {"krylov_layers": m[0], "krylov_coarse": m[1]}) for m in models]
+    for variant, krylov in runs:
         accel = variant.split(",")[0]
         amg = "AMG Ω₁" in variant
-        krylov = {"krylov_layers": None} if variant.endswith("unpreconditioned") else {}
         solver = LinearSolverOptions(kind="amg", rtol=amg_rtol) if amg else "direct"
         if variant.endswith("back-solves"):
             PrimalPart.responses = AffinePart.responses
@@ -185,16 +191,24 @@ def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--h", type=int, nargs="+", default=[8, 16, 24], help="1/h of the cube meshes")
     parser.add_argument("--contrast", type=float, nargs="+", default=[1e3, 1e6])
-    parser.add_argument("--variants", nargs="+", default=list(VARIANTS), choices=VARIANTS)
+    parser.add_argument("--variants", nargs="*", default=list(VARIANTS), choices=VARIANTS)
     parser.add_argument("--tol", type=float, default=1e-8, help="transmission residual to reach")
     parser.add_argument("--max-iterations", type=int, default=1000, help="Anderson's cap")
     parser.add_argument("--amg-rtol", type=float, default=1e-10, help="the AMG Ω₁'s CG tolerance")
     parser.add_argument(
         "--monolithic", default="auto", choices=("auto", "direct", "amg"), help="the monolithic solve's linear solver"
     )
+    parser.add_argument(
+        "--models",
+        nargs="+",
+        default=[],
+        metavar="LAYERS:COARSE",
+        help="Newton–GMRES preconditioner models to compare (band layers : AMG coarse depth, 0 none)",
+    )
     parser.add_argument("--windows", type=int, nargs="+", default=None, help="compare these front windows")
     parser.add_argument("--out", type=Path, default=None)
     args = parser.parse_args(argv)
+    models = [tuple(int(k) for k in m.split(":")) for m in args.models]
     if args.windows is not None:
         return _windows_table(args)
     head = ["h", "contrast", "variant", "DOFs", "offline [s]", "online [s]", "CPU [s]", "steps", "applications of T",
@@ -234,7 +248,9 @@ def main(argv=None) -> None:
     ]
     for n in args.h:
         for contrast in args.contrast:
-            for row in run(n, contrast, args.variants, args.tol, args.max_iterations, args.amg_rtol, args.monolithic):
+            for row in run(
+                n, contrast, args.variants, args.tol, args.max_iterations, args.amg_rtol, args.monolithic, models
+            ):
                 lines.append("| " + " | ".join(_cell(row.get(k)) for k in keys) + " |")
                 print(lines[-1], flush=True)
                 if args.out is not None:

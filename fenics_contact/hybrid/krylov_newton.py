@@ -7,7 +7,10 @@ O(n_γ²) memory, and in 3D n_γ = O(h⁻²).  Each Newton step solves its inter
     P₁ = a⊙T₁ + b,   P₂ = a⊙Y₂ + b   (T(g) = (a⊙y₂ + b g₂₁, a⊙y₁ + b g₁₂), primal a = 2α, b = −1)
 
 by GMRES, each product one Ω₁ solve (its AMG set-up reused) and one back-solve with Ω₂'s factorization of
-its Jacobian at its current active set (Y₂: Ω₂'s linearized trace response).  The Newton is inexact: GMRES
+its Jacobian at its current active set (Y₂: Ω₂'s linearized trace response).  GMRES is preconditioned from the
+right by I − P̃₁P₂, P̃₁ the Robin map of a cheap Ω₁ model (a band next to γ and the AMG's coarse functions,
+``hybrid.krylov_band``; ``InterfaceNewtonOptions.krylov_layers``, ``krylov_coarse``): the products stay exact Ω₁
+solves, their number per Newton step falls to a few.  The Newton is inexact: GMRES
 stops at the relative residual η_k = min(``ETA_MAX``, r_k) (r_k the transmission residual of the current
 pair), so the last steps are solved as accurately as the tolerance asks.  A backtracking line search on
 ‖F‖ globalizes it.  Every trial is an application of T (the Ω₂ semismooth Newton, warm-started), and the
@@ -50,9 +53,15 @@ class KrylovInterface:
     below the finest of Ω₁'s AMG (0: none) beyond it (``hybrid.krylov_band``; on one process, else none)."""
 
     def __init__(
-        self, omega1: PrimalPart, omega2: PrimalPart, a: np.ndarray, b: float, *, layers: int | None = None,
+        self,
+        omega1: PrimalPart,
+        omega2: PrimalPart,
+        a: np.ndarray,
+        b: float,
+        *,
+        layers: int | None = None,
         coarse: int = 0,
-    ) -> None:  # fmt: skip
+    ) -> None:
         self.omega1, self.omega2, self.a, self.b = omega1, omega2, a, b
         self.free = np.flatnonzero(omega1.data_free() | omega2.data_free())  #: values whose data act (not γ ∩ Γ_D)
         self.products = 0  #: interface products (each one Ω₁ solve and one Ω₂ back-solve), GMRES's and the step's

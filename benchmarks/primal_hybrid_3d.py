@@ -41,6 +41,7 @@ O((n_γ + n_c)²) numbers.
 """
 
 import argparse
+import shlex
 import sys
 import time
 from pathlib import Path
@@ -230,7 +231,7 @@ def main(argv=None) -> None:
     lines = [
         "# Algorithm 1 in 3D: interface Newton and Anderson on the 3D channel model",
         "",
-        f"Command: `OMP_NUM_THREADS=1 .venv/bin/python benchmarks/primal_hybrid_3d.py {' '.join(sys.argv[1:])}`",
+        f"Command: `OMP_NUM_THREADS=1 .venv/bin/python benchmarks/primal_hybrid_3d.py {shlex.join(sys.argv[1:])}`",
         "",
         f"Machine: {machine_description()}",
         "",
@@ -264,7 +265,7 @@ def _windows_table(args) -> None:
     lines = [
         "# Algorithm 1 in 3D: the contact Newton's local front resolution on the contact surface",
         "",
-        f"Command: `OMP_NUM_THREADS=1 .venv/bin/python benchmarks/primal_hybrid_3d.py {' '.join(sys.argv[1:])}`",
+        f"Command: `OMP_NUM_THREADS=1 .venv/bin/python benchmarks/primal_hybrid_3d.py {shlex.join(sys.argv[1:])}`",
         "",
         f"Machine: {machine_description()}",
         "",

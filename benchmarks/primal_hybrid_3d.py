@@ -12,8 +12,10 @@ h and contrast it solves
 * ``anderson``: Anderson acceleration (depth 10) of the Robin iteration;
 * ``newton, AMG Ω₁`` and ``anderson, AMG Ω₁``: Ω₁ solved by CG + AMG (``solver="amg"``, rtol ``--amg-rtol``,
   one AMG set-up for the whole solve): the matrix-free Newton–GMRES interface Newton (``hybrid.krylov_newton``;
-  steps: Newton steps and in brackets the GMRES products, each one Ω₁ solve and one Ω₂ back-solve) and
-  Anderson (depth 10);
+  steps: Newton steps and in brackets the GMRES products, each one Ω₁ solve and one Ω₂ back-solve; its GMRES
+  preconditioned by the band and AMG coarse model of Ω₁, ``hybrid.krylov_band``, the default) and Anderson
+  (depth 10); ``newton, AMG Ω₁, unpreconditioned``: the Newton–GMRES without the preconditioner; ``--models L:C …``
+  adds one Newton–GMRES row per preconditioner model (band of L layers, AMG coarse functions C levels down);
 
 each to the transmission residual ``--tol``, and reports the times (offline: the subdomain factorizations
 and the interface responses; online: the rest), the interface Newton's steps (and the local front
@@ -25,6 +27,11 @@ O((n_γ + n_c)²) numbers.
         --out benchmarks/results/primal_hybrid_3d.md
     OMP_NUM_THREADS=1 .venv/bin/python benchmarks/primal_hybrid_3d.py --h 16 24 32 --contrast 1e3 1e6 \
         --variants "newton, AMG Ω₁" "anderson, AMG Ω₁" --out benchmarks/results/primal_hybrid_3d_amg.md
+    OMP_NUM_THREADS=1 .venv/bin/python benchmarks/primal_hybrid_3d.py --h 16 24 --contrast 1e3 1e6 --monolithic amg \
+        --variants "newton, AMG Ω₁" "newton, AMG Ω₁, unpreconditioned" \
+        --out benchmarks/results/primal_hybrid_3d_amg_preconditioned.md
+    OMP_NUM_THREADS=1 .venv/bin/python benchmarks/primal_hybrid_3d.py --h 16 --contrast 1e3 1e6 --variants \
+        --models 3:0 6:0 0:1 2:1 3:1 2:2 --out benchmarks/results/primal_hybrid_3d_amg_models.md
 
 ``--windows W …`` instead compares the contact Newton's local front resolution on the contact surface
 (``InterfaceNewtonOptions.front_window`` = W; 0: the plain semismooth Newton) at every h and contrast:
@@ -34,6 +41,7 @@ O((n_γ + n_c)²) numbers.
 """
 
 import argparse
+import shlex
 import sys
 import time
 from pathlib import Path
@@ -47,14 +55,31 @@ from fenics_contact.io import machine_description
 from fenics_contact.methods import solve
 from fenics_contact.problem.models3d import channels_3d, channels_3d_mesh
 
-VARIANTS = ("newton", "newton, back-solves", "anderson", "newton, AMG Ω₁", "anderson, AMG Ω₁")
+VARIANTS = (
+    "newton",
+    "newton, back-solves",
+    "anderson",
+    "newton, AMG Ω₁",
+    "newton, AMG Ω₁, unpreconditioned",
+    "anderson, AMG Ω₁",
+)
 
 
-def run(n: int, contrast: float, variants, tol: float, max_iterations: int, amg_rtol: float = 1e-10):
-    """The rows of one mesh and contrast, one by one."""
+def run(
+    n: int,
+    contrast: float,
+    variants,
+    tol: float,
+    max_iterations: int,
+    amg_rtol: float = 1e-10,
+    monolithic: str = "auto",
+    models=(),
+):
+    """The rows of one mesh and contrast, one by one; ``models``: (layers, coarse) pairs of the Newton–GMRES
+    preconditioner's Ω₁ model, each run as a variant ``newton, AMG Ω₁ [layers:coarse]``."""
     problem = channels_3d(E_high=contrast).on(channels_3d_mesh(n))
     start, cpu = time.perf_counter(), time.process_time()
-    ref = solve(problem, "primal-monolithic")
+    ref = solve(problem, "primal-monolithic", solver=monolithic)
     cpu = time.process_time() - cpu
     its = ref.krylov_iterations
     yield {
@@ -71,9 +96,11 @@ def run(n: int, contrast: float, variants, tol: float, max_iterations: int, amg_
         "e_u": None,
     }
     entries = PrimalPart.responses
-    for variant in variants:
+    runs = [(v, {"krylov_layers": None} if v.endswith("unpreconditioned") else {}) for v in variants]
+    runs += [(f"newton, AMG Ω₁ [{m[0]}:{m[1]}]", {"krylov_layers": m[0], "krylov_coarse": m[1]}) for m in models]
+    for variant, krylov in runs:
         accel = variant.split(",")[0]
-        amg = variant.endswith("AMG Ω₁")
+        amg = "AMG Ω₁" in variant
         solver = LinearSolverOptions(kind="amg", rtol=amg_rtol) if amg else "direct"
         if variant.endswith("back-solves"):
             PrimalPart.responses = AffinePart.responses
@@ -87,6 +114,7 @@ def run(n: int, contrast: float, variants, tol: float, max_iterations: int, amg_
                 reference=ref.u,
                 max_iterations=max_iterations,
                 solver=solver,
+                **krylov,
             )
         finally:
             PrimalPart.responses = entries
@@ -94,7 +122,12 @@ def run(n: int, contrast: float, variants, tol: float, max_iterations: int, amg_
         history = result.history
         ch = history.contact_newton
         if accel == "newton" and amg:
-            steps = f"{history.newton_steps} ({result.step.krylov_interface().products} products)"
+            kry = result.step.krylov_interface()
+            per = kry.products / max(history.newton_steps, 1)
+            steps = f"{history.newton_steps} ({kry.products} products, {per:.1f} per step)"
+            band = kry.preconditioner
+            if band is not None:
+                steps += f"; Ω₁ model {band.size} unknowns, {band.factorizations} factorizations"
         elif accel == "newton":
             steps = f"{history.newton_steps} ({ch.local_iterations} local)"
         else:
@@ -159,13 +192,24 @@ def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--h", type=int, nargs="+", default=[8, 16, 24], help="1/h of the cube meshes")
     parser.add_argument("--contrast", type=float, nargs="+", default=[1e3, 1e6])
-    parser.add_argument("--variants", nargs="+", default=list(VARIANTS), choices=VARIANTS)
+    parser.add_argument("--variants", nargs="*", default=list(VARIANTS), choices=VARIANTS)
     parser.add_argument("--tol", type=float, default=1e-8, help="transmission residual to reach")
     parser.add_argument("--max-iterations", type=int, default=1000, help="Anderson's cap")
     parser.add_argument("--amg-rtol", type=float, default=1e-10, help="the AMG Ω₁'s CG tolerance")
+    parser.add_argument(
+        "--monolithic", default="auto", choices=("auto", "direct", "amg"), help="the monolithic solve's linear solver"
+    )
+    parser.add_argument(
+        "--models",
+        nargs="+",
+        default=[],
+        metavar="LAYERS:COARSE",
+        help="Newton–GMRES preconditioner models to compare (band layers : AMG coarse depth, 0 none)",
+    )
     parser.add_argument("--windows", type=int, nargs="+", default=None, help="compare these front windows")
     parser.add_argument("--out", type=Path, default=None)
     args = parser.parse_args(argv)
+    models = [tuple(int(k) for k in m.split(":")) for m in args.models]
     if args.windows is not None:
         return _windows_table(args)
     head = ["h", "contrast", "variant", "DOFs", "offline [s]", "online [s]", "CPU [s]", "steps", "applications of T",
@@ -187,7 +231,7 @@ def main(argv=None) -> None:
     lines = [
         "# Algorithm 1 in 3D: interface Newton and Anderson on the 3D channel model",
         "",
-        f"Command: `OMP_NUM_THREADS=1 .venv/bin/python benchmarks/primal_hybrid_3d.py {' '.join(sys.argv[1:])}`",
+        f"Command: `OMP_NUM_THREADS=1 .venv/bin/python benchmarks/primal_hybrid_3d.py {shlex.join(sys.argv[1:])}`",
         "",
         f"Machine: {machine_description()}",
         "",
@@ -195,7 +239,8 @@ def main(argv=None) -> None:
         f"{args.max_iterations} iterations); steps: the interface Newton's (contact Newton steps and "
         "corrections; in brackets the iterations of its local front problems) or Anderson's iterations; "
         "with an AMG Ω₁ (CG rtol " + f"{args.amg_rtol:g}" + ") the Newton–GMRES steps and its products (each one "
-        "Ω₁ solve and one Ω₂ back-solve), the Ω₁ solves in all and their median CG iterations; "
+        "Ω₁ solve and one Ω₂ back-solve), the size of the preconditioner's Ω₁ model and its factorizations, the Ω₁ "
+        "solves in all and their median CG iterations; "
         "e_u: relative L² distance to the monolithic solution; times on a machine shared with other jobs "
         "(CPU: the process's CPU time of the whole solve, offline and online, which the sharing does not inflate).",
         "",
@@ -204,7 +249,9 @@ def main(argv=None) -> None:
     ]
     for n in args.h:
         for contrast in args.contrast:
-            for row in run(n, contrast, args.variants, args.tol, args.max_iterations, args.amg_rtol):
+            for row in run(
+                n, contrast, args.variants, args.tol, args.max_iterations, args.amg_rtol, args.monolithic, models
+            ):
                 lines.append("| " + " | ".join(_cell(row.get(k)) for k in keys) + " |")
                 print(lines[-1], flush=True)
                 if args.out is not None:
@@ -218,7 +265,7 @@ def _windows_table(args) -> None:
     lines = [
         "# Algorithm 1 in 3D: the contact Newton's local front resolution on the contact surface",
         "",
-        f"Command: `OMP_NUM_THREADS=1 .venv/bin/python benchmarks/primal_hybrid_3d.py {' '.join(sys.argv[1:])}`",
+        f"Command: `OMP_NUM_THREADS=1 .venv/bin/python benchmarks/primal_hybrid_3d.py {shlex.join(sys.argv[1:])}`",
         "",
         f"Machine: {machine_description()}",
         "",

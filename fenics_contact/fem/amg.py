@@ -14,12 +14,13 @@ import logging
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.sparse as sp
 from dolfinx import fem
 from mpi4py import MPI
 from petsc4py import PETSc
 
 from fenics_contact.errors import ConvergenceError, InputError
-from fenics_contact.fem.linalg import PC_FAILED_REASONS, DirectSolver, check_entries
+from fenics_contact.fem.linalg import PC_FAILED_REASONS, DirectSolver, check_entries, petsc_to_scipy
 
 __all__ = [
     "AUTO_AMG_DOFS",
@@ -27,6 +28,7 @@ __all__ = [
     "LINEAR_SOLVERS",
     "AMGSolver",
     "LinearSolverOptions",
+    "amg_coarse_space",
     "linear_solver",
     "rigid_body_modes",
 ]
@@ -324,3 +326,18 @@ def linear_solver(
         log.info("%s: %s + AMG for %d unknowns", prefix, options.krylov.upper(), dofs)
         return AMGSolver(comm, prefix=prefix, space=space, options=options, contrast=contrast)
     return DirectSolver(comm, prefix=prefix)
+
+
+def amg_coarse_space(solver: AMGSolver, depth: int) -> sp.csr_matrix | None:
+    """The interpolation P to the finest level from the AMG hierarchy's level ``depth`` below it (the product of the
+    hierarchy's interpolations; the coarsest level where the hierarchy is shallower; None for a single level;
+    sequential): the coarse functions of ``solver``'s operator, e.g. for a Galerkin coarse operator Pᵀ A P."""
+    if isinstance(depth, bool) or not isinstance(depth, (int, np.integer)) or depth < 1:
+        raise InputError(f"the coarse depth must be an integer >= 1, got {depth!r}")
+    pc = solver.ksp.getPC()
+    levels = pc.getMGLevels()
+    P = None
+    for level in range(levels - 1, max(levels - 1 - depth, 0), -1):
+        step = petsc_to_scipy(pc.getMGInterpolation(level))
+        P = step if P is None else (P @ step).tocsr()
+    return P

@@ -7,7 +7,10 @@ O(n_γ²) memory, and in 3D n_γ = O(h⁻²).  Each Newton step solves its inter
     P₁ = a⊙T₁ + b,   P₂ = a⊙Y₂ + b   (T(g) = (a⊙y₂ + b g₂₁, a⊙y₁ + b g₁₂), primal a = 2α, b = −1)
 
 by GMRES, each product one Ω₁ solve (its AMG set-up reused) and one back-solve with Ω₂'s factorization of
-its Jacobian at its current active set (Y₂: Ω₂'s linearized trace response).  The Newton is inexact: GMRES
+its Jacobian at its current active set (Y₂: Ω₂'s linearized trace response).  GMRES is preconditioned from the
+right by I − P̃₁P₂, P̃₁ the Robin map of a cheap Ω₁ model (a band next to γ and the AMG's coarse functions,
+``hybrid.krylov_band``; ``InterfaceNewtonOptions.krylov_layers``, ``krylov_coarse``): the products stay exact Ω₁
+solves, their number per Newton step falls to a few.  The Newton is inexact: GMRES
 stops at the relative residual η_k = min(``ETA_MAX``, r_k) (r_k the transmission residual of the current
 pair), so the last steps are solved as accurately as the tolerance asks.  A backtracking line search on
 ‖F‖ globalizes it.  Every trial is an application of T (the Ω₂ semismooth Newton, warm-started), and the
@@ -20,6 +23,8 @@ import time
 import numpy as np
 import scipy.sparse.linalg as spla
 
+from fenics_contact.fem.amg import AMGSolver, amg_coarse_space
+from fenics_contact.hybrid.krylov_band import BandPreconditioner
 from fenics_contact.hybrid.options import IterationOptions
 from fenics_contact.hybrid.response import PrimalPart
 from fenics_contact.hybrid.step import IterationHistory, evaluate
@@ -41,12 +46,43 @@ ETA_MIN = 1e-13
 
 class KrylovInterface:
     """The interface equation of the Newton step, matrix-free: P₁ v by one Ω₁ solve, P₂ v by one Ω₂
-    back-solve with the factorization Ω₂ holds; vectors are global interface values (identical on all ranks)."""
+    back-solve with the factorization Ω₂ holds; vectors are global interface values (identical on all ranks).
 
-    def __init__(self, omega1: PrimalPart, omega2: PrimalPart, a: np.ndarray, b: float) -> None:
+    ``layers`` (None: no preconditioner) and ``coarse``: GMRES preconditioned from the right by the Robin response
+    of a cheap Ω₁ model, the band of Ω₁ within ``layers`` couplings of γ and the coarse functions ``coarse`` levels
+    below the finest of Ω₁'s AMG (0: none) beyond it (``hybrid.krylov_band``; on one process, else none)."""
+
+    def __init__(
+        self,
+        omega1: PrimalPart,
+        omega2: PrimalPart,
+        a: np.ndarray,
+        b: float,
+        *,
+        layers: int | None = None,
+        coarse: int = 0,
+    ) -> None:
         self.omega1, self.omega2, self.a, self.b = omega1, omega2, a, b
         self.free = np.flatnonzero(omega1.data_free() | omega2.data_free())  #: values whose data act (not γ ∩ Γ_D)
         self.products = 0  #: interface products (each one Ω₁ solve and one Ω₂ back-solve), GMRES's and the step's
+        self.layers, self.coarse = layers, coarse
+        self._band: BandPreconditioner | None = None
+        self._band_for: tuple | None = None  # (layers, coarse) of ``_band``
+
+    @property
+    def preconditioner(self) -> BandPreconditioner | None:
+        """The preconditioner of ``layers`` and ``coarse`` (built at its first use, kept while they stay; None:
+        unpreconditioned GMRES)."""
+        if self.layers is None or self.omega1.comm.size > 1:
+            return None
+        if self._band is None or self._band_for != (self.layers, self.coarse):
+            if self._band is not None:
+                self._band.destroy()
+            solver = self.omega1.sub.solver
+            P = amg_coarse_space(solver, self.coarse) if self.coarse and isinstance(solver, AMGSolver) else None
+            self._band = BandPreconditioner(self.omega1, self.omega2, self.a, self.b, layers=self.layers, coarse=P)
+            self._band_for = (self.layers, self.coarse)
+        return self._band
 
     @staticmethod
     def _response(part: PrimalPart, d: np.ndarray, solver=None) -> np.ndarray:
@@ -72,18 +108,20 @@ class KrylovInterface:
             return out
 
         count = [0]
+        band = self.preconditioner
+        right = (lambda y: y) if band is None else band.solve  # M⁻¹ (GMRES on (I − P₁P₂) M⁻¹)
 
-        def matvec(x: np.ndarray) -> np.ndarray:
+        def matvec(y: np.ndarray) -> np.ndarray:
             count[0] += 1
-            x = np.asarray(x).ravel()
+            x = right(np.asarray(y).ravel())
             return x - self.P1(self.P2(full(x)))[f]
 
         rhs = (-F21 - self.P1(F12))[f]
         A = spla.LinearOperator((f.size, f.size), matvec=matvec, dtype=float)
-        x, info = spla.gmres(
+        y, info = spla.gmres(
             A, rhs, rtol=eta, atol=0.0, restart=GMRES_RESTART, maxiter=max(GMRES_PRODUCTS // GMRES_RESTART, 1)
         )
-        d21 = full(x)
+        d21 = full(right(y))
         d12 = self.P2(d21) - F12
         self.products += count[0] + 1
         return d12, d21, count[0], info == 0
@@ -98,6 +136,7 @@ def krylov_newton_iterate(
     history = IterationHistory()
     t_off = time.perf_counter()
     kry = step.krylov_interface()
+    kry.layers, kry.coarse = nopt.krylov_layers, nopt.krylov_coarse
     history.time_offline_s = time.perf_counter() - t_off
     start = time.perf_counter()
     comm = step.comm

@@ -34,6 +34,10 @@ class InterfaceNewtonOptions:
     with the forces elsewhere held (``hybrid.fronts.LocalFronts``; the same
     fixed point; 3–5 steps instead of 8–11 where a near-rigid body rests on Γ_C at contrast 1e6: README,
     "Interface Newton").
+    ``krylov_layers`` and ``krylov_coarse`` (an Ω₁ solved by AMG: its matrix-free Newton–GMRES,
+    ``hybrid.krylov_newton``): GMRES preconditioned by the Robin response of the band of Ω₁ within
+    ``krylov_layers`` cells of γ and, beyond it, the coarse functions ``krylov_coarse`` levels below the finest of
+    Ω₁'s AMG (0: none); ``krylov_layers`` None: no preconditioner (``hybrid.krylov_band``).
     """
 
     strategy: str = "condensed"
@@ -41,6 +45,8 @@ class InterfaceNewtonOptions:
     max_corrections: int = 8
     chunk: int = 128  #: right-hand sides per multi-RHS back-solve of the offline condensation
     front_window: int = 8
+    krylov_layers: int | None = 2
+    krylov_coarse: int = 1
 
     def __post_init__(self) -> None:
         if (
@@ -50,6 +56,17 @@ class InterfaceNewtonOptions:
         ):
             raise InputError(
                 f"interface Newton: front_window must be an integer >= 0 (0: off), got {self.front_window!r}"
+            )
+        for name in ("krylov_layers", "krylov_coarse"):
+            value = getattr(self, name)
+            if (value is not None or name == "krylov_coarse") and (
+                isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 0
+            ):
+                raise InputError(f"interface Newton: {name} must be an integer >= 0, got {value!r}")
+        if self.krylov_layers == 0 and self.krylov_coarse == 0:
+            raise InputError(
+                "interface Newton: krylov_layers and krylov_coarse are both 0 (no Ω₁ model); "
+                "krylov_layers=None turns the preconditioner off"
             )
         if self.strategy not in ("condensed", "interface"):
             raise InputError(f"unknown interface Newton strategy {self.strategy!r}; choose 'condensed' or 'interface'")

@@ -70,15 +70,19 @@ def _amg_numbers(comm) -> dict:
     owned = V.dofmap.index_map.size_local
     x = np.concatenate(comm.allgather(V.tabulate_dof_coordinates()[:owned]))
     u = np.concatenate(comm.allgather(result.u.x.array.reshape(-1, 3)[:owned]))
+    preconditioned = result.step.krylov_interface().preconditioner is not None
     numbers = {"u": u[np.lexsort(np.round(x, 12).T)], "converged": result.converged, "e_u": result.e_u}
+    numbers["preconditioned"] = preconditioned
     return on_every_rank(numbers, comm=MPI.COMM_WORLD)
 
 
 @pytest.mark.mpi(sizes=(2,))
 def test_algorithm_1_with_an_amg_omega1_on_two_ranks_is_the_serial_answer():
     """The same solve on COMM_SELF and on two ranks (the AMG aggregates differ with the partition): both glued and
-    on the monolithic solution, node by node equal to the Krylov tolerance's AGREEMENT."""
+    on the monolithic solution, node by node equal to the Krylov tolerance's AGREEMENT; the GMRES preconditioned on
+    one process (``hybrid.krylov_band``), unpreconditioned on two."""
     serial, parallel = _amg_numbers(MPI.COMM_SELF), _amg_numbers(MPI.COMM_WORLD)
+    assert serial["preconditioned"] and not parallel["preconditioned"]
     for run in (serial, parallel):
         assert run["converged"] and run["e_u"] <= AGREEMENT
     assert np.abs(parallel["u"] - serial["u"]).max() <= AGREEMENT * np.abs(serial["u"]).max()

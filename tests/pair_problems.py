@@ -39,11 +39,11 @@ STRATA_PATHS = {
 
 
 def pressed_pair(
-    m, lower: Body, upper: Body, top, *, upper_slave: bool = True, friction=None, basis: str = "standard"
+    m, lower: Body, upper: Body, top, *, upper_slave: bool = True, friction=None, basis: str | None = None
 ) -> TwoBodyProblem:
     """The upper body of the pair mesh ``m`` pressed onto the lower one: the lower clamped at its bottom, the
     upper's top moved by ``top`` (a vector or a callable of x); the slave surface the upper's (``upper_slave``) or
-    the lower's; ``basis`` of the pressure (``ContactPair.basis``)."""
+    the lower's; ``basis`` of the pressure (``ContactPair.basis``, None: its default)."""
     pair = (T.UPPER_BOTTOM, T.LOWER_TOP) if upper_slave else (T.LOWER_TOP, T.UPPER_BOTTOM)
     return TwoBodyProblem(
         m.mesh,
@@ -55,10 +55,10 @@ def pressed_pair(
     )
 
 
-def hertz_cylinder_pair(slave: str, refinement: float, basis: str = "standard") -> TwoBodyProblem:
+def hertz_cylinder_pair(slave: str, refinement: float, basis: str | None = None) -> TwoBodyProblem:
     """A cylinder (R = 5, E = 2, ν = 0.25) pressed by 1.1e-3 onto a block (E = 1, ν = 0.3), contact cells
     a/(20·``refinement``) with a = 0.05, on one process; ``slave``: "cylinder" or "block", the slave surface;
-    ``basis`` of the pressure (``ContactPair.basis``)."""
+    ``basis`` of the pressure (``ContactPair.basis``, None: its default)."""
     m = cylinder_on_block(5.0, 0.05, refinement=refinement, comm=MPI.COMM_SELF)
     lower, upper = Body(T.LOWER, 1.0, 0.3), Body(T.UPPER, 2.0, 0.25)
     return pressed_pair(m, lower, upper, (0.0, -1.1e-3), upper_slave=slave == "cylinder", basis=basis)

@@ -101,16 +101,17 @@ class ContactPair:
     ``rule``: ``"segments"`` (segment-to-segment, ``fem.mortar``) or ``"vertices"`` (one-pass node-to-segment,
     which fails the contact patch test on non-matching meshes: for comparison only); ``friction``: a
     ``Friction`` law on the relative slip of the two surfaces (``fem.two_body_friction``), None: frictionless;
-    ``basis``: of the penalty pressure on the slave surface (``fem.mortar.weight_functions``), ``"standard"``
-    (P1 hat functions) or ``"dual"`` (the biorthogonal basis: the nodal pressures are the nodal values of the
-    gap's local projection, accurate to the contact edge; segment-to-segment rule only)."""
+    ``basis``: of the penalty pressure on the slave surface (``fem.mortar.weight_functions``), ``"dual"`` (the
+    biorthogonal basis: the nodal pressures are the nodal values of the gap's local projection, accurate up to
+    the contact edge; segment-to-segment rule only) or ``"standard"`` (P1 hat functions); None: dual with the
+    segment-to-segment rule, standard with the node-to-segment one."""
 
     slave: int
     master: int
     quadrature_degree: int = 3
     rule: str = "segments"
     friction: Friction | None = None
-    basis: str = "standard"
+    basis: str | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "slave", _tag(self.slave, "ContactPair.slave"))
@@ -122,6 +123,8 @@ class ContactPair:
             raise InputError(f"ContactPair.quadrature_degree must be an integer in [1, 10], got {degree!r}")
         if self.rule not in ("segments", "vertices"):
             raise InputError(f"ContactPair.rule must be 'segments' or 'vertices', got {self.rule!r}")
+        if self.basis is None:
+            object.__setattr__(self, "basis", "dual" if self.rule == "segments" else "standard")
         if self.basis not in ("standard", "dual"):
             raise InputError(f"ContactPair.basis must be 'standard' or 'dual', got {self.basis!r}")
         if self.basis == "dual" and self.rule != "segments":

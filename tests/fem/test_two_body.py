@@ -215,6 +215,20 @@ def test_the_pressure_the_pair_transmits_at_a_20(slave):
     assert _hertz_l2(t_standard, t_standard.pressure, h)[0] > l2
 
 
+def test_the_pressure_basis_of_a_pair():
+    """Dual by default for a frictionless segment-to-segment pair, standard with friction or node-to-segment; the
+    dual basis refuses the node-to-segment rule, and an unknown basis is refused."""
+    assert ContactPair(1, 2).basis == "dual"
+    assert ContactPair(1, 2, friction=fc.Friction("coulomb", mu=0.3)).basis == "standard"
+    assert ContactPair(1, 2, rule="vertices").basis == "standard"
+    assert ContactPair(1, 2, basis="standard").basis == "standard"
+    assert ContactPair(1, 2, friction=fc.Friction("tresca", threshold=0.1), basis="dual").basis == "dual"
+    with pytest.raises(InputError, match="needs the segment-to-segment rule"):
+        ContactPair(1, 2, rule="vertices", basis="dual")
+    with pytest.raises(InputError, match="must be 'standard' or 'dual'"):
+        ContactPair(1, 2, basis="biorthogonal")
+
+
 def test_methods_that_cannot_do_two_bodies_refuse():
     problem = _stacked(2, 3)
     for method in ("mixed", "mixed-monolithic", "mixed-ms"):

@@ -22,9 +22,11 @@ E1, NU1, E2, NU2 = 1.0, 0.3, 5.0, 0.2
 H1, H2 = 0.5, 0.4
 
 
-def _stacked(n_lower=7, n_upper=10, *, slave="upper", d=0.01, gap=0.0, rule="segments", dim=2, nus=(NU1, NU2)):
+def _stacked(
+    n_lower=7, n_upper=10, *, slave="upper", d=0.01, gap=0.0, rule="segments", dim=2, nus=(NU1, NU2), basis=None
+):
     """The two blocks pressed together by u_y = −d on the upper top: rollers on the bottom and the left sides
-    (the blocks expand sideways freely: they slide along each other where ν₁ ≠ ν₂)."""
+    (the blocks expand sideways freely: they slide along each other where ν₁ ≠ ν₂); ``basis`` of the pressure."""
     m = two_blocks(n_lower, n_upper, heights=(H1, H2), gap=gap, dim=dim)
     up = dim - 1
     pair = (T.UPPER_BOTTOM, T.LOWER_TOP) if slave == "upper" else (T.LOWER_TOP, T.UPPER_BOTTOM)
@@ -35,7 +37,7 @@ def _stacked(n_lower=7, n_upper=10, *, slave="upper", d=0.01, gap=0.0, rule="seg
         m.cell_tags,
         m.facet_tags,
         bodies=(Body(T.LOWER, E1, nus[0]), Body(T.UPPER, E2, nus[1])),
-        pair=ContactPair(*pair, rule=rule),
+        pair=ContactPair(*pair, rule=rule, basis=basis),
         supports=(
             Support(T.LOWER_BOTTOM, components=(up,)),
             Support(T.LOWER_LEFT, components=(0,)),
@@ -53,12 +55,13 @@ def _pressure(d, gap, delta, nus=(NU1, NU2)):
     return max(d - gap, 0.0) / (H1 / soft(E1, nus[0]) + H2 / soft(E2, nus[1]) + delta)
 
 
+@pytest.mark.parametrize("basis", ["dual", "standard"])
 @pytest.mark.parametrize("slave", ["upper", "lower"])
-def test_patch_test_non_matching_meshes_transmits_a_uniform_pressure(slave):
-    """7 against 10 cells across, either side the slave: the pressure is the exact constant to round-off on both
-    surfaces, the pressure the pair transmits too at every quadrature point, and the forces on the two bodies are
-    equal and opposite to round-off."""
-    result = fc.solve(_stacked(slave=slave), "primal-monolithic")
+def test_patch_test_non_matching_meshes_transmits_a_uniform_pressure(slave, basis):
+    """7 against 10 cells across, either side the slave, either pressure basis: the pressure is the exact constant
+    to round-off on both surfaces, the pressure the pair transmits too at every quadrature point, and the forces on
+    the two bodies are equal and opposite to round-off."""
+    result = fc.solve(_stacked(slave=slave, basis=basis), "primal-monolithic")
     p = _pressure(0.01, 0.0, result.delta)
     for profile in (result.slave, result.master):
         assert np.max(np.abs(profile.sigma_c + p)) < 1e-9 * p

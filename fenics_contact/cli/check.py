@@ -241,7 +241,7 @@ def _check_pair(case: PairCase, args: argparse.Namespace, comm: MPI.Comm) -> int
         f"  pair: slave {case.pair.slave} ({_owned(problem.facet_tags.find(problem.pair.slave), n_facets, comm)} "
         f"facets, body {slave_body}), master {case.pair.master} "
         f"({_owned(problem.facet_tags.find(problem.pair.master), n_facets, comm)} facets), "
-        f"{case.pair.rule} rule of degree {case.pair.quadrature_degree}"
+        f"{case.pair.rule} rule of degree {case.pair.quadrature_degree}, {problem.pair.basis} pressure basis"
         + (f", {case.friction.describe()} on the relative slip" if case.friction is not None else ", frictionless")
     )
     refusal = _pair_ms_refusal(case, problem, options.hybrid.layers)

@@ -32,7 +32,9 @@ H1, H2, D = 0.5, 0.4, 0.01
 TRACTION_DEGREE = 8
 
 
-def patch(n_lower: int, n_upper: int, slave: str, rule: str, *, dim: int = 2, degree: int = 3) -> tuple[float, float]:
+def patch(
+    n_lower: int, n_upper: int, slave: str, rule: str, *, dim: int = 2, degree: int = 3, basis: str | None = None
+) -> tuple[float, float]:
     """The largest relative error of the nodal pressure on either surface, and the force imbalance."""
     materials = ((1.0, 0.3), (5.0, 0.2))
     m = fc.two_blocks(n_lower, n_upper, heights=(H1, H2), dim=dim)
@@ -46,7 +48,7 @@ def patch(n_lower: int, n_upper: int, slave: str, rule: str, *, dim: int = 2, de
         m.cell_tags,
         m.facet_tags,
         bodies=(fc.Body(T.LOWER, *materials[0]), fc.Body(T.UPPER, *materials[1])),
-        pair=fc.ContactPair(*pair, quadrature_degree=degree, rule=rule),
+        pair=fc.ContactPair(*pair, quadrature_degree=degree, rule=rule, basis=basis),
         supports=(
             fc.Support(T.LOWER_BOTTOM, components=(up,)),
             fc.Support(T.LOWER_LEFT, components=(0,)),
@@ -105,29 +107,32 @@ def quadrature_cost(n: int) -> str:
 RADIUS, A = 5.0, 0.05  #: the cylinder's radius and the expected contact half-width
 
 
-def hertz_problem(m, slave: str, depth: float) -> fc.TwoBodyProblem:
+def hertz_problem(m, slave: str, depth: float, basis: str | None = None) -> fc.TwoBodyProblem:
     """An elastic cylinder (E = 2, ν = 0.25) pressed by ``depth`` onto a block (E = 1, ν = 0.3) on the mesh ``m``
-    (``cylinder_on_block``); ``slave``: "cylinder" or "block"."""
+    (``cylinder_on_block``); ``slave``: "cylinder" or "block"; ``basis`` of the pressure (None: the default)."""
     surfaces = (T.UPPER_BOTTOM, T.LOWER_TOP) if slave == "cylinder" else (T.LOWER_TOP, T.UPPER_BOTTOM)
     return fc.TwoBodyProblem(
         m.mesh,
         m.cell_tags,
         m.facet_tags,
         bodies=(fc.Body(T.LOWER, 1.0, 0.3), fc.Body(T.UPPER, 2.0, 0.25)),
-        pair=fc.ContactPair(*surfaces),
+        pair=fc.ContactPair(*surfaces, basis=basis),
         supports=(fc.Support(T.LOWER_BOTTOM), fc.Support(T.UPPER_TOP, (0.0, -depth))),
     )
 
 
 class TractionErrors(NamedTuple):
-    """The transmitted pressure against Hertz on one face (a and p₀ from its own resultant): relative L² error,
-    its part farther than two contact cells from x = ±a, the peak error, and the L² error of the best P1 pressure
-    on the slave nodes (the L² projection of the exact profile: what any P1 pressure on them can reach)."""
+    """The pressure profile of the pair against Hertz on one face (a and p₀ from its own resultant): the P1
+    interpolant Σ_p λ_p N_p of the nodal pressures (``PairTraction.nodal``): its relative L² error, its part farther
+    than two contact cells from x = ±a, its peak error; the L² error of the best P1 pressure on the slave nodes
+    (the L² projection of the exact profile: what any P1 pressure on them can reach), and that of the field the
+    penalty applies (``PairTraction.pressure``: Σ_p λ_p φ_p, the interpolant itself with the standard basis)."""
 
     l2: float
     interior: float
     peak: float
     best: float
+    applied: float
 
 
 def traction_errors(result, side: str, h: float) -> TractionErrors:
@@ -137,7 +142,7 @@ def traction_errors(result, side: str, h: float) -> TractionErrors:
     r_star, e_star = hertz_pair((RADIUS, np.inf), (2.0, 1.0), (0.25, 0.3))
     t = transmitted_pressure(result, TRACTION_DEGREE)
     x = (t.points if side == "slave" else t.master_points)[:, 0]
-    w, p = t.weights, t.pressure
+    w, p = t.weights, t.nodal
     force = float(np.sum(w * p))
     a = 2.0 * np.sqrt(r_star * force / (np.pi * e_star))
     p0 = 2.0 * force / (np.pi * a)
@@ -158,15 +163,16 @@ def traction_errors(result, side: str, h: float) -> TractionErrors:
         float(np.sqrt(np.sum((w * (p - exact) ** 2)[far])) / norm),
         float(p.max() / p0 - 1.0),
         float(best),
+        float(np.sqrt(np.sum(w * (t.pressure - exact) ** 2)) / norm),
     )
 
 
-def hertz(refinement: float, slave: str, *, depth: float = 1.1e-3) -> list[str]:
-    """Two-body Hertz (``hertz_problem``) at contact cells a/(20 r): per surface the nodal pressure's errors and
-    the L² error of the pressure the pair transmits."""
+def hertz(refinement: float, slave: str, basis: str, *, depth: float = 1.1e-3) -> list[str]:
+    """Two-body Hertz (``hertz_problem``) at contact cells a/(20 r) with the pressure ``basis``: per surface the
+    nodal pressure's errors and the L² errors of the pressure profile and of the applied field."""
     start = time.perf_counter()
     m = fc.cylinder_on_block(RADIUS, A, refinement=refinement)
-    result = fc.solve(hertz_problem(m, slave, depth), "primal-monolithic")
+    result = fc.solve(hertz_problem(m, slave, depth, basis), "primal-monolithic")
     elapsed = time.perf_counter() - start
     r_star, e_star = hertz_pair((RADIUS, np.inf), (2.0, 1.0), (0.25, 0.3))
     h = A / (20 * refinement)
@@ -176,10 +182,11 @@ def hertz(refinement: float, slave: str, *, depth: float = 1.1e-3) -> list[str]:
         e = hertz_errors(profile, radius=r_star, E=e_star, nu=0.0, h_contact=h)
         t = traction_errors(result, face, h)
         rows.append(
-            f"| {refinement:g} | {m.mesh.topology.index_map(2).size_local} | {slave} | {side} | {e.force:.5e} | "
-            f"{e.a:.4f} | "
+            f"| {refinement:g} | {m.mesh.topology.index_map(2).size_local} | {slave} | {basis} | {side} | "
+            f"{e.force:.5e} | {e.a:.4f} | "
             f"{e.half_width_cells:+.2f} | {100 * e.peak_error:+.2f}% | {100 * e.l2_error:.2f}% | "
-            f"{100 * t.l2:.2f}% | {result.newton.steps} | {result.force_balance():.1e} | {elapsed:.1f} |"
+            f"{100 * t.l2:.2f}% | {100 * t.applied:.2f}% | {result.newton.steps} | {result.force_balance():.1e} | "
+            f"{elapsed:.1f} |"
         )
     return rows
 
@@ -209,14 +216,15 @@ def _interpolant_error(x: np.ndarray, a: float) -> float:
 
 
 def hertz_edge(
-    refinement: float, depth: float, slave: str, *, delta_scale: float = 1.0, size: float = 1.0
+    refinement: float, depth: float, slave: str, *, delta_scale: float = 1.0, size: float = 1.0, basis: str = "dual"
 ) -> list[str]:
     """Two-body Hertz as in ``hertz`` at one depth, the block ``size`` times wider and deeper, δ times
     ``delta_scale``: per surface the L² error of the nodal pressure, its part from the nodes farther than two
     contact cells from the edges x = ±a, the L² error of the exact profile's own P1 interpolant on the same
-    nodes (what a nodal pressure can reach at that spacing), and the transmitted pressure's ``TractionErrors``."""
+    nodes (what a nodal pressure can reach at that spacing), and the pressure profile's ``TractionErrors``; with
+    the pressure ``basis``."""
     m = fc.cylinder_on_block(RADIUS, A, refinement=refinement, width=80.0 * size, depth=40.0 * size)
-    problem = hertz_problem(m, slave, depth)
+    problem = hertz_problem(m, slave, depth, basis)
     delta = None
     if delta_scale != 1.0:
         delta = delta_scale * fc.solve(problem, "primal-monolithic").delta
@@ -234,7 +242,8 @@ def hertz_edge(
         interior = np.sqrt(np.sum((w * (p - exact) ** 2)[far]) / np.sum(w * exact**2))
         t = traction_errors(result, face, h)
         rows.append(
-            f"| {refinement:g} | {depth:.3g} | {size:g} | {delta_scale:g} | {slave} | {side} | {e.a / h:.1f} | "
+            f"| {refinement:g} | {depth:.3g} | {size:g} | {delta_scale:g} | {basis} | {slave} | {side} | "
+            f"{e.a / h:.1f} | "
             f"{e.half_width_cells:+.2f} | {100 * e.peak_error:+.2f}% | {100 * e.l2_error:.2f}% | "
             f"{100 * interior:.2f}% | {100 * _interpolant_error(x, e.a):.2f}% | {100 * t.l2:.2f}% | "
             f"{100 * t.interior:.2f}% | {100 * t.peak:+.2f}% | {100 * t.best:.2f}% |"
@@ -242,12 +251,12 @@ def hertz_edge(
     return rows
 
 
-def edge_nodes(refinement: float, slave: str, *, depth: float = 1.1e-3, count: int = 5) -> list[str]:
+def edge_nodes(refinement: float, slave: str, basis: str, *, depth: float = 1.1e-3, count: int = 5) -> list[str]:
     """The slave nodes at the contact edge x = +a (the last ``count`` - 1 active ones and the first open one): the
     nodal penalty pressure λ_p = (s̃_p)⁺/δ (the transmitted pressure's nodal value) and the nodal pressure σ_c
     against Hertz, a and p₀ from the slave's resultant."""
     m = fc.cylinder_on_block(RADIUS, A, refinement=refinement)
-    result = fc.solve(hertz_problem(m, slave, depth), "primal-monolithic")
+    result = fc.solve(hertz_problem(m, slave, depth, basis), "primal-monolithic")
     Q, V = result.quadrature, result.u.function_space
     u = result.u.x.array[: Q.B.shape[1]]
     lam = np.maximum(Q.B @ u - Q.gap, 0.0) / result.delta
@@ -264,7 +273,7 @@ def edge_nodes(refinement: float, slave: str, *, depth: float = 1.1e-3, count: i
     for i in range(last - count + 2, last + 2):
         exact = np.sqrt(max(1.0 - (x[i] / e.a) ** 2, 0.0))
         rows.append(
-            f"| {refinement:g} | {slave} | {x[i] / e.a:.3f} | {lam[i] / e.p0:.3f} | {exact:.3f} | "
+            f"| {refinement:g} | {slave} | {basis} | {x[i] / e.a:.3f} | {lam[i] / e.p0:.3f} | {exact:.3f} | "
             f"{sigma[i] / e.p0:.3f} |"
         )
     return rows
@@ -355,16 +364,18 @@ def main() -> None:
         "|F_slave + F_master|/|F|. 3D: two boxes 1 × 1, rollers on the faces y = 0 and 1 as well, the slave "
         "triangles clipped against the master's.",
         "",
-        "| dim | cells across (lower/upper) | slave | quadrature | pressure error | force balance |",
-        "|---|---|---|---|---|---|",
+        "| dim | cells across (lower/upper) | slave | quadrature | pressure basis | pressure error | force balance |",
+        "|---|---|---|---|---|---|---|",
     ]
-    cases = [(2, 7, 10, s, r, 3) for r in ("segments", "vertices") for s in ("upper", "lower")]
-    cases += [(3, 3, 4, s, "segments", 3) for s in ("upper", "lower")]
-    cases += [(3, 5, 7, "upper", "segments", k) for k in (2, 3)] + [(3, 3, 4, "upper", "vertices", 3)]
-    for dim, nl, nu, slave, rule, degree in cases:
-        error, balance = patch(nl, nu, slave, rule, dim=dim, degree=degree)
+    cases = [(2, 7, 10, s, "segments", 3, b) for b in ("dual", "standard") for s in ("upper", "lower")]
+    cases += [(2, 7, 10, s, "vertices", 3, "standard") for s in ("upper", "lower")]
+    cases += [(3, 3, 4, s, "segments", 3, b) for b in ("dual", "standard") for s in ("upper", "lower")]
+    cases += [(3, 5, 7, "upper", "segments", k, "dual") for k in (2, 3)]
+    cases += [(3, 3, 4, "upper", "vertices", 3, "standard")]
+    for dim, nl, nu, slave, rule, degree, basis in cases:
+        error, balance = patch(nl, nu, slave, rule, dim=dim, degree=degree, basis=basis)
         label = "node-to-segment (vertices)" if rule == "vertices" else f"segment-to-segment, degree {degree}"
-        lines.append(f"| {dim} | {nl}/{nu} | {slave} | {label} | {error:.1e} | {balance:.1e} |")
+        lines.append(f"| {dim} | {nl}/{nu} | {slave} | {label} | {basis} | {error:.1e} | {balance:.1e} |")
     lines += [
         "",
         "## 2. Cost of the 3D segment-to-segment quadrature",
@@ -386,20 +397,23 @@ def main() -> None:
         "",
         "Cylinder R = 5 (E = 2, ν = 0.25) pressed by 1.1e-3 onto a block 4 × 2 (E = 1, ν = 0.3); contact cells "
         "a/(20 r) on both bodies, non-matching; R* = R, 1/E* = (1 − ν₁²)/E₁ + (1 − ν₂²)/E₂; F read off each "
-        "surface, a and p₀ from F. Half-width: half the extent of the nodes carrying contact forces, its error in "
-        "contact cells. L² error: of the nodal pressure (σ_c, the nodal contact forces over the lumped weights; "
-        "the sum over the nodes). Transmitted: of the pressure the pair transmits, the P1 field of the nodal "
-        "penalty pressures (s̃_p)⁺/δ on the slave facets, at the segment-to-segment quadrature points (degree "
-        f"{TRACTION_DEGREE} on each piece) on the slave face and at their closest points on the master face, "
-        "a and p₀ from its own resultant.",
+        "surface, a and p₀ from F; the pressure basis of the penalty dual (the default) or standard. Half-width: "
+        "half the extent of the nodes carrying contact forces, its error in contact cells. L² error: of the nodal "
+        "pressure (σ_c, the nodal contact forces over the lumped weights; the sum over the nodes). Pressure L²: of "
+        "the pressure profile, the P1 interpolant of the nodal penalty pressures λ_p = (s̃_p)⁺/δ on the slave "
+        f"facets, at the segment-to-segment quadrature points (degree {TRACTION_DEGREE} on each piece) on the slave "
+        "face and at their closest points on the master face, a and p₀ from its own resultant. Applied L²: of the "
+        "field the penalty applies, Σ_p λ_p φ_p (φ_p the basis; the same as the pressure profile with the standard "
+        "basis, with the dual basis a field that reproduces constants only).",
         "",
-        "| r | cells | slave | surface | F | a | (a_h − a)/h | p_max/p₀ − 1 | L² error | transmitted L² | "
-        "Newton steps | balance | time [s] |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "| r | cells | slave | basis | surface | F | a | (a_h − a)/h | p_max/p₀ − 1 | L² error | pressure L² | "
+        "applied L² | Newton steps | balance | time [s] |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in args.refinements:
         for slave in ("cylinder", "block"):
-            lines += hertz(r, slave)
+            for basis in ("dual", "standard"):
+                lines += hertz(r, slave, basis)
     lines += [
         "",
         "### Algorithm 1 on the Hertz pair",
@@ -419,20 +433,21 @@ def main() -> None:
         "### Where the L² error at a/20 comes from",
         "",
         "The same pair at five depths (the contact edge crosses a contact cell), then at one depth with the block "
-        "twice as wide and deep (size 2) and with δ/100, 10δ, 100δ and 1000δ. L² error: all nodes; interior: "
-        "without the nodes within two contact cells of x = ±a; P1 interpolant: the L² error of the exact profile's own P1 interpolant on "
-        "the surface's nodes (what a nodal pressure can reach at that spacing). Transmitted: the L² error of the "
-        "transmitted pressure (as above), its interior part, its peak error, and the L² error of the best P1 "
-        "pressure on the slave nodes (the L² projection of the exact profile).",
+        "twice as wide and deep (size 2) and with δ/100, 10δ, 100δ and 1000δ, both pressure bases. L² error: all "
+        "nodes; interior: without the nodes within two contact cells of x = ±a; P1 interpolant: the L² error of the "
+        "exact profile's own P1 interpolant on the surface's nodes (what a nodal pressure can reach at that "
+        "spacing). Pressure: the L² error of the pressure profile (as above), its interior part, its peak error, "
+        "and the L² error of the best P1 pressure on the slave nodes (the L² projection of the exact profile).",
         "",
-        "| r | depth | size | δ factor | slave | surface | a/h | (a_h − a)/h | p_max/p₀ − 1 | L² error | interior | "
-        "P1 interpolant | transmitted L² | transmitted interior | transmitted peak | best P1 |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "| r | depth | size | δ factor | basis | slave | surface | a/h | (a_h − a)/h | p_max/p₀ − 1 | L² error | "
+        "interior | P1 interpolant | pressure L² | pressure interior | pressure peak | best P1 |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in args.edge_refinements:
         for depth in np.linspace(1.0e-3, 1.2e-3, 5):
             for slave in ("cylinder", "block"):
-                lines += hertz_edge(r, float(depth), slave)
+                for basis in ("dual", "standard"):
+                    lines += hertz_edge(r, float(depth), slave, basis=basis)
     if args.edge_refinements:
         lines += hertz_edge(args.edge_refinements[0], 1.1e-3, "cylinder", size=2.0)
         for scale in (0.01, 10.0, 100.0, 1000.0):
@@ -441,14 +456,15 @@ def main() -> None:
         lines += [
             "",
             "The slave nodes at the contact edge x = +a at the first edge refinement and the depth of the table "
-            "above: the nodal penalty pressure λ_p = (s̃_p)⁺/δ (the nodal value of the transmitted pressure), the "
+            "above: the nodal penalty pressure λ_p = (s̃_p)⁺/δ (the nodal value of the pressure profile), the "
             "exact profile and the nodal pressure σ_c, over p₀ (a, p₀ from the slave's resultant).",
             "",
-            "| r | slave | x/a | λ_p/p₀ | exact/p₀ | nodal σ_c/p₀ |",
-            "|---|---|---|---|---|---|",
+            "| r | slave | basis | x/a | λ_p/p₀ | exact/p₀ | nodal σ_c/p₀ |",
+            "|---|---|---|---|---|---|---|",
         ]
         for slave in ("cylinder", "block"):
-            lines += edge_nodes(args.edge_refinements[0], slave)
+            for basis in ("dual", "standard"):
+                lines += edge_nodes(args.edge_refinements[0], slave, basis)
         lines += [
             "",
             "A penalty at every Gauss point instead (the same pair at the first edge refinement, the solve on the "

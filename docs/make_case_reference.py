@@ -406,6 +406,11 @@ PAIR_KEYS = {
         '"segments"',
         "segment-to-segment mortar gaps, or one-pass node-to-segment (fails the patch test: for comparison)",
     ),
+    ("pair", "basis"): (
+        "`dual` or `standard`",
+        "dual frictionless, standard with friction",
+        "the pressure basis: the dual (biorthogonal) mortar basis or the P1 hat functions (`ContactPair.basis`)",
+    ),
     ("friction", "law"): (
         "`coulomb` or `tresca`",
         "required",

@@ -38,27 +38,30 @@ STRATA_PATHS = {
 }
 
 
-def pressed_pair(m, lower: Body, upper: Body, top, *, upper_slave: bool = True, friction=None) -> TwoBodyProblem:
+def pressed_pair(
+    m, lower: Body, upper: Body, top, *, upper_slave: bool = True, friction=None, basis: str | None = None
+) -> TwoBodyProblem:
     """The upper body of the pair mesh ``m`` pressed onto the lower one: the lower clamped at its bottom, the
     upper's top moved by ``top`` (a vector or a callable of x); the slave surface the upper's (``upper_slave``) or
-    the lower's."""
+    the lower's; ``basis`` of the pressure (``ContactPair.basis``, None: its default)."""
     pair = (T.UPPER_BOTTOM, T.LOWER_TOP) if upper_slave else (T.LOWER_TOP, T.UPPER_BOTTOM)
     return TwoBodyProblem(
         m.mesh,
         m.cell_tags,
         m.facet_tags,
         bodies=(lower, upper),
-        pair=ContactPair(*pair, friction=friction),
+        pair=ContactPair(*pair, friction=friction, basis=basis),
         supports=(Support(T.LOWER_BOTTOM), Support(T.UPPER_TOP, top)),
     )
 
 
-def hertz_cylinder_pair(slave: str, refinement: float) -> TwoBodyProblem:
+def hertz_cylinder_pair(slave: str, refinement: float, basis: str | None = None) -> TwoBodyProblem:
     """A cylinder (R = 5, E = 2, ν = 0.25) pressed by 1.1e-3 onto a block (E = 1, ν = 0.3), contact cells
-    a/(20·``refinement``) with a = 0.05, on one process; ``slave``: "cylinder" or "block", the slave surface."""
+    a/(20·``refinement``) with a = 0.05, on one process; ``slave``: "cylinder" or "block", the slave surface;
+    ``basis`` of the pressure (``ContactPair.basis``, None: its default)."""
     m = cylinder_on_block(5.0, 0.05, refinement=refinement, comm=MPI.COMM_SELF)
     lower, upper = Body(T.LOWER, 1.0, 0.3), Body(T.UPPER, 2.0, 0.25)
-    return pressed_pair(m, lower, upper, (0.0, -1.1e-3), upper_slave=slave == "cylinder")
+    return pressed_pair(m, lower, upper, (0.0, -1.1e-3), upper_slave=slave == "cylinder", basis=basis)
 
 
 def tilted_pair(comm: MPI.Comm, cells: tuple[int, int], dim: int = 2) -> TwoBodyProblem:

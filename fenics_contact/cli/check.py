@@ -26,7 +26,10 @@ from fenics_contact.cli.pair import PAIR_METHODS, check_coarse_size, pair_run_op
 from fenics_contact.cli.signals import stdout_lost
 from fenics_contact.cli.solve import _mesh, _model
 from fenics_contact.errors import FenicsContactError, InputError
+from fenics_contact.hybrid.two_body import strip_cells
 from fenics_contact.methods import METHODS as CATALOGUE
+from fenics_contact.multiscale.pair import bulk_meshes
+from fenics_contact.multiscale.pair_replica import PairReplica
 from fenics_contact.problem.case import Case, MeshFile, load_case, parse_override
 from fenics_contact.problem.geometry import ContactMesh, query_gmsh_file
 from fenics_contact.problem.models3d import MODEL_3D
@@ -238,10 +241,10 @@ def _check_pair(case: PairCase, args: argparse.Namespace, comm: MPI.Comm) -> int
         f"  pair: slave {case.pair.slave} ({_owned(problem.facet_tags.find(problem.pair.slave), n_facets, comm)} "
         f"facets, body {slave_body}), master {case.pair.master} "
         f"({_owned(problem.facet_tags.find(problem.pair.master), n_facets, comm)} facets), "
-        f"{case.pair.rule} rule of degree {case.pair.quadrature_degree}"
+        f"{case.pair.rule} rule of degree {case.pair.quadrature_degree}, {problem.pair.basis} pressure basis"
         + (f", {case.friction.describe()} on the relative slip" if case.friction is not None else ", frictionless")
     )
-    refusal = _pair_ms_refusal(case, problem)
+    refusal = _pair_ms_refusal(case, problem, options.hybrid.layers)
     if options.method == "primal-ms" and refusal is not None:
         raise refusal
     notes = [f"{m} can run" if m != "primal-ms" or refusal is None else f"{m} cannot ({refusal})" for m in PAIR_METHODS]
@@ -252,12 +255,15 @@ def _check_pair(case: PairCase, args: argparse.Namespace, comm: MPI.Comm) -> int
     return 0
 
 
-def _pair_ms_refusal(case: PairCase, problem) -> InputError | None:
-    """Why ``primal-ms`` cannot run the two-body case (as ``cli.pair`` would say), or None."""
+def _pair_ms_refusal(case: PairCase, problem, layers: int) -> InputError | None:
+    """Why ``primal-ms`` cannot run the two-body case (as ``cli.pair`` would say, then the run's bulk checks of
+    ``multiscale.pair.bulk_meshes`` on the strips of ``layers`` cell layers), or None (collective)."""
     if case.coarse_size is None:
         return InputError("--method primal-ms needs the coarse size: give mesh.coarse-size or mesh.H")
     try:
         check_coarse_size(problem, case.coarse_size)
+        serial = problem if problem.comm.size == 1 else PairReplica(problem).problem  # as the run: serial bulks
+        bulk_meshes(serial, strip_cells(serial, layers), case.coarse_size, layers)
     except InputError as error:
         return error
     return None

@@ -34,7 +34,20 @@ from dolfinx import mesh as dmesh
 from fenics_contact.errors import InputError
 from fenics_contact.fem import clipping
 
-__all__ = ["Surface", "Projection", "ContactQuadrature", "surface", "project", "contact_quadrature", "nodal_gaps"]
+__all__ = [
+    "BASES",
+    "Surface",
+    "Projection",
+    "ContactQuadrature",
+    "surface",
+    "project",
+    "contact_quadrature",
+    "nodal_gaps",
+    "weight_functions",
+]
+
+#: the bases of the penalty pressure on the slave surface (``weight_functions``)
+BASES = ("standard", "dual")
 
 #: barycentric tolerance of "the orthogonal projection lies in the facet"
 _INSIDE = 1e-10
@@ -221,6 +234,8 @@ class ContactQuadrature(NamedTuple):
     #: the relative displacement u_s(x_q) − u_m(π(x_q)) at each row, one row per component (row d q + c):
     #: B = diag(ν_q)ᵀ of it; the tangential slip of friction is its part orthogonal to ν
     relative: sp.csr_matrix | None = None
+    #: for points: those on slave facets that do not wholly face the master surface (``weight_functions``)
+    partial: np.ndarray | None = None
 
 
 def _cuts(slave: Surface, master: Surface) -> list[np.ndarray]:
@@ -299,49 +314,82 @@ def _slave_points(
 
 
 def contact_quadrature(
-    slave: Surface, master: Surface, num_dofs: int, bs: int, degree: int, *, nodal: bool = True, rule: str = "segments"
+    slave: Surface,
+    master: Surface,
+    num_dofs: int,
+    bs: int,
+    degree: int,
+    *,
+    nodal: bool = True,
+    rule: str = "segments",
+    basis: str = "standard",
 ) -> ContactQuadrature:
     """The contact quadrature of a slave and a master surface (module docstring); points that do not face
     the master surface are left out.  ``num_dofs``: the scalar DOFs of the vector P1 space of block size ``bs``.
 
-    ``nodal``: the mortar-weighted nodal gaps (``nodal_gaps``) instead of the Gauss points themselves.
+    ``nodal``: the mortar-weighted nodal gaps (``nodal_gaps``) instead of the Gauss points themselves, weighted
+    with the ``basis`` of the pressure (``weight_functions``: ``"standard"`` or ``"dual"``).
     ``rule``: ``"segments"`` (the module docstring) or ``"vertices"``: the one-pass node-to-segment rule (the
     slave vertices with lumped weights), which fails the patch test on non-matching meshes (kept to show it)."""
     if rule not in ("segments", "vertices"):
         raise InputError(f"the contact quadrature rule must be 'segments' or 'vertices', got {rule!r}")
+    if basis not in BASES:
+        raise InputError(f"the pressure basis must be one of {BASES}, got {basis!r}")
+    if basis == "dual" and rule == "vertices":
+        raise InputError("the dual pressure basis needs the segment-to-segment rule (rule='segments')")
     if slave.coords.shape[0] == 0:
         raise InputError("the slave contact surface has no facets")
     facet, bary, weights, hint = _slave_points(slave, master, degree, vertices=rule == "vertices")
     points = np.einsum("nk,nkd->nd", bary, slave.coords[facet])
     proj = project(points, master, hint=hint)
     keep = proj.found
+    partial = np.isin(facet, facet[~keep])  # the points of the slave facets that do not wholly face the master
     facet, bary, weights, points = facet[keep], bary[keep], weights[keep], points[keep]
     nu, gap, mfacet, mbary = proj.nu[keep], proj.gap[keep], proj.facet[keep], proj.bary[keep]
     n, k = points.shape[0], bary.shape[1]
     rows, cols, vals, comps = [], [], [], []
-    for blocks, basis, sign in ((slave.blocks[facet], bary, 1.0), (master.blocks[mfacet], mbary, -1.0)):
+    for blocks, values, sign in ((slave.blocks[facet], bary, 1.0), (master.blocks[mfacet], mbary, -1.0)):
         for j in range(k):
             for c in range(bs):
                 rows.append(np.arange(n))
                 cols.append(bs * blocks[:, j] + c)
-                vals.append(sign * basis[:, j])
+                vals.append(sign * values[:, j])
                 comps.append(np.full(n, c))
     rows, cols, vals, comps = (np.concatenate(a) for a in (rows, cols, vals, comps))
     B = sp.csr_matrix((vals * nu[rows, comps], (rows, cols)), shape=(n, num_dofs))
     relative = sp.csr_matrix((vals, (bs * rows + comps, cols)), shape=(bs * n, num_dofs))
-    Q = ContactQuadrature(points, weights, gap, nu, B, relative=relative)
+    Q = ContactQuadrature(points, weights, gap, nu, B, relative=relative, partial=partial[keep])
     if not nodal:
         return Q
+    phi = weight_functions(bary, partial[keep], basis)
     P = sp.csr_matrix(
-        (bary.ravel(), (slave.blocks[facet].ravel(), np.repeat(np.arange(n), k))), shape=(num_dofs // bs, n)
+        (phi.ravel(), (slave.blocks[facet].ravel(), np.repeat(np.arange(n), k))), shape=(num_dofs // bs, n)
     )
     return nodal_gaps(Q, P)
 
 
-def nodal_gaps(Q: ContactQuadrature, P: sp.csr_matrix) -> ContactQuadrature:
-    """The mortar-weighted nodal gaps of the quadrature Q: one row per slave node p (P[p, q] = N_p(x_q)),
+def weight_functions(bary: np.ndarray, partial: np.ndarray, basis: str) -> np.ndarray:
+    """The values φ_p(x) of the slave vertices' weight functions at points of barycentric coordinates ``bary``
+    (n, k) on their slave facets: the nodal gaps are s̃_p = ∫ φ_p s ds / ∫ φ_p ds and the pressure the penalty
+    applies is Σ_p λ_p φ_p.
 
-        w_p = Σ_q w_q N_p(x_q),   s̃_p(u) = (1/w_p) Σ_q w_q N_p(x_q) s_q(u),
+    ``"standard"``: φ_p = N_p, the P1 hat functions.  ``"dual"``: the biorthogonal basis ψ_p = (k + 1) N_p − 1 on each
+    facet of k vertices (3N_p − 1 on a segment, 4N_p − 1 on a triangle), ∫_F ψ_p N_q ds = δ_pq ∫_F N_p ds, so that
+    s̃_p is the nodal value of the gap's local (biorthogonal) projection onto P1, exact for a gap linear on the
+    facets, and the slave's nodal contact forces are λ_p ∫ N_p ds (no coupling through a mass matrix); the points
+    of facets that do not wholly face the master (``partial``, where biorthogonality is lost) keep N_p.  Both
+    bases sum to 1 on every facet: a uniform s gives s̃ = s and a uniform pressure (the patch test)."""
+    if basis == "standard":
+        return bary
+    k = bary.shape[1]
+    return np.where(partial[:, None], bary, (k + 1) * bary - 1.0)
+
+
+def nodal_gaps(Q: ContactQuadrature, P: sp.csr_matrix) -> ContactQuadrature:
+    """The mortar-weighted nodal gaps of the quadrature Q: one row per slave node p (P[p, q] = φ_p(x_q), the weight
+    functions of ``weight_functions``),
+
+        w_p = Σ_q w_q φ_p(x_q),   s̃_p(u) = (1/w_p) Σ_q w_q φ_p(x_q) s_q(u),
 
     with the penalty (1/δ) Σ_p w_p (s̃_p)⁺ s̃_p(v): as many constraints as slave nodes (a Gauss-point penalty
     over-constrains the contact and its pressure oscillates), the same s̃ = s for a uniform s (patch test),

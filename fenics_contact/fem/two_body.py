@@ -33,7 +33,14 @@ from fenics_contact.errors import InputError
 from fenics_contact.fem.contact import ContactProfile, NewtonHistory, NewtonOptions, profile_order
 from fenics_contact.fem.friction import FrictionProfile
 from fenics_contact.fem.linalg import SparseFactor, assemble_scipy
-from fenics_contact.fem.mortar import ContactQuadrature, Surface, contact_quadrature, project, surface
+from fenics_contact.fem.mortar import (
+    ContactQuadrature,
+    Surface,
+    contact_quadrature,
+    project,
+    surface,
+    weight_functions,
+)
 from fenics_contact.fem.newton import Advance, Check, Direction, StepState, semismooth_newton_loop
 from fenics_contact.fem.primal import default_penalty
 from fenics_contact.fem.two_body_mpi import solve_two_body_distributed
@@ -352,14 +359,17 @@ def surface_profile(
 class PairTraction(NamedTuple):
     """The normal contact pressure the pair transmits, at the points of a segment-to-segment quadrature of the
     slave surface: the slave points x_q, their closest points π(x_q) on the master surface, the weights w_q, the
-    directions ν_q (the master's inward unit normal at π(x_q)) and the pressure p_q ≥ 0, which pushes the slave
-    body along −ν_q and the master along +ν_q: the resultants ∓Σ_q w_q p_q ν_q, equal and opposite."""
+    directions ν_q (the master's inward unit normal at π(x_q)) and the pressure p_q, which pushes the slave
+    body along −ν_q and the master along +ν_q: the resultants ∓Σ_q w_q p_q ν_q, equal and opposite.  ``nodal``:
+    the P1 interpolant Σ_p λ_p N_p of the nodal pressures at the same points (with the standard basis, the
+    pressure itself; with the dual basis, the profile its nodal values describe)."""
 
     points: np.ndarray
     master_points: np.ndarray
     weights: np.ndarray
     nu: np.ndarray
     pressure: np.ndarray
+    nodal: np.ndarray
 
 
 def transmitted_pressure(solution: TwoBodySolution, degree: int | None = None) -> PairTraction:
@@ -367,10 +377,15 @@ def transmitted_pressure(solution: TwoBodySolution, degree: int | None = None) -
     of ``degree`` (None: the pair's ``quadrature_degree``).
 
     The contact term Σ_p (w_p/δ) (s̃_p)⁺ s̃_p(v) of the nodal gaps (``mortar.nodal_gaps``) is
-    Σ_q w_q p(x_q) s_q(v) with p = Σ_p λ_p N_p, λ_p = (s̃_p)⁺/δ: a P1 pressure on the slave facets, which the
-    quadrature integrates against both bodies' test functions.  It is that field, read at the points (the nodal
-    profiles σ_c are its consistent nodal forces over the lumped weights).  The penetration s_q at a point
-    itself carries no pressure: the penalty constrains only its mortar-weighted nodal means."""
+    Σ_q w_q p(x_q) s_q(v) with p = Σ_p λ_p φ_p, λ_p = (s̃_p)⁺/δ and φ_p the weight functions of the pair's
+    ``basis`` (``mortar.weight_functions``): a pressure on the slave facets, which the quadrature integrates
+    against both bodies' test functions.  It is that field, read at the points.  With the standard basis it is
+    the P1 field Σ_p λ_p N_p (the nodal profiles σ_c are its consistent nodal forces over the lumped weights).
+    With the dual basis ψ_p it has, on every slave facet, the resultant of the P1 interpolant Σ_p λ_p N_p of the
+    same nodal values (``PairTraction.nodal``) and gives the slave nodes the forces λ_p ∫ N_p ds; as a field it
+    reproduces constants only (its L² error is O(h) where the pressure varies), so the pressure profile is read
+    from the nodal values.  The penetration s_q at a point itself carries no pressure: the penalty constrains
+    only its weighted nodal means."""
     Q = solution.quadrature
     if solution.problem.comm.size > 1:
         raise InputError("transmitted_pressure runs on one process (the solution's quadrature is the gathered one)")
@@ -387,11 +402,12 @@ def transmitted_pressure(solution: TwoBodySolution, degree: int | None = None) -
     master = surface(V, problem.facet_tags, problem.pair.master)
     degree = problem.pair.quadrature_degree if degree is None else degree
     points = contact_quadrature(slave, master, n, bs, degree, nodal=False, rule=problem.pair.rule)
-    on = project(points.points, slave)  # each point on its slave facet: the P1 value from its vertices
-    pressure = np.sum(on.bary * nodal[slave.blocks[on.facet]], axis=1)
+    on = project(points.points, slave)  # each point on its slave facet: the values from its vertices
+    values = nodal[slave.blocks[on.facet]]
+    pressure = np.sum(weight_functions(on.bary, points.partial, problem.pair.basis) * values, axis=1)
     foot = project(points.points, master)
     closest = np.einsum("nk,nkd->nd", foot.bary, master.coords[foot.facet])
-    return PairTraction(points.points, closest, points.weights, points.nu, pressure)
+    return PairTraction(points.points, closest, points.weights, points.nu, pressure, np.sum(on.bary * values, axis=1))
 
 
 def solve_two_body(
@@ -437,7 +453,9 @@ def solve_two_body(
     slave = surface(V, problem.facet_tags, problem.pair.slave)
     master = surface(V, problem.facet_tags, problem.pair.master)
     delta = two_body_penalty(problem, slave, master, delta)
-    Q = contact_quadrature(slave, master, n, bs, problem.pair.quadrature_degree, rule=problem.pair.rule)
+    Q = contact_quadrature(
+        slave, master, n, bs, problem.pair.quadrature_degree, rule=problem.pair.rule, basis=problem.pair.basis
+    )
     if initial is None and state is not None:
         initial = state.u
     if problem.friction is not None:

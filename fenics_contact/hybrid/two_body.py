@@ -284,7 +284,9 @@ def solve_two_body_hybrid(
     slave = surface(V, problem.facet_tags, problem.pair.slave)
     master = surface(V, problem.facet_tags, problem.pair.master)
     delta = two_body_penalty(problem, slave, master, delta)
-    Q = contact_quadrature(slave, master, n, bs, problem.pair.quadrature_degree, rule=problem.pair.rule)
+    Q = contact_quadrature(
+        slave, master, n, bs, problem.pair.quadrature_degree, rule=problem.pair.rule, basis=problem.pair.basis
+    )
     d2 = split.dofs[1]
     loc2 = _local(d2, n)
     Q2 = ContactQuadrature(Q.points, Q.weights, Q.gap, Q.nu, Q.B[:, d2].tocsr(), Q.nodes, Q.relative[:, d2].tocsr())

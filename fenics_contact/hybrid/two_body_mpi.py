@@ -260,7 +260,9 @@ def solve_two_body_hybrid_distributed(problem: TwoBodyProblem, *, delta, options
     slave = gathered_surface(V, problem, problem.pair.slave)
     master = gathered_surface(V, problem, problem.pair.master)
     delta = two_body_penalty(problem, slave, master, delta)
-    Q = contact_quadrature(slave, master, N, bs, problem.pair.quadrature_degree, rule=problem.pair.rule)
+    Q = contact_quadrature(
+        slave, master, N, bs, problem.pair.quadrature_degree, rule=problem.pair.rule, basis=problem.pair.basis
+    )
     free = np.ones(N, dtype=bool)
     free[np.concatenate(comm.allgather(lo + fixed[fixed < n_owned]))] = False
     frictional = problem.friction is not None

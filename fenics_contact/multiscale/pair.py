@@ -46,7 +46,7 @@ from fenics_contact.problem.partition import simplex_volumes
 from fenics_contact.problem.strip import coarse_partition
 from fenics_contact.problem.tags import Boundary
 
-__all__ = ["PairMultiscaleOptions", "check_bulk", "coarse_to_fine", "solve_two_body_ms_hybrid"]
+__all__ = ["PairMultiscaleOptions", "bulk_meshes", "check_bulk", "coarse_to_fine", "solve_two_body_ms_hybrid"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -109,6 +109,18 @@ def check_bulk(k: int, n_cells: int, ratio: float | None, H: float, layers: int)
             f"{ratio:.3g}): a coarse cell must hold several fine cells; give a finer mesh, fewer strip layers "
             "or a larger H"
         )
+
+
+def bulk_meshes(problem: TwoBodyProblem, strip: np.ndarray, H: float, layers: int) -> tuple[list, list]:
+    """Each body's bulk cells (outside the ``strip`` cells of ``layers`` cell layers) and its serial submesh with
+    the coarse grid of side ``H`` (``_bulk_mesh``), each bulk checked by ``check_bulk`` (serial problem)."""
+    bulks = [np.setdiff1d(problem.body_cells(k), strip).astype(np.int32) for k in (0, 1)]
+    for k, cells in enumerate(bulks):
+        check_bulk(k, cells.size, None, H, layers)
+    meshes = [_bulk_mesh(problem.mesh, cells, H) for cells in bulks]
+    for k, (cells, (sub, *_, grid)) in enumerate(zip(bulks, meshes, strict=True)):
+        check_bulk(k, cells.size, coarse_to_fine(grid, sub.geometry.dofmaps[0], sub.geometry.x), H, layers)
+    return bulks, meshes
 
 
 def _bulk_mesh(msh: dmesh.Mesh, cells: np.ndarray, H: float) -> tuple:
@@ -223,13 +235,7 @@ class _MultiscaleBulks:
         self.position[split.dofs[0]] = np.arange(split.dofs[0].size)
         h = float(np.median(np.abs(msh.h(tdim, np.arange(n_cells, dtype=np.int32)))))
         self.bodies = []
-        bulks = [np.setdiff1d(problem.body_cells(k), strip).astype(np.int32) for k in (0, 1)]
-        for k, cells in enumerate(bulks):
-            check_bulk(k, cells.size, None, options.H, layers)
-        meshes = [_bulk_mesh(msh, cells, options.H) for cells in bulks]
-        for k, (cells, (sub, *_, grid)) in enumerate(zip(bulks, meshes, strict=True)):
-            ratio = coarse_to_fine(grid, sub.geometry.dofmaps[0], sub.geometry.x)
-            check_bulk(k, cells.size, ratio, options.H, layers)
+        bulks, meshes = bulk_meshes(problem, strip, options.H, layers)
         for k, (cells, bulk) in enumerate(zip(bulks, meshes, strict=True)):
             supports = _supports_of(problem, k)
             self.bodies.append(_BodyBulk(problem, V, cells, bulk, in_strip, supports, split, options, h))

@@ -100,13 +100,20 @@ class ContactPair:
     facet tags, on different bodies; ``quadrature_degree`` of the Gauss rule on each piece of a slave facet;
     ``rule``: ``"segments"`` (segment-to-segment, ``fem.mortar``) or ``"vertices"`` (one-pass node-to-segment,
     which fails the contact patch test on non-matching meshes: for comparison only); ``friction``: a
-    ``Friction`` law on the relative slip of the two surfaces (``fem.two_body_friction``), None: frictionless."""
+    ``Friction`` law on the relative slip of the two surfaces (``fem.two_body_friction``), None: frictionless;
+    ``basis``: of the penalty pressure on the slave surface (``fem.mortar.weight_functions``), ``"dual"`` (the
+    biorthogonal basis: the nodal pressures are the nodal values of the gap's local projection, accurate up to
+    the contact edge; segment-to-segment rule only) or ``"standard"`` (P1 hat functions); None: dual for a
+    frictionless pair with the segment-to-segment rule, standard with friction (the frictional solves are
+    measured with it: with the dual basis the condensed frictional Newton of Algorithm 1 on two ranks cycles at
+    full sliding on ``cases/fault_sliding.toml``) or with the node-to-segment rule."""
 
     slave: int
     master: int
     quadrature_degree: int = 3
     rule: str = "segments"
     friction: Friction | None = None
+    basis: str | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "slave", _tag(self.slave, "ContactPair.slave"))
@@ -118,6 +125,13 @@ class ContactPair:
             raise InputError(f"ContactPair.quadrature_degree must be an integer in [1, 10], got {degree!r}")
         if self.rule not in ("segments", "vertices"):
             raise InputError(f"ContactPair.rule must be 'segments' or 'vertices', got {self.rule!r}")
+        if self.basis is None:
+            dual = self.rule == "segments" and self.friction is None
+            object.__setattr__(self, "basis", "dual" if dual else "standard")
+        if self.basis not in ("standard", "dual"):
+            raise InputError(f"ContactPair.basis must be 'standard' or 'dual', got {self.basis!r}")
+        if self.basis == "dual" and self.rule != "segments":
+            raise InputError("ContactPair: the dual pressure basis needs the segment-to-segment rule (rule='segments')")
         if self.friction is not None and not isinstance(self.friction, Friction):
             raise InputError(f"ContactPair.friction must be a Friction law or None, got {self.friction!r}")
 

@@ -28,6 +28,8 @@ vector has three components.  ``load_pair_case`` reads it into a ``PairCase``; e
     master = "lower_top"                     # Γ_C_other, onto which the slave points are projected
     quadrature-degree = 3
     rule = "segments"                        # or "vertices" (node-to-segment, for comparison)
+    basis = "dual"                           # or "standard": the pressure basis (default: dual frictionless,
+                                             #   standard with friction or node-to-segment; ContactPair.basis)
 
     [friction]                               # default: frictionless; on the relative slip of the two faces
     law = "coulomb"                          # mu = 0.6, or law = "tresca" with threshold = s (a stress)
@@ -142,14 +144,16 @@ class PairSpec:
     master: str
     quadrature_degree: int = 3
     rule: str = "segments"
+    basis: str | None = None
 
     def echo(self) -> dict:
-        return {
+        out = {
             "slave": self.slave,
             "master": self.master,
             "quadrature-degree": self.quadrature_degree,
             "rule": self.rule,
         }
+        return out if self.basis is None else out | {"basis": self.basis}
 
 
 @dataclass(frozen=True, slots=True)
@@ -240,6 +244,7 @@ class PairCase:
             self.pair.quadrature_degree,
             self.pair.rule,
             self.friction,
+            self.pair.basis,
         )
         return TwoBodyProblem(
             msh, cell_tags, tbm.facet_tags, tuple(laws), pair, tuple(supports), tractions, name=self.path.stem
@@ -514,8 +519,11 @@ def _pair(source: Source, data) -> PairSpec:
         t.get("master", read_string(), required=True),
         t.get("quadrature-degree", read_integer(1), 3),
         t.get("rule", read_string(("segments", "vertices")), "segments"),
+        t.get("basis", read_string(("dual", "standard")), None),
     )
     t.finish()
+    if spec.basis == "dual" and spec.rule != "segments":
+        raise source.error('pair.basis = "dual" needs pair.rule = "segments"')
     if spec.slave == spec.master:
         raise source.error(f"pair.slave and pair.master name the same group {spec.slave!r}")
     if spec.quadrature_degree > 10:

@@ -98,6 +98,24 @@ def test_check_mesh_reports_the_bodies_and_the_pair(capsys):
     assert "body upper: 210 cells" in text
     assert "pair: slave upper_bottom (22 facets, body upper), master lower_top (40 facets)" in text
     assert "stepped in 4 load steps" in text
+    assert "segments rule of degree 3, dual pressure basis, frictionless" in text
+
+
+def test_the_pressure_basis_of_a_case(tmp_path, capsys):
+    """``pair.basis`` reaches the pair (the default of the frictionless case: dual) and its echo; the standard
+    basis gives the same contact force to 1e-3 and balances it to round-off."""
+    assert main(["check-mesh", "--case", str(CASE), "--set", 'pair.basis="standard"']) == 0
+    assert "standard pressure basis" in capsys.readouterr().out
+    case = load_case(CASE)
+    assert case.pair.basis is None and "basis" not in case.pair.echo()
+    dual = fc.solve(case.problem(case.build_mesh()), "primal-monolithic")
+    assert dual.problem.pair.basis == "dual"
+    out = tmp_path / "standard"
+    args = ["run", "--case", str(CASE), "--no-plots", "--out", str(out), "--set", 'pair.basis="standard"']
+    assert main(args) == 0
+    summary = _summary(out)
+    assert summary["force_balance"] <= 1e-12
+    assert _relative(summary["force_slave"], dual.forces[0]) < 1e-3
 
 
 BAD = [
@@ -113,6 +131,8 @@ BAD = [
     (["--set", 'load.traction="upper_top"'], "give exactly one of load.support"),
     (["--set", 'load={traction="upper_top", steps=[[0.0, 1.0]]}'], "load.traction = 'upper_top' is not a group"),
     (["--set", "bodies.lower.supports=[]"], "has no Support"),
+    (["--set", 'pair.basis="biorthogonal"'], "must be one of ['dual', 'standard']"),
+    (["--set", 'pair={slave="upper_bottom", master="lower_top", rule="vertices", basis="dual"}'], "needs pair.rule"),
 ]
 
 

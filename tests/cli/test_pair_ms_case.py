@@ -142,3 +142,19 @@ def test_the_nbasis_words_on_the_command_line():
     for word, value in (("all", ALL_MODES), ("rigid", RIGID_MOTIONS), (4, 4)):
         options = pair_run_options(case, {"method": "primal-ms", "nbasis": word})
         assert options.multiscale.cem.nbasis == value
+
+
+def test_check_mesh_refuses_the_bulks_the_run_refuses(tmp_path, capsys):
+    """Strips of 8 cell layers take the whole upper block: check-mesh says primal-ms cannot run (and, asked for
+    primal-ms, stops with exit code 2) with the run's own message; the run refuses it, nothing written."""
+    layers = ["--set", "primal.layers=8"]
+    message = "body 2: the strips (8 cell layers from the contact surfaces) take the whole body"
+    assert main(["check-mesh", "--case", str(CASE), "--method", "primal", *layers]) == 0
+    out = capsys.readouterr().out
+    assert "primal can run" in out and f"primal-ms cannot (two-body Algorithm 3 (primal-ms): {message}" in out
+    assert main(["check-mesh", "--case", str(CASE), "--method", "primal-ms", *layers]) == 2
+    assert message in capsys.readouterr().err
+    out = tmp_path / "out"
+    assert main(["run", "--case", str(CASE), "--method", "primal-ms", "--no-plots", "--out", str(out), *layers]) == 2
+    assert message in capsys.readouterr().err
+    assert not out.exists()

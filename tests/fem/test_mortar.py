@@ -156,6 +156,54 @@ def test_clipped_quadrature_integrates_p1_traces_exactly_in_3d(sizes):
         assert np.allclose(B[:, :ns].sum(axis=1), Q.nu) and np.allclose(B[:, ns:].sum(axis=1), -Q.nu)
 
 
+@pytest.mark.parametrize("dim", [2, 3])
+def test_dual_nodal_gaps_are_the_penetration_at_the_nodes(dim):
+    """Jittered non-matching surfaces 0.01 apart, the master not under the slave's first 0.15, different linear
+    displacements on the two sides (a penetration s linear along the surface): with the dual basis the nodal gap
+    s̃_p is s at the node itself wherever the node's facets wholly face the master (∫ ψ_p N_q = δ_pq ∫ N_p), the
+    standard basis averages s over N_p (off on the jittered nodes); a uniform s is exact on every node with
+    either basis (the patch test), and the nodal weights are ∫ N_p ds over the facets facing the master."""
+    rng = np.random.default_rng(2)
+    if dim == 2:
+        xs = np.column_stack([np.linspace(0, 1, 10), np.full(10, 0.01)])
+        xs[1:-1, 0] += 0.3 * rng.uniform(-1.0, 1.0, 8) / 9
+        xm = np.column_stack([np.linspace(0.15, 1.0, 13), np.zeros(13)])
+        ts, tm = np.c_[0:9, 1:10], np.c_[0:12, 1:13]
+    else:
+        xs, ts = _grid(5, 0.01, rng)
+        xm, tm = _grid(6, 0.0, rng, box=((0.15, 1.0), (0.0, 1.0)))
+    ns, nm = xs.shape[0], xm.shape[0]
+    up = np.eye(dim)[-1]
+    slave = _surface(xs[ts], ts, -up)
+    master = _surface(xm[tm], ns + tm, up)
+    full = np.ones(ns, dtype=bool)  # the nodes whose slave facets lie wholly over the master
+    full[ts[np.any(xs[ts][..., 0] < 0.15 - 1e-12, axis=1)]] = False
+    A_s, A_m = rng.standard_normal((dim, dim)), rng.standard_normal((dim, dim))
+    u = np.concatenate([(xs @ A_s.T).ravel(), (xm @ A_m.T).ravel()])
+    x = xs[:, :-1]  # s(x) = (u_s(x) − u_m(x))·ν − g on the flat pair, ν = −e_up
+    s_exact = -(xs @ A_s.T)[:, -1] + (np.column_stack([x, np.zeros(ns)]) @ A_m.T)[:, -1] - 0.01
+    for basis in ("dual", "standard"):
+        Q = contact_quadrature(slave, master, dim * (ns + nm), dim, 2, basis=basis)
+        s_nodes = Q.B @ u - Q.gap
+        on = full[Q.nodes]
+        off = np.max(np.abs(s_nodes[on] - s_exact[Q.nodes][on]))
+        if basis == "dual":
+            assert off < 1e-13
+        else:
+            assert off > 1e-4
+        translation = np.concatenate([np.tile(-0.02 * up, ns), np.zeros(dim * nm)])
+        assert np.allclose(Q.B @ translation - Q.gap, 0.01, rtol=0.0, atol=1e-15)
+        assert np.allclose(Q.weights[on], _hat_integrals(slave)[Q.nodes][on], rtol=1e-13)
+
+
+def _hat_integrals(surf: Surface) -> np.ndarray:
+    """∫ N_p ds of each vertex over its facets."""
+    k = surf.blocks.shape[1]
+    out = np.zeros(surf.blocks.max() + 1)
+    np.add.at(out, surf.blocks.ravel(), np.repeat(surf.measures / k, k))
+    return out
+
+
 def test_a_hinted_facet_gives_the_closest_point_on_a_convex_master():
     """Points above a convex roof of four triangles, each with a random facet as hint: where the orthogonal
     projection lies in the hinted facet it is the closest point (its plane supports the roof), elsewhere the

@@ -27,11 +27,11 @@ def blocks():
     return two_blocks(7, 10, heights=(0.5, 0.4))  # 7 against 10 cells across the fault: non-matching
 
 
-def _problem(m, law, top, *, slave="upper"):
+def _problem(m, law, top, *, slave="upper", basis=None):
     """The lower block (E = 1, ν = 0.3) clamped at its bottom, the upper (E = 5, ν = 0.2) with its top moved by
-    ``top``; the contact face 1 wide."""
+    ``top``; the contact face 1 wide; ``basis`` of the pressure (None: the pair's default)."""
     lower, upper = Body(T.LOWER, 1.0, 0.3), Body(T.UPPER, 5.0, 0.2)
-    return pressed_pair(m, lower, upper, top, upper_slave=slave == "upper", friction=law)
+    return pressed_pair(m, lower, upper, top, upper_slave=slave == "upper", friction=law, basis=basis)
 
 
 def _path(m, law, **kw):
@@ -77,11 +77,13 @@ def test_tresca_sliding_blocks_carry_the_threshold_times_the_contact_length(bloc
     assert all(s.dissipation >= 0.0 for s in path)
 
 
-def test_zero_friction_is_the_frictionless_solve(blocks):
-    """Coulomb with μ = 0 on a flat interface: the frictionless solution and contact force to round-off."""
+@pytest.mark.parametrize("basis", ["dual", "standard"])
+def test_zero_friction_is_the_frictionless_solve(blocks, basis):
+    """Coulomb with μ = 0 on a flat interface, either pressure basis: the frictionless solution of that basis and
+    its contact force to round-off."""
     top = (0.004, -0.01)
-    free = solve_two_body(_problem(blocks, None, top))
-    coulomb = solve_two_body(_problem(blocks, fc.Friction("coulomb", mu=0.0), top))
+    free = solve_two_body(_problem(blocks, None, top, basis=basis))
+    coulomb = solve_two_body(_problem(blocks, fc.Friction("coulomb", mu=0.0), top, basis=basis))
     u0, u1 = free.u.x.array, coulomb.u.x.array
     assert np.linalg.norm(u1 - u0) <= 1e-10 * np.linalg.norm(u0)
     assert np.allclose(coulomb.forces[0], free.forces[0], rtol=1e-10, atol=1e-14)

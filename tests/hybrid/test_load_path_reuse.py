@@ -3,8 +3,8 @@
 * ``PrimalPart.body_load`` is assembled again only when the values it is assembled from change
   (``PrimalSubproblem.body_load_inputs``): a moved obstacle keeps it, a new body force or u_D does not, and the
   kept vector equals a fresh assembly bit for bit.
-* ``PrimalPart.solve_for`` (Ω₁ by one back-solve of the kept body load plus the data) gives Ω₁'s own solve to
-  1e-12.
+* ``PrimalPart.solve_for`` (Ω₁ as the kept J⁻¹b plus one back-solve of the data, a sparse right-hand side on one
+  process) gives Ω₁'s own solve to 1e-12, with and without a body force.
 * On one process ``InterfaceSpace``'s transfers are copies of the interface entries: the values of the general
   transfers through the parent space, bit for bit.
 * A force–indentation curve through the condensed Newton with these gives the forces of the plain path (the body
@@ -60,10 +60,21 @@ def test_body_load_is_kept_while_its_inputs_are(which):
     assert np.array_equal(loaded, _fresh(assemble, part))
 
 
-def test_solve_for_equals_the_subproblem_solve():
+@pytest.mark.parametrize("force", [0.0, 1.0])
+@pytest.mark.parametrize("sparse", [True, False])
+def test_solve_for_equals_the_subproblem_solve(force, sparse, monkeypatch):
+    """Ω₁ for data g: the kept J⁻¹b plus the sparse right-hand side's back-solve (one process), or one back-solve of
+    b + C g, equal Ω₁'s own solve, with and without a body force (b = 0: J⁻¹b without a solve)."""
     step = PrimalHybridStep(_model().on(unit_square(16, 4)))
     step.prepare()
     part = step.interface_problem(InterfaceNewtonOptions()).omega1.part
+    part.sub.fields.f.x.array[:] = force
+    assert part.solver.sequential_mumps() == (MPI.COMM_WORLD.size == 1)
+    if not sparse:
+        monkeypatch.setattr(type(part.solver), "sequential_mumps", lambda self: False)
+    sparse_solves = []
+    solve_sparse = type(part.solver).solve_sparse
+    monkeypatch.setattr(type(part.solver), "solve_sparse", lambda *a: sparse_solves.append(1) or solve_sparse(*a))
     rng = np.random.default_rng(3)
     g = rng.standard_normal(part.n_g) * step.alpha * 1e-3
     step.interface.to_part(g, 0, part.sub.g)
@@ -73,6 +84,8 @@ def test_solve_for_equals_the_subproblem_solve():
     part.solve_for(step.interface.gather(g))
     scale = np.abs(own).max()
     assert scale > 0 and np.abs(part.sub.u.x.array - own).max() <= 1e-12 * scale
+    assert len(sparse_solves) == (1 if sparse and MPI.COMM_WORLD.size == 1 else 0)
+    assert (np.abs(part.load_solution()).max() > 0) == (force != 0)
     with pytest.raises(ValueError, match="without contact"):
         step.interface_problem(InterfaceNewtonOptions()).omega2.solve_for(np.zeros(part.n_g))
 

@@ -321,10 +321,11 @@ class PrimalSubproblem:
         """(w, w) on this (sub)mesh."""
         return quadratic_form(self._M, w.x.petsc_vec, self._work)
 
-    def norm_products(self, w: fem.Function, Kw: PETSc.Vec, Mw: PETSc.Vec) -> None:
-        """Kw ← K w, Mw ← M w: a(w, w) = wᵀK w and (w, w) = wᵀM w (K, M the matrices of ``energy_norm2``,
-        ``l2_norm2``)."""
-        self._K.mult(w.x.petsc_vec, Kw)
+    def norm_products(self, w: fem.Function, Kw: PETSc.Vec | None, Mw: PETSc.Vec) -> None:
+        """Kw ← K w (unless Kw is None), Mw ← M w: a(w, w) = wᵀK w and (w, w) = wᵀM w (K, M the matrices of
+        ``energy_norm2``, ``l2_norm2``)."""
+        if Kw is not None:
+            self._K.mult(w.x.petsc_vec, Kw)
         self._M.mult(w.x.petsc_vec, Mw)
 
     def contact_profile(self) -> ContactProfile:

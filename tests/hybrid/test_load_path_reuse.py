@@ -5,6 +5,7 @@
   kept vector equals a fresh assembly bit for bit.
 * ``PrimalPart.solve_for`` (Ω₁ as the kept J⁻¹b plus one back-solve of the data, a sparse right-hand side on one
   process) gives Ω₁'s own solve to 1e-12, with and without a body force.
+* The relative change's K u₁ taken from the equations Ω₁'s back-solve solved is the product with K to 1e-12.
 * On one process ``InterfaceSpace``'s transfers are copies of the interface entries: the values of the general
   transfers through the parent space, bit for bit.
 * A force–indentation curve through the condensed Newton with these gives the forces of the plain path (the body
@@ -88,6 +89,34 @@ def test_solve_for_equals_the_subproblem_solve(force, sparse, monkeypatch):
     assert (np.abs(part.load_solution()).max() > 0) == (force != 0)
     with pytest.raises(ValueError, match="without contact"):
         step.interface_problem(InterfaceNewtonOptions()).omega2.solve_for(np.zeros(part.n_g))
+
+
+@pytest.mark.parametrize("force", [0.0, 1.0])
+def test_omega1_stiffness_product_from_its_equations(force):
+    """The relative change's K u₁ from the equations Ω₁'s back-solve solved (b + C g − R u₁ on the free rows, 0 on
+    Γ_D) is the product with K to 1e-12 there; without a ``solve_for`` state it is not taken."""
+    step = PrimalHybridStep(_model().on(unit_square(16, 4)))
+    step.prepare()
+    part = step.interface_problem(InterfaceNewtonOptions()).omega1.part
+    part.sub.fields.f.x.array[:] = force
+    rng = np.random.default_rng(4)
+    g12 = rng.standard_normal(step.interface.size) * step.alpha * 1e-3
+    Ku, product = part.sub.u.x.petsc_vec.duplicate(), part.sub.u.x.petsc_vec.duplicate()
+    step._solve_omega1(g12, False)  # Ω₁'s own solve: no equations kept
+    assert not step._omega1_stiffness_product(Ku)
+    step._solve_omega1(g12, True)  # the condensed Newton's: PrimalPart.solve_for
+    assert step._omega1_stiffness_product(Ku)
+    part.sub.norm_products(part.sub.u, product, Ku.duplicate())
+    fixed = step._robin[1]
+    assert fixed.any() and not fixed.all()
+    ours, theirs = Ku.getArray(), product.getArray()
+    scale = MPI.COMM_WORLD.allreduce(np.abs(theirs).max(), op=MPI.MAX)
+    assert scale > 0 and np.all(ours[fixed] == 0.0)
+    assert MPI.COMM_WORLD.allreduce(np.abs(ours - theirs)[~fixed].max(), op=MPI.MAX) <= 1e-12 * scale
+    x = part.sub.u.x.petsc_vec
+    assert abs(Ku.dot(x) - product.dot(x)) <= 1e-12 * abs(product.dot(x))  # a(u₁, u₁)
+    for vec in (Ku, product):
+        vec.destroy()
 
 
 @serial

@@ -230,7 +230,7 @@ class PrimalHybridStep:
         u = self.sub[0].u.x.array[: part.nown]
         if self.comm.allreduce(bool(np.any(u[fixed])), op=MPI.LOR):
             return False
-        out = part.rhs(self._omega1_data, np.zeros(0))
+        out = part.solved_rhs()
         out[part.trace_at] -= robin * u[part.trace_at]
         out[fixed] = 0.0
         Ku.getArray()[:] = out

@@ -201,6 +201,7 @@ class PrimalPart(AffinePart):
         self._kept_inverse = None  # (J₀'s factorization count, rows, the block of J₀⁻¹ there, transposed)
         self._kept_body = None  # (the values ``body_load`` was assembled from, b)
         self._kept_components = None  # (J₀'s factorization count, ``component_responses``)
+        self._solved = None  # (b or b + C g, g or None) of the last ``solve_for``
         #: condense per displacement component (``component_responses``) where the entries of J₀⁻¹ are taken
         self.by_components = True
 
@@ -375,9 +376,20 @@ class PrimalPart(AffinePart):
         if isinstance(self.solver, DirectSolver) and self.solver.sequential_mumps():
             x = self.solver.solve_sparse(self.data_at, self.data_w * g[self.data_index])
             x += self.load_solution()
+            self._solved = (self._kept_load[1], g)
             self.set_state(x)
             return
-        self.set_state(self.solve(self.rhs(g, np.zeros(0))))
+        rhs = self.rhs(g, np.zeros(0))
+        self._solved = (rhs, None)
+        self.set_state(self.solve(rhs))
+
+    def solved_rhs(self) -> np.ndarray:
+        """b + C g (local, a new array) of the last ``solve_for``: the right-hand side its state solves."""
+        b, g = self._solved
+        r = b.copy()
+        if g is not None:
+            r[self.data_at] += self.data_w * g[self.data_index]
+        return r
 
     def destroy(self) -> None:
         for obj in (self._b, self._x):

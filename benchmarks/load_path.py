@@ -232,7 +232,7 @@ def table(args, results: dict) -> str:
         lines += [
             "",
             f"The primal ratios are against the faster monolithic curve: {wall} by wall time, {cpu} by CPU time "
-            "(the force differences against the first of the two).",
+            "(the force differences against the former).",
         ]
     lines += [
         "",

@@ -306,13 +306,22 @@ class PrimalHybridStep:
                 Mprev.aypx(-1.0, Mu)
                 de, du = de + Kprev.dot(d), du + Mprev.dot(d)
                 self._products[i] = [Kprev, Mprev, Ku, Mu]  # (the next call's work and kept products)
+            elif kept:  # the products of the state, kept for the next call, give its quadratic forms
+                Ku, Mu = self._products[i][2:]
+                s.norm_products(s.u, Ku, Mu)
+                x = s.u.x.petsc_vec
+                ne_i, nu_i = Ku.dot(x), Mu.dot(x)
+                ne, nu = ne + ne_i, nu + nu_i
+                if self.comm.allreduce(bool(np.any(prev)), op=MPI.LOR):
+                    de += s.energy_norm2(diff)
+                    du += s.l2_norm2(diff)
+                else:  # from zero (a curve's first step): the change is the state itself
+                    de, du = de + ne_i, du + nu_i
             else:
                 de += s.energy_norm2(diff)
                 du += s.l2_norm2(diff)
                 ne += s.energy_norm2(s.u)
                 nu += s.l2_norm2(s.u)
-                if kept:
-                    s.norm_products(s.u, *self._products[i][2:])
             prev[:] = s.u.x.array
         if not kept:
             self._drop_products()

@@ -29,7 +29,7 @@ from fenics_contact.fem import forms_primal
 from fenics_contact.fem.amg import AMGSolver, LinearSolverOptions, linear_solver
 from fenics_contact.fem.contact import MAX_REFINEMENTS, ContactProfile, NewtonHistory, NewtonOptions, semismooth_newton
 from fenics_contact.fem.friction import NodalFriction, frictional_newton
-from fenics_contact.fem.linalg import AbsoluteTerms, DirectSolver, quadratic_form
+from fenics_contact.fem.linalg import AbsoluteTerms, ComponentBlockProduct, DirectSolver, quadratic_form
 from fenics_contact.fem.primal_boundary import NodalContactGeometry, PrimalBoundaryData
 from fenics_contact.problem.fields import MaterialFields
 from fenics_contact.problem.friction import Friction, friction_of
@@ -172,6 +172,7 @@ class PrimalSubproblem:
         self._linear_ready = False
         self._factorized_set: np.ndarray | None = None
         self._terms = AbsoluteTerms()
+        self._mass = None  # M's block of one component (``norm_products``, one process)
         self.friction = NodalFriction(self, friction, delta) if friction is not None and self.contact else None
 
     # -- contact geometry ------------------------------------------------------------------
@@ -323,10 +324,16 @@ class PrimalSubproblem:
 
     def norm_products(self, w: fem.Function, Kw: PETSc.Vec | None, Mw: PETSc.Vec) -> None:
         """Kw ← K w (unless Kw is None), Mw ← M w: a(w, w) = wᵀK w and (w, w) = wᵀM w (K, M the matrices of
-        ``energy_norm2``, ``l2_norm2``)."""
+        ``energy_norm2``, ``l2_norm2``).  On one process M w by M's block of one component
+        (``linalg.ComponentBlockProduct``: the mass form couples equal components only), the same products."""
         if Kw is not None:
             self._K.mult(w.x.petsc_vec, Kw)
-        self._M.mult(w.x.petsc_vec, Mw)
+        if self.mesh.comm.size > 1:
+            self._M.mult(w.x.petsc_vec, Mw)
+            return
+        if self._mass is None:
+            self._mass = ComponentBlockProduct(self._M, self.V.dofmap.index_map_bs)
+        self._mass.mult(w.x.petsc_vec, Mw)
 
     def contact_profile(self) -> ContactProfile:
         """u_c = u·ν − g and the consistent nodal normal stress σ_c = (R·ν_p)/w_p along Γ_C, on every rank.

@@ -6,6 +6,7 @@
 * ``PrimalPart.solve_for`` (Ω₁ as the kept J⁻¹b plus one back-solve of the data, a sparse right-hand side on one
   process) gives Ω₁'s own solve to 1e-12, with and without a body force.
 * The relative change's K u₁ taken from the equations Ω₁'s back-solve solved is the product with K to 1e-12.
+* On one process the mass products of the relative change by M's block of one component are PETSc's products.
 * On one process ``InterfaceSpace``'s transfers are copies of the interface entries: the values of the general
   transfers through the parent space, bit for bit.
 * A force–indentation curve through the condensed Newton with these gives the forces of the plain path (the body
@@ -117,6 +118,23 @@ def test_omega1_stiffness_product_from_its_equations(force):
     assert abs(Ku.dot(x) - product.dot(x)) <= 1e-12 * abs(product.dot(x))  # a(u₁, u₁)
     for vec in (Ku, product):
         vec.destroy()
+
+
+@serial
+def test_mass_products_by_one_component_block():
+    """``norm_products``' M w on one process (M's block of one component applied to the components side by side,
+    ``ComponentBlockProduct``) is PETSc's product with M, entry for entry."""
+    step = PrimalHybridStep(_model().on(unit_square(16, 4)))
+    rng = np.random.default_rng(6)
+    for sub in step.sub:
+        sub.u.x.array[:] = rng.standard_normal(sub.u.x.array.size)
+        ours, theirs = sub.u.x.petsc_vec.duplicate(), sub.u.x.petsc_vec.duplicate()
+        sub.norm_products(sub.u, None, ours)
+        sub._M.mult(sub.u.x.petsc_vec, theirs)
+        assert np.abs(theirs.getArray()).max() > 0
+        assert np.allclose(ours.getArray(), theirs.getArray(), rtol=1e-15, atol=0.0)
+        for vec in (ours, theirs):
+            vec.destroy()
 
 
 @serial

@@ -369,8 +369,8 @@ class PrimalPart(AffinePart):
         no assembly, one back-solve.  For the linear Ω₁, whose J is its only operator (``FineResponse``).  On one
         process x = J⁻¹b + J⁻¹(C g), the first kept (``load_solution``), the second a back-solve whose right-hand
         side vanishes but on the γ unknowns (``DirectSolver.solve_sparse``: MUMPS skips the forward elimination
-        elsewhere; at h = 1/256 0.57 of the dense back-solve's time); otherwise one back-solve of the kept body
-        load plus the data."""
+        elsewhere, benchmarks/results/load_step_cost.md); otherwise one back-solve of the kept body load plus the
+        data."""
         if self.n_c:
             raise ValueError("solve_for solves the subproblem without contact (its linear operator J)")
         if isinstance(self.solver, DirectSolver) and self.solver.sequential_mumps():

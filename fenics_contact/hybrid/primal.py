@@ -158,7 +158,7 @@ class PrimalHybridStep:
         self._record: dict = {}
         self._newton = None
         self._omega1_data: np.ndarray | None = None  #: the data g₁₂ of Ω₁'s last ``PrimalPart.solve_for`` (global)
-        self._robin = None  #: (R on Ω₁'s owned γ rows, its Γ_D rows) for ``_omega1_stiffness_product``
+        self._robin = None  #: (Ω₁'s PrimalPart, R on its owned γ rows, its Γ_D rows): ``_omega1_stiffness_product``
         self._krylov: KrylovInterface | None = None
         self.reference = None
         if reference is not None:
@@ -218,15 +218,15 @@ class PrimalHybridStep:
         part = getattr(getattr(self._newton, "omega1", None), "part", None)
         if self._omega1_data is None or part is None:
             return False
-        if self._robin is None:  # (once: R on the γ rows, the Γ_D rows)
+        if self._robin is None or self._robin[0] is not part:  # (once per part: R on its γ rows, the Γ_D rows)
             weights = self.interface.gather(self.alpha * self.interface.weights)
             mask = self.sub[0].u.x.petsc_vec.duplicate()
             mask.set(1.0)
             dolfinx.fem.petsc.set_bc(mask, self.sub[0].bcs)  # (0 on the Γ_D rows)
             fixed = mask.getArray(readonly=True) == 0.0
             mask.destroy()
-            self._robin = (weights[part.trace_index], fixed)
-        robin, fixed = self._robin
+            self._robin = (part, weights[part.trace_index], fixed)
+        _, robin, fixed = self._robin
         u = self.sub[0].u.x.array[: part.nown]
         if self.comm.allreduce(bool(np.any(u[fixed])), op=MPI.LOR):
             return False

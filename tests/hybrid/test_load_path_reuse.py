@@ -108,7 +108,7 @@ def test_omega1_stiffness_product_from_its_equations(force):
     step._solve_omega1(g12, True)  # the condensed Newton's: PrimalPart.solve_for
     assert step._omega1_stiffness_product(Ku)
     part.sub.norm_products(part.sub.u, product, Ku.duplicate())
-    fixed = step._robin[1]
+    fixed = step._robin[2]
     assert fixed.any() and not fixed.all()
     ours, theirs = Ku.getArray(), product.getArray()
     scale = MPI.COMM_WORLD.allreduce(np.abs(theirs).max(), op=MPI.MAX)

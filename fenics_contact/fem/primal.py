@@ -163,17 +163,27 @@ class PrimalSubproblem:
                 msh.comm, prefix=prefix, space=self.V, options=solver, contrast=_contrast(fields.mu, msh.comm)
             )
         # K and M on J's sparsity (its cell couplings are theirs; its facet terms couple no other unknowns): the
-        # pattern is computed once, not three times
-        self._K, self._M = self.A.duplicate(), self.A.duplicate()
-        for mat, form in ((self._K, self._a), (self._M, self._m)):
-            dolfinx.fem.petsc.assemble_matrix(mat, form)
-            mat.assemble()
-        self._work = self._K.createVecLeft()
+        # pattern is computed once, not three times; K on first use (``_K``)
+        self._M = self.A.duplicate()
+        dolfinx.fem.petsc.assemble_matrix(self._M, self._m)
+        self._M.assemble()
+        self._stiffness: PETSc.Mat | None = None
+        self._work = self._M.createVecLeft()
         self._linear_ready = False
         self._factorized_set: np.ndarray | None = None
         self._terms = AbsoluteTerms()
         self._mass = None  # M's block of one component (``norm_products``, one process)
         self.friction = NodalFriction(self, friction, delta) if friction is not None and self.contact else None
+
+    @property
+    def _K(self) -> PETSc.Mat:
+        """K, the matrix of the elastic form a (no boundary conditions), assembled on first use (collective):
+        Algorithm 1's linear Ω₁ along a load path takes its products from its equations and never needs it."""
+        if self._stiffness is None:
+            self._stiffness = self.A.duplicate()
+            dolfinx.fem.petsc.assemble_matrix(self._stiffness, self._a)
+            self._stiffness.assemble()
+        return self._stiffness
 
     # -- contact geometry ------------------------------------------------------------------
     @property
@@ -418,8 +428,9 @@ class PrimalSubproblem:
 
     def destroy(self) -> None:
         """Free the PETSc objects (collective)."""
-        for obj in (self.A, self.b, self.du, self._gap_vec, self._K, self._M, self._work):
-            obj.destroy()
+        for obj in (self.A, self.b, self.du, self._gap_vec, self._stiffness, self._M, self._work):
+            if obj is not None:
+                obj.destroy()
         self.solver.destroy()
         self._terms.destroy()
 

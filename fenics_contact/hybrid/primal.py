@@ -287,7 +287,8 @@ class PrimalHybridStep:
         load steps): the products with the stiffness and mass matrices of the last state are kept, and those of
         the change are their differences, K(u − u_prev) = K u − K u_prev: two products per subdomain instead of
         four (the same numbers to round-off relative to the state's, the change's relative accuracy ε/change);
-        Ω₁'s K u₁ from the equations its back-solve solved (``_omega1_stiffness_product``): one product there."""
+        Ω₁'s K u₁ from the equations its back-solve solved (``_omega1_stiffness_product``): one product there, and
+        Ω₁'s K is not assembled (``PrimalSubproblem._K``, on first use) along a load path from a zero state."""
         de = du = ne = nu = 0.0
         fast = kept and self._products is not None
         if kept and not fast:
@@ -296,10 +297,8 @@ class PrimalHybridStep:
             diff.x.array[:] = s.u.x.array - prev
             if fast:
                 Ku, Mu, Kprev, Mprev = self._products[i]
-                if i == 0 and self._omega1_stiffness_product(Ku):  # Ω₁ from its equations: the mass product only
-                    s.norm_products(s.u, None, Mu)
-                else:
-                    s.norm_products(s.u, Ku, Mu)
+                # (Ω₁'s K u₁ from its equations: the mass product only)
+                s.norm_products(s.u, None if i == 0 and self._omega1_stiffness_product(Ku) else Ku, Mu)
                 x, d = s.u.x.petsc_vec, diff.x.petsc_vec
                 ne, nu = ne + Ku.dot(x), nu + Mu.dot(x)
                 Kprev.aypx(-1.0, Ku)  # K u − K u_prev
@@ -308,7 +307,7 @@ class PrimalHybridStep:
                 self._products[i] = [Kprev, Mprev, Ku, Mu]  # (the next call's work and kept products)
             elif kept:  # the products of the state, kept for the next call, give its quadratic forms
                 Ku, Mu = self._products[i][2:]
-                s.norm_products(s.u, Ku, Mu)
+                s.norm_products(s.u, None if i == 0 and self._omega1_stiffness_product(Ku) else Ku, Mu)
                 x = s.u.x.petsc_vec
                 ne_i, nu_i = Ku.dot(x), Mu.dot(x)
                 ne, nu = ne + ne_i, nu + nu_i

@@ -175,6 +175,7 @@ def test_load_path_equals_the_plain_path(monkeypatch):
     monkeypatch.setattr(PrimalPart, "solve_for", lambda self, g: solves.append(1) or solve_for(self, g))
     fast, fast_changes = _curve(cm)
     assert len(solves) == DEPTHS.size  # Ω₁ from the kept body load at every step
+    assert fast.step.sub[0]._stiffness is None  # Ω₁'s K u₁ from its equations: its K never assembled
     mono, _ = _curve(cm, "primal-monolithic")
 
     def assembled(self):  # the body load assembled at every call

@@ -40,11 +40,11 @@ PARTS = (
     ("load term s_L (kept J⁻¹b, one dense solve)", CondensedInterface, "load_terms"),
     ("contact Newton on Γ_C", condensation, "contact_solve"),
     ("Ω₂ warm state (one J₀ back-solve)", PrimalPart, "solve"),
-    ("Ω₁ solve (one back-solve)", PrimalHybridStep, "_solve_omega1"),
+    ("Ω₁ solve (kept J⁻¹b + one back-solve of the data: a sparse right-hand side)", PrimalHybridStep, "_solve_omega1"),
     ("Ω₂ check (its residual at the warm state)", primal, "solve_or_verify"),
     ("γ traces and data (transfers)", InterfaceSpace, "from_part"),
     ("γ traces and data (transfers)", InterfaceSpace, "to_part"),
-    ("relative change (two products per subdomain)", PrimalHybridStep, "_measure"),
+    ("relative change (Ω₁: M u₁, K u₁ from its equations; Ω₂: two products)", PrimalHybridStep, "_measure"),
     ("certificate", primal, "primal_certificate"),
     ("force (contact profile: Ω₂'s reaction)", PrimalSubproblem, "contact_profile"),
 )

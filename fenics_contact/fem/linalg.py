@@ -43,6 +43,7 @@ from fenics_contact.fem import inverse_entries
 
 __all__ = [
     "AbsoluteTerms",
+    "ComponentBlockProduct",
     "DirectSolver",
     "PivotedCholesky",
     "ReusedAnalysis",
@@ -53,6 +54,9 @@ __all__ = [
     "petsc_to_scipy",
     "quadratic_form",
     "scipy_to_petsc",
+    "spd_factor",
+    "SPD_FACTOR_OPTION",
+    "SPD_FACTORS",
 ]
 
 log = logging.getLogger(__name__)
@@ -65,6 +69,13 @@ DIRECT_OPTIONS = {"ksp_type": "preonly", "pc_type": "lu", "pc_factor_mat_solver_
 #: ``DirectSolver(spd=True)``: MUMPS Cholesky without pivoting (its SYM = 1: the operator is flagged SPD), half
 #: the factors of an LU: a faster numeric factorization and back-solve (benchmarks/results/snes_vi_baseline.md)
 SPD_OPTIONS = {"ksp_type": "preonly", "pc_type": "cholesky", "pc_factor_mat_solver_type": "mumps"}
+
+#: the PETSc option that chooses how ``DirectSolver(spd=True)`` factorizes: ``cholesky`` (the default, ``SPD_OPTIONS``)
+#: or ``lu`` (as any operator, ``DIRECT_OPTIONS``), e.g. ``PETSC_OPTIONS="-fc_spd_factor lu"`` or
+#: ``PETSc.Options()["fc_spd_factor"] = "lu"`` before the solvers are made: which of the two is faster depends on
+#: the size and the machine (docs/performance.md, ``benchmarks/load_path.py --factor both``)
+SPD_FACTOR_OPTION = "fc_spd_factor"
+SPD_FACTORS = ("cholesky", "lu")
 
 #: PETSc's PC failure reasons by number (``PETSc.PC.FailedReason``)
 PC_FAILED_REASONS = {
@@ -129,10 +140,28 @@ def factorization_failure(pc: PETSc.PC, prefix: str | None = None) -> str:
     return f"{text}. Check the data (moduli, penalty and Robin coefficients) for values far out of range"
 
 
+def spd_factor() -> str:
+    """How ``DirectSolver(spd=True)`` factorizes: the PETSc option ``SPD_FACTOR_OPTION`` (``"cholesky"`` unless it is
+    set); InputError for another value."""
+    value = PETSc.Options().getString(SPD_FACTOR_OPTION, SPD_FACTORS[0]).strip().lower()
+    if value not in SPD_FACTORS:
+        raise InputError(f"-{SPD_FACTOR_OPTION} must be one of {', '.join(SPD_FACTORS)}, got {value!r}")
+    return value
+
+
 def check_entries(A: PETSc.Mat, prefix: str) -> None:
     """InputError when A has non-finite entries (overflowing data, e.g. E = 1e308) or its largest entry is
     outside the range a double-precision solve handles (``SAFE_RANGE``: squares and residual norms must stay
-    finite).  Collective."""
+    finite).  Collective.
+
+    The Frobenius norm F settles the common case without copying the entries: a finite F with
+    ``SAFE_RANGE[0]``·√(m n) ≤ F ≤ ``SAFE_RANGE[1]`` (m × n the size) bounds the largest entry |a| by
+    F/√(m n) ≤ |a| ≤ F, inside the range, and no entry is NaN or infinite (they make F so).  Otherwise the
+    entries are read to say which bound fails."""
+    m, n = A.getSize()
+    norm = A.norm(PETSc.NormType.FROBENIUS)
+    if np.isfinite(norm) and SAFE_RANGE[0] * np.sqrt(float(m) * float(n)) <= norm <= SAFE_RANGE[1]:
+        return
     _, _, values = A.getValuesCSR()
     comm = A.getComm().tompi4py()
     finite = comm.allreduce(bool(np.all(np.isfinite(values))), op=MPI.LAND)
@@ -173,7 +202,8 @@ class DirectSolver(_Factorization):
     ``solve`` and ``mat_solve`` then return the solutions of A x = b, x = D (D A D)⁻¹ (D b).  ``spd``: the
     operators are symmetric positive definite (the caller's guarantee): each is flagged so and factorized by
     MUMPS' Cholesky without pivoting (``SPD_OPTIONS``, unless ``options`` are given); should that fail (a
-    matrix positive definite in exact arithmetic only), by its LU from then on.
+    matrix positive definite in exact arithmetic only), by its LU from then on.  The PETSc option
+    ``-fc_spd_factor lu`` (``spd_factor``) makes ``spd`` operators factorize by LU like any other.
     """
 
     def __init__(
@@ -187,7 +217,7 @@ class DirectSolver(_Factorization):
     ) -> None:
         self.ksp = PETSc.KSP().create(comm)
         self.ksp.setOptionsPrefix(prefix)
-        self.spd = spd
+        self.spd = spd = spd and spd_factor() == "cholesky"
         opts = PETSc.Options()
         for key, value in (options or (SPD_OPTIONS if spd else DIRECT_OPTIONS)).items():
             opts[f"{prefix}{key}"] = value
@@ -240,16 +270,33 @@ class DirectSolver(_Factorization):
         if reason < 0:
             raise ConvergenceError(f"{self.prefix}: linear solve failed, KSP reason {reason}")
 
-    def has_inverse_entries(self) -> bool:
-        """Whether ``inverse_block`` works here: a sequential MUMPS factorization (``fem.inverse_entries``)."""
+    def sequential_mumps(self) -> bool:
+        """Whether the factors held are a sequential MUMPS factorization (``solve_sparse`` works here)."""
         pc = self.ksp.getPC()
         return (
             self.ksp.getComm().getSize() == 1
-            and inverse_entries.available()
             and self.factorizations > 0
             and pc.getType() in ("lu", "cholesky")
             and pc.getFactorSolverType() == "mumps"
         )
+
+    def has_inverse_entries(self) -> bool:
+        """Whether ``inverse_block`` works here: a sequential MUMPS factorization (``fem.inverse_entries``)."""
+        return inverse_entries.available() and self.sequential_mumps()
+
+    def solve_sparse(self, rows: np.ndarray, values: np.ndarray) -> np.ndarray:
+        """A⁻¹ b for the b that vanishes but at ``rows`` (distinct), where it holds ``values``: MUMPS' sparse
+        right-hand side (ICNTL(20)) skips the forward elimination where b vanishes (``sequential_mumps`` only);
+        ConvergenceError on a failure or non-finite values.  With ``scaling`` the solution of A x = b as ``solve``."""
+        rows = np.asarray(rows, dtype=np.int64)
+        values = np.asarray(values, dtype=PETSc.ScalarType)
+        if self.scaling is not None:
+            values = values * self.scaling[rows]
+        order = np.argsort(rows)
+        n = self.ksp.getOperators()[0].getSize()[0]
+        rhs_t = sp.csr_matrix((values[order], rows[order], np.array([0, rows.size])), shape=(1, n))
+        x = _sparse_solve(self.ksp.getPC().getFactorMatrix(), rhs_t, self.prefix)[:, 0]
+        return x if self.scaling is None else self.scaling * x
 
     def inverse_block(self, rows: np.ndarray) -> np.ndarray:
         """(A⁻¹)[rows][:, rows] (dense, in the order of ``rows``) from the factors held: MUMPS' entries of the
@@ -434,24 +481,7 @@ class SparseFactor(_Factorization):
         ConvergenceError on a failure or non-finite values."""
         if self.scaling is not None:
             rhs_t = (rhs_t @ sp.diags(self.scaling)).tocsr()  # (D B, by its transpose's columns)
-        k, n = rhs_t.shape
-        csr = _petsc_csr(rhs_t)
-        Bt = PETSc.Mat().createAIJWithArrays((k, n), csr, comm=PETSc.COMM_SELF)
-        Bt.assemble()
-        B = PETSc.Mat().createTranspose(Bt)
-        X = PETSc.Mat().createDense((n, k), comm=PETSc.COMM_SELF)
-        X.setUp()
-        try:
-            try:
-                self.ksp.getPC().getFactorMatrix().matSolve(B, X)
-            except PETSc.Error as err:
-                raise ConvergenceError(f"MUMPS failed on {self.what} ({err})") from None
-            out = X.getDenseArray().copy(order="F")
-        finally:
-            for obj in (B, Bt, X):
-                obj.destroy()
-        if not np.all(np.isfinite(out)):
-            raise ConvergenceError(f"a solve of {self.what} produced non-finite values")
+        out = _sparse_solve(self.ksp.getPC().getFactorMatrix(), rhs_t, self.what)
         return out if self.scaling is None else self.scaling[:, None] * out
 
     def inertia(self) -> tuple[int, int, int]:
@@ -472,6 +502,32 @@ class SparseFactor(_Factorization):
         for obj in (self.ksp, self.mat):
             obj.destroy()
         self._arrays = None
+
+
+def _sparse_solve(factor: PETSc.Mat, rhs_t: sp.csr_matrix, what: str) -> np.ndarray:
+    """A⁻¹ B with the sequential MUMPS factor ``factor`` of A for sparse right-hand sides B given by their transpose
+    ``rhs_t`` (one row per right-hand side, canonical CSR; PETSc hands MUMPS the transpose of an AIJ matrix as sparse
+    right-hand sides, ICNTL(20)): a dense (n × k) column-major result; ConvergenceError on a failure or non-finite
+    values (``what`` names A)."""
+    k, n = rhs_t.shape
+    csr = _petsc_csr(rhs_t)
+    Bt = PETSc.Mat().createAIJWithArrays((k, n), csr, comm=PETSc.COMM_SELF)
+    Bt.assemble()
+    B = PETSc.Mat().createTranspose(Bt)
+    X = PETSc.Mat().createDense((n, k), comm=PETSc.COMM_SELF)
+    X.setUp()
+    try:
+        try:
+            factor.matSolve(B, X)
+        except PETSc.Error as err:
+            raise ConvergenceError(f"MUMPS failed on {what} ({err})") from None
+        out = X.getDenseArray().copy(order="F")
+    finally:
+        for obj in (B, Bt, X):
+            obj.destroy()
+    if not np.all(np.isfinite(out)):
+        raise ConvergenceError(f"a solve of {what} produced non-finite values")
+    return out
 
 
 def _equilibrated(A: sp.csr_matrix, d: np.ndarray) -> sp.csr_matrix:
@@ -587,6 +643,28 @@ class AbsoluteTerms:
     def destroy(self) -> None:
         if self._abs is not None:
             self._abs.destroy()
+
+
+class ComponentBlockProduct:
+    """y = A x for a sequential matrix A = A₁ ⊗ I of a blocked space (``bs`` components interleaved) whose form
+    couples equal components only, with the same entries for each (the vector mass matrix): A₁, A's block of the
+    first component (taken once), applied to the components side by side by SciPy reads 1/bs² of A's entries for
+    the same products, in the same order (the entries A holds between different components are zeros)."""
+
+    def __init__(self, A: PETSc.Mat, bs: int) -> None:
+        if A.getComm().getSize() != 1:
+            raise ValueError("ComponentBlockProduct takes a sequential matrix")
+        n = A.getSize()[0]
+        rows = PETSc.IS().createStride(n // bs, 0, bs, comm=PETSc.COMM_SELF)
+        block = A.createSubMatrix(rows, rows)
+        self.block = petsc_to_scipy(block)
+        self.bs = bs
+        for obj in (block, rows):
+            obj.destroy()
+
+    def mult(self, x: PETSc.Vec, y: PETSc.Vec) -> None:
+        """y ← A x."""
+        y.getArray()[:] = (self.block @ x.getArray(readonly=True).reshape(-1, self.bs)).ravel()
 
 
 def quadratic_form(A: PETSc.Mat, x: PETSc.Vec, work: PETSc.Vec) -> float:

@@ -29,7 +29,7 @@ from fenics_contact.fem import forms_primal
 from fenics_contact.fem.amg import AMGSolver, LinearSolverOptions, linear_solver
 from fenics_contact.fem.contact import MAX_REFINEMENTS, ContactProfile, NewtonHistory, NewtonOptions, semismooth_newton
 from fenics_contact.fem.friction import NodalFriction, frictional_newton
-from fenics_contact.fem.linalg import AbsoluteTerms, DirectSolver, quadratic_form
+from fenics_contact.fem.linalg import AbsoluteTerms, ComponentBlockProduct, DirectSolver, quadratic_form
 from fenics_contact.fem.primal_boundary import NodalContactGeometry, PrimalBoundaryData
 from fenics_contact.problem.fields import MaterialFields
 from fenics_contact.problem.friction import Friction, friction_of
@@ -163,16 +163,27 @@ class PrimalSubproblem:
                 msh.comm, prefix=prefix, space=self.V, options=solver, contrast=_contrast(fields.mu, msh.comm)
             )
         # K and M on J's sparsity (its cell couplings are theirs; its facet terms couple no other unknowns): the
-        # pattern is computed once, not three times
-        self._K, self._M = self.A.duplicate(), self.A.duplicate()
-        for mat, form in ((self._K, self._a), (self._M, self._m)):
-            dolfinx.fem.petsc.assemble_matrix(mat, form)
-            mat.assemble()
-        self._work = self._K.createVecLeft()
+        # pattern is computed once, not three times; K on first use (``_K``)
+        self._M = self.A.duplicate()
+        dolfinx.fem.petsc.assemble_matrix(self._M, self._m)
+        self._M.assemble()
+        self._stiffness: PETSc.Mat | None = None
+        self._work = self._M.createVecLeft()
         self._linear_ready = False
         self._factorized_set: np.ndarray | None = None
         self._terms = AbsoluteTerms()
+        self._mass = None  # M's block of one component (``norm_products``, one process)
         self.friction = NodalFriction(self, friction, delta) if friction is not None and self.contact else None
+
+    @property
+    def _K(self) -> PETSc.Mat:
+        """K, the matrix of the elastic form a (no boundary conditions), assembled on first use (collective):
+        Algorithm 1's linear Ω₁ along a load path takes its products from its equations and never needs it."""
+        if self._stiffness is None:
+            self._stiffness = self.A.duplicate()
+            dolfinx.fem.petsc.assemble_matrix(self._stiffness, self._a)
+            self._stiffness.assemble()
+        return self._stiffness
 
     # -- contact geometry ------------------------------------------------------------------
     @property
@@ -321,11 +332,18 @@ class PrimalSubproblem:
         """(w, w) on this (sub)mesh."""
         return quadratic_form(self._M, w.x.petsc_vec, self._work)
 
-    def norm_products(self, w: fem.Function, Kw: PETSc.Vec, Mw: PETSc.Vec) -> None:
-        """Kw ← K w, Mw ← M w: a(w, w) = wᵀK w and (w, w) = wᵀM w (K, M the matrices of ``energy_norm2``,
-        ``l2_norm2``)."""
-        self._K.mult(w.x.petsc_vec, Kw)
-        self._M.mult(w.x.petsc_vec, Mw)
+    def norm_products(self, w: fem.Function, Kw: PETSc.Vec | None, Mw: PETSc.Vec) -> None:
+        """Kw ← K w (unless Kw is None), Mw ← M w: a(w, w) = wᵀK w and (w, w) = wᵀM w (K, M the matrices of
+        ``energy_norm2``, ``l2_norm2``).  On one process M w by M's block of one component
+        (``linalg.ComponentBlockProduct``: the mass form couples equal components only), the same products."""
+        if Kw is not None:
+            self._K.mult(w.x.petsc_vec, Kw)
+        if self.mesh.comm.size > 1:
+            self._M.mult(w.x.petsc_vec, Mw)
+            return
+        if self._mass is None:
+            self._mass = ComponentBlockProduct(self._M, self.V.dofmap.index_map_bs)
+        self._mass.mult(w.x.petsc_vec, Mw)
 
     def contact_profile(self) -> ContactProfile:
         """u_c = u·ν − g and the consistent nodal normal stress σ_c = (R·ν_p)/w_p along Γ_C, on every rank.
@@ -410,8 +428,9 @@ class PrimalSubproblem:
 
     def destroy(self) -> None:
         """Free the PETSc objects (collective)."""
-        for obj in (self.A, self.b, self.du, self._gap_vec, self._K, self._M, self._work):
-            obj.destroy()
+        for obj in (self.A, self.b, self.du, self._gap_vec, self._stiffness, self._M, self._work):
+            if obj is not None:
+                obj.destroy()
         self.solver.destroy()
         self._terms.destroy()
 

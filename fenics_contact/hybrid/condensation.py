@@ -124,7 +124,9 @@ class CondensedInterface:
             self.Yc, self._Sc, self._Yq, self._Sq = om2.responses(contact=True, chunk=problem.options.chunk)
         else:
             self.Yc = components[0]
-        f = self.f = problem.unknowns(self.Yc)  # the data at the other values stay zero
+        kept = previous is not None and previous.problem is problem and previous.Yc is self.Yc
+        # the data at the other values stay zero (``unknowns`` of the same Ω₁ response and Yc: the previous ones)
+        f = self.f = previous.f if kept else problem.unknowns(self.Yc)
         a, b, eye = problem.a[f], problem.b, np.eye(f.size)
         same = (
             previous is not None

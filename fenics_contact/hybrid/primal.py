@@ -20,6 +20,7 @@ import logging
 import time
 from dataclasses import dataclass
 
+import dolfinx.fem.petsc
 import numpy as np
 from dolfinx import fem
 from mpi4py import MPI
@@ -156,6 +157,8 @@ class PrimalHybridStep:
         self._certificate = Certificate(np.inf, np.inf)
         self._record: dict = {}
         self._newton = None
+        self._omega1_data: np.ndarray | None = None  #: the data g₁₂ of Ω₁'s last ``PrimalPart.solve_for`` (global)
+        self._robin = None  #: (Ω₁'s PrimalPart, R on its owned γ rows, its Γ_D rows): ``_omega1_stiffness_product``
         self._krylov: KrylovInterface | None = None
         self.reference = None
         if reference is not None:
@@ -199,10 +202,39 @@ class PrimalHybridStep:
         (``condensed``, the Ω₁ response held) the linear Ω₁ is one back-solve of the kept body load plus the data
         (``PrimalPart.solve_for``: no assembly of its residual), otherwise its own solve."""
         omega1 = getattr(self._newton, "omega1", None)
+        self._omega1_data = None
         if condensed and isinstance(omega1, FineResponse) and omega1.part.sub is self.sub[0]:
-            omega1.part.solve_for(self.interface.gather(g12))
+            self._omega1_data = self.interface.gather(g12)
+            omega1.part.solve_for(self._omega1_data)
             return None
         return self.sub[0].solve()
+
+    def _omega1_stiffness_product(self, Ku) -> bool:
+        """Ku ← K u₁ for the Ω₁ state ``PrimalPart.solve_for`` set, from the equations it solved, J u₁ = b + C g:
+        J is K plus the Robin term's diagonal R = α w on the γ unknowns (vertex quadrature) on the free rows, so
+        K u₁ = b + C g − R u₁ there, without a product with K (the solve's residual, like the product's rounding,
+        is ε|K||u₁| row by row); 0 on the Γ_D rows, which the relative change sees only through u₁ and its change,
+        both 0 there.  Returns False (Ku untouched) unless Ω₁'s state came from ``solve_for`` and u_D vanishes."""
+        part = getattr(getattr(self._newton, "omega1", None), "part", None)
+        if self._omega1_data is None or part is None:
+            return False
+        if self._robin is None or self._robin[0] is not part:  # (once per part: R on its γ rows, the Γ_D rows)
+            weights = self.interface.gather(self.alpha * self.interface.weights)
+            mask = self.sub[0].u.x.petsc_vec.duplicate()
+            mask.set(1.0)
+            dolfinx.fem.petsc.set_bc(mask, self.sub[0].bcs)  # (0 on the Γ_D rows)
+            fixed = mask.getArray(readonly=True) == 0.0
+            mask.destroy()
+            self._robin = (part, weights[part.trace_index], fixed)
+        _, robin, fixed = self._robin
+        u = self.sub[0].u.x.array[: part.nown]
+        if self.comm.allreduce(bool(np.any(u[fixed])), op=MPI.LOR):
+            return False
+        out = part.solved_rhs()
+        out[part.trace_at] -= robin * u[part.trace_at]
+        out[fixed] = 0.0
+        Ku.getArray()[:] = out
+        return True
 
     def certificate(self) -> Certificate:
         return self._certificate
@@ -254,7 +286,9 @@ class PrimalHybridStep:
         """The relative change of the pair since the last application of T.  ``kept`` (the condensed Newton's
         load steps): the products with the stiffness and mass matrices of the last state are kept, and those of
         the change are their differences, K(u − u_prev) = K u − K u_prev: two products per subdomain instead of
-        four (the same numbers to round-off relative to the state's, the change's relative accuracy ε/change)."""
+        four (the same numbers to round-off relative to the state's, the change's relative accuracy ε/change);
+        Ω₁'s K u₁ from the equations its back-solve solved (``_omega1_stiffness_product``): one product there, and
+        Ω₁'s K is not assembled (``PrimalSubproblem._K``, on first use) along a load path from a zero state."""
         de = du = ne = nu = 0.0
         fast = kept and self._products is not None
         if kept and not fast:
@@ -263,20 +297,30 @@ class PrimalHybridStep:
             diff.x.array[:] = s.u.x.array - prev
             if fast:
                 Ku, Mu, Kprev, Mprev = self._products[i]
-                s.norm_products(s.u, Ku, Mu)
+                # (Ω₁'s K u₁ from its equations: the mass product only)
+                s.norm_products(s.u, None if i == 0 and self._omega1_stiffness_product(Ku) else Ku, Mu)
                 x, d = s.u.x.petsc_vec, diff.x.petsc_vec
                 ne, nu = ne + Ku.dot(x), nu + Mu.dot(x)
                 Kprev.aypx(-1.0, Ku)  # K u − K u_prev
                 Mprev.aypx(-1.0, Mu)
                 de, du = de + Kprev.dot(d), du + Mprev.dot(d)
                 self._products[i] = [Kprev, Mprev, Ku, Mu]  # (the next call's work and kept products)
+            elif kept:  # the products of the state, kept for the next call, give its quadratic forms
+                Ku, Mu = self._products[i][2:]
+                s.norm_products(s.u, None if i == 0 and self._omega1_stiffness_product(Ku) else Ku, Mu)
+                x = s.u.x.petsc_vec
+                ne_i, nu_i = Ku.dot(x), Mu.dot(x)
+                ne, nu = ne + ne_i, nu + nu_i
+                if self.comm.allreduce(bool(np.any(prev)), op=MPI.LOR):
+                    de += s.energy_norm2(diff)
+                    du += s.l2_norm2(diff)
+                else:  # from zero (a curve's first step): the change is the state itself
+                    de, du = de + ne_i, du + nu_i
             else:
                 de += s.energy_norm2(diff)
                 du += s.l2_norm2(diff)
                 ne += s.energy_norm2(s.u)
                 nu += s.l2_norm2(s.u)
-                if kept:
-                    s.norm_products(s.u, *self._products[i][2:])
             prev[:] = s.u.x.array
         if not kept:
             self._drop_products()

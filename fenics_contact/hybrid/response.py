@@ -120,15 +120,21 @@ class AffinePart:
     def load_response(self) -> tuple[np.ndarray, np.ndarray]:
         """(y₀, s₀): trace and contact values of J⁻¹ b (zero data, no contact force); J⁻¹ b is kept while b and
         J's factorization stay (a load path moves the obstacle only: s₀ takes the new normals and gap)."""
+        x0 = self.load_solution()[:, None]
+        y0 = self.trace_rows(x0)[:, 0] + self.trace_offset
+        return y0, (self.contact_rows(x0)[:, 0] - self.gap if self.n_c else np.zeros(0))
+
+    def load_solution(self) -> np.ndarray:
+        """J⁻¹ b (local; the kept array, read only), solved again only when b or J's factorization changed; a
+        vanishing b (no body force, traction or u_D reaching the subproblem) gives zeros without a solve."""
         b = self.body_load()
         kept = getattr(self, "_kept_load", None)
         key = (id(self.solver), getattr(self.solver, "factorizations", None))
         changed = kept is None or kept[0] != key or not np.array_equal(kept[1], b)
         if self.comm.allreduce(changed, op=MPI.LOR):  # (collective: the solve is)
-            kept = self._kept_load = (key, b, self.solve(b))
-        x0 = kept[2][:, None]
-        y0 = self.trace_rows(x0)[:, 0] + self.trace_offset
-        return y0, (self.contact_rows(x0)[:, 0] - self.gap if self.n_c else np.zeros(0))
+            loaded = self.comm.allreduce(bool(np.any(b)), op=MPI.LOR)
+            kept = self._kept_load = (key, b, self.solve(b) if loaded else np.zeros_like(b))
+        return kept[2]
 
     def refresh(self) -> bool:
         """Re-read the contact geometry (an obstacle may have moved): True when the condensation is stale."""
@@ -195,6 +201,7 @@ class PrimalPart(AffinePart):
         self._kept_inverse = None  # (J₀'s factorization count, rows, the block of J₀⁻¹ there, transposed)
         self._kept_body = None  # (the values ``body_load`` was assembled from, b)
         self._kept_components = None  # (J₀'s factorization count, ``component_responses``)
+        self._solved = None  # (b or b + C g, g or None) of the last ``solve_for``
         #: condense per displacement component (``component_responses``) where the entries of J₀⁻¹ are taken
         self.by_components = True
 
@@ -359,11 +366,30 @@ class PrimalPart(AffinePart):
 
     def solve_for(self, g: np.ndarray) -> None:
         """Set the subproblem's state to its solution for global data g without contact forces, x = J⁻¹(b + C g):
-        one back-solve, its right-hand side from the kept body load (no assembly).  For the linear Ω₁, whose J is
-        its only operator (``FineResponse``)."""
+        no assembly, one back-solve.  For the linear Ω₁, whose J is its only operator (``FineResponse``).  On one
+        process x = J⁻¹b + J⁻¹(C g), the first kept (``load_solution``), the second a back-solve whose right-hand
+        side vanishes but on the γ unknowns (``DirectSolver.solve_sparse``: MUMPS skips the forward elimination
+        elsewhere, benchmarks/results/load_step_cost.md); otherwise one back-solve of the kept body load plus the
+        data."""
         if self.n_c:
             raise ValueError("solve_for solves the subproblem without contact (its linear operator J)")
-        self.set_state(self.solve(self.rhs(g, np.zeros(0))))
+        if isinstance(self.solver, DirectSolver) and self.solver.sequential_mumps():
+            x = self.solver.solve_sparse(self.data_at, self.data_w * g[self.data_index])
+            x += self.load_solution()
+            self._solved = (self._kept_load[1], g)
+            self.set_state(x)
+            return
+        rhs = self.rhs(g, np.zeros(0))
+        self._solved = (rhs, None)
+        self.set_state(self.solve(rhs))
+
+    def solved_rhs(self) -> np.ndarray:
+        """b + C g (local, a new array) of the last ``solve_for``: the right-hand side its state solves."""
+        b, g = self._solved
+        r = b.copy()
+        if g is not None:
+            r[self.data_at] += self.data_w * g[self.data_index]
+        return r
 
     def destroy(self) -> None:
         for obj in (self._b, self._x):

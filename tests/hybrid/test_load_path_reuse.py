@@ -3,8 +3,10 @@
 * ``PrimalPart.body_load`` is assembled again only when the values it is assembled from change
   (``PrimalSubproblem.body_load_inputs``): a moved obstacle keeps it, a new body force or u_D does not, and the
   kept vector equals a fresh assembly bit for bit.
-* ``PrimalPart.solve_for`` (Ω₁ by one back-solve of the kept body load plus the data) gives Ω₁'s own solve to
-  1e-12.
+* ``PrimalPart.solve_for`` (Ω₁ as the kept J⁻¹b plus one back-solve of the data, a sparse right-hand side on one
+  process) gives Ω₁'s own solve to 1e-12, with and without a body force.
+* The relative change's K u₁ taken from the equations Ω₁'s back-solve solved is the product with K to 1e-12.
+* On one process the mass products of the relative change by M's block of one component are PETSc's products.
 * On one process ``InterfaceSpace``'s transfers are copies of the interface entries: the values of the general
   transfers through the parent space, bit for bit.
 * A force–indentation curve through the condensed Newton with these gives the forces of the plain path (the body
@@ -60,10 +62,21 @@ def test_body_load_is_kept_while_its_inputs_are(which):
     assert np.array_equal(loaded, _fresh(assemble, part))
 
 
-def test_solve_for_equals_the_subproblem_solve():
+@pytest.mark.parametrize("force", [0.0, 1.0])
+@pytest.mark.parametrize("sparse", [True, False])
+def test_solve_for_equals_the_subproblem_solve(force, sparse, monkeypatch):
+    """Ω₁ for data g: the kept J⁻¹b plus the sparse right-hand side's back-solve (one process), or one back-solve of
+    b + C g, equal Ω₁'s own solve, with and without a body force (b = 0: J⁻¹b without a solve)."""
     step = PrimalHybridStep(_model().on(unit_square(16, 4)))
     step.prepare()
     part = step.interface_problem(InterfaceNewtonOptions()).omega1.part
+    part.sub.fields.f.x.array[:] = force
+    assert part.solver.sequential_mumps() == (MPI.COMM_WORLD.size == 1)
+    if not sparse:
+        monkeypatch.setattr(type(part.solver), "sequential_mumps", lambda self: False)
+    sparse_solves = []
+    solve_sparse = type(part.solver).solve_sparse
+    monkeypatch.setattr(type(part.solver), "solve_sparse", lambda *a: sparse_solves.append(1) or solve_sparse(*a))
     rng = np.random.default_rng(3)
     g = rng.standard_normal(part.n_g) * step.alpha * 1e-3
     step.interface.to_part(g, 0, part.sub.g)
@@ -73,8 +86,55 @@ def test_solve_for_equals_the_subproblem_solve():
     part.solve_for(step.interface.gather(g))
     scale = np.abs(own).max()
     assert scale > 0 and np.abs(part.sub.u.x.array - own).max() <= 1e-12 * scale
+    assert len(sparse_solves) == (1 if sparse and MPI.COMM_WORLD.size == 1 else 0)
+    assert (np.abs(part.load_solution()).max() > 0) == (force != 0)
     with pytest.raises(ValueError, match="without contact"):
         step.interface_problem(InterfaceNewtonOptions()).omega2.solve_for(np.zeros(part.n_g))
+
+
+@pytest.mark.parametrize("force", [0.0, 1.0])
+def test_omega1_stiffness_product_from_its_equations(force):
+    """The relative change's K u₁ from the equations Ω₁'s back-solve solved (b + C g − R u₁ on the free rows, 0 on
+    Γ_D) is the product with K to 1e-12 there; without a ``solve_for`` state it is not taken."""
+    step = PrimalHybridStep(_model().on(unit_square(16, 4)))
+    step.prepare()
+    part = step.interface_problem(InterfaceNewtonOptions()).omega1.part
+    part.sub.fields.f.x.array[:] = force
+    rng = np.random.default_rng(4)
+    g12 = rng.standard_normal(step.interface.size) * step.alpha * 1e-3
+    Ku, product = part.sub.u.x.petsc_vec.duplicate(), part.sub.u.x.petsc_vec.duplicate()
+    step._solve_omega1(g12, False)  # Ω₁'s own solve: no equations kept
+    assert not step._omega1_stiffness_product(Ku)
+    step._solve_omega1(g12, True)  # the condensed Newton's: PrimalPart.solve_for
+    assert step._omega1_stiffness_product(Ku)
+    part.sub.norm_products(part.sub.u, product, Ku.duplicate())
+    fixed = step._robin[2]
+    assert fixed.any() and not fixed.all()
+    ours, theirs = Ku.getArray(), product.getArray()
+    scale = MPI.COMM_WORLD.allreduce(np.abs(theirs).max(), op=MPI.MAX)
+    assert scale > 0 and np.all(ours[fixed] == 0.0)
+    assert MPI.COMM_WORLD.allreduce(np.abs(ours - theirs)[~fixed].max(), op=MPI.MAX) <= 1e-12 * scale
+    x = part.sub.u.x.petsc_vec
+    assert abs(Ku.dot(x) - product.dot(x)) <= 1e-12 * abs(product.dot(x))  # a(u₁, u₁)
+    for vec in (Ku, product):
+        vec.destroy()
+
+
+@serial
+def test_mass_products_by_one_component_block():
+    """``norm_products``' M w on one process (M's block of one component applied to the components side by side,
+    ``ComponentBlockProduct``) is PETSc's product with M, entry for entry."""
+    step = PrimalHybridStep(_model().on(unit_square(16, 4)))
+    rng = np.random.default_rng(6)
+    for sub in step.sub:
+        sub.u.x.array[:] = rng.standard_normal(sub.u.x.array.size)
+        ours, theirs = sub.u.x.petsc_vec.duplicate(), sub.u.x.petsc_vec.duplicate()
+        sub.norm_products(sub.u, None, ours)
+        sub._M.mult(sub.u.x.petsc_vec, theirs)
+        assert np.abs(theirs.getArray()).max() > 0
+        assert np.allclose(ours.getArray(), theirs.getArray(), rtol=1e-15, atol=0.0)
+        for vec in (ours, theirs):
+            vec.destroy()
 
 
 @serial
@@ -115,6 +175,7 @@ def test_load_path_equals_the_plain_path(monkeypatch):
     monkeypatch.setattr(PrimalPart, "solve_for", lambda self, g: solves.append(1) or solve_for(self, g))
     fast, fast_changes = _curve(cm)
     assert len(solves) == DEPTHS.size  # Ω₁ from the kept body load at every step
+    assert fast.step.sub[0]._stiffness is None  # Ω₁'s K u₁ from its equations: its K never assembled
     mono, _ = _curve(cm, "primal-monolithic")
 
     def assembled(self):  # the body load assembled at every call

@@ -1,4 +1,5 @@
-"""The monolithic solve and Algorithm 1 on two ranks give the serial answer (the same solves on COMM_SELF)."""
+"""The monolithic solve and Algorithm 1 (one solve, a load path) on two ranks give the serial answer (the same solves
+on COMM_SELF)."""
 
 import numpy as np
 import pytest
@@ -11,8 +12,10 @@ import fenics_contact  # noqa: F401  (imports dolfinx_solver first)
 from fenics_contact.fem.primal import default_penalty, solve_primal_monolithic
 from fenics_contact.hybrid.iteration import IterationOptions
 from fenics_contact.hybrid.primal import solve_primal_hybrid
+from fenics_contact.indentation import force_indentation
 from fenics_contact.problem.geometry import unit_square
 from fenics_contact.problem.models import get_model
+from fenics_contact.problem.obstacles import Circle
 
 pytestmark = pytest.mark.mpi
 
@@ -84,3 +87,32 @@ def test_two_ranks_match_serial_with_interface_newton():
     assert parallel["iterations"] == serial["iterations"]
     assert abs(parallel["hybrid_norm"] - serial["hybrid_norm"]) <= 1e-10 * serial["hybrid_norm"]
     assert np.allclose(parallel["active_set"], serial["active_set"], rtol=0, atol=1e-12)
+
+
+def _curve_numbers(comm: MPI.Comm) -> dict:
+    """Algorithm 1's load path (condensed interface Newton) on ``comm``: rank 0's forces, relative changes and
+    certificates on every rank."""
+    problem = get_model(3, E_high=1e3).with_(obstacle=Circle((3.0, 0.5), 2.0)).on(unit_square(32, 8, comm=comm))
+    changes = []
+    curve = force_indentation(
+        problem,
+        "primal",
+        np.linspace(0.004, 0.02, 3),
+        direction=(-1.0, 0.0),
+        on_step=lambda _, solver: changes.append(solver.relative_change()),
+        tol=1e-10,
+        accel="newton",
+    )
+    return on_every_rank(
+        {"forces": curve.forces.tolist(), "changes": changes, "residuals": curve.transmission_residuals.tolist()}
+    )
+
+
+def test_two_ranks_load_path_matches_serial():
+    """A load path of Algorithm 1 on two ranks (Ω₁ by one back-solve of b + C g, its K u₁ from those equations in
+    the relative change): the serial forces, relative changes and certified steps."""
+    serial = _curve_numbers(MPI.COMM_SELF)
+    parallel = _curve_numbers(MPI.COMM_WORLD)
+    assert np.allclose(parallel["forces"], serial["forces"], rtol=1e-10, atol=0.0)
+    assert np.allclose(parallel["changes"], serial["changes"], rtol=1e-6, atol=0.0)
+    assert max(serial["residuals"] + parallel["residuals"]) < 1e-10

@@ -26,6 +26,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from fenics_contact.fem.linalg import SparseFactor, scipy_to_petsc
+from fenics_contact.multiscale.cem.equations import patch_equations
 from fenics_contact.multiscale.cem.operators import FineOperators
 from fenics_contact.multiscale.cem.options import WHOLE_DOMAIN, CEMOptions
 from fenics_contact.multiscale.cem.spectral import AuxiliarySpace, build_auxiliary_space
@@ -119,6 +120,9 @@ class MultiscaleSpace:
     grams: tuple | None = None
     #: ``CEMOptions.patch_group`` the bases were built with (their supports: ``covering``)
     patch_group: int | str = 1
+    #: the ``equations.PatchEquations`` of the patch problems (ZᵀKZ from them, ``coarse.gram_matrices``) until the
+    #: Gram matrices are formed; None on a space loaded from the cache
+    equations: list | None = None
 
     @property
     def size(self) -> int:
@@ -242,20 +246,29 @@ def _patch_problem(
         raise
     t1 = time.perf_counter()
     try:
-        x = lu.solve_sparse(rhs_t)[:nI]
+        solution = lu.solve_sparse(rhs_t)
     finally:
         lu.destroy()
     timing = (t1 - t0, time.perf_counter() - t1)
+    x = solution[:nI]
     dofs = inner.astype(np.int32)
-    cells = []
+    cells, columns = [], []  # columns: of each solution in Z = [Ψ, N, N_f]
     for (at, li, on_gamma, used), i in zip(blocks, group):
         basis = PatchFunctions(dofs, np.ascontiguousarray(x[:, at : at + li]), aux.columns(i))
+        columns.append(aux.columns(i))
         corr = None
         if used.size:
             gamma_pos = np.searchsorted(ops.gamma, on_gamma[used])
             corr = PatchFunctions(dofs, np.ascontiguousarray(x[:, at + li : at + li + used.size]), gamma_pos)
+            columns.append(aux.size + gamma_pos)
         cells.append((basis, corr))
-    return cells, (x[:, -1].copy() if F is not None else None), timing
+    if F is not None:
+        columns.append(np.array([aux.size + ops.gamma.size]))
+    # the ring: the DOFs of the patch's cells that are not interior (where A x and B μ reach outside I)
+    nodes = np.unique(np.concatenate([inc.nodes(int(k)) for k in patch]))
+    ring = np.setdiff1d((ops.bs * nodes[:, None] + np.arange(ops.bs)).ravel(), inner, assume_unique=True)
+    eq = patch_equations(ops.A, aux.B, ring, inner, J, solution, rhs_t, np.concatenate(columns))
+    return cells, (x[:, -1].copy() if F is not None else None), timing, eq
 
 
 def cell_groups(grid: CoarseGrid, options: CEMOptions, dim: int) -> tuple[list, list]:
@@ -345,6 +358,7 @@ def build_multiscale_space(
         correction_cells,
         times,
         patch_group=options.patch_group,
+        equations=[r[3] for r in results],
     )
     log.info(
         "CEM offline: %d coarse cells, m = %d, dim V_ms = %d, %.1f MB of bases; eigen %.2f s, patches %.2f s",

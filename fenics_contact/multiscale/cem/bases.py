@@ -165,10 +165,12 @@ class MultiscaleSpace:
         return total + (self.Nf.nbytes if self.Nf is not None else 0)
 
 
-#: MUMPS controls of the patch LDLᵀ: the QAMD ordering (ICNTL(7) = 6).  Measured on a 7×7-cell patch at
-#: h = 1/256 (24.6k DOFs): LDLᵀ with QAMD 0.13 s, LDLᵀ with AMD 0.21 s, LU with AMD 0.39 s, SuperLU 1.8 s;
-#: QAMD copes with the μ rows (one per aux function, dense over its coarse cell).
-PATCH_ICNTL = {7: 6}
+#: MUMPS controls of the patch LDLᵀ: the approximate minimum fill ordering (ICNTL(7) = 2).  Measured (CPU time, on a
+#: shared machine) on model 3 at h = 1/256, H = 1/16, m = 4: the 16 patches of patch_group 4 (28k–73k DOFs) factorize
+#: in 2.3–2.5 s and solve in 1.8–2.1 s with AMF against 2.8–2.9 s and 2.3–2.6 s with QAMD (ICNTL(7) = 6); on patches
+#: of one cell (patch_group 1) AMF and QAMD take the same time, AMD more.  Both cope with the μ rows (one per aux
+#: function, dense over its coarse cell); SuperLU and LU take several times longer.
+PATCH_ICNTL = {7: 2}
 
 
 def global_saddle_matrix(ops: FineOperators, aux: AuxiliarySpace) -> PETSc.Mat:

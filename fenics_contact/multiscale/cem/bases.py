@@ -34,6 +34,7 @@ from fenics_contact.multiscale.coarse import CoarseGrid
 from fenics_contact.multiscale.work import run_shared
 
 __all__ = [
+    "EQUATIONS_GRAM_DIMS",
     "PATCH_ICNTL",
     "Incidence",
     "MultiscaleSpace",
@@ -173,6 +174,14 @@ class MultiscaleSpace:
 PATCH_ICNTL = {7: 2}
 
 
+#: the dimensions in which ZᵀKZ comes from the patch equations (``equations.stiffness_gram``), else from products
+#: with the fine stiffness: in 2D the ring terms are a small part of the products' work (model 3, h = 1/256, H =
+#: 1/16, m = 4, patch_group 4: the Gram matrices take 3.7 s of CPU time against 5.2 s), in 3D a patch's ring is a
+#: surface holding a large share of its DOFs and they cost more (the 16³ cube of ``channels_3d``, H = 1/8, m = 1:
+#: 6.0 s against 2.2 s)
+EQUATIONS_GRAM_DIMS = (2,)
+
+
 def global_saddle_matrix(ops: FineOperators, aux: AuxiliarySpace) -> PETSc.Mat:
     """[[A, B], [Bᵀ, −I]] on all Ω₁ DOFs and aux functions: every patch matrix is a principal submatrix."""
     M = sp.bmat([[ops.A, aux.B], [aux.B.T, -sp.identity(aux.size, format="csr")]], format="csr")
@@ -190,6 +199,7 @@ def _patch_problem(
     inner: np.ndarray,
     *,
     source: bool,
+    equations: bool,
 ) -> tuple:
     """Bases and Robin corrections of the coarse cells ``group`` and their source correction, all on ``patch``
     (one LDLᵀ); returns ([(basis, correction or None) per cell], summed source correction or None, (factorization
@@ -266,10 +276,11 @@ def _patch_problem(
         cells.append((basis, corr))
     if F is not None:
         columns.append(np.array([aux.size + ops.gamma.size]))
-    # the ring: the DOFs of the patch's cells that are not interior (where A x and B μ reach outside I)
-    nodes = np.unique(np.concatenate([inc.nodes(int(k)) for k in patch]))
-    ring = np.setdiff1d((ops.bs * nodes[:, None] + np.arange(ops.bs)).ravel(), inner, assume_unique=True)
-    eq = patch_equations(ops.A, aux.B, ring, inner, J, solution, rhs_t, np.concatenate(columns))
+    eq = None
+    if equations:  # the ring: the DOFs of the patch's cells that are not interior (where A x and B μ reach outside I)
+        nodes = np.unique(np.concatenate([inc.nodes(int(k)) for k in patch]))
+        ring = np.setdiff1d((ops.bs * nodes[:, None] + np.arange(ops.bs)).ravel(), inner, assume_unique=True)
+        eq = patch_equations(ops.A, aux.B, ring, inner, J, solution, rhs_t, np.concatenate(columns))
     return cells, (x[:, -1].copy() if F is not None else None), timing, eq
 
 
@@ -312,6 +323,7 @@ def build_multiscale_space(
     groups, patches = cell_groups(grid, options, ops.bs)
     inner = [inc.interior_dofs(p) for p in patches]
     saddle = global_saddle_matrix(ops, aux)
+    equations = ops.bs in EQUATIONS_GRAM_DIMS
     try:
         owner = np.empty(len(groups), dtype=np.int64)
         results = run_shared(
@@ -319,7 +331,16 @@ def build_multiscale_space(
             comm,
             "CEM patch problems",
             lambda q: _patch_problem(
-                ops, grid, aux, inc, saddle, groups[q], patches[q], inner[q], source=options.source_correction
+                ops,
+                grid,
+                aux,
+                inc,
+                saddle,
+                groups[q],
+                patches[q],
+                inner[q],
+                source=options.source_correction,
+                equations=equations,
             ),
             balanced=True,
             owner=owner,
@@ -360,7 +381,7 @@ def build_multiscale_space(
         correction_cells,
         times,
         patch_group=options.patch_group,
-        equations=[r[3] for r in results],
+        equations=[r[3] for r in results] if equations else None,
     )
     log.info(
         "CEM offline: %d coarse cells, m = %d, dim V_ms = %d, %.1f MB of bases; eigen %.2f s, patches %.2f s",

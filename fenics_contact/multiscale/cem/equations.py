@@ -117,6 +117,14 @@ def stiffness_gram(ops, space, equations: list, Zg: np.ndarray, *, comm: MPI.Com
     nz = n_ms + ng + 1
     Nf = space.Nf if space.Nf is not None else np.zeros(ops.size)
     by_dofs = _by_dofs(space)
+    # which DOF groups hold a DOF (to visit only the groups that meet a patch's ring)
+    member = sp.csr_matrix(
+        (
+            np.ones(sum(d.size for d, _ in by_dofs)),
+            (np.concatenate([d for d, _ in by_dofs]), np.repeat(np.arange(len(by_dofs)), [d.size for d, _ in by_dofs])),
+        ),
+        shape=(ops.size, len(by_dofs)),
+    )
     # Bᵀ Z (aux × Z columns): μ + e of every solution, in its columns
     BtZ = np.zeros((space.aux.size, nz))
     for eq in equations:
@@ -162,7 +170,8 @@ def stiffness_gram(ops, space, equations: list, Zg: np.ndarray, *, comm: MPI.Com
             return
         eq = equations[q]
         block = -(BtZ[eq.J].T @ eq.mu)  # (nz × k)
-        for dofs, parts in by_dofs:  # Z[ρ]ᵀ (A[ρ, I] x + B[ρ, J] μ), the functions of one DOF group at a time
+        for g in np.unique(member[eq.ring].indices):  # Z[ρ]ᵀ (A[ρ, I] x + B[ρ, J] μ), one DOF group at a time
+            dofs, parts = by_dofs[g]
             pos = np.minimum(np.searchsorted(dofs, eq.ring), dofs.size - 1)
             hit = np.flatnonzero(dofs[pos] == eq.ring)
             if hit.size:

@@ -30,7 +30,7 @@ log = logging.getLogger(__name__)
 
 def _fill_rows(Z: np.ndarray, parts: list, targets: list, D: np.ndarray) -> None:
     """Z[:, targets[j]] += the values of the patch functions parts[j] at the DOFs D (zero where D is outside
-    their DOFs; each target list without repeats)."""
+    their DOFs; each target list without repeats, a slice target a function's own columns, not shared)."""
     found = {}  # the functions of one patch problem share their DOF array: look D up in it once
     for p, target in zip(parts, targets):
         if id(p.dofs) not in found:
@@ -42,7 +42,12 @@ def _fill_rows(Z: np.ndarray, parts: list, targets: list, D: np.ndarray) -> None
             # column vector)
             found[id(p.dofs)] = (slice(None), slice(None), pos) if hit.all() else (index, index[:, None], pos[hit])
         hit, hit_column, rows = found[id(p.dofs)]
-        Z[hit if isinstance(target, slice) else hit_column, target] += p.values[rows]
+        if isinstance(target, slice) and isinstance(hit, slice):
+            # a function's own columns (still zero), all of D: gathered straight into Z (no temporary; "clip" is
+            # NumPy's unbuffered mode, the rows are in range)
+            np.take(p.values, rows, axis=0, out=Z[:, target], mode="clip")
+        else:
+            Z[hit if isinstance(target, slice) else hit_column, target] += p.values[rows]
 
 
 #: column pieces of the symmetric products ZᵀW of ``gram_matrices``: the blocks above the diagonal are formed,

@@ -26,6 +26,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from fenics_contact.fem.linalg import SparseFactor, scipy_to_petsc
+from fenics_contact.multiscale.cem.equations import patch_equations
 from fenics_contact.multiscale.cem.operators import FineOperators
 from fenics_contact.multiscale.cem.options import WHOLE_DOMAIN, CEMOptions
 from fenics_contact.multiscale.cem.spectral import AuxiliarySpace, build_auxiliary_space
@@ -33,6 +34,7 @@ from fenics_contact.multiscale.coarse import CoarseGrid
 from fenics_contact.multiscale.work import run_shared
 
 __all__ = [
+    "EQUATIONS_GRAM_DIMS",
     "PATCH_ICNTL",
     "Incidence",
     "MultiscaleSpace",
@@ -119,6 +121,9 @@ class MultiscaleSpace:
     grams: tuple | None = None
     #: ``CEMOptions.patch_group`` the bases were built with (their supports: ``covering``)
     patch_group: int | str = 1
+    #: the ``equations.PatchEquations`` of the patch problems (ZᵀKZ from them, ``coarse.gram_matrices``) until the
+    #: Gram matrices are formed; None on a space loaded from the cache
+    equations: list | None = None
 
     @property
     def size(self) -> int:
@@ -161,10 +166,20 @@ class MultiscaleSpace:
         return total + (self.Nf.nbytes if self.Nf is not None else 0)
 
 
-#: MUMPS controls of the patch LDLᵀ: the QAMD ordering (ICNTL(7) = 6).  Measured on a 7×7-cell patch at
-#: h = 1/256 (24.6k DOFs): LDLᵀ with QAMD 0.13 s, LDLᵀ with AMD 0.21 s, LU with AMD 0.39 s, SuperLU 1.8 s;
-#: QAMD copes with the μ rows (one per aux function, dense over its coarse cell).
-PATCH_ICNTL = {7: 6}
+#: MUMPS controls of the patch LDLᵀ: the approximate minimum fill ordering (ICNTL(7) = 2).  Measured (CPU time, on a
+#: shared machine) on model 3 at h = 1/256, H = 1/16, m = 4: the 16 patches of patch_group 4 (28k–73k DOFs) factorize
+#: in 2.3–2.5 s and solve in 1.8–2.1 s with AMF against 2.8–2.9 s and 2.3–2.6 s with QAMD (ICNTL(7) = 6); on patches
+#: of one cell (patch_group 1) AMF and QAMD take the same time, AMD more.  Both cope with the μ rows (one per aux
+#: function, dense over its coarse cell); SuperLU and LU take several times longer.
+PATCH_ICNTL = {7: 2}
+
+
+#: the dimensions in which ZᵀKZ comes from the patch equations (``equations.stiffness_gram``), else from products
+#: with the fine stiffness: in 2D the ring terms are a small part of the products' work (model 3, h = 1/256, H =
+#: 1/16, m = 4, patch_group 4: the Gram matrices take 3.7 s of CPU time against 5.2 s), in 3D a patch's ring is a
+#: surface holding a large share of its DOFs and they cost more (the 16³ cube of ``channels_3d``, H = 1/8, m = 1:
+#: 6.0 s against 2.2 s)
+EQUATIONS_GRAM_DIMS = (2,)
 
 
 def global_saddle_matrix(ops: FineOperators, aux: AuxiliarySpace) -> PETSc.Mat:
@@ -184,6 +199,7 @@ def _patch_problem(
     inner: np.ndarray,
     *,
     source: bool,
+    equations: bool,
 ) -> tuple:
     """Bases and Robin corrections of the coarse cells ``group`` and their source correction, all on ``patch``
     (one LDLᵀ); returns ([(basis, correction or None) per cell], summed source correction or None, (factorization
@@ -242,20 +258,30 @@ def _patch_problem(
         raise
     t1 = time.perf_counter()
     try:
-        x = lu.solve_sparse(rhs_t)[:nI]
+        solution = lu.solve_sparse(rhs_t)
     finally:
         lu.destroy()
     timing = (t1 - t0, time.perf_counter() - t1)
+    x = solution[:nI]
     dofs = inner.astype(np.int32)
-    cells = []
+    cells, columns = [], []  # columns: of each solution in Z = [Ψ, N, N_f]
     for (at, li, on_gamma, used), i in zip(blocks, group):
         basis = PatchFunctions(dofs, np.ascontiguousarray(x[:, at : at + li]), aux.columns(i))
+        columns.append(aux.columns(i))
         corr = None
         if used.size:
             gamma_pos = np.searchsorted(ops.gamma, on_gamma[used])
             corr = PatchFunctions(dofs, np.ascontiguousarray(x[:, at + li : at + li + used.size]), gamma_pos)
+            columns.append(aux.size + gamma_pos)
         cells.append((basis, corr))
-    return cells, (x[:, -1].copy() if F is not None else None), timing
+    if F is not None:
+        columns.append(np.array([aux.size + ops.gamma.size]))
+    eq = None
+    if equations:  # the ring: the DOFs of the patch's cells that are not interior (where A x and B μ reach outside I)
+        nodes = np.unique(np.concatenate([inc.nodes(int(k)) for k in patch]))
+        ring = np.setdiff1d((ops.bs * nodes[:, None] + np.arange(ops.bs)).ravel(), inner, assume_unique=True)
+        eq = patch_equations(ops.A, aux.B, ring, inner, J, solution, rhs_t, np.concatenate(columns))
+    return cells, (x[:, -1].copy() if F is not None else None), timing, eq
 
 
 def cell_groups(grid: CoarseGrid, options: CEMOptions, dim: int) -> tuple[list, list]:
@@ -297,6 +323,7 @@ def build_multiscale_space(
     groups, patches = cell_groups(grid, options, ops.bs)
     inner = [inc.interior_dofs(p) for p in patches]
     saddle = global_saddle_matrix(ops, aux)
+    equations = ops.bs in EQUATIONS_GRAM_DIMS
     try:
         owner = np.empty(len(groups), dtype=np.int64)
         results = run_shared(
@@ -304,7 +331,16 @@ def build_multiscale_space(
             comm,
             "CEM patch problems",
             lambda q: _patch_problem(
-                ops, grid, aux, inc, saddle, groups[q], patches[q], inner[q], source=options.source_correction
+                ops,
+                grid,
+                aux,
+                inc,
+                saddle,
+                groups[q],
+                patches[q],
+                inner[q],
+                source=options.source_correction,
+                equations=equations,
             ),
             balanced=True,
             owner=owner,
@@ -345,6 +381,7 @@ def build_multiscale_space(
         correction_cells,
         times,
         patch_group=options.patch_group,
+        equations=[r[3] for r in results] if equations else None,
     )
     log.info(
         "CEM offline: %d coarse cells, m = %d, dim V_ms = %d, %.1f MB of bases; eigen %.2f s, patches %.2f s",

@@ -193,6 +193,7 @@ def offline_stage(
     space = build_multiscale_space(ops, grid, options, comm=comm)
     t0 = time.perf_counter()
     space.grams = gram_matrices(ops, grid, space, comm=comm)  # stored too: a later run needs no pass over the bases
+    space.equations = None  # (used by the Gram matrices only)
     space.times["gram"] = time.perf_counter() - t0
     if comm.rank == 0:
         try:

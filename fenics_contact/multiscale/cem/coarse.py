@@ -2,9 +2,9 @@
 
 Online everything is done in the coordinates s = (w, g, 1) of u₁ = Z s, Z = [Ψ, N, N_f]: the coarse solve
 (ΨᵀAΨ factorized once, ``fem.linalg.PivotedCholesky``), the trace Z_γ s, the norms sᵀ(ZᵀKZ)s and sᵀ(ZᵀMZ)s.
-The Gram matrices are summed over the coarse cells K from dense blocks of the functions that cover K (BLAS
-products with the cellwise matrices [K_K; M_K], the column blocks on and above the diagonal formed and the rest
-mirrored), the cells shared out over the ranks and the sums Allreduced.
+ZᵀKZ comes from the patch equations the functions solve (``equations``); ZᵀMZ is summed over the coarse cells K
+from dense blocks of the functions that cover K (BLAS products with the cellwise M_K, the column blocks on and
+above the diagonal formed and the rest mirrored), the cells shared out over the ranks and the sums Allreduced.
 """
 
 import logging
@@ -16,6 +16,7 @@ from mpi4py import MPI
 
 from fenics_contact.fem.linalg import PivotedCholesky
 from fenics_contact.multiscale.cem.bases import Incidence, MultiscaleSpace, covering
+from fenics_contact.multiscale.cem.equations import resolves, stiffness_gram
 from fenics_contact.multiscale.cem.operators import FineOperators
 from fenics_contact.multiscale.cem.options import WHOLE_DOMAIN
 from fenics_contact.multiscale.cem.spectral import restrict
@@ -29,7 +30,7 @@ log = logging.getLogger(__name__)
 
 def _fill_rows(Z: np.ndarray, parts: list, targets: list, D: np.ndarray) -> None:
     """Z[:, targets[j]] += the values of the patch functions parts[j] at the DOFs D (zero where D is outside
-    their DOFs; each target list without repeats)."""
+    their DOFs; each target list without repeats, a slice target a function's own columns, not shared)."""
     found = {}  # the functions of one patch problem share their DOF array: look D up in it once
     for p, target in zip(parts, targets):
         if id(p.dofs) not in found:
@@ -41,7 +42,12 @@ def _fill_rows(Z: np.ndarray, parts: list, targets: list, D: np.ndarray) -> None
             # column vector)
             found[id(p.dofs)] = (slice(None), slice(None), pos) if hit.all() else (index, index[:, None], pos[hit])
         hit, hit_column, rows = found[id(p.dofs)]
-        Z[hit if isinstance(target, slice) else hit_column, target] += p.values[rows]
+        if isinstance(target, slice) and isinstance(hit, slice):
+            # a function's own columns (still zero), all of D: gathered straight into Z (no temporary; "clip" is
+            # NumPy's unbuffered mode, the rows are in range)
+            np.take(p.values, rows, axis=0, out=Z[:, target], mode="clip")
+        else:
+            Z[hit if isinstance(target, slice) else hit_column, target] += p.values[rows]
 
 
 #: column pieces of the symmetric products ZᵀW of ``gram_matrices``: the blocks above the diagonal are formed,
@@ -87,6 +93,13 @@ def _block_matrix(ops: FineOperators, grid: CoarseGrid, cells: list, cell_dofs: 
     )
 
 
+def _mass_matrix(ops: FineOperators, grid: CoarseGrid, cells: list, cell_dofs: list, D: np.ndarray) -> sp.csr_matrix:
+    """M_S (|D| × |D|): the mass matrix of the fine cells of the coarse cells ``cells`` on their DOFs D."""
+    if len(cells) == 1:
+        return restrict(ops.Mc[int(grid.colors[cells[0]])], D)
+    return _block_matrix(ops, grid, cells, cell_dofs, D)[D.size :]
+
+
 def _symmetric_products(Z: np.ndarray, W: np.ndarray) -> np.ndarray:
     """ZᵀW for a symmetric result (W = S Z, S symmetric): the column blocks on and above the diagonal formed
     (``GRAM_PIECES`` of them), the rest mirrored."""
@@ -104,16 +117,24 @@ def gram_matrices(
 ) -> tuple[np.ndarray, np.ndarray]:
     """(ZᵀKZ, ZᵀMZ) for Z = [Ψ, N, N_f] (columns: the dim V_ms bases, the γ DOFs, the source correction).
 
-    Summed over coarse cells (or blocks of small ones, ``GRAM_BLOCK_BELOW``) S of Z_Sᵀ K_S Z_S (K_S the matrix of
-    the block's fine cells, Z_S the dense block of the functions covering its cells;
+    ZᵀKZ from the patch equations when the space holds them (``equations.stiffness_gram``, unless ΨᵀAΨ is nearly
+    singular: ``equations.resolves``), else as ZᵀMZ: summed over coarse cells (or blocks of small ones,
+    ``GRAM_BLOCK_BELOW``) S of Z_Sᵀ K_S Z_S (K_S the matrix of the block's fine cells, Z_S the dense block of the
+    functions covering its cells;
     ``_symmetric_products``: (GRAM_PIECES + 1) / (2 GRAM_PIECES) of a full product); blocks shared out over
     ``comm`` (a static share: a fixed summation order) and the sums Allreduced.
     """
     inc = Incidence(ops, grid)
     n_ms, ng = space.size, space.n_gamma
     nz = n_ms + ng + 1
+    stiffness = True  # ZᵀKZ as products too, unless the patch equations give it (``equations.stiffness_gram``)
+    if space.equations is not None:
+        Zg = trace_matrix(ops, space)
+        GK = stiffness_gram(ops, space, space.equations, Zg, comm=comm)
+        stiffness = not resolves(ops, GK, Zg, n_ms)
     corr_at = {int(k): p for k, p in zip(space.correction_cells, space.correction)}
-    GK = np.zeros((nz, nz))
+    if stiffness:
+        GK = np.zeros((nz, nz))
     GM = np.zeros((nz, nz))
     covers = covering(grid, space.layers, space.patch_group, ops.bs)
     blocks = grid.groups(_gram_block(space.patch_group, ops.bs, ops.size / grid.size), ops.bs)
@@ -142,22 +163,26 @@ def gram_matrices(
         _fill_rows(Z, bases + corrections, targets, D)
         if space.Nf is not None:
             Z[:, -1] = space.Nf[D]
-        W = _block_matrix(ops, grid, cells, cell_dofs, D) @ Z  # [K_S Z; M_S Z]
-        gk, gm = _symmetric_products(Z, W[: D.size]), _symmetric_products(Z, W[D.size :])
+        if stiffness:
+            W = _block_matrix(ops, grid, cells, cell_dofs, D) @ Z  # [K_S Z; M_S Z]
+            gk, gm = _symmetric_products(Z, W[: D.size]), _symmetric_products(Z, W[D.size :])
+        else:
+            gm = _symmetric_products(Z, _mass_matrix(ops, grid, cells, cell_dofs, D) @ Z)
         # cols runs through few contiguous ranges (the modes of consecutive cells): added range by range
         cut = np.concatenate([[0], np.flatnonzero(np.diff(cols) != 1) + 1, [cols.size]])
         for a0, a1 in zip(cut[:-1], cut[1:]):
             ra = slice(cols[a0], cols[a0] + a1 - a0)
             for b0, b1 in zip(cut[:-1], cut[1:]):
                 rb = slice(cols[b0], cols[b0] + b1 - b0)
-                GK[ra, rb] += gk[a0:a1, b0:b1]
+                if stiffness:
+                    GK[ra, rb] += gk[a0:a1, b0:b1]
                 GM[ra, rb] += gm[a0:a1, b0:b1]
 
     # a static share (not handed out on request): the same cells on the same rank in every run, so the sums
     # and the Allreduce below round the same way every time
     run_shared(sizes, comm, "CEM Gram matrices", add_block, gather=False, logger=log)
     if comm.size > 1:
-        for arr in (GK, GM):
+        for arr in (GK, GM) if stiffness else (GM,):
             comm.Allreduce(MPI.IN_PLACE, arr, op=MPI.SUM)
     return GK, GM
 
@@ -195,6 +220,7 @@ class MultiscaleRobinSolver:
         self.space = space
         n_ms, ng = space.size, space.n_gamma
         self.GK, self.GM = space.grams if space.grams is not None else gram_matrices(ops, grid, space, comm=comm)
+        space.equations = None  # (used by the Gram matrices only)
         self.time_gram = time.perf_counter() - t0  #: forming the Gram matrices (0 when the space holds them)
         self.Zg = trace_matrix(ops, space)
         # ZᵀAZ = ZᵀKZ + Z_γᵀ R_γγ Z_γ (R is α times the γ vertex mass: diagonal on γ)

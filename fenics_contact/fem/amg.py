@@ -20,7 +20,8 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from fenics_contact.errors import ConvergenceError, InputError
-from fenics_contact.fem.linalg import PC_FAILED_REASONS, DirectSolver, check_entries, petsc_to_scipy
+from fenics_contact.fem.linalg import PC_FAILED_REASONS, DirectSolver, check_entries
+from fenics_contact.fem.matrices import petsc_to_scipy
 
 __all__ = [
     "AUTO_AMG_DOFS",

@@ -14,7 +14,8 @@ from petsc4py import PETSc
 from slepc4py import SLEPc
 
 from fenics_contact.errors import ConvergenceError, InputError
-from fenics_contact.fem.linalg import SparseFactor, scipy_to_petsc
+from fenics_contact.fem.linalg import SparseFactor
+from fenics_contact.fem.matrices import scipy_to_petsc
 
 __all__ = ["EIGEN_METHODS", "count_eigenvalues_below", "generalized_eigenpairs"]
 

@@ -29,7 +29,8 @@ from fenics_contact.fem import forms_primal
 from fenics_contact.fem.amg import AMGSolver, LinearSolverOptions, linear_solver
 from fenics_contact.fem.contact import MAX_REFINEMENTS, ContactProfile, NewtonHistory, NewtonOptions, semismooth_newton
 from fenics_contact.fem.friction import NodalFriction, frictional_newton
-from fenics_contact.fem.linalg import AbsoluteTerms, ComponentBlockProduct, DirectSolver, quadratic_form
+from fenics_contact.fem.linalg import DirectSolver
+from fenics_contact.fem.matrices import AbsoluteTerms, ComponentBlockProduct, quadratic_form
 from fenics_contact.fem.primal_boundary import NodalContactGeometry, PrimalBoundaryData
 from fenics_contact.problem.fields import MaterialFields
 from fenics_contact.problem.friction import Friction, friction_of
@@ -335,7 +336,7 @@ class PrimalSubproblem:
     def norm_products(self, w: fem.Function, Kw: PETSc.Vec | None, Mw: PETSc.Vec) -> None:
         """Kw ← K w (unless Kw is None), Mw ← M w: a(w, w) = wᵀK w and (w, w) = wᵀM w (K, M the matrices of
         ``energy_norm2``, ``l2_norm2``).  On one process M w by M's block of one component
-        (``linalg.ComponentBlockProduct``: the mass form couples equal components only), the same products."""
+        (``matrices.ComponentBlockProduct``: the mass form couples equal components only), the same products."""
         if Kw is not None:
             self._K.mult(w.x.petsc_vec, Kw)
         if self.mesh.comm.size > 1:

@@ -32,7 +32,8 @@ from dolfinx import mesh as dmesh
 from fenics_contact.errors import InputError
 from fenics_contact.fem.contact import ContactProfile, NewtonHistory, NewtonOptions, profile_order
 from fenics_contact.fem.friction import FrictionProfile
-from fenics_contact.fem.linalg import SparseFactor, assemble_scipy
+from fenics_contact.fem.linalg import SparseFactor
+from fenics_contact.fem.matrices import assemble_scipy
 from fenics_contact.fem.mortar import (
     ContactQuadrature,
     Surface,

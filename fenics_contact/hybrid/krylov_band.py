@@ -21,7 +21,8 @@ import numpy as np
 import scipy.sparse as sp
 
 from fenics_contact.errors import InputError
-from fenics_contact.fem.linalg import SparseFactor, petsc_to_scipy
+from fenics_contact.fem.linalg import SparseFactor
+from fenics_contact.fem.matrices import petsc_to_scipy
 from fenics_contact.hybrid.response import PrimalPart
 
 __all__ = ["BandPreconditioner", "REGULARIZATION"]

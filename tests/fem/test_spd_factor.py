@@ -16,9 +16,9 @@ from fenics_contact.fem.linalg import (
     SPD_FACTORS,
     DirectSolver,
     check_entries,
-    scipy_to_petsc,
     spd_factor,
 )
+from fenics_contact.fem.matrices import scipy_to_petsc
 from fenics_contact.problem.models import get_model
 
 

@@ -21,7 +21,8 @@ from mpi4py import MPI
 
 import fenics_contact as fc
 from fenics_contact.errors import ConvergenceError
-from fenics_contact.fem.linalg import DirectSolver, SparseFactor, scipy_to_petsc
+from fenics_contact.fem.linalg import DirectSolver, SparseFactor
+from fenics_contact.fem.matrices import scipy_to_petsc
 from fenics_contact.fem.mixed import default_epsilon
 from fenics_contact.fem.primal import default_penalty
 from fenics_contact.multiscale.mixed import MixedMultiscaleHybridStep

@@ -21,7 +21,8 @@ from petsc4py import PETSc
 
 import fenics_contact as fc
 from fenics_contact.fem.inverse_entries import available
-from fenics_contact.fem.linalg import DirectSolver, scipy_to_petsc
+from fenics_contact.fem.linalg import DirectSolver
+from fenics_contact.fem.matrices import scipy_to_petsc
 from fenics_contact.hybrid import condensation, response
 from fenics_contact.hybrid.condensation import CondensedInterface
 from fenics_contact.hybrid.iteration import InterfaceNewtonOptions

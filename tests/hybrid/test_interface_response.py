@@ -14,7 +14,8 @@ import scipy.sparse as sp
 from petsc4py import PETSc
 
 from fenics_contact.fem.inverse_entries import available, inverse_block
-from fenics_contact.fem.linalg import DirectSolver, scipy_to_petsc
+from fenics_contact.fem.linalg import DirectSolver
+from fenics_contact.fem.matrices import scipy_to_petsc
 from fenics_contact.hybrid.primal import PrimalHybridStep
 from fenics_contact.hybrid.response import AffinePart, PrimalPart
 from fenics_contact.problem.geometry import unit_square

@@ -159,7 +159,8 @@ def test_patch_problem_sparse_right_hand_sides(omega1_32_8):
     and a basis so computed solves (A + BBᵀ) ψ = B e_j on the interior DOFs of its patch."""
     from petsc4py import PETSc
 
-    from fenics_contact.fem.linalg import SparseFactor, petsc_to_scipy
+    from fenics_contact.fem.linalg import SparseFactor
+    from fenics_contact.fem.matrices import petsc_to_scipy
     from fenics_contact.multiscale.cem.bases import Incidence, cell_groups
 
     om = omega1_32_8

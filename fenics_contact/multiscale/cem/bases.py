@@ -25,7 +25,8 @@ import scipy.sparse as sp
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from fenics_contact.fem.linalg import SparseFactor, scipy_to_petsc
+from fenics_contact.fem.linalg import SparseFactor
+from fenics_contact.fem.matrices import scipy_to_petsc
 from fenics_contact.multiscale.cem.equations import patch_equations
 from fenics_contact.multiscale.cem.operators import FineOperators
 from fenics_contact.multiscale.cem.options import WHOLE_DOMAIN, CEMOptions

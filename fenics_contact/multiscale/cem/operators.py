@@ -20,7 +20,7 @@ from mpi4py import MPI
 
 from fenics_contact.errors import InputError
 from fenics_contact.fem import forms_primal
-from fenics_contact.fem.linalg import assemble_scipy
+from fenics_contact.fem.matrices import assemble_scipy
 from fenics_contact.multiscale.coarse import CoarseGrid
 from fenics_contact.problem.fields import MaterialFields
 from fenics_contact.problem.tags import Boundary

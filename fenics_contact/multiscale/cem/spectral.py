@@ -15,7 +15,7 @@ from mpi4py import MPI
 
 from fenics_contact.errors import ConvergenceError
 from fenics_contact.fem.eigen import count_eigenvalues_below, generalized_eigenpairs
-from fenics_contact.fem.linalg import scipy_to_petsc
+from fenics_contact.fem.matrices import scipy_to_petsc
 from fenics_contact.multiscale.cem.operators import FineOperators
 from fenics_contact.multiscale.cem.options import CEMOptions
 from fenics_contact.multiscale.coarse import CoarseGrid

@@ -19,7 +19,7 @@ from scipy.spatial import cKDTree
 
 from fenics_contact.errors import InputError
 from fenics_contact.fem import forms_mixed
-from fenics_contact.fem.linalg import assemble_scipy
+from fenics_contact.fem.matrices import assemble_scipy
 from fenics_contact.multiscale.cem.operators import kappa_tilde
 from fenics_contact.multiscale.coarse import CoarseGrid
 from fenics_contact.multiscale.mixed_cem.blocks import cell_blocks, row_blocks

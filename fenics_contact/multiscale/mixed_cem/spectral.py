@@ -20,7 +20,7 @@ from petsc4py import PETSc
 
 from fenics_contact.errors import ConvergenceError
 from fenics_contact.fem.eigen import count_eigenvalues_below, generalized_eigenpairs
-from fenics_contact.fem.linalg import scipy_to_petsc
+from fenics_contact.fem.matrices import scipy_to_petsc
 from fenics_contact.multiscale import work
 from fenics_contact.multiscale.coarse import CoarseGrid
 from fenics_contact.multiscale.mixed_cem.blocks import block_diag

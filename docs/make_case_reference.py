@@ -408,7 +408,7 @@ PAIR_KEYS = {
     ),
     ("pair", "basis"): (
         "`dual` or `standard`",
-        "dual frictionless, standard with friction",
+        'dual (standard with `rule = "vertices"`)',
         "the pressure basis: the dual (biorthogonal) mortar basis or the P1 hat functions (`ContactPair.basis`)",
     ),
     ("friction", "law"): (

@@ -10,7 +10,8 @@ U_L minus a compliance M (dN × dN, symmetric positive definite) times the nodal
 the loop of the monolithic frictional Newton (``fem.newton.semismooth_newton_loop`` on
 ``CondensedFrictionalSystem``: the state rule ``NodalFriction.next_state``, full steps until a state recurs, then a
 line search, in 3D from the committed state full steps throughout; in 3D a state is settled once the step is at most
-``NEGLIGIBLE`` of U as well, the slip direction varying within it), linearized first at the state of the last
+``NEGLIGIBLE`` of U as well, the slip direction varying within it; whatever the state rule predicts, a negligible
+step to an iterate that solves the law to round-off ends it, ``ROUNDOFF``), linearized first at the state of the last
 committed load step (``NodalFriction.predicted_state``), then at the trial state, with, for Coulomb, the fixed point
 on the thresholds should neither converge in ``LAW_STEPS``: once two of its iterates have the same contact and
 stick/slip sets, the Newton on the law from there (it then converges in one or two steps), the fixed point going on
@@ -46,7 +47,13 @@ from fenics_contact.fem.newton import (
     semismooth_newton_loop,
 )
 
-__all__ = ["nodal_forces", "CondensedLaw", "CondensedFrictionalSystem", "solve_condensed"]
+__all__ = ["nodal_forces", "CondensedLaw", "CondensedFrictionalSystem", "solve_condensed", "ROUNDOFF"]
+
+#: a negligible step (``NEGLIGIBLE``) to an iterate whose own residual ‖U − U_L + M λ(U)‖ (the law's, in the state of
+#: U itself) is at most this times the size of its terms ‖U‖ + ‖U_L‖ + ‖|M| |λ|‖ ends the Newton whatever the state rule
+#: predicts: there the solution has nodes on the cone's boundary (|t_trial| = τ to round-off), where the stick and
+#: the slip linearization have the same solution, and the state rule flips them on the round-off of each step
+ROUNDOFF = 1.0e-12
 
 
 def nodal_forces(friction: NodalFriction, U: np.ndarray) -> tuple[np.ndarray, np.ndarray, dict]:
@@ -147,9 +154,10 @@ class CondensedFrictionalSystem:
 
     def same(self, a: np.ndarray, b: np.ndarray) -> bool:
         """The sets are equal and, in 3D, the step is negligible (``NEGLIGIBLE``) or the thresholds are frozen
-        inside the fixed point before its hand-over (``NodalFriction.settle_on_sets``)."""
+        inside the fixed point before its hand-over (``NodalFriction.settle_on_sets``); or, whatever the sets, the
+        step is negligible to an iterate that solves the law to round-off (``ROUNDOFF``)."""
         if not np.array_equal(a, b):
-            return False
+            return self._solved
         friction = self.friction
         return friction.d == 2 or self._negligible or (friction.frozen is not None and friction.settle_on_sets)
 
@@ -159,8 +167,20 @@ class CondensedFrictionalSystem:
         self.U += self.dU
         self._next = self._next_state(self.U)
         predicted = self.key(self._next)
+        self._solved = self._negligible and self._at_roundoff()
         self.U -= self.dU
         return Direction(predicted, searchable=self._searchable)
+
+    def _at_roundoff(self) -> bool:
+        """The law's own residual at U (in the state of U) is at round-off (``ROUNDOFF``)."""
+        keep, self.friction.forced = self.friction.forced, None
+        try:
+            lam = self.law.forces(self.U)[0]
+        finally:
+            self.friction.forced = keep
+        forces = self.law.M @ lam
+        scale = np.linalg.norm(self.U) + np.linalg.norm(self.U_L) + np.linalg.norm(np.abs(self.law.M) @ np.abs(lam))
+        return bool(np.linalg.norm(self.U - self.U_L + forces) <= ROUNDOFF * scale)
 
     def line_search(self) -> float:
         keep, self.friction.forced = self.friction.forced, None  # the merit: the residual of the law itself

@@ -103,10 +103,9 @@ class ContactPair:
     ``Friction`` law on the relative slip of the two surfaces (``fem.two_body_friction``), None: frictionless;
     ``basis``: of the penalty pressure on the slave surface (``fem.mortar.weight_functions``), ``"dual"`` (the
     biorthogonal basis: the nodal pressures are the nodal values of the gap's local projection, accurate up to
-    the contact edge; segment-to-segment rule only) or ``"standard"`` (P1 hat functions); None: dual for a
-    frictionless pair with the segment-to-segment rule, standard with friction (the frictional solves are
-    measured with it: with the dual basis the condensed frictional Newton of Algorithm 1 on two ranks cycles at
-    full sliding on ``cases/fault_sliding.toml``) or with the node-to-segment rule."""
+    the contact edge; segment-to-segment rule only) or ``"standard"`` (P1 hat functions); None: dual with the
+    segment-to-segment rule, with or without friction (one basis for a pair whatever its friction: μ = 0 is the
+    frictionless pair), standard with the node-to-segment rule."""
 
     slave: int
     master: int
@@ -126,7 +125,7 @@ class ContactPair:
         if self.rule not in ("segments", "vertices"):
             raise InputError(f"ContactPair.rule must be 'segments' or 'vertices', got {self.rule!r}")
         if self.basis is None:
-            dual = self.rule == "segments" and self.friction is None
+            dual = self.rule == "segments"
             object.__setattr__(self, "basis", "dual" if dual else "standard")
         if self.basis not in ("standard", "dual"):
             raise InputError(f"ContactPair.basis must be 'standard' or 'dual', got {self.basis!r}")

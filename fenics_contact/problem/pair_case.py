@@ -28,8 +28,8 @@ vector has three components.  ``load_pair_case`` reads it into a ``PairCase``; e
     master = "lower_top"                     # Γ_C_other, onto which the slave points are projected
     quadrature-degree = 3
     rule = "segments"                        # or "vertices" (node-to-segment, for comparison)
-    basis = "dual"                           # or "standard": the pressure basis (default: dual frictionless,
-                                             #   standard with friction or node-to-segment; ContactPair.basis)
+    basis = "dual"                           # or "standard": the pressure basis (default: dual, with or
+                                             #   without friction; standard node-to-segment; ContactPair.basis)
 
     [friction]                               # default: frictionless; on the relative slip of the two faces
     law = "coulomb"                          # mu = 0.6, or law = "tresca" with threshold = s (a stress)

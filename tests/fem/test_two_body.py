@@ -220,10 +220,11 @@ def test_the_pressure_the_pair_transmits_at_a_20(slave):
 
 
 def test_the_pressure_basis_of_a_pair():
-    """Dual by default for a frictionless segment-to-segment pair, standard with friction or node-to-segment; the
-    dual basis refuses the node-to-segment rule, and an unknown basis is refused."""
+    """Dual by default for a segment-to-segment pair with or without friction, standard node-to-segment; the dual
+    basis refuses the node-to-segment rule, and an unknown basis is refused."""
     assert ContactPair(1, 2).basis == "dual"
-    assert ContactPair(1, 2, friction=fc.Friction("coulomb", mu=0.3)).basis == "standard"
+    assert ContactPair(1, 2, friction=fc.Friction("coulomb", mu=0.3)).basis == "dual"
+    assert ContactPair(1, 2, rule="vertices", friction=fc.Friction("coulomb", mu=0.3)).basis == "standard"
     assert ContactPair(1, 2, rule="vertices").basis == "standard"
     assert ContactPair(1, 2, basis="standard").basis == "standard"
     assert ContactPair(1, 2, friction=fc.Friction("tresca", threshold=0.1), basis="dual").basis == "dual"

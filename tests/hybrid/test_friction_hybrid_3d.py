@@ -22,6 +22,16 @@ def _snapshots(method, problem, **options):
     return snapshots(method, problem, PATH, **options)
 
 
+def _same_path(mono, other, u_mono, u_other, rtol=1e-8):
+    """Each step of ``other`` converged to the monolithic displacement within ``rtol`` relative, with the same stick
+    and slip nodes; the step pairs, for the checks a test adds."""
+    for a, b, ua, ub in zip(mono.steps, other.steps, u_mono, u_other, strict=True):
+        assert b.converged
+        assert np.max(np.abs(ua - ub)) <= rtol * np.max(np.abs(ua))
+        assert np.array_equal(a.friction.stick, b.friction.stick) and np.array_equal(a.friction.slip, b.friction.slip)
+    return list(zip(mono.steps, other.steps))
+
+
 @pytest.mark.parametrize("contrast", [1e3, 1e6])
 def test_algorithm_1_is_the_monolithic_frictional_solution_in_3d(contrast):
     """Coulomb μ = 0.3 on the 6 × 6 × 6 channel mesh: at every step Algorithm 1's glued displacement equals the
@@ -113,10 +123,7 @@ def test_tresca_in_3d():
     )
     mono, u_mono = _snapshots("primal-monolithic", problem)
     alg1, u_alg1 = _snapshots("primal", problem, tol=1e-11)
-    for a, b, ua, ub in zip(mono.steps, alg1.steps, u_mono, u_alg1, strict=True):
-        assert b.converged
-        assert np.max(np.abs(ua - ub)) <= 1e-8 * np.max(np.abs(ua))
-        assert np.array_equal(a.friction.stick, b.friction.stick) and np.array_equal(a.friction.slip, b.friction.slip)
+    for a, _ in _same_path(mono, alg1, u_mono, u_alg1):
         size = np.linalg.norm(a.friction.traction, axis=1)
         assert np.all(size <= 0.05 * (1.0 + 1e-10))
         assert np.allclose(size[a.friction.slip], 0.05, rtol=1e-10)
@@ -171,9 +178,6 @@ def test_the_drags_at_h_one_fifth_and_contrast_1e6():
     problem = channels_3d(E_high=1e6).on(channels_3d_mesh(5)).with_(obstacle=wall, law=Friction("coulomb", mu=0.3))
     mono, u_mono = _snapshots("primal-monolithic", problem)
     alg1, u_alg1 = _snapshots("primal", problem, tol=1e-11)
-    for a, b, ua, ub in zip(mono.steps, alg1.steps, u_mono, u_alg1, strict=True):
-        assert b.converged
-        assert np.max(np.abs(ua - ub)) <= 1e-8 * np.max(np.abs(ua))
-        assert np.array_equal(a.friction.stick, b.friction.stick) and np.array_equal(a.friction.slip, b.friction.slip)
+    _same_path(mono, alg1, u_mono, u_alg1)
     assert all(step.contact_newton_steps <= 8 for step in alg1.steps[1:])
     assert mono.steps[-1].slip_nodes > 0

@@ -33,9 +33,9 @@ from dolfinx import mesh as dmesh
 
 from fenics_contact.errors import InputError
 from fenics_contact.fem import clipping
+from fenics_contact.problem.pair import PRESSURE_BASES
 
 __all__ = [
-    "BASES",
     "Surface",
     "Projection",
     "ContactQuadrature",
@@ -46,8 +46,6 @@ __all__ = [
     "weight_functions",
 ]
 
-#: the bases of the penalty pressure on the slave surface (``weight_functions``)
-BASES = ("standard", "dual")
 
 #: barycentric tolerance of "the orthogonal projection lies in the facet"
 _INSIDE = 1e-10
@@ -333,8 +331,8 @@ def contact_quadrature(
     slave vertices with lumped weights), which fails the patch test on non-matching meshes (kept to show it)."""
     if rule not in ("segments", "vertices"):
         raise InputError(f"the contact quadrature rule must be 'segments' or 'vertices', got {rule!r}")
-    if basis not in BASES:
-        raise InputError(f"the pressure basis must be one of {BASES}, got {basis!r}")
+    if basis not in PRESSURE_BASES:
+        raise InputError(f"the pressure basis must be one of {PRESSURE_BASES}, got {basis!r}")
     if basis == "dual" and rule == "vertices":
         raise InputError("the dual pressure basis needs the segment-to-segment rule (rule='segments')")
     if slave.coords.shape[0] == 0:

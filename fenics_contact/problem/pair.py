@@ -28,7 +28,10 @@ from fenics_contact.problem.fields import _checked as checked_values
 from fenics_contact.problem.friction import Friction
 from fenics_contact.problem.materials import check_poisson_ratio, check_youngs_modulus, lame
 
-__all__ = ["Body", "Support", "ContactPair", "TwoBodyProblem"]
+__all__ = ["Body", "Support", "ContactPair", "PRESSURE_BASES", "TwoBodyProblem"]
+
+#: the bases of a pair's penalty pressure on the slave surface (``fem.mortar.weight_functions``)
+PRESSURE_BASES = ("standard", "dual")
 
 
 def _field(value, what: str, shape: tuple = ()):
@@ -125,9 +128,8 @@ class ContactPair:
         if self.rule not in ("segments", "vertices"):
             raise InputError(f"ContactPair.rule must be 'segments' or 'vertices', got {self.rule!r}")
         if self.basis is None:
-            dual = self.rule == "segments"
-            object.__setattr__(self, "basis", "dual" if dual else "standard")
-        if self.basis not in ("standard", "dual"):
+            object.__setattr__(self, "basis", "dual" if self.rule == "segments" else "standard")
+        if self.basis not in PRESSURE_BASES:
             raise InputError(f"ContactPair.basis must be 'standard' or 'dual', got {self.basis!r}")
         if self.basis == "dual" and self.rule != "segments":
             raise InputError("ContactPair: the dual pressure basis needs the segment-to-segment rule (rule='segments')")

@@ -252,8 +252,11 @@ def _solve_two_bodies(name: str, problem: TwoBodyProblem, values: Mapping[str, A
     InputError for the other methods and for other options."""
     if name not in _TWO_BODY_OPTIONS:
         raise InputError(
-            f"{name} cannot solve two deformable bodies: the mixed methods need an Arnold–Winther contact pair; "
-            "solve a TwoBodyProblem with 'primal-monolithic', 'primal' (Algorithm 1) or 'primal-ms' (Algorithm 3)"
+            f"{name} cannot solve two deformable bodies: the mixed contact law prescribes the normal displacement "
+            "u_c = g − (σ_c)⁺/ε on Γ_C as natural boundary data of one stress; between two bodies that displacement "
+            "is shared by two stresses and needs a displacement unknown on the contact surface (a mortar mixed "
+            "method), which is not built; solve a TwoBodyProblem with 'primal-monolithic', 'primal' (Algorithm 1) "
+            "or 'primal-ms' (Algorithm 3)"
         )
     accepted = _TWO_BODY_OPTIONS[name] + (("options",) if name != "primal-monolithic" else ())
     refused = sorted(set(values) - set(accepted))

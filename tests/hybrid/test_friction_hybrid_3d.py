@@ -173,11 +173,38 @@ def test_the_drags_at_h_one_fifth_and_contrast_1e6():
     monolithic solution to 1e-8 relative at every step with the same stick/slip sets, and the dense Newton from the
     committed state converges with full steps (``fem.condensed_friction``: no line search on a recurring set in 3D
     from a given state) in at most 8 steps per drag (measured 7, 7, 8; with the backtracking on ‖R‖ the last drag
-    stalled and took 26 in all through the trial state and the thresholds' fixed point)."""
+    stalled and took 26 in all through the trial state and the thresholds' fixed point).  The monolithic Newton
+    takes full steps in 3D too (``fem.friction``): at most 8 on the last drag (measured 7; 18 with the backtracking on
+    ‖F‖ once a set recurs)."""
     wall = Plane(point=(1.0, 0.5, 0.5), normal=(-1.0, 0.0, 0.0))
     problem = channels_3d(E_high=1e6).on(channels_3d_mesh(5)).with_(obstacle=wall, law=Friction("coulomb", mu=0.3))
     mono, u_mono = _snapshots("primal-monolithic", problem)
     alg1, u_alg1 = _snapshots("primal", problem, tol=1e-11)
     _same_path(mono, alg1, u_mono, u_alg1)
     assert all(step.contact_newton_steps <= 8 for step in alg1.steps[1:])
+    assert mono.steps[-1].iterations <= 8
     assert mono.steps[-1].slip_nodes > 0
+
+
+def test_the_monolithic_drags_at_nu_049_and_contrast_1e6():
+    """Coulomb μ = 0.3 on the 6 × 6 × 6 channel mesh at ν = 0.49 and contrast 1e6, pressed and dragged along y: the
+    monolithic Newton from the trial state takes full steps in 3D (``fem.friction``), at most 10 per drag (measured
+    10, 8, 4; the second took 47 with the backtracking on ‖F‖ once a set recurred, its steps down to 10⁻⁹), no node
+    carries more than μp, the slipping ones μp, and Algorithm 1 is the same path to 1e-8 relative with the same
+    stick/slip sets.  Algorithm 1's dense Newton on the last drag fails from the committed state in its 10 steps and
+    goes on from the trial state at its last iterate: at most 11 dense steps (measured 11; 14 with the trial state's
+    Newton from the step's start)."""
+    wall = Plane(point=(1.0, 0.5, 0.5), normal=(-1.0, 0.0, 0.0))
+    model = channels_3d(E_high=1e6, nu=0.49).on(channels_3d_mesh(6))
+    problem = model.with_(obstacle=wall, law=Friction("coulomb", mu=0.3))
+    mono, u_mono = _snapshots("primal-monolithic", problem)
+    alg1, u_alg1 = _snapshots("primal", problem, tol=1e-11)
+    _same_path(mono, alg1, u_mono, u_alg1)
+    assert all(step.iterations <= 10 for step in mono.steps[1:]) and mono.steps[2].iterations <= 8
+    assert alg1.steps[-1].contact_newton_steps <= 11
+    for step in mono.steps[1:]:
+        size = np.linalg.norm(step.friction.traction, axis=1)
+        bound = 0.3 * step.friction.pressure
+        assert np.all(size <= bound + 1e-12 * bound.max())
+        assert np.allclose(size[step.friction.slip], bound[step.friction.slip], rtol=1e-10)
+        assert step.slip_nodes > 0 and step.dissipation > 0.0

@@ -201,23 +201,22 @@ class NodalFriction:
     def next_state(self, *, plain: bool = False, reverse: bool = True) -> tuple[np.ndarray, np.ndarray]:
         """The state the Newton linearizes at next: (codes, slip directions) from z = (1 − β) t + β t_trial.
 
-        t is the traction of the state linearized at (``forced``; the law's own without one) and t_trial the
-        trial traction at the current u: a node sticks where |z| < τ (a tie to the round-off of t_trial slips:
-        ``sticks``) and slips along z/|z| otherwise.  The primal–dual active-set rule with the constant c = β/δ_t,
-        β = min(1, δ_t K_pp/w_p) (K_pp the node's elastic stiffness): β = 1 would be the trial state alone, whose
-        stick band |P r| ≤ τδ_t is too narrow for a Newton iterate to land in.  A node that carried no traction in
-        the state linearized at (out of contact there) takes β = 1, its trial state: with t = 0 a node entering contact would stick whatever its trial
-        traction (on model 3 at contrast 10⁶ nodes re-entered contact sticking at 25–76 times their threshold, and
-        the Newton cycled them in and out of contact).  A node that slipped in the state linearized at and whose z
-        turns against that slip direction (z·n̂ < 0) sticks instead: its traction passes through the stick disc on
-        the way, and the slip state, whose tangential stiffness is zero in 2D, would carry it across to the other
-        side in one full step (the Coulomb Newton then cycles between slip directions).  A state that reproduces itself
-        satisfies the law, with the reversal rule as without it (it only changes a node that slipped into one that
-        sticks).  ``plain``: the state of u itself (β = 1), the generalized Hessian of a frozen-threshold energy.
-        ``reverse``: with the reversal rule; without it where the state linearized at holds no slip of the path (the
-        law's at the displacement of the load alone, ``fem.condensed_friction``: its slip directions are those of a
-        displacement no contact force acts on, and its tractions pass through no stick disc).
-        """
+        t is the traction of the state linearized at (``forced``; the law's own without one) and t_trial the trial
+        traction at the current u: a node sticks where |z| < τ (a tie to the round-off of t_trial slips: ``sticks``) and
+        slips along z/|z| otherwise.  The primal–dual active-set rule with the constant c = β/δ_t, β = min(1, δ_t
+        K_pp/w_p) (K_pp the node's elastic stiffness): β = 1 would be the trial state alone, whose stick band |P r| ≤
+        τδ_t is too narrow for a Newton iterate to land in.  A node that carried no traction in the state linearized at
+        (out of contact there) takes β = 1, its trial state: with t = 0 a node entering contact would stick whatever its
+        trial traction (on model 3 at contrast 10⁶ nodes re-entered contact sticking at 25–76 times their threshold, and
+        the Newton cycled them in and out of contact).  A node that slipped in the state linearized at and whose z turns
+        against that slip direction (z·n̂ < 0) sticks instead: its traction passes through the stick disc on the way,
+        and the slip state, whose tangential stiffness is zero in 2D, would carry it across to the other side in one
+        full step (the Coulomb Newton then cycles between slip directions).  A state that reproduces itself satisfies
+        the law, with the reversal rule as without it (it only changes a node that slipped into one that sticks).
+        ``plain``: the state of u itself (β = 1), the generalized Hessian of a frozen-threshold energy. ``reverse``:
+        with the reversal rule; without it where the state linearized at holds no slip of the path (the law's at the
+        displacement of the load alone, ``fem.condensed_friction``: its slip directions are those of a displacement no
+        contact force acts on, and its tractions pass through no stick disc)."""
         if plain:
             keep, self.forced = self.forced, None
             try:

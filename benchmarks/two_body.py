@@ -418,7 +418,7 @@ def main() -> None:
         "",
         "### Algorithm 1 on the Hertz pair",
         "",
-        "Strips of 2 cell layers, α_p = E_p/√h, interface Newton, stop at the transmission residual 1e-8; against "
+        "Strips of 2 cell layers, α_p = E_p/√(h L_ref) (L_ref the pair's size), interface Newton, stop at the transmission residual 1e-8; against "
         "the monolithic solve of the same pair.",
         "",
         "| r | slave | converged | evaluations of T | interface Newton steps | transmission residual | "
@@ -482,7 +482,7 @@ def main() -> None:
         "## 4. Algorithm 1 for two bodies",
         "",
         "Two blocks, the lower (n cells across) layered (E alternating 1e3 and 1 every 0.1), the upper (E = 2, "
-        "0.7n + 1 cells across) shifted by 0.2 and pushed down by 0.005; strips of 2 cell layers, α_p = E_p/√h; "
+        "0.7n + 1 cells across) shifted by 0.2 and pushed down by 0.005; strips of 2 cell layers, α_p = E_p/√(h L_ref) (L_ref the pair's size); "
         "stop at the transmission residual 1e-8 (at most 5000 evaluations of T).",
         "",
         "| n | update | converged | evaluations of T | transmission residual | ‖u − u_mono‖/‖u_mono‖ | time [s] | "

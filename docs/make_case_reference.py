@@ -466,7 +466,7 @@ PAIR_KEYS = {
         "local modes per coarse cell (the flag `--nbasis`): the rigid motions (3), or every mode (with patches "
         "covering each bulk, Algorithm 1's solution)",
     ),
-    ("primal", "alpha-scale"): ("number > 0", None, "α_p = alpha-scale · E_p / √h_γ"),
+    ("primal", "alpha-scale"): ("number > 0", None, "α_p = alpha-scale · E_p / √(h_γ L_ref), L_ref the pair's size"),
 }
 
 

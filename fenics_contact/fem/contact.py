@@ -149,12 +149,17 @@ class ContactProfile(NamedTuple):
 
 def profile_order(points: np.ndarray) -> np.ndarray:
     """Order of contact nodes along Γ_C: by the coordinate with the larger spread (y for a vertical Γ_C), then the
-    other."""
+    other, then z (3D).  The coordinates are compared to 10⁻⁹ of the nodes' extent: nodes level in the unit-free
+    mesh stay level when a file scales it (its coordinates then carry the round-off of the new units), so the
+    order is the same in any unit."""
     if points.shape[0] == 0:
         return np.zeros(0, dtype=np.int64)
-    spread = np.ptp(points[:, :2], axis=0)
+    extent = max(float(np.max(np.ptp(points, axis=0))), np.finfo(float).tiny)
+    q = np.round((points - points.min(axis=0)) / extent * 1e9)
+    spread = np.ptp(q[:, :2], axis=0)
     major = 0 if spread[0] > spread[1] else 1
-    return np.lexsort((points[:, 1 - major], points[:, major]))
+    keys = (q[:, 1 - major], q[:, major]) if q.shape[1] < 3 else (q[:, 2], q[:, 1 - major], q[:, major])
+    return np.lexsort(keys)
 
 
 def active_interval(y: np.ndarray, active: np.ndarray) -> tuple[float, float] | None:

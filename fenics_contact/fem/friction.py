@@ -42,12 +42,20 @@ from fenics_contact.fem.newton import (
 )
 from fenics_contact.problem.friction import Friction
 
-__all__ = ["NodalFriction", "FrictionProfile", "frictional_newton", "NEGLIGIBLE"]
+__all__ = ["NodalFriction", "FrictionProfile", "frictional_newton", "NEGLIGIBLE", "TIE"]
 
 #: a 3D step (max norm) at most this times u's ends the Newton on a settled set: the Newton converges quadratically
 #: there, so the iterate after it is within a few times its square of the solution (at contrast 10⁶ on the 3D
 #: channel cube the round-off level of u is 10⁻¹⁰ of it: a step never becomes smaller there)
 NEGLIGIBLE = 1.0e-8
+
+#: a trial traction within this many round-offs of its own computation, k_t·ε·(|u_p|_t + |m|_t + |a_p|_t) (the
+#: tangential parts, |v|_t = |v − (v·ν)ν|), of the threshold is a tie, which slips (``NodalFriction.sticks``): a node
+#: the last load step left slipping starts the next on the threshold (|t_trial| = τ exactly, its anchor moved by the
+#: slip), and t_trial = −k_t (u − m − a)_t, a difference of displacements larger than it, holds that tie to about
+#: 10⁻¹² of τ; without the margin the round-off of the units decides the node's first state and the steps of the
+#: Newton (a pair at E = 1 and at E = 3: 3 and 4 steps)
+TIE = 16.0
 
 log = logging.getLogger(__name__)
 
@@ -103,6 +111,12 @@ def _tangent_2d(nu: np.ndarray) -> np.ndarray:
     if nu.shape[1] != 2:
         return np.zeros_like(nu)
     return np.column_stack([-nu[:, 1], nu[:, 0]])
+
+
+def _tangential(v: np.ndarray, nu: np.ndarray) -> np.ndarray:
+    """|v − (v·ν)ν| per node (v: (N, d) or one d-vector)."""
+    v = np.broadcast_to(v, nu.shape)
+    return np.linalg.norm(v - np.einsum("ij,ij->i", v, nu)[:, None] * nu, axis=1)
 
 
 class NodalFriction:
@@ -163,6 +177,7 @@ class NodalFriction:
         r_t = r - np.einsum("ij,ij->i", r, nu)[:, None] * nu
         t_trial = -self.k_t * r_t
         norm = np.linalg.norm(t_trial, axis=1)
+        slack = TIE * np.finfo(float).eps * self.k_t * sum(_tangential(v, nu) for v in (u, self.motion, self.anchor))
         if self.frozen is not None:
             tau = self.frozen
         elif self.law.law == "coulomb":
@@ -171,7 +186,7 @@ class NodalFriction:
             tau = np.full(gn.size, self.law.threshold)
         raw = t_trial / np.where(norm > 0.0, norm, 1.0)[:, None]
         if self.forced is None:
-            stick = (tau > 0.0) & (norm <= tau)
+            stick = (tau > 0.0) & self.sticks(norm, tau, slack)
             slip = (tau > 0.0) & ~stick
             direction = np.where(slip[:, None], raw, 0.0)
         else:
@@ -181,28 +196,27 @@ class NodalFriction:
             direction = np.where(slip[:, None], np.where(keep[:, None], forced_direction, raw), 0.0)
         t = np.where(stick[:, None], t_trial, tau[:, None] * direction)
         return dict(nu=nu, w=w, p=p, tau=tau, active=gn > 0.0, t_trial=t_trial, norm=norm, t=t, stick=stick,
-                    slip=slip, direction=direction)  # fmt: skip
+                    slip=slip, direction=direction, slack=slack)  # fmt: skip
 
     def next_state(self, *, plain: bool = False, reverse: bool = True) -> tuple[np.ndarray, np.ndarray]:
         """The state the Newton linearizes at next: (codes, slip directions) from z = (1 − β) t + β t_trial.
 
-        t is the traction of the state linearized at (``forced``; the law's own without one) and t_trial the
-        trial traction at the current u: a node sticks where |z| ≤ τ and slips along z/|z| otherwise.  The
-        primal–dual active-set rule with the constant c = β/δ_t, β = min(1, δ_t K_pp/w_p) (K_pp the node's
-        elastic stiffness): β = 1 would be the trial state alone, whose stick band |P r| ≤ τδ_t is too narrow for
-        a Newton iterate to land in.  A node that carried no traction in the state linearized at (out of contact
-        there) takes β = 1, its trial state: with t = 0 a node entering contact would stick whatever its trial
-        traction (on model 3 at contrast 10⁶ nodes re-entered contact sticking at 25–76 times their threshold, and
-        the Newton cycled them in and out of contact).  A node that slipped in the state linearized at and whose z
-        turns against that slip direction (z·n̂ < 0) sticks instead: its traction passes through the stick disc on
-        the way, and the slip state, whose tangential stiffness is zero in 2D, would carry it across to the other
-        side in one full step (the Coulomb Newton then cycles between slip directions).  A state that reproduces itself
-        satisfies the law, with the reversal rule as without it (it only changes a node that slipped into one that
-        sticks).  ``plain``: the state of u itself (β = 1), the generalized Hessian of a frozen-threshold energy.
-        ``reverse``: with the reversal rule; without it where the state linearized at holds no slip of the path (the
-        law's at the displacement of the load alone, ``fem.condensed_friction``: its slip directions are those of a
-        displacement no contact force acts on, and its tractions pass through no stick disc).
-        """
+        t is the traction of the state linearized at (``forced``; the law's own without one) and t_trial the trial
+        traction at the current u: a node sticks where |z| < τ (a tie to the round-off of t_trial slips: ``sticks``) and
+        slips along z/|z| otherwise.  The primal–dual active-set rule with the constant c = β/δ_t, β = min(1, δ_t
+        K_pp/w_p) (K_pp the node's elastic stiffness): β = 1 would be the trial state alone, whose stick band |P r| ≤
+        τδ_t is too narrow for a Newton iterate to land in.  A node that carried no traction in the state linearized at
+        (out of contact there) takes β = 1, its trial state: with t = 0 a node entering contact would stick whatever its
+        trial traction (on model 3 at contrast 10⁶ nodes re-entered contact sticking at 25–76 times their threshold, and
+        the Newton cycled them in and out of contact).  A node that slipped in the state linearized at and whose z turns
+        against that slip direction (z·n̂ < 0) sticks instead: its traction passes through the stick disc on the way,
+        and the slip state, whose tangential stiffness is zero in 2D, would carry it across to the other side in one
+        full step (the Coulomb Newton then cycles between slip directions).  A state that reproduces itself satisfies
+        the law, with the reversal rule as without it (it only changes a node that slipped into one that sticks).
+        ``plain``: the state of u itself (β = 1), the generalized Hessian of a frozen-threshold energy. ``reverse``:
+        with the reversal rule; without it where the state linearized at holds no slip of the path (the law's at the
+        displacement of the load alone, ``fem.condensed_friction``: its slip directions are those of a displacement no
+        contact force acts on, and its tractions pass through no stick disc)."""
         if plain:
             keep, self.forced = self.forced, None
             try:
@@ -217,12 +231,19 @@ class NodalFriction:
         z = (1.0 - beta) * self._linearized_traction(e) + beta * e["t_trial"]
         size = np.linalg.norm(z, axis=1)
         tau = e["tau"]
-        codes = np.where(tau > 0.0, np.where(size <= tau, 1, 2), 0).astype(np.int8)
+        codes = np.where(tau > 0.0, np.where(self.sticks(size, tau, e["slack"]), 1, 2), 0).astype(np.int8)
         direction = z / np.where(size > 0.0, size, 1.0)[:, None]
         if not plain and reverse and self.forced is not None and self.forced[0].shape == codes.shape:
             was, along = self.forced
             codes[(codes == 2) & (was == 2) & (np.einsum("ij,ij->i", direction, along) < 0.0)] = 1
         return codes, direction
+
+    @staticmethod
+    def sticks(size: np.ndarray, tau: np.ndarray, slack: np.ndarray) -> np.ndarray:
+        """|z| < τ, a tie (|z| within ``slack``, the round-off of t_trial, of τ: ``TIE``) slipping: on the threshold
+        both states give the traction τ z/|z|, and a node the last load step left slipping slips on; |z| within the
+        round-off of zero sticks (no direction to slip along)."""
+        return (size < tau - slack) | (size <= slack)
 
     @staticmethod
     def state_of(e: dict) -> tuple[np.ndarray, np.ndarray]:

@@ -69,7 +69,8 @@ UPDATES = ("newton", "anderson", "none")
 @dataclass(frozen=True, slots=True)
 class TwoBodyHybridOptions:
     """``layers``: cell layers of each strip from its contact surface (vertex neighbours); α_p = ``alpha_scale``
-    · E_p / √h_γ (E_p the mean E of the cells at the γ node p, h_γ the median γ facet size); stop when the
+    · E_p / √(h_γ L_ref) (E_p the mean E of the cells at the γ node p, h_γ the median γ facet size, L_ref the pair's
+    size ``TwoBodyProblem.length``: a stiffness per length, the same relative α in any unit); stop when the
     transmission residual is below ``tol``, at most ``max_iterations`` evaluations of T; ``accel`` the update."""
 
     layers: int = 2
@@ -181,7 +182,7 @@ class _Split:
         count = np.bincount(flat, minlength=flat.max() + 1)
         mean_E = total[nodes] / count[nodes]
         h = float(np.median(surf.measures))
-        alpha = scale * mean_E / np.sqrt(h if tdim == 2 else np.sqrt(h))
+        alpha = scale * mean_E / np.sqrt((h if tdim == 2 else np.sqrt(h)) * problem.length)
         dofs = (bs * nodes[:, None] + np.arange(bs)).ravel()
         keep = ~np.isin(dofs, fixed)
         self.gamma = dofs[keep]

@@ -103,7 +103,7 @@ class _Interface:
         count = _summed(imap, cell_blocks.ravel(), 1.0)[:, 0]
         h = float(np.median(np.concatenate(comm.allgather(surf.measures))))
         on = np.flatnonzero(weight[: imap.size_local] > 0.0)
-        alpha = scale * total[on] / count[on] / np.sqrt(h if tdim == 2 else np.sqrt(h))
+        alpha = scale * total[on] / count[on] / np.sqrt((h if tdim == 2 else np.sqrt(h)) * problem.length)
         dofs = (bs * on[:, None] + np.arange(bs)).ravel()
         keep = ~np.isin(dofs, fixed)
         lo = imap.local_range[0] * bs

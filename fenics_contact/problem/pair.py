@@ -26,6 +26,7 @@ from fenics_contact.problem.boundary import constant_vector
 from fenics_contact.problem.fields import MaterialFields, cell_function
 from fenics_contact.problem.fields import _checked as checked_values
 from fenics_contact.problem.friction import Friction
+from fenics_contact.problem.geometry import mesh_extent
 from fenics_contact.problem.materials import check_poisson_ratio, check_youngs_modulus, lame
 
 __all__ = ["Body", "Support", "ContactPair", "PRESSURE_BASES", "TwoBodyProblem"]
@@ -292,6 +293,12 @@ class TwoBodyProblem:
     def dim(self) -> int:
         """The geometric dimension (the mesh's)."""
         return self.mesh.geometry.dim
+
+    @property
+    def length(self) -> float:
+        """L_ref, the pair's size: the largest side of the mesh's bounding box (``geometry.mesh_extent``;
+        collective).  Algorithm 1's default α takes the γ facet size relative to it."""
+        return mesh_extent(self.mesh)
 
     def contact_moduli(self) -> tuple[float, float]:
         """The largest E of the cells touching the slave and the master surface."""

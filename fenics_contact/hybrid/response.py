@@ -297,14 +297,22 @@ class PrimalPart(AffinePart):
     def _inverse_block_transposed(self, solver: DirectSolver, rows: np.ndarray) -> np.ndarray:
         """((J⁻¹)[rows][:, rows])ᵀ, C-contiguous; J₀'s is kept (it is factorized once, and the rows stay when the
         obstacle moves: only the normals in Qᵀ change, so a refreshed condensation costs products, no MUMPS
-        call)."""
+        call).  J is symmetric here: MUMPS computes one triangle, swept along the rows' nodes (``_sweep``), and the
+        block, exactly symmetric, is its own transpose."""
         if solver is not getattr(self, "solver", None):  # (no J₀ without ``factorize``)
-            return np.ascontiguousarray(solver.inverse_block(rows).T)
+            return solver.inverse_block(rows, sweep=self._sweep(rows))
         kept = self._kept_inverse
         if kept is None or kept[0] != solver.factorizations or not np.array_equal(kept[1], rows):
-            block = np.ascontiguousarray(solver.inverse_block(rows).T)
+            block = solver.inverse_block(rows, sweep=self._sweep(rows))
             self._kept_inverse = kept = (solver.factorizations, rows, block)
         return kept[2]
+
+    def _sweep(self, rows: np.ndarray) -> np.ndarray:
+        """The coordinate of the rows' nodes in which they spread most: the order in which ``inverse_block`` takes
+        one triangle of a symmetric block (γ and Γ_C are lines in 2D: the position along them; the entries of a
+        column from the rows ahead of it, about half the pruned substitutions)."""
+        x = self.sub.V.tabulate_dof_coordinates()[np.asarray(rows) // self.bs]
+        return x[:, int(np.argmax(np.ptp(x, axis=0)))]
 
     def data_block(self, j0: int, j1: int) -> np.ndarray:
         B = np.zeros((self.nown, j1 - j0), order="F")

@@ -127,14 +127,23 @@ class AffinePart:
     def load_solution(self) -> np.ndarray:
         """J⁻¹ b (local; the kept array, read only), solved again only when b or J's factorization changed; a
         vanishing b (no body force, traction or u_D reaching the subproblem) gives zeros without a solve."""
-        b = self.body_load()
+        b = self._current_body_load()
         kept = getattr(self, "_kept_load", None)
         key = (id(self.solver), getattr(self.solver, "factorizations", None))
-        changed = kept is None or kept[0] != key or not np.array_equal(kept[1], b)
+        changed = kept is None or kept[0] != key or not (kept[1] is b or np.array_equal(kept[1], b))
         if self.comm.allreduce(changed, op=MPI.LOR):  # (collective: the solve is)
             loaded = self.comm.allreduce(bool(np.any(b)), op=MPI.LOR)
-            kept = self._kept_load = (key, b, self.solve(b) if loaded else np.zeros_like(b))
+            kept = self._kept_load = (key, b, self._solve_load(b) if loaded else np.zeros_like(b))
         return kept[2]
+
+    def _current_body_load(self) -> np.ndarray:
+        """b as ``load_solution`` compares it with the b of its kept solve (a subclass that keeps b returns the kept
+        array itself: the same object for the same b)."""
+        return self.body_load()
+
+    def _solve_load(self, b: np.ndarray) -> np.ndarray:
+        """J⁻¹ b for ``load_solution``."""
+        return self.solve(b)
 
     def refresh(self) -> bool:
         """Re-read the contact geometry (an obstacle may have moved): True when the condensation is stale."""
@@ -342,13 +351,26 @@ class PrimalPart(AffinePart):
     def body_load(self) -> np.ndarray:
         """b (local), assembled again only when the values it depends on changed (``body_load_inputs``: a load
         path moves the obstacle, which b does not see)."""
+        return self._current_body_load().copy()
+
+    def _current_body_load(self) -> np.ndarray:
+        """The kept b (read only: the same array while its inputs stay), assembled again when they changed."""
         inputs = self.sub.body_load_inputs()
         kept = self._kept_body
         same = kept is not None and len(kept[0]) == len(inputs) and all(map(np.array_equal, kept[0], inputs))
         if self.comm.allreduce(not same, op=MPI.LOR):  # (collective: the assembly is)
             b = self.sub.body_load(self._b).getArray(readonly=True).copy()
+            b.flags.writeable = False
             self._kept_body = kept = ([np.array(a, copy=True) for a in inputs], b)
-        return kept[1].copy()
+        return kept[1]
+
+    def _solve_load(self, b: np.ndarray) -> np.ndarray:
+        """J⁻¹ b; on one process with MUMPS' sparse right-hand side (``DirectSolver.solve_sparse``): the forward
+        elimination skips the fronts off b's support (a body force on part of the body, u_D on Γ_D)."""
+        if isinstance(self.solver, DirectSolver) and self.solver.sequential_mumps():
+            rows = np.flatnonzero(b)
+            return self.solver.solve_sparse(rows, b[rows])
+        return self.solve(b)
 
     def state(self) -> np.ndarray:
         return self.sub.u.x.petsc_vec.getArray(readonly=True).copy()

@@ -58,7 +58,7 @@ def inverse_block(
     ``sweep`` (A symmetric: one value per row, e.g. the position of its node along the interface): MUMPS computes
     the entries (i, j) with sweep[i] ≥ sweep[j] only, and the block is filled by symmetry, exactly symmetric.
     Column j's backward substitution is then pruned to the paths of the rows ahead of it: about half the entries,
-    a fifth of the time off Algorithm 1's responses (benchmarks/results/interface_response.md)."""
+    a fifth of the time off Algorithm 1's responses (docs/performance.md, Algorithm 1's interface response)."""
     if not available():
         raise RuntimeError("entries of an inverse need a real double-precision PETSc whose library is found")
     if factor.getComm().getSize() != 1:

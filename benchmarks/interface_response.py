@@ -94,7 +94,8 @@ class SchurSolver:
     def has_inverse_entries(self) -> bool:
         return True
 
-    def inverse_block(self, rows: np.ndarray) -> np.ndarray:
+    def inverse_block(self, rows: np.ndarray, *, sweep: np.ndarray | None = None) -> np.ndarray:
+        """The whole block (``sweep``, the triangle ``DirectSolver.inverse_block`` takes, does not apply here)."""
         return schur_inverse(self.ksp.getOperators()[0], rows)
 
 

@@ -48,10 +48,17 @@ def available() -> bool:
     return np.dtype(PETSc.ScalarType) == np.float64 and _library() is not None
 
 
-def inverse_block(factor: PETSc.Mat, rows: np.ndarray, *, what: str = "a matrix") -> np.ndarray:
+def inverse_block(
+    factor: PETSc.Mat, rows: np.ndarray, *, what: str = "a matrix", sweep: np.ndarray | None = None
+) -> np.ndarray:
     """(A⁻¹)[rows][:, rows], dense, in the order of ``rows`` (distinct), from the sequential MUMPS factor ``factor``
     of A (``pc.getFactorMatrix()`` of a factorized LU or Cholesky PC).  A failure raises ConvergenceError;
-    ``what`` names A in messages."""
+    ``what`` names A in messages.
+
+    ``sweep`` (A symmetric: one value per row, e.g. the position of its node along the interface): MUMPS computes
+    the entries (i, j) with sweep[i] ≥ sweep[j] only, and the block is filled by symmetry, exactly symmetric.
+    Column j's backward substitution is then pruned to the paths of the rows ahead of it: about half the entries,
+    a fifth of the time off Algorithm 1's responses (docs/performance.md, Algorithm 1's interface response)."""
     if not available():
         raise RuntimeError("entries of an inverse need a real double-precision PETSc whose library is found")
     if factor.getComm().getSize() != 1:
@@ -64,12 +71,19 @@ def inverse_block(factor: PETSc.Mat, rows: np.ndarray, *, what: str = "a matrix"
         return np.zeros((0, 0))
     if np.any(kept[1:] == kept[:-1]) or kept[0] < 0 or kept[-1] >= n:
         raise ValueError("the rows of an inverse block must be distinct unknowns of the matrix")
+    if sweep is None:
+        requested = np.ones((m, m), dtype=bool)
+    else:
+        rank = np.empty(m, dtype=np.int64)  # the rows' places in the sweep (ties in the order of ``kept``)
+        rank[np.argsort(np.asarray(sweep)[order], kind="stable")] = np.arange(m)
+        requested = rank[None, :] >= rank[:, None]  # [a, b]: A⁻¹[kept[b], kept[a]] is computed
+    col, row = np.nonzero(requested)  # (row-major: the columns of each row of Bᵀ sorted)
     counts = np.zeros(n, dtype=PETSc.IntType)
-    counts[kept] = m
+    counts[kept] = requested.sum(axis=1)
     indptr = np.concatenate([[0], np.cumsum(counts)]).astype(PETSc.IntType)
-    indices = np.tile(kept, m).astype(PETSc.IntType)
+    indices = kept[row].astype(PETSc.IntType)
     values = np.zeros(indices.size, dtype=PETSc.ScalarType)
-    # the requested entries, as the pattern of Bᵀ (n × n, rows ``kept`` full on the columns ``kept``);
+    # the requested entries, as the pattern of Bᵀ (n × n, row kept[a] holding the columns kept[b] requested);
     # PETSc writes (A⁻¹)ᵀ into it: Bᵀ[j, i] = A⁻¹[i, j]
     Bt = PETSc.Mat().createAIJWithArrays((n, n), (indptr, indices, values), comm=PETSc.COMM_SELF)
     Bt.assemble()
@@ -78,11 +92,17 @@ def inverse_block(factor: PETSc.Mat, rows: np.ndarray, *, what: str = "a matrix"
         err = getattr(_library(), _FUNCTION)(ctypes.c_void_p(factor.handle), ctypes.c_void_p(Bt.handle))
         if err != 0:
             raise ConvergenceError(f"MUMPS failed to compute entries of the inverse of {what} (PETSc error {err})")
-        block = Bt.getValuesCSR()[2].reshape(m, m).T  # [a, b] = A⁻¹[kept[a], kept[b]]
+        entries = Bt.getValuesCSR()[2]
     finally:
         for k, v in saved.items():
             factor.setMumpsIcntl(k, v)  # back to ordinary solves
         Bt.destroy()
+    if sweep is None:
+        block = entries.reshape(m, m).T  # [a, b] = A⁻¹[kept[a], kept[b]]
+    else:
+        block = np.empty((m, m))
+        block[row, col] = entries
+        block[col, row] = entries
     if not np.all(np.isfinite(block)):
         raise ConvergenceError(f"entries of the inverse of {what} are not finite")
     back = np.argsort(order)

@@ -289,11 +289,13 @@ class DirectSolver(_Factorization):
         x = _sparse_solve(self.ksp.getPC().getFactorMatrix(), rhs_t, self.prefix)[:, 0]
         return x if self.scaling is None else self.scaling * x
 
-    def inverse_block(self, rows: np.ndarray) -> np.ndarray:
+    def inverse_block(self, rows: np.ndarray, *, sweep: np.ndarray | None = None) -> np.ndarray:
         """(A⁻¹)[rows][:, rows] (dense, in the order of ``rows``) from the factors held: MUMPS' entries of the
         inverse, the values of back-solves without them (``fem.inverse_entries``; ``has_inverse_entries``).  With
-        ``scaling`` the factors are those of D A D and A⁻¹ = D (D A D)⁻¹ D (exact for powers of two)."""
-        block = inverse_entries.inverse_block(self.ksp.getPC().getFactorMatrix(), rows, what=self.prefix)
+        ``scaling`` the factors are those of D A D and A⁻¹ = D (D A D)⁻¹ D (exact for powers of two).  ``sweep``
+        (A symmetric): one triangle computed, the other by symmetry (``inverse_entries.inverse_block``)."""
+        factor = self.ksp.getPC().getFactorMatrix()
+        block = inverse_entries.inverse_block(factor, rows, what=self.prefix, sweep=sweep)
         if self.scaling is None:
             return block
         d = self.scaling[np.asarray(rows, dtype=np.int64)]

@@ -69,6 +69,14 @@ class ComponentBlockProduct:
         for obj in (block, rows):
             obj.destroy()
 
+    @classmethod
+    def of_block(cls, block: sp.csr_matrix, bs: int) -> "ComponentBlockProduct":
+        """The product by A = A₁ ⊗ I given its block A₁ of one component (e.g. the scalar mass matrix on the nodes,
+        which the vector mass matrix repeats), without A."""
+        product = cls.__new__(cls)
+        product.block, product.bs = block, bs
+        return product
+
     def mult(self, x: PETSc.Vec, y: PETSc.Vec) -> None:
         """y ← A x."""
         y.getArray()[:] = (self.block @ x.getArray(readonly=True).reshape(-1, self.bs)).ravel()

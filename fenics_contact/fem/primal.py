@@ -30,7 +30,7 @@ from fenics_contact.fem.amg import AMGSolver, LinearSolverOptions, linear_solver
 from fenics_contact.fem.contact import MAX_REFINEMENTS, ContactProfile, NewtonHistory, NewtonOptions, semismooth_newton
 from fenics_contact.fem.friction import NodalFriction, frictional_newton
 from fenics_contact.fem.linalg import DirectSolver
-from fenics_contact.fem.matrices import AbsoluteTerms, ComponentBlockProduct, quadratic_form
+from fenics_contact.fem.matrices import AbsoluteTerms, ComponentBlockProduct, assemble_scipy, quadratic_form
 from fenics_contact.fem.primal_boundary import NodalContactGeometry, PrimalBoundaryData
 from fenics_contact.problem.fields import MaterialFields
 from fenics_contact.problem.friction import Friction, friction_of
@@ -136,17 +136,25 @@ class PrimalSubproblem:
             load += forms_primal.traction_form(tractions, v)
         if robin is not None:
             load += ufl.inner(self.g, v) * ds(Boundary.INTERFACE)
-        self._load = fem.form(load)
-        self._a = fem.form(forms_primal.elastic_form(du, v, lm, mu))
-        self._m = fem.form(forms_primal.mass_form(du, v))
+        # the forms of the other uses, compiled on first use (``_form``): a solve that never asks for one (e.g.
+        # Algorithm 1's linear Ω₁ along a load path: no K, no load norm) does not pay for its compilation
+        p, r = ufl.TrialFunction(self.Q), ufl.TestFunction(self.Q)
+        self._forms: dict = {
+            "load": load,
+            "a": forms_primal.elastic_form(du, v, lm, mu),
+            "m": forms_primal.mass_form(du, v),
+            "m1": forms_primal.mass_form(p, r),  # the block of one component of "m" (``norm_products``)
+        }
         if self.contact:
             s = forms_primal.gap_function(self.u, geo.nu, geo.gap)
-            self._indicator = fem.form(forms_primal.nodal_indicator(s, q, ds_c))
-            self._gap_terms = fem.form(penalty[0] * forms_primal.heaviside(s) * geo.gap * ufl.dot(v, geo.nu) * ds_c)
             reaction = ufl.inner(stress(strain(self.u), lm, mu), strain(v)) * ufl.dx - ufl.inner(fields.f, v) * ufl.dx
             if tractions:
                 reaction -= forms_primal.traction_form(tractions, v)
-            self._reaction = fem.form(reaction)
+            self._forms |= {
+                "indicator": forms_primal.nodal_indicator(s, q, ds_c),
+                "gap_terms": penalty[0] * forms_primal.heaviside(s) * geo.gap * ufl.dot(v, geo.nu) * ds_c,
+                "reaction": reaction,
+            }
 
         self.A = dolfinx.fem.petsc.create_matrix(self._J)
         self.b = dolfinx.fem.petsc.create_vector(self.V)
@@ -164,17 +172,52 @@ class PrimalSubproblem:
                 msh.comm, prefix=prefix, space=self.V, options=solver, contrast=_contrast(fields.mu, msh.comm)
             )
         # K and M on J's sparsity (its cell couplings are theirs; its facet terms couple no other unknowns): the
-        # pattern is computed once, not three times; K on first use (``_K``)
-        self._M = self.A.duplicate()
-        dolfinx.fem.petsc.assemble_matrix(self._M, self._m)
-        self._M.assemble()
+        # pattern is computed once, not three times; both on first use (``_K``, ``_M``)
         self._stiffness: PETSc.Mat | None = None
-        self._work = self._M.createVecLeft()
+        self._mass_matrix: PETSc.Mat | None = None
+        self._work = self.A.createVecLeft()
         self._linear_ready = False
         self._factorized_set: np.ndarray | None = None
         self._terms = AbsoluteTerms()
         self._mass = None  # M's block of one component (``norm_products``, one process)
         self.friction = NodalFriction(self, friction, delta) if friction is not None and self.contact else None
+
+    def _form(self, name: str) -> fem.Form:
+        """The compiled form ``name`` of ``_forms``, compiled on first use (collective, like every use of it)."""
+        form = self._forms[name]
+        if not isinstance(form, fem.Form):
+            form = self._forms[name] = fem.form(form)
+        return form
+
+    @property
+    def _load(self) -> fem.Form:
+        """(f, v) + Σ∫_ΓN t·v [+ ∫_γ g·v]: the load of ``load_norm``."""
+        return self._form("load")
+
+    @property
+    def _indicator(self) -> fem.Form:
+        """∫_ΓC H(u·ν − g) q: the nodal active set (contact only)."""
+        return self._form("indicator")
+
+    @property
+    def _gap_terms(self) -> fem.Form:
+        """(1/δ)∫_ΓC H(u·ν − g) g v·ν: the gap's share of the penalty (contact only)."""
+        return self._form("gap_terms")
+
+    @property
+    def _reaction(self) -> fem.Form:
+        """a(u, v) − (f, v) − Σ∫_ΓN t·v: the obstacle's reaction (contact only)."""
+        return self._form("reaction")
+
+    @property
+    def _M(self) -> PETSc.Mat:
+        """M, the matrix of the mass form (u, v), assembled on first use (collective): on one process the relative
+        change takes its products from M's block of one component (``norm_products``) and never needs it."""
+        if self._mass_matrix is None:
+            self._mass_matrix = self.A.duplicate()
+            dolfinx.fem.petsc.assemble_matrix(self._mass_matrix, self._form("m"))
+            self._mass_matrix.assemble()
+        return self._mass_matrix
 
     @property
     def _K(self) -> PETSc.Mat:
@@ -182,7 +225,7 @@ class PrimalSubproblem:
         Algorithm 1's linear Ω₁ along a load path takes its products from its equations and never needs it."""
         if self._stiffness is None:
             self._stiffness = self.A.duplicate()
-            dolfinx.fem.petsc.assemble_matrix(self._stiffness, self._a)
+            dolfinx.fem.petsc.assemble_matrix(self._stiffness, self._form("a"))
             self._stiffness.assemble()
         return self._stiffness
 
@@ -343,8 +386,20 @@ class PrimalSubproblem:
             self._M.mult(w.x.petsc_vec, Mw)
             return
         if self._mass is None:
-            self._mass = ComponentBlockProduct(self._M, self.V.dofmap.index_map_bs)
+            self._mass = self._component_mass()
         self._mass.mult(w.x.petsc_vec, Mw)
+
+    def _component_mass(self) -> ComponentBlockProduct:
+        """The product with M by its block of one component (one process): the scalar mass matrix of Q, assembled
+        alone (a quarter of M's entries in 2D, the same values) when Q numbers the nodes as V its blocks, else M's
+        block taken from M."""
+        bs = self.V.dofmap.index_map_bs
+        same = self.V.dofmap.index_map.size_local == self.Q.dofmap.index_map.size_local and np.array_equal(
+            self.V.dofmap.list, self.Q.dofmap.list
+        )
+        if same and self._mass_matrix is None:
+            return ComponentBlockProduct.of_block(assemble_scipy(self._form("m1")), bs)
+        return ComponentBlockProduct(self._M, bs)
 
     def contact_profile(self) -> ContactProfile:
         """u_c = u·ν − g and the consistent nodal normal stress σ_c = (R·ν_p)/w_p along Γ_C, on every rank.
@@ -429,7 +484,7 @@ class PrimalSubproblem:
 
     def destroy(self) -> None:
         """Free the PETSc objects (collective)."""
-        for obj in (self.A, self.b, self.du, self._gap_vec, self._stiffness, self._M, self._work):
+        for obj in (self.A, self.b, self.du, self._gap_vec, self._stiffness, self._mass_matrix, self._work):
             if obj is not None:
                 obj.destroy()
         self.solver.destroy()

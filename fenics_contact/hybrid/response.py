@@ -127,14 +127,23 @@ class AffinePart:
     def load_solution(self) -> np.ndarray:
         """J⁻¹ b (local; the kept array, read only), solved again only when b or J's factorization changed; a
         vanishing b (no body force, traction or u_D reaching the subproblem) gives zeros without a solve."""
-        b = self.body_load()
+        b = self._current_body_load()
         kept = getattr(self, "_kept_load", None)
         key = (id(self.solver), getattr(self.solver, "factorizations", None))
-        changed = kept is None or kept[0] != key or not np.array_equal(kept[1], b)
+        changed = kept is None or kept[0] != key or not (kept[1] is b or np.array_equal(kept[1], b))
         if self.comm.allreduce(changed, op=MPI.LOR):  # (collective: the solve is)
             loaded = self.comm.allreduce(bool(np.any(b)), op=MPI.LOR)
-            kept = self._kept_load = (key, b, self.solve(b) if loaded else np.zeros_like(b))
+            kept = self._kept_load = (key, b, self._solve_load(b) if loaded else np.zeros_like(b))
         return kept[2]
+
+    def _current_body_load(self) -> np.ndarray:
+        """b as ``load_solution`` compares it with the b of its kept solve (a subclass that keeps b returns the kept
+        array itself: the same object for the same b)."""
+        return self.body_load()
+
+    def _solve_load(self, b: np.ndarray) -> np.ndarray:
+        """J⁻¹ b for ``load_solution``."""
+        return self.solve(b)
 
     def refresh(self) -> bool:
         """Re-read the contact geometry (an obstacle may have moved): True when the condensation is stale."""
@@ -297,14 +306,22 @@ class PrimalPart(AffinePart):
     def _inverse_block_transposed(self, solver: DirectSolver, rows: np.ndarray) -> np.ndarray:
         """((J⁻¹)[rows][:, rows])ᵀ, C-contiguous; J₀'s is kept (it is factorized once, and the rows stay when the
         obstacle moves: only the normals in Qᵀ change, so a refreshed condensation costs products, no MUMPS
-        call)."""
+        call).  J is symmetric here: MUMPS computes one triangle, swept along the rows' nodes (``_sweep``), and the
+        block, exactly symmetric, is its own transpose."""
         if solver is not getattr(self, "solver", None):  # (no J₀ without ``factorize``)
-            return np.ascontiguousarray(solver.inverse_block(rows).T)
+            return solver.inverse_block(rows, sweep=self._sweep(rows))
         kept = self._kept_inverse
         if kept is None or kept[0] != solver.factorizations or not np.array_equal(kept[1], rows):
-            block = np.ascontiguousarray(solver.inverse_block(rows).T)
+            block = solver.inverse_block(rows, sweep=self._sweep(rows))
             self._kept_inverse = kept = (solver.factorizations, rows, block)
         return kept[2]
+
+    def _sweep(self, rows: np.ndarray) -> np.ndarray:
+        """The coordinate of the rows' nodes in which they spread most: the order in which ``inverse_block`` takes
+        one triangle of a symmetric block (γ and Γ_C are lines in 2D: the position along them; the entries of a
+        column from the rows ahead of it, about half the pruned substitutions)."""
+        x = self.sub.V.tabulate_dof_coordinates()[np.asarray(rows) // self.bs]
+        return x[:, int(np.argmax(np.ptp(x, axis=0)))]
 
     def data_block(self, j0: int, j1: int) -> np.ndarray:
         B = np.zeros((self.nown, j1 - j0), order="F")
@@ -334,13 +351,26 @@ class PrimalPart(AffinePart):
     def body_load(self) -> np.ndarray:
         """b (local), assembled again only when the values it depends on changed (``body_load_inputs``: a load
         path moves the obstacle, which b does not see)."""
+        return self._current_body_load().copy()
+
+    def _current_body_load(self) -> np.ndarray:
+        """The kept b (read only: the same array while its inputs stay), assembled again when they changed."""
         inputs = self.sub.body_load_inputs()
         kept = self._kept_body
         same = kept is not None and len(kept[0]) == len(inputs) and all(map(np.array_equal, kept[0], inputs))
         if self.comm.allreduce(not same, op=MPI.LOR):  # (collective: the assembly is)
             b = self.sub.body_load(self._b).getArray(readonly=True).copy()
+            b.flags.writeable = False
             self._kept_body = kept = ([np.array(a, copy=True) for a in inputs], b)
-        return kept[1].copy()
+        return kept[1]
+
+    def _solve_load(self, b: np.ndarray) -> np.ndarray:
+        """J⁻¹ b; on one process with MUMPS' sparse right-hand side (``DirectSolver.solve_sparse``): the forward
+        elimination skips the fronts off b's support (a body force on part of the body, u_D on Γ_D)."""
+        if isinstance(self.solver, DirectSolver) and self.solver.sequential_mumps():
+            rows = np.flatnonzero(b)
+            return self.solver.solve_sparse(rows, b[rows])
+        return self.solve(b)
 
     def state(self) -> np.ndarray:
         return self.sub.u.x.petsc_vec.getArray(readonly=True).copy()

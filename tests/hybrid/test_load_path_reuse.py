@@ -6,7 +6,8 @@
 * ``PrimalPart.solve_for`` (Ω₁ as the kept J⁻¹b plus one back-solve of the data, a sparse right-hand side on one
   process) gives Ω₁'s own solve to 1e-12, with and without a body force.
 * The relative change's K u₁ taken from the equations Ω₁'s back-solve solved is the product with K to 1e-12.
-* On one process the mass products of the relative change by M's block of one component are PETSc's products.
+* On one process the mass products of the relative change by M's block of one component (the scalar mass matrix,
+  assembled alone) are PETSc's products, and M is not assembled.
 * On one process ``InterfaceSpace``'s transfers are copies of the interface entries: the values of the general
   transfers through the parent space, bit for bit.
 * A force–indentation curve through the condensed Newton with these gives the forces of the plain path (the body
@@ -19,6 +20,7 @@ import pytest
 from dolfinx import fem
 from mpi4py import MPI
 
+from fenics_contact.fem.matrices import ComponentBlockProduct
 from fenics_contact.hybrid.iteration import InterfaceNewtonOptions, IterationOptions
 from fenics_contact.hybrid.primal import PrimalHybridStep
 from fenics_contact.hybrid.response import PrimalPart
@@ -65,8 +67,8 @@ def test_body_load_is_kept_while_its_inputs_are(which):
 @pytest.mark.parametrize("force", [0.0, 1.0])
 @pytest.mark.parametrize("sparse", [True, False])
 def test_solve_for_equals_the_subproblem_solve(force, sparse, monkeypatch):
-    """Ω₁ for data g: the kept J⁻¹b plus the sparse right-hand side's back-solve (one process), or one back-solve of
-    b + C g, equal Ω₁'s own solve, with and without a body force (b = 0: J⁻¹b without a solve)."""
+    """Ω₁ for data g: the kept J⁻¹b plus the sparse right-hand side's back-solve (one process; J⁻¹b by one too), or
+    one back-solve of b + C g, equal Ω₁'s own solve, with and without a body force (b = 0: J⁻¹b without a solve)."""
     step = PrimalHybridStep(_model().on(unit_square(16, 4)))
     step.prepare()
     part = step.interface_problem(InterfaceNewtonOptions()).omega1.part
@@ -86,7 +88,8 @@ def test_solve_for_equals_the_subproblem_solve(force, sparse, monkeypatch):
     part.solve_for(step.interface.gather(g))
     scale = np.abs(own).max()
     assert scale > 0 and np.abs(part.sub.u.x.array - own).max() <= 1e-12 * scale
-    assert len(sparse_solves) == (1 if sparse and MPI.COMM_WORLD.size == 1 else 0)
+    # one process: the data's back-solve and, with a body force, J⁻¹b's by sparse right-hand sides
+    assert len(sparse_solves) == ((1 + (force != 0)) if sparse and MPI.COMM_WORLD.size == 1 else 0)
     assert (np.abs(part.load_solution()).max() > 0) == (force != 0)
     with pytest.raises(ValueError, match="without contact"):
         step.interface_problem(InterfaceNewtonOptions()).omega2.solve_for(np.zeros(part.n_g))
@@ -123,14 +126,19 @@ def test_omega1_stiffness_product_from_its_equations(force):
 @serial
 def test_mass_products_by_one_component_block():
     """``norm_products``' M w on one process (M's block of one component applied to the components side by side,
-    ``ComponentBlockProduct``) is PETSc's product with M, entry for entry."""
+    ``ComponentBlockProduct``, from the scalar mass matrix assembled alone: M itself is not assembled) is PETSc's
+    product with M, entry for entry, and that block is M's, bit for bit."""
     step = PrimalHybridStep(_model().on(unit_square(16, 4)))
     rng = np.random.default_rng(6)
     for sub in step.sub:
         sub.u.x.array[:] = rng.standard_normal(sub.u.x.array.size)
         ours, theirs = sub.u.x.petsc_vec.duplicate(), sub.u.x.petsc_vec.duplicate()
         sub.norm_products(sub.u, None, ours)
+        assert sub._mass_matrix is None  # (the scalar block only)
         sub._M.mult(sub.u.x.petsc_vec, theirs)
+        block = ComponentBlockProduct(sub._M, sub.V.dofmap.index_map_bs).block
+        for name in ("indptr", "indices", "data"):
+            assert np.array_equal(getattr(sub._mass.block, name), getattr(block, name))
         assert np.abs(theirs.getArray()).max() > 0
         assert np.allclose(ours.getArray(), theirs.getArray(), rtol=1e-15, atol=0.0)
         for vec in (ours, theirs):
@@ -175,7 +183,10 @@ def test_load_path_equals_the_plain_path(monkeypatch):
     monkeypatch.setattr(PrimalPart, "solve_for", lambda self, g: solves.append(1) or solve_for(self, g))
     fast, fast_changes = _curve(cm)
     assert len(solves) == DEPTHS.size  # Ω₁ from the kept body load at every step
-    assert fast.step.sub[0]._stiffness is None  # Ω₁'s K u₁ from its equations: its K never assembled
+    omega1 = fast.step.sub[0]
+    assert omega1._stiffness is None  # Ω₁'s K u₁ from its equations: its K never assembled
+    assert omega1._mass_matrix is None  # its mass products by the scalar block
+    assert not any(isinstance(omega1._forms[name], fem.Form) for name in ("a", "m", "load"))  # never compiled
     mono, _ = _curve(cm, "primal-monolithic")
 
     def assembled(self):  # the body load assembled at every call

@@ -89,12 +89,8 @@ def _add_columns(G: np.ndarray, columns: np.ndarray, block: np.ndarray) -> None:
 
 
 def _by_dofs(space) -> list:
-    """The functions of Ψ and N grouped by their (shared) DOF array: [(dofs, [(values, Z columns)])]."""
-    groups = {}
-    for parts, shift in ((space.basis, 0), (space.correction, space.size)):
-        for p in parts:
-            groups.setdefault(id(p.dofs), (p.dofs, []))[1].append((p.values, shift + p.columns))
-    return list(groups.values())
+    """The functions of Ψ and N by patch problem: [(dofs, [(values, Z columns)])] (``MultiscaleSpace.blocks``)."""
+    return [(p.dofs, [(p.values, p.columns)]) for p in space.blocks]
 
 
 def _rows_of(parts: list, rows: np.ndarray) -> np.ndarray:

@@ -8,12 +8,14 @@ On the patch K_{i,m} (K_i extended by m coarse layers), for all v ∈ V_h⁰(K_{
 
 solved in the sparse saddle-point form [[A_II, B_IJ], [B_IJᵀ, −I]] (μ = B_IJᵀ x; B = the columns S_k Φ_k of
 the aux functions of the patch's cells): A_II + B_IJ B_IJᵀ has a dense block per coarse cell, 45× the nonzeros
-of A_II at h = 1/256.  One MUMPS LDLᵀ per patch serves the l_i bases, the Robin corrector of the γ vertices of
+of A_II at h = 1/256.  One MUMPS LDLᵀ per patch serves the l_i bases, the Robin correctors of the γ vertices of
 K_i and the source corrector (one solve with many right-hand sides, given to MUMPS as sparse: a unit vector in
 the μ rows per basis, a few γ rows per Robin datum; ``SparseFactor.solve_sparse``).  With ``CEMOptions.patch_group`` the
 cells of a group share one patch, the union of their K_{i,m} (``cell_groups``), and one LDLᵀ serves all their
-problems; ``covering`` gives the cells whose functions reach a coarse cell.  The functions are stored per patch
-(``PatchFunctions``: the DOFs and a dense block), never as fine-mesh-sized arrays.
+problems (a γ vertex shared by cells of the group: one Robin datum, their γ-masses summed); ``covering`` gives the
+cells whose functions reach a coarse cell.  The functions of a patch problem are stored side by side
+(``MultiscaleSpace.blocks``: the DOFs and one dense row-major block, of which each cell's bases and the group's
+Robin correctors are views; ``split_block``), never as fine-mesh-sized arrays.
 """
 
 import logging

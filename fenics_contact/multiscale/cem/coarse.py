@@ -39,8 +39,10 @@ GRAM_BLOCK_BELOW = 400
 
 #: mean columns per patch problem from which ``gram_matrices`` sums the products per pair of patch problems (shared
 #: patches: few wide blocks); below (one cell per patch problem: many narrow ones) the products of a coarse cell go
-#: straight into the Gram matrices, formed in ``GRAM_PIECES`` column pieces.  Model 3, H = 1/16, m = 4, h = 1/128:
-#: with one cell per patch problem the pairs take 4.2 s against 3.9 s.
+#: straight into the Gram matrices, formed in ``GRAM_PIECES`` column pieces.  Model 3, H = 1/16, m = 4 (the Gram
+#: matrices' CPU time, two builds each): h = 1/256, patch_group 4 (48 bases and up to ~130 Robin correctors per patch
+#: problem) 2.0–2.1 s by pairs against 2.5–3.0 s straight; patch_group 1, h = 1/128 1.2 s straight against 1.9 s
+#: by pairs, h = 1/256 3.0 s against 4.6 s.
 PAIRS_FROM_WIDTH = 24
 
 #: column pieces of a coarse cell's products ZᵀW summed straight into the Gram matrices: the pieces above the

@@ -5,13 +5,15 @@ The cylinder load path's Ω₁ (``benchmarks/load_path.py``: model ``--model``, 
 patch problems (of which the LDLᵀ factorizations and their solves), the coarse operators (of which the Gram
 matrices) and the whole build.  With ``--cpu`` the phase clocks read the process's CPU time (``time.perf_counter``
 is replaced by ``time.process_time`` before the package is imported): on a machine shared with other jobs the
-CPU times are the steadier ones.
+CPU times are the steadier ones.  With ``--cache DIR`` each build also writes its offline data to a fresh cache
+file in DIR (``cache_save``: the write, as in a first run with ``cache_dir``).
 
     OMP_NUM_THREADS=1 .venv/bin/python benchmarks/cem_offline.py --h 256 --H 16 --patch-group 4 --repeat 3 --cpu
 """
 
 import argparse
 import time
+from pathlib import Path
 
 
 def main() -> None:
@@ -25,6 +27,11 @@ def main() -> None:
     parser.add_argument("--patch-group", default="4", help="coarse cells per direction sharing a patch, or 'all'")
     parser.add_argument("--repeat", type=int, default=1)
     parser.add_argument("--cpu", action="store_true", help="phase times in CPU time")
+    parser.add_argument(
+        "--cache",
+        default=None,
+        help="write the offline data to a cache file in this directory (its cem_*.npz files removed first)",
+    )
     args = parser.parse_args()
     if args.cpu:
         time.perf_counter = time.process_time
@@ -41,12 +48,16 @@ def main() -> None:
         f"model {args.model}, contrast {args.contrast:g}, h = 1/{args.h}, H = 1/{args.H}, m = {args.layers}, "
         f"l = {args.nbasis}, patch group {args.patch_group}; {clock} times [s]"
     )
+    skip = {"cache_load"} | (set() if args.cache else {"cache_save"})
     for _ in range(args.repeat):
+        if args.cache:  # (a fresh file: the build writes it)
+            for old in Path(args.cache).glob("cem_*.npz"):
+                old.unlink()
         start = time.perf_counter()
-        om = cem.build_omega1_multiscale(problem, cem=options)[0]
+        om = cem.build_omega1_multiscale(problem, cem=options, cache_dir=args.cache)[0]
         total = time.perf_counter() - start
         phases = {**om.times, **om.time_parts}
-        print(", ".join(f"{k} {v:.2f}" for k, v in phases.items() if k != "cache_load") + f", total {total:.2f}")
+        print(", ".join(f"{k} {v:.2f}" for k, v in phases.items() if k not in skip) + f", total {total:.2f}")
 
 
 if __name__ == "__main__":

@@ -315,7 +315,8 @@ def main() -> None:
                 continue
             for group in args.patch_group if method == "primal-ms" else ["1"]:
                 name = method if group == "1" else f"{method}, patch group {group}"
-                results[name] = run_child(method, args, cache if multiscale else None, group)
+                # (the offline data are written only for the run on them: a cold curve writes no cache file)
+                results[name] = run_child(method, args, cache if multiscale and args.cached else None, group)
                 print(f"{name}: whole curve {results[name]['total_s']:.2f} s", flush=True)
                 if multiscale and args.cached:
                     label = f"{name}, offline data from the cache"

@@ -48,3 +48,20 @@ def test_dependent_functions_take_the_products():
     GK, GK_direct, _ = _grams(om)
     assert np.array_equal(GK, GK_direct)
     assert om.solver.factor.rank == int(np.count_nonzero(om.ops.free)) < om.space.size
+
+
+def test_products_summed_per_pair_of_patch_problems():
+    """The Gram matrices as products, summed per pair of patch problems over the coarse cells, are ZᵀKZ and ZᵀMZ
+    of the assembled Z = [Ψ, N, N_f]; a γ vertex shared by two cells of a group has one Robin corrector in its
+    patch problem (distinct columns per block), one shared by two groups a corrector in each (their sum)."""
+    problem = models.get_model(3, E_high=100.0).on(unit_square(32, 8))
+    om = cem.build_omega1_multiscale(problem, cem=cem.CEMOptions(layers=2, nbasis=3, patch_group=2))[0]
+    space, ops = om.space, om.ops
+    assert all(np.unique(b.columns).size == b.columns.size for b in space.blocks)
+    shared = np.concatenate([p.columns for p in space.correction])
+    assert 1 < len(space.correction) and shared.size > np.unique(shared).size  # γ DOFs corrected in two groups
+    GK, GM = cem.gram_matrices(ops, om.grid, space)  # (no patch equations left: products)
+    Z = np.hstack([space.Psi.toarray(), space.N.toarray(), space.Nf[:, None]])
+    for G, W in ((GK, ops.K), (GM, ops.M)):
+        exact = Z.T @ (W @ Z)
+        assert np.max(np.abs(G - exact)) < 1e-12 * np.max(np.abs(exact))

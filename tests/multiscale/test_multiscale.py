@@ -414,7 +414,7 @@ def test_offline_cache(tmp_path, mesh_32_8, caplog):
     # corrupt one stored value: detected by the checksum, rebuilt, never used
     with np.load(files[0]) as data:
         arrays = {k: data[k] for k in data.files}
-    arrays["basis5_values"].flat[3] += 1.0
+    arrays["block5_values"].flat[3] += 1.0
     np.savez(files[0], **arrays)
     third = build()
     assert third.cache_status == "rebuilt"

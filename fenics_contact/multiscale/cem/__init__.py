@@ -54,11 +54,13 @@ at h = 1/256). One MUMPS LDLᵀ per patch serves the l_i bases, the Robin
 correction of the γ vertices of K_i and the source correction (one solve with
 many right-hand sides, sparse: MUMPS skips the forward elimination where they vanish); with
 ``CEMOptions.patch_group`` the cells of a block share one patch, the union of their K_{i,m}, and one
-factorization (a superset of each K_{i,m}: the decay estimate holds with at least m layers). The bases are
-stored per patch (the DOFs I and an |I| × l_i block), never as fine-mesh-sized arrays. The coarse operators
-ΨᵀAΨ, ΨᵀA[N N_f] are summed over coarse cells K from dense blocks of the
-functions that cover K (BLAS products per K with the cellwise matrix A_K: the blocks on and above the diagonal,
-the rest mirrored).
+factorization (a superset of each K_{i,m}: the decay estimate holds with at least m layers); a γ vertex shared
+by cells of one group has one Robin datum there (their γ-masses summed: the sum of their correctors). The
+functions of a patch problem are stored side by side (the DOFs I and an |I| × k block, of which each cell's
+bases are a view), never as fine-mesh-sized arrays. ZᵀAZ comes from the patch equations (``equations``); ZᵀMZ
+is summed over coarse cells K from dense blocks of the functions that cover K (BLAS products per K with the
+cellwise matrix M_K, summed per pair of patch problems: those on and above the diagonal formed, the rest
+mirrored).
 
 **Cellwise matrices.** a_i, s_i and the γ-mass of K_i come from a colouring of
 the coarse cells (``CoarseGrid.colors``): cells of one colour share no fine
@@ -92,6 +94,7 @@ from fenics_contact.multiscale.cem.bases import (
     cell_groups,
     covering,
     global_saddle_matrix,
+    split_block,
 )
 from fenics_contact.multiscale.cem.cache import CACHE_FORMAT, PrimalOfflineCache, offline_key, offline_stage
 from fenics_contact.multiscale.cem.coarse import MultiscaleRobinSolver, gram_matrices, trace_matrix
@@ -156,6 +159,7 @@ __all__ = [
     "cell_groups",
     "covering",
     "global_saddle_matrix",
+    "split_block",
     "MultiscaleRobinSolver",
     "gram_matrices",
     "trace_matrix",

@@ -8,12 +8,14 @@ On the patch K_{i,m} (K_i extended by m coarse layers), for all v ∈ V_h⁰(K_{
 
 solved in the sparse saddle-point form [[A_II, B_IJ], [B_IJᵀ, −I]] (μ = B_IJᵀ x; B = the columns S_k Φ_k of
 the aux functions of the patch's cells): A_II + B_IJ B_IJᵀ has a dense block per coarse cell, 45× the nonzeros
-of A_II at h = 1/256.  One MUMPS LDLᵀ per patch serves the l_i bases, the Robin corrector of the γ vertices of
+of A_II at h = 1/256.  One MUMPS LDLᵀ per patch serves the l_i bases, the Robin correctors of the γ vertices of
 K_i and the source corrector (one solve with many right-hand sides, given to MUMPS as sparse: a unit vector in
 the μ rows per basis, a few γ rows per Robin datum; ``SparseFactor.solve_sparse``).  With ``CEMOptions.patch_group`` the
 cells of a group share one patch, the union of their K_{i,m} (``cell_groups``), and one LDLᵀ serves all their
-problems; ``covering`` gives the cells whose functions reach a coarse cell.  The functions are stored per patch
-(``PatchFunctions``: the DOFs and a dense block), never as fine-mesh-sized arrays.
+problems (a γ vertex shared by cells of the group: one Robin datum, their γ-masses summed); ``covering`` gives the
+cells whose functions reach a coarse cell.  The functions of a patch problem are stored side by side
+(``MultiscaleSpace.blocks``: the DOFs and one dense row-major block, of which each cell's bases and the group's
+Robin correctors are views; ``split_block``), never as fine-mesh-sized arrays.
 """
 
 import logging
@@ -44,6 +46,7 @@ __all__ = [
     "cell_groups",
     "covering",
     "global_saddle_matrix",
+    "split_block",
 ]
 
 log = logging.getLogger(__name__)
@@ -105,7 +108,7 @@ class PatchFunctions:
 @dataclass(slots=True)
 class MultiscaleSpace:
     """V_ms = span{ψ_j^i} (``basis``, one PatchFunctions per coarse cell, columns = aux indices), the
-    Robin correction N (``correction``: γ DOF positions → Ω₁ fields, one per coarse cell touching γ)
+    Robin correction N (``correction``: γ DOF positions → Ω₁ fields, one per patch problem whose cells touch γ)
     and the source correction N_f (an Ω₁ vector, None when switched off)."""
 
     aux: AuxiliarySpace
@@ -115,7 +118,7 @@ class MultiscaleSpace:
     layers: int
     n: int  #: Ω₁ DOFs
     n_gamma: int  #: γ DOFs
-    correction_cells: np.ndarray  #: coarse cell of each ``correction`` entry
+    correction_cells: np.ndarray  #: the first coarse cell of the group whose patch problem gave each ``correction``
     times: dict = field(default_factory=dict)
     #: (ZᵀKZ, ZᵀMZ) for Z = [Ψ, N, N_f] (``coarse.gram_matrices``) when stored with the space (the offline
     #: cache), else None (``coarse.MultiscaleRobinSolver`` forms them)
@@ -125,6 +128,12 @@ class MultiscaleSpace:
     #: the ``equations.PatchEquations`` of the patch problems (ZᵀKZ from them, ``coarse.gram_matrices``) until the
     #: Gram matrices are formed; None on a space loaded from the cache
     equations: list | None = None
+    #: the functions of each patch problem side by side (``PatchFunctions``; their Z columns: the bases of the
+    #: group's cells, then its Robin correctors; ``split_block``), of which the ``basis`` and ``correction`` entries
+    #: are views
+    blocks: list = field(default_factory=list)
+    #: the coarse cells of each patch problem (``cell_groups``), whose bases ``blocks`` holds
+    groups: list = field(default_factory=list)
 
     @property
     def size(self) -> int:
@@ -179,7 +188,7 @@ PATCH_ICNTL = {7: 2}
 #: with the fine stiffness: in 2D the ring terms are a small part of the products' work (model 3, h = 1/256, H =
 #: 1/16, m = 4, patch_group 4: the Gram matrices take 3.7 s of CPU time against 5.2 s), in 3D a patch's ring is a
 #: surface holding a large share of its DOFs and they cost more (the 16³ cube of ``channels_3d``, H = 1/8, m = 1:
-#: 6.0 s against 2.2 s)
+#: 3.8 s of CPU time against 1.5 s)
 EQUATIONS_GRAM_DIMS = (2,)
 
 
@@ -203,8 +212,9 @@ def _patch_problem(
     equations: bool,
 ) -> tuple:
     """Bases and Robin corrections of the coarse cells ``group`` and their source correction, all on ``patch``
-    (one LDLᵀ); returns ([(basis, correction or None) per cell], summed source correction or None, (factorization
-    time, solve time))."""
+    (one LDLᵀ); returns ((the bases and Robin correctors side by side, |I| × k row-major; the first column of each
+    cell's bases; the ``ops.gamma`` positions of the correctors, after the bases), the summed source correction
+    or None, (factorization time, solve time), the ``PatchEquations`` or None)."""
     J = np.concatenate([aux.columns(k) for k in patch])
     nI, nJ = inner.size, J.size
     index = PETSc.IS().createGeneral(np.concatenate([inner, ops.size + J]).astype(PETSc.IntType), comm=PETSc.COMM_SELF)
@@ -212,28 +222,43 @@ def _patch_problem(
         M = saddle.createSubMatrix(index, index)
     finally:
         index.destroy()
-    blocks = []  # per cell: (first column, l_i, their γ vertices, the used Robin data columns)
     rows, cols, vals = [], [], []  # the right-hand sides' nonzeros (column, row, value: the transpose)
+    starts = []  # the first column of each cell's bases
     ncols = 0
-    for i in group:
+    for i in group:  # s(φ_j^i, πv): unit vectors in the μ rows
         li = int(aux.offsets[i + 1] - aux.offsets[i])
-        # s(φ_j^i, πv): unit vectors in the μ rows
         rows.append(ncols + np.arange(li))
         cols.append(nI + np.searchsorted(J, aux.columns(i)))
         vals.append(np.ones(li))
-        # Robin data on the γ vertices of K_i (γ-mass of the cells of K_i)
-        D_all = inc.dofs(int(i), free_only=False)
-        on_gamma = np.intersect1d(D_all, ops.gamma, assume_unique=True)
-        used = np.zeros(0, dtype=np.int64)
+        starts.append(ncols)
+        ncols += li
+    # Robin data on the γ vertices of the group's cells (γ-mass of their cells): one datum per γ DOF, the masses
+    # of the cells of the group that share its vertex summed (one operator: the sum of their correctors)
+    gamma_pos = np.zeros(0, dtype=np.int64)
+    pieces = []
+    for i in group:
+        on_gamma = np.intersect1d(inc.dofs(int(i), free_only=False), ops.gamma, assume_unique=True)
         if on_gamma.size:
-            G_I = ops.Gc[int(grid.colors[i])][on_gamma][:, inner].tocsr()  # (γ vertices of K_i × |I|)
-            used = np.flatnonzero(np.diff(G_I.indptr) > 0)
-            G_I = G_I[used].tocoo()
-            rows.append(ncols + li + G_I.row)
-            cols.append(G_I.col)
-            vals.append(G_I.data)
-        blocks.append((ncols, li, on_gamma, used))
-        ncols += li + used.size
+            pieces.append((on_gamma, ops.Gc[int(grid.colors[i])][on_gamma][:, inner].tocoo()))
+    if pieces:
+        on = np.unique(np.concatenate([d for d, _ in pieces]))
+        G_I = sp.csr_matrix(
+            (
+                np.concatenate([m.data for _, m in pieces]),
+                (
+                    np.concatenate([np.searchsorted(on, d[m.row]) for d, m in pieces]),
+                    np.concatenate([m.col for _, m in pieces]),
+                ),
+            ),
+            shape=(on.size, nI),
+        )  # (duplicates summed)
+        used = np.flatnonzero(np.diff(G_I.indptr) > 0)
+        G_I = G_I[used].tocoo()
+        rows.append(ncols + G_I.row)
+        cols.append(G_I.col)
+        vals.append(G_I.data)
+        gamma_pos = np.searchsorted(ops.gamma, on[used])
+        ncols += used.size
     F = None
     if source:
         F = ops.corrector_load[inner] * np.isin(inc.load_owner[inner // ops.bs], group)
@@ -263,18 +288,9 @@ def _patch_problem(
     finally:
         lu.destroy()
     timing = (t1 - t0, time.perf_counter() - t1)
-    x = solution[:nI]
-    dofs = inner.astype(np.int32)
-    cells, columns = [], []  # columns: of each solution in Z = [Ψ, N, N_f]
-    for (at, li, on_gamma, used), i in zip(blocks, group):
-        basis = PatchFunctions(dofs, np.ascontiguousarray(x[:, at : at + li]), aux.columns(i))
-        columns.append(aux.columns(i))
-        corr = None
-        if used.size:
-            gamma_pos = np.searchsorted(ops.gamma, on_gamma[used])
-            corr = PatchFunctions(dofs, np.ascontiguousarray(x[:, at + li : at + li + used.size]), gamma_pos)
-            columns.append(aux.size + gamma_pos)
-        cells.append((basis, corr))
+    # the functions side by side (row-major: a coarse cell's rows are gathered in one pass), N_f's column apart
+    values = np.ascontiguousarray(solution[:nI, :ncols])
+    columns = [aux.columns(i) for i in group] + [aux.size + gamma_pos]
     if F is not None:
         columns.append(np.array([aux.size + ops.gamma.size]))
     eq = None
@@ -282,7 +298,8 @@ def _patch_problem(
         nodes = np.unique(np.concatenate([inc.nodes(int(k)) for k in patch]))
         ring = np.setdiff1d((ops.bs * nodes[:, None] + np.arange(ops.bs)).ravel(), inner, assume_unique=True)
         eq = patch_equations(ops.A, aux.B, ring, inner, J, solution, rhs_t, np.concatenate(columns))
-    return cells, (x[:, -1].copy() if F is not None else None), timing, eq
+    source_corrector = solution[:nI, -1].copy() if F is not None else None
+    return (values, np.array(starts), gamma_pos), source_corrector, timing, eq
 
 
 def cell_groups(grid: CoarseGrid, options: CEMOptions, dim: int) -> tuple[list, list]:
@@ -303,6 +320,19 @@ def covering(grid: CoarseGrid, layers: int, patch_group: int | str, dim: int) ->
     held = sp.csc_matrix((np.ones(rows.size), (rows, cols)), shape=(grid.size, grid.size))
     held.sort_indices()
     return [held.indices[held.indptr[K] : held.indptr[K + 1]] for K in range(grid.size)]
+
+
+def split_block(
+    aux: AuxiliarySpace, cells: np.ndarray, dofs: np.ndarray, values: np.ndarray, gamma_pos: np.ndarray
+) -> tuple:
+    """(the block, the bases of each cell, the Robin correctors or None) of the functions ``values`` of one patch
+    problem (|dofs| × k: the bases of ``cells`` in order, then the correctors of the γ DOFs ``gamma_pos``): the
+    per-cell entries are views of the block."""
+    columns = [aux.columns(int(i)) for i in cells]
+    at = np.concatenate([[0], np.cumsum([c.size for c in columns])]).astype(np.int64)
+    bases = [PatchFunctions(dofs, values[:, a:z], c) for a, z, c in zip(at[:-1], at[1:], columns)]
+    correction = PatchFunctions(dofs, values[:, at[-1] :], gamma_pos) if gamma_pos.size else None
+    return PatchFunctions(dofs, values, np.concatenate(columns + [aux.size + gamma_pos])), bases, correction
 
 
 def build_multiscale_space(
@@ -349,13 +379,18 @@ def build_multiscale_space(
         )
     finally:
         saddle.destroy()
-    per_cell = [None] * grid.size
-    for cells, r in zip(groups, results):
-        for i, pair in zip(cells, r[0]):
-            per_cell[i] = pair
-    basis = [r[0] for r in per_cell]
-    correction = [r[1] for r in per_cell if r[1] is not None]
-    correction_cells = np.array([i for i, r in enumerate(per_cell) if r[1] is not None], dtype=np.int64)
+    basis = [None] * grid.size
+    blocks, correction, correction_cells = [], [], []
+    for cells, q_inner, r in zip(groups, inner, results):
+        values, _, gamma_pos = r[0]
+        block, bases, corr = split_block(aux, cells, q_inner.astype(np.int32), values, gamma_pos)
+        for i, pf in zip(cells, bases):
+            basis[int(i)] = pf
+        if corr is not None:
+            correction.append(corr)
+            correction_cells.append(int(cells[0]))
+        blocks.append(block)
+    correction_cells = np.array(correction_cells, dtype=np.int64)
     Nf = None
     if options.source_correction:
         Nf = np.zeros(ops.size)
@@ -383,6 +418,8 @@ def build_multiscale_space(
         times,
         patch_group=options.patch_group,
         equations=[r[3] for r in results] if equations else None,
+        blocks=blocks,
+        groups=[np.asarray(c, dtype=np.int64) for c in groups],
     )
     log.info(
         "CEM offline: %d coarse cells, m = %d, dim V_ms = %d, %.1f MB of bases; eigen %.2f s, patches %.2f s",

@@ -18,7 +18,7 @@ from mpi4py import MPI
 from fenics_contact import __version__
 from fenics_contact.errors import InputError
 from fenics_contact.multiscale.cache import OfflineCache, hash_array
-from fenics_contact.multiscale.cem.bases import MultiscaleSpace, PatchFunctions, build_multiscale_space
+from fenics_contact.multiscale.cem.bases import MultiscaleSpace, build_multiscale_space, split_block
 from fenics_contact.multiscale.cem.coarse import gram_matrices
 from fenics_contact.multiscale.cem.operators import FineOperators
 from fenics_contact.multiscale.cem.options import WHOLE_DOMAIN, CEMOptions
@@ -29,8 +29,9 @@ __all__ = ["CACHE_FORMAT", "PrimalOfflineCache", "offline_key", "offline_stage"]
 
 log = logging.getLogger(__name__)
 
-#: Format of the cached arrays: bumped whenever their layout or meaning changes (4: the Gram matrices stored).
-CACHE_FORMAT = 4
+#: Format of the cached arrays: bumped whenever their layout or meaning changes (4: the Gram matrices stored; 5: one
+#: Robin corrector per patch problem, the masses of a γ vertex shared by cells of one group summed).
+CACHE_FORMAT = 5
 
 
 def offline_key(ops: FineOperators, grid: CoarseGrid, options: CEMOptions, *, h: float) -> str:
@@ -75,14 +76,13 @@ def _pack(space: MultiscaleSpace) -> dict:
         "aux_values": np.concatenate(aux.eigenvalues),
         "aux_gaps": aux.gaps,
         "aux_vectors": np.concatenate([Phi.ravel() for Phi in aux.vectors]),
-        "meta": np.array([space.layers, space.n, space.n_gamma, len(space.basis), len(space.correction)]),
-        "correction_cells": np.asarray(space.correction_cells, dtype=np.int64),
+        "meta": np.array([space.layers, space.n, space.n_gamma, len(space.blocks)]),
     }
-    for name, parts in (("basis", space.basis), ("corr", space.correction)):
-        for k, p in enumerate(parts):
-            out[f"{name}{k}_dofs"] = p.dofs
-            out[f"{name}{k}_values"] = p.values
-            out[f"{name}{k}_columns"] = p.columns
+    for k, (cells, p) in enumerate(zip(space.groups, space.blocks)):
+        out[f"block{k}_cells"] = np.asarray(cells, dtype=np.int64)
+        out[f"block{k}_dofs"] = p.dofs
+        out[f"block{k}_values"] = p.values
+        out[f"block{k}_gamma"] = p.columns[p.columns >= space.size] - space.size
     if space.Nf is not None:
         out["Nf"] = space.Nf
     if space.patch_group != 1:  # 0: WHOLE_DOMAIN
@@ -96,7 +96,7 @@ def _unpack(arrays: dict, ops: FineOperators, grid: CoarseGrid) -> MultiscaleSpa
     offs, doffs = arrays["aux_offsets"], arrays["aux_dof_offsets"]
     if offs.size != grid.size + 1 or doffs.size != grid.size + 1:
         raise ValueError("cached auxiliary space does not match the coarse grid")
-    dofs, values, vectors, blocks = [], [], [], []
+    dofs, values, vectors, s_phi = [], [], [], []
     pos = 0
     for k in range(grid.size):
         D = arrays["aux_dofs"][doffs[k] : doffs[k + 1]]
@@ -107,17 +107,27 @@ def _unpack(arrays: dict, ops: FineOperators, grid: CoarseGrid) -> MultiscaleSpa
         dofs.append(D)
         values.append(arrays["aux_values"][offs[k] : offs[k + 1]])
         vectors.append(Phi)
-        blocks.append(S @ Phi)
-    aux = AuxiliarySpace.from_parts(ops.size, dofs, values, vectors, blocks, arrays["aux_gaps"])
-    layers, n, ng, nb, nc = (int(x) for x in arrays["meta"])
-    if n != ops.size or ng != ops.gamma.size or nb != grid.size:
+        s_phi.append(S @ Phi)
+    aux = AuxiliarySpace.from_parts(ops.size, dofs, values, vectors, s_phi, arrays["aux_gaps"])
+    layers, n, ng, nblocks = (int(x) for x in arrays["meta"])
+    if n != ops.size or ng != ops.gamma.size:
         raise ValueError("cached multiscale space does not match the Ω₁ operators")
-    parts = {}
-    for name, count in (("basis", nb), ("corr", nc)):
-        parts[name] = [
-            PatchFunctions(arrays[f"{name}{k}_dofs"], arrays[f"{name}{k}_values"], arrays[f"{name}{k}_columns"])
-            for k in range(count)
-        ]
+    basis = [None] * grid.size
+    groups, blocks, correction, correction_cells = [], [], [], []
+    for k in range(nblocks):
+        cells = arrays[f"block{k}_cells"]
+        block, bases, corr = split_block(
+            aux, cells, arrays[f"block{k}_dofs"], arrays[f"block{k}_values"], arrays[f"block{k}_gamma"]
+        )
+        for i, pf in zip(cells, bases):
+            basis[int(i)] = pf
+        if corr is not None:
+            correction.append(corr)
+            correction_cells.append(int(cells[0]))
+        groups.append(cells)
+        blocks.append(block)
+    if any(b is None for b in basis):
+        raise ValueError("cached multiscale space does not hold a basis of every coarse cell")
     times = {"eigen": 0.0, "patches": 0.0, "total": 0.0}
     nz = aux.size + ng + 1
     grams = (arrays["gram_K"], arrays["gram_M"])
@@ -126,16 +136,18 @@ def _unpack(arrays: dict, ops: FineOperators, grid: CoarseGrid) -> MultiscaleSpa
     group = int(arrays["patch_group"][0]) if "patch_group" in arrays else 1
     return MultiscaleSpace(
         aux,
-        parts["basis"],
-        parts["corr"],
+        basis,
+        correction,
         arrays.get("Nf"),
         layers,
         n,
         ng,
-        arrays["correction_cells"],
+        np.array(correction_cells, dtype=np.int64),
         times,
         grams,
         patch_group=WHOLE_DOMAIN if group == 0 else group,
+        blocks=blocks,
+        groups=groups,
     )
 
 
@@ -195,10 +207,12 @@ def offline_stage(
     space.grams = gram_matrices(ops, grid, space, comm=comm)  # stored too: a later run needs no pass over the bases
     space.equations = None  # (used by the Gram matrices only)
     space.times["gram"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
     if comm.rank == 0:
         try:
             cache.save(key, space)
         except OSError as err:  # the directory went away or filled up meanwhile: keep the built data
             log.warning("CEM offline data could not be saved to %s: %s", cache.path(key), err)
     comm.Barrier()
+    space.times["save"] = time.perf_counter() - t0
     return space, "built" if status == "missing" else "rebuilt"

@@ -3,8 +3,9 @@
 Online everything is done in the coordinates s = (w, g, 1) of u₁ = Z s, Z = [Ψ, N, N_f]: the coarse solve
 (ΨᵀAΨ factorized once, ``fem.linalg.PivotedCholesky``), the trace Z_γ s, the norms sᵀ(ZᵀKZ)s and sᵀ(ZᵀMZ)s.
 ZᵀKZ comes from the patch equations the functions solve (``equations``); ZᵀMZ is summed over the coarse cells K
-from dense blocks of the functions that cover K (BLAS products with the cellwise M_K, the column blocks on and
-above the diagonal formed and the rest mirrored), the cells shared out over the ranks and the sums Allreduced.
+from dense blocks of the functions that cover K (BLAS products with the cellwise M_K, summed per pair of patch
+problems: those on and above the diagonal formed, the rest mirrored), the cells shared out over the ranks and the
+sums Allreduced.
 """
 
 import logging
@@ -15,10 +16,10 @@ import scipy.sparse as sp
 from mpi4py import MPI
 
 from fenics_contact.fem.linalg import PivotedCholesky
-from fenics_contact.multiscale.cem.bases import Incidence, MultiscaleSpace, covering
+from fenics_contact.multiscale.cem.bases import Incidence, MultiscaleSpace, cell_groups
 from fenics_contact.multiscale.cem.equations import resolves, stiffness_gram
 from fenics_contact.multiscale.cem.operators import FineOperators
-from fenics_contact.multiscale.cem.options import WHOLE_DOMAIN
+from fenics_contact.multiscale.cem.options import WHOLE_DOMAIN, CEMOptions
 from fenics_contact.multiscale.cem.spectral import restrict
 from fenics_contact.multiscale.coarse import CoarseGrid
 from fenics_contact.multiscale.work import run_shared
@@ -28,39 +29,25 @@ __all__ = ["MultiscaleRobinSolver", "gram_matrices", "trace_matrix"]
 log = logging.getLogger(__name__)
 
 
-def _fill_rows(Z: np.ndarray, parts: list, targets: list, D: np.ndarray) -> None:
-    """Z[:, targets[j]] += the values of the patch functions parts[j] at the DOFs D (zero where D is outside
-    their DOFs; each target list without repeats, a slice target a function's own columns, not shared)."""
-    found = {}  # the functions of one patch problem share their DOF array: look D up in it once
-    for p, target in zip(parts, targets):
-        if id(p.dofs) not in found:
-            pos = np.searchsorted(p.dofs, D)
-            np.minimum(pos, p.dofs.size - 1, out=pos)
-            hit = p.dofs[pos] == D
-            index = np.flatnonzero(hit)
-            # (a cell inside the patch: all of D, no row index; an index array paired with column indices as a
-            # column vector)
-            found[id(p.dofs)] = (slice(None), slice(None), pos) if hit.all() else (index, index[:, None], pos[hit])
-        hit, hit_column, rows = found[id(p.dofs)]
-        if isinstance(target, slice) and isinstance(hit, slice):
-            # a function's own columns (still zero), all of D: gathered straight into Z (no temporary; "clip" is
-            # NumPy's unbuffered mode, the rows are in range)
-            np.take(p.values, rows, axis=0, out=Z[:, target], mode="clip")
-        else:
-            Z[hit if isinstance(target, slice) else hit_column, target] += p.values[rows]
-
-
-#: column pieces of the symmetric products ZᵀW of ``gram_matrices``: the blocks above the diagonal are formed,
-#: those below mirrored ((pieces + 1) / (2 pieces) of the work of the full product)
-GRAM_PIECES = 4
-
-
 #: fine DOFs per coarse cell below which ``gram_matrices`` sums blocks of coarse cells rather than single cells
 #: (2D): small cells make small products whose overhead dominates.  Model 3, H = 1/16, m = 4: at h = 1/128 (130
 #: Ω₁ DOFs per coarse cell) blocks of 2 × 2 cells take a fifth less time than single cells with one patch per
 #: cell, the groups of 4 × 4 (their cells covered by the same functions) two-fifths less; at h = 1/256 (520 DOFs
 #: per cell) blocks gain nothing.
 GRAM_BLOCK_BELOW = 400
+
+
+#: mean columns per patch problem from which ``gram_matrices`` sums the products per pair of patch problems (shared
+#: patches: few wide blocks); below (one cell per patch problem: many narrow ones) the products of a coarse cell go
+#: straight into the Gram matrices, formed in ``GRAM_PIECES`` column pieces.  Model 3, H = 1/16, m = 4 (the Gram
+#: matrices' CPU time, two builds each): h = 1/256, patch_group 4 (48 bases and up to ~130 Robin correctors per patch
+#: problem) 2.0–2.1 s by pairs against 2.5–3.0 s straight; patch_group 1, h = 1/128 1.2 s straight against 1.9 s
+#: by pairs, h = 1/256 3.0 s against 4.6 s.
+PAIRS_FROM_WIDTH = 24
+
+#: column pieces of a coarse cell's products ZᵀW summed straight into the Gram matrices: the pieces above the
+#: diagonal formed, those below mirrored ((pieces + 1) / (2 pieces) of the work of the full product)
+GRAM_PIECES = 4
 
 
 def _gram_block(patch_group: int | str, dim: int, dofs_per_cell: float) -> int:
@@ -100,16 +87,64 @@ def _mass_matrix(ops: FineOperators, grid: CoarseGrid, cells: list, cell_dofs: l
     return _block_matrix(ops, grid, cells, cell_dofs, D)[D.size :]
 
 
-def _symmetric_products(Z: np.ndarray, W: np.ndarray) -> np.ndarray:
-    """ZᵀW for a symmetric result (W = S Z, S symmetric): the column blocks on and above the diagonal formed
-    (``GRAM_PIECES`` of them), the rest mirrored."""
-    k = Z.shape[1]
+def _gather(Z: np.ndarray, parts: list, at: np.ndarray, D: np.ndarray) -> None:
+    """Z[:, at[j]:at[j + 1]] = the values of the patch blocks parts[j] at the DOFs D (zero where D is outside
+    their DOFs): one pass over the rows of each block."""
+    for p, a, z in zip(parts, at[:-1], at[1:]):
+        pos = np.searchsorted(p.dofs, D)
+        np.minimum(pos, p.dofs.size - 1, out=pos)
+        hit = p.dofs[pos] == D
+        if hit.all():  # gathered straight into Z ("clip": NumPy's unbuffered mode, the rows are in range)
+            np.take(p.values, pos, axis=0, out=Z[:, a:z], mode="clip")
+        else:
+            index = np.flatnonzero(hit)
+            Z[index, a:z] = p.values[pos[index]]
+
+
+def _add_pairs(acc: dict, ids: list, at: np.ndarray, Z: np.ndarray, W: np.ndarray) -> None:
+    """acc[(ids[i], ids[j])] += Z_iᵀ W_j for j ≥ i (Z_i the columns at[i]:at[i + 1]): the blocks of ZᵀW on and
+    above the diagonal, one product per block row."""
+    for i in range(len(ids)):
+        row = Z[:, at[i] : at[i + 1]].T @ W[:, at[i] :]
+        for j in range(i, len(ids)):
+            block = row[:, at[j] - at[i] : at[j + 1] - at[i]]
+            key = (ids[i], ids[j])
+            if key in acc:
+                acc[key] += block
+            else:
+                acc[key] = block.copy()
+
+
+def _distinct_columns(Z: np.ndarray, cols: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(Z with the columns of a repeated Z column summed into its first, their distinct Z columns)."""
+    uniq, first, inverse = np.unique(cols, return_index=True, return_inverse=True)
+    if uniq.size == cols.size:
+        return Z, cols
+    for j in np.flatnonzero(first[inverse] != np.arange(cols.size)):
+        Z[:, first[inverse[j]]] += Z[:, j]
+    keep = np.sort(first)
+    return Z[:, keep], cols[keep]
+
+
+def _add_direct(G: np.ndarray, cols: np.ndarray, Z: np.ndarray, W: np.ndarray) -> None:
+    """G[cols, cols] += ZᵀW (distinct ``cols``, a symmetric product): the column pieces on and above the diagonal
+    formed (``GRAM_PIECES``), the rest mirrored."""
+    k = cols.size
     cuts = np.linspace(0, k, min(GRAM_PIECES, k) + 1).astype(np.int64)
-    G = np.empty((k, k))
     for a, b in zip(cuts[:-1], cuts[1:]):
-        G[a:b, a:] = Z[:, a:b].T @ W[:, a:]
-        G[b:, a:b] = G[a:b, b:].T
-    return G
+        row = Z[:, a:b].T @ W[:, a:]
+        G[np.ix_(cols[a:b], cols[a:])] += row
+        if b < k:
+            G[np.ix_(cols[b:], cols[a:b])] += row[:, b - a :].T
+
+
+def _scatter_pairs(G: np.ndarray, acc: dict, columns: list) -> None:
+    """G += the pair blocks ``acc`` at the Z columns of their patch blocks, those below the diagonal mirrored (the
+    columns of one block are distinct; a column in two blocks sums their functions)."""
+    for (a, b), block in sorted(acc.items()):
+        G[np.ix_(columns[a], columns[b])] += block
+        if a != b:
+            G[np.ix_(columns[b], columns[a])] += block.T
 
 
 def gram_matrices(
@@ -120,9 +155,10 @@ def gram_matrices(
     ZᵀKZ from the patch equations when the space holds them (``equations.stiffness_gram``, unless ΨᵀAΨ is nearly
     singular: ``equations.resolves``), else as ZᵀMZ: summed over coarse cells (or blocks of small ones,
     ``GRAM_BLOCK_BELOW``) S of Z_Sᵀ K_S Z_S (K_S the matrix of the block's fine cells, Z_S the dense block of the
-    functions covering its cells;
-    ``_symmetric_products``: (GRAM_PIECES + 1) / (2 GRAM_PIECES) of a full product); blocks shared out over
-    ``comm`` (a static share: a fixed summation order) and the sums Allreduced.
+    patch problems' functions covering its cells, ``MultiscaleSpace.blocks``, gathered one patch problem at a time).
+    The products are summed per pair of patch problems, those on and above the diagonal formed (one product per
+    patch problem covering S) and the rest mirrored, and put into the Gram matrices at the end; the blocks are
+    shared out over ``comm`` (a static share: a fixed summation order) and the sums Allreduced.
     """
     inc = Incidence(ops, grid)
     n_ms, ng = space.size, space.n_gamma
@@ -132,55 +168,62 @@ def gram_matrices(
         Zg = trace_matrix(ops, space)
         GK = stiffness_gram(ops, space, space.equations, Zg, comm=comm)
         stiffness = not resolves(ops, GK, Zg, n_ms)
-    corr_at = {int(k): p for k, p in zip(space.correction_cells, space.correction)}
+    blocks = space.blocks
+    columns = [p.columns for p in blocks] + [np.array([nz - 1])]  # (the last: N_f's)
+    # the patch blocks holding each coarse cell (those whose functions may be nonzero on it)
+    _, patches = cell_groups(grid, CEMOptions(layers=space.layers, patch_group=space.patch_group), ops.bs)
+    held = sp.csr_matrix(
+        (
+            np.ones(sum(p.size for p in patches)),
+            (np.concatenate(patches), np.repeat(np.arange(len(patches)), [p.size for p in patches])),
+        ),
+        shape=(grid.size, len(patches)),
+    )
+    held.sort_indices()
+    units = grid.groups(_gram_block(space.patch_group, ops.bs, ops.size / grid.size), ops.bs)
+    sizes = np.array([sum(grid.cells[int(K)].size for K in b) for b in units], dtype=np.float64)
+    acc_K, acc_M = {}, {}  # (block, block) → the sum of its products over the units
+    # wide patch problems (shared patches): products per pair of them; one cell each: straight into the matrices
+    pairs = np.mean([p.columns.size for p in blocks]) >= PAIRS_FROM_WIDTH
     if stiffness:
         GK = np.zeros((nz, nz))
     GM = np.zeros((nz, nz))
-    covers = covering(grid, space.layers, space.patch_group, ops.bs)
-    blocks = grid.groups(_gram_block(space.patch_group, ops.bs, ops.size / grid.size), ops.bs)
-    sizes = np.array([sum(grid.cells[int(K)].size for K in b) for b in blocks], dtype=np.float64)
 
-    def add_block(q: int) -> None:
-        cells = [int(K) for K in blocks[q]]
+    def add_unit(q: int) -> None:
+        cells = [int(K) for K in units[q]]
         cell_dofs = [inc.dofs(K, free_only=False) for K in cells]
         D = cell_dofs[0] if len(cells) == 1 else np.unique(np.concatenate(cell_dofs))
-        cover = covers[cells[0]] if len(cells) == 1 else np.unique(np.concatenate([covers[K] for K in cells]))
-        bases = [space.basis[i] for i in cover]
-        corrections = [corr_at[int(i)] for i in cover if int(i) in corr_at]
-        # columns: the covering bases, the γ vertices of their Robin corrections (a γ vertex shared by two coarse
-        # cells has a column in both corrections: summed into one), N_f
-        cols = [p.columns for p in bases]
-        at = np.cumsum([0] + [c.size for c in cols])
-        targets = [slice(a, z) for a, z in zip(at[:-1], at[1:])]
-        if corrections:
-            uniq = np.unique(np.concatenate([p.columns for p in corrections]))
-            targets += [at[-1] + np.searchsorted(uniq, p.columns) for p in corrections]
-            cols.append(n_ms + uniq)
+        cover = np.unique(np.concatenate([held.indices[held.indptr[K] : held.indptr[K + 1]] for K in cells]))
+        parts = [blocks[b] for b in cover]
+        ids = [int(b) for b in cover]
+        widths = [p.columns.size for p in parts]
         if space.Nf is not None:
-            cols.append(np.array([nz - 1]))
-        cols = np.concatenate(cols)
-        Z = np.zeros((D.size, cols.size))
-        _fill_rows(Z, bases + corrections, targets, D)
+            ids.append(len(blocks))
+            widths.append(1)
+        at = np.concatenate([[0], np.cumsum(widths)]).astype(np.int64)
+        Z = np.zeros((D.size, int(at[-1])))
+        _gather(Z, parts, at, D)
         if space.Nf is not None:
             Z[:, -1] = space.Nf[D]
+        if not pairs:
+            Z, cols = _distinct_columns(Z, np.concatenate([columns[i] for i in ids]))
         if stiffness:
             W = _block_matrix(ops, grid, cells, cell_dofs, D) @ Z  # [K_S Z; M_S Z]
-            gk, gm = _symmetric_products(Z, W[: D.size]), _symmetric_products(Z, W[D.size :])
+            targets = ((acc_K, GK, W[: D.size]), (acc_M, GM, W[D.size :]))
         else:
-            gm = _symmetric_products(Z, _mass_matrix(ops, grid, cells, cell_dofs, D) @ Z)
-        # cols runs through few contiguous ranges (the modes of consecutive cells): added range by range
-        cut = np.concatenate([[0], np.flatnonzero(np.diff(cols) != 1) + 1, [cols.size]])
-        for a0, a1 in zip(cut[:-1], cut[1:]):
-            ra = slice(cols[a0], cols[a0] + a1 - a0)
-            for b0, b1 in zip(cut[:-1], cut[1:]):
-                rb = slice(cols[b0], cols[b0] + b1 - b0)
-                if stiffness:
-                    GK[ra, rb] += gk[a0:a1, b0:b1]
-                GM[ra, rb] += gm[a0:a1, b0:b1]
+            targets = ((acc_M, GM, _mass_matrix(ops, grid, cells, cell_dofs, D) @ Z),)
+        for acc, G, product in targets:
+            if pairs:
+                _add_pairs(acc, ids, at, Z, product)
+            else:
+                _add_direct(G, cols, Z, product)
 
     # a static share (not handed out on request): the same cells on the same rank in every run, so the sums
     # and the Allreduce below round the same way every time
-    run_shared(sizes, comm, "CEM Gram matrices", add_block, gather=False, logger=log)
+    run_shared(sizes, comm, "CEM Gram matrices", add_unit, gather=False, logger=log)
+    if stiffness:
+        _scatter_pairs(GK, acc_K, columns)
+    _scatter_pairs(GM, acc_M, columns)
     if comm.size > 1:
         for arr in (GK, GM) if stiffness else (GM,):
             comm.Allreduce(MPI.IN_PLACE, arr, op=MPI.SUM)
@@ -192,12 +235,11 @@ def trace_matrix(ops: FineOperators, space: MultiscaleSpace) -> np.ndarray:
     ng = space.n_gamma
     gamma = ops.gamma
     Zg = np.zeros((ng, space.size + ng + 1))
-    for parts, shift in ((space.basis, 0), (space.correction, space.size)):
-        for p in parts:
-            pos = np.minimum(np.searchsorted(p.dofs, gamma), p.dofs.size - 1)
-            hit = np.flatnonzero(p.dofs[pos] == gamma)
-            if hit.size:
-                Zg[np.ix_(hit, shift + p.columns)] += p.values[pos[hit]]
+    for p in space.blocks:  # (the columns of a block are distinct)
+        pos = np.minimum(np.searchsorted(p.dofs, gamma), p.dofs.size - 1)
+        hit = np.flatnonzero(p.dofs[pos] == gamma)
+        if hit.size:
+            Zg[np.ix_(hit, p.columns)] += p.values[pos[hit]]
     if space.Nf is not None:
         Zg[:, -1] = space.Nf[gamma]
     return Zg
@@ -223,23 +265,25 @@ class MultiscaleRobinSolver:
         space.equations = None  # (used by the Gram matrices only)
         self.time_gram = time.perf_counter() - t0  #: forming the Gram matrices (0 when the space holds them)
         self.Zg = trace_matrix(ops, space)
-        # ZᵀAZ = ZᵀKZ + Z_γᵀ R_γγ Z_γ (R is α times the γ vertex mass: diagonal on γ)
+        # ΨᵀAZ = ΨᵀKZ + Ψ_γᵀ R_γγ Z_γ (R is α times the γ vertex mass: diagonal on γ; the rows of ZᵀAZ the coarse
+        # problem reads)
         Rg = ops.R[ops.gamma][:, ops.gamma]
-        ZAZ = self.GK + self.Zg.T @ (Rg @ self.Zg)
-        self.A_ms = ZAZ[:n_ms, :n_ms]
+        ZAZ = self.GK[:n_ms] + self.Zg[:, :n_ms].T @ (Rg @ self.Zg)
+        self.A_ms = ZAZ[:, :n_ms]
         self.factor = PivotedCholesky(self.A_ms, what="the coarse matrix")
-        # Ψᵀℓ and Ψᵀ G[:, γ], patch by patch
-        PsiF = np.zeros(n_ms)
+        # Zᵀℓ and Zᵀ G[:, γ] (of which the rows of Ψ), patch problem by patch problem
+        ZF = np.zeros(n_ms + ng + 1)
         Gg = ops.G[:, ops.gamma].tocsr()
-        PsiG = np.zeros((n_ms, ng))
-        for p in space.basis:
-            PsiF[p.columns] += p.values.T @ ops.F[p.dofs]
+        ZG = np.zeros((n_ms + ng + 1, ng))
+        for p in space.blocks:  # (the columns of a block are distinct)
+            ZF[p.columns] += p.values.T @ ops.F[p.dofs]
             Gp = Gg[p.dofs]
             if Gp.nnz:
-                PsiG[p.columns] += (Gp.T @ p.values).T
-        self.b_f = PsiF - ZAZ[:n_ms, -1]
+                ZG[p.columns] += (Gp.T @ p.values).T
+        PsiF, PsiG = ZF[:n_ms], ZG[:n_ms]
+        self.b_f = PsiF - ZAZ[:, -1]
         # Ψᵀ (G[:, γ] − A N): the action of the interface data on the coarse right-hand side
-        self.C = PsiG - ZAZ[:n_ms, n_ms : n_ms + ng]
+        self.C = PsiG - ZAZ[:, n_ms : n_ms + ng]
         self._response = None
         self._reduced = None
         self.time_s = time.perf_counter() - t0

@@ -89,12 +89,8 @@ def _add_columns(G: np.ndarray, columns: np.ndarray, block: np.ndarray) -> None:
 
 
 def _by_dofs(space) -> list:
-    """The functions of Ψ and N grouped by their (shared) DOF array: [(dofs, [(values, Z columns)])]."""
-    groups = {}
-    for parts, shift in ((space.basis, 0), (space.correction, space.size)):
-        for p in parts:
-            groups.setdefault(id(p.dofs), (p.dofs, []))[1].append((p.values, shift + p.columns))
-    return list(groups.values())
+    """The functions of Ψ and N by patch problem: [(dofs, [(values, Z columns)])] (``MultiscaleSpace.blocks``)."""
+    return [(p.dofs, [(p.values, p.columns)]) for p in space.blocks]
 
 
 def _rows_of(parts: list, rows: np.ndarray) -> np.ndarray:
@@ -117,14 +113,6 @@ def stiffness_gram(ops, space, equations: list, Zg: np.ndarray, *, comm: MPI.Com
     nz = n_ms + ng + 1
     Nf = space.Nf if space.Nf is not None else np.zeros(ops.size)
     by_dofs = _by_dofs(space)
-    # which DOF groups hold a DOF (to visit only the groups that meet a patch's ring)
-    member = sp.csr_matrix(
-        (
-            np.ones(sum(d.size for d, _ in by_dofs)),
-            (np.concatenate([d for d, _ in by_dofs]), np.repeat(np.arange(len(by_dofs)), [d.size for d, _ in by_dofs])),
-        ),
-        shape=(ops.size, len(by_dofs)),
-    )
     # Bᵀ Z (aux × Z columns): μ + e of every solution, in its columns
     BtZ = np.zeros((space.aux.size, nz))
     for eq in equations:
@@ -132,7 +120,8 @@ def stiffness_gram(ops, space, equations: list, Zg: np.ndarray, *, comm: MPI.Com
         _add_columns(block, eq.columns, eq.Btx)
         BtZ[eq.J] += block
     # the right-hand sides' fine parts in their columns: the source correctors' loads (one vector: the column of N_f),
-    # the Robin data and A u_g (in N_f's column; sparse, near γ and Γ_D)
+    # the Robin data and A u_g (in N_f's column; sparse, near γ and Γ_D); with them the ring terms A[ρ, I] x + B[ρ, J] μ
+    # (Zᵀ of both: one sparse product per patch problem's functions)
     load = np.zeros(ops.size)
     rows, cols, vals = [], [], []
     for eq in equations:
@@ -142,6 +131,9 @@ def stiffness_gram(ops, space, equations: list, Zg: np.ndarray, *, comm: MPI.Com
         rows.append(r.row[~source])
         cols.append(eq.columns[r.col[~source]])
         vals.append(r.data[~source])
+        rows.append(np.repeat(eq.ring, eq.columns.size))
+        cols.append(np.tile(eq.columns, eq.ring.size))
+        vals.append(eq.ring_values.ravel())
     if ops.lifting is not None:
         Au = ops.A @ ops.lifting
         at = np.flatnonzero(Au)
@@ -154,7 +146,7 @@ def stiffness_gram(ops, space, equations: list, Zg: np.ndarray, *, comm: MPI.Com
     G = np.zeros((nz, nz))
 
     def add_patch(q: int) -> None:
-        if q < len(by_dofs):  # Zᵀ rhs, the rows of this DOF group's functions
+        if q < len(by_dofs):  # Zᵀ (rhs + ring terms), the rows of this DOF group's functions
             dofs, parts = by_dofs[q]
             local = rhs[dofs]
             rows = np.flatnonzero(np.diff(local.indptr))
@@ -169,15 +161,7 @@ def stiffness_gram(ops, space, equations: list, Zg: np.ndarray, *, comm: MPI.Com
         if q >= len(equations):
             return
         eq = equations[q]
-        block = -(BtZ[eq.J].T @ eq.mu)  # (nz × k)
-        for g in np.unique(member[eq.ring].indices):  # Z[ρ]ᵀ (A[ρ, I] x + B[ρ, J] μ), one DOF group at a time
-            dofs, parts = by_dofs[g]
-            pos = np.minimum(np.searchsorted(dofs, eq.ring), dofs.size - 1)
-            hit = np.flatnonzero(dofs[pos] == eq.ring)
-            if hit.size:
-                _add_rows(block, parts, _rows_of(parts, pos[hit]).T @ eq.ring_values[hit])
-        block[nz - 1] += Nf[eq.ring] @ eq.ring_values
-        _add_columns(G, eq.columns, block)
+        _add_columns(G, eq.columns, -(BtZ[eq.J].T @ eq.mu))  # −(Bᵀz_d)_J · μ_c
 
     count = max(len(equations), len(by_dofs))
     run_shared(np.ones(count), comm, "CEM stiffness Gram", add_patch, gather=False)

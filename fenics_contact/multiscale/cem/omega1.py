@@ -144,6 +144,7 @@ class Omega1Multiscale:
             "eigen": self.space.times.get("eigen", 0.0),
             "patches": self.space.times.get("patches", 0.0),
             "cache_load": self.space.times.get("load", 0.0),
+            "cache_save": self.space.times.get("save", 0.0),
             "coarse": self.solver.time_s + self.space.times.get("gram", 0.0) + t_reduce,
         }
         #: parts of the above (not added again): the patch factorizations and solves (summed over the ranks), the

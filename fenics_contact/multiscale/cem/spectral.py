@@ -194,7 +194,9 @@ def local_matrices(ops: FineOperators, grid: CoarseGrid, k: int) -> tuple[np.nda
     c = int(grid.colors[k])
     D = _cell_dofs(ops, grid, k)
     Gk = restrict(ops.Gc[c], D)
-    return D, (restrict(ops.Kc[c], D) + sp.diags(ops.alpha[D]) @ Gk).tocsr(), restrict(ops.Sc[c], D)
+    Kk = restrict(ops.Kc[c], D)
+    A = (Kk + sp.diags(ops.alpha[D]) @ Gk).tocsr() if Gk.nnz else Kk  # (the γ term on cells touching γ only)
+    return D, A, restrict(ops.Sc[c], D)
 
 
 def build_auxiliary_space(
@@ -224,11 +226,11 @@ def build_auxiliary_space(
             gap = float(lam[keep]) if keep < lam.size else gap
             lam, Phi = lam[:keep], Phi[:, :keep]
         gap = max(gap, 0.0)  # a cut through a cluster of zeros (rigid motions) can give −1e-16
-        return D, lam, Phi, gap
+        return D, lam, Phi, gap, S @ Phi
 
     parts = run_shared(sizes**1.5, comm, "CEM local eigenproblems", eigenproblem, balanced=True, logger=log)
     dofs = [p[0] for p in parts]
     values = [p[1] for p in parts]
     vectors = [p[2] for p in parts]
-    blocks = [restrict(ops.Sc[int(grid.colors[k])], D) @ Phi for k, (D, Phi) in enumerate(zip(dofs, vectors))]
+    blocks = [p[4] for p in parts]  # S_k Φ_k
     return AuxiliarySpace.from_parts(ops.size, dofs, values, vectors, blocks, np.array([p[3] for p in parts]))

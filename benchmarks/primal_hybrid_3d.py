@@ -134,7 +134,7 @@ def run(
             steps = f"{history.iterations}"
         if amg:
             cg = result.step.sub[0].solver.iterations
-            steps += f"; {len(cg)} Ω₁ solves, CG median {int(np.median(cg))}"
+            steps += f"; {len(cg)} Ω₁ solves, CG median {int(np.median(cg))}, {sum(cg)} in all"
         yield (
             {
                 "h": f"1/{n}",

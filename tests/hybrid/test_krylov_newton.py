@@ -50,8 +50,7 @@ def test_omega1_is_solved_for_the_products_and_a_few_pairs_and_the_answer_is_the
 def test_a_step_solved_again_recycles_its_products():
     """The same step solved again from cold (a load step reusing its offline data): the products kept from the first
     solve span most of the second's directions, which takes fewer new products (measured 15, then 2) and lands on the
-    same
-    monolithic solution."""
+    same monolithic solution."""
     problem = channels_3d(E_high=1e3).on(channels_3d_mesh(8))
     ref = fc.solve(problem, "primal-monolithic", solver="direct")
     amg = LinearSolverOptions(kind="amg", rtol=RTOL)

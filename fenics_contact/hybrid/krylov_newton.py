@@ -193,14 +193,18 @@ class KrylovInterface:
         r[part.data_at] = part.data_w * d[part.data_index]
         return r
 
-    def set_omega1_state(self, state: np.ndarray) -> None:
-        """Ω₁'s state (local) for the next application of T, which then solves no Ω₁ (``take_omega1_state``)."""
-        self._pending = np.array(state, dtype=float)
+    def set_omega1_state(self, state: np.ndarray, data: np.ndarray) -> None:
+        """Ω₁'s state (local) for the next application of T at Ω₁'s data ``data`` (this rank's g₁₂), which then
+        solves no Ω₁ (``take_omega1_state``)."""
+        self._pending = (np.array(state, dtype=float), np.array(data, dtype=float))
 
-    def take_omega1_state(self) -> np.ndarray | None:
-        """The state ``set_omega1_state`` set, once (None: Ω₁ is to be solved)."""
-        state, self._pending = self._pending, None
-        return state
+    def take_omega1_state(self, data: np.ndarray) -> np.ndarray | None:
+        """The state ``set_omega1_state`` set for the data ``data`` (this rank's g₁₂), once (None: none set for these
+        data, Ω₁ is to be solved)."""
+        pending, self._pending = self._pending, None
+        if pending is None or not np.array_equal(pending[1], data):
+            return None
+        return pending[0]
 
     @staticmethod
     def _response(part: PrimalPart, d: np.ndarray, solver=None) -> np.ndarray:
@@ -403,7 +407,7 @@ def krylov_newton_iterate(
             if effect > target:
                 fraction = float(np.clip(0.5 * target / effect, SMALLEST_FRACTION, 0.5))
                 state, how = state + kry.solve_omega1(off, rtol=fraction), "solved"
-        kry.set_omega1_state(state)
+        kry.set_omega1_state(state, g[:n])
         Tg, rec = evaluate(step, g, history, name=name, monitor=monitor)
         rec.info["omega1"] = how
         return Tg, rec, state

@@ -56,7 +56,8 @@ log = logging.getLogger(__name__)
 #: the largest relative GMRES tolerance of a Newton step (the first steps, far from the fixed point)
 ETA_MAX = 1e-2
 #: directions in one minimal-residual space (the recycled and the step's own; at the limit the iterate becomes the
-#: one direction of a new space: a restart); products per Newton step are capped at ``GMRES_PRODUCTS``
+#: one direction of a new space: a restart; each holds an Ω₁ state, so a step holds at most this many Ω₁ vectors);
+#: products per Newton step are capped at ``GMRES_PRODUCTS``
 GMRES_RESTART = 200
 GMRES_PRODUCTS = 2000
 #: the directions kept for the next Newton steps and load steps (the newest; each holds an Ω₁ state: memory

@@ -407,7 +407,9 @@ def krylov_newton_iterate(
             effect = certificate_change(kry.error_trace(off), state, g)
             if effect > target:
                 fraction = float(np.clip(0.5 * target / effect, SMALLEST_FRACTION, 0.5))
-                state, how = state + kry.solve_omega1(off, rtol=fraction), "solved"
+                # (a fraction at Ω₁'s own tolerance or below: the solve of the certified pair)
+                fraction, how = (tight, "certified") if fraction <= tight else (fraction, "solved")
+                state = state + kry.solve_omega1(off, rtol=fraction)
         kry.set_omega1_state(state, g[:n])
         Tg, rec = evaluate(step, g, history, name=name, monitor=monitor)
         rec.info["omega1"] = how

@@ -12,7 +12,8 @@ h and contrast it solves
 * ``anderson``: Anderson acceleration (depth 10) of the Robin iteration;
 * ``newton, AMG Ω₁`` and ``anderson, AMG Ω₁``: Ω₁ solved by CG + AMG (``solver="amg"``, rtol ``--amg-rtol``,
   one AMG set-up for the whole solve): the matrix-free Newton–GMRES interface Newton (``hybrid.krylov_newton``;
-  steps: Newton steps and in brackets the GMRES products, each one Ω₁ solve and one Ω₂ back-solve; its GMRES
+  steps: Newton steps and in brackets the GMRES products, each one Ω₁ solve and one Ω₂ back-solve (the applications of
+  T take Ω₁'s state as a combination of the products', corrected by a solve where it is off); its GMRES
   preconditioned by the band and AMG coarse model of Ω₁, ``hybrid.krylov_band``, the default) and Anderson
   (depth 10); ``newton, AMG Ω₁, unpreconditioned``: the Newton–GMRES without the preconditioner; ``--models L:C …``
   adds one Newton–GMRES row per preconditioner model (band of L layers, AMG coarse functions C levels down);
@@ -134,7 +135,7 @@ def run(
             steps = f"{history.iterations}"
         if amg:
             cg = result.step.sub[0].solver.iterations
-            steps += f"; {len(cg)} Ω₁ solves, CG median {int(np.median(cg))}"
+            steps += f"; {len(cg)} Ω₁ solves, CG median {int(np.median(cg))}, {sum(cg)} in all"
         yield (
             {
                 "h": f"1/{n}",
@@ -240,7 +241,8 @@ def main(argv=None) -> None:
         "corrections; in brackets the iterations of its local front problems) or Anderson's iterations; "
         "with an AMG Ω₁ (CG rtol " + f"{args.amg_rtol:g}" + ") the Newton–GMRES steps and its products (each one "
         "Ω₁ solve and one Ω₂ back-solve), the size of the preconditioner's Ω₁ model and its factorizations, the Ω₁ "
-        "solves in all and their median CG iterations; "
+        "solves in all (the products, and the solves correcting a combination of their states: the first and the "
+        "certified pair among them), their median CG iterations and their sum; "
         "e_u: relative L² distance to the monolithic solution; times on a machine shared with other jobs "
         "(CPU: the process's CPU time of the whole solve, offline and online, which the sharing does not inflate).",
         "",

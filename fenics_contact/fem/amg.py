@@ -241,15 +241,29 @@ class AMGSolver:
             )
         self.factorizations += 1
 
-    def solve(self, b: PETSc.Vec, x: PETSc.Vec, *, iterate: PETSc.Vec | None = None) -> None:
+    def solve(
+        self,
+        b: PETSc.Vec,
+        x: PETSc.Vec,
+        *,
+        iterate: PETSc.Vec | None = None,
+        rtol: float | None = None,
+        guess: bool = False,
+    ) -> None:
         """x = A⁻¹ b to ‖b − A x‖ ≤ rtol‖b‖, raising ConvergenceError when the Krylov solve fails.
 
         ``iterate``: the Newton iterate u when b = −F(u) (x the Newton step): the solve then stops at
         ‖b − A x‖ ≤ rtol·min(‖b‖, ‖A u + b‖), ‖A u + b‖ the norm of the right-hand side A u − F(u) of the new
-        iterate's equation A (u + x) = A u − F(u) (its free rows; ``newton_tolerance``).
+        iterate's equation A (u + x) = A u − F(u) (its free rows; ``newton_tolerance``).  ``rtol``: this solve's
+        tolerance instead of the options' (not with ``iterate``); ``guess``: start from x as it is (a warm start;
+        the stop stays relative to ‖b‖), else from zero.
         """
-        rtol = self.options.rtol if iterate is None else self.newton_tolerance(b, iterate)
+        if iterate is not None:
+            rtol = self.newton_tolerance(b, iterate)
+        elif rtol is None:
+            rtol = self.options.rtol
         self.ksp.setTolerances(rtol=rtol)
+        self.ksp.setInitialGuessNonzero(bool(guess))
         self.ksp.solve(b, x)
         if self._identity.size:  # exact on the Dirichlet rows, as a factorization
             x.array[self._identity] = b.getArray(readonly=True)[self._identity]

@@ -1,19 +1,19 @@
 """The right preconditioner of the matrix-free interface Newton's GMRES: Ω₁'s Robin response by a cheap Ω₁ model.
 
-A Newton–GMRES step (``hybrid.krylov_newton``) solves (I − P₁P₂) z = y on the interface values, P₁ = a⊙T₁ + b
+A Newton–GMRES step (``hybrid.krylov_newton``) solves (I − P₂P₁) z = y on the interface values, P₁ = a⊙T₁ + b
 Ω₁'s Robin map (each product one Ω₁ solve), P₂ = a⊙Y₂ + b Ω₂'s at its current active set (one back-solve).  The
 cheap model is Ω₁'s operator A₁ (its Robin term on γ included) on a subspace, Z: the unknowns of the band B of Ω₁
 within ``layers`` couplings of γ (graph distance in A₁: about ``layers`` cells; zero displacement beyond) and,
 beyond the band, the coarse functions of Ω₁'s AMG hierarchy (``fem.amg.amg_coarse_space``: the aggregates'
 rigid motions), which carry the smooth far-field response the band misses (the stiff channels' rigid motions, the
 soft body's bending).  Its Robin map is P̃₁ = a⊙N Z J_Z⁻¹ Zᵀ C + b, J_Z = Zᵀ A₁ Z (a Ritz approximation of
-A₁⁻¹).  M = I − P̃₁P₂ is applied exactly: M z = y is the sparse system
+A₁⁻¹).  M = I − P₂P̃₁ is applied exactly: M z = y is the sparse system
 
-    J_Z u_Z − Zᵀ C (a⊙N₂u₂) − b Zᵀ C z = 0,    J₂ u₂ − C₂ z = 0,    ((1 − b²)/a) z − N Z u_Z − b N₂u₂ = y/a
+    J_Z u_Z − Zᵀ C z = 0,    J₂ u₂ − C₂ (a⊙N Z u_Z) − b C₂ z = 0,    ((1 − b²)/a) z − b N Z u_Z − N₂u₂ = y/a
 
 (unknowns the model's and Ω₂'s states and z; z = 0 where no data act), factorized by MUMPS LU once per Ω₂
 Jacobian (its active set); M⁻¹ y is one back-solve.  With Z all of Ω₁, M is the interface operator itself.
-The GMRES then solves (I − P₁P₂) M⁻¹ w = y, each product still one exact Ω₁ solve: the fixed point stays the
+The GMRES then solves (I − P₂P₁) M⁻¹ w = y, each product still one exact Ω₁ solve: the fixed point stays the
 monolithic solution, only the products fall.  One process (the matrices are taken sequentially).
 """
 
@@ -57,7 +57,7 @@ def band_of(A: sp.csr_matrix, seeds: np.ndarray, layers: int) -> np.ndarray:
 
 
 class BandPreconditioner:
-    """M⁻¹ for the interface operator I − P₁P₂ of ``KrylovInterface``: P₁ by the band of ``layers`` couplings and
+    """M⁻¹ for the interface operator I − P₂P₁ of ``KrylovInterface``: P₁ by the band of ``layers`` couplings and
     the coarse functions ``coarse`` (an interpolation to Ω₁'s unknowns, or None)."""
 
     def __init__(
@@ -118,9 +118,9 @@ class BandPreconditioner:
         diag_z = np.where(free, (1.0 - b * b) * inv_a, 1.0)
         K = sp.bmat(
             [
-                [self.J_B, -self.C_B @ sp.diags(a) @ self.N_2, -b * self.C_B],
-                [None, J_2, -self.C_2],
-                [-R @ self.N_B, -b * (R @ self.N_2), sp.diags(diag_z)],
+                [self.J_B, None, -self.C_B],
+                [-self.C_2 @ sp.diags(a) @ self.N_B, J_2, -b * self.C_2],
+                [-b * (R @ self.N_B), -R @ self.N_2, sp.diags(diag_z)],
             ],
             format="csr",
         )

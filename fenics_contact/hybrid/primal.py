@@ -203,6 +203,10 @@ class PrimalHybridStep:
         (``PrimalPart.solve_for``: no assembly of its residual), otherwise its own solve."""
         omega1 = getattr(self._newton, "omega1", None)
         self._omega1_data = None
+        state = self._krylov.take_omega1_state(g12) if self._krylov is not None else None
+        if state is not None:  # the Newton–GMRES's (``hybrid.krylov_newton``: solved there, or a combination of solves)
+            self._krylov.omega1.set_state(state)
+            return None
         if condensed and isinstance(omega1, FineResponse) and omega1.part.sub is self.sub[0]:
             self._omega1_data = self.interface.gather(g12)
             omega1.part.solve_for(self._omega1_data)

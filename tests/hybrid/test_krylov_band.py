@@ -1,4 +1,4 @@
-"""The preconditioner of the matrix-free Newton–GMRES (an AMG Ω₁): M = I − P̃₁P₂ with Ω₁'s Robin map P̃₁ from a band
+"""The preconditioner of the matrix-free Newton–GMRES (an AMG Ω₁): M = I − P₂P̃₁ with Ω₁'s Robin map P̃₁ from a band
 next to γ and the AMG's coarse functions.  M is the interface operator itself when the band is all of Ω₁; with the
 default band the Newton–GMRES lands on the monolithic solution with fewer products than without."""
 
@@ -22,7 +22,7 @@ RTOL, TOL, AGREEMENT = 1e-12, 1e-10, 1e-8
 
 def test_the_model_of_all_of_omega1_makes_m_the_interface_operator():
     """A band of every Ω₁ unknown off Γ_D (a direct Ω₁, Ω₂ at an active set of a few Robin iterations): z = M⁻¹ y solves
-    the interface equation (I − P₁P₂) z = y of the Newton–GMRES to round-off."""
+    the interface equation (I − P₂P₁) z = y of the Newton–GMRES to round-off."""
     problem = channels_3d(E_high=1e3).on(channels_3d_mesh(6))
     step = fc.solve(problem, "primal", solver="direct", accel="anderson", max_iterations=3).step
     assert step.sub[1].solver.factorizations > 0
@@ -34,7 +34,7 @@ def test_the_model_of_all_of_omega1_makes_m_the_interface_operator():
     y = np.random.default_rng(1).standard_normal(f.size) * kry.a[f]
     z = np.zeros(kry.a.size)
     z[f] = band.solve(y)
-    residual = z[f] - kry.P1(kry.P2(z))[f] - y
+    residual = z[f] - kry.P2(kry.P1(z))[f] - y
     assert np.linalg.norm(residual) <= 1e-10 * np.linalg.norm(y)
     band.destroy()
 
@@ -43,22 +43,20 @@ def test_the_model_of_all_of_omega1_makes_m_the_interface_operator():
 def test_the_preconditioned_newton_gmres_is_the_monolithic_solution_with_fewer_products(contrast):
     """The 3D channel cube (h = 1/8), Ω₁ by CG + AMG: with the default preconditioner (a band of 2 layers, the AMG's
     first coarse level) and without, Algorithm 1 lands on the monolithic solution to AGREEMENT with its active
-    set; the preconditioned GMRES takes at most half the products (measured 29 against 110 at contrast 1e3, 28
-    against 324 at 1e6)."""
+    set; the preconditioned GMRES takes at most half the products (measured 15 against 98 at contrast 1e3, 87
+    against 833 at 1e6, where the transmission residual asked, 1e-10, is near what the AMG Ω₁ attains)."""
     problem = channels_3d(E_high=contrast).on(channels_3d_mesh(8))
     ref = fc.solve(problem, "primal-monolithic", solver="direct")
     amg = LinearSolverOptions(kind="amg", rtol=RTOL)
-    products, step = {}, None
+    products = {}
     default = InterfaceNewtonOptions().krylov_layers
-    for layers in (default, None):
-        result = fc.solve(problem, "primal", reference=ref.u, tol=TOL, solver=amg, step=step, krylov_layers=layers)
-        step = result.step
-        kry = step.krylov_interface()
+    for layers in (default, None):  # (each its own step: a step reused would recycle the first solve's products)
+        result = fc.solve(problem, "primal", reference=ref.u, tol=TOL, solver=amg, krylov_layers=layers)
+        kry = result.step.krylov_interface()
         assert (kry.preconditioner is None) == (layers is None)
         assert result.converged and result.e_u <= AGREEMENT, (layers, result.e_u)
         np.testing.assert_array_equal(result.profile.active, ref.profile.active)
-        products[layers] = kry.products - sum(products.values())
-        step.reset()
+        products[layers] = kry.products
     assert 2 * products[default] <= products[None], products
 
 

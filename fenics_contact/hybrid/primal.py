@@ -68,7 +68,7 @@ DEFAULT_ALPHA = "E*h^-1/2"
 DEFAULT_ALPHA_MS = "Emin*h^-1/2"
 #: Ω₁ unknowns from which ``solver="auto"`` takes AMG in Ω₁ (3D).  Higher than the monolithic solve's
 #: ``fem.amg.AUTO_AMG_DOFS``: with MUMPS, Algorithm 1 pays one factorization and the dense interface responses
-#: once and one application of T per load step, with AMG some hundred Ω₁ solves per load step
+#: once and one application of T per load step, with AMG 23–36 Ω₁ solves per load step at h = 1/16 and 1/24
 #: (benchmarks/primal_hybrid_3d.py; docs/performance.md), so AMG pays only where MUMPS' memory runs out (its
 #: fitted memory passes 10 GB near 330,000 DOFs, benchmarks/solvers_3d.py --fit)
 OMEGA1_AUTO_AMG_DOFS = 300_000

@@ -51,12 +51,12 @@ def _block(law):
     return ContactProblem(1.0, 0.3, obstacle=WALL, law=law).on(cm)
 
 
-@pytest.mark.parametrize("method", ["primal-monolithic", "primal"])
+@pytest.mark.parametrize("method", ["primal-monolithic", "primal", "primal-ms"])
 def test_sliding_block_coulomb(method):
     """Pressed, then dragged past sliding: every contact node slips and the tangential force is μ times the normal
     force (measured 1e-13 relative); the same normal force from the reaction (the residual without the contact
     terms) and from the penalty; the path dissipates (each step ≥ 0)."""
-    options = {"tol": 1e-10} if method == "primal" else {}
+    options = {"tol": 1e-10} if method != "primal-monolithic" else {}
     path = slide(_block(Friction("coulomb", mu=MU)), method, BLOCK_PATH, **options)
     last = path.steps[-1]
     assert last.stick_nodes == 0 and last.slip_nodes == np.count_nonzero(last.profile.active) > 10
@@ -69,11 +69,11 @@ def test_sliding_block_coulomb(method):
     assert first_drag.stick_nodes > 0 and abs(first_drag.tangential_force[1]) < MU * first_drag.normal_force
 
 
-@pytest.mark.parametrize("method", ["primal-monolithic", "primal"])
+@pytest.mark.parametrize("method", ["primal-monolithic", "primal", "primal-ms"])
 def test_sliding_block_tresca(method):
     """Tresca (s on all of Γ_C): the sliding block's tangential force is s times the length of Γ_C, Σ w_p (vertex
     quadrature; measured 1e-13 relative), whatever the normal force."""
-    options = {"tol": 1e-10} if method == "primal" else {}
+    options = {"tol": 1e-10} if method != "primal-monolithic" else {}
     path = slide(_block(Friction("tresca", threshold=THRESHOLD)), method, BLOCK_PATH, **options)
     last = path.steps[-1]
     profile = last.profile

@@ -53,7 +53,7 @@ def test_the_forms_state_the_friction_law(law):
     assert moved > 1e-3 * scale and abs(moved - nodal) < 1e-10 * nodal
 
 
-@pytest.mark.parametrize("method", ["mixed-monolithic", "mixed"])
+@pytest.mark.parametrize("method", ["mixed-monolithic", "mixed", "mixed-ms"])
 def test_sliding_block_coulomb(method):
     """Pressed, then dragged past sliding: every contact node slips but the two ends of Γ_C, and the tangential force
     of the slipping nodes is μ times their normal force plus the slip penalty's excess ε_t × slip (measured 5.4e-4
@@ -64,7 +64,7 @@ def test_sliding_block_coulomb(method):
         method,
         BLOCK_PATH,
         on_step=lambda step, solver: nodes.append(solver.contact.contact_nodes),
-        **(HYBRID if method == "mixed" else {}),
+        **(HYBRID if method != "mixed-monolithic" else {}),
     )
     last = path.steps[-1]
     fp = _corners_and_slip(last, last.friction.pressure > 0.0)
@@ -89,12 +89,15 @@ def test_sliding_block_coulomb(method):
     assert first_drag.stick_nodes > 2 and abs(first_drag.tangential_force[1]) < MU * first_drag.normal_force
 
 
-@pytest.mark.parametrize("method", ["mixed-monolithic", "mixed"])
+@pytest.mark.parametrize("method", ["mixed-monolithic", "mixed", "mixed-ms"])
 def test_sliding_block_tresca(method):
     """Tresca: the slipping nodes carry s (+ ε_t × slip: measured 6.2e-4 relative), the tangential force is s times
     the length of Γ_C but the two end nodes' weights h/12 each (measured 0.9902 = (1 − 1/96)(1 + 6.2e-4))."""
     path = slide(
-        _block(Friction("tresca", threshold=THRESHOLD)), method, BLOCK_PATH, **(HYBRID if method == "mixed" else {})
+        _block(Friction("tresca", threshold=THRESHOLD)),
+        method,
+        BLOCK_PATH,
+        **(HYBRID if method != "mixed-monolithic" else {}),
     )
     last = path.steps[-1]
     fp = _corners_and_slip(last, np.ones(last.friction.points.shape[0], bool))

@@ -214,9 +214,7 @@ class PrimalSubproblem:
         """M, the matrix of the mass form (u, v), assembled on first use (collective): on one process the relative
         change takes its products from M's block of one component (``norm_products``) and never needs it."""
         if self._mass_matrix is None:
-            self._mass_matrix = self.A.duplicate()
-            dolfinx.fem.petsc.assemble_matrix(self._mass_matrix, self._form("m"))
-            self._mass_matrix.assemble()
+            self._mass_matrix = self._on_pattern("m")
         return self._mass_matrix
 
     @property
@@ -224,10 +222,15 @@ class PrimalSubproblem:
         """K, the matrix of the elastic form a (no boundary conditions), assembled on first use (collective):
         Algorithm 1's linear Ω₁ along a load path takes its products from its equations and never needs it."""
         if self._stiffness is None:
-            self._stiffness = self.A.duplicate()
-            dolfinx.fem.petsc.assemble_matrix(self._stiffness, self._form("a"))
-            self._stiffness.assemble()
+            self._stiffness = self._on_pattern("a")
         return self._stiffness
+
+    def _on_pattern(self, name: str) -> PETSc.Mat:
+        """The matrix of the form ``name`` assembled on J's sparsity (collective)."""
+        mat = self.A.duplicate()
+        dolfinx.fem.petsc.assemble_matrix(mat, self._form(name))
+        mat.assemble()
+        return mat
 
     # -- contact geometry ------------------------------------------------------------------
     @property

@@ -47,6 +47,7 @@ __all__ = [
     "covering",
     "global_saddle_matrix",
     "split_block",
+    "split_blocks",
 ]
 
 log = logging.getLogger(__name__)
@@ -335,6 +336,23 @@ def split_block(
     return PatchFunctions(dofs, values, np.concatenate(columns + [aux.size + gamma_pos])), bases, correction
 
 
+def split_blocks(aux: AuxiliarySpace, ncells: int, parts) -> tuple[list, list, list, np.ndarray]:
+    """(the bases of each of the ``ncells`` coarse cells, the blocks, the Robin corrections, the first cell of the
+    group of each correction) of the patch problems ``parts``, each (its cells, its DOFs, its functions, the γ
+    positions of its correctors): ``split_block`` of each (a cell no part covers keeps None)."""
+    basis: list = [None] * ncells
+    blocks, correction, correction_cells = [], [], []
+    for cells, dofs, values, gamma_pos in parts:
+        block, bases, corr = split_block(aux, cells, dofs, values, gamma_pos)
+        for i, pf in zip(cells, bases):
+            basis[int(i)] = pf
+        if corr is not None:
+            correction.append(corr)
+            correction_cells.append(int(cells[0]))
+        blocks.append(block)
+    return basis, blocks, correction, np.array(correction_cells, dtype=np.int64)
+
+
 def build_multiscale_space(
     ops: FineOperators,
     grid: CoarseGrid,
@@ -379,18 +397,11 @@ def build_multiscale_space(
         )
     finally:
         saddle.destroy()
-    basis = [None] * grid.size
-    blocks, correction, correction_cells = [], [], []
-    for cells, q_inner, r in zip(groups, inner, results):
-        values, _, gamma_pos = r[0]
-        block, bases, corr = split_block(aux, cells, q_inner.astype(np.int32), values, gamma_pos)
-        for i, pf in zip(cells, bases):
-            basis[int(i)] = pf
-        if corr is not None:
-            correction.append(corr)
-            correction_cells.append(int(cells[0]))
-        blocks.append(block)
-    correction_cells = np.array(correction_cells, dtype=np.int64)
+    basis, blocks, correction, correction_cells = split_blocks(
+        aux,
+        grid.size,
+        ((cells, q_inner.astype(np.int32), r[0][0], r[0][2]) for cells, q_inner, r in zip(groups, inner, results)),
+    )
     Nf = None
     if options.source_correction:
         Nf = np.zeros(ops.size)

@@ -18,7 +18,7 @@ from mpi4py import MPI
 from fenics_contact import __version__
 from fenics_contact.errors import InputError
 from fenics_contact.multiscale.cache import OfflineCache, hash_array
-from fenics_contact.multiscale.cem.bases import MultiscaleSpace, build_multiscale_space, split_block
+from fenics_contact.multiscale.cem.bases import MultiscaleSpace, build_multiscale_space, split_blocks
 from fenics_contact.multiscale.cem.coarse import gram_matrices
 from fenics_contact.multiscale.cem.operators import FineOperators
 from fenics_contact.multiscale.cem.options import WHOLE_DOMAIN, CEMOptions
@@ -112,20 +112,15 @@ def _unpack(arrays: dict, ops: FineOperators, grid: CoarseGrid) -> MultiscaleSpa
     layers, n, ng, nblocks = (int(x) for x in arrays["meta"])
     if n != ops.size or ng != ops.gamma.size:
         raise ValueError("cached multiscale space does not match the Ω₁ operators")
-    basis = [None] * grid.size
-    groups, blocks, correction, correction_cells = [], [], [], []
-    for k in range(nblocks):
-        cells = arrays[f"block{k}_cells"]
-        block, bases, corr = split_block(
-            aux, cells, arrays[f"block{k}_dofs"], arrays[f"block{k}_values"], arrays[f"block{k}_gamma"]
-        )
-        for i, pf in zip(cells, bases):
-            basis[int(i)] = pf
-        if corr is not None:
-            correction.append(corr)
-            correction_cells.append(int(cells[0]))
-        groups.append(cells)
-        blocks.append(block)
+    groups = [arrays[f"block{k}_cells"] for k in range(nblocks)]
+    basis, blocks, correction, correction_cells = split_blocks(
+        aux,
+        grid.size,
+        (
+            (cells, arrays[f"block{k}_dofs"], arrays[f"block{k}_values"], arrays[f"block{k}_gamma"])
+            for k, cells in enumerate(groups)
+        ),
+    )
     if any(b is None for b in basis):
         raise ValueError("cached multiscale space does not hold a basis of every coarse cell")
     times = {"eigen": 0.0, "patches": 0.0, "total": 0.0}
@@ -142,7 +137,7 @@ def _unpack(arrays: dict, ops: FineOperators, grid: CoarseGrid) -> MultiscaleSpa
         layers,
         n,
         ng,
-        np.array(correction_cells, dtype=np.int64),
+        correction_cells,
         times,
         grams,
         patch_group=WHOLE_DOMAIN if group == 0 else group,

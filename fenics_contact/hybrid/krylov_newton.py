@@ -43,7 +43,7 @@ import numpy as np
 import scipy.linalg as sla
 
 from fenics_contact.fem.amg import AMGSolver, amg_coarse_space
-from fenics_contact.hybrid.certificate import relative
+from fenics_contact.hybrid.certificate import FLOOR_MARGIN, at_floor, relative
 from fenics_contact.hybrid.krylov_band import BandPreconditioner
 from fenics_contact.hybrid.options import IterationOptions
 from fenics_contact.hybrid.response import PrimalPart
@@ -428,11 +428,15 @@ def krylov_newton_iterate(
         kry.set_omega1_state(state, g[:n])
         Tg, rec = evaluate(step, g, history, name=name, monitor=monitor)
         rec.info["omega1"] = how
+        if how == "certified" and tight > 0.0:  # the floor: the certificate's rounding and Ω₁'s solve error
+            rest, _ = kry.omega1_residual(state, rhs)
+            rec.info["floor"] += certificate_change(kry.error_trace(rest), state, g)
         return Tg, rec, state
 
     def certified(rec) -> bool:
-        """The pair glues, Ω₁'s state the correction of its residual solved to Ω₁'s tolerance."""
-        return bool(rec.residual < options.tol and rec.info["omega1"] == "certified")
+        """The pair glues (below tol, or at its round-off floor), Ω₁'s state the correction of its residual solved
+        to Ω₁'s tolerance."""
+        return bool((rec.residual < options.tol or history.at_floor) and rec.info["omega1"] == "certified")
 
     g = step.initial_data() if initial is None else np.array(initial, dtype=float)
     Tg, rec, u1 = pair(g, omega1.state(), None)
@@ -470,6 +474,8 @@ def krylov_newton_iterate(
             if accepted or history.iterations >= options.max_iterations or t <= 0.5 ** (BACKTRACKS - 1):
                 break
             t *= 0.5
+        if rec.info["omega1"] == "certified" and rec.residual >= options.tol:
+            history.at_floor = at_floor(rec.residual, rec.info["floor"], rec0.residual)
         if not exact and rec.residual > 0.5 * rec0.residual and rec0.residual < FLOOR_WINDOW * options.tol:
             exact, kry.recycle = True, 0
         log.info(
@@ -498,4 +504,15 @@ def krylov_newton_iterate(
     )
     if comm.rank == 0 and not history.converged:
         log.warning("%s: the Newton–GMRES interface iteration did not reach the tolerance %g", name, options.tol)
+    if comm.rank == 0 and history.at_floor:
+        log.warning(
+            "%s: converged at the round-off floor %.1e of the transmission residual (residual %.1e above tol %.1e; "
+            "status 'floor'): the pair glues as far as Ω₁'s CG and the certificate's rounding resolve it; ask a tol of "
+            "%.0e or more, or solve Ω₁ directly (solver='direct')",
+            name,
+            rec.info["floor"],
+            rec.residual,
+            options.tol,
+            FLOOR_MARGIN * rec.info["floor"],
+        )
     return history

@@ -119,8 +119,8 @@ class TwoBodyHybridResult:
     interface_newton_steps: int = 0
     #: the round-off floor of the last pair's transmission residual (``hybrid.certificate``)
     floor: float = 0.0
-    #: ``"converged"`` (below tol), ``"floor"`` (converged at the round-off floor, above tol), ``"not converged"``
-    status: str = ""
+    #: the last pair's residual is above tol but at its round-off floor (``certificate.at_floor``; converged)
+    at_floor: bool = False
 
     @property
     def iterations(self) -> int:
@@ -131,6 +131,12 @@ class TwoBodyHybridResult:
     def transmission_residual(self) -> float:
         """The transmission residual of the last pair (the stopping rule)."""
         return self.residuals[-1]
+
+    @property
+    def status(self) -> str:
+        """``"converged"`` (below tol), ``"floor"`` (converged at the round-off floor ``floor``, above tol) or
+        ``"not converged"``."""
+        return "not converged" if not self.converged else ("floor" if self.at_floor else "converged")
 
     def force_balance(self) -> float:
         """|F_slave + F_master| / max |F| (round-off)."""
@@ -409,5 +415,5 @@ def solve_two_body_hybrid(
     next_state = PairState(u.x.array[:n].copy(), system.friction.anchor.copy() if frictional else None, g.copy())
     return TwoBodyHybridResult(
         u, converged, residuals, histories, strip, delta, elapsed, *profiles, forces, tangential, dissipation,
-        next_state, newton_steps, outcome.floor, outcome.status,
+        next_state, newton_steps, outcome.floor, outcome.status == "floor",
     )  # fmt: skip

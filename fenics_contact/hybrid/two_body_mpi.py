@@ -344,5 +344,5 @@ def solve_two_body_hybrid_distributed(problem: TwoBodyProblem, *, delta, options
             log.warning("two bodies, Algorithm 1 (MPI): NOT converged (transmission residual %.3e)", residuals[-1])
     return TwoBodyHybridResult(
         u, converged, residuals, red.histories, strip, delta, elapsed, *profiles, forces, tangential, dissipation,
-        next_state, newton_steps, outcome.floor, outcome.status,
+        next_state, newton_steps, outcome.floor, outcome.status == "floor",
     )  # fmt: skip

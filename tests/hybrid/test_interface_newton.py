@@ -243,7 +243,8 @@ def test_the_certificates_floor_is_its_terms_rounding_and_the_solves_errors_scal
         assert scaled.floor == pytest.approx(cert.floor, rel=1e-12)
     assert at_floor(5e-7, cert.floor, 6e-7) and at_floor(2e-6, 2e-7, 1e-6)
     assert not at_floor(5e-7, 2e-7, 2e-6)  # (halved: still converging)
-    assert not at_floor(5e-6, 2e-7, 5e-6)  # (above FLOOR_MARGIN × floor)
+    assert at_floor(FLOOR_MARGIN * 2e-7, 2e-7, FLOOR_MARGIN * 2e-7)
+    assert not at_floor(1.01 * FLOOR_MARGIN * 2e-7, 2e-7, FLOOR_MARGIN * 2e-7)  # (above FLOOR_MARGIN × floor)
     assert not at_floor(5e-7, 2e-7, None) and not at_floor(1.0, np.inf, 1.0)
 
 

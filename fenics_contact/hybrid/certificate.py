@@ -53,8 +53,9 @@ __all__ = [
 #: c of the floor: one rounding per term (on a stiff inclusion cut by γ at contrast 10⁶ the residual of pairs whose
 #: Ω₁ is solved to 10⁻¹² scatters over 1–5·10⁻¹⁰, this term 2·10⁻¹⁰ and Ω₁'s error 2·10⁻¹⁰ of it)
 ROUNDOFF = 1.0
-#: a residual at most this many times its floor is round-off when a step no longer halves it
-FLOOR_MARGIN = 10.0
+#: a residual at most this many times its floor is round-off when a step no longer reduces it (the residuals of pairs
+#: at their floor measured 0.3–1.0 times it; a slowly converging Anderson at 8 times it was 5 floors from the solution)
+FLOOR_MARGIN = 2.0
 #: a floor at or above this is no floor (a vanishing traction on both sides: no scale to measure round-off by)
 FLOOR_LIMIT = 1e-2
 
@@ -79,12 +80,13 @@ def relative(num: float, den: float) -> float:
     return 0.0 if num == 0.0 else np.inf
 
 
-def at_floor(residual: float, floor: float, previous: float | None) -> bool:
+def at_floor(residual: float, floor: float, previous: float | None, *, reduction: float = 0.5) -> bool:
     """The residual is round-off: at most ``FLOOR_MARGIN`` × its floor (a floor below ``FLOOR_LIMIT``), and the
-    step from the ``previous`` residual (None: no step yet) did not halve it."""
+    step from the ``previous`` residual (None: no step yet) did not bring it below ``reduction`` × that (a Newton
+    step: ½; steps of a fixed-point update, which may converge slowly: 1, no progress at all)."""
     if previous is None or not (0.0 < floor < FLOOR_LIMIT):
         return False
-    return bool(residual <= FLOOR_MARGIN * floor and residual > 0.5 * previous)
+    return bool(residual <= FLOOR_MARGIN * floor and residual >= reduction * previous)
 
 
 def primal_certificate(

@@ -8,7 +8,9 @@ goes on with Anderson acceleration, as does ``accel="anderson"``.  Shared by the
 the distributed one (``two_body_mpi``), which differ only in how T, R₁ and R₂ are computed.
 
 The iteration stops on the certificate (``hybrid.certificate``): below ``tol``, or at its round-off floor
-(``certificate.at_floor``: within ``FLOOR_MARGIN`` of the floor of the pair, and not halved by the last step), then
+(``certificate.at_floor``: within ``FLOOR_MARGIN`` of the floor of the pair, and above half the best residual before
+it; with a fixed-point update, which may converge slowly there, its last ``STALLED`` evaluations no lower than the
+best before them), then
 converged with the floor reported (a stiff body on a soft one: on the stiff side of γ the Robin data are 10⁶ times
 the traction they carry, and the balance of the tractions is resolved only to 10⁶ times the solves' relative error).
 """
@@ -29,6 +31,9 @@ log = logging.getLogger(__name__)
 
 #: interface Newton steps before the iteration goes on with Anderson acceleration (a cycle of active sets)
 NEWTON_STEPS = 30
+#: a fixed-point update (Anderson, the plain one) is at the floor when this many evaluations of T brought no residual
+#: below the best before them
+STALLED = 5
 
 
 class PairOutcome(NamedTuple):
@@ -60,22 +65,29 @@ def iterate_pair_interface(
     ``warn``: log the hand-over to Anderson and the end at the floor (one rank of a parallel run).
     """
     m = alpha.size
-    status, steps, previous = "not converged", 0, None
+    status, steps, seen = "not converged", 0, []
     cert = Certificate(np.inf, np.inf)
 
-    def done(cert: Certificate) -> str | None:
-        nonlocal previous
-        res, last, previous = cert.value, previous, cert.value
+    def done(cert: Certificate, back: int) -> str | None:
+        """Below tol, at the floor, or None: a Newton step (``back`` 1) at the floor did not halve the best residual
+        before it; a fixed-point update's last ``back`` evaluations, the last within the floor's margin, brought no
+        residual below the best before them."""
+        res = cert.value
+        seen.append(res)
         if res < options.tol:
             return "converged"
-        return "floor" if at_floor(res, cert.floor, last) else None
+        if back == 1:
+            return "floor" if at_floor(res, cert.floor, min(seen[:-1], default=None)) else None
+        if len(seen) <= back or res > FLOOR_MARGIN * cert.floor:
+            return None
+        return "floor" if at_floor(min(seen[-back:]), cert.floor, min(seen[:-back]), reduction=1.0) else None
 
     if options.accel == "newton":
         R1_ = R1()
         zero, one = np.zeros((m, m)), np.eye(m)
         for steps in range(1, min(NEWTON_STEPS, options.max_iterations) + 1):
             Tg, cert = T(g)
-            if (end := done(cert)) is not None:
+            if (end := done(cert, 1)) is not None:
                 status = end
                 break
             dT = np.block([[zero, 2 * alpha[:, None] * R2() - one], [2 * alpha[:, None] * R1_ - one, zero]])
@@ -86,7 +98,7 @@ def iterate_pair_interface(
         update = AndersonUpdate(MPI.COMM_SELF, options.depth) if options.accel != "none" else None
         for _ in range(options.max_iterations - steps):
             Tg, cert = T(g)
-            if (end := done(cert)) is not None:
+            if (end := done(cert, STALLED)) is not None:
                 status = end
                 break
             g = update(g, Tg) if update is not None else Tg

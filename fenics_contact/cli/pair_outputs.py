@@ -60,6 +60,8 @@ def step_row(result, method: str) -> dict:
         row |= {
             "iterations": result.iterations,
             "transmission_residual": result.transmission_residual,
+            "transmission_floor": result.floor,
+            "status": result.status,
             "newton_steps_total": int(sum(h.steps for h in result.newton)),
             # (the owned strip cells of each rank, summed)
             "strip_cells": int(result.u.function_space.mesh.comm.allreduce(int(result.strip.size))),

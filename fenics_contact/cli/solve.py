@@ -509,6 +509,8 @@ def _solve_and_write(
         # which applies T once, to certify its solution
         "final_rel_change": float(result.history.rel_changes[-1]) if options.accel != "newton" else None,
         "transmission_residual": result.history.transmission_residual,
+        "transmission_floor": result.history.floor,
+        "status": result.history.status,
         "interface_newton_steps": result.history.newton_steps if options.accel == "newton" else None,
         **outcome.summary,
         "active_set": profile.active_interval(),

@@ -94,6 +94,20 @@ class IterationHistory:
     #: the condensed contact Newton's history (``hybrid.contact_newton.ContactNewtonHistory``: active-set sizes,
     #: rows added / removed per step, step lengths); None for the fixed-point updates
     contact_newton: object = None
+    #: the last pair's residual is above tol but at its round-off floor (``certificate.at_floor``; converged)
+    at_floor: bool = False
+
+    @property
+    def floor(self) -> float:
+        """The round-off floor of the final pair's transmission residual (``hybrid.certificate``; 0 before the first
+        iteration)."""
+        return float(self.records[-1].info.get("floor", 0.0)) if self.records else 0.0
+
+    @property
+    def status(self) -> str:
+        """``"converged"`` (below tol), ``"floor"`` (converged at the round-off floor, ``floor``) or
+        ``"not converged"``."""
+        return "not converged" if not self.converged else ("floor" if self.at_floor else "converged")
 
     @property
     def iterations(self) -> int:
@@ -131,6 +145,16 @@ class IterationResult:
     def transmission_residual(self) -> float:
         return self.history.transmission_residual
 
+    @property
+    def floor(self) -> float:
+        """The round-off floor of the final pair's transmission residual."""
+        return self.history.floor
+
+    @property
+    def status(self) -> str:
+        """``"converged"``, ``"floor"`` (converged at the round-off floor) or ``"not converged"``."""
+        return self.history.status
+
 
 def evaluate(
     step: HybridStep,
@@ -152,7 +176,7 @@ def evaluate(
             f"{name}: the iteration produced non-finite values at iteration {history.iterations + 1}"
         )
     info = step.record()
-    info["jump"], info["balance"] = cert.jump, cert.balance
+    info["jump"], info["balance"], info["floor"] = cert.jump, cert.balance, cert.floor
     if monitor is not None:
         t0 = time.perf_counter()
         info.update(monitor())

@@ -53,7 +53,7 @@ from fenics_contact.fem.two_body import (
     two_body_penalty,
 )
 from fenics_contact.fem.two_body_friction import FrictionalTwoBodySystem, solve_frictional_pair
-from fenics_contact.hybrid.certificate import primal_certificate
+from fenics_contact.hybrid.certificate import Certificate, primal_certificate
 from fenics_contact.hybrid.pair_iteration import iterate_pair_interface
 from fenics_contact.hybrid.two_body_mpi import solve_two_body_hybrid_distributed
 from fenics_contact.problem.pair import TwoBodyProblem
@@ -117,6 +117,10 @@ class TwoBodyHybridResult:
     state: PairState | None = None
     #: the evaluations of T the interface Newton made (0 with another update)
     interface_newton_steps: int = 0
+    #: the round-off floor of the last pair's transmission residual (``hybrid.certificate``)
+    floor: float = 0.0
+    #: the last pair's residual is above tol but at its round-off floor (``certificate.at_floor``; converged)
+    at_floor: bool = False
 
     @property
     def iterations(self) -> int:
@@ -127,6 +131,12 @@ class TwoBodyHybridResult:
     def transmission_residual(self) -> float:
         """The transmission residual of the last pair (the stopping rule)."""
         return self.residuals[-1]
+
+    @property
+    def status(self) -> str:
+        """``"converged"`` (below tol), ``"floor"`` (converged at the round-off floor ``floor``, above tol) or
+        ``"not converged"``."""
+        return "not converged" if not self.converged else ("floor" if self.at_floor else "converged")
 
     def force_balance(self) -> float:
         """|F_slave + F_master| / max |F| (round-off)."""
@@ -242,6 +252,14 @@ class _Bulk:
         u[self.free] = self.factor.solve((self.rhs0 + data[self.free])[:, None])[:, 0]
         return u
 
+    def error(self, u: np.ndarray, data: np.ndarray) -> np.ndarray:
+        """An estimate of the error of ``solve``'s u (bulk DOFs): one step of iterative refinement,
+        A⁻¹(rhs − A u) (one back-solve)."""
+        out = np.zeros(self.dofs.size)
+        residual = self.rhs0 + data[self.free] - self.A_ff @ u[self.free]
+        out[self.free] = self.factor.solve(residual[:, None])[:, 0]
+        return out
+
     def destroy(self) -> None:
         self.factor.destroy()
 
@@ -310,7 +328,14 @@ def solve_two_body_hybrid(
     histories: list[NewtonHistory] = []
     residuals: list[float] = []
 
-    def solve_pair(g: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def errors(u1: np.ndarray, data1: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Estimates of the errors of u₁ and u₂ on γ (one refinement step each: the bulk's back-solve, and the
+        strips' with the Jacobian of their last Newton step for their residual there)."""
+        e1 = bulk.error(u1, data1)[g1_pos] if hasattr(bulk, "error") else np.zeros(m)
+        e2 = system.solve_block(-(system.F * system.free)[:, None])[g2_pos, 0]
+        return e1, e2
+
+    def solve_pair(g: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         data1 = np.zeros(split.dofs[0].size)
         data1[g1_pos] = w * g[:m]
         u1 = bulk.solve(data1)
@@ -318,7 +343,7 @@ def solve_two_body_hybrid(
         system.b[g2_pos] += w * g[m:]
         if frictional:
             histories.append(solve_frictional_pair(system, newton, MAX_REFINEMENTS))
-            return u1, system.u.copy()
+            return u1, system.u.copy(), data1
         trace = semismooth_newton_loop(
             system,
             system.penetration() >= 0.0,
@@ -331,24 +356,24 @@ def solve_two_body_hybrid(
             sizes="active contact nodes",
         )
         histories.append(NewtonHistory(trace.residuals, trace.active_sizes, trace.factorizations))
-        return u1, system.u.copy()
+        return u1, system.u.copy(), data1
 
     last: list[np.ndarray] = []
 
-    def T(g: np.ndarray) -> tuple[np.ndarray, float]:
-        u1, u2 = solve_pair(g)
+    def T(g: np.ndarray) -> tuple[np.ndarray, Certificate]:
+        u1, u2, data1 = solve_pair(g)
         last[:] = [u1, u2]
         u1g, u2g = u1[g1_pos], u2[g2_pos]
-        cert = primal_certificate(u1g, u2g, g[:m], g[m:], alpha, w, MPI.COMM_SELF)
+        cert = primal_certificate(u1g, u2g, g[:m], g[m:], alpha, w, MPI.COMM_SELF, errors(u1, data1))
         residuals.append(cert.value)
-        return np.concatenate([2 * alpha * u2g - g[m:], 2 * alpha * u1g - g[:m]]), cert.value
+        return np.concatenate([2 * alpha * u2g - g[m:], 2 * alpha * u1g - g[:m]]), cert
 
     g = np.zeros(2 * m)
     if state is not None and state.interface is not None and state.interface.size == 2 * m:
         g = state.interface.copy()
     try:
         # R₁ = ∂u₁|γ/∂g₁₂ (once); R₂ = ∂u₂|γ/∂g₂₁ from Ω₂'s factorized Jacobian at the current active set
-        g, converged, newton_steps = iterate_pair_interface(
+        outcome = iterate_pair_interface(
             T,
             g,
             alpha,
@@ -357,6 +382,7 @@ def solve_two_body_hybrid(
             options,
             name="two bodies, Algorithm 1",
         )
+        g, converged, newton_steps = outcome.g, outcome.converged, outcome.steps
         force = np.zeros(n)
         force[d2] = system.contact_force_vector()
         tangential = system.profile() if frictional else None
@@ -389,5 +415,5 @@ def solve_two_body_hybrid(
     next_state = PairState(u.x.array[:n].copy(), system.friction.anchor.copy() if frictional else None, g.copy())
     return TwoBodyHybridResult(
         u, converged, residuals, histories, strip, delta, elapsed, *profiles, forces, tangential, dissipation,
-        next_state, newton_steps,
+        next_state, newton_steps, outcome.floor, outcome.status == "floor",
     )  # fmt: skip

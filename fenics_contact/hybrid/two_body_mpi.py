@@ -38,7 +38,7 @@ from fenics_contact.fem.contact import NewtonHistory, NewtonOptions
 from fenics_contact.fem.linalg import DirectSolver
 from fenics_contact.fem.mortar import contact_quadrature, surface
 from fenics_contact.fem.two_body_mpi import gathered_surface, gathered_u, reduced_penalty_newton
-from fenics_contact.hybrid.certificate import primal_certificate
+from fenics_contact.hybrid.certificate import Certificate, primal_certificate
 from fenics_contact.hybrid.pair_iteration import iterate_pair_interface
 from fenics_contact.problem.materials import strain, stress
 from fenics_contact.problem.pair import TwoBodyProblem
@@ -289,17 +289,17 @@ def solve_two_body_hybrid_distributed(problem: TwoBodyProblem, *, delta, options
     m, w, alpha = iface.dofs.size, iface.weights, iface.alpha
     residuals: list[float] = []
 
-    def T(g: np.ndarray) -> tuple[np.ndarray, float]:
+    def T(g: np.ndarray) -> tuple[np.ndarray, Certificate]:
         u1g = red.r1 + red.R1 @ g[:m]
         u2g = red.a2 + red.P @ g[m:] - red.Cz @ red.contact(g[m:])
         cert = primal_certificate(u1g, u2g, g[:m], g[m:], alpha, w, MPI.COMM_SELF)
         residuals.append(cert.value)
-        return np.concatenate([2 * alpha * u2g - g[m:], 2 * alpha * u1g - g[:m]]), cert.value
+        return np.concatenate([2 * alpha * u2g - g[m:], 2 * alpha * u1g - g[:m]]), cert
 
     g = np.zeros(2 * m)
     if state is not None and state.interface is not None and state.interface.size == 2 * m:
         g = state.interface.copy()
-    g, converged, newton_steps = iterate_pair_interface(
+    outcome = iterate_pair_interface(
         T,
         g,
         alpha,
@@ -309,6 +309,7 @@ def solve_two_body_hybrid_distributed(problem: TwoBodyProblem, *, delta, options
         name="two bodies, Algorithm 1 (MPI)",
         warn=comm.rank == 0,
     )
+    g, converged, newton_steps = outcome.g, outcome.converged, outcome.steps
     lam = red.lam
     u1 = u10 + red.X1 @ g[:m]
     u2 = u20 + red.X2 @ g[m:] - red.Z @ lam
@@ -343,5 +344,5 @@ def solve_two_body_hybrid_distributed(problem: TwoBodyProblem, *, delta, options
             log.warning("two bodies, Algorithm 1 (MPI): NOT converged (transmission residual %.3e)", residuals[-1])
     return TwoBodyHybridResult(
         u, converged, residuals, red.histories, strip, delta, elapsed, *profiles, forces, tangential, dissipation,
-        next_state, newton_steps,
+        next_state, newton_steps, outcome.floor, outcome.status == "floor",
     )  # fmt: skip

@@ -20,7 +20,14 @@ from fenics_contact.errors import InputError
 from fenics_contact.fem.contact import NewtonOptions
 from fenics_contact.fem.mixed import solve_mixed_monolithic
 from fenics_contact.fem.primal import default_penalty, solve_primal_monolithic
-from fenics_contact.hybrid.certificate import mixed_certificate, primal_certificate, relative
+from fenics_contact.hybrid.certificate import (
+    FLOOR_MARGIN,
+    ROUNDOFF,
+    at_floor,
+    mixed_certificate,
+    primal_certificate,
+    relative,
+)
 from fenics_contact.hybrid.iteration import InterfaceNewtonOptions, IterationOptions, iterate
 from fenics_contact.hybrid.mixed import MixedHybridStep, solve_mixed_hybrid
 from fenics_contact.hybrid.primal import DEFAULT_ALPHA, PrimalHybridStep, solve_primal_hybrid
@@ -206,6 +213,40 @@ def test_certificate_measures_the_transmission_conditions():
     mixed = mixed_certificate(t, -t, g12, g12 - 2 * beta * t, beta, mass)  # u₁ = u₂ = g₁₂ − βt
     assert mixed.value < 1e-15
     assert relative(0.0, 0.0) == 0.0 and relative(1.0, 0.0) == np.inf and relative(1.0, 4.0) == 0.25
+
+
+def test_the_certificates_floor_is_its_terms_rounding_and_the_solves_errors_scale_free():
+    """The floor of the primal certificate: one rounding of each term it subtracts plus the subdomain solves' errors
+    (``certificate`` module docstring), the same in any units of u, g and α; ``at_floor`` counts a residual as
+    round-off only within ``FLOOR_MARGIN`` of it and when the step before did not halve it (a fixed-point update's
+    steps: did not reduce it)."""
+    rng = np.random.default_rng(2)
+    n = 12
+    w, alpha = rng.uniform(0.5, 1.0, n), rng.uniform(1.0, 5.0, n) * 1e6  # (stiff: αu ≫ t)
+    u, t = rng.standard_normal(n), rng.standard_normal(n)
+    e1, e2 = 1e-12 * rng.standard_normal(n), 1e-13 * rng.standard_normal(n)
+
+    def norm(v):
+        return float(np.sqrt(w @ v**2))
+
+    cert = primal_certificate(u, u, t + alpha * u, -t + alpha * u, alpha, w, MPI.COMM_SELF, (e1, e2))
+    eps = ROUNDOFF * np.finfo(float).eps
+    g12, g21 = t + alpha * u, -t + alpha * u
+    balance = eps * (norm(g12) + norm(g21) + 2 * norm(alpha * u)) + norm(alpha * e1) + norm(alpha * e2)
+    jump = 2 * eps * norm(u) + norm(e1) + norm(e2)
+    assert cert.floor == pytest.approx(max(balance / max(norm(g12 - alpha * u), norm(g21 - alpha * u)), jump / norm(u)))
+    assert cert.floor > 1e-7  # (αe₁ against t: 10⁶ × 10⁻¹²)
+    assert primal_certificate(u, u, g12, g21, alpha, w, MPI.COMM_SELF).floor < 1e-8  # (rounding only)
+    for U, S in ((0.05, 2.1e11), (1e3, 5e6)):  # u in a length unit, g and α·u in a stress unit
+        scaled = primal_certificate(
+            U * u, U * u, S * U * g12, S * U * g21, S * alpha, w, MPI.COMM_SELF, (U * e1, U * e2)
+        )
+        assert scaled.floor == pytest.approx(cert.floor, rel=1e-12)
+    assert at_floor(3e-7, 2e-7, 4e-7) and not at_floor(1e-7, 2e-7, 4e-7)  # (halved: still converging)
+    assert at_floor(FLOOR_MARGIN * 2e-7, 2e-7, FLOOR_MARGIN * 2e-7)
+    assert not at_floor(1.01 * FLOOR_MARGIN * 2e-7, 2e-7, FLOOR_MARGIN * 2e-7)  # (above FLOOR_MARGIN × floor)
+    assert at_floor(3e-7, 2e-7, 2.9e-7, reduction=1.0) and not at_floor(3e-7, 2e-7, 3.5e-7, reduction=1.0)
+    assert not at_floor(3e-7, 2e-7, None) and not at_floor(1.0, np.inf, 1.0)
 
 
 def test_warm_start_reuses_the_step_and_its_offline_data():

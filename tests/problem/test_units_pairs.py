@@ -17,6 +17,8 @@ import pytest
 from mpi4py import MPI
 
 import fenics_contact as fc
+from fenics_contact.hybrid.certificate import FLOOR_MARGIN
+from fenics_contact.hybrid.two_body import TwoBodyHybridOptions
 from fenics_contact.problem.pair import Body, ContactPair, Support, TwoBodyProblem
 from fenics_contact.problem.pair_meshes import PairTag as T
 from fenics_contact.problem.pair_meshes import two_blocks
@@ -183,3 +185,30 @@ def test_contrast_1e6_between_the_bodies_in_physical_units():
             assert all(np.array_equal(x, y) for x, y in zip(a["sets"], b["sets"], strict=True))
             assert np.linalg.norm(a["u"] - b["u"]) <= 1e-8 * np.linalg.norm(b["u"])
             assert np.linalg.norm(a["force"] - b["force"]) <= 1e-6 * np.linalg.norm(b["force"])
+
+
+def test_a_stiff_stratum_pressed_on_a_soft_one_at_nu_04999_ends_at_the_round_off_floor():
+    """Coulomb friction (μ = 0.3), ν = 0.4999 on both bodies, the upper block 10⁶ times stiffer than the lower one's
+    top stratum: the first press's transmission residual scatters over 3·10⁻⁷–1.3·10⁻⁶ once the pair glues (its
+    solves' errors, times the 6.5·10⁵ by which the stiff side's Robin data exceed the traction they carry), above the
+    default tolerance 10⁻⁸.  Algorithm 1 ends there converged with status "floor" in a few evaluations of T
+    (measured 4), the floor it reports above the tolerance and within ``FLOOR_MARGIN`` of the residual, and u the
+    monolithic solution to the floor (measured 9·10⁻¹¹); the next press glues below the tolerance ("converged"), in
+    every unit."""
+    law = fc.Friction("coulomb", mu=0.3)
+    for E0, L in [(1.0, 1.0), UNITS[0]]:
+        state = mono_state = None
+        for top, status in (((0.0, -0.005), "floor"), ((0.0, -0.01), "converged")):
+            problem = _pair(E0, L, top, nu=0.4999, law=law, upper=CONTRAST)
+            result = fc.solve(problem, "primal", state=state)
+            mono = fc.solve(problem, "primal-monolithic", state=mono_state)
+            assert result.converged and result.status == status, (top, result.status, result.residuals)
+            if status == "floor":
+                assert result.iterations <= 6
+                assert TwoBodyHybridOptions().tol < result.floor <= result.transmission_residual * FLOOR_MARGIN
+                assert result.transmission_residual <= FLOOR_MARGIN * result.floor
+            else:
+                assert result.transmission_residual < TwoBodyHybridOptions().tol
+            error = np.linalg.norm(result.u.x.array - mono.u.x.array) / np.linalg.norm(mono.u.x.array)
+            assert error <= result.floor, (top, error, result.floor)
+            state, mono_state = result.state, mono.state

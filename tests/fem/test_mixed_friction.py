@@ -40,8 +40,8 @@ def _corners_and_slip(step, carrying):
 def test_the_forms_state_the_friction_law(law):
     """The residual assembled from the UFL forms (``forms_mixed.friction_term``: the law written on σ_t, the sticking
     target a DG P3 function at the Gauss–Lobatto points) vanishes at the Newton solution to round-off (measured
-    4e-13–1.2e-12 of the size of its terms on two machines, with stick and slip nodes), and moving every anchor by 1e-3 changes it as it changes the
-    nodal residual the Newton solves (both ‖D F‖ 2.5e-4)."""
+    4e-13–1.2e-12 of the size of its terms on two machines, with stick and slip nodes), and moving every anchor by
+    1e-3 changes it as it changes the nodal residual the Newton solves (both ‖D F‖ 2.5e-4)."""
     problem = ContactProblem(1.0, 0.3, obstacle=WALL.translated((-0.01, 0.0)), law=law)
     sub = solve_mixed_monolithic(problem.on(unit_square(16, 4, clamped=("left",)))).problem  # (verify=True)
     fp = sub.friction.profile()

@@ -109,8 +109,9 @@ def strata_steps(comm: MPI.Comm, law, path, contrast: float = 1e3):
 def assert_serial_pair(parallel, serial, law) -> None:
     """A parallel pair result is the serial one: converged in at most 8 interface Newton steps, the forces and both
     contact profiles to 1e-10, the force balance to 1e-12 and, with friction, the same slip and stick nodes and the
-    dissipation to 1e-8."""
+    dissipation to 1e-8; its status is the serial one's, with its round-off floor estimated (> 0)."""
     assert parallel.converged and parallel.interface_newton_steps <= 8
+    assert parallel.status == serial.status and parallel.floor > 0.0, (parallel.status, serial.status, parallel.floor)
     for fp, fs in zip(parallel.forces, serial.forces, strict=True):
         assert np.linalg.norm(fp - fs) <= 1e-10 * np.linalg.norm(fs)
     assert parallel.force_balance() < 1e-12

@@ -15,6 +15,8 @@ run on each rank.  A load step's ``state`` holds the rank's owned displacement D
 and the copy's friction anchors and interface data (to be handed to the next step of the same method).
 """
 
+import dataclasses
+
 import basix.ufl
 import numpy as np
 import scipy.spatial
@@ -107,8 +109,4 @@ class PairReplica:
         state = None
         if result.state is not None:
             state = PairState(u.x.array[:owned].copy(), result.state.anchor, result.state.interface)
-        return TwoBodyHybridResult(
-            u, result.converged, result.residuals, result.newton, strip, result.delta, result.time_s,
-            result.slave, result.master, result.forces, result.friction, result.dissipation, state,
-            result.interface_newton_steps,
-        )  # fmt: skip
+        return dataclasses.replace(result, u=u, strip=strip, state=state)

@@ -156,6 +156,7 @@ class CondensedInterface:
         self.start = start if start is not None and start.size == self.D.size else None
         self.last = None
         self._load = None  # (t₁, y₂₀, g₂₁ at λ = 0, its contact values): ``load_terms``
+        self._factors: dict = {}  # the contact Newton's LU factors of its last set (a warm start's first set)
         if problem.options.front_window:
             self.chains  # noqa: B018 -- formed offline (collective: all ranks' points), not in the timed solve
 
@@ -310,7 +311,7 @@ class CondensedInterface:
             self.form_products()
         try:
             chains = self.chains if options.front_window else None
-            _, lam, hist = contact_solve(s_load, self.M, self.D, options, name, chains, start)
+            _, lam, hist = contact_solve(s_load, self.M, self.D, options, name, chains, start, self._factors)
         except ConvergenceError as err:
             lowest = self.lowest_eigenvalue()
             if lowest < 0.0:

@@ -7,7 +7,8 @@ On the 3D channel model pressed by a plane moved along −x (its normals fixed, 
 * the load term's dense solve (g₂₁ at λ = 0) is made once for the path (the load responses stay), and Gq, Yq are
   formed once the condensation serves a second step;
 * the forces are those of the path without these savings to 1e-10 and the monolithic ones to 1e-8, every step
-  certified.
+  certified;
+* the contact Newton keeps the LU factors of the set it ended on, and a solve starting on that set back-solves.
 """
 
 import numpy as np
@@ -15,6 +16,7 @@ import pytest
 
 import fenics_contact as fc
 from fenics_contact.hybrid.condensation import CondensedInterface
+from fenics_contact.hybrid.contact_newton import contact_newton
 from fenics_contact.hybrid.iteration import InterfaceNewtonOptions
 from fenics_contact.problem.models3d import channels_3d, channels_3d_mesh
 from fenics_contact.problem.obstacles import Plane
@@ -81,3 +83,26 @@ def test_a_cold_solve_on_a_kept_step_starts_from_the_load_term(warm):
     assert again.history.newton_steps == (1 if warm else first.history.newton_steps) and first.history.newton_steps > 1
     np.testing.assert_array_equal(again.profile.active, first.profile.active)
     assert again.profile.force == pytest.approx(first.profile.force, rel=1e-10)
+
+
+def test_the_contact_newton_keeps_the_factors_of_its_last_set():
+    """``contact_newton(factors=...)`` keeps the LU factors of the set it ended on; a solve that starts on that set
+    again (a warm-started load step) back-solves with them, and gives what a solve without kept factors gives."""
+    rng = np.random.default_rng(3)
+    n = 60
+    B = rng.standard_normal((n, n))
+    M = B @ B.T / n + np.eye(n)  # a compliance: symmetric positive definite
+    D = np.full(n, 1e3)
+    s_load = rng.standard_normal(n)
+    factors = {}
+    _, mu, hist = contact_newton(s_load, M, D, factors=factors)
+    last = np.flatnonzero(mu > 0.0)
+    assert hist.steps > 1 and list(factors) == [last.tobytes()]
+    lu = factors[last.tobytes()]
+    again = s_load * (1.0 + 1e-6)  # the same set
+    s, mu2, hist2 = contact_newton(again, M, D, active=mu > 0.0, factors=factors)
+    assert hist2.steps == 1 and factors[last.tobytes()] is lu  # one step, no new factorization
+    s_ref, mu_ref, _ = contact_newton(again, M, D, active=mu > 0.0)
+    np.testing.assert_array_equal(mu2 > 0.0, mu > 0.0)
+    np.testing.assert_allclose(mu2, mu_ref, rtol=1e-12, atol=1e-12 * np.abs(mu_ref).max())
+    np.testing.assert_allclose(s, s_ref, rtol=1e-12, atol=1e-12 * np.abs(s_ref).max())

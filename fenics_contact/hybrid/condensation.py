@@ -22,6 +22,11 @@ back-solved for the n_γ data and n_c contact columns (Yc, Sc, Yq, Sq) and the i
 K = I − P₁P₂ (P₁ = a⊙T₁ + b, P₂ = a⊙Yc + b) factorized; online: one J₀ back-solve and one Ω₁ load solve
 give s_L.  With Algorithm 1 the condensation is exact.
 
+A load path's steps reuse the condensation while Γ_C's normals stay (a moved plane, a changed gap): the load
+term's dense solve is kept while the load responses are, Gq and Yq are formed once the condensation serves a
+second step, and a warm-started step's contact Newton starts from the last step's active set, which a small load
+increment mostly keeps (one dense solve on it confirms it).
+
 The contact rows are Q = Σ_k diag(ν_k) E_kᵀ (ν the normals, E_k the unit vectors of displacement component
 k at the Γ_C nodes).  Where Ω₂ gives its responses per component (``PrimalPart.component_responses``), the
 condensation is formed per component once (G_k = K⁻¹P₁(a ⊙ N J₀⁻¹E_k), M_kl = E_kᵀJ₀⁻¹E_l + E_kᵀJ₀⁻¹C G_l)
@@ -150,6 +155,8 @@ class CondensedInterface:
         start = getattr(previous, "last", None)
         self.start = start if start is not None and start.size == self.D.size else None
         self.last = None
+        self._load = None  # (t₁, y₂₀, g₂₁ at λ = 0, its contact values): ``load_terms``
+        self._factors: dict = {}  # the contact Newton's LU factors of its last set (a warm start's first set)
         if problem.options.front_window:
             self.chains  # noqa: B018 -- formed offline (collective: all ranks' points), not in the timed solve
 
@@ -229,6 +236,13 @@ class CondensedInterface:
             )
         return self._Sq
 
+    def form_products(self) -> None:
+        """Gq and Yq formed from the per-component pieces (a later solve on the same normals, a load path whose
+        obstacle does not turn them): every solve after takes ``times`` as one product each instead of one per
+        component (forming costs about as much as two solves' products)."""
+        if self._nu is not None:
+            self.Gq, self.Yq  # noqa: B018 -- (kept by the properties)
+
     def times(self, name: str, lam: np.ndarray) -> np.ndarray:
         """``name`` ("Yq" or "Gq") times λ: by the per-component pieces, Σ_k X_k (ν_k ⊙ λ), when they are held and
         the product was not formed."""
@@ -238,13 +252,19 @@ class CondensedInterface:
         return sum(pieces[k] @ (self._nu[:, k] * lam) for k in range(self._nu.shape[1]))
 
     def load_terms(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Online: (s_L, g₂₁ at λ = 0, y₂₀) from one Ω₂ back-solve and the Ω₁ load response."""
+        """Online: (s_L, g₂₁ at λ = 0, y₂₀) from one Ω₂ back-solve and the Ω₁ load response.  g₂₁ at λ = 0 and its
+        contact values Sc g₂₁ are kept while both load responses are (a load path that moves the obstacle without
+        turning its normals changes only the gap in s₀₀): the dense solve and product are then not repeated."""
         p, f = self.problem, self.f
         t1 = p.omega1.load()
         y20, s00 = p.omega2.load_response()
-        g21 = np.zeros(p.a.size)
-        g21[f] = sla.lu_solve(self.lu, self.P1 @ (p.a[f] * y20[f]) + p.a[f] * t1[f])
-        return s00 + self.contact_of(g21), g21, y20
+        kept = self._load
+        if kept is None or not (np.array_equal(kept[0], t1) and np.array_equal(kept[1], y20)):
+            g21 = np.zeros(p.a.size)
+            g21[f] = sla.lu_solve(self.lu, self.P1 @ (p.a[f] * y20[f]) + p.a[f] * t1[f])
+            g21.flags.writeable = False
+            self._load = kept = (np.array(t1, copy=True), np.array(y20, copy=True), g21, self.contact_of(g21))
+        return s00 + kept[3], kept[2], y20
 
     def jacobian(self, active: np.ndarray) -> np.ndarray:
         """∂y₂/∂g₂₁ for the Ω₂ active set (Woodbury on J₀: no factorization)."""
@@ -278,14 +298,20 @@ class CondensedInterface:
         return float(np.linalg.eigvalsh(0.5 * (self.M + self.M.T))[0])
 
     def solve(
-        self, options: InterfaceNewtonOptions, name: str
+        self, options: InterfaceNewtonOptions, name: str, *, warm: bool = False
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, "ContactNewtonHistory"]:
-        """Contact Newton, then (g₁₂, g₂₁, λ) global."""
+        """Contact Newton, then (g₁₂, g₂₁, λ) global.  ``warm`` (a load step warm-started from the last one): the
+        contact Newton starts from the active set of this condensation's last solve, where there is one (a load
+        step moves the contact set by a few rows, so the last set is mostly the new one: fewer dense solves than
+        from {s_L > 0}); otherwise from ``start``."""
         p = self.problem
         s_load, g21_0, y20 = self.load_terms()
+        start = self.last if warm and self.last is not None else self.start
+        if self.last is not None:
+            self.form_products()
         try:
             chains = self.chains if options.front_window else None
-            _, lam, hist = contact_solve(s_load, self.M, self.D, options, name, chains, self.start)
+            _, lam, hist = contact_solve(s_load, self.M, self.D, options, name, chains, start, self._factors)
         except ConvergenceError as err:
             lowest = self.lowest_eigenvalue()
             if lowest < 0.0:

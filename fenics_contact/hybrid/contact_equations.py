@@ -7,19 +7,29 @@ M is symmetric).  The contact Newton (``hybrid.contact_newton``) and the local f
 """
 
 import numpy as np
+import scipy.linalg as sla
 
 __all__ = ["solve_on", "energy_line_search"]
 
 
-def solve_on(s_load: np.ndarray, M: np.ndarray, D: np.ndarray, A: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+def solve_on(
+    s_load: np.ndarray, M: np.ndarray, D: np.ndarray, A: np.ndarray, factors: dict | None = None
+) -> tuple[np.ndarray, np.ndarray, float]:
     """The contact equations s = s_L − M μ, μ = D s⁺ linearized on the set A (indices): (s, μ, the relative residual
     of the solve).  (D_A⁻¹ + M_AA) μ_A = s_L,A, μ = 0 off A, s = s_L − M_:A μ_A and on A s = μ_A / D_A (no
-    cancellation with a stiff penalty); the residual is 0 for an empty A and infinite when not finite."""
+    cancellation with a stiff penalty); the residual is 0 for an empty A and infinite when not finite.
+    ``factors``: LU factors of the systems by set (``A.tobytes()``), taken from it and added to it."""
     s, mu = s_load.copy(), np.zeros(s_load.size)
     if not A.size:
         return s, mu, 0.0
     K = M[np.ix_(A, A)] + np.diag(1.0 / D[A])
-    mu[A] = np.linalg.solve(K, s_load[A])
+    if factors is None:
+        mu[A] = np.linalg.solve(K, s_load[A])
+    else:
+        lu = factors.get(A.tobytes())
+        if lu is None:
+            lu = factors[A.tobytes()] = sla.lu_factor(K, check_finite=False)
+        mu[A] = sla.lu_solve(lu, s_load[A], check_finite=False)
     r = K @ mu[A] - s_load[A]
     s = s_load - M[:, A] @ mu[A]
     s[A] = mu[A] / D[A]

@@ -71,9 +71,18 @@ class _CondensedSystem:
     where it proposes one not yet solved."""
 
     def __init__(
-        self, s_load: np.ndarray, M: np.ndarray, D: np.ndarray, *, name: str, rtol: float, local: LocalFronts | None
+        self,
+        s_load: np.ndarray,
+        M: np.ndarray,
+        D: np.ndarray,
+        *,
+        name: str,
+        rtol: float,
+        local: LocalFronts | None,
+        factors: dict | None = None,
     ) -> None:
         self.s_load, self.M, self.D, self.name, self.rtol, self.local = s_load, M, D, name, rtol, local
+        self.factors = factors
         self.s, self.mu = s_load.copy(), np.zeros(s_load.size)
         self.hist = ContactNewtonHistory()
         self.active: np.ndarray | None = None
@@ -86,7 +95,12 @@ class _CondensedSystem:
 
     def solve(self, active: np.ndarray) -> Direction:
         self.active = active
-        self.s_new, self.mu_new, residual = solve_on(self.s_load, self.M, self.D, np.flatnonzero(active))
+        A = np.flatnonzero(active)
+        self.s_new, self.mu_new, residual = solve_on(self.s_load, self.M, self.D, A, self.factors)
+        if self.factors:  # only the set just solved on is kept (the last step's: a warm-started next solve's first)
+            kept = A.tobytes()
+            for key in [k for k in self.factors if k != kept]:
+                del self.factors[key]
         if residual > self.rtol:
             raise ConvergenceError(
                 f"{self.name}: the condensed contact system is singular or ill-conditioned "
@@ -134,6 +148,7 @@ def contact_newton(
     line_search: bool = False,
     chains=None,
     window: int = 0,
+    factors: dict | None = None,
 ) -> tuple[np.ndarray, np.ndarray, ContactNewtonHistory]:
     """Solve s = s_L − M μ, μ = D s⁺ by semismooth Newton (finite termination, globalized): (s, μ).
 
@@ -147,13 +162,15 @@ def contact_newton(
     ``chains`` (``contact_chains`` of the Γ_C unknowns' coordinates) and ``window`` > 0: the next set
     is that of the local front resolution (``LocalFronts``, ``window`` unknowns on either side of every
     front) until the line search starts; every set solved, proposed or not, is one step.  Without
-    them (``window`` = 0): the plain semismooth Newton.  The loop is ``fem.newton.semismooth_newton_loop``;
-    its ConvergenceError carries ``steps``.
+    them (``window`` = 0): the plain semismooth Newton.  ``factors``: the LU factors of the systems on the sets
+    solved, by set (``contact_equations.solve_on``; a dict kept by the caller: a load step that solves on the last
+    step's set again back-solves).  The loop is ``fem.newton.semismooth_newton_loop``; its ConvergenceError carries
+    ``steps``.
     """
     if window < 0:
         raise ValueError(f"contact_newton: window must be >= 0, got {window}")
     local = LocalFronts(chains, M, D, window) if chains and window > 0 else None
-    system = _CondensedSystem(s_load, M, D, name=name, rtol=rtol, local=local)
+    system = _CondensedSystem(s_load, M, D, name=name, rtol=rtol, local=local, factors=factors)
     start = s_load > 0.0 if active is None else np.asarray(active, dtype=bool).copy()
     trace = semismooth_newton_loop(
         system, start, name=name, max_steps=max_steps, line_search="always" if line_search else "on-cycle"
@@ -171,13 +188,14 @@ def contact_solve(
     name: str,
     chains,
     active: np.ndarray | None = None,
+    factors: dict | None = None,
 ) -> tuple[np.ndarray, np.ndarray, "ContactNewtonHistory"]:
     """``contact_newton`` with the options' local front resolution (``chains`` given, ``options.front_window``
     unknowns on either side of every front), and the plain contact Newton afresh should that not converge:
     with a non-symmetric M (a multiscale Ω₁) the energy line search that stops cycles is no merit function,
     and a set the local problems chose can lead into a cycle the plain Newton avoids.  The failed attempt's steps
     stay counted (``ContactNewtonHistory.discarded``).  ``active``: the first set (e.g. the last load step's),
-    else {s_L > 0}."""
+    else {s_L > 0}; ``factors``: ``contact_newton``'s."""
     try:
         return contact_newton(
             s_load,
@@ -188,6 +206,7 @@ def contact_solve(
             chains=chains,
             window=options.front_window,
             active=active,
+            factors=factors,
         )
     except ConvergenceError as first:
         if not chains:
@@ -198,6 +217,6 @@ def contact_solve(
             name,
             first,
         )
-        s, mu, hist = contact_newton(s_load, M, D, max_steps=options.max_steps, name=name)
+        s, mu, hist = contact_newton(s_load, M, D, max_steps=options.max_steps, name=name, factors=factors)
         hist.discarded = first.steps
         return s, mu, hist

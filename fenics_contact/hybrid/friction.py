@@ -93,8 +93,9 @@ class FrictionalCondensation(CondensedInterface):
         hist.residuals.append(float(np.linalg.norm(U - U_L + self.M @ forces)))
         return forces, hist
 
-    def solve(self, options, name: str):
-        """The frictional contact solve on the condensed unknowns, then (g₁₂, g₂₁, λ) global."""
+    def solve(self, options, name: str, *, warm: bool = False):
+        """The frictional contact solve on the condensed unknowns, then (g₁₂, g₂₁, λ) global (``warm`` is
+        ``CondensedInterface.solve``'s: this solve starts from the previous step's U in any case)."""
         p = self.problem
         U_L, g21_0, y20 = self.load_terms()
         lam, hist = self.contact_solve(U_L, name, options.max_steps)

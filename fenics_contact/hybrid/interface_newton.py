@@ -6,7 +6,8 @@ affine pieces, ``hybrid.response``).  Two strategies solve g = T(g) (``Interface
 * ``"condensed"`` (default): offline, the glued linear problem is condensed onto the Γ_C unknowns
   (``CondensedInterface``: s = s_L − M D s⁺).  Online: s_L, then the contact Newton on the contact forces
   (``hybrid.contact_newton``: dense, size n_c; with Algorithm 1 the condensation is exact and its active
-  sets are those of the monolithic semismooth Newton from its second step on), then the data g and one
+  sets are those of the monolithic semismooth Newton from its second step on; a warm-started solve, a load
+  step whose ``initial`` data are the last step's, starts it from the last active set), then the data g and one
   application of T with the real subdomain solvers: Ω₁ is solved, Ω₂'s state (one more J₀ back-solve) is
   checked against its own equations with the acceptance test of its Newton solver and solved only if
   that fails.  The transmission residual of that pair certifies the result.  Should it be above the
@@ -78,7 +79,9 @@ def newton_iterate(
     comm = step.comm
     om2 = problem.omega2
     if nopt.strategy == "condensed":
-        g12, g21, lam, ch = problem.condensed.solve(nopt, name)
+        # a warm start (a load step after another, ``initial`` its data): the contact Newton from the last active set
+        warm = initial is not None and data_norm(np.asarray(initial, dtype=float), comm) > 0.0
+        g12, g21, lam, ch = problem.condensed.solve(nopt, name, warm=warm)
         # broadcast: every rank continues from rank 0's (identical) dense result
         g12, g21, lam = comm.bcast((g12, g21, lam), root=0)
         om2.set_state(om2.solve(om2.rhs(g21, lam)))  # warm start of Ω₂: one J₀ back-solve

@@ -42,6 +42,7 @@ __all__ = [
     "DirectSolver",
     "PivotedCholesky",
     "ReusedAnalysis",
+    "SolveBuffer",
     "SparseFactor",
     "factorization_failure",
     "PC_FAILED_REASONS",
@@ -467,15 +468,19 @@ class SparseFactor(_Factorization):
             raise ConvergenceError(f"a solve of {self.what} produced non-finite values")
         return out if self.scaling is None else self.scaling[:, None] * out
 
-    def solve_sparse(self, rhs_t: sp.csr_matrix) -> np.ndarray:
+    def solve_sparse(self, rhs_t: sp.csr_matrix, *, out: np.ndarray | None = None) -> np.ndarray:
         """A⁻¹ B for sparse right-hand sides B given by their transpose ``rhs_t`` (one row per right-hand side,
         canonical CSR): MUMPS' sparse right-hand sides (ICNTL(20), which PETSc selects for the transpose of an AIJ
         matrix) skip the forward elimination where they vanish; a dense (n × k) column-major result;
-        ConvergenceError on a failure or non-finite values."""
+        ConvergenceError on a failure or non-finite values.  ``out``: a contiguous float64 buffer of at least n k
+        entries that MUMPS writes the solution into (``SolveBuffer``), the result a view of it (valid until the
+        buffer is used again; no ``scaling`` then)."""
         if self.scaling is not None:
+            if out is not None:
+                raise ValueError("solve_sparse: an output buffer with an equilibrated factorization")
             rhs_t = (rhs_t @ sp.diags(self.scaling)).tocsr()  # (D B, by its transpose's columns)
-        out = _sparse_solve(self.ksp.getPC().getFactorMatrix(), rhs_t, self.what)
-        return out if self.scaling is None else self.scaling[:, None] * out
+        result = _sparse_solve(self.ksp.getPC().getFactorMatrix(), rhs_t, self.what, out=out)
+        return result if self.scaling is None else self.scaling[:, None] * result
 
     def inertia(self) -> tuple[int, int, int]:
         """(negative, zero, positive) pivots of a Cholesky (LDLᵀ) factorization made with null-pivot detection
@@ -497,30 +502,57 @@ class SparseFactor(_Factorization):
         self._arrays = None
 
 
-def _sparse_solve(factor: PETSc.Mat, rhs_t: sp.csr_matrix, what: str) -> np.ndarray:
+class SolveBuffer:
+    """One output buffer for a sequence of ``SparseFactor.solve_sparse`` calls (``out``): MUMPS writes each solution
+    into pages already touched, where a fresh dense matrix per solve costs its zero fill and a page fault per 4 KiB
+    (the solutions of the CEM patch problems run to 10⁸ bytes).  It grows to the largest request."""
+
+    def __init__(self) -> None:
+        self.array = np.empty(0, dtype=PETSc.ScalarType)
+
+    def get(self, size: int) -> np.ndarray:
+        """The buffer, at least ``size`` entries (its contents undefined)."""
+        if self.array.size < size:
+            self.array = np.empty(0, dtype=PETSc.ScalarType)  # (the old one freed before the new one is made)
+            self.array = np.empty(size, dtype=PETSc.ScalarType)
+        return self.array
+
+    def release(self) -> None:
+        """Free the buffer (a later ``get`` makes a new one)."""
+        self.array = np.empty(0, dtype=PETSc.ScalarType)
+
+
+def _sparse_solve(factor: PETSc.Mat, rhs_t: sp.csr_matrix, what: str, *, out: np.ndarray | None = None) -> np.ndarray:
     """A⁻¹ B with the sequential MUMPS factor ``factor`` of A for sparse right-hand sides B given by their transpose
     ``rhs_t`` (one row per right-hand side, canonical CSR; PETSc hands MUMPS the transpose of an AIJ matrix as sparse
-    right-hand sides, ICNTL(20)): a dense (n × k) column-major result; ConvergenceError on a failure or non-finite
-    values (``what`` names A)."""
+    right-hand sides, ICNTL(20)): a dense (n × k) column-major result (in the buffer ``out`` when given: MUMPS
+    writes the solution into the dense matrix's array); ConvergenceError on a failure or non-finite values (``what``
+    names A)."""
     k, n = rhs_t.shape
     csr = _petsc_csr(rhs_t)
     Bt = PETSc.Mat().createAIJWithArrays((k, n), csr, comm=PETSc.COMM_SELF)
     Bt.assemble()
     B = PETSc.Mat().createTranspose(Bt)
-    X = PETSc.Mat().createDense((n, k), comm=PETSc.COMM_SELF)
-    X.setUp()
+    if out is None:
+        X = PETSc.Mat().createDense((n, k), comm=PETSc.COMM_SELF)
+        X.setUp()
+    else:
+        if out.dtype != PETSc.ScalarType or not out.flags.c_contiguous or out.size < n * k:
+            raise ValueError(f"solve_sparse: the output buffer needs {n * k} contiguous {PETSc.ScalarType} entries")
+        view = out.reshape(-1)[: n * k]
+        X = PETSc.Mat().createDense((n, k), array=view, comm=PETSc.COMM_SELF)
     try:
         try:
             factor.matSolve(B, X)
         except PETSc.Error as err:
             raise ConvergenceError(f"MUMPS failed on {what} ({err})") from None
-        out = X.getDenseArray().copy(order="F")
+        result = X.getDenseArray().copy(order="F") if out is None else view.reshape((n, k), order="F")
     finally:
         for obj in (B, Bt, X):
             obj.destroy()
-    if not np.all(np.isfinite(out)):
+    if not np.all(np.isfinite(result)):
         raise ConvergenceError(f"a solve of {what} produced non-finite values")
-    return out
+    return result
 
 
 def _equilibrated(A: sp.csr_matrix, d: np.ndarray) -> sp.csr_matrix:

@@ -136,6 +136,35 @@ def test_the_offline_cache_in_3d(cube, tmp_path):
     assert len(list(tmp_path.glob("cem_*.npz"))) == 1 and cem.PrimalOfflineCache(tmp_path).path(key).is_file()
 
 
+def test_large_3d_patches_are_ordered_by_metis_with_the_same_bases(cube, monkeypatch):
+    """3D patch problems from ``METIS_FROM_3D`` unknowns are ordered by METIS (MUMPS' INFOG(7) = 5: the ordering it
+    used), the others and every 2D one by AMF; the bases, correctors and Gram matrices are the same to round-off."""
+    from fenics_contact.fem.linalg import SparseFactor
+    from fenics_contact.multiscale.cem import bases
+
+    assert cem.patch_icntl(3, cem.METIS_FROM_3D) == {7: 5} and cem.patch_icntl(3, cem.METIS_FROM_3D - 1) == {7: 2}
+    assert cem.patch_icntl(2, 10**7) == cem.PATCH_ICNTL == {7: 2}
+    used = []
+
+    class Recorded(SparseFactor):
+        def destroy(self):
+            used.append(self.ksp.getPC().getFactorMatrix().getMumpsInfog(7))
+            super().destroy()
+
+    monkeypatch.setattr(bases, "SparseFactor", Recorded)
+    problem, _ = cube
+    built = {}
+    for threshold in (0, 10**9):  # every patch by METIS, every patch by AMF
+        monkeypatch.setattr(bases, "METIS_FROM_3D", threshold)
+        used.clear()
+        om = cem.build_omega1_multiscale(problem, cem=cem.CEMOptions(layers=1))[0]
+        assert used and set(used) == {5 if threshold == 0 else 2}
+        built[threshold] = (np.concatenate([b.values.ravel() for b in om.space.blocks]), om.space.Nf, om.solver.GM)
+    for metis, amf in zip(built[0], built[10**9]):
+        assert metis.shape == amf.shape
+        assert np.abs(metis - amf).max() <= 1e-10 * np.abs(amf).max()
+
+
 def test_mixed_ms_is_refused_in_3d_and_names_the_3d_methods(cube):
     problem, _ = cube
     with pytest.raises(InputError, match="plane problems.*'primal-ms'"):

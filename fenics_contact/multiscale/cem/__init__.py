@@ -86,6 +86,7 @@ forms), ``spectral`` (the local spectral problems, V_aux), ``bases`` (the patch 
 """
 
 from fenics_contact.multiscale.cem.bases import (
+    METIS_FROM_3D,
     PATCH_ICNTL,
     Incidence,
     MultiscaleSpace,
@@ -94,6 +95,7 @@ from fenics_contact.multiscale.cem.bases import (
     cell_groups,
     covering,
     global_saddle_matrix,
+    patch_icntl,
     split_block,
 )
 from fenics_contact.multiscale.cem.cache import CACHE_FORMAT, PrimalOfflineCache, offline_key, offline_stage
@@ -151,6 +153,7 @@ __all__ = [
     "local_matrices",
     "local_spectral_problem",
     "restrict",
+    "METIS_FROM_3D",
     "PATCH_ICNTL",
     "Incidence",
     "MultiscaleSpace",
@@ -159,6 +162,7 @@ __all__ = [
     "cell_groups",
     "covering",
     "global_saddle_matrix",
+    "patch_icntl",
     "split_block",
     "MultiscaleRobinSolver",
     "gram_matrices",

@@ -27,7 +27,8 @@ import scipy.sparse as sp
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from fenics_contact.fem.linalg import SparseFactor
+from fenics_contact.fem.heap import retained_heap
+from fenics_contact.fem.linalg import SolveBuffer, SparseFactor
 from fenics_contact.fem.matrices import scipy_to_petsc
 from fenics_contact.multiscale.cem.equations import patch_equations
 from fenics_contact.multiscale.cem.operators import FineOperators
@@ -38,6 +39,7 @@ from fenics_contact.multiscale.work import run_shared
 
 __all__ = [
     "EQUATIONS_GRAM_DIMS",
+    "METIS_FROM_3D",
     "PATCH_ICNTL",
     "Incidence",
     "MultiscaleSpace",
@@ -46,6 +48,7 @@ __all__ = [
     "cell_groups",
     "covering",
     "global_saddle_matrix",
+    "patch_icntl",
     "split_block",
     "split_blocks",
 ]
@@ -184,6 +187,21 @@ class MultiscaleSpace:
 #: function, dense over its coarse cell); SuperLU and LU take several times longer.
 PATCH_ICNTL = {7: 2}
 
+#: 3D patch problems of at least this many unknowns (interior DOFs and aux functions) are ordered by METIS' nested
+#: dissection (ICNTL(7) = 5, ``patch_icntl``), where AMF's fill grows with the fronts.  Measured on the channel cube
+#: (H = 1/8, m = 2, one patch per cell; CPU time of a factorization, METIS against AMF, on a shared machine): METIS
+#: makes 2.6–3.6× fewer flops, but its ordering costs more than that saves below ~5,500 unknowns (h = 1/16, 600–3,700
+#: unknowns: the 448 patch problems 11.7 s against 9.2 s); 0.26 s against 0.37 s at 10,000 (h = 1/24: the 448 patch
+#: problems 59 s against 70 s), 0.61 s against 1.21 s at 17,000 and 1.08 s against 2.79 s at 23,000 (h = 1/32).  In
+#: 2D nested dissection does not pay (h = 1/256, patch_group 4, 28k–73k DOFs: 5.0–5.3 s against 1.9 s).
+METIS_FROM_3D = 6000
+
+
+def patch_icntl(dim: int, size: int) -> dict[int, int]:
+    """The MUMPS controls of a patch LDLᵀ with ``size`` unknowns in dimension ``dim``: ``PATCH_ICNTL``, METIS'
+    ordering for large 3D patches (``METIS_FROM_3D``)."""
+    return {7: 5} if dim == 3 and size >= METIS_FROM_3D else PATCH_ICNTL
+
 
 #: the dimensions in which ZᵀKZ comes from the patch equations (``equations.stiffness_gram``), else from products
 #: with the fine stiffness: in 2D the ring terms are a small part of the products' work (model 3, h = 1/256, H =
@@ -211,11 +229,13 @@ def _patch_problem(
     *,
     source: bool,
     equations: bool,
+    buffer: SolveBuffer | None = None,
 ) -> tuple:
     """Bases and Robin corrections of the coarse cells ``group`` and their source correction, all on ``patch``
     (one LDLᵀ); returns ((the bases and Robin correctors side by side, |I| × k row-major; the first column of each
     cell's bases; the ``ops.gamma`` positions of the correctors, after the bases), the summed source correction
-    or None, (factorization time, solve time), the ``PatchEquations`` or None)."""
+    or None, (factorization time, solve time), the ``PatchEquations`` or None).  ``buffer`` takes the solutions of the
+    LDLᵀ (reused from one patch problem to the next)."""
     J = np.concatenate([aux.columns(k) for k in patch])
     nI, nJ = inner.size, J.size
     index = PETSc.IS().createGeneral(np.concatenate([inner, ops.size + J]).astype(PETSc.IntType), comm=PETSc.COMM_SELF)
@@ -279,13 +299,14 @@ def _patch_problem(
     M.setOption(PETSc.Mat.Option.SYMMETRIC, True)
     t0 = time.perf_counter()
     try:  # symmetric indefinite: MUMPS LDLᵀ
-        lu = SparseFactor(M, cholesky=True, icntl=PATCH_ICNTL, what="a CEM patch problem")
+        lu = SparseFactor(M, cholesky=True, icntl=patch_icntl(ops.bs, nI + nJ), what="a CEM patch problem")
     except BaseException:
         M.destroy()
         raise
     t1 = time.perf_counter()
     try:
-        solution = lu.solve_sparse(rhs_t)
+        out = None if buffer is None else buffer.get(rhs_t.shape[0] * rhs_t.shape[1])
+        solution = lu.solve_sparse(rhs_t, out=out)
     finally:
         lu.destroy()
     timing = (t1 - t0, time.perf_counter() - t1)
@@ -373,30 +394,36 @@ def build_multiscale_space(
     inner = [inc.interior_dofs(p) for p in patches]
     saddle = global_saddle_matrix(ops, aux)
     equations = ops.bs in EQUATIONS_GRAM_DIMS
-    try:
-        owner = np.empty(len(groups), dtype=np.int64)
-        results = run_shared(
-            np.array([d.size for d in inner], dtype=np.float64) ** 1.5,
-            comm,
-            "CEM patch problems",
-            lambda q: _patch_problem(
-                ops,
-                grid,
-                aux,
-                inc,
-                saddle,
-                groups[q],
-                patches[q],
-                inner[q],
-                source=options.source_correction,
-                equations=equations,
-            ),
-            balanced=True,
-            owner=owner,
-            logger=log,
-        )
-    finally:
-        saddle.destroy()
+    # MUMPS allocates each factorization's work array afresh: kept on the heap, its pages are faulted in once
+    # (``fem.heap.retained_heap``)
+    with retained_heap():
+        buffer = SolveBuffer()  # (one per rank: its patch problems come one after the other)
+        try:
+            owner = np.empty(len(groups), dtype=np.int64)
+            results = run_shared(
+                np.array([d.size for d in inner], dtype=np.float64) ** 1.5,
+                comm,
+                "CEM patch problems",
+                lambda q: _patch_problem(
+                    ops,
+                    grid,
+                    aux,
+                    inc,
+                    saddle,
+                    groups[q],
+                    patches[q],
+                    inner[q],
+                    source=options.source_correction,
+                    equations=equations,
+                    buffer=buffer,
+                ),
+                balanced=True,
+                owner=owner,
+                logger=log,
+            )
+        finally:
+            saddle.destroy()
+            buffer.release()  # (before the heap is trimmed)
     basis, blocks, correction, correction_cells = split_blocks(
         aux,
         grid.size,

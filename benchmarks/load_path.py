@@ -25,6 +25,14 @@ second time on the offline data the first run stored (``cache_dir``): the set-up
 ``--patch-group`` runs Algorithm 3 once per value of ``CEMOptions.patch_group`` (coarse cells per direction
 sharing one patch factorization; ``all``: one patch, all of Ω₁), a row each.
 
+``--parts`` splits each method's CPU time by the factorizations it works with (``fem.linalg.DirectSolver``, by
+options prefix: its factorizations, the first with MUMPS' analysis, its back-solves and its blocks of inverses
+from the factors; each wrapped by a CPU timer in the child process only) and the rest (assembly, the interface
+Newton, Python): what a method's curve costs in MUMPS work against the monolithic Newton's factorizations.
+
+    OMP_NUM_THREADS=1 .venv/bin/python benchmarks/load_path.py --h 256 --H 16 --steps 20 --model 2 \\
+        --methods primal-monolithic primal --parts
+
 ``--factor`` chooses how the primal monolithic Newton factorizes its (symmetric positive definite) Jacobians:
 MUMPS' Cholesky (the package's default), its LU (``-fc_spd_factor lu``, ``fem.linalg.spd_factor``), or ``both``:
 two monolithic rows, and every ratio is taken against the faster of the two (wall time for the wall ratio, CPU
@@ -82,7 +90,39 @@ FORWARD = (
     "tol",
     "accel",
     "check",
+    "parts",
 )
+#: the ``DirectSolver`` methods ``--parts`` times, and their names in the table (one call, several)
+PART_CALLS = {
+    "set_operator": ("factorization", "factorizations"),
+    "solve": ("back-solve", "back-solves"),
+    "solve_sparse": ("back-solve (sparse right-hand side)", "back-solves (sparse right-hand side)"),
+    "mat_solve": ("multi-right-hand-side solve", "multi-right-hand-side solves"),
+    "inverse_block": ("block of the inverse", "blocks of the inverse"),
+}
+
+
+def time_direct_solvers() -> dict:
+    """Wrap ``DirectSolver``'s factorizations and solves by CPU timers (this process only): {prefix: {call: [CPU
+    time of each call]}}, filled as they run."""
+    from fenics_contact.fem.linalg import DirectSolver
+
+    times: dict = {}
+
+    def timed(name, method):
+        def wrapper(self, *args, **kwargs):
+            start = time.process_time()
+            try:
+                return method(self, *args, **kwargs)
+            finally:
+                calls = times.setdefault(self.prefix, {})
+                calls.setdefault(name, []).append(time.process_time() - start)
+
+        return wrapper
+
+    for name in PART_CALLS:
+        setattr(DirectSolver, name, timed(name, getattr(DirectSolver, name)))
+    return times
 
 
 def one(args) -> dict:
@@ -113,6 +153,7 @@ def one(args) -> dict:
         from petsc4py import PETSc
 
         PETSc.Options()[SPD_FACTOR_OPTION] = args.factor
+    parts = time_direct_solvers() if args.parts else {}
     marks = []  # the process's CPU time at the end of every step
     wall, cpu = time.perf_counter(), time.process_time()
     curve = force_indentation(
@@ -147,6 +188,7 @@ def one(args) -> dict:
         "offline_subparts": dict(getattr(getattr(curve.step, "omega1", None), "time_parts", {})),
         # --check: the largest energy distance of the multiscale Ω₁ to the fine Ω₁ solve over the steps
         "omega1_check": max((s.omega1_check for s in curve.steps if s.omega1_check is not None), default=None),
+        "parts": parts,  # --parts: {solver prefix: {DirectSolver call: [CPU time of each call]}}
     }
 
 
@@ -222,6 +264,9 @@ def table(args, results: dict) -> str:
                 "",
                 f"{label}: Ω₁ against the fine Ω₁ solve (energy, largest over the steps): {r['omega1_check']:.2e}",
             ]
+    for label, r in results.items():
+        if r.get("parts"):
+            lines += ["", parts_line(label, r)]
     factors = [r["factor"] for r in results.values() if r.get("factor")]
     if len(factors) == 1:
         lines += ["", f"The primal monolithic Newton factorizes its Jacobians by MUMPS' {FACTOR_NAMES[factors[0]]}."]
@@ -245,6 +290,30 @@ def table(args, results: dict) -> str:
         "step.",
     ]
     return "\n".join(lines) + "\n"
+
+
+def parts_line(label: str, r: dict) -> str:
+    """``--parts``: a method's CPU time by factorization (prefix) and call, and the rest."""
+    texts, timed = [], 0.0
+    for prefix, calls in r["parts"].items():
+        items = []
+        for name, what in PART_CALLS.items():
+            cpu = calls.get(name, [])
+            if not cpu:
+                continue
+            timed += sum(cpu)
+            item = f"{len(cpu)} {what[len(cpu) > 1]} {sum(cpu):.3f}"
+            if name == "set_operator":
+                item += f" (the first, with the analysis, {cpu[0]:.3f}"
+                item += f"; the others' median {np.median(cpu[1:]):.3f})" if len(cpu) > 1 else ")"
+            elif len(cpu) > 1:
+                item += f" (median {np.median(cpu):.4f})"
+            items.append(item)
+        texts.append(f"`{prefix}`: " + ", ".join(items))
+    return (
+        f"CPU of {label} by factorization [s]: " + "; ".join(texts) + f"; the rest {r['cpu_s'] - timed:.2f} "
+        f"(of {r['cpu_s']:.2f})"
+    )
 
 
 def machine() -> str:
@@ -277,6 +346,9 @@ def main() -> None:
     parser.add_argument("--tol", type=float, default=1e-8, help="tolerance of the certificate (hybrid methods)")
     parser.add_argument("--accel", default="newton", help="the hybrid methods' update (IterationOptions.accel)")
     parser.add_argument("--check", action="store_true", help="Algorithm 3's fine Ω₁ check at every step")
+    parser.add_argument(
+        "--parts", action="store_true", help="split each method's CPU time by factorization (DirectSolver calls)"
+    )
     parser.add_argument("--cached", action="store_true", help="run the multiscale methods again on cached data")
     parser.add_argument(
         "--patch-group",

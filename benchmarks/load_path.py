@@ -33,6 +33,13 @@ Newton, Python): what a method's curve costs in MUMPS work against the monolithi
     OMP_NUM_THREADS=1 .venv/bin/python benchmarks/load_path.py --h 256 --H 16 --steps 20 --model 2 \\
         --methods primal-monolithic primal --parts
 
+``--max-memory GB`` stops a method's process once its resident memory passes GB (on a shared machine; Linux): its
+row says so, and the other rows of its family are then not compared with a monolithic curve if that was the one
+stopped.
+
+    OMP_NUM_THREADS=1 .venv/bin/python benchmarks/load_path.py --h 256 --H 16 --steps 20 \\
+        --methods mixed-monolithic mixed mixed-ms --max-memory 8
+
 ``--factor`` chooses how the primal monolithic Newton factorizes its (symmetric positive definite) Jacobians:
 MUMPS' Cholesky (the package's default), its LU (``-fc_spd_factor lu``, ``fem.linalg.spd_factor``), or ``both``:
 two monolithic rows, and every ratio is taken against the faster of the two (wall time for the wall ratio, CPU
@@ -205,11 +212,33 @@ def run_child(method: str, args, cache_dir: str | None, patch_group: str = "1", 
             cmd += [f"--{name}={value}"]
     if cache_dir:
         cmd += [f"--cache-dir={cache_dir}"]
-    proc = subprocess.run(cmd, capture_output=True, text=True, env=os.environ, cwd=ROOT)
-    line = next((row for row in proc.stdout.splitlines() if row.startswith("RESULT ")), None)
-    if line is None:
-        raise SystemExit(f"{method} failed:\n{proc.stderr[-3000:]}")
+    with tempfile.TemporaryFile("w+") as out, tempfile.TemporaryFile("w+") as err:
+        start = time.perf_counter()
+        proc = subprocess.Popen(cmd, stdout=out, stderr=err, text=True, env=os.environ, cwd=ROOT)
+        peak = 0.0
+        while proc.poll() is None:
+            peak = max(peak, resident_gb(proc.pid))
+            if args.max_memory is not None and peak > args.max_memory:
+                proc.kill()  # (this child only)
+                proc.wait()
+                return {"method": method, "stopped_gb": peak, "stopped_after_s": time.perf_counter() - start}
+            time.sleep(0.5)
+        out.seek(0)
+        err.seek(0)
+        line = next((row for row in out.read().splitlines() if row.startswith("RESULT ")), None)
+        if line is None:
+            raise SystemExit(f"{method} failed:\n{err.read()[-3000:]}")
     return json.loads(line[7:])
+
+
+def resident_gb(pid: int) -> float:
+    """The resident memory of process ``pid`` [GB] (Linux: /proc; 0 where it cannot be read)."""
+    try:
+        with open(f"/proc/{pid}/status") as status:
+            kb = next((int(row.split()[1]) for row in status if row.startswith("VmRSS:")), 0)
+    except OSError:
+        return 0.0
+    return kb * 1024 / 1e9
 
 
 def table(args, results: dict) -> str:
@@ -235,7 +264,13 @@ def table(args, results: dict) -> str:
     ]
     for label, r in results.items():
         method = r["method"]
-        monos = [m for m in results.values() if m["method"] == f"{FAMILY[method]}-monolithic"]
+        if "stopped_gb" in r:  # (--max-memory)
+            lines.append(
+                f"| {label} (stopped: its resident memory passed {r['stopped_gb']:.1f} GB after "
+                f"{r['stopped_after_s']:.0f} s) |" + " — |" * 12
+            )
+            continue
+        monos = [m for m in results.values() if m["method"] == f"{FAMILY[method]}-monolithic" and "stopped_gb" not in m]
         wall_base = min(monos, key=lambda m: m["total_s"]) if monos else None  # the faster monolithic curve
         cpu_base = min(monos, key=lambda m: m["cpu_s"]) if monos else None
         ratio = f"{r['total_s'] / wall_base['total_s']:.3f}" if monos else "—"
@@ -292,6 +327,13 @@ def table(args, results: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
+def outcome(r: dict) -> str:
+    """A child run in a few words (progress output)."""
+    if "stopped_gb" in r:
+        return f"stopped, resident memory above {r['stopped_gb']:.1f} GB after {r['stopped_after_s']:.0f} s"
+    return f"whole curve {r['total_s']:.2f} s"
+
+
 def parts_line(label: str, r: dict) -> str:
     """``--parts``: a method's CPU time by factorization (prefix) and call, and the rest."""
     texts, timed = [], 0.0
@@ -303,9 +345,8 @@ def parts_line(label: str, r: dict) -> str:
                 continue
             timed += sum(cpu)
             item = f"{len(cpu)} {what[len(cpu) > 1]} {sum(cpu):.3f}"
-            if name == "set_operator":
-                item += f" (the first, with the analysis, {cpu[0]:.3f}"
-                item += f"; the others' median {np.median(cpu[1:]):.3f})" if len(cpu) > 1 else ")"
+            if name == "set_operator" and len(cpu) > 1:
+                item += f" (the first, with the analysis, {cpu[0]:.3f}; the others' median {np.median(cpu[1:]):.3f})"
             elif len(cpu) > 1:
                 item += f" (median {np.median(cpu):.4f})"
             items.append(item)
@@ -367,6 +408,12 @@ def main() -> None:
         help="how the primal monolithic Newton factorizes its SPD Jacobians (both: a row each, the ratios against "
         "the faster)",
     )
+    parser.add_argument(
+        "--max-memory",
+        type=float,
+        default=None,
+        help="stop a method whose process's resident memory passes this many GB (a row saying so; Linux)",
+    )
     parser.add_argument("--out", type=Path, default=None, help="a markdown results file (default: print)")
     parser.add_argument("--append", action="store_true", help="add the table to --out instead of replacing it")
     parser.add_argument("--one", choices=list(FAMILY), help=argparse.SUPPRESS)
@@ -383,17 +430,17 @@ def main() -> None:
                 for factor in SPD_FACTORS if args.factor == "both" else [args.factor]:
                     name = method if args.factor != "both" else f"{method} ({FACTOR_NAMES[factor]})"
                     results[name] = run_child(method, args, None, factor=factor)
-                    print(f"{name}: whole curve {results[name]['total_s']:.2f} s", flush=True)
+                    print(f"{name}: {outcome(results[name])}", flush=True)
                 continue
             for group in args.patch_group if method == "primal-ms" else ["1"]:
                 name = method if group == "1" else f"{method}, patch group {group}"
                 # (the offline data are written only for the run on them: a cold curve writes no cache file)
                 results[name] = run_child(method, args, cache if multiscale and args.cached else None, group)
-                print(f"{name}: whole curve {results[name]['total_s']:.2f} s", flush=True)
+                print(f"{name}: {outcome(results[name])}", flush=True)
                 if multiscale and args.cached:
                     label = f"{name}, offline data from the cache"
                     results[label] = run_child(method, args, cache, group)
-                    print(f"{label}: whole curve {results[label]['total_s']:.2f} s", flush=True)
+                    print(f"{label}: {outcome(results[label])}", flush=True)
     text = table(args, results)
     if args.out:
         args.out.parent.mkdir(parents=True, exist_ok=True)

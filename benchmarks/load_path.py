@@ -219,9 +219,15 @@ def run_child(method: str, args, cache_dir: str | None, patch_group: str = "1", 
         while proc.poll() is None:
             peak = max(peak, resident_gb(proc.pid))
             if args.max_memory is not None and peak > args.max_memory:
+                cpu = cpu_seconds(proc.pid)
                 proc.kill()  # (this child only)
                 proc.wait()
-                return {"method": method, "stopped_gb": peak, "stopped_after_s": time.perf_counter() - start}
+                return {
+                    "method": method,
+                    "stopped_gb": peak,
+                    "stopped_after_s": time.perf_counter() - start,
+                    "stopped_cpu_s": cpu,
+                }
             time.sleep(0.5)
         out.seek(0)
         err.seek(0)
@@ -229,6 +235,16 @@ def run_child(method: str, args, cache_dir: str | None, patch_group: str = "1", 
         if line is None:
             raise SystemExit(f"{method} failed:\n{err.read()[-3000:]}")
     return json.loads(line[7:])
+
+
+def cpu_seconds(pid: int) -> float:
+    """The CPU time of process ``pid`` so far [s] (Linux: /proc, user and system; nan where it cannot be read)."""
+    try:
+        with open(f"/proc/{pid}/stat") as stat:
+            fields = stat.read().rsplit(")", 1)[1].split()
+    except OSError:
+        return float("nan")
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")  # (utime, stime: fields 14, 15)
 
 
 def resident_gb(pid: int) -> float:
@@ -267,7 +283,7 @@ def table(args, results: dict) -> str:
         if "stopped_gb" in r:  # (--max-memory)
             lines.append(
                 f"| {label} (stopped: its resident memory passed {r['stopped_gb']:.1f} GB after "
-                f"{r['stopped_after_s']:.0f} s) |" + " — |" * 12
+                f"{r['stopped_after_s']:.0f} s, {r['stopped_cpu_s']:.0f} s of CPU time) |" + " — |" * 12
             )
             continue
         monos = [m for m in results.values() if m["method"] == f"{FAMILY[method]}-monolithic" and "stopped_gb" not in m]
@@ -330,7 +346,10 @@ def table(args, results: dict) -> str:
 def outcome(r: dict) -> str:
     """A child run in a few words (progress output)."""
     if "stopped_gb" in r:
-        return f"stopped, resident memory above {r['stopped_gb']:.1f} GB after {r['stopped_after_s']:.0f} s"
+        return (
+            f"stopped, resident memory above {r['stopped_gb']:.1f} GB after {r['stopped_after_s']:.0f} s "
+            f"({r['stopped_cpu_s']:.0f} s of CPU time)"
+        )
     return f"whole curve {r['total_s']:.2f} s"
 
 

@@ -25,6 +25,21 @@ second time on the offline data the first run stored (``cache_dir``): the set-up
 ``--patch-group`` runs Algorithm 3 once per value of ``CEMOptions.patch_group`` (coarse cells per direction
 sharing one patch factorization; ``all``: one patch, all of Ω₁), a row each.
 
+``--parts`` splits each method's CPU time by the factorizations it works with (``fem.linalg.DirectSolver``, by
+options prefix: its factorizations, the first with MUMPS' analysis, its back-solves and its blocks of inverses
+from the factors; each wrapped by a CPU timer in the child process only) and the rest (assembly, the interface
+Newton, Python): what a method's curve costs in MUMPS work against the monolithic Newton's factorizations.
+
+    OMP_NUM_THREADS=1 .venv/bin/python benchmarks/load_path.py --h 256 --H 16 --steps 20 --model 2 \\
+        --methods primal-monolithic primal --parts
+
+``--max-memory GB`` stops a method's process once its resident memory passes GB (on a shared machine; Linux): its
+row says so, and the other rows of its family are then not compared with a monolithic curve if that was the one
+stopped.
+
+    OMP_NUM_THREADS=1 .venv/bin/python benchmarks/load_path.py --h 256 --H 16 --steps 20 \\
+        --methods mixed-monolithic mixed mixed-ms --max-memory 8
+
 ``--factor`` chooses how the primal monolithic Newton factorizes its (symmetric positive definite) Jacobians:
 MUMPS' Cholesky (the package's default), its LU (``-fc_spd_factor lu``, ``fem.linalg.spd_factor``), or ``both``:
 two monolithic rows, and every ratio is taken against the faster of the two (wall time for the wall ratio, CPU
@@ -82,7 +97,39 @@ FORWARD = (
     "tol",
     "accel",
     "check",
+    "parts",
 )
+#: the ``DirectSolver`` methods ``--parts`` times, and their names in the table (one call, several)
+PART_CALLS = {
+    "set_operator": ("factorization", "factorizations"),
+    "solve": ("back-solve", "back-solves"),
+    "solve_sparse": ("back-solve (sparse right-hand side)", "back-solves (sparse right-hand side)"),
+    "mat_solve": ("multi-right-hand-side solve", "multi-right-hand-side solves"),
+    "inverse_block": ("block of the inverse", "blocks of the inverse"),
+}
+
+
+def time_direct_solvers() -> dict:
+    """Wrap ``DirectSolver``'s factorizations and solves by CPU timers (this process only): {prefix: {call: [CPU
+    time of each call]}}, filled as they run."""
+    from fenics_contact.fem.linalg import DirectSolver
+
+    times: dict = {}
+
+    def timed(name, method):
+        def wrapper(self, *args, **kwargs):
+            start = time.process_time()
+            try:
+                return method(self, *args, **kwargs)
+            finally:
+                calls = times.setdefault(self.prefix, {})
+                calls.setdefault(name, []).append(time.process_time() - start)
+
+        return wrapper
+
+    for name in PART_CALLS:
+        setattr(DirectSolver, name, timed(name, getattr(DirectSolver, name)))
+    return times
 
 
 def one(args) -> dict:
@@ -113,6 +160,7 @@ def one(args) -> dict:
         from petsc4py import PETSc
 
         PETSc.Options()[SPD_FACTOR_OPTION] = args.factor
+    parts = time_direct_solvers() if args.parts else {}
     marks = []  # the process's CPU time at the end of every step
     wall, cpu = time.perf_counter(), time.process_time()
     curve = force_indentation(
@@ -147,6 +195,7 @@ def one(args) -> dict:
         "offline_subparts": dict(getattr(getattr(curve.step, "omega1", None), "time_parts", {})),
         # --check: the largest energy distance of the multiscale Ω₁ to the fine Ω₁ solve over the steps
         "omega1_check": max((s.omega1_check for s in curve.steps if s.omega1_check is not None), default=None),
+        "parts": parts,  # --parts: {solver prefix: {DirectSolver call: [CPU time of each call]}}
     }
 
 
@@ -163,11 +212,49 @@ def run_child(method: str, args, cache_dir: str | None, patch_group: str = "1", 
             cmd += [f"--{name}={value}"]
     if cache_dir:
         cmd += [f"--cache-dir={cache_dir}"]
-    proc = subprocess.run(cmd, capture_output=True, text=True, env=os.environ, cwd=ROOT)
-    line = next((row for row in proc.stdout.splitlines() if row.startswith("RESULT ")), None)
-    if line is None:
-        raise SystemExit(f"{method} failed:\n{proc.stderr[-3000:]}")
+    with tempfile.TemporaryFile("w+") as out, tempfile.TemporaryFile("w+") as err:
+        start = time.perf_counter()
+        proc = subprocess.Popen(cmd, stdout=out, stderr=err, text=True, env=os.environ, cwd=ROOT)
+        peak = 0.0
+        while proc.poll() is None:
+            peak = max(peak, resident_gb(proc.pid))
+            if args.max_memory is not None and peak > args.max_memory:
+                cpu = cpu_seconds(proc.pid)
+                proc.kill()  # (this child only)
+                proc.wait()
+                return {
+                    "method": method,
+                    "stopped_gb": peak,
+                    "stopped_after_s": time.perf_counter() - start,
+                    "stopped_cpu_s": cpu,
+                }
+            time.sleep(0.5)
+        out.seek(0)
+        err.seek(0)
+        line = next((row for row in out.read().splitlines() if row.startswith("RESULT ")), None)
+        if line is None:
+            raise SystemExit(f"{method} failed:\n{err.read()[-3000:]}")
     return json.loads(line[7:])
+
+
+def cpu_seconds(pid: int) -> float:
+    """The CPU time of process ``pid`` so far [s] (Linux: /proc, user and system; nan where it cannot be read)."""
+    try:
+        with open(f"/proc/{pid}/stat") as stat:
+            fields = stat.read().rsplit(")", 1)[1].split()
+    except OSError:
+        return float("nan")
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")  # (utime, stime: fields 14, 15)
+
+
+def resident_gb(pid: int) -> float:
+    """The resident memory of process ``pid`` [GB] (Linux: /proc; 0 where it cannot be read)."""
+    try:
+        with open(f"/proc/{pid}/status") as status:
+            kb = next((int(row.split()[1]) for row in status if row.startswith("VmRSS:")), 0)
+    except OSError:
+        return 0.0
+    return kb * 1024 / 1e9
 
 
 def table(args, results: dict) -> str:
@@ -193,7 +280,13 @@ def table(args, results: dict) -> str:
     ]
     for label, r in results.items():
         method = r["method"]
-        monos = [m for m in results.values() if m["method"] == f"{FAMILY[method]}-monolithic"]
+        if "stopped_gb" in r:  # (--max-memory)
+            lines.append(
+                f"| {label} (stopped: its resident memory passed {r['stopped_gb']:.1f} GB after "
+                f"{r['stopped_after_s']:.0f} s, {r['stopped_cpu_s']:.0f} s of CPU time) |" + " — |" * 12
+            )
+            continue
+        monos = [m for m in results.values() if m["method"] == f"{FAMILY[method]}-monolithic" and "stopped_gb" not in m]
         wall_base = min(monos, key=lambda m: m["total_s"]) if monos else None  # the faster monolithic curve
         cpu_base = min(monos, key=lambda m: m["cpu_s"]) if monos else None
         ratio = f"{r['total_s'] / wall_base['total_s']:.3f}" if monos else "—"
@@ -222,6 +315,9 @@ def table(args, results: dict) -> str:
                 "",
                 f"{label}: Ω₁ against the fine Ω₁ solve (energy, largest over the steps): {r['omega1_check']:.2e}",
             ]
+    for label, r in results.items():
+        if r.get("parts"):
+            lines += ["", parts_line(label, r)]
     factors = [r["factor"] for r in results.values() if r.get("factor")]
     if len(factors) == 1:
         lines += ["", f"The primal monolithic Newton factorizes its Jacobians by MUMPS' {FACTOR_NAMES[factors[0]]}."]
@@ -245,6 +341,39 @@ def table(args, results: dict) -> str:
         "step.",
     ]
     return "\n".join(lines) + "\n"
+
+
+def outcome(r: dict) -> str:
+    """A child run in a few words (progress output)."""
+    if "stopped_gb" in r:
+        return (
+            f"stopped, resident memory above {r['stopped_gb']:.1f} GB after {r['stopped_after_s']:.0f} s "
+            f"({r['stopped_cpu_s']:.0f} s of CPU time)"
+        )
+    return f"whole curve {r['total_s']:.2f} s"
+
+
+def parts_line(label: str, r: dict) -> str:
+    """``--parts``: a method's CPU time by factorization (prefix) and call, and the rest."""
+    texts, timed = [], 0.0
+    for prefix, calls in r["parts"].items():
+        items = []
+        for name, what in PART_CALLS.items():
+            cpu = calls.get(name, [])
+            if not cpu:
+                continue
+            timed += sum(cpu)
+            item = f"{len(cpu)} {what[len(cpu) > 1]} {sum(cpu):.3f}"
+            if name == "set_operator" and len(cpu) > 1:
+                item += f" (the first, with the analysis, {cpu[0]:.3f}; the others' median {np.median(cpu[1:]):.3f})"
+            elif len(cpu) > 1:
+                item += f" (median {np.median(cpu):.4f})"
+            items.append(item)
+        texts.append(f"`{prefix}`: " + ", ".join(items))
+    return (
+        f"CPU of {label} by factorization [s]: " + "; ".join(texts) + f"; the rest {r['cpu_s'] - timed:.2f} "
+        f"(of {r['cpu_s']:.2f})"
+    )
 
 
 def machine() -> str:
@@ -277,6 +406,9 @@ def main() -> None:
     parser.add_argument("--tol", type=float, default=1e-8, help="tolerance of the certificate (hybrid methods)")
     parser.add_argument("--accel", default="newton", help="the hybrid methods' update (IterationOptions.accel)")
     parser.add_argument("--check", action="store_true", help="Algorithm 3's fine Ω₁ check at every step")
+    parser.add_argument(
+        "--parts", action="store_true", help="split each method's CPU time by factorization (DirectSolver calls)"
+    )
     parser.add_argument("--cached", action="store_true", help="run the multiscale methods again on cached data")
     parser.add_argument(
         "--patch-group",
@@ -295,6 +427,12 @@ def main() -> None:
         help="how the primal monolithic Newton factorizes its SPD Jacobians (both: a row each, the ratios against "
         "the faster)",
     )
+    parser.add_argument(
+        "--max-memory",
+        type=float,
+        default=None,
+        help="stop a method whose process's resident memory passes this many GB (a row saying so; Linux)",
+    )
     parser.add_argument("--out", type=Path, default=None, help="a markdown results file (default: print)")
     parser.add_argument("--append", action="store_true", help="add the table to --out instead of replacing it")
     parser.add_argument("--one", choices=list(FAMILY), help=argparse.SUPPRESS)
@@ -311,17 +449,17 @@ def main() -> None:
                 for factor in SPD_FACTORS if args.factor == "both" else [args.factor]:
                     name = method if args.factor != "both" else f"{method} ({FACTOR_NAMES[factor]})"
                     results[name] = run_child(method, args, None, factor=factor)
-                    print(f"{name}: whole curve {results[name]['total_s']:.2f} s", flush=True)
+                    print(f"{name}: {outcome(results[name])}", flush=True)
                 continue
             for group in args.patch_group if method == "primal-ms" else ["1"]:
                 name = method if group == "1" else f"{method}, patch group {group}"
                 # (the offline data are written only for the run on them: a cold curve writes no cache file)
                 results[name] = run_child(method, args, cache if multiscale and args.cached else None, group)
-                print(f"{name}: whole curve {results[name]['total_s']:.2f} s", flush=True)
+                print(f"{name}: {outcome(results[name])}", flush=True)
                 if multiscale and args.cached:
                     label = f"{name}, offline data from the cache"
                     results[label] = run_child(method, args, cache, group)
-                    print(f"{label}: whole curve {results[label]['total_s']:.2f} s", flush=True)
+                    print(f"{label}: {outcome(results[label])}", flush=True)
     text = table(args, results)
     if args.out:
         args.out.parent.mkdir(parents=True, exist_ok=True)

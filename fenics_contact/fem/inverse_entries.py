@@ -7,6 +7,14 @@ read-out rows on γ and Γ_C).  Algorithm 1's Ω₁ response came 17× (h = 1/12
 than by back-solves in blocks of 128 columns, with their values to 1e-15 (the same factors): the command
 and table are in benchmarks/results/interface_response.md.
 
+MUMPS takes the requested columns in blocks of ICNTL(27) (its multi-right-hand-side blocking factor): larger blocks
+run its substitutions as BLAS-3, smaller ones prune them to fewer paths.  With ``BLOCKING`` columns at a time (the
+control restored after the call) Ω₁'s block on γ (514 unknowns of 123,874, model 2 with the cylinder at
+h = 1/256) took 0.097–0.101 s of CPU time against 0.113–0.159 s with MUMPS' default (−32: 32 columns, chosen
+automatically), J₀'s on γ and Γ_C (1,024 of 8,738) 0.10–0.13 s either way, the forces of the load path equal to
+3e-15 (three alternated pairs of ``benchmarks/load_path.py --one primal --h=256 --model=2 --parts``, the child
+run of the load-path table, with ``inverse_entries.BLOCKING`` set to each; a shared machine).
+
 petsc4py has no binding of ``MatMumpsGetInverseTranspose``: it is called through ctypes, in the libpetsc
 that petsc4py itself has loaded (found in the process's memory map).  Sequential factorizations only (PETSc
 wants the requested entries on one process).
@@ -21,10 +29,12 @@ from petsc4py import PETSc
 
 from fenics_contact.errors import ConvergenceError
 
-__all__ = ["available", "inverse_block"]
+__all__ = ["BLOCKING", "available", "inverse_block"]
 
 #: the PETSc function called through ctypes (it returns a PetscErrorCode, 0 on success)
 _FUNCTION = "MatMumpsGetInverseTranspose"
+#: the columns of the requested block MUMPS takes at a time (its ICNTL(27), set for the call; the module docstring)
+BLOCKING = 128
 
 
 @functools.cache
@@ -87,7 +97,8 @@ def inverse_block(
     # PETSc writes (A⁻¹)ᵀ into it: Bᵀ[j, i] = A⁻¹[i, j]
     Bt = PETSc.Mat().createAIJWithArrays((n, n), (indptr, indices, values), comm=PETSc.COMM_SELF)
     Bt.assemble()
-    saved = {k: factor.getMumpsIcntl(k) for k in (20, 30)}  # PETSc leaves them set for the entries of A⁻¹
+    saved = {k: factor.getMumpsIcntl(k) for k in (20, 27, 30)}  # PETSc leaves 20 and 30 set for the entries of A⁻¹
+    factor.setMumpsIcntl(27, BLOCKING)
     try:
         err = getattr(_library(), _FUNCTION)(ctypes.c_void_p(factor.handle), ctypes.c_void_p(Bt.handle))
         if err != 0:
@@ -95,7 +106,7 @@ def inverse_block(
         entries = Bt.getValuesCSR()[2]
     finally:
         for k, v in saved.items():
-            factor.setMumpsIcntl(k, v)  # back to ordinary solves
+            factor.setMumpsIcntl(k, v)  # back to ordinary solves (and their blocking)
         Bt.destroy()
     if sweep is None:
         block = entries.reshape(m, m).T  # [a, b] = A⁻¹[kept[a], kept[b]]

@@ -48,6 +48,7 @@ __all__ = [
     "primal_certificate",
     "mixed_certificate",
     "relative",
+    "status",
 ]
 
 #: c of the floor: one rounding per term (on a stiff inclusion cut by γ at contrast 10⁶ the residual of pairs whose
@@ -78,6 +79,11 @@ def relative(num: float, den: float) -> float:
     if den > 0.0:
         return num / den
     return 0.0 if num == 0.0 else np.inf
+
+
+def status(converged: bool, at_floor: bool) -> str:
+    """``"converged"`` (below tol), ``"floor"`` (converged at the round-off floor, above tol) or ``"not converged"``."""
+    return "not converged" if not converged else ("floor" if at_floor else "converged")
 
 
 def at_floor(residual: float, floor: float, previous: float | None, *, reduction: float = 0.5) -> bool:

@@ -17,7 +17,7 @@ import numpy as np
 from mpi4py import MPI
 
 from fenics_contact.errors import ConvergenceError
-from fenics_contact.hybrid.certificate import Certificate
+from fenics_contact.hybrid.certificate import Certificate, status
 from fenics_contact.hybrid.options import IterationOptions
 
 __all__ = [
@@ -105,9 +105,9 @@ class IterationHistory:
 
     @property
     def status(self) -> str:
-        """``"converged"`` (below tol), ``"floor"`` (converged at the round-off floor, ``floor``) or
+        """``certificate.status``: ``"converged"``, ``"floor"`` (at the round-off floor ``floor``) or
         ``"not converged"``."""
-        return "not converged" if not self.converged else ("floor" if self.at_floor else "converged")
+        return status(self.converged, self.at_floor)
 
     @property
     def iterations(self) -> int:

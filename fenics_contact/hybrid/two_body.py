@@ -53,7 +53,7 @@ from fenics_contact.fem.two_body import (
     two_body_penalty,
 )
 from fenics_contact.fem.two_body_friction import FrictionalTwoBodySystem, solve_frictional_pair
-from fenics_contact.hybrid.certificate import Certificate, primal_certificate
+from fenics_contact.hybrid.certificate import Certificate, primal_certificate, status
 from fenics_contact.hybrid.pair_iteration import iterate_pair_interface
 from fenics_contact.hybrid.two_body_mpi import solve_two_body_hybrid_distributed
 from fenics_contact.problem.pair import TwoBodyProblem
@@ -134,9 +134,9 @@ class TwoBodyHybridResult:
 
     @property
     def status(self) -> str:
-        """``"converged"`` (below tol), ``"floor"`` (converged at the round-off floor ``floor``, above tol) or
+        """``certificate.status``: ``"converged"``, ``"floor"`` (at the round-off floor ``floor``) or
         ``"not converged"``."""
-        return "not converged" if not self.converged else ("floor" if self.at_floor else "converged")
+        return status(self.converged, self.at_floor)
 
     def force_balance(self) -> float:
         """|F_slave + F_master| / max |F| (round-off)."""
